@@ -1,0 +1,22 @@
+"""genesis_lite: a differentiable multi-solver physics simulator with Genesis's API.
+
+    import genesis_lite as gs
+    gs.init(precision="64")
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True))
+"""
+from . import materials, morphs, options, surfaces
+from .errors import (AssetError, GenesisException, GradientError, InvalidInputError, SceneStateError,
+                     SimulationError)
+from .runtime import cpu, gpu, init, runtime
+from .scene import Scene, SimState
+from .tensor import (Tensor, from_numpy, from_torch, ones, ones_like, rand, randn, tensor, zeros,
+                     zeros_like)
+
+__version__ = "0.1.0"
+
+
+def __getattr__(name):
+    # gs.device and the dtypes depend on gs.init(), so they are looked up when asked for
+    if name in ("device", "tc_float", "np_float", "ti_float", "tc_int"):
+        return getattr(runtime, name)
+    raise AttributeError(f"module 'genesis_lite' has no attribute {name!r}")

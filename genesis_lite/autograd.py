@@ -1,0 +1,123 @@
+"""torch.autograd nodes around the solvers.
+
+Each ``scene.step()`` is one ``_Step`` node: inputs are every solver's state at the start of
+the step and its differentiable inputs (controls, parameters) — all torch tensors; outputs are
+the states after the step. A node keeps only what torch saves for it (its start state and its
+inputs), so a rollout's memory is one state per step, and nothing outlives the graph: zeroing
+and freeing are torch's. Getters of derived quantities (link poses) are ``_Read`` nodes.
+
+With ``SimOptions(checkpoint_interval=k)``, only every k-th step saves its state; a step
+without one is recomputed from the nearest checkpoint by its ``Rollout`` during backward.
+"""
+import torch
+
+from .errors import GradientError
+
+
+class Rollout:
+    """Per-rollout record (one per ``scene.reset()``): checkpointed states and step inputs."""
+
+    def __init__(self, sim, interval):
+        self.sim, self.interval = sim, interval
+        self.generation = sim.generation
+        self.checkpoints = {}  # step index → states at its start (tuple of tensors)
+        self.inputs = {}  # step index → inputs (only when interval > 1)
+        self._replayed = {}  # step index → start states recomputed during backward
+
+    def keeps_state(self, index):
+        return index % self.interval == 0
+
+    def record(self, index, states, inputs):
+        if self.interval > 1:
+            self.inputs[index] = inputs
+            if self.keeps_state(index):
+                self.checkpoints[index] = tuple(s.detach() for s in states)
+
+    def start_states(self, index):
+        """States at the start of step ``index``, recomputed from the last checkpoint if needed."""
+        if index not in self._replayed:
+            first = index - index % self.interval
+            states = self.checkpoints[first]
+            self._replayed = {first: states}
+            with torch.no_grad():
+                for k in range(first, first + self.interval - 1):
+                    if k + 1 not in self.inputs:
+                        break
+                    states = self.sim.forward_step(states, self.inputs[k])
+                    self._replayed[k + 1] = states
+        return self._replayed.pop(index)
+
+
+def _check_generation(sim, generation, what):
+    if sim.generation != generation:
+        raise GradientError(f"backward through {what} recorded before scene.reset(): the graph belongs to a "
+                            f"finished rollout; compute the loss and call backward before resetting the scene")
+
+
+class _Step(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, sim, rollout, index, n_states, *tensors):
+        states, inputs = tensors[:n_states], tensors[n_states:]
+        outs = sim.forward_step(states, inputs)
+        ctx.sim, ctx.rollout, ctx.index, ctx.n_states = sim, rollout, index, n_states
+        ctx.kept = rollout.keeps_state(index)
+        rollout.record(index, states, inputs)
+        ctx.save_for_backward(*(tensors if ctx.kept else inputs))
+        return outs
+
+    @staticmethod
+    def backward(ctx, *grad_states):
+        sim = ctx.sim
+        _check_generation(sim, ctx.rollout.generation, f"step {ctx.index}")
+        saved = ctx.saved_tensors
+        if ctx.kept:
+            states, inputs = saved[: ctx.n_states], saved[ctx.n_states:]
+        else:
+            states, inputs = ctx.rollout.start_states(ctx.index), saved
+        grads = sim.backward_step(states, inputs, grad_states)
+        return (None, None, None, None, *grads)
+
+
+def step(sim, rollout, index, states, inputs):
+    """Run one differentiable step; returns the new states (tuple of tensors)."""
+    return _Step.apply(sim, rollout, index, len(states), *states, *inputs)
+
+
+class _Read(torch.autograd.Function):
+    """A derived quantity of one solver's state (e.g. link poses), differentiable in the state."""
+
+    @staticmethod
+    def forward(ctx, sim, solver, generation, state):
+        ctx.sim, ctx.solver, ctx.generation = sim, solver, generation
+        ctx.save_for_backward(state)
+        return sim.read_derived(solver, state)
+
+    @staticmethod
+    def backward(ctx, grad):
+        _check_generation(ctx.sim, ctx.generation, "a link getter")
+        (state,) = ctx.saved_tensors
+        return None, None, None, ctx.sim.read_derived_backward(ctx.solver, state, grad)
+
+
+def read(sim, solver, state):
+    return _Read.apply(sim, solver, sim.generation, state)
+
+
+class _NotDifferentiable(torch.autograd.Function):
+    """Passes a value through; its backward raises, so no gradient stops silently."""
+
+    @staticmethod
+    def forward(ctx, what, state, value):
+        ctx.what = what
+        return value.clone()
+
+    @staticmethod
+    def backward(ctx, grad):
+        raise GradientError(f"{ctx.what} is not differentiable; detach it (.detach()) before using it in a loss")
+
+
+def not_differentiable(what, state, value):
+    """Attach ``value`` (computed from ``state``) to the graph with a backward that raises."""
+    if not state.requires_grad:
+        return value
+    return _NotDifferentiable.apply(what, state, value)

@@ -1,0 +1,423 @@
+"""Rigid entities: a URDF robot or a primitive body, seen through Genesis's getters, setters
+and controls. Local indices (links, dofs, qs) count within the entity; envs_idx selects
+environments when the scene is batched (n_envs > 0), and every result then gains a leading
+batch dimension.
+"""
+import numpy as np
+import torch
+
+from ..errors import InvalidInputError
+from ..runtime import runtime
+from ..tensor import wrap
+from .rotations import quat_to_rotvec, rotvec_to_quat
+
+_MODES = {"force": (0, "ctrl_force"), "position": (1, "ctrl_pos"), "velocity": (2, "ctrl_vel")}
+
+
+class RigidLink:
+    """A link: ``name``, ``idx`` (scene-wide), ``idx_local`` (within its entity)."""
+
+    def __init__(self, entity, name, idx_local):
+        self.entity, self.name, self.idx_local = entity, name, idx_local
+
+    @property
+    def idx(self):
+        return self.entity.link_start + self.idx_local
+
+    def get_pos(self, envs_idx=None):
+        """World position of the link frame origin, m: (3,) or (n_envs, 3)."""
+        return self.entity.get_links_pos([self.idx_local], envs_idx)[..., 0, :]
+
+    def get_quat(self, envs_idx=None):
+        """World orientation (w, x, y, z): (4,) or (n_envs, 4)."""
+        return self.entity.get_links_quat([self.idx_local], envs_idx)[..., 0, :]
+
+    def __repr__(self):
+        return f"RigidLink({self.name!r}, idx_local={self.idx_local})"
+
+
+class RigidJoint:
+    """The joint attaching a link to its parent: ``type`` is "fixed", "revolute", "prismatic" or "free"."""
+
+    def __init__(self, entity, name, type, link, dofs_idx_local, qs_idx_local):
+        self.entity, self.name, self.type, self.link = entity, name, type, link
+        self.dofs_idx_local, self.qs_idx_local = dofs_idx_local, qs_idx_local
+
+    @property
+    def n_dofs(self):
+        return len(self.dofs_idx_local)
+
+    def __repr__(self):
+        return f"RigidJoint({self.name!r}, type={self.type!r}, dofs_idx_local={self.dofs_idx_local})"
+
+
+class RigidEntity:
+    """A rigid entity. Units: m, rad, kg, s, N, N·m; quaternions (w, x, y, z)."""
+
+    def __init__(self, scene, idx, name, morph, material, surface, link_specs, solver):
+        self.scene, self.idx, self.name = scene, idx, name
+        self.morph, self.material, self.surface = morph, material, surface
+        self._specs = link_specs
+        self._solver = solver
+        self._solver_idx = solver.add_entity(name, link_specs)
+        self.links, self.joints = [], []
+
+    # -- structure --------------------------------------------------------------------------
+    def _on_build(self):
+        model = self._solver.model
+        mine = np.flatnonzero(model.link_entity == self._solver_idx)
+        self.link_start, self.n_links = int(mine[0]), len(mine)
+        dofs = np.flatnonzero(np.isin(model.dof_link, mine))
+        self.dof_start, self.n_dofs = (int(dofs[0]) if len(dofs) else 0), len(dofs)
+        self.q_start = int(model.link_q0[mine[0]])
+        self.n_qs = int(sum(len(self._qs_of(k)) for k in range(self.n_links)))
+        self.links = [RigidLink(self, spec.name, k) for k, spec in enumerate(self._specs)]
+        self.joints = []
+        for k, spec in enumerate(self._specs):
+            dof0 = int(model.link_dof0[self.link_start + k]) - self.dof_start
+            ndof = {"fixed": 0, "revolute": 1, "prismatic": 1, "free": 6}[spec.joint_type]
+            name = spec.joint_name or f"{spec.name}_{spec.joint_type}"
+            self.joints.append(RigidJoint(self, name, spec.joint_type, self.links[k],
+                                          list(range(dof0, dof0 + ndof)), self._qs_of(k)))
+        # per local dof: its column in the state's qpos (-1 inside a free joint)
+        self._dof_q = model.dof_q[self.dof_start: self.dof_start + self.n_dofs]
+        self._free = self._specs[0].joint_type == "free"
+
+    def _qs_of(self, k):
+        model = self._solver.model
+        link = self.link_start + k
+        q0 = int(model.link_q0[link]) - self.q_start
+        nq = {"fixed": 0, "revolute": 1, "prismatic": 1, "free": 7}[self._specs[k].joint_type]
+        return list(range(q0, q0 + nq))
+
+    @property
+    def n_joints(self):
+        return len(self.joints)
+
+    @property
+    def is_free(self):
+        return self._free
+
+    def get_link(self, name):
+        for link in self.links:
+            if link.name == name:
+                return link
+        raise InvalidInputError(f"entity '{self.name}': get_link argument 'name' must be one of "
+                                f"{[link.name for link in self.links]}, got {name!r}")
+
+    def get_joint(self, name):
+        for joint in self.joints:
+            if joint.name == name:
+                return joint
+        raise InvalidInputError(f"entity '{self.name}': get_joint argument 'name' must be one of "
+                                f"{[joint.name for joint in self.joints]}, got {name!r}")
+
+    # -- argument checking ----------------------------------------------------------------------
+    def _sim(self):
+        return self.scene._require_built(f"entity '{self.name}'")
+
+    def _local(self, idx, n, arg):
+        """Local indices (list/array/tensor/int/None) → validated int64 numpy array."""
+        if idx is None:
+            return np.arange(n)
+        arr = np.atleast_1d(idx.detach().cpu().numpy() if isinstance(idx, torch.Tensor) else np.asarray(idx))
+        if arr.dtype.kind not in "iu" or arr.ndim != 1 or (arr.size and (arr.min() < 0 or arr.max() >= n)):
+            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be integers in [0, {n}), "
+                                    f"got {idx!r}")
+        return arr.astype(np.int64)
+
+    def _envs(self, envs_idx):
+        n_envs = self.scene.n_envs
+        if n_envs == 0:
+            if envs_idx is not None:
+                raise InvalidInputError(f"entity '{self.name}': argument 'envs_idx' must be None in a scene built "
+                                        f"with n_envs=0, got {envs_idx!r}")
+            return np.zeros(1, dtype=np.int64)
+        return self._local(envs_idx, n_envs, "envs_idx")
+
+    def _values(self, value, n_cols, envs, arg):
+        """User values → (len(envs), n_cols) float tensor on gs.device; checked shape and finiteness."""
+        sim = self._sim()
+        sim.check_grad_allowed(value, self.name, arg)
+        expected = (n_cols,) if self.scene.n_envs == 0 else (len(envs), n_cols)
+        try:
+            if isinstance(value, torch.Tensor):
+                tensor = value.as_subclass(torch.Tensor).to(device=runtime.device, dtype=runtime.tc_float)
+            else:
+                tensor = torch.as_tensor(np.asarray(value, dtype=np.float64), dtype=runtime.tc_float,
+                                         device=runtime.device)
+        except (TypeError, ValueError) as err:
+            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be numbers of shape {expected}, "
+                                    f"got {type(value).__name__} ({err})") from None
+        if tuple(tensor.shape) != expected:
+            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must have shape {expected}, "
+                                    f"got {tuple(tensor.shape)}")
+        if not bool(torch.isfinite(tensor.detach()).all()):
+            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be finite, got NaN or inf in "
+                                    f"{tensor.detach().cpu().numpy()}")
+        return tensor.reshape(len(envs), n_cols)
+
+    def _out(self, value):
+        """Solver rows → user shape: drop the batch axis when the scene is not batched."""
+        if self.scene.n_envs == 0:
+            value = value[0]
+        return wrap(value, self.scene)
+
+    # -- raw state/input access -------------------------------------------------------------------
+    def _read(self, columns, envs_idx):
+        state = self._sim().state(self._solver)
+        envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
+        return state[envs][:, torch.as_tensor(columns, device=runtime.device)]
+
+    def _write(self, columns, envs, values):
+        sim = self._sim()
+        state = sim.state(self._solver)
+        rows = torch.as_tensor(envs, device=runtime.device)[:, None]
+        cols = torch.as_tensor(np.asarray(columns), device=runtime.device)[None, :]
+        sim.set_state(self._solver, state.index_put((rows, cols), values))
+
+    def _read_input(self, name, columns, envs_idx):
+        envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
+        value = self._sim().inputs(self._solver)[name]
+        return value[envs][:, torch.as_tensor(columns, device=runtime.device)]
+
+    def _write_input(self, name, columns, envs, values):
+        sim = self._sim()
+        rows = torch.as_tensor(envs, device=runtime.device)[:, None]
+        cols = torch.as_tensor(np.asarray(columns), device=runtime.device)[None, :]
+        sim.set_input(self._solver, name, sim.inputs(self._solver)[name].index_put((rows, cols), values))
+
+    def _set_dofs_input(self, name, value, dofs_idx_local, envs_idx, arg):
+        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
+        envs = self._envs(envs_idx)
+        self._write_input(name, self.dof_start + dofs, envs, self._values(value, len(dofs), envs, arg))
+
+    def _get_dofs_input(self, name, dofs_idx_local, envs_idx):
+        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
+        return self._out(self._read_input(name, self.dof_start + dofs, envs_idx))
+
+    # -- dof state ------------------------------------------------------------------------------
+    def _qpos_columns(self):
+        return self._solver_q(np.arange(self.n_qs))
+
+    def _solver_q(self, local_qs):
+        return self.q_start + np.asarray(local_qs)
+
+    def _vel_columns(self, dofs):
+        return self._solver.model.n_qs + self.dof_start + dofs
+
+    def _dofs_position_all(self, envs_idx):
+        """(B', n_dofs) dof positions; a free joint's are its origin and rotation vector."""
+        qpos = self._read(self._qpos_columns(), envs_idx)
+        scalar = qpos[:, torch.as_tensor(np.maximum(self._dof_q - self.q_start, 0), device=runtime.device)]
+        if not self._free:
+            return scalar
+        return torch.cat([qpos[:, 0:3], quat_to_rotvec(qpos[:, 3:7]), scalar[:, 6:]], dim=1)
+
+    def get_dofs_position(self, dofs_idx_local=None, envs_idx=None):
+        """Joint positions, rad or m: (n,) or (n_envs, n)."""
+        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
+        return self._out(self._dofs_position_all(envs_idx)[:, torch.as_tensor(dofs, device=runtime.device)])
+
+    def set_dofs_position(self, position, dofs_idx_local=None, envs_idx=None):
+        """Set joint positions (rad or m); a free joint's rotational dofs take a rotation vector."""
+        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
+        envs = self._envs(envs_idx)
+        values = self._values(position, len(dofs), envs, "position")
+        if not self._free:
+            self._write(self._dof_q[dofs], envs, values)
+            return
+        full = self._dofs_position_all(None if self.scene.n_envs == 0 else envs)
+        full = full.index_put((torch.arange(len(envs))[:, None], torch.as_tensor(dofs)[None, :]), values)
+        qpos = torch.cat([full[:, 0:3], rotvec_to_quat(full[:, 3:6]), full[:, 6:]], dim=1)
+        self._write(self._qpos_columns(), envs, qpos)
+
+    def get_dofs_velocity(self, dofs_idx_local=None, envs_idx=None):
+        """Joint velocities, rad/s or m/s (a free joint: world linear, body-frame angular)."""
+        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
+        return self._out(self._read(self._vel_columns(dofs), envs_idx))
+
+    def set_dofs_velocity(self, velocity, dofs_idx_local=None, envs_idx=None):
+        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
+        envs = self._envs(envs_idx)
+        self._write(self._vel_columns(dofs), envs, self._values(velocity, len(dofs), envs, "velocity"))
+
+    def get_qpos(self, qs_idx_local=None, envs_idx=None):
+        """Generalised positions (n_qs,): a free joint stores position then quaternion."""
+        qs = self._local(qs_idx_local, self.n_qs, "qs_idx_local")
+        return self._out(self._read(self._solver_q(qs), envs_idx))
+
+    def set_qpos(self, qpos, qs_idx_local=None, envs_idx=None):
+        qs = self._local(qs_idx_local, self.n_qs, "qs_idx_local")
+        envs = self._envs(envs_idx)
+        self._write(self._solver_q(qs), envs, self._values(qpos, len(qs), envs, "qpos"))
+
+    def _require_free(self, what):
+        if not self._free:
+            raise InvalidInputError(f"entity '{self.name}': {what} needs a free base, but the entity is fixed; "
+                                    f"place a fixed entity with its morph's pos/euler")
+
+    def set_pos(self, pos, envs_idx=None):
+        """Base position, m (free base only)."""
+        self._require_free("set_pos")
+        envs = self._envs(envs_idx)
+        self._write(self._solver_q([0, 1, 2]), envs, self._values(pos, 3, envs, "pos"))
+
+    def set_quat(self, quat, envs_idx=None):
+        """Base orientation (w, x, y, z) (free base only); normalised by the kinematics."""
+        self._require_free("set_quat")
+        envs = self._envs(envs_idx)
+        self._write(self._solver_q([3, 4, 5, 6]), envs, self._values(quat, 4, envs, "quat"))
+
+    # -- link kinematics ----------------------------------------------------------------------------
+    def _links(self, links_idx_local, envs_idx, columns):
+        links = self._local(links_idx_local, self.n_links, "links_idx_local")
+        derived = self._sim().derived(self._solver)
+        envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
+        rows = derived[envs][:, torch.as_tensor(self.link_start + links, device=runtime.device)]
+        return rows[..., columns]
+
+    def get_links_pos(self, links_idx_local=None, envs_idx=None):
+        """Link frame origins in the world, m: (n_links, 3) or (n_envs, n_links, 3)."""
+        return self._out(self._links(links_idx_local, envs_idx, slice(0, 3)))
+
+    def get_links_quat(self, links_idx_local=None, envs_idx=None):
+        return self._out(self._links(links_idx_local, envs_idx, slice(3, 7)))
+
+    def get_links_ang(self, links_idx_local=None, envs_idx=None):
+        """Link angular velocities in the world frame, rad/s."""
+        return self._out(self._links(links_idx_local, envs_idx, slice(7, 10)))
+
+    def get_links_vel(self, links_idx_local=None, envs_idx=None):
+        """Linear velocities of the link frame origins in the world frame, m/s."""
+        rows = self._links(links_idx_local, envs_idx, slice(0, 13))
+        pos, omega, v_origin = rows[..., 0:3], rows[..., 7:10], rows[..., 10:13]
+        return self._out(v_origin + torch.cross(omega, pos, dim=-1))
+
+    def get_pos(self, envs_idx=None):
+        """Base link position, m."""
+        return self.get_links_pos([0], envs_idx)[..., 0, :]
+
+    def get_quat(self, envs_idx=None):
+        return self.get_links_quat([0], envs_idx)[..., 0, :]
+
+    def get_vel(self, envs_idx=None):
+        return self.get_links_vel([0], envs_idx)[..., 0, :]
+
+    def get_ang(self, envs_idx=None):
+        return self.get_links_ang([0], envs_idx)[..., 0, :]
+
+    # -- parameters ---------------------------------------------------------------------------------
+    def get_links_mass(self, links_idx_local=None, envs_idx=None):
+        links = self._local(links_idx_local, self.n_links, "links_idx_local")
+        return self._out(self._read_input("mass", self.link_start + links, envs_idx))
+
+    def set_links_mass(self, mass, links_idx_local=None, envs_idx=None):
+        """Link masses, kg (rotational inertia scales with them: same shape, other density)."""
+        links = self._local(links_idx_local, self.n_links, "links_idx_local")
+        envs = self._envs(envs_idx)
+        values = self._values(mass, len(links), envs, "mass")
+        if bool((values.detach() < 0).any()):
+            raise InvalidInputError(f"entity '{self.name}': argument 'mass' must be ≥ 0 kg, got "
+                                    f"{values.detach().cpu().numpy()}")
+        self._write_input("mass", self.link_start + links, envs, values)
+
+    def get_mass(self, envs_idx=None):
+        """Total mass, kg: () or (n_envs,)."""
+        return self._out(self._read_input("mass", self.link_start + np.arange(self.n_links), envs_idx).sum(-1))
+
+    def _nonnegative(self, name):
+        def setter(value, dofs_idx_local=None, envs_idx=None):
+            dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
+            envs = self._envs(envs_idx)
+            values = self._values(value, len(dofs), envs, name)
+            if bool((values.detach() < 0).any()):
+                raise InvalidInputError(f"entity '{self.name}': argument '{name}' must be ≥ 0, got "
+                                        f"{values.detach().cpu().numpy()}")
+            self._write_input(name, self.dof_start + dofs, envs, values)
+        return setter
+
+    def set_dofs_kp(self, kp, dofs_idx_local=None, envs_idx=None):
+        """Position gains, N·m/rad or N/m."""
+        self._nonnegative("kp")(kp, dofs_idx_local, envs_idx)
+
+    def set_dofs_kv(self, kv, dofs_idx_local=None, envs_idx=None):
+        """Velocity gains, N·m·s/rad or N·s/m."""
+        self._nonnegative("kv")(kv, dofs_idx_local, envs_idx)
+
+    def set_dofs_damping(self, damping, dofs_idx_local=None, envs_idx=None):
+        """Joint damping, N·m·s/rad or N·s/m."""
+        self._nonnegative("damping")(damping, dofs_idx_local, envs_idx)
+
+    def set_dofs_armature(self, armature, dofs_idx_local=None, envs_idx=None):
+        """Rotor inertia added to the mass matrix diagonal, kg·m² or kg."""
+        self._nonnegative("armature")(armature, dofs_idx_local, envs_idx)
+
+    def get_dofs_kp(self, dofs_idx_local=None, envs_idx=None):
+        return self._get_dofs_input("kp", dofs_idx_local, envs_idx)
+
+    def get_dofs_kv(self, dofs_idx_local=None, envs_idx=None):
+        return self._get_dofs_input("kv", dofs_idx_local, envs_idx)
+
+    def get_dofs_damping(self, dofs_idx_local=None, envs_idx=None):
+        return self._get_dofs_input("damping", dofs_idx_local, envs_idx)
+
+    def get_dofs_armature(self, dofs_idx_local=None, envs_idx=None):
+        return self._get_dofs_input("armature", dofs_idx_local, envs_idx)
+
+    def set_dofs_force_range(self, lower, upper, dofs_idx_local=None, envs_idx=None):
+        """Bounds on the actuator force, N·m or N (not differentiable)."""
+        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
+        envs = self._envs(envs_idx)
+        lo, hi = self._values(lower, len(dofs), envs, "lower"), self._values(upper, len(dofs), envs, "upper")
+        if bool((lo > hi).any()):
+            raise InvalidInputError(f"entity '{self.name}': argument 'lower' must be ≤ 'upper', got "
+                                    f"{lo.cpu().numpy()} and {hi.cpu().numpy()}")
+        self._write_input("force_lo", self.dof_start + dofs, envs, lo)
+        self._write_input("force_hi", self.dof_start + dofs, envs, hi)
+
+    def get_dofs_force_range(self, dofs_idx_local=None, envs_idx=None):
+        return (self._get_dofs_input("force_lo", dofs_idx_local, envs_idx),
+                self._get_dofs_input("force_hi", dofs_idx_local, envs_idx))
+
+    # -- control ------------------------------------------------------------------------------------
+    def _control(self, mode, value, dofs_idx_local, envs_idx, arg):
+        code, name = _MODES[mode]
+        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
+        if mode == "position" and self._free and bool((dofs < 6).any()):
+            raise InvalidInputError(f"entity '{self.name}': control_dofs_position cannot drive free-joint dofs "
+                                    f"(dofs_idx_local 0-5); got {dofs.tolist()}")
+        envs = self._envs(envs_idx)
+        values = self._values(value, len(dofs), envs, arg)
+        self._write_input(name, self.dof_start + dofs, envs, values)
+        self._write_input("ctrl_mode", self.dof_start + dofs, envs,
+                          torch.full((len(envs), len(dofs)), float(code), dtype=runtime.tc_float,
+                                     device=runtime.device))
+
+    def control_dofs_force(self, force, dofs_idx_local=None, envs_idx=None):
+        """Apply joint forces (N·m or N) during the next steps, until changed."""
+        self._control("force", force, dofs_idx_local, envs_idx, "force")
+
+    def control_dofs_position(self, position, dofs_idx_local=None, envs_idx=None):
+        """PD servo to target positions: τ = kp·(target − q) − kv·q̇."""
+        self._control("position", position, dofs_idx_local, envs_idx, "position")
+
+    def control_dofs_velocity(self, velocity, dofs_idx_local=None, envs_idx=None):
+        """Velocity servo: τ = kv·(target − q̇)."""
+        self._control("velocity", velocity, dofs_idx_local, envs_idx, "velocity")
+
+    def get_dofs_control_force(self, dofs_idx_local=None, envs_idx=None):
+        """The force-control command currently applied (mode 'force' dofs)."""
+        return self._get_dofs_input("ctrl_force", dofs_idx_local, envs_idx)
+
+    # -- dynamics queries ---------------------------------------------------------------------------
+    def get_mass_mat(self, envs_idx=None):
+        """Joint-space mass matrix without armature, (n_dofs, n_dofs) or (n_envs, n_dofs, n_dofs).
+        Not differentiable (its backward raises)."""
+        full = self._sim().mass_matrix(self._solver)
+        envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
+        block = slice(self.dof_start, self.dof_start + self.n_dofs)
+        return self._out(full[envs][:, block, block])
+
+    def __repr__(self):
+        return f"RigidEntity({self.name!r}, n_links={len(self._specs)})"

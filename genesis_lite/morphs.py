@@ -1,0 +1,124 @@
+"""Morphs: what shape an entity has and where it starts (Genesis names).
+
+Angles: ``euler`` is (roll, pitch, yaw) in degrees, fixed axes x-y-z as in Genesis;
+``quat`` (w, x, y, z) overrides it when given. Lengths in metres.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InvalidInputError
+
+
+def _vec(owner, name, value, n):
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != (n,) or not np.all(np.isfinite(arr)):
+        raise InvalidInputError(f"{owner}: argument '{name}' must be {n} finite numbers, got {value!r}")
+    return arr
+
+
+def _positive(owner, name, value):
+    arr = np.atleast_1d(np.asarray(value, dtype=np.float64))
+    if not np.all(np.isfinite(arr)) or not np.all(arr > 0):
+        raise InvalidInputError(f"{owner}: argument '{name}' must be positive and finite, got {value!r}")
+
+
+def euler_to_quat(euler_deg):
+    """(roll, pitch, yaw) degrees, fixed axes x-y-z → quaternion (w, x, y, z)."""
+    r, p, y = np.radians(euler_deg) / 2.0
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    return np.array([cr * cp * cy + sr * sp * sy,
+                     sr * cp * cy - cr * sp * sy,
+                     cr * sp * cy + sr * cp * sy,
+                     cr * cp * sy - sr * sp * cy])
+
+
+@dataclass
+class Morph:
+    """Initial placement shared by every morph. fixed: welded to the world (no free joint)."""
+    pos: tuple = (0.0, 0.0, 0.0)
+    euler: tuple = (0.0, 0.0, 0.0)
+    quat: tuple = None
+    fixed: bool = False
+
+    def __post_init__(self):
+        owner = type(self).__name__
+        self.pos = _vec(owner, "pos", self.pos, 3)
+        self.euler = _vec(owner, "euler", self.euler, 3)
+        if self.quat is None:
+            self.quat = euler_to_quat(self.euler)
+        else:
+            q = _vec(owner, "quat", self.quat, 4)
+            if np.linalg.norm(q) < 1e-9:
+                raise InvalidInputError(f"{owner}: argument 'quat' must be a non-zero quaternion (w, x, y, z), "
+                                        f"got {self.quat!r}")
+            self.quat = q / np.linalg.norm(q)
+        self._check()
+
+    def _check(self):
+        pass
+
+
+@dataclass
+class URDF(Morph):
+    """A robot from a URDF file; mesh paths may be relative or ``package://``."""
+    file: str = None
+
+    def _check(self):
+        if not isinstance(self.file, str) or not self.file:
+            raise InvalidInputError(f"URDF: argument 'file' must be a path string, got {self.file!r}")
+
+
+@dataclass
+class Box(Morph):
+    """A box; size (3,) full extents, m."""
+    size: tuple = (1.0, 1.0, 1.0)
+
+    def _check(self):
+        self.size = _vec("Box", "size", self.size, 3)
+        _positive("Box", "size", self.size)
+
+
+@dataclass
+class Sphere(Morph):
+    """A sphere of ``radius`` m."""
+    radius: float = 0.5
+
+    def _check(self):
+        _positive("Sphere", "radius", self.radius)
+
+
+@dataclass
+class Cylinder(Morph):
+    """A cylinder along local z: ``radius`` and ``height`` in m."""
+    radius: float = 0.5
+    height: float = 1.0
+
+    def _check(self):
+        _positive("Cylinder", "radius", self.radius)
+        _positive("Cylinder", "height", self.height)
+
+
+@dataclass
+class Capsule(Cylinder):
+    """A capsule along local z: ``height`` is the length of the cylindrical part, m."""
+
+
+@dataclass
+class Mesh(Morph):
+    """A rigid body from a mesh file (any format trimesh reads), scaled by ``scale``."""
+    file: str = None
+    scale: float = 1.0
+
+    def _check(self):
+        if not isinstance(self.file, str) or not self.file:
+            raise InvalidInputError(f"Mesh: argument 'file' must be a path string, got {self.file!r}")
+        _positive("Mesh", "scale", self.scale)
+
+
+@dataclass
+class Plane(Morph):
+    """The ground: an infinite static half-space below z = pos[2] (always fixed)."""
+
+    def _check(self):
+        self.fixed = True

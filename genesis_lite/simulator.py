@@ -1,0 +1,184 @@
+"""The simulator behind a scene: owns the solvers, the current state and inputs as torch
+tensors, and steps them — through autograd nodes when ``requires_grad``, directly otherwise.
+
+The Taichi copy of a solver's state is authoritative between steps when no graph is built
+(torch reads it lazily); with ``requires_grad`` the torch tensor is (it is the graph's node
+value) and Taichi is re-synchronised only when something else (a backward pass) used it.
+"""
+import torch
+
+from . import autograd
+from .errors import GradientError, SimulationError
+
+
+class SolverSlot:
+    """One solver with its current torch state/inputs and what Taichi holds of them."""
+
+    def __init__(self, solver):
+        self.solver = solver
+        self.state = None  # (B, width) torch tensor; None: read lazily from Taichi
+        self.inputs = None  # name → (B, width)
+        self.uploaded_state = None  # the tensor Taichi's frame 0 equals (None: unknown)
+        self.uploaded_inputs = None  # ((tensor, version), ...) Taichi's inputs equal
+        self.derived = None  # (state, value) cache of the last derived read
+
+
+class Simulator:
+    def __init__(self, sim_options, solvers):
+        self.options = sim_options
+        self.requires_grad = sim_options.requires_grad
+        self.slots = [SolverSlot(s) for s in solvers]
+        self.generation = 0
+        self.step_index = 0
+        self.rollout = None
+
+    def build(self, n_envs):
+        for slot in self.slots:
+            slot.initial_state = slot.solver.build(n_envs)
+        self.reset()
+
+    # -- state and inputs ---------------------------------------------------------------------
+    def slot(self, solver):
+        return next(s for s in self.slots if s.solver is solver)
+
+    def state(self, solver):
+        slot = self.slot(solver)
+        if slot.state is None:
+            slot.state = slot.uploaded_state = solver.download_state()
+        return slot.state
+
+    def set_state(self, solver, state):
+        slot = self.slot(solver)
+        solver.upload_state(state)
+        slot.state = slot.uploaded_state = state
+        slot.derived = None
+
+    def inputs(self, solver):
+        return self.slot(solver).inputs
+
+    def set_input(self, solver, name, value):
+        self.slot(solver).inputs = {**self.slot(solver).inputs, name: value}
+
+    def _sync(self, slot, state, inputs):
+        """Make Taichi hold ``state`` (None: what it holds) and ``inputs``, uploading only what differs."""
+        if state is not None and slot.uploaded_state is not state:
+            slot.solver.upload_state(state)
+            slot.uploaded_state = state
+        versions = tuple((t, t._version) for t in inputs.values())
+        known = slot.uploaded_inputs
+        if known is None or len(known) != len(versions) or any(
+                a is not b or va != vb for (a, va), (b, vb) in zip(known, versions)):
+            slot.solver.upload_inputs(inputs)
+            slot.uploaded_inputs = versions
+
+    # -- stepping ---------------------------------------------------------------------------
+    def reset(self, states=None):
+        """Back to the initial (or given) states; controls cleared; a new graph starts."""
+        self.generation += 1
+        self.step_index = 0
+        self.rollout = autograd.Rollout(self, self.options.checkpoint_interval)
+        for k, slot in enumerate(self.slots):
+            defaults = slot.solver.default_inputs
+            params = slot.inputs or defaults
+            slot.inputs = {name: (params[name] if name in slot.solver.persistent_inputs else defaults[name])
+                           for name in defaults}
+            state = slot.initial_state if states is None else states[k]
+            self.set_state(slot.solver, state)
+
+    def step(self):
+        if self.requires_grad:
+            states = tuple(self.state(s.solver) for s in self.slots)
+            flat_inputs = self._grad_inputs()
+            outs = autograd.step(self, self.rollout, self.step_index, states, flat_inputs)
+            for slot, out in zip(self.slots, outs):
+                slot.state = slot.uploaded_state = out
+        else:
+            for slot in self.slots:
+                self._sync(slot, slot.state, slot.inputs)
+                slot.solver.advance()
+                slot.state = None
+                slot.uploaded_state = None
+        for slot in self.slots:
+            slot.derived = None
+        self._check_finite()
+        self.step_index += 1
+
+    def _grad_inputs(self):
+        return tuple(slot.inputs[name] for slot in self.slots for name in slot.solver.default_inputs)
+
+    def _split_inputs(self, flat):
+        out, k = [], 0
+        for slot in self.slots:
+            names = list(slot.solver.default_inputs)
+            out.append(dict(zip(names, flat[k: k + len(names)])))
+            k += len(names)
+        return out
+
+    def forward_step(self, states, flat_inputs):
+        """One step from the given states and inputs (no graph); returns the new states."""
+        outs = []
+        for slot, state, inputs in zip(self.slots, states, self._split_inputs(flat_inputs)):
+            self._sync(slot, state, inputs)
+            slot.solver.advance()
+            out = slot.solver.download_state()
+            slot.uploaded_state = out
+            outs.append(out)
+        return tuple(outs)
+
+    def backward_step(self, states, flat_inputs, grad_states):
+        """Gradients of one step's states and flat inputs, given the gradients of its outputs."""
+        grads_states, grads_inputs = [], []
+        for slot, state, inputs, grad in zip(self.slots, states, self._split_inputs(flat_inputs), grad_states):
+            self._sync(slot, state, inputs)
+            grad_state, grad_inputs = slot.solver.backward(grad)
+            slot.uploaded_state = None  # the replay moved Taichi's frame 0
+            grads_states.append(grad_state)
+            grads_inputs.extend(grad_inputs.get(name) for name in inputs)
+        return (*grads_states, *grads_inputs)
+
+    def _check_finite(self):
+        if not self.options.check_nan:
+            return
+        for slot in self.slots:
+            if slot.solver.nonfinite():
+                names = ", ".join(slot.solver.entity_names)
+                raise SimulationError(f"step {self.step_index}: the {type(slot.solver).__name__} state became "
+                                      f"non-finite (entities: {names}); reduce dt, check inputs and parameters")
+
+    # -- derived quantities -------------------------------------------------------------------
+    def derived(self, solver):
+        """Link kinematics (B, L, 13) of the current state, differentiable when it requires grad."""
+        slot = self.slot(solver)
+        state = self.state(solver)
+        if slot.derived is None or slot.derived[0] is not state:
+            if self.requires_grad and torch.is_grad_enabled() and state.requires_grad:
+                value = autograd.read(self, solver, state)
+            else:
+                value = self.read_derived(solver, state)
+            slot.derived = (state, value)
+        return slot.derived[1]
+
+    def read_derived(self, solver, state):
+        slot = self.slot(solver)
+        self._sync(slot, state, slot.inputs)
+        return solver.links_kinematics()
+
+    def read_derived_backward(self, solver, state, grad):
+        slot = self.slot(solver)
+        self._sync(slot, state, slot.inputs)
+        out = solver.links_kinematics_backward(grad)
+        slot.uploaded_state = None
+        return out
+
+    def mass_matrix(self, solver):
+        state = self.state(solver)
+        slot = self.slot(solver)
+        self._sync(slot, state, slot.inputs)
+        value = solver.mass_matrix()
+        return autograd.not_differentiable("get_mass_mat", state, value)
+
+    def check_grad_allowed(self, value, entity, arg):
+        if isinstance(value, torch.Tensor) and value.requires_grad and not self.requires_grad:
+            raise GradientError(f"entity '{entity}': argument '{arg}' requires grad but the scene was built without "
+                                f"gradients; create it with gs.Scene(sim_options=gs.options.SimOptions("
+                                f"requires_grad=True))")

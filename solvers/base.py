@@ -1,0 +1,45 @@
+"""The interface every solver implements, so that the scene and the autograd glue treat
+rigid bodies, MPM and later solvers alike.
+
+A solver's *state* is one torch tensor (B, state_width) per scene; its *inputs* (controls and
+physical parameters) are named torch tensors (B, width) applied at the next step. The solver
+keeps its own copy of both in Taichi fields and moves them on request.
+"""
+
+
+class Solver:
+    """Abstract solver. B is the number of environments (1 when the scene is not batched)."""
+
+    #: input names whose gradients ``backward`` returns, in order
+    grad_input_names = ()
+
+    def build(self, n_envs):
+        """Allocate fields for max(1, n_envs) environments; return the initial state (B, width)."""
+        raise NotImplementedError
+
+    def upload_state(self, state):
+        """Taichi state ← state (B, width)."""
+        raise NotImplementedError
+
+    def download_state(self):
+        """The current Taichi state as a new torch tensor (B, width)."""
+        raise NotImplementedError
+
+    def upload_inputs(self, inputs):
+        """Taichi inputs ← dict name → (B, width) tensors."""
+        raise NotImplementedError
+
+    def advance(self):
+        """Run one step from the uploaded state and inputs; the result becomes the current state."""
+        raise NotImplementedError
+
+    def backward(self, grad_state_out):
+        """Reverse of the step whose start state and inputs are uploaded.
+
+        Returns (grad of the start state (B, width), {name: grad (B, width)} for grad_input_names).
+        """
+        raise NotImplementedError
+
+    def destroy(self):
+        """Free the solver's fields."""
+        raise NotImplementedError

@@ -1,0 +1,145 @@
+"""The rigid model: what the articulated bodies *are* (topology, geometry, default parameters).
+
+Built once from every rigid entity's ``LinkSpec`` list; plain numpy, never changed after
+build. Parameters a user may set and differentiate (masses, damping, gains...) start from the
+defaults here and live in the solver's input tensors.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from .spec import JOINT_TYPES
+
+FIXED, REVOLUTE, PRISMATIC, FREE = range(4)
+JOINT_CODE = {name: code for code, name in enumerate(JOINT_TYPES)}
+DOFS_OF = {FIXED: 0, REVOLUTE: 1, PRISMATIC: 1, FREE: 6}
+QS_OF = {FIXED: 0, REVOLUTE: 1, PRISMATIC: 1, FREE: 7}
+
+DEFAULT_KP = 100.0  # N·m/rad (or N/m), as Genesis
+DEFAULT_KV = 10.0   # N·m·s/rad (or N·s/m)
+
+
+@dataclass
+class RigidModel:
+    """Static arrays of all rigid links in the scene (L links, D dofs, Q qs, P mass-matrix pairs).
+
+    Per link: parent (L,) (-1: the world), jtype (L,) joint code, pos0 (L, 3) m and quat0 (L, 4)
+    joint frame in the parent, axis (L, 3) in the link frame, com (L, 3) m, inertia0 (L, 3, 3)
+    kg·m² about the com, mass0 (L,) kg, dof0/q0 (L,) first dof/q, entity (L,) owner index.
+    Per dof: link (D,), q (D,) its q index (-1 inside a free joint), damping, armature, kp, kv,
+    lower/upper limits (rad or m), effort bound. pairs (P, 2): (i, j), j ≤ i, dof j on the path
+    from dof i to the root — the structural non-zeros of the lower mass matrix.
+    """
+    link_name: list
+    link_parent: np.ndarray
+    link_jtype: np.ndarray
+    link_pos0: np.ndarray
+    link_quat0: np.ndarray
+    link_axis: np.ndarray
+    link_com: np.ndarray
+    link_inertia0: np.ndarray
+    link_mass0: np.ndarray
+    link_dof0: np.ndarray
+    link_q0: np.ndarray
+    link_entity: np.ndarray
+    dof_link: np.ndarray
+    dof_q: np.ndarray
+    dof_damping: np.ndarray
+    dof_armature: np.ndarray
+    dof_kp: np.ndarray
+    dof_kv: np.ndarray
+    dof_lower: np.ndarray
+    dof_upper: np.ndarray
+    dof_effort: np.ndarray
+    pairs: np.ndarray
+    qpos0: np.ndarray
+
+    @property
+    def n_links(self):
+        return len(self.link_name)
+
+    @property
+    def n_dofs(self):
+        return len(self.dof_link)
+
+    @property
+    def n_qs(self):
+        return len(self.qpos0)
+
+
+def _initial_q(spec):
+    if spec.joint_type == "free":
+        return list(spec.pos) + list(spec.quat)
+    return [0.0] * QS_OF[JOINT_CODE[spec.joint_type]]
+
+
+def _mass_matrix_pairs(dof_link, link_parent):
+    pairs = []
+    for i, li in enumerate(dof_link):
+        for j, lj in enumerate(dof_link[: i + 1]):
+            ancestor = li
+            while ancestor >= 0 and ancestor != lj:
+                ancestor = link_parent[ancestor]
+            if ancestor == lj:
+                pairs.append((i, j))
+    return np.array(pairs, dtype=np.int32).reshape(-1, 2)
+
+
+def build_model(entities_links):
+    """Concatenate entities' link lists (each in tree order) into one RigidModel.
+
+    entities_links: list of ``list[LinkSpec]``; a free root joint takes its initial pose from
+    the root spec's pos/quat, which are then reset to identity (the qs carry the pose).
+    """
+    rows = {k: [] for k in ("name", "parent", "jtype", "pos0", "quat0", "axis", "com", "inertia0", "mass0",
+                            "dof0", "q0", "entity")}
+    dofs = {k: [] for k in ("link", "q", "damping", "armature", "lower", "upper", "effort")}
+    qpos0 = []
+    for entity_idx, links in enumerate(entities_links):
+        link_offset = len(rows["name"])
+        for spec in links:
+            code = JOINT_CODE[spec.joint_type]
+            free = code == FREE
+            rows["name"].append(spec.name)
+            rows["parent"].append(spec.parent + link_offset if spec.parent >= 0 else -1)
+            rows["jtype"].append(code)
+            rows["pos0"].append(np.zeros(3) if free else spec.pos)
+            rows["quat0"].append(np.array([1.0, 0, 0, 0]) if free else spec.quat)
+            rows["axis"].append(spec.axis)
+            rows["com"].append(spec.com)
+            rows["inertia0"].append(spec.inertia)
+            rows["mass0"].append(spec.mass)
+            rows["dof0"].append(len(dofs["link"]))
+            rows["q0"].append(len(qpos0))
+            rows["entity"].append(entity_idx)
+            link_idx = len(rows["name"]) - 1
+            for k in range(DOFS_OF[code]):
+                dofs["link"].append(link_idx)
+                dofs["q"].append(-1 if free else len(qpos0))
+                dofs["damping"].append(spec.damping)
+                dofs["armature"].append(spec.armature)
+                dofs["lower"].append(-np.inf if free else spec.lower)
+                dofs["upper"].append(np.inf if free else spec.upper)
+                dofs["effort"].append(np.inf if free else spec.effort)
+            qpos0.extend(_initial_q(spec))
+    f = np.float64
+    dof_link = np.array(dofs["link"], dtype=np.int32)
+    link_parent = np.array(rows["parent"], dtype=np.int32)
+    n_dofs = len(dof_link)
+    return RigidModel(
+        link_name=rows["name"], link_parent=link_parent,
+        link_jtype=np.array(rows["jtype"], dtype=np.int32),
+        link_pos0=np.array(rows["pos0"], dtype=f).reshape(-1, 3),
+        link_quat0=np.array(rows["quat0"], dtype=f).reshape(-1, 4),
+        link_axis=np.array(rows["axis"], dtype=f).reshape(-1, 3),
+        link_com=np.array(rows["com"], dtype=f).reshape(-1, 3),
+        link_inertia0=np.array(rows["inertia0"], dtype=f).reshape(-1, 3, 3),
+        link_mass0=np.array(rows["mass0"], dtype=f),
+        link_dof0=np.array(rows["dof0"], dtype=np.int32), link_q0=np.array(rows["q0"], dtype=np.int32),
+        link_entity=np.array(rows["entity"], dtype=np.int32),
+        dof_link=dof_link, dof_q=np.array(dofs["q"], dtype=np.int32),
+        dof_damping=np.array(dofs["damping"], dtype=f), dof_armature=np.array(dofs["armature"], dtype=f),
+        dof_kp=np.full(n_dofs, DEFAULT_KP), dof_kv=np.full(n_dofs, DEFAULT_KV),
+        dof_lower=np.array(dofs["lower"], dtype=f), dof_upper=np.array(dofs["upper"], dtype=f),
+        dof_effort=np.array(dofs["effort"], dtype=f),
+        pairs=_mass_matrix_pairs(dof_link, link_parent), qpos0=np.array(qpos0, dtype=f))

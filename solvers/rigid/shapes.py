@@ -1,0 +1,276 @@
+"""Single-link morphs (box, sphere, cylinder, capsule, mesh, plane) and their mass properties.
+
+Every builder returns a one-element ``list[LinkSpec]``: a root link with joint_type "fixed"
+(the entity builder later turns it into a fixed or free base) carrying one geom at the link
+origin. Units: metres, kilograms, kg/m³ for densities, kg·m² for inertias.
+
+``geometry_mass_properties`` is also what the URDF loader uses for links without
+``<inertial>``.
+"""
+import functools
+import os
+
+import numpy as np
+import trimesh
+
+from genesis_lite.errors import AssetError, InvalidInputError
+from solvers.rigid.spec import GeomSpec, LinkSpec
+
+_IDENTITY_QUAT = (1.0, 0.0, 0.0, 0.0)
+
+
+# ------------------------------------------------------------------ argument checks
+
+
+def check_positive(value, arg: str, owner: str, n: int | None = None) -> np.ndarray:
+    """`value` as a float64 array of `n` entries (a scalar when n is None), each finite and > 0.
+
+    Raises InvalidInputError naming `owner`, the argument, what was expected and what was given.
+    """
+    what = "a positive finite number" if n is None else f"{n} positive finite numbers"
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        arr = None
+    shape_ok = arr is not None and arr.shape == (() if n is None else (n,))
+    if not shape_ok or not np.all(np.isfinite(arr)) or not np.all(arr > 0):
+        raise InvalidInputError(f"{owner}: argument '{arg}' expected {what}, got {value!r}")
+    return arr
+
+
+def _scale3(scale, owner: str) -> np.ndarray:
+    """A mesh scale (one positive number or 3 positive numbers) as a (3,) array."""
+    if np.ndim(scale) == 0:
+        return np.full(3, check_positive(scale, "scale", owner))
+    return check_positive(scale, "scale", owner, n=3)
+
+
+# ------------------------------------------------------------------ rotations
+
+
+def quat_to_mat(quat) -> np.ndarray:
+    """(3, 3) rotation matrix of a unit quaternion (4,) w-x-y-z."""
+    w, x, y, z = np.asarray(quat, dtype=np.float64)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+# ------------------------------------------------------------------ analytic inertias
+
+
+def box_inertia(size, mass: float) -> np.ndarray:
+    """(3, 3) inertia (kg·m²) about the centre of a solid box of full extents `size` (3,) m."""
+    x2, y2, z2 = np.square(np.asarray(size, dtype=np.float64))
+    return mass / 12.0 * np.diag([y2 + z2, x2 + z2, x2 + y2])
+
+
+def sphere_inertia(radius: float, mass: float) -> np.ndarray:
+    """(3, 3) inertia (kg·m²) about the centre of a solid sphere."""
+    return np.eye(3) * 0.4 * mass * radius**2
+
+
+def cylinder_inertia(radius: float, length: float, mass: float) -> np.ndarray:
+    """(3, 3) inertia (kg·m²) about the centre of a solid cylinder whose axis is z."""
+    ixx = mass * (3.0 * radius**2 + length**2) / 12.0
+    return np.diag([ixx, ixx, 0.5 * mass * radius**2])
+
+
+def capsule_mass_inertia(radius: float, length: float, rho: float) -> tuple[float, np.ndarray]:
+    """Mass (kg) and (3, 3) inertia (kg·m²) about the centre of a capsule along z.
+
+    The capsule is a cylinder of `length` plus two hemispheres of `radius`. A hemisphere of
+    mass m_h has inertia 2/5 m_h r² about any diameter of its flat face, its centroid sits 3r/8
+    from that face, so by the parallel-axis theorem about the capsule centre (at distance
+    d = length/2 + 3r/8 from the centroid) it contributes m_h (2/5 r² - 9/64 r² + d²).
+    """
+    m_cyl = rho * np.pi * radius**2 * length
+    m_hemi = rho * 2.0 / 3.0 * np.pi * radius**3
+    d = 0.5 * length + 3.0 / 8.0 * radius
+    i_hemi = m_hemi * ((0.4 - 9.0 / 64.0) * radius**2 + d**2)
+    inertia = cylinder_inertia(radius, length, m_cyl)
+    inertia += np.diag([2 * i_hemi, 2 * i_hemi, 2 * 0.4 * m_hemi * radius**2])
+    return m_cyl + 2 * m_hemi, inertia
+
+
+# ------------------------------------------------------------------ meshes
+
+
+@functools.lru_cache(maxsize=64)
+def _load_mesh_cached(path: str, mtime_ns: int, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Raw (V, 3) vertices and (F, 3) faces of a mesh file; cached because robots reuse meshes
+    (a quadruped's four legs), keyed by modification time so edited files are re-read."""
+    # skip_materials: textures are irrelevant to physics and slow to decode.
+    mesh = trimesh.load(path, force="mesh", skip_materials=True)
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    vertices.flags.writeable = False
+    faces.flags.writeable = False
+    return vertices, faces
+
+
+def load_mesh(path: str, scale=1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) m and triangle faces (F, 3) of the mesh file `path`, scaled by `scale`.
+
+    scale: one number or (3,) per-axis factors. A mirroring scale (odd number of negative
+    factors) flips the faces so that normals keep pointing outwards.
+    Raises AssetError when the file is missing, unreadable or holds no triangles.
+    """
+    if not os.path.isfile(path):
+        raise AssetError(f"mesh file '{path}' does not exist")
+    stat = os.stat(path)
+    try:
+        vertices, faces = _load_mesh_cached(os.path.realpath(path), stat.st_mtime_ns, stat.st_size)
+    except Exception as exc:  # trimesh raises many types for bad files
+        raise AssetError(f"cannot load mesh file '{path}': {type(exc).__name__}: {exc}") from exc
+    if len(faces) == 0:
+        raise AssetError(f"mesh file '{path}' has no triangles")
+    if not np.all(np.isfinite(vertices)):
+        raise AssetError(f"mesh file '{path}' has non-finite (NaN or inf) vertex coordinates")
+    scale = np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,))
+    faces = faces[:, ::-1] if np.prod(np.sign(scale)) < 0 else faces
+    return vertices * scale, faces.copy()
+
+
+def mesh_mass_properties(vertices, faces, rho: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """Mass (kg), com (3,) m and inertia (3, 3) kg·m² about the com, in the mesh frame.
+
+    A closed, outward-oriented mesh is integrated as a solid. Any other mesh (open, or with
+    inconsistent winding) uses its convex hull instead, which is also what the contact code
+    sees. A flat or degenerate mesh has no volume and gets mass 0.
+    """
+    mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=True)
+    if not mesh.is_volume:
+        try:
+            mesh = mesh.convex_hull
+        except Exception:  # qhull fails on coplanar points: the shape has no volume
+            return 0.0, np.zeros(3), np.zeros((3, 3))
+        if mesh.volume <= 0:
+            return 0.0, np.zeros(3), np.zeros((3, 3))
+    mesh.density = rho
+    return float(mesh.mass), np.array(mesh.center_mass), np.array(mesh.moment_inertia)
+
+
+# ------------------------------------------------------------------ geometry → mass properties
+
+
+def geom_mass_properties(geom: GeomSpec, rho: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """Mass (kg), com (3,) m and inertia (3, 3) kg·m² about the com of one solid geom of
+    density `rho`, all in the geom's own frame. Planes have mass 0."""
+    size = np.asarray(geom.size, dtype=np.float64)
+    zero = np.zeros(3)
+    if geom.type == "box":
+        mass = rho * float(np.prod(size))
+        return mass, zero, box_inertia(size, mass)
+    if geom.type == "sphere":
+        mass = rho * 4.0 / 3.0 * np.pi * size[0] ** 3
+        return mass, zero, sphere_inertia(size[0], mass)
+    if geom.type == "cylinder":
+        mass = rho * np.pi * size[0] ** 2 * size[1]
+        return mass, zero, cylinder_inertia(size[0], size[1], mass)
+    if geom.type == "capsule":
+        mass, inertia = capsule_mass_inertia(size[0], size[1], rho)
+        return mass, zero, inertia
+    if geom.type == "mesh":
+        return mesh_mass_properties(geom.vertices, geom.faces, rho)
+    if geom.type == "plane":
+        return 0.0, zero, np.zeros((3, 3))
+    raise InvalidInputError(f"geom_mass_properties: geom type expected one of box, sphere, "
+                            f"cylinder, capsule, mesh, plane, got {geom.type!r}")
+
+
+def geometry_mass_properties(geoms, rho: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """Combined mass (kg), com (3,) m and inertia (3, 3) kg·m² about that com, in the link frame,
+    of solid `geoms` (list of GeomSpec placed at their pos/quat) of uniform density `rho`.
+
+    Overlapping geoms are counted twice, as in MuJoCo. No geoms (or only planes) → mass 0,
+    com 0, zero inertia.
+    """
+    parts = []
+    for geom in geoms:
+        mass, com, inertia = geom_mass_properties(geom, rho)
+        rot = quat_to_mat(geom.quat)
+        parts.append((mass, np.asarray(geom.pos) + rot @ com, rot @ inertia @ rot.T))
+    total = sum(m for m, _, _ in parts)
+    if total <= 0:
+        return 0.0, np.zeros(3), np.zeros((3, 3))
+    com = sum(m * c for m, c, _ in parts) / total
+    inertia = np.zeros((3, 3))
+    for mass, c, rot_inertia in parts:
+        d = c - com
+        # parallel-axis theorem: shift each part's inertia from its own com to the link com
+        inertia += rot_inertia + mass * (d @ d * np.eye(3) - np.outer(d, d))
+    return float(total), com, inertia
+
+
+# ------------------------------------------------------------------ link builders
+
+
+def _single_link(name: str, geom: GeomSpec, rho: float) -> list[LinkSpec]:
+    """One fixed root link holding `geom`, with the geom's solid mass properties."""
+    mass, com, inertia = geometry_mass_properties([geom], rho)
+    return [LinkSpec(
+        name=name, parent=-1, joint_name="", joint_type="fixed",
+        pos=np.zeros(3), quat=np.array(_IDENTITY_QUAT), axis=np.array([0.0, 0.0, 1.0]),
+        mass=mass, com=com, inertia=inertia, geoms=[geom],
+    )]
+
+
+def box_link(size, rho: float = 1000.0, name: str = "box") -> list[LinkSpec]:
+    """A solid box of full extents `size` (3,) m and density `rho` kg/m³, centred at the origin."""
+    size = check_positive(size, "size", "box_link", n=3)
+    rho = check_positive(rho, "rho", "box_link")
+    return _single_link(name, GeomSpec("box", size), float(rho))
+
+
+def sphere_link(radius: float, rho: float = 1000.0, name: str = "sphere") -> list[LinkSpec]:
+    """A solid sphere of `radius` m and density `rho` kg/m³, centred at the link origin."""
+    radius = check_positive(radius, "radius", "sphere_link")
+    rho = check_positive(rho, "rho", "sphere_link")
+    return _single_link(name, GeomSpec("sphere", np.array([radius])), float(rho))
+
+
+def cylinder_link(radius: float, height: float, rho: float = 1000.0,
+                  name: str = "cylinder") -> list[LinkSpec]:
+    """A solid cylinder (axis z, total `height` m, `radius` m), centred at the link origin."""
+    radius = check_positive(radius, "radius", "cylinder_link")
+    height = check_positive(height, "height", "cylinder_link")
+    rho = check_positive(rho, "rho", "cylinder_link")
+    return _single_link(name, GeomSpec("cylinder", np.array([radius, height])), float(rho))
+
+
+def capsule_link(radius: float, height: float, rho: float = 1000.0,
+                 name: str = "capsule") -> list[LinkSpec]:
+    """A solid capsule along z: a cylinder of `height` m between the two hemisphere centres,
+    capped by hemispheres of `radius` m (total length height + 2 radius), centred at the origin."""
+    radius = check_positive(radius, "radius", "capsule_link")
+    height = check_positive(height, "height", "capsule_link")
+    rho = check_positive(rho, "rho", "capsule_link")
+    return _single_link(name, GeomSpec("capsule", np.array([radius, height])), float(rho))
+
+
+def mesh_link(file: str, scale=1.0, rho: float = 1000.0, name: str | None = None) -> list[LinkSpec]:
+    """A solid triangle mesh read from `file` (any format trimesh reads), scaled by `scale`
+    (one number or (3,) per axis), with the mesh's own origin as the link origin.
+
+    Watertight, outward-oriented meshes get their exact solid mass properties; other meshes
+    (open, badly wound) use their convex hull's. The geom keeps the original triangles.
+    name defaults to the file's base name without extension.
+    Raises InvalidInputError for bad arguments, AssetError for a missing or unreadable file.
+    """
+    if not isinstance(file, (str, os.PathLike)):
+        raise InvalidInputError(f"mesh_link: argument 'file' expected a path, got {file!r}")
+    scale = _scale3(scale, "mesh_link")
+    rho = check_positive(rho, "rho", "mesh_link")
+    vertices, faces = load_mesh(os.fspath(file), scale)
+    name = name or os.path.splitext(os.path.basename(os.fspath(file)))[0]
+    geom = GeomSpec("mesh", np.zeros(0), vertices=vertices, faces=faces)
+    return _single_link(name, geom, float(rho))
+
+
+def plane_link(name: str = "plane") -> list[LinkSpec]:
+    """A static infinite plane through the link origin with normal +z (mass 0)."""
+    geom = GeomSpec("plane", np.array([0.0, 0.0, 1.0]))
+    return _single_link(name, geom, 1.0)

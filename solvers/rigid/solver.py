@@ -1,0 +1,159 @@
+"""The rigid solver: articulated bodies in reduced coordinates (see README for the physics).
+
+State per env: [qpos (Q), qvel (D)]. Inputs per env: INPUTS in data.py. Everything here is
+bookkeeping around the kernels of the stage modules; no Python loop runs over envs, links or
+dofs at step time.
+"""
+import numpy as np
+import torch
+
+from genesis_lite.errors import AssetError
+from genesis_lite.runtime import runtime
+
+from ..base import Solver
+from . import step as kernels
+from .data import BIG, INPUTS, RigidData
+from .model import FREE, build_model
+
+
+class RigidSolver(Solver):
+    """Owns the rigid model (immutable), its Taichi data and the default inputs."""
+
+    #: inputs that keep their value across ``scene.reset()`` (controls do not)
+    persistent_inputs = ("mass", "damping", "armature", "kp", "kv", "gravity", "force_lo", "force_hi")
+
+    def __init__(self, sim_options, rigid_options):
+        self.sim_options, self.rigid_options = sim_options, rigid_options
+        self.entity_links = []  # one list[LinkSpec] per rigid entity, in add order
+        self.entity_names = []
+        self.model = self.data = None
+
+    # -- building ---------------------------------------------------------------------------
+    def add_entity(self, name, links):
+        """Register an entity's links; returns its index among rigid entities."""
+        self.entity_links.append(links)
+        self.entity_names.append(name)
+        return len(self.entity_links) - 1
+
+    def build(self, n_envs):
+        self.model = build_model(self.entity_links)
+        self.n_batch = max(1, n_envs)
+        self.data = RigidData(self.model, self.n_batch, self.sim_options.substeps,
+                              self.sim_options.requires_grad, self.rigid_options.enable_joint_limit)
+        h = self.sim_options.dt / self.sim_options.substeps
+        timeconst = max(self.rigid_options.limit_timeconst, 2.0 * h)  # stable for explicit steps
+        self.data.consts.from_numpy(np.array([h, 1.0 / timeconst ** 2, 2.0 / timeconst], dtype=runtime.np_float))
+        self.grad_input_names = tuple(self.data.grad_input_names)
+        self.state_width = self.model.n_qs + self.model.n_dofs
+        self.default_inputs = self._default_inputs()
+        state = self._initial_state()
+        self.upload_state(state)
+        self._check_mass_matrix()
+        return state
+
+    def _default_inputs(self):
+        m, B = self.model, self.n_batch
+        effort = np.minimum(m.dof_effort, BIG)
+        per_env = {
+            "mass": m.link_mass0, "damping": m.dof_damping, "armature": m.dof_armature,
+            "kp": m.dof_kp, "kv": m.dof_kv, "gravity": np.array(self.sim_options.gravity),
+            "ctrl_force": np.zeros(m.n_dofs), "ctrl_pos": np.zeros(m.n_dofs), "ctrl_vel": np.zeros(m.n_dofs),
+            "force_lo": -effort, "force_hi": effort, "ctrl_mode": np.zeros(m.n_dofs)}
+        assert per_env.keys() == INPUTS.keys()
+        return {name: torch.as_tensor(np.tile(np.asarray(v, dtype=np.float64), (B, 1)), dtype=runtime.tc_float,
+                                      device=runtime.device) for name, v in per_env.items()}
+
+    def _initial_state(self):
+        qpos = np.tile(self.model.qpos0, (self.n_batch, 1))
+        qvel = np.zeros((self.n_batch, self.model.n_dofs))
+        return torch.as_tensor(np.concatenate([qpos, qvel], axis=1), dtype=runtime.tc_float, device=runtime.device)
+
+    def _check_mass_matrix(self):
+        """A dof with no inertia behind it makes M singular: say which link, at build time."""
+        if self.model.n_dofs == 0:
+            return
+        self.upload_inputs(self.default_inputs)
+        mass = self.mass_matrix()[0].double().cpu().numpy()
+        diag = np.diag(mass) + self.model.dof_armature
+        for i in np.flatnonzero(~(diag > 1e-12)):
+            link = self.model.dof_link[i]
+            entity = self.entity_names[self.model.link_entity[link]]
+            raise AssetError(f"entity '{entity}': link '{self.model.link_name[link]}' moves (dof {i}) but it and its "
+                             f"children have no mass or inertia (mass matrix diagonal {diag[i]:.3g}); expected an "
+                             f"<inertial> with positive mass and inertia, or collision geometry to derive it from")
+
+    # -- moving data ------------------------------------------------------------------------
+    def _empty(self, width):
+        return torch.empty((self.n_batch, width), dtype=runtime.tc_float, device=runtime.device)
+
+    def upload_state(self, state):
+        kernels.write_state(self.data, 0, state.detach().contiguous())
+
+    def download_state(self):
+        out = self._empty(self.state_width)
+        kernels.read_state(self.data, 0, out)
+        return out
+
+    def upload_inputs(self, inputs):
+        packed = torch.cat([inputs[name].detach() for name in INPUTS], dim=1).contiguous()
+        kernels.write_inputs(self.data, packed)
+
+    # -- stepping ---------------------------------------------------------------------------
+    def advance(self):
+        kernels.advance(self.data, 1)
+
+    def nonfinite(self):
+        """True once any step produced a non-finite state (resets the flag)."""
+        flag = self.data.nonfinite[0]
+        self.data.nonfinite[0] = 0
+        return bool(flag)
+
+    def backward(self, grad_state_out):
+        d = self.data
+        kernels.advance(d, 0)  # refill every frame from the uploaded start state and inputs
+        kernels.clear_grads(d)
+        kernels.write_state_grad(d, d.substeps, grad_state_out.contiguous())
+        for s in reversed(range(d.substeps)):
+            kernels.reverse_substep(d, s)
+        widths = [d.width(name) for name in self.grad_input_names]
+        out = self._empty(self.state_width + sum(widths))
+        kernels.read_grads(d, out)
+        parts = torch.split(out, [self.state_width] + widths, dim=1)
+        return parts[0], dict(zip(self.grad_input_names, parts[1:]))
+
+    # -- derived quantities at the uploaded state ----------------------------------------------
+    def links_kinematics(self):
+        """(B, L, 13): link origin pos (3), quat (4), spatial velocity ω (3) and v at the origin (3)."""
+        kernels.position_stages(self.data, 0)
+        out = torch.empty((self.n_batch, self.model.n_links, 13), dtype=runtime.tc_float, device=runtime.device)
+        kernels.read_links(self.data, out)
+        return out
+
+    def links_kinematics_backward(self, grad_links):
+        """Gradient of the uploaded state from a gradient of ``links_kinematics``'s output."""
+        d = self.data
+        kernels.position_stages(d, 0)
+        kernels.clear_grads(d)
+        kernels.write_links_grad(d, grad_links.contiguous())
+        kernels.bias_sweeps.grad(d, 0)
+        kernels.kinematics.grad(d, 0)
+        out = self._empty(self.state_width + sum(d.width(n) for n in self.grad_input_names))
+        kernels.read_grads(d, out)
+        return out[:, : self.state_width]
+
+    def mass_matrix(self):
+        """(B, D, D) joint-space mass matrix (armature excluded) at the uploaded state."""
+        kernels.position_stages(self.data, 0)
+        out = torch.empty((self.n_batch, self.model.n_dofs, self.model.n_dofs), dtype=runtime.tc_float,
+                          device=runtime.device)
+        kernels.read_mass_matrix(self.data, out)
+        return out
+
+    def destroy(self):
+        if self.data is not None:
+            self.data.destroy()
+            self.data = None
+
+    @property
+    def has_free_joint(self):
+        return bool(np.any(self.model.link_jtype == FREE))

@@ -1,0 +1,69 @@
+"""Quaternion and spatial-algebra helpers (Taichi functions).
+
+Conventions: quaternions are (w, x, y, z); a spatial *motion* vector (w, v) is an angular
+velocity w and the linear velocity v of the body point at the world origin; a spatial *force*
+(n, f) is a torque n about the world origin and a force f. A link's spatial inertia about the
+world origin is (m, h, I): mass m (kg), first moment h = m·c (kg·m, c the world com) and
+rotational inertia I about the origin (kg·m², 3x3).
+"""
+import taichi as ti
+
+
+@ti.func
+def quat_mul(a, b):
+    return ti.Vector([a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+                      a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+                      a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+                      a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]])
+
+
+@ti.func
+def quat_to_mat(q):
+    """Rotation matrix of a unit quaternion."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return ti.Matrix([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                      [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+@ti.func
+def quat_normalized(q):
+    return q / ti.sqrt(q.dot(q))
+
+
+@ti.func
+def axis_angle_quat(axis, angle):
+    """Rotation by ``angle`` rad about the unit ``axis``."""
+    half = 0.5 * angle
+    return ti.Vector([ti.cos(half), ti.sin(half) * axis[0], ti.sin(half) * axis[1], ti.sin(half) * axis[2]])
+
+
+@ti.func
+def quat_integrate(q, omega, h):
+    """q ⊗ exp(h·omega/2): rotate by the body-frame angular velocity omega (rad/s) for h s.
+
+    sin(θ/2)/|ω| is written with a tiny offset under the square root so that its derivative
+    stays finite at ω = 0 (Taichi evaluates both sides of a select, and |ω|' is NaN at 0)."""
+    speed = ti.sqrt(omega.dot(omega) + 1e-36)
+    half = 0.5 * h * speed
+    s = ti.sin(half) / speed
+    rot = ti.Vector([ti.cos(half), s * omega[0], s * omega[1], s * omega[2]])
+    return quat_normalized(quat_mul(quat_normalized(q), rot))
+
+
+@ti.func
+def cross_motion(aw, av, bw, bv):
+    """Spatial motion cross product (aw, av) ×m (bw, bv): rate of change of b moving with a."""
+    return aw.cross(bw), aw.cross(bv) + av.cross(bw)
+
+
+@ti.func
+def cross_force(aw, av, fn, ff):
+    """Spatial force cross product (aw, av) ×f (fn, ff)."""
+    return aw.cross(fn) + av.cross(ff), aw.cross(ff)
+
+
+@ti.func
+def inertia_mul(m, h, inertia, w, v):
+    """Spatial inertia (m, h, I) times motion (w, v) → momentum force (n, f)."""
+    return inertia @ w + h.cross(v), m * v - h.cross(w)

@@ -1,0 +1,59 @@
+"""Plain-numpy description of an articulated body, as loaded from a morph.
+
+A ``LinkSpec`` list is what the URDF loader and the primitive-shape builders produce and
+what the rigid model builder consumes. Links are in tree order: ``parent < index``.
+"""
+from dataclasses import dataclass, field
+
+import numpy as np
+
+JOINT_TYPES = ("fixed", "revolute", "prismatic", "free")
+
+
+@dataclass
+class GeomSpec:
+    """A collision shape attached to a link.
+
+    type: "box" | "sphere" | "cylinder" | "capsule" | "mesh" | "plane"
+    size: box (3,) full extents (m); sphere (1,) radius; cylinder/capsule (2,) radius, length
+          (axis along local z); plane (3,) normal; mesh: empty.
+    pos (3,) m and quat (4,) w-x-y-z: the shape's frame in the link frame.
+    vertices (V, 3) m and faces (F, 3): the triangle mesh (mesh shapes only, else None).
+    """
+    type: str
+    size: np.ndarray
+    pos: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    quat: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0, 0.0]))
+    vertices: np.ndarray = None
+    faces: np.ndarray = None
+
+
+@dataclass
+class LinkSpec:
+    """One link and the joint that attaches it to its parent.
+
+    parent: index of the parent link in the list, -1 for the root.
+    joint_type: one of JOINT_TYPES; "free" only for a root (6 dofs, 7 qs).
+    pos (3,) m, quat (4,) w-x-y-z: joint frame in the parent link frame (for the root: in the world).
+    axis (3,): unit joint axis in the joint frame (= the child link frame).
+    mass kg; com (3,) m in the link frame; inertia (3, 3) kg·m² about the com, link-frame axes.
+    damping N·m·s/rad (or N·s/m); friction N·m (or N); armature kg·m² (or kg).
+    lower/upper: joint limits, rad or m (-inf/inf when unlimited); effort: |force| bound (inf when none).
+    """
+    name: str
+    parent: int
+    joint_name: str
+    joint_type: str
+    pos: np.ndarray
+    quat: np.ndarray
+    axis: np.ndarray
+    mass: float
+    com: np.ndarray
+    inertia: np.ndarray
+    damping: float = 0.0
+    friction: float = 0.0
+    armature: float = 0.0
+    lower: float = -np.inf
+    upper: float = np.inf
+    effort: float = np.inf
+    geoms: list = field(default_factory=list)

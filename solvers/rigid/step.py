@@ -1,0 +1,153 @@
+"""One rigid step, forward and reverse: the stage order, and moving state, inputs and
+gradients between the Taichi fields and torch.
+
+Forward runs every substep of every env in one fused launch (``advance``), built from the
+same per-item functions as the stage kernels. Reverse replays that launch to refill the
+frames, then runs each stage's gradient kernel backwards, substep by substep.
+"""
+import taichi as ti
+
+from .actuation import actuation, smooth_force
+from .dynamics import bias_entry, bias_sweeps, bias_sweeps_env, joint_space, mass_entry
+from .integrator import integrate, integrate_link
+from .kinematics import kinematics, kinematics_env
+from .linalg import solve, solve_adjoint, solve_env
+
+# Stage kernels of one substep, in forward order. Reverse mode walks it backwards; the
+# solve's adjoint is hand-written (see linalg.py), every other stage uses Taichi's .grad.
+STAGES = (kinematics, bias_sweeps, joint_space, actuation, solve, integrate)
+ADJOINTS = {solve: solve_adjoint}
+
+
+@ti.func
+def _finite(x):
+    return not (ti.math.isinf(x) or ti.math.isnan(x))
+
+
+@ti.func
+def position_stages_env(d: ti.template(), s, e):
+    """Kinematics, bias forces and mass matrix of env e at frame s."""
+    kinematics_env(d, s, e)
+    bias_sweeps_env(d, s, e)
+    for k in range(d.n_pairs):
+        mass_entry(d, s, e, k)
+    for i in range(d.n_dofs):
+        bias_entry(d, s, e, i)
+
+
+@ti.kernel
+def advance(d: ti.template(), commit: ti.i32):
+    """All substeps of one step for every env; commit copies the result into frame 0."""
+    S = d.substeps
+    for e in range(d.n_batch):
+        for s in range(S):
+            position_stages_env(d, s, e)
+            for i in range(d.n_dofs):
+                smooth_force(d, s, e, i)
+            solve_env(d, s, e)
+            for l in range(d.n_links):
+                integrate_link(d, s, e, l)
+        for k in range(d.n_qs):
+            if not _finite(d.qpos[S, e, k]):
+                d.nonfinite[0] = 1
+        for k in range(d.n_dofs):
+            if not _finite(d.qvel[S, e, k]):
+                d.nonfinite[0] = 1
+        if commit:
+            for k in range(d.n_qs):
+                d.qpos[0, e, k] = d.qpos[S, e, k]
+            for k in range(d.n_dofs):
+                d.qvel[0, e, k] = d.qvel[S, e, k]
+
+
+@ti.kernel
+def position_stages(d: ti.template(), s: ti.i32):
+    for e in range(d.n_batch):
+        position_stages_env(d, s, e)
+
+
+def reverse_substep(d, s):
+    """Gradient kernels of substep s in reverse stage order (frame s must hold its forward values)."""
+    for stage in reversed(STAGES):
+        ADJOINTS.get(stage, stage.grad)(d, s)
+
+
+@ti.kernel
+def write_state(d: ti.template(), s: ti.i32, src: ti.types.ndarray()):
+    """Frame s ← src (B, Q + D): qpos then qvel of every env."""
+    for e, k in ti.ndrange(d.n_batch, d.n_qs):
+        d.qpos[s, e, k] = src[e, k]
+    for e, k in ti.ndrange(d.n_batch, d.n_dofs):
+        d.qvel[s, e, k] = src[e, d.n_qs + k]
+
+
+@ti.kernel
+def read_state(d: ti.template(), s: ti.i32, dst: ti.types.ndarray()):
+    for e, k in ti.ndrange(d.n_batch, d.n_qs):
+        dst[e, k] = d.qpos[s, e, k]
+    for e, k in ti.ndrange(d.n_batch, d.n_dofs):
+        dst[e, d.n_qs + k] = d.qvel[s, e, k]
+
+
+@ti.kernel
+def write_state_grad(d: ti.template(), s: ti.i32, src: ti.types.ndarray()):
+    for e, k in ti.ndrange(d.n_batch, d.n_qs):
+        d.qpos.grad[s, e, k] = src[e, k]
+    for e, k in ti.ndrange(d.n_batch, d.n_dofs):
+        d.qvel.grad[s, e, k] = src[e, d.n_qs + k]
+
+
+@ti.kernel
+def write_inputs(d: ti.template(), src: ti.types.ndarray()):
+    """Every input field ← its columns of src (B, total width), in INPUTS order."""
+    for f in ti.static(range(len(d.input_fields))):
+        for e, k in ti.ndrange(d.n_batch, d.input_widths[f]):
+            d.input_fields[f][e, k] = src[e, d.input_offsets[f] + k]
+
+
+@ti.kernel
+def read_grads(d: ti.template(), dst: ti.types.ndarray()):
+    """dst (B, Q + D + differentiable input widths) ← state gradient at frame 0, then input gradients."""
+    for e, k in ti.ndrange(d.n_batch, d.n_qs):
+        dst[e, k] = d.qpos.grad[0, e, k]
+    for e, k in ti.ndrange(d.n_batch, d.n_dofs):
+        dst[e, d.n_qs + k] = d.qvel.grad[0, e, k]
+    for f in ti.static(range(len(d.grad_input_fields))):
+        for e, k in ti.ndrange(d.n_batch, d.grad_input_widths[f]):
+            dst[e, d.grad_input_offsets[f] + k] = d.grad_input_fields[f].grad[e, k]
+
+
+@ti.kernel
+def clear_grads(d: ti.template()):
+    for f in ti.static(range(len(d.grad_fields))):
+        for I in ti.grouped(d.grad_fields[f].grad):
+            d.grad_fields[f].grad[I] = 0
+
+
+@ti.kernel
+def read_links(d: ti.template(), dst: ti.types.ndarray()):
+    """dst (B, L, 13) ← frame-0 link pos, quat, cvel (ω, v at the origin)."""
+    for e, l in ti.ndrange(d.n_batch, d.n_links):
+        for k in ti.static(range(3)):
+            dst[e, l, k] = d.xpos[0, e, l][k]
+            dst[e, l, 7 + k] = d.cvel_w[0, e, l][k]
+            dst[e, l, 10 + k] = d.cvel_v[0, e, l][k]
+        for k in ti.static(range(4)):
+            dst[e, l, 3 + k] = d.xquat[0, e, l][k]
+
+
+@ti.kernel
+def write_links_grad(d: ti.template(), src: ti.types.ndarray()):
+    for e, l in ti.ndrange(d.n_batch, d.n_links):
+        for k in ti.static(range(3)):
+            d.xpos.grad[0, e, l][k] = src[e, l, k]
+            d.cvel_w.grad[0, e, l][k] = src[e, l, 7 + k]
+            d.cvel_v.grad[0, e, l][k] = src[e, l, 10 + k]
+        for k in ti.static(range(4)):
+            d.xquat.grad[0, e, l][k] = src[e, l, 3 + k]
+
+
+@ti.kernel
+def read_mass_matrix(d: ti.template(), dst: ti.types.ndarray()):
+    for e, i, j in ti.ndrange(d.n_batch, d.n_dofs, d.n_dofs):
+        dst[e, i, j] = d.mass_mat[0, e, i, j]

@@ -1,0 +1,382 @@
+"""URDF → ``list[LinkSpec]``.
+
+yourdfpy parses the XML; everything else (tree order, frames, inertias, meshes, validation)
+happens here so that every problem with a file surfaces as an ``AssetError`` that names the
+file, the link or joint, what was expected and what was found.
+
+Supported joints: revolute, continuous (a revolute without limits), prismatic, fixed.
+Supported collision shapes: box, sphere, cylinder, mesh (any format trimesh reads).
+Mimic joints, velocity limits, calibration and safety controllers are ignored.
+"""
+import io
+import os
+import re
+
+import numpy as np
+import yourdfpy
+from lxml import etree
+
+from genesis_lite.errors import AssetError, InvalidInputError
+from solvers.rigid import shapes
+from solvers.rigid.spec import GeomSpec, LinkSpec
+
+_JOINT_TYPES = {"revolute": "revolute", "continuous": "revolute",
+                "prismatic": "prismatic", "fixed": "fixed"}
+_XML_DECLARATION = re.compile(rb"<\?xml\s[^>]*\?>")
+_DEFAULT_AXIS = np.array([1.0, 0.0, 0.0])  # URDF spec default
+# relative tolerance on negative principal moments, for inertias rounded to a few digits
+_INERTIA_RTOL = 1e-6
+
+
+def load_urdf(path: str, entity_name: str | None = None, rho: float = 1000.0) -> list[LinkSpec]:
+    """Links of the URDF file `path` in tree order (root first, parent index < child index).
+
+    Order is depth-first from the root, children in the order their joints appear in the
+    file (MuJoCo's body order). The root link gets joint_type "fixed" at the origin with
+    joint_name "": the entity builder decides how the base is attached.
+    rho: density (kg/m³) used for links without <inertial>, from their collision shapes
+    (else their visual shapes); links with neither get mass 0.
+    entity_name: only used in error messages.
+    Raises InvalidInputError for bad arguments and AssetError for anything wrong with the
+    file or the meshes it references.
+    """
+    if not isinstance(path, (str, os.PathLike)):
+        raise InvalidInputError(f"load_urdf: argument 'path' expected a file path, got {path!r}")
+    path = os.fspath(path)
+    rho = float(shapes.check_positive(rho, "rho", "load_urdf"))
+    ctx = _Context(path, entity_name)
+    robot = _parse(ctx)
+    links, parent_joint, order = _tree_order(ctx, robot)
+    index = {name: i for i, name in enumerate(order)}
+    specs = []
+    for name in order:
+        joint = parent_joint.get(name)
+        spec = _link_spec(ctx, links[name], joint, rho)
+        spec.parent = index[joint.parent] if joint is not None else -1
+        specs.append(spec)
+    return specs
+
+
+class _Context:
+    """Where an error happened: the file, its folder and the entity, for messages."""
+
+    def __init__(self, path: str, entity_name: str | None):
+        self.path = path
+        self.folder = os.path.dirname(os.path.abspath(path))
+        self.entity = entity_name
+
+    def error(self, msg: str) -> AssetError:
+        """An AssetError prefixed with the file (and entity) name."""
+        who = f"URDF '{self.path}'" + (f" (entity '{self.entity}')" if self.entity else "")
+        return AssetError(f"{who}: {msg}")
+
+
+# ------------------------------------------------------------------ parsing and tree
+
+
+def _parse(ctx: _Context):
+    """The yourdfpy Robot of the file.
+
+    The XML is checked strictly first, because yourdfpy otherwise falls back to a lenient
+    parser that silently drops elements.
+    """
+    if not os.path.isfile(ctx.path):
+        raise ctx.error("file not found")
+    try:
+        with open(ctx.path, "rb") as f:
+            text = f.read()
+    except OSError as exc:  # a folder, no permission
+        raise ctx.error(f"cannot read file: {exc.strerror or exc}") from exc
+    text = _strict_xml(ctx, text)
+    try:
+        # non-finite xyz/rpy make numpy warn while composing the origin; we reject them later
+        with np.errstate(invalid="ignore", over="ignore"):
+            urdf = yourdfpy.URDF.load(io.BytesIO(text), build_scene_graph=False,
+                                      load_meshes=False, load_collision_meshes=False)
+    except Exception as exc:  # yourdfpy raises KeyError, ValueError, AttributeError...
+        raise ctx.error(f"cannot parse: {type(exc).__name__}: {exc}") from exc
+    return urdf.robot
+
+
+def _strict_xml(ctx: _Context, text: bytes) -> bytes:
+    """`text` if it is well-formed XML, else `text` without its XML declarations if that is.
+
+    Many URDFs in the wild (most of pybullet_data's) declare version "0.0" or put the
+    declaration after a comment, which strict parsers reject although the rest of the
+    document is fine. The declaration is only dropped when needed since it names the encoding.
+    """
+    parser = etree.XMLParser(remove_blank_text=True)
+    try:
+        etree.fromstring(text, parser)
+        return text
+    except Exception:  # lxml.etree.XMLSyntaxError, ValueError...
+        text = _XML_DECLARATION.sub(b"", text)
+    try:
+        etree.fromstring(text, parser)
+        return text
+    except Exception as exc:
+        raise ctx.error(f"malformed XML: {exc}") from exc
+
+
+def _tree_order(ctx: _Context, robot):
+    """(links by name, parent joint by child link name, link names depth-first from the root)."""
+    links = {}
+    for link in robot.links:
+        if link.name in links:
+            raise ctx.error(f"link '{link.name}' is defined twice")
+        links[link.name] = link
+    if not links:
+        raise ctx.error("no <link> element")
+    parent_joint, children, joint_names = {}, {name: [] for name in links}, set()
+    for joint in robot.joints:
+        if joint.name in joint_names:
+            raise ctx.error(f"joint '{joint.name}' is defined twice")
+        joint_names.add(joint.name)
+        for role, link in (("parent", joint.parent), ("child", joint.child)):
+            if link not in links:
+                raise ctx.error(f"joint '{joint.name}': {role} link '{link}' is not defined")
+        if joint.child in parent_joint:
+            raise ctx.error(f"link '{joint.child}' is the child of two joints: "
+                            f"'{parent_joint[joint.child].name}' and '{joint.name}'")
+        parent_joint[joint.child] = joint
+        children[joint.parent].append(joint.child)
+    roots = [name for name in links if name not in parent_joint]
+    if len(roots) != 1:
+        raise ctx.error(f"expected exactly one root link (a link that is no joint's child), "
+                        f"found {len(roots)}: {roots}")
+    order, stack = [], [roots[0]]
+    while stack:  # iterative: long chains (ropes) would exceed Python's recursion limit
+        name = stack.pop()
+        order.append(name)
+        stack.extend(reversed(children[name]))
+    if len(order) != len(links):
+        unreachable = sorted(set(links) - set(order))
+        raise ctx.error(f"links {unreachable} are not connected to the root '{roots[0]}' "
+                        f"(the joints form a cycle)")
+    return links, parent_joint, order
+
+
+# ------------------------------------------------------------------ one link
+
+
+def _link_spec(ctx: _Context, link, joint, rho: float) -> LinkSpec:
+    """LinkSpec of `link` attached by `joint` (None for the root); `parent` is set by the caller."""
+    geoms = [_geom(ctx, link.name, c.geometry, c.origin) for c in link.collisions]
+    mass, com, inertia = _inertial(ctx, link, geoms, rho)
+    spec = LinkSpec(name=link.name, parent=-1, joint_name="", joint_type="fixed",
+                    pos=np.zeros(3), quat=np.array([1.0, 0.0, 0.0, 0.0]),
+                    axis=_DEFAULT_AXIS.copy(), mass=mass, com=com, inertia=inertia, geoms=geoms)
+    if joint is not None:
+        _apply_joint(ctx, spec, joint)
+    return spec
+
+
+def _apply_joint(ctx: _Context, spec: LinkSpec, joint) -> None:
+    """Fill the joint fields of `spec` from a yourdfpy Joint."""
+    if joint.type not in _JOINT_TYPES:
+        raise ctx.error(f"joint '{joint.name}' has type '{joint.type}'; supported types are "
+                        f"{', '.join(_JOINT_TYPES)}")
+    spec.joint_name, spec.joint_type = joint.name, _JOINT_TYPES[joint.type]
+    spec.pos, spec.quat = _pose(ctx, joint.origin, f"joint '{joint.name}' origin")
+    spec.axis = _axis(ctx, joint)
+    for field in ("damping", "friction"):
+        value = getattr(joint.dynamics, field, None)
+        setattr(spec, field, _number(ctx, value, 0.0, f"joint '{joint.name}' {field}", 0.0))
+    spec.lower, spec.upper, spec.effort = _limits(ctx, joint)
+
+
+def _axis(ctx: _Context, joint) -> np.ndarray:
+    """Unit joint axis (3,). A fixed joint's axis is irrelevant, so a zero one is tolerated."""
+    axis = np.asarray(joint.axis, dtype=np.float64)
+    norm = np.linalg.norm(axis) if axis.shape == (3,) else np.nan
+    if joint.type == "fixed" and not norm > 0:
+        return _DEFAULT_AXIS.copy()
+    if not (np.isfinite(norm) and norm > 1e-12):
+        raise ctx.error(f"joint '{joint.name}' axis expected 3 finite numbers, not all zero, "
+                        f"got {joint.axis}")
+    return axis / norm
+
+
+def _limits(ctx: _Context, joint) -> tuple[float, float, float]:
+    """(lower, upper, effort). Continuous joints and missing bounds are unlimited; missing
+    effort is unbounded. lower > upper also means unlimited: Bullet's convention (its own
+    defaults are lower=0, upper=-1), which pybullet_data's files rely on."""
+    limit, what = joint.limit, f"joint '{joint.name}' limit"
+    effort = _number(ctx, getattr(limit, "effort", None), np.inf, f"{what} effort", 0.0)
+    if joint.type in ("continuous", "fixed") or limit is None:
+        return -np.inf, np.inf, effort
+    lower = _number(ctx, limit.lower, -np.inf, f"{what} lower")
+    upper = _number(ctx, limit.upper, np.inf, f"{what} upper")
+    if lower > upper:
+        return -np.inf, np.inf, effort
+    return lower, upper, effort
+
+
+def _number(ctx: _Context, value, default: float, what: str, minimum: float = -np.inf) -> float:
+    """`value` (None, a number or a string from the XML) as a float; `default` when None.
+    Infinite values are only accepted as defaults."""
+    if value is None:
+        return float(default)
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ctx.error(f"{what} expected a number, got {value!r}") from None
+    if not np.isfinite(x) or x < minimum:
+        bound = "" if minimum == -np.inf else f" >= {minimum}"
+        raise ctx.error(f"{what} expected a finite number{bound}, got {value!r}")
+    return x
+
+
+def _pose(ctx: _Context, origin, what: str) -> tuple[np.ndarray, np.ndarray]:
+    """Position (3,) m and w-x-y-z quaternion (4,) of a yourdfpy 4x4 origin (None = identity).
+
+    yourdfpy builds the matrix from rpy as R = Rz(yaw) Ry(pitch) Rx(roll), the URDF convention.
+    """
+    if origin is None:
+        return np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
+    origin = np.asarray(origin, dtype=np.float64)
+    if not np.all(np.isfinite(origin)):
+        raise ctx.error(f"{what} expected finite xyz and rpy, got non-finite values")
+    return origin[:3, 3].copy(), mat_to_quat(origin[:3, :3])
+
+
+def mat_to_quat(rot: np.ndarray) -> np.ndarray:
+    """Unit quaternion (4,) w-x-y-z with w >= 0 of a (3, 3) rotation matrix.
+
+    Shepperd's method: branch on the largest of w, x, y, z so the division is well conditioned.
+    """
+    m = rot
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    cands = [trace, m[0, 0], m[1, 1], m[2, 2]]
+    k = int(np.argmax(cands))
+    if k == 0:
+        s = 2.0 * np.sqrt(max(1.0 + trace, 0.0))
+        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+    else:
+        i, j, l = [(0, 1, 2), (1, 2, 0), (2, 0, 1)][k - 1]
+        s = 2.0 * np.sqrt(max(1.0 + m[i, i] - m[j, j] - m[l, l], 0.0))
+        q = [0.0, 0.0, 0.0, 0.0]
+        q[0] = (m[l, j] - m[j, l]) / s
+        q[1 + i] = 0.25 * s
+        q[1 + j] = (m[j, i] + m[i, j]) / s
+        q[1 + l] = (m[l, i] + m[i, l]) / s
+    q = np.array(q)
+    q /= np.linalg.norm(q)
+    return -q if q[0] < 0 else q
+
+
+# ------------------------------------------------------------------ inertial
+
+
+def _inertial(ctx: _Context, link, geoms: list, rho: float):
+    """(mass kg, com (3,) m, inertia (3, 3) kg·m² about the com in link axes) of a link.
+
+    From <inertial> when present (inertia rotated by the inertial origin: R I Rᵀ); otherwise
+    from the collision geoms, else the visual geoms, as solids of density rho.
+    """
+    inertial = link.inertial
+    if inertial is None:
+        if not geoms:
+            geoms = [_geom(ctx, link.name, v.geometry, v.origin) for v in link.visuals]
+        mass, com, inertia = shapes.geometry_mass_properties(geoms, rho)
+        return mass, com, inertia
+    what = f"link '{link.name}' inertial"
+    mass = _number(ctx, inertial.mass, 0.0, f"{what} mass")
+    if mass < 0:
+        raise ctx.error(f"{what} mass expected >= 0, got {mass}")
+    com, quat = _pose(ctx, inertial.origin, f"{what} origin")
+    inertia = np.zeros((3, 3)) if inertial.inertia is None else np.asarray(inertial.inertia, float)
+    if not np.all(np.isfinite(inertia)):
+        raise ctx.error(f"{what} inertia expected finite values, got {inertia.tolist()}")
+    rot = shapes.quat_to_mat(quat)
+    inertia = rot @ inertia @ rot.T
+    inertia = 0.5 * (inertia + inertia.T)
+    moments = np.linalg.eigvalsh(inertia)
+    if moments[0] < -_INERTIA_RTOL * max(abs(moments[-1]), 1e-300):
+        raise ctx.error(f"{what} inertia expected positive semi-definite (principal moments "
+                        f">= 0), got principal moments {moments.tolist()}")
+    return mass, com, inertia
+
+
+# ------------------------------------------------------------------ geometry
+
+
+def _geom(ctx: _Context, link_name: str, geometry, origin) -> GeomSpec:
+    """GeomSpec of a yourdfpy Geometry placed at `origin` in the link frame."""
+    pos, quat = _pose(ctx, origin, f"link '{link_name}' geometry origin")
+    where = f"link '{link_name}'"
+    if geometry is None:
+        raise ctx.error(f"{where}: <geometry> is missing")
+    if geometry.box is not None:
+        size = _sizes(ctx, geometry.box.size, 3, f"{where} box size")
+        return GeomSpec("box", size, pos, quat)
+    if geometry.sphere is not None:
+        size = _sizes(ctx, [geometry.sphere.radius], 1, f"{where} sphere radius")
+        return GeomSpec("sphere", size, pos, quat)
+    if geometry.cylinder is not None:
+        size = _sizes(ctx, [geometry.cylinder.radius, geometry.cylinder.length], 2,
+                      f"{where} cylinder radius/length")
+        return GeomSpec("cylinder", size, pos, quat)
+    if geometry.mesh is not None:
+        vertices, faces = _mesh(ctx, link_name, geometry.mesh)
+        return GeomSpec("mesh", np.zeros(0), pos, quat, vertices=vertices, faces=faces)
+    raise ctx.error(f"{where}: <geometry> expected one of box, sphere, cylinder, mesh")
+
+
+def _sizes(ctx: _Context, values, n: int, what: str) -> np.ndarray:
+    """(n,) positive finite dimensions (m)."""
+    try:
+        arr = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        arr = np.full(0, np.nan)
+    if arr.shape != (n,) or not np.all(np.isfinite(arr)) or not np.all(arr > 0):
+        raise ctx.error(f"{what} expected {n} positive finite number(s), got {values}")
+    return arr
+
+
+def _mesh(ctx: _Context, link_name: str, mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Scaled vertices (V, 3) m and faces (F, 3) of a <mesh> element."""
+    scale = np.atleast_1d(np.asarray(1.0 if mesh.scale is None else mesh.scale, dtype=np.float64))
+    if scale.shape not in ((1,), (3,)) or not np.all(np.isfinite(scale)) or np.any(scale == 0):
+        raise ctx.error(f"link '{link_name}' mesh '{mesh.filename}' scale expected 1 or 3 "
+                        f"finite non-zero numbers, got {scale.tolist()}")
+    found, tried = resolve_mesh_path(mesh.filename or "", ctx.folder)
+    if found is None:
+        raise ctx.error(f"link '{link_name}': mesh file '{mesh.filename}' not found; "
+                        f"tried {tried}")
+    try:
+        return shapes.load_mesh(found, np.broadcast_to(scale, (3,)))
+    except AssetError as exc:
+        raise ctx.error(f"link '{link_name}': {exc}") from exc
+
+
+def resolve_mesh_path(filename: str, folder: str) -> tuple[str | None, list[str]]:
+    """(existing path or None, candidate paths tried) for a URDF mesh `filename`.
+
+    Absolute paths are used as is; relative ones are relative to `folder` (the URDF's).
+    `package://pkg/rest` is looked up as `pkg/rest` and then `rest` in `folder` and each of
+    its parents, which finds the usual layouts pkg/urdf/robot.urdf + pkg/meshes/x.stl.
+    """
+    name = filename[len("file://"):] if filename.startswith("file://") else filename
+    if name.startswith("package://"):
+        rest = name[len("package://"):]
+        tails = [rest, rest.split("/", 1)[1]] if "/" in rest else [rest]
+        candidates = []
+        for base in _ancestors(folder):
+            candidates.extend(os.path.join(base, tail) for tail in tails)
+    elif os.path.isabs(name):
+        candidates = [name]
+    else:
+        candidates = [os.path.join(folder, name)]
+    for candidate in candidates:
+        if os.path.isfile(candidate):
+            return candidate, candidates
+    return None, candidates
+
+
+def _ancestors(folder: str) -> list[str]:
+    """`folder` and its parent folders up to the filesystem root."""
+    out = [folder]
+    while os.path.dirname(out[-1]) != out[-1]:
+        out.append(os.path.dirname(out[-1]))
+    return out

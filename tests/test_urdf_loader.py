@@ -1,0 +1,392 @@
+"""URDF loader and primitive-shape builders: frames, inertias, mesh paths, errors.
+
+References: hand computations, trimesh's numerical mass properties of fine meshes, MuJoCo's
+own URDF compiler, and every URDF shipped with pybullet_data.
+"""
+import glob
+import os
+import re
+import shutil
+
+import mujoco
+import numpy as np
+import pybullet_data
+import pytest
+import trimesh
+
+from genesis_lite.errors import AssetError, GenesisException, InvalidInputError
+from solvers.rigid import shapes
+from solvers.rigid.spec import JOINT_TYPES, GeomSpec
+from solvers.rigid.urdf import load_urdf, mat_to_quat, resolve_mesh_path
+
+ASSETS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "assets")
+PYBULLET = pybullet_data.getDataPath()
+BOX_OBJ = os.path.join(ASSETS, "mesh_robot", "meshes", "link.obj")
+
+
+def rot_x(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def rot_y(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def rot_z(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def by_name(specs):
+    return {s.name: s for s in specs}
+
+
+def write_urdf(tmp_path, body, name="robot.urdf"):
+    """Write a URDF whose <robot> contains `body`; returns its path."""
+    path = tmp_path / name
+    path.write_text(f'<?xml version="1.0"?>\n<robot name="t">\n{body}\n</robot>\n')
+    return str(path)
+
+
+LINK = '<link name="{}"><inertial><mass value="1"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link>'
+
+
+def joint(name, jtype, parent="a", child="b", extra=""):
+    return f'<joint name="{name}" type="{jtype}"><parent link="{parent}"/><child link="{child}"/>{extra}</joint>'
+
+
+# ------------------------------------------------------------------ tree, joints, frames
+
+
+def test_pendulum2_tree_and_joints():
+    specs = load_urdf(os.path.join(ASSETS, "pendulum2.urdf"))
+    assert [s.name for s in specs] == ["base", "link1", "link2"]
+    assert [s.parent for s in specs] == [-1, 0, 1]
+    assert [s.joint_type for s in specs] == ["fixed", "revolute", "revolute"]
+    assert [s.joint_name for s in specs] == ["", "joint1", "joint2"]
+    base, link1, link2 = specs
+    np.testing.assert_array_equal(base.pos, 0)
+    np.testing.assert_array_equal(base.quat, [1, 0, 0, 0])
+    np.testing.assert_allclose(link1.pos, [0, 0.1, 0])
+    np.testing.assert_allclose(link2.axis, [0, 1, 0])
+    assert (link1.lower, link1.upper, link1.effort) == (-3.0, 3.0, 50.0)
+    assert link2.damping == 0.05 and link1.damping == 0.0
+    assert [g.type for g in link2.geoms] == ["cylinder", "sphere"]
+    np.testing.assert_allclose(link2.geoms[0].size, [0.02, 0.4])
+
+
+def test_inertia_rotated_by_inertial_rpy():
+    link2 = load_urdf(os.path.join(ASSETS, "pendulum2.urdf"))[2]
+    inertia = np.array([[0.011, -0.0008, 0.0012], [-0.0008, 0.012, 0.0004], [0.0012, 0.0004, 0.002]])
+    rot = rot_z(0.5) @ rot_y(-0.2) @ rot_x(0.3)  # URDF rpy = fixed-axis x, then y, then z
+    np.testing.assert_allclose(link2.inertia, rot @ inertia @ rot.T, atol=1e-15)
+    np.testing.assert_allclose(link2.com, [-0.005, 0.002, -0.2])
+    assert link2.mass == 0.8
+
+
+def test_joint_quaternion_from_rpy():
+    wrist = by_name(load_urdf(os.path.join(ASSETS, "arm3.urdf")))["hand"]
+    np.testing.assert_allclose(wrist.quat, [np.cos(np.pi / 4), 0, np.sin(np.pi / 4), 0], atol=1e-15)
+    np.testing.assert_allclose(wrist.pos, [0, 0, -0.15])
+
+
+def test_mat_to_quat_round_trip():
+    rng = np.random.default_rng(0)
+    quats = np.vstack([rng.normal(size=(200, 4)), np.eye(4), [[0, 1, 1, 0], [1e-9, 0, 0, 1]]])
+    for q in quats:
+        q = q / np.linalg.norm(q)
+        q = -q if q[0] < 0 else q
+        got = mat_to_quat(shapes.quat_to_mat(q))
+        assert np.allclose(got, q, atol=1e-12) or (abs(q[0]) < 1e-8 and np.allclose(got, -q, atol=1e-12))
+
+
+def test_arm3_joint_kinds_and_limits():
+    specs = by_name(load_urdf(os.path.join(ASSETS, "arm3.urdf")))
+    assert list(specs) == ["base", "upper", "slider", "hand", "ee"]
+    assert [s.joint_type for s in specs.values()] == ["fixed", "revolute", "prismatic", "revolute", "fixed"]
+    np.testing.assert_allclose(specs["slider"].axis, [0, 0, 1])  # "0 0 2" normalised
+    hand = specs["hand"]  # continuous
+    assert (hand.lower, hand.upper, hand.effort) == (-np.inf, np.inf, np.inf)
+    assert (specs["slider"].lower, specs["slider"].upper) == (-0.1, 0.2)
+    assert (specs["upper"].damping, specs["upper"].friction) == (0.1, 0.02)
+    assert specs["ee"].joint_name == "ee_joint" and specs["ee"].parent == 3
+
+
+def test_depth_first_order_follows_joint_order(tmp_path):
+    # joints listed b-branch first although link c is declared before b
+    body = "".join(LINK.format(n) for n in "acbd") + joint("j1", "fixed", "a", "b") + \
+        joint("j2", "fixed", "a", "c") + joint("j3", "fixed", "b", "d")
+    specs = load_urdf(write_urdf(tmp_path, body))
+    assert [s.name for s in specs] == ["a", "b", "d", "c"]
+    assert [s.parent for s in specs] == [-1, 0, 1, 0]
+
+
+def test_quadruped():
+    specs = load_urdf(os.path.join(ASSETS, "quadruped.urdf"))
+    assert len(specs) == 13 and specs[0].name == "body"
+    assert sum(s.joint_type == "revolute" for s in specs) == 12
+    assert all(np.isfinite(s.lower) and np.isfinite(s.upper) for s in specs[1:])
+    np.testing.assert_allclose(sum(s.mass for s in specs), 5.0 + 4 * 1.3)
+
+
+def test_pybullet_cartpole_and_kuka():
+    cart = load_urdf(os.path.join(PYBULLET, "cartpole.urdf"))
+    assert [(s.name, s.joint_type) for s in cart] == [
+        ("slideBar", "fixed"), ("cart", "prismatic"), ("pole", "revolute")]
+    assert cart[2].lower == -np.inf  # continuous
+    kuka = load_urdf(os.path.join(PYBULLET, "kuka_iiwa", "model.urdf"))
+    assert [s.name for s in kuka] == [f"lbr_iiwa_link_{i}" for i in range(8)]
+    assert [s.parent for s in kuka] == list(range(-1, 7))
+    assert all(s.joint_type == "revolute" and s.damping == 0.5 for s in kuka[1:])
+    assert all(g.type == "mesh" and g.vertices.shape[1] == 3 for s in kuka for g in s.geoms)
+
+
+def _mujoco_model(urdf_path, tmp_path):
+    """MuJoCo's compile of the URDF, keeping every body (no fusing of fixed joints)."""
+    text = re.sub(r"<\?xml[^>]*\?>", "", open(urdf_path).read())
+    compiler = (f'<mujoco><compiler fusestatic="false" discardvisual="true" strippath="false" '
+                f'meshdir="{os.path.dirname(urdf_path)}"/></mujoco>')
+    text = re.sub(r"(<robot[^>]*>)", r"\1" + compiler, text, count=1)
+    path = tmp_path / "mj.urdf"
+    path.write_text(text)
+    return mujoco.MjModel.from_xml_path(str(path))
+
+
+@pytest.mark.parametrize("path", [
+    os.path.join(ASSETS, "pendulum2.urdf"), os.path.join(ASSETS, "arm3.urdf"),
+    os.path.join(ASSETS, "quadruped.urdf"), os.path.join(PYBULLET, "cartpole.urdf"),
+    os.path.join(PYBULLET, "kuka_iiwa", "model.urdf")], ids=os.path.basename)
+def test_matches_mujoco_urdf_compiler(path, tmp_path):
+    specs = load_urdf(path)
+    model = _mujoco_model(path, tmp_path)
+    assert [model.body(i).name for i in range(1, model.nbody)] == [s.name for s in specs]
+    for i, spec in enumerate(specs[1:], start=2):
+        body = model.body(i)
+        np.testing.assert_allclose(spec.pos, body.pos, atol=1e-12)
+        np.testing.assert_allclose(spec.quat, body.quat * np.sign(body.quat[0] or 1), atol=1e-12)
+    for i, spec in enumerate(specs, start=1):
+        body = model.body(i)
+        rot = shapes.quat_to_mat(body.iquat)
+        np.testing.assert_allclose(spec.mass, body.mass[0], rtol=1e-12)
+        np.testing.assert_allclose(spec.inertia, rot @ np.diag(body.inertia) @ rot.T, atol=1e-12)
+        if spec.mass > 0:
+            np.testing.assert_allclose(spec.com, body.ipos, atol=1e-12)
+
+
+# ------------------------------------------------------------------ mass properties
+
+
+def test_inertia_from_box_collision():
+    slider = by_name(load_urdf(os.path.join(ASSETS, "arm3.urdf"), rho=500.0))["slider"]
+    x, y, z = 0.04, 0.05, 0.2
+    mass = 500.0 * x * y * z
+    rot = rot_z(0.3)
+    box = mass / 12 * np.diag([y * y + z * z, x * x + z * z, x * x + y * y])
+    np.testing.assert_allclose(slider.mass, mass)
+    np.testing.assert_allclose(slider.com, [0, 0, -0.05], atol=1e-15)
+    np.testing.assert_allclose(slider.inertia, rot @ box @ rot.T, atol=1e-15)
+
+
+def test_link_without_inertial_or_geometry_is_massless(tmp_path):
+    specs = load_urdf(write_urdf(tmp_path, '<link name="a"/>'))
+    assert specs[0].mass == 0 and not specs[0].inertia.any() and specs[0].geoms == []
+
+
+def test_inertia_from_visual_when_no_collision(tmp_path):
+    body = '<link name="a"><visual><geometry><sphere radius="0.1"/></geometry></visual></link>'
+    (a,) = load_urdf(write_urdf(tmp_path, body))
+    np.testing.assert_allclose(a.mass, 1000 * 4 / 3 * np.pi * 1e-3)
+    assert a.geoms == []  # visuals never collide
+
+
+def _fine_mesh(kind, r, h):
+    if kind == "sphere":
+        return trimesh.creation.icosphere(subdivisions=5, radius=r)
+    if kind == "cylinder":
+        return trimesh.creation.cylinder(radius=r, height=h, sections=256)
+    if kind == "capsule":
+        return trimesh.creation.capsule(height=h, radius=r, count=[128, 128])
+    return trimesh.creation.box(extents=(r, h, 0.3))
+
+
+@pytest.mark.parametrize("kind", ["sphere", "cylinder", "capsule", "box"])
+def test_primitive_inertia_matches_fine_mesh(kind):
+    r, h, rho = 0.15, 0.6, 700.0
+    build = {"sphere": lambda: shapes.sphere_link(r, rho), "cylinder": lambda: shapes.cylinder_link(r, h, rho),
+             "capsule": lambda: shapes.capsule_link(r, h, rho), "box": lambda: shapes.box_link((r, h, 0.3), rho)}
+    (link,) = build[kind]()
+    mesh = _fine_mesh(kind, r, h)
+    mesh.density = rho
+    assert link.joint_type == "fixed" and link.parent == -1 and link.name == kind
+    np.testing.assert_allclose(link.mass, mesh.mass, rtol=1e-2)
+    np.testing.assert_allclose(link.inertia, mesh.moment_inertia, rtol=1e-2,
+                               atol=1e-2 * np.abs(mesh.moment_inertia).max())
+    np.testing.assert_allclose(link.com, 0, atol=1e-12)
+
+
+def test_mesh_link_watertight_and_open():
+    size = np.array([0.1, 0.1, 0.2]) * [2, 1, 1]
+    (link,) = shapes.mesh_link(BOX_OBJ, scale=(2, 1, 1), rho=1000.0)
+    mass = 1000 * np.prod(size)
+    np.testing.assert_allclose(link.mass, mass)
+    np.testing.assert_allclose(link.inertia, shapes.box_inertia(size, mass), atol=1e-12)
+    # an open mesh (one face removed) falls back to its convex hull: the same box
+    geom = link.geoms[0]
+    mass2, com2, inertia2 = shapes.mesh_mass_properties(geom.vertices, geom.faces[1:], 1000.0)
+    np.testing.assert_allclose([mass2, *com2], [mass, 0, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(inertia2, link.inertia, atol=1e-12)
+
+
+def test_geometry_mass_properties_parallel_axis():
+    a = GeomSpec("sphere", np.array([0.1]), pos=np.array([0.5, 0, 0]))
+    b = GeomSpec("sphere", np.array([0.1]), pos=np.array([-0.5, 0, 0]))
+    mass, com, inertia = shapes.geometry_mass_properties([a, b], 1000.0)
+    m1 = 1000 * 4 / 3 * np.pi * 0.1**3
+    np.testing.assert_allclose(mass, 2 * m1)
+    np.testing.assert_allclose(com, 0, atol=1e-15)
+    i0 = 0.4 * m1 * 0.01
+    np.testing.assert_allclose(np.diag(inertia), [2 * i0, 2 * i0 + 2 * m1 * 0.25, 2 * i0 + 2 * m1 * 0.25])
+
+
+def test_plane_link():
+    (plane,) = shapes.plane_link()
+    assert plane.mass == 0 and plane.geoms[0].type == "plane"
+    np.testing.assert_array_equal(plane.geoms[0].size, [0, 0, 1])
+
+
+@pytest.mark.parametrize("call, arg", [
+    (lambda: shapes.box_link((1, -1, 1)), "size"), (lambda: shapes.box_link((1, 1)), "size"),
+    (lambda: shapes.sphere_link(np.nan), "radius"), (lambda: shapes.cylinder_link(1, 0), "height"),
+    (lambda: shapes.capsule_link(0.1, 0.2, rho=-1), "rho"), (lambda: shapes.mesh_link(BOX_OBJ, 0), "scale"),
+    (lambda: load_urdf(os.path.join(ASSETS, "arm3.urdf"), rho=0), "rho"), (lambda: load_urdf(None), "path")])
+def test_bad_arguments(call, arg):
+    with pytest.raises(InvalidInputError, match=f"'{arg}' expected"):
+        call()
+
+
+# ------------------------------------------------------------------ mesh paths
+
+
+def test_package_and_relative_mesh_paths():
+    specs = by_name(load_urdf(os.path.join(ASSETS, "mesh_robot", "urdf", "mesh_robot.urdf")))
+    box = trimesh.load(BOX_OBJ, force="mesh")
+    np.testing.assert_allclose(specs["base"].geoms[0].vertices, box.vertices)
+    np.testing.assert_allclose(specs["arm"].geoms[0].vertices, box.vertices * [1, 1, 2])
+    arm = specs["arm"]  # no <inertial>: a solid 0.1 x 0.1 x 0.4 box 0.2 m above the joint
+    mass = 1000 * 0.1 * 0.1 * 0.4
+    np.testing.assert_allclose(arm.mass, mass)
+    np.testing.assert_allclose(arm.com, [0, 0, 0.2], atol=1e-12)
+    np.testing.assert_allclose(arm.inertia, shapes.box_inertia([0.1, 0.1, 0.4], mass), atol=1e-12)
+
+
+def test_package_uri_found_in_ancestor_folder(tmp_path):
+    # ros-style workspace: ws/src/pkg/{urdf,meshes}, URDF nested two folders deep
+    pkg = tmp_path / "ws" / "src" / "pkg"
+    (pkg / "meshes").mkdir(parents=True)
+    (pkg / "urdf" / "robots").mkdir(parents=True)
+    shutil.copy(BOX_OBJ, pkg / "meshes" / "m.obj")
+    found, tried = resolve_mesh_path("package://pkg/meshes/m.obj", str(pkg / "urdf" / "robots"))
+    assert found == str(pkg / "meshes" / "m.obj") and found in tried
+    assert resolve_mesh_path(BOX_OBJ, "/nowhere") == (BOX_OBJ, [BOX_OBJ])
+
+
+def test_absolute_mesh_path(tmp_path):
+    body = f'<link name="a"><collision><geometry><mesh filename="{BOX_OBJ}"/></geometry></collision></link>'
+    (a,) = load_urdf(write_urdf(tmp_path, body))
+    np.testing.assert_allclose(a.mass, 1000 * 0.002)
+
+
+# ------------------------------------------------------------------ errors
+
+
+def test_missing_file(tmp_path):
+    path = str(tmp_path / "nope.urdf")
+    with pytest.raises(AssetError, match="nope.urdf.*not found"):
+        load_urdf(path)
+
+
+def test_malformed_xml(tmp_path):
+    path = tmp_path / "broken.urdf"
+    path.write_text('<robot name="x"><link name="a"></robot>')
+    with pytest.raises(AssetError, match="broken.urdf.*malformed XML"):
+        load_urdf(str(path))
+
+
+@pytest.mark.parametrize("jtype", ["planar", "floating", "ball"])
+def test_unsupported_joint_type(tmp_path, jtype):
+    path = write_urdf(tmp_path, LINK.format("a") + LINK.format("b") + joint("hip", jtype))
+    with pytest.raises(AssetError) as info:
+        load_urdf(path, entity_name="dog")
+    msg = str(info.value)
+    for part in ("robot.urdf", "'hip'", f"'{jtype}'", "revolute, continuous, prismatic, fixed", "dog"):
+        assert part in msg
+
+
+def test_missing_mesh(tmp_path):
+    body = '<link name="foot"><collision><geometry><mesh filename="package://p/missing.stl"/></geometry></collision></link>'
+    with pytest.raises(AssetError) as info:
+        load_urdf(write_urdf(tmp_path, body))
+    msg = str(info.value)
+    for part in ("robot.urdf", "'foot'", "package://p/missing.stl", "tried", str(tmp_path / "p" / "missing.stl")):
+        assert part in msg
+
+
+def test_unreadable_mesh(tmp_path):
+    (tmp_path / "bad.stl").write_bytes(b"solid x\nfacet normal nonsense\n")
+    body = '<link name="shin"><collision><geometry><mesh filename="bad.stl"/></geometry></collision></link>'
+    with pytest.raises(AssetError, match="robot.urdf.*'shin'.*bad.stl"):
+        load_urdf(write_urdf(tmp_path, body))
+
+
+@pytest.mark.parametrize("body, words", [
+    (LINK.format("a").replace('value="1"', 'value="-2"'), ["'a'", "mass"]),
+    (LINK.format("a").replace('izz="1"', 'izz="-1"'), ["'a'", "inertia", "principal moments"]),
+    (LINK.format("a") + LINK.format("b") + joint("j", "revolute", extra='<axis xyz="0 0 0"/>'), ["'j'", "axis"]),
+    (LINK.format("a") + LINK.format("b"), ["root", "'a'", "'b'"]),
+    (LINK.format("a") + joint("j", "fixed", "a", "zz"), ["'j'", "'zz'"]),
+    (LINK.format("a") + LINK.format("b") + joint("j", "fixed") + joint("k", "fixed", "b", "a"), ["root"]),
+    (LINK.format("a") + LINK.format("b") + joint("j", "prismatic", extra='<dynamics damping="fast"/>'),
+     ["'j'", "damping", "'fast'"]),
+    ('<link name="a"><collision><geometry><box size="1 0 1"/></geometry></collision></link>', ["'a'", "box"]),
+    ('<link name="a"><collision><geometry><capsule radius="1" length="1"/></geometry></collision></link>',
+     ["capsule"]),
+    ('<link name="a"/><joint name="j"><parent link="a"/></joint>', ["cannot parse"]),
+], ids=["neg-mass", "neg-inertia", "zero-axis", "two-roots", "unknown-link", "cycle", "bad-number",
+        "zero-box", "unknown-geometry", "no-child"])
+def test_invalid_content(tmp_path, body, words):
+    with pytest.raises(AssetError) as info:
+        load_urdf(write_urdf(tmp_path, body))
+    for word in ["robot.urdf", *words]:
+        assert word in str(info.value)
+
+
+# ------------------------------------------------------------------ every pybullet_data URDF
+
+ALL_PYBULLET_URDFS = sorted(os.path.relpath(p, PYBULLET)
+                            for p in glob.glob(os.path.join(PYBULLET, "**", "*.urdf"), recursive=True))
+
+
+def _check_tree(specs):
+    assert specs and specs[0].parent == -1
+    for i, s in enumerate(specs):
+        assert i == 0 or 0 <= s.parent < i
+        assert s.joint_type in JOINT_TYPES
+        assert np.isclose(np.linalg.norm(s.axis), 1.0) and np.isclose(np.linalg.norm(s.quat), 1.0)
+        assert np.isfinite(s.mass) and s.mass >= 0
+        assert np.all(np.isfinite(s.com)) and np.all(np.isfinite(s.inertia))
+        np.testing.assert_allclose(s.inertia, s.inertia.T, atol=1e-12 * max(1.0, np.abs(s.inertia).max()))
+        assert s.lower <= s.upper and s.effort >= 0 and s.damping >= 0 and s.friction >= 0
+        for g in s.geoms:
+            assert g.type != "mesh" or (g.vertices.shape[1] == 3 and g.faces.shape[1] == 3)
+
+
+@pytest.mark.parametrize("rel_path", ALL_PYBULLET_URDFS)
+def test_every_pybullet_urdf_loads_or_raises_asset_error(rel_path):
+    try:
+        specs = load_urdf(os.path.join(PYBULLET, rel_path))
+    except GenesisException as exc:
+        assert rel_path.split("/")[-1] in str(exc)
+        return
+    _check_tree(specs)
