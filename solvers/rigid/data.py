@@ -37,6 +37,7 @@ class RigidData:
         self.n_batch, self.substeps = n_batch, substeps
         self.limits_enabled = bool(limits_enabled)  # compile-time switch of the limit forces
         self.n_links, self.n_dofs, self.n_qs = model.n_links, model.n_dofs, model.n_qs
+        self.n_qs_alloc, self.n_dofs_alloc = max(1, self.n_qs), max(1, self.n_dofs)
         self.n_pairs = len(model.pairs)
         self.widths = {"links": self.n_links, "dofs": self.n_dofs}
         self._builder = ti.FieldsBuilder()
@@ -72,7 +73,7 @@ class RigidData:
         self.link_dof0, self.link_q0 = self._new((L,), dtype=i32), self._new((L,), dtype=i32)
         self.link_pos0, self.link_quat0 = self._new((L,), 3), self._new((L,), 4)
         self.link_axis, self.link_com = self._new((L,), 3), self._new((L,), 3)
-        self.link_inertia0, self.link_mass0 = self._new((L,), 3, 3), self._new((L,))
+        self.link_inertia0, self.link_inv_mass0 = self._new((L,), 3, 3), self._new((L,))
         self.dof_link, self.dof_q = self._new((D,), dtype=i32), self._new((D,), dtype=i32)
         self.dof_lower, self.dof_upper = self._new((D,)), self._new((D,))
         self.pair_i, self.pair_j = self._new((P,), dtype=i32), self._new((P,), dtype=i32)
@@ -124,7 +125,7 @@ class RigidData:
             values = getattr(model, name)
             if len(values):
                 getattr(self, name).from_numpy(values.astype(np.int32))
-        for name in ("link_pos0", "link_quat0", "link_axis", "link_com", "link_inertia0", "link_mass0",
+        for name in ("link_pos0", "link_quat0", "link_axis", "link_com", "link_inertia0", "link_inv_mass0",
                      "dof_lower", "dof_upper"):
             values = np.clip(getattr(model, name), -BIG, BIG)  # finite, so no inf·0 in gradients
             if len(values):

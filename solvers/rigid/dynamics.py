@@ -7,48 +7,62 @@ reverse tree order, so Taichi's reverse mode differentiates them exactly.
 import taichi as ti
 
 from .model import FREE, PRISMATIC, REVOLUTE
-from .spatial import cross_force, cross_motion, inertia_mul
+from .spatial import cross_force, cross_motion, dot3, inertia_mul
+
+
+@ti.func
+def _dof_motion(d: ti.template(), s, e, dof, qd, vw, vv):
+    """A dof's velocity (cdof·q̇) and velocity-product acceleration ((v × cdof)·q̇), the axis
+    moving with velocity (vw, vv)."""
+    k = ti.min(dof, d.n_dofs_alloc - 1)  # a valid index for links with fewer dofs; then qd = 0
+    sw, sv = d.cdof_w[s, e, k], d.cdof_v[s, e, k]
+    dw, dv = cross_motion(vw, vv, sw, sv)
+    return sw * qd, sv * qd, dw * qd, dv * qd
+
+
+@ti.func
+def _qvel_at(d: ti.template(), s, e, k):
+    return d.qvel[s, e, ti.min(k, d.n_dofs_alloc - 1)]
 
 
 @ti.func
 def _link_motion(d: ti.template(), s, e, l):
-    """Spatial velocity and acceleration (at zero qacc, gravity as a base acceleration) of link l."""
+    """Spatial velocity and acceleration (at zero qacc, gravity as a base acceleration) of link l.
+
+    Written without re-assigned locals (see kinematics.py): joint types select, not branch."""
     p = d.link_parent[l]
     pp = ti.max(p, 0)
-    vw = ti.Vector.zero(float, 3)
-    vv = ti.Vector.zero(float, 3)
-    aw = ti.Vector.zero(float, 3)
-    av = -ti.Vector([d.gravity[e, 0], d.gravity[e, 1], d.gravity[e, 2]])
-    if p >= 0:
-        vw, vv = d.cvel_w[s, e, pp], d.cvel_v[s, e, pp]
-        aw, av = d.cacc_w[s, e, pp], d.cacc_v[s, e, pp]
+    has_parent = p >= 0
+    zero = ti.Vector.zero(float, 3)
+    gravity = ti.Vector([d.gravity[e, 0], d.gravity[e, 1], d.gravity[e, 2]])
+    vw = ti.select(has_parent, d.cvel_w[s, e, pp], zero)
+    vv = ti.select(has_parent, d.cvel_v[s, e, pp], zero)
+    aw = ti.select(has_parent, d.cacc_w[s, e, pp], zero)
+    av = ti.select(has_parent, d.cacc_v[s, e, pp], -gravity)
     jt = d.link_jtype[l]
     dof0 = d.link_dof0[l]
-    if jt == REVOLUTE or jt == PRISMATIC:
-        qd = d.qvel[s, e, dof0]
-        sw, sv = d.cdof_w[s, e, dof0], d.cdof_v[s, e, dof0]
-        dw, dv = cross_motion(vw, vv, sw, sv)  # d(cdof)/dt: the axis moves with the parent
-        vw, vv = vw + sw * qd, vv + sv * qd
-        aw, av = aw + dw * qd, av + dv * qd
-    elif jt == FREE:
-        # Translation dofs are fixed world axes; the rotation axes move with the translating
-        # frame (their own rotation contributes ω × ω = 0), as in MuJoCo's mj_comVel.
-        vv = vv + ti.Vector([d.qvel[s, e, dof0], d.qvel[s, e, dof0 + 1], d.qvel[s, e, dof0 + 2]])
-        rw = ti.Vector.zero(float, 3)
-        rv = ti.Vector.zero(float, 3)
-        for k in ti.static(range(3, 6)):
-            qd = d.qvel[s, e, dof0 + k]
-            sw, sv = d.cdof_w[s, e, dof0 + k], d.cdof_v[s, e, dof0 + k]
-            dw, dv = cross_motion(vw, vv, sw, sv)
-            rw, rv = rw + sw * qd, rv + sv * qd
-            aw, av = aw + dw * qd, av + dv * qd
-        vw, vv = vw + rw, vv + rv
-    return vw, vv, aw, av
+    one_dof = jt == REVOLUTE or jt == PRISMATIC
+    is_free = jt == FREE
+    # one-dof joints: the axis moves with the parent
+    q1 = ti.select(one_dof, _qvel_at(d, s, e, dof0), 0.0)
+    w1, v1, dw1, dv1 = _dof_motion(d, s, e, dof0, q1, vw, vv)
+    # free joint: translation dofs are fixed world axes; the rotation axes move with the
+    # translating frame (their own rotation adds ω × ω = 0), as in MuJoCo's mj_comVel
+    trans = ti.select(is_free, ti.Vector([_qvel_at(d, s, e, dof0 + k) for k in ti.static(range(3))]), zero)
+    vt = vv + trans
+    qa = ti.select(is_free, _qvel_at(d, s, e, dof0 + 3), 0.0)
+    qb = ti.select(is_free, _qvel_at(d, s, e, dof0 + 4), 0.0)
+    qc = ti.select(is_free, _qvel_at(d, s, e, dof0 + 5), 0.0)
+    wa, va, dwa, dva = _dof_motion(d, s, e, dof0 + 3, qa, vw, vt)
+    wb, vb, dwb, dvb = _dof_motion(d, s, e, dof0 + 4, qb, vw, vt)
+    wc, vc, dwc, dvc = _dof_motion(d, s, e, dof0 + 5, qc, vw, vt)
+    return (vw + w1 + wa + wb + wc, vt + v1 + va + vb + vc,
+            aw + dw1 + dwa + dwb + dwc, av + dv1 + dva + dvb + dvc)
 
 
 @ti.func
-def bias_sweeps_env(d: ti.template(), s, e):
-    """cvel, cacc, per-link net forces, then subtree sums of forces and composite inertias."""
+def link_forces_env(d: ti.template(), s, e):
+    """cvel, cacc and the net force each link needs (f = I·a + v ×* I·v), in tree order."""
     for l in range(d.n_links):
         vw, vv, aw, av = _link_motion(d, s, e, l)
         d.cvel_w[s, e, l], d.cvel_v[s, e, l] = vw, vv
@@ -58,6 +72,11 @@ def bias_sweeps_env(d: ti.template(), s, e):
         pn, pf = inertia_mul(m, h, inertia, vw, vv)
         cn, cf = cross_force(vw, vv, pn, pf)
         d.cfrc_n[s, e, l], d.cfrc_f[s, e, l] = fn + cn, ff + cf
+
+
+@ti.func
+def subtree_sums_env(d: ti.template(), s, e):
+    """Add each link's force and composite inertia into its parent's, leaves first."""
     for i in range(d.n_links):
         l = d.n_links - 1 - i
         p = d.link_parent[l]
@@ -76,7 +95,7 @@ def mass_entry(d: ti.template(), s, e, k):
     l = d.dof_link[i]
     fn, ff = inertia_mul(d.crb_m[s, e, l], d.crb_h[s, e, l], d.crb_i[s, e, l], d.cdof_w[s, e, j],
                          d.cdof_v[s, e, j])
-    value = d.cdof_w[s, e, i].dot(fn) + d.cdof_v[s, e, i].dot(ff)
+    value = dot3(d.cdof_w[s, e, i], fn) + dot3(d.cdof_v[s, e, i], ff)
     d.mass_mat[s, e, i, j] = value
     if i != j:
         d.mass_mat[s, e, j, i] = value
@@ -86,13 +105,25 @@ def mass_entry(d: ti.template(), s, e, k):
 def bias_entry(d: ti.template(), s, e, i):
     """qfrc_bias[i] = cdof_i · (net force of the subtree of link(i)): Coriolis, centrifugal, gravity."""
     l = d.dof_link[i]
-    d.qfrc_bias[s, e, i] = d.cdof_w[s, e, i].dot(d.cfrc_n[s, e, l]) + d.cdof_v[s, e, i].dot(d.cfrc_f[s, e, l])
+    d.qfrc_bias[s, e, i] = dot3(d.cdof_w[s, e, i], d.cfrc_n[s, e, l]) + dot3(d.cdof_v[s, e, i], d.cfrc_f[s, e, l])
+
+
+@ti.func
+def bias_sweeps_env(d: ti.template(), s, e):
+    link_forces_env(d, s, e)
+    subtree_sums_env(d, s, e)
 
 
 @ti.kernel
-def bias_sweeps(d: ti.template(), s: ti.i32):
+def link_forces(d: ti.template(), s: ti.i32):
     for e in range(d.n_batch):
-        bias_sweeps_env(d, s, e)
+        link_forces_env(d, s, e)
+
+
+@ti.kernel
+def subtree_sums(d: ti.template(), s: ti.i32):
+    for e in range(d.n_batch):
+        subtree_sums_env(d, s, e)
 
 
 @ti.kernel

@@ -4,46 +4,54 @@ Everything is expressed in the world frame about the world origin (MuJoCo's ``cd
 ``cinert`` idea), so later stages are plain sweeps over the links. Inertias are derived from
 the *current* masses here, inside the differentiated step: a link's rotational inertia scales
 with its mass (constant shape, uniform density change).
+
+The link loop is differentiated by Taichi's reverse mode, so its body assigns every local
+once: joint types choose values with ``ti.select`` rather than re-assigning in branches.
 """
 import taichi as ti
 
 from .model import FREE, PRISMATIC, REVOLUTE
-from .spatial import axis_angle_quat, quat_mul, quat_normalized, quat_to_mat
+from .spatial import axis_angle_quat, mat_mul, mat_vec, quat_mul, quat_normalized, quat_to_mat
+
+
+@ti.func
+def qpos_at(d: ti.template(), s, e, k):
+    """qpos[k], with k clamped into range (links without qs point one past their parent's)."""
+    return d.qpos[s, e, ti.min(k, d.n_qs_alloc - 1)]
 
 
 @ti.func
 def _joint_pose(d: ti.template(), s, e, l):
     """World pose (pos m, quat) of link l from its parent's pose and its joint coordinate."""
     p = d.link_parent[l]
-    pp = ti.max(p, 0)  # a valid index even for roots; the value is only used when p >= 0
-    pos = d.link_pos0[l]
-    quat = d.link_quat0[l]
-    if p >= 0:
-        pos = d.xpos[s, e, pp] + quat_to_mat(d.xquat[s, e, pp]) @ pos
-        quat = quat_mul(d.xquat[s, e, pp], quat)
+    pp = ti.max(p, 0)
+    has_parent = p >= 0
+    parent_pos = ti.select(has_parent, d.xpos[s, e, pp], ti.Vector.zero(float, 3))
+    parent_quat = ti.select(has_parent, d.xquat[s, e, pp], ti.Vector([1.0, 0.0, 0.0, 0.0]))
     jt = d.link_jtype[l]
     q0 = d.link_q0[l]
-    if jt == REVOLUTE:
-        quat = quat_mul(quat, axis_angle_quat(d.link_axis[l], d.qpos[s, e, q0]))
-    elif jt == PRISMATIC:
-        pos = pos + quat_to_mat(quat) @ d.link_axis[l] * d.qpos[s, e, q0]
-    elif jt == FREE:
-        pos = ti.Vector([d.qpos[s, e, q0], d.qpos[s, e, q0 + 1], d.qpos[s, e, q0 + 2]])
-        quat = quat_normalized(ti.Vector([d.qpos[s, e, q0 + 3], d.qpos[s, e, q0 + 4],
-                                          d.qpos[s, e, q0 + 5], d.qpos[s, e, q0 + 6]]))
-    return pos, quat
+    q = qpos_at(d, s, e, q0)
+    axis = d.link_axis[l]
+    frame_pos = parent_pos + mat_vec(quat_to_mat(parent_quat), d.link_pos0[l])
+    frame_quat = quat_mul(parent_quat, d.link_quat0[l])
+    angle = ti.select(jt == REVOLUTE, q, 0.0)
+    slide = ti.select(jt == PRISMATIC, q, 0.0)
+    joint_quat = quat_mul(frame_quat, axis_angle_quat(axis, angle))
+    joint_pos = frame_pos + mat_vec(quat_to_mat(frame_quat), axis) * slide
+    free_pos = ti.Vector([qpos_at(d, s, e, q0 + k) for k in ti.static(range(3))])
+    free_quat = quat_normalized(ti.Vector([qpos_at(d, s, e, q0 + 3 + k) for k in ti.static(range(4))]))
+    is_free = jt == FREE
+    return ti.select(is_free, free_pos, joint_pos), ti.select(is_free, free_quat, joint_quat)
 
 
 @ti.func
 def _link_inertia(d: ti.template(), s, e, l, pos, rot):
     """Spatial inertia (m, h, I about the origin) of link l alone, and its start as composite."""
     m = d.mass[e, l]
-    m0 = d.link_mass0[l]
-    scale = m / m0 if m0 > 0 else 0.0  # a massless link has no inertia either (as in MuJoCo)
-    com = pos + rot @ d.link_com[l]
-    inertia_com = rot @ (d.link_inertia0[l] * scale) @ rot.transpose()
-    eye = ti.Matrix.identity(float, 3)
-    inertia = inertia_com + m * (com.dot(com) * eye - com.outer_product(com))
+    com = pos + mat_vec(rot, d.link_com[l])
+    inertia_com = mat_mul(mat_mul(rot, d.link_inertia0[l] * (m * d.link_inv_mass0[l])), rot.transpose())
+    inertia = inertia_com + m * ((com[0] ** 2 + com[1] ** 2 + com[2] ** 2) * ti.Matrix.identity(float, 3)
+                                 - com.outer_product(com))
     d.cinert_m[s, e, l] = m
     d.cinert_h[s, e, l] = m * com
     d.cinert_i[s, e, l] = inertia
@@ -58,19 +66,18 @@ def _motion_subspace(d: ti.template(), s, e, l, pos, rot):
     jt = d.link_jtype[l]
     dof0 = d.link_dof0[l]
     if jt == REVOLUTE:
-        axis = rot @ d.link_axis[l]
+        axis = mat_vec(rot, d.link_axis[l])
         d.cdof_w[s, e, dof0] = axis
         d.cdof_v[s, e, dof0] = pos.cross(axis)
     elif jt == PRISMATIC:
         d.cdof_w[s, e, dof0] = ti.Vector.zero(float, 3)
-        d.cdof_v[s, e, dof0] = rot @ d.link_axis[l]
+        d.cdof_v[s, e, dof0] = mat_vec(rot, d.link_axis[l])
     elif jt == FREE:
         # MuJoCo's free joint: world-frame translation, then rotation about body-frame axes.
         for k in ti.static(range(3)):
-            unit = ti.Vector.unit(3, k, float)
             axis = ti.Vector([rot[0, k], rot[1, k], rot[2, k]])
             d.cdof_w[s, e, dof0 + k] = ti.Vector.zero(float, 3)
-            d.cdof_v[s, e, dof0 + k] = unit
+            d.cdof_v[s, e, dof0 + k] = ti.Vector.unit(3, k, float)
             d.cdof_w[s, e, dof0 + 3 + k] = axis
             d.cdof_v[s, e, dof0 + 3 + k] = pos.cross(axis)
 

@@ -55,6 +55,11 @@ class RigidModel:
     qpos0: np.ndarray
 
     @property
+    def link_inv_mass0(self):
+        """1 / mass0, 0 for massless links (their inertia is dropped, as MuJoCo does)."""
+        return np.divide(1.0, self.link_mass0, out=np.zeros_like(self.link_mass0), where=self.link_mass0 > 0)
+
+    @property
     def n_links(self):
         return len(self.link_name)
 

@@ -8,6 +8,28 @@ rotational inertia I about the origin (kg·m², 3x3).
 """
 import taichi as ti
 
+# Taichi's reverse mode needs the bodies of serial loops free of re-assigned locals (they go
+# through its autodiff stack, where they have given wrong gradients); its built-in ``@``
+# accumulates into a local, so products here are written as single expressions.
+
+
+@ti.func
+def mat_vec(m, v):
+    """3x3 matrix times 3-vector."""
+    return ti.Vector([m[i, 0] * v[0] + m[i, 1] * v[1] + m[i, 2] * v[2] for i in ti.static(range(3))])
+
+
+@ti.func
+def mat_mul(a, b):
+    """3x3 matrix product."""
+    return ti.Matrix([[a[i, 0] * b[0, j] + a[i, 1] * b[1, j] + a[i, 2] * b[2, j] for j in ti.static(range(3))]
+                      for i in ti.static(range(3))])
+
+
+@ti.func
+def dot3(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
 
 @ti.func
 def quat_mul(a, b):
@@ -28,7 +50,7 @@ def quat_to_mat(q):
 
 @ti.func
 def quat_normalized(q):
-    return q / ti.sqrt(q.dot(q))
+    return q / ti.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
 
 
 @ti.func
@@ -44,7 +66,7 @@ def quat_integrate(q, omega, h):
 
     sin(θ/2)/|ω| is written with a tiny offset under the square root so that its derivative
     stays finite at ω = 0 (Taichi evaluates both sides of a select, and |ω|' is NaN at 0)."""
-    speed = ti.sqrt(omega.dot(omega) + 1e-36)
+    speed = ti.sqrt(dot3(omega, omega) + 1e-36)
     half = 0.5 * h * speed
     s = ti.sin(half) / speed
     rot = ti.Vector([ti.cos(half), s * omega[0], s * omega[1], s * omega[2]])
@@ -66,4 +88,4 @@ def cross_force(aw, av, fn, ff):
 @ti.func
 def inertia_mul(m, h, inertia, w, v):
     """Spatial inertia (m, h, I) times motion (w, v) → momentum force (n, f)."""
-    return inertia @ w + h.cross(v), m * v - h.cross(w)
+    return mat_vec(inertia, w) + h.cross(v), m * v - h.cross(w)

@@ -8,14 +8,14 @@ frames, then runs each stage's gradient kernel backwards, substep by substep.
 import taichi as ti
 
 from .actuation import actuation, smooth_force
-from .dynamics import bias_entry, bias_sweeps, bias_sweeps_env, joint_space, mass_entry
+from .dynamics import bias_entry, bias_sweeps_env, joint_space, link_forces, mass_entry, subtree_sums
 from .integrator import integrate, integrate_link
 from .kinematics import kinematics, kinematics_env
 from .linalg import solve, solve_adjoint, solve_env
 
 # Stage kernels of one substep, in forward order. Reverse mode walks it backwards; the
 # solve's adjoint is hand-written (see linalg.py), every other stage uses Taichi's .grad.
-STAGES = (kinematics, bias_sweeps, joint_space, actuation, solve, integrate)
+STAGES = (kinematics, link_forces, subtree_sums, joint_space, actuation, solve, integrate)
 ADJOINTS = {solve: solve_adjoint}
 
 
