@@ -80,7 +80,9 @@ class Simulator:
         for k, slot in enumerate(self.slots):
             defaults = slot.solver.default_inputs
             params = slot.inputs or defaults
-            slot.inputs = {name: (params[name] if name in slot.solver.persistent_inputs else defaults[name])
+            # parameters keep their values but not their history: a new rollout's graph must
+            # never reach into the previous one (set differentiable parameters after reset())
+            slot.inputs = {name: (params[name].detach() if name in slot.solver.persistent_inputs else defaults[name])
                            for name in defaults}
             state = slot.initial_state if states is None else states[k]
             self.set_state(slot.solver, state)

@@ -14,6 +14,19 @@ from .rotations import quat_to_rotvec, rotvec_to_quat
 _MODES = {"force": (0, "ctrl_force"), "position": (1, "ctrl_pos"), "velocity": (2, "ctrl_vel")}
 
 
+def _replace(table, envs, columns, values):
+    """``table`` (B, W) with ``values`` (len(envs), len(columns)) written at (envs, columns),
+    out of place so autograd sees it. A full overwrite is ``values`` itself: nothing is saved
+    for backward and the previous table drops out of the graph."""
+    columns = np.asarray(columns)
+    if len(envs) == table.shape[0] and np.array_equal(columns, np.arange(table.shape[1])) and \
+            np.array_equal(envs, np.arange(table.shape[0])):
+        return values
+    rows = torch.as_tensor(envs, device=table.device)[:, None]
+    cols = torch.as_tensor(columns, device=table.device)[None, :]
+    return table.index_put((rows, cols), values)
+
+
 class RigidLink:
     """A link: ``name``, ``idx`` (scene-wide), ``idx_local`` (within its entity)."""
 
@@ -171,10 +184,7 @@ class RigidEntity:
 
     def _write(self, columns, envs, values):
         sim = self._sim()
-        state = sim.state(self._solver)
-        rows = torch.as_tensor(envs, device=runtime.device)[:, None]
-        cols = torch.as_tensor(np.asarray(columns), device=runtime.device)[None, :]
-        sim.set_state(self._solver, state.index_put((rows, cols), values))
+        sim.set_state(self._solver, _replace(sim.state(self._solver), envs, columns, values))
 
     def _read_input(self, name, columns, envs_idx):
         envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
@@ -183,9 +193,7 @@ class RigidEntity:
 
     def _write_input(self, name, columns, envs, values):
         sim = self._sim()
-        rows = torch.as_tensor(envs, device=runtime.device)[:, None]
-        cols = torch.as_tensor(np.asarray(columns), device=runtime.device)[None, :]
-        sim.set_input(self._solver, name, sim.inputs(self._solver)[name].index_put((rows, cols), values))
+        sim.set_input(self._solver, name, _replace(sim.inputs(self._solver)[name], envs, columns, values))
 
     def _set_dofs_input(self, name, value, dofs_idx_local, envs_idx, arg):
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
@@ -390,9 +398,9 @@ class RigidEntity:
         envs = self._envs(envs_idx)
         values = self._values(value, len(dofs), envs, arg)
         self._write_input(name, self.dof_start + dofs, envs, values)
-        self._write_input("ctrl_mode", self.dof_start + dofs, envs,
-                          torch.full((len(envs), len(dofs)), float(code), dtype=runtime.tc_float,
-                                     device=runtime.device))
+        current = self._read_input("ctrl_mode", self.dof_start + dofs, None if self.scene.n_envs == 0 else envs)
+        if not bool((current == code).all()):  # a new mode tensor only when the mode changes
+            self._write_input("ctrl_mode", self.dof_start + dofs, envs, torch.full_like(current, float(code)))
 
     def control_dofs_force(self, force, dofs_idx_local=None, envs_idx=None):
         """Apply joint forces (N·m or N) during the next steps, until changed."""

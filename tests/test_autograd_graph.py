@@ -1,0 +1,191 @@
+"""How the differentiable scene behaves as part of torch's graph (SPEC §3): repeated rollouts,
+second backward, resets, torch.autograd.grad / gradcheck, a policy network between steps,
+non-differentiable paths, memory per step and checkpointing."""
+import numpy as np
+import pytest
+import torch
+
+import genesis_lite as gs
+from tests.conftest import asset
+
+T = 20
+
+
+@pytest.fixture
+def pendulum(f64):
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True))
+    robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
+    scene.build()
+    return scene, robot
+
+
+def _final_q_of_mass(scene, robot, mass, steps=T):
+    scene.reset()
+    robot.set_links_mass(mass)
+    robot.set_dofs_position([0.4, -0.3])
+    for _ in range(steps):
+        scene.step()
+    return robot.get_dofs_position()[0]
+
+
+def test_repeated_rollouts_bit_identical_and_fd(pendulum):
+    scene, robot = pendulum
+    m0 = robot.get_links_mass().detach().clone()
+    grads = []
+    for _ in range(20):
+        mass = m0.clone().requires_grad_(True)
+        _final_q_of_mass(scene, robot, mass).backward()
+        grads.append(mass.grad.clone())
+    for g in grads[1:]:
+        assert torch.equal(g, grads[0]), "gradients changed between identical rollouts"
+    direction = torch.tensor([0.0, 1.0, -0.5], dtype=torch.float64)
+    with torch.no_grad():
+        fd = (_final_q_of_mass(scene, robot, m0 + 1e-6 * direction)
+              - _final_q_of_mass(scene, robot, m0 - 1e-6 * direction)) / 2e-6
+    assert abs(float(grads[0] @ direction) - float(fd)) <= 1e-6 * abs(float(fd))
+
+
+def test_second_backward_needs_retain_graph(pendulum):
+    scene, robot = pendulum
+    mass = robot.get_links_mass().detach().clone().requires_grad_(True)
+    loss = _final_q_of_mass(scene, robot, mass)
+    loss.backward(retain_graph=True)
+    first = mass.grad.clone()
+    mass.grad = None
+    loss.backward()
+    assert torch.equal(first, mass.grad)
+    with pytest.raises(RuntimeError, match="second time|freed"):
+        loss.backward()
+
+
+def test_backward_after_reset_raises(pendulum):
+    scene, robot = pendulum
+    mass = robot.get_links_mass().detach().clone().requires_grad_(True)
+    loss = _final_q_of_mass(scene, robot, mass)
+    scene.reset()
+    with pytest.raises(gs.GradientError, match="reset"):
+        loss.backward()
+
+
+def test_autograd_grad_equals_backward(pendulum):
+    scene, robot = pendulum
+    mass = robot.get_links_mass().detach().clone().requires_grad_(True)
+    (grad,) = torch.autograd.grad(_final_q_of_mass(scene, robot, mass), [mass])
+    _final_q_of_mass(scene, robot, mass).backward()
+    assert torch.equal(grad, mass.grad)
+
+
+def test_gradcheck(pendulum):
+    scene, robot = pendulum
+
+    def run(q0, forces, mass):
+        # gradcheck differentiates its first output after evaluating the function again, so
+        # the rollout starts by setting the whole state instead of scene.reset() (which would
+        # close that first graph)
+        robot.set_links_mass(mass)
+        robot.set_dofs_position(q0)
+        robot.set_dofs_velocity(torch.zeros(2, dtype=torch.float64))
+        for t in range(10):
+            robot.control_dofs_force(forces[t])
+            scene.step()
+        return torch.cat([robot.get_dofs_position(), robot.get_dofs_velocity()]).as_subclass(torch.Tensor)
+
+    q0 = torch.tensor([0.3, -0.2], dtype=torch.float64, requires_grad=True)
+    forces = (0.1 * torch.randn(10, 2, dtype=torch.float64, generator=torch.Generator().manual_seed(0)))
+    mass = robot.get_links_mass().detach().clone()
+    mass[0] += 1.0  # the base link is fixed: its mass has no effect, which gradcheck also confirms
+    assert torch.autograd.gradcheck(run, (q0, forces.requires_grad_(True), mass.requires_grad_(True)),
+                                    eps=1e-6, atol=1e-7, rtol=1e-5)
+
+
+def test_policy_network_gradient_matches_fd(pendulum):
+    scene, robot = pendulum
+    torch.manual_seed(0)
+    policy = torch.nn.Sequential(torch.nn.Linear(4, 8), torch.nn.Tanh(), torch.nn.Linear(8, 2)).double()
+
+    def loss_fn():
+        scene.reset()
+        robot.set_dofs_position([0.4, -0.3])
+        for _ in range(T):
+            obs = torch.cat([robot.get_dofs_position(), robot.get_dofs_velocity()])
+            robot.control_dofs_force(policy(obs))
+            scene.step()
+        return (robot.get_dofs_position() ** 2).sum()
+
+    loss_fn().backward()
+    weight = policy[0].weight
+    direction = torch.randn_like(weight)
+    analytic = float((weight.grad * direction).sum())
+    with torch.no_grad():
+        weight += 1e-6 * direction
+        plus = float(loss_fn())
+        weight -= 2e-6 * direction
+        minus = float(loss_fn())
+        weight += 1e-6 * direction
+    numeric = (plus - minus) / 2e-6
+    assert analytic != 0.0 and abs(analytic - numeric) <= 1e-6 * max(abs(numeric), 1e-3)
+
+
+def test_non_differentiable_getter_raises_on_backward(pendulum):
+    scene, robot = pendulum
+    q0 = torch.tensor([0.3, 0.1], dtype=torch.float64, requires_grad=True)
+    scene.reset()
+    robot.set_dofs_position(q0)
+    scene.step()
+    loss = robot.get_mass_mat().sum()
+    with pytest.raises(gs.GradientError, match="get_mass_mat"):
+        loss.backward()
+
+
+def _saved_bytes(scene, robot, steps, interval_scene=None):
+    """Unique bytes torch keeps for backward over a rollout of ``steps`` steps."""
+    storages = {}
+
+    def pack(t):
+        storages[t.untyped_storage().data_ptr()] = t.untyped_storage().nbytes()
+        return t
+
+    forces = torch.zeros(steps, robot.n_dofs, dtype=torch.float64, requires_grad=True)
+    with torch.autograd.graph.saved_tensors_hooks(pack, lambda t: t):
+        scene.reset()
+        robot.set_dofs_position([0.2, 0.1])
+        for t in range(steps):
+            robot.control_dofs_force(forces[t])
+            scene.step()
+        loss = robot.get_dofs_position().sum()
+    return sum(storages.values()), loss
+
+
+@pytest.mark.parametrize("substeps", [1, 4])
+def test_memory_per_step_is_one_state(f64, substeps):
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, substeps=substeps, requires_grad=True))
+    robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
+    scene.build()
+    state_bytes = (robot.n_qs + robot.n_dofs) * 8
+    small, _ = _saved_bytes(scene, robot, 50)
+    large, _ = _saved_bytes(scene, robot, 150)
+    per_step = (large - small) / 100
+    assert 0 < per_step <= 2 * state_bytes, f"{per_step} bytes per step for a {state_bytes}-byte state"
+
+
+def test_checkpointing_bit_identical_and_smaller(f64):
+    grads, per_step = {}, {}
+    for interval in (1, 7):
+        scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True, checkpoint_interval=interval))
+        robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
+        scene.build()
+        forces = torch.linspace(-1, 1, 60 * 2, dtype=torch.float64).reshape(60, 2).requires_grad_(True)
+        mass = robot.get_links_mass().detach().clone().requires_grad_(True)
+        scene.reset()
+        robot.set_links_mass(mass)
+        robot.set_dofs_position([0.2, 0.1])
+        for t in range(60):
+            robot.control_dofs_force(forces[t])
+            scene.step()
+        (robot.get_dofs_position() ** 2).sum().backward()
+        grads[interval] = (forces.grad.clone(), mass.grad.clone())
+        small, _ = _saved_bytes(scene, robot, 35)
+        large, _ = _saved_bytes(scene, robot, 105)
+        per_step[interval] = (large - small) / 70
+    assert torch.equal(grads[1][0], grads[7][0]) and torch.equal(grads[1][1], grads[7][1])
+    assert per_step[7] < per_step[1]

@@ -1,0 +1,143 @@
+"""Gradients of rigid rollouts against central finite differences (float64), and the graph's
+behaviour across backward calls and resets (SPEC §3).
+
+Each check compares the directional derivative g·v of a scalar loss with
+(L(x + εv) − L(x − εv)) / 2ε for a random direction v.
+"""
+import numpy as np
+import pytest
+import torch
+
+import genesis_lite as gs
+from tests.conftest import asset, pybullet
+
+ROBOTS = {"pendulum2": (asset("pendulum2.urdf"), True), "cartpole": (pybullet("cartpole.urdf"), True),
+          "kuka": (pybullet("kuka_iiwa", "model.urdf"), True),
+          "kuka_free": (pybullet("kuka_iiwa", "model_free_base.urdf"), False)}
+KINDS = ("dofs_position", "dofs_velocity", "force", "position_target", "velocity_target", "mass", "damping",
+         "armature", "kp", "kv", "gravity")
+EPS = 1e-6
+_SCENES = {}
+
+
+def _scene(robot_name, n_envs, substeps, checkpoint_interval=1):
+    """One scene per configuration (building is the slow part); reset() makes it fresh."""
+    key = (robot_name, n_envs, substeps, checkpoint_interval, gs.runtime.epoch)
+    if key not in _SCENES:
+        path, fixed = ROBOTS[robot_name]
+        scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, substeps=substeps, requires_grad=True,
+                                                           checkpoint_interval=checkpoint_interval),
+                         rigid_options=gs.options.RigidOptions(enable_joint_limit=False))
+        robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=fixed))
+        scene.build(n_envs=n_envs)
+        _SCENES[key] = (scene, robot)
+    return _SCENES[key]
+
+
+def _batch(n_envs, *shape):
+    return (n_envs, *shape) if n_envs else shape
+
+
+def _nominal(kind, robot, n_envs, horizon, rng):
+    """A nominal value of the input kind (float64 tensor) and a random unit direction."""
+    n = robot.n_dofs
+    values = {
+        "dofs_position": rng.uniform(-0.5, 0.5, _batch(n_envs, n)),
+        "dofs_velocity": rng.uniform(-1, 1, _batch(n_envs, n)),
+        "force": rng.uniform(-2, 2, (horizon, *_batch(n_envs, n))),
+        "position_target": rng.uniform(-0.5, 0.5, (horizon, *_batch(n_envs, n))),
+        "velocity_target": rng.uniform(-1, 1, (horizon, *_batch(n_envs, n))),
+        "mass": robot.get_links_mass().detach().numpy() * rng.uniform(0.8, 1.2, _batch(n_envs, robot.n_links)),
+        "damping": rng.uniform(0.1, 1.0, _batch(n_envs, n)),
+        "armature": rng.uniform(0.01, 0.1, _batch(n_envs, n)),
+        "kp": rng.uniform(5, 15, _batch(n_envs, n)),
+        "kv": rng.uniform(0.2, 1, _batch(n_envs, n)),
+        "gravity": np.array([0.5, -0.3, -9.81]) + np.zeros(_batch(n_envs, 3)),
+        "base_pos": rng.uniform(-1, 1, _batch(n_envs, 3)),
+        "base_quat": rng.normal(size=_batch(n_envs, 4)),
+    }
+    value = torch.tensor(values[kind], dtype=torch.float64)
+    direction = torch.tensor(rng.normal(size=value.shape), dtype=torch.float64)
+    if kind == "mass":  # massless links stay massless (a negative mass is rejected)
+        direction = direction * (value > 0)
+    return value, direction / direction.norm()
+
+
+def _rollout(scene, robot, kind, value, horizon):
+    """Loss of a rollout in which ``kind`` takes ``value``; every other input is fixed."""
+    rng = np.random.default_rng(7)
+    scene.reset()
+    n_envs = scene.n_envs
+    q0 = torch.tensor(rng.uniform(-0.3, 0.3, _batch(n_envs, robot.n_dofs)))
+    qd0 = torch.tensor(rng.uniform(-0.5, 0.5, _batch(n_envs, robot.n_dofs)))
+    if robot.is_free:
+        q0[..., :3] = 0.0
+    robot.set_dofs_position(value if kind == "dofs_position" else q0)
+    robot.set_dofs_velocity(value if kind == "dofs_velocity" else qd0)
+    setters = {"mass": robot.set_links_mass, "damping": robot.set_dofs_damping, "armature": robot.set_dofs_armature,
+               "kp": robot.set_dofs_kp, "kv": robot.set_dofs_kv, "gravity": scene.set_gravity,
+               "base_pos": robot.set_pos, "base_quat": robot.set_quat}
+    if kind in ("position_target", "velocity_target"):  # moderate gains: explicit PD stays stable
+        robot.set_dofs_kp(torch.full(_batch(n_envs, robot.n_dofs), 10.0))
+        robot.set_dofs_kv(torch.full(_batch(n_envs, robot.n_dofs), 0.5))
+    if kind in setters:
+        setters[kind](value)
+    if kind in ("kp", "kv"):  # gains act through a position servo
+        kind, value = "position_target", torch.full((horizon, *_batch(n_envs, robot.n_dofs)), 0.2)
+    controls = {"force": robot.control_dofs_force, "position_target": robot.control_dofs_position,
+                "velocity_target": robot.control_dofs_velocity}
+    dofs = np.arange(6, robot.n_dofs) if robot.is_free and kind == "position_target" else None
+    loss = 0.0
+    for t in range(horizon):
+        if kind in controls:
+            controls[kind](value[t] if dofs is None else value[t][..., dofs], dofs)
+        scene.step()
+        if t == horizon // 2:  # a getter mid-rollout is part of the loss too
+            loss = loss + robot.get_links_pos()[..., -1, :].sin().sum()
+    loss = loss + (robot.get_dofs_position() ** 2).sum() + robot.get_dofs_velocity().cos().sum()
+    return loss + robot.get_links_quat()[..., -1, :].sum() + robot.get_links_vel()[..., -1, :].sum()
+
+
+def _check(robot_name, kind, horizon, substeps=1, n_envs=0, seed=0):
+    scene, robot = _scene(robot_name, n_envs, substeps)
+    value, direction = _nominal(kind, robot, n_envs, horizon, np.random.default_rng(seed))
+    x = value.clone().requires_grad_(True)
+    _rollout(scene, robot, kind, x, horizon).backward()
+    analytic = float((x.grad * direction).sum())
+    with torch.no_grad():
+        plus = float(_rollout(scene, robot, kind, value + EPS * direction, horizon))
+        minus = float(_rollout(scene, robot, kind, value - EPS * direction, horizon))
+    numeric = (plus - minus) / (2 * EPS)
+    err = abs(analytic - numeric) / max(abs(numeric), 1e-3)
+    assert err <= 1e-6, f"{robot_name} {kind} T={horizon}: autodiff {analytic:.10g} vs FD {numeric:.10g} (rel {err:.2g})"
+    assert analytic != 0.0, f"{robot_name} {kind}: zero gradient cannot be checked"
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_pendulum_every_input(f64, kind):
+    _check("pendulum2", kind, horizon=50, substeps=2)
+
+
+@pytest.mark.parametrize("kind", ["force", "mass", "dofs_velocity", "gravity", "kp"])
+def test_pendulum_batched(f64, kind):
+    _check("pendulum2", kind, horizon=20, n_envs=4)
+
+
+@pytest.mark.parametrize("robot_name", ["cartpole", "kuka"])
+@pytest.mark.parametrize("kind", ["dofs_position", "force", "mass", "damping", "armature"])
+def test_robots(f64, robot_name, kind):
+    _check(robot_name, kind, horizon=10)
+
+
+@pytest.mark.parametrize("kind", ["base_pos", "base_quat", "dofs_velocity", "force", "position_target"])
+def test_free_base(f64, kind):
+    _check("kuka_free", kind, horizon=10)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("robot_name", ["pendulum2", "cartpole", "kuka"])
+@pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize("horizon", [10, 50, 100, 200])
+@pytest.mark.parametrize("substeps,n_envs", [(1, 0), (3, 0), (1, 4)])
+def test_full_matrix(f64, robot_name, kind, horizon, substeps, n_envs):
+    _check(robot_name, kind, horizon, substeps, n_envs)
