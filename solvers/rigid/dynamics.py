@@ -1,8 +1,8 @@
 """Velocity and inertia stages: recursive Newton–Euler bias forces and the joint-space mass
 matrix by composite rigid bodies, all in the world frame about the origin (Featherstone).
 
-Each link's quantities are written once per frame; sums over subtrees use ``+=`` only, in
-reverse tree order, so Taichi's reverse mode differentiates them exactly.
+Each link's quantities are written once per frame and read only after, so Taichi's reverse
+mode differentiates the sweeps exactly.
 """
 import taichi as ti
 
@@ -71,21 +71,31 @@ def link_forces_env(d: ti.template(), s, e):
         fn, ff = inertia_mul(m, h, inertia, aw, av)
         pn, pf = inertia_mul(m, h, inertia, vw, vv)
         cn, cf = cross_force(vw, vv, pn, pf)
-        d.cfrc_n[s, e, l], d.cfrc_f[s, e, l] = fn + cn, ff + cf
+        d.lfrc_n[s, e, l], d.lfrc_f[s, e, l] = fn + cn, ff + cf
 
 
 @ti.func
 def subtree_sums_env(d: ti.template(), s, e):
-    """Add each link's force and composite inertia into its parent's, leaves first."""
+    """Composite inertia and net force of each link's subtree, leaves first.
+
+    chain[l] = subtree(l) + chain[next sibling of l], so a link's subtree is its own value plus
+    chain[first child]: every element is written once and read after, with no accumulation
+    (no atomics, and Taichi's reverse mode stays exact). Index L is the empty chain (zero)."""
     for i in range(d.n_links):
         l = d.n_links - 1 - i
-        p = d.link_parent[l]
-        if p >= 0:
-            d.cfrc_n[s, e, p] += d.cfrc_n[s, e, l]
-            d.cfrc_f[s, e, p] += d.cfrc_f[s, e, l]
-            d.crb_m[s, e, p] += d.crb_m[s, e, l]
-            d.crb_h[s, e, p] += d.crb_h[s, e, l]
-            d.crb_i[s, e, p] += d.crb_i[s, e, l]
+        c, n = d.link_first_child[l], d.link_next_sibling[l]
+        m = d.cinert_m[s, e, l] + d.chain_m[s, e, c]
+        h = d.cinert_h[s, e, l] + d.chain_h[s, e, c]
+        inertia = d.cinert_i[s, e, l] + d.chain_i[s, e, c]
+        fn = d.lfrc_n[s, e, l] + d.chain_n[s, e, c]
+        ff = d.lfrc_f[s, e, l] + d.chain_f[s, e, c]
+        d.crb_m[s, e, l], d.crb_h[s, e, l], d.crb_i[s, e, l] = m, h, inertia
+        d.cfrc_n[s, e, l], d.cfrc_f[s, e, l] = fn, ff
+        d.chain_m[s, e, l] = m + d.chain_m[s, e, n]
+        d.chain_h[s, e, l] = h + d.chain_h[s, e, n]
+        d.chain_i[s, e, l] = inertia + d.chain_i[s, e, n]
+        d.chain_n[s, e, l] = fn + d.chain_n[s, e, n]
+        d.chain_f[s, e, l] = ff + d.chain_f[s, e, n]
 
 
 @ti.func

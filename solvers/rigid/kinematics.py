@@ -46,7 +46,7 @@ def _joint_pose(d: ti.template(), s, e, l):
 
 @ti.func
 def _link_inertia(d: ti.template(), s, e, l, pos, rot):
-    """Spatial inertia (m, h, I about the origin) of link l alone, and its start as composite."""
+    """Spatial inertia (m, h, I about the origin) of link l alone."""
     m = d.mass[e, l]
     com = pos + mat_vec(rot, d.link_com[l])
     inertia_com = mat_mul(mat_mul(rot, d.link_inertia0[l] * (m * d.link_inv_mass0[l])), rot.transpose())
@@ -55,9 +55,6 @@ def _link_inertia(d: ti.template(), s, e, l, pos, rot):
     d.cinert_m[s, e, l] = m
     d.cinert_h[s, e, l] = m * com
     d.cinert_i[s, e, l] = inertia
-    d.crb_m[s, e, l] = m
-    d.crb_h[s, e, l] = m * com
-    d.crb_i[s, e, l] = inertia
 
 
 @ti.func

@@ -118,10 +118,16 @@ def read_grads(d: ti.template(), dst: ti.types.ndarray()):
 
 
 @ti.kernel
-def clear_grads(d: ti.template()):
-    for f in ti.static(range(len(d.grad_fields))):
-        for I in ti.grouped(d.grad_fields[f].grad):
-            d.grad_fields[f].grad[I] = 0
+def _clear_grads(d: ti.template(), fields: ti.template()):
+    for f in ti.static(range(len(fields))):
+        for I in ti.grouped(fields[f].grad):
+            fields[f].grad[I] = 0
+
+
+def clear_grads(d):
+    """Zero every gradient field (in groups: Taichi warns when unrolling more than 32)."""
+    for start in range(0, len(d.grad_fields), 32):
+        _clear_grads(d, d.grad_field_groups[start // 32])
 
 
 @ti.kernel
