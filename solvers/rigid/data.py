@@ -117,6 +117,7 @@ class RigidData:
         self.chain_m = self._new((F, B, L + 1), grad=g)
         self.chain_h, self.chain_i = self._new((F, B, L + 1), 3, grad=g), self._new((F, B, L + 1), 3, 3, grad=g)
         self.chain_n, self.chain_f = self._new((F, B, L + 1), 3, grad=g), self._new((F, B, L + 1), 3, grad=g)
+        self.dof_force_n, self.dof_force_f = self._new((F, B, D), 3, grad=g), self._new((F, B, D), 3, grad=g)
         self.mass_mat = self._new((F, B, D, D), grad=g)
         self.qfrc_bias, self.qfrc_smooth = self._new((F, B, D), grad=g), self._new((F, B, D), grad=g)
         self.qacc = self._new((F, B, D), grad=g)

@@ -99,13 +99,18 @@ def subtree_sums_env(d: ti.template(), s, e):
 
 
 @ti.func
-def mass_entry(d: ti.template(), s, e, k):
-    """Mass-matrix pair k: M[i, j] = cdof_i · (composite inertia of link(i)) cdof_j."""
-    i, j = d.pair_i[k], d.pair_j[k]
+def dof_force(d: ti.template(), s, e, i):
+    """F_i = (composite inertia of link(i)) cdof_i: the force moving dof i at unit rate takes."""
     l = d.dof_link[i]
-    fn, ff = inertia_mul(d.crb_m[s, e, l], d.crb_h[s, e, l], d.crb_i[s, e, l], d.cdof_w[s, e, j],
-                         d.cdof_v[s, e, j])
-    value = dot3(d.cdof_w[s, e, i], fn) + dot3(d.cdof_v[s, e, i], ff)
+    fn, ff = inertia_mul(d.crb_m[s, e, l], d.crb_h[s, e, l], d.crb_i[s, e, l], d.cdof_w[s, e, i], d.cdof_v[s, e, i])
+    d.dof_force_n[s, e, i], d.dof_force_f[s, e, i] = fn, ff
+
+
+@ti.func
+def mass_entry(d: ti.template(), s, e, k):
+    """Mass-matrix pair k: M[i, j] = cdof_j · F_i (dof j on the path from dof i to the root)."""
+    i, j = d.pair_i[k], d.pair_j[k]
+    value = dot3(d.cdof_w[s, e, j], d.dof_force_n[s, e, i]) + dot3(d.cdof_v[s, e, j], d.dof_force_f[s, e, i])
     d.mass_mat[s, e, i, j] = value
     if i != j:
         d.mass_mat[s, e, j, i] = value
@@ -138,7 +143,9 @@ def subtree_sums(d: ti.template(), s: ti.i32):
 
 @ti.kernel
 def joint_space(d: ti.template(), s: ti.i32):
-    """Mass matrix and bias force, parallel over (env, pair) and (env, dof)."""
+    """Mass matrix and bias force, parallel over (env, dof) and (env, pair)."""
+    for e, i in ti.ndrange(d.n_batch, d.n_dofs):
+        dof_force(d, s, e, i)
     for e, k in ti.ndrange(d.n_batch, d.n_pairs):
         mass_entry(d, s, e, k)
     for e, i in ti.ndrange(d.n_batch, d.n_dofs):

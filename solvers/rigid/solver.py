@@ -69,18 +69,21 @@ class RigidSolver(Solver):
         return torch.as_tensor(np.concatenate([qpos, qvel], axis=1), dtype=runtime.tc_float, device=runtime.device)
 
     def _check_mass_matrix(self):
-        """A dof with no inertia behind it makes M singular: say which link, at build time."""
-        if self.model.n_dofs == 0:
-            return
-        self.upload_inputs(self.default_inputs)
-        mass = self.mass_matrix()[0].double().cpu().numpy()
-        diag = np.diag(mass) + self.model.dof_armature
-        for i in np.flatnonzero(~(diag > 1e-12)):
-            link = self.model.dof_link[i]
-            entity = self.entity_names[self.model.link_entity[link]]
-            raise AssetError(f"entity '{entity}': link '{self.model.link_name[link]}' moves (dof {i}) but it and its "
-                             f"children have no mass or inertia (mass matrix diagonal {diag[i]:.3g}); expected an "
-                             f"<inertial> with positive mass and inertia, or collision geometry to derive it from")
+        """A dof with no mass or inertia behind it makes M singular: say which link, at build time."""
+        m = self.model
+        subtree_mass = m.link_mass0.copy()
+        subtree_inertia = np.trace(m.link_inertia0, axis1=1, axis2=2) * (m.link_mass0 > 0)
+        for l in reversed(range(m.n_links)):  # children have higher indices than their parent
+            if m.link_parent[l] >= 0:
+                subtree_mass[m.link_parent[l]] += subtree_mass[l]
+                subtree_inertia[m.link_parent[l]] += subtree_inertia[l]
+        for i, link in enumerate(m.dof_link):
+            if subtree_mass[link] > 0 or subtree_inertia[link] > 0 or m.dof_armature[i] > 0:
+                continue
+            entity = self.entity_names[m.link_entity[link]]
+            raise AssetError(f"entity '{entity}': link '{m.link_name[link]}' moves (dof {i}) but it and its children "
+                             f"have no mass or inertia; expected an <inertial> with positive mass, or collision "
+                             f"geometry to derive it from, or armature on the joint")
 
     # -- moving data ------------------------------------------------------------------------
     def _empty(self, width):

@@ -8,7 +8,7 @@ frames, then runs each stage's gradient kernel backwards, substep by substep.
 import taichi as ti
 
 from .actuation import actuation, smooth_force
-from .dynamics import bias_entry, bias_sweeps_env, joint_space, link_forces, mass_entry, subtree_sums
+from .dynamics import bias_entry, bias_sweeps_env, dof_force, joint_space, link_forces, mass_entry, subtree_sums
 from .integrator import integrate, integrate_link
 from .kinematics import kinematics, kinematics_env
 from .linalg import solve, solve_adjoint, solve_env
@@ -29,6 +29,8 @@ def position_stages_env(d: ti.template(), s, e):
     """Kinematics, bias forces and mass matrix of env e at frame s."""
     kinematics_env(d, s, e)
     bias_sweeps_env(d, s, e)
+    for i in range(d.n_dofs):
+        dof_force(d, s, e, i)
     for k in range(d.n_pairs):
         mass_entry(d, s, e, k)
     for i in range(d.n_dofs):
