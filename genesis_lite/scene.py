@@ -80,7 +80,11 @@ class Scene:
             raise SceneStateError("scene.build: the scene has no entity; add one with scene.add_entity()")
         self.n_envs = int(n_envs)
         sim = Simulator(self.sim_options, [self.rigid_solver])
-        sim.build(self.n_envs)
+        try:
+            sim.build(self.n_envs)
+        except Exception:  # e.g. a massless moving link: free the fields allocated so far
+            self.rigid_solver.destroy()
+            raise
         self.sim = sim
         for entity in self.entities:
             entity._on_build()
@@ -142,7 +146,9 @@ def _links_of(morph, material, name):
     """The morph's LinkSpec list, its root joint set from the morph's placement."""
     if isinstance(morph, gm.URDF):
         if not os.path.isfile(morph.file):
-            raise AssetError(f"entity '{name}': URDF file '{morph.file}' not found")
+            # name the argument and what was expected, as every error message does
+            raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.URDF expected an existing URDF file, "
+                             f"got '{morph.file}' (not found; relative paths start at {os.getcwd()})")
         links = urdf.load_urdf(morph.file, entity_name=name, rho=material.rho)
     elif isinstance(morph, gm.Box):
         links = shapes.box_link(morph.size, material.rho)
@@ -153,7 +159,10 @@ def _links_of(morph, material, name):
     elif isinstance(morph, gm.Cylinder):
         links = shapes.cylinder_link(morph.radius, morph.height, material.rho)
     elif isinstance(morph, gm.Mesh):
-        links = shapes.mesh_link(morph.file, morph.scale, material.rho)
+        try:
+            links = shapes.mesh_link(morph.file, morph.scale, material.rho)
+        except AssetError as exc:  # shapes does not know the entity: add it to the message
+            raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.Mesh: {exc}") from exc
     elif isinstance(morph, gm.Plane):
         links = shapes.plane_link()
     else:

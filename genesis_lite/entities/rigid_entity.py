@@ -6,12 +6,14 @@ batch dimension.
 import numpy as np
 import torch
 
-from ..errors import InvalidInputError
+from ..errors import InvalidInputError, SceneStateError
 from ..runtime import runtime
 from ..tensor import wrap
 from .rotations import quat_to_rotvec, rotvec_to_quat
 
 _MODES = {"force": (0, "ctrl_force"), "position": (1, "ctrl_pos"), "velocity": (2, "ctrl_vel")}
+_NDOFS = {"fixed": 0, "revolute": 1, "prismatic": 1, "free": 6}
+_NQS = {"fixed": 0, "revolute": 1, "prismatic": 1, "free": 7}
 
 
 def _replace(table, envs, columns, values):
@@ -73,35 +75,40 @@ class RigidEntity:
         self._specs = link_specs
         self._solver = solver
         self._solver_idx = solver.add_entity(name, link_specs)
-        self.links, self.joints = [], []
+        # The structure is known from the specs as soon as the entity is added (as in Genesis),
+        # so n_dofs & co. and argument checks work before build; the scene-wide offsets
+        # (link_start, dof_start, q_start) only exist after build (see __getattr__).
+        self.n_links = len(link_specs)
+        self.n_dofs = sum(_NDOFS[spec.joint_type] for spec in link_specs)
+        self.n_qs = sum(_NQS[spec.joint_type] for spec in link_specs)
+        self._free = link_specs[0].joint_type == "free"
+        self.links = [RigidLink(self, spec.name, k) for k, spec in enumerate(link_specs)]
+        self.joints, dof, q = [], 0, 0  # same local numbering as _on_build derives from the model
+        for link, spec in zip(self.links, link_specs):
+            nd, nq = _NDOFS[spec.joint_type], _NQS[spec.joint_type]
+            self.joints.append(RigidJoint(self, spec.joint_name or f"{spec.name}_{spec.joint_type}", spec.joint_type,
+                                          link, list(range(dof, dof + nd)), list(range(q, q + nq))))
+            dof, q = dof + nd, q + nq
+
+    _BUILD_ATTRS = ("link_start", "dof_start", "q_start", "_dof_q")
+
+    def __getattr__(self, attr):
+        # only reached when normal lookup fails: a build-time attribute used before build()
+        if attr in RigidEntity._BUILD_ATTRS:
+            raise SceneStateError(f"entity '{self.__dict__.get('name')}': call scene.build() first "
+                                  f"(needed for '{attr}')")
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {attr!r}")
 
     # -- structure --------------------------------------------------------------------------
     def _on_build(self):
+        """Scene-wide offsets of this entity's links, dofs and qs (known once the model is built)."""
         model = self._solver.model
         mine = np.flatnonzero(model.link_entity == self._solver_idx)
-        self.link_start, self.n_links = int(mine[0]), len(mine)
-        dofs = np.flatnonzero(np.isin(model.dof_link, mine))
-        self.dof_start, self.n_dofs = (int(dofs[0]) if len(dofs) else 0), len(dofs)
+        self.link_start = int(mine[0])
+        self.dof_start = int(model.link_dof0[mine[0]])
         self.q_start = int(model.link_q0[mine[0]])
-        self.n_qs = int(sum(len(self._qs_of(k)) for k in range(self.n_links)))
-        self.links = [RigidLink(self, spec.name, k) for k, spec in enumerate(self._specs)]
-        self.joints = []
-        for k, spec in enumerate(self._specs):
-            dof0 = int(model.link_dof0[self.link_start + k]) - self.dof_start
-            ndof = {"fixed": 0, "revolute": 1, "prismatic": 1, "free": 6}[spec.joint_type]
-            name = spec.joint_name or f"{spec.name}_{spec.joint_type}"
-            self.joints.append(RigidJoint(self, name, spec.joint_type, self.links[k],
-                                          list(range(dof0, dof0 + ndof)), self._qs_of(k)))
         # per local dof: its column in the state's qpos (-1 inside a free joint)
         self._dof_q = model.dof_q[self.dof_start: self.dof_start + self.n_dofs]
-        self._free = self._specs[0].joint_type == "free"
-
-    def _qs_of(self, k):
-        model = self._solver.model
-        link = self.link_start + k
-        q0 = int(model.link_q0[link]) - self.q_start
-        nq = {"fixed": 0, "revolute": 1, "prismatic": 1, "free": 7}[self._specs[k].joint_type]
-        return list(range(q0, q0 + nq))
 
     @property
     def n_joints(self):
@@ -153,6 +160,10 @@ class RigidEntity:
         sim = self._sim()
         sim.check_grad_allowed(value, self.name, arg)
         expected = (n_cols,) if self.scene.n_envs == 0 else (len(envs), n_cols)
+        # complex values would silently lose their imaginary part in the float conversion below
+        if (value.is_complex() if isinstance(value, torch.Tensor) else np.iscomplexobj(value)):
+            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be real numbers of shape "
+                                    f"{expected}, got complex values")
         try:
             if isinstance(value, torch.Tensor):
                 tensor = value.as_subclass(torch.Tensor).to(device=runtime.device, dtype=runtime.tc_float)

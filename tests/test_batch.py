@@ -1,0 +1,188 @@
+"""Batched scenes (n_envs > 0): every env evolves exactly as it would alone, getters gain a
+leading batch dimension, and envs_idx restricts setters to the given envs.
+"""
+import numpy as np
+import pytest
+import torch
+
+import genesis_lite as gs
+from tests.conftest import pybullet
+
+KUKA = pybullet("kuka_iiwa", "model.urdf")
+KUKA_FREE = pybullet("kuka_iiwa", "model_free_base.urdf")
+N_ENVS = 64
+N_STEPS = 50
+
+
+def _scene(path, n_envs, fixed=True):
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01))
+    robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=fixed), name="kuka")
+    scene.build(n_envs=n_envs)
+    return scene, robot
+
+
+@pytest.fixture(scope="module")
+def scenes():
+    """(batched scene, its robot, single-env scene, its robot): fixed-base KUKA, float64."""
+    gs.init(precision="64", logging_level="warning")
+    batched, robot_b = _scene(KUKA, N_ENVS)
+    single, robot_s = _scene(KUKA, 0)
+    yield batched, robot_b, single, robot_s
+    batched.destroy()
+    single.destroy()
+
+
+def _inputs(n_dofs):
+    """Random initial states (N_ENVS, n_dofs) ×2 and per-step, per-env forces (N_STEPS, N_ENVS, n_dofs)."""
+    rng = np.random.default_rng(1234)
+    qpos = rng.uniform(-1.5, 1.5, (N_ENVS, n_dofs))
+    qvel = rng.uniform(-2.0, 2.0, (N_ENVS, n_dofs))
+    force = rng.normal(0.0, 20.0, (N_STEPS, N_ENVS, n_dofs))
+    as_t = lambda a: torch.as_tensor(a, dtype=gs.tc_float, device=gs.device)  # noqa: E731
+    return as_t(qpos), as_t(qvel), as_t(force)
+
+
+def test_batch_equals_single_envs_bitwise(f64, scenes):
+    batched, robot_b, single, robot_s = scenes
+    qpos, qvel, force = _inputs(robot_b.n_dofs)
+
+    batched.reset()
+    robot_b.set_dofs_position(qpos)
+    robot_b.set_dofs_velocity(qvel)
+    traj_b = [torch.cat([robot_b.get_dofs_position(), robot_b.get_dofs_velocity()], dim=-1)]
+    for k in range(N_STEPS):
+        robot_b.control_dofs_force(force[k])
+        batched.step()
+        traj_b.append(torch.cat([robot_b.get_dofs_position(), robot_b.get_dofs_velocity()], dim=-1))
+    traj_b = torch.stack(traj_b, dim=1)  # (N_ENVS, N_STEPS + 1, 2 n_dofs)
+    assert traj_b.shape == (N_ENVS, N_STEPS + 1, 2 * robot_b.n_dofs)
+    assert torch.isfinite(traj_b).all()
+    # envs really differ (otherwise comparing them would prove little)
+    assert (traj_b[1:, -1] != traj_b[0, -1]).any(dim=-1).all()
+
+    # the same rollouts, one env at a time, in an unbatched scene (reset between them)
+    for e in range(N_ENVS):
+        single.reset()
+        robot_s.set_dofs_position(qpos[e])
+        robot_s.set_dofs_velocity(qvel[e])
+        traj = [torch.cat([robot_s.get_dofs_position(), robot_s.get_dofs_velocity()])]
+        for k in range(N_STEPS):
+            robot_s.control_dofs_force(force[k, e])
+            single.step()
+            traj.append(torch.cat([robot_s.get_dofs_position(), robot_s.get_dofs_velocity()]))
+        traj = torch.stack(traj)
+        if not torch.equal(traj, traj_b[e]):
+            diff = (traj - traj_b[e]).abs()
+            step = int(torch.nonzero(diff.amax(dim=1))[0, 0])
+            pytest.fail(f"env {e}: batched trajectory differs from the single-env one from step {step} on "
+                        f"(max |diff| {diff.max().item():.3g})")
+    # the forces mattered: without them env N_ENVS - 1 ends elsewhere
+    single.reset()
+    robot_s.set_dofs_position(qpos[-1])
+    robot_s.set_dofs_velocity(qvel[-1])
+    for _ in range(N_STEPS):
+        single.step()
+    assert (robot_s.get_dofs_position() - traj_b[-1, -1, :robot_s.n_dofs]).abs().max() > 1e-3
+
+
+def test_getters_have_batch_dim(f64, scenes):
+    batched, robot, _, _ = scenes
+    batched.reset()
+    B, D, L = N_ENVS, robot.n_dofs, robot.n_links
+    shapes = {
+        "get_dofs_position": (B, D), "get_dofs_velocity": (B, D), "get_qpos": (B, robot.n_qs),
+        "get_links_pos": (B, L, 3), "get_links_quat": (B, L, 4), "get_links_vel": (B, L, 3),
+        "get_links_ang": (B, L, 3), "get_pos": (B, 3), "get_quat": (B, 4), "get_vel": (B, 3), "get_ang": (B, 3),
+        "get_links_mass": (B, L), "get_mass": (B,), "get_mass_mat": (B, D, D), "get_dofs_kp": (B, D),
+        "get_dofs_kv": (B, D), "get_dofs_damping": (B, D), "get_dofs_armature": (B, D),
+        "get_dofs_control_force": (B, D),
+    }
+    for name, shape in shapes.items():
+        value = getattr(robot, name)()
+        assert tuple(value.shape) == shape, f"{name}: {tuple(value.shape)} != {shape}"
+        assert isinstance(value, gs.Tensor) and value.dtype == torch.float64
+    lo, hi = robot.get_dofs_force_range()
+    assert lo.shape == hi.shape == (B, D)
+    assert robot.get_link("lbr_iiwa_link_7").get_pos().shape == (B, 3)
+    assert batched.get_gravity().shape == (B, 3)
+    # a subset of envs: leading dim = len(envs_idx), in the order given
+    envs = [5, 2, 63]
+    assert robot.get_dofs_position(envs_idx=envs).shape == (3, D)
+    assert robot.get_links_pos(envs_idx=envs).shape == (3, L, 3)
+    assert robot.get_mass_mat(envs_idx=envs).shape == (3, D, D)
+    assert robot.get_dofs_position(dofs_idx_local=[1, 3], envs_idx=[7]).shape == (1, 2)
+
+
+def test_envs_idx_setters_change_only_those_envs(f64, scenes):
+    batched, robot, _, _ = scenes
+    batched.reset()
+    B, D = N_ENVS, robot.n_dofs
+    rng = np.random.default_rng(7)
+    base_q = torch.as_tensor(rng.uniform(-1, 1, (B, D)))
+    robot.set_dofs_position(base_q)
+    envs = torch.tensor([3, 17, 40])
+    others = torch.ones(B, dtype=torch.bool)
+    others[envs] = False
+
+    def check(getter, new, label):
+        now = getter()
+        assert torch.equal(now[envs], new), f"{label}: the chosen envs did not get the new values"
+        return now[others]
+
+    # state
+    before_q, before_v = robot.get_dofs_position().clone(), robot.get_dofs_velocity().clone()
+    new_q = torch.as_tensor(rng.uniform(-1, 1, (3, D)))
+    robot.set_dofs_position(new_q, envs_idx=envs)
+    assert torch.equal(check(robot.get_dofs_position, new_q, "position"), before_q[others])
+    new_v = torch.as_tensor(rng.uniform(-1, 1, (3, 2)))
+    robot.set_dofs_velocity(new_v, dofs_idx_local=[0, 6], envs_idx=envs)
+    now_v = robot.get_dofs_velocity()
+    assert torch.equal(now_v[envs][:, [0, 6]], new_v)
+    assert torch.equal(now_v[envs][:, 1:6], before_v[envs][:, 1:6])
+    assert torch.equal(now_v[others], before_v[others])
+    # parameters and controls
+    params = {"set_links_mass": "get_links_mass", "set_dofs_damping": "get_dofs_damping", "set_dofs_kp": "get_dofs_kp"}
+    saved = {setter: getattr(robot, getter)().clone() for setter, getter in params.items()}
+    try:
+        for setter, getter, cols in (("set_links_mass", "get_links_mass", robot.n_links),
+                                     ("set_dofs_damping", "get_dofs_damping", D), ("set_dofs_kp", "get_dofs_kp", D),
+                                     ("control_dofs_force", "get_dofs_control_force", D)):
+            before = getattr(robot, getter)().clone()
+            new = torch.as_tensor(rng.uniform(0.5, 2.0, (3, cols)))
+            getattr(robot, setter)(new, envs_idx=envs)
+            assert torch.equal(check(getattr(robot, getter), new, setter), before[others]), setter
+        # one step later the untouched envs are exactly where they are without any of those calls
+        batched.step()
+        after = robot.get_dofs_position()[others]
+        batched.reset()  # clears controls; parameters (mass, damping, kp) persist, for the chosen envs only
+        robot.set_dofs_position(base_q)
+        batched.step()
+        assert torch.equal(robot.get_dofs_position()[others], after)
+    finally:  # parameters persist across reset: give the shared scene its defaults back
+        for setter, value in saved.items():
+            getattr(robot, setter)(value)
+
+
+def test_free_base_envs_idx(f64):
+    scene, robot = _scene(KUKA_FREE, 4, fixed=False)
+    try:
+        assert robot.is_free and robot.n_dofs == 13 and robot.n_qs == 14
+        before_dofs, before_qpos = robot.get_dofs_position().clone(), robot.get_qpos().clone()
+        envs = [1, 3]
+        new = torch.tensor([[0.1, 0.2, 0.3, 0.0, 0.0, 0.5], [-0.1, 0.0, 0.4, 0.3, 0.0, 0.0]], dtype=torch.float64)
+        robot.set_dofs_position(new, dofs_idx_local=list(range(6)), envs_idx=envs)
+        after = robot.get_dofs_position()
+        assert torch.allclose(after[envs, :6], new, atol=1e-12)
+        assert torch.equal(after[envs, 6:], before_dofs[envs, 6:])
+        assert torch.equal(robot.get_qpos()[[0, 2]], before_qpos[[0, 2]])
+        robot.set_pos(torch.tensor([[1.0, 2.0, 3.0]], dtype=torch.float64), envs_idx=[2])
+        assert torch.equal(robot.get_pos()[2], torch.tensor([1.0, 2.0, 3.0], dtype=torch.float64))
+        assert torch.equal(robot.get_qpos()[0], before_qpos[0])
+        quat = torch.tensor([[0.0, 1.0, 0.0, 0.0]], dtype=torch.float64)
+        robot.set_quat(quat, envs_idx=[0])
+        assert torch.allclose(robot.get_quat()[0], quat[0], atol=1e-12)
+        assert torch.equal(robot.get_qpos()[2, :3], torch.tensor([1.0, 2.0, 3.0], dtype=torch.float64))
+        scene.step()
+        assert torch.isfinite(robot.get_qpos()).all()
+    finally:
+        scene.destroy()

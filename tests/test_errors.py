@@ -1,0 +1,243 @@
+"""Bad input raises a gs.GenesisException subclass whose message names the entity, the argument,
+what was expected and what was given (SPEC §5). One test per kind of mistake.
+
+Most tests share one built scene (a 2-dof pendulum named "pendulum"): building compiles
+Taichi kernels, which takes seconds.
+"""
+import math
+import os
+
+import numpy as np
+import pytest
+import torch
+
+import genesis_lite as gs
+from tests.conftest import asset
+
+ENTITY = "pendulum"
+INERTIAL = '<inertial><mass value="1"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial>'
+LINK_A = f'<link name="a">{INERTIAL}</link>'
+LINK_B = f'<link name="b">{INERTIAL}</link>'
+
+
+def joint(name, jtype):
+    return (f'<joint name="{name}" type="{jtype}"><parent link="a"/><child link="b"/>'
+            f'<axis xyz="0 0 1"/></joint>')
+
+
+def write_urdf(tmp_path, body, name="robot.urdf"):
+    path = tmp_path / name
+    path.write_text(f'<?xml version="1.0"?>\n<robot name="t">\n{body}\n</robot>\n')
+    return str(path)
+
+
+def raises(cls, fn, *substrings):
+    """Call fn, expect `cls` (a GenesisException subclass); every substring must be in the message."""
+    with pytest.raises(cls) as info:
+        fn()
+    assert isinstance(info.value, gs.GenesisException)
+    message = str(info.value)
+    for part in substrings:
+        assert part in message, f"{part!r} missing from the message: {message}"
+    return message
+
+
+@pytest.fixture(scope="module")
+def built():
+    """(scene, robot): assets/pendulum2.urdf (2 revolute dofs, fixed base) built with n_envs=0."""
+    gs.init(precision="64", logging_level="warning")
+    scene = gs.Scene()
+    robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True), name=ENTITY)
+    scene.build()
+    yield scene, robot
+    scene.destroy()
+
+
+# ------------------------------------------------------------------ assets
+
+
+def test_missing_urdf_file(f64, tmp_path):
+    scene = gs.Scene()
+    path = str(tmp_path / "nope.urdf")
+    raises(gs.AssetError, lambda: scene.add_entity(gs.morphs.URDF(file=path), name="ghost"),
+           "entity 'ghost'", "'file'", "expected an existing URDF file", path)
+
+
+def test_malformed_xml(f64, tmp_path):
+    path = write_urdf(tmp_path, LINK_A + '<link name="b">')  # <link> never closed
+    scene = gs.Scene()
+    raises(gs.AssetError, lambda: scene.add_entity(gs.morphs.URDF(file=path, fixed=True), name="bot"),
+           "entity 'bot'", path, "malformed XML")
+
+
+def test_unknown_joint_type(f64, tmp_path):
+    path = write_urdf(tmp_path, LINK_A + LINK_B + joint("slider", "planar"))
+    scene = gs.Scene()
+    raises(gs.AssetError, lambda: scene.add_entity(gs.morphs.URDF(file=path, fixed=True), name="bot"),
+           "entity 'bot'", path, "joint 'slider'", "'planar'", "supported types are", "revolute", "prismatic")
+
+
+def test_missing_mesh_in_urdf(f64, tmp_path):
+    path = write_urdf(tmp_path, '<link name="a"><collision><geometry><mesh filename="meshes/missing.stl"/>'
+                                '</geometry></collision></link>')
+    scene = gs.Scene()
+    raises(gs.AssetError, lambda: scene.add_entity(gs.morphs.URDF(file=path, fixed=True), name="bot"),
+           "entity 'bot'", "link 'a'", "meshes/missing.stl", "not found",
+           os.path.join(str(tmp_path), "meshes", "missing.stl"))  # where it looked
+
+
+def test_missing_mesh_morph(f64, tmp_path):
+    path = str(tmp_path / "missing.obj")
+    scene = gs.Scene()
+    raises(gs.AssetError, lambda: scene.add_entity(gs.morphs.Mesh(file=path), name="blob"),
+           "entity 'blob'", "'file'", path, "does not exist")
+
+
+def test_moving_massless_link_raises_at_build(f64, tmp_path):
+    path = write_urdf(tmp_path, LINK_A + '<link name="b"/>' + joint("hinge", "revolute"))
+    scene = gs.Scene()
+    scene.add_entity(gs.morphs.URDF(file=path, fixed=True), name="bot")  # loading is fine...
+    try:
+        raises(gs.AssetError, scene.build, "entity 'bot'", "link 'b'", "no mass or inertia", "expected")
+        assert not scene.is_built
+        raises(gs.SceneStateError, scene.step, "build()")
+    finally:
+        scene.destroy()
+
+
+# ------------------------------------------------------------------ scene lifecycle
+
+
+def test_step_before_build(f64):
+    scene = gs.Scene()
+    scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True), name=ENTITY)
+    raises(gs.SceneStateError, scene.step, "scene.step", "build()")
+
+
+def test_setter_before_build(f64):
+    scene = gs.Scene()
+    robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True), name=ENTITY)
+    assert (robot.n_dofs, robot.n_links, robot.n_qs) == (2, 3, 2)  # the structure is known at add time
+    assert robot.get_joint("joint2").dofs_idx_local == [1]
+    raises(gs.SceneStateError, lambda: robot.set_dofs_position([0.1, 0.2]), f"entity '{ENTITY}'", "build()")
+    raises(gs.SceneStateError, lambda: robot.get_links_mass(), f"entity '{ENTITY}'", "build()")
+    raises(gs.SceneStateError, lambda: robot.get_dofs_position(), f"entity '{ENTITY}'", "build()")
+
+
+def test_build_twice(f64, built):
+    scene, _ = built
+    raises(gs.SceneStateError, scene.build, "scene.build", "already built")
+
+
+def test_add_entity_after_build(f64, built):
+    scene, _ = built
+    raises(gs.SceneStateError, lambda: scene.add_entity(gs.morphs.Box(), name="late"),
+           "scene.add_entity", "already built", "before build()")
+
+
+# ------------------------------------------------------------------ names and indices
+
+
+def test_unknown_link_name(f64, built):
+    _, robot = built
+    raises(gs.InvalidInputError, lambda: robot.get_link("hand"),
+           f"entity '{ENTITY}'", "'name'", "'base'", "'link1'", "'link2'", "'hand'")
+
+
+def test_unknown_joint_name(f64, built):
+    _, robot = built
+    raises(gs.InvalidInputError, lambda: robot.get_joint("elbow"),
+           f"entity '{ENTITY}'", "'name'", "'joint1'", "'joint2'", "'elbow'")
+
+
+def test_dofs_idx_local_out_of_range(f64, built):
+    _, robot = built
+    raises(gs.InvalidInputError, lambda: robot.set_dofs_position([1.0], dofs_idx_local=[5]),
+           f"entity '{ENTITY}'", "'dofs_idx_local'", "[0, 2)", "[5]")
+    raises(gs.InvalidInputError, lambda: robot.get_dofs_velocity(dofs_idx_local=[-1]),
+           "'dofs_idx_local'", "[0, 2)", "[-1]")
+    raises(gs.InvalidInputError, lambda: robot.control_dofs_force([1.0], dofs_idx_local=[0.5]),
+           "'dofs_idx_local'", "integers", "[0.5]")
+
+
+def test_envs_idx_without_batch(f64, built):
+    _, robot = built
+    raises(gs.InvalidInputError, lambda: robot.set_dofs_position([0.1, 0.2], envs_idx=[0]),
+           f"entity '{ENTITY}'", "'envs_idx'", "None", "n_envs=0", "[0]")
+    raises(gs.InvalidInputError, lambda: robot.get_dofs_position(envs_idx=[0]), "'envs_idx'", "n_envs=0")
+
+
+# ------------------------------------------------------------------ values
+
+
+def test_wrong_shape(f64, built):
+    _, robot = built
+    before = robot.get_dofs_position().clone()
+    raises(gs.InvalidInputError, lambda: robot.set_dofs_position([1.0, 2.0, 3.0]),
+           f"entity '{ENTITY}'", "'position'", "(2,)", "(3,)")
+    raises(gs.InvalidInputError, lambda: robot.control_dofs_force(torch.zeros(1, 2)),
+           f"entity '{ENTITY}'", "'force'", "(2,)", "(1, 2)")
+    assert torch.equal(robot.get_dofs_position(), before)  # a rejected call changes nothing
+
+
+def test_non_numeric_and_complex_values(f64, built):
+    _, robot = built
+    raises(gs.InvalidInputError, lambda: robot.set_dofs_position(["a", "b"]),
+           f"entity '{ENTITY}'", "'position'", "(2,)")
+    raises(gs.InvalidInputError, lambda: robot.set_dofs_velocity(torch.zeros(2, dtype=torch.complex64)),
+           f"entity '{ENTITY}'", "'velocity'", "real", "complex")
+
+
+def test_nan_input(f64, built):
+    _, robot = built
+    before = robot.get_dofs_position().clone()
+    raises(gs.InvalidInputError, lambda: robot.set_dofs_position([0.1, math.nan]),
+           f"entity '{ENTITY}'", "'position'", "finite", "nan")
+    raises(gs.InvalidInputError, lambda: robot.set_dofs_velocity(torch.tensor([math.inf, 0.0])),
+           f"entity '{ENTITY}'", "'velocity'", "finite", "inf")
+    raises(gs.InvalidInputError, lambda: robot.control_dofs_position(np.array([np.nan, 0.0])),
+           f"entity '{ENTITY}'", "'position'", "finite")
+    assert torch.equal(robot.get_dofs_position(), before)
+
+
+def test_negative_mass(f64, built):
+    _, robot = built
+    before = robot.get_links_mass().clone()
+    raises(gs.InvalidInputError, lambda: robot.set_links_mass([-1.0], links_idx_local=[1]),
+           f"entity '{ENTITY}'", "'mass'", "≥ 0", "-1")
+    assert torch.equal(robot.get_links_mass(), before)
+
+
+def test_requires_grad_tensor_without_requires_grad(f64, built):
+    _, robot = built
+    target = torch.zeros(2, dtype=torch.float64, requires_grad=True)
+    raises(gs.GradientError, lambda: robot.set_dofs_position(target),
+           f"entity '{ENTITY}'", "'position'", "requires grad", "SimOptions(requires_grad=True)")
+    raises(gs.GradientError, lambda: robot.control_dofs_force(target * 2.0),
+           f"entity '{ENTITY}'", "'force'", "SimOptions(requires_grad=True)")
+    robot.set_dofs_position(target.detach())  # detaching is the other way out
+
+
+def test_set_pos_on_fixed_base(f64, built):
+    _, robot = built
+    raises(gs.InvalidInputError, lambda: robot.set_pos([0.0, 0.0, 1.0]), f"entity '{ENTITY}'", "set_pos",
+           "free base", "fixed")
+    raises(gs.InvalidInputError, lambda: robot.set_quat([1.0, 0.0, 0.0, 0.0]), f"entity '{ENTITY}'",
+           "set_quat", "free base", "fixed")
+
+
+@pytest.mark.parametrize("kwargs, arg, given", [
+    ({"dt": -0.01}, "'dt'", "-0.01"),
+    ({"dt": 0.0}, "'dt'", "0.0"),
+    ({"dt": math.nan}, "'dt'", "nan"),
+    ({"substeps": 0}, "'substeps'", "0"),
+    ({"substeps": 2.5}, "'substeps'", "2.5"),
+    ({"gravity": (0.0, -9.81)}, "'gravity'", "-9.81"),
+], ids=["dt_negative", "dt_zero", "dt_nan", "substeps_zero", "substeps_fraction", "gravity_shape"])
+def test_invalid_sim_options(f64, kwargs, arg, given):
+    raises(gs.InvalidInputError, lambda: gs.options.SimOptions(**kwargs), "SimOptions", arg, "must be", given)
+
+
+def test_invalid_options_object(f64):
+    raises(gs.InvalidInputError, lambda: gs.Scene(sim_options={"dt": 0.01}), "'sim_options'", "SimOptions",
+           "dict")
