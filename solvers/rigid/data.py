@@ -77,6 +77,7 @@ class RigidData:
         self.link_axis, self.link_com = self._new((L,), 3), self._new((L,), 3)
         self.link_inertia0, self.link_inv_mass0 = self._new((L,), 3, 3), self._new((L,))
         self.dof_link, self.dof_q = self._new((D,), dtype=i32), self._new((D,), dtype=i32)
+        self.dof_parent = self._new((D,), dtype=i32)
         self.dof_lower, self.dof_upper = self._new((D,)), self._new((D,))
         self.pair_i, self.pair_j = self._new((P,), dtype=i32), self._new((P,), dtype=i32)
         # substep h (s), limit stiffness (1/s²) and damping (1/s): runtime values, so a new dt
@@ -121,7 +122,7 @@ class RigidData:
         self.mass_mat = self._new((F, B, D, D), grad=g)
         self.qfrc_bias, self.qfrc_smooth = self._new((F, B, D), grad=g), self._new((F, B, D), grad=g)
         self.qacc = self._new((F, B, D), grad=g)
-        self.chol = self._new((F, B, D, D))  # Cholesky factor of M + diag(armature + h·damping)
+        self.factor = self._new((F, B, D, D))  # LᵀDL factor of M + diag(armature + h·damping)
         self.nonfinite = self._new((1,), dtype=ti.i32)  # set by the NaN check
 
     def width(self, name):
@@ -131,7 +132,7 @@ class RigidData:
     def _fill_model(self, model):
         f = runtime.np_float
         for name in ("link_parent", "link_jtype", "link_dof0", "link_q0", "link_first_child", "link_next_sibling",
-                     "dof_link", "dof_q"):
+                     "dof_link", "dof_q", "dof_parent"):
             values = getattr(model, name)
             if len(values):
                 getattr(self, name).from_numpy(values.astype(np.int32))

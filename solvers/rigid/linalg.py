@@ -1,43 +1,54 @@
 """Acceleration stage: qacc = A⁻¹ qfrc_smooth with A = M + diag(armature + h·damping).
 
 The h·damping term makes joint damping implicit, as MuJoCo's Euler integrator does. A is
-factored densely (Cholesky, A = L Lᵀ) per env. Taichi's reverse mode gives wrong gradients for
-factorisations (TAICHI_NOTES.md), so the adjoint is written by hand: with y = A⁻ᵀ q̄acc,
-f̄ += y and Ā −= y qaccᵀ (one more solve with the stored factor).
+factored as A = Lᵀ D L along the dof tree (Featherstone's LTDL): L[k, i] is non-zero only for
+dofs i on the path from k to the root, so there is no fill-in, the cost is Σ depth², and
+separate bodies never mix (a NaN in one stays there). Taichi's reverse mode gives wrong
+gradients for factorisations (TAICHI_NOTES.md), so the adjoint is written by hand: with
+y = A⁻¹ q̄acc (A is symmetric), f̄ += y and Ā −= y qaccᵀ — one more solve with the stored factor.
 """
 import taichi as ti
 
 
 @ti.func
 def _factor(d: ti.template(), s, e):
+    """factor[s, e] ← D (diagonal) and L (strictly lower, on the dof tree) of A."""
     h = d.consts[0]
-    for j in range(d.n_dofs):
-        diag = d.mass_mat[s, e, j, j] + d.armature[e, j] + h * d.damping[e, j]
-        for k in range(j):
-            diag -= d.chol[s, e, j, k] ** 2
-        pivot = ti.sqrt(diag)
-        d.chol[s, e, j, j] = pivot
-        for i in range(j + 1, d.n_dofs):
-            value = d.mass_mat[s, e, i, j]
-            for k in range(j):
-                value -= d.chol[s, e, i, k] * d.chol[s, e, j, k]
-            d.chol[s, e, i, j] = value / pivot
+    for k in range(d.n_dofs):
+        j = k
+        while j != -1:
+            d.factor[s, e, k, j] = d.mass_mat[s, e, k, j]
+            j = d.dof_parent[j]
+        d.factor[s, e, k, k] += d.armature[e, k] + h * d.damping[e, k]
+    for r in range(d.n_dofs):
+        k = d.n_dofs - 1 - r
+        i = d.dof_parent[k]
+        while i != -1:
+            ratio = d.factor[s, e, k, i] / d.factor[s, e, k, k]
+            j = i
+            while j != -1:
+                d.factor[s, e, i, j] -= ratio * d.factor[s, e, k, j]
+                j = d.dof_parent[j]
+            d.factor[s, e, k, i] = ratio
+            i = d.dof_parent[i]
 
 
 @ti.func
 def _solve_in_place(d: ti.template(), s, e, x: ti.template()):
-    """Overwrite x[s, e, :] (holding b) with A⁻¹ b using the stored factor."""
-    for i in range(d.n_dofs):
-        value = x[s, e, i]
-        for k in range(i):
-            value -= d.chol[s, e, i, k] * x[s, e, k]
-        x[s, e, i] = value / d.chol[s, e, i, i]
+    """Overwrite x[s, e, :] (holding b) with A⁻¹ b: solve Lᵀ, then D, then L."""
     for r in range(d.n_dofs):
-        i = d.n_dofs - 1 - r
-        value = x[s, e, i]
-        for k in range(i + 1, d.n_dofs):
-            value -= d.chol[s, e, k, i] * x[s, e, k]
-        x[s, e, i] = value / d.chol[s, e, i, i]
+        k = d.n_dofs - 1 - r
+        i = d.dof_parent[k]
+        while i != -1:
+            x[s, e, i] -= d.factor[s, e, k, i] * x[s, e, k]
+            i = d.dof_parent[i]
+    for k in range(d.n_dofs):
+        x[s, e, k] /= d.factor[s, e, k, k]
+    for k in range(d.n_dofs):
+        i = d.dof_parent[k]
+        while i != -1:
+            x[s, e, k] -= d.factor[s, e, k, i] * x[s, e, i]
+            i = d.dof_parent[i]
 
 
 @ti.func
@@ -64,7 +75,10 @@ def solve_adjoint(d: ti.template(), s: ti.i32):
         _solve_in_place(d, s, e, d.qfrc_smooth.grad)
         for i in range(d.n_dofs):
             y = d.qfrc_smooth.grad[s, e, i]
-            for j in range(d.n_dofs):
-                d.mass_mat.grad[s, e, i, j] -= y * d.qacc[s, e, j]
+            j = i  # only the structural entries of M (on the dof tree) are inputs of the solve
+            while j != -1:
+                d.mass_mat.grad[s, e, i, j] -= y * d.qacc[s, e, j] + (d.qfrc_smooth.grad[s, e, j] * d.qacc[s, e, i]
+                                                                      if j != i else 0.0)
+                j = d.dof_parent[j]
             d.armature.grad[e, i] -= y * d.qacc[s, e, i]
             d.damping.grad[e, i] -= h * y * d.qacc[s, e, i]

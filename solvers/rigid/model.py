@@ -81,6 +81,24 @@ class RigidModel:
         return nxt
 
     @property
+    def dof_parent(self):
+        """(D,) the dof just above each dof on its path to the root (-1: none). The mass matrix's
+        non-zeros follow this tree, so factoring along it creates no fill-in."""
+        parent = np.full(self.n_dofs, -1, dtype=np.int32)
+        last_dof = {}  # link → its last dof
+        for i, l in enumerate(self.dof_link):
+            last_dof[int(l)] = i
+        for i, l in enumerate(self.dof_link):
+            if i > self.link_dof0[l]:
+                parent[i] = i - 1
+                continue
+            ancestor = self.link_parent[l]
+            while ancestor >= 0 and int(ancestor) not in last_dof:
+                ancestor = self.link_parent[ancestor]
+            parent[i] = last_dof[int(ancestor)] if ancestor >= 0 else -1
+        return parent
+
+    @property
     def n_links(self):
         return len(self.link_name)
 
