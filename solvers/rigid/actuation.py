@@ -34,9 +34,3 @@ def smooth_force(d: ti.template(), s, e, i):
         if above > 0:
             force -= inertia * ti.max(stiffness * above + damping * qd, 0.0)
     d.qfrc_smooth[s, e, i] = force - d.qfrc_bias[s, e, i]
-
-
-@ti.kernel
-def actuation(d: ti.template(), s: ti.i32):
-    for e, i in ti.ndrange(d.n_batch, d.n_dofs):
-        smooth_force(d, s, e, i)

@@ -113,7 +113,7 @@ class RigidData:
         self.cacc_w, self.cacc_v = self._new((F, B, L), 3, grad=g), self._new((F, B, L), 3, grad=g)
         self.cfrc_n, self.cfrc_f = self._new((F, B, L), 3, grad=g), self._new((F, B, L), 3, grad=g)
         self.lfrc_n, self.lfrc_f = self._new((F, B, L), 3, grad=g), self._new((F, B, L), 3, grad=g)
-        # subtree sums over a link and its younger siblings (see dynamics.subtree_sums); slot L
+        # subtree sums over a link and its younger siblings (see dynamics.subtree_sum); slot L
         # stands for "no such link" and stays zero
         self.chain_m = self._new((F, B, L + 1), grad=g)
         self.chain_h, self.chain_i = self._new((F, B, L + 1), 3, grad=g), self._new((F, B, L + 1), 3, 3, grad=g)

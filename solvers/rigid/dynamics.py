@@ -61,41 +61,38 @@ def _link_motion(d: ti.template(), s, e, l):
 
 
 @ti.func
-def link_forces_env(d: ti.template(), s, e):
-    """cvel, cacc and the net force each link needs (f = I·a + v ×* I·v), in tree order."""
-    for l in range(d.n_links):
-        vw, vv, aw, av = _link_motion(d, s, e, l)
-        d.cvel_w[s, e, l], d.cvel_v[s, e, l] = vw, vv
-        d.cacc_w[s, e, l], d.cacc_v[s, e, l] = aw, av
-        m, h, inertia = d.cinert_m[s, e, l], d.cinert_h[s, e, l], d.cinert_i[s, e, l]
-        fn, ff = inertia_mul(m, h, inertia, aw, av)
-        pn, pf = inertia_mul(m, h, inertia, vw, vv)
-        cn, cf = cross_force(vw, vv, pn, pf)
-        d.lfrc_n[s, e, l], d.lfrc_f[s, e, l] = fn + cn, ff + cf
+def link_forces(d: ti.template(), s, e, l):
+    """cvel, cacc and the net force link l needs (f = I·a + v ×* I·v); parent first."""
+    vw, vv, aw, av = _link_motion(d, s, e, l)
+    d.cvel_w[s, e, l], d.cvel_v[s, e, l] = vw, vv
+    d.cacc_w[s, e, l], d.cacc_v[s, e, l] = aw, av
+    m, h, inertia = d.cinert_m[s, e, l], d.cinert_h[s, e, l], d.cinert_i[s, e, l]
+    fn, ff = inertia_mul(m, h, inertia, aw, av)
+    pn, pf = inertia_mul(m, h, inertia, vw, vv)
+    cn, cf = cross_force(vw, vv, pn, pf)
+    d.lfrc_n[s, e, l], d.lfrc_f[s, e, l] = fn + cn, ff + cf
 
 
 @ti.func
-def subtree_sums_env(d: ti.template(), s, e):
-    """Composite inertia and net force of each link's subtree, leaves first.
+def subtree_sum(d: ti.template(), s, e, l):
+    """Composite inertia and net force of link l's subtree; children first.
 
     chain[l] = subtree(l) + chain[next sibling of l], so a link's subtree is its own value plus
     chain[first child]: every element is written once and read after, with no accumulation
     (no atomics, and Taichi's reverse mode stays exact). Index L is the empty chain (zero)."""
-    for i in range(d.n_links):
-        l = d.n_links - 1 - i
-        c, n = d.link_first_child[l], d.link_next_sibling[l]
-        m = d.cinert_m[s, e, l] + d.chain_m[s, e, c]
-        h = d.cinert_h[s, e, l] + d.chain_h[s, e, c]
-        inertia = d.cinert_i[s, e, l] + d.chain_i[s, e, c]
-        fn = d.lfrc_n[s, e, l] + d.chain_n[s, e, c]
-        ff = d.lfrc_f[s, e, l] + d.chain_f[s, e, c]
-        d.crb_m[s, e, l], d.crb_h[s, e, l], d.crb_i[s, e, l] = m, h, inertia
-        d.cfrc_n[s, e, l], d.cfrc_f[s, e, l] = fn, ff
-        d.chain_m[s, e, l] = m + d.chain_m[s, e, n]
-        d.chain_h[s, e, l] = h + d.chain_h[s, e, n]
-        d.chain_i[s, e, l] = inertia + d.chain_i[s, e, n]
-        d.chain_n[s, e, l] = fn + d.chain_n[s, e, n]
-        d.chain_f[s, e, l] = ff + d.chain_f[s, e, n]
+    c, n = d.link_first_child[l], d.link_next_sibling[l]
+    m = d.cinert_m[s, e, l] + d.chain_m[s, e, c]
+    h = d.cinert_h[s, e, l] + d.chain_h[s, e, c]
+    inertia = d.cinert_i[s, e, l] + d.chain_i[s, e, c]
+    fn = d.lfrc_n[s, e, l] + d.chain_n[s, e, c]
+    ff = d.lfrc_f[s, e, l] + d.chain_f[s, e, c]
+    d.crb_m[s, e, l], d.crb_h[s, e, l], d.crb_i[s, e, l] = m, h, inertia
+    d.cfrc_n[s, e, l], d.cfrc_f[s, e, l] = fn, ff
+    d.chain_m[s, e, l] = m + d.chain_m[s, e, n]
+    d.chain_h[s, e, l] = h + d.chain_h[s, e, n]
+    d.chain_i[s, e, l] = inertia + d.chain_i[s, e, n]
+    d.chain_n[s, e, l] = fn + d.chain_n[s, e, n]
+    d.chain_f[s, e, l] = ff + d.chain_f[s, e, n]
 
 
 @ti.func
@@ -121,32 +118,3 @@ def bias_entry(d: ti.template(), s, e, i):
     """qfrc_bias[i] = cdof_i · (net force of the subtree of link(i)): Coriolis, centrifugal, gravity."""
     l = d.dof_link[i]
     d.qfrc_bias[s, e, i] = dot3(d.cdof_w[s, e, i], d.cfrc_n[s, e, l]) + dot3(d.cdof_v[s, e, i], d.cfrc_f[s, e, l])
-
-
-@ti.func
-def bias_sweeps_env(d: ti.template(), s, e):
-    link_forces_env(d, s, e)
-    subtree_sums_env(d, s, e)
-
-
-@ti.kernel
-def link_forces(d: ti.template(), s: ti.i32):
-    for e in range(d.n_batch):
-        link_forces_env(d, s, e)
-
-
-@ti.kernel
-def subtree_sums(d: ti.template(), s: ti.i32):
-    for e in range(d.n_batch):
-        subtree_sums_env(d, s, e)
-
-
-@ti.kernel
-def joint_space(d: ti.template(), s: ti.i32):
-    """Mass matrix and bias force, parallel over (env, dof) and (env, pair)."""
-    for e, i in ti.ndrange(d.n_batch, d.n_dofs):
-        dof_force(d, s, e, i)
-    for e, k in ti.ndrange(d.n_batch, d.n_pairs):
-        mass_entry(d, s, e, k)
-    for e, i in ti.ndrange(d.n_batch, d.n_dofs):
-        bias_entry(d, s, e, i)

@@ -29,9 +29,3 @@ def integrate_link(d: ti.template(), s, e, l):
         quat = quat_integrate(quat, omega, h)
         for k in ti.static(range(4)):
             d.qpos[s + 1, e, q0 + 3 + k] = quat[k]
-
-
-@ti.kernel
-def integrate(d: ti.template(), s: ti.i32):
-    for e, l in ti.ndrange(d.n_batch, d.n_links):
-        integrate_link(d, s, e, l)

@@ -80,18 +80,11 @@ def _motion_subspace(d: ti.template(), s, e, l, pos, rot):
 
 
 @ti.func
-def kinematics_env(d: ti.template(), s, e):
-    """Forward kinematics of env e at frame s: one sweep over the links in tree order."""
-    for l in range(d.n_links):
-        pos, quat = _joint_pose(d, s, e, l)
-        d.xpos[s, e, l] = pos
-        d.xquat[s, e, l] = quat
-        rot = quat_to_mat(quat)
-        _link_inertia(d, s, e, l, pos, rot)
-        _motion_subspace(d, s, e, l, pos, rot)
-
-
-@ti.kernel
-def kinematics(d: ti.template(), s: ti.i32):
-    for e in range(d.n_batch):
-        kinematics_env(d, s, e)
+def link_kinematics(d: ti.template(), s, e, l):
+    """Pose, spatial inertia and motion subspace of link l (its parent's pose must be known)."""
+    pos, quat = _joint_pose(d, s, e, l)
+    d.xpos[s, e, l] = pos
+    d.xquat[s, e, l] = quat
+    rot = quat_to_mat(quat)
+    _link_inertia(d, s, e, l, pos, rot)
+    _motion_subspace(d, s, e, l, pos, rot)

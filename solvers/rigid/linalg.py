@@ -61,6 +61,7 @@ def solve_env(d: ti.template(), s, e):
 
 @ti.kernel
 def solve(d: ti.template(), s: ti.i32):
+    """The stage kernel; ``solve_adjoint`` is its reverse."""
     for e in range(d.n_batch):
         solve_env(d, s, e)
 

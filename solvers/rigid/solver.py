@@ -138,8 +138,7 @@ class RigidSolver(Solver):
         kernels.position_stages(d, 0)
         kernels.clear_grads(d)
         kernels.write_links_grad(d, grad_links.contiguous())
-        kernels.link_forces.grad(d, 0)  # velocities come from this sweep only
-        kernels.kinematics.grad(d, 0)
+        kernels.down_sweep.grad(d, 0)  # poses and velocities come from this sweep only
         out = self._empty(self.state_width + sum(d.width(n) for n in self.grad_input_names))
         kernels.read_grads(d, out)
         return out[:, : self.state_width]

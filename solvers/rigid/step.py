@@ -7,15 +7,64 @@ frames, then runs each stage's gradient kernel backwards, substep by substep.
 """
 import taichi as ti
 
-from .actuation import actuation, smooth_force
-from .dynamics import bias_entry, bias_sweeps_env, dof_force, joint_space, link_forces, mass_entry, subtree_sums
-from .integrator import integrate, integrate_link
-from .kinematics import kinematics, kinematics_env
+from .actuation import smooth_force
+from .dynamics import bias_entry, dof_force, link_forces, mass_entry, subtree_sum
+from .integrator import integrate_link
+from .kinematics import link_kinematics
 from .linalg import solve, solve_adjoint, solve_env
+
+
+# -- per-env stage functions: the stages of one substep, in order -------------------------------
+@ti.func
+def down_sweep_env(d: ti.template(), s, e):
+    """Root to leaves: each link's pose, inertia, motion subspace, velocity and net force."""
+    for l in range(d.n_links):
+        link_kinematics(d, s, e, l)
+        link_forces(d, s, e, l)
+
+
+@ti.func
+def up_sweep_env(d: ti.template(), s, e):
+    """Leaves to root: composite inertias and subtree forces."""
+    for i in range(d.n_links):
+        subtree_sum(d, s, e, d.n_links - 1 - i)
+
+
+# -- stage kernels (reverse mode runs their .grad; Taichi needs one serial loop per kernel) ------
+@ti.kernel
+def down_sweep(d: ti.template(), s: ti.i32):
+    for e in range(d.n_batch):
+        down_sweep_env(d, s, e)
+
+
+@ti.kernel
+def up_sweep(d: ti.template(), s: ti.i32):
+    for e in range(d.n_batch):
+        up_sweep_env(d, s, e)
+
+
+@ti.kernel
+def joint_forces(d: ti.template(), s: ti.i32):
+    """Mass matrix, bias forces, then actuation, each parallel over (env, dof or pair)."""
+    for e, i in ti.ndrange(d.n_batch, d.n_dofs):
+        dof_force(d, s, e, i)
+    for e, k in ti.ndrange(d.n_batch, d.n_pairs):
+        mass_entry(d, s, e, k)
+    for e, i in ti.ndrange(d.n_batch, d.n_dofs):
+        bias_entry(d, s, e, i)
+    for e, i in ti.ndrange(d.n_batch, d.n_dofs):
+        smooth_force(d, s, e, i)
+
+
+@ti.kernel
+def integrate(d: ti.template(), s: ti.i32):
+    for e, l in ti.ndrange(d.n_batch, d.n_links):
+        integrate_link(d, s, e, l)
+
 
 # Stage kernels of one substep, in forward order. Reverse mode walks it backwards; the
 # solve's adjoint is hand-written (see linalg.py), every other stage uses Taichi's .grad.
-STAGES = (kinematics, link_forces, subtree_sums, joint_space, actuation, solve, integrate)
+STAGES = (down_sweep, up_sweep, joint_forces, solve, integrate)
 ADJOINTS = {solve: solve_adjoint}
 
 
@@ -27,8 +76,8 @@ def _finite(x):
 @ti.func
 def position_stages_env(d: ti.template(), s, e):
     """Kinematics, bias forces and mass matrix of env e at frame s."""
-    kinematics_env(d, s, e)
-    bias_sweeps_env(d, s, e)
+    down_sweep_env(d, s, e)
+    up_sweep_env(d, s, e)
     for i in range(d.n_dofs):
         dof_force(d, s, e, i)
     for k in range(d.n_pairs):
@@ -39,7 +88,8 @@ def position_stages_env(d: ti.template(), s, e):
 
 @ti.kernel
 def advance(d: ti.template(), commit: ti.i32):
-    """All substeps of one step for every env; commit copies the result into frame 0."""
+    """All substeps of one step for every env in one launch (forward only); commit copies the
+    result into frame 0 and flags any non-finite state."""
     S = d.substeps
     for e in range(d.n_batch):
         for s in range(S):
