@@ -5,6 +5,8 @@ The Taichi copy of a solver's state is authoritative between steps when no graph
 (torch reads it lazily); with ``requires_grad`` the torch tensor is (it is the graph's node
 value) and Taichi is re-synchronised only when something else (a backward pass) used it.
 """
+import weakref
+
 import torch
 
 from . import autograd
@@ -35,6 +37,9 @@ class Simulator:
     def build(self, n_envs):
         for slot in self.slots:
             slot.initial_state = slot.solver.build(n_envs)
+            # when nothing (scene or autograd graph) can reach this simulator any more, its
+            # solvers' fields may serve another scene
+            weakref.finalize(self, slot.solver.destroy)
         self.reset()
 
     # -- state and inputs ---------------------------------------------------------------------

@@ -47,7 +47,7 @@ class RigidData:
         self._place_frames(requires_grad)
         if requires_grad:
             self._builder.lazy_grad()
-        self._tree = self._builder.finalize()
+        self._builder.finalize()
         self.grad_field_groups = [tuple(self.grad_fields[k: k + 32]) for k in range(0, len(self.grad_fields), 32)]
         self._fill_model(model)
 
@@ -145,6 +145,38 @@ class RigidData:
             self.pair_i.from_numpy(model.pairs[:, 0].copy())
             self.pair_j.from_numpy(model.pairs[:, 1].copy())
 
-    def destroy(self):
-        """Free the fields (the scene is unusable afterwards)."""
-        self._tree.destroy()
+    def refill(self, model):
+        """Take a new model of the same sizes (data reused from the pool)."""
+        self._fill_model(model)
+        self.mass_mat.fill(0)  # entries off the new dof tree must read as zero
+        self.nonfinite.fill(0)
+
+
+# Kernels are compiled per RigidData object (Taichi keys template arguments by identity) and
+# their code is never freed, so data of finished scenes is kept here and handed to the next
+# scene of the same sizes: no recompilation, no growth when a process builds many scenes.
+_POOL = {}
+
+
+def _signature(model, n_batch, substeps, requires_grad, limits_enabled):
+    return (runtime.epoch, n_batch, substeps, bool(requires_grad), bool(limits_enabled), model.n_links,
+            model.n_dofs, model.n_qs, len(model.pairs))
+
+
+def acquire(model, n_batch, substeps, requires_grad, limits_enabled):
+    """RigidData for ``model``: a released one of the same sizes, or a new one."""
+    key = _signature(model, n_batch, substeps, requires_grad, limits_enabled)
+    free = _POOL.get(key)
+    if free:
+        data = free.pop()
+        data.refill(model)
+        return data
+    data = RigidData(model, n_batch, substeps, requires_grad, limits_enabled)
+    data.signature = key
+    return data
+
+
+def release(data):
+    """Return data whose scene is gone; dropped if Taichi was restarted since."""
+    if data.signature[0] == runtime.epoch:
+        _POOL.setdefault(data.signature, []).append(data)

@@ -12,7 +12,8 @@ from genesis_lite.runtime import runtime
 
 from ..base import Solver
 from . import step as kernels
-from .data import BIG, INPUTS, RigidData
+from . import data as data_pool
+from .data import BIG, INPUTS
 from .model import FREE, build_model
 
 
@@ -38,8 +39,8 @@ class RigidSolver(Solver):
     def build(self, n_envs):
         self.model = build_model(self.entity_links)
         self.n_batch = max(1, n_envs)
-        self.data = RigidData(self.model, self.n_batch, self.sim_options.substeps,
-                              self.sim_options.requires_grad, self.rigid_options.enable_joint_limit)
+        self.data = data_pool.acquire(self.model, self.n_batch, self.sim_options.substeps,
+                                      self.sim_options.requires_grad, self.rigid_options.enable_joint_limit)
         h = self.sim_options.dt / self.sim_options.substeps
         timeconst = max(self.rigid_options.limit_timeconst, 2.0 * h)  # stable for explicit steps
         self.data.consts.from_numpy(np.array([h, 1.0 / timeconst ** 2, 2.0 / timeconst], dtype=runtime.np_float))
@@ -152,8 +153,9 @@ class RigidSolver(Solver):
         return out
 
     def destroy(self):
+        """Hand the fields to the next scene of the same sizes (see data.acquire)."""
         if self.data is not None:
-            self.data.destroy()
+            data_pool.release(self.data)
             self.data = None
 
     @property
