@@ -12,6 +12,12 @@ class Solver:
 
     #: input names whose gradients ``backward`` returns, in order
     grad_input_names = ()
+    #: inputs that keep their value across ``scene.reset()`` (parameters; controls are cleared)
+    persistent_inputs = ()
+    #: name → (B, width) tensor of every input's value at build (set by ``build``)
+    default_inputs = None
+    #: names of the solver's entities, for error messages
+    entity_names = ()
 
     def build(self, n_envs):
         """Allocate fields for max(1, n_envs) environments; return the initial state (B, width)."""
@@ -31,6 +37,10 @@ class Solver:
 
     def advance(self):
         """Run one step from the uploaded state and inputs; the result becomes the current state."""
+        raise NotImplementedError
+
+    def nonfinite(self):
+        """True once a step produced a non-finite state since the last call."""
         raise NotImplementedError
 
     def backward(self, grad_state_out):
