@@ -8,7 +8,13 @@ and freeing are torch's. Getters of derived quantities (link poses) are ``_Read`
 
 With ``SimOptions(checkpoint_interval=k)``, only every k-th step saves its state; a step
 without one is recomputed from the nearest checkpoint by its ``Rollout`` during backward.
+
+Nodes hold the simulator weakly: the simulator holds the newest state, whose grad_fn is a node,
+and a strong link back would be a cycle through torch's C++ graph that Python's collector
+cannot see (every scene would live for ever).
 """
+import weakref
+
 import torch
 
 from .errors import GradientError
@@ -18,7 +24,7 @@ class Rollout:
     """Per-rollout record (one per ``scene.reset()``): checkpointed states and step inputs."""
 
     def __init__(self, sim, interval):
-        self.sim, self.interval = sim, interval
+        self.sim, self.interval = weakref.ref(sim), interval
         self.generation = sim.generation
         self.checkpoints = {}  # step index → states at its start (tuple of tensors)
         self.inputs = {}  # step index → inputs (only when interval > 1)
@@ -43,9 +49,17 @@ class Rollout:
                 for k in range(first, first + self.interval - 1):
                     if k + 1 not in self.inputs:
                         break
-                    states = self.sim.forward_step(states, self.inputs[k])
+                    states = _alive(self.sim).forward_step(states, self.inputs[k])
                     self._replayed[k + 1] = states
         return self._replayed.pop(index)
+
+
+def _alive(sim_ref):
+    sim = sim_ref()
+    if sim is None:
+        raise GradientError("backward through a scene that no longer exists: keep the scene (or call backward) "
+                            "until the gradients are computed")
+    return sim
 
 
 def _check_generation(sim, generation, what):
@@ -59,7 +73,7 @@ class _Step(torch.autograd.Function):
     def forward(ctx, sim, rollout, index, n_states, *tensors):
         states, inputs = tensors[:n_states], tensors[n_states:]
         outs = sim.forward_step(states, inputs)
-        ctx.sim, ctx.rollout, ctx.index, ctx.n_states = sim, rollout, index, n_states
+        ctx.sim, ctx.rollout, ctx.index, ctx.n_states = weakref.ref(sim), rollout, index, n_states
         ctx.kept = rollout.keeps_state(index)
         rollout.record(index, states, inputs)
         ctx.save_for_backward(*(tensors if ctx.kept else inputs))
@@ -67,7 +81,7 @@ class _Step(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, *grad_states):
-        sim = ctx.sim
+        sim = _alive(ctx.sim)
         _check_generation(sim, ctx.rollout.generation, f"step {ctx.index}")
         saved = ctx.saved_tensors
         if ctx.kept:
@@ -88,15 +102,16 @@ class _Read(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, sim, solver, generation, state):
-        ctx.sim, ctx.solver, ctx.generation = sim, solver, generation
+        ctx.sim, ctx.solver, ctx.generation = weakref.ref(sim), solver, generation
         ctx.save_for_backward(state)
         return sim.read_derived(solver, state)
 
     @staticmethod
     def backward(ctx, grad):
-        _check_generation(ctx.sim, ctx.generation, "a link getter")
+        sim = _alive(ctx.sim)
+        _check_generation(sim, ctx.generation, "a link getter")
         (state,) = ctx.saved_tensors
-        return None, None, None, ctx.sim.read_derived_backward(ctx.solver, state, grad)
+        return None, None, None, sim.read_derived_backward(ctx.solver, state, grad)
 
 
 def read(sim, solver, state):

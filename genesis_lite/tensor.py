@@ -16,6 +16,10 @@ class Tensor(torch.Tensor):
     def __repr__(self, *, tensor_contents=None):
         return "gs." + super().__repr__(tensor_contents=tensor_contents)
 
+    def __format__(self, spec):
+        # torch formats only plain 0-dim tensors with a spec like ".2f"
+        return format(self.item(), spec) if self.dim() == 0 else super().__format__(spec)
+
 
 def wrap(value, scene=None):
     """View a torch tensor as a gs.Tensor of ``scene`` (autograd history is kept)."""

@@ -38,9 +38,12 @@ def _joint_pose(d: ti.template(), s, e, l):
     slide = ti.select(jt == PRISMATIC, q, 0.0)
     joint_quat = quat_mul(frame_quat, axis_angle_quat(axis, angle))
     joint_pos = frame_pos + mat_vec(quat_to_mat(frame_quat), axis) * slide
-    free_pos = ti.Vector([qpos_at(d, s, e, q0 + k) for k in ti.static(range(3))])
-    free_quat = quat_normalized(ti.Vector([qpos_at(d, s, e, q0 + 3 + k) for k in ti.static(range(4))]))
     is_free = jt == FREE
+    free_pos = ti.Vector([qpos_at(d, s, e, q0 + k) for k in ti.static(range(3))])
+    # select before normalising: other links' stand-in qs may be all zero, and the reverse pass
+    # would multiply that branch's infinite derivative by zero
+    raw_quat = ti.Vector([qpos_at(d, s, e, q0 + 3 + k) for k in ti.static(range(4))])
+    free_quat = quat_normalized(ti.select(is_free, raw_quat, ti.Vector([1.0, 0.0, 0.0, 0.0])))
     return ti.select(is_free, free_pos, joint_pos), ti.select(is_free, free_quat, joint_quat)
 
 
