@@ -41,14 +41,16 @@ class RigidData:
         self.n_pairs = len(model.pairs)
         self.widths = {"links": self.n_links, "dofs": self.n_dofs}
         self._builder = ti.FieldsBuilder()
-        self.grad_fields = []
+        self.grad_fields = []  # every field with a gradient, inputs first
         self._place_model(model)
         self._place_inputs(requires_grad)
         self._place_frames(requires_grad)
         if requires_grad:
             self._builder.lazy_grad()
         self._builder.finalize()
-        self.grad_field_groups = [tuple(self.grad_fields[k: k + 32]) for k in range(0, len(self.grad_fields), 32)]
+        inputs = {id(f) for f in self.input_fields}
+        frames = [f for f in self.grad_fields if id(f) not in inputs]
+        self.grad_frame_groups = [tuple(frames[k: k + 32]) for k in range(0, len(frames), 32)]
         self._fill_model(model)
 
     # -- allocation -------------------------------------------------------------------------

@@ -124,62 +124,74 @@ def reverse_substep(d, s):
         ADJOINTS.get(stage, stage.grad)(d, s)
 
 
+# -- moving data: one parallel loop over envs per kernel, since every parallel loop is a task
+# -- that costs a thread-pool hand-off (tens of µs here) whatever its size ----------------------
 @ti.kernel
 def write_state(d: ti.template(), s: ti.i32, src: ti.types.ndarray()):
     """Frame s ← src (B, Q + D): qpos then qvel of every env."""
-    for e, k in ti.ndrange(d.n_batch, d.n_qs):
-        d.qpos[s, e, k] = src[e, k]
-    for e, k in ti.ndrange(d.n_batch, d.n_dofs):
-        d.qvel[s, e, k] = src[e, d.n_qs + k]
+    for e in range(d.n_batch):
+        for k in range(d.n_qs):
+            d.qpos[s, e, k] = src[e, k]
+        for k in range(d.n_dofs):
+            d.qvel[s, e, k] = src[e, d.n_qs + k]
 
 
 @ti.kernel
 def read_state(d: ti.template(), s: ti.i32, dst: ti.types.ndarray()):
-    for e, k in ti.ndrange(d.n_batch, d.n_qs):
-        dst[e, k] = d.qpos[s, e, k]
-    for e, k in ti.ndrange(d.n_batch, d.n_dofs):
-        dst[e, d.n_qs + k] = d.qvel[s, e, k]
+    for e in range(d.n_batch):
+        for k in range(d.n_qs):
+            dst[e, k] = d.qpos[s, e, k]
+        for k in range(d.n_dofs):
+            dst[e, d.n_qs + k] = d.qvel[s, e, k]
 
 
 @ti.kernel
 def write_state_grad(d: ti.template(), s: ti.i32, src: ti.types.ndarray()):
-    for e, k in ti.ndrange(d.n_batch, d.n_qs):
-        d.qpos.grad[s, e, k] = src[e, k]
-    for e, k in ti.ndrange(d.n_batch, d.n_dofs):
-        d.qvel.grad[s, e, k] = src[e, d.n_qs + k]
+    for e in range(d.n_batch):
+        for k in range(d.n_qs):
+            d.qpos.grad[s, e, k] = src[e, k]
+        for k in range(d.n_dofs):
+            d.qvel.grad[s, e, k] = src[e, d.n_qs + k]
 
 
 @ti.kernel
 def write_inputs(d: ti.template(), src: ti.types.ndarray()):
     """Every input field ← its columns of src (B, total width), in INPUTS order."""
-    for f in ti.static(range(len(d.input_fields))):
-        for e, k in ti.ndrange(d.n_batch, d.input_widths[f]):
-            d.input_fields[f][e, k] = src[e, d.input_offsets[f] + k]
+    for e in range(d.n_batch):
+        for f in ti.static(range(len(d.input_fields))):
+            for k in range(d.input_widths[f]):
+                d.input_fields[f][e, k] = src[e, d.input_offsets[f] + k]
 
 
 @ti.kernel
 def read_grads(d: ti.template(), dst: ti.types.ndarray()):
     """dst (B, Q + D + differentiable input widths) ← state gradient at frame 0, then input gradients."""
-    for e, k in ti.ndrange(d.n_batch, d.n_qs):
-        dst[e, k] = d.qpos.grad[0, e, k]
-    for e, k in ti.ndrange(d.n_batch, d.n_dofs):
-        dst[e, d.n_qs + k] = d.qvel.grad[0, e, k]
-    for f in ti.static(range(len(d.grad_input_fields))):
-        for e, k in ti.ndrange(d.n_batch, d.grad_input_widths[f]):
-            dst[e, d.grad_input_offsets[f] + k] = d.grad_input_fields[f].grad[e, k]
+    for e in range(d.n_batch):
+        for k in range(d.n_qs):
+            dst[e, k] = d.qpos.grad[0, e, k]
+        for k in range(d.n_dofs):
+            dst[e, d.n_qs + k] = d.qvel.grad[0, e, k]
+        for f in ti.static(range(len(d.grad_input_fields))):
+            for k in range(d.grad_input_widths[f]):
+                dst[e, d.grad_input_offsets[f] + k] = d.grad_input_fields[f].grad[e, k]
+
+
+@ti.func
+def _zero_frames_grad(fld: ti.template(), e):
+    """Zero env e of a (frames, B, ...) gradient field."""
+    for J in ti.grouped(ti.ndrange(fld.shape[0], *fld.shape[2:])):
+        fld.grad[J[0], e, *[J[k] for k in ti.static(range(1, J.n))]] = 0
 
 
 @ti.kernel
-def _clear_grads(d: ti.template(), fields: ti.template()):
-    for f in ti.static(range(len(fields))):
-        for I in ti.grouped(fields[f].grad):
-            fields[f].grad[I] = 0
-
-
-def clear_grads(d):
-    """Zero every gradient field (in groups: Taichi warns when unrolling more than 32)."""
-    for start in range(0, len(d.grad_fields), 32):
-        _clear_grads(d, d.grad_field_groups[start // 32])
+def clear_grads(d: ti.template()):
+    for e in range(d.n_batch):
+        for group in ti.static(d.grad_frame_groups):  # groups of ≤ 32: Taichi warns past that
+            for f in ti.static(range(len(group))):
+                _zero_frames_grad(group[f], e)
+        for f in ti.static(range(len(d.grad_input_fields))):
+            for k in range(d.grad_input_widths[f]):
+                d.grad_input_fields[f].grad[e, k] = 0
 
 
 @ti.kernel
