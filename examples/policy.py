@@ -17,24 +17,17 @@ Run:  python examples/policy.py [--short]     (or GS_EXAMPLES_SHORT=1)
 Both modes check final loss < 0.5 × initial loss (short: 10 epochs of 50 steps; full: 60
 epochs of 80 steps).
 """
-import argparse
 import os
 import time
 
 import torch
 
 import genesis_lite as gs
+from example_args import short_mode
 
 ASSETS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "assets")
 N_ENVS = 16
 TARGET = (0.6, -0.4)  # rad: the first link raised, the second bent back
-
-
-def short_mode():
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--short", action="store_true", help="quick CI run (also: GS_EXAMPLES_SHORT=1)")
-    args = parser.parse_args()
-    return args.short or os.environ.get("GS_EXAMPLES_SHORT", "0") not in ("", "0")
 
 
 class Policy(torch.nn.Module):
@@ -56,7 +49,7 @@ class Policy(torch.nn.Module):
 
 
 def main():
-    short = short_mode()
+    short = short_mode(__doc__)
     n_epochs, n_steps = (10, 50) if short else (60, 80)
     start = time.time()
     gs.init(precision="32", seed=0)

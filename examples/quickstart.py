@@ -18,26 +18,19 @@ Run:  python examples/quickstart.py [--short]     (or GS_EXAMPLES_SHORT=1)
 The script ends with a check that raises if the gradient is not finite, is zero, or disagrees
 with finite differences.
 """
-import argparse
 import os
 import time
 
 import torch
 
 import genesis_lite as gs
+from example_args import short_mode
 
 ASSETS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "assets")
 
 
-def short_mode():
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--short", action="store_true", help="quick CI run (also: GS_EXAMPLES_SHORT=1)")
-    args = parser.parse_args()
-    return args.short or os.environ.get("GS_EXAMPLES_SHORT", "0") not in ("", "0")
-
-
 def main():
-    short = short_mode()
+    short = short_mode(__doc__)
     start = time.time()
     gs.init(precision="64")
 

@@ -19,7 +19,6 @@ Run:  python examples/system_identification.py [--short]     (or GS_EXAMPLES_SHO
 Full mode (≤ 80 rollouts) checks every parameter within 1 % of the truth; short mode (≤ 40
 rollouts) within 2 %.
 """
-import argparse
 import math
 import os
 import time
@@ -27,18 +26,12 @@ import time
 import torch
 
 import genesis_lite as gs
+from example_args import short_mode
 
 ASSETS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "assets")
 LINKS = [1, 2]  # link1, link2 (link 0 is the fixed base)
 TRUE_MASS_SCALE = (1.25, 0.8)  # reality's masses / URDF masses
 TRUE_DAMPING = (0.08, 0.03)  # N·m·s/rad (URDF: 0 and 0.05)
-
-
-def short_mode():
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--short", action="store_true", help="quick CI run (also: GS_EXAMPLES_SHORT=1)")
-    args = parser.parse_args()
-    return args.short or os.environ.get("GS_EXAMPLES_SHORT", "0") not in ("", "0")
 
 
 def excitation(n_steps, dt, dtype):
@@ -51,7 +44,7 @@ def excitation(n_steps, dt, dtype):
 
 
 def main():
-    short = short_mode()
+    short = short_mode(__doc__)
     n_steps, max_evals, tolerance = (100, 40, 0.02) if short else (100, 80, 0.01)
     start = time.time()
     gs.init(precision="64")

@@ -17,22 +17,15 @@ the pendulum, that needs far more epochs.
 Run:  python examples/trajectory_optimization.py [--short]     (or GS_EXAMPLES_SHORT=1)
 Full mode checks loss(last) ≤ loss(first) / 100; short mode (20 epochs) checks a 10× drop.
 """
-import argparse
 import os
 import time
 
 import torch
 
 import genesis_lite as gs
+from example_args import short_mode
 
 ASSETS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "assets")
-
-
-def short_mode():
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--short", action="store_true", help="quick CI run (also: GS_EXAMPLES_SHORT=1)")
-    args = parser.parse_args()
-    return args.short or os.environ.get("GS_EXAMPLES_SHORT", "0") not in ("", "0")
 
 
 def rotate(quat, vec):
@@ -43,7 +36,7 @@ def rotate(quat, vec):
 
 
 def main():
-    short = short_mode()
+    short = short_mode(__doc__)
     n_epochs, required_drop = (20, 10.0) if short else (100, 100.0)
     start = time.time()
     gs.init(precision="64")

@@ -1,7 +1,6 @@
 """How the differentiable scene behaves as part of torch's graph (SPEC §3): repeated rollouts,
 second backward, resets, torch.autograd.grad / gradcheck, a policy network between steps,
 non-differentiable paths, memory per step and checkpointing."""
-import numpy as np
 import pytest
 import torch
 

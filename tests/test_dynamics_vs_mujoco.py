@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 import torch
 
-import genesis_lite as gs
 from tests import mujoco_ref
 from tests.conftest import asset, pybullet
+from tests.robot_states import limit_free_scene, random_state, scalar_joints, set_state
 
 DT = 0.01
 N_STATES = 5
@@ -28,42 +28,9 @@ ROBOTS = {
 }
 
 
-def _scene(path, free, dt=DT):
-    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=dt),
-                     rigid_options=gs.options.RigidOptions(enable_joint_limit=False))
-    robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=not free), name="robot")
-    scene.build()
-    return scene, robot
-
-
-def _scalar_joints(robot):
-    return [j for j in robot.joints if j.type in ("revolute", "prismatic")]
-
-
-def _random_state(robot, rng, free):
-    """({joint name: (q, q̇)}, None or (base qpos (7,), base qvel (6,)))."""
-    joints = {j.name: (rng.uniform(-1.5, 1.5), rng.uniform(-2, 2)) for j in _scalar_joints(robot)}
-    base = None
-    if free:
-        quat = rng.normal(size=4)
-        base = (np.concatenate([rng.uniform(-1, 1, 3), quat / np.linalg.norm(quat)]), rng.uniform(-1.5, 1.5, 6))
-    return joints, base
-
-
-def _set_ours(robot, joints, base):
-    qpos = robot.get_qpos().numpy().copy()
-    qvel = np.zeros(robot.n_dofs)
-    for joint in _scalar_joints(robot):
-        qpos[joint.qs_idx_local[0]], qvel[joint.dofs_idx_local[0]] = joints[joint.name]
-    if base is not None:
-        qpos[:7], qvel[:6] = base
-    robot.set_qpos(qpos)
-    robot.set_dofs_velocity(qvel)
-
-
 def _our_dof(robot, names):
     """Our local dof index of each MuJoCo dof name."""
-    by_joint = {j.name: j.dofs_idx_local[0] for j in _scalar_joints(robot)}
+    by_joint = {j.name: j.dofs_idx_local[0] for j in scalar_joints(robot)}
     out = []
     for name in names:
         if name.startswith(mujoco_ref.BASE + ":"):
@@ -77,7 +44,7 @@ def _our_dof(robot, names):
 @pytest.mark.parametrize("name", list(ROBOTS))
 def test_mass_matrix_and_bias_match_mujoco_f64(f64, name):
     path, free = ROBOTS[name]
-    scene, robot = _scene(path, free)
+    scene, robot = limit_free_scene(path, free, DT)
     try:
         n = robot.n_dofs
         robot.set_dofs_damping(np.zeros(n))
@@ -85,9 +52,9 @@ def test_mass_matrix_and_bias_match_mujoco_f64(f64, name):
         model = mujoco_ref.load_model(path, free_base=free, dt=DT)  # armature 0 by default
         rng = np.random.default_rng(42)
         for k in range(N_STATES):
-            joints, base = _random_state(robot, rng, free)
+            joints, base = random_state(robot, rng, free, q_range=1.5)
             scene.reset()
-            _set_ours(robot, joints, base)
+            set_state(robot, joints, base)
             mass = robot.get_mass_mat().numpy()
             qvel0 = robot.get_dofs_velocity().numpy()
             scene.step()  # zero control (reset clears controls), no damping, no armature
@@ -111,12 +78,12 @@ def test_mass_matrix_and_bias_match_mujoco_f64(f64, name):
 
 def test_kuka_trajectory_matches_mujoco_f32(f32):
     path = pybullet("kuka_iiwa", "model.urdf")
-    scene, robot = _scene(path, free=False)
+    scene, robot = limit_free_scene(path, False, DT)
     try:
         assert robot.get_qpos().dtype == torch.float32
         rng = np.random.default_rng(0)
-        joints = {j.name: (rng.uniform(-1, 1), rng.uniform(-2, 2)) for j in _scalar_joints(robot)}
-        _set_ours(robot, joints, None)
+        joints = {j.name: (rng.uniform(-1, 1), rng.uniform(-2, 2)) for j in scalar_joints(robot)}
+        set_state(robot, joints, None)
         n_steps = int(round(2.0 / DT))
         ours = [robot.get_qpos().numpy()]
         for _ in range(n_steps):
@@ -127,7 +94,7 @@ def test_kuka_trajectory_matches_mujoco_f32(f32):
         model = mujoco_ref.load_model(path, dt=DT)  # the URDF's own damping applies on both sides
         ref = mujoco_ref.rollout(model, {k: v[0] for k, v in joints.items()}, {k: v[1] for k, v in joints.items()},
                                  n_steps)
-        for joint in _scalar_joints(robot):
+        for joint in scalar_joints(robot):
             err = np.max(np.abs(ours[:, joint.qs_idx_local[0]] - ref.qpos[joint.name]))
             assert err <= 1e-4, f"joint {joint.name}: max |q - q_mujoco| = {err:.3g} rad over 2 s in float32"
     finally:

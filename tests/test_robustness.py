@@ -1,5 +1,4 @@
 """A diverging body stays alone: it neither poisons other bodies nor goes unnoticed."""
-import numpy as np
 import pytest
 import torch
 
