@@ -1,10 +1,12 @@
 """Gradients of rigid rollouts against central finite differences (float64), and the graph's
 behaviour across backward calls and resets (SPEC §3).
 
-Each check compares the directional derivative g·v of a scalar loss, for a random direction v,
-with the fourth-order central difference of L(x + kεv), k = ±1, ±2 (ε = 1e-4): truncation
-O(ε⁴) and round-off O(1e-16/ε) both stay far below the 1e-6 tolerance, also over long,
-sensitive horizons where the two-point difference is noisier than that.
+Each check compares the directional derivative g·v of a scalar loss, for a random unit
+direction v, with the fourth-order central difference of L(x + kεv), k = ±1, ±2 (ε = 1e-6;
+the fourth order keeps truncation negligible over long, sensitive horizons such as 2 s of a
+KUKA arm, where gradients reach 1e5). The error is relative to ‖g‖, the scale of the
+gradient: relative to |g·v| alone, a direction nearly orthogonal to g would make round-off
+look like error.
 """
 import numpy as np
 import pytest
@@ -18,7 +20,7 @@ ROBOTS = {"pendulum2": (asset("pendulum2.urdf"), True), "cartpole": (pybullet("c
           "kuka_free": (pybullet("kuka_iiwa", "model_free_base.urdf"), False)}
 KINDS = ("dofs_position", "dofs_velocity", "force", "position_target", "velocity_target", "mass", "damping",
          "armature", "kp", "kv", "gravity")
-EPS = 1e-4
+EPS = 1e-6
 _SCENES = {}
 
 
@@ -109,7 +111,7 @@ def _check(robot_name, kind, horizon, substeps=1, n_envs=0, seed=0):
     with torch.no_grad():
         f = {k: float(_rollout(scene, robot, kind, value + k * EPS * direction, horizon)) for k in (-2, -1, 1, 2)}
     numeric = (f[-2] - 8 * f[-1] + 8 * f[1] - f[2]) / (12 * EPS)
-    err = abs(analytic - numeric) / max(abs(numeric), 1e-3)
+    err = abs(analytic - numeric) / max(float(x.grad.norm()), 1e-3)
     assert err <= 1e-6, f"{robot_name} {kind} T={horizon}: autodiff {analytic:.10g} vs FD {numeric:.10g} (rel {err:.2g})"
     assert analytic != 0.0, f"{robot_name} {kind}: zero gradient cannot be checked"
 
