@@ -14,7 +14,6 @@ from .options import RigidOptions, SimOptions
 from .runtime import require_init, runtime
 from .simulator import Simulator
 from .surfaces import Default
-from .tensor import wrap
 from solvers.rigid import shapes, urdf
 from solvers.rigid.solver import RigidSolver
 
@@ -124,8 +123,10 @@ class Scene:
         probe._write_input("gravity", np.arange(3), envs, values)
 
     def get_gravity(self, envs_idx=None):
+        """Gravity, m/s²: (3,) or (n_envs, 3)."""
         self._require_built("scene.get_gravity")
-        return self.entities[0]._read_input("gravity", np.arange(3), envs_idx)
+        probe = self.entities[0]
+        return probe._out(probe._read_input("gravity", np.arange(3), envs_idx))
 
     @property
     def t(self):

@@ -231,8 +231,8 @@ def test_finished_scenes_are_freed(f64):
         robot.get_links_pos().sum().backward()
 
     gc.collect()
-    before = sum(isinstance(o, Simulator) for o in gc.get_objects())
+    before = sum(type(o) is Simulator for o in gc.get_objects())
     for _ in range(3):
         rollout()
     gc.collect()
-    assert sum(isinstance(o, Simulator) for o in gc.get_objects()) == before
+    assert sum(type(o) is Simulator for o in gc.get_objects()) == before

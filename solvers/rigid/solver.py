@@ -14,7 +14,7 @@ from ..base import Solver
 from . import step as kernels
 from . import data as data_pool
 from .data import BIG, INPUTS
-from .model import FREE, build_model
+from .model import build_model
 
 
 class RigidSolver(Solver):
@@ -157,7 +157,3 @@ class RigidSolver(Solver):
         if self.data is not None:
             data_pool.release(self.data)
             self.data = None
-
-    @property
-    def has_free_joint(self):
-        return bool(np.any(self.model.link_jtype == FREE))
