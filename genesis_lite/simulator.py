@@ -136,9 +136,8 @@ class Simulator:
         """Gradients of one step's states and flat inputs, given the gradients of its outputs."""
         grads_states, grads_inputs = [], []
         for slot, state, inputs, grad in zip(self.slots, states, self._split_inputs(flat_inputs), grad_states):
-            self._sync(slot, state, inputs)
-            grad_state, grad_inputs = slot.solver.backward(grad)
-            slot.uploaded_state = None  # the replay moved Taichi's frame 0
+            grad_state, grad_inputs = slot.solver.backward(state, inputs, grad)
+            slot.uploaded_state = slot.uploaded_inputs = None  # Taichi now holds this step's
             grads_states.append(grad_state)
             grads_inputs.extend(grad_inputs.get(name) for name in inputs)
         return (*grads_states, *grads_inputs)

@@ -43,8 +43,8 @@ class Solver:
         """True once a step produced a non-finite state since the last call."""
         raise NotImplementedError
 
-    def backward(self, grad_state_out):
-        """Reverse of the step whose start state and inputs are uploaded.
+    def backward(self, state, inputs, grad_state_out):
+        """Reverse of the step from ``state`` (B, width) with ``inputs`` (name → (B, width)).
 
         Returns (grad of the start state (B, width), {name: grad (B, width)} for grad_input_names).
         """

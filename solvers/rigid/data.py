@@ -95,6 +95,7 @@ class RigidData:
         self.input_fields = list(self.inputs.values())
         self.input_widths = [self.width(name) for name in INPUTS]
         self.input_offsets = [sum(self.input_widths[:k]) for k in range(len(INPUTS))]
+        self.input_total = sum(self.input_widths)
         # gradients are read out after the state's (Q + D) columns
         names = [name for name, (_, differentiable) in INPUTS.items() if differentiable and requires_grad]
         self.grad_input_names = names

@@ -99,8 +99,11 @@ class RigidSolver(Solver):
         return out
 
     def upload_inputs(self, inputs):
-        packed = torch.cat([inputs[name].detach() for name in INPUTS], dim=1).contiguous()
-        kernels.write_inputs(self.data, packed)
+        kernels.write_inputs(self.data, self._pack_inputs(inputs))
+
+    @staticmethod
+    def _pack_inputs(inputs):
+        return torch.cat([inputs[name].detach() for name in INPUTS], dim=1).contiguous()
 
     # -- stepping ---------------------------------------------------------------------------
     def advance(self):
@@ -112,11 +115,12 @@ class RigidSolver(Solver):
         self.data.nonfinite[0] = 0
         return bool(flag)
 
-    def backward(self, grad_state_out):
+    def backward(self, state, inputs, grad_state_out):
         d = self.data
-        kernels.advance(d, 0)  # refill every frame from the uploaded start state and inputs
-        kernels.clear_grads(d)
-        kernels.write_state_grad(d, d.substeps, grad_state_out.contiguous())
+        # start state, inputs and output gradient in one launch (each launch costs ~0.1 ms here)
+        packed = torch.cat([state.detach(), self._pack_inputs(inputs), grad_state_out], dim=1).contiguous()
+        kernels.prepare_reverse(d, packed)
+        kernels.advance(d, 0)  # refill every frame from the start state and inputs
         for s in reversed(range(d.substeps)):
             kernels.reverse_substep(d, s)
         widths = [d.width(name) for name in self.grad_input_names]

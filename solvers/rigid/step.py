@@ -146,15 +146,6 @@ def read_state(d: ti.template(), s: ti.i32, dst: ti.types.ndarray()):
 
 
 @ti.kernel
-def write_state_grad(d: ti.template(), s: ti.i32, src: ti.types.ndarray()):
-    for e in range(d.n_batch):
-        for k in range(d.n_qs):
-            d.qpos.grad[s, e, k] = src[e, k]
-        for k in range(d.n_dofs):
-            d.qvel.grad[s, e, k] = src[e, d.n_qs + k]
-
-
-@ti.kernel
 def write_inputs(d: ti.template(), src: ti.types.ndarray()):
     """Every input field ← its columns of src (B, total width), in INPUTS order."""
     for e in range(d.n_batch):
@@ -183,15 +174,41 @@ def _zero_frames_grad(fld: ti.template(), e):
         fld.grad[J[0], e, *[J[k] for k in ti.static(range(1, J.n))]] = 0
 
 
+@ti.func
+def _clear_grads_env(d: ti.template(), e):
+    for group in ti.static(d.grad_frame_groups):  # groups of ≤ 32: Taichi warns past that
+        for f in ti.static(range(len(group))):
+            _zero_frames_grad(group[f], e)
+    for f in ti.static(range(len(d.grad_input_fields))):
+        for k in range(d.grad_input_widths[f]):
+            d.grad_input_fields[f].grad[e, k] = 0
+
+
 @ti.kernel
 def clear_grads(d: ti.template()):
     for e in range(d.n_batch):
-        for group in ti.static(d.grad_frame_groups):  # groups of ≤ 32: Taichi warns past that
-            for f in ti.static(range(len(group))):
-                _zero_frames_grad(group[f], e)
-        for f in ti.static(range(len(d.grad_input_fields))):
-            for k in range(d.grad_input_widths[f]):
-                d.grad_input_fields[f].grad[e, k] = 0
+        _clear_grads_env(d, e)
+
+
+@ti.kernel
+def prepare_reverse(d: ti.template(), src: ti.types.ndarray()):
+    """src (B, state | inputs | state gradient): frame 0 ← start state, inputs ← their
+    columns, every gradient ← 0, then the last frame's state gradient ← the output gradient."""
+    for e in range(d.n_batch):
+        width = d.n_qs + d.n_dofs
+        for k in range(d.n_qs):
+            d.qpos[0, e, k] = src[e, k]
+        for k in range(d.n_dofs):
+            d.qvel[0, e, k] = src[e, d.n_qs + k]
+        for f in ti.static(range(len(d.input_fields))):
+            for k in range(d.input_widths[f]):
+                d.input_fields[f][e, k] = src[e, width + d.input_offsets[f] + k]
+        _clear_grads_env(d, e)
+        seed = width + d.input_total
+        for k in range(d.n_qs):
+            d.qpos.grad[d.substeps, e, k] = src[e, seed + k]
+        for k in range(d.n_dofs):
+            d.qvel.grad[d.substeps, e, k] = src[e, seed + d.n_qs + k]
 
 
 @ti.kernel
