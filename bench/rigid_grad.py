@@ -99,7 +99,7 @@ def main():
     for name, path, n_envs, n_steps in CASES:
         t0 = time.perf_counter()
         fwd, fwd_bwd, plain, finite = time_case(path, n_envs, n_steps, args.repeats)
-        rows.append((f"genesis_lite", name, n_envs, n_steps, fwd, fwd_bwd, plain, finite))
+        rows.append(("genesis_lite", name, n_envs, n_steps, fwd, fwd_bwd, plain, finite))
         print(f"  {name} n_envs={n_envs} done ({time.perf_counter() - t0:.1f} s with compilation)", flush=True)
     peers = [("Genesis", "genesis"), ("Newton", "newton")]
     for label, module in peers:
