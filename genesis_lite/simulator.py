@@ -137,7 +137,7 @@ class Simulator:
         grads_states, grads_inputs = [], []
         for slot, state, inputs, grad in zip(self.slots, states, self._split_inputs(flat_inputs), grad_states):
             grad_state, grad_inputs = slot.solver.backward(state, inputs, grad)
-            slot.uploaded_state = slot.uploaded_inputs = None  # Taichi now holds this step's
+            slot.uploaded_state = slot.uploaded_inputs = None  # Taichi holds this old step now
             grads_states.append(grad_state)
             grads_inputs.extend(grad_inputs.get(name) for name in inputs)
         return (*grads_states, *grads_inputs)

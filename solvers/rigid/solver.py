@@ -132,7 +132,7 @@ class RigidSolver(Solver):
     # -- derived quantities at the uploaded state ----------------------------------------------
     def links_kinematics(self):
         """(B, L, 13): link origin pos (3), quat (4), spatial velocity ω (3) and v at the origin (3)."""
-        kernels.position_stages(self.data, 0)
+        kernels.down_sweep(self.data, 0)  # poses and velocities need this sweep only
         out = torch.empty((self.n_batch, self.model.n_links, 13), dtype=runtime.tc_float, device=runtime.device)
         kernels.read_links(self.data, out)
         return out
@@ -140,7 +140,7 @@ class RigidSolver(Solver):
     def links_kinematics_backward(self, grad_links):
         """Gradient of the uploaded state from a gradient of ``links_kinematics``'s output."""
         d = self.data
-        kernels.position_stages(d, 0)
+        kernels.down_sweep(d, 0)
         kernels.clear_grads(d)
         kernels.write_links_grad(d, grad_links.contiguous())
         kernels.down_sweep.grad(d, 0)  # poses and velocities come from this sweep only
