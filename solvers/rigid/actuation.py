@@ -8,6 +8,8 @@ scaled by the dof's own inertia M[i, i], and only ever pushes out of the violate
 """
 import taichi as ti
 
+from .data import accumulate
+
 FORCE, POSITION, VELOCITY = 0, 1, 2
 
 
@@ -34,3 +36,52 @@ def smooth_force(d: ti.template(), s, e, i):
         if above > 0:
             force -= inertia * ti.max(stiffness * above + damping * qd, 0.0)
     d.qfrc_smooth[s, e, i] = force - d.qfrc_bias[s, e, i]
+
+
+@ti.func
+def smooth_force_adjoint(d: ti.template(), s, e, i):
+    """Reverse of smooth_force: ∂L/∂qfrc_smooth[s, e, i] → state, bias, M[i, i] and the inputs."""
+    g = d.qfrc_smooth.grad[s, e, i]
+    qd = d.qvel[s, e, i]
+    qi = d.dof_q[i]
+    q = d.qpos[s, e, ti.max(qi, 0)]
+    mode = ti.cast(d.ctrl_mode[e, i], ti.i32)
+    kp, kv = d.kp[e, i], d.kv[e, i]
+    g_q, g_qd = 0.0, -g * d.damping[e, i]
+    accumulate(d.qfrc_bias.grad, ti.Vector([s, e, i]), -g)
+    accumulate(d.damping.grad, ti.Vector([e, i]), -g * qd)
+    if d.limits_enabled and qi >= 0:
+        stiffness, damping = d.consts[1], d.consts[2]
+        inertia = d.mass_mat[s, e, i, i]
+        push_up = stiffness * (d.dof_lower[i] - q) - damping * qd
+        push_down = stiffness * (q - d.dof_upper[i]) + damping * qd
+        g_inertia = 0.0
+        if d.dof_lower[i] - q > 0 and push_up > 0:
+            g_inertia += g * push_up
+            g_q -= g * inertia * stiffness
+            g_qd -= g * inertia * damping
+        if q - d.dof_upper[i] > 0 and push_down > 0:
+            g_inertia -= g * push_down
+            g_q -= g * inertia * stiffness
+            g_qd -= g * inertia * damping
+        accumulate(d.mass_mat.grad, ti.Vector([s, e, i, i]), g_inertia)
+    force = d.ctrl_force[e, i]
+    if mode == POSITION:
+        force = kp * (d.ctrl_pos[e, i] - q) - kv * qd
+    elif mode == VELOCITY:
+        force = kv * (d.ctrl_vel[e, i] - qd)
+    g_force = g if d.force_lo[e, i] < force and force < d.force_hi[e, i] else 0.0  # a clipped force is constant
+    if mode == POSITION:
+        accumulate(d.kp.grad, ti.Vector([e, i]), g_force * (d.ctrl_pos[e, i] - q))
+        accumulate(d.kv.grad, ti.Vector([e, i]), -g_force * qd)
+        accumulate(d.ctrl_pos.grad, ti.Vector([e, i]), g_force * kp)
+        g_q -= g_force * kp
+        g_qd -= g_force * kv
+    elif mode == VELOCITY:
+        accumulate(d.kv.grad, ti.Vector([e, i]), g_force * (d.ctrl_vel[e, i] - qd))
+        accumulate(d.ctrl_vel.grad, ti.Vector([e, i]), g_force * kv)
+        g_qd -= g_force * kv
+    else:
+        accumulate(d.ctrl_force.grad, ti.Vector([e, i]), g_force)
+    accumulate(d.qpos.grad, ti.Vector([s, e, ti.max(qi, 0)]), g_q)
+    accumulate(d.qvel.grad, ti.Vector([s, e, i]), g_qd)

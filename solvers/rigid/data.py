@@ -183,3 +183,11 @@ def release(data):
     """Return data whose scene is gone; dropped if Taichi was restarted since."""
     if data.signature[0] == runtime.epoch:
         _POOL.setdefault(data.signature, []).append(data)
+
+
+@ti.func
+def accumulate(fld: ti.template(), index, value):
+    """fld[index] += value without an atomic. The step kernels give each env to one thread, so
+    nothing else writes there, and Taichi's ``+=`` on a field is an atomic costing several
+    plain adds on CPU."""
+    fld[index] = fld[index] + value

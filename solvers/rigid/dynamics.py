@@ -7,7 +7,8 @@ mode differentiates the sweeps exactly.
 import taichi as ti
 
 from .model import FREE, PRISMATIC, REVOLUTE
-from .spatial import cross_force, cross_motion, dot3, inertia_mul
+from .data import accumulate
+from .spatial import cross_force, cross_motion, dot3, inertia_mul, inertia_mul_adjoint
 
 
 @ti.func
@@ -118,3 +119,132 @@ def bias_entry(d: ti.template(), s, e, i):
     """qfrc_bias[i] = cdof_i · (net force of the subtree of link(i)): Coriolis, centrifugal, gravity."""
     l = d.dof_link[i]
     d.qfrc_bias[s, e, i] = dot3(d.cdof_w[s, e, i], d.cfrc_n[s, e, l]) + dot3(d.cdof_v[s, e, i], d.cfrc_f[s, e, l])
+
+
+# -- reverse mode: each function below undoes the one of the same name above, for one env -----
+@ti.func
+def _dof_motion_adjoint(sw, sv, qd, vw, vv, gw, gv, gdw, gdv):
+    """Gradients (q̇, cdof w, cdof v, moving-frame vw, vv) of _dof_motion from those of its outputs."""
+    g_qd = dot3(sw, gw) + dot3(sv, gv) + dot3(vw.cross(sw), gdw) + dot3(vw.cross(sv) + vv.cross(sw), gdv)
+    g_sw = qd * (gw + gdw.cross(vw) + gdv.cross(vv))
+    g_sv = qd * (gv + gdv.cross(vw))
+    return g_qd, g_sw, g_sv, qd * (sw.cross(gdw) + sv.cross(gdv)), qd * sw.cross(gdv)
+
+
+@ti.func
+def _one_dof_adjoint(d: ti.template(), s, e, dof, vw, vv, gw, gv, gdw, gdv):
+    """Reverse of one _dof_motion term: q̇ and cdof gradients stored; the frame's returned."""
+    g_qd, g_sw, g_sv, g_vw, g_vv = _dof_motion_adjoint(d.cdof_w[s, e, dof], d.cdof_v[s, e, dof],
+                                                       d.qvel[s, e, dof], vw, vv, gw, gv, gdw, gdv)
+    accumulate(d.qvel.grad, ti.Vector([s, e, dof]), g_qd)
+    accumulate(d.cdof_w.grad, ti.Vector([s, e, dof]), g_sw)
+    accumulate(d.cdof_v.grad, ti.Vector([s, e, dof]), g_sv)
+    return g_vw, g_vv
+
+
+@ti.func
+def _link_motion_adjoint(d: ti.template(), s, e, l, gw, gv, gaw, gav):
+    """Reverse of _link_motion from the gradients of link l's velocity (gw, gv) and acceleration."""
+    p = d.link_parent[l]
+    pp = ti.max(p, 0)
+    zero = ti.Vector.zero(float, 3)
+    vw = d.cvel_w[s, e, pp] if p >= 0 else zero
+    vv = d.cvel_v[s, e, pp] if p >= 0 else zero
+    jt = d.link_jtype[l]
+    dof0 = d.link_dof0[l]
+    g_vw, g_vv = gw, gv  # the parent's velocity passes straight through
+    if jt == REVOLUTE or jt == PRISMATIC:
+        w, v = _one_dof_adjoint(d, s, e, dof0, vw, vv, gw, gv, gaw, gav)
+        g_vw += w
+        g_vv += v
+    elif jt == FREE:
+        vt = vv + ti.Vector([d.qvel[s, e, dof0 + k] for k in ti.static(range(3))])
+        g_vt = gv
+        for k in ti.static(range(3)):
+            w, v = _one_dof_adjoint(d, s, e, dof0 + 3 + k, vw, vt, gw, gv, gaw, gav)
+            g_vw += w
+            g_vt += v
+        for k in ti.static(range(3)):
+            accumulate(d.qvel.grad, ti.Vector([s, e, dof0 + k]), g_vt[k])
+        g_vv = g_vt
+    if p >= 0:
+        accumulate(d.cvel_w.grad, ti.Vector([s, e, p]), g_vw)
+        accumulate(d.cvel_v.grad, ti.Vector([s, e, p]), g_vv)
+        accumulate(d.cacc_w.grad, ti.Vector([s, e, p]), gaw)
+        accumulate(d.cacc_v.grad, ti.Vector([s, e, p]), gav)
+    else:  # a root's base acceleration is −gravity
+        for k in ti.static(range(3)):
+            accumulate(d.gravity.grad, ti.Vector([e, k]), -gav[k])
+
+
+@ti.func
+def link_forces_adjoint(d: ti.template(), s, e, l):
+    vw, vv = d.cvel_w[s, e, l], d.cvel_v[s, e, l]
+    aw, av = d.cacc_w[s, e, l], d.cacc_v[s, e, l]
+    m, h, inertia = d.cinert_m[s, e, l], d.cinert_h[s, e, l], d.cinert_i[s, e, l]
+    gn, gf = d.lfrc_n.grad[s, e, l], d.lfrc_f.grad[s, e, l]
+    gm, gh, gi, gaw, gav = inertia_mul_adjoint(m, h, inertia, aw, av, gn, gf)
+    pn, pf = inertia_mul(m, h, inertia, vw, vv)
+    # (cn, cf) = (vw × pn + vv × pf, vw × pf)
+    gm2, gh2, gi2, gvw, gvv = inertia_mul_adjoint(m, h, inertia, vw, vv, gn.cross(vw), gn.cross(vv) + gf.cross(vw))
+    accumulate(d.cinert_m.grad, ti.Vector([s, e, l]), gm + gm2)
+    accumulate(d.cinert_h.grad, ti.Vector([s, e, l]), gh + gh2)
+    accumulate(d.cinert_i.grad, ti.Vector([s, e, l]), gi + gi2)
+    _link_motion_adjoint(d, s, e, l,
+                         d.cvel_w.grad[s, e, l] + gvw + pn.cross(gn) + pf.cross(gf),
+                         d.cvel_v.grad[s, e, l] + gvv + pf.cross(gn),
+                         d.cacc_w.grad[s, e, l] + gaw, d.cacc_v.grad[s, e, l] + gav)
+
+
+@ti.func
+def _sum_adjoint(d: ti.template(), own: ti.template(), total: ti.template(), chain: ti.template(), s, e, l):
+    """Reverse of total[l] = own[l] + chain[first child]; chain[l] = total[l] + chain[next sibling].
+    Parents and older siblings have lower indices, so their gradients have arrived."""
+    c, n = d.link_first_child[l], d.link_next_sibling[l]
+    g_chain = chain.grad[s, e, l]
+    accumulate(chain.grad, ti.Vector([s, e, n]), g_chain)
+    g_total = total.grad[s, e, l] + g_chain
+    accumulate(own.grad, ti.Vector([s, e, l]), g_total)
+    accumulate(chain.grad, ti.Vector([s, e, c]), g_total)
+
+
+@ti.func
+def subtree_sum_adjoint(d: ti.template(), s, e, l):
+    _sum_adjoint(d, d.cinert_m, d.crb_m, d.chain_m, s, e, l)
+    _sum_adjoint(d, d.cinert_h, d.crb_h, d.chain_h, s, e, l)
+    _sum_adjoint(d, d.cinert_i, d.crb_i, d.chain_i, s, e, l)
+    _sum_adjoint(d, d.lfrc_n, d.cfrc_n, d.chain_n, s, e, l)
+    _sum_adjoint(d, d.lfrc_f, d.cfrc_f, d.chain_f, s, e, l)
+
+
+@ti.func
+def dof_force_adjoint(d: ti.template(), s, e, i):
+    l = d.dof_link[i]
+    gm, gh, gi, gw, gv = inertia_mul_adjoint(d.crb_m[s, e, l], d.crb_h[s, e, l], d.crb_i[s, e, l],
+                                             d.cdof_w[s, e, i], d.cdof_v[s, e, i],
+                                             d.dof_force_n.grad[s, e, i], d.dof_force_f.grad[s, e, i])
+    accumulate(d.crb_m.grad, ti.Vector([s, e, l]), gm)
+    accumulate(d.crb_h.grad, ti.Vector([s, e, l]), gh)
+    accumulate(d.crb_i.grad, ti.Vector([s, e, l]), gi)
+    accumulate(d.cdof_w.grad, ti.Vector([s, e, i]), gw)
+    accumulate(d.cdof_v.grad, ti.Vector([s, e, i]), gv)
+
+
+@ti.func
+def mass_entry_adjoint(d: ti.template(), s, e, k):
+    i, j = d.pair_i[k], d.pair_j[k]
+    g = d.mass_mat.grad[s, e, i, j] + (d.mass_mat.grad[s, e, j, i] if i != j else 0.0)
+    accumulate(d.cdof_w.grad, ti.Vector([s, e, j]), g * d.dof_force_n[s, e, i])
+    accumulate(d.cdof_v.grad, ti.Vector([s, e, j]), g * d.dof_force_f[s, e, i])
+    accumulate(d.dof_force_n.grad, ti.Vector([s, e, i]), g * d.cdof_w[s, e, j])
+    accumulate(d.dof_force_f.grad, ti.Vector([s, e, i]), g * d.cdof_v[s, e, j])
+
+
+@ti.func
+def bias_entry_adjoint(d: ti.template(), s, e, i):
+    l = d.dof_link[i]
+    g = d.qfrc_bias.grad[s, e, i]
+    accumulate(d.cdof_w.grad, ti.Vector([s, e, i]), g * d.cfrc_n[s, e, l])
+    accumulate(d.cdof_v.grad, ti.Vector([s, e, i]), g * d.cfrc_f[s, e, l])
+    accumulate(d.cfrc_n.grad, ti.Vector([s, e, l]), g * d.cdof_w[s, e, i])
+    accumulate(d.cfrc_f.grad, ti.Vector([s, e, l]), g * d.cdof_v[s, e, i])

@@ -7,7 +7,18 @@ angular velocity: quat' = quat ⊗ exp(h·ω/2), renormalised.
 import taichi as ti
 
 from .model import FREE, PRISMATIC, REVOLUTE
-from .spatial import quat_integrate
+from .data import accumulate
+from .spatial import quat_integrate, quat_integrate_adjoint
+
+
+@ti.func
+def _quat_at(d: ti.template(), s, e, k):
+    return ti.Vector([d.qpos[s, e, k + j] for j in ti.static(range(4))])
+
+
+@ti.func
+def _omega_at(d: ti.template(), s, e, k):
+    return ti.Vector([d.qvel[s, e, k + j] for j in ti.static(range(3))])
 
 
 @ti.func
@@ -24,8 +35,35 @@ def integrate_link(d: ti.template(), s, e, l):
             d.qvel[s + 1, e, dof0 + k] = d.qvel[s, e, dof0 + k] + h * d.qacc[s, e, dof0 + k]
         for k in ti.static(range(3)):
             d.qpos[s + 1, e, q0 + k] = d.qpos[s, e, q0 + k] + h * d.qvel[s + 1, e, dof0 + k]
-        quat = ti.Vector([d.qpos[s, e, q0 + 3], d.qpos[s, e, q0 + 4], d.qpos[s, e, q0 + 5], d.qpos[s, e, q0 + 6]])
-        omega = ti.Vector([d.qvel[s + 1, e, dof0 + 3], d.qvel[s + 1, e, dof0 + 4], d.qvel[s + 1, e, dof0 + 5]])
-        quat = quat_integrate(quat, omega, h)
+        quat = quat_integrate(_quat_at(d, s, e, q0 + 3), _omega_at(d, s + 1, e, dof0 + 3), h)
         for k in ti.static(range(4)):
             d.qpos[s + 1, e, q0 + 3 + k] = quat[k]
+
+
+@ti.func
+def _velocity_adjoint(d: ti.template(), s, e, dof, g_qd):
+    """g_qd = ∂L/∂q̇[s+1] in total: it reaches q̇[s] and, times h, q̈[s]."""
+    accumulate(d.qvel.grad, ti.Vector([s, e, dof]), g_qd)
+    accumulate(d.qacc.grad, ti.Vector([s, e, dof]), d.consts[0] * g_qd)
+
+
+@ti.func
+def integrate_link_adjoint(d: ti.template(), s, e, l):
+    """Reverse of integrate_link: gradients at frame s+1 → frame s and qacc[s]."""
+    h = d.consts[0]
+    jt = d.link_jtype[l]
+    dof0, q0 = d.link_dof0[l], d.link_q0[l]
+    gq, gv = ti.static(d.qpos.grad, d.qvel.grad)
+    if jt == REVOLUTE or jt == PRISMATIC:
+        accumulate(gq, ti.Vector([s, e, q0]), gq[s + 1, e, q0])
+        _velocity_adjoint(d, s, e, dof0, gv[s + 1, e, dof0] + h * gq[s + 1, e, q0])
+    elif jt == FREE:
+        g_quat_new = ti.Vector([gq[s + 1, e, q0 + 3 + k] for k in ti.static(range(4))])
+        g_quat, g_omega = quat_integrate_adjoint(_quat_at(d, s, e, q0 + 3), _omega_at(d, s + 1, e, dof0 + 3), h,
+                                                 g_quat_new)
+        for k in ti.static(range(3)):
+            accumulate(gq, ti.Vector([s, e, q0 + k]), gq[s + 1, e, q0 + k])
+            _velocity_adjoint(d, s, e, dof0 + k, gv[s + 1, e, dof0 + k] + h * gq[s + 1, e, q0 + k])
+            _velocity_adjoint(d, s, e, dof0 + 3 + k, gv[s + 1, e, dof0 + 3 + k] + g_omega[k])
+        for k in ti.static(range(4)):
+            accumulate(gq, ti.Vector([s, e, q0 + 3 + k]), g_quat[k])

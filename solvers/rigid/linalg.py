@@ -9,6 +9,8 @@ y = A⁻¹ q̄acc (A is symmetric), f̄ += y and Ā −= y qaccᵀ — one more 
 """
 import taichi as ti
 
+from .data import accumulate
+
 
 @ti.func
 def _factor(d: ti.template(), s, e):
@@ -19,7 +21,7 @@ def _factor(d: ti.template(), s, e):
         while j != -1:
             d.factor[s, e, k, j] = d.mass_mat[s, e, k, j]
             j = d.dof_parent[j]
-        d.factor[s, e, k, k] += d.armature[e, k] + h * d.damping[e, k]
+        accumulate(d.factor, ti.Vector([s, e, k, k]), d.armature[e, k] + h * d.damping[e, k])
     for r in range(d.n_dofs):
         k = d.n_dofs - 1 - r
         i = d.dof_parent[k]
@@ -27,7 +29,7 @@ def _factor(d: ti.template(), s, e):
             ratio = d.factor[s, e, k, i] / d.factor[s, e, k, k]
             j = i
             while j != -1:
-                d.factor[s, e, i, j] -= ratio * d.factor[s, e, k, j]
+                accumulate(d.factor, ti.Vector([s, e, i, j]), -ratio * d.factor[s, e, k, j])
                 j = d.dof_parent[j]
             d.factor[s, e, k, i] = ratio
             i = d.dof_parent[i]
@@ -40,14 +42,14 @@ def _solve_in_place(d: ti.template(), s, e, x: ti.template()):
         k = d.n_dofs - 1 - r
         i = d.dof_parent[k]
         while i != -1:
-            x[s, e, i] -= d.factor[s, e, k, i] * x[s, e, k]
+            accumulate(x, ti.Vector([s, e, i]), -d.factor[s, e, k, i] * x[s, e, k])
             i = d.dof_parent[i]
     for k in range(d.n_dofs):
-        x[s, e, k] /= d.factor[s, e, k, k]
+        x[s, e, k] = x[s, e, k] / d.factor[s, e, k, k]
     for k in range(d.n_dofs):
         i = d.dof_parent[k]
         while i != -1:
-            x[s, e, k] -= d.factor[s, e, k, i] * x[s, e, i]
+            accumulate(x, ti.Vector([s, e, k]), -d.factor[s, e, k, i] * x[s, e, i])
             i = d.dof_parent[i]
 
 
@@ -59,27 +61,20 @@ def solve_env(d: ti.template(), s, e):
     _solve_in_place(d, s, e, d.qacc)
 
 
-@ti.kernel
-def solve(d: ti.template(), s: ti.i32):
-    """The stage kernel; ``solve_adjoint`` is its reverse."""
-    for e in range(d.n_batch):
-        solve_env(d, s, e)
-
-
-@ti.kernel
-def solve_adjoint(d: ti.template(), s: ti.i32):
-    """Reverse of ``solve`` for frame s; qfrc_smooth.grad[s] must be zero on entry."""
+@ti.func
+def solve_adjoint_env(d: ti.template(), s, e):
+    """Reverse of ``solve_env`` for frame s. Sets qfrc_smooth.grad[s, e] (the solve is the only
+    reader of qfrc_smooth) and adds to the gradients of M, armature and damping."""
     h = d.consts[0]
-    for e in range(d.n_batch):
-        for i in range(d.n_dofs):
-            d.qfrc_smooth.grad[s, e, i] = d.qacc.grad[s, e, i]
-        _solve_in_place(d, s, e, d.qfrc_smooth.grad)
-        for i in range(d.n_dofs):
-            y = d.qfrc_smooth.grad[s, e, i]
-            j = i  # only the structural entries of M (on the dof tree) are inputs of the solve
-            while j != -1:
-                d.mass_mat.grad[s, e, i, j] -= y * d.qacc[s, e, j] + (d.qfrc_smooth.grad[s, e, j] * d.qacc[s, e, i]
-                                                                      if j != i else 0.0)
-                j = d.dof_parent[j]
-            d.armature.grad[e, i] -= y * d.qacc[s, e, i]
-            d.damping.grad[e, i] -= h * y * d.qacc[s, e, i]
+    for i in range(d.n_dofs):
+        d.qfrc_smooth.grad[s, e, i] = d.qacc.grad[s, e, i]
+    _solve_in_place(d, s, e, d.qfrc_smooth.grad)
+    for i in range(d.n_dofs):
+        y = d.qfrc_smooth.grad[s, e, i]
+        j = i  # only the structural entries of M (on the dof tree) are inputs of the solve
+        while j != -1:
+            g = y * d.qacc[s, e, j] + (d.qfrc_smooth.grad[s, e, j] * d.qacc[s, e, i] if j != i else 0.0)
+            accumulate(d.mass_mat.grad, ti.Vector([s, e, i, j]), -g)
+            j = d.dof_parent[j]
+        accumulate(d.armature.grad, ti.Vector([e, i]), -y * d.qacc[s, e, i])
+        accumulate(d.damping.grad, ti.Vector([e, i]), -h * y * d.qacc[s, e, i])

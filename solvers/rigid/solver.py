@@ -116,41 +116,40 @@ class RigidSolver(Solver):
         return bool(flag)
 
     def backward(self, state, inputs, grad_state_out):
-        d = self.data
-        # start state, inputs and output gradient in one launch (each launch costs ~0.1 ms here)
+        """Gradients of the step's start state and differentiable inputs from that of its end
+        state: load, replay, reverse (see step.py)."""
         packed = torch.cat([state.detach(), self._pack_inputs(inputs), grad_state_out], dim=1).contiguous()
-        kernels.prepare_reverse(d, packed)
-        kernels.advance(d, 0)  # refill every frame from the start state and inputs
-        for s in reversed(range(d.substeps)):
-            kernels.reverse_substep(d, s)
-        widths = [d.width(name) for name in self.grad_input_names]
-        out = self._empty(self.state_width + sum(widths))
-        kernels.read_grads(d, out)
+        out = self._empty(self.state_width + sum(self.data.width(name) for name in self.grad_input_names))
+        kernels.prepare_reverse(self.data, packed)
+        kernels.advance(self.data, 0)
+        for s in reversed(range(self.data.substeps)):  # two kernels: one compiles 3x slower
+            kernels.reverse_dynamics(self.data, s)
+            kernels.reverse_kinematics(self.data, s, out)
+        return self._split_grads(out)
+
+    def _split_grads(self, out):
+        widths = [self.data.width(name) for name in self.grad_input_names]
         parts = torch.split(out, [self.state_width] + widths, dim=1)
         return parts[0], dict(zip(self.grad_input_names, parts[1:]))
 
     # -- derived quantities at the uploaded state ----------------------------------------------
     def links_kinematics(self):
         """(B, L, 13): link origin pos (3), quat (4), spatial velocity ω (3) and v at the origin (3)."""
-        kernels.down_sweep(self.data, 0)  # poses and velocities need this sweep only
+        kernels.down_sweep(self.data)  # poses and velocities need this sweep only
         out = torch.empty((self.n_batch, self.model.n_links, 13), dtype=runtime.tc_float, device=runtime.device)
         kernels.read_links(self.data, out)
         return out
 
     def links_kinematics_backward(self, grad_links):
         """Gradient of the uploaded state from a gradient of ``links_kinematics``'s output."""
-        d = self.data
-        kernels.down_sweep(d, 0)
-        kernels.clear_grads(d)
-        kernels.write_links_grad(d, grad_links.contiguous())
-        kernels.down_sweep.grad(d, 0)  # poses and velocities come from this sweep only
-        out = self._empty(self.state_width + sum(d.width(n) for n in self.grad_input_names))
-        kernels.read_grads(d, out)
-        return out[:, : self.state_width]
+        kernels.down_sweep(self.data)
+        out = self._empty(self.state_width + sum(self.data.width(n) for n in self.grad_input_names))
+        kernels.down_sweep_adjoint(self.data, grad_links.contiguous(), out)
+        return self._split_grads(out)[0]
 
     def mass_matrix(self):
         """(B, D, D) joint-space mass matrix (armature excluded) at the uploaded state."""
-        kernels.position_stages(self.data, 0)
+        kernels.position_stages(self.data)
         out = torch.empty((self.n_batch, self.model.n_dofs, self.model.n_dofs), dtype=runtime.tc_float,
                           device=runtime.device)
         kernels.read_mass_matrix(self.data, out)

@@ -89,3 +89,65 @@ def cross_force(aw, av, fn, ff):
 def inertia_mul(m, h, inertia, w, v):
     """Spatial inertia (m, h, I) times motion (w, v) → momentum force (n, f)."""
     return mat_vec(inertia, w) + h.cross(v), m * v - h.cross(w)
+
+
+# -- adjoints (reverse mode, hand-written): each takes the forward inputs and the gradient of
+# -- the output, and returns the gradients of the inputs ---------------------------------------
+@ti.func
+def quat_conj(q):
+    return ti.Vector([q[0], -q[1], -q[2], -q[3]])
+
+
+@ti.func
+def quat_mul_adjoint(a, b, g):
+    """Gradients of a and b from g = ∂L/∂(a ⊗ b): right and left products transpose to conjugates."""
+    return quat_mul(g, quat_conj(b)), quat_mul(quat_conj(a), g)
+
+
+@ti.func
+def quat_to_mat_adjoint(q, g):
+    """Gradient of q from g = ∂L/∂R, R = quat_to_mat(q) (the polynomial, not assuming |q| = 1)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return 2 * ti.Vector([
+        -z * g[0, 1] + y * g[0, 2] + z * g[1, 0] - x * g[1, 2] - y * g[2, 0] + x * g[2, 1],
+        y * g[0, 1] + z * g[0, 2] + y * g[1, 0] - 2 * x * g[1, 1] - w * g[1, 2] + z * g[2, 0] + w * g[2, 1]
+        - 2 * x * g[2, 2],
+        -2 * y * g[0, 0] + x * g[0, 1] + w * g[0, 2] + x * g[1, 0] + z * g[1, 2] - w * g[2, 0] + z * g[2, 1]
+        - 2 * y * g[2, 2],
+        -2 * z * g[0, 0] - w * g[0, 1] + x * g[0, 2] + w * g[1, 0] - 2 * z * g[1, 1] + y * g[1, 2] + x * g[2, 0]
+        + y * g[2, 1]])
+
+
+@ti.func
+def normalized_adjoint(q, g):
+    """Gradient of q from g = ∂L/∂(q / |q|)."""
+    norm = ti.sqrt(q.dot(q))
+    unit = q / norm
+    return (g - unit * unit.dot(g)) / norm
+
+
+@ti.func
+def quat_integrate_adjoint(q, omega, h, g):
+    """Gradients of q and omega from g = ∂L/∂quat_integrate(q, omega, h)."""
+    speed = ti.sqrt(dot3(omega, omega) + 1e-36)
+    half = 0.5 * h * speed
+    s = ti.sin(half) / speed
+    rot = ti.Vector([ti.cos(half), s * omega[0], s * omega[1], s * omega[2]])
+    unit_q = quat_normalized(q)
+    product = quat_mul(unit_q, rot)
+    g_unit_q, g_rot = quat_mul_adjoint(unit_q, rot, normalized_adjoint(product, g))
+    g_axis = ti.Vector([g_rot[1], g_rot[2], g_rot[3]])
+    g_s = dot3(g_axis, omega)
+    g_speed = -g_rot[0] * ti.sin(half) * 0.5 * h + g_s * (ti.cos(half) * 0.5 * h * speed - ti.sin(half)) / speed ** 2
+    return normalized_adjoint(q, g_unit_q), s * g_axis + g_speed * omega / speed
+
+
+@ti.func
+def inertia_mul_adjoint(m, h, inertia, w, v, gn, gf):
+    """Gradients (m, h, I, w, v) from (gn, gf) = ∂L/∂inertia_mul(m, h, I, w, v)."""
+    g_m = dot3(gf, v)
+    g_h = v.cross(gn) - w.cross(gf)
+    g_inertia = gn.outer_product(w)
+    g_w = mat_vec(inertia.transpose(), gn) - gf.cross(h)
+    g_v = gn.cross(h) + m * gf
+    return g_m, g_h, g_inertia, g_w, g_v

@@ -1,20 +1,24 @@
-"""One rigid step, forward and reverse: the stage order, and moving state, inputs and
-gradients between the Taichi fields and torch.
+"""One rigid step, forward and reverse, and moving state, inputs and gradients between the
+Taichi fields and torch.
 
-Forward runs every substep of every env in one fused launch (``advance``), built from the
-same per-item functions as the stage kernels. Reverse replays that launch to refill the
-frames, then runs each stage's gradient kernel backwards, substep by substep.
+Forward runs every substep of every env in one launch (``advance``). Reverse is three:
+``prepare_reverse`` loads the step's start state, inputs and output gradient, ``advance``
+replays the substeps to refill the frames, and ``reverse`` runs each stage's hand-written
+adjoint in reverse order, substep by substep, and writes the gradients out. (One fused launch
+took LLVM ten times longer to compile than the three.) Each env belongs to one thread, so
+gradients accumulate without atomics.
 """
 import taichi as ti
 
-from .actuation import smooth_force
-from .dynamics import bias_entry, dof_force, link_forces, mass_entry, subtree_sum
-from .integrator import integrate_link
-from .kinematics import link_kinematics
-from .linalg import solve, solve_adjoint, solve_env
+from .actuation import smooth_force, smooth_force_adjoint
+from .dynamics import (bias_entry, bias_entry_adjoint, dof_force, dof_force_adjoint, link_forces,
+                       link_forces_adjoint, mass_entry, mass_entry_adjoint, subtree_sum, subtree_sum_adjoint)
+from .integrator import integrate_link, integrate_link_adjoint
+from .kinematics import link_kinematics, link_kinematics_adjoint
+from .linalg import solve_adjoint_env, solve_env
 
 
-# -- per-env stage functions: the stages of one substep, in order -------------------------------
+# -- one substep of one env, in stage order, and its reverse --------------------------------------
 @ti.func
 def down_sweep_env(d: ti.template(), s, e):
     """Root to leaves: each link's pose, inertia, motion subspace, velocity and net force."""
@@ -24,66 +28,61 @@ def down_sweep_env(d: ti.template(), s, e):
 
 
 @ti.func
-def up_sweep_env(d: ti.template(), s, e):
-    """Leaves to root: composite inertias and subtree forces."""
-    for i in range(d.n_links):
-        subtree_sum(d, s, e, d.n_links - 1 - i)
-
-
-# -- stage kernels (reverse mode runs their .grad; Taichi needs one serial loop per kernel) ------
-@ti.kernel
-def down_sweep(d: ti.template(), s: ti.i32):
-    for e in range(d.n_batch):
-        down_sweep_env(d, s, e)
-
-
-@ti.kernel
-def up_sweep(d: ti.template(), s: ti.i32):
-    for e in range(d.n_batch):
-        up_sweep_env(d, s, e)
-
-
-@ti.kernel
-def joint_forces(d: ti.template(), s: ti.i32):
-    """Mass matrix, bias forces, then actuation, each parallel over (env, dof or pair)."""
-    for e, i in ti.ndrange(d.n_batch, d.n_dofs):
-        dof_force(d, s, e, i)
-    for e, k in ti.ndrange(d.n_batch, d.n_pairs):
-        mass_entry(d, s, e, k)
-    for e, i in ti.ndrange(d.n_batch, d.n_dofs):
-        bias_entry(d, s, e, i)
-    for e, i in ti.ndrange(d.n_batch, d.n_dofs):
-        smooth_force(d, s, e, i)
-
-
-@ti.kernel
-def integrate(d: ti.template(), s: ti.i32):
-    for e, l in ti.ndrange(d.n_batch, d.n_links):
-        integrate_link(d, s, e, l)
-
-
-# Stage kernels of one substep, in forward order. Reverse mode walks it backwards; the
-# solve's adjoint is hand-written (see linalg.py), every other stage uses Taichi's .grad.
-STAGES = (down_sweep, up_sweep, joint_forces, solve, integrate)
-ADJOINTS = {solve: solve_adjoint}
-
-
-@ti.func
-def _finite(x):
-    return not (ti.math.isinf(x) or ti.math.isnan(x))
+def down_sweep_adjoint_env(d: ti.template(), s, e):
+    for r in range(d.n_links):
+        l = d.n_links - 1 - r
+        link_forces_adjoint(d, s, e, l)
+        link_kinematics_adjoint(d, s, e, l)
 
 
 @ti.func
 def position_stages_env(d: ti.template(), s, e):
-    """Kinematics, bias forces and mass matrix of env e at frame s."""
+    """Kinematics, then (leaves to root) composite inertias and subtree forces, then the mass
+    matrix and bias forces of env e at frame s."""
     down_sweep_env(d, s, e)
-    up_sweep_env(d, s, e)
+    for r in range(d.n_links):
+        subtree_sum(d, s, e, d.n_links - 1 - r)
     for i in range(d.n_dofs):
         dof_force(d, s, e, i)
     for k in range(d.n_pairs):
         mass_entry(d, s, e, k)
     for i in range(d.n_dofs):
         bias_entry(d, s, e, i)
+
+
+@ti.func
+def substep_env(d: ti.template(), s, e):
+    """Frame s → frame s + 1."""
+    position_stages_env(d, s, e)
+    for i in range(d.n_dofs):
+        smooth_force(d, s, e, i)
+    solve_env(d, s, e)
+    for l in range(d.n_links):
+        integrate_link(d, s, e, l)
+
+
+@ti.func
+def dynamics_adjoint_env(d: ti.template(), s, e):
+    """Gradients at frame s + 1 → frame s and the inputs, down to the link-sweep outputs (frame s
+    must hold its forward values); down_sweep_adjoint_env finishes the substep."""
+    for l in range(d.n_links):
+        integrate_link_adjoint(d, s, e, l)
+    solve_adjoint_env(d, s, e)
+    for i in range(d.n_dofs):
+        smooth_force_adjoint(d, s, e, i)
+    for i in range(d.n_dofs):
+        bias_entry_adjoint(d, s, e, i)
+    for k in range(d.n_pairs):
+        mass_entry_adjoint(d, s, e, k)
+    for i in range(d.n_dofs):
+        dof_force_adjoint(d, s, e, i)
+    for l in range(d.n_links):
+        subtree_sum_adjoint(d, s, e, l)
+
+
+@ti.func
+def _finite(x):
+    return not (ti.math.isinf(x) or ti.math.isnan(x))
 
 
 @ti.kernel
@@ -93,12 +92,7 @@ def advance(d: ti.template(), commit: ti.i32):
     S = d.substeps
     for e in range(d.n_batch):
         for s in range(S):
-            position_stages_env(d, s, e)
-            for i in range(d.n_dofs):
-                smooth_force(d, s, e, i)
-            solve_env(d, s, e)
-            for l in range(d.n_links):
-                integrate_link(d, s, e, l)
+            substep_env(d, s, e)
         for k in range(d.n_qs):
             if not _finite(d.qpos[S, e, k]):
                 d.nonfinite[0] = 1
@@ -113,15 +107,66 @@ def advance(d: ti.template(), commit: ti.i32):
 
 
 @ti.kernel
-def position_stages(d: ti.template(), s: ti.i32):
+def prepare_reverse(d: ti.template(), src: ti.types.ndarray()):
+    """src (B, state | inputs | gradient of the end state): frame 0 and the inputs ← the step's
+    start, every gradient ← 0, then the last frame's state gradient ← the seed."""
+    S = d.substeps
     for e in range(d.n_batch):
-        position_stages_env(d, s, e)
+        _load_start(d, e, src)
+        _clear_grads_env(d, e)
+        seed = d.n_qs + d.n_dofs + d.input_total
+        for k in range(d.n_qs):
+            d.qpos.grad[S, e, k] = src[e, seed + k]
+        for k in range(d.n_dofs):
+            d.qvel.grad[S, e, k] = src[e, seed + d.n_qs + k]
 
 
-def reverse_substep(d, s):
-    """Gradient kernels of substep s in reverse stage order (frame s must hold its forward values)."""
-    for stage in reversed(STAGES):
-        ADJOINTS.get(stage, stage.grad)(d, s)
+@ti.kernel
+def reverse_dynamics(d: ti.template(), s: ti.i32):
+    """Adjoints of substep s from the integration back to the subtree sums."""
+    for e in range(d.n_batch):
+        dynamics_adjoint_env(d, s, e)
+
+
+@ti.kernel
+def reverse_kinematics(d: ti.template(), s: ti.i32, dst: ti.types.ndarray()):
+    """Adjoint of substep s's down sweep; after substep 0 the gradients go to dst (B, state
+    gradient | differentiable input gradients), as _read_grads_env lays it out."""
+    for e in range(d.n_batch):
+        down_sweep_adjoint_env(d, s, e)
+        if s == 0:
+            _read_grads_env(d, e, dst)
+
+
+@ti.kernel
+def down_sweep(d: ti.template()):
+    """Link poses and velocities at frame 0 (what the link getters read)."""
+    for e in range(d.n_batch):
+        down_sweep_env(d, 0, e)
+
+
+@ti.kernel
+def down_sweep_adjoint(d: ti.template(), src: ti.types.ndarray(), dst: ti.types.ndarray()):
+    """src (B, L, 13): gradient of read_links' output → dst: gradient of the frame-0 state (as
+    read_grads lays it out). The down sweep at frame 0 must be current."""
+    for e in range(d.n_batch):
+        _clear_grads_env(d, e)
+        for l in range(d.n_links):
+            for k in ti.static(range(3)):
+                d.xpos.grad[0, e, l][k] = src[e, l, k]
+                d.cvel_w.grad[0, e, l][k] = src[e, l, 7 + k]
+                d.cvel_v.grad[0, e, l][k] = src[e, l, 10 + k]
+            for k in ti.static(range(4)):
+                d.xquat.grad[0, e, l][k] = src[e, l, 3 + k]
+        down_sweep_adjoint_env(d, 0, e)
+        _read_grads_env(d, e, dst)
+
+
+@ti.kernel
+def position_stages(d: ti.template()):
+    """Mass matrix and bias at frame 0."""
+    for e in range(d.n_batch):
+        position_stages_env(d, 0, e)
 
 
 # -- moving data: one parallel loop over envs per kernel, since every parallel loop is a task
@@ -154,17 +199,29 @@ def write_inputs(d: ti.template(), src: ti.types.ndarray()):
                 d.input_fields[f][e, k] = src[e, d.input_offsets[f] + k]
 
 
-@ti.kernel
-def read_grads(d: ti.template(), dst: ti.types.ndarray()):
-    """dst (B, Q + D + differentiable input widths) ← state gradient at frame 0, then input gradients."""
-    for e in range(d.n_batch):
-        for k in range(d.n_qs):
-            dst[e, k] = d.qpos.grad[0, e, k]
-        for k in range(d.n_dofs):
-            dst[e, d.n_qs + k] = d.qvel.grad[0, e, k]
-        for f in ti.static(range(len(d.grad_input_fields))):
-            for k in range(d.grad_input_widths[f]):
-                dst[e, d.grad_input_offsets[f] + k] = d.grad_input_fields[f].grad[e, k]
+@ti.func
+def _read_grads_env(d: ti.template(), e, dst: ti.template()):
+    """dst[e] (Q + D + differentiable input widths) ← state gradient at frame 0, then input gradients."""
+    for k in range(d.n_qs):
+        dst[e, k] = d.qpos.grad[0, e, k]
+    for k in range(d.n_dofs):
+        dst[e, d.n_qs + k] = d.qvel.grad[0, e, k]
+    for f in ti.static(range(len(d.grad_input_fields))):
+        for k in range(d.grad_input_widths[f]):
+            dst[e, d.grad_input_offsets[f] + k] = d.grad_input_fields[f].grad[e, k]
+
+
+@ti.func
+def _load_start(d: ti.template(), e, src: ti.template()):
+    """Frame 0 and the inputs of env e ← src[e] (state | inputs, in INPUTS order)."""
+    width = d.n_qs + d.n_dofs
+    for k in range(d.n_qs):
+        d.qpos[0, e, k] = src[e, k]
+    for k in range(d.n_dofs):
+        d.qvel[0, e, k] = src[e, d.n_qs + k]
+    for f in ti.static(range(len(d.input_fields))):
+        for k in range(d.input_widths[f]):
+            d.input_fields[f][e, k] = src[e, width + d.input_offsets[f] + k]
 
 
 @ti.func
@@ -185,33 +242,6 @@ def _clear_grads_env(d: ti.template(), e):
 
 
 @ti.kernel
-def clear_grads(d: ti.template()):
-    for e in range(d.n_batch):
-        _clear_grads_env(d, e)
-
-
-@ti.kernel
-def prepare_reverse(d: ti.template(), src: ti.types.ndarray()):
-    """src (B, state | inputs | state gradient): frame 0 ← start state, inputs ← their
-    columns, every gradient ← 0, then the last frame's state gradient ← the output gradient."""
-    for e in range(d.n_batch):
-        width = d.n_qs + d.n_dofs
-        for k in range(d.n_qs):
-            d.qpos[0, e, k] = src[e, k]
-        for k in range(d.n_dofs):
-            d.qvel[0, e, k] = src[e, d.n_qs + k]
-        for f in ti.static(range(len(d.input_fields))):
-            for k in range(d.input_widths[f]):
-                d.input_fields[f][e, k] = src[e, width + d.input_offsets[f] + k]
-        _clear_grads_env(d, e)
-        seed = width + d.input_total
-        for k in range(d.n_qs):
-            d.qpos.grad[d.substeps, e, k] = src[e, seed + k]
-        for k in range(d.n_dofs):
-            d.qvel.grad[d.substeps, e, k] = src[e, seed + d.n_qs + k]
-
-
-@ti.kernel
 def read_links(d: ti.template(), dst: ti.types.ndarray()):
     """dst (B, L, 13) ← frame-0 link pos, quat, cvel (ω, v at the origin)."""
     for e, l in ti.ndrange(d.n_batch, d.n_links):
@@ -221,17 +251,6 @@ def read_links(d: ti.template(), dst: ti.types.ndarray()):
             dst[e, l, 10 + k] = d.cvel_v[0, e, l][k]
         for k in ti.static(range(4)):
             dst[e, l, 3 + k] = d.xquat[0, e, l][k]
-
-
-@ti.kernel
-def write_links_grad(d: ti.template(), src: ti.types.ndarray()):
-    for e, l in ti.ndrange(d.n_batch, d.n_links):
-        for k in ti.static(range(3)):
-            d.xpos.grad[0, e, l][k] = src[e, l, k]
-            d.cvel_w.grad[0, e, l][k] = src[e, l, 7 + k]
-            d.cvel_v.grad[0, e, l][k] = src[e, l, 10 + k]
-        for k in ti.static(range(4)):
-            d.xquat.grad[0, e, l][k] = src[e, l, 3 + k]
 
 
 @ti.kernel
