@@ -37,7 +37,6 @@ class RigidData:
         self.n_batch, self.substeps = n_batch, substeps
         self.limits_enabled = bool(limits_enabled)  # compile-time switch of the limit forces
         self.n_links, self.n_dofs, self.n_qs = model.n_links, model.n_dofs, model.n_qs
-        self.n_qs_alloc, self.n_dofs_alloc = max(1, self.n_qs), max(1, self.n_dofs)
         self.n_pairs = len(model.pairs)
         self.widths = {"links": self.n_links, "dofs": self.n_dofs}
         self._builder = ti.FieldsBuilder()

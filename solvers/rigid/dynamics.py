@@ -1,8 +1,7 @@
 """Velocity and inertia stages: recursive Newton–Euler bias forces and the joint-space mass
 matrix by composite rigid bodies, all in the world frame about the origin (Featherstone).
 
-Each link's quantities are written once per frame and read only after, so Taichi's reverse
-mode differentiates the sweeps exactly.
+Each forward function has its hand-written reverse further down (see docs/architecture.md).
 """
 import taichi as ti
 
@@ -12,53 +11,38 @@ from .spatial import cross_force, cross_motion, dot3, inertia_mul, inertia_mul_a
 
 
 @ti.func
-def _dof_motion(d: ti.template(), s, e, dof, qd, vw, vv):
+def _dof_motion(d: ti.template(), s, e, dof, vw, vv):
     """A dof's velocity (cdof·q̇) and velocity-product acceleration ((v × cdof)·q̇), the axis
     moving with velocity (vw, vv)."""
-    k = ti.min(dof, d.n_dofs_alloc - 1)  # a valid index for links with fewer dofs; then qd = 0
-    sw, sv = d.cdof_w[s, e, k], d.cdof_v[s, e, k]
+    qd = d.qvel[s, e, dof]
+    sw, sv = d.cdof_w[s, e, dof], d.cdof_v[s, e, dof]
     dw, dv = cross_motion(vw, vv, sw, sv)
     return sw * qd, sv * qd, dw * qd, dv * qd
 
 
 @ti.func
-def _qvel_at(d: ti.template(), s, e, k):
-    return d.qvel[s, e, ti.min(k, d.n_dofs_alloc - 1)]
-
-
-@ti.func
 def _link_motion(d: ti.template(), s, e, l):
-    """Spatial velocity and acceleration (at zero qacc, gravity as a base acceleration) of link l.
-
-    Written without re-assigned locals (see kinematics.py): joint types select, not branch."""
+    """Spatial velocity and acceleration (at zero qacc, gravity as a base acceleration) of link l."""
     p = d.link_parent[l]
-    pp = ti.max(p, 0)
-    has_parent = p >= 0
-    zero = ti.Vector.zero(float, 3)
-    gravity = ti.Vector([d.gravity[e, 0], d.gravity[e, 1], d.gravity[e, 2]])
-    vw = ti.select(has_parent, d.cvel_w[s, e, pp], zero)
-    vv = ti.select(has_parent, d.cvel_v[s, e, pp], zero)
-    aw = ti.select(has_parent, d.cacc_w[s, e, pp], zero)
-    av = ti.select(has_parent, d.cacc_v[s, e, pp], -gravity)
+    vw, vv, aw = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)
+    av = -ti.Vector([d.gravity[e, 0], d.gravity[e, 1], d.gravity[e, 2]])
+    if p >= 0:
+        vw, vv, aw, av = d.cvel_w[s, e, p], d.cvel_v[s, e, p], d.cacc_w[s, e, p], d.cacc_v[s, e, p]
     jt = d.link_jtype[l]
     dof0 = d.link_dof0[l]
-    one_dof = jt == REVOLUTE or jt == PRISMATIC
-    is_free = jt == FREE
-    # one-dof joints: the axis moves with the parent
-    q1 = ti.select(one_dof, _qvel_at(d, s, e, dof0), 0.0)
-    w1, v1, dw1, dv1 = _dof_motion(d, s, e, dof0, q1, vw, vv)
-    # free joint: translation dofs are fixed world axes; the rotation axes move with the
-    # translating frame (their own rotation adds ω × ω = 0), as in MuJoCo's mj_comVel
-    trans = ti.select(is_free, ti.Vector([_qvel_at(d, s, e, dof0 + k) for k in ti.static(range(3))]), zero)
-    vt = vv + trans
-    qa = ti.select(is_free, _qvel_at(d, s, e, dof0 + 3), 0.0)
-    qb = ti.select(is_free, _qvel_at(d, s, e, dof0 + 4), 0.0)
-    qc = ti.select(is_free, _qvel_at(d, s, e, dof0 + 5), 0.0)
-    wa, va, dwa, dva = _dof_motion(d, s, e, dof0 + 3, qa, vw, vt)
-    wb, vb, dwb, dvb = _dof_motion(d, s, e, dof0 + 4, qb, vw, vt)
-    wc, vc, dwc, dvc = _dof_motion(d, s, e, dof0 + 5, qc, vw, vt)
-    return (vw + w1 + wa + wb + wc, vt + v1 + va + vb + vc,
-            aw + dw1 + dwa + dwb + dwc, av + dv1 + dva + dvb + dvc)
+    w, v, dw, dv = vw, vv, aw, av
+    if jt == REVOLUTE or jt == PRISMATIC:  # the axis moves with the parent
+        w1, v1, dw1, dv1 = _dof_motion(d, s, e, dof0, vw, vv)
+        w, v, dw, dv = vw + w1, vv + v1, aw + dw1, av + dv1
+    elif jt == FREE:
+        # translation dofs are fixed world axes; the rotation axes move with the translating
+        # frame (their own rotation adds ω × ω = 0), as in MuJoCo's mj_comVel
+        vt = vv + ti.Vector([d.qvel[s, e, dof0 + k] for k in ti.static(range(3))])
+        v = vt
+        for k in ti.static(range(3)):
+            wk, vk, dwk, dvk = _dof_motion(d, s, e, dof0 + 3 + k, vw, vt)
+            w, v, dw, dv = w + wk, v + vk, dw + dwk, dv + dvk
+    return w, v, dw, dv
 
 
 @ti.func

@@ -5,8 +5,7 @@ Everything is expressed in the world frame about the world origin (MuJoCo's ``cd
 the *current* masses here, inside the differentiated step: a link's rotational inertia scales
 with its mass (constant shape, uniform density change).
 
-The link loop is differentiated by Taichi's reverse mode, so its body assigns every local
-once: joint types choose values with ``ti.select`` rather than re-assigning in branches.
+Each forward function has its hand-written reverse below it (see docs/architecture.md).
 """
 import taichi as ti
 
@@ -17,36 +16,27 @@ from .spatial import (axis_angle_quat, mat_mul, mat_vec, normalized_adjoint, qua
 
 
 @ti.func
-def qpos_at(d: ti.template(), s, e, k):
-    """qpos[k], with k clamped into range (links without qs point one past their parent's)."""
-    return d.qpos[s, e, ti.min(k, d.n_qs_alloc - 1)]
-
-
-@ti.func
 def _joint_pose(d: ti.template(), s, e, l):
     """World pose (pos m, quat) of link l from its parent's pose and its joint coordinate."""
-    p = d.link_parent[l]
-    pp = ti.max(p, 0)
-    has_parent = p >= 0
-    parent_pos = ti.select(has_parent, d.xpos[s, e, pp], ti.Vector.zero(float, 3))
-    parent_quat = ti.select(has_parent, d.xquat[s, e, pp], ti.Vector([1.0, 0.0, 0.0, 0.0]))
     jt = d.link_jtype[l]
     q0 = d.link_q0[l]
-    q = qpos_at(d, s, e, q0)
-    axis = d.link_axis[l]
-    frame_pos = parent_pos + mat_vec(quat_to_mat(parent_quat), d.link_pos0[l])
-    frame_quat = quat_mul(parent_quat, d.link_quat0[l])
-    angle = ti.select(jt == REVOLUTE, q, 0.0)
-    slide = ti.select(jt == PRISMATIC, q, 0.0)
-    joint_quat = quat_mul(frame_quat, axis_angle_quat(axis, angle))
-    joint_pos = frame_pos + mat_vec(quat_to_mat(frame_quat), axis) * slide
-    is_free = jt == FREE
-    free_pos = ti.Vector([qpos_at(d, s, e, q0 + k) for k in ti.static(range(3))])
-    # select before normalising: other links' stand-in qs may be all zero, and the reverse pass
-    # would multiply that branch's infinite derivative by zero
-    raw_quat = ti.Vector([qpos_at(d, s, e, q0 + 3 + k) for k in ti.static(range(4))])
-    free_quat = quat_normalized(ti.select(is_free, raw_quat, ti.Vector([1.0, 0.0, 0.0, 0.0])))
-    return ti.select(is_free, free_pos, joint_pos), ti.select(is_free, free_quat, joint_quat)
+    pos = ti.Vector.zero(float, 3)
+    quat = ti.Vector([1.0, 0.0, 0.0, 0.0])
+    if jt == FREE:  # the coordinates are the world pose, whatever the parent
+        pos = ti.Vector([d.qpos[s, e, q0 + k] for k in ti.static(range(3))])
+        quat = quat_normalized(ti.Vector([d.qpos[s, e, q0 + 3 + k] for k in ti.static(range(4))]))
+    else:
+        p = d.link_parent[l]
+        if p >= 0:
+            pos = d.xpos[s, e, p]
+            quat = d.xquat[s, e, p]
+        pos = pos + mat_vec(quat_to_mat(quat), d.link_pos0[l])
+        quat = quat_mul(quat, d.link_quat0[l])
+        if jt == REVOLUTE:
+            quat = quat_mul(quat, axis_angle_quat(d.link_axis[l], d.qpos[s, e, q0]))
+        elif jt == PRISMATIC:
+            pos = pos + mat_vec(quat_to_mat(quat), d.link_axis[l]) * d.qpos[s, e, q0]
+    return pos, quat
 
 
 @ti.func

@@ -8,9 +8,7 @@ rotational inertia I about the origin (kg·m², 3x3).
 """
 import taichi as ti
 
-# Taichi's reverse mode needs the bodies of serial loops free of re-assigned locals (they go
-# through its autodiff stack, where they have given wrong gradients); its built-in ``@``
-# accumulates into a local, so products here are written as single expressions.
+# Products are written out as single expressions: Taichi's ``@`` accumulates into a local.
 
 
 @ti.func
