@@ -10,17 +10,27 @@ velocities. "forward" is the rollout that records the graph; "fwd+bwd" adds ``lo
 "no-grad fwd" is the same rollout in a scene built without requires_grad (the cost of being
 differentiable is the difference). Best of ``--repeats`` after one warm-up rollout.
 
-Peers (Genesis ``genesis-world``, Newton ``newton``) are timed only if importable; they are not
-installed here, so their rows say so.
+Peers, Genesis (``genesis-world``) and Newton (``newton``, SolverFeatherstone), run the same rollout
+(same URDF, dt, controls and q0, written to .npz files) through ``bench/peers.py`` in a subprocess:
+with this interpreter if it imports the peer, else with the interpreter named by ``GENESIS_PYTHON``
+/ ``NEWTON_PYTHON`` (virtualenvs set up as in ``bench/README.md``), else its row says "not
+installed". Their rows add "fwd+bwd / ours" (the peer's fwd+bwd time over ours for the same case;
+goal ≥ 10) and max |Δq| (rad), the largest difference of the final joint positions of the no-grad
+rollouts from ours; a note under the table gives each peer's version, import and build times (s)
+and how its rollout differs from ours.
 
-Run:  python bench/rigid_grad.py [--repeats 3]
+Run:  [GENESIS_PYTHON=... NEWTON_PYTHON=...] python bench/rigid_grad.py [--repeats 3]
 """
 import argparse
 import importlib.util
+import json
 import os
+import subprocess
 import sys
+import tempfile
 import time
 
+import numpy as np
 import pybullet_data
 import torch
 
@@ -33,6 +43,7 @@ KUKA = os.path.join(pybullet_data.getDataPath(), "kuka_iiwa", "model.urdf")
 PENDULUM = os.path.join(ROOT, "assets", "pendulum2.urdf")
 DT = 0.01
 CASES = [("pendulum2", PENDULUM, 0, 50), ("kuka", KUKA, 1, 100), ("kuka", KUKA, 256, 100)]
+PEERS = [("Genesis", "genesis", "GENESIS_PYTHON"), ("Newton", "newton", "NEWTON_PYTHON")]
 
 
 def make_scene(path, n_envs, requires_grad):
@@ -83,8 +94,26 @@ def time_case(path, n_envs, n_steps, repeats):
         t0 = time.perf_counter()
         rollout(plain_scene, plain_robot, plain_controls, plain_q0).item()
         plain = min(plain, time.perf_counter() - t0)
+    inputs = {"urdf": path, "n_envs": n_envs, "dt": DT, "controls": plain_controls.cpu().numpy(),
+              "q0": plain_q0.cpu().numpy(), "q_final": plain_robot.get_dofs_position().cpu().numpy()}
     plain_scene.destroy()
-    return fwd, fwd_bwd, plain, finite
+    return fwd, fwd_bwd, plain, finite, inputs
+
+
+def peer_python(module, env_var):
+    """The interpreter to run a peer with: this one if it imports ``module``, else ``$env_var`` (or None)."""
+    return sys.executable if importlib.util.find_spec(module) is not None else os.environ.get(env_var)
+
+
+def run_peer(python, engine, case_files, repeats):
+    """Run ``bench/peers.py`` in ``python``; return its header dict and one result dict per case (times in s)."""
+    command = [python, os.path.join(ROOT, "bench", "peers.py"), engine, *case_files, "--repeats", str(repeats)]
+    proc = subprocess.run(command, capture_output=True, text=True)
+    results = [json.loads(line[len("RESULT "):]) for line in proc.stdout.splitlines() if line.startswith("RESULT ")]
+    if proc.returncode != 0 or len(results) != len(case_files) + 1:
+        tail = (proc.stderr.strip().splitlines() or ["no output"])[-1]
+        raise RuntimeError(f"exit code {proc.returncode}: {tail}")
+    return results[0], results[1:]
 
 
 def main():
@@ -95,34 +124,55 @@ def main():
     print(f"differentiable rigid rollouts, float32, contact-free, dt={DT}, best of {args.repeats}; "
           f"{os.cpu_count()} CPUs")
 
-    rows = []
+    rows, inputs = [], []
     for name, path, n_envs, n_steps in CASES:
         t0 = time.perf_counter()
-        fwd, fwd_bwd, plain, finite = time_case(path, n_envs, n_steps, args.repeats)
-        rows.append(("genesis_lite", name, n_envs, n_steps, fwd, fwd_bwd, plain, finite))
+        fwd, fwd_bwd, plain, finite, case_inputs = time_case(path, n_envs, n_steps, args.repeats)
+        rows.append(("genesis_lite", name, n_envs, n_steps, fwd, fwd_bwd, plain, finite, None, None))
+        inputs.append(case_inputs)
         print(f"  {name} n_envs={n_envs} done ({time.perf_counter() - t0:.1f} s with compilation)", flush=True)
-    peers = [("Genesis", "genesis"), ("Newton", "newton")]
-    for label, module in peers:
-        if importlib.util.find_spec(module) is None:
-            rows.append((label, "-", None, None, None, None, None, None))
-        else:  # pragma: no cover - not installed in this environment
-            rows.append((label, "installed but not benchmarked by this script", None, None, None, None, None, None))
+
+    notes = []
+    with tempfile.TemporaryDirectory() as tmp:
+        case_files = [os.path.join(tmp, f"case{i}.npz") for i in range(len(CASES))]
+        for case_file, case_inputs in zip(case_files, inputs):
+            np.savez(case_file, **case_inputs)
+        for label, engine, env_var in PEERS:
+            python = peer_python(engine, env_var)
+            if python is None:
+                notes.append(f"{label}: not installed (set {env_var}, see bench/README.md)")
+                continue
+            t0 = time.perf_counter()
+            try:
+                info, results = run_peer(python, engine, case_files, args.repeats)
+            except RuntimeError as error:
+                notes.append(f"{label} ({python}): failed, {error}")
+                continue
+            for ours, case_inputs, r in zip(rows[:len(CASES)], inputs, results):
+                _, name, n_envs, n_steps, _, ours_fwd_bwd = ours[:6]
+                dq = float(np.abs(np.asarray(r["q_final"]) - case_inputs["q_final"]).max())
+                rows.append((label, name, n_envs, n_steps, r["fwd"], r["fwd_bwd"], r["plain"], r["finite"],
+                             r["fwd_bwd"] / ours_fwd_bwd, dq))
+            builds = " / ".join(f"{r['build']:.1f}" for r in results)
+            notes.append(f"{label} {info['version']} ({python}): import + init {info['import']:.1f} s, "
+                         f"build {builds} s, whole run {time.perf_counter() - t0:.0f} s; {info['note']}")
+            print(f"  {label} done ({time.perf_counter() - t0:.0f} s)", flush=True)
 
     print()
     header = (f"{'simulator':>12} | {'robot':>9} | {'n_envs':>6} | {'steps':>5} | {'forward ms':>10} | "
               f"{'fwd+bwd ms':>10} | {'bwd/fwd':>7} | {'no-grad fwd ms':>14} | {'fwd grad/no-grad':>16} | "
-              f"{'env-steps/s fwd+bwd':>19} | {'grads finite':>12}")
+              f"{'env-steps/s fwd+bwd':>19} | {'grads finite':>12} | {'fwd+bwd / ours':>14} | {'max |Δq|':>8}")
     print(header)
     print("-" * len(header))
-    for sim, robot, n_envs, n_steps, fwd, fwd_bwd, plain, finite in rows:
-        if fwd is None:
-            note = "not installed" if robot == "-" else robot
-            print(f"{sim:>12} | {note}")
-            continue
+    for sim, robot, n_envs, n_steps, fwd, fwd_bwd, plain, finite, vs_ours, dq in rows:
         envs = max(1, n_envs)
+        versus = "-" if vs_ours is None else f"{vs_ours:.2f}"
+        delta = "-" if dq is None else f"{dq:.1e}"
         print(f"{sim:>12} | {robot:>9} | {n_envs:>6} | {n_steps:>5} | {fwd * 1e3:>10.1f} | {fwd_bwd * 1e3:>10.1f} | "
               f"{(fwd_bwd - fwd) / fwd:>7.2f} | {plain * 1e3:>14.1f} | {fwd / plain:>16.2f} | "
-              f"{envs * n_steps / fwd_bwd:>19,.0f} | {str(finite):>12}")
+              f"{envs * n_steps / fwd_bwd:>19,.0f} | {str(finite):>12} | {versus:>14} | {delta:>8}")
+    for note in notes:
+        print(note)
 
 
 if __name__ == "__main__":

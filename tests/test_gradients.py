@@ -17,23 +17,28 @@ from tests.conftest import asset, pybullet
 
 ROBOTS = {"pendulum2": (asset("pendulum2.urdf"), True), "cartpole": (pybullet("cartpole.urdf"), True),
           "kuka": (pybullet("kuka_iiwa", "model.urdf"), True),
-          "kuka_free": (pybullet("kuka_iiwa", "model_free_base.urdf"), False)}
+          "kuka_free": (pybullet("kuka_iiwa", "model_free_base.urdf"), False),
+          "quadruped": (asset("quadruped.urdf"), False)}  # a floating base with four branches
 KINDS = ("dofs_position", "dofs_velocity", "force", "position_target", "velocity_target", "mass", "damping",
          "armature", "kp", "kv", "gravity")
 EPS = 1e-6
 _SCENES = {}
 
 
-def _scene(robot_name, n_envs, substeps, checkpoint_interval=1):
-    """One scene per configuration (building is the slow part); reset() makes it fresh."""
-    key = (robot_name, n_envs, substeps, checkpoint_interval, gs.runtime.epoch)
+def _scene(robot_name, n_envs, substeps, checkpoint_interval=1, limited=False):
+    """One scene per configuration (building is the slow part); reset() makes it fresh.
+    ``limited``: joint limits on and every force clipped to ±1.5 (a share of the controls clips)."""
+    key = (robot_name, n_envs, substeps, checkpoint_interval, limited, gs.runtime.epoch)
     if key not in _SCENES:
         path, fixed = ROBOTS[robot_name]
         scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, substeps=substeps, requires_grad=True,
                                                            checkpoint_interval=checkpoint_interval),
-                         rigid_options=gs.options.RigidOptions(enable_joint_limit=False))
+                         rigid_options=gs.options.RigidOptions(enable_joint_limit=limited))
         robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=fixed))
         scene.build(n_envs=n_envs)
+        if limited:
+            bound = torch.full(_batch(n_envs, robot.n_dofs), 1.5, dtype=torch.float64)
+            robot.set_dofs_force_range(-bound, bound)
         _SCENES[key] = (scene, robot)
     return _SCENES[key]
 
@@ -102,8 +107,8 @@ def _rollout(scene, robot, kind, value, horizon):
     return loss + robot.get_links_quat()[..., -1, :].sum() + robot.get_links_vel()[..., -1, :].sum()
 
 
-def _check(robot_name, kind, horizon, substeps=1, n_envs=0, seed=0):
-    scene, robot = _scene(robot_name, n_envs, substeps)
+def _check(robot_name, kind, horizon, substeps=1, n_envs=0, seed=0, limited=False):
+    scene, robot = _scene(robot_name, n_envs, substeps, limited=limited)
     value, direction = _nominal(kind, robot, n_envs, horizon, np.random.default_rng(seed))
     x = value.clone().requires_grad_(True)
     _rollout(scene, robot, kind, x, horizon).backward()
@@ -135,6 +140,27 @@ def test_robots(f64, robot_name, kind):
 @pytest.mark.parametrize("kind", ["base_pos", "base_quat", "dofs_velocity", "force", "position_target"])
 def test_free_base(f64, kind):
     _check("kuka_free", kind, horizon=10)
+
+
+@pytest.mark.parametrize("kind", ["base_quat", "dofs_velocity", "force", "mass", "gravity"])
+def test_branching_tree(f64, kind):
+    """Sibling subtrees (the up sweep's chains) and a floating base."""
+    _check("quadruped", kind, horizon=10)
+
+
+@pytest.mark.parametrize("kind", ["dofs_position", "force", "kp", "mass"])
+def test_limits_and_force_range(f64, kind):
+    """Soft joint limits pushing (the calves start past their upper bound 0) and clipped forces."""
+    _check("quadruped", kind, horizon=20, limited=True)
+
+
+def test_limits_and_force_range_are_at_work(f64):
+    """The rollouts of test_limits_and_force_range differ from unlimited ones."""
+    forces, _ = _nominal("force", _scene("quadruped", 0, 1)[1], 0, 20, np.random.default_rng(0))
+    with torch.no_grad():
+        losses = [float(_rollout(*_scene("quadruped", 0, 1, limited=limited), "force", forces, 20))
+                  for limited in (False, True)]
+    assert abs(losses[0] - losses[1]) > 1e-3 * abs(losses[0]), losses
 
 
 @pytest.mark.slow
