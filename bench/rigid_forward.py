@@ -17,7 +17,7 @@ and the second is reported (with its parts).
 
 Goals: ≥ 2× MuJoCo's throughput at 1024 envs; first step < 5 s.
 
-Run:  python bench/rigid_forward.py [--steps 100] [--repeats 3] [--envs 1 64 1024]
+Run:  python bench/rigid_forward.py [--steps 100] [--repeats 10] [--envs 1 64 1024]
 """
 import argparse
 import json
@@ -130,7 +130,7 @@ def first_step_time():
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--steps", type=int, default=100)
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--repeats", type=int, default=10)
     parser.add_argument("--envs", type=int, nargs="+", default=[1, 64, 1024])
     parser.add_argument("--skip-first-step", action="store_true")
     args = parser.parse_args()

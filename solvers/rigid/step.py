@@ -110,15 +110,12 @@ def advance(d: ti.template(), commit: ti.i32):
 def prepare_reverse(d: ti.template(), src: ti.types.ndarray()):
     """src (B, state | inputs | gradient of the end state): frame 0 and the inputs ← the step's
     start, every gradient ← 0, then the last frame's state gradient ← the seed."""
-    S = d.substeps
+    width = d.n_qs + d.n_dofs
     for e in range(d.n_batch):
-        _load_start(d, e, src)
+        _state_from(d.qpos, d.qvel, 0, e, src, 0)
+        _inputs_from(d, e, src, width)
         _clear_grads_env(d, e)
-        seed = d.n_qs + d.n_dofs + d.input_total
-        for k in range(d.n_qs):
-            d.qpos.grad[S, e, k] = src[e, seed + k]
-        for k in range(d.n_dofs):
-            d.qvel.grad[S, e, k] = src[e, seed + d.n_qs + k]
+        _state_from(d.qpos.grad, d.qvel.grad, d.substeps, e, src, width + d.input_total)
 
 
 @ti.kernel
@@ -148,7 +145,7 @@ def down_sweep(d: ti.template()):
 @ti.kernel
 def down_sweep_adjoint(d: ti.template(), src: ti.types.ndarray(), dst: ti.types.ndarray()):
     """src (B, L, 13): gradient of read_links' output → dst: gradient of the frame-0 state (as
-    read_grads lays it out). The down sweep at frame 0 must be current."""
+    _read_grads_env lays it out). The down sweep at frame 0 must be current."""
     for e in range(d.n_batch):
         _clear_grads_env(d, e)
         for l in range(d.n_links):
@@ -171,57 +168,59 @@ def position_stages(d: ti.template()):
 
 # -- moving data: one parallel loop over envs per kernel, since every parallel loop is a task
 # -- that costs a thread-pool hand-off (tens of µs here) whatever its size ----------------------
+@ti.func
+def _state_from(qpos: ti.template(), qvel: ti.template(), s, e, src: ti.template(), offset):
+    """Frame s of (qpos, qvel) (values or gradients) of env e ← src[e, offset:] (Q + D)."""
+    for k in range(qpos.shape[2]):
+        qpos[s, e, k] = src[e, offset + k]
+    for k in range(qvel.shape[2]):
+        qvel[s, e, k] = src[e, offset + qpos.shape[2] + k]
+
+
+@ti.func
+def _state_to(qpos: ti.template(), qvel: ti.template(), s, e, dst: ti.template()):
+    """dst[e, :Q + D] ← frame s of (qpos, qvel) of env e."""
+    for k in range(qpos.shape[2]):
+        dst[e, k] = qpos[s, e, k]
+    for k in range(qvel.shape[2]):
+        dst[e, qpos.shape[2] + k] = qvel[s, e, k]
+
+
+@ti.func
+def _inputs_from(d: ti.template(), e, src: ti.template(), offset):
+    """Every input field of env e ← its columns of src[e, offset:], in INPUTS order."""
+    for f in ti.static(range(len(d.input_fields))):
+        for k in range(d.input_widths[f]):
+            d.input_fields[f][e, k] = src[e, offset + d.input_offsets[f] + k]
+
+
 @ti.kernel
 def write_state(d: ti.template(), s: ti.i32, src: ti.types.ndarray()):
     """Frame s ← src (B, Q + D): qpos then qvel of every env."""
     for e in range(d.n_batch):
-        for k in range(d.n_qs):
-            d.qpos[s, e, k] = src[e, k]
-        for k in range(d.n_dofs):
-            d.qvel[s, e, k] = src[e, d.n_qs + k]
+        _state_from(d.qpos, d.qvel, s, e, src, 0)
 
 
 @ti.kernel
 def read_state(d: ti.template(), s: ti.i32, dst: ti.types.ndarray()):
     for e in range(d.n_batch):
-        for k in range(d.n_qs):
-            dst[e, k] = d.qpos[s, e, k]
-        for k in range(d.n_dofs):
-            dst[e, d.n_qs + k] = d.qvel[s, e, k]
+        _state_to(d.qpos, d.qvel, s, e, dst)
 
 
 @ti.kernel
 def write_inputs(d: ti.template(), src: ti.types.ndarray()):
     """Every input field ← its columns of src (B, total width), in INPUTS order."""
     for e in range(d.n_batch):
-        for f in ti.static(range(len(d.input_fields))):
-            for k in range(d.input_widths[f]):
-                d.input_fields[f][e, k] = src[e, d.input_offsets[f] + k]
+        _inputs_from(d, e, src, 0)
 
 
 @ti.func
 def _read_grads_env(d: ti.template(), e, dst: ti.template()):
     """dst[e] (Q + D + differentiable input widths) ← state gradient at frame 0, then input gradients."""
-    for k in range(d.n_qs):
-        dst[e, k] = d.qpos.grad[0, e, k]
-    for k in range(d.n_dofs):
-        dst[e, d.n_qs + k] = d.qvel.grad[0, e, k]
+    _state_to(d.qpos.grad, d.qvel.grad, 0, e, dst)
     for f in ti.static(range(len(d.grad_input_fields))):
         for k in range(d.grad_input_widths[f]):
             dst[e, d.grad_input_offsets[f] + k] = d.grad_input_fields[f].grad[e, k]
-
-
-@ti.func
-def _load_start(d: ti.template(), e, src: ti.template()):
-    """Frame 0 and the inputs of env e ← src[e] (state | inputs, in INPUTS order)."""
-    width = d.n_qs + d.n_dofs
-    for k in range(d.n_qs):
-        d.qpos[0, e, k] = src[e, k]
-    for k in range(d.n_dofs):
-        d.qvel[0, e, k] = src[e, d.n_qs + k]
-    for f in ti.static(range(len(d.input_fields))):
-        for k in range(d.input_widths[f]):
-            d.input_fields[f][e, k] = src[e, width + d.input_offsets[f] + k]
 
 
 @ti.func
