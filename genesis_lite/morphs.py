@@ -61,12 +61,23 @@ class Morph:
 
 @dataclass
 class URDF(Morph):
-    """A robot from a URDF file; mesh paths may be relative or ``package://``."""
+    """A robot from a URDF file; mesh paths may be relative or ``package://``.
+
+    default_armature: armature (kg·m² or kg) of every dof, as URDF has no tag for it. Genesis
+    defaults to 0.1; 0 here, so that the dynamics are the file's (and MuJoCo's)."""
     file: str = None
+    default_armature: float = 0.0
 
     def _check(self):
         if not isinstance(self.file, str) or not self.file:
             raise InvalidInputError(f"URDF: argument 'file' must be a path string, got {self.file!r}")
+        try:
+            armature = float(self.default_armature)
+        except (TypeError, ValueError):
+            armature = np.nan
+        if not np.isfinite(armature) or armature < 0:
+            raise InvalidInputError(f"URDF: argument 'default_armature' must be a finite number ≥ 0 (kg·m² or kg), "
+                                    f"got {self.default_armature!r}")
 
 
 @dataclass

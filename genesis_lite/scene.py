@@ -151,6 +151,8 @@ def _links_of(morph, material, name):
             raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.URDF expected an existing URDF file, "
                              f"got '{morph.file}' (not found; relative paths start at {os.getcwd()})")
         links = urdf.load_urdf(morph.file, entity_name=name, rho=material.rho)
+        for link in links:
+            link.armature = morph.default_armature
     elif isinstance(morph, gm.Box):
         links = shapes.box_link(morph.size, material.rho)
     elif isinstance(morph, gm.Sphere):

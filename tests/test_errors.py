@@ -241,3 +241,18 @@ def test_invalid_sim_options(f64, kwargs, arg, given):
 def test_invalid_options_object(f64):
     raises(gs.InvalidInputError, lambda: gs.Scene(sim_options={"dt": 0.01}), "'sim_options'", "SimOptions",
            "dict")
+
+
+@pytest.mark.parametrize("value", [-0.1, math.nan, "heavy"])
+def test_invalid_default_armature(f64, value):
+    raises(gs.InvalidInputError, lambda: gs.morphs.URDF(file=asset("pendulum2.urdf"), default_armature=value),
+           "URDF", "'default_armature'", "≥ 0", repr(value))
+
+
+def test_default_armature_reaches_every_dof(f64):
+    """Genesis's URDF option: armature on every dof (URDF has no tag for it)."""
+    scene = gs.Scene()
+    robot = scene.add_entity(gs.morphs.URDF(file=asset("quadruped.urdf"), default_armature=0.05))
+    scene.build()
+    assert torch.equal(robot.get_dofs_armature(), torch.full((robot.n_dofs,), 0.05, dtype=torch.float64))
+    scene.destroy()
