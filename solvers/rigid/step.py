@@ -90,6 +90,7 @@ def advance(d: ti.template(), commit: ti.i32):
     """All substeps of one step for every env in one launch (forward only); commit copies the
     result into frame 0 and flags any non-finite state."""
     S = d.substeps
+    ti.loop_config(serialize=d.serial)
     for e in range(d.n_batch):
         for s in range(S):
             substep_env(d, s, e)
@@ -111,6 +112,7 @@ def prepare_reverse(d: ti.template(), src: ti.types.ndarray()):
     """src (B, state | inputs | gradient of the end state): frame 0 and the inputs ← the step's
     start, every gradient ← 0, then the last frame's state gradient ← the seed."""
     width = d.n_qs + d.n_dofs
+    ti.loop_config(serialize=d.serial)
     for e in range(d.n_batch):
         _state_from(d.qpos, d.qvel, 0, e, src, 0)
         _inputs_from(d, e, src, width)
@@ -121,6 +123,7 @@ def prepare_reverse(d: ti.template(), src: ti.types.ndarray()):
 @ti.kernel
 def reverse_dynamics(d: ti.template(), s: ti.i32):
     """Adjoints of substep s from the integration back to the subtree sums."""
+    ti.loop_config(serialize=d.serial)
     for e in range(d.n_batch):
         dynamics_adjoint_env(d, s, e)
 
@@ -129,6 +132,7 @@ def reverse_dynamics(d: ti.template(), s: ti.i32):
 def reverse_kinematics(d: ti.template(), s: ti.i32, dst: ti.types.ndarray()):
     """Adjoint of substep s's down sweep; after substep 0 the gradients go to dst (B, state
     gradient | differentiable input gradients), as _read_grads_env lays it out."""
+    ti.loop_config(serialize=d.serial)
     for e in range(d.n_batch):
         down_sweep_adjoint_env(d, s, e)
         if s == 0:
@@ -138,6 +142,7 @@ def reverse_kinematics(d: ti.template(), s: ti.i32, dst: ti.types.ndarray()):
 @ti.kernel
 def down_sweep(d: ti.template()):
     """Link poses and velocities at frame 0 (what the link getters read)."""
+    ti.loop_config(serialize=d.serial)
     for e in range(d.n_batch):
         down_sweep_env(d, 0, e)
 
@@ -146,6 +151,7 @@ def down_sweep(d: ti.template()):
 def down_sweep_adjoint(d: ti.template(), src: ti.types.ndarray(), dst: ti.types.ndarray()):
     """src (B, L, 13): gradient of read_links' output → dst: gradient of the frame-0 state (as
     _read_grads_env lays it out). The down sweep at frame 0 must be current."""
+    ti.loop_config(serialize=d.serial)
     for e in range(d.n_batch):
         _clear_grads_env(d, e)
         for l in range(d.n_links):
@@ -162,12 +168,13 @@ def down_sweep_adjoint(d: ti.template(), src: ti.types.ndarray(), dst: ti.types.
 @ti.kernel
 def position_stages(d: ti.template()):
     """Mass matrix and bias at frame 0."""
+    ti.loop_config(serialize=d.serial)
     for e in range(d.n_batch):
         position_stages_env(d, 0, e)
 
 
-# -- moving data: one parallel loop over envs per kernel, since every parallel loop is a task
-# -- that costs a thread-pool hand-off (tens of µs here) whatever its size ----------------------
+# -- moving data: one loop over envs per kernel, since every parallel loop is a task that costs a
+# -- thread-pool hand-off (~80 µs here) whatever its size; small scenes run serially (data.serial)
 @ti.func
 def _state_from(qpos: ti.template(), qvel: ti.template(), s, e, src: ti.template(), offset):
     """Frame s of (qpos, qvel) (values or gradients) of env e ← src[e, offset:] (Q + D)."""
@@ -197,12 +204,14 @@ def _inputs_from(d: ti.template(), e, src: ti.template(), offset):
 @ti.kernel
 def write_state(d: ti.template(), s: ti.i32, src: ti.types.ndarray()):
     """Frame s ← src (B, Q + D): qpos then qvel of every env."""
+    ti.loop_config(serialize=d.serial)
     for e in range(d.n_batch):
         _state_from(d.qpos, d.qvel, s, e, src, 0)
 
 
 @ti.kernel
 def read_state(d: ti.template(), s: ti.i32, dst: ti.types.ndarray()):
+    ti.loop_config(serialize=d.serial)
     for e in range(d.n_batch):
         _state_to(d.qpos, d.qvel, s, e, dst)
 
@@ -210,6 +219,7 @@ def read_state(d: ti.template(), s: ti.i32, dst: ti.types.ndarray()):
 @ti.kernel
 def write_inputs(d: ti.template(), src: ti.types.ndarray()):
     """Every input field ← its columns of src (B, total width), in INPUTS order."""
+    ti.loop_config(serialize=d.serial)
     for e in range(d.n_batch):
         _inputs_from(d, e, src, 0)
 
@@ -243,6 +253,7 @@ def _clear_grads_env(d: ti.template(), e):
 @ti.kernel
 def read_links(d: ti.template(), dst: ti.types.ndarray()):
     """dst (B, L, 13) ← frame-0 link pos, quat, cvel (ω, v at the origin)."""
+    ti.loop_config(serialize=d.serial)
     for e, l in ti.ndrange(d.n_batch, d.n_links):
         for k in ti.static(range(3)):
             dst[e, l, k] = d.xpos[0, e, l][k]
@@ -254,5 +265,6 @@ def read_links(d: ti.template(), dst: ti.types.ndarray()):
 
 @ti.kernel
 def read_mass_matrix(d: ti.template(), dst: ti.types.ndarray()):
+    ti.loop_config(serialize=d.serial)
     for e, i, j in ti.ndrange(d.n_batch, d.n_dofs, d.n_dofs):
         dst[e, i, j] = d.mass_mat[0, e, i, j]
