@@ -19,7 +19,7 @@ goal ≥ 10) and max |Δq| (rad), the largest difference of the final joint posi
 rollouts from ours; a note under the table gives each peer's version, import and build times (s)
 and how its rollout differs from ours.
 
-Run:  [GENESIS_PYTHON=... NEWTON_PYTHON=...] python bench/rigid_grad.py [--repeats 3]
+Run:  [GENESIS_PYTHON=... NEWTON_PYTHON=...] python bench/rigid_grad.py [--repeats 5]
 """
 import argparse
 import importlib.util
@@ -118,7 +118,7 @@ def run_peer(python, engine, case_files, repeats):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
     gs.init(backend=gs.cpu, precision="32", logging_level="warning")
     print(f"differentiable rigid rollouts, float32, contact-free, dt={DT}, best of {args.repeats}; "
