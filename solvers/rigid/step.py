@@ -114,10 +114,10 @@ def prepare_reverse(d: ti.template(), src: ti.types.ndarray()):
     width = d.n_qs + d.n_dofs
     ti.loop_config(serialize=d.serial)
     for e in range(d.n_batch):
-        _state_from(d.qpos, d.qvel, 0, e, src, 0)
+        _state_from(d, d.qpos, d.qvel, 0, e, src, 0)
         _inputs_from(d, e, src, width)
         _clear_grads_env(d, e)
-        _state_from(d.qpos.grad, d.qvel.grad, d.substeps, e, src, width + d.input_total)
+        _state_from(d, d.qpos.grad, d.qvel.grad, d.substeps, e, src, width + d.input_total)
 
 
 @ti.kernel
@@ -176,21 +176,22 @@ def position_stages(d: ti.template()):
 # -- moving data: one loop over envs per kernel, since every parallel loop is a task that costs a
 # -- thread-pool hand-off (~80 µs here) whatever its size; small scenes run serially (data.serial)
 @ti.func
-def _state_from(qpos: ti.template(), qvel: ti.template(), s, e, src: ti.template(), offset):
-    """Frame s of (qpos, qvel) (values or gradients) of env e ← src[e, offset:] (Q + D)."""
-    for k in range(qpos.shape[2]):
+def _state_from(d: ti.template(), qpos: ti.template(), qvel: ti.template(), s, e, src: ti.template(), offset):
+    """Frame s of (qpos, qvel) (values or gradients) of env e ← src[e, offset:] (Q + D). Counts
+    come from d: a field's shape pads an empty axis to 1."""
+    for k in range(d.n_qs):
         qpos[s, e, k] = src[e, offset + k]
-    for k in range(qvel.shape[2]):
-        qvel[s, e, k] = src[e, offset + qpos.shape[2] + k]
+    for k in range(d.n_dofs):
+        qvel[s, e, k] = src[e, offset + d.n_qs + k]
 
 
 @ti.func
-def _state_to(qpos: ti.template(), qvel: ti.template(), s, e, dst: ti.template()):
+def _state_to(d: ti.template(), qpos: ti.template(), qvel: ti.template(), s, e, dst: ti.template()):
     """dst[e, :Q + D] ← frame s of (qpos, qvel) of env e."""
-    for k in range(qpos.shape[2]):
+    for k in range(d.n_qs):
         dst[e, k] = qpos[s, e, k]
-    for k in range(qvel.shape[2]):
-        dst[e, qpos.shape[2] + k] = qvel[s, e, k]
+    for k in range(d.n_dofs):
+        dst[e, d.n_qs + k] = qvel[s, e, k]
 
 
 @ti.func
@@ -206,14 +207,14 @@ def write_state(d: ti.template(), s: ti.i32, src: ti.types.ndarray()):
     """Frame s ← src (B, Q + D): qpos then qvel of every env."""
     ti.loop_config(serialize=d.serial)
     for e in range(d.n_batch):
-        _state_from(d.qpos, d.qvel, s, e, src, 0)
+        _state_from(d, d.qpos, d.qvel, s, e, src, 0)
 
 
 @ti.kernel
 def read_state(d: ti.template(), s: ti.i32, dst: ti.types.ndarray()):
     ti.loop_config(serialize=d.serial)
     for e in range(d.n_batch):
-        _state_to(d.qpos, d.qvel, s, e, dst)
+        _state_to(d, d.qpos, d.qvel, s, e, dst)
 
 
 @ti.kernel
@@ -227,7 +228,7 @@ def write_inputs(d: ti.template(), src: ti.types.ndarray()):
 @ti.func
 def _read_grads_env(d: ti.template(), e, dst: ti.template()):
     """dst[e] (Q + D + differentiable input widths) ← state gradient at frame 0, then input gradients."""
-    _state_to(d.qpos.grad, d.qvel.grad, 0, e, dst)
+    _state_to(d, d.qpos.grad, d.qvel.grad, 0, e, dst)
     for f in ti.static(range(len(d.grad_input_fields))):
         for k in range(d.grad_input_widths[f]):
             dst[e, d.grad_input_offsets[f] + k] = d.grad_input_fields[f].grad[e, k]
