@@ -77,7 +77,6 @@ class RigidData:
         i32 = ti.i32
         self.link_parent, self.link_jtype = self._new((L,), dtype=i32), self._new((L,), dtype=i32)
         self.link_dof0, self.link_q0 = self._new((L,), dtype=i32), self._new((L,), dtype=i32)
-        self.link_first_child, self.link_next_sibling = self._new((L,), dtype=i32), self._new((L,), dtype=i32)
         self.link_pos0, self.link_quat0 = self._new((L,), 3), self._new((L,), 4)
         self.link_axis, self.link_com = self._new((L,), 3), self._new((L,), 3)
         self.link_inertia0, self.link_inv_mass0 = self._new((L,), 3, 3), self._new((L,))
@@ -119,11 +118,6 @@ class RigidData:
         self.cacc_w, self.cacc_v = self._new((F, B, L), 3, grad=g), self._new((F, B, L), 3, grad=g)
         self.cfrc_n, self.cfrc_f = self._new((F, B, L), 3, grad=g), self._new((F, B, L), 3, grad=g)
         self.lfrc_n, self.lfrc_f = self._new((F, B, L), 3, grad=g), self._new((F, B, L), 3, grad=g)
-        # subtree sums over a link and its younger siblings (see dynamics.subtree_sum); slot L
-        # stands for "no such link" and stays zero
-        self.chain_m = self._new((F, B, L + 1), grad=g)
-        self.chain_h, self.chain_i = self._new((F, B, L + 1), 3, grad=g), self._new((F, B, L + 1), 3, 3, grad=g)
-        self.chain_n, self.chain_f = self._new((F, B, L + 1), 3, grad=g), self._new((F, B, L + 1), 3, grad=g)
         self.dof_force_n, self.dof_force_f = self._new((F, B, D), 3, grad=g), self._new((F, B, D), 3, grad=g)
         self.mass_mat = self._new((F, B, D, D), grad=g)
         self.qfrc_bias, self.qfrc_smooth = self._new((F, B, D), grad=g), self._new((F, B, D), grad=g)
@@ -137,8 +131,7 @@ class RigidData:
 
     def _fill_model(self, model):
         f = runtime.np_float
-        for name in ("link_parent", "link_jtype", "link_dof0", "link_q0", "link_first_child", "link_next_sibling",
-                     "dof_link", "dof_q", "dof_parent"):
+        for name in ("link_parent", "link_jtype", "link_dof0", "link_q0", "dof_link", "dof_q", "dof_parent"):
             values = getattr(model, name)
             if len(values):
                 getattr(self, name).from_numpy(values.astype(np.int32))

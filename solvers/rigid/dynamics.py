@@ -56,28 +56,21 @@ def link_forces(d: ti.template(), s, e, l):
     pn, pf = inertia_mul(m, h, inertia, vw, vv)
     cn, cf = cross_force(vw, vv, pn, pf)
     d.lfrc_n[s, e, l], d.lfrc_f[s, e, l] = fn + cn, ff + cf
+    d.cfrc_n[s, e, l], d.cfrc_f[s, e, l] = fn + cn, ff + cf  # the up sweep adds the children's
 
 
 @ti.func
 def subtree_sum(d: ti.template(), s, e, l):
-    """Composite inertia and net force of link l's subtree; children first.
-
-    chain[l] = subtree(l) + chain[next sibling of l], so a link's subtree is its own value plus
-    chain[first child]: every element is written once and read after, with no accumulation
-    (no atomics, and Taichi's reverse mode stays exact). Index L is the empty chain (zero)."""
-    c, n = d.link_first_child[l], d.link_next_sibling[l]
-    m = d.cinert_m[s, e, l] + d.chain_m[s, e, c]
-    h = d.cinert_h[s, e, l] + d.chain_h[s, e, c]
-    inertia = d.cinert_i[s, e, l] + d.chain_i[s, e, c]
-    fn = d.lfrc_n[s, e, l] + d.chain_n[s, e, c]
-    ff = d.lfrc_f[s, e, l] + d.chain_f[s, e, c]
-    d.crb_m[s, e, l], d.crb_h[s, e, l], d.crb_i[s, e, l] = m, h, inertia
-    d.cfrc_n[s, e, l], d.cfrc_f[s, e, l] = fn, ff
-    d.chain_m[s, e, l] = m + d.chain_m[s, e, n]
-    d.chain_h[s, e, l] = h + d.chain_h[s, e, n]
-    d.chain_i[s, e, l] = inertia + d.chain_i[s, e, n]
-    d.chain_n[s, e, l] = fn + d.chain_n[s, e, n]
-    d.chain_f[s, e, l] = ff + d.chain_f[s, e, n]
+    """Add link l's composite inertia and subtree force into its parent's; run leaves first.
+    crb and cfrc start as each link's own (written by the down sweep), so once a link's
+    children are done its values are its subtree's."""
+    p = d.link_parent[l]
+    if p >= 0:
+        accumulate(d.crb_m, ti.Vector([s, e, p]), d.crb_m[s, e, l])
+        accumulate(d.crb_h, ti.Vector([s, e, p]), d.crb_h[s, e, l])
+        accumulate(d.crb_i, ti.Vector([s, e, p]), d.crb_i[s, e, l])
+        accumulate(d.cfrc_n, ti.Vector([s, e, p]), d.cfrc_n[s, e, l])
+        accumulate(d.cfrc_f, ti.Vector([s, e, p]), d.cfrc_f[s, e, l])
 
 
 @ti.func
@@ -181,24 +174,22 @@ def link_forces_adjoint(d: ti.template(), s, e, l):
 
 
 @ti.func
-def _sum_adjoint(d: ti.template(), own: ti.template(), total: ti.template(), chain: ti.template(), s, e, l):
-    """Reverse of total[l] = own[l] + chain[first child]; chain[l] = total[l] + chain[next sibling].
-    Parents and older siblings have lower indices, so their gradients have arrived."""
-    c, n = d.link_first_child[l], d.link_next_sibling[l]
-    g_chain = chain.grad[s, e, l]
-    accumulate(chain.grad, ti.Vector([s, e, n]), g_chain)
-    g_total = total.grad[s, e, l] + g_chain
-    accumulate(own.grad, ti.Vector([s, e, l]), g_total)
-    accumulate(chain.grad, ti.Vector([s, e, c]), g_total)
+def _sum_adjoint(own: ti.template(), total: ti.template(), s, e, l, p):
+    """total[l] = own[l] + Σ total[children]: a link's total gradient takes its parent's, then
+    reaches its own value. Run roots first (parents have lower indices)."""
+    if p >= 0:
+        accumulate(total.grad, ti.Vector([s, e, l]), total.grad[s, e, p])
+    accumulate(own.grad, ti.Vector([s, e, l]), total.grad[s, e, l])
 
 
 @ti.func
 def subtree_sum_adjoint(d: ti.template(), s, e, l):
-    _sum_adjoint(d, d.cinert_m, d.crb_m, d.chain_m, s, e, l)
-    _sum_adjoint(d, d.cinert_h, d.crb_h, d.chain_h, s, e, l)
-    _sum_adjoint(d, d.cinert_i, d.crb_i, d.chain_i, s, e, l)
-    _sum_adjoint(d, d.lfrc_n, d.cfrc_n, d.chain_n, s, e, l)
-    _sum_adjoint(d, d.lfrc_f, d.cfrc_f, d.chain_f, s, e, l)
+    p = d.link_parent[l]
+    _sum_adjoint(d.cinert_m, d.crb_m, s, e, l, p)
+    _sum_adjoint(d.cinert_h, d.crb_h, s, e, l, p)
+    _sum_adjoint(d.cinert_i, d.crb_i, s, e, l, p)
+    _sum_adjoint(d.lfrc_n, d.cfrc_n, s, e, l, p)
+    _sum_adjoint(d.lfrc_f, d.cfrc_f, s, e, l, p)
 
 
 @ti.func

@@ -50,6 +50,8 @@ def _link_inertia(d: ti.template(), s, e, l, pos, rot):
     d.cinert_m[s, e, l] = m
     d.cinert_h[s, e, l] = m * com
     d.cinert_i[s, e, l] = inertia
+    # composite inertia starts as the link's own; the up sweep adds the children's
+    d.crb_m[s, e, l], d.crb_h[s, e, l], d.crb_i[s, e, l] = m, m * com, inertia
 
 
 @ti.func

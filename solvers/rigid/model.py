@@ -60,27 +60,6 @@ class RigidModel:
         return np.divide(1.0, self.link_mass0, out=np.zeros_like(self.link_mass0), where=self.link_mass0 > 0)
 
     @property
-    def link_first_child(self):
-        """(L,) lowest-index child of each link; n_links when it has none."""
-        first = np.full(self.n_links, self.n_links, dtype=np.int32)
-        for l in reversed(range(self.n_links)):
-            if self.link_parent[l] >= 0:
-                first[self.link_parent[l]] = l
-        return first
-
-    @property
-    def link_next_sibling(self):
-        """(L,) next higher-index link with the same parent; n_links when there is none."""
-        nxt = np.full(self.n_links, self.n_links, dtype=np.int32)
-        last = {}
-        for l in reversed(range(self.n_links)):
-            p = int(self.link_parent[l])
-            if p >= 0:
-                nxt[l] = last.get(p, self.n_links)
-                last[p] = l
-        return nxt
-
-    @property
     def dof_parent(self):
         """(D,) the dof just above each dof on its path to the root (-1: none). The mass matrix's
         non-zeros follow this tree, so factoring along it creates no fill-in."""

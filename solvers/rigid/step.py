@@ -238,8 +238,9 @@ def _read_grads_env(d: ti.template(), e, dst: ti.template()):
 
 @ti.func
 def _zero_frames_grad(fld: ti.template(), e):
-    """Zero env e of a (frames, B, ...) gradient field."""
-    for J in ti.grouped(ti.ndrange(fld.shape[0], *fld.shape[2:])):
+    """Zero env e of a (frames, B, ...) gradient field in frames 0 … S − 1: the adjoints add into
+    those; the last frame's intermediates are never used, and its state gradient is the seed."""
+    for J in ti.grouped(ti.ndrange(fld.shape[0] - 1, *fld.shape[2:])):
         fld.grad[J[0], e, *[J[k] for k in ti.static(range(1, J.n))]] = 0
 
 
