@@ -16,10 +16,6 @@ gpu = "gpu"
 
 _LOG_LEVELS = {"debug": ti.DEBUG, "info": ti.INFO, "warning": ti.WARN, "error": ti.ERROR}
 
-# Serial loops over links are reversed by Taichi's autodiff with a per-loop stack; it must
-# hold one entry per link (see TAICHI_NOTES.md: the default stack segfaults at ~40 links).
-AD_STACK_SIZE = 1024
-
 
 class _Runtime:
     """What ``gs.init`` chose. ``epoch`` counts restarts so stale scenes can be detected."""
@@ -72,8 +68,8 @@ def init(backend=cpu, precision="32", seed=None, logging_level="warning", debug=
         else:
             logger.warning("gs.init: gs.gpu requested but CUDA is not available; using the CPU")
     ti_float = ti.f64 if precision == "64" else ti.f32
-    ti.init(arch=arch, default_fp=ti_float, default_ip=ti.i32, ad_stack_size=AD_STACK_SIZE,
-            debug=debug, log_level=_LOG_LEVELS[logging_level], offline_cache=True)
+    ti.init(arch=arch, default_fp=ti_float, default_ip=ti.i32, debug=debug, log_level=_LOG_LEVELS[logging_level],
+            offline_cache=True)
     runtime.initialized = True
     runtime.options = options
     runtime.epoch += 1

@@ -2,8 +2,9 @@
 frames of one step and every intermediate quantity, each indexed by substep frame.
 
 Frame f of ``qpos``/``qvel`` is the state before substep f (frame S is the step's result).
-Intermediates of substep f live at frame f, so nothing is overwritten within a step and a
-step's reverse pass can run every stage's gradient kernel after a single forward replay.
+Intermediates of substep f live at frame f, so after a single forward replay every substep's
+values are there for its hand-written adjoint. The ``.grad`` fields are that adjoint's storage
+(Taichi's autodiff is not used).
 """
 import numpy as np
 import taichi as ti
