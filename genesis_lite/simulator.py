@@ -66,15 +66,27 @@ class Simulator:
 
     def _sync(self, slot, state, inputs):
         """Make Taichi hold ``state`` (None: what it holds) and ``inputs``, uploading only what differs."""
+        self._sync_state(slot, state)
+        pending = self._pending_inputs(slot, inputs)
+        if pending is not None:
+            slot.solver.upload_inputs(pending)
+
+    @staticmethod
+    def _sync_state(slot, state):
         if state is not None and slot.uploaded_state is not state:
             slot.solver.upload_state(state)
             slot.uploaded_state = state
+
+    @staticmethod
+    def _pending_inputs(slot, inputs):
+        """``inputs`` if Taichi does not hold them yet (recorded as held from now on), else None."""
         versions = tuple((t, t._version) for t in inputs.values())
         known = slot.uploaded_inputs
-        if known is None or len(known) != len(versions) or any(
-                a is not b or va != vb for (a, va), (b, vb) in zip(known, versions)):
-            slot.solver.upload_inputs(inputs)
-            slot.uploaded_inputs = versions
+        if known is not None and len(known) == len(versions) and all(
+                a is b and va == vb for (a, va), (b, vb) in zip(known, versions)):
+            return None
+        slot.uploaded_inputs = versions
+        return inputs
 
     # -- stepping ---------------------------------------------------------------------------
     def reset(self, states=None):
@@ -101,8 +113,8 @@ class Simulator:
                 slot.state = slot.uploaded_state = out
         else:
             for slot in self.slots:
-                self._sync(slot, slot.state, slot.inputs)
-                slot.solver.advance()
+                self._sync_state(slot, slot.state)
+                slot.solver.advance(self._pending_inputs(slot, slot.inputs))
                 slot.state = None
                 slot.uploaded_state = None
         for slot in self.slots:
@@ -125,9 +137,8 @@ class Simulator:
         """One step from the given states and inputs (no graph); returns the new states."""
         outs = []
         for slot, state, inputs in zip(self.slots, states, self._split_inputs(flat_inputs)):
-            self._sync(slot, state, inputs)
-            slot.solver.advance()
-            out = slot.solver.download_state()
+            self._sync_state(slot, state)
+            out = slot.solver.advance(self._pending_inputs(slot, inputs), download=True)
             slot.uploaded_state = out
             outs.append(out)
         return tuple(outs)

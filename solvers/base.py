@@ -35,8 +35,10 @@ class Solver:
         """Taichi inputs ← dict name → (B, width) tensors."""
         raise NotImplementedError
 
-    def advance(self):
-        """Run one step from the uploaded state and inputs; the result becomes the current state."""
+    def advance(self, inputs=None, download=False):
+        """Run one step from the uploaded state, after uploading ``inputs`` (name → (B, width))
+        when given (else the uploaded ones hold); the result becomes the current state, and is
+        returned as a new tensor (B, width) when ``download`` (else None)."""
         raise NotImplementedError
 
     def nonfinite(self):

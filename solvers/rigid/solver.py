@@ -11,7 +11,8 @@ from genesis_lite.errors import AssetError
 from genesis_lite.runtime import runtime
 
 from ..base import Solver
-from . import step as kernels
+from ..launch import BoundKernels
+from . import step
 from . import data as data_pool
 from .data import BIG, INPUTS
 from .model import build_model
@@ -41,11 +42,15 @@ class RigidSolver(Solver):
         self.n_batch = max(1, n_envs)
         self.data = data_pool.acquire(self.model, self.n_batch, self.sim_options.substeps,
                                       self.sim_options.requires_grad, self.rigid_options.enable_joint_limit)
+        self.kernels = BoundKernels(self.data, *step.KERNELS)
+        self._nothing = torch.empty((0, 0), dtype=runtime.tc_float, device=runtime.device)  # an unused array argument
         h = self.sim_options.dt / self.sim_options.substeps
         timeconst = max(self.rigid_options.limit_timeconst, 2.0 * h)  # stable for explicit steps
         self.data.consts.from_numpy(np.array([h, 1.0 / timeconst ** 2, 2.0 / timeconst], dtype=runtime.np_float))
         self.grad_input_names = tuple(self.data.grad_input_names)
         self.state_width = self.model.n_qs + self.model.n_dofs
+        # column widths of backward's output: state gradient, then each differentiable input's
+        self.grad_widths = [self.state_width] + [self.data.width(name) for name in self.grad_input_names]
         self.default_inputs = self._default_inputs()
         state = self._initial_state()
         self.upload_state(state)
@@ -91,23 +96,27 @@ class RigidSolver(Solver):
         return torch.empty((self.n_batch, width), dtype=runtime.tc_float, device=runtime.device)
 
     def upload_state(self, state):
-        kernels.write_state(self.data, 0, state.detach().contiguous())
+        self.kernels.write_state(0, state.detach().contiguous())
 
     def download_state(self):
         out = self._empty(self.state_width)
-        kernels.read_state(self.data, 0, out)
+        self.kernels.read_state(0, out)
         return out
 
     def upload_inputs(self, inputs):
-        kernels.write_inputs(self.data, self._pack_inputs(inputs))
+        self.kernels.write_inputs(self._pack_inputs(inputs))
 
     @staticmethod
-    def _pack_inputs(inputs):
-        return torch.cat([inputs[name].detach() for name in INPUTS], dim=1).contiguous()
+    def _pack_inputs(inputs, before=(), after=()):
+        """(B, width) of ``before``, every input in INPUTS order, ``after``: the kernels read values
+        only, so nothing is detached (a graph node made here is never used)."""
+        return torch.cat([*before, *(inputs[name] for name in INPUTS), *after], dim=1)
 
     # -- stepping ---------------------------------------------------------------------------
-    def advance(self):
-        kernels.advance(self.data, 1)
+    def advance(self, inputs=None, download=False):
+        out = self._empty(self.state_width) if download else self._nothing
+        self.kernels.advance(1, self._nothing if inputs is None else self._pack_inputs(inputs), out)
+        return out if download else None
 
     def nonfinite(self):
         """True once any step produced a non-finite state (resets the flag)."""
@@ -118,41 +127,40 @@ class RigidSolver(Solver):
     def backward(self, state, inputs, grad_state_out):
         """Gradients of the step's start state and differentiable inputs from that of its end
         state: load, replay, reverse (see step.py)."""
-        packed = torch.cat([state.detach(), self._pack_inputs(inputs), grad_state_out], dim=1).contiguous()
-        out = self._empty(self.state_width + sum(self.data.width(name) for name in self.grad_input_names))
-        kernels.prepare_reverse(self.data, packed)
-        kernels.advance(self.data, 0)
-        for s in reversed(range(self.data.substeps)):  # two kernels: one compiles 3x slower
-            kernels.reverse_dynamics(self.data, s)
-            kernels.reverse_kinematics(self.data, s, out)
+        packed = self._pack_inputs(inputs, before=(state,), after=(grad_state_out,))
+        out = self._empty(sum(self.grad_widths))
+        self.kernels.prepare_reverse(packed)
+        self.kernels.advance(0, self._nothing, self._nothing)
+        for s in reversed(range(self.sim_options.substeps)):  # two kernels: one compiles 3x slower
+            self.kernels.reverse_dynamics(s)
+            self.kernels.reverse_kinematics(s, out)
         return self._split_grads(out)
 
     def _split_grads(self, out):
-        widths = [self.data.width(name) for name in self.grad_input_names]
-        parts = torch.split(out, [self.state_width] + widths, dim=1)
+        parts = torch.split(out, self.grad_widths, dim=1)
         return parts[0], dict(zip(self.grad_input_names, parts[1:]))
 
     # -- derived quantities at the uploaded state ----------------------------------------------
     def links_kinematics(self):
         """(B, L, 13): link origin pos (3), quat (4), spatial velocity ω (3) and v at the origin (3)."""
-        kernels.down_sweep(self.data)  # poses and velocities need this sweep only
+        self.kernels.down_sweep()  # poses and velocities need this sweep only
         out = torch.empty((self.n_batch, self.model.n_links, 13), dtype=runtime.tc_float, device=runtime.device)
-        kernels.read_links(self.data, out)
+        self.kernels.read_links(out)
         return out
 
     def links_kinematics_backward(self, grad_links):
         """Gradient of the uploaded state from a gradient of ``links_kinematics``'s output."""
-        kernels.down_sweep(self.data)
-        out = self._empty(self.state_width + sum(self.data.width(n) for n in self.grad_input_names))
-        kernels.down_sweep_adjoint(self.data, grad_links.contiguous(), out)
+        self.kernels.down_sweep()
+        out = self._empty(sum(self.grad_widths))
+        self.kernels.down_sweep_adjoint(grad_links.contiguous(), out)
         return self._split_grads(out)[0]
 
     def mass_matrix(self):
         """(B, D, D) joint-space mass matrix (armature excluded) at the uploaded state."""
-        kernels.position_stages(self.data)
+        self.kernels.position_stages()
         out = torch.empty((self.n_batch, self.model.n_dofs, self.model.n_dofs), dtype=runtime.tc_float,
                           device=runtime.device)
-        kernels.read_mass_matrix(self.data, out)
+        self.kernels.read_mass_matrix(out)
         return out
 
     def destroy(self):

@@ -1,11 +1,11 @@
 """One rigid step, forward and reverse, and moving state, inputs and gradients between the
 Taichi fields and torch.
 
-Forward runs every substep of every env in one launch (``advance``). Reverse:
-``prepare_reverse`` loads the step's start state, inputs and output gradient, ``advance``
-replays the substeps to refill the frames, then for each substep, last first,
-``reverse_dynamics`` and ``reverse_kinematics`` run the stages' hand-written adjoints in
-reverse order; after substep 0 the gradients are written out. (Fused into one kernel, LLVM
+Forward runs every substep of every env in one launch (``advance``, which can also load the
+inputs and write out the result). Reverse: ``prepare_reverse`` loads the step's start state,
+inputs and output gradient, ``advance`` replays the substeps to refill the frames, then for
+each substep, last first, ``reverse_dynamics`` and ``reverse_kinematics`` run the stages'
+hand-written adjoints in reverse order; after substep 0 the gradients are written out. (Fused into one kernel, LLVM
 took 31 s to compile it; split so, 6 s.) Each env belongs to one thread, so gradients
 accumulate without atomics.
 """
@@ -88,12 +88,15 @@ def _finite(x):
 
 
 @ti.kernel
-def advance(d: ti.template(), commit: ti.i32):
-    """All substeps of one step for every env in one launch (forward only); commit copies the
-    result into frame 0 and flags any non-finite state."""
+def advance(d: ti.template(), commit: ti.i32, inputs: ti.types.ndarray(), out: ti.types.ndarray()):
+    """All substeps of one step for every env in one launch (forward only). Unless empty, inputs
+    (B, total input width) are loaded first and the result is written to out (B, Q + D) — each
+    a launch saved. commit copies the result into frame 0 and flags any non-finite state."""
     S = d.substeps
     ti.loop_config(serialize=d.serial)
     for e in range(d.n_batch):
+        if inputs.shape[0] > 0:
+            _inputs_from(d, e, inputs, 0)
         for s in range(S):
             substep_env(d, s, e)
         for k in range(d.n_qs):
@@ -102,6 +105,8 @@ def advance(d: ti.template(), commit: ti.i32):
         for k in range(d.n_dofs):
             if not _finite(d.qvel[S, e, k]):
                 d.nonfinite[0] = 1
+        if out.shape[0] > 0:
+            _state_to(d, d.qpos, d.qvel, S, e, out)
         if commit:
             for k in range(d.n_qs):
                 d.qpos[0, e, k] = d.qpos[S, e, k]
@@ -272,3 +277,8 @@ def read_mass_matrix(d: ti.template(), dst: ti.types.ndarray()):
     ti.loop_config(serialize=d.serial)
     for e, i, j in ti.ndrange(d.n_batch, d.n_dofs, d.n_dofs):
         dst[e, i, j] = d.mass_mat[0, e, i, j]
+
+
+#: what solver.py launches (bound to its data by solvers.launch)
+KERNELS = (advance, prepare_reverse, reverse_dynamics, reverse_kinematics, down_sweep, down_sweep_adjoint,
+           position_stages, write_state, read_state, write_inputs, read_links, read_mass_matrix)
