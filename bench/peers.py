@@ -58,8 +58,8 @@ def genesis_engine():
         def forward():
             scene.reset()
             robot.set_dofs_position(q)
-            for t in range(len(u)):
-                robot.control_dofs_force(u[t])
+            for force in u.unbind(0):  # as rigid_grad.py does
+                robot.control_dofs_force(force)
                 scene.step()
             state = scene.sim.rigid_solver.get_state()
             final["q"] = state.qpos

@@ -4,8 +4,10 @@ Cases: (a) the 2-link pendulum ``assets/pendulum2.urdf``, 50 steps, no batch; (b
 (pybullet_data ``kuka_iiwa/model.urdf``, 7 dofs, fixed) 100 steps at n_envs = 1 and 256.
 Everything is float32, contact-free, joint limits off, dt = 0.01 s; the scene is built with
 ``SimOptions(requires_grad=True)``; a force-control tensor (n_steps, [n_envs,] n_dofs) requiring
-grad drives every step; the loss is the sum of squares of the final joint positions and
-velocities. "forward" is the rollout that records the graph; "fwd+bwd" adds ``loss.backward()``
+grad drives every step, its rows taken with ``unbind`` (torch's backward of ``controls[t]``
+builds and adds a zero tensor of the whole rollout's size at every step: a cost of
+steps² × envs that is torch's, not the simulator's; Genesis gets the same); the loss is the
+sum of squares of the final joint positions and velocities. "forward" is the rollout that records the graph; "fwd+bwd" adds ``loss.backward()``
 (gradients reach the controls and the initial state). "bwd/fwd" = (fwd+bwd − fwd) / fwd.
 "no-grad fwd" is the same rollout in a scene built without requires_grad (the cost of being
 differentiable is the difference). Best of ``--repeats`` after one warm-up rollout.
@@ -57,8 +59,8 @@ def make_scene(path, n_envs, requires_grad):
 def rollout(scene, robot, controls, q0):
     scene.reset()
     robot.set_dofs_position(q0)
-    for t in range(len(controls)):
-        robot.control_dofs_force(controls[t])
+    for force in controls.unbind(0):  # see the module docstring
+        robot.control_dofs_force(force)
         scene.step()
     return robot.get_dofs_position().pow(2).sum() + robot.get_dofs_velocity().pow(2).sum()
 

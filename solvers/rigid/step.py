@@ -116,14 +116,14 @@ def advance(d: ti.template(), commit: ti.i32, inputs: ti.types.ndarray(), out: t
 
 @ti.kernel
 def prepare_reverse(d: ti.template(), src: ti.types.ndarray()):
-    """src (B, state | inputs | gradient of the end state): frame 0 and the inputs ← the step's
-    start, every gradient ← 0, then the last frame's state gradient ← the seed."""
+    """src (B, state | inputs | gradient of the end state): every gradient ← 0, frame 0 and the
+    inputs ← the step's start, then the last frame's state gradient ← the seed."""
+    _clear_grads(d, d.substeps)
     width = d.n_qs + d.n_dofs
-    ti.loop_config(serialize=d.serial)
+    ti.loop_config(serialize=True)  # moving data: cheaper than a thread hand-off (see below)
     for e in range(d.n_batch):
         _state_from(d, d.qpos, d.qvel, 0, e, src, 0)
         _inputs_from(d, e, src, width)
-        _clear_grads_env(d, e)
         _state_from(d, d.qpos.grad, d.qvel.grad, d.substeps, e, src, width + d.input_total)
 
 
@@ -158,9 +158,9 @@ def down_sweep(d: ti.template()):
 def down_sweep_adjoint(d: ti.template(), src: ti.types.ndarray(), dst: ti.types.ndarray()):
     """src (B, L, 13): gradient of read_links' output → dst: gradient of the frame-0 state (as
     _read_grads_env lays it out). The down sweep at frame 0 must be current."""
+    _clear_grads(d, 1)
     ti.loop_config(serialize=d.serial)
     for e in range(d.n_batch):
-        _clear_grads_env(d, e)
         for l in range(d.n_links):
             for k in ti.static(range(3)):
                 d.xpos.grad[0, e, l][k] = src[e, l, k]
@@ -180,8 +180,8 @@ def position_stages(d: ti.template()):
         position_stages_env(d, 0, e)
 
 
-# -- moving data: one loop over envs per kernel, since every parallel loop is a task that costs a
-# -- thread-pool hand-off (~80 µs here) whatever its size; small scenes run serially (data.serial)
+# -- moving data: serial loops on the calling thread. A parallel loop costs a thread-pool hand-off
+# -- (~80 µs here) whatever its size, more than copying a few floats of every env
 @ti.func
 def _state_from(d: ti.template(), qpos: ti.template(), qvel: ti.template(), s, e, src: ti.template(), offset):
     """Frame s of (qpos, qvel) (values or gradients) of env e ← src[e, offset:] (Q + D). Counts
@@ -212,14 +212,14 @@ def _inputs_from(d: ti.template(), e, src: ti.template(), offset):
 @ti.kernel
 def write_state(d: ti.template(), s: ti.i32, src: ti.types.ndarray()):
     """Frame s ← src (B, Q + D): qpos then qvel of every env."""
-    ti.loop_config(serialize=d.serial)
+    ti.loop_config(serialize=True)
     for e in range(d.n_batch):
         _state_from(d, d.qpos, d.qvel, s, e, src, 0)
 
 
 @ti.kernel
 def read_state(d: ti.template(), s: ti.i32, dst: ti.types.ndarray()):
-    ti.loop_config(serialize=d.serial)
+    ti.loop_config(serialize=True)
     for e in range(d.n_batch):
         _state_to(d, d.qpos, d.qvel, s, e, dst)
 
@@ -227,7 +227,7 @@ def read_state(d: ti.template(), s: ti.i32, dst: ti.types.ndarray()):
 @ti.kernel
 def write_inputs(d: ti.template(), src: ti.types.ndarray()):
     """Every input field ← its columns of src (B, total width), in INPUTS order."""
-    ti.loop_config(serialize=d.serial)
+    ti.loop_config(serialize=True)
     for e in range(d.n_batch):
         _inputs_from(d, e, src, 0)
 
@@ -242,27 +242,28 @@ def _read_grads_env(d: ti.template(), e, dst: ti.template()):
 
 
 @ti.func
-def _zero_frames_grad(fld: ti.template(), e):
-    """Zero env e of a (frames, B, ...) gradient field in frames 0 … S − 1: the adjoints add into
-    those; the last frame's intermediates are never used, and its state gradient is the seed."""
-    for J in ti.grouped(ti.ndrange(fld.shape[0] - 1, *fld.shape[2:])):
-        fld.grad[J[0], e, *[J[k] for k in ti.static(range(1, J.n))]] = 0
+def _zero_grad_frames(fld: ti.template(), frames):
+    """Zero the gradient of frames 0 … frames − 1 of every env: one contiguous block, which a
+    serial loop on the calling thread clears at memset speed (no thread hand-off)."""
+    ti.loop_config(serialize=True)
+    for I in ti.grouped(ti.ndrange(frames, *fld.shape[1:])):
+        fld.grad[I] = 0
 
 
 @ti.func
-def _clear_grads_env(d: ti.template(), e):
+def _clear_grads(d: ti.template(), frames):
+    """Every gradient of frames 0 … frames − 1 and every input gradient ← 0 (top-level loops)."""
     for group in ti.static(d.grad_frame_groups):  # groups of ≤ 32: Taichi warns past that
         for f in ti.static(range(len(group))):
-            _zero_frames_grad(group[f], e)
+            _zero_grad_frames(group[f], frames)
     for f in ti.static(range(len(d.grad_input_fields))):
-        for k in range(d.grad_input_widths[f]):
-            d.grad_input_fields[f].grad[e, k] = 0
+        _zero_grad_frames(d.grad_input_fields[f], d.n_batch)  # (B, width): its rows as frames
 
 
 @ti.kernel
 def read_links(d: ti.template(), dst: ti.types.ndarray()):
     """dst (B, L, 13) ← frame-0 link pos, quat, cvel (ω, v at the origin)."""
-    ti.loop_config(serialize=d.serial)
+    ti.loop_config(serialize=True)
     for e, l in ti.ndrange(d.n_batch, d.n_links):
         for k in ti.static(range(3)):
             dst[e, l, k] = d.xpos[0, e, l][k]
@@ -274,7 +275,7 @@ def read_links(d: ti.template(), dst: ti.types.ndarray()):
 
 @ti.kernel
 def read_mass_matrix(d: ti.template(), dst: ti.types.ndarray()):
-    ti.loop_config(serialize=d.serial)
+    ti.loop_config(serialize=True)
     for e, i, j in ti.ndrange(d.n_batch, d.n_dofs, d.n_dofs):
         dst[e, i, j] = d.mass_mat[0, e, i, j]
 
