@@ -3,7 +3,9 @@
 A Taichi 1.7 kernel call spends ~30 µs in Python on this machine (template lookup, argument
 checks, launch context), more than a small scene's whole step. A :class:`BoundKernel` fixes a
 kernel's template argument (a solver's data), lets Taichi compile and check the first call as
-usual, and afterwards fills the launch context itself: ~3 µs a launch.
+usual, and afterwards fills the launch context itself: ~3 µs a launch. It uses Taichi 1.7's
+kernel internals (``_primal``, ``compiled_kernels``, ``make_launch_context``), which is why
+pyproject.toml pins taichi 1.7.*.
 """
 import torch
 from taichi.lang import impl

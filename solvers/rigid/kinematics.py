@@ -118,17 +118,18 @@ def _link_inertia_adjoint(d: ti.template(), s, e, l, pos, rot):
     """Gradients (pos, rot) from those of link l's spatial inertia; the mass's is stored."""
     m = d.mass[e, l]
     com = pos + mat_vec(rot, d.link_com[l])
-    inertia_body = d.link_inertia0[l] * (m * d.link_inv_mass0[l])
     g_m, g_h, g_i = d.cinert_m.grad[s, e, l], d.cinert_h.grad[s, e, l], d.cinert_i.grad[s, e, l]
     trace = g_i.trace()
     com_sq = com.dot(com)
-    g_com = m * (g_h + 2.0 * trace * com - mat_vec(g_i + g_i.transpose(), com))
-    g_body = mat_mul(mat_mul(rot.transpose(), g_i), rot)
+    g_sym = g_i + g_i.transpose()
+    g_com = m * (g_h + 2.0 * trace * com - mat_vec(g_sym, com))
+    # I = R I0 Rᵀ · m/m0 with I0 symmetric: only g_sym matters, and with W = g_sym R I0,
+    # ∂/∂R = W · m/m0 and ∂/∂m of the rotated term = ½ Σ(W ∘ R) / m0 (two products, not six)
+    weighted = mat_mul(mat_mul(g_sym, rot), d.link_inertia0[l])
     g_mass = (g_m + g_h.dot(com) + trace * com_sq - com.dot(mat_vec(g_i, com))
-              + (g_body * d.link_inertia0[l]).sum() * d.link_inv_mass0[l])
+              + 0.5 * (weighted * rot).sum() * d.link_inv_mass0[l])
     accumulate(d.mass.grad, ti.Vector([e, l]), g_mass)
-    g_rot = (mat_mul(mat_mul(g_i, rot), inertia_body.transpose()) + mat_mul(mat_mul(g_i.transpose(), rot), inertia_body)
-             + g_com.outer_product(d.link_com[l]))
+    g_rot = weighted * (m * d.link_inv_mass0[l]) + g_com.outer_product(d.link_com[l])
     return g_com, g_rot
 
 
@@ -144,10 +145,10 @@ def _joint_pose_adjoint(d: ti.template(), s, e, l, g_pos, g_quat):
     frame_quat = quat_mul(parent_quat, d.link_quat0[l])
     g_frame_quat = g_quat
     if jt == REVOLUTE:
-        angle = d.qpos[s, e, q0]
-        g_frame_quat, g_turn = quat_mul_adjoint(frame_quat, axis_angle_quat(axis, angle), g_quat)
-        g_angle = 0.5 * (-ti.sin(0.5 * angle) * g_turn[0]
-                         + ti.cos(0.5 * angle) * (g_turn[1] * axis[0] + g_turn[2] * axis[1] + g_turn[3] * axis[2]))
+        turn = axis_angle_quat(axis, d.qpos[s, e, q0])  # (cos θ/2, sin θ/2 · axis), axis a unit vector
+        g_frame_quat, g_turn = quat_mul_adjoint(frame_quat, turn, g_quat)
+        sin_half = turn[1] * axis[0] + turn[2] * axis[1] + turn[3] * axis[2]
+        g_angle = 0.5 * (-sin_half * g_turn[0] + turn[0] * (g_turn[1] * axis[0] + g_turn[2] * axis[1] + g_turn[3] * axis[2]))
         accumulate(d.qpos.grad, ti.Vector([s, e, q0]), g_angle)
     elif jt == PRISMATIC:
         slide = d.qpos[s, e, q0]

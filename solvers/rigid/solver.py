@@ -137,7 +137,7 @@ class RigidSolver(Solver):
         return self._split_grads(out)
 
     def _split_grads(self, out):
-        parts = torch.split(out, self.grad_widths, dim=1)
+        parts = out.split_with_sizes(self.grad_widths, dim=1)
         return parts[0], dict(zip(self.grad_input_names, parts[1:]))
 
     # -- derived quantities at the uploaded state ----------------------------------------------
