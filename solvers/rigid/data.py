@@ -40,6 +40,7 @@ class RigidData:
     def __init__(self, model, n_batch, substeps, requires_grad, limits_enabled):
         self.n_batch, self.substeps = n_batch, substeps
         self.limits_enabled = bool(limits_enabled)  # compile-time switch of the limit forces
+        self.requires_grad = bool(requires_grad)  # compile-time: the adjoints exist
         self.serial = n_batch * max(1, model.n_links) <= SERIAL_LINK_ENVS  # compile-time, see above
         self.n_links, self.n_dofs, self.n_qs = model.n_links, model.n_dofs, model.n_qs
         self.n_pairs = len(model.pairs)
