@@ -39,7 +39,7 @@ def _is_range(idx, n):
 def _all_finite(tensor):
     """No NaN or inf in ``tensor`` (numpy's check is 3× cheaper than torch's on small CPU tensors)."""
     if tensor.device.type == "cpu":
-        return bool(np.isfinite(tensor.numpy()).all())
+        return bool(np.isfinite(tensor.numpy(force=True)).all())
     return bool(torch.isfinite(tensor).all())
 
 
