@@ -6,6 +6,7 @@ import pytest
 import torch
 
 import genesis_lite as gs
+from solvers.rigid.data import SERIAL_LINK_ENVS
 from tests.conftest import pybullet
 
 KUKA = pybullet("kuka_iiwa", "model.urdf")
@@ -198,26 +199,28 @@ def test_batch_equals_single_envs_other_robots(precision, path, fixed):
     """(Last in the module: it restarts Taichi, which ends the module's scenes.) Bitwise
     equality must not hinge on one robot: batched and single-env scenes run kernels
     compiled for different loop schedules (data.serial), and floating-point contraction could
-    differ between them. Substeps > 1, float32 too; every 8th env is replayed alone."""
+    differ between them. Substeps > 1, float32 too; eight of the envs are replayed alone."""
     gs.init(precision=precision, logging_level="warning")
-    built = []
-    for n_envs in (N_ENVS, 0):
-        scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.005, substeps=2))
-        robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=fixed))
-        scene.build(n_envs=n_envs)
-        built.append((scene, robot))
-    (batched, robot_b), (single, robot_s) = built
+    single = gs.Scene(sim_options=gs.options.SimOptions(dt=0.005, substeps=2))
+    robot_s = single.add_entity(gs.morphs.URDF(file=path, fixed=fixed))
+    single.build()
+    n_envs = SERIAL_LINK_ENVS // robot_s.n_links + 1  # the smallest batch that runs on the thread pool
+    batched = gs.Scene(sim_options=gs.options.SimOptions(dt=0.005, substeps=2))
+    robot_b = batched.add_entity(gs.morphs.URDF(file=path, fixed=fixed))
+    batched.build(n_envs=n_envs)
+    assert not batched.sim.slots[0].solver.data.serial and single.sim.slots[0].solver.data.serial
+    built = [(batched, robot_b), (single, robot_s)]
     rng = np.random.default_rng(5)
     D, steps = robot_b.n_dofs, 20
     as_t = lambda a: torch.as_tensor(a, dtype=gs.tc_float)  # noqa: E731
-    qpos, qvel = as_t(rng.uniform(-0.5, 0.5, (N_ENVS, D))), as_t(rng.uniform(-1, 1, (N_ENVS, D)))
-    force = as_t(rng.normal(0, 1, (steps, N_ENVS, D)))
+    qpos, qvel = as_t(rng.uniform(-0.5, 0.5, (n_envs, D))), as_t(rng.uniform(-1, 1, (n_envs, D)))
+    force = as_t(rng.normal(0, 1, (steps, n_envs, D)))
     robot_b.set_dofs_position(qpos)
     robot_b.set_dofs_velocity(qvel)
     for k in range(steps):
         robot_b.control_dofs_force(force[k])
         batched.step()
-    for e in range(0, N_ENVS, 8):
+    for e in range(0, n_envs, n_envs // 8):
         single.reset()
         robot_s.set_dofs_position(qpos[e])
         robot_s.set_dofs_velocity(qvel[e])
