@@ -120,7 +120,7 @@ def run_peer(python, engine, case_files, repeats):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--repeats", type=int, default=10)
     args = parser.parse_args()
     gs.init(backend=gs.cpu, precision="32", logging_level="warning")
     print(f"differentiable rigid rollouts, float32, contact-free, dt={DT}, best of {args.repeats}; "
