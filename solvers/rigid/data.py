@@ -42,7 +42,6 @@ class RigidData:
     def __init__(self, model, n_batch, substeps, requires_grad, limits_enabled):
         self.n_batch, self.substeps = n_batch, substeps
         self.limits_enabled = bool(limits_enabled)  # compile-time switch of the limit forces
-        self.requires_grad = bool(requires_grad)  # compile-time: the adjoints exist
         self.serial = n_batch * max(1, model.n_links) <= SERIAL_LINK_ENVS  # compile-time, see above
         self.n_links, self.n_dofs, self.n_qs = model.n_links, model.n_dofs, model.n_qs
         self.n_pairs = len(model.pairs)
@@ -80,6 +79,7 @@ class RigidData:
         L, D, P = self.n_links, self.n_dofs, self.n_pairs
         i32 = ti.i32
         self.link_parent, self.link_jtype = self._new((L,), dtype=i32), self._new((L,), dtype=i32)
+        self.link_static = self._new((L,), dtype=i32)
         self.link_dof0, self.link_q0 = self._new((L,), dtype=i32), self._new((L,), dtype=i32)
         self.link_pos0, self.link_quat0 = self._new((L,), 3), self._new((L,), 4)
         self.link_axis, self.link_com = self._new((L,), 3), self._new((L,), 3)
@@ -135,7 +135,7 @@ class RigidData:
 
     def _fill_model(self, model):
         f = runtime.np_float
-        for name in ("link_parent", "link_jtype", "link_dof0", "link_q0", "dof_link", "dof_q", "dof_parent"):
+        for name in ("link_parent", "link_jtype", "link_static", "link_dof0", "link_q0", "dof_link", "dof_q", "dof_parent"):
             values = getattr(model, name)
             if len(values):
                 getattr(self, name).from_numpy(values.astype(np.int32))

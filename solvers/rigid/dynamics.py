@@ -156,21 +156,28 @@ def _link_motion_adjoint(d: ti.template(), s, e, l, gw, gv, gaw, gav):
 
 @ti.func
 def link_forces_adjoint(d: ti.template(), s, e, l):
-    vw, vv = d.cvel_w[s, e, l], d.cvel_v[s, e, l]
-    aw, av = d.cacc_w[s, e, l], d.cacc_v[s, e, l]
-    m, h, inertia = d.cinert_m[s, e, l], d.cinert_h[s, e, l], d.cinert_i[s, e, l]
-    gn, gf = d.lfrc_n.grad[s, e, l], d.lfrc_f.grad[s, e, l]
-    gm, gh, gi, gaw, gav = inertia_mul_adjoint(m, h, inertia, aw, av, gn, gf)
-    pn, pf = inertia_mul(m, h, inertia, vw, vv)
-    # (cn, cf) = (vw × pn + vv × pf, vw × pf)
-    gm2, gh2, gi2, gvw, gvv = inertia_mul_adjoint(m, h, inertia, vw, vv, gn.cross(vw), gn.cross(vv) + gf.cross(vw))
-    accumulate(d.cinert_m.grad, ti.Vector([s, e, l]), gm + gm2)
-    accumulate(d.cinert_h.grad, ti.Vector([s, e, l]), gh + gh2)
-    accumulate(d.cinert_i.grad, ti.Vector([s, e, l]), gi + gi2)
-    _link_motion_adjoint(d, s, e, l,
-                         d.cvel_w.grad[s, e, l] + gvw + pn.cross(gn) + pf.cross(gf),
-                         d.cvel_v.grad[s, e, l] + gvv + pf.cross(gn),
-                         d.cacc_w.grad[s, e, l] + gaw, d.cacc_v.grad[s, e, l] + gav)
+    """A static link's inertia and forces reach no dof: only its motion's gradient flows (to
+    gravity), so the inertia terms are skipped."""
+    gw, gv = d.cvel_w.grad[s, e, l], d.cvel_v.grad[s, e, l]
+    gaw, gav = d.cacc_w.grad[s, e, l], d.cacc_v.grad[s, e, l]
+    if not d.link_static[l]:
+        vw, vv = d.cvel_w[s, e, l], d.cvel_v[s, e, l]
+        aw, av = d.cacc_w[s, e, l], d.cacc_v[s, e, l]
+        m, h, inertia = d.cinert_m[s, e, l], d.cinert_h[s, e, l], d.cinert_i[s, e, l]
+        gn, gf = d.lfrc_n.grad[s, e, l], d.lfrc_f.grad[s, e, l]
+        gm, gh, gi, g_aw, g_av = inertia_mul_adjoint(m, h, inertia, aw, av, gn, gf)
+        pn, pf = inertia_mul(m, h, inertia, vw, vv)
+        # (cn, cf) = (vw × pn + vv × pf, vw × pf)
+        gm2, gh2, gi2, gvw, gvv = inertia_mul_adjoint(m, h, inertia, vw, vv, gn.cross(vw),
+                                                      gn.cross(vv) + gf.cross(vw))
+        accumulate(d.cinert_m.grad, ti.Vector([s, e, l]), gm + gm2)
+        accumulate(d.cinert_h.grad, ti.Vector([s, e, l]), gh + gh2)
+        accumulate(d.cinert_i.grad, ti.Vector([s, e, l]), gi + gi2)
+        gw += gvw + pn.cross(gn) + pf.cross(gf)
+        gv += gvv + pf.cross(gn)
+        gaw += g_aw
+        gav += g_av
+    _link_motion_adjoint(d, s, e, l, gw, gv, gaw, gav)
 
 
 @ti.func
@@ -185,11 +192,12 @@ def _sum_adjoint(own: ti.template(), total: ti.template(), s, e, l, p):
 @ti.func
 def subtree_sum_adjoint(d: ti.template(), s, e, l):
     p = d.link_parent[l]
-    _sum_adjoint(d.cinert_m, d.crb_m, s, e, l, p)
-    _sum_adjoint(d.cinert_h, d.crb_h, s, e, l, p)
-    _sum_adjoint(d.cinert_i, d.crb_i, s, e, l, p)
-    _sum_adjoint(d.lfrc_n, d.cfrc_n, s, e, l, p)
-    _sum_adjoint(d.lfrc_f, d.cfrc_f, s, e, l, p)
+    if not d.link_static[l]:  # a static link's sums reach no dof: their gradients are zero
+        _sum_adjoint(d.cinert_m, d.crb_m, s, e, l, p)
+        _sum_adjoint(d.cinert_h, d.crb_h, s, e, l, p)
+        _sum_adjoint(d.cinert_i, d.crb_i, s, e, l, p)
+        _sum_adjoint(d.lfrc_n, d.cfrc_n, s, e, l, p)
+        _sum_adjoint(d.lfrc_f, d.cfrc_f, s, e, l, p)
 
 
 @ti.func

@@ -60,6 +60,16 @@ class RigidModel:
         return np.divide(1.0, self.link_mass0, out=np.zeros_like(self.link_mass0), where=self.link_mass0 > 0)
 
     @property
+    def link_static(self):
+        """(L,) 1 for a link welded to the world (no dof on it or above it, like a fixed robot's
+        base): it never moves, and no dof carries its inertia or forces."""
+        static = np.zeros(self.n_links, dtype=np.int32)
+        for l in range(self.n_links):  # parents come before their children
+            p = self.link_parent[l]
+            static[l] = self.link_jtype[l] == FIXED and (p < 0 or static[p])
+        return static
+
+    @property
     def dof_parent(self):
         """(D,) the dof just above each dof on its path to the root (-1: none). The mass matrix's
         non-zeros follow this tree, so factoring along it creates no fill-in."""

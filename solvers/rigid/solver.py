@@ -115,7 +115,7 @@ class RigidSolver(Solver):
     # -- stepping ---------------------------------------------------------------------------
     def advance(self, inputs=None, download=False):
         out = self._empty(self.state_width) if download else self._nothing
-        self.kernels.advance(0, self._nothing if inputs is None else self._pack_inputs(inputs), out)
+        self.kernels.advance(1, self._nothing if inputs is None else self._pack_inputs(inputs), out)
         return out if download else None
 
     def nonfinite(self):
@@ -130,11 +130,9 @@ class RigidSolver(Solver):
         packed = self._pack_inputs(inputs, before=(state,), after=(grad_state_out,))
         out = self._empty(sum(self.grad_widths))
         self.kernels.prepare_reverse(packed)
-        self.kernels.advance(1, self._nothing, self._nothing)  # replay + the last substep's reverse_dynamics
-        last = self.sim_options.substeps - 1
-        for s in reversed(range(last + 1)):  # two kernels: one compiles 3x slower
-            if s < last:
-                self.kernels.reverse_dynamics(s)
+        self.kernels.advance(0, self._nothing, self._nothing)
+        for s in reversed(range(self.sim_options.substeps)):  # two kernels: one compiles 3x slower
+            self.kernels.reverse_dynamics(s)
             self.kernels.reverse_kinematics(s, out)
         return self._split_grads(out)
 

@@ -4,8 +4,8 @@ Taichi fields and torch.
 Forward runs every substep of every env in one launch (``advance``, which can also load the
 inputs and write out the result). Reverse: ``prepare_reverse`` loads the step's start state,
 inputs and output gradient, ``advance`` replays the substeps to refill the frames, then for
-each substep, last first, ``reverse_dynamics`` (for the last substep: at the end of the
-replay) and ``reverse_kinematics`` run the stages' hand-written adjoints in reverse order; after substep 0 the gradients are written out. (Fused into one kernel, LLVM
+each substep, last first, ``reverse_dynamics`` and ``reverse_kinematics`` run the stages'
+hand-written adjoints in reverse order; after substep 0 the gradients are written out. (Fused into one kernel, LLVM
 took 31 s to compile it; split so, 6 s.) Each env belongs to one thread, so gradients
 accumulate without atomics.
 """
@@ -30,11 +30,14 @@ def down_sweep_env(d: ti.template(), s, e):
 
 @ti.func
 def down_sweep_adjoint_env(d: ti.template(), s, e):
-    """Leaves to root: a link's gradients are complete once its children are done."""
+    """Leaves to root: a link's gradients are complete once its children are done. A static link
+    (welded to the world) passes on only its motion's gradient (to gravity): its pose depends on
+    no input, and its inertia and forces reach no dof."""
     for r in range(d.n_links):
         l = d.n_links - 1 - r
         link_forces_adjoint(d, s, e, l)
-        link_kinematics_adjoint(d, s, e, l)
+        if not d.link_static[l]:
+            link_kinematics_adjoint(d, s, e, l)
 
 
 @ti.func
@@ -88,12 +91,10 @@ def _finite(x):
 
 
 @ti.kernel
-def advance(d: ti.template(), replay: ti.i32, inputs: ti.types.ndarray(), out: ti.types.ndarray()):
-    """All substeps of one step for every env in one launch. Unless empty, inputs (B, total input
-    width) are loaded first and the result is written to out (B, Q + D), each a launch saved.
-    A step copies its result into frame 0 and flags any non-finite state; a replay (in the
-    reverse pass, after prepare_reverse) goes on with the last substep's dynamics adjoint
-    instead, which saves the reverse pass a thread hand-off."""
+def advance(d: ti.template(), commit: ti.i32, inputs: ti.types.ndarray(), out: ti.types.ndarray()):
+    """All substeps of one step for every env in one launch (forward only). Unless empty, inputs
+    (B, total input width) are loaded first and the result is written to out (B, Q + D) — each
+    a launch saved. commit copies the result into frame 0 and flags any non-finite state."""
     S = d.substeps
     ti.loop_config(serialize=d.serial)
     for e in range(d.n_batch):
@@ -101,18 +102,15 @@ def advance(d: ti.template(), replay: ti.i32, inputs: ti.types.ndarray(), out: t
             _inputs_from(d, e, inputs, 0)
         for s in range(S):
             substep_env(d, s, e)
-        if replay:
-            if ti.static(d.requires_grad):
-                dynamics_adjoint_env(d, S - 1, e)
-        else:
-            for k in range(d.n_qs):
-                if not _finite(d.qpos[S, e, k]):
-                    d.nonfinite[0] = 1
-            for k in range(d.n_dofs):
-                if not _finite(d.qvel[S, e, k]):
-                    d.nonfinite[0] = 1
-            if out.shape[0] > 0:
-                _state_to(d, d.qpos, d.qvel, S, e, out)
+        for k in range(d.n_qs):
+            if not _finite(d.qpos[S, e, k]):
+                d.nonfinite[0] = 1
+        for k in range(d.n_dofs):
+            if not _finite(d.qvel[S, e, k]):
+                d.nonfinite[0] = 1
+        if out.shape[0] > 0:
+            _state_to(d, d.qpos, d.qvel, S, e, out)
+        if commit:
             for k in range(d.n_qs):
                 d.qpos[0, e, k] = d.qpos[S, e, k]
             for k in range(d.n_dofs):
