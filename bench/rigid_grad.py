@@ -7,8 +7,9 @@ Everything is float32, contact-free, joint limits off, dt = 0.01 s; the scene is
 grad drives every step, its rows taken with ``unbind`` (torch's backward of ``controls[t]``
 builds and adds a zero tensor of the whole rollout's size at every step: a cost of
 steps² × envs that is torch's, not the simulator's; Genesis gets the same); the loss is the
-sum of squares of the final joint positions and velocities. "forward" is the rollout that records the graph; "fwd+bwd" adds ``loss.backward()``
-(gradients reach the controls and the initial state). "bwd/fwd" = (fwd+bwd − fwd) / fwd.
+sum of squares of the final joint positions and velocities. "forward" is the rollout that
+records the graph; "fwd+bwd" adds ``loss.backward()`` (gradients reach the controls and the
+initial state). "bwd/fwd" = (fwd+bwd − fwd) / fwd.
 "no-grad fwd" is the same rollout in a scene built without requires_grad (the cost of being
 differentiable is the difference). Best of ``--repeats`` after one warm-up rollout.
 

@@ -135,7 +135,8 @@ class RigidData:
 
     def _fill_model(self, model):
         f = runtime.np_float
-        for name in ("link_parent", "link_jtype", "link_static", "link_dof0", "link_q0", "dof_link", "dof_q", "dof_parent"):
+        for name in ("link_parent", "link_jtype", "link_static", "link_dof0", "link_q0", "dof_link", "dof_q",
+                     "dof_parent"):
             values = getattr(model, name)
             if len(values):
                 getattr(self, name).from_numpy(values.astype(np.int32))

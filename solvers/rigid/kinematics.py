@@ -148,7 +148,8 @@ def _joint_pose_adjoint(d: ti.template(), s, e, l, g_pos, g_quat):
         turn = axis_angle_quat(axis, d.qpos[s, e, q0])  # (cos θ/2, sin θ/2 · axis), axis a unit vector
         g_frame_quat, g_turn = quat_mul_adjoint(frame_quat, turn, g_quat)
         sin_half = turn[1] * axis[0] + turn[2] * axis[1] + turn[3] * axis[2]
-        g_angle = 0.5 * (-sin_half * g_turn[0] + turn[0] * (g_turn[1] * axis[0] + g_turn[2] * axis[1] + g_turn[3] * axis[2]))
+        g_axis_part = g_turn[1] * axis[0] + g_turn[2] * axis[1] + g_turn[3] * axis[2]
+        g_angle = 0.5 * (-sin_half * g_turn[0] + turn[0] * g_axis_part)
         accumulate(d.qpos.grad, ti.Vector([s, e, q0]), g_angle)
     elif jt == PRISMATIC:
         slide = d.qpos[s, e, q0]
