@@ -46,7 +46,7 @@ class BoundKernel:
 
 
 class BoundKernels:
-    """The kernels of a module bound to one data object: ``kernels.advance(1)``."""
+    """The kernels of a module bound to one data object: ``kernels.read_state(0, out)``."""
 
     def __init__(self, data, *kernels):
         for kernel in kernels:

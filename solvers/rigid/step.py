@@ -5,9 +5,9 @@ Forward runs every substep of every env in one launch (``advance``, which can al
 inputs and write out the result). Reverse: ``prepare_reverse`` loads the step's start state,
 inputs and output gradient, ``advance`` replays the substeps to refill the frames, then for
 each substep, last first, ``reverse_dynamics`` and ``reverse_kinematics`` run the stages'
-hand-written adjoints in reverse order; after substep 0 the gradients are written out. (Fused into one kernel, LLVM
-took 31 s to compile it; split so, 6 s.) Each env belongs to one thread, so gradients
-accumulate without atomics.
+hand-written adjoints in reverse order; after substep 0 the gradients are written out.
+(Fused into one kernel, LLVM took 31 s to compile it; split so, 6 s.) Each env belongs to one
+thread, so gradients accumulate without atomics.
 """
 import taichi as ti
 
@@ -184,7 +184,7 @@ def position_stages(d: ti.template()):
 
 
 # -- moving data: serial loops on the calling thread. A parallel loop costs a thread-pool hand-off
-# -- (~80 µs here) whatever its size, more than copying a few floats of every env
+# -- (~100 µs here in a rollout) whatever its size, more than copying a few floats of every env
 @ti.func
 def _state_from(d: ti.template(), qpos: ti.template(), qvel: ti.template(), s, e, src: ti.template(), offset):
     """Frame s of (qpos, qvel) (values or gradients) of env e ← src[e, offset:] (Q + D). Counts
