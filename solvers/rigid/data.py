@@ -51,11 +51,9 @@ class RigidData:
         self._place_model(model)
         self._place_inputs(requires_grad)
         self._place_frames(requires_grad)
-        if requires_grad:
-            self._builder.lazy_grad()
         self._builder.finalize()
         inputs = {id(f) for f in self.input_fields}
-        frames = [f for f in self.grad_fields if id(f) not in inputs]
+        frames = [f.grad for f in self.grad_fields if id(f) not in inputs] + self.grad_only_fields
         self.grad_frame_groups = [tuple(frames[k: k + 32]) for k in range(0, len(frames), 32)]
         self._fill_model(model)
 
@@ -72,6 +70,9 @@ class RigidData:
         shape = tuple(max(1, int(s)) for s in shape)
         self._builder.dense(ti.axes(*range(len(shape))), shape).place(fld)
         if grad:
+            # a block of its own (lazy_grad would interleave it with the values): the forward
+            # then never drags gradients through the cache, and zeroing them is a memset
+            self._builder.dense(ti.axes(*range(len(shape))), shape).place(fld.grad)
             self.grad_fields.append(fld)
         return fld
 
@@ -113,16 +114,20 @@ class RigidData:
     def _place_frames(self, g):
         F, B, L, D, Q = self.substeps + 1, self.n_batch, self.n_links, self.n_dofs, self.n_qs
         self.qpos, self.qvel = self._new((F, B, Q), grad=g), self._new((F, B, D), grad=g)
-        self.xpos, self.xquat = self._new((F, B, L), 3, grad=g), self._new((F, B, L), 4, grad=g)
-        self.cinert_m, self.crb_m = self._new((F, B, L), grad=g), self._new((F, B, L), grad=g)
-        self.cinert_h, self.crb_h = self._new((F, B, L), 3, grad=g), self._new((F, B, L), 3, grad=g)
-        self.cinert_i, self.crb_i = self._new((F, B, L), 3, 3, grad=g), self._new((F, B, L), 3, 3, grad=g)
+        self.xpos, self.xquat = self._new((F, B, L), 3, grad=g), self._new((F, B, L), 4)
+        # a link's rotation is differentiated as a small world-frame turn δθ, not through its
+        # quaternion (see kinematics.py): xrot_grad is ∂L/∂δθ, a gradient with no value field
+        self.xrot_grad = self._new((F, B, L), 3)
+        self.grad_only_fields = [self.xrot_grad] if g else []
+        # a link's own inertia has no gradient field: its gradient is its subtree sum's (crb)
+        self.cinert_m, self.crb_m = self._new((F, B, L)), self._new((F, B, L), grad=g)
+        self.cinert_h, self.crb_h = self._new((F, B, L), 3), self._new((F, B, L), 3, grad=g)
+        self.cinert_i, self.crb_i = self._new((F, B, L), 3, 3), self._new((F, B, L), 3, 3, grad=g)
         self.cdof_w, self.cdof_v = self._new((F, B, D), 3, grad=g), self._new((F, B, D), 3, grad=g)
         self.cvel_w, self.cvel_v = self._new((F, B, L), 3, grad=g), self._new((F, B, L), 3, grad=g)
         self.cacc_w, self.cacc_v = self._new((F, B, L), 3, grad=g), self._new((F, B, L), 3, grad=g)
         self.cfrc_n, self.cfrc_f = self._new((F, B, L), 3, grad=g), self._new((F, B, L), 3, grad=g)
-        self.lfrc_n, self.lfrc_f = self._new((F, B, L), 3, grad=g), self._new((F, B, L), 3, grad=g)
-        self.dof_force_n, self.dof_force_f = self._new((F, B, D), 3, grad=g), self._new((F, B, D), 3, grad=g)
+        self.dof_force_n, self.dof_force_f = self._new((F, B, D), 3), self._new((F, B, D), 3)
         self.mass_mat = self._new((F, B, D, D), grad=g)
         self.qfrc_bias, self.qfrc_smooth = self._new((F, B, D), grad=g), self._new((F, B, D), grad=g)
         self.qacc = self._new((F, B, D), grad=g)

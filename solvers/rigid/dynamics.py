@@ -55,7 +55,6 @@ def link_forces(d: ti.template(), s, e, l):
     fn, ff = inertia_mul(m, h, inertia, aw, av)
     pn, pf = inertia_mul(m, h, inertia, vw, vv)
     cn, cf = cross_force(vw, vv, pn, pf)
-    d.lfrc_n[s, e, l], d.lfrc_f[s, e, l] = fn + cn, ff + cf
     d.cfrc_n[s, e, l], d.cfrc_f[s, e, l] = fn + cn, ff + cf  # the up sweep adds the children's
 
 
@@ -156,78 +155,73 @@ def _link_motion_adjoint(d: ti.template(), s, e, l, gw, gv, gaw, gav):
 
 @ti.func
 def link_forces_adjoint(d: ti.template(), s, e, l):
-    """A static link's inertia and forces reach no dof: only its motion's gradient flows (to
-    gravity), so the inertia terms are skipped."""
+    """Reverse of link_forces; returns the gradient (m, h, I) of link l's own inertia, which
+    link_kinematics_adjoint takes next. Link l's force and inertia gradients are those of its
+    subtree's sums (subtree_sum_adjoint has run). A static link's inertia and forces reach no
+    dof: only its motion's gradient flows (to gravity)."""
     gw, gv = d.cvel_w.grad[s, e, l], d.cvel_v.grad[s, e, l]
     gaw, gav = d.cacc_w.grad[s, e, l], d.cacc_v.grad[s, e, l]
+    g_m, g_h, g_i = 0.0, ti.Vector.zero(float, 3), ti.Matrix.zero(float, 3, 3)
     if not d.link_static[l]:
         vw, vv = d.cvel_w[s, e, l], d.cvel_v[s, e, l]
         aw, av = d.cacc_w[s, e, l], d.cacc_v[s, e, l]
         m, h, inertia = d.cinert_m[s, e, l], d.cinert_h[s, e, l], d.cinert_i[s, e, l]
-        gn, gf = d.lfrc_n.grad[s, e, l], d.lfrc_f.grad[s, e, l]
+        gn, gf = d.cfrc_n.grad[s, e, l], d.cfrc_f.grad[s, e, l]
         gm, gh, gi, g_aw, g_av = inertia_mul_adjoint(m, h, inertia, aw, av, gn, gf)
         pn, pf = inertia_mul(m, h, inertia, vw, vv)
         # (cn, cf) = (vw × pn + vv × pf, vw × pf)
         gm2, gh2, gi2, gvw, gvv = inertia_mul_adjoint(m, h, inertia, vw, vv, gn.cross(vw),
                                                       gn.cross(vv) + gf.cross(vw))
-        accumulate(d.cinert_m.grad, ti.Vector([s, e, l]), gm + gm2)
-        accumulate(d.cinert_h.grad, ti.Vector([s, e, l]), gh + gh2)
-        accumulate(d.cinert_i.grad, ti.Vector([s, e, l]), gi + gi2)
+        g_m = d.crb_m.grad[s, e, l] + gm + gm2
+        g_h = d.crb_h.grad[s, e, l] + gh + gh2
+        g_i = d.crb_i.grad[s, e, l] + gi + gi2
         gw += gvw + pn.cross(gn) + pf.cross(gf)
         gv += gvv + pf.cross(gn)
         gaw += g_aw
         gav += g_av
     _link_motion_adjoint(d, s, e, l, gw, gv, gaw, gav)
-
-
-@ti.func
-def _sum_adjoint(own: ti.template(), total: ti.template(), s, e, l, p):
-    """total[l] = own[l] + Σ total[children]: a link's total gradient takes its parent's, then
-    reaches its own value. Run roots first (parents have lower indices)."""
-    if p >= 0:
-        accumulate(total.grad, ti.Vector([s, e, l]), total.grad[s, e, p])
-    accumulate(own.grad, ti.Vector([s, e, l]), total.grad[s, e, l])
+    return g_m, g_h, g_i
 
 
 @ti.func
 def subtree_sum_adjoint(d: ti.template(), s, e, l):
+    """crb[l] and cfrc[l] are link l's own value plus its children's sums, so each child's sum
+    takes the gradient of its parent's (run roots first): afterwards the gradient of a link's
+    sum is also that of its own inertia and force. A static link's sums reach no dof."""
     p = d.link_parent[l]
-    if not d.link_static[l]:  # a static link's sums reach no dof: their gradients are zero
-        _sum_adjoint(d.cinert_m, d.crb_m, s, e, l, p)
-        _sum_adjoint(d.cinert_h, d.crb_h, s, e, l, p)
-        _sum_adjoint(d.cinert_i, d.crb_i, s, e, l, p)
-        _sum_adjoint(d.lfrc_n, d.cfrc_n, s, e, l, p)
-        _sum_adjoint(d.lfrc_f, d.cfrc_f, s, e, l, p)
+    if p >= 0 and not d.link_static[l]:
+        accumulate(d.crb_m.grad, ti.Vector([s, e, l]), d.crb_m.grad[s, e, p])
+        accumulate(d.crb_h.grad, ti.Vector([s, e, l]), d.crb_h.grad[s, e, p])
+        accumulate(d.crb_i.grad, ti.Vector([s, e, l]), d.crb_i.grad[s, e, p])
+        accumulate(d.cfrc_n.grad, ti.Vector([s, e, l]), d.cfrc_n.grad[s, e, p])
+        accumulate(d.cfrc_f.grad, ti.Vector([s, e, l]), d.cfrc_f.grad[s, e, p])
 
 
 @ti.func
-def dof_force_adjoint(d: ti.template(), s, e, i):
+def dof_row_adjoint(d: ti.template(), s, e, i):
+    """Reverse of bias_entry, of row i of the mass matrix (mass_entry) and of dof_force for dof
+    i. M[i, j] = cdof_j · F_i along the dof tree, so the gradient of F_i is summed over the row
+    in registers and goes straight on to the composite inertia and cdof_i."""
     l = d.dof_link[i]
-    gm, gh, gi, gw, gv = inertia_mul_adjoint(d.crb_m[s, e, l], d.crb_h[s, e, l], d.crb_i[s, e, l],
-                                             d.cdof_w[s, e, i], d.cdof_v[s, e, i],
-                                             d.dof_force_n.grad[s, e, i], d.dof_force_f.grad[s, e, i])
+    sw, sv = d.cdof_w[s, e, i], d.cdof_v[s, e, i]
+    g = d.qfrc_bias.grad[s, e, i]
+    accumulate(d.cdof_w.grad, ti.Vector([s, e, i]), g * d.cfrc_n[s, e, l])
+    accumulate(d.cdof_v.grad, ti.Vector([s, e, i]), g * d.cfrc_f[s, e, l])
+    accumulate(d.cfrc_n.grad, ti.Vector([s, e, l]), g * sw)
+    accumulate(d.cfrc_f.grad, ti.Vector([s, e, l]), g * sv)
+    fn, ff = d.dof_force_n[s, e, i], d.dof_force_f[s, e, i]
+    g_fn, g_ff = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)
+    j = i
+    while j != -1:  # the dofs on the path from i to the root: row i's structural entries
+        g_ij = d.mass_mat.grad[s, e, i, j] + (d.mass_mat.grad[s, e, j, i] if i != j else 0.0)
+        g_fn += g_ij * d.cdof_w[s, e, j]
+        g_ff += g_ij * d.cdof_v[s, e, j]
+        accumulate(d.cdof_w.grad, ti.Vector([s, e, j]), g_ij * fn)
+        accumulate(d.cdof_v.grad, ti.Vector([s, e, j]), g_ij * ff)
+        j = d.dof_parent[j]
+    gm, gh, gi, gw, gv = inertia_mul_adjoint(d.crb_m[s, e, l], d.crb_h[s, e, l], d.crb_i[s, e, l], sw, sv, g_fn, g_ff)
     accumulate(d.crb_m.grad, ti.Vector([s, e, l]), gm)
     accumulate(d.crb_h.grad, ti.Vector([s, e, l]), gh)
     accumulate(d.crb_i.grad, ti.Vector([s, e, l]), gi)
     accumulate(d.cdof_w.grad, ti.Vector([s, e, i]), gw)
     accumulate(d.cdof_v.grad, ti.Vector([s, e, i]), gv)
-
-
-@ti.func
-def mass_entry_adjoint(d: ti.template(), s, e, k):
-    i, j = d.pair_i[k], d.pair_j[k]
-    g = d.mass_mat.grad[s, e, i, j] + (d.mass_mat.grad[s, e, j, i] if i != j else 0.0)
-    accumulate(d.cdof_w.grad, ti.Vector([s, e, j]), g * d.dof_force_n[s, e, i])
-    accumulate(d.cdof_v.grad, ti.Vector([s, e, j]), g * d.dof_force_f[s, e, i])
-    accumulate(d.dof_force_n.grad, ti.Vector([s, e, i]), g * d.cdof_w[s, e, j])
-    accumulate(d.dof_force_f.grad, ti.Vector([s, e, i]), g * d.cdof_v[s, e, j])
-
-
-@ti.func
-def bias_entry_adjoint(d: ti.template(), s, e, i):
-    l = d.dof_link[i]
-    g = d.qfrc_bias.grad[s, e, i]
-    accumulate(d.cdof_w.grad, ti.Vector([s, e, i]), g * d.cfrc_n[s, e, l])
-    accumulate(d.cdof_v.grad, ti.Vector([s, e, i]), g * d.cfrc_f[s, e, l])
-    accumulate(d.cfrc_n.grad, ti.Vector([s, e, l]), g * d.cdof_w[s, e, i])
-    accumulate(d.cfrc_f.grad, ti.Vector([s, e, l]), g * d.cdof_v[s, e, i])

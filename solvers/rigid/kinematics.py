@@ -11,8 +11,8 @@ import taichi as ti
 
 from .data import accumulate
 from .model import FREE, PRISMATIC, REVOLUTE
-from .spatial import (axis_angle_quat, mat_mul, mat_vec, normalized_adjoint, quat_mul, quat_mul_adjoint,
-                      quat_normalized, quat_to_mat, quat_to_mat_adjoint)
+from .spatial import (axis_angle_quat, mat_mul, mat_vec, normalized_adjoint, quat_conj, quat_mul, quat_normalized,
+                      quat_to_mat)
 
 
 @ti.func
@@ -88,93 +88,92 @@ def link_kinematics(d: ti.template(), s, e, l):
 
 
 # -- reverse mode ----------------------------------------------------------------------------
+# A link's pose gradient is carried as (g_pos, g_rot): ∂L/∂(a shift of its origin) and
+# ∂L/∂(a small world-frame rotation δθ of the link, R → (I + [δθ]×) R). Every quantity of the
+# link rotates with it, so each term is a cross product, and passing the gradient to the joint
+# and the parent takes one dot and one cross product — no quaternion algebra, no sin or cos.
 @ti.func
 def _motion_subspace_adjoint(d: ti.template(), s, e, l, pos, rot):
-    """Gradients (pos, rot) from those of link l's cdof."""
+    """(g_pos, g_rot) from the gradients of link l's cdof (δw = δθ × w, δv = δpos × w + pos × δw)."""
     jt = d.link_jtype[l]
     dof0 = d.link_dof0[l]
-    axis = d.link_axis[l]
     g_pos = ti.Vector.zero(float, 3)
-    g_rot = ti.Matrix.zero(float, 3, 3)
+    g_rot = ti.Vector.zero(float, 3)
     if jt == REVOLUTE:
-        gw, gv = d.cdof_w.grad[s, e, dof0], d.cdof_v.grad[s, e, dof0]
-        g_pos = mat_vec(rot, axis).cross(gv)  # cdof_v = pos × cdof_w
-        g_rot = (gw + gv.cross(pos)).outer_product(axis)
+        gv = d.cdof_v.grad[s, e, dof0]
+        axis = d.cdof_w[s, e, dof0]
+        g_pos = axis.cross(gv)
+        g_rot = axis.cross(d.cdof_w.grad[s, e, dof0] + gv.cross(pos))
     elif jt == PRISMATIC:
-        g_rot = d.cdof_v.grad[s, e, dof0].outer_product(axis)
+        g_rot = d.cdof_v[s, e, dof0].cross(d.cdof_v.grad[s, e, dof0])
     elif jt == FREE:
         for k in ti.static(range(3)):  # rotation axes are rot's columns; translations are constant
-            gw, gv = d.cdof_w.grad[s, e, dof0 + 3 + k], d.cdof_v.grad[s, e, dof0 + 3 + k]
-            column = ti.Vector([rot[0, k], rot[1, k], rot[2, k]])
-            g_pos += column.cross(gv)
-            g_column = gw + gv.cross(pos)
-            for r in ti.static(range(3)):
-                g_rot[r, k] = g_column[r]
+            gv = d.cdof_v.grad[s, e, dof0 + 3 + k]
+            axis = ti.Vector([rot[0, k], rot[1, k], rot[2, k]])
+            g_pos += axis.cross(gv)
+            g_rot += axis.cross(d.cdof_w.grad[s, e, dof0 + 3 + k] + gv.cross(pos))
     return g_pos, g_rot
 
 
 @ti.func
-def _link_inertia_adjoint(d: ti.template(), s, e, l, pos, rot):
-    """Gradients (pos, rot) from those of link l's spatial inertia; the mass's is stored."""
+def _link_inertia_adjoint(d: ti.template(), s, e, l, pos, rot, g_m, g_h, g_i):
+    """(g_pos, g_rot) from the gradient (g_m, g_h, g_i) of link l's spatial inertia; the mass's
+    is stored."""
     m = d.mass[e, l]
-    com = pos + mat_vec(rot, d.link_com[l])
-    g_m, g_h, g_i = d.cinert_m.grad[s, e, l], d.cinert_h.grad[s, e, l], d.cinert_i.grad[s, e, l]
+    arm = mat_vec(rot, d.link_com[l])  # com − pos, rotating with the link
+    com = pos + arm
     trace = g_i.trace()
-    com_sq = com.dot(com)
     g_sym = g_i + g_i.transpose()
     g_com = m * (g_h + 2.0 * trace * com - mat_vec(g_sym, com))
-    # I = R I0 Rᵀ · m/m0 with I0 symmetric: only g_sym matters, and with W = g_sym R I0,
-    # ∂/∂R = W · m/m0 and ∂/∂m of the rotated term = ½ Σ(W ∘ R) / m0 (two products, not six)
-    weighted = mat_mul(mat_mul(g_sym, rot), d.link_inertia0[l])
-    g_mass = (g_m + g_h.dot(com) + trace * com_sq - com.dot(mat_vec(g_i, com))
-              + 0.5 * (weighted * rot).sum() * d.link_inv_mass0[l])
+    # rotated inertia about the com: m·U with U = R I0 Rᵀ / m0 symmetric, and a rotation moves
+    # it by δU = [δθ]× U − U [δθ]×, so ∂L/∂δθ is m times the axial vector of P − Pᵀ, P = U g_sym
+    unit = mat_mul(mat_mul(rot, d.link_inertia0[l]), rot.transpose()) * d.link_inv_mass0[l]
+    p = mat_mul(unit, g_sym)
+    g_mass = (g_m + g_h.dot(com) + trace * com.dot(com) - com.dot(mat_vec(g_i, com))
+              + 0.5 * (g_sym * unit).sum())
     accumulate(d.mass.grad, ti.Vector([e, l]), g_mass)
-    g_rot = weighted * (m * d.link_inv_mass0[l]) + g_com.outer_product(d.link_com[l])
+    g_rot = arm.cross(g_com) + m * ti.Vector([p[1, 2] - p[2, 1], p[2, 0] - p[0, 2], p[0, 1] - p[1, 0]])
     return g_com, g_rot
 
 
 @ti.func
-def _joint_pose_adjoint(d: ti.template(), s, e, l, g_pos, g_quat):
-    """Reverse of _joint_pose: gradients to the joint coordinates and the parent's pose."""
+def _joint_pose_adjoint(d: ti.template(), s, e, l, pos, quat, g_pos, g_rot):
+    """Reverse of _joint_pose: link l's complete (g_pos, g_rot) → its joint coordinates and its
+    parent's pose (the parent's origin shifts it, the parent's rotation turns it about there)."""
     p = d.link_parent[l]
-    pp = ti.max(p, 0)
-    parent_quat = d.xquat[s, e, pp] if p >= 0 else ti.Vector([1.0, 0.0, 0.0, 0.0])
     jt = d.link_jtype[l]
     q0 = d.link_q0[l]
-    axis = d.link_axis[l]
-    frame_quat = quat_mul(parent_quat, d.link_quat0[l])
-    g_frame_quat = g_quat
-    if jt == REVOLUTE:
-        turn = axis_angle_quat(axis, d.qpos[s, e, q0])  # (cos θ/2, sin θ/2 · axis), axis a unit vector
-        g_frame_quat, g_turn = quat_mul_adjoint(frame_quat, turn, g_quat)
-        sin_half = turn[1] * axis[0] + turn[2] * axis[1] + turn[3] * axis[2]
-        g_axis_part = g_turn[1] * axis[0] + g_turn[2] * axis[1] + g_turn[3] * axis[2]
-        g_angle = 0.5 * (-sin_half * g_turn[0] + turn[0] * g_axis_part)
-        accumulate(d.qpos.grad, ti.Vector([s, e, q0]), g_angle)
+    if jt == REVOLUTE:  # the axis in the world is cdof_w
+        accumulate(d.qpos.grad, ti.Vector([s, e, q0]), g_rot.dot(d.cdof_w[s, e, d.link_dof0[l]]))
     elif jt == PRISMATIC:
-        slide = d.qpos[s, e, q0]
-        g_frame_quat += quat_to_mat_adjoint(frame_quat, g_pos.outer_product(axis) * slide)
-        accumulate(d.qpos.grad, ti.Vector([s, e, q0]), g_pos.dot(mat_vec(quat_to_mat(frame_quat), axis)))
-    elif jt == FREE:
+        accumulate(d.qpos.grad, ti.Vector([s, e, q0]), g_pos.dot(d.cdof_v[s, e, d.link_dof0[l]]))
+    elif jt == FREE:  # δquat = ½ (0, δθ) ⊗ quat, quat = raw / |raw|
         raw = ti.Vector([d.qpos[s, e, q0 + 3 + k] for k in ti.static(range(4))])
-        g_raw = normalized_adjoint(raw, g_quat)
+        g_raw = normalized_adjoint(raw, 2.0 * quat_mul(ti.Vector([0.0, g_rot[0], g_rot[1], g_rot[2]]), quat))
         for k in ti.static(range(3)):
             accumulate(d.qpos.grad, ti.Vector([s, e, q0 + k]), g_pos[k])
         for k in ti.static(range(4)):
             accumulate(d.qpos.grad, ti.Vector([s, e, q0 + 3 + k]), g_raw[k])
     if p >= 0 and jt != FREE:  # a free joint's pose does not depend on its parent's
-        g_parent_quat = (quat_mul_adjoint(parent_quat, d.link_quat0[l], g_frame_quat)[0]
-                         + quat_to_mat_adjoint(parent_quat, g_pos.outer_product(d.link_pos0[l])))
         accumulate(d.xpos.grad, ti.Vector([s, e, p]), g_pos)
-        accumulate(d.xquat.grad, ti.Vector([s, e, p]), g_parent_quat)
+        accumulate(d.xrot_grad, ti.Vector([s, e, p]), g_rot + (pos - d.xpos[s, e, p]).cross(g_pos))
 
 
 @ti.func
-def link_kinematics_adjoint(d: ti.template(), s, e, l):
-    """Reverse of link_kinematics (gradients of link l's outputs must be complete)."""
+def rotation_gradient(quat, g_quat):
+    """g_rot of a link from the gradient of its unit quaternion: δquat = ½ (0, δθ) ⊗ quat, so
+    g_rot = ½ vec(g_quat ⊗ quat*) (the part of g_quat along quat changes nothing)."""
+    g = quat_mul(g_quat, quat_conj(quat))
+    return 0.5 * ti.Vector([g[1], g[2], g[3]])
+
+
+@ti.func
+def link_kinematics_adjoint(d: ti.template(), s, e, l, g_m, g_h, g_i):
+    """Reverse of link_kinematics, given the gradient (g_m, g_h, g_i) of link l's inertia (the
+    gradients of its other outputs must be complete)."""
     pos, quat = d.xpos[s, e, l], d.xquat[s, e, l]
     rot = quat_to_mat(quat)
     g_pos_m, g_rot_m = _motion_subspace_adjoint(d, s, e, l, pos, rot)
-    g_pos_i, g_rot_i = _link_inertia_adjoint(d, s, e, l, pos, rot)
-    g_quat = d.xquat.grad[s, e, l] + quat_to_mat_adjoint(quat, g_rot_m + g_rot_i)
-    _joint_pose_adjoint(d, s, e, l, d.xpos.grad[s, e, l] + g_pos_m + g_pos_i, g_quat)
+    g_pos_i, g_rot_i = _link_inertia_adjoint(d, s, e, l, pos, rot, g_m, g_h, g_i)
+    g_rot = d.xrot_grad[s, e, l] + g_rot_m + g_rot_i
+    _joint_pose_adjoint(d, s, e, l, pos, quat, d.xpos.grad[s, e, l] + g_pos_m + g_pos_i, g_rot)

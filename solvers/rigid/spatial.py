@@ -103,20 +103,6 @@ def quat_mul_adjoint(a, b, g):
 
 
 @ti.func
-def quat_to_mat_adjoint(q, g):
-    """Gradient of q from g = ∂L/∂R, R = quat_to_mat(q) (the polynomial, not assuming |q| = 1)."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    return 2 * ti.Vector([
-        -z * g[0, 1] + y * g[0, 2] + z * g[1, 0] - x * g[1, 2] - y * g[2, 0] + x * g[2, 1],
-        y * g[0, 1] + z * g[0, 2] + y * g[1, 0] - 2 * x * g[1, 1] - w * g[1, 2] + z * g[2, 0] + w * g[2, 1]
-        - 2 * x * g[2, 2],
-        -2 * y * g[0, 0] + x * g[0, 1] + w * g[0, 2] + x * g[1, 0] + z * g[1, 2] - w * g[2, 0] + z * g[2, 1]
-        - 2 * y * g[2, 2],
-        -2 * z * g[0, 0] - w * g[0, 1] + x * g[0, 2] + w * g[1, 0] - 2 * z * g[1, 1] + y * g[1, 2] + x * g[2, 0]
-        + y * g[2, 1]])
-
-
-@ti.func
 def normalized_adjoint(q, g):
     """Gradient of q from g = ∂L/∂(q / |q|)."""
     norm = ti.sqrt(q.dot(q))

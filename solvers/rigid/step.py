@@ -12,10 +12,10 @@ thread, so gradients accumulate without atomics.
 import taichi as ti
 
 from .actuation import smooth_force, smooth_force_adjoint
-from .dynamics import (bias_entry, bias_entry_adjoint, dof_force, dof_force_adjoint, link_forces,
-                       link_forces_adjoint, mass_entry, mass_entry_adjoint, subtree_sum, subtree_sum_adjoint)
+from .dynamics import (bias_entry, dof_force, dof_row_adjoint, link_forces, link_forces_adjoint, mass_entry,
+                       subtree_sum, subtree_sum_adjoint)
 from .integrator import integrate_link, integrate_link_adjoint
-from .kinematics import link_kinematics, link_kinematics_adjoint
+from .kinematics import link_kinematics, link_kinematics_adjoint, rotation_gradient
 from .linalg import solve_adjoint_env, solve_env
 
 
@@ -35,9 +35,9 @@ def down_sweep_adjoint_env(d: ti.template(), s, e):
     no input, and its inertia and forces reach no dof."""
     for r in range(d.n_links):
         l = d.n_links - 1 - r
-        link_forces_adjoint(d, s, e, l)
+        g_m, g_h, g_i = link_forces_adjoint(d, s, e, l)
         if not d.link_static[l]:
-            link_kinematics_adjoint(d, s, e, l)
+            link_kinematics_adjoint(d, s, e, l, g_m, g_h, g_i)
 
 
 @ti.func
@@ -76,11 +76,7 @@ def dynamics_adjoint_env(d: ti.template(), s, e):
     for i in range(d.n_dofs):
         smooth_force_adjoint(d, s, e, i)
     for i in range(d.n_dofs):
-        bias_entry_adjoint(d, s, e, i)
-    for k in range(d.n_pairs):
-        mass_entry_adjoint(d, s, e, k)
-    for i in range(d.n_dofs):
-        dof_force_adjoint(d, s, e, i)
+        dof_row_adjoint(d, s, e, i)
     for l in range(d.n_links):
         subtree_sum_adjoint(d, s, e, l)
 
@@ -169,8 +165,8 @@ def down_sweep_adjoint(d: ti.template(), src: ti.types.ndarray(), dst: ti.types.
                 d.xpos.grad[0, e, l][k] = src[e, l, k]
                 d.cvel_w.grad[0, e, l][k] = src[e, l, 7 + k]
                 d.cvel_v.grad[0, e, l][k] = src[e, l, 10 + k]
-            for k in ti.static(range(4)):
-                d.xquat.grad[0, e, l][k] = src[e, l, 3 + k]
+            g_quat = ti.Vector([src[e, l, 3 + k] for k in ti.static(range(4))])
+            d.xrot_grad[0, e, l] = rotation_gradient(d.xquat[0, e, l], g_quat)
         down_sweep_adjoint_env(d, 0, e)
         _read_grads_env(d, e, dst)
 
@@ -245,12 +241,12 @@ def _read_grads_env(d: ti.template(), e, dst: ti.template()):
 
 
 @ti.func
-def _zero_grad_frames(fld: ti.template(), frames):
-    """Zero the gradient of frames 0 … frames − 1 of every env: one contiguous block, which a
-    serial loop on the calling thread clears at memset speed (no thread hand-off)."""
+def _zero_grad_frames(grad: ti.template(), frames):
+    """Zero frames 0 … frames − 1 of a gradient field for every env: one contiguous block, which
+    a serial loop on the calling thread clears at memset speed (no thread hand-off)."""
     ti.loop_config(serialize=True)
-    for I in ti.grouped(ti.ndrange(frames, *fld.shape[1:])):
-        fld.grad[I] = 0
+    for I in ti.grouped(ti.ndrange(frames, *grad.shape[1:])):
+        grad[I] = 0
 
 
 @ti.func
@@ -260,7 +256,7 @@ def _clear_grads(d: ti.template(), frames):
         for f in ti.static(range(len(group))):
             _zero_grad_frames(group[f], frames)
     for f in ti.static(range(len(d.grad_input_fields))):
-        _zero_grad_frames(d.grad_input_fields[f], d.n_batch)  # (B, width): its rows as frames
+        _zero_grad_frames(d.grad_input_fields[f].grad, d.n_batch)  # (B, width): its rows as frames
 
 
 @ti.kernel
