@@ -71,7 +71,7 @@ class RigidData:
         self._builder.dense(ti.axes(*range(len(shape))), shape).place(fld)
         if grad:
             # a block of its own (lazy_grad would interleave it with the values): the forward
-            # then never drags gradients through the cache, and zeroing them is a memset
+            # then never drags gradients through the cache, and zeroing them is one sweep
             self._builder.dense(ti.axes(*range(len(shape))), shape).place(fld.grad)
             self.grad_fields.append(fld)
         return fld
