@@ -5,7 +5,7 @@
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True))
 """
 from . import materials, morphs, options, surfaces
-from .errors import (AssetError, GenesisException, GradientError, InvalidInputError, SceneStateError,
+from .solvers.core import (AssetError, GenesisException, GradientError, InvalidInputError, SceneStateError,
                      SimulationError)
 from .runtime import cpu, gpu, init, runtime
 from .scene import Scene, SimState

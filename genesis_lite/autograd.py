@@ -17,7 +17,7 @@ import weakref
 
 import torch
 
-from .errors import GradientError
+from .solvers.core import GradientError
 
 
 class Rollout:

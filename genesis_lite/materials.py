@@ -3,7 +3,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InvalidInputError
+from .solvers.core import InvalidInputError
 
 
 @dataclass

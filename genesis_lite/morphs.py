@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InvalidInputError
+from .solvers.core import InvalidInputError
 
 
 def _vec(owner, name, value, n):

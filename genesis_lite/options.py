@@ -3,7 +3,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InvalidInputError
+from .solvers.core import InvalidInputError
 
 
 def _check_vec3(owner, name, value):

@@ -9,7 +9,7 @@ import numpy as np
 import taichi as ti
 import torch
 
-from .errors import InvalidInputError, SceneStateError
+from .solvers.core import InvalidInputError, SceneStateError, runtime
 
 cpu = "cpu"
 gpu = "gpu"
@@ -17,21 +17,6 @@ gpu = "gpu"
 _LOG_LEVELS = {"debug": ti.DEBUG, "info": ti.INFO, "warning": ti.WARN, "error": ti.ERROR}
 
 
-class _Runtime:
-    """What ``gs.init`` chose. ``epoch`` counts restarts so stale scenes can be detected."""
-
-    def __init__(self):
-        self.initialized = False
-        self.options = None
-        self.epoch = 0
-        self.device = torch.device("cpu")
-        self.tc_float = torch.float32
-        self.np_float = np.float32
-        self.ti_float = ti.f32
-        self.tc_int = torch.int32
-
-
-runtime = _Runtime()
 logger = logging.getLogger("genesis_lite")
 
 

@@ -8,14 +8,14 @@ import numpy as np
 
 from . import morphs as gm
 from .entities import RigidEntity
-from .errors import AssetError, InvalidInputError, SceneStateError
+from .solvers.core import AssetError, InvalidInputError, SceneStateError
 from .materials import Rigid
 from .options import RigidOptions, SimOptions
 from .runtime import require_init, runtime
 from .simulator import Simulator
+from .solvers.rigid import shapes, urdf
+from .solvers.rigid.solver import RigidSolver
 from .surfaces import Default
-from solvers.rigid import shapes, urdf
-from solvers.rigid.solver import RigidSolver
 
 
 class SimState:

@@ -10,7 +10,7 @@ import weakref
 import torch
 
 from . import autograd
-from .errors import GradientError, SimulationError
+from .solvers.core import GradientError, SimulationError
 
 
 class SolverSlot:

@@ -6,7 +6,7 @@ list. Creation ops put data on ``gs.device`` in ``gs.tc_float`` (integers keep t
 import numpy as np
 import torch
 
-from .runtime import runtime
+from .solvers.core import runtime
 
 
 class Tensor(torch.Tensor):

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 import genesis_lite as gs
-from solvers.rigid.data import SERIAL_LINK_ENVS
+from genesis_lite.solvers.rigid.data import SERIAL_LINK_ENVS
 from tests.conftest import pybullet
 
 KUKA = pybullet("kuka_iiwa", "model.urdf")

@@ -14,10 +14,10 @@ import pybullet_data
 import pytest
 import trimesh
 
-from genesis_lite.errors import AssetError, GenesisException, InvalidInputError
-from solvers.rigid import shapes
-from solvers.rigid.spec import JOINT_TYPES, GeomSpec
-from solvers.rigid.urdf import load_urdf, mat_to_quat, resolve_mesh_path
+from genesis_lite.solvers.core import AssetError, GenesisException, InvalidInputError
+from genesis_lite.solvers.rigid import shapes
+from genesis_lite.solvers.rigid.spec import JOINT_TYPES, GeomSpec
+from genesis_lite.solvers.rigid.urdf import load_urdf, mat_to_quat, resolve_mesh_path
 
 ASSETS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "assets")
 PYBULLET = pybullet_data.getDataPath()

@@ -6,8 +6,7 @@ batch dimension.
 import numpy as np
 import torch
 
-from ..errors import InvalidInputError, SceneStateError
-from ..runtime import runtime
+from ..solvers.core import InvalidInputError, SceneStateError, runtime
 from ..tensor import wrap
 from .rotations import quat_to_rotvec, rotvec_to_quat
 

@@ -9,7 +9,7 @@ values are there for its hand-written adjoint. The ``.grad`` fields are that adj
 import numpy as np
 import taichi as ti
 
-from genesis_lite.runtime import runtime
+from ..core import runtime
 
 BIG = 1e30  # stands for an absent bound
 # Up to this many (env, link) pairs the kernels run on the calling thread. In a rollout, handing a

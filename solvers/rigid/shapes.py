@@ -13,8 +13,8 @@ import os
 import numpy as np
 import trimesh
 
-from genesis_lite.errors import AssetError, InvalidInputError
-from solvers.rigid.spec import GeomSpec, LinkSpec
+from ..core import AssetError, InvalidInputError
+from .spec import GeomSpec, LinkSpec
 
 _IDENTITY_QUAT = (1.0, 0.0, 0.0, 0.0)
 

@@ -7,10 +7,8 @@ dofs at step time.
 import numpy as np
 import torch
 
-from genesis_lite.errors import AssetError
-from genesis_lite.runtime import runtime
-
 from ..base import Solver
+from ..core import AssetError, runtime
 from ..launch import BoundKernels
 from . import step
 from . import data as data_pool

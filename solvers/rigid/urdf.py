@@ -16,9 +16,9 @@ import numpy as np
 import yourdfpy
 from lxml import etree
 
-from genesis_lite.errors import AssetError, InvalidInputError
-from solvers.rigid import shapes
-from solvers.rigid.spec import GeomSpec, LinkSpec
+from ..core import AssetError, InvalidInputError
+from . import shapes
+from .spec import GeomSpec, LinkSpec
 
 _JOINT_TYPES = {"revolute": "revolute", "continuous": "revolute",
                 "prismatic": "prismatic", "fixed": "fixed"}

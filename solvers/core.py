@@ -1,0 +1,57 @@
+"""What the API package and the solvers both need: the error classes, and the float
+precision and device that ``gs.init`` chose. The solvers import nothing from the API package
+(``genesis_lite``); imports run one way, from the API to the solvers, and the API re-exports
+these names (``gs.GenesisException``, ``gs.device``...).
+
+Every error a user can trigger is a :class:`GenesisException` subclass whose message
+names the entity, the argument, what was expected and what was given.
+"""
+import numpy as np
+import taichi as ti
+import torch
+
+
+class GenesisException(Exception):
+    """Base class of every error genesis_lite raises on purpose."""
+
+
+class InvalidInputError(GenesisException, ValueError):
+    """A user-supplied value has the wrong shape, dtype, device, range or is not finite."""
+
+
+class AssetError(GenesisException):
+    """A file (URDF, mesh) is missing, malformed or uses something unsupported."""
+
+
+class SceneStateError(GenesisException, RuntimeError):
+    """The scene is used out of order (step before build, build twice, add after build...)."""
+
+
+class GradientError(GenesisException, RuntimeError):
+    """A gradient cannot be computed: non-differentiable path, stale graph, missing requires_grad."""
+
+
+class SimulationError(GenesisException, RuntimeError):
+    """The simulation produced a non-finite state (raised when SimOptions(check_nan=True))."""
+
+
+class Runtime:
+    """What ``gs.init`` chose; ``epoch`` counts Taichi restarts so that stale scenes are detected.
+
+    arch: the Taichi arch Taichi actually runs on (ti.cpu or ti.cuda); device: the torch device
+    of every tensor the simulator makes, always the one matching ``arch``.
+    """
+
+    def __init__(self):
+        self.initialized = False
+        self.options = None
+        self.epoch = 0
+        self.arch = ti.cpu
+        self.device = torch.device("cpu")
+        self.tc_float = torch.float32
+        self.np_float = np.float32
+        self.ti_float = ti.f32
+        self.tc_int = torch.int32
+
+
+runtime = Runtime()

@@ -1,0 +1,55 @@
+"""One namespace: solvers/ installs as genesis_lite.solvers, nothing else lands at the top level,
+and imports run one way, from the API package to the solvers."""
+import ast
+import os
+import pathlib
+import subprocess
+import sys
+import zipfile
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+
+
+def test_wheel_installs_only_genesis_lite(tmp_path):
+    """The wheel's files all live under genesis_lite/ (or its dist-info): no top-level 'solvers'."""
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w",
+                    str(tmp_path), str(ROOT)], check=True, capture_output=True, timeout=300)
+    (wheel,) = tmp_path.glob("genesis_lite-*.whl")
+    names = zipfile.ZipFile(wheel).namelist()
+    tops = {name.split("/")[0] for name in names}
+    assert {t for t in tops if not t.endswith(".dist-info")} == {"genesis_lite"}, sorted(tops)
+    assert "genesis_lite/solvers/rigid/solver.py" in names
+    assert "genesis_lite/solvers/core.py" in names
+
+
+def test_solvers_import_first_outside_the_source_tree(tmp_path):
+    """``import genesis_lite.solvers.rigid.solver`` as a first import works from any folder, and
+    no module called ``solvers`` is importable there (a user's own ``solvers`` stays theirs)."""
+    code = ("import importlib.util, genesis_lite.solvers.rigid.solver as s; "
+            "assert importlib.util.find_spec('solvers') is None; print(s.RigidSolver.__name__)")
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    result = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
+                            timeout=120, env=env)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert result.stdout.strip().endswith("RigidSolver")
+
+
+def _imported_modules(path):
+    """(module, level) of every import statement in the file."""
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            yield from ((alias.name, 0) for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            yield node.module or "", node.level
+
+
+def test_solvers_never_import_the_api():
+    """Every import in solvers/ is relative (within the solvers) or a third-party package."""
+    files = sorted((ROOT / "solvers").rglob("*.py"))
+    assert len(files) > 10
+    for path in files:
+        for module, level in _imported_modules(path):
+            depth = len(path.relative_to(ROOT / "solvers").parts) - 1  # folders below solvers/
+            assert level <= depth + 1, f"{path}: a relative import leaves the solvers package"
+            if level == 0:
+                assert module.split(".")[0] not in ("genesis_lite", "solvers"), f"{path} imports {module}"
