@@ -1,35 +1,49 @@
 """Launching Taichi kernels with little Python overhead.
 
 A Taichi 1.7 kernel call spends ~30 µs in Python on this machine (template lookup, argument
-checks, launch context), more than a small scene's whole step. A :class:`BoundKernel` fixes a
-kernel's template argument (a solver's data), lets Taichi compile and check the first call as
-usual, and afterwards fills the launch context itself: ~3 µs a launch. It uses Taichi 1.7's
-kernel internals (``_primal``, ``compiled_kernels``, ``make_launch_context``), which is why
-pyproject.toml pins taichi 1.7.*.
+checks, launch context), more than a small scene's whole step. A :class:`BoundKernel` lets
+Taichi compile and check the first call of each signature as usual, and afterwards fills the
+launch context itself: a few µs a launch. The compiled kernel is shared by every scene (the
+scene's data are array arguments), so the cache is per kernel, not per scene. It uses Taichi
+1.7's kernel internals (``_primal``, ``compiled_kernels``, ``make_launch_context``), which is
+why pyproject.toml pins taichi 1.7.*.
 """
 import torch
 from taichi.lang import impl
+from taichi.lang._ndarray import Ndarray
+
+# kernel → {(template value, argument signature): (program, compiled kernel, code)}
+_COMPILED = {}
+
+
+def _signature(args):
+    """What Taichi compiles a kernel for: the kinds, dtypes and dims of its array arguments."""
+    return tuple((a.dtype, a.dim()) if isinstance(a, torch.Tensor) else
+                 (a.dtype, a.element_shape, len(a.shape)) if isinstance(a, Ndarray) else int
+                 for a in args)
 
 
 class BoundKernel:
-    """``kernel(data, *args)`` where args are Python ints and contiguous torch tensors."""
+    """``kernel(template, *arrays, *args)``: a kernel with one compile-time argument, then a scene's
+    arenas (Taichi ndarrays), then Python ints and contiguous torch tensors."""
 
-    def __init__(self, kernel, data):
-        self.kernel, self.data = kernel, data
-        # tensor dtypes and dims (Taichi compiles per such signature) → (program, kernel, code)
-        self.compiled = {}
+    def __init__(self, kernel, template, arrays):
+        self.kernel, self.template, self.arrays = kernel, template, list(arrays)
+        self.compiled = _COMPILED.setdefault(kernel, {})
 
     def __call__(self, *args):
-        signature = tuple((a.dtype, a.dim()) for a in args if isinstance(a, torch.Tensor))
-        entry = self.compiled.get(signature)
         program = impl.get_runtime().prog
+        key = (self.template, _signature(self.arrays) + _signature(args))
+        entry = self.compiled.get(key)
         if entry is None or entry[0] is not program:
-            self.kernel(self.data, *args)  # compiles and checks the arguments
-            self.compiled[signature] = self._resolve(program, args)
+            self.kernel(self.template, *self.arrays, *args)  # compiles and checks the arguments
+            self.compiled[key] = self._resolve(program, args)
             return
         _, kernel, code = entry
         context = kernel.make_launch_context()
-        for k, arg in enumerate(args):
+        for k, array in enumerate(self.arrays):
+            context.set_arg_ndarray((k,), array.arr)
+        for k, arg in enumerate(args, start=len(self.arrays)):
             if isinstance(arg, torch.Tensor):
                 if not arg.is_contiguous():
                     raise ValueError(f"{self.kernel.__name__}: argument {k} must be a contiguous tensor")
@@ -41,13 +55,13 @@ class BoundKernel:
 
     def _resolve(self, program, args):
         primal = self.kernel._primal
-        kernel = primal.compiled_kernels[primal.ensure_compiled(self.data, *args)]
+        kernel = primal.compiled_kernels[primal.ensure_compiled(self.template, *self.arrays, *args)]
         return program, kernel, program.compile_kernel(program.config(), program.get_device_caps(), kernel)
 
 
 class BoundKernels:
-    """The kernels of a module bound to one data object: ``kernels.read_state(0, out)``."""
+    """Kernels bound to one scene's arrays: ``kernels.read_state(0, out)``."""
 
-    def __init__(self, data, *kernels):
+    def __init__(self, template, arrays, *kernels):
         for kernel in kernels:
-            setattr(self, kernel.__name__, BoundKernel(kernel, data))
+            setattr(self, kernel.__name__, BoundKernel(kernel, template, arrays))

@@ -1,13 +1,26 @@
-"""Taichi storage of the rigid solver: the model's constants, the per-step inputs, the state
-frames of one step and every intermediate quantity, each indexed by substep frame.
+"""Storage of the rigid solver: the model's constants, the per-step inputs, the state frames of
+one step and every intermediate quantity, each indexed by substep frame.
 
 Frame f of ``qpos``/``qvel`` is the state before substep f (frame S is the step's result).
 Intermediates of substep f live at frame f, so after a single forward replay every substep's
-values are there for its hand-written adjoint. The ``.grad`` fields are that adjoint's storage
-(Taichi's autodiff is not used).
+values are there for its hand-written adjoint. Gradients (``.grad``) are that adjoint's
+storage (Taichi's autodiff is not used).
+
+**Compiled once for every scene.** All of a scene's data lives in five Taichi ndarrays, one per
+element type (``ARENAS``: int, float, 3-vector, 4-vector, 3×3 matrix), passed to every kernel as
+arguments. Sizes (envs, links, dofs...) and where each array starts are runtime values in the
+int arena's header, so a kernel is compiled once per float precision and serves every robot,
+batch size and substep count; Taichi compiles field-based kernels per field instance instead
+(a second scene of the same robot recompiled everything: 20 s). Inside a kernel, ``bind``
+turns the arenas into a :class:`RigidView` whose arrays index like fields:
+``d.xpos[s, e, l]``, ``d.mass.grad[e, l]``, ``d.mass_mat[s, e, i, j]``.
 """
+import warnings
+
 import numpy as np
 import taichi as ti
+from taichi.lang import impl
+from taichi.lang.expr import Expr
 
 from ..core import runtime
 
@@ -20,180 +33,257 @@ SERIAL_LINK_ENVS = 2048
 
 # Per-step inputs: name → (width per env, differentiable). Their order is the packing order.
 INPUTS = {
-    "mass": ("links", True),        # kg
-    "damping": ("dofs", True),      # N·m·s/rad or N·s/m
-    "armature": ("dofs", True),     # kg·m² or kg
-    "kp": ("dofs", True),           # N·m/rad or N/m
-    "kv": ("dofs", True),           # N·m·s/rad or N·s/m
-    "gravity": (3, True),           # m/s²
-    "ctrl_force": ("dofs", True),   # N·m or N
-    "ctrl_pos": ("dofs", True),     # rad or m
-    "ctrl_vel": ("dofs", True),     # rad/s or m/s
-    "force_lo": ("dofs", False),    # N·m or N
-    "force_hi": ("dofs", False),
-    "ctrl_mode": ("dofs", False),   # 0 force, 1 position, 2 velocity (see actuation.py)
+    "mass": ("L", True),        # kg
+    "damping": ("D", True),     # N·m·s/rad or N·s/m
+    "armature": ("D", True),    # kg·m² or kg
+    "kp": ("D", True),          # N·m/rad or N/m
+    "kv": ("D", True),          # N·m·s/rad or N·s/m
+    "gravity": (3, True),       # m/s²
+    "ctrl_force": ("D", True),  # N·m or N
+    "ctrl_pos": ("D", True),    # rad or m
+    "ctrl_vel": ("D", True),    # rad/s or m/s
+    "force_lo": ("D", False),   # N·m or N
+    "force_hi": ("D", False),
+    "ctrl_mode": ("D", False),  # 0 force, 1 position, 2 velocity (see actuation.py)
 }
 
+# Model constants: name → (arena, count). Per link (L), per dof (D), per mass-matrix pair (P).
+MODEL = {
+    "link_parent": ("i", "L"), "link_jtype": ("i", "L"), "link_static": ("i", "L"), "link_dof0": ("i", "L"),
+    "link_q0": ("i", "L"), "dof_link": ("i", "D"), "dof_q": ("i", "D"), "dof_parent": ("i", "D"),
+    "pair_i": ("i", "P"), "pair_j": ("i", "P"),
+    "link_inv_mass0": ("f", "L"), "dof_lower": ("f", "D"), "dof_upper": ("f", "D"),
+    # substep h (s), limit stiffness (1/s²) and damping (1/s): runtime values like everything else
+    "consts": ("f", 3),
+    "link_pos0": ("v3", "L"), "link_axis": ("v3", "L"), "link_com": ("v3", "L"), "link_quat0": ("v4", "L"),
+    "link_inertia0": ("m3", "L"),
+}
 
-@ti.data_oriented
+# Per-frame arrays: name → (arena, count per env, has a gradient). "DD": a (D, D) matrix per env.
+FRAMES = {
+    "qpos": ("f", "Q", True), "qvel": ("f", "D", True),
+    "xpos": ("v3", "L", True), "xquat": ("v4", "L", False),
+    # a link's own inertia has no gradient array: its gradient is its subtree sum's (crb)
+    "cinert_m": ("f", "L", False), "cinert_h": ("v3", "L", False), "cinert_i": ("m3", "L", False),
+    "crb_m": ("f", "L", True), "crb_h": ("v3", "L", True), "crb_i": ("m3", "L", True),
+    "cdof_w": ("v3", "D", True), "cdof_v": ("v3", "D", True),
+    "cvel_w": ("v3", "L", True), "cvel_v": ("v3", "L", True),
+    "cacc_w": ("v3", "L", True), "cacc_v": ("v3", "L", True),
+    "cfrc_n": ("v3", "L", True), "cfrc_f": ("v3", "L", True),
+    "dof_force_n": ("v3", "D", False), "dof_force_f": ("v3", "D", False),
+    "mass_mat": ("f", "DD", True),
+    "qfrc_bias": ("f", "D", True), "qfrc_smooth": ("f", "D", True), "qacc": ("f", "D", True),
+    "factor": ("f", "DD", False),  # LᵀDL factor of M + diag(armature + h·damping)
+}
+# a link's rotation is differentiated as a small world-frame turn δθ, not through its quaternion
+# (see kinematics.py): xrot_grad is ∂L/∂δθ, a gradient with no value array
+GRAD_ONLY = {"xrot_grad": ("v3", "L")}
+
+ARENAS = ("i", "f", "v3", "v4", "m3")
+# The int arena starts with a header of sizes and flags; every array's place follows from the
+# sizes (``layout``). W: all inputs' width per env; G: the differentiable ones', which come first.
+SIZES = ("B", "L", "D", "Q", "P", "S", "W", "G", "limits", "nonfinite")
+HEADER = {name: k for k, name in enumerate(SIZES)}
+_REGIONS = [(a, g) for g in (False, True) for a in ("f", "v3", "v4", "m3")]  # (arena, gradients?)
+
+assert [diff for _, diff in INPUTS.values()] == sorted((diff for _, diff in INPUTS.values()), reverse=True), \
+    "differentiable inputs come first"
+
+
+def input_width(name, n_links, n_dofs):
+    width = INPUTS[name][0]
+    return {"L": n_links, "D": n_dofs}.get(width, width)
+
+
+def _region_members(arena, grads):
+    """(name, count) of the arrays in an arena's frame region (values, or gradients)."""
+    if not grads:
+        return [(n, c) for n, (a, c, _) in FRAMES.items() if a == arena]
+    return ([(n, c) for n, (a, c, g) in FRAMES.items() if a == arena and g]
+            + [(n, c) for n, (a, c) in GRAD_ONLY.items() if a == arena])
+
+
+def layout(size):
+    """Where every array starts in its arena, from the sizes ``size`` (name → value, SIZES):
+    Python ints at build time, Taichi expressions inside kernels — the same arithmetic, so
+    both sides agree by construction, and a kernel loads only the few sizes.
+
+    Returns (start, end): start["model:NAME"], ["inputs"], ["inputs.grad"] (B, W),
+    ["frame:NAME"], ["grad:NAME"], and per frame region ["region:ARENA:GRADS"] and
+    ["stride:ARENA:GRADS"] (one frame of all its arrays); end[ARENA, GRADS] is where the arena's
+    values (GRADS False) or gradients end. Model arrays come first, then (float arena) the
+    inputs and their gradients, then per arena the frames of its arrays — frame s of all of them,
+    then frame s + 1... — then their gradients laid out alike, so that zeroing the gradients of
+    frames 0 … k − 1 is one contiguous sweep per arena."""
+    B = size["B"]
+    count = {"L": size["L"], "D": size["D"], "Q": size["Q"], "P": size["P"], "DD": size["D"] * size["D"], 3: 3}
+    end = {"i": len(SIZES), "f": 0, "v3": 0, "v4": 0, "m3": 0}
+    start = {}
+    for name, (arena, c) in MODEL.items():
+        start[f"model:{name}"] = end[arena]
+        end[arena] = end[arena] + count[c]
+    start["inputs"], start["inputs.grad"] = end["f"], end["f"] + B * size["W"]
+    end["f"] = end["f"] + 2 * B * size["W"]
+    stop = {("i", False): end["i"], ("i", True): end["i"]}
+    for arena, grads in _REGIONS:
+        region = end[arena]
+        offset = region
+        for name, c in _region_members(arena, grads):
+            start[f"{'grad' if grads else 'frame'}:{name}"] = offset
+            offset = offset + B * count[c]
+        start[f"region:{arena}:{grads}"], start[f"stride:{arena}:{grads}"] = region, offset - region
+        end[arena] = stop[arena, grads] = region + (size["S"] + 1) * (offset - region)
+    return start, stop
+
+
 class RigidData:
-    """Fields of one scene's rigid solver. B envs, S substeps; sizes from the model."""
+    """The arenas of one scene's rigid solver (B envs, S substeps, sizes from the model).
 
-    def __init__(self, model, n_batch, substeps, requires_grad, limits_enabled):
+    ``arenas`` are the kernels' array arguments, in ARENAS order; ``serial`` is their one
+    compile-time switch (loops on the calling thread, see SERIAL_LINK_ENVS).
+    """
+
+    def __init__(self, model, n_batch, substeps, requires_grad, limits_enabled, consts):
         self.n_batch, self.substeps = n_batch, substeps
-        self.limits_enabled = bool(limits_enabled)  # compile-time switch of the limit forces
-        self.serial = n_batch * max(1, model.n_links) <= SERIAL_LINK_ENVS  # compile-time, see above
         self.n_links, self.n_dofs, self.n_qs = model.n_links, model.n_dofs, model.n_qs
-        self.n_pairs = len(model.pairs)
-        self.widths = {"links": self.n_links, "dofs": self.n_dofs}
-        self._builder = ti.FieldsBuilder()
-        self.grad_fields = []  # every field with a gradient, inputs first
-        self._place_model(model)
-        self._place_inputs(requires_grad)
-        self._place_frames(requires_grad)
-        self._builder.finalize()
-        inputs = {id(f) for f in self.input_fields}
-        frames = [f.grad for f in self.grad_fields if id(f) not in inputs] + self.grad_only_fields
-        self.grad_frame_groups = [tuple(frames[k: k + 32]) for k in range(0, len(frames), 32)]
-        self._fill_model(model)
+        self.serial = n_batch * max(1, model.n_links) <= SERIAL_LINK_ENVS
+        self.widths = [input_width(name, self.n_links, self.n_dofs) for name in INPUTS]
+        self.input_total = sum(self.widths)
+        self.grad_total = sum(w for w, (_, diff) in zip(self.widths, INPUTS.values()) if diff)
+        self.grad_input_names = [n for n, (_, diff) in INPUTS.items() if diff] if requires_grad else []
+        self.size = {"B": n_batch, "L": model.n_links, "D": model.n_dofs, "Q": model.n_qs, "P": len(model.pairs),
+                     "S": substeps, "W": self.input_total, "G": self.grad_total,
+                     "limits": int(bool(limits_enabled)), "nonfinite": 0}
+        self.start, stop = layout(self.size)
+        length = {a: stop[a, bool(requires_grad)] for a in ARENAS}  # no gradient storage without gradients
+        dtype = runtime.ti_float
+        self.arenas = [ti.ndarray(ti.i32, length["i"]), ti.ndarray(dtype, max(1, length["f"])),
+                       ti.Vector.ndarray(3, dtype, max(1, length["v3"])),
+                       ti.Vector.ndarray(4, dtype, max(1, length["v4"])),
+                       ti.Matrix.ndarray(3, 3, dtype, max(1, length["m3"]))]
+        self._fill(model, consts)
 
-    # -- allocation -------------------------------------------------------------------------
-    def _new(self, shape, n=None, m=None, dtype=None, grad=False):
-        """Allocate a scalar (n None), vector (n) or matrix (n, m) field; zero-size axes padded to 1."""
-        dtype = dtype or runtime.ti_float
-        if n is None:
-            fld = ti.field(dtype, needs_grad=grad)
-        elif m is None:
-            fld = ti.Vector.field(n, dtype, needs_grad=grad)
-        else:
-            fld = ti.Matrix.field(n, m, dtype, needs_grad=grad)
-        shape = tuple(max(1, int(s)) for s in shape)
-        self._builder.dense(ti.axes(*range(len(shape))), shape).place(fld)
-        if grad:
-            # a block of its own (lazy_grad would interleave it with the values): the forward
-            # then never drags gradients through the cache, and zeroing them is one sweep
-            self._builder.dense(ti.axes(*range(len(shape))), shape).place(fld.grad)
-            self.grad_fields.append(fld)
-        return fld
+    def _fill(self, model, consts):
+        """Header, model and consts (h s, limit stiffness 1/s², limit damping 1/s) into the arenas."""
+        values = {a: np.zeros(arr.shape + arr.element_shape, dtype=np.int32 if a == "i" else runtime.np_float)
+                  for a, arr in zip(ARENAS, self.arenas)}
+        values["i"][: len(SIZES)] = [self.size[name] for name in SIZES]
+        for name, (arena, _) in MODEL.items():
+            array = np.asarray(consts if name == "consts" else getattr(model, name))
+            if len(array):
+                begin = self.start[f"model:{name}"]
+                # floats finite, so no inf·0 in gradients
+                values[arena][begin: begin + len(array)] = array if arena == "i" else np.clip(array, -BIG, BIG)
+        for arena, arr in zip(ARENAS, self.arenas):
+            arr.from_numpy(values[arena])
 
-    def _place_model(self, model):
-        L, D, P = self.n_links, self.n_dofs, self.n_pairs
-        i32 = ti.i32
-        self.link_parent, self.link_jtype = self._new((L,), dtype=i32), self._new((L,), dtype=i32)
-        self.link_static = self._new((L,), dtype=i32)
-        self.link_dof0, self.link_q0 = self._new((L,), dtype=i32), self._new((L,), dtype=i32)
-        self.link_pos0, self.link_quat0 = self._new((L,), 3), self._new((L,), 4)
-        self.link_axis, self.link_com = self._new((L,), 3), self._new((L,), 3)
-        self.link_inertia0, self.link_inv_mass0 = self._new((L,), 3, 3), self._new((L,))
-        self.dof_link, self.dof_q = self._new((D,), dtype=i32), self._new((D,), dtype=i32)
-        self.dof_parent = self._new((D,), dtype=i32)
-        self.dof_lower, self.dof_upper = self._new((D,)), self._new((D,))
-        self.pair_i, self.pair_j = self._new((P,), dtype=i32), self._new((P,), dtype=i32)
-        # substep h (s), limit stiffness (1/s²) and damping (1/s): runtime values, so a new dt
-        # does not recompile the kernels
-        self.consts = self._new((3,))
-
-    def _place_inputs(self, requires_grad):
-        self.inputs = {}
-        for name, (width, differentiable) in INPUTS.items():
-            fld = self._new((self.n_batch, self.width(name)), grad=requires_grad and differentiable)
-            setattr(self, name, fld)
-            self.inputs[name] = fld
-        self.input_fields = list(self.inputs.values())
-        self.input_widths = [self.width(name) for name in INPUTS]
-        self.input_offsets = [sum(self.input_widths[:k]) for k in range(len(INPUTS))]
-        self.input_total = sum(self.input_widths)
-        # gradients are read out after the state's (Q + D) columns
-        names = [name for name, (_, differentiable) in INPUTS.items() if differentiable and requires_grad]
-        self.grad_input_names = names
-        self.grad_input_fields = [self.inputs[name] for name in names]
-        self.grad_input_widths = [self.width(name) for name in names]
-        start = self.n_qs + self.n_dofs
-        self.grad_input_offsets = [start + sum(self.grad_input_widths[:k]) for k in range(len(names))]
-
-    def _place_frames(self, g):
-        F, B, L, D, Q = self.substeps + 1, self.n_batch, self.n_links, self.n_dofs, self.n_qs
-        self.qpos, self.qvel = self._new((F, B, Q), grad=g), self._new((F, B, D), grad=g)
-        self.xpos, self.xquat = self._new((F, B, L), 3, grad=g), self._new((F, B, L), 4)
-        # a link's rotation is differentiated as a small world-frame turn δθ, not through its
-        # quaternion (see kinematics.py): xrot_grad is ∂L/∂δθ, a gradient with no value field
-        self.xrot_grad = self._new((F, B, L), 3)
-        self.grad_only_fields = [self.xrot_grad] if g else []
-        # a link's own inertia has no gradient field: its gradient is its subtree sum's (crb)
-        self.cinert_m, self.crb_m = self._new((F, B, L)), self._new((F, B, L), grad=g)
-        self.cinert_h, self.crb_h = self._new((F, B, L), 3), self._new((F, B, L), 3, grad=g)
-        self.cinert_i, self.crb_i = self._new((F, B, L), 3, 3), self._new((F, B, L), 3, 3, grad=g)
-        self.cdof_w, self.cdof_v = self._new((F, B, D), 3, grad=g), self._new((F, B, D), 3, grad=g)
-        self.cvel_w, self.cvel_v = self._new((F, B, L), 3, grad=g), self._new((F, B, L), 3, grad=g)
-        self.cacc_w, self.cacc_v = self._new((F, B, L), 3, grad=g), self._new((F, B, L), 3, grad=g)
-        self.cfrc_n, self.cfrc_f = self._new((F, B, L), 3, grad=g), self._new((F, B, L), 3, grad=g)
-        self.dof_force_n, self.dof_force_f = self._new((F, B, D), 3), self._new((F, B, D), 3)
-        self.mass_mat = self._new((F, B, D, D), grad=g)
-        self.qfrc_bias, self.qfrc_smooth = self._new((F, B, D), grad=g), self._new((F, B, D), grad=g)
-        self.qacc = self._new((F, B, D), grad=g)
-        self.factor = self._new((F, B, D, D))  # LᵀDL factor of M + diag(armature + h·damping)
-        self.nonfinite = self._new((1,), dtype=ti.i32)  # set by the NaN check
+    def take_nonfinite(self):
+        """True once a step produced a non-finite state since the last call (which clears it)."""
+        ints, slot = self.arenas[0], HEADER["nonfinite"]
+        flag = ints[slot]
+        ints[slot] = 0
+        return bool(flag)
 
     def width(self, name):
-        width = INPUTS[name][0]
-        return self.widths.get(width, width)
-
-    def _fill_model(self, model):
-        f = runtime.np_float
-        for name in ("link_parent", "link_jtype", "link_static", "link_dof0", "link_q0", "dof_link", "dof_q",
-                     "dof_parent"):
-            values = getattr(model, name)
-            if len(values):
-                getattr(self, name).from_numpy(values.astype(np.int32))
-        for name in ("link_pos0", "link_quat0", "link_axis", "link_com", "link_inertia0", "link_inv_mass0",
-                     "dof_lower", "dof_upper"):
-            values = np.clip(getattr(model, name), -BIG, BIG)  # finite, so no inf·0 in gradients
-            if len(values):
-                getattr(self, name).from_numpy(values.astype(f))
-        if self.n_pairs:
-            self.pair_i.from_numpy(model.pairs[:, 0].copy())
-            self.pair_j.from_numpy(model.pairs[:, 1].copy())
-
-    def refill(self, model):
-        """Take a new model of the same sizes (data reused from the pool)."""
-        self._fill_model(model)
-        self.mass_mat.fill(0)  # entries off the new dof tree must read as zero
-        self.nonfinite.fill(0)
+        return self.widths[list(INPUTS).index(name)]
 
 
-# Kernels are compiled per RigidData object (Taichi keys template arguments by identity) and
-# their code is never freed, so data of finished scenes is kept here and handed to the next
-# scene of the same sizes: no recompilation, no growth when a process builds many scenes.
-_POOL = {}
+# -- inside kernels ------------------------------------------------------------------------------
+def _subscript(array, index):
+    return impl.subscript(None, array, index)
 
 
-def _signature(model, n_batch, substeps, requires_grad, limits_enabled):
-    return (runtime.epoch, n_batch, substeps, bool(requires_grad), bool(limits_enabled), model.n_links,
-            model.n_dofs, model.n_qs, len(model.pairs))
+def _components(index):
+    """Index components from a tuple or a Taichi vector expression."""
+    if isinstance(index, (tuple, list)):
+        return list(index)
+    if isinstance(index, Expr) and index.is_tensor():
+        return [_subscript(index, k) for k in range(index.get_shape()[0])]
+    return [index]
 
 
-def acquire(model, n_batch, substeps, requires_grad, limits_enabled):
-    """RigidData for ``model``: a released one of the same sizes, or a new one."""
-    key = _signature(model, n_batch, substeps, requires_grad, limits_enabled)
-    free = _POOL.get(key)
-    if free:
-        data = free.pop()
-        data.refill(model)
-        return data
-    data = RigidData(model, n_batch, substeps, requires_grad, limits_enabled)
-    data.signature = key
-    return data
+class ArrayView:
+    """One array inside an arena, indexed like a field: element [i0, i1, ...] is arena[start +
+    Σ i_k·stride_k]; ``grad`` is the view of its gradient (None when it has none)."""
+    _data_oriented = True  # lets Taichi keep the object itself in kernel scope
+
+    def __init__(self, arena, start, strides, grad=None):
+        self.arena, self.start, self.strides, self.grad = arena, start, strides, grad
+
+    def __getitem__(self, index):
+        offset = self.start
+        for i, stride in zip(_components(index), self.strides):
+            offset = offset + i * stride
+        return _subscript(self.arena, offset)
 
 
-def release(data):
-    """Return data whose scene is gone; dropped if Taichi was restarted since."""
-    if data.signature[0] == runtime.epoch:
-        _POOL.setdefault(data.signature, []).append(data)
+class Region:
+    """The gradients of one arena: frame k of all of them is [start + k·stride, start + (k+1)·stride)."""
+    _data_oriented = True
+
+    def __init__(self, arena, start, stride):
+        self.arena, self.start, self.stride = arena, start, stride
+
+
+class RigidView:
+    """Kernel-scope view of one scene's arenas: sizes (``n_links``...) as local variables and
+    every array of MODEL, INPUTS, FRAMES and GRAD_ONLY as an :class:`ArrayView`."""
+    _data_oriented = True
+
+    def __init__(self, ints, f1, v3, v4, m3):
+        arenas = dict(zip(ARENAS, (ints, f1, v3, v4, m3)))
+        size = {name: impl.expr_init(_subscript(ints, k)) for name, k in HEADER.items()}
+        start, _ = layout(size)
+        self.n_batch, self.n_links, self.n_dofs, self.n_qs = size["B"], size["L"], size["D"], size["Q"]
+        self.n_pairs, self.substeps, self.input_total, self.grad_total = size["P"], size["S"], size["W"], size["G"]
+        self.limits_enabled = size["limits"]
+        self.nonfinite = ArrayView(ints, HEADER["nonfinite"], (1,))  # set by the NaN check
+        count = {"L": self.n_links, "D": self.n_dofs, "Q": self.n_qs, "DD": self.n_dofs * self.n_dofs}
+        for name, (arena, _) in MODEL.items():
+            setattr(self, name, ArrayView(arenas[arena], start[f"model:{name}"], (1,)))
+        row = (self.input_total, 1)  # [e, column]
+        self.inputs = ArrayView(f1, start["inputs"], row, ArrayView(f1, start["inputs.grad"], row))
+        column = 0
+        for name, (width, _) in INPUTS.items():
+            grad = ArrayView(f1, start["inputs.grad"] + column, row)
+            setattr(self, name, ArrayView(f1, start["inputs"] + column, row, grad))
+            column = column + count.get(width, width)
+        for name, (arena, c, has_grad) in FRAMES.items():
+            grad = None
+            if has_grad:
+                grad = ArrayView(arenas[arena], start[f"grad:{name}"], self._frame_strides(start, arena, c, count, True))
+            setattr(self, name, ArrayView(arenas[arena], start[f"frame:{name}"],
+                                          self._frame_strides(start, arena, c, count, False), grad))
+        for name, (arena, c) in GRAD_ONLY.items():
+            setattr(self, name, ArrayView(arenas[arena], start[f"grad:{name}"],
+                                          self._frame_strides(start, arena, c, count, True)))
+        self.regions = [Region(arenas[a], start[f"region:{a}:True"], start[f"stride:{a}:True"]) for a in ARENAS[1:]]
+
+    @staticmethod
+    def _frame_strides(start, arena, c, count, grads):
+        frame = start[f"stride:{arena}:{grads}"]
+        if c == "DD":  # [s, e, i, j]
+            return frame, count["DD"], count["D"], 1
+        return frame, count[c], 1  # [s, e, k]
+
+
+@ti.func
+def n_batch(ints: ti.template()):
+    """The number of envs (the header's first slot): the bound of every kernel's env loop."""
+    return ints[0]
+
+
+def bind(ints, f1, v3, v4, m3):
+    """Called inside a kernel (in the env loop): the :class:`RigidView` of the arenas."""
+    return RigidView(ints, f1, v3, v4, m3)
+
+
+# bind runs as Python while Taichi builds a kernel, on purpose: it only creates the view
+warnings.filterwarnings("ignore", message='.*Calling non-taichi function "bind"', category=SyntaxWarning)
 
 
 @ti.func
 def accumulate(fld: ti.template(), index, value):
     """fld[index] += value without an atomic. The step kernels give each env to one thread, so
-    nothing else writes there, and Taichi's ``+=`` on a field is an atomic costing several
-    plain adds on CPU."""
+    nothing else writes there, and Taichi's ``+=`` is an atomic costing several plain adds on CPU."""
     fld[index] = fld[index] + value

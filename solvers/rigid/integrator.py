@@ -53,7 +53,7 @@ def integrate_link_adjoint(d: ti.template(), s, e, l):
     h = d.consts[0]
     jt = d.link_jtype[l]
     dof0, q0 = d.link_dof0[l], d.link_q0[l]
-    gq, gv = ti.static(d.qpos.grad, d.qvel.grad)
+    gq, gv = d.qpos.grad, d.qvel.grad
     if jt == REVOLUTE or jt == PRISMATIC:
         accumulate(gq, ti.Vector([s, e, q0]), gq[s + 1, e, q0])
         _velocity_adjoint(d, s, e, dof0, gv[s + 1, e, dof0] + h * gq[s + 1, e, q0])

@@ -88,6 +88,16 @@ class RigidModel:
         return parent
 
     @property
+    def pair_i(self):
+        """(P,) the row dof of each mass-matrix pair."""
+        return self.pairs[:, 0]
+
+    @property
+    def pair_j(self):
+        """(P,) the column dof of each mass-matrix pair (an ancestor-or-self of the row's)."""
+        return self.pairs[:, 1]
+
+    @property
     def n_links(self):
         return len(self.link_name)
 

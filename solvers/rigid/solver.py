@@ -11,8 +11,7 @@ from ..base import Solver
 from ..core import AssetError, runtime
 from ..launch import BoundKernels
 from . import step
-from . import data as data_pool
-from .data import BIG, INPUTS
+from .data import BIG, INPUTS, RigidData
 from .model import build_model
 
 
@@ -38,13 +37,12 @@ class RigidSolver(Solver):
     def build(self, n_envs):
         self.model = build_model(self.entity_links)
         self.n_batch = max(1, n_envs)
-        self.data = data_pool.acquire(self.model, self.n_batch, self.sim_options.substeps,
-                                      self.sim_options.requires_grad, self.rigid_options.enable_joint_limit)
-        self.kernels = BoundKernels(self.data, *step.KERNELS)
-        self._nothing = torch.empty((0, 0), dtype=runtime.tc_float, device=runtime.device)  # an unused array argument
         h = self.sim_options.dt / self.sim_options.substeps
         timeconst = max(self.rigid_options.limit_timeconst, 2.0 * h)  # stable for explicit steps
-        self.data.consts.from_numpy(np.array([h, 1.0 / timeconst ** 2, 2.0 / timeconst], dtype=runtime.np_float))
+        self.data = RigidData(self.model, self.n_batch, self.sim_options.substeps, self.sim_options.requires_grad,
+                              self.rigid_options.enable_joint_limit, [h, 1.0 / timeconst ** 2, 2.0 / timeconst])
+        self.kernels = BoundKernels(self.data.serial, self.data.arenas, *step.KERNELS)
+        self._nothing = torch.empty((0, 0), dtype=runtime.tc_float, device=runtime.device)  # an unused array argument
         self.grad_input_names = tuple(self.data.grad_input_names)
         self.state_width = self.model.n_qs + self.model.n_dofs
         # column widths of backward's output: state gradient, then each differentiable input's
@@ -118,9 +116,7 @@ class RigidSolver(Solver):
 
     def nonfinite(self):
         """True once any step produced a non-finite state (resets the flag)."""
-        flag = self.data.nonfinite[0]
-        self.data.nonfinite[0] = 0
-        return bool(flag)
+        return self.data.take_nonfinite()
 
     def backward(self, state, inputs, grad_state_out):
         """Gradients of the step's start state and differentiable inputs from that of its end
@@ -162,7 +158,5 @@ class RigidSolver(Solver):
         return out
 
     def destroy(self):
-        """Hand the fields to the next scene of the same sizes (see data.acquire)."""
-        if self.data is not None:
-            data_pool.release(self.data)
-            self.data = None
+        """Free the arenas (the compiled kernels stay, for every later scene)."""
+        self.data = self.kernels = None

@@ -8,9 +8,14 @@ each substep, last first, ``reverse_dynamics`` and ``reverse_kinematics`` run th
 hand-written adjoints in reverse order; after substep 0 the gradients are written out.
 (Fused into one kernel, LLVM took 31 s to compile it; split so, 6 s.) Each env belongs to one
 thread, so gradients accumulate without atomics.
+
+Every kernel takes ``serial`` (compile-time: run the env loop on the calling thread) and the
+scene's five arenas (data.py), and binds them to a view in its env loop: one compiled kernel
+serves every scene of the process.
 """
 import taichi as ti
 
+from .data import bind, n_batch
 from .actuation import smooth_force, smooth_force_adjoint
 from .dynamics import (bias_entry, dof_force, dof_row_adjoint, link_forces, link_forces_adjoint, mass_entry,
                        subtree_sum, subtree_sum_adjoint)
@@ -86,14 +91,18 @@ def _finite(x):
     return not (ti.math.isinf(x) or ti.math.isnan(x))
 
 
+A = ti.types.ndarray()  # an arena, or a torch tensor moving data in or out
+
+
 @ti.kernel
-def advance(d: ti.template(), commit: ti.i32, inputs: ti.types.ndarray(), out: ti.types.ndarray()):
+def advance(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, commit: ti.i32, inputs: A, out: A):
     """All substeps of one step for every env in one launch (forward only). Unless empty, inputs
     (B, total input width) are loaded first and the result is written to out (B, Q + D) — each
     a launch saved. commit copies the result into frame 0 and flags any non-finite state."""
-    S = d.substeps
-    ti.loop_config(serialize=d.serial)
-    for e in range(d.n_batch):
+    ti.loop_config(serialize=serial)
+    for e in range(n_batch(ints)):
+        d = bind(ints, f1, v3, v4, m3)
+        S = d.substeps
         if inputs.shape[0] > 0:
             _inputs_from(d, e, inputs, 0)
         for s in range(S):
@@ -114,52 +123,57 @@ def advance(d: ti.template(), commit: ti.i32, inputs: ti.types.ndarray(), out: t
 
 
 @ti.kernel
-def prepare_reverse(d: ti.template(), src: ti.types.ndarray()):
+def prepare_reverse(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, src: A):
     """src (B, state | inputs | gradient of the end state): every gradient ← 0, frame 0 and the
     inputs ← the step's start, then the last frame's state gradient ← the seed."""
-    _clear_grads(d, d.substeps)
-    width = d.n_qs + d.n_dofs
     ti.loop_config(serialize=True)  # moving data: cheaper than a thread hand-off (see below)
-    for e in range(d.n_batch):
+    for e in range(n_batch(ints)):
+        d = bind(ints, f1, v3, v4, m3)
+        if e == 0:
+            _clear_grads(d, d.substeps)
+        width = d.n_qs + d.n_dofs
         _state_from(d, d.qpos, d.qvel, 0, e, src, 0)
         _inputs_from(d, e, src, width)
         _state_from(d, d.qpos.grad, d.qvel.grad, d.substeps, e, src, width + d.input_total)
 
 
 @ti.kernel
-def reverse_dynamics(d: ti.template(), s: ti.i32):
+def reverse_dynamics(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, s: ti.i32):
     """Adjoints of substep s from the integration back to the subtree sums."""
-    ti.loop_config(serialize=d.serial)
-    for e in range(d.n_batch):
-        dynamics_adjoint_env(d, s, e)
+    ti.loop_config(serialize=serial)
+    for e in range(n_batch(ints)):
+        dynamics_adjoint_env(bind(ints, f1, v3, v4, m3), s, e)
 
 
 @ti.kernel
-def reverse_kinematics(d: ti.template(), s: ti.i32, dst: ti.types.ndarray()):
+def reverse_kinematics(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, s: ti.i32, dst: A):
     """Adjoint of substep s's down sweep; after substep 0 the gradients go to dst (B, state
     gradient | differentiable input gradients), as _read_grads_env lays it out."""
-    ti.loop_config(serialize=d.serial)
-    for e in range(d.n_batch):
+    ti.loop_config(serialize=serial)
+    for e in range(n_batch(ints)):
+        d = bind(ints, f1, v3, v4, m3)
         down_sweep_adjoint_env(d, s, e)
         if s == 0:
             _read_grads_env(d, e, dst)
 
 
 @ti.kernel
-def down_sweep(d: ti.template()):
+def down_sweep(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A):
     """Link poses and velocities at frame 0 (what the link getters read)."""
-    ti.loop_config(serialize=d.serial)
-    for e in range(d.n_batch):
-        down_sweep_env(d, 0, e)
+    ti.loop_config(serialize=serial)
+    for e in range(n_batch(ints)):
+        down_sweep_env(bind(ints, f1, v3, v4, m3), 0, e)
 
 
 @ti.kernel
-def down_sweep_adjoint(d: ti.template(), src: ti.types.ndarray(), dst: ti.types.ndarray()):
+def down_sweep_adjoint(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, src: A, dst: A):
     """src (B, L, 13): gradient of read_links' output → dst: gradient of the frame-0 state (as
     _read_grads_env lays it out). The down sweep at frame 0 must be current."""
-    _clear_grads(d, 1)
-    ti.loop_config(serialize=d.serial)
-    for e in range(d.n_batch):
+    ti.loop_config(serialize=True)
+    for e in range(n_batch(ints)):
+        d = bind(ints, f1, v3, v4, m3)
+        if e == 0:
+            _clear_grads(d, 1)
         for l in range(d.n_links):
             for k in ti.static(range(3)):
                 d.xpos.grad[0, e, l][k] = src[e, l, k]
@@ -167,24 +181,26 @@ def down_sweep_adjoint(d: ti.template(), src: ti.types.ndarray(), dst: ti.types.
                 d.cvel_v.grad[0, e, l][k] = src[e, l, 10 + k]
             g_quat = ti.Vector([src[e, l, 3 + k] for k in ti.static(range(4))])
             d.xrot_grad[0, e, l] = rotation_gradient(d.xquat[0, e, l], g_quat)
+    ti.loop_config(serialize=serial)
+    for e in range(n_batch(ints)):
+        d = bind(ints, f1, v3, v4, m3)
         down_sweep_adjoint_env(d, 0, e)
         _read_grads_env(d, e, dst)
 
 
 @ti.kernel
-def position_stages(d: ti.template()):
+def position_stages(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A):
     """Mass matrix and bias at frame 0."""
-    ti.loop_config(serialize=d.serial)
-    for e in range(d.n_batch):
-        position_stages_env(d, 0, e)
+    ti.loop_config(serialize=serial)
+    for e in range(n_batch(ints)):
+        position_stages_env(bind(ints, f1, v3, v4, m3), 0, e)
 
 
 # -- moving data: serial loops on the calling thread. A parallel loop costs a thread-pool hand-off
 # -- (~100 µs here in a rollout) whatever its size, more than copying a few floats of every env
 @ti.func
 def _state_from(d: ti.template(), qpos: ti.template(), qvel: ti.template(), s, e, src: ti.template(), offset):
-    """Frame s of (qpos, qvel) (values or gradients) of env e ← src[e, offset:] (Q + D). Counts
-    come from d: a field's shape pads an empty axis to 1."""
+    """Frame s of (qpos, qvel) (values or gradients) of env e ← src[e, offset:] (Q + D)."""
     for k in range(d.n_qs):
         qpos[s, e, k] = src[e, offset + k]
     for k in range(d.n_dofs):
@@ -202,83 +218,86 @@ def _state_to(d: ti.template(), qpos: ti.template(), qvel: ti.template(), s, e, 
 
 @ti.func
 def _inputs_from(d: ti.template(), e, src: ti.template(), offset):
-    """Every input field of env e ← its columns of src[e, offset:], in INPUTS order."""
-    for f in ti.static(range(len(d.input_fields))):
-        for k in range(d.input_widths[f]):
-            d.input_fields[f][e, k] = src[e, offset + d.input_offsets[f] + k]
+    """Every input of env e ← src[e, offset:] (total input width, in INPUTS order)."""
+    for k in range(d.input_total):
+        d.inputs[e, k] = src[e, offset + k]
 
 
 @ti.kernel
-def write_state(d: ti.template(), s: ti.i32, src: ti.types.ndarray()):
+def write_state(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, s: ti.i32, src: A):
     """Frame s ← src (B, Q + D): qpos then qvel of every env."""
     ti.loop_config(serialize=True)
-    for e in range(d.n_batch):
+    for e in range(n_batch(ints)):
+        d = bind(ints, f1, v3, v4, m3)
         _state_from(d, d.qpos, d.qvel, s, e, src, 0)
 
 
 @ti.kernel
-def read_state(d: ti.template(), s: ti.i32, dst: ti.types.ndarray()):
+def read_state(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, s: ti.i32, dst: A):
     ti.loop_config(serialize=True)
-    for e in range(d.n_batch):
+    for e in range(n_batch(ints)):
+        d = bind(ints, f1, v3, v4, m3)
         _state_to(d, d.qpos, d.qvel, s, e, dst)
 
 
 @ti.kernel
-def write_inputs(d: ti.template(), src: ti.types.ndarray()):
-    """Every input field ← its columns of src (B, total width), in INPUTS order."""
+def write_inputs(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, src: A):
+    """Every input ← its columns of src (B, total width), in INPUTS order."""
     ti.loop_config(serialize=True)
-    for e in range(d.n_batch):
-        _inputs_from(d, e, src, 0)
+    for e in range(n_batch(ints)):
+        _inputs_from(bind(ints, f1, v3, v4, m3), e, src, 0)
 
 
 @ti.func
 def _read_grads_env(d: ti.template(), e, dst: ti.template()):
-    """dst[e] (Q + D + differentiable input widths) ← state gradient at frame 0, then input gradients."""
+    """dst[e] (Q + D + differentiable input widths) ← state gradient at frame 0, then the
+    gradients of the differentiable inputs (the first columns of the inputs)."""
     _state_to(d, d.qpos.grad, d.qvel.grad, 0, e, dst)
-    for f in ti.static(range(len(d.grad_input_fields))):
-        for k in range(d.grad_input_widths[f]):
-            dst[e, d.grad_input_offsets[f] + k] = d.grad_input_fields[f].grad[e, k]
+    for k in range(d.grad_total):
+        dst[e, d.n_qs + d.n_dofs + k] = d.inputs.grad[e, k]
 
 
 @ti.func
-def _zero_grad_frames(grad: ti.template(), frames):
-    """Zero frames 0 … frames − 1 of a gradient field for every env: one contiguous block, which
-    a serial loop on the calling thread sweeps (no thread hand-off); ~21 GB/s here."""
-    ti.loop_config(serialize=True)
-    for I in ti.grouped(ti.ndrange(frames, *grad.shape[1:])):
-        grad[I] = 0
+def _zero_frames(region: ti.template(), frames):
+    for k in range(region.start, region.start + frames * region.stride):
+        region.arena[k] = ti.zero(region.arena[k])
 
 
 @ti.func
 def _clear_grads(d: ti.template(), frames):
-    """Every gradient of frames 0 … frames − 1 and every input gradient ← 0 (top-level loops)."""
-    for group in ti.static(d.grad_frame_groups):  # groups of ≤ 32: Taichi warns past that
-        for f in ti.static(range(len(group))):
-            _zero_grad_frames(group[f], frames)
-    for f in ti.static(range(len(d.grad_input_fields))):
-        _zero_grad_frames(d.grad_input_fields[f].grad, d.n_batch)  # (B, width): its rows as frames
+    """Every gradient of frames 0 … frames − 1 and every input gradient ← 0: one contiguous
+    sweep per arena (data.py lays the gradients out frame by frame), ~21 GB/s here."""
+    for r in ti.static(range(len(d.regions))):
+        _zero_frames(d.regions[r], frames)
+    for e in range(d.n_batch):
+        for k in range(d.input_total):
+            d.inputs.grad[e, k] = 0.0
 
 
 @ti.kernel
-def read_links(d: ti.template(), dst: ti.types.ndarray()):
+def read_links(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, dst: A):
     """dst (B, L, 13) ← frame-0 link pos, quat, cvel (ω, v at the origin)."""
     ti.loop_config(serialize=True)
-    for e, l in ti.ndrange(d.n_batch, d.n_links):
-        for k in ti.static(range(3)):
-            dst[e, l, k] = d.xpos[0, e, l][k]
-            dst[e, l, 7 + k] = d.cvel_w[0, e, l][k]
-            dst[e, l, 10 + k] = d.cvel_v[0, e, l][k]
-        for k in ti.static(range(4)):
-            dst[e, l, 3 + k] = d.xquat[0, e, l][k]
+    for e in range(n_batch(ints)):
+        d = bind(ints, f1, v3, v4, m3)
+        for l in range(d.n_links):
+            for k in ti.static(range(3)):
+                dst[e, l, k] = d.xpos[0, e, l][k]
+                dst[e, l, 7 + k] = d.cvel_w[0, e, l][k]
+                dst[e, l, 10 + k] = d.cvel_v[0, e, l][k]
+            for k in ti.static(range(4)):
+                dst[e, l, 3 + k] = d.xquat[0, e, l][k]
 
 
 @ti.kernel
-def read_mass_matrix(d: ti.template(), dst: ti.types.ndarray()):
+def read_mass_matrix(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, dst: A):
     ti.loop_config(serialize=True)
-    for e, i, j in ti.ndrange(d.n_batch, d.n_dofs, d.n_dofs):
-        dst[e, i, j] = d.mass_mat[0, e, i, j]
+    for e in range(n_batch(ints)):
+        d = bind(ints, f1, v3, v4, m3)
+        for i, j in ti.ndrange(d.n_dofs, d.n_dofs):
+            dst[e, i, j] = d.mass_mat[0, e, i, j]
 
 
-#: what solver.py launches (bound to its data by solvers.launch)
+#: what solver.py launches (through solvers.launch, with the scene's arenas)
 KERNELS = (advance, prepare_reverse, reverse_dynamics, reverse_kinematics, down_sweep, down_sweep_adjoint,
            position_stages, write_state, read_state, write_inputs, read_links, read_mass_matrix)
