@@ -7,7 +7,7 @@
 from . import materials, morphs, options, surfaces
 from .solvers.core import (AssetError, GenesisException, GradientError, InvalidInputError, SceneStateError,
                      SimulationError)
-from .runtime import cpu, gpu, init, runtime
+from .runtime import cpu, destroy, gpu, init, runtime
 from .scene import Scene, SimState
 from .tensor import (Tensor, from_numpy, from_torch, ones, ones_like, rand, randn, tensor, zeros,
                      zeros_like)

@@ -8,6 +8,8 @@ import logging
 import numpy as np
 import taichi as ti
 import torch
+from taichi.lang import impl
+from taichi.lang.misc import is_arch_supported
 
 from .solvers.core import InvalidInputError, SceneStateError, runtime
 
@@ -20,48 +22,69 @@ _LOG_LEVELS = {"debug": ti.DEBUG, "info": ti.INFO, "warning": ti.WARN, "error": 
 logger = logging.getLogger("genesis_lite")
 
 
-def init(backend=cpu, precision="32", seed=None, logging_level="warning", debug=False):
+def init(backend=None, precision="32", seed=None, logging_level="warning", debug=False):
     """Start the simulator runtime.
 
-    backend: ``gs.cpu`` or ``gs.gpu`` (CUDA when present, else a warning and CPU).
-    precision: "32" or "64" — the float width of every field and every returned tensor.
+    backend: ``gs.cpu``, ``gs.gpu`` (CUDA; without it, one warning and the CPU), or None, as in
+        Genesis: the GPU when CUDA is present, else the CPU.
+    precision: "32" or "64" — the float width of every array and every returned tensor.
     seed: seeds torch and numpy when given.
     debug: Taichi debug mode (bounds checks; slow).
+
+    Kernels are compiled without fast math: no reassociation or contraction, so a kernel gives
+    the same bits whether its env loop runs on one thread or many, on any x86-64 CPU
+    (batched scenes equal single-env ones bit for bit). torch's device is always the one of
+    the arch Taichi actually started on.
     """
     precision = str(precision)
     if precision not in ("32", "64"):
         raise InvalidInputError(f"gs.init: argument 'precision' must be '32' or '64', got {precision!r}")
-    if backend not in (cpu, gpu):
-        raise InvalidInputError(f"gs.init: argument 'backend' must be gs.cpu or gs.gpu, got {backend!r}")
+    if backend not in (None, cpu, gpu):
+        raise InvalidInputError(f"gs.init: argument 'backend' must be gs.cpu, gs.gpu or None, got {backend!r}")
     if logging_level not in _LOG_LEVELS:
         raise InvalidInputError(
             f"gs.init: argument 'logging_level' must be one of {sorted(_LOG_LEVELS)}, got {logging_level!r}")
-    options = (backend, precision, bool(debug))
     if seed is not None:
         torch.manual_seed(seed)
         np.random.seed(seed)
     logger.setLevel(logging_level.upper())
+    arch = _requested_arch(backend)
+    options = (arch, precision, bool(debug))
     if runtime.initialized and runtime.options == options:
         return
     if runtime.initialized:
         ti.reset()
-    arch = ti.cpu
-    device = torch.device("cpu")
-    if backend == gpu:
-        if torch.cuda.is_available():
-            arch, device = ti.cuda, torch.device("cuda")
-        else:
-            logger.warning("gs.init: gs.gpu requested but CUDA is not available; using the CPU")
     ti_float = ti.f64 if precision == "64" else ti.f32
-    ti.init(arch=arch, default_fp=ti_float, default_ip=ti.i32, debug=debug, log_level=_LOG_LEVELS[logging_level],
-            offline_cache=True)
+    ti.init(arch=arch, default_fp=ti_float, default_ip=ti.i32, debug=debug, fast_math=False,
+            log_level=_LOG_LEVELS[logging_level], offline_cache=True)
+    runtime.arch = impl.current_cfg().arch  # Taichi falls back to the CPU when CUDA fails to start
+    if backend == gpu and runtime.arch != ti.cuda:
+        logger.warning("gs.init: gs.gpu requested but CUDA is not available; running on the CPU")
+    runtime.device = torch.device("cuda" if runtime.arch == ti.cuda else "cpu")
     runtime.initialized = True
     runtime.options = options
     runtime.epoch += 1
-    runtime.device = device
     runtime.ti_float = ti_float
     runtime.tc_float = torch.float64 if precision == "64" else torch.float32
     runtime.np_float = np.float64 if precision == "64" else np.float32
+
+
+def _requested_arch(backend):
+    """CUDA only when torch can use it too (torch's tensors are the kernels' arguments), and Taichi
+    was built with it; else the CPU. Asked in this order: Taichi's check warns without a driver."""
+    if backend != cpu and torch.cuda.is_available() and is_arch_supported(ti.cuda):
+        return ti.cuda
+    return ti.cpu
+
+
+def destroy():
+    """End the runtime (Genesis's ``gs.destroy``): Taichi stops, every scene becomes unusable
+    (using one raises SceneStateError), and ``gs.init`` may be called again."""
+    if runtime.initialized:
+        ti.reset()
+        runtime.initialized = False
+        runtime.options = None
+        runtime.epoch += 1
 
 
 def require_init(what):

@@ -8,60 +8,74 @@ scene's data are array arguments), so the cache is per kernel, not per scene. It
 1.7's kernel internals (``_primal``, ``compiled_kernels``, ``make_launch_context``), which is
 why pyproject.toml pins taichi 1.7.*.
 """
+import taichi as ti
 import torch
 from taichi.lang import impl
-from taichi.lang._ndarray import Ndarray
+
+from .core import InvalidInputError
 
 # kernel → {(template value, argument signature): (program, compiled kernel, code)}
 _COMPILED = {}
 
 
 def _signature(args):
-    """What Taichi compiles a kernel for: the kinds, dtypes and dims of its array arguments."""
-    return tuple((a.dtype, a.dim()) if isinstance(a, torch.Tensor) else
-                 (a.dtype, a.element_shape, len(a.shape)) if isinstance(a, Ndarray) else int
-                 for a in args)
+    """What Taichi compiles a kernel for: the dtypes and dims of its array arguments."""
+    return tuple((a.dtype, a.dim()) if isinstance(a, torch.Tensor) else int for a in args)
 
 
 class BoundKernel:
     """``kernel(template, *arrays, *args)``: a kernel with one compile-time argument, then a scene's
-    arenas (Taichi ndarrays), then Python ints and contiguous torch tensors."""
+    arrays (contiguous torch tensors whose trailing ``element_dims`` dims are each element's shape,
+    as the kernel annotates them), then Python ints and contiguous torch tensors."""
 
-    def __init__(self, kernel, template, arrays):
+    def __init__(self, kernel, template, arrays, element_dims):
         self.kernel, self.template, self.arrays = kernel, template, list(arrays)
+        self.arrays_signature = _signature(self.arrays)
+        self._check(self.arrays, impl.current_cfg().arch == ti.cuda)
+        # what a launch context takes of each array (Taichi wants its shape without the element's)
+        self.array_args = [(a.data_ptr(), a.element_size() * a.numel(), tuple(a.shape[: a.dim() - n]))
+                           for a, n in zip(self.arrays, element_dims)]
         self.compiled = _COMPILED.setdefault(kernel, {})
 
     def __call__(self, *args):
         program = impl.get_runtime().prog
-        key = (self.template, _signature(self.arrays) + _signature(args))
+        key = (self.template, self.arrays_signature + _signature(args))
         entry = self.compiled.get(key)
         if entry is None or entry[0] is not program:
+            self._check(args, program.config().arch == ti.cuda)
             self.kernel(self.template, *self.arrays, *args)  # compiles and checks the arguments
             self.compiled[key] = self._resolve(program, args)
             return
-        _, kernel, code = entry
+        _, kernel, code, on_cuda = entry
+        self._check(args, on_cuda)
         context = kernel.make_launch_context()
-        for k, array in enumerate(self.arrays):
-            context.set_arg_ndarray((k,), array.arr)
+        for k, (pointer, size, shape) in enumerate(self.array_args):
+            context.set_arg_external_array_with_shape((k,), pointer, size, shape, 0)
         for k, arg in enumerate(args, start=len(self.arrays)):
             if isinstance(arg, torch.Tensor):
-                if not arg.is_contiguous():
-                    raise ValueError(f"{self.kernel.__name__}: argument {k} must be a contiguous tensor")
                 context.set_arg_external_array_with_shape((k,), arg.data_ptr(), arg.element_size() * arg.numel(),
                                                           tuple(arg.shape), 0)
             else:
                 context.set_arg_int((k,), int(arg))
         program.launch_kernel(code, context)
 
+    def _check(self, args, on_cuda):
+        """Tensors must be contiguous and on the kernels' device: never device memory to CPU code."""
+        for k, arg in enumerate(args):
+            if isinstance(arg, torch.Tensor) and (arg.is_cuda != on_cuda or not arg.is_contiguous()):
+                raise InvalidInputError(f"{self.kernel.__name__}: argument {k} must be a contiguous tensor on "
+                                        f"{'cuda' if on_cuda else 'the cpu'}, got one on {arg.device}")
+
     def _resolve(self, program, args):
         primal = self.kernel._primal
         kernel = primal.compiled_kernels[primal.ensure_compiled(self.template, *self.arrays, *args)]
-        return program, kernel, program.compile_kernel(program.config(), program.get_device_caps(), kernel)
+        code = program.compile_kernel(program.config(), program.get_device_caps(), kernel)
+        return program, kernel, code, program.config().arch == ti.cuda
 
 
 class BoundKernels:
     """Kernels bound to one scene's arrays: ``kernels.read_state(0, out)``."""
 
-    def __init__(self, template, arrays, *kernels):
+    def __init__(self, template, arrays, element_dims, *kernels):
         for kernel in kernels:
-            setattr(self, kernel.__name__, BoundKernel(kernel, template, arrays))
+            setattr(self, kernel.__name__, BoundKernel(kernel, template, arrays, element_dims))

@@ -6,7 +6,7 @@ Intermediates of substep f live at frame f, so after a single forward replay eve
 values are there for its hand-written adjoint. Gradients (``.grad``) are that adjoint's
 storage (Taichi's autodiff is not used).
 
-**Compiled once for every scene.** All of a scene's data lives in five Taichi ndarrays, one per
+**Compiled once for every scene.** All of a scene's data lives in five torch tensors, one per
 element type (``ARENAS``: int, float, 3-vector, 4-vector, 3×3 matrix), passed to every kernel as
 arguments. Sizes (envs, links, dofs...) and where each array starts are runtime values in the
 int arena's header, so a kernel is compiled once per float precision and serves every robot,
@@ -19,6 +19,7 @@ import warnings
 
 import numpy as np
 import taichi as ti
+import torch
 from taichi.lang import impl
 from taichi.lang.expr import Expr
 
@@ -80,6 +81,13 @@ FRAMES = {
 GRAD_ONLY = {"xrot_grad": ("v3", "L")}
 
 ARENAS = ("i", "f", "v3", "v4", "m3")
+ELEMENT = {"i": (), "f": (), "v3": (3,), "v4": (4,), "m3": (3, 3)}  # each arena's element shape
+# the kernels' annotations of the arenas: Taichi takes the float type from the tensors, the
+# element shape from the annotation (so one kernel source serves both precisions)
+ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
+               ti.types.ndarray(dtype=ti.types.vector(3, float), ndim=1),
+               ti.types.ndarray(dtype=ti.types.vector(4, float), ndim=1),
+               ti.types.ndarray(dtype=ti.types.matrix(3, 3, float), ndim=1))
 # The int arena starts with a header of sizes and flags; every array's place follows from the
 # sizes (``layout``). W: all inputs' width per env; G: the differentiable ones', which come first.
 SIZES = ("B", "L", "D", "Q", "P", "S", "W", "G", "limits", "nonfinite")
@@ -156,17 +164,14 @@ class RigidData:
                      "limits": int(bool(limits_enabled)), "nonfinite": 0}
         self.start, stop = layout(self.size)
         length = {a: stop[a, bool(requires_grad)] for a in ARENAS}  # no gradient storage without gradients
-        dtype = runtime.ti_float
-        self.arenas = [ti.ndarray(ti.i32, length["i"]), ti.ndarray(dtype, max(1, length["f"])),
-                       ti.Vector.ndarray(3, dtype, max(1, length["v3"])),
-                       ti.Vector.ndarray(4, dtype, max(1, length["v4"])),
-                       ti.Matrix.ndarray(3, 3, dtype, max(1, length["m3"]))]
-        self._fill(model, consts)
+        values = {a: np.zeros((max(1, length[a]), *ELEMENT[a]), dtype=np.int32 if a == "i" else runtime.np_float)
+                  for a in ARENAS}
+        self._fill(values, model, consts)
+        # torch owns the memory (freed with the scene, whatever Taichi does meanwhile)
+        self.arenas = [torch.from_numpy(values[a]).to(runtime.device) for a in ARENAS]
 
-    def _fill(self, model, consts):
+    def _fill(self, values, model, consts):
         """Header, model and consts (h s, limit stiffness 1/s², limit damping 1/s) into the arenas."""
-        values = {a: np.zeros(arr.shape + arr.element_shape, dtype=np.int32 if a == "i" else runtime.np_float)
-                  for a, arr in zip(ARENAS, self.arenas)}
         values["i"][: len(SIZES)] = [self.size[name] for name in SIZES]
         for name, (arena, _) in MODEL.items():
             array = np.asarray(consts if name == "consts" else getattr(model, name))
@@ -174,15 +179,13 @@ class RigidData:
                 begin = self.start[f"model:{name}"]
                 # floats finite, so no inf·0 in gradients
                 values[arena][begin: begin + len(array)] = array if arena == "i" else np.clip(array, -BIG, BIG)
-        for arena, arr in zip(ARENAS, self.arenas):
-            arr.from_numpy(values[arena])
 
     def take_nonfinite(self):
         """True once a step produced a non-finite state since the last call (which clears it)."""
         ints, slot = self.arenas[0], HEADER["nonfinite"]
-        flag = ints[slot]
+        flag = bool(ints[slot])
         ints[slot] = 0
-        return bool(flag)
+        return flag
 
     def width(self, name):
         return self.widths[list(INPUTS).index(name)]

@@ -11,7 +11,7 @@ from ..base import Solver
 from ..core import AssetError, runtime
 from ..launch import BoundKernels
 from . import step
-from .data import BIG, INPUTS, RigidData
+from .data import ARENAS, BIG, ELEMENT, INPUTS, RigidData
 from .model import build_model
 
 
@@ -41,7 +41,8 @@ class RigidSolver(Solver):
         timeconst = max(self.rigid_options.limit_timeconst, 2.0 * h)  # stable for explicit steps
         self.data = RigidData(self.model, self.n_batch, self.sim_options.substeps, self.sim_options.requires_grad,
                               self.rigid_options.enable_joint_limit, [h, 1.0 / timeconst ** 2, 2.0 / timeconst])
-        self.kernels = BoundKernels(self.data.serial, self.data.arenas, *step.KERNELS)
+        self.kernels = BoundKernels(self.data.serial, self.data.arenas, [len(ELEMENT[a]) for a in ARENAS],
+                                    *step.KERNELS)
         self._nothing = torch.empty((0, 0), dtype=runtime.tc_float, device=runtime.device)  # an unused array argument
         self.grad_input_names = tuple(self.data.grad_input_names)
         self.state_width = self.model.n_qs + self.model.n_dofs
@@ -155,6 +156,13 @@ class RigidSolver(Solver):
         out = torch.empty((self.n_batch, self.model.n_dofs, self.model.n_dofs), dtype=runtime.tc_float,
                           device=runtime.device)
         self.kernels.read_mass_matrix(out)
+        return out
+
+    def dofs_force(self):
+        """(B, D) generalised force at the uploaded state and inputs: clipped actuator force −
+        damping·q̇ + limit forces − bias (qfrc_smooth, what the next step solves with)."""
+        out = self._empty(self.model.n_dofs)
+        self.kernels.read_dofs_force(out)
         return out
 
     def destroy(self):

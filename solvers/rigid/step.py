@@ -15,7 +15,7 @@ serves every scene of the process.
 """
 import taichi as ti
 
-from .data import bind, n_batch
+from .data import ARENA_TYPES, bind, n_batch
 from .actuation import smooth_force, smooth_force_adjoint
 from .dynamics import (bias_entry, dof_force, dof_row_adjoint, link_forces, link_forces_adjoint, mass_entry,
                        subtree_sum, subtree_sum_adjoint)
@@ -91,11 +91,12 @@ def _finite(x):
     return not (ti.math.isinf(x) or ti.math.isnan(x))
 
 
-A = ti.types.ndarray()  # an arena, or a torch tensor moving data in or out
+A = ti.types.ndarray()  # a torch tensor moving data in or out
+I, F, V3, V4, M3 = ARENA_TYPES  # a scene's arenas (data.py)
 
 
 @ti.kernel
-def advance(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, commit: ti.i32, inputs: A, out: A):
+def advance(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, commit: ti.i32, inputs: A, out: A):
     """All substeps of one step for every env in one launch (forward only). Unless empty, inputs
     (B, total input width) are loaded first and the result is written to out (B, Q + D) — each
     a launch saved. commit copies the result into frame 0 and flags any non-finite state."""
@@ -123,7 +124,7 @@ def advance(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, commit: 
 
 
 @ti.kernel
-def prepare_reverse(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, src: A):
+def prepare_reverse(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, src: A):
     """src (B, state | inputs | gradient of the end state): every gradient ← 0, frame 0 and the
     inputs ← the step's start, then the last frame's state gradient ← the seed."""
     ti.loop_config(serialize=True)  # moving data: cheaper than a thread hand-off (see below)
@@ -138,7 +139,7 @@ def prepare_reverse(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, 
 
 
 @ti.kernel
-def reverse_dynamics(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, s: ti.i32):
+def reverse_dynamics(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32):
     """Adjoints of substep s from the integration back to the subtree sums."""
     ti.loop_config(serialize=serial)
     for e in range(n_batch(ints)):
@@ -146,7 +147,7 @@ def reverse_dynamics(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A,
 
 
 @ti.kernel
-def reverse_kinematics(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, s: ti.i32, dst: A):
+def reverse_kinematics(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, dst: A):
     """Adjoint of substep s's down sweep; after substep 0 the gradients go to dst (B, state
     gradient | differentiable input gradients), as _read_grads_env lays it out."""
     ti.loop_config(serialize=serial)
@@ -158,7 +159,7 @@ def reverse_kinematics(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: 
 
 
 @ti.kernel
-def down_sweep(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A):
+def down_sweep(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3):
     """Link poses and velocities at frame 0 (what the link getters read)."""
     ti.loop_config(serialize=serial)
     for e in range(n_batch(ints)):
@@ -166,7 +167,7 @@ def down_sweep(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A):
 
 
 @ti.kernel
-def down_sweep_adjoint(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, src: A, dst: A):
+def down_sweep_adjoint(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, src: A, dst: A):
     """src (B, L, 13): gradient of read_links' output → dst: gradient of the frame-0 state (as
     _read_grads_env lays it out). The down sweep at frame 0 must be current."""
     ti.loop_config(serialize=True)
@@ -189,7 +190,7 @@ def down_sweep_adjoint(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: 
 
 
 @ti.kernel
-def position_stages(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A):
+def position_stages(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3):
     """Mass matrix and bias at frame 0."""
     ti.loop_config(serialize=serial)
     for e in range(n_batch(ints)):
@@ -224,7 +225,7 @@ def _inputs_from(d: ti.template(), e, src: ti.template(), offset):
 
 
 @ti.kernel
-def write_state(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, s: ti.i32, src: A):
+def write_state(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, src: A):
     """Frame s ← src (B, Q + D): qpos then qvel of every env."""
     ti.loop_config(serialize=True)
     for e in range(n_batch(ints)):
@@ -233,7 +234,7 @@ def write_state(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, s: t
 
 
 @ti.kernel
-def read_state(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, s: ti.i32, dst: A):
+def read_state(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, dst: A):
     ti.loop_config(serialize=True)
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
@@ -241,7 +242,7 @@ def read_state(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, s: ti
 
 
 @ti.kernel
-def write_inputs(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, src: A):
+def write_inputs(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, src: A):
     """Every input ← its columns of src (B, total width), in INPUTS order."""
     ti.loop_config(serialize=True)
     for e in range(n_batch(ints)):
@@ -275,7 +276,7 @@ def _clear_grads(d: ti.template(), frames):
 
 
 @ti.kernel
-def read_links(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, dst: A):
+def read_links(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
     """dst (B, L, 13) ← frame-0 link pos, quat, cvel (ω, v at the origin)."""
     ti.loop_config(serialize=True)
     for e in range(n_batch(ints)):
@@ -290,7 +291,7 @@ def read_links(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, dst: 
 
 
 @ti.kernel
-def read_mass_matrix(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A, dst: A):
+def read_mass_matrix(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
     ti.loop_config(serialize=True)
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
@@ -298,6 +299,19 @@ def read_mass_matrix(serial: ti.template(), ints: A, f1: A, v3: A, v4: A, m3: A,
             dst[e, i, j] = d.mass_mat[0, e, i, j]
 
 
+@ti.kernel
+def read_dofs_force(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
+    """dst (B, D) ← qfrc_smooth at frame 0 (the position stages and the force stage run there):
+    the force the next step's solve is given, at the current state and inputs."""
+    ti.loop_config(serialize=serial)
+    for e in range(n_batch(ints)):
+        d = bind(ints, f1, v3, v4, m3)
+        position_stages_env(d, 0, e)
+        for i in range(d.n_dofs):
+            smooth_force(d, 0, e, i)
+            dst[e, i] = d.qfrc_smooth[0, e, i]
+
+
 #: what solver.py launches (through solvers.launch, with the scene's arenas)
 KERNELS = (advance, prepare_reverse, reverse_dynamics, reverse_kinematics, down_sweep, down_sweep_adjoint,
-           position_stages, write_state, read_state, write_inputs, read_links, read_mass_matrix)
+           position_stages, write_state, read_state, write_inputs, read_links, read_mass_matrix, read_dofs_force)

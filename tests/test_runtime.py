@@ -1,0 +1,111 @@
+"""gs.init and gs.destroy: the backend actually started decides torch's device, a missing GPU
+gives one warning and the CPU for both, no path hands device memory to CPU kernels, and kernels
+are compiled without fast math."""
+import importlib
+import logging
+
+import numpy as np
+import pytest
+import taichi as ti
+import torch
+
+import genesis_lite as gs
+from genesis_lite.solvers.launch import BoundKernel
+from tests.conftest import asset
+
+
+def _warnings(caplog):
+    return [r for r in caplog.records if r.levelno == logging.WARNING and r.name == "genesis_lite"]
+
+
+def _pendulum():
+    scene = gs.Scene()
+    robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
+    scene.build()
+    return scene, robot
+
+
+def test_gpu_without_cuda_warns_once_and_runs_on_cpu(caplog, monkeypatch):
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    gs.destroy()
+    with caplog.at_level(logging.WARNING, logger="genesis_lite"):
+        gs.init(backend=gs.gpu, precision="64")
+    assert len(_warnings(caplog)) == 1 and "CUDA is not available" in _warnings(caplog)[0].getMessage()
+    assert gs.runtime.arch == ti.cpu and gs.device == torch.device("cpu")
+    scene, robot = _pendulum()
+    scene.step()
+    assert robot.get_dofs_position().device.type == "cpu"
+
+
+def test_taichi_falling_back_to_cpu_decides_torch_device(caplog, monkeypatch):
+    """torch sees CUDA but Taichi cannot start it (here: no driver): both run on the CPU."""
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(importlib.import_module("genesis_lite.runtime"), "is_arch_supported", lambda arch: True)
+    gs.destroy()
+    with caplog.at_level(logging.WARNING, logger="genesis_lite"):
+        gs.init(backend=gs.gpu, precision="64")
+    if gs.runtime.arch == ti.cuda:  # a machine with a working GPU
+        assert gs.device.type == "cuda"
+        return
+    assert gs.device == torch.device("cpu")
+    assert len(_warnings(caplog)) == 1
+
+
+def test_default_backend_on_a_cpu_machine_is_quiet(caplog, monkeypatch):
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    gs.destroy()
+    with caplog.at_level(logging.WARNING, logger="genesis_lite"):
+        gs.init(precision="64")
+    assert not _warnings(caplog)
+    assert gs.device == torch.device("cpu")
+
+
+def test_kernels_refuse_memory_of_another_device(f64):
+    """The launch path checks every tensor against the arch the kernel was compiled for."""
+    scene, _ = _pendulum()
+    kernel = scene.sim.slots[0].solver.kernels.read_state
+    with pytest.raises(gs.InvalidInputError, match="must be a contiguous tensor on cuda"):
+        kernel._check((0, torch.zeros(1, 4, dtype=torch.float64)), on_cuda=True)
+    with pytest.raises(gs.InvalidInputError, match="contiguous"):
+        kernel(0, torch.zeros(4, 2, dtype=torch.float64)[:, :1].t())
+    assert isinstance(kernel, BoundKernel)
+
+
+def test_destroy_ends_scenes_and_init_starts_again(f64):
+    scene, robot = _pendulum()
+    scene.step()
+    gs.destroy()
+    with pytest.raises(gs.SceneStateError, match="gs.init"):
+        scene.step()
+    with pytest.raises(gs.SceneStateError, match="gs.init"):
+        gs.Scene()
+    gs.destroy()  # twice is harmless
+    gs.init(precision="64")
+    scene, robot = _pendulum()
+    scene.step()
+    assert torch.isfinite(robot.get_dofs_position()).all()
+
+
+@ti.kernel
+def _running_sum(x: ti.types.ndarray(), out: ti.types.ndarray()):
+    for i in range(1):
+        total = 0.0
+        for k in range(x.shape[0]):
+            total += x[k]
+        out[0] = total
+
+
+def test_kernels_never_reassociate(f64):
+    """gs.init compiles without fast math, so a running sum adds in program order, as IEEE
+    says: LLVM may not split it into vector lanes (4 doubles with AVX2, 8 with AVX-512, and
+    differently for the serial and the parallel compilation of a loop). That is the ground of
+    batched = single env bit for bit on any CPU. With fast math on, this test fails here (the sum
+    differs in its last bits)."""
+    rng = np.random.default_rng(1)
+    values = rng.uniform(-1, 1, 257) * 10.0 ** rng.integers(-8, 9, 257)
+    in_order = 0.0
+    for v in values:
+        in_order += v
+    out = torch.zeros(1, dtype=torch.float64)
+    _running_sum(torch.tensor(values), out)
+    assert out.item() == in_order, f"the kernel summed out of order: {out.item()!r} != {in_order!r}"
