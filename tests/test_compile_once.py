@@ -1,0 +1,40 @@
+"""Kernels are compiled once per process and precision, not per scene: a scene's data are the
+kernels' array arguments (solvers/rigid/data.py). Other robots, batch sizes, substep counts and
+time steps, and a second live scene of the same robot, reuse every compiled kernel."""
+import torch
+
+import genesis_lite as gs
+from genesis_lite.solvers.launch import _COMPILED
+from tests.conftest import asset, pybullet
+
+
+def _n_compiled():
+    """Compiled kernel instances Taichi holds, over every kernel of the rigid step."""
+    return sum(len(kernel._primal.compiled_kernels) for kernel in _COMPILED)
+
+
+def _rollout_with_backward(path, fixed, n_envs, substeps, dt):
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=dt, substeps=substeps, requires_grad=True))
+    robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=fixed))
+    scene.build(n_envs=n_envs)
+    force = torch.full((n_envs, robot.n_dofs) if n_envs else (robot.n_dofs,), 0.1, dtype=torch.float64,
+                       requires_grad=True)
+    robot.control_dofs_force(force)
+    for _ in range(3):
+        scene.step()
+    (robot.get_links_pos().sum() + robot.get_dofs_velocity().sum() + robot.get_mass_mat().sum().detach()).backward()
+    assert torch.isfinite(force.grad).all() and force.grad.abs().sum() > 0
+    return scene
+
+
+def test_scenes_share_compiled_kernels(f64):
+    first = _rollout_with_backward(asset("pendulum2.urdf"), True, 0, 1, 0.01)
+    compiled = _n_compiled()
+    assert compiled > 0
+    # the same robot again while the first scene lives, then other robots, sizes and steps
+    second = _rollout_with_backward(asset("pendulum2.urdf"), True, 0, 1, 0.01)
+    _rollout_with_backward(pybullet("kuka_iiwa", "model.urdf"), True, 3, 2, 0.005)
+    _rollout_with_backward(asset("quadruped.urdf"), False, 2, 3, 0.002)
+    assert _n_compiled() == compiled, "a new scene compiled kernels again"
+    first.step()
+    second.step()
