@@ -3,7 +3,7 @@ rigid bodies, MPM and later solvers alike.
 
 A solver's *state* is one torch tensor (B, state_width) per scene; its *inputs* (controls and
 physical parameters) are named torch tensors (B, width) applied at the next step. The solver
-keeps its own copy of both in Taichi fields and moves them on request.
+keeps its own copy of both in its kernels' arrays and moves them on request.
 """
 
 
@@ -20,7 +20,7 @@ class Solver:
     entity_names = ()
 
     def build(self, n_envs):
-        """Allocate fields for max(1, n_envs) environments; return the initial state (B, width)."""
+        """Allocate for max(1, n_envs) environments; return the initial state (B, width)."""
         raise NotImplementedError
 
     def upload_state(self, state):
@@ -53,5 +53,5 @@ class Solver:
         raise NotImplementedError
 
     def destroy(self):
-        """Free the solver's fields."""
+        """Free the solver's arrays."""
         raise NotImplementedError

@@ -1,5 +1,5 @@
 """One rigid step, forward and reverse, and moving state, inputs and gradients between the
-Taichi fields and torch.
+scene's arenas and torch.
 
 Forward runs every substep of every env in one launch (``advance``, which can also load the
 inputs and write out the result). Reverse: ``prepare_reverse`` loads the step's start state,
