@@ -194,6 +194,16 @@ class Simulator:
         value = solver.mass_matrix()
         return autograd.not_differentiable("get_mass_mat", state, value)
 
+    def dofs_force(self, solver):
+        """(B, D) generalised dof forces of the current state and inputs (solver.dofs_force). Its
+        backward raises if the state or any input requires grad: it depends on all of them."""
+        state = self.state(solver)
+        slot = self.slot(solver)
+        self._sync(slot, state, slot.inputs)
+        value = solver.dofs_force()
+        anchor = next((t for t in (state, *slot.inputs.values()) if t.requires_grad), state)
+        return autograd.not_differentiable("get_dofs_force", anchor, value)
+
     def check_grad_allowed(self, value, entity, arg):
         if isinstance(value, torch.Tensor) and value.requires_grad and not self.requires_grad:
             raise GradientError(f"entity '{entity}': argument '{arg}' requires grad but the scene was built without "

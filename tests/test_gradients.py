@@ -85,7 +85,9 @@ def _rollout(scene, robot, kind, value, horizon):
     robot.set_dofs_velocity(value if kind == "dofs_velocity" else qd0)
     setters = {"mass": robot.set_links_mass, "damping": robot.set_dofs_damping, "armature": robot.set_dofs_armature,
                "kp": robot.set_dofs_kp, "kv": robot.set_dofs_kv, "gravity": scene.set_gravity,
-               "base_pos": robot.set_pos, "base_quat": robot.set_quat}
+               # the base setters come after the velocities: keep them (set_pos/set_quat zero them by default)
+               "base_pos": lambda v: robot.set_pos(v, zero_velocity=False),
+               "base_quat": lambda v: robot.set_quat(v, zero_velocity=False)}
     if kind in ("position_target", "velocity_target"):  # moderate gains: explicit PD stays stable
         robot.set_dofs_kp(torch.full(_batch(n_envs, robot.n_dofs), 10.0))
         robot.set_dofs_kv(torch.full(_batch(n_envs, robot.n_dofs), 0.5))

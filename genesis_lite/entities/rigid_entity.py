@@ -8,9 +8,9 @@ import torch
 
 from ..solvers.core import InvalidInputError, SceneStateError, runtime
 from ..tensor import wrap
-from .rotations import quat_to_rotvec, rotvec_to_quat
+from .rotations import euler_xyz_to_quat, quat_to_euler_xyz
 
-_MODES = {"force": (0, "ctrl_force"), "position": (1, "ctrl_pos"), "velocity": (2, "ctrl_vel")}
+_MODES = {"force": 0, "position": 1, "velocity": 2}  # ctrl_mode codes (solvers/rigid/actuation.py)
 _NDOFS = {"fixed": 0, "revolute": 1, "prismatic": 1, "free": 6}
 _NQS = {"fixed": 0, "revolute": 1, "prismatic": 1, "free": 7}
 
@@ -33,6 +33,17 @@ def _is_range(idx, n):
     if len(idx) != n:
         return False
     return idx.tolist() == list(range(n)) if n <= 64 else bool(np.array_equal(idx, np.arange(n)))
+
+
+def _ltdl(mass):
+    """(B, n, n) symmetric positive definite M → (L (B, n, n) unit lower triangular, D_inv (B, n))
+    with M = Lᵀ·diag(1 / D_inv)·L (Genesis's decomposition). With P the order reversal,
+    P·M·P = (P·Lᵀ·P)·(P·D·P)·(P·L·P) is an ordinary L′D′L′ᵀ, read off its Cholesky factor
+    C = L′·diag(√D′)."""
+    chol = torch.linalg.cholesky(mass.flip(-2, -1))
+    root = torch.diagonal(chol, dim1=-2, dim2=-1)
+    lower = (chol / root[..., None, :]).transpose(-2, -1).flip(-2, -1)
+    return lower, 1.0 / root.flip(-1) ** 2
 
 
 def _all_finite(tensor):
@@ -120,8 +131,11 @@ class RigidEntity:
         self.link_start = int(mine[0])
         self.dof_start = int(model.link_dof0[mine[0]])
         self.q_start = int(model.link_q0[mine[0]])
-        # per local dof: its column in the state's qpos (-1 inside a free joint)
-        self._dof_q = model.dof_q[self.dof_start: self.dof_start + self.n_dofs]
+        # per local dof: its column in the state's qpos; a free base's linear dofs are its origin's
+        # columns, its rotational dofs (Euler angles, stored as a quaternion) -1
+        self._dof_q = model.dof_q[self.dof_start: self.dof_start + self.n_dofs].astype(np.int64)
+        if self._free:
+            self._dof_q[:3] = self.q_start + np.arange(3)
 
     @property
     def n_joints(self):
@@ -202,11 +216,21 @@ class RigidEntity:
 
     # -- raw state/input access -------------------------------------------------------------------
     def _read(self, columns, envs_idx):
+        return self._rows(columns, self._envs(envs_idx))
+
+    def _rows(self, columns, envs):
+        """State columns of the envs ``envs`` (int array): (len(envs), len(columns))."""
         state = self._sim().state(self._solver)
-        envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
+        envs = torch.as_tensor(envs, device=runtime.device)
         return state[envs][:, torch.as_tensor(columns, device=runtime.device)]
 
-    def _write(self, columns, envs, values):
+    def _write(self, columns, envs, values, zero_velocity=False):
+        """State columns ← values (len(envs), len(columns)) in envs, out of place. zero_velocity:
+        every dof velocity of the entity there ← 0 too, in the same write (so with gradients
+        those columns are constants: nothing set before flows through them)."""
+        if zero_velocity:
+            columns = np.concatenate([columns, self._vel_columns(np.arange(self.n_dofs))])
+            values = torch.cat([values, values.new_zeros(len(envs), self.n_dofs)], dim=1)
         sim = self._sim()
         sim.set_state(self._solver, _replace(sim.state(self._solver), envs, columns, values))
 
@@ -239,30 +263,45 @@ class RigidEntity:
         return self._solver.model.n_qs + self.dof_start + dofs
 
     def _dofs_position_all(self, envs_idx):
-        """(B', n_dofs) dof positions; a free joint's are its origin and rotation vector."""
+        """(B', n_dofs) dof positions; a free base's are its origin and Euler angles."""
         qpos = self._read(self._qpos_columns(), envs_idx)
         scalar = qpos[:, torch.as_tensor(np.maximum(self._dof_q - self.q_start, 0), device=runtime.device)]
         if not self._free:
             return scalar
-        return torch.cat([qpos[:, 0:3], quat_to_rotvec(qpos[:, 3:7]), scalar[:, 6:]], dim=1)
+        return torch.cat([scalar[:, 0:3], quat_to_euler_xyz(qpos[:, 3:7]), scalar[:, 6:]], dim=1)
 
     def get_dofs_position(self, dofs_idx_local=None, envs_idx=None):
-        """Joint positions, rad or m: (n,) or (n_envs, n)."""
+        """Joint positions, rad or m: (n,) or (n_envs, n). A free base's dofs 0-2 are the world
+        position of its link origin (m), 3-5 its orientation as intrinsic X-Y-Z Euler angles
+        (rad, R = Rx(a)·Ry(b)·Rz(c), as in Genesis); get_qpos gives the quaternion."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
         return self._out(self._dofs_position_all(envs_idx)[:, torch.as_tensor(dofs, device=runtime.device)])
 
-    def set_dofs_position(self, position, dofs_idx_local=None, envs_idx=None):
-        """Set joint positions (rad or m); a free joint's rotational dofs take a rotation vector."""
+    def set_dofs_position(self, position, dofs_idx_local=None, envs_idx=None, *, zero_velocity=True):
+        """Set joint positions, rad or m: (n,) or (len(envs_idx), n); a free base's dofs as in
+        get_dofs_position. Setting some of its Euler angles keeps the others' current values
+        (read back from its quaternion). zero_velocity (Genesis's default after a jump): first
+        set every dof velocity of the entity to 0 in the selected envs (all if envs_idx is None)."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
         envs = self._envs(envs_idx)
         values = self._values(position, len(dofs), envs, "position")
-        if not self._free:
-            self._write(self._dof_q[dofs], envs, values)
-            return
-        full = self._dofs_position_all(None if self.scene.n_envs == 0 else envs)
-        full = full.index_put((torch.arange(len(envs))[:, None], torch.as_tensor(dofs)[None, :]), values)
-        qpos = torch.cat([full[:, 0:3], rotvec_to_quat(full[:, 3:6]), full[:, 6:]], dim=1)
-        self._write(self._qpos_columns(), envs, qpos)
+        columns = self._dof_q[dofs]
+        turned = columns < 0  # a free base's Euler angles
+        if turned.any():
+            quat = euler_xyz_to_quat(self._base_euler(envs, dofs[turned] - 3, values[:, turned]))
+            columns = np.concatenate([columns[~turned], self._solver_q([3, 4, 5, 6])])
+            values = torch.cat([values[:, ~turned], quat], dim=1)
+        self._write(columns, envs, values, zero_velocity)
+
+    def _base_euler(self, envs, axes, angles):
+        """(len(envs), 3) Euler angles of the free base: ``angles`` (len(envs), k) at ``axes``
+        (k ints in 0-2), the current ones elsewhere."""
+        rows = torch.arange(len(envs), device=runtime.device)[:, None]
+        axes = torch.as_tensor(axes, device=runtime.device)[None, :]
+        if len(set(axes.flatten().tolist())) == 3:  # all set: the current orientation is not read
+            return angles.new_zeros(len(envs), 3).index_put((rows, axes), angles)
+        current = quat_to_euler_xyz(self._rows(self._solver_q([3, 4, 5, 6]), envs))
+        return current.index_put((rows, axes), angles)
 
     def get_dofs_velocity(self, dofs_idx_local=None, envs_idx=None):
         """Joint velocities, rad/s or m/s (a free joint: world linear, body-frame angular)."""
@@ -270,6 +309,7 @@ class RigidEntity:
         return self._out(self._read(self._vel_columns(dofs), envs_idx))
 
     def set_dofs_velocity(self, velocity, dofs_idx_local=None, envs_idx=None):
+        """Joint velocities, rad/s or m/s, as get_dofs_velocity gives them."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
         envs = self._envs(envs_idx)
         self._write(self._vel_columns(dofs), envs, self._values(velocity, len(dofs), envs, "velocity"))
@@ -279,27 +319,32 @@ class RigidEntity:
         qs = self._local(qs_idx_local, self.n_qs, "qs_idx_local")
         return self._out(self._read(self._solver_q(qs), envs_idx))
 
-    def set_qpos(self, qpos, qs_idx_local=None, envs_idx=None):
+    def set_qpos(self, qpos, qs_idx_local=None, envs_idx=None, *, zero_velocity=True):
+        """Generalised positions (n,) or (len(envs_idx), n); zero_velocity as in set_dofs_position."""
         qs = self._local(qs_idx_local, self.n_qs, "qs_idx_local")
         envs = self._envs(envs_idx)
-        self._write(self._solver_q(qs), envs, self._values(qpos, len(qs), envs, "qpos"))
+        self._write(self._solver_q(qs), envs, self._values(qpos, len(qs), envs, "qpos"), zero_velocity)
 
     def _require_free(self, what):
+        # Genesis moves a fixed entity's welded base too; ours keeps a fixed base in the model
         if not self._free:
-            raise InvalidInputError(f"entity '{self.name}': {what} needs a free base, but the entity is fixed; "
-                                    f"place a fixed entity with its morph's pos/euler")
+            raise InvalidInputError(f"entity '{self.name}': {what} needs a free base (a morph with fixed=False), "
+                                    f"got a fixed one; place a fixed entity with its morph's pos/euler before "
+                                    f"scene.build(), or create it with fixed=False to move it")
 
-    def set_pos(self, pos, envs_idx=None):
-        """Base position, m (free base only)."""
+    def set_pos(self, pos, envs_idx=None, *, zero_velocity=True):
+        """Base position in the world, m: (3,) or (len(envs_idx), 3) (free base only);
+        zero_velocity as in set_dofs_position."""
         self._require_free("set_pos")
         envs = self._envs(envs_idx)
-        self._write(self._solver_q([0, 1, 2]), envs, self._values(pos, 3, envs, "pos"))
+        self._write(self._solver_q([0, 1, 2]), envs, self._values(pos, 3, envs, "pos"), zero_velocity)
 
-    def set_quat(self, quat, envs_idx=None):
-        """Base orientation (w, x, y, z) (free base only); normalised by the kinematics."""
+    def set_quat(self, quat, envs_idx=None, *, zero_velocity=True):
+        """Base orientation (w, x, y, z): (4,) or (len(envs_idx), 4) (free base only); normalised by
+        the kinematics; zero_velocity as in set_dofs_position."""
         self._require_free("set_quat")
         envs = self._envs(envs_idx)
-        self._write(self._solver_q([3, 4, 5, 6]), envs, self._values(quat, 4, envs, "quat"))
+        self._write(self._solver_q([3, 4, 5, 6]), envs, self._values(quat, 4, envs, "quat"), zero_velocity)
 
     # -- link kinematics ----------------------------------------------------------------------------
     def _links(self, links_idx_local, envs_idx, columns):
@@ -413,43 +458,102 @@ class RigidEntity:
                 self._get_dofs_input("force_hi", dofs_idx_local, envs_idx))
 
     # -- control ------------------------------------------------------------------------------------
-    def _control(self, mode, value, dofs_idx_local, envs_idx, arg):
-        code, name = _MODES[mode]
+    def _control(self, method, mode, targets, dofs_idx_local, envs_idx):
+        """Switch the dofs to ``mode`` with ``targets``: {input name: (value, argument name)}; a value
+        None is the constant 0 (written only where the input holds something else)."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
         if mode == "position" and self._free and bool((dofs < 6).any()):
-            raise InvalidInputError(f"entity '{self.name}': control_dofs_position cannot drive free-joint dofs "
+            raise InvalidInputError(f"entity '{self.name}': {method} cannot drive free-joint dofs "
                                     f"(dofs_idx_local 0-5); got {dofs.tolist()}")
         envs = self._envs(envs_idx)
-        values = self._values(value, len(dofs), envs, arg)
-        self._write_input(name, self.dof_start + dofs, envs, values)
+        columns = self.dof_start + dofs
+        checked = {name: self._values(value, len(dofs), envs, arg) for name, (value, arg) in targets.items()
+                   if value is not None}  # every argument checked before anything is written
+        for name in targets:
+            if name in checked:
+                self._write_input(name, columns, envs, checked[name])
+            elif not self._holds_zeros(name, columns, envs):
+                self._write_input(name, columns, envs, torch.zeros(len(envs), len(dofs), dtype=runtime.tc_float,
+                                                                   device=runtime.device))
+        code = _MODES[mode]
         modes = self._sim().inputs(self._solver)["ctrl_mode"].cpu().numpy()  # never differentiable
-        if not (modes[envs[:, None], self.dof_start + dofs] == code).all():  # a new tensor only on a change
-            self._write_input("ctrl_mode", self.dof_start + dofs, envs, torch.full_like(values, float(code)))
+        if not (modes[envs[:, None], columns] == code).all():  # a new tensor only on a change
+            self._write_input("ctrl_mode", columns, envs, torch.full((len(envs), len(dofs)), float(code),
+                                                                     dtype=runtime.tc_float, device=runtime.device))
+
+    def _holds_zeros(self, name, columns, envs):
+        """The input ``name`` is 0 at (envs, columns) and no graph stands behind it."""
+        value = self._sim().inputs(self._solver)[name]
+        if value.requires_grad:
+            return False
+        held = value.cpu().numpy()
+        return not held.any() or not held[envs[:, None], columns].any()  # the first test is cheaper
 
     def control_dofs_force(self, force, dofs_idx_local=None, envs_idx=None):
         """Apply joint forces (N·m or N) during the next steps, until changed."""
-        self._control("force", force, dofs_idx_local, envs_idx, "force")
+        self._control("control_dofs_force", "force", {"ctrl_force": (force, "force")}, dofs_idx_local, envs_idx)
 
     def control_dofs_position(self, position, dofs_idx_local=None, envs_idx=None):
-        """PD servo to target positions: τ = kp·(target − q) − kv·q̇."""
-        self._control("position", position, dofs_idx_local, envs_idx, "position")
+        """PD servo to target positions (rad or m) at rest: τ = kp·(target − q) − kv·q̇, clipped to
+        the force range."""
+        self._control("control_dofs_position", "position", {"ctrl_pos": (position, "position"),
+                                                            "ctrl_vel": (None, "velocity")}, dofs_idx_local, envs_idx)
+
+    def control_dofs_position_velocity(self, position, velocity, dofs_idx_local=None, envs_idx=None):
+        """PD servo to target positions (rad or m) and velocities (rad/s or m/s):
+        τ = kp·(position − q) + kv·(velocity − q̇), clipped to the force range."""
+        self._control("control_dofs_position_velocity", "position",
+                      {"ctrl_pos": (position, "position"), "ctrl_vel": (velocity, "velocity")},
+                      dofs_idx_local, envs_idx)
 
     def control_dofs_velocity(self, velocity, dofs_idx_local=None, envs_idx=None):
-        """Velocity servo: τ = kv·(target − q̇)."""
-        self._control("velocity", velocity, dofs_idx_local, envs_idx, "velocity")
+        """Velocity servo to target velocities (rad/s or m/s): τ = kv·(target − q̇), clipped to the
+        force range."""
+        self._control("control_dofs_velocity", "velocity", {"ctrl_vel": (velocity, "velocity")}, dofs_idx_local,
+                      envs_idx)
 
     def get_dofs_control_force(self, dofs_idx_local=None, envs_idx=None):
-        """The force-control command currently applied (mode 'force' dofs)."""
-        return self._get_dofs_input("ctrl_force", dofs_idx_local, envs_idx)
+        """The actuator force, N·m or N: (n,) or (n_envs, n), as Genesis computes it: each dof's
+        command recomputed from the current state and targets, clipped to the force range — force
+        mode: the command; velocity: kv·(v* − q̇); position: kp·(q* − q) + kv·(v* − q̇). No damping,
+        gravity or limit forces (get_dofs_force has them). Differentiable."""
+        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
+        columns = self.dof_start + dofs
+        read = {name: self._read_input(name, columns, envs_idx) for name in
+                ("ctrl_mode", "ctrl_force", "ctrl_pos", "ctrl_vel", "kp", "kv", "force_lo", "force_hi")}
+        q = self._dofs_position_all(envs_idx)[:, torch.as_tensor(dofs, device=runtime.device)]
+        qd = self._read(self._vel_columns(dofs), envs_idx)
+        servo = read["kv"] * (read["ctrl_vel"] - qd)
+        mode = read["ctrl_mode"]
+        force = torch.where(mode == _MODES["position"], read["kp"] * (read["ctrl_pos"] - q) + servo,
+                            torch.where(mode == _MODES["velocity"], servo, read["ctrl_force"]))
+        return self._out(torch.minimum(torch.maximum(force, read["force_lo"]), read["force_hi"]))
 
     # -- dynamics queries ---------------------------------------------------------------------------
-    def get_mass_mat(self, envs_idx=None):
-        """Joint-space mass matrix without armature, (n_dofs, n_dofs) or (n_envs, n_dofs, n_dofs).
-        Not differentiable (its backward raises)."""
+    def get_dofs_force(self, dofs_idx_local=None, envs_idx=None):
+        """Generalised force on the dofs, N·m or N: (n,) or (n_envs, n): clipped actuator force −
+        damping·q̇ + soft joint-limit forces − bias (gravity, Coriolis, centrifugal), at the current
+        state and inputs: what the next step applies (Genesis returns what its last substep applied,
+        from that substep's start state, and no constraint forces). Not differentiable."""
+        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
+        full = self._sim().dofs_force(self._solver)
+        envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
+        return self._out(full[envs][:, torch.as_tensor(self.dof_start + dofs, device=runtime.device)])
+
+    def get_mass_mat(self, envs_idx=None, decompose=False):
+        """Joint-space mass matrix M with armature on its diagonal (as in Genesis), kg·m² or kg:
+        (n_dofs, n_dofs) or (n_envs, n_dofs, n_dofs); Genesis also adds dt·damping and dt·kv there
+        after a step, ours never. decompose: (L, D_inv) instead, L (…, n, n) unit lower triangular
+        and D_inv (…, n) such that M = Lᵀ·diag(1 / D_inv)·L. Not differentiable."""
         full = self._sim().mass_matrix(self._solver)
         envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
         block = slice(self.dof_start, self.dof_start + self.n_dofs)
-        return self._out(full[envs][:, block, block])
+        armature = self._read_input("armature", self.dof_start + np.arange(self.n_dofs), envs_idx).detach()
+        mass = full[envs][:, block, block] + torch.diag_embed(armature)
+        if not decompose:
+            return self._out(mass)
+        lower, d_inv = _ltdl(mass)
+        return self._out(lower), self._out(d_inv)
 
     def __repr__(self):
         return f"RigidEntity({self.name!r}, n_links={len(self._specs)})"

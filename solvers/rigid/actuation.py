@@ -1,8 +1,10 @@
 """Force stage: controls, PD servos, joint damping and soft joint limits → qfrc_smooth.
 
 Control modes per dof (as in Genesis): 0 force (``control_dofs_force``), 1 position
-(τ = kp·(q* − q) − kv·q̇), 2 velocity (τ = kv·(q̇* − q̇)); the result is clipped to the dof's
-force range. Damping −b·q̇ is passive (and treated implicitly by the solve, as MuJoCo does).
+(τ = kp·(q* − q) + kv·(q̇* − q̇), with q̇* = ``ctrl_vel``: 0 after ``control_dofs_position``,
+the target of ``control_dofs_position_velocity``), 2 velocity (τ = kv·(q̇* − q̇)); the result is
+clipped to the dof's force range. Damping −b·q̇ is passive (and treated implicitly by the solve,
+as MuJoCo does).
 A limit pushes back like a critically damped spring with time constant ``limit_timeconst``,
 scaled by the dof's own inertia M[i, i], and only ever pushes out of the violated bound.
 """
@@ -14,17 +16,23 @@ FORCE, POSITION, VELOCITY = 0, 1, 2
 
 
 @ti.func
+def actuator_force(d: ti.template(), e, i, mode, q, qd):
+    """Dof i's actuator command in env e before clipping."""
+    force = d.ctrl_force[e, i]
+    if mode != FORCE:
+        force = d.kv[e, i] * (d.ctrl_vel[e, i] - qd)
+        if mode == POSITION:
+            force += d.kp[e, i] * (d.ctrl_pos[e, i] - q)
+    return force
+
+
+@ti.func
 def smooth_force(d: ti.template(), s, e, i):
     qd = d.qvel[s, e, i]
     qi = d.dof_q[i]
     q = d.qpos[s, e, ti.max(qi, 0)]  # free-joint dofs have no scalar q; never used for them
     mode = ti.cast(d.ctrl_mode[e, i], ti.i32)
-    force = d.ctrl_force[e, i]
-    if mode == POSITION:
-        force = d.kp[e, i] * (d.ctrl_pos[e, i] - q) - d.kv[e, i] * qd
-    elif mode == VELOCITY:
-        force = d.kv[e, i] * (d.ctrl_vel[e, i] - qd)
-    force = ti.min(ti.max(force, d.force_lo[e, i]), d.force_hi[e, i])
+    force = ti.min(ti.max(actuator_force(d, e, i, mode, q, qd), d.force_lo[e, i]), d.force_hi[e, i])
     force -= d.damping[e, i] * qd
     if d.limits_enabled and qi >= 0:
         stiffness, damping = d.consts[1], d.consts[2]
@@ -65,23 +73,17 @@ def smooth_force_adjoint(d: ti.template(), s, e, i):
             g_q -= g * inertia * stiffness
             g_qd -= g * inertia * damping
         accumulate(d.mass_mat.grad, ti.Vector([s, e, i, i]), g_inertia)
-    force = d.ctrl_force[e, i]
-    if mode == POSITION:
-        force = kp * (d.ctrl_pos[e, i] - q) - kv * qd
-    elif mode == VELOCITY:
-        force = kv * (d.ctrl_vel[e, i] - qd)
+    force = actuator_force(d, e, i, mode, q, qd)
     g_force = g if d.force_lo[e, i] < force and force < d.force_hi[e, i] else 0.0  # a clipped force is constant
-    if mode == POSITION:
-        accumulate(d.kp.grad, ti.Vector([e, i]), g_force * (d.ctrl_pos[e, i] - q))
-        accumulate(d.kv.grad, ti.Vector([e, i]), -g_force * qd)
-        accumulate(d.ctrl_pos.grad, ti.Vector([e, i]), g_force * kp)
-        g_q -= g_force * kp
-        g_qd -= g_force * kv
-    elif mode == VELOCITY:
+    if mode == FORCE:
+        accumulate(d.ctrl_force.grad, ti.Vector([e, i]), g_force)
+    else:  # the velocity term, shared by both servos
         accumulate(d.kv.grad, ti.Vector([e, i]), g_force * (d.ctrl_vel[e, i] - qd))
         accumulate(d.ctrl_vel.grad, ti.Vector([e, i]), g_force * kv)
         g_qd -= g_force * kv
-    else:
-        accumulate(d.ctrl_force.grad, ti.Vector([e, i]), g_force)
+    if mode == POSITION:
+        accumulate(d.kp.grad, ti.Vector([e, i]), g_force * (d.ctrl_pos[e, i] - q))
+        accumulate(d.ctrl_pos.grad, ti.Vector([e, i]), g_force * kp)
+        g_q -= g_force * kp
     accumulate(d.qpos.grad, ti.Vector([s, e, ti.max(qi, 0)]), g_q)
     accumulate(d.qvel.grad, ti.Vector([s, e, i]), g_qd)

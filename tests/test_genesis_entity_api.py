@@ -1,0 +1,440 @@
+"""RigidEntity methods that behave as Genesis 1.4.5's (parity report §Q1, Q3-Q6): the
+``zero_velocity`` keyword of the position setters, a free base's Euler-angle dofs, the actuator
+and generalised dof forces, ``control_dofs_position_velocity`` (with finite-difference gradients
+of its targets) and the mass matrix with armature and its LᵀDL decomposition.
+
+Numbers quoted from Genesis were measured on the same 1-dof pendulum (PENDULUM below).
+"""
+import inspect
+
+import numpy as np
+import pytest
+import torch
+from scipy.spatial.transform import Rotation
+
+import genesis_lite as gs
+from genesis_lite.entities.rotations import euler_xyz_to_quat, quat_to_euler_xyz
+from tests.conftest import asset, pybullet
+
+# A 1-dof pendulum about y: 1 kg at 0.5 m and 0.5 kg at 1 m below the hinge, so gravity pulls with
+# 9.81·(1·0.5 + 0.5·1)·sin q = 9.81·sin q N·m; effort 5 N·m, damping 0.5 N·m·s/rad.
+PENDULUM = """<?xml version="1.0"?>
+<robot name="pend">
+  <link name="world"/>
+  <joint name="weld" type="fixed"><parent link="world"/><child link="base"/><origin xyz="0 0 1"/></joint>
+  <link name="base">
+    <inertial><mass value="1.0"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>
+  </link>
+  <joint name="hinge" type="revolute"><parent link="base"/><child link="arm"/><axis xyz="0 1 0"/>
+    <limit lower="-3" upper="3" effort="5" velocity="10"/><dynamics damping="0.5"/></joint>
+  <link name="arm">
+    <inertial><origin xyz="0 0 -0.5"/><mass value="1.0"/>
+      <inertia ixx="0.001" iyy="0.001" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial>
+  </link>
+  <joint name="tip_j" type="fixed"><parent link="arm"/><child link="tip"/><origin xyz="0 0 -1"/></joint>
+  <link name="tip">
+    <inertial><mass value="0.5"/><inertia ixx="0.001" iyy="0.001" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial>
+  </link>
+</robot>
+"""
+KUKA_FREE = pybullet("kuka_iiwa", "model_free_base.urdf")
+DT = 0.01
+
+
+def _t(values):
+    return torch.as_tensor(np.asarray(values, dtype=np.float64))
+
+
+@pytest.fixture(scope="module")
+def pendulum(tmp_path_factory):
+    """(scene, pendulum): the 1-dof PENDULUM, unbatched, no gradients."""
+    gs.init(precision="64", logging_level="warning")
+    path = tmp_path_factory.mktemp("urdf") / "pendulum.urdf"
+    path.write_text(PENDULUM)
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT))
+    robot = scene.add_entity(gs.morphs.URDF(file=str(path), fixed=True), name="pendulum")
+    scene.build()
+    yield scene, robot
+    scene.destroy()
+
+
+@pytest.fixture(scope="module")
+def two_robots():
+    """(scene, free KUKA, 2-link pendulum) in one scene with n_envs=2, no gradients."""
+    gs.init(precision="64", logging_level="warning")
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT))
+    kuka = scene.add_entity(gs.morphs.URDF(file=KUKA_FREE, fixed=False), name="kuka")
+    other = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True), name="other")
+    scene.build(n_envs=2)
+    yield scene, kuka, other
+    scene.destroy()
+
+
+@pytest.fixture(scope="module")
+def graph():
+    """(scene, 2-link pendulum) with requires_grad, 2 substeps."""
+    gs.init(precision="64", logging_level="warning")
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT, substeps=2, requires_grad=True))
+    robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True), name="pendulum2")
+    scene.build()
+    yield scene, robot
+    scene.destroy()
+
+
+# -- zero_velocity (§Q1) --------------------------------------------------------------------------------
+def _fill_velocities(kuka, other, rng):
+    kuka.set_dofs_velocity(_t(rng.uniform(-1, 1, (2, kuka.n_dofs))))
+    other.set_dofs_velocity(_t(rng.uniform(-1, 1, (2, other.n_dofs))))
+    return kuka.get_dofs_velocity().clone(), other.get_dofs_velocity().clone()
+
+
+SETTERS = {  # name → (call with envs_idx and zero_velocity), each writing something for one env
+    "set_dofs_position": lambda r, envs, **kw: r.set_dofs_position(_t([[0.3]]), [6], envs, **kw),
+    "set_qpos": lambda r, envs, **kw: r.set_qpos(_t([[0.2, -0.1]]), [7, 8], envs, **kw),
+    "set_pos": lambda r, envs, **kw: r.set_pos(_t([[0.1, 0.2, 0.5]]), envs, **kw),
+    "set_quat": lambda r, envs, **kw: r.set_quat(_t([[0.0, 1.0, 0.0, 0.0]]), envs, **kw),
+}
+
+
+@pytest.mark.parametrize("setter", list(SETTERS))
+def test_zero_velocity_zeroes_every_dof_of_the_entity_in_the_selected_envs(f64, two_robots, setter):
+    scene, kuka, other = two_robots
+    scene.reset()
+    rng = np.random.default_rng(0)
+    kuka_v, other_v = _fill_velocities(kuka, other, rng)
+    SETTERS[setter](kuka, [1])  # default zero_velocity=True: all 13 dofs of env 1, whatever was set
+    assert torch.equal(kuka.get_dofs_velocity()[1], torch.zeros(kuka.n_dofs, dtype=torch.float64))
+    assert torch.equal(kuka.get_dofs_velocity()[0], kuka_v[0])
+    assert torch.equal(other.get_dofs_velocity(), other_v), f"{setter} touched another entity"
+
+    kuka_v, _ = _fill_velocities(kuka, other, rng)
+    SETTERS[setter](kuka, [0], zero_velocity=False)
+    assert torch.equal(kuka.get_dofs_velocity(), kuka_v)
+
+    keyword = inspect.signature(getattr(kuka, setter)).parameters["zero_velocity"]
+    assert keyword.kind is inspect.Parameter.KEYWORD_ONLY and keyword.default is True  # as in Genesis
+
+
+def test_zero_velocity_all_envs_by_default(f64, two_robots):
+    scene, kuka, other = two_robots
+    scene.reset()
+    _fill_velocities(kuka, other, np.random.default_rng(1))
+    kuka.set_dofs_position(_t([[0.1], [0.2]]), [7])
+    assert not kuka.get_dofs_velocity().any()
+    assert other.get_dofs_velocity().all()
+
+
+def test_zero_velocity_cuts_earlier_velocities_out_of_the_graph(f64, graph):
+    """With gradients the zeroed velocities are constants: a velocity set before a position setter
+    gets no gradient (it no longer acts); with zero_velocity=False it does."""
+    scene, robot = graph
+    grads = {}
+    for zero in (True, False):
+        scene.reset()
+        q0 = _t([0.3, -0.2]).requires_grad_(True)
+        v0 = _t([0.5, 1.0]).requires_grad_(True)
+        robot.set_dofs_velocity(v0)
+        robot.set_dofs_position(q0, zero_velocity=zero)
+        if zero:
+            assert torch.equal(robot.get_dofs_velocity().detach(), torch.zeros(2, dtype=torch.float64))
+        for _ in range(5):
+            scene.step()
+        loss = (robot.get_dofs_position() ** 2).sum() + robot.get_dofs_velocity().sum()
+        grads[zero] = torch.autograd.grad(loss, (q0, v0), allow_unused=True)
+    assert grads[True][1] is None and grads[True][0].abs().min() > 0
+    assert grads[False][1] is not None and grads[False][1].abs().min() > 0
+
+
+# -- a free base's Euler-angle dofs (§Q3) --------------------------------------------------------------
+def _wxyz(rotation):
+    xyzw = rotation.as_quat()
+    return np.concatenate([xyzw[..., 3:], xyzw[..., :3]], axis=-1)
+
+
+def _same_rotation(q1, q2, tol):
+    """Unit quaternions equal up to sign."""
+    return min(np.abs(q1 - q2).max(), np.abs(q1 + q2).max()) <= tol
+
+
+def test_euler_maps_match_scipy_intrinsic_xyz(f64):
+    rng = np.random.default_rng(0)
+    angles = np.stack([rng.uniform(-3, 3, 200), rng.uniform(-1.5, 1.5, 200), rng.uniform(-3, 3, 200)], axis=1)
+    quat = euler_xyz_to_quat(_t(angles)).numpy()
+    ref = _wxyz(Rotation.from_euler("XYZ", angles))
+    assert all(_same_rotation(a, b, 1e-14) for a, b in zip(quat, ref))
+    back = quat_to_euler_xyz(_t(ref) * 2.5).numpy()  # any norm
+    assert np.abs(back - Rotation.from_euler("XYZ", angles).as_euler("XYZ")).max() <= 1e-12
+    assert np.abs(back - angles).max() <= 1e-12  # get ∘ set is the identity away from gimbal lock
+    # Genesis: set_dofs_position([0, 0, 0, .1, .2, .3]) stores the quaternion (0.98186, 0.06407, 0.09116, 0.15344)
+    assert np.allclose(euler_xyz_to_quat(_t([0.1, 0.2, 0.3])).numpy(), [0.98186, 0.06407, 0.09116, 0.15344], atol=1e-5)
+
+
+def test_euler_maps_are_differentiable(f64):
+    rng = np.random.default_rng(1)
+    angles = _t(rng.uniform(-1.2, 1.2, (4, 3))).requires_grad_(True)
+    assert torch.autograd.gradcheck(euler_xyz_to_quat, (angles,), eps=1e-6, atol=1e-9)
+    quat = _t(rng.normal(size=(4, 4))).requires_grad_(True)
+    assert torch.autograd.gradcheck(quat_to_euler_xyz, (quat,), eps=1e-6, atol=1e-9)
+    # at gimbal lock only a + c is defined (Genesis: a = 0); the gradient stays finite
+    locked = euler_xyz_to_quat(_t([[0.4, np.pi / 2, 0.3]])).requires_grad_(True)
+    angles = quat_to_euler_xyz(locked)
+    assert np.allclose(angles.detach().numpy(), [[0.0, np.pi / 2, 0.7]], atol=1e-7)
+    angles.sum().backward()
+    assert torch.isfinite(locked.grad).all()
+    # quarter turns about y (exact lock: cos b = 0) and x (atan2(0, 0) in the lock formula)
+    for quat, expected in (([1.0, 0.0, 1.0, 0.0], [0.0, np.pi / 2, 0.0]),
+                           ([1.0, 1.0, 0.0, 0.0], [np.pi / 2, 0.0, 0.0])):
+        quarter = _t(quat).requires_grad_(True)
+        angles = quat_to_euler_xyz(quarter)
+        assert np.allclose(angles.detach().numpy(), expected, rtol=0, atol=1e-15)
+        angles.sum().backward()
+        assert torch.isfinite(quarter.grad).all(), quat
+
+
+def test_free_base_dofs_are_origin_and_euler_angles(f64, two_robots):
+    scene, kuka, _ = two_robots
+    scene.reset()
+    # Genesis: a base at extrinsic euler (30, 45, 60)° has dofs 3-5 = (-0.4293, 0.8319, 1.0181)
+    quat = _wxyz(Rotation.from_euler("xyz", [30, 45, 60], degrees=True))
+    kuka.set_quat(_t([quat, quat]))
+    assert np.allclose(kuka.get_dofs_position()[:, 3:6].numpy(), [-0.4293, 0.8319, 1.0181], atol=1e-4)
+    rng = np.random.default_rng(2)
+    dofs = rng.uniform(-1.2, 1.2, (2, kuka.n_dofs))
+    kuka.set_dofs_position(_t(dofs))
+    qpos = kuka.get_qpos().numpy()
+    assert np.array_equal(qpos[:, :3], dofs[:, :3])
+    assert np.allclose(kuka.get_pos().numpy(), dofs[:, :3], rtol=0, atol=1e-15)
+    for e in range(2):
+        assert _same_rotation(qpos[e, 3:7], _wxyz(Rotation.from_euler("XYZ", dofs[e, 3:6])), 1e-14)
+    assert np.abs(kuka.get_dofs_position().numpy() - dofs).max() <= 1e-12
+
+
+def test_free_base_partial_writes_keep_the_other_dofs(f64, two_robots):
+    scene, kuka, _ = two_robots
+    scene.reset()
+    dofs = np.random.default_rng(3).uniform(-1.2, 1.2, (2, kuka.n_dofs))
+    kuka.set_dofs_position(_t(dofs))
+    qpos = kuka.get_qpos().clone()
+    kuka.set_dofs_position(_t([[0.7]]), [4], envs_idx=[1])  # one angle of env 1
+    expected = dofs.copy()
+    expected[1, 4] = 0.7
+    assert np.abs(kuka.get_dofs_position().numpy() - expected).max() <= 1e-12
+    assert torch.equal(kuka.get_qpos()[0], qpos[0])
+    assert torch.equal(kuka.get_qpos()[1, list(range(3)) + list(range(7, kuka.n_qs))],
+                       qpos[1, list(range(3)) + list(range(7, kuka.n_qs))])
+    before = kuka.get_qpos().clone()
+    kuka.set_dofs_position(_t([[1.5, 0.25], [2.5, -0.25]]), [0, 8])  # linear dofs leave the quaternion alone
+    after = kuka.get_qpos()
+    assert torch.equal(after[:, 3:7], before[:, 3:7])
+    assert after[:, 0].tolist() == [1.5, 2.5]
+
+
+def test_set_pos_on_a_fixed_entity_says_what_to_do(f64, pendulum):
+    _, robot = pendulum
+    for call in (lambda: robot.set_pos([0.0, 0.0, 1.0]), lambda: robot.set_quat([1.0, 0.0, 0.0, 0.0])):
+        with pytest.raises(gs.InvalidInputError) as info:
+            call()
+        message = str(info.value)
+        for part in ("entity 'pendulum'", "free base", "got a fixed one", "pos/euler", "fixed=False to move it"):
+            assert part in message, message
+
+
+# -- get_dofs_control_force, control_dofs_position_velocity (§Q4, Q6) -----------------------------------
+def test_control_force_is_the_command_at_the_current_state(f64, pendulum):
+    scene, robot = pendulum
+    scene.reset()
+    assert robot.get_dofs_control_force().tolist() == [0.0]  # force mode, command 0
+    robot.set_dofs_position([0.3])
+    robot.control_dofs_position([0.0])
+    assert robot.get_dofs_control_force().tolist() == [-5.0]  # Genesis: kp·(0 − 0.3) = −30, clipped to ±5
+    robot.set_dofs_force_range([-1000.0], [1000.0])
+    try:
+        assert np.isclose(float(robot.get_dofs_control_force()), -30.0, rtol=0, atol=1e-12)
+        scene.step()  # from then on, the command at the new state (Genesis: −26.2185 after one step)
+        q, v = float(robot.get_dofs_position()), float(robot.get_dofs_velocity())
+        assert np.isclose(float(robot.get_dofs_control_force()), 100 * (0 - q) - 10 * v, rtol=0, atol=1e-12)
+        robot.control_dofs_velocity([1.0])
+        assert np.isclose(float(robot.get_dofs_control_force()), 10 * (1.0 - v), rtol=0, atol=1e-12)
+        robot.control_dofs_position_velocity([0.5], [2.0])
+        assert np.isclose(float(robot.get_dofs_control_force()), 100 * (0.5 - q) + 10 * (2.0 - v), rtol=0, atol=1e-12)
+        robot.control_dofs_position([0.5])  # the velocity target goes back to 0
+        assert np.isclose(float(robot.get_dofs_control_force()), 100 * (0.5 - q) - 10 * v, rtol=0, atol=1e-12)
+        robot.control_dofs_force([3.0])
+        assert robot.get_dofs_control_force().tolist() == [3.0]
+    finally:
+        robot.set_dofs_force_range([-5.0], [5.0])
+    robot.control_dofs_position_velocity([0.5], [2.0])
+    assert robot.get_dofs_control_force().tolist() == [5.0]  # Genesis: clipped to the effort 5
+
+
+def test_control_force_mixed_modes_batched(f64, two_robots):
+    scene, kuka, other = two_robots
+    scene.reset()
+    rng = np.random.default_rng(4)
+    q, v = rng.uniform(-1, 1, (2, 2)), rng.uniform(-1, 1, (2, 2))
+    other.set_dofs_position(_t(q))
+    other.set_dofs_velocity(_t(v))
+    kp, kv = other.get_dofs_kp().numpy(), other.get_dofs_kv().numpy()
+    other.control_dofs_position_velocity(_t([[0.2], [0.3]]), _t([[0.5], [-0.5]]), [0])
+    other.control_dofs_velocity(_t([[1.0]]), [1], envs_idx=[1])
+    other.control_dofs_force(_t([[0.7]]), [1], envs_idx=[0])
+    expected = np.array([
+        [kp[0, 0] * (0.2 - q[0, 0]) + kv[0, 0] * (0.5 - v[0, 0]), 0.7],
+        [kp[1, 0] * (0.3 - q[1, 0]) + kv[1, 0] * (-0.5 - v[1, 0]), kv[1, 1] * (1.0 - v[1, 1])]])
+    lo, hi = other.get_dofs_force_range()
+    expected = np.clip(expected, lo.numpy(), hi.numpy())
+    assert np.abs(other.get_dofs_control_force().numpy() - expected).max() <= 1e-12
+    assert np.abs(other.get_dofs_control_force([1], envs_idx=[1]).numpy() - expected[1:, 1:]).max() <= 1e-12
+
+
+def test_control_force_is_differentiable(f64, graph):
+    scene, robot = graph
+    scene.reset()
+    target = _t([0.1, -0.1]).requires_grad_(True)
+    robot.control_dofs_position(target)
+    (grad,) = torch.autograd.grad(robot.get_dofs_control_force().sum(), target)
+    assert torch.equal(grad, robot.get_dofs_kp().detach())
+
+
+def _rollout(scene, robot, pos_targets, vel_targets, kv, horizon=30):
+    """Loss of a servoed rollout of the 2-link pendulum (kp 10; moderate gains stay stable)."""
+    scene.reset()
+    robot.set_dofs_position([0.3, -0.4])
+    robot.set_dofs_velocity([0.5, -0.2])
+    robot.set_dofs_kp([10.0, 10.0])
+    robot.set_dofs_kv(kv)
+    loss = 0.0
+    for t in range(horizon):
+        robot.control_dofs_position_velocity(pos_targets[t], vel_targets[t])
+        scene.step()
+        loss = loss + robot.get_links_pos()[-1].sin().sum() * 0.1
+    return loss + (robot.get_dofs_position() ** 2).sum() + robot.get_dofs_velocity().cos().sum()
+
+
+@pytest.mark.parametrize("which", [0, 1, 2], ids=["position", "velocity", "kv"])
+def test_position_velocity_targets_gradient_matches_finite_differences(f64, graph, which):
+    """The position servo's velocity target and kv through kv·(v* − q̇): hand-written adjoint vs
+    fourth-order central differences (relative to the gradient's norm, as in test_gradients)."""
+    scene, robot = graph
+    rng = np.random.default_rng(5)
+    inputs = [_t(rng.uniform(-0.5, 0.5, (30, 2))), _t(rng.uniform(-1, 1, (30, 2))), _t([0.6, 0.9])]
+    direction = _t(rng.normal(size=inputs[which].shape))
+    direction /= direction.norm()
+    x = [t.clone().requires_grad_(k == which) for k, t in enumerate(inputs)]
+    _rollout(scene, robot, *x).backward()
+    grad = x[which].grad
+    analytic = float((grad * direction).sum())
+    eps = 1e-6
+    with torch.no_grad():
+        f = {}
+        for k in (-2, -1, 1, 2):
+            moved = list(inputs)
+            moved[which] = inputs[which] + k * eps * direction
+            f[k] = float(_rollout(scene, robot, *moved))
+    numeric = (f[-2] - 8 * f[-1] + 8 * f[1] - f[2]) / (12 * eps)
+    assert analytic != 0.0
+    assert abs(analytic - numeric) <= 1e-6 * float(grad.norm()), (analytic, numeric)
+
+
+# -- get_dofs_force (§Q4) ------------------------------------------------------------------------------
+def test_dofs_force_of_the_pendulum_is_analytic(f64, pendulum):
+    scene, robot = pendulum
+    scene.reset()
+    q, v = 0.3, 0.7
+    robot.set_dofs_position([q])
+    robot.set_dofs_velocity([v])
+    gravity = 9.81 * np.sin(q)  # N·m, pulling back to q = 0
+    assert np.isclose(float(robot.get_dofs_force()), -0.5 * v - gravity, rtol=0, atol=1e-12)  # no control
+    robot.control_dofs_position([0.0])
+    assert np.isclose(float(robot.get_dofs_force()), -5.0 - 0.5 * v - gravity, rtol=0, atol=1e-12)  # clipped
+    robot.set_dofs_force_range([-1000.0], [1000.0])
+    try:
+        command = 100 * (0.0 - q) - 10 * v
+        assert np.isclose(float(robot.get_dofs_force()), command - 0.5 * v - gravity, rtol=0, atol=1e-12)
+    finally:
+        robot.set_dofs_force_range([-5.0], [5.0])
+
+
+def test_dofs_force_is_what_the_next_step_applies(f64, two_robots):
+    """q̇' = q̇ + h·A⁻¹·get_dofs_force() with A = get_mass_mat() + h·diag(damping) (semi-implicit
+    Euler, implicit damping), and the actuator's share is get_dofs_control_force()."""
+    scene, kuka, other = two_robots
+    scene.reset()
+    rng = np.random.default_rng(6)
+    for robot in (kuka, other):
+        robot.set_dofs_position(_t(rng.uniform(-1, 1, (2, robot.n_dofs))))
+        robot.set_dofs_velocity(_t(rng.uniform(-1, 1, (2, robot.n_dofs))))
+    kuka_forces = _t(rng.uniform(-5, 5, (2, kuka.n_dofs)))
+
+    def control():
+        other.control_dofs_position_velocity(_t([[0.2], [0.3]]), _t([[0.5], [-0.5]]), [0])
+        other.control_dofs_velocity(_t([[1.0], [-1.0]]), [1])
+        kuka.control_dofs_force(kuka_forces)
+
+    control()
+    predicted = {}
+    for robot in (kuka, other):
+        force, actuator = robot.get_dofs_force().numpy(), robot.get_dofs_control_force().numpy()
+        damping, qvel = robot.get_dofs_damping().numpy(), robot.get_dofs_velocity().numpy()
+        matrix = robot.get_mass_mat().numpy() + DT * np.eye(robot.n_dofs) * damping[:, None, :]
+        predicted[robot.name] = qvel + DT * np.linalg.solve(matrix, force[..., None])[..., 0]
+        robot.control_dofs_force(torch.zeros(2, robot.n_dofs, dtype=torch.float64))
+        assert np.abs(force - robot.get_dofs_force().numpy() - actuator).max() <= 1e-10, robot.name
+    control()
+    scene.step()
+    for robot in (kuka, other):
+        err = np.abs(robot.get_dofs_velocity().numpy() - predicted[robot.name]).max()
+        assert err <= 1e-10, f"{robot.name}: max |q̇' − predicted| = {err:.3g}"
+
+
+def test_dofs_force_of_a_free_base_at_rest_is_its_weight(f64, two_robots):
+    scene, kuka, _ = two_robots
+    scene.reset()
+    weight = kuka.get_mass().numpy() * -9.81  # N, on the world-linear dofs
+    force = kuka.get_dofs_force().numpy()
+    assert np.abs(force[:, :2]).max() <= 1e-10
+    assert np.abs(force[:, 2] - weight).max() <= 1e-10
+
+
+def test_dofs_force_is_not_differentiable(f64, graph):
+    scene, robot = graph
+    scene.reset()
+    robot.control_dofs_force(_t([0.1, 0.2]).requires_grad_(True))  # only an input requires grad
+    with pytest.raises(gs.GradientError, match="get_dofs_force"):
+        robot.get_dofs_force().sum().backward()
+
+
+# -- get_mass_mat (§Q5) --------------------------------------------------------------------------------
+def test_mass_matrix_includes_armature(f64, pendulum):
+    scene, robot = pendulum
+    scene.reset()
+    assert robot.get_dofs_armature().tolist() == [0.0]
+    assert np.isclose(float(robot.get_mass_mat()), 0.752, rtol=0, atol=1e-12)  # 1·0.5² + 0.001 + 0.5·1² + 0.001
+    robot.set_dofs_armature([0.1])
+    try:
+        assert np.isclose(float(robot.get_mass_mat()), 0.852, rtol=0, atol=1e-12)  # Genesis: 0.752 + armature
+    finally:
+        robot.set_dofs_armature([0.0])
+
+
+def test_mass_matrix_decomposition(f64, two_robots):
+    scene, kuka, other = two_robots
+    scene.reset()
+    rng = np.random.default_rng(7)
+    kuka.set_dofs_position(_t(rng.uniform(-1, 1, (2, kuka.n_dofs))))
+    armature = kuka.get_dofs_armature().clone()
+    kuka.set_dofs_armature(_t(rng.uniform(0.01, 0.1, (2, kuka.n_dofs))))
+    try:
+        mass = kuka.get_mass_mat()
+        lower, d_inv = kuka.get_mass_mat(decompose=True)
+        assert lower.shape == (2, kuka.n_dofs, kuka.n_dofs) and d_inv.shape == (2, kuka.n_dofs)
+        assert torch.equal(lower.diagonal(dim1=-2, dim2=-1), torch.ones(2, kuka.n_dofs, dtype=torch.float64))
+        assert torch.equal(lower.triu(1), torch.zeros_like(lower))
+        rebuilt = lower.transpose(-2, -1) @ torch.diag_embed(1.0 / d_inv) @ lower
+        assert (rebuilt - mass).abs().max() <= 1e-12 * mass.abs().max()
+        one_lower, one_d_inv = kuka.get_mass_mat(envs_idx=[1], decompose=True)
+        assert one_lower.shape == (1, kuka.n_dofs, kuka.n_dofs) and torch.allclose(one_d_inv[0], d_inv[1])
+    finally:
+        kuka.set_dofs_armature(armature)
+    lower, d_inv = other.get_mass_mat(decompose=True)  # a two-link chain: d_inv[1] = 1 / M[1, 1]
+    assert torch.allclose(d_inv[:, 1], 1.0 / other.get_mass_mat()[:, 1, 1], rtol=1e-14, atol=0)
