@@ -41,7 +41,8 @@ def main():
             requires_grad=True,  # enable differentiability
         ),
     )
-    robot = scene.add_entity(gs.morphs.URDF(file=os.path.join(ASSETS, "arm3.urdf"), fixed=True))
+    # "ee" hangs on a fixed joint: keep it as a link (fixed-joint links are merged by default)
+    robot = scene.add_entity(gs.morphs.URDF(file=os.path.join(ASSETS, "arm3.urdf"), fixed=True, links_to_keep=["ee"]))
     scene.build()
     print(f"built in {time.time() - start:.1f} s: {robot.n_dofs} dofs "
           f"({', '.join(j.name for j in robot.joints if j.n_dofs)})")

@@ -9,14 +9,21 @@ from .solvers.core import InvalidInputError
 @dataclass
 class Rigid:
     """A rigid body. rho: density, kg/m³ (used where a link has no inertial);
-    friction: Coulomb coefficient used by contacts (None: the solver default)."""
+    friction: Coulomb coefficient of every collision shape of the entity, in [0.01, 5] as Genesis
+    (None: the asset's, e.g. a URDF link's <contact><lateral_friction>, else 1.0). Kept in the
+    model for the contact stage: no contact forces are computed yet."""
     rho: float = 200.0
     friction: float = None
 
     def __post_init__(self):
-        if not (np.isscalar(self.rho) and np.isfinite(self.rho) and self.rho > 0):
-            raise InvalidInputError(f"materials.Rigid: argument 'rho' must be a positive finite number, got {self.rho!r}")
-        if self.friction is not None and not (np.isscalar(self.friction) and np.isfinite(self.friction)
-                                              and self.friction >= 0):
-            raise InvalidInputError(
-                f"materials.Rigid: argument 'friction' must be a finite number ≥ 0, got {self.friction!r}")
+        if not (_is_real(self.rho) and np.isfinite(self.rho) and self.rho > 0):
+            raise InvalidInputError(f"materials.Rigid: argument 'rho' must be a positive finite number, "
+                                    f"got {self.rho!r}")
+        if self.friction is not None and not (_is_real(self.friction) and 0.01 <= self.friction <= 5.0):
+            raise InvalidInputError(f"materials.Rigid: argument 'friction' must be a number in [0.01, 5.0] "
+                                    f"(or None), got {self.friction!r}")
+
+
+def _is_real(value):
+    """A real number (not a bool, string or array)."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))

@@ -64,9 +64,16 @@ class URDF(Morph):
     """A robot from a URDF file; mesh paths may be relative or ``package://``.
 
     default_armature: armature (kg·m² or kg) of every dof, as URDF has no tag for it. Genesis
-    defaults to 0.1; 0 here, so that the dynamics are the file's (and MuJoCo's)."""
+    defaults to 0.1; 0 here, so that the dynamics are the file's (and MuJoCo's).
+    merge_fixed_links: merge every link attached by a fixed joint into its parent, as Genesis
+    (and MuJoCo) do: one rigid body, same physics, fewer links. The merged link keeps the
+    parent's name; the merged-away names no longer exist. The root link is never merged.
+    links_to_keep: names of links that must not be merged away (sequence of str).
+    (solvers/rigid/merge.py says how, and where the link order differs from Genesis's.)"""
     file: str = None
     default_armature: float = 0.0
+    merge_fixed_links: bool = True
+    links_to_keep: tuple = ()
 
     def _check(self):
         if not isinstance(self.file, str) or not self.file:
@@ -78,6 +85,14 @@ class URDF(Morph):
         if not np.isfinite(armature) or armature < 0:
             raise InvalidInputError(f"URDF: argument 'default_armature' must be a finite number ≥ 0 (kg·m² or kg), "
                                     f"got {self.default_armature!r}")
+        if not isinstance(self.merge_fixed_links, (bool, np.bool_)):
+            raise InvalidInputError(f"URDF: argument 'merge_fixed_links' must be True or False, "
+                                    f"got {self.merge_fixed_links!r}")
+        keep = self.links_to_keep
+        if not isinstance(keep, (list, tuple, set, frozenset)) or not all(isinstance(name, str) for name in keep):
+            raise InvalidInputError(f"URDF: argument 'links_to_keep' must be a sequence of link names (str), "
+                                    f"got {keep!r}")
+        self.merge_fixed_links, self.links_to_keep = bool(self.merge_fixed_links), tuple(keep)
 
 
 @dataclass

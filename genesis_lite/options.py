@@ -1,5 +1,5 @@
 """Scene options (Genesis names). Values are validated when the options are made."""
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -59,3 +59,193 @@ class RigidOptions:
 
     def __post_init__(self):
         _check_positive("RigidOptions", "limit_timeconst", self.limit_timeconst)
+
+
+# -- visualisation (no viewer or camera exists yet: these are validated and stored for them) ---------
+
+def _check_bool(owner, name, value):
+    if not isinstance(value, (bool, np.bool_)):
+        raise InvalidInputError(f"{owner}: argument '{name}' must be True or False, got {value!r}")
+    return bool(value)
+
+
+def _check_optional(check, owner, name, value, *args):
+    return None if value is None else check(owner, name, value, *args)
+
+
+def _is_positive_int(value):
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)) and value > 0
+
+
+def _check_positive_int(owner, name, value):
+    if not _is_positive_int(value):
+        raise InvalidInputError(f"{owner}: argument '{name}' must be a positive integer, got {value!r}")
+    return int(value)
+
+
+def _check_float(owner, name, value, lo, hi, what):
+    """A finite number in the open interval (lo, hi)."""
+    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+    if not (ok and np.isfinite(value) and lo < value < hi):
+        raise InvalidInputError(f"{owner}: argument '{name}' must be {what}, got {value!r}")
+    return float(value)
+
+
+def _check_color(owner, name, value):
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        arr = np.full(0, np.nan)
+    if arr.shape != (3,) or not np.all((arr >= 0) & (arr <= 1)):
+        raise InvalidInputError(f"{owner}: argument '{name}' must be 3 numbers in [0, 1] (RGB), got {value!r}")
+    return tuple(float(v) for v in arr)
+
+
+def _check_choice(owner, name, value, choices):
+    if value not in choices:
+        raise InvalidInputError(f"{owner}: argument '{name}' must be one of {list(choices)}, got {value!r}")
+    return value
+
+
+@dataclass
+class ViewerOptions:
+    """The interactive viewer's options (Genesis 1.4.5's names and defaults). No viewer exists yet:
+    ``gs.Scene(show_viewer=True)`` raises; these are validated and kept for it.
+
+    res: (2,) pixels or None (the display's). run_in_thread: None (platform default) or bool.
+    refresh_rate: frames/s. realtime_factor: playback speed (1.0: real time) or None (as fast
+    as possible). camera_pos, camera_lookat (m), camera_up: the camera pose (3,) each.
+    camera_fov: vertical field of view, degrees. enable_help_text, enable_default_keybinds,
+    enable_gui: viewer overlays. max_FPS: deprecated alias of refresh_rate (as Genesis).
+    """
+    res: tuple = None
+    run_in_thread: bool = None
+    refresh_rate: int = 60
+    realtime_factor: float = 1.0
+    camera_pos: tuple = (3.5, 0.5, 2.5)
+    camera_lookat: tuple = (0.0, 0.0, 0.5)
+    camera_up: tuple = (0.0, 0.0, 1.0)
+    camera_fov: float = 40
+    enable_help_text: bool = True
+    enable_default_keybinds: bool = True
+    enable_gui: bool = False
+    max_FPS: int = None
+
+    def __post_init__(self):
+        owner = "ViewerOptions"
+        if self.res is not None:
+            pair = isinstance(self.res, (list, tuple)) and len(self.res) == 2
+            if not (pair and all(map(_is_positive_int, self.res))):
+                raise InvalidInputError(f"{owner}: argument 'res' must be 2 positive integers (pixels) or None, "
+                                        f"got {self.res!r}")
+            self.res = tuple(int(v) for v in self.res)
+        self.run_in_thread = _check_optional(_check_bool, owner, "run_in_thread", self.run_in_thread)
+        self.refresh_rate = _check_positive_int(owner, "refresh_rate", self.refresh_rate)
+        self.realtime_factor = _check_optional(_check_float, owner, "realtime_factor", self.realtime_factor,
+                                               0.0, np.inf, "a positive finite number or None")
+        for name in ("camera_pos", "camera_lookat", "camera_up"):
+            setattr(self, name, _check_vec3(owner, name, getattr(self, name)))
+        if not np.any(self.camera_up):
+            raise InvalidInputError(f"{owner}: argument 'camera_up' must be a non-zero vector, got {self.camera_up}")
+        self.camera_fov = _check_float(owner, "camera_fov", self.camera_fov, 0.0, 180.0,
+                                       "a number of degrees in (0, 180)")
+        for name in ("enable_help_text", "enable_default_keybinds", "enable_gui"):
+            setattr(self, name, _check_bool(owner, name, getattr(self, name)))
+        if self.max_FPS is not None:
+            self.max_FPS = _check_positive_int(owner, "max_FPS", self.max_FPS)
+            if self.refresh_rate not in (60, self.max_FPS):  # 60: the default, i.e. not set
+                raise InvalidInputError(f"{owner}: arguments 'max_FPS' (deprecated) and 'refresh_rate' are the "
+                                        f"same setting; give only 'refresh_rate', got {self.max_FPS} and "
+                                        f"{self.refresh_rate}")
+            self.refresh_rate = self.max_FPS
+
+
+_LIGHT_KEYS = {"directional": ("dir", "color", "intensity"), "point": ("pos", "color", "intensity"),
+               "ambient": ("color", "intensity")}
+
+
+def _default_lights():
+    return [{"type": "directional", "dir": (-1.0, -1.0, -1.0), "color": (1.0, 1.0, 1.0), "intensity": 5.0}]
+
+
+def _check_lights(owner, value):
+    """A list of light dicts: {"type": "directional", "dir", "color", "intensity"}, {"type": "point",
+    "pos", "color", "intensity"} or {"type": "ambient", "color", "intensity"} (Genesis's fields)."""
+    if not isinstance(value, (list, tuple)):
+        raise InvalidInputError(f"{owner}: argument 'lights' must be a list of light dicts, got {value!r}")
+    lights = []
+    for k, light in enumerate(value):
+        kind = light.get("type", "directional") if isinstance(light, dict) else None
+        keys = _LIGHT_KEYS.get(kind)
+        if keys is None or set(light) - {"type", *keys} or set(keys) - set(light):
+            raise InvalidInputError(f"{owner}: argument 'lights[{k}]' must be a dict with 'type' one of "
+                                    f"{list(_LIGHT_KEYS)} and exactly the keys of that type {_LIGHT_KEYS}, "
+                                    f"got {light!r}")
+        lights.append({"type": kind, **{name: _check_light_value(owner, f"lights[{k}].{name}", light[name])
+                                        for name in keys}})
+    return lights
+
+
+def _check_light_value(owner, name, value):
+    if name.endswith(".color"):
+        return _check_color(owner, name, value)
+    if name.endswith(".intensity"):
+        return _check_float(owner, name, value, -np.inf, np.inf, "a finite number")
+    return _check_vec3(owner, name, value)  # dir or pos
+
+
+@dataclass
+class VisOptions:
+    """What is drawn, whatever the viewer or camera (Genesis 1.4.5's names and defaults). No
+    renderer exists yet: these are validated and kept for it.
+
+    show_world_frame / show_link_frame / show_cameras: draw those frames (sizes in m).
+    shadow, plane_reflection: rendering effects. split_envs: cameras render each env on its
+    own (else all envs side by side, at the offsets of ``scene.build(env_spacing=…)``).
+    background_color, ambient_light: RGB in [0, 1]. visualize_{mpm,sph,pbd}_boundary: solver
+    bounds. segmentation_level: "entity" | "link" | "geom". render_particle_as: "sphere" | "tet";
+    particle_size_scale (> 0). contact_force_scale: m/N of contact arrows (> 0).
+    n_support_neighbors: particles per visual vertex. rendered_envs_idx: env indices or None
+    (all; checked against n_envs at build). lights: list of light dicts (see _check_lights).
+    """
+    show_world_frame: bool = False
+    world_frame_size: float = 1.0
+    show_link_frame: bool = False
+    link_frame_size: float = 0.2
+    show_cameras: bool = False
+    shadow: bool = True
+    plane_reflection: bool = False
+    split_envs: bool = False
+    background_color: tuple = (0.04, 0.08, 0.12)
+    ambient_light: tuple = (0.1, 0.1, 0.1)
+    visualize_mpm_boundary: bool = False
+    visualize_sph_boundary: bool = False
+    visualize_pbd_boundary: bool = False
+    segmentation_level: str = "link"
+    render_particle_as: str = "sphere"
+    particle_size_scale: float = 1.0
+    contact_force_scale: float = 0.01
+    n_support_neighbors: int = 12
+    rendered_envs_idx: tuple = None
+    lights: list = field(default_factory=_default_lights)
+
+    def __post_init__(self):
+        owner = "VisOptions"
+        for name in ("show_world_frame", "show_link_frame", "show_cameras", "shadow", "plane_reflection",
+                     "split_envs", "visualize_mpm_boundary", "visualize_sph_boundary", "visualize_pbd_boundary"):
+            setattr(self, name, _check_bool(owner, name, getattr(self, name)))
+        for name in ("world_frame_size", "link_frame_size", "particle_size_scale", "contact_force_scale"):
+            setattr(self, name, _check_float(owner, name, getattr(self, name), 0.0, np.inf, "a positive finite number"))
+        for name in ("background_color", "ambient_light"):
+            setattr(self, name, _check_color(owner, name, getattr(self, name)))
+        _check_choice(owner, "segmentation_level", self.segmentation_level, ("entity", "link", "geom"))
+        _check_choice(owner, "render_particle_as", self.render_particle_as, ("sphere", "tet"))
+        self.n_support_neighbors = _check_positive_int(owner, "n_support_neighbors", self.n_support_neighbors)
+        if self.rendered_envs_idx is not None:
+            idx = self.rendered_envs_idx
+            if isinstance(idx, (str, bytes)) or not hasattr(idx, "__iter__") or \
+                    not all(isinstance(i, (int, np.integer)) and not isinstance(i, bool) and i >= 0 for i in idx):
+                raise InvalidInputError(f"{owner}: argument 'rendered_envs_idx' must be env indices (integers ≥ 0) "
+                                        f"or None, got {idx!r}")
+            self.rendered_envs_idx = tuple(int(i) for i in idx)
+        self.lights = _check_lights(owner, self.lights)

@@ -13,6 +13,17 @@ from . import autograd
 from .solvers.core import GradientError, SimulationError
 
 
+def _restored(table, source, envs):
+    """``source`` (B, W) when ``envs`` is None, else a detached copy of ``table`` (B, W) whose
+    rows ``envs`` come from ``source``."""
+    if envs is None:
+        return source
+    out = table.detach().clone()
+    rows = torch.as_tensor(envs, device=out.device)
+    out[rows] = source[rows]
+    return out
+
+
 class SolverSlot:
     """One solver with its current torch state/inputs and what Taichi holds of them."""
 
@@ -89,20 +100,27 @@ class Simulator:
         return inputs
 
     # -- stepping ---------------------------------------------------------------------------
-    def reset(self, states=None):
-        """Back to the initial (or given) states; controls cleared; a new graph starts."""
+    def reset(self, states=None, envs=None):
+        """Back to the initial states, or to ``states`` (one (B, width) tensor per solver), which
+        become the initial states of every later reset. ``envs`` (int array): only those envs
+        are reset, the others keep their current state (and controls).
+
+        Controls are cleared, parameters kept. Everything is detached, so a new graph starts:
+        a backward through the previous one raises, and a state taken mid-rollout brings no
+        graph along (nor does a parameter: set differentiable ones after reset())."""
+        if states is not None:
+            for slot, state in zip(self.slots, states):
+                slot.initial_state = state.detach().clone()  # the caller's tensor may change later
         self.generation += 1
         self.step_index = 0
         self.rollout = autograd.Rollout(self, self.options.checkpoint_interval)
-        for k, slot in enumerate(self.slots):
+        for slot in self.slots:
             defaults = slot.solver.default_inputs
-            params = slot.inputs or defaults
-            # parameters keep their values but not their history: a new rollout's graph must
-            # never reach into the previous one (set differentiable parameters after reset())
-            slot.inputs = {name: (params[name].detach() if name in slot.solver.persistent_inputs else defaults[name])
-                           for name in defaults}
-            state = slot.initial_state if states is None else states[k]
-            self.set_state(slot.solver, state)
+            current = slot.inputs or defaults
+            slot.inputs = {name: current[name].detach() if name in slot.solver.persistent_inputs
+                           else _restored(current[name], defaults[name], envs) for name in defaults}
+            current_state = None if envs is None else self.state(slot.solver)
+            self.set_state(slot.solver, _restored(current_state, slot.initial_state, envs))
 
     def step(self):
         if self.requires_grad:

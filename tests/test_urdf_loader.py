@@ -110,7 +110,7 @@ def test_arm3_joint_kinds_and_limits():
     hand = specs["hand"]  # continuous
     assert (hand.lower, hand.upper, hand.effort) == (-np.inf, np.inf, np.inf)
     assert (specs["slider"].lower, specs["slider"].upper) == (-0.1, 0.2)
-    assert (specs["upper"].damping, specs["upper"].friction) == (0.1, 0.02)
+    assert (specs["upper"].damping, specs["upper"].frictionloss) == (0.1, 0.02)
     assert specs["ee"].joint_name == "ee_joint" and specs["ee"].parent == 3
 
 
@@ -377,7 +377,7 @@ def _check_tree(specs):
         assert np.isfinite(s.mass) and s.mass >= 0
         assert np.all(np.isfinite(s.com)) and np.all(np.isfinite(s.inertia))
         np.testing.assert_allclose(s.inertia, s.inertia.T, atol=1e-12 * max(1.0, np.abs(s.inertia).max()))
-        assert s.lower <= s.upper and s.effort >= 0 and s.damping >= 0 and s.friction >= 0
+        assert s.lower <= s.upper and s.effort >= 0 and s.damping >= 0 and s.frictionloss >= 0
         for g in s.geoms:
             assert g.type != "mesh" or (g.vertices.shape[1] == 3 and g.faces.shape[1] == 3)
 

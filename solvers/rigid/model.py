@@ -17,18 +17,23 @@ QS_OF = {FIXED: 0, REVOLUTE: 1, PRISMATIC: 1, FREE: 7}
 
 DEFAULT_KP = 100.0  # N·m/rad (or N/m), as Genesis
 DEFAULT_KV = 10.0   # N·m·s/rad (or N·s/m)
+DEFAULT_FRICTION = 1.0  # contact friction coefficient where neither asset nor material states one, as Genesis
 
 
 @dataclass
 class RigidModel:
-    """Static arrays of all rigid links in the scene (L links, D dofs, Q qs, P mass-matrix pairs).
+    """Static arrays of all rigid links in the scene (L links, D dofs, Q qs, P mass-matrix pairs,
+    G collision geoms).
 
     Per link: parent (L,) (-1: the world), jtype (L,) joint code, pos0 (L, 3) m and quat0 (L, 4)
     joint frame in the parent, axis (L, 3) in the link frame, com (L, 3) m, inertia0 (L, 3, 3)
     kg·m² about the com, mass0 (L,) kg, dof0/q0 (L,) first dof/q, entity (L,) owner index.
     Per dof: link (D,), q (D,) its q index (-1 inside a free joint), damping, armature, kp, kv,
-    lower/upper limits (rad or m), effort bound. pairs (P, 2): (i, j), j ≤ i, dof j on the path
-    from dof i to the root — the structural non-zeros of the lower mass matrix.
+    lower/upper limits (rad or m), effort bound, frictionloss (N·m or N, dry joint friction; not
+    applied yet). pairs (P, 2): (i, j), j ≤ i, dof j on the path from dof i to the root — the
+    structural non-zeros of the lower mass matrix.
+    Per collision geom (kept for the contact stage; no contact is simulated yet): geom_link (G,)
+    its link, geom_type (G,) its GeomSpec type, geom_friction (G,) Coulomb coefficient.
     """
     link_name: list
     link_parent: np.ndarray
@@ -51,6 +56,10 @@ class RigidModel:
     dof_lower: np.ndarray
     dof_upper: np.ndarray
     dof_effort: np.ndarray
+    dof_frictionloss: np.ndarray
+    geom_link: np.ndarray
+    geom_type: list
+    geom_friction: np.ndarray
     pairs: np.ndarray
     qpos0: np.ndarray
 
@@ -68,6 +77,18 @@ class RigidModel:
             p = self.link_parent[l]
             static[l] = self.link_jtype[l] == FIXED and (p < 0 or static[p])
         return static
+
+    def contact_possible(self):
+        """True when two links with collision geoms could touch: two distinct links, not both
+        welded to the world, not parent and child (Genesis skips these pairs by default; it
+        also skips pairs that overlap at rest, which this check does not look at)."""
+        parent = self.link_parent
+        with_geom = np.zeros(self.n_links, dtype=bool)
+        with_geom[self.geom_link] = True
+        children_with_geom = np.bincount(parent[with_geom & (parent >= 0)], minlength=self.n_links)
+        parent_with_geom = (parent >= 0) & with_geom[np.maximum(parent, 0)]
+        others = with_geom.sum() - 1 - parent_with_geom - children_with_geom  # links it may touch
+        return bool(np.any(with_geom & (self.link_static == 0) & (others > 0)))
 
     @property
     def dof_parent(self):
@@ -136,7 +157,8 @@ def build_model(entities_links):
     """
     rows = {k: [] for k in ("name", "parent", "jtype", "pos0", "quat0", "axis", "com", "inertia0", "mass0",
                             "dof0", "q0", "entity")}
-    dofs = {k: [] for k in ("link", "q", "damping", "armature", "lower", "upper", "effort")}
+    dofs = {k: [] for k in ("link", "q", "damping", "armature", "lower", "upper", "effort", "frictionloss")}
+    geoms = {k: [] for k in ("link", "type", "friction")}
     qpos0 = []
     for entity_idx, links in enumerate(entities_links):
         link_offset = len(rows["name"])
@@ -164,6 +186,11 @@ def build_model(entities_links):
                 dofs["lower"].append(-np.inf if free else spec.lower)
                 dofs["upper"].append(np.inf if free else spec.upper)
                 dofs["effort"].append(np.inf if free else spec.effort)
+                dofs["frictionloss"].append(0.0 if free else spec.frictionloss)
+            for geom in spec.geoms:
+                geoms["link"].append(link_idx)
+                geoms["type"].append(geom.type)
+                geoms["friction"].append(DEFAULT_FRICTION if geom.friction is None else geom.friction)
             qpos0.extend(_initial_q(spec))
     f = np.float64
     dof_link = np.array(dofs["link"], dtype=np.int32)
@@ -184,5 +211,7 @@ def build_model(entities_links):
         dof_damping=np.array(dofs["damping"], dtype=f), dof_armature=np.array(dofs["armature"], dtype=f),
         dof_kp=np.full(n_dofs, DEFAULT_KP), dof_kv=np.full(n_dofs, DEFAULT_KV),
         dof_lower=np.array(dofs["lower"], dtype=f), dof_upper=np.array(dofs["upper"], dtype=f),
-        dof_effort=np.array(dofs["effort"], dtype=f),
+        dof_effort=np.array(dofs["effort"], dtype=f), dof_frictionloss=np.array(dofs["frictionloss"], dtype=f),
+        geom_link=np.array(geoms["link"], dtype=np.int32), geom_type=geoms["type"],
+        geom_friction=np.array(geoms["friction"], dtype=f),
         pairs=_mass_matrix_pairs(dof_link, link_parent), qpos0=np.array(qpos0, dtype=f))

@@ -19,6 +19,9 @@ class GeomSpec:
           (axis along local z); plane (3,) normal; mesh: empty.
     pos (3,) m and quat (4,) w-x-y-z: the shape's frame in the link frame.
     vertices (V, 3) m and faces (F, 3): the triangle mesh (mesh shapes only, else None).
+    friction: Coulomb coefficient of contacts on this shape (dimensionless); None when neither
+          the asset nor the material states one (the model then uses its default). Kept for the
+          contact stage: no contact forces are computed yet.
     """
     type: str
     size: np.ndarray
@@ -26,6 +29,7 @@ class GeomSpec:
     quat: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0, 0.0]))
     vertices: np.ndarray = None
     faces: np.ndarray = None
+    friction: float = None
 
 
 @dataclass
@@ -37,8 +41,11 @@ class LinkSpec:
     pos (3,) m, quat (4,) w-x-y-z: joint frame in the parent link frame (for the root: in the world).
     axis (3,): unit joint axis in the joint frame (= the child link frame).
     mass kg; com (3,) m in the link frame; inertia (3, 3) kg·m² about the com, link-frame axes.
-    damping N·m·s/rad (or N·s/m); friction N·m (or N); armature kg·m² (or kg).
+    damping N·m·s/rad (or N·s/m); armature kg·m² (or kg); frictionloss N·m (or N): the joint's
+    dry friction (URDF ``<dynamics friction>``; kept in the model, not applied yet).
     lower/upper: joint limits, rad or m (-inf/inf when unlimited); effort: |force| bound (inf when none).
+    merged: (link name, fixed joint name) of every link merged into this one (merge.py), for
+    error messages about names that no longer exist.
     """
     name: str
     parent: int
@@ -51,9 +58,10 @@ class LinkSpec:
     com: np.ndarray
     inertia: np.ndarray
     damping: float = 0.0
-    friction: float = 0.0
+    frictionloss: float = 0.0
     armature: float = 0.0
     lower: float = -np.inf
     upper: float = np.inf
     effort: float = np.inf
     geoms: list = field(default_factory=list)
+    merged: list = field(default_factory=list)

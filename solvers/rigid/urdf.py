@@ -6,7 +6,12 @@ file, the link or joint, what was expected and what was found.
 
 Supported joints: revolute, continuous (a revolute without limits), prismatic, fixed.
 Supported collision shapes: box, sphere, cylinder, mesh (any format trimesh reads).
-Mimic joints, velocity limits, calibration and safety controllers are ignored.
+Friction: ``<dynamics friction>`` is the joint's dry friction (LinkSpec.frictionloss); URDF has
+no contact friction, so the one pybullet reads, ``<link><contact><lateral_friction value>``,
+becomes the friction of that link's collision shapes (GeomSpec.friction). Both are kept for
+the contact stage (not simulated yet).
+Ignored: mimic joints, velocity limits, calibration, safety controllers, and pybullet's other
+``<contact>`` entries (rolling/spinning friction, restitution, stiffness, damping, cfm/erp).
 """
 import io
 import os
@@ -45,13 +50,16 @@ def load_urdf(path: str, entity_name: str | None = None, rho: float = 1000.0) ->
     path = os.fspath(path)
     rho = float(shapes.check_positive(rho, "rho", "load_urdf"))
     ctx = _Context(path, entity_name)
-    robot = _parse(ctx)
+    robot, xml = _parse(ctx)
     links, parent_joint, order = _tree_order(ctx, robot)
+    friction = _contact_friction(ctx, xml)
     index = {name: i for i, name in enumerate(order)}
     specs = []
     for name in order:
         joint = parent_joint.get(name)
         spec = _link_spec(ctx, links[name], joint, rho)
+        for geom in spec.geoms:
+            geom.friction = friction.get(name)
         spec.parent = index[joint.parent] if joint is not None else -1
         specs.append(spec)
     return specs
@@ -75,7 +83,7 @@ class _Context:
 
 
 def _parse(ctx: _Context):
-    """The yourdfpy Robot of the file.
+    """(the yourdfpy Robot of the file, its lxml root element).
 
     The XML is checked strictly first, because yourdfpy otherwise falls back to a lenient
     parser that silently drops elements.
@@ -87,7 +95,7 @@ def _parse(ctx: _Context):
             text = f.read()
     except OSError as exc:  # a folder, no permission
         raise ctx.error(f"cannot read file: {exc.strerror or exc}") from exc
-    text = _strict_xml(ctx, text)
+    text, xml = _strict_xml(ctx, text)
     try:
         # non-finite xyz/rpy make numpy warn while composing the origin; we reject them later
         with np.errstate(invalid="ignore", over="ignore"):
@@ -95,11 +103,12 @@ def _parse(ctx: _Context):
                                       load_meshes=False, load_collision_meshes=False)
     except Exception as exc:  # yourdfpy raises KeyError, ValueError, AttributeError...
         raise ctx.error(f"cannot parse: {type(exc).__name__}: {exc}") from exc
-    return urdf.robot
+    return urdf.robot, xml
 
 
-def _strict_xml(ctx: _Context, text: bytes) -> bytes:
-    """`text` if it is well-formed XML, else `text` without its XML declarations if that is.
+def _strict_xml(ctx: _Context, text: bytes):
+    """(`text`, its root element) if it is well-formed XML, else the same for `text` without
+    its XML declarations if that is.
 
     Many URDFs in the wild (most of pybullet_data's) declare version "0.0" or put the
     declaration after a comment, which strict parsers reject although the rest of the
@@ -107,13 +116,11 @@ def _strict_xml(ctx: _Context, text: bytes) -> bytes:
     """
     parser = etree.XMLParser(remove_blank_text=True)
     try:
-        etree.fromstring(text, parser)
-        return text
+        return text, etree.fromstring(text, parser)
     except Exception:  # lxml.etree.XMLSyntaxError, ValueError...
         text = _XML_DECLARATION.sub(b"", text)
     try:
-        etree.fromstring(text, parser)
-        return text
+        return text, etree.fromstring(text, parser)
     except Exception as exc:
         raise ctx.error(f"malformed XML: {exc}") from exc
 
@@ -156,6 +163,21 @@ def _tree_order(ctx: _Context, robot):
     return links, parent_joint, order
 
 
+def _contact_friction(ctx: _Context, xml) -> dict:
+    """Link name → ``<contact><lateral_friction value>`` (pybullet's contact friction coefficient)
+    for the links that state one; yourdfpy does not read ``<contact>``, so it comes from the XML."""
+    out = {}
+    for link in xml.iterfind("link"):
+        element = link.find("contact/lateral_friction")
+        if element is None:
+            continue
+        what = f"link '{link.get('name')}' contact lateral_friction value"
+        if element.get("value") is None:
+            raise ctx.error(f"{what} expected a number >= 0, got no 'value' attribute")
+        out[link.get("name")] = _number(ctx, element.get("value"), 0.0, what, 0.0)
+    return out
+
+
 # ------------------------------------------------------------------ one link
 
 
@@ -179,9 +201,9 @@ def _apply_joint(ctx: _Context, spec: LinkSpec, joint) -> None:
     spec.joint_name, spec.joint_type = joint.name, _JOINT_TYPES[joint.type]
     spec.pos, spec.quat = _pose(ctx, joint.origin, f"joint '{joint.name}' origin")
     spec.axis = _axis(ctx, joint)
-    for field in ("damping", "friction"):
-        value = getattr(joint.dynamics, field, None)
-        setattr(spec, field, _number(ctx, value, 0.0, f"joint '{joint.name}' {field}", 0.0))
+    for tag, field in (("damping", "damping"), ("friction", "frictionloss")):
+        value = getattr(joint.dynamics, tag, None)
+        setattr(spec, field, _number(ctx, value, 0.0, f"joint '{joint.name}' {tag}", 0.0))
     spec.lower, spec.upper, spec.effort = _limits(ctx, joint)
 
 

@@ -1,0 +1,417 @@
+"""Genesis's scene-level API: reset(state, envs_idx), viewer/vis options and build/step
+arguments, URDF(merge_fixed_links, links_to_keep), the no-contact warning and the friction
+kept in the model (docs/genesis_api.md)."""
+import logging
+import re
+
+import numpy as np
+import pytest
+import torch
+
+import genesis_lite as gs
+from genesis_lite.solvers.rigid import merge, shapes
+from genesis_lite.solvers.rigid.spec import GeomSpec, LinkSpec
+from genesis_lite.solvers.rigid.urdf import load_urdf
+from tests.conftest import asset, pybullet
+
+R2D2, MINITAUR = pybullet("r2d2.urdf"), pybullet("quadruped", "minitaur.urdf")
+KUKA = pybullet("kuka_iiwa", "model.urdf")
+
+
+def _pendulum(requires_grad=True, n_envs=0):
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=requires_grad))
+    robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
+    scene.build(n_envs=n_envs)
+    return scene, robot
+
+
+# ------------------------------------------------------------------ reset(state, envs_idx)
+
+
+def _state_mid_rollout(scene, robot):
+    """A state taken after 5 steps from an initial position that requires grad (its graph attached)."""
+    q0 = torch.tensor([0.4, -0.3], dtype=torch.float64, requires_grad=True)
+    robot.set_dofs_position(q0)
+    for _ in range(5):
+        scene.step()
+    state = scene.get_state()
+    assert state.rigid.grad_fn is not None
+    return state
+
+
+def test_reset_to_state_from_a_graph_then_backward_matches_fd(f64):
+    scene, robot = _pendulum()
+    scene.reset(_state_mid_rollout(scene, robot))
+
+    def loss_of(mass, forces):
+        for t in range(10):
+            robot.control_dofs_force(forces[t])
+            if t == 0:
+                robot.set_links_mass(mass)
+            scene.step()
+        return (robot.get_dofs_position() ** 2).sum() + robot.get_links_pos()[-1].sum()
+
+    mass = robot.get_links_mass().detach().clone().requires_grad_(True)
+    forces = torch.linspace(-0.5, 0.5, 20, dtype=torch.float64).reshape(10, 2).requires_grad_(True)
+    loss_of(mass, forces).backward()  # raised GradientError while the state kept its graph
+    d_mass, d_forces = torch.tensor([0.0, 0.3, -0.2], dtype=torch.float64), torch.ones(10, 2, dtype=torch.float64)
+    analytic = float(mass.grad @ d_mass + (forces.grad * d_forces).sum())
+    with torch.no_grad():
+        scene.reset()  # back to the state given to reset(state)
+        plus = float(loss_of(mass + 1e-6 * d_mass, forces + 1e-6 * d_forces))
+        scene.reset()
+        minus = float(loss_of(mass - 1e-6 * d_mass, forces - 1e-6 * d_forces))
+    numeric = (plus - minus) / 2e-6
+    assert analytic != 0.0 and abs(analytic - numeric) <= 1e-6 * abs(numeric)
+
+
+def test_reset_state_becomes_the_registered_initial_state(f64):
+    scene, robot = _pendulum()
+    state = _state_mid_rollout(scene, robot)
+    expected = state.rigid.detach().clone()
+    scene.reset(state)
+    assert not scene.get_state().rigid.requires_grad  # detached, as Genesis stores it
+    after_reset = []
+    for _ in range(2):
+        assert torch.equal(scene.get_state().rigid, expected)
+        robot.control_dofs_force([0.3, -0.1])
+        for _ in range(4):
+            scene.step()
+        after_reset.append(robot.get_dofs_position().detach().clone())
+        scene.reset()  # plain reset: back to `state`, bit for bit, controls cleared
+    assert torch.equal(after_reset[0], after_reset[1])
+    assert torch.equal(robot.get_dofs_control_force(), torch.zeros(2, dtype=torch.float64))
+
+
+def test_reset_envs_idx_restores_only_those_envs(f64):
+    scene, robot = _pendulum(requires_grad=False, n_envs=3)
+    initial = scene.get_state().rigid.clone()
+    robot.set_dofs_damping([[0.1, 0.2], [0.3, 0.4], [0.5, 0.6]])
+    robot.set_dofs_position([[0.1, 0.2], [0.3, 0.4], [0.5, 0.6]])
+    robot.control_dofs_force([[1.0, 2.0], [3.0, 4.0], [5.0, 6.0]])
+    scene.step()
+    before = scene.get_state().rigid.clone()
+    scene.reset(envs_idx=[1])
+    after = scene.get_state().rigid
+    assert torch.equal(after[1], initial[1]) and torch.equal(after[[0, 2]], before[[0, 2]])
+    np.testing.assert_array_equal(robot.get_dofs_control_force().numpy(), [[1, 2], [0, 0], [5, 6]])
+    np.testing.assert_array_equal(robot.get_dofs_damping().numpy(), [[0.1, 0.2], [0.3, 0.4], [0.5, 0.6]])
+
+    scene.reset(scene.get_state(), envs_idx=torch.tensor([2]))  # registers the whole state, resets env 2
+    registered = scene.get_state().rigid.clone()
+    robot.set_dofs_position([[-1.0, -1.0]] * 3)
+    scene.reset()
+    assert torch.equal(scene.get_state().rigid, registered)
+
+
+@pytest.mark.parametrize("n_envs, envs_idx, expected", [
+    (0, [0], "None in a scene built with n_envs=0"), (3, [3], "integers in [0, 3)"),
+    (3, [0.5], "integers in [0, 3)"), (3, [[0]], "integers in [0, 3)")])
+def test_reset_bad_envs_idx(f64, n_envs, envs_idx, expected):
+    scene, _ = _pendulum(requires_grad=False, n_envs=n_envs)
+    with pytest.raises(gs.InvalidInputError, match=re.escape(f"scene.reset: argument 'envs_idx' must be {expected}, "
+                                                             f"got {envs_idx!r}")):
+        scene.reset(envs_idx=envs_idx)
+
+
+# ------------------------------------------------------------------ viewer, vis, build and step arguments
+
+
+def test_viewer_and_vis_options_defaults_are_genesis():
+    viewer = gs.options.ViewerOptions()
+    assert (viewer.res, viewer.run_in_thread, viewer.refresh_rate, viewer.realtime_factor, viewer.camera_pos,
+            viewer.camera_lookat, viewer.camera_up, viewer.camera_fov, viewer.enable_help_text,
+            viewer.enable_default_keybinds, viewer.enable_gui, viewer.max_FPS) == (
+        None, None, 60, 1.0, (3.5, 0.5, 2.5), (0.0, 0.0, 0.5), (0.0, 0.0, 1.0), 40, True, True, False, None)
+    vis = gs.options.VisOptions()
+    assert (vis.show_world_frame, vis.world_frame_size, vis.show_link_frame, vis.link_frame_size, vis.show_cameras,
+            vis.shadow, vis.plane_reflection, vis.split_envs, vis.background_color, vis.ambient_light,
+            vis.segmentation_level, vis.render_particle_as, vis.particle_size_scale, vis.contact_force_scale,
+            vis.n_support_neighbors, vis.rendered_envs_idx) == (
+        False, 1.0, False, 0.2, False, True, False, False, (0.04, 0.08, 0.12), (0.1, 0.1, 0.1), "link", "sphere",
+        1.0, 0.01, 12, None)
+    assert vis.lights == [{"type": "directional", "dir": (-1.0, -1.0, -1.0), "color": (1.0, 1.0, 1.0),
+                           "intensity": 5.0}]
+    assert gs.options.ViewerOptions(max_FPS=30).refresh_rate == 30  # Genesis's deprecated alias
+
+
+@pytest.mark.parametrize("kind, arg, value", [
+    ("ViewerOptions", "res", (640,)), ("ViewerOptions", "refresh_rate", 0), ("ViewerOptions", "camera_fov", 180),
+    ("ViewerOptions", "camera_pos", (0, 1)), ("ViewerOptions", "enable_gui", "yes"),
+    ("ViewerOptions", "realtime_factor", -1.0), ("VisOptions", "shadow", 1),
+    ("VisOptions", "background_color", (2, 0, 0)),
+    ("VisOptions", "segmentation_level", "pixel"), ("VisOptions", "rendered_envs_idx", [-1]),
+    ("VisOptions", "link_frame_size", 0.0), ("VisOptions", "lights", [{"type": "spot"}])])
+def test_viewer_and_vis_options_bad_values(kind, arg, value):
+    with pytest.raises(gs.InvalidInputError, match=rf"{kind}: argument '{arg}.* must be .*got"):
+        getattr(gs.options, kind)(**{arg: value})
+
+
+def test_scene_keeps_viewer_and_vis_options(f64):
+    viewer, vis = gs.options.ViewerOptions(camera_fov=30), gs.options.VisOptions(show_world_frame=True)
+    scene = gs.Scene(viewer_options=viewer, vis_options=vis, show_viewer=None)
+    assert scene.viewer_options is viewer and scene.vis_options is vis and scene.show_viewer is False
+    with pytest.raises(gs.InvalidInputError, match="'vis_options' must be gs.options.VisOptions, got ViewerOptions"):
+        gs.Scene(vis_options=viewer)
+
+
+@pytest.mark.parametrize("show_viewer", [True, 1, "yes"])
+def test_show_viewer_raises(f64, show_viewer):
+    with pytest.raises(gs.InvalidInputError, match="'show_viewer' must be False or None: .*no interactive viewer "
+                                                    "yet .*cameras .*later release.*got"):
+        gs.Scene(show_viewer=show_viewer)
+
+
+def test_build_env_layout_is_genesis_and_leaves_the_physics(f64):
+    finals = []
+    for kwargs in ({}, dict(env_spacing=(1.0, 2.0)), dict(env_spacing=(1.0, 2.0), n_envs_per_row=2,
+                                                          center_envs_at_origin=False)):
+        scene = gs.Scene()
+        robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
+        scene.build(n_envs=5, **kwargs)
+        robot.set_dofs_position(torch.full((5, 2), 0.3, dtype=torch.float64))
+        for _ in range(3):
+            scene.step(update_visualizer=False, refresh_visualizer=False)
+        finals.append(robot.get_links_pos())
+        if kwargs.get("n_envs_per_row") == 2:  # rows along x, columns along y, not centred
+            assert scene.n_envs_per_row == 2
+            np.testing.assert_array_equal(scene.envs_offset, [[0, 0, 0], [0, 2, 0], [1, 0, 0], [1, 2, 0], [2, 0, 0]])
+        elif kwargs:  # ceil(sqrt(5)) = 3 per row, centred on the bounding box
+            assert scene.n_envs_per_row == 3 and scene.env_spacing == (1.0, 2.0)
+            np.testing.assert_array_equal(scene.envs_offset,
+                                          [[-0.5, -2, 0], [-0.5, 0, 0], [-0.5, 2, 0], [0.5, -2, 0], [0.5, 0, 0]])
+        else:
+            np.testing.assert_array_equal(scene.envs_offset, np.zeros((5, 3)))
+    assert torch.equal(finals[0], finals[1]) and torch.equal(finals[0], finals[2])
+
+
+@pytest.mark.parametrize("kwargs, arg", [(dict(env_spacing=(1.0,)), "env_spacing"),
+                                         (dict(env_spacing=(1.0, np.nan)), "env_spacing"),
+                                         (dict(n_envs_per_row=0), "n_envs_per_row"),
+                                         (dict(center_envs_at_origin="yes"), "center_envs_at_origin"),
+                                         (dict(n_envs=True), "n_envs")])
+def test_build_bad_arguments(f64, kwargs, arg):
+    scene = gs.Scene()
+    scene.add_entity(gs.morphs.Box())
+    with pytest.raises(gs.InvalidInputError, match=f"scene.build: argument '{arg}' must be .*got"):
+        scene.build(**kwargs)
+
+
+def test_rendered_envs_idx_checked_at_build(f64):
+    scene = gs.Scene(vis_options=gs.options.VisOptions(rendered_envs_idx=[0, 4]))
+    scene.add_entity(gs.morphs.Box())
+    with pytest.raises(gs.InvalidInputError, match=r"'rendered_envs_idx' must be env indices below 4 .*got \(0, 4\)"):
+        scene.build(n_envs=4)
+
+
+def test_step_bad_visualizer_flag(f64):
+    scene, _ = _pendulum(requires_grad=False)
+    with pytest.raises(gs.InvalidInputError, match="scene.step: argument 'refresh_visualizer' must be True or False"):
+        scene.step(refresh_visualizer=None)
+
+
+# ------------------------------------------------------------------ merge_fixed_links
+
+
+def _entity(path, **morph_kwargs):
+    scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_joint_limit=False, enable_collision=False))
+    robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=morph_kwargs.pop("fixed", False), **morph_kwargs))
+    scene.build()
+    return scene, robot
+
+
+def test_kuka_has_no_fixed_joint_to_merge():
+    links = load_urdf(KUKA)
+    merged = merge.merge_fixed_links(links)
+    assert [(s.name, s.parent, s.mass) for s in merged] == [(s.name, s.parent, s.mass) for s in links]
+
+
+def test_r2d2_merged_as_genesis(f64):
+    _, robot = _entity(R2D2)
+    assert robot.n_links == 9 and robot.n_dofs == 14
+    assert [link.name for link in robot.links] == [
+        "base_link", "right_front_wheel", "right_back_wheel", "left_front_wheel", "left_back_wheel", "gripper_pole",
+        "left_gripper", "right_gripper", "head"]
+    np.testing.assert_allclose(robot.get_links_mass().numpy(), [50, 1, 1, 1, 1, 0.05, 0.1, 0.1, 11], rtol=1e-15)
+    model = robot._solver.model
+    assert np.bincount(model.geom_link, minlength=9).tolist() == [5, 1, 1, 1, 1, 1, 2, 2, 2]
+    _, unmerged = _entity(R2D2, merge_fixed_links=False)
+    assert unmerged.n_links == 16
+
+
+def test_minitaur_merged_as_genesis(f64):
+    _, robot = _entity(MINITAUR)
+    assert robot.n_links == 17 and robot.n_dofs == 22
+    mass = dict(zip((link.name for link in robot.links), robot.get_links_mass().numpy()))
+    assert mass["base_chassis_link"] == pytest.approx(3.2, rel=1e-15)
+    assert all(mass[name] == pytest.approx(0.3, rel=1e-15) for name in mass if name.startswith("motor_"))
+
+
+@pytest.mark.parametrize("path", [R2D2, MINITAUR])
+def test_merged_model_has_the_same_dynamics(f64, path):
+    """Merging moves no dof (ours keeps the dof order), so mass matrices and trajectories compare as they are."""
+    results = []
+    for merge_fixed_links in (False, True):
+        scene, robot = _entity(path, merge_fixed_links=merge_fixed_links)
+        rng = np.random.default_rng(0)
+        qpos = rng.uniform(-1, 1, robot.n_qs)
+        qpos[3:7] /= np.linalg.norm(qpos[3:7])
+        robot.set_qpos(qpos)
+        robot.set_dofs_velocity(rng.uniform(-1, 1, robot.n_dofs))
+        mass_mat = robot.get_mass_mat().numpy()
+        robot.control_dofs_force(rng.uniform(-0.2, 0.2, robot.n_dofs))
+        for _ in range(20):
+            scene.step()
+        poses = dict(zip((link.name for link in robot.links), robot.get_links_pos().numpy()))
+        results.append((mass_mat, robot.get_qpos().numpy(), robot.get_dofs_velocity().numpy(), poses))
+    (m0, q0, v0, poses0), (m1, q1, v1, poses1) = results
+    np.testing.assert_allclose(m1, m0, rtol=0, atol=1e-12 * np.abs(m0).max())
+    np.testing.assert_allclose(q1, q0, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(v1, v0, rtol=0, atol=1e-12)
+    for name, pos in poses1.items():  # the merged links keep their parent's frame
+        np.testing.assert_allclose(pos, poses0[name], rtol=0, atol=1e-12)
+
+
+def _box_link(name, parent, pos, quat, size, joint_type="fixed"):
+    geom = GeomSpec("box", np.array(size))
+    mass, com, inertia = shapes.geometry_mass_properties([geom], 1000.0)
+    return LinkSpec(name=name, parent=parent, joint_name=f"{name}_joint", joint_type=joint_type, pos=np.array(pos),
+                    quat=np.array(quat), axis=np.array([0.0, 0.0, 1.0]), mass=mass, com=com, inertia=inertia,
+                    geoms=[geom])
+
+
+def test_merge_combines_mass_properties_exactly_and_reparents():
+    turn = np.array([np.cos(0.35), np.sin(0.35), 0.0, 0.0])  # 0.7 rad about x
+    links = [_box_link("root", -1, [0, 0, 0], [1, 0, 0, 0], [0.2, 0.3, 0.4]),
+             _box_link("welded", 0, [0.5, 0.1, -0.2], turn, [0.1, 0.1, 0.6]),
+             _box_link("grandchild", 1, [0.0, 0.0, 0.3], [1, 0, 0, 0], [0.1, 0.1, 0.1], joint_type="revolute"),
+             _box_link("sibling", 0, [-0.5, 0, 0], [1, 0, 0, 0], [0.1, 0.2, 0.1], joint_type="revolute")]
+    merged = merge.merge_fixed_links(links)
+    assert [(s.name, s.parent) for s in merged] == [("root", -1), ("grandchild", 0), ("sibling", 0)]
+    assert merged[0].merged == [("welded", "welded_joint")] and links[0].geoms != merged[0].geoms  # input untouched
+    # the same two boxes placed in the root frame directly
+    moved = GeomSpec("box", np.array([0.1, 0.1, 0.6]), pos=np.array([0.5, 0.1, -0.2]), quat=turn)
+    mass, com, inertia = shapes.geometry_mass_properties([links[0].geoms[0], moved], 1000.0)
+    root = merged[0]
+    assert root.mass == pytest.approx(mass, rel=1e-14)
+    np.testing.assert_allclose(root.com, com, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(root.inertia, inertia, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(root.geoms[1].pos, moved.pos, atol=1e-15)
+    np.testing.assert_allclose(root.geoms[1].quat, moved.quat, atol=1e-15)
+    # the grandchild's joint frame: the welded link's frame composed with its own
+    np.testing.assert_allclose(merged[1].pos, [0.5, 0.1, -0.2] + shapes.quat_to_mat(turn) @ [0, 0, 0.3], atol=1e-15)
+    np.testing.assert_allclose(merged[1].quat, turn, atol=1e-15)
+
+
+def test_merge_massless_part_adds_nothing():
+    links = [_box_link("root", -1, [0, 0, 0], [1, 0, 0, 0], [0.2, 0.3, 0.4]),
+             _box_link("marker", 0, [1.0, 0, 0], [1, 0, 0, 0], [0.1, 0.1, 0.1])]
+    links[1].mass = 0.0  # its inertia stays non-zero: the model ignores it, so must the merge
+    root = merge.merge_fixed_links(links)[0]
+    assert root.mass == links[0].mass
+    np.testing.assert_array_equal(root.com, links[0].com)
+    np.testing.assert_array_equal(root.inertia, links[0].inertia)
+
+
+def test_links_to_keep(f64):
+    _, robot = _entity(R2D2, links_to_keep=["left_tip", "box"])
+    names = [link.name for link in robot.links]
+    assert robot.n_links == 11 and "left_tip" in names and "box" in names and "right_tip" not in names
+    assert names.index("left_tip") > names.index("left_gripper")
+    with pytest.raises(gs.InvalidInputError, match=r"entity 'urdf_0': gs.morphs.URDF: argument 'links_to_keep' "
+                                                   r"expected names of links of the file, got unknown names \['tip'\]"):
+        _entity(R2D2, links_to_keep=["tip"])
+
+
+@pytest.mark.parametrize("kwargs, arg", [(dict(merge_fixed_links=1), "merge_fixed_links"),
+                                         (dict(links_to_keep="box"), "links_to_keep"),
+                                         (dict(links_to_keep=[3]), "links_to_keep")])
+def test_urdf_merge_arguments_checked(kwargs, arg):
+    with pytest.raises(gs.InvalidInputError, match=f"URDF: argument '{arg}' must be .*got"):
+        gs.morphs.URDF(file=R2D2, **kwargs)
+
+
+def test_merged_into_names_the_absorbing_link():
+    merged = merge.merge_fixed_links(load_urdf(R2D2))
+    assert merge.merged_into(merged, "right_base") == "base_link"
+    assert merge.merged_into(merged, "left_tip") == "left_gripper"
+    assert merge.merged_into(merged, "head") is None
+
+
+@pytest.mark.xfail(strict=True, reason="needs RigidEntity.get_link to consult merge.merged_into "
+                                       "(genesis_lite/entities/rigid_entity.py, owned by another change)")
+def test_get_link_of_a_merged_away_name(f64):
+    _, robot = _entity(R2D2)
+    with pytest.raises(gs.InvalidInputError, match="'right_base' was merged into link 'base_link'"):
+        robot.get_link("right_base")
+
+
+# ------------------------------------------------------------------ contact not simulated: say so; friction kept
+
+
+def _warnings_at_build(caplog, morphs, enable_collision=True):
+    scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=enable_collision))
+    for morph in morphs:
+        scene.add_entity(morph)
+    with caplog.at_level(logging.WARNING, logger="genesis_lite"):
+        caplog.clear()
+        scene.build()
+        for _ in range(3):
+            scene.step()
+    return [r for r in caplog.records if r.name == "genesis_lite" and "contacts are not simulated" in r.message]
+
+
+def test_no_contact_warning_once_at_build(f64, caplog):
+    box = gs.morphs.Box(pos=(0, 0, 1))
+    warned = _warnings_at_build(caplog, [gs.morphs.Plane(), box])
+    assert len(warned) == 1 and warned[0].levelno == logging.WARNING
+    assert "enable_collision=False" in warned[0].message
+    assert len(_warnings_at_build(caplog, [gs.morphs.URDF(file=asset("arm3.urdf"), fixed=True)])) == 1  # self
+
+
+@pytest.mark.parametrize("case", ["plane alone", "box alone", "two fixed boxes", "parent and child",
+                                  "collision off"])
+def test_no_contact_warning_when_nothing_can_touch(f64, caplog, tmp_path, case):
+    morphs = {"plane alone": [gs.morphs.Plane()], "box alone": [gs.morphs.Box()],
+              "two fixed boxes": [gs.morphs.Box(fixed=True), gs.morphs.Box(fixed=True, pos=(0, 0, 0.5))],
+              "parent and child": [gs.morphs.URDF(file=_friction_urdf(tmp_path), fixed=True)],  # adjacent only
+              "collision off": [gs.morphs.Plane(), gs.morphs.Box(pos=(0, 0, 1))]}[case]
+    assert _warnings_at_build(caplog, morphs, enable_collision=case != "collision off") == []
+
+
+def _friction_urdf(tmp_path, lateral="0.3"):
+    contact = "" if lateral is None else f'<contact><lateral_friction value="{lateral}"/></contact>'
+    box = '<collision><geometry><box size="0.1 0.1 0.1"/></geometry></collision>'
+    inertial = '<inertial><mass value="1"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial>'
+    path = tmp_path / "friction.urdf"
+    path.write_text(f'<robot name="f"><link name="a">{inertial}{box}</link>'
+                    f'<link name="b">{inertial}{contact}{box}{box}</link>'
+                    f'<joint name="j" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/>'
+                    f'<dynamics damping="0.1" friction="0.7"/></joint></robot>')
+    return str(path)
+
+
+def test_friction_kept_in_the_model(f64, tmp_path):
+    path = _friction_urdf(tmp_path)
+    scene = gs.Scene()
+    scene.add_entity(gs.morphs.URDF(file=path, fixed=True))
+    scene.add_entity(gs.morphs.URDF(file=path, fixed=True), material=gs.materials.Rigid(friction=0.5))
+    scene.add_entity(gs.morphs.Box(), material=gs.materials.Rigid(friction=2.0))
+    scene.build()
+    model = scene.rigid_solver.model
+    # file: link a states nothing (Genesis's default 1.0), b's <contact><lateral_friction> 0.3; the material wins
+    np.testing.assert_array_equal(model.geom_friction, [1.0, 0.3, 0.3, 0.5, 0.5, 0.5, 2.0])
+    np.testing.assert_array_equal(model.geom_link, [0, 1, 1, 2, 3, 3, 4])
+    np.testing.assert_array_equal(model.dof_frictionloss, [0.7, 0.7, 0, 0, 0, 0, 0, 0])  # the box's free dofs: 0
+
+
+@pytest.mark.parametrize("lateral", ["-1", "abc"])
+def test_bad_lateral_friction(tmp_path, lateral):
+    with pytest.raises(gs.AssetError, match="link 'b' contact lateral_friction value expected a .*number"):
+        load_urdf(_friction_urdf(tmp_path, lateral))
+
+
+@pytest.mark.parametrize("friction", [0.0, 6.0, "1", True])
+def test_material_friction_range_is_genesis(friction):
+    with pytest.raises(gs.InvalidInputError, match=r"argument 'friction' must be a number in \[0.01, 5.0\]"):
+        gs.materials.Rigid(friction=friction)
