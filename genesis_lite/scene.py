@@ -119,7 +119,7 @@ class Scene:
         sim = Simulator(self.sim_options, [self.rigid_solver])
         try:
             sim.build(self.n_envs)
-        except Exception:  # e.g. a massless moving link: free the fields allocated so far
+        except Exception:  # e.g. a massless moving link: free the arrays allocated so far
             self.rigid_solver.destroy()
             raise
         self.sim = sim
@@ -210,7 +210,7 @@ class Scene:
         return self.sim_options.dt
 
     def destroy(self):
-        """Free the scene's Taichi fields."""
+        """Free the scene's arrays (its solvers' data); the scene cannot step afterwards."""
         self.rigid_solver.destroy()
         self.sim = None
 

@@ -49,7 +49,7 @@ class Simulator:
         for slot in self.slots:
             slot.initial_state = slot.solver.build(n_envs)
             # when nothing (scene or autograd graph) can reach this simulator any more, its
-            # solvers' fields may serve another scene
+            # solvers' arrays are freed (a graph's nodes may still hold a solver object)
             weakref.finalize(self, slot.solver.destroy)
         self.reset()
 

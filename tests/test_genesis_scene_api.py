@@ -338,8 +338,21 @@ def test_merged_into_names_the_absorbing_link():
     assert merge.merged_into(merged, "head") is None
 
 
-@pytest.mark.xfail(strict=True, reason="needs RigidEntity.get_link to consult merge.merged_into "
-                                       "(genesis_lite/entities/rigid_entity.py, owned by another change)")
+def test_joints_are_the_moving_ones(f64):
+    """As in Genesis: a fixed joint is no RigidJoint; a free root's joint is 'root_joint' (r2d2:
+    the root and 8 moving joints of its 16 links; a fixed KUKA: its 7 revolute joints)."""
+    _, r2d2 = _entity(R2D2)
+    assert r2d2.n_joints == 9 and r2d2.joints[0].name == "root_joint" and r2d2.joints[0].type == "free"
+    assert all(joint.n_dofs > 0 for joint in r2d2.joints)
+    assert sum(joint.n_dofs for joint in r2d2.joints) == r2d2.n_dofs
+    scene = gs.Scene()
+    kuka = scene.add_entity(gs.morphs.URDF(file=KUKA, fixed=True))
+    assert [joint.name for joint in kuka.joints] == [f"lbr_iiwa_joint_{k}" for k in range(1, 8)]
+    assert [joint.dofs_idx_local for joint in kuka.joints] == [[k] for k in range(7)]
+    with pytest.raises(gs.InvalidInputError, match="'left_base_joint' is a fixed joint \\(of link 'base_link'\\)"):
+        r2d2.get_joint("left_base_joint")
+
+
 def test_get_link_of_a_merged_away_name(f64):
     _, robot = _entity(R2D2)
     with pytest.raises(gs.InvalidInputError, match="'right_base' was merged into link 'base_link'"):

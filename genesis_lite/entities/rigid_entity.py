@@ -7,6 +7,7 @@ import numpy as np
 import torch
 
 from ..solvers.core import InvalidInputError, SceneStateError, runtime
+from ..solvers.rigid.merge import merged_into
 from ..tensor import wrap
 from .rotations import euler_xyz_to_quat, quat_to_euler_xyz
 
@@ -107,11 +108,15 @@ class RigidEntity:
         self.n_qs = sum(_NQS[spec.joint_type] for spec in link_specs)
         self._free = link_specs[0].joint_type == "free"
         self.links = [RigidLink(self, spec.name, k) for k, spec in enumerate(link_specs)]
-        self.joints, dof, q = [], 0, 0  # same local numbering as _on_build derives from the model
+        # Joints that move (a free root's too), as in Genesis: a fixed joint is no RigidJoint. Same
+        # local numbering as _on_build derives from the model.
+        self.joints, dof, q = [], 0, 0
         for link, spec in zip(self.links, link_specs):
             nd, nq = _NDOFS[spec.joint_type], _NQS[spec.joint_type]
-            self.joints.append(RigidJoint(self, spec.joint_name or f"{spec.name}_{spec.joint_type}", spec.joint_type,
-                                          link, list(range(dof, dof + nd)), list(range(q, q + nq))))
+            if nd:
+                name = spec.joint_name or ("root_joint" if spec.joint_type == "free" else f"{spec.name}_joint")
+                self.joints.append(RigidJoint(self, name, spec.joint_type, link, list(range(dof, dof + nd)),
+                                              list(range(q, q + nq))))
             dof, q = dof + nd, q + nq
 
     _BUILD_ATTRS = ("link_start", "dof_start", "q_start", "_dof_q")
@@ -149,6 +154,12 @@ class RigidEntity:
         for link in self.links:
             if link.name == name:
                 return link
+        host = merged_into(self._specs, name)
+        if host is not None:
+            raise InvalidInputError(f"entity '{self.name}': get_link argument 'name': link {name!r} was merged into "
+                                    f"link {host!r} (it hangs on a fixed joint, and gs.morphs.URDF(merge_fixed_links"
+                                    f"=True) merges such links); use get_link({host!r}), or load with "
+                                    f"links_to_keep=[{name!r}] or merge_fixed_links=False")
         raise InvalidInputError(f"entity '{self.name}': get_link argument 'name' must be one of "
                                 f"{[link.name for link in self.links]}, got {name!r}")
 
@@ -156,6 +167,12 @@ class RigidEntity:
         for joint in self.joints:
             if joint.name == name:
                 return joint
+        fixed = [spec.name for spec in self._specs if spec.joint_type == "fixed" and spec.joint_name == name]
+        fixed += [host.name for host in self._specs for _, joint in host.merged if joint == name]
+        if fixed:
+            raise InvalidInputError(f"entity '{self.name}': get_joint argument 'name': {name!r} is a fixed joint "
+                                    f"(of link {fixed[0]!r}); as in Genesis, only joints that move are RigidJoints: "
+                                    f"{[joint.name for joint in self.joints]}")
         raise InvalidInputError(f"entity '{self.name}': get_joint argument 'name' must be one of "
                                 f"{[joint.name for joint in self.joints]}, got {name!r}")
 
