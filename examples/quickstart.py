@@ -45,7 +45,7 @@ def main():
     robot = scene.add_entity(gs.morphs.URDF(file=os.path.join(ASSETS, "arm3.urdf"), fixed=True, links_to_keep=["ee"]))
     scene.build()
     print(f"built in {time.time() - start:.1f} s: {robot.n_dofs} dofs "
-          f"({', '.join(j.name for j in robot.joints if j.n_dofs)})")
+          f"({', '.join(j.name for j in robot.joints)})")
 
     n_steps = 100
     target = torch.tensor([0.25, 0.15, 0.05], device=gs.device, dtype=gs.tc_float)

@@ -131,8 +131,9 @@ class _NotDifferentiable(torch.autograd.Function):
         raise GradientError(f"{ctx.what} is not differentiable; detach it (.detach()) before using it in a loss")
 
 
-def not_differentiable(what, state, value):
-    """Attach ``value`` (computed from ``state``) to the graph with a backward that raises."""
-    if not state.requires_grad:
+def not_differentiable(what, anchor, value):
+    """Attach ``value`` (computed from ``anchor``, a tensor of the graph) to the graph with a
+    backward that raises."""
+    if not anchor.requires_grad:
         return value
-    return _NotDifferentiable.apply(what, state, value)
+    return _NotDifferentiable.apply(what, anchor, value)

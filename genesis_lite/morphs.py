@@ -92,6 +92,10 @@ class URDF(Morph):
         if not isinstance(keep, (list, tuple, set, frozenset)) or not all(isinstance(name, str) for name in keep):
             raise InvalidInputError(f"URDF: argument 'links_to_keep' must be a sequence of link names (str), "
                                     f"got {keep!r}")
+        if keep and not self.merge_fixed_links:  # it would be ignored: say so instead
+            raise InvalidInputError(f"URDF: argument 'links_to_keep' names links to keep from merging, so it needs "
+                                    f"merge_fixed_links=True, got links_to_keep={tuple(keep)!r} with "
+                                    f"merge_fixed_links=False")
         self.merge_fixed_links, self.links_to_keep = bool(self.merge_fixed_links), tuple(keep)
 
 

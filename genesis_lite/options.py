@@ -63,7 +63,7 @@ class RigidOptions:
 
 # -- visualisation (no viewer or camera exists yet: these are validated and stored for them) ---------
 
-def _check_bool(owner, name, value):
+def check_bool(owner, name, value):
     if not isinstance(value, (bool, np.bool_)):
         raise InvalidInputError(f"{owner}: argument '{name}' must be True or False, got {value!r}")
     return bool(value)
@@ -73,8 +73,13 @@ def _check_optional(check, owner, name, value, *args):
     return None if value is None else check(owner, name, value, *args)
 
 
+def is_int(value):
+    """An integer, and not a bool (which Python counts as one)."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
 def _is_positive_int(value):
-    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)) and value > 0
+    return is_int(value) and value > 0
 
 
 def _check_positive_int(owner, name, value):
@@ -139,7 +144,7 @@ class ViewerOptions:
                 raise InvalidInputError(f"{owner}: argument 'res' must be 2 positive integers (pixels) or None, "
                                         f"got {self.res!r}")
             self.res = tuple(int(v) for v in self.res)
-        self.run_in_thread = _check_optional(_check_bool, owner, "run_in_thread", self.run_in_thread)
+        self.run_in_thread = _check_optional(check_bool, owner, "run_in_thread", self.run_in_thread)
         self.refresh_rate = _check_positive_int(owner, "refresh_rate", self.refresh_rate)
         self.realtime_factor = _check_optional(_check_float, owner, "realtime_factor", self.realtime_factor,
                                                0.0, np.inf, "a positive finite number or None")
@@ -150,7 +155,7 @@ class ViewerOptions:
         self.camera_fov = _check_float(owner, "camera_fov", self.camera_fov, 0.0, 180.0,
                                        "a number of degrees in (0, 180)")
         for name in ("enable_help_text", "enable_default_keybinds", "enable_gui"):
-            setattr(self, name, _check_bool(owner, name, getattr(self, name)))
+            setattr(self, name, check_bool(owner, name, getattr(self, name)))
         if self.max_FPS is not None:
             self.max_FPS = _check_positive_int(owner, "max_FPS", self.max_FPS)
             if self.refresh_rate not in (60, self.max_FPS):  # 60: the default, i.e. not set
@@ -233,7 +238,7 @@ class VisOptions:
         owner = "VisOptions"
         for name in ("show_world_frame", "show_link_frame", "show_cameras", "shadow", "plane_reflection",
                      "split_envs", "visualize_mpm_boundary", "visualize_sph_boundary", "visualize_pbd_boundary"):
-            setattr(self, name, _check_bool(owner, name, getattr(self, name)))
+            setattr(self, name, check_bool(owner, name, getattr(self, name)))
         for name in ("world_frame_size", "link_frame_size", "particle_size_scale", "contact_force_scale"):
             setattr(self, name, _check_float(owner, name, getattr(self, name), 0.0, np.inf, "a positive finite number"))
         for name in ("background_color", "ambient_light"):

@@ -12,6 +12,7 @@ from taichi.lang import impl
 from taichi.lang.misc import is_arch_supported
 
 from .solvers.core import InvalidInputError, SceneStateError, runtime
+from .solvers.launch import forget as forget_kernels
 
 cpu = "cpu"
 gpu = "gpu"
@@ -53,6 +54,7 @@ def init(backend=None, precision="32", seed=None, logging_level="warning", debug
     if runtime.initialized and runtime.options == options:
         return
     if runtime.initialized:
+        forget_kernels()
         ti.reset()
     ti_float = ti.f64 if precision == "64" else ti.f32
     ti.init(arch=arch, default_fp=ti_float, default_ip=ti.i32, debug=debug, fast_math=False,
@@ -81,6 +83,7 @@ def destroy():
     """End the runtime (Genesis's ``gs.destroy``): Taichi stops, every scene becomes unusable
     (using one raises SceneStateError), and ``gs.init`` may be called again."""
     if runtime.initialized:
+        forget_kernels()
         ti.reset()
         runtime.initialized = False
         runtime.options = None

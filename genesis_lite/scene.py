@@ -14,7 +14,7 @@ from . import morphs as gm
 from .entities import RigidEntity
 from .solvers.core import AssetError, InvalidInputError, SceneStateError
 from .materials import Rigid
-from .options import RigidOptions, SimOptions, ViewerOptions, VisOptions
+from .options import RigidOptions, SimOptions, ViewerOptions, VisOptions, check_bool, is_int
 from .runtime import require_init, runtime
 from .simulator import Simulator
 from .solvers.rigid import merge, shapes, urdf
@@ -70,6 +70,7 @@ class Scene:
         self.sim = None
         self.n_envs = 0
         self._epoch = runtime.epoch
+        self._destroyed = False
 
     # -- building ---------------------------------------------------------------------------
     @property
@@ -104,7 +105,7 @@ class Scene:
         """
         if self.is_built:
             raise SceneStateError("scene.build: the scene is already built; build() may be called once")
-        if not _is_int(n_envs) or n_envs < 0:
+        if not is_int(n_envs) or n_envs < 0:
             raise InvalidInputError(f"scene.build: argument 'n_envs' must be an integer ≥ 0, got {n_envs!r}")
         if not self.entities:
             raise SceneStateError("scene.build: the scene has no entity; add one with scene.add_entity()")
@@ -137,6 +138,8 @@ class Scene:
     def _require_built(self, what):
         if self._epoch != runtime.epoch:
             raise SceneStateError(f"{what}: gs.init() was called again after this scene was made; build a new scene")
+        if self._destroyed:
+            raise SceneStateError(f"{what}: the scene was destroyed (scene.destroy()); build a new scene")
         if not self.is_built:
             raise SceneStateError(f"{what}: call scene.build() first")
         return self.sim
@@ -148,8 +151,8 @@ class Scene:
         update_visualizer, refresh_visualizer: Genesis's switches for the viewer and cameras,
         accepted (True or False) and without effect until those exist."""
         if update_visualizer is not True or refresh_visualizer is not True:  # the common case costs two tests
-            _check_bool("scene.step", "update_visualizer", update_visualizer)
-            _check_bool("scene.step", "refresh_visualizer", refresh_visualizer)
+            check_bool("scene.step", "update_visualizer", update_visualizer)
+            check_bool("scene.step", "refresh_visualizer", refresh_visualizer)
         self._require_built("scene.step").step()
 
     def reset(self, state=None, envs_idx=None):
@@ -163,8 +166,9 @@ class Scene:
         """
         sim = self._require_built("scene.reset")
         if state is not None and not (isinstance(state, SimState) and state.scene is self):
+            given = "a SimState of another scene" if isinstance(state, SimState) else type(state).__name__
             raise InvalidInputError(f"scene.reset: argument 'state' must come from this scene's get_state(), "
-                                    f"got {type(state).__name__}")
+                                    f"got {given}")
         sim.reset(None if state is None else state.states, self._envs_idx("scene.reset", envs_idx))
 
     def _envs_idx(self, what, envs_idx):
@@ -213,15 +217,7 @@ class Scene:
         """Free the scene's arrays (its solvers' data); the scene cannot step afterwards."""
         self.rigid_solver.destroy()
         self.sim = None
-
-
-def _is_int(value):
-    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
-
-
-def _check_bool(what, arg, value):
-    if not isinstance(value, (bool, np.bool_)):
-        raise InvalidInputError(f"{what}: argument '{arg}' must be True or False, got {value!r}")
+        self._destroyed = True
 
 
 def _envs_layout(n_batch, env_spacing, n_envs_per_row, center):
@@ -234,10 +230,10 @@ def _envs_layout(n_batch, env_spacing, n_envs_per_row, center):
     if spacing.shape != (2,) or not np.all(np.isfinite(spacing)):
         raise InvalidInputError(f"scene.build: argument 'env_spacing' must be 2 finite numbers (m), "
                                 f"got {env_spacing!r}")
-    if n_envs_per_row is not None and (not _is_int(n_envs_per_row) or n_envs_per_row <= 0):
+    if n_envs_per_row is not None and (not is_int(n_envs_per_row) or n_envs_per_row <= 0):
         raise InvalidInputError(f"scene.build: argument 'n_envs_per_row' must be a positive integer or None, "
                                 f"got {n_envs_per_row!r}")
-    _check_bool("scene.build", "center_envs_at_origin", center)
+    check_bool("scene.build", "center_envs_at_origin", center)
     per_row = n_envs_per_row or int(np.ceil(np.sqrt(n_batch)))
     k = np.arange(n_batch)
     offset = np.stack([k // per_row * spacing[0], k % per_row * spacing[1], np.zeros(n_batch)], axis=-1)

@@ -206,21 +206,25 @@ class Simulator:
         return out
 
     def mass_matrix(self, solver):
-        state = self.state(solver)
-        slot = self.slot(solver)
-        self._sync(slot, state, slot.inputs)
-        value = solver.mass_matrix()
-        return autograd.not_differentiable("get_mass_mat", state, value)
+        """(B, D, D) joint-space mass matrix without armature at the current state
+        (solver.mass_matrix); not differentiable (see _query)."""
+        return self._query(solver, "get_mass_mat", solver.mass_matrix)
 
     def dofs_force(self, solver):
-        """(B, D) generalised dof forces of the current state and inputs (solver.dofs_force). Its
-        backward raises if the state or any input requires grad: it depends on all of them."""
+        """(B, D) generalised dof forces of the current state and inputs (solver.dofs_force);
+        not differentiable (see _query)."""
+        return self._query(solver, "get_dofs_force", solver.dofs_force)
+
+    def _query(self, solver, what, compute):
+        """``compute()`` at the current state and inputs, as a value whose backward raises when
+        the state or any input requires grad: it depends on all of them, and a gradient must
+        never stop silently."""
         state = self.state(solver)
         slot = self.slot(solver)
         self._sync(slot, state, slot.inputs)
-        value = solver.dofs_force()
+        value = compute()
         anchor = next((t for t in (state, *slot.inputs.values()) if t.requires_grad), state)
-        return autograd.not_differentiable("get_dofs_force", anchor, value)
+        return autograd.not_differentiable(what, anchor, value)
 
     def check_grad_allowed(self, value, entity, arg):
         if isinstance(value, torch.Tensor) and value.requires_grad and not self.requires_grad:

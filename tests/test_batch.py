@@ -198,7 +198,7 @@ def test_free_base_envs_idx(f64):
 def test_batch_equals_single_envs_other_robots(precision, path, fixed):
     """(Last in the module: it restarts Taichi, which ends the module's scenes.) Bitwise
     equality must not hinge on one robot: batched and single-env scenes run kernels
-    compiled for different loop schedules (data.serial), and floating-point contraction could
+    compiled for different loop schedules (data.RigidData.schedule), and floating-point contraction could
     differ between them. Substeps > 1, float32 too; eight of the envs are replayed alone."""
     gs.init(precision=precision, logging_level="warning")
     single = gs.Scene(sim_options=gs.options.SimOptions(dt=0.005, substeps=2))
@@ -208,7 +208,7 @@ def test_batch_equals_single_envs_other_robots(precision, path, fixed):
     batched = gs.Scene(sim_options=gs.options.SimOptions(dt=0.005, substeps=2))
     robot_b = batched.add_entity(gs.morphs.URDF(file=path, fixed=fixed))
     batched.build(n_envs=n_envs)
-    assert not batched.sim.slots[0].solver.data.serial and single.sim.slots[0].solver.data.serial
+    assert not batched.sim.slots[0].solver.data.schedule[0] and single.sim.slots[0].solver.data.schedule[0]
     built = [(batched, robot_b), (single, robot_s)]
     rng = np.random.default_rng(5)
     D, steps = robot_b.n_dofs, 20

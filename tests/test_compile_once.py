@@ -22,7 +22,8 @@ def _rollout_with_backward(path, fixed, n_envs, substeps, dt):
     robot.control_dofs_force(force)
     for _ in range(3):
         scene.step()
-    (robot.get_links_pos().sum() + robot.get_dofs_velocity().sum() + robot.get_mass_mat().sum().detach()).backward()
+    read = robot.get_mass_mat().sum().detach() + robot.get_dofs_force().sum().detach()
+    (robot.get_links_pos().sum() + robot.get_dofs_velocity().sum() + read).backward()
     assert torch.isfinite(force.grad).all() and force.grad.abs().sum() > 0
     return scene
 
@@ -38,3 +39,12 @@ def test_scenes_share_compiled_kernels(f64):
     assert _n_compiled() == compiled, "a new scene compiled kernels again"
     first.step()
     second.step()
+
+
+def test_large_batches_share_compiled_kernels(f64):
+    """Batches past data.SERIAL_LINK_ENVS run their env loop on the thread pool: one more compiled
+    variant, shared in turn by every such scene."""
+    _rollout_with_backward(pybullet("kuka_iiwa", "model.urdf"), True, 300, 1, 0.01)
+    compiled = _n_compiled()
+    _rollout_with_backward(asset("quadruped.urdf"), False, 200, 2, 0.005)
+    assert _n_compiled() == compiled, "a new scene compiled kernels again"

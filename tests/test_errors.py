@@ -256,3 +256,37 @@ def test_default_armature_reaches_every_dof(f64):
     scene.build()
     assert torch.equal(robot.get_dofs_armature(), torch.full((robot.n_dofs,), 0.05, dtype=torch.float64))
     scene.destroy()
+
+
+def test_destroyed_scene_says_so(f64):
+    scene = gs.Scene()
+    scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
+    scene.build()
+    scene.destroy()
+    with pytest.raises(gs.SceneStateError, match="scene.step: the scene was destroyed"):
+        scene.step()
+
+
+def test_reset_to_another_scenes_state(f64, built):
+    scene, _ = built
+    other = gs.Scene()
+    other.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
+    other.build()
+    with pytest.raises(gs.InvalidInputError, match="must come from this scene's get_state\\(\\), got a SimState of "
+                                                   "another scene"):
+        scene.reset(other.get_state())
+    other.destroy()
+
+
+def test_zero_quaternion(f64):
+    scene = gs.Scene()
+    box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1)), name="box")
+    scene.build()
+    with pytest.raises(gs.InvalidInputError, match="entity 'box': argument 'quat' must be non-zero"):
+        box.set_quat([0.0, 0.0, 0.0, 0.0])
+    scene.destroy()
+
+
+def test_links_to_keep_without_merging():
+    with pytest.raises(gs.InvalidInputError, match="'links_to_keep' .* needs merge_fixed_links=True"):
+        gs.morphs.URDF(file=asset("pendulum2.urdf"), merge_fixed_links=False, links_to_keep=["link1"])

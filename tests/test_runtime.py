@@ -61,14 +61,23 @@ def test_default_backend_on_a_cpu_machine_is_quiet(caplog, monkeypatch):
 
 
 def test_kernels_refuse_memory_of_another_device(f64):
-    """The launch path checks every tensor against the arch the kernel was compiled for."""
+    """Every launch checks each tensor against the arch its kernel was compiled for: here the
+    compiled entry is marked as CUDA code, and a CPU tensor is refused before any launch."""
     scene, _ = _pendulum()
     kernel = scene.sim.slots[0].solver.kernels.read_state
-    with pytest.raises(gs.InvalidInputError, match="must be a contiguous tensor on cuda"):
-        kernel._check((0, torch.zeros(1, 4, dtype=torch.float64)), on_cuda=True)
-    with pytest.raises(gs.InvalidInputError, match="contiguous"):
+    out = torch.zeros(1, 4, dtype=torch.float64)
+    kernel(0, out)  # compiles
+    assert isinstance(kernel, BoundKernel) and kernel.compiled
+    for key, (program, compiled, code, _) in list(kernel.compiled.items()):
+        kernel.compiled[key] = (program, compiled, code, True)
+    try:
+        with pytest.raises(gs.InvalidInputError, match="argument 6 must be a tensor on cuda, got one on cpu"):
+            kernel(0, out)
+    finally:
+        for key, (program, compiled, code, _) in list(kernel.compiled.items()):
+            kernel.compiled[key] = (program, compiled, code, False)
+    with pytest.raises(gs.InvalidInputError, match="argument 6 must be a contiguous tensor"):
         kernel(0, torch.zeros(4, 2, dtype=torch.float64)[:, :1].t())
-    assert isinstance(kernel, BoundKernel)
 
 
 def test_destroy_ends_scenes_and_init_starts_again(f64):

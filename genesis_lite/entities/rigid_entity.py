@@ -36,12 +36,16 @@ def _is_range(idx, n):
     return idx.tolist() == list(range(n)) if n <= 64 else bool(np.array_equal(idx, np.arange(n)))
 
 
-def _ltdl(mass):
+def _ltdl(mass, entity):
     """(B, n, n) symmetric positive definite M → (L (B, n, n) unit lower triangular, D_inv (B, n))
     with M = Lᵀ·diag(1 / D_inv)·L (Genesis's decomposition). With P the order reversal,
     P·M·P = (P·Lᵀ·P)·(P·D·P)·(P·L·P) is an ordinary L′D′L′ᵀ, read off its Cholesky factor
     C = L′·diag(√D′)."""
-    chol = torch.linalg.cholesky(mass.flip(-2, -1))
+    chol, info = torch.linalg.cholesky_ex(mass.flip(-2, -1))
+    if bool((info != 0).any()):
+        raise InvalidInputError(f"entity '{entity}': get_mass_mat(decompose=True) expected a positive definite "
+                                f"mass matrix, got a singular one (a moving link left without mass, inertia or "
+                                f"armature, e.g. by set_links_mass(0))")
     root = torch.diagonal(chol, dim1=-2, dim2=-1)
     lower = (chol / root[..., None, :]).transpose(-2, -1).flip(-2, -1)
     return lower, 1.0 / root.flip(-1) ** 2
@@ -361,7 +365,11 @@ class RigidEntity:
         the kinematics; zero_velocity as in set_dofs_position."""
         self._require_free("set_quat")
         envs = self._envs(envs_idx)
-        self._write(self._solver_q([3, 4, 5, 6]), envs, self._values(quat, 4, envs, "quat"), zero_velocity)
+        values = self._values(quat, 4, envs, "quat")
+        if bool((values.detach().norm(dim=-1) == 0).any()):
+            raise InvalidInputError(f"entity '{self.name}': argument 'quat' must be non-zero quaternions (w, x, y, z), "
+                                    f"got {values.detach().cpu().numpy()}")
+        self._write(self._solver_q([3, 4, 5, 6]), envs, values, zero_velocity)
 
     # -- link kinematics ----------------------------------------------------------------------------
     def _links(self, links_idx_local, envs_idx, columns):
@@ -565,11 +573,12 @@ class RigidEntity:
         full = self._sim().mass_matrix(self._solver)
         envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
         block = slice(self.dof_start, self.dof_start + self.n_dofs)
-        armature = self._read_input("armature", self.dof_start + np.arange(self.n_dofs), envs_idx).detach()
+        armature = self._read_input("armature", self.dof_start + np.arange(self.n_dofs), envs_idx)
+        # the armature's graph meets full's non-differentiable anchor: a backward raises
         mass = full[envs][:, block, block] + torch.diag_embed(armature)
         if not decompose:
             return self._out(mass)
-        lower, d_inv = _ltdl(mass)
+        lower, d_inv = _ltdl(mass, self.name)
         return self._out(lower), self._out(d_inv)
 
     def __repr__(self):

@@ -23,7 +23,7 @@ import torch
 from taichi.lang import impl
 from taichi.lang.expr import Expr
 
-from ..core import runtime
+from ..core import InvalidInputError, runtime
 
 BIG = 1e30  # stands for an absent bound
 # Up to this many (env, link) pairs the kernels run on the calling thread. In a rollout, handing a
@@ -147,14 +147,19 @@ def layout(size):
 class RigidData:
     """The arenas of one scene's rigid solver (B envs, S substeps, sizes from the model).
 
-    ``arenas`` are the kernels' array arguments, in ARENAS order; ``serial`` is their one
-    compile-time switch (loops on the calling thread, see SERIAL_LINK_ENVS).
+    ``arenas`` are the kernels' array arguments, in ARENAS order; ``schedule`` is their one
+    compile-time argument: whether the compute loops and the data-moving loops run on the
+    calling thread (see SERIAL_LINK_ENVS).
     """
 
     def __init__(self, model, n_batch, substeps, requires_grad, limits_enabled, consts):
         self.n_batch, self.substeps = n_batch, substeps
         self.n_links, self.n_dofs, self.n_qs = model.n_links, model.n_dofs, model.n_qs
-        self.serial = n_batch * max(1, model.n_links) <= SERIAL_LINK_ENVS
+        on_cpu = runtime.arch == ti.cpu
+        # (compute loops, data-moving loops) on the calling thread? On the CPU small batches and
+        # every data move are (a hand-off to the pool costs more, see SERIAL_LINK_ENVS); on a GPU
+        # nothing is (one GPU thread would do it all)
+        self.schedule = (on_cpu and n_batch * max(1, model.n_links) <= SERIAL_LINK_ENVS, on_cpu)
         self.widths = [input_width(name, self.n_links, self.n_dofs) for name in INPUTS]
         self.input_total = sum(self.widths)
         self.grad_total = sum(w for w, (_, diff) in zip(self.widths, INPUTS.values()) if diff)
@@ -164,6 +169,10 @@ class RigidData:
                      "limits": int(bool(limits_enabled)), "nonfinite": 0}
         self.start, stop = layout(self.size)
         length = {a: stop[a, bool(requires_grad)] for a in ARENAS}  # no gradient storage without gradients
+        if max(length.values()) >= 2 ** 31:  # indices inside kernels are 32-bit
+            raise InvalidInputError(f"rigid solver: n_envs={n_batch} with substeps={substeps} (requires_grad="
+                                    f"{bool(requires_grad)}) expected arrays of fewer than 2**31 elements, got "
+                                    f"{max(length.values())}; use fewer envs or substeps per scene")
         values = {a: np.zeros((max(1, length[a]), *ELEMENT[a]), dtype=np.int32 if a == "i" else runtime.np_float)
                   for a in ARENAS}
         self._fill(values, model, consts)

@@ -41,7 +41,7 @@ class RigidSolver(Solver):
         timeconst = max(self.rigid_options.limit_timeconst, 2.0 * h)  # stable for explicit steps
         self.data = RigidData(self.model, self.n_batch, self.sim_options.substeps, self.sim_options.requires_grad,
                               self.rigid_options.enable_joint_limit, [h, 1.0 / timeconst ** 2, 2.0 / timeconst])
-        self.kernels = BoundKernels(self.data.serial, self.data.arenas, [len(ELEMENT[a]) for a in ARENAS],
+        self.kernels = BoundKernels(self.data.schedule, self.data.arenas, [len(ELEMENT[a]) for a in ARENAS],
                                     *step.KERNELS)
         self._nothing = torch.empty((0, 0), dtype=runtime.tc_float, device=runtime.device)  # an unused array argument
         self.grad_input_names = tuple(self.data.grad_input_names)
@@ -105,9 +105,10 @@ class RigidSolver(Solver):
 
     @staticmethod
     def _pack_inputs(inputs, before=(), after=()):
-        """(B, width) of ``before``, every input in INPUTS order, ``after``: the kernels read values
-        only, so nothing is detached (a graph node made here is never used)."""
-        return torch.cat([*before, *(inputs[name] for name in INPUTS), *after], dim=1)
+        """(B, width) of ``before``, every input in INPUTS order, ``after``. The kernels read values
+        only: no graph is built (nor does Taichi see a tensor that requires grad)."""
+        with torch.no_grad():
+            return torch.cat([*before, *(inputs[name] for name in INPUTS), *after], dim=1)
 
     # -- stepping ---------------------------------------------------------------------------
     def advance(self, inputs=None, download=False):

@@ -9,9 +9,10 @@ hand-written adjoints in reverse order; after substep 0 the gradients are writte
 (Fused into one kernel, LLVM took 31 s to compile it; split so, 6 s.) Each env belongs to one
 thread, so gradients accumulate without atomics.
 
-Every kernel takes ``serial`` (compile-time: run the env loop on the calling thread) and the
-scene's five arenas (data.py), and binds them to a view in its env loop: one compiled kernel
-serves every scene of the process.
+Every kernel takes ``schedule`` (compile-time: whether its compute loop, and its data-moving
+loops, run on the calling thread; data.RigidData.schedule) and the scene's five arenas
+(data.py), and binds them to a view in its env loop: one compiled kernel serves every scene
+of the process.
 """
 import taichi as ti
 
@@ -96,11 +97,11 @@ I, F, V3, V4, M3 = ARENA_TYPES  # a scene's arenas (data.py)
 
 
 @ti.kernel
-def advance(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, commit: ti.i32, inputs: A, out: A):
+def advance(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, commit: ti.i32, inputs: A, out: A):
     """All substeps of one step for every env in one launch (forward only). Unless empty, inputs
     (B, total input width) are loaded first and the result is written to out (B, Q + D) — each
     a launch saved. commit copies the result into frame 0 and flags any non-finite state."""
-    ti.loop_config(serialize=serial)
+    ti.loop_config(serialize=schedule[0])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
         S = d.substeps
@@ -124,14 +125,13 @@ def advance(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, commi
 
 
 @ti.kernel
-def prepare_reverse(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, src: A):
+def prepare_reverse(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, src: A):
     """src (B, state | inputs | gradient of the end state): every gradient ← 0, frame 0 and the
     inputs ← the step's start, then the last frame's state gradient ← the seed."""
-    ti.loop_config(serialize=True)  # moving data: cheaper than a thread hand-off (see below)
+    _clear_grads(schedule, ints, f1, v3, v4, m3, True)
+    ti.loop_config(serialize=schedule[1])  # moving data: on the CPU cheaper than a thread hand-off (see below)
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
-        if e == 0:
-            _clear_grads(d, d.substeps)
         width = d.n_qs + d.n_dofs
         _state_from(d, d.qpos, d.qvel, 0, e, src, 0)
         _inputs_from(d, e, src, width)
@@ -139,18 +139,18 @@ def prepare_reverse(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M
 
 
 @ti.kernel
-def reverse_dynamics(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32):
+def reverse_dynamics(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32):
     """Adjoints of substep s from the integration back to the subtree sums."""
-    ti.loop_config(serialize=serial)
+    ti.loop_config(serialize=schedule[0])
     for e in range(n_batch(ints)):
         dynamics_adjoint_env(bind(ints, f1, v3, v4, m3), s, e)
 
 
 @ti.kernel
-def reverse_kinematics(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, dst: A):
+def reverse_kinematics(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, dst: A):
     """Adjoint of substep s's down sweep; after substep 0 the gradients go to dst (B, state
     gradient | differentiable input gradients), as _read_grads_env lays it out."""
-    ti.loop_config(serialize=serial)
+    ti.loop_config(serialize=schedule[0])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
         down_sweep_adjoint_env(d, s, e)
@@ -159,22 +159,21 @@ def reverse_kinematics(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3
 
 
 @ti.kernel
-def down_sweep(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3):
+def down_sweep(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3):
     """Link poses and velocities at frame 0 (what the link getters read)."""
-    ti.loop_config(serialize=serial)
+    ti.loop_config(serialize=schedule[0])
     for e in range(n_batch(ints)):
         down_sweep_env(bind(ints, f1, v3, v4, m3), 0, e)
 
 
 @ti.kernel
-def down_sweep_adjoint(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, src: A, dst: A):
+def down_sweep_adjoint(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, src: A, dst: A):
     """src (B, L, 13): gradient of read_links' output → dst: gradient of the frame-0 state (as
     _read_grads_env lays it out). The down sweep at frame 0 must be current."""
-    ti.loop_config(serialize=True)
+    _clear_grads(schedule, ints, f1, v3, v4, m3, False)
+    ti.loop_config(serialize=schedule[1])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
-        if e == 0:
-            _clear_grads(d, 1)
         for l in range(d.n_links):
             for k in ti.static(range(3)):
                 d.xpos.grad[0, e, l][k] = src[e, l, k]
@@ -182,7 +181,7 @@ def down_sweep_adjoint(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3
                 d.cvel_v.grad[0, e, l][k] = src[e, l, 10 + k]
             g_quat = ti.Vector([src[e, l, 3 + k] for k in ti.static(range(4))])
             d.xrot_grad[0, e, l] = rotation_gradient(d.xquat[0, e, l], g_quat)
-    ti.loop_config(serialize=serial)
+    ti.loop_config(serialize=schedule[0])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
         down_sweep_adjoint_env(d, 0, e)
@@ -190,14 +189,14 @@ def down_sweep_adjoint(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3
 
 
 @ti.kernel
-def position_stages(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3):
+def position_stages(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3):
     """Mass matrix and bias at frame 0."""
-    ti.loop_config(serialize=serial)
+    ti.loop_config(serialize=schedule[0])
     for e in range(n_batch(ints)):
         position_stages_env(bind(ints, f1, v3, v4, m3), 0, e)
 
 
-# -- moving data: serial loops on the calling thread. A parallel loop costs a thread-pool hand-off
+# -- moving data: on the CPU serial loops on the calling thread. A parallel loop costs a thread-pool hand-off
 # -- (~100 µs here in a rollout) whatever its size, more than copying a few floats of every env
 @ti.func
 def _state_from(d: ti.template(), qpos: ti.template(), qvel: ti.template(), s, e, src: ti.template(), offset):
@@ -225,26 +224,26 @@ def _inputs_from(d: ti.template(), e, src: ti.template(), offset):
 
 
 @ti.kernel
-def write_state(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, src: A):
+def write_state(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, src: A):
     """Frame s ← src (B, Q + D): qpos then qvel of every env."""
-    ti.loop_config(serialize=True)
+    ti.loop_config(serialize=schedule[1])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
         _state_from(d, d.qpos, d.qvel, s, e, src, 0)
 
 
 @ti.kernel
-def read_state(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, dst: A):
-    ti.loop_config(serialize=True)
+def read_state(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, dst: A):
+    ti.loop_config(serialize=schedule[1])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
         _state_to(d, d.qpos, d.qvel, s, e, dst)
 
 
 @ti.kernel
-def write_inputs(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, src: A):
+def write_inputs(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, src: A):
     """Every input ← its columns of src (B, total width), in INPUTS order."""
-    ti.loop_config(serialize=True)
+    ti.loop_config(serialize=schedule[1])
     for e in range(n_batch(ints)):
         _inputs_from(bind(ints, f1, v3, v4, m3), e, src, 0)
 
@@ -265,9 +264,22 @@ def _zero_frames(region: ti.template(), frames):
 
 
 @ti.func
-def _clear_grads(d: ti.template(), frames):
-    """Every gradient of frames 0 … frames − 1 and every input gradient ← 0: one contiguous
-    sweep per arena (data.py lays the gradients out frame by frame), ~21 GB/s here."""
+def _clear_grads(schedule: ti.template(), ints: ti.template(), f1: ti.template(), v3: ti.template(),
+                 v4: ti.template(), m3: ti.template(), whole_step: ti.template()):
+    """Every input gradient and every gradient of frames 0 … S − 1 (whole_step) or of frame 0
+    ← 0: one contiguous sweep per arena (data.py lays the gradients out frame by frame), ~21 GB/s
+    here. A loop of its own, before the loops that seed gradients (no env races another)."""
+    ti.loop_config(serialize=schedule[1])
+    for _ in range(1):
+        d = bind(ints, f1, v3, v4, m3)
+        if ti.static(whole_step):
+            _zero_grads(d, d.substeps)
+        else:
+            _zero_grads(d, 1)
+
+
+@ti.func
+def _zero_grads(d: ti.template(), frames):
     for r in ti.static(range(len(d.regions))):
         _zero_frames(d.regions[r], frames)
     for e in range(d.n_batch):
@@ -276,9 +288,9 @@ def _clear_grads(d: ti.template(), frames):
 
 
 @ti.kernel
-def read_links(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
+def read_links(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
     """dst (B, L, 13) ← frame-0 link pos, quat, cvel (ω, v at the origin)."""
-    ti.loop_config(serialize=True)
+    ti.loop_config(serialize=schedule[1])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
         for l in range(d.n_links):
@@ -291,8 +303,8 @@ def read_links(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, ds
 
 
 @ti.kernel
-def read_mass_matrix(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
-    ti.loop_config(serialize=True)
+def read_mass_matrix(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
+    ti.loop_config(serialize=schedule[1])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
         for i, j in ti.ndrange(d.n_dofs, d.n_dofs):
@@ -300,10 +312,10 @@ def read_mass_matrix(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: 
 
 
 @ti.kernel
-def read_dofs_force(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
+def read_dofs_force(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
     """dst (B, D) ← qfrc_smooth at frame 0 (the position stages and the force stage run there):
     the force the next step's solve is given, at the current state and inputs."""
-    ti.loop_config(serialize=serial)
+    ti.loop_config(serialize=schedule[0])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
         position_stages_env(d, 0, e)
