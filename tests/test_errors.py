@@ -282,8 +282,11 @@ def test_zero_quaternion(f64):
     scene = gs.Scene()
     box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1)), name="box")
     scene.build()
-    with pytest.raises(gs.InvalidInputError, match="entity 'box': argument 'quat' must be non-zero"):
+    with pytest.raises(gs.InvalidInputError, match="entity 'box': argument 'quat' must hold non-zero"):
         box.set_quat([0.0, 0.0, 0.0, 0.0])
+    with pytest.raises(gs.InvalidInputError, match="entity 'box': argument 'qpos' must hold non-zero"):
+        box.set_qpos([0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0])
+    box.set_qpos([0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0])
     scene.destroy()
 
 

@@ -344,7 +344,16 @@ class RigidEntity:
         """Generalised positions (n,) or (len(envs_idx), n); zero_velocity as in set_dofs_position."""
         qs = self._local(qs_idx_local, self.n_qs, "qs_idx_local")
         envs = self._envs(envs_idx)
-        self._write(self._solver_q(qs), envs, self._values(qpos, len(qs), envs, "qpos"), zero_velocity)
+        values = self._values(qpos, len(qs), envs, "qpos")
+        if self._free and set(range(3, 7)) <= set(qs.tolist()):  # a free base's whole quaternion
+            self._check_quat(values[:, [qs.tolist().index(k) for k in range(3, 7)]], "qpos")
+        self._write(self._solver_q(qs), envs, values, zero_velocity)
+
+    def _check_quat(self, quats, arg):
+        """quats (n, 4): a zero quaternion has no orientation (the kinematics would make NaN)."""
+        if bool((quats.detach().norm(dim=-1) == 0).any()):
+            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must hold non-zero quaternions (w, x, y, "
+                                    f"z), got {quats.detach().cpu().numpy()}")
 
     def _require_free(self, what):
         # Genesis moves a fixed entity's welded base too; ours keeps a fixed base in the model
@@ -366,9 +375,7 @@ class RigidEntity:
         self._require_free("set_quat")
         envs = self._envs(envs_idx)
         values = self._values(quat, 4, envs, "quat")
-        if bool((values.detach().norm(dim=-1) == 0).any()):
-            raise InvalidInputError(f"entity '{self.name}': argument 'quat' must be non-zero quaternions (w, x, y, z), "
-                                    f"got {values.detach().cpu().numpy()}")
+        self._check_quat(values, "quat")
         self._write(self._solver_q([3, 4, 5, 6]), envs, values, zero_velocity)
 
     # -- link kinematics ----------------------------------------------------------------------------
