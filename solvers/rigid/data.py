@@ -153,14 +153,12 @@ class RigidData:
     """
 
     def __init__(self, model, n_batch, substeps, requires_grad, limits_enabled, consts):
-        self.n_batch, self.substeps = n_batch, substeps
-        self.n_links, self.n_dofs, self.n_qs = model.n_links, model.n_dofs, model.n_qs
         on_cpu = runtime.arch == ti.cpu
         # (compute loops, data-moving loops) on the calling thread? On the CPU small batches and
         # every data move are (a hand-off to the pool costs more, see SERIAL_LINK_ENVS); on a GPU
         # nothing is (one GPU thread would do it all)
         self.schedule = (on_cpu and n_batch * max(1, model.n_links) <= SERIAL_LINK_ENVS, on_cpu)
-        self.widths = [input_width(name, self.n_links, self.n_dofs) for name in INPUTS]
+        self.widths = [input_width(name, model.n_links, model.n_dofs) for name in INPUTS]
         self.input_total = sum(self.widths)
         self.grad_total = sum(w for w, (_, diff) in zip(self.widths, INPUTS.values()) if diff)
         self.grad_input_names = [n for n, (_, diff) in INPUTS.items() if diff] if requires_grad else []
