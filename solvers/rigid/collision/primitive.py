@@ -1,0 +1,537 @@
+"""Primitive colliders: plane, sphere, capsule and cylinder pairs, and plane–box.
+
+MuJoCo's mjc_PlaneSphere, mjc_PlaneCapsule, mjc_PlaneCylinder, mjc_PlaneBox, mjc_SphereSphere,
+mjc_SphereCapsule, mjc_SphereCylinder and mjc_CapsuleCapsule (engine_collision_primitive.c;
+capsule–capsule as MuJoCo 4.0 does it, which is not that file: see its section), reproduced
+contact for contact: same count, order, positions, normals and distances, to the bit in float64.
+
+Every collider has the signature and return of ``contact/interfaces.md``::
+
+    count, position, normal, dist, feature = plane_box(pos1, rot1, size1, pos2, rot2, size2, margin)
+
+with K (the ``*_MAX`` constant) rows; geom 1 has the lower MuJoCo type, the normal points from
+geom 1 to geom 2. ``margin`` is what MuJoCo hands its colliders: the pair's margin plus its gap.
+A contact is emitted when its distance is <= margin (MuJoCo's test, boundary included).
+
+Each collider is a *decide* (which discrete features give contacts, in MuJoCo's order) and an
+*evaluate* (one contact as a closed form of the two poses with its feature frozen); the
+collider is decide followed by evaluate per row, so the backward can differentiate evaluate.
+The features are documented at each collider.
+
+Contact frame: every collider here passes MuJoCo a zero first tangent except plane–capsule,
+which passes the capsule axis (column 2 of rot2); build the frame with
+``frame.contact_frame(normal[k], tangent)``.
+"""
+import taichi as ti
+
+from ..spatial import dot3, mat_vec
+from .frame import (AT_MINUS, AT_PLUS, FREE, MINVAL, column, cross3, normalize3, segment_weight_states,
+                    segment_weight_terms, segment_weights)
+
+PLANE_SPHERE_MAX = 1
+PLANE_CAPSULE_MAX = 2
+PLANE_CYLINDER_MAX = 4
+PLANE_BOX_MAX = 4
+SPHERE_SPHERE_MAX = 1
+SPHERE_CAPSULE_MAX = 1
+SPHERE_CYLINDER_MAX = 1
+CAPSULE_CAPSULE_MAX = 2
+
+
+def _collider(decide, evaluate, max_contacts, doc):
+    """The collider of a decide/evaluate pair: decide, then evaluate each found contact's row.
+
+    Rows k >= count stay zero (features too).
+    """
+
+    @ti.func
+    def collide(pos1, rot1, size1, pos2, rot2, size2, margin):
+        count, feature = decide(pos1, rot1, size1, pos2, rot2, size2, margin)
+        position = ti.Matrix.zero(float, max_contacts, 3)
+        normal = ti.Matrix.zero(float, max_contacts, 3)
+        dist = ti.Vector.zero(float, max_contacts)
+        for k in range(count):  # a loop, not unrolled: evaluate is inlined once
+            p, n, d = evaluate(pos1, rot1, size1, pos2, rot2, size2, feature[k])
+            for i in ti.static(range(3)):
+                position[k, i] = p[i]
+                normal[k, i] = n[i]
+            dist[k] = d
+        return count, position, normal, dist, feature
+
+    collide.__doc__ = doc
+    return collide
+
+
+# ---------------------------------------------------------------- two building blocks
+#
+# MuJoCo builds most primitive pairs from a point-versus-plane test and a sphere-versus-sphere
+# test on derived points (a capsule's end, the nearest point of a segment, a cylinder's rim).
+
+@ti.func
+def _plane_point_evaluate(plane_pos, plane_normal, centre, radius):
+    """Contact of a sphere (centre, radius) with a plane (a point on it, unit normal).
+
+    Returns (position, normal, dist): dist = height of the centre above the plane - radius,
+    position halfway between the plane and the sphere's lowest point, normal = plane_normal.
+    """
+    dist = dot3(centre - plane_pos, plane_normal) - radius
+    position = centre + plane_normal * (-dist / 2 - radius)
+    return position, plane_normal, dist
+
+
+@ti.func
+def _plane_point_hit(plane_pos, plane_normal, centre, radius, margin):
+    """Whether MuJoCo's plane–sphere test emits a contact (height <= margin + radius)."""
+    return dot3(centre - plane_pos, plane_normal) <= margin + radius
+
+
+# Sphere–sphere normal cases (the `ss` feature of every collider built on sphere–sphere)
+CENTRES_APART = 0       # normal = unit (c2 - c1)
+CENTRES_COINCIDE = 1    # |c2 - c1| < MINVAL: normal = unit (z1 × z2), the geoms' z axes
+AXES_ALIGNED = 2        # ... and |z1 × z2| < MINVAL too: normal = world x
+
+
+@ti.func
+def _sphere_sphere_decide(c1, r1, c2, r2, z1, z2, margin):
+    """(hit, ss) of MuJoCo's sphere–sphere test on centres c1, c2 and radii r1, r2.
+
+    hit: |c1 - c2| <= margin + r1 + r2 (compared squared, as MuJoCo). ss: the normal case.
+    """
+    dif = c1 - c2
+    reach = margin + r1 + r2
+    hit = dot3(dif, dif) <= reach * reach
+    _, gap = normalize3(c2 - c1)
+    ss = CENTRES_APART
+    if gap < MINVAL:
+        _, axes_sine = normalize3(cross3(z1, z2))
+        ss = CENTRES_COINCIDE if axes_sine >= MINVAL else AXES_ALIGNED
+    return hit, ss
+
+
+@ti.func
+def _sphere_sphere_evaluate(c1, r1, c2, r2, z1, z2, ss):
+    """Contact (position, normal, dist) of two spheres with the normal case ss frozen.
+
+    dist = |c2 - c1| - r1 - r2; position = c1 + normal (r1 + dist/2), halfway between the
+    surfaces. z1, z2 (the geoms' z axes) orient the normal only when the centres coincide.
+    """
+    dif = c1 - c2
+    dist = ti.sqrt(dot3(dif, dif)) - r1 - r2
+    normal, _ = normalize3(c2 - c1)
+    if ss == CENTRES_COINCIDE:
+        normal, _ = normalize3(cross3(z1, z2))
+    elif ss == AXES_ALIGNED:
+        normal = ti.Vector([1.0, 0.0, 0.0])
+    position = normal * (r1 + dist / 2) + c1
+    return position, normal, dist
+
+
+# ---------------------------------------------------------------- plane – sphere
+# feature: always 0 (one contact: the sphere's lowest point).
+
+@ti.func
+def plane_sphere_decide(pos1, rot1, size1, pos2, rot2, size2, margin):
+    """(count, feature (1,)) of plane (geom 1, normal = its z axis) – sphere (radius size2[0])."""
+    count = 0
+    if _plane_point_hit(pos1, column(rot1, 2), pos2, size2[0], margin):
+        count = 1
+    return count, ti.Vector.zero(ti.i32, PLANE_SPHERE_MAX)
+
+
+@ti.func
+def plane_sphere_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
+    """(position, normal, dist) of the plane–sphere contact."""
+    return _plane_point_evaluate(pos1, column(rot1, 2), pos2, size2[0])
+
+
+plane_sphere = _collider(plane_sphere_decide, plane_sphere_evaluate, PLANE_SPHERE_MAX,
+                         "Plane – sphere (mjc_PlaneSphere): at most 1 contact.")
+
+
+# ---------------------------------------------------------------- plane – capsule
+# feature: which end of the capsule's segment: 0 the +z end (pos2 + h z2), 1 the -z end.
+# Each end is tested as a sphere of the capsule's radius, +z end first.
+
+@ti.func
+def _capsule_end(pos, rot, size, end):
+    """End `end` (0: +z, 1: -z) of a capsule's segment (world, m); size = (radius, half-length)."""
+    segment = column(rot, 2) * size[1]
+    point = pos + segment
+    if end == 1:
+        point = pos - segment
+    return point
+
+
+@ti.func
+def plane_capsule_decide(pos1, rot1, size1, pos2, rot2, size2, margin):
+    """(count, feature (2,)) of plane – capsule: the ends within margin, +z end first."""
+    feature = ti.Vector.zero(ti.i32, PLANE_CAPSULE_MAX)
+    count = 0
+    for end in ti.static(range(2)):
+        if _plane_point_hit(pos1, column(rot1, 2), _capsule_end(pos2, rot2, size2, end), size2[0], margin):
+            feature[count] = end
+            count += 1
+    return count, feature
+
+
+@ti.func
+def plane_capsule_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
+    """(position, normal, dist) of the plane – capsule-end contact `feature`."""
+    return _plane_point_evaluate(pos1, column(rot1, 2), _capsule_end(pos2, rot2, size2, feature), size2[0])
+
+
+plane_capsule = _collider(plane_capsule_decide, plane_capsule_evaluate, PLANE_CAPSULE_MAX,
+                          "Plane – capsule (mjc_PlaneCapsule): at most 2 contacts; "
+                          "MuJoCo's first tangent is the capsule axis.")
+
+
+# ---------------------------------------------------------------- plane – cylinder
+# feature = point + 4 flipped + 8 flat.
+#   flipped: the cylinder axis a is replaced by -a so that it points towards the plane (n·a > 0).
+#   flat: the disks are parallel to the plane (|a (n·a) - n|² < MINVAL²), so the rim direction
+#         is the cylinder's x axis instead of the plane normal's component across the axis.
+#   point: NEAR_RIM the lowest rim point of the disk nearer the plane; FAR_RIM the same rim
+#          direction on the other disk; SIDE_A / SIDE_B the two other corners of an equilateral
+#          triangle inscribed in the near disk (±60° either side of the opposite direction).
+# MuJoCo emits nothing unless NEAR_RIM is within margin; then FAR_RIM if within margin, then
+# SIDE_A and SIDE_B together if their (common) distance is within margin.
+NEAR_RIM, FAR_RIM, SIDE_A, SIDE_B = 0, 1, 2, 3
+
+
+@ti.func
+def _plane_cylinder_terms(pos1, rot1, pos2, rot2, size2, flipped, flat):
+    """Shared plane–cylinder quantities for frozen (flipped, flat).
+
+    Returns n (plane normal), axis_h (axis towards the plane times half-length), rim (radius
+    vector in the near disk towards the plane), dist0 (height of the cylinder centre), axis_drop
+    = (n·a) h and rim_drop = n·rim (heights of the disk centre and rim point relative to it).
+    """
+    n = column(rot1, 2)
+    axis = column(rot2, 2)
+    along = dot3(n, axis)
+    if flipped:
+        axis = -axis
+        along = -along
+    dist0 = dot3(pos2 - pos1, n)
+    rim = axis * along - n
+    if flat:
+        rim = column(rot2, 0) * size2[0]
+    else:
+        rim = rim * (size2[0] / ti.sqrt(dot3(rim, rim)))
+    return n, axis * size2[1], rim, dist0, along * size2[1], dot3(rim, n)
+
+
+@ti.func
+def plane_cylinder_decide(pos1, rot1, size1, pos2, rot2, size2, margin):
+    """(count, feature (4,)) of plane – cylinder (size2 = radius, half-length)."""
+    n = column(rot1, 2)
+    axis = column(rot2, 2)
+    along = dot3(n, axis)
+    across = axis * along - n
+    flipped = 1 if along > 0 else 0
+    flat = 1 if dot3(across, across) < MINVAL * MINVAL else 0
+    _, _, _, dist0, axis_drop, rim_drop = _plane_cylinder_terms(pos1, rot1, pos2, rot2, size2, flipped, flat)
+    base = 4 * flipped + 8 * flat
+    feature = ti.Vector.zero(ti.i32, PLANE_CYLINDER_MAX)
+    count = 0
+    if dist0 + axis_drop + rim_drop <= margin:
+        feature[0] = base + NEAR_RIM
+        count = 1
+        if dist0 - axis_drop + rim_drop <= margin:
+            feature[count] = base + FAR_RIM
+            count += 1
+        if dist0 + axis_drop + (-rim_drop * 0.5) <= margin:
+            feature[count] = base + SIDE_A
+            feature[count + 1] = base + SIDE_B
+            count += 2
+    return count, feature
+
+
+@ti.func
+def plane_cylinder_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
+    """(position, normal, dist) of the plane – cylinder contact `feature`."""
+    point = feature % 4
+    n, axis_h, rim, dist0, axis_drop, rim_drop = _plane_cylinder_terms(
+        pos1, rot1, pos2, rot2, size2, (feature // 4) % 2, feature // 8)
+    dist = 0.0
+    position = ti.Vector.zero(float, 3)
+    if point == NEAR_RIM:
+        dist = dist0 + axis_drop + rim_drop
+        position = pos2 + rim + axis_h + n * (-dist * 0.5)
+    elif point == FAR_RIM:
+        dist = dist0 - axis_drop + rim_drop
+        position = pos2 + rim - axis_h + n * (-dist * 0.5)
+    else:
+        dist = dist0 + axis_drop + (-rim_drop * 0.5)
+        sideways, _ = normalize3(cross3(rim, axis_h))
+        sideways = sideways * (size2[0] * ti.sqrt(3.0) / 2)
+        if point == SIDE_B:
+            sideways = -sideways
+        position = pos2 + sideways + axis_h + rim * (-0.5) + n * (-dist * 0.5)
+    return position, n, dist
+
+
+plane_cylinder = _collider(plane_cylinder_decide, plane_cylinder_evaluate, PLANE_CYLINDER_MAX,
+                           "Plane – cylinder (mjc_PlaneCylinder): at most 4 contacts.")
+
+
+# ---------------------------------------------------------------- plane – box
+# feature: the corner index c in 0..7, corner = (±sx, ±sy, ±sz) in the box frame with bit 0, 1, 2
+# of c set for +x, +y, +z. MuJoCo keeps the first four corners, in index order, that are within
+# margin and on the plane's side of the box centre (n·(R v) <= 0).
+
+@ti.func
+def _box_corner_offset(rot, size, corner):
+    """World offset from a box's centre to its corner `corner` (0..7), m."""
+    local = ti.Vector([ti.select((corner & 1) != 0, size[0], -size[0]),
+                       ti.select((corner & 2) != 0, size[1], -size[1]),
+                       ti.select((corner & 4) != 0, size[2], -size[2])])
+    return mat_vec(rot, local)
+
+
+@ti.func
+def plane_box_decide(pos1, rot1, size1, pos2, rot2, size2, margin):
+    """(count, feature (4,)) of plane – box (size2 = half-extents)."""
+    n = column(rot1, 2)
+    centre_height = dot3(pos2 - pos1, n)
+    feature = ti.Vector.zero(ti.i32, PLANE_BOX_MAX)
+    count = 0
+    for corner in range(8):
+        drop = dot3(n, _box_corner_offset(rot2, size2, corner))
+        if count < PLANE_BOX_MAX and centre_height + drop <= margin and drop <= 0:
+            feature[count] = corner
+            count += 1
+    return count, feature
+
+
+@ti.func
+def plane_box_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
+    """(position, normal, dist) of the plane – box-corner contact `feature`."""
+    n = column(rot1, 2)
+    offset = _box_corner_offset(rot2, size2, feature)
+    dist = dot3(pos2 - pos1, n) + dot3(n, offset)
+    return offset + pos2 + n * (-dist / 2), n, dist
+
+
+plane_box = _collider(plane_box_decide, plane_box_evaluate, PLANE_BOX_MAX,
+                      "Plane – box (mjc_PlaneBox): at most 4 contacts.")
+
+
+# ---------------------------------------------------------------- sphere – sphere
+# feature: the sphere–sphere normal case ss (CENTRES_APART, CENTRES_COINCIDE, AXES_ALIGNED).
+
+@ti.func
+def sphere_sphere_decide(pos1, rot1, size1, pos2, rot2, size2, margin):
+    """(count, feature (1,)) of sphere – sphere."""
+    hit, ss = _sphere_sphere_decide(pos1, size1[0], pos2, size2[0], column(rot1, 2), column(rot2, 2), margin)
+    return ti.select(hit, 1, 0), ti.Vector([ss])
+
+
+@ti.func
+def sphere_sphere_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
+    """(position, normal, dist) of the sphere–sphere contact."""
+    return _sphere_sphere_evaluate(pos1, size1[0], pos2, size2[0], column(rot1, 2), column(rot2, 2), feature)
+
+
+sphere_sphere = _collider(sphere_sphere_decide, sphere_sphere_evaluate, SPHERE_SPHERE_MAX,
+                          "Sphere – sphere (mjc_SphereSphere): at most 1 contact.")
+
+
+# ---------------------------------------------------------------- sphere – capsule
+# feature = 3 clamp + ss. clamp: where the sphere centre's projection on the capsule segment
+# lies: FREE inside, AT_PLUS clipped to the +z end, AT_MINUS to the -z end; the sphere is then
+# tested against a sphere of the capsule's radius there; ss: its normal case.
+
+@ti.func
+def _capsule_nearest(pos1, pos2, rot2, size2, clamp):
+    """Point of the capsule's segment nearest pos1 (its axial coordinate clipped per clamp)."""
+    axis = column(rot2, 2)
+    x = dot3(axis, pos1 - pos2)
+    if clamp == AT_PLUS:
+        x = size2[1]
+    elif clamp == AT_MINUS:
+        x = -size2[1]
+    return axis * x + pos2
+
+
+@ti.func
+def sphere_capsule_decide(pos1, rot1, size1, pos2, rot2, size2, margin):
+    """(count, feature (1,)) of sphere (geom 1) – capsule (geom 2)."""
+    axis = column(rot2, 2)
+    x = dot3(axis, pos1 - pos2)
+    clamp = FREE
+    if x < -size2[1]:
+        clamp = AT_MINUS
+    elif x > size2[1]:
+        clamp = AT_PLUS
+    hit, ss = _sphere_sphere_decide(pos1, size1[0], _capsule_nearest(pos1, pos2, rot2, size2, clamp), size2[0],
+                                    column(rot1, 2), axis, margin)
+    return ti.select(hit, 1, 0), ti.Vector([3 * clamp + ss])
+
+
+@ti.func
+def sphere_capsule_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
+    """(position, normal, dist) of the sphere – capsule contact `feature`."""
+    nearest = _capsule_nearest(pos1, pos2, rot2, size2, feature // 3)
+    return _sphere_sphere_evaluate(pos1, size1[0], nearest, size2[0], column(rot1, 2), column(rot2, 2),
+                                   feature % 3)
+
+
+sphere_capsule = _collider(sphere_capsule_decide, sphere_capsule_evaluate, SPHERE_CAPSULE_MAX,
+                           "Sphere – capsule (mjc_SphereCapsule): at most 1 contact.")
+
+
+# ---------------------------------------------------------------- sphere – cylinder
+# feature = 3 kind + ss. kind: which part of the cylinder the sphere centre faces:
+#   SIDE: level with the barrel (|x| < h): sphere–sphere with the axis point at the centre's
+#         level and the cylinder's radius;
+#   TOP_CAP / BOTTOM_CAP: over a disk (distance from the axis < radius): sphere against the cap's
+#         plane (outward normal ±axis, normal then reversed to point sphere → cylinder);
+#   TOP_RIM / BOTTOM_RIM: beyond both: sphere–sphere with the nearest rim point, radius 0.
+# A centre inside the cylinder takes the nearer of side and cap (cap only when strictly nearer).
+# ss: the sphere–sphere normal case (0 for caps).
+SIDE, TOP_CAP, BOTTOM_CAP, TOP_RIM, BOTTOM_RIM = 0, 1, 2, 3, 4
+
+
+@ti.func
+def _cylinder_target(pos1, pos2, rot2, size2, kind):
+    """The cylinder point the sphere centre pos1 is tested against, for a frozen kind.
+
+    Returns (point, radius): SIDE: the axis point level with pos1 and the cylinder radius;
+    caps: the cap's centre (radius unused, 0); rims: the rim point nearest pos1 and 0.
+    """
+    axis = column(rot2, 2)
+    x = dot3(axis, pos1 - pos2)
+    along = axis * x
+    point = along + pos2
+    radius = 0.0
+    if kind == SIDE:
+        radius = size2[0]
+    else:
+        end = axis * ti.select(kind == TOP_CAP or kind == TOP_RIM, size2[1], -size2[1])
+        if kind == TOP_CAP or kind == BOTTOM_CAP:
+            point = pos2 + end
+        else:
+            across = pos1 - pos2 - along
+            point = end + across * (size2[0] / ti.sqrt(dot3(across, across))) + pos2
+    return point, radius
+
+
+@ti.func
+def _cap_normal(rot2, kind):
+    """Outward normal of the cap of kind TOP_CAP (+axis) or BOTTOM_CAP (-axis)."""
+    axis = column(rot2, 2)
+    if kind == BOTTOM_CAP:
+        axis = -axis
+    return axis
+
+
+@ti.func
+def sphere_cylinder_decide(pos1, rot1, size1, pos2, rot2, size2, margin):
+    """(count, feature (1,)) of sphere (geom 1) – cylinder (geom 2, size = radius, half-length)."""
+    axis = column(rot2, 2)
+    offset = pos1 - pos2
+    x = dot3(axis, offset)
+    across = offset - axis * x
+    across_sqr = dot3(across, across)
+    side = ti.abs(x) < size2[1]
+    cap = across_sqr < size2[0] * size2[0]
+    if side and cap:
+        if size2[1] - ti.abs(x) < size2[0] - ti.sqrt(across_sqr):
+            side = False
+        else:
+            cap = False
+    kind = SIDE
+    if not side:
+        kind = ti.select(cap, TOP_CAP, TOP_RIM) + ti.select(x > 0, 0, 1)
+    point, radius = _cylinder_target(pos1, pos2, rot2, size2, kind)
+    hit = False
+    ss = CENTRES_APART
+    if cap:
+        hit = _plane_point_hit(point, _cap_normal(rot2, kind), pos1, size1[0], margin)
+    else:
+        hit, ss = _sphere_sphere_decide(pos1, size1[0], point, radius, column(rot1, 2), axis, margin)
+    return ti.select(hit, 1, 0), ti.Vector([3 * kind + ss])
+
+
+@ti.func
+def sphere_cylinder_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
+    """(position, normal, dist) of the sphere – cylinder contact `feature`."""
+    kind = feature // 3
+    point, radius = _cylinder_target(pos1, pos2, rot2, size2, kind)
+    position = ti.Vector.zero(float, 3)
+    normal = ti.Vector.zero(float, 3)
+    dist = 0.0
+    if kind == TOP_CAP or kind == BOTTOM_CAP:
+        position, normal, dist = _plane_point_evaluate(point, _cap_normal(rot2, kind), pos1, size1[0])
+        normal = -normal
+    else:
+        position, normal, dist = _sphere_sphere_evaluate(pos1, size1[0], point, radius, column(rot1, 2),
+                                                         column(rot2, 2), feature % 3)
+    return position, normal, dist
+
+
+sphere_cylinder = _collider(sphere_cylinder_decide, sphere_cylinder_evaluate, SPHERE_CYLINDER_MAX,
+                            "Sphere – cylinder (mjc_SphereCylinder): at most 1 contact.")
+
+
+# ---------------------------------------------------------------- capsule – capsule
+# MuJoCo 4.0's mjc_CapsuleCapsule (it differs from the C source of MuJoCo 3 copied in
+# mujoco_src/, which clamps x in [-1, 1] and tries four end candidates when parallel): the
+# segments run from the -z end to the +z end of each capsule, and frame.segment_weight_states
+# gives one pair of weights (non-parallel) or two (parallel within about 1e-4 rad: from capsule
+# 1's -z end, then from its +z end); each pair is tested as two spheres at those points.
+# feature = 3 state + ss. state = 3 s_state + t_state: the weight states (frame.FREE / AT_START
+# / AT_END) on capsule 1 and 2, fixing the closed form (frame.segment_weights); ss: the
+# spheres' normal case.
+
+@ti.func
+def _capsule_segment(pos, rot, size):
+    """(start, end) of a capsule's segment: its -z end and +z end (world, m)."""
+    half = column(rot, 2) * size[1]
+    return pos - half, pos + half
+
+
+@ti.func
+def _capsule_pair_terms(pos1, rot1, size1, pos2, rot2, size2):
+    """Segment-weight terms (frame.segment_weight_terms) and segment starts of two capsules."""
+    start1, end1 = _capsule_segment(pos1, rot1, size1)
+    start2, end2 = _capsule_segment(pos2, rot2, size2)
+    d1, d2, r, a, b, c, e, f = segment_weight_terms(start1, end1, start2, end2)
+    return start1, start2, d1, d2, r, a, b, c, e, f
+
+
+@ti.func
+def _capsule_pair_points(pos1, rot1, size1, pos2, rot2, size2, state):
+    """Sphere centres (c1, c2) on the two capsule segments for a frozen weight-pair state."""
+    start1, start2, d1, d2, r, a, b, c, e, f = _capsule_pair_terms(pos1, rot1, size1, pos2, rot2, size2)
+    s, t = segment_weights(d1, d2, r, a, b, c, e, f, state)
+    return d1 * s + start1, d2 * t + start2
+
+
+@ti.func
+def capsule_capsule_decide(pos1, rot1, size1, pos2, rot2, size2, margin):
+    """(count, feature (2,)) of capsule – capsule (sizes = radius, half-length)."""
+    _, _, d1, d2, r, a, b, c, e, f = _capsule_pair_terms(pos1, rot1, size1, pos2, rot2, size2)
+    n, state0, state1 = segment_weight_states(d1, d2, r, a, b, c, e, f)
+    feature = ti.Vector.zero(ti.i32, CAPSULE_CAPSULE_MAX)
+    count = 0
+    for k in range(n):
+        state = ti.select(k == 0, state0, state1)
+        c1, c2 = _capsule_pair_points(pos1, rot1, size1, pos2, rot2, size2, state)
+        hit, ss = _sphere_sphere_decide(c1, size1[0], c2, size2[0], column(rot1, 2), column(rot2, 2), margin)
+        if hit:
+            feature[count] = 3 * state + ss
+            count += 1
+    return count, feature
+
+
+@ti.func
+def capsule_capsule_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
+    """(position, normal, dist) of the capsule – capsule contact `feature`."""
+    c1, c2 = _capsule_pair_points(pos1, rot1, size1, pos2, rot2, size2, feature // 3)
+    return _sphere_sphere_evaluate(c1, size1[0], c2, size2[0], column(rot1, 2), column(rot2, 2), feature % 3)
+
+
+capsule_capsule = _collider(capsule_capsule_decide, capsule_capsule_evaluate, CAPSULE_CAPSULE_MAX,
+                            "Capsule – capsule (MuJoCo 4.0's mjc_CapsuleCapsule): at most 2 contacts.")
