@@ -1,0 +1,756 @@
+"""Constraint solve of one env: MuJoCo's primal Newton method (mj_solNewton), as MuJoCo 4 runs it.
+
+**Cost.** With a0 = M⁻¹ qfrc_smooth (qacc_smooth), jar = J·a − aref per row and D = 1/R,
+    qacc = argmin_a  ½ (a − a0)ᵀ M (a − a0) + Σ_rows s(jar),
+a convex C¹ piecewise-quadratic (plus the cone) whose force per row is f = −∂s/∂jar:
+- friction loss (bound F): Huber, ½ D jar² while |jar| < R F, else F |jar| − ½ R F² (f = ∓F);
+- one-sided (limit, frictionless contact, pyramid edge): ½ D jar² while jar < 0, else 0;
+- elliptic block (dim rows, N = μ jar₀, U_j = μ_j jar_j, T = |U|): top zone N ≥ μT: 0; bottom
+  zone μN + T ≤ 0: Σ ½ D_j jar_j²; middle zone: ½ Dm (N − μT)², Dm = D₀ / (μ² (1 + μ²)).
+Each row's state (efc_state, MuJoCo's mjtConstraintState) names its piece: SATISFIED (zero),
+QUADRATIC, LINEARNEG / LINEARPOS (friction loss saturated), CONE (middle zone, whole block).
+
+**Islands.** As MuJoCo (islands on by default), the dofs split into islands: kinematic trees
+(a tree = the dofs under one root of ``d.dof_parent``) joined by rows that touch both; each
+island is solved on its own (own scale, line searches, termination). Dofs no row touches keep
+qacc = qacc_smooth. MuJoCo takes a contact's trees from its two geoms' bodies; we take them
+from the rows' non-zero Jacobian entries (the same unless a row is exactly zero on a tree).
+
+**Warm start** (mj_fwdConstraint): the whole env's cost at qacc_warmstart (constraints + Gauss)
+against the constraint cost at qacc_smooth; the lower one starts every island.
+
+**Newton iteration** per island, with scale = 1 / Σ_island M_ii: the gradient g = M a −
+qfrc_smooth − Jᵀ f; the Hessian H = M + Jᵀ diag(D·[state = QUADRATIC]) J + Σ_cones J_cᵀ H_c J_c
+(H_c the middle zone's dim × dim Hessian in jar), factored densely each iteration (no
+incremental updates); direction −H⁻¹ g; an exact line search on the 1-D piecewise quadratic
+(PrimalSearch: a Newton step from 0, one-sided Newton steps until the derivative changes sign,
+then a bracketed search among the two brackets' Newton points and the midpoint), converged where
+|dcost/dα| < tolerance · ls_tolerance · |search| / scale, at most ls_iterations evaluations.
+Start: stop at once if ½ scale gᵀM⁻¹g < tolerance and scale |g| < tolerance (certificate), or
+if scale |g| < tolerance and the Newton decrement ½ scale gᵀH⁻¹g < tolerance. After each step:
+stop if 0 < scale · improvement < tolerance, scale |g| < tolerance or the decrement <
+tolerance; also when the line search returns α = 0 or after ``iterations`` steps.
+solver_niter is the sum of the islands' iteration counts (MuJoCo's Σ d.solver_niter).
+
+**For the backward.** At exit d.solver_H holds the lower Cholesky factor L (H = L Lᵀ) of the
+whole env's final Hessian, block-diagonal over islands (M's factor on unconstrained dofs),
+consistent with the final efc_state (the active set) and solver_jar = J qacc − aref (from which
+the cone blocks H_c follow). Implicit differentiation solves H u = ḡ with it.
+
+**Checking against MuJoCo.** With islands, MuJoCo copies only the forces back from its island
+arrays: after mj_forward, d.efc_state still holds the warm-start test's states (at qacc_smooth);
+the solve's final states, which ours equal, are d.iefc_state[d.map_efc2iefc].
+
+**Where we differ from MuJoCo.** Dense Cholesky of M (MuJoCo: sparse LDLᵀ) and a fresh dense
+factor of H every iteration (MuJoCo: rank-one updates): round-off only. Island trees from the
+Jacobian (above). No equality rows, no noslip, no sleeping, warm start always on.
+"""
+import taichi as ti
+
+# Row types (efc_type) of the interface
+UNUSED, FRICTION_LOSS, ONE_SIDED, ELLIPTIC_FIRST, ELLIPTIC_REST = 0, 1, 2, 3, 4
+# MuJoCo's mjtConstraintState (efc_state)
+SATISFIED, QUADRATIC, LINEARNEG, LINEARPOS, CONE = 0, 1, 2, 3, 4
+# elliptic cone zones
+TOP, BOTTOM, MIDDLE = 1, 2, 3
+MINVAL = 1e-15  # MuJoCo's mjMINVAL
+ALL = -2        # island label standing for every dof and row
+NO_ISLAND = -1  # label of a dof (or row) that no row touches
+
+# Work arrays of the solve, indexed [s, e, k] (D, R) or [s, e, i, j] (DD). Element "i": int32.
+SCRATCH = {
+    "solver_H": ("f", "DD"),          # Hessian H (lower triangle), factored in place: L, H = L Lᵀ
+    "solver_Ma": ("f", "D"),          # M qacc
+    "solver_Mv": ("f", "D"),          # M search
+    "solver_grad": ("f", "D"),        # cost gradient in qacc
+    "solver_Mgrad": ("f", "D"),       # H⁻¹ grad (M⁻¹ grad for the start certificate)
+    "solver_search": ("f", "D"),      # search direction
+    "solver_jar": ("f", "R"),         # J qacc − aref
+    "solver_Jv": ("f", "R"),          # J search
+    "solver_tree": ("i", "D"),        # union-find parent of a tree's root dof (−1: no row)
+    "solver_dof_island": ("i", "D"),  # island of a dof: its root tree's root dof, or −1
+    "solver_row_island": ("i", "R"),  # island of a row
+}
+
+
+# ----------------------------------------------------------------------------- islands
+@ti.func
+def _tree_of(d: ti.template(), i):
+    """Root dof of dof i's kinematic tree (its ancestor with no parent)."""
+    t = i
+    while d.dof_parent[t] != -1:
+        t = d.dof_parent[t]
+    return t
+
+
+@ti.func
+def _find(d: ti.template(), s, e, t):
+    """Union-find root of active tree t."""
+    while d.solver_tree[s, e, t] != t:
+        t = d.solver_tree[s, e, t]
+    return t
+
+
+@ti.func
+def _find_islands(d: ti.template(), s, e):
+    """Label dofs and rows with their island: trees joined by every used row's non-zero Jacobian
+    entries; an island is named by its smallest tree (MuJoCo's canonical root)."""
+    for i in range(d.n_dofs):
+        d.solver_tree[s, e, i] = NO_ISLAND
+    for r in range(d.n_rows):
+        if d.efc_type[s, e, r] != UNUSED:
+            first = NO_ISLAND
+            for i in range(d.n_dofs):
+                if d.efc_J[s, e, r, i] != 0.0:
+                    t = _tree_of(d, i)
+                    if d.solver_tree[s, e, t] == NO_ISLAND:
+                        d.solver_tree[s, e, t] = t
+                    if first == NO_ISLAND:
+                        first = t
+                    else:  # link the larger root under the smaller
+                        a, b = _find(d, s, e, first), _find(d, s, e, t)
+                        d.solver_tree[s, e, ti.max(a, b)] = ti.min(a, b)
+    for i in range(d.n_dofs):
+        t = _tree_of(d, i)
+        label = NO_ISLAND
+        if d.solver_tree[s, e, t] != NO_ISLAND:
+            label = _find(d, s, e, t)
+        d.solver_dof_island[s, e, i] = label
+    for r in range(d.n_rows):  # an elliptic block's rows share one island
+        t = d.efc_type[s, e, r]
+        if t != ELLIPTIC_REST:
+            count = d.efc_dim[s, e, r] if t == ELLIPTIC_FIRST else 1
+            label = NO_ISLAND
+            if t != UNUSED:
+                for q in range(count):
+                    for i in range(d.n_dofs):
+                        if label == NO_ISLAND and d.efc_J[s, e, r + q, i] != 0.0:
+                            label = d.solver_dof_island[s, e, i]
+            for q in range(count):
+                d.solver_row_island[s, e, r + q] = label
+
+
+@ti.func
+def _dof_in(d: ti.template(), s, e, i, k):
+    return k == ALL or d.solver_dof_island[s, e, i] == k
+
+
+@ti.func
+def _row_in(d: ti.template(), s, e, r, k):
+    """Row r is used and in island k; an elliptic block counts by its first row."""
+    t = d.efc_type[s, e, r]
+    return t != UNUSED and t != ELLIPTIC_REST and (k == ALL or d.solver_row_island[s, e, r] == k)
+
+
+# ----------------------------------------------------------------------------- dense algebra
+@ti.func
+def _cholesky(d: ti.template(), A: ti.template(), s, e, k):
+    """In place, A[s, e] (lower triangle of a symmetric positive matrix, restricted to island k's
+    dofs) ← its Cholesky factor L. As mju_cholFactor, a pivot below MINVAL is raised to MINVAL
+    and its column cleared."""
+    for j in range(d.n_dofs):
+        if _dof_in(d, s, e, j, k):
+            pivot = A[s, e, j, j]
+            for c in range(j):
+                if _dof_in(d, s, e, c, k):
+                    pivot -= A[s, e, j, c] * A[s, e, j, c]
+            deficient = pivot < MINVAL
+            if deficient:
+                pivot = MINVAL
+            ljj = ti.sqrt(pivot)
+            A[s, e, j, j] = ljj
+            inv = 1.0 / ljj
+            for i in range(j + 1, d.n_dofs):
+                if _dof_in(d, s, e, i, k):
+                    if deficient:
+                        A[s, e, i, j] = 0.0
+                    else:
+                        acc = A[s, e, i, j]
+                        for c in range(j):
+                            if _dof_in(d, s, e, c, k):
+                                acc -= A[s, e, i, c] * A[s, e, j, c]
+                        A[s, e, i, j] = acc * inv
+
+
+@ti.func
+def _cholesky_solve(d: ti.template(), L: ti.template(), x: ti.template(), s, e, k):
+    """In place, x[s, e] ← (L Lᵀ)⁻¹ x[s, e] on island k's dofs (L from ``_cholesky``)."""
+    for i in range(d.n_dofs):
+        if _dof_in(d, s, e, i, k):
+            acc = x[s, e, i]
+            for j in range(i):
+                if _dof_in(d, s, e, j, k):
+                    acc -= L[s, e, i, j] * x[s, e, j]
+            x[s, e, i] = acc / L[s, e, i, i]
+    for q in range(d.n_dofs):
+        i = d.n_dofs - 1 - q
+        if _dof_in(d, s, e, i, k):
+            acc = x[s, e, i]
+            for j in range(i + 1, d.n_dofs):
+                if _dof_in(d, s, e, j, k):
+                    acc -= L[s, e, j, i] * x[s, e, j]
+            x[s, e, i] = acc / L[s, e, i, i]
+
+
+@ti.func
+def _dot(d: ti.template(), a: ti.template(), b: ti.template(), s, e, k):
+    """a[s, e] · b[s, e] over island k's dofs."""
+    acc = 0.0
+    for i in range(d.n_dofs):
+        if _dof_in(d, s, e, i, k):
+            acc += a[s, e, i] * b[s, e, i]
+    return acc
+
+
+@ti.func
+def _mul_M(d: ti.template(), s, e, k, x: ti.template(), out: ti.template()):
+    """out[s, e] ← M x[s, e] on island k's dofs (M couples no two islands)."""
+    for i in range(d.n_dofs):
+        if _dof_in(d, s, e, i, k):
+            acc = 0.0
+            for j in range(d.n_dofs):
+                acc += d.solver_M[s, e, i, j] * x[s, e, j]
+            out[s, e, i] = acc
+
+
+@ti.func
+def _set_jar(d: ti.template(), s, e, k):
+    """jar ← J qacc − aref on island k's rows (all their rows, elliptic tails included)."""
+    for r in range(d.n_rows):
+        if d.efc_type[s, e, r] != UNUSED and (k == ALL or d.solver_row_island[s, e, r] == k):
+            acc = 0.0
+            for i in range(d.n_dofs):
+                acc += d.efc_J[s, e, r, i] * d.qacc[s, e, i]
+            d.solver_jar[s, e, r] = acc - d.efc_aref[s, e, r]
+
+
+# ----------------------------------------------------------------------------- cost pieces
+@ti.func
+def _cone_zone(N, Tsqr, mu):
+    """Zone of an elliptic cone at normal N = μ jar₀ and tangential T² = Σ U_j²; returns (zone, T)."""
+    zone, T = TOP, 0.0
+    if Tsqr <= 0.0:
+        if N < 0.0:
+            zone = BOTTOM
+    else:
+        T = ti.sqrt(Tsqr)
+        if N >= mu * T:
+            zone = TOP
+        elif mu * N + T <= 0.0:
+            zone = BOTTOM
+        else:
+            zone = MIDDLE
+    return zone, T
+
+
+@ti.func
+def _update_constraints(d: ti.template(), s, e, k):
+    """mj_constraintUpdate on island k's rows: efc_state and efc_force from solver_jar.
+    Returns the constraint cost Σ s(jar)."""
+    cost = 0.0
+    for r in range(d.n_rows):
+        if _row_in(d, s, e, r, k):
+            t = d.efc_type[s, e, r]
+            jar, R = d.solver_jar[s, e, r], d.efc_R[s, e, r]
+            D = 1.0 / R
+            if t == FRICTION_LOSS:
+                F = d.efc_floss[s, e, r]
+                if jar <= -R * F:
+                    cost += -0.5 * R * F * F - F * jar
+                    d.efc_force[s, e, r], d.efc_state[s, e, r] = F, LINEARNEG
+                elif jar >= R * F:
+                    cost += -0.5 * R * F * F + F * jar
+                    d.efc_force[s, e, r], d.efc_state[s, e, r] = -F, LINEARPOS
+                else:
+                    cost += 0.5 * D * jar * jar
+                    d.efc_force[s, e, r], d.efc_state[s, e, r] = -D * jar, QUADRATIC
+            elif t == ONE_SIDED:
+                if jar >= 0.0:
+                    d.efc_force[s, e, r], d.efc_state[s, e, r] = 0.0, SATISFIED
+                else:
+                    cost += 0.5 * D * jar * jar
+                    d.efc_force[s, e, r], d.efc_state[s, e, r] = -D * jar, QUADRATIC
+            else:
+                cost += _update_cone(d, s, e, r)
+    return cost
+
+
+@ti.func
+def _update_cone(d: ti.template(), s, e, r):
+    """State and forces of the elliptic block starting at row r; returns its cost."""
+    dim, mu = d.efc_dim[s, e, r], d.efc_mu[s, e, r]
+    N = d.solver_jar[s, e, r] * mu
+    Tsqr = 0.0
+    for j in range(1, dim):
+        u = d.solver_jar[s, e, r + j] * d.efc_mu[s, e, r + j]
+        Tsqr += u * u
+    zone, T = _cone_zone(N, Tsqr, mu)
+    cost, state = 0.0, SATISFIED
+    if zone == TOP:
+        for j in range(dim):
+            d.efc_force[s, e, r + j] = 0.0
+    elif zone == BOTTOM:
+        state = QUADRATIC
+        for j in range(dim):
+            jar = d.solver_jar[s, e, r + j]
+            D = 1.0 / d.efc_R[s, e, r + j]
+            cost += 0.5 * D * jar * jar
+            d.efc_force[s, e, r + j] = -D * jar
+    else:
+        state = CONE
+        Dm = (1.0 / d.efc_R[s, e, r]) / (mu * mu * (1.0 + mu * mu))
+        gap = N - mu * T
+        cost = 0.5 * Dm * gap * gap
+        f0 = -Dm * gap * mu
+        d.efc_force[s, e, r] = f0
+        for j in range(1, dim):
+            fr = d.efc_mu[s, e, r + j]
+            d.efc_force[s, e, r + j] = -f0 / T * (d.solver_jar[s, e, r + j] * fr) * fr
+    for j in range(dim):
+        d.efc_state[s, e, r + j] = state
+    return cost
+
+
+@ti.func
+def _cone_hessian_entry(d: ti.template(), s, e, r, a, b, N, T):
+    """Entry (a, b) of the middle zone's Hessian of the block at row r in jar (MuJoCo's con->H):
+    Dm s_a s_b [∂²(N − μT)²/2 / ∂U_a ∂U_b] with s = (μ, μ_1, ...)."""
+    mu = d.efc_mu[s, e, r]
+    Dm = (1.0 / d.efc_R[s, e, r]) / (mu * mu * (1.0 + mu * mu))
+    Ua = d.solver_jar[s, e, r + a] * d.efc_mu[s, e, r + a]
+    Ub = d.solver_jar[s, e, r + b] * d.efc_mu[s, e, r + b]
+    h = 1.0
+    if a == 0 and b > 0:
+        h = -mu / T * Ub
+    elif a > 0 and b == 0:
+        h = -mu / T * Ua
+    elif a > 0:
+        h = mu * N / (T * T * T) * Ua * Ub
+        if a == b:
+            h += mu * mu - mu * N / T
+    return Dm * d.efc_mu[s, e, r + a] * d.efc_mu[s, e, r + b] * h
+
+
+@ti.func
+def _factor_hessian(d: ti.template(), s, e, k):
+    """solver_H ← Cholesky factor of island k's H = M + Jᵀ D_quadratic J + cone blocks."""
+    for i in range(d.n_dofs):
+        if _dof_in(d, s, e, i, k):
+            for j in range(i + 1):
+                if _dof_in(d, s, e, j, k):
+                    d.solver_H[s, e, i, j] = d.solver_M[s, e, i, j]
+    for r in range(d.n_rows):
+        if d.efc_type[s, e, r] != UNUSED and d.solver_row_island[s, e, r] == k:
+            if d.efc_state[s, e, r] == QUADRATIC:
+                D = 1.0 / d.efc_R[s, e, r]
+                for i in range(d.n_dofs):
+                    DJi = D * d.efc_J[s, e, r, i]
+                    if DJi != 0.0:
+                        for j in range(i + 1):
+                            d.solver_H[s, e, i, j] += DJi * d.efc_J[s, e, r, j]
+            if d.efc_type[s, e, r] == ELLIPTIC_FIRST and d.efc_state[s, e, r] == CONE:
+                _add_cone_hessian(d, s, e, r)
+    _cholesky(d, d.solver_H, s, e, k)
+
+
+@ti.func
+def _add_cone_hessian(d: ti.template(), s, e, r):
+    """solver_H += J_cᵀ H_c J_c for the elliptic block at row r (middle zone)."""
+    dim, mu = d.efc_dim[s, e, r], d.efc_mu[s, e, r]
+    N = d.solver_jar[s, e, r] * mu
+    Tsqr = 0.0
+    for j in range(1, dim):
+        u = d.solver_jar[s, e, r + j] * d.efc_mu[s, e, r + j]
+        Tsqr += u * u
+    T = ti.sqrt(Tsqr)
+    for a in range(dim):
+        for b in range(dim):
+            h = _cone_hessian_entry(d, s, e, r, a, b, N, T)
+            for i in range(d.n_dofs):
+                hJ = h * d.efc_J[s, e, r + a, i]
+                if hJ != 0.0:
+                    for j in range(i + 1):
+                        d.solver_H[s, e, i, j] += hJ * d.efc_J[s, e, r + b, j]
+
+
+@ti.func
+def _update_gradient(d: ti.template(), s, e, k):
+    """qfrc_constraint = Jᵀ f and grad = M qacc − qfrc_smooth − qfrc_constraint on island k."""
+    for i in range(d.n_dofs):
+        if _dof_in(d, s, e, i, k):
+            acc = 0.0
+            for r in range(d.n_rows):
+                if d.efc_type[s, e, r] != UNUSED and d.solver_row_island[s, e, r] == k:
+                    acc += d.efc_J[s, e, r, i] * d.efc_force[s, e, r]
+            d.qfrc_constraint[s, e, i] = acc
+            d.solver_grad[s, e, i] = d.solver_Ma[s, e, i] - d.qfrc_smooth[s, e, i] - acc
+
+
+# ----------------------------------------------------------------------------- line search
+@ti.func
+def _friction_cost(x, F, RF, D):
+    """Huber cost of a friction-loss row at jar = x (bound F, RF = R F)."""
+    cost = F * (-0.5 * RF + x)
+    if -RF < x and x < RF:
+        cost = 0.5 * D * x * x
+    elif x <= -RF:
+        cost = F * (-0.5 * RF - x)
+    return cost
+
+
+@ti.func
+def _friction_zone(x, RF):
+    zone = 1
+    if -RF < x and x < RF:
+        zone = 0
+    elif x <= -RF:
+        zone = -1
+    return zone
+
+
+@ti.func
+def _friction_cost_change(x0, x, F, RF, D):
+    """cost(x) − cost(x0) of a friction-loss row, without cancellation inside one piece."""
+    z0, z = _friction_zone(x0, RF), _friction_zone(x, RF)
+    change = _friction_cost(x, F, RF, D) - _friction_cost(x0, F, RF, D)
+    if z0 == 0 and z == 0:
+        change = 0.5 * D * (x - x0) * (x + x0)
+    elif z0 == -1 and z == -1:
+        change = F * (x0 - x)
+    elif z0 == 1 and z == 1:
+        change = F * (x - x0)
+    return change
+
+
+@ti.func
+def _cone_cost_change(alpha, q0, q1, q2, U0, V0, UU, UV, VV, mu, Dm):
+    """cost(α) − cost(0) of an elliptic block along the search (MuJoCo's ellipticCostDif);
+    q0..q2: its bottom-zone quadratic ½ jarᵀDjar, jvᵀDjar, ½ jvᵀDjv. Returns (change, zone, T)."""
+    zone0, T0 = _cone_zone(U0, UU, mu)
+    N = U0 + alpha * V0
+    zone, T = _cone_zone(N, UU + alpha * (2.0 * UV + alpha * VV), mu)
+    change = 0.0
+    if zone0 == BOTTOM and zone == BOTTOM:
+        change = alpha * alpha * q2 + alpha * q1
+    elif zone0 == MIDDLE and zone == MIDDLE:  # rationalised: no cancellation
+        dT = alpha * (2.0 * UV + alpha * VV) / (T + T0)
+        dgap = alpha * V0 - mu * dT
+        change = 0.5 * Dm * dgap * (2.0 * (U0 - mu * T0) + dgap)
+    elif zone0 == MIDDLE and zone == BOTTOM:
+        gap0 = mu * U0 + T0
+        change = alpha * (alpha * q2 + q1) + 0.5 * Dm * gap0 * gap0
+    elif zone0 == BOTTOM and zone == MIDDLE:
+        gap = mu * N + T
+        change = alpha * (alpha * q2 + q1) - 0.5 * Dm * gap * gap
+    elif zone0 == TOP and zone == BOTTOM:
+        change = alpha * alpha * q2 + alpha * q1 + q0
+    elif zone0 == TOP and zone == MIDDLE:
+        gap = N - mu * T
+        change = 0.5 * Dm * gap * gap
+    elif zone0 == MIDDLE and zone == TOP:
+        gap0 = U0 - mu * T0
+        change = -0.5 * Dm * gap0 * gap0
+    elif zone0 == BOTTOM and zone == TOP:
+        change = -q0
+    return change, zone, T
+
+
+@ti.func
+def _eval_cone(d: ti.template(), s, e, r, alpha):
+    """(cost change, d/dα, d²/dα²) of the elliptic block at row r at step α."""
+    dim, mu = d.efc_dim[s, e, r], d.efc_mu[s, e, r]
+    q0, q1, q2, UU, UV, VV = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    for j in range(dim):
+        jar, jv = d.solver_jar[s, e, r + j], d.solver_Jv[s, e, r + j]
+        D = 1.0 / d.efc_R[s, e, r + j]
+        DJ = D * jar
+        q0 += jar * DJ
+        q1 += jv * DJ
+        q2 += jv * D * jv
+        if j > 0:
+            fr = d.efc_mu[s, e, r + j]
+            U, V = jar * fr, jv * fr
+            UU += U * U
+            UV += U * V
+            VV += V * V
+    q0 *= 0.5
+    q2 *= 0.5
+    U0, V0 = d.solver_jar[s, e, r] * mu, d.solver_Jv[s, e, r] * mu
+    Dm = (1.0 / d.efc_R[s, e, r]) / (mu * mu * (1.0 + mu * mu))
+    change, zone, T = _cone_cost_change(alpha, q0, q1, q2, U0, V0, UU, UV, VV, mu, Dm)
+    d0, d1 = 0.0, 0.0
+    if zone == BOTTOM:
+        d0, d1 = 2.0 * alpha * q2 + q1, 2.0 * q2
+    elif zone == MIDDLE:
+        N = U0 + alpha * V0
+        T1 = (UV + alpha * VV) / T
+        T2 = VV / T - (UV + alpha * VV) * T1 / (T * T)
+        slope = V0 - mu * T1
+        d0 = Dm * (N - mu * T) * slope
+        d1 = Dm * (slope * slope + (N - mu * T) * (-mu * T2))
+    return change, d0, d1
+
+
+@ti.func
+def _eval(d: ti.template(), s, e, k, alpha, gauss1, gauss2):
+    """Point (α, cost(α) − cost(0), d/dα, d²/dα²) of island k's cost along solver_search
+    (MuJoCo's PrimalEval); gauss1, gauss2: the Gauss term's linear and quadratic coefficients."""
+    cost, d0, d1 = 0.0, 0.0, 0.0
+    quad = ti.Vector([0.0, gauss1, gauss2])  # summed active quadratics, shifted by cost(0)
+    for r in range(d.n_rows):
+        if _row_in(d, s, e, r, k):
+            t = d.efc_type[s, e, r]
+            jar, jv = d.solver_jar[s, e, r], d.solver_Jv[s, e, r]
+            D = 1.0 / d.efc_R[s, e, r]
+            if t == FRICTION_LOSS:
+                F = d.efc_floss[s, e, r]
+                RF = d.efc_R[s, e, r] * F
+                x = jar + alpha * jv
+                cost += _friction_cost_change(jar, x, F, RF, D)
+                if -RF < x and x < RF:
+                    d0 += D * x * jv
+                    d1 += D * jv * jv
+                elif x <= -RF:
+                    d0 += -F * jv
+                else:
+                    d0 += F * jv
+            elif t == ONE_SIDED:
+                DJ = D * jar
+                q0 = 0.5 * (jar * DJ)
+                cost0 = 0.0
+                if jar < 0.0:
+                    cost0 = q0
+                if jar + alpha * jv < 0.0:
+                    quad += ti.Vector([q0 - cost0, jv * DJ, 0.5 * (jv * D * jv)])
+                else:
+                    cost -= cost0
+            else:
+                c, c1, c2 = _eval_cone(d, s, e, r, alpha)
+                cost += c
+                d0 += c1
+                d1 += c2
+    cost += alpha * alpha * quad[2] + alpha * quad[1] + quad[0]
+    d0 += 2.0 * alpha * quad[2] + quad[1]
+    d1 += 2.0 * quad[2]
+    if d1 <= 0.0:  # cannot happen for a convex cost; MuJoCo's guard
+        d1 = MINVAL
+    return ti.Vector([alpha, cost, d0, d1])
+
+
+@ti.func
+def _newton_point(p):
+    """α of the 1-D Newton step from point p = (α, cost, d/dα, d²/dα²)."""
+    return p[0] - p[2] / p[3]
+
+
+@ti.func
+def _update_bracket(p, c0, c1, c2):
+    """MuJoCo's updateBracket: move bracket end p to any candidate with a derivative of p's sign
+    and a smaller magnitude. Returns (new p, moved)."""
+    moved = 0
+    for c in ti.static([c0, c1, c2]):
+        if p[2] < 0.0 and c[2] < 0.0 and p[2] < c[2]:
+            p, moved = c, 1
+        elif p[2] > 0.0 and c[2] > 0.0 and p[2] > c[2]:
+            p, moved = c, 1
+    return p, moved
+
+
+# Phases of the line search: which point the evaluation just made is
+_P0, _P1_FIRST, _P1_ONE_SIDED, _P1_NEXT_SETUP, _MID, _P1_NEXT, _P2_NEXT, _BRACKET = 0, 1, 2, 3, 4, 5, 6, 7
+
+
+@ti.func
+def _line_search(d: ti.template(), s, e, k, tolerance, ls_iterations, scale):
+    """Exact line search of island k along solver_search (MuJoCo's PrimalSearch), written as one
+    loop with a single evaluation site. Sets solver_Mv and solver_Jv. Returns (α, improvement =
+    cost(0) − cost(α)); α = 0 when the search is degenerate or nothing improves."""
+    snorm = ti.sqrt(_dot(d, d.solver_search, d.solver_search, s, e, k))
+    alpha, improvement = 0.0, 0.0
+    if snorm >= MINVAL:
+        gtol = tolerance * snorm / scale
+        _mul_M(d, s, e, k, d.solver_search, d.solver_Mv)
+        for r in range(d.n_rows):
+            if d.efc_type[s, e, r] != UNUSED and d.solver_row_island[s, e, r] == k:
+                acc = 0.0
+                for i in range(d.n_dofs):
+                    acc += d.efc_J[s, e, r, i] * d.solver_search[s, e, i]
+                d.solver_Jv[s, e, r] = acc
+        gauss1 = _dot(d, d.solver_search, d.solver_Ma, s, e, k) - _dot(d, d.qfrc_smooth, d.solver_search, s, e, k)
+        gauss2 = 0.5 * _dot(d, d.solver_search, d.solver_Mv, s, e, k)
+
+        zero = ti.Vector([0.0, 0.0, 0.0, 0.0])
+        p0, p1, p2, p1next, p2next, pmid, best = zero, zero, zero, zero, zero, zero, zero
+        phase, n_eval, x, direction, p2_pending, done = _P0, 0, 0.0, 1.0, 0, 0
+        while not done:
+            if phase == _BRACKET:  # head of the bracketed loop: evaluate no point here
+                if n_eval < ls_iterations:
+                    x, phase = 0.5 * (p1[0] + p2[0]), _MID
+                else:  # out of evaluations: the better bracket end if it improves
+                    done = 1
+                    if p1[1] <= p2[1] and p1[1] < 0.0:
+                        best = p1
+                    elif p2[1] <= p1[1] and p2[1] < 0.0:
+                        best = p2
+                    else:
+                        best = p0
+                continue
+            p = _eval(d, s, e, k, x, gauss1, gauss2)
+            n_eval += 1
+            if phase == _P0:
+                p0, x, phase = p, _newton_point(p), _P1_FIRST
+            elif phase == _P1_FIRST or phase == _P1_ONE_SIDED:
+                p1 = p
+                converged = ti.abs(p[2]) < gtol and p[1] < 0.0
+                if phase == _P1_FIRST:
+                    converged = ti.abs(p[2]) < gtol and (p[0] == 0.0 or p[1] < 0.0)
+                    direction = 1.0 if p[2] < 0.0 else -1.0
+                    p2 = p0
+                if converged:
+                    best, done = p1, 1
+                elif p1[2] * direction <= -gtol and n_eval < ls_iterations:
+                    p2, x, phase = p1, _newton_point(p1), _P1_ONE_SIDED
+                elif n_eval >= ls_iterations:  # could not bracket
+                    best, done = p1, 1
+                else:
+                    p2next, x, phase = p1, _newton_point(p1), _P1_NEXT_SETUP
+            elif phase == _P1_NEXT_SETUP:
+                p1next, phase = p, _BRACKET
+            elif phase == _MID:
+                pmid = p
+                best_i, best_cost = -1, 0.0
+                i = 0
+                for c in ti.static([p1next, p2next, pmid]):
+                    if ti.abs(c[2]) < gtol and (best_i == -1 or c[1] < best_cost):
+                        best_i, best_cost, best = i, c[1], c
+                    i += 1
+                if best_i >= 0:
+                    done = 1
+                else:
+                    p1, moved1 = _update_bracket(p1, p1next, p2next, pmid)
+                    p2, moved2 = _update_bracket(p2, p1next, p2next, pmid)
+                    if moved1 == 0 and moved2 == 0:  # round-off reached: take the midpoint
+                        best, done = pmid, 1
+                    elif moved1 == 1:
+                        x, phase, p2_pending = _newton_point(p1), _P1_NEXT, moved2
+                    else:
+                        x, phase = _newton_point(p2), _P2_NEXT
+            elif phase == _P1_NEXT:
+                p1next, phase = p, _BRACKET
+                if p2_pending == 1:
+                    x, phase = _newton_point(p2), _P2_NEXT
+            else:  # _P2_NEXT
+                p2next, phase = p, _BRACKET
+        alpha, improvement = best[0], -best[1]
+    return alpha, improvement
+
+
+# ----------------------------------------------------------------------------- drivers
+@ti.func
+def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iterations, ls_tolerance):
+    """Newton iterations on island k from the current qacc (mj_solPrimal); returns their count.
+    Leaves qacc, efc_force/state, qfrc_constraint and the factored final H of the island."""
+    inertia = 0.0
+    for i in range(d.n_dofs):
+        if _dof_in(d, s, e, i, k):
+            inertia += d.solver_M[s, e, i, i]
+    scale = 1.0 / inertia
+    _mul_M(d, s, e, k, d.qacc, d.solver_Ma)
+    _set_jar(d, s, e, k)
+    niter, first, improvement = 0, 1, 0.0
+    while True:
+        _update_constraints(d, s, e, k)
+        _update_gradient(d, s, e, k)
+        gradient = scale * ti.sqrt(_dot(d, d.solver_grad, d.solver_grad, s, e, k))
+        # The island's block of solver_H holds M's factor until its first Hessian: the first
+        # pass solves with it for the duality gap ½ gᵀM⁻¹g (a good warm start needs no Newton
+        # step), then with H for the Newton decrement ½ gᵀH⁻¹g; later passes only with H.
+        certificate, decrement = 0, 0.0
+        n_solves = 1 + first
+        for attempt in range(n_solves):
+            if attempt == n_solves - 1:
+                _factor_hessian(d, s, e, k)  # also where the certificate stops: the backward needs it
+            for i in range(d.n_dofs):
+                if _dof_in(d, s, e, i, k):
+                    d.solver_Mgrad[s, e, i] = d.solver_grad[s, e, i]
+            _cholesky_solve(d, d.solver_H, d.solver_Mgrad, s, e, k)
+            decrement = ti.max(0.0, 0.5 * scale * _dot(d, d.solver_grad, d.solver_Mgrad, s, e, k))
+            if attempt == 0 and first:
+                certificate = decrement < tolerance and gradient < tolerance
+        stop = 0
+        if first:
+            stop = certificate or (gradient < tolerance and decrement < tolerance)
+            first = 0
+        else:
+            niter += 1
+            stop = (improvement > 0.0 and improvement < tolerance) or gradient < tolerance \
+                or decrement < tolerance
+        if stop or niter >= iterations:
+            break
+        for i in range(d.n_dofs):
+            if _dof_in(d, s, e, i, k):
+                d.solver_search[s, e, i] = -d.solver_Mgrad[s, e, i]
+        alpha, ls_improvement = _line_search(d, s, e, k, tolerance * ls_tolerance, ls_iterations, scale)
+        if alpha == 0.0:
+            break
+        for i in range(d.n_dofs):
+            if _dof_in(d, s, e, i, k):
+                d.qacc[s, e, i] += alpha * d.solver_search[s, e, i]
+                d.solver_Ma[s, e, i] += alpha * d.solver_Mv[s, e, i]
+        for r in range(d.n_rows):
+            if d.efc_type[s, e, r] != UNUSED and d.solver_row_island[s, e, r] == k:
+                d.solver_jar[s, e, r] += alpha * d.solver_Jv[s, e, r]
+        improvement = scale * ls_improvement
+    return niter
+
+
+@ti.func
+def _warm_start(d: ti.template(), s, e):
+    """qacc ← qacc_warmstart if its total cost is not above the constraint cost of qacc_smooth
+    (the Gauss term vanishes there), else qacc_smooth; unconstrained dofs take qacc_smooth."""
+    cost_warm, cost_smooth = 0.0, 0.0
+    for trial in range(2):  # 0: the warm start, 1: qacc_smooth
+        for i in range(d.n_dofs):
+            d.qacc[s, e, i] = d.qacc_warmstart[e, i] if trial == 0 else d.qacc_smooth[s, e, i]
+        _set_jar(d, s, e, ALL)
+        cost = _update_constraints(d, s, e, ALL)
+        if trial == 0:
+            _mul_M(d, s, e, ALL, d.qacc, d.solver_Ma)
+            for i in range(d.n_dofs):
+                cost += 0.5 * (d.solver_Ma[s, e, i] - d.qfrc_smooth[s, e, i]) \
+                    * (d.qacc[s, e, i] - d.qacc_smooth[s, e, i])
+            cost_warm = cost
+        else:
+            cost_smooth = cost
+    for i in range(d.n_dofs):
+        if cost_warm <= cost_smooth and d.solver_dof_island[s, e, i] != NO_ISLAND:
+            d.qacc[s, e, i] = d.qacc_warmstart[e, i]
+
+
+@ti.func
+def newton_solve(d: ti.template(), s, e, iterations, tolerance, ls_iterations, ls_tolerance):
+    """Constrained acceleration of env e at substep frame s (see the module docstring).
+
+    Reads solver_M (D, D) kg·m² / kg, qfrc_smooth (D,) N·m / N, the rows efc_type, efc_dim,
+    efc_mu, efc_J (R, D), efc_R, efc_aref, efc_floss, qacc_warmstart[e] (D,) and dof_parent.
+    Writes qacc_smooth, qacc (D,) rad/s² / m/s², efc_force (R,), efc_state (R,), qfrc_constraint
+    (D,), solver_niter, and the SCRATCH arrays (solver_H: the final Hessian's factor).
+    iterations, ls_iterations: limits; tolerance, ls_tolerance: MuJoCo's opt values."""
+    _find_islands(d, s, e)
+    for i in range(d.n_dofs):
+        for j in range(d.n_dofs):
+            d.solver_H[s, e, i, j] = d.solver_M[s, e, i, j] if j <= i else 0.0
+        d.qacc_smooth[s, e, i] = d.qfrc_smooth[s, e, i]
+        d.qfrc_constraint[s, e, i] = 0.0
+    # M's factor: qacc_smooth now; each island replaces its block with its Hessian's factor,
+    # unconstrained dofs keep it (H = M there)
+    _cholesky(d, d.solver_H, s, e, ALL)
+    _cholesky_solve(d, d.solver_H, d.qacc_smooth, s, e, ALL)
+    for r in range(d.n_rows):
+        d.efc_force[s, e, r], d.efc_state[s, e, r] = 0.0, SATISFIED
+    _warm_start(d, s, e)
+    niter = 0
+    for k in range(d.n_dofs):
+        if d.solver_tree[s, e, k] == k:  # k is an island's canonical root
+            niter += _solve_island(d, s, e, k, iterations, tolerance, ls_iterations, ls_tolerance)
+    d.solver_niter[s, e] = niter
