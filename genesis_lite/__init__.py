@@ -5,6 +5,7 @@
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True))
 """
 from . import materials, morphs, options, surfaces
+from .options import constraint_solver, friction_cone
 from .solvers.core import (AssetError, GenesisException, GradientError, InvalidInputError, SceneStateError,
                      SimulationError)
 from .runtime import cpu, destroy, gpu, init, runtime

@@ -46,19 +46,86 @@ class SimOptions:
         self.checkpoint_interval = int(self.checkpoint_interval)
 
 
+class constraint_solver:
+    """``gs.constraint_solver``: how the rigid constraint problem is solved."""
+    Newton = "Newton"
+    CG = "CG"
+
+
+class friction_cone:
+    """``gs.friction_cone``: pyramidal (MuJoCo's default, edges J_n ± μ J_t) or elliptic (exact)."""
+    pyramidal = "pyramidal"
+    elliptic = "elliptic"
+
+
+# defaults that depend on enable_mujoco_compatibility: MuJoCo's, else Genesis's
+MUJOCO_TIMECONST, GENESIS_TIMECONST = 0.02, 0.01
+MUJOCO_ITERATIONS, GENESIS_ITERATIONS = 100, 25
+
+
 @dataclass
 class RigidOptions:
-    """Rigid solver switches.
+    """Rigid solver switches (Genesis 1.4.5's names and defaults unless said).
 
-    enable_collision: contact between shapes (contact is not implemented yet: see README).
+    enable_collision: contacts between collision shapes. Pair rules: enable_self_collision (two
+        links of one entity), enable_adjacent_collision (parent and child links),
+        enable_neutral_collision (pairs of one entity already touching at the initial pose).
     enable_joint_limit: soft joint-limit forces (time constant limit_timeconst s, critically damped).
+    constraint_solver: Newton (CG is not implemented). iterations (None: 25, or MuJoCo's 100
+        under enable_mujoco_compatibility), tolerance (None: 1e-8 in float64, 1e-5 in float32),
+        ls_iterations, ls_tolerance: the solve's limits.
+    friction_cone: pyramidal or elliptic. impratio: friction-to-normal impedance ratio (None: 1
+        with the pyramidal cone, 100 with the elliptic one, as Genesis; 1 with
+        enable_mujoco_compatibility).
+    constraint_timeconst: contact time constant s of every geom without its own solref (None:
+        0.01 as Genesis, or MuJoCo's 0.02 under enable_mujoco_compatibility).
+    max_contacts: contact slots per env (None: the candidate pairs' worst case, at most 8 per
+        moving link and at least 16); more contacts stop the simulation with an error.
+    enable_mujoco_compatibility: MuJoCo's defaults exactly (time constant 0.02 s, 100
+        iterations, impratio 1), for scenes compared with MuJoCo.
     """
     enable_collision: bool = True
+    enable_self_collision: bool = True
+    enable_adjacent_collision: bool = False
+    enable_neutral_collision: bool = False
     enable_joint_limit: bool = True
     limit_timeconst: float = 0.02
+    constraint_solver: str = constraint_solver.Newton
+    iterations: int = None
+    tolerance: float = None
+    ls_iterations: int = 50
+    ls_tolerance: float = 1e-2
+    friction_cone: str = friction_cone.pyramidal
+    impratio: float = None
+    constraint_timeconst: float = None
+    max_contacts: int = None
+    enable_mujoco_compatibility: bool = False
 
     def __post_init__(self):
-        _check_positive("RigidOptions", "limit_timeconst", self.limit_timeconst)
+        owner = "RigidOptions"
+        for name in ("enable_collision", "enable_self_collision", "enable_adjacent_collision",
+                     "enable_neutral_collision", "enable_joint_limit", "enable_mujoco_compatibility"):
+            setattr(self, name, check_bool(owner, name, getattr(self, name)))
+        _check_positive(owner, "limit_timeconst", self.limit_timeconst)
+        if self.constraint_solver != constraint_solver.Newton:
+            raise InvalidInputError(f"{owner}: argument 'constraint_solver' expected gs.constraint_solver.Newton "
+                                    f"(CG is not implemented), got {self.constraint_solver!r}")
+        self.ls_iterations = _check_positive_int(owner, "ls_iterations", self.ls_iterations)
+        for name in ("iterations", "tolerance", "impratio", "constraint_timeconst", "max_contacts"):
+            if getattr(self, name) is not None:
+                _check_positive(owner, name, getattr(self, name), integer=name in ("iterations", "max_contacts"))
+        _check_positive(owner, "ls_tolerance", self.ls_tolerance)
+        _check_choice(owner, "friction_cone", self.friction_cone, (friction_cone.pyramidal, friction_cone.elliptic))
+
+    def resolved(self, precision_bits):
+        """(timeconst s, iterations, tolerance, impratio) after the defaults that depend on other
+        options: MuJoCo's under enable_mujoco_compatibility, else Genesis's."""
+        compat = self.enable_mujoco_compatibility
+        tolerance = self.tolerance or (1e-8 if precision_bits == 64 else 1e-5)
+        impratio = self.impratio or (100.0 if self.friction_cone == friction_cone.elliptic and not compat else 1.0)
+        timeconst = self.constraint_timeconst or (MUJOCO_TIMECONST if compat else GENESIS_TIMECONST)
+        iterations = self.iterations or (MUJOCO_ITERATIONS if compat else GENESIS_ITERATIONS)
+        return timeconst, int(iterations), tolerance, impratio
 
 
 # -- visualisation (no viewer or camera exists yet: these are validated and stored for them) ---------

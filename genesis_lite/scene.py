@@ -4,7 +4,6 @@ Lifecycle errors (step before build, build twice, add after build) raise SceneSt
 Genesis's viewer and visualisation arguments are accepted and validated; there is no viewer or
 camera yet, so they change nothing (``show_viewer=True`` raises rather than being ignored).
 """
-import logging
 import os
 
 import numpy as np
@@ -33,7 +32,6 @@ class SimState:
         return self.states[0]
 
 
-_logger = logging.getLogger("genesis_lite")
 
 
 class Scene:
@@ -126,14 +124,6 @@ class Scene:
         self.sim = sim
         for entity in self.entities:
             entity._on_build()
-        self._warn_no_contact()
-
-    def _warn_no_contact(self):
-        """Say once, at build, that bodies which could touch will pass through each other."""
-        if self.rigid_options.enable_collision and self.rigid_solver.model.contact_possible():
-            _logger.warning("scene.build: contacts are not simulated yet: bodies with collision geometry pass through "
-                            "each other and through the ground (contact comes with a later release). Build with "
-                            "gs.options.RigidOptions(enable_collision=False) to say that this is intended.")
 
     def _require_built(self, what):
         if self._epoch != runtime.epoch:

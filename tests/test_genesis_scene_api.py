@@ -359,37 +359,40 @@ def test_get_link_of_a_merged_away_name(f64):
         robot.get_link("right_base")
 
 
-# ------------------------------------------------------------------ contact not simulated: say so; friction kept
+# ------------------------------------------------------------------ which geom pairs may collide; friction kept
 
 
-def _warnings_at_build(caplog, morphs, enable_collision=True):
-    scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=enable_collision))
+def _candidate_pairs(morphs, **options):
+    scene = gs.Scene(rigid_options=gs.options.RigidOptions(**options))
     for morph in morphs:
         scene.add_entity(morph)
-    with caplog.at_level(logging.WARNING, logger="genesis_lite"):
-        caplog.clear()
-        scene.build()
-        for _ in range(3):
-            scene.step()
-    return [r for r in caplog.records if r.name == "genesis_lite" and "contacts are not simulated" in r.message]
+    scene.build()
+    model = scene.rigid_solver.model
+    return list(zip(model.pair_geom1.tolist(), model.pair_geom2.tolist()))
 
 
-def test_no_contact_warning_once_at_build(f64, caplog):
-    box = gs.morphs.Box(pos=(0, 0, 1))
-    warned = _warnings_at_build(caplog, [gs.morphs.Plane(), box])
-    assert len(warned) == 1 and warned[0].levelno == logging.WARNING
-    assert "enable_collision=False" in warned[0].message
-    assert len(_warnings_at_build(caplog, [gs.morphs.URDF(file=asset("arm3.urdf"), fixed=True)])) == 1  # self
+def test_plane_and_free_box_may_collide_ordered_as_mujoco(f64):
+    assert _candidate_pairs([gs.morphs.Box(pos=(0, 0, 1)), gs.morphs.Plane()]) == [(1, 0)]  # plane first
 
 
 @pytest.mark.parametrize("case", ["plane alone", "box alone", "two fixed boxes", "parent and child",
                                   "collision off"])
-def test_no_contact_warning_when_nothing_can_touch(f64, caplog, tmp_path, case):
+def test_no_candidate_pair_when_nothing_can_touch(f64, tmp_path, case):
     morphs = {"plane alone": [gs.morphs.Plane()], "box alone": [gs.morphs.Box()],
               "two fixed boxes": [gs.morphs.Box(fixed=True), gs.morphs.Box(fixed=True, pos=(0, 0, 0.5))],
               "parent and child": [gs.morphs.URDF(file=_friction_urdf(tmp_path), fixed=True)],  # adjacent only
               "collision off": [gs.morphs.Plane(), gs.morphs.Box(pos=(0, 0, 1))]}[case]
-    assert _warnings_at_build(caplog, morphs, enable_collision=case != "collision off") == []
+    assert _candidate_pairs(morphs, enable_collision=case != "collision off") == []
+
+
+def test_pair_rules_self_adjacent_and_neutral(f64, tmp_path):
+    arm = lambda: [gs.morphs.URDF(file=_friction_urdf(tmp_path), fixed=True)]  # parent a (1 box), child b (2)
+    assert _candidate_pairs(arm()) == []
+    assert len(_candidate_pairs(arm(), enable_adjacent_collision=True, enable_neutral_collision=True)) == 2
+    # the two boxes overlap at the initial pose: a neutral pair, dropped unless enabled
+    assert _candidate_pairs(arm(), enable_adjacent_collision=True) == []
+    assert _candidate_pairs(arm(), enable_adjacent_collision=True, enable_self_collision=False,
+                            enable_neutral_collision=True) == []
 
 
 def _friction_urdf(tmp_path, lateral="0.3"):

@@ -51,6 +51,17 @@ def _ltdl(mass, entity):
     return lower, 1.0 / root.flip(-1) ** 2
 
 
+def _check_sol_params(name, p):
+    """(timeconst, dampratio, dmin, dmax, width, midpoint, power) within MuJoCo's ranges."""
+    standard, direct = p[0] > 0 and p[1] > 0, p[0] <= 0 and p[1] <= 0
+    ok = (np.all(np.isfinite(p)) and (standard or direct) and 0 <= p[2] < 1 and 0 < p[3] < 1 and p[2] <= p[3]
+          and p[4] >= 0 and 0 < p[5] < 1 and p[6] >= 1)
+    if not ok:
+        raise InvalidInputError(f"entity '{name}': argument 'sol_params' expected timeconst and dampratio both > 0 "
+                                f"(or both ≤ 0: direct), 0 ≤ dmin ≤ dmax < 1, width ≥ 0, 0 < midpoint < 1, "
+                                f"power ≥ 1, got {p.tolist()}")
+
+
 def _all_finite(tensor):
     """No NaN or inf in ``tensor`` (numpy's check is 3× cheaper than torch's on small CPU tensors)."""
     if tensor.device.type == "cpu":
@@ -110,6 +121,8 @@ class RigidEntity:
         self.n_links = len(link_specs)
         self.n_dofs = sum(_NDOFS[spec.joint_type] for spec in link_specs)
         self.n_qs = sum(_NQS[spec.joint_type] for spec in link_specs)
+        self.n_geoms = sum(len(spec.geoms) for spec in link_specs)
+        self._link_geoms = np.cumsum([0] + [len(spec.geoms) for spec in link_specs])  # local geoms per link
         self._free = link_specs[0].joint_type == "free"
         self.links = [RigidLink(self, spec.name, k) for k, spec in enumerate(link_specs)]
         # Joints that move (a free root's too), as in Genesis: a fixed joint is no RigidJoint. Same
@@ -123,7 +136,7 @@ class RigidEntity:
                                               list(range(q, q + nq))))
             dof, q = dof + nd, q + nq
 
-    _BUILD_ATTRS = ("link_start", "dof_start", "q_start", "_dof_q")
+    _BUILD_ATTRS = ("link_start", "dof_start", "q_start", "geom_start", "_dof_q")
 
     def __getattr__(self, attr):
         # only reached when normal lookup fails: a build-time attribute used before build()
@@ -140,6 +153,8 @@ class RigidEntity:
         self.link_start = int(mine[0])
         self.dof_start = int(model.link_dof0[mine[0]])
         self.q_start = int(model.link_q0[mine[0]])
+        # the entity's geoms are contiguous: the model lists them link by link, entity by entity
+        self.geom_start = int(np.searchsorted(model.geom_link, mine[0]))
         # per local dof: its column in the state's qpos; a free base's linear dofs are its origin's
         # columns, its rotational dofs (Euler angles, stored as a quaternion) -1
         self._dof_q = model.dof_q[self.dof_start: self.dof_start + self.n_dofs].astype(np.int64)
@@ -488,6 +503,96 @@ class RigidEntity:
     def get_dofs_force_range(self, dofs_idx_local=None, envs_idx=None):
         return (self._get_dofs_input("force_lo", dofs_idx_local, envs_idx),
                 self._get_dofs_input("force_hi", dofs_idx_local, envs_idx))
+
+    # -- contacts -----------------------------------------------------------------------------------
+    def get_contacts(self, with_entity=None, exclude_self_contact=False):
+        """The contacts of the last step that involve this entity (Genesis's format): a dict of
+        geom_a, geom_b, link_a, link_b (global indices), position (m), force_a and force_b (N,
+        world: the contact's force on geom a and on geom b). Shapes (n, ...) in an unbatched
+        scene; (n_envs, C, ...) with a valid_mask (n_envs, C) in a batched one. with_entity: only
+        contacts with that entity (itself: self-contacts only); exclude_self_contact: drop those."""
+        self._sim()  # built?
+        raw = self._solver.contacts()
+        model = self._solver.model
+        geom_a, geom_b = raw[..., 0].long(), raw[..., 1].long()
+        links = torch.as_tensor(model.geom_link, device=runtime.device, dtype=torch.long)
+        link_a, link_b = links[geom_a.clamp(min=0)], links[geom_b.clamp(min=0)]
+        mine = lambda g, entity: (g >= entity.geom_start) & (g < entity.geom_start + entity.n_geoms)
+        a_mine, b_mine = mine(geom_a, self), mine(geom_b, self)
+        if with_entity is self:
+            if exclude_self_contact:
+                raise InvalidInputError(f"entity '{self.name}': with_entity=self asks for self-contacts, which "
+                                        f"exclude_self_contact=True removes")
+            valid = a_mine & b_mine
+        else:
+            valid = (a_mine ^ b_mine) if exclude_self_contact else (a_mine | b_mine)
+            if with_entity is not None:
+                valid &= mine(geom_a, with_entity) | mine(geom_b, with_entity)
+        valid &= geom_a >= 0
+        out = {"geom_a": geom_a, "geom_b": geom_b, "link_a": link_a, "link_b": link_b, "position": raw[..., 2:5],
+               "force_a": -raw[..., 5:8], "force_b": raw[..., 5:8]}
+        if self.scene.n_envs == 0:
+            return {k: v[0][valid[0]] for k, v in out.items()}
+        out["valid_mask"] = valid
+        return out
+
+    def get_links_net_contact_force(self, envs_idx=None):
+        """(n_links, 3) or (n_envs, n_links, 3) N, world: the sum of the last step's contact forces
+        on each link of the entity."""
+        envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
+        raw = self._solver.contacts()[envs]
+        links = torch.as_tensor(self._solver.model.geom_link, device=runtime.device, dtype=torch.long)
+        total = raw.new_zeros(len(envs), self._solver.model.n_links, 3)
+        for side, sign in ((0, -1.0), (1, 1.0)):
+            geom = raw[..., side].long()
+            valid = (geom >= 0).unsqueeze(-1)
+            link = links[geom.clamp(min=0)]
+            total.scatter_add_(1, link.unsqueeze(-1).expand(-1, -1, 3), sign * raw[..., 5:8] * valid)
+        return self._out(total[:, self.link_start: self.link_start + self.n_links])
+
+    # -- contact parameters -----------------------------------------------------------------------
+    def set_friction(self, friction):
+        """Coulomb friction coefficient of every collision geom of the entity, in every env (a
+        contact takes the larger of its two geoms' values), in [0.01, 5] as Genesis."""
+        if not (isinstance(friction, (int, float, np.integer, np.floating)) and 0.01 <= friction <= 5.0):
+            raise InvalidInputError(f"entity '{self.name}': argument 'friction' must be a number in [0.01, 5.0], "
+                                    f"got {friction!r}")
+        envs = self._envs(None) if self.scene.n_envs == 0 else np.arange(self.scene.n_envs)
+        values = torch.full((len(envs), self.n_geoms), float(friction), dtype=runtime.tc_float, device=runtime.device)
+        self._write_input("friction", self.geom_start + np.arange(self.n_geoms), envs, values)
+
+    def set_friction_ratio(self, friction_ratio, links_idx_local=None, envs_idx=None):
+        """Friction of the geoms of the given links ← ratio (one per link, ≥ 0) × their friction at
+        build (the asset's or the material's)."""
+        links = self._local(links_idx_local, self.n_links, "links_idx_local")
+        envs = self._envs(envs_idx)
+        ratio = self._values(friction_ratio, len(links), envs, "friction_ratio")
+        if bool((ratio.detach() < 0).any()):
+            raise InvalidInputError(f"entity '{self.name}': argument 'friction_ratio' must be ≥ 0, got "
+                                    f"{ratio.detach().cpu().numpy()}")
+        counts = torch.as_tensor(np.diff(self._link_geoms)[links], device=runtime.device)
+        geoms = np.concatenate([np.arange(self._link_geoms[l], self._link_geoms[l + 1]) for l in links] + [[]])
+        geoms = self.geom_start + geoms.astype(np.int64)
+        base = torch.as_tensor(self._solver.model.geom_friction[geoms], dtype=runtime.tc_float, device=runtime.device)
+        self._write_input("friction", geoms, envs, torch.repeat_interleave(ratio, counts, dim=1) * base)
+
+    def set_sol_params(self, sol_params, geoms_idx_local=None, envs_idx=None):
+        """Contact softness of the entity's geoms (all by default): 7 numbers per geom, Genesis's and
+        MuJoCo's (timeconst s, dampratio, dmin, dmax, width m, midpoint, power) = solref then
+        solimp; timeconst and dampratio both ≤ 0 mean MuJoCo's direct form (−stiffness, −damping).
+        A contact averages its two geoms' values."""
+        geoms = self._local(geoms_idx_local, self.n_geoms, "geoms_idx_local")
+        envs = self._envs(envs_idx)
+        params = torch.as_tensor(np.asarray(sol_params, dtype=np.float64), dtype=runtime.tc_float, device=runtime.device)
+        if params.shape != (7,):
+            raise InvalidInputError(f"entity '{self.name}': argument 'sol_params' must be 7 numbers (timeconst, "
+                                    f"dampratio, dmin, dmax, width, midpoint, power), got shape {tuple(params.shape)}")
+        _check_sol_params(self.name, params.cpu().numpy())
+        columns = self.geom_start + geoms
+        ref = params[:2].repeat(len(envs), len(geoms))
+        imp = params[2:].repeat(len(envs), len(geoms))
+        self._write_input("solref", (2 * columns[:, None] + np.arange(2)).ravel(), envs, ref)
+        self._write_input("solimp", (5 * columns[:, None] + np.arange(5)).ravel(), envs, imp)
 
     # -- control ------------------------------------------------------------------------------------
     def _control(self, method, mode, targets, dofs_idx_local, envs_idx):

@@ -24,6 +24,7 @@ from taichi.lang import impl
 from taichi.lang.expr import Expr
 
 from ..core import InvalidInputError, runtime
+from .constraint.solver import SCRATCH as SOLVER_SCRATCH
 
 BIG = 1e30  # stands for an absent bound
 # Up to this many (env, link) pairs the kernels run on the calling thread. In a rollout, handing a
@@ -46,6 +47,9 @@ INPUTS = {
     "force_lo": ("D", False),   # N·m or N
     "force_hi": ("D", False),
     "ctrl_mode": ("D", False),  # 0 force, 1 position, 2 velocity (see actuation.py)
+    "friction": ("G", False),   # per collision geom: Coulomb coefficient (pairs take the larger)
+    "solref": ("G2", False),    # per geom: (time constant s, damping ratio), or (−stiffness, −damping)
+    "solimp": ("G5", False),    # per geom: (d0, dwidth, width m, midpoint, power) of the impedance
 }
 
 # Model constants: name → (arena, count). Per link (L), per dof (D), per mass-matrix pair (P).
@@ -53,9 +57,17 @@ MODEL = {
     "link_parent": ("i", "L"), "link_jtype": ("i", "L"), "link_static": ("i", "L"), "link_dof0": ("i", "L"),
     "link_q0": ("i", "L"), "dof_link": ("i", "D"), "dof_q": ("i", "D"), "dof_parent": ("i", "D"),
     "pair_i": ("i", "P"), "pair_j": ("i", "P"),
+    # collision geometry (geometry.py; MuJoCo's conventions) and the candidate geom pairs
+    "geom_type": ("i", "G"), "geom_link": ("i", "G"), "geom_hull0": ("i", "G"), "geom_hull_n": ("i", "G"),
+    "pair_geom1": ("i", "N"), "pair_geom2": ("i", "N"), "pair_condim": ("i", "N"),
+    "geom_rbound": ("f", "G"), "pair_margin": ("f", "N"),
+    # MuJoCo's body_invweight0 (translation, rotation) at the initial pose: the constraint rows' scale
+    "link_invweight_t": ("f", "L"), "link_invweight_r": ("f", "L"),
+    "geom_pos": ("v3", "G"), "geom_size": ("v3", "G"), "hull_vert": ("v3", "H"), "geom_quat": ("v4", "G"),
     "link_inv_mass0": ("f", "L"), "dof_lower": ("f", "D"), "dof_upper": ("f", "D"),
-    # substep h (s), limit stiffness (1/s²) and damping (1/s): runtime values like everything else
-    "consts": ("f", 3),
+    # substep h (s), limit stiffness (1/s²) and damping (1/s), impratio, solver tolerance and line-search
+    # tolerance: runtime values like everything else (CONSTS names them)
+    "consts": ("f", 6),
     "link_pos0": ("v3", "L"), "link_axis": ("v3", "L"), "link_com": ("v3", "L"), "link_quat0": ("v4", "L"),
     "link_inertia0": ("m3", "L"),
 }
@@ -75,7 +87,23 @@ FRAMES = {
     "mass_mat": ("f", "DD", True),
     "qfrc_bias": ("f", "D", True), "qfrc_smooth": ("f", "D", True), "qacc": ("f", "D", True),
     "factor": ("f", "DD", False),  # LᵀDL factor of M + diag(armature + h·damping)
+    # contact (collision.py): geom poses, then the contacts found (count in n_con[s, e, 0])
+    "geom_xpos": ("v3", "G", False), "geom_xmat": ("m3", "G", False),
+    "n_con": ("i", 1, False), "con_pair": ("i", "C", False), "con_feature": ("i", "C", False),
+    "con_pos": ("v3", "C", False), "con_frame": ("m3", "C", False), "con_dist": ("f", "C", False),
+    "con_efc": ("i", "C", False),  # each contact's first row
+    # constraint rows (constraint/rows.py; n_efc[s, e, 0] in use) and the solve (constraint/solver.py)
+    "n_efc": ("i", 1, False), "efc_type": ("i", "R", False), "efc_dim": ("i", "R", False),
+    "efc_id": ("i", "R", False), "efc_state": ("i", "R", False),
+    "efc_J": ("f", "RD", False), "efc_R": ("f", "R", False), "efc_aref": ("f", "R", False),
+    "efc_floss": ("f", "R", False), "efc_mu": ("f", "R", False), "efc_force": ("f", "R", False),
+    "solver_M": ("f", "DD", False), "qacc_smooth": ("f", "D", False), "qacc_constrained": ("f", "D", False),
+    "qfrc_constraint": ("f", "D", False), "solver_niter": ("i", 1, False),
+    # the solve's work arrays (the final Hessian factor among them, for the backward)
+    **{name: (arena, count, False) for name, (arena, count) in SOLVER_SCRATCH.items()},
 }
+# Per-env arrays that persist from step to step: name → (arena, count per env), indexed [e, k]
+PER_ENV = {"qacc_warmstart": ("f", "D")}  # the constraint solve's start: the last substep's solution
 # a link's rotation is differentiated as a small world-frame turn δθ, not through its quaternion
 # (see kinematics.py): xrot_grad is ∂L/∂δθ, a gradient with no value array
 GRAD_ONLY = {"xrot_grad": ("v3", "L")}
@@ -89,18 +117,21 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
                ti.types.ndarray(dtype=ti.types.vector(4, float), ndim=1),
                ti.types.ndarray(dtype=ti.types.matrix(3, 3, float), ndim=1))
 # The int arena starts with a header of sizes and flags; every array's place follows from the
-# sizes (``layout``). W: all inputs' width per env; G: the differentiable ones', which come first.
-SIZES = ("B", "L", "D", "Q", "P", "S", "W", "G", "limits", "nonfinite")
+# sizes (``layout``). W: all inputs' width per env; GW: the differentiable ones', which come first. G geoms, N candidate
+# geom pairs, H hull vertices, C contact slots, R constraint rows per env (see RigidData).
+SIZES = ("B", "L", "D", "Q", "P", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C", "R", "cone",
+         "iterations", "ls_iterations", "overflow", "constrained")
+CONSTS = ("h", "limit_stiffness", "limit_damping", "impratio", "tolerance", "ls_tolerance")
 HEADER = {name: k for k, name in enumerate(SIZES)}
-_REGIONS = [(a, g) for g in (False, True) for a in ("f", "v3", "v4", "m3")]  # (arena, gradients?)
+_REGIONS = [("i", False)] + [(a, g) for g in (False, True) for a in ("f", "v3", "v4", "m3")]  # (arena, gradients?)
 
 assert [diff for _, diff in INPUTS.values()] == sorted((diff for _, diff in INPUTS.values()), reverse=True), \
     "differentiable inputs come first"
 
 
-def input_width(name, n_links, n_dofs):
+def input_width(name, n_links, n_dofs, n_geoms):
     width = INPUTS[name][0]
-    return {"L": n_links, "D": n_dofs}.get(width, width)
+    return {"L": n_links, "D": n_dofs, "G": n_geoms, "G2": 2 * n_geoms, "G5": 5 * n_geoms}.get(width, width)
 
 
 def _region_members(arena, grads):
@@ -124,7 +155,7 @@ def layout(size):
     then frame s + 1... — then their gradients laid out alike, so that zeroing the gradients of
     frames 0 … k − 1 is one contiguous sweep per arena."""
     B = size["B"]
-    count = {"L": size["L"], "D": size["D"], "Q": size["Q"], "P": size["P"], "DD": size["D"] * size["D"], 3: 3}
+    count = _counts(size)
     end = {"i": len(SIZES), "f": 0, "v3": 0, "v4": 0, "m3": 0}
     start = {}
     for name, (arena, c) in MODEL.items():
@@ -132,6 +163,9 @@ def layout(size):
         end[arena] = end[arena] + count[c]
     start["inputs"], start["inputs.grad"] = end["f"], end["f"] + B * size["W"]
     end["f"] = end["f"] + 2 * B * size["W"]
+    for name, (arena, c) in PER_ENV.items():
+        start[f"env:{name}"] = end[arena]
+        end[arena] = end[arena] + B * count[c]
     stop = {("i", False): end["i"], ("i", True): end["i"]}
     for arena, grads in _REGIONS:
         region = end[arena]
@@ -141,7 +175,16 @@ def layout(size):
             offset = offset + B * count[c]
         start[f"region:{arena}:{grads}"], start[f"stride:{arena}:{grads}"] = region, offset - region
         end[arena] = stop[arena, grads] = region + (size["S"] + 1) * (offset - region)
+    stop["i", True] = stop["i", False]  # no integer array has a gradient
     return start, stop
+
+
+def _counts(size):
+    """Element count per env of each count name used in MODEL and FRAMES."""
+    D, R = size["D"], size["R"]
+    return {"L": size["L"], "D": D, "Q": size["Q"], "P": size["P"], "DD": D * D, "G": size["G"], "N": size["N"],
+            "H": size["H"], "C": size["C"], "R": R, "RD": R * D, "G2": 2 * size["G"], "G5": 5 * size["G"], 1: 1,
+            len(CONSTS): len(CONSTS)}
 
 
 class RigidData:
@@ -152,19 +195,25 @@ class RigidData:
     calling thread (see SERIAL_LINK_ENVS).
     """
 
-    def __init__(self, model, n_batch, substeps, requires_grad, limits_enabled, consts):
+    def __init__(self, model, n_batch, substeps, requires_grad, settings):
+        """settings: limits (joint limits on?), consts (CONSTS values), contacts (C) and rows (R)
+        per env, cone (1: elliptic), iterations and ls_iterations of the solve."""
         on_cpu = runtime.arch == ti.cpu
         # (compute loops, data-moving loops) on the calling thread? On the CPU small batches and
         # every data move are (a hand-off to the pool costs more, see SERIAL_LINK_ENVS); on a GPU
         # nothing is (one GPU thread would do it all)
         self.schedule = (on_cpu and n_batch * max(1, model.n_links) <= SERIAL_LINK_ENVS, on_cpu)
-        self.widths = [input_width(name, model.n_links, model.n_dofs) for name in INPUTS]
+        n_geoms = len(model.geom_type)
+        self.widths = [input_width(name, model.n_links, model.n_dofs, n_geoms) for name in INPUTS]
         self.input_total = sum(self.widths)
         self.grad_total = sum(w for w, (_, diff) in zip(self.widths, INPUTS.values()) if diff)
         self.grad_input_names = [n for n, (_, diff) in INPUTS.items() if diff] if requires_grad else []
         self.size = {"B": n_batch, "L": model.n_links, "D": model.n_dofs, "Q": model.n_qs, "P": len(model.pairs),
-                     "S": substeps, "W": self.input_total, "G": self.grad_total,
-                     "limits": int(bool(limits_enabled)), "nonfinite": 0}
+                     "S": substeps, "W": self.input_total, "GW": self.grad_total,
+                     "limits": int(bool(settings["limits"])), "nonfinite": 0, "G": n_geoms,
+                     "N": len(model.pair_geom1), "H": len(model.hull_vert), "C": settings["contacts"],
+                     "R": settings["rows"], "cone": settings["cone"], "iterations": settings["iterations"],
+                     "ls_iterations": settings["ls_iterations"], "overflow": 0, "constrained": 0}
         self.start, stop = layout(self.size)
         length = {a: stop[a, bool(requires_grad)] for a in ARENAS}  # no gradient storage without gradients
         if max(length.values()) >= 2 ** 31:  # indices inside kernels are 32-bit
@@ -173,12 +222,12 @@ class RigidData:
                                     f"{max(length.values())}; use fewer envs or substeps per scene")
         values = {a: np.zeros((max(1, length[a]), *ELEMENT[a]), dtype=np.int32 if a == "i" else runtime.np_float)
                   for a in ARENAS}
-        self._fill(values, model, consts)
+        self._fill(values, model, settings["consts"])
         # torch owns the memory (freed with the scene, whatever Taichi does meanwhile)
         self.arenas = [torch.from_numpy(values[a]).to(runtime.device) for a in ARENAS]
 
     def _fill(self, values, model, consts):
-        """Header, model and consts (h s, limit stiffness 1/s², limit damping 1/s) into the arenas."""
+        """Header, model and consts (CONSTS) into the arenas."""
         values["i"][: len(SIZES)] = [self.size[name] for name in SIZES]
         for name, (arena, _) in MODEL.items():
             array = np.asarray(consts if name == "consts" else getattr(model, name))
@@ -187,9 +236,11 @@ class RigidData:
                 # floats finite, so no inf·0 in gradients
                 values[arena][begin: begin + len(array)] = array if arena == "i" else np.clip(array, -BIG, BIG)
 
-    def take_nonfinite(self):
-        """True once a step produced a non-finite state since the last call (which clears it)."""
-        ints, slot = self.arenas[0], HEADER["nonfinite"]
+    def take_flag(self, name):
+        """True once a step raised the header's flag ``name`` ("nonfinite": a non-finite state;
+        "overflow": more contacts than slots; "constrained": constraint rows were active) since
+        the last call, which clears it."""
+        ints, slot = self.arenas[0], HEADER[name]
         flag = bool(ints[slot])
         ints[slot] = 0
         return flag
@@ -228,11 +279,12 @@ class ArrayView:
 
 
 class Region:
-    """The gradients of one arena: frame k of all of them is [start + k·stride, start + (k+1)·stride)."""
+    """The gradients of one arena: frame k of all of them is [start + k·stride, start + (k+1)·stride);
+    shape: the arena's element shape (ELEMENT)."""
     _data_oriented = True
 
-    def __init__(self, arena, start, stride):
-        self.arena, self.start, self.stride = arena, start, stride
+    def __init__(self, arena, start, stride, shape):
+        self.arena, self.start, self.stride, self.shape = arena, start, stride, shape
 
 
 class RigidView:
@@ -247,10 +299,15 @@ class RigidView:
         # compiling the reverse kernels took 4-14x longer (reverse_dynamics: 21.5 s → 1.6 s here)
         start = {name: impl.expr_init(value) for name, value in layout(size)[0].items()}
         self.n_batch, self.n_links, self.n_dofs, self.n_qs = size["B"], size["L"], size["D"], size["Q"]
-        self.n_pairs, self.substeps, self.input_total, self.grad_total = size["P"], size["S"], size["W"], size["G"]
+        self.n_pairs, self.substeps, self.input_total, self.grad_total = size["P"], size["S"], size["W"], size["GW"]
         self.limits_enabled = size["limits"]
+        self.n_geoms, self.n_candidates, self.contact_capacity, self.row_capacity = size["G"], size["N"], size["C"], size["R"]
+        self.elliptic, self.iterations, self.ls_iterations = size["cone"], size["iterations"], size["ls_iterations"]
+        self.n_rows = self.row_capacity  # the solve's row loop (rows past n_efc are UNUSED)
         self.nonfinite = ArrayView(ints, HEADER["nonfinite"], (1,))  # set by the NaN check
-        count = {"L": self.n_links, "D": self.n_dofs, "Q": self.n_qs, "DD": self.n_dofs * self.n_dofs}
+        self.overflow = ArrayView(ints, HEADER["overflow"], (1,))  # set when contacts exceed their slots
+        self.constrained = ArrayView(ints, HEADER["constrained"], (1,))  # set when a substep had constraint rows
+        count = _counts(size)
         for name, (arena, _) in MODEL.items():
             setattr(self, name, ArrayView(arenas[arena], start[f"model:{name}"], (1,)))
         row = (self.input_total, 1)  # [e, column]
@@ -260,6 +317,8 @@ class RigidView:
             grad = ArrayView(f1, start["inputs.grad"] + column, row)
             setattr(self, name, ArrayView(f1, start["inputs"] + column, row, grad))
             column = column + count.get(width, width)
+        for name, (arena, c) in PER_ENV.items():
+            setattr(self, name, ArrayView(arenas[arena], start[f"env:{name}"], (count[c], 1)))
         for name, (arena, c, has_grad) in FRAMES.items():
             grad = None
             if has_grad:
@@ -269,13 +328,14 @@ class RigidView:
         for name, (arena, c) in GRAD_ONLY.items():
             setattr(self, name, ArrayView(arenas[arena], start[f"grad:{name}"],
                                           self._frame_strides(start, arena, c, count, True)))
-        self.regions = [Region(arenas[a], start[f"region:{a}:True"], start[f"stride:{a}:True"]) for a in ARENAS[1:]]
+        self.regions = [Region(arenas[a], start[f"region:{a}:True"], start[f"stride:{a}:True"], ELEMENT[a])
+                        for a in ARENAS[1:]]
 
     @staticmethod
     def _frame_strides(start, arena, c, count, grads):
         frame = start[f"stride:{arena}:{grads}"]
-        if c == "DD":  # [s, e, i, j]
-            return frame, count["DD"], count["D"], 1
+        if c in ("DD", "RD"):  # [s, e, i, j]
+            return frame, count[c], count["D"], 1
         return frame, count[c], 1  # [s, e, k]
 
 

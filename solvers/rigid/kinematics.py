@@ -177,3 +177,18 @@ def link_kinematics_adjoint(d: ti.template(), s, e, l, g_m, g_h, g_i):
     g_pos_i, g_rot_i = _link_inertia_adjoint(d, s, e, l, pos, rot, g_m, g_h, g_i)
     g_rot = d.xrot_grad[s, e, l] + g_rot_m + g_rot_i
     _joint_pose_adjoint(d, s, e, l, pos, quat, d.xpos.grad[s, e, l] + g_pos_m + g_pos_i, g_rot)
+
+
+@ti.func
+def dof_count(d: ti.template(), link):
+    """Dofs of a link's joint: 6 (free), 1 (hinge, slide) or 0 (fixed)."""
+    jt = d.link_jtype[link]
+    return 6 if jt == FREE else (1 if jt == REVOLUTE or jt == PRISMATIC else 0)
+
+
+@ti.func
+def dof_motion_at(d: ti.template(), s, e, i, point):
+    """(linear, angular) velocity at ``point`` (world, m) of the body dof i moves, per unit of
+    its velocity: cdof_v + cdof_w × point and cdof_w (spatial motion about the origin, moved)."""
+    angular = d.cdof_w[s, e, i]
+    return d.cdof_v[s, e, i] + angular.cross(point), angular

@@ -55,10 +55,21 @@ def _solve_in_place(d: ti.template(), s, e, x: ti.template()):
 
 @ti.func
 def solve_env(d: ti.template(), s, e):
+    """qacc = A⁻¹ (qfrc_smooth + qfrc_constraint): the constraint force, solved for with M alone,
+    goes through the damped matrix like every other force (MuJoCo's Euler integrator). Without
+    damping MuJoCo integrates the constraint solve's own acceleration, which differs from that
+    by the solve's tolerance: so do we."""
     _factor(d, s, e)
+    undamped = True
     for i in range(d.n_dofs):
         d.qacc[s, e, i] = d.qfrc_smooth[s, e, i]
+        if d.row_capacity > 0:
+            d.qacc[s, e, i] += d.qfrc_constraint[s, e, i]
+            undamped = undamped and d.damping[e, i] == 0.0
     _solve_in_place(d, s, e, d.qacc)
+    if d.row_capacity > 0 and undamped and d.n_efc[s, e, 0] > 0:
+        for i in range(d.n_dofs):
+            d.qacc[s, e, i] = d.qacc_constrained[s, e, i]
 
 
 @ti.func

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import geometry
 from .spec import JOINT_TYPES
 
 FIXED, REVOLUTE, PRISMATIC, FREE = range(4)
@@ -32,8 +33,13 @@ class RigidModel:
     lower/upper limits (rad or m), effort bound, frictionloss (N·m or N, dry joint friction; not
     applied yet). pairs (P, 2): (i, j), j ≤ i, dof j on the path from dof i to the root — the
     structural non-zeros of the lower mass matrix.
-    Per collision geom (kept for the contact stage; no contact is simulated yet): geom_link (G,)
-    its link, geom_type (G,) its GeomSpec type, geom_friction (G,) Coulomb coefficient.
+    Per collision geom (geometry.py, MuJoCo's conventions): geom_type (G,) code, geom_link (G,),
+    geom_pos (G, 3) m and geom_quat (G, 4) in the link frame, geom_size (G, 3) half sizes m,
+    geom_rbound (G,) bounding radius m, geom_hull0/geom_hull_n (G,) its hull's vertices in
+    hull_vert (H, 3) m, geom_friction (G,) Coulomb coefficient. Per candidate geom pair (N):
+    pair_geom1/pair_geom2 (ordered as MuJoCo orders them), pair_condim (1 or 3), pair_margin m.
+    link_invweight_t/_r (L,): MuJoCo's body_invweight0 (1/kg, 1/(kg·m²)) at the initial pose,
+    the constraint rows' scale (zero until the solver computes it at build).
     """
     link_name: list
     link_parent: np.ndarray
@@ -57,9 +63,22 @@ class RigidModel:
     dof_upper: np.ndarray
     dof_effort: np.ndarray
     dof_frictionloss: np.ndarray
+    geom_type: np.ndarray
     geom_link: np.ndarray
-    geom_type: list
+    geom_pos: np.ndarray
+    geom_quat: np.ndarray
+    geom_size: np.ndarray
+    geom_rbound: np.ndarray
+    geom_hull0: np.ndarray
+    geom_hull_n: np.ndarray
+    hull_vert: np.ndarray
     geom_friction: np.ndarray
+    pair_geom1: np.ndarray
+    pair_geom2: np.ndarray
+    pair_condim: np.ndarray
+    pair_margin: np.ndarray
+    link_invweight_t: np.ndarray
+    link_invweight_r: np.ndarray
     pairs: np.ndarray
     qpos0: np.ndarray
 
@@ -72,23 +91,7 @@ class RigidModel:
     def link_static(self):
         """(L,) 1 for a link welded to the world (no dof on it or above it, like a fixed robot's
         base): it never moves, and no dof carries its inertia or forces."""
-        static = np.zeros(self.n_links, dtype=np.int32)
-        for l in range(self.n_links):  # parents come before their children
-            p = self.link_parent[l]
-            static[l] = self.link_jtype[l] == FIXED and (p < 0 or static[p])
-        return static
-
-    def contact_possible(self):
-        """True when two links with collision geoms could touch: two distinct links, not both
-        welded to the world, not parent and child (Genesis skips these pairs by default; it
-        also skips pairs that overlap at rest, which this check does not look at)."""
-        parent = self.link_parent
-        with_geom = np.zeros(self.n_links, dtype=bool)
-        with_geom[self.geom_link] = True
-        children_with_geom = np.bincount(parent[with_geom & (parent >= 0)], minlength=self.n_links)
-        parent_with_geom = (parent >= 0) & with_geom[np.maximum(parent, 0)]
-        others = with_geom.sum() - 1 - parent_with_geom - children_with_geom  # links it may touch
-        return bool(np.any(with_geom & (self.link_static == 0) & (others > 0)))
+        return _static_links(self.link_parent, self.link_jtype)
 
     @property
     def dof_parent(self):
@@ -131,6 +134,14 @@ class RigidModel:
         return len(self.qpos0)
 
 
+def _static_links(link_parent, link_jtype):
+    static = np.zeros(len(link_parent), dtype=np.int32)
+    for l in range(len(link_parent)):  # parents come before their children
+        p = link_parent[l]
+        static[l] = link_jtype[l] == FIXED and (p < 0 or static[p])
+    return static
+
+
 def _initial_q(spec):
     if spec.joint_type == "free":
         return list(spec.pos) + list(spec.quat)
@@ -149,16 +160,17 @@ def _mass_matrix_pairs(dof_link, link_parent):
     return np.array(pairs, dtype=np.int32).reshape(-1, 2)
 
 
-def build_model(entities_links):
+def build_model(entities_links, self_collision=True, adjacent_collision=False):
     """Concatenate entities' link lists (each in tree order) into one RigidModel.
 
     entities_links: list of ``list[LinkSpec]``; a free root joint takes its initial pose from
     the root spec's pos/quat, which are then reset to identity (the qs carry the pose).
+    self_collision / adjacent_collision: the pair rules of geometry.candidate_pairs.
     """
     rows = {k: [] for k in ("name", "parent", "jtype", "pos0", "quat0", "axis", "com", "inertia0", "mass0",
                             "dof0", "q0", "entity")}
     dofs = {k: [] for k in ("link", "q", "damping", "armature", "lower", "upper", "effort", "frictionloss")}
-    geoms = {k: [] for k in ("link", "type", "friction")}
+    geoms, geom_links, geom_names = [], [], []
     qpos0 = []
     for entity_idx, links in enumerate(entities_links):
         link_offset = len(rows["name"])
@@ -187,10 +199,10 @@ def build_model(entities_links):
                 dofs["upper"].append(np.inf if free else spec.upper)
                 dofs["effort"].append(np.inf if free else spec.effort)
                 dofs["frictionloss"].append(0.0 if free else spec.frictionloss)
-            for geom in spec.geoms:
-                geoms["link"].append(link_idx)
-                geoms["type"].append(geom.type)
-                geoms["friction"].append(DEFAULT_FRICTION if geom.friction is None else geom.friction)
+            for k, geom in enumerate(spec.geoms):
+                geoms.append(geom)
+                geom_links.append(link_idx)
+                geom_names.append(f"link '{spec.name}' collision geom {k}")
             qpos0.extend(_initial_q(spec))
     f = np.float64
     dof_link = np.array(dofs["link"], dtype=np.int32)
@@ -212,6 +224,26 @@ def build_model(entities_links):
         dof_kp=np.full(n_dofs, DEFAULT_KP), dof_kv=np.full(n_dofs, DEFAULT_KV),
         dof_lower=np.array(dofs["lower"], dtype=f), dof_upper=np.array(dofs["upper"], dtype=f),
         dof_effort=np.array(dofs["effort"], dtype=f), dof_frictionloss=np.array(dofs["frictionloss"], dtype=f),
-        geom_link=np.array(geoms["link"], dtype=np.int32), geom_type=geoms["type"],
-        geom_friction=np.array(geoms["friction"], dtype=f),
+        **_geoms(geoms, geom_links, geom_names), **_pairs(geoms, geom_links, rows, self_collision, adjacent_collision),
+        link_invweight_t=np.zeros(len(link_parent)), link_invweight_r=np.zeros(len(link_parent)),
         pairs=_mass_matrix_pairs(dof_link, link_parent), qpos0=np.array(qpos0, dtype=f))
+
+
+def _geoms(geoms, geom_links, geom_names):
+    arrays = geometry.geom_arrays(geoms, geom_links, lambda k: geom_names[k])
+    out = {f"geom_{k}": v for k, v in arrays.items() if k != "hull_vert"}
+    out["hull_vert"] = arrays["hull_vert"]
+    out["geom_friction"] = np.array([DEFAULT_FRICTION if g.friction is None else g.friction for g in geoms],
+                                    dtype=np.float64)
+    return out
+
+
+def _pairs(geoms, geom_links, rows, self_collision, adjacent_collision):
+    link_parent = np.array(rows["parent"], dtype=np.int32)
+    static = _static_links(link_parent, np.array(rows["jtype"]))
+    types = np.array([geometry.GEOM_CODE[g.type] for g in geoms], dtype=np.int32)
+    pairs = geometry.candidate_pairs(types, np.array(geom_links, dtype=np.int32), link_parent, static,
+                                     np.array(rows["entity"]), self_collision, adjacent_collision)
+    n = len(pairs)
+    return {"pair_geom1": pairs[:, 0].copy(), "pair_geom2": pairs[:, 1].copy(),
+            "pair_condim": np.full(n, 3, dtype=np.int32), "pair_margin": np.zeros(n)}

@@ -8,9 +8,9 @@ import numpy as np
 import torch
 
 from ..base import Solver
-from ..core import AssetError, runtime
-from ..launch import BoundKernels
-from . import step
+from ..core import AssetError, GradientError, SimulationError, runtime
+from ..launch import BoundKernel, BoundKernels
+from . import contact, step
 from .data import ARENAS, BIG, ELEMENT, INPUTS, RigidData
 from .model import build_model
 
@@ -35,24 +35,45 @@ class RigidSolver(Solver):
         return len(self.entity_links) - 1
 
     def build(self, n_envs):
-        self.model = build_model(self.entity_links)
+        options = self.rigid_options
+        self.model = build_model(self.entity_links, options.enable_self_collision, options.enable_adjacent_collision)
+        if not options.enable_collision:
+            self.model = contact.without_pairs(self.model)
         self.n_batch = max(1, n_envs)
-        h = self.sim_options.dt / self.sim_options.substeps
-        timeconst = max(self.rigid_options.limit_timeconst, 2.0 * h)  # stable for explicit steps
-        self.data = RigidData(self.model, self.n_batch, self.sim_options.substeps, self.sim_options.requires_grad,
-                              self.rigid_options.enable_joint_limit, [h, 1.0 / timeconst ** 2, 2.0 / timeconst])
-        self.kernels = BoundKernels(self.data.schedule, self.data.arenas, [len(ELEMENT[a]) for a in ARENAS],
-                                    *step.KERNELS)
         self._nothing = torch.empty((0, 0), dtype=runtime.tc_float, device=runtime.device)  # an unused array argument
-        self.grad_input_names = tuple(self.data.grad_input_names)
         self.state_width = self.model.n_qs + self.model.n_dofs
+        self._check_mass_matrix()
+        self._allocate()
+        if len(self.model.pair_geom1):  # what needs kernels at the initial pose: then the final storage
+            self.model = contact.at_initial_pose(self, options.enable_neutral_collision)
+            self._allocate()
+        self.grad_input_names = tuple(self.data.grad_input_names)
         # column widths of backward's output: state gradient, then each differentiable input's
         self.grad_widths = [self.state_width] + [self.data.width(name) for name in self.grad_input_names]
-        self.default_inputs = self._default_inputs()
         state = self._initial_state()
         self.upload_state(state)
-        self._check_mass_matrix()
         return state
+
+    def _allocate(self):
+        """The scene's arenas and kernels for the current model, holding the default inputs."""
+        options, sim = self.rigid_options, self.sim_options
+        h = sim.dt / sim.substeps
+        timeconst = max(options.limit_timeconst, 2.0 * h)  # stable for explicit steps
+        self.timeconst, iterations, tolerance, impratio = options.resolved(64 if runtime.tc_float == torch.float64 else 32)
+        contacts, rows = contact.capacity(self.model, options)
+        settings = {"limits": options.enable_joint_limit, "contacts": contacts, "rows": rows,
+                    "cone": int(options.friction_cone == "elliptic"), "iterations": iterations,
+                    "ls_iterations": options.ls_iterations,
+                    "consts": [h, 1.0 / timeconst ** 2, 2.0 / timeconst, impratio, tolerance, options.ls_tolerance]}
+        self.data = RigidData(self.model, self.n_batch, sim.substeps, sim.requires_grad, settings)
+        element_dims = [len(ELEMENT[a]) for a in ARENAS]
+        self.kernels = BoundKernels(self.data.schedule, self.data.arenas, element_dims, *step.KERNELS)
+        m = self.model
+        kinds = sorted({(int(m.geom_type[a]), int(m.geom_type[b])) for a, b in zip(m.pair_geom1, m.pair_geom2)})
+        self.colliders = [BoundKernel(step.collide, (self.data.schedule, kind), self.data.arenas, element_dims)
+                          for kind in kinds]
+        self.default_inputs = self._default_inputs()
+        self.upload_inputs(self.default_inputs)
 
     def _default_inputs(self):
         m, B = self.model, self.n_batch
@@ -61,7 +82,9 @@ class RigidSolver(Solver):
             "mass": m.link_mass0, "damping": m.dof_damping, "armature": m.dof_armature,
             "kp": m.dof_kp, "kv": m.dof_kv, "gravity": np.array(self.sim_options.gravity),
             "ctrl_force": np.zeros(m.n_dofs), "ctrl_pos": np.zeros(m.n_dofs), "ctrl_vel": np.zeros(m.n_dofs),
-            "force_lo": -effort, "force_hi": effort, "ctrl_mode": np.zeros(m.n_dofs)}
+            "force_lo": -effort, "force_hi": effort, "ctrl_mode": np.zeros(m.n_dofs),
+            "friction": m.geom_friction, "solref": np.tile([self.timeconst, 1.0], len(m.geom_type)),
+            "solimp": np.tile(contact.DEFAULT_SOLIMP, len(m.geom_type))}
         assert per_env.keys() == INPUTS.keys()
         return {name: torch.as_tensor(np.tile(np.asarray(v, dtype=np.float64), (B, 1)), dtype=runtime.tc_float,
                                       device=runtime.device) for name, v in per_env.items()}
@@ -113,12 +136,29 @@ class RigidSolver(Solver):
     # -- stepping ---------------------------------------------------------------------------
     def advance(self, inputs=None, download=False):
         out = self._empty(self.state_width) if download else self._nothing
-        self.kernels.advance(1, self._nothing if inputs is None else self._pack_inputs(inputs), out)
+        self.run_step(self._nothing if inputs is None else self._pack_inputs(inputs), out, commit=1)
+        if self.data.size["N"] and self.data.take_flag("overflow"):
+            raise SimulationError(f"rigid solver (entities: {', '.join(self.entity_names)}): more contacts than the "
+                                  f"{self.data.size['C']} slots per env; expected RigidOptions(max_contacts=...) "
+                                  f"above that")
         return out if download else None
+
+    def run_step(self, inputs, out, commit):
+        """One step's kernels: without candidate pairs one launch for all substeps, else four
+        stages per substep (one kernel per collider kind: see collision/detect.py)."""
+        if not self.colliders:
+            self.kernels.advance(commit, inputs, out)
+            return
+        for s in range(self.sim_options.substeps):
+            self.kernels.smooth_substep(s, inputs if s == 0 else self._nothing)
+            for collide in self.colliders:
+                collide(s)
+            self.kernels.constrain(s)
+            self.kernels.finish_substep(s, commit, out)
 
     def nonfinite(self):
         """True once any step produced a non-finite state (resets the flag)."""
-        return self.data.take_nonfinite()
+        return self.data.take_flag("nonfinite")
 
     def backward(self, state, inputs, grad_state_out):
         """Gradients of the step's start state and differentiable inputs from that of its end
@@ -126,7 +166,13 @@ class RigidSolver(Solver):
         packed = self._pack_inputs(inputs, before=(state,), after=(grad_state_out,))
         out = self._empty(sum(self.grad_widths))
         self.kernels.prepare_reverse(packed)
-        self.kernels.advance(0, self._nothing, self._nothing)
+        self.data.take_flag("constrained")
+        self.run_step(self._nothing, self._nothing, commit=0)
+        if self.data.size["R"] and self.data.take_flag("constrained"):
+            raise GradientError(f"rigid solver (entities: {', '.join(self.entity_names)}): this step had contacts; "
+                                f"gradients through contact are not implemented yet (steps without any contact "
+                                f"differentiate exactly); build with RigidOptions(enable_collision=False) to "
+                                f"simulate without contact")
         for s in reversed(range(self.sim_options.substeps)):  # two kernels: one compiles 3x slower
             self.kernels.reverse_dynamics(s)
             self.kernels.reverse_kinematics(s, out)
@@ -164,6 +210,14 @@ class RigidSolver(Solver):
         damping·q̇ + limit forces − bias (qfrc_smooth, what the next step solves with)."""
         out = self._empty(self.model.n_dofs)
         self.kernels.read_dofs_force(out)
+        return out
+
+    def contacts(self, substep=-1):
+        """(B, C, 9) the contacts of the last step's ``substep`` (see step.read_contacts; rows past
+        each env's count have geom −1), C = 0 without candidate pairs."""
+        out = torch.empty((self.n_batch, self.data.size["C"], 9), dtype=runtime.tc_float, device=runtime.device)
+        if self.data.size["C"]:
+            self.kernels.read_contacts(substep % self.sim_options.substeps, out)
         return out
 
     def destroy(self):

@@ -18,10 +18,14 @@ import taichi as ti
 
 from .data import ARENA_TYPES, bind, n_batch
 from .actuation import smooth_force, smooth_force_adjoint
+from .collision.detect import collide_kind, geom_poses
+from .constraint.rows import contact_force, contact_rows
+from .constraint.solver import newton_solve
 from .dynamics import (bias_entry, dof_force, dof_row_adjoint, link_forces, link_forces_adjoint, mass_entry,
                        subtree_sum, subtree_sum_adjoint)
 from .integrator import integrate_link, integrate_link_adjoint
-from .kinematics import link_kinematics, link_kinematics_adjoint, rotation_gradient
+from .kinematics import dof_count, dof_motion_at, link_kinematics, link_kinematics_adjoint, rotation_gradient
+from .spatial import mat_vec, quat_to_mat
 from .linalg import solve_adjoint_env, solve_env
 
 
@@ -62,14 +66,50 @@ def position_stages_env(d: ti.template(), s, e):
 
 
 @ti.func
-def substep_env(d: ti.template(), s, e):
-    """Frame s → frame s + 1."""
+def constraint_env(d: ti.template(), s, e):
+    """Rows of frame s's contacts, then the constraint solve → qfrc_constraint[s, e]."""
+    rows = 0
+    for c in range(d.n_con[s, e, 0]):
+        d.con_efc[s, e, c] = rows
+        rows += contact_rows(d, s, e, c, rows)
+    d.n_efc[s, e, 0] = rows
+    for r in range(rows, d.row_capacity):
+        d.efc_type[s, e, r] = 0
+    if rows > 0:
+        d.constrained[0] = 1
+        for i, j in ti.ndrange(d.n_dofs, d.n_dofs):  # the solve's M: dense, with armature
+            d.solver_M[s, e, i, j] = d.mass_mat[s, e, ti.max(i, j), ti.min(i, j)]
+        for i in range(d.n_dofs):
+            d.solver_M[s, e, i, i] += d.armature[e, i]
+        newton_solve(d, s, e, d.iterations, d.consts[4], d.ls_iterations, d.consts[5])
+        for i in range(d.n_dofs):  # the next solve starts from this solution
+            d.qacc_constrained[s, e, i] = d.qacc_warmstart[e, i] = d.qacc[s, e, i]
+    else:
+        for i in range(d.n_dofs):
+            d.qfrc_constraint[s, e, i] = 0.0
+
+
+@ti.func
+def smooth_env(d: ti.template(), s, e):
+    """Frame s's position stages and smooth force (everything before the solve)."""
     position_stages_env(d, s, e)
     for i in range(d.n_dofs):
         smooth_force(d, s, e, i)
+
+
+@ti.func
+def finish_substep_env(d: ti.template(), s, e):
+    """Frame s's acceleration and integration → frame s + 1."""
     solve_env(d, s, e)
     for l in range(d.n_links):
         integrate_link(d, s, e, l)
+
+
+@ti.func
+def substep_env(d: ti.template(), s, e):
+    """Frame s → frame s + 1 without constraints."""
+    smooth_env(d, s, e)
+    finish_substep_env(d, s, e)
 
 
 @ti.func
@@ -109,19 +149,71 @@ def advance(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, com
             _inputs_from(d, e, inputs, 0)
         for s in range(S):
             substep_env(d, s, e)
+        _end_step(d, e, commit, out)
+
+
+@ti.func
+def _end_step(d: ti.template(), e, commit, out: ti.template()):
+    """After the last substep: flag a non-finite state, write the result to out (unless empty),
+    and with commit copy it into frame 0."""
+    S = d.substeps
+    for k in range(d.n_qs):
+        if not _finite(d.qpos[S, e, k]):
+            d.nonfinite[0] = 1
+    for k in range(d.n_dofs):
+        if not _finite(d.qvel[S, e, k]):
+            d.nonfinite[0] = 1
+    if out.shape[0] > 0:
+        _state_to(d, d.qpos, d.qvel, S, e, out)
+    if commit:
         for k in range(d.n_qs):
-            if not _finite(d.qpos[S, e, k]):
-                d.nonfinite[0] = 1
+            d.qpos[0, e, k] = d.qpos[S, e, k]
         for k in range(d.n_dofs):
-            if not _finite(d.qvel[S, e, k]):
-                d.nonfinite[0] = 1
-        if out.shape[0] > 0:
-            _state_to(d, d.qpos, d.qvel, S, e, out)
-        if commit:
-            for k in range(d.n_qs):
-                d.qpos[0, e, k] = d.qpos[S, e, k]
-            for k in range(d.n_dofs):
-                d.qvel[0, e, k] = d.qvel[S, e, k]
+            d.qvel[0, e, k] = d.qvel[S, e, k]
+
+
+# -- a substep with constraints: one kernel per stage (inlined into one, LLVM compiled for many
+# -- minutes), a collider kernel per pair kind present in the scene, compiled for those only
+@ti.kernel
+def smooth_substep(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, inputs: A):
+    """Frame s up to the smooth force, then the geom poses; the contact list emptied. At s = 0
+    the inputs (unless empty) are loaded first."""
+    ti.loop_config(serialize=schedule[0])
+    for e in range(n_batch(ints)):
+        d = bind(ints, f1, v3, v4, m3)
+        if s == 0 and inputs.shape[0] > 0:
+            _inputs_from(d, e, inputs, 0)
+        smooth_env(d, s, e)
+        geom_poses(d, s, e)
+        d.n_con[s, e, 0] = 0
+
+
+@ti.kernel
+def collide(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32):
+    """Frame s's contacts of the pairs of one kind; config = (schedule, (type 1, type 2))."""
+    ti.loop_config(serialize=config[0][0])
+    for e in range(n_batch(ints)):
+        collide_kind(bind(ints, f1, v3, v4, m3), s, e, config[1])
+
+
+@ti.kernel
+def constrain(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32):
+    """Frame s's constraint rows and solve."""
+    ti.loop_config(serialize=schedule[0])
+    for e in range(n_batch(ints)):
+        constraint_env(bind(ints, f1, v3, v4, m3), s, e)
+
+
+@ti.kernel
+def finish_substep(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, commit: ti.i32,
+                   out: A):
+    """Frame s → frame s + 1; after the last substep, what advance does at the end of a step."""
+    ti.loop_config(serialize=schedule[0])
+    for e in range(n_batch(ints)):
+        d = bind(ints, f1, v3, v4, m3)
+        finish_substep_env(d, s, e)
+        if s == d.substeps - 1:
+            _end_step(d, e, commit, out)
 
 
 @ti.kernel
@@ -259,8 +351,14 @@ def _read_grads_env(d: ti.template(), e, dst: ti.template()):
 
 @ti.func
 def _zero_frames(region: ti.template(), frames):
+    # a literal zero: ti.zero(x) is x·0, which without fast math reads every element and keeps NaN
     for k in range(region.start, region.start + frames * region.stride):
-        region.arena[k] = ti.zero(region.arena[k])
+        if ti.static(len(region.shape) == 0):
+            region.arena[k] = 0.0
+        elif ti.static(len(region.shape) == 1):
+            region.arena[k] = ti.Vector.zero(float, region.shape[0])
+        else:
+            region.arena[k] = ti.Matrix.zero(float, region.shape[0], region.shape[1])
 
 
 @ti.func
@@ -324,6 +422,48 @@ def read_dofs_force(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3:
             dst[e, i] = d.qfrc_smooth[0, e, i]
 
 
+@ti.kernel
+def read_com_jacobians(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
+    """dst (B, L, 6, D) ← each link's centre-of-mass Jacobian at frame 0 (rows: linear velocity
+    of the com, then angular velocity, world frame). The down sweep at frame 0 must be current."""
+    ti.loop_config(serialize=schedule[1])
+    for e in range(n_batch(ints)):
+        d = bind(ints, f1, v3, v4, m3)
+        for l in range(d.n_links):
+            com = d.xpos[0, e, l] + mat_vec(quat_to_mat(d.xquat[0, e, l]), d.link_com[l])
+            for i in range(d.n_dofs):
+                for k in ti.static(range(6)):
+                    dst[e, l, k, i] = 0.0
+            a = l
+            while a >= 0:
+                for i in range(d.link_dof0[a], d.link_dof0[a] + dof_count(d, a)):
+                    linear, angular = dof_motion_at(d, 0, e, i, com)
+                    for k in ti.static(range(3)):
+                        dst[e, l, k, i] = linear[k]
+                        dst[e, l, 3 + k, i] = angular[k]
+                a = d.link_parent[a]
+
+
+@ti.kernel
+def read_contacts(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, dst: A):
+    """dst (B, C, 9) ← substep s's contacts: geom 1, geom 2 (as floats), position (3, m), force on
+    geom 2 (3, N, world; −it acts on geom 1), distance (m); rows past n_con: geom −1."""
+    ti.loop_config(serialize=schedule[1])
+    for e in range(n_batch(ints)):
+        d = bind(ints, f1, v3, v4, m3)
+        for c in range(d.contact_capacity):
+            dst[e, c, 0], dst[e, c, 1] = -1.0, -1.0
+            if c < d.n_con[s, e, 0]:
+                pair = d.con_pair[s, e, c]
+                force = d.con_frame[s, e, c].transpose() @ contact_force(d, s, e, c)
+                dst[e, c, 0], dst[e, c, 1] = d.pair_geom1[pair], d.pair_geom2[pair]
+                for k in ti.static(range(3)):
+                    dst[e, c, 2 + k] = d.con_pos[s, e, c][k]
+                    dst[e, c, 5 + k] = force[k]
+                dst[e, c, 8] = d.con_dist[s, e, c]
+
+
 #: what solver.py launches (through solvers.launch, with the scene's arenas)
 KERNELS = (advance, prepare_reverse, reverse_dynamics, reverse_kinematics, down_sweep, down_sweep_adjoint,
-           position_stages, write_state, read_state, write_inputs, read_links, read_mass_matrix, read_dofs_force)
+           position_stages, write_state, read_state, write_inputs, read_links, read_mass_matrix, read_dofs_force,
+           read_com_jacobians, read_contacts, smooth_substep, constrain, finish_substep)

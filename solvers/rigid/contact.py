@@ -1,0 +1,90 @@
+"""Contact bookkeeping of the rigid solver at build (plain Python around the kernels): how many
+contact and row slots a scene needs, the constants MuJoCo computes at the initial pose
+(``body_invweight0``), and the filter of pairs touching at that pose.
+"""
+from dataclasses import replace
+
+import numpy as np
+import torch
+
+from ..core import runtime
+from .geometry import BOX, PLANE
+
+DEFAULT_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)  # MuJoCo's (d0, dmax, width m, midpoint, power)
+# MuJoCo's contact budget of a pair (colliders in collision/), by (type 1, type 2); others: one
+BUDGET = {(PLANE, 3): 2, (PLANE, 5): 4, (PLANE, BOX): 4, (3, 3): 2, (3, BOX): 2, (BOX, BOX): 8}
+MAX_PER_MOVING_LINK = 8  # default max_contacts: a box resting on a face touches at up to 8 points
+MIN_CONTACTS = 16
+
+
+def without_pairs(model):
+    """The model with no candidate pair (collision disabled)."""
+    empty = np.zeros(0, dtype=np.int32)
+    return replace(model, pair_geom1=empty, pair_geom2=empty, pair_condim=empty, pair_margin=np.zeros(0))
+
+
+def _pair_budget(model, k):
+    return BUDGET.get((int(model.geom_type[model.pair_geom1[k]]), int(model.geom_type[model.pair_geom2[k]])), 1)
+
+
+def capacity(model, options):
+    """(contact slots C, row slots R) per env: C the pairs' worst case, capped by max_contacts
+    (default: MAX_PER_MOVING_LINK per moving link with geometry, at least MIN_CONTACTS); R
+    enough rows for C contacts of the largest condim under the cone."""
+    worst = sum(_pair_budget(model, k) for k in range(len(model.pair_geom1)))
+    if options.max_contacts is not None:
+        cap = int(options.max_contacts)
+    else:
+        moving = len(set(model.geom_link[model.link_static[model.geom_link] == 0].tolist()))
+        cap = max(MIN_CONTACTS, MAX_PER_MOVING_LINK * moving)
+    contacts = min(worst, cap)
+    condim = int(model.pair_condim.max()) if len(model.pair_condim) else 1
+    rows_per_contact = condim if options.friction_cone == "elliptic" or condim == 1 else 2 * (condim - 1)
+    return contacts, contacts * rows_per_contact
+
+
+def _invweight(solver):
+    """MuJoCo's body_invweight0 per link (translation 1/kg, rotation 1/(kg·m²)): the mean of the
+    translational and rotational diagonal of J M⁻¹ Jᵀ, J the Jacobian of the link's centre of
+    mass at the initial pose, M with armature; zero for links welded to the world. Env 0's
+    parameters (the scene's defaults)."""
+    m = solver.model
+    mass_matrix = solver.mass_matrix()[0].double().cpu().numpy() + np.diag(m.dof_armature)
+    jac = torch.empty((solver.n_batch, m.n_links, 6, m.n_dofs), dtype=runtime.tc_float, device=runtime.device)
+    solver.kernels.read_com_jacobians(jac)
+    jac = jac[0].double().cpu().numpy()
+    inv_jt = np.linalg.solve(mass_matrix, jac.transpose(0, 2, 1)) if m.n_dofs else np.zeros((m.n_links, 0, 6))
+    a = jac @ inv_jt  # (L, 6, 6)
+    diag = np.diagonal(a, axis1=1, axis2=2)
+    moving = m.link_static == 0
+    return diag[:, :3].mean(axis=1) * moving, diag[:, 3:].mean(axis=1) * moving
+
+
+def _touching_pairs(solver):
+    """Candidate pairs with a contact at the initial pose (env 0): the first substep of a step
+    that is not committed finds them."""
+    solver.run_step(solver._nothing, solver._nothing, commit=0)
+    for flag in ("overflow", "constrained", "nonfinite"):
+        solver.data.take_flag(flag)
+    found = solver.contacts(substep=0)[0].cpu().numpy()
+    found = found[found[:, 0] >= 0]
+    model = solver.model
+    geoms = set(zip(found[:, 0].astype(int).tolist(), found[:, 1].astype(int).tolist()))
+    return np.array([(g1, g2) in geoms for g1, g2 in zip(model.pair_geom1.tolist(), model.pair_geom2.tolist())],
+                    dtype=bool)
+
+
+def at_initial_pose(solver, neutral_collision):
+    """The solver's model with body_invweight0 filled and, unless ``neutral_collision``, without
+    the pairs of one entity touching at the initial pose (Genesis's rule). The solver's storage
+    must hold the initial state."""
+    solver.upload_state(solver._initial_state())
+    inv_t, inv_r = _invweight(solver)
+    model = replace(solver.model, link_invweight_t=inv_t, link_invweight_r=inv_r)
+    if neutral_collision:
+        return model
+    entity = model.link_entity[model.geom_link]
+    same = entity[model.pair_geom1] == entity[model.pair_geom2]
+    keep = ~(same & _touching_pairs(solver))
+    return replace(model, pair_geom1=model.pair_geom1[keep], pair_geom2=model.pair_geom2[keep],
+                   pair_condim=model.pair_condim[keep], pair_margin=model.pair_margin[keep])

@@ -1,0 +1,95 @@
+"""The same contact scene in genesis_lite and in MuJoCo (test support).
+
+A scene is a plane (optional) and free bodies, each one primitive shape. The MuJoCo model takes
+every body's mass, centre of mass and inertia from our built model, so the two agree on mass
+properties whatever each derives from the shape; the shapes, friction, solref and solimp are
+MuJoCo's defaults unless given. State layout is the same in both: per body qpos (pos, quat)
+and qvel (world linear velocity, body angular velocity), bodies in order.
+"""
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+import genesis_lite as gs
+
+
+@dataclass
+class Body:
+    shape: str          # "box" | "sphere" | "capsule" | "cylinder"
+    size: tuple         # ours: box full extents; sphere (r,); capsule/cylinder (r, length)
+    pos: tuple = (0.0, 0.0, 0.5)
+    quat: tuple = (1.0, 0.0, 0.0, 0.0)
+
+
+@dataclass
+class ContactScene:
+    bodies: list
+    plane: bool = True
+    dt: float = 0.002
+    cone: str = "pyramidal"
+    impratio: float = 1.0
+    solref: tuple = None   # every geom's, None: MuJoCo's default
+    solimp: tuple = None
+    n_envs: int = 0
+    options: dict = field(default_factory=dict)
+
+
+def _morph(body):
+    kw = dict(pos=body.pos, quat=body.quat)
+    if body.shape == "box":
+        return gs.morphs.Box(size=body.size, **kw)
+    if body.shape == "sphere":
+        return gs.morphs.Sphere(radius=body.size[0], **kw)
+    if body.shape == "capsule":
+        return gs.morphs.Capsule(radius=body.size[0], height=body.size[1], **kw)
+    return gs.morphs.Cylinder(radius=body.size[0], height=body.size[1], **kw)
+
+
+def build_ours(spec):
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=spec.dt),
+                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True,
+                                                           friction_cone=spec.cone, impratio=spec.impratio,
+                                                           **spec.options),
+                     show_viewer=False)
+    plane = scene.add_entity(gs.morphs.Plane()) if spec.plane else None
+    entities = [scene.add_entity(_morph(b)) for b in spec.bodies]
+    scene.build(n_envs=spec.n_envs)
+    if spec.solref is not None or spec.solimp is not None:
+        solref = spec.solref or (0.02, 1.0)
+        solimp = spec.solimp or (0.9, 0.95, 0.001, 0.5, 2.0)
+        for entity in ([plane] if spec.plane else []) + entities:
+            entity.set_sol_params([*solref, *solimp])
+    return scene, entities
+
+
+def _geom_xml(body):
+    s = np.asarray(body.size, dtype=float)
+    if body.shape == "box":
+        return f'type="box" size="{s[0] / 2} {s[1] / 2} {s[2] / 2}"'
+    if body.shape == "sphere":
+        return f'type="sphere" size="{s[0]}"'
+    return f'type="{body.shape}" size="{s[0]} {s[1] / 2}"'
+
+
+def build_mujoco(spec, model):
+    """MuJoCo's model of the scene, mass properties from our RigidModel ``model``."""
+    sol = ""
+    if spec.solref is not None:
+        sol += f' solref="{spec.solref[0]} {spec.solref[1]}"'
+    if spec.solimp is not None:
+        sol += ' solimp="' + " ".join(str(v) for v in spec.solimp) + '"'
+    moving = [l for l in range(model.n_links) if model.link_jtype[l] != 0]
+    bodies = []
+    for k, (body, link) in enumerate(zip(spec.bodies, moving)):
+        inertia = model.link_inertia0[link]
+        com = model.link_com[link]
+        bodies.append(
+            f'<body name="b{k}" pos="{" ".join(map(str, body.pos))}" quat="{" ".join(map(str, body.quat))}">'
+            f'<freejoint/><inertial pos="{com[0]} {com[1]} {com[2]}" mass="{model.link_mass0[link]}" '
+            f'fullinertia="{inertia[0, 0]} {inertia[1, 1]} {inertia[2, 2]} {inertia[0, 1]} {inertia[0, 2]} '
+            f'{inertia[1, 2]}"/><geom {_geom_xml(body)}{sol}/></body>')
+    plane = f'<geom type="plane" size="0 0 1"{sol}/>' if spec.plane else ""
+    xml = (f'<mujoco><option timestep="{spec.dt}" cone="{spec.cone}" impratio="{spec.impratio}"/>'
+           f'<worldbody>{plane}{"".join(bodies)}</worldbody></mujoco>')
+    return mujoco.MjModel.from_xml_string(xml)

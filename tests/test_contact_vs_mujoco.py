@@ -1,0 +1,130 @@
+"""Contact, step for step against MuJoCo: from the same state (re-synced before every step),
+one step gives the same velocities (≤ 1e-8) and the same contacts (count, position, normal,
+distance) for every primitive pair, both friction cones, default and non-default solref,
+solimp and impratio.
+
+Each case is one batched scene whose envs start from different MuJoCo states near contact
+(penetrating up to a few mm, or just apart), with random velocities.
+"""
+import mujoco
+import numpy as np
+import pytest
+import torch
+
+import genesis_lite as gs
+from tests.contact_scenes import Body, ContactScene, build_mujoco, build_ours
+
+N_STATES = 24
+rng_seed = 7
+
+
+def _random_quat(rng):
+    q = rng.normal(size=4)
+    return q / np.linalg.norm(q)
+
+
+def _touching_states(m, rng, n, depth=(-0.002, 0.003)):
+    """n (qpos, qvel) of MuJoCo model m with every free body placed so that its geoms are at a
+    signed distance in -depth from the others (shifted along z, or along the centre line)."""
+    d = mujoco.MjData(m)
+    states = []
+    n_bodies = m.nbody - 1
+    for _ in range(n):
+        qpos = m.qpos0.copy()
+        for b in range(n_bodies):
+            qpos[7 * b: 7 * b + 3] = rng.uniform(-0.05, 0.05, 3) + [0.0, 0.0, 0.3 * (b + 1)]
+            qpos[7 * b + 3: 7 * b + 7] = _random_quat(rng)
+        has_plane = m.ngeom > n_bodies
+        for b in range(n_bodies):  # body b down onto what is below it (the plane or body b - 1)
+            if b == 0 and not has_plane:
+                continue
+            below = b - 1
+            target = -rng.uniform(*depth)
+            for _ in range(8):
+                d.qpos[:] = qpos
+                mujoco.mj_kinematics(m, d)
+                g2 = m.body_geomadr[b + 1]
+                g1 = 0 if below < 0 else m.body_geomadr[below + 1]  # the plane is geom 0
+                dist = mujoco.mj_geomDistance(m, d, g1, g2, 10.0, None)
+                qpos[7 * b + 2] -= dist - target
+        qvel = rng.uniform(-1.0, 1.0, m.nv)
+        states.append((qpos, qvel))
+    return states
+
+
+def _mujoco_step(m, qpos, qvel):
+    d = mujoco.MjData(m)
+    d.qpos[:], d.qvel[:] = qpos, qvel
+    mujoco.mj_step(m, d)
+    return d
+
+
+def _set_ours(entities, qpos, qvel):
+    for b, entity in enumerate(entities):
+        entity.set_qpos(torch.as_tensor(qpos[:, 7 * b: 7 * b + 7], dtype=gs.tc_float), zero_velocity=False)
+        entity.set_dofs_velocity(torch.as_tensor(qvel[:, 6 * b: 6 * b + 6], dtype=gs.tc_float))
+
+
+def _contacts_mujoco(d):
+    return [(c.geom[0], c.geom[1], c.pos.copy(), c.frame[:3].copy(), c.dist) for c in d.contact[: d.ncon]]
+
+
+def _check_step(spec, n_states=N_STATES):
+    spec.n_envs = n_states
+    scene, entities = build_ours(spec)
+    m = build_mujoco(spec, scene.rigid_solver.model)
+    rng = np.random.default_rng(rng_seed)
+    states = _touching_states(m, rng, n_states)
+    qpos = np.array([q for q, _ in states])
+    qvel = np.array([v for _, v in states])
+    _set_ours(entities, qpos, qvel)
+    scene.step()
+    ours_qvel = np.concatenate([e.get_dofs_velocity().cpu().numpy() for e in entities], axis=1)
+    contacts = entities[0].get_contacts()
+    geom_map = _geom_map(scene, m, spec)
+    n_touching = 0
+    for k in range(n_states):
+        d = _mujoco_step(m, qpos[k], qvel[k])
+        assert np.allclose(ours_qvel[k], d.qvel, rtol=0, atol=1e-8), (k, ours_qvel[k] - d.qvel)
+        expected = _contacts_mujoco(d)
+        valid = contacts["valid_mask"][k]
+        ours = [(int(a), int(b), p) for a, b, p in zip(contacts["geom_a"][k][valid], contacts["geom_b"][k][valid],
+                                                      contacts["position"][k][valid].cpu().numpy())]
+        assert len(ours) == len(expected), (k, len(ours), len(expected))
+        for (a, b, p), (g1, g2, pos, normal, dist) in zip(ours, expected):
+            assert (geom_map[a], geom_map[b]) == (g1, g2)
+            assert np.allclose(p, pos, rtol=0, atol=1e-10)
+        n_touching += len(expected) > 0
+    assert n_touching >= n_states // 2, "most states must touch"
+
+
+def _geom_map(scene, m, spec):
+    """Our global geom index → MuJoCo's (same order: the plane first, then one per body)."""
+    return {k: k for k in range(m.ngeom)}
+
+
+PLANE_SHAPES = [Body("sphere", (0.1,)), Body("capsule", (0.05, 0.2)), Body("box", (0.2, 0.3, 0.1)),
+                Body("cylinder", (0.08, 0.2))]
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+@pytest.mark.parametrize("body", PLANE_SHAPES, ids=lambda b: b.shape)
+def test_plane_pairs_step_like_mujoco(f64, body, cone):
+    _check_step(ContactScene([body], cone=cone))
+
+
+PAIRS = [("sphere", "sphere"), ("sphere", "capsule"), ("capsule", "capsule"), ("sphere", "box"),
+         ("capsule", "box"), ("box", "box")]
+SHAPE = {"sphere": Body("sphere", (0.1,)), "capsule": Body("capsule", (0.05, 0.2)), "box": Body("box", (0.2, 0.3, 0.1))}
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+@pytest.mark.parametrize("pair", PAIRS, ids="-".join)
+def test_body_pairs_step_like_mujoco(f64, pair, cone):
+    _check_step(ContactScene([SHAPE[pair[0]], SHAPE[pair[1]]], plane=False, cone=cone))
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_non_default_parameters_step_like_mujoco(f64, cone):
+    _check_step(ContactScene([Body("box", (0.2, 0.3, 0.1))], cone=cone, impratio=3.0, solref=(0.05, 0.7),
+                             solimp=(0.8, 0.99, 0.004, 0.3, 3.0)))
