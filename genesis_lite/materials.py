@@ -10,8 +10,8 @@ from .solvers.core import InvalidInputError
 class Rigid:
     """A rigid body. rho: density, kg/m³ (used where a link has no inertial);
     friction: Coulomb coefficient of every collision shape of the entity, in [0.01, 5] as Genesis
-    (None: the asset's, e.g. a URDF link's <contact><lateral_friction>, else 1.0). Kept in the
-    model for the contact stage: no contact forces are computed yet."""
+    (None: the asset's, e.g. a URDF link's <contact><lateral_friction>, else 1.0); a contact
+    takes the larger of its two shapes' values."""
     rho: float = 200.0
     friction: float = None
 

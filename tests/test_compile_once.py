@@ -1,6 +1,7 @@
 """Kernels are compiled once per process and precision, not per scene: a scene's data are the
 kernels' array arguments (solvers/rigid/data.py). Other robots, batch sizes, substep counts and
-time steps, and a second live scene of the same robot, reuse every compiled kernel."""
+time steps, and a second live scene of the same robot, reuse every compiled kernel; a contact
+scene compiles the collider of each pair kind it has once, for every later scene."""
 import torch
 
 import genesis_lite as gs
@@ -14,7 +15,8 @@ def _n_compiled():
 
 
 def _rollout_with_backward(path, fixed, n_envs, substeps, dt):
-    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=dt, substeps=substeps, requires_grad=True))
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=dt, substeps=substeps, requires_grad=True),
+                     rigid_options=gs.options.RigidOptions(enable_collision=False))
     robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=fixed))
     scene.build(n_envs=n_envs)
     force = torch.full((n_envs, robot.n_dofs) if n_envs else (robot.n_dofs,), 0.1, dtype=torch.float64,
@@ -48,3 +50,22 @@ def test_large_batches_share_compiled_kernels(f64):
     compiled = _n_compiled()
     _rollout_with_backward(asset("quadruped.urdf"), False, 200, 2, 0.005)
     assert _n_compiled() == compiled, "a new scene compiled kernels again"
+
+
+def _boxes_on_plane(sizes, n_envs):
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002))
+    scene.add_entity(gs.morphs.Plane())
+    for k, size in enumerate(sizes):
+        scene.add_entity(gs.morphs.Box(size=size, pos=(0.0, 0.0, 0.5 * size[2] + 0.3 * k)))
+    scene.build(n_envs=n_envs)
+    for _ in range(3):
+        scene.step()
+    return scene
+
+
+def test_contact_scenes_share_compiled_kernels(f64):
+    """Plane–box and box–box pairs: a scene of other sizes, counts and batch reuses every kernel."""
+    _boxes_on_plane([(0.2, 0.2, 0.2), (0.1, 0.3, 0.2)], 0)
+    compiled = _n_compiled()
+    _boxes_on_plane([(0.1, 0.1, 0.1)] * 5, 3)
+    assert _n_compiled() == compiled, "a new contact scene compiled kernels again"

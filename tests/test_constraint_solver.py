@@ -208,6 +208,8 @@ class _View:
         self.efc_J = ti.field(float, shape=(1, E, R, D))
         self.qacc_warmstart = ti.field(float, shape=(E, D))
         self.solver_niter = ti.field(ti.i32, shape=(1, E))
+        self.n_efc = ti.field(ti.i32, shape=(1, E, 1))  # rows in use: every slot (unused ones hold garbage)
+        self.n_efc.fill(R)
         self.dof_parent = ti.field(ti.i32, shape=D)
         for name, (element, count) in cs.SCRATCH.items():
             setattr(self, name, ti.field(float if element == "f" else ti.i32, shape=shapes[count]))

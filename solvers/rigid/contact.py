@@ -2,13 +2,17 @@
 contact and row slots a scene needs, the constants MuJoCo computes at the initial pose
 (``body_invweight0``), and the filter of pairs touching at that pose.
 """
+import logging
 from dataclasses import replace
 
 import numpy as np
 import torch
 
 from ..core import runtime
+from .collision.detect import COLLIDERS
 from .geometry import BOX, PLANE
+
+_logger = logging.getLogger("genesis_lite")
 
 DEFAULT_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)  # MuJoCo's (d0, dmax, width m, midpoint, power)
 # MuJoCo's contact budget of a pair (colliders in collision/), by (type 1, type 2); others: one
@@ -17,10 +21,23 @@ MAX_PER_MOVING_LINK = 8  # default max_contacts: a box resting on a face touches
 MIN_CONTACTS = 16
 
 
-def without_pairs(model):
-    """The model with no candidate pair (collision disabled)."""
-    empty = np.zeros(0, dtype=np.int32)
-    return replace(model, pair_geom1=empty, pair_geom2=empty, pair_condim=empty, pair_margin=np.zeros(0))
+def without_pairs(model, keep=None):
+    """The model with only the candidate pairs ``keep`` (bool (N,); None: none, collision off)."""
+    keep = np.zeros(len(model.pair_geom1), dtype=bool) if keep is None else keep
+    return replace(model, pair_geom1=model.pair_geom1[keep], pair_geom2=model.pair_geom2[keep],
+                   pair_condim=model.pair_condim[keep], pair_margin=model.pair_margin[keep])
+
+
+def without_uncollidable(model, names):
+    """The model without the pairs no collider handles yet (meshes, cylinder against capsule,
+    cylinder or box), and a warning naming them (nothing is dropped silently)."""
+    kinds = list(zip(model.geom_type[model.pair_geom1].tolist(), model.geom_type[model.pair_geom2].tolist()))
+    keep = np.array([kind in COLLIDERS for kind in kinds], dtype=bool)
+    if not keep.all():
+        dropped = sorted({f"{names[a]}-{names[b]}" for (a, b), k in zip(kinds, keep) if not k})
+        _logger.warning(f"scene.build: contacts between {', '.join(dropped)} are not simulated yet (no collider for "
+                        f"these shapes): {int((~keep).sum())} of {len(keep)} geom pairs pass through each other")
+    return without_pairs(model, keep)
 
 
 def _pair_budget(model, k):
@@ -85,6 +102,4 @@ def at_initial_pose(solver, neutral_collision):
         return model
     entity = model.link_entity[model.geom_link]
     same = entity[model.pair_geom1] == entity[model.pair_geom2]
-    keep = ~(same & _touching_pairs(solver))
-    return replace(model, pair_geom1=model.pair_geom1[keep], pair_geom2=model.pair_geom2[keep],
-                   pair_condim=model.pair_condim[keep], pair_margin=model.pair_margin[keep])
+    return without_pairs(model, ~(same & _touching_pairs(solver)))

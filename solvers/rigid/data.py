@@ -225,6 +225,9 @@ class RigidData:
         self._fill(values, model, settings["consts"])
         # torch owns the memory (freed with the scene, whatever Taichi does meanwhile)
         self.arenas = [torch.from_numpy(values[a]).to(runtime.device) for a in ARENAS]
+        # the header's flags, read after every step with contacts: on the CPU a numpy view of the
+        # int arena (~0.1 µs a read, against ~15 µs for a torch scalar read and write)
+        self.header = self.arenas[0].numpy() if self.arenas[0].device.type == "cpu" else self.arenas[0]
 
     def _fill(self, values, model, consts):
         """Header, model and consts (CONSTS) into the arenas."""
@@ -240,9 +243,10 @@ class RigidData:
         """True once a step raised the header's flag ``name`` ("nonfinite": a non-finite state;
         "overflow": more contacts than slots; "constrained": constraint rows were active) since
         the last call, which clears it."""
-        ints, slot = self.arenas[0], HEADER[name]
-        flag = bool(ints[slot])
-        ints[slot] = 0
+        slot = HEADER[name]
+        flag = bool(self.header[slot])
+        if flag:
+            self.header[slot] = 0
         return flag
 
     def width(self, name):
@@ -303,7 +307,6 @@ class RigidView:
         self.limits_enabled = size["limits"]
         self.n_geoms, self.n_candidates, self.contact_capacity, self.row_capacity = size["G"], size["N"], size["C"], size["R"]
         self.elliptic, self.iterations, self.ls_iterations = size["cone"], size["iterations"], size["ls_iterations"]
-        self.n_rows = self.row_capacity  # the solve's row loop (rows past n_efc are UNUSED)
         self.nonfinite = ArrayView(ints, HEADER["nonfinite"], (1,))  # set by the NaN check
         self.overflow = ArrayView(ints, HEADER["overflow"], (1,))  # set when contacts exceed their slots
         self.constrained = ArrayView(ints, HEADER["constrained"], (1,))  # set when a substep had constraint rows

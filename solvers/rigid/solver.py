@@ -12,6 +12,7 @@ from ..core import AssetError, GradientError, SimulationError, runtime
 from ..launch import BoundKernel, BoundKernels
 from . import contact, step
 from .data import ARENAS, BIG, ELEMENT, INPUTS, RigidData
+from .geometry import GEOM_CODE
 from .model import build_model
 
 
@@ -39,6 +40,7 @@ class RigidSolver(Solver):
         self.model = build_model(self.entity_links, options.enable_self_collision, options.enable_adjacent_collision)
         if not options.enable_collision:
             self.model = contact.without_pairs(self.model)
+        self.model = contact.without_uncollidable(self.model, {v: k for k, v in GEOM_CODE.items()})
         self.n_batch = max(1, n_envs)
         self._nothing = torch.empty((0, 0), dtype=runtime.tc_float, device=runtime.device)  # an unused array argument
         self.state_width = self.model.n_qs + self.model.n_dofs

@@ -20,8 +20,7 @@ class GeomSpec:
     pos (3,) m and quat (4,) w-x-y-z: the shape's frame in the link frame.
     vertices (V, 3) m and faces (F, 3): the triangle mesh (mesh shapes only, else None).
     friction: Coulomb coefficient of contacts on this shape (dimensionless); None when neither
-          the asset nor the material states one (the model then uses its default). Kept for the
-          contact stage: no contact forces are computed yet.
+          the asset nor the material states one (the model then uses its default).
     """
     type: str
     size: np.ndarray

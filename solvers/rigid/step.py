@@ -73,8 +73,6 @@ def constraint_env(d: ti.template(), s, e):
         d.con_efc[s, e, c] = rows
         rows += contact_rows(d, s, e, c, rows)
     d.n_efc[s, e, 0] = rows
-    for r in range(rows, d.row_capacity):
-        d.efc_type[s, e, r] = 0
     if rows > 0:
         d.constrained[0] = 1
         for i, j in ti.ndrange(d.n_dofs, d.n_dofs):  # the solve's M: dense, with armature
@@ -317,11 +315,15 @@ def _inputs_from(d: ti.template(), e, src: ti.template(), offset):
 
 @ti.kernel
 def write_state(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, src: A):
-    """Frame s ← src (B, Q + D): qpos then qvel of every env."""
+    """Frame s ← src (B, Q + D): qpos then qvel of every env. The constraint solve's warm start
+    is cleared too (as MuJoCo's reset does): a step then depends on its start state alone, so a
+    rollout repeated from the same state, alone or in a batch, gives the same bits."""
     ti.loop_config(serialize=schedule[1])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
         _state_from(d, d.qpos, d.qvel, s, e, src, 0)
+        for k in range(d.n_dofs):
+            d.qacc_warmstart[e, k] = 0.0
 
 
 @ti.kernel

@@ -97,7 +97,7 @@ def _find_islands(d: ti.template(), s, e):
     entries; an island is named by its smallest tree (MuJoCo's canonical root)."""
     for i in range(d.n_dofs):
         d.solver_tree[s, e, i] = NO_ISLAND
-    for r in range(d.n_rows):
+    for r in range(d.n_efc[s, e, 0]):
         if d.efc_type[s, e, r] != UNUSED:
             first = NO_ISLAND
             for i in range(d.n_dofs):
@@ -116,7 +116,7 @@ def _find_islands(d: ti.template(), s, e):
         if d.solver_tree[s, e, t] != NO_ISLAND:
             label = _find(d, s, e, t)
         d.solver_dof_island[s, e, i] = label
-    for r in range(d.n_rows):  # an elliptic block's rows share one island
+    for r in range(d.n_efc[s, e, 0]):  # an elliptic block's rows share one island
         t = d.efc_type[s, e, r]
         if t != ELLIPTIC_REST:
             count = d.efc_dim[s, e, r] if t == ELLIPTIC_FIRST else 1
@@ -216,7 +216,7 @@ def _mul_M(d: ti.template(), s, e, k, x: ti.template(), out: ti.template()):
 @ti.func
 def _set_jar(d: ti.template(), s, e, k):
     """jar ← J qacc − aref on island k's rows (all their rows, elliptic tails included)."""
-    for r in range(d.n_rows):
+    for r in range(d.n_efc[s, e, 0]):
         if d.efc_type[s, e, r] != UNUSED and (k == ALL or d.solver_row_island[s, e, r] == k):
             acc = 0.0
             for i in range(d.n_dofs):
@@ -248,7 +248,7 @@ def _update_constraints(d: ti.template(), s, e, k):
     """mj_constraintUpdate on island k's rows: efc_state and efc_force from solver_jar.
     Returns the constraint cost Σ s(jar)."""
     cost = 0.0
-    for r in range(d.n_rows):
+    for r in range(d.n_efc[s, e, 0]):
         if _row_in(d, s, e, r, k):
             t = d.efc_type[s, e, r]
             jar, R = d.solver_jar[s, e, r], d.efc_R[s, e, r]
@@ -339,7 +339,7 @@ def _factor_hessian(d: ti.template(), s, e, k):
             for j in range(i + 1):
                 if _dof_in(d, s, e, j, k):
                     d.solver_H[s, e, i, j] = d.solver_M[s, e, i, j]
-    for r in range(d.n_rows):
+    for r in range(d.n_efc[s, e, 0]):
         if d.efc_type[s, e, r] != UNUSED and d.solver_row_island[s, e, r] == k:
             if d.efc_state[s, e, r] == QUADRATIC:
                 D = 1.0 / d.efc_R[s, e, r]
@@ -379,7 +379,7 @@ def _update_gradient(d: ti.template(), s, e, k):
     for i in range(d.n_dofs):
         if _dof_in(d, s, e, i, k):
             acc = 0.0
-            for r in range(d.n_rows):
+            for r in range(d.n_efc[s, e, 0]):
                 if d.efc_type[s, e, r] != UNUSED and d.solver_row_island[s, e, r] == k:
                     acc += d.efc_J[s, e, r, i] * d.efc_force[s, e, r]
             d.qfrc_constraint[s, e, i] = acc
@@ -497,7 +497,7 @@ def _eval(d: ti.template(), s, e, k, alpha, gauss1, gauss2):
     (MuJoCo's PrimalEval); gauss1, gauss2: the Gauss term's linear and quadratic coefficients."""
     cost, d0, d1 = 0.0, 0.0, 0.0
     quad = ti.Vector([0.0, gauss1, gauss2])  # summed active quadratics, shifted by cost(0)
-    for r in range(d.n_rows):
+    for r in range(d.n_efc[s, e, 0]):
         if _row_in(d, s, e, r, k):
             t = d.efc_type[s, e, r]
             jar, jv = d.solver_jar[s, e, r], d.solver_Jv[s, e, r]
@@ -570,7 +570,7 @@ def _line_search(d: ti.template(), s, e, k, tolerance, ls_iterations, scale):
     if snorm >= MINVAL:
         gtol = tolerance * snorm / scale
         _mul_M(d, s, e, k, d.solver_search, d.solver_Mv)
-        for r in range(d.n_rows):
+        for r in range(d.n_efc[s, e, 0]):
             if d.efc_type[s, e, r] != UNUSED and d.solver_row_island[s, e, r] == k:
                 acc = 0.0
                 for i in range(d.n_dofs):
@@ -697,7 +697,7 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
             if _dof_in(d, s, e, i, k):
                 d.qacc[s, e, i] += alpha * d.solver_search[s, e, i]
                 d.solver_Ma[s, e, i] += alpha * d.solver_Mv[s, e, i]
-        for r in range(d.n_rows):
+        for r in range(d.n_efc[s, e, 0]):
             if d.efc_type[s, e, r] != UNUSED and d.solver_row_island[s, e, r] == k:
                 d.solver_jar[s, e, r] += alpha * d.solver_Jv[s, e, r]
         improvement = scale * ls_improvement
@@ -731,7 +731,7 @@ def _warm_start(d: ti.template(), s, e):
 def newton_solve(d: ti.template(), s, e, iterations, tolerance, ls_iterations, ls_tolerance):
     """Constrained acceleration of env e at substep frame s (see the module docstring).
 
-    Reads solver_M (D, D) kg·m² / kg, qfrc_smooth (D,) N·m / N, the rows efc_type, efc_dim,
+    Reads solver_M (D, D) kg·m² / kg, qfrc_smooth (D,) N·m / N, the n_efc[s, e, 0] rows efc_type, efc_dim,
     efc_mu, efc_J (R, D), efc_R, efc_aref, efc_floss, qacc_warmstart[e] (D,) and dof_parent.
     Writes qacc_smooth, qacc (D,) rad/s² / m/s², efc_force (R,), efc_state (R,), qfrc_constraint
     (D,), solver_niter, and the SCRATCH arrays (solver_H: the final Hessian's factor).
@@ -746,7 +746,7 @@ def newton_solve(d: ti.template(), s, e, iterations, tolerance, ls_iterations, l
     # unconstrained dofs keep it (H = M there)
     _cholesky(d, d.solver_H, s, e, ALL)
     _cholesky_solve(d, d.solver_H, d.qacc_smooth, s, e, ALL)
-    for r in range(d.n_rows):
+    for r in range(d.n_efc[s, e, 0]):
         d.efc_force[s, e, r], d.efc_state[s, e, r] = 0.0, SATISFIED
     _warm_start(d, s, e)
     niter = 0

@@ -1,0 +1,171 @@
+"""Contact physics against references no one here wrote: MuJoCo trajectories, closed-form
+mechanics (Coulomb sliding, rolling on an incline), and rest. Every analytic case also runs in
+MuJoCo inside the test, to show we are as close to the closed form as it is.
+
+MuJoCo's defaults on both sides (``enable_mujoco_compatibility``), dt 2 ms, float64.
+"""
+import mujoco
+import numpy as np
+import pytest
+import torch
+
+import genesis_lite as gs
+from tests.contact_scenes import Body, ContactScene, build_mujoco, build_ours
+
+G = 9.81
+
+
+def _run(spec, steps, before_step=None):
+    """(ours, MuJoCo's) qpos trajectories (steps + 1, nq) from the spec's initial state."""
+    scene, entities = build_ours(spec)
+    if before_step:
+        before_step(scene, entities)
+    m = build_mujoco(spec, scene.rigid_solver.model)
+    d = mujoco.MjData(m)
+    if before_step:
+        m.opt.gravity[:] = scene.rigid_solver.default_inputs["gravity"][0].cpu().numpy()
+        m.geom_friction[:, 0] = scene.sim.inputs(scene.rigid_solver)["friction"][0].cpu().numpy()
+    d.qpos[:] = np.concatenate([e.get_qpos().cpu().numpy() for e in entities])
+    d.qvel[:] = np.concatenate([e.get_dofs_velocity().cpu().numpy() for e in entities])
+    mujoco.mj_forward(m, d)
+    ours, theirs = [d.qpos.copy()], [d.qpos.copy()]
+    for _ in range(steps):
+        scene.step()
+        mujoco.mj_step(m, d)
+        ours.append(np.concatenate([e.get_qpos().cpu().numpy() for e in entities]))
+        theirs.append(d.qpos.copy())
+    return np.array(ours), np.array(theirs), scene, entities
+
+
+def _spin(entities, omega):
+    for e in entities:
+        e.set_dofs_velocity(torch.tensor([0.0, 0.0, 0.0, *omega], dtype=gs.tc_float))
+
+
+@pytest.mark.parametrize("shape", ["box", "sphere", "capsule"])
+def test_dropped_with_spin_follows_mujoco(f64, shape):
+    """0.5 s: landing, bouncing and rolling, ≤ 1e-6 from MuJoCo's trajectory."""
+    body = {"box": Body("box", (0.2, 0.3, 0.1), pos=(0, 0, 0.3), quat=(0.9, 0.3, 0.2, 0.1)),
+            "sphere": Body("sphere", (0.1,), pos=(0, 0, 0.3)),
+            "capsule": Body("capsule", (0.05, 0.2), pos=(0, 0, 0.3), quat=(0.8, 0.5, 0.3, 0.1))}[shape]
+    ours, theirs, _, _ = _run(ContactScene([body]), 250, lambda scene, ents: _spin(ents, (3.0, -2.0, 5.0)))
+    assert ours[-1][2] < 0.2, "it landed"
+    assert np.abs(ours - theirs).max() < 1e-6
+
+
+def test_box_rests(f64):
+    """Penetration ≤ 1 mm, drift ≤ 1 mm over 5 s, speed < 1e-3 m/s after 2 s (MuJoCo alike)."""
+    spec = ContactScene([Body("box", (0.2, 0.2, 0.2), pos=(0, 0, 0.1))])
+    ours, theirs, scene, (box,) = _run(spec, 2500)
+    for traj in (ours, theirs):
+        assert 0.1 - traj[:, 2].min() <= 1e-3
+        assert np.abs(traj[-1, :3] - traj[1000, :3]).max() <= 1e-3
+    assert float(box.get_dofs_velocity().abs().max()) < 1e-3
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_sliding_box_stops_at_coulomb_distance(f64, cone):
+    """1 kg-ish box launched at 1 m/s, μ 0.5: stops within 3 % of v²/(2μg)."""
+    spec = ContactScene([Body("box", (0.1, 0.1, 0.1), pos=(0, 0, 0.05))], cone=cone)
+
+    def launch(scene, entities):
+        entities[0].set_friction(0.2)
+        scene.entities[0].set_friction(0.5)  # the plane's: a contact takes the larger (MuJoCo's rule)
+        entities[0].set_dofs_velocity(torch.tensor([1.0, 0, 0, 0, 0, 0], dtype=gs.tc_float))
+
+    ours, theirs, _, _ = _run(spec, 300, launch)
+    expected = 1.0 / (2 * 0.5 * G)
+    for traj in (ours, theirs):
+        assert abs(traj[-1, 0] - expected) <= 0.03 * expected, (traj[-1, 0], expected)
+
+
+@pytest.mark.parametrize("rolling", [True, False])
+def test_sphere_on_incline(f64, rolling):
+    """Gravity tilted by 20°: a sphere rolls at (5/7) g sinθ with μ 1, slides at g sinθ with μ 1e-3
+    (μ = 0 exactly leaves a pyramid no regularisation, in MuJoCo too; this μ changes a by 0.3 %)."""
+    theta = np.radians(20.0)
+    spec = ContactScene([Body("sphere", (0.1,), pos=(0, 0, 0.1))])
+
+    def incline(scene, entities):
+        for e in scene.entities:
+            e.set_friction_ratio(np.ones(e.n_links) * (1.0 if rolling else 1e-3))
+        solver = scene.rigid_solver
+        gravity = torch.tensor([G * np.sin(theta), 0.0, -G * np.cos(theta)], dtype=gs.tc_float)
+        solver.default_inputs["gravity"][:] = gravity
+        scene.sim.set_input(solver, "gravity", gravity.expand(1, 3).clone())
+
+    steps, h = 250, 0.002
+    ours, theirs, _, _ = _run(spec, steps, incline)
+    expected = (5.0 / 7.0 if rolling else 1.0) * G * np.sin(theta)
+    for traj in (ours, theirs):
+        accel = 2 * (traj[-1, 0] - traj[0, 0]) / (h * h * steps * (steps + 1))
+        assert abs(accel - expected) <= 0.01 * expected, (accel, expected)
+
+
+def test_tower_of_boxes_stands(f64):
+    """10 boxes stacked, 5 s: the tower stands and comes to rest (max |qvel| < 1e-5)."""
+    bodies = [Body("box", (0.2, 0.2, 0.2), pos=(0, 0, 0.1 + 0.2 * k)) for k in range(10)]
+    ours, theirs, scene, entities = _run(ContactScene(bodies), 2500)
+    assert np.abs(ours[-1, 0::7]).max() < 1e-3 and np.abs(ours[-1, 1::7]).max() < 1e-3  # no sideways drift
+    assert ours[-1, 7 * 9 + 2] > 1.8  # the top box is still on top
+    speed = max(float(e.get_dofs_velocity().abs().max()) for e in entities)
+    assert speed < 1e-5
+
+
+A1_STAND = np.tile([0.0, 0.8, -1.5], 4)  # hip, thigh, calf of each leg (rad)
+
+
+def _a1_mujoco(path, z, kp, kv, dt):
+    spec = mujoco.MjSpec.from_file(path)
+    spec.compiler.fusestatic = True
+    spec.compiler.alignfree = False
+    root = spec.worldbody.bodies[0]
+    root.add_freejoint()
+    root.pos = [0.0, 0.0, z]
+    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
+    spec.option.timestep = dt
+    for joint in spec.joints:
+        if joint.type != mujoco.mjtJoint.mjJNT_FREE:
+            spec.add_actuator(target=joint.name, trntype=mujoco.mjtTrn.mjTRN_JOINT).set_to_position(kp=kp, kv=kv)
+    m = spec.compile()
+    d = mujoco.MjData(m)
+    d.qpos[7:] = d.ctrl[:] = A1_STAND
+    return m, d
+
+
+def test_quadruped_holds_its_standing_pose(f64):
+    """pybullet_data's a1 on a plane, PD servos holding a standing pose for 5 s: the base stays
+    within 2 cm of its start height (MuJoCo, with position actuators of the same gains, too)."""
+    from tests.conftest import pybullet
+    path, z, kp, kv, dt = pybullet("a1", "a1.urdf"), 0.305, 100.0, 2.0, 0.002
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=dt),
+                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True), show_viewer=False)
+    scene.add_entity(gs.morphs.Plane())
+    robot = scene.add_entity(gs.morphs.URDF(file=path, pos=(0, 0, z)))
+    scene.build()
+    legs = np.arange(6, robot.n_dofs)
+    robot.set_dofs_position(A1_STAND, legs)
+    robot.set_dofs_kp(np.full(len(legs), kp), legs)
+    robot.set_dofs_kv(np.full(len(legs), kv), legs)
+    robot.control_dofs_position(A1_STAND, legs)
+    m, d = _a1_mujoco(path, z, kp, kv, dt)
+    for _ in range(2500):
+        scene.step()
+        mujoco.mj_step(m, d)
+    assert abs(float(robot.get_pos()[2]) - z) < 0.02
+    assert abs(d.qpos[2] - z) < 0.02
+    assert len(robot.get_contacts(with_entity=scene.entities[0])["geom_a"]) == 4  # four feet
+
+
+@pytest.mark.parametrize("shape", ["box", "sphere", "capsule"])
+def test_float32_lands_and_rests(f32, shape):
+    """float32: the same drops land without exploding and come to rest (speed < 1e-3)."""
+    body = {"box": Body("box", (0.2, 0.3, 0.1), pos=(0, 0, 0.3), quat=(0.9, 0.3, 0.2, 0.1)),
+            "sphere": Body("sphere", (0.1,), pos=(0, 0, 0.3)),
+            "capsule": Body("capsule", (0.05, 0.2), pos=(0, 0, 0.3), quat=(0.8, 0.5, 0.3, 0.1))}[shape]
+    scene, (entity,) = build_ours(ContactScene([body]))
+    for _ in range(1500):
+        scene.step()
+    assert torch.isfinite(entity.get_qpos()).all()
+    assert 0.0 < float(entity.get_pos()[2]) < 0.2
+    assert float(entity.get_dofs_velocity().abs().max()) < 1e-3
