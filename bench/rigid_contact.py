@@ -3,8 +3,8 @@ and 1024, float32 here and float64 in MuJoCo, dt 2 ms, MuJoCo's contact defaults
 (``RigidOptions(enable_mujoco_compatibility=True)``, pyramidal cone).
 
 Scenes: a 0.2 m box resting on a plane; the pybullet_data ``a1`` quadruped on a plane holding
-its initial pose with position servos (kp 50, kv 1; MuJoCo: position actuators with the same
-gains); a tower of 10 boxes.
+a standing pose with position servos (kp 100, kv 2; MuJoCo: position actuators with the same
+gains); a tower of 10 boxes. Each is timed resting (after a warm-up), as a scene runs on.
 MuJoCo is ``mujoco.rollout`` with 2 threads on the same models (built by tests/contact_scenes
 for the boxes; the a1 URDF with a plane and a free joint). Best of ``--repeats`` runs of
 ``--steps`` steps after a warm-up.
@@ -43,17 +43,22 @@ def tower_scene():
                          for k in range(10)], dt=DT)
 
 
+A1_STAND = np.tile([0.0, 0.8, -1.5], 4)  # hip, thigh, calf per leg (rad)
+A1_Z, KP, KV = 0.305, 100.0, 2.0
+
+
 def a1_ours(n_envs):
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT),
                      rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True), show_viewer=False)
     scene.add_entity(gs.morphs.Plane())
-    robot = scene.add_entity(gs.morphs.URDF(file=A1, pos=(0, 0, 0.43)))
+    robot = scene.add_entity(gs.morphs.URDF(file=A1, pos=(0, 0, A1_Z)))
     scene.build(n_envs=n_envs)
-    joints = np.arange(6, robot.n_dofs)
-    robot.set_dofs_kp(np.full(len(joints), 50.0) if n_envs == 0 else np.full((n_envs, len(joints)), 50.0), joints)
-    robot.set_dofs_kv(np.full(len(joints), 1.0) if n_envs == 0 else np.full((n_envs, len(joints)), 1.0), joints)
-    target = np.zeros(len(joints)) if n_envs == 0 else np.zeros((n_envs, len(joints)))
-    robot.control_dofs_position(target, joints)
+    legs = np.arange(6, robot.n_dofs)
+    batch = lambda row: row if n_envs == 0 else np.tile(row, (n_envs, 1))  # noqa: E731
+    robot.set_dofs_position(batch(A1_STAND), legs)
+    robot.set_dofs_kp(batch(np.full(len(legs), KP)), legs)
+    robot.set_dofs_kv(batch(np.full(len(legs), KV)), legs)
+    robot.control_dofs_position(batch(A1_STAND), legs)
     return scene
 
 
@@ -63,22 +68,22 @@ def a1_mujoco():
     spec.compiler.alignfree = False
     root = spec.worldbody.bodies[0]
     root.add_freejoint()
-    root.pos = [0, 0, 0.43]
+    root.pos = [0, 0, A1_Z]
     spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
     for joint in spec.joints:
         if joint.type != mujoco.mjtJoint.mjJNT_FREE:
-            actuator = spec.add_actuator(target=joint.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-            actuator.set_to_position(kp=50.0, kv=1.0)
+            spec.add_actuator(target=joint.name, trntype=mujoco.mjtTrn.mjTRN_JOINT).set_to_position(kp=KP, kv=KV)
     spec.option.timestep = DT
-    return spec.compile()
+    m = spec.compile()
+    m.qpos0[7:] = A1_STAND
+    return m
 
 
 def time_ours(scene, steps, repeats):
-    for _ in range(5):
+    for _ in range(50):  # compile, settle
         scene.step()
     best = float("inf")
     for _ in range(repeats):
-        scene.reset()
         start = time.perf_counter()
         for _ in range(steps):
             scene.step()
@@ -89,16 +94,20 @@ def time_ours(scene, steps, repeats):
 
 def time_mujoco(m, n_envs, steps, repeats):
     d = mujoco.MjData(m)
+    d.ctrl[:] = m.qpos0[7:] if m.nu else 0.0
+    for _ in range(50):  # settle, as ours
+        mujoco.mj_step(m, d)
     state = np.zeros((n_envs, mujoco.mj_stateSize(m, mujoco.mjtState.mjSTATE_FULLPHYSICS)))
     mujoco.mj_getState(m, d, state[0], mujoco.mjtState.mjSTATE_FULLPHYSICS)
     state[:] = state[0]
     datas = [mujoco.MjData(m) for _ in range(MJ_THREADS)]
     best = float("inf")
     with rollout.Rollout(nthread=MJ_THREADS) as runner:
-        runner.rollout([m] * n_envs, datas, state, nstep=5)
+        control = np.tile(d.ctrl, (n_envs, steps, 1))
+        runner.rollout([m] * n_envs, datas, state, control[:, :5], nstep=5)
         for _ in range(repeats):
             start = time.perf_counter()
-            runner.rollout([m] * n_envs, datas, state, nstep=steps)
+            runner.rollout([m] * n_envs, datas, state, control, nstep=steps)
             best = min(best, time.perf_counter() - start)
     return best
 

@@ -293,3 +293,47 @@ def test_zero_quaternion(f64):
 def test_links_to_keep_without_merging():
     with pytest.raises(gs.InvalidInputError, match="'links_to_keep' .* needs merge_fixed_links=True"):
         gs.morphs.URDF(file=asset("pendulum2.urdf"), merge_fixed_links=False, links_to_keep=["link1"])
+
+
+# -- contact parameters and shapes ------------------------------------------------------------------
+def _box_on_plane():
+    scene = gs.Scene()
+    plane = scene.add_entity(gs.morphs.Plane())
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.2), pos=(0, 0, 0.1)))
+    scene.build()
+    return plane, box
+
+
+@pytest.mark.parametrize("friction", [-0.5, 0.0, 6.0, float("nan"), "high"])
+def test_friction_out_of_range(f64, friction):
+    _, box = _box_on_plane()
+    with pytest.raises(gs.InvalidInputError, match=r"entity 'box_1': argument 'friction' must be a number in \[0.01"):
+        box.set_friction(friction)
+
+
+def test_negative_friction_ratio(f64):
+    _, box = _box_on_plane()
+    with pytest.raises(gs.InvalidInputError, match="argument 'friction_ratio' must be ≥ 0"):
+        box.set_friction_ratio([-1.0])
+
+
+@pytest.mark.parametrize("params", [(0.02, -1.0, 0.9, 0.95, 0.001, 0.5, 2.0),  # mixed solref signs
+                                    (0.02, 1.0, 0.96, 0.95, 0.001, 0.5, 2.0),  # dmin > dmax
+                                    (0.02, 1.0, 0.9, 1.0, 0.001, 0.5, 2.0),    # dmax = 1
+                                    (0.02, 1.0, 0.9, 0.95, -0.001, 0.5, 2.0),  # negative width
+                                    (0.02, 1.0, 0.9, 0.95, 0.001, 1.5, 2.0),   # midpoint ≥ 1
+                                    (0.02, 1.0, 0.9, 0.95, 0.001, 0.5, 0.5)])  # power < 1
+def test_sol_params_out_of_range(f64, params):
+    _, box = _box_on_plane()
+    with pytest.raises(gs.InvalidInputError, match="argument 'sol_params' expected timeconst and dampratio"):
+        box.set_sol_params(params)
+
+
+def test_mesh_without_a_hull(f64, tmp_path):
+    flat = tmp_path / "flat.obj"  # every vertex in one plane: no convex hull with volume
+    flat.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n")
+    scene = gs.Scene()
+    scene.add_entity(gs.morphs.Plane())
+    scene.add_entity(gs.morphs.Mesh(file=str(flat), pos=(0, 0, 1)))
+    with pytest.raises(gs.GenesisException, match="convex hull"):
+        scene.build()
