@@ -27,7 +27,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 import genesis_lite as gs  # noqa: E402
-from tests.contact_scenes import Body, ContactScene, build_mujoco, build_ours  # noqa: E402
+from tests.contact_scenes import Body, ContactScene, a1_mujoco, build_mujoco, build_ours  # noqa: E402
 
 A1 = os.path.join(pybullet_data.getDataPath(), "a1", "a1.urdf")
 DT = 0.002
@@ -62,23 +62,6 @@ def a1_ours(n_envs):
     return scene
 
 
-def a1_mujoco():
-    spec = mujoco.MjSpec.from_file(A1)
-    spec.compiler.fusestatic = True
-    spec.compiler.alignfree = False
-    root = spec.worldbody.bodies[0]
-    root.add_freejoint()
-    root.pos = [0, 0, A1_Z]
-    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
-    for joint in spec.joints:
-        if joint.type != mujoco.mjtJoint.mjJNT_FREE:
-            spec.add_actuator(target=joint.name, trntype=mujoco.mjtTrn.mjTRN_JOINT).set_to_position(kp=KP, kv=KV)
-    spec.option.timestep = DT
-    m = spec.compile()
-    m.qpos0[7:] = A1_STAND
-    return m
-
-
 def time_ours(scene, steps, repeats):
     for _ in range(50):  # compile, settle
         scene.step()
@@ -92,9 +75,7 @@ def time_ours(scene, steps, repeats):
     return best
 
 
-def time_mujoco(m, n_envs, steps, repeats):
-    d = mujoco.MjData(m)
-    d.ctrl[:] = m.qpos0[7:] if m.nu else 0.0
+def time_mujoco(m, d, n_envs, steps, repeats):
     for _ in range(50):  # settle, as ours
         mujoco.mj_step(m, d)
     state = np.zeros((n_envs, mujoco.mj_stateSize(m, mujoco.mjtState.mjSTATE_FULLPHYSICS)))
@@ -123,14 +104,15 @@ def main():
     for name in ("box", "a1", "tower"):
         for n_envs in args.envs:
             if name == "a1":
-                scene, m = a1_ours(n_envs if n_envs > 1 else 0), a1_mujoco()
+                scene, (m, d) = a1_ours(n_envs if n_envs > 1 else 0), a1_mujoco(A1, A1_Z, A1_STAND, KP, KV, DT)
             else:
                 spec = box_scene() if name == "box" else tower_scene()
                 spec.n_envs = n_envs if n_envs > 1 else 0
                 scene, _ = build_ours(spec)
                 m = build_mujoco(spec, scene.rigid_solver.model)
+                d = mujoco.MjData(m)
             ours = n_envs * args.steps / time_ours(scene, args.steps, args.repeats)
-            theirs = n_envs * args.steps / time_mujoco(m, n_envs, args.steps, args.repeats)
+            theirs = n_envs * args.steps / time_mujoco(m, d, n_envs, args.steps, args.repeats)
             print(f"{name:8} {n_envs:6d} {ours:17.0f} {theirs:19.0f} {ours / theirs:6.2f}", flush=True)
 
 

@@ -93,3 +93,24 @@ def build_mujoco(spec, model):
     xml = (f'<mujoco><option timestep="{spec.dt}" cone="{spec.cone}" impratio="{spec.impratio}"/>'
            f'<worldbody>{plane}{"".join(bodies)}</worldbody></mujoco>')
     return mujoco.MjModel.from_xml_string(xml)
+
+
+def a1_mujoco(path, z, stand, kp, kv, dt):
+    """MuJoCo's model and data of a URDF quadruped (pybullet_data's a1) on a plane: a free base at
+    height z (m), position actuators (kp, kv) on every other joint, targets and joints at
+    ``stand`` (rad)."""
+    spec = mujoco.MjSpec.from_file(path)
+    spec.compiler.fusestatic = True
+    spec.compiler.alignfree = False
+    root = spec.worldbody.bodies[0]
+    root.add_freejoint()
+    root.pos = [0.0, 0.0, z]
+    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
+    spec.option.timestep = dt
+    for joint in spec.joints:
+        if joint.type != mujoco.mjtJoint.mjJNT_FREE:
+            spec.add_actuator(target=joint.name, trntype=mujoco.mjtTrn.mjTRN_JOINT).set_to_position(kp=kp, kv=kv)
+    m = spec.compile()
+    d = mujoco.MjData(m)
+    d.qpos[7:] = d.ctrl[:] = stand
+    return m, d

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 import genesis_lite as gs
-from tests.contact_scenes import Body, ContactScene, build_mujoco, build_ours
+from tests.contact_scenes import Body, ContactScene, a1_mujoco, build_mujoco, build_ours
 
 G = 9.81
 
@@ -115,24 +115,6 @@ def test_tower_of_boxes_stands(f64):
 A1_STAND = np.tile([0.0, 0.8, -1.5], 4)  # hip, thigh, calf of each leg (rad)
 
 
-def _a1_mujoco(path, z, kp, kv, dt):
-    spec = mujoco.MjSpec.from_file(path)
-    spec.compiler.fusestatic = True
-    spec.compiler.alignfree = False
-    root = spec.worldbody.bodies[0]
-    root.add_freejoint()
-    root.pos = [0.0, 0.0, z]
-    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
-    spec.option.timestep = dt
-    for joint in spec.joints:
-        if joint.type != mujoco.mjtJoint.mjJNT_FREE:
-            spec.add_actuator(target=joint.name, trntype=mujoco.mjtTrn.mjTRN_JOINT).set_to_position(kp=kp, kv=kv)
-    m = spec.compile()
-    d = mujoco.MjData(m)
-    d.qpos[7:] = d.ctrl[:] = A1_STAND
-    return m, d
-
-
 def test_quadruped_holds_its_standing_pose(f64):
     """pybullet_data's a1 on a plane, PD servos holding a standing pose for 5 s: the base stays
     within 2 cm of its start height (MuJoCo, with position actuators of the same gains, too)."""
@@ -148,7 +130,7 @@ def test_quadruped_holds_its_standing_pose(f64):
     robot.set_dofs_kp(np.full(len(legs), kp), legs)
     robot.set_dofs_kv(np.full(len(legs), kv), legs)
     robot.control_dofs_position(A1_STAND, legs)
-    m, d = _a1_mujoco(path, z, kp, kv, dt)
+    m, d = a1_mujoco(path, z, A1_STAND, kp, kv, dt)
     for _ in range(2500):
         scene.step()
         mujoco.mj_step(m, d)

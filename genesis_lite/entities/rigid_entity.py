@@ -583,7 +583,8 @@ class RigidEntity:
         A contact averages its two geoms' values."""
         geoms = self._local(geoms_idx_local, self.n_geoms, "geoms_idx_local")
         envs = self._envs(envs_idx)
-        params = torch.as_tensor(np.asarray(sol_params, dtype=np.float64), dtype=runtime.tc_float, device=runtime.device)
+        params = torch.as_tensor(np.asarray(sol_params, dtype=np.float64), dtype=runtime.tc_float,
+                                 device=runtime.device)
         if params.shape != (7,):
             raise InvalidInputError(f"entity '{self.name}': argument 'sol_params' must be 7 numbers (timeconst, "
                                     f"dampratio, dmin, dmax, width, midpoint, power), got shape {tuple(params.shape)}")

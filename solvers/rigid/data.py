@@ -305,7 +305,8 @@ class RigidView:
         self.n_batch, self.n_links, self.n_dofs, self.n_qs = size["B"], size["L"], size["D"], size["Q"]
         self.n_pairs, self.substeps, self.input_total, self.grad_total = size["P"], size["S"], size["W"], size["GW"]
         self.limits_enabled = size["limits"]
-        self.n_geoms, self.n_candidates, self.contact_capacity, self.row_capacity = size["G"], size["N"], size["C"], size["R"]
+        self.n_geoms, self.n_candidates = size["G"], size["N"]
+        self.contact_capacity, self.row_capacity = size["C"], size["R"]
         self.elliptic, self.iterations, self.ls_iterations = size["cone"], size["iterations"], size["ls_iterations"]
         self.nonfinite = ArrayView(ints, HEADER["nonfinite"], (1,))  # set by the NaN check
         self.overflow = ArrayView(ints, HEADER["overflow"], (1,))  # set when contacts exceed their slots
@@ -325,7 +326,8 @@ class RigidView:
         for name, (arena, c, has_grad) in FRAMES.items():
             grad = None
             if has_grad:
-                grad = ArrayView(arenas[arena], start[f"grad:{name}"], self._frame_strides(start, arena, c, count, True))
+                grad = ArrayView(arenas[arena], start[f"grad:{name}"],
+                                 self._frame_strides(start, arena, c, count, True))
             setattr(self, name, ArrayView(arenas[arena], start[f"frame:{name}"],
                                           self._frame_strides(start, arena, c, count, False), grad))
         for name, (arena, c) in GRAD_ONLY.items():

@@ -61,7 +61,8 @@ class RigidSolver(Solver):
         options, sim = self.rigid_options, self.sim_options
         h = sim.dt / sim.substeps
         timeconst = max(options.limit_timeconst, 2.0 * h)  # stable for explicit steps
-        self.timeconst, iterations, tolerance, impratio = options.resolved(64 if runtime.tc_float == torch.float64 else 32)
+        bits = 64 if runtime.tc_float == torch.float64 else 32
+        self.timeconst, iterations, tolerance, impratio = options.resolved(bits)
         contacts, rows = contact.capacity(self.model, options)
         settings = {"limits": options.enable_joint_limit, "contacts": contacts, "rows": rows,
                     "cone": int(options.friction_cone == "elliptic"), "iterations": iterations,

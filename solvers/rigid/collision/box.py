@@ -24,7 +24,8 @@ import taichi as ti
 from taichi.lang import impl
 
 from ..spatial import dot3, mat_vec
-from .frame import AT_MINUS, AT_PLUS, MINVAL, column, normalize3, segment_pair_params, segment_pair_state
+from .frame import (AT_MINUS, AT_PLUS, MINVAL, collider, column, normalize3, segment_pair_params,
+                    segment_pair_state)
 
 SPHERE_BOX_MAX = 1
 CAPSULE_BOX_MAX = 2
@@ -69,30 +70,6 @@ def _mat_t_mat(rot1: ti.template(), rot2: ti.template()):
     """rot1ᵀ rot2 in MuJoCo's order: geom 2's axes (columns) in geom 1's frame."""
     return ti.Matrix([[rot1[0, i] * rot2[0, j] + rot1[1, i] * rot2[1, j] + rot1[2, i] * rot2[2, j]
                        for j in ti.static(range(3))] for i in ti.static(range(3))])
-
-
-def _collider(decide, evaluate, max_contacts, doc):
-    """The collider of a decide/evaluate pair: decide, then evaluate each found contact's row.
-
-    The row loop is a runtime loop so that evaluate is inlined once. Rows k >= count are zero.
-    """
-
-    @ti.func
-    def collide(pos1, rot1, size1, pos2, rot2, size2, margin):
-        count, feature = decide(pos1, rot1, size1, pos2, rot2, size2, margin)
-        position = ti.Matrix.zero(float, max_contacts, 3)
-        normal = ti.Matrix.zero(float, max_contacts, 3)
-        dist = ti.Vector.zero(float, max_contacts)
-        for k in range(count):
-            p, n, d = evaluate(pos1, rot1, size1, pos2, rot2, size2, feature[k])
-            for i in ti.static(range(3)):
-                position[k, i] = p[i]
-                normal[k, i] = n[i]
-            dist[k] = d
-        return count, position, normal, dist, feature
-
-    collide.__doc__ = doc
-    return collide
 
 
 # ---------------------------------------------------------------- sphere – box
@@ -189,7 +166,7 @@ def sphere_box_evaluate(pos1: ti.template(), rot1: ti.template(), size1: ti.temp
     return _sphere_box_world(centre, size1[0], pos2, rot2, size2, feature)
 
 
-sphere_box = _collider(sphere_box_decide, sphere_box_evaluate, SPHERE_BOX_MAX,
+sphere_box = collider(sphere_box_decide, sphere_box_evaluate, SPHERE_BOX_MAX,
                        "Sphere – box (mjc_SphereBox): at most 1 contact.")
 
 
@@ -458,7 +435,7 @@ def capsule_box_evaluate(pos1: ti.template(), rot1: ti.template(), size1: ti.tem
     return _sphere_box_world(centre, size1[0], pos2, rot2, size2, feature % SPHERE_BOX_FEATURES)
 
 
-capsule_box = _collider(capsule_box_decide, capsule_box_evaluate, CAPSULE_BOX_MAX,
+capsule_box = collider(capsule_box_decide, capsule_box_evaluate, CAPSULE_BOX_MAX,
                         "Capsule – box (mjc_CapsuleBox): at most 2 contacts.")
 
 
@@ -912,5 +889,5 @@ def box_box_evaluate(pos1: ti.template(), rot1: ti.template(), size1: ti.templat
     return position, normal, dist
 
 
-box_box = _collider(box_box_decide, box_box_evaluate, BOX_BOX_MAX,
+box_box = collider(box_box_decide, box_box_evaluate, BOX_BOX_MAX,
                     "Box – box (mjc_BoxBox): at most 8 contacts (a clipped face's vertices, or one edge contact).")

@@ -252,3 +252,27 @@ def segment_weight_states(d1, d2, r, a, b, c, e, f):
             state0 = _pair_state(AT_START, 0.0, a, b, c, e, f)
             state1 = _pair_state(AT_END, 1.0, a, b, c, e, f)
     return n, state0, state1
+
+
+def collider(decide, evaluate, max_contacts, doc):
+    """The collider of a decide/evaluate pair: decide, then evaluate each found contact's row.
+
+    Rows k >= count stay zero (features too).
+    """
+
+    @ti.func
+    def collide(pos1, rot1, size1, pos2, rot2, size2, margin):
+        count, feature = decide(pos1, rot1, size1, pos2, rot2, size2, margin)
+        position = ti.Matrix.zero(float, max_contacts, 3)
+        normal = ti.Matrix.zero(float, max_contacts, 3)
+        dist = ti.Vector.zero(float, max_contacts)
+        for k in range(count):  # a loop, not unrolled: evaluate is inlined once
+            p, n, d = evaluate(pos1, rot1, size1, pos2, rot2, size2, feature[k])
+            for i in ti.static(range(3)):
+                position[k, i] = p[i]
+                normal[k, i] = n[i]
+            dist[k] = d
+        return count, position, normal, dist, feature
+
+    collide.__doc__ = doc
+    return collide

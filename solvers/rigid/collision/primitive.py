@@ -25,7 +25,7 @@ which passes the capsule axis (column 2 of rot2); build the frame with
 import taichi as ti
 
 from ..spatial import dot3, mat_vec
-from .frame import (AT_MINUS, AT_PLUS, FREE, MINVAL, column, cross3, normalize3, segment_weight_states,
+from .frame import (AT_MINUS, AT_PLUS, FREE, MINVAL, collider, column, cross3, normalize3, segment_weight_states,
                     segment_weight_terms, segment_weights)
 
 PLANE_SPHERE_MAX = 1
@@ -36,30 +36,6 @@ SPHERE_SPHERE_MAX = 1
 SPHERE_CAPSULE_MAX = 1
 SPHERE_CYLINDER_MAX = 1
 CAPSULE_CAPSULE_MAX = 2
-
-
-def _collider(decide, evaluate, max_contacts, doc):
-    """The collider of a decide/evaluate pair: decide, then evaluate each found contact's row.
-
-    Rows k >= count stay zero (features too).
-    """
-
-    @ti.func
-    def collide(pos1, rot1, size1, pos2, rot2, size2, margin):
-        count, feature = decide(pos1, rot1, size1, pos2, rot2, size2, margin)
-        position = ti.Matrix.zero(float, max_contacts, 3)
-        normal = ti.Matrix.zero(float, max_contacts, 3)
-        dist = ti.Vector.zero(float, max_contacts)
-        for k in range(count):  # a loop, not unrolled: evaluate is inlined once
-            p, n, d = evaluate(pos1, rot1, size1, pos2, rot2, size2, feature[k])
-            for i in ti.static(range(3)):
-                position[k, i] = p[i]
-                normal[k, i] = n[i]
-            dist[k] = d
-        return count, position, normal, dist, feature
-
-    collide.__doc__ = doc
-    return collide
 
 
 # ---------------------------------------------------------------- two building blocks
@@ -144,7 +120,7 @@ def plane_sphere_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
     return _plane_point_evaluate(pos1, column(rot1, 2), pos2, size2[0])
 
 
-plane_sphere = _collider(plane_sphere_decide, plane_sphere_evaluate, PLANE_SPHERE_MAX,
+plane_sphere = collider(plane_sphere_decide, plane_sphere_evaluate, PLANE_SPHERE_MAX,
                          "Plane – sphere (mjc_PlaneSphere): at most 1 contact.")
 
 
@@ -180,7 +156,7 @@ def plane_capsule_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
     return _plane_point_evaluate(pos1, column(rot1, 2), _capsule_end(pos2, rot2, size2, feature), size2[0])
 
 
-plane_capsule = _collider(plane_capsule_decide, plane_capsule_evaluate, PLANE_CAPSULE_MAX,
+plane_capsule = collider(plane_capsule_decide, plane_capsule_evaluate, PLANE_CAPSULE_MAX,
                           "Plane – capsule (mjc_PlaneCapsule): at most 2 contacts; "
                           "MuJoCo's first tangent is the capsule axis.")
 
@@ -271,7 +247,7 @@ def plane_cylinder_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
     return position, n, dist
 
 
-plane_cylinder = _collider(plane_cylinder_decide, plane_cylinder_evaluate, PLANE_CYLINDER_MAX,
+plane_cylinder = collider(plane_cylinder_decide, plane_cylinder_evaluate, PLANE_CYLINDER_MAX,
                            "Plane – cylinder (mjc_PlaneCylinder): at most 4 contacts.")
 
 
@@ -313,7 +289,7 @@ def plane_box_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
     return offset + pos2 + n * (-dist / 2), n, dist
 
 
-plane_box = _collider(plane_box_decide, plane_box_evaluate, PLANE_BOX_MAX,
+plane_box = collider(plane_box_decide, plane_box_evaluate, PLANE_BOX_MAX,
                       "Plane – box (mjc_PlaneBox): at most 4 contacts.")
 
 
@@ -333,7 +309,7 @@ def sphere_sphere_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
     return _sphere_sphere_evaluate(pos1, size1[0], pos2, size2[0], column(rot1, 2), column(rot2, 2), feature)
 
 
-sphere_sphere = _collider(sphere_sphere_decide, sphere_sphere_evaluate, SPHERE_SPHERE_MAX,
+sphere_sphere = collider(sphere_sphere_decide, sphere_sphere_evaluate, SPHERE_SPHERE_MAX,
                           "Sphere – sphere (mjc_SphereSphere): at most 1 contact.")
 
 
@@ -377,7 +353,7 @@ def sphere_capsule_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
                                    feature % 3)
 
 
-sphere_capsule = _collider(sphere_capsule_decide, sphere_capsule_evaluate, SPHERE_CAPSULE_MAX,
+sphere_capsule = collider(sphere_capsule_decide, sphere_capsule_evaluate, SPHERE_CAPSULE_MAX,
                            "Sphere – capsule (mjc_SphereCapsule): at most 1 contact.")
 
 
@@ -471,7 +447,7 @@ def sphere_cylinder_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
     return position, normal, dist
 
 
-sphere_cylinder = _collider(sphere_cylinder_decide, sphere_cylinder_evaluate, SPHERE_CYLINDER_MAX,
+sphere_cylinder = collider(sphere_cylinder_decide, sphere_cylinder_evaluate, SPHERE_CYLINDER_MAX,
                             "Sphere – cylinder (mjc_SphereCylinder): at most 1 contact.")
 
 
@@ -533,5 +509,5 @@ def capsule_capsule_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
     return _sphere_sphere_evaluate(c1, size1[0], c2, size2[0], column(rot1, 2), column(rot2, 2), feature % 3)
 
 
-capsule_capsule = _collider(capsule_capsule_decide, capsule_capsule_evaluate, CAPSULE_CAPSULE_MAX,
+capsule_capsule = collider(capsule_capsule_decide, capsule_capsule_evaluate, CAPSULE_CAPSULE_MAX,
                             "Capsule – capsule (MuJoCo 4.0's mjc_CapsuleCapsule): at most 2 contacts.")

@@ -276,14 +276,21 @@ def _update_constraints(d: ti.template(), s, e, k):
 
 
 @ti.func
+def _cone_coordinates(d: ti.template(), s, e, r):
+    """(N, T²) of the elliptic block at row r: N = μ jar₀ and T² = Σ_j (μ_j jar_j)²."""
+    N = d.solver_jar[s, e, r] * d.efc_mu[s, e, r]
+    Tsqr = 0.0
+    for j in range(1, d.efc_dim[s, e, r]):
+        u = d.solver_jar[s, e, r + j] * d.efc_mu[s, e, r + j]
+        Tsqr += u * u
+    return N, Tsqr
+
+
+@ti.func
 def _update_cone(d: ti.template(), s, e, r):
     """State and forces of the elliptic block starting at row r; returns its cost."""
     dim, mu = d.efc_dim[s, e, r], d.efc_mu[s, e, r]
-    N = d.solver_jar[s, e, r] * mu
-    Tsqr = 0.0
-    for j in range(1, dim):
-        u = d.solver_jar[s, e, r + j] * d.efc_mu[s, e, r + j]
-        Tsqr += u * u
+    N, Tsqr = _cone_coordinates(d, s, e, r)
     zone, T = _cone_zone(N, Tsqr, mu)
     cost, state = 0.0, SATISFIED
     if zone == TOP:
@@ -357,11 +364,7 @@ def _factor_hessian(d: ti.template(), s, e, k):
 def _add_cone_hessian(d: ti.template(), s, e, r):
     """solver_H += J_cᵀ H_c J_c for the elliptic block at row r (middle zone)."""
     dim, mu = d.efc_dim[s, e, r], d.efc_mu[s, e, r]
-    N = d.solver_jar[s, e, r] * mu
-    Tsqr = 0.0
-    for j in range(1, dim):
-        u = d.solver_jar[s, e, r + j] * d.efc_mu[s, e, r + j]
-        Tsqr += u * u
+    N, Tsqr = _cone_coordinates(d, s, e, r)
     T = ti.sqrt(Tsqr)
     for a in range(dim):
         for b in range(dim):
