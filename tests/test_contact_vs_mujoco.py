@@ -1,7 +1,7 @@
-"""Contact, step for step against MuJoCo: from the same state (re-synced before every step),
-one step gives the same velocities (≤ 1e-8) and the same contacts (count, position, normal,
-distance) for every primitive pair, both friction cones, default and non-default solref,
-solimp and impratio.
+"""Contact, step for step against MuJoCo: from the same state, one step gives the same
+velocities (≤ 1e-8) and the same contacts (count, geoms, positions; the colliders' normals,
+frames and distances are compared with MuJoCo's in tests/test_colliders_*.py) for every
+primitive pair, both friction cones, default and non-default solref, solimp and impratio.
 
 Each case is one batched scene whose envs start from different MuJoCo states near contact
 (penetrating up to a few mm, or just apart), with random velocities.
@@ -66,7 +66,7 @@ def _set_ours(entities, qpos, qvel):
 
 
 def _contacts_mujoco(d):
-    return [(c.geom[0], c.geom[1], c.pos.copy(), c.frame[:3].copy(), c.dist) for c in d.contact[: d.ncon]]
+    return [(c.geom[0], c.geom[1], c.pos.copy()) for c in d.contact[: d.ncon]]
 
 
 def _check_step(spec, n_states=N_STATES):
@@ -91,7 +91,7 @@ def _check_step(spec, n_states=N_STATES):
         ours = [(int(a), int(b), p) for a, b, p in zip(contacts["geom_a"][k][valid], contacts["geom_b"][k][valid],
                                                       contacts["position"][k][valid].cpu().numpy())]
         assert len(ours) == len(expected), (k, len(ours), len(expected))
-        for (a, b, p), (g1, g2, pos, normal, dist) in zip(ours, expected):
+        for (a, b, p), (g1, g2, pos) in zip(ours, expected):
             assert (geom_map[a], geom_map[b]) == (g1, g2)
             assert np.allclose(p, pos, rtol=0, atol=1e-10)
         n_touching += len(expected) > 0

@@ -506,7 +506,7 @@ class RigidEntity:
 
     # -- contacts -----------------------------------------------------------------------------------
     def get_contacts(self, with_entity=None, exclude_self_contact=False):
-        """The contacts of the last step that involve this entity (Genesis's format): a dict of
+        """The contacts of the last step's last substep that involve this entity (Genesis's format): a dict of
         geom_a, geom_b, link_a, link_b (global indices), position (m), force_a and force_b (N,
         world: the contact's force on geom a and on geom b). Shapes (n, ...) in an unbatched
         scene; (n_envs, C, ...) with a valid_mask (n_envs, C) in a batched one. with_entity: only
@@ -537,8 +537,8 @@ class RigidEntity:
         return out
 
     def get_links_net_contact_force(self, envs_idx=None):
-        """(n_links, 3) or (n_envs, n_links, 3) N, world: the sum of the last step's contact forces
-        on each link of the entity."""
+        """(n_links, 3) or (n_envs, n_links, 3) N, world: the sum of the contact forces of the last
+        step's last substep on each link of the entity."""
         envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
         raw = self._solver.contacts()[envs]
         links = torch.as_tensor(self._solver.model.geom_link, device=runtime.device, dtype=torch.long)

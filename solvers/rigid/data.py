@@ -249,6 +249,12 @@ class RigidData:
             self.header[slot] = 0
         return flag
 
+    def per_env(self, name):
+        """The (B, count) torch view of a PER_ENV array."""
+        arena, count = PER_ENV[name]
+        begin, n = self.start[f"env:{name}"], self.size["B"] * _counts(self.size)[count]
+        return self.arenas[ARENAS.index(arena)][begin: begin + n].view(self.size["B"], -1)
+
     def width(self, name):
         return self.widths[list(INPUTS).index(name)]
 

@@ -142,8 +142,8 @@ class RigidSolver(Solver):
         self.run_step(self._nothing if inputs is None else self._pack_inputs(inputs), out, commit=1)
         if self.data.size["N"] and self.data.take_flag("overflow"):
             raise SimulationError(f"rigid solver (entities: {', '.join(self.entity_names)}): more contacts than the "
-                                  f"{self.data.size['C']} slots per env; expected RigidOptions(max_contacts=...) "
-                                  f"above that")
+                                  f"{self.data.size['C']} slots per env in this step (it was taken without the "
+                                  f"extra ones); expected RigidOptions(max_contacts=...) above that")
         return out if download else None
 
     def run_step(self, inputs, out, commit):
@@ -170,7 +170,10 @@ class RigidSolver(Solver):
         out = self._empty(sum(self.grad_widths))
         self.kernels.prepare_reverse(packed)
         self.data.take_flag("constrained")
+        warm_start = self.data.per_env("qacc_warmstart").clone() if self.colliders else None
         self.run_step(self._nothing, self._nothing, commit=0)
+        if warm_start is not None:  # the replay must not move the forward's warm start
+            self.data.per_env("qacc_warmstart").copy_(warm_start)
         if self.data.size["R"] and self.data.take_flag("constrained"):
             raise GradientError(f"rigid solver (entities: {', '.join(self.entity_names)}): this step had contacts; "
                                 f"gradients through contact are not implemented yet (steps without any contact "

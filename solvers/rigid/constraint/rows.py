@@ -23,6 +23,7 @@ from ..kinematics import dof_count, dof_motion_at
 UNUSED, FRICTION_LOSS, ONE_SIDED, ELLIPTIC_FIRST, ELLIPTIC_REST = range(5)
 
 MINVAL = 1e-15  # MuJoCo's mjMINVAL: a floor on every divisor
+MINMU = 1e-5  # MuJoCo's mjMINMU: a floor on friction (μ = 0 would leave a pyramid edge no regulariser)
 MINIMP, MAXIMP = 0.0001, 0.9999  # MuJoCo's bounds on the impedance
 
 
@@ -80,9 +81,9 @@ def stiffness_damping(solref, dmax, h):
 
 @ti.func
 def contact_params(d: ti.template(), e, pair):
-    """(friction, solref (2,), solimp (5,)) of a geom pair in env e: the larger friction, the
-    average of the solrefs (their minimum in direct form) and of the solimps, as MuJoCo mixes
-    two geoms of equal solmix and priority."""
+    """(friction, solref (2,), solimp (5,)) of a geom pair in env e: the larger friction (at
+    least MINMU), the average of the solrefs (their minimum in direct form) and of the solimps,
+    as MuJoCo mixes two geoms of equal solmix and priority."""
     g1, g2 = d.pair_geom1[pair], d.pair_geom2[pair]
     a = ti.Vector([d.solref[e, 2 * g1], d.solref[e, 2 * g1 + 1]])
     b = ti.Vector([d.solref[e, 2 * g2], d.solref[e, 2 * g2 + 1]])
@@ -90,7 +91,7 @@ def contact_params(d: ti.template(), e, pair):
     if a[0] > 0 and b[0] > 0:
         solref = 0.5 * a + 0.5 * b
     solimp = ti.Vector([0.5 * d.solimp[e, 5 * g1 + k] + 0.5 * d.solimp[e, 5 * g2 + k] for k in ti.static(range(5))])
-    return ti.max(d.friction[e, g1], d.friction[e, g2]), solref, _clamped_solimp(solimp)
+    return ti.max(MINMU, d.friction[e, g1], d.friction[e, g2]), solref, _clamped_solimp(solimp)
 
 
 @ti.func
