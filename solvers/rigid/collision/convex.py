@@ -1,0 +1,1648 @@
+"""Convex narrow phase: MuJoCo 4.0's native GJK + EPA ("nativeccd") and its contact rules.
+
+MuJoCo sends these pairs (its table mjCOLLISIONFUNC) to the general convex colliders:
+sphere-mesh, capsule-cylinder, capsule-mesh, cylinder-cylinder, cylinder-box, cylinder-mesh,
+box-mesh and mesh-mesh to `convex_convex` (MuJoCo's mjc_Convex), plane-mesh to `plane_mesh`
+(mjc_PlaneConvex). The oracle is the installed MuJoCo 4.0.0, whose nativeccd differs from the
+3.12 sources we hold (changelog 4.0.0 item 27, "improved numerical stability of nativeccd and
+multiccd"): where they differ, the GJK, the margin handling, the contact budgets and plane-mesh
+below follow 4.0's compiled code (read from libmujoco.so's disassembly); EPA and the polytope
+clipping follow the 3.12 sources.
+
+1. GJK on the Minkowski difference of two support functions, from the geom centres; the next
+   iterate is the origin's exact projection on the simplex's line or plane. With a sphere or a
+   capsule, or a margin, GJK first measures the distance between the cores (sphere -> point,
+   capsule -> segment, margins removed); if they are apart the contact is their closest-point
+   pair moved out by the radii and half margins (shallow contact).
+2. Otherwise GJK decides intersection, and EPA grows GJK's final simplex into a polytope around
+   the origin (a hexahedron from a segment, a bipyramid from a triangle, the tetrahedron itself)
+   and expands it toward the face nearest the origin: penetration depth, normal and one witness
+   point per geom.
+3. Boxes and meshes (budget 4) clip two facing faces, or an edge along a face, found from the
+   final EPA face's features: up to 4 contacts (the largest quadrilateral of the clipped
+   polygon). Capsules (budget 2) and cylinders (budget 4) get one contact here: MuJoCo 4.0's
+   multi-contact for them (and for margins, through the shallow path) is not reproduced.
+
+A contact is emitted when dist < margin; its position is the midpoint of the witness points, its
+normal points from geom 1 to geom 2 (MuJoCo's convention).
+
+Data. Meshes are convex hulls stored flat (`MeshHulls`, names prefixed hull_): vertices in the
+geom frame, the hull's vertex graph (hill climbing), its polygons (coplanar triangles merged)
+and per vertex the polygons holding it. Exact agreement with MuJoCo needs MuJoCo's own hull data
+(its mesh frame, float32 vertices, qhull's graph order that breaks support ties):
+`hulls_from_mujoco` reads it from a compiled MjModel, `hulls_from_vertices` builds the same
+structure with trimesh. The GJK simplex, EPA polytope and clipping buffers live in a per-env
+workspace (`SCRATCH`: arrays ccd_v, ccd_f, ccd_i indexed [row..., k]); Taichi's compile time
+grows with (local array size) x (runtime-indexed accesses), so there are no large local arrays.
+
+Compile time. Everything is inlined and each heavy piece appears once in the code (one support
+call per GJK and per EPA loop, one face attachment, one clipping loop). Taichi's CFG
+optimisation is still superlinear on it: a kernel calling convex_convex compiles in 156 s with
+default options, 11 s with `cfg_optimization=False` (compile such kernels with it off, see the
+tests' `_lean_compile`).
+
+Features (what a backward needs to replay a contact as a closed form of the two poses), one row
+of FEATURE_SIZE ints per contact, column 0 the kind:
+- KIND_CORE (shallow sphere/capsule/margin contact): columns 1..6 = (id on geom 1, id on geom 2)
+  of the final GJK simplex vertices (closest points of the cores), column 7 = their number.
+- KIND_EPA: columns 1..6 = (id on geom 1, id on geom 2) of the three vertices of the final EPA
+  face (the contact is the projection of the origin on that Minkowski triangle), column 7 = 3.
+  Ids: box corner (bit 0: +x, bit 1: +y, bit 2: +z), mesh vertex (mesh-local); -1 where the
+  support is smooth (sphere, capsule, cylinder and their cores): the backward re-evaluates the
+  support at the frozen direction there.
+- KIND_CLIP (face/edge clipping): column 1 = clipping face (box face 0..5 = +x,-x,+y,-y,+z,-z, or
+  mesh polygon id), column 2 = clipped face (-1 for an edge); columns 3, 4 = the two lines that
+  meet at the point (k < 256: edge k -> k+1 of the clipped polygon, 256 + e: side plane e of the
+  clipping face, through its edge e -> e+1 and along its normal); columns 5, 6 = the clipped
+  edge's vertex ids (-1 for face on face); column 7 = 0 face on face, 1 an edge of geom 1
+  clipped by a face of geom 2, 2 an edge of geom 2 clipped by a face of geom 1. The point lies
+  on the clipped feature; the other witness is it moved by |dist| against the clipping face's
+  normal, dist = (point - clipping face vertex 0) . normal.
+- KIND_PLANE (plane-mesh): column 1 = mesh vertex id (the contact is that vertex, moved half its
+  depth along the plane normal).
+"""
+import numpy as np
+import taichi as ti
+
+# MuJoCo geom type codes (mjtGeom), and two internal "cores": sphere -> point, capsule -> segment
+PLANE, SPHERE, CAPSULE, CYLINDER, BOX, MESH = 0, 2, 3, 5, 6, 7
+_POINT, _SEGMENT = 100, 101
+
+CCD_ITERATIONS = 35      # mjOption.ccd_iterations (MuJoCo's default): GJK and EPA iterations
+CCD_TOLERANCE = 1e-6     # mjOption.ccd_tolerance (MuJoCo's default), m
+CONVEX_MAX = 4           # contact budget of convex_convex (MuJoCo 4.0: 4, or 2 with a capsule, 1 with a sphere)
+PLANE_MESH_MAX = 4       # contact budget of plane_mesh (MuJoCo 4.0)
+FEATURE_SIZE = 8
+KIND_CORE, KIND_EPA, KIND_CLIP, KIND_PLANE = 1, 2, 3, 4
+POLYGON_MAX = 32         # vertices of a mesh polygon multi-contact can use (larger: single contact)
+
+# workspace layout (one row per env): 3-vectors, floats, ints
+_VERTS = 5 + CCD_ITERATIONS          # EPA polytope vertices (MuJoCo's bound); GJK uses slots 0..7
+_FACES = 2 * _VERTS - 4              # live faces of a closed triangulated polytope (slots reused)
+_HORIZON = 24                        # MuJoCo's horizon buffer
+_CLIP = 2 * POLYGON_MAX              # a polygon clipped by a convex one has at most both counts
+_V_VERT, _V_VERT1, _V_VERT2 = 0, _VERTS, 2 * _VERTS          # Minkowski vertex, geom-1, geom-2 point
+_V_FACE = 3 * _VERTS                                         # face: projection of the origin
+_V_CLIP = _V_FACE + _FACES                                   # clipping face's vertices
+_V_SIDE = _V_CLIP + POLYGON_MAX                              # clipping face's side-plane normals
+_V_POLY = _V_SIDE + POLYGON_MAX                              # clipped polygon, two buffers
+_F_DIST2, _F_SIDE = 0, _FACES                                # face: squared distance; side offsets
+_I_ID1, _I_ID2 = 0, _VERTS                                   # vertex ids on geom 1, 2
+_I_FVERTS, _I_FADJ, _I_FINDEX = 2 * _VERTS, 2 * _VERTS + _FACES, 2 * _VERTS + 2 * _FACES
+_I_MAP, _I_FREE, _I_STACK = _I_FINDEX + _FACES, _I_FINDEX + 2 * _FACES, _I_FINDEX + 3 * _FACES
+_I_NEW = _I_STACK + _FACES                                   # faces to attach: verts, adjacency, slot
+_I_TAG = _I_NEW + 3 * _HORIZON                               # clipped points' lines (2 per point)
+_V_WIT = _V_POLY + 2 * _CLIP                                 # one run's witness points: 4 + 4
+_F_WIT = _F_SIDE + POLYGON_MAX                               # their distances
+_I_WIT = _I_TAG + 4 * _CLIP                                  # their features (4 x FEATURE_SIZE)
+SCRATCH = {"ccd_v": ("v3", _V_WIT + 8), "ccd_f": ("f", _F_WIT + 4), "ccd_i": ("i", _I_WIT + 4 * FEATURE_SIZE)}
+
+_MINVAL = 1e-15                     # mjMINVAL
+_MINVAL2 = _MINVAL * _MINVAL
+_BIG = 1e30                         # "no value" (MuJoCo: DBL_MAX)
+_FLT_MAX = 3.4028234663852886e38    # MuJoCo's exhaustive mesh search starts at -FLT_MAX
+_GJK_EPS = 0.5 * (CCD_TOLERANCE * CCD_TOLERANCE)
+_FACE_TOL = 0.996                   # faces aligned within ~5.1 deg
+_EDGE_TOL = 0.0888                  # edge parallel to a face within ~5.1 deg
+# initial polytopes, one face per entry: vertices (a, b, c), neighbours across ab, bc, ca
+_TETRA = ((0, 1, 2, 1, 3, 2), (0, 3, 1, 2, 3, 0), (0, 2, 3, 0, 3, 1), (3, 2, 1, 2, 0, 1))
+_HEXA = ((0, 2, 3, 1, 3, 2), (0, 4, 2, 2, 4, 0), (0, 3, 4, 0, 5, 1),
+         (1, 3, 2, 5, 0, 4), (1, 2, 4, 3, 1, 5), (1, 4, 3, 4, 2, 3))
+_BIPYRAMID = ((4, 0, 1, 1, 3, 2), (4, 2, 0, 2, 4, 0), (4, 1, 2, 0, 5, 1),
+              (3, 1, 0, 5, 0, 4), (3, 0, 2, 3, 1, 5), (3, 2, 1, 4, 2, 3))
+# box faces 0..5 as 4 corner ids each (bit 0: +x, bit 1: +y, bit 2: +z), in MuJoCo's order
+_BOX_CORNERS = (7, 3, 1, 5, 2, 6, 4, 0, 2, 3, 7, 6, 4, 5, 1, 0, 6, 7, 5, 4, 3, 2, 0, 1)
+
+
+# ----------------------------------------------------------------------------- mesh hull data
+
+class MeshHulls:
+    """Convex hulls of all meshes of a model, flat numpy arrays (geom frame, m).
+
+    Per mesh m: vertices hull_vert[hull_vertadr[m] + v], v < hull_vertnum[m] (mesh-local ids v
+    below); hull_climb[m] (1: supports hill-climb the graph, as MuJoCo for meshes of >= 10
+    vertices; 0: exhaustive scan); hull_extrema[27 m + k] (hill-climb seed for each direction
+    cell (cx, cy, cz) of {-1, 0, 1}^3, k = 9 (cx + 1) + 3 (cy + 1) + cz + 1).
+    Per vertex (absolute index): hull_edgeadr (start of its neighbour list in hull_edge, ended by
+    -1; -1 if not on the hull), hull_vert_polyadr, hull_vert_polynum (its polygons in
+    hull_polymap, mesh-local polygon ids).
+    Per polygon p (absolute = hull_polyadr[m] + local id, hull_polynum[m] of them):
+    hull_poly_vertadr[p], hull_poly_vertnum[p] (its vertex ids in hull_poly_vert, counter-
+    clockwise seen from outside), hull_poly_normal[p] (outward unit normal).
+    """
+
+    FIELDS = ("hull_vert", "hull_vertadr", "hull_vertnum", "hull_climb", "hull_extrema",
+              "hull_edgeadr", "hull_edge", "hull_polyadr", "hull_polynum", "hull_poly_vertadr",
+              "hull_poly_vertnum", "hull_poly_vert", "hull_poly_normal", "hull_vert_polyadr",
+              "hull_vert_polynum", "hull_polymap")
+
+    def __init__(self, **arrays):
+        for name in self.FIELDS:
+            setattr(self, name, np.asarray(arrays[name]))
+
+
+def _extrema(vertices: np.ndarray, hull_ids: list) -> list:
+    """Hill-climb seeds: for each cell (cx, cy, cz) of {-1, 0, 1}^3 the first hull vertex with
+    the largest projection on (cx, cy, cz), as MuJoCo's mesh_extrema."""
+    cells = np.array([(cx, cy, cz) for cx in (-1, 0, 1) for cy in (-1, 0, 1) for cz in (-1, 0, 1)])
+    return [hull_ids[int(i)] for i in np.argmax(vertices[hull_ids] @ cells.T, axis=0)]
+
+
+def _outline(faces: np.ndarray) -> list:
+    """Vertex cycle around a group of coplanar, consistently wound triangles."""
+    directed = {(int(f[i]), int(f[(i + 1) % 3])) for f in faces for i in range(3)}
+    follow = {a: b for a, b in directed if (b, a) not in directed}
+    cycle = [min(follow)]
+    while follow[cycle[-1]] != cycle[0]:
+        cycle.append(follow[cycle[-1]])
+    return cycle
+
+
+def _pack(meshes: list) -> MeshHulls:
+    """Concatenate per-mesh dicts (vert, climb, extrema, neighbours, polygons, normals) into one
+    MeshHulls."""
+    out = {name: [] for name in MeshHulls.FIELDS}
+    for mesh in meshes:
+        vert_base, poly_base = len(out["hull_vert"]), len(out["hull_poly_vertadr"])
+        nvert = len(mesh["vert"])
+        out["hull_vert"].extend(mesh["vert"])
+        out["hull_vertadr"].append(vert_base)
+        out["hull_vertnum"].append(nvert)
+        out["hull_climb"].append(int(mesh["climb"]))
+        out["hull_extrema"].extend(mesh["extrema"])
+        out["hull_polyadr"].append(poly_base)
+        out["hull_polynum"].append(len(mesh["polygons"]))
+        vert_polys = [[] for _ in range(nvert)]
+        for p, polygon in enumerate(mesh["polygons"]):
+            out["hull_poly_vertadr"].append(len(out["hull_poly_vert"]))
+            out["hull_poly_vertnum"].append(len(polygon))
+            out["hull_poly_vert"].extend(polygon)
+            out["hull_poly_normal"].append(mesh["normals"][p])
+            for v in polygon:
+                vert_polys[v].append(p)
+        for v in range(nvert):
+            neighbours = mesh["neighbours"].get(v)
+            out["hull_edgeadr"].append(-1 if neighbours is None else len(out["hull_edge"]))
+            if neighbours is not None:
+                out["hull_edge"].extend(list(neighbours) + [-1])
+            out["hull_vert_polyadr"].append(len(out["hull_polymap"]))
+            out["hull_vert_polynum"].append(len(vert_polys[v]))
+            out["hull_polymap"].extend(vert_polys[v])
+    arrays = {name: np.array(values, dtype=np.int32) for name, values in out.items()}
+    for name in ("hull_vert", "hull_poly_normal"):
+        arrays[name] = np.array(out[name], dtype=np.float64).reshape(-1, 3)
+    return MeshHulls(**arrays)
+
+
+def hulls_from_vertices(meshes: list) -> MeshHulls:
+    """MeshHulls of the convex hulls (trimesh) of a list of (V, 3) vertex arrays (geom frame, m).
+
+    Only the hull's vertices are kept; coplanar hull triangles merge into polygons (trimesh's
+    facets), wound counter-clockwise seen from outside.
+    """
+    import trimesh
+
+    packed = []
+    for vertices in meshes:
+        hull = trimesh.Trimesh(vertices=np.asarray(vertices, dtype=np.float64)).convex_hull
+        vert, faces = np.asarray(hull.vertices), np.asarray(hull.faces)
+        in_facet = np.zeros(len(faces), dtype=bool)
+        polygons = []
+        for facet in hull.facets:
+            in_facet[facet] = True
+            polygons.append(_outline(faces[facet]))
+        polygons += [[int(i) for i in f] for f in faces[~in_facet]]
+        normals = []
+        for polygon in polygons:
+            a, b, c = vert[polygon[0]], vert[polygon[1]], vert[polygon[2]]
+            normal = np.cross(b - a, c - a)
+            normals.append(normal / np.linalg.norm(normal))
+        packed.append(dict(vert=vert, climb=len(vert) >= 10,
+                           extrema=_extrema(vert, list(range(len(vert)))),
+                           neighbours={v: sorted(n) for v, n in enumerate(hull.vertex_neighbors)},
+                           polygons=polygons, normals=normals))
+    return _pack(packed)
+
+
+def hulls_from_mujoco(model) -> MeshHulls:
+    """MeshHulls holding exactly MuJoCo's compiled mesh data (vertices in MuJoCo's mesh frame,
+    float32 values, its qhull graph, polygons and extrema): for parity tests against MuJoCo."""
+    packed = []
+    extrema_all = np.asarray(model.mesh_extrema).reshape(-1)
+    for m in range(model.nmesh):
+        adr, num = model.mesh_vertadr[m], model.mesh_vertnum[m]
+        vert = np.asarray(model.mesh_vert[adr:adr + num], dtype=np.float64)
+        graph = model.mesh_graph[model.mesh_graphadr[m]:]
+        nhull = graph[0]
+        edgeadr, globalid, edges = graph[2:2 + nhull], graph[2 + nhull:2 + 2 * nhull], graph[2 + 2 * nhull:]
+        neighbours = {}
+        for local in range(nhull):
+            ids, i = [], edgeadr[local]
+            while edges[i] >= 0:
+                ids.append(int(globalid[edges[i]]))
+                i += 1
+            neighbours[int(globalid[local])] = ids
+        padr, pnum = model.mesh_polyadr[m], model.mesh_polynum[m]
+        polygons = [list(model.mesh_polyvert[model.mesh_polyvertadr[p]:model.mesh_polyvertadr[p]
+                                             + model.mesh_polyvertnum[p]]) for p in range(padr, padr + pnum)]
+        packed.append(dict(vert=vert, climb=num >= 10,
+                           extrema=[int(globalid[i]) for i in extrema_all[27 * m:27 * m + 27]],
+                           neighbours=neighbours, polygons=polygons,
+                           normals=list(model.mesh_polynormal[padr:padr + pnum])))
+    hulls = _pack(packed)
+    # MuJoCo's polygon map, in its own order (mesh-local polygon ids)
+    hulls.hull_polymap = np.asarray(model.mesh_polymap, dtype=np.int32)
+    hulls.hull_vert_polyadr = np.asarray(model.mesh_polymapadr, dtype=np.int32)
+    hulls.hull_vert_polynum = np.asarray(model.mesh_polymapnum, dtype=np.int32)
+    return hulls
+
+
+@ti.data_oriented
+class HullFields:
+    """Taichi fields holding a MeshHulls (same attribute names), to pass as `hull`. Any object
+    with these attributes, indexable like Taichi fields, serves as well."""
+
+    def __init__(self, hulls: MeshHulls):
+        for name in MeshHulls.FIELDS:
+            array = getattr(hulls, name)
+            if len(array) == 0:  # Taichi fields cannot be empty
+                array = np.zeros((1,) + array.shape[1:], dtype=array.dtype)
+            if array.ndim == 2:
+                field = ti.Vector.field(3, float, shape=len(array))
+            else:
+                field = ti.field(ti.i32 if array.dtype.kind == "i" else float, shape=len(array))
+            field.from_numpy(array)
+            setattr(self, name, field)
+
+
+@ti.data_oriented
+class Workspace:
+    """Taichi fields with the collider's per-env workspace (`SCRATCH`), `rows` rows: pass it as
+    `ws` and a row tuple (row,) to the colliders."""
+
+    def __init__(self, rows: int):
+        self.ccd_v = ti.Vector.field(3, float, shape=(rows, SCRATCH["ccd_v"][1]))
+        self.ccd_f = ti.field(float, shape=(rows, SCRATCH["ccd_f"][1]))
+        self.ccd_i = ti.field(ti.i32, shape=(rows, SCRATCH["ccd_i"][1]))
+
+
+# ----------------------------------------------------------------------------- small algebra
+# Written out term by term in MuJoCo's evaluation order, so results agree to the last bit.
+
+@ti.func
+def _dot(a: ti.template(), b: ti.template()):
+    """a . b for 3-vectors, summed left to right."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@ti.func
+def _cross(a: ti.template(), b: ti.template()):
+    """a x b for 3-vectors."""
+    return ti.Vector([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+@ti.func
+def _det3(a: ti.template(), b: ti.template(), c: ti.template()):
+    """Determinant of the 3x3 matrix with columns a, b, c: a . (b x c)."""
+    return (a[0] * (b[1] * c[2] - b[2] * c[1]) + a[1] * (b[2] * c[0] - b[0] * c[2])
+            + a[2] * (b[0] * c[1] - b[1] * c[0]))
+
+
+@ti.func
+def _rot(rot: ti.template(), v):
+    """rot @ v (geom frame -> world)."""
+    return ti.Vector([rot[0, 0] * v[0] + rot[0, 1] * v[1] + rot[0, 2] * v[2],
+                      rot[1, 0] * v[0] + rot[1, 1] * v[1] + rot[1, 2] * v[2],
+                      rot[2, 0] * v[0] + rot[2, 1] * v[1] + rot[2, 2] * v[2]])
+
+
+@ti.func
+def _rot_t(rot: ti.template(), v):
+    """rot^T @ v (world -> geom frame)."""
+    return ti.Vector([rot[0, 0] * v[0] + rot[1, 0] * v[1] + rot[2, 0] * v[2],
+                      rot[0, 1] * v[0] + rot[1, 1] * v[1] + rot[2, 1] * v[2],
+                      rot[0, 2] * v[0] + rot[1, 2] * v[1] + rot[2, 2] * v[2]])
+
+
+@ti.func
+def _normalize(v):
+    """v / |v| as MuJoCo's mju_normalize3 (times the inverse norm; (1, 0, 0) if |v| < 1e-15)."""
+    norm = ti.sqrt(_dot(v, v))
+    out = ti.Vector([1.0, 0.0, 0.0])
+    if norm >= _MINVAL:
+        out = v * (1.0 / norm)
+    return out
+
+
+@ti.func
+def _same_sign(a, b):
+    """True when a and b are both > 0 or both < 0."""
+    return (a > 0 and b > 0) or (a < 0 and b < 0)
+
+
+@ti.func
+def _wrap(i, n):
+    """i mod n for 0 <= i < 2 n (Taichi's Python-style % costs much compile time)."""
+    return i - n if i >= n else i
+
+
+@ti.func
+def _pick(i, values: ti.template()):
+    """values[i] for a static tuple of int constants and a runtime i (a chain of selects)."""
+    out = values[0]
+    for j in ti.static(range(1, len(values))):
+        out = ti.select(i == j, values[j], out)
+    return out
+
+
+def _packed(table):
+    """Face table rows (a, b, c, adj_ab, adj_bc, adj_ca) as two tuples of packed ints."""
+    return (tuple(a | b << 10 | c << 20 for a, b, c, *_ in table),
+            tuple(x | y << 10 | z << 20 for *_, x, y, z in table))
+
+
+# ----------------------------------------------------------------------------- workspace
+
+@ti.func
+def _vert(ws: ti.template(), row: ti.template(), slot):
+    """Minkowski vertex (geom-1 point minus geom-2 point) in workspace slot `slot`."""
+    return ws.ccd_v[row + (_V_VERT + slot,)]
+
+
+@ti.func
+def _put_vertex(ws: ti.template(), row: ti.template(), slot, p1, p2, id1, id2):
+    """Store support points p1 (geom 1), p2 (geom 2) and their ids in workspace slot `slot`."""
+    ws.ccd_v[row + (_V_VERT + slot,)] = p1 - p2
+    ws.ccd_v[row + (_V_VERT1 + slot,)] = p1
+    ws.ccd_v[row + (_V_VERT2 + slot,)] = p2
+    ws.ccd_i[row + (_I_ID1 + slot,)] = id1
+    ws.ccd_i[row + (_I_ID2 + slot,)] = id2
+
+
+@ti.func
+def _copy_vertex(ws: ti.template(), row: ti.template(), src, dst):
+    """Copy workspace vertex slot src to slot dst."""
+    _put_vertex(ws, row, dst, ws.ccd_v[row + (_V_VERT1 + src,)], ws.ccd_v[row + (_V_VERT2 + src,)],
+                ws.ccd_i[row + (_I_ID1 + src,)], ws.ccd_i[row + (_I_ID2 + src,)])
+
+
+@ti.func
+def _combine(weights, ws: ti.template(), row: ti.template(), base, slot):
+    """sum_s weights[s] * (3-vector at workspace base + slot[s]), s = 0..3, left to right."""
+    out = weights[0] * ws.ccd_v[row + (base + slot[0],)]
+    for s in ti.static(range(1, 4)):
+        out = out + weights[s] * ws.ccd_v[row + (base + slot[s],)]
+    return out
+
+
+# ----------------------------------------------------------------------------- support functions
+# A shape is the tuple (kind, mesh, pos, rot, size, margin): kind a geom type or a core, mesh the
+# mesh id (-1 if none), pos (3,) m and rot (3, 3) its world pose, size MuJoCo's geom size, margin
+# the pair margin (each shape grows by margin / 2).
+
+@ti.func
+def _mesh_support(mesh, local_dir, cache, hull: ti.template()):
+    """Mesh vertex (mesh-local id) farthest along local_dir (geom frame), found as MuJoCo does:
+    hill climbing from the better of the cached vertex and the direction cell's seed, or a scan
+    of all vertices starting from the cached one; ties keep the vertex found first."""
+    adr = hull.hull_vertadr[mesh]
+    climb = hull.hull_climb[mesh]
+    best, best_dot = 0, -_FLT_MAX
+    if climb:
+        cx = int(local_dir[0] > 0.4) - int(local_dir[0] < -0.4) + 1
+        cy = int(local_dir[1] > 0.4) - int(local_dir[1] < -0.4) + 1
+        cz = int(local_dir[2] > 0.4) - int(local_dir[2] < -0.4) + 1
+        best = hull.hull_extrema[27 * mesh + cx * 9 + cy * 3 + cz]
+        seed_dot = _dot(local_dir, hull.hull_vert[adr + best])
+        if cache >= 0 and not seed_dot > _dot(local_dir, hull.hull_vert[adr + cache]):
+            best = cache
+        best_dot = _dot(local_dir, hull.hull_vert[adr + best])
+    elif cache >= 0:
+        best, best_dot = cache, _dot(local_dir, hull.hull_vert[adr + cache])
+    # climbing: scan the neighbours of `base`, again from the new best while it moves;
+    # exhaustive: scan every vertex once
+    base = best
+    cursor = hull.hull_edgeadr[adr + base] if climb else 0
+    while True:
+        candidate = cursor
+        if climb:
+            candidate = hull.hull_edge[cursor]
+        if candidate < 0 or candidate >= hull.hull_vertnum[mesh]:
+            if not (climb and best != base):
+                break
+            base = best
+            cursor = hull.hull_edgeadr[adr + base]
+        else:
+            d = _dot(local_dir, hull.hull_vert[adr + candidate])
+            if d > best_dot:
+                best_dot, best = d, candidate
+            cursor += 1
+    return best
+
+
+@ti.func
+def _support(shape: ti.template(), direction, cache, hull: ti.template()):
+    """Farthest point (world, m) of `shape` along the unit `direction`, and its discrete id
+    (box corner bits, mesh vertex; else `cache` unchanged, as MuJoCo's vertindex)."""
+    kind, mesh, pos, rot, size, margin = shape
+    point = pos
+    feature = cache
+    if kind == SPHERE:
+        point = size[0] * direction + pos
+    elif kind == _SEGMENT:
+        along = rot[0, 2] * direction[0] + rot[1, 2] * direction[1] + rot[2, 2] * direction[2]
+        half = ti.select(along >= 0, size[1], -size[1])
+        point = ti.Vector([rot[0, 2] * half, rot[1, 2] * half, rot[2, 2] * half]) + pos
+    elif kind != _POINT:
+        local_dir = _rot_t(rot, direction)
+        positive = ti.Vector([int(local_dir[k] >= 0) for k in ti.static(range(3))])
+        local = ti.Vector([ti.select(positive[0], size[0], -size[0]), ti.select(positive[1], size[1], -size[1]),
+                           ti.select(positive[2], size[2], -size[2])])
+        if kind == CAPSULE:
+            local = local_dir * size[0]
+            local[2] += ti.select(positive[2], size[1], -size[1])
+        elif kind == CYLINDER:
+            planar2 = local_dir[0] * local_dir[0] + local_dir[1] * local_dir[1]
+            scale = ti.select(planar2 >= _MINVAL2, size[0] / ti.sqrt(planar2), 0.0)
+            local = ti.Vector([scale * local_dir[0], scale * local_dir[1], ti.select(positive[2], size[1], -size[1])])
+        elif kind == BOX:
+            feature = positive[0] + 2 * positive[1] + 4 * positive[2]
+        elif kind == MESH:
+            feature = _mesh_support(mesh, local_dir, cache, hull)
+            local = hull.hull_vert[hull.hull_vertadr[mesh] + feature]
+        point = _rot(rot, local) + pos
+    if margin > 0:
+        point += direction * (0.5 * margin)
+    return point, feature
+
+
+@ti.func
+def _minkowski(shape1: ti.template(), shape2: ti.template(), direction, cache1, cache2, hull: ti.template()):
+    """Support of the Minkowski difference along `direction`: the support points (world) of
+    geom 1 along +direction and of geom 2 along -direction, and their ids. One `_support` in a
+    loop over the two geoms, so that it is inlined once."""
+    p1, p2 = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+    ids = ti.Vector([cache1, cache2])
+    for g in range(2):
+        first = g == 0
+        shape = (ti.select(first, shape1[0], shape2[0]), ti.select(first, shape1[1], shape2[1]),
+                 ti.select(first, shape1[2], shape2[2]), ti.select(first, shape1[3], shape2[3]),
+                 ti.select(first, shape1[4], shape2[4]), ti.select(first, shape1[5], shape2[5]))
+        point, id_g = _support(shape, ti.select(first, direction, -direction), ti.select(first, ids[0], ids[1]), hull)
+        if first:
+            p1, ids[0] = point, id_g
+        else:
+            p2, ids[1] = point, id_g
+    return p1, p2, ids[0], ids[1]
+
+
+@ti.func
+def _discrete(shape1: ti.template(), shape2: ti.template()):
+    """True when both shapes are polytopes (box or mesh) without margin: GJK and EPA then
+    converge exactly and use tolerance 0 / 1e-15."""
+    return ((shape1[0] == BOX or shape1[0] == MESH) and (shape2[0] == BOX or shape2[0] == MESH)
+            and shape1[5] == 0 and shape2[5] == 0)
+
+
+# ----------------------------------------------------------------------------- GJK
+
+@ti.func
+def _project_origin_line(a, b):
+    """Projection of the origin on the line through a and b (b if they coincide)."""
+    diff = b - a
+    length2 = _dot(diff, diff)
+    out = b
+    if length2 != 0:
+        out = b + (-(_dot(b, diff) / length2)) * diff
+    return out
+
+
+@ti.func
+def _project_origin_plane(a, b, c):
+    """Projection of the origin on the plane of triangle (a, b, c), and 1 if the triangle is
+    degenerate. The normal comes from the first of three edge pairs that is well conditioned."""
+    d21, d31, d32 = b - a, c - a, c - b
+    degenerate, done = 0, 0
+    out = ti.Vector([0.0, 0.0, 0.0])
+    for k in ti.static(range(3)):
+        normal = _cross(d32, d21) if k == 0 else (_cross(d21, d31) if k == 1 else _cross(d31, d32))
+        anchor = b if k == 0 else (a if k == 1 else c)
+        if not done:
+            nv, nn = _dot(normal, anchor), _dot(normal, normal)
+            if nn == 0:
+                degenerate, done = 1, 1
+            elif k == 2 or (nv != 0 and nn > _MINVAL):
+                out = normal * (nv / nn)
+                done = 1
+    return degenerate, out
+
+
+@ti.func
+def _s1d(a, b):
+    """Barycentric weights (wa, wb) of the point of segment ab closest to the origin, from the
+    projection's coordinate along the segment's longest axis (Montanari et al. 2017)."""
+    p = _project_origin_line(a, b)
+    mu_max, pa, pb, pp = a[0] - b[0], a[0], b[0], p[0]
+    for k in ti.static(range(1, 3)):
+        if ti.abs(a[k] - b[k]) >= ti.abs(mu_max):
+            mu_max, pa, pb, pp = a[k] - b[k], a[k], b[k], p[k]
+    c1, c2 = pp - pb, pa - pp
+    weights = ti.Vector([0.0, 1.0])
+    if _same_sign(mu_max, c1) and _same_sign(mu_max, c2):
+        weights = ti.Vector([c1 / mu_max, c2 / mu_max])
+    return weights
+
+
+@ti.func
+def _area_coords(a, b, c, p):
+    """Signed areas (p b c, p c a, p a b) on the coordinate plane where triangle abc's projection
+    is largest, and that projection's area (MuJoCo's S2D cofactors)."""
+    m1 = b[1] * c[2] - b[2] * c[1] - a[1] * c[2] + a[2] * c[1] + a[1] * b[2] - a[2] * b[1]
+    m2 = b[0] * c[2] - b[2] * c[0] - a[0] * c[2] + a[2] * c[0] + a[0] * b[2] - a[2] * b[0]
+    m3 = b[0] * c[1] - b[1] * c[0] - a[0] * c[1] + a[1] * c[0] + a[0] * b[1] - a[1] * b[0]
+    keep_yz = ti.abs(m1) >= ti.abs(m2) and ti.abs(m1) >= ti.abs(m3)
+    keep_xz = not keep_yz and ti.abs(m2) >= ti.abs(m3)
+    m_max = ti.select(keep_yz, m1, ti.select(keep_xz, m2, m3))
+    x = ti.select(keep_yz, 1, 0)
+    y = ti.select(keep_yz or keep_xz, 2, 1)
+    px, py, ax, ay, bx, by, cx, cy = p[x], p[y], a[x], a[y], b[x], b[y], c[x], c[y]
+    c1 = px * by + py * cx + bx * cy - px * cy - py * bx - cx * by
+    c2 = px * cy + py * ax + cx * ay - px * ay - py * cx - ax * cy
+    c3 = px * ay + py * bx + ax * by - px * by - py * ax - bx * ay
+    return ti.Vector([c1, c2, c3]), m_max
+
+
+@ti.func
+def _s2d(a, b, c):
+    """Barycentric weights (wa, wb, wc) of the point of triangle abc closest to the origin (a
+    degenerate triangle, e.g. c == b, falls back to segment ab)."""
+    degenerate, p = _project_origin_plane(a, b, c)
+    weights = ti.Vector([0.0, 0.0, 0.0])
+    try_edge = ti.Vector([0, 0, 1])  # edges bc, ac, ab
+    if not degenerate:
+        cofactors, m_max = _area_coords(a, b, c, p)
+        inside = ti.Vector([int(_same_sign(m_max, cofactors[k])) for k in ti.static(range(3))])
+        if inside[0] and inside[1] and inside[2]:
+            weights = cofactors / m_max
+        try_edge = 1 - inside
+    dmin = _BIG
+    for e in range(3):
+        if try_edge[e]:
+            u = ti.select(e == 0, b, a)
+            v = ti.select(e == 2, b, c)
+            w = _s1d(u, v)
+            closest = w[0] * u + w[1] * v
+            d = _dot(closest, closest)
+            if d < dmin:
+                dmin = d
+                weights = ti.Vector([ti.select(e == 0, 0.0, w[0]),
+                                     ti.select(e == 0, w[0], ti.select(e == 1, 0.0, w[1])),
+                                     ti.select(e == 2, 0.0, w[1])])
+    return weights
+
+
+@ti.func
+def _subdistance(s1, s2, s3, s4, n):
+    """Barycentric weights (4,) of the point closest to the origin of the simplex of the first n
+    of s1..s4: the origin itself if a tetrahedron encloses it, else the best face that sees it."""
+    weights = ti.Vector([1.0, 0.0, 0.0, 0.0])
+    if n >= 2:
+        try_face = ti.Vector([0, 0, 0, 1])  # faces opposite s1, s2, s3, s4
+        if n == 4:
+            cof = ti.Vector([-_det3(s2, s3, s4), _det3(s1, s3, s4), -_det3(s1, s2, s4), _det3(s1, s2, s3)])
+            m_det = cof[0] + cof[1] + cof[2] + cof[3]
+            inside = ti.Vector([int(_same_sign(m_det, cof[k])) for k in ti.static(range(4))])
+            try_face = 1 - inside
+            if inside[0] and inside[1] and inside[2] and inside[3]:
+                weights = cof / m_det
+        dmin = _BIG
+        for f in range(4):
+            if try_face[f]:
+                a = ti.select(f == 0, s2, s1)
+                b = ti.select(f <= 1, s3, s2)
+                c = ti.select(f <= 2, s4, ti.select(n == 2, s2, s3))
+                w = _s2d(a, b, c)
+                closest = w[0] * a + w[1] * b + w[2] * c
+                d = _dot(closest, closest)
+                if d < dmin:
+                    dmin = d
+                    weights = ti.Vector([ti.select(f == 0, 0.0, w[0]),
+                                         ti.select(f == 0, w[0], ti.select(f == 1, 0.0, w[1])),
+                                         ti.select(f <= 1, w[1], ti.select(f == 2, 0.0, w[2])),
+                                         ti.select(f == 3, 0.0, w[2])])
+    return weights
+
+
+@ti.func
+def _gjk(shape1: ti.template(), shape2: ti.template(), get_dist, dist_cutoff, cache1, cache2,
+         hull: ti.template(), ws: ti.template(), row: ti.template()):
+    """MuJoCo 4.0's GJK from the two geom centres (read from its compiled code: unlike the 3.x
+    sources there is no tetrahedron walk; the next iterate is the exact projection of the origin
+    on the simplex's line or plane). get_dist: distance wanted (sphere/capsule cores, margins),
+    stop once it provably exceeds dist_cutoff; else stop as soon as separation is proven.
+    One support query per pass; the last pass checks separation at the final iterate.
+
+    Returns (n, x1, x2, dist, separated, cache1, cache2): the final simplex in workspace slots
+    0..n-1, the witness points (world), the distance (0: the origin is enclosed; _BIG:
+    separation proven early).
+    """
+    discrete = _discrete(shape1, shape2)
+    epsilon = ti.select(discrete, 0.0, _GJK_EPS)
+    min_norm = ti.select(discrete or get_dist, _MINVAL, CCD_TOLERANCE)
+    x1, x2 = shape1[2], shape2[2]
+    x_k = x1 - x2
+    x_norm = ti.sqrt(_dot(x_k, x_k))
+    if x_norm < _MINVAL:  # coincident centres: start along x
+        x_k, x_norm = ti.Vector([1.0, 0.0, 0.0]), 1.0
+    weights = ti.Vector([1.0, 0.0, 0.0, 0.0])
+    slot = ti.Vector([0, 1, 2, 3])  # workspace slot of each simplex vertex (4 slots, permuted)
+    n, k, separated, decided, final = 0, 0, 0, 0, 0
+    while True:
+        if final:  # converged: witness points, and a last support to check separation
+            if n > 0:
+                x1, x2 = _combine(weights, ws, row, _V_VERT1, slot), _combine(weights, ws, row, _V_VERT2, slot)
+            if n == 4 or separated or x_norm < _MINVAL:
+                break
+        p1, p2, cache1, cache2 = _minkowski(shape1, shape2, -(x_k * (1.0 / x_norm)), cache1, cache2, hull)
+        s_k = p1 - p2
+        lower = _dot(x_k, s_k)  # lower / x_norm bounds the distance from below
+        if final:
+            separated = int(lower > 0)
+            break
+        _put_vertex(ws, row, slot[n], p1, p2, cache1, cache2)
+        if lower > 0:
+            separated = 1
+            if not get_dist or (dist_cutoff < _BIG and lower >= dist_cutoff * x_norm):
+                decided, n = 1, 0
+                break
+        if k != 0 and _dot(x_k, x_k - s_k) < epsilon:  # Frank-Wolfe duality gap: converged
+            final = 1
+            continue
+        weights = _subdistance(_vert(ws, row, slot[0]), _vert(ws, row, slot[1]), _vert(ws, row, slot[2]),
+                               _vert(ws, row, slot[3]), n + 1)
+        kept, dropped, m = ti.Vector([0, 0, 0, 0]), ti.Vector([0, 0, 0, 0]), 0
+        n = 0
+        for s in ti.static(range(4)):  # keep the vertices with nonzero weight, in order
+            if weights[s] != 0:
+                kept[n], weights[n] = slot[s], weights[s]
+                n += 1
+            else:
+                dropped[m] = slot[s]
+                m += 1
+        for s in ti.static(range(4)):
+            slot[s] = ti.select(s < n, kept[s], dropped[ti.max(s - n, 0)])
+            if s >= n:
+                weights[s] = 0.0
+        if n == 0:
+            decided, separated = 1, 1
+            break
+        if n == 4:
+            final = 1
+            continue
+        # next iterate: the vertex, or the origin projected on the segment's line / triangle's plane
+        a, b = _vert(ws, row, slot[0]), _vert(ws, row, slot[1])
+        x_k = _combine(weights, ws, row, _V_VERT, slot)
+        if n == 2:
+            diff = b - a
+            if not _dot(diff, diff) < _MINVAL2:
+                x_k = _project_origin_line(a, b)
+        elif n == 3:
+            degenerate, projection = _project_origin_plane(a, b, _vert(ws, row, slot[2]))
+            if not degenerate:
+                x_k = projection
+        x_norm_prev = x_norm
+        x_norm = ti.sqrt(_dot(x_k, x_k))
+        k += 1
+        if x_norm < ti.select(n == 1, _MINVAL, min_norm) or (k > 1 and ti.abs(x_norm - x_norm_prev) < _MINVAL) \
+                or k >= CCD_ITERATIONS:
+            final = 1
+    dist = _BIG
+    if not decided:
+        dist = ti.select(n == 4 and not separated, 0.0, x_norm)
+    for t in range(8):  # the simplex back to slots 0..3 in order, through slots 4..7
+        _copy_vertex(ws, row, ti.select(t < 4, slot[t & 3], t), ti.select(t < 4, t + 4, t - 4))
+    return n, x1, x2, dist, separated, cache1, cache2
+
+
+# ----------------------------------------------------------------------------- EPA
+
+@ti.func
+def _origin_in_tetra(p0, p1, p2, p3):
+    """True when the origin lies strictly inside tetrahedron (p0, p1, p2, p3)."""
+    inside = True
+    for k in ti.static(range(4)):
+        a, b, c, d = (p0, p1, p2, p3) if k == 0 else ((p1, p2, p3, p0) if k == 1 else (
+            (p2, p3, p0, p1) if k == 2 else (p3, p0, p1, p2)))
+        normal = _cross(b - a, c - a)
+        inside = inside and _same_sign(_dot(normal, d - a), _dot(normal, -a))
+    return inside
+
+
+@ti.func
+def _ray_triangle(v1, v2, v3, v4, v5):
+    """True when line v1 -> v2 crosses triangle (v3, v4, v5) (three volumes of one sign)."""
+    d12, d13, d14, d15 = v2 - v1, v3 - v1, v4 - v1, v5 - v1
+    vol1, vol2, vol3 = _det3(d13, d14, d12), _det3(d14, d15, d12), _det3(d15, d13, d12)
+    return (vol1 >= 0 and vol2 >= 0 and vol3 >= 0) or (vol1 <= 0 and vol2 <= 0 and vol3 <= 0)
+
+
+@ti.func
+def _on_triangle(a, b, c, p):
+    """True when p lies on triangle abc (non-negative barycentrics, distance < 1e-15)."""
+    cofactors, m_max = _area_coords(a, b, c, p)
+    w = cofactors / m_max
+    back = a * w[0] + b * w[1] + c * w[2]
+    return w[0] >= 0 and w[1] >= 0 and w[2] >= 0 and ti.sqrt(_dot(back - p, back - p)) < _MINVAL
+
+
+@ti.func
+def _turn120(axis):
+    """Rotation matrix of 120 degrees about `axis`."""
+    norm = ti.sqrt(_dot(axis, axis))
+    u = ti.Vector([axis[0] / norm, axis[1] / norm, axis[2] / norm])
+    s, c = 0.86602540378, -0.5
+    return ti.Matrix([[c + u[0] * u[0] * (1 - c), u[0] * u[1] * (1 - c) - u[2] * s, u[0] * u[2] * (1 - c) + u[1] * s],
+                      [u[1] * u[0] * (1 - c) + u[2] * s, c + u[1] * u[1] * (1 - c), u[1] * u[2] * (1 - c) - u[0] * s],
+                      [u[0] * u[2] * (1 - c) - u[1] * s, u[1] * u[2] * (1 - c) + u[0] * s, c + u[2] * u[2] * (1 - c)]])
+
+
+@ti.func
+def _attach_face(ws: ti.template(), row: ti.template(), center, slot, verts, adj):
+    """Write face `slot` (vertex slots and neighbour faces packed 10 bits each, a | b << 10 |
+    c << 20; neighbours across ab, bc, ca): its outward projection of the origin and that
+    point's squared norm, returned; 0 if the triangle is degenerate."""
+    ws.ccd_i[row + (_I_FVERTS + slot,)] = verts
+    ws.ccd_i[row + (_I_FADJ + slot,)] = adj
+    va = _vert(ws, row, verts & 1023)
+    degenerate, v = _project_origin_plane(_vert(ws, row, verts >> 20), _vert(ws, row, (verts >> 10) & 1023), va)
+    dist2 = 0.0
+    if not degenerate:
+        if _dot(v, va - center) < 0:
+            v = -v
+        dist2 = _dot(v, v)
+        ws.ccd_v[row + (_V_FACE + slot,)] = v
+        ws.ccd_f[row + (_F_DIST2 + slot,)] = dist2
+        ws.ccd_i[row + (_I_FINDEX + slot,)] = -1
+    return dist2
+
+
+@ti.func
+def _unmap(ws: ti.template(), row: ti.template(), face, nmap, nfree):
+    """Delete `face`: off the map (the map's last entry takes its place), slot onto the free
+    list. Returns the new (nmap, nfree)."""
+    m = ws.ccd_i[row + (_I_FINDEX + face,)]
+    if m >= 0:
+        nmap -= 1
+        last = ws.ccd_i[row + (_I_MAP + nmap,)]
+        ws.ccd_i[row + (_I_MAP + m,)] = last
+        ws.ccd_i[row + (_I_FINDEX + last,)] = m
+    ws.ccd_i[row + (_I_FINDEX + face,)] = -2
+    ws.ccd_i[row + (_I_FREE + nfree,)] = face
+    return nmap, nfree + 1
+
+
+@ti.func
+def _horizon(ws: ti.template(), row: ti.template(), face, w, nmap, nfree):
+    """Delete `face` and, depth first in MuJoCo's order, every face connected to it that sees
+    w; record each edge between a deleted and a kept face (kept face, its edge index) at _I_NEW.
+    Returns (edge count, 1 if the horizon overflowed, nmap, nfree)."""
+    nmap, nfree = _unmap(ws, row, face, nmap, nfree)
+    ws.ccd_i[row + (_I_STACK,)] = face << 4  # frames: face << 4 | first edge << 2 | edges done
+    depth, nedges, overflow = 1, 0, 0
+    while depth > 0:
+        frame = ws.ccd_i[row + (_I_STACK + depth - 1,)]
+        current, first, done = frame >> 4, (frame >> 2) & 3, frame & 3
+        if done == ti.select(depth == 1, 3, 2):  # the first face has 3 edges to walk, others 2
+            depth -= 1
+        else:
+            ws.ccd_i[row + (_I_STACK + depth - 1,)] = frame + 1
+            edge = _wrap(first + done, 3)
+            neighbour = (ws.ccd_i[row + (_I_FADJ + current,)] >> (10 * edge)) & 1023
+            if ws.ccd_i[row + (_I_FINDEX + neighbour,)] > -2:
+                shared = (ws.ccd_i[row + (_I_FVERTS + current,)] >> (10 * _wrap(edge + 1, 3))) & 1023
+                nverts = ws.ccd_i[row + (_I_FVERTS + neighbour,)]
+                neighbour_edge = ti.select(nverts & 1023 == shared, 0, ti.select((nverts >> 10) & 1023 == shared, 1, 2))
+                v = ws.ccd_v[row + (_V_FACE + neighbour,)]
+                if _dot(v, w) - ws.ccd_f[row + (_F_DIST2 + neighbour,)] > _MINVAL:  # it sees w: delete
+                    nmap, nfree = _unmap(ws, row, neighbour, nmap, nfree)
+                    ws.ccd_i[row + (_I_STACK + depth,)] = (neighbour << 4) | (_wrap(neighbour_edge + 1, 3) << 2)
+                    depth += 1
+                elif nedges < _HORIZON:
+                    ws.ccd_i[row + (_I_NEW + nedges,)] = (neighbour << 2) | neighbour_edge
+                    nedges += 1
+                else:
+                    overflow = 1
+    return nedges, overflow, nmap, nfree
+
+
+@ti.func
+def _cone(ws: ti.template(), row: ti.template(), w_slot, nedges, nfaces, nfree):
+    """Plan the faces joining vertex w_slot to the horizon edges (at _I_NEW), in order: each gets
+    a free slot, its neighbours (previous new face, the kept face, next new face), and the kept
+    face now neighbours it. Rewrites _I_NEW as (verts, adjacency, slot) per new face. Returns
+    (nfaces, nfree)."""
+    for i in range(nedges):
+        slot = nfaces
+        if nfree > 0:
+            nfree -= 1
+            slot = ws.ccd_i[row + (_I_FREE + nfree,)]
+        else:
+            nfaces += 1
+        ws.ccd_i[row + (_I_NEW + 2 * _HORIZON + i,)] = slot
+    for i in range(nedges):
+        kept_edge = ws.ccd_i[row + (_I_NEW + i,)]
+        kept, edge = kept_edge >> 2, kept_edge & 3
+        kept_verts = ws.ccd_i[row + (_I_FVERTS + kept,)]
+        a = (kept_verts >> (10 * edge)) & 1023
+        b = (kept_verts >> (10 * _wrap(edge + 1, 3))) & 1023
+        slot = ws.ccd_i[row + (_I_NEW + 2 * _HORIZON + i,)]
+        adj = ws.ccd_i[row + (_I_FADJ + kept,)]
+        ws.ccd_i[row + (_I_FADJ + kept,)] = (adj & ~(1023 << (10 * edge))) | (slot << (10 * edge))
+        before = ws.ccd_i[row + (_I_NEW + 2 * _HORIZON + _wrap(i + nedges - 1, nedges),)]
+        after = ws.ccd_i[row + (_I_NEW + 2 * _HORIZON + _wrap(i + 1, nedges),)]
+        ws.ccd_i[row + (_I_NEW + _HORIZON + i,)] = before | (kept << 10) | (after << 20)
+        ws.ccd_i[row + (_I_NEW + i,)] = w_slot | (b << 10) | (a << 20)
+    return nfaces, nfree
+
+
+_TETRA_PACKED, _HEXA_PACKED, _BIPYRAMID_PACKED = _packed(_TETRA), _packed(_HEXA), _packed(_BIPYRAMID)
+_EXPAND, _START2, _START3, _START4, _STOP = 0, 2, 3, 4, 5
+
+
+@ti.func
+def _epa(shape1: ti.template(), shape2: ti.template(), n, cache1, cache2, hull: ti.template(),
+         ws: ti.template(), row: ti.template()):
+    """MuJoCo's EPA from GJK's final simplex (workspace slots 0..n-1, n = 2, 3 or 4): build a
+    polytope around the origin (a hexahedron from a segment, a bipyramid from a triangle, the
+    tetrahedron itself; a triangle again when the origin lies on a face), then expand it toward
+    the face nearest the origin until the support along that face's normal stops growing.
+
+    One pass of the loop = plan (directions of 0..3 support queries, faces to attach), the
+    queries, the attachments; stage _STOP ends it.
+    Returns (found, face (3,) workspace slots of the final face's vertices, x1, x2 (witness
+    points, world), dist (-depth), cache1, cache2).
+    """
+    discrete = _discrete(shape1, shape2)
+    tolerance = ti.select(discrete, _MINVAL, CCD_TOLERANCE)
+    stage = n
+    nverts, nfaces, nmap, nfree = n, 0, 0, 0
+    center = ti.Vector([0.0, 0.0, 0.0])
+    restart = ti.Vector([0, 1, 2])   # the triangle a _START3 pass starts from
+    found, failed, k = 0, 0, 0
+    best_verts, best_v, best_dist2 = 0, ti.Vector([0.0, 0.0, 0.0]), 0.0
+    upper, upper2, lower, lower2 = _BIG, _BIG, 0.0, 0.0
+    while stage != _STOP:
+        # ---- plan
+        nquery, nnew, nearest = 0, 0, -1
+        direction, axis = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+        turn = ti.Matrix.identity(float, 3)
+        if stage == _START4:
+            center = (((_vert(ws, row, 0) + _vert(ws, row, 1)) + _vert(ws, row, 2)) + _vert(ws, row, 3)) * 0.25
+            nnew = 4
+        elif stage == _START2:
+            a, b = _vert(ws, row, 0), _vert(ws, row, 1)
+            center = (a + b) * 0.5
+            diff = b - a
+            unit = ti.Vector([0.0, 0.0, 0.0])  # the axis along diff's smallest component
+            small = ti.min(ti.abs(diff[0]), ti.abs(diff[1]), ti.abs(diff[2]))
+            unit[ti.select(ti.abs(diff[0]) == small, 0, ti.select(ti.abs(diff[1]) == small, 1, 2))] = 1.0
+            direction, turn, nquery, nnew = _cross(unit, diff), _turn120(diff), 3, 6
+        elif stage == _START3:
+            for t in range(6):  # triangle `restart` to slots 0..2, through slots 5..7
+                src = ti.select(t < 3, restart[ti.min(t, 2)], t + 2)
+                _copy_vertex(ws, row, src, ti.select(t < 3, t + 5, t - 3))
+            nverts, nfaces, nmap, nfree = 3, 0, 0, 0
+            a, b, c = _vert(ws, row, 0), _vert(ws, row, 1), _vert(ws, row, 2)
+            center = ((a + b) + c) * (1.0 / 3.0)
+            axis = _cross(b - a, c - a)
+            if ti.sqrt(_dot(axis, axis)) < _MINVAL:
+                stage, failed = _STOP, 1
+            else:
+                direction, nquery, nnew = -axis, 2, 6
+        elif stage == _EXPAND:
+            lower2 = _BIG
+            for m in range(nmap):
+                face = ws.ccd_i[row + (_I_MAP + m,)]
+                if ws.ccd_f[row + (_F_DIST2 + face,)] < lower2:
+                    nearest, lower2 = face, ws.ccd_f[row + (_F_DIST2 + face,)]
+            if k >= CCD_ITERATIONS or nearest < 0 or lower2 > upper2:
+                stage = _STOP  # keep the previous nearest face
+            else:
+                found = 1
+                best_verts = ws.ccd_i[row + (_I_FVERTS + nearest,)]
+                best_v, best_dist2 = ws.ccd_v[row + (_V_FACE + nearest,)], lower2
+                if lower2 <= 0:
+                    stage = _STOP
+                else:
+                    lower = ti.sqrt(lower2)
+                    direction, nquery = best_v, 1
+        # ---- support queries (the only ones of EPA)
+        for q in range(nquery):
+            norm = ti.sqrt(_dot(direction, direction))
+            unit_dir = ti.Vector([1.0, 0.0, 0.0])
+            if norm > _MINVAL:
+                unit_dir = direction / norm
+            p1, p2, cache1, cache2 = _minkowski(shape1, shape2, unit_dir, cache1, cache2, hull)
+            _put_vertex(ws, row, nverts, p1, p2, cache1, cache2)
+            nverts += 1
+            direction = ti.select(stage == _START2, _rot(turn, direction), axis)
+        # ---- after the queries: checks, and the horizon's new faces
+        a, b, c = _vert(ws, row, 0), _vert(ws, row, 1), _vert(ws, row, 2)
+        if stage == _START3 and (_on_triangle(a, b, c, _vert(ws, row, 4)) or _on_triangle(a, b, c, _vert(ws, row, 3))):
+            stage, failed = _STOP, 1
+        elif stage == _EXPAND:
+            w_slot = nverts - 1
+            w = _vert(ws, row, w_slot)
+            upper_k = _dot(best_v, w) / lower
+            if upper_k < upper:
+                upper = upper_k
+                upper2 = upper * upper
+            repeated = 0
+            if discrete:  # a support point seen before: converged
+                id1, id2 = ws.ccd_i[row + (_I_ID1 + w_slot,)], ws.ccd_i[row + (_I_ID2 + w_slot,)]
+                for i in range(w_slot):
+                    if ws.ccd_i[row + (_I_ID1 + i,)] == id1 and ws.ccd_i[row + (_I_ID2 + i,)] == id2:
+                        repeated = 1
+            if upper - lower < tolerance:
+                if k == 0 and upper < lower - 1e-10:
+                    found = 0
+                stage = _STOP
+            elif repeated:
+                stage = _STOP
+            else:
+                nedges, overflow, nmap, nfree = _horizon(ws, row, nearest, w, nmap, nfree)
+                if nedges < 3 or overflow:
+                    stage, found = _STOP, 0
+                elif nedges > nfree + _FACES - nfaces:
+                    stage = _STOP  # out of face slots (MuJoCo: out of memory): keep this face
+                else:
+                    nfaces, nfree = _cone(ws, row, w_slot, nedges, nfaces, nfree)
+                    nnew = nedges
+        # ---- attach the planned faces (the only attachment site)
+        restart_face = -1
+        for i in range(nnew):
+            verts, adj, slot = 0, 0, i
+            if stage == _EXPAND:
+                verts, adj = ws.ccd_i[row + (_I_NEW + i,)], ws.ccd_i[row + (_I_NEW + _HORIZON + i,)]
+                slot = ws.ccd_i[row + (_I_NEW + 2 * _HORIZON + i,)]
+            else:
+                verts = ti.select(stage == _START4, _pick(i, _TETRA_PACKED[0]), ti.select(
+                    stage == _START2, _pick(i, _HEXA_PACKED[0]), _pick(i, _BIPYRAMID_PACKED[0])))
+                adj = ti.select(stage == _START4, _pick(i, _TETRA_PACKED[1]), ti.select(
+                    stage == _START2, _pick(i, _HEXA_PACKED[1]), _pick(i, _BIPYRAMID_PACKED[1])))
+            d2 = _attach_face(ws, row, center, slot, verts, adj)
+            if stage == _EXPAND:
+                if d2 == 0:
+                    stage, found = _STOP, 0
+                    break
+                if d2 >= lower2 and d2 <= upper2:
+                    ws.ccd_i[row + (_I_MAP + nmap,)] = slot
+                    ws.ccd_i[row + (_I_FINDEX + slot,)] = nmap
+                    nmap += 1
+            elif d2 < _MINVAL2:  # the origin lies on this face
+                if stage == _START3:
+                    stage, failed = _STOP, 1
+                else:
+                    restart_face = verts
+                break
+        # ---- next stage
+        if stage == _EXPAND:
+            if nmap == 0:
+                stage = _STOP
+            k += 1
+        elif stage != _STOP:
+            if restart_face >= 0:
+                restart = ti.Vector([restart_face & 1023, (restart_face >> 10) & 1023, restart_face >> 20])
+                stage = _START3
+            elif stage == _START4 and not _origin_in_tetra(_vert(ws, row, 0), _vert(ws, row, 1), _vert(ws, row, 2),
+                                                          _vert(ws, row, 3)):
+                stage, failed = _STOP, 1
+            elif stage == _START2 and not _ray_triangle(_vert(ws, row, 0), _vert(ws, row, 1), _vert(ws, row, 2),
+                                                       _vert(ws, row, 3), _vert(ws, row, 4)):
+                stage, failed = _STOP, 1
+            else:
+                nfaces = nnew
+                nmap = nnew
+                for f in range(nnew):
+                    ws.ccd_i[row + (_I_MAP + f,)] = f
+                    ws.ccd_i[row + (_I_FINDEX + f,)] = f
+                stage = _EXPAND
+    # ---- witness points: barycentrics of the origin's projection on the final face
+    face = ti.Vector([best_verts & 1023, (best_verts >> 10) & 1023, best_verts >> 20])
+    x1, x2 = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+    dist = 0.0
+    found = found and not failed
+    if found:
+        cofactors, m_max = _area_coords(_vert(ws, row, face[0]), _vert(ws, row, face[1]), _vert(ws, row, face[2]),
+                                        best_v)
+        w = cofactors / m_max
+        for s in ti.static(range(3)):
+            x1 += w[s] * ws.ccd_v[row + (_V_VERT1 + face[s],)]
+            x2 += w[s] * ws.ccd_v[row + (_V_VERT2 + face[s],)]
+        dist = -ti.sqrt(best_dist2)
+    return found, face, x1, x2, dist, cache1, cache2
+
+
+# ----------------------------------------------------------------------------- multi-contact
+# Features of a box: faces 0..5 = +x, -x, +y, -y, +z, -z; corners by bits (bit 0: +x, ...).
+
+@ti.func
+def _box_corner(shape: ti.template(), corner):
+    """World position of box corner `corner`."""
+    size = shape[4]
+    local = ti.Vector([ti.select(corner & 1, size[0], -size[0]), ti.select(corner & 2, size[1], -size[1]),
+                       ti.select(corner & 4, size[2], -size[2])])
+    return _rot(shape[3], local) + shape[2]
+
+
+@ti.func
+def _face_normal(shape: ti.template(), face, hull: ti.template()):
+    """World outward unit normal of box face / mesh polygon `face` (mesh-local id)."""
+    local = ti.Vector([0.0, 0.0, 0.0])
+    if shape[0] == BOX:
+        local[face >> 1] = 1.0 - 2.0 * (face & 1)
+    else:
+        local = hull.hull_poly_normal[hull.hull_polyadr[shape[1]] + face]
+    return _rot(shape[3], local)
+
+
+@ti.func
+def _faces_at(shape: ti.template(), dim, vids, direction, hull: ti.template()):
+    """The faces a feature of `dim` vertices (ids vids) may lie on, as MuJoCo's boxNormals /
+    meshNormals: returns (count, up to 3 face ids, from_map); from_map: the faces are the
+    vertex's polygons, read with `_face_of`. A box feature that does not pin a face picks the
+    face within ~5 deg of `direction` (world), if any."""
+    faces = ti.Vector([0, 0, 0])
+    count, from_map = 0, 0
+    if shape[0] == BOX:
+        if dim == 1:
+            for axis in ti.static(range(3)):
+                faces[axis] = 2 * axis + ti.select(vids[0] & (1 << axis), 0, 1)
+            count = 3
+        else:
+            for axis in ti.static(range(3)):
+                bit = 1 << axis
+                all_set = (vids[0] & bit) != 0 and (vids[1] & bit) != 0 and (dim == 2 or (vids[2] & bit) != 0)
+                none_set = (vids[0] & bit) == 0 and (vids[1] & bit) == 0 and (dim == 2 or (vids[2] & bit) == 0)
+                if all_set or none_set:
+                    faces[count] = 2 * axis + ti.select(all_set, 0, 1)
+                    count += 1
+            if count != 4 - dim:  # 1 face for 3 corners, 2 for an edge: else the face near `direction`
+                local = _rot_t(shape[3], direction)
+                local = local * (1.0 / ti.sqrt(_dot(local, local)))
+                count = 0
+                for face in range(6):
+                    if count == 0 and (1.0 - 2.0 * (face & 1)) * local[face >> 1] > _FACE_TOL:
+                        faces[0], count = face, 1
+    elif dim == 1:
+        count, from_map = hull.hull_vert_polynum[hull.hull_vertadr[shape[1]] + vids[0]], 1
+    else:
+        # polygons shared by the first two vertices (at most 2), then by the third
+        adr = hull.hull_vertadr[shape[1]]
+        a_adr, a_num = hull.hull_vert_polyadr[adr + vids[0]], hull.hull_vert_polynum[adr + vids[0]]
+        b_adr, b_num = hull.hull_vert_polyadr[adr + vids[1]], hull.hull_vert_polynum[adr + vids[1]]
+        for i in range(a_num):
+            for j in range(b_num):
+                if count < 2 and hull.hull_polymap[a_adr + i] == hull.hull_polymap[b_adr + j]:
+                    faces[count] = hull.hull_polymap[a_adr + i]
+                    count += 1
+        if dim == 3:
+            c_adr, c_num = hull.hull_vert_polyadr[adr + vids[2]], hull.hull_vert_polynum[adr + vids[2]]
+            shared = 0
+            for i in range(count):
+                for j in range(c_num):
+                    if shared == 0 and faces[i] == hull.hull_polymap[c_adr + j]:
+                        faces[0], shared = faces[i], 1
+            count = shared
+    return count, faces, from_map
+
+
+@ti.func
+def _face_of(shape: ti.template(), vid, faces, from_map, i, hull: ti.template()):
+    """Face i of a `_faces_at` list."""
+    face = faces[ti.min(i, 2)]
+    if from_map:
+        face = hull.hull_polymap[hull.hull_vert_polyadr[hull.hull_vertadr[shape[1]] + vid] + i]
+    return face
+
+
+@ti.func
+def _edge_at(shape: ti.template(), dim, vids, start, end2, i, hull: ti.template()):
+    """Edge i leaving a feature's first vertex (world `start`): the feature itself if it is an
+    edge (far end end2), else each box edge / each polygon's edge to the previous vertex at
+    the vertex. Returns (unit direction, far end (world), far end id); the count is
+    `_edge_count`."""
+    end, end_id = end2, vids[1]
+    if dim == 1:
+        if shape[0] == BOX:
+            end_id = vids[0] ^ (1 << i)
+            end = _box_corner(shape, end_id)
+        else:
+            adr = hull.hull_vertadr[shape[1]]
+            poly = hull.hull_polyadr[shape[1]] + hull.hull_polymap[hull.hull_vert_polyadr[adr + vids[0]] + i]
+            vadr, num = hull.hull_poly_vertadr[poly], hull.hull_poly_vertnum[poly]
+            for j in range(num):
+                if hull.hull_poly_vert[vadr + j] == vids[0]:
+                    end_id = hull.hull_poly_vert[vadr + _wrap(j + num - 1, num)]
+            end = _rot(shape[3], hull.hull_vert[adr + end_id]) + shape[2]
+    return _normalize(end - start), end, end_id
+
+
+@ti.func
+def _edge_count(shape: ti.template(), dim, vids, hull: ti.template()):
+    """Number of edges `_edge_at` enumerates (0 for a face)."""
+    count = ti.select(dim == 2, 1, 0)
+    if dim == 1:
+        count = 3
+        if shape[0] == MESH:
+            count = hull.hull_vert_polynum[hull.hull_vertadr[shape[1]] + vids[0]]
+    return count
+
+
+@ti.func
+def _put_face(shape: ti.template(), face, base, ws: ti.template(), row: ti.template(), hull: ti.template()):
+    """Write the vertices (world) of box face / mesh polygon `face` at workspace 3-vector slots
+    base.., in MuJoCo's order (a polygon reversed: clockwise seen from outside). Returns the
+    count, 0 for a polygon of more than POLYGON_MAX vertices."""
+    count = 4
+    if shape[0] == BOX:
+        for i in range(4):
+            corner = _pick(face * 4 + i, _BOX_CORNERS)
+            ws.ccd_v[row + (base + i,)] = _box_corner(shape, corner)
+    else:
+        adr = hull.hull_vertadr[shape[1]]
+        poly = hull.hull_polyadr[shape[1]] + face
+        vadr, count = hull.hull_poly_vertadr[poly], hull.hull_poly_vertnum[poly]
+        if count > POLYGON_MAX:
+            count = 0
+        for i in range(count):
+            v = hull.hull_vert[adr + hull.hull_poly_vert[vadr + count - 1 - i]]
+            ws.ccd_v[row + (base + i,)] = _rot(shape[3], v) + shape[2]
+    return count
+
+
+@ti.func
+def _quad_area(a, b, c, d):
+    """Area of quadrilateral abcd (half the norm of its two triangles' summed normals)."""
+    g = _cross(d - a, b - d) + _cross(c - b, a - c)
+    return 0.5 * ti.sqrt(_dot(g, g))
+
+
+@ti.func
+def _quad_at(ws: ti.template(), row: ti.template(), base, a, b, c, d):
+    """Area of the quadrilateral of workspace points base + (a, b, c, d)."""
+    return _quad_area(ws.ccd_v[row + (base + a,)], ws.ccd_v[row + (base + b,)], ws.ccd_v[row + (base + c,)],
+                      ws.ccd_v[row + (base + d,)])
+
+
+@ti.func
+def _largest_quad(ws: ti.template(), row: ti.template(), base, npoly):
+    """MuJoCo's greedy search for a large quadrilateral among npoly > 4 points at workspace
+    slots base..: for each first corner a, advance d while the area grows, and after each step
+    c, then b. Returns the 4 indices (relative to base)."""
+    a, b, c, d = 0, 1, 2, 3
+    best = ti.Vector([0, 1, 2, 3])
+    area = _quad_at(ws, row, base, a, b, c, d)
+    while a < npoly:
+        while True:
+            area2 = _quad_at(ws, row, base, a, b, c, _wrap(d + 1, npoly))
+            if not area2 > area:
+                break
+            area, d = area2, _wrap(d + 1, npoly)
+            best = ti.Vector([a, b, c, d])
+            while True:
+                area2 = _quad_at(ws, row, base, a, b, _wrap(c + 1, npoly), d)
+                if not area2 > area:
+                    break
+                area, c = area2, _wrap(c + 1, npoly)
+                best = ti.Vector([a, b, c, d])
+            while True:
+                area2 = _quad_at(ws, row, base, a, _wrap(b + 1, npoly), c, d)
+                if not area2 > area:
+                    break
+                area, b = area2, _wrap(b + 1, npoly)
+                best = ti.Vector([a, b, c, d])
+        if b == a:
+            b = _wrap(b + 1, npoly)
+            if c == b:
+                c = _wrap(c + 1, npoly)
+                if d == c:
+                    d = _wrap(d + 1, npoly)
+        a += 1
+    return best
+
+
+@ti.func
+def _clip(nclip, npoly, normal, direction, ws: ti.template(), row: ti.template()):
+    """MuJoCo's polygonClip: clip the polygon at workspace slots _V_POLY.. (npoly points, lines
+    tagged at _I_TAG) by the side planes of the face at _V_CLIP.. (nclip points, outward plane
+    normal `normal`), keep the points behind the face and pick at most 4: the largest quad of
+    more than 4, the two farthest of a clipped edge. Writes the witness pairs (clipped point,
+    and it moved |dist| along `direction`) with their distances and tags at the _WIT places.
+    Returns their number."""
+    is_edge = npoly == 2
+    face0 = ws.ccd_v[row + (_V_CLIP,)]
+    for e in range(nclip):  # side planes through each edge, containing the normal
+        a, b = ws.ccd_v[row + (_V_CLIP + e,)], ws.ccd_v[row + (_V_CLIP + _wrap(e + 1, nclip),)]
+        side = _normalize(_cross(b - a, (a + normal) - a))
+        ws.ccd_v[row + (_V_SIDE + e,)] = side
+        ws.ccd_f[row + (_F_SIDE + e,)] = _dot(side, a)
+    src = 0  # Sutherland-Hodgman, from one buffer of _CLIP points to the other
+    for e in range(nclip):
+        dst = _CLIP - src
+        nout = 0
+        a, side, offset = ws.ccd_v[row + (_V_CLIP + e,)], ws.ccd_v[row + (_V_SIDE + e,)], ws.ccd_f[row + (_F_SIDE + e,)]
+        for i in range(npoly):
+            j = _wrap(i + 1, npoly)
+            p, q = ws.ccd_v[row + (_V_POLY + src + i,)], ws.ccd_v[row + (_V_POLY + src + j,)]
+            p_in, q_in = _dot(p - a, side) > -_MINVAL, _dot(q - a, side) > -_MINVAL
+            if (p_in or q_in) and not (p_in and q_in):  # PQ crosses the side plane
+                pq = q - p
+                denom = _dot(side, pq)
+                if denom != 0:
+                    t = (offset - _dot(side, p)) / denom
+                    if t >= 0.0 and t <= 1.0 and nout < _CLIP:
+                        line = ws.ccd_i[row + (_I_TAG + 2 * (src + i) + 1,)]  # PQ's line
+                        ws.ccd_v[row + (_V_POLY + dst + nout,)] = p + t * pq
+                        ws.ccd_i[row + (_I_TAG + 2 * (dst + nout),)] = ti.select(p_in, line, 256 + e)
+                        ws.ccd_i[row + (_I_TAG + 2 * (dst + nout) + 1,)] = ti.select(p_in, 256 + e, line)
+                        nout += 1
+            if q_in and nout < _CLIP:
+                ws.ccd_v[row + (_V_POLY + dst + nout,)] = q
+                for t in ti.static(range(2)):
+                    ws.ccd_i[row + (_I_TAG + 2 * (dst + nout) + t,)] = ws.ccd_i[row + (_I_TAG + 2 * (src + j) + t,)]
+                nout += 1
+        src, npoly = dst, nout
+    kept = 0
+    for i in range(npoly):  # keep the points behind the clipping face
+        point = ws.ccd_v[row + (_V_POLY + src + i,)]
+        if _dot(point - face0, normal) <= 0:
+            ws.ccd_v[row + (_V_POLY + src + kept,)] = point
+            for t in ti.static(range(2)):
+                ws.ccd_i[row + (_I_TAG + 2 * (src + kept) + t,)] = ws.ccd_i[row + (_I_TAG + 2 * (src + i) + t,)]
+            kept += 1
+    picks = ti.Vector([0, 1, 2, 3])
+    nx = ti.min(kept, 4)
+    if kept > 4:
+        picks = _largest_quad(ws, row, _V_POLY + src, kept)
+    elif is_edge and kept > 2:  # a clipped edge: its two farthest points
+        nx = 2
+        farthest = 0.0
+        for i in range(kept):
+            for j in range(i + 1, kept):
+                diff = ws.ccd_v[row + (_V_POLY + src + j,)] - ws.ccd_v[row + (_V_POLY + src + i,)]
+                if _dot(diff, diff) > farthest:
+                    farthest = _dot(diff, diff)
+                    picks[0], picks[1] = i, j
+    for i in range(nx):
+        point = ws.ccd_v[row + (_V_POLY + src + picks[i],)]
+        d = _dot(point - face0, normal)
+        ws.ccd_v[row + (_V_WIT + i,)] = point + direction * (-ti.abs(d))
+        ws.ccd_v[row + (_V_WIT + 4 + i,)] = point
+        ws.ccd_f[row + (_F_WIT + i,)] = d
+        for t in ti.static(range(2)):
+            ws.ccd_i[row + (_I_WIT + i * FEATURE_SIZE + 3 + t,)] = ws.ccd_i[row + (_I_TAG + 2 * (src + picks[i]) + t,)]
+    return nx
+
+
+@ti.func
+def _simplex_dim(vids, points):
+    """Distinct ids among a feature's 3 vertex ids (3 x 3 world points): its dimension 1, 2 or
+    3; for 2, the distinct pair moved to the front (ids and points)."""
+    dim = 3
+    if vids[0] == vids[1]:
+        dim = 1
+        if vids[0] != vids[2]:
+            dim = 2
+            vids[1] = vids[2]
+            for c in ti.static(range(3)):
+                points[1, c] = points[2, c]
+    elif vids[2] == vids[0] or vids[2] == vids[1]:
+        dim = 2
+    return dim, vids, points
+
+
+@ti.func
+def _multicontact(shape1: ti.template(), shape2: ti.template(), slots, nslots, x1, x2, hull: ti.template(),
+                  ws: ti.template(), row: ti.template()):
+    """MuJoCo's multi-contact between two polytopes (boxes, meshes): from the features of the
+    final EPA face on each geom (workspace slots `slots`), find two facing faces (normals within
+    ~5 deg), else an edge of the lower-dimensional feature parallel to a face of the other geom,
+    and clip one by the other (`_clip`). Writes up to 4 witness pairs at the _WIT places with
+    KIND_CLIP features. Returns their number, 0 when nothing aligns (keep the EPA contact)."""
+    nx = 0
+    polytopes = (shape1[0] == BOX or shape1[0] == MESH) and (shape2[0] == BOX or shape2[0] == MESH)
+    if polytopes and not ((shape1[0] == MESH and hull.hull_polynum[shape1[1]] == 0)
+                          or (shape2[0] == MESH and hull.hull_polynum[shape2[1]] == 0)):
+        s = ti.Vector([slots[0], slots[ti.select(nslots >= 2, 1, 0)], slots[ti.select(nslots > 2, 2, 0)]])
+        ids1 = ti.Vector([ws.ccd_i[row + (_I_ID1 + s[k],)] for k in ti.static(range(3))])
+        ids2 = ti.Vector([ws.ccd_i[row + (_I_ID2 + s[k],)] for k in ti.static(range(3))])
+        pts1 = ti.Matrix.rows([ws.ccd_v[row + (_V_VERT1 + s[k],)] for k in ti.static(range(3))])
+        pts2 = ti.Matrix.rows([ws.ccd_v[row + (_V_VERT2 + s[k],)] for k in ti.static(range(3))])
+        dim1, ids1, pts1 = _simplex_dim(ids1, pts1)
+        dim2, ids2, pts2 = _simplex_dim(ids2, pts2)
+        count1, faces1, map1 = _faces_at(shape1, dim1, ids1, x1 - x2, hull)
+        count2, faces2, map2 = _faces_at(shape2, dim2, ids2, x2 - x1, hull)
+        # facing faces: the first pair (i, j) in order
+        pair_i, pair_j, edge_geom = -1, -1, 0
+        for i in range(count1):
+            normal1 = _face_normal(shape1, _face_of(shape1, ids1[0], faces1, map1, i, hull), hull)
+            for j in range(count2):
+                if pair_i < 0:
+                    normal2 = _face_normal(shape2, _face_of(shape2, ids2[0], faces2, map2, j, hull), hull)
+                    if _dot(normal1, normal2) < -_FACE_TOL:
+                        pair_i, pair_j = i, j
+        # else an edge of the lower-dimensional feature parallel to one of the other's faces
+        start = ti.Vector([pts1[0, 0], pts1[0, 1], pts1[0, 2]])
+        end2 = ti.Vector([pts1[1, 0], pts1[1, 1], pts1[1, 2]])
+        if pair_i < 0 and dim1 < 3 and dim1 <= dim2:
+            edge_geom = 1
+        elif pair_i < 0 and dim2 < 3:
+            edge_geom = 2
+            start = ti.Vector([pts2[0, 0], pts2[0, 1], pts2[0, 2]])
+            end2 = ti.Vector([pts2[1, 0], pts2[1, 1], pts2[1, 2]])
+        if edge_geom > 0:
+            nedges = ti.select(edge_geom == 1, _edge_count(shape1, dim1, ids1, hull),
+                               _edge_count(shape2, dim2, ids2, hull))
+            nfaces = ti.select(edge_geom == 1, count2, count1)
+            for f in range(nfaces):
+                face_normal = ti.Vector([0.0, 0.0, 0.0])
+                if edge_geom == 1:
+                    face_normal = _face_normal(shape2, _face_of(shape2, ids2[0], faces2, map2, f, hull), hull)
+                else:
+                    face_normal = _face_normal(shape1, _face_of(shape1, ids1[0], faces1, map1, f, hull), hull)
+                for e in range(nedges):
+                    if pair_i < 0:
+                        direction = ti.Vector([0.0, 0.0, 0.0])
+                        if edge_geom == 1:
+                            direction, _, _ = _edge_at(shape1, dim1, ids1, start, end2, e, hull)
+                        else:
+                            direction, _, _ = _edge_at(shape2, dim2, ids2, start, end2, e, hull)
+                        if ti.abs(_dot(direction, face_normal)) < _EDGE_TOL:
+                            pair_i, pair_j = e, f
+        if pair_i >= 0:
+            # the clipping face (`clip_shape` = 1 or 2) and the clipped polygon
+            clip_face, clipped_face = -1, -1
+            nclip, npoly = 0, 2
+            normal, direction = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+            edge_a, edge_b = -1, -1
+            if edge_geom == 0:
+                clip_face = _face_of(shape1, ids1[0], faces1, map1, pair_i, hull)
+                clipped_face = _face_of(shape2, ids2[0], faces2, map2, pair_j, hull)
+                nclip = _put_face(shape1, clip_face, _V_CLIP, ws, row, hull)
+                npoly = _put_face(shape2, clipped_face, _V_POLY, ws, row, hull)
+                normal = _face_normal(shape1, clip_face, hull)
+                direction = _face_normal(shape2, clipped_face, hull)
+            else:
+                end = ti.Vector([0.0, 0.0, 0.0])
+                if edge_geom == 1:
+                    _, end, edge_b = _edge_at(shape1, dim1, ids1, start, end2, pair_i, hull)
+                    edge_a = ids1[0]
+                    clip_face = _face_of(shape2, ids2[0], faces2, map2, pair_j, hull)
+                    nclip = _put_face(shape2, clip_face, _V_CLIP, ws, row, hull)
+                    normal = _face_normal(shape2, clip_face, hull)
+                else:
+                    _, end, edge_b = _edge_at(shape2, dim2, ids2, start, end2, pair_i, hull)
+                    edge_a = ids2[0]
+                    clip_face = _face_of(shape1, ids1[0], faces1, map1, pair_j, hull)
+                    nclip = _put_face(shape1, clip_face, _V_CLIP, ws, row, hull)
+                    normal = _face_normal(shape1, clip_face, hull)
+                ws.ccd_v[row + (_V_POLY,)] = start
+                ws.ccd_v[row + (_V_POLY + 1,)] = end
+                direction = -normal
+            for v in range(npoly):  # point v of the clipped polygon joins its edges v - 1 and v
+                ws.ccd_i[row + (_I_TAG + 2 * v,)] = _wrap(v + npoly - 1, npoly)
+                ws.ccd_i[row + (_I_TAG + 2 * v + 1,)] = v
+            if nclip >= 3 and npoly >= 2:
+                nx = _clip(nclip, npoly, normal, direction, ws, row)
+            for c in range(nx):
+                if edge_geom == 1:  # the clipped edge is geom 1's: swap the witnesses
+                    w1, w2 = ws.ccd_v[row + (_V_WIT + c,)], ws.ccd_v[row + (_V_WIT + 4 + c,)]
+                    ws.ccd_v[row + (_V_WIT + c,)], ws.ccd_v[row + (_V_WIT + 4 + c,)] = w2, w1
+                base = _I_WIT + c * FEATURE_SIZE
+                ws.ccd_i[row + (base,)] = KIND_CLIP
+                ws.ccd_i[row + (base + 1,)] = clip_face
+                ws.ccd_i[row + (base + 2,)] = clipped_face
+                ws.ccd_i[row + (base + 5,)] = edge_a
+                ws.ccd_i[row + (base + 6,)] = edge_b
+                ws.ccd_i[row + (base + 7,)] = edge_geom
+    return nx
+
+
+# ----------------------------------------------------------------------------- one CCD run
+
+@ti.func
+def _write_witness(ws: ti.template(), row: ti.template(), i, x1, x2, dist, kind, slots, nslots):
+    """Store witness pair i (world points on geom 1 and 2), its distance and its feature row
+    (kind, then the ids on geom 1 and 2 of the vertices in workspace slots `slots[:nslots]`)."""
+    ws.ccd_v[row + (_V_WIT + i,)] = x1
+    ws.ccd_v[row + (_V_WIT + 4 + i,)] = x2
+    ws.ccd_f[row + (_F_WIT + i,)] = dist
+    base = _I_WIT + i * FEATURE_SIZE
+    ws.ccd_i[row + (base,)] = kind
+    ws.ccd_i[row + (base + 7,)] = nslots
+    for s in range(3):
+        id1, id2 = -1, -1
+        if s < nslots:
+            id1, id2 = ws.ccd_i[row + (_I_ID1 + slots[s],)], ws.ccd_i[row + (_I_ID2 + slots[s],)]
+        ws.ccd_i[row + (base + 1 + 2 * s,)] = id1
+        ws.ccd_i[row + (base + 2 + 2 * s,)] = id2
+
+
+@ti.func
+def _ccd(shape1: ti.template(), shape2: ti.template(), multi, hull: ti.template(), ws: ti.template(),
+         row: ti.template()):
+    """One MuJoCo 4.0 mjc_ccd run. With a sphere or capsule, or a margin, GJK first measures the
+    distance between the cores (sphere -> point, capsule -> segment, margins removed); if they
+    are apart the contact is their closest-point pair inflated by the radii and half margins.
+    Otherwise (deep) GJK + EPA on the full shapes. Then multi-contact when `multi`.
+    Writes nx witness pairs (points on each geom, distance without margin, feature) at the
+    workspace's _WIT places; the run yields contacts when their smallest distance is < 0.
+    Returns nx."""
+    kind1, kind2, margin = shape1[0], shape2[0], shape1[5]
+    round1 = kind1 == SPHERE or kind1 == CAPSULE
+    round2 = kind2 == SPHERE or kind2 == CAPSULE
+    full1 = 0.5 * margin + ti.select(round1, shape1[4][0], 0.0)
+    full2 = 0.5 * margin + ti.select(round2, shape2[4][0], 0.0)
+    cache1, cache2 = -1, -1
+    nx, done = 0, 0
+    for core in range(2):  # pass 0: cores without margin (if any); pass 1: the full shapes
+        if done or (core == 0 and not (round1 or round2 or margin > 0)):
+            continue
+        shrink1, shrink2 = core == 0 and round1, core == 0 and round2
+        s1 = (ti.select(shrink1, ti.select(kind1 == SPHERE, _POINT, _SEGMENT), kind1), shape1[1], shape1[2],
+              shape1[3], shape1[4], ti.select(core == 0, 0.0, margin))
+        s2 = (ti.select(shrink2, ti.select(kind2 == SPHERE, _POINT, _SEGMENT), kind2), shape2[1], shape2[2],
+              shape2[3], shape2[4], ti.select(core == 0, 0.0, margin))
+        cutoff = ti.select(core == 0, full1 + full2, 0.0)
+        n, x1, x2, dist, separated, cache1, cache2 = _gjk(s1, s2, cutoff > 0, cutoff, cache1, cache2, hull, ws, row)
+        kind, slots, nslots = KIND_CORE, ti.Vector([0, 1, 2]), n
+        if core == 0:
+            if dist > CCD_TOLERANCE:  # shallow: inflate the cores' closest points
+                done = 1
+                if full1 != 0 or full2 != 0:
+                    normal = _normalize(x2 - x1)
+                    x1 += full1 * normal
+                    x2 += (-full2) * normal
+                    dist -= full1 + full2
+                nx = 1
+        else:
+            done = 1
+            if dist <= CCD_TOLERANCE and n > 1 and not separated:
+                found, face, x1, x2, dist, cache1, cache2 = _epa(s1, s2, n, cache1, cache2, hull, ws, row)
+                nx, kind, slots, nslots = found, KIND_EPA, face, 3
+        if nx == 1:
+            _write_witness(ws, row, 0, x1, x2, dist, kind, slots, nslots)
+            if multi and kind == KIND_EPA:  # MuJoCo 4.0's clipping for shallow contacts is not reproduced
+                nx = ti.max(nx, _multicontact(s1, s2, slots, nslots, x1, x2, hull, ws, row))
+    return nx
+
+
+# ----------------------------------------------------------------------------- colliders
+
+@ti.func
+def _budget(type1, type2):
+    """MuJoCo 4.0's contact budget of one convex pair: 4 between boxes, meshes and cylinders, 2
+    for a capsule against a capsule or one of those, else 1."""
+    flat1 = type1 == BOX or type1 == MESH or type1 == CYLINDER
+    flat2 = type2 == BOX or type2 == MESH or type2 == CYLINDER
+    budget = 1
+    if flat1 and flat2:
+        budget = 4
+    elif (type1 == CAPSULE and (flat2 or type2 == CAPSULE)) or (type2 == CAPSULE and flat1):
+        budget = 2
+    return budget
+
+
+@ti.func
+def convex_convex(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, mesh2, margin,
+                  hull: ti.template(), ws: ti.template(), row: ti.template()):
+    """Contacts between two convex geoms (MuJoCo 4.0's mjc_Convex, nativeccd), for the pairs
+    sphere-mesh, capsule-cylinder, capsule-mesh, cylinder-cylinder, cylinder-box, cylinder-mesh,
+    box-mesh, mesh-mesh (type1 <= type2, MuJoCo's type codes).
+
+    pos (3,) m and rot (3, 3) (columns = geom axes) are world poses, size MuJoCo's geom sizes,
+    mesh the mesh id in `hull` (-1 if not a mesh), margin (m) the pair's margin (+ gap); hull
+    holds the meshes (MeshHulls' arrays), ws[row..., :] this env's workspace (SCRATCH).
+    Returns count (0..CONVEX_MAX), position (CONVEX_MAX, 3) world m, normal (CONVEX_MAX, 3) from
+    geom 1 to geom 2, dist (CONVEX_MAX,) m, feature (CONVEX_MAX, FEATURE_SIZE) (module doc).
+    """
+    position, normal = ti.Matrix.zero(float, CONVEX_MAX, 3), ti.Matrix.zero(float, CONVEX_MAX, 3)
+    dist = ti.Vector.zero(float, CONVEX_MAX)
+    feature = ti.Matrix.zero(ti.i32, CONVEX_MAX, FEATURE_SIZE)
+    nx = _ccd((type1, mesh1, pos1, rot1, size1, margin), (type2, mesh2, pos2, rot2, size2, margin),
+              _budget(type1, type2) > 1, hull, ws, row)
+    deepest = _BIG
+    for i in range(nx):
+        deepest = ti.min(deepest, ws.ccd_f[row + (_F_WIT + i,)])
+    count = 0
+    if deepest < 0:
+        count = nx
+        for i in ti.static(range(CONVEX_MAX)):
+            if i < nx:
+                x1, x2 = ws.ccd_v[row + (_V_WIT + i,)], ws.ccd_v[row + (_V_WIT + 4 + i,)]
+                point, unit = (x1 + x2) * 0.5, _normalize(x1 - x2)
+                for c in ti.static(range(3)):
+                    position[i, c], normal[i, c] = point[c], unit[c]
+                dist[i] = margin + ws.ccd_f[row + (_F_WIT + i,)]
+                for c in ti.static(range(FEATURE_SIZE)):
+                    feature[i, c] = ws.ccd_i[row + (_I_WIT + i * FEATURE_SIZE + c,)]
+    return count, position, normal, dist, feature
+
+
+@ti.func
+def _polygon_point(hull: ti.template(), vadr, padr, num, i):
+    """Mesh-frame vertex number i (wrapped) of the polygon whose vertex list is at padr."""
+    return hull.hull_vert[vadr + hull.hull_poly_vert[padr + _wrap(i, num)]]
+
+
+@ti.func
+def _quad_on(hull: ti.template(), vadr, padr, num, s, b, c, d):
+    """Area of quadrilateral (s, b, c, d) of a polygon: half the norm of its diagonals' cross
+    product (mesh frame)."""
+    a_c = _polygon_point(hull, vadr, padr, num, s) - _polygon_point(hull, vadr, padr, num, c)
+    b_d = _polygon_point(hull, vadr, padr, num, b) - _polygon_point(hull, vadr, padr, num, d)
+    g = _cross(a_c, b_d)
+    return 0.5 * ti.sqrt(_dot(g, g))
+
+
+@ti.func
+def plane_mesh(pos1, rot1, size1, pos2, rot2, size2, mesh2, margin, hull: ti.template()):
+    """Contacts between a plane (geom 1: normal = its z axis, through pos1) and a mesh (geom 2),
+    as MuJoCo 4.0's mjc_PlaneConvex (read from its compiled code): the mesh's support vertex
+    along -normal, then the other vertices of the hull polygon at it that faces the plane most
+    (for more than 4, a large quadrilateral through the support vertex, grown greedily), those
+    within `margin` of the plane and on the plane's side of the mesh centre. Contacts at the
+    vertices moved half their depth along the normal.
+
+    Arguments as convex_convex (size1, size2 unused, no workspace); returns as convex_convex,
+    budget PLANE_MESH_MAX; features KIND_PLANE with the vertex id.
+    """
+    position = ti.Matrix.zero(float, PLANE_MESH_MAX, 3)
+    normal_out = ti.Matrix.zero(float, PLANE_MESH_MAX, 3)
+    dist = ti.Vector.zero(float, PLANE_MESH_MAX)
+    feature = ti.Matrix.zero(ti.i32, PLANE_MESH_MAX, FEATURE_SIZE)
+    normal = ti.Vector([rot1[0, 2], rot1[1, 2], rot1[2, 2]])
+    local_n = _rot_t(rot2, normal)
+    vadr = hull.hull_vertadr[mesh2]
+    deepest = _mesh_support(mesh2, _rot_t(rot2, -normal), -1, hull)
+    count = 0
+    point = _rot(rot2, hull.hull_vert[vadr + deepest]) + pos2
+    depth = _dot(normal, point - pos1)
+    if depth <= margin:
+        # the polygon at the support vertex that faces the plane most
+        face, facing = -1, 1.0
+        padr = hull.hull_vert_polyadr[vadr + deepest]
+        for i in range(hull.hull_vert_polynum[vadr + deepest]):
+            poly = hull.hull_polymap[padr + i]
+            d = _dot(local_n, hull.hull_poly_normal[hull.hull_polyadr[mesh2] + poly])
+            if facing > d:
+                face = poly
+            facing = ti.min(d, facing)
+        picks = ti.Vector([0, 1, 2, 3])
+        num = 1
+        vert_adr = 0
+        if face >= 0:
+            poly = hull.hull_polyadr[mesh2] + face
+            vert_adr, num = hull.hull_poly_vertadr[poly], hull.hull_poly_vertnum[poly]
+            s = 0
+            for j in range(num):
+                if s == 0 and hull.hull_poly_vert[vert_adr + j] == deepest:
+                    s = j
+            picks = ti.Vector([s, _wrap(s + 1, num), _wrap(s + 2, num), _wrap(s + 3, num)])
+            if num >= 5:  # grow a large quadrilateral s, b, c, d: advance d, then c, then b
+                b, c, d = picks[1], picks[2], picks[3]
+                area = _quad_on(hull, vadr, vert_adr, num, s, b, c, d)
+                while True:
+                    area2 = _quad_on(hull, vadr, vert_adr, num, s, b, c, _wrap(d + 1, num))
+                    if area >= area2:
+                        break
+                    d, area = _wrap(d + 1, num), area2
+                    while True:
+                        area2 = _quad_on(hull, vadr, vert_adr, num, s, b, _wrap(c + 1, num), d)
+                        if not area < area2:
+                            break
+                        c, area = _wrap(c + 1, num), area2
+                    while True:
+                        area2 = _quad_on(hull, vadr, vert_adr, num, s, _wrap(b + 1, num), c, d)
+                        if not area < area2:
+                            break
+                        b, area = _wrap(b + 1, num), area2
+                picks = ti.Vector([s, b, c, d])
+                num = 4
+        for k in ti.static(range(PLANE_MESH_MAX)):
+            vertex = deepest
+            keep = k == 0
+            if k > 0 and k < num:
+                vertex = hull.hull_poly_vert[vert_adr + picks[k]]
+                point = _rot(rot2, hull.hull_vert[vadr + vertex]) + pos2
+                depth = _dot(normal, point - pos1)
+                keep = depth <= margin and not _dot(normal, point - pos2) > 0
+            if keep:
+                contact = point + normal * (depth * -0.5)
+                for c in ti.static(range(3)):
+                    position[count, c], normal_out[count, c] = contact[c], normal[c]
+                dist[count] = depth
+                feature[count, 0], feature[count, 1] = KIND_PLANE, vertex
+                count += 1
+    return count, position, normal_out, dist, feature
