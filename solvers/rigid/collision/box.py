@@ -2,7 +2,7 @@
 
 MuJoCo's mjc_SphereBox, mjc_CapsuleBox and mjc_BoxBox (engine_collision_box.c), reproduced
 contact for contact: same count, order, positions, normals and distances. Every collider has
-the signature and return of ``contact/interfaces.md``::
+the signature and return described in the package docstring (``collision/__init__.py``)::
 
     count, position, normal, dist, feature = box_box(pos1, rot1, size1, pos2, rot2, size2, margin)
 

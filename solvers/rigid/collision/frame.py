@@ -1,6 +1,6 @@
 """Contact frame and small geometry helpers shared by the colliders.
 
-Conventions (``contact/interfaces.md``): vectors are world-frame 3-vectors (m for points),
+Conventions (the package docstring): vectors are world-frame 3-vectors (m for points),
 rotations are 3x3 matrices whose columns are a geom's axes in the world. Where a result decides
 a branch (a distance against a margin, a clamp), the arithmetic follows MuJoCo's order of
 operations so the same branch is taken; the build runs without fast math, so these functions

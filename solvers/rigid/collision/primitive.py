@@ -5,7 +5,7 @@ mjc_SphereCapsule, mjc_SphereCylinder and mjc_CapsuleCapsule (engine_collision_p
 capsule–capsule as MuJoCo 4.0 does it, which is not that file: see its section), reproduced
 contact for contact: same count, order, positions, normals and distances, to the bit in float64.
 
-Every collider has the signature and return of ``contact/interfaces.md``::
+Every collider has the signature and return described in the package docstring (``collision/__init__.py``)::
 
     count, position, normal, dist, feature = plane_box(pos1, rot1, size1, pos2, rot2, size2, margin)
 
