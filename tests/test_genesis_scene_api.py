@@ -1,7 +1,6 @@
 """Genesis's scene-level API: reset(state, envs_idx), viewer/vis options and build/step
 arguments, URDF(merge_fixed_links, links_to_keep), the no-contact warning and the friction
 kept in the model (docs/genesis_api.md)."""
-import logging
 import re
 
 import numpy as np

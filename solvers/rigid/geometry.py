@@ -10,7 +10,6 @@ import numpy as np
 import trimesh
 
 from ..core import AssetError
-from .shapes import quat_to_mat
 
 # MuJoCo's mjtGeom codes (its collision table is indexed by them)
 PLANE, SPHERE, CAPSULE, CYLINDER, BOX, MESH = 0, 2, 3, 5, 6, 7
@@ -115,7 +114,3 @@ def candidate_pairs(geom_type, geom_link, link_parent, link_static, link_entity,
             pairs.append((a, b) if geom_type[a] <= geom_type[b] else (b, a))
     return np.array(pairs, dtype=np.int32).reshape(-1, 2)
 
-
-def world_rotations(quat):
-    """(G, 3, 3) rotation matrices of (G, 4) quaternions (columns: the frame's axes)."""
-    return np.array([quat_to_mat(q) for q in quat]).reshape(-1, 3, 3)
