@@ -31,6 +31,7 @@ class ContactScene:
     impratio: float = 1.0
     solref: tuple = None   # every geom's, None: MuJoCo's default
     solimp: tuple = None
+    sol_per_geom: list = None  # one (solref, solimp) 7-tuple per geom (plane first): overrides solref/solimp
     n_envs: int = 0
     options: dict = field(default_factory=dict)
 
@@ -55,12 +56,27 @@ def build_ours(spec):
     plane = scene.add_entity(gs.morphs.Plane()) if spec.plane else None
     entities = [scene.add_entity(_morph(b)) for b in spec.bodies]
     scene.build(n_envs=spec.n_envs)
-    if spec.solref is not None or spec.solimp is not None:
-        solref = spec.solref or (0.02, 1.0)
-        solimp = spec.solimp or (0.9, 0.95, 0.001, 0.5, 2.0)
-        for entity in ([plane] if spec.plane else []) + entities:
-            entity.set_sol_params([*solref, *solimp])
+    for entity, params in zip(([plane] if spec.plane else []) + entities, _sol_params(spec)):
+        if params is not None:
+            entity.set_sol_params(params)
     return scene, entities
+
+
+def _sol_params(spec):
+    """Each geom's 7 sol params (None: MuJoCo's defaults), plane first."""
+    n = len(spec.bodies) + bool(spec.plane)
+    if spec.sol_per_geom is not None:
+        return list(spec.sol_per_geom)
+    if spec.solref is None and spec.solimp is None:
+        return [None] * n
+    return [(*(spec.solref or (0.02, 1.0)), *(spec.solimp or (0.9, 0.95, 0.001, 0.5, 2.0)))] * n
+
+
+def _sol_xml(params):
+    if params is None:
+        return ""
+    return f' solref="{params[0]} {params[1]}" solimp="' + " ".join(str(v) for v in params[2:]) + '"'
+
 
 
 def _geom_xml(body):
@@ -74,14 +90,11 @@ def _geom_xml(body):
 
 def build_mujoco(spec, model):
     """MuJoCo's model of the scene, mass properties from our RigidModel ``model``."""
-    sol = ""
-    if spec.solref is not None:
-        sol += f' solref="{spec.solref[0]} {spec.solref[1]}"'
-    if spec.solimp is not None:
-        sol += ' solimp="' + " ".join(str(v) for v in spec.solimp) + '"'
+    sols = [_sol_xml(params) for params in _sol_params(spec)]
+    plane_sol, body_sols = (sols[0], sols[1:]) if spec.plane else ("", sols)
     moving = [l for l in range(model.n_links) if model.link_jtype[l] != 0]
     bodies = []
-    for k, (body, link) in enumerate(zip(spec.bodies, moving)):
+    for k, (body, link, sol) in enumerate(zip(spec.bodies, moving, body_sols)):
         inertia = model.link_inertia0[link]
         com = model.link_com[link]
         bodies.append(
@@ -89,7 +102,7 @@ def build_mujoco(spec, model):
             f'<freejoint/><inertial pos="{com[0]} {com[1]} {com[2]}" mass="{model.link_mass0[link]}" '
             f'fullinertia="{inertia[0, 0]} {inertia[1, 1]} {inertia[2, 2]} {inertia[0, 1]} {inertia[0, 2]} '
             f'{inertia[1, 2]}"/><geom {_geom_xml(body)}{sol}/></body>')
-    plane = f'<geom type="plane" size="0 0 1"{sol}/>' if spec.plane else ""
+    plane = f'<geom type="plane" size="0 0 1"{plane_sol}/>' if spec.plane else ""
     xml = (f'<mujoco><option timestep="{spec.dt}" cone="{spec.cone}" impratio="{spec.impratio}"/>'
            f'<worldbody>{plane}{"".join(bodies)}</worldbody></mujoco>')
     return mujoco.MjModel.from_xml_string(xml)

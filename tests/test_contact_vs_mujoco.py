@@ -128,3 +128,12 @@ def test_body_pairs_step_like_mujoco(f64, pair, cone):
 def test_non_default_parameters_step_like_mujoco(f64, cone):
     _check_step(ContactScene([Body("box", (0.2, 0.3, 0.1))], cone=cone, impratio=3.0, solref=(0.05, 0.7),
                              solimp=(0.8, 0.99, 0.004, 0.3, 3.0)))
+
+
+@pytest.mark.parametrize("form", ["standard", "direct"])
+def test_two_geoms_parameters_mix_like_mujoco(f64, form):
+    """A contact averages its geoms' solimp, averages their standard solref or takes the smaller
+    direct one, as MuJoCo mixes two geoms of equal solmix and priority."""
+    plane, box = {"standard": ((0.03, 0.8), (0.015, 1.2)), "direct": ((-8000.0, -60.0), (-12000.0, -40.0))}[form]
+    params = [(*plane, 0.85, 0.97, 0.002, 0.4, 2.0), (*box, 0.7, 0.9, 0.0005, 0.6, 3.0)]
+    _check_step(ContactScene([Body("box", (0.2, 0.3, 0.1))], sol_per_geom=params))
