@@ -9,14 +9,11 @@ import numpy as np
 import torch
 
 from ..core import runtime
-from .collision.detect import COLLIDERS
-from .geometry import BOX, PLANE
+from .collision.detect import BUDGET, COLLIDERS
 
 _logger = logging.getLogger("genesis_lite")
 
 DEFAULT_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)  # MuJoCo's (d0, dmax, width m, midpoint, power)
-# MuJoCo's contact budget of a pair (colliders in collision/), by (type 1, type 2); others: one
-BUDGET = {(PLANE, 3): 2, (PLANE, 5): 4, (PLANE, BOX): 4, (3, 3): 2, (3, BOX): 2, (BOX, BOX): 8}
 MAX_PER_MOVING_LINK = 8  # default max_contacts: a box resting on a face touches at up to 8 points
 MIN_CONTACTS = 16
 
@@ -41,7 +38,8 @@ def without_uncollidable(model, names):
 
 
 def _pair_budget(model, k):
-    return BUDGET.get((int(model.geom_type[model.pair_geom1[k]]), int(model.geom_type[model.pair_geom2[k]])), 1)
+    """Contacts pair k's collider may give (every pair left has a collider: without_uncollidable)."""
+    return BUDGET[int(model.geom_type[model.pair_geom1[k]]), int(model.geom_type[model.pair_geom2[k]])]
 
 
 def capacity(model, options):

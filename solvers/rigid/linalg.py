@@ -70,7 +70,8 @@ def solve_env(d: ti.template(), s, e):
     if d.row_capacity > 0 and undamped and d.n_efc[s, e, 0] > 0:
         for i in range(d.n_dofs):
             d.qacc[s, e, i] = d.qacc_constrained[s, e, i]
-    elif d.row_capacity > 0:  # no rows: the next solve starts from this acceleration (MuJoCo's rule)
+    elif d.row_capacity > 0 and d.n_efc[s, e, 0] == 0:  # the next solve starts from this acceleration
+        # (MuJoCo's rule; after a solve, constraint_env already stored the solve's own)
         for i in range(d.n_dofs):
             d.qacc_warmstart[e, i] = d.qacc[s, e, i]
 

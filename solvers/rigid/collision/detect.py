@@ -65,14 +65,22 @@ def _posed(collider):
     return call
 
 
-# (type 1, type 2) → (collider, whether MuJoCo's frame takes geom 2's axis as its first tangent)
-PRIMITIVES = {(PLANE, SPHERE): (primitive.plane_sphere, False), (PLANE, CAPSULE): (primitive.plane_capsule, True),
-              (PLANE, CYLINDER): (primitive.plane_cylinder, False), (PLANE, BOX): (primitive.plane_box, False),
-              (SPHERE, SPHERE): (primitive.sphere_sphere, False), (SPHERE, CAPSULE): (primitive.sphere_capsule, False),
-              (SPHERE, CYLINDER): (primitive.sphere_cylinder, False),
-              (CAPSULE, CAPSULE): (primitive.capsule_capsule, False), (SPHERE, BOX): (box.sphere_box, False),
-              (CAPSULE, BOX): (box.capsule_box, False), (BOX, BOX): (box.box_box, False)}
-COLLIDERS = {kind: (_posed(collider), tangent) for kind, (collider, tangent) in PRIMITIVES.items()}
+# (type 1, type 2) → (collider, its contact budget, whether MuJoCo's frame takes geom 2's axis as
+# its first tangent)
+P, B = primitive, box
+PRIMITIVES = {(PLANE, SPHERE): (P.plane_sphere, P.PLANE_SPHERE_MAX, False),
+              (PLANE, CAPSULE): (P.plane_capsule, P.PLANE_CAPSULE_MAX, True),
+              (PLANE, CYLINDER): (P.plane_cylinder, P.PLANE_CYLINDER_MAX, False),
+              (PLANE, BOX): (P.plane_box, P.PLANE_BOX_MAX, False),
+              (SPHERE, SPHERE): (P.sphere_sphere, P.SPHERE_SPHERE_MAX, False),
+              (SPHERE, CAPSULE): (P.sphere_capsule, P.SPHERE_CAPSULE_MAX, False),
+              (SPHERE, CYLINDER): (P.sphere_cylinder, P.SPHERE_CYLINDER_MAX, False),
+              (CAPSULE, CAPSULE): (P.capsule_capsule, P.CAPSULE_CAPSULE_MAX, False),
+              (SPHERE, BOX): (B.sphere_box, B.SPHERE_BOX_MAX, False),
+              (CAPSULE, BOX): (B.capsule_box, B.CAPSULE_BOX_MAX, False),
+              (BOX, BOX): (B.box_box, B.BOX_BOX_MAX, False)}
+COLLIDERS = {kind: (_posed(collider), tangent) for kind, (collider, _, tangent) in PRIMITIVES.items()}
+BUDGET = {kind: budget for kind, (_, budget, _) in PRIMITIVES.items()}  # contacts a pair may give
 
 
 @ti.func
