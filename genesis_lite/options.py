@@ -70,15 +70,17 @@ class RigidOptions:
     enable_collision: contacts between collision shapes. Pair rules: enable_self_collision (two
         links of one entity), enable_adjacent_collision (parent and child links),
         enable_neutral_collision (pairs of one entity already touching at the initial pose).
-    enable_joint_limit: soft joint-limit forces (time constant limit_timeconst s, critically damped).
+    enable_joint_limit: joint limits, as constraint rows of the contact solve (time constant
+        constraint_timeconst, critically damped, MuJoCo's default solimp).
     constraint_solver: Newton (CG is not implemented). iterations (None: 25, or MuJoCo's 100
         under enable_mujoco_compatibility), tolerance (None: 1e-8 in float64, 1e-5 in float32),
         ls_iterations, ls_tolerance: the solve's limits.
     friction_cone: pyramidal or elliptic. impratio: friction-to-normal impedance ratio (None: 1
         with the pyramidal cone, 100 with the elliptic one, as Genesis; 1 with
         enable_mujoco_compatibility).
-    constraint_timeconst: contact time constant s of every geom without its own solref (None:
-        0.01 as Genesis, or MuJoCo's 0.02 under enable_mujoco_compatibility).
+    constraint_timeconst: time constant s of the joint-limit and friction-loss rows and of every
+        geom without its own solref (None: 0.01 as Genesis, or MuJoCo's 0.02 under
+        enable_mujoco_compatibility).
     max_contacts: contact slots per env (None: the candidate pairs' worst case, at most 8 per
         moving link and at least 16); more contacts stop the simulation with an error.
     enable_mujoco_compatibility: MuJoCo's defaults exactly (time constant 0.02 s, 100
@@ -89,7 +91,6 @@ class RigidOptions:
     enable_adjacent_collision: bool = False
     enable_neutral_collision: bool = False
     enable_joint_limit: bool = True
-    limit_timeconst: float = 0.02
     constraint_solver: str = constraint_solver.Newton
     iterations: int = None
     tolerance: float = None
@@ -106,7 +107,6 @@ class RigidOptions:
         for name in ("enable_collision", "enable_self_collision", "enable_adjacent_collision",
                      "enable_neutral_collision", "enable_joint_limit", "enable_mujoco_compatibility"):
             setattr(self, name, check_bool(owner, name, getattr(self, name)))
-        _check_positive(owner, "limit_timeconst", self.limit_timeconst)
         if self.constraint_solver != constraint_solver.Newton:
             raise InvalidInputError(f"{owner}: argument 'constraint_solver' expected gs.constraint_solver.Newton "
                                     f"(CG is not implemented), got {self.constraint_solver!r}")

@@ -252,19 +252,28 @@ def test_joint_limit_holds(f64, urdf_dir):
     """A constant 4 N·m torque pushes the pendulum toward its upper limit (0.5 rad); gravity
     resists with m g l sin q ≤ 4.9 N·m, too weak to stop it before 2.45 rad.
 
-    With soft limits (a spring-damper k = 1/τ², c = 2/τ, τ = limit_timeconst = 0.02 s, scaled by
-    M[i, i] = I_pivot) the rest angle q = 0.5 + p solves I p / τ² = 4 − m g l sin(0.5 + p):
-    p = 2.5e-3 rad. At rest q̈ = 0 exactly, so this holds for any dt; the transient (near
-    critical damping, time constant 0.02 s) has died out well below 1e-9 rad over the last 0.1 s
-    of the 1 s run (measured 3e-13), where the angle must match to 1e-9 rad, and it must never
-    overshoot the bound by more than 0.05 rad (the impact at 3.3 rad/s penetrates
-    ~v τ / e ≈ 0.024 rad; measured 0.0237). Without limits the pendulum ends
-    far past the bound (q > 1.5 rad after 1 s).
+    The limit is a soft constraint row (MuJoCo's model, as documented): at rest (q̈ = q̇ = 0) past
+    the bound by p its force is f = aref / R with aref = K·d·p, R = (1 − d)/d · A, where
+    K = 1/(dmax² tc²) (time constant tc = 0.01 s, damping ratio 1), A = 1/I_pivot (M⁻¹ at the
+    initial pose) and the impedance d(p) rises from d0 = 0.9 along 0.9 + 0.05·2(p/w)² (w =
+    0.001 rad, p < w/2). So the rest angle q = 0.5 + p solves K d² I p / (1 − d) = 4 − m g l
+    sin q: p = 7.1e-5 rad. It holds for any dt; the transient (critically damped, 0.01 s) has
+    died out well below 1e-9 rad over the last 0.1 s of the 1 s run, where the angle must match
+    to 1e-9 rad, and it must never overshoot the bound by more than 0.05 rad. Without limits
+    the pendulum ends far past the bound (q > 1.5 rad after 1 s).
     """
-    torque, tau = 4.0, 0.02
-    p = 0.0
-    for _ in range(50):  # fixed point: the right-hand side changes slowly with p
-        p = tau ** 2 / PEND_INERTIA * (torque - PEND_MASS * G * PEND_LENGTH * np.sin(LIMIT + p))
+    torque, tc, (d0, dmax, width, mid) = 4.0, 0.01, (0.9, 0.95, 0.001, 0.5)
+
+    def excess(p):  # the row's force minus the net torque it must hold
+        x = min(p / width, 1.0)
+        d = d0 + (dmax - d0) * (x * x / mid if x <= mid else 1.0 - (1.0 - x) ** 2 / (1.0 - mid))
+        stiffness = 1.0 / (dmax * tc) ** 2
+        return stiffness * d * d * PEND_INERTIA * p / (1.0 - d) - (torque - PEND_MASS * G * PEND_LENGTH * np.sin(LIMIT + p))
+
+    low, high = 0.0, 0.01
+    for _ in range(200):  # bisection: excess rises with p
+        low, high = ((low + high) / 2, high) if excess((low + high) / 2) < 0 else (low, (low + high) / 2)
+    p = (low + high) / 2
     rest = LIMIT + p
     runs = {}
     for limits_on in (True, False):
@@ -278,8 +287,8 @@ def test_joint_limit_holds(f64, urdf_dir):
         runs[limits_on] = np.array(angles)
     held = runs[True][-100:]
     assert np.abs(held - rest).max() <= 1e-9, (
-        f"with limits on, the pendulum rests at {held[-1]:.10f} rad; expected the soft limit's "
-        f"{rest:.10f} rad (bound {LIMIT} rad + penetration {p:.4g} rad from I p / τ² = torque − m g l sin q)")
+        f"with limits on, the pendulum rests at {held[-1]:.10f} rad; expected the limit row's "
+        f"{rest:.10f} rad (bound {LIMIT} rad + penetration {p:.4g} rad, where its force holds the torque)")
     assert runs[True].max() <= LIMIT + 0.05, f"overshoots the limit {LIMIT} rad to {runs[True].max():.4f} rad"
     free = runs[False][-1]
     assert free > 1.5, f"without limits the pendulum should pass {LIMIT} rad by far; it ends at {free:.3f} rad"

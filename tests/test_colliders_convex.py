@@ -3,8 +3,8 @@
 Two bodies with one geom each are posed at random; MuJoCo's contacts after mj_forward are the
 reference. The mesh data is MuJoCo's own (hulls_from_mujoco): its frame, float32 vertices and
 hull graph, so that support points break ties alike. One compiled kernel per family
-(convex_convex, plane_mesh), the cases batched through ndarrays; the kernels compile without
-Taichi's CFG optimisation, which is superlinear on this code (11 s instead of 156 s here).
+(convex_convex, plane_mesh), the cases batched through ndarrays; they compile without Taichi's
+CFG optimisation (gs.init turns it off), which is superlinear on this code (11 s instead of 156 s).
 
 Agreement reached (see convex.py's docstring for why the rest differs): plane-mesh and
 sphere-mesh contacts agree with MuJoCo to rounding (1e-15); in the other pairs the count and
@@ -12,14 +12,11 @@ every dist, position and normal agree to EXACT in 37-91% of the in-contact poses
 and differ where MuJoCo 4.0's rewritten multi-contact (capsules, cylinders, margins), polytope
 initialisation or face clipping is not reproduced.
 """
-import contextlib
-
 import mujoco
 import numpy as np
 import pytest
 import taichi as ti
 import trimesh
-from taichi.lang import impl
 
 import genesis_lite as gs
 from genesis_lite.solvers.rigid.collision import convex as cv
@@ -77,17 +74,6 @@ def _mujoco_contacts(d):
     return [(c.dist, c.pos.copy(), c.frame[:3].copy()) for c in d.contact[:d.ncon]]
 
 
-@contextlib.contextmanager
-def _lean_compile():
-    """Compile the kernels called inside without Taichi's CFG optimisation."""
-    cfg = impl.current_cfg()
-    saved, cfg.cfg_optimization = cfg.cfg_optimization, False
-    try:
-        yield
-    finally:
-        cfg.cfg_optimization = saved
-
-
 class _Harness:
     """Hull fields of the test meshes, a workspace, and the two batch kernels."""
 
@@ -102,9 +88,8 @@ class _Harness:
         assert n <= ROWS
         out = (np.zeros(n, np.int32), np.zeros((n, cv.CONVEX_MAX, 3)), np.zeros((n, cv.CONVEX_MAX, 3)),
                np.zeros((n, cv.CONVEX_MAX)), np.zeros((n, cv.CONVEX_MAX, cv.FEATURE_SIZE), np.int32))
-        with _lean_compile():
-            _convex_kernel(np.asarray(types, np.int32), sizes, np.asarray(meshes, np.int32), pos, rot, margins,
-                           self.hull, self.ws, *out)
+        _convex_kernel(np.asarray(types, np.int32), sizes, np.asarray(meshes, np.int32), pos, rot, margins,
+                       self.hull, self.ws, *out)
         return out
 
     def plane_mesh(self, meshes, pos, rot, margins):
@@ -112,8 +97,7 @@ class _Harness:
         n = len(meshes)
         out = (np.zeros(n, np.int32), np.zeros((n, cv.PLANE_MESH_MAX, 3)), np.zeros((n, cv.PLANE_MESH_MAX, 3)),
                np.zeros((n, cv.PLANE_MESH_MAX)), np.zeros((n, cv.PLANE_MESH_MAX, cv.FEATURE_SIZE), np.int32))
-        with _lean_compile():
-            _plane_kernel(np.asarray(meshes, np.int32), pos, rot, margins, self.hull, *out)
+        _plane_kernel(np.asarray(meshes, np.int32), pos, rot, margins, self.hull, *out)
         return out
 
 

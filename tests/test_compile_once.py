@@ -31,7 +31,10 @@ def _rollout_with_backward(path, fixed, n_envs, substeps, dt):
 
 
 def test_scenes_share_compiled_kernels(f64):
+    """The pendulum stays within its joint limits (one launch a step); the quadruped's calves
+    start past theirs (the constraint stage's kernels and its reverse)."""
     first = _rollout_with_backward(asset("pendulum2.urdf"), True, 0, 1, 0.01)
+    _rollout_with_backward(asset("quadruped.urdf"), False, 0, 1, 0.01)
     compiled = _n_compiled()
     assert compiled > 0
     # the same robot again while the first scene lives, then other robots, sizes and steps
@@ -47,7 +50,9 @@ def test_large_batches_share_compiled_kernels(f64):
     """Batches past data.SERIAL_LINK_ENVS run their env loop on the thread pool: one more compiled
     variant, shared in turn by every such scene."""
     _rollout_with_backward(pybullet("kuka_iiwa", "model.urdf"), True, 300, 1, 0.01)
+    _rollout_with_backward(asset("quadruped.urdf"), False, 300, 1, 0.01)
     compiled = _n_compiled()
+    _rollout_with_backward(pybullet("kuka_iiwa", "model.urdf"), True, 250, 2, 0.005)
     _rollout_with_backward(asset("quadruped.urdf"), False, 200, 2, 0.005)
     assert _n_compiled() == compiled, "a new scene compiled kernels again"
 

@@ -12,7 +12,7 @@ import pytest
 import torch
 
 import genesis_lite as gs
-from tests.conftest import asset
+from tests.conftest import asset, pybullet
 
 ENTITY = "pendulum"
 INERTIAL = '<inertial><mass value="1"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial>'
@@ -337,3 +337,15 @@ def test_mesh_without_a_hull(f64, tmp_path):
     scene.add_entity(gs.morphs.Mesh(file=str(flat), pos=(0, 0, 1)))
     with pytest.raises(gs.GenesisException, match="convex hull"):
         scene.build()
+
+
+@pytest.mark.parametrize("path,link", [(pybullet("cartpole.urdf"), "cart"),
+                                       (pybullet("random_urdfs", "000", "000.urdf"), "random_obj_000")])
+def test_singular_mass_matrix_names_the_link(f64, path, link):
+    """A free base on a massless root (cartpole's slideBar carries the cart's prismatic joint: the
+    cart moves no mass the base does not), or an inertia with a zero principal moment (izz = 0
+    under a free joint's rotation), makes M singular: a named AssetError at build, not numpy's
+    LinAlgError or a NaN on the first step."""
+    scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False))
+    scene.add_entity(gs.morphs.URDF(file=path, fixed=False), name="bot")
+    raises(gs.AssetError, scene.build, "entity 'bot'", f"link '{link}'", "positive definite mass matrix")

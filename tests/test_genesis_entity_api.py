@@ -438,3 +438,30 @@ def test_mass_matrix_decomposition(f64, two_robots):
         kuka.set_dofs_armature(armature)
     lower, d_inv = other.get_mass_mat(decompose=True)  # a two-link chain: d_inv[1] = 1 / M[1, 1]
     assert torch.allclose(d_inv[:, 1], 1.0 / other.get_mass_mat()[:, 1, 1], rtol=1e-14, atol=0)
+
+
+# -- friction loss -------------------------------------------------------------------------------------
+def test_frictionloss_holds_and_releases_the_pendulum(f64, pendulum):
+    """get/set_dofs_frictionloss round trip (the URDF gives none); a bound above the gravity torque
+    at 0.5 rad (9.81 sin 0.5 = 4.7 N·m) nearly holds the pendulum (MuJoCo's soft friction lets it
+    creep), a bound F below it lets it swing as if the torque were 4.7 − F (the row saturates at
+    F while it slides): over 0.2 s it turns (4.7 − 1)/4.7 = 0.79 as far with F = 1; a negative
+    bound is refused by name."""
+    scene, robot = pendulum
+    swings = {}
+    scene.reset()
+    assert robot.get_dofs_frictionloss().tolist() == [0.0]
+    for bound in (0.0, 1.0, 20.0):
+        scene.reset()  # friction loss is a parameter: it persists through resets, as damping does
+        robot.set_dofs_frictionloss([bound])
+        assert robot.get_dofs_frictionloss().tolist() == [bound]
+        robot.set_dofs_position([0.5])
+        for _ in range(20):
+            scene.step()
+        swings[bound] = 0.5 - robot.get_dofs_position().item()
+    robot.set_dofs_frictionloss([0.0])
+    torque = 9.81 * np.sin(0.5)
+    assert swings[0.0] > 0.1 and abs(swings[1.0] / swings[0.0] - (torque - 1.0) / torque) < 0.02, swings
+    assert 0.0 < swings[20.0] < 0.02 * swings[0.0], swings
+    with pytest.raises(gs.InvalidInputError, match="entity 'pendulum': argument 'frictionloss' must be ≥ 0"):
+        robot.set_dofs_frictionloss([-1.0])

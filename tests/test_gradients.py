@@ -20,25 +20,31 @@ ROBOTS = {"pendulum2": (asset("pendulum2.urdf"), True), "cartpole": (pybullet("c
           "kuka_free": (pybullet("kuka_iiwa", "model_free_base.urdf"), False),
           "quadruped": (asset("quadruped.urdf"), False)}  # a floating base with four branches
 KINDS = ("dofs_position", "dofs_velocity", "force", "position_target", "velocity_target", "mass", "damping",
-         "armature", "kp", "kv", "gravity")
+         "armature", "kp", "kv", "gravity", "frictionloss")
 EPS = 1e-6
 _SCENES = {}
 
 
 def _scene(robot_name, n_envs, substeps, checkpoint_interval=1, limited=False):
     """One scene per configuration (building is the slow part); reset() makes it fresh.
-    ``limited``: joint limits on and every force clipped to ±1.5 (a share of the controls clips)."""
+    ``limited``: joint limits on, friction loss 0.05 on every dof and every force clipped to ±1.5
+    (a share of the controls clips). The constraint solve runs to 1e-14: the gradient is that of
+    the exact solution, and finite differences of a solve stopped at 1e-8 see its stopping
+    point move (up to 1e-6 of ‖g‖ here). No collision: these are the gradients of articulated
+    dynamics and of the joint rows (gradients through contact are not implemented yet)."""
     key = (robot_name, n_envs, substeps, checkpoint_interval, limited, gs.runtime.epoch)
     if key not in _SCENES:
         path, fixed = ROBOTS[robot_name]
         scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, substeps=substeps, requires_grad=True,
                                                            checkpoint_interval=checkpoint_interval),
-                         rigid_options=gs.options.RigidOptions(enable_joint_limit=limited))
+                         rigid_options=gs.options.RigidOptions(enable_joint_limit=limited, tolerance=1e-14,
+                                                               enable_collision=False))
         robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=fixed))
         scene.build(n_envs=n_envs)
         if limited:
             bound = torch.full(_batch(n_envs, robot.n_dofs), 1.5, dtype=torch.float64)
             robot.set_dofs_force_range(-bound, bound)
+            robot.set_dofs_frictionloss(torch.full(_batch(n_envs, robot.n_dofs), 0.05, dtype=torch.float64))
         _SCENES[key] = (scene, robot)
     return _SCENES[key]
 
@@ -62,6 +68,7 @@ def _nominal(kind, robot, n_envs, horizon, rng):
         "kp": rng.uniform(5, 15, _batch(n_envs, n)),
         "kv": rng.uniform(0.2, 1, _batch(n_envs, n)),
         "gravity": np.array([0.5, -0.3, -9.81]) + np.zeros(_batch(n_envs, 3)),
+        "frictionloss": rng.uniform(0.02, 0.2, _batch(n_envs, n)),
         "base_pos": rng.uniform(-1, 1, _batch(n_envs, 3)),
         "base_quat": rng.normal(size=_batch(n_envs, 4)),
     }
@@ -84,6 +91,7 @@ def _rollout(scene, robot, kind, value, horizon):
     robot.set_dofs_position(value if kind == "dofs_position" else q0)
     robot.set_dofs_velocity(value if kind == "dofs_velocity" else qd0)
     setters = {"mass": robot.set_links_mass, "damping": robot.set_dofs_damping, "armature": robot.set_dofs_armature,
+               "frictionloss": robot.set_dofs_frictionloss,
                "kp": robot.set_dofs_kp, "kv": robot.set_dofs_kv, "gravity": scene.set_gravity,
                # the base setters come after the velocities: keep them (set_pos/set_quat zero them by default)
                "base_pos": lambda v: robot.set_pos(v, zero_velocity=False),
@@ -150,9 +158,10 @@ def test_branching_tree(f64, kind):
     _check("quadruped", kind, horizon=10)
 
 
-@pytest.mark.parametrize("kind", ["dofs_position", "force", "kp", "mass"])
+@pytest.mark.parametrize("kind", ["dofs_position", "dofs_velocity", "force", "kp", "mass", "armature", "frictionloss"])
 def test_limits_and_force_range(f64, kind):
-    """Soft joint limits pushing (the calves start past their upper bound 0) and clipped forces."""
+    """Joint limits pushing (the calves start past their upper bound 0), friction loss (sliding
+    and stuck dofs) and clipped forces: the constraint solve's implicit gradient."""
     _check("quadruped", kind, horizon=20, limited=True)
 
 

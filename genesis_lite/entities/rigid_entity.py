@@ -473,6 +473,11 @@ class RigidEntity:
         """Joint damping, N·m·s/rad or N·s/m."""
         self._nonnegative("damping")(damping, dofs_idx_local, envs_idx)
 
+    def set_dofs_frictionloss(self, frictionloss, dofs_idx_local=None, envs_idx=None):
+        """Dry joint friction, N·m or N: a friction-loss constraint row (MuJoCo's) resisting the
+        dof's motion up to this bound. Differentiable."""
+        self._nonnegative("frictionloss")(frictionloss, dofs_idx_local, envs_idx)
+
     def set_dofs_armature(self, armature, dofs_idx_local=None, envs_idx=None):
         """Rotor inertia added to the mass matrix diagonal, kg·m² or kg."""
         self._nonnegative("armature")(armature, dofs_idx_local, envs_idx)
@@ -485,6 +490,9 @@ class RigidEntity:
 
     def get_dofs_damping(self, dofs_idx_local=None, envs_idx=None):
         return self._get_dofs_input("damping", dofs_idx_local, envs_idx)
+
+    def get_dofs_frictionloss(self, dofs_idx_local=None, envs_idx=None):
+        return self._get_dofs_input("frictionloss", dofs_idx_local, envs_idx)
 
     def get_dofs_armature(self, dofs_idx_local=None, envs_idx=None):
         return self._get_dofs_input("armature", dofs_idx_local, envs_idx)
@@ -653,8 +661,8 @@ class RigidEntity:
     def get_dofs_control_force(self, dofs_idx_local=None, envs_idx=None):
         """The actuator force, N·m or N: (n,) or (n_envs, n), as Genesis computes it: each dof's
         command recomputed from the current state and targets, clipped to the force range — force
-        mode: the command; velocity: kv·(v* − q̇); position: kp·(q* − q) + kv·(v* − q̇). No damping,
-        gravity or limit forces (get_dofs_force has them). Differentiable."""
+        mode: the command; velocity: kv·(v* − q̇); position: kp·(q* − q) + kv·(v* − q̇). No damping
+        or gravity (get_dofs_force has them), no constraint forces. Differentiable."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
         columns = self.dof_start + dofs
         read = {name: self._read_input(name, columns, envs_idx) for name in
@@ -670,9 +678,10 @@ class RigidEntity:
     # -- dynamics queries ---------------------------------------------------------------------------
     def get_dofs_force(self, dofs_idx_local=None, envs_idx=None):
         """Generalised force on the dofs, N·m or N: (n,) or (n_envs, n): clipped actuator force −
-        damping·q̇ + soft joint-limit forces − bias (gravity, Coriolis, centrifugal), at the current
-        state and inputs: what the next step applies (Genesis returns what its last substep applied,
-        from that substep's start state, and no constraint forces). Not differentiable."""
+        damping·q̇ − bias (gravity, Coriolis, centrifugal), at the current state and inputs: what
+        the next step's constraint solve starts from (Genesis returns what its last substep
+        applied, from that substep's start state; neither includes constraint forces: joint
+        limits, friction loss, contacts). Not differentiable."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
         full = self._sim().dofs_force(self._solver)
         envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)

@@ -24,6 +24,8 @@ from taichi.lang import impl
 from taichi.lang.expr import Expr
 
 from ..core import InvalidInputError, runtime
+from .collision.convex import CONVEX_PAIRS, FEATURE_SIZE
+from .collision.convex import SCRATCH as CONVEX_SCRATCH
 from .constraint.solver import SCRATCH as SOLVER_SCRATCH
 
 BIG = 1e30  # stands for an absent bound
@@ -44,6 +46,7 @@ INPUTS = {
     "ctrl_force": ("D", True),  # N·m or N
     "ctrl_pos": ("D", True),    # rad or m
     "ctrl_vel": ("D", True),    # rad/s or m/s
+    "frictionloss": ("D", True),  # N·m or N: dry joint friction, a constraint row (constraint/rows.py)
     "force_lo": ("D", False),   # N·m or N
     "force_hi": ("D", False),
     "ctrl_mode": ("D", False),  # 0 force, 1 position, 2 velocity (see actuation.py)
@@ -52,22 +55,27 @@ INPUTS = {
     "solimp": ("G5", False),    # per geom: (d0, dwidth, width m, midpoint, power) of the impedance
 }
 
+CONSTS = ("h", "timeconst", "impratio", "tolerance", "ls_tolerance")
+CONST = {name: k for k, name in enumerate(CONSTS)}  # where each is in the model's "consts"
+
 # Model constants: name → (arena, count). Per link (L), per dof (D), per mass-matrix pair (P).
 MODEL = {
     "link_parent": ("i", "L"), "link_jtype": ("i", "L"), "link_static": ("i", "L"), "link_dof0": ("i", "L"),
     "link_q0": ("i", "L"), "dof_link": ("i", "D"), "dof_q": ("i", "D"), "dof_parent": ("i", "D"),
     "pair_i": ("i", "P"), "pair_j": ("i", "P"),
     # collision geometry (geometry.py; MuJoCo's conventions) and the candidate geom pairs
-    "geom_type": ("i", "G"), "geom_link": ("i", "G"), "geom_hull0": ("i", "G"), "geom_hull_n": ("i", "G"),
+    "geom_type": ("i", "G"), "geom_link": ("i", "G"), "geom_mesh": ("i", "G"), "hull_int": ("i", "HI"),
     "pair_geom1": ("i", "N"), "pair_geom2": ("i", "N"), "pair_condim": ("i", "N"),
     "geom_rbound": ("f", "G"), "pair_margin": ("f", "N"),
     # MuJoCo's body_invweight0 (translation, rotation) at the initial pose: the constraint rows' scale
     "link_invweight_t": ("f", "L"), "link_invweight_r": ("f", "L"),
-    "geom_pos": ("v3", "G"), "geom_size": ("v3", "G"), "hull_vert": ("v3", "H"), "geom_quat": ("v4", "G"),
+    # and MuJoCo's dof_invweight0: the scale of the joint-limit and friction-loss rows
+    "dof_invweight0": ("f", "D"),
+    "geom_pos": ("v3", "G"), "geom_size": ("v3", "G"), "hull_vec": ("v3", "H"), "geom_quat": ("v4", "G"),
     "link_inv_mass0": ("f", "L"), "dof_lower": ("f", "D"), "dof_upper": ("f", "D"),
-    # substep h (s), limit stiffness (1/s²) and damping (1/s), impratio, solver tolerance and line-search
-    # tolerance: runtime values like everything else (CONSTS names them)
-    "consts": ("f", 6),
+    # substep h (s), the time constant (s) of the joint-limit and friction-loss rows, impratio, solver
+    # tolerance and line-search tolerance: runtime values like everything else (CONSTS names them)
+    "consts": ("f", len(CONSTS)),
     "link_pos0": ("v3", "L"), "link_axis": ("v3", "L"), "link_com": ("v3", "L"), "link_quat0": ("v4", "L"),
     "link_inertia0": ("m3", "L"),
 }
@@ -89,21 +97,25 @@ FRAMES = {
     "factor": ("f", "DD", False),  # LᵀDL factor of M + diag(armature + h·damping)
     # contact (collision.py): geom poses, then the contacts found (count in n_con[s, e, 0])
     "geom_xpos": ("v3", "G", False), "geom_xmat": ("m3", "G", False),
-    "n_con": ("i", 1, False), "con_pair": ("i", "C", False), "con_feature": ("i", "C", False),
+    "n_con": ("i", 1, False), "con_pair": ("i", "C", False), "con_feature": ("i", "CF", False),
     "con_pos": ("v3", "C", False), "con_frame": ("m3", "C", False), "con_dist": ("f", "C", False),
     "con_efc": ("i", "C", False),  # each contact's first row
     # constraint rows (constraint/rows.py; n_efc[s, e, 0] in use) and the solve (constraint/solver.py)
-    "n_efc": ("i", 1, False), "efc_type": ("i", "R", False), "efc_dim": ("i", "R", False),
+    "n_efc": ("i", 1, False), "efc_dof_rows": ("i", 1, False),  # rows in use; of them, single-dof rows first
+    "efc_type": ("i", "R", False), "efc_dim": ("i", "R", False),
     "efc_id": ("i", "R", False), "efc_state": ("i", "R", False),
     "efc_J": ("f", "RD", False), "efc_R": ("f", "R", False), "efc_aref": ("f", "R", False),
     "efc_floss": ("f", "R", False), "efc_mu": ("f", "R", False), "efc_force": ("f", "R", False),
-    "solver_M": ("f", "DD", False), "qacc_smooth": ("f", "D", False), "qacc_constrained": ("f", "D", False),
-    "qfrc_constraint": ("f", "D", False), "solver_niter": ("i", 1, False),
+    "solver_M": ("f", "DD", False), "qacc_smooth": ("f", "D", False), "qacc_constrained": ("f", "D", True),
+    "qfrc_constraint": ("f", "D", True), "solver_niter": ("i", 1, False),
     # the solve's work arrays (the final Hessian factor among them, for the backward)
     **{name: (arena, count, False) for name, (arena, count) in SOLVER_SCRATCH.items()},
 }
 # Per-env arrays that persist from step to step: name → (arena, count per env), indexed [e, k]
-PER_ENV = {"qacc_warmstart": ("f", "D")}  # the constraint solve's start: the last substep's solution
+PER_ENV = {"qacc_warmstart": ("f", "D"),  # the constraint solve's start: the last substep's solution
+           "needs_rows": ("i", 1),  # 1: the one-launch step met a violated joint limit (step.advance)
+           # the convex colliders' workspace (collision/convex.py), when the scene has such pairs
+           **{name: (arena, f"ws:{name}") for name, (arena, _) in CONVEX_SCRATCH.items()}}
 # a link's rotation is differentiated as a small world-frame turn δθ, not through its quaternion
 # (see kinematics.py): xrot_grad is ∂L/∂δθ, a gradient with no value array
 GRAD_ONLY = {"xrot_grad": ("v3", "L")}
@@ -118,10 +130,10 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
                ti.types.ndarray(dtype=ti.types.matrix(3, 3, float), ndim=1))
 # The int arena starts with a header of sizes and flags; every array's place follows from the
 # sizes (``layout``). W: all inputs' width per env; GW: the differentiable ones', which come first. G geoms, N candidate
-# geom pairs, H hull vertices, C contact slots, R constraint rows per env (see RigidData).
+# geom pairs, H hull vertices, C contact slots, R constraint rows per env (see RigidData); HI the meshes' hull
+# ints (geometry.py), WS 1 when the convex colliders need their workspace (CONVEX_SCRATCH), else 0.
 SIZES = ("B", "L", "D", "Q", "P", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C", "R", "cone",
-         "iterations", "ls_iterations", "overflow", "constrained")
-CONSTS = ("h", "limit_stiffness", "limit_damping", "impratio", "tolerance", "ls_tolerance")
+         "iterations", "ls_iterations", "overflow", "contacted", "rows_needed", "HI", "WS")
 HEADER = {name: k for k, name in enumerate(SIZES)}
 _REGIONS = [("i", False)] + [(a, g) for g in (False, True) for a in ("f", "v3", "v4", "m3")]  # (arena, gradients?)
 
@@ -179,12 +191,20 @@ def layout(size):
     return start, stop
 
 
+def _has_convex_pairs(model):
+    """Whether a candidate pair goes to convex_convex (its workspace is then allocated)."""
+    kinds = zip(model.geom_type[model.pair_geom1].tolist(), model.geom_type[model.pair_geom2].tolist())
+    return any(kind in CONVEX_PAIRS for kind in kinds)
+
+
 def _counts(size):
     """Element count per env of each count name used in MODEL and FRAMES."""
     D, R = size["D"], size["R"]
     return {"L": size["L"], "D": D, "Q": size["Q"], "P": size["P"], "DD": D * D, "G": size["G"], "N": size["N"],
-            "H": size["H"], "C": size["C"], "R": R, "RD": R * D, "G2": 2 * size["G"], "G5": 5 * size["G"], 1: 1,
-            len(CONSTS): len(CONSTS)}
+            "H": size["H"], "C": size["C"], "CF": FEATURE_SIZE * size["C"], "HI": size["HI"], "R": R, "RD": R * D,
+            "G2": 2 * size["G"], "G5": 5 * size["G"], 1: 1,
+            len(CONSTS): len(CONSTS),
+            **{f"ws:{name}": size["WS"] * n for name, (_, n) in CONVEX_SCRATCH.items()}}
 
 
 class RigidData:
@@ -211,9 +231,10 @@ class RigidData:
         self.size = {"B": n_batch, "L": model.n_links, "D": model.n_dofs, "Q": model.n_qs, "P": len(model.pairs),
                      "S": substeps, "W": self.input_total, "GW": self.grad_total,
                      "limits": int(bool(settings["limits"])), "nonfinite": 0, "G": n_geoms,
-                     "N": len(model.pair_geom1), "H": len(model.hull_vert), "C": settings["contacts"],
+                     "N": len(model.pair_geom1), "H": len(model.hull_vec), "C": settings["contacts"],
                      "R": settings["rows"], "cone": settings["cone"], "iterations": settings["iterations"],
-                     "ls_iterations": settings["ls_iterations"], "overflow": 0, "constrained": 0}
+                     "ls_iterations": settings["ls_iterations"], "overflow": 0, "contacted": 0, "rows_needed": 0,
+                     "HI": len(model.hull_int), "WS": int(_has_convex_pairs(model))}
         self.start, stop = layout(self.size)
         length = {a: stop[a, bool(requires_grad)] for a in ARENAS}  # no gradient storage without gradients
         if max(length.values()) >= 2 ** 31:  # indices inside kernels are 32-bit
@@ -241,7 +262,8 @@ class RigidData:
 
     def take_flag(self, name):
         """True once a step raised the header's flag ``name`` ("nonfinite": a non-finite state;
-        "overflow": more contacts than slots; "constrained": constraint rows were active) since
+        "overflow": more contacts than slots; "contacted": a substep had contact rows;
+        "rows_needed": an env of the one-launch step met a joint limit) since
         the last call, which clears it."""
         slot = HEADER[name]
         flag = bool(self.header[slot])
@@ -316,7 +338,8 @@ class RigidView:
         self.elliptic, self.iterations, self.ls_iterations = size["cone"], size["iterations"], size["ls_iterations"]
         self.nonfinite = ArrayView(ints, HEADER["nonfinite"], (1,))  # set by the NaN check
         self.overflow = ArrayView(ints, HEADER["overflow"], (1,))  # set when contacts exceed their slots
-        self.constrained = ArrayView(ints, HEADER["constrained"], (1,))  # set when a substep had constraint rows
+        self.contacted = ArrayView(ints, HEADER["contacted"], (1,))  # set when a substep had contact rows
+        self.rows_needed = ArrayView(ints, HEADER["rows_needed"], (1,))  # set when an env's needs_rows is
         count = _counts(size)
         for name, (arena, _) in MODEL.items():
             setattr(self, name, ArrayView(arenas[arena], start[f"model:{name}"], (1,)))

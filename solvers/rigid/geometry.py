@@ -10,6 +10,7 @@ import numpy as np
 import trimesh
 
 from ..core import AssetError
+from .collision import convex
 
 # MuJoCo's mjtGeom codes (its collision table is indexed by them)
 PLANE, SPHERE, CAPSULE, CYLINDER, BOX, MESH = 0, 2, 3, 5, 6, 7
@@ -31,8 +32,8 @@ def _quat_mul(a, b):
     return np.concatenate([[aw * bw - av @ bv], aw * bv + bw * av + np.cross(av, bv)])
 
 
-def _convex_hull(geom, where):
-    """(V, 3) vertices of the convex hull of a mesh geom, in its frame."""
+def _check_hull(geom, where):
+    """Raise AssetError unless a mesh geom's convex hull has volume (qhull fails on flat input)."""
     try:
         hull = trimesh.convex.convex_hull(np.asarray(geom.vertices, dtype=np.float64))
     except Exception as error:  # qhull raises its own error types on flat or degenerate input
@@ -40,7 +41,23 @@ def _convex_hull(geom, where):
     if len(hull.vertices) < 4 or not hull.volume > 0:
         raise AssetError(f"{where}: mesh expected a convex hull with volume, got {len(hull.vertices)} vertices and "
                          f"volume {hull.volume}")
-    return np.asarray(hull.vertices, dtype=np.float64)
+
+
+def _hull_arrays(hulls):
+    """The hulls (convex.MeshHulls) as two flat arrays for the kernels: hull_vec (H, 3), every
+    hull vertex (m, geom frame) then every polygon's outward unit normal, and hull_int (HI,),
+    HULL_HEADER slots (where each of convex.HULL_INT_FIELDS starts in hull_int, then where the
+    normals start in hull_vec) followed by those int arrays."""
+    fields = [np.asarray(getattr(hulls, name), dtype=np.int32).ravel() for name in convex.HULL_INT_FIELDS]
+    header, start = [], convex.HULL_HEADER
+    for array in fields:
+        header.append(start)
+        start += len(array)
+    header.append(len(hulls.hull_vert))
+    hull_int = np.concatenate([np.array(header, dtype=np.int32)] + fields).astype(np.int32)
+    hull_vec = np.concatenate([np.asarray(hulls.hull_vert, dtype=np.float64).reshape(-1, 3),
+                               np.asarray(hulls.hull_poly_normal, dtype=np.float64).reshape(-1, 3)])
+    return hull_vec, hull_int
 
 
 def geom_arrays(geoms, link_of, where_of):
@@ -49,13 +66,15 @@ def geom_arrays(geoms, link_of, where_of):
     geoms: list of GeomSpec; link_of[k]: its link; where_of(k): a name for error messages.
     Returns a dict: type (G,) code, link (G,), pos (G, 3) m and quat (G, 4) the geom frame in the
     link frame, size (G, 3) MuJoCo sizes (half extents, radius and half length), rbound (G,) m
-    radius of a sphere about the geom origin holding it (0 for planes: unbounded), hull0 and
-    hull_n (G,) each mesh's hull vertices in ``hull_vert`` (H, 3) m, geom frame.
+    radius of a sphere about the geom origin holding it (0 for planes: unbounded), mesh (G,) the
+    geom's mesh number (-1: not a mesh); and the meshes' convex hulls (convex.MeshHulls built with
+    trimesh: vertices, vertex graph, polygons) as hull_vec (H, 3) and hull_int (HI,)
+    (``_hull_arrays``). A mesh collides as its convex hull.
     """
-    out = {k: [] for k in ("type", "link", "pos", "quat", "size", "rbound", "hull0", "hull_n")}
-    hull_vert = []
+    out = {k: [] for k in ("type", "link", "pos", "quat", "size", "rbound", "mesh")}
+    meshes = []
     for k, geom in enumerate(geoms):
-        size, quat, hull = np.zeros(3), np.asarray(geom.quat, dtype=np.float64), None
+        size, quat, mesh = np.zeros(3), np.asarray(geom.quat, dtype=np.float64), -1
         s = np.asarray(geom.size, dtype=np.float64)
         if geom.type == "box":
             size[:] = s / 2
@@ -68,23 +87,27 @@ def geom_arrays(geoms, link_of, where_of):
         elif geom.type == "plane":
             quat, rbound = _quat_mul(quat, _quat_z_to(s)), 0.0
         else:  # mesh
-            hull = _convex_hull(geom, where_of(k))
-            rbound = np.max(np.linalg.norm(hull, axis=1))
+            _check_hull(geom, where_of(k))
+            mesh = len(meshes)
+            meshes.append(np.asarray(geom.vertices, dtype=np.float64))
+            rbound = 0.0  # set from its hull below
         out["type"].append(GEOM_CODE[geom.type])
         out["link"].append(link_of[k])
         out["pos"].append(np.asarray(geom.pos, dtype=np.float64))
         out["quat"].append(quat / np.linalg.norm(quat))
         out["size"].append(size)
         out["rbound"].append(rbound)
-        out["hull0"].append(len(hull_vert))
-        out["hull_n"].append(0 if hull is None else len(hull))
-        if hull is not None:
-            hull_vert.extend(hull)
-    arrays = {k: np.array(v, dtype=np.int32 if k in ("type", "link", "hull0", "hull_n") else np.float64)
+        out["mesh"].append(mesh)
+    arrays = {k: np.array(v, dtype=np.int32 if k in ("type", "link", "mesh") else np.float64)
               for k, v in out.items()}
     for k, width in (("pos", 3), ("quat", 4), ("size", 3)):
         arrays[k] = arrays[k].reshape(-1, width)
-    arrays["hull_vert"] = np.array(hull_vert, dtype=np.float64).reshape(-1, 3)
+    hulls = convex.hulls_from_vertices(meshes)
+    for k, mesh in enumerate(arrays["mesh"]):
+        if mesh >= 0:
+            adr, num = hulls.hull_vertadr[mesh], hulls.hull_vertnum[mesh]
+            arrays["rbound"][k] = np.linalg.norm(hulls.hull_vert[adr: adr + num], axis=1).max()
+    arrays["hull_vec"], arrays["hull_int"] = _hull_arrays(hulls)
     return arrays
 
 

@@ -6,6 +6,8 @@ dofs i on the path from k to the root, so there is no fill-in, the cost is Σ de
 separate bodies never mix (a NaN in one stays there). Taichi's reverse mode gives wrong
 gradients for factorisations (TAICHI_NOTES.md), so the adjoint is written by hand: with
 y = A⁻¹ q̄acc (A is symmetric), f̄ += y and Ā −= y qaccᵀ — one more solve with the stored factor.
+In a step with a constraint stage the force includes qfrc_constraint, or the acceleration is the
+solve's own (see _undamped_solution); the solve's adjoint is constraint/implicit.py.
 """
 import taichi as ti
 
@@ -54,42 +56,62 @@ def _solve_in_place(d: ti.template(), s, e, x: ti.template()):
 
 
 @ti.func
-def solve_env(d: ti.template(), s, e):
-    """qacc = A⁻¹ (qfrc_smooth + qfrc_constraint): the constraint force, solved for with M alone,
-    goes through the damped matrix like every other force (MuJoCo's Euler integrator). Without
-    damping MuJoCo integrates the constraint solve's own acceleration, which differs from that
-    by the solve's tolerance: so do we."""
+def _undamped_solution(d: ti.template(), s, e):
+    """Whether frame s integrates the constraint solve's own acceleration: it had rows and no dof
+    is damped. MuJoCo's Euler integrator does so; with damping the constraint force, solved for
+    with M alone, goes through the damped matrix like every other force."""
+    undamped = d.n_efc[s, e, 0] > 0
+    for i in range(d.n_dofs):
+        undamped = undamped and d.damping[e, i] == 0.0
+    return undamped
+
+
+@ti.func
+def solve_env(d: ti.template(), s, e, rows: ti.template()):
+    """qacc = A⁻¹ (qfrc_smooth + qfrc_constraint), or the solve's qacc_constrained (see
+    _undamped_solution); rows: whether the step has a constraint stage (compile time)."""
     _factor(d, s, e)
-    undamped = True
     for i in range(d.n_dofs):
         d.qacc[s, e, i] = d.qfrc_smooth[s, e, i]
-        if d.row_capacity > 0:
+        if ti.static(rows):
             d.qacc[s, e, i] += d.qfrc_constraint[s, e, i]
-            undamped = undamped and d.damping[e, i] == 0.0
     _solve_in_place(d, s, e, d.qacc)
-    if d.row_capacity > 0 and undamped and d.n_efc[s, e, 0] > 0:
-        for i in range(d.n_dofs):
-            d.qacc[s, e, i] = d.qacc_constrained[s, e, i]
-    elif d.row_capacity > 0 and d.n_efc[s, e, 0] == 0:  # the next solve starts from this acceleration
-        # (MuJoCo's rule; after a solve, constraint_env already stored the solve's own)
+    solved = False  # the constraint solve set the warm start already (constraint_env)
+    if ti.static(rows):
+        solved = d.n_efc[s, e, 0] > 0
+        if _undamped_solution(d, s, e):
+            for i in range(d.n_dofs):
+                d.qacc[s, e, i] = d.qacc_constrained[s, e, i]
+    if not solved:  # the next solve starts from this acceleration (MuJoCo's rule)
         for i in range(d.n_dofs):
             d.qacc_warmstart[e, i] = d.qacc[s, e, i]
 
 
 @ti.func
-def solve_adjoint_env(d: ti.template(), s, e):
-    """Reverse of ``solve_env`` for frame s. Sets qfrc_smooth.grad[s, e] (the solve is the only
-    reader of qfrc_smooth) and adds to the gradients of M, armature and damping."""
+def solve_adjoint_env(d: ti.template(), s, e, rows: ti.template()):
+    """Reverse of ``solve_env`` for frame s. Sets qfrc_smooth.grad[s, e] and, with rows, the
+    gradients of qacc_constrained and qfrc_constraint (the constraint solve's adjoint takes them
+    on), and adds to the gradients of M, armature and damping."""
     h = d.consts[0]
+    undamped = False
+    if ti.static(rows):
+        undamped = _undamped_solution(d, s, e)
+        for i in range(d.n_dofs):
+            d.qacc_constrained.grad[s, e, i] = d.qacc.grad[s, e, i] if undamped else 0.0
     for i in range(d.n_dofs):
-        d.qfrc_smooth.grad[s, e, i] = d.qacc.grad[s, e, i]
-    _solve_in_place(d, s, e, d.qfrc_smooth.grad)
-    for i in range(d.n_dofs):
-        y = d.qfrc_smooth.grad[s, e, i]
-        j = i  # only the structural entries of M (on the dof tree) are inputs of the solve
-        while j != -1:
-            g = y * d.qacc[s, e, j] + (d.qfrc_smooth.grad[s, e, j] * d.qacc[s, e, i] if j != i else 0.0)
-            accumulate(d.mass_mat.grad, ti.Vector([s, e, i, j]), -g)
-            j = d.dof_parent[j]
-        accumulate(d.armature.grad, ti.Vector([e, i]), -y * d.qacc[s, e, i])
-        accumulate(d.damping.grad, ti.Vector([e, i]), -h * y * d.qacc[s, e, i])
+        d.qfrc_smooth.grad[s, e, i] = 0.0 if undamped else d.qacc.grad[s, e, i]
+    if not undamped:
+        _solve_in_place(d, s, e, d.qfrc_smooth.grad)
+        for i in range(d.n_dofs):
+            y = d.qfrc_smooth.grad[s, e, i]
+            j = i  # only the structural entries of M (on the dof tree) are inputs of the solve
+            while j != -1:
+                g = y * d.qacc[s, e, j] + (d.qfrc_smooth.grad[s, e, j] * d.qacc[s, e, i] if j != i else 0.0)
+                accumulate(d.mass_mat.grad, ti.Vector([s, e, i, j]), -g)
+                j = d.dof_parent[j]
+            accumulate(d.armature.grad, ti.Vector([e, i]), -y * d.qacc[s, e, i])
+            accumulate(d.damping.grad, ti.Vector([e, i]), -h * y * d.qacc[s, e, i])
+    if ti.static(rows):
+        for i in range(d.n_dofs):
+            d.qfrc_constraint.grad[s, e, i] = 0.0 if undamped or d.n_efc[s, e, 0] == 0 \
+                else d.qfrc_smooth.grad[s, e, i]

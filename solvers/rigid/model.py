@@ -30,16 +30,18 @@ class RigidModel:
     joint frame in the parent, axis (L, 3) in the link frame, com (L, 3) m, inertia0 (L, 3, 3)
     kg·m² about the com, mass0 (L,) kg, dof0/q0 (L,) first dof/q, entity (L,) owner index.
     Per dof: link (D,), q (D,) its q index (-1 inside a free joint), damping, armature, kp, kv,
-    lower/upper limits (rad or m), effort bound, frictionloss (N·m or N, dry joint friction; not
-    applied yet). pairs (P, 2): (i, j), j ≤ i, dof j on the path from dof i to the root — the
+    lower/upper limits (rad or m), effort bound, frictionloss (N·m or N, dry joint friction: a
+    constraint row). pairs (P, 2): (i, j), j ≤ i, dof j on the path from dof i to the root — the
     structural non-zeros of the lower mass matrix.
     Per collision geom (geometry.py, MuJoCo's conventions): geom_type (G,) code, geom_link (G,),
     geom_pos (G, 3) m and geom_quat (G, 4) in the link frame, geom_size (G, 3) half sizes m,
-    geom_rbound (G,) bounding radius m, geom_hull0/geom_hull_n (G,) its hull's vertices in
-    hull_vert (H, 3) m, geom_friction (G,) Coulomb coefficient. Per candidate geom pair (N):
+    geom_rbound (G,) bounding radius m, geom_mesh (G,) its mesh number (-1: none), the meshes'
+    convex hulls as hull_vec (H, 3) and hull_int (HI,) (geometry._hull_arrays), geom_friction (G,)
+    Coulomb coefficient. Per candidate geom pair (N):
     pair_geom1/pair_geom2 (ordered as MuJoCo orders them), pair_condim (1 or 3), pair_margin m.
     link_invweight_t/_r (L,): MuJoCo's body_invweight0 (1/kg, 1/(kg·m²)) at the initial pose,
-    the constraint rows' scale (zero until the solver computes it at build).
+    the contact rows' scale, and dof_invweight0 (D,) MuJoCo's, the joint-limit and friction-loss
+    rows' scale (zero until the solver computes them at build).
     """
     link_name: list
     link_parent: np.ndarray
@@ -69,9 +71,9 @@ class RigidModel:
     geom_quat: np.ndarray
     geom_size: np.ndarray
     geom_rbound: np.ndarray
-    geom_hull0: np.ndarray
-    geom_hull_n: np.ndarray
-    hull_vert: np.ndarray
+    geom_mesh: np.ndarray
+    hull_vec: np.ndarray
+    hull_int: np.ndarray
     geom_friction: np.ndarray
     pair_geom1: np.ndarray
     pair_geom2: np.ndarray
@@ -79,6 +81,7 @@ class RigidModel:
     pair_margin: np.ndarray
     link_invweight_t: np.ndarray
     link_invweight_r: np.ndarray
+    dof_invweight0: np.ndarray
     pairs: np.ndarray
     qpos0: np.ndarray
 
@@ -226,13 +229,12 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
         dof_effort=np.array(dofs["effort"], dtype=f), dof_frictionloss=np.array(dofs["frictionloss"], dtype=f),
         **_geoms(geoms, geom_links, geom_names), **_pairs(geoms, geom_links, rows, self_collision, adjacent_collision),
         link_invweight_t=np.zeros(len(link_parent)), link_invweight_r=np.zeros(len(link_parent)),
-        pairs=_mass_matrix_pairs(dof_link, link_parent), qpos0=np.array(qpos0, dtype=f))
+        dof_invweight0=np.zeros(n_dofs), pairs=_mass_matrix_pairs(dof_link, link_parent), qpos0=np.array(qpos0, dtype=f))
 
 
 def _geoms(geoms, geom_links, geom_names):
     arrays = geometry.geom_arrays(geoms, geom_links, lambda k: geom_names[k])
-    out = {f"geom_{k}": v for k, v in arrays.items() if k != "hull_vert"}
-    out["hull_vert"] = arrays["hull_vert"]
+    out = {k if k.startswith("hull_") else f"geom_{k}": v for k, v in arrays.items()}
     out["geom_friction"] = np.array([DEFAULT_FRICTION if g.friction is None else g.friction for g in geoms],
                                     dtype=np.float64)
     return out

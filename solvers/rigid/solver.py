@@ -11,6 +11,7 @@ from ..base import Solver
 from ..core import AssetError, GradientError, SimulationError, runtime
 from ..launch import BoundKernel, BoundKernels
 from . import contact, step
+from .collision import detect
 from .data import ARENAS, BIG, ELEMENT, INPUTS, RigidData
 from .geometry import GEOM_CODE
 from .model import build_model
@@ -20,7 +21,7 @@ class RigidSolver(Solver):
     """Owns the rigid model (immutable), its Taichi data and the default inputs."""
 
     #: inputs that keep their value across ``scene.reset()`` (controls do not)
-    persistent_inputs = ("mass", "damping", "armature", "kp", "kv", "gravity", "force_lo", "force_hi")
+    persistent_inputs = ("mass", "damping", "armature", "kp", "kv", "gravity", "force_lo", "force_hi", "frictionloss")
 
     def __init__(self, sim_options, rigid_options):
         self.sim_options, self.rigid_options = sim_options, rigid_options
@@ -45,10 +46,9 @@ class RigidSolver(Solver):
         self._nothing = torch.empty((0, 0), dtype=runtime.tc_float, device=runtime.device)  # an unused array argument
         self.state_width = self.model.n_qs + self.model.n_dofs
         self._check_mass_matrix()
+        self._allocate()  # what needs kernels at the initial pose: then the final storage
+        self.model = contact.at_initial_pose(self, options.enable_neutral_collision)
         self._allocate()
-        if len(self.model.pair_geom1):  # what needs kernels at the initial pose: then the final storage
-            self.model = contact.at_initial_pose(self, options.enable_neutral_collision)
-            self._allocate()
         self.grad_input_names = tuple(self.data.grad_input_names)
         # column widths of backward's output: state gradient, then each differentiable input's
         self.grad_widths = [self.state_width] + [self.data.width(name) for name in self.grad_input_names]
@@ -60,21 +60,24 @@ class RigidSolver(Solver):
         """The scene's arenas and kernels for the current model, holding the default inputs."""
         options, sim = self.rigid_options, self.sim_options
         h = sim.dt / sim.substeps
-        timeconst = max(options.limit_timeconst, 2.0 * h)  # stable for explicit steps
         bits = 64 if runtime.tc_float == torch.float64 else 32
         self.timeconst, iterations, tolerance, impratio = options.resolved(bits)
         contacts, rows = contact.capacity(self.model, options)
         settings = {"limits": options.enable_joint_limit, "contacts": contacts, "rows": rows,
                     "cone": int(options.friction_cone == "elliptic"), "iterations": iterations,
                     "ls_iterations": options.ls_iterations,
-                    "consts": [h, 1.0 / timeconst ** 2, 2.0 / timeconst, impratio, tolerance, options.ls_tolerance]}
+                    "consts": [h, self.timeconst, impratio, tolerance, options.ls_tolerance]}
         self.data = RigidData(self.model, self.n_batch, sim.substeps, sim.requires_grad, settings)
         element_dims = [len(ELEMENT[a]) for a in ARENAS]
-        self.kernels = BoundKernels(self.data.schedule, self.data.arenas, element_dims, *step.KERNELS)
+        schedule, arenas = self.data.schedule, self.data.arenas
+        self.kernels = BoundKernels(schedule, arenas, element_dims, *step.KERNELS)
         m = self.model
-        kinds = sorted({(int(m.geom_type[a]), int(m.geom_type[b])) for a, b in zip(m.pair_geom1, m.pair_geom2)})
-        self.colliders = [BoundKernel(step.collide, (self.data.schedule, kind), self.data.arenas, element_dims)
-                          for kind in kinds]
+        self.colliders = [BoundKernel(step.collide, (schedule, kind), arenas, element_dims)
+                          for kind in detect.kernel_kinds(m)]
+        # the reverse of a substep, without and with the constraint stage
+        self.reverse_kernel = [BoundKernel(step.reverse_dynamics, (schedule, rows), arenas, element_dims)
+                               for rows in (0, 1)]
+        self.limited = contact.limited_dofs(self.model, options) > 0
         self.default_inputs = self._default_inputs()
         self.upload_inputs(self.default_inputs)
 
@@ -85,7 +88,8 @@ class RigidSolver(Solver):
             "mass": m.link_mass0, "damping": m.dof_damping, "armature": m.dof_armature,
             "kp": m.dof_kp, "kv": m.dof_kv, "gravity": np.array(self.sim_options.gravity),
             "ctrl_force": np.zeros(m.n_dofs), "ctrl_pos": np.zeros(m.n_dofs), "ctrl_vel": np.zeros(m.n_dofs),
-            "force_lo": -effort, "force_hi": effort, "ctrl_mode": np.zeros(m.n_dofs),
+            "frictionloss": m.dof_frictionloss, "force_lo": -effort, "force_hi": effort,
+            "ctrl_mode": np.zeros(m.n_dofs),
             "friction": m.geom_friction, "solref": np.tile([self.timeconst, 1.0], len(m.geom_type)),
             "solimp": np.tile(contact.DEFAULT_SOLIMP, len(m.geom_type))}
         assert per_env.keys() == INPUTS.keys()
@@ -114,6 +118,27 @@ class RigidSolver(Solver):
                              f"have no mass or inertia; expected an <inertial> with positive mass, or collision "
                              f"geometry to derive it from, or armature on the joint")
 
+    def check_positive_definite(self, mass_matrix):
+        """M (D, D) with armature at the initial pose must be positive definite: else name the
+        link of the first dof whose pivot vanishes (a massless root carrying a joint, an inertia
+        with a zero principal moment under a free joint, ...), at build time. A pivot counts as
+        vanished below a round-off share of its own diagonal entry (M comes in the scene's
+        precision)."""
+        share = 1e-10 if runtime.tc_float == torch.float64 else 1e-5
+        reduced = mass_matrix.astype(np.float64)
+        for i in range(len(reduced)):  # Gaussian elimination in dof order: pivot i of M's LDLᵀ
+            pivot = reduced[i, i]
+            if not pivot > share * mass_matrix[i, i]:
+                m = self.model
+                link = m.dof_link[i]
+                raise AssetError(f"entity '{self.entity_names[m.link_entity[link]]}': link '{m.link_name[link]}' "
+                                 f"(dof {i}) expected a positive definite mass matrix, got a pivot of {pivot:.3g} "
+                                 f"against a diagonal entry of {mass_matrix[i, i]:.3g}: this dof moves no mass or inertia "
+                                 f"that the dofs before it do not move already (a massless base under a free joint, a "
+                                 f"zero principal moment of inertia); give the links positive masses and inertias "
+                                 f"with positive principal moments, or armature on the joint")
+            reduced[i + 1:, i + 1:] -= np.outer(reduced[i + 1:, i], reduced[i, i + 1:]) / pivot
+
     # -- moving data ------------------------------------------------------------------------
     def _empty(self, width):
         return torch.empty((self.n_batch, width), dtype=runtime.tc_float, device=runtime.device)
@@ -127,7 +152,16 @@ class RigidSolver(Solver):
         return out
 
     def upload_inputs(self, inputs):
+        self._note_inputs(inputs)
         self.kernels.write_inputs(self._pack_inputs(inputs))
+
+    def _note_inputs(self, inputs):
+        """Keep whether the inputs Taichi holds give some dof friction loss (a constraint row)."""
+        self.friction = bool((inputs["frictionloss"] > 0).any())
+
+    def _constrained(self):
+        """Whether a step may have constraint rows: contact pairs, joint limits or friction loss."""
+        return bool(self.colliders) or self.limited or self.friction
 
     @staticmethod
     def _pack_inputs(inputs, before=(), after=()):
@@ -139,6 +173,8 @@ class RigidSolver(Solver):
     # -- stepping ---------------------------------------------------------------------------
     def advance(self, inputs=None, download=False):
         out = self._empty(self.state_width) if download else self._nothing
+        if inputs is not None:
+            self._note_inputs(inputs)
         self.run_step(self._nothing if inputs is None else self._pack_inputs(inputs), out, commit=1)
         if self.data.size["N"] and self.data.take_flag("overflow"):
             raise SimulationError(f"rigid solver (entities: {', '.join(self.entity_names)}): more contacts than the "
@@ -147,17 +183,22 @@ class RigidSolver(Solver):
         return out if download else None
 
     def run_step(self, inputs, out, commit):
-        """One step's kernels: without candidate pairs one launch for all substeps, else four
-        stages per substep (one kernel per collider kind: see collision/detect.py)."""
-        if not self.colliders:
+        """One step's kernels. Without contact pairs or friction loss, one launch for all substeps
+        (advance), which leaves the envs meeting a joint limit to the constraint stage; else, or
+        for those envs, three stage kernels per substep with the colliders between the first two
+        (one kernel per pair kind: see collision/detect.py)."""
+        flagged_only = 0
+        if not (self.colliders or self.friction):
             self.kernels.advance(commit, inputs, out)
-            return
+            if not (self.limited and self.data.take_flag("rows_needed")):
+                return
+            inputs, flagged_only = self._nothing, 1  # advance loaded them
         for s in range(self.sim_options.substeps):
-            self.kernels.smooth_substep(s, inputs if s == 0 else self._nothing)
+            self.kernels.smooth_substep(s, inputs if s == 0 else self._nothing, flagged_only)
             for collide in self.colliders:
                 collide(s)
-            self.kernels.constrain(s)
-            self.kernels.finish_substep(s, commit, out)
+            self.kernels.constrain(s, flagged_only)
+            self.kernels.finish_substep(s, commit, out, flagged_only)
 
     def nonfinite(self):
         """True once any step produced a non-finite state (resets the flag)."""
@@ -166,21 +207,23 @@ class RigidSolver(Solver):
     def backward(self, state, inputs, grad_state_out):
         """Gradients of the step's start state and differentiable inputs from that of its end
         state: load, replay, reverse (see step.py)."""
+        self._note_inputs(inputs)
         packed = self._pack_inputs(inputs, before=(state,), after=(grad_state_out,))
         out = self._empty(sum(self.grad_widths))
         self.kernels.prepare_reverse(packed)
-        self.data.take_flag("constrained")
-        warm_start = self.data.per_env("qacc_warmstart").clone() if self.colliders else None
+        self.data.take_flag("contacted")
+        constrained = self._constrained()
+        warm_start = self.data.per_env("qacc_warmstart").clone() if constrained else None
         self.run_step(self._nothing, self._nothing, commit=0)
         if warm_start is not None:  # the replay must not move the forward's warm start
             self.data.per_env("qacc_warmstart").copy_(warm_start)
-        if self.data.size["R"] and self.data.take_flag("constrained"):
+        if self.data.take_flag("contacted"):
             raise GradientError(f"rigid solver (entities: {', '.join(self.entity_names)}): this step had contacts; "
                                 f"gradients through contact are not implemented yet (steps without any contact "
                                 f"differentiate exactly); build with RigidOptions(enable_collision=False) to "
                                 f"simulate without contact")
         for s in reversed(range(self.sim_options.substeps)):  # two kernels: one compiles 3x slower
-            self.kernels.reverse_dynamics(s)
+            self.reverse_kernel[constrained](s)
             self.kernels.reverse_kinematics(s, out)
         return self._split_grads(out)
 
@@ -213,7 +256,7 @@ class RigidSolver(Solver):
 
     def dofs_force(self):
         """(B, D) generalised force at the uploaded state and inputs: clipped actuator force −
-        damping·q̇ + limit forces − bias (qfrc_smooth, what the next step solves with)."""
+        damping·q̇ − bias (qfrc_smooth, what the next step's constraint solve starts from)."""
         out = self._empty(self.model.n_dofs)
         self.kernels.read_dofs_force(out)
         return out

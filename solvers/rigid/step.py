@@ -2,8 +2,13 @@
 scene's arenas and torch.
 
 Forward runs every substep of every env in one launch (``advance``, which can also load the
-inputs and write out the result). Reverse: ``prepare_reverse`` loads the step's start state,
-inputs and output gradient, ``advance`` replays the substeps to refill the frames, then for
+inputs and write out the result) when no constraint row arises: no contact pair, no friction
+loss, and (checked per env and substep) no violated joint limit. Otherwise a substep is three
+stage kernels (smooth, constrain, finish) and one collider kernel per pair kind between the
+first two (see below; the constraint solve inlined into ``advance`` took LLVM 100 s to
+compile); an env that advance stops at a limit is taken again from its start by those, which
+then skip the other envs. Both ways give the same bits when no row arises. Reverse: ``prepare_reverse`` loads the step's start state,
+inputs and output gradient, the forward replays the substeps to refill the frames, then for
 each substep, last first, ``reverse_dynamics`` and ``reverse_kinematics`` run the stages'
 hand-written adjoints in reverse order; after substep 0 the gradients are written out.
 (Fused into one kernel, LLVM took 31 s to compile it; split so, 6 s.) Each env belongs to one
@@ -16,10 +21,11 @@ of the process.
 """
 import taichi as ti
 
-from .data import ARENA_TYPES, bind, n_batch
+from .data import ARENA_TYPES, CONST, bind, n_batch
 from .actuation import smooth_force, smooth_force_adjoint
 from .collision.detect import collide_kind, geom_poses
-from .constraint.rows import contact_force, contact_rows
+from .constraint.implicit import solve_adjoint
+from .constraint.rows import contact_force, contact_rows, dof_rows, limit_violated
 from .constraint.solver import newton_solve
 from .dynamics import (bias_entry, dof_force, dof_row_adjoint, link_forces, link_forces_adjoint, mass_entry,
                        subtree_sum, subtree_sum_adjoint)
@@ -67,19 +73,21 @@ def position_stages_env(d: ti.template(), s, e):
 
 @ti.func
 def constraint_env(d: ti.template(), s, e):
-    """Rows of frame s's contacts, then the constraint solve → qfrc_constraint[s, e]."""
-    rows = 0
+    """Rows of frame s (single-dof rows, then its contacts'), then the constraint solve →
+    qacc_constrained and qfrc_constraint[s, e]."""
+    rows = dof_rows(d, s, e)
     for c in range(d.n_con[s, e, 0]):
+        d.contacted[0] = 1
         d.con_efc[s, e, c] = rows
         rows += contact_rows(d, s, e, c, rows)
     d.n_efc[s, e, 0] = rows
     if rows > 0:
-        d.constrained[0] = 1
         for i, j in ti.ndrange(d.n_dofs, d.n_dofs):  # the solve's M: dense, with armature
             d.solver_M[s, e, i, j] = d.mass_mat[s, e, ti.max(i, j), ti.min(i, j)]
         for i in range(d.n_dofs):
             d.solver_M[s, e, i, i] += d.armature[e, i]
-        newton_solve(d, s, e, d.iterations, d.consts[4], d.ls_iterations, d.consts[5])
+        newton_solve(d, s, e, d.iterations, d.consts[CONST["tolerance"]], d.ls_iterations,
+                     d.consts[CONST["ls_tolerance"]])
         for i in range(d.n_dofs):  # the next solve starts from this solution
             d.qacc_constrained[s, e, i] = d.qacc_warmstart[e, i] = d.qacc[s, e, i]
     else:
@@ -96,27 +104,31 @@ def smooth_env(d: ti.template(), s, e):
 
 
 @ti.func
-def finish_substep_env(d: ti.template(), s, e):
-    """Frame s's acceleration and integration → frame s + 1."""
-    solve_env(d, s, e)
+def finish_substep_env(d: ti.template(), s, e, rows: ti.template()):
+    """Frame s's acceleration and integration → frame s + 1 (rows: after a constraint stage)."""
+    solve_env(d, s, e, rows)
     for l in range(d.n_links):
         integrate_link(d, s, e, l)
 
 
 @ti.func
 def substep_env(d: ti.template(), s, e):
-    """Frame s → frame s + 1 without constraints."""
+    """Frame s → frame s + 1 without constraint rows (n_efc = 0 tells the reverse so)."""
     smooth_env(d, s, e)
-    finish_substep_env(d, s, e)
+    d.n_efc[s, e, 0] = 0
+    finish_substep_env(d, s, e, False)
 
 
 @ti.func
-def dynamics_adjoint_env(d: ti.template(), s, e):
+def dynamics_adjoint_env(d: ti.template(), s, e, rows: ti.template()):
     """Gradients at frame s + 1 → frame s and the inputs, down to the link-sweep outputs (frame s
     must hold its forward values); down_sweep_adjoint_env finishes the substep."""
     for l in range(d.n_links):
         integrate_link_adjoint(d, s, e, l)
-    solve_adjoint_env(d, s, e)
+    solve_adjoint_env(d, s, e, rows)
+    if ti.static(rows):
+        if d.n_efc[s, e, 0] > 0:
+            solve_adjoint(d, s, e)
     for i in range(d.n_dofs):
         smooth_force_adjoint(d, s, e, i)
     for i in range(d.n_dofs):
@@ -136,18 +148,29 @@ I, F, V3, V4, M3 = ARENA_TYPES  # a scene's arenas (data.py)
 
 @ti.kernel
 def advance(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, commit: ti.i32, inputs: A, out: A):
-    """All substeps of one step for every env in one launch (forward only). Unless empty, inputs
-    (B, total input width) are loaded first and the result is written to out (B, Q + D) — each
-    a launch saved. commit copies the result into frame 0 and flags any non-finite state."""
+    """All substeps of one step for every env in one launch (forward only), for a step without
+    contact pairs or friction loss. Unless empty, inputs (B, total input width) are loaded first
+    and the result is written to out (B, Q + D) — each a launch saved. commit copies the result
+    into frame 0 and flags any non-finite state. An env that meets a violated joint limit at a
+    substep stops there, uncommitted, with needs_rows set (and the header's rows_needed): the
+    constrained stage kernels then take the step for it (solver.run_step)."""
     ti.loop_config(serialize=schedule[0])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
         S = d.substeps
         if inputs.shape[0] > 0:
             _inputs_from(d, e, inputs, 0)
+        violated = 0
         for s in range(S):
-            substep_env(d, s, e)
-        _end_step(d, e, commit, out)
+            if violated == 0:
+                violated = limit_violated(d, s, e)
+                if violated == 0:
+                    substep_env(d, s, e)
+        d.needs_rows[e, 0] = violated
+        if violated:
+            d.rows_needed[0] = 1
+        else:
+            _end_step(d, e, commit, out)
 
 
 @ti.func
@@ -170,20 +193,28 @@ def _end_step(d: ti.template(), e, commit, out: ti.template()):
             d.qvel[0, e, k] = d.qvel[S, e, k]
 
 
-# -- a substep with constraints: one kernel per stage (inlined into one, LLVM compiled for many
+# -- a substep with constraint rows: one kernel per stage (inlined into one, LLVM compiled for many
 # -- minutes), a collider kernel per pair kind present in the scene, compiled for those only
+@ti.func
+def _skipped(d: ti.template(), e, flagged_only):
+    """With flagged_only, the stage kernels take only the envs advance left to them (needs_rows)."""
+    return flagged_only and d.needs_rows[e, 0] == 0
+
+
 @ti.kernel
-def smooth_substep(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, inputs: A):
+def smooth_substep(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, inputs: A,
+                   flagged_only: ti.i32):
     """Frame s up to the smooth force, then the geom poses; the contact list emptied. At s = 0
     the inputs (unless empty) are loaded first."""
     ti.loop_config(serialize=schedule[0])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
-        if s == 0 and inputs.shape[0] > 0:
-            _inputs_from(d, e, inputs, 0)
-        smooth_env(d, s, e)
-        geom_poses(d, s, e)
-        d.n_con[s, e, 0] = 0
+        if not _skipped(d, e, flagged_only):
+            if s == 0 and inputs.shape[0] > 0:
+                _inputs_from(d, e, inputs, 0)
+            smooth_env(d, s, e)
+            geom_poses(d, s, e)
+            d.n_con[s, e, 0] = 0
 
 
 @ti.kernel
@@ -195,23 +226,26 @@ def collide(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti
 
 
 @ti.kernel
-def constrain(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32):
+def constrain(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, flagged_only: ti.i32):
     """Frame s's constraint rows and solve."""
     ti.loop_config(serialize=schedule[0])
     for e in range(n_batch(ints)):
-        constraint_env(bind(ints, f1, v3, v4, m3), s, e)
+        d = bind(ints, f1, v3, v4, m3)
+        if not _skipped(d, e, flagged_only):
+            constraint_env(d, s, e)
 
 
 @ti.kernel
 def finish_substep(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, commit: ti.i32,
-                   out: A):
+                   out: A, flagged_only: ti.i32):
     """Frame s → frame s + 1; after the last substep, what advance does at the end of a step."""
     ti.loop_config(serialize=schedule[0])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
-        finish_substep_env(d, s, e)
-        if s == d.substeps - 1:
-            _end_step(d, e, commit, out)
+        if not _skipped(d, e, flagged_only):
+            finish_substep_env(d, s, e, True)
+            if s == d.substeps - 1:
+                _end_step(d, e, commit, out)
 
 
 @ti.kernel
@@ -229,11 +263,12 @@ def prepare_reverse(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3:
 
 
 @ti.kernel
-def reverse_dynamics(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32):
-    """Adjoints of substep s from the integration back to the subtree sums."""
-    ti.loop_config(serialize=schedule[0])
+def reverse_dynamics(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32):
+    """Adjoints of substep s from the integration back to the subtree sums; config = (schedule,
+    rows), rows: the step had a constraint stage."""
+    ti.loop_config(serialize=config[0][0])
     for e in range(n_batch(ints)):
-        dynamics_adjoint_env(bind(ints, f1, v3, v4, m3), s, e)
+        dynamics_adjoint_env(bind(ints, f1, v3, v4, m3), s, e, config[1])
 
 
 @ti.kernel
@@ -465,7 +500,8 @@ def read_contacts(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M
                 dst[e, c, 8] = d.con_dist[s, e, c]
 
 
-#: what solver.py launches (through solvers.launch, with the scene's arenas)
-KERNELS = (advance, prepare_reverse, reverse_dynamics, reverse_kinematics, down_sweep, down_sweep_adjoint,
+#: what solver.py launches (through solvers.launch, with the scene's arenas; reverse_dynamics and
+#: collide with a config of their own)
+KERNELS = (advance, prepare_reverse, reverse_kinematics, down_sweep, down_sweep_adjoint,
            position_stages, write_state, read_state, write_inputs, read_links, read_mass_matrix, read_dofs_force,
            read_com_jacobians, read_contacts, smooth_substep, constrain, finish_substep)

@@ -38,8 +38,7 @@ grows with (local array size) x (runtime-indexed accesses), so there are no larg
 Compile time. Everything is inlined and each heavy piece appears once in the code (one support
 call per GJK and per EPA loop, one face attachment, one clipping loop). Taichi's CFG
 optimisation is still superlinear on it: a kernel calling convex_convex compiles in 156 s with
-default options, 11 s with `cfg_optimization=False` (compile such kernels with it off, see the
-tests' `_lean_compile`).
+default options, 11 s with `cfg_optimization=False` (gs.init turns it off for every kernel).
 
 Features (what a backward needs to replay a contact as a closed form of the two poses), one row
 of FEATURE_SIZE ints per contact, column 0 the kind:
@@ -72,6 +71,11 @@ CCD_ITERATIONS = 35      # mjOption.ccd_iterations (MuJoCo's default): GJK and E
 CCD_TOLERANCE = 1e-6     # mjOption.ccd_tolerance (MuJoCo's default), m
 CONVEX_MAX = 4           # contact budget of convex_convex (MuJoCo 4.0: 4, or 2 with a capsule, 1 with a sphere)
 PLANE_MESH_MAX = 4       # contact budget of plane_mesh (MuJoCo 4.0)
+# the pairs (type 1, type 2) MuJoCo sends to mjc_Convex, i.e. to convex_convex, and their contact
+# budgets in MuJoCo 4.0 (the rule of `_budget`: 1 with a sphere, 2 with a capsule, else 4)
+CONVEX_BUDGET = {(SPHERE, MESH): 1, (CAPSULE, CYLINDER): 2, (CAPSULE, MESH): 2, (CYLINDER, CYLINDER): 4,
+                 (CYLINDER, BOX): 4, (CYLINDER, MESH): 4, (BOX, MESH): 4, (MESH, MESH): 4}
+CONVEX_PAIRS = tuple(CONVEX_BUDGET)
 FEATURE_SIZE = 8
 KIND_CORE, KIND_EPA, KIND_CLIP, KIND_PLANE = 1, 2, 3, 4
 POLYGON_MAX = 32         # vertices of a mesh polygon multi-contact can use (larger: single contact)
@@ -139,6 +143,13 @@ class MeshHulls:
     def __init__(self, **arrays):
         for name in self.FIELDS:
             setattr(self, name, np.asarray(arrays[name]))
+
+
+# MeshHulls' int arrays, in the order the rigid model packs them into one array (geometry.py): a
+# header of HULL_HEADER slots (where each starts, then where the polygon normals start among the
+# model's 3-vectors) followed by the arrays
+HULL_INT_FIELDS = tuple(name for name in MeshHulls.FIELDS if name not in ("hull_vert", "hull_poly_normal"))
+HULL_HEADER = len(HULL_INT_FIELDS) + 1
 
 
 def _extrema(vertices: np.ndarray, hull_ids: list) -> list:

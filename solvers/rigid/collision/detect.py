@@ -1,17 +1,26 @@
 """Collision stage of one env's substep: geom poses, a bounding-sphere broad phase over the
 candidate pairs (built once, geometry.py), and each pair's collider → the contact list.
 
+Colliders: the primitive ones (primitive.py, box.py) and, for meshes and the cylinder pairs
+MuJoCo sends to its general convex collider, convex.py's plane_mesh and convex_convex (meshes as
+their convex hull; the hull data and the workspace are arrays of the scene's storage, data.py).
+
 The pairs of one kind (type 1, type 2) are handled together (``collide_kind``, a kernel of its
-own: a scene compiles the colliders it uses, and no kernel holds them all). Contacts are
+own: a scene compiles the colliders it uses, and no kernel holds them all; every convex_convex
+kind may share one kernel, ``kernel_kinds``). Contacts are
 appended to con_*[s, e, 0 … n_con), kind by kind, in pair order within a kind; a pair's
 contacts come in its collider's order, as MuJoCo lists them. More contacts than slots sets the
 header's overflow flag (the solver raises) instead of writing past the end.
 """
-import taichi as ti
+import warnings
 
-from ..geometry import BOX, CAPSULE, CYLINDER, PLANE, SPHERE
+import taichi as ti
+from taichi.lang import impl
+
+from ..data import ArrayView
+from ..geometry import BOX, CAPSULE, CYLINDER, MESH, PLANE, SPHERE
 from ..spatial import mat_mul, mat_vec, quat_to_mat
-from . import box, primitive
+from . import box, convex, primitive
 from .frame import contact_frame
 
 
@@ -40,13 +49,21 @@ def _may_touch(d: ti.template(), s, e, pair):
 
 @ti.func
 def _append(d: ti.template(), s, e, pair, count, position, normal, dist, feature, tangent):
-    """Add a collider's first ``count`` contacts (rows of position, normal, dist, feature)."""
+    """Add a collider's first ``count`` contacts (rows of position, normal, dist, feature: (K,)
+    one int per contact, or (K, FEATURE_SIZE) for the convex colliders), each contact's feature
+    as FEATURE_SIZE ints in con_feature[s, e, FEATURE_SIZE n ...] (a primitive's in the first)."""
     n = d.n_con[s, e, 0]
     for k in ti.static(range(dist.n)):
         if k < count:
             if n < d.contact_capacity:
                 d.con_pair[s, e, n] = pair
-                d.con_feature[s, e, n] = feature[k]
+                for j in ti.static(range(convex.FEATURE_SIZE)):
+                    value = 0
+                    if ti.static(len(feature.get_shape()) == 2):
+                        value = feature[k, j]
+                    elif ti.static(j == 0):
+                        value = feature[k]
+                    d.con_feature[s, e, convex.FEATURE_SIZE * n + j] = value
                 d.con_pos[s, e, n] = ti.Vector([position[k, j] for j in ti.static(range(3))])
                 d.con_frame[s, e, n] = contact_frame(ti.Vector([normal[k, j] for j in ti.static(range(3))]), tangent)
                 d.con_dist[s, e, n] = dist[k]
@@ -65,8 +82,44 @@ def _posed(collider):
     return call
 
 
+class HullView:
+    """Kernel-scope view of the meshes' hulls in a RigidView ``d`` with convex.MeshHulls' names
+    (the ``hull`` argument of the convex colliders): d.hull_vec holds the vertices then the
+    polygon normals, d.hull_int a header of where each int array starts, then the arrays
+    (geometry._hull_arrays). Each start is loaded once, into a local."""
+    _data_oriented = True
+
+    def __init__(self, d):
+        ints, vecs = d.hull_int, d.hull_vec
+        for k, name in enumerate(convex.HULL_INT_FIELDS):
+            setattr(self, name, ArrayView(ints.arena, impl.expr_init(ints.start + ints[k]), (1,)))
+        self.hull_vert = vecs
+        self.hull_poly_normal = ArrayView(vecs.arena, impl.expr_init(vecs.start + ints[len(convex.HULL_INT_FIELDS)]),
+                                          (1,))
+
+
+# HullView runs as Python while Taichi builds a kernel, on purpose: it only creates the view
+warnings.filterwarnings("ignore", message='.*Calling non-taichi function "HullView"', category=SyntaxWarning)
+
+
+@ti.func
+def _plane_mesh(d: ti.template(), s, e, g1, g2, margin):
+    """convex.plane_mesh on geoms g1 (the plane) and g2 (a mesh) at frame s."""
+    return convex.plane_mesh(d.geom_xpos[s, e, g1], d.geom_xmat[s, e, g1], d.geom_size[g1], d.geom_xpos[s, e, g2],
+                             d.geom_xmat[s, e, g2], d.geom_size[g2], d.geom_mesh[g2], margin, HullView(d))
+
+
+@ti.func
+def _convex_convex(d: ti.template(), s, e, g1, g2, margin):
+    """convex.convex_convex on geoms g1 and g2 at frame s, env e's row of the workspace (the
+    types are run-time values: one compiled kernel serves every convex pair kind)."""
+    return convex.convex_convex(d.geom_type[g1], d.geom_xpos[s, e, g1], d.geom_xmat[s, e, g1], d.geom_size[g1],
+                                d.geom_mesh[g1], d.geom_type[g2], d.geom_xpos[s, e, g2], d.geom_xmat[s, e, g2],
+                                d.geom_size[g2], d.geom_mesh[g2], margin, HullView(d), d, (e,))
+
+
 # (type 1, type 2) → (collider, its contact budget, whether MuJoCo's frame takes geom 2's axis as
-# its first tangent)
+# its first tangent; the convex colliders' contacts take MuJoCo's default frame)
 P, B = primitive, box
 PRIMITIVES = {(PLANE, SPHERE): (P.plane_sphere, P.PLANE_SPHERE_MAX, False),
               (PLANE, CAPSULE): (P.plane_capsule, P.PLANE_CAPSULE_MAX, True),
@@ -79,18 +132,44 @@ PRIMITIVES = {(PLANE, SPHERE): (P.plane_sphere, P.PLANE_SPHERE_MAX, False),
               (SPHERE, BOX): (B.sphere_box, B.SPHERE_BOX_MAX, False),
               (CAPSULE, BOX): (B.capsule_box, B.CAPSULE_BOX_MAX, False),
               (BOX, BOX): (B.box_box, B.BOX_BOX_MAX, False)}
-COLLIDERS = {kind: (_posed(collider), tangent) for kind, (collider, _, tangent) in PRIMITIVES.items()}
-BUDGET = {kind: budget for kind, (_, budget, _) in PRIMITIVES.items()}  # contacts a pair may give
+CONVEX = {(PLANE, MESH): (_plane_mesh, convex.PLANE_MESH_MAX, False),
+          **{kind: (_convex_convex, budget, False) for kind, budget in convex.CONVEX_BUDGET.items()}}
+COLLIDERS = {**{kind: (_posed(collider), tangent) for kind, (collider, _, tangent) in PRIMITIVES.items()},
+             **{kind: (collider, tangent) for kind, (collider, _, tangent) in CONVEX.items()}}
+BUDGET = {kind: budget for kind, (_, budget, _) in {**PRIMITIVES, **CONVEX}.items()}  # contacts a pair may give
+# One kernel may serve every convex_convex pair kind (``kernel_kinds``): it is the slowest to compile
+ALL_CONVEX = "convex"
+COLLIDERS[ALL_CONVEX] = (_convex_convex, False)
+
+
+def kernel_kinds(model):
+    """The collider kernels a model needs: a pair kind (type 1, type 2) each, except that every
+    convex_convex pair is handled by one kernel (ALL_CONVEX), primitive kinds first, sorted."""
+    kinds = {(int(model.geom_type[a]), int(model.geom_type[b])) for a, b in zip(model.pair_geom1, model.pair_geom2)}
+    convex_kinds = kinds & set(convex.CONVEX_PAIRS)
+    return sorted(kinds - convex_kinds) + ([ALL_CONVEX] if convex_kinds else [])
+
+
+@ti.func
+def _of_kind(type1, type2, kind: ti.template()):
+    """Whether a pair of geom types (type1 <= type2) is handled by the kernel of ``kind``."""
+    match = False
+    if ti.static(kind == ALL_CONVEX):
+        for other in ti.static(convex.CONVEX_PAIRS):
+            match = match or (type1 == other[0] and type2 == other[1])
+    else:
+        match = type1 == kind[0] and type2 == kind[1]
+    return match
 
 
 @ti.func
 def collide_kind(d: ti.template(), s, e, kind: ti.template()):
-    """Frame s's contacts of env e from the candidate pairs of one kind (type 1, type 2), in pair
-    order, appended to the contact list."""
+    """Frame s's contacts of env e from the candidate pairs of one kind (type 1, type 2), or of
+    every convex_convex kind (kind ALL_CONVEX), in pair order, appended to the contact list."""
     collider, axis_tangent = ti.static(COLLIDERS[kind])
     for pair in range(d.n_candidates):
         g1, g2 = d.pair_geom1[pair], d.pair_geom2[pair]
-        if d.geom_type[g1] == kind[0] and d.geom_type[g2] == kind[1] and _may_touch(d, s, e, pair):
+        if _of_kind(d.geom_type[g1], d.geom_type[g2], kind) and _may_touch(d, s, e, pair):
             count, position, normal, dist, feature = collider(d, s, e, g1, g2, d.pair_margin[pair])
             tangent = ti.Vector.zero(float, 3)
             if ti.static(axis_tangent):

@@ -14,9 +14,17 @@ distance, diagA_t = invweight_t(link 1) + invweight_t(link 2) (rotational alike)
 - elliptic: rows J_n, J_t1, ... with R_n = (1 − d)/d · diagA_t and R_t = R_n / impratio;
 - aref = −B·(J q̇) − K·d·(dist − margin) on normal and pyramid rows, −B·(J q̇) on elliptic
   tangents, with K = 1/(dmax² tc² ζ²), B = 2/(dmax tc) (tc ≥ 2h) or the direct form (−k, −b).
+
+Before the contacts come, as in MuJoCo, one row per dof with friction loss F > 0 (FRICTION_LOSS,
+J = e_i, aref = −B q̇_i, bound F) and one per violated joint limit (ONE_SIDED, distance
+q − lower with J = e_i, or upper − q with J = −e_i). Their R uses diagA = dof_invweight0, their
+solref is (timeconst, 1) with the scene's constraint time constant, their solimp MuJoCo's
+default. Their adjoint (``dof_rows_adjoint``) takes the solve's implicit gradient of each row's
+aref, R and bound back to q, q̇ and the friction loss; contact rows have none yet.
 """
 import taichi as ti
 
+from ..data import CONST, accumulate
 from ..kinematics import dof_count, dof_motion_at
 
 # row types, as the solver reads them (interfaces agreed with solver.py)
@@ -25,6 +33,7 @@ UNUSED, FRICTION_LOSS, ONE_SIDED, ELLIPTIC_FIRST, ELLIPTIC_REST = range(5)
 MINVAL = 1e-15  # MuJoCo's mjMINVAL: a floor on every divisor
 MINMU = 1e-5  # MuJoCo's mjMINMU: a floor on friction (μ = 0 would leave a pyramid edge no regulariser)
 MINIMP, MAXIMP = 0.0001, 0.9999  # MuJoCo's bounds on the impedance
+DEFAULT_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)  # MuJoCo's (d0, dmax, width m, midpoint, power)
 
 
 @ti.func
@@ -147,8 +156,8 @@ def contact_rows(d: ti.template(), s, e, c, first):
     tran = d.link_invweight_t[l1] + d.link_invweight_t[l2]
     dist, margin = d.con_dist[s, e, c], d.pair_margin[pair]
     imp = impedance(solimp, dist, margin)
-    k, b = stiffness_damping(solref, solimp[1], d.consts[0])
-    impratio = d.consts[3]
+    k, b = stiffness_damping(solref, solimp[1], d.consts[CONST["h"]])
+    impratio = d.consts[CONST["impratio"]]
     r0 = ti.max(MINVAL, (1.0 - imp) * (tran + mu * mu * tran if condim > 1 and pyramidal else tran) / imp)
     r1 = r0 / ti.max(MINVAL, impratio)
     mu_reg = mu * ti.sqrt(r1 / r0)
@@ -189,3 +198,107 @@ def contact_force(d: ti.template(), s, e, c):
                 out[0] += plus + minus
                 out[k + 1] = (plus - minus) * mu
     return out
+
+
+# -- rows of single dofs: friction loss and joint limits --------------------------------------------
+@ti.func
+def _dof_row(d: ti.template(), s, e, r, i, sign, dist):
+    """Row r on dof i alone (J = sign·e_i) at distance dist (m or rad; 0 for friction loss): its
+    Jacobian, R and aref, with the scene's time constant and MuJoCo's default solimp."""
+    for j in range(d.n_dofs):
+        d.efc_J[s, e, r, j] = 0.0
+    d.efc_J[s, e, r, i] = sign
+    solimp = ti.Vector(DEFAULT_SOLIMP, dt=float)
+    imp = impedance(solimp, dist, 0.0)
+    k, b = stiffness_damping(ti.Vector([d.consts[CONST["timeconst"]], 1.0]), solimp[1], d.consts[CONST["h"]])
+    d.efc_R[s, e, r] = ti.max(MINVAL, (1.0 - imp) / imp * d.dof_invweight0[i])
+    d.efc_aref[s, e, r] = -b * sign * d.qvel[s, e, i] - k * imp * dist
+    d.efc_dim[s, e, r], d.efc_id[s, e, r], d.efc_mu[s, e, r] = 1, i, 0.0
+
+
+@ti.func
+def _limit_side(d: ti.template(), s, e, i):
+    """(sign, distance) of dof i's violated joint limit at frame s: (1, q − lower) below it,
+    (−1, upper − q) above it, (0, 0) within or without limits (no row)."""
+    sign, dist = 0.0, 0.0
+    qi = d.dof_q[i]
+    if d.limits_enabled and qi >= 0:
+        q = d.qpos[s, e, qi]
+        if q - d.dof_lower[i] < 0.0:
+            sign, dist = 1.0, q - d.dof_lower[i]
+        elif d.dof_upper[i] - q < 0.0:
+            sign, dist = -1.0, d.dof_upper[i] - q
+    return sign, dist
+
+
+@ti.func
+def limit_violated(d: ti.template(), s, e):
+    """1 if some joint limit of env e is violated at frame s (a limit row would arise), else 0."""
+    violated = 0
+    if d.limits_enabled:
+        for i in range(d.n_dofs):
+            sign, _ = _limit_side(d, s, e, i)
+            if sign != 0.0:
+                violated = 1
+    return violated
+
+
+@ti.func
+def dof_rows(d: ti.template(), s, e):
+    """Rows 0… of frame s: friction loss of every dof with F > 0, then every violated joint
+    limit. Returns how many (also kept in efc_dof_rows[s, e, 0])."""
+    rows = 0
+    for i in range(d.n_dofs):
+        bound = d.frictionloss[e, i]
+        if bound > 0.0:
+            _dof_row(d, s, e, rows, i, 1.0, 0.0)
+            d.efc_type[s, e, rows], d.efc_floss[s, e, rows] = FRICTION_LOSS, bound
+            rows += 1
+    for i in range(d.n_dofs):
+        sign, dist = _limit_side(d, s, e, i)
+        if sign != 0.0:
+            _dof_row(d, s, e, rows, i, sign, dist)
+            d.efc_type[s, e, rows], d.efc_floss[s, e, rows] = ONE_SIDED, 0.0
+            rows += 1
+    d.efc_dof_rows[s, e, 0] = rows
+    return rows
+
+
+@ti.func
+def _impedance_slope(solimp, dist, margin):
+    """∂impedance/∂dist (1/m) of ``impedance``: zero outside |dist − margin| < width."""
+    d0, dmax, width, mid, power = solimp[0], solimp[1], solimp[2], solimp[3], solimp[4]
+    slope = 0.0
+    if not (d0 == dmax or width <= MINVAL):
+        x = ti.abs((dist - margin) / width)
+        dy = 0.0
+        if 0.0 < x and x < 1.0:
+            if power == 1.0:
+                dy = 1.0
+            elif x <= mid:
+                dy = power / _power(mid, power - 1.0) * _power(x, power - 1.0)
+            else:
+                dy = power / _power(1.0 - mid, power - 1.0) * _power(1.0 - x, power - 1.0)
+        slope = (dmax - d0) * dy / width * (1.0 if dist - margin > 0.0 else -1.0)
+    return slope
+
+
+@ti.func
+def dof_rows_adjoint(d: ti.template(), s, e, r, g_aref, g_R, g_bound):
+    """Reverse of ``_dof_row`` for row r (< efc_dof_rows) given the gradients of its aref, R and
+    friction-loss bound: into q, q̇ at frame s and the friction-loss input."""
+    i = d.efc_id[s, e, r]
+    sign = d.efc_J[s, e, r, i]
+    solimp = ti.Vector(DEFAULT_SOLIMP, dt=float)
+    k, b = stiffness_damping(ti.Vector([d.consts[CONST["timeconst"]], 1.0]), solimp[1], d.consts[CONST["h"]])
+    accumulate(d.qvel.grad, ti.Vector([s, e, i]), -b * sign * g_aref)
+    if d.efc_type[s, e, r] == FRICTION_LOSS:
+        accumulate(d.frictionloss.grad, ti.Vector([e, i]), g_bound)
+    else:  # a limit: aref and R depend on the distance
+        _, dist = _limit_side(d, s, e, i)
+        imp, slope = impedance(solimp, dist, 0.0), _impedance_slope(solimp, dist, 0.0)
+        g_imp = -k * dist * g_aref
+        if (1.0 - imp) / imp * d.dof_invweight0[i] > MINVAL:  # else R is its floor
+            g_imp -= d.dof_invweight0[i] / (imp * imp) * g_R
+        g_dist = -k * imp * g_aref + slope * g_imp
+        accumulate(d.qpos.grad, ti.Vector([s, e, d.dof_q[i]]), sign * g_dist)

@@ -173,7 +173,7 @@ def _cholesky(d: ti.template(), A: ti.template(), s, e, k):
 
 
 @ti.func
-def _cholesky_solve(d: ti.template(), L: ti.template(), x: ti.template(), s, e, k):
+def cholesky_solve(d: ti.template(), L: ti.template(), x: ti.template(), s, e, k):
     """In place, x[s, e] ← (L Lᵀ)⁻¹ x[s, e] on island k's dofs (L from ``_cholesky``)."""
     for i in range(d.n_dofs):
         if _dof_in(d, s, e, i, k):
@@ -676,7 +676,7 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
             for i in range(d.n_dofs):
                 if _dof_in(d, s, e, i, k):
                     d.solver_Mgrad[s, e, i] = d.solver_grad[s, e, i]
-            _cholesky_solve(d, d.solver_H, d.solver_Mgrad, s, e, k)
+            cholesky_solve(d, d.solver_H, d.solver_Mgrad, s, e, k)
             decrement = ti.max(0.0, 0.5 * scale * _dot(d, d.solver_grad, d.solver_Mgrad, s, e, k))
             if attempt == 0 and first:
                 certificate = decrement < tolerance and gradient < tolerance
@@ -748,7 +748,7 @@ def newton_solve(d: ti.template(), s, e, iterations, tolerance, ls_iterations, l
     # M's factor: qacc_smooth now; each island replaces its block with its Hessian's factor,
     # unconstrained dofs keep it (H = M there)
     _cholesky(d, d.solver_H, s, e, ALL)
-    _cholesky_solve(d, d.solver_H, d.qacc_smooth, s, e, ALL)
+    cholesky_solve(d, d.solver_H, d.qacc_smooth, s, e, ALL)
     for r in range(d.n_efc[s, e, 0]):
         d.efc_force[s, e, r], d.efc_state[s, e, r] = 0.0, SATISFIED
     _warm_start(d, s, e)
