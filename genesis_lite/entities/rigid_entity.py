@@ -475,7 +475,8 @@ class RigidEntity:
 
     def set_dofs_frictionloss(self, frictionloss, dofs_idx_local=None, envs_idx=None):
         """Dry joint friction, N·m or N: a friction-loss constraint row (MuJoCo's) resisting the
-        dof's motion up to this bound. Differentiable."""
+        dof's motion up to this bound. Differentiable where positive (at 0 the dof has no row and
+        the gradient is 0: start a fit from a small positive value)."""
         self._nonnegative("frictionloss")(frictionloss, dofs_idx_local, envs_idx)
 
     def set_dofs_armature(self, armature, dofs_idx_local=None, envs_idx=None):

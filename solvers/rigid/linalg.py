@@ -100,7 +100,14 @@ def solve_adjoint_env(d: ti.template(), s, e, rows: ti.template()):
             d.qacc_constrained.grad[s, e, i] = d.qacc.grad[s, e, i] if undamped else 0.0
     for i in range(d.n_dofs):
         d.qfrc_smooth.grad[s, e, i] = 0.0 if undamped else d.qacc.grad[s, e, i]
-    if not undamped:
+    if undamped:  # damping still has its (one-sided) derivative at 0: any damping > 0 gives A⁻¹(...)
+        y = d.solver_search  # the solve's scratch, free in the reverse
+        for i in range(d.n_dofs):
+            y[s, e, i] = d.qacc.grad[s, e, i]
+        _solve_in_place(d, s, e, y)
+        for i in range(d.n_dofs):
+            accumulate(d.damping.grad, ti.Vector([e, i]), -h * y[s, e, i] * d.qacc[s, e, i])
+    else:
         _solve_in_place(d, s, e, d.qfrc_smooth.grad)
         for i in range(d.n_dofs):
             y = d.qfrc_smooth.grad[s, e, i]

@@ -212,10 +212,10 @@ class RigidSolver(Solver):
         out = self._empty(sum(self.grad_widths))
         self.kernels.prepare_reverse(packed)
         self.data.take_flag("contacted")
-        constrained = self._constrained()
+        constrained = self._constrained()  # else no solve reads the warm start: leave it
         warm_start = self.data.per_env("qacc_warmstart").clone() if constrained else None
         self.run_step(self._nothing, self._nothing, commit=0)
-        if warm_start is not None:  # the replay must not move the forward's warm start
+        if constrained:  # the replay must not move the forward's warm start
             self.data.per_env("qacc_warmstart").copy_(warm_start)
         if self.data.take_flag("contacted"):
             raise GradientError(f"rigid solver (entities: {', '.join(self.entity_names)}): this step had contacts; "

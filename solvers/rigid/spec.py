@@ -41,7 +41,7 @@ class LinkSpec:
     axis (3,): unit joint axis in the joint frame (= the child link frame).
     mass kg; com (3,) m in the link frame; inertia (3, 3) kg·m² about the com, link-frame axes.
     damping N·m·s/rad (or N·s/m); armature kg·m² (or kg); frictionloss N·m (or N): the joint's
-    dry friction (URDF ``<dynamics friction>``; kept in the model, not applied yet).
+    dry friction (URDF ``<dynamics friction>``; a friction-loss constraint row).
     lower/upper: joint limits, rad or m (-inf/inf when unlimited); effort: |force| bound (inf when none).
     merged: (link name, fixed joint name) of every link merged into this one (merge.py), for
     error messages about names that no longer exist.

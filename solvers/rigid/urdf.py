@@ -9,7 +9,7 @@ Supported collision shapes: box, sphere, cylinder, mesh (any format trimesh read
 Friction: ``<dynamics friction>`` is the joint's dry friction (LinkSpec.frictionloss); URDF has
 no contact friction, so the one pybullet reads, ``<link><contact><lateral_friction value>``,
 becomes the friction of that link's collision shapes (GeomSpec.friction). The joint's dry
-friction is kept in the model (not applied yet).
+friction is a friction-loss constraint row, as in MuJoCo.
 Ignored: mimic joints, velocity limits, calibration, safety controllers, and pybullet's other
 ``<contact>`` entries (rolling/spinning friction, restitution, stiffness, damping, cfm/erp).
 """

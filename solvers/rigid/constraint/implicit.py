@@ -11,7 +11,8 @@ the Hessian the solve factored last (solver_H, H = L Lᵀ). So one more solve wi
 u = H⁻¹ ā, gives every gradient: q̄frc_smooth += u, M̄ −= u aᵀ, and per row, with w = J_r·u,
 θ̄ = (∂f/∂θ)·w: a quadratic row (f = −jar/R) has āref = w/R and R̄ = w·jar/R², a saturated
 friction-loss row (f = ±F) has F̄ = ±w, a satisfied row nothing. The solve's tolerance, its
-iterations and its warm start do not enter: the gradient is that of the exact solution.
+iterations and its warm start have no term: the gradient is that of the exact solution at the
+point the solve returned.
 
 qfrc_constraint = Jᵀ f, read by the damped integration (linalg.solve_env), equals M a −
 qfrc_smooth at the solution, so its gradient reaches a, M and qfrc_smooth through that form.
