@@ -3,8 +3,10 @@
 Each ``scene.step()`` is one ``_Step`` node: inputs are every solver's state at the start of
 the step and its differentiable inputs (controls, parameters) — all torch tensors; outputs are
 the states after the step. A node keeps only what torch saves for it (its start state and its
-inputs), so a rollout's memory is one state per step, and nothing outlives the graph: zeroing
-and freeing are torch's. Getters of derived quantities (link poses) are ``_Read`` nodes.
+inputs) and the solvers' warm starts the step started from (``solver.warm_start()``: the rigid
+constraint solve's, so that the backward's replay repeats the forward exactly), so a rollout's
+memory is about one state per step, and nothing outlives the graph: zeroing and freeing are
+torch's. Getters of derived quantities (link poses) are ``_Read`` nodes.
 
 With ``SimOptions(checkpoint_interval=k)``, only every k-th step saves its state; a step
 without one is recomputed from the nearest checkpoint by its ``Rollout`` during backward.
@@ -26,31 +28,34 @@ class Rollout:
     def __init__(self, sim, interval):
         self.sim, self.interval = weakref.ref(sim), interval
         self.generation = sim.generation
-        self.checkpoints = {}  # step index → states at its start (tuple of tensors)
+        self.checkpoints = {}  # step index → (states at its start (tuple of tensors), warm starts)
         self.inputs = {}  # step index → inputs (only when interval > 1)
-        self._replayed = {}  # step index → start states recomputed during backward
+        self._replayed = {}  # step index → (start states, warm starts) recomputed during backward
 
     def keeps_state(self, index):
         return index % self.interval == 0
 
-    def record(self, index, states, inputs):
+    def record(self, index, states, inputs, warm_starts):
         if self.interval > 1:
             self.inputs[index] = inputs
             if self.keeps_state(index):
-                self.checkpoints[index] = tuple(s.detach() for s in states)
+                self.checkpoints[index] = (tuple(s.detach() for s in states), warm_starts)
 
     def start_states(self, index):
-        """States at the start of step ``index``, recomputed from the last checkpoint if needed."""
+        """(states, warm starts) at the start of step ``index``, recomputed from the last
+        checkpoint if needed (from its warm starts too: the same steps again, bit for bit)."""
         if index not in self._replayed:
             first = index - index % self.interval
-            states = self.checkpoints[first]
-            self._replayed = {first: states}
+            states, warm_starts = self.checkpoints[first]
+            self._replayed = {first: (states, warm_starts)}
+            sim = _alive(self.sim)
             with torch.no_grad():
                 for k in range(first, first + self.interval - 1):
                     if k + 1 not in self.inputs:
                         break
-                    states = _alive(self.sim).forward_step(states, self.inputs[k])
-                    self._replayed[k + 1] = states
+                    states = sim.forward_step(states, self.inputs[k], warm_starts)
+                    warm_starts = sim.warm_starts()
+                    self._replayed[k + 1] = (states, warm_starts)
         return self._replayed.pop(index)
 
 
@@ -75,7 +80,8 @@ class _Step(torch.autograd.Function):
         outs = sim.forward_step(states, inputs)
         ctx.sim, ctx.rollout, ctx.index, ctx.n_states = weakref.ref(sim), rollout, index, n_states
         ctx.kept = rollout.keeps_state(index)
-        rollout.record(index, states, inputs)
+        ctx.warm_starts = tuple(sim.started_from) if ctx.kept else None  # no tensors of the graph
+        rollout.record(index, states, inputs, ctx.warm_starts)
         ctx.save_for_backward(*(tensors if ctx.kept else inputs))
         return outs
 
@@ -85,10 +91,10 @@ class _Step(torch.autograd.Function):
         _check_generation(sim, ctx.rollout.generation, f"step {ctx.index}")
         saved = ctx.saved_tensors
         if ctx.kept:
-            states, inputs = saved[: ctx.n_states], saved[ctx.n_states:]
+            states, inputs, warm_starts = saved[: ctx.n_states], saved[ctx.n_states:], ctx.warm_starts
         else:
-            states, inputs = ctx.rollout.start_states(ctx.index), saved
-        grads = sim.backward_step(states, inputs, grad_states)
+            (states, warm_starts), inputs = ctx.rollout.start_states(ctx.index), saved
+        grads = sim.backward_step(states, inputs, grad_states, warm_starts)
         return (None, None, None, None, *grads)
 
 

@@ -151,21 +151,32 @@ class Simulator:
             k += len(names)
         return out
 
-    def forward_step(self, states, flat_inputs):
-        """One step from the given states and inputs (no graph); returns the new states."""
-        outs = []
-        for slot, state, inputs in zip(self.slots, states, self._split_inputs(flat_inputs)):
-            self._sync_state(slot, state)
+    def warm_starts(self):
+        """Each solver's warm start (solver.warm_start()), as a tuple."""
+        return tuple(slot.solver.warm_start() for slot in self.slots)
+
+    def forward_step(self, states, flat_inputs, warm_starts=None):
+        """One step from the given states and inputs (no graph), and from ``warm_starts`` when
+        given (else what the solvers hold); returns the new states. ``started_from`` keeps the
+        warm starts the step started from, for its backward."""
+        outs, self.started_from = [], []
+        for k, (slot, state, inputs) in enumerate(zip(self.slots, states, self._split_inputs(flat_inputs))):
+            self._sync_state(slot, state)  # uploading a state clears the warm start
+            if warm_starts is not None:
+                slot.solver.set_warm_start(warm_starts[k])
+            self.started_from.append(slot.solver.warm_start())
             out = slot.solver.advance(self._pending_inputs(slot, inputs), download=True)
             slot.uploaded_state = out
             outs.append(out)
         return tuple(outs)
 
-    def backward_step(self, states, flat_inputs, grad_states):
-        """Gradients of one step's states and flat inputs, given the gradients of its outputs."""
+    def backward_step(self, states, flat_inputs, grad_states, warm_starts):
+        """Gradients of one step's states and flat inputs, given the gradients of its outputs and
+        the warm starts it started from (its replay then repeats it exactly)."""
         grads_states, grads_inputs = [], []
-        for slot, state, inputs, grad in zip(self.slots, states, self._split_inputs(flat_inputs), grad_states):
-            grad_state, grad_inputs = slot.solver.backward(state, inputs, grad)
+        for slot, state, inputs, grad, warm_start in zip(self.slots, states, self._split_inputs(flat_inputs),
+                                                         grad_states, warm_starts):
+            grad_state, grad_inputs = slot.solver.backward(state, inputs, grad, warm_start)
             slot.uploaded_state = slot.uploaded_inputs = None  # Taichi holds this old step now
             grads_states.append(grad_state)
             grads_inputs.extend(grad_inputs.get(name) for name in inputs)

@@ -45,7 +45,16 @@ class Solver:
         """True once a step produced a non-finite state since the last call."""
         raise NotImplementedError
 
-    def backward(self, state, inputs, grad_state_out):
+    def warm_start(self):
+        """A copy of what a step carries over besides its state and inputs without it changing
+        the result beyond a tolerance (the rigid solver's constraint-solve warm start), or None."""
+        raise NotImplementedError
+
+    def set_warm_start(self, warm_start):
+        """Restore ``warm_start()``'s value (None: leave it)."""
+        raise NotImplementedError
+
+    def backward(self, state, inputs, grad_state_out, warm_start=None):
         """Reverse of the step from ``state`` (B, width) with ``inputs`` (name → (B, width)).
 
         Returns (grad of the start state (B, width), {name: grad (B, width)} for grad_input_names).

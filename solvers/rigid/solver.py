@@ -204,19 +204,28 @@ class RigidSolver(Solver):
         """True once any step produced a non-finite state (resets the flag)."""
         return self.data.take_flag("nonfinite")
 
-    def backward(self, state, inputs, grad_state_out):
+    def warm_start(self):
+        """(B, D) copy of the constraint solve's warm start (what the next step's solve starts
+        from), or None when no step can have a solve."""
+        return self.data.per_env("qacc_warmstart").clone() if self._constrained() else None
+
+    def set_warm_start(self, warm_start):
+        """The warm start ← ``warm_start`` (from ``warm_start()``; None: leave it)."""
+        if warm_start is not None:
+            self.data.per_env("qacc_warmstart").copy_(warm_start)
+
+    def backward(self, state, inputs, grad_state_out, warm_start=None):
         """Gradients of the step's start state and differentiable inputs from that of its end
-        state: load, replay, reverse (see step.py)."""
+        state: load (with the warm start the forward step started from), replay exactly,
+        reverse (see step.py)."""
         self._note_inputs(inputs)
         packed = self._pack_inputs(inputs, before=(state,), after=(grad_state_out,))
         out = self._empty(sum(self.grad_widths))
         self.kernels.prepare_reverse(packed)
         self.data.take_flag("contacted")
-        constrained = self._constrained()  # else no solve reads the warm start: leave it
-        warm_start = self.data.per_env("qacc_warmstart").clone() if constrained else None
+        self.set_warm_start(warm_start)
+        constrained = self._constrained()
         self.run_step(self._nothing, self._nothing, commit=0)
-        if constrained:  # the replay must not move the forward's warm start
-            self.data.per_env("qacc_warmstart").copy_(warm_start)
         if self.data.take_flag("contacted"):
             raise GradientError(f"rigid solver (entities: {', '.join(self.entity_names)}): this step had contacts; "
                                 f"gradients through contact are not implemented yet (steps without any contact "
