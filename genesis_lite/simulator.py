@@ -44,6 +44,7 @@ class Simulator:
         self.generation = 0
         self.step_index = 0
         self.rollout = None
+        self.started_from = []  # the solvers' warm starts the last forward_step started from
 
     def build(self, n_envs):
         for slot in self.slots:
