@@ -334,7 +334,7 @@ class RigidView:
         self.n_pairs, self.substeps, self.input_total, self.grad_total = size["P"], size["S"], size["W"], size["GW"]
         self.limits_enabled = size["limits"]
         self.n_geoms, self.n_candidates = size["G"], size["N"]
-        self.contact_capacity, self.row_capacity = size["C"], size["R"]
+        self.contact_capacity = size["C"]
         self.elliptic, self.iterations, self.ls_iterations = size["cone"], size["iterations"], size["ls_iterations"]
         self.nonfinite = ArrayView(ints, HEADER["nonfinite"], (1,))  # set by the NaN check
         self.overflow = ArrayView(ints, HEADER["overflow"], (1,))  # set when contacts exceed their slots
