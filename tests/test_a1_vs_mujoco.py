@@ -26,12 +26,12 @@ start the elliptic cone differs by up to 2e-5: its Newton solve stops at toleran
 cost, which leaves qvel that far from the converged solution, and where it stops depends on
 where it starts (the pyramidal cone's solve ends exactly, whatever its start).
 
-Nothing is excluded in MuJoCo. Our a1 drops its cylinder–box and cylinder–cylinder self-pairs
-(no collider for them yet, a build warning), and skips pairs touching at the initial pose
-(``enable_neutral_collision`` False); MuJoCo keeps every pair of non-adjacent bodies. In this
+Nothing is excluded in MuJoCo. Our a1 collides its cylinder self-pairs too (the convex
+collider) but skips pairs touching at the initial pose (``enable_neutral_collision`` False);
+MuJoCo keeps every pair of non-adjacent bodies. In this
 motion MuJoCo finds no contact but plane ones (the feet, and for a moment a calf box; its contact
-list, compared above, would show any self-contact), so the difference does not matter here. No joint comes within 0.1 rad of
-its limit either (checked), so neither side produces limit forces or rows.
+list, compared above, would show any self-contact), so the difference does not matter here.
+No joint comes within 0.1 rad of its limit either (checked), so neither side makes limit rows.
 """
 import mujoco
 import numpy as np

@@ -268,7 +268,8 @@ def test_joint_limit_holds(f64, urdf_dir):
         x = min(p / width, 1.0)
         d = d0 + (dmax - d0) * (x * x / mid if x <= mid else 1.0 - (1.0 - x) ** 2 / (1.0 - mid))
         stiffness = 1.0 / (dmax * tc) ** 2
-        return stiffness * d * d * PEND_INERTIA * p / (1.0 - d) - (torque - PEND_MASS * G * PEND_LENGTH * np.sin(LIMIT + p))
+        held = torque - PEND_MASS * G * PEND_LENGTH * np.sin(LIMIT + p)
+        return stiffness * d * d * PEND_INERTIA * p / (1.0 - d) - held
 
     low, high = 0.0, 0.01
     for _ in range(200):  # bisection: excess rises with p

@@ -229,7 +229,8 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
         dof_effort=np.array(dofs["effort"], dtype=f), dof_frictionloss=np.array(dofs["frictionloss"], dtype=f),
         **_geoms(geoms, geom_links, geom_names), **_pairs(geoms, geom_links, rows, self_collision, adjacent_collision),
         link_invweight_t=np.zeros(len(link_parent)), link_invweight_r=np.zeros(len(link_parent)),
-        dof_invweight0=np.zeros(n_dofs), pairs=_mass_matrix_pairs(dof_link, link_parent), qpos0=np.array(qpos0, dtype=f))
+        dof_invweight0=np.zeros(n_dofs), pairs=_mass_matrix_pairs(dof_link, link_parent),
+        qpos0=np.array(qpos0, dtype=f))
 
 
 def _geoms(geoms, geom_links, geom_names):

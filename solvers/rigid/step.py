@@ -7,10 +7,12 @@ loss, and (checked per env and substep) no violated joint limit. Otherwise a sub
 stage kernels (smooth, constrain, finish) and one collider kernel per pair kind between the
 first two (see below; the constraint solve inlined into ``advance`` took LLVM 100 s to
 compile); an env that advance stops at a limit is taken again from its start by those, which
-then skip the other envs. Both ways give the same bits when no row arises. Reverse: ``prepare_reverse`` loads the step's start state,
-inputs and output gradient, the forward replays the substeps to refill the frames, then for
-each substep, last first, ``reverse_dynamics`` and ``reverse_kinematics`` run the stages'
-hand-written adjoints in reverse order; after substep 0 the gradients are written out.
+then skip the other envs. Both ways give the same bits when no row arises.
+
+Reverse: ``prepare_reverse`` loads the step's start state, inputs and output gradient, the
+forward replays the substeps to refill the frames, then for each substep, last first,
+``reverse_dynamics`` and ``reverse_kinematics`` run the stages' hand-written adjoints in
+reverse order; after substep 0 the gradients are written out.
 (Fused into one kernel, LLVM took 31 s to compile it; split so, 6 s.) Each env belongs to one
 thread, so gradients accumulate without atomics.
 
