@@ -440,24 +440,25 @@ class RigidEntity:
         """Link masses, kg (rotational inertia scales with them: same shape, other density)."""
         links = self._local(links_idx_local, self.n_links, "links_idx_local")
         envs = self._envs(envs_idx)
-        values = self._values(mass, len(links), envs, "mass")
-        if bool((values.detach() < 0).any()):
-            raise InvalidInputError(f"entity '{self.name}': argument 'mass' must be ≥ 0 kg, got "
-                                    f"{values.detach().cpu().numpy()}")
+        values = self._refuse_negative("mass", self._values(mass, len(links), envs, "mass"), " kg")
         self._write_input("mass", self.link_start + links, envs, values)
 
     def get_mass(self, envs_idx=None):
         """Total mass, kg: () or (n_envs,)."""
         return self._out(self._read_input("mass", self.link_start + np.arange(self.n_links), envs_idx).sum(-1))
 
+    def _refuse_negative(self, name, values, unit=""):
+        """values (a tensor), after a named error if any is negative."""
+        if bool((values.detach() < 0).any()):
+            raise InvalidInputError(f"entity '{self.name}': argument '{name}' must be ≥ 0{unit}, got "
+                                    f"{values.detach().cpu().numpy()}")
+        return values
+
     def _nonnegative(self, name):
         def setter(value, dofs_idx_local=None, envs_idx=None):
             dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
             envs = self._envs(envs_idx)
-            values = self._values(value, len(dofs), envs, name)
-            if bool((values.detach() < 0).any()):
-                raise InvalidInputError(f"entity '{self.name}': argument '{name}' must be ≥ 0, got "
-                                        f"{values.detach().cpu().numpy()}")
+            values = self._refuse_negative(name, self._values(value, len(dofs), envs, name))
             self._write_input(name, self.dof_start + dofs, envs, values)
         return setter
 
@@ -576,9 +577,7 @@ class RigidEntity:
         links = self._local(links_idx_local, self.n_links, "links_idx_local")
         envs = self._envs(envs_idx)
         ratio = self._values(friction_ratio, len(links), envs, "friction_ratio")
-        if bool((ratio.detach() < 0).any()):
-            raise InvalidInputError(f"entity '{self.name}': argument 'friction_ratio' must be ≥ 0, got "
-                                    f"{ratio.detach().cpu().numpy()}")
+        ratio = self._refuse_negative("friction_ratio", ratio)
         counts = torch.as_tensor(np.diff(self._link_geoms)[links], device=runtime.device)
         geoms = np.concatenate([np.arange(self._link_geoms[l], self._link_geoms[l + 1]) for l in links] + [[]])
         geoms = self.geom_start + geoms.astype(np.int64)
