@@ -31,7 +31,7 @@ def _scene(robot_name, n_envs, substeps, checkpoint_interval=1, limited=False):
     (a share of the controls clips). The constraint solve runs to 1e-14: the gradient is that of
     the exact solution, and finite differences of a solve stopped at 1e-8 see its stopping
     point move (up to 1e-6 of ‖g‖ here). No collision: these are the gradients of articulated
-    dynamics and of the joint rows (gradients through contact are not implemented yet)."""
+    dynamics and of the joint rows (contact: tests/test_contact_gradients.py)."""
     key = (robot_name, n_envs, substeps, checkpoint_interval, limited, gs.runtime.epoch)
     if key not in _SCENES:
         path, fixed = ROBOTS[robot_name]

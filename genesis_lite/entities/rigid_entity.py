@@ -585,21 +585,29 @@ class RigidEntity:
         self._write_input("friction", geoms, envs, torch.repeat_interleave(ratio, counts, dim=1) * base)
 
     def set_sol_params(self, sol_params, geoms_idx_local=None, envs_idx=None):
-        """Contact softness of the entity's geoms (all by default): 7 numbers per geom, Genesis's and
+        """Contact softness of the entity's geoms (all by default): 7 numbers, Genesis's and
         MuJoCo's (timeconst s, dampratio, dmin, dmax, width m, midpoint, power) = solref then
-        solimp; timeconst and dampratio both ≤ 0 mean MuJoCo's direct form (−stiffness, −damping).
-        A contact averages its two geoms' values."""
+        solimp, for every env of envs_idx or (len(envs_idx), 7) one row per env; timeconst and
+        dampratio both ≤ 0 mean MuJoCo's direct form (−stiffness, −damping). A contact averages
+        its two geoms' values. Differentiable (a time constant held at 2·dt/substeps has none)."""
         geoms = self._local(geoms_idx_local, self.n_geoms, "geoms_idx_local")
         envs = self._envs(envs_idx)
-        params = torch.as_tensor(np.asarray(sol_params, dtype=np.float64), dtype=runtime.tc_float,
-                                 device=runtime.device)
-        if params.shape != (7,):
+        self._sim().check_grad_allowed(sol_params, self.name, "sol_params")
+        if isinstance(sol_params, torch.Tensor):  # kept in the graph: differentiable
+            params = sol_params.as_subclass(torch.Tensor).to(device=runtime.device, dtype=runtime.tc_float)
+        else:
+            params = torch.as_tensor(np.asarray(sol_params, dtype=np.float64), dtype=runtime.tc_float,
+                                     device=runtime.device)
+        if params.shape not in ((7,), (len(envs), 7)):
             raise InvalidInputError(f"entity '{self.name}': argument 'sol_params' must be 7 numbers (timeconst, "
-                                    f"dampratio, dmin, dmax, width, midpoint, power), got shape {tuple(params.shape)}")
-        _check_sol_params(self.name, params.cpu().numpy())
+                                    f"dampratio, dmin, dmax, width, midpoint, power), or 7 per env of envs_idx "
+                                    f"{(len(envs), 7)}, got shape {tuple(params.shape)}")
+        for row in params.detach().cpu().numpy().reshape(-1, 7):
+            _check_sol_params(self.name, row)
         columns = self.geom_start + geoms
-        ref = params[:2].repeat(len(envs), len(geoms))
-        imp = params[2:].repeat(len(envs), len(geoms))
+        params = params.expand(len(envs), 7)
+        ref = params[:, :2].repeat(1, len(geoms))
+        imp = params[:, 2:].repeat(1, len(geoms))
         self._write_input("solref", (2 * columns[:, None] + np.arange(2)).ravel(), envs, ref)
         self._write_input("solimp", (5 * columns[:, None] + np.arange(5)).ravel(), envs, imp)
 

@@ -47,12 +47,12 @@ INPUTS = {
     "ctrl_pos": ("D", True),    # rad or m
     "ctrl_vel": ("D", True),    # rad/s or m/s
     "frictionloss": ("D", True),  # N·m or N: dry joint friction, a constraint row (constraint/rows.py)
+    "friction": ("G", True),    # per collision geom: Coulomb coefficient (pairs take the larger)
+    "solref": ("G2", True),     # per geom: (time constant s, damping ratio), or (−stiffness, −damping)
+    "solimp": ("G5", True),     # per geom: (d0, dwidth, width m, midpoint, power) of the impedance
     "force_lo": ("D", False),   # N·m or N
     "force_hi": ("D", False),
     "ctrl_mode": ("D", False),  # 0 force, 1 position, 2 velocity (see actuation.py)
-    "friction": ("G", False),   # per collision geom: Coulomb coefficient (pairs take the larger)
-    "solref": ("G2", False),    # per geom: (time constant s, damping ratio), or (−stiffness, −damping)
-    "solimp": ("G5", False),    # per geom: (d0, dwidth, width m, midpoint, power) of the impedance
 }
 
 CONSTS = ("h", "timeconst", "impratio", "tolerance", "ls_tolerance")
@@ -96,9 +96,9 @@ FRAMES = {
     "qfrc_bias": ("f", "D", True), "qfrc_smooth": ("f", "D", True), "qacc": ("f", "D", True),
     "factor": ("f", "DD", False),  # LᵀDL factor of M + diag(armature + h·damping)
     # contact (collision.py): geom poses, then the contacts found (count in n_con[s, e, 0])
-    "geom_xpos": ("v3", "G", False), "geom_xmat": ("m3", "G", False),
+    "geom_xpos": ("v3", "G", True), "geom_xmat": ("m3", "G", True),  # gradient of xmat: ∂L/∂ each entry
     "n_con": ("i", 1, False), "con_pair": ("i", "C", False), "con_feature": ("i", "CF", False),
-    "con_pos": ("v3", "C", False), "con_frame": ("m3", "C", False), "con_dist": ("f", "C", False),
+    "con_pos": ("v3", "C", True), "con_frame": ("m3", "C", True), "con_dist": ("f", "C", True),
     "con_efc": ("i", "C", False),  # each contact's first row
     # constraint rows (constraint/rows.py; n_efc[s, e, 0] in use) and the solve (constraint/solver.py)
     "n_efc": ("i", 1, False), "efc_dof_rows": ("i", 1, False),  # rows in use; of them, single-dof rows first

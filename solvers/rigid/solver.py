@@ -17,11 +17,20 @@ from .geometry import GEOM_CODE
 from .model import build_model
 
 
+def _pair_name(kind):
+    """'box–mesh' for a collider kernel kind (type 1, type 2); 'convex' for the shared one."""
+    if kind == detect.ALL_CONVEX:
+        return "convex pairs (meshes, cylinders with capsules, cylinders or boxes)"
+    names = {code: name for name, code in GEOM_CODE.items()}
+    return f"{names[kind[0]]}–{names[kind[1]]}"
+
+
 class RigidSolver(Solver):
     """Owns the rigid model (immutable), its Taichi data and the default inputs."""
 
     #: inputs that keep their value across ``scene.reset()`` (controls do not)
-    persistent_inputs = ("mass", "damping", "armature", "kp", "kv", "gravity", "force_lo", "force_hi", "frictionloss")
+    persistent_inputs = ("mass", "damping", "armature", "kp", "kv", "gravity", "force_lo", "force_hi", "frictionloss",
+                         "friction", "solref", "solimp")
 
     def __init__(self, sim_options, rigid_options):
         self.sim_options, self.rigid_options = sim_options, rigid_options
@@ -77,6 +86,9 @@ class RigidSolver(Solver):
         # the reverse of a substep, without and with the constraint stage
         self.reverse_kernel = [BoundKernel(step.reverse_dynamics, (schedule, rows), arenas, element_dims)
                                for rows in (0, 1)]
+        self.collider_reverses = [BoundKernel(step.collide_adjoint, (schedule, kind), arenas, element_dims)
+                                  for kind in detect.differentiable_kinds(m)]
+        self.undifferentiable = [kind for kind in detect.kernel_kinds(m) if kind not in detect.REVERSES]
         self.limited = contact.limited_dofs(self.model, options) > 0
         self.default_inputs = self._default_inputs()
         self.upload_inputs(self.default_inputs)
@@ -226,13 +238,16 @@ class RigidSolver(Solver):
         self.set_warm_start(warm_start)
         constrained = self._constrained()
         self.run_step(self._nothing, self._nothing, commit=0)
-        if self.data.take_flag("contacted"):
-            raise GradientError(f"rigid solver (entities: {', '.join(self.entity_names)}): this step had contacts; "
-                                f"gradients through contact are not implemented yet (steps without any contact "
-                                f"differentiate exactly); build with RigidOptions(enable_collision=False) to "
-                                f"simulate without contact")
-        for s in reversed(range(self.sim_options.substeps)):  # two kernels: one compiles 3x slower
+        if self.data.take_flag("contacted") and self.undifferentiable:
+            names = ", ".join(_pair_name(kind) for kind in self.undifferentiable)
+            raise GradientError(f"rigid solver (entities: {', '.join(self.entity_names)}): this step had contacts, "
+                                f"and the scene has geom pairs whose contacts have no gradient yet ({names}); "
+                                f"expected pairs among plane, sphere, capsule, box, and cylinders or meshes on a "
+                                f"plane or with spheres (see README), or RigidOptions(enable_collision=False)")
+        for s in reversed(range(self.sim_options.substeps)):  # separate kernels: fused, they compile slower
             self.reverse_kernel[constrained](s)
+            for reverse in self.collider_reverses:
+                reverse(s)
             self.kernels.reverse_kinematics(s, out)
         return self._split_grads(out)
 

@@ -25,7 +25,7 @@ import taichi as ti
 
 from .data import ARENA_TYPES, CONST, bind, n_batch
 from .actuation import smooth_force, smooth_force_adjoint
-from .collision.detect import collide_kind, geom_poses
+from .collision.detect import collide_adjoint_kind, collide_kind, geom_poses, geom_poses_adjoint
 from .constraint.implicit import solve_adjoint
 from .constraint.rows import contact_force, contact_rows, dof_rows, limit_violated
 from .constraint.solver import newton_solve
@@ -274,12 +274,24 @@ def reverse_dynamics(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: 
 
 
 @ti.kernel
+def collide_adjoint(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32):
+    """Reverse of frame s's contacts of one pair kind (into the geoms' pose gradients); config =
+    (schedule, (type 1, type 2)). Runs between reverse_dynamics and reverse_kinematics."""
+    ti.loop_config(serialize=config[0][0])
+    for e in range(n_batch(ints)):
+        collide_adjoint_kind(bind(ints, f1, v3, v4, m3), s, e, config[1])
+
+
+@ti.kernel
 def reverse_kinematics(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, dst: A):
-    """Adjoint of substep s's down sweep; after substep 0 the gradients go to dst (B, state
-    gradient | differentiable input gradients), as _read_grads_env lays it out."""
+    """Adjoint of substep s's geom poses (when it had contacts) and down sweep; after substep 0
+    the gradients go to dst (B, state gradient | differentiable input gradients), as
+    _read_grads_env lays it out."""
     ti.loop_config(serialize=schedule[0])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
+        if d.n_con[s, e, 0] > 0:
+            geom_poses_adjoint(d, s, e)
         down_sweep_adjoint_env(d, s, e)
         if s == 0:
             _read_grads_env(d, e, dst)

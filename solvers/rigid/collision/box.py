@@ -19,13 +19,21 @@ without fast math), so the same branch is taken. Decide code, never differentiat
 ``ti.select`` to small ``if`` blocks: control flow is what makes Taichi's compile time grow.
 Every collider here gives MuJoCo a zero first tangent: build the frame with
 ``frame.contact_frame(normal[k], zeros)``.
+
+Each evaluate has its hand-written reverse beside it, ``<name>_evaluate_adjoint(pos1, rot1,
+size1, pos2, rot2, size2, feature, g_position, g_normal, g_dist) -> (g_pos1, g_rot1, g_pos2,
+g_rot2)``: the gradient of g_position·position + g_normal·normal + g_dist·dist with respect to
+the poses (rot's 9 entries taken as independent numbers), feature frozen, forward values
+recomputed inside; its helpers' reverses (``<helper>_adjoint``) sit beside them. At a kink of
+evaluate (a sphere centre exactly on the face it is inside of: depth = |0|) the adjoint takes
+the symmetric subgradient 0, as frame.normalize3_adjoint does at a zero vector.
 """
 import taichi as ti
 from taichi.lang import impl
 
-from ..spatial import dot3, mat_vec
-from .frame import (AT_MINUS, AT_PLUS, MINVAL, collider, column, normalize3, segment_pair_params,
-                    segment_pair_state)
+from ..spatial import dot3, mat_mul, mat_vec
+from .frame import (AT_MINUS, AT_PLUS, MINVAL, collider, column, column_adjoint, cross3, cross3_adjoint, normalize3,
+                    normalize3_adjoint, segment_pair_params, segment_pair_params_adjoint, segment_pair_state)
 
 SPHERE_BOX_MAX = 1
 CAPSULE_BOX_MAX = 2
@@ -72,6 +80,18 @@ def _mat_t_mat(rot1: ti.template(), rot2: ti.template()):
                        for j in ti.static(range(3))] for i in ti.static(range(3))])
 
 
+@ti.func
+def _mat_t_vec_adjoint(rot: ti.template(), v: ti.template(), g: ti.template()):
+    """Reverse of _mat_t_vec(rot, v) given the gradient g (3,) of its result: (g_rot (3, 3), g_v (3,))."""
+    return v.outer_product(g), mat_vec(rot, g)
+
+
+@ti.func
+def _mat_vec_adjoint(rot: ti.template(), v: ti.template(), g: ti.template()):
+    """Reverse of mat_vec(rot, v) given the gradient g (3,) of its result: (g_rot (3, 3), g_v (3,))."""
+    return g.outer_product(v), _mat_t_vec(rot, g)
+
+
 # ---------------------------------------------------------------- sphere – box
 # The nearest box point is the sphere's centre clamped to the box (box frame); a centre inside
 # the box leaves through its nearest face.
@@ -104,6 +124,14 @@ def _sphere_box_feature(centre: ti.template(), half: ti.template()):
 
 
 @ti.func
+def _sphere_box_clamped(centre: ti.template(), half: ti.template(), feature):
+    """The box point nearest to an outside centre (box frame) of clamp pattern `feature`."""
+    return ti.Vector([ti.select(feature // 3**c % 3 == 1, -half[c], ti.select(feature // 3**c % 3 == 2, half[c],
+                                                                                 centre[c]))
+                      for c in ti.static(range(3))])
+
+
+@ti.func
 def _sphere_box_local(centre: ti.template(), radius, half: ti.template(), feature):
     """(position, normal, dist) in the box frame of a sphere (centre, radius) against a box.
 
@@ -124,9 +152,7 @@ def _sphere_box_local(centre: ti.template(), radius, half: ti.template(), featur
         position[c] = centre[c] + normal[c] * ((radius - depth) / 2)
         dist = -depth - radius
     else:
-        clamped = ti.Vector([ti.select(feature // 3**c % 3 == 1, -half[c],
-                                       ti.select(feature // 3**c % 3 == 2, half[c], centre[c]))
-                             for c in ti.static(range(3))])
+        clamped = _sphere_box_clamped(centre, half, feature)
         unit, gap = normalize3(clamped - centre)
         deepest = centre + unit * radius
         position = clamped * 0.5 + deepest * 0.5
@@ -136,11 +162,45 @@ def _sphere_box_local(centre: ti.template(), radius, half: ti.template(), featur
 
 
 @ti.func
+def _sphere_box_local_adjoint(centre: ti.template(), radius, half: ti.template(), feature, g_position: ti.template(),
+                              g_normal: ti.template(), g_dist):
+    """Reverse of _sphere_box_local: the gradient (3,) of the centre (box frame) from those of
+    (position, normal, dist). Inside, the face's normal is constant; outside, the clamped
+    coordinates are the box's (constant) except within the slab, where they follow the centre."""
+    g_centre = ti.Vector.zero(float, 3)
+    if feature >= SPHERE_BOX_INSIDE:
+        f = feature - SPHERE_BOX_INSIDE
+        c = f // 2
+        side = 1.0 if f % 2 else -1.0
+        below = side * half[c] - centre[c]  # depth = |below|: its slope is 0 at 0 (torch's abs)
+        depth_slope = ti.select(below < 0, 1.0, ti.select(below > 0, -1.0, 0.0))  # d depth / d centre_c
+        g_centre = g_position
+        g_centre[c] += (g_position[c] * side * 0.5 - g_dist) * depth_slope
+    else:
+        clamped = _sphere_box_clamped(centre, half, feature)
+        g_diff = normalize3_adjoint(clamped - centre, g_normal + g_position * (0.5 * radius), g_dist)
+        follows = ti.Vector([ti.select(feature // 3**c % 3 == 0, 1.0, 0.0) for c in ti.static(range(3))])
+        g_centre = g_position * 0.5 - g_diff + (g_position * 0.5 + g_diff) * follows
+    return g_centre
+
+
+@ti.func
 def _sphere_box_world(centre: ti.template(), radius, pos2: ti.template(), rot2: ti.template(), half: ti.template(),
                       feature):
     """_sphere_box_local's contact in the world: (position m, normal, dist m)."""
     position, normal, dist = _sphere_box_local(centre, radius, half, feature)
     return mat_vec(rot2, position) + pos2, mat_vec(rot2, normal), dist
+
+
+@ti.func
+def _sphere_box_world_adjoint(centre: ti.template(), radius, rot2: ti.template(), half: ti.template(), feature,
+                              g_position: ti.template(), g_normal: ti.template(), g_dist):
+    """Reverse of _sphere_box_world: (g_centre (3,), g_rot2 (3, 3)); pos2's gradient is g_position."""
+    position, normal, _ = _sphere_box_local(centre, radius, half, feature)
+    g_rot2, g_local_position = _mat_vec_adjoint(rot2, position, g_position)
+    g_rot2_normal, g_local_normal = _mat_vec_adjoint(rot2, normal, g_normal)
+    return (_sphere_box_local_adjoint(centre, radius, half, feature, g_local_position, g_local_normal, g_dist),
+            g_rot2 + g_rot2_normal)
 
 
 @ti.func
@@ -164,6 +224,19 @@ def sphere_box_evaluate(pos1: ti.template(), rot1: ti.template(), size1: ti.temp
     """(position, normal, dist) of the sphere–box contact with its feature frozen (world)."""
     centre = _mat_t_vec(rot2, pos1 - pos2)
     return _sphere_box_world(centre, size1[0], pos2, rot2, size2, feature)
+
+
+@ti.func
+def sphere_box_evaluate_adjoint(pos1: ti.template(), rot1: ti.template(), size1: ti.template(), pos2: ti.template(),
+                                rot2: ti.template(), size2: ti.template(), feature, g_position: ti.template(),
+                                g_normal: ti.template(), g_dist):
+    """Reverse of sphere_box_evaluate: (g_pos1 (3,), g_rot1 (3, 3), g_pos2 (3,), g_rot2 (3, 3)) from
+    the gradients of (position, normal, dist); rot1 (the sphere's) does not enter: g_rot1 = 0."""
+    rel = pos1 - pos2
+    centre = _mat_t_vec(rot2, rel)
+    g_centre, g_rot2 = _sphere_box_world_adjoint(centre, size1[0], rot2, size2, feature, g_position, g_normal, g_dist)
+    g_rot2_centre, g_rel = _mat_t_vec_adjoint(rot2, rel, g_centre)
+    return g_rel, ti.Matrix.zero(float, 3, 3), g_position - g_rel, g_rot2 + g_rot2_centre
 
 
 sphere_box = collider(sphere_box_decide, sphere_box_evaluate, SPHERE_BOX_MAX,
@@ -196,6 +269,16 @@ def _capsule_in_box(pos1: ti.template(), rot1: ti.template(), size1: ti.template
     pos = _mat_t_vec(rot2, pos1 - pos2)
     axis = _mat_t_vec(rot2, column(rot1, 2))
     return pos, axis, axis * size1[1]
+
+
+@ti.func
+def _capsule_in_box_adjoint(pos1: ti.template(), rot1: ti.template(), size1: ti.template(), pos2: ti.template(),
+                            rot2: ti.template(), g_pos: ti.template(), g_halfaxis: ti.template()):
+    """Reverse of _capsule_in_box from the gradients of pos and halfaxis (axis's own is not used):
+    (g_pos1, g_rot1, g_pos2, g_rot2)."""
+    g_rot2, g_rel = _mat_t_vec_adjoint(rot2, pos1 - pos2, g_pos)
+    g_rot2_axis, g_column = _mat_t_vec_adjoint(rot2, column(rot1, 2), g_halfaxis * size1[1])
+    return g_rel, column_adjoint(g_column, 2), -g_rel, g_rot2 + g_rot2_axis
 
 
 @ti.func
@@ -236,17 +319,45 @@ def _edge_axis_params(pos: ti.template(), halfaxis: ti.template(), halflength, h
 
 
 @ti.func
-def _capsule_param(pos: ti.template(), halfaxis: ti.template(), halflength, half: ti.template(), seg):
-    """Axis parameter t (point pos + t halfaxis) of a segment code seg (the capsule–box section)."""
-    base = seg % CAPSULE_BASES
-    off = seg // CAPSULE_BASES
-    t = 2.0 * base - 1.0
+def _edge_axis_params_adjoint(pos: ti.template(), halfaxis: ti.template(), halflength, half: ti.template(), edge,
+                              state, g_x1, g_x2):
+    """Reverse of _edge_axis_params: (g_pos, g_halfaxis) from the gradients of (x1, x2). ma and mc
+    are constants (box size, capsule half-length)."""
+    j, corner = _box_edge(edge)
+    ma, mb, mc, u, v, det = _edge_axis_terms(pos, halfaxis, halflength, half, j, corner)
+    _, g_mb, _, g_u, g_v, g_det = segment_pair_params_adjoint(ma, mb, mc, u, v, det, state, g_x1, g_x2)
+    g_mb -= 2 * mb * g_det
+    dif = _edge_corner(half, j, corner) - pos
+    g_dif = halfaxis * g_v
+    g_dif[j] -= half[j] * g_u
+    g_halfaxis = dif * g_v
+    g_halfaxis[j] -= half[j] * g_mb
+    return -g_dif, g_halfaxis
+
+
+@ti.func
+def _capsule_base_params(pos: ti.template(), halfaxis: ti.template(), halflength, half: ti.template(), base):
+    """(x1, t0) of a segment base code: the edge parameter (0 for an end) and the axis parameter."""
     x1 = 0.0
+    t = 2.0 * base - 1.0
     if base >= 2:
         x1, t = _edge_axis_params(pos, halfaxis, halflength, half, (base - 2) // 9, (base - 2) % 9)
+    return x1, t
+
+
+@ti.func
+def _plane_offset(off):
+    """(c, side) of a plane offset code: the point where the axis crosses x_c = side half_c."""
+    return (off - _OFF_PLANE) // 2, 1.0 if (off - _OFF_PLANE) % 2 else -1.0
+
+
+@ti.func
+def _capsule_param(pos: ti.template(), halfaxis: ti.template(), halflength, half: ti.template(), seg):
+    """Axis parameter t (point pos + t halfaxis) of a segment code seg (the capsule–box section)."""
+    x1, t = _capsule_base_params(pos, halfaxis, halflength, half, seg % CAPSULE_BASES)
+    off = seg // CAPSULE_BASES
     if off >= _OFF_PLANE:
-        c = (off - _OFF_PLANE) // 2
-        side = 1.0 if (off - _OFF_PLANE) % 2 else -1.0
+        c, side = _plane_offset(off)
         mul = -t  # the base is an end; the offset runs towards the other end
         start = pos[c] + halfaxis[c] * -mul
         t = (side * half[c] - start) / halfaxis[c] * mul * mul + t
@@ -266,10 +377,62 @@ def _capsule_param(pos: ti.template(), halfaxis: ti.template(), halflength, half
 
 
 @ti.func
+def _capsule_param_adjoint(pos: ti.template(), halfaxis: ti.template(), halflength, half: ti.template(), seg, g_t):
+    """Reverse of _capsule_param: (g_pos, g_halfaxis) from the gradient of t. An end (base or
+    offset) is a constant; an offset adds a term in one |halfaxis_c| (and x1 along an edge)."""
+    base = seg % CAPSULE_BASES
+    off = seg // CAPSULE_BASES
+    x1, t = _capsule_base_params(pos, halfaxis, halflength, half, base)
+    g_pos = ti.Vector.zero(float, 3)
+    g_halfaxis = ti.Vector.zero(float, 3)
+    g_x1 = 0.0
+    g_t0 = g_t
+    if off >= _OFF_PLANE:  # t0 + (side half_c - start_c)/h_c mul², start_c = pos_c - mul h_c; t0 = -mul is an end
+        c, side = _plane_offset(off)
+        mul = -t
+        h = halfaxis[c]
+        g_start = -g_t * mul * mul / h
+        g_pos[c] = g_start
+        g_halfaxis[c] = -g_t * (side * half[c] - pos[c] + mul * h) / (h * h) * mul * mul - mul * g_start
+        g_t0 = 0.0
+    elif off >= _OFF_EDGE:  # t0 + sign half_c (1 + sigma x1)/|h_c|
+        k = off - _OFF_EDGE
+        c = k // 4
+        sign = 1.0 if k // 2 % 2 else -1.0
+        sigma = 1.0 if k % 2 else -1.0
+        g_x1 = g_t * sign * half[c] * sigma / ti.abs(halfaxis[c])
+        g_halfaxis[c] = -g_t * sign * half[c] * (1.0 + sigma * x1) / ti.abs(halfaxis[c]) / halfaxis[c]
+    elif off >= _OFF_SPAN:  # t0 + sign 2 half_c/|h_c|
+        c = (off - _OFF_SPAN) // 2
+        sign = 1.0 if (off - _OFF_SPAN) % 2 else -1.0
+        g_halfaxis[c] = -g_t * sign * 2 * half[c] / ti.abs(halfaxis[c]) / halfaxis[c]
+    elif off >= _OFF_END:
+        g_t0 = 0.0
+    if base >= 2:
+        g_pos_base, g_halfaxis_base = _edge_axis_params_adjoint(pos, halfaxis, halflength, half, (base - 2) // 9,
+                                                                (base - 2) % 9, g_x1, g_t0)
+        g_pos += g_pos_base
+        g_halfaxis += g_halfaxis_base
+    return g_pos, g_halfaxis
+
+
+@ti.func
 def _capsule_sphere_centre(pos: ti.template(), halfaxis: ti.template(), t, pos2: ti.template(), rot2: ti.template()):
     """Box-frame centre of the sphere at axis parameter t, through the world as MuJoCo rounds it."""
     world = mat_vec(rot2, pos + halfaxis * t) + pos2
     return _mat_t_vec(rot2, world - pos2)
+
+
+@ti.func
+def _capsule_sphere_centre_adjoint(pos: ti.template(), halfaxis: ti.template(), t, pos2: ti.template(),
+                                   rot2: ti.template(), g_centre: ti.template()):
+    """Reverse of _capsule_sphere_centre: (g_pos, g_halfaxis, g_t, g_rot2). pos2 is added, then
+    taken away: its gradients cancel exactly (none returned); rot2 enters twice."""
+    point = pos + halfaxis * t
+    world = mat_vec(rot2, point) + pos2
+    g_rot2_back, g_world = _mat_t_vec_adjoint(rot2, world - pos2, g_centre)
+    g_rot2_out, g_point = _mat_vec_adjoint(rot2, point, g_world)
+    return g_point, g_point * t, dot3(g_point, halfaxis), g_rot2_back + g_rot2_out
 
 
 @ti.func
@@ -435,6 +598,29 @@ def capsule_box_evaluate(pos1: ti.template(), rot1: ti.template(), size1: ti.tem
     return _sphere_box_world(centre, size1[0], pos2, rot2, size2, feature % SPHERE_BOX_FEATURES)
 
 
+@ti.func
+def capsule_box_evaluate_adjoint(pos1: ti.template(), rot1: ti.template(), size1: ti.template(), pos2: ti.template(),
+                                 rot2: ti.template(), size2: ti.template(), feature, g_position: ti.template(),
+                                 g_normal: ti.template(), g_dist):
+    """Reverse of capsule_box_evaluate: (g_pos1 (3,), g_rot1 (3, 3), g_pos2 (3,), g_rot2 (3, 3))
+    from the gradients of (position, normal, dist); of rot1 only column 2 (the axis) enters."""
+    pos, _, halfaxis = _capsule_in_box(pos1, rot1, size1, pos2, rot2)
+    seg = feature // SPHERE_BOX_FEATURES
+    t = _capsule_param(pos, halfaxis, size1[1], size2, seg)
+    centre = _capsule_sphere_centre(pos, halfaxis, t, pos2, rot2)
+    off = seg // CAPSULE_BASES
+    if off >= _OFF_PLANE:  # the sphere lies on the plane x_c = side half_c (exactly, but for rounding): put it
+        c, side = _plane_offset(off)  # there, so that a depth from that face sits at its kink (slope 0)
+        centre[c] = side * size2[c]
+    g_centre, g_rot2 = _sphere_box_world_adjoint(centre, size1[0], rot2, size2, feature % SPHERE_BOX_FEATURES,
+                                                 g_position, g_normal, g_dist)
+    g_pos, g_halfaxis, g_t, g_rot2_centre = _capsule_sphere_centre_adjoint(pos, halfaxis, t, pos2, rot2, g_centre)
+    g_pos_t, g_halfaxis_t = _capsule_param_adjoint(pos, halfaxis, size1[1], size2, seg, g_t)
+    g_pos1, g_rot1, g_pos2, g_rot2_in = _capsule_in_box_adjoint(pos1, rot1, size1, pos2, rot2, g_pos + g_pos_t,
+                                                                g_halfaxis + g_halfaxis_t)
+    return g_pos1, g_rot1, g_pos2 + g_position, g_rot2 + g_rot2_centre + g_rot2_in
+
+
 capsule_box = collider(capsule_box_decide, capsule_box_evaluate, CAPSULE_BOX_MAX,
                         "Capsule – box (mjc_CapsuleBox): at most 2 contacts.")
 
@@ -468,13 +654,40 @@ def _box_pair(pos1: ti.template(), rot1: ti.template(), pos2: ti.template(), rot
 
 
 @ti.func
+def _box_pair_adjoint(pos1: ti.template(), rot1: ti.template(), pos2: ti.template(), rot2: ti.template(),
+                      g_rot: ti.template(), g_pos21: ti.template(), g_pos12: ti.template()):
+    """Reverse of _box_pair: (g_pos1, g_rot1, g_pos2, g_rot2) from the gradients of (rot, pos21, pos12)."""
+    g_rot1, g_rel21 = _mat_t_vec_adjoint(rot1, pos2 - pos1, g_pos21)
+    g_rot2, g_rel12 = _mat_t_vec_adjoint(rot2, pos1 - pos2, g_pos12)
+    g_rot1 += mat_mul(rot2, g_rot.transpose())  # rot = rot1ᵀ rot2
+    g_rot2 += mat_mul(rot1, g_rot)
+    return g_rel12 - g_rel21, g_rot1, g_rel21 - g_rel12, g_rot2
+
+
+@ti.func
 def _edge_axis(rot: ti.template(), i, j):
     """Unit e_i × (box 2's axis j), box 1's frame, normalised as MuJoCo (component i is 0)."""
+    unit, _ = normalize3(_edge_cross(rot, i, j))
+    return unit
+
+
+@ti.func
+def _edge_cross(rot: ti.template(), i, j):
+    """e_i × (box 2's axis j) in box 1's frame, not normalised."""
     axis = ti.Vector.zero(float, 3)
     axis[(i + 1) % 3] = -rot[(i + 2) % 3, j]
     axis[(i + 2) % 3] = rot[(i + 1) % 3, j]
-    unit, _ = normalize3(axis)
-    return unit
+    return axis
+
+
+@ti.func
+def _edge_axis_adjoint(rot: ti.template(), i, j, g_unit: ti.template()):
+    """Reverse of _edge_axis: the gradient (3, 3) of rot from that of the unit axis."""
+    g_axis = normalize3_adjoint(_edge_cross(rot, i, j), g_unit, 0.0)
+    g_rot = ti.Matrix.zero(float, 3, 3)
+    g_rot[(i + 2) % 3, j] = -g_axis[(i + 1) % 3]
+    g_rot[(i + 1) % 3, j] = g_axis[(i + 2) % 3]
+    return g_rot
 
 
 @ti.func
@@ -555,6 +768,23 @@ def _clip_apply(x, state, limit):
 
 
 @ti.func
+def _edge_witness_terms(rot: ti.template(), pos21: ti.template(), size1: ti.template(), size2: ti.template(), i, j,
+                        corners):
+    """(c1, cc, c2, d2, e) of the edges (i, j) from `corners` (_edge_witness), box 1's frame: c1 box 1's
+    edge centre, cc box 2's in box 2's frame, c2 = rot cc + pos21, d2 box 2's axis j, e = c2 - c1."""
+    i1, i2, j1, j2 = (i + 1) % 3, (i + 2) % 3, (j + 1) % 3, (j + 2) % 3
+    c1 = ti.Vector.zero(float, 3)
+    c1[i1] = ti.select(corners & 1, size1[i1], -size1[i1])
+    c1[i2] = ti.select(corners & 2, size1[i2], -size1[i2])
+    cc = ti.Vector.zero(float, 3)
+    cc[j1] = ti.select(corners & 4, size2[j1], -size2[j1])
+    cc[j2] = ti.select(corners & 8, size2[j2], -size2[j2])
+    c2 = mat_vec(rot, cc) + pos21
+    d2 = ti.Vector([rot[0, j], rot[1, j], rot[2, j]])
+    return c1, cc, c2, d2, c2 - c1
+
+
+@ti.func
 def _edge_witness(rot: ti.template(), pos21: ti.template(), size1: ti.template(), size2: ti.template(), i, j, corners,
                   states, replay: ti.template()):
     """Closest points of box 1's edge along axis i and box 2's edge along axis j (box 1's frame).
@@ -566,18 +796,9 @@ def _edge_witness(rot: ti.template(), pos21: ti.template(), size1: ti.template()
     _clip_state's) are decided here (replay False) or frozen (replay True). Returns
     (p1, p2, states): p1 on box 1's edge, p2 on box 2's.
     """
-    i1, i2, j1, j2 = (i + 1) % 3, (i + 2) % 3, (j + 1) % 3, (j + 2) % 3
-    c1 = ti.Vector.zero(float, 3)
-    c1[i1] = ti.select(corners & 1, size1[i1], -size1[i1])
-    c1[i2] = ti.select(corners & 2, size1[i2], -size1[i2])
-    cc = ti.Vector.zero(float, 3)
-    cc[j1] = ti.select(corners & 4, size2[j1], -size2[j1])
-    cc[j2] = ti.select(corners & 8, size2[j2], -size2[j2])
-    c2 = mat_vec(rot, cc) + pos21
-    d2 = ti.Vector([rot[0, j], rot[1, j], rot[2, j]])
+    c1, cc, c2, d2, e = _edge_witness_terms(rot, pos21, size1, size2, i, j, corners)
     b = d2[i]  # cosine between the edges
     denom = 1 - b * b
-    e = c2 - c1
     d1e = e[i]
     d2e = dot3(d2, e)
     st = states
@@ -600,6 +821,45 @@ def _edge_witness(rot: ti.template(), pos21: ti.template(), size1: ti.template()
     p1 = c1
     p1[i] += s
     return p1, c2 + d2 * t, st
+
+
+@ti.func
+def _edge_witness_adjoint(rot: ti.template(), pos21: ti.template(), size1: ti.template(), size2: ti.template(), i, j,
+                          corners, states, g_p1: ti.template(), g_p2: ti.template()):
+    """Reverse of _edge_witness (states frozen): (g_rot, g_pos21) from the gradients of (p1, p2).
+    A clipped parameter is a constant; parallel edges start from the constant s = 0."""
+    _, cc, _, d2, e = _edge_witness_terms(rot, pos21, size1, size2, i, j, corners)
+    b = d2[i]
+    denom = 1 - b * b
+    d2e = dot3(d2, e)
+    s0 = 0.0
+    if states & 1 == 0:
+        s0 = (e[i] - b * d2e) / denom
+    s1 = _clip_apply(s0, (states >> 1) & 3, size1[i])
+    t = _clip_apply(b * s1 - d2e, (states >> 3) & 3, size2[j])
+    # s2 = d1e + b t, then clipped into p1[i]
+    g_s2 = ti.select((states >> 5) & 3 == 0, g_p1[i], 0.0)
+    g_t = dot3(d2, g_p2) + g_s2 * b
+    g_b = g_s2 * t
+    g_d1e = g_s2
+    # t = b s1 - d2e, clipped
+    g_t = ti.select((states >> 3) & 3 == 0, g_t, 0.0)
+    g_b += g_t * s1
+    g_d2e = -g_t
+    # s0 = (d1e - b d2e) / (1 - b²), clipped
+    g_s0 = ti.select((states >> 1) & 3 == 0 and states & 1 == 0, g_t * b, 0.0)
+    g_d1e += g_s0 / denom
+    g_d2e -= g_s0 * b / denom
+    g_b += (2 * b * s0 - d2e) * g_s0 / denom
+    g_e = d2 * g_d2e
+    g_e[i] += g_d1e
+    g_c2 = g_p2 + g_e  # p2 = c2 + d2 t, e = c2 - c1
+    g_rot = g_c2.outer_product(cc)  # c2 = rot cc + pos21
+    g_d2 = g_p2 * t + e * g_d2e
+    for r in ti.static(range(3)):
+        g_rot[r, j] += g_d2[r]
+    g_rot[i, j] += g_b
+    return g_rot, g_c2
 
 
 @ti.func
@@ -647,16 +907,40 @@ def _edge_decide(rot: ti.template(), pos21: ti.template(), size1: ti.template(),
 
 
 @ti.func
+def _edge_points(rot: ti.template(), pos21: ti.template(), size1: ti.template(), size2: ti.template(), feature):
+    """(p1, p2, axis) of an edge contact, box 1's frame: its witness pair and its oriented axis."""
+    code = feature & 15
+    i, j = (code - 6) // 3, (code - 6) % 3
+    p1, p2, _ = _edge_witness(rot, pos21, size1, size2, i, j, (feature >> 5) & 15, feature >> 9, True)
+    return p1, p2, _oriented_edge_axis(rot, i, j, (feature >> 4) & 1)
+
+
+@ti.func
 def _edge_evaluate(rot1: ti.template(), pos1: ti.template(), rot: ti.template(), pos21: ti.template(),
                    size1: ti.template(), size2: ti.template(), feature):
     """(position, normal, dist) of an edge contact (world): midpoint of the witness pair, the
     axis as normal, the witness gap along it as distance."""
-    code = feature & 15
-    i, j = (code - 6) // 3, (code - 6) % 3
-    p1, p2, _ = _edge_witness(rot, pos21, size1, size2, i, j, (feature >> 5) & 15, feature >> 9, True)
-    axis = _oriented_edge_axis(rot, i, j, (feature >> 4) & 1)
+    p1, p2, axis = _edge_points(rot, pos21, size1, size2, feature)
     mid = (p1 + p2) * 0.5
     return mat_vec(rot1, mid) + pos1, mat_vec(rot1, axis), dot3(p2 - p1, axis)
+
+
+@ti.func
+def _edge_evaluate_adjoint(rot1: ti.template(), rot: ti.template(), pos21: ti.template(), size1: ti.template(),
+                           size2: ti.template(), feature, g_position: ti.template(), g_normal: ti.template(), g_dist):
+    """Reverse of _edge_evaluate: (g_rot1, g_rot, g_pos21); pos1's gradient is g_position."""
+    p1, p2, axis = _edge_points(rot, pos21, size1, size2, feature)
+    code = feature & 15
+    i, j = (code - 6) // 3, (code - 6) % 3
+    corners, states = (feature >> 5) & 15, feature >> 9
+    flip = ti.select((feature >> 4) & 1, -1.0, 1.0)
+    g_rot1, g_mid = _mat_vec_adjoint(rot1, (p1 + p2) * 0.5, g_position)
+    g_rot1_normal, g_axis = _mat_vec_adjoint(rot1, axis, g_normal)
+    g_gap = axis * g_dist  # dist = (p2 - p1)·axis
+    g_rot, g_pos21 = _edge_witness_adjoint(rot, pos21, size1, size2, i, j, corners, states, g_mid * 0.5 - g_gap,
+                                           g_mid * 0.5 + g_gap)
+    g_rot += _edge_axis_adjoint(rot, i, j, (g_axis + (p2 - p1) * g_dist) * flip)
+    return g_rot1 + g_rot1_normal, g_rot, g_pos21
 
 
 # ---------------------------------------------------------------- box – box: face contact
@@ -703,11 +987,36 @@ def _incident_face(rinc: ti.template(), pos21: ti.template(), pos12: ti.template
 
 
 @ti.func
+def _incident_face_adjoint(size1: ti.template(), size2: ti.template(), code, sgn, binc, tinc, g_cx: ti.template(),
+                           g_du: ti.template(), g_dv: ti.template()):
+    """Reverse of _incident_face: (g_rinc (3, 3), g_posoi (3,)) from the gradients of (cx, du, dv);
+    posoi is pos21 when box 1 is the reference (code < 3), else pos12."""
+    a = code % 3
+    sizeinc = ti.select(code < 3, size2, size1)
+    bu, bv = (binc + 1) % 3, (binc + 2) % 3
+    g_rinc = ti.Matrix.zero(float, 3, 3)
+    g_posoi = ti.Vector.zero(float, 3)
+    for r in ti.static(range(3)):
+        flip = sgn if r == 2 else 1.0  # the height (r = 2) is measured along sgn
+        c = (a + 1 + r) % 3
+        g_posoi[c] = g_cx[r] * flip
+        g_rinc[c, binc] += g_cx[r] * flip * tinc * sizeinc[binc]
+        g_rinc[c, bu] += g_du[r] * flip * sizeinc[bu]
+        g_rinc[c, bv] += g_dv[r] * flip * sizeinc[bv]
+    return g_rinc, g_posoi
+
+
+@ti.func
 def _face_corner(cx: ti.template(), du: ti.template(), dv: ti.template(), k):
     """Corner k (0 … 3) of the incident face, face coordinates."""
-    su = ti.select(k == 0 or k == 3, 1.0, -1.0)
-    sv = ti.select(k < 2, 1.0, -1.0)
+    su, sv = _corner_signs(k)
     return cx + su * du + sv * dv
+
+
+@ti.func
+def _corner_signs(k):
+    """(su, sv) of the incident face's corner k: (1, 1), (-1, 1), (-1, -1), (1, -1)."""
+    return ti.select(k == 0 or k == 3, 1.0, -1.0), ti.select(k < 2, 1.0, -1.0)
 
 
 @ti.func
@@ -732,6 +1041,45 @@ def _face_vertex(cx: ti.template(), du: ti.template(), dv: ti.template(), lim: t
         dq = sign * q[c] - lim[c]
         v = v + (dp / (dp - dq)) * (q - v)
     return v
+
+
+@ti.func
+def _face_vertex_adjoint(cx: ti.template(), du: ti.template(), dv: ti.template(), lim: ti.template(), tag,
+                         g_v: ti.template()):
+    """Reverse of _face_vertex: (g_cx, g_du, g_dv) from the gradient of the vertex. A reference
+    corner's x, y are constants; its z is the incident plane's height there."""
+    k = ti.select(tag < _FACE_TAG_EDGE, tag, (tag - _FACE_TAG_EDGE) // 4) % 4
+    g_cx = ti.Vector.zero(float, 3)
+    g_du = ti.Vector.zero(float, 3)
+    g_dv = ti.Vector.zero(float, 3)
+    g_start = g_v  # the gradient of corner k, and of corner k + 1 (a cut edge's end)
+    g_end = ti.Vector.zero(float, 3)
+    if tag >= _FACE_TAG_RECT:  # z = cx_z - (n_x (x - cx_x) + n_y (y - cx_y)) / n_z, n = du × dv
+        g_start = ti.Vector.zero(float, 3)
+        rel_x = ti.select((tag - _FACE_TAG_RECT) // 2, -lim[0], lim[0]) - cx[0]
+        rel_y = ti.select((tag - _FACE_TAG_RECT) % 2, -lim[1], lim[1]) - cx[1]
+        n = cross3(du, dv)
+        g_rise = -g_v[2] / n[2]  # rise = n_x rel_x + n_y rel_y
+        g_n = ti.Vector([g_rise * rel_x, g_rise * rel_y, -g_rise * (n[0] * rel_x + n[1] * rel_y) / n[2]])
+        g_cx = ti.Vector([-g_rise * n[0], -g_rise * n[1], g_v[2]])
+        g_du, g_dv = cross3_adjoint(du, dv, g_n)
+    elif tag >= _FACE_TAG_EDGE:  # v + lam (q - v), lam = dp / (dp - dq)
+        plane = (tag - _FACE_TAG_EDGE) % 4
+        v = _face_corner(cx, du, dv, k)
+        q = _face_corner(cx, du, dv, (k + 1) % 4)
+        c = plane // 2
+        sign = 1.0 - 2.0 * (plane % 2)
+        dp = sign * v[c] - lim[c]
+        dq = sign * q[c] - lim[c]
+        lam = dp / (dp - dq)
+        g_lam = dot3(g_v, q - v) / ((dp - dq) * (dp - dq))
+        g_start = g_v * (1 - lam)
+        g_start[c] -= sign * g_lam * dq
+        g_end = g_v * lam
+        g_end[c] += sign * g_lam * dp
+    su, sv = _corner_signs(k)
+    su1, sv1 = _corner_signs((k + 1) % 4)
+    return g_cx + g_start + g_end, g_du + g_start * su + g_end * su1, g_dv + g_start * sv + g_end * sv1
 
 
 @ti.func
@@ -827,28 +1175,71 @@ def _face_decide(rot: ti.template(), pos21: ti.template(), pos12: ti.template(),
 
 
 @ti.func
+def _feature_incident_face(rot: ti.template(), pos21: ti.template(), pos12: ti.template(), size1: ti.template(),
+                           size2: ti.template(), feature):
+    """_incident_face (cx, du, dv, lim) of a face contact's feature."""
+    code = feature & 15
+    return _incident_face(_incident_axes(rot, code < 3), pos21, pos12, size1, size2, code,
+                          ti.select((feature >> 4) & 1, 1.0, -1.0), (feature >> 6) & 3,
+                          ti.select((feature >> 5) & 1, 1.0, -1.0))
+
+
+@ti.func
+def _face_point(rot1: ti.template(), rot2: ti.template(), rot: ti.template(), pos21: ti.template(),
+                pos12: ti.template(), size1: ti.template(), size2: ti.template(), feature):
+    """(v, local, rotref) of a face contact: its vertex v (face coordinates), the contact point
+    `local` in the reference box's frame (midway between the face plane and v's height) and that
+    box's rotation."""
+    code = feature & 15
+    ref1 = code < 3
+    a = code % 3
+    cx, du, dv, lim = _feature_incident_face(rot, pos21, pos12, size1, size2, feature)
+    v = _face_vertex(cx, du, dv, lim, (feature >> 8) & 31)
+    local = ti.Vector.zero(float, 3)
+    local[(a + 1) % 3] = v[0]
+    local[(a + 2) % 3] = v[1]
+    local[a] = ti.select((feature >> 4) & 1, 1.0, -1.0) * (ti.select(ref1, size1[a], size2[a]) + 0.5 * v[2])
+    return v, local, ti.select(ref1, rot1, rot2)
+
+
+@ti.func
 def _face_evaluate(pos1: ti.template(), rot1: ti.template(), pos2: ti.template(), rot2: ti.template(),
                    rot: ti.template(), pos21: ti.template(), pos12: ti.template(), size1: ti.template(),
                    size2: ti.template(), feature):
     """(position, normal, dist) of a face contact (world): the vertex's (x, y) on the reference
     face, midway between the face plane and the incident surface along the normal; normal along
     the reference face's axis, from box 1 to box 2; dist = the vertex's height z."""
+    v, local, rotref = _face_point(rot1, rot2, rot, pos21, pos12, size1, size2, feature)
     code = feature & 15
-    sgn = ti.select((feature >> 4) & 1, 1.0, -1.0)
-    tinc = ti.select((feature >> 5) & 1, 1.0, -1.0)
-    rinc = _incident_axes(rot, code < 3)
-    cx, du, dv, lim = _incident_face(rinc, pos21, pos12, size1, size2, code, sgn, (feature >> 6) & 3, tinc)
-    v = _face_vertex(cx, du, dv, lim, (feature >> 8) & 31)
     ref1 = code < 3
     a = code % 3
-    rotref = ti.select(ref1, rot1, rot2)
-    local = ti.Vector.zero(float, 3)
-    local[(a + 1) % 3] = v[0]
-    local[(a + 2) % 3] = v[1]
-    local[a] = sgn * (ti.select(ref1, size1[a], size2[a]) + 0.5 * v[2])
-    nsign = ti.select(ref1, sgn, -sgn)
+    nsign = ti.select(ref1, 1.0, -1.0) * ti.select((feature >> 4) & 1, 1.0, -1.0)
     normal = ti.Vector([nsign * rotref[0, a], nsign * rotref[1, a], nsign * rotref[2, a]])
     return mat_vec(rotref, local) + ti.select(ref1, pos1, pos2), normal, v[2]
+
+
+@ti.func
+def _face_evaluate_adjoint(pos1: ti.template(), rot1: ti.template(), pos2: ti.template(), rot2: ti.template(),
+                           rot: ti.template(), pos21: ti.template(), pos12: ti.template(), size1: ti.template(),
+                           size2: ti.template(), feature, g_position: ti.template(), g_normal: ti.template(), g_dist):
+    """Reverse of _face_evaluate: (g_posref, g_rotref, g_rot, g_posoi) — the gradients of the
+    reference box's pose (box 1's when code < 3, else box 2's), of rot and of posoi (pos21 when
+    code < 3, else pos12)."""
+    _, local, rotref = _face_point(rot1, rot2, rot, pos21, pos12, size1, size2, feature)
+    cx, du, dv, lim = _feature_incident_face(rot, pos21, pos12, size1, size2, feature)
+    code = feature & 15
+    ref1 = code < 3
+    a = code % 3
+    sgn = ti.select((feature >> 4) & 1, 1.0, -1.0)
+    g_rotref, g_local = _mat_vec_adjoint(rotref, local, g_position)
+    nsign = ti.select(ref1, sgn, -sgn)
+    for r in ti.static(range(3)):
+        g_rotref[r, a] += nsign * g_normal[r]
+    g_v = ti.Vector([g_local[(a + 1) % 3], g_local[(a + 2) % 3], 0.5 * sgn * g_local[a] + g_dist])
+    g_cx, g_du, g_dv = _face_vertex_adjoint(cx, du, dv, lim, (feature >> 8) & 31, g_v)
+    g_rinc, g_posoi = _incident_face_adjoint(size1, size2, code, sgn, (feature >> 6) & 3,
+                                             ti.select((feature >> 5) & 1, 1.0, -1.0), g_cx, g_du, g_dv)
+    return g_position, g_rotref, _incident_axes(g_rinc, ref1), g_posoi
 
 
 @ti.func
@@ -887,6 +1278,31 @@ def box_box_evaluate(pos1: ti.template(), rot1: ti.template(), size1: ti.templat
     else:
         position, normal, dist = _face_evaluate(pos1, rot1, pos2, rot2, rot, pos21, pos12, size1, size2, feature)
     return position, normal, dist
+
+
+@ti.func
+def box_box_evaluate_adjoint(pos1: ti.template(), rot1: ti.template(), size1: ti.template(), pos2: ti.template(),
+                             rot2: ti.template(), size2: ti.template(), feature, g_position: ti.template(),
+                             g_normal: ti.template(), g_dist):
+    """Reverse of box_box_evaluate: (g_pos1 (3,), g_rot1 (3, 3), g_pos2 (3,), g_rot2 (3, 3)) from
+    the gradients of (position, normal, dist)."""
+    rot, pos21, pos12 = _box_pair(pos1, rot1, pos2, rot2)
+    zero3 = ti.Vector.zero(float, 3)
+    zero33 = ti.Matrix.zero(float, 3, 3)
+    g_pos1, g_rot1, g_pos2, g_rot2 = g_position, zero33, zero3, zero33  # an edge contact's position is box 1's
+    g_rot, g_pos21, g_pos12 = zero33, zero3, zero3
+    if feature & 15 >= 6:
+        g_rot1, g_rot, g_pos21 = _edge_evaluate_adjoint(rot1, rot, pos21, size1, size2, feature, g_position, g_normal,
+                                                        g_dist)
+    else:
+        ref1 = feature & 15 < 3
+        g_posref, g_rotref, g_rot, g_posoi = _face_evaluate_adjoint(pos1, rot1, pos2, rot2, rot, pos21, pos12, size1,
+                                                                    size2, feature, g_position, g_normal, g_dist)
+        g_pos1, g_rot1 = ti.select(ref1, g_posref, zero3), ti.select(ref1, g_rotref, zero33)
+        g_pos2, g_rot2 = ti.select(ref1, zero3, g_posref), ti.select(ref1, zero33, g_rotref)
+        g_pos21, g_pos12 = ti.select(ref1, g_posoi, zero3), ti.select(ref1, zero3, g_posoi)
+    p1, r1, p2, r2 = _box_pair_adjoint(pos1, rot1, pos2, rot2, g_rot, g_pos21, g_pos12)
+    return g_pos1 + p1, g_rot1 + r1, g_pos2 + p2, g_rot2 + r2
 
 
 box_box = collider(box_box_decide, box_box_evaluate, BOX_BOX_MAX,

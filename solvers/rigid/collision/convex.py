@@ -38,27 +38,50 @@ grows with (local array size) x (runtime-indexed accesses), so there are no larg
 Compile time. Everything is inlined and each heavy piece appears once in the code (one support
 call per GJK and per EPA loop, one face attachment, one clipping loop). Taichi's CFG
 optimisation is still superlinear on it: a kernel calling convex_convex compiles in 156 s with
-default options, 11 s with `cfg_optimization=False` (gs.init turns it off for every kernel).
+default options, 11 s with `cfg_optimization=False` (gs.init turns it off for every kernel). The
+replay's vertex lookups run in loops for the same reason: a kernel calling convex_evaluate_adjoint
+(plane_mesh's beside it) compiles in about 5 s, one calling convex_evaluate in about 2.5 s.
 
 Features (what a backward needs to replay a contact as a closed form of the two poses), one row
-of FEATURE_SIZE ints per contact, column 0 the kind:
+of FEATURE_SIZE ints per contact, column 0 the kind; columns 8, 9 hold the forward's contact
+normal (of the EPA contact for KIND_CLIP), coded in two ints (octahedral map, ~1e-9 rad):
 - KIND_CORE (shallow sphere/capsule/margin contact): columns 1..6 = (id on geom 1, id on geom 2)
   of the final GJK simplex vertices (closest points of the cores), column 7 = their number.
 - KIND_EPA: columns 1..6 = (id on geom 1, id on geom 2) of the three vertices of the final EPA
   face (the contact is the projection of the origin on that Minkowski triangle), column 7 = 3.
-  Ids: box corner (bit 0: +x, bit 1: +y, bit 2: +z), mesh vertex (mesh-local); -1 where the
-  support is smooth (sphere, capsule, cylinder and their cores): the backward re-evaluates the
-  support at the frozen direction there.
+  Ids: box corner (bit 0: +x, bit 1: +y, bit 2: +z), mesh vertex (mesh-local), 1 / 0 for the
+  +z / -z end of a segment, capsule or cylinder, -1 for a sphere's centre. Column 10 (CORE and
+  EPA): how each cylinder meets the contact, mode1 + 3 mode2: 0 rim, 1 cap (normal along its
+  axis), 2 side (normal across it).
 - KIND_CLIP (face/edge clipping): column 1 = clipping face (box face 0..5 = +x,-x,+y,-y,+z,-z, or
   mesh polygon id), column 2 = clipped face (-1 for an edge); columns 3, 4 = the two lines that
   meet at the point (k < 256: edge k -> k+1 of the clipped polygon, 256 + e: side plane e of the
   clipping face, through its edge e -> e+1 and along its normal); columns 5, 6 = the clipped
   edge's vertex ids (-1 for face on face); column 7 = 0 face on face, 1 an edge of geom 1
-  clipped by a face of geom 2, 2 an edge of geom 2 clipped by a face of geom 1. The point lies
-  on the clipped feature; the other witness is it moved by |dist| against the clipping face's
-  normal, dist = (point - clipping face vertex 0) . normal.
+  clipped by a face of geom 2, 2 an edge of geom 2 clipped by a face of geom 1; column 10 = 1
+  when the edge's far end is an EPA support point too (its near end always is: with a margin
+  both sit half of it out). The point lies on the clipped feature; the other witness is it
+  moved by |dist| against the clipping face's normal, dist = (point - clipping face vertex 0) .
+  normal.
 - KIND_PLANE (plane-mesh): column 1 = mesh vertex id (the contact is that vertex, moved half its
   depth along the plane normal).
+
+Replay (backward). `convex_evaluate` and `plane_mesh_evaluate` give a contact again from its
+feature row as a closed form of the two geom poses; `convex_evaluate_adjoint` and
+`plane_mesh_evaluate_adjoint` are those closed forms' hand-written reverses (the colliders never
+call them: a backward's kernel does, per contact). Where the forward computes the contact from
+discrete points only (plane-mesh, clipping, GJK between points, segments, boxes and meshes, EPA
+between boxes and meshes without margin) the replay is the forward's own value to rounding. Where
+the forward iterates on curved supports (EPA with a sphere, capsule or margin, whose balls it
+samples at a few directions; any cylinder; a clipped edge's ends with a margin) the replay is the
+converged contact those iterations approach, within the CCD tolerance's effect of the forward
+(1e-5 m typical, 3e-3 m seen with cylinders): each geom is a core (point, segment, box, mesh)
+swept by a ball (sphere and capsule radius, half the margin, a cylinder's disk on its side), or
+for a cylinder at its rim by its disk; the normal is the plane normal of the feature's Minkowski
+points (a cylinder's cap adds its plane), else the direction between the cores' closest points,
+else (a cylinder rim against a vertex or edge, where the disk's curvature decides) the forward's
+normal, frozen, made orthogonal to the feature's line. Only that case, and the half-margin offset
+of a clipped edge's ends (along the EPA normal), hold a direction fixed.
 """
 import numpy as np
 import taichi as ti
@@ -76,7 +99,7 @@ PLANE_MESH_MAX = 4       # contact budget of plane_mesh (MuJoCo 4.0)
 CONVEX_BUDGET = {(SPHERE, MESH): 1, (CAPSULE, CYLINDER): 2, (CAPSULE, MESH): 2, (CYLINDER, CYLINDER): 4,
                  (CYLINDER, BOX): 4, (CYLINDER, MESH): 4, (BOX, MESH): 4, (MESH, MESH): 4}
 CONVEX_PAIRS = tuple(CONVEX_BUDGET)
-FEATURE_SIZE = 8
+FEATURE_SIZE = 11
 KIND_CORE, KIND_EPA, KIND_CLIP, KIND_PLANE = 1, 2, 3, 4
 POLYGON_MAX = 32         # vertices of a mesh polygon multi-contact can use (larger: single contact)
 
@@ -106,6 +129,8 @@ _MINVAL2 = _MINVAL * _MINVAL
 _BIG = 1e30                         # "no value" (MuJoCo: DBL_MAX)
 _FLT_MAX = 3.4028234663852886e38    # MuJoCo's exhaustive mesh search starts at -FLT_MAX
 _GJK_EPS = 0.5 * (CCD_TOLERANCE * CCD_TOLERANCE)
+_OCTAHEDRAL = 1073741824.0          # 2^30: scale of a unit vector's two-int code (_encode_direction)
+_AXIS_TOL = 1e-9                    # a normal this close to a cylinder's axis (across it): on its cap (side)
 _FACE_TOL = 0.996                   # faces aligned within ~5.1 deg
 _EDGE_TOL = 0.0888                  # edge parallel to a face within ~5.1 deg
 # initial polytopes, one face per entry: vertices (a, b, c), neighbours across ab, bc, ca
@@ -114,8 +139,9 @@ _HEXA = ((0, 2, 3, 1, 3, 2), (0, 4, 2, 2, 4, 0), (0, 3, 4, 0, 5, 1),
          (1, 3, 2, 5, 0, 4), (1, 2, 4, 3, 1, 5), (1, 4, 3, 4, 2, 3))
 _BIPYRAMID = ((4, 0, 1, 1, 3, 2), (4, 2, 0, 2, 4, 0), (4, 1, 2, 0, 5, 1),
               (3, 1, 0, 5, 0, 4), (3, 0, 2, 3, 1, 5), (3, 2, 1, 4, 2, 3))
-# box faces 0..5 as 4 corner ids each (bit 0: +x, bit 1: +y, bit 2: +z), in MuJoCo's order
-_BOX_CORNERS = (7, 3, 1, 5, 2, 6, 4, 0, 2, 3, 7, 6, 4, 5, 1, 0, 6, 7, 5, 4, 3, 2, 0, 1)
+# box faces 0..5 as 4 corner ids each (bit 0: +x, bit 1: +y, bit 2: +z), in MuJoCo's order, 3 bits a corner
+_BOX_FACES = tuple(a | b << 3 | c << 6 | d << 9 for a, b, c, d in
+                   ((7, 3, 1, 5), (2, 6, 4, 0), (2, 3, 7, 6), (4, 5, 1, 0), (6, 7, 5, 4), (3, 2, 0, 1)))
 
 
 # ----------------------------------------------------------------------------- mesh hull data
@@ -346,6 +372,32 @@ def _normalize(v):
 
 
 @ti.func
+def _sign(x):
+    """1.0 for x >= 0, else -1.0."""
+    return ti.select(x >= 0, 1.0, -1.0)
+
+
+@ti.func
+def _encode_direction(unit):
+    """Two ints coding a unit 3-vector (octahedral map, steps of 2^-30: ~1e-9 rad)."""
+    p = unit / (ti.abs(unit[0]) + ti.abs(unit[1]) + ti.abs(unit[2]))
+    x, y = p[0], p[1]
+    if p[2] < 0:  # the lower half folds over the octahedron's edges
+        x, y = (1.0 - ti.abs(p[1])) * _sign(p[0]), (1.0 - ti.abs(p[0])) * _sign(p[1])
+    return int(ti.round(x * _OCTAHEDRAL)), int(ti.round(y * _OCTAHEDRAL))
+
+
+@ti.func
+def _decode_direction(code_x, code_y):
+    """The unit 3-vector of an `_encode_direction` code."""
+    x, y = code_x / _OCTAHEDRAL, code_y / _OCTAHEDRAL
+    z = 1.0 - ti.abs(x) - ti.abs(y)
+    if z < 0:
+        x, y = (1.0 - ti.abs(y)) * _sign(x), (1.0 - ti.abs(x)) * _sign(y)
+    return _normalize(ti.Vector([x, y, z]))
+
+
+@ti.func
 def _same_sign(a, b):
     """True when a and b are both > 0 or both < 0."""
     return (a > 0 and b > 0) or (a < 0 and b < 0)
@@ -454,7 +506,8 @@ def _mesh_support(mesh, local_dir, cache, hull: ti.template()):
 @ti.func
 def _support(shape: ti.template(), direction, cache, hull: ti.template()):
     """Farthest point (world, m) of `shape` along the unit `direction`, and its discrete id
-    (box corner bits, mesh vertex; else `cache` unchanged, as MuJoCo's vertindex)."""
+    (box corner bits, mesh vertex, 1 / 0 for the +z / -z end of a segment, capsule or cylinder;
+    a sphere or point keeps `cache`, as MuJoCo's vertindex). Only a mesh reads `cache`."""
     kind, mesh, pos, rot, size, margin = shape
     point = pos
     feature = cache
@@ -464,6 +517,7 @@ def _support(shape: ti.template(), direction, cache, hull: ti.template()):
         along = rot[0, 2] * direction[0] + rot[1, 2] * direction[1] + rot[2, 2] * direction[2]
         half = ti.select(along >= 0, size[1], -size[1])
         point = ti.Vector([rot[0, 2] * half, rot[1, 2] * half, rot[2, 2] * half]) + pos
+        feature = int(along >= 0)
     elif kind != _POINT:
         local_dir = _rot_t(rot, direction)
         positive = ti.Vector([int(local_dir[k] >= 0) for k in ti.static(range(3))])
@@ -472,10 +526,12 @@ def _support(shape: ti.template(), direction, cache, hull: ti.template()):
         if kind == CAPSULE:
             local = local_dir * size[0]
             local[2] += ti.select(positive[2], size[1], -size[1])
+            feature = positive[2]
         elif kind == CYLINDER:
             planar2 = local_dir[0] * local_dir[0] + local_dir[1] * local_dir[1]
             scale = ti.select(planar2 >= _MINVAL2, size[0] / ti.sqrt(planar2), 0.0)
             local = ti.Vector([scale * local_dir[0], scale * local_dir[1], ti.select(positive[2], size[1], -size[1])])
+            feature = positive[2]
         elif kind == BOX:
             feature = positive[0] + 2 * positive[1] + 4 * positive[2]
         elif kind == MESH:
@@ -488,6 +544,14 @@ def _support(shape: ti.template(), direction, cache, hull: ti.template()):
 
 
 @ti.func
+def _pick_shape(first, shape1: ti.template(), shape2: ti.template()):
+    """shape1 if `first` else shape2 (a run-time choice, field by field)."""
+    return (ti.select(first, shape1[0], shape2[0]), ti.select(first, shape1[1], shape2[1]),
+            ti.select(first, shape1[2], shape2[2]), ti.select(first, shape1[3], shape2[3]),
+            ti.select(first, shape1[4], shape2[4]), ti.select(first, shape1[5], shape2[5]))
+
+
+@ti.func
 def _minkowski(shape1: ti.template(), shape2: ti.template(), direction, cache1, cache2, hull: ti.template()):
     """Support of the Minkowski difference along `direction`: the support points (world) of
     geom 1 along +direction and of geom 2 along -direction, and their ids. One `_support` in a
@@ -496,10 +560,8 @@ def _minkowski(shape1: ti.template(), shape2: ti.template(), direction, cache1, 
     ids = ti.Vector([cache1, cache2])
     for g in range(2):
         first = g == 0
-        shape = (ti.select(first, shape1[0], shape2[0]), ti.select(first, shape1[1], shape2[1]),
-                 ti.select(first, shape1[2], shape2[2]), ti.select(first, shape1[3], shape2[3]),
-                 ti.select(first, shape1[4], shape2[4]), ti.select(first, shape1[5], shape2[5]))
-        point, id_g = _support(shape, ti.select(first, direction, -direction), ti.select(first, ids[0], ids[1]), hull)
+        point, id_g = _support(_pick_shape(first, shape1, shape2), ti.select(first, direction, -direction),
+                               ti.select(first, ids[0], ids[1]), hull)
         if first:
             p1, ids[0] = point, id_g
         else:
@@ -1058,23 +1120,33 @@ def _epa(shape1: ti.template(), shape2: ti.template(), n, cache1, cache2, hull: 
 # Features of a box: faces 0..5 = +x, -x, +y, -y, +z, -z; corners by bits (bit 0: +x, ...).
 
 @ti.func
-def _box_corner(shape: ti.template(), corner):
-    """World position of box corner `corner`."""
-    size = shape[4]
-    local = ti.Vector([ti.select(corner & 1, size[0], -size[0]), ti.select(corner & 2, size[1], -size[1]),
-                       ti.select(corner & 4, size[2], -size[2])])
-    return _rot(shape[3], local) + shape[2]
+def _corner_local(size, corner):
+    """Geom-frame position of box corner `corner` (half-extents size)."""
+    return ti.Vector([ti.select(corner & 1, size[0], -size[0]), ti.select(corner & 2, size[1], -size[1]),
+                      ti.select(corner & 4, size[2], -size[2])])
 
 
 @ti.func
-def _face_normal(shape: ti.template(), face, hull: ti.template()):
-    """World outward unit normal of box face / mesh polygon `face` (mesh-local id)."""
+def _box_corner(shape: ti.template(), corner):
+    """World position of box corner `corner`."""
+    return _rot(shape[3], _corner_local(shape[4], corner)) + shape[2]
+
+
+@ti.func
+def _face_normal_local(shape: ti.template(), face, hull: ti.template()):
+    """Geom-frame outward unit normal of box face / mesh polygon `face` (mesh-local id)."""
     local = ti.Vector([0.0, 0.0, 0.0])
     if shape[0] == BOX:
         local[face >> 1] = 1.0 - 2.0 * (face & 1)
     else:
         local = hull.hull_poly_normal[hull.hull_polyadr[shape[1]] + face]
-    return _rot(shape[3], local)
+    return local
+
+
+@ti.func
+def _face_normal(shape: ti.template(), face, hull: ti.template()):
+    """World outward unit normal of box face / mesh polygon `face` (mesh-local id)."""
+    return _rot(shape[3], _face_normal_local(shape, face, hull))
 
 
 @ti.func
@@ -1171,24 +1243,38 @@ def _edge_count(shape: ti.template(), dim, vids, hull: ti.template()):
 
 
 @ti.func
+def _face_size(shape: ti.template(), face, hull: ti.template()):
+    """Number of vertices of box face / mesh polygon `face`."""
+    count = 4
+    if shape[0] != BOX:
+        count = hull.hull_poly_vertnum[hull.hull_polyadr[shape[1]] + face]
+    return count
+
+
+@ti.func
+def _face_local(shape: ti.template(), face, i, hull: ti.template()):
+    """Geom-frame vertex i of box face / mesh polygon `face`, in MuJoCo's order (a polygon
+    reversed: clockwise seen from outside)."""
+    local = ti.Vector([0.0, 0.0, 0.0])
+    if shape[0] == BOX:
+        local = _corner_local(shape[4], (_pick(face, _BOX_FACES) >> (3 * i)) & 7)
+    else:
+        poly = hull.hull_polyadr[shape[1]] + face
+        last = hull.hull_poly_vertadr[poly] + hull.hull_poly_vertnum[poly] - 1
+        local = hull.hull_vert[hull.hull_vertadr[shape[1]] + hull.hull_poly_vert[last - i]]
+    return local
+
+
+@ti.func
 def _put_face(shape: ti.template(), face, base, ws: ti.template(), row: ti.template(), hull: ti.template()):
     """Write the vertices (world) of box face / mesh polygon `face` at workspace 3-vector slots
-    base.., in MuJoCo's order (a polygon reversed: clockwise seen from outside). Returns the
-    count, 0 for a polygon of more than POLYGON_MAX vertices."""
-    count = 4
-    if shape[0] == BOX:
-        for i in range(4):
-            corner = _pick(face * 4 + i, _BOX_CORNERS)
-            ws.ccd_v[row + (base + i,)] = _box_corner(shape, corner)
-    else:
-        adr = hull.hull_vertadr[shape[1]]
-        poly = hull.hull_polyadr[shape[1]] + face
-        vadr, count = hull.hull_poly_vertadr[poly], hull.hull_poly_vertnum[poly]
-        if count > POLYGON_MAX:
-            count = 0
-        for i in range(count):
-            v = hull.hull_vert[adr + hull.hull_poly_vert[vadr + count - 1 - i]]
-            ws.ccd_v[row + (base + i,)] = _rot(shape[3], v) + shape[2]
+    base.., in `_face_local`'s order. Returns the count, 0 for a polygon of more than
+    POLYGON_MAX vertices."""
+    count = _face_size(shape, face, hull)
+    if count > POLYGON_MAX:
+        count = 0
+    for i in range(count):
+        ws.ccd_v[row + (base + i,)] = _rot(shape[3], _face_local(shape, face, i, hull)) + shape[2]
     return count
 
 
@@ -1437,21 +1523,45 @@ def _multicontact(shape1: ti.template(), shape2: ti.template(), slots, nslots, x
                 ws.ccd_i[row + (base + 5,)] = edge_a
                 ws.ccd_i[row + (base + 6,)] = edge_b
                 ws.ccd_i[row + (base + 7,)] = edge_geom
+                for t in ti.static(range(8, 10)):  # the EPA contact's normal, as the first row holds it
+                    ws.ccd_i[row + (base + t,)] = ws.ccd_i[row + (_I_WIT + t,)]
+                ws.ccd_i[row + (base + 10,)] = int(ti.select(edge_geom == 1, dim1, dim2) == 2)
     return nx
 
 
 # ----------------------------------------------------------------------------- one CCD run
 
 @ti.func
-def _write_witness(ws: ti.template(), row: ti.template(), i, x1, x2, dist, kind, slots, nslots):
-    """Store witness pair i (world points on geom 1 and 2), its distance and its feature row
-    (kind, then the ids on geom 1 and 2 of the vertices in workspace slots `slots[:nslots]`)."""
-    ws.ccd_v[row + (_V_WIT + i,)] = x1
-    ws.ccd_v[row + (_V_WIT + 4 + i,)] = x2
-    ws.ccd_f[row + (_F_WIT + i,)] = dist
-    base = _I_WIT + i * FEATURE_SIZE
+def _cylinder_modes(shape1: ti.template(), shape2: ti.template(), normal):
+    """How each cylinder meets a CORE / EPA contact of unit `normal`, mode1 + 3 mode2: 0 at its
+    rim (or not a cylinder), 1 on its cap (normal along the axis: the supports span the cap's
+    plane), 2 on its side (normal across the axis: the disk acts as a ball). Exact in the forward:
+    a face of the final polytope is in a cap's plane, or contains the axis, to rounding."""
+    modes = 0
+    for g in ti.static(range(2)):
+        shape = shape1 if g == 0 else shape2
+        along = ti.abs(shape[3][0, 2] * normal[0] + shape[3][1, 2] * normal[1] + shape[3][2, 2] * normal[2])
+        mode = ti.select(along >= 1.0 - _AXIS_TOL, 1, ti.select(along <= _AXIS_TOL, 2, 0))
+        modes += ti.select(shape[0] == CYLINDER, mode, 0) * (1 if g == 0 else 3)
+    return modes
+
+
+@ti.func
+def _write_witness(shape1: ti.template(), shape2: ti.template(), ws: ti.template(), row: ti.template(), x1, x2,
+                   dist, kind, slots, nslots):
+    """Store the run's witness pair (world points on geom 1 and 2, at the _WIT places' first
+    row), its distance and its feature row: kind, the ids on geom 1 and 2 of the vertices in
+    workspace slots `slots[:nslots]`, nslots, the code of the normal x1 - x2, and each
+    cylinder's mode (`_cylinder_modes`)."""
+    ws.ccd_v[row + (_V_WIT,)] = x1
+    ws.ccd_v[row + (_V_WIT + 4,)] = x2
+    ws.ccd_f[row + (_F_WIT,)] = dist
+    base = _I_WIT
+    normal = _normalize(x1 - x2)
     ws.ccd_i[row + (base,)] = kind
     ws.ccd_i[row + (base + 7,)] = nslots
+    ws.ccd_i[row + (base + 8,)], ws.ccd_i[row + (base + 9,)] = _encode_direction(normal)
+    ws.ccd_i[row + (base + 10,)] = _cylinder_modes(shape1, shape2, normal)
     for s in range(3):
         id1, id2 = -1, -1
         if s < nslots:
@@ -1503,7 +1613,7 @@ def _ccd(shape1: ti.template(), shape2: ti.template(), multi, hull: ti.template(
                 found, face, x1, x2, dist, cache1, cache2 = _epa(s1, s2, n, cache1, cache2, hull, ws, row)
                 nx, kind, slots, nslots = found, KIND_EPA, face, 3
         if nx == 1:
-            _write_witness(ws, row, 0, x1, x2, dist, kind, slots, nslots)
+            _write_witness(s1, s2, ws, row, x1, x2, dist, kind, slots, nslots)
             if multi and kind == KIND_EPA:  # MuJoCo 4.0's clipping for shallow contacts is not reproduced
                 nx = ti.max(nx, _multicontact(s1, s2, slots, nslots, x1, x2, hull, ws, row))
     return nx
@@ -1657,3 +1767,503 @@ def plane_mesh(pos1, rot1, size1, pos2, rot2, size2, mesh2, margin, hull: ti.tem
                 feature[count, 0], feature[count, 1] = KIND_PLANE, vertex
                 count += 1
     return count, position, normal_out, dist, feature
+
+
+# ----------------------------------------------------------------------------- replay (backward)
+# A contact replayed from its feature row as a closed form of the two geom poses, and that closed
+# form's hand-written reverse. The colliders never call these: a backward calls them per contact.
+# pos (3,) m, rot (3, 3) as 9 independent numbers (a non-orthonormal rot gives the formula's value,
+# the rotation gradient is its projection); the adjoints return d(g_position . position +
+# g_normal . normal + g_dist . dist) / d(pos1, rot1, pos2, rot2).
+
+@ti.func
+def _normalize_adjoint(v, g):
+    """Gradient with respect to v of g . _normalize(v); 0 below the 1e-15 floor, where
+    _normalize is the constant (1, 0, 0)."""
+    norm = ti.sqrt(_dot(v, v))
+    out = ti.Vector([0.0, 0.0, 0.0])
+    if norm >= _MINVAL:
+        unit = v * (1.0 / norm)
+        out = (g - unit * _dot(unit, g)) * (1.0 / norm)
+    return out
+
+
+@ti.func
+def _witness_adjoint(x1, x2, g_position, g_normal):
+    """Gradients with respect to the witness points x1, x2 of g_position . (x1 + x2) / 2 +
+    g_normal . _normalize(x1 - x2), the contact's position and normal."""
+    g_delta = _normalize_adjoint(x1 - x2, g_normal)
+    return 0.5 * g_position + g_delta, 0.5 * g_position - g_delta
+
+
+@ti.func
+def _support_local(shape: ti.template(), vid, hull: ti.template()):
+    """Geom-frame point of a `_support` id: box corner, mesh vertex, the +z (1) / -z (0) end of
+    a capsule's or cylinder's segment (size[1] from the centre); the centre for a sphere or
+    id < 0."""
+    local = ti.Vector([0.0, 0.0, 0.0])
+    if vid >= 0:
+        if shape[0] == BOX:
+            local = _corner_local(shape[4], vid)
+        elif shape[0] == MESH:
+            local = hull.hull_vert[hull.hull_vertadr[shape[1]] + vid]
+        elif shape[0] == CAPSULE or shape[0] == CYLINDER:
+            local[2] = ti.select(vid == 1, shape[4][1], -shape[4][1])
+    return local
+
+
+@ti.func
+def _ball(shape: ti.template(), mode):
+    """Radius (m) of the ball that sweeps a geom's core in CCD: the sphere's or capsule's radius,
+    a cylinder's on its side (mode 2: the normal is across the axis, where its disk acts as a
+    ball), plus half the pair margin (shape[5])."""
+    radius = ti.select(shape[0] == SPHERE or shape[0] == CAPSULE or mode == 2, shape[4][0], 0.0)
+    return 0.5 * shape[5] + radius
+
+
+@ti.func
+def _disk_local(shape: ti.template(), mode, direction):
+    """Geom-frame support point, along the world `direction`, of a cylinder's disk (radius
+    size[0] in its xy plane; the cylinder is its segment swept by it) at its rim (mode 0): 0 for
+    other kinds and modes and along the axis, as `_support`."""
+    local = ti.Vector([0.0, 0.0, 0.0])
+    if shape[0] == CYLINDER and mode == 0:
+        local_dir = _rot_t(shape[3], direction)
+        planar2 = local_dir[0] * local_dir[0] + local_dir[1] * local_dir[1]
+        if planar2 >= _MINVAL2:
+            scale = shape[4][0] / ti.sqrt(planar2)
+            local = ti.Vector([scale * local_dir[0], scale * local_dir[1], 0.0])
+    return local
+
+
+@ti.func
+def _disk_adjoint(shape: ti.template(), mode, direction, g_disk):
+    """Reverse of disk = rot @ _disk_local(shape, mode, direction): (g_direction (3,), g_rot
+    (3, 3)) from g_disk (3,)."""
+    g_direction, g_rot = ti.Vector([0.0, 0.0, 0.0]), ti.Matrix.zero(float, 3, 3)
+    if shape[0] == CYLINDER and mode == 0:
+        local_dir = _rot_t(shape[3], direction)
+        planar2 = local_dir[0] * local_dir[0] + local_dir[1] * local_dir[1]
+        if planar2 >= _MINVAL2:
+            scale = shape[4][0] / ti.sqrt(planar2)
+            g_local = _rot_t(shape[3], g_disk)
+            along = (g_local[0] * local_dir[0] + g_local[1] * local_dir[1]) / planar2
+            # local = size[0] * (l_x, l_y) / |(l_x, l_y)|, l = rot^T direction
+            g_dir_local = ti.Vector([scale * (g_local[0] - along * local_dir[0]),
+                                     scale * (g_local[1] - along * local_dir[1]), 0.0])
+            g_direction = _rot(shape[3], g_dir_local)
+            g_rot = g_disk.outer_product(_disk_local(shape, mode, direction)) + direction.outer_product(g_dir_local)
+    return g_direction, g_rot
+
+
+@ti.func
+def _vertex_ids(feature):
+    """The distinct (id on geom 1, id on geom 2) pairs among a KIND_CORE / KIND_EPA feature's
+    feature[7] vertices, in order: (m = their number - 1, ids on geom 1 (3,), ids on geom 2 (3,));
+    slots past m repeat vertex 0."""
+    ids1 = ti.Vector([feature[1], feature[3], feature[5]])
+    ids2 = ti.Vector([feature[2], feature[4], feature[6]])
+    keep1 = feature[7] > 1 and (ids1[1] != ids1[0] or ids2[1] != ids2[0])
+    keep2 = feature[7] > 2 and (ids1[2] != ids1[0] or ids2[2] != ids2[0]) and (
+        not keep1 or ids1[2] != ids1[1] or ids2[2] != ids2[1])
+    m = int(keep1) + int(keep2)
+    second = ti.select(keep1, 1, 2)
+    out1 = ti.Vector([ids1[0], ti.select(m > 0, ids1[second], ids1[0]), ti.select(m == 2, ids1[2], ids1[0])])
+    out2 = ti.Vector([ids2[0], ti.select(m > 0, ids2[second], ids2[0]), ti.select(m == 2, ids2[2], ids2[0])])
+    return m, out1, out2
+
+
+@ti.func
+def _core_locals(shape1: ti.template(), shape2: ti.template(), ids1, ids2, cap1, cap2, hull: ti.template()):
+    """Geom-frame points (3 rows per geom) of the vertices of a CORE / EPA feature (ids (3,) per
+    geom). A geom on its cap gives its first vertex and that point moved one unit along its x
+    and y axes (spanning the cap's plane); the geom facing it, its first vertex thrice."""
+    local1, local2 = ti.Matrix.zero(float, 3, 3), ti.Matrix.zero(float, 3, 3)
+    for v in range(6):  # one lookup in a loop: inlined once
+        first = v < 3
+        j = ti.select(first, v, v - 3)
+        cap = ti.select(first, cap1, cap2)
+        ids = ti.select(first, ids1, ids2)
+        point = _support_local(_pick_shape(first, shape1, shape2), ti.select(cap1 or cap2, ids[0], ids[j]), hull)
+        if cap and j > 0:
+            point[j - 1] += 1.0
+        for c in ti.static(range(3)):
+            if first:
+                local1[j, c] = point[c]
+            else:
+                local2[j, c] = point[c]
+    return local1, local2
+
+
+@ti.func
+def _core_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template()):
+    """The closed form of a KIND_CORE / KIND_EPA contact, every intermediate returned (its
+    adjoint recomputes them). Each geom is a core (point, segment, box, mesh) swept by a ball
+    (`_ball`) and, for a cylinder at its rim, by a disk (`_disk_local`). The feature's vertices
+    give points a_j on core 1 and b_j on core 2 (j <= m, distinct pairs; a cylinder on its cap
+    gives its cap's plane), w_j = a_j - b_j; the contact normal n (from geom 1 to geom 2) is
+    - m = 2: the unit normal of the plane of the w_j (the final EPA face or GJK triangle),
+      oriented as the forward's normal u (feature columns 8, 9);
+    - m < 2: the direction from the closest point of the w_j's line (or point) to the origin
+      (the cores' closest points), or u made orthogonal to that line when a cylinder meets at
+      its rim (its disk's curvature, not a closed form, decides it there).
+    The balls and disks add their supports along n (geom 1) and -n (geom 2) to every vertex;
+    the witness points x1, x2 apply the weights (lam: of w_1 - w_0, w_2 - w_0) of the point of
+    that (moved) line or plane closest to the origin to each geom's points.
+    Returns (m, locals of a_j (3 rows), locals of b_j, a_0..2, b_0..2, modes (2,), u, pre (n
+    before normalising), n, disk 1, disk 2, lam (2,), x1, x2)."""
+    m, ids1, ids2 = _vertex_ids(feature)
+    modes = ti.Vector([feature[10] % 3, feature[10] // 3])
+    cap1 = shape1[0] == CYLINDER and modes[0] == 1
+    cap2 = shape2[0] == CYLINDER and modes[1] == 1 and not cap1
+    if cap1 or cap2:
+        m = 2
+    local1, local2 = _core_locals(shape1, shape2, ids1, ids2, cap1, cap2, hull)
+    a0, a1, a2 = [_rot(shape1[3], ti.Vector([local1[j, c] for c in ti.static(range(3))])) + shape1[2]
+                  for j in ti.static(range(3))]
+    b0, b1, b2 = [_rot(shape2[3], ti.Vector([local2[j, c] for c in ti.static(range(3))])) + shape2[2]
+                  for j in ti.static(range(3))]
+    w0, e1, e2 = a0 - b0, (a1 - b1) - (a0 - b0), (a2 - b2) - (a0 - b0)
+    u = _decode_direction(feature[8], feature[9])
+    pre = _cross(e1, e2)
+    if m == 2:
+        pre = pre * _sign(_dot(pre, u))
+    else:
+        pre = ti.select(_rim(shape1, modes[0]) or _rim(shape2, modes[1]), u, -w0)
+        if m == 1:
+            pre = pre - e1 * (_dot(e1, pre) / _dot(e1, e1))
+    n = _normalize(pre)
+    disk1 = _rot(shape1[3], _disk_local(shape1, modes[0], n))
+    disk2 = _rot(shape2[3], _disk_local(shape2, modes[1], n))
+    w0_swept = w0 + (_ball(shape1, modes[0]) + _ball(shape2, modes[1])) * n + disk1 + disk2
+    lam = ti.Vector([0.0, 0.0])
+    g11, g12, g22 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
+    r1, r2 = -_dot(e1, w0_swept), -_dot(e2, w0_swept)
+    if m == 2:
+        det = g11 * g22 - g12 * g12
+        lam = ti.Vector([(g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det])
+    elif m == 1:
+        lam[0] = r1 / g11
+    x1 = a0 + lam[0] * (a1 - a0) + lam[1] * (a2 - a0) + _ball(shape1, modes[0]) * n + disk1
+    x2 = b0 + lam[0] * (b1 - b0) + lam[1] * (b2 - b0) - _ball(shape2, modes[1]) * n - disk2
+    return m, local1, local2, a0, a1, a2, b0, b1, b2, modes, u, pre, n, disk1, disk2, lam, x1, x2
+
+
+@ti.func
+def _rim(shape: ti.template(), mode):
+    """True for a cylinder that meets the contact at its rim (mode 0)."""
+    return shape[0] == CYLINDER and mode == 0
+
+
+@ti.func
+def _core_evaluate(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template()):
+    """(position, normal, dist) of a KIND_CORE / KIND_EPA contact (`_core_terms`): the witness
+    points' midpoint, n, and margin minus the swept shapes' overlap along n."""
+    terms = _core_terms(shape1, shape2, feature, hull)
+    n, x1, x2 = terms[12], terms[16], terms[17]
+    return (x1 + x2) * 0.5, n, shape1[5] - _dot(x1 - x2, n)
+
+
+@ti.func
+def _core_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template(),
+                           g_position, g_normal, g_dist):
+    """Reverse of `_core_evaluate`: (g_pos1, g_rot1, g_pos2, g_rot2)."""
+    m, local1, local2, a0, a1, a2, b0, b1, b2, modes, u, pre, n, disk1, disk2, lam, x1, x2 = _core_terms(
+        shape1, shape2, feature, hull)
+    ball1, ball2 = _ball(shape1, modes[0]), _ball(shape2, modes[1])
+    w0, e1, e2 = a0 - b0, (a1 - b1) - (a0 - b0), (a2 - b2) - (a0 - b0)
+    g_x1 = 0.5 * g_position - g_dist * n
+    g_x2 = 0.5 * g_position + g_dist * n
+    g_n = g_normal - g_dist * (x1 - x2) + ball1 * g_x1 - ball2 * g_x2
+    g_a = ti.Matrix.rows([(1.0 - lam[0] - lam[1]) * g_x1, lam[0] * g_x1, lam[1] * g_x1])
+    g_b = ti.Matrix.rows([(1.0 - lam[0] - lam[1]) * g_x2, lam[0] * g_x2, lam[1] * g_x2])
+    g_lam = ti.Vector([_dot(g_x1, a1 - a0) + _dot(g_x2, b1 - b0), _dot(g_x1, a2 - a0) + _dot(g_x2, b2 - b0)])
+    # lam = G^-1 r, G the Gram matrix of e1, e2, r = -(e1, e2) . w0_swept
+    w0_swept = w0 + (ball1 + ball2) * n + disk1 + disk2
+    g11, g12, g22 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
+    g_r = ti.Vector([0.0, 0.0])
+    if m == 2:
+        det = g11 * g22 - g12 * g12
+        g_r = ti.Vector([(g22 * g_lam[0] - g12 * g_lam[1]) / det, (g11 * g_lam[1] - g12 * g_lam[0]) / det])
+    elif m == 1:
+        g_r[0] = g_lam[0] / g11
+    g_e1 = -2.0 * g_r[0] * lam[0] * e1 - (g_r[0] * lam[1] + g_r[1] * lam[0]) * e2 - g_r[0] * w0_swept
+    g_e2 = -2.0 * g_r[1] * lam[1] * e2 - (g_r[0] * lam[1] + g_r[1] * lam[0]) * e1 - g_r[1] * w0_swept
+    g_w0 = -g_r[0] * e1 - g_r[1] * e2  # through w0_swept
+    g_n += (ball1 + ball2) * g_w0
+    g_n1, g_rot1 = _disk_adjoint(shape1, modes[0], n, g_x1 + g_w0)
+    g_n2, g_rot2 = _disk_adjoint(shape2, modes[1], n, g_w0 - g_x2)
+    g_pre = _normalize_adjoint(pre, g_n + g_n1 + g_n2)
+    if m == 2:  # pre = +-e1 x e2
+        g_cross = g_pre * _sign(_dot(_cross(e1, e2), u))
+        g_e1 += _cross(e2, g_cross)
+        g_e2 += _cross(g_cross, e1)
+    else:
+        rim = _rim(shape1, modes[0]) or _rim(shape2, modes[1])
+        base = ti.select(rim, u, -w0)
+        g_base = g_pre
+        if m == 1:  # pre = base - e1 t, t = e1 . base / e1 . e1
+            t = _dot(e1, base) / g11
+            g_t = -_dot(g_pre, e1)
+            g_e1 += -t * g_pre + g_t * (base - 2.0 * t * e1) / g11
+            g_base += g_t * e1 / g11
+        if not rim:
+            g_w0 -= g_base
+    g_w = ti.Matrix.rows([g_w0 - g_e1 - g_e2, g_e1, g_e2])
+    g_a += g_w
+    g_b -= g_w
+    g_pos1, g_pos2 = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+    for j in ti.static(range(3)):
+        ga = ti.Vector([g_a[j, c] for c in ti.static(range(3))])
+        gb = ti.Vector([g_b[j, c] for c in ti.static(range(3))])
+        g_pos1 += ga
+        g_pos2 += gb
+        g_rot1 += ga.outer_product(ti.Vector([local1[j, c] for c in ti.static(range(3))]))
+        g_rot2 += gb.outer_product(ti.Vector([local2[j, c] for c in ti.static(range(3))]))
+    return g_pos1, g_rot1, g_pos2, g_rot2
+
+
+@ti.func
+def _clip_point_local(shape: ti.template(), feature, i, hull: ti.template()):
+    """Geom-frame vertex i of a KIND_CLIP contact's clipped polygon: the clipped face's
+    (`_face_local` order), or for an edge (feature[7] > 0) its ends feature[5], feature[6]."""
+    local = ti.Vector([0.0, 0.0, 0.0])
+    if feature[7] > 0:
+        local = _support_local(shape, ti.select(i == 0, feature[5], feature[6]), hull)
+    else:
+        local = _face_local(shape, feature[2], i, hull)
+    return local
+
+
+@ti.func
+def _solve_planes(n0, p0, n1, p1, n2, p2):
+    """The point on the three planes through p_i with normals n_i, and the inverse of the matrix
+    with rows n_i."""
+    inverse = ti.Matrix.rows([n0, n1, n2]).inverse()
+    return inverse @ ti.Vector([_dot(n0, p0), _dot(n1, p1), _dot(n2, p2)]), inverse
+
+
+@ti.func
+def _clip_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template()):
+    """The closed form of a KIND_CLIP contact, every intermediate returned (its adjoint
+    recomputes them). The clipping face is on geom 2 when an edge of geom 1 is clipped
+    (feature[7] = 1), else on geom 1; the clipped polygon on the other geom. The point lies on
+    two of the forward's clipping lines (module doc): both polygon edges (their shared
+    vertex), a polygon edge k and a side plane e (the edge's line, as the planes through it
+    along cross(edge, N) and cross(edge, cross(edge, N)), N the clipping face's normal, meets the
+    plane through clipping edge e and N), or two side planes e, f (they meet the clipped face's
+    plane).
+    Returns (clip-side locals C (rows: vertices 0, e, e + 1, f, f + 1 of the clipping face), N's
+    local, clipped-side locals P (rows: vertices 0, k or the vertex, k + 1), the clipped face
+    normal's local, their world values C_*, N, P_* (a clipped edge's ends moved as the forward's
+    are, below), D, the number of side planes, the three planes' normals n0, n1, n2 and the
+    points q1, q2 of the last two (the first passes through C_e), the point and the inverse of
+    the matrix with rows n_i)."""
+    edge_geom = feature[7]
+    clip = _pick_shape(edge_geom != 1, shape1, shape2)
+    other = _pick_shape(edge_geom == 1, shape1, shape2)
+    nclip, npoly = _face_size(clip, feature[1], hull), 2
+    if edge_geom == 0:
+        npoly = _face_size(other, feature[2], hull)
+    tag0, tag1 = feature[3], feature[4]
+    sides = int(tag0 >= 256) + int(tag1 >= 256)
+    side_e = ti.select(tag0 >= 256, tag0, tag1) - 256
+    side_f = ti.select(sides == 2, tag1 - 256, side_e)
+    line = ti.select(tag0 < 256, tag0, tag1)
+    first = ti.select(sides == 0, tag1, ti.select(sides == 2, 0, line))
+    clip_ids = ti.Vector([0, side_e, _wrap(side_e + 1, nclip), side_f, _wrap(side_f + 1, nclip)])
+    poly_ids = ti.Vector([0, first, _wrap(first + 1, npoly)])
+    local_c, local_p = ti.Matrix.zero(float, 5, 3), ti.Matrix.zero(float, 3, 3)
+    for v in range(8):  # one lookup in a loop: inlined once
+        if v < 5:
+            point = _face_local(clip, feature[1], clip_ids[v], hull)
+            for c in ti.static(range(3)):
+                local_c[v, c] = point[c]
+        else:
+            point = _clip_point_local(other, feature, poly_ids[v - 5], hull)
+            for c in ti.static(range(3)):
+                local_p[v - 5, c] = point[c]
+    local_n = _face_normal_local(clip, feature[1], hull)
+    local_d = ti.Vector([0.0, 0.0, 0.0])
+    if edge_geom == 0:
+        local_d = _face_normal_local(other, feature[2], hull)
+    c0, ce, ce1, cf, cf1 = [_rot(clip[3], ti.Vector([local_c[j, c] for c in ti.static(range(3))])) + clip[2]
+                            for j in ti.static(range(5))]
+    # a clipped edge's ends are the EPA support points (feature[10]: the far end too): with a
+    # margin they sit half of it out along the EPA normal u (geom 1) or against it (geom 2)
+    start = 0.5 * clip[5] * ti.select(edge_geom == 1, 1.0, ti.select(edge_geom == 2, -1.0, 0.0)) * _decode_direction(
+        feature[8], feature[9])
+    p0, pa, pb = [_rot(other[3], ti.Vector([local_p[j, c] for c in ti.static(range(3))])) + other[2]
+                  + ti.select(poly_ids[j] == 0 or feature[10] == 1, start, ti.Vector([0.0, 0.0, 0.0]))
+                  for j in ti.static(range(3))]
+    normal, face_d = _rot(clip[3], local_n), _rot(other[3], local_d)
+    # the planes: side e, then the polygon edge's two planes or side f and the clipped face
+    edge = pb - pa
+    across = _cross(edge, normal)
+    n0 = _cross(ce1 - ce, normal)
+    n1 = ti.select(sides == 2, _cross(cf1 - cf, normal), across)
+    n2 = ti.select(sides == 2, face_d, _cross(edge, across))
+    q1 = ti.select(sides == 2, cf, pa)
+    q2 = ti.select(sides == 2, p0, pa)
+    point, inverse = pa, ti.Matrix.identity(float, 3)
+    if sides > 0:
+        point, inverse = _solve_planes(n0, ce, n1, q1, n2, q2)
+    return (local_c, local_n, local_p, local_d, c0, ce, ce1, cf, cf1, normal, p0, pa, pb, face_d, sides,
+            n0, n1, n2, q1, q2, point, inverse)
+
+
+@ti.func
+def _clip_witnesses(edge_geom, c0, normal, face_d, point):
+    """The witness pair (x1, x2) and the distance d of a clipped point (forward's `_clip`): the
+    point, and it moved |d| against the clipped face's normal (or along the clipping face's
+    normal for a clipped edge), d = (point - c0) . normal; geom 1's witness first."""
+    d = _dot(point - c0, normal)
+    moved = point - ti.select(edge_geom == 0, face_d, -normal) * ti.abs(d)
+    return ti.select(edge_geom == 1, point, moved), ti.select(edge_geom == 1, moved, point), d
+
+
+@ti.func
+def _clip_evaluate(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template()):
+    """(position, normal, dist) of a KIND_CLIP contact (`_clip_terms`); dist = margin + d, as
+    the forward's."""
+    terms = _clip_terms(shape1, shape2, feature, hull)  # c0, N, D, the point: entries 4, 9, 13, 20
+    x1, x2, d = _clip_witnesses(feature[7], terms[4], terms[9], terms[13], terms[20])
+    return (x1 + x2) * 0.5, _normalize(x1 - x2), shape1[5] + d
+
+
+@ti.func
+def _side_plane_adjoint(a, b, normal, g_plane):
+    """Reverse of plane normal = (b - a) x normal: (g_a, g_b, g_normal) from g_plane."""
+    g_edge = _cross(normal, g_plane)
+    return -g_edge, g_edge, _cross(g_plane, b - a)
+
+
+@ti.func
+def _clip_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template(),
+                           g_position, g_normal, g_dist):
+    """Reverse of `_clip_evaluate`: (g_pos1, g_rot1, g_pos2, g_rot2)."""
+    (local_c, local_n, local_p, local_d, c0, ce, ce1, cf, cf1, normal, p0, pa, pb, face_d, sides,
+     n0, n1, n2, q1, q2, point, inverse) = _clip_terms(shape1, shape2, feature, hull)
+    edge_geom = feature[7]
+    x1, x2, d = _clip_witnesses(edge_geom, c0, normal, face_d, point)
+    g_x1, g_x2 = _witness_adjoint(x1, x2, g_position, g_normal)
+    g_moved = ti.select(edge_geom == 1, g_x2, g_x1)
+    g_point = ti.select(edge_geom == 1, g_x1, g_x2) + g_moved
+    direction = ti.select(edge_geom == 0, face_d, -normal)
+    g_d = g_dist - _sign(d) * _dot(g_moved, direction) * ti.select(d == 0, 0.0, 1.0)
+    g_direction = -ti.abs(d) * g_moved
+    g_face_d = ti.select(edge_geom == 0, g_direction, ti.Vector([0.0, 0.0, 0.0]))
+    g_normal_c = ti.select(edge_geom == 0, ti.Vector([0.0, 0.0, 0.0]), -g_direction) + g_d * (point - c0)
+    g_point += g_d * normal
+    g_c = ti.Matrix.zero(float, 5, 3)  # rows: c0, ce, ce1, cf, cf1
+    g_p = ti.Matrix.zero(float, 3, 3)  # rows: p0, pa, pb
+    for c in ti.static(range(3)):
+        g_c[0, c] = -g_d * normal[c]
+    if sides == 0:
+        for c in ti.static(range(3)):
+            g_p[1, c] = g_point[c]
+    else:  # point = M^-1 h, rows of M the plane normals n_i, h_i = n_i . q_i
+        y = inverse.transpose() @ g_point
+        g_n0, g_n1, g_n2 = y[0] * (ce - point), y[1] * (q1 - point), y[2] * (q2 - point)
+        g_ce, g_ce1, g_nrm = _side_plane_adjoint(ce, ce1, normal, g_n0)
+        g_ce += y[0] * n0
+        g_normal_c += g_nrm
+        g_q1, g_q2 = y[1] * n1, y[2] * n2
+        g_cf, g_cf1, g_pa, g_pb = (ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0]),
+                                   ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0]))
+        if sides == 2:
+            g_cf, g_cf1, g_nrm = _side_plane_adjoint(cf, cf1, normal, g_n1)
+            g_cf += g_q1
+            g_normal_c += g_nrm
+            g_face_d += g_n2
+            for c in ti.static(range(3)):
+                g_p[0, c] = g_q2[c]
+        else:  # n1 = edge x N, n2 = edge x n1, edge = pb - pa, both planes through pa
+            edge = pb - pa
+            g_across = g_n1 + _cross(g_n2, edge)
+            g_edge = _cross(n1, g_n2) + _cross(normal, g_across)
+            g_normal_c += _cross(g_across, edge)
+            g_pa = g_q1 + g_q2 - g_edge
+            g_pb = g_edge
+        rows = (g_ce, g_ce1, g_cf, g_cf1)
+        for j in ti.static(range(4)):
+            for c in ti.static(range(3)):
+                g_c[j + 1, c] += rows[j][c]
+        for c in ti.static(range(3)):
+            g_p[1, c] += g_pa[c]
+            g_p[2, c] += g_pb[c]
+    g_pos_c, g_pos_p = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+    g_rot_c, g_rot_p = g_normal_c.outer_product(local_n), g_face_d.outer_product(local_d)
+    for j in ti.static(range(5)):
+        g_cj = ti.Vector([g_c[j, c] for c in ti.static(range(3))])
+        g_pos_c += g_cj
+        g_rot_c += g_cj.outer_product(ti.Vector([local_c[j, c] for c in ti.static(range(3))]))
+    for j in ti.static(range(3)):
+        g_pj = ti.Vector([g_p[j, c] for c in ti.static(range(3))])
+        g_pos_p += g_pj
+        g_rot_p += g_pj.outer_product(ti.Vector([local_p[j, c] for c in ti.static(range(3))]))
+    clip_first = edge_geom != 1
+    return (ti.select(clip_first, g_pos_c, g_pos_p), ti.select(clip_first, g_rot_c, g_rot_p),
+            ti.select(clip_first, g_pos_p, g_pos_c), ti.select(clip_first, g_rot_p, g_rot_c))
+
+
+@ti.func
+def convex_evaluate(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, mesh2, margin, feature,
+                    hull: ti.template()):
+    """One contact of `convex_convex` replayed from its feature row (FEATURE_SIZE ints, a
+    ti.Vector), a closed form of the two geom poses: (position (3,) world m, normal (3,) from
+    geom 1 to geom 2, dist m). Arguments as convex_convex's; `hull` as there."""
+    shape1, shape2 = (type1, mesh1, pos1, rot1, size1, margin), (type2, mesh2, pos2, rot2, size2, margin)
+    position, normal, dist = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0]), 0.0
+    if feature[0] == KIND_CLIP:
+        position, normal, dist = _clip_evaluate(shape1, shape2, feature, hull)
+    else:
+        position, normal, dist = _core_evaluate(shape1, shape2, feature, hull)
+    return position, normal, dist
+
+
+@ti.func
+def convex_evaluate_adjoint(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, mesh2, margin, feature,
+                            hull: ti.template(), g_position, g_normal, g_dist):
+    """Reverse of `convex_evaluate`: the gradients of g_position . position + g_normal . normal
+    + g_dist * dist with respect to pos1 (3,), rot1 (3, 3) (its 9 entries), pos2, rot2:
+    (g_pos1, g_rot1, g_pos2, g_rot2). Exact for the closed form; where it is constant (a
+    normal of a vector under 1e-15, _normalize's fallback) its derivative is 0."""
+    shape1, shape2 = (type1, mesh1, pos1, rot1, size1, margin), (type2, mesh2, pos2, rot2, size2, margin)
+    g_pos1, g_pos2 = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+    g_rot1, g_rot2 = ti.Matrix.zero(float, 3, 3), ti.Matrix.zero(float, 3, 3)
+    if feature[0] == KIND_CLIP:
+        g_pos1, g_rot1, g_pos2, g_rot2 = _clip_evaluate_adjoint(shape1, shape2, feature, hull, g_position,
+                                                                g_normal, g_dist)
+    else:
+        g_pos1, g_rot1, g_pos2, g_rot2 = _core_evaluate_adjoint(shape1, shape2, feature, hull, g_position,
+                                                                g_normal, g_dist)
+    return g_pos1, g_rot1, g_pos2, g_rot2
+
+
+@ti.func
+def plane_mesh_evaluate(pos1, rot1, size1, pos2, rot2, size2, mesh2, feature, hull: ti.template()):
+    """One contact of `plane_mesh` replayed from its feature row (KIND_PLANE, vertex id):
+    (position, normal, dist) of mesh vertex feature[1] against the plane (normal: rot1's z
+    column). Arguments as plane_mesh's (sizes unused)."""
+    normal = ti.Vector([rot1[0, 2], rot1[1, 2], rot1[2, 2]])
+    point = _rot(rot2, hull.hull_vert[hull.hull_vertadr[mesh2] + feature[1]]) + pos2
+    depth = _dot(normal, point - pos1)
+    return point + normal * (depth * -0.5), normal, depth
+
+
+@ti.func
+def plane_mesh_evaluate_adjoint(pos1, rot1, size1, pos2, rot2, size2, mesh2, feature, hull: ti.template(),
+                                g_position, g_normal, g_dist):
+    """Reverse of `plane_mesh_evaluate`: (g_pos1, g_rot1, g_pos2, g_rot2)."""
+    normal = ti.Vector([rot1[0, 2], rot1[1, 2], rot1[2, 2]])
+    local = hull.hull_vert[hull.hull_vertadr[mesh2] + feature[1]]
+    point = _rot(rot2, local) + pos2
+    depth = _dot(normal, point - pos1)
+    g_depth = g_dist - 0.5 * _dot(g_position, normal)
+    g_plane = g_normal - 0.5 * depth * g_position + g_depth * (point - pos1)
+    g_point = g_position + g_depth * normal
+    g_rot1 = ti.Matrix.zero(float, 3, 3)
+    for r in ti.static(range(3)):
+        g_rot1[r, 2] = g_plane[r]
+    return -g_depth * normal, g_rot1, g_point, g_point.outer_product(local)

@@ -17,11 +17,11 @@ import warnings
 import taichi as ti
 from taichi.lang import impl
 
-from ..data import ArrayView
+from ..data import ArrayView, accumulate
 from ..geometry import BOX, CAPSULE, CYLINDER, MESH, PLANE, SPHERE
 from ..spatial import mat_mul, mat_vec, quat_to_mat
 from . import box, convex, primitive
-from .frame import contact_frame
+from .frame import column, contact_frame, contact_frame_adjoint
 
 
 @ti.func
@@ -175,3 +175,107 @@ def collide_kind(d: ti.template(), s, e, kind: ti.template()):
             if ti.static(axis_tangent):
                 tangent = ti.Vector([d.geom_xmat[s, e, g2][k, 2] for k in ti.static(range(3))])
             _append(d, s, e, pair, count, position, normal, dist, feature, tangent)
+
+
+# -- reverse: a contact's gradients (position, frame, distance) → its geoms' poses → their links ------
+def _posed_reverse(evaluate, adjoint):
+    """A primitive evaluate and its adjoint called on contact c's geoms at frame s with its
+    recorded feature: (evaluate → (position, normal, dist), adjoint(g_position, g_normal, g_dist)
+    → (g_pos1, g_rot1, g_pos2, g_rot2))."""
+    @ti.func
+    def poses(d: ti.template(), s, e, g1, g2):
+        return (d.geom_xpos[s, e, g1], d.geom_xmat[s, e, g1], d.geom_size[g1],
+                d.geom_xpos[s, e, g2], d.geom_xmat[s, e, g2], d.geom_size[g2])
+
+    @ti.func
+    def replay(d: ti.template(), s, e, g1, g2, c):
+        p1, r1, z1, p2, r2, z2 = poses(d, s, e, g1, g2)
+        return evaluate(p1, r1, z1, p2, r2, z2, d.con_feature[s, e, convex.FEATURE_SIZE * c])
+
+    @ti.func
+    def reverse(d: ti.template(), s, e, g1, g2, c, g_position, g_normal, g_dist):
+        p1, r1, z1, p2, r2, z2 = poses(d, s, e, g1, g2)
+        return adjoint(p1, r1, z1, p2, r2, z2, d.con_feature[s, e, convex.FEATURE_SIZE * c], g_position, g_normal,
+                       g_dist)
+    return replay, reverse
+
+
+# (type 1, type 2) → (replay, reverse) of its collider, for the kinds that have a reverse (every
+# primitive kind, plane–mesh; convex_convex's replay is approximate on curved shapes: not yet)
+_NAMES = {(PLANE, SPHERE): (P, "plane_sphere"), (PLANE, CAPSULE): (P, "plane_capsule"),
+          (PLANE, CYLINDER): (P, "plane_cylinder"), (PLANE, BOX): (P, "plane_box"),
+          (SPHERE, SPHERE): (P, "sphere_sphere"), (SPHERE, CAPSULE): (P, "sphere_capsule"),
+          (SPHERE, CYLINDER): (P, "sphere_cylinder"), (CAPSULE, CAPSULE): (P, "capsule_capsule"),
+          (SPHERE, BOX): (B, "sphere_box"), (CAPSULE, BOX): (B, "capsule_box"), (BOX, BOX): (B, "box_box")}
+REVERSES = {kind: _posed_reverse(getattr(module, f"{name}_evaluate"), getattr(module, f"{name}_evaluate_adjoint"))
+            for kind, (module, name) in _NAMES.items()}
+
+
+@ti.func
+def _feature_row(d: ti.template(), s, e, c):
+    """Contact c's recorded feature: FEATURE_SIZE ints (the convex colliders' layout)."""
+    return ti.Vector([d.con_feature[s, e, convex.FEATURE_SIZE * c + j] for j in ti.static(range(convex.FEATURE_SIZE))])
+
+
+@ti.func
+def _plane_mesh_replay(d: ti.template(), s, e, g1, g2, c):
+    return convex.plane_mesh_evaluate(d.geom_xpos[s, e, g1], d.geom_xmat[s, e, g1], d.geom_size[g1],
+                                      d.geom_xpos[s, e, g2], d.geom_xmat[s, e, g2], d.geom_size[g2], d.geom_mesh[g2],
+                                      _feature_row(d, s, e, c), HullView(d))
+
+
+@ti.func
+def _plane_mesh_reverse(d: ti.template(), s, e, g1, g2, c, g_position, g_normal, g_dist):
+    return convex.plane_mesh_evaluate_adjoint(d.geom_xpos[s, e, g1], d.geom_xmat[s, e, g1], d.geom_size[g1],
+                                              d.geom_xpos[s, e, g2], d.geom_xmat[s, e, g2], d.geom_size[g2],
+                                              d.geom_mesh[g2], _feature_row(d, s, e, c), HullView(d), g_position,
+                                              g_normal, g_dist)
+
+
+REVERSES[(PLANE, MESH)] = (_plane_mesh_replay, _plane_mesh_reverse)
+
+
+def differentiable_kinds(model):
+    """Which of the model's collider kernels (kernel_kinds) have a reverse."""
+    return [kind for kind in kernel_kinds(model) if kind in REVERSES]
+
+
+@ti.func
+def collide_adjoint_kind(d: ti.template(), s, e, kind: ti.template()):
+    """Reverse of frame s's contacts of one pair kind: each contact's gradients (con_pos,
+    con_frame, con_dist; from the rows' reverse) through its frame and its collider's closed
+    form (feature frozen) into geom_xpos.grad and geom_xmat.grad (∂L/∂ each entry)."""
+    replay, reverse = ti.static(REVERSES[kind])
+    _, axis_tangent = ti.static(COLLIDERS[kind])
+    for c in range(d.n_con[s, e, 0]):
+        pair = d.con_pair[s, e, c]
+        g1, g2 = d.pair_geom1[pair], d.pair_geom2[pair]
+        if _of_kind(d.geom_type[g1], d.geom_type[g2], kind):
+            position, normal, dist = replay(d, s, e, g1, g2, c)  # the normal before the frame renormalises it
+            tangent = ti.Vector.zero(float, 3)
+            if ti.static(axis_tangent):
+                tangent = column(d.geom_xmat[s, e, g2], 2)
+            g_normal, g_tangent = contact_frame_adjoint(normal, tangent, d.con_frame.grad[s, e, c])
+            g_pos1, g_rot1, g_pos2, g_rot2 = reverse(d, s, e, g1, g2, c, d.con_pos.grad[s, e, c], g_normal,
+                                                     d.con_dist.grad[s, e, c])
+            if ti.static(axis_tangent):
+                for k in ti.static(range(3)):
+                    g_rot2[k, 2] += g_tangent[k]
+            accumulate(d.geom_xpos.grad, ti.Vector([s, e, g1]), g_pos1)
+            accumulate(d.geom_xmat.grad, ti.Vector([s, e, g1]), g_rot1)
+            accumulate(d.geom_xpos.grad, ti.Vector([s, e, g2]), g_pos2)
+            accumulate(d.geom_xmat.grad, ti.Vector([s, e, g2]), g_rot2)
+
+
+@ti.func
+def geom_poses_adjoint(d: ti.template(), s, e):
+    """Reverse of geom_poses: each geom's gradients onto its link's origin and small turn δθ
+    (a turn moves the geom's centre by δθ × (centre − origin) and each axis by δθ × axis)."""
+    for g in range(d.n_geoms):
+        link = d.geom_link[g]
+        g_pos, g_mat, mat = d.geom_xpos.grad[s, e, g], d.geom_xmat.grad[s, e, g], d.geom_xmat[s, e, g]
+        g_rot = (d.geom_xpos[s, e, g] - d.xpos[s, e, link]).cross(g_pos)
+        for j in ti.static(range(3)):
+            g_rot += column(mat, j).cross(column(g_mat, j))
+        accumulate(d.xpos.grad, ti.Vector([s, e, link]), g_pos)
+        accumulate(d.xrot_grad, ti.Vector([s, e, link]), g_rot)

@@ -5,6 +5,11 @@ rotations are 3x3 matrices whose columns are a geom's axes in the world. Where a
 a branch (a distance against a margin, a clamp), the arithmetic follows MuJoCo's order of
 operations so the same branch is taken; the build runs without fast math, so these functions
 reproduce MuJoCo's doubles, not just its formulas.
+
+The helpers the colliders' evaluates use have hand-written reverses beside them, named
+``<helper>_adjoint`` (column, cross3, normalize3, segment_pair_terms, segment_pair_params,
+segment_weight_terms, segment_weights): given the helper's inputs and the gradients of its
+outputs they return the gradients of its inputs, for the same frozen state where it has one.
 """
 import taichi as ti
 
@@ -23,9 +28,24 @@ def column(rot, j: ti.template()):
 
 
 @ti.func
+def column_adjoint(g_column, j: ti.template()):
+    """Reverse of column: the (3, 3) gradient of rot, g_column (3,) in column j, zeros elsewhere."""
+    g_rot = ti.Matrix.zero(float, 3, 3)
+    for i in ti.static(range(3)):
+        g_rot[i, j] = g_column[i]
+    return g_rot
+
+
+@ti.func
 def cross3(a, b):
     """a × b of two 3-vectors, written out in MuJoCo's order."""
     return ti.Vector([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+@ti.func
+def cross3_adjoint(a, b, g_cross):
+    """Reverse of cross3: (g_a, g_b) = (b × g, g × a) for the gradient g_cross (3,) of a × b."""
+    return cross3(b, g_cross), cross3(g_cross, a)
 
 
 @ti.func
@@ -40,6 +60,22 @@ def normalize3(v):
     if norm >= MINVAL:
         unit = v * (1.0 / norm)
     return unit, norm
+
+
+@ti.func
+def normalize3_adjoint(v, g_unit, g_norm):
+    """Reverse of normalize3: the gradient (3,) of v given those of unit (3,) and norm.
+
+    |v| >= MINVAL: (g_unit - u (u·g_unit)) / |v| + g_norm u, u = v / |v|. Shorter, where
+    normalize3 takes v for zero: 0 (the unit is the constant x axis, and the norm's kink at v = 0
+    has the symmetric subgradient 0, which is also what a central difference sees there).
+    """
+    norm = ti.sqrt(dot3(v, v))
+    g_v = ti.Vector.zero(float, 3)
+    if norm >= MINVAL:
+        unit = v * (1.0 / norm)
+        g_v = (g_unit - unit * dot3(unit, g_unit)) / norm + unit * g_norm
+    return g_v
 
 
 @ti.func
@@ -90,6 +126,19 @@ def segment_pair_terms(a1, a2, dif):
 
 
 @ti.func
+def segment_pair_terms_adjoint(a1, a2, dif, g_ma, g_mb, g_mc, g_u, g_v, g_det):
+    """Reverse of segment_pair_terms: (g_a1, g_a2, g_dif) (3,) each, given the gradients of its
+    six outputs (det = ma mc - mb² passes its gradient on through ma, mb, mc)."""
+    ma, mb, mc, _, _, _ = segment_pair_terms(a1, a2, dif)
+    g_ma_all = g_ma + g_det * mc
+    g_mb_all = g_mb - 2.0 * g_det * mb
+    g_mc_all = g_mc + g_det * ma
+    g_a1 = a1 * (2.0 * g_ma_all) - a2 * g_mb_all - dif * g_u
+    g_a2 = a2 * (2.0 * g_mc_all) - a1 * g_mb_all + dif * g_v
+    return g_a1, g_a2, a2 * g_v - a1 * g_u
+
+
+@ti.func
 def clamp_value(state):
     """The parameter value of a clamped state: +1 for AT_PLUS, -1 for AT_MINUS."""
     return ti.select(state == AT_PLUS, 1.0, -1.0)
@@ -130,6 +179,43 @@ def segment_pair_params(ma, mb, mc, u, v, det, state):
         x1 = clamp_value(s1)
         x2 = clamp_value(s2)
     return x1, x2
+
+
+@ti.func
+def segment_pair_params_adjoint(ma, mb, mc, u, v, det, state, g_x1, g_x2):
+    """Reverse of segment_pair_params for the same frozen state: the gradients (g_ma, g_mb,
+    g_mc, g_u, g_v, g_det) given those of x1, x2. det is an input of its own (chain it through
+    segment_pair_terms_adjoint); a clamped parameter (±1) passes no gradient. Both clamped: 0.
+    """
+    x1, x2 = segment_pair_params(ma, mb, mc, u, v, det, state)
+    s1 = state // 3
+    s2 = state % 3
+    g_ma = 0.0
+    g_mb = 0.0
+    g_mc = 0.0
+    g_u = 0.0
+    g_v = 0.0
+    g_det = 0.0
+    if s1 == FREE and s2 == FREE:  # x1 det = mc u - mb v, x2 det = ma v - mb u
+        h1 = g_x1 / det
+        h2 = g_x2 / det
+        g_ma = h2 * v
+        g_mb = -h1 * v - h2 * u
+        g_mc = h1 * u
+        g_u = h1 * mc - h2 * mb
+        g_v = h2 * ma - h1 * mb
+        g_det = -h1 * x1 - h2 * x2
+    elif s2 == FREE:  # x2 mc = v - mb x1
+        h2 = g_x2 / mc
+        g_v = h2
+        g_mb = -h2 * x1
+        g_mc = -h2 * x2
+    elif s1 == FREE:  # x1 ma = u - mb x2
+        h1 = g_x1 / ma
+        g_u = h1
+        g_mb = -h1 * x2
+        g_ma = -h1 * x1
+    return g_ma, g_mb, g_mc, g_u, g_v, g_det
 
 
 @ti.func
@@ -175,6 +261,17 @@ def segment_weight_terms(p0, p1, q0, q1):
 
 
 @ti.func
+def segment_weight_terms_adjoint(p0, p1, q0, q1, g_d1, g_d2, g_r, g_a, g_b, g_c, g_e, g_f):
+    """Reverse of segment_weight_terms: (g_p0, g_p1, g_q0, g_q1) (3,) each, given the gradients
+    of its outputs (d1, d2, r (3,) each; a, b, c, e, f scalars)."""
+    d1, d2, r, _, _, _, _, _ = segment_weight_terms(p0, p1, q0, q1)
+    g_d1_all = g_d1 + d1 * (2.0 * g_a) + d2 * g_b + r * g_c
+    g_d2_all = g_d2 + d1 * g_b + d2 * (2.0 * g_e) + r * g_f
+    g_r_all = g_r + d1 * g_c + d2 * g_f
+    return g_r_all - g_d1_all, g_d1_all, -g_r_all - g_d2_all, g_d2_all
+
+
+@ti.func
 def weight_value(state):
     """The weight of a clamped state: 0 for AT_START, 1 for AT_END."""
     return ti.select(state == AT_END, 1.0, 0.0)
@@ -211,6 +308,46 @@ def segment_weights(d1, d2, r, a, b, c, e, f, state):
     elif s_state == FREE:
         s = (b * t - c) / a
     return s, t
+
+
+@ti.func
+def segment_weights_adjoint(d1, d2, r, a, b, c, e, f, state, g_s, g_t):
+    """Reverse of segment_weights for the same frozen state: the gradients (g_d1, g_d2, g_r (3,)
+    each, g_a, g_b, g_c, g_e, g_f) given those of s and t (chain them through
+    segment_weight_terms_adjoint). A clamped weight (0 or 1) passes no gradient; both free, s's
+    gradient collects t's share (t = (b s + f)/e) before going through the cross products.
+    """
+    s, t = segment_weights(d1, d2, r, a, b, c, e, f, state)
+    s_state = state // 3
+    t_state = state % 3
+    g_d1 = ti.Vector.zero(float, 3)
+    g_d2 = ti.Vector.zero(float, 3)
+    g_r = ti.Vector.zero(float, 3)
+    g_a = 0.0
+    g_b = 0.0
+    g_c = 0.0
+    g_e = 0.0
+    g_f = 0.0
+    if t_state == FREE:  # t e = b s + f
+        h = g_t / e
+        g_b = h * s
+        g_f = h
+        g_e = -h * t
+        g_s += h * b
+    if s_state == FREE and t_state == FREE:  # s = (n·w) / (n·n), n = d1 × d2, w = d2 × r
+        normal = cross3(d1, d2)
+        across = cross3(d2, r)
+        area_sqr = dot3(normal, normal)
+        g_normal = across * (g_s / area_sqr) - normal * (2.0 * g_s * s / area_sqr)
+        g_d1, g_d2 = cross3_adjoint(d1, d2, g_normal)
+        g_d2_across, g_r = cross3_adjoint(d2, r, normal * (g_s / area_sqr))
+        g_d2 += g_d2_across
+    elif s_state == FREE:  # s a = b t - c
+        h = g_s / a
+        g_b = h * t
+        g_c = -h
+        g_a = -h * s
+    return g_d1, g_d2, g_r, g_a, g_b, g_c, g_e, g_f
 
 
 @ti.func
@@ -276,3 +413,24 @@ def collider(decide, evaluate, max_contacts, doc):
 
     collide.__doc__ = doc
     return collide
+
+
+@ti.func
+def contact_frame_adjoint(normal, tangent, g_frame):
+    """Reverse of contact_frame: (∂L/∂normal, ∂L/∂tangent) (3,) each from ∂L/∂frame (3, 3, rows
+    n, t1, t2), with the choice of hint (the given tangent, or a world axis) frozen; the
+    tangent's gradient is 0 when a world axis replaced it."""
+    n, _norm = normalize3(normal)
+    hint, given = tangent, 1.0
+    if dot3(hint, hint) < 0.25:
+        hint, given = ti.Vector([0.0, 0.0, 1.0]), 0.0
+        if n[1] < 0.5 and n[1] > -0.5:
+            hint = ti.Vector([0.0, 1.0, 0.0])
+    m = hint - n * dot3(n, hint)
+    t1, _m_norm = normalize3(m)
+    g_t2 = ti.Vector([g_frame[2, k] for k in ti.static(range(3))])
+    g_n = ti.Vector([g_frame[0, k] for k in ti.static(range(3))]) + cross3(t1, g_t2)  # t2 = n × t1
+    g_t1 = ti.Vector([g_frame[1, k] for k in ti.static(range(3))]) + cross3(g_t2, n)
+    g_m = normalize3_adjoint(m, g_t1, 0.0)
+    g_n -= dot3(n, hint) * g_m + hint * dot3(n, g_m)
+    return normalize3_adjoint(normal, g_n, 0.0), given * (g_m - n * dot3(n, g_m))

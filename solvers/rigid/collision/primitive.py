@@ -18,6 +18,17 @@ Each collider is a *decide* (which discrete features give contacts, in MuJoCo's 
 collider is decide followed by evaluate per row, so the backward can differentiate evaluate.
 The features are documented at each collider.
 
+Each evaluate has its hand-written reverse right after it (issue 11's backward)::
+
+    g_pos1, g_rot1, g_pos2, g_rot2 = plane_box_evaluate_adjoint(pos1, rot1, size1, pos2, rot2, size2, feature,
+                                                                g_position, g_normal, g_dist)
+
+the gradients of g_position·position + g_normal·normal + g_dist·dist with respect to the
+positions (3,) and to the rotations' 9 entries taken as independent numbers (3, 3), exactly as
+evaluate's float formula uses them, feature frozen; sizes get none. Intermediates are
+recomputed, nothing is stored. Where a frozen feature sits on a kink (coincident sphere centres)
+the adjoint takes the symmetric subgradient 0, as documented at _sphere_sphere_evaluate_adjoint.
+
 Contact frame: every collider here passes MuJoCo a zero first tangent except plane–capsule,
 which passes the capsule axis (column 2 of rot2); build the frame with
 ``frame.contact_frame(normal[k], tangent)``.
@@ -25,8 +36,9 @@ which passes the capsule axis (column 2 of rot2); build the frame with
 import taichi as ti
 
 from ..spatial import dot3, mat_vec
-from .frame import (AT_MINUS, AT_PLUS, FREE, MINVAL, collider, column, cross3, normalize3, segment_weight_states,
-                    segment_weight_terms, segment_weights)
+from .frame import (AT_MINUS, AT_PLUS, FREE, MINVAL, collider, column, column_adjoint, cross3, cross3_adjoint,
+                    normalize3, normalize3_adjoint, segment_weight_states, segment_weight_terms,
+                    segment_weight_terms_adjoint, segment_weights, segment_weights_adjoint)
 
 PLANE_SPHERE_MAX = 1
 PLANE_CAPSULE_MAX = 2
@@ -53,6 +65,15 @@ def _plane_point_evaluate(plane_pos, plane_normal, centre, radius):
     dist = dot3(centre - plane_pos, plane_normal) - radius
     position = centre + plane_normal * (-dist / 2 - radius)
     return position, plane_normal, dist
+
+
+@ti.func
+def _plane_point_evaluate_adjoint(plane_pos, plane_normal, centre, radius, g_position, g_normal, g_dist):
+    """Reverse of _plane_point_evaluate: (g_plane_pos, g_plane_normal, g_centre) (3,) each."""
+    _, _, dist = _plane_point_evaluate(plane_pos, plane_normal, centre, radius)
+    g_dist_all = g_dist - 0.5 * dot3(g_position, plane_normal)
+    g_plane_normal = g_normal + g_position * (-dist / 2 - radius) + (centre - plane_pos) * g_dist_all
+    return -plane_normal * g_dist_all, g_plane_normal, g_position + plane_normal * g_dist_all
 
 
 @ti.func
@@ -102,6 +123,28 @@ def _sphere_sphere_evaluate(c1, r1, c2, r2, z1, z2, ss):
     return position, normal, dist
 
 
+@ti.func
+def _sphere_sphere_evaluate_adjoint(c1, r1, c2, r2, z1, z2, ss, g_position, g_normal, g_dist):
+    """Reverse of _sphere_sphere_evaluate: (g_c1, g_c2, g_z1, g_z2) (3,) each.
+
+    With the centres coinciding (|c2 - c1| < MINVAL) dist passes no gradient: |c2 - c1| has a kink
+    at 0, whose symmetric subgradient is 0 (normalize3_adjoint); the normal is unit(z1 × z2)
+    (CENTRES_COINCIDE) or a constant (AXES_ALIGNED).
+    """
+    _, normal, dist = _sphere_sphere_evaluate(c1, r1, c2, r2, z1, z2, ss)
+    g_normal_all = g_normal + g_position * (r1 + dist / 2)
+    g_gap = g_dist + 0.5 * dot3(g_position, normal)  # dist = |c2 - c1| - r1 - r2
+    g_unit = ti.Vector.zero(float, 3)
+    g_z1 = ti.Vector.zero(float, 3)
+    g_z2 = ti.Vector.zero(float, 3)
+    if ss == CENTRES_APART:
+        g_unit = g_normal_all
+    elif ss == CENTRES_COINCIDE:
+        g_z1, g_z2 = cross3_adjoint(z1, z2, normalize3_adjoint(cross3(z1, z2), g_normal_all, 0.0))
+    g_c2 = normalize3_adjoint(c2 - c1, g_unit, g_gap)
+    return g_position - g_c2, g_c2, g_z1, g_z2
+
+
 # ---------------------------------------------------------------- plane – sphere
 # feature: always 0 (one contact: the sphere's lowest point).
 
@@ -118,6 +161,14 @@ def plane_sphere_decide(pos1, rot1, size1, pos2, rot2, size2, margin):
 def plane_sphere_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
     """(position, normal, dist) of the plane–sphere contact."""
     return _plane_point_evaluate(pos1, column(rot1, 2), pos2, size2[0])
+
+
+@ti.func
+def plane_sphere_evaluate_adjoint(pos1, rot1, size1, pos2, rot2, size2, feature, g_position, g_normal, g_dist):
+    """Reverse of plane_sphere_evaluate: (g_pos1 (3,), g_rot1 (3, 3), g_pos2 (3,), g_rot2 (3, 3))."""
+    g_pos1, g_n, g_pos2 = _plane_point_evaluate_adjoint(pos1, column(rot1, 2), pos2, size2[0], g_position, g_normal,
+                                                        g_dist)
+    return g_pos1, column_adjoint(g_n, 2), g_pos2, ti.Matrix.zero(float, 3, 3)
 
 
 plane_sphere = collider(plane_sphere_decide, plane_sphere_evaluate, PLANE_SPHERE_MAX,
@@ -154,6 +205,15 @@ def plane_capsule_decide(pos1, rot1, size1, pos2, rot2, size2, margin):
 def plane_capsule_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
     """(position, normal, dist) of the plane – capsule-end contact `feature`."""
     return _plane_point_evaluate(pos1, column(rot1, 2), _capsule_end(pos2, rot2, size2, feature), size2[0])
+
+
+@ti.func
+def plane_capsule_evaluate_adjoint(pos1, rot1, size1, pos2, rot2, size2, feature, g_position, g_normal, g_dist):
+    """Reverse of plane_capsule_evaluate: (g_pos1 (3,), g_rot1 (3, 3), g_pos2 (3,), g_rot2 (3, 3))."""
+    g_pos1, g_n, g_end = _plane_point_evaluate_adjoint(pos1, column(rot1, 2), _capsule_end(pos2, rot2, size2, feature),
+                                                       size2[0], g_position, g_normal, g_dist)
+    end_sign = ti.select(feature == 1, -1.0, 1.0)  # end = pos2 ± z2 h
+    return g_pos1, column_adjoint(g_n, 2), g_end, column_adjoint(g_end * (end_sign * size2[1]), 2)
 
 
 plane_capsule = collider(plane_capsule_decide, plane_capsule_evaluate, PLANE_CAPSULE_MAX,
@@ -195,6 +255,33 @@ def _plane_cylinder_terms(pos1, rot1, pos2, rot2, size2, flipped, flat):
     else:
         rim = rim * (size2[0] / ti.sqrt(dot3(rim, rim)))
     return n, axis * size2[1], rim, dist0, along * size2[1], dot3(rim, n)
+
+
+@ti.func
+def _plane_cylinder_terms_adjoint(pos1, rot1, pos2, rot2, size2, flipped, flat, g_n, g_axis_h, g_rim, g_dist0,
+                                  g_axis_drop, g_rim_drop):
+    """Reverse of _plane_cylinder_terms: (g_pos1 (3,), g_rot1 (3, 3), g_pos2 (3,), g_rot2 (3, 3)) given
+    the gradients of its six outputs (n, axis_h, rim (3,); dist0, axis_drop, rim_drop)."""
+    n, _, rim, _, _, _ = _plane_cylinder_terms(pos1, rot1, pos2, rot2, size2, flipped, flat)
+    sign = ti.select(flipped != 0, -1.0, 1.0)
+    axis = column(rot2, 2) * sign
+    along = dot3(n, axis)
+    g_rim_all = g_rim + n * g_rim_drop
+    g_n_all = g_n + rim * g_rim_drop + (pos2 - pos1) * g_dist0
+    g_axis = g_axis_h * size2[1]
+    g_along = g_axis_drop * size2[1]
+    g_rot2 = ti.Matrix.zero(float, 3, 3)
+    if flat:
+        g_rot2 = column_adjoint(g_rim_all * size2[0], 0)
+    else:  # rim = R unit(axis along - n)
+        g_across = normalize3_adjoint(axis * along - n, g_rim_all * size2[0], 0.0)
+        g_axis += g_across * along
+        g_along += dot3(g_across, axis)
+        g_n_all -= g_across
+    g_n_all += axis * g_along
+    g_axis += n * g_along
+    g_rot2 += column_adjoint(g_axis * sign, 2)
+    return -n * g_dist0, column_adjoint(g_n_all, 2), n * g_dist0, g_rot2
 
 
 @ti.func
@@ -247,6 +334,34 @@ def plane_cylinder_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
     return position, n, dist
 
 
+@ti.func
+def plane_cylinder_evaluate_adjoint(pos1, rot1, size1, pos2, rot2, size2, feature, g_position, g_normal, g_dist):
+    """Reverse of plane_cylinder_evaluate: (g_pos1 (3,), g_rot1 (3, 3), g_pos2 (3,), g_rot2 (3, 3)).
+
+    Every point is position = pos2 + rim_w rim + axis_w axis_h (+ sideways) - n dist / 2 with
+    dist = dist0 + axis_w axis_drop + rim_w rim_drop: axis_w = -1 for FAR_RIM, rim_w = -1/2 for
+    the triangle's sides, else 1.
+    """
+    point = feature % 4
+    _, _, dist = plane_cylinder_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature)
+    n, axis_h, rim, _, _, _ = _plane_cylinder_terms(pos1, rot1, pos2, rot2, size2, (feature // 4) % 2, feature // 8)
+    axis_w = ti.select(point == FAR_RIM, -1.0, 1.0)
+    rim_w = ti.select(point == SIDE_A or point == SIDE_B, -0.5, 1.0)
+    g_dist_all = g_dist - 0.5 * dot3(g_position, n)
+    g_axis_h = g_position * axis_w
+    g_rim = g_position * rim_w
+    if point == SIDE_A or point == SIDE_B:  # sideways = ±(R √3/2) unit(rim × axis_h)
+        scale = ti.select(point == SIDE_B, -1.0, 1.0) * (size2[0] * ti.sqrt(3.0) / 2)
+        g_rim_side, g_axis_side = cross3_adjoint(
+            rim, axis_h, normalize3_adjoint(cross3(rim, axis_h), g_position * scale, 0.0))
+        g_rim += g_rim_side
+        g_axis_h += g_axis_side
+    g_pos1, g_rot1, g_pos2, g_rot2 = _plane_cylinder_terms_adjoint(
+        pos1, rot1, pos2, rot2, size2, (feature // 4) % 2, feature // 8, g_normal + g_position * (-dist * 0.5),
+        g_axis_h, g_rim, g_dist_all, g_dist_all * axis_w, g_dist_all * rim_w)
+    return g_pos1, g_rot1, g_pos2 + g_position, g_rot2
+
+
 plane_cylinder = collider(plane_cylinder_decide, plane_cylinder_evaluate, PLANE_CYLINDER_MAX,
                            "Plane – cylinder (mjc_PlaneCylinder): at most 4 contacts.")
 
@@ -289,6 +404,18 @@ def plane_box_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
     return offset + pos2 + n * (-dist / 2), n, dist
 
 
+@ti.func
+def plane_box_evaluate_adjoint(pos1, rot1, size1, pos2, rot2, size2, feature, g_position, g_normal, g_dist):
+    """Reverse of plane_box_evaluate: (g_pos1 (3,), g_rot1 (3, 3), g_pos2 (3,), g_rot2 (3, 3))."""
+    _, n, dist = plane_box_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature)
+    offset = _box_corner_offset(rot2, size2, feature)
+    local = _box_corner_offset(ti.Matrix.identity(float, 3), size2, feature)
+    g_dist_all = g_dist - 0.5 * dot3(g_position, n)
+    g_offset = g_position + n * g_dist_all  # also pos2's gradient: offset and pos2 enter alike
+    g_n = g_normal + g_position * (-dist / 2) + (pos2 - pos1 + offset) * g_dist_all
+    return -n * g_dist_all, column_adjoint(g_n, 2), g_offset, g_offset.outer_product(local)
+
+
 plane_box = collider(plane_box_decide, plane_box_evaluate, PLANE_BOX_MAX,
                       "Plane – box (mjc_PlaneBox): at most 4 contacts.")
 
@@ -307,6 +434,16 @@ def sphere_sphere_decide(pos1, rot1, size1, pos2, rot2, size2, margin):
 def sphere_sphere_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
     """(position, normal, dist) of the sphere–sphere contact."""
     return _sphere_sphere_evaluate(pos1, size1[0], pos2, size2[0], column(rot1, 2), column(rot2, 2), feature)
+
+
+@ti.func
+def sphere_sphere_evaluate_adjoint(pos1, rot1, size1, pos2, rot2, size2, feature, g_position, g_normal, g_dist):
+    """Reverse of sphere_sphere_evaluate: (g_pos1 (3,), g_rot1 (3, 3), g_pos2 (3,), g_rot2 (3, 3)).
+    The rotations get a gradient only when the centres coincide (the normal is unit(z1 × z2))."""
+    g_pos1, g_pos2, g_z1, g_z2 = _sphere_sphere_evaluate_adjoint(pos1, size1[0], pos2, size2[0], column(rot1, 2),
+                                                                 column(rot2, 2), feature, g_position, g_normal,
+                                                                 g_dist)
+    return g_pos1, column_adjoint(g_z1, 2), g_pos2, column_adjoint(g_z2, 2)
 
 
 sphere_sphere = collider(sphere_sphere_decide, sphere_sphere_evaluate, SPHERE_SPHERE_MAX,
@@ -331,6 +468,28 @@ def _capsule_nearest(pos1, pos2, rot2, size2, clamp):
 
 
 @ti.func
+def _axial_adjoint(pos1, pos2, axis, g_x):
+    """Reverse of x = axis·(pos1 - pos2): (g_pos1, g_pos2, g_axis) (3,) each."""
+    return axis * g_x, -axis * g_x, (pos1 - pos2) * g_x
+
+
+@ti.func
+def _capsule_nearest_adjoint(pos1, pos2, rot2, size2, clamp, g_nearest):
+    """Reverse of _capsule_nearest: (g_pos1, g_pos2, g_axis) (3,) each; a clamped x (±h) passes none."""
+    axis = column(rot2, 2)
+    x = dot3(axis, pos1 - pos2)
+    g_x = dot3(g_nearest, axis)
+    if clamp == AT_PLUS:
+        x = size2[1]
+        g_x = 0.0
+    elif clamp == AT_MINUS:
+        x = -size2[1]
+        g_x = 0.0
+    g_pos1, g_pos2, g_axis = _axial_adjoint(pos1, pos2, axis, g_x)
+    return g_pos1, g_pos2 + g_nearest, g_axis + g_nearest * x
+
+
+@ti.func
 def sphere_capsule_decide(pos1, rot1, size1, pos2, rot2, size2, margin):
     """(count, feature (1,)) of sphere (geom 1) – capsule (geom 2)."""
     axis = column(rot2, 2)
@@ -351,6 +510,17 @@ def sphere_capsule_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
     nearest = _capsule_nearest(pos1, pos2, rot2, size2, feature // 3)
     return _sphere_sphere_evaluate(pos1, size1[0], nearest, size2[0], column(rot1, 2), column(rot2, 2),
                                    feature % 3)
+
+
+@ti.func
+def sphere_capsule_evaluate_adjoint(pos1, rot1, size1, pos2, rot2, size2, feature, g_position, g_normal, g_dist):
+    """Reverse of sphere_capsule_evaluate: (g_pos1 (3,), g_rot1 (3, 3), g_pos2 (3,), g_rot2 (3, 3))."""
+    nearest = _capsule_nearest(pos1, pos2, rot2, size2, feature // 3)
+    g_pos1, g_nearest, g_z1, g_z2 = _sphere_sphere_evaluate_adjoint(
+        pos1, size1[0], nearest, size2[0], column(rot1, 2), column(rot2, 2), feature % 3, g_position, g_normal,
+        g_dist)
+    g_pos1_near, g_pos2, g_axis = _capsule_nearest_adjoint(pos1, pos2, rot2, size2, feature // 3, g_nearest)
+    return g_pos1 + g_pos1_near, column_adjoint(g_z1, 2), g_pos2, column_adjoint(g_z2 + g_axis, 2)
 
 
 sphere_capsule = collider(sphere_capsule_decide, sphere_capsule_evaluate, SPHERE_CAPSULE_MAX,
@@ -391,6 +561,27 @@ def _cylinder_target(pos1, pos2, rot2, size2, kind):
             across = pos1 - pos2 - along
             point = end + across * (size2[0] / ti.sqrt(dot3(across, across))) + pos2
     return point, radius
+
+
+@ti.func
+def _cylinder_target_adjoint(pos1, pos2, rot2, size2, kind, g_point):
+    """Reverse of _cylinder_target's point: (g_pos1, g_pos2, g_axis) (3,) each."""
+    axis = column(rot2, 2)
+    x = dot3(axis, pos1 - pos2)
+    g_pos1 = ti.Vector.zero(float, 3)
+    g_pos2 = g_point
+    g_axis = ti.Vector.zero(float, 3)
+    g_along = g_point  # SIDE: point = along + pos2
+    if kind != SIDE:
+        g_axis = g_point * ti.select(kind == TOP_CAP or kind == TOP_RIM, size2[1], -size2[1])
+        g_along = ti.Vector.zero(float, 3)
+        if kind == TOP_RIM or kind == BOTTOM_RIM:  # + R unit(across), across = pos1 - pos2 - along
+            g_across = normalize3_adjoint(pos1 - pos2 - axis * x, g_point * size2[0], 0.0)
+            g_pos1 = g_across
+            g_pos2 -= g_across
+            g_along = -g_across
+    g_pos1_x, g_pos2_x, g_axis_x = _axial_adjoint(pos1, pos2, axis, dot3(g_along, axis))  # along = axis x
+    return g_pos1 + g_pos1_x, g_pos2 + g_pos2_x, g_axis + g_along * x + g_axis_x
 
 
 @ti.func
@@ -447,6 +638,27 @@ def sphere_cylinder_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
     return position, normal, dist
 
 
+@ti.func
+def sphere_cylinder_evaluate_adjoint(pos1, rot1, size1, pos2, rot2, size2, feature, g_position, g_normal, g_dist):
+    """Reverse of sphere_cylinder_evaluate: (g_pos1 (3,), g_rot1 (3, 3), g_pos2 (3,), g_rot2 (3, 3))."""
+    kind = feature // 3
+    point, radius = _cylinder_target(pos1, pos2, rot2, size2, kind)
+    g_pos1 = ti.Vector.zero(float, 3)
+    g_point = ti.Vector.zero(float, 3)
+    g_z1 = ti.Vector.zero(float, 3)
+    g_axis = ti.Vector.zero(float, 3)
+    if kind == TOP_CAP or kind == BOTTOM_CAP:  # the cap's plane test (normal ±axis), its normal reversed
+        g_point, g_cap, g_pos1 = _plane_point_evaluate_adjoint(point, _cap_normal(rot2, kind), pos1, size1[0],
+                                                               g_position, -g_normal, g_dist)
+        g_axis = g_cap * ti.select(kind == BOTTOM_CAP, -1.0, 1.0)
+    else:
+        g_pos1, g_point, g_z1, g_axis = _sphere_sphere_evaluate_adjoint(
+            pos1, size1[0], point, radius, column(rot1, 2), column(rot2, 2), feature % 3, g_position, g_normal,
+            g_dist)
+    g_pos1_target, g_pos2, g_axis_target = _cylinder_target_adjoint(pos1, pos2, rot2, size2, kind, g_point)
+    return g_pos1 + g_pos1_target, column_adjoint(g_z1, 2), g_pos2, column_adjoint(g_axis + g_axis_target, 2)
+
+
 sphere_cylinder = collider(sphere_cylinder_decide, sphere_cylinder_evaluate, SPHERE_CYLINDER_MAX,
                             "Sphere – cylinder (mjc_SphereCylinder): at most 1 contact.")
 
@@ -469,6 +681,12 @@ def _capsule_segment(pos, rot, size):
 
 
 @ti.func
+def _capsule_segment_adjoint(size, g_start, g_end):
+    """Reverse of _capsule_segment: (g_pos, g_axis) (3,) each, axis = column 2 of rot."""
+    return g_start + g_end, (g_end - g_start) * size[1]
+
+
+@ti.func
 def _capsule_pair_terms(pos1, rot1, size1, pos2, rot2, size2):
     """Segment-weight terms (frame.segment_weight_terms) and segment starts of two capsules."""
     start1, end1 = _capsule_segment(pos1, rot1, size1)
@@ -483,6 +701,23 @@ def _capsule_pair_points(pos1, rot1, size1, pos2, rot2, size2, state):
     start1, start2, d1, d2, r, a, b, c, e, f = _capsule_pair_terms(pos1, rot1, size1, pos2, rot2, size2)
     s, t = segment_weights(d1, d2, r, a, b, c, e, f, state)
     return d1 * s + start1, d2 * t + start2
+
+
+@ti.func
+def _capsule_pair_points_adjoint(pos1, rot1, size1, pos2, rot2, size2, state, g_c1, g_c2):
+    """Reverse of _capsule_pair_points: (g_pos1, g_axis1, g_pos2, g_axis2) (3,) each, axes = column
+    2 of the rotations; through the frozen weights' closed form (frame.segment_weights_adjoint)."""
+    start1, end1 = _capsule_segment(pos1, rot1, size1)
+    start2, end2 = _capsule_segment(pos2, rot2, size2)
+    d1, d2, r, a, b, c, e, f = segment_weight_terms(start1, end1, start2, end2)
+    s, t = segment_weights(d1, d2, r, a, b, c, e, f, state)
+    g_d1, g_d2, g_r, g_a, g_b, g_c, g_e, g_f = segment_weights_adjoint(d1, d2, r, a, b, c, e, f, state,
+                                                                       dot3(g_c1, d1), dot3(g_c2, d2))
+    g_start1, g_end1, g_start2, g_end2 = segment_weight_terms_adjoint(
+        start1, end1, start2, end2, g_d1 + g_c1 * s, g_d2 + g_c2 * t, g_r, g_a, g_b, g_c, g_e, g_f)
+    g_pos1, g_axis1 = _capsule_segment_adjoint(size1, g_start1 + g_c1, g_end1)
+    g_pos2, g_axis2 = _capsule_segment_adjoint(size2, g_start2 + g_c2, g_end2)
+    return g_pos1, g_axis1, g_pos2, g_axis2
 
 
 @ti.func
@@ -507,6 +742,18 @@ def capsule_capsule_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
     """(position, normal, dist) of the capsule – capsule contact `feature`."""
     c1, c2 = _capsule_pair_points(pos1, rot1, size1, pos2, rot2, size2, feature // 3)
     return _sphere_sphere_evaluate(c1, size1[0], c2, size2[0], column(rot1, 2), column(rot2, 2), feature % 3)
+
+
+@ti.func
+def capsule_capsule_evaluate_adjoint(pos1, rot1, size1, pos2, rot2, size2, feature, g_position, g_normal, g_dist):
+    """Reverse of capsule_capsule_evaluate: (g_pos1 (3,), g_rot1 (3, 3), g_pos2 (3,), g_rot2 (3, 3))."""
+    c1, c2 = _capsule_pair_points(pos1, rot1, size1, pos2, rot2, size2, feature // 3)
+    g_c1, g_c2, g_z1, g_z2 = _sphere_sphere_evaluate_adjoint(c1, size1[0], c2, size2[0], column(rot1, 2),
+                                                             column(rot2, 2), feature % 3, g_position, g_normal,
+                                                             g_dist)
+    g_pos1, g_axis1, g_pos2, g_axis2 = _capsule_pair_points_adjoint(pos1, rot1, size1, pos2, rot2, size2,
+                                                                    feature // 3, g_c1, g_c2)
+    return g_pos1, column_adjoint(g_z1 + g_axis1, 2), g_pos2, column_adjoint(g_z2 + g_axis2, 2)
 
 
 capsule_capsule = collider(capsule_capsule_decide, capsule_capsule_evaluate, CAPSULE_CAPSULE_MAX,

@@ -24,8 +24,8 @@ refuses a backward through a step with contacts).
 import taichi as ti
 
 from ..data import accumulate
-from .rows import dof_rows_adjoint
-from .solver import ALL, LINEARNEG, LINEARPOS, QUADRATIC, cholesky_solve
+from .rows import contact_rows_adjoint, dof_rows_adjoint, rows_per_contact
+from .solver import ALL, CONE, LINEARNEG, LINEARPOS, QUADRATIC, cholesky_solve, cone_coordinates, cone_hessian_entry
 
 
 @ti.func
@@ -61,12 +61,71 @@ def solve_adjoint(d: ti.template(), s, e):
     for r in range(d.efc_dof_rows[s, e, 0]):
         i = d.efc_id[s, e, r]
         w = d.efc_J[s, e, r, i] * u[s, e, i]
-        state, R = d.efc_state[s, e, r], d.efc_R[s, e, r]
+        state = d.efc_state[s, e, r]
         g_aref, g_R, g_bound = 0.0, 0.0, 0.0
         if state == QUADRATIC:
-            g_aref, g_R = w / R, w * d.solver_jar[s, e, r] / (R * R)
+            g_aref, g_R = _quadratic_row(d, s, e, r, w)
         elif state == LINEARNEG:
             g_bound = w
         elif state == LINEARPOS:
             g_bound = -w
         dof_rows_adjoint(d, s, e, r, g_aref, g_R, g_bound)
+    for c in range(d.n_con[s, e, 0]):
+        _contact_adjoint(d, s, e, c)
+
+
+@ti.func
+def _quadratic_row(d: ti.template(), s, e, r, w):
+    """(āref, R̄) of row r in its quadratic piece (f = −jar/R), w = J_r·u."""
+    R = d.efc_R[s, e, r]
+    return w / R, w * d.solver_jar[s, e, r] / (R * R)
+
+
+@ti.func
+def _cone_adjoint(d: ti.template(), s, e, r, w):
+    """(āref, R̄, μ̄) (each (4,)) of the elliptic block at row r in the middle zone, w_j = J_j·u.
+    There f_0 = −D_0 (jar_0 − T) / (1 + μ²) and f_j = −f_0 μ_j² jar_j / T (T = |μ_j jar_j|,
+    μ = efc_mu of the normal row, μ_j of tangent j): āref = H_c w (H_c the block's Hessian
+    in jar, as the solve has it), R̄_0 = −(w·f)/R_0, μ̄ = −2μ (w·f)/(1 + μ²), and μ̄_j through T."""
+    dim, mu = d.efc_dim[s, e, r], d.efc_mu[s, e, r]
+    N, Tsqr = cone_coordinates(d, s, e, r)
+    T = ti.sqrt(Tsqr)
+    g_aref, g_R, g_mu = ti.Vector.zero(float, 4), ti.Vector.zero(float, 4), ti.Vector.zero(float, 4)
+    w_force, tangential = 0.0, 0.0  # w·f, and S = Σ_{k≥1} w_k μ_k² jar_k
+    for a in range(dim):
+        for b in range(dim):
+            g_aref[a] += cone_hessian_entry(d, s, e, r, a, b, N, T) * w[b]
+        w_force += w[a] * d.efc_force[s, e, r + a]
+        if a > 0:
+            mu_a = d.efc_mu[s, e, r + a]
+            tangential += w[a] * mu_a * mu_a * d.solver_jar[s, e, r + a]
+    g_R[0] = -w_force / d.efc_R[s, e, r]
+    g_mu[0] = -2.0 * mu / (1.0 + mu * mu) * w_force
+    kappa, f0 = 1.0 / (d.efc_R[s, e, r] * (1.0 + mu * mu)), d.efc_force[s, e, r]
+    for j in range(1, dim):
+        mu_j, jar_j = d.efc_mu[s, e, r + j], d.solver_jar[s, e, r + j]
+        dT = mu_j * jar_j * jar_j / T  # ∂T/∂μ_j
+        g_mu[j] = kappa * dT * (w[0] - tangential / T) - f0 * (2.0 * w[j] * mu_j * jar_j / T - dT * tangential / Tsqr)
+    return g_aref, g_R, g_mu
+
+
+@ti.func
+def _contact_adjoint(d: ti.template(), s, e, c):
+    """Contact c's rows: their implicit gradients (quadratic rows as above, an elliptic block in
+    its middle zone by _cone_adjoint, satisfied rows none), then rows.contact_rows_adjoint."""
+    first = d.con_efc[s, e, c]
+    n = rows_per_contact(d, d.pair_condim[d.con_pair[s, e, c]])
+    w, force = ti.Vector.zero(float, 4), ti.Vector.zero(float, 4)
+    for j in range(n):
+        for i in range(d.n_dofs):
+            w[j] += d.efc_J[s, e, first + j, i] * d.solver_Mgrad[s, e, i]
+        force[j] = d.efc_force[s, e, first + j]
+    g_aref, g_R, g_mu = ti.Vector.zero(float, 4), ti.Vector.zero(float, 4), ti.Vector.zero(float, 4)
+    if d.efc_state[s, e, first] == CONE:
+        g_aref, g_R, g_mu = _cone_adjoint(d, s, e, first, w)
+    else:
+        for j in range(n):
+            if d.efc_state[s, e, first + j] == QUADRATIC:
+                aref_j, R_j = _quadratic_row(d, s, e, first + j, w[j])
+                g_aref[j], g_R[j] = aref_j, R_j
+    contact_rows_adjoint(d, s, e, c, force, g_aref, g_R, g_mu)

@@ -24,7 +24,7 @@ aref, R and bound back to q, q̇ and the friction loss; contact rows have none y
 """
 import taichi as ti
 
-from ..data import CONST, accumulate
+from ..data import BIG, CONST, accumulate
 from ..kinematics import dof_count, dof_motion_at
 
 # row types, as the solver reads them (interfaces agreed with solver.py)
@@ -141,31 +141,38 @@ def rows_per_contact(d: ti.template(), condim):
 
 
 @ti.func
+def _contact_scalars(d: ti.template(), s, e, c):
+    """What contact c's rows are made of besides its Jacobian: (condim, μ, solref, solimp,
+    impedance, K, B, R_0, R_1, μ_reg, diagA_t): R_0 = (1 − d)/d · diagA_t (times 1 + μ² on a
+    pyramid), R_1 = R_0 / impratio, μ_reg = μ √(R_1/R_0)."""
+    pair = d.con_pair[s, e, c]
+    condim = d.pair_condim[pair]
+    mu, solref, solimp = contact_params(d, e, pair)
+    l1, l2 = d.geom_link[d.pair_geom1[pair]], d.geom_link[d.pair_geom2[pair]]
+    tran = d.link_invweight_t[l1] + d.link_invweight_t[l2]
+    imp = impedance(solimp, d.con_dist[s, e, c], d.pair_margin[pair])
+    k, b = stiffness_damping(solref, solimp[1], d.consts[CONST["h"]])
+    r0 = ti.max(MINVAL, (1.0 - imp) * (tran + mu * mu * tran if condim > 1 and not d.elliptic else tran) / imp)
+    r1 = r0 / ti.max(MINVAL, d.consts[CONST["impratio"]])
+    return condim, mu, solref, solimp, imp, k, b, r0, r1, mu * ti.sqrt(r1 / r0), tran
+
+
+@ti.func
 def contact_rows(d: ti.template(), s, e, c, first):
     """Rows first… of contact c at frame s: Jacobian, R, aref, type. Returns how many rows."""
     pair = d.con_pair[s, e, c]
-    condim = d.pair_condim[pair]
     pyramidal = not d.elliptic
+    condim, mu, _solref, _solimp, imp, k, b, r0, r1, mu_reg, _tran = _contact_scalars(d, s, e, c)
     n = rows_per_contact(d, condim)
-    mu, solref, solimp = contact_params(d, e, pair)
     frame, pos = d.con_frame[s, e, c], d.con_pos[s, e, c]
     l1, l2 = d.geom_link[d.pair_geom1[pair]], d.geom_link[d.pair_geom2[pair]]
     _zero_rows(d, s, e, first, n)
     _add_link_jacobian(d, s, e, l1, pos, frame, -1.0, first, condim, pyramidal, mu)
     _add_link_jacobian(d, s, e, l2, pos, frame, 1.0, first, condim, pyramidal, mu)
-    tran = d.link_invweight_t[l1] + d.link_invweight_t[l2]
     dist, margin = d.con_dist[s, e, c], d.pair_margin[pair]
-    imp = impedance(solimp, dist, margin)
-    k, b = stiffness_damping(solref, solimp[1], d.consts[CONST["h"]])
-    impratio = d.consts[CONST["impratio"]]
-    r0 = ti.max(MINVAL, (1.0 - imp) * (tran + mu * mu * tran if condim > 1 and pyramidal else tran) / imp)
-    r1 = r0 / ti.max(MINVAL, impratio)
-    mu_reg = mu * ti.sqrt(r1 / r0)
     for j in range(n):
         r = first + j
-        velocity = 0.0
-        for i in range(d.n_dofs):
-            velocity += d.efc_J[s, e, r, i] * d.qvel[s, e, i]
+        velocity = _row_velocity(d, s, e, r)
         kind, reg, aref = ONE_SIDED, r0, -b * velocity - k * imp * (dist - margin)
         if condim > 1 and pyramidal:
             reg = 2.0 * mu_reg * mu_reg * r0
@@ -177,6 +184,198 @@ def contact_rows(d: ti.template(), s, e, c, first):
         d.efc_dim[s, e, r], d.efc_id[s, e, r], d.efc_floss[s, e, r] = condim, c, 0.0
         d.efc_mu[s, e, r] = mu_reg if j == 0 else mu
     return n
+
+
+@ti.func
+def _row_velocity(d: ti.template(), s, e, r):
+    """J_r · q̇ at frame s (m/s or rad/s)."""
+    velocity = 0.0
+    for i in range(d.n_dofs):
+        velocity += d.efc_J[s, e, r, i] * d.qvel[s, e, i]
+    return velocity
+
+
+# -- reverse of a contact's rows ---------------------------------------------------------------------
+@ti.func
+def impedance_gradient(solimp, dist, margin):
+    """(∂d/∂dist 1/m, ∂d/∂solimp (5,)) of ``impedance``: d = d0 + y(x) (dmax − d0), x = |dist −
+    margin| / width, y the two power curves (y = x^p / mid^(p−1) up to the midpoint, 1 − (1 −
+    x)^p / (1 − mid)^(p−1) after it); y is flat outside 0 < x < 1."""
+    d0, dmax, width, mid, power = solimp[0], solimp[1], solimp[2], solimp[3], solimp[4]
+    g_dist, g_solimp = 0.0, ti.Vector([0.5, 0.5, 0.0, 0.0, 0.0], dt=float)
+    if not (d0 == dmax or width <= MINVAL):
+        x = ti.abs((dist - margin) / width)
+        y, dy, dy_mid, dy_power = 0.0, 0.0, 0.0, 0.0  # y and its partials in x, mid and power
+        if x >= 1.0:
+            y = 1.0
+        elif x > 0.0:
+            if x <= mid:
+                y = _power(x, power) / _power(mid, power - 1.0)
+                dy = power * _power(x, power - 1.0) / _power(mid, power - 1.0)
+                dy_mid, dy_power = -(power - 1.0) * y / mid, y * (ti.log(x) - ti.log(mid))
+            else:
+                rest = _power(1.0 - x, power) / _power(1.0 - mid, power - 1.0)  # 1 − y
+                y = 1.0 - rest
+                dy = power * _power(1.0 - x, power - 1.0) / _power(1.0 - mid, power - 1.0)
+                dy_mid = -(power - 1.0) * rest / (1.0 - mid)
+                dy_power = -rest * (ti.log(1.0 - x) - ti.log(1.0 - mid))
+        span = dmax - d0
+        g_dist = span * dy / width * (1.0 if dist - margin > 0.0 else -1.0)
+        g_solimp = ti.Vector([1.0 - y, y, -span * dy * x / width, span * dy_mid, span * dy_power])
+    return g_dist, g_solimp
+
+
+@ti.func
+def _stiffness_damping_adjoint(solref, dmax, h, g_k, g_b):
+    """Reverse of ``stiffness_damping``: (∂L/∂solref (2,), ∂L/∂dmax) from ∂L/∂K and ∂L/∂B (a
+    floored divisor, or the time constant held at 2h, passes nothing)."""
+    g_solref, g_dmax = ti.Vector.zero(float, 2), 0.0
+    k, b = stiffness_damping(solref, dmax, h)
+    if solref[0] > 0:
+        tc, ratio = ti.max(solref[0], 2.0 * h), solref[1]
+        if dmax * dmax * tc * tc * ratio * ratio > MINVAL:  # K = 1/(dmax tc ζ)²
+            g_dmax -= 2.0 * k / dmax * g_k
+            g_solref[1] -= 2.0 * k / ratio * g_k
+            if solref[0] >= 2.0 * h:
+                g_solref[0] -= 2.0 * k / tc * g_k
+        if dmax * tc > MINVAL:  # B = 2/(dmax tc)
+            g_dmax -= b / dmax * g_b
+            if solref[0] >= 2.0 * h:
+                g_solref[0] -= b / tc * g_b
+    else:  # direct: K = −solref₀/dmax², B = −solref₁/dmax
+        if dmax * dmax > MINVAL:
+            g_solref[0] -= g_k / (dmax * dmax)
+            g_dmax -= 2.0 * k / dmax * g_k
+        if dmax > MINVAL:
+            g_solref[1] -= g_b / dmax
+            g_dmax -= b / dmax * g_b
+    return g_solref, g_dmax
+
+
+@ti.func
+def _contact_params_adjoint(d: ti.template(), e, pair, g_mu, g_solref, g_solimp):
+    """Reverse of ``contact_params``: the pair's μ, solref and (clamped) solimp gradients onto its
+    geoms' inputs in env e (μ: the geom whose friction the pair took, unless the floor MINMU won)."""
+    g1, g2 = d.pair_geom1[pair], d.pair_geom2[pair]
+    f1, f2 = d.friction[e, g1], d.friction[e, g2]
+    if ti.max(f1, f2) > MINMU:
+        accumulate(d.friction.grad, ti.Vector([e, g1 if f1 >= f2 else g2]), g_mu)
+    a0, b0 = d.solref[e, 2 * g1], d.solref[e, 2 * g2]
+    for k in ti.static(range(2)):
+        a, b = d.solref[e, 2 * g1 + k], d.solref[e, 2 * g2 + k]
+        if a0 > 0 and b0 > 0:  # the average
+            accumulate(d.solref.grad, ti.Vector([e, 2 * g1 + k]), 0.5 * g_solref[k])
+            accumulate(d.solref.grad, ti.Vector([e, 2 * g2 + k]), 0.5 * g_solref[k])
+        else:  # the smaller
+            accumulate(d.solref.grad, ti.Vector([e, 2 * (g1 if a <= b else g2) + k]), g_solref[k])
+    lower = ti.Vector([MINIMP, MINIMP, 0.0, MINIMP, 1.0])
+    upper = ti.Vector([MAXIMP, MAXIMP, BIG, MAXIMP, BIG])
+    for k in ti.static(range(5)):
+        mixed = 0.5 * d.solimp[e, 5 * g1 + k] + 0.5 * d.solimp[e, 5 * g2 + k]
+        if lower[k] <= mixed and mixed <= upper[k]:  # else clamped
+            for g in ti.static((g1, g2)):
+                accumulate(d.solimp.grad, ti.Vector([e, 5 * g + k]), 0.5 * g_solimp[k])
+
+
+@ti.func
+def _frame_coefficients(d: ti.template(), n, mu, by_row):
+    """Σ_rows c_rf by_row[r] per frame direction f (n, t1, t2), where row r's Jacobian is Σ_f c_rf
+    J_f: one row (condim 1), the pyramid's edges J_n ± μ J_tk, or the elliptic rows J_f."""
+    out = ti.Vector.zero(float, 3)
+    if n == 1 or d.elliptic:
+        for j in ti.static(range(3)):
+            out[j] = by_row[j] if j < n else 0.0
+    else:
+        for k in ti.static(range(2)):
+            plus, minus = by_row[2 * k], by_row[2 * k + 1]
+            out[0] += plus + minus
+            out[k + 1] = mu * (plus - minus)
+    return out
+
+
+@ti.func
+def _jacobian_adjoint(d: ti.template(), s, e, c, link, sign, g_u, g_w, b):
+    """Reverse of one link's share of contact c's rows (``_add_link_jacobian``): with J̄_f = g_u[f]
+    u − g_w[f] w̃ per frame direction f (u = H⁻¹ā, w̃ = qacc + B q̇; see contact_rows_adjoint),
+    into cdof_v, cdof_w and q̇ (aref's velocity term −B J q̇) at frame s. Returns (∂L/∂frame
+    (3, 3), ∂L/∂pos (3,), Σ_i J_f,i u_i (3,), Σ_i J_f,i w̃_i (3,))."""
+    frame, pos = d.con_frame[s, e, c], d.con_pos[s, e, c]
+    g_frame, g_pos = ti.Matrix.zero(float, 3, 3), ti.Vector.zero(float, 3)
+    j_u, j_w = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)
+    a = link
+    while a >= 0:
+        dof0 = d.link_dof0[a]
+        for i in range(dof0, dof0 + dof_count(d, a)):
+            linear, angular = dof_motion_at(d, s, e, i, pos)
+            u, w = d.solver_Mgrad[s, e, i], d.qacc_constrained[s, e, i] + b * d.qvel[s, e, i]
+            g_rows = sign * (g_u * u - g_w * w)  # ∂L/∂(frame @ linear)
+            g_frame += g_rows.outer_product(linear)
+            g_linear = frame.transpose() @ g_rows
+            accumulate(d.cdof_v.grad, ti.Vector([s, e, i]), g_linear)
+            accumulate(d.cdof_w.grad, ti.Vector([s, e, i]), pos.cross(g_linear))
+            g_pos += g_linear.cross(angular)
+            along = sign * (frame @ linear)  # J_f,i
+            accumulate(d.qvel.grad, ti.Vector([s, e, i]), -b * g_w.dot(along))
+            j_u += along * u
+            j_w += along * w
+        a = d.link_parent[a]
+    return g_frame, g_pos, j_u, j_w
+
+
+@ti.func
+def contact_rows_adjoint(d: ti.template(), s, e, c, force, g_aref, g_R, g_mu):
+    """Reverse of ``contact_rows`` for contact c at frame s, from its rows' solved forces f_j and
+    the solve's implicit gradients of their aref, R and efc_mu (each (4,), rows past the
+    contact's unused), with u = H⁻¹ā in solver_Mgrad. The Jacobian's gradient is J̄_j = f_j u −
+    āref_j (qacc + B q̇) (the solve's stationarity, and aref's −B J q̇). Into: con_pos, con_frame
+    and con_dist's gradients (the collider's reverse takes them on), cdof and q̇ at frame s, and
+    the friction, solref and solimp inputs."""
+    pair = d.con_pair[s, e, c]
+    condim, mu, solref, solimp, imp, k, b, r0, r1, mu_reg, tran = _contact_scalars(d, s, e, c)
+    n = rows_per_contact(d, condim)
+    pyramid = condim > 1 and not d.elliptic
+    g_u, g_w = _frame_coefficients(d, n, mu, force), _frame_coefficients(d, n, mu, g_aref)
+    l1, l2 = d.geom_link[d.pair_geom1[pair]], d.geom_link[d.pair_geom2[pair]]
+    f1, p1, u1, w1 = _jacobian_adjoint(d, s, e, c, l1, -1.0, g_u, g_w, b)
+    f2, p2, u2, w2 = _jacobian_adjoint(d, s, e, c, l2, 1.0, g_u, g_w, b)
+    j_u, j_w = u1 + u2, w1 + w2
+    g_mu_total, g_mu_reg, g_r0, g_k, g_b, g_imp = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    if pyramid:  # J_n ± μ J_tk
+        for t in ti.static(range(2)):
+            g_mu_total += ((force[2 * t] - force[2 * t + 1]) * j_u[t + 1]
+                           - (g_aref[2 * t] - g_aref[2 * t + 1]) * j_w[t + 1])
+    dist, margin = d.con_dist[s, e, c], d.pair_margin[pair]
+    g_dist = 0.0
+    for j in range(n):
+        g_b -= _row_velocity(d, s, e, d.con_efc[s, e, c] + j) * g_aref[j]
+        if not (d.elliptic and j > 0):  # rows with the position term −K d (dist − margin)
+            g_k -= imp * (dist - margin) * g_aref[j]
+            g_imp -= k * (dist - margin) * g_aref[j]
+            g_dist -= k * imp * g_aref[j]
+        if pyramid:  # R = 2 μ_reg² R_0
+            g_r0 += 2.0 * mu_reg * mu_reg * g_R[j]
+            g_mu_reg += 4.0 * mu_reg * r0 * g_R[j]
+        elif j == 0:  # R_0, and the cone's μ_reg
+            g_r0 += g_R[j]
+            g_mu_reg += g_mu[j]
+        else:  # elliptic tangents: R_1 = R_0 / impratio, μ
+            g_r0 += g_R[j] * r1 / r0
+            g_mu_total += g_mu[j]
+    g_mu_total += g_mu_reg * ti.sqrt(r1 / r0)
+    scale = tran + mu * mu * tran if pyramid else tran
+    if (1.0 - imp) * scale / imp > MINVAL:  # else R_0 is its floor
+        g_imp -= scale / (imp * imp) * g_r0
+        if pyramid:
+            g_mu_total += (1.0 - imp) / imp * 2.0 * mu * tran * g_r0
+    slope, g_solimp = impedance_gradient(solimp, dist, margin)
+    g_dist += slope * g_imp
+    g_solimp *= g_imp
+    g_solref, g_dmax = _stiffness_damping_adjoint(solref, solimp[1], d.consts[CONST["h"]], g_k, g_b)
+    g_solimp[1] += g_dmax
+    _contact_params_adjoint(d, e, pair, g_mu_total, g_solref, g_solimp)
+    accumulate(d.con_pos.grad, ti.Vector([s, e, c]), p1 + p2)
+    accumulate(d.con_frame.grad, ti.Vector([s, e, c]), f1 + f2)
+    accumulate(d.con_dist.grad, ti.Vector([s, e, c]), g_dist)
 
 
 @ti.func
@@ -265,25 +464,6 @@ def dof_rows(d: ti.template(), s, e):
 
 
 @ti.func
-def _impedance_slope(solimp, dist, margin):
-    """∂impedance/∂dist (1/m) of ``impedance``: zero outside |dist − margin| < width."""
-    d0, dmax, width, mid, power = solimp[0], solimp[1], solimp[2], solimp[3], solimp[4]
-    slope = 0.0
-    if not (d0 == dmax or width <= MINVAL):
-        x = ti.abs((dist - margin) / width)
-        dy = 0.0
-        if 0.0 < x and x < 1.0:
-            if power == 1.0:
-                dy = 1.0
-            elif x <= mid:
-                dy = power / _power(mid, power - 1.0) * _power(x, power - 1.0)
-            else:
-                dy = power / _power(1.0 - mid, power - 1.0) * _power(1.0 - x, power - 1.0)
-        slope = (dmax - d0) * dy / width * (1.0 if dist - margin > 0.0 else -1.0)
-    return slope
-
-
-@ti.func
 def dof_rows_adjoint(d: ti.template(), s, e, r, g_aref, g_R, g_bound):
     """Reverse of ``_dof_row`` for row r (< efc_dof_rows) given the gradients of its aref, R and
     friction-loss bound: into q, q̇ at frame s and the friction-loss input."""
@@ -296,7 +476,8 @@ def dof_rows_adjoint(d: ti.template(), s, e, r, g_aref, g_R, g_bound):
         accumulate(d.frictionloss.grad, ti.Vector([e, i]), g_bound)
     else:  # a limit: aref and R depend on the distance
         _, dist = _limit_side(d, s, e, i)
-        imp, slope = impedance(solimp, dist, 0.0), _impedance_slope(solimp, dist, 0.0)
+        imp = impedance(solimp, dist, 0.0)
+        slope, _solimp_slope = impedance_gradient(solimp, dist, 0.0)
         g_imp = -k * dist * g_aref
         if (1.0 - imp) / imp * d.dof_invweight0[i] > MINVAL:  # else R is its floor
             g_imp -= d.dof_invweight0[i] / (imp * imp) * g_R

@@ -276,7 +276,7 @@ def _update_constraints(d: ti.template(), s, e, k):
 
 
 @ti.func
-def _cone_coordinates(d: ti.template(), s, e, r):
+def cone_coordinates(d: ti.template(), s, e, r):
     """(N, T²) of the elliptic block at row r: N = μ jar₀ and T² = Σ_j (μ_j jar_j)²."""
     N = d.solver_jar[s, e, r] * d.efc_mu[s, e, r]
     Tsqr = 0.0
@@ -290,7 +290,7 @@ def _cone_coordinates(d: ti.template(), s, e, r):
 def _update_cone(d: ti.template(), s, e, r):
     """State and forces of the elliptic block starting at row r; returns its cost."""
     dim, mu = d.efc_dim[s, e, r], d.efc_mu[s, e, r]
-    N, Tsqr = _cone_coordinates(d, s, e, r)
+    N, Tsqr = cone_coordinates(d, s, e, r)
     zone, T = _cone_zone(N, Tsqr, mu)
     cost, state = 0.0, SATISFIED
     if zone == TOP:
@@ -319,7 +319,7 @@ def _update_cone(d: ti.template(), s, e, r):
 
 
 @ti.func
-def _cone_hessian_entry(d: ti.template(), s, e, r, a, b, N, T):
+def cone_hessian_entry(d: ti.template(), s, e, r, a, b, N, T):
     """Entry (a, b) of the middle zone's Hessian of the block at row r in jar (MuJoCo's con->H):
     Dm s_a s_b [∂²(N − μT)²/2 / ∂U_a ∂U_b] with s = (μ, μ_1, ...)."""
     mu = d.efc_mu[s, e, r]
@@ -364,11 +364,11 @@ def _factor_hessian(d: ti.template(), s, e, k):
 def _add_cone_hessian(d: ti.template(), s, e, r):
     """solver_H += J_cᵀ H_c J_c for the elliptic block at row r (middle zone)."""
     dim, mu = d.efc_dim[s, e, r], d.efc_mu[s, e, r]
-    N, Tsqr = _cone_coordinates(d, s, e, r)
+    N, Tsqr = cone_coordinates(d, s, e, r)
     T = ti.sqrt(Tsqr)
     for a in range(dim):
         for b in range(dim):
-            h = _cone_hessian_entry(d, s, e, r, a, b, N, T)
+            h = cone_hessian_entry(d, s, e, r, a, b, N, T)
             for i in range(d.n_dofs):
                 hJ = h * d.efc_J[s, e, r + a, i]
                 if hJ != 0.0:
