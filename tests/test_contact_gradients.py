@@ -57,11 +57,15 @@ def _batch(n_envs, value):
 
 
 # case → (nominal input (k,), loss) ; each loss takes (scene, body, x) and runs one rollout
-def _start(body, n_envs, pos, quat, vel):
-    """The same start state in every env (the inputs under test differ per env)."""
-    def every_env(value):
-        value = torch.tensor(value, dtype=torch.float64)
-        return value.expand(n_envs, len(value)) if n_envs else value
+def _every_env(value, n_envs):
+    value = torch.tensor(value, dtype=torch.float64)
+    return value.expand(n_envs, len(value)) if n_envs else value
+
+
+def _start(body, n_envs, pos, quat, vel, gravity=(0.0, 0.0, -9.81)):
+    """The same start state and gravity in every env (the inputs under test differ per env)."""
+    every_env = lambda value: _every_env(value, n_envs)  # noqa: E731
+    body.scene.set_gravity(every_env(gravity))
     body.set_pos(every_env(pos), zero_velocity=False)
     body.set_quat(every_env(quat), zero_velocity=False)
     body.set_dofs_velocity(every_env(vel))
@@ -116,9 +120,10 @@ def _softness(scene, body, x, steps):
 
 
 def _sliding_softness(scene, body, x, steps):
-    """sol_params of a sliding box (impedance width 1 cm: its rows' R moves with the depth) →
-    sliding distance and depth: the elliptic cone's middle zone through R and μ."""
-    _start(body, scene.n_envs, *SLIDE)
+    """sol_params of a box kept sliding by a sideways pull (impedance width 1 cm: its rows' R
+    moves with the depth) → sliding distance and depth: the elliptic cone's middle zone through
+    R and μ."""
+    _start(body, scene.n_envs, *SLIDE, gravity=(12.0, 0.0, -9.81))  # pulled along faster than μg: it keeps sliding
     body.set_sol_params(x)
     _roll(scene, steps)
     return body.get_pos()[..., 0].sum() + 1e2 * body.get_pos()[..., 2].sum()

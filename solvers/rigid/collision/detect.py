@@ -73,12 +73,20 @@ def _append(d: ti.template(), s, e, pair, count, position, normal, dist, feature
     d.n_con[s, e, 0] = n
 
 
+@ti.func
+def _pair_poses(d: ti.template(), s, e, g1, g2):
+    """(pos1, rot1, size1, pos2, rot2, size2) of geoms g1 and g2 at frame s: a primitive
+    collider's (and its evaluate's) first arguments."""
+    return (d.geom_xpos[s, e, g1], d.geom_xmat[s, e, g1], d.geom_size[g1],
+            d.geom_xpos[s, e, g2], d.geom_xmat[s, e, g2], d.geom_size[g2])
+
+
 def _posed(collider):
     """A primitive collider called with the two geoms' poses and sizes at frame s."""
     @ti.func
     def call(d: ti.template(), s, e, g1, g2, margin):
-        return collider(d.geom_xpos[s, e, g1], d.geom_xmat[s, e, g1], d.geom_size[g1],
-                        d.geom_xpos[s, e, g2], d.geom_xmat[s, e, g2], d.geom_size[g2], margin)
+        p1, r1, z1, p2, r2, z2 = _pair_poses(d, s, e, g1, g2)
+        return collider(p1, r1, z1, p2, r2, z2, margin)
     return call
 
 
@@ -183,18 +191,13 @@ def _posed_reverse(evaluate, adjoint):
     recorded feature: (evaluate → (position, normal, dist), adjoint(g_position, g_normal, g_dist)
     → (g_pos1, g_rot1, g_pos2, g_rot2))."""
     @ti.func
-    def poses(d: ti.template(), s, e, g1, g2):
-        return (d.geom_xpos[s, e, g1], d.geom_xmat[s, e, g1], d.geom_size[g1],
-                d.geom_xpos[s, e, g2], d.geom_xmat[s, e, g2], d.geom_size[g2])
-
-    @ti.func
     def replay(d: ti.template(), s, e, g1, g2, c):
-        p1, r1, z1, p2, r2, z2 = poses(d, s, e, g1, g2)
+        p1, r1, z1, p2, r2, z2 = _pair_poses(d, s, e, g1, g2)
         return evaluate(p1, r1, z1, p2, r2, z2, d.con_feature[s, e, convex.FEATURE_SIZE * c])
 
     @ti.func
     def reverse(d: ti.template(), s, e, g1, g2, c, g_position, g_normal, g_dist):
-        p1, r1, z1, p2, r2, z2 = poses(d, s, e, g1, g2)
+        p1, r1, z1, p2, r2, z2 = _pair_poses(d, s, e, g1, g2)
         return adjoint(p1, r1, z1, p2, r2, z2, d.con_feature[s, e, convex.FEATURE_SIZE * c], g_position, g_normal,
                        g_dist)
     return replay, reverse
