@@ -1,5 +1,6 @@
 """Scene options (Genesis names). Values are validated when the options are made."""
-from dataclasses import dataclass, field
+import functools
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -20,6 +21,28 @@ def _check_positive(owner, name, value, integer=False):
         raise InvalidInputError(f"{owner}: argument '{name}' must be {kind}, got {value!r}")
 
 
+def _keywords(*genesis_only):
+    """Class decorator of an options dataclass: a keyword it does not have raises
+    InvalidInputError naming the class, the keyword and the accepted ones (Python's TypeError
+    named neither). ``genesis_only``: Genesis 1.4.5's options of that class which genesis_lite
+    does not have, so that the message says so rather than "unknown"."""
+    def decorate(cls):
+        init, accepted = cls.__init__, [f.name for f in fields(cls)]
+
+        @functools.wraps(init)
+        def checked_init(self, *args, **kwargs):
+            for name in kwargs:
+                if name not in accepted:
+                    what = "a Genesis option that genesis_lite does not have" if name in genesis_only else "unknown"
+                    raise InvalidInputError(f"{cls.__name__}: argument '{name}' is {what}; expected one of "
+                                            f"{accepted}")
+            init(self, *args, **kwargs)
+        cls.__init__ = checked_init
+        return cls
+    return decorate
+
+
+@_keywords("substeps_local", "floor_height")
 @dataclass
 class SimOptions:
     """Time stepping and differentiability.
@@ -63,6 +86,12 @@ MUJOCO_TIMECONST, GENESIS_TIMECONST = 0.02, 0.01
 MUJOCO_ITERATIONS, GENESIS_ITERATIONS = 100, 25
 
 
+@_keywords("dt", "gravity", "disable_constraint", "max_collision_pairs", "multiplier_collision_broad_phase",
+           "integrator", "IK_max_targets", "batch_links_info", "batch_joints_info", "batch_dofs_info",
+           "noslip_iterations", "noslip_tolerance", "contact_resolution", "enable_torsional_friction",
+           "enable_rolling_friction", "contact_pruning_tolerance", "sparse_solve", "box_box_detection",
+           "use_hibernation", "hibernation_thresh_vel", "max_dynamic_constraints", "enable_multi_contact",
+           "use_gjk_collision", "enable_contact_patch", "broadphase_traversal")
 @dataclass
 class RigidOptions:
     """Rigid solver switches (Genesis 1.4.5's names and defaults unless said).
@@ -179,6 +208,7 @@ def _check_choice(owner, name, value, choices):
     return value
 
 
+@_keywords()
 @dataclass
 class ViewerOptions:
     """The interactive viewer's options (Genesis 1.4.5's names and defaults). No viewer exists yet:
@@ -266,6 +296,7 @@ def _check_light_value(owner, name, value):
     return _check_vec3(owner, name, value)  # dir or pos
 
 
+@_keywords()
 @dataclass
 class VisOptions:
     """What is drawn, whatever the viewer or camera (Genesis 1.4.5's names and defaults). No

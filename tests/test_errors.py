@@ -238,6 +238,19 @@ def test_invalid_sim_options(f64, kwargs, arg, given):
     raises(gs.InvalidInputError, lambda: gs.options.SimOptions(**kwargs), "SimOptions", arg, "must be", given)
 
 
+@pytest.mark.parametrize("options, name, what", [
+    ("RigidOptions", "use_hibernation", "a Genesis option that genesis_lite does not have"),
+    ("RigidOptions", "limit_timeconst", "unknown"),
+    ("SimOptions", "floor_height", "a Genesis option that genesis_lite does not have"),
+    ("VisOptions", "shadows", "unknown"),
+    ("ViewerOptions", "fov", "unknown"),
+])
+def test_unknown_option_keyword(f64, options, name, what):
+    """A keyword an options class lacks names the class, the keyword, why, and what is accepted."""
+    raises(gs.InvalidInputError, lambda: getattr(gs.options, options)(**{name: 1}), options, f"'{name}'", what,
+           "expected one of")
+
+
 def test_invalid_options_object(f64):
     raises(gs.InvalidInputError, lambda: gs.Scene(sim_options={"dt": 0.01}), "'sim_options'", "SimOptions",
            "dict")
