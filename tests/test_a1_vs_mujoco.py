@@ -14,11 +14,9 @@ on both sides); both step once; then over 1 s of steps:
 - the contact list of the step equals MuJoCo's ``d.contact``: count, geom pairs (our global
   geom indices are MuJoCo's: the plane first, then the URDF's collision geoms in the same order,
   fixed links fused into their parents on both sides), positions to 1e-12 m and world contact
-  forces (MuJoCo's ``mj_contactForce``, up to ~200 N here) to 1e-8 N. Both lists are sorted by
-  geom pair first (each pair's contacts keep their order): ours runs the colliders kind by kind,
-  so when a calf box (plane–box) touches along with the feet (plane–sphere), as it does for a
-  moment with the pyramidal cone, its contacts come after all the feet's, where MuJoCo lists
-  them by body pair.
+  forces (MuJoCo's ``mj_contactForce``, up to ~200 N here) to 1e-8 N, in MuJoCo's order (by body
+  pair: when a calf box (plane–box) touches along with the feet (plane–sphere), as it does for
+  a moment with the pyramidal cone, its contacts come between the feet's).
 
 Measured (both cones): qvel within 1e-13, qpos 1e-15, contact positions 1e-15 m, forces 2e-12 N;
 0 to 4 contacts, the count changing 30-45 times in the second. Without clearing MuJoCo's warm
@@ -87,12 +85,6 @@ def _ours_contacts(robot):
                     c["force_b"].cpu().numpy()))
 
 
-def _by_pair(contacts):
-    """Contacts sorted by geom pair, each pair's own in their order (a stable sort): we list
-    contacts kind by kind (plane–sphere, then plane–box, ...), MuJoCo by body pair."""
-    return sorted(contacts, key=lambda c: (c[0], c[1]))
-
-
 @pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
 def test_a1_steps_like_mujoco(f64, cone):
     """1 s of re-synced steps: qvel and qpos ≤ 1e-7 from MuJoCo's, the same contacts each step."""
@@ -114,7 +106,7 @@ def test_a1_steps_like_mujoco(f64, cone):
         dv = np.abs(robot.get_dofs_velocity().cpu().numpy() - d.qvel).max()
         dq = np.abs(robot.get_qpos().cpu().numpy() - d.qpos).max()
         assert dv <= 1e-7 and dq <= 1e-7, (step, dv, dq)
-        ours, theirs = _by_pair(_ours_contacts(robot)), _by_pair(_mujoco_contacts(m, d))
+        ours, theirs = _ours_contacts(robot), _mujoco_contacts(m, d)
         assert len(ours) == len(theirs), (step, ours, theirs)
         for (a, b, pos, force), (g1, g2, pos_mj, force_mj) in zip(ours, theirs):
             assert (a, b) == (g1, g2), (step, ours, theirs)

@@ -25,7 +25,7 @@ import taichi as ti
 
 from .data import ARENA_TYPES, CONST, bind, n_batch
 from .actuation import smooth_force, smooth_force_adjoint
-from .collision.detect import collide_adjoint_kind, collide_kind, geom_poses, geom_poses_adjoint
+from .collision.detect import collide_adjoint_kind, collide_kind, geom_poses, geom_poses_adjoint, sort_contacts
 from .constraint.implicit import solve_adjoint
 from .constraint.rows import contact_force, contact_rows, dof_rows, limit_violated
 from .constraint.solver import newton_solve
@@ -75,8 +75,9 @@ def position_stages_env(d: ti.template(), s, e):
 
 @ti.func
 def constraint_env(d: ti.template(), s, e):
-    """Rows of frame s (single-dof rows, then its contacts'), then the constraint solve →
-    qacc_constrained and qfrc_constraint[s, e]."""
+    """Rows of frame s (single-dof rows, then its contacts', in MuJoCo's order), then the
+    constraint solve → qacc_constrained and qfrc_constraint[s, e]."""
+    sort_contacts(d, s, e)
     rows = dof_rows(d, s, e)
     for c in range(d.n_con[s, e, 0]):
         d.contacted[0] = 1

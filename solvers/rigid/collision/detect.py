@@ -74,6 +74,30 @@ def _append(d: ti.template(), s, e, pair, count, position, normal, dist, feature
 
 
 @ti.func
+def sort_contacts(d: ti.template(), s, e):
+    """Frame s's contacts into candidate-pair order, MuJoCo's (by body pair, then geom pair): the
+    colliders run kind by kind and append in kind order. Stable (a pair's contacts keep their
+    collider's order), in place; an insertion sort, as the list is sorted within each kind."""
+    for c in range(1, d.n_con[s, e, 0]):
+        k = c
+        while k > 0 and d.con_pair[s, e, k - 1] > d.con_pair[s, e, k]:
+            _swap_contacts(d, s, e, k - 1, k)
+            k -= 1
+
+
+@ti.func
+def _swap_contacts(d: ti.template(), s, e, a, b):
+    """Exchange contacts a and b of frame s (everything a collider wrote of them)."""
+    d.con_pair[s, e, a], d.con_pair[s, e, b] = d.con_pair[s, e, b], d.con_pair[s, e, a]
+    d.con_pos[s, e, a], d.con_pos[s, e, b] = d.con_pos[s, e, b], d.con_pos[s, e, a]
+    d.con_frame[s, e, a], d.con_frame[s, e, b] = d.con_frame[s, e, b], d.con_frame[s, e, a]
+    d.con_dist[s, e, a], d.con_dist[s, e, b] = d.con_dist[s, e, b], d.con_dist[s, e, a]
+    for j in range(convex.FEATURE_SIZE):
+        fa, fb = convex.FEATURE_SIZE * a + j, convex.FEATURE_SIZE * b + j
+        d.con_feature[s, e, fa], d.con_feature[s, e, fb] = d.con_feature[s, e, fb], d.con_feature[s, e, fa]
+
+
+@ti.func
 def _pair_poses(d: ti.template(), s, e, g1, g2):
     """(pos1, rot1, size1, pos2, rot2, size2) of geoms g1 and g2 at frame s: a primitive
     collider's (and its evaluate's) first arguments."""
