@@ -114,6 +114,11 @@ class RigidOptions:
         moving link and at least 16); more contacts stop the simulation with an error.
     enable_mujoco_compatibility: MuJoCo's defaults exactly (time constant 0.02 s, 100
         iterations, impratio 1), for scenes compared with MuJoCo.
+    smooth_contact (ours): every geom's default solimp becomes (0, 0.95, 0.001, 0.5, 2), whose
+        impedance starts at zero at contact onset, so a contact's force grows from zero with depth
+        instead of jumping (MuJoCo's default d0 = 0.9 jumps): the step is then a smooth map through
+        contact onset, for gradients. Needs friction_cone=elliptic (the pyramid's edges add
+        kinks). Joint limits keep MuJoCo's default solimp; set_sol_params still sets any geom's.
     """
     enable_collision: bool = True
     enable_self_collision: bool = True
@@ -130,11 +135,13 @@ class RigidOptions:
     constraint_timeconst: float = None
     max_contacts: int = None
     enable_mujoco_compatibility: bool = False
+    smooth_contact: bool = False
 
     def __post_init__(self):
         owner = "RigidOptions"
         for name in ("enable_collision", "enable_self_collision", "enable_adjacent_collision",
-                     "enable_neutral_collision", "enable_joint_limit", "enable_mujoco_compatibility"):
+                     "enable_neutral_collision", "enable_joint_limit", "enable_mujoco_compatibility",
+                     "smooth_contact"):
             setattr(self, name, check_bool(owner, name, getattr(self, name)))
         if self.constraint_solver != constraint_solver.Newton:
             raise InvalidInputError(f"{owner}: argument 'constraint_solver' expected gs.constraint_solver.Newton "
@@ -145,6 +152,10 @@ class RigidOptions:
                 _check_positive(owner, name, getattr(self, name), integer=name in ("iterations", "max_contacts"))
         _check_positive(owner, "ls_tolerance", self.ls_tolerance)
         _check_choice(owner, "friction_cone", self.friction_cone, (friction_cone.pyramidal, friction_cone.elliptic))
+        if self.smooth_contact and self.friction_cone != friction_cone.elliptic:
+            raise InvalidInputError(f"{owner}: argument 'smooth_contact' needs friction_cone="
+                                    f"gs.friction_cone.elliptic (the pyramid's edges make the map kink), got "
+                                    f"friction_cone={self.friction_cone!r}")
 
     def resolved(self, precision_bits):
         """(timeconst s, iterations, tolerance, impratio) after the defaults that depend on other

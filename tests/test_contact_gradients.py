@@ -26,13 +26,15 @@ _SCENES = {}
 HALF = (0.1, 0.15, 0.05)  # box half extents, m
 
 
-def _scene(cone, n_envs=0, substeps=1, shape="box", tag=""):
+def _scene(cone, n_envs=0, substeps=1, shape="box", tag="", smooth=False):
     """One scene per configuration (building is the slow part). Parameters persist across
-    reset(): each case sets its own, and ``tag`` gives a scene of its own."""
-    key = (cone, n_envs, substeps, shape, tag, gs.runtime.epoch)
+    reset(): each case sets its own, and ``tag`` gives a scene of its own. smooth:
+    RigidOptions(smooth_contact=True)."""
+    key = (cone, n_envs, substeps, shape, tag, smooth, gs.runtime.epoch)
     if key not in _SCENES:
         scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, substeps=substeps, requires_grad=True),
-                         rigid_options=gs.options.RigidOptions(tolerance=1e-14, friction_cone=cone),
+                         rigid_options=gs.options.RigidOptions(tolerance=1e-14, friction_cone=cone,
+                                                               smooth_contact=smooth),
                          show_viewer=False)
         scene.add_entity(gs.morphs.Plane())
         if shape == "box":
@@ -144,8 +146,8 @@ def _roll(scene, steps):
         scene.step()
 
 
-def _check(case, cone, steps, n_envs=0, substeps=1, seed=0, shape="box"):
-    scene, body = _scene(cone, n_envs, substeps, shape)
+def _check(case, cone, steps, n_envs=0, substeps=1, seed=0, shape="box", smooth=False):
+    scene, body = _scene(cone, n_envs, substeps, shape, smooth=smooth)
     loss_of, nominal = CASES[case]
     value = _batch(n_envs, nominal())
     direction = torch.tensor(np.random.default_rng(seed).normal(size=value.shape))
@@ -178,6 +180,20 @@ def test_box_on_plane(f64, case, cone):
 @pytest.mark.parametrize("case", ["sliding_velocity", "tilted"])
 def test_mesh_on_plane(f64, case):
     _check(case, "elliptic", steps=50, shape="mesh")
+
+
+@pytest.mark.parametrize("case", ["tilted", "mass"])
+def test_smooth_contact(f64, case):
+    """RigidOptions(smooth_contact=True) (elliptic; impedance from zero at contact onset): a
+    tilted box landing on one corner after another, contacts making and breaking; a box's mass."""
+    _check(case, "elliptic", steps=50, smooth=True)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", ["tilted", "mass", "sliding_velocity", "softness"])
+@pytest.mark.parametrize("steps,n_envs,substeps", [(200, 0, 1), (50, 4, 1), (200, 4, 1), (50, 0, 2), (200, 0, 2)])
+def test_smooth_contact_matrix(f64, case, steps, n_envs, substeps):
+    _check(case, "elliptic", steps, n_envs, substeps, smooth=True)
 
 
 @pytest.mark.slow

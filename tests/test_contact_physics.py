@@ -15,12 +15,13 @@ from tests.contact_scenes import Body, ContactScene, a1_mujoco, build_mujoco, bu
 G = 9.81
 
 
-def _run(spec, steps, before_step=None):
-    """(ours, MuJoCo's) qpos trajectories (steps + 1, nq) from the spec's initial state."""
+def _run(spec, steps, before_step=None, mujoco_spec=None):
+    """(ours, MuJoCo's) qpos trajectories (steps + 1, nq) from the spec's initial state
+    (MuJoCo's model from mujoco_spec when given)."""
     scene, entities = build_ours(spec)
     if before_step:
         before_step(scene, entities)
-    m = build_mujoco(spec, scene.rigid_solver.model)
+    m = build_mujoco(mujoco_spec or spec, scene.rigid_solver.model)
     d = mujoco.MjData(m)
     if before_step:
         m.opt.gravity[:] = scene.rigid_solver.default_inputs["gravity"][0].cpu().numpy()
@@ -74,6 +75,34 @@ def test_sliding_box_stops_at_coulomb_distance(f64, cone):
         entities[0].set_dofs_velocity(torch.tensor([1.0, 0, 0, 0, 0, 0], dtype=gs.tc_float))
 
     ours, theirs, _, _ = _run(spec, 300, launch)
+    expected = 1.0 / (2 * 0.5 * G)
+    for traj in (ours, theirs):
+        assert abs(traj[-1, 0] - expected) <= 0.03 * expected, (traj[-1, 0], expected)
+
+
+def test_smooth_contact_is_mujoco_with_zero_onset_impedance(f64):
+    """RigidOptions(smooth_contact=True) is MuJoCo with solimp (0, 0.95, 0.001, 0.5, 2) and the
+    elliptic cone: a tilted box dropped with spin follows MuJoCo's trajectory (0.5 s, ≤ 1e-6),
+    then rests within 1 mm of its size (penetration, drift), and a box launched at 1 m/s with μ
+    0.5 stops within 3 % of v²/(2μg)."""
+    body = Body("box", (0.2, 0.3, 0.1), pos=(0, 0, 0.3), quat=(0.9, 0.3, 0.2, 0.1))
+    ours_spec = ContactScene([body], cone="elliptic", options={"smooth_contact": True})
+    mujoco_spec = ContactScene([body], cone="elliptic", solimp=(0.0, 0.95, 0.001, 0.5, 2.0))
+    ours, theirs, _, _ = _run(ours_spec, 1500, lambda scene, ents: _spin(ents, (3.0, -2.0, 5.0)),
+                              mujoco_spec)
+    assert np.abs(ours[:251] - theirs[:251]).max() < 1e-6
+    assert 0.05 - ours[1000:, 2].min() <= 1e-3 and np.abs(ours[-1, :3] - ours[1000, :3]).max() <= 1e-3
+
+    slide = ContactScene([Body("box", (0.1, 0.1, 0.1), pos=(0, 0, 0.05))], cone="elliptic",
+                         options={"smooth_contact": True})
+
+    def launch(scene, entities):
+        scene.entities[0].set_friction(0.5)
+        entities[0].set_friction(0.2)
+        entities[0].set_dofs_velocity(torch.tensor([1.0, 0, 0, 0, 0, 0], dtype=gs.tc_float))
+
+    ours, theirs, _, _ = _run(slide, 300, launch, ContactScene(slide.bodies, cone="elliptic",
+                                                               solimp=(0.0, 0.95, 0.001, 0.5, 2.0)))
     expected = 1.0 / (2 * 0.5 * G)
     for traj in (ours, theirs):
         assert abs(traj[-1, 0] - expected) <= 0.03 * expected, (traj[-1, 0], expected)

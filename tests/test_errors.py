@@ -251,6 +251,11 @@ def test_unknown_option_keyword(f64, options, name, what):
            "expected one of")
 
 
+def test_smooth_contact_needs_the_elliptic_cone(f64):
+    raises(gs.InvalidInputError, lambda: gs.options.RigidOptions(smooth_contact=True), "RigidOptions",
+           "'smooth_contact'", "elliptic", "'pyramidal'")
+
+
 def test_invalid_options_object(f64):
     raises(gs.InvalidInputError, lambda: gs.Scene(sim_options={"dt": 0.01}), "'sim_options'", "SimOptions",
            "dict")

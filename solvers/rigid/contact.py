@@ -10,7 +10,7 @@ import torch
 
 from ..core import runtime
 from .collision.detect import BUDGET, COLLIDERS
-from .constraint.rows import DEFAULT_SOLIMP  # noqa: F401 (the geoms' default, read by solver.py)
+from .constraint.rows import DEFAULT_SOLIMP, SMOOTH_SOLIMP  # noqa: F401 (the geoms' defaults, read by solver.py)
 
 _logger = logging.getLogger("genesis_lite")
 MAX_PER_MOVING_LINK = 8  # default max_contacts: a box resting on a face touches at up to 8 points

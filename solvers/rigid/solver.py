@@ -103,7 +103,8 @@ class RigidSolver(Solver):
             "frictionloss": m.dof_frictionloss, "force_lo": -effort, "force_hi": effort,
             "ctrl_mode": np.zeros(m.n_dofs),
             "friction": m.geom_friction, "solref": np.tile([self.timeconst, 1.0], len(m.geom_type)),
-            "solimp": np.tile(contact.DEFAULT_SOLIMP, len(m.geom_type))}
+            "solimp": np.tile(contact.SMOOTH_SOLIMP if self.rigid_options.smooth_contact else contact.DEFAULT_SOLIMP,
+                              len(m.geom_type))}
         assert per_env.keys() == INPUTS.keys()
         return {name: torch.as_tensor(np.tile(np.asarray(v, dtype=np.float64), (B, 1)), dtype=runtime.tc_float,
                                       device=runtime.device) for name, v in per_env.items()}

@@ -34,6 +34,9 @@ MINVAL = 1e-15  # MuJoCo's mjMINVAL: a floor on every divisor
 MINMU = 1e-5  # MuJoCo's mjMINMU: a floor on friction (μ = 0 would leave a pyramid edge no regulariser)
 MINIMP, MAXIMP = 0.0001, 0.9999  # MuJoCo's bounds on the impedance
 DEFAULT_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)  # MuJoCo's (d0, dmax, width m, midpoint, power)
+# RigidOptions(smooth_contact=True)'s: the impedance starts at 0 at contact onset (d0 = 0, clamped to
+# MINIMP as MuJoCo does), so the contact force grows from zero with depth instead of jumping
+SMOOTH_SOLIMP = (0.0, 0.95, 0.001, 0.5, 2.0)
 
 
 @ti.func
