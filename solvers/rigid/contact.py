@@ -99,7 +99,7 @@ def _touching_pairs(solver):
     if solver.data.take_flag("overflow"):
         _logger.warning(f"scene.build: more contacts at the initial pose than the {solver.data.size['C']} slots per "
                         f"env: pairs beyond them are not filtered as touching; raise RigidOptions(max_contacts=...)")
-    for flag in ("contacted", "nonfinite"):
+    for flag in ("inexact", "nonfinite"):
         solver.data.take_flag(flag)
     found = solver.contacts(substep=0)[0].cpu().numpy()
     found = found[found[:, 0] >= 0]

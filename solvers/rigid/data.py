@@ -133,7 +133,7 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
 # geom pairs, H hull vertices, C contact slots, R constraint rows per env (see RigidData); HI the meshes' hull
 # ints (geometry.py), WS 1 when the convex colliders need their workspace (CONVEX_SCRATCH), else 0.
 SIZES = ("B", "L", "D", "Q", "P", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C", "R", "cone",
-         "iterations", "ls_iterations", "overflow", "contacted", "rows_needed", "HI", "WS")
+         "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact")
 HEADER = {name: k for k, name in enumerate(SIZES)}
 _REGIONS = [("i", False)] + [(a, g) for g in (False, True) for a in ("f", "v3", "v4", "m3")]  # (arena, gradients?)
 
@@ -233,8 +233,8 @@ class RigidData:
                      "limits": int(bool(settings["limits"])), "nonfinite": 0, "G": n_geoms,
                      "N": len(model.pair_geom1), "H": len(model.hull_vec), "C": settings["contacts"],
                      "R": settings["rows"], "cone": settings["cone"], "iterations": settings["iterations"],
-                     "ls_iterations": settings["ls_iterations"], "overflow": 0, "contacted": 0, "rows_needed": 0,
-                     "HI": len(model.hull_int), "WS": int(_has_convex_pairs(model))}
+                     "ls_iterations": settings["ls_iterations"], "overflow": 0, "rows_needed": 0,
+                     "HI": len(model.hull_int), "WS": int(_has_convex_pairs(model)), "inexact": 0}
         self.start, stop = layout(self.size)
         length = {a: stop[a, bool(requires_grad)] for a in ARENAS}  # no gradient storage without gradients
         if max(length.values()) >= 2 ** 31:  # indices inside kernels are 32-bit
@@ -262,8 +262,8 @@ class RigidData:
 
     def take_flag(self, name):
         """True once a step raised the header's flag ``name`` ("nonfinite": a non-finite state;
-        "overflow": more contacts than slots; "contacted": a substep had contact rows;
-        "rows_needed": an env of the one-launch step met a joint limit) since
+        "overflow": more contacts than slots; "rows_needed": an env of the one-launch step met a
+        joint limit; "inexact": a contact came from a collider whose replay is not exact) since
         the last call, which clears it."""
         slot = HEADER[name]
         flag = bool(self.header[slot])
@@ -338,8 +338,9 @@ class RigidView:
         self.elliptic, self.iterations, self.ls_iterations = size["cone"], size["iterations"], size["ls_iterations"]
         self.nonfinite = ArrayView(ints, HEADER["nonfinite"], (1,))  # set by the NaN check
         self.overflow = ArrayView(ints, HEADER["overflow"], (1,))  # set when contacts exceed their slots
-        self.contacted = ArrayView(ints, HEADER["contacted"], (1,))  # set when a substep had contact rows
         self.rows_needed = ArrayView(ints, HEADER["rows_needed"], (1,))  # set when an env's needs_rows is
+        # set when a contact's collider has no exact replay (collision/detect.py: replay_exact)
+        self.inexact = ArrayView(ints, HEADER["inexact"], (1,))
         count = _counts(size)
         for name, (arena, _) in MODEL.items():
             setattr(self, name, ArrayView(arenas[arena], start[f"model:{name}"], (1,)))

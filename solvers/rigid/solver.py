@@ -18,9 +18,7 @@ from .model import build_model
 
 
 def _pair_name(kind):
-    """'box–mesh' for a collider kernel kind (type 1, type 2); 'convex' for the shared one."""
-    if kind == detect.ALL_CONVEX:
-        return "convex pairs (meshes, cylinders with capsules, cylinders or boxes)"
+    """'box–mesh' for a pair kind (type 1, type 2)."""
     names = {code: name for name, code in GEOM_CODE.items()}
     return f"{names[kind[0]]}–{names[kind[1]]}"
 
@@ -88,7 +86,7 @@ class RigidSolver(Solver):
                                for rows in (0, 1)]
         self.collider_reverses = [BoundKernel(step.collide_adjoint, (schedule, kind), arenas, element_dims)
                                   for kind in detect.differentiable_kinds(m)]
-        self.undifferentiable = [kind for kind in detect.kernel_kinds(m) if kind not in detect.REVERSES]
+        self.inexact_kinds = detect.inexact_kinds(m)  # pair kinds whose contacts have no exact reverse
         self.limited = contact.limited_dofs(self.model, options) > 0
         self.default_inputs = self._default_inputs()
         self.upload_inputs(self.default_inputs)
@@ -235,16 +233,17 @@ class RigidSolver(Solver):
         packed = self._pack_inputs(inputs, before=(state,), after=(grad_state_out,))
         out = self._empty(sum(self.grad_widths))
         self.kernels.prepare_reverse(packed)
-        self.data.take_flag("contacted")
+        self.data.take_flag("inexact")
         self.set_warm_start(warm_start)
         constrained = self._constrained()
         self.run_step(self._nothing, self._nothing, commit=0)
-        if self.data.take_flag("contacted") and self.undifferentiable:
-            names = ", ".join(_pair_name(kind) for kind in self.undifferentiable)
-            raise GradientError(f"rigid solver (entities: {', '.join(self.entity_names)}): this step had contacts, "
-                                f"and the scene has geom pairs whose contacts have no gradient yet ({names}); "
-                                f"expected pairs among plane, sphere, capsule, box, and cylinders or meshes on a "
-                                f"plane or with spheres (see README), or RigidOptions(enable_collision=False)")
+        if self.data.take_flag("inexact"):
+            names = ", ".join(_pair_name(kind) for kind in self.inexact_kinds)
+            raise GradientError(f"rigid solver (entities: {', '.join(self.entity_names)}): this step had a contact "
+                                f"of a pair kind whose contacts have no gradient yet ({names}: the convex collider "
+                                f"iterates on curved shapes and margins); expected contacts among planes, spheres, "
+                                f"capsules, boxes, meshes, and cylinders on a plane or with spheres, meshes and "
+                                f"boxes without margin (see README), or RigidOptions(enable_collision=False)")
         for s in reversed(range(self.sim_options.substeps)):  # separate kernels: fused, they compile slower
             self.reverse_kernel[constrained](s)
             for reverse in self.collider_reverses:

@@ -25,7 +25,8 @@ import taichi as ti
 
 from .data import ARENA_TYPES, CONST, bind, n_batch
 from .actuation import smooth_force, smooth_force_adjoint
-from .collision.detect import collide_adjoint_kind, collide_kind, geom_poses, geom_poses_adjoint, sort_contacts
+from .collision.detect import (collide_adjoint_kind, collide_kind, geom_poses, geom_poses_adjoint, replay_exact,
+                               sort_contacts)
 from .constraint.implicit import solve_adjoint
 from .constraint.rows import contact_force, contact_rows, dof_rows, limit_violated
 from .constraint.solver import newton_solve
@@ -80,7 +81,8 @@ def constraint_env(d: ti.template(), s, e):
     sort_contacts(d, s, e)
     rows = dof_rows(d, s, e)
     for c in range(d.n_con[s, e, 0]):
-        d.contacted[0] = 1
+        if not replay_exact(d, d.con_pair[s, e, c]):
+            d.inexact[0] = 1
         d.con_efc[s, e, c] = rows
         rows += contact_rows(d, s, e, c, rows)
     d.n_efc[s, e, 0] = rows

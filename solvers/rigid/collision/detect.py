@@ -262,6 +262,51 @@ def _plane_mesh_reverse(d: ti.template(), s, e, g1, g2, c, g_position, g_normal,
 REVERSES[(PLANE, MESH)] = (_plane_mesh_replay, _plane_mesh_reverse)
 
 
+@ti.func
+def _convex_replay(d: ti.template(), s, e, g1, g2, c):
+    return convex.convex_evaluate(d.geom_type[g1], d.geom_xpos[s, e, g1], d.geom_xmat[s, e, g1], d.geom_size[g1],
+                                  d.geom_mesh[g1], d.geom_type[g2], d.geom_xpos[s, e, g2], d.geom_xmat[s, e, g2],
+                                  d.geom_size[g2], d.geom_mesh[g2], d.pair_margin[d.con_pair[s, e, c]],
+                                  _feature_row(d, s, e, c), HullView(d))
+
+
+@ti.func
+def _convex_reverse(d: ti.template(), s, e, g1, g2, c, g_position, g_normal, g_dist):
+    return convex.convex_evaluate_adjoint(d.geom_type[g1], d.geom_xpos[s, e, g1], d.geom_xmat[s, e, g1],
+                                          d.geom_size[g1], d.geom_mesh[g1], d.geom_type[g2], d.geom_xpos[s, e, g2],
+                                          d.geom_xmat[s, e, g2], d.geom_size[g2], d.geom_mesh[g2],
+                                          d.pair_margin[d.con_pair[s, e, c]], _feature_row(d, s, e, c), HullView(d),
+                                          g_position, g_normal, g_dist)
+
+
+# convex_convex's replay is its forward's own closed form between polytopes (boxes, meshes) without
+# margin; on a curved geom (sphere, capsule, cylinder) or with a margin the forward iterates (EPA
+# samples the balls, the cylinder's rim) and the replay is the converged form, up to the CCD
+# tolerance away (tests/test_adjoints_convex.py): a backward over such a contact raises
+REVERSES[ALL_CONVEX] = (_convex_replay, _convex_reverse)
+POLYTOPES = (BOX, MESH)
+
+
+@ti.func
+def replay_exact(d: ti.template(), pair):
+    """Whether the contacts of candidate pair ``pair`` replay exactly (see POLYTOPES)."""
+    type1, type2 = d.geom_type[d.pair_geom1[pair]], d.geom_type[d.pair_geom2[pair]]
+    exact = True
+    if _of_kind(type1, type2, ALL_CONVEX):
+        exact = (type1 == BOX or type1 == MESH) and (type2 == BOX or type2 == MESH) and d.pair_margin[pair] == 0.0
+    return exact
+
+
+def inexact_kinds(model):
+    """The model's candidate pair kinds (type 1, type 2) whose contacts do not replay exactly."""
+    kinds = set()
+    for a, b, margin in zip(model.pair_geom1, model.pair_geom2, model.pair_margin):
+        kind = (int(model.geom_type[a]), int(model.geom_type[b]))
+        if kind in convex.CONVEX_PAIRS and not (set(kind) <= set(POLYTOPES) and margin == 0.0):
+            kinds.add(kind)
+    return sorted(kinds)
+
+
 def differentiable_kinds(model):
     """Which of the model's collider kernels (kernel_kinds) have a reverse."""
     return [kind for kind in kernel_kinds(model) if kind in REVERSES]
