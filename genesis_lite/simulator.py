@@ -197,8 +197,10 @@ class Simulator:
         """Link kinematics (B, L, 13) of the current state, differentiable when it requires grad."""
         slot = self.slot(solver)
         state = self.state(solver)
-        if slot.derived is None or slot.derived[0] is not state:
-            if self.requires_grad and torch.is_grad_enabled() and state.requires_grad:
+        graph = self.requires_grad and torch.is_grad_enabled() and state.requires_grad
+        # a value read under torch.no_grad() (a camera's, a logger's) serves no later read that needs the graph
+        if slot.derived is None or slot.derived[0] is not state or (graph and slot.derived[1].grad_fn is None):
+            if graph:
                 value = autograd.read(self, solver, state)
             else:
                 value = self.read_derived(solver, state)

@@ -67,6 +67,31 @@ def test_backward_after_reset_raises(pendulum):
         loss.backward()
 
 
+def test_getter_under_no_grad_does_not_detach_a_later_one(pendulum):
+    """A link getter called under torch.no_grad() (as a camera or a logger does) and then again
+    with grad on the same state: the second is in the graph, its gradient that of a fresh read."""
+    scene, robot = pendulum
+    link = robot.get_link("link2")
+
+    def tip(mass, peek):
+        scene.reset()
+        robot.set_links_mass(mass)
+        robot.set_dofs_position([0.4, -0.3])
+        for _ in range(T):
+            scene.step()
+        if peek:
+            with torch.no_grad():
+                link.get_pos()
+        return link.get_pos().sum()
+
+    grads = []
+    for peek in (False, True):
+        mass = robot.get_links_mass().detach().clone().requires_grad_(True)
+        tip(mass, peek).backward()
+        grads.append(mass.grad)
+    assert grads[1].abs().sum() > 0 and torch.equal(grads[0], grads[1])
+
+
 def test_autograd_grad_equals_backward(pendulum):
     scene, robot = pendulum
     mass = robot.get_links_mass().detach().clone().requires_grad_(True)
