@@ -222,8 +222,9 @@ def _check_choice(owner, name, value, choices):
 @_keywords()
 @dataclass
 class ViewerOptions:
-    """The interactive viewer's options (Genesis 1.4.5's names and defaults). No viewer exists yet:
-    ``gs.Scene(show_viewer=True)`` raises; these are validated and kept for it.
+    """The interactive viewer's options (Genesis 1.4.5's names and defaults). No viewer exists yet
+    (cameras are headless: scene.add_camera): ``gs.Scene(show_viewer=True)`` raises; these are
+    validated and kept for it.
 
     res: (2,) pixels or None (the display's). run_in_thread: None (platform default) or bool.
     refresh_rate: frames/s. realtime_factor: playback speed (1.0: real time) or None (as fast
@@ -310,8 +311,10 @@ def _check_light_value(owner, name, value):
 @_keywords()
 @dataclass
 class VisOptions:
-    """What is drawn, whatever the viewer or camera (Genesis 1.4.5's names and defaults). No
-    renderer exists yet: these are validated and kept for it.
+    """What is drawn, whatever the viewer or camera (Genesis 1.4.5's names and defaults). Cameras
+    (genesis_lite/vis/camera.py) read background_color, segmentation_level and rendered_envs_idx;
+    adding a camera raises for non-default values of what they cannot draw yet (world, link and
+    camera frames, plane reflection, split_envs, ambient_light, lights); shadow draws no shadow.
 
     show_world_frame / show_link_frame / show_cameras: draw those frames (sizes in m).
     shadow, plane_reflection: rendering effects. split_envs: cameras render each env on its

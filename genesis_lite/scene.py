@@ -1,8 +1,10 @@
 """The scene: entities are added, then ``build(n_envs)`` fixes everything and ``step()`` runs.
 
 Lifecycle errors (step before build, build twice, add after build) raise SceneStateError.
-Genesis's viewer and visualisation arguments are accepted and validated; there is no viewer or
-camera yet, so they change nothing (``show_viewer=True`` raises rather than being ignored).
+Cameras (``add_camera``, vis/camera.py) render the scene headless, before or after build (Genesis
+only before); they read ``vis_options`` and draw the debug spheres of ``draw_debug_spheres``.
+There is no interactive viewer: ``show_viewer=True`` raises rather than being ignored, and
+``viewer_options`` are validated and kept for it.
 """
 import os
 
@@ -19,6 +21,8 @@ from .simulator import Simulator
 from .solvers.rigid import merge, shapes, urdf
 from .solvers.rigid.solver import RigidSolver
 from .surfaces import Default
+from .vis.camera import Camera
+from .vis.visuals import DebugSpheres, SceneVisuals
 
 
 class SimState:
@@ -38,9 +42,9 @@ class Scene:
     """Entities, options and, once built, the simulator.
 
     sim_options, rigid_options: gs.options.SimOptions / RigidOptions (None: defaults).
-    viewer_options, vis_options: gs.options.ViewerOptions / VisOptions (None: defaults), kept
-    for the viewer and cameras of a later release. show_viewer: False or None (Genesis's
-    default); True raises, as there is no interactive viewer yet.
+    viewer_options, vis_options: gs.options.ViewerOptions / VisOptions (None: defaults); the
+    cameras read vis_options, viewer_options are kept for an interactive viewer of a later release.
+    show_viewer: False or None (Genesis's default); True raises, as there is no interactive viewer.
     """
 
     def __init__(self, sim_options=None, rigid_options=None, viewer_options=None, vis_options=None,
@@ -60,8 +64,9 @@ class Scene:
         no_viewer = show_viewer is None or (isinstance(show_viewer, (bool, np.bool_)) and not show_viewer)
         if not no_viewer:
             raise InvalidInputError(f"gs.Scene: argument 'show_viewer' must be False or None: genesis_lite has no "
-                                    f"interactive viewer yet (cameras and rendering come with a later release), "
-                                    f"got {show_viewer!r}")
+                                    f"interactive viewer yet — use headless cameras for images and videos "
+                                    f"(scene.add_camera(...), camera.render(), camera.start_recording()); a viewer "
+                                    f"may come in a later release, got {show_viewer!r}")
         self.show_viewer = False
         self.entities = []
         self.rigid_solver = RigidSolver(self.sim_options, self.rigid_options)
@@ -69,6 +74,9 @@ class Scene:
         self.n_envs = 0
         self._epoch = runtime.epoch
         self._destroyed = False
+        self._cameras = []
+        self._drawing = None  # SceneVisuals of the cameras, made at the first render
+        self._debug_objects, self._debug_gathered = [], None  # DebugSpheres; their Spheres, made when drawn
 
     # -- building ---------------------------------------------------------------------------
     @property
@@ -86,6 +94,9 @@ class Scene:
         if not isinstance(material, Rigid):
             raise InvalidInputError(f"scene.add_entity: argument 'material' must be gs.materials.Rigid (other "
                                     f"materials need solvers not built yet), got {type(material).__name__}")
+        if surface is not None and not isinstance(surface, Default):
+            raise InvalidInputError(f"scene.add_entity: argument 'surface' must be gs.surfaces.Default or None, "
+                                    f"got {type(surface).__name__}")
         name = name or f"{type(morph).__name__.lower()}_{len(self.entities)}"
         links = _links_of(morph, material, name)
         entity = RigidEntity(self, len(self.entities), name, morph, material, surface or Default(), links,
@@ -115,6 +126,8 @@ class Scene:
                                     f"below {max(1, n_envs)} (n_envs={n_envs}), got {rendered}")
         self.n_envs = int(n_envs)
         self.env_spacing = tuple(float(v) for v in env_spacing)
+        for camera in self._cameras:  # their env_idx checked before anything is allocated
+            camera._bind_env()
         sim = Simulator(self.sim_options, [self.rigid_solver])
         try:
             sim.build(self.n_envs)
@@ -124,6 +137,8 @@ class Scene:
         self.sim = sim
         for entity in self.entities:
             entity._on_build()
+        for camera in self._cameras:
+            camera._on_build()
 
     def _require_built(self, what):
         if self._epoch != runtime.epoch:
@@ -134,12 +149,83 @@ class Scene:
             raise SceneStateError(f"{what}: call scene.build() first")
         return self.sim
 
+    # -- cameras and debug drawing ----------------------------------------------------------
+    def add_camera(self, model="pinhole", res=(320, 320), pos=(0.5, 2.5, 3.5), lookat=(0.5, 0.5, 0.5),
+                   up=(0.0, 0.0, 1.0), fov=30, aperture=2.0, focus_dist=None, GUI=False, spp=256, denoise=None,
+                   near=0.1, far=20.0, env_idx=None, debug=False):
+        """A headless pinhole camera (Genesis's arguments and defaults; vis/camera.py says what each
+        does and which are refused): res (width, height) pixels, pos / lookat (3,) m, up (3,), fov
+        vertical degrees, near / far m, env_idx (batched scenes), debug (draws debug spheres too).
+        Before or after build (Genesis: before only). Returns the Camera."""
+        camera = Camera(self, len(self._cameras), model, res, pos, lookat, up, fov, aperture, focus_dist, GUI, spp,
+                        denoise, near, far, env_idx, debug)
+        if self.is_built:
+            camera._bind_env()
+            camera._on_build()
+        self._cameras.append(camera)
+        return camera
+
+    def draw_debug_sphere(self, pos, radius=0.01, color=(1.0, 0.0, 0.0, 0.5)):
+        """One debug sphere at ``pos`` (3,) m world; see draw_debug_spheres."""
+        return self._add_debug_spheres("scene.draw_debug_sphere", pos, radius, color)
+
+    def draw_debug_spheres(self, poss, radius=0.01, color=(1.0, 0.0, 0.0, 0.5)):
+        """Spheres of ``radius`` m at ``poss`` (N, 3) m world (numpy or torch; copied now), drawn by
+        debug cameras (``add_camera(debug=True)``) until cleared; color (r, g, b[, a]) in [0, 1],
+        alpha not drawn. Returns the object to pass to clear_debug_object."""
+        return self._add_debug_spheres("scene.draw_debug_spheres", poss, radius, color)
+
+    def _add_debug_spheres(self, owner, poss, radius, color):
+        self._require_built(owner)
+        spheres = DebugSpheres(owner, poss, radius, color)
+        self._debug_objects.append(spheres)
+        self._debug_gathered = None
+        return spheres
+
+    def clear_debug_object(self, obj):
+        """Stop drawing one object returned by draw_debug_sphere(s)."""
+        if not any(obj is mine for mine in self._debug_objects):
+            raise InvalidInputError(f"scene.clear_debug_object: argument 'obj' must be a debug object of this scene "
+                                    f"(returned by draw_debug_spheres and not cleared yet), got {obj!r}")
+        self._debug_objects = [mine for mine in self._debug_objects if mine is not obj]
+        self._debug_gathered = None
+
+    def clear_debug_objects(self):
+        """Stop drawing every debug object."""
+        self._debug_objects, self._debug_gathered = [], None
+
+    def _debug_spheres(self):
+        """The rasterizer's Spheres of every debug object (None when there is none), gathered once
+        per change."""
+        if self._debug_gathered is None and self._debug_objects:
+            self._debug_gathered = DebugSpheres.gather(self._debug_objects)
+        return self._debug_gathered
+
+    def _rendered_envs(self):
+        """The envs cameras draw (batch rows): VisOptions.rendered_envs_idx, else all."""
+        rendered = self.vis_options.rendered_envs_idx
+        return np.arange(max(1, self.n_envs)) if rendered is None else np.asarray(rendered, dtype=np.int64)
+
+    def _camera_visuals(self):
+        """The cameras' SceneVisuals, made at the first render (the scene is built)."""
+        if self._drawing is None:
+            self._drawing = SceneVisuals(self, self._rendered_envs(), self.vis_options.segmentation_level)
+        return self._drawing
+
+    def _link_kinematics(self):
+        """(B, L, 13) link kinematics of the current state, read where the state lives: from the
+        solver when it holds the state (after an ordinary step; nothing is downloaded), else from
+        the state tensor (detached)."""
+        if self.sim.slot(self.rigid_solver).state is None:
+            return self.rigid_solver.links_kinematics()
+        return self.sim.derived(self.rigid_solver).detach()
+
     # -- running ----------------------------------------------------------------------------
     def step(self, update_visualizer=True, refresh_visualizer=True):
         """Advance by ``dt`` (``substeps`` integration substeps).
 
         update_visualizer, refresh_visualizer: Genesis's switches for the viewer and cameras,
-        accepted (True or False) and without effect until those exist."""
+        accepted (True or False) and without effect: cameras draw when render() is called."""
         if update_visualizer is not True or refresh_visualizer is not True:  # the common case costs two tests
             check_bool("scene.step", "update_visualizer", update_visualizer)
             check_bool("scene.step", "refresh_visualizer", refresh_visualizer)
@@ -204,10 +290,13 @@ class Scene:
         return self.sim_options.dt
 
     def destroy(self):
-        """Free the scene's arrays (its solvers' data); the scene cannot step afterwards."""
+        """Free the scene's arrays (its solvers' data) and finish the cameras' streamed recordings;
+        the scene cannot step afterwards."""
         self.rigid_solver.destroy()
         self.sim = None
         self._destroyed = True
+        for camera in self._cameras:  # last: a failing video file leaves the scene destroyed all the same
+            camera._close()
 
 
 def _envs_layout(n_batch, env_spacing, n_envs_per_row, center):

@@ -1,8 +1,27 @@
 """Surfaces: how an entity looks to cameras."""
 from dataclasses import dataclass
 
+import numpy as np
+
+from .solvers.core import InvalidInputError
+
 
 @dataclass
 class Default:
-    """A plain surface; color (r, g, b) in [0, 1]."""
-    color: tuple = (0.6, 0.6, 0.6)
+    """A plain surface. color: (r, g, b) or (r, g, b, a) in [0, 1], or None (Genesis's default):
+    the asset's own colours (a URDF's materials), else grey. A colour given here paints the whole
+    entity, URDF materials included, as in Genesis. Cameras draw opaque surfaces: alpha is kept
+    but not drawn."""
+    color: tuple = None
+
+    def __post_init__(self):
+        if self.color is None:
+            return
+        try:
+            color = np.asarray(self.color, dtype=np.float64)
+        except (TypeError, ValueError):
+            color = np.full(0, np.nan)
+        if color.shape not in ((3,), (4,)) or not np.all((color >= 0) & (color <= 1)):
+            raise InvalidInputError(f"surfaces.Default: argument 'color' must be (r, g, b) or (r, g, b, a) in [0, 1] "
+                                    f"or None, got {self.color!r}")
+        self.color = tuple(float(c) for c in color)

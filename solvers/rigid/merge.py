@@ -10,16 +10,16 @@ import numpy as np
 
 from ..core import InvalidInputError
 from .shapes import quat_to_mat
-from .spec import GeomSpec, LinkSpec
+from .spec import LinkSpec, ShapeSpec
 
 
 def merge_fixed_links(links: list[LinkSpec], links_to_keep=(), owner: str = "merge_fixed_links") -> list[LinkSpec]:
     """``links`` (tree order) with every link attached by a fixed joint merged into its parent.
 
     Deepest links first, as Genesis: a merged child C's contents are re-expressed in its
-    parent P's frame (C's frame in P is its joint frame T): C's collision geoms move to P, C's
-    children are re-parented to P with their joint frames composed with T, and P's mass, com and
-    inertia become those of the two bodies together (parallel-axis theorem). The merged link
+    parent P's frame (C's frame in P is its joint frame T): C's collision geoms and visuals move
+    to P, C's children are re-parented to P with their joint frames composed with T, and P's mass,
+    com and inertia become those of the two bodies together (parallel-axis theorem). The merged link
     keeps P's name and joint; ``P.merged`` records C's name and its fixed joint's name.
     A massless part adds nothing, not even its inertia, as the model drops the inertia of
     massless links (MuJoCo does the same).
@@ -71,8 +71,9 @@ def _names_to_keep(links, links_to_keep, owner):
 
 
 def _copy(spec: LinkSpec) -> LinkSpec:
-    """A copy whose fields may be reassigned without touching ``spec`` (geoms are copied on move)."""
-    return replace(spec, geoms=list(spec.geoms), merged=list(spec.merged))
+    """A copy whose fields may be reassigned without touching ``spec`` (geoms and visuals are
+    copied on move)."""
+    return replace(spec, geoms=list(spec.geoms), visuals=list(spec.visuals), merged=list(spec.merged))
 
 
 def _merge_into(parent: LinkSpec, child: LinkSpec) -> None:
@@ -82,6 +83,7 @@ def _merge_into(parent: LinkSpec, child: LinkSpec) -> None:
         (parent.mass, parent.com, parent.inertia),
         (child.mass, child.pos + rot @ child.com, rot @ child.inertia @ rot.T))
     parent.geoms = parent.geoms + [_moved(geom, child.pos, child.quat) for geom in child.geoms]
+    parent.visuals = parent.visuals + [_moved(visual, child.pos, child.quat) for visual in child.visuals]
     parent.merged = parent.merged + [(child.name, child.joint_name)] + child.merged
 
 
@@ -106,8 +108,9 @@ def _reparent(spec: LinkSpec, removed: LinkSpec) -> None:
     spec.pos, spec.quat = _compose(removed.pos, removed.quat, spec.pos, spec.quat)
 
 
-def _moved(geom: GeomSpec, pos, quat) -> GeomSpec:
-    """A copy of ``geom`` placed in the frame in which (pos, quat) is the pose of its old frame."""
+def _moved(geom: ShapeSpec, pos, quat) -> ShapeSpec:
+    """A copy of ``geom`` (a collision geom or a visual) placed in the frame in which (pos, quat)
+    is the pose of its old frame."""
     new_pos, new_quat = _compose(pos, quat, geom.pos, geom.quat)
     return replace(geom, pos=new_pos, quat=new_quat)
 

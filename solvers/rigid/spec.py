@@ -11,16 +11,14 @@ JOINT_TYPES = ("fixed", "revolute", "prismatic", "free")
 
 
 @dataclass
-class GeomSpec:
-    """A collision shape attached to a link.
+class ShapeSpec:
+    """A shape attached to a link.
 
     type: "box" | "sphere" | "cylinder" | "capsule" | "mesh" | "plane"
     size: box (3,) full extents (m); sphere (1,) radius; cylinder/capsule (2,) radius, length
           (axis along local z); plane (3,) normal; mesh: empty.
     pos (3,) m and quat (4,) w-x-y-z: the shape's frame in the link frame.
     vertices (V, 3) m and faces (F, 3): the triangle mesh (mesh shapes only, else None).
-    friction: Coulomb coefficient of contacts on this shape (dimensionless); None when neither
-          the asset nor the material states one (the model then uses its default).
     """
     type: str
     size: np.ndarray
@@ -28,7 +26,22 @@ class GeomSpec:
     quat: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0, 0.0]))
     vertices: np.ndarray = None
     faces: np.ndarray = None
+
+
+@dataclass
+class GeomSpec(ShapeSpec):
+    """A collision shape. friction: Coulomb coefficient of contacts on this shape
+    (dimensionless); None when neither the asset nor the material states one (the model then
+    uses its default)."""
     friction: float = None
+
+
+@dataclass
+class VisualSpec(ShapeSpec):
+    """A shape drawn by cameras; the physics never reads it. rgba (4,) in [0, 1]: the asset's
+    colour (URDF ``<material>``), or None when it gives none (the entity's surface colour, else
+    the default, is used)."""
+    rgba: np.ndarray = None
 
 
 @dataclass
@@ -45,6 +58,8 @@ class LinkSpec:
     lower/upper: joint limits, rad or m (-inf/inf when unlimited); effort: |force| bound (inf when none).
     merged: (link name, fixed joint name) of every link merged into this one (merge.py), for
     error messages about names that no longer exist.
+    visuals: VisualSpec list, what cameras draw of the link (URDF ``<visual>``; empty for
+    primitive morphs, which are drawn from their geoms).
     """
     name: str
     parent: int
@@ -64,3 +79,4 @@ class LinkSpec:
     effort: float = np.inf
     geoms: list = field(default_factory=list)
     merged: list = field(default_factory=list)
+    visuals: list = field(default_factory=list)

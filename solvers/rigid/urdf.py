@@ -6,6 +6,9 @@ file, the link or joint, what was expected and what was found.
 
 Supported joints: revolute, continuous (a revolute without limits), prismatic, fixed.
 Supported collision shapes: box, sphere, cylinder, mesh (any format trimesh reads).
+Visuals (``<visual>``, what cameras draw; the physics ignores them): the same shapes, with the
+colour of their ``<material>``, given in place or by the name of a material defined at robot
+level or in another visual. Textures, and the colours inside mesh files, are not read.
 Friction: ``<dynamics friction>`` is the joint's dry friction (LinkSpec.frictionloss); URDF has
 no contact friction, so the one pybullet reads, ``<link><contact><lateral_friction value>``,
 becomes the friction of that link's collision shapes (GeomSpec.friction). The joint's dry
@@ -23,7 +26,7 @@ from lxml import etree
 
 from ..core import AssetError, InvalidInputError
 from . import shapes
-from .spec import GeomSpec, LinkSpec
+from .spec import GeomSpec, LinkSpec, VisualSpec
 
 _JOINT_TYPES = {"revolute": "revolute", "continuous": "revolute",
                 "prismatic": "prismatic", "fixed": "fixed"}
@@ -53,11 +56,12 @@ def load_urdf(path: str, entity_name: str | None = None, rho: float = 1000.0) ->
     robot, xml = _parse(ctx)
     links, parent_joint, order = _tree_order(ctx, robot)
     friction = _contact_friction(ctx, xml)
+    colors = _material_colors(ctx, robot)
     index = {name: i for i, name in enumerate(order)}
     specs = []
     for name in order:
         joint = parent_joint.get(name)
-        spec = _link_spec(ctx, links[name], joint, rho)
+        spec = _link_spec(ctx, links[name], joint, rho, colors)
         for geom in spec.geoms:
             geom.friction = friction.get(name)
         spec.parent = index[joint.parent] if joint is not None else -1
@@ -181,13 +185,16 @@ def _contact_friction(ctx: _Context, xml) -> dict:
 # ------------------------------------------------------------------ one link
 
 
-def _link_spec(ctx: _Context, link, joint, rho: float) -> LinkSpec:
-    """LinkSpec of `link` attached by `joint` (None for the root); `parent` is set by the caller."""
+def _link_spec(ctx: _Context, link, joint, rho: float, colors: dict) -> LinkSpec:
+    """LinkSpec of `link` attached by `joint` (None for the root); `parent` is set by the caller.
+    colors: material name → rgba (see _material_colors)."""
     geoms = [_geom(ctx, link.name, c.geometry, c.origin) for c in link.collisions]
+    visuals = [_visual(ctx, link.name, v, colors) for v in link.visuals]
     mass, com, inertia = _inertial(ctx, link, geoms, rho)
     spec = LinkSpec(name=link.name, parent=-1, joint_name="", joint_type="fixed",
                     pos=np.zeros(3), quat=np.array([1.0, 0.0, 0.0, 0.0]),
-                    axis=_DEFAULT_AXIS.copy(), mass=mass, com=com, inertia=inertia, geoms=geoms)
+                    axis=_DEFAULT_AXIS.copy(), mass=mass, com=com, inertia=inertia, geoms=geoms,
+                    visuals=visuals)
     if joint is not None:
         _apply_joint(ctx, spec, joint)
     return spec
@@ -343,6 +350,40 @@ def _geom(ctx: _Context, link_name: str, geometry, origin) -> GeomSpec:
         vertices, faces = _mesh(ctx, link_name, geometry.mesh)
         return GeomSpec("mesh", np.zeros(0), pos, quat, vertices=vertices, faces=faces)
     raise ctx.error(f"{where}: <geometry> expected one of box, sphere, cylinder, mesh")
+
+
+def _visual(ctx: _Context, link_name: str, visual, colors: dict) -> VisualSpec:
+    """VisualSpec of a yourdfpy Visual: its shape as _geom reads it, and its material's colour
+    (None when it has none or names no known colour)."""
+    geom = _geom(ctx, link_name, visual.geometry, visual.origin)
+    material = visual.material
+    if material is None:
+        rgba = None
+    elif material.color is None:
+        rgba = colors.get(material.name)
+    else:
+        rgba = _rgba(ctx, material.color.rgba, f"link '{link_name}' visual material color")
+    return VisualSpec(geom.type, geom.size, geom.pos, geom.quat, geom.vertices, geom.faces, rgba)
+
+
+def _material_colors(ctx: _Context, robot) -> dict:
+    """Material name → rgba (4,) of every named material that states a colour: those defined at
+    robot level, then those defined inside a visual (URDF lets any visual name them); the first
+    definition of a name wins."""
+    materials = list(robot.materials) + [v.material for link in robot.links for v in link.visuals]
+    colors = {}
+    for material in materials:
+        if material is not None and material.name and material.color is not None:
+            colors.setdefault(material.name, _rgba(ctx, material.color.rgba, f"material '{material.name}' color"))
+    return colors
+
+
+def _rgba(ctx: _Context, values, what: str) -> np.ndarray:
+    """(4,) rgba in [0, 1] from a URDF ``<color rgba>``."""
+    arr = np.asarray(values, dtype=np.float64)
+    if arr.shape != (4,) or not np.all((arr >= 0) & (arr <= 1)):
+        raise ctx.error(f"{what} expected rgba: 4 numbers in [0, 1], got {np.asarray(values).tolist()}")
+    return arr
 
 
 def _sizes(ctx: _Context, values, n: int, what: str) -> np.ndarray:

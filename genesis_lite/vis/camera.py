@@ -1,0 +1,394 @@
+"""Cameras: headless pinhole views of a scene, drawn by the software rasterizer (rasterizer.py),
+with Genesis 1.4.5's names, arguments and defaults (``gs.vis.camera.Camera``).
+
+A camera is added with ``scene.add_camera`` (before or after ``scene.build``; Genesis only
+allows before). ``render`` draws the scene's current state: the link poses are read from the
+rigid solver where they live (no copy of the state), converted to float32 per drawn shape; the
+triangles (visuals.SceneVisuals) are built once per scene, at the first render.
+
+Frames: ``pos``/``lookat`` are world coordinates of the camera's env (env_idx); the camera looks
+along −z of its frame, x right, y up (OpenGL). In a batched scene every rendered env
+(``VisOptions.rendered_envs_idx``, all by default) is drawn at its offset ``scene.envs_offset``,
+and the camera stands at its pose plus its own env's offset, as Genesis's rasterizer does with
+``split_envs=False``.
+
+Images, as Genesis returns them: rgb (H, W, 3) uint8; depth (H, W) float32 m along the view axis,
+``far`` where nothing is drawn; segmentation (H, W) int32: the ids of
+``VisOptions.segmentation_level`` ("link" by default: the scene-wide link index, as RigidLink.idx;
+"entity": entity.idx; "geom": the drawn shape's scene-wide index), −1 where nothing is drawn (Genesis
+returns its own compacted indices instead, 0 for nothing); normal (H, W, 3) float32 world-frame unit
+normals, 0 where nothing is drawn. Debug spheres (``scene.draw_debug_spheres``) are drawn by
+debug cameras only (``debug=True``), as in Genesis, with segmentation −1.
+
+Recording: ``start_recording()``, then every ``render()`` appends its rgb frame, and
+``stop_recording(save_to_filename, fps)`` writes an MP4 or GIF (recorder.py); or Genesis 1.4.5's
+``start_recording(save_to_filename, fps)`` … ``stop_recording()``, which streams frames to the file
+as they are rendered. Genesis 1.4.5 records a frame at each ``scene.step`` instead of each render.
+
+Not supported (clear errors): GUI windows, the thinlens and fisheye models and the raytracer's
+arguments, ``antialiasing``, VisOptions that draw more than the scene (world/link frames, camera
+frustums, plane reflection), per-env images (``split_envs=True``) and custom lights. Not drawn:
+shadows (``VisOptions.shadow``), textures, transparency.
+"""
+import os
+import sys
+import time
+
+import numpy as np
+
+from ..entities import RigidEntity
+from ..options import _check_float, _check_vec3, check_bool, is_int
+from ..solvers.core import InvalidInputError, SceneStateError
+from .rasterizer import Rasterizer, View
+from .recorder import Recording
+
+# VisOptions whose non-default values cameras cannot honour (their defaults draw nothing extra)
+UNSUPPORTED_VIS_OPTIONS = ("show_world_frame", "show_link_frame", "show_cameras", "plane_reflection", "split_envs",
+                           "ambient_light", "lights")
+_GOLDEN = 0.618033988749895  # hue step of the segmentation colours: neighbouring ids differ
+
+
+class Camera:
+    """A pinhole camera of ``scene`` (see the module docstring); made by ``scene.add_camera``,
+    whose arguments it takes (Genesis's): res (width, height) pixels; pos, lookat (3,) m; up (3,);
+    fov: vertical field of view, degrees; near, far: clipping distances, m; env_idx: the env it
+    belongs to in a batched scene (None: the first rendered env); debug: also draw debug objects.
+    model must be "pinhole"; GUI False; aperture, focus_dist, spp, denoise (thinlens and raytracer
+    settings) at their defaults."""
+
+    def __init__(self, scene, idx, model="pinhole", res=(320, 320), pos=(0.5, 2.5, 3.5), lookat=(0.5, 0.5, 0.5),
+                 up=(0.0, 0.0, 1.0), fov=30, aperture=2.0, focus_dist=None, GUI=False, spp=256, denoise=None,
+                 near=0.1, far=20.0, env_idx=None, debug=False):
+        self._scene, self._idx = scene, idx
+        self._name = owner = f"camera {idx}"
+        _check_unsupported(owner, model, GUI, aperture, focus_dist, spp, denoise)
+        _check_vis_options(owner, scene.vis_options)
+        if not (isinstance(res, (tuple, list)) and len(res) == 2 and all(is_int(r) and r > 0 for r in res)):
+            raise InvalidInputError(f"{owner}: argument 'res' must be (width, height), 2 positive integers (pixels), "
+                                    f"got {res!r}")
+        self._res = (int(res[0]), int(res[1]))
+        self._fov = _check_float(owner, "fov", fov, 0.0, 180.0, "a vertical field of view in (0, 180) degrees")
+        self._near = _check_float(owner, "near", near, 0.0, np.inf, "a positive finite distance (m)")
+        self._far = _check_float(owner, "far", far, self._near, np.inf, f"a finite distance (m) > near ({near})")
+        if env_idx is not None and not (is_int(env_idx) and env_idx >= 0):
+            raise InvalidInputError(f"{owner}: argument 'env_idx' must be None or an env index (integer ≥ 0), "
+                                    f"got {env_idx!r}")
+        self._env_idx = None if env_idx is None else int(env_idx)
+        self._debug = check_bool(owner, "debug", debug)
+        self._pos = self._lookat = self._up = None
+        self.set_pose(pos=pos, lookat=lookat, up=up)
+        self._rasterizer = Rasterizer(self._res, background=scene.vis_options.background_color)
+        self._follow = None  # (entity, offset (3,) or None until build, fixed_axis, smoothing, fix_orientation)
+        self._recording, self._paused = None, False
+        self._is_built = False
+
+    # -- life cycle ---------------------------------------------------------------------------
+    def _bind_env(self):
+        """Check env_idx and settle its default once the scene's n_envs is known (scene.build,
+        before the simulator is made, or add_camera after build)."""
+        rendered = self._scene._rendered_envs()
+        if self._scene.n_envs == 0:
+            if self._env_idx is not None:
+                raise InvalidInputError(f"{self._name}: argument 'env_idx' must be None in a scene built with "
+                                        f"n_envs=0, got {self._env_idx}")
+        elif self._env_idx is None:
+            self._env_idx = int(rendered[0])
+        elif self._env_idx not in rendered:
+            raise InvalidInputError(f"{self._name}: argument 'env_idx' must be one of the rendered envs "
+                                    f"{rendered.tolist()} (VisOptions.rendered_envs_idx, n_envs={self._scene.n_envs}), "
+                                    f"got {self._env_idx}")
+
+    def _on_build(self):
+        """The scene is built: the camera can render."""
+        self._is_built = True
+        if self._follow is not None and self._follow[1] is None:  # followed before build: measure now
+            entity, _, fixed_axis, smoothing, fix_orientation = self._follow
+            self.follow_entity(entity, fixed_axis, smoothing, fix_orientation)
+
+    def _require_built(self, what):
+        self._scene._require_built(f"{self._name}.{what}")
+
+    # -- pose ---------------------------------------------------------------------------------
+    def set_pose(self, transform=None, pos=None, lookat=None, up=None, envs_idx=None):
+        """Move the camera: ``transform`` (4, 4) camera → env-world pose (the camera looks along
+        its −z, up is its y), or any of pos, lookat (3,) m and up (3,) (the others kept).
+        envs_idx must be None (one pose: the camera renders one image)."""
+        owner = f"{self._name}.set_pose"
+        if envs_idx is not None:
+            raise InvalidInputError(f"{owner}: argument 'envs_idx' must be None (per-env poses need "
+                                    f"VisOptions(split_envs=True), which is not supported), got {envs_idx!r}")
+        if transform is not None:
+            if pos is not None or lookat is not None or up is not None:
+                raise InvalidInputError(f"{owner}: give either 'transform' or ('pos', 'lookat', 'up'), got both")
+            pos, lookat, up = _transform_to_pose(owner, transform)
+        pos = self._pos if pos is None else np.array(_check_vec3(owner, "pos", pos))
+        lookat = self._lookat if lookat is None else np.array(_check_vec3(owner, "lookat", lookat))
+        up = self._up if up is None else np.array(_check_vec3(owner, "up", up))
+        _camera_axes(owner, pos, lookat, up)  # refuses a degenerate pose before anything changes
+        self._pos, self._lookat, self._up = pos, lookat, up
+
+    def _offset(self):
+        """(3,) m: where the camera's env is drawn (0 in an unbatched scene or before build)."""
+        if not self._is_built or self._env_idx is None:
+            return np.zeros(3)
+        return self._scene.envs_offset[self._env_idx]
+
+    @property
+    def pos(self):
+        """(3,) float32 m, world (the env's offset included, as Genesis)."""
+        return (self._pos + self._offset()).astype(np.float32)
+
+    @property
+    def lookat(self):
+        """(3,) float32 m, world."""
+        return (self._lookat + self._offset()).astype(np.float32)
+
+    @property
+    def up(self):
+        """(3,) float32: the camera's y axis (up in the image), world."""
+        return _camera_axes(self._name, self._pos, self._lookat, self._up)[:, 1].astype(np.float32)
+
+    @property
+    def transform(self):
+        """(4, 4) float32: camera → world pose (columns: x right, y up, z backwards, position)."""
+        transform = np.eye(4)
+        transform[:3, :3] = _camera_axes(self._name, self._pos, self._lookat, self._up)
+        transform[:3, 3] = self._pos + self._offset()
+        return transform.astype(np.float32)
+
+    @property
+    def extrinsics(self):
+        """(4, 4) world → camera transform in the OpenCV convention (y down, looking along +z)."""
+        transform = self.transform.astype(np.float64)
+        transform[:3, 1:3] *= -1
+        return np.linalg.inv(transform)
+
+    @property
+    def intrinsics(self):
+        """(3, 3) pinhole matrix [[f, 0, cx], [0, f, cy], [0, 0, 1]], pixels."""
+        return np.array([[self.f, 0.0, self.cx], [0.0, self.f, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def f(self):
+        """Focal length, pixels: (height / 2) / tan(fov / 2)."""
+        return 0.5 * self._res[1] / np.tan(np.radians(0.5 * self._fov))
+
+    @property
+    def cx(self):
+        return 0.5 * self._res[0]
+
+    @property
+    def cy(self):
+        return 0.5 * self._res[1]
+
+    idx = property(lambda self: self._idx, doc="The camera's index in the scene.")
+    model = property(lambda self: "pinhole")
+    res = property(lambda self: self._res, doc="(width, height) pixels.")
+    fov = property(lambda self: self._fov, doc="Vertical field of view, degrees.")
+    near = property(lambda self: self._near)
+    far = property(lambda self: self._far)
+    aspect_ratio = property(lambda self: self._res[0] / self._res[1])
+    env_idx = property(lambda self: self._env_idx, doc="The env the camera belongs to (None: unbatched scene).")
+    debug = property(lambda self: self._debug)
+    GUI = property(lambda self: False)
+    is_built = property(lambda self: self._is_built)
+
+    # -- following an entity ------------------------------------------------------------------
+    def follow_entity(self, entity, fixed_axis=(None, None, None), smoothing=None, fix_orientation=False):
+        """Follow ``entity`` (its base) from now on: at each render the camera keeps the offset it
+        has now (measured at build when the scene is not built yet) to the entity and looks at it.
+        fixed_axis: (3,) None (free) or a world coordinate (m) the camera's position keeps on that
+        axis; smoothing: None or in [0, 1): the weight of the camera's previous position and lookat
+        (exponential smoothing); fix_orientation: keep the orientation, only move."""
+        owner = f"{self._name}.follow_entity"
+        if not isinstance(entity, RigidEntity) or entity.scene is not self._scene:
+            raise InvalidInputError(f"{owner}: argument 'entity' must be an entity of this camera's scene, got "
+                                    f"{entity!r}")
+        if not (isinstance(fixed_axis, (tuple, list)) and len(fixed_axis) == 3):
+            raise InvalidInputError(f"{owner}: argument 'fixed_axis' must be 3 entries, each None or a coordinate "
+                                    f"(m), got {fixed_axis!r}")
+        fixed_axis = tuple(None if v is None else _check_float(owner, "fixed_axis", v, -np.inf, np.inf, "finite")
+                           for v in fixed_axis)
+        numeric = isinstance(smoothing, (int, float, np.integer, np.floating)) and not isinstance(smoothing, bool)
+        if smoothing is not None and not (numeric and 0 <= smoothing < 1):
+            raise InvalidInputError(f"{owner}: argument 'smoothing' must be None or a number in [0, 1), got "
+                                    f"{smoothing!r}")
+        check_bool(owner, "fix_orientation", fix_orientation)
+        offset = None
+        if self._is_built:
+            offset = self._pos - self._entity_pos(entity)
+            if np.linalg.norm(offset) < 1e-9:
+                raise InvalidInputError(f"{owner}: the camera must not stand at the base of entity '{entity.name}' "
+                                        f"(pos {self._pos.tolist()}); move it away first")
+        self._follow = (entity, offset, fixed_axis, smoothing, bool(fix_orientation))
+
+    def unfollow_entity(self):
+        """Stop following; the camera keeps its current pose."""
+        self._follow = None
+
+    def _entity_pos(self, entity):
+        """(3,) float64 m: the entity's base position in the camera's env."""
+        pos = entity.get_pos(None if self._scene.n_envs == 0 else [self._env_idx])
+        return pos.detach().cpu().numpy().astype(np.float64).reshape(3)
+
+    def _update_following(self):
+        """Move the camera after its followed entity (Genesis's update: the previous position relative
+        to the offset is pulled to the entity, smoothed; lookat follows unless the orientation is fixed)."""
+        entity, offset, fixed_axis, smoothing, fix_orientation = self._follow
+        target = self._entity_pos(entity)
+        weight = 0.0 if smoothing is None else smoothing
+        pos = weight * (self._pos - offset) + (1.0 - weight) * target + offset
+        for axis, value in enumerate(fixed_axis):
+            if value is not None:
+                pos[axis] = value
+        lookat = self._lookat + (pos - self._pos) if fix_orientation else \
+            weight * self._lookat + (1.0 - weight) * target
+        self.set_pose(pos=pos, lookat=lookat)
+
+    # -- rendering ----------------------------------------------------------------------------
+    def render(self, rgb=True, depth=False, segmentation=False, colorize_seg=False, normal=False,
+               antialiasing=False, force_render=False):
+        """Draw the scene's current state: (rgb (H, W, 3) uint8, depth (H, W) float32 m,
+        segmentation (H, W) int32 ids — or (H, W, 3) uint8 colours with colorize_seg —, normal
+        (H, W, 3) float32), None for each one not asked for (see the module docstring).
+        force_render: accepted (every call renders). While recording, the rgb frame is appended."""
+        owner = f"{self._name}.render"
+        flags = dict(rgb=rgb, depth=depth, segmentation=segmentation, colorize_seg=colorize_seg, normal=normal,
+                     antialiasing=antialiasing, force_render=force_render)
+        for name, value in flags.items():
+            check_bool(owner, name, value)
+        if antialiasing:
+            raise InvalidInputError(f"{owner}: argument 'antialiasing' must be False (Genesis applies it with its "
+                                    f"BatchRenderer only), got True")
+        self._require_built("render")
+        if self._follow is not None:
+            self._update_following()
+        recording = self._recording is not None and not self._paused
+        scene = self._scene
+        drawing = scene._camera_visuals()
+        view = View(self._pos + self._offset(), self._lookat + self._offset(), self._up, self._fov, self._near,
+                    self._far, self._res)
+        images = self._rasterizer.render(view, drawing.meshes, drawing.instances(scene._link_kinematics()),
+                                         scene._debug_spheres() if self._debug else None,
+                                         rgb=rgb or recording, depth=depth, segmentation=segmentation, normal=normal)
+        if recording:
+            self._recording.add(images["rgb"])
+        if depth:
+            np.minimum(images["depth"], self._far, out=images["depth"])  # nothing drawn: far, as Genesis
+        seg = images.get("segmentation")
+        if seg is not None and colorize_seg:
+            seg = colorize_segmentation(seg)
+        return images["rgb"] if rgb else None, images.get("depth"), seg, images.get("normal")
+
+    # -- recording ----------------------------------------------------------------------------
+    def start_recording(self, save_to_filename=None, fps=None):
+        """Start recording: every render() appends its frame. With ``save_to_filename`` (.mp4 or
+        .gif) the frames stream to that file at ``fps`` (default 60) as they come (Genesis 1.4.5);
+        without, they are kept in memory until stop_recording names the file. After
+        pause_recording, resumes the same recording (arguments must then be None)."""
+        owner = f"{self._name}.start_recording"
+        self._require_built("start_recording")
+        if self._recording is not None:
+            if not self._paused:
+                raise SceneStateError(f"{owner}: the camera is already recording; call stop_recording() first")
+            if save_to_filename is not None or fps is not None:
+                raise InvalidInputError(f"{owner}: resuming a paused recording keeps its file and fps: arguments "
+                                        f"must be None, got {save_to_filename!r} and {fps!r}")
+            self._paused = False
+            return
+        if save_to_filename is None and fps is not None:
+            raise InvalidInputError(f"{owner}: argument 'fps' needs 'save_to_filename' (without a file, give fps to "
+                                    f"stop_recording), got fps={fps!r}")
+        self._recording, self._paused = Recording(self._name, self._res, save_to_filename, fps), False
+
+    def pause_recording(self):
+        """Stop appending frames until start_recording() resumes; the frames so far are kept."""
+        if self._recording is None or self._paused:
+            raise SceneStateError(f"{self._name}.pause_recording: the camera is not recording; call "
+                                  f"start_recording() first")
+        self._paused = True
+
+    def stop_recording(self, save_to_filename=None, fps=None):
+        """Finish the recording and write its file: the one named at start (then both arguments must
+        be None), else ``save_to_filename`` (.mp4 or .gif; None: Genesis's default name
+        ``<script>_cam_<idx>_<date>_<time>.mp4`` in the working folder) at ``fps`` (default 60)."""
+        owner = f"{self._name}.stop_recording"
+        if self._recording is None:
+            raise SceneStateError(f"{owner}: the camera is not recording; call start_recording() first")
+        if self._recording.n_frames == 0:  # the recording goes on
+            raise SceneStateError(f"{owner}: no frame was recorded; call camera.render() while recording (each "
+                                  f"render appends a frame)")
+        if not self._recording.streamed and save_to_filename is None:
+            script = os.path.splitext(os.path.basename(sys.argv[0] or "python"))[0] or "python"
+            save_to_filename = f"{script}_cam_{self._idx}_{time.strftime('%Y%m%d_%H%M%S')}.mp4"
+        target = self._recording.target(save_to_filename, fps)  # a bad argument: the recording goes on
+        recording, self._recording = self._recording, None
+        recording.save(*target)
+
+    def _close(self):
+        """The scene is destroyed: finish a streamed recording's file (as Genesis does); a buffered
+        one has no file yet and is dropped."""
+        recording, self._recording = self._recording, None
+        if recording is not None and recording.streamed and recording.n_frames:
+            recording.save(*recording.target())
+
+    def __repr__(self):
+        return f"Camera(idx={self._idx}, res={self._res}, pos={self._pos.tolist()}, lookat={self._lookat.tolist()})"
+
+
+def _check_unsupported(owner, model, GUI, aperture, focus_dist, spp, denoise):
+    """Refuse what only Genesis's windows, thinlens/fisheye models and raytracer do."""
+    if model != "pinhole":
+        raise InvalidInputError(f"{owner}: argument 'model' must be 'pinhole' (the thinlens and fisheye models need "
+                                f"Genesis's raytracer and batch renderer), got {model!r}")
+    if GUI is not False:
+        raise InvalidInputError(f"{owner}: argument 'GUI' must be False: genesis_lite's cameras are headless (show "
+                                f"the images with matplotlib, or record a video), got {GUI!r}")
+    for name, value, default in (("aperture", aperture, 2.0), ("focus_dist", focus_dist, None), ("spp", spp, 256),
+                                 ("denoise", denoise, None)):
+        if value is not default and value != default:
+            raise InvalidInputError(f"{owner}: argument '{name}' is a thinlens/raytracer setting and must keep its "
+                                    f"default {default!r} with the rasterized pinhole camera, got {value!r}")
+
+
+def _check_vis_options(owner, vis_options):
+    """Refuse the VisOptions set away from their defaults that cameras would have to ignore."""
+    default = type(vis_options)()
+    for name in UNSUPPORTED_VIS_OPTIONS:
+        if getattr(vis_options, name) != getattr(default, name):
+            raise InvalidInputError(f"{owner}: VisOptions argument '{name}' must keep its default "
+                                    f"{getattr(default, name)!r}: genesis_lite's cameras do not draw it, got "
+                                    f"{getattr(vis_options, name)!r}")
+
+
+def _camera_axes(owner, pos, lookat, up):
+    """(3, 3) columns: the camera's x (right), y (up), z (backwards) axes in the world; a clear
+    error when pos = lookat or up is parallel to the view direction."""
+    back = pos - lookat
+    if not np.linalg.norm(back) > 0:
+        raise InvalidInputError(f"{owner}: arguments 'pos' and 'lookat' must differ, got both {pos.tolist()}")
+    back = back / np.linalg.norm(back)
+    right = np.cross(up, back)
+    if not np.linalg.norm(right) > 1e-9 * np.linalg.norm(up):
+        raise InvalidInputError(f"{owner}: argument 'up' must be a vector not parallel to the view direction, got "
+                                f"up={up.tolist()} with lookat - pos={(lookat - pos).tolist()}")
+    right /= np.linalg.norm(right)
+    return np.stack([right, np.cross(back, right), back], axis=1)
+
+
+def _transform_to_pose(owner, transform):
+    """(pos, lookat, up) of a (4, 4) camera → world transform: lookat 1 m ahead along −z, up = y."""
+    matrix = np.asarray(transform, dtype=np.float64)
+    rot = matrix[:3, :3] if matrix.shape == (4, 4) else None
+    if rot is None or not np.isfinite(matrix).all() or not np.allclose(rot.T @ rot, np.eye(3), atol=1e-5):
+        raise InvalidInputError(f"{owner}: argument 'transform' must be a finite (4, 4) pose whose top-left 3×3 is a "
+                                f"rotation, got {np.asarray(transform).tolist()}")
+    return matrix[:3, 3], matrix[:3, 3] - rot[:, 2], rot[:, 1]
+
+
+def colorize_segmentation(seg):
+    """(H, W) int segmentation ids → (H, W, 3) uint8 colours: one saturated hue per id (neighbouring
+    ids far apart on the colour wheel), black for −1 (nothing)."""
+    hue = np.mod(seg * _GOLDEN, 1.0)[..., None]
+    rgb = np.clip(np.abs(np.mod(hue * 6.0 + np.array([0.0, 4.0, 2.0]), 6.0) - 3.0) - 1.0, 0.0, 1.0)
+    return np.where(seg[..., None] < 0, 0, rgb * 255 + 0.5).astype(np.uint8)

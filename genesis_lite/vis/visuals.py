@@ -1,0 +1,175 @@
+"""What cameras draw: every entity's shapes as triangles in its link frames, with colours.
+
+A URDF entity is drawn from its ``<visual>`` elements (``LinkSpec.visuals``: loaded by
+solvers/rigid/urdf.py, moved with their link when fixed links merge); a primitive morph (Box,
+Sphere, Cylinder, Capsule, Mesh, Plane) from its own shape, i.e. its collision geom. Colours, as in
+Genesis: the entity's ``surface.color`` when given (it paints the whole entity), else the URDF
+material's colour, else DEFAULT_COLOR. Alpha is not drawn (surfaces are opaque).
+
+Shapes become triangle meshes once: boxes with flat faces, spheres as icospheres of
+SPHERE_SUBDIVISIONS, cylinders and capsules with SECTIONS sides, meshes as they are; each is split
+along its edges sharper than SHARP_EDGE, so that shading rounds curved surfaces and keeps edges
+crisp. A Plane is drawn as a square of PLANE_SIZE m (Genesis's default plane_size) in one colour
+(Genesis draws a checker texture).
+
+``SceneVisuals`` is a built scene's drawing for the envs the cameras draw: one MeshSet holding
+every shape of every drawn env in its link frame (a plane once: it is the same plane in every env),
+built once, and per frame the Instances: each shape at its link's world pose, read from the rigid
+solver, moved by its env's drawing offset (``scene.envs_offset``). ``DebugSpheres`` are the
+spheres of ``scene.draw_debug_spheres``.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import trimesh
+
+from .. import morphs as gm
+from ..solvers.core import InvalidInputError, runtime
+from ..solvers.rigid.spec import VisualSpec
+from .rasterizer import Instances, MeshSet, Spheres
+
+DEFAULT_COLOR = (0.6, 0.6, 0.6)
+PLANE_SIZE = 1000.0
+SPHERE_SUBDIVISIONS = 4
+SECTIONS = 64
+SHARP_EDGE = np.radians(30.0)
+
+
+@dataclass
+class Shape:
+    """One drawn shape: its link (scene-wide index), triangles in the link frame (vertices (V, 3) m,
+    unit normals (V, 3), faces (F, 3)), rgb colour (3,), its segmentation ids {level: id} and
+    whether it is a plane (drawn once, not per env)."""
+    link: int
+    mesh: tuple
+    color: np.ndarray
+    seg: dict
+    is_plane: bool
+
+
+def scene_shapes(scene):
+    """Every shape of a built scene's entities, entity by entity, link by link (list of Shape);
+    the "geom" segmentation id is the shape's index in that list."""
+    shapes = []
+    for entity in scene.entities:
+        override = None if entity.surface.color is None else np.asarray(entity.surface.color[:3])
+        is_plane = isinstance(entity.morph, gm.Plane)
+        for k, spec in enumerate(entity._specs):
+            link = entity.link_start + k
+            visuals = spec.visuals if isinstance(entity.morph, gm.URDF) else [_geom_visual(g) for g in spec.geoms]
+            for visual in visuals:
+                color = override if override is not None else \
+                    np.asarray(DEFAULT_COLOR if visual.rgba is None else visual.rgba[:3])
+                seg = {"entity": entity.idx, "link": link, "geom": len(shapes)}
+                shapes.append(Shape(link, tessellate(visual), color, seg, is_plane))
+    return shapes
+
+
+def _geom_visual(geom):
+    """A primitive morph's collision geom as the VisualSpec that draws it (no colour of its own)."""
+    return VisualSpec(geom.type, geom.size, geom.pos, geom.quat, geom.vertices, geom.faces)
+
+
+def tessellate(visual):
+    """(vertices (V, 3) m, unit normals (V, 3), faces (F, 3)) of a VisualSpec in its link's frame."""
+    size = np.asarray(visual.size, dtype=np.float64)
+    if visual.type == "box":
+        mesh = trimesh.creation.box(extents=size)
+    elif visual.type == "sphere":
+        mesh = trimesh.creation.icosphere(subdivisions=SPHERE_SUBDIVISIONS, radius=size[0])
+    elif visual.type == "cylinder":
+        mesh = trimesh.creation.cylinder(radius=size[0], height=size[1], sections=SECTIONS)
+    elif visual.type == "capsule":
+        mesh = trimesh.creation.capsule(height=size[1], radius=size[0], count=[SECTIONS // 2, SECTIONS])
+    elif visual.type == "mesh":
+        mesh = trimesh.Trimesh(visual.vertices, visual.faces, process=False)
+    elif visual.type == "plane":
+        mesh = _plane(size)
+    else:
+        raise InvalidInputError(f"tessellate: VisualSpec type must be one of box, sphere, cylinder, capsule, mesh, "
+                                f"plane, got {visual.type!r}")
+    mesh = trimesh.graph.smooth_shade(mesh, angle=SHARP_EDGE, facet_minarea=None)
+    rot = trimesh.transformations.quaternion_matrix(visual.quat)[:3, :3]
+    return (mesh.vertices @ rot.T + visual.pos, mesh.vertex_normals @ rot.T, np.asarray(mesh.faces))
+
+
+def _plane(normal):
+    """A square of PLANE_SIZE m through the origin, orthogonal to ``normal`` (3,), facing it."""
+    half = PLANE_SIZE / 2
+    square = np.array([[-half, -half, 0.0], [half, -half, 0.0], [half, half, 0.0], [-half, half, 0.0]])
+    turn = trimesh.geometry.align_vectors([0.0, 0.0, 1.0], normal)[:3, :3]
+    return trimesh.Trimesh(square @ turn.T, [[0, 1, 2], [0, 2, 3]], process=False)
+
+
+def quat_to_rot(quat):
+    """(N, 4) unit quaternions (w, x, y, z) → (N, 3, 3) rotation matrices (torch)."""
+    w, x, y, z = quat.unbind(-1)
+    return torch.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+                        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+                        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], dim=-1).reshape(-1, 3, 3)
+
+
+class SceneVisuals:
+    """The drawing of a built scene in the envs ``envs`` (batch rows, int sequence): the MeshSet,
+    built here once (None when nothing has a shape), with one instance per (env, shape), and the
+    Instances of a frame (``instances``). Segmentation ids at ``segmentation_level``."""
+
+    def __init__(self, scene, envs, segmentation_level):
+        rows = [(env, shape) for shape in scene_shapes(scene) for env in (envs[:1] if shape.is_plane else envs)]
+        self.meshes = MeshSet.from_parts([shape.mesh for _, shape in rows]) if rows else None
+        device = runtime.device
+        env = np.array([env for env, _ in rows], dtype=np.int64)
+        self._env = torch.as_tensor(env, device=device)
+        self._link = torch.as_tensor([shape.link for _, shape in rows], dtype=torch.int64, device=device)
+        self._offset = torch.as_tensor(scene.envs_offset[env].reshape(-1, 3), dtype=torch.float32, device=device)
+        self._color = torch.as_tensor(np.array([shape.color for _, shape in rows]).reshape(-1, 3),
+                                      dtype=torch.float32, device=device)
+        self._seg = torch.as_tensor([shape.seg[segmentation_level] for _, shape in rows], dtype=torch.int32,
+                                    device=device)
+
+    def instances(self, links):
+        """The Instances of the frame whose link kinematics are ``links`` (B, L, ≥ 7): per instance
+        its link's world pose (position m, quaternion) as float32, moved by its env's offset; None
+        when nothing has a shape."""
+        if self.meshes is None:
+            return None
+        rows = links[self._env, self._link]
+        rot = quat_to_rot(rows[:, 3:7]).to(torch.float32)
+        return Instances(rot, rows[:, :3].to(torch.float32) + self._offset, self._color, self._seg)
+
+
+class DebugSpheres:
+    """Spheres of ``scene.draw_debug_spheres``, drawn by debug cameras: pos (N, 3) float32 m world,
+    radius m, color (r, g, b[, a]) in [0, 1] (alpha not drawn)."""
+
+    def __init__(self, owner, poss, radius, color):
+        if isinstance(poss, torch.Tensor):
+            poss = poss.detach().cpu().numpy()
+        pos = np.asarray(poss, dtype=np.float64)
+        pos = pos.reshape(1, 3) if pos.shape == (3,) else pos
+        if pos.ndim != 2 or pos.shape[1] != 3 or not np.isfinite(pos).all():
+            raise InvalidInputError(f"{owner}: argument 'poss' must be finite positions of shape (N, 3) m, "
+                                    f"got shape {np.shape(poss)}")
+        if not (isinstance(radius, (int, float, np.integer, np.floating)) and 0 < radius < np.inf):
+            raise InvalidInputError(f"{owner}: argument 'radius' must be a positive finite number (m), got {radius!r}")
+        rgba = np.asarray(color, dtype=np.float64) if np.ndim(color) == 1 else np.full(0, np.nan)
+        if rgba.shape not in ((3,), (4,)) or not np.all((rgba >= 0) & (rgba <= 1)):
+            raise InvalidInputError(f"{owner}: argument 'color' must be (r, g, b) or (r, g, b, a) in [0, 1], "
+                                    f"got {color!r}")
+        self.pos = torch.as_tensor(pos, dtype=torch.float32, device=runtime.device)
+        self.radius, self.color = float(radius), rgba
+
+    @staticmethod
+    def gather(objects):
+        """The Spheres of a list of DebugSpheres (seg −1: they belong to no entity); None if none."""
+        if not objects:
+            return None
+        n = [len(obj.pos) for obj in objects]
+        device = runtime.device
+        radius = torch.cat([torch.full((k,), obj.radius, dtype=torch.float32, device=device)
+                            for k, obj in zip(n, objects)])
+        color = torch.cat([torch.as_tensor(obj.color[:3], dtype=torch.float32, device=device).expand(k, 3)
+                           for k, obj in zip(n, objects)])
+        return Spheres(torch.cat([obj.pos for obj in objects]), radius, color,
+                       torch.full((sum(n),), -1, dtype=torch.int32, device=device))

@@ -1,0 +1,463 @@
+"""Cameras through the public API (scene.add_camera, camera.render, recording, following, batched
+scenes, debug spheres) against references we did not write: the pinhole projection of known
+corners, a sphere's analytic silhouette, trimesh's ray casts of URDF visual meshes posed by
+yourdfpy's forward kinematics, imageio reading the videos back, and (when an OpenGL context can be
+made) moderngl drawing the same triangles."""
+import numpy as np
+import pytest
+import torch
+import trimesh
+import yourdfpy
+
+import genesis_lite as gs
+from genesis_lite.solvers.rigid import merge
+from genesis_lite.solvers.rigid.urdf import load_urdf
+from tests.conftest import pybullet
+
+KUKA, R2D2 = pybullet("kuka_iiwa", "model.urdf"), pybullet("r2d2.urdf")
+KUKA_Q = [0.3, 0.5, -0.2, -1.0, 0.4, 0.8, 0.1]
+NO_CONTACT = dict(rigid_options=gs.options.RigidOptions(enable_collision=False))
+
+
+# ------------------------------------------------------------------ references
+
+
+def pinhole(pos, lookat, up, fov, res):
+    """(world → camera rotation (3, 3) rows x right / y up / z back, focal length px) of Genesis's
+    pinhole camera: z = (pos − lookat)/|·|, x = up × z normalised, y = z × x; f = (H/2)/tan(fov/2)."""
+    z = np.subtract(pos, lookat) / np.linalg.norm(np.subtract(pos, lookat))
+    x = np.cross(up, z) / np.linalg.norm(np.cross(up, z))
+    return np.stack([x, np.cross(z, x), z]), res[1] / 2 / np.tan(np.radians(fov) / 2)
+
+
+def project(points, pos, lookat, up, fov, res):
+    """Pixel coordinates (N, 2) (u right, v down; pixel (i, j) spans [j, j+1] × [i, i+1]) and
+    depths along the view axis (N,) of world points (N, 3)."""
+    rot, f = pinhole(pos, lookat, up, fov, res)
+    cam = (np.asarray(points, dtype=np.float64) - pos) @ rot.T
+    depth = -cam[:, 2]
+    return np.stack([res[0] / 2 + f * cam[:, 0] / depth, res[1] / 2 - f * cam[:, 1] / depth], axis=1), depth
+
+
+def ray_cast_mask(mesh, pos, lookat, up, fov, res):
+    """(H, W) bool: pixel-centre rays of the pinhole camera that hit the trimesh ``mesh`` (trimesh's ray caster)."""
+    rot, f = pinhole(pos, lookat, up, fov, res)
+    u, v = np.meshgrid(np.arange(res[0]) + 0.5, np.arange(res[1]) + 0.5)
+    local = np.stack([(u - res[0] / 2) / f, -(v - res[1] / 2) / f, -np.ones_like(u)], axis=-1).reshape(-1, 3)
+    hit = mesh.ray.intersects_any(np.tile(pos, (len(local), 1)), local @ rot)
+    return hit.reshape(res[1], res[0])
+
+
+def iou(a, b):
+    return (a & b).sum() / (a | b).sum()
+
+
+def yourdfpy_visuals(path, cfg):
+    """The URDF's visual meshes in the world (root at the origin), posed by yourdfpy at joint
+    values ``cfg`` (name → value), concatenated into one trimesh."""
+    robot = yourdfpy.URDF.load(path, load_meshes=True, build_scene_graph=True)
+    robot.update_cfg(cfg)
+    return robot.scene.to_geometry()
+
+
+# ------------------------------------------------------------------ images
+
+
+def test_box_on_plane_from_above_pixels_depth_segmentation(f32):
+    scene = gs.Scene(**NO_CONTACT)
+    plane = scene.add_entity(gs.morphs.Plane())
+    box = scene.add_entity(gs.morphs.Box(size=(0.4, 0.3, 0.2), pos=(0.1, -0.05, 0.1), fixed=True),
+                           surface=gs.surfaces.Default(color=(1.0, 0.0, 0.0)))
+    view = dict(pos=(0.0, 0.0, 3.0), lookat=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=40, res=(320, 240))
+    cam = scene.add_camera(**view)
+    sky = scene.add_camera(res=(64, 48), pos=(0.0, 0.0, 3.0), lookat=(0.0, 0.0, 4.0), up=(0.0, 1.0, 0.0))
+    scene.build()
+    rgb, depth, seg, normal = cam.render(depth=True, segmentation=True, normal=True)
+    assert rgb.shape == (240, 320, 3) and rgb.dtype == np.uint8
+    assert depth.shape == seg.shape == (240, 320) and depth.dtype == np.float32
+    assert normal.shape == (240, 320, 3)
+    # the box's top face (z = 0.2) is its whole silhouette from straight above
+    corners = np.array([[x, y, 0.2] for x in (-0.1, 0.3) for y in (-0.2, 0.1)])
+    uv, _ = project(corners, **view)
+    (u0, v0), (u1, v1) = uv.min(axis=0), uv.max(axis=0)
+    u, v = np.meshgrid(np.arange(320) + 0.5, np.arange(240) + 0.5)
+    inside = (u > u0 + 0.5) & (u < u1 - 0.5) & (v > v0 + 0.5) & (v < v1 - 0.5)
+    outside = (u < u0 - 0.5) | (u > u1 + 0.5) | (v < v0 - 0.5) | (v > v1 + 0.5)
+    assert inside.sum() > 1500
+    assert (seg[inside] == box.links[0].idx).all() and (seg[outside] == plane.links[0].idx).all()
+    assert (rgb[inside][:, 0] > 100).all() and (rgb[inside][:, 1:] == 0).all()  # red, shaded
+    grey = rgb[outside].astype(int)
+    assert (grey[:, 0] > 20).all() and (grey[:, 0] == grey[:, 1]).all() and (grey[:, 1] == grey[:, 2]).all()
+    np.testing.assert_allclose(depth[inside], 2.8, rtol=5e-3)
+    np.testing.assert_allclose(depth[outside], 3.0, rtol=5e-3)
+    assert np.abs(normal[inside | outside] - [0.0, 0.0, 1.0]).max() < 1e-4
+    # only what was asked for, as Genesis: None in the other slots
+    rgb_only = cam.render()
+    assert rgb_only[1:] == (None, None, None) and np.array_equal(rgb_only[0], rgb)
+    assert cam.render(rgb=False, depth=True)[0] is None
+    # nothing drawn: background colour, depth = far, segmentation -1 (Genesis's background key)
+    rgb, depth, seg, _ = sky.render(depth=True, segmentation=True)
+    background = np.round(np.array(scene.vis_options.background_color) * 255)
+    assert (np.abs(rgb.reshape(-1, 3) - background) <= 1).all()
+    assert (depth == sky.far).all() and (seg == -1).all()
+
+
+def test_sphere_silhouette_matches_its_analytic_projection(f32):
+    scene = gs.Scene(**NO_CONTACT)
+    ball = scene.add_entity(gs.morphs.Sphere(radius=0.5, fixed=True))
+    cam = scene.add_camera(res=(400, 400), pos=(0.0, 0.0, 4.0), lookat=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=30)
+    scene.build()
+    _, _, seg, _ = cam.render(rgb=False, segmentation=True)
+    # the cone of rays tangent to the sphere has half-angle asin(r/d): a disc of radius f·tan(asin(r/d)) px
+    f, r, d = cam.f, 0.5, 4.0
+    disc = np.pi * (f * r / np.sqrt(d * d - r * r)) ** 2
+    area = (seg == ball.links[0].idx).sum()
+    assert abs(area / disc - 1) < 0.01, (area, disc)
+
+
+def test_primitive_morph_silhouettes_match_trimesh_ray_casts(f32):
+    mesh_file = pybullet("kuka_iiwa", "meshes", "link_2.stl")
+    shapes = [(gs.morphs.Box(size=(0.3, 0.2, 0.25), pos=(0.0, -0.6, 0.2), euler=(20, 30, 40), fixed=True),
+               trimesh.creation.box(extents=(0.3, 0.2, 0.25))),
+              (gs.morphs.Cylinder(radius=0.1, height=0.3, pos=(0.0, -0.2, 0.2), euler=(60, 0, 10), fixed=True),
+               trimesh.creation.cylinder(radius=0.1, height=0.3, sections=512)),
+              (gs.morphs.Capsule(radius=0.08, height=0.2, pos=(0.0, 0.2, 0.2), euler=(0, 50, 0), fixed=True),
+               trimesh.creation.capsule(radius=0.08, height=0.2, count=[256, 256])),
+              (gs.morphs.Mesh(file=mesh_file, scale=1.5, pos=(0.0, 0.6, 0.1), euler=(90, 0, 0), fixed=True),
+               trimesh.load(mesh_file, force="mesh").apply_scale(1.5))]
+    scene = gs.Scene(**NO_CONTACT)
+    for morph, _ in shapes:
+        scene.add_entity(morph)
+    view = dict(pos=(1.2, 0.2, 0.8), lookat=(0.0, 0.0, 0.2), up=(0.0, 0.0, 1.0), fov=70, res=(320, 240))
+    cam = scene.add_camera(**view)
+    scene.build()
+    _, _, seg, _ = cam.render(rgb=False, segmentation=True)
+    for k, (morph, mesh) in enumerate(shapes):
+        pose = trimesh.transformations.quaternion_matrix(morph.quat)
+        pose[:3, 3] = morph.pos
+        reference = ray_cast_mask(mesh.copy().apply_transform(pose), **view)
+        assert reference.sum() > 300, (type(morph).__name__, reference.sum())
+        assert iou(seg == k, reference) >= 0.98, (type(morph).__name__, iou(seg == k, reference))
+
+
+@pytest.mark.parametrize("path, cfg", [(KUKA, KUKA_Q), (R2D2, None)], ids=["kuka", "r2d2"])
+def test_urdf_visual_silhouette_matches_trimesh_ray_casts(f32, path, cfg):
+    scene = gs.Scene(**NO_CONTACT)
+    robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=True))
+    view = dict(pos=(1.0, 0.8, 1.0), lookat=(0.0, 0.0, 0.5 if cfg else 0.0), up=(0.0, 0.0, 1.0), fov=60,
+                res=(200, 150))
+    cam = scene.add_camera(**view)
+    scene.build()
+    names = {joint.name: k for k, joint in enumerate(robot.joints)}
+    if cfg:
+        robot.set_dofs_position(cfg)
+    _, _, seg, _ = cam.render(rgb=False, segmentation=True)
+    reference = ray_cast_mask(yourdfpy_visuals(path, {name: cfg[k] for name, k in names.items()} if cfg else {}),
+                              **view)
+    assert reference.sum() > 2000
+    assert iou(seg >= 0, reference) >= 0.98
+
+
+def test_urdf_material_colours_and_surface_override(f32):
+    scene = gs.Scene(**NO_CONTACT)
+    robot = scene.add_entity(gs.morphs.URDF(file=KUKA, fixed=True))
+    painted = scene.add_entity(gs.morphs.URDF(file=R2D2, pos=(0.0, 1.0, 0.5), fixed=True),
+                               surface=gs.surfaces.Default(color=(0.0, 1.0, 0.0, 1.0)))
+    cam = scene.add_camera(res=(240, 180), pos=(2.5, 0.5, 1.0), lookat=(0.0, 0.5, 0.5), fov=50)
+    scene.build()
+    rgb, _, seg, _ = cam.render(segmentation=True)
+    # link 3 names the robot-level material "Orange" (1, 0.42, 0.04); links 1, 2 "Blue" (0.5, 0.7, 1)
+    orange = rgb[seg == robot.get_link("lbr_iiwa_link_3").idx].astype(int)
+    blue = rgb[seg == robot.get_link("lbr_iiwa_link_2").idx].astype(int)
+    assert len(orange) > 50 and len(blue) > 50
+    assert (orange[:, 0] > orange[:, 1]).all() and (orange[:, 1] > orange[:, 2]).all()
+    assert (blue[:, 2] > blue[:, 1]).all() and (blue[:, 1] > blue[:, 0]).all()
+    r2d2_ids = [link.idx for link in painted.links]
+    green = rgb[np.isin(seg, r2d2_ids)]
+    assert len(green) > 500 and (green[:, [0, 2]] == 0).all() and (green[:, 1] > 0).all()
+
+
+URDF_MATERIALS = """<robot name="colours">
+  <link name="a"><visual><geometry><box size="0.1 0.1 0.1"/></geometry>
+    <material name="red"><color rgba="1 0 0 1"/></material></visual></link>
+  <link name="b"><visual><geometry><sphere radius="0.1"/></geometry><material name="red"/></visual>
+    <visual><geometry><cylinder radius="0.1" length="0.2"/></geometry><material name="nope"/></visual></link>
+  <joint name="ab" type="fixed"><parent link="a"/><child link="b"/><origin xyz="0 0 0.5"/></joint>
+</robot>"""
+
+
+def test_urdf_visuals_named_materials_and_merging(tmp_path):
+    path = tmp_path / "colours.urdf"
+    path.write_text(URDF_MATERIALS)
+    links = load_urdf(str(path))
+    assert [[v.type for v in link.visuals] for link in links] == [["box"], ["sphere", "cylinder"]]
+    # "red" is defined inside link a's visual and named by link b's; "nope" is defined nowhere
+    assert [v.rgba.tolist() if v.rgba is not None else None for link in links for v in link.visuals] == \
+        [[1.0, 0.0, 0.0, 1.0], [1.0, 0.0, 0.0, 1.0], None]
+    (merged,) = merge.merge_fixed_links(links)
+    assert [v.type for v in merged.visuals] == ["box", "sphere", "cylinder"]
+    np.testing.assert_allclose(merged.visuals[1].pos, [0.0, 0.0, 0.5])  # b's visuals move with b's frame
+    path.write_text(URDF_MATERIALS.replace('rgba="1 0 0 1"', 'rgba="2 0 0 1"'))
+    with pytest.raises(gs.AssetError, match=r"material 'red' color expected rgba: 4 numbers in \[0, 1\], got "
+                                            r"\[2.0, 0.0, 0.0, 1.0\]"):
+        load_urdf(str(path))
+
+
+@pytest.mark.parametrize("level", ["entity", "link", "geom"])
+def test_segmentation_levels(f32, level):
+    scene = gs.Scene(vis_options=gs.options.VisOptions(segmentation_level=level), **NO_CONTACT)
+    plane = scene.add_entity(gs.morphs.Plane())
+    robot = scene.add_entity(gs.morphs.URDF(file=R2D2, pos=(0.0, 0.0, 0.5), fixed=True))
+    cam = scene.add_camera(res=(160, 120), pos=(1.5, 1.0, 1.0), lookat=(0.0, 0.0, 0.4), fov=50)
+    scene.build()
+    _, _, seg, _ = cam.render(rgb=False, segmentation=True)
+    ids = set(np.unique(seg).tolist()) - {-1}  # -1: the sky above the horizon
+    if level == "entity":
+        assert ids == {plane.idx, robot.idx}
+    elif level == "link":
+        assert plane.links[0].idx in ids and len(ids & {link.idx for link in robot.links}) >= 5
+    else:  # one id per drawn shape: the plane's, then r2d2's 16 visuals
+        assert 0 in ids and len(ids) >= 8 and max(ids) <= 16
+    colours = cam.render(rgb=False, segmentation=True, colorize_seg=True)[2]
+    assert colours.shape == (120, 160, 3) and colours.dtype == np.uint8
+    assert len(np.unique(colours.reshape(-1, 3), axis=0)) == len(ids) + 1  # black: the sky
+
+
+def test_debug_spheres_are_drawn_by_debug_cameras(f32):
+    scene = gs.Scene(**NO_CONTACT)
+    plane = scene.add_entity(gs.morphs.Plane())
+    view = dict(pos=(0.0, 0.0, 3.0), lookat=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=40, res=(160, 120))
+    debug, plain = scene.add_camera(**view, debug=True), scene.add_camera(**view)
+    with pytest.raises(gs.SceneStateError, match="draw_debug_spheres.*build"):
+        scene.draw_debug_spheres(np.zeros((1, 3)))
+    scene.build()
+    centres = np.array([[0.0, 0.0, 0.5], [0.4, 0.1, 0.5], [-0.3, -0.2, 0.2]])
+    blue = scene.draw_debug_spheres(torch.as_tensor(centres), radius=0.05, color=(0.0, 0.0, 1.0, 0.5))
+    red = scene.draw_debug_sphere((0.2, -0.3, 0.5), radius=0.08, color=(1.0, 0.0, 0.0))
+    rgb, depth, seg, _ = debug.render(depth=True, segmentation=True)
+    uv, _ = project(centres, **view)
+    rows, cols = uv[:, 1].astype(int), uv[:, 0].astype(int)
+    assert (rgb[rows, cols, 2] > 0).all() and (rgb[rows, cols, :2] == 0).all() and (seg[rows, cols] == -1).all()
+    np.testing.assert_allclose(depth[60, 80], 3.0 - 0.5 - 0.05, rtol=5e-3)  # the sphere on the view axis
+    (red_u, red_v), = project([[0.2, -0.3, 0.5]], **view)[0]
+    assert (rgb[int(red_v), int(red_u)] > 0).tolist() == [True, False, False]
+    assert (plain.render(segmentation=True)[2] == plane.links[0].idx).all()  # not a debug camera: no spheres
+    scene.clear_debug_object(blue)
+    rgb = debug.render()[0]
+    assert (rgb[rows, cols, 0] == rgb[rows, cols, 2]).all() and (rgb[rows, cols, 0] > 0).all()  # the grey plane
+    assert rgb[int(red_v), int(red_u), 1] == 0  # the other object stays
+    scene.clear_debug_objects()
+    with pytest.raises(gs.InvalidInputError, match="clear_debug_object.*'obj'"):
+        scene.clear_debug_object(red)
+
+
+def test_near_plane_clipping(f32):
+    scene = gs.Scene(**NO_CONTACT)
+    plane = scene.add_entity(gs.morphs.Plane())
+    behind = scene.add_entity(gs.morphs.Box(size=(0.5, 0.5, 0.5), pos=(-1.0, 0.0, 1.0), fixed=True))
+    view = dict(pos=(0.0, 0.0, 1.0), lookat=(1.0, 0.0, 1.0), up=(0.0, 0.0, 1.0), fov=60, res=(160, 120))
+    cam = scene.add_camera(**view, near=0.1)
+    scene.build()
+    _, depth, seg, _ = cam.render(depth=True, segmentation=True)
+    assert behind.links[0].idx not in seg  # behind the camera: nothing drawn
+    # the ground plane crosses the near plane: below the horizon each row sees it at h·f/(v − cy)
+    rows = np.arange(66, 120)  # nearer than far (20 m)
+    expected = 1.0 * cam.f / (rows + 0.5 - 60.0)
+    np.testing.assert_allclose(depth[rows, :], np.repeat(expected[:, None], 160, axis=1), rtol=5e-3)
+    assert (seg[:60] == -1).all() and (seg[rows] == plane.links[0].idx).all()
+
+
+# ------------------------------------------------------------------ following, batched scenes
+
+
+def test_follow_entity_keeps_the_entity_at_the_image_centre(f32):
+    scene = gs.Scene(**NO_CONTACT)
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.2), pos=(0.0, 0.0, 2.0)))
+    cam = scene.add_camera(res=(160, 120), pos=(2.0, 1.0, 2.5), lookat=(0.0, 0.0, 2.0), fov=40)
+    cam.follow_entity(box)  # before build: the offset is measured at build
+    still = scene.add_camera(res=(160, 120), pos=(2.0, 1.0, 2.5), lookat=(0.0, 0.0, 2.0), fov=40)
+    scene.build()
+    box.set_dofs_velocity([1.0, -0.5, 0.0, 0.0, 0.0, 0.0])
+    for _ in range(40):
+        scene.step()
+    from_solver = still.render(rgb=False, segmentation=True)[2]  # the link poses read where the step left them
+    pos = box.get_pos().numpy()  # the state is now a tensor: poses come from it
+    assert np.array_equal(still.render(rgb=False, segmentation=True)[2], from_solver)
+    for camera, centred in ((cam, True), (still, False)):
+        seg = camera.render(rgb=False, segmentation=True)[2]
+        v, u = np.nonzero(seg == box.links[0].idx)
+        off_centre = np.hypot(u.mean() + 0.5 - 80, v.mean() + 0.5 - 60) if len(u) else np.inf
+        assert (off_centre < 2.0) == centred, off_centre
+    np.testing.assert_allclose(cam.pos - pos, [2.0, 1.0, 0.5], atol=1e-4)
+    np.testing.assert_allclose(cam.lookat, pos, atol=1e-4)
+    cam.follow_entity(box, fixed_axis=(None, None, 3.0))
+    scene.step()
+    cam.render()
+    assert cam.pos[2] == pytest.approx(3.0)
+
+
+def test_env_idx_draws_its_env_at_its_offset(f32):
+    scene = gs.Scene(**NO_CONTACT)
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.2), pos=(0.0, 0.0, 1.0)))
+    view = dict(pos=(0.0, 0.0, 3.0), lookat=(0.0, 0.0, 1.0), up=(0.0, 1.0, 0.0), fov=40, res=(160, 120))
+    cams = [scene.add_camera(**view, env_idx=k) for k in range(3)]
+    scene.build(n_envs=3, env_spacing=(10.0, 10.0))
+    box.set_pos(np.array([[0.0, 0.0, 1.0], [0.3, 0.0, 1.0], [-0.3, 0.2, 1.0]]))
+    for k, cam in enumerate(cams):
+        np.testing.assert_allclose(cam.pos, np.array(view["pos"]) + scene.envs_offset[k], atol=1e-5)
+        seg = cam.render(rgb=False, segmentation=True)[2]
+        v, u = np.nonzero(seg == box.links[0].idx)
+        top = box.get_pos().numpy()[k] + [0.0, 0.0, 0.1]
+        (expected_u, expected_v), = project([top], **view)[0]
+        assert abs(u.mean() + 0.5 - expected_u) < 1.0 and abs(v.mean() + 0.5 - expected_v) < 1.0
+
+
+def test_rendered_envs_idx_and_bad_env_idx(f32):
+    scene = gs.Scene(vis_options=gs.options.VisOptions(rendered_envs_idx=[1]), **NO_CONTACT)
+    scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.2), pos=(0.0, 0.0, 1.0)))
+    cam = scene.add_camera()
+    bad = scene.add_camera(env_idx=0)
+    with pytest.raises(gs.InvalidInputError, match=r"camera 1: argument 'env_idx' must be one of the rendered envs "
+                                                   r"\[1\].*got 0"):
+        scene.build(n_envs=2)
+    scene = gs.Scene(**NO_CONTACT)
+    scene.add_entity(gs.morphs.Box())
+    scene.build(n_envs=2)
+    assert scene.add_camera().env_idx == 0
+    with pytest.raises(gs.InvalidInputError, match=r"camera 1: argument 'env_idx' .*got 5"):
+        scene.add_camera(env_idx=5)
+    assert cam.env_idx == 1 and bad.env_idx == 0  # the default: the first rendered env
+
+
+# ------------------------------------------------------------------ recording
+
+
+def test_recording_writes_mp4_and_gif_read_back_by_imageio(f32, tmp_path):
+    import imageio.v2 as imageio
+
+    scene = gs.Scene(**NO_CONTACT)
+    scene.add_entity(gs.morphs.Box(size=(0.3, 0.3, 0.3), pos=(0.0, 0.0, 1.0)))
+    cam = scene.add_camera(res=(161, 121), pos=(2.0, 0.0, 0.5), lookat=(0.0, 0.0, 0.5), fov=50)
+    scene.build()
+    frames = []
+    for target in ("buffered.mp4", "buffered.gif"):
+        cam.start_recording()
+        for k in range(12):
+            scene.step()
+            frames.append(cam.render()[0])
+            if k == 5:  # a paused recording skips renders
+                cam.pause_recording()
+                cam.render()
+                cam.start_recording()
+        cam.stop_recording(str(tmp_path / target), fps=20)
+    cam.start_recording(str(tmp_path / "streamed.mp4"), fps=25)
+    for _ in range(12):
+        scene.step()
+        cam.render()
+    cam.stop_recording()
+    for name, fps in (("buffered.mp4", 20), ("streamed.mp4", 25)):
+        reader = imageio.get_reader(str(tmp_path / name))
+        video = np.stack([frame for frame in reader])  # list() would ask len(): inf
+        assert video.shape == (12, 122, 162, 3)  # padded to even dimensions (yuv420p)
+        assert reader.get_meta_data()["fps"] == fps
+        assert np.abs(video[0, :121, :161].astype(int) - frames[0]).mean() < 6  # lossy, but the same picture
+    gif = imageio.mimread(str(tmp_path / "buffered.gif"))
+    assert len(gif) == 12 and gif[0].shape[:2] == (121, 161)
+    assert np.abs(gif[-1][..., :3].astype(int) - frames[-1]).mean() < 6
+
+
+# ------------------------------------------------------------------ errors
+
+
+def test_errors_name_the_camera_argument_and_value(f32, tmp_path):
+    scene = gs.Scene(**NO_CONTACT)
+    scene.add_entity(gs.morphs.Box())
+    cam = scene.add_camera()
+    with pytest.raises(gs.SceneStateError, match=r"camera 0.render: call scene.build\(\) first"):
+        cam.render()
+    cases = [(dict(res=(0, 10)), r"camera 1: argument 'res' must be \(width, height\).*got \(0, 10\)"),
+             (dict(res=(64.5, 48)), r"argument 'res'.*got \(64.5, 48\)"),
+             (dict(fov=180), r"camera 1: argument 'fov' must be a vertical field of view in \(0, 180\).*got 180"),
+             (dict(pos=(0, 0, np.nan)), r"camera 1.set_pose: argument 'pos' must be 3 finite numbers"),
+             (dict(pos=(1, 2, 3), lookat=(1, 2, 3)), r"'pos' and 'lookat' must differ, got both \[1.0, 2.0, 3.0\]"),
+             (dict(pos=(0, 0, 3), lookat=(0, 0, 0)), r"argument 'up' must be a vector not parallel"),
+             (dict(near=1.0, far=0.5), r"argument 'far' must be a finite distance \(m\) > near"),
+             (dict(GUI=True), r"argument 'GUI' must be False.*headless"),
+             (dict(model="thinlens"), r"argument 'model' must be 'pinhole'"),
+             (dict(spp=64), r"argument 'spp' is a thinlens/raytracer setting"),
+             (dict(env_idx=-1), r"argument 'env_idx' must be None or an env index")]
+    for kwargs, message in cases:
+        with pytest.raises(gs.InvalidInputError, match=message):
+            scene.add_camera(**kwargs)
+    with pytest.raises(gs.InvalidInputError, match=r"VisOptions argument 'show_world_frame' must keep its default"):
+        gs.Scene(vis_options=gs.options.VisOptions(show_world_frame=True)).add_camera()
+    scene.build()
+    with pytest.raises(gs.SceneStateError, match=r"camera 0.stop_recording: the camera is not recording"):
+        cam.stop_recording()
+    with pytest.raises(gs.InvalidInputError, match=r"'save_to_filename' must be a path ending in one of "
+                                                   r"\('.mp4', '.gif'\), got '.*clip.avi'"):
+        cam.start_recording(str(tmp_path / "clip.avi"))
+    cam.start_recording()
+    with pytest.raises(gs.SceneStateError, match="already recording"):
+        cam.start_recording()
+    with pytest.raises(gs.SceneStateError, match="no frame was recorded"):
+        cam.stop_recording(str(tmp_path / "a.mp4"))
+    with pytest.raises(gs.InvalidInputError, match=r"argument 'antialiasing' must be False"):
+        cam.render(antialiasing=True)
+    with pytest.raises(gs.InvalidInputError, match=r"follow_entity: argument 'entity' must be an entity of this"):
+        cam.follow_entity("box")
+    cam.render()
+    cam.stop_recording(str(tmp_path / "a.gif"))  # the recording went on after the errors
+    cam.start_recording(str(tmp_path / "b.mp4"), fps=30)
+    cam.render()
+    with pytest.raises(gs.InvalidInputError, match=r"stop_recording arguments 'save_to_filename' and 'fps' must be "
+                                                   r"None for a recording started with a filename"):
+        cam.stop_recording(str(tmp_path / "c.mp4"))
+    cam.stop_recording()
+    assert (tmp_path / "a.gif").is_file() and (tmp_path / "b.mp4").is_file()
+
+
+# ------------------------------------------------------------------ an OpenGL cross-check
+
+
+def gl_silhouette(triangles, pos, lookat, up, fov, res, near=0.1, far=20.0):
+    """(H, W) bool silhouette of world triangles (N, 3, 3) drawn by OpenGL (moderngl, standalone EGL
+    context) with the same pinhole camera; skips the test when no context can be made."""
+    moderngl = pytest.importorskip("moderngl")
+    try:
+        ctx = moderngl.create_standalone_context(backend="egl")
+    except Exception as error:  # no EGL / Mesa on this machine
+        pytest.skip(f"no standalone OpenGL context: {error}")
+    rot, _ = pinhole(pos, lookat, up, fov, res)
+    view = np.eye(4)
+    view[:3, :3], view[:3, 3] = rot, -rot @ pos
+    t = np.tan(np.radians(fov) / 2)
+    proj = np.array([[1 / (t * res[0] / res[1]), 0, 0, 0], [0, 1 / t, 0, 0],
+                     [0, 0, (far + near) / (near - far), 2 * far * near / (near - far)], [0, 0, -1, 0]])
+    program = ctx.program(vertex_shader="#version 330\nuniform mat4 mvp; in vec3 p;"
+                                        "void main() { gl_Position = mvp * vec4(p, 1.0); }",
+                          fragment_shader="#version 330\nout vec4 c; void main() { c = vec4(1.0); }")
+    program["mvp"].write((proj @ view).T.astype("f4").tobytes())
+    vao = ctx.vertex_array(program, ctx.buffer(triangles.astype("f4").tobytes()), "p")
+    fbo = ctx.simple_framebuffer(res)
+    fbo.use()
+    fbo.clear(0.0, 0.0, 0.0, 1.0)
+    vao.render(moderngl.TRIANGLES)
+    image = np.frombuffer(fbo.read(components=1), dtype=np.uint8).reshape(res[1], res[0])
+    ctx.release()
+    return image[::-1] > 0  # OpenGL's rows go up
+
+
+def test_silhouette_matches_opengl(f32):
+    scene = gs.Scene(**NO_CONTACT)
+    robot = scene.add_entity(gs.morphs.URDF(file=KUKA, fixed=True))
+    view = dict(pos=np.array([1.0, 0.8, 1.0]), lookat=np.array([0.0, 0.0, 0.5]), up=np.array([0.0, 0.0, 1.0]),
+                fov=60, res=(240, 180))
+    cam = scene.add_camera(**view)
+    scene.build()
+    robot.set_dofs_position(KUKA_Q)
+    _, _, seg, _ = cam.render(rgb=False, segmentation=True)
+    mesh = yourdfpy_visuals(KUKA, {joint.name: KUKA_Q[k] for k, joint in enumerate(robot.joints)})
+    silhouette = gl_silhouette(mesh.vertices[mesh.faces], **view)
+    assert silhouette.sum() > 2000
+    assert iou(seg >= 0, silhouette) >= 0.98
