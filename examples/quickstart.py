@@ -14,7 +14,11 @@ Differences from the page's snippet, and why:
   also requires grad (it holds the slider against gravity and turns the shoulder and wrist).
 * ``precision="64"`` so that the gradient can be checked against central finite differences.
 
-Run:  python examples/quickstart.py [--short]     (or GS_EXAMPLES_SHORT=1)
+Outputs (in ``--out DIR``, default ./outputs): ``quickstart.mp4``, the rollout (the target is the
+green sphere), and ``quickstart_end_effector.png``, the end effector's coordinates over the
+rollout beside the target's.
+
+Run:  python examples/quickstart.py [--short] [--out DIR]     (or GS_EXAMPLES_SHORT=1)
 The script ends with a check that raises if the gradient is not finite, is zero, or disagrees
 with finite differences.
 """
@@ -24,13 +28,13 @@ import time
 import torch
 
 import genesis_lite as gs
-from example_args import short_mode
+from example_run import TARGET_COLOR, ExampleRun
 
 ASSETS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "assets")
 
 
 def main():
-    short = short_mode(__doc__)
+    run = ExampleRun(__doc__, __file__)
     start = time.time()
     gs.init(precision="64")
 
@@ -43,6 +47,7 @@ def main():
     )
     # "ee" hangs on a fixed joint: keep it as a link (fixed-joint links are merged by default)
     robot = scene.add_entity(gs.morphs.URDF(file=os.path.join(ASSETS, "arm3.urdf"), fixed=True, links_to_keep=["ee"]))
+    camera = run.camera(scene, pos=(0.45, 0.75, 0.5), lookat=(0.15, 0.05, 0.08))
     scene.build()
     print(f"built in {time.time() - start:.1f} s: {robot.n_dofs} dofs "
           f"({', '.join(j.name for j in robot.joints)})")
@@ -53,13 +58,16 @@ def main():
     forces = torch.tensor([0.1, 4.3, 0.001], device=gs.device, dtype=gs.tc_float, requires_grad=True)
     ee = robot.get_link("ee")
 
-    def rollout(initial_pos):
-        """Loss of one rollout from ``initial_pos`` (a fresh graph each time: scene.reset())."""
+    def rollout(initial_pos, after_step=None):
+        """(loss, final end-effector position (3,)) of one rollout from ``initial_pos`` (a fresh graph
+        each time: scene.reset()). after_step: called after every step (the video's frames)."""
         scene.reset()
         robot.set_dofs_position(initial_pos)
         for i in range(n_steps):
             robot.control_dofs_force(forces)
             scene.step()
+            if after_step is not None:
+                after_step()
             if (i + 1) % 25 == 0 and torch.is_grad_enabled():
                 print(f"  step {i + 1}/{n_steps}: dofs position {robot.get_dofs_position().detach().cpu().numpy()}")
         final_pos = ee.get_pos()
@@ -79,8 +87,25 @@ def main():
     print("d loss / d initial_pos =", initial_pos.grad)
     print("d loss / d forces      =", forces.grad)
 
+    # -- what to look at: the rollout and its end effector's path -----------------------------------
+    scene.draw_debug_sphere(target, radius=0.02, color=TARGET_COLOR)
+    ee_path = []
+
+    def filmed_rollout(film_frame):
+        """The rollout, filmed, gathering the end effector's position after every step."""
+        def after_step():
+            film_frame()
+            ee_path.append(ee.get_pos().clone())
+        return rollout(initial_pos.detach(), after_step)
+
+    _, video = run.record(camera, filmed_rollout)
+    ee_path = torch.stack(ee_path)
+    plot = run.plot("end_effector", {axis: ee_path[:, k] for k, axis in enumerate("xyz")}, "step", "position (m)",
+                    "quickstart: end effector under constant forces", targets=dict(zip("xyz", target.tolist())))
+    print(f"wrote {video}, {plot}")
+
     # -- check: finite, non-zero, and equal to central finite differences ---------------------------
-    test_final(rollout, initial_pos, short)
+    test_final(rollout, initial_pos, run.short)
     print(f"quickstart OK in {time.time() - start:.1f} s")
 
 

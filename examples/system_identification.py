@@ -15,7 +15,11 @@ inertia scales with its mass (``set_links_mass`` keeps the shape), so two masses
 coefficients describe the whole difference between model and reality. The base link is fixed,
 its mass has no effect and is not fitted.
 
-Run:  python examples/system_identification.py [--short]     (or GS_EXAMPLES_SHORT=1)
+Outputs (in ``--out DIR``, default ./outputs): ``system_identification.mp4``, the fitted model's
+rollout, its tip retracing the observed tip's path (green dots), and
+``system_identification_loss.png``, the trajectory error per L-BFGS evaluation.
+
+Run:  python examples/system_identification.py [--short] [--out DIR]     (or GS_EXAMPLES_SHORT=1)
 Full mode (≤ 80 rollouts) checks every parameter within 1 % of the truth; short mode (≤ 40
 rollouts) within 2 %.
 """
@@ -24,14 +28,16 @@ import os
 import time
 
 import torch
+import tqdm
 
 import genesis_lite as gs
-from example_args import short_mode
+from example_run import PENDULUM_VIEW, TARGET_COLOR, ExampleRun, point_on_link
 
 ASSETS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "assets")
 LINKS = [1, 2]  # link1, link2 (link 0 is the fixed base)
 TRUE_MASS_SCALE = (1.25, 0.8)  # reality's masses / URDF masses
 TRUE_DAMPING = (0.08, 0.03)  # N·m·s/rad (URDF: 0 and 0.05)
+TIP = (0.0, 0.0, -0.4)  # m, in link2's frame: the centre of its sphere
 
 
 def excitation(n_steps, dt, dtype):
@@ -44,13 +50,14 @@ def excitation(n_steps, dt, dtype):
 
 
 def main():
-    short = short_mode(__doc__)
-    n_steps, max_evals, tolerance = (100, 40, 0.02) if short else (100, 80, 0.01)
+    run = ExampleRun(__doc__, __file__)
+    n_steps, max_evals, tolerance = (100, 40, 0.02) if run.short else (100, 80, 0.01)
     start = time.time()
     gs.init(precision="64")
     dt = 0.01
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=dt, requires_grad=True))
     robot = scene.add_entity(gs.morphs.URDF(file=os.path.join(ASSETS, "pendulum2.urdf"), fixed=True))
+    camera = run.camera(scene, *PENDULUM_VIEW)
     scene.build()
     f = gs.tc_float
 
@@ -60,8 +67,9 @@ def main():
     true_damping = torch.tensor(TRUE_DAMPING, dtype=f, device=gs.device)
     forces = excitation(n_steps, dt, f)
 
-    def rollout(mass, damping):
-        """Joint positions and velocities after every step, (n_steps, 2 · n_dofs)."""
+    def rollout(mass, damping, after_step=None):
+        """Joint positions and velocities after every step, (n_steps, 2 · n_dofs). after_step: called
+        after every step (the video's frames, the tip's path)."""
         scene.reset()
         robot.set_links_mass(mass, LINKS)
         robot.set_dofs_damping(damping)
@@ -70,11 +78,15 @@ def main():
             robot.control_dofs_force(forces[t])
             scene.step()
             states.append(torch.cat([robot.get_dofs_position(), robot.get_dofs_velocity()]))
+            if after_step is not None:
+                after_step()
         return torch.stack(states)
 
-    # 1. the observation
+    # 1. the observation (and where the tip went, for the video)
+    tip, tip_offset = robot.get_link("link2"), torch.tensor(TIP, dtype=f, device=gs.device)
+    observed_tip = []
     with torch.no_grad():
-        observed = rollout(true_mass, true_damping)
+        observed = rollout(true_mass, true_damping, lambda: observed_tip.append(point_on_link(tip, tip_offset)))
     weight = 1.0 / observed.var(dim=0)  # each channel counts the same, whatever its unit
     print(f"built and observed in {time.time() - start:.1f} s: {n_steps} steps, "
           f"|q|max = {observed[:, :2].abs().max().item():.2f} rad, |q̇|max = {observed[:, 2:].abs().max().item():.2f} rad/s")
@@ -88,6 +100,7 @@ def main():
                                   history_size=20, line_search_fn="strong_wolfe",
                                   tolerance_grad=1e-15, tolerance_change=1e-18)
     evals = []
+    progress = tqdm.tqdm(total=max_evals, desc="system identification", unit="rollout")
 
     def closure():
         optimizer.zero_grad()
@@ -95,14 +108,23 @@ def main():
         loss = (weight * (rollout(mass, damping) - observed) ** 2).mean()
         loss.backward()
         evals.append(loss.item())
-        print(f"eval {len(evals):3d}: loss {loss.item():.3e}  mass {mass.detach().cpu().numpy().round(5)}  "
-              f"damping {damping.detach().cpu().numpy().round(5)}  ({time.time() - start:.1f} s)")
+        progress.set_postfix(loss=f"{loss.item():.3e}", refresh=False)
+        progress.update()
         return loss
 
     optimizer.step(closure)
+    progress.close()
     mass, damping = torch.exp(log_mass).detach(), torch.exp(log_damping).detach()
     print(f"fitted: mass {mass.cpu().numpy()} kg, damping {damping.cpu().numpy()} N·m·s/rad "
           f"after {len(evals)} rollouts, {time.time() - start:.1f} s in all")
+
+    # 3. what to look at: the fitted model retracing the observed tip's path, the loss curve
+    scene.draw_debug_spheres(torch.stack(observed_tip), radius=0.01, color=TARGET_COLOR)
+    _, video = run.record(camera, lambda after_step: rollout(mass, damping, after_step))
+    plot = run.plot("loss", {"loss": evals}, "L-BFGS evaluation (one rollout and its backward each)",
+                    "loss (weighted mean squared state error)", "system identification: masses and damping",
+                    log_y=True)
+    print(f"wrote {video}, {plot}")
     test_final(torch.cat([mass, damping]), torch.cat([true_mass, true_damping]), tolerance)
 
 

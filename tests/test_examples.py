@@ -1,16 +1,43 @@
-"""Examples double as tests: each runs in its short mode and ends with its own check."""
+"""Examples double as tests: each runs in its short mode and ends with its own check; here we also
+check that it left something to look at: a readable MP4 of moving frames and a readable PNG plot."""
 import os
 import subprocess
 import sys
 
+import imageio.v3 as iio
+import numpy as np
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-EXAMPLES = ["quickstart.py", "trajectory_optimization.py", "system_identification.py", "policy.py"]
+# example → the plot it writes besides <example>.mp4
+EXAMPLES = {"quickstart": "end_effector", "trajectory_optimization": "loss", "system_identification": "loss",
+            "policy": "loss"}
+SHORT_RES = (320, 240)  # examples/example_run.py: frames in short mode (width, height)
+MIN_FRAMES = 10
+MOVED = 30  # a pixel differs between the first and last frame by more than this (0-255): not codec noise
 
 
 @pytest.mark.parametrize("name", EXAMPLES)
-def test_example_short(name):
-    result = subprocess.run([sys.executable, os.path.join(ROOT, "examples", name), "--short"], cwd=ROOT,
-                            capture_output=True, text=True, timeout=600)
+def test_example_short(name, tmp_path):
+    result = subprocess.run([sys.executable, os.path.join(ROOT, "examples", f"{name}.py"), "--short",
+                             "--out", str(tmp_path)], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, f"{name} failed:\n{result.stdout[-3000:]}\n{result.stderr[-3000:]}"
+    _check_video(tmp_path / f"{name}.mp4")
+    _check_plot(tmp_path / f"{name}_{EXAMPLES[name]}.png")
+
+
+def _check_video(path):
+    """An MP4 imageio reads: at least MIN_FRAMES frames of SHORT_RES, and the scene moved."""
+    frames = iio.imread(path, index=None)
+    width, height = SHORT_RES
+    assert frames.ndim == 4 and frames.shape[1:] == (height, width, 3), f"{path}: frames {frames.shape}"
+    assert len(frames) >= MIN_FRAMES, f"{path}: {len(frames)} frames, expected ≥ {MIN_FRAMES}"
+    changed = np.abs(frames[0].astype(int) - frames[-1].astype(int)).max(axis=-1) > MOVED
+    assert changed.mean() > 1e-3, f"{path}: the first and last frames are the same picture"
+
+
+def _check_plot(path):
+    """A PNG imageio reads, with more than one colour in it."""
+    image = iio.imread(path)
+    assert image.ndim == 3 and image.shape[0] > 100 and image.shape[1] > 100, f"{path}: image {image.shape}"
+    assert len(np.unique(image.reshape(-1, image.shape[-1]), axis=0)) > 2, f"{path}: a blank image"
