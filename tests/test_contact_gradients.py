@@ -15,14 +15,13 @@ n_envs 0 and 4, substeps 2) runs under ``-m slow``.
 import os
 import tempfile
 
-import numpy as np
 import pytest
 import torch
 import trimesh
 
 import genesis_lite as gs
+from tests.fd_scan import assert_converged, directional_errors
 
-EPS = (1e-5, 1e-6, 1e-7, 1e-8)
 _SCENES = {}
 HALF = (0.1, 0.15, 0.05)  # box half extents, m
 
@@ -154,26 +153,12 @@ def _roll(scene, steps):
 def _check(case, cone, steps, n_envs=0, substeps=1, seed=0, shape="box", smooth=False, ground="plane"):
     scene, body = _scene(cone, n_envs, substeps, shape, smooth=smooth, ground=ground)
     loss_of, nominal = CASES[case]
-    value = _batch(n_envs, nominal())
-    direction = torch.tensor(np.random.default_rng(seed).normal(size=value.shape))
-    direction = direction / direction.norm()
-    x = value.clone().requires_grad_(True)
-    scene.reset()
-    loss_of(scene, body, x, steps).backward()
-    grad = x.grad
-    analytic, scale = float((grad * direction).sum()), float(grad.norm())
-    assert scale > 0.0, f"{case}: zero gradient cannot be checked"
-    errors = {}
-    with torch.no_grad():
-        for eps in EPS:
-            ends = []
-            for sign in (1, -1):
-                scene.reset()
-                ends.append(float(loss_of(scene, body, value + sign * eps * direction, steps)))
-            errors[eps] = (analytic - (ends[0] - ends[1]) / (2 * eps)) / scale
-    scan = ", ".join(f"{eps:.0e}: {err:.1e}" for eps, err in errors.items())
-    converged = [min(abs(errors[a]), abs(errors[b])) for a, b in zip(EPS, EPS[1:]) if abs(errors[a] - errors[b]) < 1e-5]
-    assert converged and min(converged) <= 1e-5, f"{case} {cone} T={steps}: relative errors per eps {scan}"
+
+    def loss(x):
+        scene.reset()
+        return loss_of(scene, body, x, steps)
+
+    assert_converged(directional_errors(loss, _batch(n_envs, nominal()), seed), f"{case} {cone} T={steps}")
 
 
 @pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])

@@ -1,0 +1,36 @@
+"""The eps-scan check of gradients through contact (test support): a directional derivative
+against central finite differences at several eps.
+
+The map is a discrete simulation, smooth between kinks (a contact making or breaking, a row
+changing state): near one, large eps straddle it and disagree, while small eps converge to the
+derivative. So the check asks for convergence, not for one eps to agree.
+"""
+import numpy as np
+import torch
+
+EPS = (1e-5, 1e-6, 1e-7, 1e-8)
+BAR = 1e-5  # relative to ‖g‖
+
+
+def directional_errors(loss, value, seed=0):
+    """{eps: (g·v − (L(x + εv) − L(x − εv)) / 2ε) / ‖g‖} at x = value for a random unit v, where
+    g = ∇L(x) by backward. loss(x) runs one rollout from its start (it resets the scene)."""
+    direction = torch.tensor(np.random.default_rng(seed).normal(size=value.shape))
+    direction = direction / direction.norm()
+    x = value.clone().requires_grad_(True)
+    loss(x).backward()
+    analytic, scale = float((x.grad * direction).sum()), float(x.grad.norm())
+    assert scale > 0.0, "zero gradient cannot be checked"
+    errors = {}
+    with torch.no_grad():
+        for eps in EPS:
+            central = (float(loss(value + eps * direction)) - float(loss(value - eps * direction))) / (2 * eps)
+            errors[eps] = (analytic - central) / scale
+    return errors
+
+
+def assert_converged(errors, what):
+    """Two neighbouring eps agree to BAR, and there the error is ≤ BAR."""
+    scan = ", ".join(f"{eps:.0e}: {err:.1e}" for eps, err in errors.items())
+    converged = [min(abs(errors[a]), abs(errors[b])) for a, b in zip(EPS, EPS[1:]) if abs(errors[a] - errors[b]) < BAR]
+    assert converged and min(converged) <= BAR, f"{what}: relative errors per eps {scan}"
