@@ -111,3 +111,13 @@ def point_on_link(link, offset):
     w, u = quat[..., :1], quat[..., 1:]
     t = 2.0 * torch.cross(u, offset.expand_as(u), dim=-1)
     return link.get_pos() + offset + w * t + torch.cross(u, t, dim=-1)
+
+
+def check_loss_drop(losses, required_drop, name):
+    """The example's self-check: every loss finite and the last ≥ required_drop× below the first."""
+    if not all(torch.isfinite(torch.tensor(losses))):
+        raise AssertionError(f"a loss is not finite: {losses}")
+    if not losses[-1] * required_drop <= losses[0]:
+        raise AssertionError(f"the loss must fall ≥ {required_drop:.0f}×: {losses[0]:.4e} → {losses[-1]:.4e} "
+                             f"({losses[0] / losses[-1]:.1f}×)")
+    print(f"{name} OK (≥ {required_drop:.0f}× drop)")

@@ -28,7 +28,7 @@ import torch
 import tqdm
 
 import genesis_lite as gs
-from example_run import PENDULUM_VIEW, TARGET_COLOR, ExampleRun, point_on_link
+from example_run import PENDULUM_VIEW, TARGET_COLOR, ExampleRun, check_loss_drop, point_on_link
 
 ASSETS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "assets")
 
@@ -92,16 +92,7 @@ def main():
     plot = run.plot("loss", {"loss": losses}, "epoch", "loss (m², mean squared tip error)",
                     f"trajectory optimisation: Adam on {n_steps} × {n_dofs} joint torques", log_y=True)
     print(f"optimised tip {final_pos.cpu().numpy().round(4)} (target {target.cpu().numpy()}); wrote {video}, {plot}")
-    test_final(losses, required_drop)
-
-
-def test_final(losses, required_drop):
-    if not all(torch.isfinite(torch.tensor(losses))):
-        raise AssertionError(f"a loss is not finite: {losses}")
-    if not losses[-1] * required_drop <= losses[0]:
-        raise AssertionError(f"the loss must fall ≥ {required_drop:.0f}×: {losses[0]:.4e} → {losses[-1]:.4e} "
-                             f"({losses[0] / losses[-1]:.1f}×)")
-    print(f"trajectory optimisation OK (≥ {required_drop:.0f}× drop)")
+    check_loss_drop(losses, required_drop, "trajectory optimisation")
 
 
 if __name__ == "__main__":

@@ -11,7 +11,7 @@ import imageio.v3 as iio
 import numpy as np
 from PIL import Image
 
-EXAMPLES = ("quickstart", "trajectory_optimization", "system_identification", "policy")
+EXAMPLES = ("quickstart", "trajectory_optimization", "system_identification", "policy", "push_box")
 MAX_FRAMES = 60
 WIDTH = 240  # pixels
 COLORS = 128
