@@ -287,6 +287,23 @@ def test_control_force_mixed_modes_batched(f64, two_robots):
     assert np.abs(other.get_dofs_control_force([1], envs_idx=[1]).numpy() - expected[1:, 1:]).max() <= 1e-12
 
 
+def test_batched_setters_broadcast_one_row(f64, two_robots):
+    """In a batched scene a value of one row applies to every env of envs_idx, as Genesis
+    broadcasts; a row per env still sets each its own."""
+    scene, kuka, other = two_robots
+    scene.reset()
+    other.set_dofs_kp(_t([30.0, 40.0]))
+    assert other.get_dofs_kp().tolist() == [[30.0, 40.0], [30.0, 40.0]]
+    other.set_dofs_kv(_t([1.5]), [1], envs_idx=[1])
+    assert other.get_dofs_kv()[:, 1].tolist()[1] == 1.5
+    other.set_dofs_position(_t([0.2, -0.1]))
+    assert other.get_dofs_position().tolist() == [[0.2, -0.1], [0.2, -0.1]]
+    other.set_dofs_position(_t([[0.3, 0.0], [0.4, 0.1]]))
+    assert other.get_dofs_position().tolist() == [[0.3, 0.0], [0.4, 0.1]]
+    with pytest.raises(gs.InvalidInputError, match=r"\(2, 2\) or \(2,\) for every env, got \(3,\)"):
+        other.set_dofs_position(_t([0.1, 0.2, 0.3]))
+
+
 def test_control_force_is_differentiable(f64, graph):
     scene, robot = graph
     scene.reset()

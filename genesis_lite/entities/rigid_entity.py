@@ -219,7 +219,8 @@ class RigidEntity:
         return self._local(envs_idx, n_envs, "envs_idx")
 
     def _values(self, value, n_cols, envs, arg):
-        """User values → (len(envs), n_cols) float tensor on gs.device; checked shape and finiteness."""
+        """User values → (len(envs), n_cols) float tensor on gs.device; checked shape and finiteness.
+        In a batched scene (n_cols,) values apply to every env of envs (Genesis broadcasts too)."""
         sim = self._sim()
         sim.check_grad_allowed(value, self.name, arg)
         expected = (n_cols,) if self.scene.n_envs == 0 else (len(envs), n_cols)
@@ -236,8 +237,11 @@ class RigidEntity:
         except (TypeError, ValueError) as err:
             raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be numbers of shape {expected}, "
                                     f"got {type(value).__name__} ({err})") from None
+        if self.scene.n_envs and tuple(tensor.shape) == (n_cols,):
+            tensor = tensor.expand(len(envs), n_cols)
         if tuple(tensor.shape) != expected:
-            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must have shape {expected}, "
+            every_env = f" or {(n_cols,)} for every env" if self.scene.n_envs else ""
+            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must have shape {expected}{every_env}, "
                                     f"got {tuple(tensor.shape)}")
         if not _all_finite(tensor.detach()):
             raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be finite, got NaN or inf in "
