@@ -41,9 +41,11 @@ the cone blocks H_c follow). Implicit differentiation solves H u = ḡ with it.
 arrays: after mj_forward, d.efc_state still holds the warm-start test's states (at qacc_smooth);
 the solve's final states, which ours equal, are d.iefc_state[d.map_efc2iefc].
 
-**Where we differ from MuJoCo.** Dense Cholesky of M (MuJoCo: sparse LDLᵀ) and a fresh dense
-factor of H every iteration (MuJoCo: rank-one updates): round-off only. Island trees from the
-Jacobian (above). No equality rows, no noslip, no sleeping, warm start always on.
+**Where we differ from MuJoCo.** An envelope (skyline) Cholesky of M and a fresh one of H every
+iteration (MuJoCo: sparse LDLᵀ, rank-one updates of H): round-off only. The envelope and the
+rows' column lists (efc_cols) skip exact zeros only, so the results equal the dense ones bit for
+bit. Island trees from the Jacobian (above). No equality rows, no noslip, no sleeping, warm
+start always on.
 """
 import taichi as ti
 
