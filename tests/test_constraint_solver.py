@@ -206,6 +206,11 @@ class _View:
             setattr(self, name, ti.field(ti.i32, shape=(1, E, R)))
         self.solver_M = ti.field(float, shape=(1, E, D, D))
         self.efc_J = ti.field(float, shape=(1, E, R, D))
+        # every row's non-zero columns: all of them (efc_cols[0 … D) = 0 … D − 1), a valid superset
+        self.efc_col0, self.efc_ncol = ti.field(ti.i32, shape=(1, E, R)), ti.field(ti.i32, shape=(1, E, R))
+        self.efc_cols = ti.field(ti.i32, shape=(1, E, D))
+        self.efc_ncol.fill(D)
+        self.efc_cols.from_numpy(np.tile(np.arange(D, dtype=np.int32), (1, E, 1)))
         self.qacc_warmstart = ti.field(float, shape=(E, D))
         self.solver_niter = ti.field(ti.i32, shape=(1, E))
         self.n_efc = ti.field(ti.i32, shape=(1, E, 1))  # rows in use: every slot (unused ones hold garbage)

@@ -104,7 +104,10 @@ FRAMES = {
     "n_efc": ("i", 1, False), "efc_dof_rows": ("i", 1, False),  # rows in use; of them, single-dof rows first
     "efc_type": ("i", "R", False), "efc_dim": ("i", "R", False),
     "efc_id": ("i", "R", False), "efc_state": ("i", "R", False),
-    "efc_J": ("f", "RD", False), "efc_R": ("f", "R", False), "efc_aref": ("f", "R", False),
+    "efc_J": ("f", "RD", False),
+    # each row's non-zero columns: efc_cols[efc_col0 …] (efc_ncol of them, ascending), a contact's
+    # rows sharing its list (from c·D), a single-dof row r its one dof (at C·D + r)
+    "efc_col0": ("i", "R", False), "efc_ncol": ("i", "R", False), "efc_cols": ("i", "CD", False), "efc_R": ("f", "R", False), "efc_aref": ("f", "R", False),
     "efc_floss": ("f", "R", False), "efc_mu": ("f", "R", False), "efc_force": ("f", "R", False),
     "solver_M": ("f", "DD", False), "qacc_smooth": ("f", "D", False), "qacc_constrained": ("f", "D", True),
     "qfrc_constraint": ("f", "D", True), "solver_niter": ("i", 1, False),
@@ -202,6 +205,7 @@ def _counts(size):
     D, R = size["D"], size["R"]
     return {"L": size["L"], "D": D, "Q": size["Q"], "P": size["P"], "DD": D * D, "G": size["G"], "N": size["N"],
             "H": size["H"], "C": size["C"], "CF": FEATURE_SIZE * size["C"], "HI": size["HI"], "R": R, "RD": R * D,
+            "CD": size["C"] * D + 2 * D,
             "G2": 2 * size["G"], "G5": 5 * size["G"], 1: 1,
             len(CONSTS): len(CONSTS),
             **{f"ws:{name}": size["WS"] * n for name, (_, n) in CONVEX_SCRATCH.items()}}

@@ -74,7 +74,7 @@ def solve_env(d: ti.template(), s, e, rows: ti.template()):
     for i in range(d.n_dofs):
         d.qacc[s, e, i] = d.qfrc_smooth[s, e, i]
         if ti.static(rows):
-            d.qacc[s, e, i] += d.qfrc_constraint[s, e, i]
+            accumulate(d.qacc, ti.Vector([s, e, i]), d.qfrc_constraint[s, e, i])
     _solve_in_place(d, s, e, d.qacc)
     solved = False  # the constraint solve set the warm start already (constraint_env)
     if ti.static(rows):

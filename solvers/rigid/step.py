@@ -23,7 +23,7 @@ of the process.
 """
 import taichi as ti
 
-from .data import ARENA_TYPES, CONST, bind, n_batch
+from .data import ARENA_TYPES, CONST, accumulate, bind, n_batch
 from .actuation import smooth_force, smooth_force_adjoint
 from .collision.detect import (collide_adjoint_kind, collide_kind, geom_poses, geom_poses_adjoint, replay_exact,
                                sort_contacts)
@@ -87,10 +87,11 @@ def constraint_env(d: ti.template(), s, e):
         rows += contact_rows(d, s, e, c, rows)
     d.n_efc[s, e, 0] = rows
     if rows > 0:
-        for i, j in ti.ndrange(d.n_dofs, d.n_dofs):  # the solve's M: dense, with armature
-            d.solver_M[s, e, i, j] = d.mass_mat[s, e, ti.max(i, j), ti.min(i, j)]
+        for i in range(d.n_dofs):  # the solve's M: dense, with armature
+            for j in range(d.n_dofs):
+                d.solver_M[s, e, i, j] = d.mass_mat[s, e, ti.max(i, j), ti.min(i, j)]
         for i in range(d.n_dofs):
-            d.solver_M[s, e, i, i] += d.armature[e, i]
+            accumulate(d.solver_M, ti.Vector([s, e, i, i]), d.armature[e, i])
         newton_solve(d, s, e, d.iterations, d.consts[CONST["tolerance"]], d.ls_iterations,
                      d.consts[CONST["ls_tolerance"]])
         for i in range(d.n_dofs):  # the next solve starts from this solution

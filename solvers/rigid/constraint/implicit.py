@@ -25,7 +25,7 @@ import taichi as ti
 
 from ..data import accumulate
 from .rows import contact_rows_adjoint, dof_rows_adjoint, rows_per_contact
-from .solver import ALL, CONE, LINEARNEG, LINEARPOS, QUADRATIC, cholesky_solve, cone_coordinates, cone_hessian_entry
+from .solver import CONE, LINEARNEG, LINEARPOS, QUADRATIC, cholesky_solve, cone_coordinates, cone_hessian_entry
 
 
 @ti.func
@@ -53,7 +53,7 @@ def solve_adjoint(d: ti.template(), s, e):
         for j in range(d.n_dofs):
             acc += d.solver_M[s, e, i, j] * d.qfrc_constraint.grad[s, e, j]
         u[s, e, i] = acc
-    cholesky_solve(d, d.solver_H, u, s, e, ALL)
+    cholesky_solve(d, d.solver_H, u, s, e)
     for i in range(d.n_dofs):
         accumulate(d.qfrc_smooth.grad, ti.Vector([s, e, i]), u[s, e, i] - d.qfrc_constraint.grad[s, e, i])
         g_mass[s, e, i] = d.qfrc_constraint.grad[s, e, i] - u[s, e, i]

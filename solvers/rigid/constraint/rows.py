@@ -124,14 +124,14 @@ def _add_link_jacobian(d: ti.template(), s, e, link, pos, frame, sign, first, co
             linear, _ = dof_motion_at(d, s, e, i, pos)
             v = frame @ linear
             if condim == 1:
-                d.efc_J[s, e, first, i] += sign * v[0]
+                accumulate(d.efc_J, ti.Vector([s, e, first, i]), sign * v[0])
             elif pyramidal:
                 for k in ti.static(range(2)):  # condim 3: two tangents
-                    d.efc_J[s, e, first + 2 * k, i] += sign * (v[0] + mu * v[k + 1])
-                    d.efc_J[s, e, first + 2 * k + 1, i] += sign * (v[0] - mu * v[k + 1])
+                    accumulate(d.efc_J, ti.Vector([s, e, first + 2 * k, i]), sign * (v[0] + mu * v[k + 1]))
+                    accumulate(d.efc_J, ti.Vector([s, e, first + 2 * k + 1, i]), sign * (v[0] - mu * v[k + 1]))
             else:
                 for k in ti.static(range(3)):
-                    d.efc_J[s, e, first + k, i] += sign * v[k]
+                    accumulate(d.efc_J, ti.Vector([s, e, first + k, i]), sign * v[k])
         a = d.link_parent[a]
 
 
@@ -172,9 +172,11 @@ def contact_rows(d: ti.template(), s, e, c, first):
     _zero_rows(d, s, e, first, n)
     _add_link_jacobian(d, s, e, l1, pos, frame, -1.0, first, condim, pyramidal, mu)
     _add_link_jacobian(d, s, e, l2, pos, frame, 1.0, first, condim, pyramidal, mu)
+    ncol = _contact_columns(d, s, e, c, l1, l2)
     dist, margin = d.con_dist[s, e, c], d.pair_margin[pair]
     for j in range(n):
         r = first + j
+        d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = c * d.n_dofs, ncol
         velocity = _row_velocity(d, s, e, r)
         kind, reg, aref = ONE_SIDED, r0, -b * velocity - k * imp * (dist - margin)
         if condim > 1 and pyramidal:
@@ -190,10 +192,38 @@ def contact_rows(d: ti.template(), s, e, c, first):
 
 
 @ti.func
+def _contact_columns(d: ti.template(), s, e, c, l1, l2):
+    """The columns where contact c's rows can be non-zero (the dofs on the paths of links l1 and
+    l2 to the root: MuJoCo's sparse Jacobian), ascending, into efc_cols[s, e, c·D …]. Returns
+    their count. The two paths are walked together, the larger link first (a parent comes before
+    its children, and a link's dofs after its parent's), which lists the dofs descending; then
+    the list is reversed."""
+    base, n = c * d.n_dofs, 0
+    a, b = l1, l2
+    while a >= 0 or b >= 0:
+        link = ti.max(a, b)
+        dof0 = d.link_dof0[link]
+        count = dof_count(d, link)
+        for k in range(count):
+            d.efc_cols[s, e, base + n + k] = dof0 + count - 1 - k
+        n += count
+        if a == link:
+            a = d.link_parent[a]
+        if b == link:
+            b = d.link_parent[b]
+    for k in range(n // 2):
+        lo, hi = d.efc_cols[s, e, base + k], d.efc_cols[s, e, base + n - 1 - k]
+        d.efc_cols[s, e, base + k], d.efc_cols[s, e, base + n - 1 - k] = hi, lo
+    return n
+
+
+@ti.func
 def _row_velocity(d: ti.template(), s, e, r):
-    """J_r · q̇ at frame s (m/s or rad/s)."""
+    """J_r · q̇ at frame s (m/s or rad/s), over the row's non-zero columns."""
     velocity = 0.0
-    for i in range(d.n_dofs):
+    col0 = d.efc_col0[s, e, r]
+    for a in range(d.efc_ncol[s, e, r]):
+        i = d.efc_cols[s, e, col0 + a]
         velocity += d.efc_J[s, e, r, i] * d.qvel[s, e, i]
     return velocity
 
@@ -410,6 +440,9 @@ def _dof_row(d: ti.template(), s, e, r, i, sign, dist):
     for j in range(d.n_dofs):
         d.efc_J[s, e, r, j] = 0.0
     d.efc_J[s, e, r, i] = sign
+    # its one column, in slot r after the contacts' lists (a frame has at most 2 D single-dof rows)
+    d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = d.contact_capacity * d.n_dofs + r, 1
+    d.efc_cols[s, e, d.contact_capacity * d.n_dofs + r] = i
     solimp = ti.Vector(DEFAULT_SOLIMP, dt=float)
     imp = impedance(solimp, dist, 0.0)
     k, b = stiffness_damping(ti.Vector([d.consts[CONST["timeconst"]], 1.0]), solimp[1], d.consts[CONST["h"]])

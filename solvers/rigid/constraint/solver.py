@@ -41,9 +41,11 @@ the cone blocks H_c follow). Implicit differentiation solves H u = ḡ with it.
 arrays: after mj_forward, d.efc_state still holds the warm-start test's states (at qacc_smooth);
 the solve's final states, which ours equal, are d.iefc_state[d.map_efc2iefc].
 
-**Where we differ from MuJoCo.** Dense Cholesky of M (MuJoCo: sparse LDLᵀ) and a fresh dense
-factor of H every iteration (MuJoCo: rank-one updates): round-off only. Island trees from the
-Jacobian (above). No equality rows, no noslip, no sleeping, warm start always on.
+**Where we differ from MuJoCo.** An envelope (skyline) Cholesky of M and a fresh one of H every
+iteration (MuJoCo: sparse LDLᵀ, rank-one updates of H): round-off only. The envelope and the
+rows' column lists (efc_cols) skip exact zeros only, so the results equal the dense ones bit for
+bit. Island trees from the Jacobian (above). No equality rows, no noslip, no sleeping, warm
+start always on.
 """
 import taichi as ti
 
@@ -68,21 +70,16 @@ SCRATCH = {
     "solver_jar": ("f", "R"),         # J qacc − aref
     "solver_Jv": ("f", "R"),          # J search
     "solver_tree": ("i", "D"),        # union-find parent of a tree's root dof (−1: no row)
+    "solver_dof_tree": ("i", "D"),    # root dof of a dof's kinematic tree
     "solver_dof_island": ("i", "D"),  # island of a dof: its root tree's root dof, or −1
     "solver_row_island": ("i", "R"),  # island of a row
+    "solver_dofs": ("i", "D"),        # the dofs of the island being solved, ascending
+    "solver_rows": ("i", "R"),        # its used rows (elliptic tails included), ascending
+    "solver_first": ("i", "D"),       # envelope of its H: per position a, the first b with H[a, b] ≠ 0
 }
 
 
 # ----------------------------------------------------------------------------- islands
-@ti.func
-def _tree_of(d: ti.template(), i):
-    """Root dof of dof i's kinematic tree (its ancestor with no parent)."""
-    t = i
-    while d.dof_parent[t] != -1:
-        t = d.dof_parent[t]
-    return t
-
-
 @ti.func
 def _find(d: ti.template(), s, e, t):
     """Union-find root of active tree t."""
@@ -95,23 +92,27 @@ def _find(d: ti.template(), s, e, t):
 def _find_islands(d: ti.template(), s, e):
     """Label dofs and rows with their island: trees joined by every used row's non-zero Jacobian
     entries; an island is named by its smallest tree (MuJoCo's canonical root)."""
-    for i in range(d.n_dofs):
+    for i in range(d.n_dofs):  # a dof's parent comes before it
+        parent = d.dof_parent[i]
+        d.solver_dof_tree[s, e, i] = i if parent == -1 else d.solver_dof_tree[s, e, parent]
         d.solver_tree[s, e, i] = NO_ISLAND
     for r in range(d.n_efc[s, e, 0]):
         if d.efc_type[s, e, r] != UNUSED:
             first = NO_ISLAND
-            for i in range(d.n_dofs):
+            col0 = d.efc_col0[s, e, r]
+            for a in range(d.efc_ncol[s, e, r]):
+                i = d.efc_cols[s, e, col0 + a]
                 if d.efc_J[s, e, r, i] != 0.0:
-                    t = _tree_of(d, i)
+                    t = d.solver_dof_tree[s, e, i]
                     if d.solver_tree[s, e, t] == NO_ISLAND:
                         d.solver_tree[s, e, t] = t
                     if first == NO_ISLAND:
                         first = t
                     else:  # link the larger root under the smaller
-                        a, b = _find(d, s, e, first), _find(d, s, e, t)
-                        d.solver_tree[s, e, ti.max(a, b)] = ti.min(a, b)
+                        u, v = _find(d, s, e, first), _find(d, s, e, t)
+                        d.solver_tree[s, e, ti.max(u, v)] = ti.min(u, v)
     for i in range(d.n_dofs):
-        t = _tree_of(d, i)
+        t = d.solver_dof_tree[s, e, i]
         label = NO_ISLAND
         if d.solver_tree[s, e, t] != NO_ISLAND:
             label = _find(d, s, e, t)
@@ -122,8 +123,10 @@ def _find_islands(d: ti.template(), s, e):
             count = d.efc_dim[s, e, r] if t == ELLIPTIC_FIRST else 1
             label = NO_ISLAND
             if t != UNUSED:
+                col0 = d.efc_col0[s, e, r]
                 for q in range(count):
-                    for i in range(d.n_dofs):
+                    for a in range(d.efc_ncol[s, e, r]):
+                        i = d.efc_cols[s, e, col0 + a]
                         if label == NO_ISLAND and d.efc_J[s, e, r + q, i] != 0.0:
                             label = d.solver_dof_island[s, e, i]
             for q in range(count):
@@ -131,97 +134,147 @@ def _find_islands(d: ti.template(), s, e):
 
 
 @ti.func
-def _dof_in(d: ti.template(), s, e, i, k):
-    return k == ALL or d.solver_dof_island[s, e, i] == k
+def _select(d: ti.template(), s, e, k):
+    """solver_dofs ← island k's dofs, solver_rows ← its used rows (k = ALL: every dof and used
+    row), both ascending. Returns their counts (n, m). Every loop of the solve runs over these
+    lists, and a row's products over its non-zero columns (efc_cols): the sums keep the dense
+    order, less exact zeros, so the results are the dense ones bit for bit."""
+    n, m = 0, 0
+    for i in range(d.n_dofs):
+        if k == ALL or d.solver_dof_island[s, e, i] == k:
+            d.solver_dofs[s, e, n] = i
+            n += 1
+    for r in range(d.n_efc[s, e, 0]):
+        if d.efc_type[s, e, r] != UNUSED and (k == ALL or d.solver_row_island[s, e, r] == k):
+            d.solver_rows[s, e, m] = r
+            m += 1
+    return n, m
 
 
 @ti.func
-def _row_in(d: ti.template(), s, e, r, k):
-    """Row r is used and in island k; an elliptic block counts by its first row."""
-    t = d.efc_type[s, e, r]
-    return t != UNUSED and t != ELLIPTIC_REST and (k == ALL or d.solver_row_island[s, e, r] == k)
+def _row_dot(d: ti.template(), s, e, r, x: ti.template()):
+    """J_r · x[s, e] over row r's non-zero columns."""
+    acc = 0.0
+    col0 = d.efc_col0[s, e, r]
+    for a in range(d.efc_ncol[s, e, r]):
+        i = d.efc_cols[s, e, col0 + a]
+        acc += d.efc_J[s, e, r, i] * x[s, e, i]
+    return acc
 
 
 # ----------------------------------------------------------------------------- dense algebra
 @ti.func
-def _cholesky(d: ti.template(), A: ti.template(), s, e, k):
-    """In place, A[s, e] (lower triangle of a symmetric positive matrix, restricted to island k's
-    dofs) ← its Cholesky factor L. As mju_cholFactor, a pivot below MINVAL is raised to MINVAL
-    and its column cleared."""
-    for j in range(d.n_dofs):
-        if _dof_in(d, s, e, j, k):
-            pivot = A[s, e, j, j]
-            for c in range(j):
-                if _dof_in(d, s, e, c, k):
-                    pivot -= A[s, e, j, c] * A[s, e, j, c]
-            deficient = pivot < MINVAL
-            if deficient:
-                pivot = MINVAL
-            ljj = ti.sqrt(pivot)
-            A[s, e, j, j] = ljj
-            inv = 1.0 / ljj
-            for i in range(j + 1, d.n_dofs):
-                if _dof_in(d, s, e, i, k):
-                    if deficient:
-                        A[s, e, i, j] = 0.0
-                    else:
-                        acc = A[s, e, i, j]
-                        for c in range(j):
-                            if _dof_in(d, s, e, c, k):
-                                acc -= A[s, e, i, c] * A[s, e, j, c]
-                        A[s, e, i, j] = acc * inv
+def _envelope(d: ti.template(), s, e, n):
+    """solver_first[a] ← the first position b ≤ a (in solver_dofs) where row a of solver_H's lower
+    triangle is non-zero. A Cholesky factor keeps every zero left of this envelope (no fill-in
+    there), so the factor and solves below skip those columns: free bodies stacked in a chain
+    give a banded H."""
+    for a in range(n):
+        i = d.solver_dofs[s, e, a]
+        b = 0
+        while b < a and d.solver_H[s, e, i, d.solver_dofs[s, e, b]] == 0.0:
+            b += 1
+        d.solver_first[s, e, a] = b
 
 
 @ti.func
-def cholesky_solve(d: ti.template(), L: ti.template(), x: ti.template(), s, e, k):
-    """In place, x[s, e] ← (L Lᵀ)⁻¹ x[s, e] on island k's dofs (L from ``_cholesky``)."""
+def _cholesky(d: ti.template(), s, e, n):
+    """In place, solver_H (lower triangle of a symmetric positive matrix on the n dofs of
+    solver_dofs, envelope in solver_first) ← its Cholesky factor L. As mju_cholFactor, a pivot
+    below MINVAL is raised to MINVAL and its column cleared."""
+    for b in range(n):
+        j, fb = d.solver_dofs[s, e, b], d.solver_first[s, e, b]
+        pivot = d.solver_H[s, e, j, j]
+        for c in range(fb, b):
+            ljc = d.solver_H[s, e, j, d.solver_dofs[s, e, c]]
+            pivot -= ljc * ljc
+        deficient = pivot < MINVAL
+        if deficient:
+            pivot = MINVAL
+        ljj = ti.sqrt(pivot)
+        d.solver_H[s, e, j, j] = ljj
+        inv = 1.0 / ljj
+        for a in range(b + 1, n):
+            fa = d.solver_first[s, e, a]
+            if fa <= b:  # else L[a, b] stays 0
+                i = d.solver_dofs[s, e, a]
+                if deficient:
+                    d.solver_H[s, e, i, j] = 0.0
+                else:
+                    acc = d.solver_H[s, e, i, j]
+                    for c in range(ti.max(fa, fb), b):
+                        col = d.solver_dofs[s, e, c]
+                        acc -= d.solver_H[s, e, i, col] * d.solver_H[s, e, j, col]
+                    d.solver_H[s, e, i, j] = acc * inv
+
+
+@ti.func
+def _factor_solve(d: ti.template(), x: ti.template(), s, e, n):
+    """In place, x[s, e] ← (L Lᵀ)⁻¹ x[s, e] on the n dofs of solver_dofs (L in solver_H from
+    ``_cholesky``, envelope in solver_first)."""
+    for a in range(n):
+        i = d.solver_dofs[s, e, a]
+        acc = x[s, e, i]
+        for b in range(d.solver_first[s, e, a], a):
+            j = d.solver_dofs[s, e, b]
+            acc -= d.solver_H[s, e, i, j] * x[s, e, j]
+        x[s, e, i] = acc / d.solver_H[s, e, i, i]
+    for q in range(n):
+        a = n - 1 - q
+        i = d.solver_dofs[s, e, a]
+        acc = x[s, e, i]
+        for b in range(a + 1, n):
+            if d.solver_first[s, e, b] <= a:
+                j = d.solver_dofs[s, e, b]
+                acc -= d.solver_H[s, e, j, i] * x[s, e, j]
+        x[s, e, i] = acc / d.solver_H[s, e, i, i]
+
+
+@ti.func
+def cholesky_solve(d: ti.template(), L: ti.template(), x: ti.template(), s, e):
+    """In place, x[s, e] ← (L Lᵀ)⁻¹ x[s, e] on every dof (L lower triangular, (D, D)): the
+    backward's solve with the final factor."""
     for i in range(d.n_dofs):
-        if _dof_in(d, s, e, i, k):
-            acc = x[s, e, i]
-            for j in range(i):
-                if _dof_in(d, s, e, j, k):
-                    acc -= L[s, e, i, j] * x[s, e, j]
-            x[s, e, i] = acc / L[s, e, i, i]
+        acc = x[s, e, i]
+        for j in range(i):
+            acc -= L[s, e, i, j] * x[s, e, j]
+        x[s, e, i] = acc / L[s, e, i, i]
     for q in range(d.n_dofs):
         i = d.n_dofs - 1 - q
-        if _dof_in(d, s, e, i, k):
-            acc = x[s, e, i]
-            for j in range(i + 1, d.n_dofs):
-                if _dof_in(d, s, e, j, k):
-                    acc -= L[s, e, j, i] * x[s, e, j]
-            x[s, e, i] = acc / L[s, e, i, i]
+        acc = x[s, e, i]
+        for j in range(i + 1, d.n_dofs):
+            acc -= L[s, e, j, i] * x[s, e, j]
+        x[s, e, i] = acc / L[s, e, i, i]
 
 
 @ti.func
-def _dot(d: ti.template(), a: ti.template(), b: ti.template(), s, e, k):
-    """a[s, e] · b[s, e] over island k's dofs."""
+def _dot(d: ti.template(), a: ti.template(), b: ti.template(), s, e, n):
+    """a[s, e] · b[s, e] over the n dofs of solver_dofs."""
     acc = 0.0
-    for i in range(d.n_dofs):
-        if _dof_in(d, s, e, i, k):
-            acc += a[s, e, i] * b[s, e, i]
+    for p in range(n):
+        i = d.solver_dofs[s, e, p]
+        acc += a[s, e, i] * b[s, e, i]
     return acc
 
 
 @ti.func
-def _mul_M(d: ti.template(), s, e, k, x: ti.template(), out: ti.template()):
-    """out[s, e] ← M x[s, e] on island k's dofs (M couples no two islands)."""
-    for i in range(d.n_dofs):
-        if _dof_in(d, s, e, i, k):
-            acc = 0.0
-            for j in range(d.n_dofs):
-                acc += d.solver_M[s, e, i, j] * x[s, e, j]
-            out[s, e, i] = acc
+def _mul_M(d: ti.template(), s, e, n, x: ti.template(), out: ti.template()):
+    """out[s, e] ← M x[s, e] on the n dofs of solver_dofs (an island: M couples no two islands)."""
+    for p in range(n):
+        i = d.solver_dofs[s, e, p]
+        acc = 0.0
+        for q in range(n):
+            j = d.solver_dofs[s, e, q]
+            acc += d.solver_M[s, e, i, j] * x[s, e, j]
+        out[s, e, i] = acc
 
 
 @ti.func
-def _set_jar(d: ti.template(), s, e, k):
-    """jar ← J qacc − aref on island k's rows (all their rows, elliptic tails included)."""
-    for r in range(d.n_efc[s, e, 0]):
-        if d.efc_type[s, e, r] != UNUSED and (k == ALL or d.solver_row_island[s, e, r] == k):
-            acc = 0.0
-            for i in range(d.n_dofs):
-                acc += d.efc_J[s, e, r, i] * d.qacc[s, e, i]
-            d.solver_jar[s, e, r] = acc - d.efc_aref[s, e, r]
+def _set_jar(d: ti.template(), s, e, m):
+    """jar ← J qacc − aref on the m rows of solver_rows."""
+    for q in range(m):
+        r = d.solver_rows[s, e, q]
+        d.solver_jar[s, e, r] = _row_dot(d, s, e, r, d.qacc) - d.efc_aref[s, e, r]
 
 
 # ----------------------------------------------------------------------------- cost pieces
@@ -244,13 +297,14 @@ def _cone_zone(N, Tsqr, mu):
 
 
 @ti.func
-def _update_constraints(d: ti.template(), s, e, k):
-    """mj_constraintUpdate on island k's rows: efc_state and efc_force from solver_jar.
+def _update_constraints(d: ti.template(), s, e, m):
+    """mj_constraintUpdate on the m rows of solver_rows: efc_state and efc_force from solver_jar.
     Returns the constraint cost Σ s(jar)."""
     cost = 0.0
-    for r in range(d.n_efc[s, e, 0]):
-        if _row_in(d, s, e, r, k):
-            t = d.efc_type[s, e, r]
+    for q in range(m):
+        r = d.solver_rows[s, e, q]
+        t = d.efc_type[s, e, r]
+        if t != ELLIPTIC_REST:  # a block counts by its first row
             jar, R = d.solver_jar[s, e, r], d.efc_R[s, e, r]
             D = 1.0 / R
             if t == FRICTION_LOSS:
@@ -339,54 +393,66 @@ def cone_hessian_entry(d: ti.template(), s, e, r, a, b, N, T):
 
 
 @ti.func
-def _factor_hessian(d: ti.template(), s, e, k):
-    """solver_H ← Cholesky factor of island k's H = M + Jᵀ D_quadratic J + cone blocks."""
-    for i in range(d.n_dofs):
-        if _dof_in(d, s, e, i, k):
-            for j in range(i + 1):
-                if _dof_in(d, s, e, j, k):
-                    d.solver_H[s, e, i, j] = d.solver_M[s, e, i, j]
-    for r in range(d.n_efc[s, e, 0]):
-        if d.efc_type[s, e, r] != UNUSED and d.solver_row_island[s, e, r] == k:
-            if d.efc_state[s, e, r] == QUADRATIC:
-                D = 1.0 / d.efc_R[s, e, r]
-                for i in range(d.n_dofs):
-                    DJi = D * d.efc_J[s, e, r, i]
-                    if DJi != 0.0:
-                        for j in range(i + 1):
-                            d.solver_H[s, e, i, j] += DJi * d.efc_J[s, e, r, j]
-            if d.efc_type[s, e, r] == ELLIPTIC_FIRST and d.efc_state[s, e, r] == CONE:
-                _add_cone_hessian(d, s, e, r)
-    _cholesky(d, d.solver_H, s, e, k)
+def _factor_hessian(d: ti.template(), s, e, n, m):
+    """solver_H ← Cholesky factor of H = M + Jᵀ D_quadratic J + cone blocks on the n dofs of
+    solver_dofs and the m rows of solver_rows (an island's)."""
+    for a in range(n):
+        i = d.solver_dofs[s, e, a]
+        for b in range(a + 1):
+            j = d.solver_dofs[s, e, b]
+            d.solver_H[s, e, i, j] = d.solver_M[s, e, i, j]
+    for q in range(m):
+        r = d.solver_rows[s, e, q]
+        if d.efc_state[s, e, r] == QUADRATIC:
+            _add_outer(d, s, e, r, r, 1.0 / d.efc_R[s, e, r])
+        if d.efc_type[s, e, r] == ELLIPTIC_FIRST and d.efc_state[s, e, r] == CONE:
+            _add_cone_hessian(d, s, e, r)
+    _envelope(d, s, e, n)
+    _cholesky(d, s, e, n)
+
+
+@ti.func
+def _add_outer(d: ti.template(), s, e, ra, rb, h):
+    """solver_H += h J_raᵀ J_rb (lower triangle) over the non-zero columns the two rows share
+    (rows of one contact). The terms go in the dense order (i, then j ≤ i), zeros skipped."""
+    col0 = d.efc_col0[s, e, ra]
+    for a in range(d.efc_ncol[s, e, ra]):
+        i = d.efc_cols[s, e, col0 + a]
+        hJ = h * d.efc_J[s, e, ra, i]
+        if hJ != 0.0:
+            for b in range(a + 1):
+                j = d.efc_cols[s, e, col0 + b]
+                # written out: an array's += is an atomic add in Taichi (a locked loop on the CPU)
+                d.solver_H[s, e, i, j] = d.solver_H[s, e, i, j] + hJ * d.efc_J[s, e, rb, j]
 
 
 @ti.func
 def _add_cone_hessian(d: ti.template(), s, e, r):
     """solver_H += J_cᵀ H_c J_c for the elliptic block at row r (middle zone)."""
-    dim, mu = d.efc_dim[s, e, r], d.efc_mu[s, e, r]
+    dim = d.efc_dim[s, e, r]
     N, Tsqr = cone_coordinates(d, s, e, r)
     T = ti.sqrt(Tsqr)
     for a in range(dim):
         for b in range(dim):
-            h = cone_hessian_entry(d, s, e, r, a, b, N, T)
-            for i in range(d.n_dofs):
-                hJ = h * d.efc_J[s, e, r + a, i]
-                if hJ != 0.0:
-                    for j in range(i + 1):
-                        d.solver_H[s, e, i, j] += hJ * d.efc_J[s, e, r + b, j]
+            _add_outer(d, s, e, r + a, r + b, cone_hessian_entry(d, s, e, r, a, b, N, T))
 
 
 @ti.func
-def _update_gradient(d: ti.template(), s, e, k):
-    """qfrc_constraint = Jᵀ f and grad = M qacc − qfrc_smooth − qfrc_constraint on island k."""
-    for i in range(d.n_dofs):
-        if _dof_in(d, s, e, i, k):
-            acc = 0.0
-            for r in range(d.n_efc[s, e, 0]):
-                if d.efc_type[s, e, r] != UNUSED and d.solver_row_island[s, e, r] == k:
-                    acc += d.efc_J[s, e, r, i] * d.efc_force[s, e, r]
-            d.qfrc_constraint[s, e, i] = acc
-            d.solver_grad[s, e, i] = d.solver_Ma[s, e, i] - d.qfrc_smooth[s, e, i] - acc
+def _update_gradient(d: ti.template(), s, e, n, m):
+    """qfrc_constraint = Jᵀ f and grad = M qacc − qfrc_smooth − qfrc_constraint on the n dofs of
+    solver_dofs (rows: the m of solver_rows, scattered in row order)."""
+    for p in range(n):
+        d.qfrc_constraint[s, e, d.solver_dofs[s, e, p]] = 0.0
+    for q in range(m):
+        r = d.solver_rows[s, e, q]
+        f = d.efc_force[s, e, r]
+        col0 = d.efc_col0[s, e, r]
+        for a in range(d.efc_ncol[s, e, r]):
+            i = d.efc_cols[s, e, col0 + a]
+            d.qfrc_constraint[s, e, i] = d.qfrc_constraint[s, e, i] + d.efc_J[s, e, r, i] * f
+    for p in range(n):
+        i = d.solver_dofs[s, e, p]
+        d.solver_grad[s, e, i] = d.solver_Ma[s, e, i] - d.qfrc_smooth[s, e, i] - d.qfrc_constraint[s, e, i]
 
 
 # ----------------------------------------------------------------------------- line search
@@ -495,14 +561,16 @@ def _eval_cone(d: ti.template(), s, e, r, alpha):
 
 
 @ti.func
-def _eval(d: ti.template(), s, e, k, alpha, gauss1, gauss2):
-    """Point (α, cost(α) − cost(0), d/dα, d²/dα²) of island k's cost along solver_search
-    (MuJoCo's PrimalEval); gauss1, gauss2: the Gauss term's linear and quadratic coefficients."""
+def _eval(d: ti.template(), s, e, m, alpha, gauss1, gauss2):
+    """Point (α, cost(α) − cost(0), d/dα, d²/dα²) of the island's cost (rows: the m of
+    solver_rows) along solver_search (MuJoCo's PrimalEval); gauss1, gauss2: the Gauss term's
+    linear and quadratic coefficients."""
     cost, d0, d1 = 0.0, 0.0, 0.0
     quad = ti.Vector([0.0, gauss1, gauss2])  # summed active quadratics, shifted by cost(0)
-    for r in range(d.n_efc[s, e, 0]):
-        if _row_in(d, s, e, r, k):
-            t = d.efc_type[s, e, r]
+    for q in range(m):
+        r = d.solver_rows[s, e, q]
+        t = d.efc_type[s, e, r]
+        if t != ELLIPTIC_REST:
             jar, jv = d.solver_jar[s, e, r], d.solver_Jv[s, e, r]
             D = 1.0 / d.efc_R[s, e, r]
             if t == FRICTION_LOSS:
@@ -564,23 +632,21 @@ _P0, _P1_FIRST, _P1_ONE_SIDED, _P1_NEXT_SETUP, _MID, _P1_NEXT, _P2_NEXT, _BRACKE
 
 
 @ti.func
-def _line_search(d: ti.template(), s, e, k, tolerance, ls_iterations, scale):
-    """Exact line search of island k along solver_search (MuJoCo's PrimalSearch), written as one
-    loop with a single evaluation site. Sets solver_Mv and solver_Jv. Returns (α, improvement =
-    cost(0) − cost(α)); α = 0 when the search is degenerate or nothing improves."""
-    snorm = ti.sqrt(_dot(d, d.solver_search, d.solver_search, s, e, k))
+def _line_search(d: ti.template(), s, e, n, m, tolerance, ls_iterations, scale):
+    """Exact line search of the island (solver_dofs, solver_rows: n dofs, m rows) along
+    solver_search (MuJoCo's PrimalSearch), written as one loop with a single evaluation site.
+    Sets solver_Mv and solver_Jv. Returns (α, improvement = cost(0) − cost(α)); α = 0 when the
+    search is degenerate or nothing improves."""
+    snorm = ti.sqrt(_dot(d, d.solver_search, d.solver_search, s, e, n))
     alpha, improvement = 0.0, 0.0
     if snorm >= MINVAL:
         gtol = tolerance * snorm / scale
-        _mul_M(d, s, e, k, d.solver_search, d.solver_Mv)
-        for r in range(d.n_efc[s, e, 0]):
-            if d.efc_type[s, e, r] != UNUSED and d.solver_row_island[s, e, r] == k:
-                acc = 0.0
-                for i in range(d.n_dofs):
-                    acc += d.efc_J[s, e, r, i] * d.solver_search[s, e, i]
-                d.solver_Jv[s, e, r] = acc
-        gauss1 = _dot(d, d.solver_search, d.solver_Ma, s, e, k) - _dot(d, d.qfrc_smooth, d.solver_search, s, e, k)
-        gauss2 = 0.5 * _dot(d, d.solver_search, d.solver_Mv, s, e, k)
+        _mul_M(d, s, e, n, d.solver_search, d.solver_Mv)
+        for q in range(m):
+            r = d.solver_rows[s, e, q]
+            d.solver_Jv[s, e, r] = _row_dot(d, s, e, r, d.solver_search)
+        gauss1 = _dot(d, d.solver_search, d.solver_Ma, s, e, n) - _dot(d, d.qfrc_smooth, d.solver_search, s, e, n)
+        gauss2 = 0.5 * _dot(d, d.solver_search, d.solver_Mv, s, e, n)
 
         zero = ti.Vector([0.0, 0.0, 0.0, 0.0])
         p0, p1, p2, p1next, p2next, pmid, best = zero, zero, zero, zero, zero, zero, zero
@@ -598,7 +664,7 @@ def _line_search(d: ti.template(), s, e, k, tolerance, ls_iterations, scale):
                     else:
                         best = p0
                 continue
-            p = _eval(d, s, e, k, x, gauss1, gauss2)
+            p = _eval(d, s, e, m, x, gauss1, gauss2)
             n_eval += 1
             if phase == _P0:
                 p0, x, phase = p, _newton_point(p), _P1_FIRST
@@ -653,18 +719,19 @@ def _line_search(d: ti.template(), s, e, k, tolerance, ls_iterations, scale):
 def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iterations, ls_tolerance):
     """Newton iterations on island k from the current qacc (mj_solPrimal); returns their count.
     Leaves qacc, efc_force/state, qfrc_constraint and the factored final H of the island."""
+    n, m = _select(d, s, e, k)
     inertia = 0.0
-    for i in range(d.n_dofs):
-        if _dof_in(d, s, e, i, k):
-            inertia += d.solver_M[s, e, i, i]
+    for p in range(n):
+        i = d.solver_dofs[s, e, p]
+        inertia += d.solver_M[s, e, i, i]
     scale = 1.0 / inertia
-    _mul_M(d, s, e, k, d.qacc, d.solver_Ma)
-    _set_jar(d, s, e, k)
+    _mul_M(d, s, e, n, d.qacc, d.solver_Ma)
+    _set_jar(d, s, e, m)
     niter, first, improvement = 0, 1, 0.0
     while True:
-        _update_constraints(d, s, e, k)
-        _update_gradient(d, s, e, k)
-        gradient = scale * ti.sqrt(_dot(d, d.solver_grad, d.solver_grad, s, e, k))
+        _update_constraints(d, s, e, m)
+        _update_gradient(d, s, e, n, m)
+        gradient = scale * ti.sqrt(_dot(d, d.solver_grad, d.solver_grad, s, e, n))
         # The island's block of solver_H holds M's factor until its first Hessian: the first
         # pass solves with it for the duality gap ½ gᵀM⁻¹g (a good warm start needs no Newton
         # step), then with H for the Newton decrement ½ gᵀH⁻¹g; later passes only with H.
@@ -672,12 +739,14 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
         n_solves = 1 + first
         for attempt in range(n_solves):
             if attempt == n_solves - 1:
-                _factor_hessian(d, s, e, k)  # also where the certificate stops: the backward needs it
-            for i in range(d.n_dofs):
-                if _dof_in(d, s, e, i, k):
-                    d.solver_Mgrad[s, e, i] = d.solver_grad[s, e, i]
-            cholesky_solve(d, d.solver_H, d.solver_Mgrad, s, e, k)
-            decrement = ti.max(0.0, 0.5 * scale * _dot(d, d.solver_grad, d.solver_Mgrad, s, e, k))
+                _factor_hessian(d, s, e, n, m)  # also where the certificate stops: the backward needs it
+            else:  # M's factor, in the island's positions
+                _envelope(d, s, e, n)
+            for p in range(n):
+                i = d.solver_dofs[s, e, p]
+                d.solver_Mgrad[s, e, i] = d.solver_grad[s, e, i]
+            _factor_solve(d, d.solver_Mgrad, s, e, n)
+            decrement = ti.max(0.0, 0.5 * scale * _dot(d, d.solver_grad, d.solver_Mgrad, s, e, n))
             if attempt == 0 and first:
                 certificate = decrement < tolerance and gradient < tolerance
         stop = 0
@@ -690,35 +759,36 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
                 or decrement < tolerance
         if stop or niter >= iterations:
             break
-        for i in range(d.n_dofs):
-            if _dof_in(d, s, e, i, k):
-                d.solver_search[s, e, i] = -d.solver_Mgrad[s, e, i]
-        alpha, ls_improvement = _line_search(d, s, e, k, tolerance * ls_tolerance, ls_iterations, scale)
+        for p in range(n):
+            i = d.solver_dofs[s, e, p]
+            d.solver_search[s, e, i] = -d.solver_Mgrad[s, e, i]
+        alpha, ls_improvement = _line_search(d, s, e, n, m, tolerance * ls_tolerance, ls_iterations, scale)
         if alpha == 0.0:
             break
-        for i in range(d.n_dofs):
-            if _dof_in(d, s, e, i, k):
-                d.qacc[s, e, i] += alpha * d.solver_search[s, e, i]
-                d.solver_Ma[s, e, i] += alpha * d.solver_Mv[s, e, i]
-        for r in range(d.n_efc[s, e, 0]):
-            if d.efc_type[s, e, r] != UNUSED and d.solver_row_island[s, e, r] == k:
-                d.solver_jar[s, e, r] += alpha * d.solver_Jv[s, e, r]
+        for p in range(n):
+            i = d.solver_dofs[s, e, p]
+            d.qacc[s, e, i] = d.qacc[s, e, i] + alpha * d.solver_search[s, e, i]
+            d.solver_Ma[s, e, i] = d.solver_Ma[s, e, i] + alpha * d.solver_Mv[s, e, i]
+        for q in range(m):
+            r = d.solver_rows[s, e, q]
+            d.solver_jar[s, e, r] = d.solver_jar[s, e, r] + alpha * d.solver_Jv[s, e, r]
         improvement = scale * ls_improvement
     return niter
 
 
 @ti.func
-def _warm_start(d: ti.template(), s, e):
+def _warm_start(d: ti.template(), s, e, n, m):
     """qacc ← qacc_warmstart if its total cost is not above the constraint cost of qacc_smooth
-    (the Gauss term vanishes there), else qacc_smooth; unconstrained dofs take qacc_smooth."""
+    (the Gauss term vanishes there), else qacc_smooth; unconstrained dofs take qacc_smooth.
+    solver_dofs and solver_rows hold every dof (n) and used row (m)."""
     cost_warm, cost_smooth = 0.0, 0.0
     for trial in range(2):  # 0: the warm start, 1: qacc_smooth
         for i in range(d.n_dofs):
             d.qacc[s, e, i] = d.qacc_warmstart[e, i] if trial == 0 else d.qacc_smooth[s, e, i]
-        _set_jar(d, s, e, ALL)
-        cost = _update_constraints(d, s, e, ALL)
+        _set_jar(d, s, e, m)
+        cost = _update_constraints(d, s, e, m)
         if trial == 0:
-            _mul_M(d, s, e, ALL, d.qacc, d.solver_Ma)
+            _mul_M(d, s, e, n, d.qacc, d.solver_Ma)
             for i in range(d.n_dofs):
                 cost += 0.5 * (d.solver_Ma[s, e, i] - d.qfrc_smooth[s, e, i]) \
                     * (d.qacc[s, e, i] - d.qacc_smooth[s, e, i])
@@ -735,7 +805,8 @@ def newton_solve(d: ti.template(), s, e, iterations, tolerance, ls_iterations, l
     """Constrained acceleration of env e at substep frame s (see the module docstring).
 
     Reads solver_M (D, D) kg·m² / kg, qfrc_smooth (D,) N·m / N, the n_efc[s, e, 0] rows efc_type, efc_dim,
-    efc_mu, efc_J (R, D), efc_R, efc_aref, efc_floss, qacc_warmstart[e] (D,) and dof_parent.
+    efc_mu, efc_J (R, D) with their non-zero columns (efc_col0, efc_ncol, efc_cols), efc_R, efc_aref,
+    efc_floss, qacc_warmstart[e] (D,) and dof_parent.
     Writes qacc_smooth, qacc (D,) rad/s² / m/s², efc_force (R,), efc_state (R,), qfrc_constraint
     (D,), solver_niter, and the SCRATCH arrays (solver_H: the final Hessian's factor).
     iterations, ls_iterations: limits; tolerance, ls_tolerance: MuJoCo's opt values."""
@@ -747,11 +818,13 @@ def newton_solve(d: ti.template(), s, e, iterations, tolerance, ls_iterations, l
         d.qfrc_constraint[s, e, i] = 0.0
     # M's factor: qacc_smooth now; each island replaces its block with its Hessian's factor,
     # unconstrained dofs keep it (H = M there)
-    _cholesky(d, d.solver_H, s, e, ALL)
-    cholesky_solve(d, d.solver_H, d.qacc_smooth, s, e, ALL)
+    n, m = _select(d, s, e, ALL)
+    _envelope(d, s, e, n)
+    _cholesky(d, s, e, n)
+    _factor_solve(d, d.qacc_smooth, s, e, n)
     for r in range(d.n_efc[s, e, 0]):
         d.efc_force[s, e, r], d.efc_state[s, e, r] = 0.0, SATISFIED
-    _warm_start(d, s, e)
+    _warm_start(d, s, e, n, m)
     niter = 0
     for k in range(d.n_dofs):
         if d.solver_tree[s, e, k] == k:  # k is an island's canonical root
