@@ -331,6 +331,8 @@ class Camera:
         recording, self._recording = self._recording, None
         if recording is not None and recording.streamed and recording.n_frames:
             recording.save(*recording.target())
+        elif recording is not None and not recording.streamed:
+            recording.discard()
 
     def __repr__(self):
         return f"Camera(idx={self._idx}, res={self._res}, pos={self._pos.tolist()}, lookat={self._lookat.tolist()})"

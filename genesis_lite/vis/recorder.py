@@ -8,7 +8,10 @@ says which the user picks):
   it to ffmpeg, which encodes in its own process while the caller goes on rendering; memory stays
   bounded (QUEUE_FRAMES frames at most wait);
 - buffered, when the file is named as recording stops (``stop_recording(save_to_filename, fps)``):
-  the frames are kept in memory (the camera hands over fresh uint8 arrays: no copy) and encoded then.
+  the frames are encoded all the same as they come, into a temporary raw H.264 stream, and kept in
+  memory too (the camera hands over fresh uint8 arrays: no copy) in case a GIF is asked for. An MP4
+  is then that stream wrapped at the frame rate given (no re-encoding: milliseconds); encoding it
+  all at the end cost 1.8–4.5 ms a frame, up to +29 % on a rendered rollout.
 
 MP4: libx264, yuv420p so that every player reads it; yuv420p needs an even width and height, so an
 odd one gets a black column or row of padding. Preset ultrafast (crf 23): 2 ms a 640×480 frame on
@@ -18,7 +21,11 @@ its frames wait in memory until the file is written (Pillow writes a GIF at once
 """
 import os
 import queue
+import subprocess
+import tempfile
 import threading
+import weakref
+from fractions import Fraction
 
 import imageio.v3 as iio
 import imageio_ffmpeg
@@ -52,11 +59,12 @@ def check_target(owner, filename, fps):
 
 
 class _Mp4Writer:
-    """Frames (H, W, 3) uint8 piped to an ffmpeg process writing an H.264 MP4."""
+    """Frames (H, W, 3) uint8 piped to an ffmpeg process writing an H.264 MP4 (raw: a bare H.264
+    stream, for mux_h264)."""
 
-    def __init__(self, filename, fps, res):
+    def __init__(self, filename, fps, res, raw=False):
         width, height = res
-        extra = _EVEN if width % 2 or height % 2 else []
+        extra = (_EVEN if width % 2 or height % 2 else []) + (["-f", "h264"] if raw else [])
         self._encoder = imageio_ffmpeg.write_frames(filename, (width, height), fps=fps, codec="libx264",
                                                     pix_fmt_in="rgb24", pix_fmt_out="yuv420p", quality=None,
                                                     macro_block_size=1, output_params=_X264 + extra,
@@ -81,6 +89,16 @@ class _GifWriter:
 
     def close(self):
         iio.imwrite(self._filename, np.stack(self._frames), extension=".gif", duration=1000.0 / self._fps, loop=0)
+
+
+def mux_h264(raw, filename, fps):
+    """The MP4 ``filename`` from the raw H.264 stream in the file ``raw``, at ``fps`` frames/s,
+    without re-encoding: the frames' timestamps follow -r, and the stream's own timing (x264 wrote
+    the rate it encoded at) is rewritten to match, so that players and readers see fps."""
+    tick = Fraction(2 * fps).limit_denominator(1_000_000)  # H.264 counts two ticks a frame
+    subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-loglevel", "error", "-r", str(fps), "-i", raw, "-c",
+                    "copy", "-bsf:v", f"h264_metadata=tick_rate={tick.numerator}/{tick.denominator}", filename],
+                   check=True, capture_output=True)
 
 
 def _open_writer(filename, fps, res):
@@ -125,30 +143,32 @@ class Recording:
     def __init__(self, owner, res, filename=None, fps=None):
         self.owner, self.res, self.n_frames = owner, res, 0
         self.streamed = filename is not None
-        self._frames, self._stream = [], None
+        self._frames = []
         if self.streamed:
             self.filename, self.fps = check_target(owner, filename, fps)
             self._stream = _Stream(self._writer(self.filename, self.fps))
+        else:  # encoded meanwhile into a temporary raw stream (removed when saved, dropped or collected)
+            handle, self._raw = tempfile.mkstemp(suffix=".h264")
+            os.close(handle)
+            self._remove_raw = weakref.finalize(self, _remove, self._raw)
+            self._stream = _Stream(self._writer(self._raw, DEFAULT_FPS, raw=True))
 
-    def _writer(self, filename, fps):
+    def _writer(self, filename, fps, raw=False):
         try:
-            return _open_writer(filename, fps, self.res)
+            return _Mp4Writer(filename, fps, self.res, raw) if raw else _open_writer(filename, fps, self.res)
         except Exception as error:
             raise AssetError(f"{self.owner}: cannot write video file {filename!r}: {error}") from error
 
     def add(self, frame):
         """Append a frame: (H, W, 3) uint8, not modified afterwards by the caller."""
-        if self.streamed:
-            self._put(frame)
-        else:
+        if not self.streamed:
             self._frames.append(frame)
-        self.n_frames += 1
-
-    def _put(self, frame):
         try:
             self._stream.put(frame)
         except Exception as error:
-            raise AssetError(f"{self.owner}: writing video file {self.filename!r} failed: {error}") from error
+            target = self.filename if self.streamed else self._raw
+            raise AssetError(f"{self.owner}: writing video file {target!r} failed: {error}") from error
+        self.n_frames += 1
 
     def target(self, filename=None, fps=None):
         """The (file, fps) save writes: the ones named at start (both arguments must then be None),
@@ -167,17 +187,38 @@ class Recording:
         if self.streamed:
             self._finish(self._stream.close, filename)
             return
-        writer = self._writer(filename, fps)
 
-        def write_all():
-            for frame in self._frames:
-                writer.write(frame)
-            writer.close()
-        self._finish(write_all, filename)
+        def write():
+            self._stream.close()
+            if filename.lower().endswith(".mp4"):
+                mux_h264(self._raw, filename, fps)
+            else:
+                writer = _open_writer(filename, fps, self.res)
+                for frame in self._frames:
+                    writer.write(frame)
+                writer.close()
+        try:
+            self._finish(write, filename)
+        finally:
+            self._frames = []
+            self._remove_raw()
+
+    def discard(self):
+        """Drop a buffered recording (no file is written)."""
+        try:
+            self._stream.close()
+        except Exception:  # nothing is kept of it: an encoder's failure does not matter any more
+            pass
         self._frames = []
+        self._remove_raw()
 
     def _finish(self, finish, filename):
         try:
             finish()
         except Exception as error:
             raise AssetError(f"{self.owner}: writing video file {filename!r} failed: {error}") from error
+
+
+def _remove(path):
+    if os.path.exists(path):
+        os.remove(path)
