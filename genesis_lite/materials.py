@@ -1,8 +1,9 @@
-"""Materials (Genesis names)."""
+"""Materials (Genesis names): ``Rigid`` and the ``MPM`` namespace."""
 from dataclasses import dataclass
 
 import numpy as np
 
+from .options import _keywords
 from .solvers.core import InvalidInputError
 
 
@@ -27,3 +28,248 @@ class Rigid:
 def _is_real(value):
     """A real number (not a bool, string or array)."""
     return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
+
+# -- MPM ----------------------------------------------------------------------------------------------------------
+
+#: the particle samplers genesis_lite implements (solvers/mpm/sampling.py)
+MPM_SAMPLERS = ("regular", "random")
+
+
+def _mpm_real(owner, name, value, ok, expected):
+    """``value`` as a float after checking it is a finite real number with ``ok(value)``."""
+    if not (_is_real(value) and np.isfinite(value) and ok(float(value))):
+        raise InvalidInputError(f"{owner}: argument '{name}' must be {expected}, got {value!r}")
+    return float(value)
+
+
+def _mpm_bool(owner, name, value):
+    if not isinstance(value, (bool, np.bool_)):
+        raise InvalidInputError(f"{owner}: argument '{name}' must be True or False, got {value!r}")
+    return bool(value)
+
+
+def _mpm_choice(owner, name, value, choices):
+    if value not in choices:
+        raise InvalidInputError(f"{owner}: argument '{name}' must be one of {list(choices)}, got {value!r}")
+    return value
+
+
+def _mpm_sampler(owner, value):
+    """Our samplers; Genesis's physics-based 'pbs' / 'pbs-<res>' raise rather than being replaced."""
+    if isinstance(value, str) and (value == "pbs" or (value.startswith("pbs-") and value[4:].isdigit())):
+        raise InvalidInputError(f"{owner}: argument 'sampler' {value!r} (Genesis's physics-based sampler) is not "
+                                f"implemented in genesis_lite; expected one of {list(MPM_SAMPLERS)} ('regular': a "
+                                f"lattice at particle_size spacing, the closest to pbs's even spacing)")
+    return _mpm_choice(owner, "sampler", value, MPM_SAMPLERS)
+
+
+class MPM:
+    """``gs.materials.MPM``: the MPM materials (Genesis 1.4.5's classes, arguments and defaults).
+
+    Every material takes E (Young's modulus, Pa, > 0), nu (Poisson ratio, in (−1, 0.5)),
+    rho (density, kg/m³, > 0), lam / mu (Lamé parameters, Pa; None: from E and nu) and sampler,
+    keywords only. The solver reads: ``solver_kind`` (a layout.KIND name), ``solver_params()``
+    (the material's non-differentiable constants, Genesis's names), ``E``, ``nu``, ``rho`` (the
+    per-particle inputs' initial values) and ``default_Jp`` (the particles' initial Jp).
+
+    Differences from Genesis:
+    - sampler: "regular" (a lattice, Genesis's "regular" layout) or "random" (uniform, from a
+      generator seeded per entity: deterministic). Genesis's default "pbs" (physics-based, Linux
+      x86 only) is not implemented and raises; the default is "regular" where Genesis's is
+      "pbs", and "random" where Genesis's is (Snow, Sand).
+    - lam / mu, when given, define the material: E and nu are recomputed from them (Genesis's
+      stress reads lam and mu and ignores E and nu), since our solver takes E and nu per
+      particle. Muscle refuses them (its fibre stiffness is E).
+    - ranges Genesis does not check: yield_lower in [0, 1) (1 − yield_lower clamps singular
+      values, which must stay positive), friction_angle in (0°, 90°).
+    """
+
+    @_keywords()
+    @dataclass(kw_only=True)
+    class Base:
+        """The base class of MPM materials (not to be made directly, as in Genesis)."""
+        E: float = 1e6
+        nu: float = 0.2
+        rho: float = 1000.0
+        lam: float = None
+        mu: float = None
+        sampler: str = "regular"
+
+        def __post_init__(self):
+            owner = self._owner()
+            if type(self) is MPM.Base:
+                raise InvalidInputError(f"{owner}: the base class of MPM materials cannot be used itself; use "
+                                        f"MPM.Elastic, ElastoPlastic, Snow, Sand, Liquid or Muscle")
+            self.E = _mpm_real(owner, "E", self.E, lambda v: v > 0, "a positive finite number (Pa)")
+            self.nu = _mpm_real(owner, "nu", self.nu, lambda v: -1.0 < v < 0.5, "a number in (−1, 0.5)")
+            self.rho = _mpm_real(owner, "rho", self.rho, lambda v: v > 0, "a positive finite number (kg/m³)")
+            self.sampler = _mpm_sampler(owner, self.sampler)
+            self._check(owner)
+            self._resolve_lame(owner)
+
+        def _owner(self):
+            return f"materials.MPM.{type(self).__name__}"
+
+        def _check(self, owner):
+            """Checks of a subclass's own arguments."""
+
+        def _resolve_lame(self, owner):
+            """lam and mu from E and nu (Genesis's formulas), or E and nu from a given lam / mu."""
+            given = [name for name in ("lam", "mu") if getattr(self, name) is not None]
+            for name in given:
+                setattr(self, name, _mpm_real(owner, name, getattr(self, name), lambda v: True, "a finite number (Pa)"))
+            E, nu = self.E, self.nu
+            mu = self.mu if self.mu is not None else E / (2.0 * (1.0 + nu))
+            lam = self.lam if self.lam is not None else E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+            if given:
+                # E > 0 and nu in (−1, 0.5) ⟺ mu > 0 and 3 lam + 2 mu > 0
+                if not (mu > 0 and 3.0 * lam + 2.0 * mu > 0):
+                    raise InvalidInputError(f"{owner}: arguments 'lam' and 'mu' must give mu > 0 and 3·lam + 2·mu > 0 "
+                                            f"(E > 0, nu in (−1, 0.5)), got lam={lam!r}, mu={mu!r}")
+                self.E = mu * (3.0 * lam + 2.0 * mu) / (lam + mu)
+                self.nu = lam / (2.0 * (lam + mu))
+            self.lam, self.mu = lam, mu
+
+        @property
+        def default_Jp(self):
+            """The particles' Jp at rest (a volume ratio; Sand's is a log-volume correction, 0)."""
+            return 1.0
+
+        @property
+        def solver_kind(self):
+            """The constitutive model's name in solvers/mpm/layout.KIND."""
+            raise NotImplementedError
+
+        def solver_params(self):
+            """{name: value} of the material's non-differentiable constants (Genesis's names)."""
+            return {}
+
+    @_keywords()
+    @dataclass(kw_only=True)
+    class Elastic(Base):
+        """Elastic material: model "corotation" (corotated linear) or "neohooken" (neo-Hookean)."""
+        E: float = 3e5
+        model: str = "corotation"
+
+        def _check(self, owner):
+            _mpm_choice(owner, "model", self.model, ("corotation", "neohooken"))
+
+        @property
+        def solver_kind(self):
+            return self.model
+
+    @_keywords()
+    @dataclass(kw_only=True)
+    class ElastoPlastic(Base):
+        """Elasto-plastic material: von Mises yield (use_von_mises, von_mises_yield_stress, Pa) or,
+        without it, singular values of F clamped to [1 − yield_lower, 1 + yield_higher]."""
+        yield_lower: float = 2.5e-2
+        yield_higher: float = 4.5e-3
+        use_von_mises: bool = True
+        von_mises_yield_stress: float = 10000.0
+
+        def _check(self, owner):
+            self.yield_lower = _mpm_real(owner, "yield_lower", self.yield_lower, lambda v: 0 <= v < 1,
+                                         "a number in [0, 1)")
+            self.yield_higher = _mpm_real(owner, "yield_higher", self.yield_higher, lambda v: v >= 0,
+                                          "a finite number ≥ 0")
+            self.use_von_mises = _mpm_bool(owner, "use_von_mises", self.use_von_mises)
+            self.von_mises_yield_stress = _mpm_real(owner, "von_mises_yield_stress", self.von_mises_yield_stress,
+                                                    lambda v: v > 0, "a positive finite number (Pa)")
+
+        @property
+        def solver_kind(self):
+            return "elastoplastic"
+
+        def solver_params(self):
+            return {"yield_lower": self.yield_lower, "yield_higher": self.yield_higher,
+                    "use_von_mises": self.use_von_mises, "von_mises_yield_stress": self.von_mises_yield_stress}
+
+    @_keywords()
+    @dataclass(kw_only=True)
+    class Snow(ElastoPlastic):
+        """Snow: ElastoPlastic's clamp, hardening exp(10 (1 − Jp)) when compressed; no von Mises."""
+        sampler: str = "random"
+        use_von_mises: bool = False
+
+        def _check(self, owner):
+            if self.use_von_mises is not False:
+                raise InvalidInputError(f"{owner}: argument 'use_von_mises' must be False (Snow does not support "
+                                        f"von Mises yield), got {self.use_von_mises!r}")
+            super()._check(owner)
+
+        @property
+        def solver_kind(self):
+            return "snow"
+
+        def solver_params(self):
+            return {"yield_lower": self.yield_lower, "yield_higher": self.yield_higher}
+
+    @_keywords()
+    @dataclass(kw_only=True)
+    class Sand(Base):
+        """Sand: Drucker–Prager plasticity (Klár et al. 2016) with ``friction_angle`` degrees."""
+        sampler: str = "random"
+        friction_angle: float = 45.0
+
+        def _check(self, owner):
+            self.friction_angle = _mpm_real(owner, "friction_angle", self.friction_angle, lambda v: 0 < v < 90,
+                                            "a number of degrees in (0, 90)")
+
+        @property
+        def default_Jp(self):
+            return 0.0
+
+        @property
+        def solver_kind(self):
+            return "sand"
+
+        def solver_params(self):
+            return {"friction_angle": self.friction_angle}
+
+    @_keywords()
+    @dataclass(kw_only=True)
+    class Liquid(Base):
+        """Liquid: pressure lam·J·(J − 1); ``viscous`` keeps the shear term (else mu = 0, as Genesis)."""
+        viscous: bool = False
+
+        def _check(self, owner):
+            self.viscous = _mpm_bool(owner, "viscous", self.viscous)
+
+        def _resolve_lame(self, owner):
+            super()._resolve_lame(owner)
+            if not self.viscous:
+                self.mu = 0.0
+
+        @property
+        def solver_kind(self):
+            return "liquid"
+
+        def solver_params(self):
+            return {"viscous": self.viscous}
+
+    @_keywords()
+    @dataclass(kw_only=True)
+    class Muscle(Elastic):
+        """Muscle: Elastic (model "neohooken" by default) plus the active fibre stress
+        E · actu · F (d ⊗ d) Fᵀ, with ``n_groups`` actuation groups (entity.set_muscle,
+        entity.set_actuation)."""
+        E: float = 1e6
+        model: str = "neohooken"
+        n_groups: int = 1
+
+        def _check(self, owner):
+            super()._check(owner)
+            if not (isinstance(self.n_groups, (int, np.integer)) and not isinstance(self.n_groups, (bool, np.bool_))
+                    and self.n_groups >= 1):
+                raise InvalidInputError(f"{owner}: argument 'n_groups' must be an integer ≥ 1, got {self.n_groups!r}")
+            self.n_groups = int(self.n_groups)
+            if self.lam is not None or self.mu is not None:
+                raise InvalidInputError(f"{owner}: arguments 'lam' and 'mu' are not supported for a muscle (its fibre "
+                                        f"stiffness is E, as Genesis); give E and nu, got lam={self.lam!r}, "
+                                        f"mu={self.mu!r}")
+
+        @property
+        def solver_kind(self):
+            return f"muscle_{self.model}"

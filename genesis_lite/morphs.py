@@ -101,12 +101,26 @@ class URDF(Morph):
 
 @dataclass
 class Box(Morph):
-    """A box; size (3,) full extents, m."""
+    """A box; size (3,) full extents, m. Or, as Genesis, its corners ``lower`` and ``upper``
+    (3,) m, given together, which set pos (their midpoint) and size (their difference) and take
+    priority over both; lower and upper are filled from pos and size otherwise."""
     size: tuple = (1.0, 1.0, 1.0)
+    lower: tuple = None
+    upper: tuple = None
 
     def _check(self):
+        if (self.lower is None) != (self.upper is None):
+            raise InvalidInputError(f"Box: arguments 'lower' and 'upper' must be given together, got lower="
+                                    f"{self.lower!r} and upper={self.upper!r}")
+        if self.lower is not None:
+            lower, upper = _vec("Box", "lower", self.lower, 3), _vec("Box", "upper", self.upper, 3)
+            if not np.all(upper > lower):
+                raise InvalidInputError(f"Box: argument 'upper' must exceed 'lower' on every axis, got lower="
+                                        f"{lower.tolist()} and upper={upper.tolist()}")
+            self.pos, self.size = (lower + upper) / 2.0, upper - lower
         self.size = _vec("Box", "size", self.size, 3)
         _positive("Box", "size", self.size)
+        self.lower, self.upper = self.pos - self.size / 2.0, self.pos + self.size / 2.0
 
 
 @dataclass

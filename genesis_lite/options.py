@@ -1,5 +1,6 @@
 """Scene options (Genesis names). Values are validated when the options are made."""
 import functools
+import logging
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -34,7 +35,7 @@ def _keywords(*genesis_only):
             for name in kwargs:
                 if name not in accepted:
                     what = "a Genesis option that genesis_lite does not have" if name in genesis_only else "unknown"
-                    raise InvalidInputError(f"{cls.__name__}: argument '{name}' is {what}; expected one of "
+                    raise InvalidInputError(f"{cls.__qualname__}: argument '{name}' is {what}; expected one of "
                                             f"{accepted}")
             init(self, *args, **kwargs)
         cls.__init__ = checked_init
@@ -166,6 +167,104 @@ class RigidOptions:
         timeconst = self.constraint_timeconst or (MUJOCO_TIMECONST if compat else GENESIS_TIMECONST)
         iterations = self.iterations or (MUJOCO_ITERATIONS if compat else GENESIS_ITERATIONS)
         return timeconst, int(iterations), tolerance, impratio
+
+
+#: MPMOptions.boundary_condition's choices: what the domain walls do to the grid velocity
+MPM_BOUNDARY_CONDITIONS = ("slip", "sticky")
+
+
+@_keywords()
+@dataclass
+class MPMOptions:
+    """The MPM solver's options (Genesis 1.4.5's names and defaults, plus boundary_condition).
+
+    dt: the MPM substep, s, or None (SimOptions.dt / SimOptions.substeps). As in Genesis, a
+        given dt must divide SimOptions.dt an integer number of times and that number is the
+        substeps of every solver (substeps() says it and raises on a conflict).
+    gravity: (3,) m/s² or None (SimOptions.gravity).
+    particle_size: particle diameter, m; None: 0.01 · 64 / grid_density (resolved here, as
+        Genesis). A particle's volume is particle_size³ and its mass rho · particle_size³.
+    grid_density: grid cells per metre (dx = 1 / grid_density).
+    enable_CPIC: Genesis's compatible PIC for thin rigid colliders; only False (no coupling yet).
+    lower_bound, upper_bound: (3,) m, the domain. Its walls lie 3 cells inside it
+        (wall_bounds()): particles are clamped to them, and a particle must start strictly
+        between them.
+    boundary_condition (ours): what the walls do to the grid velocity at the nodes beyond
+        them: "slip" (Genesis's: the component into the wall is zeroed, the tangential one
+        kept) or "sticky" (every component zeroed: the material sticks to the walls).
+    use_sparse_grid, leaf_block_size: deprecated in Genesis, without effect (a warning when set).
+    """
+    dt: float = None
+    gravity: tuple = None
+    particle_size: float = None
+    grid_density: float = 64
+    enable_CPIC: bool = False
+    lower_bound: tuple = (-1.0, -1.0, 0.0)
+    upper_bound: tuple = (1.0, 1.0, 1.0)
+    boundary_condition: str = "slip"
+    use_sparse_grid: bool = False
+    leaf_block_size: int = 8
+
+    def __post_init__(self):
+        owner = "MPMOptions"
+        if self.dt is not None:
+            self.dt = _check_float(owner, "dt", self.dt, 0.0, np.inf, "a positive finite number (s) or None")
+        if self.gravity is not None:
+            self.gravity = _check_vec3(owner, "gravity", self.gravity)
+        self.grid_density = _check_float(owner, "grid_density", self.grid_density, 0.0, np.inf,
+                                         "a positive finite number (cells per m)")
+        if self.particle_size is None:
+            self.particle_size = 0.01 * 64.0 / self.grid_density
+        self.particle_size = _check_float(owner, "particle_size", self.particle_size, 0.0, np.inf,
+                                          "a positive finite number (m) or None")
+        if check_bool(owner, "enable_CPIC", self.enable_CPIC):
+            raise InvalidInputError(f"{owner}: argument 'enable_CPIC' must be False: CPIC couples MPM with thin "
+                                    f"rigid objects, and genesis_lite has no MPM-rigid coupling yet, got True")
+        self.enable_CPIC = False
+        self.lower_bound = _check_vec3(owner, "lower_bound", self.lower_bound)
+        self.upper_bound = _check_vec3(owner, "upper_bound", self.upper_bound)
+        lower, upper = self.wall_bounds()
+        if not np.all(upper > lower):
+            raise InvalidInputError(f"{owner}: arguments 'lower_bound' and 'upper_bound' must leave room inside the "
+                                    f"walls, 3 cells (3 / grid_density = {3.0 / self.grid_density:g} m) inside them "
+                                    f"on each side: upper_bound − lower_bound > {6.0 / self.grid_density:g} m on "
+                                    f"every axis, got {self.lower_bound} and {self.upper_bound}")
+        _check_choice(owner, "boundary_condition", self.boundary_condition, MPM_BOUNDARY_CONDITIONS)
+        if check_bool(owner, "use_sparse_grid", self.use_sparse_grid):
+            logging.getLogger("genesis_lite").warning("MPMOptions: 'use_sparse_grid' is deprecated and has no effect.")
+        if not is_int(self.leaf_block_size):
+            raise InvalidInputError(f"{owner}: argument 'leaf_block_size' must be an integer (deprecated, without "
+                                    f"effect), got {self.leaf_block_size!r}")
+        if self.leaf_block_size != 8:
+            logging.getLogger("genesis_lite").warning("MPMOptions: 'leaf_block_size' is deprecated and has no effect.")
+
+    @property
+    def dx(self):
+        """Grid cell size, m."""
+        return 1.0 / self.grid_density
+
+    def wall_bounds(self):
+        """(lower (3,), upper (3,)) m numpy: the walls, 3 cells inside the domain (Genesis's safety
+        padding). Particles are kept within them; a sampled or set particle must lie strictly
+        between them."""
+        pad = 3.0 / self.grid_density
+        return np.asarray(self.lower_bound) + pad, np.asarray(self.upper_bound) - pad
+
+    def substeps(self, sim_options):
+        """The number of MPM substeps per scene step: SimOptions.substeps when dt is None, else
+        SimOptions.dt / dt, which must be an integer (as Genesis). A SimOptions.substeps other
+        than 1 (taken as "not asked for") must then agree with it."""
+        if self.dt is None:
+            return sim_options.substeps
+        ratio = sim_options.dt / self.dt
+        count = int(round(ratio))
+        if count < 1 or abs(count * self.dt - sim_options.dt) > 1e-9 * sim_options.dt:
+            raise InvalidInputError(f"MPMOptions: argument 'dt' must divide SimOptions.dt = {sim_options.dt:g} s an "
+                                    f"integer number of times, got {self.dt:g} s (ratio {ratio:g})")
+        if sim_options.substeps != 1 and count != sim_options.substeps:
+            raise InvalidInputError(f"MPMOptions: argument 'dt' = {self.dt:g} s makes {count} substeps per step, but "
+                                    f"SimOptions.substeps = {sim_options.substeps}; set one or the other")
+        return count
 
 
 # -- visualisation (no viewer or camera exists yet: these are validated and stored for them) ---------

@@ -6,18 +6,22 @@ only before); they read ``vis_options`` and draw the debug spheres of ``draw_deb
 There is no interactive viewer: ``show_viewer=True`` raises rather than being ignored, and
 ``viewer_options`` are validated and kept for it.
 """
+import dataclasses
 import os
 
 import numpy as np
 import torch
 
 from . import morphs as gm
-from .entities import RigidEntity
+from .entities import MPMEntity, RigidEntity
+from .entities.common import replace_columns
+from .entities.mpm_entity import sample_particles
 from .solvers.core import AssetError, InvalidInputError, SceneStateError
-from .materials import Rigid
-from .options import RigidOptions, SimOptions, ViewerOptions, VisOptions, check_bool, is_int
+from .materials import MPM, Rigid
+from .options import MPMOptions, RigidOptions, SimOptions, ViewerOptions, VisOptions, check_bool, is_int
 from .runtime import require_init, runtime
 from .simulator import Simulator
+from .solvers.mpm.solver import MPMSolver
 from .solvers.rigid import merge, shapes, urdf
 from .solvers.rigid.solver import RigidSolver
 from .surfaces import Default
@@ -33,7 +37,17 @@ class SimState:
 
     @property
     def rigid(self):
-        return self.states[0]
+        """The rigid solver's state (B, n_qs + n_dofs), or None without rigid entities."""
+        return self._of(self.scene.rigid_solver)
+
+    @property
+    def mpm(self):
+        """The MPM solver's state (B, n_particles · 25) (solvers/mpm/layout.py), or None."""
+        return self._of(self.scene.mpm_solver)
+
+    def _of(self, solver):
+        slots = self.scene.sim.slots
+        return next((state for slot, state in zip(slots, self.states) if slot.solver is solver), None)
 
 
 
@@ -41,21 +55,24 @@ class SimState:
 class Scene:
     """Entities, options and, once built, the simulator.
 
-    sim_options, rigid_options: gs.options.SimOptions / RigidOptions (None: defaults).
+    sim_options, rigid_options, mpm_options: gs.options.SimOptions / RigidOptions / MPMOptions
+    (None: defaults).
     viewer_options, vis_options: gs.options.ViewerOptions / VisOptions (None: defaults); the
     cameras read vis_options, viewer_options are kept for an interactive viewer of a later release.
     show_viewer: False or None (Genesis's default); True raises, as there is no interactive viewer.
     """
 
     def __init__(self, sim_options=None, rigid_options=None, viewer_options=None, vis_options=None,
-                 show_viewer=False):
+                 show_viewer=False, mpm_options=None):
         require_init("gs.Scene")
         self.sim_options = sim_options or SimOptions()
         self.rigid_options = rigid_options or RigidOptions()
         self.viewer_options = viewer_options or ViewerOptions()
         self.vis_options = vis_options or VisOptions()
+        self.mpm_options = mpm_options or MPMOptions()
         for arg, value, kind in (("sim_options", self.sim_options, SimOptions),
                                  ("rigid_options", self.rigid_options, RigidOptions),
+                                 ("mpm_options", self.mpm_options, MPMOptions),
                                  ("viewer_options", self.viewer_options, ViewerOptions),
                                  ("vis_options", self.vis_options, VisOptions)):
             if not isinstance(value, kind):
@@ -69,7 +86,11 @@ class Scene:
                                     f"may come in a later release, got {show_viewer!r}")
         self.show_viewer = False
         self.entities = []
+        # every solver steps with the same substeps (MPMOptions.dt may set them)
+        self.sim_options = dataclasses.replace(self.sim_options,
+                                               substeps=self.mpm_options.substeps(self.sim_options))
         self.rigid_solver = RigidSolver(self.sim_options, self.rigid_options)
+        self.mpm_solver = None  # made with the first MPM entity
         self.sim = None
         self.n_envs = 0
         self._epoch = runtime.epoch
@@ -84,25 +105,50 @@ class Scene:
         return self.sim is not None
 
     def add_entity(self, morph, material=None, surface=None, name=None):
-        """Add a rigid entity from a morph; returns the entity."""
+        """Add an entity from a morph: rigid (material gs.materials.Rigid, the default) or MPM
+        particles (a gs.materials.MPM material); returns the entity."""
         if self.is_built:
             raise SceneStateError("scene.add_entity: the scene is already built; add every entity before build()")
         if not isinstance(morph, gm.Morph):
             raise InvalidInputError(f"scene.add_entity: argument 'morph' must be a gs.morphs object, "
                                     f"got {type(morph).__name__}")
         material = material or Rigid()
-        if not isinstance(material, Rigid):
-            raise InvalidInputError(f"scene.add_entity: argument 'material' must be gs.materials.Rigid (other "
-                                    f"materials need solvers not built yet), got {type(material).__name__}")
+        if not isinstance(material, (Rigid, MPM.Base)):
+            raise InvalidInputError(f"scene.add_entity: argument 'material' must be gs.materials.Rigid or a "
+                                    f"gs.materials.MPM material, got {type(material).__name__}")
         if surface is not None and not isinstance(surface, Default):
             raise InvalidInputError(f"scene.add_entity: argument 'surface' must be gs.surfaces.Default or None, "
                                     f"got {type(surface).__name__}")
         name = name or f"{type(morph).__name__.lower()}_{len(self.entities)}"
+        if isinstance(material, MPM.Base):
+            return self._add_mpm_entity(morph, material, surface, name)
         links = _links_of(morph, material, name)
         entity = RigidEntity(self, len(self.entities), name, morph, material, surface or Default(), links,
                              self.rigid_solver)
         self.entities.append(entity)
         return entity
+
+    def _add_mpm_entity(self, morph, material, surface, name):
+        """Particles sampled from the morph's volume at MPMOptions.particle_size."""
+        if self.mpm_solver is None:
+            o, sim = self.mpm_options, self.sim_options
+            self.mpm_solver = MPMSolver(sim.dt, sim.substeps, o.gravity or sim.gravity, o.grid_density, o.particle_size,
+                                        o.lower_bound, o.upper_bound, o.boundary_condition == "sticky",
+                                        sim.requires_grad)
+        solver = self.mpm_solver
+        positions = sample_particles(morph, material, self.mpm_options.particle_size, solver.wall_lower,
+                                     solver.wall_upper, seed=len(self.entities), name=name)
+        start = solver.add_entity(name, material.solver_kind, material.solver_params(), material.E, material.nu,
+                                  material.rho, material.default_Jp, positions)
+        entity = MPMEntity(self, len(self.entities), name, morph, material, surface or Default(), solver, start,
+                           len(positions), particles=positions)
+        self.entities.append(entity)
+        return entity
+
+    def _solvers(self):
+        """The solvers that have entities, rigid first."""
+        rigid = any(isinstance(e, RigidEntity) for e in self.entities)
+        return [s for s in (self.rigid_solver if rigid else None, self.mpm_solver) if s is not None]
 
     def build(self, n_envs=0, env_spacing=(0.0, 0.0), n_envs_per_row=None, center_envs_at_origin=True):
         """Allocate and compile for ``n_envs`` environments (0: no batch dimension).
@@ -128,11 +174,13 @@ class Scene:
         self.env_spacing = tuple(float(v) for v in env_spacing)
         for camera in self._cameras:  # their env_idx checked before anything is allocated
             camera._bind_env()
-        sim = Simulator(self.sim_options, [self.rigid_solver])
+        solvers = self._solvers()
+        sim = Simulator(self.sim_options, solvers)
         try:
             sim.build(self.n_envs)
         except Exception:  # e.g. a massless moving link: free the arrays allocated so far
-            self.rigid_solver.destroy()
+            for solver in solvers:
+                solver.destroy()
             raise
         self.sim = sim
         for entity in self.entities:
@@ -215,7 +263,9 @@ class Scene:
     def _link_kinematics(self):
         """(B, L, 13) link kinematics of the current state, read where the state lives: from the
         solver when it holds the state (after an ordinary step; nothing is downloaded), else from
-        the state tensor (detached)."""
+        the state tensor (detached); None without rigid entities."""
+        if self.rigid_solver not in self._solvers():
+            return None
         if self.sim.slot(self.rigid_solver).state is None:
             return self.rigid_solver.links_kinematics()
         return self.sim.derived(self.rigid_solver).detach()
@@ -266,19 +316,21 @@ class Scene:
         return SimState(self, [sim.state(slot.solver) for slot in sim.slots])
 
     def set_gravity(self, gravity, envs_idx=None):
-        """Gravity, m/s²: (3,) or (n_envs, 3); differentiable."""
+        """Gravity of every solver, m/s²: (3,) or (n_envs, 3); differentiable."""
         sim = self._require_built("scene.set_gravity")
         sim.check_grad_allowed(gravity, "scene", "gravity")
-        probe = self.entities[0]
+        probe = self.entities[0]  # parses the value as an entity's setter does
         envs = probe._envs(envs_idx)
         values = probe._values(gravity, 3, envs, "gravity")
-        probe._write_input("gravity", np.arange(3), envs, values)
+        for slot in sim.slots:
+            sim.set_input(slot.solver, "gravity", replace_columns(slot.inputs["gravity"], envs, np.arange(3), values))
 
     def get_gravity(self, envs_idx=None):
         """Gravity, m/s²: (3,) or (n_envs, 3)."""
-        self._require_built("scene.get_gravity")
+        sim = self._require_built("scene.get_gravity")
         probe = self.entities[0]
-        return probe._out(probe._read_input("gravity", np.arange(3), envs_idx))
+        envs = torch.as_tensor(probe._envs(envs_idx), device=runtime.device)
+        return probe._out(sim.inputs(sim.slots[0].solver)["gravity"][envs])
 
     @property
     def t(self):
@@ -292,7 +344,8 @@ class Scene:
     def destroy(self):
         """Free the scene's arrays (its solvers' data) and finish the cameras' streamed recordings;
         the scene cannot step afterwards."""
-        self.rigid_solver.destroy()
+        for solver in self._solvers():
+            solver.destroy()
         self.sim = None
         self._destroyed = True
         for camera in self._cameras:  # last: a failing video file leaves the scene destroyed all the same

@@ -133,7 +133,8 @@ class Simulator:
         else:
             for slot in self.slots:
                 self._sync_state(slot, slot.state)
-                slot.solver.advance(self._pending_inputs(slot, slot.inputs))
+            self._advance([self._pending_inputs(slot, slot.inputs) for slot in self.slots], download=False)
+            for slot in self.slots:
                 slot.state = None
                 slot.uploaded_state = None
         for slot in self.slots:
@@ -160,28 +161,62 @@ class Simulator:
         """One step from the given states and inputs (no graph), and from ``warm_starts`` when
         given (else what the solvers hold); returns the new states. ``started_from`` keeps the
         warm starts the step started from, for its backward."""
-        outs, self.started_from = [], []
+        self.started_from, pending = [], []
         for k, (slot, state, inputs) in enumerate(zip(self.slots, states, self._split_inputs(flat_inputs))):
             self._sync_state(slot, state)  # uploading a state clears the warm start
             if warm_starts is not None:
                 slot.solver.set_warm_start(warm_starts[k])
             self.started_from.append(slot.solver.warm_start())
-            out = slot.solver.advance(self._pending_inputs(slot, inputs), download=True)
+            pending.append(self._pending_inputs(slot, inputs))
+        outs = self._advance(pending, download=True)
+        for slot, out in zip(self.slots, outs):
             slot.uploaded_state = out
-            outs.append(out)
         return tuple(outs)
+
+    def _advance(self, inputs, download):
+        """One step of every solver from the uploaded states, after uploading ``inputs`` (one dict
+        or None per solver): a solver alone advances on its own, several share the substep loop
+        (solvers/base.py); returns the new states when ``download`` (else Nones)."""
+        if len(self.slots) == 1:
+            return [self.slots[0].solver.advance(inputs[0], download=download)]
+        solvers = [slot.solver for slot in self.slots]
+        for solver, pending in zip(solvers, inputs):
+            solver.begin_step(pending)
+        for s in range(self.options.substeps):
+            for solver in solvers:
+                solver.substep_pre_coupling(s)
+            # rigid–MPM coupling (the next issue) acts here, on the solvers' substep s
+            for solver in solvers:
+                solver.substep_post_coupling(s)
+        return [solver.end_step(download) for solver in solvers]
 
     def backward_step(self, states, flat_inputs, grad_states, warm_starts):
         """Gradients of one step's states and flat inputs, given the gradients of its outputs and
         the warm starts it started from (its replay then repeats it exactly)."""
+        split = self._split_inputs(flat_inputs)
+        if len(self.slots) == 1:
+            results = [self.slots[0].solver.backward(states[0], split[0], grad_states[0], warm_starts[0])]
+        else:
+            results = self._backward_shared(states, split, grad_states, warm_starts)
         grads_states, grads_inputs = [], []
-        for slot, state, inputs, grad, warm_start in zip(self.slots, states, self._split_inputs(flat_inputs),
-                                                         grad_states, warm_starts):
-            grad_state, grad_inputs = slot.solver.backward(state, inputs, grad, warm_start)
+        for slot, inputs, (grad_state, grad_inputs) in zip(self.slots, split, results):
             slot.uploaded_state = slot.uploaded_inputs = None  # Taichi holds this old step now
             grads_states.append(grad_state)
             grads_inputs.extend(grad_inputs.get(name) for name in inputs)
         return (*grads_states, *grads_inputs)
+
+    def _backward_shared(self, states, inputs, grad_states, warm_starts):
+        """The shared substep loop's reverse (solvers/base.py): load, replay, then mirror order."""
+        solvers = [slot.solver for slot in self.slots]
+        for solver, state, pending, grad, warm_start in zip(solvers, states, inputs, grad_states, warm_starts):
+            solver.begin_reverse(state, pending, grad, warm_start)
+        self._advance([None] * len(solvers), download=False)
+        for s in reversed(range(self.options.substeps)):
+            for solver in reversed(solvers):
+                solver.substep_post_coupling_backward(s)
+            for solver in reversed(solvers):
+                solver.substep_pre_coupling_backward(s)
+        return [solver.end_reverse() for solver in solvers]
 
     def _check_finite(self):
         if not self.options.check_nan:

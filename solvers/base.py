@@ -4,6 +4,25 @@ rigid bodies, MPM and later solvers alike.
 A solver's *state* is one torch tensor (B, state_width) per scene; its *inputs* (controls and
 physical parameters) are named torch tensors (B, width) applied at the next step. The solver
 keeps its own copy of both in its kernels' arrays and moves them on request.
+
+**The shared substep loop.** A step of a scene with several solvers (and, with coupling, a
+coupler between them) runs, for each substep s, every solver's ``substep_pre_coupling(s)``,
+then the coupling, then every solver's ``substep_post_coupling(s)`` (Genesis's order). Its
+reverse runs in mirror order, after a replay of the step's forward that leaves each substep's
+intermediates in place:
+
+    begin_step(inputs)                              begin_reverse(state, inputs, grad, warm_start)
+    for s in substeps:                              (the forward loop, replaying the step)
+        pre_coupling(s) of every solver             for s in reversed(substeps):
+        couple(s)                                       post_coupling_backward(s), solvers reversed
+        post_coupling(s) of every solver                couple_backward(s)
+    end_step(download) → new state                      pre_coupling_backward(s), solvers reversed
+                                                    end_reverse() → (grad of state, grads of inputs)
+
+A solver alone in a scene runs ``advance``/``backward`` instead: the same loop with nothing in
+between, which a solver may fuse into fewer launches (the rigid solver takes a contact-free step
+in one launch, the MPM solver a substep in one). The simulator picks (genesis_lite/simulator.py).
+Fused or not, a step gives the same bits: the same stage functions run in the same order.
 """
 
 
@@ -18,6 +37,8 @@ class Solver:
     default_inputs = None
     #: names of the solver's entities, for error messages
     entity_names = ()
+    #: substeps per step
+    substeps = 1
 
     def build(self, n_envs):
         """Allocate for max(1, n_envs) environments; return the initial state (B, width)."""
@@ -35,11 +56,57 @@ class Solver:
         """Taichi inputs ← dict name → (B, width) tensors."""
         raise NotImplementedError
 
-    def advance(self, inputs=None, download=False):
-        """Run one step from the uploaded state, after uploading ``inputs`` (name → (B, width))
-        when given (else the uploaded ones hold); the result becomes the current state, and is
-        returned as a new tensor (B, width) when ``download`` (else None)."""
+    # -- one step, substep by substep (the shared loop) -------------------------------------------
+    def begin_step(self, inputs):
+        """Start a step from the uploaded state, after uploading ``inputs`` (None: those held)."""
         raise NotImplementedError
+
+    def substep_pre_coupling(self, s):
+        """Substep s up to where a coupler acts."""
+        raise NotImplementedError
+
+    def substep_post_coupling(self, s):
+        """The rest of substep s."""
+        raise NotImplementedError
+
+    def end_step(self, download):
+        """Finish the step: its result becomes the current state, returned as a new tensor
+        (B, width) when ``download`` (else None)."""
+        raise NotImplementedError
+
+    def begin_reverse(self, state, inputs, grad_state_out, warm_start):
+        """Load a step's start state, inputs, the warm start it started from and the gradient of
+        its end state, for a replay (begin_step(None), the substeps) and then the reverse."""
+        raise NotImplementedError
+
+    def substep_post_coupling_backward(self, s):
+        raise NotImplementedError
+
+    def substep_pre_coupling_backward(self, s):
+        raise NotImplementedError
+
+    def end_reverse(self):
+        """(grad of the start state (B, width), {name: grad (B, width)} for grad_input_names)."""
+        raise NotImplementedError
+
+    # -- one step, alone ------------------------------------------------------------------------
+    def advance(self, inputs=None, download=False):
+        """One whole step (the loop above with no coupler); see begin_step and end_step."""
+        self.begin_step(inputs)
+        for s in range(self.substeps):
+            self.substep_pre_coupling(s)
+            self.substep_post_coupling(s)
+        return self.end_step(download)
+
+    def backward(self, state, inputs, grad_state_out, warm_start=None):
+        """Reverse of the step from ``state`` (B, width) with ``inputs`` (name → (B, width));
+        returns end_reverse()'s gradients."""
+        self.begin_reverse(state, inputs, grad_state_out, warm_start)
+        self.advance()  # the replay
+        for s in reversed(range(self.substeps)):
+            self.substep_post_coupling_backward(s)
+            self.substep_pre_coupling_backward(s)
+        return self.end_reverse()
 
     def nonfinite(self):
         """True once a step produced a non-finite state since the last call."""
@@ -52,13 +119,6 @@ class Solver:
 
     def set_warm_start(self, warm_start):
         """Restore ``warm_start()``'s value (None: leave it)."""
-        raise NotImplementedError
-
-    def backward(self, state, inputs, grad_state_out, warm_start=None):
-        """Reverse of the step from ``state`` (B, width) with ``inputs`` (name → (B, width)).
-
-        Returns (grad of the start state (B, width), {name: grad (B, width)} for grad_input_names).
-        """
         raise NotImplementedError
 
     def destroy(self):

@@ -8,32 +8,12 @@ import torch
 
 from ..solvers.core import InvalidInputError, SceneStateError, runtime
 from ..solvers.rigid.merge import merged_into
-from ..tensor import wrap
+from .common import EntityIndexing, replace_columns as _replace
 from .rotations import euler_xyz_to_quat, quat_to_euler_xyz
 
 _MODES = {"force": 0, "position": 1, "velocity": 2}  # ctrl_mode codes (solvers/rigid/actuation.py)
 _NDOFS = {"fixed": 0, "revolute": 1, "prismatic": 1, "free": 6}
 _NQS = {"fixed": 0, "revolute": 1, "prismatic": 1, "free": 7}
-
-
-def _replace(table, envs, columns, values):
-    """``table`` (B, W) with ``values`` (len(envs), len(columns)) written at (envs, columns),
-    out of place so autograd sees it. A full overwrite is ``values`` itself: nothing is saved
-    for backward and the previous table drops out of the graph."""
-    columns = np.asarray(columns)
-    if _is_range(columns, table.shape[1]) and _is_range(envs, table.shape[0]):
-        return values
-    rows = torch.as_tensor(envs, device=table.device)[:, None]
-    cols = torch.as_tensor(columns, device=table.device)[None, :]
-    return table.index_put((rows, cols), values)
-
-
-def _is_range(idx, n):
-    """``idx`` (int numpy array) is exactly 0, 1, …, n − 1 (Python lists compare short arrays
-    ~10× faster than numpy)."""
-    if len(idx) != n:
-        return False
-    return idx.tolist() == list(range(n)) if n <= 64 else bool(np.array_equal(idx, np.arange(n)))
 
 
 def _ltdl(mass, entity):
@@ -60,13 +40,6 @@ def _check_sol_params(name, p):
         raise InvalidInputError(f"entity '{name}': argument 'sol_params' expected timeconst and dampratio both > 0 "
                                 f"(or both ≤ 0: direct), 0 ≤ dmin ≤ dmax < 1, width ≥ 0, 0 < midpoint < 1, "
                                 f"power ≥ 1, got {p.tolist()}")
-
-
-def _all_finite(tensor):
-    """No NaN or inf in ``tensor`` (numpy's check is 3× cheaper than torch's on small CPU tensors)."""
-    if tensor.device.type == "cpu":
-        return bool(np.isfinite(tensor.numpy(force=True)).all())
-    return bool(torch.isfinite(tensor).all())
 
 
 class RigidLink:
@@ -106,7 +79,7 @@ class RigidJoint:
         return f"RigidJoint({self.name!r}, type={self.type!r}, dofs_idx_local={self.dofs_idx_local})"
 
 
-class RigidEntity:
+class RigidEntity(EntityIndexing):
     """A rigid entity. Units: m, rad, kg, s, N, N·m; quaternions (w, x, y, z)."""
 
     def __init__(self, scene, idx, name, morph, material, surface, link_specs, solver):
@@ -196,64 +169,6 @@ class RigidEntity:
                                 f"{[joint.name for joint in self.joints]}, got {name!r}")
 
     # -- argument checking ----------------------------------------------------------------------
-    def _sim(self):
-        return self.scene._require_built(f"entity '{self.name}'")
-
-    def _local(self, idx, n, arg):
-        """Local indices (list/array/tensor/int/None) → validated int64 numpy array."""
-        if idx is None:
-            return np.arange(n)
-        arr = np.atleast_1d(idx.detach().cpu().numpy() if isinstance(idx, torch.Tensor) else np.asarray(idx))
-        if arr.dtype.kind not in "iu" or arr.ndim != 1 or (arr.size and (arr.min() < 0 or arr.max() >= n)):
-            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be integers in [0, {n}), "
-                                    f"got {idx!r}")
-        return arr.astype(np.int64)
-
-    def _envs(self, envs_idx):
-        n_envs = self.scene.n_envs
-        if n_envs == 0:
-            if envs_idx is not None:
-                raise InvalidInputError(f"entity '{self.name}': argument 'envs_idx' must be None in a scene built "
-                                        f"with n_envs=0, got {envs_idx!r}")
-            return np.zeros(1, dtype=np.int64)
-        return self._local(envs_idx, n_envs, "envs_idx")
-
-    def _values(self, value, n_cols, envs, arg):
-        """User values → (len(envs), n_cols) float tensor on gs.device; checked shape and finiteness.
-        In a batched scene (n_cols,) values apply to every env of envs (Genesis broadcasts too)."""
-        sim = self._sim()
-        sim.check_grad_allowed(value, self.name, arg)
-        expected = (n_cols,) if self.scene.n_envs == 0 else (len(envs), n_cols)
-        # complex values would silently lose their imaginary part in the float conversion below
-        if (value.is_complex() if isinstance(value, torch.Tensor) else np.iscomplexobj(value)):
-            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be real numbers of shape "
-                                    f"{expected}, got complex values")
-        try:
-            if isinstance(value, torch.Tensor):
-                tensor = value.as_subclass(torch.Tensor).to(device=runtime.device, dtype=runtime.tc_float)
-            else:
-                tensor = torch.as_tensor(np.asarray(value, dtype=np.float64), dtype=runtime.tc_float,
-                                         device=runtime.device)
-        except (TypeError, ValueError) as err:
-            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be numbers of shape {expected}, "
-                                    f"got {type(value).__name__} ({err})") from None
-        if self.scene.n_envs and tuple(tensor.shape) == (n_cols,):
-            tensor = tensor.expand(len(envs), n_cols)
-        if tuple(tensor.shape) != expected:
-            every_env = f" or {(n_cols,)} for every env" if self.scene.n_envs else ""
-            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must have shape {expected}{every_env}, "
-                                    f"got {tuple(tensor.shape)}")
-        if not _all_finite(tensor.detach()):
-            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be finite, got NaN or inf in "
-                                    f"{tensor.detach().cpu().numpy()}")
-        return tensor.reshape(len(envs), n_cols)
-
-    def _out(self, value):
-        """Solver rows → user shape: drop the batch axis when the scene is not batched."""
-        if self.scene.n_envs == 0:
-            value = value[0]
-        return wrap(value, self.scene)
-
     # -- raw state/input access -------------------------------------------------------------------
     def _read(self, columns, envs_idx):
         return self._rows(columns, self._envs(envs_idx))

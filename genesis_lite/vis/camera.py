@@ -269,7 +269,7 @@ class Camera:
         view = View(self._pos + self._offset(), self._lookat + self._offset(), self._up, self._fov, self._near,
                     self._far, self._res)
         images = self._rasterizer.render(view, drawing.meshes, drawing.instances(scene._link_kinematics()),
-                                         scene._debug_spheres() if self._debug else None,
+                                         drawing.particles(scene._debug_spheres() if self._debug else None),
                                          rgb=rgb or recording, depth=depth, segmentation=segmentation, normal=normal)
         if recording:
             self._recording.add(images["rgb"])

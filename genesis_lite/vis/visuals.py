@@ -53,6 +53,8 @@ def scene_shapes(scene):
     the "geom" segmentation id is the shape's index in that list."""
     shapes = []
     for entity in scene.entities:
+        if not hasattr(entity, "_specs"):  # particles: SceneVisuals.particles draws them
+            continue
         override = None if entity.surface.color is None else np.asarray(entity.surface.color[:3])
         is_plane = isinstance(entity.morph, gm.Plane)
         for k, spec in enumerate(entity._specs):
@@ -128,11 +130,38 @@ class SceneVisuals:
         self._seg = torch.as_tensor([shape.seg[segmentation_level] for _, shape in rows], dtype=torch.int32,
                                     device=device)
 
+        self._particles = [(e, np.asarray(DEFAULT_COLOR if e.surface.color is None else e.surface.color[:3]))
+                           for e in scene.entities if hasattr(e, "n_particles")]
+        self._envs = torch.as_tensor(np.asarray(envs), dtype=torch.int64, device=device)
+        self._envs_offset = torch.as_tensor(scene.envs_offset[np.asarray(envs)], dtype=torch.float32, device=device)
+
+    def particles(self, extra=None):
+        """The Spheres of every MPM entity's particles in the drawn envs (radius: half the particle
+        size; colour: the entity's surface colour; segmentation id: the entity's index at every
+        level), then those of ``extra`` (Spheres or None); None when there are none."""
+        parts = [] if extra is None else [extra]
+        for entity, color in self._particles:
+            with torch.no_grad():
+                pos = entity.get_particles_pos(envs_idx=self._envs if entity.scene.n_envs else None)
+            pos = pos.reshape(-1, len(self._envs), entity.n_particles, 3) if entity.scene.n_envs else pos[None, None]
+            pos = (pos[0].to(torch.float32) + self._envs_offset[:, None, :]).reshape(-1, 3)
+            n = len(pos)
+            parts.append(Spheres(pos, torch.full((n,), entity.particle_size / 2.0, dtype=torch.float32,
+                                                 device=pos.device),
+                                 torch.as_tensor(color, dtype=torch.float32, device=pos.device).expand(n, 3),
+                                 torch.full((n,), entity.idx, dtype=torch.int32, device=pos.device)))
+        if not parts:
+            return None
+        return parts[0] if len(parts) == 1 else Spheres(torch.cat([q.pos for q in parts]),
+                                                        torch.cat([q.radius for q in parts]),
+                                                        torch.cat([q.color for q in parts]),
+                                                        torch.cat([q.seg for q in parts]))
+
     def instances(self, links):
         """The Instances of the frame whose link kinematics are ``links`` (B, L, ≥ 7): per instance
         its link's world pose (position m, quaternion) as float32, moved by its env's offset; None
         when nothing has a shape."""
-        if self.meshes is None:
+        if self.meshes is None or links is None:
             return None
         rows = links[self._env, self._link]
         rot = quat_to_rot(rows[:, 3:7]).to(torch.float32)

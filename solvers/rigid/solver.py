@@ -35,6 +35,8 @@ class RigidSolver(Solver):
         self.entity_links = []  # one list[LinkSpec] per rigid entity, in add order
         self.entity_names = []
         self.model = self.data = None
+        self.substeps = sim_options.substeps
+        self._commit = 1  # 0 while a backward replays a step: its frames stay for the reverse
 
     # -- building ---------------------------------------------------------------------------
     def add_entity(self, name, links):
@@ -186,18 +188,22 @@ class RigidSolver(Solver):
         out = self._empty(self.state_width) if download else self._nothing
         if inputs is not None:
             self._note_inputs(inputs)
-        self.run_step(self._nothing if inputs is None else self._pack_inputs(inputs), out, commit=1)
+        self.run_step(self._nothing if inputs is None else self._pack_inputs(inputs), out, commit=self._commit)
+        return self._end(out if download else None)
+
+    def _end(self, result):
+        """A step's end: ready for the next forward (not a replay); raise on a contact overflow."""
+        self._commit = 1
         if self.data.size["N"] and self.data.take_flag("overflow"):
             raise SimulationError(f"rigid solver (entities: {', '.join(self.entity_names)}): more contacts than the "
                                   f"{self.data.size['C']} slots per env in this step (it was taken without the "
                                   f"extra ones); expected RigidOptions(max_contacts=...) above that")
-        return out if download else None
+        return result
 
     def run_step(self, inputs, out, commit):
         """One step's kernels. Without contact pairs or friction loss, one launch for all substeps
         (advance), which leaves the envs meeting a joint limit to the constraint stage; else, or
-        for those envs, three stage kernels per substep with the colliders between the first two
-        (one kernel per pair kind: see collision/detect.py)."""
+        for those envs, the stage kernels of each substep (_substep)."""
         flagged_only = 0
         if not (self.colliders or self.friction):
             self.kernels.advance(commit, inputs, out)
@@ -205,11 +211,33 @@ class RigidSolver(Solver):
                 return
             inputs, flagged_only = self._nothing, 1  # advance loaded them
         for s in range(self.sim_options.substeps):
-            self.kernels.smooth_substep(s, inputs if s == 0 else self._nothing, flagged_only)
-            for collide in self.colliders:
-                collide(s)
-            self.kernels.constrain(s, flagged_only)
-            self.kernels.finish_substep(s, commit, out, flagged_only)
+            self._substep(s, inputs if s == 0 else self._nothing, out, commit, flagged_only)
+
+    def _substep(self, s, inputs, out, commit, flagged_only):
+        """Substep s as three stage kernels with the colliders between the first two (one kernel
+        per pair kind: see collision/detect.py); inputs (loaded when not empty), out (the result,
+        at the last substep, when not empty), commit: see step.finish_substep; flagged_only: only
+        the envs that advance left to the constraint stage."""
+        self.kernels.smooth_substep(s, inputs, flagged_only)
+        for collide in self.colliders:
+            collide(s)
+        self.kernels.constrain(s, flagged_only)
+        self.kernels.finish_substep(s, commit, out, flagged_only)
+
+    # -- the shared substep loop (solvers/base.py): the whole rigid substep comes before coupling --
+    def begin_step(self, inputs):
+        if inputs is not None:
+            self._note_inputs(inputs)
+        self._step_inputs = self._nothing if inputs is None else self._pack_inputs(inputs)
+
+    def substep_pre_coupling(self, s):
+        self._substep(s, self._step_inputs if s == 0 else self._nothing, self._nothing, self._commit, 0)
+
+    def substep_post_coupling(self, s):
+        pass
+
+    def end_step(self, download):
+        return self._end(self.download_state() if download and self._commit else None)
 
     def nonfinite(self):
         """True once any step produced a non-finite state (resets the flag)."""
@@ -225,31 +253,35 @@ class RigidSolver(Solver):
         if warm_start is not None:
             self.data.per_env("qacc_warmstart").copy_(warm_start)
 
-    def backward(self, state, inputs, grad_state_out, warm_start=None):
-        """Gradients of the step's start state and differentiable inputs from that of its end
-        state: load (with the warm start the forward step started from), replay exactly,
-        reverse (see step.py)."""
+    def begin_reverse(self, state, inputs, grad_state_out, warm_start):
+        """Load the step's start state, inputs and output gradient, and the warm start the forward
+        step started from: its replay (uncommitted) then repeats it exactly (see step.py)."""
         self._note_inputs(inputs)
         packed = self._pack_inputs(inputs, before=(state,), after=(grad_state_out,))
-        out = self._empty(sum(self.grad_widths))
+        self._grads = self._empty(sum(self.grad_widths))
         self.kernels.prepare_reverse(packed)
         self.data.take_flag("inexact")
         self.set_warm_start(warm_start)
-        constrained = self._constrained()
-        self.run_step(self._nothing, self._nothing, commit=0)
-        if self.data.take_flag("inexact"):
+        self._commit = 0
+
+    def substep_post_coupling_backward(self, s):
+        if s == self.sim_options.substeps - 1 and self.data.take_flag("inexact"):  # the replay's contacts
             names = ", ".join(_pair_name(kind) for kind in self.inexact_kinds)
             raise GradientError(f"rigid solver (entities: {', '.join(self.entity_names)}): this step had a contact "
                                 f"of a pair kind whose contacts have no gradient yet ({names}: the convex collider "
                                 f"iterates on curved shapes and margins); expected contacts among planes, spheres, "
                                 f"capsules, boxes, meshes, and cylinders on a plane or with spheres, meshes and "
                                 f"boxes without margin (see README), or RigidOptions(enable_collision=False)")
-        for s in reversed(range(self.sim_options.substeps)):  # separate kernels: fused, they compile slower
-            self.reverse_kernel[constrained](s)
-            for reverse in self.collider_reverses:
-                reverse(s)
-            self.kernels.reverse_kinematics(s, out)
-        return self._split_grads(out)
+
+    def substep_pre_coupling_backward(self, s):
+        """Substep s's reverse, as separate kernels: fused, they compile slower."""
+        self.reverse_kernel[self._constrained()](s)
+        for reverse in self.collider_reverses:
+            reverse(s)
+        self.kernels.reverse_kinematics(s, self._grads)
+
+    def end_reverse(self):
+        return self._split_grads(self._grads)
 
     def _split_grads(self, out):
         parts = out.split_with_sizes(self.grad_widths, dim=1)

@@ -1,0 +1,99 @@
+"""What every entity kind shares: checked local and env indices, the batch axis of results, and
+out-of-place writes into the simulator's (B, W) state and input tables (so autograd sees them)."""
+import numpy as np
+import torch
+
+from ..solvers.core import InvalidInputError, runtime
+from ..tensor import wrap
+
+
+def replace_columns(table, envs, columns, values):
+    """``table`` (B, W) with ``values`` (len(envs), len(columns)) written at (envs, columns),
+    out of place so autograd sees it. A full overwrite is ``values`` itself: nothing is saved
+    for backward and the previous table drops out of the graph."""
+    columns = np.asarray(columns)
+    if is_range(columns, table.shape[1]) and is_range(envs, table.shape[0]):
+        return values
+    rows = torch.as_tensor(envs, device=table.device)[:, None]
+    cols = torch.as_tensor(columns, device=table.device)[None, :]
+    return table.index_put((rows, cols), values)
+
+
+def is_range(idx, n):
+    """``idx`` (int numpy array) is exactly 0, 1, …, n − 1 (Python lists compare short arrays
+    ~10× faster than numpy)."""
+    if len(idx) != n:
+        return False
+    return idx.tolist() == list(range(n)) if n <= 64 else bool(np.array_equal(idx, np.arange(n)))
+
+
+def all_finite(tensor):
+    """No NaN or inf in ``tensor`` (numpy's check is 3× cheaper than torch's on small CPU tensors)."""
+    if tensor.device.type == "cpu":
+        return bool(np.isfinite(tensor.numpy(force=True)).all())
+    return bool(torch.isfinite(tensor).all())
+
+
+class EntityIndexing:
+    """Mixin of an entity with ``scene`` and ``name``: its checked indices and result shapes."""
+
+    def _sim(self):
+        return self.scene._require_built(f"entity '{self.name}'")
+
+    def _local(self, idx, n, arg):
+        """Local indices (list/array/tensor/int/None) → validated int64 numpy array."""
+        if idx is None:
+            return np.arange(n)
+        arr = np.atleast_1d(idx.detach().cpu().numpy() if isinstance(idx, torch.Tensor) else np.asarray(idx))
+        if arr.dtype.kind not in "iu" or arr.ndim != 1 or (arr.size and (arr.min() < 0 or arr.max() >= n)):
+            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be integers in [0, {n}), "
+                                    f"got {idx!r}")
+        return arr.astype(np.int64)
+
+    def _envs(self, envs_idx):
+        n_envs = self.scene.n_envs
+        if n_envs == 0:
+            if envs_idx is not None:
+                raise InvalidInputError(f"entity '{self.name}': argument 'envs_idx' must be None in a scene built "
+                                        f"with n_envs=0, got {envs_idx!r}")
+            return np.zeros(1, dtype=np.int64)
+        return self._local(envs_idx, n_envs, "envs_idx")
+
+    def _out(self, value):
+        """Solver rows → user shape: drop the batch axis when the scene is not batched."""
+        if self.scene.n_envs == 0:
+            value = value[0]
+        return wrap(value, self.scene)
+
+    def _tensor(self, value, arg, expected):
+        """User values (list, numpy, torch) → a float tensor on gs.device in gs.tc_float, kept in
+        the autograd graph; refused when it requires grad in a scene without gradients, or holds
+        complex numbers or non-numbers (``expected``: the shape the message states)."""
+        self._sim().check_grad_allowed(value, self.name, arg)
+        # complex values would silently lose their imaginary part in the float conversion below
+        if (value.is_complex() if isinstance(value, torch.Tensor) else np.iscomplexobj(value)):
+            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be real numbers of shape "
+                                    f"{expected}, got complex values")
+        try:
+            if isinstance(value, torch.Tensor):
+                return value.as_subclass(torch.Tensor).to(device=runtime.device, dtype=runtime.tc_float)
+            return torch.as_tensor(np.asarray(value, dtype=np.float64), dtype=runtime.tc_float, device=runtime.device)
+        except (TypeError, ValueError) as err:
+            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be numbers of shape {expected}, "
+                                    f"got {type(value).__name__} ({err})") from None
+
+    def _values(self, value, n_cols, envs, arg):
+        """User values → (len(envs), n_cols) float tensor on gs.device; checked shape and finiteness.
+        In a batched scene (n_cols,) values apply to every env of envs (Genesis broadcasts too)."""
+        expected = (n_cols,) if self.scene.n_envs == 0 else (len(envs), n_cols)
+        tensor = self._tensor(value, arg, expected)
+        if self.scene.n_envs and tuple(tensor.shape) == (n_cols,):
+            tensor = tensor.expand(len(envs), n_cols)
+        if tuple(tensor.shape) != expected:
+            every_env = f" or {(n_cols,)} for every env" if self.scene.n_envs else ""
+            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must have shape {expected}{every_env}, "
+                                    f"got {tuple(tensor.shape)}")
+        if not all_finite(tensor.detach()):
+            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be finite, got NaN or inf in "
+                                    f"{tensor.detach().cpu().numpy()}")
+        return tensor.reshape(len(envs), n_cols)

@@ -1,0 +1,304 @@
+"""MPM entities: a body of particles (Genesis's MPMEntity), seen through getters and setters of
+the MPM solver's state and per-particle inputs (solvers/mpm/layout.py).
+
+Every getter reads the simulator's torch state, so with SimOptions(requires_grad=True) it is
+part of the autograd graph; every setter writes out of place, so gradients reach what was set.
+Local particle indices count within the entity; in a batched scene (n_envs > 0) results gain a
+leading batch dimension and ``envs_idx`` selects environments. Units: m, m/s, Pa, kg/m³, kg.
+"""
+import numpy as np
+import torch
+
+from .. import morphs as gm
+from ..materials import MPM
+from ..solvers.core import AssetError, InvalidInputError, SceneStateError, runtime
+from ..solvers.mpm import layout, sampling
+from .common import EntityIndexing, all_finite, is_range, replace_columns
+
+
+def sample_particles(morph, material, particle_size, wall_lower, wall_upper, seed, name):
+    """World positions (n, 3) float64 of the particles of an MPM entity named ``name``: its morph
+    (Box, Sphere, Cylinder, Mesh) filled by the material's sampler at ``particle_size`` m
+    (``seed`` seeds the random sampler). Every particle must lie strictly between the MPM
+    walls (wall_lower, wall_upper (3,) m), as Genesis requires."""
+    owner = f"entity '{name}'"
+    pose = {"pos": morph.pos, "quat": morph.quat, "owner": owner}
+    args = (particle_size, material.sampler, seed)
+    if isinstance(morph, gm.Box):
+        particles = sampling.sample("box", *args, size=morph.size, **pose)
+    elif isinstance(morph, gm.Sphere):
+        particles = sampling.sample("sphere", *args, radius=float(morph.radius), **pose)
+    elif isinstance(morph, gm.Capsule):  # a Cylinder subclass: refused before the Cylinder branch
+        raise InvalidInputError(f"{owner}: argument 'morph' of an MPM entity must be gs.morphs.Box, Sphere, Cylinder "
+                                f"or Mesh, got Capsule")
+    elif isinstance(morph, gm.Cylinder):
+        particles = sampling.sample("cylinder", *args, radius=float(morph.radius), height=float(morph.height), **pose)
+    elif isinstance(morph, gm.Mesh):
+        try:
+            particles = sampling.sample("mesh", *args, file=morph.file, scale=morph.scale, **pose)
+        except AssetError as exc:  # sampling does not know the entity: add it to the message
+            raise AssetError(f"{owner}: argument 'file' of gs.morphs.Mesh: {exc}") from exc
+    else:
+        raise InvalidInputError(f"{owner}: argument 'morph' of an MPM entity must be gs.morphs.Box, Sphere, Cylinder "
+                                f"or Mesh, got {type(morph).__name__}")
+    _check_inside(owner, "morph", particles, wall_lower, wall_upper)
+    return particles
+
+
+def _check_inside(owner, arg, positions, wall_lower, wall_upper):
+    """Raise unless every position (…, 3) (numpy) lies strictly between the walls."""
+    lower, upper = np.asarray(wall_lower), np.asarray(wall_upper)
+    if not (np.all(positions > lower) and np.all(positions < upper)):
+        flat = positions.reshape(-1, 3)
+        raise InvalidInputError(f"{owner}: argument '{arg}' must put every particle strictly inside the MPM walls "
+                                f"(MPMOptions lower_bound / upper_bound, 3 cells inside them): between "
+                                f"{lower.tolist()} and {upper.tolist()} m, got particles spanning "
+                                f"{flat.min(0).tolist()} to {flat.max(0).tolist()} m")
+
+
+class MPMEntityState:
+    """One entity's particle state (torch views, differentiable): pos, vel (…, n, 3); C, F
+    (…, n, 3, 3); Jp (…, n); with a leading n_envs axis in a batched scene."""
+
+    def __init__(self, entity, pos, vel, C, F, Jp):
+        self.entity = entity
+        self.pos, self.vel, self.C, self.F, self.Jp = pos, vel, C, F, Jp
+
+
+class MPMEntity(EntityIndexing):
+    """Particles of one material in the MPM solver: rows particle_start … particle_start +
+    n_particles − 1 of its state and per-particle inputs.
+
+    particles: the sampled world positions (n, 3) (sample_particles), whose offsets from
+    morph.pos set_position uses to move the body as a whole.
+    The solver provides: ``wall_lower`` / ``wall_upper`` (3,) numpy m, ``particle_size`` m and
+    ``set_fiber(start, directions (n, 3))`` (muscle fibre directions).
+    """
+
+    def __init__(self, scene, idx, name, morph, material, surface, solver, particle_start, n_particles,
+                 particles=None):
+        self.scene, self.idx, self.name = scene, idx, name
+        self.morph, self.material, self.surface = morph, material, surface
+        self._solver = solver
+        self.particle_start, self.n_particles = int(particle_start), int(n_particles)
+        self.init_particles = None if particles is None else np.asarray(particles, dtype=np.float64)
+        if self.init_particles is not None and self.init_particles.shape != (self.n_particles, 3):
+            raise InvalidInputError(f"entity '{name}': argument 'particles' must have shape {(self.n_particles, 3)}, "
+                                    f"got {self.init_particles.shape}")
+        self._muscle_group = np.zeros(self.n_particles, dtype=np.int64)
+
+    def _on_build(self):
+        """Nothing to resolve: the particle rows are known when the entity is added."""
+
+    @property
+    def particle_end(self):
+        return self.particle_start + self.n_particles
+
+    @property
+    def particle_size(self):
+        """Particle diameter, m (MPMOptions.particle_size)."""
+        return self._solver.particle_size
+
+    # -- raw state/input access -------------------------------------------------------------------
+    def _particle_rows(self, envs, first=0, last=layout.WIDTH):
+        """(len(envs), n_particles, last − first) columns first..last of the entity's state rows in
+        envs ``envs`` (int array), a copy (never a view a caller could change the state through),
+        made of those columns only (gathering whole rows first cost ~20 ms for 10k particles)."""
+        state = self._sim().state(self._solver)
+        rows = state.reshape(state.shape[0], -1, layout.WIDTH)[:, self.particle_start: self.particle_end, first:last]
+        return rows.clone() if is_range(envs, state.shape[0]) else rows[torch.as_tensor(envs, device=rows.device)]
+
+    def _field(self, name, envs_idx):
+        """State field ``name`` (layout.STATE) of every particle: (…, n, width)."""
+        return self._out(self._particle_rows(self._envs(envs_idx), *layout.STATE[name]))
+
+    def _write_fields(self, names, parts, envs, values):
+        """State fields ``names`` (consecutive in layout.STATE) of particles ``parts`` (local int
+        array) in envs ← values (len(envs), len(parts), their total width), out of place."""
+        first, last = layout.STATE[names[0]][0], layout.STATE[names[-1]][1]
+        columns = ((self.particle_start + parts)[:, None] * layout.WIDTH + np.arange(first, last)[None, :]).ravel()
+        sim = self._sim()
+        table = sim.state(self._solver)
+        sim.set_state(self._solver, replace_columns(table, envs, columns, values.reshape(len(envs), -1)))
+
+    def _write_input(self, name, parts, envs, values):
+        """Per-particle input ``name`` of particles ``parts`` in envs ← values (len(envs), len(parts))."""
+        sim = self._sim()
+        table = sim.inputs(self._solver)[name]
+        sim.set_input(self._solver, name, replace_columns(table, envs, self.particle_start + parts, values))
+
+    def _particle_values(self, value, n_parts, element, envs, arg):
+        """User values → (len(envs), n_parts, *element) tensor: any shape that broadcasts to
+        (n_parts, *element) (unbatched scene) or (len(envs), n_parts, *element) (batched), so
+        (*element,) applies to every particle and (n_parts, *element) to every env. Finite."""
+        target = (n_parts, *element) if self.scene.n_envs == 0 else (len(envs), n_parts, *element)
+        tensor = self._tensor(value, arg, target)
+        if not _broadcasts(tensor.shape, target):
+            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must have shape {target} (or one that "
+                                    f"broadcasts to it, e.g. {tuple(element) or '()'} for every particle), got "
+                                    f"{tuple(tensor.shape)}")
+        if not all_finite(tensor.detach()):
+            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be finite, got NaN or inf")
+        return tensor.broadcast_to(target).reshape(len(envs), n_parts, *element)
+
+    # -- particle state ---------------------------------------------------------------------------
+    def get_particles_pos(self, envs_idx=None):
+        """Particle positions, m: (n_particles, 3) or (n_envs, n_particles, 3)."""
+        return self._field("pos", envs_idx)
+
+    def get_particles_vel(self, envs_idx=None):
+        """Particle velocities, m/s: (n_particles, 3) or (n_envs, n_particles, 3)."""
+        return self._field("vel", envs_idx)
+
+    def set_particles_pos(self, poss, particles_idx_local=None, envs_idx=None):
+        """Particle positions, m: (n, 3) for the particles of particles_idx_local (all by
+        default), (len(envs_idx), n, 3) per env, or anything broadcasting to it. As Genesis, the
+        particles set start afresh: velocity 0, C = 0, F = I, Jp at the material's rest value.
+        Every position must lie strictly inside the MPM walls. Differentiable in ``poss``."""
+        parts = self._local(particles_idx_local, self.n_particles, "particles_idx_local")
+        envs = self._envs(envs_idx)
+        pos = self._particle_values(poss, len(parts), (3,), envs, "poss")
+        _check_inside(f"entity '{self.name}'", "poss", pos.detach().cpu().numpy(), self._solver.wall_lower,
+                      self._solver.wall_upper)
+        rest = pos.new_zeros(len(envs), len(parts), layout.WIDTH - 3)  # vel, C, F, Jp after pos
+        rest[..., _span("F", 3)] = torch.eye(3, dtype=pos.dtype, device=pos.device).reshape(9)
+        rest[..., _span("Jp", 3)] = self.material.default_Jp
+        self._write_fields(("pos", "vel", "C", "F", "Jp"), parts, envs, torch.cat([pos, rest], dim=-1))
+
+    def set_particles_vel(self, vels, particles_idx_local=None, envs_idx=None):
+        """Particle velocities, m/s: shapes as set_particles_pos (a (3,) value sets every
+        particle's). Differentiable in ``vels``."""
+        parts = self._local(particles_idx_local, self.n_particles, "particles_idx_local")
+        envs = self._envs(envs_idx)
+        self._write_fields(("vel",), parts, envs, self._particle_values(vels, len(parts), (3,), envs, "vels"))
+
+    def set_position(self, value, envs_idx=None):
+        """Genesis's set_position: (n_particles, 3) or (len(envs_idx), n_particles, 3) sets every
+        particle (set_particles_pos); (3,) or (len(envs_idx), 3) moves the body as a whole so
+        that its origin (where morph.pos put it) is there, the particles at their sampled
+        offsets. A (n, 3) value with n == n_particles is per particle (as Genesis)."""
+        tensor = self._tensor(value, "value", "(3,) or (n_particles, 3)")
+        if tensor.dim() == 1 or (tensor.dim() == 2 and tensor.shape[0] != self.n_particles):
+            if self.init_particles is None:
+                raise SceneStateError(f"entity '{self.name}': set_position with a centre needs the sampled "
+                                      f"particles, which the scene did not give the entity")
+            offsets = torch.as_tensor(self.init_particles - np.asarray(self.morph.pos), dtype=tensor.dtype,
+                                      device=tensor.device)
+            tensor = offsets + tensor[..., None, :]
+        self.set_particles_pos(tensor, None, envs_idx)
+
+    def set_velocity(self, vels, envs_idx=None):
+        """Genesis's set_velocity: every particle's velocity, m/s ((3,), (n_particles, 3) or
+        (len(envs_idx), n_particles, 3))."""
+        self.set_particles_vel(vels, None, envs_idx)
+
+    def get_state(self):
+        """MPMEntityState of every env: pos, vel, C, F, Jp (differentiable torch views)."""
+        rows = self._particle_rows(self._envs(None))
+        lead = rows.shape[:-1]
+        field = lambda name, shape: self._out(rows[..., slice(*layout.STATE[name])].reshape(*lead, *shape))
+        return MPMEntityState(self, field("pos", (3,)), field("vel", (3,)), field("C", (3, 3)), field("F", (3, 3)),
+                              field("Jp", ()))
+
+    # -- material parameters ------------------------------------------------------------------------
+    def set_material_params(self, E=None, nu=None, rho=None, particles_idx_local=None, envs_idx=None):
+        """Young's modulus E (Pa, > 0), Poisson ratio nu (in (−1, 0.5)) and density rho (kg/m³,
+        > 0) of the particles (all by default): a scalar for all, (n,) per particle,
+        (len(envs_idx), n) per env and particle. None leaves a parameter as it is. Differentiable
+        (Genesis's are compile-time constants). Every value is checked before any is written."""
+        parts = self._local(particles_idx_local, self.n_particles, "particles_idx_local")
+        envs = self._envs(envs_idx)
+        limits = {"E": (0.0, np.inf, "> 0 (Pa)"), "nu": (-1.0, 0.5, "in (−1, 0.5)"),
+                  "rho": (0.0, np.inf, "> 0 (kg/m³)")}
+        checked = {}
+        for name, value in (("E", E), ("nu", nu), ("rho", rho)):
+            if value is None:
+                continue
+            values = self._particle_values(value, len(parts), (), envs, name)
+            lo, hi, what = limits[name]
+            held = values.detach()
+            if not bool(((held > lo) & (held < hi)).all()):
+                raise InvalidInputError(f"entity '{self.name}': argument '{name}' must be {what}, got values from "
+                                        f"{held.min().item():g} to {held.max().item():g}")
+            checked[name] = values
+        for name, values in checked.items():
+            self._write_input(name, parts, envs, values)
+
+    def get_mass(self, envs_idx=None):
+        """Total mass, kg: Σ rho · particle_size³, () or (n_envs,); differentiable in rho."""
+        envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
+        rho = self._sim().inputs(self._solver)["rho"][envs][:, self.particle_start: self.particle_end]
+        return self._out(rho.sum(-1) * self.particle_size ** 3)
+
+    # -- muscles ---------------------------------------------------------------------------------------
+    def _require_muscle(self, method):
+        if not isinstance(self.material, MPM.Muscle):
+            raise InvalidInputError(f"entity '{self.name}': {method} needs a gs.materials.MPM.Muscle entity, got "
+                                    f"{type(self.material).__qualname__}")
+
+    def set_actuation(self, actu, envs_idx=None):
+        """Muscle actuation per group (no unit): a scalar for all groups, (n_groups,), or
+        (len(envs_idx), n_groups); each particle takes its group's value (set_muscle) until the
+        next call or scene.reset(). Differentiable in ``actu``."""
+        self._require_muscle("set_actuation")
+        envs = self._envs(envs_idx)
+        n_groups = self.material.n_groups
+        target = (n_groups,) if self.scene.n_envs == 0 else (len(envs), n_groups)
+        groups = self._tensor(actu, "actu", target)
+        if not _broadcasts(groups.shape, target):
+            raise InvalidInputError(f"entity '{self.name}': argument 'actu' must have shape {target} (one value per "
+                                    f"muscle group), or be one number, got {tuple(groups.shape)}")
+        if not all_finite(groups.detach()):
+            raise InvalidInputError(f"entity '{self.name}': argument 'actu' must be finite, got NaN or inf")
+        groups = groups.broadcast_to(target).reshape(len(envs), n_groups)
+        per_particle = groups[:, torch.as_tensor(self._muscle_group, device=groups.device)]
+        self._write_input("actu", np.arange(self.n_particles), envs, per_particle)
+
+    def set_muscle(self, muscle_group=None, muscle_direction=None):
+        """Genesis's set_muscle: muscle_group (n_particles,) integers in [0, n_groups) (all 0 at
+        first), used by the next set_actuation; muscle_direction (n_particles, 3) or (3,) fibre
+        directions (normalised here; (0, 0, 1) at first). Not differentiable."""
+        self._require_muscle("set_muscle")
+        self._sim()
+        if muscle_group is not None:
+            group = muscle_group.detach().cpu().numpy() if isinstance(muscle_group, torch.Tensor) else \
+                np.asarray(muscle_group)
+            n_groups = self.material.n_groups
+            if group.shape != (self.n_particles,) or group.dtype.kind not in "iu" or \
+                    (group.size and (group.min() < 0 or group.max() >= n_groups)):
+                raise InvalidInputError(f"entity '{self.name}': argument 'muscle_group' must be {self.n_particles} "
+                                        f"integers in [0, {n_groups}), got shape {group.shape} of {group.dtype}")
+            self._muscle_group = group.astype(np.int64)
+        if muscle_direction is not None:
+            directions = np.asarray(muscle_direction.detach().cpu().numpy() if isinstance(muscle_direction,
+                                    torch.Tensor) else muscle_direction, dtype=np.float64)
+            if directions.shape not in ((3,), (self.n_particles, 3)):
+                raise InvalidInputError(f"entity '{self.name}': argument 'muscle_direction' must have shape (3,) or "
+                                        f"{(self.n_particles, 3)}, got {directions.shape}")
+            directions = np.broadcast_to(directions, (self.n_particles, 3))
+            norms = np.linalg.norm(directions, axis=1)
+            if not (np.all(np.isfinite(directions)) and np.all(norms > 0)):
+                raise InvalidInputError(f"entity '{self.name}': argument 'muscle_direction' must hold finite, non-zero "
+                                        f"vectors, got a zero or non-finite one")
+            self._solver.set_fiber(self.particle_start, directions / norms[:, None])
+
+    def get_muscle_group(self):
+        """(n_particles,) int64 tensor: each particle's muscle group."""
+        self._require_muscle("get_muscle_group")
+        return torch.as_tensor(self._muscle_group, device=runtime.device)
+
+    def __repr__(self):
+        return f"MPMEntity({self.name!r}, {type(self.material).__qualname__}, n_particles={self.n_particles})"
+
+
+def _span(name, skip):
+    """The columns of state field ``name`` in a row from which the first ``skip`` columns were dropped."""
+    first, last = layout.STATE[name]
+    return slice(first - skip, last - skip)
+
+
+def _broadcasts(shape, target):
+    """A tensor of ``shape`` broadcasts to ``target`` (numpy's rules, no new dimensions beyond it)."""
+    if len(shape) > len(target):
+        return False
+    return all(have in (1, want) for have, want in zip(reversed(tuple(shape)), reversed(tuple(target))))

@@ -1,0 +1,1 @@
+"""The MPM particle solver (MLS-MPM): solver.py owns it, kernels.py runs a substep."""

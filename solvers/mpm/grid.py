@@ -1,0 +1,139 @@
+"""The grid update: nodal momentum to velocity, gravity, and the domain walls (Genesis's grid op);
+then the touched nodes are cleared for the next substep; and the update's adjoint.
+
+Forward, per listed node i: v_i = mask_i ⊙ (P_i / M_i + h g), mask_i zeroing the components a
+wall stops. The adjoint reads the mask off the updated grid (see ``wall_mask``), so the rebuilt
+grid needs nothing beyond what the forward leaves in it.
+"""
+import taichi as ti
+
+
+@ti.func
+def largest_count(active: ti.template()):
+    """Row B, column 0 of ``active`` ← the largest env's node count (the grid loops' bound)."""
+    for once in range(1):
+        B = active.shape[0] - 1
+        most = 0
+        for e in range(B):
+            most = ti.max(most, active[e, 0])
+        active[B, 0] = most
+
+
+@ti.func
+def grid_stage(grid: ti.template(), active: ti.template(), gravity: ti.template(), grid_f: ti.template(),
+               grid_i: ti.template()):
+    """Momentum → velocity, gravity, then the walls (Genesis's grid op, restitution 0)."""
+    h, dx = grid_f[0], 1.0 / grid_f[1]
+    B = active.shape[0] - 1
+    for e, k in ti.ndrange(B, active[B, 0]):
+        if k < active[e, 0]:
+            n = active[e, k + 1]
+            v = ti.Vector([grid[e, n, 0], grid[e, n, 1], grid[e, n, 2]]) / grid[e, n, 3]
+            v += h * ti.Vector([gravity[e, 0], gravity[e, 1], gravity[e, 2]])
+            v = wall_velocity(node_position(n, dx, grid_i), v, grid_f, grid_i[6])
+            for c in ti.static(range(3)):
+                grid[e, n, c] = v[c]
+
+
+@ti.func
+def node_position(n, dx, grid_i: ti.template()):
+    """Position (3,) m of flat node n."""
+    node = ti.Vector([n // (grid_i[4] * grid_i[5]), n // grid_i[5] % grid_i[4], n % grid_i[5]])
+    return (node + ti.Vector([grid_i[0], grid_i[1], grid_i[2]])) * dx
+
+
+@ti.func
+def wall_velocity(pos, v, grid_f: ti.template(), sticky):
+    """Velocity (3,) m/s at pos (3,) m after the walls: a component moving out through a wall
+    it has reached is zeroed (slip), or all of them (sticky)."""
+    out = v
+    beyond = 0
+    for c in ti.static(range(3)):
+        if (pos[c] >= grid_f[6 + c] and v[c] >= 0.0) or (pos[c] <= grid_f[3 + c] and v[c] <= 0.0):
+            out[c] = 0.0
+            beyond = 1
+    if sticky and beyond:
+        out = ti.Vector.zero(float, 3)
+    return out
+
+
+@ti.func
+def clear_stage(grid: ti.template(), active: ti.template()):
+    """Zero the nodes this substep touched, and the counts."""
+    B = active.shape[0] - 1
+    for e, k in ti.ndrange(B, active[B, 0]):
+        if k < active[e, 0]:
+            n = active[e, k + 1]
+            for c in ti.static(range(4)):
+                grid[e, n, c] = 0.0
+    for e in range(B + 1):
+        active[e, 0] = 0
+
+
+@ti.func
+def wall_mask(pos, v, grid_f: ti.template(), sticky):
+    """The mask (3,) of 0/1 that wall_velocity applied at a node at pos (3,) m whose updated
+    velocity is v (3,): a component beyond a wall that the walls did not zero points strictly
+    inwards (nonzero), so it was zeroed iff it is zero now; sticky walls zero all or none."""
+    mask = ti.Vector([1.0, 1.0, 1.0])
+    stopped = 0
+    for c in ti.static(range(3)):
+        if (pos[c] >= grid_f[6 + c] or pos[c] <= grid_f[3 + c]) and v[c] == 0.0:
+            mask[c] = 0.0
+            stopped = 1
+    if sticky and stopped:
+        mask = ti.Vector.zero(float, 3)
+    return mask
+
+
+@ti.func
+def grid_adjoint_stage(grid: ti.template(), grad_grid: ti.template(), active: ti.template(), gravity: ti.template(),
+                       grid_f: ti.template(), grid_i: ti.template()):
+    """Reverse of the update, per listed node (parallel): grad_grid's velocity gradient (0:3) →
+    (∂L/∂P (0:3), ∂L/∂M (3)); the grid's velocity is replaced by mask ⊙ ∂L/∂v for the gravity
+    sum (gravity_adjoint_stage)."""
+    h, dx = grid_f[0], 1.0 / grid_f[1]
+    B = active.shape[0] - 1
+    for e, k in ti.ndrange(B, active[B, 0]):
+        if k < active[e, 0]:
+            n = active[e, k + 1]
+            v = ti.Vector([grid[e, n, 0], grid[e, n, 1], grid[e, n, 2]])
+            mass = grid[e, n, 3]
+            g_v = wall_mask(node_position(n, dx, grid_i), v, grid_f, grid_i[6]) * ti.Vector(
+                [grad_grid[e, n, 0], grad_grid[e, n, 1], grad_grid[e, n, 2]])
+            # where the mask passes, v = P / M + h g: P / M = v − h g
+            velocity = v - h * ti.Vector([gravity[e, 0], gravity[e, 1], gravity[e, 2]])
+            for c in ti.static(range(3)):
+                grad_grid[e, n, c] = g_v[c] / mass
+                grid[e, n, c] = g_v[c]
+            grad_grid[e, n, 3] = -g_v.dot(velocity) / mass
+
+
+@ti.func
+def gravity_adjoint_stage(grid: ti.template(), active: ti.template(), grad_gravity: ti.template(),
+                          grid_f: ti.template()):
+    """grad_gravity (B, 3) += h Σ mask ⊙ ∂L/∂v over env e's listed nodes, serially in list order
+    (deterministic), from what grid_adjoint_stage left in the grid."""
+    h = grid_f[0]
+    B = active.shape[0] - 1
+    for e in range(B):
+        total = ti.Vector.zero(float, 3)
+        for k in range(active[e, 0]):
+            n = active[e, k + 1]
+            total += ti.Vector([grid[e, n, 0], grid[e, n, 1], grid[e, n, 2]])
+        for c in ti.static(range(3)):
+            grad_gravity[e, c] = grad_gravity[e, c] + h * total[c]
+
+
+@ti.func
+def clear_adjoint_stage(grid: ti.template(), grad_grid: ti.template(), active: ti.template()):
+    """Zero the nodes this substep touched, in the rebuilt grid and its gradient, and the counts."""
+    B = active.shape[0] - 1
+    for e, k in ti.ndrange(B, active[B, 0]):
+        if k < active[e, 0]:
+            n = active[e, k + 1]
+            for c in ti.static(range(4)):
+                grid[e, n, c] = 0.0
+                grad_grid[e, n, c] = 0.0
+    for e in range(B + 1):
+        active[e, 0] = 0

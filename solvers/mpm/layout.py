@@ -1,0 +1,32 @@
+"""What the MPM solver's tensors hold, shared by the solver, its kernels and the entity API.
+
+State: one torch tensor (B, n_particles · WIDTH) per scene; viewed as (B, n_particles, WIDTH),
+each particle's row holds STATE's fields (row-major 3×3 matrices):
+- pos (3): position, m (world);
+- vel (3): velocity, m/s;
+- C (9): APIC affine velocity field, 1/s;
+- F (9): deformation gradient (elastic part), no unit;
+- Jp (1): plastic volume ratio (Snow's hardening, Sand's volume correction), 1 at rest.
+
+Inputs (name → (B, width) tensor): E (B, n) Young's modulus, Pa; nu (B, n) Poisson ratio;
+rho (B, n) density, kg/m³; actu (B, n) muscle actuation, no unit (0 for other materials);
+gravity (B, 3) m/s². Parameters keep their value across scene.reset(); actu is a control,
+cleared by reset.
+
+Material kinds: each particle has a kind code (KIND) and N_CONSTS constants whose meaning
+depends on the kind (solvers/mpm/constitutive.py: encode).
+"""
+
+#: field → (first column, last column + 1) of a particle's state row
+STATE = {"pos": (0, 3), "vel": (3, 6), "C": (6, 15), "F": (15, 24), "Jp": (24, 25)}
+WIDTH = 25
+
+#: per-particle inputs (B, n_particles), then per-env ones with their width
+PARTICLE_INPUTS = ("E", "nu", "rho", "actu")
+ENV_INPUTS = {"gravity": 3}
+PERSISTENT_INPUTS = ("E", "nu", "rho", "gravity")
+
+#: material kind → code of the kernels' runtime branch
+KIND = {"corotation": 0, "neohooken": 1, "elastoplastic": 2, "snow": 3, "sand": 4, "liquid": 5,
+        "muscle_corotation": 6, "muscle_neohooken": 7}
+N_CONSTS = 4

@@ -1,0 +1,137 @@
+"""Particle to grid (p2g): each particle's material update and stress, then the scatter of its
+mass and APIC momentum to the 27 nodes around it; and their adjoints.
+
+Forward, per particle p of env e (h the substep, κ = 4 h vol inv_dx²):
+    F_tmp = (I + h C) F;  (F', Jp', τ) = constitutive(F_tmp, Jp);  A = −κ τ + m C  (m = ρ vol)
+    P_i += w_i (m v + A (x_i − x)),  M_i += w_i m   over the 27 nodes i (x_i − x = (offset − fx) dx).
+The scatter's reverse is a gather (parallel over particles): every particle reads the gradients
+(∂L/∂P_i, ∂L/∂M_i) of its nodes.
+"""
+import taichi as ti
+
+from .constitutive import constitutive, constitutive_adjoint
+from .stencil import (cell_of, node_index, row_matrix, row_vector, store_matrix, store_vector, weight, weight_grad,
+                      weights)
+
+
+@ti.func
+def stress_stage(frames: ti.template(), params: ti.template(), kinds: ti.template(), consts: ti.template(),
+                 fiber: ti.template(), affine: ti.template(), grid_f: ti.template(), src, dst,
+                 store_state: ti.template()):
+    """Per particle: the material update F, Jp → frame dst (when ``store_state``: the reverse
+    rebuilds only the affine matrix), and the affine momentum matrix."""
+    h, vol, inv_dx = grid_f[0], grid_f[2], grid_f[1]
+    for e, p in ti.ndrange(frames.shape[1], frames.shape[2]):
+        C = row_matrix(frames, src, e, p, 6)
+        F_tmp = (ti.Matrix.identity(float, 3) + h * C) @ row_matrix(frames, src, e, p, 15)
+        kind = kinds[p]
+        c = ti.Vector([consts[p, 0], consts[p, 1], consts[p, 2], consts[p, 3]])
+        d = ti.Vector([fiber[p, 0], fiber[p, 1], fiber[p, 2]])
+        F_new, Jp_new, tau = constitutive(kind, c, params[e, p, 0], params[e, p, 1], params[e, p, 3], d, F_tmp,
+                                          frames[src, e, p, 24])
+        if ti.static(store_state):
+            store_matrix(frames, dst, e, p, 15, F_new)
+            frames[dst, e, p, 24] = Jp_new
+        mass = params[e, p, 2] * vol
+        aff = (-h * vol * 4.0 * inv_dx * inv_dx) * tau + mass * C
+        for k in ti.static(range(9)):
+            affine[e, p, k] = aff[k // 3, k % 3]
+
+
+@ti.func
+def scatter_stage(frames: ti.template(), params: ti.template(), affine: ti.template(), grid: ti.template(),
+                  active: ti.template(), grid_f: ti.template(), grid_i: ti.template(), src):
+    """p2g, serial per env (in particle order: deterministic); lists each node on first touch."""
+    inv_dx, vol = grid_f[1], grid_f[2]
+    for e in range(frames.shape[1]):
+        count = 0
+        for p in range(frames.shape[2]):
+            base, fx = cell_of(row_vector(frames, src, e, p, 0), inv_dx, grid_i)
+            mass = params[e, p, 2] * vol
+            momentum = mass * row_vector(frames, src, e, p, 3)
+            aff = affine_matrix(affine, e, p)
+            W = weights(fx)
+            ny, nz = grid_i[4], grid_i[5]
+            # the 27 nodes as three runtime loops, weights and indices built up level by level
+            # (one loop over o with a weight() per node ran 3× slower)
+            for i in range(3):
+                for j in range(3):
+                    wxy = W[i, 0] * W[j, 1]
+                    row = ((base[0] + i) * ny + base[1] + j) * nz + base[2]
+                    for k in range(3):
+                        n = row + k
+                        w = wxy * W[k, 2]
+                        dpos = (ti.Vector([i, j, k], float) - fx) / inv_dx
+                        contribution = w * (momentum + aff @ dpos)
+                        old_mass = grid[e, n, 3]
+                        for c in ti.static(range(3)):
+                            grid[e, n, c] = grid[e, n, c] + contribution[c]
+                        grid[e, n, 3] = old_mass + w * mass
+                        if old_mass == 0.0 and w * mass > 0.0:
+                            count += 1
+                            active[e, count] = n
+        active[e, 0] = count
+
+
+@ti.func
+def affine_matrix(affine: ti.template(), e, p):
+    """Particle p's affine momentum matrix (3×3) of this substep."""
+    aff = ti.Matrix.zero(float, 3, 3)
+    for k in ti.static(range(9)):
+        aff[k // 3, k % 3] = affine[e, p, k]
+    return aff
+
+
+@ti.func
+def p2g_adjoint_stage(frames: ti.template(), params: ti.template(), kinds: ti.template(), consts: ti.template(),
+                      fiber: ti.template(), affine: ti.template(), grads: ti.template(), grad_params: ti.template(),
+                      grad_grid: ti.template(), scratch: ti.template(), grid_f: ti.template(),
+                      grid_i: ti.template(), src):
+    """Reverse of the scatter and the stress, per particle (parallel): the gather of the nodes'
+    (∂L/∂P, ∂L/∂M) (grad_grid) and the material's adjoint turn the gradient of frame dst's F, Jp
+    (grads) and g2p's partial position gradient (scratch 3:6) into the gradient of frame src's
+    whole row (written over grads' row), and add the parameters' gradients (grad_params: E, nu,
+    rho, actu) per particle."""
+    h, inv_dx, vol = grid_f[0], grid_f[1], grid_f[2]
+    for e, p in ti.ndrange(frames.shape[1], frames.shape[2]):
+        pos, vel = row_vector(frames, src, e, p, 0), row_vector(frames, src, e, p, 3)
+        base, fx = cell_of(pos, inv_dx, grid_i)
+        mass = params[e, p, 2] * vol
+        aff = affine_matrix(affine, e, p)
+        momentum = mass * vel
+        g_mass = 0.0
+        g_momentum = ti.Vector.zero(float, 3)
+        g_aff = ti.Matrix.zero(float, 3, 3)
+        g_fx = ti.Vector.zero(float, 3)
+        for o in range(27):
+            n, offset = node_index(grid_i, base, o)
+            w, dw = weight(fx, offset), weight_grad(fx, offset)
+            g_P = ti.Vector([grad_grid[e, n, 0], grad_grid[e, n, 1], grad_grid[e, n, 2]])
+            g_M = grad_grid[e, n, 3]
+            dpos = (offset - fx) / inv_dx
+            g_momentum += w * g_P
+            g_mass += w * g_M
+            g_aff += w * g_P.outer_product(dpos)
+            g_fx += (g_P.dot(momentum + aff @ dpos) + g_M * mass) * dw - (w / inv_dx) * (aff.transpose() @ g_P)
+        # the stress: A = −κ τ + m C, F_tmp = (I + h C) F
+        C, F = row_matrix(frames, src, e, p, 6), row_matrix(frames, src, e, p, 15)
+        g_mass += g_momentum.dot(vel) + (g_aff * C).sum()
+        g_C = mass * g_aff
+        step = ti.Matrix.identity(float, 3) + h * C
+        F_tmp = step @ F
+        c = ti.Vector([consts[p, 0], consts[p, 1], consts[p, 2], consts[p, 3]])
+        d = ti.Vector([fiber[p, 0], fiber[p, 1], fiber[p, 2]])
+        g_F_tmp, g_Jp, g_E, g_nu, g_actu = constitutive_adjoint(
+            kinds[p], c, params[e, p, 0], params[e, p, 1], params[e, p, 3], d, F_tmp, frames[src, e, p, 24],
+            row_matrix(grads, 0, e, p, 15), grads[0, e, p, 24], (-h * vol * 4.0 * inv_dx * inv_dx) * g_aff)
+        g_C += h * g_F_tmp @ F.transpose()
+        g_pos = ti.Vector([scratch[e, p, 3], scratch[e, p, 4], scratch[e, p, 5]]) + inv_dx * g_fx
+        store_vector(grads, 0, e, p, 0, g_pos)
+        store_vector(grads, 0, e, p, 3, mass * g_momentum)
+        store_matrix(grads, 0, e, p, 6, g_C)
+        store_matrix(grads, 0, e, p, 15, step.transpose() @ g_F_tmp)
+        grads[0, e, p, 24] = g_Jp
+        grad_params[e, p, 0] = grad_params[e, p, 0] + g_E
+        grad_params[e, p, 1] = grad_params[e, p, 1] + g_nu
+        grad_params[e, p, 2] = grad_params[e, p, 2] + vol * g_mass
+        grad_params[e, p, 3] = grad_params[e, p, 3] + g_actu

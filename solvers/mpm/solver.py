@@ -1,0 +1,216 @@
+"""The MPM solver: MLS-MPM particles of many materials on one grid (kernels.py), batched over envs.
+
+State per env: every particle's row of layout.STATE, flattened (B, N · 25). Inputs: layout's
+per-particle E, nu, rho, actu and the per-env gravity. Bookkeeping only: the physics is in the
+kernels of kernels.py (one launch per substep) and constitutive.py.
+"""
+import warnings
+
+import numpy as np
+import torch
+
+from ..base import Solver
+from ..core import InvalidInputError, runtime
+from ..launch import BoundKernels
+from . import kernels, layout
+from .adjoint import MPMAdjoint
+from .constitutive import encode
+from .model import EntitySpec, Grid, MPMModel
+
+# Genesis's suggested bound on the substep: h ≤ 2e-2 · dx (s, dx in m)
+GENESIS_DT_PER_DX = 2e-2
+
+
+class MPMSolver(MPMAdjoint, Solver):
+    persistent_inputs = layout.PERSISTENT_INPUTS
+
+    def __init__(self, dt, substeps, gravity, grid_density, particle_size, lower_bound, upper_bound, sticky,
+                 requires_grad):
+        """dt: step, s; substeps per step; gravity (3,) m/s²; grid_density cells per m; particle_size
+        (a particle's edge, m: its volume is particle_size³); lower/upper_bound (3,) m; sticky walls
+        (else slip); requires_grad: keep every substep's particles for the backward."""
+        self.dt, self.substeps, self.gravity = dt, substeps, np.asarray(gravity, dtype=np.float64)
+        self.requires_grad = requires_grad
+        grid = Grid(float(grid_density), np.asarray(lower_bound, dtype=np.float64),
+                    np.asarray(upper_bound, dtype=np.float64))
+        self.particle_size = float(particle_size)
+        self.model = MPMModel(grid, self.particle_size ** 3, bool(sticky))
+        self.entity_names = []
+        self.wall_lower, self.wall_upper = grid.wall_lower, grid.wall_upper
+
+    # -- building ---------------------------------------------------------------------------
+    def add_entity(self, name, kind, params, E, nu, rho, Jp, positions):
+        """Register an entity's particles (n, 3) m of a material kind (layout.KIND name) with its
+        non-differentiable params, E (Pa), nu, rho (kg/m³) and initial Jp; returns the index of
+        its first particle."""
+        positions = np.asarray(positions, dtype=np.float64)
+        self.model.check_inside(name, positions, "its particles")
+        start = sum(len(s.positions) for s in self.model.entities)
+        self.model.entities.append(EntitySpec(name, kind, dict(params), E, nu, rho, Jp, positions, start))
+        self.entity_names.append(name)
+        return start
+
+    def build(self, n_envs):
+        self.model.finish(encode)
+        self.n_batch, m = max(1, n_envs), self.model
+        self.n_particles = m.n_particles
+        self.state_width = m.n_particles * layout.WIDTH
+        self._check_memory()
+        self._check_substep()
+        self._allocate()
+        self.default_inputs = self._default_inputs()
+        self.upload_inputs(self.default_inputs)
+        state = self._initial_state()
+        self.upload_state(state)
+        return state
+
+    def _grid_bytes(self):
+        size = torch.finfo(runtime.tc_float).bits // 8
+        return self.n_batch * self.model.grid.n_nodes * (4 * size + 4)
+
+    def _check_memory(self):
+        """The grid must fit in the memory available now (a named error, not a crash)."""
+        need = self._grid_bytes()
+        pages, page = _available_pages(), _page_size()
+        if pages is not None and need > pages * page:
+            g = self.model.grid
+            raise InvalidInputError(f"MPM solver (entities: {', '.join(self.entity_names)}): the grid of "
+                                    f"{' × '.join(str(int(r)) for r in g.res)} nodes × {self.n_batch} env(s) needs "
+                                    f"{need / 2**30:.1f} GiB, expected at most the {pages * page / 2**30:.1f} GiB "
+                                    f"available; lower MPMOptions grid_density or tighten lower_bound/upper_bound")
+
+    def _check_substep(self):
+        """Warn when the substep exceeds the stability limit: Genesis's suggested h ≤ 2e-2·dx, and
+        the elastic wave's CFL bound h ≤ dx / c with c = √((λ + 2μ)/ρ) of the stiffest material."""
+        m, h = self.model, self.dt / self.substeps
+        E, nu, rho = m.defaults["E"], m.defaults["nu"], m.defaults["rho"]
+        modulus = E * (1 - nu) / ((1 + nu) * (1 - 2 * nu))  # λ + 2μ
+        wave = float(np.sqrt(np.max(modulus / rho))) if m.n_particles else 0.0
+        limit = min(GENESIS_DT_PER_DX * m.grid.dx, m.grid.dx / wave if wave > 0 else np.inf)
+        if h > limit:
+            warnings.warn(f"MPM solver (entities: {', '.join(self.entity_names)}): the substep dt / substeps = "
+                          f"{h:.3g} s exceeds the stability limit {limit:.3g} s (min of 2e-2·dx = "
+                          f"{GENESIS_DT_PER_DX * m.grid.dx:.3g} s and dx / wave speed = {m.grid.dx / wave:.3g} s); "
+                          f"the simulation may blow up: raise SimOptions substeps or lower dt", stacklevel=4)
+
+    def _allocate(self):
+        m, B, N = self.model, self.n_batch, self.model.n_particles
+        S, g = self.substeps, m.grid
+
+        def floats(*shape):
+            return torch.zeros(shape, dtype=runtime.tc_float, device=runtime.device)
+
+        def ints(*shape):
+            return torch.zeros(shape, dtype=torch.int32, device=runtime.device)
+
+        self.n_frames = S + 1 if self.requires_grad else 2
+        self.frames = floats(self.n_frames, B, N, layout.WIDTH)
+        self.params = floats(B, N, len(layout.PARTICLE_INPUTS))
+        self.gravity_in = floats(B, 3)
+        self.kinds = torch.as_tensor(m.kinds, device=runtime.device)
+        self.consts = torch.as_tensor(m.consts, dtype=runtime.tc_float, device=runtime.device)
+        self.fiber = floats(N, 3)
+        self.fiber[:, 0] = 1.0
+        self.affine = floats(B, N, 9)
+        self.grid = floats(B, g.n_nodes, 4)
+        self.active = ints(B + 1, g.n_nodes + 1)
+        h = self.dt / self.substeps
+        self.grid_f = torch.as_tensor([h, g.density, m.vol, *g.wall_lower, *g.wall_upper], dtype=runtime.tc_float,
+                                      device=runtime.device)
+        self.grid_i = torch.as_tensor([*g.lowest, *g.res, int(m.sticky)], dtype=torch.int32, device=runtime.device)
+        self.flags = ints(1)
+        arrays = [self.frames, self.params, self.gravity_in, self.kinds, self.consts, self.fiber, self.affine,
+                  self.grid, self.active, self.grid_f, self.grid_i, self.flags]
+        self.kernels = BoundKernels(0, arrays, [0] * len(arrays), *kernels.KERNELS)
+        self.current = 0  # the frame holding the current state
+        if self.requires_grad:
+            self._allocate_reverse()
+
+    def _default_inputs(self):
+        m, B = self.model, self.n_batch
+        values = {"E": m.defaults["E"], "nu": m.defaults["nu"], "rho": m.defaults["rho"],
+                  "actu": np.zeros(m.n_particles), "gravity": self.gravity}
+        return {name: torch.as_tensor(np.tile(v, (B, 1)), dtype=runtime.tc_float, device=runtime.device)
+                for name, v in values.items()}
+
+    def _initial_state(self):
+        m = self.model
+        rows = np.zeros((m.n_particles, layout.WIDTH))
+        rows[:, 0:3] = m.pos0
+        rows[:, 15:24] = np.eye(3).ravel()
+        rows[:, 24] = m.Jp0
+        return torch.as_tensor(np.tile(rows.ravel(), (self.n_batch, 1)), dtype=runtime.tc_float,
+                               device=runtime.device)
+
+    def set_fiber(self, start, directions):
+        """Muscle fibre directions (n, 3) of particles start.. (normalised here)."""
+        d = torch.as_tensor(np.asarray(directions, dtype=np.float64), dtype=runtime.tc_float, device=runtime.device)
+        self.fiber[start: start + len(d)] = d / d.norm(dim=1, keepdim=True)
+
+    # -- moving data ------------------------------------------------------------------------
+    def upload_state(self, state):
+        self.kernels.write_state(self.current, state.detach().contiguous())
+
+    def download_state(self):
+        out = torch.empty((self.n_batch, self.state_width), dtype=runtime.tc_float, device=runtime.device)
+        self.kernels.read_state(self.current, out)
+        return out
+
+    def upload_inputs(self, inputs):
+        with torch.no_grad():
+            self.params.copy_(torch.stack([inputs[name] for name in layout.PARTICLE_INPUTS], dim=-1))
+            self.gravity_in.copy_(inputs["gravity"])
+
+    # -- stepping ---------------------------------------------------------------------------
+    def begin_step(self, inputs):
+        if inputs is not None:
+            self.upload_inputs(inputs)
+
+    def _frames(self, s):
+        """(source, destination) frames of substep s of the step that starts at ``current``."""
+        return (self.current + s) % self.n_frames, (self.current + s + 1) % self.n_frames
+
+    def substep_pre_coupling(self, s):
+        self.kernels.pre_coupling(*self._frames(s))
+
+    def substep_post_coupling(self, s):
+        self.kernels.post_coupling(*self._frames(s))
+
+    def end_step(self, download):
+        self.current = (self.current + self.substeps) % self.n_frames
+        return self.download_state() if download else None
+
+    def advance(self, inputs=None, download=False):
+        """A whole step, one launch per substep (kernels.substep fuses pre and post coupling)."""
+        self.begin_step(inputs)
+        for s in range(self.substeps):
+            self.kernels.substep(*self._frames(s))
+        return self.end_step(download)
+
+    def nonfinite(self):
+        flagged = bool(self.flags[0])
+        self.flags.zero_()
+        return flagged
+
+    def warm_start(self):
+        return None
+
+    def set_warm_start(self, warm_start):
+        pass
+
+    def destroy(self):
+        self.kernels = self.frames = self.grid = None
+
+
+def _available_pages():
+    """Pages of memory available now (Linux), else None."""
+    try:
+        import os
+        return os.sysconf("SC_AVPHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def _page_size():
+    import os
+    return os.sysconf("SC_PAGE_SIZE")

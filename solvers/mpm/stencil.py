@@ -1,0 +1,87 @@
+"""The quadratic B-spline stencil that ties a particle to its 27 grid nodes (its weights and their
+gradients, for the adjoints), and reading and writing a particle's state row (layout.STATE)
+inside kernels."""
+import taichi as ti
+
+
+@ti.func
+def row_matrix(frames: ti.template(), f, e, p, k0):
+    """The 3×3 matrix stored row-major at columns k0..k0+8 of a particle row."""
+    m = ti.Matrix.zero(float, 3, 3)
+    for i in ti.static(range(3)):
+        for j in ti.static(range(3)):
+            m[i, j] = frames[f, e, p, k0 + 3 * i + j]
+    return m
+
+
+@ti.func
+def row_vector(frames: ti.template(), f, e, p, k0):
+    return ti.Vector([frames[f, e, p, k0], frames[f, e, p, k0 + 1], frames[f, e, p, k0 + 2]])
+
+
+@ti.func
+def store_matrix(frames: ti.template(), f, e, p, k0, m):
+    for i in ti.static(range(3)):
+        for j in ti.static(range(3)):
+            frames[f, e, p, k0 + 3 * i + j] = m[i, j]
+
+
+@ti.func
+def store_vector(frames: ti.template(), f, e, p, k0, v):
+    for i in ti.static(range(3)):
+        frames[f, e, p, k0 + i] = v[i]
+
+
+@ti.func
+def bspline(fx, i):
+    """Quadratic B-spline weight (3,) of node offset i ∈ {0, 1, 2} for a particle at fx (3,)
+    cells from its base node (fx ∈ [0.5, 1.5) per axis)."""
+    return ti.select(i == 0, 0.5 * (1.5 - fx) ** 2, ti.select(i == 1, 0.75 - (fx - 1.0) ** 2, 0.5 * (fx - 0.5) ** 2))
+
+
+@ti.func
+def bspline_grad(fx, i):
+    """d bspline(fx, i) / d fx, per axis (3,)."""
+    return ti.select(i == 0, fx - 1.5, ti.select(i == 1, -2.0 * (fx - 1.0), fx - 0.5))
+
+
+@ti.func
+def weight(fx, offset):
+    """The stencil weight (product of the three axes' B-splines) of node ``offset`` (3, int)."""
+    return bspline(fx, offset[0])[0] * bspline(fx, offset[1])[1] * bspline(fx, offset[2])[2]
+
+
+@ti.func
+def weights(fx):
+    """3×3: row i holds the three axes' B-spline weights of node offset i, so that node
+    (i, j, k)'s weight is W[i, 0] · W[j, 1] · W[k, 2] (= weight(fx, (i, j, k)), bit for bit)."""
+    return ti.Matrix.rows([bspline(fx, 0), bspline(fx, 1), bspline(fx, 2)])
+
+
+@ti.func
+def weight_grad(fx, offset):
+    """d weight(fx, offset) / d fx (3,), 1/cell."""
+    b = ti.Vector([bspline(fx, offset[0])[0], bspline(fx, offset[1])[1], bspline(fx, offset[2])[2]])
+    d = ti.Vector([bspline_grad(fx, offset[0])[0], bspline_grad(fx, offset[1])[1], bspline_grad(fx, offset[2])[2]])
+    return ti.Vector([d[0] * b[1] * b[2], b[0] * d[1] * b[2], b[0] * b[1] * d[2]])
+
+
+@ti.func
+def cell_of(pos, inv_dx, grid_i: ti.template()):
+    """(base node (3, int, relative to the grid's lowest node), fx (3,) cells) of a particle at
+    pos (3,) m. The base is clamped into the grid so that no index can leave it, even for a
+    non-finite position (flagged elsewhere)."""
+    scaled = pos * inv_dx
+    base = ti.floor(scaled - 0.5, int)
+    fx = scaled - base
+    lowest = ti.Vector([grid_i[0], grid_i[1], grid_i[2]])
+    top = ti.Vector([grid_i[3] - 3, grid_i[4] - 3, grid_i[5] - 3])
+    return ti.max(ti.min(base - lowest, top), 0), fx
+
+
+@ti.func
+def node_index(grid_i: ti.template(), base, o):
+    """Flat index of node base + (o // 9, o // 3 % 3, o % 3), and that offset (3, int)."""
+    offset = ti.Vector([o // 9, o // 3 % 3, o % 3])
+    node = base + offset
+    return (node[0] * grid_i[4] + node[1]) * grid_i[5] + node[2], offset
