@@ -287,18 +287,25 @@ def _is_muscle(kind):
 
 
 @ti.func
+def _decompose(kind, consts, F_tmp):
+    """(J = det F_tmp, U, σ (3,), V) with F_tmp = U diag(σ) Vᵀ for the kinds that need the SVD;
+    identities for the others (which never read them)."""
+    U = ti.Matrix.identity(float, 3)
+    sig = ti.Vector([1.0, 1.0, 1.0], float)
+    V = ti.Matrix.identity(float, 3)
+    if _needs_svd(kind, consts):
+        U, sig, V = svd3(F_tmp)
+    return F_tmp.determinant(), U, sig, V
+
+
+@ti.func
 def constitutive(kind, consts, E, nu, actu, fiber, F_tmp, Jp):
     """One particle's material update: kind (i32, layout.KIND), consts (N_CONSTS vector, see
     `encode`), E (Pa), nu, actu (muscle actuation, 0 elsewhere), fiber (unit 3-vector, muscle fibre
     direction), F_tmp = (I + h C) F (3×3), Jp (plastic volume ratio) → (F_new (3×3), Jp_new, tau (3×3,
     Pa)) as Genesis 1.4.5 computes them (to round-off)."""
     mu, lam = _lame(E, nu)
-    J = F_tmp.determinant()
-    U = ti.Matrix.identity(float, 3)
-    sig = ti.Vector([1.0, 1.0, 1.0], float)
-    V = ti.Matrix.identity(float, 3)
-    if _needs_svd(kind, consts):
-        U, sig, V = svd3(F_tmp)
+    J, U, sig, V = _decompose(kind, consts, F_tmp)
     # (the derivatives are the reverse's; unused here, the compiler drops them)
     moved, f, df, df_dJp, df_dmu, df_dlam, Jp_new, dJp_new, dJp_new_dJp = _return_map(kind, consts, mu, lam, sig, Jp)
     F_new = F_tmp
@@ -351,12 +358,7 @@ def constitutive_adjoint(kind, consts, E, nu, actu, fiber, F_tmp, Jp, g_F_new, g
     branches (one-sided derivatives at kinks). No gradient to consts or fiber."""
     mu, lam = _lame(E, nu)
     dmu_dE, dmu_dnu, dlam_dE, dlam_dnu = _lame_derivatives(E, nu)
-    J = F_tmp.determinant()
-    U = ti.Matrix.identity(float, 3)
-    sig = ti.Vector([1.0, 1.0, 1.0], float)
-    V = ti.Matrix.identity(float, 3)
-    if _needs_svd(kind, consts):
-        U, sig, V = svd3(F_tmp)
+    J, U, sig, V = _decompose(kind, consts, F_tmp)
     # f, df: the singular values of F_new (of F_tmp where the map leaves it: f = σ, df = I)
     moved, f, df, df_dJp, df_dmu, df_dlam, Jp_new, dJp_new, dJp_new_dJp = _return_map(kind, consts, mu, lam, sig, Jp)
     mu_eff, lam_eff, hardening = _effective_lame(kind, consts, mu, lam, Jp)
