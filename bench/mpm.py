@@ -288,6 +288,8 @@ def run_case(python, engine, case, args, tmp):
     if mode == "grad":
         long = run_worker(python, engine, mode, case, args, tmp, horizon=2 * args.horizon)
         result["peak_rss_2k"] = long.get("peak_rss", float("nan"))
+        if "error" in long:
+            print(f"  {case} {engine} at 2K steps: {long['error']}", flush=True)
     return result
 
 
