@@ -189,16 +189,17 @@ class RigidSolver(Solver):
         if inputs is not None:
             self._note_inputs(inputs)
         self.run_step(self._nothing if inputs is None else self._pack_inputs(inputs), out, commit=self._commit)
-        return self._end(out if download else None)
-
-    def _end(self, result):
-        """A step's end: ready for the next forward (not a replay); raise on a contact overflow."""
         self._commit = 1
-        if self.data.size["N"] and self.data.take_flag("overflow"):
+        if self.data.size["N"]:
+            self._check_overflow()
+        return out if download else None
+
+    def _check_overflow(self):
+        """Raise if the step had more contacts than slots."""
+        if self.data.take_flag("overflow"):
             raise SimulationError(f"rigid solver (entities: {', '.join(self.entity_names)}): more contacts than the "
                                   f"{self.data.size['C']} slots per env in this step (it was taken without the "
                                   f"extra ones); expected RigidOptions(max_contacts=...) above that")
-        return result
 
     def run_step(self, inputs, out, commit):
         """One step's kernels. Without contact pairs or friction loss, one launch for all substeps
@@ -237,7 +238,11 @@ class RigidSolver(Solver):
         pass
 
     def end_step(self, download):
-        return self._end(self.download_state() if download and self._commit else None)
+        result = self.download_state() if download and self._commit else None
+        self._commit = 1
+        if self.data.size["N"]:
+            self._check_overflow()
+        return result
 
     def nonfinite(self):
         """True once any step produced a non-finite state (resets the flag)."""
