@@ -9,8 +9,8 @@ scatter into the nodes' velocity gradients, run serially per env (deterministic,
 """
 import taichi as ti
 
-from .stencil import (cell_of, node_index, row_matrix, row_vector, store_matrix, store_vector, weight, weight_grad,
-                      weights)
+from .stencil import (cell_of, row_matrix, row_vector, stencil_node, stencil_weight_grad, store_matrix, store_vector,
+                      weight_grads, weights)
 
 
 @ti.func
@@ -19,17 +19,13 @@ def gather_velocity(grid: ti.template(), e, base, fx, inv_dx, grid_i: ti.templat
     vel = ti.Vector.zero(float, 3)
     C = ti.Matrix.zero(float, 3, 3)
     W = weights(fx)
-    ny, nz = grid_i[4], grid_i[5]
-    for i in range(3):  # as the scatter's loops (p2g.py)
+    for i in range(3):
         for j in range(3):
-            wxy = W[i, 0] * W[j, 1]
-            row = ((base[0] + i) * ny + base[1] + j) * nz + base[2]
             for k in range(3):
-                n = row + k
-                w = wxy * W[k, 2]
+                n, offset, w = stencil_node(grid_i, base, W, i, j, k)
                 v = ti.Vector([grid[e, n, 0], grid[e, n, 1], grid[e, n, 2]])
                 vel += w * v
-                C += (4.0 * inv_dx * w) * v.outer_product(ti.Vector([i, j, k], float) - fx)
+                C += (4.0 * inv_dx * w) * v.outer_product(offset - fx)
     return vel, C
 
 
@@ -94,12 +90,15 @@ def gather_adjoint_stage(frames: ti.template(), grid: ti.template(), grads: ti.t
                 g_vel[c] = g_vel_new[c]
         g_vel += h * g_moved
         g_fx = ti.Vector.zero(float, 3)
-        for o in range(27):
-            n, offset = node_index(grid_i, base, o)
-            w, dw = weight(fx, offset), weight_grad(fx, offset)
-            v = ti.Vector([grid[e, n, 0], grid[e, n, 1], grid[e, n, 2]])
-            g_C_v = g_C.transpose() @ v
-            g_fx += (g_vel.dot(v) + 4.0 * inv_dx * g_C_v.dot(offset - fx)) * dw - (4.0 * inv_dx * w) * g_C_v
+        W, dW = weights(fx), weight_grads(fx)
+        for i in range(3):
+            for j in range(3):
+                for k in range(3):
+                    n, offset, w = stencil_node(grid_i, base, W, i, j, k)
+                    dw = stencil_weight_grad(W, dW, i, j, k)
+                    v = ti.Vector([grid[e, n, 0], grid[e, n, 1], grid[e, n, 2]])
+                    g_C_v = g_C.transpose() @ v
+                    g_fx += (g_vel.dot(v) + 4.0 * inv_dx * g_C_v.dot(offset - fx)) * dw - (4.0 * inv_dx * w) * g_C_v
         g_pos = g_moved + inv_dx * g_fx
         for c in ti.static(range(3)):
             scratch[e, p, c] = g_vel[c]
@@ -117,8 +116,11 @@ def gather_adjoint_scatter(frames: ti.template(), grads: ti.template(), scratch:
             base, fx = cell_of(row_vector(frames, src, e, p, 0), inv_dx, grid_i)
             g_vel = ti.Vector([scratch[e, p, 0], scratch[e, p, 1], scratch[e, p, 2]])
             g_C = row_matrix(grads, 0, e, p, 6)
-            for o in range(27):
-                n, offset = node_index(grid_i, base, o)
-                g_v = weight(fx, offset) * (g_vel + (4.0 * inv_dx) * (g_C @ (offset - fx)))
-                for k in ti.static(range(3)):
-                    grad_grid[e, n, k] = grad_grid[e, n, k] + g_v[k]
+            W = weights(fx)
+            for i in range(3):
+                for j in range(3):
+                    for k in range(3):
+                        n, offset, w = stencil_node(grid_i, base, W, i, j, k)
+                        g_v = w * (g_vel + (4.0 * inv_dx) * (g_C @ (offset - fx)))
+                        for c in ti.static(range(3)):
+                            grad_grid[e, n, c] = grad_grid[e, n, c] + g_v[c]

@@ -10,8 +10,8 @@ The scatter's reverse is a gather (parallel over particles): every particle read
 import taichi as ti
 
 from .constitutive import constitutive, constitutive_adjoint
-from .stencil import (cell_of, node_index, row_matrix, row_vector, store_matrix, store_vector, weight, weight_grad,
-                      weights)
+from .stencil import (cell_of, row_matrix, row_vector, stencil_node, stencil_weight_grad, store_matrix, store_vector,
+                      weight_grads, weights)
 
 
 @ti.func
@@ -51,17 +51,11 @@ def scatter_stage(frames: ti.template(), params: ti.template(), affine: ti.templ
             momentum = mass * row_vector(frames, src, e, p, 3)
             aff = affine_matrix(affine, e, p)
             W = weights(fx)
-            ny, nz = grid_i[4], grid_i[5]
-            # the 27 nodes as three runtime loops, weights and indices built up level by level
-            # (one loop over o with a weight() per node ran 3× slower)
             for i in range(3):
                 for j in range(3):
-                    wxy = W[i, 0] * W[j, 1]
-                    row = ((base[0] + i) * ny + base[1] + j) * nz + base[2]
                     for k in range(3):
-                        n = row + k
-                        w = wxy * W[k, 2]
-                        dpos = (ti.Vector([i, j, k], float) - fx) / inv_dx
+                        n, offset, w = stencil_node(grid_i, base, W, i, j, k)
+                        dpos = (offset - fx) / inv_dx
                         contribution = w * (momentum + aff @ dpos)
                         old_mass = grid[e, n, 3]
                         for c in ti.static(range(3)):
@@ -103,16 +97,19 @@ def p2g_adjoint_stage(frames: ti.template(), params: ti.template(), kinds: ti.te
         g_momentum = ti.Vector.zero(float, 3)
         g_aff = ti.Matrix.zero(float, 3, 3)
         g_fx = ti.Vector.zero(float, 3)
-        for o in range(27):
-            n, offset = node_index(grid_i, base, o)
-            w, dw = weight(fx, offset), weight_grad(fx, offset)
-            g_P = ti.Vector([grad_grid[e, n, 0], grad_grid[e, n, 1], grad_grid[e, n, 2]])
-            g_M = grad_grid[e, n, 3]
-            dpos = (offset - fx) / inv_dx
-            g_momentum += w * g_P
-            g_mass += w * g_M
-            g_aff += w * g_P.outer_product(dpos)
-            g_fx += (g_P.dot(momentum + aff @ dpos) + g_M * mass) * dw - (w / inv_dx) * (aff.transpose() @ g_P)
+        W, dW = weights(fx), weight_grads(fx)
+        for i in range(3):
+            for j in range(3):
+                for k in range(3):
+                    n, offset, w = stencil_node(grid_i, base, W, i, j, k)
+                    dw = stencil_weight_grad(W, dW, i, j, k)
+                    g_P = ti.Vector([grad_grid[e, n, 0], grad_grid[e, n, 1], grad_grid[e, n, 2]])
+                    g_M = grad_grid[e, n, 3]
+                    dpos = (offset - fx) / inv_dx
+                    g_momentum += w * g_P
+                    g_mass += w * g_M
+                    g_aff += w * g_P.outer_product(dpos)
+                    g_fx += (g_P.dot(momentum + aff @ dpos) + g_M * mass) * dw - (w / inv_dx) * (aff.transpose() @ g_P)
         # the stress: A = −κ τ + m C, F_tmp = (I + h C) F
         C, F = row_matrix(frames, src, e, p, 6), row_matrix(frames, src, e, p, 15)
         g_mass += g_momentum.dot(vel) + (g_aff * C).sum()
