@@ -202,3 +202,45 @@ def test_forward_with_requires_grad_is_bitwise_plain():
     plain.run(plain.state, plain.inputs)
     graded.run(graded.state, graded.inputs)
     assert torch.equal(plain.solver.download_state(), graded.solver.download_state())
+
+
+def test_a_saved_grid_too_small_grows_and_gives_the_same_bits():
+    """The replay keeps each substep's updated grid for the reverse, up to a capacity of nodes
+    per env and substep; one forced far below what the block reaches overflows in the first
+    replay, which grows it and replays again: the gradients keep the bits they have with room
+    for the whole grid."""
+    reference = Rollout("neohooken", {}, 2, "generic", seed=3)
+    reference.solver.set_saved_grid_capacity(reference.solver.model.grid.n_nodes)
+    expected = reference.gradients()
+    rollout = Rollout("neohooken", {}, 2, "generic", seed=3)
+    rollout.solver.set_saved_grid_capacity(4)
+    grads = rollout.gradients()
+    assert rollout.solver.saved_grid.shape[2] > 4
+    assert torch.equal(grads[0], expected[0])
+    assert all(torch.equal(grads[1][name], expected[1][name]) for name in expected[1])
+
+
+@pytest.mark.parametrize("n_envs", [0, 2])
+def test_the_shared_substep_loop_gives_the_bits_of_the_solver_alone(n_envs):
+    """A scene of several solvers runs a step's backward as simulator._backward_shared does: its
+    replay goes through the split pre/post coupling kernels, which keep the grid for the reverse
+    as the fused substep does: with no coupler between the halves, the same gradient bits."""
+    rollout = Rollout("neohooken", {}, n_envs, "generic", seed=4, throw=(0.0, 0.0, -3.0))
+    fused = rollout.gradients()
+    _, starts = rollout.run(rollout.state, rollout.inputs, keep=True)
+    solver, grad = rollout.solver, rollout.weights.clone()
+    totals = {name: torch.zeros_like(value) for name, value in rollout.inputs.items()}
+    for start in reversed(starts):
+        solver.begin_reverse(start, rollout.inputs, grad, None)
+        solver.begin_step(None)
+        for s in range(SUBSTEPS):
+            solver.substep_pre_coupling(s)
+            solver.substep_post_coupling(s)
+        solver.end_step(False)
+        for s in reversed(range(SUBSTEPS)):
+            solver.substep_post_coupling_backward(s)
+            solver.substep_pre_coupling_backward(s)
+        grad, grad_inputs = solver.end_reverse()
+        totals = {name: totals[name] + grad_inputs[name] for name in totals}
+    assert torch.equal(grad, fused[0])
+    assert all(torch.equal(totals[name], fused[1][name]) for name in totals)

@@ -122,9 +122,17 @@ def _lame_derivatives(E, nu):
 
 
 @ti.func
-def _needs_svd(kind, consts):
+def needs_svd(kind, consts):
     """Whether the material reads SVD(F_tmp): all but neo-Hookean ones and the inviscid liquid."""
     return not (kind == _NEOHOOKEN or kind == _MUSCLE_NEOHOOKEN or (kind == _LIQUID and consts[0] < 0.5))
+
+
+def any_needs_svd(kinds, consts):
+    """Whether any particle of kinds (N,) with consts (N, N_CONSTS) (numpy) reads SVD(F_tmp):
+    `needs_svd` on the host."""
+    kinds, consts = np.asarray(kinds), np.asarray(consts)
+    spared = (kinds == _NEOHOOKEN) | (kinds == _MUSCLE_NEOHOOKEN) | ((kinds == _LIQUID) & (consts[:, 0] < 0.5))
+    return bool((~spared).any())
 
 
 @ti.func
@@ -287,13 +295,13 @@ def _is_muscle(kind):
 
 
 @ti.func
-def _decompose(kind, consts, F_tmp):
+def decompose(kind, consts, F_tmp):
     """(J = det F_tmp, U, σ (3,), V) with F_tmp = U diag(σ) Vᵀ for the kinds that need the SVD;
     identities for the others (which never read them)."""
     U = ti.Matrix.identity(float, 3)
     sig = ti.Vector([1.0, 1.0, 1.0], float)
     V = ti.Matrix.identity(float, 3)
-    if _needs_svd(kind, consts):
+    if needs_svd(kind, consts):
         U, sig, V = svd3(F_tmp)
     return F_tmp.determinant(), U, sig, V
 
@@ -304,8 +312,14 @@ def constitutive(kind, consts, E, nu, actu, fiber, F_tmp, Jp):
     `encode`), E (Pa), nu, actu (muscle actuation, 0 elsewhere), fiber (unit 3-vector, muscle fibre
     direction), F_tmp = (I + h C) F (3×3), Jp (plastic volume ratio) → (F_new (3×3), Jp_new, tau (3×3,
     Pa)) as Genesis 1.4.5 computes them (to round-off)."""
+    J, U, sig, V = decompose(kind, consts, F_tmp)
+    return constitutive_decomposed(kind, consts, E, nu, actu, fiber, F_tmp, Jp, J, U, sig, V)
+
+
+@ti.func
+def constitutive_decomposed(kind, consts, E, nu, actu, fiber, F_tmp, Jp, J, U, sig, V):
+    """`constitutive` given F_tmp's decomposition (J, U, σ, V) = decompose(kind, consts, F_tmp)."""
     mu, lam = _lame(E, nu)
-    J, U, sig, V = _decompose(kind, consts, F_tmp)
     # (the derivatives are the reverse's; unused here, the compiler drops them)
     moved, f, df, df_dJp, df_dmu, df_dlam, Jp_new, dJp_new, dJp_new_dJp = _return_map(kind, consts, mu, lam, sig, Jp)
     F_new = F_tmp
@@ -356,16 +370,28 @@ def constitutive_adjoint(kind, consts, E, nu, actu, fiber, F_tmp, Jp, g_F_new, g
     """Reverse of `constitutive` at the same inputs: the adjoints g_F_new (3×3), g_Jp_new, g_tau (3×3)
     of its outputs → (g_F_tmp (3×3), g_Jp, g_E, g_nu, g_actu). Recomputes the forward; replays its
     branches (one-sided derivatives at kinks). No gradient to consts or fiber."""
+    J, U, sig, V = decompose(kind, consts, F_tmp)
+    return constitutive_adjoint_decomposed(kind, consts, E, nu, actu, fiber, F_tmp, Jp, J, U, sig, V, g_F_new,
+                                           g_Jp_new, g_tau)
+
+
+@ti.func
+def constitutive_adjoint_decomposed(kind, consts, E, nu, actu, fiber, F_tmp, Jp, J, U, sig, V, g_F_new, g_Jp_new,
+                                    g_tau):
+    """`constitutive_adjoint` given F_tmp's decomposition (J, U, σ, V) = decompose(kind, consts,
+    F_tmp) (the MPM reverse reads the one its replay kept rather than redo the SVD)."""
     mu, lam = _lame(E, nu)
     dmu_dE, dmu_dnu, dlam_dE, dlam_dnu = _lame_derivatives(E, nu)
-    J, U, sig, V = _decompose(kind, consts, F_tmp)
     # f, df: the singular values of F_new (of F_tmp where the map leaves it: f = σ, df = I)
     moved, f, df, df_dJp, df_dmu, df_dlam, Jp_new, dJp_new, dJp_new_dJp = _return_map(kind, consts, mu, lam, sig, Jp)
     mu_eff, lam_eff, hardening = _effective_lame(kind, consts, mu, lam, Jp)
 
     g_F = ti.Matrix.zero(float, 3, 3)  # world-frame part of g_F_tmp
     X = ti.Matrix.zero(float, 3, 3)  # singular-frame part: g_F_tmp += U X Vᵀ
-    M = U.transpose() @ g_F_new @ V  # g_F_new in the singular frame
+    svd = needs_svd(kind, consts)
+    M = g_F_new  # g_F_new in the singular frame (U = V = I without an SVD: no products by them)
+    if svd:
+        M = U.transpose() @ g_F_new @ V
     g_f = ti.Vector([M[0, 0], M[1, 1], M[2, 2]]) * ti.select(moved != 0, 1.0, 0.0)  # ∂L/∂f, f's own inputs
     g_J = 0.0
     g_mu = 0.0
@@ -420,7 +446,9 @@ def constitutive_adjoint(kind, consts, E, nu, actu, fiber, F_tmp, Jp, g_F_new, g
     cofactor = ti.Matrix([[F_tmp[(i + 1) % 3, (j + 1) % 3] * F_tmp[(i + 2) % 3, (j + 2) % 3]
                            - F_tmp[(i + 1) % 3, (j + 2) % 3] * F_tmp[(i + 2) % 3, (j + 1) % 3]
                            for j in ti.static(range(3))] for i in ti.static(range(3))])
-    g_F += g_J * cofactor + U @ X @ V.transpose()
+    if svd:
+        X = U @ X @ V.transpose()
+    g_F += g_J * cofactor + X
     g_E += g_mu * dmu_dE + g_lam * dlam_dE
     g_nu = g_mu * dmu_dnu + g_lam * dlam_dnu
     return g_F, g_Jp, g_E, g_nu, g_actu

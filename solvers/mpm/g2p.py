@@ -4,13 +4,16 @@ nodes around it, moves, and is kept inside the walls; and its adjoint.
 Forward, per particle (v_i the updated node velocities, w_i the stencil weights at fx):
     v' = Σ w_i v_i,  C' = 4 inv_dx Σ w_i v_i ⊗ (offset_i − fx),  x' = clamp(x + h v'),
     and the velocity component moving out through a wall it has reached is zeroed.
-The walls are piecewise: the adjoint differentiates the branch taken. The gather's reverse is a
-scatter into the nodes' velocity gradients, run serially per env (deterministic, no atomics).
+The walls are piecewise: the adjoint differentiates the branch taken (read off v' as the replay
+kept it). The gather's reverse is a scatter into the nodes' velocity gradients, run serially per
+env (deterministic, no atomics), and a parallel pass for the position's gradient through the
+weights, which sums each node's terms u_i · v_i ∂w_i/∂fx and takes C''s (offset − fx) term once
+per particle (Σ w_i v_i = v').
 """
 import taichi as ti
 
-from .stencil import (cell_of, row_matrix, row_vector, stencil_node, stencil_weight_grad, store_matrix, store_vector,
-                      weight_grads, weights)
+from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, row_matrix, row_vector, stencil_node,
+                      stencil_row, store_matrix, store_vector, transposed_times, weight_grads, weights)
 
 
 @ti.func
@@ -31,8 +34,9 @@ def gather_velocity(grid: ti.template(), e, base, fx, inv_dx, grid_i: ti.templat
 
 @ti.func
 def gather_stage(frames: ti.template(), grid: ti.template(), grid_f: ti.template(), grid_i: ti.template(),
-                 flags: ti.template(), src, dst):
-    """g2p: new velocity, affine field C and position; particles kept inside the walls."""
+                 flags: ti.template(), gathered: ti.template(), src, dst, keep):
+    """g2p: new velocity, affine field C and position; particles kept inside the walls. When
+    keep ≥ 0 (a replay), the gathered velocity (before the walls) → gathered's slot ``keep``."""
     h, inv_dx = grid_f[0], grid_f[1]
     for e, p in ti.ndrange(frames.shape[1], frames.shape[2]):
         pos = row_vector(frames, src, e, p, 0)
@@ -43,6 +47,8 @@ def gather_stage(frames: ti.template(), grid: ti.template(), grid_f: ti.template
             if not (ti.abs(moved[c]) < ti.math.inf):  # NaN or ±inf
                 flags[0] = 1
         pos_new, vel_new = wall_particle(moved, vel, grid_f)
+        if keep >= 0:
+            store_vector(gathered, keep, e, p, 0, vel)
         store_vector(frames, dst, e, p, 0, pos_new)
         store_vector(frames, dst, e, p, 3, vel_new)
         store_matrix(frames, dst, e, p, 6, C)
@@ -68,16 +74,27 @@ def wall_blocks(pos, vel, grid_f: ti.template(), c: ti.template()):
 
 
 @ti.func
-def gather_adjoint_stage(frames: ti.template(), grid: ti.template(), grads: ti.template(), scratch: ti.template(),
-                         grid_f: ti.template(), grid_i: ti.template(), src):
+def node_gradient_rows(g_C, O, inv_dx):
+    """Node i's velocity v_i enters v' and C' as w_i u_i · v_i, u_i = ∂L/∂v' + 4 inv_dx ∂L/∂C'
+    (offset_i − fx): (U_x, U_y, U_z), 3×3 each, with u at node (i, j, k) = ∂L/∂v' + row i of U_x
+    + row j of U_y + row k of U_z (summed in that order), from ∂L/∂C' (3×3) and the nodes'
+    offsets per axis O = axis_offsets(fx) (cells)."""
+    scaled = (4.0 * inv_dx) * g_C
+    return column_terms(scaled, O, 0), column_terms(scaled, O, 1), column_terms(scaled, O, 2)
+
+
+@ti.func
+def gather_adjoint_stage(frames: ti.template(), grid: ti.template(), gathered: ti.template(), grads: ti.template(),
+                         scratch: ti.template(), grid_f: ti.template(), grid_i: ti.template(), src):
     """Reverse of g2p, per particle (parallel), from the gradient of frame dst's pos, vel, C
-    (grads' rows) and the rebuilt updated grid: scratch 0:3 ← ∂L/∂v' (the gathered velocity),
-    scratch 3:6 ← ∂L/∂x through the move and the stencil weights of the gather."""
+    (grads' rows), the gathered velocity the replay kept (gathered's slot src) and the restored
+    updated grid: scratch 0:3 ← ∂L/∂v' (the gathered velocity), scratch 3:6 ← ∂L/∂x through the
+    move and the stencil weights of the gather."""
     h, inv_dx = grid_f[0], grid_f[1]
     for e, p in ti.ndrange(frames.shape[1], frames.shape[2]):
         pos = row_vector(frames, src, e, p, 0)
         base, fx = cell_of(pos, inv_dx, grid_i)
-        vel, _ = gather_velocity(grid, e, base, fx, inv_dx, grid_i)
+        vel = row_vector(gathered, src, e, p, 0)
         moved = pos + h * vel
         g_pos_new, g_vel_new = row_vector(grads, 0, e, p, 0), row_vector(grads, 0, e, p, 3)
         g_C = row_matrix(grads, 0, e, p, 6)
@@ -89,16 +106,22 @@ def gather_adjoint_stage(frames: ti.template(), grid: ti.template(), grads: ti.t
             if not wall_blocks(moved, vel, grid_f, c):
                 g_vel[c] = g_vel_new[c]
         g_vel += h * g_moved
-        g_fx = ti.Vector.zero(float, 3)
-        W, dW = weights(fx), weight_grads(fx)
+        # C''s own (offset − fx) gives −4 inv_dx ∂L/∂C'ᵀ Σ w_i v_i = −4 inv_dx ∂L/∂C'ᵀ v' (v' as the
+        # replay kept it), once per particle; the weights give Σ (u_i · v_i) ∂w_i/∂fx
+        g_fx = -(4.0 * inv_dx) * transposed_times(g_C, vel)
+        W, dW, O = weights(fx), weight_grads(fx), axis_offsets(fx)
+        U_x, U_y, U_z = node_gradient_rows(g_C, O, inv_dx)
         for i in range(3):
             for j in range(3):
+                row = stencil_row(grid_i, base, i, j)
+                w_ij, dw_x, dw_y = W[i, 0] * W[j, 1], dW[i, 0] * W[j, 1], W[i, 0] * dW[j, 1]
+                u_ij = g_vel + matrix_row(U_x, i) + matrix_row(U_y, j)
                 for k in range(3):
-                    n, offset, w = stencil_node(grid_i, base, W, i, j, k)
-                    dw = stencil_weight_grad(W, dW, i, j, k)
+                    n = row + k
+                    dw = ti.Vector([dw_x * W[k, 2], dw_y * W[k, 2], w_ij * dW[k, 2]])
                     v = ti.Vector([grid[e, n, 0], grid[e, n, 1], grid[e, n, 2]])
-                    g_C_v = g_C.transpose() @ v
-                    g_fx += (g_vel.dot(v) + 4.0 * inv_dx * g_C_v.dot(offset - fx)) * dw - (4.0 * inv_dx * w) * g_C_v
+                    u = u_ij + matrix_row(U_z, k)
+                    g_fx += v.dot(u) * dw
         g_pos = g_moved + inv_dx * g_fx
         for c in ti.static(range(3)):
             scratch[e, p, c] = g_vel[c]
@@ -109,18 +132,22 @@ def gather_adjoint_stage(frames: ti.template(), grid: ti.template(), grads: ti.t
 def gather_adjoint_scatter(frames: ti.template(), grads: ti.template(), scratch: ti.template(),
                            grad_grid: ti.template(), grid_f: ti.template(), grid_i: ti.template(), src):
     """Reverse of g2p into the grid, serial per env (particle order: deterministic): each node's
-    velocity gradient (grad_grid 0:3, zero before) += w (∂L/∂v' + 4 inv_dx ∂L/∂C' (offset − fx))."""
+    velocity gradient (grad_grid 0:3, zero before) += w_i u_i (node_gradient_rows)."""
     inv_dx = grid_f[1]
     for e in range(frames.shape[1]):
         for p in range(frames.shape[2]):
             base, fx = cell_of(row_vector(frames, src, e, p, 0), inv_dx, grid_i)
             g_vel = ti.Vector([scratch[e, p, 0], scratch[e, p, 1], scratch[e, p, 2]])
             g_C = row_matrix(grads, 0, e, p, 6)
-            W = weights(fx)
+            W, O = weights(fx), axis_offsets(fx)
+            U_x, U_y, U_z = node_gradient_rows(g_C, O, inv_dx)
             for i in range(3):
                 for j in range(3):
+                    row = stencil_row(grid_i, base, i, j)
+                    w_ij = W[i, 0] * W[j, 1]
+                    u_ij = g_vel + matrix_row(U_x, i) + matrix_row(U_y, j)
                     for k in range(3):
-                        n, offset, w = stencil_node(grid_i, base, W, i, j, k)
-                        g_v = w * (g_vel + (4.0 * inv_dx) * (g_C @ (offset - fx)))
+                        n = row + k
+                        g_v = (w_ij * W[k, 2]) * (u_ij + matrix_row(U_z, k))
                         for c in ti.static(range(3)):
                             grad_grid[e, n, c] = grad_grid[e, n, c] + g_v[c]

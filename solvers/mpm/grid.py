@@ -2,8 +2,9 @@
 then the touched nodes are cleared for the next substep; and the update's adjoint.
 
 Forward, per listed node i: v_i = mask_i ⊙ (P_i / M_i + h g), mask_i zeroing the components a
-wall stops. The adjoint reads the mask off the updated grid (see ``wall_mask``), so the rebuilt
-grid needs nothing beyond what the forward leaves in it.
+wall stops. The adjoint reads the mask off the updated grid (see ``wall_mask``), so the grid a
+replay keeps (its listed nodes' (v, M), ``saved_grid``, and the list, ``saved_nodes``) is all
+the reverse needs: ``restore_stage`` puts it back.
 """
 import taichi as ti
 
@@ -21,8 +22,12 @@ def largest_count(active: ti.template()):
 
 @ti.func
 def grid_stage(grid: ti.template(), active: ti.template(), gravity: ti.template(), grid_f: ti.template(),
-               grid_i: ti.template()):
-    """Momentum → velocity, gravity, then the walls (Genesis's grid op, restitution 0)."""
+               grid_i: ti.template(), saved_grid: ti.template(), saved_nodes: ti.template(), keep):
+    """Momentum → velocity, gravity, then the walls (Genesis's grid op, restitution 0). When
+    keep ≥ 0 (a replay), the updated grid is also kept for the reverse: its listed nodes' (v, M)
+    and the lists into slot ``keep`` of saved_grid / saved_nodes, as far as their capacity goes
+    (the counts are kept whole: the solver grows the capacity and replays again when one
+    exceeds it)."""
     h, dx = grid_f[0], 1.0 / grid_f[1]
     B = active.shape[0] - 1
     for e, k in ti.ndrange(B, active[B, 0]):
@@ -33,6 +38,30 @@ def grid_stage(grid: ti.template(), active: ti.template(), gravity: ti.template(
             v = wall_velocity(node_position(n, dx, grid_i), v, grid_f, grid_i[6])
             for c in ti.static(range(3)):
                 grid[e, n, c] = v[c]
+            if keep >= 0 and k < saved_grid.shape[2]:
+                saved_nodes[keep, e, k + 1] = n
+                for c in ti.static(range(3)):
+                    saved_grid[keep, e, k, c] = v[c]
+                saved_grid[keep, e, k, 3] = grid[e, n, 3]
+    if keep >= 0:
+        for e in range(B + 1):
+            saved_nodes[keep, e, 0] = active[e, 0]
+
+
+@ti.func
+def restore_stage(grid: ti.template(), active: ti.template(), saved_grid: ti.template(), saved_nodes: ti.template(),
+                  s):
+    """The updated grid of substep s and its node lists (``active``), as the replay kept them
+    (grid_stage), back in place of the zeros between substeps."""
+    B = active.shape[0] - 1
+    for e, k in ti.ndrange(B, saved_nodes[s, B, 0]):
+        if k < saved_nodes[s, e, 0]:
+            n = saved_nodes[s, e, k + 1]
+            active[e, k + 1] = n
+            for c in ti.static(range(4)):
+                grid[e, n, c] = saved_grid[s, e, k, c]
+    for e in range(B + 1):
+        active[e, 0] = saved_nodes[s, e, 0]
 
 
 @ti.func
@@ -127,7 +156,7 @@ def gravity_adjoint_stage(grid: ti.template(), active: ti.template(), grad_gravi
 
 @ti.func
 def clear_adjoint_stage(grid: ti.template(), grad_grid: ti.template(), active: ti.template()):
-    """Zero the nodes this substep touched, in the rebuilt grid and its gradient, and the counts."""
+    """Zero the nodes this substep touched, in the restored grid and its gradient, and the counts."""
     B = active.shape[0] - 1
     for e, k in ti.ndrange(B, active[B, 0]):
         if k < active[e, 0]:

@@ -3,21 +3,33 @@ and its reverse.
 
 Every array is a kernel argument (a torch tensor), so each kernel is compiled once per precision
 and serves every scene (solvers/launch.py). The arrays, per scene (B envs, N particles, K grid
-nodes, S substeps):
+nodes, S substeps, cap the saved grid's capacity):
 
 - ``frames`` (S + 1 or 2, B, N, 25): particle state rows (layout.STATE), one frame per substep
   boundary (all of them when the step will be differentiated, else two used in turn);
 - ``params`` (B, N, 4): E (Pa), nu, rho (kg/m³), actu per particle; ``gravity`` (B, 3) m/s²;
 - ``kinds`` (N,) int material code, ``consts`` (N, layout.N_CONSTS), ``fiber`` (N, 3) unit muscle
   fibre directions: the model;
-- ``affine`` (B, N, 9): scratch, each particle's APIC affine momentum matrix of this substep, N·s/m²·m;
+- ``affine`` (S or 1, B, N, 9): each particle's APIC affine momentum matrix, N·s/m²·m, of the
+  substep in progress (slot 0), or in a replay of substep s (slot s, kept for the reverse);
+- ``svd`` (S, B, N, 21): a replay's SVD of each particle's F_tmp, U (9, row-major), σ (3), V (9),
+  per substep, for the materials that take one (constitutive.needs_svd; a 1-sized dummy when the
+  solver does not differentiate or no material takes one);
 - ``grid`` (B, K, 4): per node momentum (3, kg·m/s) and mass (kg), after the update velocity (m/s)
   and mass; zero between substeps;
 - ``active`` (B + 1, K + 1) int: per env the number of nodes the particles reach, then their
   indices (the grid update and the clearing touch only those); row B holds the largest count;
 - ``grid_f`` (9,): h (s), inv_dx (1/m), vol (m³), walls' lower (3) and upper (3) corners (m);
 - ``grid_i`` (7,): the grid's lowest node in cells (3), nodes per axis (3), sticky walls (0/1);
-- ``flags`` (1,) int: set to 1 when a particle's new state is not finite.
+- ``flags`` (1,) int: set to 1 when a particle's new state is not finite;
+- what a replay keeps for the reverse, per substep s (1-sized dummies when the solver does not
+  differentiate): ``gathered`` (S, B, N, 3) each particle's gathered velocity (m/s, before the
+  walls); ``saved_grid`` (S, B, cap, 4) the updated grid's listed nodes, (v (3) m/s, M kg) in
+  list order; ``saved_nodes`` (S, B + 1, cap + 1) int their lists, laid out as ``active`` (the
+  counts are whole even where they exceed cap: the solver then grows cap and replays again).
+
+The forward kernels take, after the arrays, src and dst (frames) and keep: −1 in a plain step, s
+in a replay of substep s (which then keeps what the reverse reads; a plain step pays nothing).
 
 The reverse kernels (REVERSE_KERNELS) take five more arrays:
 - ``grads`` (1, B, N, 25): the gradient of the loss w.r.t. a frame's particle rows — of frame
@@ -28,13 +40,15 @@ The reverse kernels (REVERSE_KERNELS) take five more arrays:
   zero between substeps;
 - ``scratch`` (B, N, 6): per particle ∂L/∂v' of the gathered velocity (3), and ∂L/∂x through g2p (3).
 
-The reverse of substep s (frames s, s + 1 filled by a replay of the step) rebuilds the substep's
-grid from frame s with the forward's own stages (bit for bit, frames untouched), then runs the
-adjoints in mirror order: g2p (per particle, then its scatter into grad_grid serially per env),
-the grid update (per node, then gravity serially per env), p2g and the stress (per particle).
-It takes two launches, post_coupling_backward and pre_coupling_backward, even for a solver alone:
-one fused kernel gave the same bits but took 4× longer to compile (147 s against 8 + 26 s cold,
-with every material's stress and its adjoint in it), for ~0.1 ms a substep saved.
+The reverse of substep s (frames s, s + 1 filled by a replay of the step) restores the substep's
+updated grid as the replay kept it — after the update, so what a coupler does to the grid
+between pre and post coupling is in it, where rebuilding the grid from frame s would miss it —
+and runs the adjoints in mirror order: g2p (per particle, with the replay's gathered velocity,
+then its scatter into grad_grid serially per env), the grid update (per node, then gravity
+serially per env), p2g and the stress (per particle, with the replay's affine matrices and
+SVDs: the reverse runs no SVD). It takes two launches, post_coupling_backward and
+pre_coupling_backward, as the shared loop interleaves a coupler's reverse between them; the
+stress adjoint (the costliest to compile) is in the second only.
 
 Scatter order decides round-off: the scatter runs serially per env (as MPM_NOTES measured, faster
 than atomics on CPU), so results are deterministic and a batched env equals a single-env scene.
@@ -43,45 +57,49 @@ import taichi as ti
 
 from .g2p import gather_adjoint_scatter, gather_adjoint_stage, gather_stage
 from .grid import (clear_adjoint_stage, clear_stage, grid_adjoint_stage, grid_stage, gravity_adjoint_stage,
-                   largest_count)
+                   largest_count, restore_stage)
 from .p2g import p2g_adjoint_stage, scatter_stage, stress_stage
 
 A = ti.types.ndarray()
 
 
 @ti.kernel
-def substep(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, grid: A,
-            active: A, grid_f: A, grid_i: A, flags: A, src: ti.i32, dst: ti.i32):
+def substep(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
+            grid: A, active: A, grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
+            src: ti.i32, dst: ti.i32, keep: ti.i32):
     """A whole substep from frame src to frame dst, in one launch (no coupling)."""
-    stress_stage(frames, params, kinds, consts, fiber, affine, grid_f, src, dst, True)
-    scatter_stage(frames, params, affine, grid, active, grid_f, grid_i, src)
+    stress_stage(frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep)
+    scatter_stage(frames, params, affine, grid, active, grid_f, grid_i, src, ti.max(keep, 0))
     largest_count(active)
-    grid_stage(grid, active, gravity, grid_f, grid_i)
-    gather_stage(frames, grid, grid_f, grid_i, flags, src, dst)
+    grid_stage(grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
+    gather_stage(frames, grid, grid_f, grid_i, flags, gathered, src, dst, keep)
     clear_stage(grid, active)
 
 
 @ti.kernel
-def pre_coupling(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A,
-                 grid: A, active: A, grid_f: A, grid_i: A, flags: A, src: ti.i32, dst: ti.i32):
+def pre_coupling(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
+                 grid: A, active: A, grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
+                 src: ti.i32, dst: ti.i32, keep: ti.i32):
     """The substep up to the grid update (stress and p2g): the grid holds momentum and mass."""
-    stress_stage(frames, params, kinds, consts, fiber, affine, grid_f, src, dst, True)
-    scatter_stage(frames, params, affine, grid, active, grid_f, grid_i, src)
+    stress_stage(frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep)
+    scatter_stage(frames, params, affine, grid, active, grid_f, grid_i, src, ti.max(keep, 0))
     largest_count(active)
 
 
 @ti.kernel
-def post_coupling(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A,
-                  grid: A, active: A, grid_f: A, grid_i: A, flags: A, src: ti.i32, dst: ti.i32):
+def post_coupling(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
+                  grid: A, active: A, grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
+                  src: ti.i32, dst: ti.i32, keep: ti.i32):
     """The rest of the substep: grid update, g2p, grid cleared."""
-    grid_stage(grid, active, gravity, grid_f, grid_i)
-    gather_stage(frames, grid, grid_f, grid_i, flags, src, dst)
+    grid_stage(grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
+    gather_stage(frames, grid, grid_f, grid_i, flags, gathered, src, dst, keep)
     clear_stage(grid, active)
 
 
 @ti.kernel
-def write_state(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A,
-                grid: A, active: A, grid_f: A, grid_i: A, flags: A, f: ti.i32, src: A):
+def write_state(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
+                grid: A, active: A, grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
+                f: ti.i32, src: A):
     """Frame f ← src (B, N · 25)."""
     for e, p in ti.ndrange(frames.shape[1], frames.shape[2]):
         for k in range(25):
@@ -89,8 +107,9 @@ def write_state(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, co
 
 
 @ti.kernel
-def read_state(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A,
-               grid: A, active: A, grid_f: A, grid_i: A, flags: A, f: ti.i32, dst: A):
+def read_state(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
+               grid: A, active: A, grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
+               f: ti.i32, dst: A):
     """dst (B, N · 25) ← frame f."""
     for e, p in ti.ndrange(frames.shape[1], frames.shape[2]):
         for k in range(25):
@@ -102,15 +121,13 @@ KERNELS = (substep, pre_coupling, post_coupling, write_state, read_state)
 
 @ti.kernel
 def post_coupling_backward(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A,
-                           affine: A, grid: A, active: A, grid_f: A, grid_i: A, flags: A, grads: A, grad_params: A,
-                           grad_gravity: A, grad_grid: A, scratch: A, src: ti.i32):
-    """Substep src's updated grid rebuilt from frame src (frames untouched), then the reverse of
+                           affine: A, svd: A, grid: A, active: A, grid_f: A, grid_i: A, flags: A, gathered: A,
+                           saved_grid: A, saved_nodes: A, grads: A, grad_params: A, grad_gravity: A, grad_grid: A,
+                           scratch: A, src: ti.i32):
+    """Substep src's updated grid restored (as the replay kept it), then the reverse of
     post_coupling (g2p and the grid update): grad_grid ← (∂L/∂P, ∂L/∂M), grad_gravity += its part."""
-    stress_stage(frames, params, kinds, consts, fiber, affine, grid_f, src, src + 1, False)
-    scatter_stage(frames, params, affine, grid, active, grid_f, grid_i, src)
-    largest_count(active)
-    grid_stage(grid, active, gravity, grid_f, grid_i)
-    gather_adjoint_stage(frames, grid, grads, scratch, grid_f, grid_i, src)
+    restore_stage(grid, active, saved_grid, saved_nodes, src)
+    gather_adjoint_stage(frames, grid, gathered, grads, scratch, grid_f, grid_i, src)
     gather_adjoint_scatter(frames, grads, scratch, grad_grid, grid_f, grid_i, src)
     grid_adjoint_stage(grid, grad_grid, active, gravity, grid_f, grid_i)
     gravity_adjoint_stage(grid, active, grad_gravity, grid_f)
@@ -118,12 +135,13 @@ def post_coupling_backward(_: ti.template(), frames: A, params: A, gravity: A, k
 
 @ti.kernel
 def pre_coupling_backward(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A,
-                          affine: A, grid: A, active: A, grid_f: A, grid_i: A, flags: A, grads: A, grad_params: A,
-                          grad_gravity: A, grad_grid: A, scratch: A, src: ti.i32):
+                          affine: A, svd: A, grid: A, active: A, grid_f: A, grid_i: A, flags: A, gathered: A,
+                          saved_grid: A, saved_nodes: A, grads: A, grad_params: A, grad_gravity: A, grad_grid: A,
+                          scratch: A, src: ti.i32):
     """The reverse of pre_coupling (p2g and the stress): grads ← the gradient of frame src,
     grad_params += their part; the touched nodes cleared."""
-    p2g_adjoint_stage(frames, params, kinds, consts, fiber, affine, grads, grad_params, grad_grid, scratch, grid_f,
-                      grid_i, src)
+    p2g_adjoint_stage(frames, params, kinds, consts, fiber, affine, svd, grads, grad_params, grad_grid, scratch,
+                      grid_f, grid_i, src)
     clear_adjoint_stage(grid, grad_grid, active)
 
 

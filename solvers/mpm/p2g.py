@@ -5,43 +5,53 @@ Forward, per particle p of env e (h the substep, κ = 4 h vol inv_dx²):
     F_tmp = (I + h C) F;  (F', Jp', τ) = constitutive(F_tmp, Jp);  A = −κ τ + m C  (m = ρ vol)
     P_i += w_i (m v + A (x_i − x)),  M_i += w_i m   over the 27 nodes i (x_i − x = (offset − fx) dx).
 The scatter's reverse is a gather (parallel over particles): every particle reads the gradients
-(∂L/∂P_i, ∂L/∂M_i) of its nodes.
+(∂L/∂P_i, ∂L/∂M_i) of its nodes; then the stress's adjoint, with the affine matrix and SVD(F_tmp)
+the replay kept. Terms that are the same for every node (A's part through x_i − x, Aᵀ Σ w ∂L/∂P_i)
+are taken once per particle; the per-node products of A with the offsets come from per-axis rows
+(stencil.column_terms).
 """
 import taichi as ti
 
-from .constitutive import constitutive, constitutive_adjoint
-from .stencil import (cell_of, row_matrix, row_vector, stencil_node, stencil_weight_grad, store_matrix, store_vector,
-                      weight_grads, weights)
+from .constitutive import constitutive_adjoint_decomposed, constitutive_decomposed, decompose, needs_svd
+from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, row_matrix, row_vector, stencil_node,
+                      stencil_row, store_matrix, store_vector, transposed_times, weight_grads, weights)
 
 
 @ti.func
 def stress_stage(frames: ti.template(), params: ti.template(), kinds: ti.template(), consts: ti.template(),
-                 fiber: ti.template(), affine: ti.template(), grid_f: ti.template(), src, dst,
-                 store_state: ti.template()):
-    """Per particle: the material update F, Jp → frame dst (when ``store_state``: the reverse
-    rebuilds only the affine matrix), and the affine momentum matrix."""
+                 fiber: ti.template(), affine: ti.template(), svd: ti.template(), grid_f: ti.template(), src, dst,
+                 keep):
+    """Per particle: the material update F, Jp → frame dst, and the affine momentum matrix →
+    affine's slot max(keep, 0). A replay (keep = s ≥ 0) keeps what the reverse reads: the affine
+    matrix in slot s, and SVD(F_tmp) in svd's slot s for the materials that take one."""
     h, vol, inv_dx = grid_f[0], grid_f[2], grid_f[1]
+    slot = ti.max(keep, 0)
     for e, p in ti.ndrange(frames.shape[1], frames.shape[2]):
         C = row_matrix(frames, src, e, p, 6)
         F_tmp = (ti.Matrix.identity(float, 3) + h * C) @ row_matrix(frames, src, e, p, 15)
         kind = kinds[p]
         c = ti.Vector([consts[p, 0], consts[p, 1], consts[p, 2], consts[p, 3]])
         d = ti.Vector([fiber[p, 0], fiber[p, 1], fiber[p, 2]])
-        F_new, Jp_new, tau = constitutive(kind, c, params[e, p, 0], params[e, p, 1], params[e, p, 3], d, F_tmp,
-                                          frames[src, e, p, 24])
-        if ti.static(store_state):
-            store_matrix(frames, dst, e, p, 15, F_new)
-            frames[dst, e, p, 24] = Jp_new
+        J, U, sig, V = decompose(kind, c, F_tmp)
+        if keep >= 0 and needs_svd(kind, c):
+            store_matrix(svd, keep, e, p, 0, U)
+            store_vector(svd, keep, e, p, 9, sig)
+            store_matrix(svd, keep, e, p, 12, V)
+        F_new, Jp_new, tau = constitutive_decomposed(kind, c, params[e, p, 0], params[e, p, 1], params[e, p, 3], d,
+                                                     F_tmp, frames[src, e, p, 24], J, U, sig, V)
+        store_matrix(frames, dst, e, p, 15, F_new)
+        frames[dst, e, p, 24] = Jp_new
         mass = params[e, p, 2] * vol
         aff = (-h * vol * 4.0 * inv_dx * inv_dx) * tau + mass * C
         for k in ti.static(range(9)):
-            affine[e, p, k] = aff[k // 3, k % 3]
+            affine[slot, e, p, k] = aff[k // 3, k % 3]
 
 
 @ti.func
 def scatter_stage(frames: ti.template(), params: ti.template(), affine: ti.template(), grid: ti.template(),
-                  active: ti.template(), grid_f: ti.template(), grid_i: ti.template(), src):
-    """p2g, serial per env (in particle order: deterministic); lists each node on first touch."""
+                  active: ti.template(), grid_f: ti.template(), grid_i: ti.template(), src, slot):
+    """p2g, serial per env (in particle order: deterministic); lists each node on first touch.
+    The affine matrices are read from affine's slot ``slot``."""
     inv_dx, vol = grid_f[1], grid_f[2]
     for e in range(frames.shape[1]):
         count = 0
@@ -49,7 +59,7 @@ def scatter_stage(frames: ti.template(), params: ti.template(), affine: ti.templ
             base, fx = cell_of(row_vector(frames, src, e, p, 0), inv_dx, grid_i)
             mass = params[e, p, 2] * vol
             momentum = mass * row_vector(frames, src, e, p, 3)
-            aff = affine_matrix(affine, e, p)
+            aff = affine_matrix(affine, slot, e, p)
             W = weights(fx)
             for i in range(3):
                 for j in range(3):
@@ -68,59 +78,79 @@ def scatter_stage(frames: ti.template(), params: ti.template(), affine: ti.templ
 
 
 @ti.func
-def affine_matrix(affine: ti.template(), e, p):
-    """Particle p's affine momentum matrix (3×3) of this substep."""
+def affine_matrix(affine: ti.template(), slot, e, p):
+    """Particle p's affine momentum matrix (3×3) in affine's slot ``slot``."""
     aff = ti.Matrix.zero(float, 3, 3)
     for k in ti.static(range(9)):
-        aff[k // 3, k % 3] = affine[e, p, k]
+        aff[k // 3, k % 3] = affine[slot, e, p, k]
     return aff
 
 
 @ti.func
 def p2g_adjoint_stage(frames: ti.template(), params: ti.template(), kinds: ti.template(), consts: ti.template(),
-                      fiber: ti.template(), affine: ti.template(), grads: ti.template(), grad_params: ti.template(),
-                      grad_grid: ti.template(), scratch: ti.template(), grid_f: ti.template(),
-                      grid_i: ti.template(), src):
+                      fiber: ti.template(), affine: ti.template(), svd: ti.template(), grads: ti.template(),
+                      grad_params: ti.template(), grad_grid: ti.template(), scratch: ti.template(),
+                      grid_f: ti.template(), grid_i: ti.template(), src):
     """Reverse of the scatter and the stress, per particle (parallel): the gather of the nodes'
     (∂L/∂P, ∂L/∂M) (grad_grid) and the material's adjoint turn the gradient of frame dst's F, Jp
     (grads) and g2p's partial position gradient (scratch 3:6) into the gradient of frame src's
     whole row (written over grads' row), and add the parameters' gradients (grad_params: E, nu,
-    rho, actu) per particle."""
+    rho, actu) per particle. The affine matrices and SVD(F_tmp) are the replay's (slot src)."""
     h, inv_dx, vol = grid_f[0], grid_f[1], grid_f[2]
     for e, p in ti.ndrange(frames.shape[1], frames.shape[2]):
         pos, vel = row_vector(frames, src, e, p, 0), row_vector(frames, src, e, p, 3)
         base, fx = cell_of(pos, inv_dx, grid_i)
         mass = params[e, p, 2] * vol
-        aff = affine_matrix(affine, e, p)
+        aff = affine_matrix(affine, src, e, p)
         momentum = mass * vel
         g_mass = 0.0
         g_momentum = ti.Vector.zero(float, 3)
         g_aff = ti.Matrix.zero(float, 3, 3)
         g_fx = ti.Vector.zero(float, 3)
         W, dW = weights(fx), weight_grads(fx)
+        # per axis c and offset a: the node offset (a − fx_c) dx (D[a, c]) and its term of aff @ dpos
+        # (row a of A_c): the stencil adds these instead of taking a product per node
+        D = axis_offsets(fx) / inv_dx
+        A_x, A_y, A_z = column_terms(aff, D, 0), column_terms(aff, D, 1), column_terms(aff, D, 2)
         for i in range(3):
             for j in range(3):
+                row = stencil_row(grid_i, base, i, j)
+                w_ij, dw_x, dw_y = W[i, 0] * W[j, 1], dW[i, 0] * W[j, 1], W[i, 0] * dW[j, 1]
+                aff_ij = matrix_row(A_x, i) + matrix_row(A_y, j)
                 for k in range(3):
-                    n, offset, w = stencil_node(grid_i, base, W, i, j, k)
-                    dw = stencil_weight_grad(W, dW, i, j, k)
+                    n = row + k
+                    w = w_ij * W[k, 2]
+                    dw = ti.Vector([dw_x * W[k, 2], dw_y * W[k, 2], w_ij * dW[k, 2]])
+                    dpos = ti.Vector([D[i, 0], D[j, 1], D[k, 2]])
                     g_P = ti.Vector([grad_grid[e, n, 0], grad_grid[e, n, 1], grad_grid[e, n, 2]])
                     g_M = grad_grid[e, n, 3]
-                    dpos = (offset - fx) / inv_dx
-                    g_momentum += w * g_P
+                    weighted = w * g_P
+                    g_momentum += weighted
                     g_mass += w * g_M
-                    g_aff += w * g_P.outer_product(dpos)
-                    g_fx += (g_P.dot(momentum + aff @ dpos) + g_M * mass) * dw - (w / inv_dx) * (aff.transpose() @ g_P)
+                    g_aff += weighted.outer_product(dpos)
+                    aff_dpos = aff_ij + matrix_row(A_z, k)
+                    g_fx += (g_P.dot(momentum + aff_dpos) + g_M * mass) * dw
+        # the nodes' offsets x_i − x = (offset − fx) dx in P_i: −dx Aᵀ Σ w ∂L/∂P_i, once per particle
+        g_fx -= transposed_times(aff, g_momentum) / inv_dx
         # the stress: A = −κ τ + m C, F_tmp = (I + h C) F
         C, F = row_matrix(frames, src, e, p, 6), row_matrix(frames, src, e, p, 15)
         g_mass += g_momentum.dot(vel) + (g_aff * C).sum()
         g_C = mass * g_aff
         step = ti.Matrix.identity(float, 3) + h * C
         F_tmp = step @ F
+        kind = kinds[p]
         c = ti.Vector([consts[p, 0], consts[p, 1], consts[p, 2], consts[p, 3]])
         d = ti.Vector([fiber[p, 0], fiber[p, 1], fiber[p, 2]])
-        g_F_tmp, g_Jp, g_E, g_nu, g_actu = constitutive_adjoint(
-            kinds[p], c, params[e, p, 0], params[e, p, 1], params[e, p, 3], d, F_tmp, frames[src, e, p, 24],
-            row_matrix(grads, 0, e, p, 15), grads[0, e, p, 24], (-h * vol * 4.0 * inv_dx * inv_dx) * g_aff)
+        # SVD(F_tmp) as the replay kept it (identities where the material takes none, as decompose)
+        U = ti.Matrix.identity(float, 3)
+        sig = ti.Vector([1.0, 1.0, 1.0], float)
+        V = ti.Matrix.identity(float, 3)
+        if needs_svd(kind, c):
+            U, sig, V = row_matrix(svd, src, e, p, 0), row_vector(svd, src, e, p, 9), row_matrix(svd, src, e, p, 12)
+        g_F_tmp, g_Jp, g_E, g_nu, g_actu = constitutive_adjoint_decomposed(
+            kind, c, params[e, p, 0], params[e, p, 1], params[e, p, 3], d, F_tmp, frames[src, e, p, 24],
+            F_tmp.determinant(), U, sig, V, row_matrix(grads, 0, e, p, 15), grads[0, e, p, 24],
+            (-h * vol * 4.0 * inv_dx * inv_dx) * g_aff)
         g_C += h * g_F_tmp @ F.transpose()
         g_pos = ti.Vector([scratch[e, p, 3], scratch[e, p, 4], scratch[e, p, 5]]) + inv_dx * g_fx
         store_vector(grads, 0, e, p, 0, g_pos)

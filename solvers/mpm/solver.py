@@ -14,7 +14,7 @@ from ..core import InvalidInputError, runtime
 from ..launch import BoundKernels
 from . import kernels, layout
 from .adjoint import MPMAdjoint
-from .constitutive import encode
+from .constitutive import any_needs_svd, encode
 from .model import EntitySpec, Grid, MPMModel
 
 # Genesis's suggested bound on the substep: h ≤ 2e-2 · dx (s, dx in m)
@@ -64,20 +64,32 @@ class MPMSolver(MPMAdjoint, Solver):
         self.upload_state(state)
         return state
 
-    def _grid_bytes(self):
+    def _memory_bytes(self):
+        """Bytes the solver's arrays take: the grid (4 floats and a list int per node and env) and
+        the particle frames, plus, when it differentiates, what a replay keeps per substep (affine
+        matrix, gathered velocity and, for the materials that take one, the SVD: 12 or 33 floats
+        per particle) and the gradients' grid and rows."""
         size = torch.finfo(runtime.tc_float).bits // 8
-        return self.n_batch * self.model.grid.n_nodes * (4 * size + 4)
+        B, N, K, S = self.n_batch, self.model.n_particles, self.model.grid.n_nodes, self.substeps
+        frames = S + 1 if self.requires_grad else 2
+        floats = B * (K * 4 + frames * N * layout.WIDTH)
+        if self.requires_grad:
+            kept = 9 + 3 + (21 if any_needs_svd(self.model.kinds, self.model.consts) else 0)
+            floats += B * (S * N * kept + K * 4 + N * (layout.WIDTH + 10))
+        return floats * size + B * K * 4
 
     def _check_memory(self):
-        """The grid must fit in the memory available now (a named error, not a crash)."""
-        need = self._grid_bytes()
+        """The grid and the particle arrays must fit in the memory available now (a named error,
+        not a crash)."""
+        need = self._memory_bytes()
         pages, page = _available_pages(), _page_size()
         if pages is not None and need > pages * page:
             g = self.model.grid
             raise InvalidInputError(f"MPM solver (entities: {', '.join(self.entity_names)}): the grid of "
-                                    f"{' × '.join(str(int(r)) for r in g.res)} nodes × {self.n_batch} env(s) needs "
-                                    f"{need / 2**30:.1f} GiB, expected at most the {pages * page / 2**30:.1f} GiB "
-                                    f"available; lower MPMOptions grid_density or tighten lower_bound/upper_bound")
+                                    f"{' × '.join(str(int(r)) for r in g.res)} nodes and {self.model.n_particles} "
+                                    f"particles × {self.n_batch} env(s) need {need / 2**30:.1f} GiB, expected at most "
+                                    f"the {pages * page / 2**30:.1f} GiB available; lower MPMOptions grid_density, "
+                                    f"tighten lower_bound/upper_bound or use fewer particles")
 
     def _check_substep(self):
         """Warn when the substep exceeds the stability limit: Genesis's suggested h ≤ 2e-2·dx, and
@@ -111,7 +123,7 @@ class MPMSolver(MPMAdjoint, Solver):
         self.consts = torch.as_tensor(m.consts, dtype=runtime.tc_float, device=runtime.device)
         self.fiber = floats(N, 3)
         self.fiber[:, 0] = 1.0
-        self.affine = floats(B, N, 9)
+        self.affine = floats(S if self.requires_grad else 1, B, N, 9)
         self.grid = floats(B, g.n_nodes, 4)
         self.active = ints(B + 1, g.n_nodes + 1)
         h = self.dt / self.substeps
@@ -119,12 +131,27 @@ class MPMSolver(MPMAdjoint, Solver):
                                       device=runtime.device)
         self.grid_i = torch.as_tensor([*g.lowest, *g.res, int(m.sticky)], dtype=torch.int32, device=runtime.device)
         self.flags = ints(1)
-        arrays = [self.frames, self.params, self.gravity_in, self.kinds, self.consts, self.fiber, self.affine,
-                  self.grid, self.active, self.grid_f, self.grid_i, self.flags]
-        self.kernels = BoundKernels(0, arrays, [0] * len(arrays), *kernels.KERNELS)
         self.current = 0  # the frame holding the current state
+        self.replaying = False  # set by begin_reverse until the replay's end_step: keep what the reverse reads
         if self.requires_grad:
             self._allocate_reverse()
+        else:  # what a replay keeps: never written by plain steps
+            self.svd, self.gathered = floats(1, 1, 1, 21), floats(1, 1, 1, 3)
+            self.saved_grid, self.saved_nodes = floats(1, 1, 1, 4), ints(1, 1, 1)
+        self._bind()
+
+    def _arrays(self):
+        """The forward kernels' arrays, in their order."""
+        return [self.frames, self.params, self.gravity_in, self.kinds, self.consts, self.fiber, self.affine,
+                self.svd, self.grid, self.active, self.grid_f, self.grid_i, self.flags, self.gathered,
+                self.saved_grid, self.saved_nodes]
+
+    def _bind(self):
+        """Bind the kernels to the arrays (again after the saved grid grows)."""
+        arrays = self._arrays()
+        self.kernels = BoundKernels(0, arrays, [0] * len(arrays), *kernels.KERNELS)
+        if self.requires_grad:
+            self._bind_reverse()
 
     def _default_inputs(self):
         m, B = self.model, self.n_batch
@@ -167,8 +194,10 @@ class MPMSolver(MPMAdjoint, Solver):
             self.upload_inputs(inputs)
 
     def _frames(self, s):
-        """(source, destination) frames of substep s of the step that starts at ``current``."""
-        return (self.current + s) % self.n_frames, (self.current + s + 1) % self.n_frames
+        """(source frame, destination frame, keep) of substep s of the step that starts at
+        ``current``; keep: s in a replay (the kernels keep what the reverse reads), else −1."""
+        return ((self.current + s) % self.n_frames, (self.current + s + 1) % self.n_frames,
+                s if self.replaying else -1)
 
     def substep_pre_coupling(self, s):
         self.kernels.pre_coupling(*self._frames(s))
@@ -177,6 +206,8 @@ class MPMSolver(MPMAdjoint, Solver):
         self.kernels.post_coupling(*self._frames(s))
 
     def end_step(self, download):
+        if self.replaying:
+            self.end_replay()
         self.current = (self.current + self.substeps) % self.n_frames
         return self.download_state() if download else None
 
@@ -199,7 +230,7 @@ class MPMSolver(MPMAdjoint, Solver):
         pass
 
     def destroy(self):
-        self.kernels = self.frames = self.grid = None
+        self.kernels = self.reverse_kernels = self.frames = self.grid = None
 
 
 def _available_pages():

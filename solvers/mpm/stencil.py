@@ -1,5 +1,6 @@
 """The quadratic B-spline stencil that ties a particle to its 27 grid nodes (its weights and their
-gradients, for the adjoints), and reading and writing a particle's state row (layout.STATE)
+gradients, for the adjoints; the nodes' offsets per axis, and the per-axis rows of a matrix times
+them, for the adjoints' loops), and reading and writing a particle's state row (layout.STATE)
 inside kernels."""
 import taichi as ti
 
@@ -69,10 +70,37 @@ def stencil_node(grid_i: ti.template(), base, W, i, j, k):
 
 
 @ti.func
-def stencil_weight_grad(W, dW, i, j, k):
-    """d weight / d fx (3,), 1/cell, of node (i, j, k) (W = weights, dW = weight_grads)."""
-    wx, wy, wz = W[i, 0], W[j, 1], W[k, 2]
-    return ti.Vector([dW[i, 0] * wy * wz, wx * dW[j, 1] * wz, wx * wy * dW[k, 2]])
+def stencil_row(grid_i: ti.template(), base, i, j):
+    """Flat index of node (i, j, 0) of the stencil at ``base`` (node (i, j, k) is this + k)."""
+    return ((base[0] + i) * grid_i[4] + base[1] + j) * grid_i[5] + base[2]
+
+
+@ti.func
+def axis_offsets(fx):
+    """3×3: [a, c] = a − fx[c], the offset (cells) of the stencil's nodes a ∈ {0, 1, 2} along
+    axis c from a particle at fx (node (i, j, k)'s offset − fx is (O[i, 0], O[j, 1], O[k, 2]))."""
+    return ti.Matrix([[float(a) - fx[c] for c in ti.static(range(3))] for a in ti.static(range(3))])
+
+
+@ti.func
+def column_terms(M, D, c: ti.template()):
+    """3×3: row a holds column c of M (3×3) times D[a, c]: with D[a, c] node a's offset along axis
+    c (axis_offsets, in cells or metres), M @ offset at node (i, j, k) is row i of column_terms(M,
+    D, 0) + row j of (…, 1) + row k of (…, 2), summed in a matrix product's order, so the stencil
+    loops add three precomputed rows instead of taking a product per node."""
+    return ti.Matrix([[M[r, c] * D[a, c] for r in ti.static(range(3))] for a in ti.static(range(3))])
+
+
+@ti.func
+def matrix_row(M, a):
+    """Row a (a runtime index) of a 3×3 matrix, as a 3-vector."""
+    return ti.Vector([M[a, 0], M[a, 1], M[a, 2]])
+
+
+@ti.func
+def transposed_times(M, v):
+    """Mᵀ v (3,) for a 3×3 M, summed in a matrix product's order (less its zero start)."""
+    return ti.Vector([M[0, c] * v[0] + M[1, c] * v[1] + M[2, c] * v[2] for c in ti.static(range(3))])
 
 
 @ti.func
