@@ -11,7 +11,8 @@ import pytest
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # example → the plot it writes besides <example>.mp4
 EXAMPLES = {"quickstart": "end_effector", "trajectory_optimization": "loss", "system_identification": "loss",
-            "policy": "loss", "push_box": "loss", "material_identification": "fit"}
+            "policy": "loss", "push_box": "loss", "material_identification": "fit",
+            "soft_robot": "loss"}
 SHORT_RES = (320, 240)  # examples/example_run.py: frames in short mode (width, height)
 MIN_FRAMES = 10
 MOVED = 30  # a pixel differs between the first and last frame by more than this (0-255): not codec noise
