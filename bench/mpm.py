@@ -34,9 +34,11 @@ What is measured (both engines alike, float32 unless ``--precision 64``):
   "spread" = (worst − best) / best; particle-substeps/s = N · S · substeps / best.
 - fwd+bwd: a one-step warm-up rollout (it compiles or loads every kernel), then ``--repeats``
   rollouts of K = ``--horizon`` steps, each timed up to the loss (forward) and through
-  ``loss.backward()``; "bwd/fwd" = backward / forward of the best rollout. Memory per step: the
-  same at 2K steps in another process (one rollout after the same warm-up), (peak at 2K − peak
-  at K) / K, in MiB per step and bytes per particle per step.
+  ``loss.backward()``; "bwd/fwd" = backward / forward of the best rollout. Memory against the
+  horizon, in the same process afterwards: one rollout each of K, 2K and 4K steps, the peak RSS
+  restarted before each; "peak MiB" is its peak above the RSS before it (what the rollout and its
+  backward held at most), "MiB/stp" and "B/p" the slope from K to 4K steps per step and per
+  particle per step.
 - peak RSS: the process's resident-set high-water mark (VmHWM of /proc/self/status), restarted
   after the warm-up ("5" into /proc/self/clear_refs) so that it holds the timed runs and leaves
   out the transient memory of compiling kernels: the whole process (interpreter, engine, torch,
@@ -62,6 +64,8 @@ import time
 T_START = time.perf_counter()  # the worker's time to first step counts from here
 
 import argparse  # noqa: E402
+import ctypes  # noqa: E402
+import gc  # noqa: E402
 import json  # noqa: E402
 import os  # noqa: E402
 import subprocess  # noqa: E402
@@ -78,6 +82,7 @@ FLOOR = 3 / GRID_DENSITY + 0.001   # m: the blocks' bottom, 1 mm above the floor
 GAP = 0.02                          # m: between the mixed scene's blocks
 SIDE = {"10k": 0.22, "50k": 0.37}           # m: one block's side (22³, 37³ particles)
 MIXED_SIDE = {"10k": 0.14, "50k": 0.23}     # m: each of the four blocks (4·14³, 4·23³)
+MEMORY_HORIZONS = (1, 2, 4)                 # memory is measured at these multiples of K steps
 STEPS = {"10k": 10, "50k": 2}               # steps per timed repeat
 MATERIALS = ("neohooken", "corotation", "sand", "mixed")
 CASES = [f"{m}-{size}" for m in MATERIALS for size in SIDE] + ["grad-neohooken-10k"]
@@ -217,7 +222,27 @@ def time_gradients(scene, entities, engine, horizon, repeats, precision):
     rollout(1)
     reset_peak_rss()
     fwd, bwd, loss = zip(*[rollout(horizon) for _ in range(repeats)])
-    return list(fwd), list(bwd), v0.grad.detach().double().numpy(), loss[-1]
+    grad = v0.grad.detach().double().numpy()
+    return list(fwd), list(bwd), grad, loss[-1], [peak_growth(rollout, k * horizon) for k in MEMORY_HORIZONS]
+
+
+def release_free_heap():
+    """Return the C heap's free memory to the system (glibc's malloc_trim), so that what an earlier
+    rollout freed is not resident any more and a rollout's RSS growth counts all it holds."""
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+
+
+def peak_growth(rollout, n_steps):
+    """(n_steps, MiB): the peak RSS of a rollout of n_steps and its backward above the RSS before it."""
+    gc.collect()
+    release_free_heap()
+    before = rss_now_mb()
+    reset_peak_rss()
+    rollout(n_steps)
+    return n_steps, peak_rss_mb() - before
 
 
 def worker(engine, mode, case, args, out):
@@ -240,7 +265,7 @@ def worker(engine, mode, case, args, out):
         array = final_positions(entities, engine, False).double().numpy()
     else:
         result["horizon"] = args.horizon
-        result["fwd"], result["bwd"], array, result["loss"] = time_gradients(
+        result["fwd"], result["bwd"], array, result["loss"], result["memory"] = time_gradients(
             scene, entities, engine, args.horizon, args.repeats, args.precision)
     if mode != "first":
         result["finite"] = bool(np.isfinite(array).all())
@@ -258,12 +283,11 @@ def genesis_python():
     return python or (GENESIS_VENV if os.path.exists(GENESIS_VENV) else None)
 
 
-def run_worker(python, engine, mode, case, args, tmp, horizon=None):
+def run_worker(python, engine, mode, case, args, tmp):
     """Run one worker process; return its result dict (with "array" when it saved one) or {"error": …}."""
-    out = os.path.join(tmp, f"{engine}-{mode}-{case}-{horizon or args.horizon}.json")
+    out = os.path.join(tmp, f"{engine}-{mode}-{case}.json")
     command = [python, os.path.abspath(__file__), "--worker", engine, mode, case, out,
-               "--precision", args.precision, "--repeats", str(1 if horizon else args.repeats),
-               "--horizon", str(horizon or args.horizon)]
+               "--precision", args.precision, "--repeats", str(args.repeats), "--horizon", str(args.horizon)]
     proc = subprocess.run(command, capture_output=True, text=True)
     if proc.returncode != 0 or not os.path.exists(out):
         lines = [line for line in proc.stderr.strip().splitlines() if line.strip()] or ["no output"]
@@ -285,11 +309,6 @@ def run_case(python, engine, case, args, tmp):
         first = run_worker(python, engine, "first", case, args, tmp)
         result["first"] = first.get("first_step", float("nan"))
         result["first_parts"] = first
-    if mode == "grad":
-        long = run_worker(python, engine, mode, case, args, tmp, horizon=2 * args.horizon)
-        result["peak_rss_2k"] = long.get("peak_rss", float("nan"))
-        if "error" in long:
-            print(f"  {case} {engine} at 2K steps: {long['error']}", flush=True)
     return result
 
 
@@ -333,11 +352,12 @@ def grad_row(engine, case, r, ours):
     n, k = sum(r["n_particles"]), r["horizon"]
     rollout = [f + b for f, b in zip(r["fwd"], r["bwd"])]
     best = int(np.argmin(rollout))
-    per_step = 2**20 * (r.get("peak_rss_2k", np.nan) - r["peak_rss"]) / k  # bytes
+    (k0, m0), (k1, m1) = r["memory"][0], r["memory"][-1]
+    per_step = 2**20 * (m1 - m0) / (k1 - k0)  # bytes
     ms = lambda times: f"{1e3 * min(times) / k:>8.1f} {spread(times):>4.0f}%"  # noqa: E731
     line = (f"{n:>6} | {k:>3} | {ms(r['fwd'])} | {ms(r['bwd'])} | {ms(rollout)} | "
             f"{r['bwd'][best] / r['fwd'][best]:>7.2f} | {r['peak_rss']:>7.0f} {r['peak_rss'] - r['rss_init']:>7.0f} | "
-            f"{per_step / 2**20:>7.2f} {per_step / n:>6.0f} | "
+            f"{' '.join(f'{m:>5.0f}' for _, m in r['memory'])} | {per_step / 2**20:>7.2f} {per_step / n:>6.0f} | "
             f"{str(r['finite']):>6} | ")
     return head + line + comparison(r, ours, lambda x: min(f + b for f, b in zip(x["fwd"], x["bwd"])))
 
@@ -361,10 +381,11 @@ def print_tables(cases, results, args):
     if grad:
         header = (f"{'case':>18} | {'engine':>12} | {'N':>6} | {'K':>3} | {'fwd ms/step':>14} | "
                   f"{'bwd ms/step':>14} | {'fwd+bwd ms/step':>14} | {'bwd/fwd':>7} | {'RSS MiB':>7} {'sim MiB':>7} | "
-                  f"{'MiB/stp':>7} {'B/p':>6} | {'finite':>6} | {'G / us':>7} | {'RSS G/us':>6} | "
+                  f"{'peak MiB K,2K,4K':>17} | {'MiB/stp':>7} {'B/p':>6} | {'finite':>6} | {'G / us':>7} | {'RSS G/us':>6} | "
                   f"{'Δgrad':>8}")
-        print(f"\nforward + backward (loss into v0), {args.precision}-bit: best of {args.repeats}; MiB/stp = "
-              f"(peak RSS at 2K steps − at K) / K, B/p the same in bytes per particle")
+        print(f"\nforward + backward (loss into v0), {args.precision}-bit: best of {args.repeats}; peak MiB: a "
+              f"rollout's peak RSS above the RSS before it at horizons {', '.join(f'{k}K' for k in MEMORY_HORIZONS)}; "
+              f"MiB/stp = its slope per step, B/p per particle per step")
         print(header + "\n" + "-" * len(header))
         for case in grad:
             ours = results[case].get("ours")

@@ -1,7 +1,7 @@
 """Make the README's small GIFs (docs/media/<example>.gif) from the examples' full-mode videos.
 
 Run the examples first (``python examples/<example>.py``: they write outputs/<example>.mp4), then
-``python docs/media/make_gifs.py [--out-dir outputs]``. Each GIF keeps at most MAX_FRAMES frames,
+``python docs/media/make_gifs.py [--out-dir outputs] [example ...]`` (default: all of them). Each GIF keeps at most MAX_FRAMES frames,
 evenly spaced over the video, WIDTH pixels wide, in COLORS colours, and must stay under MAX_BYTES.
 """
 import argparse
@@ -11,7 +11,8 @@ import imageio.v3 as iio
 import numpy as np
 from PIL import Image
 
-EXAMPLES = ("quickstart", "trajectory_optimization", "system_identification", "policy", "push_box")
+EXAMPLES = ("quickstart", "trajectory_optimization", "system_identification", "policy", "push_box",
+            "material_identification", "soft_robot")
 MAX_FRAMES = 60
 WIDTH = 240  # pixels
 COLORS = 128
@@ -37,8 +38,10 @@ def make_gif(video, gif):
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out-dir", default="outputs", help="where the examples wrote their videos")
+    parser.add_argument("examples", nargs="*", choices=EXAMPLES, default=EXAMPLES, metavar="example",
+                        help=f"which GIFs to make (default: all of {', '.join(EXAMPLES)})")
     args = parser.parse_args()
-    for name in EXAMPLES:
+    for name in args.examples:
         gif = os.path.join(HERE, f"{name}.gif")
         size = make_gif(os.path.join(args.out_dir, f"{name}.mp4"), gif)
         print(f"{gif}: {size / 1000:.0f} kB")
