@@ -2,7 +2,8 @@
 
 Run the examples first (``python examples/<example>.py``: they write outputs/<example>.mp4), then
 ``python docs/media/make_gifs.py [--out-dir outputs] [example ...]`` (default: all of them). Each GIF keeps at most MAX_FRAMES frames,
-evenly spaced over the video, WIDTH pixels wide, in COLORS colours, and must stay under MAX_BYTES.
+evenly spaced over the video, WIDTH pixels wide, in COLORS colours, and must stay under MAX_BYTES
+(fewer frames are tried, down to MIN_FRAMES, until it does).
 """
 import argparse
 import os
@@ -14,6 +15,7 @@ from PIL import Image
 EXAMPLES = ("quickstart", "trajectory_optimization", "system_identification", "policy", "push_box",
             "material_identification", "soft_robot")
 MAX_FRAMES = 60
+MIN_FRAMES = 20
 WIDTH = 240  # pixels
 COLORS = 128
 MAX_BYTES = 300_000
@@ -21,10 +23,21 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 
 
 def make_gif(video, gif):
-    """Write ``gif`` from the MP4 ``video``: ≤ MAX_FRAMES frames, WIDTH px wide, COLORS colours
-    shared by every frame, playing as long as the video. Returns the GIF's size in bytes."""
+    """Write ``gif`` from the MP4 ``video`` with the most frames (≤ MAX_FRAMES, ≥ MIN_FRAMES) that
+    keep it under MAX_BYTES. Returns the GIF's size in bytes."""
     frames, fps = iio.imread(video, index=None), iio.immeta(video)["fps"]
-    keep = np.unique(np.linspace(0, len(frames) - 1, min(MAX_FRAMES, len(frames))).round().astype(int))
+    for count in range(min(MAX_FRAMES, len(frames)), MIN_FRAMES - 1, -10):
+        size = write_gif(frames, fps, count, gif)
+        if size <= MAX_BYTES:
+            break
+    return size
+
+
+def write_gif(frames, fps, count, gif):
+    """Write ``gif`` from ``frames`` (n, h, w, 3) of a video at ``fps``: ``count`` frames evenly
+    spaced, WIDTH px wide, COLORS colours shared by every frame, playing as long as the video.
+    Returns its size in bytes."""
+    keep = np.unique(np.linspace(0, len(frames) - 1, min(count, len(frames))).round().astype(int))
     height = round(frames.shape[1] * WIDTH / frames.shape[2])
     small = [Image.fromarray(frames[k]).resize((WIDTH, height), Image.LANCZOS) for k in keep]
     # one palette for the whole clip (from all its frames stacked), so colours do not flicker
