@@ -118,3 +118,44 @@ def test_kernels_never_reassociate(f64):
     out = torch.zeros(1, dtype=torch.float64)
     _running_sum(torch.tensor(values), out)
     assert out.item() == in_order, f"the kernel summed out of order: {out.item()!r} != {in_order!r}"
+
+
+# -- solvers/taichi_startup.py: start-up costs removed, Taichi's behaviour kept -----------------------
+@ti.func
+def _misspelt(x):
+    return x + undefined_name  # noqa: F821  (the compile error under test)
+
+
+def test_compile_error_names_file_line_and_source(f64):
+    """Taichi's source positions, written without text wrapping, still say where an error is: the
+    file, the line, the function and the source line with a caret under the culprit."""
+    @ti.kernel
+    def calls_misspelt() -> ti.f64:
+        return _misspelt(1.0)
+
+    with pytest.raises(ti.TaichiCompilationError) as error:
+        calls_misspelt()
+    message = str(error.value)
+    line = 1 + open(__file__).read().split("\n").index("    return x + undefined_name  # noqa: F821  (the compile error under test)")
+    assert f'{__file__}", line {line}, in _misspelt' in message
+    assert "return x + undefined_name" in message and "^^^^^^^^^^^^^^" in message
+
+
+@ti.data_oriented
+class _Counter:
+    def __init__(self):
+        self.total = ti.field(ti.i32, shape=())
+
+    @ti.kernel
+    def add(self, n: ti.i32):
+        self.total[None] += n
+
+
+def test_kernels_defined_in_classes_still_bind_to_their_instance(f64):
+    """Taichi tells a kernel defined in a class body from a module-level one by reading its caller's
+    frame (the lookup taichi_startup makes fast): a data-oriented class's kernel binds to its
+    instance, a module-level kernel runs as a plain function."""
+    counter = _Counter()
+    counter.add(3)
+    counter.add(4)
+    assert counter.total[None] == 7
