@@ -12,24 +12,33 @@ per particle (Σ w_i v_i = v').
 """
 import taichi as ti
 
-from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, row_matrix, row_vector, stencil_node,
-                      stencil_row, store_matrix, store_vector, transposed_times, weight_grads, weights)
+from .stencil import (add_to_row, axis_offsets, axis_products, cell_of, column_terms, matrix_row, row_matrix,
+                      row_vector, scatter_spread, stencil_row, store_matrix, store_vector, transposed_times,
+                      weight_grads, weights)
 
 
 @ti.func
 def gather_velocity(grid: ti.template(), e, base, fx, inv_dx, grid_i: ti.template()):
-    """(v' (3,) m/s, C' (3×3) 1/s) gathered from env e's updated grid around a particle."""
-    vel = ti.Vector.zero(float, 3)
-    C = ti.Matrix.zero(float, 3, 3)
+    """(v' (3,) m/s, C' (3×3) 1/s) gathered from env e's updated grid around a particle; C''s
+    outer products are summed per axis (stencil.axis_products)."""
     W = weights(fx)
+    by_i = ti.Matrix.zero(float, 3, 3)
+    by_j = ti.Matrix.zero(float, 3, 3)
+    by_k = ti.Matrix.zero(float, 3, 3)
     for i in range(3):
         for j in range(3):
+            row = stencil_row(grid_i, base, i, j)
+            w_ij = W[i, 0] * W[j, 1]
+            line = ti.Vector.zero(float, 3)
             for k in range(3):
-                n, offset, w = stencil_node(grid_i, base, W, i, j, k)
-                v = ti.Vector([grid[e, n, 0], grid[e, n, 1], grid[e, n, 2]])
-                vel += w * v
-                C += (4.0 * inv_dx * w) * v.outer_product(offset - fx)
-    return vel, C
+                n = row + k
+                wv = (w_ij * W[k, 2]) * ti.Vector([grid[e, n, 0], grid[e, n, 1], grid[e, n, 2]])
+                line += wv
+                by_k = add_to_row(by_k, k, wv)
+            by_i = add_to_row(by_i, i, line)
+            by_j = add_to_row(by_j, j, line)
+    vel = matrix_row(by_i, 0) + matrix_row(by_i, 1) + matrix_row(by_i, 2)
+    return vel, (4.0 * inv_dx) * axis_products(by_i, by_j, by_k, axis_offsets(fx))
 
 
 @ti.func
@@ -130,24 +139,50 @@ def gather_adjoint_stage(frames: ti.template(), grid: ti.template(), gathered: t
 
 @ti.func
 def gather_adjoint_scatter(frames: ti.template(), grads: ti.template(), scratch: ti.template(),
-                           grad_grid: ti.template(), grid_f: ti.template(), grid_i: ti.template(), src):
-    """Reverse of g2p into the grid, serial per env (particle order: deterministic): each node's
-    velocity gradient (grad_grid 0:3, zero before) += w_i u_i (node_gradient_rows)."""
+                           grad_grid: ti.template(), part_grid: ti.template(), active: ti.template(),
+                           grid_f: ti.template(), grid_i: ti.template(), src):
+    """Reverse of g2p into the grid: each node's velocity gradient (grad_grid 0:3, zero before)
+    += w_i u_i (node_gradient_rows), deterministic, on two threads (stencil.scatter_spread): the
+    first half of each env's particles into grad_grid, the second into part_grid (0:3), then added
+    over the listed nodes (active) and part_grid zeroed."""
+    B, N = frames.shape[1], frames.shape[2]
+    half = (N + 1) // 2
+    spread = scatter_spread(B)
+    for t in range(2 * B * spread):
+        if t % spread == 0:
+            e, second = t // spread // 2, t // spread % 2
+            if second == 0:
+                velocity_gradient_range(frames, grads, scratch, grad_grid, grid_f, grid_i, src, e, 0, half)
+            else:
+                velocity_gradient_range(frames, grads, scratch, part_grid, grid_f, grid_i, src, e, half, N)
+    for e, k in ti.ndrange(B, active[B, 0]):
+        if k < active[e, 0]:
+            n = active[e, k + 1]
+            for c in ti.static(range(3)):
+                grad_grid[e, n, c] = grad_grid[e, n, c] + part_grid[e, n, c]
+                part_grid[e, n, c] = 0.0
+
+
+@ti.func
+def velocity_gradient_range(frames: ti.template(), grads: ti.template(), scratch: ti.template(),
+                            grad_grid: ti.template(), grid_f: ti.template(), grid_i: ti.template(), src, e, first,
+                            end):
+    """Env e's particles first..end − 1, serially in particle order: their nodes' velocity
+    gradients (grad_grid 0:3) += w_i u_i."""
     inv_dx = grid_f[1]
-    for e in range(frames.shape[1]):
-        for p in range(frames.shape[2]):
-            base, fx = cell_of(row_vector(frames, src, e, p, 0), inv_dx, grid_i)
-            g_vel = ti.Vector([scratch[e, p, 0], scratch[e, p, 1], scratch[e, p, 2]])
-            g_C = row_matrix(grads, 0, e, p, 6)
-            W, O = weights(fx), axis_offsets(fx)
-            U_x, U_y, U_z = node_gradient_rows(g_C, O, inv_dx)
-            for i in range(3):
-                for j in range(3):
-                    row = stencil_row(grid_i, base, i, j)
-                    w_ij = W[i, 0] * W[j, 1]
-                    u_ij = g_vel + matrix_row(U_x, i) + matrix_row(U_y, j)
-                    for k in range(3):
-                        n = row + k
-                        g_v = (w_ij * W[k, 2]) * (u_ij + matrix_row(U_z, k))
-                        for c in ti.static(range(3)):
-                            grad_grid[e, n, c] = grad_grid[e, n, c] + g_v[c]
+    for p in range(first, end):
+        base, fx = cell_of(row_vector(frames, src, e, p, 0), inv_dx, grid_i)
+        g_vel = ti.Vector([scratch[e, p, 0], scratch[e, p, 1], scratch[e, p, 2]])
+        g_C = row_matrix(grads, 0, e, p, 6)
+        W, O = weights(fx), axis_offsets(fx)
+        U_x, U_y, U_z = node_gradient_rows(g_C, O, inv_dx)
+        for i in range(3):
+            for j in range(3):
+                row = stencil_row(grid_i, base, i, j)
+                w_ij = W[i, 0] * W[j, 1]
+                u_ij = g_vel + matrix_row(U_x, i) + matrix_row(U_y, j)
+                for k in range(3):
+                    n = row + k
+                    g_v = (w_ij * W[k, 2]) * (u_ij + matrix_row(U_z, k))
+                    for c in ti.static(range(3)):
+                        grad_grid[e, n, c] = grad_grid[e, n, c] + g_v[c]

@@ -10,6 +10,24 @@ import taichi as ti
 
 
 @ti.func
+def merge_stage(grid: ti.template(), active: ti.template(), part_grid: ti.template(), part_nodes: ti.template()):
+    """The second half's scatter (part_grid, its nodes in part_nodes) added into the grid, serially
+    per env in part_nodes' order; its nodes the first half did not reach are listed in active; the
+    part_grid nodes are zeroed for the next substep."""
+    for e in range(active.shape[0] - 1):
+        count = active[e, 0]
+        for k in range(part_nodes[e, 0]):
+            n = part_nodes[e, k + 1]
+            if grid[e, n, 3] == 0.0:
+                count += 1
+                active[e, count] = n
+            for c in ti.static(range(4)):
+                grid[e, n, c] = grid[e, n, c] + part_grid[e, n, c]
+                part_grid[e, n, c] = 0.0
+        active[e, 0] = count
+
+
+@ti.func
 def largest_count(active: ti.template()):
     """Row B, column 0 of ``active`` ← the largest env's node count (the grid loops' bound)."""
     for once in range(1):

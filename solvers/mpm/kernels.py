@@ -19,6 +19,9 @@ nodes, S substeps, cap the saved grid's capacity):
   and mass; zero between substeps;
 - ``active`` (B + 1, K + 1) int: per env the number of nodes the particles reach, then their
   indices (the grid update and the clearing touch only those); row B holds the largest count;
+- ``part_grid`` (B, K, 4), ``part_nodes`` (B + 1, K + 1) int: the second half of the particles'
+  scatter (p2g's, then in the reverse g2p's) and its node list, added into grid (grad_grid) at
+  once and zeroed (stencil.scatter_spread);
 - ``grid_f`` (9,): h (s), inv_dx (1/m), vol (m³), walls' lower (3) and upper (3) corners (m);
 - ``grid_i`` (7,): the grid's lowest node in cells (3), nodes per axis (3), sticky walls (0/1);
 - ``flags`` (1,) int: set to 1 when a particle's new state is not finite;
@@ -50,14 +53,15 @@ SVDs: the reverse runs no SVD). It takes two launches, post_coupling_backward an
 pre_coupling_backward, as the shared loop interleaves a coupler's reverse between them; the
 stress adjoint (the costliest to compile) is in the second only.
 
-Scatter order decides round-off: the scatter runs serially per env (as MPM_NOTES measured, faster
-than atomics on CPU), so results are deterministic and a batched env equals a single-env scene.
+Scatter order decides round-off: the scatters run serially per env and half of the particles (as
+MPM_NOTES measured, faster than atomics on CPU; the two halves on two threads), so results are
+deterministic and a batched env equals a single-env scene.
 """
 import taichi as ti
 
 from .g2p import gather_adjoint_scatter, gather_adjoint_stage, gather_stage
 from .grid import (clear_adjoint_stage, clear_stage, grid_adjoint_stage, grid_stage, gravity_adjoint_stage,
-                   largest_count, restore_stage)
+                   largest_count, merge_stage, restore_stage)
 from .p2g import p2g_adjoint_stage, scatter_stage, stress_stage
 
 A = ti.types.ndarray()
@@ -65,11 +69,12 @@ A = ti.types.ndarray()
 
 @ti.kernel
 def substep(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
-            grid: A, active: A, grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
-            src: ti.i32, dst: ti.i32, keep: ti.i32):
+            grid: A, active: A, part_grid: A, part_nodes: A, grid_f: A, grid_i: A, flags: A, gathered: A,
+            saved_grid: A, saved_nodes: A, src: ti.i32, dst: ti.i32, keep: ti.i32):
     """A whole substep from frame src to frame dst, in one launch (no coupling)."""
     stress_stage(frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep)
-    scatter_stage(frames, params, affine, grid, active, grid_f, grid_i, src, ti.max(keep, 0))
+    scatter_stage(frames, params, affine, grid, active, part_grid, part_nodes, grid_f, grid_i, src, ti.max(keep, 0))
+    merge_stage(grid, active, part_grid, part_nodes)
     largest_count(active)
     grid_stage(grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
     gather_stage(frames, grid, grid_f, grid_i, flags, gathered, src, dst, keep)
@@ -78,17 +83,20 @@ def substep(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts
 
 @ti.kernel
 def pre_coupling(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
-                 grid: A, active: A, grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
+                 grid: A, active: A, part_grid: A, part_nodes: A,
+                 grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                  src: ti.i32, dst: ti.i32, keep: ti.i32):
     """The substep up to the grid update (stress and p2g): the grid holds momentum and mass."""
     stress_stage(frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep)
-    scatter_stage(frames, params, affine, grid, active, grid_f, grid_i, src, ti.max(keep, 0))
+    scatter_stage(frames, params, affine, grid, active, part_grid, part_nodes, grid_f, grid_i, src, ti.max(keep, 0))
+    merge_stage(grid, active, part_grid, part_nodes)
     largest_count(active)
 
 
 @ti.kernel
 def post_coupling(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
-                  grid: A, active: A, grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
+                  grid: A, active: A, part_grid: A, part_nodes: A,
+                  grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                   src: ti.i32, dst: ti.i32, keep: ti.i32):
     """The rest of the substep: grid update, g2p, grid cleared."""
     grid_stage(grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
@@ -98,7 +106,8 @@ def post_coupling(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, 
 
 @ti.kernel
 def write_state(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
-                grid: A, active: A, grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
+                grid: A, active: A, part_grid: A, part_nodes: A,
+                grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                 f: ti.i32, src: A):
     """Frame f ← src (B, N · 25)."""
     for e, p in ti.ndrange(frames.shape[1], frames.shape[2]):
@@ -108,7 +117,8 @@ def write_state(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, co
 
 @ti.kernel
 def read_state(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
-               grid: A, active: A, grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
+               grid: A, active: A, part_grid: A, part_nodes: A,
+               grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                f: ti.i32, dst: A):
     """dst (B, N · 25) ← frame f."""
     for e, p in ti.ndrange(frames.shape[1], frames.shape[2]):
@@ -121,21 +131,23 @@ KERNELS = (substep, pre_coupling, post_coupling, write_state, read_state)
 
 @ti.kernel
 def post_coupling_backward(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A,
-                           affine: A, svd: A, grid: A, active: A, grid_f: A, grid_i: A, flags: A, gathered: A,
+                           affine: A, svd: A, grid: A, active: A, part_grid: A, part_nodes: A,
+                           grid_f: A, grid_i: A, flags: A, gathered: A,
                            saved_grid: A, saved_nodes: A, grads: A, grad_params: A, grad_gravity: A, grad_grid: A,
                            scratch: A, src: ti.i32):
     """Substep src's updated grid restored (as the replay kept it), then the reverse of
     post_coupling (g2p and the grid update): grad_grid ← (∂L/∂P, ∂L/∂M), grad_gravity += its part."""
     restore_stage(grid, active, saved_grid, saved_nodes, src)
     gather_adjoint_stage(frames, grid, gathered, grads, scratch, grid_f, grid_i, src)
-    gather_adjoint_scatter(frames, grads, scratch, grad_grid, grid_f, grid_i, src)
+    gather_adjoint_scatter(frames, grads, scratch, grad_grid, part_grid, active, grid_f, grid_i, src)
     grid_adjoint_stage(grid, grad_grid, active, gravity, grid_f, grid_i)
     gravity_adjoint_stage(grid, active, grad_gravity, grid_f)
 
 
 @ti.kernel
 def pre_coupling_backward(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A,
-                          affine: A, svd: A, grid: A, active: A, grid_f: A, grid_i: A, flags: A, gathered: A,
+                          affine: A, svd: A, grid: A, active: A, part_grid: A, part_nodes: A,
+                          grid_f: A, grid_i: A, flags: A, gathered: A,
                           saved_grid: A, saved_nodes: A, grads: A, grad_params: A, grad_gravity: A, grad_grid: A,
                           scratch: A, src: ti.i32):
     """The reverse of pre_coupling (p2g and the stress): grads ← the gradient of frame src,

@@ -13,8 +13,9 @@ are taken once per particle; the per-node products of A with the offsets come fr
 import taichi as ti
 
 from .constitutive import constitutive_adjoint_decomposed, constitutive_decomposed, decompose, needs_svd
-from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, row_matrix, row_vector, stencil_node,
-                      stencil_row, store_matrix, store_vector, transposed_times, weight_grads, weights)
+from .stencil import (add_to_row, axis_offsets, axis_products, cell_of, column_terms, matrix_row, row_matrix,
+                      row_vector, scatter_spread, stencil_row, store_matrix, store_vector, transposed_times,
+                      weight_grads, weights)
 
 
 @ti.func
@@ -49,32 +50,57 @@ def stress_stage(frames: ti.template(), params: ti.template(), kinds: ti.templat
 
 @ti.func
 def scatter_stage(frames: ti.template(), params: ti.template(), affine: ti.template(), grid: ti.template(),
-                  active: ti.template(), grid_f: ti.template(), grid_i: ti.template(), src, slot):
-    """p2g, serial per env (in particle order: deterministic); lists each node on first touch.
-    The affine matrices are read from affine's slot ``slot``."""
+                  active: ti.template(), part_grid: ti.template(), part_nodes: ti.template(), grid_f: ti.template(),
+                  grid_i: ti.template(), src, slot):
+    """p2g, deterministic, on two threads (stencil.scatter_spread): each env's first half of the
+    particles scattered into grid (listing its nodes in active), the second into part_grid
+    (listing in part_nodes); merge_stage then adds the second into the first. The affine matrices
+    are read from affine's slot ``slot``."""
+    B, N = frames.shape[1], frames.shape[2]
+    half = (N + 1) // 2
+    spread = scatter_spread(B)
+    for t in range(2 * B * spread):
+        if t % spread == 0:
+            e, second = t // spread // 2, t // spread % 2
+            if second == 0:
+                scatter_range(frames, params, affine, grid, active, grid_f, grid_i, src, slot, e, 0, half)
+            else:
+                scatter_range(frames, params, affine, part_grid, part_nodes, grid_f, grid_i, src, slot, e, half, N)
+
+
+@ti.func
+def scatter_range(frames: ti.template(), params: ti.template(), affine: ti.template(), grid: ti.template(),
+                  nodes: ti.template(), grid_f: ti.template(), grid_i: ti.template(), src, slot, e, first, end):
+    """Env e's particles first..end − 1 scattered into ``grid`` (B, K, 4: momentum, mass), serially
+    in particle order; ``nodes`` (B + 1, K + 1) lists each node on first touch (count, then nodes)."""
     inv_dx, vol = grid_f[1], grid_f[2]
-    for e in range(frames.shape[1]):
-        count = 0
-        for p in range(frames.shape[2]):
-            base, fx = cell_of(row_vector(frames, src, e, p, 0), inv_dx, grid_i)
-            mass = params[e, p, 2] * vol
-            momentum = mass * row_vector(frames, src, e, p, 3)
-            aff = affine_matrix(affine, slot, e, p)
-            W = weights(fx)
-            for i in range(3):
-                for j in range(3):
-                    for k in range(3):
-                        n, offset, w = stencil_node(grid_i, base, W, i, j, k)
-                        dpos = (offset - fx) / inv_dx
-                        contribution = w * (momentum + aff @ dpos)
-                        old_mass = grid[e, n, 3]
-                        for c in ti.static(range(3)):
-                            grid[e, n, c] = grid[e, n, c] + contribution[c]
-                        grid[e, n, 3] = old_mass + w * mass
-                        if old_mass == 0.0 and w * mass > 0.0:
-                            count += 1
-                            active[e, count] = n
-        active[e, 0] = count
+    count = 0
+    for p in range(first, end):
+        base, fx = cell_of(row_vector(frames, src, e, p, 0), inv_dx, grid_i)
+        mass = params[e, p, 2] * vol
+        momentum = mass * row_vector(frames, src, e, p, 3)
+        aff = affine_matrix(affine, slot, e, p)
+        W = weights(fx)
+        # aff @ (x_i − x) per node from per-axis rows, summed in a matrix product's order
+        D = axis_offsets(fx) / inv_dx
+        A_x, A_y, A_z = column_terms(aff, D, 0), column_terms(aff, D, 1), column_terms(aff, D, 2)
+        for i in range(3):
+            for j in range(3):
+                row = stencil_row(grid_i, base, i, j)
+                w_ij = W[i, 0] * W[j, 1]
+                aff_ij = matrix_row(A_x, i) + matrix_row(A_y, j)
+                for k in range(3):
+                    n = row + k
+                    w = w_ij * W[k, 2]
+                    contribution = w * (momentum + (aff_ij + matrix_row(A_z, k)))
+                    old_mass = grid[e, n, 3]
+                    for c in ti.static(range(3)):
+                        grid[e, n, c] = grid[e, n, c] + contribution[c]
+                    grid[e, n, 3] = old_mass + w * mass
+                    if old_mass == 0.0 and w * mass > 0.0:
+                        count += 1
+                        nodes[e, count] = n
+    nodes[e, 0] = count
 
 
 @ti.func
@@ -104,9 +130,11 @@ def p2g_adjoint_stage(frames: ti.template(), params: ti.template(), kinds: ti.te
         aff = affine_matrix(affine, src, e, p)
         momentum = mass * vel
         g_mass = 0.0
-        g_momentum = ti.Vector.zero(float, 3)
-        g_aff = ti.Matrix.zero(float, 3, 3)
         g_fx = ti.Vector.zero(float, 3)
+        # Σ w ∂L/∂P_i per node index along each axis: ∂L/∂A = Σ w ∂L/∂P_i ⊗ (x_i − x) from them
+        by_i = ti.Matrix.zero(float, 3, 3)
+        by_j = ti.Matrix.zero(float, 3, 3)
+        by_k = ti.Matrix.zero(float, 3, 3)
         W, dW = weights(fx), weight_grads(fx)
         # per axis c and offset a: the node offset (a − fx_c) dx (D[a, c]) and its term of aff @ dpos
         # (row a of A_c): the stencil adds these instead of taking a product per node
@@ -117,19 +145,23 @@ def p2g_adjoint_stage(frames: ti.template(), params: ti.template(), kinds: ti.te
                 row = stencil_row(grid_i, base, i, j)
                 w_ij, dw_x, dw_y = W[i, 0] * W[j, 1], dW[i, 0] * W[j, 1], W[i, 0] * dW[j, 1]
                 aff_ij = matrix_row(A_x, i) + matrix_row(A_y, j)
+                line = ti.Vector.zero(float, 3)
                 for k in range(3):
                     n = row + k
                     w = w_ij * W[k, 2]
                     dw = ti.Vector([dw_x * W[k, 2], dw_y * W[k, 2], w_ij * dW[k, 2]])
-                    dpos = ti.Vector([D[i, 0], D[j, 1], D[k, 2]])
                     g_P = ti.Vector([grad_grid[e, n, 0], grad_grid[e, n, 1], grad_grid[e, n, 2]])
                     g_M = grad_grid[e, n, 3]
                     weighted = w * g_P
-                    g_momentum += weighted
+                    line += weighted
+                    by_k = add_to_row(by_k, k, weighted)
                     g_mass += w * g_M
-                    g_aff += weighted.outer_product(dpos)
                     aff_dpos = aff_ij + matrix_row(A_z, k)
                     g_fx += (g_P.dot(momentum + aff_dpos) + g_M * mass) * dw
+                by_i = add_to_row(by_i, i, line)
+                by_j = add_to_row(by_j, j, line)
+        g_momentum = matrix_row(by_i, 0) + matrix_row(by_i, 1) + matrix_row(by_i, 2)
+        g_aff = axis_products(by_i, by_j, by_k, D)
         # the nodes' offsets x_i − x = (offset − fx) dx in P_i: −dx Aᵀ Σ w ∂L/∂P_i, once per particle
         g_fx -= transposed_times(aff, g_momentum) / inv_dx
         # the stress: A = −κ τ + m C, F_tmp = (I + h C) F

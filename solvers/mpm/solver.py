@@ -65,18 +65,19 @@ class MPMSolver(MPMAdjoint, Solver):
         return state
 
     def _memory_bytes(self):
-        """Bytes the solver's arrays take: the grid (4 floats and a list int per node and env) and
+        """Bytes the solver's arrays take: the grid (4 floats and a list int per node and env, twice:
+        p2g scatters half of the particles into a second grid) and
         the particle frames, plus, when it differentiates, what a replay keeps per substep (affine
         matrix, gathered velocity and, for the materials that take one, the SVD: 12 or 33 floats
         per particle) and the gradients' grid and rows."""
         size = torch.finfo(runtime.tc_float).bits // 8
         B, N, K, S = self.n_batch, self.model.n_particles, self.model.grid.n_nodes, self.substeps
         frames = S + 1 if self.requires_grad else 2
-        floats = B * (K * 4 + frames * N * layout.WIDTH)
+        floats = B * (2 * K * 4 + frames * N * layout.WIDTH)
         if self.requires_grad:
             kept = 9 + 3 + (21 if any_needs_svd(self.model.kinds, self.model.consts) else 0)
             floats += B * (S * N * kept + K * 4 + N * (layout.WIDTH + 10))
-        return floats * size + B * K * 4
+        return floats * size + 2 * B * K * 4
 
     def _check_memory(self):
         """The grid and the particle arrays must fit in the memory available now (a named error,
@@ -126,6 +127,7 @@ class MPMSolver(MPMAdjoint, Solver):
         self.affine = floats(S if self.requires_grad else 1, B, N, 9)
         self.grid = floats(B, g.n_nodes, 4)
         self.active = ints(B + 1, g.n_nodes + 1)
+        self.part_grid, self.part_nodes = floats(B, g.n_nodes, 4), ints(B + 1, g.n_nodes + 1)  # p2g's second half
         h = self.dt / self.substeps
         self.grid_f = torch.as_tensor([h, g.density, m.vol, *g.wall_lower, *g.wall_upper], dtype=runtime.tc_float,
                                       device=runtime.device)
@@ -143,8 +145,8 @@ class MPMSolver(MPMAdjoint, Solver):
     def _arrays(self):
         """The forward kernels' arrays, in their order."""
         return [self.frames, self.params, self.gravity_in, self.kinds, self.consts, self.fiber, self.affine,
-                self.svd, self.grid, self.active, self.grid_f, self.grid_i, self.flags, self.gathered,
-                self.saved_grid, self.saved_nodes]
+                self.svd, self.grid, self.active, self.part_grid, self.part_nodes, self.grid_f, self.grid_i, self.flags,
+                self.gathered, self.saved_grid, self.saved_nodes]
 
     def _bind(self):
         """Bind the kernels to the arrays (again after the saved grid grows)."""

@@ -1,7 +1,7 @@
 """The quadratic B-spline stencil that ties a particle to its 27 grid nodes (its weights and their
 gradients, for the adjoints; the nodes' offsets per axis, and the per-axis rows of a matrix times
-them, for the adjoints' loops), and reading and writing a particle's state row (layout.STATE)
-inside kernels."""
+them, for the adjoints' loops), reading and writing a particle's state row (layout.STATE)
+inside kernels, and how the serial scatters are spread over two threads (``scatter_spread``)."""
 import taichi as ti
 
 
@@ -61,17 +61,10 @@ def weight_grads(fx):
 
 
 @ti.func
-def stencil_node(grid_i: ti.template(), base, W, i, j, k):
-    """Node (i, j, k) ∈ {0, 1, 2}³ of the stencil at ``base``: (flat index, offset (3,) as floats,
-    weight). Callers loop i, j, k as three runtime loops: one loop over 27 decoding o // 9,
-    o // 3 % 3, o % 3 ran 1.7× slower."""
-    n = ((base[0] + i) * grid_i[4] + base[1] + j) * grid_i[5] + base[2] + k
-    return n, ti.Vector([i, j, k], float), W[i, 0] * W[j, 1] * W[k, 2]
-
-
-@ti.func
 def stencil_row(grid_i: ti.template(), base, i, j):
-    """Flat index of node (i, j, 0) of the stencil at ``base`` (node (i, j, k) is this + k)."""
+    """Flat index of node (i, j, 0) of the stencil at ``base`` (node (i, j, k) is this + k). Callers
+    loop i, j, k as three runtime loops: one loop over 27 decoding o // 9, o // 3 % 3, o % 3 ran
+    1.7× slower."""
     return ((base[0] + i) * grid_i[4] + base[1] + j) * grid_i[5] + base[2]
 
 
@@ -89,6 +82,31 @@ def column_terms(M, D, c: ti.template()):
     D, 0) + row j of (…, 1) + row k of (…, 2), summed in a matrix product's order, so the stencil
     loops add three precomputed rows instead of taking a product per node."""
     return ti.Matrix([[M[r, c] * D[a, c] for r in ti.static(range(3))] for a in ti.static(range(3))])
+
+
+@ti.func
+def add_to_row(M, a, v):
+    """M (3×3) with v (3,) added to its row a (a runtime index)."""
+    out = M
+    for c in ti.static(range(3)):
+        out[a, c] += v[c]
+    return out
+
+
+@ti.func
+def axis_products(by_i, by_j, by_k, D):
+    """Σ over the stencil's nodes of u_n ⊗ offset_n (3×3), from the partial sums of u per node
+    index along each axis (by_i row a: Σ u over the nodes with i = a; by_j, by_k likewise) and the
+    offsets per axis D (axis_offsets): node (i, j, k)'s offset along x is D[i, 0], so column 0 is
+    Σ_a D[a, 0] by_i[a] (and y from by_j, z from by_k). A stencil loop that keeps the three partial
+    sums (3 adds a node each) replaces an outer product a node (9 products and adds)."""
+    M = ti.Matrix.zero(float, 3, 3)
+    for a in ti.static(range(3)):
+        for r in ti.static(range(3)):
+            M[r, 0] += D[a, 0] * by_i[a, r]
+            M[r, 1] += D[a, 1] * by_j[a, r]
+            M[r, 2] += D[a, 2] * by_k[a, r]
+    return M
 
 
 @ti.func
@@ -114,3 +132,15 @@ def cell_of(pos, inv_dx, grid_i: ti.template()):
     lowest = ti.Vector([grid_i[0], grid_i[1], grid_i[2]])
     top = ti.Vector([grid_i[3] - 3, grid_i[4] - 3, grid_i[5] - 3])
     return ti.max(ti.min(base - lowest, top), 0), fx
+
+
+@ti.func
+def scatter_spread(B):
+    """The serial scatters (p2g's, and g2p's reverse) run each env's particles in two halves by index
+    (the first ``(N + 1) // 2``, the rest), each serially in particle order into its own grid, which
+    are then added (node by node, first + second): the same sums whatever the machine or the number
+    of envs. The 2·B half-scatters are iterations t of a loop of 2·B·spread where t % spread == 0
+    (half t // spread % 2 of env t // spread // 2): Taichi's CPU backend runs a parallel loop of few
+    iterations on one thread (measured: 2, 4 or 64 long iterations took as long as run one after
+    another; 2 long ones spread over 2048 ran on two threads, 45 ms against 85)."""
+    return ti.max(1, 1024 // B)
