@@ -12,33 +12,26 @@ per particle (Σ w_i v_i = v').
 """
 import taichi as ti
 
-from .stencil import (add_to_row, axis_offsets, axis_products, cell_of, column_terms, matrix_row, row_matrix,
-                      row_vector, scatter_spread, stencil_row, store_matrix, store_vector, transposed_times,
-                      weight_grads, weights)
+from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, row_matrix, row_vector, scatter_spread,
+                      stencil_row, store_matrix, store_vector, transposed_times, weight_grads, weights)
 
 
 @ti.func
 def gather_velocity(grid: ti.template(), e, base, fx, inv_dx, grid_i: ti.template()):
-    """(v' (3,) m/s, C' (3×3) 1/s) gathered from env e's updated grid around a particle; C''s
-    outer products are summed per axis (stencil.axis_products)."""
-    W = weights(fx)
-    by_i = ti.Matrix.zero(float, 3, 3)
-    by_j = ti.Matrix.zero(float, 3, 3)
-    by_k = ti.Matrix.zero(float, 3, 3)
+    """(v' (3,) m/s, C' (3×3) 1/s) gathered from env e's updated grid around a particle."""
+    W, O = weights(fx), axis_offsets(fx)
+    vel = ti.Vector.zero(float, 3)
+    C = ti.Matrix.zero(float, 3, 3)
     for i in range(3):
         for j in range(3):
             row = stencil_row(grid_i, base, i, j)
             w_ij = W[i, 0] * W[j, 1]
-            line = ti.Vector.zero(float, 3)
             for k in range(3):
                 n = row + k
                 wv = (w_ij * W[k, 2]) * ti.Vector([grid[e, n, 0], grid[e, n, 1], grid[e, n, 2]])
-                line += wv
-                by_k = add_to_row(by_k, k, wv)
-            by_i = add_to_row(by_i, i, line)
-            by_j = add_to_row(by_j, j, line)
-    vel = matrix_row(by_i, 0) + matrix_row(by_i, 1) + matrix_row(by_i, 2)
-    return vel, (4.0 * inv_dx) * axis_products(by_i, by_j, by_k, axis_offsets(fx))
+                vel += wv
+                C += wv.outer_product(ti.Vector([O[i, 0], O[j, 1], O[k, 2]]))
+    return vel, (4.0 * inv_dx) * C
 
 
 @ti.func

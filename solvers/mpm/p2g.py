@@ -13,9 +13,8 @@ are taken once per particle; the per-node products of A with the offsets come fr
 import taichi as ti
 
 from .constitutive import constitutive_adjoint_decomposed, constitutive_decomposed, decompose, needs_svd
-from .stencil import (add_to_row, axis_offsets, axis_products, cell_of, column_terms, matrix_row, row_matrix,
-                      row_vector, scatter_spread, stencil_row, store_matrix, store_vector, transposed_times,
-                      weight_grads, weights)
+from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, row_matrix, row_vector, scatter_spread,
+                      stencil_row, store_matrix, store_vector, transposed_times, weight_grads, weights)
 
 
 @ti.func
@@ -130,11 +129,9 @@ def p2g_adjoint_stage(frames: ti.template(), params: ti.template(), kinds: ti.te
         aff = affine_matrix(affine, src, e, p)
         momentum = mass * vel
         g_mass = 0.0
+        g_momentum = ti.Vector.zero(float, 3)
+        g_aff = ti.Matrix.zero(float, 3, 3)
         g_fx = ti.Vector.zero(float, 3)
-        # Σ w ∂L/∂P_i per node index along each axis: ∂L/∂A = Σ w ∂L/∂P_i ⊗ (x_i − x) from them
-        by_i = ti.Matrix.zero(float, 3, 3)
-        by_j = ti.Matrix.zero(float, 3, 3)
-        by_k = ti.Matrix.zero(float, 3, 3)
         W, dW = weights(fx), weight_grads(fx)
         # per axis c and offset a: the node offset (a − fx_c) dx (D[a, c]) and its term of aff @ dpos
         # (row a of A_c): the stencil adds these instead of taking a product per node
@@ -145,7 +142,6 @@ def p2g_adjoint_stage(frames: ti.template(), params: ti.template(), kinds: ti.te
                 row = stencil_row(grid_i, base, i, j)
                 w_ij, dw_x, dw_y = W[i, 0] * W[j, 1], dW[i, 0] * W[j, 1], W[i, 0] * dW[j, 1]
                 aff_ij = matrix_row(A_x, i) + matrix_row(A_y, j)
-                line = ti.Vector.zero(float, 3)
                 for k in range(3):
                     n = row + k
                     w = w_ij * W[k, 2]
@@ -153,15 +149,11 @@ def p2g_adjoint_stage(frames: ti.template(), params: ti.template(), kinds: ti.te
                     g_P = ti.Vector([grad_grid[e, n, 0], grad_grid[e, n, 1], grad_grid[e, n, 2]])
                     g_M = grad_grid[e, n, 3]
                     weighted = w * g_P
-                    line += weighted
-                    by_k = add_to_row(by_k, k, weighted)
+                    g_momentum += weighted
+                    g_aff += weighted.outer_product(ti.Vector([D[i, 0], D[j, 1], D[k, 2]]))
                     g_mass += w * g_M
                     aff_dpos = aff_ij + matrix_row(A_z, k)
                     g_fx += (g_P.dot(momentum + aff_dpos) + g_M * mass) * dw
-                by_i = add_to_row(by_i, i, line)
-                by_j = add_to_row(by_j, j, line)
-        g_momentum = matrix_row(by_i, 0) + matrix_row(by_i, 1) + matrix_row(by_i, 2)
-        g_aff = axis_products(by_i, by_j, by_k, D)
         # the nodes' offsets x_i − x = (offset − fx) dx in P_i: −dx Aᵀ Σ w ∂L/∂P_i, once per particle
         g_fx -= transposed_times(aff, g_momentum) / inv_dx
         # the stress: A = −κ τ + m C, F_tmp = (I + h C) F

@@ -85,31 +85,6 @@ def column_terms(M, D, c: ti.template()):
 
 
 @ti.func
-def add_to_row(M, a, v):
-    """M (3×3) with v (3,) added to its row a (a runtime index)."""
-    out = M
-    for c in ti.static(range(3)):
-        out[a, c] += v[c]
-    return out
-
-
-@ti.func
-def axis_products(by_i, by_j, by_k, D):
-    """Σ over the stencil's nodes of u_n ⊗ offset_n (3×3), from the partial sums of u per node
-    index along each axis (by_i row a: Σ u over the nodes with i = a; by_j, by_k likewise) and the
-    offsets per axis D (axis_offsets): node (i, j, k)'s offset along x is D[i, 0], so column 0 is
-    Σ_a D[a, 0] by_i[a] (and y from by_j, z from by_k). A stencil loop that keeps the three partial
-    sums (3 adds a node each) replaces an outer product a node (9 products and adds)."""
-    M = ti.Matrix.zero(float, 3, 3)
-    for a in ti.static(range(3)):
-        for r in ti.static(range(3)):
-            M[r, 0] += D[a, 0] * by_i[a, r]
-            M[r, 1] += D[a, 1] * by_j[a, r]
-            M[r, 2] += D[a, 2] * by_k[a, r]
-    return M
-
-
-@ti.func
 def matrix_row(M, a):
     """Row a (a runtime index) of a 3×3 matrix, as a 3-vector."""
     return ti.Vector([M[a, 0], M[a, 1], M[a, 2]])
