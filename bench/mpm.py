@@ -25,7 +25,9 @@ particles, a 0.37 m one 37³ = 50 653.
 Every case runs in a fresh process per engine (this file with ``--worker``): ours in this
 interpreter, Genesis (genesis-world 1.4.5, backend cpu) in ``$GENESIS_PYTHON`` (default: the
 virtualenv of bench/README.md, /work/peers/genesis/bin/python, when it exists). Cases run in
-turn, ours then Genesis's, so both see the same load on a shared machine.
+turn, ours then Genesis's, so both see the same load on a shared machine. Both run with
+``OMP_WAIT_POLICY=PASSIVE`` (unless set): torch's OpenMP threads then do not spin on the cores the
+engines' kernels run on after each torch op (genesis_lite's import sets it; Genesis's does not).
 
 What is measured (both engines alike, float32 unless ``--precision 64``):
 - forward: ``--repeats`` timed runs of S steps (10 for the 10k scenes, 2 for the 50k ones), each
@@ -288,7 +290,11 @@ def run_worker(python, engine, mode, case, args, tmp):
     out = os.path.join(tmp, f"{engine}-{mode}-{case}.json")
     command = [python, os.path.abspath(__file__), "--worker", engine, mode, case, out,
                "--precision", args.precision, "--repeats", str(args.repeats), "--horizon", str(args.horizon)]
-    proc = subprocess.run(command, capture_output=True, text=True)
+    # both engines with torch's OpenMP threads waiting passively (genesis_lite's import sets it, where
+    # torch comes in through it; Genesis's does not): neither engine's kernels share the cores with
+    # spinning threads
+    env = {**os.environ, "OMP_WAIT_POLICY": os.environ.get("OMP_WAIT_POLICY", "PASSIVE")}
+    proc = subprocess.run(command, capture_output=True, text=True, env=env)
     if proc.returncode != 0 or not os.path.exists(out):
         lines = [line for line in proc.stderr.strip().splitlines() if line.strip()] or ["no output"]
         return {"error": f"exit code {proc.returncode}: {lines[-1][:300]}"}

@@ -1,8 +1,11 @@
 """gs.init and gs.destroy: the backend actually started decides torch's device, a missing GPU
 gives one warning and the CPU for both, no path hands device memory to CPU kernels, and kernels
-are compiled without fast math."""
+are compiled without fast math; torch's OpenMP threads wait passively unless the user says otherwise."""
 import importlib
 import logging
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -159,3 +162,16 @@ def test_kernels_defined_in_classes_still_bind_to_their_instance(f64):
     counter.add(3)
     counter.add(4)
     assert counter.total[None] == 7
+
+
+@pytest.mark.parametrize("preset", [None, "ACTIVE"])
+def test_torch_openmp_threads_wait_passively_unless_set(preset):
+    """Importing genesis_lite (first, as libgomp reads the policy when torch loads it) sets
+    OMP_WAIT_POLICY=PASSIVE, so that torch's threads do not spin on the cores of the next Taichi
+    kernel; a policy already set is kept."""
+    env = {key: value for key, value in os.environ.items() if key != "OMP_WAIT_POLICY"}
+    if preset:
+        env["OMP_WAIT_POLICY"] = preset
+    code = "import genesis_lite, os; print(os.environ['OMP_WAIT_POLICY'])"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == (preset or "PASSIVE")

@@ -87,13 +87,41 @@ def node_gradient_rows(g_C, O, inv_dx):
 
 @ti.func
 def gather_adjoint_stage(frames: ti.template(), grid: ti.template(), gathered: ti.template(), grads: ti.template(),
-                         scratch: ti.template(), grid_f: ti.template(), grid_i: ti.template(), src):
-    """Reverse of g2p, per particle (parallel), from the gradient of frame dst's pos, vel, C
-    (grads' rows), the gathered velocity the replay kept (gathered's slot src) and the restored
-    updated grid: scratch 0:3 ← ∂L/∂v' (the gathered velocity), scratch 3:6 ← ∂L/∂x through the
-    move and the stencil weights of the gather."""
+                         scratch: ti.template(), grad_grid: ti.template(), part_grid: ti.template(),
+                         active: ti.template(), grid_f: ti.template(), grid_i: ti.template(), src):
+    """Reverse of g2p, from the gradient of frame dst's pos, vel, C (grads' rows), the gathered
+    velocity the replay kept (gathered's slot src) and the restored updated grid: each node's
+    velocity gradient (grad_grid 0:3, zero before) += w_i u_i (node_gradient_rows); per particle,
+    scratch 0:3 ← ∂L/∂v' (the gathered velocity), scratch 3:6 ← ∂L/∂x through the move and the
+    stencil weights of the gather. Deterministic, on two threads (stencil.scatter_spread): the first
+    half of each env's particles scatter into grad_grid, the second into part_grid (0:3), which is
+    then added over the listed nodes (active) and zeroed."""
+    B, N = frames.shape[1], frames.shape[2]
+    half = (N + 1) // 2
+    spread = scatter_spread(B)
+    for t in range(2 * B * spread):
+        if t % spread == 0:
+            e, second = t // spread // 2, t // spread % 2
+            if second == 0:
+                gather_adjoint_range(frames, grid, gathered, grads, scratch, grad_grid, grid_f, grid_i, src, e, 0, half)
+            else:
+                gather_adjoint_range(frames, grid, gathered, grads, scratch, part_grid, grid_f, grid_i, src, e, half, N)
+    for e, k in ti.ndrange(B, active[B, 0]):
+        if k < active[e, 0]:
+            n = active[e, k + 1]
+            for c in ti.static(range(3)):
+                grad_grid[e, n, c] = grad_grid[e, n, c] + part_grid[e, n, c]
+                part_grid[e, n, c] = 0.0
+
+
+@ti.func
+def gather_adjoint_range(frames: ti.template(), grid: ti.template(), gathered: ti.template(), grads: ti.template(),
+                         scratch: ti.template(), grad_grid: ti.template(), grid_f: ti.template(),
+                         grid_i: ti.template(), src, e, first, end):
+    """g2p's reverse for env e's particles first..end − 1, serially in particle order: their nodes'
+    velocity gradients (grad_grid 0:3) += w_i u_i, and their rows of scratch."""
     h, inv_dx = grid_f[0], grid_f[1]
-    for e, p in ti.ndrange(frames.shape[1], frames.shape[2]):
+    for p in range(first, end):
         pos = row_vector(frames, src, e, p, 0)
         base, fx = cell_of(pos, inv_dx, grid_i)
         vel = row_vector(gathered, src, e, p, 0)
@@ -124,58 +152,10 @@ def gather_adjoint_stage(frames: ti.template(), grid: ti.template(), gathered: t
                     v = ti.Vector([grid[e, n, 0], grid[e, n, 1], grid[e, n, 2]])
                     u = u_ij + matrix_row(U_z, k)
                     g_fx += v.dot(u) * dw
+                    g_v = (w_ij * W[k, 2]) * u
+                    for c in ti.static(range(3)):
+                        grad_grid[e, n, c] = grad_grid[e, n, c] + g_v[c]
         g_pos = g_moved + inv_dx * g_fx
         for c in ti.static(range(3)):
             scratch[e, p, c] = g_vel[c]
             scratch[e, p, 3 + c] = g_pos[c]
-
-
-@ti.func
-def gather_adjoint_scatter(frames: ti.template(), grads: ti.template(), scratch: ti.template(),
-                           grad_grid: ti.template(), part_grid: ti.template(), active: ti.template(),
-                           grid_f: ti.template(), grid_i: ti.template(), src):
-    """Reverse of g2p into the grid: each node's velocity gradient (grad_grid 0:3, zero before)
-    += w_i u_i (node_gradient_rows), deterministic, on two threads (stencil.scatter_spread): the
-    first half of each env's particles into grad_grid, the second into part_grid (0:3), then added
-    over the listed nodes (active) and part_grid zeroed."""
-    B, N = frames.shape[1], frames.shape[2]
-    half = (N + 1) // 2
-    spread = scatter_spread(B)
-    for t in range(2 * B * spread):
-        if t % spread == 0:
-            e, second = t // spread // 2, t // spread % 2
-            if second == 0:
-                velocity_gradient_range(frames, grads, scratch, grad_grid, grid_f, grid_i, src, e, 0, half)
-            else:
-                velocity_gradient_range(frames, grads, scratch, part_grid, grid_f, grid_i, src, e, half, N)
-    for e, k in ti.ndrange(B, active[B, 0]):
-        if k < active[e, 0]:
-            n = active[e, k + 1]
-            for c in ti.static(range(3)):
-                grad_grid[e, n, c] = grad_grid[e, n, c] + part_grid[e, n, c]
-                part_grid[e, n, c] = 0.0
-
-
-@ti.func
-def velocity_gradient_range(frames: ti.template(), grads: ti.template(), scratch: ti.template(),
-                            grad_grid: ti.template(), grid_f: ti.template(), grid_i: ti.template(), src, e, first,
-                            end):
-    """Env e's particles first..end − 1, serially in particle order: their nodes' velocity
-    gradients (grad_grid 0:3) += w_i u_i."""
-    inv_dx = grid_f[1]
-    for p in range(first, end):
-        base, fx = cell_of(row_vector(frames, src, e, p, 0), inv_dx, grid_i)
-        g_vel = ti.Vector([scratch[e, p, 0], scratch[e, p, 1], scratch[e, p, 2]])
-        g_C = row_matrix(grads, 0, e, p, 6)
-        W, O = weights(fx), axis_offsets(fx)
-        U_x, U_y, U_z = node_gradient_rows(g_C, O, inv_dx)
-        for i in range(3):
-            for j in range(3):
-                row = stencil_row(grid_i, base, i, j)
-                w_ij = W[i, 0] * W[j, 1]
-                u_ij = g_vel + matrix_row(U_x, i) + matrix_row(U_y, j)
-                for k in range(3):
-                    n = row + k
-                    g_v = (w_ij * W[k, 2]) * (u_ij + matrix_row(U_z, k))
-                    for c in ti.static(range(3)):
-                        grad_grid[e, n, c] = grad_grid[e, n, c] + g_v[c]

@@ -59,7 +59,7 @@ deterministic and a batched env equals a single-env scene.
 """
 import taichi as ti
 
-from .g2p import gather_adjoint_scatter, gather_adjoint_stage, gather_stage
+from .g2p import gather_adjoint_stage, gather_stage
 from .grid import (clear_adjoint_stage, clear_stage, grid_adjoint_stage, grid_stage, gravity_adjoint_stage,
                    largest_count, merge_stage, restore_stage)
 from .p2g import p2g_adjoint_stage, scatter_stage, stress_stage
@@ -138,8 +138,7 @@ def post_coupling_backward(_: ti.template(), frames: A, params: A, gravity: A, k
     """Substep src's updated grid restored (as the replay kept it), then the reverse of
     post_coupling (g2p and the grid update): grad_grid ← (∂L/∂P, ∂L/∂M), grad_gravity += its part."""
     restore_stage(grid, active, saved_grid, saved_nodes, src)
-    gather_adjoint_stage(frames, grid, gathered, grads, scratch, grid_f, grid_i, src)
-    gather_adjoint_scatter(frames, grads, scratch, grad_grid, part_grid, active, grid_f, grid_i, src)
+    gather_adjoint_stage(frames, grid, gathered, grads, scratch, grad_grid, part_grid, active, grid_f, grid_i, src)
     grid_adjoint_stage(grid, grad_grid, active, gravity, grid_f, grid_i)
     gravity_adjoint_stage(grid, active, grad_gravity, grid_f)
 
