@@ -85,7 +85,8 @@ def time_mujoco(m, d, n_envs, steps, repeats):
     best = float("inf")
     with rollout.Rollout(nthread=MJ_THREADS) as runner:
         control = np.tile(d.ctrl, (n_envs, steps, 1))
-        runner.rollout([m] * n_envs, datas, state, control[:, :5], nstep=5)
+        warm = min(5, steps)
+        runner.rollout([m] * n_envs, datas, state, control[:, :warm], nstep=warm)
         for _ in range(repeats):
             start = time.perf_counter()
             runner.rollout([m] * n_envs, datas, state, control, nstep=steps)

@@ -22,13 +22,10 @@ step (ms); "bwd/fwd" = (fwd+bwd − fwd) / fwd of the best times; "spread" = (wo
 over the repeats; "no-grad fwd" is the same rollout in a scene built without requires_grad.
 One warm-up rollout (compilation) before ``--repeats`` timed ones.
 
-The a1's self-collision pairs of kinds cylinder–cylinder and cylinder–box go through our convex
-collider;
-where that has no gradient yet (our solver lists such pairs as ``undifferentiable``), a backward
-through any step with a contact raises GradientError, so the a1 then runs with
-``enable_self_collision=False`` in both engines, and a note under the table says so. The a1
-standing here never touches itself (its contacts are the feet on the plane), so the filter
-changes no contact; it only drops the candidate pairs.
+The a1 keeps self-collision on in both engines. Its cylinder–cylinder and cylinder–box self-pairs go
+through our convex collider, whose curved contacts have no gradient yet: a backward through a step
+where one of them touches raises GradientError. Standing, the a1 never touches itself (its contacts
+are the feet on the plane), so its backward runs.
 
 Genesis (``genesis-world`` 1.4.5) runs the same scenes and v0 (written to .npz files) in its own
 interpreter, this script with ``--peer``: this interpreter if it imports ``genesis``, else
@@ -162,16 +159,13 @@ def time_rollouts(make, case, repeats):
 # -- ours -----------------------------------------------------------------------------------------------
 
 def ours_case(scene_name, n_envs, n_steps):
-    """The case dict of ``scene_name`` for both engines, with v0; for the a1, self-collision is
-    filtered when our solver cannot differentiate those pairs yet (see the module docstring)."""
+    """The case dict of ``scene_name`` for both engines, with v0."""
     import genesis_lite as gs
     case = {"scene": scene_name, "n_envs": n_envs, "n_steps": n_steps, "self_collision": True, "urdf": a1_urdf()}
     scene, entity, _ = build(gs, case, requires_grad=True, ours=True)
-    pending = [str(kind) for kind in scene.rigid_solver.undifferentiable]
     case["v0"] = initial_velocity(scene_name, n_envs, entity.n_dofs)
     scene.destroy()
-    case["self_collision"] = not pending
-    return case, pending
+    return case
 
 
 def ours_make(case):
@@ -277,10 +271,7 @@ def main():
     cases, ours, notes = [], [], []
     for name in SCENES:
         t0 = time.perf_counter()
-        case, pending = ours_case(name, args.envs, args.steps)
-        if pending and name == "a1":
-            notes.append(f"a1: self-collision off in both engines (our collider kinds without a gradient yet: "
-                         f"{', '.join(pending)}; see the module docstring)")
+        case = ours_case(name, args.envs, args.steps)
         cases.append(case)
         ours.append(time_rollouts(ours_make(case), case, args.repeats))
         print(f"  ours {name} done ({time.perf_counter() - t0:.0f} s with compilation)", flush=True)
