@@ -74,7 +74,12 @@ class Simulator:
         return self.slot(solver).inputs
 
     def set_input(self, solver, name, value):
-        self.slot(solver).inputs = {**self.slot(solver).inputs, name: value}
+        """Input ``name`` of ``solver`` ← value; the inputs derived from it (solver.derived_from:
+        the rigid rows' scale from mass and armature) are recomputed, in the graph."""
+        inputs = {**self.slot(solver).inputs, name: value}
+        if name in solver.derived_from:
+            inputs = solver.derive_inputs(inputs)
+        self.slot(solver).inputs = inputs
 
     def _sync(self, slot, state, inputs):
         """Make Taichi hold ``state`` (None: what it holds) and ``inputs``, uploading only what differs."""
@@ -118,6 +123,7 @@ class Simulator:
         for slot in self.slots:
             defaults = slot.solver.default_inputs
             current = slot.inputs or defaults
+            # (inputs derived from persistent ones are persistent too: detached, they still match)
             slot.inputs = {name: current[name].detach() if name in slot.solver.persistent_inputs
                            else _restored(current[name], defaults[name], envs) for name in defaults}
             current_state = None if envs is None else self.state(slot.solver)

@@ -29,12 +29,18 @@ Fused or not, a step gives the same bits: the same stage functions run in the sa
 class Solver:
     """Abstract solver. B is the number of environments (1 when the scene is not batched)."""
 
+    def derive_inputs(self, inputs):
+        """``inputs`` (name → (B, width)) with the inputs derived from others recomputed (none here)."""
+        return inputs
+
     #: input names whose gradients ``backward`` returns, in order
     grad_input_names = ()
     #: inputs that keep their value across ``scene.reset()`` (parameters; controls are cleared)
     persistent_inputs = ()
     #: name → (B, width) tensor of every input's value at build (set by ``build``)
     default_inputs = None
+    #: inputs from which ``derive_inputs`` computes others (recomputed whenever one is set)
+    derived_from = ()
     #: names of the solver's entities, for error messages
     entity_names = ()
     #: substeps per step

@@ -24,21 +24,25 @@ from tests.fd_scan import assert_converged, directional_errors
 
 _SCENES = {}
 HALF = (0.1, 0.15, 0.05)  # box half extents, m
+SLAB = 0.04  # thickness (m) of the free slab the "mass" case's box lands on
 
 
 def _scene(cone, n_envs=0, substeps=1, shape="box", tag="", smooth=False, ground="plane"):
     """One scene per configuration (building is the slow part). Parameters persist across
     reset(): each case sets its own, and ``tag`` gives a scene of its own. smooth:
-    RigidOptions(smooth_contact=True). ground: "plane", or "box": a fixed box whose top is the
-    plane z = 0 (a mesh on it goes through the convex collider)."""
+    RigidOptions(smooth_contact=True). ground: "plane", "box": a fixed box whose top is the
+    plane z = 0 (a mesh on it goes through the convex collider), or "slab": the plane with a free
+    0.6 × 0.6 m slab SLAB thick resting on it."""
     key = (cone, n_envs, substeps, shape, tag, smooth, ground, gs.runtime.epoch)
     if key not in _SCENES:
         scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, substeps=substeps, requires_grad=True),
                          rigid_options=gs.options.RigidOptions(tolerance=1e-14, friction_cone=cone,
                                                                smooth_contact=smooth),
                          show_viewer=False)
-        if ground == "plane":
+        if ground in ("plane", "slab"):
             scene.add_entity(gs.morphs.Plane())
+            if ground == "slab":
+                scene.add_entity(gs.morphs.Box(size=(0.6, 0.6, SLAB), pos=(0, 0, SLAB / 2)))
         else:
             scene.add_entity(gs.morphs.Box(size=(2.0, 2.0, 0.2), pos=(0, 0, -0.1), fixed=True))
         if shape == "box":
@@ -98,8 +102,10 @@ def _friction(scene, body, x, steps):
 
 
 def _mass(scene, body, x, steps):
-    """Box mass → landing position (dropped 2 cm, moving sideways, spinning)."""
-    _start(body, scene.n_envs, (0, 0, HALF[2] + 0.02), (1, 0, 0, 0), (0.5, -0.2, 0.0, 0.3, 0.2, 1.0))
+    """Box mass → landing position (dropped 2 cm onto a free slab, moving sideways, spinning): the
+    mass enters M and, through body_invweight0, the box–slab contact rows' R (diagA = 1/m_box +
+    1/m_slab; a lone free body's motion does not depend on its mass, as in MuJoCo)."""
+    _start(body, scene.n_envs, (0, 0, SLAB + HALF[2] + 0.02), (1, 0, 0, 0), (0.5, -0.2, 0.0, 0.3, 0.2, 1.0))
     body.set_links_mass(x)
     _roll(scene, steps)
     return (body.get_pos() * torch.tensor([1.0, 1.0, 10.0])).sum() + body.get_quat()[..., 1:].sum()
@@ -150,8 +156,11 @@ def _roll(scene, steps):
         scene.step()
 
 
+GROUND = {"mass": "slab"}  # the cases that need another ground than the plane
+
+
 def _check(case, cone, steps, n_envs=0, substeps=1, seed=0, shape="box", smooth=False, ground="plane"):
-    scene, body = _scene(cone, n_envs, substeps, shape, smooth=smooth, ground=ground)
+    scene, body = _scene(cone, n_envs, substeps, shape, smooth=smooth, ground=GROUND.get(case, ground))
     loss_of, nominal = CASES[case]
 
     def loss(x):

@@ -6,6 +6,8 @@ primitive pair, both friction cones, default and non-default solref, solimp and 
 Each case is one batched scene whose envs start from different MuJoCo states near contact
 (penetrating up to a few mm, or just apart), with random velocities.
 """
+import copy
+
 import mujoco
 import numpy as np
 import pytest
@@ -69,9 +71,11 @@ def _contacts_mujoco(d):
     return [(c.geom[0], c.geom[1], c.pos.copy()) for c in d.contact[: d.ncon]]
 
 
-def _check_step(spec, n_states=N_STATES, entity=0):
+def _check_step(spec, n_states=N_STATES, entity=0, mass_scale=None):
     """One step from MuJoCo's states: velocities, and the contacts of ``entities[entity]`` (its
-    get_contacts) against MuJoCo's contacts that involve its geoms, in order."""
+    get_contacts) against MuJoCo's contacts that involve its geoms, in order. mass_scale
+    (n_states, bodies): each env's masses (and so inertias) scaled after build, in MuJoCo by a
+    model per env with body_mass and body_inertia scaled and mj_setConst (body_invweight0 anew)."""
     spec.n_envs = n_states
     scene, entities = build_ours(spec)
     m = build_mujoco(spec, scene.rigid_solver.model)
@@ -79,6 +83,12 @@ def _check_step(spec, n_states=N_STATES, entity=0):
     states = _touching_states(m, rng, n_states)
     qpos = np.array([q for q, _ in states])
     qvel = np.array([v for _, v in states])
+    models = [m] * n_states
+    if mass_scale is not None:
+        models = [_scaled(m, scales) for scales in mass_scale]
+        for b, body in enumerate(entities):
+            mass = body.get_links_mass().cpu().numpy() * mass_scale[:, b: b + 1]
+            body.set_links_mass(torch.as_tensor(mass, dtype=gs.tc_float))
     _set_ours(entities, qpos, qvel)
     scene.step()
     ours_qvel = np.concatenate([e.get_dofs_velocity().cpu().numpy() for e in entities], axis=1)
@@ -87,7 +97,7 @@ def _check_step(spec, n_states=N_STATES, entity=0):
     mine = set(range(entities[entity].geom_start, entities[entity].geom_start + entities[entity].n_geoms))
     n_touching = 0
     for k in range(n_states):
-        d = _mujoco_step(m, qpos[k], qvel[k])
+        d = _mujoco_step(models[k], qpos[k], qvel[k])
         assert np.allclose(ours_qvel[k], d.qvel, rtol=0, atol=1e-8), (k, ours_qvel[k] - d.qvel)
         expected = [c for c in _contacts_mujoco(d) if c[0] in mine or c[1] in mine]
         valid = contacts["valid_mask"][k]
@@ -99,6 +109,17 @@ def _check_step(spec, n_states=N_STATES, entity=0):
             assert np.allclose(p, pos, rtol=0, atol=1e-10)
         n_touching += len(expected) > 0
     assert n_touching >= n_states // 2, "most states must touch"
+
+
+def _scaled(m, scales):
+    """A copy of MuJoCo model m with free body b's mass and inertia times scales[b], its constants
+    (body_invweight0, dof_invweight0) recomputed."""
+    scaled = copy.deepcopy(m)
+    for b, scale in enumerate(scales):
+        scaled.body_mass[b + 1] *= scale
+        scaled.body_inertia[b + 1] *= scale
+    mujoco.mj_setConst(scaled, mujoco.MjData(scaled))
+    return scaled
 
 
 def _geom_map(scene, m, spec):
@@ -125,6 +146,15 @@ SHAPE = {"sphere": Body("sphere", (0.1,)), "capsule": Body("capsule", (0.05, 0.2
 @pytest.mark.parametrize("pair", PAIRS, ids="-".join)
 def test_body_pairs_step_like_mujoco(f64, pair, cone):
     _check_step(ContactScene([SHAPE[pair[0]], SHAPE[pair[1]]], plane=False, cone=cone))
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_masses_set_after_build_step_like_mujoco(f64, cone):
+    """A box on a box on the plane, each env its own masses, set after build: the rows' scale
+    (body_invweight0) follows them as MuJoCo's mj_setConst makes it (the box–box contact's diagA
+    is 1/m₁ + 1/m₂ for free boxes; with the build's constants, qvel differs by ~1e-2)."""
+    scales = np.random.default_rng(3).uniform(0.3, 3.0, (N_STATES, 2))
+    _check_step(ContactScene([SHAPE["box"], Body("box", (0.1, 0.15, 0.08))], cone=cone), mass_scale=scales)
 
 
 @pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])

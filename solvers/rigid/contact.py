@@ -67,29 +67,59 @@ def capacity(model, options):
     return contacts, contacts * rows_per_contact + limited_dofs(model, options) + model.n_dofs
 
 
-def _invweight(solver):
-    """MuJoCo's constants of the rows' scale at the initial pose, env 0's parameters (the
-    scene's defaults), M with armature:
-    - body_invweight0 per link (translation 1/kg, rotation 1/(kg·m²)): the mean of the
-      translational and rotational diagonal of J M⁻¹ Jᵀ, J the Jacobian of the link's centre of
-      mass; zero for links welded to the world;
-    - dof_invweight0 per dof: the diagonal of M⁻¹, averaged over a free joint's three
-      translations and its three rotations."""
-    m = solver.model
-    mass_matrix = solver.mass_matrix()[0].double().cpu().numpy() + np.diag(m.dof_armature)
-    solver.check_positive_definite(mass_matrix)
-    jac = torch.empty((solver.n_batch, m.n_links, 6, m.n_dofs), dtype=runtime.tc_float, device=runtime.device)
-    solver.kernels.read_com_jacobians(jac)
-    jac = jac[0].double().cpu().numpy()
-    inv_jt = np.linalg.solve(mass_matrix, jac.transpose(0, 2, 1)) if m.n_dofs else np.zeros((m.n_links, 0, 6))
-    a = jac @ inv_jt  # (L, 6, 6)
-    diag = np.diagonal(a, axis1=1, axis2=2)
-    moving = m.link_static == 0
-    dof_inv = np.diag(np.linalg.inv(mass_matrix)).copy() if m.n_dofs else np.zeros(0)
-    free = np.flatnonzero(m.dof_q < 0)  # a free joint's 6 dofs, in order (translation, rotation)
-    for first in free[::3]:
-        dof_inv[first: first + 3] = dof_inv[first: first + 3].mean()
-    return diag[:, :3].mean(axis=1) * moving, diag[:, 3:].mean(axis=1) * moving, dof_inv
+class InvweightBasis:
+    """What MuJoCo's body_invweight0 and dof_invweight0 (mj_setConst) are made of at the initial
+    pose q0, where they depend on nothing but the masses and the armature: M(q0) = Σ_l mass_l K_l +
+    diag(armature) (a link's inertia scales with its mass: K_l is M of link l alone at 1 kg), and
+    J_l (6, D) the Jacobian of link l's centre of mass. ``__call__`` gives the rows' scale per env
+    from the mass and armature inputs, in torch, so that their gradients reach mass and armature
+    (Genesis recomputes them when those change, as mj_setConst does):
+    - invweight_t per link (1/kg): the mean of the translational diagonal of J_l M⁻¹ J_lᵀ; zero for
+      links welded to the world (the rotational one is not read: condim ≤ 3);
+    - invweight_dof per dof: the diagonal of M⁻¹, averaged over a free joint's three translations
+      and its three rotations."""
+
+    def __init__(self, solver):
+        m = solver.model
+        L, D = m.n_links, m.n_dofs
+        inputs = dict(solver.default_inputs)
+        self.K = np.zeros((L, D, D))
+        for link in range(L):  # M of each link alone at unit mass (M is linear in the masses)
+            unit = torch.zeros_like(inputs["mass"])
+            unit[:, link] = 1.0
+            solver.upload_inputs({**inputs, "mass": unit})
+            self.K[link] = solver.mass_matrix()[0].double().cpu().numpy()
+        solver.upload_inputs(inputs)
+        jac = torch.empty((solver.n_batch, L, 6, D), dtype=runtime.tc_float, device=runtime.device)
+        solver.kernels.read_com_jacobians(jac)
+        self.J = jac[0, :, :3].double().cpu().numpy()  # (L, 3, D): the translational rows
+        self.moving = (m.link_static == 0).astype(np.float64)
+        # dof_invweight0 = diag(M⁻¹) @ average: a free joint's translations and rotations averaged
+        self.average = np.eye(D)
+        for first in np.flatnonzero(m.dof_q < 0)[::3]:
+            self.average[first: first + 3, first: first + 3] = 1.0 / 3.0
+        mass_matrix = np.einsum("l,lij->ij", m.link_mass0, self.K) + np.diag(m.dof_armature)
+        solver.check_positive_definite(mass_matrix)
+
+    def __call__(self, mass, armature):
+        """(invweight_t (B, L), invweight_dof (B, D)) in mass's dtype, from mass (B, L) kg and armature
+        (B, D); computed in float64, one env at a time: batched linear algebra (inverse, matrix
+        products) may sum in another order for another batch size, and a batched env must equal a
+        single-env scene bit for bit (~50 µs an env, when mass or armature is set)."""
+        if mass.shape[1] == 0 or armature.shape[1] == 0:
+            return torch.zeros_like(mass), torch.zeros_like(armature)
+        consts = [torch.as_tensor(a, dtype=torch.float64, device=mass.device)
+                  for a in (self.K, self.J, self.moving, self.average)]
+        rows = [self._one_env(mass[e: e + 1].double(), armature[e: e + 1].double(), *consts)
+                for e in range(mass.shape[0])]
+        return (torch.cat([r[0] for r in rows]).to(mass.dtype), torch.cat([r[1] for r in rows]).to(mass.dtype))
+
+    @staticmethod
+    def _one_env(mass, armature, K, J, moving, average):
+        """(1, L), (1, D) for one env's mass (1, L) and armature (1, D)."""
+        inverse = torch.linalg.inv((mass[0, :, None, None] * K).sum(0) + torch.diag(armature[0]))
+        translational = torch.einsum("lri,ij,lrj->l", J, inverse, J) / 3.0 * moving
+        return translational[None], (torch.diagonal(inverse) @ average)[None]
 
 
 def _touching_pairs(solver):
@@ -110,12 +140,12 @@ def _touching_pairs(solver):
 
 
 def at_initial_pose(solver, neutral_collision):
-    """The solver's model with body_invweight0 and dof_invweight0 filled and, unless
-    ``neutral_collision``, without the pairs of one entity touching at the initial pose
-    (Genesis's rule). The solver's storage must hold the initial state."""
+    """(The basis of the rows' scale, solver.invweight_basis, set;) the solver's model without, unless
+    ``neutral_collision``, the pairs of one entity touching at the initial pose (Genesis's rule).
+    The solver's storage must hold the initial state."""
     solver.upload_state(solver._initial_state())
-    inv_t, inv_r, inv_dof = _invweight(solver)
-    model = replace(solver.model, link_invweight_t=inv_t, link_invweight_r=inv_r, dof_invweight0=inv_dof)
+    solver.invweight_basis = InvweightBasis(solver)
+    model = solver.model
     if neutral_collision or not len(model.pair_geom1):
         return model
     entity = model.link_entity[model.geom_link]

@@ -50,6 +50,11 @@ INPUTS = {
     "friction": ("G", True),    # per collision geom: Coulomb coefficient (pairs take the larger)
     "solref": ("G2", True),     # per geom: (time constant s, damping ratio), or (−stiffness, −damping)
     "solimp": ("G5", True),     # per geom: (d0, dwidth, width m, midpoint, power) of the impedance
+    # MuJoCo's body_invweight0 (translation, 1/kg) per link and dof_invweight0 per dof (1/kg or
+    # 1/(kg·m²)): the rows' scale (constraint/rows.py), derived from mass and armature at the initial
+    # pose (contact.invweight), never set by hand
+    "invweight_t": ("L", True),
+    "invweight_dof": ("D", True),
     "force_lo": ("D", False),   # N·m or N
     "force_hi": ("D", False),
     "ctrl_mode": ("D", False),  # 0 force, 1 position, 2 velocity (see actuation.py)
@@ -67,10 +72,6 @@ MODEL = {
     "geom_type": ("i", "G"), "geom_link": ("i", "G"), "geom_mesh": ("i", "G"), "hull_int": ("i", "HI"),
     "pair_geom1": ("i", "N"), "pair_geom2": ("i", "N"), "pair_condim": ("i", "N"),
     "geom_rbound": ("f", "G"), "pair_margin": ("f", "N"),
-    # MuJoCo's body_invweight0 (translation, rotation) at the initial pose: the constraint rows' scale
-    "link_invweight_t": ("f", "L"), "link_invweight_r": ("f", "L"),
-    # and MuJoCo's dof_invweight0: the scale of the joint-limit and friction-loss rows
-    "dof_invweight0": ("f", "D"),
     "geom_pos": ("v3", "G"), "geom_size": ("v3", "G"), "hull_vec": ("v3", "H"), "geom_quat": ("v4", "G"),
     "link_inv_mass0": ("f", "L"), "dof_lower": ("f", "D"), "dof_upper": ("f", "D"),
     # substep h (s), the time constant (s) of the joint-limit and friction-loss rows, impratio, solver

@@ -39,9 +39,6 @@ class RigidModel:
     convex hulls as hull_vec (H, 3) and hull_int (HI,) (geometry._hull_arrays), geom_friction (G,)
     Coulomb coefficient. Per candidate geom pair (N):
     pair_geom1/pair_geom2 (ordered as MuJoCo orders them), pair_condim (1 or 3), pair_margin m.
-    link_invweight_t/_r (L,): MuJoCo's body_invweight0 (1/kg, 1/(kg·m²)) at the initial pose,
-    the contact rows' scale, and dof_invweight0 (D,) MuJoCo's, the joint-limit and friction-loss
-    rows' scale (zero until the solver computes them at build).
     """
     link_name: list
     link_parent: np.ndarray
@@ -79,9 +76,6 @@ class RigidModel:
     pair_geom2: np.ndarray
     pair_condim: np.ndarray
     pair_margin: np.ndarray
-    link_invweight_t: np.ndarray
-    link_invweight_r: np.ndarray
-    dof_invweight0: np.ndarray
     pairs: np.ndarray
     qpos0: np.ndarray
 
@@ -228,8 +222,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
         dof_lower=np.array(dofs["lower"], dtype=f), dof_upper=np.array(dofs["upper"], dtype=f),
         dof_effort=np.array(dofs["effort"], dtype=f), dof_frictionloss=np.array(dofs["frictionloss"], dtype=f),
         **_geoms(geoms, geom_links, geom_names), **_pairs(geoms, geom_links, rows, self_collision, adjacent_collision),
-        link_invweight_t=np.zeros(len(link_parent)), link_invweight_r=np.zeros(len(link_parent)),
-        dof_invweight0=np.zeros(n_dofs), pairs=_mass_matrix_pairs(dof_link, link_parent),
+        pairs=_mass_matrix_pairs(dof_link, link_parent),
         qpos0=np.array(qpos0, dtype=f))
 
 

@@ -28,7 +28,7 @@ class RigidSolver(Solver):
 
     #: inputs that keep their value across ``scene.reset()`` (controls do not)
     persistent_inputs = ("mass", "damping", "armature", "kp", "kv", "gravity", "force_lo", "force_hi", "frictionloss",
-                         "friction", "solref", "solimp")
+                         "friction", "solref", "solimp", "invweight_t", "invweight_dof")
 
     def __init__(self, sim_options, rigid_options):
         self.sim_options, self.rigid_options = sim_options, rigid_options
@@ -104,10 +104,24 @@ class RigidSolver(Solver):
             "ctrl_mode": np.zeros(m.n_dofs),
             "friction": m.geom_friction, "solref": np.tile([self.timeconst, 1.0], len(m.geom_type)),
             "solimp": np.tile(contact.SMOOTH_SOLIMP if self.rigid_options.smooth_contact else contact.DEFAULT_SOLIMP,
-                              len(m.geom_type))}
+                              len(m.geom_type)),
+            "invweight_t": np.zeros(m.n_links), "invweight_dof": np.zeros(m.n_dofs)}
         assert per_env.keys() == INPUTS.keys()
-        return {name: torch.as_tensor(np.tile(np.asarray(v, dtype=np.float64), (B, 1)), dtype=runtime.tc_float,
-                                      device=runtime.device) for name, v in per_env.items()}
+        inputs = {name: torch.as_tensor(np.tile(np.asarray(v, dtype=np.float64), (B, 1)), dtype=runtime.tc_float,
+                                        device=runtime.device) for name, v in per_env.items()}
+        return self.derive_inputs(inputs)
+
+    derived_from = ("mass", "armature")
+
+    def derive_inputs(self, inputs):
+        """``inputs`` with the rows' scale (invweight_t, invweight_dof) recomputed from their mass and
+        armature (contact.InvweightBasis; differentiable); zeros before the basis exists (the first
+        allocation at build, which forms no rows)."""
+        basis = getattr(self, "invweight_basis", None)
+        if basis is None:
+            return inputs
+        invweight_t, invweight_dof = basis(inputs["mass"], inputs["armature"])
+        return {**inputs, "invweight_t": invweight_t, "invweight_dof": invweight_dof}
 
     def _initial_state(self):
         qpos = np.tile(self.model.qpos0, (self.n_batch, 1))

@@ -1,7 +1,8 @@
 """Constraint rows of one env's substep, as MuJoCo makes them: each contact's Jacobian in its
 frame, its impedance from solimp, its reference acceleration from solref, and its regulariser
 R from the approximate inverse inertia diagA (``body_invweight0`` at the initial pose, not the
-true diagonal of J M⁻¹ Jᵀ).
+true diagonal of J M⁻¹ Jᵀ; per env, from the mass and armature inputs: the inputs invweight_t
+and invweight_dof, contact.InvweightBasis).
 
 Rows are appended in contact order from row 0; n_efc[s, e, 0] counts them. Row types are the
 solver's (solver.py): ONE_SIDED for a frictionless contact or a pyramid edge, ELLIPTIC_FIRST and
@@ -20,7 +21,8 @@ J = e_i, aref = −B q̇_i, bound F) and one per violated joint limit (ONE_SIDED
 q − lower with J = e_i, or upper − q with J = −e_i). Their R uses diagA = dof_invweight0, their
 solref is (timeconst, 1) with the scene's constraint time constant, their solimp MuJoCo's
 default. Their adjoint (``dof_rows_adjoint``) takes the solve's implicit gradient of each row's
-aref, R and bound back to q, q̇ and the friction loss; contact rows have none yet.
+aref, R and bound back to q, q̇, the friction loss and dof_invweight0 (``contact_rows_adjoint``
+likewise for contact rows, into body_invweight0 among others).
 """
 import taichi as ti
 
@@ -152,7 +154,7 @@ def _contact_scalars(d: ti.template(), s, e, c):
     condim = d.pair_condim[pair]
     mu, solref, solimp = contact_params(d, e, pair)
     l1, l2 = d.geom_link[d.pair_geom1[pair]], d.geom_link[d.pair_geom2[pair]]
-    tran = d.link_invweight_t[l1] + d.link_invweight_t[l2]
+    tran = d.invweight_t[e, l1] + d.invweight_t[e, l2]
     imp = impedance(solimp, d.con_dist[s, e, c], d.pair_margin[pair])
     k, b = stiffness_damping(solref, solimp[1], d.consts[CONST["h"]])
     r0 = ti.max(MINVAL, (1.0 - imp) * (tran + mu * mu * tran if condim > 1 and not d.elliptic else tran) / imp)
@@ -400,6 +402,10 @@ def contact_rows_adjoint(d: ti.template(), s, e, c, force, g_aref, g_R, g_mu):
         g_imp -= scale / (imp * imp) * g_r0
         if pyramid:
             g_mu_total += (1.0 - imp) / imp * 2.0 * mu * tran * g_r0
+        # diagA = invweight_t of both links (body_invweight0, from their masses: contact.InvweightBasis)
+        g_tran = (1.0 - imp) / imp * (1.0 + mu * mu if pyramid else 1.0) * g_r0
+        accumulate(d.invweight_t.grad, ti.Vector([e, l1]), g_tran)
+        accumulate(d.invweight_t.grad, ti.Vector([e, l2]), g_tran)
     slope, g_solimp = impedance_gradient(solimp, dist, margin)
     g_dist += slope * g_imp
     g_solimp *= g_imp
@@ -446,7 +452,7 @@ def _dof_row(d: ti.template(), s, e, r, i, sign, dist):
     solimp = ti.Vector(DEFAULT_SOLIMP, dt=float)
     imp = impedance(solimp, dist, 0.0)
     k, b = stiffness_damping(ti.Vector([d.consts[CONST["timeconst"]], 1.0]), solimp[1], d.consts[CONST["h"]])
-    d.efc_R[s, e, r] = ti.max(MINVAL, (1.0 - imp) / imp * d.dof_invweight0[i])
+    d.efc_R[s, e, r] = ti.max(MINVAL, (1.0 - imp) / imp * d.invweight_dof[e, i])
     d.efc_aref[s, e, r] = -b * sign * d.qvel[s, e, i] - k * imp * dist
     d.efc_dim[s, e, r], d.efc_id[s, e, r], d.efc_mu[s, e, r] = 1, i, 0.0
 
@@ -508,14 +514,20 @@ def dof_rows_adjoint(d: ti.template(), s, e, r, g_aref, g_R, g_bound):
     solimp = ti.Vector(DEFAULT_SOLIMP, dt=float)
     k, b = stiffness_damping(ti.Vector([d.consts[CONST["timeconst"]], 1.0]), solimp[1], d.consts[CONST["h"]])
     accumulate(d.qvel.grad, ti.Vector([s, e, i]), -b * sign * g_aref)
+    dist = 0.0
+    if d.efc_type[s, e, r] != FRICTION_LOSS:
+        _, dist = _limit_side(d, s, e, i)
+    imp = impedance(solimp, dist, 0.0)
+    scale = d.invweight_dof[e, i]
+    on_floor = not ((1.0 - imp) / imp * scale > MINVAL)  # R at its floor: no gradient through it
+    if not on_floor:  # R = (1 − imp) / imp · dof_invweight0
+        accumulate(d.invweight_dof.grad, ti.Vector([e, i]), (1.0 - imp) / imp * g_R)
     if d.efc_type[s, e, r] == FRICTION_LOSS:
         accumulate(d.frictionloss.grad, ti.Vector([e, i]), g_bound)
     else:  # a limit: aref and R depend on the distance
-        _, dist = _limit_side(d, s, e, i)
-        imp = impedance(solimp, dist, 0.0)
         slope, _solimp_slope = impedance_gradient(solimp, dist, 0.0)
         g_imp = -k * dist * g_aref
-        if (1.0 - imp) / imp * d.dof_invweight0[i] > MINVAL:  # else R is its floor
-            g_imp -= d.dof_invweight0[i] / (imp * imp) * g_R
+        if not on_floor:
+            g_imp -= scale / (imp * imp) * g_R
         g_dist = -k * imp * g_aref + slope * g_imp
         accumulate(d.qpos.grad, ti.Vector([s, e, d.dof_q[i]]), sign * g_dist)
