@@ -12,8 +12,8 @@ per particle (Σ w_i v_i = v').
 """
 import taichi as ti
 
-from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, row_matrix, row_vector, scatter_spread,
-                      stencil_row, store_matrix, store_vector, transposed_times, weight_grads, weights)
+from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, row_matrix, row_vector, scatter_half,
+                      scatter_spread, stencil_row, store_matrix, store_vector, transposed_times, weight_grads, weights)
 
 
 @ti.func
@@ -97,15 +97,12 @@ def gather_adjoint_stage(frames: ti.template(), grid: ti.template(), gathered: t
     half of each env's particles scatter into grad_grid, the second into part_grid (0:3), which is
     then added over the listed nodes (active) and zeroed."""
     B, N = frames.shape[1], frames.shape[2]
-    half = (N + 1) // 2
-    spread = scatter_spread(B)
-    for t in range(2 * B * spread):
-        if t % spread == 0:
-            e, second = t // spread // 2, t // spread % 2
-            if second == 0:
-                gather_adjoint_range(frames, grid, gathered, grads, scratch, grad_grid, grid_f, grid_i, src, e, 0, half)
-            else:
-                gather_adjoint_range(frames, grid, gathered, grads, scratch, part_grid, grid_f, grid_i, src, e, half, N)
+    for t in range(2 * B * scatter_spread(B)):
+        working, e, second, first, end = scatter_half(t, B, N)
+        if working and second == 0:
+            gather_adjoint_range(frames, grid, gathered, grads, scratch, grad_grid, grid_f, grid_i, src, e, first, end)
+        elif working:
+            gather_adjoint_range(frames, grid, gathered, grads, scratch, part_grid, grid_f, grid_i, src, e, first, end)
     for e, k in ti.ndrange(B, active[B, 0]):
         if k < active[e, 0]:
             n = active[e, k + 1]

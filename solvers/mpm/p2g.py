@@ -13,8 +13,8 @@ are taken once per particle; the per-node products of A with the offsets come fr
 import taichi as ti
 
 from .constitutive import constitutive_adjoint_decomposed, constitutive_decomposed, decompose, needs_svd
-from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, row_matrix, row_vector, scatter_spread,
-                      stencil_row, store_matrix, store_vector, transposed_times, weight_grads, weights)
+from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, row_matrix, row_vector, scatter_half,
+                      scatter_spread, stencil_row, store_matrix, store_vector, transposed_times, weight_grads, weights)
 
 
 @ti.func
@@ -56,15 +56,12 @@ def scatter_stage(frames: ti.template(), params: ti.template(), affine: ti.templ
     (listing in part_nodes); merge_stage then adds the second into the first. The affine matrices
     are read from affine's slot ``slot``."""
     B, N = frames.shape[1], frames.shape[2]
-    half = (N + 1) // 2
-    spread = scatter_spread(B)
-    for t in range(2 * B * spread):
-        if t % spread == 0:
-            e, second = t // spread // 2, t // spread % 2
-            if second == 0:
-                scatter_range(frames, params, affine, grid, active, grid_f, grid_i, src, slot, e, 0, half)
-            else:
-                scatter_range(frames, params, affine, part_grid, part_nodes, grid_f, grid_i, src, slot, e, half, N)
+    for t in range(2 * B * scatter_spread(B)):
+        working, e, second, first, end = scatter_half(t, B, N)
+        if working and second == 0:
+            scatter_range(frames, params, affine, grid, active, grid_f, grid_i, src, slot, e, first, end)
+        elif working:
+            scatter_range(frames, params, affine, part_grid, part_nodes, grid_f, grid_i, src, slot, e, first, end)
 
 
 @ti.func

@@ -119,3 +119,14 @@ def scatter_spread(B):
     iterations on one thread (measured: 2, 4 or 64 long iterations took as long as run one after
     another; 2 long ones spread over 2048 ran on two threads, 45 ms against 85)."""
     return ti.max(1, 1024 // B)
+
+
+@ti.func
+def scatter_half(t, B, N):
+    """Iteration t of a two-half scatter's loop, range(2 * B * scatter_spread(B)): (working: 1 for the
+    iterations that run a half, 0 for the spread's idle ones; its env e; second: 0 for the first
+    half, 1 for the second; its particles first..end − 1)."""
+    spread = scatter_spread(B)
+    half = (N + 1) // 2
+    e, second = t // spread // 2, t // spread % 2
+    return int(t % spread == 0), e, second, ti.select(second == 0, 0, half), ti.select(second == 0, half, N)
