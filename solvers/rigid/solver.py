@@ -37,6 +37,7 @@ class RigidSolver(Solver):
         self.model = self.data = None
         self.substeps = sim_options.substeps
         self._commit = 1  # 0 while a backward replays a step: its frames stay for the reverse
+        self.invweight_basis = None  # contact.InvweightBasis, taken at build
 
     # -- building ---------------------------------------------------------------------------
     def add_entity(self, name, links):
@@ -47,6 +48,7 @@ class RigidSolver(Solver):
 
     def build(self, n_envs):
         options = self.rigid_options
+        self.invweight_basis = None  # until at_initial_pose takes it for this model
         self.model = build_model(self.entity_links, options.enable_self_collision, options.enable_adjacent_collision)
         if not options.enable_collision:
             self.model = contact.without_pairs(self.model)
@@ -117,10 +119,9 @@ class RigidSolver(Solver):
         """``inputs`` with the rows' scale (invweight_t, invweight_dof) recomputed from their mass and
         armature (contact.InvweightBasis; differentiable); zeros before the basis exists (the first
         allocation at build, which forms no rows)."""
-        basis = getattr(self, "invweight_basis", None)
-        if basis is None:
+        if self.invweight_basis is None:
             return inputs
-        invweight_t, invweight_dof = basis(inputs["mass"], inputs["armature"])
+        invweight_t, invweight_dof = self.invweight_basis(inputs["mass"], inputs["armature"])
         return {**inputs, "invweight_t": invweight_t, "invweight_dof": invweight_dof}
 
     def _initial_state(self):
