@@ -83,23 +83,23 @@ class InvweightBasis:
         m = solver.model
         L, D = m.n_links, m.n_dofs
         inputs = dict(solver.default_inputs)
-        self.K = np.zeros((L, D, D))
+        K = np.zeros((L, D, D))
         for link in range(L):  # M of each link alone at unit mass (M is linear in the masses)
             unit = torch.zeros_like(inputs["mass"])
             unit[:, link] = 1.0
             solver.upload_inputs({**inputs, "mass": unit})
-            self.K[link] = solver.mass_matrix()[0].double().cpu().numpy()
+            K[link] = solver.mass_matrix()[0].double().cpu().numpy()
         solver.upload_inputs(inputs)
+        solver.check_positive_definite(np.einsum("l,lij->ij", m.link_mass0, K) + np.diag(m.dof_armature))
         jac = torch.empty((solver.n_batch, L, 6, D), dtype=runtime.tc_float, device=runtime.device)
         solver.kernels.read_com_jacobians(jac)
-        self.J = jac[0, :, :3].double().cpu().numpy()  # (L, 3, D): the translational rows
-        self.moving = (m.link_static == 0).astype(np.float64)
         # dof_invweight0 = diag(M⁻¹) @ average: a free joint's translations and rotations averaged
-        self.average = np.eye(D)
+        average = np.eye(D)
         for first in np.flatnonzero(m.dof_q < 0)[::3]:
-            self.average[first: first + 3, first: first + 3] = 1.0 / 3.0
-        mass_matrix = np.einsum("l,lij->ij", m.link_mass0, self.K) + np.diag(m.dof_armature)
-        solver.check_positive_definite(mass_matrix)
+            average[first: first + 3, first: first + 3] = 1.0 / 3.0
+        # K (L, D, D), J (L, 3, D) the translational rows, moving (L,), average (D, D): float64
+        self.consts = [torch.as_tensor(a, dtype=torch.float64, device=runtime.device)
+                       for a in (K, jac[0, :, :3].double().cpu().numpy(), (m.link_static == 0), average)]
 
     def __call__(self, mass, armature):
         """(invweight_t (B, L), invweight_dof (B, D)) in mass's dtype, from mass (B, L) kg and armature
@@ -108,9 +108,7 @@ class InvweightBasis:
         single-env scene bit for bit (~50 µs an env, when mass or armature is set)."""
         if mass.shape[1] == 0 or armature.shape[1] == 0:
             return torch.zeros_like(mass), torch.zeros_like(armature)
-        consts = [torch.as_tensor(a, dtype=torch.float64, device=mass.device)
-                  for a in (self.K, self.J, self.moving, self.average)]
-        rows = [self._one_env(mass[e: e + 1].double(), armature[e: e + 1].double(), *consts)
+        rows = [self._one_env(mass[e: e + 1].double(), armature[e: e + 1].double(), *self.consts)
                 for e in range(mass.shape[0])]
         return (torch.cat([r[0] for r in rows]).to(mass.dtype), torch.cat([r[1] for r in rows]).to(mass.dtype))
 
