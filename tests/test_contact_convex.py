@@ -77,9 +77,9 @@ def _morph(body, meshes, pos=(0.0, 0.0, 0.5)):
     return gs.morphs.Mesh(file=meshes[size], pos=pos)
 
 
-def _build_ours(plane, bodies, meshes, n_envs):
+def _build_ours(plane, bodies, meshes, n_envs, compat=True):
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002),
-                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True), show_viewer=False)
+                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=compat), show_viewer=False)
     if plane:
         scene.add_entity(gs.morphs.Plane())
     entities = [scene.add_entity(_morph(body, meshes)) for body in bodies]
@@ -150,6 +150,53 @@ def test_convex_pairs_step_like_mujoco(f64, meshes, case):
     assert touching >= N_STATES // 2, "most states must touch"
     print(f"{case}: {exact} of {touching} touching states exact")
     assert exact >= MIN_EXACT[case] * touching, (case, exact, touching)
+
+
+CONVERGED_APPROX = 1e-3  # m: a converged contact against the CCD iterate (measured 6e-5 m on these near-touching states)
+
+
+@pytest.mark.parametrize("case", ["cylinder-box", "cylinder-cylinder", "capsule-cylinder"])
+def test_converged_contacts_stay_near_mujocos(f64, meshes, case):
+    """Without enable_mujoco_compatibility a curved convex contact is the converged closed form of
+    its feature (detect.converge_contacts) instead of MuJoCo's CCD iterate, which the compatible
+    scene reproduces: from the same touching states, the same contacts (geoms, count), each within
+    CONVERGED_APPROX of the iterate in position and distance, and some of them moved."""
+    plane, bodies = CASES[case]
+    scenes = [_build_ours(plane, bodies, meshes, N_STATES, compat) for compat in (True, False)]
+    m = _build_mujoco(plane, bodies, meshes, scenes[0][0].rigid_solver.model)
+    states = _touching_states(m, np.random.default_rng(SEED), N_STATES)
+    qpos, qvel = np.array([q for q, _ in states]), np.array([v for _, v in states])
+    contacts = []
+    for scene, entities in scenes:
+        _set_ours(entities, qpos, qvel)
+        scene.step()
+        contacts.append(scene.rigid_solver.contacts().cpu().numpy())
+    iterate, converged = contacts
+    assert np.array_equal(iterate[..., :2], converged[..., :2]), "the same contacts, in the same order"
+    on = iterate[..., 0] >= 0
+    moved = np.abs(converged[..., 2:5] - iterate[..., 2:5]).max(-1)[on]
+    dist = np.abs(converged[..., 8] - iterate[..., 8])[on]
+    print(f"{case}: {on.sum()} contacts, moved up to {moved.max():.1e} m (distance {dist.max():.1e} m), "
+          f"{np.mean(moved > 1e-10):.0%} moved")
+    assert on.sum() >= N_STATES // 2 and moved.max() <= CONVERGED_APPROX and dist.max() <= CONVERGED_APPROX
+    assert np.any(moved > 1e-10), "no contact was converged"
+
+
+def test_cap_contacts_keep_the_iterate(f64):
+    """A cylinder standing on its cap on a box face: the closed form would put the contact at the
+    box corner its feature names (convex.frozen), so the forward keeps the iterate, as under
+    enable_mujoco_compatibility (the backward then raises: test_contact_gradients)."""
+    contacts = []
+    for compat in (True, False):
+        scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=compat), show_viewer=False)
+        scene.add_entity(gs.morphs.Box(size=(1.0, 1.0, 0.2), pos=(0, 0, -0.1), fixed=True))
+        scene.add_entity(gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0.01, 0.02, 0.099)))
+        scene.build()
+        scene.step()
+        rows = scene.rigid_solver.contacts()[0].cpu().numpy()
+        contacts.append(rows[rows[:, 0] >= 0][:, [0, 1, 2, 3, 4, 8]])  # geoms, position, distance
+    assert len(contacts[0]) and np.array_equal(contacts[0], contacts[1])
+    assert np.abs(contacts[1][:, 2:4] - (0.01, 0.02)).max() < 0.05  # under the can
 
 
 def test_mesh_box_rests_like_box(f64, meshes):

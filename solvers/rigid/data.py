@@ -135,9 +135,10 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
 # The int arena starts with a header of sizes and flags; every array's place follows from the
 # sizes (``layout``). W: all inputs' width per env; GW: the differentiable ones', which come first. G geoms, N candidate
 # geom pairs, H hull vertices, C contact slots, R constraint rows per env (see RigidData); HI the meshes' hull
-# ints (geometry.py), WS 1 when the convex colliders need their workspace (CONVEX_SCRATCH), else 0.
+# ints (geometry.py), WS 1 when the convex colliders need their workspace (CONVEX_SCRATCH), else 0; converged 1
+# when curved convex contacts are their converged closed form (collision/detect.py: converge_contacts).
 SIZES = ("B", "L", "D", "Q", "P", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C", "R", "cone",
-         "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact")
+         "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged")
 HEADER = {name: k for k, name in enumerate(SIZES)}
 _REGIONS = [("i", False)] + [(a, g) for g in (False, True) for a in ("f", "v3", "v4", "m3")]  # (arena, gradients?)
 
@@ -239,7 +240,8 @@ class RigidData:
                      "N": len(model.pair_geom1), "H": len(model.hull_vec), "C": settings["contacts"],
                      "R": settings["rows"], "cone": settings["cone"], "iterations": settings["iterations"],
                      "ls_iterations": settings["ls_iterations"], "overflow": 0, "rows_needed": 0,
-                     "HI": len(model.hull_int), "WS": int(_has_convex_pairs(model)), "inexact": 0}
+                     "HI": len(model.hull_int), "WS": int(_has_convex_pairs(model)), "inexact": 0,
+                     "converged": int(bool(settings["converged"]))}
         self.start, stop = layout(self.size)
         length = {a: stop[a, bool(requires_grad)] for a in ARENAS}  # no gradient storage without gradients
         if max(length.values()) >= 2 ** 31:  # indices inside kernels are 32-bit
@@ -341,6 +343,7 @@ class RigidView:
         self.n_geoms, self.n_candidates = size["G"], size["N"]
         self.contact_capacity = size["C"]
         self.elliptic, self.iterations, self.ls_iterations = size["cone"], size["iterations"], size["ls_iterations"]
+        self.converged = size["converged"]
         self.nonfinite = ArrayView(ints, HEADER["nonfinite"], (1,))  # set by the NaN check
         self.overflow = ArrayView(ints, HEADER["overflow"], (1,))  # set when contacts exceed their slots
         self.rows_needed = ArrayView(ints, HEADER["rows_needed"], (1,))  # set when an env's needs_rows is

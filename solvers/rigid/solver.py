@@ -76,21 +76,23 @@ class RigidSolver(Solver):
         contacts, rows = contact.capacity(self.model, options)
         settings = {"limits": options.enable_joint_limit, "contacts": contacts, "rows": rows,
                     "cone": int(options.friction_cone == "elliptic"), "iterations": iterations,
-                    "ls_iterations": options.ls_iterations,
+                    "ls_iterations": options.ls_iterations, "converged": not options.enable_mujoco_compatibility,
                     "consts": [h, self.timeconst, impratio, tolerance, options.ls_tolerance]}
         self.data = RigidData(self.model, self.n_batch, sim.substeps, sim.requires_grad, settings)
         element_dims = [len(ELEMENT[a]) for a in ARENAS]
         schedule, arenas = self.data.schedule, self.data.arenas
         self.kernels = BoundKernels(schedule, arenas, element_dims, *step.KERNELS)
         m = self.model
+        self.inexact_kinds = detect.inexact_kinds(m)  # pair kinds whose contacts may be CCD iterates
         self.colliders = [BoundKernel(step.collide, (schedule, kind), arenas, element_dims)
                           for kind in detect.kernel_kinds(m)]
+        if self.data.size["converged"] and self.inexact_kinds:  # curved convex contacts → their closed forms
+            self.colliders.append(BoundKernel(step.converge, schedule, arenas, element_dims))
         # the reverse of a substep, without and with the constraint stage
         self.reverse_kernel = [BoundKernel(step.reverse_dynamics, (schedule, rows), arenas, element_dims)
                                for rows in (0, 1)]
         self.collider_reverses = [BoundKernel(step.collide_adjoint, (schedule, kind), arenas, element_dims)
                                   for kind in detect.differentiable_kinds(m)]
-        self.inexact_kinds = detect.inexact_kinds(m)  # pair kinds whose contacts have no exact reverse
         self.limited = contact.limited_dofs(self.model, options) > 0
         self.default_inputs = self._default_inputs()
         self.upload_inputs(self.default_inputs)
@@ -287,11 +289,17 @@ class RigidSolver(Solver):
     def substep_post_coupling_backward(self, s):
         if s == self.sim_options.substeps - 1 and self.data.take_flag("inexact"):  # the replay's contacts
             names = ", ".join(_pair_name(kind) for kind in self.inexact_kinds)
-            raise GradientError(f"rigid solver (entities: {', '.join(self.entity_names)}): this step had a contact "
-                                f"of a pair kind whose contacts have no gradient yet ({names}: the convex collider "
-                                f"iterates on curved shapes and margins); expected contacts among planes, spheres, "
-                                f"capsules, boxes, meshes, and cylinders on a plane or with spheres, meshes and "
-                                f"boxes without margin (see README), or RigidOptions(enable_collision=False)")
+            if self.rigid_options.enable_mujoco_compatibility:
+                why = (f"under RigidOptions(enable_mujoco_compatibility=True) the convex collider's contacts of "
+                       f"{names} are MuJoCo's iterates on curved shapes and margins, which have no exact gradient; "
+                       f"expected enable_mujoco_compatibility=False (their converged contacts)")
+            else:
+                why = (f"a contact of {names} kept part of the convex collider's iterate (a cylinder's cap on an "
+                       f"edge or a face, its rim on a vertex or an edge, or a degenerate feature), which has no "
+                       f"exact gradient yet; expected other contact features (see README), or "
+                       f"RigidOptions(enable_collision=False)")
+            raise GradientError(f"rigid solver (entities: {', '.join(self.entity_names)}): this step had no exact "
+                                f"gradient: {why}")
 
     def substep_pre_coupling_backward(self, s):
         """Substep s's reverse, as separate kernels: fused, they compile slower."""

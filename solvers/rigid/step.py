@@ -25,8 +25,8 @@ import taichi as ti
 
 from .data import ARENA_TYPES, CONST, accumulate, bind, n_batch
 from .actuation import smooth_force, smooth_force_adjoint
-from .collision.detect import (collide_adjoint_kind, collide_kind, geom_poses, geom_poses_adjoint, replay_exact,
-                               sort_contacts)
+from .collision.detect import (collide_adjoint_kind, collide_kind, converge_contacts, geom_poses, geom_poses_adjoint,
+                               replay_exact, sort_contacts)
 from .constraint.implicit import solve_adjoint
 from .constraint.rows import contact_force, contact_rows, dof_rows, limit_violated
 from .constraint.solver import newton_solve
@@ -81,7 +81,7 @@ def constraint_env(d: ti.template(), s, e):
     sort_contacts(d, s, e)
     rows = dof_rows(d, s, e)
     for c in range(d.n_con[s, e, 0]):
-        if not replay_exact(d, d.con_pair[s, e, c]):
+        if not replay_exact(d, s, e, c):
             d.inexact[0] = 1
         d.con_efc[s, e, c] = rows
         rows += contact_rows(d, s, e, c, rows)
@@ -229,6 +229,14 @@ def collide(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti
     ti.loop_config(serialize=config[0][0])
     for e in range(n_batch(ints)):
         collide_kind(bind(ints, f1, v3, v4, m3), s, e, config[1])
+
+
+@ti.kernel
+def converge(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32):
+    """Frame s's curved convex contacts made the closed form of their feature (after the colliders)."""
+    ti.loop_config(serialize=schedule[0])
+    for e in range(n_batch(ints)):
+        converge_contacts(bind(ints, f1, v3, v4, m3), s, e)
 
 
 @ti.kernel

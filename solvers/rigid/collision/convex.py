@@ -66,10 +66,11 @@ normal (of the EPA contact for KIND_CLIP), coded in two ints (octahedral map, ~1
 - KIND_PLANE (plane-mesh): column 1 = mesh vertex id (the contact is that vertex, moved half its
   depth along the plane normal).
 
-Replay (backward). `convex_evaluate` and `plane_mesh_evaluate` give a contact again from its
-feature row as a closed form of the two geom poses; `convex_evaluate_adjoint` and
+Replay. `convex_evaluate` and `plane_mesh_evaluate` give a contact again from its feature row
+as a closed form of the two geom poses; `convex_evaluate_adjoint` and
 `plane_mesh_evaluate_adjoint` are those closed forms' hand-written reverses (the colliders never
-call them: a backward's kernel does, per contact). Where the forward computes the contact from
+call them: a backward's kernel does, per contact; and the forward's detect.converge_contacts
+makes an iterate on curved supports (`iterated`) its closed form, unless `frozen`). Where the forward computes the contact from
 discrete points only (plane-mesh, clipping, GJK between points, segments, boxes and meshes, EPA
 between boxes and meshes without margin) the replay is the forward's own value to rounding. Where
 the forward iterates on curved supports (EPA with a sphere, capsule or margin, whose balls it
@@ -81,7 +82,9 @@ for a cylinder at its rim by its disk; the normal is the plane normal of the fea
 points (a cylinder's cap adds its plane), else the direction between the cores' closest points,
 else (a cylinder rim against a vertex or edge, where the disk's curvature decides) the forward's
 normal, frozen, made orthogonal to the feature's line. Only that case, and the half-margin offset
-of a clipped edge's ends (along the EPA normal), hold a direction fixed.
+of a clipped edge's ends (along the EPA normal), hold a direction fixed; and a cylinder's cap is
+spanned with unit steps, so its contact point is a closed form only against a single vertex
+(`frozen`).
 """
 import numpy as np
 import taichi as ti
@@ -2239,6 +2242,41 @@ def convex_evaluate_adjoint(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, 
         g_pos1, g_rot1, g_pos2, g_rot2 = _core_evaluate_adjoint(shape1, shape2, feature, hull, g_position,
                                                                 g_normal, g_dist)
     return g_pos1, g_rot1, g_pos2, g_rot2
+
+
+@ti.func
+def iterated(type1, type2, margin, feature):
+    """Whether a `convex_convex` contact (its feature row) is the forward's CCD iterate on a curved
+    support, within the CCD tolerance's effect of `convex_evaluate`, rather than that closed form:
+    anything with a cylinder; EPA with a sphere, a capsule or a margin; a clipped edge with a
+    margin (its ends are EPA support points)."""
+    round_ = type1 == SPHERE or type1 == CAPSULE or type2 == SPHERE or type2 == CAPSULE
+    curved = type1 == CYLINDER or type2 == CYLINDER or (feature[0] == KIND_EPA and (margin > 0 or round_))
+    return curved or (feature[0] == KIND_CLIP and feature[7] > 0 and margin > 0)
+
+
+@ti.func
+def frozen(type1, type2, margin, feature):
+    """Whether `convex_evaluate` keeps something of the forward's iterate for this contact, so that
+    it is not a closed form of the poses alone (its adjoint misses that part) or not where the
+    forward's contact is:
+    - the normal of a cylinder meeting a vertex or an edge at its rim (m < 2 in `_core_terms`);
+    - the half-margin offset of a clipped edge's ends;
+    - the point of a cylinder on its cap against an edge or a face (or another cap): the closed
+      form spans the cap's plane with unit steps, not the iterate's rim points, so its point is
+      the other geom's first vertex projected on that plane, anywhere along the edge or face
+      (exact for a vertex, or a sphere's, capsule's or cylinder rim's single support point)."""
+    held = feature[0] == KIND_CLIP and feature[7] > 0 and margin > 0
+    if feature[0] != KIND_CLIP:
+        m, ids1, ids2 = _vertex_ids(feature)
+        mode1, mode2 = feature[10] % 3, feature[10] // 3
+        cap1, cap2 = type1 == CYLINDER and mode1 == 1, type2 == CYLINDER and mode2 == 1
+        rim = (type1 == CYLINDER and mode1 == 0) or (type2 == CYLINDER and mode2 == 0)
+        other = ti.select(cap1, ids2, ids1)  # the ids of the geom facing the cap (slots past m repeat the first)
+        held = m < 2 and rim
+        if cap1 or cap2:
+            held = (cap1 and cap2) or other[1] != other[0] or other[2] != other[0]
+    return held
 
 
 @ti.func
