@@ -117,7 +117,8 @@ class RigidOptions:
         iterations, impratio 1), for scenes compared with MuJoCo; and the convex collider's contacts
         on curved shapes (with a cylinder; a sphere or capsule deep in a mesh) are MuJoCo's CCD
         iterates rather than the converged closed form of their feature (within 6e-5 m at touching
-        poses), which have no exact gradient (a backward over one raises GradientError).
+        poses; a cylinder on its cap touches at the foot of the cap's centre, the iterate anywhere
+        on the cap), which have no exact gradient (a backward over one raises GradientError).
     smooth_contact (ours): every geom's default solimp becomes (0, 0.95, 0.001, 0.5, 2), whose
         impedance starts at zero at contact onset, so a contact's force grows from zero with depth
         instead of jumping (MuJoCo's default d0 = 0.9 jumps): the step is then a smooth map through

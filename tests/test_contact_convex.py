@@ -182,21 +182,26 @@ def test_converged_contacts_stay_near_mujocos(f64, meshes, case):
     assert np.any(moved > 1e-10), "no contact was converged"
 
 
-def test_cap_contacts_keep_the_iterate(f64):
-    """A cylinder standing on its cap on a box face: the closed form would put the contact at the
-    box corner its feature names (convex.frozen), so the forward keeps the iterate, as under
-    enable_mujoco_compatibility (the backward then raises: test_contact_gradients)."""
-    contacts = []
-    for compat in (True, False):
-        scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=compat), show_viewer=False)
-        scene.add_entity(gs.morphs.Box(size=(1.0, 1.0, 0.2), pos=(0, 0, -0.1), fixed=True))
-        scene.add_entity(gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0.01, 0.02, 0.099)))
-        scene.build()
-        scene.step()
-        rows = scene.rigid_solver.contacts()[0].cpu().numpy()
-        contacts.append(rows[rows[:, 0] >= 0][:, [0, 1, 2, 3, 4, 8]])  # geoms, position, distance
-    assert len(contacts[0]) and np.array_equal(contacts[0], contacts[1])
-    assert np.abs(contacts[1][:, 2:4] - (0.01, 0.02)).max() < 0.05  # under the can
+def test_cap_contacts_lie_under_the_cap(f64):
+    """A can standing on its cap, on a box face and on a wider cylinder's cap: the iterate's point
+    is anywhere on the cap (where EPA's last face was), the converged contact is the foot of the
+    cap's centre (convex._cap_terms), at the iterate's distance."""
+    for ground in (gs.morphs.Box(size=(1.0, 1.0, 0.2), pos=(0, 0, -0.1), fixed=True),
+                   gs.morphs.Cylinder(radius=0.3, height=0.2, pos=(0, 0, -0.1), fixed=True)):
+        contacts = []
+        for compat in (True, False):
+            scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=compat),
+                             show_viewer=False)
+            scene.add_entity(ground)
+            scene.add_entity(gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0.01, 0.02, 0.099)))
+            scene.build()
+            scene.step()
+            rows = scene.rigid_solver.contacts()[0].cpu().numpy()
+            contacts.append(rows[rows[:, 0] >= 0][:, [0, 1, 2, 3, 4, 8]])  # geoms, position, distance
+        iterate, converged = contacts
+        assert len(iterate) == len(converged) == 1 and np.array_equal(iterate[:, :2], converged[:, :2])
+        np.testing.assert_allclose(converged[0, 2:5], (0.01, 0.02, -0.0005), atol=1e-12)
+        assert abs(converged[0, 5] - iterate[0, 5]) < 1e-12 and np.abs(iterate[0, 2:4] - (0.01, 0.02)).max() > 1e-3
 
 
 def test_mesh_box_rests_like_box(f64, meshes):

@@ -271,15 +271,19 @@ CURVED_SCENES = {
                                                            euler=(30, 10, 0))),
     "cylinder-cylinder rim on cap": ("cylinder", lambda: gs.morphs.Cylinder(radius=0.05, height=0.2,
                                                                             pos=(0.05, 0, 0.12), euler=(30, 10, 0))),
+    "cylinder-box cap": ("box", lambda: gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0, 0, 0.099))),
+    "cylinder-cylinder cap on cap": ("cylinder", lambda: gs.morphs.Cylinder(radius=0.05, height=0.2,
+                                                                            pos=(0.05, 0, 0.099))),
     "cylinder-mesh rim on face": ("mesh", lambda: gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0.05, 0, 0.3),
                                                                      euler=(30, 10, 0))),
 }
 SPIN = (0.3, 0.1, -0.2, 0.5, 0.4, 1.0)
 
 
-def _curved_scene(ground, morph, cone="pyramidal", compat=False):
-    """A fixed ground (a 1 m box or a 0.3 m-radius cylinder with their tops at z = 0, or an
-    octahedron mesh 0.25 m tall whose top vertex is at z = 0.1875) and a free body on it."""
+def _curved_scene(ground, morph, cone="pyramidal", compat=False, n_envs=0):
+    """A fixed ground (a 1 m box or a 0.3 m-radius cylinder with their tops at z = 0, an
+    octahedron mesh 0.25 m tall whose top vertex is at z = 0.1875, or a capsule of radius 5 cm
+    lying along y at z = 0) and a free body on it."""
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True),
                      rigid_options=gs.options.RigidOptions(tolerance=1e-14, friction_cone=cone,
                                                            enable_mujoco_compatibility=compat), show_viewer=False)
@@ -287,13 +291,15 @@ def _curved_scene(ground, morph, cone="pyramidal", compat=False):
         scene.add_entity(gs.morphs.Box(size=(1.0, 1.0, 0.2), pos=(0, 0, -0.1), fixed=True))
     elif ground == "cylinder":
         scene.add_entity(gs.morphs.Cylinder(radius=0.3, height=0.2, pos=(0, 0, -0.1), fixed=True))
+    elif ground == "capsule":
+        scene.add_entity(gs.morphs.Capsule(radius=0.05, height=0.6, euler=(90, 0, 0), fixed=True))
     else:
         path = os.path.join(tempfile.mkdtemp(), "octahedron.obj")
         vertices = [(0.5, 0, 0), (-0.5, 0, 0), (0, 0.75, 0), (0, -0.75, 0), (0, 0, 0.25), (0, 0, -0.25)]
         trimesh.Trimesh(vertices).convex_hull.export(path)
         scene.add_entity(gs.morphs.Mesh(file=path, pos=(0, 0, -0.0625), fixed=True))
     body = scene.add_entity(morph)
-    scene.build()
+    scene.build(n_envs=n_envs)
     return scene, body
 
 
@@ -317,17 +323,43 @@ def test_curved_convex_pairs(f64, case, cone):
     assert len(scene.rigid_solver.contacts()) > 0, "the body must touch the ground at the end"
 
 
+def test_curved_convex_gradients_repeat_and_batch(f64):
+    """Through converged contacts (a cylinder tipping onto its rim, then its side, on a box, and
+    standing on its cap), a repeated rollout gives the same gradient bit for bit, and n_envs = 3
+    gives each env's gradient of a single-env scene."""
+    velocity = _batch(3, torch.tensor(SPIN, dtype=torch.float64))
+
+    def gradients(scene, body, x):
+        x = x.clone().requires_grad_(True)
+        scene.reset()
+        body.set_dofs_velocity(x)
+        _roll(scene, 40)
+        (body.get_pos().sum() + body.get_quat()[..., 1:].sum()).backward()
+        return x.grad
+
+    for case in ("cylinder-box rim", "cylinder-box cap"):
+        ground, morph = CURVED_SCENES[case]
+        batched = gradients(*_curved_scene(ground, morph(), n_envs=3), velocity)
+        single = _curved_scene(ground, morph())
+        for e in range(3):
+            first = gradients(*single, velocity[e])
+            assert torch.equal(first, batched[e]) and torch.equal(first, gradients(*single, velocity[e])), (case, e)
+
+
 def test_curved_convex_pairs_refuse_a_backward_where_the_iterate_stays(f64):
-    """Where the closed form would keep part of the iterate (a cylinder standing on its cap on a
-    face: its point is not a closed form of the feature) the contact stays the iterate, and a
+    """Where the closed form would hold the iterate's normal (a cylinder tipped 40° whose rim
+    lands on a lying capsule's side: rim against a segment) the contact stays the iterate, and a
     backward over it says so, never a silent zero or an approximate gradient; so does every
-    curved convex contact under enable_mujoco_compatibility, which keeps MuJoCo's iterates."""
-    for compat, match in ((False, "cap on an edge or a face"), (True, "enable_mujoco_compatibility")):
-        morph = gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0, 0, 0.099) if not compat else (0, 0, 0.049),
-                                   euler=(0, 0, 0) if not compat else (90, 0, 0))
-        scene, can = _curved_scene("box", morph, compat=compat)
+    curved convex contact under enable_mujoco_compatibility, which keeps MuJoCo's iterates (a
+    cylinder lying on a box)."""
+    cases = ((False, "capsule", gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0, 0, 0.16), euler=(0, 40, 0)),
+              "rim on a vertex or an edge", 30),
+             (True, "box", gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0, 0, 0.049), euler=(90, 0, 0)),
+              "enable_mujoco_compatibility", 1))
+    for compat, ground, morph, match, steps in cases:
+        scene, can = _curved_scene(ground, morph, compat=compat)
         velocity = torch.zeros(6, dtype=torch.float64, requires_grad=True)
         can.set_dofs_velocity(velocity)
-        scene.step()
+        _roll(scene, steps)
         with pytest.raises(gs.GradientError, match=match):
             can.get_pos().sum().backward()

@@ -82,9 +82,9 @@ for a cylinder at its rim by its disk; the normal is the plane normal of the fea
 points (a cylinder's cap adds its plane), else the direction between the cores' closest points,
 else (a cylinder rim against a vertex or edge, where the disk's curvature decides) the forward's
 normal, frozen, made orthogonal to the feature's line. Only that case, and the half-margin offset
-of a clipped edge's ends (along the EPA normal), hold a direction fixed; and a cylinder's cap is
-spanned with unit steps, so its contact point is a closed form only against a single vertex
-(`frozen`).
+of a clipped edge's ends (along the EPA normal), hold a direction fixed (`frozen`). A cylinder on
+its cap has a closed form of its own (`_cap_terms`): the normal is its axis, the point the foot of
+its cap's centre on the other geom's feature, where the iterate's point is anywhere on the cap.
 """
 import numpy as np
 import taichi as ti
@@ -1877,19 +1877,14 @@ def _vertex_ids(feature):
 
 
 @ti.func
-def _core_locals(shape1: ti.template(), shape2: ti.template(), ids1, ids2, cap1, cap2, hull: ti.template()):
+def _core_locals(shape1: ti.template(), shape2: ti.template(), ids1, ids2, hull: ti.template()):
     """Geom-frame points (3 rows per geom) of the vertices of a CORE / EPA feature (ids (3,) per
-    geom). A geom on its cap gives its first vertex and that point moved one unit along its x
-    and y axes (spanning the cap's plane); the geom facing it, its first vertex thrice."""
+    geom)."""
     local1, local2 = ti.Matrix.zero(float, 3, 3), ti.Matrix.zero(float, 3, 3)
     for v in range(6):  # one lookup in a loop: inlined once
         first = v < 3
         j = ti.select(first, v, v - 3)
-        cap = ti.select(first, cap1, cap2)
-        ids = ti.select(first, ids1, ids2)
-        point = _support_local(_pick_shape(first, shape1, shape2), ti.select(cap1 or cap2, ids[0], ids[j]), hull)
-        if cap and j > 0:
-            point[j - 1] += 1.0
+        point = _support_local(_pick_shape(first, shape1, shape2), ti.select(first, ids1, ids2)[j], hull)
         for c in ti.static(range(3)):
             if first:
                 local1[j, c] = point[c]
@@ -1903,8 +1898,8 @@ def _core_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.
     """The closed form of a KIND_CORE / KIND_EPA contact, every intermediate returned (its
     adjoint recomputes them). Each geom is a core (point, segment, box, mesh) swept by a ball
     (`_ball`) and, for a cylinder at its rim, by a disk (`_disk_local`). The feature's vertices
-    give points a_j on core 1 and b_j on core 2 (j <= m, distinct pairs; a cylinder on its cap
-    gives its cap's plane), w_j = a_j - b_j; the contact normal n (from geom 1 to geom 2) is
+    give points a_j on core 1 and b_j on core 2 (j <= m, distinct pairs), w_j = a_j - b_j; the
+    contact normal n (from geom 1 to geom 2) is
     - m = 2: the unit normal of the plane of the w_j (the final EPA face or GJK triangle),
       oriented as the forward's normal u (feature columns 8, 9);
     - m < 2: the direction from the closest point of the w_j's line (or point) to the origin
@@ -1917,11 +1912,7 @@ def _core_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.
     before normalising), n, disk 1, disk 2, lam (2,), x1, x2)."""
     m, ids1, ids2 = _vertex_ids(feature)
     modes = ti.Vector([feature[10] % 3, feature[10] // 3])
-    cap1 = shape1[0] == CYLINDER and modes[0] == 1
-    cap2 = shape2[0] == CYLINDER and modes[1] == 1 and not cap1
-    if cap1 or cap2:
-        m = 2
-    local1, local2 = _core_locals(shape1, shape2, ids1, ids2, cap1, cap2, hull)
+    local1, local2 = _core_locals(shape1, shape2, ids1, ids2, hull)
     a0, a1, a2 = [_rot(shape1[3], ti.Vector([local1[j, c] for c in ti.static(range(3))])) + shape1[2]
                   for j in ti.static(range(3))]
     b0, b1, b2 = [_rot(shape2[3], ti.Vector([local2[j, c] for c in ti.static(range(3))])) + shape2[2]
@@ -2024,6 +2015,147 @@ def _core_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature
         g_rot1 += ga.outer_product(ti.Vector([local1[j, c] for c in ti.static(range(3))]))
         g_rot2 += gb.outer_product(ti.Vector([local2[j, c] for c in ti.static(range(3))]))
     return g_pos1, g_rot1, g_pos2, g_rot2
+
+
+# A cylinder on its cap (mode 1): the forward's supports on it are rim points at angles the feature
+# does not keep, and a flat cap against an edge or face touches along a line or patch. The closed
+# form takes the cap's axis as the normal and, on the other geom, the point of its feature (vertex,
+# line or plane) nearest the cap's centre: the foot of the cap's centre, as a single contact of a
+# flat-on-flat patch is (no torque from it for a can standing square on a face).
+@ti.func
+def _cap_side(shape1: ti.template(), shape2: ti.template(), feature):
+    """0 when no cylinder of a CORE / EPA contact is on its cap; else which geom (1, 2) the cap
+    closed form stands on: the one on its cap, or of two, the smaller radius (the contact lies
+    under that cap, which a cap it rests on holds)."""
+    cap1 = shape1[0] == CYLINDER and feature[10] % 3 == 1
+    cap2 = shape2[0] == CYLINDER and feature[10] // 3 == 1
+    side = ti.select(cap1, 1, ti.select(cap2, 2, 0))
+    if cap1 and cap2 and shape2[4][0] < shape1[4][0]:
+        side = 2
+    return side
+
+
+@ti.func
+def _cap_other_locals(other: ti.template(), mode_o, ids, count, hull: ti.template()):
+    """(k, geom-frame points (3 rows)) of the feature of the geom facing a cap: its distinct ids
+    among the first `count` of `ids` (3,) (k + 1 of them), or, a cylinder on its own cap (mode_o
+    1), its cap's centre and that point moved one unit along its x and y axes (k = 2). Rows past
+    k repeat row 0."""
+    keep1 = count > 1 and ids[1] != ids[0]
+    keep2 = count > 2 and ids[2] != ids[0] and ids[2] != ids[1]
+    second = ti.select(keep1, ids[1], ids[2])
+    k = int(keep1) + int(keep2)
+    chosen = ti.Vector([ids[0], ti.select(k > 0, second, ids[0]), ti.select(k == 2, ids[2], ids[0])])
+    flat = other[0] == CYLINDER and mode_o == 1
+    if flat:
+        k = 2
+    local = ti.Matrix.zero(float, 3, 3)
+    for j in range(3):  # one lookup in a loop: inlined once
+        point = _support_local(other, ti.select(flat, ids[0], chosen[j]), hull)
+        if flat and j > 0:
+            point[j - 1] += 1.0
+        for c in ti.static(range(3)):
+            local[j, c] = point[c]
+    return k, local
+
+
+@ti.func
+def _cap_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template()):
+    """The cap closed form (see above), every intermediate returned. The cap's geom C (side
+    `_cap_side`), the other O. n = C's axis oriented as the forward's normal u (from geom 1 to
+    geom 2). q = the point nearest C's cap centre c of the flat through O's points o_j (Gram
+    solve for mu, weights of f_j = o_j - o_0); O's witness is q moved by its ball and disk
+    against n (as `_core_terms`'), C's is that point projected on the cap's plane, moved by C's
+    ball (half the margin). sgn = +1 when C is geom 1.
+    Returns (first, C, O, c local, O's locals, k, c, o_0..2, mu (2,), q, pre, n, disk_O, x_C,
+    x_O, sgn)."""
+    first = _cap_side(shape1, shape2, feature) == 1
+    cap, other = _pick_shape(first, shape1, shape2), _pick_shape(not first, shape1, shape2)
+    mode_o = ti.select(first, feature[10] // 3, feature[10] % 3)
+    ids_o = ti.select(first, ti.Vector([feature[2], feature[4], feature[6]]),
+                      ti.Vector([feature[1], feature[3], feature[5]]))
+    c_local = _support_local(cap, ti.select(first, feature[1], feature[2]), hull)
+    k, o_local = _cap_other_locals(other, mode_o, ids_o, feature[7], hull)
+    c = _rot(cap[3], c_local) + cap[2]
+    o0, o1, o2 = [_rot(other[3], ti.Vector([o_local[j, i] for i in ti.static(range(3))])) + other[2]
+                  for j in ti.static(range(3))]
+    sgn = ti.select(first, 1.0, -1.0)
+    u = _decode_direction(feature[8], feature[9])
+    axis = ti.Vector([cap[3][0, 2], cap[3][1, 2], cap[3][2, 2]])
+    pre = axis * _sign(_dot(axis, u))
+    n = _normalize(pre)
+    f1, f2, to_c = o1 - o0, o2 - o0, c - o0
+    g11, g12, g22 = _dot(f1, f1), _dot(f1, f2), _dot(f2, f2)
+    r1, r2 = _dot(f1, to_c), _dot(f2, to_c)
+    mu = ti.Vector([0.0, 0.0])
+    if k == 2:
+        det = g11 * g22 - g12 * g12
+        mu = ti.Vector([(g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det])
+    elif k == 1:
+        mu[0] = r1 / g11
+    q = o0 + mu[0] * f1 + mu[1] * f2
+    disk_o = _rot(other[3], _disk_local(other, mode_o, n))
+    x_o = q - sgn * (_ball(other, mode_o) * n + disk_o)
+    x_c = x_o + _dot(c - x_o, n) * n + sgn * _ball(cap, 1) * n
+    return first, cap, other, c_local, o_local, k, c, o0, o1, o2, mu, q, pre, n, disk_o, x_c, x_o, sgn, mode_o
+
+
+@ti.func
+def _cap_evaluate(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template()):
+    """(position, normal, dist) of a contact of a cylinder on its cap (`_cap_terms`)."""
+    terms = _cap_terms(shape1, shape2, feature, hull)
+    first, n, x_c, x_o = terms[0], terms[13], terms[15], terms[16]
+    x1, x2 = ti.select(first, x_c, x_o), ti.select(first, x_o, x_c)
+    return (x1 + x2) * 0.5, n, shape1[5] - _dot(x1 - x2, n)
+
+
+@ti.func
+def _cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template(),
+                          g_position, g_normal, g_dist):
+    """Reverse of `_cap_evaluate`: (g_pos1, g_rot1, g_pos2, g_rot2)."""
+    first, cap, other, c_local, o_local, k, c, o0, o1, o2, mu, q, pre, n, disk_o, x_c, x_o, sgn, mode_o = \
+        _cap_terms(shape1, shape2, feature, hull)
+    x1, x2 = ti.select(first, x_c, x_o), ti.select(first, x_o, x_c)
+    g_x1, g_x2 = 0.5 * g_position - g_dist * n, 0.5 * g_position + g_dist * n
+    g_n = g_normal - g_dist * (x1 - x2)
+    g_xc, g_xo = ti.select(first, g_x1, g_x2), ti.select(first, g_x2, g_x1)
+    # x_c = x_o + ((c - x_o) . n) n + sgn ball_c n
+    along = _dot(g_xc, n)
+    g_xo += g_xc - along * n
+    g_c = along * n
+    g_n += _dot(c - x_o, n) * g_xc + along * (c - x_o) + sgn * _ball(cap, 1) * g_xc
+    # x_o = q - sgn (ball_o n + disk_o)
+    g_q = g_xo
+    g_n -= sgn * _ball(other, mode_o) * g_xo
+    g_dir, g_rot_o = _disk_adjoint(other, mode_o, n, -sgn * g_xo)
+    g_n += g_dir
+    # q = o0 + mu . f, mu = G^-1 r, G the Gram matrix of f1, f2, r = f . (c - o0)
+    f1, f2, to_c = o1 - o0, o2 - o0, c - o0
+    g11, g12, g22 = _dot(f1, f1), _dot(f1, f2), _dot(f2, f2)
+    g_mu = ti.Vector([_dot(f1, g_q), _dot(f2, g_q)])
+    g_r = ti.Vector([0.0, 0.0])
+    if k == 2:
+        det = g11 * g22 - g12 * g12
+        g_r = ti.Vector([(g22 * g_mu[0] - g12 * g_mu[1]) / det, (g11 * g_mu[1] - g12 * g_mu[0]) / det])
+    elif k == 1:
+        g_r[0] = g_mu[0] / g11
+    g_f1 = mu[0] * g_q - 2.0 * g_r[0] * mu[0] * f1 - (g_r[0] * mu[1] + g_r[1] * mu[0]) * f2 + g_r[0] * to_c
+    g_f2 = mu[1] * g_q - 2.0 * g_r[1] * mu[1] * f2 - (g_r[0] * mu[1] + g_r[1] * mu[0]) * f1 + g_r[1] * to_c
+    g_to_c = g_r[0] * f1 + g_r[1] * f2
+    g_c += g_to_c
+    g_o = ti.Matrix.rows([g_q - g_f1 - g_f2 - g_to_c, g_f1, g_f2])
+    # n = normalize(pre), pre = +-C's axis (column 2 of its rotation)
+    g_pre = _normalize_adjoint(pre, g_n)
+    g_rot_c = g_c.outer_product(c_local)
+    for i in ti.static(range(3)):
+        g_rot_c[i, 2] += g_pre[i] * _sign(_dot(pre, ti.Vector([cap[3][0, 2], cap[3][1, 2], cap[3][2, 2]])))
+    g_pos_o = ti.Vector([0.0, 0.0, 0.0])
+    for j in ti.static(range(3)):
+        row = ti.Vector([g_o[j, i] for i in ti.static(range(3))])
+        g_pos_o += row
+        g_rot_o += row.outer_product(ti.Vector([o_local[j, i] for i in ti.static(range(3))]))
+    return (ti.select(first, g_c, g_pos_o), ti.select(first, g_rot_c, g_rot_o),
+            ti.select(first, g_pos_o, g_c), ti.select(first, g_rot_o, g_rot_c))
 
 
 @ti.func
@@ -2220,6 +2352,8 @@ def convex_evaluate(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, m
     position, normal, dist = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0]), 0.0
     if feature[0] == KIND_CLIP:
         position, normal, dist = _clip_evaluate(shape1, shape2, feature, hull)
+    elif _cap_side(shape1, shape2, feature) != 0:
+        position, normal, dist = _cap_evaluate(shape1, shape2, feature, hull)
     else:
         position, normal, dist = _core_evaluate(shape1, shape2, feature, hull)
     return position, normal, dist
@@ -2238,6 +2372,9 @@ def convex_evaluate_adjoint(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, 
     if feature[0] == KIND_CLIP:
         g_pos1, g_rot1, g_pos2, g_rot2 = _clip_evaluate_adjoint(shape1, shape2, feature, hull, g_position,
                                                                 g_normal, g_dist)
+    elif _cap_side(shape1, shape2, feature) != 0:
+        g_pos1, g_rot1, g_pos2, g_rot2 = _cap_evaluate_adjoint(shape1, shape2, feature, hull, g_position,
+                                                               g_normal, g_dist)
     else:
         g_pos1, g_rot1, g_pos2, g_rot2 = _core_evaluate_adjoint(shape1, shape2, feature, hull, g_position,
                                                                 g_normal, g_dist)
@@ -2257,25 +2394,17 @@ def iterated(type1, type2, margin, feature):
 
 @ti.func
 def frozen(type1, type2, margin, feature):
-    """Whether `convex_evaluate` keeps something of the forward's iterate for this contact, so that
-    it is not a closed form of the poses alone (its adjoint misses that part) or not where the
-    forward's contact is:
-    - the normal of a cylinder meeting a vertex or an edge at its rim (m < 2 in `_core_terms`);
-    - the half-margin offset of a clipped edge's ends;
-    - the point of a cylinder on its cap against an edge or a face (or another cap): the closed
-      form spans the cap's plane with unit steps, not the iterate's rim points, so its point is
-      the other geom's first vertex projected on that plane, anywhere along the edge or face
-      (exact for a vertex, or a sphere's, capsule's or cylinder rim's single support point)."""
+    """Whether `convex_evaluate` holds one of the forward's directions fixed for this contact, so
+    that it is not a closed form of the poses alone (its adjoint misses that direction's change):
+    the normal of a cylinder meeting a vertex or an edge at its rim (m < 2 in `_core_terms`), the
+    half-margin offset of a clipped edge's ends."""
     held = feature[0] == KIND_CLIP and feature[7] > 0 and margin > 0
     if feature[0] != KIND_CLIP:
-        m, ids1, ids2 = _vertex_ids(feature)
+        m, _, _ = _vertex_ids(feature)
         mode1, mode2 = feature[10] % 3, feature[10] // 3
-        cap1, cap2 = type1 == CYLINDER and mode1 == 1, type2 == CYLINDER and mode2 == 1
+        cap = (type1 == CYLINDER and mode1 == 1) or (type2 == CYLINDER and mode2 == 1)
         rim = (type1 == CYLINDER and mode1 == 0) or (type2 == CYLINDER and mode2 == 0)
-        other = ti.select(cap1, ids2, ids1)  # the ids of the geom facing the cap (slots past m repeat the first)
-        held = m < 2 and rim
-        if cap1 or cap2:
-            held = (cap1 and cap2) or other[1] != other[0] or other[2] != other[0]
+        held = m < 2 and rim and not cap
     return held
 
 
