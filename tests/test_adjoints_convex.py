@@ -31,14 +31,18 @@ from tests.collider_adjoint import N_COTANGENT, N_INPUTS, _unit3, _unit33
 from tests.test_colliders_convex import MARGIN, TYPES, _convex_cases, _geom, _Harness, _model, _random_quat
 
 EXACT = 1e-9     # m: replays of the forward's own closed form
-APPROX = 5e-3    # m: replays of the converged closed form, against the forward's CCD iterate (measured 3.4e-3)
+APPROX = 5e-3    # m: replays of the converged closed form, against the forward's CCD iterate (measured 4.4e-3)
+# the same for their unit normals: EPA's normal on curved supports converges slowly at depth (the
+# distance is second order in it): measured 3.4e-2 for a cylinder's rim 6 cm deep in a capsule
+NORMAL_APPROX = 5e-2
 TOL = 1e-6       # relative error of the adjoint against central differences, at each contact's best eps
 SCAN = (1e-5, 1e-6, 1e-7, 1e-8)
 K = max(cv.CONVEX_MAX, cv.PLANE_MESH_MAX)
 F = cv.FEATURE_SIZE
 # branches of the closed form (see _branch) the random poses must reach
 BRANCHES = {"plane", "core m=0", "core m=1", "core m=2", "epa m=2", "epa rim, frozen normal", "cylinder rim",
-            "cylinder cap", "cap on a point", "cap on a line", "cap on a plane", "cylinder side", "clip face-face", "clip edge of geom 1", "clip edge of geom 2",
+            "cylinder cap", "cap on a point", "cap on a line", "cap on a plane", "rim on a point", "rim on a line",
+            "cylinder side", "clip face-face", "clip edge of geom 1", "clip edge of geom 2",
             "clip vertex", "clip edge x side plane", "clip side x side plane", "clip edge with margin"}
 
 
@@ -224,7 +228,10 @@ def _branch(f, types, margin):
     if caps:  # the flat of the geom facing the cap (convex._cap_other_locals)
         other_ids = set(f[2 - caps[0]:1 + 2 * f[7]:2]) if len(caps) == 1 else {0, 1, 2}
         out.add(("cap on a point", "cap on a line", "cap on a plane")[len(other_ids) - 1])
-    if m < 2 and 0 in cylinders:
+    rims = [g for g in range(2) if types[g] == cv.CYLINDER and modes[g] == 0]
+    if m < 2 and len(rims) == 1 and len(set(f[1 + rims[0]:1 + 2 * f[7]:2])) == 1 and not caps:
+        out.add(("rim on a point", "rim on a line")[m])  # convex._rim_terms
+    elif m < 2 and rims and not caps:
         out.add(("core" if f[0] == cv.KIND_CORE else "epa") + " rim, frozen normal")
     return out
 
@@ -264,34 +271,38 @@ def results():
     rows = [(i, k) for i in range(n) for k in range(count[i])]
     forward_rows = np.concatenate([position, normal, dist[..., None]], axis=2)
     return {"rows": rows, "names": names, "feature": feature, "types": batch["types"], "margins": batch["margins"],
-            "replay_error": np.abs(replay - forward_rows).max(axis=2),
-            "replay_error_no_position": np.abs(replay - forward_rows)[..., 3:].max(axis=2), "scan": scan}
+            "replay_error": np.abs(replay - forward_rows), "scan": scan}
 
 
 def test_replay_matches_forward(results):
     """Each contact's replay equals the forward's contact: to EXACT where the closed form is the
-    forward's own, to APPROX (the CCD tolerance's effect) where the forward iterates on curves;
-    for a cylinder on its cap, in normal and distance only (the iterate's point is anywhere on the
-    cap, the closed form's the foot of its centre: convex._cap_terms)."""
+    forward's own; where the forward iterates on curves, position and distance to APPROX (the CCD
+    tolerance's effect) and the normal to NORMAL_APPROX, except a cylinder's point on its cap (the
+    iterate's is anywhere on the cap, the closed form's the foot of its centre: convex._cap_terms).
+    Errors below are in units of each bar."""
     r, feature = results, results["feature"]
     exact, approx = collections.defaultdict(list), collections.defaultdict(list)
     for i, k in r["rows"]:
         f = feature[i, k]
         key = (r["names"][i], int(f[0]), float(r["margins"][i]))
-        on_cap = "cylinder cap" in _branch(f, r["types"][i], r["margins"][i])
-        error = r["replay_error_no_position" if on_cap else "replay_error"][i, k]
-        (exact if _exact(f, r["types"][i], r["margins"][i]) else approx)[key].append(error)
+        errors = r["replay_error"][i, k]
+        if _exact(f, r["types"][i], r["margins"][i]):
+            exact[key].append(errors.max() / EXACT)
+        else:
+            on_cap = "cylinder cap" in _branch(f, r["types"][i], r["margins"][i])
+            approx[key].append(max(0.0 if on_cap else errors[:3].max() / APPROX, errors[3:6].max() / NORMAL_APPROX,
+                                   errors[6] / APPROX))
     print()
     for key in sorted(set(exact) | set(approx)):
         e, a = np.array(exact[key]), np.array(approx[key])
         print(f"{key[0]:18s} kind {key[1]} margin {key[2]}: exact-form {len(e):3d} max {e.max(initial=0):.1e}"
-              f" | converged-form {len(a):3d} max {a.max(initial=0):.1e}, {np.mean(a <= EXACT) if len(a) else 0:.0%}"
-              f" within {EXACT:g}")
+              f" | converged-form {len(a):3d} max {a.max(initial=0):.1e}, "
+              f"{np.mean(a * APPROX <= EXACT) if len(a) else 0:.0%} within {EXACT:g}")
     everything = [e for values in exact.values() for e in values]
     print(f"{len(everything)} of {len(r['rows'])} contacts have the forward's closed form")
     assert {key[1] for key in exact} == {cv.KIND_CORE, cv.KIND_EPA, cv.KIND_CLIP, cv.KIND_PLANE}
-    assert max(everything) <= EXACT
-    assert max(e for values in approx.values() for e in values) <= APPROX
+    assert max(everything) <= 1.0
+    assert max(e for values in approx.values() for e in values) <= 1.0
 
 
 def test_adjoint_matches_central_differences(results):

@@ -274,6 +274,8 @@ CURVED_SCENES = {
     "cylinder-box cap": ("box", lambda: gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0, 0, 0.099))),
     "cylinder-cylinder cap on cap": ("cylinder", lambda: gs.morphs.Cylinder(radius=0.05, height=0.2,
                                                                             pos=(0.05, 0, 0.099))),
+    "cylinder-capsule rim on a line": ("capsule", lambda: gs.morphs.Cylinder(radius=0.05, height=0.2,
+                                                                              pos=(0, 0, 0.16), euler=(0, 40, 0))),
     "cylinder-mesh rim on face": ("mesh", lambda: gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0.05, 0, 0.3),
                                                                      euler=(30, 10, 0))),
 }
@@ -347,13 +349,13 @@ def test_curved_convex_gradients_repeat_and_batch(f64):
 
 
 def test_curved_convex_pairs_refuse_a_backward_where_the_iterate_stays(f64):
-    """Where the closed form would hold the iterate's normal (a cylinder tipped 40° whose rim
-    lands on a lying capsule's side: rim against a segment) the contact stays the iterate, and a
-    backward over it says so, never a silent zero or an approximate gradient; so does every
-    curved convex contact under enable_mujoco_compatibility, which keeps MuJoCo's iterates (a
-    cylinder lying on a box)."""
-    cases = ((False, "capsule", gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0, 0, 0.16), euler=(0, 40, 0)),
-              "rim on a vertex or an edge", 30),
+    """Where the closed form would hold the iterate's normal (a can tipped 30° whose rim meets the
+    rim of a wider cylinder's top: two circles) the contact stays the iterate, and a backward over
+    it says so, never a silent zero or an approximate gradient; so does every curved convex
+    contact under enable_mujoco_compatibility, which keeps MuJoCo's iterates (a can lying on a
+    box)."""
+    cases = ((False, "cylinder", gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0.35, 0, 0.02), euler=(0, 30, 0)),
+              "rim to rim", 1),
              (True, "box", gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0, 0, 0.049), euler=(90, 0, 0)),
               "enable_mujoco_compatibility", 1))
     for compat, ground, morph, match, steps in cases:

@@ -79,12 +79,14 @@ converged contact those iterations approach, within the CCD tolerance's effect o
 (1e-5 m typical, 3e-3 m seen with cylinders): each geom is a core (point, segment, box, mesh)
 swept by a ball (sphere and capsule radius, half the margin, a cylinder's disk on its side), or
 for a cylinder at its rim by its disk; the normal is the plane normal of the feature's Minkowski
-points (a cylinder's cap adds its plane), else the direction between the cores' closest points,
-else (a cylinder rim against a vertex or edge, where the disk's curvature decides) the forward's
-normal, frozen, made orthogonal to the feature's line. Only that case, and the half-margin offset
-of a clipped edge's ends (along the EPA normal), hold a direction fixed (`frozen`). A cylinder on
-its cap has a closed form of its own (`_cap_terms`): the normal is its axis, the point the foot of
-its cap's centre on the other geom's feature, where the iterate's point is anywhere on the cap.
+points, else the direction between the cores' closest points. Two cylinder features have closed
+forms of their own: on its cap (`_cap_terms`) the normal is its axis and the point the foot of the
+cap's centre on the other geom's feature, where the iterate's point is anywhere on the cap; at its
+rim against a vertex or an edge (`_rim_terms`) the contact is where the rim's circle comes closest
+to that point or line (Newton on the circle's angle; the reverse by implicit differentiation).
+Two rims against each other (or a rim feature holding both ends) keep the forward's normal,
+frozen, made orthogonal to the feature's line; that, and the half-margin offset of a clipped
+edge's ends (along the EPA normal), hold a direction fixed (`frozen`).
 """
 import numpy as np
 import taichi as ti
@@ -1904,7 +1906,7 @@ def _core_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.
       oriented as the forward's normal u (feature columns 8, 9);
     - m < 2: the direction from the closest point of the w_j's line (or point) to the origin
       (the cores' closest points), or u made orthogonal to that line when a cylinder meets at
-      its rim (its disk's curvature, not a closed form, decides it there).
+      its rim and `_rim_terms` does not take the contact (two rims; frozen).
     The balls and disks add their supports along n (geom 1) and -n (geom 2) to every vertex;
     the witness points x1, x2 apply the weights (lam: of w_1 - w_0, w_2 - w_0) of the point of
     that (moved) line or plane closest to the origin to each geom's points.
@@ -2158,6 +2160,140 @@ def _cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature,
             ti.select(first, g_pos_o, g_c), ti.select(first, g_rot_o, g_rot_c))
 
 
+# A cylinder meeting a vertex or an edge at its rim (m < 2 in `_core_terms`): the contact is where
+# the rim's circle comes closest to that point or line, at the circle angle th where the distance is
+# stationary. Newton on th from the forward's normal finds it to round-off in a few iterations;
+# the reverse differentiates the stationarity condition (implicit function), not the iterations.
+RIM_NEWTON = 12  # Newton iterations on th (quadratic from a start within EPA's tolerance)
+
+
+@ti.func
+def _rim_side(shape1: ti.template(), shape2: ti.template(), feature):
+    """0 unless exactly one geom of a CORE / EPA contact is a cylinder at its rim (mode 0), with a
+    single end in the feature, meeting the other geom's vertex or edge (m < 2); else which (1, 2)."""
+    m, ids1, ids2 = _vertex_ids(feature)
+    rim1 = shape1[0] == CYLINDER and feature[10] % 3 == 0
+    rim2 = shape2[0] == CYLINDER and feature[10] // 3 == 0
+    ids = ti.select(rim1, ids1, ids2)
+    side = 0
+    if m < 2 and rim1 != rim2 and ids[1] == ids[0] and ids[2] == ids[0]:
+        side = ti.select(rim1, 1, 2)
+    return side
+
+
+@ti.func
+def _rim_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template()):
+    """The rim closed form (see above), every intermediate returned. The rim's geom C (side
+    `_rim_side`): its end's centre e, axes xh, yh, radius R; the other O: the point o0 and, for an
+    edge, the line o0 + t f. th stationary for |Q (k(th) - o0)|^2, k(th) = e + R (cos th xh +
+    sin th yh), Q the projection across f (the identity for a point), g' its second derivative
+    (> 0 at the minimum Newton is to find, else the form is flagged invalid); l the line's point
+    nearest k, d = k - l, n = d oriented as the forward's normal u; C's witness k moved by its
+    ball (half the margin) along n, O's l by its ball against n; sgn = +1 when C is geom 1.
+    Returns (first, C, O, mode_o, locals (e, o0, o1 as rows), line, e, xh, yh, o0, f, th, k, k1
+    (dk/dth), t, pre, n, x_c, x_o, sgn, g', valid)."""
+    first = _rim_side(shape1, shape2, feature) == 1
+    rim, other = _pick_shape(first, shape1, shape2), _pick_shape(not first, shape1, shape2)
+    mode_o = ti.select(first, feature[10] // 3, feature[10] % 3)
+    m, ids1, ids2 = _vertex_ids(feature)
+    ids_r, ids_o = ti.select(first, ids1, ids2), ti.select(first, ids2, ids1)
+    local = ti.Matrix.zero(float, 3, 3)
+    for j in range(3):  # one lookup in a loop: inlined once
+        point = _support_local(_pick_shape(j == 0, rim, other), ti.select(j == 0, ids_r[0], ids_o[ti.max(j - 1, 0)]),
+                               hull)
+        for c in ti.static(range(3)):
+            local[j, c] = point[c]
+    rows = [ti.Vector([local[j, c] for c in ti.static(range(3))]) for j in ti.static(range(3))]
+    e = _rot(rim[3], rows[0]) + rim[2]
+    xh = ti.Vector([rim[3][0, 0], rim[3][1, 0], rim[3][2, 0]])
+    yh = ti.Vector([rim[3][0, 1], rim[3][1, 1], rim[3][2, 1]])
+    o0 = _rot(other[3], rows[1]) + other[2]
+    f = _rot(other[3], rows[2] - rows[1])
+    line = m == 1
+    ff = ti.select(line, _dot(f, f), 1.0)
+    radius = rim[4][0]
+    sgn = ti.select(first, 1.0, -1.0)
+    u = _decode_direction(feature[8], feature[9])
+    start = _rot_t(rim[3], sgn * u)  # the rim's support along its side's normal: the angle to start from
+    th = ti.atan2(start[1], start[0])
+    k, k1, v, gp = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0]), 0.0
+    for it in range(RIM_NEWTON + 1):  # the last pass only evaluates at the converged th
+        cos, sin = ti.cos(th), ti.sin(th)
+        k = e + radius * (cos * xh + sin * yh)
+        k1 = radius * (cos * yh - sin * xh)
+        v = k - o0
+        qv = v - ti.select(line, _dot(f, v) / ff, 0.0) * f
+        qk1 = k1 - ti.select(line, _dot(f, k1) / ff, 0.0) * f
+        gp = _dot(qk1, k1) - _dot(qv, k - e)  # d2/dth2 of |Q v|^2 / 2 (k'' = e - k)
+        if it < RIM_NEWTON:
+            th -= _dot(qv, k1) / gp
+    t = ti.select(line, _dot(f, v) / ff, 0.0)
+    d = v - t * f
+    pre = d * _sign(_dot(d, u))
+    n = _normalize(pre)
+    x_c = k + sgn * _ball(rim, 0) * n
+    x_o = o0 + t * f - sgn * _ball(other, mode_o) * n
+    valid = gp > 0
+    return first, rim, other, mode_o, local, line, e, xh, yh, o0, f, th, k, k1, t, pre, n, x_c, x_o, sgn, gp, valid
+
+
+@ti.func
+def _rim_evaluate(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template()):
+    """(position, normal, dist) of a cylinder's rim on a vertex or an edge (`_rim_terms`); NaN
+    where Newton did not end at a minimum (converge_contacts then keeps the iterate)."""
+    terms = _rim_terms(shape1, shape2, feature, hull)
+    first, n, x_c, x_o, valid = terms[0], terms[16], terms[17], terms[18], terms[21]
+    x1, x2 = ti.select(first, x_c, x_o), ti.select(first, x_o, x_c)
+    bad = ti.select(valid, 0.0, ti.math.nan)
+    return (x1 + x2) * 0.5 + bad, n + bad, shape1[5] - _dot(x1 - x2, n) + bad
+
+
+@ti.func
+def _rim_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template(),
+                          g_position, g_normal, g_dist):
+    """Reverse of `_rim_evaluate`: (g_pos1, g_rot1, g_pos2, g_rot2); through th by the implicit
+    function theorem on its stationarity, dth = -(dg / dinputs) / g'."""
+    first, rim, other, mode_o, local, line, e, xh, yh, o0, f, th, k, k1, t, pre, n, x_c, x_o, sgn, gp, _ = \
+        _rim_terms(shape1, shape2, feature, hull)
+    x1, x2 = ti.select(first, x_c, x_o), ti.select(first, x_o, x_c)
+    g_x1, g_x2 = 0.5 * g_position - g_dist * n, 0.5 * g_position + g_dist * n
+    g_xc, g_xo = ti.select(first, g_x1, g_x2), ti.select(first, g_x2, g_x1)
+    g_n = g_normal - g_dist * (x1 - x2) + sgn * _ball(rim, 0) * g_xc - sgn * _ball(other, mode_o) * g_xo
+    g_d = _normalize_adjoint(pre, g_n) * _sign(_dot(pre, k - o0 - t * f))
+    # d = v - t f, t = f . v / ff (0 for a point), v = k - o0; x_o's line point o0 + t f
+    ff = ti.select(line, _dot(f, f), 1.0)
+    v = k - o0
+    g_t = _dot(f, g_xo - g_d)
+    g_v = g_d + ti.select(line, g_t / ff, 0.0) * f
+    g_f = t * (g_xo - g_d) + ti.select(line, g_t / ff, 0.0) * (v - 2.0 * t * f)
+    g_k = g_xc + g_v
+    g_o0 = g_xo - g_v
+    # k = e + R (cos th xh + sin th yh): explicit, then th's own dependence
+    radius, cos, sin = rim[4][0], ti.cos(th), ti.sin(th)
+    lam = -_dot(g_k, k1) / gp
+    # g(th, inputs) = Q v . k1 = 0: its partials, times lam
+    qv = v - ti.select(line, _dot(f, v) / ff, 0.0) * f
+    qk1 = k1 - ti.select(line, _dot(f, k1) / ff, 0.0) * f
+    g_k += lam * qk1
+    g_o0 -= lam * qk1
+    g_k1 = lam * qv
+    g_f += ti.select(line, lam, 0.0) * (2.0 * _dot(f, v) * _dot(f, k1) * f / ff - v * _dot(f, k1) - k1 * _dot(f, v)) / ff
+    g_e = g_k
+    g_xh = radius * (cos * g_k - sin * g_k1)
+    g_yh = radius * (sin * g_k + cos * g_k1)
+    g_pos_c = g_e
+    g_rot_c = g_e.outer_product(ti.Vector([local[0, c] for c in ti.static(range(3))]))
+    for i in ti.static(range(3)):
+        g_rot_c[i, 0] += g_xh[i]
+        g_rot_c[i, 1] += g_yh[i]
+    o_local0 = ti.Vector([local[1, c] for c in ti.static(range(3))])
+    o_local1 = ti.Vector([local[2, c] for c in ti.static(range(3))])
+    g_pos_o = g_o0
+    g_rot_o = g_o0.outer_product(o_local0) + g_f.outer_product(o_local1 - o_local0)
+    return (ti.select(first, g_pos_c, g_pos_o), ti.select(first, g_rot_c, g_rot_o),
+            ti.select(first, g_pos_o, g_pos_c), ti.select(first, g_rot_o, g_rot_c))
+
+
 @ti.func
 def _clip_point_local(shape: ti.template(), feature, i, hull: ti.template()):
     """Geom-frame vertex i of a KIND_CLIP contact's clipped polygon: the clipped face's
@@ -2354,6 +2490,8 @@ def convex_evaluate(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, m
         position, normal, dist = _clip_evaluate(shape1, shape2, feature, hull)
     elif _cap_side(shape1, shape2, feature) != 0:
         position, normal, dist = _cap_evaluate(shape1, shape2, feature, hull)
+    elif _rim_side(shape1, shape2, feature) != 0:
+        position, normal, dist = _rim_evaluate(shape1, shape2, feature, hull)
     else:
         position, normal, dist = _core_evaluate(shape1, shape2, feature, hull)
     return position, normal, dist
@@ -2374,6 +2512,9 @@ def convex_evaluate_adjoint(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, 
                                                                 g_normal, g_dist)
     elif _cap_side(shape1, shape2, feature) != 0:
         g_pos1, g_rot1, g_pos2, g_rot2 = _cap_evaluate_adjoint(shape1, shape2, feature, hull, g_position,
+                                                               g_normal, g_dist)
+    elif _rim_side(shape1, shape2, feature) != 0:
+        g_pos1, g_rot1, g_pos2, g_rot2 = _rim_evaluate_adjoint(shape1, shape2, feature, hull, g_position,
                                                                g_normal, g_dist)
     else:
         g_pos1, g_rot1, g_pos2, g_rot2 = _core_evaluate_adjoint(shape1, shape2, feature, hull, g_position,
@@ -2396,15 +2537,18 @@ def iterated(type1, type2, margin, feature):
 def frozen(type1, type2, margin, feature):
     """Whether `convex_evaluate` holds one of the forward's directions fixed for this contact, so
     that it is not a closed form of the poses alone (its adjoint misses that direction's change):
-    the normal of a cylinder meeting a vertex or an edge at its rim (m < 2 in `_core_terms`), the
-    half-margin offset of a clipped edge's ends."""
+    the normal of two cylinders meeting at their rims, or of a rim whose feature holds both its
+    ends (m < 2 in `_core_terms`, outside `_rim_side`), the half-margin offset of a clipped edge's
+    ends."""
     held = feature[0] == KIND_CLIP and feature[7] > 0 and margin > 0
     if feature[0] != KIND_CLIP:
-        m, _, _ = _vertex_ids(feature)
+        m, ids1, ids2 = _vertex_ids(feature)
         mode1, mode2 = feature[10] % 3, feature[10] // 3
         cap = (type1 == CYLINDER and mode1 == 1) or (type2 == CYLINDER and mode2 == 1)
-        rim = (type1 == CYLINDER and mode1 == 0) or (type2 == CYLINDER and mode2 == 0)
-        held = m < 2 and rim and not cap
+        rim1, rim2 = type1 == CYLINDER and mode1 == 0, type2 == CYLINDER and mode2 == 0
+        ids = ti.select(rim1, ids1, ids2)
+        one_end = ids[1] == ids[0] and ids[2] == ids[0]
+        held = m < 2 and (rim1 or rim2) and not cap and (rim1 == rim2 or not one_end)
     return held
 
 
