@@ -349,13 +349,13 @@ def test_curved_convex_gradients_repeat_and_batch(f64):
 
 
 def test_curved_convex_pairs_refuse_a_backward_where_the_iterate_stays(f64):
-    """Where the closed form would hold the iterate's normal (a can tipped 30° whose rim meets the
-    rim of a wider cylinder's top: two circles) the contact stays the iterate, and a backward over
-    it says so, never a silent zero or an approximate gradient; so does every curved convex
-    contact under enable_mujoco_compatibility, which keeps MuJoCo's iterates (a can lying on a
-    box)."""
+    """Where no closed form is the converged contact (a can tipped 30° against the rim of a wider
+    cylinder's top, whose feature holds both ends of one: convex.frozen) the contact stays the
+    iterate, and a backward over it says so, never a silent zero or an approximate gradient; so
+    does every curved convex contact under enable_mujoco_compatibility, which keeps MuJoCo's
+    iterates (a can lying on a box)."""
     cases = ((False, "cylinder", gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0.35, 0, 0.02), euler=(0, 30, 0)),
-              "rim to rim", 1),
+              "both ends of one", 1),
              (True, "box", gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0, 0, 0.049), euler=(90, 0, 0)),
               "enable_mujoco_compatibility", 1))
     for compat, ground, morph, match, steps in cases:

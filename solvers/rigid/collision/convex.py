@@ -82,11 +82,10 @@ for a cylinder at its rim by its disk; the normal is the plane normal of the fea
 points, else the direction between the cores' closest points. Two cylinder features have closed
 forms of their own: on its cap (`_cap_terms`) the normal is its axis and the point the foot of the
 cap's centre on the other geom's feature, where the iterate's point is anywhere on the cap; at its
-rim against a vertex or an edge (`_rim_terms`) the contact is where the rim's circle comes closest
-to that point or line (Newton on the circle's angle; the reverse by implicit differentiation).
-Two rims against each other (or a rim feature holding both ends) keep the forward's normal,
-frozen, made orthogonal to the feature's line; that, and the half-margin offset of a clipped
-edge's ends (along the EPA normal), hold a direction fixed (`frozen`).
+rim against a vertex, an edge (`_rim_terms`) or another rim (`_rims_terms`) the contact is where
+the rim's circle comes closest to that point, line or circle (Newton on the circles' angles; the reverse by implicit
+differentiation). Two features keep the iterate (`frozen`): a clipped edge's ends with a margin
+(offset along the EPA normal), and two rims with both ends of one cylinder in the feature.
 """
 import numpy as np
 import taichi as ti
@@ -1905,8 +1904,8 @@ def _core_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.
     - m = 2: the unit normal of the plane of the w_j (the final EPA face or GJK triangle),
       oriented as the forward's normal u (feature columns 8, 9);
     - m < 2: the direction from the closest point of the w_j's line (or point) to the origin
-      (the cores' closest points), or u made orthogonal to that line when a cylinder meets at
-      its rim and `_rim_terms` does not take the contact (two rims; frozen).
+      (the cores' closest points; a cylinder at its rim whose feature holds both its ends, its
+      axis, is then met on its side, as the converged contact is).
     The balls and disks add their supports along n (geom 1) and -n (geom 2) to every vertex;
     the witness points x1, x2 apply the weights (lam: of w_1 - w_0, w_2 - w_0) of the point of
     that (moved) line or plane closest to the origin to each geom's points.
@@ -1925,7 +1924,7 @@ def _core_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.
     if m == 2:
         pre = pre * _sign(_dot(pre, u))
     else:
-        pre = ti.select(_rim(shape1, modes[0]) or _rim(shape2, modes[1]), u, -w0)
+        pre = -w0
         if m == 1:
             pre = pre - e1 * (_dot(e1, pre) / _dot(e1, e1))
     n = _normalize(pre)
@@ -1943,12 +1942,6 @@ def _core_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.
     x1 = a0 + lam[0] * (a1 - a0) + lam[1] * (a2 - a0) + _ball(shape1, modes[0]) * n + disk1
     x2 = b0 + lam[0] * (b1 - b0) + lam[1] * (b2 - b0) - _ball(shape2, modes[1]) * n - disk2
     return m, local1, local2, a0, a1, a2, b0, b1, b2, modes, u, pre, n, disk1, disk2, lam, x1, x2
-
-
-@ti.func
-def _rim(shape: ti.template(), mode):
-    """True for a cylinder that meets the contact at its rim (mode 0)."""
-    return shape[0] == CYLINDER and mode == 0
 
 
 @ti.func
@@ -1995,16 +1988,13 @@ def _core_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature
         g_e1 += _cross(e2, g_cross)
         g_e2 += _cross(g_cross, e1)
     else:
-        rim = _rim(shape1, modes[0]) or _rim(shape2, modes[1])
-        base = ti.select(rim, u, -w0)
         g_base = g_pre
-        if m == 1:  # pre = base - e1 t, t = e1 . base / e1 . e1
-            t = _dot(e1, base) / g11
+        if m == 1:  # pre = base - e1 t, t = e1 . base / e1 . e1, base = -w0
+            t = -_dot(e1, w0) / g11
             g_t = -_dot(g_pre, e1)
-            g_e1 += -t * g_pre + g_t * (base - 2.0 * t * e1) / g11
+            g_e1 += -t * g_pre + g_t * (-w0 - 2.0 * t * e1) / g11
             g_base += g_t * e1 / g11
-        if not rim:
-            g_w0 -= g_base
+        g_w0 -= g_base
     g_w = ti.Matrix.rows([g_w0 - g_e1 - g_e2, g_e1, g_e2])
     g_a += g_w
     g_b -= g_w
@@ -2160,11 +2150,43 @@ def _cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature,
             ti.select(first, g_pos_o, g_c), ti.select(first, g_rot_o, g_rot_c))
 
 
-# A cylinder meeting a vertex or an edge at its rim (m < 2 in `_core_terms`): the contact is where
-# the rim's circle comes closest to that point or line, at the circle angle th where the distance is
-# stationary. Newton on th from the forward's normal finds it to round-off in a few iterations;
-# the reverse differentiates the stationarity condition (implicit function), not the iterations.
-RIM_NEWTON = 12  # Newton iterations on th (quadratic from a start within EPA's tolerance)
+# A cylinder meeting a vertex, an edge or another cylinder's rim at its rim (m < 2 in `_core_terms`):
+# the contact is where the rim's circle comes closest to that point, line or circle, at the angles
+# where the distance is stationary. Newton on the angles from the forward's normal finds them to
+# round-off in a few iterations; the reverse differentiates the stationarity condition (the implicit
+# function theorem), not the iterations.
+RIM_NEWTON = 12  # Newton iterations (quadratic from a start within EPA's tolerance)
+
+
+@ti.func
+def _circle(shape: ti.template(), e_local, th):
+    """A cylinder's rim at angle th: (its end's centre e (world; e_local in the geom frame), the
+    point k = e + R (cos th xh + sin th yh), dk/dth), xh, yh the geom's x and y axes, R its radius."""
+    e = _rot(shape[3], e_local) + shape[2]
+    xh = ti.Vector([shape[3][0, 0], shape[3][1, 0], shape[3][2, 0]])
+    yh = ti.Vector([shape[3][0, 1], shape[3][1, 1], shape[3][2, 1]])
+    cos, sin = ti.cos(th), ti.sin(th)
+    return e, e + shape[4][0] * (cos * xh + sin * yh), shape[4][0] * (cos * yh - sin * xh)
+
+
+@ti.func
+def _circle_adjoint(shape: ti.template(), e_local, th, g_k, g_dk):
+    """Reverse of `_circle`'s k and dk/dth at a fixed th: (g_pos, g_rot)."""
+    cos, sin, radius = ti.cos(th), ti.sin(th), shape[4][0]
+    g_xh = radius * (cos * g_k - sin * g_dk)
+    g_yh = radius * (sin * g_k + cos * g_dk)
+    g_rot = g_k.outer_product(e_local)
+    for i in ti.static(range(3)):
+        g_rot[i, 0] += g_xh[i]
+        g_rot[i, 1] += g_yh[i]
+    return g_k, g_rot
+
+
+@ti.func
+def _start_angle(shape: ti.template(), direction):
+    """The angle of a cylinder's rim support along the world `direction` (`_disk_local`)."""
+    local = _rot_t(shape[3], direction)
+    return ti.atan2(local[1], local[0])
 
 
 @ti.func
@@ -2183,15 +2205,15 @@ def _rim_side(shape1: ti.template(), shape2: ti.template(), feature):
 
 @ti.func
 def _rim_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template()):
-    """The rim closed form (see above), every intermediate returned. The rim's geom C (side
-    `_rim_side`): its end's centre e, axes xh, yh, radius R; the other O: the point o0 and, for an
-    edge, the line o0 + t f. th stationary for |Q (k(th) - o0)|^2, k(th) = e + R (cos th xh +
-    sin th yh), Q the projection across f (the identity for a point), g' its second derivative
-    (> 0 at the minimum Newton is to find, else the form is flagged invalid); l the line's point
-    nearest k, d = k - l, n = d oriented as the forward's normal u; C's witness k moved by its
-    ball (half the margin) along n, O's l by its ball against n; sgn = +1 when C is geom 1.
-    Returns (first, C, O, mode_o, locals (e, o0, o1 as rows), line, e, xh, yh, o0, f, th, k, k1
-    (dk/dth), t, pre, n, x_c, x_o, sgn, g', valid)."""
+    """The rim-on-a-point-or-line form (see above), every intermediate returned. The rim's geom C
+    (side `_rim_side`): its circle k(th) (`_circle`); the other O: the point o0 and, for an edge,
+    the line o0 + t f. th stationary for |Q (k(th) - o0)|^2, Q the projection across f (the
+    identity for a point), g' its second derivative (> 0 at the minimum Newton is to find, else
+    the form is flagged invalid); l the line's point nearest k, d = k - l, n = d oriented as the
+    forward's normal u; C's witness k moved by its ball (half the margin) along n, O's l by its
+    ball against n; sgn = +1 when C is geom 1.
+    Returns (first, C, O, mode_o, locals (e, o0, o1 as rows), line, o0, f, th, k, dk/dth, t, pre,
+    n, x_c, x_o, sgn, g', valid)."""
     first = _rim_side(shape1, shape2, feature) == 1
     rim, other = _pick_shape(first, shape1, shape2), _pick_shape(not first, shape1, shape2)
     mode_o = ti.select(first, feature[10] // 3, feature[10] % 3)
@@ -2204,23 +2226,17 @@ def _rim_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.t
         for c in ti.static(range(3)):
             local[j, c] = point[c]
     rows = [ti.Vector([local[j, c] for c in ti.static(range(3))]) for j in ti.static(range(3))]
-    e = _rot(rim[3], rows[0]) + rim[2]
-    xh = ti.Vector([rim[3][0, 0], rim[3][1, 0], rim[3][2, 0]])
-    yh = ti.Vector([rim[3][0, 1], rim[3][1, 1], rim[3][2, 1]])
     o0 = _rot(other[3], rows[1]) + other[2]
     f = _rot(other[3], rows[2] - rows[1])
     line = m == 1
     ff = ti.select(line, _dot(f, f), 1.0)
-    radius = rim[4][0]
     sgn = ti.select(first, 1.0, -1.0)
     u = _decode_direction(feature[8], feature[9])
-    start = _rot_t(rim[3], sgn * u)  # the rim's support along its side's normal: the angle to start from
-    th = ti.atan2(start[1], start[0])
+    th = _start_angle(rim, sgn * u)
     k, k1, v, gp = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0]), 0.0
     for it in range(RIM_NEWTON + 1):  # the last pass only evaluates at the converged th
-        cos, sin = ti.cos(th), ti.sin(th)
-        k = e + radius * (cos * xh + sin * yh)
-        k1 = radius * (cos * yh - sin * xh)
+        e, k_th, k1_th = _circle(rim, rows[0], th)
+        k, k1 = k_th, k1_th
         v = k - o0
         qv = v - ti.select(line, _dot(f, v) / ff, 0.0) * f
         qk1 = k1 - ti.select(line, _dot(f, k1) / ff, 0.0) * f
@@ -2233,18 +2249,22 @@ def _rim_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.t
     n = _normalize(pre)
     x_c = k + sgn * _ball(rim, 0) * n
     x_o = o0 + t * f - sgn * _ball(other, mode_o) * n
-    valid = gp > 0
-    return first, rim, other, mode_o, local, line, e, xh, yh, o0, f, th, k, k1, t, pre, n, x_c, x_o, sgn, gp, valid
+    return first, rim, other, mode_o, local, line, o0, f, th, k, k1, t, pre, n, x_c, x_o, sgn, gp, gp > 0
+
+
+@ti.func
+def _nan_unless(valid):
+    """0 if valid, else NaN (added to a form's outputs: converge_contacts then keeps the iterate)."""
+    return ti.select(valid, 0.0, ti.math.nan)
 
 
 @ti.func
 def _rim_evaluate(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template()):
     """(position, normal, dist) of a cylinder's rim on a vertex or an edge (`_rim_terms`); NaN
-    where Newton did not end at a minimum (converge_contacts then keeps the iterate)."""
+    where Newton did not end at a minimum."""
     terms = _rim_terms(shape1, shape2, feature, hull)
-    first, n, x_c, x_o, valid = terms[0], terms[16], terms[17], terms[18], terms[21]
+    first, n, x_c, x_o, bad = terms[0], terms[13], terms[14], terms[15], _nan_unless(terms[18])
     x1, x2 = ti.select(first, x_c, x_o), ti.select(first, x_o, x_c)
-    bad = ti.select(valid, 0.0, ti.math.nan)
     return (x1 + x2) * 0.5 + bad, n + bad, shape1[5] - _dot(x1 - x2, n) + bad
 
 
@@ -2253,7 +2273,7 @@ def _rim_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature,
                           g_position, g_normal, g_dist):
     """Reverse of `_rim_evaluate`: (g_pos1, g_rot1, g_pos2, g_rot2); through th by the implicit
     function theorem on its stationarity, dth = -(dg / dinputs) / g'."""
-    first, rim, other, mode_o, local, line, e, xh, yh, o0, f, th, k, k1, t, pre, n, x_c, x_o, sgn, gp, _ = \
+    first, rim, other, mode_o, local, line, o0, f, th, k, k1, t, pre, n, x_c, x_o, sgn, gp, _ = \
         _rim_terms(shape1, shape2, feature, hull)
     x1, x2 = ti.select(first, x_c, x_o), ti.select(first, x_o, x_c)
     g_x1, g_x2 = 0.5 * g_position - g_dist * n, 0.5 * g_position + g_dist * n
@@ -2268,30 +2288,103 @@ def _rim_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature,
     g_f = t * (g_xo - g_d) + ti.select(line, g_t / ff, 0.0) * (v - 2.0 * t * f)
     g_k = g_xc + g_v
     g_o0 = g_xo - g_v
-    # k = e + R (cos th xh + sin th yh): explicit, then th's own dependence
-    radius, cos, sin = rim[4][0], ti.cos(th), ti.sin(th)
+    # th's own dependence: g(th, inputs) = Q v . dk/dth = 0, its partials times lam
     lam = -_dot(g_k, k1) / gp
-    # g(th, inputs) = Q v . k1 = 0: its partials, times lam
     qv = v - ti.select(line, _dot(f, v) / ff, 0.0) * f
     qk1 = k1 - ti.select(line, _dot(f, k1) / ff, 0.0) * f
     g_k += lam * qk1
     g_o0 -= lam * qk1
-    g_k1 = lam * qv
     g_f += ti.select(line, lam, 0.0) * (2.0 * _dot(f, v) * _dot(f, k1) * f / ff - v * _dot(f, k1) - k1 * _dot(f, v)) / ff
-    g_e = g_k
-    g_xh = radius * (cos * g_k - sin * g_k1)
-    g_yh = radius * (sin * g_k + cos * g_k1)
-    g_pos_c = g_e
-    g_rot_c = g_e.outer_product(ti.Vector([local[0, c] for c in ti.static(range(3))]))
-    for i in ti.static(range(3)):
-        g_rot_c[i, 0] += g_xh[i]
-        g_rot_c[i, 1] += g_yh[i]
+    e_local = ti.Vector([local[0, c] for c in ti.static(range(3))])
+    g_pos_c, g_rot_c = _circle_adjoint(rim, e_local, th, g_k, lam * qv)
     o_local0 = ti.Vector([local[1, c] for c in ti.static(range(3))])
     o_local1 = ti.Vector([local[2, c] for c in ti.static(range(3))])
-    g_pos_o = g_o0
     g_rot_o = g_o0.outer_product(o_local0) + g_f.outer_product(o_local1 - o_local0)
-    return (ti.select(first, g_pos_c, g_pos_o), ti.select(first, g_rot_c, g_rot_o),
-            ti.select(first, g_pos_o, g_pos_c), ti.select(first, g_rot_o, g_rot_c))
+    return (ti.select(first, g_pos_c, g_o0), ti.select(first, g_rot_c, g_rot_o),
+            ti.select(first, g_o0, g_pos_c), ti.select(first, g_rot_o, g_rot_c))
+
+
+@ti.func
+def _two_rims(shape1: ti.template(), shape2: ti.template(), feature):
+    """Whether a CORE / EPA contact is two cylinders meeting at their rims, one end each (m = 0)."""
+    m, _, _ = _vertex_ids(feature)
+    return (m == 0 and shape1[0] == CYLINDER and shape2[0] == CYLINDER and feature[10] % 3 == 0
+            and feature[10] // 3 == 0)
+
+
+@ti.func
+def _rims_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template()):
+    """Two rims (see above), every intermediate returned: the angles (a, b) stationary for
+    |k_1(a) - k_2(b)|^2 / 2, Newton on its gradient G = (d . dk_1/da, -d . dk_2/db), d = k_1 - k_2,
+    with its Hessian H (positive definite at the minimum Newton is to find, else the form is
+    flagged invalid); n = d oriented as the forward's normal u; each witness its k moved by its
+    ball (half the margin) along n (geom 1) or against it (geom 2).
+    Returns (locals (each end's centre as a row), a, b, k_1, dk_1, k_2, dk_2, (h11, h12, h22), pre,
+    n, x1, x2, valid)."""
+    local = ti.Matrix.zero(float, 2, 3)
+    for j in range(2):  # one lookup in a loop: inlined once
+        point = _support_local(_pick_shape(j == 0, shape1, shape2), feature[1 + j], hull)
+        for c in ti.static(range(3)):
+            local[j, c] = point[c]
+    e1_local = ti.Vector([local[0, c] for c in ti.static(range(3))])
+    e2_local = ti.Vector([local[1, c] for c in ti.static(range(3))])
+    u = _decode_direction(feature[8], feature[9])
+    a, b = _start_angle(shape1, u), _start_angle(shape2, -u)
+    k_1, dk_1, k_2, dk_2 = [ti.Vector([0.0, 0.0, 0.0]) for _ in ti.static(range(4))]
+    hess = ti.Vector([0.0, 0.0, 0.0])
+    for it in range(RIM_NEWTON + 1):  # the last pass only evaluates at the converged angles
+        e_1, k_1a, dk_1a = _circle(shape1, e1_local, a)
+        e_2, k_2b, dk_2b = _circle(shape2, e2_local, b)
+        k_1, dk_1, k_2, dk_2 = k_1a, dk_1a, k_2b, dk_2b
+        d = k_1 - k_2
+        hess = ti.Vector([_dot(dk_1, dk_1) - _dot(d, k_1 - e_1), -_dot(dk_1, dk_2),
+                          _dot(dk_2, dk_2) + _dot(d, k_2 - e_2)])
+        if it < RIM_NEWTON:
+            g1, g2 = _dot(d, dk_1), -_dot(d, dk_2)
+            det = hess[0] * hess[2] - hess[1] * hess[1]
+            a -= (hess[2] * g1 - hess[1] * g2) / det
+            b -= (hess[0] * g2 - hess[1] * g1) / det
+    d = k_1 - k_2
+    pre = d * _sign(_dot(d, u))
+    n = _normalize(pre)
+    x1 = k_1 + _ball(shape1, 0) * n
+    x2 = k_2 - _ball(shape2, 0) * n
+    valid = hess[0] > 0 and hess[0] * hess[2] - hess[1] * hess[1] > 0
+    return local, a, b, k_1, dk_1, k_2, dk_2, hess, pre, n, x1, x2, valid
+
+
+@ti.func
+def _rims_evaluate(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template()):
+    """(position, normal, dist) of two cylinders meeting at their rims (`_rims_terms`); NaN where
+    Newton did not end at a minimum."""
+    terms = _rims_terms(shape1, shape2, feature, hull)
+    n, x1, x2, bad = terms[9], terms[10], terms[11], _nan_unless(terms[12])
+    return (x1 + x2) * 0.5 + bad, n + bad, shape1[5] - _dot(x1 - x2, n) + bad
+
+
+@ti.func
+def _rims_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template(),
+                           g_position, g_normal, g_dist):
+    """Reverse of `_rims_evaluate`: (g_pos1, g_rot1, g_pos2, g_rot2); through the angles by the
+    implicit function theorem on G = 0: d(a, b) = -H^-1 dG / dinputs."""
+    local, a, b, k_1, dk_1, k_2, dk_2, hess, pre, n, x1, x2, _ = _rims_terms(shape1, shape2, feature, hull)
+    g_x1, g_x2 = 0.5 * g_position - g_dist * n, 0.5 * g_position + g_dist * n
+    g_n = g_normal - g_dist * (x1 - x2) + _ball(shape1, 0) * g_x1 - _ball(shape2, 0) * g_x2
+    d = k_1 - k_2
+    g_d = _normalize_adjoint(pre, g_n) * _sign(_dot(pre, d))
+    g_k1, g_k2 = g_x1 + g_d, g_x2 - g_d
+    # the angles' own dependence: lam = -H^-1 (dL/da, dL/db), then lam . dG/dinputs
+    g_a, g_b = _dot(g_k1, dk_1), _dot(g_k2, dk_2)
+    det = hess[0] * hess[2] - hess[1] * hess[1]
+    lam1 = -(hess[2] * g_a - hess[1] * g_b) / det
+    lam2 = -(hess[0] * g_b - hess[1] * g_a) / det
+    g_k1 += lam1 * dk_1 - lam2 * dk_2
+    g_k2 += lam2 * dk_2 - lam1 * dk_1
+    e1_local = ti.Vector([local[0, c] for c in ti.static(range(3))])
+    e2_local = ti.Vector([local[1, c] for c in ti.static(range(3))])
+    g_pos1, g_rot1 = _circle_adjoint(shape1, e1_local, a, g_k1, lam1 * d)
+    g_pos2, g_rot2 = _circle_adjoint(shape2, e2_local, b, g_k2, -lam2 * d)
+    return g_pos1, g_rot1, g_pos2, g_rot2
 
 
 @ti.func
@@ -2492,6 +2585,8 @@ def convex_evaluate(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, m
         position, normal, dist = _cap_evaluate(shape1, shape2, feature, hull)
     elif _rim_side(shape1, shape2, feature) != 0:
         position, normal, dist = _rim_evaluate(shape1, shape2, feature, hull)
+    elif _two_rims(shape1, shape2, feature):
+        position, normal, dist = _rims_evaluate(shape1, shape2, feature, hull)
     else:
         position, normal, dist = _core_evaluate(shape1, shape2, feature, hull)
     return position, normal, dist
@@ -2516,6 +2611,9 @@ def convex_evaluate_adjoint(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, 
     elif _rim_side(shape1, shape2, feature) != 0:
         g_pos1, g_rot1, g_pos2, g_rot2 = _rim_evaluate_adjoint(shape1, shape2, feature, hull, g_position,
                                                                g_normal, g_dist)
+    elif _two_rims(shape1, shape2, feature):
+        g_pos1, g_rot1, g_pos2, g_rot2 = _rims_evaluate_adjoint(shape1, shape2, feature, hull, g_position,
+                                                                g_normal, g_dist)
     else:
         g_pos1, g_rot1, g_pos2, g_rot2 = _core_evaluate_adjoint(shape1, shape2, feature, hull, g_position,
                                                                 g_normal, g_dist)
@@ -2535,21 +2633,15 @@ def iterated(type1, type2, margin, feature):
 
 @ti.func
 def frozen(type1, type2, margin, feature):
-    """Whether `convex_evaluate` holds one of the forward's directions fixed for this contact, so
-    that it is not a closed form of the poses alone (its adjoint misses that direction's change):
-    the normal of two cylinders meeting at their rims, or of a rim whose feature holds both its
-    ends (m < 2 in `_core_terms`, outside `_rim_side`), the half-margin offset of a clipped edge's
-    ends."""
-    held = feature[0] == KIND_CLIP and feature[7] > 0 and margin > 0
-    if feature[0] != KIND_CLIP:
-        m, ids1, ids2 = _vertex_ids(feature)
-        mode1, mode2 = feature[10] % 3, feature[10] // 3
-        cap = (type1 == CYLINDER and mode1 == 1) or (type2 == CYLINDER and mode2 == 1)
-        rim1, rim2 = type1 == CYLINDER and mode1 == 0, type2 == CYLINDER and mode2 == 0
-        ids = ti.select(rim1, ids1, ids2)
-        one_end = ids[1] == ids[0] and ids[2] == ids[0]
-        held = m < 2 and (rim1 or rim2) and not cap and (rim1 == rim2 or not one_end)
-    return held
+    """Whether `convex_evaluate` is not this contact's converged form, so that the forward keeps
+    the iterate (detect.converge_contacts) and a backward over it raises: a clipped edge's ends with
+    a margin (their half-margin offset is along the iterate's normal), and two cylinders at their
+    rims with both ends of one in the feature (m = 1; `_core_terms` would take that one's axis and
+    the other's end centre, not its rim)."""
+    rims = type1 == CYLINDER and type2 == CYLINDER and feature[10] % 3 == 0 and feature[10] // 3 == 0
+    m, _, _ = _vertex_ids(feature)
+    return (feature[0] == KIND_CLIP and feature[7] > 0 and margin > 0) or (feature[0] != KIND_CLIP and rims
+                                                                            and m == 1)
 
 
 @ti.func
