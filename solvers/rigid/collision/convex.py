@@ -84,8 +84,8 @@ forms of their own: on its cap (`_cap_terms`) the normal is its axis and the poi
 cap's centre on the other geom's feature, where the iterate's point is anywhere on the cap; at its
 rim against a vertex, an edge (`_rim_terms`) or another rim (`_rims_terms`) the contact is where
 the rim's circle comes closest to that point, line or circle (Newton on the circles' angles; the reverse by implicit
-differentiation). Two features keep the iterate (`frozen`): a clipped edge's ends with a margin
-(offset along the EPA normal), and two rims with both ends of one cylinder in the feature.
+differentiation). Only a clipped edge's ends with a margin keep the iterate (`frozen`: their
+offset is along the EPA normal).
 """
 import numpy as np
 import taichi as ti
@@ -2191,15 +2191,22 @@ def _start_angle(shape: ti.template(), direction):
 
 @ti.func
 def _rim_side(shape1: ti.template(), shape2: ti.template(), feature):
-    """0 unless exactly one geom of a CORE / EPA contact is a cylinder at its rim (mode 0), with a
-    single end in the feature, meeting the other geom's vertex or edge (m < 2); else which (1, 2)."""
+    """0 unless a geom of a CORE / EPA contact is a cylinder at its rim (mode 0) with a single end
+    in the feature, meeting the other geom's vertex or edge (m < 2), the other not at a rim of its
+    own with one end (`_two_rims`); else which (1, 2). An other cylinder "at its rim" with both its
+    ends in the feature is met on its side (the iterate's normal, a little off its axis's normal,
+    made it a rim: `_rim_terms`)."""
     m, ids1, ids2 = _vertex_ids(feature)
     rim1 = shape1[0] == CYLINDER and feature[10] % 3 == 0
     rim2 = shape2[0] == CYLINDER and feature[10] // 3 == 0
-    ids = ti.select(rim1, ids1, ids2)
+    one1 = ids1[1] == ids1[0] and ids1[2] == ids1[0]
+    one2 = ids2[1] == ids2[0] and ids2[2] == ids2[0]
     side = 0
-    if m < 2 and rim1 != rim2 and ids[1] == ids[0] and ids[2] == ids[0]:
-        side = ti.select(rim1, 1, 2)
+    if m < 2:
+        if rim1 and one1 and not (rim2 and one2):
+            side = 1
+        elif rim2 and one2 and not (rim1 and one1):
+            side = 2
     return side
 
 
@@ -2217,6 +2224,8 @@ def _rim_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.t
     first = _rim_side(shape1, shape2, feature) == 1
     rim, other = _pick_shape(first, shape1, shape2), _pick_shape(not first, shape1, shape2)
     mode_o = ti.select(first, feature[10] // 3, feature[10] % 3)
+    if other[0] == CYLINDER and mode_o == 0:  # both its ends in the feature: on its side
+        mode_o = 2
     m, ids1, ids2 = _vertex_ids(feature)
     ids_r, ids_o = ti.select(first, ids1, ids2), ti.select(first, ids2, ids1)
     local = ti.Matrix.zero(float, 3, 3)
@@ -2633,15 +2642,10 @@ def iterated(type1, type2, margin, feature):
 
 @ti.func
 def frozen(type1, type2, margin, feature):
-    """Whether `convex_evaluate` is not this contact's converged form, so that the forward keeps
-    the iterate (detect.converge_contacts) and a backward over it raises: a clipped edge's ends with
-    a margin (their half-margin offset is along the iterate's normal), and two cylinders at their
-    rims with both ends of one in the feature (m = 1; `_core_terms` would take that one's axis and
-    the other's end centre, not its rim)."""
-    rims = type1 == CYLINDER and type2 == CYLINDER and feature[10] % 3 == 0 and feature[10] // 3 == 0
-    m, _, _ = _vertex_ids(feature)
-    return (feature[0] == KIND_CLIP and feature[7] > 0 and margin > 0) or (feature[0] != KIND_CLIP and rims
-                                                                            and m == 1)
+    """Whether `convex_evaluate` holds one of the forward's directions fixed for this contact, so
+    that the forward keeps the iterate (detect.converge_contacts) and a backward over it raises: a
+    clipped edge's ends with a margin (their half-margin offset is along the iterate's normal)."""
+    return feature[0] == KIND_CLIP and feature[7] > 0 and margin > 0
 
 
 @ti.func
