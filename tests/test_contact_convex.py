@@ -182,26 +182,46 @@ def test_converged_contacts_stay_near_mujocos(f64, meshes, case):
     assert np.any(moved > 1e-10), "no contact was converged"
 
 
+def _quat_turning(a, b):
+    """The unit quaternion (w, x, y, z) of the shortest rotation taking unit vector a to b."""
+    a, b = np.asarray(a, float) / np.linalg.norm(a), np.asarray(b, float) / np.linalg.norm(b)
+    q = np.array([1.0 + a @ b, *np.cross(a, b)])
+    return q / np.linalg.norm(q)
+
+
 def test_cap_contacts_lie_under_the_cap(f64):
-    """A can standing on its cap, on a box face and on a wider cylinder's cap: the iterate's point
-    is anywhere on the cap (where EPA's last face was), the converged contact is the foot of the
-    cap's centre (convex._cap_terms), at the iterate's distance."""
-    for ground in (gs.morphs.Box(size=(1.0, 1.0, 0.2), pos=(0, 0, -0.1), fixed=True),
-                   gs.morphs.Cylinder(radius=0.3, height=0.2, pos=(0, 0, -0.1), fixed=True)):
+    """A cylinder's cap against a face, a line and a vertex: the iterate's point is anywhere on the
+    cap (where EPA's last face was); the converged contact is the foot of the cap's centre on the
+    other geom's feature (convex._cap_terms), at the iterate's distance:
+    - a can standing on a box face and on a wider cylinder's cap: under the can's centre;
+    - a capsule lying along y, 5 cm off a wide cylinder's axis, on its cap: on the capsule's axis
+      at the point nearest the cap's centre, (0.05, 0);
+    - a box balanced on a corner, 1 mm into a wide cylinder's cap: at that corner."""
+    wide = gs.morphs.Cylinder(radius=0.3, height=0.2, pos=(0, 0, -0.1), fixed=True)
+    corner = np.array([-0.05, -0.05, -0.05])
+    quat = _quat_turning(corner, (0, 0, -1))
+    cases = [(gs.morphs.Box(size=(1.0, 1.0, 0.2), pos=(0, 0, -0.1), fixed=True),
+              gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0.01, 0.02, 0.099)), (0.01, 0.02)),
+             (wide, gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0.01, 0.02, 0.099)), (0.01, 0.02)),
+             (wide, gs.morphs.Capsule(radius=0.05, height=0.2, pos=(0.05, 0.03, 0.049), euler=(90, 0, 0)),
+              (0.05, 0.0)),
+             (wide, gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.1, 0.05, np.linalg.norm(corner) - 1e-3), quat=quat),
+              (0.1, 0.05))]
+    for ground, body, foot in cases:
         contacts = []
         for compat in (True, False):
             scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=compat),
                              show_viewer=False)
             scene.add_entity(ground)
-            scene.add_entity(gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0.01, 0.02, 0.099)))
+            scene.add_entity(body)
             scene.build()
             scene.step()
             rows = scene.rigid_solver.contacts()[0].cpu().numpy()
             contacts.append(rows[rows[:, 0] >= 0][:, [0, 1, 2, 3, 4, 8]])  # geoms, position, distance
         iterate, converged = contacts
-        assert len(iterate) == len(converged) == 1 and np.array_equal(iterate[:, :2], converged[:, :2])
-        np.testing.assert_allclose(converged[0, 2:5], (0.01, 0.02, -0.0005), atol=1e-12)
-        assert abs(converged[0, 5] - iterate[0, 5]) < 1e-12 and np.abs(iterate[0, 2:4] - (0.01, 0.02)).max() > 1e-3
+        assert len(iterate) == len(converged) == 1 and np.array_equal(iterate[:, :2], converged[:, :2]), body
+        np.testing.assert_allclose(converged[0, 2:4], foot, atol=1e-9, err_msg=str(body))
+        np.testing.assert_allclose(converged[0, 5], iterate[0, 5], atol=1e-9, err_msg=str(body))
 
 
 def test_mesh_box_rests_like_box(f64, meshes):

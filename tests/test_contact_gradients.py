@@ -269,7 +269,7 @@ CURVED_SCENES = {
                                                             euler=(90, 0, 0))),
     "cylinder-box rim": ("box", lambda: gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0, 0, 0.12),
                                                            euler=(30, 10, 0))),
-    "cylinder-cylinder rim on cap": ("cylinder", lambda: gs.morphs.Cylinder(radius=0.05, height=0.2,
+    "cylinder-cylinder tipped onto a cap": ("cylinder", lambda: gs.morphs.Cylinder(radius=0.05, height=0.2,
                                                                             pos=(0.05, 0, 0.12), euler=(30, 10, 0))),
     "cylinder-box cap": ("box", lambda: gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0, 0, 0.099))),
     "cylinder-cylinder cap on cap": ("cylinder", lambda: gs.morphs.Cylinder(radius=0.05, height=0.2,
@@ -311,18 +311,22 @@ def test_curved_convex_pairs(f64, case, cone):
     """Contacts of a cylinder through the convex collider, which iterates on its rim: the forward
     takes the converged closed form of each contact's feature (converge_contacts), so the step is
     that closed form's map and its reverse is exact. A body with an initial spin (6) → its pose
-    after 40 steps, contacts on at the end."""
+    after 40 steps; it touches the ground in at least 10 of them (some roll or slide off)."""
     ground, morph = CURVED_SCENES[case]
     scene, body = _curved_scene(ground, morph(), cone)
+    touching = []
 
     def loss(x):
         scene.reset()
         body.set_dofs_velocity(x)
-        _roll(scene, 40)
+        touching.clear()
+        for _ in range(40):
+            scene.step()
+            touching.append(bool((scene.rigid_solver.contacts()[..., 0] >= 0).any()))
         return (body.get_pos() * torch.tensor([1.0, 2.0, 5.0])).sum() + body.get_quat()[1:].sum()
 
     assert_converged(directional_errors(loss, torch.tensor(SPIN, dtype=torch.float64)), f"{case} {cone}")
-    assert len(scene.rigid_solver.contacts()) > 0, "the body must touch the ground at the end"
+    assert sum(touching) >= 10, f"{case}: the body touched the ground in {sum(touching)} of 40 steps"
 
 
 def test_curved_convex_gradients_repeat_and_batch(f64):

@@ -294,9 +294,10 @@ class RigidSolver(Solver):
                        f"{names} are MuJoCo's iterates on curved shapes and margins, which have no exact gradient; "
                        f"expected enable_mujoco_compatibility=False (their converged contacts)")
             else:
-                why = (f"a contact of {names} kept the convex collider's iterate (a degenerate feature, whose "
-                       f"closed form is not finite), which has no exact gradient; expected other contact features, "
-                       f"or RigidOptions(enable_collision=False)")
+                why = (f"a contact of {names} kept the convex collider's iterate (two cylinders at their rims "
+                       f"with both ends of each in the contact's feature, or a feature whose form is not finite or "
+                       f"not converged), which has no exact gradient; expected other contact features, or "
+                       f"RigidOptions(enable_collision=False)")
             raise GradientError(f"rigid solver (entities: {', '.join(self.entity_names)}): this step had no exact "
                                 f"gradient: {why}")
 

@@ -70,8 +70,8 @@ Replay. `convex_evaluate` and `plane_mesh_evaluate` give a contact again from it
 as a closed form of the two geom poses; `convex_evaluate_adjoint` and
 `plane_mesh_evaluate_adjoint` are those closed forms' hand-written reverses (the colliders never
 call them: a backward's kernel does, per contact; and the forward's detect.converge_contacts
-makes an iterate on curved supports (`iterated`) its closed form, unless `frozen`). Where the forward computes the contact from
-discrete points only (plane-mesh, clipping, GJK between points, segments, boxes and meshes, EPA
+makes an iterate on curved supports (`iterated`) its closed form, unless `frozen`). Where the
+forward computes the contact from discrete points only (plane-mesh, clipping, GJK between points, segments, boxes and meshes, EPA
 between boxes and meshes without margin) the replay is the forward's own value to rounding. Where
 the forward iterates on curved supports (EPA with a sphere, capsule or margin, whose balls it
 samples at a few directions; any cylinder; a clipped edge's ends with a margin) the replay is the
@@ -84,11 +84,13 @@ forms of their own: on its cap (`_cap_terms`) the normal is its axis and the poi
 cap's centre on the other geom's feature, where the iterate's point is anywhere on the cap; at its
 rim against a vertex, an edge (`_rim_terms`) or another rim (`_rims_terms`) the contact is where
 the rim's circle comes closest to that point, line or circle (Newton on the circles' angles; the reverse by implicit
-differentiation). Only a clipped edge's ends with a margin keep the iterate (`frozen`: their
-offset is along the EPA normal).
+differentiation). The iterate stays where no form here is the converged contact (`frozen`: a
+clipped edge's ends with a margin, offset along the EPA normal; two cylinders at their rims with
+both ends of each in the feature) or where the form is not finite.
 """
 import numpy as np
 import taichi as ti
+from taichi.lang import impl
 
 # MuJoCo geom type codes (mjtGeom), and two internal "cores": sphere -> point, capsule -> segment
 PLANE, SPHERE, CAPSULE, CYLINDER, BOX, MESH = 0, 2, 3, 5, 6, 7
@@ -1773,9 +1775,10 @@ def plane_mesh(pos1, rot1, size1, pos2, rot2, size2, mesh2, margin, hull: ti.tem
     return count, position, normal_out, dist, feature
 
 
-# ----------------------------------------------------------------------------- replay (backward)
+# ----------------------------------------------------------------------------- replay
 # A contact replayed from its feature row as a closed form of the two geom poses, and that closed
-# form's hand-written reverse. The colliders never call these: a backward calls them per contact.
+# form's hand-written reverse. The colliders never call these: detect.converge_contacts makes an
+# iterate its closed form in the forward, and a backward calls the reverses per contact.
 # pos (3,) m, rot (3, 3) as 9 independent numbers (a non-orthonormal rot gives the formula's value,
 # the rotation gradient is its projection); the adjoints return d(g_position . position +
 # g_normal . normal + g_dist . dist) / d(pos1, rot1, pos2, rot2).
@@ -2060,7 +2063,7 @@ def _cap_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.t
     against n (as `_core_terms`'), C's is that point projected on the cap's plane, moved by C's
     ball (half the margin). sgn = +1 when C is geom 1.
     Returns (first, C, O, c local, O's locals, k, c, o_0..2, mu (2,), q, pre, n, disk_O, x_C,
-    x_O, sgn)."""
+    x_O, sgn, O's mode)."""
     first = _cap_side(shape1, shape2, feature) == 1
     cap, other = _pick_shape(first, shape1, shape2), _pick_shape(not first, shape1, shape2)
     mode_o = ti.select(first, feature[10] // 3, feature[10] % 3)
@@ -2068,6 +2071,8 @@ def _cap_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.t
                       ti.Vector([feature[1], feature[3], feature[5]]))
     c_local = _support_local(cap, ti.select(first, feature[1], feature[2]), hull)
     k, o_local = _cap_other_locals(other, mode_o, ids_o, feature[7], hull)
+    if other[0] == CYLINDER and mode_o == 0 and k > 0:  # "at its rim" with both ends: on its side (`_rim_terms`)
+        mode_o = 2
     c = _rot(cap[3], c_local) + cap[2]
     o0, o1, o2 = [_rot(other[3], ti.Vector([o_local[j, i] for i in ti.static(range(3))])) + other[2]
                   for j in ti.static(range(3))]
@@ -2158,6 +2163,13 @@ def _cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature,
 RIM_NEWTON = 12  # Newton iterations (quadratic from a start within EPA's tolerance)
 
 
+def _newton_tolerance():
+    """Largest accepted stationarity residual after RIM_NEWTON iterations, relative to its terms'
+    size (read at compile time: the square root of the float type's unit round-off). Larger, the
+    solve did not converge and the implicit reverse would not be the forward's derivative."""
+    return 3.5e-4 if impl.get_runtime().default_fp == ti.f32 else 1.5e-8
+
+
 @ti.func
 def _circle(shape: ti.template(), e_local, th):
     """A cylinder's rim at angle th: (its end's centre e (world; e_local in the geom frame), the
@@ -2242,7 +2254,8 @@ def _rim_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.t
     sgn = ti.select(first, 1.0, -1.0)
     u = _decode_direction(feature[8], feature[9])
     th = _start_angle(rim, sgn * u)
-    k, k1, v, gp = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0]), 0.0
+    k, k1, v = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+    gp, converged = 0.0, False
     for it in range(RIM_NEWTON + 1):  # the last pass only evaluates at the converged th
         e, k_th, k1_th = _circle(rim, rows[0], th)
         k, k1 = k_th, k1_th
@@ -2250,15 +2263,18 @@ def _rim_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.t
         qv = v - ti.select(line, _dot(f, v) / ff, 0.0) * f
         qk1 = k1 - ti.select(line, _dot(f, k1) / ff, 0.0) * f
         gp = _dot(qk1, k1) - _dot(qv, k - e)  # d2/dth2 of |Q v|^2 / 2 (k'' = e - k)
+        residual = _dot(qv, k1)
         if it < RIM_NEWTON:
-            th -= _dot(qv, k1) / gp
+            th -= residual / gp
+        else:
+            converged = ti.abs(residual) <= ti.static(_newton_tolerance()) * ti.sqrt(_dot(qv, qv) * _dot(k1, k1))
     t = ti.select(line, _dot(f, v) / ff, 0.0)
     d = v - t * f
     pre = d * _sign(_dot(d, u))
     n = _normalize(pre)
     x_c = k + sgn * _ball(rim, 0) * n
     x_o = o0 + t * f - sgn * _ball(other, mode_o) * n
-    return first, rim, other, mode_o, local, line, o0, f, th, k, k1, t, pre, n, x_c, x_o, sgn, gp, gp > 0
+    return first, rim, other, mode_o, local, line, o0, f, th, k, k1, t, pre, n, x_c, x_o, sgn, gp, gp > 0 and converged
 
 
 @ti.func
@@ -2303,7 +2319,8 @@ def _rim_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature,
     qk1 = k1 - ti.select(line, _dot(f, k1) / ff, 0.0) * f
     g_k += lam * qk1
     g_o0 -= lam * qk1
-    g_f += ti.select(line, lam, 0.0) * (2.0 * _dot(f, v) * _dot(f, k1) * f / ff - v * _dot(f, k1) - k1 * _dot(f, v)) / ff
+    fv, fk1 = _dot(f, v), _dot(f, k1)
+    g_f += ti.select(line, lam, 0.0) * (2.0 * fv * fk1 * f / ff - v * fk1 - k1 * fv) / ff
     e_local = ti.Vector([local[0, c] for c in ti.static(range(3))])
     g_pos_c, g_rot_c = _circle_adjoint(rim, e_local, th, g_k, lam * qv)
     o_local0 = ti.Vector([local[1, c] for c in ti.static(range(3))])
@@ -2340,7 +2357,7 @@ def _rims_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.
     u = _decode_direction(feature[8], feature[9])
     a, b = _start_angle(shape1, u), _start_angle(shape2, -u)
     k_1, dk_1, k_2, dk_2 = [ti.Vector([0.0, 0.0, 0.0]) for _ in ti.static(range(4))]
-    hess = ti.Vector([0.0, 0.0, 0.0])
+    hess, converged = ti.Vector([0.0, 0.0, 0.0]), False
     for it in range(RIM_NEWTON + 1):  # the last pass only evaluates at the converged angles
         e_1, k_1a, dk_1a = _circle(shape1, e1_local, a)
         e_2, k_2b, dk_2b = _circle(shape2, e2_local, b)
@@ -2348,17 +2365,20 @@ def _rims_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.
         d = k_1 - k_2
         hess = ti.Vector([_dot(dk_1, dk_1) - _dot(d, k_1 - e_1), -_dot(dk_1, dk_2),
                           _dot(dk_2, dk_2) + _dot(d, k_2 - e_2)])
+        g1, g2 = _dot(d, dk_1), -_dot(d, dk_2)
         if it < RIM_NEWTON:
-            g1, g2 = _dot(d, dk_1), -_dot(d, dk_2)
             det = hess[0] * hess[2] - hess[1] * hess[1]
             a -= (hess[2] * g1 - hess[1] * g2) / det
             b -= (hess[0] * g2 - hess[1] * g1) / det
+        else:
+            scale = ti.sqrt(_dot(d, d) * (_dot(dk_1, dk_1) + _dot(dk_2, dk_2)))
+            converged = ti.max(ti.abs(g1), ti.abs(g2)) <= ti.static(_newton_tolerance()) * scale
     d = k_1 - k_2
     pre = d * _sign(_dot(d, u))
     n = _normalize(pre)
     x1 = k_1 + _ball(shape1, 0) * n
     x2 = k_2 - _ball(shape2, 0) * n
-    valid = hess[0] > 0 and hess[0] * hess[2] - hess[1] * hess[1] > 0
+    valid = hess[0] > 0 and hess[0] * hess[2] - hess[1] * hess[1] > 0 and converged
     return local, a, b, k_1, dk_1, k_2, dk_2, hess, pre, n, x1, x2, valid
 
 
@@ -2642,10 +2662,16 @@ def iterated(type1, type2, margin, feature):
 
 @ti.func
 def frozen(type1, type2, margin, feature):
-    """Whether `convex_evaluate` holds one of the forward's directions fixed for this contact, so
-    that the forward keeps the iterate (detect.converge_contacts) and a backward over it raises: a
-    clipped edge's ends with a margin (their half-margin offset is along the iterate's normal)."""
-    return feature[0] == KIND_CLIP and feature[7] > 0 and margin > 0
+    """Whether `convex_evaluate` is not this contact's converged form, so that the forward keeps
+    the iterate (detect.converge_contacts) and a backward over it raises: a clipped edge's ends with
+    a margin (their half-margin offset is along the iterate's normal), and two cylinders "at their
+    rims" with both ends of each in the feature (m = 1: `_core_terms` would take a line through
+    both axes, neither cylinder's side)."""
+    m, ids1, ids2 = _vertex_ids(feature)
+    rims = type1 == CYLINDER and type2 == CYLINDER and feature[10] % 3 == 0 and feature[10] // 3 == 0
+    ends = (ids1[1] != ids1[0] or ids1[2] != ids1[0]) and (ids2[1] != ids2[0] or ids2[2] != ids2[0])
+    return (feature[0] == KIND_CLIP and feature[7] > 0 and margin > 0) or (feature[0] != KIND_CLIP and rims
+                                                                            and m == 1 and ends)
 
 
 @ti.func
