@@ -152,7 +152,7 @@ def test_convex_pairs_step_like_mujoco(f64, meshes, case):
     assert exact >= MIN_EXACT[case] * touching, (case, exact, touching)
 
 
-CONVERGED_APPROX = 1e-3  # m: a converged contact against the CCD iterate (measured 6e-5 m on these near-touching states)
+CONVERGED_APPROX = 1e-3  # m: a converged contact against the CCD iterate (measured 6e-5 m at these touching states)
 
 
 @pytest.mark.parametrize("case", ["cylinder-box", "cylinder-cylinder", "capsule-cylinder"])

@@ -71,22 +71,24 @@ as a closed form of the two geom poses; `convex_evaluate_adjoint` and
 `plane_mesh_evaluate_adjoint` are those closed forms' hand-written reverses (the colliders never
 call them: a backward's kernel does, per contact; and the forward's detect.converge_contacts
 makes an iterate on curved supports (`iterated`) its closed form, unless `frozen`). Where the
-forward computes the contact from discrete points only (plane-mesh, clipping, GJK between points, segments, boxes and meshes, EPA
-between boxes and meshes without margin) the replay is the forward's own value to rounding. Where
-the forward iterates on curved supports (EPA with a sphere, capsule or margin, whose balls it
-samples at a few directions; any cylinder; a clipped edge's ends with a margin) the replay is the
-converged contact those iterations approach, within the CCD tolerance's effect of the forward
-(1e-5 m typical, 3e-3 m seen with cylinders): each geom is a core (point, segment, box, mesh)
-swept by a ball (sphere and capsule radius, half the margin, a cylinder's disk on its side), or
-for a cylinder at its rim by its disk; the normal is the plane normal of the feature's Minkowski
-points, else the direction between the cores' closest points. Two cylinder features have closed
-forms of their own: on its cap (`_cap_terms`) the normal is its axis and the point the foot of the
-cap's centre on the other geom's feature, where the iterate's point is anywhere on the cap; at its
-rim against a vertex, an edge (`_rim_terms`) or another rim (`_rims_terms`) the contact is where
-the rim's circle comes closest to that point, line or circle (Newton on the circles' angles; the reverse by implicit
-differentiation). The iterate stays where no form here is the converged contact (`frozen`: a
-clipped edge's ends with a margin, offset along the EPA normal; two cylinders at their rims with
-both ends of each in the feature) or where the form is not finite.
+forward computes the contact from discrete points only (plane-mesh, clipping, GJK between
+points, segments, boxes and meshes, EPA between boxes and meshes without margin) the replay is
+the forward's own value to rounding. Where the forward iterates on curved supports (EPA with a
+sphere, capsule or margin, whose balls it samples at a few directions; any cylinder; a clipped
+edge's ends with a margin) the replay is the converged contact those iterations approach, within
+the CCD tolerance's effect of the forward (1e-5 m typical, 4e-3 m and 3e-2 rad in the normal at
+deep random poses with cylinders): each geom is a core (point, segment, box, mesh) swept by a
+ball (sphere and capsule radius, half the margin, a cylinder's disk on its side), or for a
+cylinder at its rim by its disk; the normal is the plane normal of the feature's Minkowski
+points, else the direction between the cores' closest points. Two cylinder features have forms
+of their own: on its cap (`_cap_terms`) the normal is its axis and the point the foot of the
+cap's centre on the other geom's feature, where the iterate's point is anywhere on the cap; at
+its rim against a vertex, an edge (`_rim_terms`) or another rim (`_rims_terms`) the contact is
+where the rim's circle comes closest to that point, line or circle (Newton on the circles'
+angles, converged to round-off; the reverse by implicit differentiation). The iterate stays where
+no form here is the converged contact (`frozen`: a clipped edge's ends with a margin, offset
+along the EPA normal; two cylinders at their rims with both ends of each in the feature) or
+where the form is not finite or Newton did not converge.
 """
 import numpy as np
 import taichi as ti
