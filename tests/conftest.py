@@ -18,14 +18,23 @@ def pybullet(*parts):
     return os.path.join(PYBULLET, *parts)
 
 
-FIRST = ("test_examples.py",)  # the longest file (each example a subprocess, ~20 s): started first
+FIRST = ("test_examples.py",)  # the longest file: started first
+LAST = ("test_runtime.py",)  # restarts the runtime (gs.destroy, gs.init on another backend)
+
+
+def _float32(item):
+    return "f32" in getattr(item, "fixturenames", ())
 
 
 def pytest_collection_modifyitems(items):
-    """Run FIRST's tests before the rest (order otherwise kept): the suite runs on two workers,
-    one file to a worker (pyproject's addopts), and a long file dealt out last would run alone
-    at the end."""
-    items.sort(key=lambda item: os.path.basename(str(item.fspath)) not in FIRST)
+    """Run FIRST's tests before the rest: the suite runs on two workers, one test file to a worker
+    (pyproject's addopts), and a long file dealt out last would run alone at the end. Then the
+    files without float32 tests, those with, and LAST; in a file, float64 tests first. A change
+    of precision restarts Taichi (gs.init), and every kernel the worker uses next pays Taichi's
+    code generation again (~20 s for the constraint stage's on a slow machine)."""
+    mixed = {item.fspath for item in items if _float32(item)}
+    items.sort(key=lambda item: (os.path.basename(str(item.fspath)) not in FIRST,
+                                 os.path.basename(str(item.fspath)) in LAST, item.fspath in mixed, _float32(item)))
 
 
 @pytest.fixture

@@ -22,7 +22,9 @@ def _warnings(caplog):
 
 
 def _pendulum():
-    scene = gs.Scene()
+    """Without self-collision: no contact pairs, so no contact kernels to load again after each
+    restart of the runtime here."""
+    scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_self_collision=False))
     robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
     scene.build()
     return scene, robot
