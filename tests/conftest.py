@@ -29,9 +29,9 @@ def _float32(item):
 def pytest_collection_modifyitems(items):
     """Run FIRST's tests before the rest: the suite runs on two workers, one test file to a worker
     (pyproject's addopts), and a long file dealt out last would run alone at the end. Then the
-    files without float32 tests, those with, and LAST; in a file, float64 tests first. A change
-    of precision restarts Taichi (gs.init), and every kernel the worker uses next pays Taichi's
-    code generation again (~20 s for the constraint stage's on a slow machine)."""
+    files without tests on the f32 fixture, those with, and LAST; in a file, the others first. A
+    change of precision restarts Taichi (gs.init), and every kernel the worker uses next pays
+    LLVM's optimisation and code generation again (~20 s for `constrain` on a slow machine)."""
     mixed = {item.fspath for item in items if _float32(item)}
     items.sort(key=lambda item: (os.path.basename(str(item.fspath)) not in FIRST,
                                  os.path.basename(str(item.fspath)) in LAST, item.fspath in mixed, _float32(item)))
