@@ -1,5 +1,7 @@
 """Shared fixtures: runtime precision and the robots we test on."""
 import os
+import runpy
+import sys
 
 import pybullet_data
 import pytest
@@ -18,23 +20,47 @@ def pybullet(*parts):
     return os.path.join(PYBULLET, *parts)
 
 
-FIRST = ("test_examples.py",)  # the longest file: started first
+FIRST = ("test_examples.py",)  # the longest file: started right after the float32 group
 LAST = ("test_runtime.py",)  # restarts the runtime (gs.destroy, gs.init on another backend)
+FLOAT32 = "float32"  # the xdist group of every float32 test
 
 
 def _float32(item):
-    return "f32" in getattr(item, "fixturenames", ())
+    """Whether the test runs in float32: on the f32 fixture, marked float32, or parametrized with
+    precision "32"."""
+    callspec = getattr(item, "callspec", None)
+    return ("f32" in getattr(item, "fixturenames", ()) or item.get_closest_marker(FLOAT32) is not None
+            or (callspec is not None and callspec.params.get("precision") == "32"))
 
 
+@pytest.hookimpl(tryfirst=True)  # before xdist's hook, which names a group's tests by their mark
 def pytest_collection_modifyitems(items):
-    """Run FIRST's tests before the rest: the suite runs on two workers, one test file to a worker
-    (pyproject's addopts), and a long file dealt out last would run alone at the end. Then the
-    files without tests on the f32 fixture, those with, and LAST; in a file, the others first. A
-    change of precision restarts Taichi (gs.init), and every kernel the worker uses next pays
-    LLVM's optimisation and code generation again (~20 s for `constrain` on a slow machine)."""
-    mixed = {item.fspath for item in items if _float32(item)}
-    items.sort(key=lambda item: (os.path.basename(str(item.fspath)) not in FIRST,
-                                 os.path.basename(str(item.fspath)) in LAST, item.fspath in mixed, _float32(item)))
+    """Every float32 test in one group (xdist_group), run first; then FIRST's tests, the other
+    files, and LAST. A change of precision restarts Taichi (gs.init), and every kernel the worker
+    uses next pays LLVM's optimisation and code generation again (~20 s for `constrain` on a slow
+    machine); a kernel one worker compiles reaches the disk cache only when its Taichi stops, so
+    float32 tests spread over both workers compiled the float32 kernels in each."""
+    items.sort(key=lambda item: (not _float32(item), os.path.basename(str(item.fspath)) not in FIRST,
+                                 os.path.basename(str(item.fspath)) in LAST))
+    for item in items:
+        if _float32(item):
+            item.add_marker(pytest.mark.xdist_group(FLOAT32))
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_xdist_make_scheduler(config, log):
+    """pyproject's --dist loadgroup, with one work unit per test file (as --dist loadfile) for the
+    tests in no group, where xdist's loadgroup deals them out one by one."""
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadGroupScheduling
+
+    class FileOrGroupScheduling(LoadGroupScheduling):
+        def _split_scope(self, nodeid):
+            scope = super()._split_scope(nodeid)  # the test's group, or its own nodeid in none
+            return nodeid.split("::", 1)[0] if scope == nodeid else scope
+
+    return FileOrGroupScheduling(config, log)
 
 
 @pytest.fixture
@@ -45,3 +71,17 @@ def f64():
 @pytest.fixture
 def f32():
     gs.init(precision="32", logging_level="warning")
+
+
+@pytest.fixture
+def run_script(monkeypatch):
+    """run_script(path, args): the script run inside the test process as ``python path *args``
+    would (``__main__``, its folder on the path, the repository as working directory): the kernels
+    it shares with other tests and scripts load once, where a process of its own paid Taichi's code
+    generation again (20-60 s a script on a slow machine)."""
+    def run(path, args):
+        monkeypatch.chdir(os.path.dirname(ASSETS))
+        monkeypatch.setattr(sys, "argv", [path, *args])
+        monkeypatch.syspath_prepend(os.path.dirname(path))
+        runpy.run_path(path, run_name="__main__")
+    return run

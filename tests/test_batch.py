@@ -196,7 +196,8 @@ def test_free_base_envs_idx(f64):
     ("64", pybullet("cartpole.urdf"), True),
 ])
 def test_batch_equals_single_envs_other_robots(precision, path, fixed):
-    """(Last in the module: it restarts Taichi, which ends the module's scenes.) Bitwise
+    """(Last in the module: a change of precision restarts Taichi, which ends the module's scenes;
+    the float32 case runs in conftest's float32 group.) Bitwise
     equality must not hinge on one robot: batched and single-env scenes run kernels
     compiled for different loop schedules (data.RigidData.schedule), and floating-point contraction could
     differ between them. Substeps > 1, float32 too; eight of the envs are replayed alone."""

@@ -1,10 +1,9 @@
 """The benchmark scripts still run, ours only, at their smallest sizes: every one but
 compile_times.py (which starts processes on empty kernel caches). A bench is not a timed test, but
 one that breaks goes unnoticed: rigid_contact_grad.py read a solver attribute that had been removed
-and crashed for several sessions. Peers are left out (their interpreters are unset)."""
+and crashed for several sessions. Peers are left out (their interpreters are unset). They run
+inside the test process (conftest's run_script), all in float32."""
 import os
-import subprocess
-import sys
 
 import pytest
 
@@ -20,9 +19,9 @@ SMALLEST = {
 }
 
 
+@pytest.mark.float32
 @pytest.mark.parametrize("name", SMALLEST)
-def test_bench_runs(name):
-    env = {key: value for key, value in os.environ.items() if key not in ("GENESIS_PYTHON", "NEWTON_PYTHON")}
-    done = subprocess.run([sys.executable, os.path.join("bench", f"{name}.py"), *SMALLEST[name]], cwd=ROOT, env=env,
-                          capture_output=True, text=True, timeout=900)
-    assert done.returncode == 0, f"bench/{name}.py failed:\n{done.stdout[-1500:]}\n{done.stderr[-3000:]}"
+def test_bench_runs(name, run_script, monkeypatch):
+    monkeypatch.delenv("GENESIS_PYTHON", raising=False)
+    monkeypatch.delenv("NEWTON_PYTHON", raising=False)
+    run_script(os.path.join(ROOT, "bench", f"{name}.py"), SMALLEST[name])

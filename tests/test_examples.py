@@ -1,12 +1,7 @@
 """Examples double as tests: each runs in its short mode and ends with its own check; here we also
 check that it left something to look at: a readable MP4 of moving frames and a readable PNG plot.
-
-They run inside the test process, as a script run by ``python`` (``__main__``, its folder on the
-path, its command line): the kernels they share are then loaded once, where a process per example
-paid Taichi's code generation again each time (20-60 s an example on a slow machine)."""
+They run inside the test process (conftest's run_script)."""
 import os
-import runpy
-import sys
 
 import imageio.v3 as iio
 import numpy as np
@@ -15,20 +10,17 @@ import pytest
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # example → the plot it writes besides <example>.mp4
 EXAMPLES = {"quickstart": "end_effector", "trajectory_optimization": "loss", "system_identification": "loss",
-            "push_box": "loss", "material_identification": "fit",
-            "policy": "loss", "soft_robot": "loss"}  # float64 ones first: a change of precision restarts Taichi
+            "push_box": "loss", "material_identification": "fit", "policy": "loss", "soft_robot": "loss"}
+FLOAT32 = ("policy", "soft_robot")  # gs.init(precision="32"): in conftest's float32 group
 SHORT_RES = (320, 240)  # examples/example_run.py: frames in short mode (width, height)
 MIN_FRAMES = 10
 MOVED = 30  # a pixel differs between the first and last frame by more than this (0-255): not codec noise
 
 
-@pytest.mark.parametrize("name", EXAMPLES)
-def test_example_short(name, tmp_path, monkeypatch):
-    script = os.path.join(ROOT, "examples", f"{name}.py")
-    monkeypatch.chdir(ROOT)
-    monkeypatch.setattr(sys, "argv", [script, "--short", "--out", str(tmp_path)])
-    monkeypatch.syspath_prepend(os.path.dirname(script))
-    runpy.run_path(script, run_name="__main__")  # an example's own check raises
+@pytest.mark.parametrize("name", [pytest.param(name, marks=[pytest.mark.float32] if name in FLOAT32 else [])
+                                  for name in EXAMPLES])
+def test_example_short(name, tmp_path, run_script):
+    run_script(os.path.join(ROOT, "examples", f"{name}.py"), ["--short", "--out", str(tmp_path)])  # its check raises
     _check_video(tmp_path / f"{name}.mp4")
     _check_plot(tmp_path / f"{name}_{EXAMPLES[name]}.png")
 
