@@ -47,7 +47,7 @@ def pytest_collection_modifyitems(items):
             item.add_marker(pytest.mark.xdist_group(FLOAT32))
 
 
-@pytest.hookimpl(tryfirst=True)
+@pytest.hookimpl(tryfirst=True, optionalhook=True)  # optional: pytest -p no:xdist has no such hook
 def pytest_xdist_make_scheduler(config, log):
     """pyproject's --dist loadgroup, with one work unit per test file (as --dist loadfile) for the
     tests in no group, where xdist's loadgroup deals them out one by one."""
