@@ -216,6 +216,12 @@ class _View:
         self.n_efc = ti.field(ti.i32, shape=(1, E, 1))  # rows in use: every slot (unused ones hold garbage)
         self.n_efc.fill(R)
         self.dof_parent = ti.field(ti.i32, shape=D)
+        # M's non-zero pairs (i, j ≤ i): all of them, a valid superset (M·v adds exact zeros)
+        lower = np.array([(i, j) for i in range(D) for j in range(i + 1)], dtype=np.int32)
+        self.n_pairs = len(lower)
+        self.pair_i, self.pair_j = ti.field(ti.i32, shape=self.n_pairs), ti.field(ti.i32, shape=self.n_pairs)
+        self.pair_i.from_numpy(lower[:, 0])
+        self.pair_j.from_numpy(lower[:, 1])
         for name, (element, count) in cs.SCRATCH.items():
             setattr(self, name, ti.field(float if element == "f" else ti.i32, shape=shapes[count]))
         self.opt_iterations = ti.field(ti.i32, shape=E)

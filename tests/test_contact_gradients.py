@@ -20,6 +20,7 @@ import torch
 import trimesh
 
 import genesis_lite as gs
+from genesis_lite.solvers.rigid.data import SERIAL_SOLVE_ENVS
 from tests.fd_scan import assert_converged, directional_errors
 
 _SCENES = {}
@@ -251,13 +252,18 @@ def test_repeated_rollouts_bit_identical(f64, cone):
         assert torch.equal(first, second), case
 
 
-def test_batched_equals_single_with_contact(f64):
-    """n_envs = 4 gives each env's gradient of a single-env scene, bit for bit."""
-    batched = _gradient(*_scene("pyramidal", n_envs=4, tag="batched"), "tilted", 30)
+@pytest.mark.parametrize("n_envs", [4, SERIAL_SOLVE_ENVS + 1])
+def test_batched_equals_single_with_contact(f64, n_envs):
+    """A batch gives each env's gradient of a single-env scene, bit for bit; past
+    SERIAL_SOLVE_ENVS envs the solve and its reverse run on the thread pool, as other kernels."""
+    batched_scene, batched_body = _scene("pyramidal", n_envs=n_envs, tag="batched")
+    on_calling_thread = batched_scene.sim.slots[0].solver.data.solve_schedule[0]
+    assert on_calling_thread == (n_envs <= SERIAL_SOLVE_ENVS)
+    batched = _gradient(batched_scene, batched_body, "tilted", 30)
     scene, body = _scene("pyramidal", tag="batched")  # both with the build's parameters
     loss_of, nominal = CASES["tilted"]
-    for e in range(4):
-        x = _batch(4, nominal())[e].clone().requires_grad_(True)
+    for e in sorted({0, n_envs // 3, 2 * n_envs // 3, n_envs - 1}):
+        x = _batch(n_envs, nominal())[e].clone().requires_grad_(True)
         scene.reset()
         loss_of(scene, body, x, 30).backward()
         assert torch.equal(x.grad, batched[e]), e

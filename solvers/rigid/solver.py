@@ -89,8 +89,10 @@ class RigidSolver(Solver):
         if self.data.size["converged"] and self.inexact_kinds:  # curved convex contacts → their closed forms
             self.colliders.append(BoundKernel(step.converge, schedule, arenas, element_dims))
         # the reverse of a substep, without and with the constraint stage
-        self.reverse_kernel = [BoundKernel(step.reverse_dynamics, (schedule, rows), arenas, element_dims)
-                               for rows in (0, 1)]
+        solve_schedule = self.data.solve_schedule
+        self.constrain = BoundKernel(step.constrain, solve_schedule, arenas, element_dims)
+        self.reverse_kernel = [BoundKernel(step.reverse_dynamics, (schedule, 0), arenas, element_dims),
+                               BoundKernel(step.reverse_dynamics, (solve_schedule, 1), arenas, element_dims)]
         self.collider_reverses = [BoundKernel(step.collide_adjoint, (schedule, kind), arenas, element_dims)
                                   for kind in detect.differentiable_kinds(m)]
         self.limited = contact.limited_dofs(self.model, options) > 0
@@ -239,7 +241,7 @@ class RigidSolver(Solver):
         self.kernels.smooth_substep(s, inputs, flagged_only)
         for collide in self.colliders:
             collide(s)
-        self.kernels.constrain(s, flagged_only)
+        self.constrain(s, flagged_only)
         self.kernels.finish_substep(s, commit, out, flagged_only)
 
     # -- the shared substep loop (solvers/base.py): the whole rigid substep comes before coupling --

@@ -87,9 +87,9 @@ def constraint_env(d: ti.template(), s, e):
         rows += contact_rows(d, s, e, c, rows)
     d.n_efc[s, e, 0] = rows
     if rows > 0:
-        for i in range(d.n_dofs):  # the solve's M: dense, with armature
-            for j in range(d.n_dofs):
-                d.solver_M[s, e, i, j] = d.mass_mat[s, e, ti.max(i, j), ti.min(i, j)]
+        for k in range(d.n_pairs):  # the solve's M: symmetric, with armature (other entries stay 0)
+            i, j = d.pair_i[k], d.pair_j[k]
+            d.solver_M[s, e, i, j] = d.solver_M[s, e, j, i] = d.mass_mat[s, e, i, j]
         for i in range(d.n_dofs):
             accumulate(d.solver_M, ti.Vector([s, e, i, i]), d.armature[e, i])
         newton_solve(d, s, e, d.iterations, d.consts[CONST["tolerance"]], d.ls_iterations,
@@ -527,7 +527,7 @@ def read_contacts(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M
 
 
 #: what solver.py launches (through solvers.launch, with the scene's arenas; reverse_dynamics and
-#: collide with a config of their own)
+#: collide with a config of their own, constrain with the solve's schedule)
 KERNELS = (advance, prepare_reverse, reverse_kinematics, down_sweep, down_sweep_adjoint,
            position_stages, write_state, read_state, write_inputs, read_links, read_mass_matrix, read_dofs_force,
-           read_com_jacobians, read_contacts, smooth_substep, constrain, finish_substep)
+           read_com_jacobians, read_contacts, smooth_substep, finish_substep)

@@ -40,10 +40,12 @@ def _may_touch(d: ti.template(), s, e, pair):
     further apart than its margin, so that its collider cannot find a contact."""
     g1, g2 = d.pair_geom1[pair], d.pair_geom2[pair]
     p1, p2 = d.geom_xpos[s, e, g1], d.geom_xpos[s, e, g2]
-    gap = (p2 - p1).norm() - d.geom_rbound[g1] - d.geom_rbound[g2]
+    gap = 0.0
     if d.geom_type[g1] == PLANE:  # the plane's normal is its z axis
         normal = ti.Vector([d.geom_xmat[s, e, g1][k, 2] for k in ti.static(range(3))])
         gap = normal.dot(p2 - p1) - d.geom_rbound[g2]
+    else:
+        gap = (p2 - p1).norm() - d.geom_rbound[g1] - d.geom_rbound[g2]
     return gap < d.pair_margin[pair]
 
 
@@ -201,12 +203,15 @@ def collide_kind(d: ti.template(), s, e, kind: ti.template()):
     collider, axis_tangent = ti.static(COLLIDERS[kind])
     for pair in range(d.n_candidates):
         g1, g2 = d.pair_geom1[pair], d.pair_geom2[pair]
-        if _of_kind(d.geom_type[g1], d.geom_type[g2], kind) and _may_touch(d, s, e, pair):
-            count, position, normal, dist, feature = collider(d, s, e, g1, g2, d.pair_margin[pair])
-            tangent = ti.Vector.zero(float, 3)
-            if ti.static(axis_tangent):
-                tangent = ti.Vector([d.geom_xmat[s, e, g2][k, 2] for k in ti.static(range(3))])
-            _append(d, s, e, pair, count, position, normal, dist, feature, tangent)
+        # nested: Taichi's `and` evaluates both sides, and the broad phase of every pair in every
+        # kind's kernel took 12 % of the a1's step
+        if _of_kind(d.geom_type[g1], d.geom_type[g2], kind):
+            if _may_touch(d, s, e, pair):
+                count, position, normal, dist, feature = collider(d, s, e, g1, g2, d.pair_margin[pair])
+                tangent = ti.Vector.zero(float, 3)
+                if ti.static(axis_tangent):
+                    tangent = ti.Vector([d.geom_xmat[s, e, g2][k, 2] for k in ti.static(range(3))])
+                _append(d, s, e, pair, count, position, normal, dist, feature, tangent)
 
 
 @ti.func

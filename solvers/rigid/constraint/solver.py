@@ -21,8 +21,9 @@ against the constraint cost at qacc_smooth; the lower one starts every island.
 
 **Newton iteration** per island, with scale = 1 / Σ_island M_ii: the gradient g = M a −
 qfrc_smooth − Jᵀ f; the Hessian H = M + Jᵀ diag(D·[state = QUADRATIC]) J + Σ_cones J_cᵀ H_c J_c
-(H_c the middle zone's dim × dim Hessian in jar), factored densely each iteration (no
-incremental updates); direction −H⁻¹ g; an exact line search on the 1-D piecewise quadratic
+(H_c the middle zone's dim × dim Hessian in jar), factored densely in each iteration whose
+states differ from the last (no incremental updates; the same states and no cone in its middle
+zone give the same H, whose factor is kept); direction −H⁻¹ g; an exact line search on the 1-D piecewise quadratic
 (PrimalSearch: a Newton step from 0, one-sided Newton steps until the derivative changes sign,
 then a bracketed search among the two brackets' Newton points and the midpoint), converged where
 |dcost/dα| < tolerance · ls_tolerance · |search| / scale, at most ls_iterations evaluations.
@@ -41,8 +42,8 @@ the cone blocks H_c follow). Implicit differentiation solves H u = ḡ with it.
 arrays: after mj_forward, d.efc_state still holds the warm-start test's states (at qacc_smooth);
 the solve's final states, which ours equal, are d.iefc_state[d.map_efc2iefc].
 
-**Where we differ from MuJoCo.** An envelope (skyline) Cholesky of M and a fresh one of H every
-iteration (MuJoCo: sparse LDLᵀ, rank-one updates of H): round-off only. The envelope and the
+**Where we differ from MuJoCo.** An envelope (skyline) Cholesky of M and a fresh one of H in every
+iteration that changes a state (MuJoCo: sparse LDLᵀ, rank-one updates of H): round-off only. The envelope and the
 rows' column lists (efc_cols) skip exact zeros only, so the results equal the dense ones bit for
 bit. Island trees from the Jacobian (above). No equality rows, no noslip, no sleeping, warm
 start always on.
@@ -258,15 +259,20 @@ def _dot(d: ti.template(), a: ti.template(), b: ti.template(), s, e, n):
 
 
 @ti.func
-def _mul_M(d: ti.template(), s, e, n, x: ti.template(), out: ti.template()):
-    """out[s, e] ← M x[s, e] on the n dofs of solver_dofs (an island: M couples no two islands)."""
+def _mul_M(d: ti.template(), s, e, k, n, x: ti.template(), out: ti.template()):
+    """out[s, e] ← M x[s, e] on island k's n dofs (solver_dofs; k = ALL: every dof), over M's
+    non-zero entries only: the model's mass-matrix pairs (dof j on dof i's path to the root),
+    which never join two islands. (A dense product: the tower's 60 dofs made 3600 terms a call,
+    its pairs 210.)"""
     for p in range(n):
-        i = d.solver_dofs[s, e, p]
-        acc = 0.0
-        for q in range(n):
-            j = d.solver_dofs[s, e, q]
-            acc += d.solver_M[s, e, i, j] * x[s, e, j]
-        out[s, e, i] = acc
+        out[s, e, d.solver_dofs[s, e, p]] = 0.0
+    for q in range(d.n_pairs):
+        i, j = d.pair_i[q], d.pair_j[q]
+        if k == ALL or d.solver_dof_island[s, e, i] == k:
+            m_ij = d.solver_M[s, e, i, j]
+            out[s, e, i] = out[s, e, i] + m_ij * x[s, e, j]
+            if i != j:
+                out[s, e, j] = out[s, e, j] + m_ij * x[s, e, i]
 
 
 @ti.func
@@ -299,12 +305,15 @@ def _cone_zone(N, Tsqr, mu):
 @ti.func
 def _update_constraints(d: ti.template(), s, e, m):
     """mj_constraintUpdate on the m rows of solver_rows: efc_state and efc_force from solver_jar.
-    Returns the constraint cost Σ s(jar)."""
-    cost = 0.0
+    Returns (the constraint cost Σ s(jar), changed): changed is 1 when the Hessian these states
+    give may differ from the one the previous states gave: a row changed state, or an elliptic
+    block is in its middle zone (whose Hessian follows jar)."""
+    cost, changed = 0.0, 0
     for q in range(m):
         r = d.solver_rows[s, e, q]
         t = d.efc_type[s, e, r]
         if t != ELLIPTIC_REST:  # a block counts by its first row
+            previous = d.efc_state[s, e, r]
             jar, R = d.solver_jar[s, e, r], d.efc_R[s, e, r]
             D = 1.0 / R
             if t == FRICTION_LOSS:
@@ -326,7 +335,10 @@ def _update_constraints(d: ti.template(), s, e, m):
                     d.efc_force[s, e, r], d.efc_state[s, e, r] = -D * jar, QUADRATIC
             else:
                 cost += _update_cone(d, s, e, r)
-    return cost
+            state = d.efc_state[s, e, r]
+            if state != previous or state == CONE:
+                changed = 1
+    return cost, changed
 
 
 @ti.func
@@ -632,8 +644,8 @@ _P0, _P1_FIRST, _P1_ONE_SIDED, _P1_NEXT_SETUP, _MID, _P1_NEXT, _P2_NEXT, _BRACKE
 
 
 @ti.func
-def _line_search(d: ti.template(), s, e, n, m, tolerance, ls_iterations, scale):
-    """Exact line search of the island (solver_dofs, solver_rows: n dofs, m rows) along
+def _line_search(d: ti.template(), s, e, k, n, m, tolerance, ls_iterations, scale):
+    """Exact line search of island k (solver_dofs, solver_rows: n dofs, m rows) along
     solver_search (MuJoCo's PrimalSearch), written as one loop with a single evaluation site.
     Sets solver_Mv and solver_Jv. Returns (α, improvement = cost(0) − cost(α)); α = 0 when the
     search is degenerate or nothing improves."""
@@ -641,7 +653,7 @@ def _line_search(d: ti.template(), s, e, n, m, tolerance, ls_iterations, scale):
     alpha, improvement = 0.0, 0.0
     if snorm >= MINVAL:
         gtol = tolerance * snorm / scale
-        _mul_M(d, s, e, n, d.solver_search, d.solver_Mv)
+        _mul_M(d, s, e, k, n, d.solver_search, d.solver_Mv)
         for q in range(m):
             r = d.solver_rows[s, e, q]
             d.solver_Jv[s, e, r] = _row_dot(d, s, e, r, d.solver_search)
@@ -725,11 +737,11 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
         i = d.solver_dofs[s, e, p]
         inertia += d.solver_M[s, e, i, i]
     scale = 1.0 / inertia
-    _mul_M(d, s, e, n, d.qacc, d.solver_Ma)
+    _mul_M(d, s, e, k, n, d.qacc, d.solver_Ma)
     _set_jar(d, s, e, m)
     niter, first, improvement = 0, 1, 0.0
     while True:
-        _update_constraints(d, s, e, m)
+        _, changed = _update_constraints(d, s, e, m)
         _update_gradient(d, s, e, n, m)
         gradient = scale * ti.sqrt(_dot(d, d.solver_grad, d.solver_grad, s, e, n))
         # The island's block of solver_H holds M's factor until its first Hessian: the first
@@ -739,7 +751,10 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
         n_solves = 1 + first
         for attempt in range(n_solves):
             if attempt == n_solves - 1:
-                _factor_hessian(d, s, e, n, m)  # also where the certificate stops: the backward needs it
+                # also where the certificate stops (the backward needs it); after a step that left
+                # every state (and so H) as it was, the island's block still holds H's factor
+                if first or changed:
+                    _factor_hessian(d, s, e, n, m)
             else:  # M's factor, in the island's positions
                 _envelope(d, s, e, n)
             for p in range(n):
@@ -762,7 +777,7 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
         for p in range(n):
             i = d.solver_dofs[s, e, p]
             d.solver_search[s, e, i] = -d.solver_Mgrad[s, e, i]
-        alpha, ls_improvement = _line_search(d, s, e, n, m, tolerance * ls_tolerance, ls_iterations, scale)
+        alpha, ls_improvement = _line_search(d, s, e, k, n, m, tolerance * ls_tolerance, ls_iterations, scale)
         if alpha == 0.0:
             break
         for p in range(n):
@@ -786,9 +801,9 @@ def _warm_start(d: ti.template(), s, e, n, m):
         for i in range(d.n_dofs):
             d.qacc[s, e, i] = d.qacc_warmstart[e, i] if trial == 0 else d.qacc_smooth[s, e, i]
         _set_jar(d, s, e, m)
-        cost = _update_constraints(d, s, e, m)
+        cost, _ = _update_constraints(d, s, e, m)
         if trial == 0:
-            _mul_M(d, s, e, n, d.qacc, d.solver_Ma)
+            _mul_M(d, s, e, ALL, n, d.qacc, d.solver_Ma)
             for i in range(d.n_dofs):
                 cost += 0.5 * (d.solver_Ma[s, e, i] - d.qfrc_smooth[s, e, i]) \
                     * (d.qacc[s, e, i] - d.qacc_smooth[s, e, i])
@@ -811,9 +826,9 @@ def newton_solve(d: ti.template(), s, e, iterations, tolerance, ls_iterations, l
     (D,), solver_niter, and the SCRATCH arrays (solver_H: the final Hessian's factor).
     iterations, ls_iterations: limits; tolerance, ls_tolerance: MuJoCo's opt values."""
     _find_islands(d, s, e)
-    for i in range(d.n_dofs):
-        for j in range(d.n_dofs):
-            d.solver_H[s, e, i, j] = d.solver_M[s, e, i, j] if j <= i else 0.0
+    for i in range(d.n_dofs):  # (the upper triangle is never written: it stays 0)
+        for j in range(i + 1):
+            d.solver_H[s, e, i, j] = d.solver_M[s, e, i, j]
         d.qacc_smooth[s, e, i] = d.qfrc_smooth[s, e, i]
         d.qfrc_constraint[s, e, i] = 0.0
     # M's factor: qacc_smooth now; each island replaces its block with its Hessian's factor,
