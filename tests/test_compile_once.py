@@ -6,7 +6,9 @@ import torch
 
 import genesis_lite as gs
 from genesis_lite.solvers.launch import _COMPILED
+from genesis_lite.solvers.rigid.data import SERIAL_SOLVE_ENVS
 from tests.conftest import asset, pybullet
+from tests import test_contact_gradients
 
 
 def _n_compiled():
@@ -55,6 +57,14 @@ def test_large_batches_share_compiled_kernels(f64):
     _rollout_with_backward(pybullet("kuka_iiwa", "model.urdf"), True, 250, 2, 0.005)
     _rollout_with_backward(asset("quadruped.urdf"), False, 200, 2, 0.005)
     assert _n_compiled() == compiled, "a new scene compiled kernels again"
+
+
+def test_contact_batch_on_the_pool_equals_single_envs(f64):
+    """Past data.SERIAL_SOLVE_ENVS envs the constraint solve and its reverse run on the thread
+    pool, whatever the link count: a box's gradients there equal a single-env scene's, bit for
+    bit. Here, after the test above, it reuses the pool variants of those kernels that the
+    quadruped's batches compiled (on its own, 100 s of LLVM on a slow machine)."""
+    test_contact_gradients.test_batched_equals_single_with_contact(None, n_envs=SERIAL_SOLVE_ENVS + 1)
 
 
 def _boxes_on_plane(sizes, n_envs):

@@ -252,10 +252,9 @@ def test_repeated_rollouts_bit_identical(f64, cone):
         assert torch.equal(first, second), case
 
 
-@pytest.mark.parametrize("n_envs", [4, SERIAL_SOLVE_ENVS + 1])
-def test_batched_equals_single_with_contact(f64, n_envs):
-    """A batch gives each env's gradient of a single-env scene, bit for bit; past
-    SERIAL_SOLVE_ENVS envs the solve and its reverse run on the thread pool, as other kernels."""
+def test_batched_equals_single_with_contact(f64, n_envs=4):
+    """A batch gives each env's gradient of a single-env scene, bit for bit (with n_envs past
+    SERIAL_SOLVE_ENVS, on the thread pool: tests/test_compile_once.py)."""
     batched_scene, batched_body = _scene("pyramidal", n_envs=n_envs, tag="batched")
     on_calling_thread = batched_scene.sim.slots[0].solver.data.solve_schedule[0]
     assert on_calling_thread == (n_envs <= SERIAL_SOLVE_ENVS)
