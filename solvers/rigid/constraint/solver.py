@@ -24,9 +24,10 @@ qfrc_smooth − Jᵀ f; the Hessian H = M + Jᵀ diag(D·[state = QUADRATIC]) J 
 (H_c the middle zone's dim × dim Hessian in jar), factored densely in each iteration whose
 states differ from the last (no incremental updates; the same states and no cone in its middle
 zone give the same H, whose factor is kept); direction −H⁻¹ g; an exact line search on the 1-D
-piecewise quadratic (PrimalSearch: a Newton step from 0, one-sided Newton steps until the derivative changes sign,
-then a bracketed search among the two brackets' Newton points and the midpoint), converged where
-|dcost/dα| < tolerance · ls_tolerance · |search| / scale, at most ls_iterations evaluations.
+piecewise quadratic (PrimalSearch: a Newton step from 0, one-sided Newton steps until the
+derivative changes sign, then a bracketed search among the two brackets' Newton points and the
+midpoint), converged where |dcost/dα| < tolerance · ls_tolerance · |search| / scale, at most
+ls_iterations evaluations.
 Start: stop at once if ½ scale gᵀM⁻¹g < tolerance and scale |g| < tolerance (certificate), or
 if scale |g| < tolerance and the Newton decrement ½ scale gᵀH⁻¹g < tolerance. After each step:
 stop if 0 < scale · improvement < tolerance, scale |g| < tolerance or the decrement <
@@ -45,8 +46,8 @@ the solve's final states, which ours equal, are d.iefc_state[d.map_efc2iefc].
 **Where we differ from MuJoCo.** An envelope (skyline) Cholesky of M and a fresh one of H in
 every iteration that changes a state (MuJoCo: sparse LDLᵀ, rank-one updates of H): round-off
 only. The envelope and the rows' column lists (efc_cols) skip exact zeros only, so the results
-equal the dense ones bit for bit; M·v sums over M's pairs (_mul_M), in their order. Island trees from the Jacobian (above). No equality rows, no noslip, no sleeping, warm
-start always on.
+equal the dense ones bit for bit; M·v sums over M's pairs (_mul_M), in their order. Island trees
+from the Jacobian (above). No equality rows, no noslip, no sleeping, warm start always on.
 """
 import taichi as ti
 
