@@ -64,7 +64,7 @@ def test_contact_batch_on_the_pool_equals_single_envs(f64):
     pool, whatever the link count: a box's gradients there equal a single-env scene's, bit for
     bit. Here, after the test above, it reuses the pool variants of those kernels that the
     quadruped's batches compiled (on its own, 100 s of LLVM on a slow machine)."""
-    test_contact_gradients.test_batched_equals_single_with_contact(None, n_envs=SERIAL_SOLVE_ENVS + 1)
+    test_contact_gradients.assert_batch_equals_single(SERIAL_SOLVE_ENVS + 1)
 
 
 def _boxes_on_plane(sizes, n_envs):

@@ -252,9 +252,13 @@ def test_repeated_rollouts_bit_identical(f64, cone):
         assert torch.equal(first, second), case
 
 
-def test_batched_equals_single_with_contact(f64, n_envs=4):
-    """A batch gives each env's gradient of a single-env scene, bit for bit (with n_envs past
-    SERIAL_SOLVE_ENVS, on the thread pool: tests/test_compile_once.py)."""
+def test_batched_equals_single_with_contact(f64):
+    assert_batch_equals_single(4)
+
+
+def assert_batch_equals_single(n_envs):
+    """A batch of n_envs gives each env's gradient of a single-env scene, bit for bit (with n_envs
+    past SERIAL_SOLVE_ENVS the solve runs on the thread pool: tests/test_compile_once.py)."""
     batched_scene, batched_body = _scene("pyramidal", n_envs=n_envs, tag="batched")
     on_calling_thread = batched_scene.sim.slots[0].solver.data.solve_schedule[0]
     assert on_calling_thread == (n_envs <= SERIAL_SOLVE_ENVS)
