@@ -180,3 +180,31 @@ def test_float32_lands_and_rests(f32, shape):
     assert torch.isfinite(entity.get_qpos()).all()
     assert 0.0 < float(entity.get_pos()[2]) < 0.2
     assert float(entity.get_dofs_velocity().abs().max()) < 1e-3
+
+
+def test_contact_readouts_of_a_batch_with_and_without_contacts(f64):
+    """Two envs: a 2 kg box resting on the plane (four corner contacts) and one 1 m up (none). The
+    contact rows past an env's count are geom −1 and zeros, so no read-out carries garbage: the net
+    contact force on the resting box balances its weight, the flying box's is exactly 0."""
+    mass, g = 2.0, 9.81
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002), show_viewer=False)
+    scene.add_entity(gs.morphs.Plane())
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.1), pos=(0.0, 0.0, 0.05)))
+    scene.build(n_envs=2)
+    box.set_links_mass(torch.tensor([[mass], [mass]], dtype=gs.tc_float))
+    box.set_pos(torch.tensor([[0.0, 0.0, 0.05], [0.0, 0.0, 1.0]], dtype=gs.tc_float))
+    for _ in range(200):  # settled; the second box falls 0.2 m, still in the air
+        scene.step()
+    solver = scene.rigid_solver
+    raw = torch.full((2, solver.data.size["C"], 9), float("nan"), dtype=gs.tc_float)
+    solver.kernels.read_contacts(0, raw)  # every element written, the unused rows too
+    assert torch.equal(raw, solver.contacts())
+    unused = raw[..., 0] < 0
+    assert unused[1].all() and (~unused[0]).sum() == 4
+    assert torch.all(raw[unused][:, 1] == -1) and torch.all(raw[unused][:, 2:] == 0)
+    force = box.get_links_net_contact_force()
+    assert torch.allclose(force[0, 0], torch.tensor([0.0, 0.0, mass * g], dtype=gs.tc_float), rtol=0, atol=1e-6)
+    assert torch.equal(force[1], torch.zeros(1, 3, dtype=gs.tc_float))
+    found = box.get_contacts()
+    assert found["valid_mask"].sum(1).tolist() == [4, 0]
+    assert torch.all(found["position"][~found["valid_mask"]] == 0)

@@ -349,7 +349,7 @@ class RigidSolver(Solver):
 
     def contacts(self, substep=-1):
         """(B, C, 9) the contacts of the last step's ``substep`` (see step.read_contacts; rows past
-        each env's count have geom −1), C = 0 without candidate pairs."""
+        each env's count have geom −1 and zeros), C = 0 without candidate pairs."""
         out = torch.empty((self.n_batch, self.data.size["C"], 9), dtype=runtime.tc_float, device=runtime.device)
         if self.data.size["C"]:
             self.kernels.read_contacts(substep % self.sim_options.substeps, out)
