@@ -5,6 +5,7 @@ The Taichi copy of a solver's state is authoritative between steps when no graph
 (torch reads it lazily); with ``requires_grad`` the torch tensor is (it is the graph's node
 value) and Taichi is re-synchronised only when something else (a backward pass) used it.
 """
+import operator
 import weakref
 
 import torch
@@ -32,7 +33,7 @@ class SolverSlot:
         self.state = None  # (B, width) torch tensor; None: read lazily from Taichi
         self.inputs = None  # name → (B, width)
         self.uploaded_state = None  # the tensor Taichi's frame 0 equals (None: unknown)
-        self.uploaded_inputs = None  # ((tensor, version), ...) Taichi's inputs equal
+        self.uploaded_inputs = None  # ((tensor, ...), (version, ...)): Taichi's inputs equal
         self.derived = None  # (state, value) cache of the last derived read
 
 
@@ -97,12 +98,12 @@ class Simulator:
     @staticmethod
     def _pending_inputs(slot, inputs):
         """``inputs`` if Taichi does not hold them yet (recorded as held from now on), else None."""
-        versions = tuple((t, t._version) for t in inputs.values())
+        tensors = tuple(inputs.values())
+        versions = tuple([t._version for t in tensors])
         known = slot.uploaded_inputs
-        if known is not None and len(known) == len(versions) and all(
-                a is b and va == vb for (a, va), (b, vb) in zip(known, versions)):
+        if known is not None and known[1] == versions and all(map(operator.is_, tensors, known[0])):
             return None
-        slot.uploaded_inputs = versions
+        slot.uploaded_inputs = (tensors, versions)
         return inputs
 
     # -- stepping ---------------------------------------------------------------------------

@@ -75,6 +75,7 @@ def test_kernels_refuse_memory_of_another_device(f64):
     assert isinstance(kernel, BoundKernel) and kernel.compiled
     for key, (program, compiled, code, _) in list(kernel.compiled.items()):
         kernel.compiled[key] = (program, compiled, code, True)
+    kernel.last = None  # a repeat of the last call (same program, same tensors) would launch unchecked
     try:
         with pytest.raises(gs.InvalidInputError, match="argument 6 must be a tensor on cuda, got one on cpu"):
             kernel(0, out)
@@ -83,6 +84,37 @@ def test_kernels_refuse_memory_of_another_device(f64):
             kernel.compiled[key] = (program, compiled, code, False)
     with pytest.raises(gs.InvalidInputError, match="argument 6 must be a contiguous tensor"):
         kernel(0, torch.zeros(4, 2, dtype=torch.float64)[:, :1].t())
+
+
+@ti.kernel
+def _write_scalars(offset: ti.template(), arena: ti.types.ndarray(), s: ti.i32, k: ti.i32):
+    for _ in range(1):
+        arena[s] = k + offset
+
+
+@ti.kernel
+def _copy_element(offset: ti.template(), arena: ti.types.ndarray(), out: ti.types.ndarray(), s: ti.i32):
+    for _ in range(1):
+        out[0] = arena[s] + offset
+
+
+def test_repeated_launches_take_each_calls_arguments(f64):
+    """A BoundKernel reuses launch contexts (per scalar-argument tuple; the last call's tensors):
+    every call still runs with its own arguments, in any order of repeats and changes."""
+    arena = torch.zeros(4, dtype=torch.float64)
+    write = BoundKernel(_write_scalars, 10, [arena], [0])
+    assert write.scalars_only
+    for s, k in [(0, 1), (1, 2), (0, 3), (0, 3), (2, 4), (1, 5), (1, 5), (0, 6)]:
+        write(s, k)
+        assert arena[s] == k + 10, (s, k, arena)
+    assert arena.tolist() == [16.0, 15.0, 14.0, 0.0]
+    copy = BoundKernel(_copy_element, 100, [arena], [0])
+    assert not copy.scalars_only
+    a, b = torch.zeros(1, dtype=torch.float64), torch.zeros(1, dtype=torch.float64)
+    for out, s in [(a, 0), (a, 0), (b, 1), (b, 1), (a, 1), (a, 2), (b, 2), (b, 0)]:
+        out.zero_()
+        copy(out, s)
+        assert out[0] == arena[s] + 100, (s, out)
 
 
 def test_destroy_ends_scenes_and_init_starts_again(f64):
