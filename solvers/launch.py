@@ -6,9 +6,8 @@ Taichi compile and check the first call of each signature as usual, and afterwar
 launch context itself; a launch that repeats one it met (the same scalars, or the same tensors
 as the last call) reuses that context as it is, leaving ~2 µs of Taichi's own C++ a launch. The
 compiled kernel is shared by every scene (the scene's data are array arguments), so the cache is
-per kernel, not per scene. It uses Taichi
-1.7's kernel internals (``_primal``, ``compiled_kernels``, ``make_launch_context``), which is
-why pyproject.toml pins taichi 1.7.*.
+per kernel, not per scene. It uses Taichi 1.7's kernel internals (``_primal``, ``arguments``,
+``compiled_kernels``, ``make_launch_context``), which is why pyproject.toml pins taichi 1.7.*.
 """
 import operator
 
