@@ -121,14 +121,13 @@ class InvweightBasis:
 
 
 def _touching_pairs(solver):
-    """Candidate pairs with a contact at the initial pose (env 0): the first substep of a step
-    that is not committed finds them."""
-    solver.run_step(solver._nothing, solver._nothing, commit=0)
+    """Candidate pairs with a contact at the initial pose (env 0), from the colliders alone (the
+    constraint solve is neither run nor compiled for it)."""
+    solver.detect_contacts()
     if solver.data.take_flag("overflow"):
         _logger.warning(f"scene.build: more contacts at the initial pose than the {solver.data.size['C']} slots per "
                         f"env: pairs beyond them are not filtered as touching; raise RigidOptions(max_contacts=...)")
-    for flag in ("inexact", "nonfinite"):
-        solver.data.take_flag(flag)
+    solver.data.take_flag("inexact")
     found = solver.contacts(substep=0)[0].cpu().numpy()
     found = found[found[:, 0] >= 0]
     model = solver.model

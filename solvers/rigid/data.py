@@ -141,9 +141,10 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
 # sizes (``layout``). W: all inputs' width per env; GW: the differentiable ones', which come first. G geoms, N candidate
 # geom pairs, H hull vertices, C contact slots, R constraint rows per env (see RigidData); HI the meshes' hull
 # ints (geometry.py), WS 1 when the convex colliders need their workspace (CONVEX_SCRATCH), else 0; converged 1
-# when curved convex contacts are their converged closed form (collision/detect.py: converge_contacts).
+# when curved convex contacts are their converged closed form (collision/detect.py: converge_contacts); constrained
+# a flag: some env of the substep has a constraint row to form (a contact, friction loss, a violated limit).
 SIZES = ("B", "L", "D", "Q", "P", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C", "R", "cone",
-         "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged")
+         "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged", "constrained")
 HEADER = {name: k for k, name in enumerate(SIZES)}
 _REGIONS = [("i", False)] + [(a, g) for g in (False, True) for a in ("f", "v3", "v4", "m3")]  # (arena, gradients?)
 
@@ -249,7 +250,7 @@ class RigidData:
                      "R": settings["rows"], "cone": settings["cone"], "iterations": settings["iterations"],
                      "ls_iterations": settings["ls_iterations"], "overflow": 0, "rows_needed": 0,
                      "HI": len(model.hull_int), "WS": int(_has_convex_pairs(model)), "inexact": 0,
-                     "converged": int(bool(settings["converged"]))}
+                     "converged": int(bool(settings["converged"])), "constrained": 0}
         self.start, stop = layout(self.size)
         length = {a: stop[a, bool(requires_grad)] for a in ARENAS}  # no gradient storage without gradients
         if max(length.values()) >= 2 ** 31:  # indices inside kernels are 32-bit
@@ -264,6 +265,7 @@ class RigidData:
         # the header's flags, read after every step with contacts: on the CPU a numpy view of the
         # int arena (~0.1 µs a read, against ~15 µs for a torch scalar read and write)
         self.header = self.arenas[0].numpy() if self.arenas[0].device.type == "cpu" else self.arenas[0]
+        self.flags_on_host = isinstance(self.header, np.ndarray)  # a read costs no wait for a device
 
     def _fill(self, values, model, consts):
         """Header, model and consts (CONSTS) into the arenas."""
@@ -278,7 +280,8 @@ class RigidData:
     def take_flag(self, name):
         """True once a step raised the header's flag ``name`` ("nonfinite": a non-finite state;
         "overflow": more contacts than slots; "rows_needed": an env of the one-launch step met a
-        joint limit; "inexact": a contact came from a collider whose replay is not exact) since
+        joint limit; "inexact": a contact came from a collider whose replay is not exact;
+        "constrained": a substep's smooth stage or colliders found a constraint row to form) since
         the last call, which clears it."""
         slot = HEADER[name]
         flag = bool(self.header[slot])
@@ -357,6 +360,8 @@ class RigidView:
         self.rows_needed = ArrayView(ints, HEADER["rows_needed"], (1,))  # set when an env's needs_rows is
         # set when a contact's collider has no exact replay (collision/detect.py: replay_exact)
         self.inexact = ArrayView(ints, HEADER["inexact"], (1,))
+        # set when an env of the substep has a constraint row to form (the host then runs the solve)
+        self.constrained = ArrayView(ints, HEADER["constrained"], (1,))
         count = _counts(size)
         for name, (arena, _) in MODEL.items():
             setattr(self, name, ArrayView(arenas[arena], start[f"model:{name}"], (1,)))

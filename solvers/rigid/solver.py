@@ -38,6 +38,7 @@ class RigidSolver(Solver):
         self.substeps = sim_options.substeps
         self._commit = 1  # 0 while a backward replays a step: its frames stay for the reverse
         self.invweight_basis = None  # contact.InvweightBasis, taken at build
+        self._rows_in_substep = [False] * self.substeps  # whether the step's constraint stage ran, per substep
 
     # -- building ---------------------------------------------------------------------------
     def add_entity(self, name, links):
@@ -225,6 +226,7 @@ class RigidSolver(Solver):
         (advance), which leaves the envs meeting a joint limit to the constraint stage; else, or
         for those envs, the stage kernels of each substep (_substep)."""
         flagged_only = 0
+        self._rows_in_substep = [False] * self.sim_options.substeps
         if not (self.colliders or self.friction):
             self.kernels.advance(commit, inputs, out)
             if not (self.limited and self.data.take_flag("rows_needed")):
@@ -232,6 +234,14 @@ class RigidSolver(Solver):
             inputs, flagged_only = self._nothing, 1  # advance loaded them
         for s in range(self.sim_options.substeps):
             self._substep(s, inputs if s == 0 else self._nothing, out, commit, flagged_only)
+
+    def detect_contacts(self):
+        """Frame 0's contacts at the uploaded state (the first substep's stages up to the colliders;
+        no step is taken)."""
+        self.kernels.smooth_substep(0, self._nothing, 0)
+        for collide in self.colliders:
+            collide(0)
+        self.data.take_flag("constrained")
 
     def _substep(self, s, inputs, out, commit, flagged_only):
         """Substep s as three stage kernels with the colliders between the first two (one kernel
@@ -241,11 +251,18 @@ class RigidSolver(Solver):
         self.kernels.smooth_substep(s, inputs, flagged_only)
         for collide in self.colliders:
             collide(s)
-        self.constrain(s, flagged_only)
+        # the solve only where some env has a row to form (the frame is one without rows until
+        # then): a scene out of contact never loads the solve's kernel (tens of seconds of LLVM in
+        # a fresh process) nor runs it; on a GPU the flag is not read (a wait for the device)
+        rows = bool(flagged_only) or (self.data.take_flag("constrained") if self.data.flags_on_host else True)
+        if rows:
+            self.constrain(s, flagged_only)
+        self._rows_in_substep[s] = rows  # the reverse of a substep without rows skips the solve's
         self.kernels.finish_substep(s, commit, out, flagged_only)
 
     # -- the shared substep loop (solvers/base.py): the whole rigid substep comes before coupling --
     def begin_step(self, inputs):
+        self._rows_in_substep = [False] * self.sim_options.substeps
         if inputs is not None:
             self._note_inputs(inputs)
         self._step_inputs = self._nothing if inputs is None else self._pack_inputs(inputs)
@@ -305,7 +322,7 @@ class RigidSolver(Solver):
 
     def substep_pre_coupling_backward(self, s):
         """Substep s's reverse, as separate kernels: fused, they compile slower."""
-        self.reverse_kernel[self._constrained()](s)
+        self.reverse_kernel[self._rows_in_substep[s]](s)
         for reverse in self.collider_reverses:
             reverse(s)
         self.kernels.reverse_kinematics(s, self._grads)

@@ -4,10 +4,11 @@ scene's arenas and torch.
 Forward runs every substep of every env in one launch (``advance``, which can also load the
 inputs and write out the result) when no constraint row arises: no contact pair, no friction
 loss, and (checked per env and substep) no violated joint limit. Otherwise a substep is three
-stage kernels (smooth, constrain, finish) and one collider kernel per pair kind between the
-first two (see below; the constraint solve inlined into ``advance`` took LLVM 100 s to
-compile); an env that advance stops at a limit is taken again from its start by those, which
-then skip the other envs. Both ways give the same bits when no row arises.
+stage kernels (smooth, constrain, finish; constrain only when some env has a row to form, the
+header's ``constrained`` flag) and one collider kernel per pair kind between the first two (see
+below; the constraint solve inlined into ``advance`` took LLVM 100 s to compile); an env that
+advance stops at a limit is taken again from its start by those, which then skip the other
+envs. Both ways give the same bits when no row arises.
 
 Reverse: ``prepare_reverse`` loads the step's start state, inputs and output gradient, the
 forward replays the substeps to refill the frames, then for each substep, last first,
@@ -28,7 +29,7 @@ from .actuation import smooth_force, smooth_force_adjoint
 from .collision.detect import (collide_adjoint_kind, collide_kind, converge_contacts, geom_poses, geom_poses_adjoint,
                                replay_exact, sort_contacts)
 from .constraint.implicit import solve_adjoint
-from .constraint.rows import contact_force, contact_rows, dof_rows, limit_violated
+from .constraint.rows import contact_force, contact_rows, dof_rows, dof_rows_arise, limit_violated
 from .constraint.solver import newton_solve
 from .dynamics import (bias_entry, dof_force, dof_row_adjoint, link_forces, link_forces_adjoint, mass_entry,
                        subtree_sum, subtree_sum_adjoint)
@@ -86,7 +87,7 @@ def constraint_env(d: ti.template(), s, e):
         d.con_efc[s, e, c] = rows
         rows += contact_rows(d, s, e, c, rows)
     d.n_efc[s, e, 0] = rows
-    if rows > 0:
+    if rows > 0:  # (else qfrc_constraint stays smooth_substep's zero)
         for k in range(d.n_pairs):  # the solve's M: symmetric, with armature (other entries stay 0)
             i, j = d.pair_i[k], d.pair_j[k]
             d.solver_M[s, e, i, j] = d.solver_M[s, e, j, i] = d.mass_mat[s, e, i, j]
@@ -96,9 +97,6 @@ def constraint_env(d: ti.template(), s, e):
                      d.consts[CONST["ls_tolerance"]])
         for i in range(d.n_dofs):  # the next solve starts from this solution
             d.qacc_constrained[s, e, i] = d.qacc_warmstart[e, i] = d.qacc[s, e, i]
-    else:
-        for i in range(d.n_dofs):
-            d.qfrc_constraint[s, e, i] = 0.0
 
 
 @ti.func
@@ -210,8 +208,10 @@ def _skipped(d: ti.template(), e, flagged_only):
 @ti.kernel
 def smooth_substep(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, inputs: A,
                    flagged_only: ti.i32):
-    """Frame s up to the smooth force, then the geom poses; the contact list emptied. At s = 0
-    the inputs (unless empty) are loaded first."""
+    """Frame s up to the smooth force, then the geom poses; the contact list emptied and the
+    frame left as one without rows (the constraint stage, if it runs, overwrites that); the
+    header's ``constrained`` flag raised if the env has dof rows to form. At s = 0 the inputs
+    (unless empty) are loaded first."""
     ti.loop_config(serialize=schedule[0])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
@@ -220,7 +220,11 @@ def smooth_substep(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: 
                 _inputs_from(d, e, inputs, 0)
             smooth_env(d, s, e)
             geom_poses(d, s, e)
-            d.n_con[s, e, 0] = 0
+            d.n_con[s, e, 0] = d.n_efc[s, e, 0] = 0
+            for i in range(d.n_dofs):
+                d.qfrc_constraint[s, e, i] = 0.0
+            if dof_rows_arise(d, s, e):
+                d.constrained[0] = 1
 
 
 @ti.kernel

@@ -73,6 +73,8 @@ def _append(d: ti.template(), s, e, pair, count, position, normal, dist, feature
             else:
                 d.overflow[0] = 1
     d.n_con[s, e, 0] = n
+    if n > 0:  # the constraint stage has rows to form
+        d.constrained[0] = 1
 
 
 @ti.func

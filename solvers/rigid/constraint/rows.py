@@ -485,6 +485,16 @@ def limit_violated(d: ti.template(), s, e):
 
 
 @ti.func
+def dof_rows_arise(d: ti.template(), s, e):
+    """1 if env e forms dof rows at frame s (some dof has friction loss, or a limit is violated)."""
+    arise = limit_violated(d, s, e)
+    for i in range(d.n_dofs):
+        if d.frictionloss[e, i] > 0.0:
+            arise = 1
+    return arise
+
+
+@ti.func
 def dof_rows(d: ti.template(), s, e):
     """Rows 0… of frame s: friction loss of every dof with F > 0, then every violated joint
     limit. Returns how many (also kept in efc_dof_rows[s, e, 0])."""
