@@ -210,12 +210,13 @@ def test_contact_readouts_of_a_batch_with_and_without_contacts(f64):
     assert torch.all(found["position"][~found["valid_mask"]] == 0)
 
 
-def test_solve_runs_only_in_substeps_with_rows(f64, monkeypatch):
-    """The constraint solve (forward) and its adjoint (reverse) run only in substeps where some env
-    has a row to form: two envs drop a sphere from 12 and 20 cm (radius 5 cm, 2 substeps of 5
-    ms), a differentiable rollout; build finds the touching pairs without the solve. Every step
-    whose substeps have no contact in either env launches neither; each one that has launches
-    both, once per substep with a contact."""
+def test_contact_stages_run_only_in_substeps_that_need_them(f64, monkeypatch):
+    """The colliders and the constraint solve, and their adjoints, run only in substeps where some
+    env has a near pair, or a row to form: two envs drop a sphere from 12 and 20 cm (radius 5 cm,
+    2 substeps of 5 ms; its bounding sphere is itself, so near is touching), a differentiable
+    rollout; build finds the touching pairs without the solve. Every step whose substeps have no
+    contact in either env launches none of them; each one that has launches them once per
+    substep with a contact."""
     from genesis_lite.solvers.launch import BoundKernel
     launched = []
     original = BoundKernel.__call__
@@ -233,16 +234,17 @@ def test_solve_runs_only_in_substeps_with_rows(f64, monkeypatch):
     assert "constrain" not in launched and "smooth_substep" in launched  # the colliders ran at build
     z0 = torch.tensor([[0.0, 0.0, 0.12], [0.0, 0.0, 0.20]], dtype=gs.tc_float, requires_grad=True)
     ball.set_pos(z0)
-    solves, touching = [], []
+    solves, collides, touching = [], [], []
     for _ in range(25):
         launched.clear()
         scene.step()
         solves.append(launched.count("constrain"))
+        collides.append(launched.count("collide"))
         touching.append(sum(bool((scene.rigid_solver.contacts(substep=s)[:, :, 0] >= 0).any()) for s in range(2)))
-    assert solves == touching, (solves, touching)
+    assert solves == touching and collides == touching, (solves, collides, touching)
     assert touching[0] == 0 and touching[-1] == 2  # in the air, then resting
     launched.clear()
     ball.get_pos()[:, 2].sum().backward()
-    assert launched.count("reverse_dynamics:1") == sum(touching)
+    assert launched.count("reverse_dynamics:1") == launched.count("collide_adjoint") == sum(touching)
     assert launched.count("reverse_dynamics:0") == 2 * len(touching) - sum(touching)
     assert torch.isfinite(z0.grad).all()

@@ -106,6 +106,7 @@ FRAMES = {
     "n_con": ("i", 1, False), "con_pair": ("i", "C", False), "con_feature": ("i", "CF", False),
     "con_pos": ("v3", "C", True), "con_frame": ("m3", "C", True), "con_dist": ("f", "C", True),
     "con_efc": ("i", "C", False),  # each contact's first row
+    "n_near": ("i", 1, False), "near_pairs": ("i", "N", False),  # the broad phase's pairs (collision/detect.py)
     # constraint rows (constraint/rows.py; n_efc[s, e, 0] in use) and the solve (constraint/solver.py)
     "n_efc": ("i", 1, False), "efc_dof_rows": ("i", 1, False),  # rows in use; of them, single-dof rows first
     "efc_type": ("i", "R", False), "efc_dim": ("i", "R", False),
@@ -142,9 +143,11 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
 # geom pairs, H hull vertices, C contact slots, R constraint rows per env (see RigidData); HI the meshes' hull
 # ints (geometry.py), WS 1 when the convex colliders need their workspace (CONVEX_SCRATCH), else 0; converged 1
 # when curved convex contacts are their converged closed form (collision/detect.py: converge_contacts); constrained
-# a flag: some env of the substep has a constraint row to form (a contact, friction loss, a violated limit).
+# a flag: some env of the substep has a constraint row to form (a contact, friction loss, a violated limit);
+# colliders_due a mask of the collider kernels the substep's near pairs need (collision/detect.py: KERNEL_BIT).
 SIZES = ("B", "L", "D", "Q", "P", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C", "R", "cone",
-         "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged", "constrained")
+         "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged", "constrained",
+         "colliders_due")
 HEADER = {name: k for k, name in enumerate(SIZES)}
 _REGIONS = [("i", False)] + [(a, g) for g in (False, True) for a in ("f", "v3", "v4", "m3")]  # (arena, gradients?)
 
@@ -250,7 +253,8 @@ class RigidData:
                      "R": settings["rows"], "cone": settings["cone"], "iterations": settings["iterations"],
                      "ls_iterations": settings["ls_iterations"], "overflow": 0, "rows_needed": 0,
                      "HI": len(model.hull_int), "WS": int(_has_convex_pairs(model)), "inexact": 0,
-                     "converged": int(bool(settings["converged"])), "constrained": 0}
+                     "converged": int(bool(settings["converged"])), "constrained": 0,
+                     "colliders_due": 0}
         self.start, stop = layout(self.size)
         length = {a: stop[a, bool(requires_grad)] for a in ARENAS}  # no gradient storage without gradients
         if max(length.values()) >= 2 ** 31:  # indices inside kernels are 32-bit
@@ -281,10 +285,11 @@ class RigidData:
         """True once a step raised the header's flag ``name`` ("nonfinite": a non-finite state;
         "overflow": more contacts than slots; "rows_needed": an env of the one-launch step met a
         joint limit; "inexact": a contact came from a collider whose replay is not exact;
-        "constrained": a substep's smooth stage or colliders found a constraint row to form) since
-        the last call, which clears it."""
+        "constrained": a substep's smooth stage or colliders found a constraint row to form;
+        "colliders_due": the mask of collider kernels a substep needs) since the last call, which
+        clears it. Returns its value (an int, 0 when not raised)."""
         slot = HEADER[name]
-        flag = bool(self.header[slot])
+        flag = int(self.header[slot])
         if flag:
             self.header[slot] = 0
         return flag
@@ -362,6 +367,7 @@ class RigidView:
         self.inexact = ArrayView(ints, HEADER["inexact"], (1,))
         # set when an env of the substep has a constraint row to form (the host then runs the solve)
         self.constrained = ArrayView(ints, HEADER["constrained"], (1,))
+        self.colliders_due = ArrayView(ints, HEADER["colliders_due"], (1,))  # bits of the collider kernels due
         count = _counts(size)
         for name, (arena, _) in MODEL.items():
             setattr(self, name, ArrayView(arenas[arena], start[f"model:{name}"], (1,)))

@@ -38,7 +38,12 @@ class RigidSolver(Solver):
         self.substeps = sim_options.substeps
         self._commit = 1  # 0 while a backward replays a step: its frames stay for the reverse
         self.invweight_basis = None  # contact.InvweightBasis, taken at build
-        self._rows_in_substep = [False] * self.substeps  # whether the step's constraint stage ran, per substep
+        self._clear_substep_record()
+
+    def _clear_substep_record(self):
+        """Per substep of the step being taken (forward or replay), for its reverse: whether its
+        constraint stage ran, and the mask of its collider kernels that ran (detect.KERNEL_BIT)."""
+        self._rows_in_substep, self._colliders_in_substep = [False] * self.substeps, [0] * self.substeps
 
     # -- building ---------------------------------------------------------------------------
     def add_entity(self, name, links):
@@ -85,16 +90,19 @@ class RigidSolver(Solver):
         self.kernels = BoundKernels(schedule, arenas, element_dims, *step.KERNELS)
         m = self.model
         self.inexact_kinds = detect.inexact_kinds(m)  # pair kinds whose contacts may be CCD iterates
-        self.colliders = [BoundKernel(step.collide, (schedule, kind), arenas, element_dims)
+        # (bit in the header's colliders_due mask, kernel) of each collider kernel
+        self.colliders = [(detect.KERNEL_BIT[kind], BoundKernel(step.collide, (schedule, kind), arenas, element_dims))
                           for kind in detect.kernel_kinds(m)]
         if self.data.size["converged"] and self.inexact_kinds:  # curved convex contacts → their closed forms
-            self.colliders.append(BoundKernel(step.converge, schedule, arenas, element_dims))
+            self.colliders.append((detect.KERNEL_BIT[detect.ALL_CONVEX],
+                                   BoundKernel(step.converge, schedule, arenas, element_dims)))
         # the reverse of a substep, without and with the constraint stage
         solve_schedule = self.data.solve_schedule
         self.constrain = BoundKernel(step.constrain, solve_schedule, arenas, element_dims)
         self.reverse_kernel = [BoundKernel(step.reverse_dynamics, (schedule, 0), arenas, element_dims),
                                BoundKernel(step.reverse_dynamics, (solve_schedule, 1), arenas, element_dims)]
-        self.collider_reverses = [BoundKernel(step.collide_adjoint, (schedule, kind), arenas, element_dims)
+        self.collider_reverses = [(detect.KERNEL_BIT[kind], BoundKernel(step.collide_adjoint, (schedule, kind),
+                                                                        arenas, element_dims))
                                   for kind in detect.differentiable_kinds(m)]
         self.limited = contact.limited_dofs(self.model, options) > 0
         self.default_inputs = self._default_inputs()
@@ -226,7 +234,7 @@ class RigidSolver(Solver):
         (advance), which leaves the envs meeting a joint limit to the constraint stage; else, or
         for those envs, the stage kernels of each substep (_substep)."""
         flagged_only = 0
-        self._rows_in_substep = [False] * self.sim_options.substeps
+        self._clear_substep_record()
         if not (self.colliders or self.friction):
             self.kernels.advance(commit, inputs, out)
             if not (self.limited and self.data.take_flag("rows_needed")):
@@ -239,9 +247,17 @@ class RigidSolver(Solver):
         """Frame 0's contacts at the uploaded state (the first substep's stages up to the colliders;
         no step is taken)."""
         self.kernels.smooth_substep(0, self._nothing, 0)
-        for collide in self.colliders:
-            collide(0)
+        self._collide(0)
         self.data.take_flag("constrained")
+
+    def _collide(self, s):
+        """Frame s's collider kernels that its near pairs need (every one on a GPU, where reading
+        the mask would wait for the device)."""
+        due = self.data.take_flag("colliders_due") if self.data.flags_on_host else -1
+        self._colliders_in_substep[s] = due
+        for bit, collide in self.colliders:
+            if due >> bit & 1:
+                collide(s)
 
     def _substep(self, s, inputs, out, commit, flagged_only):
         """Substep s as three stage kernels with the colliders between the first two (one kernel
@@ -249,12 +265,11 @@ class RigidSolver(Solver):
         at the last substep, when not empty), commit: see step.finish_substep; flagged_only: only
         the envs that advance left to the constraint stage."""
         self.kernels.smooth_substep(s, inputs, flagged_only)
-        for collide in self.colliders:
-            collide(s)
+        self._collide(s)
         # the solve only where some env has a row to form (the frame is one without rows until
         # then): a scene out of contact never loads the solve's kernel (tens of seconds of LLVM in
         # a fresh process) nor runs it; on a GPU the flag is not read (a wait for the device)
-        rows = bool(flagged_only) or (self.data.take_flag("constrained") if self.data.flags_on_host else True)
+        rows = bool(flagged_only or (self.data.take_flag("constrained") if self.data.flags_on_host else True))
         if rows:
             self.constrain(s, flagged_only)
         self._rows_in_substep[s] = rows  # the reverse of a substep without rows skips the solve's
@@ -262,7 +277,7 @@ class RigidSolver(Solver):
 
     # -- the shared substep loop (solvers/base.py): the whole rigid substep comes before coupling --
     def begin_step(self, inputs):
-        self._rows_in_substep = [False] * self.sim_options.substeps
+        self._clear_substep_record()
         if inputs is not None:
             self._note_inputs(inputs)
         self._step_inputs = self._nothing if inputs is None else self._pack_inputs(inputs)
@@ -323,8 +338,9 @@ class RigidSolver(Solver):
     def substep_pre_coupling_backward(self, s):
         """Substep s's reverse, as separate kernels: fused, they compile slower."""
         self.reverse_kernel[self._rows_in_substep[s]](s)
-        for reverse in self.collider_reverses:
-            reverse(s)
+        for bit, reverse in self.collider_reverses:
+            if self._colliders_in_substep[s] >> bit & 1:  # else that kind has no contact to reverse
+                reverse(s)
         self.kernels.reverse_kinematics(s, self._grads)
 
     def end_reverse(self):

@@ -27,7 +27,7 @@ import taichi as ti
 from .data import ARENA_TYPES, CONST, accumulate, bind, n_batch
 from .actuation import smooth_force, smooth_force_adjoint
 from .collision.detect import (collide_adjoint_kind, collide_kind, converge_contacts, geom_poses, geom_poses_adjoint,
-                               replay_exact, sort_contacts)
+                               near_pairs, replay_exact, sort_contacts)
 from .constraint.implicit import solve_adjoint
 from .constraint.rows import contact_force, contact_rows, dof_rows, dof_rows_arise, limit_violated
 from .constraint.solver import newton_solve
@@ -208,10 +208,10 @@ def _skipped(d: ti.template(), e, flagged_only):
 @ti.kernel
 def smooth_substep(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, inputs: A,
                    flagged_only: ti.i32):
-    """Frame s up to the smooth force, then the geom poses; the contact list emptied and the
-    frame left as one without rows (the constraint stage, if it runs, overwrites that); the
-    header's ``constrained`` flag raised if the env has dof rows to form. At s = 0 the inputs
-    (unless empty) are loaded first."""
+    """Frame s up to the smooth force, then the geom poses and the broad phase (near pairs, the
+    header's colliders_due mask); the contact list emptied and the frame left as one without
+    rows (the constraint stage, if it runs, overwrites that); the header's ``constrained`` flag
+    raised if the env has dof rows to form. At s = 0 the inputs (unless empty) are loaded first."""
     ti.loop_config(serialize=schedule[0])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
@@ -220,6 +220,7 @@ def smooth_substep(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: 
                 _inputs_from(d, e, inputs, 0)
             smooth_env(d, s, e)
             geom_poses(d, s, e)
+            near_pairs(d, s, e)
             d.n_con[s, e, 0] = d.n_efc[s, e, 0] = 0
             for i in range(d.n_dofs):
                 d.qfrc_constraint[s, e, i] = 0.0

@@ -5,9 +5,11 @@ Colliders: the primitive ones (primitive.py, box.py) and, for meshes and the cyl
 MuJoCo sends to its general convex collider, convex.py's plane_mesh and convex_convex (meshes as
 their convex hull; the hull data and the workspace are arrays of the scene's storage, data.py).
 
-The pairs of one kind (type 1, type 2) are handled together (``collide_kind``, a kernel of its
-own: a scene compiles the colliders it uses, and no kernel holds them all; every convex_convex
-kind may share one kernel, ``kernel_kinds``). Contacts are
+The broad phase (``near_pairs``) runs in the smooth stage's kernel and lists each env's near
+pairs. The pairs of one kind (type 1, type 2) are handled together (``collide_kind``, a kernel of
+its own: a scene compiles the colliders it uses, and no kernel holds them all; every
+convex_convex kind may share one kernel, ``kernel_kinds``), which runs in a substep only when some
+env has a near pair of its kind (the header's colliders_due mask, read by the host). Contacts are
 appended to con_*[s, e, 0 … n_con), kind by kind, in pair order within a kind; a pair's
 contacts come in its collider's order, as MuJoCo lists them. More contacts than slots sets the
 header's overflow flag (the solver raises) instead of writing past the end.
@@ -178,6 +180,30 @@ ALL_CONVEX = "convex"
 COLLIDERS[ALL_CONVEX] = (_convex_convex, False)
 
 
+# Each collider kernel's bit in the header's colliders_due mask: a kernel runs in a substep only
+# when the broad phase (near_pairs) found a pair of its kind in some env
+KERNEL_BIT = {kind: bit for bit, kind in enumerate([*sorted(PRIMITIVES), (PLANE, MESH), ALL_CONVEX])}
+
+
+@ti.func
+def near_pairs(d: ti.template(), s, e):
+    """The broad phase of frame s: near_pairs[s, e, 0 … n_near) ← the candidate pairs whose
+    bounding volumes come within their margin (ascending; the colliders take only these); the
+    header's colliders_due mask gets the bits (KERNEL_BIT) of the kernels they need."""
+    n, due = 0, 0
+    for pair in range(d.n_candidates):
+        if _may_touch(d, s, e, pair):
+            d.near_pairs[s, e, n] = pair
+            n += 1
+            type1, type2 = d.geom_type[d.pair_geom1[pair]], d.geom_type[d.pair_geom2[pair]]
+            for kind in ti.static(list(KERNEL_BIT)):
+                if _of_kind(type1, type2, kind):
+                    due |= ti.static(1 << KERNEL_BIT[kind])
+    d.n_near[s, e, 0] = n
+    if due != 0:
+        ti.atomic_or(d.colliders_due[0], due)
+
+
 def kernel_kinds(model):
     """The collider kernels a model needs: a pair kind (type 1, type 2) each, except that every
     convex_convex pair is handled by one kernel (ALL_CONVEX), primitive kinds first, sorted."""
@@ -203,17 +229,15 @@ def collide_kind(d: ti.template(), s, e, kind: ti.template()):
     """Frame s's contacts of env e from the candidate pairs of one kind (type 1, type 2), or of
     every convex_convex kind (kind ALL_CONVEX), in pair order, appended to the contact list."""
     collider, axis_tangent = ti.static(COLLIDERS[kind])
-    for pair in range(d.n_candidates):
+    for q in range(d.n_near[s, e, 0]):  # the broad phase's pairs (near_pairs)
+        pair = d.near_pairs[s, e, q]
         g1, g2 = d.pair_geom1[pair], d.pair_geom2[pair]
-        # nested: Taichi's `and` evaluates both sides, and the broad phase of every pair in every
-        # kind's kernel took 12 % of the a1's step
         if _of_kind(d.geom_type[g1], d.geom_type[g2], kind):
-            if _may_touch(d, s, e, pair):
-                count, position, normal, dist, feature = collider(d, s, e, g1, g2, d.pair_margin[pair])
-                tangent = ti.Vector.zero(float, 3)
-                if ti.static(axis_tangent):
-                    tangent = ti.Vector([d.geom_xmat[s, e, g2][k, 2] for k in ti.static(range(3))])
-                _append(d, s, e, pair, count, position, normal, dist, feature, tangent)
+            count, position, normal, dist, feature = collider(d, s, e, g1, g2, d.pair_margin[pair])
+            tangent = ti.Vector.zero(float, 3)
+            if ti.static(axis_tangent):
+                tangent = ti.Vector([d.geom_xmat[s, e, g2][k, 2] for k in ti.static(range(3))])
+            _append(d, s, e, pair, count, position, normal, dist, feature, tangent)
 
 
 @ti.func
