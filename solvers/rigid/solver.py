@@ -269,7 +269,8 @@ class RigidSolver(Solver):
         # the solve only where some env has a row to form (the frame is one without rows until
         # then): a scene out of contact never loads the solve's kernel (tens of seconds of LLVM in
         # a fresh process) nor runs it; on a GPU the flag is not read (a wait for the device)
-        rows = bool(flagged_only or (self.data.take_flag("constrained") if self.data.flags_on_host else True))
+        found = self.data.take_flag("constrained") if self.data.flags_on_host else 1  # read, so cleared, always
+        rows = bool(flagged_only or found)
         if rows:
             self.constrain(s, flagged_only)
         self._rows_in_substep[s] = rows  # the reverse of a substep without rows skips the solve's
