@@ -282,7 +282,7 @@ class RigidData:
                 values[arena][begin: begin + len(array)] = array if arena == "i" else np.clip(array, -BIG, BIG)
 
     def take_flag(self, name):
-        """True once a step raised the header's flag ``name`` ("nonfinite": a non-finite state;
+        """The header's flag ``name`` if a step raised it ("nonfinite": a non-finite state;
         "overflow": more contacts than slots; "rows_needed": an env of the one-launch step met a
         joint limit; "inexact": a contact came from a collider whose replay is not exact;
         "constrained": a substep's smooth stage or colliders found a constraint row to form;
