@@ -21,6 +21,9 @@ def pybullet(*parts):
 
 
 FIRST = ("test_examples.py",)  # the longest file: started right after the float32 group
+# batches past data.SERIAL_SOLVE_ENVS: the thread-pool variants of the constraint solve and its
+# reverse (~20 s of LLVM a worker, warm cache) load on one worker only; dealt out after FIRST
+POOL = ("test_batch.py", "test_compile_once.py")
 LAST = ("test_runtime.py",)  # restarts the runtime (gs.destroy, gs.init on another backend)
 FLOAT32 = "float32"  # the xdist group of every float32 test
 
@@ -35,16 +38,19 @@ def _float32(item):
 
 @pytest.hookimpl(tryfirst=True)  # before xdist's hook, which names a group's tests by their mark
 def pytest_collection_modifyitems(items):
-    """Every float32 test in one group (xdist_group), run first; then FIRST's tests, the other
-    files, and LAST. A change of precision restarts Taichi (gs.init), and every kernel the worker
+    """Every float32 test in one group (xdist_group), run first; then FIRST's tests, POOL's (one
+    group), the other files, and LAST. A change of precision restarts Taichi (gs.init), and every kernel the worker
     uses next pays LLVM's optimisation and code generation again (~20 s for `constrain` on a slow
     machine); a kernel one worker compiles reaches the disk cache only when its Taichi stops, so
     float32 tests spread over both workers compiled the float32 kernels in each."""
-    items.sort(key=lambda item: (not _float32(item), os.path.basename(str(item.fspath)) not in FIRST,
-                                 os.path.basename(str(item.fspath)) in LAST))
+    name = lambda item: os.path.basename(str(item.fspath))  # noqa: E731
+    items.sort(key=lambda item: (not _float32(item), name(item) not in FIRST, name(item) not in POOL,
+                                 name(item) in LAST))
     for item in items:
         if _float32(item):
             item.add_marker(pytest.mark.xdist_group(FLOAT32))
+        elif name(item) in POOL:
+            item.add_marker(pytest.mark.xdist_group("pool"))
 
 
 @pytest.hookimpl(tryfirst=True, optionalhook=True)  # optional: pytest -p no:xdist has no such hook
