@@ -402,29 +402,48 @@ RESOLUTION_MATERIALS = {
 }
 
 
-def _com_trajectories(density, substeps, seconds):
+def _com_trajectories(density, substeps, seconds, side=BLOCK, drop=0.1, names=tuple(RESOLUTION_MATERIALS)):
     """COM trajectories (steps + 1, 3) per material at ``density`` cells/m (particle_size Genesis's default
-    0.64/density): each material a 12 cm block, its bottom 10 cm above the floor wall, the blocks 1 m
-    apart in one grid (checked not to meet); muscle actuated at 0.1 along x. Also the smallest gap between
-    two bodies at the end (m)."""
-    scene = make_scene(density, (-1.6, -1.1, 0.0), (1.6, 1.1, 0.6), substeps=substeps)
+    0.64/density): each material a cube of ``side`` m, its bottom ``drop`` m above the floor wall, the
+    cubes 1 m apart in one grid (checked not to meet), or one alone at the centre; muscle actuated at 0.1
+    along x. Also the smallest gap between two bodies at the end (m; inf for one)."""
+    scene = make_scene(density, (-1.6, -1.1, 0.0), (1.6, 1.1, max(0.6, drop + side + 0.3)), substeps=substeps)
     floor = floor_of(0.0, density)
-    spots = [(x, y) for y in (-0.5, 0.5) for x in (-1.0, 0.0, 1.0)]
-    bodies = {name: scene.add_entity(gs.morphs.Box(pos=(x, y, floor + 0.1 + BLOCK / 2), size=(BLOCK,) * 3),
-                                     material=make(), name=name)
-              for (name, make), (x, y) in zip(RESOLUTION_MATERIALS.items(), spots)}
+    spots = [(x, y) for y in (-0.5, 0.5) for x in (-1.0, 0.0, 1.0)] if len(names) > 1 else [(0.0, 0.0)]
+    bodies = {name: scene.add_entity(gs.morphs.Box(pos=(x, y, floor + drop + side / 2), size=(side,) * 3),
+                                     material=RESOLUTION_MATERIALS[name](), name=name)
+              for name, (x, y) in zip(names, spots)}
     scene.build()
-    bodies["muscle"].set_muscle(muscle_direction=(1.0, 0.0, 0.0))
-    bodies["muscle"].set_actuation(0.1)
+    if "muscle" in bodies:
+        bodies["muscle"].set_muscle(muscle_direction=(1.0, 0.0, 0.0))
+        bodies["muscle"].set_actuation(0.1)
     tracks = {name: [pos(body).mean(0)] for name, body in bodies.items()}
     for _ in range(int(round(seconds / DT))):
         scene.step()
         for name, body in bodies.items():
             tracks[name].append(pos(body).mean(0))
     last = {name: pos(body) for name, body in bodies.items()}
-    gap = min(np.abs(last[a][:, None, :2] - last[b][None, :, :2]).max(-1).min()
-              for a in last for b in last if a < b)
+    gap = min((np.abs(last[a][:, None, :2] - last[b][None, :, :2]).max(-1).min()
+               for a in last for b in last if a < b), default=np.inf)
     return {name: np.array(t) - t[0] for name, t in tracks.items()}, gap
+
+
+def _resolution_errors(seconds, **bodies):
+    """Each material at 32 and 64 cells/m (particle_size following Genesis's default: 2 and 1 cm, 8× the
+    particles), the same substep h = 2.5e-4 s (within both stability bounds, so only space is refined).
+    COM displacement from the start, error = max over time of |Δ_32(t) − Δ_64(t)| / max over time
+    |Δ_64(t)|, per material; printed."""
+    coarse, gap_coarse = _com_trajectories(32, 8, seconds, **bodies)
+    fine, gap_fine = _com_trajectories(64, 8, seconds, **bodies)
+    errors = {}
+    for name in coarse:
+        scale = np.linalg.norm(fine[name], axis=1).max()
+        errors[name] = np.linalg.norm(coarse[name] - fine[name], axis=1).max() / scale
+        print(f"\nresolution {name}: COM travel {scale:.4f} m; max |Δ32 − Δ64| = {errors[name]:.1%} of it "
+              f"(final COM z: {coarse[name][-1, 2]:+.4f} vs {fine[name][-1, 2]:+.4f} m)", end="")
+    print(f"\nsmallest gap between two bodies at the end: {gap_coarse:.3f} m (32), {gap_fine:.3f} m (64)")
+    assert min(gap_coarse, gap_fine) > 0.0  # the liquid's thin front comes within 8 mm of a neighbour at 64 cells/m
+    return errors
 
 
 @pytest.mark.slow
@@ -433,22 +452,24 @@ def _com_trajectories(density, substeps, seconds):
                    "cells/m, ~15 % of the 10 cm travel) and the coarse grid damps the rebound; Genesis's walls and "
                    "transfers (ours match Genesis to 1e-10), not a solver bug")
 def test_com_trajectories_agree_across_grid_resolutions(f64):
-    """Each material at 32 and 64 cells/m (particle_size following Genesis's default: 2 and 1 cm, 8× the
-    particles), the same substep h = 2.5e-4 s (within both stability bounds, so only space is refined),
-    0.4 s: fall, impact, spreading or bouncing. COM displacement from the start, error = max over time
-    of |Δ_32(t) − Δ_64(t)| / max over time |Δ_64(t)|. Pass: < 10 % for every material."""
-    seconds, substeps = 0.4, 8
-    coarse, gap_coarse = _com_trajectories(32, substeps, seconds)
-    fine, gap_fine = _com_trajectories(64, substeps, seconds)
-    errors = {}
-    for name in RESOLUTION_MATERIALS:
-        scale = np.linalg.norm(fine[name], axis=1).max()
-        errors[name] = np.linalg.norm(coarse[name] - fine[name], axis=1).max() / scale
-        print(f"\nresolution {name}: COM travel {scale:.4f} m; max |Δ32 − Δ64| = {errors[name]:.1%} of it "
-              f"(final COM z: {coarse[name][-1, 2]:+.4f} vs {fine[name][-1, 2]:+.4f} m)", end="")
-    print(f"\nsmallest gap between two bodies at the end: {gap_coarse:.3f} m (32), {gap_fine:.3f} m (64)")
-    assert min(gap_coarse, gap_fine) > 0.0  # the liquid's thin front comes within 8 mm of a neighbour at 64 cells/m
+    """12 cm cubes (3.8 cells across at 32 cells/m) dropped 10 cm, 0.4 s: fall, impact, spreading or
+    bouncing. Pass: < 10 % for every material."""
+    errors = _resolution_errors(0.4)
     assert max(errors.values()) < 0.10, errors
+
+
+@pytest.mark.slow
+def test_resolved_com_trajectories_agree_across_grid_resolutions(f64):
+    """24 cm cubes (7.7 cells across at 32 cells/m) dropped 30 cm, 0.6 s: the floor's offset of ~1 dx
+    (above) is ~5 % of the travel; the sand and the liquid, which spread over the floor (a few grains of
+    sand splash 0.9 m at 64 cells/m), each in a grid of its own.
+    Measured 2026-11-24: elastic (E 1e5) 5.4 %, elastoplastic 3.6 %, snow 5.5 %, sand 1.0 %, liquid
+    3.6 % — asserted < 10 %. Not asserted, and why: the stiffer bodies' rebounds converge more slowly
+    in space — Elastic(E=1e6) 12.4 %, Muscle() unactuated 10.6 %, actuated at 0.1 along x 18.7 %
+    (issue 12 stays open on it)."""
+    for names in (("elastic", "elastoplastic", "snow"), ("sand",), ("liquid",)):
+        errors = _resolution_errors(0.6, side=0.24, drop=0.3, names=names)
+        assert max(errors.values()) < 0.10, errors
 
 
 # -- mixed scene ---------------------------------------------------------------------------------------------
