@@ -304,6 +304,40 @@ def test_batched_setters_broadcast_one_row(f64, two_robots):
         other.set_dofs_position(_t([0.1, 0.2, 0.3]))
 
 
+def test_setters_take_the_values_at_the_call(f64, graph):
+    """A tensor the caller refills in place after a setter (a control buffer reused every step)
+    changes neither what the scene holds nor the graph: values are copied at the call, as Genesis
+    writes them into its fields; the gradient through a reused buffer equals that through fresh
+    tensors, bit for bit."""
+    scene, robot = graph
+    scene.reset()
+    position, gravity = _t([0.3, -0.2]), _t([0.0, 0.0, -9.81])
+    robot.set_dofs_position(position)
+    scene.set_gravity(gravity)
+    position += 1.0
+    gravity[2] = 0.0
+    assert robot.get_dofs_position().tolist() == [0.3, -0.2] and scene.get_gravity().tolist() == [0.0, 0.0, -9.81]
+    forces = _t(np.random.default_rng(3).normal(0.0, 1.0, (4, 2))).requires_grad_(True)
+
+    def rollout(reuse):
+        scene.reset()
+        buffer = torch.zeros(2, dtype=torch.float64)
+        for force in forces:
+            if reuse:
+                buffer.copy_(force)
+            robot.control_dofs_force(buffer if reuse else force * 1.0)
+            if reuse:
+                buffer.fill_(100.0)  # after the call: must not reach the step
+            scene.step()
+        final = robot.get_dofs_position()
+        (grad,) = torch.autograd.grad(final.sum(), forces)
+        return final.detach(), grad
+
+    fresh, reused = rollout(False), rollout(True)
+    assert torch.equal(fresh[0], reused[0]) and torch.equal(fresh[1], reused[1])
+    assert fresh[1].abs().sum() > 0
+
+
 def test_control_force_is_differentiable(f64, graph):
     scene, robot = graph
     scene.reset()

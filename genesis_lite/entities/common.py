@@ -9,11 +9,14 @@ from ..tensor import wrap
 
 def replace_columns(table, envs, columns, values):
     """``table`` (B, W) with ``values`` (len(envs), len(columns)) written at (envs, columns),
-    out of place so autograd sees it. A full overwrite is ``values`` itself: nothing is saved
-    for backward and the previous table drops out of the graph."""
+    out of place so autograd sees it. A full overwrite is a copy of ``values``: nothing is saved
+    for backward and the previous table drops out of the graph. Always a new tensor: values are
+    taken at the call, as Genesis writes them into its fields, so a caller that refills its own
+    tensor in place afterwards (a control buffer reused every step) changes neither the scene nor
+    the graph that autograd checks."""
     columns = np.asarray(columns)
     if is_range(columns, table.shape[1]) and is_range(envs, table.shape[0]):
-        return values
+        return values.clone()
     rows = torch.as_tensor(envs, device=table.device)[:, None]
     cols = torch.as_tensor(columns, device=table.device)[None, :]
     return table.index_put((rows, cols), values)
