@@ -11,6 +11,7 @@ import weakref
 import torch
 
 from . import autograd
+from .runtime import logger
 from .solvers.core import GradientError, SimulationError
 
 
@@ -35,6 +36,7 @@ class SolverSlot:
         self.uploaded_state = None  # the tensor Taichi's frame 0 equals (None: unknown)
         self.uploaded_inputs = None  # ((tensor, ...), (version, ...)): Taichi's inputs equal
         self.derived = None  # (state, value) cache of the last derived read
+        self.warned_nonfinite = False  # _check_finite warned once
 
 
 class Simulator:
@@ -231,13 +233,20 @@ class Simulator:
         return [solver.end_reverse() for solver in solvers]
 
     def _check_finite(self):
-        if not self.options.check_nan:
-            return
+        """With check_nan, raise at the first non-finite state; without, warn once per solver whose
+        blown-up state would look finite (Solver.hides_nonfinite: MPM's particles stay inside the
+        walls, NaN or not)."""
         for slot in self.slots:
-            if slot.solver.nonfinite():
-                names = ", ".join(slot.solver.entity_names)
-                raise SimulationError(f"step {self.step_index}: the {type(slot.solver).__name__} state became "
-                                      f"non-finite (entities: {names}); reduce dt, check inputs and parameters")
+            if not (self.options.check_nan or slot.solver.hides_nonfinite) or not slot.solver.nonfinite():
+                continue
+            message = (f"step {self.step_index}: the {type(slot.solver).__name__} state became non-finite "
+                       f"(entities: {', '.join(slot.solver.entity_names)}); reduce dt, check inputs and parameters")
+            if self.options.check_nan:
+                raise SimulationError(message)
+            if not slot.warned_nonfinite:
+                slot.warned_nonfinite = True
+                logger.warning(f"{message}. Its particles are kept inside the walls, so their positions look finite "
+                               f"while velocities and deformation are NaN; SimOptions(check_nan=True) raises here.")
 
     # -- derived quantities -------------------------------------------------------------------
     def derived(self, solver):

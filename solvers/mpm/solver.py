@@ -23,6 +23,7 @@ GENESIS_DT_PER_DX = 2e-2
 
 class MPMSolver(MPMAdjoint, Solver):
     persistent_inputs = layout.PERSISTENT_INPUTS
+    hides_nonfinite = True  # g2p.wall_particle clamps a NaN position onto a wall
 
     def __init__(self, dt, substeps, gravity, grid_density, particle_size, lower_bound, upper_bound, sticky,
                  requires_grad):
