@@ -14,7 +14,7 @@ import torch
 
 from . import morphs as gm
 from .entities import MPMEntity, RigidEntity
-from .entities.common import replace_columns
+from .entities.common import EntityIndexing, replace_columns
 from .entities.mpm_entity import sample_particles
 from .solvers.core import AssetError, InvalidInputError, SceneStateError
 from .materials import MPM, Rigid
@@ -319,7 +319,7 @@ class Scene:
         """Gravity of every solver, m/s²: (3,) or (n_envs, 3); differentiable."""
         sim = self._require_built("scene.set_gravity")
         sim.check_grad_allowed(gravity, "scene", "gravity")
-        probe = self.entities[0]  # parses the value as an entity's setter does
+        probe = _SceneArguments(self, "set_gravity")
         envs = probe._envs(envs_idx)
         values = probe._values(gravity, 3, envs, "gravity")
         for slot in sim.slots:
@@ -328,7 +328,7 @@ class Scene:
     def get_gravity(self, envs_idx=None):
         """Gravity, m/s²: (3,) or (n_envs, 3)."""
         sim = self._require_built("scene.get_gravity")
-        probe = self.entities[0]
+        probe = _SceneArguments(self, "get_gravity")
         envs = torch.as_tensor(probe._envs(envs_idx), device=runtime.device)
         return probe._out(sim.inputs(sim.slots[0].solver)["gravity"][envs])
 
@@ -411,3 +411,15 @@ def _links_of(morph, material, name):
     root.joint_type = "fixed" if morph.fixed else "free"
     root.pos, root.quat = np.asarray(morph.pos, dtype=float), np.asarray(morph.quat, dtype=float)
     return links
+
+
+class _SceneArguments(EntityIndexing):
+    """Parses a scene method's arguments (gravity, envs_idx) as an entity's setters do; its errors
+    name the method."""
+
+    def __init__(self, scene, method):
+        self.scene, self.name, self._method = scene, "scene", method
+
+    @property
+    def _who(self):
+        return f"scene.{self._method}"

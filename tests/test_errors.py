@@ -367,3 +367,26 @@ def test_singular_mass_matrix_names_the_link(f64, path, link):
     scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False))
     scene.add_entity(gs.morphs.URDF(file=path, fixed=False), name="bot")
     raises(gs.AssetError, scene.build, "entity 'bot'", f"link '{link}'", "positive definite mass matrix")
+
+
+def test_zero_mass_set_after_build_names_the_link(f64):
+    """A mass set to zero where it leaves M singular (a wheel's spin dof moves nothing else): a
+    named InvalidInputError, not torch's LinAlgError, and the masses stay as they were."""
+    scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False))
+    robot = scene.add_entity(gs.morphs.URDF(file=pybullet("r2d2.urdf")), name="r2d2")
+    scene.build(n_envs=2)
+    before = robot.get_links_mass().clone()
+    wheel = [link.name for link in robot.links].index("left_front_wheel")
+    raises(gs.InvalidInputError, lambda: robot.set_links_mass([0.0], links_idx_local=[wheel], envs_idx=[1]),
+           "entity 'r2d2'", "link 'left_front_wheel'", "positive definite mass matrix")
+    assert torch.equal(robot.get_links_mass(), before)
+    raises(gs.InvalidInputError, lambda: robot.set_links_mass([1.0], links_idx_local=[0], envs_idx=[]),
+           "entity 'r2d2'", "'envs_idx'", "at least one index in [0, 2)", "empty list")
+
+
+def test_scene_gravity_errors_name_the_scene_method(f64, built):
+    scene, _ = built
+    raises(gs.InvalidInputError, lambda: scene.set_gravity([0.0, -9.81]), "scene.set_gravity", "'gravity'", "(3,)")
+    raises(gs.InvalidInputError, lambda: scene.get_gravity(envs_idx=[0]), "scene.get_gravity", "'envs_idx'", "n_envs=0")
+    message = raises(gs.InvalidInputError, lambda: scene.set_gravity([0.0, 0.0, math.nan]), "scene.set_gravity")
+    assert ENTITY not in message

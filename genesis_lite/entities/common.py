@@ -40,16 +40,24 @@ def all_finite(tensor):
 class EntityIndexing:
     """Mixin of an entity with ``scene`` and ``name``: its checked indices and result shapes."""
 
+    @property
+    def _who(self):
+        """Who error messages name."""
+        return f"entity '{self.name}'"
+
     def _sim(self):
-        return self.scene._require_built(f"entity '{self.name}'")
+        return self.scene._require_built(self._who)
 
     def _local(self, idx, n, arg):
         """Local indices (list/array/tensor/int/None) → validated int64 numpy array."""
         if idx is None:
             return np.arange(n)
         arr = np.atleast_1d(idx.detach().cpu().numpy() if isinstance(idx, torch.Tensor) else np.asarray(idx))
+        if arr.size == 0:
+            raise InvalidInputError(f"{self._who}: argument '{arg}' must hold at least one index in [0, {n}), "
+                                    f"got an empty {type(idx).__name__}")
         if arr.dtype.kind not in "iu" or arr.ndim != 1 or (arr.size and (arr.min() < 0 or arr.max() >= n)):
-            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be integers in [0, {n}), "
+            raise InvalidInputError(f"{self._who}: argument '{arg}' must be integers in [0, {n}), "
                                     f"got {idx!r}")
         return arr.astype(np.int64)
 
@@ -57,7 +65,7 @@ class EntityIndexing:
         n_envs = self.scene.n_envs
         if n_envs == 0:
             if envs_idx is not None:
-                raise InvalidInputError(f"entity '{self.name}': argument 'envs_idx' must be None in a scene built "
+                raise InvalidInputError(f"{self._who}: argument 'envs_idx' must be None in a scene built "
                                         f"with n_envs=0, got {envs_idx!r}")
             return np.zeros(1, dtype=np.int64)
         return self._local(envs_idx, n_envs, "envs_idx")
@@ -75,14 +83,14 @@ class EntityIndexing:
         self._sim().check_grad_allowed(value, self.name, arg)
         # complex values would silently lose their imaginary part in the float conversion below
         if (value.is_complex() if isinstance(value, torch.Tensor) else np.iscomplexobj(value)):
-            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be real numbers of shape "
+            raise InvalidInputError(f"{self._who}: argument '{arg}' must be real numbers of shape "
                                     f"{expected}, got complex values")
         try:
             if isinstance(value, torch.Tensor):
                 return value.as_subclass(torch.Tensor).to(device=runtime.device, dtype=runtime.tc_float)
             return torch.as_tensor(np.asarray(value, dtype=np.float64), dtype=runtime.tc_float, device=runtime.device)
         except (TypeError, ValueError) as err:
-            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be numbers of shape {expected}, "
+            raise InvalidInputError(f"{self._who}: argument '{arg}' must be numbers of shape {expected}, "
                                     f"got {type(value).__name__} ({err})") from None
 
     def _values(self, value, n_cols, envs, arg):
@@ -94,9 +102,9 @@ class EntityIndexing:
             tensor = tensor.expand(len(envs), n_cols)
         if tuple(tensor.shape) != expected:
             every_env = f" or {(n_cols,)} for every env" if self.scene.n_envs else ""
-            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must have shape {expected}{every_env}, "
+            raise InvalidInputError(f"{self._who}: argument '{arg}' must have shape {expected}{every_env}, "
                                     f"got {tuple(tensor.shape)}")
         if not all_finite(tensor.detach()):
-            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be finite, got NaN or inf in "
+            raise InvalidInputError(f"{self._who}: argument '{arg}' must be finite, got NaN or inf in "
                                     f"{tensor.detach().cpu().numpy()}")
         return tensor.reshape(len(envs), n_cols)

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import torch
 
-from ..core import runtime
+from ..core import InvalidInputError, runtime
 from .collision.detect import BUDGET, COLLIDERS
 from .constraint.rows import DEFAULT_SOLIMP, SMOOTH_SOLIMP  # noqa: F401 (the geoms' defaults, read by solver.py)
 
@@ -91,6 +91,7 @@ class InvweightBasis:
             K[link] = solver.mass_matrix()[0].double().cpu().numpy()
         solver.upload_inputs(inputs)
         solver.check_positive_definite(np.einsum("l,lij->ij", m.link_mass0, K) + np.diag(m.dof_armature))
+        self.check_positive_definite = solver.check_positive_definite
         jac = torch.empty((solver.n_batch, L, 6, D), dtype=runtime.tc_float, device=runtime.device)
         solver.kernels.read_com_jacobians(jac)
         # dof_invweight0 = diag(M⁻¹) @ average: a free joint's translations and rotations averaged
@@ -108,14 +109,18 @@ class InvweightBasis:
         single-env scene bit for bit (~50 µs an env, when mass or armature is set)."""
         if mass.shape[1] == 0 or armature.shape[1] == 0:
             return torch.zeros_like(mass), torch.zeros_like(armature)
-        rows = [self._one_env(mass[e: e + 1].double(), armature[e: e + 1].double(), *self.consts)
-                for e in range(mass.shape[0])]
+        rows = [self._one_env(mass[e: e + 1].double(), armature[e: e + 1].double()) for e in range(mass.shape[0])]
         return (torch.cat([r[0] for r in rows]).to(mass.dtype), torch.cat([r[1] for r in rows]).to(mass.dtype))
 
-    @staticmethod
-    def _one_env(mass, armature, K, J, moving, average):
-        """(1, L), (1, D) for one env's mass (1, L) and armature (1, D)."""
-        inverse = torch.linalg.inv((mass[0, :, None, None] * K).sum(0) + torch.diag(armature[0]))
+    def _one_env(self, mass, armature):
+        """(1, L), (1, D) for one env's mass (1, L) and armature (1, D); a singular M (a mass set
+        to zero) is an InvalidInputError naming the link."""
+        K, J, moving, average = self.consts
+        matrix = (mass[0, :, None, None] * K).sum(0) + torch.diag(armature[0])
+        inverse, info = torch.linalg.inv_ex(matrix)
+        if info.item() != 0:
+            self.check_positive_definite(matrix.detach().cpu().numpy(), InvalidInputError)
+            torch.linalg.inv(matrix)  # singular below the check's share: torch's own error
         translational = torch.einsum("lri,ij,lrj->l", J, inverse, J) / 3.0 * moving
         return translational[None], (torch.diagonal(inverse) @ average)[None]
 

@@ -159,12 +159,12 @@ class RigidSolver(Solver):
                              f"have no mass or inertia; expected an <inertial> with positive mass, or collision "
                              f"geometry to derive it from, or armature on the joint")
 
-    def check_positive_definite(self, mass_matrix):
-        """M (D, D) with armature at the initial pose must be positive definite: else name the
-        link of the first dof whose pivot vanishes (a massless root carrying a joint, an inertia
-        with a zero principal moment under a free joint, ...), at build time. A pivot counts as
-        vanished below a round-off share of its own diagonal entry (M comes in the scene's
-        precision)."""
+    def check_positive_definite(self, mass_matrix, error=AssetError):
+        """M (D, D) with armature at the initial pose must be positive definite: else raise
+        ``error`` naming the link of the first dof whose pivot vanishes (a massless root carrying a
+        joint, an inertia with a zero principal moment under a free joint, ...), at build time or
+        when masses or armature are set. A pivot counts as vanished below a round-off share of its
+        own diagonal entry (M comes in the scene's precision)."""
         share = 1e-10 if runtime.tc_float == torch.float64 else 1e-5
         reduced = mass_matrix.astype(np.float64)
         for i in range(len(reduced)):  # Gaussian elimination in dof order: pivot i of M's LDLᵀ
@@ -172,7 +172,7 @@ class RigidSolver(Solver):
             if not pivot > share * mass_matrix[i, i]:
                 m = self.model
                 link = m.dof_link[i]
-                raise AssetError(f"entity '{self.entity_names[m.link_entity[link]]}': link '{m.link_name[link]}' "
+                raise error(f"entity '{self.entity_names[m.link_entity[link]]}': link '{m.link_name[link]}' "
                                  f"(dof {i}) expected a positive definite mass matrix, got a pivot of {pivot:.3g} "
                                  f"against a diagonal entry of {mass_matrix[i, i]:.3g}: this dof moves no mass or "
                                  f"inertia that the dofs before it do not move already (a massless base under a free "
