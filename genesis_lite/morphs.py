@@ -162,7 +162,14 @@ class Mesh(Morph):
 
 @dataclass
 class Plane(Morph):
-    """The ground: an infinite static half-space below z = pos[2] (always fixed)."""
+    """The ground: an infinite static half-space (always fixed) bounded by the plane through pos
+    whose normal is ``normal`` (3,) in the morph's frame (euler / quat turn it), pointing out of
+    the solid side: by default +z, the half-space below z = pos[2]."""
+    normal: tuple = (0.0, 0.0, 1.0)
 
     def _check(self):
         self.fixed = True
+        normal = _vec("Plane", "normal", self.normal, 3)
+        if not np.linalg.norm(normal) > 1e-9:
+            raise InvalidInputError(f"Plane: argument 'normal' must be a non-zero 3-vector, got {self.normal!r}")
+        self.normal = normal / np.linalg.norm(normal)

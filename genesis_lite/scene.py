@@ -401,7 +401,7 @@ def _links_of(morph, material, name):
         except AssetError as exc:  # shapes does not know the entity: add it to the message
             raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.Mesh: {exc}") from exc
     elif isinstance(morph, gm.Plane):
-        links = shapes.plane_link()
+        links = shapes.plane_link(morph.normal)
     else:
         raise InvalidInputError(f"scene.add_entity: morph type {type(morph).__name__} is not supported")
     if material.friction is not None:  # the material's friction overrides the asset's, as Genesis

@@ -404,7 +404,8 @@ def test_errors_name_the_camera_argument_and_value(f32, tmp_path):
         cam.stop_recording(str(tmp_path / "a.mp4"))
     with pytest.raises(gs.InvalidInputError, match=r"argument 'antialiasing' must be False"):
         cam.render(antialiasing=True)
-    with pytest.raises(gs.InvalidInputError, match=r"follow_entity: argument 'entity' must be an entity of this"):
+    with pytest.raises(gs.InvalidInputError, match=r"follow_entity: argument 'entity' must be a rigid entity .*, "
+                                                   r"got str 'box'"):
         cam.follow_entity("box")
     cam.render()
     cam.stop_recording(str(tmp_path / "a.gif"))  # the recording went on after the errors

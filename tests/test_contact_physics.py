@@ -131,6 +131,33 @@ def test_sphere_on_incline(f64, rolling):
         assert abs(accel - expected) <= 0.01 * expected, (accel, expected)
 
 
+@pytest.mark.parametrize("plane", [{"normal": (np.sin(np.radians(20.0)), 0.0, np.cos(np.radians(20.0)))},
+                                   {"euler": (0.0, 20.0, 0.0)},
+                                   {"quat": (0.0, 1.0, 0.0, 0.0), "normal": (np.sin(np.radians(20.0)), 0.0,
+                                                                              -np.cos(np.radians(20.0)))}],
+                         ids=["normal", "euler", "flipped_twice"])
+def test_sphere_rolls_down_a_tilted_plane(f64, plane):
+    """A plane tilted by 20° about y, by its ``normal`` (Genesis's argument, in the morph's frame),
+    by euler, or by a half turn about x of a plane whose normal points down (the two cancel): a
+    sphere released on it rolls downhill (+x) at (5/7) g sin θ, as on the tilted-gravity incline
+    above."""
+    theta, radius, h, steps = np.radians(20.0), 0.1, 0.002, 250
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=h))
+    scene.add_entity(gs.morphs.Plane(**plane))
+    normal = np.array([np.sin(theta), 0.0, np.cos(theta)])
+    sphere = scene.add_entity(gs.morphs.Sphere(radius=radius, pos=tuple(normal * radius)))
+    scene.build()
+    start = sphere.get_pos().numpy().copy()
+    for _ in range(steps):
+        scene.step()
+    travel = sphere.get_pos().numpy() - start
+    downhill = np.array([np.cos(theta), 0.0, -np.sin(theta)])
+    accel = 2 * (travel @ downhill) / (h * h * steps * (steps + 1))
+    expected = 5.0 / 7.0 * G * np.sin(theta)
+    assert abs(accel - expected) <= 0.01 * expected, (accel, expected)
+    assert abs(travel @ normal) < 1e-3 and abs(travel[1]) < 1e-9  # on the plane, straight down it
+
+
 def test_tower_of_boxes_stands(f64):
     """10 boxes stacked, 5 s: the tower stands and comes to rest (max |qvel| < 1e-5)."""
     bodies = [Body("box", (0.2, 0.2, 0.2), pos=(0, 0, 0.1 + 0.2 * k)) for k in range(10)]

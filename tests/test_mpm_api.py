@@ -271,6 +271,10 @@ def test_sample_particles_from_morphs(meshes):
     for morph in (gs.morphs.Capsule(), gs.morphs.Plane()):
         with pytest.raises(gs.InvalidInputError, match="must be gs.morphs.Box, Sphere, Cylinder or Mesh"):
             sample_particles(morph, MPM.Elastic(), P, *walls, 0, "bad")
+    with pytest.raises(gs.InvalidInputError, match="entity 'pinned': argument 'fixed' of gs.morphs.Box must be False "
+                                                   "for an MPM entity"):
+        sample_particles(gs.morphs.Box(pos=(0, 0, 0.5), size=(0.1, 0.1, 0.1), fixed=True), MPM.Elastic(), P, *walls,
+                         0, "pinned")
     with pytest.raises(gs.AssetError, match="entity 'leaky': argument 'file' of gs.morphs.Mesh: .*not watertight"):
         sample_particles(gs.morphs.Mesh(file=meshes["open"], pos=(0, 0, 0.5)), MPM.Elastic(), P, *walls, 0, "leaky")
 

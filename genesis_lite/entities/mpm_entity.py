@@ -22,6 +22,9 @@ def sample_particles(morph, material, particle_size, wall_lower, wall_upper, see
     (``seed`` seeds the random sampler). Every particle must lie strictly between the MPM
     walls (wall_lower, wall_upper (3,) m), as Genesis requires."""
     owner = f"entity '{name}'"
+    if morph.fixed and not isinstance(morph, gm.Plane):  # a Plane is always fixed: refused below
+        raise InvalidInputError(f"{owner}: argument 'fixed' of gs.morphs.{type(morph).__name__} must be False for an "
+                                f"MPM entity (its particles move; only the walls hold them), got True")
     pose = {"pos": morph.pos, "quat": morph.quat, "owner": owner}
     args = (particle_size, material.sampler, seed)
     if isinstance(morph, gm.Box):

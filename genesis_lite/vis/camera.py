@@ -201,9 +201,12 @@ class Camera:
         axis; smoothing: None or in [0, 1): the weight of the camera's previous position and lookat
         (exponential smoothing); fix_orientation: keep the orientation, only move."""
         owner = f"{self._name}.follow_entity"
-        if not isinstance(entity, RigidEntity) or entity.scene is not self._scene:
+        if not isinstance(entity, RigidEntity):
+            raise InvalidInputError(f"{owner}: argument 'entity' must be a rigid entity (the camera follows its "
+                                    f"base link), got {type(entity).__name__} {getattr(entity, 'name', entity)!r}")
+        if entity.scene is not self._scene:
             raise InvalidInputError(f"{owner}: argument 'entity' must be an entity of this camera's scene, got "
-                                    f"{entity!r}")
+                                    f"{entity.name!r} of another scene")
         if not (isinstance(fixed_axis, (tuple, list)) and len(fixed_axis) == 3):
             raise InvalidInputError(f"{owner}: argument 'fixed_axis' must be 3 entries, each None or a coordinate "
                                     f"(m), got {fixed_axis!r}")

@@ -156,8 +156,9 @@ class RigidSolver(Solver):
                 continue
             entity = self.entity_names[m.link_entity[link]]
             raise AssetError(f"entity '{entity}': link '{m.link_name[link]}' moves (dof {i}) but it and its children "
-                             f"have no mass or inertia; expected an <inertial> with positive mass, or collision "
-                             f"geometry to derive it from, or armature on the joint")
+                             f"have no mass or inertia (an <inertial> of mass 0 — which pybullet reads as a static "
+                             f"body — or none); expected an <inertial> with positive mass, or collision geometry to "
+                             f"derive it from, or armature on the joint, or fixed=True for a body that does not move")
 
     def check_positive_definite(self, mass_matrix, error=AssetError):
         """M (D, D) with armature at the initial pose must be positive definite: else raise
