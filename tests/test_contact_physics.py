@@ -10,6 +10,7 @@ import pytest
 import torch
 
 import genesis_lite as gs
+from genesis_lite.solvers.rigid import contact
 from tests.contact_scenes import Body, ContactScene, a1_mujoco, build_mujoco, build_ours
 
 G = 9.81
@@ -275,3 +276,28 @@ def test_contact_stages_run_only_in_substeps_that_need_them(f64, monkeypatch):
     assert launched.count("reverse_dynamics:1") == launched.count("collide_adjoint") == sum(touching)
     assert launched.count("reverse_dynamics:0") == 2 * len(touching) - sum(touching)
     assert torch.isfinite(z0.grad).all()
+
+
+def test_more_contacts_than_slots_is_a_named_error(f64, caplog):
+    """Two boxes resting on the plane, one on the other (up to 8 contacts a face each), with 6
+    contact slots: build warns, the first step raises naming max_contacts and the pairs' worst
+    case (plane-box 8 each, box-box 8), which is enough."""
+    def boxes(max_contacts):
+        scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002),
+                         rigid_options=gs.options.RigidOptions(max_contacts=max_contacts))
+        scene.add_entity(gs.morphs.Plane())
+        scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.2), pos=(0.0, 0.0, 0.1)), name="low")
+        scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.0, 0.0, 0.25)), name="high")
+        scene.build()
+        return scene
+
+    caplog.clear()
+    scene = boxes(6)
+    worst = contact.worst_case_contacts(scene.rigid_solver.model)
+    assert any("max_contacts" in r.getMessage() and f"up to {worst}" in r.getMessage() for r in caplog.records)
+    with pytest.raises(gs.SimulationError, match=rf"entities: .*low, high.* more contacts than the 6 slots per env.*"
+                                                 rf"max_contacts=.*up to {worst}"):
+        scene.step()
+    scene = boxes(worst)
+    for _ in range(5):
+        scene.step()

@@ -50,12 +50,17 @@ def limited_dofs(model, options):
     return int((finite & (model.dof_q >= 0)).sum())
 
 
+def worst_case_contacts(model):
+    """The most contacts the candidate pairs can make in one env (each pair kind's budget)."""
+    return sum(_pair_budget(model, k) for k in range(len(model.pair_geom1)))
+
+
 def capacity(model, options):
     """(contact slots C, row slots R) per env: C the pairs' worst case, capped by max_contacts
     (default: MAX_PER_MOVING_LINK per moving link with geometry, at least MIN_CONTACTS); R
     enough rows for C contacts of the largest condim under the cone, one per limited dof (at
     most one of its two bounds is violated) and one per dof for friction loss (settable on any)."""
-    worst = sum(_pair_budget(model, k) for k in range(len(model.pair_geom1)))
+    worst = worst_case_contacts(model)
     if options.max_contacts is not None:
         cap = int(options.max_contacts)
     else:
@@ -131,7 +136,8 @@ def _touching_pairs(solver):
     solver.detect_contacts()
     if solver.data.take_flag("overflow"):
         _logger.warning(f"scene.build: more contacts at the initial pose than the {solver.data.size['C']} slots per "
-                        f"env: pairs beyond them are not filtered as touching; raise RigidOptions(max_contacts=...)")
+                        f"env: pairs beyond them are not filtered as touching; raise RigidOptions(max_contacts=...) "
+                        f"(this scene's pairs can make up to {worst_case_contacts(solver.model)})")
     solver.data.take_flag("inexact")
     found = solver.contacts(substep=0)[0].cpu().numpy()
     found = found[found[:, 0] >= 0]

@@ -228,7 +228,9 @@ class RigidSolver(Solver):
         if self.data.take_flag("overflow"):
             raise SimulationError(f"rigid solver (entities: {', '.join(self.entity_names)}): more contacts than the "
                                   f"{self.data.size['C']} slots per env in this step (it was taken without the "
-                                  f"extra ones); expected RigidOptions(max_contacts=...) above that")
+                                  f"extra ones); expected RigidOptions(max_contacts=...) above that (this scene's "
+                                  f"pairs can make up to {contact.worst_case_contacts(self.model)}; the default is "
+                                  f"{contact.MAX_PER_MOVING_LINK} per moving link)")
 
     def run_step(self, inputs, out, commit):
         """One step's kernels. Without contact pairs or friction loss, one launch for all substeps
