@@ -111,7 +111,7 @@ def build_mujoco(spec, model):
 def a1_mujoco(path, z, stand, kp, kv, dt):
     """MuJoCo's model and data of a URDF quadruped (pybullet_data's a1) on a plane: a free base at
     height z (m), position actuators (kp, kv) on every other joint, targets and joints at
-    ``stand`` (rad)."""
+    ``stand`` (rad); the implicitfast integrator."""
     spec = mujoco.MjSpec.from_file(path)
     spec.compiler.fusestatic = True
     spec.compiler.alignfree = False
@@ -120,6 +120,8 @@ def a1_mujoco(path, z, stand, kp, kv, dt):
     root.pos = [0.0, 0.0, z]
     spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
     spec.option.timestep = dt
+    # the servos' kv implicit, as ours (actuation.py): MuJoCo's implicitfast; its Euler treats only damping so
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     for joint in spec.joints:
         if joint.type != mujoco.mjtJoint.mjJNT_FREE:
             spec.add_actuator(target=joint.name, trntype=mujoco.mjtTrn.mjTRN_JOINT).set_to_position(kp=kp, kv=kv)

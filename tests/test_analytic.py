@@ -90,13 +90,14 @@ SLIDER_MASS, ARMATURE, DAMPING, KP, KV = 2.0, 0.3, 0.5, 50.0, 3.0
 def _servo_map(mode, target, h):
     """(A, c) of the affine map x' = A x + c, x = (q, q̇), that one substep of length h is.
 
-    A horizontal slider has no bias force. With D = m + armature + h·damping the solve gives
-    q̈ = (α − β q − γ q̇) / D, where the position servo τ = kp (q* − q) − kv q̇ gives
-    (α, β, γ) = (kp q*, kp, kv + damping) and the velocity servo τ = kv (q̇* − q̇) gives
-    (kv q̇*, 0, kv + damping). Then q̇' = q̇ + h q̈ and q' = q + h q̇':
+    A horizontal slider has no bias force. With D = m + armature + h·(damping + kv) (both velocity
+    terms implicit, as Genesis's default integrator) the solve gives q̈ = (α − β q − γ q̇) / D,
+    where the position servo τ = kp (q* − q) − kv q̇ gives (α, β, γ) = (kp q*, kp, kv + damping)
+    and the velocity servo τ = kv (q̇* − q̇) gives (kv q̇*, 0, kv + damping). Then q̇' = q̇ + h q̈
+    and q' = q + h q̇':
         q̇' = −(hβ/D) q + (1 − hγ/D) q̇ + hα/D,   q' = q + h q̇'.
     """
-    D = SLIDER_MASS + ARMATURE + h * DAMPING
+    D = SLIDER_MASS + ARMATURE + h * (DAMPING + KV)
     alpha, beta = (KP * target, KP) if mode == "position" else (KV * target, 0.0)
     gamma = KV + DAMPING
     velocity_row = np.array([-h * beta / D, 1.0 - h * gamma / D])
@@ -133,8 +134,9 @@ def test_pd_servo_slider_matches_discrete_closed_form(f64, urdf_dir, substeps, m
     Any sign or gain error moves the trajectory by orders of magnitude more (the references
     iterated with the mutation, over the 300 steps): kv's sign flipped in the position servo
     (γ 3.5 → −2.5: unstable) by 2 m; the damping's sign flipped in force and solve alike
-    (γ 3.5 → 2.5, D 2.305 → 2.295) by 0.06 m (position servo) and 0.15 m/s (velocity servo,
-    whose steady state kv q̇*/(kv + b) goes from 0.43 to 0.6 m/s); kp and kv swapped by 0.8 m.
+    (γ 3.5 → 2.5, D 2.335 → 2.325) by 0.06 m (position servo) and 0.15 m/s (velocity servo,
+    whose steady state kv q̇*/(kv + b) goes from 0.43 to 0.6 m/s); kp and kv swapped by 0.8 m;
+    kv left out of D (an explicit servo, MuJoCo's Euler integrator) by 7e-3 m and 5e-3 m/s.
     """
     scene, robot = _slider(urdf_dir, substeps)
     scene.reset()

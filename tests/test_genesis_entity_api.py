@@ -407,8 +407,9 @@ def test_dofs_force_of_the_pendulum_is_analytic(f64, pendulum):
 
 
 def test_dofs_force_is_what_the_next_step_applies(f64, two_robots):
-    """q̇' = q̇ + h·A⁻¹·get_dofs_force() with A = get_mass_mat() + h·diag(damping) (semi-implicit
-    Euler, implicit damping), and the actuator's share is get_dofs_control_force()."""
+    """q̇' = q̇ + h·A⁻¹·get_dofs_force() with A = get_mass_mat() + h·diag(damping + kv of the dofs
+    in a servo mode) (semi-implicit Euler, implicit damping and servo kv, as Genesis), and the
+    actuator's share is get_dofs_control_force()."""
     scene, kuka, other = two_robots
     scene.reset()
     rng = np.random.default_rng(6)
@@ -427,6 +428,8 @@ def test_dofs_force_is_what_the_next_step_applies(f64, two_robots):
     for robot in (kuka, other):
         force, actuator = robot.get_dofs_force().numpy(), robot.get_dofs_control_force().numpy()
         damping, qvel = robot.get_dofs_damping().numpy(), robot.get_dofs_velocity().numpy()
+        if robot is other:  # both its dofs are servoed
+            damping = damping + robot.get_dofs_kv().numpy()
         matrix = robot.get_mass_mat().numpy() + DT * np.eye(robot.n_dofs) * damping[:, None, :]
         predicted[robot.name] = qvel + DT * np.linalg.solve(matrix, force[..., None])[..., 0]
         robot.control_dofs_force(torch.zeros(2, robot.n_dofs, dtype=torch.float64))
@@ -516,3 +519,22 @@ def test_frictionloss_holds_and_releases_the_pendulum(f64, pendulum):
     assert 0.0 < swings[20.0] < 0.02 * swings[0.0], swings
     with pytest.raises(gs.InvalidInputError, match="entity 'pendulum': argument 'frictionloss' must be ≥ 0"):
         robot.set_dofs_frictionloss([-1.0])
+
+
+def test_genesis_franka_gains_hold_the_arm(f64):
+    """Genesis's control_franka tutorial gains (kp up to 4500, kv up to 450) on pybullet's Panda at
+    dt 10 ms: the servos' kv is implicit, as Genesis's default integrator makes it, so the arm holds
+    its target, off by its gravity torque over kp (measured 7.7e-3 rad) and at rest. (With kv
+    explicit, h·kv/inertia ≫ 2 on the distal joints: the arm chattered 0.14 rad off at 4 rad/s.)"""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01))
+    arm = scene.add_entity(gs.morphs.URDF(file=pybullet("franka_panda", "panda.urdf"), fixed=True))
+    scene.build()
+    arm.set_dofs_kp(_t([4500, 4500, 3500, 3500, 2000, 2000, 2000, 100, 100]))
+    arm.set_dofs_kv(_t([450, 450, 350, 350, 200, 200, 200, 10, 10]))
+    target = _t([0.5, 0.3, 0.0, -1.5, 0.0, 1.5, 0.5, 0.02, 0.02])
+    arm.set_dofs_position(target)
+    arm.control_dofs_position(target)
+    for _ in range(200):
+        scene.step()
+    assert (arm.get_dofs_position() - target).abs().max() < 0.01
+    assert arm.get_dofs_velocity().abs().max() < 1e-6

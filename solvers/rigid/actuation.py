@@ -4,14 +4,27 @@ loss are constraint rows: constraint/rows.py).
 Control modes per dof (as in Genesis): 0 force (``control_dofs_force``), 1 position
 (τ = kp·(q* − q) + kv·(q̇* − q̇), with q̇* = ``ctrl_vel``: 0 after ``control_dofs_position``,
 the target of ``control_dofs_position_velocity``), 2 velocity (τ = kv·(q̇* − q̇)); the result is
-clipped to the dof's force range. Damping −b·q̇ is passive (and treated implicitly by the solve,
-as MuJoCo does).
+clipped to the dof's force range. Damping −b·q̇ is passive. Both velocity terms are treated
+implicitly by the acceleration stage (linalg.py: h·(b + kv) on A's diagonal, kv of a dof in a
+servo mode), as Genesis's default integrator does (approximate_implicitfast; MuJoCo's implicitfast
+too, its Euler integrator only for b): an explicit kv is unstable once h·kv exceeds about twice
+the dof's inertia, which the gains of Genesis's examples do at its time steps.
 """
 import taichi as ti
 
 from .data import accumulate
 
 FORCE, POSITION, VELOCITY = 0, 1, 2
+
+
+@ti.func
+def servo_kv(d: ti.template(), e, i):
+    """Dof i's velocity gain kv in env e when it is in a servo mode (position or velocity), else 0:
+    what its actuator adds to the implicit damping."""
+    kv = 0.0
+    if ti.cast(d.ctrl_mode[e, i], ti.i32) != FORCE:
+        kv = d.kv[e, i]
+    return kv
 
 
 @ti.func

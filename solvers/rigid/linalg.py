@@ -1,6 +1,8 @@
-"""Acceleration stage: qacc = A⁻¹ qfrc_smooth with A = M + diag(armature + h·damping).
+"""Acceleration stage: qacc = A⁻¹ qfrc_smooth with A = M + diag(armature + h·(damping + kv_servo)).
 
-The h·damping term makes joint damping implicit, as MuJoCo's Euler integrator does. A is
+The h·damping term makes joint damping implicit, as MuJoCo's Euler integrator does, and h·kv_servo
+(kv of a dof in position or velocity control, actuation.servo_kv) the servo's velocity term, as
+Genesis's default integrator and MuJoCo's implicitfast do. A is
 factored as A = Lᵀ D L along the dof tree (Featherstone's LTDL): L[k, i] is non-zero only for
 dofs i on the path from k to the root, so there is no fill-in, the cost is Σ depth², and
 separate bodies never mix (a NaN in one stays there). Taichi's reverse mode gives wrong
@@ -11,6 +13,7 @@ solve's own (see _undamped_solution); the solve's adjoint is constraint/implicit
 """
 import taichi as ti
 
+from .actuation import FORCE, servo_kv
 from .data import accumulate
 
 
@@ -23,7 +26,7 @@ def _factor(d: ti.template(), s, e):
         while j != -1:
             d.factor[s, e, k, j] = d.mass_mat[s, e, k, j]
             j = d.dof_parent[j]
-        accumulate(d.factor, ti.Vector([s, e, k, k]), d.armature[e, k] + h * d.damping[e, k])
+        accumulate(d.factor, ti.Vector([s, e, k, k]), d.armature[e, k] + h * (d.damping[e, k] + servo_kv(d, e, k)))
     for r in range(d.n_dofs):
         k = d.n_dofs - 1 - r
         i = d.dof_parent[k]
@@ -58,11 +61,11 @@ def _solve_in_place(d: ti.template(), s, e, x: ti.template()):
 @ti.func
 def _undamped_solution(d: ti.template(), s, e):
     """Whether frame s integrates the constraint solve's own acceleration: it had rows and no dof
-    is damped. MuJoCo's Euler integrator does so; with damping the constraint force, solved for
-    with M alone, goes through the damped matrix like every other force."""
+    is damped (joint damping or a servo's kv). MuJoCo does so; with damping the constraint force,
+    solved for with M alone, goes through the damped matrix like every other force."""
     undamped = d.n_efc[s, e, 0] > 0
     for i in range(d.n_dofs):
-        undamped = undamped and d.damping[e, i] == 0.0
+        undamped = undamped and d.damping[e, i] == 0.0 and servo_kv(d, e, i) == 0.0
     return undamped
 
 
@@ -91,7 +94,7 @@ def solve_env(d: ti.template(), s, e, rows: ti.template()):
 def solve_adjoint_env(d: ti.template(), s, e, rows: ti.template()):
     """Reverse of ``solve_env`` for frame s. Sets qfrc_smooth.grad[s, e] and, with rows, the
     gradients of qacc_constrained and qfrc_constraint (the constraint solve's adjoint takes them
-    on), and adds to the gradients of M, armature and damping."""
+    on), and adds to the gradients of M, armature, damping and a servo's kv."""
     h = d.consts[0]
     undamped = False
     if ti.static(rows):
@@ -106,7 +109,7 @@ def solve_adjoint_env(d: ti.template(), s, e, rows: ti.template()):
             y[s, e, i] = d.qacc.grad[s, e, i]
         _solve_in_place(d, s, e, y)
         for i in range(d.n_dofs):
-            accumulate(d.damping.grad, ti.Vector([e, i]), -h * y[s, e, i] * d.qacc[s, e, i])
+            _accumulate_damping_grad(d, e, i, -h * y[s, e, i] * d.qacc[s, e, i])
     else:
         _solve_in_place(d, s, e, d.qfrc_smooth.grad)
         for i in range(d.n_dofs):
@@ -117,8 +120,16 @@ def solve_adjoint_env(d: ti.template(), s, e, rows: ti.template()):
                 accumulate(d.mass_mat.grad, ti.Vector([s, e, i, j]), -g)
                 j = d.dof_parent[j]
             accumulate(d.armature.grad, ti.Vector([e, i]), -y * d.qacc[s, e, i])
-            accumulate(d.damping.grad, ti.Vector([e, i]), -h * y * d.qacc[s, e, i])
+            _accumulate_damping_grad(d, e, i, -h * y * d.qacc[s, e, i])
     if ti.static(rows):
         for i in range(d.n_dofs):
             d.qfrc_constraint.grad[s, e, i] = 0.0 if undamped or d.n_efc[s, e, 0] == 0 \
                 else d.qfrc_smooth.grad[s, e, i]
+
+
+@ti.func
+def _accumulate_damping_grad(d: ti.template(), e, i, g):
+    """∂L/∂(A's diagonal term h·(damping + kv_servo)) · h = g, to damping and, in a servo mode, kv."""
+    accumulate(d.damping.grad, ti.Vector([e, i]), g)
+    if ti.cast(d.ctrl_mode[e, i], ti.i32) != FORCE:
+        accumulate(d.kv.grad, ti.Vector([e, i]), g)
