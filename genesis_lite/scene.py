@@ -19,7 +19,7 @@ from .entities.mpm_entity import sample_particles
 from .solvers.core import AssetError, InvalidInputError, SceneStateError
 from .materials import MPM, Rigid
 from .options import MPMOptions, RigidOptions, SimOptions, ViewerOptions, VisOptions, check_bool, is_int
-from .runtime import require_init, runtime
+from .runtime import logger, require_init, runtime
 from .simulator import Simulator
 from .solvers.mpm.solver import MPMSolver
 from .solvers.rigid import merge, shapes, urdf
@@ -175,6 +175,10 @@ class Scene:
         for camera in self._cameras:  # their env_idx checked before anything is allocated
             camera._bind_env()
         solvers = self._solvers()
+        if len(solvers) > 1:  # accepted, so say what does not happen yet
+            logger.warning("scene.build: rigid and MPM entities share the substep loop but do not interact yet (no "
+                           "rigid–MPM coupling): particles pass through rigid bodies and the rigid ground, and the MPM "
+                           "walls hold the particles only")
         sim = Simulator(self.sim_options, solvers)
         try:
             sim.build(self.n_envs)
