@@ -15,6 +15,9 @@ from .constraint.rows import DEFAULT_SOLIMP, SMOOTH_SOLIMP  # noqa: F401 (the ge
 _logger = logging.getLogger("genesis_lite")
 MAX_PER_MOVING_LINK = 8  # default max_contacts: a box resting on a face touches at up to 8 points
 MIN_CONTACTS = 16
+# default max_contacts: the pairs' worst case where the rows' Jacobians of every env fit in this (a
+# scene of few envs never runs out of slots); else MAX_PER_MOVING_LINK per moving link
+ROW_JACOBIAN_BUDGET = 64 * 2 ** 20  # bytes
 
 
 def without_pairs(model, keep=None):
@@ -55,21 +58,25 @@ def worst_case_contacts(model):
     return sum(_pair_budget(model, k) for k in range(len(model.pair_geom1)))
 
 
-def capacity(model, options):
-    """(contact slots C, row slots R) per env: C the pairs' worst case, capped by max_contacts
-    (default: MAX_PER_MOVING_LINK per moving link with geometry, at least MIN_CONTACTS); R
-    enough rows for C contacts of the largest condim under the cone, one per limited dof (at
-    most one of its two bounds is violated) and one per dof for friction loss (settable on any)."""
+def capacity(model, options, n_batch, itemsize):
+    """(contact slots C, row slots R) per env of ``n_batch`` envs in floats of ``itemsize`` bytes:
+    C the pairs' worst case, capped by max_contacts (default: the worst case when the row
+    Jacobians of all envs, R·D floats each, fit in ROW_JACOBIAN_BUDGET, else MAX_PER_MOVING_LINK
+    per moving link with geometry, at least MIN_CONTACTS); R enough rows for C contacts of the
+    largest condim under the cone, one per limited dof (at most one of its two bounds is
+    violated) and one per dof for friction loss (settable on any)."""
     worst = worst_case_contacts(model)
+    condim = int(model.pair_condim.max()) if len(model.pair_condim) else 1
+    rows_per_contact = condim if options.friction_cone == "elliptic" or condim == 1 else 2 * (condim - 1)
+    other_rows = limited_dofs(model, options) + model.n_dofs
     if options.max_contacts is not None:
         cap = int(options.max_contacts)
     else:
         moving = len(set(model.geom_link[model.link_static[model.geom_link] == 0].tolist()))
-        cap = max(MIN_CONTACTS, MAX_PER_MOVING_LINK * moving)
+        jacobians = n_batch * (worst * rows_per_contact + other_rows) * model.n_dofs * itemsize
+        cap = worst if jacobians <= ROW_JACOBIAN_BUDGET else max(MIN_CONTACTS, MAX_PER_MOVING_LINK * moving)
     contacts = min(worst, cap)
-    condim = int(model.pair_condim.max()) if len(model.pair_condim) else 1
-    rows_per_contact = condim if options.friction_cone == "elliptic" or condim == 1 else 2 * (condim - 1)
-    return contacts, contacts * rows_per_contact + limited_dofs(model, options) + model.n_dofs
+    return contacts, contacts * rows_per_contact + other_rows
 
 
 class InvweightBasis:
