@@ -31,7 +31,9 @@ Genesis (``genesis-world`` 1.4.5) runs the same scenes and v0 (written to .npz f
 interpreter, this script with ``--peer``: this interpreter if it imports ``genesis``, else
 ``$GENESIS_PYTHON`` (virtualenv: bench/README.md), else its rows say "not installed". Genesis,
 backend cpu, differs from ours in: its integrator (``approximate_implicitfast``, the only one it
-differentiates; ours: MuJoCo's Euler), its own colliders (ours: MuJoCo's),
+differentiates; ours makes damping and servo kv implicit as it does, but solves contact with M and
+integrates the constraint force through the damped matrix, as MuJoCo's implicitfast), its own
+colliders (ours: MuJoCo's),
 ``URDF(default_armature=0.0)`` (its default adds
 armature 0.1), legs set with a grad-requiring tensor (given one that does not, 1.4.5 ignores
 ``set_dofs_position`` or crashes in a requires_grad scene) and its differentiable read-out

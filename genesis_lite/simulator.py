@@ -36,7 +36,7 @@ class SolverSlot:
         self.uploaded_state = None  # the tensor Taichi's frame 0 equals (None: unknown)
         self.uploaded_inputs = None  # ((tensor, ...), (version, ...)): Taichi's inputs equal
         self.derived = None  # (state, value) cache of the last derived read
-        self.warned_nonfinite = False  # _check_finite warned once
+        self.warned_nonfinite = False  # _check_finite warned once since the last reset
 
 
 class Simulator:
@@ -124,6 +124,7 @@ class Simulator:
         self.step_index = 0
         self.rollout = autograd.Rollout(self, self.options.checkpoint_interval)
         for slot in self.slots:
+            slot.warned_nonfinite = False
             defaults = slot.solver.default_inputs
             current = slot.inputs or defaults
             # (inputs derived from persistent ones are persistent too: detached, they still match)

@@ -120,7 +120,8 @@ def a1_mujoco(path, z, stand, kp, kv, dt):
     root.pos = [0.0, 0.0, z]
     spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
     spec.option.timestep = dt
-    # the servos' kv implicit, as ours (actuation.py): MuJoCo's implicitfast; its Euler treats only damping so
+    # the servos' kv implicit, as ours (actuation.py): MuJoCo's implicitfast (no force range here, so no
+    # actuator is clamped, where implicitfast would drop its kv); its Euler treats only damping so
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     for joint in spec.joints:
         if joint.type != mujoco.mjtJoint.mjJNT_FREE:

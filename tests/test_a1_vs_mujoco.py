@@ -117,7 +117,7 @@ def test_a1_steps_like_mujoco(f64, cone):
         limit_gap = min(limit_gap, float(np.min(np.minimum(d.qpos[7:] - lower, upper - d.qpos[7:]))))
     # a hard case: feet touch and lift (the contact set changes), the base sways, no joint limit is met
     assert touched >= {7, 12, 17, 22}, touched  # the four foot spheres
-    assert max(counts) >= 4 and min(counts) <= 2, (min(counts), max(counts))
+    assert max(counts) >= 4 and min(counts) <= 2, (min(counts), max(counts))  # all four feet down at once (5 at times)
     assert sum(a != b for a, b in zip(counts, counts[1:])) >= 10
     assert np.abs(d.qpos[:3] - base_start).max() > 0.01
     assert limit_gap > 0.1

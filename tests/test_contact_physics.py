@@ -301,34 +301,3 @@ def test_more_contacts_than_slots_is_a_named_error(f64, caplog):
     scene = boxes(worst)
     for _ in range(5):
         scene.step()
-
-
-def _crossed_stack():
-    """Four layers of three 30 × 9 × 5 cm boards, each layer crossing the one below (12 boxes, 36
-    board-on-board crossings of up to 8 contacts each, ~120 at rest)."""
-    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002))
-    scene.add_entity(gs.morphs.Plane())
-    for layer in range(4):
-        for k in range(3):
-            across = layer % 2 == 1
-            scene.add_entity(gs.morphs.Box(pos=(0.0, 0.1 * (k - 1), 0.025 + 0.05 * layer) if across else
-                                           (0.1 * (k - 1), 0.0, 0.025 + 0.05 * layer),
-                                           size=(0.3, 0.09, 0.05) if across else (0.09, 0.3, 0.05)))
-    return scene
-
-
-def test_default_contact_slots_hold_a_dense_stack(f64):
-    """By default a scene of few envs gets the pairs' worst case of contact slots (their row
-    Jacobians fit the memory budget), so a crossed stack of 12 boards stands (it needs more than
-    the 8 per moving link that large batches fall back to)."""
-    scene = _crossed_stack()
-    scene.build()
-    start = [box.get_pos().clone() for box in scene.entities[1:]]
-    for _ in range(100):
-        scene.step()
-    assert max(float((box.get_pos() - p).abs().max()) for box, p in zip(scene.entities[1:], start)) < 1e-3
-    model, options = scene.rigid_solver.model, scene.rigid_options
-    worst = contact.worst_case_contacts(model)
-    assert scene.rigid_solver.data.size["C"] == worst > 12 * contact.MAX_PER_MOVING_LINK
-    # where the worst case's Jacobians outgrow the budget, 8 per moving link
-    assert contact.capacity(model, options, 4096, 8)[0] == 12 * contact.MAX_PER_MOVING_LINK

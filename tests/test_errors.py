@@ -380,8 +380,12 @@ def test_zero_mass_set_after_build_names_the_link(f64):
     raises(gs.InvalidInputError, lambda: robot.set_links_mass([0.0], links_idx_local=[wheel], envs_idx=[1]),
            "entity 'r2d2'", "link 'left_front_wheel'", "positive definite mass matrix")
     assert torch.equal(robot.get_links_mass(), before)
-    raises(gs.InvalidInputError, lambda: robot.set_links_mass([1.0], links_idx_local=[0], envs_idx=[]),
-           "entity 'r2d2'", "'envs_idx'", "at least one index in [0, 2)", "empty list")
+    # no env selected (RL code passes done.nonzero()[:, 0], empty on most steps): nothing changes
+    qpos = robot.get_qpos().clone()
+    robot.set_links_mass([1.0], links_idx_local=[0], envs_idx=[])
+    robot.set_qpos(torch.zeros(0, robot.n_qs, dtype=torch.float64), envs_idx=torch.zeros(0, dtype=torch.long))
+    assert torch.equal(robot.get_links_mass(), before) and torch.equal(robot.get_qpos(), qpos)
+    assert robot.get_qpos(envs_idx=[]).shape == (0, robot.n_qs)
 
 
 def test_scene_gravity_errors_name_the_scene_method(f64, built):

@@ -53,9 +53,8 @@ class EntityIndexing:
         if idx is None:
             return np.arange(n)
         arr = np.atleast_1d(idx.detach().cpu().numpy() if isinstance(idx, torch.Tensor) else np.asarray(idx))
-        if arr.size == 0:
-            raise InvalidInputError(f"{self._who}: argument '{arg}' must hold at least one index in [0, {n}), "
-                                    f"got an empty {type(idx).__name__}")
+        if arr.size == 0:  # no index (a list of none reads as floats): nothing selected, as in Genesis
+            return np.zeros(0, dtype=np.int64)
         if arr.dtype.kind not in "iu" or arr.ndim != 1 or (arr.size and (arr.min() < 0 or arr.max() >= n)):
             raise InvalidInputError(f"{self._who}: argument '{arg}' must be integers in [0, {n}), "
                                     f"got {idx!r}")

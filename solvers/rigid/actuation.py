@@ -6,9 +6,10 @@ Control modes per dof (as in Genesis): 0 force (``control_dofs_force``), 1 posit
 the target of ``control_dofs_position_velocity``), 2 velocity (τ = kv·(q̇* − q̇)); the result is
 clipped to the dof's force range. Damping −b·q̇ is passive. Both velocity terms are treated
 implicitly by the acceleration stage (linalg.py: h·(b + kv) on A's diagonal, kv of a dof in a
-servo mode), as Genesis's default integrator does (approximate_implicitfast; MuJoCo's implicitfast
-too, its Euler integrator only for b): an explicit kv is unstable once h·kv exceeds about twice
-the dof's inertia, which the gains of Genesis's examples do at its time steps.
+servo mode), as Genesis's default integrator does (approximate_implicitfast, clipped or not;
+MuJoCo's implicitfast likewise but without the kv of an actuator clamped by its force range, its
+Euler integrator only b): an explicit kv is unstable once h·kv exceeds about twice the dof's
+inertia, which the gains of Genesis's examples do at its time steps.
 """
 import taichi as ti
 

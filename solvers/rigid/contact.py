@@ -15,9 +15,6 @@ from .constraint.rows import DEFAULT_SOLIMP, SMOOTH_SOLIMP  # noqa: F401 (the ge
 _logger = logging.getLogger("genesis_lite")
 MAX_PER_MOVING_LINK = 8  # default max_contacts: a box resting on a face touches at up to 8 points
 MIN_CONTACTS = 16
-# default max_contacts: the pairs' worst case where the rows' Jacobians of every env fit in this (a
-# scene of few envs never runs out of slots); else MAX_PER_MOVING_LINK per moving link
-ROW_JACOBIAN_BUDGET = 64 * 2 ** 20  # bytes
 
 
 def without_pairs(model, keep=None):
@@ -58,25 +55,21 @@ def worst_case_contacts(model):
     return sum(_pair_budget(model, k) for k in range(len(model.pair_geom1)))
 
 
-def capacity(model, options, n_batch, itemsize):
-    """(contact slots C, row slots R) per env of ``n_batch`` envs in floats of ``itemsize`` bytes:
-    C the pairs' worst case, capped by max_contacts (default: the worst case when the row
-    Jacobians of all envs, R·D floats each, fit in ROW_JACOBIAN_BUDGET, else MAX_PER_MOVING_LINK
-    per moving link with geometry, at least MIN_CONTACTS); R enough rows for C contacts of the
-    largest condim under the cone, one per limited dof (at most one of its two bounds is
-    violated) and one per dof for friction loss (settable on any)."""
+def capacity(model, options):
+    """(contact slots C, row slots R) per env: C the pairs' worst case, capped by max_contacts
+    (default: MAX_PER_MOVING_LINK per moving link with geometry, at least MIN_CONTACTS); R
+    enough rows for C contacts of the largest condim under the cone, one per limited dof (at
+    most one of its two bounds is violated) and one per dof for friction loss (settable on any)."""
     worst = worst_case_contacts(model)
-    condim = int(model.pair_condim.max()) if len(model.pair_condim) else 1
-    rows_per_contact = condim if options.friction_cone == "elliptic" or condim == 1 else 2 * (condim - 1)
-    other_rows = limited_dofs(model, options) + model.n_dofs
     if options.max_contacts is not None:
         cap = int(options.max_contacts)
     else:
         moving = len(set(model.geom_link[model.link_static[model.geom_link] == 0].tolist()))
-        jacobians = n_batch * (worst * rows_per_contact + other_rows) * model.n_dofs * itemsize
-        cap = worst if jacobians <= ROW_JACOBIAN_BUDGET else max(MIN_CONTACTS, MAX_PER_MOVING_LINK * moving)
+        cap = max(MIN_CONTACTS, MAX_PER_MOVING_LINK * moving)
     contacts = min(worst, cap)
-    return contacts, contacts * rows_per_contact + other_rows
+    condim = int(model.pair_condim.max()) if len(model.pair_condim) else 1
+    rows_per_contact = condim if options.friction_cone == "elliptic" or condim == 1 else 2 * (condim - 1)
+    return contacts, contacts * rows_per_contact + limited_dofs(model, options) + model.n_dofs
 
 
 class InvweightBasis:
@@ -103,7 +96,6 @@ class InvweightBasis:
             K[link] = solver.mass_matrix()[0].double().cpu().numpy()
         solver.upload_inputs(inputs)
         solver.check_positive_definite(np.einsum("l,lij->ij", m.link_mass0, K) + np.diag(m.dof_armature))
-        self.check_positive_definite = solver.check_positive_definite
         jac = torch.empty((solver.n_batch, L, 6, D), dtype=runtime.tc_float, device=runtime.device)
         solver.kernels.read_com_jacobians(jac)
         # dof_invweight0 = diag(M⁻¹) @ average: a free joint's translations and rotations averaged
@@ -114,24 +106,26 @@ class InvweightBasis:
         self.consts = [torch.as_tensor(a, dtype=torch.float64, device=runtime.device)
                        for a in (K, jac[0, :, :3].double().cpu().numpy(), (m.link_static == 0), average)]
 
-    def __call__(self, mass, armature):
+    def __call__(self, mass, armature, check_positive_definite):
         """(invweight_t (B, L), invweight_dof (B, D)) in mass's dtype, from mass (B, L) kg and armature
-        (B, D); computed in float64, one env at a time: batched linear algebra (inverse, matrix
-        products) may sum in another order for another batch size, and a batched env must equal a
-        single-env scene bit for bit (~50 µs an env, when mass or armature is set)."""
+        (B, D); a singular M goes to check_positive_definite (RigidSolver's: it names the link).
+        Computed in float64, one env at a time: batched linear algebra (inverse, matrix products)
+        may sum in another order for another batch size, and a batched env must equal a single-env
+        scene bit for bit (~50 µs an env, when mass or armature is set)."""
         if mass.shape[1] == 0 or armature.shape[1] == 0:
             return torch.zeros_like(mass), torch.zeros_like(armature)
-        rows = [self._one_env(mass[e: e + 1].double(), armature[e: e + 1].double()) for e in range(mass.shape[0])]
+        rows = [self._one_env(mass[e: e + 1].double(), armature[e: e + 1].double(), check_positive_definite)
+                for e in range(mass.shape[0])]
         return (torch.cat([r[0] for r in rows]).to(mass.dtype), torch.cat([r[1] for r in rows]).to(mass.dtype))
 
-    def _one_env(self, mass, armature):
+    def _one_env(self, mass, armature, check_positive_definite):
         """(1, L), (1, D) for one env's mass (1, L) and armature (1, D); a singular M (a mass set
         to zero) is an InvalidInputError naming the link."""
         K, J, moving, average = self.consts
         matrix = (mass[0, :, None, None] * K).sum(0) + torch.diag(armature[0])
         inverse, info = torch.linalg.inv_ex(matrix)
         if info.item() != 0:
-            self.check_positive_definite(matrix.detach().cpu().numpy(), InvalidInputError)
+            check_positive_definite(matrix.detach().cpu().numpy(), InvalidInputError)
             torch.linalg.inv(matrix)  # singular below the check's share: torch's own error
         translational = torch.einsum("lri,ij,lrj->l", J, inverse, J) / 3.0 * moving
         return translational[None], (torch.diagonal(inverse) @ average)[None]

@@ -272,16 +272,5 @@ def mesh_link(file: str, scale=1.0, rho: float = 1000.0, name: str | None = None
 
 def plane_link(normal=(0.0, 0.0, 1.0), name: str = "plane") -> list[LinkSpec]:
     """A static infinite plane through the link origin with unit ``normal`` (3,) in the link frame
-    (mass 0): the geom's frame turns +z onto it by the shortest arc (the colliders take a plane's
-    normal from its frame's z axis)."""
-    geom = GeomSpec("plane", np.array([0.0, 0.0, 1.0]), quat=_shortest_arc_from_z(np.asarray(normal, dtype=float)))
-    return _single_link(name, geom, 1.0)
-
-
-def _shortest_arc_from_z(normal) -> np.ndarray:
-    """The quaternion (w, x, y, z) of the smallest rotation taking +z onto the unit ``normal``."""
-    z = np.array([0.0, 0.0, 1.0])
-    if normal[2] < -1.0 + 1e-12:  # antiparallel: half a turn about x
-        return np.array([0.0, 1.0, 0.0, 0.0])
-    quat = np.concatenate([[1.0 + z @ normal], np.cross(z, normal)])
-    return quat / np.linalg.norm(quat)
+    (mass 0; the plane's size is its normal: geometry.py turns the geom frame's z onto it)."""
+    return _single_link(name, GeomSpec("plane", np.asarray(normal, dtype=float)), 1.0)

@@ -79,7 +79,7 @@ class RigidSolver(Solver):
         h = sim.dt / sim.substeps
         bits = 64 if runtime.tc_float == torch.float64 else 32
         self.timeconst, iterations, tolerance, impratio = options.resolved(bits)
-        contacts, rows = contact.capacity(self.model, options, self.n_batch, bits // 8)
+        contacts, rows = contact.capacity(self.model, options)
         settings = {"limits": options.enable_joint_limit, "contacts": contacts, "rows": rows,
                     "cone": int(options.friction_cone == "elliptic"), "iterations": iterations,
                     "ls_iterations": options.ls_iterations, "converged": not options.enable_mujoco_compatibility,
@@ -134,7 +134,8 @@ class RigidSolver(Solver):
         allocation at build, which forms no rows)."""
         if self.invweight_basis is None:
             return inputs
-        invweight_t, invweight_dof = self.invweight_basis(inputs["mass"], inputs["armature"])
+        invweight_t, invweight_dof = self.invweight_basis(inputs["mass"], inputs["armature"],
+                                                          self.check_positive_definite)
         return {**inputs, "invweight_t": invweight_t, "invweight_dof": invweight_dof}
 
     def _initial_state(self):
@@ -230,7 +231,7 @@ class RigidSolver(Solver):
                                   f"{self.data.size['C']} slots per env in this step (it was taken without the "
                                   f"extra ones); expected RigidOptions(max_contacts=...) above that (this scene's "
                                   f"pairs can make up to {contact.worst_case_contacts(self.model)}; the default is "
-                                  f"that where it fits in memory, else {contact.MAX_PER_MOVING_LINK} per moving link)")
+                                  f"{contact.MAX_PER_MOVING_LINK} per moving link)")
 
     def run_step(self, inputs, out, commit):
         """One step's kernels. Without contact pairs or friction loss, one launch for all substeps
