@@ -321,7 +321,7 @@ class Scene:
 
     def set_gravity(self, gravity, envs_idx=None):
         """Gravity of every solver, m/s²: (3,) or (n_envs, 3); differentiable."""
-        self._require_built("scene.set_gravity")
+        sim = self._require_built("scene.set_gravity")
         probe = _SceneArguments(self, "set_gravity")
         envs = probe._envs(envs_idx)
         values = probe._values(gravity, 3, envs, "gravity")
