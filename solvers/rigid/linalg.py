@@ -3,8 +3,8 @@
 The h·damping term makes joint damping implicit, as MuJoCo's Euler integrator does, and h·kv_servo
 (kv of a dof in position or velocity control, actuation.servo_kv) the servo's velocity term, as
 Genesis's default integrator does (and MuJoCo's implicitfast, for servos within their force range).
-A is
-factored as A = Lᵀ D L along the dof tree (Featherstone's LTDL): L[k, i] is non-zero only for
+
+A is factored as A = Lᵀ D L along the dof tree (Featherstone's LTDL): L[k, i] is non-zero only for
 dofs i on the path from k to the root, so there is no fill-in, the cost is Σ depth², and
 separate bodies never mix (a NaN in one stays there). Taichi's reverse mode gives wrong
 gradients for factorisations (TAICHI_NOTES.md), so the adjoint is written by hand: with
