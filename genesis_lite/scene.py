@@ -119,7 +119,13 @@ class Scene:
         if surface is not None and not isinstance(surface, Default):
             raise InvalidInputError(f"scene.add_entity: argument 'surface' must be gs.surfaces.Default or None, "
                                     f"got {type(surface).__name__}")
-        name = name or f"{type(morph).__name__.lower()}_{len(self.entities)}"
+        taken = [entity.name for entity in self.entities]  # errors and readouts name entities: one each
+        if name is None:
+            name = next(f"{type(morph).__name__.lower()}_{k}" for k in range(len(taken), 2 * len(taken) + 1)
+                        if f"{type(morph).__name__.lower()}_{k}" not in taken)
+        elif name in taken:
+            raise InvalidInputError(f"scene.add_entity: argument 'name' must differ from the names of the scene's "
+                                    f"entities, got {name!r}, which entity {taken.index(name)} has")
         if isinstance(material, MPM.Base):
             return self._add_mpm_entity(morph, material, surface, name)
         links = _links_of(morph, material, name)

@@ -138,6 +138,17 @@ def test_add_entity_after_build(f64, built):
 # ------------------------------------------------------------------ names and indices
 
 
+def test_duplicate_entity_name(f64):
+    scene = gs.Scene()
+    scene.add_entity(gs.morphs.Box(), name="crate")
+    raises(gs.InvalidInputError, lambda: scene.add_entity(gs.morphs.Sphere(), name="crate"),
+           "scene.add_entity", "'name'", "'crate'", "entity 0")
+    scene.add_entity(gs.morphs.Sphere())  # a generated name
+    raises(gs.InvalidInputError, lambda: scene.add_entity(gs.morphs.Sphere(), name="sphere_1"), "'sphere_1'")
+    scene.add_entity(gs.morphs.Box(), name="box_3")
+    assert scene.add_entity(gs.morphs.Box()).name == "box_4"  # generated names skip taken ones
+
+
 def test_unknown_link_name(f64, built):
     _, robot = built
     raises(gs.InvalidInputError, lambda: robot.get_link("hand"),
