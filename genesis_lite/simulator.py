@@ -238,7 +238,7 @@ class Simulator:
         blown-up state would look finite (Solver.hides_nonfinite: MPM's particles stay inside the
         walls, NaN or not)."""
         for slot in self.slots:
-            if not (self.options.check_nan or slot.solver.hides_nonfinite) or not slot.solver.nonfinite():
+            if not (self.options.check_nan or slot.solver.hides_nonfinite is not None) or not slot.solver.nonfinite():
                 continue
             message = (f"step {self.step_index}: the {type(slot.solver).__name__} state became non-finite "
                        f"(entities: {', '.join(slot.solver.entity_names)}); reduce dt, check inputs and parameters")
@@ -246,8 +246,7 @@ class Simulator:
                 raise SimulationError(message)
             if not slot.warned_nonfinite:
                 slot.warned_nonfinite = True
-                logger.warning(f"{message}. Its particles are kept inside the walls, so their positions look finite "
-                               f"while velocities and deformation are NaN; SimOptions(check_nan=True) raises here.")
+                logger.warning(f"{message}: {slot.solver.hides_nonfinite}; SimOptions(check_nan=True) raises here")
 
     # -- derived quantities -------------------------------------------------------------------
     def derived(self, solver):

@@ -45,9 +45,9 @@ class Solver:
     entity_names = ()
     #: substeps per step
     substeps = 1
-    #: a step can leave a blown-up state looking finite (MPM's walls clamp NaN positions back inside):
-    #: the simulator then reads ``nonfinite()`` after every step and warns, also without check_nan
-    hides_nonfinite = False
+    #: why a blown-up state can look finite (MPM's walls clamp NaN positions back inside), or None: when
+    #: set, the simulator reads ``nonfinite()`` after every step and warns with it, also without check_nan
+    hides_nonfinite = None
 
     def build(self, n_envs):
         """Allocate for max(1, n_envs) environments; return the initial state (B, width)."""

@@ -23,7 +23,8 @@ GENESIS_DT_PER_DX = 2e-2
 
 class MPMSolver(MPMAdjoint, Solver):
     persistent_inputs = layout.PERSISTENT_INPUTS
-    hides_nonfinite = True  # g2p.wall_particle clamps a NaN position onto a wall
+    hides_nonfinite = ("its particles are kept inside the walls (g2p.wall_particle), so their positions look "
+                       "finite while velocities and deformation are NaN")
 
     def __init__(self, dt, substeps, gravity, grid_density, particle_size, lower_bound, upper_bound, sticky,
                  requires_grad):

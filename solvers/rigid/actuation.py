@@ -19,11 +19,17 @@ FORCE, POSITION, VELOCITY = 0, 1, 2
 
 
 @ti.func
+def in_servo_mode(d: ti.template(), e, i):
+    """Whether dof i of env e is in position or velocity control (its kv acts)."""
+    return ti.cast(d.ctrl_mode[e, i], ti.i32) != FORCE
+
+
+@ti.func
 def servo_kv(d: ti.template(), e, i):
-    """Dof i's velocity gain kv in env e when it is in a servo mode (position or velocity), else 0:
-    what its actuator adds to the implicit damping."""
+    """Dof i's velocity gain kv in env e when it is in a servo mode, else 0: what its actuator
+    adds to the implicit damping."""
     kv = 0.0
-    if ti.cast(d.ctrl_mode[e, i], ti.i32) != FORCE:
+    if in_servo_mode(d, e, i):
         kv = d.kv[e, i]
     return kv
 

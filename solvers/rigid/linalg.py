@@ -14,7 +14,7 @@ solve's own (see _undamped_solution); the solve's adjoint is constraint/implicit
 """
 import taichi as ti
 
-from .actuation import FORCE, servo_kv
+from .actuation import in_servo_mode, servo_kv
 from .data import accumulate
 
 
@@ -130,7 +130,8 @@ def solve_adjoint_env(d: ti.template(), s, e, rows: ti.template()):
 
 @ti.func
 def _accumulate_damping_grad(d: ti.template(), e, i, g):
-    """∂L/∂(A's diagonal term h·(damping + kv_servo)) · h = g, to damping and, in a servo mode, kv."""
+    """g = h·∂L/∂A[i, i], added to damping's gradient and, for a dof in a servo mode, to kv's: both
+    enter A[i, i] as h·(damping + kv_servo)."""
     accumulate(d.damping.grad, ti.Vector([e, i]), g)
-    if ti.cast(d.ctrl_mode[e, i], ti.i32) != FORCE:
+    if in_servo_mode(d, e, i):
         accumulate(d.kv.grad, ti.Vector([e, i]), g)

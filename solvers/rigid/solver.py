@@ -175,11 +175,11 @@ class RigidSolver(Solver):
                 m = self.model
                 link = m.dof_link[i]
                 raise error(f"entity '{self.entity_names[m.link_entity[link]]}': link '{m.link_name[link]}' "
-                                 f"(dof {i}) expected a positive definite mass matrix, got a pivot of {pivot:.3g} "
-                                 f"against a diagonal entry of {mass_matrix[i, i]:.3g}: this dof moves no mass or "
-                                 f"inertia that the dofs before it do not move already (a massless base under a free "
-                                 f"joint, a zero principal moment of inertia); give the links positive masses and "
-                                 f"inertias with positive principal moments, or armature on the joint")
+                            f"(dof {i}) expected a positive definite mass matrix, got a pivot of {pivot:.3g} "
+                            f"against a diagonal entry of {mass_matrix[i, i]:.3g}: this dof moves no mass or "
+                            f"inertia that the dofs before it do not move already (a massless base under a free "
+                            f"joint, a zero principal moment of inertia); give the links positive masses and "
+                            f"inertias with positive principal moments, or armature on the joint")
             reduced[i + 1:, i + 1:] -= np.outer(reduced[i + 1:, i], reduced[i, i + 1:]) / pivot
 
     # -- moving data ------------------------------------------------------------------------
