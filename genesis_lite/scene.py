@@ -329,7 +329,7 @@ class Scene:
         """Gravity of every solver, m/s²: (3,) or (n_envs, 3); differentiable."""
         sim = self._require_built("scene.set_gravity")
         probe = _SceneArguments(self, "set_gravity")
-        envs = probe._envs(envs_idx)
+        envs = probe._envs(envs_idx, distinct=True)
         values = probe._values(gravity, 3, envs, "gravity")
         for slot in sim.slots:
             sim.set_input(slot.solver, "gravity", replace_columns(slot.inputs["gravity"], envs, np.arange(3), values))

@@ -178,6 +178,28 @@ def test_envs_idx_without_batch(f64, built):
     raises(gs.InvalidInputError, lambda: robot.get_dofs_position(envs_idx=[0]), "'envs_idx'", "n_envs=0")
 
 
+def test_repeated_index_in_a_write(f64):
+    """A setter given the same dof (env, particle...) twice would keep either value (torch's
+    index_put leaves it undefined): refused, naming the argument and the index, and nothing is
+    written. Getters may repeat an index (a column read twice)."""
+    gs.init(precision="64", logging_level="warning")
+    scene = gs.Scene()
+    robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True), name=ENTITY)
+    scene.build(n_envs=3)
+    before = robot.get_dofs_position().clone()
+    raises(gs.InvalidInputError, lambda: robot.set_dofs_position([0.1, 0.2], dofs_idx_local=[1, 1]),
+           f"entity '{ENTITY}'", "'dofs_idx_local'", "[1] more than once")
+    raises(gs.InvalidInputError, lambda: robot.control_dofs_force([[1.0, 2.0]] * 3, dofs_idx_local=[0, 0]),
+           "'dofs_idx_local'", "[0] more than once")
+    raises(gs.InvalidInputError, lambda: robot.set_dofs_kp([[5.0, 6.0]] * 3, envs_idx=torch.tensor([2, 0, 2])),
+           "'envs_idx'", "[2] more than once")
+    raises(gs.InvalidInputError, lambda: scene.set_gravity([[0.0, 0.0, -1.0]] * 2, envs_idx=[1, 1]),
+           "scene.set_gravity", "'envs_idx'", "[1] more than once")
+    assert torch.equal(robot.get_dofs_position(), before)
+    assert robot.get_dofs_position(dofs_idx_local=[1, 1], envs_idx=[0, 0]).shape == (2, 2)
+    scene.destroy()
+
+
 # ------------------------------------------------------------------ values
 
 

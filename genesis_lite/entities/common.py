@@ -48,8 +48,10 @@ class EntityIndexing:
     def _sim(self):
         return self.scene._require_built(self._who)
 
-    def _local(self, idx, n, arg):
-        """Local indices (list/array/tensor/int/None) → validated int64 numpy array."""
+    def _local(self, idx, n, arg, distinct=False):
+        """Local indices (list/array/tensor/int/None) → validated int64 numpy array. distinct (a
+        setter's indices): an index given twice is refused, since which of its values would land
+        is undefined (torch's index_put, like Genesis's parallel kernels, picks either)."""
         if idx is None:
             return np.arange(n)
         arr = np.atleast_1d(idx.detach().cpu().numpy() if isinstance(idx, torch.Tensor) else np.asarray(idx))
@@ -58,16 +60,20 @@ class EntityIndexing:
         if arr.dtype.kind not in "iu" or arr.ndim != 1 or (arr.size and (arr.min() < 0 or arr.max() >= n)):
             raise InvalidInputError(f"{self._who}: argument '{arg}' must be integers in [0, {n}), "
                                     f"got {idx!r}")
+        if distinct and len(set(arr.tolist())) != arr.size:  # a set: ~10× cheaper than np.unique when short
+            values, counts = np.unique(arr, return_counts=True)
+            raise InvalidInputError(f"{self._who}: argument '{arg}' must not repeat an index in a write, "
+                                    f"got {values[counts > 1].tolist()} more than once in {idx!r}")
         return arr.astype(np.int64)
 
-    def _envs(self, envs_idx):
+    def _envs(self, envs_idx, distinct=False):
         n_envs = self.scene.n_envs
         if n_envs == 0:
             if envs_idx is not None:
                 raise InvalidInputError(f"{self._who}: argument 'envs_idx' must be None in a scene built "
                                         f"with n_envs=0, got {envs_idx!r}")
             return np.zeros(1, dtype=np.int64)
-        return self._local(envs_idx, n_envs, "envs_idx")
+        return self._local(envs_idx, n_envs, "envs_idx", distinct)
 
     def _out(self, value):
         """Solver rows → user shape: drop the batch axis when the scene is not batched."""

@@ -158,8 +158,8 @@ class MPMEntity(EntityIndexing):
         default), (len(envs_idx), n, 3) per env, or anything broadcasting to it. As Genesis, the
         particles set start afresh: velocity 0, C = 0, F = I, Jp at the material's rest value.
         Every position must lie strictly inside the MPM walls. Differentiable in ``poss``."""
-        parts = self._local(particles_idx_local, self.n_particles, "particles_idx_local")
-        envs = self._envs(envs_idx)
+        parts = self._local(particles_idx_local, self.n_particles, "particles_idx_local", distinct=True)
+        envs = self._envs(envs_idx, distinct=True)
         pos = self._particle_values(poss, len(parts), (3,), envs, "poss")
         _check_inside(f"entity '{self.name}'", "poss", pos.detach().cpu().numpy(), self._solver.wall_lower,
                       self._solver.wall_upper)
@@ -171,8 +171,8 @@ class MPMEntity(EntityIndexing):
     def set_particles_vel(self, vels, particles_idx_local=None, envs_idx=None):
         """Particle velocities, m/s: shapes as set_particles_pos (a (3,) value sets every
         particle's). Differentiable in ``vels``."""
-        parts = self._local(particles_idx_local, self.n_particles, "particles_idx_local")
-        envs = self._envs(envs_idx)
+        parts = self._local(particles_idx_local, self.n_particles, "particles_idx_local", distinct=True)
+        envs = self._envs(envs_idx, distinct=True)
         self._write_fields(("vel",), parts, envs, self._particle_values(vels, len(parts), (3,), envs, "vels"))
 
     def set_position(self, value, envs_idx=None):
@@ -209,8 +209,8 @@ class MPMEntity(EntityIndexing):
         > 0) of the particles (all by default): a scalar for all, (n,) per particle,
         (len(envs_idx), n) per env and particle. None leaves a parameter as it is. Differentiable
         (Genesis's are compile-time constants). Every value is checked before any is written."""
-        parts = self._local(particles_idx_local, self.n_particles, "particles_idx_local")
-        envs = self._envs(envs_idx)
+        parts = self._local(particles_idx_local, self.n_particles, "particles_idx_local", distinct=True)
+        envs = self._envs(envs_idx, distinct=True)
         limits = {"E": (0.0, np.inf, "> 0 (Pa)"), "nu": (-1.0, 0.5, "in (−1, 0.5)"),
                   "rho": (0.0, np.inf, "> 0 (kg/m³)")}
         checked = {}
@@ -244,7 +244,7 @@ class MPMEntity(EntityIndexing):
         (len(envs_idx), n_groups); each particle takes its group's value (set_muscle) until the
         next call or scene.reset(). Differentiable in ``actu``."""
         self._require_muscle("set_actuation")
-        envs = self._envs(envs_idx)
+        envs = self._envs(envs_idx, distinct=True)
         n_groups = self.material.n_groups
         target = (n_groups,) if self.scene.n_envs == 0 else (len(envs), n_groups)
         groups = self._tensor(actu, "actu", target)

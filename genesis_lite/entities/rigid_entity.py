@@ -199,8 +199,8 @@ class RigidEntity(EntityIndexing):
         sim.set_input(self._solver, name, _replace(sim.inputs(self._solver)[name], envs, columns, values))
 
     def _set_dofs_input(self, name, value, dofs_idx_local, envs_idx, arg):
-        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
-        envs = self._envs(envs_idx)
+        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
+        envs = self._envs(envs_idx, distinct=True)
         self._write_input(name, self.dof_start + dofs, envs, self._values(value, len(dofs), envs, arg))
 
     def _get_dofs_input(self, name, dofs_idx_local, envs_idx):
@@ -237,8 +237,8 @@ class RigidEntity(EntityIndexing):
         get_dofs_position. Setting some of its Euler angles keeps the others' current values
         (read back from its quaternion). zero_velocity (Genesis's default after a jump): first
         set every dof velocity of the entity to 0 in the selected envs (all if envs_idx is None)."""
-        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
-        envs = self._envs(envs_idx)
+        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
+        envs = self._envs(envs_idx, distinct=True)
         values = self._values(position, len(dofs), envs, "position")
         columns = self._dof_q[dofs]
         turned = columns < 0  # a free base's Euler angles
@@ -265,8 +265,8 @@ class RigidEntity(EntityIndexing):
 
     def set_dofs_velocity(self, velocity, dofs_idx_local=None, envs_idx=None):
         """Joint velocities, rad/s or m/s, as get_dofs_velocity gives them."""
-        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
-        envs = self._envs(envs_idx)
+        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
+        envs = self._envs(envs_idx, distinct=True)
         self._write(self._vel_columns(dofs), envs, self._values(velocity, len(dofs), envs, "velocity"))
 
     def get_qpos(self, qs_idx_local=None, envs_idx=None):
@@ -276,8 +276,8 @@ class RigidEntity(EntityIndexing):
 
     def set_qpos(self, qpos, qs_idx_local=None, envs_idx=None, *, zero_velocity=True):
         """Generalised positions (n,) or (len(envs_idx), n); zero_velocity as in set_dofs_position."""
-        qs = self._local(qs_idx_local, self.n_qs, "qs_idx_local")
-        envs = self._envs(envs_idx)
+        qs = self._local(qs_idx_local, self.n_qs, "qs_idx_local", distinct=True)
+        envs = self._envs(envs_idx, distinct=True)
         values = self._values(qpos, len(qs), envs, "qpos")
         if self._free and set(range(3, 7)) <= set(qs.tolist()):  # a free base's whole quaternion
             self._check_quat(values[:, [qs.tolist().index(k) for k in range(3, 7)]], "qpos")
@@ -300,14 +300,14 @@ class RigidEntity(EntityIndexing):
         """Base position in the world, m: (3,) or (len(envs_idx), 3) (free base only);
         zero_velocity as in set_dofs_position."""
         self._require_free("set_pos")
-        envs = self._envs(envs_idx)
+        envs = self._envs(envs_idx, distinct=True)
         self._write(self._solver_q([0, 1, 2]), envs, self._values(pos, 3, envs, "pos"), zero_velocity)
 
     def set_quat(self, quat, envs_idx=None, *, zero_velocity=True):
         """Base orientation (w, x, y, z): (4,) or (len(envs_idx), 4) (free base only); normalised by
         the kinematics; zero_velocity as in set_dofs_position."""
         self._require_free("set_quat")
-        envs = self._envs(envs_idx)
+        envs = self._envs(envs_idx, distinct=True)
         values = self._values(quat, 4, envs, "quat")
         self._check_quat(values, "quat")
         self._write(self._solver_q([3, 4, 5, 6]), envs, values, zero_velocity)
@@ -357,8 +357,8 @@ class RigidEntity(EntityIndexing):
 
     def set_links_mass(self, mass, links_idx_local=None, envs_idx=None):
         """Link masses, kg (rotational inertia scales with them: same shape, other density)."""
-        links = self._local(links_idx_local, self.n_links, "links_idx_local")
-        envs = self._envs(envs_idx)
+        links = self._local(links_idx_local, self.n_links, "links_idx_local", distinct=True)
+        envs = self._envs(envs_idx, distinct=True)
         values = self._refuse_negative("mass", self._values(mass, len(links), envs, "mass"), " kg")
         self._write_input("mass", self.link_start + links, envs, values)
 
@@ -375,8 +375,8 @@ class RigidEntity(EntityIndexing):
 
     def _nonnegative(self, name):
         def setter(value, dofs_idx_local=None, envs_idx=None):
-            dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
-            envs = self._envs(envs_idx)
+            dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
+            envs = self._envs(envs_idx, distinct=True)
             values = self._refuse_negative(name, self._values(value, len(dofs), envs, name))
             self._write_input(name, self.dof_start + dofs, envs, values)
         return setter
@@ -420,8 +420,8 @@ class RigidEntity(EntityIndexing):
 
     def set_dofs_force_range(self, lower, upper, dofs_idx_local=None, envs_idx=None):
         """Bounds on the actuator force, N·m or N (not differentiable)."""
-        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
-        envs = self._envs(envs_idx)
+        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
+        envs = self._envs(envs_idx, distinct=True)
         lo, hi = self._values(lower, len(dofs), envs, "lower"), self._values(upper, len(dofs), envs, "upper")
         if bool((lo > hi).any()):
             raise InvalidInputError(f"entity '{self.name}': argument 'lower' must be ≤ 'upper', got "
@@ -493,8 +493,8 @@ class RigidEntity(EntityIndexing):
     def set_friction_ratio(self, friction_ratio, links_idx_local=None, envs_idx=None):
         """Friction of the geoms of the given links ← ratio (one per link, ≥ 0) × their friction at
         build (the asset's or the material's)."""
-        links = self._local(links_idx_local, self.n_links, "links_idx_local")
-        envs = self._envs(envs_idx)
+        links = self._local(links_idx_local, self.n_links, "links_idx_local", distinct=True)
+        envs = self._envs(envs_idx, distinct=True)
         ratio = self._values(friction_ratio, len(links), envs, "friction_ratio")
         ratio = self._refuse_negative("friction_ratio", ratio)
         counts = torch.as_tensor(np.diff(self._link_geoms)[links], device=runtime.device)
@@ -509,8 +509,8 @@ class RigidEntity(EntityIndexing):
         solimp, for every env of envs_idx or (len(envs_idx), 7) one row per env; timeconst and
         dampratio both ≤ 0 mean MuJoCo's direct form (−stiffness, −damping). A contact averages
         its two geoms' values. Differentiable (a time constant held at 2·dt/substeps has none)."""
-        geoms = self._local(geoms_idx_local, self.n_geoms, "geoms_idx_local")
-        envs = self._envs(envs_idx)
+        geoms = self._local(geoms_idx_local, self.n_geoms, "geoms_idx_local", distinct=True)
+        envs = self._envs(envs_idx, distinct=True)
         self._sim().check_grad_allowed(sol_params, self.name, "sol_params")
         if isinstance(sol_params, torch.Tensor):  # kept in the graph: differentiable
             params = sol_params.as_subclass(torch.Tensor).to(device=runtime.device, dtype=runtime.tc_float)
@@ -534,11 +534,11 @@ class RigidEntity(EntityIndexing):
     def _control(self, method, mode, targets, dofs_idx_local, envs_idx):
         """Switch the dofs to ``mode`` with ``targets``: {input name: (value, argument name)}; a value
         None is the constant 0 (written only where the input holds something else)."""
-        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
+        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
         if mode == "position" and self._free and bool((dofs < 6).any()):
             raise InvalidInputError(f"entity '{self.name}': {method} cannot drive free-joint dofs "
                                     f"(dofs_idx_local 0-5); got {dofs.tolist()}")
-        envs = self._envs(envs_idx)
+        envs = self._envs(envs_idx, distinct=True)
         columns = self.dof_start + dofs
         checked = {name: self._values(value, len(dofs), envs, arg) for name, (value, arg) in targets.items()
                    if value is not None}  # every argument checked before anything is written
