@@ -48,6 +48,7 @@ class Simulator:
         self.step_index = 0
         self.rollout = None
         self.started_from = []  # the solvers' warm starts the last forward_step started from
+        self.warned_graph_cut = False  # _warn_graph_cut warned since the last reset
 
     def build(self, n_envs):
         for slot in self.slots:
@@ -123,6 +124,7 @@ class Simulator:
         self.generation += 1
         self.step_index = 0
         self.rollout = autograd.Rollout(self, self.options.checkpoint_interval)
+        self.warned_graph_cut = False
         for slot in self.slots:
             slot.warned_nonfinite = False
             defaults = slot.solver.default_inputs
@@ -137,6 +139,8 @@ class Simulator:
         if self.requires_grad:
             states = tuple(self.state(s.solver) for s in self.slots)
             flat_inputs = self._grad_inputs()
+            if not torch.is_grad_enabled():
+                self._warn_graph_cut(states + flat_inputs)
             outs = autograd.step(self, self.rollout, self.step_index, states, flat_inputs)
             for slot, out in zip(self.slots, outs):
                 slot.state = slot.uploaded_state = out
@@ -156,6 +160,17 @@ class Simulator:
             slot.derived = None
         self._check_finite()
         self.step_index += 1
+
+    def _warn_graph_cut(self, tensors):
+        """A step under torch.no_grad() is not recorded, as any torch op there: what required grad
+        before it reaches no later loss through it. Legitimate (a warm-up), but easy to do by
+        accident (a step inside an evaluation block), so warned once per rollout when it cuts a
+        graph."""
+        if not self.warned_graph_cut and any(t.requires_grad for t in tensors):
+            self.warned_graph_cut = True
+            logger.warning(f"scene.step() under torch.no_grad() at step {self.step_index}: the step is not "
+                           f"recorded, so gradients of later losses stop here (state and inputs set before "
+                           f"it get none through it)")
 
     def _grad_inputs(self):
         return tuple(slot.inputs[name] for slot in self.slots for name in slot.solver.default_inputs)

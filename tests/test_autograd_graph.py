@@ -92,6 +92,30 @@ def test_getter_under_no_grad_does_not_detach_a_later_one(pendulum):
     assert grads[1].abs().sum() > 0 and torch.equal(grads[0], grads[1])
 
 
+def test_step_under_no_grad_cutting_a_graph_warns_once(pendulum, caplog):
+    """Steps under torch.no_grad() are not recorded (torch's rule): the mass set before them gets
+    no gradient through them. Warned once a rollout, naming the step; not when nothing it could
+    cut requires grad (a finite-difference evaluation)."""
+    scene, robot = pendulum
+    caplog.clear()
+    _final_q_of_mass(scene, robot, robot.get_links_mass().detach().clone())
+    with torch.no_grad():
+        _final_q_of_mass(scene, robot, robot.get_links_mass().detach().clone())
+    assert not any("no_grad" in r.getMessage() for r in caplog.records)
+    for _ in range(2):
+        mass = robot.get_links_mass().detach().clone().requires_grad_(True)
+        scene.reset()
+        robot.set_links_mass(mass)
+        scene.step()
+        with torch.no_grad():
+            for _ in range(3):
+                scene.step()
+        scene.step()
+        warnings = [r.getMessage() for r in caplog.records if "no_grad" in r.getMessage()]
+        assert len(warnings) == 1 and "step 1" in warnings[0], warnings
+        caplog.clear()
+
+
 def test_autograd_grad_equals_backward(pendulum):
     scene, robot = pendulum
     mass = robot.get_links_mass().detach().clone().requires_grad_(True)
