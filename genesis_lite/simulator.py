@@ -11,7 +11,7 @@ import weakref
 import torch
 
 from . import autograd
-from .runtime import logger
+from .runtime import keep_large_blocks_off_the_heap, logger
 from .solvers.core import GradientError, SimulationError
 
 
@@ -56,6 +56,8 @@ class Simulator:
             # when nothing (scene or autograd graph) can reach this simulator any more, its
             # solvers' arrays are freed (a graph's nodes may still hold a solver object)
             weakref.finalize(self, slot.solver.destroy)
+        if self.requires_grad:  # a rollout frees a state a step: keep its memory returnable
+            keep_large_blocks_off_the_heap()
         self.reset()
 
     # -- state and inputs ---------------------------------------------------------------------
