@@ -314,6 +314,8 @@ class Scene:
         if isinstance(envs_idx, torch.Tensor):
             envs_idx = envs_idx.detach().cpu().numpy()
         idx = np.atleast_1d(np.asarray(envs_idx))
+        if idx.size == 0 and idx.ndim == 1:  # [] reads as floats: no env, as the entities' setters take it
+            idx = idx.astype(np.int64)
         if self.n_envs == 0 or idx.ndim != 1 or idx.dtype.kind not in "iu" or \
                 (idx.size and (idx.min() < 0 or idx.max() >= self.n_envs)):
             expected = "None in a scene built with n_envs=0" if self.n_envs == 0 else \

@@ -410,6 +410,18 @@ def test_set_position_velocity(f64):
     batched_sand.set_position([[0.0, 0.0, 0.3], [0.0, 0.0, 0.7]])  # one centre per env
     torch.testing.assert_close(batched_sand.get_particles_pos()[:, :, 2].mean(1),
                                torch.tensor([0.3, 0.7], dtype=torch.float64))
+    per_env = torch.tensor([[1.0, 0.0, 0.0], [0.0, 2.0, 0.0]], dtype=torch.float64)
+    batched_sand.set_velocity(per_env)  # one velocity per env (Genesis's broadcast_tensor)
+    torch.testing.assert_close(batched_sand.get_particles_vel(), per_env[:, None].expand(2, 8, 3))
+    batched_sand.set_particles_vel(per_env[[1]], particles_idx_local=[0, 3], envs_idx=[0])
+    torch.testing.assert_close(batched_sand.get_particles_vel()[0, [0, 3]], per_env[[1, 1]])
+    # no env selected (RL code passes done.nonzero()[:, 0], empty on most steps): nothing changes
+    before = _rows(batched_sim).clone()
+    none = torch.zeros(0, dtype=torch.long)
+    batched_sand.set_particles_vel([0.0, 0.0, 5.0], envs_idx=none)
+    batched_sand.set_particles_pos(torch.zeros(0, 8, 3), envs_idx=none)
+    batched_sand.set_position([0.0, 0.0, 0.3], envs_idx=[])
+    torch.testing.assert_close(_rows(batched_sim), before, rtol=0, atol=0)
 
 
 def test_entity_state_errors(f64):

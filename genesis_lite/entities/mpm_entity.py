@@ -122,7 +122,7 @@ class MPMEntity(EntityIndexing):
         columns = ((self.particle_start + parts)[:, None] * layout.WIDTH + np.arange(first, last)[None, :]).ravel()
         sim = self._sim()
         table = sim.state(self._solver)
-        sim.set_state(self._solver, replace_columns(table, envs, columns, values.reshape(len(envs), -1)))
+        sim.set_state(self._solver, replace_columns(table, envs, columns, values.reshape(len(envs), len(columns))))
 
     def _write_input(self, name, parts, envs, values):
         """Per-particle input ``name`` of particles ``parts`` in envs ← values (len(envs), len(parts))."""
@@ -133,13 +133,19 @@ class MPMEntity(EntityIndexing):
     def _particle_values(self, value, n_parts, element, envs, arg):
         """User values → (len(envs), n_parts, *element) tensor: any shape that broadcasts to
         (n_parts, *element) (unbatched scene) or (len(envs), n_parts, *element) (batched), so
-        (*element,) applies to every particle and (n_parts, *element) to every env. Finite."""
+        (*element,) applies to every particle and (n_parts, *element) to every env; in a batched
+        scene a (len(envs), *element) value that does not broadcast so is one per env (Genesis's
+        broadcast_tensor tries the trailing axes, then a particle axis inserted). Finite."""
         target = (n_parts, *element) if self.scene.n_envs == 0 else (len(envs), n_parts, *element)
         tensor = self._tensor(value, arg, target)
+        if self.scene.n_envs and not _broadcasts(tensor.shape, target) and \
+                tuple(tensor.shape) == (len(envs), *element):
+            tensor = tensor.unsqueeze(1)
         if not _broadcasts(tensor.shape, target):
+            per_env = f", {(len(envs), *element)} one per env" if self.scene.n_envs else ""
             raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must have shape {target} (or one that "
-                                    f"broadcasts to it, e.g. {tuple(element) or '()'} for every particle), got "
-                                    f"{tuple(tensor.shape)}")
+                                    f"broadcasts to it, e.g. {tuple(element) or '()'} for every particle{per_env}), "
+                                    f"got {tuple(tensor.shape)}")
         if not all_finite(tensor.detach()):
             raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be finite, got NaN or inf")
         return tensor.broadcast_to(target).reshape(len(envs), n_parts, *element)
