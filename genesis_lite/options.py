@@ -9,14 +9,18 @@ from .solvers.core import InvalidInputError
 
 
 def _check_vec3(owner, name, value):
-    arr = np.asarray(value, dtype=np.float64)
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):  # a string, None, nested lists of other lengths
+        arr = np.full(0, np.nan)
     if arr.shape != (3,) or not np.all(np.isfinite(arr)):
         raise InvalidInputError(f"{owner}: argument '{name}' must be 3 finite numbers, got {value!r}")
     return tuple(float(v) for v in arr)
 
 
 def _check_positive(owner, name, value, integer=False):
-    ok = np.isscalar(value) and np.isfinite(value) and value > 0 and (not integer or int(value) == value)
+    number = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+    ok = number and np.isfinite(value) and value > 0 and (not integer or int(value) == value)
     if not ok:
         kind = "a positive integer" if integer else "a positive finite number"
         raise InvalidInputError(f"{owner}: argument '{name}' must be {kind}, got {value!r}")
@@ -67,6 +71,9 @@ class SimOptions:
         _check_positive("SimOptions", "substeps", self.substeps, integer=True)
         _check_positive("SimOptions", "checkpoint_interval", self.checkpoint_interval, integer=True)
         self.gravity = _check_vec3("SimOptions", "gravity", self.gravity)
+        self.requires_grad = check_bool("SimOptions", "requires_grad", self.requires_grad)
+        self.check_nan = check_bool("SimOptions", "check_nan", self.check_nan)
+        self.dt = float(self.dt)
         self.substeps = int(self.substeps)
         self.checkpoint_interval = int(self.checkpoint_interval)
 

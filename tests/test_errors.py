@@ -266,7 +266,14 @@ def test_set_pos_on_fixed_base(f64, built):
     ({"substeps": 0}, "'substeps'", "0"),
     ({"substeps": 2.5}, "'substeps'", "2.5"),
     ({"gravity": (0.0, -9.81)}, "'gravity'", "-9.81"),
-], ids=["dt_negative", "dt_zero", "dt_nan", "substeps_zero", "substeps_fraction", "gravity_shape"])
+    ({"dt": "0.01"}, "'dt'", "'0.01'"),
+    ({"dt": True}, "'dt'", "True"),
+    ({"gravity": "down"}, "'gravity'", "'down'"),
+    ({"requires_grad": "no"}, "'requires_grad'", "'no'"),
+    ({"requires_grad": 1}, "'requires_grad'", "1"),
+    ({"check_nan": "no"}, "'check_nan'", "'no'"),
+], ids=["dt_negative", "dt_zero", "dt_nan", "substeps_zero", "substeps_fraction", "gravity_shape", "dt_string",
+        "dt_bool", "gravity_string", "requires_grad_string", "requires_grad_int", "check_nan_string"])
 def test_invalid_sim_options(f64, kwargs, arg, given):
     raises(gs.InvalidInputError, lambda: gs.options.SimOptions(**kwargs), "SimOptions", arg, "must be", given)
 

@@ -168,6 +168,8 @@ def test_mpm_options(caplog):
     bad = [({"enable_CPIC": True}, "'enable_CPIC' must be False"), ({"grid_density": 0}, "'grid_density'"),
            ({"particle_size": -0.01}, "'particle_size'"), ({"dt": 0.0}, "'dt'"), ({"gravity": (0, 0)}, "'gravity'"),
            ({"lower_bound": (0, 0, 0), "upper_bound": (1, 1, 0.05)}, "'lower_bound' and 'upper_bound'"),
+           ({"lower_bound": "abc"}, "'lower_bound' must be 3 finite numbers, got 'abc'"),
+           ({"grid_density": "64"}, "'grid_density'"),
            ({"boundary_condition": "free"}, "'boundary_condition' must be one of ['slip', 'sticky']"),
            ({"sparse": True}, "MPMOptions: argument 'sparse' is unknown"), ({"leaf_block_size": 8.0}, "leaf_block")]
     for kwargs, fragment in bad:
