@@ -191,6 +191,22 @@ def test_cameras_draw_the_particles(f64):
     assert rgb[drawn].mean(axis=0)[0] > 2 * rgb[drawn].mean(axis=0)[1]  # red
 
 
+@pytest.mark.parametrize("level, box_id, jelly_id", [("link", 0, 1), ("geom", 0, 1), ("entity", 1, 0)])
+def test_particle_segmentation_ids_differ_from_the_rigid_ones(f64, level, box_id, jelly_id):
+    """A jelly (entity 0) left of a rigid box (entity 1, link 0, shape 0), seen from above: at the
+    link and geom levels the particles' id comes after the rigid ones (it was the entity index, 0,
+    the box's link id); at the entity level, the entity indices."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT, substeps=SUBSTEPS),
+                     mpm_options=gs.options.MPMOptions(**SMALL), vis_options=gs.options.VisOptions(segmentation_level=level))
+    scene.add_entity(gs.morphs.Box(pos=(-0.12, 0.0, 0.3), size=(0.1, 0.1, 0.1)), material=_jelly(), name="jelly")
+    scene.add_entity(gs.morphs.Box(pos=(0.12, 0.0, 0.3), size=(0.1, 0.1, 0.1), fixed=True), name="box")
+    camera = scene.add_camera(res=(200, 100), pos=(0.0, 0.0, 1.3), lookat=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=30)
+    scene.build()
+    _, _, seg, _ = camera.render(rgb=False, segmentation=True)
+    assert set(np.unique(seg).tolist()) == {-1, box_id, jelly_id}
+    assert np.nonzero(seg == jelly_id)[1].max() < 100 < np.nonzero(seg == box_id)[1].min()
+
+
 def test_scene_gravity_reaches_every_solver(f64):
     """scene.set_gravity sets the rigid and the MPM solver's gravity alike."""
     scene, blob, cube = _scene(_jelly(), rigid=True)

@@ -15,8 +15,9 @@ and the camera stands at its pose plus its own env's offset, as Genesis's raster
 Images, as Genesis returns them: rgb (H, W, 3) uint8; depth (H, W) float32 m along the view axis,
 ``far`` where nothing is drawn; segmentation (H, W) int32: the ids of
 ``VisOptions.segmentation_level`` ("link" by default: the scene-wide link index, as RigidLink.idx;
-"entity": entity.idx; "geom": the drawn shape's scene-wide index), −1 where nothing is drawn (Genesis
-returns its own compacted indices instead, 0 for nothing); normal (H, W, 3) float32 world-frame unit
+"entity": entity.idx; "geom": the drawn shape's scene-wide index; an MPM entity's particles, at the
+link and geom levels, the ids after the rigid ones, one per MPM entity), −1 where nothing is drawn
+(Genesis returns its own compacted indices instead, 0 for nothing); normal (H, W, 3) float32 world-frame unit
 normals, 0 where nothing is drawn. Debug spheres (``scene.draw_debug_spheres``) are drawn by
 debug cameras only (``debug=True``), as in Genesis, with segmentation −1.
 

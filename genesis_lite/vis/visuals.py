@@ -112,13 +112,24 @@ def quat_to_rot(quat):
                         2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], dim=-1).reshape(-1, 3, 3)
 
 
+def _particle_seg(entity, k, level, scene, n_shapes):
+    """Segmentation id of the k-th particle entity: its entity index at the "entity" level; at the
+    "link" and "geom" levels, one past the scene's links (shapes), then one per particle entity,
+    so that no particle id is a rigid link's (shape's) id."""
+    if level == "entity":
+        return entity.idx
+    n_links = sum(e.n_links for e in scene.entities if hasattr(e, "_specs"))
+    return (n_links if level == "link" else n_shapes) + k
+
+
 class SceneVisuals:
     """The drawing of a built scene in the envs ``envs`` (batch rows, int sequence): the MeshSet,
     built here once (None when nothing has a shape), with one instance per (env, shape), and the
     Instances of a frame (``instances``). Segmentation ids at ``segmentation_level``."""
 
     def __init__(self, scene, envs, segmentation_level):
-        rows = [(env, shape) for shape in scene_shapes(scene) for env in (envs[:1] if shape.is_plane else envs)]
+        shapes = scene_shapes(scene)
+        rows = [(env, shape) for shape in shapes for env in (envs[:1] if shape.is_plane else envs)]
         self.meshes = MeshSet.from_parts([shape.mesh for _, shape in rows]) if rows else None
         device = runtime.device
         env = np.array([env for env, _ in rows], dtype=np.int64)
@@ -130,17 +141,19 @@ class SceneVisuals:
         self._seg = torch.as_tensor([shape.seg[segmentation_level] for _, shape in rows], dtype=torch.int32,
                                     device=device)
 
-        self._particles = [(e, np.asarray(DEFAULT_COLOR if e.surface.color is None else e.surface.color[:3]))
-                           for e in scene.entities if hasattr(e, "n_particles")]
+        particle_entities = [e for e in scene.entities if hasattr(e, "n_particles")]
+        self._particles = [(e, np.asarray(DEFAULT_COLOR if e.surface.color is None else e.surface.color[:3]),
+                            _particle_seg(e, k, segmentation_level, scene, len(shapes)))
+                           for k, e in enumerate(particle_entities)]
         self._envs = torch.as_tensor(np.asarray(envs), dtype=torch.int64, device=device)
         self._envs_offset = torch.as_tensor(scene.envs_offset[np.asarray(envs)], dtype=torch.float32, device=device)
 
     def particles(self, extra=None):
         """The Spheres of every MPM entity's particles in the drawn envs (radius: half the particle
-        size; colour: the entity's surface colour; segmentation id: the entity's index at every
-        level), then those of ``extra`` (Spheres or None); None when there are none."""
+        size; colour: the entity's surface colour; segmentation id: _particle_seg's), then those of
+        ``extra`` (Spheres or None); None when there are none."""
         parts = [] if extra is None else [extra]
-        for entity, color in self._particles:
+        for entity, color, seg in self._particles:
             with torch.no_grad():
                 pos = entity.get_particles_pos(envs_idx=self._envs if entity.scene.n_envs else None)
             pos = pos.reshape(-1, len(self._envs), entity.n_particles, 3) if entity.scene.n_envs else pos[None, None]
@@ -149,7 +162,7 @@ class SceneVisuals:
             parts.append(Spheres(pos, torch.full((n,), entity.particle_size / 2.0, dtype=torch.float32,
                                                  device=pos.device),
                                  torch.as_tensor(color, dtype=torch.float32, device=pos.device).expand(n, 3),
-                                 torch.full((n,), entity.idx, dtype=torch.int32, device=pos.device)))
+                                 torch.full((n,), seg, dtype=torch.int32, device=pos.device)))
         if not parts:
             return None
         return parts[0] if len(parts) == 1 else Spheres(torch.cat([q.pos for q in parts]),
