@@ -389,8 +389,9 @@ def test_errors_name_the_camera_argument_and_value(f32, tmp_path):
     for kwargs, message in cases:
         with pytest.raises(gs.InvalidInputError, match=message):
             scene.add_camera(**kwargs)
-    with pytest.raises(gs.InvalidInputError, match=r"VisOptions argument 'show_world_frame' must keep its default"):
-        gs.Scene(vis_options=gs.options.VisOptions(show_world_frame=True)).add_camera()
+    for name in ("show_world_frame", "visualize_mpm_boundary"):
+        with pytest.raises(gs.InvalidInputError, match=rf"VisOptions argument '{name}' must keep its default"):
+            gs.Scene(vis_options=gs.options.VisOptions(**{name: True})).add_camera()
     scene.build()
     with pytest.raises(gs.SceneStateError, match=r"camera 0.stop_recording: the camera is not recording"):
         cam.stop_recording()

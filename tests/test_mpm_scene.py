@@ -168,13 +168,16 @@ def test_a_substep_above_the_stability_limit_warns(f64):
         scene.build()
 
 
-def test_cameras_draw_the_particles(f64):
-    """A camera draws each particle as a sphere of half the particle size in its entity's colour,
-    with the entity's segmentation id; from straight above, the jelly's particles fill its
-    projected square (touching spheres: at least π/4 of it, the lower layers show through the
-    gaps) and nothing outside it."""
+@pytest.mark.parametrize("scale", [1.0, 2.0])
+def test_cameras_draw_the_particles(f64, scale):
+    """A camera draws each particle as a sphere of half the particle size (times
+    VisOptions.particle_size_scale) in its entity's colour, with the entity's segmentation id;
+    from straight above, the jelly's particles fill its projected square, grown by the spheres'
+    extra radius on each side (touching spheres: at least π/4 of it, the lower layers show
+    through the gaps) and nothing outside it."""
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT, substeps=SUBSTEPS),
-                     mpm_options=gs.options.MPMOptions(**SMALL))
+                     mpm_options=gs.options.MPMOptions(**SMALL),
+                     vis_options=gs.options.VisOptions(particle_size_scale=scale))
     scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.3), size=(0.12, 0.12, 0.12)), material=_jelly(), name="jelly",
                      surface=gs.surfaces.Default(color=(0.9, 0.2, 0.2)))
     camera = scene.add_camera(res=(200, 200), pos=(0.0, 0.0, 1.3), lookat=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0),
@@ -182,11 +185,13 @@ def test_cameras_draw_the_particles(f64):
     scene.build()
     rgb, _, seg, _ = camera.render(rgb=True, segmentation=True)
     drawn = seg == 0
-    top = 0.3 + 0.06 - scene.mpm_options.particle_size / 2.0  # the top layer's centres
+    size = scene.mpm_options.particle_size
+    top = 0.3 + 0.06 - size / 2.0  # the top layer's centres
     focal = 100.0 / np.tan(np.radians(15.0))
-    side = 0.12 * focal / (1.3 - top)  # pixels, the square the particles fill
+    side = (0.12 + (scale - 1.0) * size) * focal / (1.3 - top - (scale - 1.0) * size / 2)  # pixels
     rows, cols = np.nonzero(drawn)
-    assert max(rows.max() - rows.min() + 1, cols.max() - cols.min() + 1) <= side + 2
+    extent = max(rows.max() - rows.min() + 1, cols.max() - cols.min() + 1)
+    assert side - 3 <= extent <= side + 2
     assert np.pi / 4 < drawn.sum() / side ** 2 <= 1.0
     assert rgb[drawn].mean(axis=0)[0] > 2 * rgb[drawn].mean(axis=0)[1]  # red
 

@@ -45,7 +45,7 @@ from .recorder import Recording
 
 # VisOptions whose non-default values cameras cannot honour (their defaults draw nothing extra)
 UNSUPPORTED_VIS_OPTIONS = ("show_world_frame", "show_link_frame", "show_cameras", "plane_reflection", "split_envs",
-                           "ambient_light", "lights")
+                           "ambient_light", "lights", "visualize_mpm_boundary")
 _GOLDEN = 0.618033988749895  # hue step of the segmentation colours: neighbouring ids differ
 
 

@@ -141,6 +141,7 @@ class SceneVisuals:
         self._seg = torch.as_tensor([shape.seg[segmentation_level] for _, shape in rows], dtype=torch.int32,
                                     device=device)
 
+        self._particle_scale = scene.vis_options.particle_size_scale
         particle_entities = [e for e in scene.entities if hasattr(e, "n_particles")]
         self._particles = [(e, np.asarray(DEFAULT_COLOR if e.surface.color is None else e.surface.color[:3]),
                             _particle_seg(e, k, segmentation_level, scene, len(shapes)))
@@ -150,7 +151,7 @@ class SceneVisuals:
 
     def particles(self, extra=None):
         """The Spheres of every MPM entity's particles in the drawn envs (radius: half the particle
-        size; colour: the entity's surface colour; segmentation id: _particle_seg's), then those of
+        size times VisOptions.particle_size_scale, as Genesis's rasterizer; colour: the entity's surface colour; segmentation id: _particle_seg's), then those of
         ``extra`` (Spheres or None); None when there are none."""
         parts = [] if extra is None else [extra]
         for entity, color, seg in self._particles:
@@ -159,7 +160,8 @@ class SceneVisuals:
             pos = pos.reshape(-1, len(self._envs), entity.n_particles, 3) if entity.scene.n_envs else pos[None, None]
             pos = (pos[0].to(torch.float32) + self._envs_offset[:, None, :]).reshape(-1, 3)
             n = len(pos)
-            parts.append(Spheres(pos, torch.full((n,), entity.particle_size / 2.0, dtype=torch.float32,
+            radius = entity.particle_size / 2.0 * self._particle_scale
+            parts.append(Spheres(pos, torch.full((n,), radius, dtype=torch.float32,
                                                  device=pos.device),
                                  torch.as_tensor(color, dtype=torch.float32, device=pos.device).expand(n, 3),
                                  torch.full((n,), seg, dtype=torch.int32, device=pos.device)))
