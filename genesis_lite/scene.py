@@ -337,7 +337,9 @@ class Scene:
             sim.set_input(slot.solver, "gravity", replace_columns(slot.inputs["gravity"], envs, np.arange(3), values))
 
     def get_gravity(self, envs_idx=None):
-        """Gravity, m/s²: (3,) or (n_envs, 3)."""
+        """Gravity, m/s²: (3,) or (n_envs, 3): the first solver's (the rigid solver's when there is
+        one; an MPMOptions(gravity=...) of its own shows in the MPM solver only, until set_gravity
+        sets every solver's)."""
         sim = self._require_built("scene.get_gravity")
         probe = _SceneArguments(self, "get_gravity")
         envs = torch.as_tensor(probe._envs(envs_idx), device=runtime.device)
