@@ -21,6 +21,7 @@ import trimesh
 
 import genesis_lite as gs
 from genesis_lite.solvers.rigid.data import SERIAL_SOLVE_ENVS
+from tests.conftest import pybullet
 from tests.fd_scan import assert_converged, directional_errors
 
 _SCENES = {}
@@ -190,6 +191,37 @@ def test_mesh_on_box(f64, case, cone):
     _check(case, cone, steps=50, shape="mesh", ground="box")
 
 
+def test_default_tolerance_converges_an_elliptic_slide_for_its_gradient(f64):
+    """pybullet's Panda finger (a convex mesh, 1e6 kg/m³) driven at 0.3 m/s into a fixed box with
+    the elliptic cone at the default tolerance, one step: four contacts of one face, one sliding
+    (its force on the cone). At Genesis's 1e-8 MuJoCo's Newton-decrement test stopped the solve
+    after 11 iterations (decrement 4e-9, scaled gradient 5e-4) and the initial pose's gradient
+    missed the forward map's derivative by 9e-4 of its norm; the float64 default (1e-12) takes
+    the solve to its solution, where the implicit gradient is the map's."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True, gravity=(0, 0, 0)),
+                     rigid_options=gs.options.RigidOptions(friction_cone=gs.friction_cone.elliptic))
+    scene.add_entity(gs.morphs.Box(pos=(0.62, 0.0, 0.04), size=(0.08, 0.08, 0.08), fixed=True))
+    finger = scene.add_entity(gs.morphs.Mesh(file=pybullet("franka_panda", "meshes", "collision", "finger.obj"),
+                                             pos=(0.5737357, -0.0198982, 0.0886440), quat=(3.79279e-5, 0.999939318,
+                                                                                           2.44788e-5, -0.011016294)),
+                              material=gs.materials.Rigid(rho=1e6))
+    scene.build()
+    start = finger.get_dofs_position().detach().clone()
+    weights = torch.tensor([0.3, -1.3, 0.3, -1.2, 1.3, -0.6, 0.4, 0.9, -0.1, 0.5, 1.1, -0.7], dtype=torch.float64)
+
+    def loss(q):
+        scene.reset()
+        finger.set_dofs_position(q)
+        finger.set_dofs_velocity(torch.tensor([0.3, 0.0, 0.0, 0.0, 0.0, 0.0], dtype=torch.float64))
+        scene.step()
+        return (torch.cat([finger.get_dofs_position(), finger.get_dofs_velocity()]) * weights).sum()
+
+    loss(start)
+    assert len(finger.get_contacts()["geom_a"]) == 4
+    for seed in range(2):
+        assert_converged(directional_errors(loss, start, seed), f"finger pose, direction {seed}")
+
+
 @pytest.mark.parametrize("case", ["tilted", "mass"])
 def test_smooth_contact(f64, case):
     """RigidOptions(smooth_contact=True) (elliptic; impedance from zero at contact onset): a
@@ -250,6 +282,26 @@ def test_repeated_rollouts_bit_identical(f64, cone):
     for case in ("tilted", "friction"):
         first, second = _gradient(scene, body, case, 30), _gradient(scene, body, case, 30)
         assert torch.equal(first, second), case
+
+
+def test_set_friction_is_the_differentiable_ratio_input(f64):
+    """set_friction with a 0-d tensor requiring grad (it took numbers only) writes the input that
+    set_friction_ratio scales (the box's build friction is 1): the same loss and gradient bits,
+    so the ratio's finite-difference test covers it."""
+    scene, body = _scene("pyramidal")
+    assert scene.rigid_solver.model.geom_friction[body.geom_start] == 1.0
+    results = []
+    for set_friction in (lambda x: body.set_friction(x[0]), body.set_friction_ratio):
+        x = torch.tensor([1.3], dtype=torch.float64, requires_grad=True)
+        scene.reset()
+        _start(body, scene.n_envs, *SLIDE)
+        set_friction(x)
+        _roll(scene, 30)
+        loss = body.get_pos()[..., 0].sum()
+        loss.backward()
+        results.append((loss.detach(), x.grad))
+    assert results[1][1].abs() > 0
+    assert torch.equal(results[0][0], results[1][0]) and torch.equal(results[0][1], results[1][1])
 
 
 def test_batched_equals_single_with_contact(f64):

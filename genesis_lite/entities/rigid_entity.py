@@ -482,13 +482,18 @@ class RigidEntity(EntityIndexing):
     # -- contact parameters -----------------------------------------------------------------------
     def set_friction(self, friction):
         """Coulomb friction coefficient of every collision geom of the entity, in every env (a
-        contact takes the larger of its two geoms' values), in [0.01, 5] as Genesis."""
-        if not (isinstance(friction, (int, float, np.integer, np.floating)) and 0.01 <= friction <= 5.0):
+        contact takes the larger of its two geoms' values), in [0.01, 5] as Genesis: a number, or
+        a 0-d tensor, differentiable (as set_friction_ratio)."""
+        try:
+            value = None if isinstance(friction, (bool, np.bool_)) else self._tensor(friction, "friction", "()")
+        except InvalidInputError:  # not numbers: the message below says what is expected
+            value = None
+        if value is None or value.dim() != 0 or not 0.01 <= float(value.detach()) <= 5.0:
             raise InvalidInputError(f"entity '{self.name}': argument 'friction' must be a number in [0.01, 5.0], "
                                     f"got {friction!r}")
         envs = self._envs(None) if self.scene.n_envs == 0 else np.arange(self.scene.n_envs)
-        values = torch.full((len(envs), self.n_geoms), float(friction), dtype=runtime.tc_float, device=runtime.device)
-        self._write_input("friction", self.geom_start + np.arange(self.n_geoms), envs, values)
+        self._write_input("friction", self.geom_start + np.arange(self.n_geoms), envs,
+                          value.expand(len(envs), self.n_geoms))
 
     def set_friction_ratio(self, friction_ratio, links_idx_local=None, envs_idx=None):
         """Friction of the geoms of the given links ← ratio (one per link, ≥ 0) × their friction at
