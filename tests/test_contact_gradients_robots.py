@@ -238,3 +238,48 @@ def _gradient(name, cone, steps):
 def test_repeated_rollouts_bit_identical(f64, name, cone):
     first, second = _gradient(name, cone, 30), _gradient(name, cone, 30)
     assert torch.equal(first, second)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="open defect: a Panda hand pressing a small box, whose edges clip the "
+                                       "fingers' contact patch: the pose gradient misses FD by ~5e-4 of its norm")
+def test_panda_presses_a_small_box_pose_gradient(f64):
+    """pybullet_data's Panda (self-collision off, Genesis's tutorial gains, force range ±1e4)
+    driven down onto a fixed 8 cm box for 5 steps (dt 10 ms): 8 mesh–box contacts of its hand and
+    fingers, the box's edges clipping the fingers' patch. One more step from there: the gradient
+    of a weighted sum of the new state in the start joint positions. The velocity gradient agrees
+    to 6e-10; the position one misses by 5e-4 of its norm (1.5e-3 at other states), at any
+    tolerance; with the box moved so that one finger's face lies inside the box's face, or the
+    fingers on a plane or a large box, or the same finger as a free body, it agrees. Found by an
+    exploratory pass (session 21); not yet understood."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True),
+                     rigid_options=gs.options.RigidOptions(enable_self_collision=False, tolerance=1e-14))
+    arm = scene.add_entity(gs.morphs.URDF(file=os.path.join(pybullet_data.getDataPath(), "franka_panda", "panda.urdf"),
+                                          fixed=True))
+    scene.add_entity(gs.morphs.Box(pos=(0.62, 0.0, 0.04), size=(0.08, 0.08, 0.08), fixed=True))
+    scene.build()
+    arm.set_dofs_kp(torch.tensor([4500, 4500, 3500, 3500, 2000, 2000, 2000, 100, 100], dtype=torch.float64))
+    arm.set_dofs_kv(torch.tensor([450, 450, 350, 350, 200, 200, 200, 10, 10], dtype=torch.float64))
+    arm.set_dofs_force_range(torch.full((9,), -1e4, dtype=torch.float64), torch.full((9,), 1e4, dtype=torch.float64))
+    q0 = torch.tensor([0.0, 0.55, 0.0, -2.1, 0.0, 2.65, 0.785, 0.02, 0.02], dtype=torch.float64)
+    sweep = torch.tensor([0.0, 0.25, 0.0, 0.35, 0.0, -0.1, 0.0, 0.0, 0.0], dtype=torch.float64) / 60
+
+    with torch.no_grad():
+        arm.set_dofs_position(q0)
+        for t in range(5):
+            arm.control_dofs_position(q0 + sweep * t)
+            scene.step()
+        q5, v5 = arm.get_dofs_position().clone(), arm.get_dofs_velocity().clone()
+    weights = torch.tensor(np.random.default_rng(1).normal(size=18))
+
+    def loss(q):
+        scene.reset()
+        arm.set_dofs_position(q)
+        arm.set_dofs_velocity(v5)
+        arm.control_dofs_position(q0 + sweep * 5)
+        scene.step()
+        return (torch.cat([arm.get_dofs_position(), arm.get_dofs_velocity()]) * weights).sum()
+
+    loss(q5)
+    assert len(arm.get_contacts()["geom_a"]) == 8
+    assert_converged(directional_errors(loss, q5), "Panda pose")
