@@ -202,7 +202,8 @@ def test_particle_segmentation_ids_differ_from_the_rigid_ones(f64, level, box_id
     link and geom levels the particles' id comes after the rigid ones (it was the entity index, 0,
     the box's link id); at the entity level, the entity indices."""
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT, substeps=SUBSTEPS),
-                     mpm_options=gs.options.MPMOptions(**SMALL), vis_options=gs.options.VisOptions(segmentation_level=level))
+                     mpm_options=gs.options.MPMOptions(**SMALL),
+                     vis_options=gs.options.VisOptions(segmentation_level=level))
     scene.add_entity(gs.morphs.Box(pos=(-0.12, 0.0, 0.3), size=(0.1, 0.1, 0.1)), material=_jelly(), name="jelly")
     scene.add_entity(gs.morphs.Box(pos=(0.12, 0.0, 0.3), size=(0.1, 0.1, 0.1), fixed=True), name="box")
     camera = scene.add_camera(res=(200, 100), pos=(0.0, 0.0, 1.3), lookat=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=30)

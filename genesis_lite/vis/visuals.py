@@ -151,8 +151,9 @@ class SceneVisuals:
 
     def particles(self, extra=None):
         """The Spheres of every MPM entity's particles in the drawn envs (radius: half the particle
-        size times VisOptions.particle_size_scale, as Genesis's rasterizer; colour: the entity's surface colour; segmentation id: _particle_seg's), then those of
-        ``extra`` (Spheres or None); None when there are none."""
+        size times VisOptions.particle_size_scale, as Genesis's rasterizer; colour: the entity's
+        surface colour; segmentation id: _particle_seg's), then those of ``extra`` (Spheres or
+        None); None when there are none."""
         parts = [] if extra is None else [extra]
         for entity, color, seg in self._particles:
             with torch.no_grad():
