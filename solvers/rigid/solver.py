@@ -330,7 +330,8 @@ class RigidSolver(Solver):
             names = ", ".join(_pair_name(kind) for kind in self.inexact_kinds)
             if self.rigid_options.enable_mujoco_compatibility:
                 why = (f"under RigidOptions(enable_mujoco_compatibility=True) the convex collider's contacts of "
-                       f"{names} are MuJoCo's iterates on curved shapes and margins, which have no exact gradient; "
+                       f"{names} are MuJoCo's iterates on curved shapes and margins (and its clipping corners on "
+                       f"mesh polygons), which have no exact gradient; "
                        f"expected enable_mujoco_compatibility=False (their converged contacts)")
             else:
                 why = (f"a contact of {names} kept the convex collider's iterate (two cylinders at their rims "

@@ -2653,13 +2653,18 @@ def convex_evaluate_adjoint(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, 
 
 @ti.func
 def iterated(type1, type2, margin, feature):
-    """Whether a `convex_convex` contact (its feature row) is the forward's CCD iterate on a curved
-    support, within the CCD tolerance's effect of `convex_evaluate`, rather than that closed form:
-    anything with a cylinder; EPA with a sphere, a capsule or a margin; a clipped edge with a
-    margin (its ends are EPA support points)."""
+    """Whether a `convex_convex` contact (its feature row) is not the closed form `convex_evaluate`
+    gives but near it: the forward's CCD iterate on a curved support, within the CCD tolerance's
+    effect (anything with a cylinder; EPA with a sphere, a capsule or a margin; a clipped edge with
+    a margin: its ends are EPA support points), or a corner of the clipping face (two side planes)
+    on a mesh's polygon, which the forward interpolates along the clipped polygon's edges and the
+    closed form puts on the plane of its vertex 0 and normal: the same where the polygon is
+    planar, ~1e-4 m apart on a hull's merged facets that are not (pybullet's Panda finger), where
+    the gradient of the closed form then missed the forward's derivative."""
     round_ = type1 == SPHERE or type1 == CAPSULE or type2 == SPHERE or type2 == CAPSULE
     curved = type1 == CYLINDER or type2 == CYLINDER or (feature[0] == KIND_EPA and (margin > 0 or round_))
-    return curved or (feature[0] == KIND_CLIP and feature[7] > 0 and margin > 0)
+    corner = feature[0] == KIND_CLIP and feature[7] == 0 and feature[3] >= 256 and feature[4] >= 256 and type2 == MESH
+    return curved or (feature[0] == KIND_CLIP and feature[7] > 0 and margin > 0) or corner
 
 
 @ti.func

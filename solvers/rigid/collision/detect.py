@@ -363,12 +363,12 @@ def replay_exact(d: ti.template(), s, e, c):
 
 
 def inexact_kinds(model):
-    """The model's candidate pair kinds (type 1, type 2) whose contacts may be CCD iterates on
-    curved supports (convex.iterated)."""
+    """The model's candidate pair kinds (type 1, type 2) whose contacts may not be their closed
+    form (convex.iterated): CCD iterates on curved supports, or clipping corners on a mesh."""
     kinds = set()
     for a, b, margin in zip(model.pair_geom1, model.pair_geom2, model.pair_margin):
         kind = (int(model.geom_type[a]), int(model.geom_type[b]))
-        if kind in convex.CONVEX_PAIRS and not (set(kind) <= set(POLYTOPES) and margin == 0.0):
+        if kind in convex.CONVEX_PAIRS and not (set(kind) <= set(POLYTOPES) and margin == 0.0 and kind[1] != MESH):
             kinds.add(kind)
     return sorted(kinds)
 
