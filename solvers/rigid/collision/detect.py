@@ -351,7 +351,6 @@ def _convex_reverse(d: ti.template(), s, e, g1, g2, c, g_position, g_normal, g_d
 # tolerance away (tests/test_adjoints_convex.py). Unless converge_contacts made the forward's
 # contact that form (and no direction is frozen), a backward over such a contact raises.
 REVERSES[ALL_CONVEX] = (_convex_replay, _convex_reverse)
-POLYTOPES = (BOX, MESH)
 
 
 @ti.func
@@ -364,13 +363,13 @@ def replay_exact(d: ti.template(), s, e, c):
 
 def inexact_kinds(model):
     """The model's candidate pair kinds (type 1, type 2) whose contacts may not be their closed
-    form (convex.iterated): CCD iterates on curved supports, or clipping corners on a mesh."""
-    kinds = set()
-    for a, b, margin in zip(model.pair_geom1, model.pair_geom2, model.pair_margin):
-        kind = (int(model.geom_type[a]), int(model.geom_type[b]))
-        if kind in convex.CONVEX_PAIRS and not (set(kind) <= set(POLYTOPES) and margin == 0.0 and kind[1] != MESH):
-            kinds.add(kind)
-    return sorted(kinds)
+    form (convex.iterated): every convex_convex kind, with or without a margin, as each has a
+    curved geom (CCD iterates) or a mesh (clipping corners on its polygons); box–box goes to
+    box.py, whose contacts are closed forms."""
+    kinds = {(int(model.geom_type[a]), int(model.geom_type[b])) for a, b in zip(model.pair_geom1,
+                                                                                model.pair_geom2)}
+    return sorted(kind for kind in kinds if kind in convex.CONVEX_PAIRS)
+
 
 
 def differentiable_kinds(model):
