@@ -89,11 +89,11 @@ class RigidSolver(Solver):
         schedule, arenas = self.data.schedule, self.data.arenas
         self.kernels = BoundKernels(schedule, arenas, element_dims, *step.KERNELS)
         m = self.model
-        self.inexact_kinds = detect.inexact_kinds(m)  # pair kinds whose contacts may be CCD iterates
+        self.inexact_kinds = detect.inexact_kinds(m)  # pair kinds whose contacts may not be closed forms
         # (bit in the header's colliders_due mask, kernel) of each collider kernel
         self.colliders = [(detect.KERNEL_BIT[kind], BoundKernel(step.collide, (schedule, kind), arenas, element_dims))
                           for kind in detect.kernel_kinds(m)]
-        if self.data.size["converged"] and self.inexact_kinds:  # curved convex contacts → their closed forms
+        if self.data.size["converged"] and self.inexact_kinds:  # convex contacts → their closed forms
             self.colliders.append((detect.KERNEL_BIT[detect.ALL_CONVEX],
                                    BoundKernel(step.converge, schedule, arenas, element_dims)))
         # the reverse of a substep, without and with the constraint stage

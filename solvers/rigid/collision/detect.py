@@ -255,9 +255,9 @@ def _iterated_kind(d: ti.template(), s, e, c):
 
 @ti.func
 def converge_contacts(d: ti.template(), s, e):
-    """Frame s's convex_convex contacts that are CCD iterates on curved supports (convex.iterated)
-    become the closed form of their feature (convex.convex_evaluate), the contact those
-    iterations approach: the step is then a closed form of the poses between feature changes,
+    """Frame s's convex_convex contacts that are not their closed form (convex.iterated: CCD
+    iterates on curved supports, clipping corners on mesh polygons) become the closed form of
+    their feature (convex.convex_evaluate): the step is then a closed form of the poses between feature changes,
     whose reverse is exact. Not where the closed form keeps part of the iterate (convex.frozen),
     nor where it is not finite (a degenerate feature; the inexact flag is raised). Run after the
     colliders, as a kernel of its own (in theirs, it compiled 7 s slower)."""
