@@ -22,9 +22,11 @@ import os
 import mujoco
 import numpy as np
 import pytest
+import torch
 import trimesh
 
 import genesis_lite as gs
+from genesis_lite.solvers.rigid.collision import detect
 from tests.test_contact_vs_mujoco import _mujoco_step, _set_ours, _touching_states
 
 N_STATES = 16
@@ -241,3 +243,40 @@ def test_mesh_box_rests_like_box(f64, meshes):
         worst = max(worst, np.abs(a[0] + 1.0 - b[0]), np.abs(a[1:] - b[1:]).max())
     assert worst < 1e-8, worst
     assert abs(b[2] - BOX_HALF[2]) < 1e-3 and np.abs(mesh.get_dofs_velocity().cpu().numpy()).max() < 1e-4
+
+
+def test_bounding_boxes_keep_apart_pairs_from_their_colliders(f64, tmp_path, monkeypatch):
+    """The broad phase tests bounding boxes after bounding spheres, as MuJoCo's midphase: a box
+    bar (1 m × 4 cm × 4 cm) and a mesh bar of the same shape whose vertices sit 30 cm off its
+    origin (its box is off-centre), side by side 2 cm apart, 1 cm above a plane, no gravity. Every
+    pair's bounding spheres overlap, no pair touches: no collider kernel runs, at build or in a
+    step. Moved 0.5 cm into the box bar, the mesh bar's convex collider runs and finds the
+    contact; the plane's colliders still do not."""
+    from genesis_lite.solvers.launch import BoundKernel
+    collides = []
+    original = BoundKernel.__call__
+
+    def counting(self, *args):
+        if self.kernel.__name__ == "collide":
+            collides.append(self.template[1])
+        original(self, *args)
+
+    monkeypatch.setattr(BoundKernel, "__call__", counting)
+    bar = trimesh.creation.box(extents=(1.0, 0.04, 0.04))
+    bar.apply_translation((0.3, 0.0, 0.0))
+    bar.export(str(tmp_path / "bar.obj"))
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, gravity=(0.0, 0.0, 0.0)), show_viewer=False)
+    scene.add_entity(gs.morphs.Plane())
+    box_bar = scene.add_entity(gs.morphs.Box(size=(1.0, 0.04, 0.04), pos=(0.0, 0.0, 0.03)))
+    mesh_bar = scene.add_entity(gs.morphs.Mesh(file=str(tmp_path / "bar.obj"), pos=(-0.3, 0.06, 0.03)))
+    scene.build()
+    box_radius, mesh_radius = scene.rigid_solver.model.geom_rbound[1:3]  # geoms: plane, box bar, mesh bar
+    assert np.hypot(0.3, 0.06) < box_radius + mesh_radius and min(box_radius, mesh_radius) > 0.03
+    for _ in range(3):
+        scene.step()
+    assert collides == [] and len(box_bar.get_contacts()["geom_a"]) == 0
+    mesh_bar.set_pos(torch.tensor([-0.3, 0.035, 0.03], dtype=gs.tc_float))
+    scene.step()
+    assert collides == [detect.ALL_CONVEX]
+    contacts = mesh_bar.get_contacts(with_entity=box_bar)
+    assert len(contacts["geom_a"]) > 0

@@ -66,12 +66,13 @@ def geom_arrays(geoms, link_of, where_of):
     geoms: list of GeomSpec; link_of[k]: its link; where_of(k): a name for error messages.
     Returns a dict: type (G,) code, link (G,), pos (G, 3) m and quat (G, 4) the geom frame in the
     link frame, size (G, 3) MuJoCo sizes (half extents, radius and half length), rbound (G,) m
-    radius of a sphere about the geom origin holding it (0 for planes: unbounded), mesh (G,) the
-    geom's mesh number (-1: not a mesh); and the meshes' convex hulls (convex.MeshHulls built with
-    trimesh: vertices, vertex graph, polygons) as hull_vec (H, 3) and hull_int (HI,)
-    (``_hull_arrays``). A mesh collides as its convex hull.
+    radius of a sphere about the geom origin holding it (0 for planes: unbounded), aabb_center and
+    aabb_half (G, 3) m the centre and half extents of a box holding it in the geom frame (MuJoCo's
+    geom_aabb; zero for planes), mesh (G,) the geom's mesh number (-1: not a mesh); and the meshes'
+    convex hulls (convex.MeshHulls built with trimesh: vertices, vertex graph, polygons) as hull_vec
+    (H, 3) and hull_int (HI,) (``_hull_arrays``). A mesh collides as its convex hull.
     """
-    out = {k: [] for k in ("type", "link", "pos", "quat", "size", "rbound", "mesh")}
+    out = {k: [] for k in ("type", "link", "pos", "quat", "size", "rbound", "aabb_half", "mesh")}
     meshes = []
     for k, geom in enumerate(geoms):
         size, quat, mesh = np.zeros(3), np.asarray(geom.quat, dtype=np.float64), -1
@@ -97,18 +98,31 @@ def geom_arrays(geoms, link_of, where_of):
         out["quat"].append(quat / np.linalg.norm(quat))
         out["size"].append(size)
         out["rbound"].append(rbound)
+        out["aabb_half"].append(_aabb_half(geom.type, size))
         out["mesh"].append(mesh)
     arrays = {k: np.array(v, dtype=np.int32 if k in ("type", "link", "mesh") else np.float64)
               for k, v in out.items()}
-    for k, width in (("pos", 3), ("quat", 4), ("size", 3)):
+    for k, width in (("pos", 3), ("quat", 4), ("size", 3), ("aabb_half", 3)):
         arrays[k] = arrays[k].reshape(-1, width)
+    arrays["aabb_center"] = np.zeros_like(arrays["aabb_half"])
     hulls = convex.hulls_from_vertices(meshes)
     for k, mesh in enumerate(arrays["mesh"]):
         if mesh >= 0:
             adr, num = hulls.hull_vertadr[mesh], hulls.hull_vertnum[mesh]
-            arrays["rbound"][k] = np.linalg.norm(hulls.hull_vert[adr: adr + num], axis=1).max()
+            vertices = np.asarray(hulls.hull_vert[adr: adr + num], dtype=np.float64).reshape(-1, 3)
+            arrays["rbound"][k] = np.linalg.norm(vertices, axis=1).max()
+            lowest, highest = vertices.min(axis=0), vertices.max(axis=0)
+            arrays["aabb_center"][k], arrays["aabb_half"][k] = (lowest + highest) / 2, (highest - lowest) / 2
     arrays["hull_vec"], arrays["hull_int"] = _hull_arrays(hulls)
     return arrays
+
+
+def _aabb_half(geom_type, size):
+    """Half extents (3,) m of the box about the geom origin that holds a primitive of MuJoCo sizes
+    ``size`` (3,); zeros for a plane (unbounded) and a mesh (set from its hull)."""
+    radius, half_length = size[0], size[1]
+    return {"box": size, "sphere": np.full(3, radius), "capsule": np.array([radius, radius, radius + half_length]),
+            "cylinder": np.array([radius, radius, half_length])}.get(geom_type, np.zeros(3))
 
 
 def candidate_pairs(geom_type, geom_link, link_parent, link_static, link_entity, self_collision=True,

@@ -1,5 +1,6 @@
-"""Collision stage of one env's substep: geom poses, a bounding-sphere broad phase over the
-candidate pairs (built once, geometry.py), and each pair's collider → the contact list.
+"""Collision stage of one env's substep: geom poses, a broad phase over the candidate pairs
+(built once, geometry.py: bounding spheres, then bounding boxes, as MuJoCo), and each pair's
+collider → the contact list.
 
 Colliders: the primitive ones (primitive.py, box.py) and, for meshes and the cylinder pairs
 MuJoCo sends to its general convex collider, convex.py's plane_mesh and convex_convex (meshes as
@@ -38,17 +39,58 @@ def geom_poses(d: ti.template(), s, e):
 
 @ti.func
 def _may_touch(d: ti.template(), s, e, pair):
-    """Broad phase: False when the pair's bounding spheres (or a plane and a bounding sphere) are
-    further apart than its margin, so that its collider cannot find a contact."""
+    """Broad phase: False when the pair's bounding volumes are further apart than its margin, so
+    that its collider cannot find a contact: the bounding spheres (a plane and a sphere), then, as
+    MuJoCo's midphase (mj_collideOBB), the bounding boxes (geom_aabb_*) on the six axes of their
+    faces (a plane and a box: the box's lowest point), apart only beyond the margin, as
+    MuJoCo's test. Both are conservative: a pair they keep apart has no contact, so they change
+    which colliders run, never a contact."""
     g1, g2 = d.pair_geom1[pair], d.pair_geom2[pair]
     p1, p2 = d.geom_xpos[s, e, g1], d.geom_xpos[s, e, g2]
-    gap = 0.0
+    margin = d.pair_margin[pair]
+    near = False
     if d.geom_type[g1] == PLANE:  # the plane's normal is its z axis
-        normal = ti.Vector([d.geom_xmat[s, e, g1][k, 2] for k in ti.static(range(3))])
-        gap = normal.dot(p2 - p1) - d.geom_rbound[g2]
+        normal = column(d.geom_xmat[s, e, g1], 2)
+        near = normal.dot(p2 - p1) - d.geom_rbound[g2] < margin
+        if near:
+            centre2, rot2, half2 = _box_of(d, s, e, g2)
+            near = normal.dot(centre2 - p1) - _box_radius(rot2, half2, normal) <= margin
     else:
-        gap = (p2 - p1).norm() - d.geom_rbound[g1] - d.geom_rbound[g2]
-    return gap < d.pair_margin[pair]
+        near = (p2 - p1).norm() - d.geom_rbound[g1] - d.geom_rbound[g2] < margin
+        if near:
+            near = _boxes_overlap(d, s, e, g1, g2, margin)
+    return near
+
+
+@ti.func
+def _box_of(d: ti.template(), s, e, g):
+    """(centre (3,) m, rotation (3×3, columns the axes), half extents (3,) m) of geom g's bounding
+    box in frame s of env e."""
+    rot = d.geom_xmat[s, e, g]
+    return d.geom_xpos[s, e, g] + mat_vec(rot, d.geom_aabb_center[g]), rot, d.geom_aabb_half[g]
+
+
+@ti.func
+def _box_radius(rot, half, axis):
+    """Half the extent (m) of a box (rotation rot, half extents half) along the unit axis (3,)."""
+    return (ti.abs(half[0] * column(rot, 0).dot(axis)) + ti.abs(half[1] * column(rot, 1).dot(axis))
+            + ti.abs(half[2] * column(rot, 2).dot(axis)))
+
+
+@ti.func
+def _boxes_overlap(d: ti.template(), s, e, g1, g2, margin):
+    """Whether the bounding boxes of geoms g1 and g2, grown by margin, overlap along each of the
+    six face normals (separating-axis test on those axes, as MuJoCo's mj_collideOBB)."""
+    centre1, rot1, half1 = _box_of(d, s, e, g1)
+    centre2, rot2, half2 = _box_of(d, s, e, g2)
+    offset = centre2 - centre1
+    overlap = True
+    for k in ti.static(range(3)):
+        for axis in ti.static((column(rot1, k), column(rot2, k))):
+            reach = _box_radius(rot1, half1, axis) + _box_radius(rot2, half2, axis) + margin
+            if reach < ti.abs(offset.dot(axis)):
+                overlap = False
+    return overlap
 
 
 @ti.func
