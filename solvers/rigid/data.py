@@ -345,10 +345,12 @@ class Region:
 
 class RigidView:
     """Kernel-scope view of one scene's arenas: sizes (``n_links``...) as local variables and
-    every array of MODEL, INPUTS, FRAMES and GRAD_ONLY as an :class:`ArrayView`."""
+    every array of MODEL, INPUTS, FRAMES and GRAD_ONLY as an :class:`ArrayView`. ``cone``: the
+    friction cone as a compile-time value (True: elliptic), for the kernels of the constraint
+    solve and its reverse, which then leave the other cone's code out; None: read at run time."""
     _data_oriented = True
 
-    def __init__(self, ints, f1, v3, v4, m3):
+    def __init__(self, ints, f1, v3, v4, m3, cone=None):
         arenas = dict(zip(ARENAS, (ints, f1, v3, v4, m3)))
         size = {name: impl.expr_init(_subscript(ints, k)) for name, k in HEADER.items()}
         # each start held in a local: spelled out at every access instead, the IR grew so much that
@@ -359,7 +361,8 @@ class RigidView:
         self.limits_enabled = size["limits"]
         self.n_geoms, self.n_candidates = size["G"], size["N"]
         self.contact_capacity = size["C"]
-        self.elliptic, self.iterations, self.ls_iterations = size["cone"], size["iterations"], size["ls_iterations"]
+        self.elliptic = size["cone"] if cone is None else bool(cone)
+        self.iterations, self.ls_iterations = size["iterations"], size["ls_iterations"]
         self.converged = size["converged"]
         self.nonfinite = ArrayView(ints, HEADER["nonfinite"], (1,))  # set by the NaN check
         self.overflow = ArrayView(ints, HEADER["overflow"], (1,))  # set when contacts exceed their slots
@@ -408,9 +411,10 @@ def n_batch(ints: ti.template()):
     return ints[0]
 
 
-def bind(ints, f1, v3, v4, m3):
-    """Called inside a kernel (in the env loop): the :class:`RigidView` of the arenas."""
-    return RigidView(ints, f1, v3, v4, m3)
+def bind(ints, f1, v3, v4, m3, cone=None):
+    """Called inside a kernel (in the env loop): the :class:`RigidView` of the arenas (cone: see
+    RigidView)."""
+    return RigidView(ints, f1, v3, v4, m3, cone)
 
 
 # bind runs as Python while Taichi builds a kernel, on purpose: it only creates the view

@@ -245,11 +245,12 @@ def converge(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s:
 
 
 @ti.kernel
-def constrain(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, flagged_only: ti.i32):
-    """Frame s's constraint rows and solve."""
-    ti.loop_config(serialize=schedule[0])
+def constrain(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, flagged_only: ti.i32):
+    """Frame s's constraint rows and solve; config = (schedule, elliptic): the cone is compiled in,
+    so a scene loads only its own cone's code (the elliptic cone's is a third of the kernel)."""
+    ti.loop_config(serialize=config[0][0])
     for e in range(n_batch(ints)):
-        d = bind(ints, f1, v3, v4, m3)
+        d = bind(ints, f1, v3, v4, m3, cone=config[1])
         if not _skipped(d, e, flagged_only):
             constraint_env(d, s, e)
 
@@ -284,10 +285,11 @@ def prepare_reverse(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3:
 @ti.kernel
 def reverse_dynamics(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32):
     """Adjoints of substep s from the integration back to the subtree sums; config = (schedule,
-    rows), rows: the step had a constraint stage."""
+    rows, elliptic), rows: the step had a constraint stage; elliptic: its cone (compiled in, as
+    constrain's; False without rows)."""
     ti.loop_config(serialize=config[0][0])
     for e in range(n_batch(ints)):
-        dynamics_adjoint_env(bind(ints, f1, v3, v4, m3), s, e, config[1])
+        dynamics_adjoint_env(bind(ints, f1, v3, v4, m3, cone=config[2]), s, e, config[1])
 
 
 @ti.kernel

@@ -121,7 +121,10 @@ def _contact_adjoint(d: ti.template(), s, e, c):
             w[j] += d.efc_J[s, e, first + j, i] * d.solver_Mgrad[s, e, i]
         force[j] = d.efc_force[s, e, first + j]
     g_aref, g_R, g_mu = ti.Vector.zero(float, 4), ti.Vector.zero(float, 4), ti.Vector.zero(float, 4)
-    if d.efc_state[s, e, first] == CONE:
+    in_cone = False
+    if ti.static(d.elliptic):  # (a pyramidal solve has no cone state: its kernels leave this out)
+        in_cone = d.efc_state[s, e, first] == CONE
+    if in_cone:
         g_aref, g_R, g_mu = _cone_adjoint(d, s, e, first, w)
     else:
         for j in range(n):

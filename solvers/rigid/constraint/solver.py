@@ -334,7 +334,7 @@ def _update_constraints(d: ti.template(), s, e, m):
                 else:
                     cost += 0.5 * D * jar * jar
                     d.efc_force[s, e, r], d.efc_state[s, e, r] = -D * jar, QUADRATIC
-            else:
+            elif ti.static(d.elliptic):  # (an elliptic block's first row; a pyramidal solve has none)
                 cost += _update_cone(d, s, e, r)
             state = d.efc_state[s, e, r]
             if state != previous or state == CONE:
@@ -418,8 +418,9 @@ def _factor_hessian(d: ti.template(), s, e, n, m):
         r = d.solver_rows[s, e, q]
         if d.efc_state[s, e, r] == QUADRATIC:
             _add_outer(d, s, e, r, r, 1.0 / d.efc_R[s, e, r])
-        if d.efc_type[s, e, r] == ELLIPTIC_FIRST and d.efc_state[s, e, r] == CONE:
-            _add_cone_hessian(d, s, e, r)
+        if ti.static(d.elliptic):
+            if d.efc_type[s, e, r] == ELLIPTIC_FIRST and d.efc_state[s, e, r] == CONE:
+                _add_cone_hessian(d, s, e, r)
     _envelope(d, s, e, n)
     _cholesky(d, s, e, n)
 
@@ -608,7 +609,7 @@ def _eval(d: ti.template(), s, e, m, alpha, gauss1, gauss2):
                     quad += ti.Vector([q0 - cost0, jv * DJ, 0.5 * (jv * D * jv)])
                 else:
                     cost -= cost0
-            else:
+            elif ti.static(d.elliptic):  # (an elliptic block's first row)
                 c, c1, c2 = _eval_cone(d, s, e, r, alpha)
                 cost += c
                 d0 += c1
