@@ -535,8 +535,8 @@ def read_contacts(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M
                 dst[e, c, 8] = d.con_dist[s, e, c]
 
 
-#: what solver.py launches (through solvers.launch, with the scene's arenas; reverse_dynamics and
-#: collide with a config of their own, constrain with the solve's schedule)
+#: what solver.py launches (through solvers.launch, with the scene's arenas; reverse_dynamics,
+#: collide and constrain with a config of their own: constrain's is the solve's schedule and the cone)
 KERNELS = (advance, prepare_reverse, reverse_kinematics, down_sweep, down_sweep_adjoint,
            position_stages, write_state, read_state, write_inputs, read_links, read_mass_matrix, read_dofs_force,
            read_com_jacobians, read_contacts, smooth_substep, finish_substep)

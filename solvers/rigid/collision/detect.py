@@ -40,11 +40,12 @@ def geom_poses(d: ti.template(), s, e):
 @ti.func
 def _may_touch(d: ti.template(), s, e, pair):
     """Broad phase: False when the pair's bounding volumes are further apart than its margin, so
-    that its collider cannot find a contact: the bounding spheres (a plane and a sphere), then, as
-    MuJoCo's midphase (mj_collideOBB), the bounding boxes (geom_aabb_*) on the six axes of their
-    faces (a plane and a box: the box's lowest point), apart only beyond the margin, as
-    MuJoCo's test. Both are conservative: a pair they keep apart has no contact, so they change
-    which colliders run, never a contact."""
+    that its collider cannot find a contact: the bounding spheres (a plane and a sphere), then the
+    bounding boxes (geom_aabb_*) on the six axes of their faces, apart only beyond the margin, as
+    MuJoCo's mj_collideOBB (which MuJoCo runs between bodies of several geoms); a plane tests the
+    box's lowest point. The box tests add a slack to the margin (_box_slack: above their round-off
+    and above box–box's own tolerance, which keeps contacts a hair apart), so they change which
+    colliders run, never a contact."""
     g1, g2 = d.pair_geom1[pair], d.pair_geom2[pair]
     p1, p2 = d.geom_xpos[s, e, g1], d.geom_xpos[s, e, g2]
     margin = d.pair_margin[pair]
@@ -54,12 +55,23 @@ def _may_touch(d: ti.template(), s, e, pair):
         near = normal.dot(p2 - p1) - d.geom_rbound[g2] < margin
         if near:
             centre2, rot2, half2 = _box_of(d, s, e, g2)
-            near = normal.dot(centre2 - p1) - _box_radius(rot2, half2, normal) <= margin
+            slack = _box_slack(half2.sum() + (centre2 - p1).norm())
+            near = normal.dot(centre2 - p1) - _box_radius(rot2, half2, normal) <= margin + slack
     else:
         near = (p2 - p1).norm() - d.geom_rbound[g1] - d.geom_rbound[g2] < margin
         if near:
             near = _boxes_overlap(d, s, e, g1, g2, margin)
     return near
+
+
+@ti.func
+def _box_slack(scale):
+    """Distance (m) the box tests add to the margin for boxes of summed sizes and offsets ``scale``
+    (m): above their round-off and above box–box's separation tolerance (box._box_box_eps: 1e-6 and
+    1e-13 of the summed sizes in float32 and float64), so that no contact a collider would keep is
+    lost; ~1e-6 m in float32."""
+    relative = ti.static(1e-5 if impl.get_runtime().default_fp == ti.f32 else 1e-12)
+    return relative * scale
 
 
 @ti.func
@@ -84,10 +96,11 @@ def _boxes_overlap(d: ti.template(), s, e, g1, g2, margin):
     centre1, rot1, half1 = _box_of(d, s, e, g1)
     centre2, rot2, half2 = _box_of(d, s, e, g2)
     offset = centre2 - centre1
+    reach_beyond = margin + _box_slack(half1.sum() + half2.sum() + offset.norm())
     overlap = True
     for k in ti.static(range(3)):
         for axis in ti.static((column(rot1, k), column(rot2, k))):
-            reach = _box_radius(rot1, half1, axis) + _box_radius(rot2, half2, axis) + margin
+            reach = _box_radius(rot1, half1, axis) + _box_radius(rot2, half2, axis) + reach_beyond
             if reach < ti.abs(offset.dot(axis)):
                 overlap = False
     return overlap
