@@ -12,26 +12,38 @@ per particle (Σ w_i v_i = v').
 """
 import taichi as ti
 
-from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, row_matrix, row_vector, scatter_half,
-                      scatter_spread, stencil_row, store_matrix, store_vector, transposed_times, weight_grads, weights)
+from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, node_count, node_at, node_vector, row_matrix,
+                      row_vector, scatter_half, scatter_spread, stencil_row, store_matrix, store_vector,
+                      transposed_times, weight_grads, weights)
 
 
 @ti.func
 def gather_velocity(grid: ti.template(), e, base, fx, inv_dx, grid_i: ti.template()):
-    """(v' (3,) m/s, C' (3×3) 1/s) gathered from env e's updated grid around a particle."""
-    W, O = weights(fx), axis_offsets(fx)
+    """(v' (3,) m/s, C' (3×3) 1/s) gathered from env e's updated grid (flat, node_count) around a
+    particle. The weights and offsets factor per axis (w = W[i, 0] W[j, 1] W[k, 2], offset − fx =
+    (O[i, 0], O[j, 1], O[k, 2])), so the sums run axis by axis, innermost z: per node two 3-vector
+    multiply-adds where a weight and an outer product per node took five."""
+    W, O, K = weights(fx), axis_offsets(fx), node_count(grid_i)
     vel = ti.Vector.zero(float, 3)
-    C = ti.Matrix.zero(float, 3, 3)
+    C_x, C_y, C_z = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)
     for i in range(3):
+        # Σ over j, k of W[j, 1] W[k, 2] v, and of that times O[j, 1], and times O[k, 2]
+        plane, plane_y, plane_z = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)
         for j in range(3):
-            row = stencil_row(grid_i, base, i, j)
-            w_ij = W[i, 0] * W[j, 1]
+            row_at = node_at(e, stencil_row(grid_i, base, i, j), K)
+            line, line_z = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)
             for k in range(3):
-                n = row + k
-                wv = (w_ij * W[k, 2]) * ti.Vector([grid[e, n, 0], grid[e, n, 1], grid[e, n, 2]])
-                vel += wv
-                C += wv.outer_product(ti.Vector([O[i, 0], O[j, 1], O[k, 2]]))
-    return vel, (4.0 * inv_dx) * C
+                v = node_vector(grid, row_at + 4 * k)
+                line += W[k, 2] * v
+                line_z += (W[k, 2] * O[k, 2]) * v
+            plane += W[j, 1] * line
+            plane_y += (W[j, 1] * O[j, 1]) * line
+            plane_z += W[j, 1] * line_z
+        vel += W[i, 0] * plane
+        C_x += (W[i, 0] * O[i, 0]) * plane
+        C_y += W[i, 0] * plane_y
+        C_z += W[i, 0] * plane_z
+    return vel, (4.0 * inv_dx) * ti.Matrix.cols([C_x, C_y, C_z])
 
 
 @ti.func
@@ -103,12 +115,13 @@ def gather_adjoint_stage(frames: ti.template(), grid: ti.template(), gathered: t
             gather_adjoint_range(frames, grid, gathered, grads, scratch, grad_grid, grid_f, grid_i, src, e, first, end)
         elif working:
             gather_adjoint_range(frames, grid, gathered, grads, scratch, part_grid, grid_f, grid_i, src, e, first, end)
+    K = node_count(grid_i)
     for e, k in ti.ndrange(B, active[B, 0]):
         if k < active[e, 0]:
-            n = active[e, k + 1]
+            at = node_at(e, active[e, k + 1], K)
             for c in ti.static(range(3)):
-                grad_grid[e, n, c] = grad_grid[e, n, c] + part_grid[e, n, c]
-                part_grid[e, n, c] = 0.0
+                grad_grid[at + c] = grad_grid[at + c] + part_grid[at + c]
+                part_grid[at + c] = 0.0
 
 
 @ti.func
@@ -117,7 +130,7 @@ def gather_adjoint_range(frames: ti.template(), grid: ti.template(), gathered: t
                          grid_i: ti.template(), src, e, first, end):
     """g2p's reverse for env e's particles first..end − 1, serially in particle order: their nodes'
     velocity gradients (grad_grid 0:3) += w_i u_i, and their rows of scratch."""
-    h, inv_dx = grid_f[0], grid_f[1]
+    h, inv_dx, K = grid_f[0], grid_f[1], node_count(grid_i)
     for p in range(first, end):
         pos = row_vector(frames, src, e, p, 0)
         base, fx = cell_of(pos, inv_dx, grid_i)
@@ -140,18 +153,18 @@ def gather_adjoint_range(frames: ti.template(), grid: ti.template(), gathered: t
         U_x, U_y, U_z = node_gradient_rows(g_C, O, inv_dx)
         for i in range(3):
             for j in range(3):
-                row = stencil_row(grid_i, base, i, j)
+                row_at = node_at(e, stencil_row(grid_i, base, i, j), K)
                 w_ij, dw_x, dw_y = W[i, 0] * W[j, 1], dW[i, 0] * W[j, 1], W[i, 0] * dW[j, 1]
                 u_ij = g_vel + matrix_row(U_x, i) + matrix_row(U_y, j)
                 for k in range(3):
-                    n = row + k
+                    at = row_at + 4 * k
                     dw = ti.Vector([dw_x * W[k, 2], dw_y * W[k, 2], w_ij * dW[k, 2]])
-                    v = ti.Vector([grid[e, n, 0], grid[e, n, 1], grid[e, n, 2]])
+                    v = node_vector(grid, at)
                     u = u_ij + matrix_row(U_z, k)
                     g_fx += v.dot(u) * dw
                     g_v = (w_ij * W[k, 2]) * u
                     for c in ti.static(range(3)):
-                        grad_grid[e, n, c] = grad_grid[e, n, c] + g_v[c]
+                        grad_grid[at + c] = grad_grid[at + c] + g_v[c]
         g_pos = g_moved + inv_dx * g_fx
         for c in ti.static(range(3)):
             scratch[e, p, c] = g_vel[c]

@@ -8,22 +8,27 @@ the reverse needs: ``restore_stage`` puts it back.
 """
 import taichi as ti
 
+from .stencil import node_count, node_at, node_vector
+
 
 @ti.func
-def merge_stage(grid: ti.template(), active: ti.template(), part_grid: ti.template(), part_nodes: ti.template()):
+def merge_stage(grid: ti.template(), active: ti.template(), part_grid: ti.template(), part_nodes: ti.template(),
+                grid_i: ti.template()):
     """The second half's scatter (part_grid, its nodes in part_nodes) added into the grid, serially
     per env in part_nodes' order; its nodes the first half did not reach are listed in active; the
     part_grid nodes are zeroed for the next substep."""
+    K = node_count(grid_i)
     for e in range(active.shape[0] - 1):
         count = active[e, 0]
         for k in range(part_nodes[e, 0]):
             n = part_nodes[e, k + 1]
-            if grid[e, n, 3] == 0.0:
+            at = node_at(e, n, K)
+            if grid[at + 3] == 0.0:
                 count += 1
                 active[e, count] = n
             for c in ti.static(range(4)):
-                grid[e, n, c] = grid[e, n, c] + part_grid[e, n, c]
-                part_grid[e, n, c] = 0.0
+                grid[at + c] = grid[at + c] + part_grid[at + c]
+                part_grid[at + c] = 0.0
         active[e, 0] = count
 
 
@@ -46,21 +51,22 @@ def grid_stage(grid: ti.template(), active: ti.template(), gravity: ti.template(
     and the lists into slot ``keep`` of saved_grid / saved_nodes, as far as their capacity goes
     (the counts are kept whole: the solver grows the capacity and replays again when one
     exceeds it)."""
-    h, dx = grid_f[0], 1.0 / grid_f[1]
+    h, dx, K = grid_f[0], 1.0 / grid_f[1], node_count(grid_i)
     B = active.shape[0] - 1
     for e, k in ti.ndrange(B, active[B, 0]):
         if k < active[e, 0]:
             n = active[e, k + 1]
-            v = ti.Vector([grid[e, n, 0], grid[e, n, 1], grid[e, n, 2]]) / grid[e, n, 3]
+            at = node_at(e, n, K)
+            v = node_vector(grid, at) / grid[at + 3]
             v += h * ti.Vector([gravity[e, 0], gravity[e, 1], gravity[e, 2]])
             v = wall_velocity(node_position(n, dx, grid_i), v, grid_f, grid_i[6])
             for c in ti.static(range(3)):
-                grid[e, n, c] = v[c]
+                grid[at + c] = v[c]
             if keep >= 0 and k < saved_grid.shape[2]:
                 saved_nodes[keep, e, k + 1] = n
                 for c in ti.static(range(3)):
                     saved_grid[keep, e, k, c] = v[c]
-                saved_grid[keep, e, k, 3] = grid[e, n, 3]
+                saved_grid[keep, e, k, 3] = grid[at + 3]
     if keep >= 0:
         for e in range(B + 1):
             saved_nodes[keep, e, 0] = active[e, 0]
@@ -68,16 +74,17 @@ def grid_stage(grid: ti.template(), active: ti.template(), gravity: ti.template(
 
 @ti.func
 def restore_stage(grid: ti.template(), active: ti.template(), saved_grid: ti.template(), saved_nodes: ti.template(),
-                  s):
+                  grid_i: ti.template(), s):
     """The updated grid of substep s and its node lists (``active``), as the replay kept them
     (grid_stage), back in place of the zeros between substeps."""
-    B = active.shape[0] - 1
+    B, K = active.shape[0] - 1, node_count(grid_i)
     for e, k in ti.ndrange(B, saved_nodes[s, B, 0]):
         if k < saved_nodes[s, e, 0]:
             n = saved_nodes[s, e, k + 1]
             active[e, k + 1] = n
+            at = node_at(e, n, K)
             for c in ti.static(range(4)):
-                grid[e, n, c] = saved_grid[s, e, k, c]
+                grid[at + c] = saved_grid[s, e, k, c]
     for e in range(B + 1):
         active[e, 0] = saved_nodes[s, e, 0]
 
@@ -105,14 +112,14 @@ def wall_velocity(pos, v, grid_f: ti.template(), sticky):
 
 
 @ti.func
-def clear_stage(grid: ti.template(), active: ti.template()):
+def clear_stage(grid: ti.template(), active: ti.template(), grid_i: ti.template()):
     """Zero the nodes this substep touched, and the counts."""
-    B = active.shape[0] - 1
+    B, K = active.shape[0] - 1, node_count(grid_i)
     for e, k in ti.ndrange(B, active[B, 0]):
         if k < active[e, 0]:
-            n = active[e, k + 1]
+            at = node_at(e, active[e, k + 1], K)
             for c in ti.static(range(4)):
-                grid[e, n, c] = 0.0
+                grid[at + c] = 0.0
     for e in range(B + 1):
         active[e, 0] = 0
 
@@ -139,48 +146,47 @@ def grid_adjoint_stage(grid: ti.template(), grad_grid: ti.template(), active: ti
     """Reverse of the update, per listed node (parallel): grad_grid's velocity gradient (0:3) →
     (∂L/∂P (0:3), ∂L/∂M (3)); the grid's velocity is replaced by mask ⊙ ∂L/∂v for the gravity
     sum (gravity_adjoint_stage)."""
-    h, dx = grid_f[0], 1.0 / grid_f[1]
+    h, dx, K = grid_f[0], 1.0 / grid_f[1], node_count(grid_i)
     B = active.shape[0] - 1
     for e, k in ti.ndrange(B, active[B, 0]):
         if k < active[e, 0]:
             n = active[e, k + 1]
-            v = ti.Vector([grid[e, n, 0], grid[e, n, 1], grid[e, n, 2]])
-            mass = grid[e, n, 3]
-            g_v = wall_mask(node_position(n, dx, grid_i), v, grid_f, grid_i[6]) * ti.Vector(
-                [grad_grid[e, n, 0], grad_grid[e, n, 1], grad_grid[e, n, 2]])
+            at = node_at(e, n, K)
+            v = node_vector(grid, at)
+            mass = grid[at + 3]
+            g_v = wall_mask(node_position(n, dx, grid_i), v, grid_f, grid_i[6]) * node_vector(grad_grid, at)
             # where the mask passes, v = P / M + h g: P / M = v − h g
             velocity = v - h * ti.Vector([gravity[e, 0], gravity[e, 1], gravity[e, 2]])
             for c in ti.static(range(3)):
-                grad_grid[e, n, c] = g_v[c] / mass
-                grid[e, n, c] = g_v[c]
-            grad_grid[e, n, 3] = -g_v.dot(velocity) / mass
+                grad_grid[at + c] = g_v[c] / mass
+                grid[at + c] = g_v[c]
+            grad_grid[at + 3] = -g_v.dot(velocity) / mass
 
 
 @ti.func
 def gravity_adjoint_stage(grid: ti.template(), active: ti.template(), grad_gravity: ti.template(),
-                          grid_f: ti.template()):
+                          grid_f: ti.template(), grid_i: ti.template()):
     """grad_gravity (B, 3) += h Σ mask ⊙ ∂L/∂v over env e's listed nodes, serially in list order
     (deterministic), from what grid_adjoint_stage left in the grid."""
-    h = grid_f[0]
+    h, K = grid_f[0], node_count(grid_i)
     B = active.shape[0] - 1
     for e in range(B):
         total = ti.Vector.zero(float, 3)
         for k in range(active[e, 0]):
-            n = active[e, k + 1]
-            total += ti.Vector([grid[e, n, 0], grid[e, n, 1], grid[e, n, 2]])
+            total += node_vector(grid, node_at(e, active[e, k + 1], K))
         for c in ti.static(range(3)):
             grad_gravity[e, c] = grad_gravity[e, c] + h * total[c]
 
 
 @ti.func
-def clear_adjoint_stage(grid: ti.template(), grad_grid: ti.template(), active: ti.template()):
+def clear_adjoint_stage(grid: ti.template(), grad_grid: ti.template(), active: ti.template(), grid_i: ti.template()):
     """Zero the nodes this substep touched, in the restored grid and its gradient, and the counts."""
-    B = active.shape[0] - 1
+    B, K = active.shape[0] - 1, node_count(grid_i)
     for e, k in ti.ndrange(B, active[B, 0]):
         if k < active[e, 0]:
-            n = active[e, k + 1]
+            at = node_at(e, active[e, k + 1], K)
             for c in ti.static(range(4)):
-                grid[e, n, c] = 0.0
-                grad_grid[e, n, c] = 0.0
+                grid[at + c] = 0.0
+                grad_grid[at + c] = 0.0
     for e in range(B + 1):
         active[e, 0] = 0

@@ -15,12 +15,12 @@ nodes, S substeps, cap the saved grid's capacity):
 - ``svd`` (S, B, N, 21): a replay's SVD of each particle's F_tmp, U (9, row-major), σ (3), V (9),
   per substep, for the materials that take one (constitutive.needs_svd; a 1-sized dummy when the
   solver does not differentiate or no material takes one);
-- ``grid`` (B, K, 4): per node momentum (3, kg·m/s) and mass (kg), after the update velocity (m/s)
-  and mass; zero between substeps;
+- ``grid`` (B, K, 4), passed flat (stencil.node_count): per node momentum (3, kg·m/s) and mass
+  (kg), after the update velocity (m/s) and mass; zero between substeps;
 - ``active`` (B + 1, K + 1) int: per env the number of nodes the particles reach, then their
   indices (the grid update and the clearing touch only those); row B holds the largest count;
-- ``part_grid`` (B, K, 4), ``part_nodes`` (B + 1, K + 1) int: the second half of the particles'
-  scatter (p2g's, then in the reverse g2p's) and its node list, added into grid (grad_grid) at
+- ``part_grid`` (B, K, 4, flat), ``part_nodes`` (B + 1, K + 1) int: the second half of the
+  particles' scatter (p2g's, then in the reverse g2p's) and its node list, added into grid (grad_grid) at
   once and zeroed (stencil.scatter_spread);
 - ``grid_f`` (9,): h (s), inv_dx (1/m), vol (m³), walls' lower (3) and upper (3) corners (m);
 - ``grid_i`` (7,): the grid's lowest node in cells (3), nodes per axis (3), sticky walls (0/1);
@@ -39,7 +39,7 @@ The reverse kernels (REVERSE_KERNELS) take five more arrays:
   s + 1 before substep s's reverse, of frame s after it (overwritten in place, row by row);
 - ``grad_params`` (B, N, 4): ∂L/∂(E, nu, rho, actu) per particle, summed over the substeps;
 - ``grad_gravity`` (B, 3): ∂L/∂gravity, summed over the substeps;
-- ``grad_grid`` (B, K, 4): per node ∂L/∂v (3) of the updated velocity, then ∂L/∂P (3), ∂L/∂M;
+- ``grad_grid`` (B, K, 4, flat): per node ∂L/∂v (3) of the updated velocity, then ∂L/∂P (3), ∂L/∂M;
   zero between substeps;
 - ``scratch`` (B, N, 6): per particle ∂L/∂v' of the gathered velocity (3), and ∂L/∂x through g2p (3).
 
@@ -74,11 +74,11 @@ def substep(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts
     """A whole substep from frame src to frame dst, in one launch (no coupling)."""
     stress_stage(frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep)
     scatter_stage(frames, params, affine, grid, active, part_grid, part_nodes, grid_f, grid_i, src, ti.max(keep, 0))
-    merge_stage(grid, active, part_grid, part_nodes)
+    merge_stage(grid, active, part_grid, part_nodes, grid_i)
     largest_count(active)
     grid_stage(grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
     gather_stage(frames, grid, grid_f, grid_i, flags, gathered, src, dst, keep)
-    clear_stage(grid, active)
+    clear_stage(grid, active, grid_i)
 
 
 @ti.kernel
@@ -89,7 +89,7 @@ def pre_coupling(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, c
     """The substep up to the grid update (stress and p2g): the grid holds momentum and mass."""
     stress_stage(frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep)
     scatter_stage(frames, params, affine, grid, active, part_grid, part_nodes, grid_f, grid_i, src, ti.max(keep, 0))
-    merge_stage(grid, active, part_grid, part_nodes)
+    merge_stage(grid, active, part_grid, part_nodes, grid_i)
     largest_count(active)
 
 
@@ -101,7 +101,7 @@ def post_coupling(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, 
     """The rest of the substep: grid update, g2p, grid cleared."""
     grid_stage(grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
     gather_stage(frames, grid, grid_f, grid_i, flags, gathered, src, dst, keep)
-    clear_stage(grid, active)
+    clear_stage(grid, active, grid_i)
 
 
 @ti.kernel
@@ -137,10 +137,10 @@ def post_coupling_backward(_: ti.template(), frames: A, params: A, gravity: A, k
                            scratch: A, src: ti.i32):
     """Substep src's updated grid restored (as the replay kept it), then the reverse of
     post_coupling (g2p and the grid update): grad_grid ← (∂L/∂P, ∂L/∂M), grad_gravity += its part."""
-    restore_stage(grid, active, saved_grid, saved_nodes, src)
+    restore_stage(grid, active, saved_grid, saved_nodes, grid_i, src)
     gather_adjoint_stage(frames, grid, gathered, grads, scratch, grad_grid, part_grid, active, grid_f, grid_i, src)
     grid_adjoint_stage(grid, grad_grid, active, gravity, grid_f, grid_i)
-    gravity_adjoint_stage(grid, active, grad_gravity, grid_f)
+    gravity_adjoint_stage(grid, active, grad_gravity, grid_f, grid_i)
 
 
 @ti.kernel
@@ -153,7 +153,7 @@ def pre_coupling_backward(_: ti.template(), frames: A, params: A, gravity: A, ki
     grad_params += their part; the touched nodes cleared."""
     p2g_adjoint_stage(frames, params, kinds, consts, fiber, affine, svd, grads, grad_params, grad_grid, scratch,
                       grid_f, grid_i, src)
-    clear_adjoint_stage(grid, grad_grid, active)
+    clear_adjoint_stage(grid, grad_grid, active, grid_i)
 
 
 REVERSE_KERNELS = (post_coupling_backward, pre_coupling_backward)

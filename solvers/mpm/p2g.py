@@ -13,8 +13,9 @@ are taken once per particle; the per-node products of A with the offsets come fr
 import taichi as ti
 
 from .constitutive import constitutive_adjoint_decomposed, constitutive_decomposed, decompose, needs_svd
-from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, row_matrix, row_vector, scatter_half,
-                      scatter_spread, stencil_row, store_matrix, store_vector, transposed_times, weight_grads, weights)
+from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, node_count, node_at, node_vector, row_matrix,
+                      row_vector, scatter_half, scatter_spread, stencil_row, store_matrix, store_vector,
+                      transposed_times, weight_grads, weights)
 
 
 @ti.func
@@ -67,9 +68,10 @@ def scatter_stage(frames: ti.template(), params: ti.template(), affine: ti.templ
 @ti.func
 def scatter_range(frames: ti.template(), params: ti.template(), affine: ti.template(), grid: ti.template(),
                   nodes: ti.template(), grid_f: ti.template(), grid_i: ti.template(), src, slot, e, first, end):
-    """Env e's particles first..end − 1 scattered into ``grid`` (B, K, 4: momentum, mass), serially
-    in particle order; ``nodes`` (B + 1, K + 1) lists each node on first touch (count, then nodes)."""
-    inv_dx, vol = grid_f[1], grid_f[2]
+    """Env e's particles first..end − 1 scattered into ``grid`` (flat B · K · 4: momentum, mass),
+    serially in particle order; ``nodes`` (B + 1, K + 1) lists each node on first touch (count, then
+    nodes)."""
+    inv_dx, vol, K = grid_f[1], grid_f[2], node_count(grid_i)
     count = 0
     for p in range(first, end):
         base, fx = cell_of(row_vector(frames, src, e, p, 0), inv_dx, grid_i)
@@ -83,19 +85,20 @@ def scatter_range(frames: ti.template(), params: ti.template(), affine: ti.templ
         for i in range(3):
             for j in range(3):
                 row = stencil_row(grid_i, base, i, j)
+                row_at = node_at(e, row, K)
                 w_ij = W[i, 0] * W[j, 1]
                 aff_ij = matrix_row(A_x, i) + matrix_row(A_y, j)
                 for k in range(3):
-                    n = row + k
+                    at = row_at + 4 * k
                     w = w_ij * W[k, 2]
                     contribution = w * (momentum + (aff_ij + matrix_row(A_z, k)))
-                    old_mass = grid[e, n, 3]
+                    old_mass = grid[at + 3]
                     for c in ti.static(range(3)):
-                        grid[e, n, c] = grid[e, n, c] + contribution[c]
-                    grid[e, n, 3] = old_mass + w * mass
+                        grid[at + c] = grid[at + c] + contribution[c]
+                    grid[at + 3] = old_mass + w * mass
                     if old_mass == 0.0 and w * mass > 0.0:
                         count += 1
-                        nodes[e, count] = n
+                        nodes[e, count] = row + k
     nodes[e, 0] = count
 
 
@@ -118,7 +121,7 @@ def p2g_adjoint_stage(frames: ti.template(), params: ti.template(), kinds: ti.te
     (grads) and g2p's partial position gradient (scratch 3:6) into the gradient of frame src's
     whole row (written over grads' row), and add the parameters' gradients (grad_params: E, nu,
     rho, actu) per particle. The affine matrices and SVD(F_tmp) are the replay's (slot src)."""
-    h, inv_dx, vol = grid_f[0], grid_f[1], grid_f[2]
+    h, inv_dx, vol, K = grid_f[0], grid_f[1], grid_f[2], node_count(grid_i)
     for e, p in ti.ndrange(frames.shape[1], frames.shape[2]):
         pos, vel = row_vector(frames, src, e, p, 0), row_vector(frames, src, e, p, 3)
         base, fx = cell_of(pos, inv_dx, grid_i)
@@ -136,15 +139,15 @@ def p2g_adjoint_stage(frames: ti.template(), params: ti.template(), kinds: ti.te
         A_x, A_y, A_z = column_terms(aff, D, 0), column_terms(aff, D, 1), column_terms(aff, D, 2)
         for i in range(3):
             for j in range(3):
-                row = stencil_row(grid_i, base, i, j)
+                row_at = node_at(e, stencil_row(grid_i, base, i, j), K)
                 w_ij, dw_x, dw_y = W[i, 0] * W[j, 1], dW[i, 0] * W[j, 1], W[i, 0] * dW[j, 1]
                 aff_ij = matrix_row(A_x, i) + matrix_row(A_y, j)
                 for k in range(3):
-                    n = row + k
+                    at = row_at + 4 * k
                     w = w_ij * W[k, 2]
                     dw = ti.Vector([dw_x * W[k, 2], dw_y * W[k, 2], w_ij * dW[k, 2]])
-                    g_P = ti.Vector([grad_grid[e, n, 0], grad_grid[e, n, 1], grad_grid[e, n, 2]])
-                    g_M = grad_grid[e, n, 3]
+                    g_P = node_vector(grad_grid, at)
+                    g_M = grad_grid[at + 3]
                     weighted = w * g_P
                     g_momentum += weighted
                     g_aff += weighted.outer_product(ti.Vector([D[i, 0], D[j, 1], D[k, 2]]))

@@ -147,7 +147,8 @@ class MPMSolver(MPMAdjoint, Solver):
     def _arrays(self):
         """The forward kernels' arrays, in their order."""
         return [self.frames, self.params, self.gravity_in, self.kinds, self.consts, self.fiber, self.affine,
-                self.svd, self.grid, self.active, self.part_grid, self.part_nodes, self.grid_f, self.grid_i, self.flags,
+                self.svd, self.grid.view(-1), self.active, self.part_grid.view(-1), self.part_nodes, self.grid_f,
+                self.grid_i, self.flags,
                 self.gathered, self.saved_grid, self.saved_nodes]
 
     def _bind(self):
