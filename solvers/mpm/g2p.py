@@ -12,8 +12,9 @@ per particle (Σ w_i v_i = v').
 """
 import taichi as ti
 
-from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, node_count, node_at, node_vector, row_matrix,
-                      row_vector, scatter_half, scatter_spread, stencil_row, store_matrix, store_vector,
+from .layout import WIDTH
+from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, node_at, node_count, node_vector, row_at,
+                      row_matrix, row_vector, scatter_half, scatter_spread, stencil_row, store_matrix, store_vector,
                       transposed_times, weight_grads, weights)
 
 
@@ -30,10 +31,10 @@ def gather_velocity(grid: ti.template(), e, base, fx, inv_dx, grid_i: ti.templat
         # Σ over j, k of W[j, 1] W[k, 2] v, and of that times O[j, 1], and times O[k, 2]
         plane, plane_y, plane_z = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)
         for j in range(3):
-            row_at = node_at(e, stencil_row(grid_i, base, i, j), K)
+            line_at = node_at(e, stencil_row(grid_i, base, i, j), K)
             line, line_z = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)
             for k in range(3):
-                v = node_vector(grid, row_at + 4 * k)
+                v = node_vector(grid, line_at + 4 * k)
                 line += W[k, 2] * v
                 line_z += (W[k, 2] * O[k, 2]) * v
             plane += W[j, 1] * line
@@ -47,13 +48,14 @@ def gather_velocity(grid: ti.template(), e, base, fx, inv_dx, grid_i: ti.templat
 
 
 @ti.func
-def gather_stage(frames: ti.template(), grid: ti.template(), grid_f: ti.template(), grid_i: ti.template(),
-                 flags: ti.template(), gathered: ti.template(), src, dst, keep):
+def gather_stage(frames: ti.template(), params: ti.template(), grid: ti.template(), grid_f: ti.template(),
+                 grid_i: ti.template(), flags: ti.template(), gathered: ti.template(), src, dst, keep):
     """g2p: new velocity, affine field C and position; particles kept inside the walls. When
     keep ≥ 0 (a replay), the gathered velocity (before the walls) → gathered's slot ``keep``."""
     h, inv_dx = grid_f[0], grid_f[1]
-    for e, p in ti.ndrange(frames.shape[1], frames.shape[2]):
-        pos = row_vector(frames, src, e, p, 0)
+    B, N = params.shape[0], params.shape[1]
+    for e, p in ti.ndrange(B, N):
+        pos = row_vector(frames, row_at(src, e, p, B, N, WIDTH))
         base, fx = cell_of(pos, inv_dx, grid_i)
         vel, C = gather_velocity(grid, e, base, fx, inv_dx, grid_i)
         moved = pos + h * vel
@@ -62,10 +64,11 @@ def gather_stage(frames: ti.template(), grid: ti.template(), grid_f: ti.template
                 flags[0] = 1
         pos_new, vel_new = wall_particle(moved, vel, grid_f)
         if keep >= 0:
-            store_vector(gathered, keep, e, p, 0, vel)
-        store_vector(frames, dst, e, p, 0, pos_new)
-        store_vector(frames, dst, e, p, 3, vel_new)
-        store_matrix(frames, dst, e, p, 6, C)
+            store_vector(gathered, row_at(keep, e, p, B, N, 3), vel)
+        dst_at = row_at(dst, e, p, B, N, WIDTH)
+        store_vector(frames, dst_at, pos_new)
+        store_vector(frames, dst_at + 3, vel_new)
+        store_matrix(frames, dst_at + 6, C)
 
 
 @ti.func
@@ -98,9 +101,10 @@ def node_gradient_rows(g_C, O, inv_dx):
 
 
 @ti.func
-def gather_adjoint_stage(frames: ti.template(), grid: ti.template(), gathered: ti.template(), grads: ti.template(),
-                         scratch: ti.template(), grad_grid: ti.template(), part_grid: ti.template(),
-                         active: ti.template(), grid_f: ti.template(), grid_i: ti.template(), src):
+def gather_adjoint_stage(frames: ti.template(), params: ti.template(), grid: ti.template(), gathered: ti.template(),
+                         grads: ti.template(), scratch: ti.template(), grad_grid: ti.template(),
+                         part_grid: ti.template(), active: ti.template(), grid_f: ti.template(),
+                         grid_i: ti.template(), src):
     """Reverse of g2p, from the gradient of frame dst's pos, vel, C (grads' rows), the gathered
     velocity the replay kept (gathered's slot src) and the restored updated grid: each node's
     velocity gradient (grad_grid 0:3, zero before) += w_i u_i (node_gradient_rows); per particle,
@@ -108,13 +112,15 @@ def gather_adjoint_stage(frames: ti.template(), grid: ti.template(), gathered: t
     stencil weights of the gather. Deterministic, on two threads (stencil.scatter_spread): the first
     half of each env's particles scatter into grad_grid, the second into part_grid (0:3), which is
     then added over the listed nodes (active) and zeroed."""
-    B, N = frames.shape[1], frames.shape[2]
+    B, N = params.shape[0], params.shape[1]
     for t in range(2 * B * scatter_spread(B)):
         working, e, second, first, end = scatter_half(t, B, N)
         if working and second == 0:
-            gather_adjoint_range(frames, grid, gathered, grads, scratch, grad_grid, grid_f, grid_i, src, e, first, end)
+            gather_adjoint_range(frames, grid, gathered, grads, scratch, grad_grid, grid_f, grid_i, src, e, first, end,
+                                 B, N)
         elif working:
-            gather_adjoint_range(frames, grid, gathered, grads, scratch, part_grid, grid_f, grid_i, src, e, first, end)
+            gather_adjoint_range(frames, grid, gathered, grads, scratch, part_grid, grid_f, grid_i, src, e, first, end,
+                                 B, N)
     K = node_count(grid_i)
     for e, k in ti.ndrange(B, active[B, 0]):
         if k < active[e, 0]:
@@ -127,17 +133,19 @@ def gather_adjoint_stage(frames: ti.template(), grid: ti.template(), gathered: t
 @ti.func
 def gather_adjoint_range(frames: ti.template(), grid: ti.template(), gathered: ti.template(), grads: ti.template(),
                          scratch: ti.template(), grad_grid: ti.template(), grid_f: ti.template(),
-                         grid_i: ti.template(), src, e, first, end):
-    """g2p's reverse for env e's particles first..end − 1, serially in particle order: their nodes'
-    velocity gradients (grad_grid 0:3) += w_i u_i, and their rows of scratch."""
+                         grid_i: ti.template(), src, e, first, end, B, N):
+    """g2p's reverse for env e's particles first..end − 1 (of B envs of N particles), serially in
+    particle order: their nodes' velocity gradients (grad_grid 0:3) += w_i u_i, and their rows of
+    scratch."""
     h, inv_dx, K = grid_f[0], grid_f[1], node_count(grid_i)
     for p in range(first, end):
-        pos = row_vector(frames, src, e, p, 0)
+        pos = row_vector(frames, row_at(src, e, p, B, N, WIDTH))
         base, fx = cell_of(pos, inv_dx, grid_i)
-        vel = row_vector(gathered, src, e, p, 0)
+        vel = row_vector(gathered, row_at(src, e, p, B, N, 3))
         moved = pos + h * vel
-        g_pos_new, g_vel_new = row_vector(grads, 0, e, p, 0), row_vector(grads, 0, e, p, 3)
-        g_C = row_matrix(grads, 0, e, p, 6)
+        grad_at = row_at(0, e, p, B, N, WIDTH)
+        g_pos_new, g_vel_new = row_vector(grads, grad_at), row_vector(grads, grad_at + 3)
+        g_C = row_matrix(grads, grad_at + 6)
         g_moved = ti.Vector.zero(float, 3)
         g_vel = ti.Vector.zero(float, 3)
         for c in ti.static(range(3)):
@@ -153,11 +161,11 @@ def gather_adjoint_range(frames: ti.template(), grid: ti.template(), gathered: t
         U_x, U_y, U_z = node_gradient_rows(g_C, O, inv_dx)
         for i in range(3):
             for j in range(3):
-                row_at = node_at(e, stencil_row(grid_i, base, i, j), K)
+                line_at = node_at(e, stencil_row(grid_i, base, i, j), K)
                 w_ij, dw_x, dw_y = W[i, 0] * W[j, 1], dW[i, 0] * W[j, 1], W[i, 0] * dW[j, 1]
                 u_ij = g_vel + matrix_row(U_x, i) + matrix_row(U_y, j)
                 for k in range(3):
-                    at = row_at + 4 * k
+                    at = line_at + 4 * k
                     dw = ti.Vector([dw_x * W[k, 2], dw_y * W[k, 2], w_ij * dW[k, 2]])
                     v = node_vector(grid, at)
                     u = u_ij + matrix_row(U_z, k)
@@ -165,7 +173,6 @@ def gather_adjoint_range(frames: ti.template(), grid: ti.template(), gathered: t
                     g_v = (w_ij * W[k, 2]) * u
                     for c in ti.static(range(3)):
                         grad_grid[at + c] = grad_grid[at + c] + g_v[c]
-        g_pos = g_moved + inv_dx * g_fx
-        for c in ti.static(range(3)):
-            scratch[e, p, c] = g_vel[c]
-            scratch[e, p, 3 + c] = g_pos[c]
+        scratch_at = row_at(0, e, p, B, N, 6)
+        store_vector(scratch, scratch_at, g_vel)
+        store_vector(scratch, scratch_at + 3, g_moved + inv_dx * g_fx)

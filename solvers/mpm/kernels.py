@@ -3,16 +3,18 @@ and its reverse.
 
 Every array is a kernel argument (a torch tensor), so each kernel is compiled once per precision
 and serves every scene (solvers/launch.py). The arrays, per scene (B envs, N particles, K grid
-nodes, S substeps, cap the saved grid's capacity):
+nodes, S substeps, cap the saved grid's capacity); those marked "flat" are passed as 1-d views
+and indexed through stencil.row_at (per-particle rows) or stencil.node_at (grid nodes), which
+costs far less than indexing a 3- or 4-d ndarray (B and N are read off ``params``' shape):
 
-- ``frames`` (S + 1 or 2, B, N, 25): particle state rows (layout.STATE), one frame per substep
+- ``frames`` (S + 1 or 2, B, N, 25, flat): particle state rows (layout.STATE), one frame per substep
   boundary (all of them when the step will be differentiated, else two used in turn);
 - ``params`` (B, N, 4): E (Pa), nu, rho (kg/m³), actu per particle; ``gravity`` (B, 3) m/s²;
 - ``kinds`` (N,) int material code, ``consts`` (N, layout.N_CONSTS), ``fiber`` (N, 3) unit muscle
   fibre directions: the model;
-- ``affine`` (S or 1, B, N, 9): each particle's APIC affine momentum matrix, N·s/m²·m, of the
+- ``affine`` (S or 1, B, N, 9, flat): each particle's APIC affine momentum matrix, N·s/m²·m, of the
   substep in progress (slot 0), or in a replay of substep s (slot s, kept for the reverse);
-- ``svd`` (S, B, N, 21): a replay's SVD of each particle's F_tmp, U (9, row-major), σ (3), V (9),
+- ``svd`` (S, B, N, 21, flat): a replay's SVD of each particle's F_tmp, U (9, row-major), σ (3), V (9),
   per substep, for the materials that take one (constitutive.needs_svd; a 1-sized dummy when the
   solver does not differentiate or no material takes one);
 - ``grid`` (B, K, 4), passed flat (stencil.node_count): per node momentum (3, kg·m/s) and mass
@@ -26,7 +28,7 @@ nodes, S substeps, cap the saved grid's capacity):
 - ``grid_i`` (7,): the grid's lowest node in cells (3), nodes per axis (3), sticky walls (0/1);
 - ``flags`` (1,) int: set to 1 when a particle's new state is not finite;
 - what a replay keeps for the reverse, per substep s (1-sized dummies when the solver does not
-  differentiate): ``gathered`` (S, B, N, 3) each particle's gathered velocity (m/s, before the
+  differentiate): ``gathered`` (S, B, N, 3, flat) each particle's gathered velocity (m/s, before the
   walls); ``saved_grid`` (S, B, cap, 4) the updated grid's listed nodes, (v (3) m/s, M kg) in
   list order; ``saved_nodes`` (S, B + 1, cap + 1) int their lists, laid out as ``active`` (the
   counts are whole even where they exceed cap: the solver then grows cap and replays again).
@@ -35,13 +37,13 @@ The forward kernels take, after the arrays, src and dst (frames) and keep: −1 
 in a replay of substep s (which then keeps what the reverse reads; a plain step pays nothing).
 
 The reverse kernels (REVERSE_KERNELS) take five more arrays:
-- ``grads`` (1, B, N, 25): the gradient of the loss w.r.t. a frame's particle rows — of frame
+- ``grads`` (1, B, N, 25, flat): the gradient of the loss w.r.t. a frame's particle rows — of frame
   s + 1 before substep s's reverse, of frame s after it (overwritten in place, row by row);
 - ``grad_params`` (B, N, 4): ∂L/∂(E, nu, rho, actu) per particle, summed over the substeps;
 - ``grad_gravity`` (B, 3): ∂L/∂gravity, summed over the substeps;
 - ``grad_grid`` (B, K, 4, flat): per node ∂L/∂v (3) of the updated velocity, then ∂L/∂P (3), ∂L/∂M;
   zero between substeps;
-- ``scratch`` (B, N, 6): per particle ∂L/∂v' of the gathered velocity (3), and ∂L/∂x through g2p (3).
+- ``scratch`` (B, N, 6, flat): per particle ∂L/∂v' of the gathered velocity (3), and ∂L/∂x through g2p (3).
 
 The reverse of substep s (frames s, s + 1 filled by a replay of the step) restores the substep's
 updated grid as the replay kept it — after the update, so what a coupler does to the grid
@@ -62,7 +64,9 @@ import taichi as ti
 from .g2p import gather_adjoint_stage, gather_stage
 from .grid import (clear_adjoint_stage, clear_stage, grid_adjoint_stage, grid_stage, gravity_adjoint_stage,
                    largest_count, merge_stage, restore_stage)
+from .layout import WIDTH
 from .p2g import p2g_adjoint_stage, scatter_stage, stress_stage
+from .stencil import row_at
 
 A = ti.types.ndarray()
 
@@ -77,7 +81,7 @@ def substep(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts
     merge_stage(grid, active, part_grid, part_nodes, grid_i)
     largest_count(active)
     grid_stage(grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
-    gather_stage(frames, grid, grid_f, grid_i, flags, gathered, src, dst, keep)
+    gather_stage(frames, params, grid, grid_f, grid_i, flags, gathered, src, dst, keep)
     clear_stage(grid, active, grid_i)
 
 
@@ -100,7 +104,7 @@ def post_coupling(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, 
                   src: ti.i32, dst: ti.i32, keep: ti.i32):
     """The rest of the substep: grid update, g2p, grid cleared."""
     grid_stage(grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
-    gather_stage(frames, grid, grid_f, grid_i, flags, gathered, src, dst, keep)
+    gather_stage(frames, params, grid, grid_f, grid_i, flags, gathered, src, dst, keep)
     clear_stage(grid, active, grid_i)
 
 
@@ -110,9 +114,10 @@ def write_state(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, co
                 grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                 f: ti.i32, src: A):
     """Frame f ← src (B, N · 25)."""
-    for e, p in ti.ndrange(frames.shape[1], frames.shape[2]):
-        for k in range(25):
-            frames[f, e, p, k] = src[e, p * 25 + k]
+    B, N = params.shape[0], params.shape[1]
+    for e, p in ti.ndrange(B, N):
+        for k in range(WIDTH):
+            frames[row_at(f, e, p, B, N, WIDTH) + k] = src[e, p * WIDTH + k]
 
 
 @ti.kernel
@@ -121,9 +126,10 @@ def read_state(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, con
                grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                f: ti.i32, dst: A):
     """dst (B, N · 25) ← frame f."""
-    for e, p in ti.ndrange(frames.shape[1], frames.shape[2]):
-        for k in range(25):
-            dst[e, p * 25 + k] = frames[f, e, p, k]
+    B, N = params.shape[0], params.shape[1]
+    for e, p in ti.ndrange(B, N):
+        for k in range(WIDTH):
+            dst[e, p * WIDTH + k] = frames[row_at(f, e, p, B, N, WIDTH) + k]
 
 
 KERNELS = (substep, pre_coupling, post_coupling, write_state, read_state)
@@ -138,7 +144,8 @@ def post_coupling_backward(_: ti.template(), frames: A, params: A, gravity: A, k
     """Substep src's updated grid restored (as the replay kept it), then the reverse of
     post_coupling (g2p and the grid update): grad_grid ← (∂L/∂P, ∂L/∂M), grad_gravity += its part."""
     restore_stage(grid, active, saved_grid, saved_nodes, grid_i, src)
-    gather_adjoint_stage(frames, grid, gathered, grads, scratch, grad_grid, part_grid, active, grid_f, grid_i, src)
+    gather_adjoint_stage(frames, params, grid, gathered, grads, scratch, grad_grid, part_grid, active, grid_f, grid_i,
+                         src)
     grid_adjoint_stage(grid, grad_grid, active, gravity, grid_f, grid_i)
     gravity_adjoint_stage(grid, active, grad_gravity, grid_f, grid_i)
 

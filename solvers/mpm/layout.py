@@ -20,6 +20,8 @@ depends on the kind (solvers/mpm/constitutive.py: encode).
 #: field → (first column, last column + 1) of a particle's state row
 STATE = {"pos": (0, 3), "vel": (3, 6), "C": (6, 15), "F": (15, 24), "Jp": (24, 25)}
 WIDTH = 25
+#: a replay's SVD of F_tmp per particle: U (9, row-major), σ (3), V (9)
+SVD_WIDTH = 21
 
 #: per-particle inputs (B, n_particles), then per-env ones with their width
 PARTICLE_INPUTS = ("E", "nu", "rho", "actu")

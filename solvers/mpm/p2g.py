@@ -13,8 +13,9 @@ are taken once per particle; the per-node products of A with the offsets come fr
 import taichi as ti
 
 from .constitutive import constitutive_adjoint_decomposed, constitutive_decomposed, decompose, needs_svd
-from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, node_count, node_at, node_vector, row_matrix,
-                      row_vector, scatter_half, scatter_spread, stencil_row, store_matrix, store_vector,
+from .layout import SVD_WIDTH, WIDTH
+from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, node_at, node_count, node_vector, row_at,
+                      row_matrix, row_vector, scatter_half, scatter_spread, stencil_row, store_matrix, store_vector,
                       transposed_times, weight_grads, weights)
 
 
@@ -27,25 +28,27 @@ def stress_stage(frames: ti.template(), params: ti.template(), kinds: ti.templat
     matrix in slot s, and SVD(F_tmp) in svd's slot s for the materials that take one."""
     h, vol, inv_dx = grid_f[0], grid_f[2], grid_f[1]
     slot = ti.max(keep, 0)
-    for e, p in ti.ndrange(frames.shape[1], frames.shape[2]):
-        C = row_matrix(frames, src, e, p, 6)
-        F_tmp = (ti.Matrix.identity(float, 3) + h * C) @ row_matrix(frames, src, e, p, 15)
+    B, N = params.shape[0], params.shape[1]
+    for e, p in ti.ndrange(B, N):
+        src_at, dst_at = row_at(src, e, p, B, N, WIDTH), row_at(dst, e, p, B, N, WIDTH)
+        C = row_matrix(frames, src_at + 6)
+        F_tmp = (ti.Matrix.identity(float, 3) + h * C) @ row_matrix(frames, src_at + 15)
         kind = kinds[p]
         c = ti.Vector([consts[p, 0], consts[p, 1], consts[p, 2], consts[p, 3]])
         d = ti.Vector([fiber[p, 0], fiber[p, 1], fiber[p, 2]])
         J, U, sig, V = decompose(kind, c, F_tmp)
         if keep >= 0 and needs_svd(kind, c):
-            store_matrix(svd, keep, e, p, 0, U)
-            store_vector(svd, keep, e, p, 9, sig)
-            store_matrix(svd, keep, e, p, 12, V)
+            svd_at = row_at(keep, e, p, B, N, SVD_WIDTH)
+            store_matrix(svd, svd_at, U)
+            store_vector(svd, svd_at + 9, sig)
+            store_matrix(svd, svd_at + 12, V)
         F_new, Jp_new, tau = constitutive_decomposed(kind, c, params[e, p, 0], params[e, p, 1], params[e, p, 3], d,
-                                                     F_tmp, frames[src, e, p, 24], J, U, sig, V)
-        store_matrix(frames, dst, e, p, 15, F_new)
-        frames[dst, e, p, 24] = Jp_new
+                                                     F_tmp, frames[src_at + 24], J, U, sig, V)
+        store_matrix(frames, dst_at + 15, F_new)
+        frames[dst_at + 24] = Jp_new
         mass = params[e, p, 2] * vol
         aff = (-h * vol * 4.0 * inv_dx * inv_dx) * tau + mass * C
-        for k in ti.static(range(9)):
-            affine[slot, e, p, k] = aff[k // 3, k % 3]
+        store_matrix(affine, row_at(slot, e, p, B, N, 9), aff)
 
 
 @ti.func
@@ -56,7 +59,7 @@ def scatter_stage(frames: ti.template(), params: ti.template(), affine: ti.templ
     particles scattered into grid (listing its nodes in active), the second into part_grid
     (listing in part_nodes); merge_stage then adds the second into the first. The affine matrices
     are read from affine's slot ``slot``."""
-    B, N = frames.shape[1], frames.shape[2]
+    B, N = params.shape[0], params.shape[1]
     for t in range(2 * B * scatter_spread(B)):
         working, e, second, first, end = scatter_half(t, B, N)
         if working and second == 0:
@@ -72,12 +75,14 @@ def scatter_range(frames: ti.template(), params: ti.template(), affine: ti.templ
     serially in particle order; ``nodes`` (B + 1, K + 1) lists each node on first touch (count, then
     nodes)."""
     inv_dx, vol, K = grid_f[1], grid_f[2], node_count(grid_i)
+    B, N = params.shape[0], params.shape[1]
     count = 0
     for p in range(first, end):
-        base, fx = cell_of(row_vector(frames, src, e, p, 0), inv_dx, grid_i)
+        src_at = row_at(src, e, p, B, N, WIDTH)
+        base, fx = cell_of(row_vector(frames, src_at), inv_dx, grid_i)
         mass = params[e, p, 2] * vol
-        momentum = mass * row_vector(frames, src, e, p, 3)
-        aff = affine_matrix(affine, slot, e, p)
+        momentum = mass * row_vector(frames, src_at + 3)
+        aff = row_matrix(affine, row_at(slot, e, p, B, N, 9))
         W = weights(fx)
         # aff @ (x_i − x) per node from per-axis rows, summed in a matrix product's order
         D = axis_offsets(fx) / inv_dx
@@ -85,11 +90,11 @@ def scatter_range(frames: ti.template(), params: ti.template(), affine: ti.templ
         for i in range(3):
             for j in range(3):
                 row = stencil_row(grid_i, base, i, j)
-                row_at = node_at(e, row, K)
+                line_at = node_at(e, row, K)
                 w_ij = W[i, 0] * W[j, 1]
                 aff_ij = matrix_row(A_x, i) + matrix_row(A_y, j)
                 for k in range(3):
-                    at = row_at + 4 * k
+                    at = line_at + 4 * k
                     w = w_ij * W[k, 2]
                     contribution = w * (momentum + (aff_ij + matrix_row(A_z, k)))
                     old_mass = grid[at + 3]
@@ -103,15 +108,6 @@ def scatter_range(frames: ti.template(), params: ti.template(), affine: ti.templ
 
 
 @ti.func
-def affine_matrix(affine: ti.template(), slot, e, p):
-    """Particle p's affine momentum matrix (3×3) in affine's slot ``slot``."""
-    aff = ti.Matrix.zero(float, 3, 3)
-    for k in ti.static(range(9)):
-        aff[k // 3, k % 3] = affine[slot, e, p, k]
-    return aff
-
-
-@ti.func
 def p2g_adjoint_stage(frames: ti.template(), params: ti.template(), kinds: ti.template(), consts: ti.template(),
                       fiber: ti.template(), affine: ti.template(), svd: ti.template(), grads: ti.template(),
                       grad_params: ti.template(), grad_grid: ti.template(), scratch: ti.template(),
@@ -122,11 +118,13 @@ def p2g_adjoint_stage(frames: ti.template(), params: ti.template(), kinds: ti.te
     whole row (written over grads' row), and add the parameters' gradients (grad_params: E, nu,
     rho, actu) per particle. The affine matrices and SVD(F_tmp) are the replay's (slot src)."""
     h, inv_dx, vol, K = grid_f[0], grid_f[1], grid_f[2], node_count(grid_i)
-    for e, p in ti.ndrange(frames.shape[1], frames.shape[2]):
-        pos, vel = row_vector(frames, src, e, p, 0), row_vector(frames, src, e, p, 3)
+    B, N = params.shape[0], params.shape[1]
+    for e, p in ti.ndrange(B, N):
+        src_at, grad_at = row_at(src, e, p, B, N, WIDTH), row_at(0, e, p, B, N, WIDTH)
+        pos, vel = row_vector(frames, src_at), row_vector(frames, src_at + 3)
         base, fx = cell_of(pos, inv_dx, grid_i)
         mass = params[e, p, 2] * vol
-        aff = affine_matrix(affine, src, e, p)
+        aff = row_matrix(affine, row_at(src, e, p, B, N, 9))
         momentum = mass * vel
         g_mass = 0.0
         g_momentum = ti.Vector.zero(float, 3)
@@ -139,11 +137,11 @@ def p2g_adjoint_stage(frames: ti.template(), params: ti.template(), kinds: ti.te
         A_x, A_y, A_z = column_terms(aff, D, 0), column_terms(aff, D, 1), column_terms(aff, D, 2)
         for i in range(3):
             for j in range(3):
-                row_at = node_at(e, stencil_row(grid_i, base, i, j), K)
+                line_at = node_at(e, stencil_row(grid_i, base, i, j), K)
                 w_ij, dw_x, dw_y = W[i, 0] * W[j, 1], dW[i, 0] * W[j, 1], W[i, 0] * dW[j, 1]
                 aff_ij = matrix_row(A_x, i) + matrix_row(A_y, j)
                 for k in range(3):
-                    at = row_at + 4 * k
+                    at = line_at + 4 * k
                     w = w_ij * W[k, 2]
                     dw = ti.Vector([dw_x * W[k, 2], dw_y * W[k, 2], w_ij * dW[k, 2]])
                     g_P = node_vector(grad_grid, at)
@@ -157,7 +155,7 @@ def p2g_adjoint_stage(frames: ti.template(), params: ti.template(), kinds: ti.te
         # the nodes' offsets x_i − x = (offset − fx) dx in P_i: −dx Aᵀ Σ w ∂L/∂P_i, once per particle
         g_fx -= transposed_times(aff, g_momentum) / inv_dx
         # the stress: A = −κ τ + m C, F_tmp = (I + h C) F
-        C, F = row_matrix(frames, src, e, p, 6), row_matrix(frames, src, e, p, 15)
+        C, F = row_matrix(frames, src_at + 6), row_matrix(frames, src_at + 15)
         g_mass += g_momentum.dot(vel) + (g_aff * C).sum()
         g_C = mass * g_aff
         step = ti.Matrix.identity(float, 3) + h * C
@@ -170,18 +168,19 @@ def p2g_adjoint_stage(frames: ti.template(), params: ti.template(), kinds: ti.te
         sig = ti.Vector([1.0, 1.0, 1.0], float)
         V = ti.Matrix.identity(float, 3)
         if needs_svd(kind, c):
-            U, sig, V = row_matrix(svd, src, e, p, 0), row_vector(svd, src, e, p, 9), row_matrix(svd, src, e, p, 12)
+            svd_at = row_at(src, e, p, B, N, SVD_WIDTH)
+            U, sig, V = row_matrix(svd, svd_at), row_vector(svd, svd_at + 9), row_matrix(svd, svd_at + 12)
         g_F_tmp, g_Jp, g_E, g_nu, g_actu = constitutive_adjoint_decomposed(
-            kind, c, params[e, p, 0], params[e, p, 1], params[e, p, 3], d, F_tmp, frames[src, e, p, 24],
-            F_tmp.determinant(), U, sig, V, row_matrix(grads, 0, e, p, 15), grads[0, e, p, 24],
+            kind, c, params[e, p, 0], params[e, p, 1], params[e, p, 3], d, F_tmp, frames[src_at + 24],
+            F_tmp.determinant(), U, sig, V, row_matrix(grads, grad_at + 15), grads[grad_at + 24],
             (-h * vol * 4.0 * inv_dx * inv_dx) * g_aff)
         g_C += h * g_F_tmp @ F.transpose()
-        g_pos = ti.Vector([scratch[e, p, 3], scratch[e, p, 4], scratch[e, p, 5]]) + inv_dx * g_fx
-        store_vector(grads, 0, e, p, 0, g_pos)
-        store_vector(grads, 0, e, p, 3, mass * g_momentum)
-        store_matrix(grads, 0, e, p, 6, g_C)
-        store_matrix(grads, 0, e, p, 15, step.transpose() @ g_F_tmp)
-        grads[0, e, p, 24] = g_Jp
+        g_pos = row_vector(scratch, row_at(0, e, p, B, N, 6) + 3) + inv_dx * g_fx
+        store_vector(grads, grad_at, g_pos)
+        store_vector(grads, grad_at + 3, mass * g_momentum)
+        store_matrix(grads, grad_at + 6, g_C)
+        store_matrix(grads, grad_at + 15, step.transpose() @ g_F_tmp)
+        grads[grad_at + 24] = g_Jp
         grad_params[e, p, 0] = grad_params[e, p, 0] + g_E
         grad_params[e, p, 1] = grad_params[e, p, 1] + g_nu
         grad_params[e, p, 2] = grad_params[e, p, 2] + vol * g_mass

@@ -145,11 +145,12 @@ class MPMSolver(MPMAdjoint, Solver):
         self._bind()
 
     def _arrays(self):
-        """The forward kernels' arrays, in their order."""
-        return [self.frames, self.params, self.gravity_in, self.kinds, self.consts, self.fiber, self.affine,
-                self.svd, self.grid.view(-1), self.active, self.part_grid.view(-1), self.part_nodes, self.grid_f,
-                self.grid_i, self.flags,
-                self.gathered, self.saved_grid, self.saved_nodes]
+        """The forward kernels' arrays, in their order; the per-particle ones and the grids flat
+        (stencil.row_at, stencil.node_count)."""
+        return [self.frames.view(-1), self.params, self.gravity_in, self.kinds, self.consts, self.fiber,
+                self.affine.view(-1), self.svd.view(-1), self.grid.view(-1), self.active, self.part_grid.view(-1),
+                self.part_nodes, self.grid_f, self.grid_i, self.flags, self.gathered.view(-1), self.saved_grid,
+                self.saved_nodes]
 
     def _bind(self):
         """Bind the kernels to the arrays (again after the saved grid grows)."""

@@ -6,31 +6,41 @@ import taichi as ti
 
 
 @ti.func
-def row_matrix(frames: ti.template(), f, e, p, k0):
-    """The 3×3 matrix stored row-major at columns k0..k0+8 of a particle row."""
+def row_at(slot, e, p, B, N, width: ti.template()):
+    """First index of particle p's row of env e in slot (a frame or substep) of a per-particle
+    array (slots, B, N, width) passed flat. The kernels take every per-particle array flat: an
+    index into a flat array costs one load of its pointer, where a 4-d ndarray reloads its shape
+    after every store and multiplies it out per access."""
+    return ((slot * B + e) * N + p) * width
+
+
+@ti.func
+def row_matrix(rows: ti.template(), at):
+    """The 3×3 matrix stored row-major at rows[at..at + 8] (a flat per-particle array)."""
     m = ti.Matrix.zero(float, 3, 3)
     for i in ti.static(range(3)):
         for j in ti.static(range(3)):
-            m[i, j] = frames[f, e, p, k0 + 3 * i + j]
+            m[i, j] = rows[at + 3 * i + j]
     return m
 
 
 @ti.func
-def row_vector(frames: ti.template(), f, e, p, k0):
-    return ti.Vector([frames[f, e, p, k0], frames[f, e, p, k0 + 1], frames[f, e, p, k0 + 2]])
+def row_vector(rows: ti.template(), at):
+    """The 3-vector at rows[at..at + 2]."""
+    return ti.Vector([rows[at], rows[at + 1], rows[at + 2]])
 
 
 @ti.func
-def store_matrix(frames: ti.template(), f, e, p, k0, m):
+def store_matrix(rows: ti.template(), at, m):
     for i in ti.static(range(3)):
         for j in ti.static(range(3)):
-            frames[f, e, p, k0 + 3 * i + j] = m[i, j]
+            rows[at + 3 * i + j] = m[i, j]
 
 
 @ti.func
-def store_vector(frames: ti.template(), f, e, p, k0, v):
+def store_vector(rows: ti.template(), at, v):
     for i in ti.static(range(3)):
-        frames[f, e, p, k0 + i] = v[i]
+        rows[at + i] = v[i]
 
 
 @ti.func
