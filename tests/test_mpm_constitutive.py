@@ -13,7 +13,7 @@ import taichi as ti
 
 from genesis_lite.solvers.mpm.constitutive import constitutive, constitutive_adjoint, encode
 from genesis_lite.solvers.mpm.layout import KIND, N_CONSTS
-from genesis_lite.solvers.mpm.svd import svd3
+from genesis_lite.solvers.mpm.svd import svd3, svd3_pair
 
 
 @ti.func
@@ -69,6 +69,23 @@ def _decompose(F: ti.types.ndarray(), U: ti.types.ndarray(), sig: ti.types.ndarr
         _store(V, n, v)
         for i in ti.static(range(3)):
             sig[n, i] = s[i]
+
+
+@ti.kernel
+def _decompose_pairs(F: ti.types.ndarray(), partner: ti.types.ndarray(), U: ti.types.ndarray(),
+                     sig: ti.types.ndarray(), V: ti.types.ndarray(), U2: ti.types.ndarray(), sig2: ti.types.ndarray(),
+                     V2: ti.types.ndarray()):
+    """svd3_pair of F[n] with F[partner[n]]: rows n of U, sig, V get F[n]'s factors, of U2, sig2, V2
+    its partner's."""
+    for n in range(F.shape[0]):
+        u, s, v, u2, s2, v2 = svd3_pair(_mat(F, n), _mat(F, partner[n]))
+        _store(U, n, u)
+        _store(V, n, v)
+        _store(U2, n, u2)
+        _store(V2, n, v2)
+        for i in ti.static(range(3)):
+            sig[n, i] = s[i]
+            sig2[n, i] = s2[i]
 
 
 def run(cases, dtype=np.float64):
@@ -303,13 +320,18 @@ def test_yield_branches_are_exercised(f64):
                 assert moved == ("projected" in label), label
 
 
-def _svd_batch(dtype):
+def _svd_matrices(dtype):
+    """809 test matrices (n, 3, 3): random, near the identity, repeated, inverted, rank-deficient, zero."""
     rng = np.random.default_rng(3)
     F = np.concatenate([rng.normal(size=(400, 3, 3)), np.eye(3) + 0.02 * rng.normal(size=(400, 3, 3)),
                         [np.eye(3), np.diag([1.1, 1.1, 0.9]), _stretch(rng, [1.1, 1.1, 0.9]),
                          _stretch(rng, [1.0, 1.0, 1.0 + 1e-9]), np.diag([1.0, 1.0, -1.0]), _stretch(rng, [2, 1, -0.5]),
                          _stretch(rng, [1.0, 1e-3, 1e-9]), np.diag([1.0, 0.0, 0.0]), np.zeros((3, 3))]])
-    F = F.astype(dtype)
+    return F.astype(dtype)
+
+
+def _svd_batch(dtype):
+    F = _svd_matrices(dtype)
     U, V = np.zeros_like(F), np.zeros_like(F)
     sig = np.zeros((len(F), 3), dtype)
     _decompose(F, U, sig, V)
@@ -324,6 +346,22 @@ def _svd_batch(dtype):
             "sorted": bool(np.all(np.abs(sig[:, 0]) >= np.abs(sig[:, 1])) and np.all(np.abs(sig[:, 1]) >= np.abs(sig[:, 2]))),
             "signs": bool(np.all(sig[:, :2] >= 0) and np.all(sig[:-2, 2] * np.linalg.det(F[:-2]) > 0)),
             "values": (np.abs(np.abs(sig) - np.linalg.svd(F, compute_uv=False)).max(axis=1) / scale).max()}
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_svd_pair_gives_each_matrix_the_bits_of_its_own_svd(dtype, request):
+    """The stress stage decomposes particles two at a time (svd3_pair): each must get exactly what
+    svd3 gives it alone, whatever its partner needs (partners drawn from the whole batch: random,
+    near the identity, degenerate, zero)."""
+    request.getfixturevalue("f64" if dtype == np.float64 else "f32")
+    F = _svd_matrices(dtype)
+    partner = np.random.default_rng(4).permutation(len(F)).astype(np.int32)
+    alone = [np.zeros_like(F), np.zeros((len(F), 3), dtype), np.zeros_like(F)]
+    paired = [np.zeros_like(a) for a in alone + alone]
+    _decompose(F, *alone)
+    _decompose_pairs(F, partner, *paired)
+    for a, first, second in zip(alone, paired[:3], paired[3:]):
+        assert np.array_equal(first, a) and np.array_equal(second, a[partner])
 
 
 def test_svd_float64(f64):

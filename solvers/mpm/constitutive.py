@@ -35,7 +35,7 @@ from taichi.lang import impl
 
 from ..core import InvalidInputError
 from .layout import KIND, N_CONSTS
-from .svd import svd3, unit_roundoff
+from .svd import svd3, svd3_pair, unit_roundoff
 
 _NEOHOOKEN = KIND["neohooken"]
 _ELASTOPLASTIC = KIND["elastoplastic"]
@@ -304,6 +304,21 @@ def decompose(kind, consts, F_tmp):
     if needs_svd(kind, consts):
         U, sig, V = svd3(F_tmp)
     return F_tmp.determinant(), U, sig, V
+
+
+@ti.func
+def decompose_pair(kind_F, consts_F, F, kind_G, consts_G, G):
+    """`decompose` of two particles at once, the same bits as two calls: (J_F, U_F, σ_F, V_F, J_G,
+    U_G, σ_G, V_G). Their SVDs run interleaved (svd.svd3_pair), a material that takes none
+    carried through as the identity (its SVD: identities, as decompose gives it)."""
+    U_F, V_F, U_G, V_G = (ti.Matrix.identity(float, 3), ti.Matrix.identity(float, 3), ti.Matrix.identity(float, 3),
+                          ti.Matrix.identity(float, 3))
+    sig_F, sig_G = ti.Vector([1.0, 1.0, 1.0], float), ti.Vector([1.0, 1.0, 1.0], float)
+    svd_F, svd_G = needs_svd(kind_F, consts_F), needs_svd(kind_G, consts_G)
+    if svd_F or svd_G:
+        U_F, sig_F, V_F, U_G, sig_G, V_G = svd3_pair(ti.select(svd_F, F, ti.Matrix.identity(float, 3)),
+                                                     ti.select(svd_G, G, ti.Matrix.identity(float, 3)))
+    return F.determinant(), U_F, sig_F, V_F, G.determinant(), U_G, sig_G, V_G
 
 
 @ti.func

@@ -12,7 +12,7 @@ are taken once per particle; the per-node products of A with the offsets come fr
 """
 import taichi as ti
 
-from .constitutive import constitutive_adjoint_decomposed, constitutive_decomposed, decompose, needs_svd
+from .constitutive import constitutive_adjoint_decomposed, constitutive_decomposed, decompose_pair, needs_svd
 from .layout import SVD_WIDTH, WIDTH
 from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, node_at, node_count, node_vector, row_at,
                       row_matrix, row_vector, scatter_half, scatter_spread, stencil_row, store_matrix, store_vector,
@@ -25,30 +25,61 @@ def stress_stage(frames: ti.template(), params: ti.template(), kinds: ti.templat
                  keep):
     """Per particle: the material update F, Jp → frame dst, and the affine momentum matrix →
     affine's slot max(keep, 0). A replay (keep = s ≥ 0) keeps what the reverse reads: the affine
-    matrix in slot s, and SVD(F_tmp) in svd's slot s for the materials that take one."""
-    h, vol, inv_dx = grid_f[0], grid_f[2], grid_f[1]
-    slot = ti.max(keep, 0)
+    matrix in slot s, and SVD(F_tmp) in svd's slot s for the materials that take one. Particles
+    go two at a time (2q, 2q + 1), their SVDs interleaved (constitutive.decompose_pair: the
+    Jacobi sweeps wait on divisions and square roots, which two independent ones overlap), the
+    rest one after the other."""
+    h = grid_f[0]
     B, N = params.shape[0], params.shape[1]
-    for e, p in ti.ndrange(B, N):
-        src_at, dst_at = row_at(src, e, p, B, N, WIDTH), row_at(dst, e, p, B, N, WIDTH)
-        C = row_matrix(frames, src_at + 6)
-        F_tmp = (ti.Matrix.identity(float, 3) + h * C) @ row_matrix(frames, src_at + 15)
-        kind = kinds[p]
-        c = ti.Vector([consts[p, 0], consts[p, 1], consts[p, 2], consts[p, 3]])
-        d = ti.Vector([fiber[p, 0], fiber[p, 1], fiber[p, 2]])
-        J, U, sig, V = decompose(kind, c, F_tmp)
-        if keep >= 0 and needs_svd(kind, c):
-            svd_at = row_at(keep, e, p, B, N, SVD_WIDTH)
-            store_matrix(svd, svd_at, U)
-            store_vector(svd, svd_at + 9, sig)
-            store_matrix(svd, svd_at + 12, V)
-        F_new, Jp_new, tau = constitutive_decomposed(kind, c, params[e, p, 0], params[e, p, 1], params[e, p, 3], d,
-                                                     F_tmp, frames[src_at + 24], J, U, sig, V)
-        store_matrix(frames, dst_at + 15, F_new)
-        frames[dst_at + 24] = Jp_new
-        mass = params[e, p, 2] * vol
-        aff = (-h * vol * 4.0 * inv_dx * inv_dx) * tau + mass * C
-        store_matrix(affine, row_at(slot, e, p, B, N, 9), aff)
+    for e, pair in ti.ndrange(B, (N + 1) // 2):
+        first, second = 2 * pair, ti.min(2 * pair + 1, N - 1)
+        C_first, F_first = deformation(frames, row_at(src, e, first, B, N, WIDTH), h)
+        C_second, F_second = deformation(frames, row_at(src, e, second, B, N, WIDTH), h)
+        J_first, U_first, sig_first, V_first, J_second, U_second, sig_second, V_second = decompose_pair(
+            kinds[first], material_consts(consts, first), F_first, kinds[second], material_consts(consts, second),
+            F_second)
+        for half in range(1 + int(second > first)):  # one call site: the material code is inlined once
+            p, C, F_tmp, J, U, sig, V = first, C_first, F_first, J_first, U_first, sig_first, V_first
+            if half == 1:
+                p, C, F_tmp, J, U, sig, V = second, C_second, F_second, J_second, U_second, sig_second, V_second
+            material_update(frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep, e, p, C, F_tmp,
+                            J, U, sig, V)
+
+
+@ti.func
+def deformation(frames: ti.template(), src_at, h):
+    """(C, F_tmp = (I + h C) F) of the particle row at src_at."""
+    C = row_matrix(frames, src_at + 6)
+    return C, (ti.Matrix.identity(float, 3) + h * C) @ row_matrix(frames, src_at + 15)
+
+
+@ti.func
+def material_consts(consts: ti.template(), p):
+    return ti.Vector([consts[p, 0], consts[p, 1], consts[p, 2], consts[p, 3]])
+
+
+@ti.func
+def material_update(frames: ti.template(), params: ti.template(), kinds: ti.template(), consts: ti.template(),
+                    fiber: ti.template(), affine: ti.template(), svd: ti.template(), grid_f: ti.template(), src, dst,
+                    keep, e, p, C, F_tmp, J, U, sig, V):
+    """stress_stage for particle p of env e, given its C, F_tmp and decomposition (J, U, σ, V)."""
+    h, vol, inv_dx = grid_f[0], grid_f[2], grid_f[1]
+    B, N = params.shape[0], params.shape[1]
+    kind, c = kinds[p], material_consts(consts, p)
+    if keep >= 0 and needs_svd(kind, c):
+        svd_at = row_at(keep, e, p, B, N, SVD_WIDTH)
+        store_matrix(svd, svd_at, U)
+        store_vector(svd, svd_at + 9, sig)
+        store_matrix(svd, svd_at + 12, V)
+    d = ti.Vector([fiber[p, 0], fiber[p, 1], fiber[p, 2]])
+    F_new, Jp_new, tau = constitutive_decomposed(kind, c, params[e, p, 0], params[e, p, 1], params[e, p, 3], d, F_tmp,
+                                                 frames[row_at(src, e, p, B, N, WIDTH) + 24], J, U, sig, V)
+    dst_at = row_at(dst, e, p, B, N, WIDTH)
+    store_matrix(frames, dst_at + 15, F_new)
+    frames[dst_at + 24] = Jp_new
+    mass = params[e, p, 2] * vol
+    aff = (-h * vol * 4.0 * inv_dx * inv_dx) * tau + mass * C
+    store_matrix(affine, row_at(ti.max(keep, 0), e, p, B, N, 9), aff)
 
 
 @ti.func

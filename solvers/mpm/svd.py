@@ -9,10 +9,12 @@ h = 1e-6 through a return mapping that rebuilds F = U S Vᵀ is noise. Hestenes'
 rotates the columns of A = F V until they are orthogonal (each rotation is orthogonal to
 round-off, and the stopping test asks for column cosines below the unit round-off), so
 U diag(σ) Vᵀ − F and UᵀU − I, VᵀV − I are a few ulps. Measured (tests/test_mpm_constitutive.py, 809
-matrices: random, near I, repeated, inverted, rank-deficient, zero): float64 reconstruction ≤ 1.3e-15
-(relative to max |F_ij|), orthogonality ≤ 1.4e-15, singular values within 1.4e-15 of numpy's (ti.svd:
-reconstruction 3.5e-10); float32 ≤ 7.9e-7, 6.3e-7, 5.7e-7. Cost ~0.3–0.7 µs per matrix on this 2-core
-CPU. Its sweep count varies with F, but every F gives the same result on every run.
+matrices: random, near I, repeated, inverted, rank-deficient, zero): float64 reconstruction ≤ 1.2e-15
+(relative to max |F_ij|), orthogonality ≤ 1.6e-15, singular values within 1.2e-15 of numpy's (ti.svd:
+reconstruction 3.5e-10); float32 ≤ 7.4e-7, 6.9e-7, 5.7e-7. Cost ~0.3–0.7 µs per matrix on this 2-core
+CPU, mostly waiting on each rotation's divisions and square roots (3.5–4.3 sweeps, 7–9 rotations on
+average), which svd3_pair overlaps between two matrices. Its sweep count varies with F, but every F
+gives the same result on every run.
 """
 import taichi as ti
 from taichi.lang import impl
@@ -26,19 +28,21 @@ def unit_roundoff():
 
 
 @ti.func
-def _rotate_columns(A: ti.template(), V: ti.template(), p: ti.template(), q: ti.template(), tol):
+def _rotate_columns(A: ti.template(), V: ti.template(), p: ti.template(), q: ti.template(), tol2):
     """One Jacobi rotation of columns p, q of A (3×3) and V that makes A's columns p, q orthogonal;
-    returns 1 if they were not orthogonal to tol (relative cosine), else 0 (nothing done)."""
+    returns 1 if they were not orthogonal to √tol2 (relative cosine), else 0 (nothing done)."""
     alpha = A[0, p] * A[0, p] + A[1, p] * A[1, p] + A[2, p] * A[2, p]
     beta = A[0, q] * A[0, q] + A[1, q] * A[1, q] + A[2, q] * A[2, q]
     gamma = A[0, p] * A[0, q] + A[1, p] * A[1, q] + A[2, p] * A[2, q]
     rotated = 0
-    if ti.abs(gamma) > tol * ti.sqrt(alpha * beta):
+    if gamma * gamma > tol2 * (alpha * beta):
         rotated = 1
-        zeta = (beta - alpha) / (2.0 * gamma)
-        # the smaller root of t² + 2ζt − 1 = 0: a rotation of at most 45°
-        t = 1.0 / (ti.abs(zeta) + ti.sqrt(1.0 + zeta * zeta))
-        if zeta < 0.0:
+        # t = tan θ, the smaller root of t² + 2ζt − 1 = 0 with ζ = (β − α) / 2γ (a rotation of at
+        # most 45°), written with one division: the rotation's chain of divisions and square roots
+        # is what a Jacobi sweep waits on
+        d = beta - alpha
+        t = (2.0 * gamma) / (ti.abs(d) + ti.sqrt(d * d + 4.0 * gamma * gamma))
+        if d < 0.0:
             t = -t
         c = 1.0 / ti.sqrt(1.0 + t * t)
         s = c * t
@@ -49,6 +53,15 @@ def _rotate_columns(A: ti.template(), V: ti.template(), p: ti.template(), q: ti.
             vp, vq = V[r, p], V[r, q]
             V[r, p] = c * vp - s * vq
             V[r, q] = s * vp + c * vq
+    return rotated
+
+
+@ti.func
+def _sweep(A: ti.template(), V: ti.template(), tol2):
+    """One cyclic Jacobi sweep (column pairs 01, 02, 12); the number of rotations it made."""
+    rotated = _rotate_columns(A, V, 0, 1, tol2)
+    rotated += _rotate_columns(A, V, 0, 2, tol2)
+    rotated += _rotate_columns(A, V, 1, 2, tol2)
     return rotated
 
 
@@ -75,16 +88,41 @@ def svd3(F):
     """F (3×3) → (U (3×3), sig (3-vector), V (3×3)) with F = U diag(sig) Vᵀ, det U = det V = 1,
     |sig| sorted decreasing, sig[0], sig[1] ≥ 0 and sig[2] carrying det F's sign. Rank-deficient
     F get any orthonormal completion of U."""
-    tol = ti.static(unit_roundoff())
+    tol2 = ti.static(unit_roundoff() ** 2)
     A = F
     V = ti.Matrix.identity(float, 3)
     sweep = 0
     rotated = 1
     while rotated != 0 and sweep < _MAX_SWEEPS:
-        rotated = _rotate_columns(A, V, 0, 1, tol)
-        rotated += _rotate_columns(A, V, 0, 2, tol)
-        rotated += _rotate_columns(A, V, 1, 2, tol)
+        rotated = _sweep(A, V, tol2)
         sweep += 1
+    return _factors(A, V)
+
+
+@ti.func
+def svd3_pair(F, G):
+    """svd3 of two matrices at once, the same bits as two calls: (U_F, σ_F, V_F, U_G, σ_G, V_G). The
+    sweeps of F and G alternate in one loop, so the processor overlaps two independent chains of
+    divisions and square roots (10k near-identity matrices, float32: 0.75 ms against 1.15 for
+    svd3 one by one). A matrix that has converged makes no rotation in the sweeps it is carried
+    through, hence the same bits."""
+    tol2 = ti.static(unit_roundoff() ** 2)
+    A, B = F, G
+    V, W = ti.Matrix.identity(float, 3), ti.Matrix.identity(float, 3)
+    sweep = 0
+    rotated = 1
+    while rotated != 0 and sweep < _MAX_SWEEPS:
+        rotated = _sweep(A, V, tol2) + _sweep(B, W, tol2)
+        sweep += 1
+    U_F, sig_F, V_F = _factors(A, V)
+    U_G, sig_G, V_G = _factors(B, W)
+    return U_F, sig_F, V_F, U_G, sig_G, V_G
+
+
+@ti.func
+def _factors(A, V):
+    """(U, σ, V) from the converged A = F V (orthogonal columns) and V: columns sorted by length,
+    V made a rotation (det F's sign in σ₂), U the normalised columns, re-orthogonalised."""
     # sort the columns by length (three compare-swaps), keeping A = F V
     norms = ti.Vector([A[0, k] ** 2 + A[1, k] ** 2 + A[2, k] ** 2 for k in ti.static(range(3))])
     for p, q in ti.static(((0, 1), (1, 2), (0, 1))):
