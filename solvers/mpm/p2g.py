@@ -139,6 +139,54 @@ def scatter_range(frames: ti.template(), params: ti.template(), affine: ti.templ
 
 
 @ti.func
+def scatter_reverse(grad_grid: ti.template(), env_at, base, W, dW, D, aff, momentum, mass, grid_i: ti.template()):
+    """One particle's gather of its 27 nodes' (∂L/∂P_i, ∂L/∂M_i) (grad_grid, env starting at
+    env_at), the reverse of P_i += w_i (m v + A (x_i − x)), M_i += w_i m with the weights
+    and offsets (D, m) taken as fixed, and of the weights' dependence on fx:
+    (Σ w ∂L/∂P (3), Σ w ∂L/∂P ⊗ (x_i − x) (3×3), Σ w ∂L/∂M, Σ s_i ∂w_i/∂fx (3)) with
+    s_i = ∂L/∂P_i · (m v + A (x_i − x)) + ∂L/∂M_i m. The weights, offsets and derivatives factor
+    per axis (w = W[i, 0] W[j, 1] W[k, 2]), so the sums run axis by axis, innermost z: per node the
+    scalar s and five multiply-adds (as g2p's gather_velocity)."""
+    # A (x_i − x) at node (i, j, k) = row i of A_x + row j of A_y + row k of A_z
+    A_x, A_y, A_z = column_terms(aff, D, 0), column_terms(aff, D, 1), column_terms(aff, D, 2)
+    g_momentum, g_x, g_y, g_z = (ti.Vector.zero(float, 3), ti.Vector.zero(float, 3), ti.Vector.zero(float, 3),
+                                 ti.Vector.zero(float, 3))
+    g_mass = 0.0
+    g_fx = ti.Vector.zero(float, 3)
+    for i in range(3):
+        plane, plane_y, plane_z = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)
+        plane_M, plane_s, plane_s_y, plane_s_z = 0.0, 0.0, 0.0, 0.0
+        for j in range(3):
+            line_at = env_at + 4 * stencil_row(grid_i, base, i, j)
+            moved_ij = momentum + (matrix_row(A_x, i) + matrix_row(A_y, j))
+            line, line_z = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)
+            line_M, line_s, line_s_z = 0.0, 0.0, 0.0
+            for k in range(3):
+                at = line_at + 4 * k
+                g_P, g_M = node_vector(grad_grid, at), grad_grid[at + 3]
+                s = g_P.dot(moved_ij + matrix_row(A_z, k)) + g_M * mass
+                line += W[k, 2] * g_P
+                line_z += (W[k, 2] * D[k, 2]) * g_P
+                line_M += W[k, 2] * g_M
+                line_s += W[k, 2] * s
+                line_s_z += dW[k, 2] * s
+            plane += W[j, 1] * line
+            plane_y += (W[j, 1] * D[j, 1]) * line
+            plane_z += W[j, 1] * line_z
+            plane_M += W[j, 1] * line_M
+            plane_s += W[j, 1] * line_s
+            plane_s_y += dW[j, 1] * line_s
+            plane_s_z += W[j, 1] * line_s_z
+        g_momentum += W[i, 0] * plane
+        g_x += (W[i, 0] * D[i, 0]) * plane
+        g_y += W[i, 0] * plane_y
+        g_z += W[i, 0] * plane_z
+        g_mass += W[i, 0] * plane_M
+        g_fx += ti.Vector([dW[i, 0] * plane_s, W[i, 0] * plane_s_y, W[i, 0] * plane_s_z])
+    return g_momentum, ti.Matrix.cols([g_x, g_y, g_z]), g_mass, g_fx
+
+
+@ti.func
 def p2g_adjoint_stage(frames: ti.template(), params: ti.template(), kinds: ti.template(), consts: ti.template(),
                       fiber: ti.template(), affine: ti.template(), svd: ti.template(), grads: ti.template(),
                       grad_params: ti.template(), grad_grid: ti.template(), scratch: ti.template(),
@@ -157,32 +205,11 @@ def p2g_adjoint_stage(frames: ti.template(), params: ti.template(), kinds: ti.te
         mass = params[e, p, 2] * vol
         aff = row_matrix(affine, row_at(src, e, p, B, N, 9))
         momentum = mass * vel
-        g_mass = 0.0
-        g_momentum = ti.Vector.zero(float, 3)
-        g_aff = ti.Matrix.zero(float, 3, 3)
-        g_fx = ti.Vector.zero(float, 3)
         W, dW = weights(fx), weight_grads(fx)
-        # per axis c and offset a: the node offset (a − fx_c) dx (D[a, c]) and its term of aff @ dpos
-        # (row a of A_c): the stencil adds these instead of taking a product per node
+        # the node offsets (a − fx_c) dx per axis c and offset a (D[a, c])
         D = axis_offsets(fx) / inv_dx
-        A_x, A_y, A_z = column_terms(aff, D, 0), column_terms(aff, D, 1), column_terms(aff, D, 2)
-        for i in range(3):
-            for j in range(3):
-                line_at = node_at(e, stencil_row(grid_i, base, i, j), K)
-                w_ij, dw_x, dw_y = W[i, 0] * W[j, 1], dW[i, 0] * W[j, 1], W[i, 0] * dW[j, 1]
-                aff_ij = matrix_row(A_x, i) + matrix_row(A_y, j)
-                for k in range(3):
-                    at = line_at + 4 * k
-                    w = w_ij * W[k, 2]
-                    dw = ti.Vector([dw_x * W[k, 2], dw_y * W[k, 2], w_ij * dW[k, 2]])
-                    g_P = node_vector(grad_grid, at)
-                    g_M = grad_grid[at + 3]
-                    weighted = w * g_P
-                    g_momentum += weighted
-                    g_aff += weighted.outer_product(ti.Vector([D[i, 0], D[j, 1], D[k, 2]]))
-                    g_mass += w * g_M
-                    aff_dpos = aff_ij + matrix_row(A_z, k)
-                    g_fx += (g_P.dot(momentum + aff_dpos) + g_M * mass) * dw
+        g_momentum, g_aff, g_mass, g_fx = scatter_reverse(grad_grid, node_at(e, 0, K), base, W, dW, D, aff,
+                                                          momentum, mass, grid_i)
         # the nodes' offsets x_i − x = (offset − fx) dx in P_i: −dx Aᵀ Σ w ∂L/∂P_i, once per particle
         g_fx -= transposed_times(aff, g_momentum) / inv_dx
         # the stress: A = −κ τ + m C, F_tmp = (I + h C) F
