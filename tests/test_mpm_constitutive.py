@@ -364,6 +364,23 @@ def test_svd_pair_gives_each_matrix_the_bits_of_its_own_svd(dtype, request):
         assert np.array_equal(first, a) and np.array_equal(second, a[partner])
 
 
+def test_svd_float32_with_columns_whose_squared_difference_overflows(f32):
+    """Columns of length ~5e9 in float32: their squared lengths fit (~2.5e19) but the rotation's
+    (β − α)² + 4γ² overflows; the rotation then takes the ζ = (β − α)/2γ form (a blown-up state
+    must still decompose exactly, as before the one-division form)."""
+    rng = np.random.default_rng(5)
+    F = np.concatenate([[[[5e9, 1e3, 0.0], [0.0, 1e8, 0.0], [0.0, 0.0, 1.0]]],
+                        rng.normal(size=(20, 3, 3)) * np.array([6e9, 1e8, 1.0])]).astype(np.float32)
+    U, V = np.zeros_like(F), np.zeros_like(F)
+    sig = np.zeros((len(F), 3), np.float32)
+    _decompose(F, U, sig, V)
+    reference = np.linalg.svd(F.astype(np.float64), compute_uv=False)
+    scale = np.abs(F).max(axis=(1, 2))
+    assert (np.abs(np.abs(sig) - reference).max(axis=1) / scale).max() <= 3e-6
+    rebuilt = np.einsum("nij,nj,nkj->nik", U.astype(np.float64), sig.astype(np.float64), V.astype(np.float64))
+    assert (np.abs(rebuilt - F).max(axis=(1, 2)) / scale).max() <= 3e-6
+
+
 def test_svd_float64(f64):
     stats = _svd_batch(np.float64)
     assert stats["sorted"] and stats["signs"], stats

@@ -163,6 +163,25 @@ def test_a_grid_too_large_for_memory_raises(f64):
         scene.build()
 
 
+def test_arrays_beyond_32_bit_indices_raise(f64, monkeypatch):
+    """On a machine with memory enough for them, arrays of more than 2³¹ − 1 numbers still raise:
+    the kernels' indices are 32-bit (Taichi 1.7), so such an index would wrap. 500 envs of Genesis's
+    default domain at 64 cells/m: a grid of 500 × 1.08 M nodes × 4 numbers."""
+    import genesis_lite.solvers.mpm.solver as mpm_solver
+
+    monkeypatch.setattr(mpm_solver, "_available_pages", lambda: 2**50)  # a machine with memory to spare
+
+    def allocate(self):
+        raise AssertionError("allocated: the index check did not stop the build")
+
+    monkeypatch.setattr(mpm_solver.MPMSolver, "_allocate", allocate)
+    scene = gs.Scene(mpm_options=gs.options.MPMOptions(grid_density=64))
+    scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.5), size=(0.05, 0.05, 0.05)), material=_jelly(), name="jelly")
+    with pytest.raises(gs.InvalidInputError, match="entities: jelly.*the grid would hold 2,1.*numbers.*500 env.*"
+                                                   "at most 2,147,483,647"):
+        scene.build(n_envs=500)
+
+
 def test_a_substep_above_the_stability_limit_warns(f64):
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=1e-2, substeps=1), mpm_options=gs.options.MPMOptions(**SMALL))
     scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.3), size=(0.1, 0.1, 0.1)), material=_jelly(), name="jelly")

@@ -5,10 +5,10 @@ Forward, per particle (v_i the updated node velocities, w_i the stencil weights 
     v' = Σ w_i v_i,  C' = 4 inv_dx Σ w_i v_i ⊗ (offset_i − fx),  x' = clamp(x + h v'),
     and the velocity component moving out through a wall it has reached is zeroed.
 The walls are piecewise: the adjoint differentiates the branch taken (read off v' as the replay
-kept it). The gather's reverse is a scatter into the nodes' velocity gradients, run serially per
-env (deterministic, no atomics), and a parallel pass for the position's gradient through the
-weights, which sums each node's terms u_i · v_i ∂w_i/∂fx and takes C''s (offset − fx) term once
-per particle (Σ w_i v_i = v').
+kept it). The gather's reverse is one pass, run serially per env and half of the particles
+(deterministic, no atomics): it scatters into the nodes' velocity gradients and, in the same
+stencil loop, sums each node's u_i · v_i ∂w_i/∂fx for the position's gradient through the
+weights; C''s (offset − fx) term is taken once per particle (Σ w_i v_i = v').
 """
 import taichi as ti
 

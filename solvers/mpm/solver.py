@@ -19,6 +19,8 @@ from .model import EntitySpec, Grid, MPMModel
 
 # Genesis's suggested bound on the substep: h ≤ 2e-2 · dx (s, dx in m)
 GENESIS_DT_PER_DX = 2e-2
+# Taichi 1.7 indexes an array with 32-bit ints (an index past this wraps: a crash or a wrong write)
+MAX_ARRAY_ELEMENTS = 2**31 - 1
 
 
 class MPMSolver(MPMAdjoint, Solver):
@@ -58,6 +60,7 @@ class MPMSolver(MPMAdjoint, Solver):
         self.n_particles = m.n_particles
         self.state_width = m.n_particles * layout.WIDTH
         self._check_memory()
+        self._check_indices()
         self._check_substep()
         self._allocate()
         self.default_inputs = self._default_inputs()
@@ -93,6 +96,32 @@ class MPMSolver(MPMAdjoint, Solver):
                                     f"particles × {self.n_batch} env(s) need {need / 2**30:.1f} GiB, expected at most "
                                     f"the {pages * page / 2**30:.1f} GiB available; lower MPMOptions grid_density, "
                                     f"tighten lower_bound/upper_bound or use fewer particles")
+
+    def _largest_array(self):
+        """(numbers, name) of the largest array the kernels index; the replay's saved grid at the
+        largest capacity it can grow to (every node, every substep)."""
+        B, N, K, S = self.n_batch, self.model.n_particles, self.model.grid.n_nodes, self.substeps
+        frames = S + 1 if self.requires_grad else 2
+        sizes = {"the particle frames": frames * B * N * layout.WIDTH, "the grid": B * K * 4}
+        if self.requires_grad:
+            sizes["the replay's saved grid"] = S * B * K * 4
+            if any_needs_svd(self.model.kinds, self.model.consts):
+                sizes["the replay's SVDs"] = S * B * N * layout.SVD_WIDTH
+        name = max(sizes, key=sizes.get)
+        return sizes[name], name
+
+    def _check_indices(self):
+        """No array may hold more numbers than the kernels' 32-bit indices reach (a named error, not
+        a wrapped index)."""
+        numbers, name = self._largest_array()
+        if numbers > MAX_ARRAY_ELEMENTS:
+            g = self.model.grid
+            raise InvalidInputError(f"MPM solver (entities: {', '.join(self.entity_names)}): {name} would hold "
+                                    f"{numbers:,} numbers (a grid of {' × '.join(str(int(r)) for r in g.res)} "
+                                    f"nodes, {self.model.n_particles} particles, {self.n_batch} env(s), "
+                                    f"{self.substeps} substeps), expected at most {MAX_ARRAY_ELEMENTS:,}, what "
+                                    f"Taichi's 32-bit indices reach; lower MPMOptions grid_density, tighten "
+                                    f"lower_bound/upper_bound, or use fewer particles, envs or substeps")
 
     def _check_substep(self):
         """Warn when the substep exceeds the stability limit: Genesis's suggested h ≤ 2e-2·dx, and

@@ -8,9 +8,10 @@ import taichi as ti
 @ti.func
 def row_at(slot, e, p, B, N, width: ti.template()):
     """First index of particle p's row of env e in slot (a frame or substep) of a per-particle
-    array (slots, B, N, width) passed flat. The kernels take every per-particle array flat: an
-    index into a flat array costs one load of its pointer, where a 4-d ndarray reloads its shape
-    after every store and multiplies it out per access."""
+    array (slots, B, N, width) passed flat. The kernels take the particle rows (frames, affine,
+    svd, gathered, grads, scratch) flat: an index into a flat array costs one load of its
+    pointer, where a 4-d ndarray reloads its shape after every store and multiplies it out per
+    access. Indices are 32-bit (solver.MAX_ARRAY_ELEMENTS bounds the arrays)."""
     return ((slot * B + e) * N + p) * width
 
 

@@ -41,9 +41,17 @@ def _rotate_columns(A: ti.template(), V: ti.template(), p: ti.template(), q: ti.
         # most 45°), written with one division: the rotation's chain of divisions and square roots
         # is what a Jacobi sweep waits on
         d = beta - alpha
-        t = (2.0 * gamma) / (ti.abs(d) + ti.sqrt(d * d + 4.0 * gamma * gamma))
-        if d < 0.0:
-            t = -t
+        root = ti.sqrt(d * d + 4.0 * gamma * gamma)
+        t = 0.0
+        if root < ti.math.inf:
+            t = (2.0 * gamma) / (ti.abs(d) + root)
+            if d < 0.0:
+                t = -t
+        else:  # d² + 4γ² overflows (float32 columns longer than ~4e9): the ζ form, which does not
+            zeta = d / (2.0 * gamma)
+            t = 1.0 / (ti.abs(zeta) + ti.sqrt(1.0 + zeta * zeta))
+            if zeta < 0.0:
+                t = -t
         c = 1.0 / ti.sqrt(1.0 + t * t)
         s = c * t
         for r in ti.static(range(3)):
