@@ -22,7 +22,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-import trimesh
 
 from .. import morphs as gm
 from ..solvers.core import InvalidInputError, runtime
@@ -75,6 +74,8 @@ def _geom_visual(geom):
 
 def tessellate(visual):
     """(vertices (V, 3) m, unit normals (V, 3), faces (F, 3)) of a VisualSpec in its link's frame."""
+    import trimesh  # (imported when first needed: with scipy it takes ~0.7 s)
+
     size = np.asarray(visual.size, dtype=np.float64)
     if visual.type == "box":
         mesh = trimesh.creation.box(extents=size)
@@ -98,6 +99,8 @@ def tessellate(visual):
 
 def _plane(normal):
     """A square of PLANE_SIZE m through the origin, orthogonal to ``normal`` (3,), facing it."""
+    import trimesh
+
     half = PLANE_SIZE / 2
     square = np.array([[-half, -half, 0.0], [half, -half, 0.0], [half, half, 0.0], [-half, half, 0.0]])
     turn = trimesh.geometry.align_vectors([0.0, 0.0, 1.0], normal)[:3, :3]

@@ -7,7 +7,6 @@ ordered by type with the normal pointing from its first geom to its second. Mesh
 their convex hull (trimesh).
 """
 import numpy as np
-import trimesh
 
 from ..core import AssetError
 from .collision import convex
@@ -34,6 +33,8 @@ def _quat_mul(a, b):
 
 def _check_hull(geom, where):
     """Raise AssetError unless a mesh geom's convex hull has volume (qhull fails on flat input)."""
+    import trimesh  # (imported when first needed: with scipy it takes ~0.7 s)
+
     try:
         hull = trimesh.convex.convex_hull(np.asarray(geom.vertices, dtype=np.float64))
     except Exception as error:  # qhull raises its own error types on flat or degenerate input

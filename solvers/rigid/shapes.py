@@ -11,7 +11,6 @@ import functools
 import os
 
 import numpy as np
-import trimesh
 
 from ..core import AssetError, InvalidInputError
 from .spec import GeomSpec, LinkSpec
@@ -102,6 +101,8 @@ def capsule_mass_inertia(radius: float, length: float, rho: float) -> tuple[floa
 def _load_mesh_cached(path: str, mtime_ns: int, size: int) -> tuple[np.ndarray, np.ndarray]:
     """Raw (V, 3) vertices and (F, 3) faces of a mesh file; cached because robots reuse meshes
     (a quadruped's four legs), keyed by modification time so edited files are re-read."""
+    import trimesh  # (imported when first needed: with scipy it takes ~0.7 s)
+
     # skip_materials: textures are irrelevant to physics and slow to decode.
     mesh = trimesh.load(path, force="mesh", skip_materials=True)
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
@@ -141,6 +142,8 @@ def mesh_mass_properties(vertices, faces, rho: float) -> tuple[float, np.ndarray
     inconsistent winding) uses its convex hull instead, which is also what the contact code
     sees. A flat or degenerate mesh has no volume and gets mass 0.
     """
+    import trimesh
+
     mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=True)
     if not mesh.is_volume:
         try:

@@ -21,7 +21,6 @@ import os
 import re
 
 import numpy as np
-import yourdfpy
 from lxml import etree
 
 from ..core import AssetError, InvalidInputError
@@ -92,6 +91,8 @@ def _parse(ctx: _Context):
     The XML is checked strictly first, because yourdfpy otherwise falls back to a lenient
     parser that silently drops elements.
     """
+    import yourdfpy  # (imported when first needed: it imports trimesh and scipy, ~0.7 s)
+
     if not os.path.isfile(ctx.path):
         raise ctx.error("file not found")
     try:
