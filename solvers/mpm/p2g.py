@@ -55,6 +55,7 @@ def deformation(frames: ti.template(), src_at, h):
 
 @ti.func
 def material_consts(consts: ti.template(), p):
+    """Particle p's material constants (layout.N_CONSTS vector; constitutive.encode says what)."""
     return ti.Vector([consts[p, 0], consts[p, 1], consts[p, 2], consts[p, 3]])
 
 
