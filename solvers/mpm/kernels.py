@@ -7,29 +7,29 @@ nodes, S substeps, cap the saved grid's capacity); those marked "flat" are passe
 and indexed through stencil.row_at (per-particle rows) or stencil.node_at (grid nodes), which
 costs far less than indexing a 3- or 4-d ndarray (B and N are read off ``params``' shape):
 
-- ``frames`` (S + 1 or 2, B, N, 25, flat): particle state rows (layout.STATE), one frame per substep
-  boundary (all of them when the step will be differentiated, else two used in turn);
+- ``frames`` (S + 1 or 2, B, N, 25, flat): particle state rows (layout.STATE), one frame per
+  substep boundary (all of them when the step will be differentiated, else two used in turn);
 - ``params`` (B, N, 4): E (Pa), nu, rho (kg/m³), actu per particle; ``gravity`` (B, 3) m/s²;
 - ``kinds`` (N,) int material code, ``consts`` (N, layout.N_CONSTS), ``fiber`` (N, 3) unit muscle
   fibre directions: the model;
-- ``affine`` (S or 1, B, N, 9, flat): each particle's APIC affine momentum matrix, N·s/m²·m, of the
-  substep in progress (slot 0), or in a replay of substep s (slot s, kept for the reverse);
-- ``svd`` (S, B, N, 21, flat): a replay's SVD of each particle's F_tmp, U (9, row-major), σ (3), V (9),
-  per substep, for the materials that take one (constitutive.needs_svd; a 1-sized dummy when the
-  solver does not differentiate or no material takes one);
+- ``affine`` (S or 1, B, N, 9, flat): each particle's APIC affine momentum matrix, N·s/m²·m, of
+  the substep in progress (slot 0), or in a replay of substep s (slot s, kept for the reverse);
+- ``svd`` (S, B, N, 21, flat): a replay's SVD of each particle's F_tmp, U (9, row-major), σ (3),
+  V (9), per substep, for the materials that take one (constitutive.needs_svd; a 1-sized dummy
+  when the solver does not differentiate or no material takes one);
 - ``grid`` (B, K, 4), passed flat (stencil.node_count): per node momentum (3, kg·m/s) and mass
   (kg), after the update velocity (m/s) and mass; zero between substeps;
 - ``active`` (B + 1, K + 1) int: per env the number of nodes the particles reach, then their
   indices (the grid update and the clearing touch only those); row B holds the largest count;
 - ``part_grid`` (B, K, 4, flat), ``part_nodes`` (B + 1, K + 1) int: the second half of the
-  particles' scatter (p2g's, then in the reverse g2p's) and its node list, added into grid (grad_grid) at
-  once and zeroed (stencil.scatter_spread);
+  particles' scatter (p2g's, then in the reverse g2p's) and its node list, added into grid
+  (grad_grid) at once and zeroed (stencil.scatter_spread);
 - ``grid_f`` (9,): h (s), inv_dx (1/m), vol (m³), walls' lower (3) and upper (3) corners (m);
 - ``grid_i`` (7,): the grid's lowest node in cells (3), nodes per axis (3), sticky walls (0/1);
 - ``flags`` (1,) int: set to 1 when a particle's new state is not finite;
 - what a replay keeps for the reverse, per substep s (1-sized dummies when the solver does not
-  differentiate): ``gathered`` (S, B, N, 3, flat) each particle's gathered velocity (m/s, before the
-  walls); ``saved_grid`` (S, B, cap, 4) the updated grid's listed nodes, (v (3) m/s, M kg) in
+  differentiate): ``gathered`` (S, B, N, 3, flat) each particle's gathered velocity (m/s, before
+  the walls); ``saved_grid`` (S, B, cap, 4) the updated grid's listed nodes, (v (3) m/s, M kg) in
   list order; ``saved_nodes`` (S, B + 1, cap + 1) int their lists, laid out as ``active`` (the
   counts are whole even where they exceed cap: the solver then grows cap and replays again).
 
@@ -37,13 +37,14 @@ The forward kernels take, after the arrays, src and dst (frames) and keep: −1 
 in a replay of substep s (which then keeps what the reverse reads; a plain step pays nothing).
 
 The reverse kernels (REVERSE_KERNELS) take five more arrays:
-- ``grads`` (1, B, N, 25, flat): the gradient of the loss w.r.t. a frame's particle rows — of frame
-  s + 1 before substep s's reverse, of frame s after it (overwritten in place, row by row);
+- ``grads`` (1, B, N, 25, flat): the gradient of the loss w.r.t. a frame's particle rows — of
+  frame s + 1 before substep s's reverse, of frame s after it (overwritten in place, row by row);
 - ``grad_params`` (B, N, 4): ∂L/∂(E, nu, rho, actu) per particle, summed over the substeps;
 - ``grad_gravity`` (B, 3): ∂L/∂gravity, summed over the substeps;
-- ``grad_grid`` (B, K, 4, flat): per node ∂L/∂v (3) of the updated velocity, then ∂L/∂P (3), ∂L/∂M;
-  zero between substeps;
-- ``scratch`` (B, N, 6, flat): per particle ∂L/∂v' of the gathered velocity (3), and ∂L/∂x through g2p (3).
+- ``grad_grid`` (B, K, 4, flat): per node ∂L/∂v (3) of the updated velocity, then ∂L/∂P (3),
+  ∂L/∂M; zero between substeps;
+- ``scratch`` (B, N, 6, flat): per particle ∂L/∂v' of the gathered velocity (3), and ∂L/∂x
+  through g2p (3).
 
 The reverse of substep s (frames s, s + 1 filled by a replay of the step) restores the substep's
 updated grid as the replay kept it — after the update, so what a coupler does to the grid

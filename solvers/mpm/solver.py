@@ -174,7 +174,7 @@ class MPMSolver(MPMAdjoint, Solver):
         self._bind()
 
     def _arrays(self):
-        """The forward kernels' arrays, in their order; the per-particle ones and the grids flat
+        """The forward kernels' arrays, in their order; the particle rows and the grids flat
         (stencil.row_at, stencil.node_count)."""
         return [self.frames.view(-1), self.params, self.gravity_in, self.kinds, self.consts, self.fiber,
                 self.affine.view(-1), self.svd.view(-1), self.grid.view(-1), self.active, self.part_grid.view(-1),
