@@ -117,8 +117,9 @@ def write_state(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, co
     """Frame f ← src (B, N · 25)."""
     B, N = params.shape[0], params.shape[1]
     for e, p in ti.ndrange(B, N):
+        at = row_at(f, e, p, B, N, WIDTH)
         for k in range(WIDTH):
-            frames[row_at(f, e, p, B, N, WIDTH) + k] = src[e, p * WIDTH + k]
+            frames[at + k] = src[e, p * WIDTH + k]
 
 
 @ti.kernel
@@ -129,8 +130,9 @@ def read_state(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, con
     """dst (B, N · 25) ← frame f."""
     B, N = params.shape[0], params.shape[1]
     for e, p in ti.ndrange(B, N):
+        at = row_at(f, e, p, B, N, WIDTH)
         for k in range(WIDTH):
-            dst[e, p * WIDTH + k] = frames[row_at(f, e, p, B, N, WIDTH) + k]
+            dst[e, p * WIDTH + k] = frames[at + k]
 
 
 KERNELS = (substep, pre_coupling, post_coupling, write_state, read_state)
