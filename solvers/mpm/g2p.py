@@ -122,6 +122,7 @@ def gather_adjoint_stage(frames: ti.template(), params: ti.template(), grid: ti.
             gather_adjoint_range(frames, grid, gathered, grads, scratch, part_grid, grid_f, grid_i, src, e, first, end,
                                  B, N)
     K = node_count(grid_i)
+    ti.loop_config(serialize=True)  # only adds: a thread-pool task costs more (grid.py)
     for e, k in ti.ndrange(B, active[B, 0]):
         if k < active[e, 0]:
             at = node_at(e, active[e, k + 1], K)
