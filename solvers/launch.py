@@ -134,5 +134,10 @@ class BoundKernels:
     """Kernels bound to one scene's arrays: ``kernels.read_state(0, out)``."""
 
     def __init__(self, template, arrays, element_dims, *kernels):
+        self.bind(template, arrays, element_dims, *kernels)
+
+    def bind(self, template, arrays, element_dims, *kernels):
+        """Bind more kernels (or bind them again), with their own compile-time argument; returns self."""
         for kernel in kernels:
             setattr(self, kernel.__name__, BoundKernel(kernel, template, arrays, element_dims))
+        return self

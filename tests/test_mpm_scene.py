@@ -129,6 +129,26 @@ def test_batched_envs_equal_single_scenes(f64):
     assert torch.equal(blob_b.get_state().F[1], blob_s.get_state().F)
 
 
+def test_material_updates_without_svd_materials_equal_those_beside_them(f64):
+    """A scene none of whose materials takes an SVD compiles its stress stage without one, a particle at
+    a time (kernels.STRESS_KERNELS); beside a corotated body the stage takes particles in pairs with
+    interleaved SVDs. A neo-Hookean jelly moves the same bits either way (its neighbour, 20 cm away,
+    never shares a node; each body is one half of the scatter in both scenes)."""
+    def jelly_beside(model):
+        scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT, substeps=SUBSTEPS),
+                         mpm_options=gs.options.MPMOptions(**SMALL))
+        jelly = scene.add_entity(gs.morphs.Box(pos=(-0.15, 0.0, 0.3), size=(0.1, 0.1, 0.1)), material=_jelly())
+        scene.add_entity(gs.morphs.Box(pos=(0.15, 0.0, 0.3), size=(0.1, 0.1, 0.1)),
+                         material=gs.materials.MPM.Elastic(E=1e5, nu=0.2, model=model))
+        scene.build()
+        _spin(jelly)
+        for _ in range(5):
+            scene.step()
+        return jelly.get_state()
+    alone, beside = jelly_beside("neohooken"), jelly_beside("corotation")
+    assert torch.equal(alone.pos, beside.pos) and torch.equal(alone.F, beside.F)
+
+
 def test_rigid_and_mpm_share_the_substep_loop_bit_for_bit(f64, caplog):
     """A scene with rigid and MPM entities runs both through the shared substep loop (split
     kernels); with no coupler yet, each evolves exactly as in a scene of its own (fused

@@ -35,6 +35,9 @@ costs far less than indexing a 3- or 4-d ndarray (B and N are read off ``params`
 
 The forward kernels take, after the arrays, src and dst (frames) and keep: −1 in a plain step, s
 in a replay of substep s (which then keeps what the reverse reads; a plain step pays nothing).
+The two that run the stress (STRESS_KERNELS) are compiled for whether any of the scene's
+materials takes an SVD (p2g.stress_stage: pairs of particles with interleaved SVDs, or one
+particle at a time without the SVD's code); the others once.
 
 The reverse kernels (REVERSE_KERNELS) take five more arrays:
 - ``grads`` (1, B, N, 25, flat): the gradient of the loss w.r.t. a frame's particle rows — of
@@ -73,11 +76,11 @@ A = ti.types.ndarray()
 
 
 @ti.kernel
-def substep(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
+def substep(svd_kinds: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
             grid: A, active: A, part_grid: A, part_nodes: A, grid_f: A, grid_i: A, flags: A, gathered: A,
             saved_grid: A, saved_nodes: A, src: ti.i32, dst: ti.i32, keep: ti.i32):
     """A whole substep from frame src to frame dst, in one launch (no coupling)."""
-    stress_stage(frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep)
+    stress_stage(svd_kinds, frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep)
     scatter_stage(frames, params, affine, grid, active, part_grid, part_nodes, grid_f, grid_i, src, ti.max(keep, 0))
     merge_stage(grid, active, part_grid, part_nodes, grid_i)
     largest_count(active)
@@ -87,12 +90,12 @@ def substep(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts
 
 
 @ti.kernel
-def pre_coupling(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
+def pre_coupling(svd_kinds: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
                  grid: A, active: A, part_grid: A, part_nodes: A,
                  grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                  src: ti.i32, dst: ti.i32, keep: ti.i32):
     """The substep up to the grid update (stress and p2g): the grid holds momentum and mass."""
-    stress_stage(frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep)
+    stress_stage(svd_kinds, frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep)
     scatter_stage(frames, params, affine, grid, active, part_grid, part_nodes, grid_f, grid_i, src, ti.max(keep, 0))
     merge_stage(grid, active, part_grid, part_nodes, grid_i)
     largest_count(active)
@@ -135,7 +138,8 @@ def read_state(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, con
             dst[e, p * WIDTH + k] = frames[at + k]
 
 
-KERNELS = (substep, pre_coupling, post_coupling, write_state, read_state)
+KERNELS = (post_coupling, write_state, read_state)
+STRESS_KERNELS = (substep, pre_coupling)  # compile-time argument: whether any material takes an SVD
 
 
 @ti.kernel

@@ -20,30 +20,38 @@ from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, node_at, 
 
 
 @ti.func
-def stress_stage(frames: ti.template(), params: ti.template(), kinds: ti.template(), consts: ti.template(),
-                 fiber: ti.template(), affine: ti.template(), svd: ti.template(), grid_f: ti.template(), src, dst,
-                 keep):
+def stress_stage(svd_kinds: ti.template(), frames: ti.template(), params: ti.template(), kinds: ti.template(),
+                 consts: ti.template(), fiber: ti.template(), affine: ti.template(), svd: ti.template(),
+                 grid_f: ti.template(), src, dst, keep):
     """Per particle: the material update F, Jp → frame dst, and the affine momentum matrix →
     affine's slot max(keep, 0). A replay (keep = s ≥ 0) keeps what the reverse reads: the affine
-    matrix in slot s, and SVD(F_tmp) in svd's slot s for the materials that take one. Particles
-    go two at a time (2q, 2q + 1), their SVDs interleaved (constitutive.decompose_pair: the
-    Jacobi sweeps wait on divisions and square roots, which two independent ones overlap), the
-    rest one after the other."""
+    matrix in slot s, and SVD(F_tmp) in svd's slot s for the materials that take one.
+    svd_kinds (compile time): whether any of the scene's materials takes an SVD. Then particles
+    go two at a time (2q, 2q + 1), their SVDs interleaved (constitutive.decompose_pair: the Jacobi
+    sweeps wait on divisions and square roots, which two independent ones overlap); else one at a
+    time, without the SVD's code (the pairs' structure cost a neo-Hookean substep 3–5 %)."""
     h = grid_f[0]
     B, N = params.shape[0], params.shape[1]
-    for e, pair in ti.ndrange(B, (N + 1) // 2):
-        first, second = 2 * pair, ti.min(2 * pair + 1, N - 1)
-        C_first, F_first = deformation(frames, row_at(src, e, first, B, N, WIDTH), h)
-        C_second, F_second = deformation(frames, row_at(src, e, second, B, N, WIDTH), h)
-        J_first, U_first, sig_first, V_first, J_second, U_second, sig_second, V_second = decompose_pair(
-            kinds[first], material_consts(consts, first), F_first, kinds[second], material_consts(consts, second),
-            F_second)
-        for half in range(1 + int(second > first)):  # one call site: the material code is inlined once
-            p, C, F_tmp, J, U, sig, V = first, C_first, F_first, J_first, U_first, sig_first, V_first
-            if half == 1:
-                p, C, F_tmp, J, U, sig, V = second, C_second, F_second, J_second, U_second, sig_second, V_second
+    if ti.static(svd_kinds):
+        for e, pair in ti.ndrange(B, (N + 1) // 2):
+            first, second = 2 * pair, ti.min(2 * pair + 1, N - 1)
+            C_first, F_first = deformation(frames, row_at(src, e, first, B, N, WIDTH), h)
+            C_second, F_second = deformation(frames, row_at(src, e, second, B, N, WIDTH), h)
+            J_first, U_first, sig_first, V_first, J_second, U_second, sig_second, V_second = decompose_pair(
+                kinds[first], material_consts(consts, first), F_first, kinds[second], material_consts(consts, second),
+                F_second)
+            for half in range(1 + int(second > first)):  # one call site: the material code is inlined once
+                p, C, F_tmp, J, U, sig, V = first, C_first, F_first, J_first, U_first, sig_first, V_first
+                if half == 1:
+                    p, C, F_tmp, J, U, sig, V = second, C_second, F_second, J_second, U_second, sig_second, V_second
+                material_update(frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep, e, p, C,
+                                F_tmp, J, U, sig, V)
+    else:
+        for e, p in ti.ndrange(B, N):
+            C, F_tmp = deformation(frames, row_at(src, e, p, B, N, WIDTH), h)
+            identity = ti.Matrix.identity(float, 3)  # the SVD of a material that takes none (as decompose)
             material_update(frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep, e, p, C, F_tmp,
-                            J, U, sig, V)
+                            F_tmp.determinant(), identity, ti.Vector([1.0, 1.0, 1.0], float), identity)
 
 
 @ti.func

@@ -184,7 +184,10 @@ class MPMSolver(MPMAdjoint, Solver):
     def _bind(self):
         """Bind the kernels to the arrays (again after the saved grid grows)."""
         arrays = self._arrays()
-        self.kernels = BoundKernels(0, arrays, [0] * len(arrays), *kernels.KERNELS)
+        dims = [0] * len(arrays)
+        svd_kinds = any_needs_svd(self.model.kinds, self.model.consts)
+        self.kernels = BoundKernels(0, arrays, dims, *kernels.KERNELS).bind(svd_kinds, arrays, dims,
+                                                                          *kernels.STRESS_KERNELS)
         if self.requires_grad:
             self._bind_reverse()
 
