@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import taichi as ti
 
-from genesis_lite.solvers.mpm.constitutive import constitutive, constitutive_adjoint, encode
+from genesis_lite.solvers.mpm.constitutive import any_needs_svd, constitutive, constitutive_adjoint, encode, needs_svd
 from genesis_lite.solvers.mpm.layout import KIND, N_CONSTS
 from genesis_lite.solvers.mpm.svd import svd3, svd3_pair
 
@@ -346,6 +346,27 @@ def _svd_batch(dtype):
             "sorted": bool(np.all(np.abs(sig[:, 0]) >= np.abs(sig[:, 1])) and np.all(np.abs(sig[:, 1]) >= np.abs(sig[:, 2]))),
             "signs": bool(np.all(sig[:, :2] >= 0) and np.all(sig[:-2, 2] * np.linalg.det(F[:-2]) > 0)),
             "values": (np.abs(np.abs(sig) - np.linalg.svd(F, compute_uv=False)).max(axis=1) / scale).max()}
+
+
+@ti.kernel
+def _device_needs_svd(kind: ti.types.ndarray(), consts: ti.types.ndarray(), out: ti.types.ndarray()):
+    for n in range(kind.shape[0]):
+        out[n] = int(needs_svd(kind[n], ti.Vector([consts[n, k] for k in ti.static(range(N_CONSTS))])))
+
+
+def test_host_and_kernels_agree_on_which_materials_take_an_svd(f64):
+    """The solver compiles its stress stage for any_needs_svd (the host's answer: without an SVD
+    material, no SVD at all); the kernels branch on needs_svd. They must agree for every kind and
+    flag, or a material that takes an SVD would get identities for it."""
+    cases = [encode(name, {}) for name in KIND] + [encode("liquid", {"viscous": True}),
+                                                   encode("elastoplastic", {"use_von_mises": False})]
+    kinds = np.array([kind for kind, _ in cases], dtype=np.int32)
+    consts = np.stack([c for _, c in cases])
+    out = np.zeros(len(cases), dtype=np.int32)
+    _device_needs_svd(kinds, consts, out)
+    host = [any_needs_svd(kinds[n:n + 1], consts[n:n + 1]) for n in range(len(cases))]
+    assert out.astype(bool).tolist() == host
+    assert host.count(False) == 3  # neo-Hookean, its muscle, the inviscid liquid
 
 
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])

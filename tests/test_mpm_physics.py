@@ -502,7 +502,8 @@ def test_stiff_com_trajectories_agree_at_64_and_128_cells_per_metre(f64):
     along x, a grid step finer: 24 cm cubes dropped 30 cm, 0.6 s, at 64 and 128 cells/m (15.4 and 30.7
     cells across; 13 824 and 110 592 particles each), h = 1.25e-4 s. A coarse grid damps a stiff body's
     rebound (its apex 11 cm below the start at 32 cells/m, 5 cm at 64 and 128). Measured 2026-11-28:
-    stiff elastic 2.7 %, muscle 2.8 % (at 32 and 64 cells/m with this h: 25 %). Asserted < 10 %.
+    stiff elastic 2.7 %, muscle 2.8 % (the stiff elastic at 32 and 64 cells/m with this h: 25 %).
+    Asserted < 10 %.
     The actuation is raised over the first 0.1 s, as a muscle is activated: switched on at once, it
     starts an undamped axial oscillation (~70 Hz: a 24 cm body at a wave speed of ~33 m/s) whose phase
     at the impact, 0.25 s later, decides how high the block rebounds; its frequency follows the grid, so

@@ -77,7 +77,8 @@ class MPMAdjoint:
     def _bind_reverse(self):
         arrays = self._arrays() + [self.grads.view(-1), self.grad_params, self.grad_gravity, self.grad_grid.view(-1),
                                    self.scratch.view(-1)]
-        self.reverse_kernels = BoundKernels(0, arrays, [0] * len(arrays), *kernels.REVERSE_KERNELS)
+        self.reverse_kernels = BoundKernels((False, self.serial_chores), arrays, [0] * len(arrays),
+                                            *kernels.REVERSE_KERNELS)
 
     def begin_reverse(self, state, inputs, grad_state_out, warm_start):
         """Frame 0 ← the step's start state (B, N · 25), the inputs uploaded, grads ← the gradient

@@ -101,10 +101,10 @@ def node_gradient_rows(g_C, O, inv_dx):
 
 
 @ti.func
-def gather_adjoint_stage(frames: ti.template(), params: ti.template(), grid: ti.template(), gathered: ti.template(),
-                         grads: ti.template(), scratch: ti.template(), grad_grid: ti.template(),
-                         part_grid: ti.template(), active: ti.template(), grid_f: ti.template(),
-                         grid_i: ti.template(), src):
+def gather_adjoint_stage(serial: ti.template(), frames: ti.template(), params: ti.template(), grid: ti.template(),
+                         gathered: ti.template(), grads: ti.template(), scratch: ti.template(),
+                         grad_grid: ti.template(), part_grid: ti.template(), active: ti.template(),
+                         grid_f: ti.template(), grid_i: ti.template(), src):
     """Reverse of g2p, from the gradient of frame dst's pos, vel, C (grads' rows), the gathered
     velocity the replay kept (gathered's slot src) and the restored updated grid: each node's
     velocity gradient (grad_grid 0:3, zero before) += w_i u_i (node_gradient_rows); per particle,
@@ -122,7 +122,7 @@ def gather_adjoint_stage(frames: ti.template(), params: ti.template(), grid: ti.
             gather_adjoint_range(frames, grid, gathered, grads, scratch, part_grid, grid_f, grid_i, src, e, first, end,
                                  B, N)
     K = node_count(grid_i)
-    ti.loop_config(serialize=True)  # only adds: a thread-pool task costs more (grid.py)
+    ti.loop_config(serialize=serial)  # only adds: for a few envs a thread-pool task costs more (grid.py)
     for e, k in ti.ndrange(B, active[B, 0]):
         if k < active[e, 0]:
             at = node_at(e, active[e, k + 1], K)

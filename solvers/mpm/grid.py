@@ -6,13 +6,14 @@ wall stops. The adjoint reads the mask off the updated grid (see ``wall_mask``),
 replay keeps (its listed nodes' (v, M), ``saved_grid``, and the list, ``saved_nodes``) is all
 the reverse needs: ``restore_stage`` puts it back.
 
-The loops that only move, add or zero the listed nodes' values, and those over the envs' counts,
-run serially on the calling thread (``ti.loop_config(serialize=True)``): a parallel loop is a task
-of Taichi's thread pool, which wakes its sleeping workers and then waits to be woken itself, ~10 µs
-at best and ~60 µs typically on these 2-core machines (8 empty parallel loops: 70–160 µs best, 420–
-520 µs median a launch; serial: 15–30 µs), more than zeroing or copying a few thousand nodes. A
-10k-particle substep's small tasks went from 0.15 to 0.05 ms (medians; kernel profiler). The update
-itself (a division per node) stays parallel.
+The loops that only move, add or zero the listed nodes' values (``serial``, a compile-time
+argument: in a single-env scene on the CPU, solver.SERIAL_CHORE_ENVS) and those over the envs'
+counts run serially on the calling thread: a parallel loop is a task of Taichi's thread pool, which wakes
+its sleeping workers and then waits to be woken itself, ~10 µs at best and ~60 µs typically on
+these 2-core machines (8 empty parallel loops: 70–160 µs best, 420–520 µs median a launch;
+serial: 15–30 µs), more than zeroing or copying one env's few thousand nodes. A 10k-particle
+substep's small tasks went from 0.15 to 0.05 ms (medians; kernel profiler). The update itself
+(a division per node) stays parallel; on a GPU every loop does (one GPU thread would do it all).
 """
 import taichi as ti
 
@@ -20,13 +21,13 @@ from .stencil import node_count, node_at, node_vector
 
 
 @ti.func
-def merge_stage(grid: ti.template(), active: ti.template(), part_grid: ti.template(), part_nodes: ti.template(),
-                grid_i: ti.template()):
+def merge_stage(serial: ti.template(), grid: ti.template(), active: ti.template(), part_grid: ti.template(),
+                part_nodes: ti.template(), grid_i: ti.template()):
     """The second half's scatter (part_grid, its nodes in part_nodes) added into the grid, serially
     per env in part_nodes' order; its nodes the first half did not reach are listed in active; the
     part_grid nodes are zeroed for the next substep."""
     K = node_count(grid_i)
-    ti.loop_config(serialize=True)
+    ti.loop_config(serialize=serial)
     for e in range(active.shape[0] - 1):
         count = active[e, 0]
         for k in range(part_nodes[e, 0]):
@@ -78,18 +79,17 @@ def grid_stage(grid: ti.template(), active: ti.template(), gravity: ti.template(
                     saved_grid[keep, e, k, c] = v[c]
                 saved_grid[keep, e, k, 3] = grid[at + 3]
     if keep >= 0:
-        ti.loop_config(serialize=True)
         for e in range(B + 1):
             saved_nodes[keep, e, 0] = active[e, 0]
 
 
 @ti.func
-def restore_stage(grid: ti.template(), active: ti.template(), saved_grid: ti.template(), saved_nodes: ti.template(),
-                  grid_i: ti.template(), s):
+def restore_stage(serial: ti.template(), grid: ti.template(), active: ti.template(), saved_grid: ti.template(),
+                  saved_nodes: ti.template(), grid_i: ti.template(), s):
     """The updated grid of substep s and its node lists (``active``), as the replay kept them
     (grid_stage), back in place of the zeros between substeps."""
     B, K = active.shape[0] - 1, node_count(grid_i)
-    ti.loop_config(serialize=True)
+    ti.loop_config(serialize=serial)
     for e, k in ti.ndrange(B, saved_nodes[s, B, 0]):
         if k < saved_nodes[s, e, 0]:
             n = saved_nodes[s, e, k + 1]
@@ -125,10 +125,10 @@ def wall_velocity(pos, v, grid_f: ti.template(), sticky):
 
 
 @ti.func
-def clear_stage(grid: ti.template(), active: ti.template(), grid_i: ti.template()):
+def clear_stage(serial: ti.template(), grid: ti.template(), active: ti.template(), grid_i: ti.template()):
     """Zero the nodes this substep touched, and the counts."""
     B, K = active.shape[0] - 1, node_count(grid_i)
-    ti.loop_config(serialize=True)
+    ti.loop_config(serialize=serial)
     for e, k in ti.ndrange(B, active[B, 0]):
         if k < active[e, 0]:
             at = node_at(e, active[e, k + 1], K)
@@ -179,13 +179,13 @@ def grid_adjoint_stage(grid: ti.template(), grad_grid: ti.template(), active: ti
 
 
 @ti.func
-def gravity_adjoint_stage(grid: ti.template(), active: ti.template(), grad_gravity: ti.template(),
-                          grid_f: ti.template(), grid_i: ti.template()):
+def gravity_adjoint_stage(serial: ti.template(), grid: ti.template(), active: ti.template(),
+                          grad_gravity: ti.template(), grid_f: ti.template(), grid_i: ti.template()):
     """grad_gravity (B, 3) += h Σ mask ⊙ ∂L/∂v over env e's listed nodes, serially in list order
     (deterministic), from what grid_adjoint_stage left in the grid."""
     h, K = grid_f[0], node_count(grid_i)
     B = active.shape[0] - 1
-    ti.loop_config(serialize=True)
+    ti.loop_config(serialize=serial)
     for e in range(B):
         total = ti.Vector.zero(float, 3)
         for k in range(active[e, 0]):
@@ -195,10 +195,11 @@ def gravity_adjoint_stage(grid: ti.template(), active: ti.template(), grad_gravi
 
 
 @ti.func
-def clear_adjoint_stage(grid: ti.template(), grad_grid: ti.template(), active: ti.template(), grid_i: ti.template()):
+def clear_adjoint_stage(serial: ti.template(), grid: ti.template(), grad_grid: ti.template(), active: ti.template(),
+                        grid_i: ti.template()):
     """Zero the nodes this substep touched, in the restored grid and its gradient, and the counts."""
     B, K = active.shape[0] - 1, node_count(grid_i)
-    ti.loop_config(serialize=True)
+    ti.loop_config(serialize=serial)
     for e, k in ti.ndrange(B, active[B, 0]):
         if k < active[e, 0]:
             at = node_at(e, active[e, k + 1], K)

@@ -35,9 +35,11 @@ costs far less than indexing a 3- or 4-d ndarray (B and N are read off ``params`
 
 The forward kernels take, after the arrays, src and dst (frames) and keep: −1 in a plain step, s
 in a replay of substep s (which then keeps what the reverse reads; a plain step pays nothing).
-The two that run the stress (STRESS_KERNELS) are compiled for whether any of the scene's
-materials takes an SVD (p2g.stress_stage: pairs of particles with interleaved SVDs, or one
-particle at a time without the SVD's code); the others once.
+Every kernel's compile-time argument is a scene's ``config`` = (takes_svd, serial): whether any
+of its materials takes an SVD (p2g.stress_stage: pairs of particles with interleaved SVDs, or one
+particle at a time with none; only the kernels that run the stress, STRESS_KERNELS, are bound
+with it, the others with False), and whether the grid's chores (adding, copying, zeroing listed
+nodes) run on the calling thread (grid.py; solver.SERIAL_CHORE_ENVS).
 
 The reverse kernels (REVERSE_KERNELS) take five more arrays:
 - ``grads`` (1, B, N, 25, flat): the gradient of the loss w.r.t. a frame's particle rows — of
@@ -76,44 +78,44 @@ A = ti.types.ndarray()
 
 
 @ti.kernel
-def substep(svd_kinds: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
+def substep(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
             grid: A, active: A, part_grid: A, part_nodes: A, grid_f: A, grid_i: A, flags: A, gathered: A,
             saved_grid: A, saved_nodes: A, src: ti.i32, dst: ti.i32, keep: ti.i32):
     """A whole substep from frame src to frame dst, in one launch (no coupling)."""
-    stress_stage(svd_kinds, frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep)
+    stress_stage(config[0], frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep)
     scatter_stage(frames, params, affine, grid, active, part_grid, part_nodes, grid_f, grid_i, src, ti.max(keep, 0))
-    merge_stage(grid, active, part_grid, part_nodes, grid_i)
+    merge_stage(config[1], grid, active, part_grid, part_nodes, grid_i)
     largest_count(active)
     grid_stage(grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
     gather_stage(frames, params, grid, grid_f, grid_i, flags, gathered, src, dst, keep)
-    clear_stage(grid, active, grid_i)
+    clear_stage(config[1], grid, active, grid_i)
 
 
 @ti.kernel
-def pre_coupling(svd_kinds: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
+def pre_coupling(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
                  grid: A, active: A, part_grid: A, part_nodes: A,
                  grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                  src: ti.i32, dst: ti.i32, keep: ti.i32):
     """The substep up to the grid update (stress and p2g): the grid holds momentum and mass."""
-    stress_stage(svd_kinds, frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep)
+    stress_stage(config[0], frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep)
     scatter_stage(frames, params, affine, grid, active, part_grid, part_nodes, grid_f, grid_i, src, ti.max(keep, 0))
-    merge_stage(grid, active, part_grid, part_nodes, grid_i)
+    merge_stage(config[1], grid, active, part_grid, part_nodes, grid_i)
     largest_count(active)
 
 
 @ti.kernel
-def post_coupling(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
+def post_coupling(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
                   grid: A, active: A, part_grid: A, part_nodes: A,
                   grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                   src: ti.i32, dst: ti.i32, keep: ti.i32):
     """The rest of the substep: grid update, g2p, grid cleared."""
     grid_stage(grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
     gather_stage(frames, params, grid, grid_f, grid_i, flags, gathered, src, dst, keep)
-    clear_stage(grid, active, grid_i)
+    clear_stage(config[1], grid, active, grid_i)
 
 
 @ti.kernel
-def write_state(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
+def write_state(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
                 grid: A, active: A, part_grid: A, part_nodes: A,
                 grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                 f: ti.i32, src: A):
@@ -126,7 +128,7 @@ def write_state(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, co
 
 
 @ti.kernel
-def read_state(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
+def read_state(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
                grid: A, active: A, part_grid: A, part_nodes: A,
                grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                f: ti.i32, dst: A):
@@ -139,26 +141,26 @@ def read_state(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, con
 
 
 KERNELS = (post_coupling, write_state, read_state)
-STRESS_KERNELS = (substep, pre_coupling)  # compile-time argument: whether any material takes an SVD
+STRESS_KERNELS = (substep, pre_coupling)  # bound with the scene's takes_svd (the others with False)
 
 
 @ti.kernel
-def post_coupling_backward(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A,
+def post_coupling_backward(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A,
                            affine: A, svd: A, grid: A, active: A, part_grid: A, part_nodes: A,
                            grid_f: A, grid_i: A, flags: A, gathered: A,
                            saved_grid: A, saved_nodes: A, grads: A, grad_params: A, grad_gravity: A, grad_grid: A,
                            scratch: A, src: ti.i32):
     """Substep src's updated grid restored (as the replay kept it), then the reverse of
     post_coupling (g2p and the grid update): grad_grid ← (∂L/∂P, ∂L/∂M), grad_gravity += its part."""
-    restore_stage(grid, active, saved_grid, saved_nodes, grid_i, src)
-    gather_adjoint_stage(frames, params, grid, gathered, grads, scratch, grad_grid, part_grid, active, grid_f, grid_i,
-                         src)
+    restore_stage(config[1], grid, active, saved_grid, saved_nodes, grid_i, src)
+    gather_adjoint_stage(config[1], frames, params, grid, gathered, grads, scratch, grad_grid, part_grid, active,
+                         grid_f, grid_i, src)
     grid_adjoint_stage(grid, grad_grid, active, gravity, grid_f, grid_i)
-    gravity_adjoint_stage(grid, active, grad_gravity, grid_f, grid_i)
+    gravity_adjoint_stage(config[1], grid, active, grad_gravity, grid_f, grid_i)
 
 
 @ti.kernel
-def pre_coupling_backward(_: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A,
+def pre_coupling_backward(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A,
                           affine: A, svd: A, grid: A, active: A, part_grid: A, part_nodes: A,
                           grid_f: A, grid_i: A, flags: A, gathered: A,
                           saved_grid: A, saved_nodes: A, grads: A, grad_params: A, grad_gravity: A, grad_grid: A,
@@ -167,7 +169,7 @@ def pre_coupling_backward(_: ti.template(), frames: A, params: A, gravity: A, ki
     grad_params += their part; the touched nodes cleared."""
     p2g_adjoint_stage(frames, params, kinds, consts, fiber, affine, svd, grads, grad_params, grad_grid, scratch,
                       grid_f, grid_i, src)
-    clear_adjoint_stage(grid, grad_grid, active, grid_i)
+    clear_adjoint_stage(config[1], grid, grad_grid, active, grid_i)
 
 
 REVERSE_KERNELS = (post_coupling_backward, pre_coupling_backward)

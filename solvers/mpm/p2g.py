@@ -20,19 +20,19 @@ from .stencil import (axis_offsets, cell_of, column_terms, matrix_row, node_at, 
 
 
 @ti.func
-def stress_stage(svd_kinds: ti.template(), frames: ti.template(), params: ti.template(), kinds: ti.template(),
+def stress_stage(takes_svd: ti.template(), frames: ti.template(), params: ti.template(), kinds: ti.template(),
                  consts: ti.template(), fiber: ti.template(), affine: ti.template(), svd: ti.template(),
                  grid_f: ti.template(), src, dst, keep):
     """Per particle: the material update F, Jp → frame dst, and the affine momentum matrix →
     affine's slot max(keep, 0). A replay (keep = s ≥ 0) keeps what the reverse reads: the affine
     matrix in slot s, and SVD(F_tmp) in svd's slot s for the materials that take one.
-    svd_kinds (compile time): whether any of the scene's materials takes an SVD. Then particles
-    go two at a time (2q, 2q + 1), their SVDs interleaved (constitutive.decompose_pair: the Jacobi
+    takes_svd (compile time): whether any of the scene's materials takes an SVD. Then particles go
+    two at a time (2q, 2q + 1), their SVDs interleaved (constitutive.decompose_pair: the Jacobi
     sweeps wait on divisions and square roots, which two independent ones overlap); else one at a
-    time, without the SVD's code (the pairs' structure cost a neo-Hookean substep 3–5 %)."""
+    time, with no SVD (the pairs' structure cost a neo-Hookean substep 3–5 %)."""
     h = grid_f[0]
     B, N = params.shape[0], params.shape[1]
-    if ti.static(svd_kinds):
+    if ti.static(takes_svd):
         for e, pair in ti.ndrange(B, (N + 1) // 2):
             first, second = 2 * pair, ti.min(2 * pair + 1, N - 1)
             C_first, F_first = deformation(frames, row_at(src, e, first, B, N, WIDTH), h)
@@ -44,13 +44,13 @@ def stress_stage(svd_kinds: ti.template(), frames: ti.template(), params: ti.tem
                 p, C, F_tmp, J, U, sig, V = first, C_first, F_first, J_first, U_first, sig_first, V_first
                 if half == 1:
                     p, C, F_tmp, J, U, sig, V = second, C_second, F_second, J_second, U_second, sig_second, V_second
-                material_update(frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep, e, p, C,
+                material_update(takes_svd, frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep, e, p, C,
                                 F_tmp, J, U, sig, V)
     else:
         for e, p in ti.ndrange(B, N):
             C, F_tmp = deformation(frames, row_at(src, e, p, B, N, WIDTH), h)
             identity = ti.Matrix.identity(float, 3)  # the SVD of a material that takes none (as decompose)
-            material_update(frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep, e, p, C, F_tmp,
+            material_update(takes_svd, frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep, e, p, C, F_tmp,
                             F_tmp.determinant(), identity, ti.Vector([1.0, 1.0, 1.0], float), identity)
 
 
@@ -68,18 +68,19 @@ def material_consts(consts: ti.template(), p):
 
 
 @ti.func
-def material_update(frames: ti.template(), params: ti.template(), kinds: ti.template(), consts: ti.template(),
-                    fiber: ti.template(), affine: ti.template(), svd: ti.template(), grid_f: ti.template(), src, dst,
-                    keep, e, p, C, F_tmp, J, U, sig, V):
+def material_update(takes_svd: ti.template(), frames: ti.template(), params: ti.template(), kinds: ti.template(),
+                    consts: ti.template(), fiber: ti.template(), affine: ti.template(), svd: ti.template(),
+                    grid_f: ti.template(), src, dst, keep, e, p, C, F_tmp, J, U, sig, V):
     """stress_stage for particle p of env e, given its C, F_tmp and decomposition (J, U, σ, V)."""
     h, vol, inv_dx = grid_f[0], grid_f[2], grid_f[1]
     B, N = params.shape[0], params.shape[1]
     kind, c = kinds[p], material_consts(consts, p)
-    if keep >= 0 and needs_svd(kind, c):
-        svd_at = row_at(keep, e, p, B, N, SVD_WIDTH)
-        store_matrix(svd, svd_at, U)
-        store_vector(svd, svd_at + 9, sig)
-        store_matrix(svd, svd_at + 12, V)
+    if ti.static(takes_svd):  # (else svd is a 1-sized dummy)
+        if keep >= 0 and needs_svd(kind, c):
+            svd_at = row_at(keep, e, p, B, N, SVD_WIDTH)
+            store_matrix(svd, svd_at, U)
+            store_vector(svd, svd_at + 9, sig)
+            store_matrix(svd, svd_at + 12, V)
     d = ti.Vector([fiber[p, 0], fiber[p, 1], fiber[p, 2]])
     F_new, Jp_new, tau = constitutive_decomposed(kind, c, params[e, p, 0], params[e, p, 1], params[e, p, 3], d, F_tmp,
                                                  frames[row_at(src, e, p, B, N, WIDTH) + 24], J, U, sig, V)
