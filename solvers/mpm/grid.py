@@ -8,9 +8,9 @@ the reverse needs: ``restore_stage`` puts it back.
 
 The loops that only move, add or zero the listed nodes' values (``serial``, a compile-time
 argument: in a single-env scene on the CPU, solver.SERIAL_CHORE_ENVS) and those over the envs'
-counts run serially on the calling thread: a parallel loop is a task of Taichi's thread pool, which wakes
-its sleeping workers and then waits to be woken itself, ~10 µs at best and ~60 µs typically on
-these 2-core machines (8 empty parallel loops: 70–160 µs best, 420–520 µs median a launch;
+counts run serially on the calling thread: a parallel loop is a task of Taichi's thread pool,
+which wakes its sleeping workers and then waits to be woken itself, ~10 µs at best and ~60 µs
+typically on these 2-core machines (8 empty parallel loops: 70–160 µs best, 420–520 µs median a launch;
 serial: 15–30 µs), more than zeroing or copying one env's few thousand nodes. A 10k-particle
 substep's small tasks went from 0.15 to 0.05 ms (medians; kernel profiler). The update itself
 (a division per node) stays parallel; on a GPU every loop does (one GPU thread would do it all).

@@ -92,8 +92,8 @@ def substep(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, c
 
 
 @ti.kernel
-def pre_coupling(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
-                 grid: A, active: A, part_grid: A, part_nodes: A,
+def pre_coupling(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A,
+                 affine: A, svd: A, grid: A, active: A, part_grid: A, part_nodes: A,
                  grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                  src: ti.i32, dst: ti.i32, keep: ti.i32):
     """The substep up to the grid update (stress and p2g): the grid holds momentum and mass."""
@@ -104,8 +104,8 @@ def pre_coupling(config: ti.template(), frames: A, params: A, gravity: A, kinds:
 
 
 @ti.kernel
-def post_coupling(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
-                  grid: A, active: A, part_grid: A, part_nodes: A,
+def post_coupling(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A,
+                  affine: A, svd: A, grid: A, active: A, part_grid: A, part_nodes: A,
                   grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                   src: ti.i32, dst: ti.i32, keep: ti.i32):
     """The rest of the substep: grid update, g2p, grid cleared."""
@@ -115,8 +115,8 @@ def post_coupling(config: ti.template(), frames: A, params: A, gravity: A, kinds
 
 
 @ti.kernel
-def write_state(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
-                grid: A, active: A, part_grid: A, part_nodes: A,
+def write_state(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A,
+                affine: A, svd: A, grid: A, active: A, part_grid: A, part_nodes: A,
                 grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                 f: ti.i32, src: A):
     """Frame f ← src (B, N · 25)."""
@@ -128,8 +128,8 @@ def write_state(config: ti.template(), frames: A, params: A, gravity: A, kinds: 
 
 
 @ti.kernel
-def read_state(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
-               grid: A, active: A, part_grid: A, part_nodes: A,
+def read_state(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A,
+               affine: A, svd: A, grid: A, active: A, part_grid: A, part_nodes: A,
                grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                f: ti.i32, dst: A):
     """dst (B, N · 25) ← frame f."""

@@ -44,14 +44,14 @@ def stress_stage(takes_svd: ti.template(), frames: ti.template(), params: ti.tem
                 p, C, F_tmp, J, U, sig, V = first, C_first, F_first, J_first, U_first, sig_first, V_first
                 if half == 1:
                     p, C, F_tmp, J, U, sig, V = second, C_second, F_second, J_second, U_second, sig_second, V_second
-                material_update(takes_svd, frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep, e, p, C,
-                                F_tmp, J, U, sig, V)
+                material_update(takes_svd, frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep,
+                                e, p, C, F_tmp, J, U, sig, V)
     else:
         for e, p in ti.ndrange(B, N):
             C, F_tmp = deformation(frames, row_at(src, e, p, B, N, WIDTH), h)
             identity = ti.Matrix.identity(float, 3)  # the SVD of a material that takes none (as decompose)
-            material_update(takes_svd, frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep, e, p, C, F_tmp,
-                            F_tmp.determinant(), identity, ti.Vector([1.0, 1.0, 1.0], float), identity)
+            material_update(takes_svd, frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep, e,
+                            p, C, F_tmp, F_tmp.determinant(), identity, ti.Vector([1.0, 1.0, 1.0], float), identity)
 
 
 @ti.func
