@@ -16,6 +16,7 @@ SMALLEST = {
     "kernel_times": ["--envs", "4", "--repeats", "1"],
     "render": ["--repeats", "1", "--frames", "2", "--record-frames", "2"],
     "mpm": ["--only", "ours", "--cases", "neohooken-10k", "--repeats", "1", "--no-first-step"],
+    "sand_pile": ["--only", "ours", "--angles", "30", "--steps", "2"],
 }
 
 
