@@ -9,7 +9,9 @@ memory is about one state per step, and nothing outlives the graph: zeroing and 
 torch's. Getters of derived quantities (link poses) are ``_Read`` nodes.
 
 With ``SimOptions(checkpoint_interval=k)``, only every k-th step saves its state; a step
-without one is recomputed from the nearest checkpoint by its ``Rollout`` during backward.
+without one is recomputed from the nearest checkpoint by its ``Rollout`` during backward. A step
+whose start state is not what the step before it returned (a setter replaced it in between)
+saves its state too: a recomputation from an earlier checkpoint would not repeat the setter.
 
 Nodes hold the simulator weakly: the simulator holds the newest state, whose grad_fn is a node,
 and a strong link back would be a cycle through torch's C++ graph that Python's collector
@@ -31,31 +33,42 @@ class Rollout:
         self.checkpoints = {}  # step index → (states at its start (tuple of tensors), warm starts)
         self.inputs = {}  # step index → inputs (only when interval > 1)
         self._replayed = {}  # step index → (start states, warm starts) recomputed during backward
+        self._last_outputs = ()  # weak references to the states the newest step returned
 
-    def keeps_state(self, index):
-        return index % self.interval == 0
+    def keeps_state(self, index, states):
+        """Whether step ``index``, starting from ``states``, keeps them: every interval-th step, and
+        a step whose start states are not the ones the step before returned (a setter replaced
+        them between the two steps, which no recomputation from an earlier checkpoint repeats)."""
+        return self.interval == 1 or index % self.interval == 0 or not (
+            len(self._last_outputs) == len(states) and all(map(lambda ref, s: ref() is s, self._last_outputs, states)))
 
-    def record(self, index, states, inputs, warm_starts):
+    def record(self, index, states, inputs, kept, warm_starts):
         if self.interval > 1:
             self.inputs[index] = inputs
-            if self.keeps_state(index):
+            if kept:
                 self.checkpoints[index] = (tuple(s.detach() for s in states), warm_starts)
 
+    def stepped(self, outputs):
+        """The newest step returned ``outputs`` (held weakly: a strong link from the rollout, which
+        every node of the graph holds, to a state whose grad_fn is a node would be a cycle)."""
+        self._last_outputs = tuple(weakref.ref(o) for o in outputs)
+
     def start_states(self, index):
-        """(states, warm starts) at the start of step ``index``, recomputed from the last
-        checkpoint if needed (from its warm starts too: the same steps again, bit for bit)."""
+        """(states, warm starts) at the start of step ``index``, recomputed from the checkpoint
+        before it (from its warm starts too: the same steps again, bit for bit); the steps up to
+        the next checkpoint are kept for the calls that follow (backward goes down the steps)."""
         if index not in self._replayed:
-            first = index - index % self.interval
+            first = max(k for k in self.checkpoints if k <= index)
             states, warm_starts = self.checkpoints[first]
             self._replayed = {first: (states, warm_starts)}
             sim = _alive(self.sim)
             with torch.no_grad():
-                for k in range(first, first + self.interval - 1):
-                    if k + 1 not in self.inputs:
-                        break
+                k = first
+                while k + 1 in self.inputs and k + 1 not in self.checkpoints:
                     states = sim.forward_step(states, self.inputs[k], warm_starts)
                     warm_starts = sim.warm_starts()
-                    self._replayed[k + 1] = (states, warm_starts)
+                    k += 1
+                    self._replayed[k] = (states, warm_starts)
         return self._replayed.pop(index)
 
 
@@ -75,13 +88,12 @@ def _check_generation(sim, generation, what):
 
 class _Step(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, sim, rollout, index, n_states, *tensors):
+    def forward(ctx, sim, rollout, index, kept, n_states, *tensors):
         states, inputs = tensors[:n_states], tensors[n_states:]
         outs = sim.forward_step(states, inputs)
-        ctx.sim, ctx.rollout, ctx.index, ctx.n_states = weakref.ref(sim), rollout, index, n_states
-        ctx.kept = rollout.keeps_state(index)
-        ctx.warm_starts = tuple(sim.started_from) if ctx.kept else None  # no tensors of the graph
-        rollout.record(index, states, inputs, ctx.warm_starts)
+        ctx.sim, ctx.rollout, ctx.index, ctx.n_states, ctx.kept = weakref.ref(sim), rollout, index, n_states, kept
+        ctx.warm_starts = tuple(sim.started_from) if kept else None  # no tensors of the graph
+        rollout.record(index, states, inputs, kept, ctx.warm_starts)
         ctx.save_for_backward(*(tensors if ctx.kept else inputs))
         return outs
 
@@ -95,12 +107,14 @@ class _Step(torch.autograd.Function):
         else:
             (states, warm_starts), inputs = ctx.rollout.start_states(ctx.index), saved
         grads = sim.backward_step(states, inputs, grad_states, warm_starts)
-        return (None, None, None, None, *grads)
+        return (None, None, None, None, None, *grads)
 
 
 def step(sim, rollout, index, states, inputs):
     """Run one differentiable step; returns the new states (tuple of tensors)."""
-    return _Step.apply(sim, rollout, index, len(states), *states, *inputs)
+    outs = _Step.apply(sim, rollout, index, rollout.keeps_state(index, states), len(states), *states, *inputs)
+    rollout.stepped(outs)
+    return outs
 
 
 class _Read(torch.autograd.Function):

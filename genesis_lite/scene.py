@@ -324,8 +324,11 @@ class Scene:
         return idx.astype(np.int64)
 
     def get_state(self):
+        """A snapshot of every solver's state: copies (in the graph when differentiable), never the
+        simulator's own tensors, so that changing it in place changes neither the scene nor the
+        state a plain reset() returns to (the state at build is that tensor until a step)."""
         sim = self._require_built("scene.get_state")
-        return SimState(self, [sim.state(slot.solver) for slot in sim.slots])
+        return SimState(self, [sim.state(slot.solver).clone() for slot in sim.slots])
 
     def set_gravity(self, gravity, envs_idx=None):
         """Gravity of every solver, m/s²: (3,) or (n_envs, 3); differentiable."""

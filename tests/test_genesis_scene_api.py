@@ -82,6 +82,24 @@ def test_reset_state_becomes_the_registered_initial_state(f64):
     assert torch.equal(robot.get_dofs_control_force(), torch.zeros(2, dtype=torch.float64))
 
 
+@pytest.mark.parametrize("requires_grad", [False, True])
+def test_get_state_is_a_snapshot_not_the_scene(f64, requires_grad):
+    """Changing a get_state() snapshot in place changes neither the scene nor what reset() returns
+    to: right after build the state tensor was the registered initial state itself (an edit moved
+    the live scene and every later reset)."""
+    scene, robot = _pendulum(requires_grad=requires_grad)
+    snapshot = scene.get_state()
+    initial = snapshot.rigid.detach().clone()
+    with torch.no_grad():
+        snapshot.rigid[0, 0] += 1.0
+    assert torch.equal(scene.get_state().rigid, initial)
+    robot.control_dofs_force([0.3, -0.1])
+    for _ in range(3):
+        scene.step()
+    scene.reset()
+    assert torch.equal(scene.get_state().rigid, initial)
+
+
 def test_reset_envs_idx_restores_only_those_envs(f64):
     scene, robot = _pendulum(requires_grad=False, n_envs=3)
     initial = scene.get_state().rigid.clone()

@@ -267,8 +267,8 @@ def test_sample_particles_from_morphs(meshes):
     mesh = sample_particles(gs.morphs.Mesh(file=meshes["ball"], pos=(0, 0, 0.5), scale=0.5), MPM.Liquid(), P, *walls,
                             0, "drop")
     assert np.linalg.norm(mesh - [0, 0, 0.5], axis=1).max() <= 0.05
-    with pytest.raises(gs.InvalidInputError, match="entity 'low': argument 'morph' must put every particle strictly "
-                                                   "inside the MPM walls"):
+    with pytest.raises(gs.InvalidInputError, match="entity 'low': argument 'morph' must put every particle "
+                                                   "strictly inside the MPM walls"):
         sample_particles(gs.morphs.Box(pos=(0, 0, 0.02), size=(0.1, 0.1, 0.1)), MPM.Elastic(), P, *walls, 0, "low")
     for morph in (gs.morphs.Capsule(), gs.morphs.Plane()):
         with pytest.raises(gs.InvalidInputError, match="must be gs.morphs.Box, Sphere, Cylinder or Mesh"):
@@ -288,12 +288,6 @@ class FakeSolver:
     wall_lower, wall_upper = np.array([-0.5, -0.5, 0.0]), np.array([0.5, 0.5, 1.0])
     particle_size = P
 
-    def __init__(self):
-        self.fibers = {}
-
-    def set_fiber(self, start, directions):
-        self.fibers[start] = directions
-
 
 class FakeSim:
     """The simulator's state/input interface: (B, N·WIDTH) state, (B, N) per-particle inputs."""
@@ -306,7 +300,8 @@ class FakeSim:
         self._state = rows.reshape(n_batch, -1)
         full = lambda value: torch.full((n_batch, n_particles), value, dtype=torch.float64)
         self._inputs = {"E": full(3e5), "nu": full(0.2), "rho": full(1000.0), "actu": full(0.0),
-                        "gravity": torch.zeros(n_batch, 3, dtype=torch.float64)}
+                        "gravity": torch.zeros(n_batch, 3, dtype=torch.float64),
+                        "fiber": torch.tensor(layout.DEFAULT_FIBER, dtype=torch.float64).repeat(n_batch, n_particles)}
 
     def state(self, solver):
         return self._state
@@ -428,8 +423,11 @@ def test_set_position_velocity(f64):
 
 def test_entity_state_errors(f64):
     scene, sim, sand, muscle = _scene(2)
-    cases = [(lambda: sand.set_particles_pos(torch.zeros(2, 8, 3, dtype=torch.float64)), gs.InvalidInputError,
-              "entity 'sand': argument 'poss' must put every particle strictly inside the MPM walls"),
+    on_walls = torch.tensor([[-0.5, 0.5, 0.0], [0.5, -0.5, 1.0]], dtype=torch.float64).repeat(4, 1)
+    sand.set_particles_pos(on_walls)  # where the solver keeps particles that reach a wall: accepted
+    assert torch.equal(sand.get_particles_pos(), on_walls.expand(2, 8, 3))
+    cases = [(lambda: sand.set_particles_pos(torch.full((2, 8, 3), -0.6, dtype=torch.float64)), gs.InvalidInputError,
+              "entity 'sand': argument 'poss' must put every particle inside the MPM walls (or on them)"),
              (lambda: sand.set_position([0.0, 0.0, 0.999]), gs.InvalidInputError, "inside the MPM walls"),
              (lambda: sand.set_particles_vel(torch.zeros(3, 8, 3)), gs.InvalidInputError,
               "entity 'sand': argument 'vels' must have shape (2, 8, 3)"),
@@ -439,12 +437,25 @@ def test_entity_state_errors(f64):
               "'particles_idx_local' must be integers in [0, 8)"),
              (lambda: sand.get_particles_pos(envs_idx=[2]), gs.InvalidInputError, "'envs_idx' must be integers"),
              (lambda: sand.set_particles_vel(torch.zeros(3, dtype=torch.complex128)), gs.InvalidInputError,
-              "complex")]
+              "complex"),
+             # values a float conversion would turn into NaN, 2e5 and 1.0, and a ragged list
+             (lambda: sand.set_particles_vel(None), gs.InvalidInputError,
+              "entity 'sand': argument 'vels' must be real numbers of shape (2, 8, 3), got NoneType"),
+             (lambda: muscle.set_material_params(E="2e5"), gs.InvalidInputError, "'E' must be real numbers"),
+             (lambda: muscle.set_material_params(E=True), gs.InvalidInputError, "got bool"),
+             (lambda: sand.set_particles_vel([[0.0, 0.0, 1.0], [0.0, 1.0]]), gs.InvalidInputError,
+              "'vels' must be numbers of shape (2, 8, 3), got list"),
+             (lambda: sand.set_position([0.0, 0.0, 0.3, 1.0]), gs.InvalidInputError,
+              "entity 'sand': argument 'value' must be a centre (3,) or (len(envs_idx), 3) or the particles' "
+              "positions (8, 3), got (4,)")]
     for call, error, fragment in cases:
         with pytest.raises(error) as info:
             call()
         assert fragment in str(info.value)
     scene, sim, sand, muscle = _scene(0, requires_grad=False)
+    with pytest.raises(gs.InvalidInputError, match=r"'value' must be a centre \(3,\) or the particles' positions "
+                                                   r"\(8, 3\), got \(2, 3\)"):  # two centres, one env
+        sand.set_position([[0.0, 0.0, 0.3], [0.0, 0.0, 0.2]])
     with pytest.raises(gs.GradientError, match="entity 'sand': argument 'vels' requires grad .*requires_grad=True"):
         sand.set_particles_vel(torch.zeros(3, requires_grad=True))
     with pytest.raises(gs.InvalidInputError, match="'envs_idx' must be None in a scene built with n_envs=0"):
@@ -482,8 +493,12 @@ def test_material_params(f64):
 
 def test_muscle_actuation(f64):
     scene, sim, sand, muscle = _scene(2, muscle_groups=2)
-    muscle.set_muscle(muscle_group=np.array([0, 1] * 4), muscle_direction=[0.0, 0.0, 2.0])
-    np.testing.assert_allclose(muscle._solver.fibers[8], np.tile([0.0, 0.0, 1.0], (8, 1)))
+    fiber = sim.inputs(None)["fiber"].reshape(2, 16, 3)
+    assert (fiber == torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)).all()  # Genesis's default
+    muscle.set_muscle(muscle_group=np.array([0, 1] * 4), muscle_direction=[2.0, 0.0, 0.0])
+    fiber = sim.inputs(None)["fiber"].reshape(2, 16, 3)
+    assert (fiber[:, 8:] == torch.tensor([1.0, 0.0, 0.0], dtype=torch.float64)).all()  # normalised, every env
+    assert (fiber[:, :8] == torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)).all()  # the sand's untouched
     actu = torch.tensor([[0.5, -0.25], [1.0, 2.0]], dtype=torch.float64, requires_grad=True)
     muscle.set_actuation(actu)
     per_particle = sim.inputs(None)["actu"]

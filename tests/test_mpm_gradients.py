@@ -75,7 +75,9 @@ class Rollout:
         self.inputs = {name: value.clone() for name, value in self.solver.default_inputs.items()}
         self.inputs["E"] *= torch.tensor(1.0 + 0.2 * rng.random((B, N)))
         if kind.startswith("muscle"):
-            self.solver.set_fiber(0, rng.normal(size=(N, 3)))
+            fibers = rng.normal(size=(N, 3))
+            self.inputs["fiber"] = torch.tensor(fibers / np.linalg.norm(fibers, axis=1, keepdims=True)).view(1, -1) \
+                .repeat(B, 1)
             self.inputs["actu"] = torch.tensor(rng.random((B, N)) * 0.5)
         self.weights = torch.tensor(rng.normal(size=(B, N * 25)))
         self.rng = rng
@@ -97,7 +99,7 @@ class Rollout:
         """(∂L/∂start state (B, N·25), {input: ∂L/∂input}), step by step in reverse."""
         _, starts = self.run(self.state, self.inputs, keep=True)
         grad = self.weights.clone()
-        totals = {name: torch.zeros_like(value) for name, value in self.inputs.items()}
+        totals = {name: torch.zeros_like(self.inputs[name]) for name in self.solver.grad_input_names}
         for start in reversed(starts):
             grad, grad_inputs = self.solver.backward(start, self.inputs, grad)
             for name in totals:
@@ -229,7 +231,7 @@ def test_the_shared_substep_loop_gives_the_bits_of_the_solver_alone(n_envs):
     fused = rollout.gradients()
     _, starts = rollout.run(rollout.state, rollout.inputs, keep=True)
     solver, grad = rollout.solver, rollout.weights.clone()
-    totals = {name: torch.zeros_like(value) for name, value in rollout.inputs.items()}
+    totals = {name: torch.zeros_like(rollout.inputs[name]) for name in solver.grad_input_names}
     for start in reversed(starts):
         solver.begin_reverse(start, rollout.inputs, grad, None)
         solver.begin_step(None)

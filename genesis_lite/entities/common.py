@@ -86,17 +86,22 @@ class EntityIndexing:
         the autograd graph; refused when it requires grad in a scene without gradients, or holds
         complex numbers or non-numbers (``expected``: the shape the message states)."""
         self._sim().check_grad_allowed(value, self.name, arg)
-        # complex values would silently lose their imaginary part in the float conversion below
-        if (value.is_complex() if isinstance(value, torch.Tensor) else np.iscomplexobj(value)):
-            raise InvalidInputError(f"{self._who}: argument '{arg}' must be real numbers of shape "
-                                    f"{expected}, got complex values")
-        try:
-            if isinstance(value, torch.Tensor):
-                return value.as_subclass(torch.Tensor).to(device=runtime.device, dtype=runtime.tc_float)
-            return torch.as_tensor(np.asarray(value, dtype=np.float64), dtype=runtime.tc_float, device=runtime.device)
-        except (TypeError, ValueError) as err:
-            raise InvalidInputError(f"{self._who}: argument '{arg}' must be numbers of shape {expected}, "
-                                    f"got {type(value).__name__} ({err})") from None
+        if isinstance(value, torch.Tensor):
+            kind = "complex" if value.is_complex() else "bool" if value.dtype == torch.bool else None
+        else:
+            try:  # (None, a string or a bool would become NaN, a number or 1.0 in a float conversion)
+                array = np.asarray(value)
+            except ValueError as err:  # a ragged nesting of sequences
+                raise InvalidInputError(f"{self._who}: argument '{arg}' must be numbers of shape {expected}, "
+                                        f"got {type(value).__name__} ({err})") from None
+            kind = None if array.dtype.kind in "iuf" else {"c": "complex", "b": "bool", "U": "strings", "S": "bytes"}.get(
+                array.dtype.kind, type(value).__name__ if array.ndim == 0 else "objects that are not numbers")
+        if kind is not None:
+            raise InvalidInputError(f"{self._who}: argument '{arg}' must be real numbers of shape {expected}, "
+                                    f"got {kind}")
+        if isinstance(value, torch.Tensor):
+            return value.as_subclass(torch.Tensor).to(device=runtime.device, dtype=runtime.tc_float)
+        return torch.as_tensor(array.astype(np.float64), dtype=runtime.tc_float, device=runtime.device)
 
     def _values(self, value, n_cols, envs, arg):
         """User values → (len(envs), n_cols) float tensor on gs.device; checked shape and finiteness.

@@ -44,16 +44,21 @@ def sample_particles(morph, material, particle_size, wall_lower, wall_upper, see
     else:
         raise InvalidInputError(f"{owner}: argument 'morph' of an MPM entity must be gs.morphs.Box, Sphere, Cylinder "
                                 f"or Mesh, got {type(morph).__name__}")
-    _check_inside(owner, "morph", particles, wall_lower, wall_upper)
+    _check_inside(owner, "morph", particles, wall_lower, wall_upper, strictly=True)
     return particles
 
 
-def _check_inside(owner, arg, positions, wall_lower, wall_upper):
-    """Raise unless every position (…, 3) (numpy) lies strictly between the walls."""
+def _check_inside(owner, arg, positions, wall_lower, wall_upper, strictly):
+    """Raise unless every position (…, 3) (numpy) lies between the walls: ``strictly`` for a morph's
+    particles (Genesis's check), else on them too, where the solver keeps particles that reach a
+    wall (g2p.wall_particle), so that what get_particles_pos returns is accepted back."""
     lower, upper = np.asarray(wall_lower), np.asarray(wall_upper)
-    if not (np.all(positions > lower) and np.all(positions < upper)):
+    inside = (np.all(positions > lower) and np.all(positions < upper)) if strictly else \
+        (np.all(positions >= lower) and np.all(positions <= upper))
+    if not inside:
         flat = positions.reshape(-1, 3)
-        raise InvalidInputError(f"{owner}: argument '{arg}' must put every particle strictly inside the MPM walls "
+        where = "strictly inside the MPM walls" if strictly else "inside the MPM walls (or on them)"
+        raise InvalidInputError(f"{owner}: argument '{arg}' must put every particle {where} "
                                 f"(MPMOptions lower_bound / upper_bound, 3 cells inside them): between "
                                 f"{lower.tolist()} and {upper.tolist()} m, got particles spanning "
                                 f"{flat.min(0).tolist()} to {flat.max(0).tolist()} m")
@@ -74,8 +79,7 @@ class MPMEntity(EntityIndexing):
 
     particles: the sampled world positions (n, 3) (sample_particles), whose offsets from
     morph.pos set_position uses to move the body as a whole.
-    The solver provides: ``wall_lower`` / ``wall_upper`` (3,) numpy m, ``particle_size`` m and
-    ``set_fiber(start, directions (n, 3))`` (muscle fibre directions).
+    The solver provides: ``wall_lower`` / ``wall_upper`` (3,) numpy m and ``particle_size`` m.
     """
 
     def __init__(self, scene, idx, name, morph, material, surface, solver, particle_start, n_particles,
@@ -163,12 +167,12 @@ class MPMEntity(EntityIndexing):
         """Particle positions, m: (n, 3) for the particles of particles_idx_local (all by
         default), (len(envs_idx), n, 3) per env, or anything broadcasting to it. As Genesis, the
         particles set start afresh: velocity 0, C = 0, F = I, Jp at the material's rest value.
-        Every position must lie strictly inside the MPM walls. Differentiable in ``poss``."""
+        Every position must lie inside the MPM walls (on them included). Differentiable in ``poss``."""
         parts = self._local(particles_idx_local, self.n_particles, "particles_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         pos = self._particle_values(poss, len(parts), (3,), envs, "poss")
         _check_inside(f"entity '{self.name}'", "poss", pos.detach().cpu().numpy(), self._solver.wall_lower,
-                      self._solver.wall_upper)
+                      self._solver.wall_upper, strictly=False)
         rest = pos.new_zeros(len(envs), len(parts), layout.WIDTH - 3)  # vel, C, F, Jp after pos
         rest[..., _span("F", 3)] = torch.eye(3, dtype=pos.dtype, device=pos.device).reshape(9)
         rest[..., _span("Jp", 3)] = self.material.default_Jp
@@ -188,6 +192,10 @@ class MPMEntity(EntityIndexing):
         offsets. A (n, 3) value with n == n_particles is per particle (as Genesis)."""
         tensor = self._tensor(value, "value", "(3,) or (n_particles, 3)")
         if tensor.dim() == 1 or (tensor.dim() == 2 and tensor.shape[0] != self.n_particles):
+            if tensor.shape[-1] != 3 or (tensor.dim() == 2 and self.scene.n_envs == 0):
+                centres = "(3,)" if self.scene.n_envs == 0 else "(3,) or (len(envs_idx), 3)"
+                raise InvalidInputError(f"entity '{self.name}': argument 'value' must be a centre {centres} or the "
+                                        f"particles' positions ({self.n_particles}, 3), got {tuple(tensor.shape)}")
             if self.init_particles is None:
                 raise SceneStateError(f"entity '{self.name}': set_position with a centre needs the sampled "
                                       f"particles, which the scene did not give the entity")
@@ -289,7 +297,17 @@ class MPMEntity(EntityIndexing):
             if not (np.all(np.isfinite(directions)) and np.all(norms > 0)):
                 raise InvalidInputError(f"entity '{self.name}': argument 'muscle_direction' must hold finite, non-zero "
                                         f"vectors, got a zero or non-finite one")
-            self._solver.set_fiber(self.particle_start, directions / norms[:, None])
+            self._write_fibers(directions / norms[:, None])
+
+    def _write_fibers(self, directions):
+        """The solver's input "fiber" (B, N · 3; every env alike) ← the unit directions (n, 3) of
+        this entity's particles: an input, so that each step records the fibres it ran with."""
+        sim = self._sim()
+        table = sim.inputs(self._solver)["fiber"]
+        columns = 3 * self.particle_start + np.arange(3 * self.n_particles)
+        values = torch.as_tensor(directions, dtype=table.dtype, device=table.device).reshape(1, -1)
+        sim.set_input(self._solver, "fiber", replace_columns(table, np.arange(table.shape[0]), columns,
+                                                             values.expand(table.shape[0], -1)))
 
     def get_muscle_group(self):
         """(n_particles,) int64 tensor: each particle's muscle group."""

@@ -10,8 +10,11 @@ each particle's row holds STATE's fields (row-major 3×3 matrices):
 
 Inputs (name → (B, width) tensor): E (B, n) Young's modulus, Pa; nu (B, n) Poisson ratio;
 rho (B, n) density, kg/m³; actu (B, n) muscle actuation, no unit (0 for other materials);
-gravity (B, 3) m/s². Parameters keep their value across scene.reset(); actu is a control,
-cleared by reset.
+gravity (B, 3) m/s²; fiber (B, n · 3) unit muscle fibre directions, the same in every env (the
+kernels read row 0; an input, not model data, so that every step records the directions it ran
+with and its backward replays them: set_muscle may change them between steps). Parameters and
+fibres keep their value across scene.reset(); actu is a control, cleared by reset. fiber has no
+gradient.
 
 Material kinds: each particle has a kind code (KIND) and N_CONSTS constants whose meaning
 depends on the kind (solvers/mpm/constitutive.py: encode).
@@ -26,7 +29,9 @@ SVD_WIDTH = 21
 #: per-particle inputs (B, n_particles), then per-env ones with their width
 PARTICLE_INPUTS = ("E", "nu", "rho", "actu")
 ENV_INPUTS = {"gravity": 3}
-PERSISTENT_INPUTS = ("E", "nu", "rho", "gravity")
+PERSISTENT_INPUTS = ("E", "nu", "rho", "gravity", "fiber")
+#: a muscle's fibre direction until set_muscle sets it (Genesis's)
+DEFAULT_FIBER = (0.0, 0.0, 1.0)
 
 #: material kind → code of the kernels' runtime branch
 KIND = {"corotation": 0, "neohooken": 1, "elastoplastic": 2, "snow": 3, "sand": 4, "liquid": 5,

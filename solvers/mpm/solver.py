@@ -1,7 +1,7 @@
 """The MPM solver: MLS-MPM particles of many materials on one grid (kernels.py), batched over envs.
 
 State per env: every particle's row of layout.STATE, flattened (B, N · 25). Inputs: layout's
-per-particle E, nu, rho, actu and the per-env gravity. Bookkeeping only: the physics is in the
+per-particle E, nu, rho, actu, the per-env gravity and the muscle fibres. Bookkeeping only: the physics is in the
 kernels of kernels.py (one launch per substep) and constitutive.py.
 """
 import warnings
@@ -161,8 +161,7 @@ class MPMSolver(MPMAdjoint, Solver):
         self.gravity_in = floats(B, 3)
         self.kinds = torch.as_tensor(m.kinds, device=runtime.device)
         self.consts = torch.as_tensor(m.consts, dtype=runtime.tc_float, device=runtime.device)
-        self.fiber = floats(N, 3)
-        self.fiber[:, 0] = 1.0
+        self.fiber = floats(N, 3)  # uploaded from the input "fiber" (layout)
         self.affine = floats(S if self.requires_grad else 1, B, N, 9)
         self.grid = floats(B, g.n_nodes, 4)
         self.active = ints(B + 1, g.n_nodes + 1)
@@ -202,7 +201,8 @@ class MPMSolver(MPMAdjoint, Solver):
     def _default_inputs(self):
         m, B = self.model, self.n_batch
         values = {"E": m.defaults["E"], "nu": m.defaults["nu"], "rho": m.defaults["rho"],
-                  "actu": np.zeros(m.n_particles), "gravity": self.gravity}
+                  "actu": np.zeros(m.n_particles), "gravity": self.gravity,
+                  "fiber": np.tile(layout.DEFAULT_FIBER, m.n_particles)}
         return {name: torch.as_tensor(np.tile(v, (B, 1)), dtype=runtime.tc_float, device=runtime.device)
                 for name, v in values.items()}
 
@@ -214,11 +214,6 @@ class MPMSolver(MPMAdjoint, Solver):
         rows[:, 24] = m.Jp0
         return torch.as_tensor(np.tile(rows.ravel(), (self.n_batch, 1)), dtype=runtime.tc_float,
                                device=runtime.device)
-
-    def set_fiber(self, start, directions):
-        """Muscle fibre directions (n, 3) of particles start.. (normalised here)."""
-        d = torch.as_tensor(np.asarray(directions, dtype=np.float64), dtype=runtime.tc_float, device=runtime.device)
-        self.fiber[start: start + len(d)] = d / d.norm(dim=1, keepdim=True)
 
     # -- moving data ------------------------------------------------------------------------
     def upload_state(self, state):
@@ -233,6 +228,7 @@ class MPMSolver(MPMAdjoint, Solver):
         with torch.no_grad():
             self.params.copy_(torch.stack([inputs[name] for name in layout.PARTICLE_INPUTS], dim=-1))
             self.gravity_in.copy_(inputs["gravity"])
+            self.fiber.copy_(inputs["fiber"][0].view(-1, 3))
 
     # -- stepping ---------------------------------------------------------------------------
     def begin_step(self, inputs):
