@@ -70,9 +70,12 @@ class Simulator:
             slot.state = slot.uploaded_state = solver.download_state()
         return slot.state
 
-    def set_state(self, solver, state):
+    def set_state(self, solver, state, envs=None):
+        """The state of ``solver`` ← state (B, width), of which the rows ``envs`` (int array; None:
+        all) changed: a reset or a setter (solver.state_replaced)."""
         slot = self.slot(solver)
         solver.upload_state(state)
+        solver.state_replaced(envs)
         slot.state = slot.uploaded_state = state
         slot.derived = None
 
@@ -135,7 +138,7 @@ class Simulator:
             slot.inputs = {name: current[name].detach() if name in slot.solver.persistent_inputs
                            else _restored(current[name], defaults[name], envs) for name in defaults}
             current_state = None if envs is None else self.state(slot.solver)
-            self.set_state(slot.solver, _restored(current_state, slot.initial_state, envs))
+            self.set_state(slot.solver, _restored(current_state, slot.initial_state, envs), envs)
 
     def step(self):
         if self.requires_grad:
@@ -301,6 +304,15 @@ class Simulator:
         """(B, D) generalised dof forces of the current state and inputs (solver.dofs_force);
         not differentiable (see _query)."""
         return self._query(solver, "get_dofs_force", solver.dofs_force)
+
+    def contacts(self, solver, what):
+        """(B, C, 9) the last step's contacts (solver.contacts), as a value whose backward raises
+        when the state requires grad: contact positions and forces are read-outs of the step's
+        collision and constraint solve, not differentiable (the state's gradient carries their
+        effect), and a gradient must never stop silently."""
+        value = solver.contacts()
+        state = self.slot(solver).state
+        return value if state is None else autograd.not_differentiable(what, state, value)
 
     def _query(self, solver, what, compute):
         """``compute()`` at the current state and inputs, as a value whose backward raises when

@@ -145,7 +145,8 @@ def _plane_kernel(meshes: ti.types.ndarray(), pos: ti.types.ndarray(), rot: ti.t
         p1, r1 = _pose(pos, rot, c, 0)
         p2, r2 = _pose(pos, rot, c, 1)
         zero = ti.Vector([0.0, 0.0, 0.0])
-        n, po, no, di, fe = cv.plane_mesh(p1, r1, zero, p2, r2, zero, meshes[c], margins[c], hull)
+        # centre2 = the frame origin: MuJoCo's mesh frame is its centre
+        n, po, no, di, fe = cv.plane_mesh(p1, r1, zero, p2, r2, zero, meshes[c], zero, margins[c], hull)
         _store(c, n, po, no, di, fe, count, position, normal, dist, feature)
 
 

@@ -291,7 +291,9 @@ def test_set_friction_is_the_differentiable_ratio_input(f64):
     scene, body = _scene("pyramidal")
     assert scene.rigid_solver.model.geom_friction[body.geom_start] == 1.0
     results = []
-    for set_friction in (lambda x: body.set_friction(x[0]), body.set_friction_ratio):
+    ones = torch.ones(body.n_links, dtype=torch.float64)  # (the scene is shared: another test's ratio is kept)
+    for set_friction in (lambda x: (body.set_friction_ratio(ones), body.set_friction(x[0])),
+                         lambda x: (body.set_friction(1.0), body.set_friction_ratio(x))):  # (the first's 1.3 kept)
         x = torch.tensor([1.3], dtype=torch.float64, requires_grad=True)
         scene.reset()
         _start(body, scene.n_envs, *SLIDE)
@@ -302,6 +304,29 @@ def test_set_friction_is_the_differentiable_ratio_input(f64):
         results.append((loss.detach(), x.grad))
     assert results[1][1].abs() > 0
     assert torch.equal(results[0][0], results[1][0]) and torch.equal(results[0][1], results[1][1])
+
+
+def test_friction_is_friction_times_ratio_whichever_is_set_last(f32):
+    """Genesis's rule: a geom's friction is its friction (set_friction) × its per-env ratio
+    (set_friction_ratio), each kept when the other is set (the ratio scaled the build's friction and
+    set_friction dropped the ratio: 0.25 then ratio 2 gave 2.0, ratio 0.5 then 0.8 gave 0.8). In
+    float32, whose 0.01 lies below 0.01, set_friction takes its documented lower bound."""
+    scene = gs.Scene(show_viewer=False)
+    scene.add_entity(gs.morphs.Plane())
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.1), pos=(0.0, 0.0, 0.05)))
+    scene.build(n_envs=2)
+
+    def friction():
+        return scene.sim.inputs(scene.rigid_solver)["friction"][:, box.geom_start].tolist()
+
+    box.set_friction(0.25)
+    box.set_friction_ratio([[2.0], [3.0]])
+    assert friction() == pytest.approx([0.5, 0.75])
+    box.set_friction(0.8)
+    assert friction() == pytest.approx([1.6, 2.4])
+    box.set_friction_ratio([0.5], envs_idx=[1])
+    assert friction() == pytest.approx([1.6, 0.4])
+    box.set_friction(0.01)
 
 
 def test_batched_equals_single_with_contact(f64):

@@ -236,6 +236,63 @@ def test_contact_readouts_of_a_batch_with_and_without_contacts(f64):
     found = box.get_contacts()
     assert found["valid_mask"].sum(1).tolist() == [4, 0]
     assert torch.all(found["position"][~found["valid_mask"]] == 0)
+    with pytest.raises(gs.InvalidInputError, match="argument 'with_entity' must be a rigid entity of the same scene"):
+        box.get_contacts(with_entity=0)
+    with pytest.raises(gs.InvalidInputError, match="argument 'exclude_self_contact' must be True or False"):
+        box.get_contacts(exclude_self_contact="no")
+
+
+def test_contacts_of_envs_a_reset_or_setter_replaced_are_gone_until_the_next_step(f64):
+    """Two envs with a box resting on the plane: after reset(envs_idx=[1]) and after set_pos, the
+    envs whose state was replaced report no contact and no contact force (the last step's held
+    for a box now in the air: stale observations right after a reset), the others keep theirs; the
+    next step finds contacts again (Genesis clears its collider when a state is set)."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002), show_viewer=False)
+    scene.add_entity(gs.morphs.Plane())
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.1), pos=(0.0, 0.0, 0.05)))
+    scene.build(n_envs=2)
+
+    def counts():
+        return box.get_contacts()["valid_mask"].sum(1).tolist(), box.get_links_net_contact_force()[:, 0, 2].tolist()
+
+    for _ in range(20):
+        scene.step()
+    assert counts()[0] == [4, 4]
+    scene.reset(envs_idx=[1])
+    found, force = counts()
+    assert found == [4, 0] and force[0] > 0.0 and force[1] == 0.0
+    scene.step()
+    assert counts()[0] == [4, 4]  # reset to where it rests: in contact again
+    box.set_pos([0.0, 0.0, 1.0], envs_idx=[0])
+    assert counts() == ([0, 4], [0.0, counts()[1][1]])
+    scene.step()
+    assert counts()[0] == [0, 4]
+
+
+def test_contact_readouts_refuse_a_backward_in_a_differentiable_scene(f64):
+    """get_contacts() and get_links_net_contact_force() are read-outs of the step's solve, not
+    differentiable: a loss through them raises GradientError at backward (it backpropagated and
+    left their term out, silently), detached they are plain values."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, requires_grad=True), show_viewer=False)
+    scene.add_entity(gs.morphs.Plane())
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.1), pos=(0.0, 0.0, 0.05)))
+    scene.build()
+    velocity = torch.tensor([0.5, 0.0, 0.0, 0.0, 0.0, 0.0], dtype=torch.float64, requires_grad=True)
+    for read in (lambda: box.get_links_net_contact_force().sum(), lambda: box.get_contacts()["force_b"].sum(),
+                 lambda: box.get_contacts()["position"].sum()):
+        scene.reset()
+        box.set_dofs_velocity(velocity)
+        for _ in range(5):
+            scene.step()
+        assert read().requires_grad  # in the graph: a loss through it would build
+        with pytest.raises(gs.GradientError, match="is not differentiable"):
+            (box.get_pos().sum() + read()).backward()
+    scene.reset()
+    box.set_dofs_velocity(velocity)
+    for _ in range(5):
+        scene.step()
+    (box.get_pos().sum() + box.get_links_net_contact_force().detach().sum()).backward()
+    assert velocity.grad[0] > 0.0
 
 
 def test_contact_stages_run_only_in_substeps_that_need_them(f64, monkeypatch):

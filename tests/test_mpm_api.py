@@ -306,7 +306,7 @@ class FakeSim:
     def state(self, solver):
         return self._state
 
-    def set_state(self, solver, state):
+    def set_state(self, solver, state, envs=None):
         self._state = state
 
     def inputs(self, solver):

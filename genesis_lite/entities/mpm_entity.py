@@ -126,7 +126,8 @@ class MPMEntity(EntityIndexing):
         columns = ((self.particle_start + parts)[:, None] * layout.WIDTH + np.arange(first, last)[None, :]).ravel()
         sim = self._sim()
         table = sim.state(self._solver)
-        sim.set_state(self._solver, replace_columns(table, envs, columns, values.reshape(len(envs), len(columns))))
+        sim.set_state(self._solver, replace_columns(table, envs, columns, values.reshape(len(envs), len(columns))),
+                      envs)
 
     def _write_input(self, name, parts, envs, values):
         """Per-particle input ``name`` of particles ``parts`` in envs ← values (len(envs), len(parts))."""

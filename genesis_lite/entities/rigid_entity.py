@@ -96,6 +96,7 @@ class RigidEntity(EntityIndexing):
         self.n_qs = sum(_NQS[spec.joint_type] for spec in link_specs)
         self.n_geoms = sum(len(spec.geoms) for spec in link_specs)
         self._link_geoms = np.cumsum([0] + [len(spec.geoms) for spec in link_specs])  # local geoms per link
+        self._friction = self._friction_ratio = None  # set_friction's and set_friction_ratio's (_friction_ratios)
         self._free = link_specs[0].joint_type == "free"
         self.links = [RigidLink(self, spec.name, k) for k, spec in enumerate(link_specs)]
         # Joints that move (a free root's too), as in Genesis: a fixed joint is no RigidJoint. Same
@@ -187,7 +188,7 @@ class RigidEntity(EntityIndexing):
             columns = np.concatenate([columns, self._vel_columns(np.arange(self.n_dofs))])
             values = torch.cat([values, values.new_zeros(len(envs), self.n_dofs)], dim=1)
         sim = self._sim()
-        sim.set_state(self._solver, _replace(sim.state(self._solver), envs, columns, values))
+        sim.set_state(self._solver, _replace(sim.state(self._solver), envs, columns, values), envs)
 
     def _read_input(self, name, columns, envs_idx):
         envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
@@ -439,9 +440,15 @@ class RigidEntity(EntityIndexing):
         geom_a, geom_b, link_a, link_b (global indices), position (m), force_a and force_b (N,
         world: the contact's force on geom a and on geom b). Shapes (n, ...) in an unbatched
         scene; (n_envs, C, ...) with a valid_mask (n_envs, C) in a batched one. with_entity: only
-        contacts with that entity (itself: self-contacts only); exclude_self_contact: drop those."""
-        self._sim()  # built?
-        raw = self._solver.contacts()
+        contacts with that entity (itself: self-contacts only); exclude_self_contact: drop those.
+        Not differentiable (a backward through position or forces raises)."""
+        if not (with_entity is None or (isinstance(with_entity, RigidEntity) and with_entity.scene is self.scene)):
+            raise InvalidInputError(f"entity '{self.name}': argument 'with_entity' must be a rigid entity of the same "
+                                    f"scene or None, got {with_entity!r}")
+        if not isinstance(exclude_self_contact, (bool, np.bool_)):
+            raise InvalidInputError(f"entity '{self.name}': argument 'exclude_self_contact' must be True or False, "
+                                    f"got {exclude_self_contact!r}")
+        raw = self._sim().contacts(self._solver, "get_contacts")
         model = self._solver.model
         geom_a, geom_b = raw[..., 0].long(), raw[..., 1].long()
         links = torch.as_tensor(model.geom_link, device=runtime.device, dtype=torch.long)
@@ -467,9 +474,9 @@ class RigidEntity(EntityIndexing):
 
     def get_links_net_contact_force(self, envs_idx=None):
         """(n_links, 3) or (n_envs, n_links, 3) N, world: the sum of the contact forces of the last
-        step's last substep on each link of the entity."""
+        step's last substep on each link of the entity. Not differentiable (a backward raises)."""
         envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
-        raw = self._solver.contacts()[envs]
+        raw = self._sim().contacts(self._solver, "get_links_net_contact_force")[envs]
         links = torch.as_tensor(self._solver.model.geom_link, device=runtime.device, dtype=torch.long)
         total = raw.new_zeros(len(envs), self._solver.model.n_links, 3)
         for side, sign in ((0, -1.0), (1, 1.0)):
@@ -481,32 +488,54 @@ class RigidEntity(EntityIndexing):
 
     # -- contact parameters -----------------------------------------------------------------------
     def set_friction(self, friction):
-        """Coulomb friction coefficient of every collision geom of the entity, in every env (a
-        contact takes the larger of its two geoms' values), in [0.01, 5] as Genesis: a number, or
-        a 0-d tensor, differentiable (as set_friction_ratio)."""
+        """Coulomb friction coefficient of every collision geom of the entity (a contact takes the
+        larger of its two geoms' values), in [0.01, 5] as Genesis: a number, or a 0-d tensor,
+        differentiable. As Genesis's, it keeps each env's friction ratio: a geom's friction is
+        friction × ratio (set_friction_ratio)."""
         try:
             value = None if isinstance(friction, (bool, np.bool_)) else self._tensor(friction, "friction", "()")
         except InvalidInputError:  # not numbers: the message below says what is expected
             value = None
-        if value is None or value.dim() != 0 or not 0.01 <= float(value.detach()) <= 5.0:
+        # (float32 holds 0.01 a little below it, 5.0 exactly: bounds within float32's round-off)
+        if value is None or value.dim() != 0 or not 0.01 * (1 - 1e-6) <= float(value.detach()) <= 5.0:
             raise InvalidInputError(f"entity '{self.name}': argument 'friction' must be a number in [0.01, 5.0], "
                                     f"got {friction!r}")
-        envs = self._envs(None) if self.scene.n_envs == 0 else np.arange(self.scene.n_envs)
-        self._write_input("friction", self.geom_start + np.arange(self.n_geoms), envs,
-                          value.expand(len(envs), self.n_geoms))
+        self._friction_ratios()  # (made from the build's values at the first call)
+        self._friction = value.expand(self.n_geoms)
+        self._write_friction(np.arange(self.n_geoms), self._envs(None))
 
     def set_friction_ratio(self, friction_ratio, links_idx_local=None, envs_idx=None):
-        """Friction of the geoms of the given links ← ratio (one per link, ≥ 0) × their friction at
-        build (the asset's or the material's)."""
+        """Friction ratio (one per link, ≥ 0) of the geoms of the given links, per env: a geom's
+        friction is its friction (the asset's or material's, or set_friction's) × its ratio (1 at
+        first), as Genesis's, whichever of the two is set last. Differentiable."""
         links = self._local(links_idx_local, self.n_links, "links_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         ratio = self._values(friction_ratio, len(links), envs, "friction_ratio")
         ratio = self._refuse_negative("friction_ratio", ratio)
         counts = torch.as_tensor(np.diff(self._link_geoms)[links], device=runtime.device)
         geoms = np.concatenate([np.arange(self._link_geoms[l], self._link_geoms[l + 1]) for l in links] + [[]])
-        geoms = self.geom_start + geoms.astype(np.int64)
-        base = torch.as_tensor(self._solver.model.geom_friction[geoms], dtype=runtime.tc_float, device=runtime.device)
-        self._write_input("friction", geoms, envs, torch.repeat_interleave(ratio, counts, dim=1) * base)
+        geoms = geoms.astype(np.int64)
+        self._friction_ratios()  # (the table exists)
+        self._friction_ratio = _replace(self._friction_ratio, envs, geoms, torch.repeat_interleave(ratio, counts, dim=1))
+        self._write_friction(geoms, envs)
+
+    def _friction_ratios(self):
+        """(friction (n_geoms,), ratio (B, n_geoms)) of the entity's geoms, made at the first call
+        from the build's friction and ratios of 1."""
+        if self._friction_ratio is None:
+            model = self._solver.model
+            self._friction = torch.as_tensor(model.geom_friction[self.geom_start: self.geom_start + self.n_geoms],
+                                             dtype=runtime.tc_float, device=runtime.device)
+            self._friction_ratio = torch.ones(self._solver.n_batch, self.n_geoms, dtype=runtime.tc_float,
+                                              device=runtime.device)
+        return self._friction, self._friction_ratio
+
+    def _write_friction(self, geoms, envs):
+        """The input "friction" of the entity's geoms ``geoms`` (local) in ``envs`` ← friction × ratio."""
+        friction, ratio = self._friction_ratios()
+        index = torch.as_tensor(geoms, device=runtime.device, dtype=torch.long)
+        rows = torch.as_tensor(envs, device=runtime.device, dtype=torch.long)
+        self._write_input("friction", self.geom_start + geoms, envs, friction[index] * ratio[rows][:, index])
 
     def set_sol_params(self, sol_params, geoms_idx_local=None, envs_idx=None):
         """Contact softness of the entity's geoms (all by default): 7 numbers, Genesis's and

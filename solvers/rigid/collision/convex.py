@@ -1696,7 +1696,7 @@ def _quad_on(hull: ti.template(), vadr, padr, num, s, b, c, d):
 
 
 @ti.func
-def plane_mesh(pos1, rot1, size1, pos2, rot2, size2, mesh2, margin, hull: ti.template()):
+def plane_mesh(pos1, rot1, size1, pos2, rot2, size2, mesh2, centre2, margin, hull: ti.template()):
     """Contacts between a plane (geom 1: normal = its z axis, through pos1) and a mesh (geom 2),
     as MuJoCo 4.0's mjc_PlaneConvex (read from its compiled code): the mesh's support vertex
     along -normal, then the other vertices of the hull polygon at it that faces the plane most
@@ -1704,8 +1704,12 @@ def plane_mesh(pos1, rot1, size1, pos2, rot2, size2, mesh2, margin, hull: ti.tem
     within `margin` of the plane and on the plane's side of the mesh centre. Contacts at the
     vertices moved half their depth along the normal.
 
-    Arguments as convex_convex (size1, size2 unused, no workspace); returns as convex_convex,
-    budget PLANE_MESH_MAX; features KIND_PLANE with the vertex id.
+    Arguments as convex_convex (size1, size2 unused, no workspace), and centre2 (3,): the mesh's
+    centre in its frame (its hull's box centre). MuJoCo's test is against the geom's origin, which
+    is the mesh's centre there (it moves a mesh's frame to its centre of mass); a mesh file's
+    origin may lie anywhere (at its base, below it), where that test dropped every vertex but the
+    deepest and the body never came to rest. Returns as convex_convex, budget PLANE_MESH_MAX;
+    features KIND_PLANE with the vertex id.
     """
     position = ti.Matrix.zero(float, PLANE_MESH_MAX, 3)
     normal_out = ti.Matrix.zero(float, PLANE_MESH_MAX, 3)
@@ -1766,7 +1770,7 @@ def plane_mesh(pos1, rot1, size1, pos2, rot2, size2, mesh2, margin, hull: ti.tem
                 vertex = hull.hull_poly_vert[vert_adr + picks[k]]
                 point = _rot(rot2, hull.hull_vert[vadr + vertex]) + pos2
                 depth = _dot(normal, point - pos1)
-                keep = depth <= margin and not _dot(normal, point - pos2) > 0
+                keep = depth <= margin and not _dot(normal, point - (_rot(rot2, centre2) + pos2)) > 0
             if keep:
                 contact = point + normal * (depth * -0.5)
                 for c in ti.static(range(3)):
