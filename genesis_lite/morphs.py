@@ -53,6 +53,8 @@ class Morph:
                 raise InvalidInputError(f"{owner}: argument 'quat' must be a non-zero quaternion (w, x, y, z), "
                                         f"got {self.quat!r}")
             self.quat = q / np.linalg.norm(q)
+        if not isinstance(self.fixed, (bool, np.bool_)):  # ('no' would weld the body)
+            raise InvalidInputError(f"{owner}: argument 'fixed' must be True or False, got {self.fixed!r}")
         self._check()
 
     def _check(self):
@@ -139,8 +141,8 @@ class Cylinder(Morph):
     height: float = 1.0
 
     def _check(self):
-        _positive("Cylinder", "radius", self.radius)
-        _positive("Cylinder", "height", self.height)
+        _positive(type(self).__name__, "radius", self.radius)
+        _positive(type(self).__name__, "height", self.height)
 
 
 @dataclass
@@ -165,10 +167,12 @@ class Plane(Morph):
     """The ground: an infinite static half-space (always fixed) bounded by the plane through pos
     whose normal is ``normal`` (3,) in the morph's frame (euler / quat turn it), pointing out of
     the solid side: by default +z, the half-space below z = pos[2]."""
+    fixed: bool = True
     normal: tuple = (0.0, 0.0, 1.0)
 
     def _check(self):
-        self.fixed = True
+        if not self.fixed:  # (Genesis's rule too)
+            raise InvalidInputError("Plane: argument 'fixed' must be True (a plane is always fixed), got False")
         normal = _vec("Plane", "normal", self.normal, 3)
         if not np.linalg.norm(normal) > 1e-9:
             raise InvalidInputError(f"Plane: argument 'normal' must be a non-zero 3-vector, got {self.normal!r}")

@@ -93,6 +93,15 @@ def test_missing_mesh_morph(f64, tmp_path):
            "entity 'blob'", "'file'", path, "does not exist")
 
 
+def test_morph_arguments():
+    """A morph names itself and the argument: 'fixed' is a bool (a truthy string welded the body),
+    a Plane is always fixed (False was dropped without a word), a capsule says Capsule."""
+    raises(gs.InvalidInputError, lambda: gs.morphs.Box(fixed="no"), "Box", "'fixed'", "True or False", "'no'")
+    raises(gs.InvalidInputError, lambda: gs.morphs.Plane(fixed=False), "Plane", "'fixed'", "must be True")
+    raises(gs.InvalidInputError, lambda: gs.morphs.Capsule(radius=0.0), "Capsule: argument 'radius'", "positive")
+    assert gs.morphs.Plane().fixed and not gs.morphs.Box().fixed
+
+
 def test_moving_massless_link_raises_at_build(f64, tmp_path):
     path = write_urdf(tmp_path, LINK_A + '<link name="b"/>' + joint("hinge", "revolute"))
     scene = gs.Scene()

@@ -287,6 +287,10 @@ class FakeSolver:
     """What MPMEntity asks of the MPM solver."""
     wall_lower, wall_upper = np.array([-0.5, -0.5, 0.0]), np.array([0.5, 0.5, 1.0])
     particle_size = P
+    checked = None
+
+    def check_substep(self, E, nu, rho):
+        self.checked = (E, nu, rho)
 
 
 class FakeSim:
@@ -479,6 +483,8 @@ def test_material_params(f64):
     torch.testing.assert_close(grho, torch.full((2, 8), P ** 3, dtype=torch.float64))
     sand.set_material_params(rho=[[800.0] * 8], envs_idx=[1], particles_idx_local=None)
     assert (sim.inputs(None)["rho"][1, :8] == 800).all() and (sim.inputs(None)["rho"][0, :8] == 1000).all()
+    E_checked, nu_checked, rho_checked = sand._solver.checked  # the substep checked against the envs set
+    assert E_checked.shape == (1, 8) and (E_checked == 3e5).all() and (rho_checked == 800).all()
     held = {name: value.clone() for name, value in sim.inputs(None).items()}
     for kwargs, fragment in [({"E": 1e5, "nu": 0.5}, "'nu' must be in (−1, 0.5), got values from 0.5"),
                              ({"E": torch.zeros(8)}, "'E' must be > 0 (Pa)"), ({"rho": -1.0}, "'rho' must be > 0"),

@@ -206,8 +206,22 @@ def test_arrays_beyond_32_bit_indices_raise(f64, monkeypatch):
 def test_a_substep_above_the_stability_limit_warns(f64):
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=1e-2, substeps=1), mpm_options=gs.options.MPMOptions(**SMALL))
     scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.3), size=(0.1, 0.1, 0.1)), material=_jelly(), name="jelly")
-    with pytest.warns(UserWarning, match="entities: jelly.*exceeds the stability limit"):
+    with pytest.warns(UserWarning, match="entities: jelly.*exceeds the stability limit") as record:
         scene.build()
+    assert record[0].filename == __file__  # at the user's line
+
+
+def test_a_material_made_stiffer_than_the_substep_allows_warns(f64):
+    """set_material_params checks the substep against the new stiffness too (E 1e10 after build ran
+    to NaN without a word before the step that blew up); a softer value does not warn."""
+    import warnings
+    scene, blob, _ = _scene(_jelly())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        blob.set_material_params(E=2e5)
+    with pytest.warns(UserWarning, match="entities: blob.*exceeds the stability limit.*dx / wave speed") as record:
+        blob.set_material_params(E=1e10)
+    assert record[0].filename == __file__
 
 
 @pytest.mark.parametrize("scale", [1.0, 2.0])

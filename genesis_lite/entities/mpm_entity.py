@@ -241,6 +241,12 @@ class MPMEntity(EntityIndexing):
             checked[name] = values
         for name, values in checked.items():
             self._write_input(name, parts, envs, values)
+        if checked:  # a stiffer or lighter material may need a shorter substep
+            inputs = self._sim().inputs(self._solver)
+            columns = torch.as_tensor(self.particle_start + parts, device=runtime.device)
+            rows = torch.as_tensor(envs, device=runtime.device)
+            self._solver.check_substep(*(inputs[name][rows][:, columns].detach().cpu().numpy()
+                                         for name in ("E", "nu", "rho")))
 
     def get_mass(self, envs_idx=None):
         """Total mass, kg: Σ rho · particle_size³, () or (n_envs,); differentiable in rho."""

@@ -132,18 +132,25 @@ class MPMSolver(MPMAdjoint, Solver):
                                     f"lower_bound/upper_bound, or use fewer particles, envs or substeps")
 
     def _check_substep(self):
-        """Warn when the substep exceeds the stability limit: Genesis's suggested h ≤ 2e-2·dx, and
-        the elastic wave's CFL bound h ≤ dx / c with c = √((λ + 2μ)/ρ) of the stiffest material."""
+        """At build: check_substep with the materials' parameters."""
+        m = self.model
+        self.check_substep(m.defaults["E"], m.defaults["nu"], m.defaults["rho"], stacklevel=6)  # the user's build
+
+    def check_substep(self, E, nu, rho, stacklevel=3):
+        """Warn when the substep exceeds the stability limit for particles of Young's modulus E (Pa),
+        Poisson ratio nu and density rho (kg/m³), arrays of one shape: Genesis's suggested
+        h ≤ 2e-2·dx, and the elastic wave's CFL bound h ≤ dx / c with c = √((λ + 2μ)/ρ) of the
+        stiffest particle (also after set_material_params raises a stiffness)."""
         m, h = self.model, self.dt / self.substeps
-        E, nu, rho = m.defaults["E"], m.defaults["nu"], m.defaults["rho"]
+        E, nu, rho = np.asarray(E, dtype=np.float64), np.asarray(nu, dtype=np.float64), np.asarray(rho, dtype=np.float64)
         modulus = E * (1 - nu) / ((1 + nu) * (1 - 2 * nu))  # λ + 2μ
-        wave = float(np.sqrt(np.max(modulus / rho))) if m.n_particles else 0.0
+        wave = float(np.sqrt(np.max(modulus / rho))) if modulus.size else 0.0
         limit = min(GENESIS_DT_PER_DX * m.grid.dx, m.grid.dx / wave if wave > 0 else np.inf)
         if h > limit:
             warnings.warn(f"MPM solver (entities: {', '.join(self.entity_names)}): the substep dt / substeps = "
                           f"{h:.3g} s exceeds the stability limit {limit:.3g} s (min of 2e-2·dx = "
                           f"{GENESIS_DT_PER_DX * m.grid.dx:.3g} s and dx / wave speed = {m.grid.dx / wave:.3g} s); "
-                          f"the simulation may blow up: raise SimOptions substeps or lower dt", stacklevel=4)
+                          f"the simulation may blow up: raise SimOptions substeps or lower dt", stacklevel=stacklevel)
 
     def _allocate(self):
         m, B, N = self.model, self.n_batch, self.model.n_particles
