@@ -43,8 +43,8 @@ class Rollout:
             len(self._last_outputs) == len(states) and all(map(lambda ref, s: ref() is s, self._last_outputs, states)))
 
     def record(self, index, states, inputs, kept, warm_starts):
-        if self.interval > 1:
-            self.inputs[index] = inputs
+        if self.interval > 1:  # detached: an input computed from a state would close a cycle through the graph
+            self.inputs[index] = tuple(t.detach() for t in inputs)
             if kept:
                 self.checkpoints[index] = (tuple(s.detach() for s in states), warm_starts)
 
@@ -101,6 +101,7 @@ class _Step(torch.autograd.Function):
     def backward(ctx, *grad_states):
         sim = _alive(ctx.sim)
         _check_generation(sim, ctx.rollout.generation, f"step {ctx.index}")
+        sim.hold_contacts()  # the replays below overwrite what the last step found
         saved = ctx.saved_tensors
         if ctx.kept:
             states, inputs, warm_starts = saved[: ctx.n_states], saved[ctx.n_states:], ctx.warm_starts

@@ -57,7 +57,9 @@ class SimOptions:
     check_nan: stop at the first non-finite state, naming the step and entity (without it, an MPM
         blow-up, whose particles the walls keep at finite positions, warns once).
     checkpoint_interval: with requires_grad, keep the state of every k-th step only and
-        recompute the others during backward (memory ÷ k, about one extra forward pass).
+        recompute the others during backward (memory ÷ k, about one extra forward pass). A step
+        whose state a setter replaced keeps its state too (a recomputation would miss the
+        setter): with a setter before every step, every state is kept.
     """
     dt: float = 1e-2
     substeps: int = 1

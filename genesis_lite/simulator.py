@@ -8,6 +8,7 @@ value) and Taichi is re-synchronised only when something else (a backward pass) 
 import operator
 import weakref
 
+import numpy as np
 import torch
 
 from . import autograd
@@ -37,6 +38,11 @@ class SolverSlot:
         self.uploaded_inputs = None  # ((tensor, ...), (version, ...)): Taichi's inputs equal
         self.derived = None  # (state, value) cache of the last derived read
         self.warned_nonfinite = False  # _check_finite warned once since the last reset
+        # contacts() of the last step: (B,) bool of the envs whose state a reset or setter replaced
+        # since (None: none), and the contacts as the step left them, kept before a backward's
+        # replays overwrite the solver's (None: the solver still holds them)
+        self.replaced_envs = None
+        self.held_contacts = None
 
 
 class Simulator:
@@ -72,10 +78,13 @@ class Simulator:
 
     def set_state(self, solver, state, envs=None):
         """The state of ``solver`` ← state (B, width), of which the rows ``envs`` (int array; None:
-        all) changed: a reset or a setter (solver.state_replaced)."""
+        all) changed: a reset or a setter, after which those envs have no contacts until the next
+        step (Genesis clears its collider when a state is set)."""
         slot = self.slot(solver)
         solver.upload_state(state)
-        solver.state_replaced(envs)
+        if slot.replaced_envs is None:
+            slot.replaced_envs = np.zeros(state.shape[0], dtype=bool)
+        slot.replaced_envs[slice(None) if envs is None else envs] = True
         slot.state = slot.uploaded_state = state
         slot.derived = None
 
@@ -162,7 +171,7 @@ class Simulator:
                 slot.state = None
                 slot.uploaded_state = None
         for slot in self.slots:
-            slot.derived = None
+            slot.derived = slot.replaced_envs = slot.held_contacts = None
         self._check_finite()
         self.step_index += 1
 
@@ -306,13 +315,22 @@ class Simulator:
         return self._query(solver, "get_dofs_force", solver.dofs_force)
 
     def contacts(self, solver, what):
-        """(B, C, 9) the last step's contacts (solver.contacts), as a value whose backward raises
-        when the state requires grad: contact positions and forces are read-outs of the step's
-        collision and constraint solve, not differentiable (the state's gradient carries their
-        effect), and a gradient must never stop silently."""
-        value = solver.contacts()
-        state = self.slot(solver).state
-        return value if state is None else autograd.not_differentiable(what, state, value)
+        """(B, C, 9) the last step's contacts (solver.contacts), none in the envs replaced since
+        (set_state), as a value whose backward raises when the state requires grad: contact
+        positions and forces are read-outs of the step's collision and constraint solve, not
+        differentiable (the state's gradient carries their effect), and a gradient must never stop
+        silently."""
+        slot = self.slot(solver)
+        value = solver.contacts() if slot.held_contacts is None else slot.held_contacts
+        if slot.replaced_envs is not None:
+            value = solver.without_contacts(value, torch.as_tensor(slot.replaced_envs, device=value.device))
+        return value if slot.state is None else autograd.not_differentiable(what, slot.state, value)
+
+    def hold_contacts(self):
+        """Keep every contact solver's last-step contacts before a backward replays steps over them."""
+        for slot in self.slots:
+            if slot.held_contacts is None and hasattr(slot.solver, "contacts"):
+                slot.held_contacts = slot.solver.contacts()
 
     def _query(self, solver, what, compute):
         """``compute()`` at the current state and inputs, as a value whose backward raises when

@@ -57,10 +57,6 @@ class Solver:
         """Taichi state ← state (B, width)."""
         raise NotImplementedError
 
-    def state_replaced(self, envs):
-        """The scene replaced the state of ``envs`` (int array; None: all) between steps (a reset, a
-        setter): what the last step found there (contacts) is gone. Nothing here."""
-
     def download_state(self):
         """The current Taichi state as a new torch tensor (B, width)."""
         raise NotImplementedError

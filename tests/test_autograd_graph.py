@@ -271,6 +271,31 @@ def test_checkpointing_bit_identical_with_setters_between_steps(f64):
     assert bool((grads[1][1] != 0).all())
 
 
+def test_a_checkpointed_closed_loop_rollout_is_freed_after_reset(f64):
+    """Controls computed from the state (a closed loop) with checkpoint_interval 2: the rollout keeps
+    each step's inputs for its recomputations, detached, else input → its graph → the step's node →
+    the rollout would be a cycle inside torch's graph that Python's collector cannot see (the old
+    rollout, its checkpoints and graph lived on after reset)."""
+    import gc
+    import weakref
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True, checkpoint_interval=2))
+    robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
+    scene.build()
+    gain = torch.tensor(0.5, dtype=torch.float64, requires_grad=True)
+    scene.reset()
+    robot.set_dofs_position([0.2, 0.1])
+    for _ in range(6):
+        robot.control_dofs_force(-gain * robot.get_dofs_position())
+        scene.step()
+    (robot.get_dofs_position() ** 2).sum().backward()
+    assert gain.grad != 0.0
+    rollout = weakref.ref(scene.sim.rollout)
+    scene.reset()
+    scene.step()
+    gc.collect()
+    assert rollout() is None
+
+
 def test_gradient_finite_at_zero_joint_angles(f64):
     """Stand-in values of unused joint branches must not leak NaN into gradients (q = 0)."""
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True))

@@ -329,6 +329,29 @@ def test_friction_is_friction_times_ratio_whichever_is_set_last(f32):
     box.set_friction(0.01)
 
 
+def test_friction_and_ratio_set_in_one_rollout_are_detached_by_reset(f64):
+    """The entity keeps friction and ratio between calls; a reset detaches them as the scene's
+    parameters, so a later rollout's backward does not run through the earlier one's graph (it
+    raised 'backward through the graph a second time')."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True), show_viewer=False)
+    scene.add_entity(gs.morphs.Plane())
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.1), pos=(0.0, 0.0, 0.05)))
+    scene.build()
+    ratio = torch.tensor([1.5], dtype=torch.float64, requires_grad=True)
+    friction = torch.tensor(0.9, dtype=torch.float64, requires_grad=True)
+    grads = []
+    for set_param in (lambda: box.set_friction_ratio(ratio), lambda: box.set_friction(friction)):
+        scene.reset()
+        set_param()
+        box.set_dofs_velocity([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+        for _ in range(5):
+            scene.step()
+        box.get_pos()[0].backward()
+        grads.append(ratio.grad.clone())
+    assert grads[0] != 0.0 and friction.grad != 0.0  # (0.9 × 1.5 above the plane's 1.0: the box's friction acts)
+    assert torch.equal(grads[1], grads[0])  # the second rollout reaches the ratio no more
+
+
 def test_batched_equals_single_with_contact(f64):
     assert_batch_equals_single(4)
 

@@ -269,6 +269,26 @@ def test_contacts_of_envs_a_reset_or_setter_replaced_are_gone_until_the_next_ste
     assert counts()[0] == [0, 4]
 
 
+def test_contacts_after_a_backward_are_the_last_steps(f64):
+    """A backward replays steps over the solver's contact arrays: the read-outs after it still give
+    the last step's contacts (they gave the first replayed step's: a landed box read none), and an
+    env replaced before it still has none."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, requires_grad=True), show_viewer=False)
+    scene.add_entity(gs.morphs.Plane())
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.1), pos=(0.0, 0.0, 0.1)))
+    scene.build(n_envs=2)
+    velocity = torch.zeros(2, 6, dtype=torch.float64, requires_grad=True)
+    box.set_dofs_velocity(velocity)
+    for _ in range(60):  # falls 5 cm, lands
+        scene.step()
+    landed = box.get_contacts()["valid_mask"].sum(1).tolist()
+    assert landed == [4, 4]
+    loss = box.get_pos().sum()
+    box.set_pos([0.0, 0.0, 1.0], envs_idx=[1])
+    loss.backward()
+    assert box.get_contacts()["valid_mask"].sum(1).tolist() == [4, 0]
+
+
 def test_contact_readouts_refuse_a_backward_in_a_differentiable_scene(f64):
     """get_contacts() and get_links_net_contact_force() are read-outs of the step's solve, not
     differentiable: a loss through them raises GradientError at backward (it backpropagated and

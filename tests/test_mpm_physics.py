@@ -223,8 +223,9 @@ def test_sand_column_collapse_slope(f64, friction_angle, monkeypatch):
     volume correction leaves a particle that has expanded stress-free until it is compressed
     again: 70–85 % of the flowing grains and 40–47 % of the deposit are in that state, so friction
     does not act on the material that runs out. Conversely the Drucker–Prager cone, fitted to
-    compression, lets an axisymmetric pile stand far above φ (a 60° cone with φ 45° holds). Within
-    ±7° for φ ≤ 30° only (and at 30° by a hair: 21.3°)."""
+    compression, lets an axisymmetric pile stand far above φ (a 60° cone with φ 45° holds). Not
+    within ±7° even at 30° (21.3°, 8.7° below; Genesis 21.7–22.2°). Asserted besides: the slope
+    within 3° of the measured one (a change of the sand model or the walls shows)."""
     monkeypatch.syspath_prepend(BENCH)
     import sand_pile
     scene, sand, floor = sand_pile.column(gs, "ours", friction_angle)
@@ -232,6 +233,7 @@ def test_sand_column_collapse_slope(f64, friction_angle, monkeypatch):
     print(f"\nsand column φ = {friction_angle}°: deposit flank slope {angle:.1f}°; profile r {np.round(radii, 3)} "
           f"h {np.round(heights, 3)}")
     assert 10.0 < angle < friction_angle + 7.0
+    assert abs(angle - {30.0: 21.3, 45.0: 28.5}[friction_angle]) < 3.0
 
 
 # -- plasticity under a press ------------------------------------------------------------------------------

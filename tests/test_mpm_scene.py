@@ -203,6 +203,20 @@ def test_arrays_beyond_32_bit_indices_raise(f64, monkeypatch):
         scene.build(n_envs=500)
 
 
+def test_positions_the_walls_clamped_are_accepted_back_in_float32(f32):
+    """Particles thrown onto the floor sit on its wall as the kernels round it (float32: 0.19374999
+    for a wall at 0.19375); set_particles_pos(get_particles_pos()) takes them back (it compared
+    them with the float64 wall and refused)."""
+    scene, blob, _ = _scene(gs.materials.MPM.Liquid(), lower_bound=(-0.3, -0.3, 0.1), upper_bound=(0.3, 0.3, 0.7),
+                            pos=(0.0, 0.0, 0.3), size=(0.08, 0.08, 0.08))
+    blob.set_velocity([0.0, 0.0, -20.0])
+    for _ in range(3):
+        scene.step()
+    pos = blob.get_particles_pos()
+    assert float(pos[:, 2].min()) == np.float32(0.1 + 3.0 / 32)  # on the floor's wall, rounded
+    blob.set_particles_pos(pos)
+
+
 def test_a_substep_above_the_stability_limit_warns(f64):
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=1e-2, substeps=1), mpm_options=gs.options.MPMOptions(**SMALL))
     scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.3), size=(0.1, 0.1, 0.1)), material=_jelly(), name="jelly")

@@ -91,7 +91,7 @@ class EntityIndexing:
         else:
             try:  # (None, a string or a bool would become NaN, a number or 1.0 in a float conversion)
                 array = np.asarray(value)
-            except ValueError as err:  # a ragged nesting of sequences
+            except (ValueError, TypeError, RuntimeError) as err:  # ragged; tensors numpy cannot take
                 raise InvalidInputError(f"{self._who}: argument '{arg}' must be numbers of shape {expected}, "
                                         f"got {type(value).__name__} ({err})") from None
             kind = None if array.dtype.kind in "iuf" else {"c": "complex", "b": "bool", "U": "strings", "S": "bytes"}.get(

@@ -52,7 +52,8 @@ def _check_inside(owner, arg, positions, wall_lower, wall_upper, strictly):
     """Raise unless every position (…, 3) (numpy) lies between the walls: ``strictly`` for a morph's
     particles (Genesis's check), else on them too, where the solver keeps particles that reach a
     wall (g2p.wall_particle), so that what get_particles_pos returns is accepted back."""
-    lower, upper = np.asarray(wall_lower), np.asarray(wall_upper)
+    # (in the positions' precision: the kernels clamp particles onto the walls rounded to it)
+    lower, upper = np.asarray(wall_lower).astype(positions.dtype), np.asarray(wall_upper).astype(positions.dtype)
     inside = (np.all(positions > lower) and np.all(positions < upper)) if strictly else \
         (np.all(positions >= lower) and np.all(positions <= upper))
     if not inside:

@@ -97,6 +97,7 @@ class RigidEntity(EntityIndexing):
         self.n_geoms = sum(len(spec.geoms) for spec in link_specs)
         self._link_geoms = np.cumsum([0] + [len(spec.geoms) for spec in link_specs])  # local geoms per link
         self._friction = self._friction_ratio = None  # set_friction's and set_friction_ratio's (_friction_ratios)
+        self._friction_generation = None  # the rollout they were set in
         self._free = link_specs[0].joint_type == "free"
         self.links = [RigidLink(self, spec.name, k) for k, spec in enumerate(link_specs)]
         # Joints that move (a free root's too), as in Genesis: a fixed joint is no RigidJoint. Same
@@ -521,13 +522,18 @@ class RigidEntity(EntityIndexing):
 
     def _friction_ratios(self):
         """(friction (n_geoms,), ratio (B, n_geoms)) of the entity's geoms, made at the first call
-        from the build's friction and ratios of 1."""
+        from the build's friction and ratios of 1; detached after a reset, as the scene's
+        parameters (a graph from the rollout before would be backpropagated through again)."""
+        generation = self._sim().generation
         if self._friction_ratio is None:
             model = self._solver.model
             self._friction = torch.as_tensor(model.geom_friction[self.geom_start: self.geom_start + self.n_geoms],
                                              dtype=runtime.tc_float, device=runtime.device)
             self._friction_ratio = torch.ones(self._solver.n_batch, self.n_geoms, dtype=runtime.tc_float,
                                               device=runtime.device)
+        elif self._friction_generation != generation:
+            self._friction, self._friction_ratio = self._friction.detach(), self._friction_ratio.detach()
+        self._friction_generation = generation
         return self._friction, self._friction_ratio
 
     def _write_friction(self, geoms, envs):

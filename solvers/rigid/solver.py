@@ -42,17 +42,8 @@ class RigidSolver(Solver):
 
     def _clear_substep_record(self):
         """Per substep of the step being taken (forward or replay), for its reverse: whether its
-        constraint stage ran, and the mask of its collider kernels that ran (detect.KERNEL_BIT).
-        The step's contacts are those of every env again (state_replaced)."""
+        constraint stage ran, and the mask of its collider kernels that ran (detect.KERNEL_BIT)."""
         self._rows_in_substep, self._colliders_in_substep = [False] * self.substeps, [0] * self.substeps
-        self._replaced_envs = None
-
-    def state_replaced(self, envs):
-        """The last step's contacts of ``envs`` (None: all) no longer hold: contacts() reports none
-        there until the next step (Genesis clears its collider when a state is set)."""
-        if self._replaced_envs is None:
-            self._replaced_envs = np.zeros(self.n_batch, dtype=bool)
-        self._replaced_envs[slice(None) if envs is None else envs] = True
 
     # -- building ---------------------------------------------------------------------------
     def add_entity(self, name, links):
@@ -401,10 +392,15 @@ class RigidSolver(Solver):
         out = torch.empty((self.n_batch, self.data.size["C"], 9), dtype=runtime.tc_float, device=runtime.device)
         if self.data.size["C"]:
             self.kernels.read_contacts(substep % self.sim_options.substeps, out)
-            if self._replaced_envs is not None:  # set by a reset or a setter since: no contact
-                replaced = torch.as_tensor(self._replaced_envs, device=out.device)
-                out[replaced] = 0.0
-                out[replaced, :, :2] = -1.0
+        return out
+
+    @staticmethod
+    def without_contacts(contacts, envs):
+        """``contacts`` (B, C, 9) as contacts() gives them, with none in the envs of the bool mask
+        ``envs`` (B,) (their rows as the unused ones: geom −1, the rest 0)."""
+        out = contacts.clone()
+        out[envs] = 0.0
+        out[envs, :, :2] = -1.0
         return out
 
     def destroy(self):
