@@ -7,6 +7,9 @@ from .options import _keywords
 from .solvers.core import InvalidInputError
 
 
+@_keywords("use_visual_raycasting", "friction_torsional", "friction_rolling", "needs_coup", "coup_friction",
+           "coup_softness", "coup_restitution", "sdf_cell_size", "sdf_min_res", "sdf_max_res", "gravity_compensation",
+           "coup_type", "coup_links", "enable_coup_collision", "coup_collision_links", "contact_resistance")
 @dataclass
 class Rigid:
     """A rigid body. rho: density, kg/m³ (used where a link has no inertial);

@@ -102,6 +102,13 @@ def test_morph_arguments():
     assert gs.morphs.Plane().fixed and not gs.morphs.Box().fixed
 
 
+def test_rigid_material_keywords():
+    """An unknown keyword of gs.materials.Rigid is a named error (Python's TypeError named nothing),
+    and Genesis's own that genesis_lite does not have say so (its coupling ones come with coupling)."""
+    raises(gs.InvalidInputError, lambda: gs.materials.Rigid(foo=1), "Rigid", "'foo' is unknown", "'rho', 'friction'")
+    raises(gs.InvalidInputError, lambda: gs.materials.Rigid(coup_friction=0.5), "'coup_friction' is a Genesis option")
+
+
 def test_moving_massless_link_raises_at_build(f64, tmp_path):
     path = write_urdf(tmp_path, LINK_A + '<link name="b"/>' + joint("hinge", "revolute"))
     scene = gs.Scene()
