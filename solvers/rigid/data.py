@@ -78,7 +78,7 @@ MODEL = {
     "pair_geom1": ("i", "N"), "pair_geom2": ("i", "N"), "pair_condim": ("i", "N"),
     "geom_rbound": ("f", "G"), "pair_margin": ("f", "N"),
     "geom_pos": ("v3", "G"), "geom_size": ("v3", "G"), "hull_vec": ("v3", "H"), "geom_quat": ("v4", "G"),
-    "geom_aabb_center": ("v3", "G"), "geom_aabb_half": ("v3", "G"),
+    "geom_aabb_center": ("v3", "G"), "geom_aabb_half": ("v3", "G"), "geom_centre": ("v3", "G"),
     "link_inv_mass0": ("f", "L"), "dof_lower": ("f", "D"), "dof_upper": ("f", "D"),
     # substep h (s), the time constant (s) of the joint-limit and friction-loss rows, impratio, solver
     # tolerance and line-search tolerance: runtime values like everything else (CONSTS names them)

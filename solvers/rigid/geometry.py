@@ -69,7 +69,9 @@ def geom_arrays(geoms, link_of, where_of):
     link frame, size (G, 3) MuJoCo sizes (half extents, radius and half length), rbound (G,) m
     radius of a sphere about the geom origin holding it (0 for planes: unbounded), aabb_center and
     aabb_half (G, 3) m the centre and half extents of a box holding it in the geom frame (MuJoCo's
-    geom_aabb; zero for planes), mesh (G,) the geom's mesh number (-1: not a mesh); and the meshes'
+    geom_aabb; zero for planes), centre (G, 3) m a point inside it, in the geom frame (the mean of a
+    mesh hull's vertices, which a mesh file's origin need not be; the origin for a primitive), mesh
+    (G,) the geom's mesh number (-1: not a mesh); and the meshes''
     convex hulls (convex.MeshHulls built with trimesh: vertices, vertex graph, polygons) as hull_vec
     (H, 3) and hull_int (HI,) (``_hull_arrays``). A mesh collides as its convex hull.
     """
@@ -105,7 +107,7 @@ def geom_arrays(geoms, link_of, where_of):
               for k, v in out.items()}
     for k, width in (("pos", 3), ("quat", 4), ("size", 3), ("aabb_half", 3)):
         arrays[k] = arrays[k].reshape(-1, width)
-    arrays["aabb_center"] = np.zeros_like(arrays["aabb_half"])
+    arrays["aabb_center"], arrays["centre"] = np.zeros_like(arrays["aabb_half"]), np.zeros_like(arrays["aabb_half"])
     hulls = convex.hulls_from_vertices(meshes)
     for k, mesh in enumerate(arrays["mesh"]):
         if mesh >= 0:
@@ -114,6 +116,7 @@ def geom_arrays(geoms, link_of, where_of):
             arrays["rbound"][k] = np.linalg.norm(vertices, axis=1).max()
             lowest, highest = vertices.min(axis=0), vertices.max(axis=0)
             arrays["aabb_center"][k], arrays["aabb_half"][k] = (lowest + highest) / 2, (highest - lowest) / 2
+            arrays["centre"][k] = vertices.mean(axis=0)  # (a box's centre can lie on the hull: a wedge's)
     arrays["hull_vec"], arrays["hull_int"] = _hull_arrays(hulls)
     return arrays
 

@@ -36,7 +36,8 @@ class RigidModel:
     Per collision geom (geometry.py, MuJoCo's conventions): geom_type (G,) code, geom_link (G,),
     geom_pos (G, 3) m and geom_quat (G, 4) in the link frame, geom_size (G, 3) half sizes m,
     geom_rbound (G,) bounding radius m, geom_aabb_center and geom_aabb_half (G, 3) m a bounding box
-    in the geom frame (MuJoCo's geom_aabb), geom_mesh (G,) its mesh number (-1: none), the meshes'
+    in the geom frame (MuJoCo's geom_aabb), geom_centre (G, 3) m a point inside the geom (geom
+    frame; a mesh's hull vertex mean), geom_mesh (G,) its mesh number (-1: none), the meshes'
     convex hulls as hull_vec (H, 3) and hull_int (HI,) (geometry._hull_arrays), geom_friction (G,)
     Coulomb coefficient. Per candidate geom pair (N):
     pair_geom1/pair_geom2 (ordered as MuJoCo orders them), pair_condim (1 or 3), pair_margin m.
@@ -71,6 +72,7 @@ class RigidModel:
     geom_rbound: np.ndarray
     geom_aabb_center: np.ndarray
     geom_aabb_half: np.ndarray
+    geom_centre: np.ndarray
     geom_mesh: np.ndarray
     hull_vec: np.ndarray
     hull_int: np.ndarray

@@ -1705,7 +1705,7 @@ def plane_mesh(pos1, rot1, size1, pos2, rot2, size2, mesh2, centre2, margin, hul
     vertices moved half their depth along the normal.
 
     Arguments as convex_convex (size1, size2 unused, no workspace), and centre2 (3,): the mesh's
-    centre in its frame (its hull's box centre). MuJoCo's test is against the geom's origin, which
+    centre in its frame (its hull's vertex mean: always inside). MuJoCo's test is against the geom's origin, which
     is the mesh's centre there (it moves a mesh's frame to its centre of mass); a mesh file's
     origin may lie anywhere (at its base, below it), where that test dropped every vertex but the
     deepest and the body never came to rest. Returns as convex_convex, budget PLANE_MESH_MAX;

@@ -199,7 +199,7 @@ warnings.filterwarnings("ignore", message='.*Calling non-taichi function "HullVi
 def _plane_mesh(d: ti.template(), s, e, g1, g2, margin):
     """convex.plane_mesh on geoms g1 (the plane) and g2 (a mesh) at frame s."""
     return convex.plane_mesh(d.geom_xpos[s, e, g1], d.geom_xmat[s, e, g1], d.geom_size[g1], d.geom_xpos[s, e, g2],
-                             d.geom_xmat[s, e, g2], d.geom_size[g2], d.geom_mesh[g2], d.geom_aabb_center[g2], margin,
+                             d.geom_xmat[s, e, g2], d.geom_size[g2], d.geom_mesh[g2], d.geom_centre[g2], margin,
                              HullView(d))
 
 
