@@ -39,8 +39,9 @@ class Rollout:
         """Whether step ``index``, starting from ``states``, keeps them: every interval-th step, and
         a step whose start states are not the ones the step before returned (a setter replaced
         them between the two steps, which no recomputation from an earlier checkpoint repeats)."""
-        return self.interval == 1 or index % self.interval == 0 or not (
-            len(self._last_outputs) == len(states) and all(map(lambda ref, s: ref() is s, self._last_outputs, states)))
+        follows = len(self._last_outputs) == len(states) and all(
+            ref() is state for ref, state in zip(self._last_outputs, states))
+        return self.interval == 1 or index % self.interval == 0 or not follows
 
     def record(self, index, states, inputs, kept, warm_starts):
         if self.interval > 1:  # detached: an input computed from a state would close a cycle through the graph
