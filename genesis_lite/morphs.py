@@ -7,7 +7,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .options import _keywords
 from .solvers.core import InvalidInputError
+
+# Genesis 1.4.5's morph options that genesis_lite does not have (a named error says so, where
+# Python's TypeError named neither the morph nor the keyword): every morph's, the primitives',
+# the tetrahedral meshing ones (FEM, not here) and the file morphs'
+_MORPH = ("offset_pos", "offset_euler", "offset_quat", "visualization", "collision", "enable_custom_vverts")
+_PRIMITIVE = _MORPH + ("batch_fixed_verts", "contype", "conaffinity")
+_TETGEN = ("order", "mindihedral", "minratio", "nobisect", "quality", "maxvolume", "verbose", "force_retet")
+_FILE = _MORPH + ("decimate", "decimate_face_num", "decimate_aggressiveness", "watertighten", "convexify",
+                  "decompose_object_error_threshold", "decompose_robot_error_threshold", "coacd_options",
+                  "recompute_inertia", "align", "file_meshes_are_zup", "batch_fixed_verts")
 
 
 def _vec(owner, name, value, n):
@@ -61,6 +72,7 @@ class Morph:
         pass
 
 
+@_keywords(*_FILE, "scale", "prioritize_urdf_material", "xacro_args")
 @dataclass
 class URDF(Morph):
     """A robot from a URDF file; mesh paths may be relative or ``package://``.
@@ -101,6 +113,7 @@ class URDF(Morph):
         self.merge_fixed_links, self.links_to_keep = bool(self.merge_fixed_links), tuple(keep)
 
 
+@_keywords(*_PRIMITIVE, *_TETGEN)
 @dataclass
 class Box(Morph):
     """A box; size (3,) full extents, m. Or, as Genesis, its corners ``lower`` and ``upper``
@@ -125,6 +138,7 @@ class Box(Morph):
         self.lower, self.upper = self.pos - self.size / 2.0, self.pos + self.size / 2.0
 
 
+@_keywords(*_PRIMITIVE, *_TETGEN)
 @dataclass
 class Sphere(Morph):
     """A sphere of ``radius`` m."""
@@ -134,6 +148,7 @@ class Sphere(Morph):
         _positive("Sphere", "radius", self.radius)
 
 
+@_keywords(*_PRIMITIVE, *_TETGEN)
 @dataclass
 class Cylinder(Morph):
     """A cylinder along local z: ``radius`` and ``height`` in m."""
@@ -145,11 +160,14 @@ class Cylinder(Morph):
         _positive(type(self).__name__, "height", self.height)
 
 
+@_keywords(*_PRIMITIVE, *_TETGEN)
 @dataclass
 class Capsule(Cylinder):
     """A capsule along local z: ``height`` is the length of the cylindrical part, m."""
 
 
+@_keywords(*_FILE, *_TETGEN, "contype", "conaffinity", "group_by_material",
+           "merge_submeshes_for_collision")
 @dataclass
 class Mesh(Morph):
     """A rigid body from a mesh file (any format trimesh reads), scaled by ``scale``."""
@@ -162,6 +180,7 @@ class Mesh(Morph):
         _positive("Mesh", "scale", self.scale)
 
 
+@_keywords(*_PRIMITIVE, "plane_size", "tile_size")
 @dataclass
 class Plane(Morph):
     """The ground: an infinite static half-space (always fixed) bounded by the plane through pos

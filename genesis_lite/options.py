@@ -54,8 +54,9 @@ class SimOptions:
 
     dt: step length, s. substeps: integration substeps per step (substep = dt / substeps).
     gravity: (3,) m/s². requires_grad: build the torch autograd graph through every step.
-    check_nan: stop at the first non-finite state, naming the step and entity (without it, an MPM
-        blow-up, whose particles the walls keep at finite positions, warns once).
+    check_nan: stop at the first non-finite state, naming the step and entity (without it, a
+        blow-up warns once: always on the CPU, on a GPU only MPM's, whose particles the walls keep
+        at finite positions; reading the rigid solver's flag there would wait for the device).
     checkpoint_interval: with requires_grad, keep the state of every k-th step only and
         recompute the others during backward (memory ÷ k, about one extra forward pass). A step
         whose state a setter replaced keeps its state too (a recomputation would miss the

@@ -263,11 +263,11 @@ class Simulator:
         return [solver.end_reverse() for solver in solvers]
 
     def _check_finite(self):
-        """With check_nan, raise at the first non-finite state; without, warn once per solver whose
-        blown-up state would look finite (Solver.hides_nonfinite: MPM's particles stay inside the
-        walls, NaN or not)."""
+        """With check_nan, raise at the first non-finite state; without, warn once per solver that
+        watches its state (Solver.watches_nonfinite: the rigid solver where its flag is on the host,
+        MPM always, as its particles stay inside the walls, NaN or not)."""
         for slot in self.slots:
-            if not (self.options.check_nan or slot.solver.hides_nonfinite is not None) or not slot.solver.nonfinite():
+            if not (self.options.check_nan or slot.solver.watches_nonfinite) or not slot.solver.nonfinite():
                 continue
             message = (f"step {self.step_index}: the {type(slot.solver).__name__} state became non-finite "
                        f"(entities: {', '.join(slot.solver.entity_names)}); reduce dt, check inputs and parameters")
@@ -275,7 +275,8 @@ class Simulator:
                 raise SimulationError(message)
             if not slot.warned_nonfinite:
                 slot.warned_nonfinite = True
-                logger.warning(f"{message}: {slot.solver.hides_nonfinite}; SimOptions(check_nan=True) raises here")
+                why = f": {slot.solver.hides_nonfinite}" if slot.solver.hides_nonfinite else ""
+                logger.warning(f"{message}{why}; SimOptions(check_nan=True) raises here")
 
     # -- derived quantities -------------------------------------------------------------------
     def derived(self, solver):

@@ -45,9 +45,12 @@ class Solver:
     entity_names = ()
     #: substeps per step
     substeps = 1
-    #: why a blown-up state can look finite (MPM's walls clamp NaN positions back inside), or None: when
-    #: set, the simulator reads ``nonfinite()`` after every step and warns with it, also without check_nan
+    #: why a blown-up state can look finite (MPM's walls clamp NaN positions back inside), or None; the
+    #: simulator's warning says it
     hides_nonfinite = None
+    #: whether the simulator reads ``nonfinite()`` after every step also without check_nan, to warn
+    #: once: where reading it is cheap (no wait for a device) or a blow-up would look finite
+    watches_nonfinite = False
 
     def build(self, n_envs):
         """Allocate for max(1, n_envs) environments; return the initial state (B, width)."""

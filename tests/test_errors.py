@@ -102,6 +102,17 @@ def test_morph_arguments():
     assert gs.morphs.Plane().fixed and not gs.morphs.Box().fixed
 
 
+def test_morph_keywords():
+    """A morph's unknown keyword is a named error listing the accepted ones (Python's TypeError named
+    neither); Genesis's own that genesis_lite does not have say so."""
+    raises(gs.InvalidInputError, lambda: gs.morphs.Box(foo=1), "Box", "'foo' is unknown", "'size', 'lower'")
+    raises(gs.InvalidInputError, lambda: gs.morphs.Mesh(file="a.obj", convexify=False), "Mesh", "'convexify' is a Genesis")
+    raises(gs.InvalidInputError, lambda: gs.morphs.URDF(file="a.urdf", scale=2.0), "URDF", "'scale' is a Genesis")
+    raises(gs.InvalidInputError, lambda: gs.morphs.Plane(plane_size=(5, 5)), "Plane", "'plane_size' is a Genesis")
+    raises(gs.InvalidInputError, lambda: gs.morphs.Capsule(collision=False), "Capsule", "'collision' is a Genesis")
+    assert gs.morphs.Sphere((0, 0, 1), radius=0.2).radius == 0.2  # positional arguments still work
+
+
 def test_rigid_material_keywords():
     """An unknown keyword of gs.materials.Rigid is a named error (Python's TypeError named nothing),
     and Genesis's own that genesis_lite does not have say so (its coupling ones come with coupling)."""

@@ -6,6 +6,7 @@ one does (solvers/mpm/layout.py): shapes, values, out-of-place writes, gradients
 import ast
 import logging
 import os
+import warnings
 
 import numpy as np
 import pytest
@@ -279,6 +280,29 @@ def test_sample_particles_from_morphs(meshes):
                          0, "pinned")
     with pytest.raises(gs.AssetError, match="entity 'leaky': argument 'file' of gs.morphs.Mesh: .*not watertight"):
         sample_particles(gs.morphs.Mesh(file=meshes["open"], pos=(0, 0, 0.5)), MPM.Elastic(), P, *walls, 0, "leaky")
+
+
+
+def test_particles_too_coarse_for_their_shape_warn(meshes):
+    """Particles whose volume (count · particle_size³, which makes the mass) is off the morph's by
+    more than 2× warn, naming entity, morph, ratio and a particle_size that fits; the shapes'
+    volumes (sampling.shape_volume) are exact, a mesh's from its surface."""
+    walls = (np.array([-0.5, -0.5, 0.0]), np.array([0.5, 0.5, 1.0]))
+    assert sampling.shape_volume("mesh", file=meshes["ball"], scale=(1.0, 2.0, -0.5)) == pytest.approx(
+        meshes["ball_volume"])
+    assert sampling.shape_volume("cylinder", radius=0.1, height=0.3) == pytest.approx(np.pi * 0.003)
+    cases = [(gs.morphs.Box(pos=(0, 0, 0.5), size=(0.3, 0.3, 0.3)), 0.2, "1 particle(s) of particle_size 0.2 m hold "
+              "0.296× the volume of its Box (0.027 m³)"),
+             (gs.morphs.Sphere(pos=(0, 0, 0.5), radius=0.04), 0.05, "8 particle(s)"),
+             (gs.morphs.Mesh(file=meshes["ball"], pos=(0, 0, 0.5)), 0.12, "8 particle(s)")]
+    for morph, size, fragment in cases:
+        with pytest.warns(UserWarning, match=r"entity 'coarse': its .*too coarse.*at most") as record:
+            sample_particles(morph, MPM.Elastic(), size, *walls, 0, "coarse")
+        assert fragment in str(record[0].message), str(record[0].message)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for morph, size, _ in cases:
+            sample_particles(morph, MPM.Elastic(), size / 4, *walls, 0, "fine")
 
 
 # -- the entity, on a fake simulator ------------------------------------------------------------------------------

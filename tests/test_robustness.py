@@ -46,6 +46,21 @@ def test_check_nan_names_step_and_entities(f64):
             scene.step()
 
 
+def test_rigid_blow_up_warns_once_a_rollout_without_check_nan(f64, caplog):
+    """Without check_nan a diverging rigid entity is not silent: the first non-finite step warns,
+    naming step and entity and pointing to check_nan, once a rollout (again after a reset)."""
+    scene, wild, _ = _two_pendulums()
+    for rollout in range(2):
+        caplog.clear()
+        _diverge(wild)
+        for _ in range(50):
+            scene.step()
+        warnings = [r.getMessage() for r in caplog.records if "non-finite" in r.getMessage()]
+        assert len(warnings) == 1 and "wild" in warnings[0] and "check_nan" in warnings[0], (rollout, warnings)
+        assert not bool(torch.isfinite(wild.get_dofs_position()).all())
+        scene.reset()
+
+
 def test_mpm_blow_up_is_not_hidden_by_the_walls(f64, caplog):
     """A stiff body at a substep far above its stability limit blows up; the walls clamp its NaN
     positions back inside, so without check_nan the scene warns once a rollout (until a reset),

@@ -6,6 +6,8 @@ part of the autograd graph; every setter writes out of place, so gradients reach
 Local particle indices count within the entity; in a batched scene (n_envs > 0) results gain a
 leading batch dimension and ``envs_idx`` selects environments. Units: m, m/s, Pa, kg/m³, kg.
 """
+import warnings
+
 import numpy as np
 import torch
 
@@ -25,27 +27,41 @@ def sample_particles(morph, material, particle_size, wall_lower, wall_upper, see
     if morph.fixed and not isinstance(morph, gm.Plane):  # a Plane is always fixed: refused below
         raise InvalidInputError(f"{owner}: argument 'fixed' of gs.morphs.{type(morph).__name__} must be False for an "
                                 f"MPM entity (its particles move; only the walls hold them), got True")
-    pose = {"pos": morph.pos, "quat": morph.quat, "owner": owner}
-    args = (particle_size, material.sampler, seed)
-    if isinstance(morph, gm.Box):
-        particles = sampling.sample("box", *args, size=morph.size, **pose)
-    elif isinstance(morph, gm.Sphere):
-        particles = sampling.sample("sphere", *args, radius=float(morph.radius), **pose)
-    elif isinstance(morph, gm.Capsule):  # a Cylinder subclass: refused before the Cylinder branch
-        raise InvalidInputError(f"{owner}: argument 'morph' of an MPM entity must be gs.morphs.Box, Sphere, Cylinder "
-                                f"or Mesh, got Capsule")
-    elif isinstance(morph, gm.Cylinder):
-        particles = sampling.sample("cylinder", *args, radius=float(morph.radius), height=float(morph.height), **pose)
-    elif isinstance(morph, gm.Mesh):
-        try:
-            particles = sampling.sample("mesh", *args, file=morph.file, scale=morph.scale, **pose)
-        except AssetError as exc:  # sampling does not know the entity: add it to the message
-            raise AssetError(f"{owner}: argument 'file' of gs.morphs.Mesh: {exc}") from exc
-    else:
+    if isinstance(morph, gm.Capsule) or not isinstance(morph, (gm.Box, gm.Sphere, gm.Cylinder, gm.Mesh)):
         raise InvalidInputError(f"{owner}: argument 'morph' of an MPM entity must be gs.morphs.Box, Sphere, Cylinder "
                                 f"or Mesh, got {type(morph).__name__}")
+    shape, dims = _shape(morph)
+    try:
+        particles = sampling.sample(shape, particle_size, material.sampler, seed, morph.pos, morph.quat, owner=owner,
+                                    **dims)
+    except AssetError as exc:  # sampling does not know the entity: add it to the message
+        raise AssetError(f"{owner}: argument 'file' of gs.morphs.Mesh: {exc}") from exc
+    _check_volume(owner, morph, len(particles), particle_size, sampling.shape_volume(shape, **dims))
     _check_inside(owner, "morph", particles, wall_lower, wall_upper, strictly=True)
     return particles
+
+
+def _shape(morph):
+    """(sampling's shape name, its parameters) of a Box, Sphere, Cylinder or Mesh morph."""
+    if isinstance(morph, gm.Box):
+        return "box", {"size": morph.size}
+    if isinstance(morph, gm.Sphere):
+        return "sphere", {"radius": float(morph.radius)}
+    if isinstance(morph, gm.Cylinder):
+        return "cylinder", {"radius": float(morph.radius), "height": float(morph.height)}
+    return "mesh", {"file": morph.file, "scale": morph.scale}
+
+
+def _check_volume(owner, morph, count, particle_size, volume):
+    """Warn when the particles' volume (count · particle_size³, which makes the mass) is off the
+    morph's volume m³ by more than 2× either way: particles too coarse for the shape (Genesis
+    samples and weighs them alike, without a word)."""
+    ratio = count * particle_size ** 3 / volume
+    if not 0.5 <= ratio <= 2.0:
+        warnings.warn(f"{owner}: its {count} particle(s) of particle_size {particle_size:g} m hold {ratio:.3g}× the "
+                      f"volume of its {type(morph).__name__} ({volume:.3g} m³), and its mass is ρ · that volume: "
+                      f"particle_size is too coarse for the shape; lower MPMOptions particle_size (at most "
+                      f"{volume ** (1.0 / 3.0) / 4.0:.3g} m puts 4 or more particles across it)", stacklevel=5)
 
 
 def _check_inside(owner, arg, positions, wall_lower, wall_upper, strictly):

@@ -82,6 +82,20 @@ def place(points, pos, quat):
     return points @ rotation.T + np.asarray(pos, dtype=np.float64)
 
 
+def shape_volume(shape, *, size=None, radius=None, height=None, file=None, scale=1.0):
+    """Volume, m³, of the shape ``sample`` fills (its parameters; a mesh's from its closed
+    surface by the divergence theorem)."""
+    if shape == "box":
+        return float(np.prod(size))
+    if shape == "sphere":
+        return 4.0 / 3.0 * np.pi * radius ** 3
+    if shape == "cylinder":
+        return np.pi * radius ** 2 * height
+    vertices, faces = load_mesh(file, scale)
+    corners = vertices[faces]  # (F, 3 corners, 3)
+    return abs(float(np.einsum("ij,ij->", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])))) / 6.0
+
+
 def sample(shape, particle_size, sampler="regular", seed=0, pos=(0.0, 0.0, 0.0), quat=(1.0, 0.0, 0.0, 0.0), *,
            size=None, radius=None, height=None, file=None, scale=1.0, owner="sampling"):
     """World particle positions (n, 3) float64, m, of ``shape`` ("box": size (3,); "sphere":

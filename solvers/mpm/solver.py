@@ -34,6 +34,7 @@ class MPMSolver(MPMAdjoint, Solver):
     persistent_inputs = layout.PERSISTENT_INPUTS
     hides_nonfinite = ("its particles are kept inside the walls (g2p.wall_particle), so their positions look "
                        "finite while velocities and deformation are NaN")
+    watches_nonfinite = True
 
     def __init__(self, dt, substeps, gravity, grid_density, particle_size, lower_bound, upper_bound, sticky,
                  requires_grad):

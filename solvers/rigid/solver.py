@@ -304,6 +304,11 @@ class RigidSolver(Solver):
         """True once any step produced a non-finite state (resets the flag)."""
         return self.data.take_flag("nonfinite")
 
+    @property
+    def watches_nonfinite(self):
+        # on the CPU the flag is a read of host memory; on a GPU it would wait for the device
+        return self.data.flags_on_host
+
     def warm_start(self):
         """(B, D) copy of the constraint solve's warm start (what the next step's solve starts
         from), or None when no step can have a solve."""
