@@ -335,9 +335,7 @@ class RigidEntity(EntityIndexing):
 
     def get_links_vel(self, links_idx_local=None, envs_idx=None):
         """Linear velocities of the link frame origins in the world frame, m/s."""
-        rows = self._links(links_idx_local, envs_idx, slice(0, 13))
-        pos, omega, v_origin = rows[..., 0:3], rows[..., 7:10], rows[..., 10:13]
-        return self._out(v_origin + torch.cross(omega, pos, dim=-1))
+        return self._out(self._links(links_idx_local, envs_idx, slice(10, 13)))
 
     def get_pos(self, envs_idx=None):
         """Base link position, m."""

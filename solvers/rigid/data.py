@@ -70,8 +70,8 @@ CONST = {name: k for k, name in enumerate(CONSTS)}  # where each is in the model
 
 # Model constants: name → (arena, count). Per link (L), per dof (D), per mass-matrix pair (P).
 MODEL = {
-    "link_parent": ("i", "L"), "link_jtype": ("i", "L"), "link_static": ("i", "L"), "link_dof0": ("i", "L"),
-    "link_q0": ("i", "L"), "dof_link": ("i", "D"), "dof_q": ("i", "D"), "dof_parent": ("i", "D"),
+    "link_parent": ("i", "L"), "link_root": ("i", "L"), "link_jtype": ("i", "L"), "link_static": ("i", "L"),
+    "link_dof0": ("i", "L"), "link_q0": ("i", "L"), "dof_link": ("i", "D"), "dof_q": ("i", "D"), "dof_parent": ("i", "D"),
     "pair_i": ("i", "P"), "pair_j": ("i", "P"),
     # collision geometry (geometry.py; MuJoCo's conventions) and the candidate geom pairs
     "geom_type": ("i", "G"), "geom_link": ("i", "G"), "geom_mesh": ("i", "G"), "hull_int": ("i", "HI"),

@@ -1,5 +1,6 @@
 """Velocity and inertia stages: recursive Newton–Euler bias forces and the joint-space mass
-matrix by composite rigid bodies, all in the world frame about the origin (Featherstone).
+matrix by composite rigid bodies, all in the world frame about each tree's reference point
+(kinematics.reference; Featherstone).
 
 Each forward function has its hand-written reverse further down (see docs/architecture.md).
 """

@@ -1,7 +1,11 @@
 """Position stage: link poses, spatial inertias and joint motion subspaces from qpos.
 
-Everything is expressed in the world frame about the world origin (MuJoCo's ``cdof`` and
-``cinert`` idea), so later stages are plain sweeps over the links. Inertias are derived from
+Spatial quantities are expressed in the world frame about a point of each kinematic tree, its
+root link's origin (MuJoCo's ``cdof`` and ``cinert`` idea, about the root's subtree centre of
+mass there), so later stages are plain sweeps over the links. About the world origin instead, a
+robot far from it pays for it in round-off: a float32 quadruped at x = 300 m had a mass matrix
+that was not positive definite. The outputs of a step do not depend on the point (only their
+round-off does), so the reverse takes it as a constant: the gradients stay exact. Inertias are derived from
 the *current* masses here, inside the differentiated step: a link's rotational inertia scales
 with its mass (constant shape, uniform density change).
 
@@ -40,8 +44,16 @@ def _joint_pose(d: ti.template(), s, e, l):
 
 
 @ti.func
+def reference(d: ti.template(), s, e, l):
+    """The point link l's spatial quantities are taken about at frame s: its tree's root link
+    origin (world, m). Its root's pose is known before it (parents come first)."""
+    return d.xpos[s, e, d.link_root[l]]
+
+
+@ti.func
 def _link_inertia(d: ti.template(), s, e, l, pos, rot):
-    """Spatial inertia (m, h, I about the origin) of link l alone."""
+    """Spatial inertia (m, h, I about the reference) of link l alone; pos: its origin relative to
+    the reference."""
     m = d.mass[e, l]
     com = pos + mat_vec(rot, d.link_com[l])
     inertia_com = mat_mul(mat_mul(rot, d.link_inertia0[l] * (m * d.link_inv_mass0[l])), rot.transpose())
@@ -56,7 +68,8 @@ def _link_inertia(d: ti.template(), s, e, l, pos, rot):
 
 @ti.func
 def _motion_subspace(d: ti.template(), s, e, l, pos, rot):
-    """cdof (angular, linear-at-origin) of each dof of link l."""
+    """cdof (angular, linear at the reference) of each dof of link l; pos: its origin relative to
+    the reference."""
     jt = d.link_jtype[l]
     dof0 = d.link_dof0[l]
     if jt == REVOLUTE:
@@ -83,8 +96,9 @@ def link_kinematics(d: ti.template(), s, e, l):
     d.xpos[s, e, l] = pos
     d.xquat[s, e, l] = quat
     rot = quat_to_mat(quat)
-    _link_inertia(d, s, e, l, pos, rot)
-    _motion_subspace(d, s, e, l, pos, rot)
+    relative = pos - reference(d, s, e, l)
+    _link_inertia(d, s, e, l, relative, rot)
+    _motion_subspace(d, s, e, l, relative, rot)
 
 
 # -- reverse mode ----------------------------------------------------------------------------
@@ -94,7 +108,8 @@ def link_kinematics(d: ti.template(), s, e, l):
 # and the parent takes one dot and one cross product — no quaternion algebra, no sin or cos.
 @ti.func
 def _motion_subspace_adjoint(d: ti.template(), s, e, l, pos, rot):
-    """(g_pos, g_rot) from the gradients of link l's cdof (δw = δθ × w, δv = δpos × w + pos × δw)."""
+    """(g_pos, g_rot) from the gradients of link l's cdof (δw = δθ × w, δv = δpos × w + pos × δw;
+    pos relative to the reference, a constant here)."""
     jt = d.link_jtype[l]
     dof0 = d.link_dof0[l]
     g_pos = ti.Vector.zero(float, 3)
@@ -118,7 +133,7 @@ def _motion_subspace_adjoint(d: ti.template(), s, e, l, pos, rot):
 @ti.func
 def _link_inertia_adjoint(d: ti.template(), s, e, l, pos, rot, g_m, g_h, g_i):
     """(g_pos, g_rot) from the gradient (g_m, g_h, g_i) of link l's spatial inertia; the mass's
-    is stored."""
+    is stored (pos relative to the reference, a constant here)."""
     m = d.mass[e, l]
     arm = mat_vec(rot, d.link_com[l])  # com − pos, rotating with the link
     com = pos + arm
@@ -173,8 +188,9 @@ def link_kinematics_adjoint(d: ti.template(), s, e, l, g_m, g_h, g_i):
     gradients of its other outputs must be complete)."""
     pos, quat = d.xpos[s, e, l], d.xquat[s, e, l]
     rot = quat_to_mat(quat)
-    g_pos_m, g_rot_m = _motion_subspace_adjoint(d, s, e, l, pos, rot)
-    g_pos_i, g_rot_i = _link_inertia_adjoint(d, s, e, l, pos, rot, g_m, g_h, g_i)
+    relative = pos - reference(d, s, e, l)
+    g_pos_m, g_rot_m = _motion_subspace_adjoint(d, s, e, l, relative, rot)
+    g_pos_i, g_rot_i = _link_inertia_adjoint(d, s, e, l, relative, rot, g_m, g_h, g_i)
     g_rot = d.xrot_grad[s, e, l] + g_rot_m + g_rot_i
     _joint_pose_adjoint(d, s, e, l, pos, quat, d.xpos.grad[s, e, l] + g_pos_m + g_pos_i, g_rot)
 
@@ -189,6 +205,7 @@ def dof_count(d: ti.template(), link):
 @ti.func
 def dof_motion_at(d: ti.template(), s, e, i, point):
     """(linear, angular) velocity at ``point`` (world, m) of the body dof i moves, per unit of
-    its velocity: cdof_v + cdof_w × point and cdof_w (spatial motion about the origin, moved)."""
+    its velocity: cdof_v + cdof_w × (point − reference) and cdof_w (the spatial motion about the
+    reference, moved to the point)."""
     angular = d.cdof_w[s, e, i]
-    return d.cdof_v[s, e, i] + angular.cross(point), angular
+    return d.cdof_v[s, e, i] + angular.cross(point - reference(d, s, e, d.dof_link[i])), angular

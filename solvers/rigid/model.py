@@ -96,6 +96,16 @@ class RigidModel:
         return _static_links(self.link_parent, self.link_jtype)
 
     @property
+    def link_root(self):
+        """(L,) int32: the root link of each link's kinematic tree (the link itself for a root).
+        The tree's spatial quantities are taken about the root link's origin (kinematics.py)."""
+        root = np.arange(self.n_links, dtype=np.int32)
+        for l in range(self.n_links):  # a parent comes before its children
+            if self.link_parent[l] >= 0:
+                root[l] = root[self.link_parent[l]]
+        return root
+
+    @property
     def dof_parent(self):
         """(D,) the dof just above each dof on its path to the root (-1: none). The mass matrix's
         non-zeros follow this tree, so factoring along it creates no fill-in."""

@@ -363,7 +363,8 @@ class RigidSolver(Solver):
 
     # -- derived quantities at the uploaded state ----------------------------------------------
     def links_kinematics(self):
-        """(B, L, 13): link origin pos (3), quat (4), spatial velocity ω (3) and v at the origin (3)."""
+        """(B, L, 13): link origin pos (3), quat (4), angular velocity ω (3) and the link origin's linear
+        velocity v (3), world frame."""
         self.kernels.down_sweep()  # poses and velocities need this sweep only
         out = torch.empty((self.n_batch, self.model.n_links, 13), dtype=runtime.tc_float, device=runtime.device)
         self.kernels.read_links(out)

@@ -1,10 +1,10 @@
 """Quaternion and spatial-algebra helpers (Taichi functions).
 
-Conventions: quaternions are (w, x, y, z); a spatial *motion* vector (w, v) is an angular
-velocity w and the linear velocity v of the body point at the world origin; a spatial *force*
-(n, f) is a torque n about the world origin and a force f. A link's spatial inertia about the
-world origin is (m, h, I): mass m (kg), first moment h = m·c (kg·m, c the world com) and
-rotational inertia I about the origin (kg·m², 3x3).
+Conventions: quaternions are (w, x, y, z); world-frame spatial vectors about a reference point
+o (kinematics.reference: its kinematic tree's root link origin): a *motion* vector (w, v) is an
+angular velocity w and the linear velocity v of the body point at o; a *force* (n, f) is a torque
+n about o and a force f. A link's spatial inertia about o is (m, h, I): mass m (kg), first moment
+h = m·(c − o) (kg·m, c the world com) and rotational inertia I about o (kg·m², 3x3).
 """
 import taichi as ti
 

@@ -34,7 +34,7 @@ from .constraint.solver import newton_solve
 from .dynamics import (bias_entry, dof_force, dof_row_adjoint, link_forces, link_forces_adjoint, mass_entry,
                        subtree_sum, subtree_sum_adjoint)
 from .integrator import integrate_link, integrate_link_adjoint
-from .kinematics import dof_count, dof_motion_at, link_kinematics, link_kinematics_adjoint, rotation_gradient
+from .kinematics import dof_count, dof_motion_at, link_kinematics, link_kinematics_adjoint, reference, rotation_gradient
 from .spatial import mat_vec, quat_to_mat
 from .linalg import solve_adjoint_env, solve_env
 
@@ -333,10 +333,14 @@ def down_sweep_adjoint(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, 
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
         for l in range(d.n_links):
-            for k in ti.static(range(3)):
-                d.xpos.grad[0, e, l][k] = src[e, l, k]
-                d.cvel_w.grad[0, e, l][k] = src[e, l, 7 + k]
-                d.cvel_v.grad[0, e, l][k] = src[e, l, 10 + k]
+            # v = cvel_v + ω × (pos − reference), the reference a constant (kinematics.py)
+            g_pos = ti.Vector([src[e, l, k] for k in ti.static(range(3))])
+            g_w = ti.Vector([src[e, l, 7 + k] for k in ti.static(range(3))])
+            g_v = ti.Vector([src[e, l, 10 + k] for k in ti.static(range(3))])
+            w, arm = d.cvel_w[0, e, l], d.xpos[0, e, l] - reference(d, 0, e, l)
+            d.xpos.grad[0, e, l] = g_pos + g_v.cross(w)
+            d.cvel_w.grad[0, e, l] = g_w + arm.cross(g_v)
+            d.cvel_v.grad[0, e, l] = g_v
             g_quat = ti.Vector([src[e, l, 3 + k] for k in ti.static(range(4))])
             d.xrot_grad[0, e, l] = rotation_gradient(d.xquat[0, e, l], g_quat)
     ti.loop_config(serialize=schedule[0])
@@ -457,15 +461,17 @@ def _zero_grads(d: ti.template(), frames):
 
 @ti.kernel
 def read_links(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
-    """dst (B, L, 13) ← frame-0 link pos, quat, cvel (ω, v at the origin)."""
+    """dst (B, L, 13) ← frame-0 link pos, quat, ω and v of the link origin (world frame)."""
     ti.loop_config(serialize=schedule[1])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
         for l in range(d.n_links):
+            w, pos = d.cvel_w[0, e, l], d.xpos[0, e, l]
+            v = d.cvel_v[0, e, l] + w.cross(pos - reference(d, 0, e, l))
             for k in ti.static(range(3)):
-                dst[e, l, k] = d.xpos[0, e, l][k]
-                dst[e, l, 7 + k] = d.cvel_w[0, e, l][k]
-                dst[e, l, 10 + k] = d.cvel_v[0, e, l][k]
+                dst[e, l, k] = pos[k]
+                dst[e, l, 7 + k] = w[k]
+                dst[e, l, 10 + k] = v[k]
             for k in ti.static(range(4)):
                 dst[e, l, 3 + k] = d.xquat[0, e, l][k]
 

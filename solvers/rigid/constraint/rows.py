@@ -27,7 +27,7 @@ likewise for contact rows, into body_invweight0 among others).
 import taichi as ti
 
 from ..data import BIG, CONST, accumulate
-from ..kinematics import dof_count, dof_motion_at
+from ..kinematics import dof_count, dof_motion_at, reference
 
 # row types, as the solver reads them (interfaces agreed with solver.py)
 UNUSED, FRICTION_LOSS, ONE_SIDED, ELLIPTIC_FIRST, ELLIPTIC_REST = range(5)
@@ -118,7 +118,8 @@ def _zero_rows(d: ti.template(), s, e, first, count):
 @ti.func
 def _add_link_jacobian(d: ti.template(), s, e, link, pos, frame, sign, first, condim, pyramidal, mu):
     """Add sign × (link's point Jacobian at pos, in the contact frame) into the contact's rows
-    first…: every dof on the link's path to the root moves the point by cdof_v + cdof_w × pos."""
+    first…: every dof on the link's path to the root moves the point by cdof_v + cdof_w × (pos −
+    reference) (kinematics.dof_motion_at)."""
     a = link
     while a >= 0:
         dof0 = d.link_dof0[a]
@@ -347,7 +348,8 @@ def _jacobian_adjoint(d: ti.template(), s, e, c, link, sign, g_u, g_w, b):
             g_frame += g_rows.outer_product(linear)
             g_linear = frame.transpose() @ g_rows
             accumulate(d.cdof_v.grad, ti.Vector([s, e, i]), g_linear)
-            accumulate(d.cdof_w.grad, ti.Vector([s, e, i]), pos.cross(g_linear))
+            arm = pos - reference(d, s, e, a)  # (the reference is a constant of the reverse: kinematics.py)
+            accumulate(d.cdof_w.grad, ti.Vector([s, e, i]), arm.cross(g_linear))
             g_pos += g_linear.cross(angular)
             along = sign * (frame @ linear)  # J_f,i
             accumulate(d.qvel.grad, ti.Vector([s, e, i]), -b * g_w.dot(along))
