@@ -20,6 +20,7 @@ cannot see (every scene would live for ever).
 import weakref
 
 import torch
+from torch.autograd.function import once_differentiable
 
 from .solvers.core import GradientError
 
@@ -99,6 +100,7 @@ class _Step(torch.autograd.Function):
         return outs
 
     @staticmethod
+    @once_differentiable  # first-order only: a second derivative raises (torch names the function)
     def backward(ctx, *grad_states):
         sim = _alive(ctx.sim)
         _check_generation(sim, ctx.rollout.generation, f"step {ctx.index}")
@@ -129,6 +131,7 @@ class _Read(torch.autograd.Function):
         return sim.read_derived(solver, state)
 
     @staticmethod
+    @once_differentiable
     def backward(ctx, grad):
         sim = _alive(ctx.sim)
         _check_generation(sim, ctx.generation, "a link getter")

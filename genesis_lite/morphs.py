@@ -77,8 +77,9 @@ class Morph:
 class URDF(Morph):
     """A robot from a URDF file; mesh paths may be relative or ``package://``.
 
-    default_armature: armature (kg·m² or kg) of every dof, as URDF has no tag for it. Genesis
-    defaults to 0.1; 0 here, so that the dynamics are the file's (and MuJoCo's).
+    default_armature: armature (kg·m² or kg) of every revolute and prismatic dof (a motor's rotor;
+    as Genesis, not a free base's), as URDF has no tag for it. Genesis defaults to 0.1; 0 here,
+    so that the dynamics are the file's (and MuJoCo's).
     merge_fixed_links: merge every link attached by a fixed joint into its parent, as Genesis
     (and MuJoCo) do: one rigid body, same physics, fewer links. The merged link keeps the
     parent's name; the merged-away names no longer exist. The root link is never merged.

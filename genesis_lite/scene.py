@@ -401,8 +401,9 @@ def _links_of(morph, material, name):
         links = urdf.load_urdf(morph.file, entity_name=name, rho=material.rho)
         if morph.merge_fixed_links:
             links = merge.merge_fixed_links(links, morph.links_to_keep, owner=f"entity '{name}': gs.morphs.URDF")
-        for link in links:
-            link.armature = morph.default_armature
+        for link in links:  # a motor's rotor on each joint one could drive (Genesis's rule): not a free base's
+            if link.joint_type in ("revolute", "prismatic"):
+                link.armature = morph.default_armature
     elif isinstance(morph, gm.Box):
         links = shapes.box_link(morph.size, material.rho)
     elif isinstance(morph, gm.Sphere):

@@ -365,3 +365,19 @@ def test_checkpointing_bit_identical_with_constraint_rows(f64):
         ((robot.get_dofs_position() ** 2).sum() + robot.get_dofs_velocity().cos().sum()).backward()
         grads[interval] = velocity.grad.clone()
     assert torch.equal(grads[1], grads[3]), (grads[1] - grads[3]).abs().max()
+
+
+def test_second_derivatives_raise_rather_than_drop_out(pendulum):
+    """The step and the link getters are differentiable once: a gradient taken with create_graph
+    and differentiated again raises (it was a constant: the simulator's second-order part dropped
+    out of a Hessian-vector product without a word)."""
+    scene, robot = pendulum
+    scene.reset()
+    velocity = torch.tensor([0.3, 0.1], dtype=torch.float64, requires_grad=True)
+    robot.set_dofs_velocity(velocity)
+    for _ in range(5):
+        scene.step()
+    loss = (robot.get_dofs_position() ** 2).sum() + robot.get_links_pos().sum()
+    (grad,) = torch.autograd.grad(loss, velocity, create_graph=True)
+    with pytest.raises(RuntimeError, match="differentiate twice"):
+        (grad ** 2).sum().backward()

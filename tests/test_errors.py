@@ -378,6 +378,11 @@ def test_zero_quaternion(f64):
     with pytest.raises(gs.InvalidInputError, match="entity 'box': argument 'qpos' must hold non-zero"):
         box.set_qpos([0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0])
     box.set_qpos([0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+    # a write of part of the quaternion is checked on the quaternion it leaves (w = 0 here left none)
+    with pytest.raises(gs.InvalidInputError, match="entity 'box': argument 'qpos' must hold non-zero"):
+        box.set_qpos([0.0], qs_idx_local=[3])
+    box.set_qpos([0.0, 1.0], qs_idx_local=[3, 5])
+    assert box.get_qpos()[3:].tolist() == [0.0, 0.0, 1.0, 0.0]
     scene.destroy()
 
 

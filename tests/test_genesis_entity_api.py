@@ -267,6 +267,21 @@ def test_control_force_is_the_command_at_the_current_state(f64, pendulum):
     assert robot.get_dofs_control_force().tolist() == [5.0]  # Genesis: clipped to the effort 5
 
 
+def test_force_range_may_be_unbounded(f64, pendulum):
+    """±inf is no bound, as Genesis's default (a Genesis script restoring it works); NaN is refused."""
+    scene, robot = pendulum
+    scene.reset()
+    robot.set_dofs_position([0.3])
+    robot.control_dofs_position([0.0])
+    robot.set_dofs_force_range([-float("inf")], [float("inf")])
+    try:
+        assert np.isclose(float(robot.get_dofs_control_force()), -30.0, rtol=0, atol=1e-12)
+        with pytest.raises(gs.InvalidInputError, match="argument 'upper' must be free of NaN"):
+            robot.set_dofs_force_range([-1.0], [float("nan")])
+    finally:
+        robot.set_dofs_force_range([-5.0], [5.0])
+
+
 def test_control_force_mixed_modes_batched(f64, two_robots):
     scene, kuka, other = two_robots
     scene.reset()

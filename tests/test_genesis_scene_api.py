@@ -448,3 +448,19 @@ def test_bad_lateral_friction(tmp_path, lateral):
 def test_material_friction_range_is_genesis(friction):
     with pytest.raises(gs.InvalidInputError, match=r"argument 'friction' must be a number in \[0.01, 5.0\]"):
         gs.materials.Rigid(friction=friction)
+
+
+def test_default_armature_on_motor_joints_only_and_urdf_gains(f64):
+    """As Genesis: URDF(default_armature) goes to revolute and prismatic dofs, not to a free base's
+    (which then falls at exactly g: one Euler step from rest, vz = −g·dt); the Panda's
+    <safety_controller k_position k_velocity> are its arm joints' kp and kv (Genesis 1.4.5: kv 40)."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01),
+                     rigid_options=gs.options.RigidOptions(enable_collision=False))
+    arm = scene.add_entity(gs.morphs.URDF(file=asset("arm3.urdf"), pos=(0, 0, 1), default_armature=0.1))
+    panda = scene.add_entity(gs.morphs.URDF(file=pybullet("franka_panda/panda.urdf"), fixed=True))
+    scene.build()
+    assert arm.get_dofs_armature().tolist() == [0.0] * 6 + [0.1] * (arm.n_dofs - 6)
+    scene.step()
+    assert arm.get_dofs_velocity()[2].item() == pytest.approx(-9.81 * 0.01, rel=1e-12)
+    assert panda.get_dofs_kp().tolist() == [100.0] * 9
+    assert panda.get_dofs_kv().tolist() == [40.0] * 7 + [10.0] * 2  # the fingers have no safety controller

@@ -20,7 +20,7 @@ ROBOTS = {"pendulum2": (asset("pendulum2.urdf"), True), "cartpole": (pybullet("c
           "kuka_free": (pybullet("kuka_iiwa", "model_free_base.urdf"), False),
           "quadruped": (asset("quadruped.urdf"), False)}  # a floating base with four branches
 KINDS = ("dofs_position", "dofs_velocity", "force", "position_target", "velocity_target", "mass", "damping",
-         "armature", "kp", "kv", "gravity", "frictionloss")
+         "armature", "kp", "kv", "gravity", "frictionloss", "force_range")
 EPS = 1e-6
 # fourth-order differences at two eps, the better one counts: round-off grows as eps shrinks
 # (measured: the limited quadruped's kp case 6e-8 at 1e-5, 1e-6 at 1e-6, 8e-6 at 1e-7)
@@ -72,6 +72,7 @@ def _nominal(kind, robot, n_envs, horizon, rng):
         "kv": rng.uniform(0.2, 1, _batch(n_envs, n)),
         "gravity": np.array([0.5, -0.3, -9.81]) + np.zeros(_batch(n_envs, 3)),
         "frictionloss": rng.uniform(0.02, 0.2, _batch(n_envs, n)),
+        "force_range": np.stack([rng.uniform(-1.8, -1.2, _batch(n_envs, n)), rng.uniform(1.2, 1.8, _batch(n_envs, n))]),
         "base_pos": rng.uniform(-1, 1, _batch(n_envs, 3)),
         "base_quat": rng.normal(size=_batch(n_envs, 4)),
     }
@@ -96,6 +97,7 @@ def _rollout(scene, robot, kind, value, horizon):
     setters = {"mass": robot.set_links_mass, "damping": robot.set_dofs_damping, "armature": robot.set_dofs_armature,
                "frictionloss": robot.set_dofs_frictionloss,
                "kp": robot.set_dofs_kp, "kv": robot.set_dofs_kv, "gravity": scene.set_gravity,
+               "force_range": lambda v: robot.set_dofs_force_range(v[0], v[1]),
                # the base setters come after the velocities: keep them (set_pos/set_quat zero them by default)
                "base_pos": lambda v: robot.set_pos(v, zero_velocity=False),
                "base_quat": lambda v: robot.set_quat(v, zero_velocity=False)}
@@ -106,6 +108,8 @@ def _rollout(scene, robot, kind, value, horizon):
         setters[kind](value)
     if kind in ("kp", "kv"):  # gains act through a position servo
         kind, value = "position_target", torch.full((horizon, *_batch(n_envs, robot.n_dofs)), 0.2)
+    if kind == "force_range":  # forces of which a share clips at either bound
+        kind, value = "force", torch.tensor(rng.uniform(-2.5, 2.5, (horizon, *_batch(n_envs, robot.n_dofs))))
     controls = {"force": robot.control_dofs_force, "position_target": robot.control_dofs_position,
                 "velocity_target": robot.control_dofs_velocity}
     dofs = np.arange(6, robot.n_dofs) if robot.is_free and kind == "position_target" else None
@@ -164,7 +168,8 @@ def test_branching_tree(f64, kind):
     _check("quadruped", kind, horizon=10)
 
 
-@pytest.mark.parametrize("kind", ["dofs_position", "dofs_velocity", "force", "kp", "mass", "armature", "frictionloss"])
+@pytest.mark.parametrize("kind", ["dofs_position", "dofs_velocity", "force", "kp", "mass", "armature", "frictionloss",
+                                  "force_range"])
 def test_limits_and_force_range(f64, kind):
     """Joint limits pushing (the calves start past their upper bound 0), friction loss (sliding
     and stuck dofs) and clipped forces: the constraint solve's implicit gradient."""

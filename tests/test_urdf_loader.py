@@ -353,13 +353,36 @@ def test_unreadable_mesh(tmp_path):
     ('<link name="a"><collision><geometry><capsule radius="1" length="1"/></geometry></collision></link>',
      ["capsule"]),
     ('<link name="a"/><joint name="j"><parent link="a"/></joint>', ["cannot parse"]),
+    # what yourdfpy would fill in (izz 1, mass 0) or drop (a 4th number, a second element)
+    (LINK.format("a").replace(' izz="1"', ""), ["link 'a'", "<inertia>", "without izz"]),
+    (LINK.format("a").replace('<mass value="1"/>', "<mass/>"), ["link 'a'", "<mass>", "without value"]),
+    (LINK.format("a") + LINK.format("b") + joint("j", "revolute", extra='<origin xyz="0 0 1 0"/>'),
+     ["joint 'j'", "<origin xyz>", "3 numbers", "'0 0 1 0'"]),
+    (LINK.format("a") + LINK.format("b") + joint("j", "revolute", extra='<axis xyz="0 0 1"/><axis xyz="1 0 0"/>'),
+     ["joint 'j'", "one <axis>", "got 2"]),
+    ('<link name="a"><collision><geometry><box size="1 1"/></geometry></collision></link>', ["link 'a'", "<box size>"]),
+    ('<link name="a"><inertial><mass value="1"/></inertial><inertial><mass value="2"/></inertial></link>',
+     ["link 'a'", "one <inertial>"]),
 ], ids=["neg-mass", "neg-inertia", "zero-axis", "two-roots", "unknown-link", "cycle", "bad-number",
-        "zero-box", "unknown-geometry", "no-child"])
+        "zero-box", "unknown-geometry", "no-child", "moment-missing", "mass-value-missing", "four-numbers",
+        "two-axes", "box-two-sizes", "two-inertials"])
 def test_invalid_content(tmp_path, body, words):
     with pytest.raises(AssetError) as info:
         load_urdf(write_urdf(tmp_path, body))
     for word in ["robot.urdf", *words]:
         assert word in str(info.value)
+
+
+def test_safety_controller_gains_and_mimic_warning(tmp_path, caplog):
+    """<safety_controller k_position k_velocity> are the joint's servo gains (Genesis reads them
+    so), None without; a mimic joint warns that it moves on its own (no equality constraint yet)."""
+    gains = '<safety_controller k_position="7" k_velocity="3" soft_lower_limit="-0.5" soft_upper_limit="0.5"/>'
+    body = (LINK.format("a") + LINK.format("b") + LINK.format("c") + joint("j", "revolute", extra=gains)
+            + joint("k", "revolute", "b", "c", extra='<mimic joint="j" multiplier="-1"/>'))
+    specs = by_name(load_urdf(write_urdf(tmp_path, body)))
+    assert (specs["b"].kp, specs["b"].kv) == (7.0, 3.0) and (specs["c"].kp, specs["c"].kv) == (None, None)
+    assert any("joint 'k' mimics joint 'j'" in r.getMessage() and "equality constraint" in r.getMessage()
+               for r in caplog.records)
 
 
 # ------------------------------------------------------------------ every pybullet_data URDF

@@ -103,9 +103,10 @@ class EntityIndexing:
             return value.as_subclass(torch.Tensor).to(device=runtime.device, dtype=runtime.tc_float)
         return torch.as_tensor(array.astype(np.float64), dtype=runtime.tc_float, device=runtime.device)
 
-    def _values(self, value, n_cols, envs, arg):
-        """User values → (len(envs), n_cols) float tensor on gs.device; checked shape and finiteness.
-        In a batched scene (n_cols,) values apply to every env of envs (Genesis broadcasts too)."""
+    def _values(self, value, n_cols, envs, arg, infinite=False):
+        """User values → (len(envs), n_cols) float tensor on gs.device; checked shape and finiteness
+        (``infinite``: ±inf allowed, for bounds). In a batched scene (n_cols,) values apply to every
+        env of envs (Genesis broadcasts too)."""
         expected = (n_cols,) if self.scene.n_envs == 0 else (len(envs), n_cols)
         tensor = self._tensor(value, arg, expected)
         if self.scene.n_envs and tuple(tensor.shape) == (n_cols,):
@@ -114,7 +115,8 @@ class EntityIndexing:
             every_env = f" or {(n_cols,)} for every env" if self.scene.n_envs else ""
             raise InvalidInputError(f"{self._who}: argument '{arg}' must have shape {expected}{every_env}, "
                                     f"got {tuple(tensor.shape)}")
-        if not all_finite(tensor.detach()):
-            raise InvalidInputError(f"{self._who}: argument '{arg}' must be finite, got NaN or inf in "
+        if not (bool((~torch.isnan(tensor.detach())).all()) if infinite else all_finite(tensor.detach())):
+            what = "free of NaN" if infinite else "finite"
+            raise InvalidInputError(f"{self._who}: argument '{arg}' must be {what}, got "
                                     f"{tensor.detach().cpu().numpy()}")
         return tensor.reshape(len(envs), n_cols)

@@ -281,8 +281,11 @@ class RigidEntity(EntityIndexing):
         qs = self._local(qs_idx_local, self.n_qs, "qs_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         values = self._values(qpos, len(qs), envs, "qpos")
-        if self._free and set(range(3, 7)) <= set(qs.tolist()):  # a free base's whole quaternion
-            self._check_quat(values[:, [qs.tolist().index(k) for k in range(3, 7)]], "qpos")
+        written = [k for k in range(3, 7) if k in qs.tolist()]
+        if self._free and written:  # the free base's quaternion this write leaves
+            quats = self._rows(self._solver_q(np.arange(3, 7)), envs).detach().clone()
+            quats[:, [k - 3 for k in written]] = values[:, [qs.tolist().index(k) for k in written]].detach()
+            self._check_quat(quats, "qpos")
         self._write(self._solver_q(qs), envs, values, zero_velocity)
 
     def _check_quat(self, quats, arg):
@@ -419,10 +422,12 @@ class RigidEntity(EntityIndexing):
         return self._get_dofs_input("armature", dofs_idx_local, envs_idx)
 
     def set_dofs_force_range(self, lower, upper, dofs_idx_local=None, envs_idx=None):
-        """Bounds on the actuator force, N·m or N (not differentiable)."""
+        """Bounds on the actuator force, N·m or N (±inf: none, Genesis's default); differentiable (a
+        clipped force is its bound)."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
-        lo, hi = self._values(lower, len(dofs), envs, "lower"), self._values(upper, len(dofs), envs, "upper")
+        lo = self._values(lower, len(dofs), envs, "lower", infinite=True)
+        hi = self._values(upper, len(dofs), envs, "upper", infinite=True)
         if bool((lo > hi).any()):
             raise InvalidInputError(f"entity '{self.name}': argument 'lower' must be ≤ 'upper', got "
                                     f"{lo.cpu().numpy()} and {hi.cpu().numpy()}")

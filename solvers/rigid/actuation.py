@@ -69,7 +69,13 @@ def smooth_force_adjoint(d: ti.template(), s, e, i):
     accumulate(d.qfrc_bias.grad, ti.Vector([s, e, i]), -g)
     accumulate(d.damping.grad, ti.Vector([e, i]), -g * qd)
     force = actuator_force(d, e, i, mode, q, qd)
-    g_force = g if d.force_lo[e, i] < force and force < d.force_hi[e, i] else 0.0  # a clipped force is constant
+    g_force = 0.0  # a clipped force is its bound (at the bound itself too)
+    if d.force_lo[e, i] < force and force < d.force_hi[e, i]:
+        g_force = g
+    elif force <= d.force_lo[e, i]:
+        accumulate(d.force_lo.grad, ti.Vector([e, i]), g)
+    else:
+        accumulate(d.force_hi.grad, ti.Vector([e, i]), g)
     if mode == FORCE:
         accumulate(d.ctrl_force.grad, ti.Vector([e, i]), g_force)
     else:  # the velocity term, shared by both servos

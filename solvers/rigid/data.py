@@ -60,8 +60,8 @@ INPUTS = {
     # pose (contact.invweight), never set by hand
     "invweight_t": ("L", True),
     "invweight_dof": ("D", True),
-    "force_lo": ("D", False),   # N·m or N
-    "force_hi": ("D", False),
+    "force_lo": ("D", True),    # N·m or N: the actuator force's bounds
+    "force_hi": ("D", True),
     "ctrl_mode": ("D", False),  # 0 force, 1 position, 2 velocity (see actuation.py)
 }
 

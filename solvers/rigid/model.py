@@ -181,7 +181,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
     """
     rows = {k: [] for k in ("name", "parent", "jtype", "pos0", "quat0", "axis", "com", "inertia0", "mass0",
                             "dof0", "q0", "entity")}
-    dofs = {k: [] for k in ("link", "q", "damping", "armature", "lower", "upper", "effort", "frictionloss")}
+    dofs = {k: [] for k in ("link", "q", "damping", "armature", "lower", "upper", "effort", "frictionloss", "kp", "kv")}
     geoms, geom_links, geom_names = [], [], []
     qpos0 = []
     for entity_idx, links in enumerate(entities_links):
@@ -211,6 +211,8 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
                 dofs["upper"].append(np.inf if free else spec.upper)
                 dofs["effort"].append(np.inf if free else spec.effort)
                 dofs["frictionloss"].append(0.0 if free else spec.frictionloss)
+                dofs["kp"].append(DEFAULT_KP if free or spec.kp is None else spec.kp)
+                dofs["kv"].append(DEFAULT_KV if free or spec.kv is None else spec.kv)
             for k, geom in enumerate(spec.geoms):
                 geoms.append(geom)
                 geom_links.append(link_idx)
@@ -233,7 +235,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
         link_entity=np.array(rows["entity"], dtype=np.int32),
         dof_link=dof_link, dof_q=np.array(dofs["q"], dtype=np.int32),
         dof_damping=np.array(dofs["damping"], dtype=f), dof_armature=np.array(dofs["armature"], dtype=f),
-        dof_kp=np.full(n_dofs, DEFAULT_KP), dof_kv=np.full(n_dofs, DEFAULT_KV),
+        dof_kp=np.array(dofs["kp"], dtype=f), dof_kv=np.array(dofs["kv"], dtype=f),
         dof_lower=np.array(dofs["lower"], dtype=f), dof_upper=np.array(dofs["upper"], dtype=f),
         dof_effort=np.array(dofs["effort"], dtype=f), dof_frictionloss=np.array(dofs["frictionloss"], dtype=f),
         **_geoms(geoms, geom_links, geom_names), **_pairs(geoms, geom_links, rows, self_collision, adjacent_collision),

@@ -56,6 +56,8 @@ class LinkSpec:
     damping N·m·s/rad (or N·s/m); armature kg·m² (or kg); frictionloss N·m (or N): the joint's
     dry friction (URDF ``<dynamics friction>``; a friction-loss constraint row).
     lower/upper: joint limits, rad or m (-inf/inf when unlimited); effort: |force| bound (inf when none).
+    kp N·m/rad (or N/m), kv N·m·s/rad (or N·s/m): the joint's servo gains, None for the solver's
+    defaults.
     merged: (link name, fixed joint name) of every link merged into this one (merge.py), for
     error messages about names that no longer exist.
     visuals: VisualSpec list, what cameras draw of the link (URDF ``<visual>``; empty for
@@ -77,6 +79,8 @@ class LinkSpec:
     lower: float = -np.inf
     upper: float = np.inf
     effort: float = np.inf
+    kp: float = None
+    kv: float = None
     geoms: list = field(default_factory=list)
     merged: list = field(default_factory=list)
     visuals: list = field(default_factory=list)

@@ -13,10 +13,19 @@ Friction: ``<dynamics friction>`` is the joint's dry friction (LinkSpec.friction
 no contact friction, so the one pybullet reads, ``<link><contact><lateral_friction value>``,
 becomes the friction of that link's collision shapes (GeomSpec.friction). The joint's dry
 friction is a friction-loss constraint row, as in MuJoCo.
-Ignored: mimic joints, velocity limits, calibration, safety controllers, and pybullet's other
-``<contact>`` entries (rolling/spinning friction, restitution, stiffness, damping, cfm/erp).
+Servo gains: ``<safety_controller k_position k_velocity>`` are the joint's kp and kv, as Genesis
+reads them (LinkSpec.kp, kv; the solver's defaults otherwise).
+Mimic joints warn: they would need an equality constraint, which genesis_lite does not have yet
+(the joint moves on its own).
+Ignored: velocity limits, calibration, the safety controller's soft limits (as Genesis), and
+pybullet's other ``<contact>`` entries (rolling/spinning friction, restitution, stiffness,
+damping, cfm/erp).
+Checked on the XML itself, where yourdfpy would fill in or drop (urdfdom and MuJoCo refuse):
+an ``<inertia>`` needs all six moments and a ``<mass>`` its value; ``xyz``, ``rpy`` and a box's
+``size`` hold three numbers; an element a URDF allows once in its parent appears once.
 """
 import io
+import logging
 import os
 import re
 
@@ -30,6 +39,16 @@ from .spec import GeomSpec, LinkSpec, VisualSpec
 _JOINT_TYPES = {"revolute": "revolute", "continuous": "revolute",
                 "prismatic": "prismatic", "fixed": "fixed"}
 _XML_DECLARATION = re.compile(rb"<\?xml\s[^>]*\?>")
+# what the XML itself must hold (yourdfpy fills in a missing moment as 1, a missing mass as 0,
+# keeps the first of two <origin>s and the first 3 of 4 numbers): element → attributes it needs;
+# element → attributes of three numbers; parent → the children it may hold once
+_REQUIRED = {"inertia": ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"), "mass": ("value",)}
+_TRIPLES = {"origin": ("xyz", "rpy"), "axis": ("xyz",), "box": ("size",)}
+_ONCE = {"link": ("inertial",), "inertial": ("origin", "mass", "inertia"),
+         "joint": ("origin", "axis", "parent", "child", "limit", "dynamics", "mimic", "safety_controller",
+                   "calibration"),
+         "collision": ("origin", "geometry"), "visual": ("origin", "geometry", "material")}
+_logger = logging.getLogger("genesis_lite")
 _DEFAULT_AXIS = np.array([1.0, 0.0, 0.0])  # URDF spec default
 # relative tolerance on negative principal moments, for inertias rounded to a few digits
 _INERTIA_RTOL = 1e-6
@@ -76,10 +95,13 @@ class _Context:
         self.folder = os.path.dirname(os.path.abspath(path))
         self.entity = entity_name
 
+    def where(self) -> str:
+        """The file (and entity) name, as messages start."""
+        return f"URDF '{self.path}'" + (f" (entity '{self.entity}')" if self.entity else "")
+
     def error(self, msg: str) -> AssetError:
         """An AssetError prefixed with the file (and entity) name."""
-        who = f"URDF '{self.path}'" + (f" (entity '{self.entity}')" if self.entity else "")
-        return AssetError(f"{who}: {msg}")
+        return AssetError(f"{self.where()}: {msg}")
 
 
 # ------------------------------------------------------------------ parsing and tree
@@ -101,6 +123,7 @@ def _parse(ctx: _Context):
     except OSError as exc:  # a folder, no permission
         raise ctx.error(f"cannot read file: {exc.strerror or exc}") from exc
     text, xml = _strict_xml(ctx, text)
+    _check_elements(ctx, xml)
     try:
         # non-finite xyz/rpy make numpy warn while composing the origin; we reject them later
         with np.errstate(invalid="ignore", over="ignore"):
@@ -128,6 +151,30 @@ def _strict_xml(ctx: _Context, text: bytes):
         return text, etree.fromstring(text, parser)
     except Exception as exc:
         raise ctx.error(f"malformed XML: {exc}") from exc
+
+
+def _check_elements(ctx: _Context, xml) -> None:
+    """Raise where the XML lacks what yourdfpy would invent or holds what it would drop (_REQUIRED,
+    _TRIPLES, _ONCE), naming the link or joint."""
+    for element in xml.iter():
+        parent = element.getparent()
+        if not isinstance(element.tag, str) or parent is None:
+            continue
+        owner = next((a for a in element.iterancestors() if a.tag in ("link", "joint")), None)
+        where = f"{owner.tag} '{owner.get('name')}'" if owner is not None else f"<{parent.tag}>"
+        if parent.tag in _ONCE and element.tag in _ONCE[parent.tag] and parent.index(element) != parent.index(
+                parent.find(element.tag)):
+            raise ctx.error(f"{where}: <{parent.tag}> expected one <{element.tag}>, got "
+                            f"{len(parent.findall(element.tag))}")
+        if element.tag in _REQUIRED and parent.tag == "inertial":
+            missing = [a for a in _REQUIRED[element.tag] if a not in element.attrib]
+            if missing:
+                raise ctx.error(f"{where} inertial <{element.tag}> expected the attributes "
+                                f"{', '.join(_REQUIRED[element.tag])}, got one without {', '.join(missing)}")
+        for attribute in _TRIPLES.get(element.tag, ()):
+            if attribute in element.attrib and len(element.get(attribute).split()) != 3:
+                raise ctx.error(f"{where}: <{element.tag} {attribute}> expected 3 numbers, got "
+                                f"{element.get(attribute)!r}")
 
 
 def _tree_order(ctx: _Context, robot):
@@ -213,6 +260,12 @@ def _apply_joint(ctx: _Context, spec: LinkSpec, joint) -> None:
         value = getattr(joint.dynamics, tag, None)
         setattr(spec, field, _number(ctx, value, 0.0, f"joint '{joint.name}' {tag}", 0.0))
     spec.lower, spec.upper, spec.effort = _limits(ctx, joint)
+    gains = joint.safety_controller
+    spec.kp = _number(ctx, getattr(gains, "k_position", None), None, f"joint '{joint.name}' k_position", 0.0)
+    spec.kv = _number(ctx, getattr(gains, "k_velocity", None), None, f"joint '{joint.name}' k_velocity", 0.0)
+    if joint.mimic is not None and spec.joint_type != "fixed":
+        _logger.warning(f"{ctx.where()}: joint '{joint.name}' mimics joint '{joint.mimic.joint}', which "
+                        f"needs an equality constraint: genesis_lite has none yet, so it moves on its own")
 
 
 def _axis(ctx: _Context, joint) -> np.ndarray:
@@ -243,10 +296,10 @@ def _limits(ctx: _Context, joint) -> tuple[float, float, float]:
 
 
 def _number(ctx: _Context, value, default: float, what: str, minimum: float = -np.inf) -> float:
-    """`value` (None, a number or a string from the XML) as a float; `default` when None.
-    Infinite values are only accepted as defaults."""
+    """`value` (None, a number or a string from the XML) as a float; `default` when None (None
+    stays None). Infinite values are only accepted as defaults."""
     if value is None:
-        return float(default)
+        return None if default is None else float(default)
     try:
         x = float(value)
     except (TypeError, ValueError):
