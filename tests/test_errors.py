@@ -340,12 +340,15 @@ def test_invalid_default_armature(f64, value):
            "URDF", "'default_armature'", "≥ 0", repr(value))
 
 
-def test_default_armature_reaches_every_dof(f64):
-    """Genesis's URDF option: armature on every dof (URDF has no tag for it)."""
+def test_default_armature_reaches_every_joint_dof(f64):
+    """Genesis's URDF option: armature on every revolute and prismatic dof (URDF has no tag for
+    it), not on the free base's."""
     scene = gs.Scene()
     robot = scene.add_entity(gs.morphs.URDF(file=asset("quadruped.urdf"), default_armature=0.05))
     scene.build()
-    assert torch.equal(robot.get_dofs_armature(), torch.full((robot.n_dofs,), 0.05, dtype=torch.float64))
+    expected = torch.full((robot.n_dofs,), 0.05, dtype=torch.float64)
+    expected[:6] = 0.0
+    assert torch.equal(robot.get_dofs_armature(), expected)
     scene.destroy()
 
 
