@@ -482,9 +482,9 @@ class VisOptions:
         self.n_support_neighbors = _check_positive_int(owner, "n_support_neighbors", self.n_support_neighbors)
         if self.rendered_envs_idx is not None:
             idx = self.rendered_envs_idx
-            if isinstance(idx, (str, bytes)) or not hasattr(idx, "__iter__") or \
+            if isinstance(idx, (str, bytes)) or not hasattr(idx, "__iter__") or not list(idx) or \
                     not all(isinstance(i, (int, np.integer)) and not isinstance(i, bool) and i >= 0 for i in idx):
-                raise InvalidInputError(f"{owner}: argument 'rendered_envs_idx' must be env indices (integers ≥ 0) "
-                                        f"or None, got {idx!r}")
+                raise InvalidInputError(f"{owner}: argument 'rendered_envs_idx' must be env indices (integers ≥ 0, at "
+                                        f"least one) or None, got {idx!r}")
             self.rendered_envs_idx = tuple(int(i) for i in idx)
         self.lights = _check_lights(owner, self.lights)

@@ -3,8 +3,10 @@
 ``gs.init`` may be called again with other options: Taichi is then restarted and every
 scene built before becomes unusable (using it raises :class:`SceneStateError`).
 """
+import atexit
 import ctypes
 import logging
+import weakref
 
 import numpy as np
 import taichi as ti
@@ -22,6 +24,29 @@ _LOG_LEVELS = {"debug": ti.DEBUG, "info": ti.INFO, "warning": ti.WARN, "error": 
 
 
 logger = logging.getLogger("genesis_lite")
+_scenes = weakref.WeakSet()  # the scenes of the running runtime: ending it ends them
+
+
+def track(scene):
+    """Register a new scene: gs.destroy, a restarting gs.init and the interpreter's exit end it."""
+    _scenes.add(scene)
+
+
+def _end_scenes():
+    """Destroy every live scene (arrays freed, the cameras' recordings finished), as Genesis's
+    gs.destroy does."""
+    for scene in list(_scenes):
+        if not scene._destroyed:
+            scene.destroy()
+    _scenes.clear()
+
+
+@atexit.register
+def _finish_recordings():
+    """At exit, finish the cameras' streamed recordings (a writer thread still held frames: the
+    last ones were lost); Taichi itself is left to its own exit."""
+    for scene in list(_scenes):
+        scene._finish_recordings()
 
 
 def init(backend=None, precision="32", seed=None, logging_level="warning", debug=False):
@@ -58,6 +83,7 @@ def init(backend=None, precision="32", seed=None, logging_level="warning", debug
     if runtime.initialized and runtime.options == options:
         return
     if runtime.initialized:
+        _end_scenes()
         forget_kernels()
         ti.reset()
     ti_float = ti.f64 if precision == "64" else ti.f32
@@ -84,9 +110,11 @@ def _requested_arch(backend):
 
 
 def destroy():
-    """End the runtime (Genesis's ``gs.destroy``): Taichi stops, every scene becomes unusable
-    (using one raises SceneStateError), and ``gs.init`` may be called again."""
+    """End the runtime (Genesis's ``gs.destroy``): every scene is destroyed (its cameras' streamed
+    recordings finished) and becomes unusable (using one raises SceneStateError), Taichi stops,
+    and ``gs.init`` may be called again."""
     if runtime.initialized:
+        _end_scenes()
         forget_kernels()
         ti.reset()
         runtime.initialized = False

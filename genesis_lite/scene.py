@@ -19,7 +19,7 @@ from .entities.mpm_entity import sample_particles
 from .solvers.core import AssetError, InvalidInputError, SceneStateError
 from .materials import MPM, Rigid
 from .options import MPMOptions, RigidOptions, SimOptions, ViewerOptions, VisOptions, check_bool, is_int
-from .runtime import logger, require_init, runtime
+from .runtime import logger, require_init, runtime, track
 from .simulator import Simulator
 from .solvers.mpm.solver import MPMSolver
 from .solvers.rigid import merge, shapes, urdf
@@ -65,6 +65,7 @@ class Scene:
     def __init__(self, sim_options=None, rigid_options=None, viewer_options=None, vis_options=None,
                  show_viewer=False, mpm_options=None):
         require_init("gs.Scene")
+        track(self)
         self.sim_options = sim_options or SimOptions()
         self.rigid_options = rigid_options or RigidOptions()
         self.viewer_options = viewer_options or ViewerOptions()
@@ -364,7 +365,11 @@ class Scene:
             solver.destroy()
         self.sim = None
         self._destroyed = True
-        for camera in self._cameras:  # last: a failing video file leaves the scene destroyed all the same
+        self._finish_recordings()  # last: a failing video file leaves the scene destroyed all the same
+
+    def _finish_recordings(self):
+        """Each camera's streamed recording finished (its file written), a buffered one dropped."""
+        for camera in self._cameras:
             camera._close()
 
 

@@ -3,6 +3,8 @@ scenes, debug spheres) against references we did not write: the pinhole projecti
 corners, a sphere's analytic silhouette, trimesh's ray casts of URDF visual meshes posed by
 yourdfpy's forward kinematics, imageio reading the videos back, and (when an OpenGL context can be
 made) moderngl drawing the same triangles."""
+import os
+
 import numpy as np
 import pytest
 import torch
@@ -329,6 +331,45 @@ def test_rendered_envs_idx_and_bad_env_idx(f32):
     assert cam.env_idx == 1 and bad.env_idx == 0  # the default: the first rendered env
 
 
+def test_a_plane_other_than_horizontal_is_drawn_in_every_env(f32):
+    """A wall (normal +y) stands in each env at its drawing offset (a horizontal plane is the same
+    plane in every env and drawn once; a wall is not): each env's camera, 2 m in front of its own
+    wall, sees it 2 m away (it saw env 0's wall, 6 m away, from env 1)."""
+    scene = gs.Scene(**NO_CONTACT)
+    scene.add_entity(gs.morphs.Plane(pos=(0.0, -1.0, 0.0), normal=(0.0, 1.0, 0.0)))
+    cams = [scene.add_camera(res=(32, 24), pos=(0.0, 1.0, 0.5), lookat=(0.0, -1.0, 0.5), env_idx=k) for k in range(2)]
+    scene.build(n_envs=2, env_spacing=(4.0, 4.0))
+    for cam in cams:
+        depth = cam.render(rgb=False, depth=True)[1]
+        assert depth[12, 16] == pytest.approx(2.0, abs=1e-4)
+
+
+def test_follow_entity_refuses_a_camera_at_the_base_before_anything_is_built(f32):
+    """A camera standing at the followed entity's base (within float32's rounding of its position:
+    the view would point where the rounding does) is refused; told before build, the build raises
+    before anything is built, and a build after moving the camera works."""
+    scene = gs.Scene(**NO_CONTACT)
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.2), pos=(0.1, 0.3, 0.7)))
+    cam = scene.add_camera(pos=(0.1, 0.3, 0.7), lookat=(1.0, 0.0, 0.7))
+    other = scene.add_camera(pos=(2.0, 0.0, 1.0), lookat=(0.0, 0.0, 0.5))
+    cam.follow_entity(box)
+    with pytest.raises(gs.InvalidInputError, match="camera 0.follow_entity: the camera must not stand at the base of "
+                                                   "entity 'box_0'"):
+        scene.build(n_envs=2)
+    assert not scene.is_built and not cam.is_built and other.env_idx is None
+    cam.set_pose(pos=(1.0, 0.3, 0.7))
+    scene.build()
+    assert cam.env_idx is None and other.render(rgb=False, segmentation=True)[2].max() == box.links[0].idx
+    cam.set_pose(pos=box.get_pos().numpy().astype(np.float64))  # the base, as float32 gives it back
+    with pytest.raises(gs.InvalidInputError, match="must not stand at the base"):
+        cam.follow_entity(box)
+    cam.set_pose(pos=(0.1, 0.3, 0.7))  # the base up to float32 rounding (~1e-8 m off)
+    with pytest.raises(gs.InvalidInputError, match="must not stand at the base"):
+        cam.follow_entity(box)
+    with pytest.raises(gs.InvalidInputError, match="'rendered_envs_idx' must be env indices .*at least one"):
+        gs.options.VisOptions(rendered_envs_idx=[])
+
+
 # ------------------------------------------------------------------ recording
 
 
@@ -364,6 +405,44 @@ def test_recording_writes_mp4_and_gif_read_back_by_imageio(f32, tmp_path):
     gif = imageio.mimread(str(tmp_path / "buffered.gif"))
     assert len(gif) == 12 and gif[0].shape[:2] == (121, 161)
     assert np.abs(gif[-1][..., :3].astype(int) - frames[-1]).mean() < 6
+    # a GIF's delays: 1/fps rounded to hundredths of a second (Pillow truncates), at least two
+    from PIL import Image
+
+    for fps, delay in ((20, 50), (60, 20), (30, 30), (7, 140)):
+        cam.start_recording()
+        for k in range(3):  # frames that differ (Pillow merges equal ones, adding their delays)
+            cam.set_pose(pos=(2.0, 0.6 * k, 0.5))
+            cam.render()
+        cam.stop_recording(str(tmp_path / f"{fps}.gif"), fps=fps)
+        with Image.open(tmp_path / f"{fps}.gif") as image:
+            assert image.info["duration"] == delay, fps
+    with pytest.raises(gs.InvalidInputError, match="'save_to_filename' must name a file, got .*a folder"):
+        os.makedirs(tmp_path / "folder.mp4")
+        cam.start_recording(str(tmp_path / "folder.mp4"))
+
+
+def test_scenes_ending_finish_their_recordings(f32, tmp_path, caplog):
+    """gs.destroy (and a restarting gs.init, and the interpreter's exit) end every scene, whose
+    cameras finish a streamed recording's file (Genesis's atexit destroy does); a buffered one,
+    without a file, is dropped with a warning."""
+    import imageio.v2 as imageio
+
+    scene = gs.Scene(**NO_CONTACT)
+    scene.add_entity(gs.morphs.Box(size=(0.3, 0.3, 0.3), pos=(0.0, 0.0, 1.0)))
+    streamed = scene.add_camera(res=(32, 24), pos=(2.0, 0.0, 0.5), lookat=(0.0, 0.0, 0.5))
+    buffered = scene.add_camera(res=(32, 24), pos=(2.0, 0.0, 0.5), lookat=(0.0, 0.0, 0.5))
+    scene.build()
+    streamed.start_recording(str(tmp_path / "streamed.mp4"), fps=30)
+    buffered.start_recording()
+    for _ in range(30):
+        streamed.render()
+        buffered.render()
+    gs.init(precision="64")  # a restart ends the scenes of the runtime before
+    with pytest.raises(gs.SceneStateError):
+        scene.step()
+    assert len([frame for frame in imageio.get_reader(str(tmp_path / "streamed.mp4"))]) == 30  # (len(): inf)
+    assert any("camera 1: a recording of 30 frames was dropped" in r.getMessage() for r in caplog.records)
+    gs.init(precision="32")
 
 
 # ------------------------------------------------------------------ errors

@@ -31,6 +31,7 @@ arguments, ``antialiasing``, VisOptions that draw more than the scene (world/lin
 frustums, plane reflection), per-env images (``split_envs=True``) and custom lights. Not drawn:
 shadows (``VisOptions.shadow``), textures, transparency.
 """
+import logging
 import os
 import sys
 import time
@@ -42,6 +43,8 @@ from ..options import _check_float, _check_vec3, check_bool, is_int
 from ..solvers.core import InvalidInputError, SceneStateError
 from .rasterizer import Rasterizer, View
 from .recorder import Recording
+
+logger = logging.getLogger("genesis_lite")
 
 # VisOptions whose non-default values cameras cannot honour (their defaults draw nothing extra)
 UNSUPPORTED_VIS_OPTIONS = ("show_world_frame", "show_link_frame", "show_cameras", "plane_reflection", "split_envs",
@@ -74,7 +77,8 @@ class Camera:
         if env_idx is not None and not (is_int(env_idx) and env_idx >= 0):
             raise InvalidInputError(f"{owner}: argument 'env_idx' must be None or an env index (integer ≥ 0), "
                                     f"got {env_idx!r}")
-        self._env_idx = None if env_idx is None else int(env_idx)
+        self._env_idx_arg = self._env_idx = None if env_idx is None else int(env_idx)  # (the argument, kept:
+        # a build that raises leaves no default behind)
         self._debug = check_bool(owner, "debug", debug)
         self._pos = self._lookat = self._up = None
         self.set_pose(pos=pos, lookat=lookat, up=up)
@@ -85,9 +89,11 @@ class Camera:
 
     # -- life cycle ---------------------------------------------------------------------------
     def _bind_env(self):
-        """Check env_idx and settle its default once the scene's n_envs is known (scene.build,
-        before the simulator is made, or add_camera after build)."""
+        """Check env_idx and settle its default once the scene's n_envs is known, and that the camera
+        does not stand at the base of an entity it was told to follow (scene.build, before the
+        simulator is made, or add_camera after build)."""
         rendered = self._scene._rendered_envs()
+        self._env_idx = self._env_idx_arg
         if self._scene.n_envs == 0:
             if self._env_idx is not None:
                 raise InvalidInputError(f"{self._name}: argument 'env_idx' must be None in a scene built with "
@@ -98,6 +104,8 @@ class Camera:
             raise InvalidInputError(f"{self._name}: argument 'env_idx' must be one of the rendered envs "
                                     f"{rendered.tolist()} (VisOptions.rendered_envs_idx, n_envs={self._scene.n_envs}), "
                                     f"got {self._env_idx}")
+        if self._follow is not None and self._follow[1] is None:  # followed before build: the base starts at
+            self._apart(f"{self._name}.follow_entity", self._follow[0], self._follow[0].morph.pos)  # its morph's pos
 
     def _on_build(self):
         """The scene is built: the camera can render."""
@@ -220,11 +228,18 @@ class Camera:
         check_bool(owner, "fix_orientation", fix_orientation)
         offset = None
         if self._is_built:
-            offset = self._pos - self._entity_pos(entity)
-            if np.linalg.norm(offset) < 1e-9:
-                raise InvalidInputError(f"{owner}: the camera must not stand at the base of entity '{entity.name}' "
-                                        f"(pos {self._pos.tolist()}); move it away first")
+            offset = self._apart(owner, entity, self._entity_pos(entity))
         self._follow = (entity, offset, fixed_axis, smoothing, bool(fix_orientation))
+
+    def _apart(self, owner, entity, base):
+        """The camera's offset (3,) m from the followed entity's base at ``base`` (3,) m; raise when it
+        stands there (within 1 µm per metre from the origin: float32 positions come back rounded,
+        and the view would point where the rounding does)."""
+        offset = self._pos - base
+        if np.linalg.norm(offset) <= 1e-6 * (1.0 + np.linalg.norm(base)):
+            raise InvalidInputError(f"{owner}: the camera must not stand at the base of entity '{entity.name}' "
+                                    f"(pos {self._pos.tolist()}, the base at {base.tolist()}); move it away first")
+        return offset
 
     def unfollow_entity(self):
         """Stop following; the camera keeps its current pose."""
@@ -331,11 +346,14 @@ class Camera:
 
     def _close(self):
         """The scene is destroyed: finish a streamed recording's file (as Genesis does); a buffered
-        one has no file yet and is dropped."""
+        one has no file yet and is dropped, with a warning when it held frames."""
         recording, self._recording = self._recording, None
         if recording is not None and recording.streamed and recording.n_frames:
             recording.save(*recording.target())
         elif recording is not None and not recording.streamed:
+            if recording.n_frames:
+                logger.warning(f"{self._name}: a recording of {recording.n_frames} frames was dropped with its scene "
+                               f"(it had no file: stop_recording(save_to_filename) saves one)")
             recording.discard()
 
     def __repr__(self):

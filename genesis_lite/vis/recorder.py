@@ -16,8 +16,10 @@ says which the user picks):
 MP4: libx264, yuv420p so that every player reads it; yuv420p needs an even width and height, so an
 odd one gets a black column or row of padding. Preset ultrafast (crf 23): 2 ms a 640×480 frame on
 2 cores, half of veryfast's, for files ~6× larger (260 kB for bench/render.py's 300 KUKA frames).
-GIF: looped, each frame shown for 1/fps s rounded to the format's unit, a hundredth of a second;
-its frames wait in memory until the file is written (Pillow writes a GIF at once).
+GIF: looped, each frame shown for 1/fps s rounded to the format's unit, a hundredth of a second,
+and at least two (browsers show a shorter delay as a tenth of a second: 60 fps plays at 50); its
+frames wait in memory until the file is written (Pillow writes a GIF at once, truncating a
+delay to its unit: it is given rounded).
 """
 import os
 import queue
@@ -52,6 +54,8 @@ def check_target(owner, filename, fps):
     if not os.path.isdir(folder):
         raise InvalidInputError(f"{owner}: argument 'save_to_filename' must be in an existing folder, got "
                                 f"{filename!r} ({folder} does not exist)")
+    if os.path.isdir(filename):
+        raise InvalidInputError(f"{owner}: argument 'save_to_filename' must name a file, got {filename!r}, a folder")
     fps = DEFAULT_FPS if fps is None else fps
     if isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating)) or not 0 < fps < np.inf:
         raise InvalidInputError(f"{owner}: argument 'fps' must be a positive number of frames per second, got {fps!r}")
@@ -88,7 +92,8 @@ class _GifWriter:
         self._frames.append(frame)
 
     def close(self):
-        iio.imwrite(self._filename, np.stack(self._frames), extension=".gif", duration=1000.0 / self._fps, loop=0)
+        delay = 10 * max(2, round(100.0 / self._fps))  # ms
+        iio.imwrite(self._filename, np.stack(self._frames), extension=".gif", duration=delay, loop=0)
 
 
 def mux_h264(raw, filename, fps):

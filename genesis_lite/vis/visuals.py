@@ -13,7 +13,8 @@ crisp. A Plane is drawn as a square of PLANE_SIZE m (Genesis's default plane_siz
 (Genesis draws a checker texture).
 
 ``SceneVisuals`` is a built scene's drawing for the envs the cameras draw: one MeshSet holding
-every shape of every drawn env in its link frame (a plane once: it is the same plane in every env),
+every shape of every drawn env in its link frame (a horizontal plane once: the envs' drawing
+offsets are horizontal, so it is the same plane in every env; another plane once per env),
 built once, and per frame the Instances: each shape at its link's world pose, read from the rigid
 solver, moved by its env's drawing offset (``scene.envs_offset``). ``DebugSpheres`` are the
 spheres of ``scene.draw_debug_spheres``.
@@ -39,12 +40,12 @@ SHARP_EDGE = np.radians(30.0)
 class Shape:
     """One drawn shape: its link (scene-wide index), triangles in the link frame (vertices (V, 3) m,
     unit normals (V, 3), faces (F, 3)), rgb colour (3,), its segmentation ids {level: id} and
-    whether it is a plane (drawn once, not per env)."""
+    whether it is the same in every env (a horizontal plane: drawn once, not per env)."""
     link: int
     mesh: tuple
     color: np.ndarray
     seg: dict
-    is_plane: bool
+    shared: bool
 
 
 def scene_shapes(scene):
@@ -55,7 +56,7 @@ def scene_shapes(scene):
         if not hasattr(entity, "_specs"):  # particles: SceneVisuals.particles draws them
             continue
         override = None if entity.surface.color is None else np.asarray(entity.surface.color[:3])
-        is_plane = isinstance(entity.morph, gm.Plane)
+        shared = isinstance(entity.morph, gm.Plane) and _horizontal(entity.morph)
         for k, spec in enumerate(entity._specs):
             link = entity.link_start + k
             visuals = spec.visuals if isinstance(entity.morph, gm.URDF) else [_geom_visual(g) for g in spec.geoms]
@@ -63,8 +64,17 @@ def scene_shapes(scene):
                 color = override if override is not None else \
                     np.asarray(DEFAULT_COLOR if visual.rgba is None else visual.rgba[:3])
                 seg = {"entity": entity.idx, "link": link, "geom": len(shapes)}
-                shapes.append(Shape(link, tessellate(visual), color, seg, is_plane))
+                shapes.append(Shape(link, tessellate(visual), color, seg, shared))
     return shapes
+
+
+def _horizontal(plane):
+    """Whether a Plane morph's world normal is ±z (its quat turns its normal)."""
+    import trimesh
+
+    rot = trimesh.transformations.quaternion_matrix(plane.quat)[:3, :3]
+    normal = rot @ np.asarray(plane.normal, dtype=np.float64)
+    return bool(np.all(np.abs(normal[:2]) <= 1e-9 * np.linalg.norm(normal)))
 
 
 def _geom_visual(geom):
@@ -132,7 +142,7 @@ class SceneVisuals:
 
     def __init__(self, scene, envs, segmentation_level):
         shapes = scene_shapes(scene)
-        rows = [(env, shape) for shape in shapes for env in (envs[:1] if shape.is_plane else envs)]
+        rows = [(env, shape) for shape in shapes for env in (envs[:1] if shape.shared else envs)]
         self.meshes = MeshSet.from_parts([shape.mesh for _, shape in rows]) if rows else None
         device = runtime.device
         env = np.array([env for env, _ in rows], dtype=np.int64)
