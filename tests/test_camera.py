@@ -456,6 +456,7 @@ def test_errors_name_the_camera_argument_and_value(f32, tmp_path):
         cam.render()
     cases = [(dict(res=(0, 10)), r"camera 1: argument 'res' must be \(width, height\).*got \(0, 10\)"),
              (dict(res=(64.5, 48)), r"argument 'res'.*got \(64.5, 48\)"),
+             (dict(res=(200000, 200000)), r"argument 'res'.* up to 16384, got \(200000, 200000\)"),
              (dict(fov=180), r"camera 1: argument 'fov' must be a vertical field of view in \(0, 180\).*got 180"),
              (dict(pos=(0, 0, np.nan)), r"camera 1.set_pose: argument 'pos' must be 3 finite numbers"),
              (dict(pos=(1, 2, 3), lookat=(1, 2, 3)), r"'pos' and 'lookat' must differ, got both \[1.0, 2.0, 3.0\]"),
@@ -487,6 +488,9 @@ def test_errors_name_the_camera_argument_and_value(f32, tmp_path):
     with pytest.raises(gs.InvalidInputError, match=r"follow_entity: argument 'entity' must be a rigid entity .*, "
                                                    r"got str 'box'"):
         cam.follow_entity("box")
+    for transform in (np.diag([-1.0, 1.0, 1.0, 1.0]), np.vstack([np.eye(4)[:3], [5.0, 5.0, 5.0, 7.0]])):
+        with pytest.raises(gs.InvalidInputError, match=r"'transform' must be a finite \(4, 4\) pose .*det \+1"):
+            cam.set_pose(transform=transform)  # a mirror, a last row that is not (0, 0, 0, 1)
     cam.render()
     cam.stop_recording(str(tmp_path / "a.gif"))  # the recording went on after the errors
     cam.start_recording(str(tmp_path / "b.mp4"), fps=30)

@@ -45,6 +45,7 @@ from .rasterizer import Rasterizer, View
 from .recorder import Recording
 
 logger = logging.getLogger("genesis_lite")
+MAX_RES = 16384  # pixels a side (a 16k × 16k frame's buffers already take ~5 GB)
 
 # VisOptions whose non-default values cameras cannot honour (their defaults draw nothing extra)
 UNSUPPORTED_VIS_OPTIONS = ("show_world_frame", "show_link_frame", "show_cameras", "plane_reflection", "split_envs",
@@ -67,9 +68,9 @@ class Camera:
         self._name = owner = f"camera {idx}"
         _check_unsupported(owner, model, GUI, aperture, focus_dist, spp, denoise)
         _check_vis_options(owner, scene.vis_options)
-        if not (isinstance(res, (tuple, list)) and len(res) == 2 and all(is_int(r) and r > 0 for r in res)):
-            raise InvalidInputError(f"{owner}: argument 'res' must be (width, height), 2 positive integers (pixels), "
-                                    f"got {res!r}")
+        if not (isinstance(res, (tuple, list)) and len(res) == 2 and all(is_int(r) and 0 < r <= MAX_RES for r in res)):
+            raise InvalidInputError(f"{owner}: argument 'res' must be (width, height), 2 positive integers (pixels) up "
+                                    f"to {MAX_RES}, got {res!r}")
         self._res = (int(res[0]), int(res[1]))
         self._fov = _check_float(owner, "fov", fov, 0.0, 180.0, "a vertical field of view in (0, 180) degrees")
         self._near = _check_float(owner, "near", near, 0.0, np.inf, "a positive finite distance (m)")
@@ -404,9 +405,10 @@ def _transform_to_pose(owner, transform):
     """(pos, lookat, up) of a (4, 4) camera → world transform: lookat 1 m ahead along −z, up = y."""
     matrix = np.asarray(transform, dtype=np.float64)
     rot = matrix[:3, :3] if matrix.shape == (4, 4) else None
-    if rot is None or not np.isfinite(matrix).all() or not np.allclose(rot.T @ rot, np.eye(3), atol=1e-5):
+    if rot is None or not np.isfinite(matrix).all() or not np.allclose(rot.T @ rot, np.eye(3), atol=1e-5) or \
+            np.linalg.det(rot) < 0 or not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0], atol=1e-6):
         raise InvalidInputError(f"{owner}: argument 'transform' must be a finite (4, 4) pose whose top-left 3×3 is a "
-                                f"rotation, got {np.asarray(transform).tolist()}")
+                                f"rotation (det +1) and last row (0, 0, 0, 1), got {np.asarray(transform).tolist()}")
     return matrix[:3, 3], matrix[:3, 3] - rot[:, 2], rot[:, 1]
 
 
