@@ -178,3 +178,27 @@ def test_mixed_kinds_keep_mujoco_contact_order(f64, cone):
     kind, and the contacts are then listed as MuJoCo lists them, by body pair: the same rows in
     the same order, so the same rounding."""
     _check_step(ContactScene([SHAPE["box"], SHAPE["box"], SHAPE["sphere"]], cone=cone), entity=1)
+
+
+@pytest.mark.parametrize("shape, size", [("capsule", (0.05, 0.3)), ("cylinder", (0.08, 0.2)), ("box", (0.2, 0.3, 0.1))])
+def test_bodies_placed_exactly_on_the_plane_step_like_mujoco(f64, shape, size):
+    """Lying exactly on the plane, a quaternion typed as (√½, √½, 0, 0) (|q|² = 1 + 2e-16): MuJoCo
+    keeps it (its normalisation skips a norm within 1e-15 of 1) and rounds the rotation matrix its
+    way, so both ends sit at distance 0, listed and pushing nothing (a contact makes rows below the
+    margin only). With 1 − 2(y² + z²), one end came 2e-17 m under the plane and its contact kicked
+    the body into a 0.08 rad/s spin MuJoCo does not have; contacts at the margin made rows."""
+    h = 0.7071067811865476
+    for quat in ((h, h, 0.0, 0.0), (h, 0.0, h, 0.0)):
+        z = size[0] if shape != "box" else size[2] / 2.0
+        spec = ContactScene([Body(shape, size, pos=(0.0, 0.0, z), quat=quat)])
+        scene, (body,) = build_ours(spec)
+        m = build_mujoco(spec, scene.rigid_solver.model)
+        d = mujoco.MjData(m)
+        d.qpos[:] = body.get_qpos().numpy()
+        scene.step()
+        mujoco.mj_step(m, d)
+        assert np.abs(body.get_dofs_velocity().numpy() - d.qvel).max() <= 1e-12, (shape, quat)
+        contacts = body.get_contacts()
+        assert contacts["geom_a"].numel() == d.ncon, (shape, quat)
+        if d.nefc == 0:
+            assert torch.all(contacts["force_a"] == 0.0), (shape, quat)

@@ -29,7 +29,7 @@ from .actuation import smooth_force, smooth_force_adjoint
 from .collision.detect import (collide_adjoint_kind, collide_kind, converge_contacts, geom_poses, geom_poses_adjoint,
                                near_pairs, replay_exact, sort_contacts)
 from .constraint.implicit import solve_adjoint
-from .constraint.rows import contact_force, contact_rows, dof_rows, dof_rows_arise, limit_violated
+from .constraint.rows import contact_force, contact_included, contact_rows, dof_rows, dof_rows_arise, limit_violated
 from .constraint.solver import newton_solve
 from .dynamics import (bias_entry, dof_force, dof_row_adjoint, link_forces, link_forces_adjoint, mass_entry,
                        subtree_sum, subtree_sum_adjoint)
@@ -85,7 +85,8 @@ def constraint_env(d: ti.template(), s, e):
         if not replay_exact(d, s, e, c):
             d.inexact[0] = 1
         d.con_efc[s, e, c] = rows
-        rows += contact_rows(d, s, e, c, rows)
+        if contact_included(d, s, e, c):
+            rows += contact_rows(d, s, e, c, rows)
     d.n_efc[s, e, 0] = rows
     if rows > 0:  # (else qfrc_constraint stays smooth_substep's zero)
         for k in range(d.n_pairs):  # the solve's M: symmetric, with armature (other entries stay 0)

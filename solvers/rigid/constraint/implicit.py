@@ -24,7 +24,7 @@ refuses a backward through a step with contacts).
 import taichi as ti
 
 from ..data import accumulate
-from .rows import contact_rows_adjoint, dof_rows_adjoint, rows_per_contact
+from .rows import contact_included, contact_rows_adjoint, dof_rows_adjoint, rows_per_contact
 from .solver import CONE, LINEARNEG, LINEARPOS, QUADRATIC, cholesky_solve, cone_coordinates, cone_hessian_entry
 
 
@@ -71,7 +71,8 @@ def solve_adjoint(d: ti.template(), s, e):
             g_bound = -w
         dof_rows_adjoint(d, s, e, r, g_aref, g_R, g_bound)
     for c in range(d.n_con[s, e, 0]):
-        _contact_adjoint(d, s, e, c)
+        if contact_included(d, s, e, c):
+            _contact_adjoint(d, s, e, c)
 
 
 @ti.func

@@ -164,6 +164,13 @@ def _contact_scalars(d: ti.template(), s, e, c):
 
 
 @ti.func
+def contact_included(d: ti.template(), s, e, c):
+    """Whether contact c of frame s makes rows: as MuJoCo (its exclude flag), only below its pair's
+    margin. A contact exactly at it (a body placed exactly on a plane) is listed, pushes nothing."""
+    return d.con_dist[s, e, c] < d.pair_margin[d.con_pair[s, e, c]]
+
+
+@ti.func
 def contact_rows(d: ti.template(), s, e, c, first):
     """Rows first… of contact c at frame s: Jacobian, R, aref, type. Returns how many rows."""
     pair = d.con_pair[s, e, c]
@@ -426,17 +433,19 @@ def contact_force(d: ti.template(), s, e, c):
     friction along tangent k the difference of edge pair k's times μ (MuJoCo's mj_contactForce)."""
     first = d.con_efc[s, e, c]
     condim = d.pair_condim[d.con_pair[s, e, c]]
-    out = ti.Vector([d.efc_force[s, e, first], 0.0, 0.0])
-    if condim > 1:
-        if d.elliptic:
-            out = ti.Vector([d.efc_force[s, e, first + k] for k in ti.static(range(3))])
-        else:
-            mu = d.efc_mu[s, e, first + 1]
-            out = ti.Vector.zero(float, 3)
-            for k in ti.static(range(2)):
-                plus, minus = d.efc_force[s, e, first + 2 * k], d.efc_force[s, e, first + 2 * k + 1]
-                out[0] += plus + minus
-                out[k + 1] = (plus - minus) * mu
+    out = ti.Vector.zero(float, 3)  # (a contact without rows pushes nothing)
+    if not contact_included(d, s, e, c):
+        pass
+    elif condim == 1:
+        out[0] = d.efc_force[s, e, first]
+    elif d.elliptic:
+        out = ti.Vector([d.efc_force[s, e, first + k] for k in ti.static(range(3))])
+    else:
+        mu = d.efc_mu[s, e, first + 1]
+        for k in ti.static(range(2)):
+            plus, minus = d.efc_force[s, e, first + 2 * k], d.efc_force[s, e, first + 2 * k + 1]
+            out[0] += plus + minus
+            out[k + 1] = (plus - minus) * mu
     return out
 
 
