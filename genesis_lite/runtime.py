@@ -34,11 +34,16 @@ def track(scene):
 
 def _end_scenes():
     """Destroy every live scene (arrays freed, the cameras' recordings finished), as Genesis's
-    gs.destroy does."""
+    gs.destroy does; every one, then the first error (a video file that could not be written)."""
+    errors = []
     for scene in list(_scenes):
         if not scene._destroyed:
-            scene.destroy()
+            try:
+                scene.destroy()
+            except Exception as exc:
+                errors.append(exc)
     _scenes.clear()
+    return errors
 
 
 @atexit.register
@@ -83,7 +88,8 @@ def init(backend=None, precision="32", seed=None, logging_level="warning", debug
     if runtime.initialized and runtime.options == options:
         return
     if runtime.initialized:
-        _end_scenes()
+        for error in _end_scenes():  # (the restart goes on: the old scenes are over either way)
+            logger.warning(f"gs.init: ending a scene of the runtime before: {type(error).__name__}: {error}")
         forget_kernels()
         ti.reset()
     ti_float = ti.f64 if precision == "64" else ti.f32
@@ -114,12 +120,14 @@ def destroy():
     recordings finished) and becomes unusable (using one raises SceneStateError), Taichi stops,
     and ``gs.init`` may be called again."""
     if runtime.initialized:
-        _end_scenes()
+        errors = _end_scenes()
         forget_kernels()
         ti.reset()
         runtime.initialized = False
         runtime.options = None
         runtime.epoch += 1
+        if errors:
+            raise errors[0]
 
 
 def keep_large_blocks_off_the_heap():

@@ -65,7 +65,6 @@ class Scene:
     def __init__(self, sim_options=None, rigid_options=None, viewer_options=None, vis_options=None,
                  show_viewer=False, mpm_options=None):
         require_init("gs.Scene")
-        track(self)
         self.sim_options = sim_options or SimOptions()
         self.rigid_options = rigid_options or RigidOptions()
         self.viewer_options = viewer_options or ViewerOptions()
@@ -99,6 +98,7 @@ class Scene:
         self._cameras = []
         self._drawing = None  # SceneVisuals of the cameras, made at the first render
         self._debug_objects, self._debug_gathered = [], None  # DebugSpheres; their Spheres, made when drawn
+        track(self)  # last: a scene whose options raised is no scene to end
 
     # -- building ---------------------------------------------------------------------------
     @property

@@ -132,6 +132,16 @@ def test_destroy_ends_scenes_and_init_starts_again(f64):
     assert torch.isfinite(robot.get_dofs_position()).all()
 
 
+def test_destroy_after_a_scene_whose_options_raised(f64):
+    """A scene whose constructor raised is no scene gs.destroy ends (it was tracked before its
+    fields were set: destroy raised AttributeError and left Taichi running)."""
+    with pytest.raises(gs.InvalidInputError) as raised:
+        gs.Scene(show_viewer=True)
+    gs.destroy()  # the traceback in ``raised`` keeps the half-made scene alive
+    assert raised.value is not None
+    gs.init(precision="64")
+
+
 @ti.kernel
 def _running_sum(x: ti.types.ndarray(), out: ti.types.ndarray()):
     for i in range(1):

@@ -56,7 +56,7 @@ def _check_volume(owner, morph, count, particle_size, volume):
     """Warn when the particles' volume (count · particle_size³, which makes the mass) is off the
     morph's volume m³ by more than 2× either way: particles too coarse for the shape (Genesis
     samples and weighs them alike, without a word)."""
-    ratio = count * particle_size ** 3 / volume
+    ratio = count * particle_size ** 3 / volume if volume > 0 else np.inf  # (a flat mesh has none)
     if not 0.5 <= ratio <= 2.0:
         warnings.warn(f"{owner}: its {count} particle(s) of particle_size {particle_size:g} m hold {ratio:.3g}× the "
                       f"volume of its {type(morph).__name__} ({volume:.3g} m³), and its mass is ρ · that volume: "

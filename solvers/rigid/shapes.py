@@ -48,12 +48,14 @@ def _scale3(scale, owner: str) -> np.ndarray:
 
 
 def quat_to_mat(quat) -> np.ndarray:
-    """(3, 3) rotation matrix of a unit quaternion (4,) w-x-y-z."""
+    """(3, 3) rotation matrix of a unit quaternion (4,) w-x-y-z, rounded as MuJoCo 4.0's
+    mju_quat2Mat (and spatial.quat_to_mat in the kernels)."""
     w, x, y, z = np.asarray(quat, dtype=np.float64)
+    ww, xx, yy, zz = w * w, x * x, y * y, z * z
     return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        [(ww - yy) + (xx - zz), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), (ww + yy) - (xx + zz), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), (ww - yy) + (zz - xx)],
     ])
 
 
