@@ -115,7 +115,7 @@ class EntityIndexing:
             every_env = f" or {(n_cols,)} for every env" if self.scene.n_envs else ""
             raise InvalidInputError(f"{self._who}: argument '{arg}' must have shape {expected}{every_env}, "
                                     f"got {tuple(tensor.shape)}")
-        if not (bool((~torch.isnan(tensor.detach())).all()) if infinite else all_finite(tensor.detach())):
+        if bool(torch.isnan(tensor.detach()).any()) if infinite else not all_finite(tensor.detach()):
             what = "free of NaN" if infinite else "finite"
             raise InvalidInputError(f"{self._who}: argument '{arg}' must be {what}, got "
                                     f"{tensor.detach().cpu().numpy()}")

@@ -26,6 +26,7 @@ import torch
 
 from .. import morphs as gm
 from ..solvers.core import InvalidInputError, runtime
+from ..solvers.rigid.shapes import quat_to_mat
 from ..solvers.rigid.spec import VisualSpec
 from .rasterizer import Instances, MeshSet, Spheres
 
@@ -70,10 +71,7 @@ def scene_shapes(scene):
 
 def _horizontal(plane):
     """Whether a Plane morph's world normal is ±z (its quat turns its normal)."""
-    import trimesh
-
-    rot = trimesh.transformations.quaternion_matrix(plane.quat)[:3, :3]
-    normal = rot @ np.asarray(plane.normal, dtype=np.float64)
+    normal = quat_to_mat(plane.quat) @ np.asarray(plane.normal, dtype=np.float64)
     return bool(np.all(np.abs(normal[:2]) <= 1e-9 * np.linalg.norm(normal)))
 
 

@@ -1763,6 +1763,7 @@ def plane_mesh(pos1, rot1, size1, pos2, rot2, size2, mesh2, centre2, margin, hul
                         b, area = _wrap(b + 1, num), area2
                 picks = ti.Vector([s, b, c, d])
                 num = 4
+        centre = _rot(rot2, centre2) + pos2  # (world)
         for k in ti.static(range(PLANE_MESH_MAX)):
             vertex = deepest
             keep = k == 0
@@ -1770,7 +1771,7 @@ def plane_mesh(pos1, rot1, size1, pos2, rot2, size2, mesh2, centre2, margin, hul
                 vertex = hull.hull_poly_vert[vert_adr + picks[k]]
                 point = _rot(rot2, hull.hull_vert[vadr + vertex]) + pos2
                 depth = _dot(normal, point - pos1)
-                keep = depth <= margin and not _dot(normal, point - (_rot(rot2, centre2) + pos2)) > 0
+                keep = depth <= margin and not _dot(normal, point - centre) > 0
             if keep:
                 contact = point + normal * (depth * -0.5)
                 for c in ti.static(range(3)):

@@ -434,18 +434,17 @@ def contact_force(d: ti.template(), s, e, c):
     first = d.con_efc[s, e, c]
     condim = d.pair_condim[d.con_pair[s, e, c]]
     out = ti.Vector.zero(float, 3)  # (a contact without rows pushes nothing)
-    if not contact_included(d, s, e, c):
-        pass
-    elif condim == 1:
-        out[0] = d.efc_force[s, e, first]
-    elif d.elliptic:
-        out = ti.Vector([d.efc_force[s, e, first + k] for k in ti.static(range(3))])
-    else:
-        mu = d.efc_mu[s, e, first + 1]
-        for k in ti.static(range(2)):
-            plus, minus = d.efc_force[s, e, first + 2 * k], d.efc_force[s, e, first + 2 * k + 1]
-            out[0] += plus + minus
-            out[k + 1] = (plus - minus) * mu
+    if contact_included(d, s, e, c):
+        if condim == 1:
+            out[0] = d.efc_force[s, e, first]
+        elif d.elliptic:
+            out = ti.Vector([d.efc_force[s, e, first + k] for k in ti.static(range(3))])
+        else:
+            mu = d.efc_mu[s, e, first + 1]
+            for k in ti.static(range(2)):
+                plus, minus = d.efc_force[s, e, first + 2 * k], d.efc_force[s, e, first + 2 * k + 1]
+                out[0] += plus + minus
+                out[k + 1] = (plus - minus) * mu
     return out
 
 
