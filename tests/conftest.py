@@ -7,6 +7,7 @@ import pybullet_data
 import pytest
 
 import genesis_lite as gs
+from genesis_lite.solvers.core import runtime
 
 ASSETS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "assets")
 PYBULLET = pybullet_data.getDataPath()
@@ -26,6 +27,7 @@ FIRST = ("test_examples.py",)  # the longest file: started right after the float
 POOL = ("test_batch.py", "test_compile_once.py")
 LAST = ("test_runtime.py",)  # restarts the runtime (gs.destroy, gs.init on another backend)
 FLOAT32 = "float32"  # the xdist group of every float32 test
+RESTARTS = "restarts"  # the mark of a test that restarts Taichi while it runs (gs.init with other options, gs.destroy)
 
 
 def _float32(item):
@@ -39,18 +41,38 @@ def _float32(item):
 @pytest.hookimpl(tryfirst=True)  # before xdist's hook, which names a group's tests by their mark
 def pytest_collection_modifyitems(items):
     """Every float32 test in one group (xdist_group), run first; then FIRST's tests, POOL's (one
-    group), the other files, and LAST. A change of precision restarts Taichi (gs.init), and every kernel the worker
-    uses next pays LLVM's optimisation and code generation again (~20 s for `constrain` on a slow
-    machine); a kernel one worker compiles reaches the disk cache only when its Taichi stops, so
-    float32 tests spread over both workers compiled the float32 kernels in each."""
+    group), the other files, and LAST; in each group the tests marked RESTARTS last. A change of
+    precision restarts Taichi (gs.init), and every kernel the worker uses next pays LLVM's code
+    generation again (15-20 s for `constrain` alone, warm cache); a kernel one worker compiles
+    reaches the disk cache only when its Taichi stops, so float32 tests spread over both workers
+    compiled the float32 kernels in each. Two restarts amid the float32 group made that worker
+    load the float32 contact kernels three times (the suite: 4:18-4:51 → 3:51, measured)."""
     name = lambda item: os.path.basename(str(item.fspath))  # noqa: E731
-    items.sort(key=lambda item: (not _float32(item), name(item) not in FIRST, name(item) not in POOL,
-                                 name(item) in LAST))
+    items.sort(key=lambda item: (not _float32(item), item.get_closest_marker(RESTARTS) is not None,
+                                 name(item) not in FIRST, name(item) not in POOL, name(item) in LAST))
     for item in items:
         if _float32(item):
             item.add_marker(pytest.mark.xdist_group(FLOAT32))
         elif name(item) in POOL:
             item.add_marker(pytest.mark.xdist_group("pool"))
+        elif item.get_closest_marker(RESTARTS) is not None and name(item) not in LAST:
+            item.add_marker(pytest.mark.xdist_group(RESTARTS))  # a unit dealt out last, not amid its file's
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_call(item):
+    """A test that restarts Taichi more than once while it runs, or leaves it in another precision
+    than its group's (or stopped), must be marked RESTARTS (or be in LAST), so that it runs where
+    that costs nothing: the suite would otherwise slow down unseen. (One switch to the test's own
+    precision is a fixture's work done in the test body.)"""
+    epoch = runtime.epoch
+    yield
+    restarts = runtime.epoch - epoch
+    precision = runtime.options[1] if runtime.initialized else None
+    if (restarts > 1 or (restarts == 1 and precision != ("32" if _float32(item) else "64"))) \
+            and item.get_closest_marker(RESTARTS) is None and os.path.basename(str(item.fspath)) not in LAST:
+        pytest.fail(f"{item.nodeid} restarted Taichi {restarts} times and left it in precision {precision}: mark "
+                    f"it @pytest.mark.{RESTARTS} (run last in its group)", pytrace=False)
 
 
 @pytest.hookimpl(tryfirst=True, optionalhook=True)  # optional: pytest -p no:xdist has no such hook

@@ -421,6 +421,7 @@ def test_recording_writes_mp4_and_gif_read_back_by_imageio(f32, tmp_path):
         cam.start_recording(str(tmp_path / "folder.mp4"))
 
 
+@pytest.mark.restarts  # (conftest: last in the float32 group)
 def test_scenes_ending_finish_their_recordings(f32, tmp_path, caplog):
     """gs.destroy (and a restarting gs.init, and the interpreter's exit) end every scene, whose
     cameras finish a streamed recording's file (Genesis's atexit destroy does); a buffered one,

@@ -369,7 +369,7 @@ def test_host_and_kernels_agree_on_which_materials_take_an_svd(f64):
     assert host.count(False) == 3  # neo-Hookean, its muscle, the inviscid liquid
 
 
-@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+@pytest.mark.parametrize("dtype", [np.float64, pytest.param(np.float32, marks=pytest.mark.float32)])
 def test_svd_pair_gives_each_matrix_the_bits_of_its_own_svd(dtype, request):
     """The stress stage decomposes particles two at a time (svd3_pair): each must get exactly what
     svd3 gives it alone, whatever its partner needs (partners drawn from the whole batch: random,

@@ -415,6 +415,7 @@ def test_bad_input_raises_clear_errors():
     raises(lambda: _rasterizer((32, 32)).render(view, meshes), "'meshes' and 'instances'")
 
 
+@pytest.mark.restarts  # (conftest: last in the float32 group)
 def test_float32_whatever_the_precision():
     """gs.init(precision="64") renders the same bits: every value in the kernels is float32."""
     view = rz.View(pos=(0.3, -2.0, 1.5), lookat=(0, 0, 0.2), up=(0, 0, 1), fov=45, res=(160, 120))
