@@ -473,13 +473,13 @@ def _capsule_nearest(pos: ti.template(), halfaxis: ti.template(), halflength, ha
     for edge in range(12):  # the box edges; parallel ones (det < MINVAL) are skipped
         j, corner = _box_edge(edge)
         ma, mb, mc, u, v, det = _edge_axis_terms(pos, halfaxis, halflength, half, j, corner)
-        state = segment_pair_state(ma, mb, mc, u, v, det)
+        state, flag = segment_pair_state(ma, mb, mc, u, v, det)
         ex, et = segment_pair_params(ma, mb, mc, u, v, det, state)
         gap = _edge_corner(half, j, corner) - pos + halfaxis * -et
         gap[j] += half[j] * ex
         d2 = dot3(gap, gap)
         better = ti.abs(det) >= MINVAL and d2 < best - MINVAL
-        s1 = 1 + _bit(state // 3 == AT_PLUS) - _bit(state // 3 == AT_MINUS)
+        s1 = 1 + _bit(flag == AT_PLUS) - _bit(flag == AT_MINUS)  # (MuJoCo's flag, not always x1's clamp)
         s2 = 1 + _bit(state % 3 == AT_PLUS) - _bit(state % 3 == AT_MINUS)
         best = ti.select(better, d2, best)
         t = ti.select(better, et, t)

@@ -223,19 +223,24 @@ def segment_pair_state(ma, mb, mc, u, v, det):
     """MuJoCo's clamping of the closest points of two non-parallel segments (|det| >= MINVAL).
 
     Solve unconstrained; if x1 leaves [-1, 1], clamp it and re-solve x2; if x2 then leaves
-    [-1, 1], clamp it and re-solve x1, clipped. Returns the final clamp state 3 s1 + s2, whose
-    closed form segment_pair_params reproduces.
+    [-1, 1], clamp it and re-solve x1, clipped. Returns (the final clamp state 3 s1 + s2, whose
+    closed form segment_pair_params reproduces; x1's clamp flag as MuJoCo's mjraw_CapsuleBox
+    reports it): where clamping x2 re-solves x1 inside [-1, 1], MuJoCo keeps x1's flag from the
+    first solve (at an end, though x1 is free), and the flag chooses the capsule–box contacts.
     """
     x1 = (mc * u - mb * v) / det
     x2 = (ma * v - mb * u) / det
     s1 = clamp_state(x1)
+    flag = s1
     s2 = FREE
     if s1 != FREE:
         x2 = (v - mb * clamp_value(s1)) / mc
     if x2 > 1.0 or x2 < -1.0:
         s2 = clamp_state(x2)
         s1 = clamp_state((u - mb * clamp_value(s2)) / ma)
-    return 3 * s1 + s2
+        if s1 != FREE:
+            flag = s1
+    return 3 * s1 + s2, flag
 
 
 # ---------------------------------------------------------------- closest points of two segments, weights in [0, 1]
