@@ -14,7 +14,7 @@ import torch
 
 from . import morphs as gm
 from .entities import MPMEntity, RigidEntity
-from .entities.common import EntityIndexing, replace_columns
+from .entities.common import EntityIndexing, envs_mask_to_idx, replace_columns
 from .entities.mpm_entity import sample_particles
 from .solvers.core import AssetError, InvalidInputError, SceneStateError
 from .materials import MPM, Rigid
@@ -105,9 +105,11 @@ class Scene:
     def is_built(self):
         return self.sim is not None
 
-    def add_entity(self, morph, material=None, surface=None, name=None):
+    def add_entity(self, morph, material=None, surface=None, visualize_contact=False, vis_mode=None, name=None):
         """Add an entity from a morph: rigid (material gs.materials.Rigid, the default) or MPM
-        particles (a gs.materials.MPM material); returns the entity."""
+        particles (a gs.materials.MPM material); returns the entity. Genesis's arguments in
+        Genesis's order; with no viewer, visualize_contact can only be False and vis_mode only the
+        one the cameras draw (None, or "visual" for a rigid entity, "particle" for particles)."""
         if self.is_built:
             raise SceneStateError("scene.add_entity: the scene is already built; add every entity before build()")
         if not isinstance(morph, gm.Morph):
@@ -120,6 +122,16 @@ class Scene:
         if surface is not None and not isinstance(surface, Default):
             raise InvalidInputError(f"scene.add_entity: argument 'surface' must be gs.surfaces.Default or None, "
                                     f"got {type(surface).__name__}")
+        if visualize_contact is not False:
+            raise InvalidInputError(f"scene.add_entity: argument 'visualize_contact' must be False (there is no "
+                                    f"viewer to draw contacts in), got {visualize_contact!r}")
+        drawn = "particle" if isinstance(material, MPM.Base) else "visual"
+        if vis_mode not in (None, drawn):
+            raise InvalidInputError(f"scene.add_entity: argument 'vis_mode' must be None or {drawn!r} (what the "
+                                    f"cameras draw of a {type(material).__name__} entity), got {vis_mode!r}")
+        if name is not None and not isinstance(name, str):
+            raise InvalidInputError(f"scene.add_entity: argument 'name' must be a str or None, got "
+                                    f"{type(name).__name__} {name!r}")
         taken = [entity.name for entity in self.entities]  # errors and readouts name entities: one each
         if name is None:
             name = next(f"{type(morph).__name__.lower()}_{k}" for k in range(len(taken), 2 * len(taken) + 1)
@@ -200,10 +212,11 @@ class Scene:
             camera._on_build()
 
     def _require_built(self, what):
+        if self._destroyed:
+            raise SceneStateError(f"{what}: the scene was destroyed (scene.destroy(), gs.destroy(), or gs.init() "
+                                  f"restarting the runtime); build a new scene")
         if self._epoch != runtime.epoch:
             raise SceneStateError(f"{what}: gs.init() was called again after this scene was made; build a new scene")
-        if self._destroyed:
-            raise SceneStateError(f"{what}: the scene was destroyed (scene.destroy()); build a new scene")
         if not self.is_built:
             raise SceneStateError(f"{what}: call scene.build() first")
         return self.sim
@@ -312,6 +325,8 @@ class Scene:
         """``envs_idx`` (None, int, sequence, array or tensor) as an int64 array (None stays None)."""
         if envs_idx is None:
             return None
+        if self.n_envs:
+            envs_idx = envs_mask_to_idx(envs_idx, self.n_envs, what)
         if isinstance(envs_idx, torch.Tensor):
             envs_idx = envs_idx.detach().cpu().numpy()
         idx = np.atleast_1d(np.asarray(envs_idx))

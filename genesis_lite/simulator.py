@@ -316,7 +316,7 @@ class Simulator:
         return self._query(solver, "get_dofs_force", solver.dofs_force)
 
     def contacts(self, solver, what):
-        """(B, C, 9) the last step's contacts (solver.contacts), none in the envs replaced since
+        """(B, C, 12) the last step's contacts (solver.contacts), none in the envs replaced since
         (set_state), as a value whose backward raises when the state requires grad: contact
         positions and forces are read-outs of the step's collision and constraint solve, not
         differentiable (the state's gradient carries their effect), and a gradient must never stop

@@ -1,7 +1,9 @@
-"""Three costs Taichi 1.7 pays in every process for nothing, avoided before any kernel is defined.
+"""Four costs Taichi 1.7 pays in every process for nothing: three avoided before any kernel is
+defined, the fourth (``skip_repeated_strength_reduction``) when the runtime starts on the CPU.
 
-Both are start-up time only: what Taichi compiles, caches and runs is unchanged. They touch
-Taichi 1.7 internals, which is why pyproject.toml pins taichi 1.7.* (as for solvers/launch.py).
+All are start-up time only: what Taichi compiles and caches is unchanged, and so is every result
+its kernels compute. They touch Taichi 1.7 internals, which is why pyproject.toml pins taichi
+1.7.* (as for solvers/launch.py).
 
 1. Defining a kernel or ti.func: Taichi's decorator asks ``inspect.getframeinfo`` whether the
    definition sits in a class body, looking two frames up. For a function defined at a module's
@@ -20,10 +22,25 @@ Taichi 1.7 internals, which is why pyproject.toml pins taichi 1.7.* (as for solv
    thousands of times for the contact kernels (~1 s of an example's start-up, measured under
    cProfile: 2.5 of 22 s). A function's source does not change while the process runs: it is read
    once per function.
+4. Loading a kernel from the offline cache: Taichi caches the kernel's LLVM IR after its O3
+   pipeline, which ends with loop strength reduction (``optimize_module`` in codegen_cpu.cpp), and
+   every process turns the cached IR into machine code with LLVM's code generator, whose IR passes
+   run loop strength reduction again. On our kernels (index arithmetic of the arenas in nested
+   loops) that second pass and the scalar evolution it queries were most of the load: profiled,
+   ~55 % of a quadruped's first backward. Its code generation is told to skip it (LLVM's
+   ``-disable-lsr``; the strength reduction done before caching stays): a KUKA's first backward
+   7.6–8.6 → 2.6 s, a quadruped's 27 → 5.3–6.0 s of CPU, warm cache. The option is set through
+   LLVM's C API entry ``LLVMParseCommandLineOptions``, which Taichi's library holds but does not
+   export: its address is read from the library's ELF symbol table.
 """
+import ctypes
 import functools
 import inspect
+import mmap
+import sys
 import weakref
+
+import numpy as np
 
 from taichi.lang import kernel_impl
 from taichi.lang.ast.ast_transformer_utils import ASTTransformerContext
@@ -58,3 +75,61 @@ inspect.modulesbyfile.setdefault("<frozen importlib._bootstrap>", "importlib._bo
 ASTTransformerContext.get_pos_info = _source_position
 kernel_impl.getsourcefile = _once_per_function(kernel_impl.getsourcefile)
 kernel_impl.getsourcelines = _once_per_function(kernel_impl.getsourcelines)
+
+
+_ELF_SYMBOL = np.dtype([("name", "<u4"), ("info", "u1"), ("other", "u1"), ("section", "<u2"), ("value", "<u8"),
+                        ("size", "<u8")])
+
+
+def _symbol_values(path, names):
+    """{name: value} of the symbols ``names`` defined in the ELF64 (little-endian) shared library
+    at ``path``, from its full symbol table (.symtab; names it does not define are left out)."""
+    def read(file, offset, size):
+        file.seek(offset)
+        return file.read(size)
+
+    with open(path, "rb") as file:
+        header = read(file, 0, 64)
+        if header[:6] != b"\x7fELF\x02\x01":
+            return {}
+        table, (entry_size, count) = int.from_bytes(header[40:48], "little"), np.frombuffer(header[58:62], "<u2")
+        sections = np.frombuffer(read(file, table, int(entry_size) * int(count)), np.uint8).reshape(count, -1)
+        kinds, links = sections[:, 4:8].copy().view("<u4")[:, 0], sections[:, 40:44].copy().view("<u4")[:, 0]
+        offsets, sizes = sections[:, 24:32].copy().view("<u8")[:, 0], sections[:, 32:40].copy().view("<u8")[:, 0]
+        symtab = np.flatnonzero(kinds == 2)  # SHT_SYMTAB: absent from a stripped library
+        if len(symtab) != 1:
+            return {}
+        symtab, strtab = int(symtab[0]), int(links[symtab[0]])
+        symbols = np.frombuffer(read(file, int(offsets[symtab]), int(sizes[symtab])), _ELF_SYMBOL)
+        with mmap.mmap(file.fileno(), 0, access=mmap.ACCESS_READ) as image:
+            start, end = int(offsets[strtab]), int(offsets[strtab] + sizes[strtab])
+            places = {name: image.find(b"\0" + name.encode() + b"\0", start - 1, end) for name in names}
+    values = {}
+    for name, at in places.items():
+        found = symbols[(symbols["name"] == at + 1 - start) & (symbols["section"] != 0)] if at >= 0 else ()
+        if len(found) == 1:
+            values[name] = int(found["value"][0])
+    return values
+
+
+def skip_repeated_strength_reduction():
+    """Tell the LLVM inside Taichi's library not to run loop strength reduction when it generates
+    machine code (4. above); once per process, from the CPU runtime's start (``gs.init``), before
+    any kernel is loaded. Does nothing where the library is not the one this reads (another
+    platform, a stripped build, another LLVM): loads are then as slow as before, nothing else."""
+    library = sys.modules["taichi._lib.core.taichi_python"]
+    if getattr(library, "_strength_reduction_skipped", False):
+        return  # (LLVM exits the process when an option is given twice)
+    library._strength_reduction_skipped = True
+    wanted = ("PyInit_taichi_python", "LLVMParseCommandLineOptions", "_ZL10DisableLSR")
+    try:
+        values = _symbol_values(library.__file__, wanted)
+    except (OSError, ValueError):
+        return
+    if len(values) != len(wanted):  # (_ZL10DisableLSR: the option exists; an unknown one makes LLVM exit)
+        return
+    exported = ctypes.cast(ctypes.CDLL(library.__file__).PyInit_taichi_python, ctypes.c_void_p).value
+    parse = ctypes.CFUNCTYPE(None, ctypes.c_int, ctypes.POINTER(ctypes.c_char_p), ctypes.c_char_p)(
+        exported - values["PyInit_taichi_python"] + values["LLVMParseCommandLineOptions"])
+    arguments = (ctypes.c_char_p * 2)(b"genesis_lite", b"-disable-lsr")
+    parse(2, arguments, None)

@@ -224,7 +224,7 @@ def test_contact_readouts_of_a_batch_with_and_without_contacts(f64):
     for _ in range(200):  # settled; the second box falls 0.2 m, still in the air
         scene.step()
     solver = scene.rigid_solver
-    raw = torch.full((2, solver.data.size["C"], 9), float("nan"), dtype=gs.tc_float)
+    raw = torch.full((2, solver.data.size["C"], 12), float("nan"), dtype=gs.tc_float)
     solver.kernels.read_contacts(0, raw)  # every element written, the unused rows too
     assert torch.equal(raw, solver.contacts())
     unused = raw[..., 0] < 0

@@ -553,3 +553,66 @@ def test_genesis_franka_gains_hold_the_arm(f64):
         scene.step()
     assert (arm.get_dofs_position() - target).abs().max() < 0.01
     assert arm.get_dofs_velocity().abs().max() < 1e-6
+
+
+# -- found porting Genesis scripts (2026-11-28) ------------------------------------------------------
+def test_add_entity_takes_genesis_arguments_in_genesis_order(f64):
+    """add_entity(morph, material, surface, visualize_contact, vis_mode, name): Genesis's order, so a
+    positional visualize_contact is not taken for a name; what has no effect without a viewer is
+    refused unless it is the default, and a name must be a string."""
+    scene = gs.Scene()
+    box = scene.add_entity(gs.morphs.Box(), None, None, False, "visual")
+    assert box.name == "box_0"
+    for kwargs, arg in [({"visualize_contact": True}, "visualize_contact"), ({"vis_mode": "collision"}, "vis_mode"),
+                        ({"name": 5}, "name")]:
+        with pytest.raises(gs.InvalidInputError, match=f"argument '{arg}'"):
+            scene.add_entity(gs.morphs.Sphere(), **kwargs)
+    with pytest.raises(gs.InvalidInputError, match="'particle'"):
+        scene.add_entity(gs.morphs.Box(), gs.materials.MPM.Elastic(), vis_mode="visual")
+
+
+def test_tensor_without_data_is_a_named_error(f64, pendulum):
+    _, robot = pendulum
+    with pytest.raises(gs.InvalidInputError, match="entity 'pendulum'.*'position'.*meta"):
+        robot.set_dofs_position(torch.zeros(1, device="meta"))
+
+
+def test_boolean_masks_select_envs(f64):
+    """envs_idx as a boolean mask over the envs (Genesis takes one) in setters, getters and reset."""
+    scene = gs.Scene()
+    box = scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 1.0)))
+    scene.build(n_envs=3)
+    mask = torch.tensor([False, True, True])
+    box.set_pos(torch.tensor([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]), envs_idx=mask)
+    assert box.get_pos().tolist() == [[0.0, 0.0, 1.0], [1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]
+    assert box.get_pos(envs_idx=np.array([True, False, True])).tolist() == [[0.0, 0.0, 1.0], [4.0, 5.0, 6.0]]
+    scene.reset(envs_idx=[False, False, True])
+    assert box.get_pos()[2].tolist() == [0.0, 0.0, 1.0] and box.get_pos()[1].tolist() == [1.0, 2.0, 3.0]
+    with pytest.raises(gs.InvalidInputError, match=r"boolean mask must have shape \(3,\)"):
+        box.set_pos(torch.zeros(1, 3), envs_idx=[True, False])
+
+
+def test_contacts_have_genesis_normal_and_penetration(f64):
+    """get_contacts' normal points from geom b to geom a and penetration is the overlap depth, as
+    Genesis's; indices are int32, as Genesis's."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002))
+    plane = scene.add_entity(gs.morphs.Plane())
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.2), pos=(0.0, 0.0, 0.0995)))
+    scene.build()
+    scene.step()
+    contacts = box.get_contacts(with_entity=plane)
+    assert len(contacts["geom_a"]) == 4 and all(contacts[k].dtype == torch.int32 for k in ("geom_a", "link_b"))
+    assert (contacts["geom_a"] == plane.geom_start).all()  # the plane is geom a: the normal points into it
+    assert torch.allclose(contacts["normal"], torch.tensor([0.0, 0.0, -1.0], dtype=torch.float64).expand(4, 3))
+    assert torch.allclose(contacts["penetration"], torch.full((4,), 0.0005, dtype=torch.float64), atol=1e-4)
+    assert (contacts["penetration"] > 0).all() and (contacts["force_b"][:, 2] > 0).all()
+
+
+def test_joints_answer_genesis_deprecated_singular_names(f64, pendulum, caplog):
+    _, robot = pendulum
+    hinge = robot.get_joint("hinge")
+    assert hinge.dof_idx_local == hinge.dofs_idx_local[0] and isinstance(hinge.dof_idx_local, int)
+    assert hinge.dof_idx == robot.dof_start + hinge.dofs_idx_local[0] and hinge.q_idx_local == hinge.qs_idx_local[0]
+    assert any("dof_idx_local is deprecated" in r.getMessage() for r in caplog.records)
+    with pytest.raises(AttributeError, match="no attribute 'dofs_index'"):
+        hinge.dofs_index

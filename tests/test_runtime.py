@@ -151,6 +151,16 @@ def _running_sum(x: ti.types.ndarray(), out: ti.types.ndarray()):
         out[0] = total
 
 
+def test_destroyed_scene_says_it_was_destroyed(f64):
+    scene = gs.Scene()
+    scene.add_entity(gs.morphs.Box())
+    scene.build()
+    gs.destroy()
+    with pytest.raises(gs.SceneStateError, match="scene.step: the scene was destroyed .*gs.destroy"):
+        scene.step()
+    gs.init(precision="64", logging_level="warning")
+
+
 def test_kernels_never_reassociate(f64):
     """gs.init compiles without fast math, so a running sum adds in program order, as IEEE
     says: LLVM may not split it into vector lanes (4 doubles with AVX2, 8 with AVX-512, and
@@ -206,6 +216,49 @@ def test_kernels_defined_in_classes_still_bind_to_their_instance(f64):
     counter.add(3)
     counter.add(4)
     assert counter.total[None] == 7
+
+
+_LSR_OPTION = """
+import ctypes, sys
+import genesis_lite as gs
+from genesis_lite.solvers import taichi_startup
+library = sys.modules["taichi._lib.core.taichi_python"]
+names = ("PyInit_taichi_python", "_ZL10DisableLSR")
+values = taichi_startup._symbol_values(library.__file__, names)
+base = ctypes.cast(ctypes.CDLL(library.__file__).PyInit_taichi_python, ctypes.c_void_p).value - values[names[0]]
+option = lambda: ctypes.string_at(base + values[names[1]], 64)  # (the cl::opt<bool> object)
+before = option()
+{init}
+first = option()
+gs.init(backend=gs.cpu, precision="64"); gs.destroy(); gs.init(backend=gs.cpu, precision="32")
+print(first != before, option() == first)
+"""
+
+
+@pytest.mark.parametrize("backend", ["gs.cpu", "None"])
+def test_cpu_runtime_skips_repeated_strength_reduction(backend):
+    """gs.init on the CPU sets LLVM's -disable-lsr inside Taichi's library (loading cached kernels
+    3-5× faster): the option's object in the library's memory changes at the first start and stays
+    as it is through later starts (the option is given once a process)."""
+    code = _LSR_OPTION.format(init=f"gs.init(backend={backend})")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split()[-2:] == ["True", "True"]
+
+
+def test_symbol_table_reader(tmp_path):
+    """The ELF reader finds Taichi's exported and hidden symbols at the addresses the library has
+    (the exported one checked against the dynamic loader), and nothing in a file that is no ELF."""
+    from genesis_lite.solvers import taichi_startup
+
+    library = sys.modules["taichi._lib.core.taichi_python"]
+    names = ("PyInit_taichi_python", "LLVMParseCommandLineOptions", "_ZL10DisableLSR", "no_such_symbol_anywhere")
+    values = taichi_startup._symbol_values(library.__file__, names)
+    assert sorted(values) == sorted(names[:3])
+    assert values["PyInit_taichi_python"] != values["LLVMParseCommandLineOptions"]
+    not_elf = tmp_path / "not_elf.so"
+    not_elf.write_bytes(b"#!/bin/sh\n" * 20)
+    assert taichi_startup._symbol_values(str(not_elf), names) == {}
 
 
 @pytest.mark.parametrize("preset", [None, "ACTIVE"])

@@ -37,6 +37,18 @@ def all_finite(tensor):
     return bool(torch.isfinite(tensor).all())
 
 
+def envs_mask_to_idx(envs_idx, n_envs, who):
+    """A boolean mask over the envs (as Genesis takes one) → the indices it selects; any other
+    ``envs_idx`` is returned as it is."""
+    mask = envs_idx.detach().cpu().numpy() if isinstance(envs_idx, torch.Tensor) else envs_idx
+    if not (isinstance(mask, (np.ndarray, list, tuple)) and np.asarray(mask).dtype == np.bool_):
+        return envs_idx
+    if np.asarray(mask).shape != (n_envs,):
+        raise InvalidInputError(f"{who}: argument 'envs_idx' as a boolean mask must have shape ({n_envs},), got "
+                                f"{np.asarray(mask).shape}")
+    return np.flatnonzero(mask)
+
+
 class EntityIndexing:
     """Mixin of an entity with ``scene`` and ``name``: its checked indices and result shapes."""
 
@@ -73,7 +85,7 @@ class EntityIndexing:
                 raise InvalidInputError(f"{self._who}: argument 'envs_idx' must be None in a scene built "
                                         f"with n_envs=0, got {envs_idx!r}")
             return np.zeros(1, dtype=np.int64)
-        return self._local(envs_idx, n_envs, "envs_idx", distinct)
+        return self._local(envs_mask_to_idx(envs_idx, n_envs, self._who), n_envs, "envs_idx", distinct)
 
     def _out(self, value):
         """Solver rows → user shape: drop the batch axis when the scene is not batched."""
@@ -100,6 +112,9 @@ class EntityIndexing:
             raise InvalidInputError(f"{self._who}: argument '{arg}' must be real numbers of shape {expected}, "
                                     f"got {kind}")
         if isinstance(value, torch.Tensor):
+            if value.device.type == "meta":
+                raise InvalidInputError(f"{self._who}: argument '{arg}' must hold values (a tensor on {runtime.device} "
+                                        f"or another device with data), got a tensor on the meta device")
             return value.as_subclass(torch.Tensor).to(device=runtime.device, dtype=runtime.tc_float)
         return torch.as_tensor(array.astype(np.float64), dtype=runtime.tc_float, device=runtime.device)
 

@@ -6,6 +6,7 @@ batch dimension.
 import numpy as np
 import torch
 
+from ..runtime import logger
 from ..solvers.core import InvalidInputError, SceneStateError, runtime
 from ..solvers.rigid.merge import merged_into
 from .common import EntityIndexing, replace_columns as _replace
@@ -74,6 +75,27 @@ class RigidJoint:
     @property
     def n_dofs(self):
         return len(self.dofs_idx_local)
+
+    @property
+    def dofs_idx(self):
+        """The joint's dofs in the scene's rigid solver (available once the scene is built)."""
+        return [self.entity.dof_start + i for i in self.dofs_idx_local]
+
+    @property
+    def qs_idx(self):
+        """The joint's generalized coordinates in the scene's rigid solver (once built)."""
+        return [self.entity.q_start + i for i in self.qs_idx_local]
+
+    def __getattr__(self, name):
+        """Genesis's deprecated singular names (dof_idx_local, dof_idx, q_idx_local, q_idx): an int
+        for a joint of one dof (or coordinate), None for none, else the list; with Genesis's warning."""
+        plural = {"dof_idx": "dofs_idx", "dof_idx_local": "dofs_idx_local", "q_idx": "qs_idx",
+                  "q_idx_local": "qs_idx_local"}.get(name)
+        if plural is None:
+            raise AttributeError(f"'RigidJoint' object has no attribute {name!r}")
+        logger.warning(f"RigidJoint.{name} is deprecated (as in Genesis); use '{plural}' instead")
+        values = getattr(self, plural)
+        return values[0] if len(values) == 1 else None if not values else values
 
     def __repr__(self):
         return f"RigidJoint({self.name!r}, type={self.type!r}, dofs_idx_local={self.dofs_idx_local})"
@@ -441,8 +463,9 @@ class RigidEntity(EntityIndexing):
     # -- contacts -----------------------------------------------------------------------------------
     def get_contacts(self, with_entity=None, exclude_self_contact=False):
         """The contacts of the last step's last substep that involve this entity (Genesis's format): a dict of
-        geom_a, geom_b, link_a, link_b (global indices), position (m), force_a and force_b (N,
-        world: the contact's force on geom a and on geom b). Shapes (n, ...) in an unbatched
+        geom_a, geom_b, link_a, link_b (global indices, int32), position (m), normal (unit, world,
+        from geom b to geom a, as Genesis), penetration (m, > 0 when the geoms overlap), force_a and
+        force_b (N, world: the contact's force on geom a and on geom b). Shapes (n, ...) in an unbatched
         scene; (n_envs, C, ...) with a valid_mask (n_envs, C) in a batched one. with_entity: only
         contacts with that entity (itself: self-contacts only); exclude_self_contact: drop those.
         Not differentiable (a backward through position or forces raises)."""
@@ -469,7 +492,8 @@ class RigidEntity(EntityIndexing):
             if with_entity is not None:
                 valid &= mine(geom_a, with_entity) | mine(geom_b, with_entity)
         valid &= geom_a >= 0
-        out = {"geom_a": geom_a, "geom_b": geom_b, "link_a": link_a, "link_b": link_b, "position": raw[..., 2:5],
+        out = {"geom_a": geom_a.int(), "geom_b": geom_b.int(), "link_a": link_a.int(), "link_b": link_b.int(),
+               "position": raw[..., 2:5], "normal": -raw[..., 9:12], "penetration": -raw[..., 8],
                "force_a": -raw[..., 5:8], "force_b": raw[..., 5:8]}
         if self.scene.n_envs == 0:
             return {k: v[0][valid[0]] for k, v in out.items()}

@@ -393,16 +393,16 @@ class RigidSolver(Solver):
         return out
 
     def contacts(self, substep=-1):
-        """(B, C, 9) the contacts of the last step's ``substep`` (see step.read_contacts; rows past
+        """(B, C, 12) the contacts of the last step's ``substep`` (see step.read_contacts; rows past
         each env's count have geom −1 and zeros), C = 0 without candidate pairs."""
-        out = torch.empty((self.n_batch, self.data.size["C"], 9), dtype=runtime.tc_float, device=runtime.device)
+        out = torch.empty((self.n_batch, self.data.size["C"], 12), dtype=runtime.tc_float, device=runtime.device)
         if self.data.size["C"]:
             self.kernels.read_contacts(substep % self.sim_options.substeps, out)
         return out
 
     @staticmethod
     def without_contacts(contacts, envs):
-        """``contacts`` (B, C, 9) as contacts() gives them, with none in the envs of the bool mask
+        """``contacts`` (B, C, 12) as contacts() gives them, with none in the envs of the bool mask
         ``envs`` (B,) (their rows as the unused ones: geom −1, the rest 0)."""
         out = contacts.clone()
         out[envs] = 0.0
