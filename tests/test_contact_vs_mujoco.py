@@ -202,3 +202,33 @@ def test_bodies_placed_exactly_on_the_plane_step_like_mujoco(f64, shape, size):
         assert contacts["geom_a"].numel() == d.ncon, (shape, quat)
         if d.nefc == 0:
             assert torch.all(contacts["force_a"] == 0.0), (shape, quat)
+
+
+_HALF_TURN_Y = "0.7071067811865476 0 0.7071067811865476 0"
+
+
+@pytest.mark.parametrize("kind", ["box", "capsule"])
+def test_bounding_spheres_exactly_touching_keep_the_pair(f64, kind):
+    """MuJoCo's broad phase drops a pair only when its bounding spheres are strictly further apart
+    than the margin: boxes corner on corner (distance exactly 0, listed) and capsules end to end
+    (−6e-17, two contacts with rows) are found, as MuJoCo finds them (ours dropped both pairs)."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, gravity=(0, 0, 0)),
+                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True), show_viewer=False)
+    if kind == "box":
+        poses, size = [((0, 0, 0.1), None), ((0.2, 0.2, 0.2), None)], "0.1 0.1 0.05"
+        first = [scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.1), pos=pos)) for pos, _ in poses][0]
+    else:
+        quat = (np.sqrt(0.5), 0.0, np.sqrt(0.5), 0.0)
+        poses, size = [((0, 0, 0.1), _HALF_TURN_Y), ((0.26, 0, 0.1), _HALF_TURN_Y)], "0.03 0.1"
+        first = [scene.add_entity(gs.morphs.Capsule(radius=0.03, height=0.2, pos=pos, quat=quat))
+                 for pos, _ in poses][0]
+    scene.build()
+    bodies = "".join(f'<body pos="{" ".join(map(str, pos))}"{f" quat={chr(34)}{q}{chr(34)}" if q else ""}>'
+                     f'<freejoint/><geom type="{kind}" size="{size}"/></body>' for pos, q in poses)
+    m = mujoco.MjModel.from_xml_string(f'<mujoco><option gravity="0 0 0"/><worldbody>{bodies}</worldbody></mujoco>')
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    scene.step()
+    ours = first.get_contacts()
+    assert d.ncon > 0 and len(ours["geom_a"]) == d.ncon
+    assert np.allclose(-ours["penetration"].numpy(), [c.dist for c in d.contact[:d.ncon]], rtol=0, atol=1e-15)

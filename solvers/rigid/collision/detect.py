@@ -40,7 +40,8 @@ def geom_poses(d: ti.template(), s, e):
 @ti.func
 def _may_touch(d: ti.template(), s, e, pair):
     """Broad phase: False when the pair's bounding volumes are further apart than its margin, so
-    that its collider cannot find a contact: the bounding spheres (a plane and a sphere), then the
+    that its collider cannot find a contact: the bounding spheres (a plane and a sphere; as
+    MuJoCo's, a pair exactly at the margin is kept), then the
     bounding boxes (geom_aabb_*) on the six axes of their faces, apart only beyond the margin, as
     MuJoCo's mj_collideOBB (which MuJoCo runs between bodies of several geoms); a plane tests the
     box's lowest point. The box tests add a slack to the margin (_box_slack: above their round-off
@@ -52,13 +53,14 @@ def _may_touch(d: ti.template(), s, e, pair):
     near = False
     if d.geom_type[g1] == PLANE:  # the plane's normal is its z axis
         normal = column(d.geom_xmat[s, e, g1], 2)
-        near = normal.dot(p2 - p1) - d.geom_rbound[g2] < margin
+        near = normal.dot(p2 - p1) <= margin + d.geom_rbound[g2]  # (as MuJoCo: kept at equality)
         if near:
             centre2, rot2, half2 = _box_of(d, s, e, g2)
             slack = _box_slack(half2.sum() + (centre2 - p1).norm())
             near = normal.dot(centre2 - p1) - _box_radius(rot2, half2, normal) <= margin + slack
     else:
-        near = (p2 - p1).norm() - d.geom_rbound[g1] - d.geom_rbound[g2] < margin
+        gap, bound = p1 - p2, d.geom_rbound[g1] + d.geom_rbound[g2] + margin  # MuJoCo's filterSphere
+        near = gap[0] * gap[0] + gap[1] * gap[1] + gap[2] * gap[2] <= bound * bound
         if near:
             near = _boxes_overlap(d, s, e, g1, g2, margin)
     return near
