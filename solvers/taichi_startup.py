@@ -1,8 +1,8 @@
 """Four costs Taichi 1.7 pays in every process for nothing: three avoided before any kernel is
 defined, the fourth (``skip_repeated_strength_reduction``) when the runtime starts on the CPU.
 
-All are start-up time only: what Taichi compiles and caches is unchanged, and so is every result
-its kernels compute. They touch Taichi 1.7 internals, which is why pyproject.toml pins taichi
+All are start-up time only: what Taichi caches is unchanged, and so is every result its kernels
+compute (4. changes the machine code a load makes, not its arithmetic). They touch Taichi 1.7 internals, which is why pyproject.toml pins taichi
 1.7.* (as for solvers/launch.py).
 
 1. Defining a kernel or ti.func: Taichi's decorator asks ``inspect.getframeinfo`` whether the
@@ -23,15 +23,16 @@ its kernels compute. They touch Taichi 1.7 internals, which is why pyproject.tom
    cProfile: 2.5 of 22 s). A function's source does not change while the process runs: it is read
    once per function.
 4. Loading a kernel from the offline cache: Taichi caches the kernel's LLVM IR after its O3
-   pipeline, which ends with loop strength reduction (``optimize_module`` in codegen_cpu.cpp), and
-   every process turns the cached IR into machine code with LLVM's code generator, whose IR passes
-   run loop strength reduction again. On our kernels (index arithmetic of the arenas in nested
+   pipeline and the loop strength reduction (and three cleanup passes) it runs after it
+   (``optimize_module`` in codegen_cpu.cpp), and every process turns the cached IR into machine
+   code with LLVM's code generator, whose IR passes run loop strength reduction again. On our kernels (index arithmetic of the arenas in nested
    loops) that second pass and the scalar evolution it queries were most of the load: profiled,
    ~55 % of a quadruped's first backward. Its code generation is told to skip it (LLVM's
    ``-disable-lsr``; the strength reduction done before caching stays): a KUKA's first backward
    7.6–8.6 → 2.6 s, a quadruped's 27 → 5.3–6.0 s of CPU, warm cache. The option is set through
    LLVM's C API entry ``LLVMParseCommandLineOptions``, which Taichi's library holds but does not
-   export: its address is read from the library's ELF symbol table.
+   export: its address is read from the library's ELF symbol table (~20 ms; ~1 s the first time
+   after a reboot, reading 28 MB of the library's tables from disk).
 """
 import ctypes
 import functools
@@ -82,8 +83,10 @@ _ELF_SYMBOL = np.dtype([("name", "<u4"), ("info", "u1"), ("other", "u1"), ("sect
 
 
 def _symbol_values(path, names):
-    """{name: value} of the symbols ``names`` defined in the ELF64 (little-endian) shared library
-    at ``path``, from its full symbol table (.symtab; names it does not define are left out)."""
+    """{name: (value, file offset)} of the symbols ``names`` defined in the ELF64 (little-endian)
+    shared library at ``path``, from its full symbol table (.symtab; names it does not define are
+    left out). The file offset is where the symbol's bytes lie in the file (None for a symbol of
+    a section the file holds no bytes of, as .bss)."""
     def read(file, offset, size):
         file.seek(offset)
         return file.read(size)
@@ -94,8 +97,8 @@ def _symbol_values(path, names):
             return {}
         table, (entry_size, count) = int.from_bytes(header[40:48], "little"), np.frombuffer(header[58:62], "<u2")
         sections = np.frombuffer(read(file, table, int(entry_size) * int(count)), np.uint8).reshape(count, -1)
-        kinds, links = sections[:, 4:8].copy().view("<u4")[:, 0], sections[:, 40:44].copy().view("<u4")[:, 0]
-        offsets, sizes = sections[:, 24:32].copy().view("<u8")[:, 0], sections[:, 32:40].copy().view("<u8")[:, 0]
+        field = lambda start, size: sections[:, start:start + size].copy().view(f"<u{size}")[:, 0]  # noqa: E731
+        kinds, addresses, offsets, sizes, links = field(4, 4), field(16, 8), field(24, 8), field(32, 8), field(40, 4)
         symtab = np.flatnonzero(kinds == 2)  # SHT_SYMTAB: absent from a stripped library
         if len(symtab) != 1:
             return {}
@@ -108,28 +111,47 @@ def _symbol_values(path, names):
     for name, at in places.items():
         found = symbols[(symbols["name"] == at + 1 - start) & (symbols["section"] != 0)] if at >= 0 else ()
         if len(found) == 1:
-            values[name] = int(found["value"][0])
+            value, section = int(found["value"][0]), int(found["section"][0])
+            in_file = section < len(kinds) and kinds[section] != 8  # (SHT_NOBITS: no bytes in the file)
+            values[name] = (value, value - int(addresses[section]) + int(offsets[section]) if in_file else None)
     return values
 
 
 def skip_repeated_strength_reduction():
     """Tell the LLVM inside Taichi's library not to run loop strength reduction when it generates
-    machine code (4. above); once per process, from the CPU runtime's start (``gs.init``), before
-    any kernel is loaded. Does nothing where the library is not the one this reads (another
-    platform, a stripped build, another LLVM): loads are then as slow as before, nothing else."""
-    library = sys.modules["taichi._lib.core.taichi_python"]
-    if getattr(library, "_strength_reduction_skipped", False):
-        return  # (LLVM exits the process when an option is given twice)
+    machine code (4. above): once per process, from the CPU runtime's first start (``gs.init``),
+    before any kernel is loaded. It holds for the whole process, every Taichi kernel (a user's
+    own too) and later runtimes (Taichi's CUDA path adds its own strength reduction pass, which
+    stays). Does nothing where the library is not the one this reads (another platform, a
+    stripped build, another LLVM, a file replaced since it was loaded): loads are then as slow as
+    before, nothing else."""
+    library = sys.modules.get("taichi._lib.core.taichi_python")
+    if library is None or getattr(library, "_strength_reduction_skipped", False):
+        return
     library._strength_reduction_skipped = True
-    wanted = ("PyInit_taichi_python", "LLVMParseCommandLineOptions", "_ZL10DisableLSR")
     try:
-        values = _symbol_values(library.__file__, wanted)
-    except (OSError, ValueError):
+        entry = _loaded_entry(library.__file__)
+    except Exception:  # (a speed-up only: whatever fails, Taichi runs as it would)
         return
-    if len(values) != len(wanted):  # (_ZL10DisableLSR: the option exists; an unknown one makes LLVM exit)
-        return
-    exported = ctypes.cast(ctypes.CDLL(library.__file__).PyInit_taichi_python, ctypes.c_void_p).value
-    parse = ctypes.CFUNCTYPE(None, ctypes.c_int, ctypes.POINTER(ctypes.c_char_p), ctypes.c_char_p)(
-        exported - values["PyInit_taichi_python"] + values["LLVMParseCommandLineOptions"])
-    arguments = (ctypes.c_char_p * 2)(b"genesis_lite", b"-disable-lsr")
-    parse(2, arguments, None)
+    if entry is not None:
+        entry(2, (ctypes.c_char_p * 2)(b"genesis_lite", b"-disable-lsr"), None)
+
+
+def _loaded_entry(path):
+    """LLVMParseCommandLineOptions of the library loaded from ``path`` as a ctypes function, or
+    None: its address is the exported PyInit_taichi_python's (the load base) moved by the two
+    symbols' distance in the file's symbol table, and its first bytes in memory must be those the
+    file holds there (the file is the loaded library). _ZL10DisableLSR is the option's object:
+    without it this LLVM has no such option (it would ignore it)."""
+    wanted = ("PyInit_taichi_python", "LLVMParseCommandLineOptions", "_ZL10DisableLSR")
+    symbols = _symbol_values(path, wanted)
+    if len(symbols) != len(wanted) or symbols["LLVMParseCommandLineOptions"][1] is None:
+        return None
+    exported = ctypes.cast(ctypes.CDLL(path).PyInit_taichi_python, ctypes.c_void_p).value
+    (init, _), (parse, in_file) = symbols["PyInit_taichi_python"], symbols["LLVMParseCommandLineOptions"]
+    address = exported - init + parse
+    with open(path, "rb") as file:
+        file.seek(in_file)
+        if file.read(32) != ctypes.string_at(address, 32):
+            return None
+    return ctypes.CFUNCTYPE(None, ctypes.c_int, ctypes.POINTER(ctypes.c_char_p), ctypes.c_char_p)(address)

@@ -59,20 +59,22 @@ def pytest_collection_modifyitems(items):
             item.add_marker(pytest.mark.xdist_group(RESTARTS))  # a unit dealt out last, not amid its file's
 
 
-@pytest.hookimpl(hookwrapper=True)
+@pytest.hookimpl(wrapper=True)
 def pytest_runtest_call(item):
-    """A test that restarts Taichi more than once while it runs, or leaves it in another precision
+    """A test that restarts Taichi more than once while it runs, or leaves it with other options
     than its group's (or stopped), must be marked RESTARTS (or be in LAST), so that it runs where
     that costs nothing: the suite would otherwise slow down unseen. (One switch to the test's own
-    precision is a fixture's work done in the test body.)"""
+    precision is a fixture's work done in the test body.) Checked only when the test passed: a
+    failure keeps its own report."""
     epoch = runtime.epoch
-    yield
+    result = yield
     restarts = runtime.epoch - epoch
-    precision = runtime.options[1] if runtime.initialized else None
-    if (restarts > 1 or (restarts == 1 and precision != ("32" if _float32(item) else "64"))) \
+    options = runtime.options[1:] if runtime.initialized else None  # (precision, debug)
+    if (restarts > 1 or (restarts == 1 and options != ("32" if _float32(item) else "64", False))) \
             and item.get_closest_marker(RESTARTS) is None and os.path.basename(str(item.fspath)) not in LAST:
-        pytest.fail(f"{item.nodeid} restarted Taichi {restarts} times and left it in precision {precision}: mark "
-                    f"it @pytest.mark.{RESTARTS} (run last in its group)", pytrace=False)
+        pytest.fail(f"{item.nodeid} restarted Taichi {restarts} times and left it with (precision, debug) "
+                    f"{options}: mark it @pytest.mark.{RESTARTS} (run last in its group)", pytrace=False)
+    return result
 
 
 @pytest.hookimpl(tryfirst=True, optionalhook=True)  # optional: pytest -p no:xdist has no such hook

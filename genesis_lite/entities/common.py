@@ -40,6 +40,8 @@ def all_finite(tensor):
 def envs_mask_to_idx(envs_idx, n_envs, who):
     """A boolean mask over the envs (as Genesis takes one) → the indices it selects; any other
     ``envs_idx`` is returned as it is."""
+    if isinstance(envs_idx, torch.Tensor) and envs_idx.device.type == "meta":
+        raise InvalidInputError(f"{who}: argument 'envs_idx' must hold values, got a tensor on the meta device")
     mask = envs_idx.detach().cpu().numpy() if isinstance(envs_idx, torch.Tensor) else envs_idx
     if not (isinstance(mask, (np.ndarray, list, tuple)) and np.asarray(mask).dtype == np.bool_):
         return envs_idx

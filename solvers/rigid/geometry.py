@@ -6,6 +6,8 @@ type codes (``GEOM_CODE``), half sizes, a plane's normal along its frame's z axi
 ordered by type with the normal pointing from its first geom to its second. Meshes collide as
 their convex hull (trimesh).
 """
+import math
+
 import numpy as np
 
 from ..core import AssetError
@@ -82,12 +84,12 @@ def geom_arrays(geoms, link_of, where_of):
         s = np.asarray(geom.size, dtype=np.float64)
         if geom.type == "box":
             size[:] = s / 2
-            rbound = np.linalg.norm(size)
+            rbound = math.sqrt(size[0] * size[0] + size[1] * size[1] + size[2] * size[2])  # (MuJoCo's rounding)
         elif geom.type == "sphere":
             size[0] = rbound = s[0]
         elif geom.type in ("capsule", "cylinder"):
             size[:2] = s[0], s[1] / 2
-            rbound = size[0] + size[1] if geom.type == "capsule" else np.hypot(size[0], size[1])
+            rbound = size[0] + size[1] if geom.type == "capsule" else math.sqrt(size[0] * size[0] + size[1] * size[1])
         elif geom.type == "plane":
             quat, rbound = _quat_mul(quat, _quat_z_to(s)), 0.0
         else:  # mesh

@@ -442,8 +442,10 @@ def _capsule_nearest(pos: ti.template(), halfaxis: ti.template(), halflength, ha
     Returns (cltype, base, t, x1, clface, clcorner, cledge): cltype -3/-1 when the -1/+1 end is
     nearest to a face (clface: the one axis along which it lies outside the box, -1 inside),
     else 3 s1 + s2 with MuJoCo's clamp codes (0 at -1, 1 inside, 2 at +1) of the edge
-    parameter x1 and the axis parameter t; -4 when nothing was found. base: the segment base
-    code; clcorner: the edge's corner nearest to the axis point; cledge: the edge's axis.
+    parameter x1 and the axis parameter t, s1 being MuJoCo's flag (segment_pair_state: an end's
+    code where x1 was re-solved inside the edge); -4 when nothing was found. base: the segment
+    base code (the true clamp state); clcorner: the edge's corner MuJoCo names from s1 (its +1
+    end when s1 = 2); cledge: the edge's axis.
     """
     best = bestmax
     cltype = -4
