@@ -122,7 +122,7 @@ class Scene:
         if surface is not None and not isinstance(surface, Default):
             raise InvalidInputError(f"scene.add_entity: argument 'surface' must be gs.surfaces.Default or None, "
                                     f"got {type(surface).__name__}")
-        if visualize_contact is not False:
+        if not (isinstance(visualize_contact, (bool, np.bool_)) and not visualize_contact):
             raise InvalidInputError(f"scene.add_entity: argument 'visualize_contact' must be False (there is no "
                                     f"viewer to draw contacts in), got {visualize_contact!r}")
         drawn = "particle" if isinstance(material, MPM.Base) else "visual"
