@@ -30,6 +30,11 @@ FLOAT32 = "float32"  # the xdist group of every float32 test
 RESTARTS = "restarts"  # the mark of a test that restarts Taichi while it runs (gs.init with other options, gs.destroy)
 
 
+def _file(item):
+    """The test's file name."""
+    return os.path.basename(str(item.fspath))
+
+
 def _float32(item):
     """Whether the test runs in float32: on the f32 fixture, marked float32, or parametrized with
     precision "32"."""
@@ -47,15 +52,14 @@ def pytest_collection_modifyitems(items):
     reaches the disk cache only when its Taichi stops, so float32 tests spread over both workers
     compiled the float32 kernels in each. Two restarts amid the float32 group made that worker
     load the float32 contact kernels three times (the suite: 4:18-4:51 → 3:51, measured)."""
-    name = lambda item: os.path.basename(str(item.fspath))  # noqa: E731
     items.sort(key=lambda item: (not _float32(item), item.get_closest_marker(RESTARTS) is not None,
-                                 name(item) not in FIRST, name(item) not in POOL, name(item) in LAST))
+                                 _file(item) not in FIRST, _file(item) not in POOL, _file(item) in LAST))
     for item in items:
         if _float32(item):
             item.add_marker(pytest.mark.xdist_group(FLOAT32))
-        elif name(item) in POOL:
+        elif _file(item) in POOL:
             item.add_marker(pytest.mark.xdist_group("pool"))
-        elif item.get_closest_marker(RESTARTS) is not None and name(item) not in LAST:
+        elif item.get_closest_marker(RESTARTS) is not None and _file(item) not in LAST:
             item.add_marker(pytest.mark.xdist_group(RESTARTS))  # a unit dealt out last, not amid its file's
 
 
@@ -71,7 +75,7 @@ def pytest_runtest_call(item):
     restarts = runtime.epoch - epoch
     options = runtime.options[1:] if runtime.initialized else None  # (precision, debug)
     if (restarts > 1 or (restarts == 1 and options != ("32" if _float32(item) else "64", False))) \
-            and item.get_closest_marker(RESTARTS) is None and os.path.basename(str(item.fspath)) not in LAST:
+            and item.get_closest_marker(RESTARTS) is None and _file(item) not in LAST:
         pytest.fail(f"{item.nodeid} restarted Taichi {restarts} times and left it with (precision, debug) "
                     f"{options}: mark it @pytest.mark.{RESTARTS} (run last in its group)", pytrace=False)
     return result
