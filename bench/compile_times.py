@@ -3,9 +3,10 @@
 Each case runs in a fresh ``python`` subprocess, float64, a differentiable rollout of 5 steps
 with force controls requiring grad and a backward:
 
-- empty kernel cache (a new, empty Taichi offline cache folder): the first KUKA scene, then in
-  the same process a second live KUKA scene, then a quadruped scene (another robot);
-- warm cache: the same three, and a fresh process's import + init + build + first step.
+- empty caches (new, empty folders for Taichi's offline cache and genesis_lite's asset cache):
+  the first KUKA scene, then in the same process a second live KUKA scene, then a quadruped scene
+  (another robot);
+- warm caches: the same three, and a fresh process's import + init + build + first step.
 
 Goals (issue "Solid ground"): second scene of the same robot < 1 s with an empty cache; another
 robot < 5 s with a warm cache; fresh process < 3 s with a warm cache.
@@ -65,7 +66,11 @@ def run(cache, mode):
     import pybullet_data
     kuka = os.path.join(pybullet_data.getDataPath(), "kuka_iiwa", "model.urdf")
     quadruped = os.path.join(ROOT, "assets", "quadruped.urdf")
-    env = {**os.environ, "TI_OFFLINE_CACHE_FILE_PATH": cache}
+    # both caches in `cache`: Taichi's kernels and genesis_lite's assets (URDF links, meshes, hulls);
+    # Python's bytecode cache as a user has it (pip compiles an installed package; a machine that
+    # sets PYTHONDONTWRITEBYTECODE compiles genesis_lite's ~70 modules in every process, +0.17 s)
+    env = {**os.environ, "TI_OFFLINE_CACHE_FILE_PATH": cache, "GENESIS_LITE_CACHE_DIR": os.path.join(cache, "assets")}
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     out = subprocess.run([sys.executable, "-c", _CHILD, kuka, quadruped, mode], cwd=ROOT, env=env,
                          capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])

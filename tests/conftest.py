@@ -1,7 +1,9 @@
 """Shared fixtures: runtime precision and the robots we test on."""
 import os
 import runpy
+import shutil
 import sys
+import tempfile
 
 import pybullet_data
 import pytest
@@ -41,6 +43,14 @@ def _float32(item):
     callspec = getattr(item, "callspec", None)
     return ("f32" in getattr(item, "fixturenames", ()) or item.get_closest_marker(FLOAT32) is not None
             or (callspec is not None and callspec.params.get("precision") == "32"))
+
+
+def pytest_configure(config):
+    """The asset cache (solvers/asset_cache.py) in a folder of the run's own (each xdist worker's):
+    tests neither read what other runs or versions left there nor fill the user's."""
+    folder = tempfile.mkdtemp(prefix="genesis_lite_assets_")
+    os.environ["GENESIS_LITE_CACHE_DIR"] = folder
+    config.add_cleanup(lambda: shutil.rmtree(folder, ignore_errors=True))
 
 
 @pytest.hookimpl(tryfirst=True)  # before xdist's hook, which names a group's tests by their mark

@@ -33,19 +33,6 @@ def _quat_mul(a, b):
     return np.concatenate([[aw * bw - av @ bv], aw * bv + bw * av + np.cross(av, bv)])
 
 
-def _check_hull(geom, where):
-    """Raise AssetError unless a mesh geom's convex hull has volume (qhull fails on flat input)."""
-    import trimesh  # (imported when first needed: with scipy it takes ~0.7 s)
-
-    try:
-        hull = trimesh.convex.convex_hull(np.asarray(geom.vertices, dtype=np.float64))
-    except Exception as error:  # qhull raises its own error types on flat or degenerate input
-        raise AssetError(f"{where}: mesh expected a convex hull with volume, got a degenerate one ({error})") from None
-    if len(hull.vertices) < 4 or not hull.volume > 0:
-        raise AssetError(f"{where}: mesh expected a convex hull with volume, got {len(hull.vertices)} vertices and "
-                         f"volume {hull.volume}")
-
-
 def _hull_arrays(hulls):
     """The hulls (convex.MeshHulls) as two flat arrays for the kernels: hull_vec (H, 3), every
     hull vertex (m, geom frame) then every polygon's outward unit normal, and hull_int (HI,),
@@ -73,9 +60,9 @@ def geom_arrays(geoms, link_of, where_of):
     aabb_half (G, 3) m the centre and half extents of a box holding it in the geom frame (MuJoCo's
     geom_aabb; zero for planes), centre (G, 3) m a point inside it, in the geom frame (the mean of a
     mesh hull's vertices, which a mesh file's origin need not be; the origin for a primitive), mesh
-    (G,) the geom's mesh number (-1: not a mesh); and the meshes''
-    convex hulls (convex.MeshHulls built with trimesh: vertices, vertex graph, polygons) as hull_vec
-    (H, 3) and hull_int (HI,) (``_hull_arrays``). A mesh collides as its convex hull.
+    (G,) the geom's mesh number (-1: not a mesh); and the meshes' convex hulls (convex.mesh_hull:
+    vertices, vertex graph, polygons) as hull_vec (H, 3) and hull_int (HI,) (``_hull_arrays``). A
+    mesh collides as its convex hull; one without volume is an AssetError.
     """
     out = {k: [] for k in ("type", "link", "pos", "quat", "size", "rbound", "aabb_half", "mesh")}
     meshes = []
@@ -93,9 +80,11 @@ def geom_arrays(geoms, link_of, where_of):
         elif geom.type == "plane":
             quat, rbound = _quat_mul(quat, _quat_z_to(s)), 0.0
         else:  # mesh
-            _check_hull(geom, where_of(k))
             mesh = len(meshes)
-            meshes.append(np.asarray(geom.vertices, dtype=np.float64))
+            try:
+                meshes.append(convex.mesh_hull(geom.vertices))
+            except AssetError as error:
+                raise AssetError(f"{where_of(k)}: {error}") from None
             rbound = 0.0  # set from its hull below
         out["type"].append(GEOM_CODE[geom.type])
         out["link"].append(link_of[k])
@@ -110,7 +99,7 @@ def geom_arrays(geoms, link_of, where_of):
     for k, width in (("pos", 3), ("quat", 4), ("size", 3), ("aabb_half", 3)):
         arrays[k] = arrays[k].reshape(-1, width)
     arrays["aabb_center"], arrays["centre"] = np.zeros_like(arrays["aabb_half"]), np.zeros_like(arrays["aabb_half"])
-    hulls = convex.hulls_from_vertices(meshes)
+    hulls = convex.pack_hulls(meshes)
     for k, mesh in enumerate(arrays["mesh"]):
         if mesh >= 0:
             adr, num = hulls.hull_vertadr[mesh], hulls.hull_vertnum[mesh]

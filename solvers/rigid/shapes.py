@@ -12,6 +12,7 @@ import os
 
 import numpy as np
 
+from .. import asset_cache
 from ..core import AssetError, InvalidInputError
 from .spec import GeomSpec, LinkSpec
 
@@ -101,17 +102,23 @@ def capsule_mass_inertia(radius: float, length: float, rho: float) -> tuple[floa
 
 @functools.lru_cache(maxsize=64)
 def _load_mesh_cached(path: str, mtime_ns: int, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """Raw (V, 3) vertices and (F, 3) faces of a mesh file; cached because robots reuse meshes
-    (a quadruped's four legs), keyed by modification time so edited files are re-read."""
-    import trimesh  # (imported when first needed: with scipy it takes ~0.7 s)
-
-    # skip_materials: textures are irrelevant to physics and slow to decode.
-    mesh = trimesh.load(path, force="mesh", skip_materials=True)
-    vertices = np.asarray(mesh.vertices, dtype=np.float64)
-    faces = np.asarray(mesh.faces, dtype=np.int64)
+    """Raw (V, 3) vertices and (F, 3) faces of a mesh file; kept because robots reuse meshes (a
+    quadruped's four legs), here and in the asset cache, keyed by modification time and size so
+    that edited files are read again."""
+    vertices, faces = asset_cache.load_or_compute("mesh", [path.encode()], lambda: (_read_mesh(path), [path]),
+                                                  (__file__,), ("trimesh", "numpy"))
     vertices.flags.writeable = False
     faces.flags.writeable = False
     return vertices, faces
+
+
+def _read_mesh(path: str) -> tuple[np.ndarray, np.ndarray]:
+    """(V, 3) vertices and (F, 3) faces of a mesh file, read by trimesh."""
+    import trimesh  # (imported when first needed: with scipy it takes ~0.6 s)
+
+    # skip_materials: textures are irrelevant to physics and slow to decode.
+    mesh = trimesh.load(path, force="mesh", skip_materials=True)
+    return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
 
 
 def load_mesh(path: str, scale=1.0) -> tuple[np.ndarray, np.ndarray]:
@@ -142,8 +149,17 @@ def mesh_mass_properties(vertices, faces, rho: float) -> tuple[float, np.ndarray
 
     A closed, outward-oriented mesh is integrated as a solid. Any other mesh (open, or with
     inconsistent winding) uses its convex hull instead, which is also what the contact code
-    sees. A flat or degenerate mesh has no volume and gets mass 0.
+    sees. A flat or degenerate mesh has no volume and gets mass 0. Kept in the asset cache.
     """
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    inputs = [vertices.tobytes(), faces.tobytes(), repr(float(rho)).encode()]
+    return asset_cache.load_or_compute("mass", inputs, lambda: (_mesh_mass_properties(vertices, faces, rho), ()),
+                                       (__file__,), ("trimesh", "scipy", "numpy"))
+
+
+def _mesh_mass_properties(vertices, faces, rho: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """mesh_mass_properties, computed by trimesh."""
     import trimesh
 
     mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=True)

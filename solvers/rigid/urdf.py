@@ -2,7 +2,8 @@
 
 yourdfpy parses the XML; everything else (tree order, frames, inertias, meshes, validation)
 happens here so that every problem with a file surfaces as an ``AssetError`` that names the
-file, the link or joint, what was expected and what was found.
+file, the link or joint, what was expected and what was found. A file's links are kept in the
+asset cache (solvers/asset_cache.py): a file read before, with the same meshes, is not parsed again.
 
 Supported joints: revolute, continuous (a revolute without limits), prismatic, fixed.
 Supported collision shapes: box, sphere, cylinder, mesh (any format trimesh reads).
@@ -32,8 +33,9 @@ import re
 import numpy as np
 from lxml import etree
 
+from .. import asset_cache
 from ..core import AssetError, InvalidInputError
-from . import shapes
+from . import shapes, spec
 from .spec import GeomSpec, LinkSpec, VisualSpec
 
 _JOINT_TYPES = {"revolute": "revolute", "continuous": "revolute",
@@ -49,6 +51,9 @@ _ONCE = {"link": ("inertial",), "inertial": ("origin", "mass", "inertia"),
                    "calibration"),
          "collision": ("origin", "geometry"), "visual": ("origin", "geometry", "material")}
 _logger = logging.getLogger("genesis_lite")
+# what a file's links are computed by, for the asset cache's keys
+_SOURCES = (__file__, shapes.__file__, spec.__file__)
+_PACKAGES = ("yourdfpy", "lxml", "trimesh", "scipy", "numpy")
 _DEFAULT_AXIS = np.array([1.0, 0.0, 0.0])  # URDF spec default
 # relative tolerance on negative principal moments, for inertias rounded to a few digits
 _INERTIA_RTOL = 1e-6
@@ -71,7 +76,21 @@ def load_urdf(path: str, entity_name: str | None = None, rho: float = 1000.0) ->
     path = os.fspath(path)
     rho = float(shapes.check_positive(rho, "rho", "load_urdf"))
     ctx = _Context(path, entity_name)
-    robot, xml = _parse(ctx)
+    text = _read(ctx)
+
+    def links_and_warnings():
+        return (_links(ctx, text, rho), ctx.warnings), ctx.meshes
+
+    inputs = [os.path.realpath(path).encode(), repr(rho).encode(), text]  # (meshes are found from the folder)
+    specs, warnings = asset_cache.load_or_compute("urdf", inputs, links_and_warnings, _SOURCES, _PACKAGES)
+    for message in warnings:
+        _logger.warning(f"{ctx.where()}: {message}")
+    return specs
+
+
+def _links(ctx: "_Context", text: bytes, rho: float) -> list[LinkSpec]:
+    """load_urdf's links, from the file's bytes `text`."""
+    robot, xml = _parse(ctx, text)
     links, parent_joint, order = _tree_order(ctx, robot)
     friction = _contact_friction(ctx, xml)
     colors = _material_colors(ctx, robot)
@@ -94,6 +113,8 @@ class _Context:
         self.path = path
         self.folder = os.path.dirname(os.path.abspath(path))
         self.entity = entity_name
+        self.meshes = []  # the mesh files read
+        self.warnings = []  # what to warn of, said after the file and entity name
 
     def where(self) -> str:
         """The file (and entity) name, as messages start."""
@@ -107,21 +128,25 @@ class _Context:
 # ------------------------------------------------------------------ parsing and tree
 
 
-def _parse(ctx: _Context):
-    """(the yourdfpy Robot of the file, its lxml root element).
-
-    The XML is checked strictly first, because yourdfpy otherwise falls back to a lenient
-    parser that silently drops elements.
-    """
-    import yourdfpy  # (imported when first needed: it imports trimesh and scipy, ~0.7 s)
-
+def _read(ctx: _Context) -> bytes:
+    """The file's bytes."""
     if not os.path.isfile(ctx.path):
         raise ctx.error("file not found")
     try:
         with open(ctx.path, "rb") as f:
-            text = f.read()
+            return f.read()
     except OSError as exc:  # a folder, no permission
         raise ctx.error(f"cannot read file: {exc.strerror or exc}") from exc
+
+
+def _parse(ctx: _Context, text: bytes):
+    """(the yourdfpy Robot of the file's bytes `text`, its lxml root element).
+
+    The XML is checked strictly first, because yourdfpy otherwise falls back to a lenient
+    parser that silently drops elements.
+    """
+    import yourdfpy  # (imported when first needed: it imports trimesh and scipy, ~0.6 s)
+
     text, xml = _strict_xml(ctx, text)
     _check_elements(ctx, xml)
     try:
@@ -264,8 +289,8 @@ def _apply_joint(ctx: _Context, spec: LinkSpec, joint) -> None:
     spec.kp = _number(ctx, getattr(gains, "k_position", None), None, f"joint '{joint.name}' k_position", 0.0)
     spec.kv = _number(ctx, getattr(gains, "k_velocity", None), None, f"joint '{joint.name}' k_velocity", 0.0)
     if joint.mimic is not None and spec.joint_type != "fixed":
-        _logger.warning(f"{ctx.where()}: joint '{joint.name}' mimics joint '{joint.mimic.joint}', which "
-                        f"needs an equality constraint: genesis_lite has none yet, so it moves on its own")
+        ctx.warnings.append(f"joint '{joint.name}' mimics joint '{joint.mimic.joint}', which needs an equality "
+                            f"constraint: genesis_lite has none yet, so it moves on its own")
 
 
 def _axis(ctx: _Context, joint) -> np.ndarray:
@@ -461,6 +486,7 @@ def _mesh(ctx: _Context, link_name: str, mesh) -> tuple[np.ndarray, np.ndarray]:
     if found is None:
         raise ctx.error(f"link '{link_name}': mesh file '{mesh.filename}' not found; "
                         f"tried {tried}")
+    ctx.meshes.append(found)
     try:
         return shapes.load_mesh(found, np.broadcast_to(scale, (3,)))
     except AssetError as exc:

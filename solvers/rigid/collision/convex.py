@@ -94,6 +94,9 @@ import numpy as np
 import taichi as ti
 from taichi.lang import impl
 
+from ... import asset_cache
+from ...core import AssetError
+
 # MuJoCo geom type codes (mjtGeom), and two internal "cores": sphere -> point, capsule -> segment
 PLANE, SPHERE, CAPSULE, CYLINDER, BOX, MESH = 0, 2, 3, 5, 6, 7
 _POINT, _SEGMENT = 100, 101
@@ -203,9 +206,9 @@ def _outline(faces: np.ndarray) -> list:
     return cycle
 
 
-def _pack(meshes: list) -> MeshHulls:
-    """Concatenate per-mesh dicts (vert, climb, extrema, neighbours, polygons, normals) into one
-    MeshHulls."""
+def pack_hulls(meshes: list) -> MeshHulls:
+    """Concatenate per-mesh dicts (vert, climb, extrema, neighbours, polygons, normals: mesh_hull's)
+    into one MeshHulls."""
     out = {name: [] for name in MeshHulls.FIELDS}
     for mesh in meshes:
         vert_base, poly_base = len(out["hull_vert"]), len(out["hull_poly_vertadr"])
@@ -240,33 +243,46 @@ def _pack(meshes: list) -> MeshHulls:
 
 
 def hulls_from_vertices(meshes: list) -> MeshHulls:
-    """MeshHulls of the convex hulls (trimesh) of a list of (V, 3) vertex arrays (geom frame, m).
+    """MeshHulls of the convex hulls of a list of (V, 3) vertex arrays (geom frame, m): ``mesh_hull``
+    of each, packed."""
+    return pack_hulls([mesh_hull(vertices) for vertices in meshes])
 
-    Only the hull's vertices are kept; coplanar hull triangles merge into polygons (trimesh's
-    facets), wound counter-clockwise seen from outside.
-    """
-    import trimesh
 
-    packed = []
-    for vertices in meshes:
-        hull = trimesh.Trimesh(vertices=np.asarray(vertices, dtype=np.float64)).convex_hull
-        vert, faces = np.asarray(hull.vertices), np.asarray(hull.faces)
-        in_facet = np.zeros(len(faces), dtype=bool)
-        polygons = []
-        for facet in hull.facets:
-            in_facet[facet] = True
-            polygons.append(_outline(faces[facet]))
-        polygons += [[int(i) for i in f] for f in faces[~in_facet]]
-        normals = []
-        for polygon in polygons:
-            a, b, c = vert[polygon[0]], vert[polygon[1]], vert[polygon[2]]
-            normal = np.cross(b - a, c - a)
-            normals.append(normal / np.linalg.norm(normal))
-        packed.append(dict(vert=vert, climb=len(vert) >= 10,
-                           extrema=_extrema(vert, list(range(len(vert)))),
-                           neighbours={v: sorted(n) for v, n in enumerate(hull.vertex_neighbors)},
-                           polygons=polygons, normals=normals))
-    return _pack(packed)
+def mesh_hull(vertices) -> dict:
+    """The convex hull (trimesh's, from qhull) of (V, 3) vertices (geom frame, m), as ``pack_hulls`` takes
+    it: only the hull's vertices are kept; coplanar hull triangles merge into polygons (trimesh's
+    facets), wound counter-clockwise seen from outside. Kept in the asset cache, by the vertices'
+    bits. Raises AssetError when the hull has no volume (flat or degenerate input)."""
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    return asset_cache.load_or_compute("hull", [vertices.tobytes()], lambda: (_hull(vertices), ()),
+                                       (__file__,), ("trimesh", "scipy", "networkx", "numpy"))
+
+
+def _hull(vertices: np.ndarray) -> dict:
+    """mesh_hull, computed."""
+    import trimesh  # (imported when first needed: with scipy it takes ~0.6 s)
+
+    try:  # (qhull fails on flat input)
+        check = trimesh.convex.convex_hull(vertices)
+    except Exception as error:  # qhull raises its own error types on flat or degenerate input
+        raise AssetError(f"mesh expected a convex hull with volume, got a degenerate one ({error})") from None
+    if len(check.vertices) < 4 or not check.volume > 0:
+        raise AssetError(f"mesh expected a convex hull with volume, got {len(check.vertices)} vertices and "
+                         f"volume {check.volume}")
+    hull = trimesh.Trimesh(vertices=vertices).convex_hull
+    vert, faces = np.asarray(hull.vertices), np.asarray(hull.faces)
+    in_facet = np.zeros(len(faces), dtype=bool)
+    polygons = []
+    for facet in hull.facets:
+        in_facet[facet] = True
+        polygons.append(_outline(faces[facet]))
+    polygons += [[int(i) for i in f] for f in faces[~in_facet]]
+    first, second, third = (vert[[polygon[i] for polygon in polygons]] for i in range(3))
+    normals = np.cross(second - first, third - first)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    return dict(vert=vert, climb=len(vert) >= 10, extrema=_extrema(vert, list(range(len(vert)))),
+                neighbours={v: sorted(n) for v, n in enumerate(hull.vertex_neighbors)},
+                polygons=polygons, normals=normals)
 
 
 def hulls_from_mujoco(model) -> MeshHulls:
@@ -294,7 +310,7 @@ def hulls_from_mujoco(model) -> MeshHulls:
                            extrema=[int(globalid[i]) for i in extrema_all[27 * m:27 * m + 27]],
                            neighbours=neighbours, polygons=polygons,
                            normals=list(model.mesh_polynormal[padr:padr + pnum])))
-    hulls = _pack(packed)
+    hulls = pack_hulls(packed)
     # MuJoCo's polygon map, in its own order (mesh-local polygon ids)
     hulls.hull_polymap = np.asarray(model.mesh_polymap, dtype=np.int32)
     hulls.hull_vert_polyadr = np.asarray(model.mesh_polymapadr, dtype=np.int32)
