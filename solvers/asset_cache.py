@@ -4,20 +4,24 @@ triangles and a mesh's mass properties (rigid/shapes.py), a mesh's convex hull
 
 Why: a fresh process that builds a robot it has built before then neither imports yourdfpy,
 trimesh and scipy (~0.6 s, scipy most of it) nor runs qhull again. A KUKA arm's fresh process
-(import, build, first step; warm kernel cache) took 3.5 s, 2.6 s with it (measured, 2-core
+(import, build, first step; warm kernel cache) took 3.5 s, 2.5 s with it (measured, 2-core
 EPYC). Genesis keeps such a cache too (~/.cache/genesis).
 
-An entry is a pickle named by the SHA-256 of everything its computation reads: its input (a
-file's bytes or path, the arguments), the source files of the modules that compute it and the
+An entry is a pickle named by the SHA-256 of its input (a file's bytes or path, the
+arguments), the source files of the modules that compute it and the
 versions of the packages they call, so that an edit to any of them makes a new entry rather than
 reading a stale one. The other files a computation reads (a URDF's meshes, a mesh file named by
-its path) are listed in the entry with their size and modification time: a change to any makes
-the entry a miss. Nothing is stored for a computation that raises.
+its path) are listed in the entry as they were before it read them (``snapshot``: size, times,
+inode), and so are the places a URDF's mesh was looked for first and not found: a change to any
+makes the entry a miss. Nothing is stored for a computation that raises, nor for one that read a
+mesh file of a format that may name other files (glTF's buffers, COLLADA's images: their changes
+would go unseen; shapes.SELF_CONTAINED_MESH lists the formats kept).
 
 Where: ``$GENESIS_LITE_CACHE_DIR``, else ``$XDG_CACHE_HOME/genesis_lite``, else
 ``~/.cache/genesis_lite``; ``GENESIS_LITE_CACHE_DIR=""`` turns the cache off. Delete the folder to
-empty it. It is a speed-up only: a folder that cannot be written, or an entry that cannot be
-read, is passed over.
+empty it (nothing is ever evicted). It is a speed-up only: a folder that cannot be written, or
+an entry that cannot be read, is passed over. Entries are pickles, which run code when read:
+point it only at a folder you trust, as Taichi's cache (which holds machine code).
 """
 import contextlib
 import functools
@@ -42,10 +46,12 @@ def folder() -> str | None:
 def load_or_compute(kind: str, inputs: list, compute, sources: tuple, packages: tuple):
     """The value of ``compute()`` for ``inputs``: from the cache, or computed and stored.
 
-    kind: the entry's folder ("urdf", "mesh", "mass", "hull"); inputs: bytes, everything the computation
-    depends on besides the files it names; compute() → (value, files): the value (picklable, not None) and
-    the paths of the other files it read; sources: the paths of the modules that compute it;
-    packages: the names of the installed packages it calls.
+    kind: the entry's folder ("urdf", "mesh", "mass", "hull"); inputs: bytes, everything the
+    computation depends on besides the files it names; compute() → (value, files): the value
+    (picklable, not None) and the ``snapshot``s of the other files it read (or looked for), each
+    taken before reading the file; files None: the value is not to be stored (it read a file
+    that may name further files); sources: the paths of the modules that compute it; packages:
+    the names of the installed packages it calls.
     """
     where = folder()
     if where is None:
@@ -55,8 +61,21 @@ def load_or_compute(kind: str, inputs: list, compute, sources: tuple, packages: 
     if entry is not None:
         return entry
     value, files = compute()
-    _write(path, (value, _stats(files)))
+    if files is not None:
+        _write(path, (value, files))
     return value
+
+
+def snapshot(path) -> tuple:
+    """(path, identity) of a file as it is now: its size, modification and change times and inode
+    (None when it does not exist). The change time cannot be set back (``cp -p``, ``rsync -a``
+    and ``tar`` restore the modification time), so a rewritten file differs even at the same size
+    and modification time."""
+    try:
+        stat = os.stat(path)
+    except OSError:
+        return os.fspath(path), None
+    return os.fspath(path), (stat.st_size, stat.st_mtime_ns, stat.st_ctime_ns, stat.st_ino)
 
 
 def _digest(kind: str, inputs: list, sources: tuple, packages: tuple) -> str:
@@ -83,22 +102,13 @@ def _code_digest(sources: tuple, packages: tuple) -> bytes:
     return digest.digest()
 
 
-def _stats(files) -> list:
-    """(path, size, modification time ns) of each file."""
-    out = []
-    for file in files:
-        stat = os.stat(file)
-        out.append((os.fspath(file), stat.st_size, stat.st_mtime_ns))
-    return out
-
-
 def _read(path: str):
     """The value stored at ``path``, or None when there is none, it cannot be read, or a file it
     was computed from has changed since."""
     try:
         with open(path, "rb") as file:
-            value, stats = pickle.load(file)
-        return value if _stats(stat[0] for stat in stats) == stats else None
+            value, files = pickle.load(file)
+        return value if all(snapshot(name) == (name, identity) for name, identity in files) else None
     except Exception:  # (absent, unreadable, from another pickle protocol, a file gone: a miss)
         return None
 

@@ -113,6 +113,83 @@ def test_the_same_urdf_elsewhere_reads_its_own_meshes(cache, tmp_path):
     assert np.abs(load_urdf(large)[1].geoms[0].vertices).max() == 0.3
 
 
+def test_a_symlinked_urdf_reads_the_meshes_beside_the_link(cache, tmp_path):
+    """A URDF linked into another folder finds its relative meshes there, as without the cache."""
+    mesh_robot(tmp_path / "one", half=0.1)
+    mesh_robot(tmp_path / "two", half=0.3)
+    os.remove(tmp_path / "two" / "robot.urdf")
+    os.symlink(tmp_path / "one" / "robot.urdf", tmp_path / "two" / "robot.urdf")
+    assert np.abs(load_urdf(str(tmp_path / "one" / "robot.urdf"))[1].geoms[0].vertices).max() == 0.1
+    assert np.abs(load_urdf(str(tmp_path / "two" / "robot.urdf"))[1].geoms[0].vertices).max() == 0.3
+
+
+def test_a_mesh_appearing_where_it_is_looked_for_first_is_read(cache, tmp_path):
+    """package://pkg/meshes/cube.obj is found as pkg/meshes/cube.obj from pkg/urdf/ (its parent);
+    a cube.obj put later at pkg/urdf/meshes/, looked at first, is what the next load reads."""
+    package = tmp_path / "pkg"
+    mesh_robot(package, half=0.1)
+    (package / "urdf").mkdir()
+    text = (package / "robot.urdf").read_text().replace("meshes/cube.obj", "package://pkg/meshes/cube.obj")
+    (package / "urdf" / "robot.urdf").write_text(text)
+    path = str(package / "urdf" / "robot.urdf")
+    assert np.abs(load_urdf(path)[1].geoms[0].vertices).max() == 0.1
+    (package / "urdf" / "meshes").mkdir()
+    (package / "urdf" / "meshes" / "cube.obj").write_text(cube_obj(0.3))
+    assert np.abs(load_urdf(path)[1].geoms[0].vertices).max() == 0.3
+
+
+def test_a_mesh_rewritten_with_its_size_and_time_is_read_again(cache, tmp_path):
+    """A mesh file replaced by one of the same size, its modification time set back (cp -p, rsync
+    -a, tar): the next load reads the new triangles (the change time and inode differ)."""
+    path = mesh_robot(tmp_path, half=0.1)
+    mesh = tmp_path / "meshes" / "cube.obj"
+    before = os.stat(mesh)
+    assert np.abs(load_urdf(path)[1].geoms[0].vertices).max() == 0.1
+    replacement = tmp_path / "new.obj"
+    replacement.write_text(cube_obj(0.2))
+    assert os.stat(replacement).st_size == before.st_size
+    os.replace(replacement, mesh)
+    os.utime(mesh, ns=(before.st_atime_ns, before.st_mtime_ns))
+    assert np.abs(load_urdf(path)[1].geoms[0].vertices).max() == 0.2
+
+
+def test_a_mesh_changed_or_removed_while_read_is_no_entry(cache, tmp_path, monkeypatch):
+    """A mesh file rewritten just after it is read: the entry holds what was read with the file as
+    it was before, so the next load reads the new file; removed instead, the load still succeeds."""
+    path = mesh_robot(tmp_path, half=0.1)
+    mesh = tmp_path / "meshes" / "cube.obj"
+    read = urdf.shapes._read_mesh
+
+    def read_then_rewrite(name):
+        out = read(name)
+        mesh.write_text(cube_obj(0.25))
+        return out
+    monkeypatch.setattr(urdf.shapes, "_read_mesh", read_then_rewrite)
+    assert np.abs(load_urdf(path)[1].geoms[0].vertices).max() == 0.1
+    monkeypatch.setattr(urdf.shapes, "_read_mesh", read)
+    assert np.abs(load_urdf(path)[1].geoms[0].vertices).max() == 0.25
+
+    gone = tmp_path / "gone.obj"
+    gone.write_text(cube_obj(0.4))
+    monkeypatch.setattr(urdf.shapes, "_read_mesh", lambda name: (read(name), os.remove(name))[0])
+    assert np.abs(shapes.mesh_link(str(gone))[0].geoms[0].vertices).max() == 0.4
+
+
+def test_meshes_that_name_other_files_are_not_kept(cache, tmp_path):
+    """A glTF mesh keeps its triangles in a buffer file beside it, which the cache would not watch:
+    neither it nor the URDF naming it is stored, so a new buffer is read."""
+    import trimesh
+
+    path = mesh_robot(tmp_path)
+    for half in (0.1, 0.3):
+        for name, data in trimesh.creation.box(extents=(2 * half,) * 3).export(file_type="gltf").items():
+            (tmp_path / "meshes" / name).write_bytes(data)
+        text = (tmp_path / "robot.urdf").read_text().replace("cube.obj", "model.gltf")
+        (tmp_path / "robot.urdf").write_text(text)
+        assert np.abs(load_urdf(path)[1].geoms[0].vertices).max() == pytest.approx(half)
+    assert not entries(cache, "urdf") and not entries(cache, "mesh")
+
+
 def test_density_is_part_of_the_key(cache, tmp_path):
     """A link without <inertial> weighs rho × its volume, whatever density was read before."""
     box = '<collision><geometry><box size="1 1 1"/></geometry></collision>'

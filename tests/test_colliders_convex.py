@@ -259,10 +259,10 @@ def test_degenerate_poses_stay_finite(harness):
         np.testing.assert_allclose(np.linalg.norm(normal[i, :count[i]], axis=1), 1.0, atol=1e-12)
 
 
-def test_hulls_from_vertices_match_mujoco_structure():
+def test_mesh_hulls_match_mujoco_structure():
     """The trimesh-built hull of a box: 8 vertices, 6 outward quadrilaterals (3 per vertex) and
     18 hull edges (the triangulated hull's graph), as MuJoCo's own."""
-    hulls = cv.hulls_from_vertices([_meshes()[1]])
+    hulls = cv.pack_hulls([cv.mesh_hull(_meshes()[1])])
     reference = cv.hulls_from_mujoco(_model("", _geom("mesh", 1, 0.0)))
     assert hulls.hull_vertnum[0] == reference.hull_vertnum[1] == 8
     assert len(hulls.hull_poly_vertnum) == reference.hull_polynum[1] == 6

@@ -100,13 +100,22 @@ def capsule_mass_inertia(radius: float, length: float, rho: float) -> tuple[floa
 # ------------------------------------------------------------------ meshes
 
 
+# mesh formats whose file holds the whole mesh (textures aside: not read), which the asset cache
+# keeps; others (glTF, COLLADA...) may name further files, whose changes it would not see
+SELF_CONTAINED_MESH = (".stl", ".obj", ".ply", ".off", ".glb")
+
+
 @functools.lru_cache(maxsize=64)
-def _load_mesh_cached(path: str, mtime_ns: int, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """Raw (V, 3) vertices and (F, 3) faces of a mesh file; kept because robots reuse meshes (a
-    quadruped's four legs), here and in the asset cache, keyed by modification time and size so
-    that edited files are read again."""
-    vertices, faces = asset_cache.load_or_compute("mesh", [path.encode()], lambda: (_read_mesh(path), [path]),
-                                                  (__file__,), ("trimesh", "numpy"))
+def _load_mesh_cached(file: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """Raw (V, 3) vertices and (F, 3) faces of the mesh file of ``file``, its asset_cache.snapshot
+    (taken before reading it); kept because robots reuse meshes (a quadruped's four legs), here
+    and in the asset cache, by the snapshot, so that edited files are read again."""
+    path = file[0]
+
+    def read():
+        return _read_mesh(path), [file] if path.lower().endswith(SELF_CONTAINED_MESH) else None
+
+    vertices, faces = asset_cache.load_or_compute("mesh", [path.encode()], read, (__file__,), ("trimesh", "numpy"))
     vertices.flags.writeable = False
     faces.flags.writeable = False
     return vertices, faces
@@ -130,9 +139,8 @@ def load_mesh(path: str, scale=1.0) -> tuple[np.ndarray, np.ndarray]:
     """
     if not os.path.isfile(path):
         raise AssetError(f"mesh file '{path}' does not exist")
-    stat = os.stat(path)
     try:
-        vertices, faces = _load_mesh_cached(os.path.realpath(path), stat.st_mtime_ns, stat.st_size)
+        vertices, faces = _load_mesh_cached(asset_cache.snapshot(os.path.realpath(path)))
     except Exception as exc:  # trimesh raises many types for bad files
         raise AssetError(f"cannot load mesh file '{path}': {type(exc).__name__}: {exc}") from exc
     if len(faces) == 0:

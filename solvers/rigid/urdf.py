@@ -79,9 +79,9 @@ def load_urdf(path: str, entity_name: str | None = None, rho: float = 1000.0) ->
     text = _read(ctx)
 
     def links_and_warnings():
-        return (_links(ctx, text, rho), ctx.warnings), ctx.meshes
+        return (_links(ctx, text, rho), ctx.warnings), ctx.files
 
-    inputs = [os.path.realpath(path).encode(), repr(rho).encode(), text]  # (meshes are found from the folder)
+    inputs = [os.path.abspath(path).encode(), repr(rho).encode(), text]  # (meshes are found from its folder)
     specs, warnings = asset_cache.load_or_compute("urdf", inputs, links_and_warnings, _SOURCES, _PACKAGES)
     for message in warnings:
         _logger.warning(f"{ctx.where()}: {message}")
@@ -113,7 +113,8 @@ class _Context:
         self.path = path
         self.folder = os.path.dirname(os.path.abspath(path))
         self.entity = entity_name
-        self.meshes = []  # the mesh files read
+        self.files = []  # asset_cache.snapshot of the mesh files read and of the places looked at before; None:
+        # a mesh file may name others (the links are not to be cached)
         self.warnings = []  # what to warn of, said after the file and entity name
 
     def where(self) -> str:
@@ -486,7 +487,10 @@ def _mesh(ctx: _Context, link_name: str, mesh) -> tuple[np.ndarray, np.ndarray]:
     if found is None:
         raise ctx.error(f"link '{link_name}': mesh file '{mesh.filename}' not found; "
                         f"tried {tried}")
-    ctx.meshes.append(found)
+    if ctx.files is not None and found.lower().endswith(shapes.SELF_CONTAINED_MESH):
+        ctx.files += [asset_cache.snapshot(candidate) for candidate in tried[:tried.index(found) + 1]]
+    else:
+        ctx.files = None
     try:
         return shapes.load_mesh(found, np.broadcast_to(scale, (3,)))
     except AssetError as exc:

@@ -30,9 +30,9 @@ Data. Meshes are convex hulls stored flat (`MeshHulls`, names prefixed hull_): v
 geom frame, the hull's vertex graph (hill climbing), its polygons (coplanar triangles merged)
 and per vertex the polygons holding it. Exact agreement with MuJoCo needs MuJoCo's own hull data
 (its mesh frame, float32 vertices, qhull's graph order that breaks support ties):
-`hulls_from_mujoco` reads it from a compiled MjModel, `hulls_from_vertices` builds the same
-structure with trimesh. The GJK simplex, EPA polytope and clipping buffers live in a per-env
-workspace (`SCRATCH`: arrays ccd_v, ccd_f, ccd_i indexed [row..., k]); Taichi's compile time
+`hulls_from_mujoco` reads it from a compiled MjModel, `mesh_hull` builds the same structure
+with trimesh (`pack_hulls` packs several). The GJK simplex, EPA polytope and clipping buffers
+live in a per-env workspace (`SCRATCH`: arrays ccd_v, ccd_f, ccd_i indexed [row..., k]); Taichi's compile time
 grows with (local array size) x (runtime-indexed accesses), so there are no large local arrays.
 
 Compile time. Everything is inlined and each heavy piece appears once in the code (one support
@@ -242,12 +242,6 @@ def pack_hulls(meshes: list) -> MeshHulls:
     return MeshHulls(**arrays)
 
 
-def hulls_from_vertices(meshes: list) -> MeshHulls:
-    """MeshHulls of the convex hulls of a list of (V, 3) vertex arrays (geom frame, m): ``mesh_hull``
-    of each, packed."""
-    return pack_hulls([mesh_hull(vertices) for vertices in meshes])
-
-
 def mesh_hull(vertices) -> dict:
     """The convex hull (trimesh's, from qhull) of (V, 3) vertices (geom frame, m), as ``pack_hulls`` takes
     it: only the hull's vertices are kept; coplanar hull triangles merge into polygons (trimesh's
@@ -277,9 +271,11 @@ def _hull(vertices: np.ndarray) -> dict:
         in_facet[facet] = True
         polygons.append(_outline(faces[facet]))
     polygons += [[int(i) for i in f] for f in faces[~in_facet]]
-    first, second, third = (vert[[polygon[i] for polygon in polygons]] for i in range(3))
-    normals = np.cross(second - first, third - first)
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    normals = []
+    for polygon in polygons:
+        a, b, c = vert[polygon[0]], vert[polygon[1]], vert[polygon[2]]
+        normal = np.cross(b - a, c - a)
+        normals.append(normal / np.linalg.norm(normal))
     return dict(vert=vert, climb=len(vert) >= 10, extrema=_extrema(vert, list(range(len(vert)))),
                 neighbours={v: sorted(n) for v, n in enumerate(hull.vertex_neighbors)},
                 polygons=polygons, normals=normals)
