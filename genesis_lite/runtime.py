@@ -16,7 +16,7 @@ from taichi.lang.misc import is_arch_supported
 
 from .solvers.core import InvalidInputError, SceneStateError, runtime
 from .solvers.launch import forget as forget_kernels
-from .solvers.taichi_startup import skip_repeated_strength_reduction
+from .solvers.taichi_startup import skip_code_generation_passes
 
 cpu = "cpu"
 gpu = "gpu"
@@ -98,7 +98,7 @@ def init(backend=None, precision="32", seed=None, logging_level="warning", debug
             log_level=_LOG_LEVELS[logging_level], offline_cache=True)
     runtime.arch = impl.current_cfg().arch  # Taichi falls back to the CPU when CUDA fails to start
     if runtime.arch == ti.cpu:
-        skip_repeated_strength_reduction()  # loading cached kernels 3-5× faster (taichi_startup.py)
+        skip_code_generation_passes()  # loading cached kernels 3-5× faster (taichi_startup.py)
     if backend == gpu and runtime.arch != ti.cuda:
         logger.warning("gs.init: gs.gpu requested but CUDA is not available; running on the CPU")
     runtime.device = torch.device("cuda" if runtime.arch == ti.cuda else "cpu")

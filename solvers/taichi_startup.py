@@ -1,5 +1,6 @@
 """Four costs Taichi 1.7 pays in every process for nothing: three avoided before any kernel is
-defined (the first before Taichi is imported), the fourth (``skip_repeated_strength_reduction``) when the runtime starts on the CPU.
+defined (the first before Taichi is imported), the fourth (``skip_code_generation_passes``) when
+the runtime starts on the CPU.
 
 All are start-up time only: what Taichi caches is unchanged, and so is every result its kernels
 compute (4. changes the machine code a load makes, not its arithmetic). They touch Taichi 1.7 internals, which is why pyproject.toml pins taichi
@@ -34,7 +35,12 @@ compute (4. changes the machine code a load makes, not its arithmetic). They tou
    7.6–8.6 → 2.6 s, a quadruped's 27 → 5.3–6.0 s of CPU, warm cache. The option is set through
    LLVM's C API entry ``LLVMParseCommandLineOptions``, which Taichi's library holds but does not
    export: its address is read from the library's ELF symbol table (~20 ms; ~1 s the first time
-   after a reboot, reading 28 MB of the library's tables from disk).
+   after a reboot, reading 28 MB of the library's tables from disk). The same call skips X86
+   domain reassignment (``-disable-x86-domain-reassignment``), a pass of code generation for
+   AVX-512 machines that moves scalar integer logic into mask registers: ~9 % of the library's
+   time in an a1 quadruped's fresh process, its first step 1.8–1.9 → 1.4–1.6 s (float64, warm
+   cache), its run time unchanged within the noise (a1 at 1 and 256 envs, boxes at 1024, KUKA at
+   1024, old and new alternating: 2026-11-28).
 """
 import ctypes
 import functools
@@ -121,24 +127,27 @@ def _symbol_values(path, names):
     return values
 
 
-def skip_repeated_strength_reduction():
-    """Tell the LLVM inside Taichi's library not to run loop strength reduction when it generates
-    machine code (4. above): once per process, from the CPU runtime's first start (``gs.init``),
-    before any kernel is loaded. It holds for the whole process, every Taichi kernel (a user's
-    own too) and later runtimes (Taichi's CUDA path adds its own strength reduction pass, which
-    stays). Does nothing where the library is not the one this reads (another platform, a
-    stripped build, another LLVM, a file replaced since it was loaded): loads are then as slow as
-    before, nothing else."""
+def skip_code_generation_passes():
+    """Tell the LLVM inside Taichi's library not to run loop strength reduction nor X86 domain
+    reassignment when it generates machine code (4. above): once per process, from the CPU
+    runtime's first start (``gs.init``), before any kernel is loaded. It holds for the whole
+    process, every Taichi kernel (a user's own too) and later runtimes (Taichi's CUDA path adds
+    its own strength reduction pass, which stays). Does nothing where the library is not the one
+    this reads (another platform, a stripped build, another LLVM, a file replaced since it was
+    loaded): loads are then as slow as before, nothing else."""
     library = sys.modules.get("taichi._lib.core.taichi_python")
-    if library is None or getattr(library, "_strength_reduction_skipped", False):
+    if library is None or getattr(library, "_code_generation_passes_skipped", False):
         return
-    library._strength_reduction_skipped = True
+    library._code_generation_passes_skipped = True
     try:
         entry = _loaded_entry(library.__file__)
     except Exception:  # (a speed-up only: whatever fails, Taichi runs as it would)
         return
-    if entry is not None:
-        entry(2, (ctypes.c_char_p * 2)(b"genesis_lite", b"-disable-lsr"), None)
+    if entry is not None:  # (LLVM's C entry ignores an option its build lacks, and applies the others)
+        entry(len(_SKIPPED_PASSES), (ctypes.c_char_p * len(_SKIPPED_PASSES))(*_SKIPPED_PASSES), None)
+
+
+_SKIPPED_PASSES = (b"genesis_lite", b"-disable-lsr", b"-disable-x86-domain-reassignment")  # (argv[0] first)
 
 
 def _loaded_entry(path):

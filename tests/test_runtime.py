@@ -218,20 +218,20 @@ def test_kernels_defined_in_classes_still_bind_to_their_instance(f64):
     assert counter.total[None] == 7
 
 
-_LSR_OPTION = """
+_CODEGEN_OPTIONS = """
 import ctypes, sys
 import genesis_lite as gs
 from genesis_lite.solvers import taichi_startup
 library = sys.modules["taichi._lib.core.taichi_python"]
-names = ("PyInit_taichi_python", "_ZL10DisableLSR")
+names = ("PyInit_taichi_python", "_ZL10DisableLSR", "_ZL28DisableX86DomainReassignment")
 values = taichi_startup._symbol_values(library.__file__, names)
 base = ctypes.cast(ctypes.CDLL(library.__file__).PyInit_taichi_python, ctypes.c_void_p).value - values[names[0]][0]
-option = lambda: ctypes.string_at(base + values[names[1]][0], 64)  # (the cl::opt<bool> object)
+option = lambda: [ctypes.string_at(base + values[name][0], 64) for name in names[1:]]  # (the cl::opt<bool>s)
 before = option()
 {init}
 first = option()
 gs.init(backend=gs.cpu, precision="64"); gs.destroy(); gs.init(backend=gs.cpu, precision="32")
-print(first != before, option() == first)
+print(all(a != b for a, b in zip(first, before)), option() == first)
 """
 
 
@@ -246,12 +246,14 @@ def _taichi_symbols(*names):
     return values
 
 
-def test_cpu_runtime_skips_repeated_strength_reduction():
-    """gs.init on the CPU sets LLVM's -disable-lsr inside Taichi's library (loading cached kernels
-    3-5× faster): the option's object in the library's memory changes at the first start and stays
-    as it is through later starts (the option is given once a process)."""
-    _taichi_symbols("PyInit_taichi_python", "_ZL10DisableLSR", "LLVMParseCommandLineOptions")
-    code = _LSR_OPTION.format(init="gs.init(backend=gs.cpu)")
+def test_cpu_runtime_skips_code_generation_passes():
+    """gs.init on the CPU sets LLVM's -disable-lsr and -disable-x86-domain-reassignment inside
+    Taichi's library (loading cached kernels 3-5× faster): each option's object in the library's
+    memory changes at the first start and stays as it is through later starts (the options are
+    given once a process)."""
+    _taichi_symbols("PyInit_taichi_python", "_ZL10DisableLSR", "_ZL28DisableX86DomainReassignment",
+                    "LLVMParseCommandLineOptions")
+    code = _CODEGEN_OPTIONS.format(init="gs.init(backend=gs.cpu)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split()[-2:] == ["True", "True"]
