@@ -141,7 +141,8 @@ def keep_large_blocks_off_the_heap():
     rollout's RSS then grew by one state per step as if nothing were freed (1000 MPM particles,
     float64, checkpoint_interval 100: 196 KB a step; with the threshold fixed, 2.9 KB). Process-
     wide, as malloc is: blocks of 128 KiB and more are mapped and unmapped, as before glibc's first
-    adjustment. Nothing happens off glibc."""
+    adjustment, so a hot path should not allocate one a step (the rigid solver keeps its packed
+    inputs' buffers: RigidSolver._pack_inputs). Nothing happens off glibc."""
     global _threshold_fixed
     if _threshold_fixed:
         return

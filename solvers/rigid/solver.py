@@ -36,6 +36,7 @@ class RigidSolver(Solver):
         self.entity_names = []
         self.model = self.data = None
         self._frictionloss_seen = (None, None)  # the frictionloss input _note_inputs last checked, its version
+        self._packed = {}  # width → the (B, width) buffer _pack_inputs writes
         self.substeps = sim_options.substeps
         self._commit = 1  # 0 while a backward replays a step: its frames stay for the reverse
         self.invweight_basis = None  # contact.InvweightBasis, taken at build
@@ -214,12 +215,19 @@ class RigidSolver(Solver):
         """Whether a step may have constraint rows: contact pairs, joint limits or friction loss."""
         return bool(self.colliders) or self.limited or self.friction
 
-    @staticmethod
-    def _pack_inputs(inputs, before=(), after=()):
+    def _pack_inputs(self, inputs, before=(), after=()):
         """(B, width) of ``before``, every input in INPUTS order, ``after``. The kernels read values
-        only: no graph is built (nor does Taichi see a tensor that requires grad)."""
+        only: no graph is built (nor does Taichi see a tensor that requires grad). Written into a
+        buffer kept per width and reused by the next call: the kernels read it before that. (A
+        new tensor a step was a new memory mapping once B·width reached 32k floats, glibc's mmap
+        threshold being fixed at 128 KiB (runtime.keep_large_blocks_off_the_heap): its page faults
+        cost a KUKA's 256-env differentiable rollout ~10 %.)"""
+        parts = [*before, *(inputs[name] for name in INPUTS), *after]
+        width = sum(part.shape[1] for part in parts)
+        if width not in self._packed:
+            self._packed[width] = self._empty(width)
         with torch.no_grad():
-            return torch.cat([*before, *(inputs[name] for name in INPUTS), *after], dim=1)
+            return torch.cat(parts, dim=1, out=self._packed[width])
 
     # -- stepping ---------------------------------------------------------------------------
     def advance(self, inputs=None, download=False):
