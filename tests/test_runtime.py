@@ -198,6 +198,27 @@ def test_compile_error_names_file_line_and_source(f64):
     assert "return x + undefined_name" in message and "^^^^^^^^^^^^^^" in message
 
 
+@ti.func
+def _twice(x):
+    return 2.0 * x
+
+
+def test_an_inlined_functions_lines_are_wrapped_once(f64):
+    """The transform passes a ti.func's source lines through textwrap.fill at every inlining;
+    taichi_startup remembers each line's: inlining _twice a second time is all hits, no new miss
+    for its lines, and the kernel computes as before."""
+    from taichi.lang import kernel_impl
+
+    @ti.kernel
+    def quadruple(x: ti.f64) -> ti.f64:
+        return _twice(_twice(x))
+
+    before = kernel_impl.textwrap.fill.cache_info()
+    assert quadruple(1.5) == 6.0
+    after = kernel_impl.textwrap.fill.cache_info()
+    assert after.hits - before.hits >= 3 and after.misses - before.misses <= 4 + 3  # (the kernel's lines, _twice's once)
+
+
 @ti.data_oriented
 class _Counter:
     def __init__(self):
