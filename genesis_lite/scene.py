@@ -179,6 +179,7 @@ class Scene:
         """
         if self.is_built:
             raise SceneStateError("scene.build: the scene is already built; build() may be called once")
+        _refuse_inference_mode("scene.build")
         if not is_int(n_envs) or n_envs < 0:
             raise InvalidInputError(f"scene.build: argument 'n_envs' must be an integer ≥ 0, got {n_envs!r}")
         if not self.entities:
@@ -303,6 +304,7 @@ class Scene:
         if update_visualizer is not True or refresh_visualizer is not True:  # the common case costs two tests
             check_bool("scene.step", "update_visualizer", update_visualizer)
             check_bool("scene.step", "refresh_visualizer", refresh_visualizer)
+        _refuse_inference_mode("scene.step")
         self._require_built("scene.step").step()
 
     def reset(self, state=None, envs_idx=None):
@@ -460,3 +462,12 @@ class _SceneArguments(EntityIndexing):
     @property
     def _who(self):
         return f"scene.{self._method}"
+
+
+def _refuse_inference_mode(what):
+    """Raise under torch.inference_mode(): the scene tells new inputs and states from those Taichi
+    holds by their version counters, which inference tensors lack (torch raised its own error
+    from deep inside)."""
+    if torch.is_inference_mode_enabled():
+        raise SceneStateError(f"{what}: genesis_lite does not run under torch.inference_mode() (its tensors carry no "
+                              f"version counter, which the scene reads); use torch.no_grad() instead")

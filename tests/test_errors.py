@@ -476,3 +476,18 @@ def test_scene_gravity_errors_name_the_scene_method(f64, built):
     raises(gs.InvalidInputError, lambda: scene.get_gravity(envs_idx=[0]), "scene.get_gravity", "'envs_idx'", "n_envs=0")
     message = raises(gs.InvalidInputError, lambda: scene.set_gravity([0.0, 0.0, math.nan]), "scene.set_gravity")
     assert ENTITY not in message
+
+
+def test_inference_mode_is_refused_by_name(f64):
+    """Under torch.inference_mode() build and step raise a SceneStateError that says to use
+    torch.no_grad() (torch's own error came from deep inside: inference tensors carry no version
+    counter, which the scene reads); under no_grad the scene steps."""
+    scene = gs.Scene()
+    scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True), name=ENTITY)
+    with torch.inference_mode(), pytest.raises(gs.SceneStateError, match=r"scene.build: .*inference_mode.*no_grad"):
+        scene.build()
+    scene.build()
+    with torch.inference_mode(), pytest.raises(gs.SceneStateError, match=r"scene.step: .*inference_mode.*no_grad"):
+        scene.step()
+    with torch.no_grad():
+        scene.step()

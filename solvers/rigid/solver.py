@@ -202,8 +202,9 @@ class RigidSolver(Solver):
 
     def _note_inputs(self, inputs):
         """Keep whether the inputs Taichi holds give some dof friction loss (a constraint row).
-        Checked again only for another frictionloss tensor, or the same one changed in place: a
-        rollout passes the same one every step, and the check costs ~15 µs of torch amid a step
+        Checked again only for another frictionloss tensor, or the same one changed in place by
+        torch (which counts its versions; the entity setters always give a new tensor): a rollout
+        passes the same one every step, and the check costs ~15 µs of torch amid a step
         (a tenth of a small robot's differentiable step)."""
         frictionloss = inputs["frictionloss"]
         seen = self._frictionloss_seen
