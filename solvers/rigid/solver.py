@@ -220,9 +220,9 @@ class RigidSolver(Solver):
         """(B, width) of ``before``, every input in INPUTS order, ``after``. The kernels read values
         only: no graph is built (nor does Taichi see a tensor that requires grad). Written into a
         buffer kept per width and reused by the next call: the kernels read it before that. (A
-        new tensor a step was a new memory mapping once B·width reached 32k floats, glibc's mmap
-        threshold being fixed at 128 KiB (runtime.keep_large_blocks_off_the_heap): its page faults
-        cost a KUKA's 256-env differentiable rollout ~10 %.)"""
+        new tensor a step was a new memory mapping once it reached 128 KiB, glibc's mmap threshold
+        being fixed there (runtime.keep_large_blocks_off_the_heap): its page faults cost a KUKA's
+        256-env differentiable rollout 18 %.)"""
         parts = [*before, *(inputs[name] for name in INPUTS), *after]
         width = sum(part.shape[1] for part in parts)
         if width not in self._packed:
