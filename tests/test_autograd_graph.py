@@ -387,7 +387,7 @@ def test_second_derivatives_raise_rather_than_drop_out(pendulum):
 def test_a_step_packs_its_inputs_into_one_kept_buffer(f64):
     """The rigid step hands its inputs to the kernels packed in a buffer kept per width, not a new
     tensor a step: with glibc's mmap threshold fixed at 128 KiB (keep_large_blocks_off_the_heap),
-    a new (256, 167) float32 tensor a step was a new memory mapping, ~10 % of a KUKA's 256-env
+    a new (256, 167) float32 tensor a step was a new memory mapping, 18 % of a KUKA's 256-env
     differentiable rollout. The packed values are those of torch.cat, and a forward step and its
     reverse (state and output gradient around the inputs) each get their own buffer."""
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True))
