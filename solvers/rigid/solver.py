@@ -427,5 +427,6 @@ class RigidSolver(Solver):
         return out
 
     def destroy(self):
-        """Free the arenas (the compiled kernels stay, for every later scene)."""
+        """Free the arenas and the input packs (the compiled kernels stay, for every later scene)."""
         self.data = self.kernels = None
+        self._packed, self._frictionloss_seen = {}, (None, None)
