@@ -3,8 +3,8 @@ defined (the first before Taichi is imported), the fourth (``skip_code_generatio
 the runtime starts on the CPU.
 
 All are start-up time only: what Taichi caches is unchanged, and so is every result its kernels
-compute (4. changes the machine code a load makes, not its arithmetic). They touch Taichi 1.7 internals, which is why pyproject.toml pins taichi
-1.7.* (as for solvers/launch.py).
+compute (4. changes the machine code a load makes, not its arithmetic). They touch Taichi 1.7
+internals, which is why pyproject.toml pins taichi 1.7.* (as for solvers/launch.py).
 
 1. Defining a kernel or ti.func: Taichi's decorator asks ``inspect.getframeinfo`` whether the
    definition sits in a class body, looking two frames up. For a function defined at a module's
@@ -30,8 +30,8 @@ compute (4. changes the machine code a load makes, not its arithmetic). They tou
 4. Loading a kernel from the offline cache: Taichi caches the kernel's LLVM IR after its O3
    pipeline and the loop strength reduction (and three cleanup passes) it runs after it
    (``optimize_module`` in codegen_cpu.cpp), and every process turns the cached IR into machine
-   code with LLVM's code generator, whose IR passes run loop strength reduction again. On our kernels (index arithmetic of the arenas in nested
-   loops) that second pass and the scalar evolution it queries were most of the load: profiled,
+   code with LLVM's code generator, whose IR passes run loop strength reduction again. On our
+   kernels (index arithmetic of the arenas in nested loops) that second pass and the scalar evolution it queries were most of the load: profiled,
    ~55 % of a quadruped's first backward. Its code generation is told to skip it (LLVM's
    ``-disable-lsr``; the strength reduction done before caching stays): a KUKA's first backward
    7.6–8.6 → 2.6 s, a quadruped's 27 → 5.3–6.0 s of CPU, warm cache. The option is set through

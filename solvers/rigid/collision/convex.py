@@ -32,8 +32,8 @@ and per vertex the polygons holding it. Exact agreement with MuJoCo needs MuJoCo
 (its mesh frame, float32 vertices, qhull's graph order that breaks support ties):
 `hulls_from_mujoco` reads it from a compiled MjModel, `mesh_hull` builds the same structure
 with trimesh (`pack_hulls` packs several). The GJK simplex, EPA polytope and clipping buffers
-live in a per-env workspace (`SCRATCH`: arrays ccd_v, ccd_f, ccd_i indexed [row..., k]); Taichi's compile time
-grows with (local array size) x (runtime-indexed accesses), so there are no large local arrays.
+live in a per-env workspace (`SCRATCH`: arrays ccd_v, ccd_f, ccd_i indexed [row..., k]); Taichi's
+compile time grows with (local array size) x (runtime-indexed accesses): no large local arrays.
 
 Compile time. Everything is inlined and each heavy piece appears once in the code (one support
 call per GJK and per EPA loop, one face attachment, one clipping loop). Taichi's CFG
@@ -243,10 +243,10 @@ def pack_hulls(meshes: list) -> MeshHulls:
 
 
 def mesh_hull(vertices) -> dict:
-    """The convex hull (trimesh's, from qhull) of (V, 3) vertices (geom frame, m), as ``pack_hulls`` takes
-    it: only the hull's vertices are kept; coplanar hull triangles merge into polygons (trimesh's
-    facets), wound counter-clockwise seen from outside. Kept in the asset cache, by the vertices'
-    bits. Raises AssetError when the hull has no volume (flat or degenerate input)."""
+    """The convex hull (trimesh's, qhull) of (V, 3) vertices (geom frame, m), as ``pack_hulls`` takes it:
+    the hull's vertices only; coplanar hull triangles merged into polygons (trimesh's facets), wound
+    counter-clockwise seen from outside. Kept in the asset cache, by the vertices' bits. Raises
+    AssetError when the hull has no volume (flat or degenerate input)."""
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     return asset_cache.load_or_compute("hull", [vertices.tobytes()], lambda: (_hull(vertices), ()),
                                        (__file__,), ("trimesh", "scipy", "networkx", "numpy"))
@@ -256,7 +256,7 @@ def _hull(vertices: np.ndarray) -> dict:
     """mesh_hull, computed."""
     import trimesh  # (imported when first needed: with scipy it takes ~0.6 s)
 
-    try:  # (qhull fails on flat input)
+    try:
         check = trimesh.convex.convex_hull(vertices)
     except Exception as error:  # qhull raises its own error types on flat or degenerate input
         raise AssetError(f"mesh expected a convex hull with volume, got a degenerate one ({error})") from None
