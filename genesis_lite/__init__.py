@@ -4,6 +4,7 @@
     gs.init(precision="64")
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True))
 """
+import gc
 import os
 
 # Taichi's CPU kernels and torch's OpenMP threads share the cores. After each parallel torch op (a
@@ -13,14 +14,23 @@ import os
 # imported by this import; a policy the user set is kept.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from . import materials, morphs, options, surfaces
-from .options import constraint_solver, friction_cone
-from .solvers.core import (AssetError, GenesisException, GradientError, InvalidInputError, SceneStateError,
-                     SimulationError)
-from .runtime import cpu, destroy, gpu, init, runtime
-from .scene import Scene, SimState
-from .tensor import (Tensor, from_numpy, from_torch, ones, ones_like, rand, randn, tensor, zeros,
-                     zeros_like)
+# The import makes ~40k objects (modules, classes, functions: they live on) next to torch's ~170k;
+# the garbage collector's passes over all of them took 0.08 of the import's 0.26 s, after torch's.
+_collecting = gc.isenabled()
+gc.disable()
+try:
+    from . import materials, morphs, options, surfaces
+    from .options import constraint_solver, friction_cone
+    from .solvers.core import (AssetError, GenesisException, GradientError, InvalidInputError, SceneStateError,
+                               SimulationError)
+    from .runtime import cpu, destroy, gpu, init, runtime
+    from .scene import Scene, SimState
+    from .tensor import (Tensor, from_numpy, from_torch, ones, ones_like, rand, randn, tensor, zeros,
+                         zeros_like)
+finally:
+    if _collecting:
+        gc.enable()
+    del _collecting
 
 __version__ = "0.1.0"
 

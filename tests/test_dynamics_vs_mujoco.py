@@ -9,10 +9,12 @@
 Dofs are matched by joint name; a free base's dofs 0-5 are MuJoCo's "__base__:0..5"
 (world linear velocity, then body-frame angular velocity).
 """
+import mujoco
 import numpy as np
 import pytest
 import torch
 
+import genesis_lite as gs
 from tests import mujoco_ref
 from tests.conftest import asset, pybullet
 from tests.robot_states import limit_free_scene, random_state, scalar_joints, set_state
@@ -97,5 +99,34 @@ def test_kuka_trajectory_matches_mujoco_f32(f32):
         for joint in scalar_joints(robot):
             err = np.max(np.abs(ours[:, joint.qs_idx_local[0]] - ref.qpos[joint.name]))
             assert err <= 1e-4, f"joint {joint.name}: max |q - q_mujoco| = {err:.3g} rad over 2 s in float32"
+    finally:
+        scene.destroy()
+
+
+@pytest.mark.parametrize("name", list(ROBOTS))
+def test_rows_scale_matches_mujoco_invweight0_f64(f64, name):
+    """The constraint rows' scale — MuJoCo's body_invweight0 (translation) and dof_invweight0, made
+    from M at the initial pose (contact.InvweightBasis, which assembles M from the links' centre-of-
+    mass Jacobians) — equals mj_setConst's, a free base turned so that no link's frame is the world's."""
+    path, free = ROBOTS[name]
+    scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False))
+    robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=not free, pos=(0.1, -0.2, 0.3), euler=(30, -50, 70)))
+    scene.build()
+    try:
+        solver = robot._solver
+        mass = solver.default_inputs["mass"]
+        invweight_link, invweight_dof = solver.invweight_basis(mass, torch.zeros((1, robot.n_dofs), dtype=mass.dtype),
+                                                               solver.check_positive_definite)
+        model = mujoco_ref.load_model(path, free_base=free, dt=DT)  # armature 0
+        if free:
+            model.qpos0[:7] = robot.get_qpos().numpy()[:7]
+        mujoco.mj_setConst(model, mujoco.MjData(model))
+        perm = _our_dof(robot, mujoco_ref.dof_names(model))
+        assert np.allclose(invweight_dof[0].numpy()[perm], model.dof_invweight0, rtol=1e-10, atol=0)
+        ours = {link.name: invweight_link[0, link.idx_local].item() for link in robot.links}
+        moving = [b for b in range(1, model.nbody) if model.body(b).name in ours and model.body_invweight0[b, 0] > 0]
+        assert len(moving) >= 2
+        for b in moving:
+            assert np.isclose(ours[model.body(b).name], model.body_invweight0[b, 0], rtol=1e-10, atol=0), model.body(b).name
     finally:
         scene.destroy()

@@ -309,3 +309,13 @@ def test_torch_openmp_threads_wait_passively_unless_set(preset):
     code = "import genesis_lite, os; print(os.environ['OMP_WAIT_POLICY'])"
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     assert out.stdout.strip().splitlines()[-1] == (preset or "PASSIVE")
+
+
+@pytest.mark.parametrize("collecting", [True, False])
+def test_the_import_leaves_the_garbage_collector_as_it_found_it(collecting):
+    """The import runs with the collector off (its full passes over torch's objects took a third of
+    it) and turns it back on only if it was on, without a name left behind."""
+    code = (f"import gc, torch; {'' if collecting else 'gc.disable(); '}import genesis_lite; "
+            "print(gc.isenabled(), hasattr(genesis_lite, '_collecting'))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == f"{collecting} False"

@@ -86,25 +86,23 @@ class InvweightBasis:
 
     def __init__(self, solver):
         m = solver.model
-        L, D = m.n_links, m.n_dofs
-        inputs = dict(solver.default_inputs)
-        K = np.zeros((L, D, D))
-        for link in range(L):  # M of each link alone at unit mass (M is linear in the masses)
-            unit = torch.zeros_like(inputs["mass"])
-            unit[:, link] = 1.0
-            solver.upload_inputs({**inputs, "mass": unit})
-            K[link] = solver.mass_matrix()[0].double().cpu().numpy()
-        solver.upload_inputs(inputs)
-        solver.check_positive_definite(np.einsum("l,lij->ij", m.link_mass0, K) + np.diag(m.dof_armature))
-        jac = torch.empty((solver.n_batch, L, 6, D), dtype=runtime.tc_float, device=runtime.device)
+        D = m.n_dofs
+        jac = torch.empty((solver.n_batch, m.n_links, 6, D), dtype=runtime.tc_float, device=runtime.device)
         solver.kernels.read_com_jacobians(jac)
+        jac = jac[0].double().cpu().numpy()
+        # M of each link alone at unit mass (M is linear in the masses): J_vᵀ J_v + J_ωᵀ (I_l / m_l) J_ω,
+        # J_ω in the link's frame, where its inertia is given (a massless link's is dropped)
+        unit_inertia = m.link_inertia0 * m.link_inv_mass0[:, None, None]
+        K = (np.einsum("lki,lkj->lij", jac[:, :3], jac[:, :3])
+             + np.einsum("lki,lkn,lnj->lij", jac[:, 3:], unit_inertia, jac[:, 3:]))
+        solver.check_positive_definite(np.einsum("l,lij->ij", m.link_mass0, K) + np.diag(m.dof_armature))
         # dof_invweight0 = diag(M⁻¹) @ average: a free joint's translations and rotations averaged
         average = np.eye(D)
         for first in np.flatnonzero(m.dof_q < 0)[::3]:
             average[first: first + 3, first: first + 3] = 1.0 / 3.0
         # K (L, D, D), J (L, 3, D) the translational rows, moving (L,), average (D, D): float64
         self.consts = [torch.as_tensor(a, dtype=torch.float64, device=runtime.device)
-                       for a in (K, jac[0, :, :3].double().cpu().numpy(), (m.link_static == 0), average)]
+                       for a in (K, jac[:, :3], (m.link_static == 0), average)]
 
     def __call__(self, mass, armature, check_positive_definite):
         """(invweight_t (B, L), invweight_dof (B, D)) in mass's dtype, from mass (B, L) kg and armature

@@ -501,13 +501,17 @@ def read_dofs_force(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3:
 
 @ti.kernel
 def read_com_jacobians(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
-    """dst (B, L, 6, D) ← each link's centre-of-mass Jacobian at frame 0 (rows: linear velocity
-    of the com, then angular velocity, world frame). The down sweep at frame 0 must be current."""
-    ti.loop_config(serialize=schedule[1])
+    """dst (B, L, 6, D) ← each link's centre-of-mass Jacobian at the frame-0 state, after the link
+    poses there (rows: linear velocity of the com, world frame; then angular velocity, in the
+    link's own frame, where its inertia is given: M = Σ_l Jᵀ diag(m_l, I_l) J)."""
+    ti.loop_config(serialize=schedule[0])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
+        for l in range(d.n_links):  # (parents first: a link's pose needs its parent's)
+            link_kinematics(d, 0, e, l)
         for l in range(d.n_links):
-            com = d.xpos[0, e, l] + mat_vec(quat_to_mat(d.xquat[0, e, l]), d.link_com[l])
+            rot = quat_to_mat(d.xquat[0, e, l])
+            com = d.xpos[0, e, l] + mat_vec(rot, d.link_com[l])
             for i in range(d.n_dofs):
                 for k in ti.static(range(6)):
                     dst[e, l, k, i] = 0.0
@@ -515,6 +519,7 @@ def read_com_jacobians(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, 
             while a >= 0:
                 for i in range(d.link_dof0[a], d.link_dof0[a] + dof_count(d, a)):
                     linear, angular = dof_motion_at(d, 0, e, i, com)
+                    angular = mat_vec(rot.transpose(), angular)
                     for k in ti.static(range(3)):
                         dst[e, l, k, i] = linear[k]
                         dst[e, l, 3 + k, i] = angular[k]
