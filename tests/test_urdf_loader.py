@@ -413,3 +413,23 @@ def test_every_pybullet_urdf_loads_or_raises_asset_error(rel_path):
         assert rel_path.split("/")[-1] in str(exc)
         return
     _check_tree(specs)
+
+
+@pytest.mark.parametrize("shape", ['<sphere radius="0"/>', '<box size="0.1 0 0.2"/>', '<cylinder radius="0.1" length="0"/>'])
+def test_a_zero_size_visual_draws_nothing_and_weighs_nothing(tmp_path, shape):
+    """A visual primitive with a zero dimension (laikago_toes.urdf's toe markers: spheres of radius 0)
+    is no visual and no volume; a negative size stays an error, and so does a zero-size collision."""
+    marker = f'<visual><geometry>{shape}</geometry></visual>'
+    solid = '<visual><geometry><sphere radius="0.1"/></geometry></visual>'
+    (a,) = load_urdf(write_urdf(tmp_path, f'<link name="a">{marker}{solid}</link>'))
+    assert [v.type for v in a.visuals] == ["sphere"]
+    np.testing.assert_allclose(a.mass, 1000 * 4 / 3 * np.pi * 1e-3)  # the solid sphere's alone
+    (b,) = load_urdf(write_urdf(tmp_path, f'<link name="b">{marker}</link>', name="marker_only.urdf"))
+    assert b.visuals == [] and b.mass == 0
+    negative = shape.replace('"0"', '"-0.1"').replace(" 0 ", " -0.1 ")
+    with pytest.raises(AssetError, match="positive finite"):
+        load_urdf(write_urdf(tmp_path, f'<link name="c"><visual><geometry>{negative}</geometry></visual></link>',
+                             name="negative.urdf"))
+    with pytest.raises(AssetError, match="positive finite"):
+        load_urdf(write_urdf(tmp_path, f'<link name="d"><collision><geometry>{shape}</geometry></collision></link>',
+                             name="zero_collision.urdf"))

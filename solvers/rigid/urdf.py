@@ -263,7 +263,7 @@ def _link_spec(ctx: _Context, link, joint, rho: float, colors: dict) -> LinkSpec
     """LinkSpec of `link` attached by `joint` (None for the root); `parent` is set by the caller.
     colors: material name → rgba (see _material_colors)."""
     geoms = [_geom(ctx, link.name, c.geometry, c.origin) for c in link.collisions]
-    visuals = [_visual(ctx, link.name, v, colors) for v in link.visuals]
+    visuals = [_visual(ctx, link.name, v, colors) for v in link.visuals if not _zero_size(v.geometry)]
     mass, com, inertia = _inertial(ctx, link, geoms, rho)
     spec = LinkSpec(name=link.name, parent=-1, joint_name="", joint_type="fixed",
                     pos=np.zeros(3), quat=np.array([1.0, 0.0, 0.0, 0.0]),
@@ -381,12 +381,13 @@ def _inertial(ctx: _Context, link, geoms: list, rho: float):
     """(mass kg, com (3,) m, inertia (3, 3) kg·m² about the com in link axes) of a link.
 
     From <inertial> when present (inertia rotated by the inertial origin: R I Rᵀ); otherwise
-    from the collision geoms, else the visual geoms, as solids of density rho.
+    from the collision geoms, else the visual geoms (those of zero size hold nothing), as solids
+    of density rho.
     """
     inertial = link.inertial
     if inertial is None:
         if not geoms:
-            geoms = [_geom(ctx, link.name, v.geometry, v.origin) for v in link.visuals]
+            geoms = [_geom(ctx, link.name, v.geometry, v.origin) for v in link.visuals if not _zero_size(v.geometry)]
         mass, com, inertia = shapes.geometry_mass_properties(geoms, rho)
         return mass, com, inertia
     what = f"link '{link.name}' inertial"
@@ -430,6 +431,23 @@ def _geom(ctx: _Context, link_name: str, geometry, origin) -> GeomSpec:
         vertices, faces = _mesh(ctx, link_name, geometry.mesh)
         return GeomSpec("mesh", np.zeros(0), pos, quat, vertices=vertices, faces=faces)
     raise ctx.error(f"{where}: <geometry> expected one of box, sphere, cylinder, mesh")
+
+
+def _zero_size(geometry) -> bool:
+    """Whether a visual is a primitive with a zero dimension and none negative (laikago_toes.urdf's
+    toes: spheres of radius 0, markers): it has nothing to draw, and draws nothing, as in pybullet.
+    A collision shape of zero size stays an error (nothing to collide with is not what a file
+    means), and so does a negative or non-finite size (_geom raises)."""
+    if geometry is None:
+        return False
+    dims = ([] if geometry.box is None else list(np.ravel(geometry.box.size)))
+    dims += [] if geometry.sphere is None else [geometry.sphere.radius]
+    dims += [] if geometry.cylinder is None else [geometry.cylinder.radius, geometry.cylinder.length]
+    try:
+        dims = np.asarray(dims, dtype=np.float64)
+    except (TypeError, ValueError):
+        return False
+    return bool(len(dims)) and bool(np.all(np.isfinite(dims)) and np.all(dims >= 0) and np.any(dims == 0))
 
 
 def _visual(ctx: _Context, link_name: str, visual, colors: dict) -> VisualSpec:
