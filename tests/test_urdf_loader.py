@@ -415,21 +415,28 @@ def test_every_pybullet_urdf_loads_or_raises_asset_error(rel_path):
     _check_tree(specs)
 
 
-@pytest.mark.parametrize("shape", ['<sphere radius="0"/>', '<box size="0.1 0 0.2"/>', '<cylinder radius="0.1" length="0"/>'])
-def test_a_zero_size_visual_draws_nothing_and_weighs_nothing(tmp_path, shape):
-    """A visual primitive with a zero dimension (laikago_toes.urdf's toe markers: spheres of radius 0)
-    is no visual and no volume; a negative size stays an error, and so does a zero-size collision."""
+@pytest.mark.parametrize("shape, drawn", [('<sphere radius="0"/>', False), ('<cylinder radius="0" length="0.1"/>', False),
+                                          ('<box size="0.1 0 0"/>', False), ('<box size="0.1 0 0.2"/>', True),
+                                          ('<cylinder radius="0.1" length="0"/>', True)])
+def test_a_visual_of_zero_size_weighs_nothing_and_draws_what_it_has(tmp_path, shape, drawn):
+    """A visual primitive with a zero dimension holds no volume; it is drawn when it has a surface
+    (a flat box or disc, as pybullet draws them) and dropped when it has none (laikago_toes.urdf's
+    toe markers: spheres of radius 0). Its origin is still checked; a negative size stays an error,
+    and so does a collision shape of zero size."""
     marker = f'<visual><geometry>{shape}</geometry></visual>'
     solid = '<visual><geometry><sphere radius="0.1"/></geometry></visual>'
     (a,) = load_urdf(write_urdf(tmp_path, f'<link name="a">{marker}{solid}</link>'))
-    assert [v.type for v in a.visuals] == ["sphere"]
+    assert [v.type for v in a.visuals] == ([shape[1:4].replace("cyl", "cylinder")] if drawn else []) + ["sphere"]
     np.testing.assert_allclose(a.mass, 1000 * 4 / 3 * np.pi * 1e-3)  # the solid sphere's alone
     (b,) = load_urdf(write_urdf(tmp_path, f'<link name="b">{marker}</link>', name="marker_only.urdf"))
-    assert b.visuals == [] and b.mass == 0
-    negative = shape.replace('"0"', '"-0.1"').replace(" 0 ", " -0.1 ")
-    with pytest.raises(AssetError, match="positive finite"):
+    assert len(b.visuals) == drawn and b.mass == 0
+    with pytest.raises(AssetError, match="non-negative finite"):
+        negative = shape.replace('"0"', '"-0.1"').replace(" 0 ", " -0.1 ").replace(" 0\"", " -0.1\"")
         load_urdf(write_urdf(tmp_path, f'<link name="c"><visual><geometry>{negative}</geometry></visual></link>',
                              name="negative.urdf"))
+    with pytest.raises(AssetError, match="origin"):
+        load_urdf(write_urdf(tmp_path, f'<link name="n"><visual><origin xyz="nan 0 0"/><geometry>{shape}</geometry>'
+                                       f'</visual></link>', name="nan_origin.urdf"))
     with pytest.raises(AssetError, match="positive finite"):
         load_urdf(write_urdf(tmp_path, f'<link name="d"><collision><geometry>{shape}</geometry></collision></link>',
                              name="zero_collision.urdf"))

@@ -263,7 +263,7 @@ def _link_spec(ctx: _Context, link, joint, rho: float, colors: dict) -> LinkSpec
     """LinkSpec of `link` attached by `joint` (None for the root); `parent` is set by the caller.
     colors: material name → rgba (see _material_colors)."""
     geoms = [_geom(ctx, link.name, c.geometry, c.origin) for c in link.collisions]
-    visuals = [_visual(ctx, link.name, v, colors) for v in link.visuals if not _zero_size(v.geometry)]
+    visuals = [v for v in (_visual(ctx, link.name, v, colors) for v in link.visuals) if _drawable(v)]
     mass, com, inertia = _inertial(ctx, link, geoms, rho)
     spec = LinkSpec(name=link.name, parent=-1, joint_name="", joint_type="fixed",
                     pos=np.zeros(3), quat=np.array([1.0, 0.0, 0.0, 0.0]),
@@ -381,13 +381,13 @@ def _inertial(ctx: _Context, link, geoms: list, rho: float):
     """(mass kg, com (3,) m, inertia (3, 3) kg·m² about the com in link axes) of a link.
 
     From <inertial> when present (inertia rotated by the inertial origin: R I Rᵀ); otherwise
-    from the collision geoms, else the visual geoms (those of zero size hold nothing), as solids
-    of density rho.
+    from the collision geoms, else the visual geoms (a flat or empty one holds no volume), as
+    solids of density rho.
     """
     inertial = link.inertial
     if inertial is None:
         if not geoms:
-            geoms = [_geom(ctx, link.name, v.geometry, v.origin) for v in link.visuals if not _zero_size(v.geometry)]
+            geoms = [_geom(ctx, link.name, v.geometry, v.origin, visual=True) for v in link.visuals]
         mass, com, inertia = shapes.geometry_mass_properties(geoms, rho)
         return mass, com, inertia
     what = f"link '{link.name}' inertial"
@@ -411,21 +411,23 @@ def _inertial(ctx: _Context, link, geoms: list, rho: float):
 # ------------------------------------------------------------------ geometry
 
 
-def _geom(ctx: _Context, link_name: str, geometry, origin) -> GeomSpec:
-    """GeomSpec of a yourdfpy Geometry placed at `origin` in the link frame."""
+def _geom(ctx: _Context, link_name: str, geometry, origin, visual=False) -> GeomSpec:
+    """GeomSpec of a yourdfpy Geometry placed at `origin` in the link frame. A visual primitive
+    may have zero dimensions (a flat box or disc, or a marker: laikago_toes.urdf's toes are
+    spheres of radius 0); a collision shape may not (nothing to collide with)."""
     pos, quat = _pose(ctx, origin, f"link '{link_name}' geometry origin")
     where = f"link '{link_name}'"
     if geometry is None:
         raise ctx.error(f"{where}: <geometry> is missing")
     if geometry.box is not None:
-        size = _sizes(ctx, geometry.box.size, 3, f"{where} box size")
+        size = _sizes(ctx, geometry.box.size, 3, f"{where} box size", visual)
         return GeomSpec("box", size, pos, quat)
     if geometry.sphere is not None:
-        size = _sizes(ctx, [geometry.sphere.radius], 1, f"{where} sphere radius")
+        size = _sizes(ctx, [geometry.sphere.radius], 1, f"{where} sphere radius", visual)
         return GeomSpec("sphere", size, pos, quat)
     if geometry.cylinder is not None:
         size = _sizes(ctx, [geometry.cylinder.radius, geometry.cylinder.length], 2,
-                      f"{where} cylinder radius/length")
+                      f"{where} cylinder radius/length", visual)
         return GeomSpec("cylinder", size, pos, quat)
     if geometry.mesh is not None:
         vertices, faces = _mesh(ctx, link_name, geometry.mesh)
@@ -433,27 +435,19 @@ def _geom(ctx: _Context, link_name: str, geometry, origin) -> GeomSpec:
     raise ctx.error(f"{where}: <geometry> expected one of box, sphere, cylinder, mesh")
 
 
-def _zero_size(geometry) -> bool:
-    """Whether a visual is a primitive with a zero dimension and none negative (laikago_toes.urdf's
-    toes: spheres of radius 0, markers): it has nothing to draw, and draws nothing, as in pybullet.
-    A collision shape of zero size stays an error (nothing to collide with is not what a file
-    means), and so does a negative or non-finite size (_geom raises)."""
-    if geometry is None:
-        return False
-    dims = ([] if geometry.box is None else list(np.ravel(geometry.box.size)))
-    dims += [] if geometry.sphere is None else [geometry.sphere.radius]
-    dims += [] if geometry.cylinder is None else [geometry.cylinder.radius, geometry.cylinder.length]
-    try:
-        dims = np.asarray(dims, dtype=np.float64)
-    except (TypeError, ValueError):
-        return False
-    return bool(len(dims)) and bool(np.all(np.isfinite(dims)) and np.all(dims >= 0) and np.any(dims == 0))
+def _drawable(visual: VisualSpec) -> bool:
+    """Whether a visual has a surface to draw: not a sphere or cylinder of radius 0, nor a box
+    with two zero sides (a point or a segment draws nothing, in pybullet too; a flat box or disc
+    is drawn)."""
+    if visual.type in ("sphere", "cylinder"):
+        return bool(visual.size[0] > 0)
+    return visual.type != "box" or int(np.count_nonzero(visual.size == 0)) <= 1
 
 
 def _visual(ctx: _Context, link_name: str, visual, colors: dict) -> VisualSpec:
     """VisualSpec of a yourdfpy Visual: its shape as _geom reads it, and its material's colour
     (None when it has none or names no known colour)."""
-    geom = _geom(ctx, link_name, visual.geometry, visual.origin)
+    geom = _geom(ctx, link_name, visual.geometry, visual.origin, visual=True)
     material = visual.material
     if material is None:
         rgba = None
@@ -484,14 +478,15 @@ def _rgba(ctx: _Context, values, what: str) -> np.ndarray:
     return arr
 
 
-def _sizes(ctx: _Context, values, n: int, what: str) -> np.ndarray:
-    """(n,) positive finite dimensions (m)."""
+def _sizes(ctx: _Context, values, n: int, what: str, zero_allowed=False) -> np.ndarray:
+    """(n,) positive (or, zero_allowed, non-negative) finite dimensions (m)."""
     try:
         arr = np.asarray(values, dtype=np.float64)
     except (TypeError, ValueError):
         arr = np.full(0, np.nan)
-    if arr.shape != (n,) or not np.all(np.isfinite(arr)) or not np.all(arr > 0):
-        raise ctx.error(f"{what} expected {n} positive finite number(s), got {values}")
+    if arr.shape != (n,) or not np.all(np.isfinite(arr)) or not np.all(arr >= 0 if zero_allowed else arr > 0):
+        raise ctx.error(f"{what} expected {n} {'non-negative' if zero_allowed else 'positive'} finite number(s), "
+                        f"got {values}")
     return arr
 
 
