@@ -440,3 +440,25 @@ def test_a_visual_of_zero_size_weighs_nothing_and_draws_what_it_has(tmp_path, sh
     with pytest.raises(AssetError, match="positive finite"):
         load_urdf(write_urdf(tmp_path, f'<link name="d"><collision><geometry>{shape}</geometry></collision></link>',
                              name="zero_collision.urdf"))
+
+
+def test_roslaunch_environment_substitutions_are_expanded(tmp_path, monkeypatch):
+    """$(optenv NAME default) takes the variable or the default, $(env NAME) the variable (an error
+    when unset), as roslaunch does (pybullet_data's husky.urdf keeps one); any other substitution
+    ($(find ...), $(arg ...)) is an AssetError saying to run xacro. A changed variable is seen
+    through the asset cache."""
+    body = (LINK.format("a") + LINK.format("b")
+            + '<joint name="j" type="fixed"><parent link="a"/><child link="b"/>'
+              '<origin xyz="$(optenv GL_TEST_XYZ 0.1 0.2 0.3)" rpy="$(env GL_TEST_RPY)"/></joint>')
+    path = write_urdf(tmp_path, body)
+    monkeypatch.delenv("GL_TEST_XYZ", raising=False)
+    monkeypatch.setenv("GL_TEST_RPY", "0 0 0")
+    np.testing.assert_allclose(by_name(load_urdf(path))["b"].pos, [0.1, 0.2, 0.3])
+    monkeypatch.setenv("GL_TEST_XYZ", "1 2 3")
+    np.testing.assert_allclose(by_name(load_urdf(path))["b"].pos, [1.0, 2.0, 3.0])
+    monkeypatch.delenv("GL_TEST_RPY")
+    with pytest.raises(AssetError, match=r"\$\(env GL_TEST_RPY\).*not set"):
+        load_urdf(path)
+    found = write_urdf(tmp_path, LINK.format("a").replace('value="1"', 'value="$(arg mass)"', 1), name="arg.urdf")
+    with pytest.raises(AssetError, match="expand the file with xacro"):
+        load_urdf(found)

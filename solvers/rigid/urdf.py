@@ -76,7 +76,7 @@ def load_urdf(path: str, entity_name: str | None = None, rho: float = 1000.0) ->
     path = os.fspath(path)
     rho = float(shapes.check_positive(rho, "rho", "load_urdf"))
     ctx = _Context(path, entity_name)
-    text = _read(ctx)
+    text = _substitute_env(ctx, _read(ctx))
 
     def links_and_warnings():
         return (_links(ctx, text, rho), ctx.warnings), ctx.files
@@ -138,6 +138,33 @@ def _read(ctx: _Context) -> bytes:
             return f.read()
     except OSError as exc:  # a folder, no permission
         raise ctx.error(f"cannot read file: {exc.strerror or exc}") from exc
+
+
+# roslaunch's substitution args, as a URDF made by xacro may keep them (pybullet_data's husky.urdf:
+# xyz="$(optenv HUSKY_IMU_XYZ 0.19 0 0.149)")
+_SUBSTITUTION = re.compile(rb"\$\((\w+)((?:\s+[^\s()]+)*)\s*\)")
+
+
+def _substitute_env(ctx: _Context, text: bytes) -> bytes:
+    """The file's bytes with roslaunch's environment substitutions done: $(optenv NAME default…)
+    → the variable NAME if set, else the default (the words after the name; none: empty), and
+    $(env NAME) → the variable, which must be set. Any other $(…) (find, arg, eval: xacro's) is
+    an AssetError saying to expand the file with xacro first. (The result, not the file, keys the
+    asset cache, so a changed variable is seen.)"""
+    def replace(match):
+        kind, words = match.group(1).decode(), match.group(2).split()
+        name = words[0].decode() if words else ""
+        if kind == "optenv" and name:
+            value = os.environ.get(name)
+            return value.encode() if value is not None else b" ".join(words[1:])
+        if kind == "env" and len(words) == 1:
+            if name not in os.environ:
+                raise ctx.error(f"$(env {name}) names an environment variable that is not set")
+            return os.environ[name].encode()
+        raise ctx.error(f"{match.group(0).decode()!r} is a xacro/roslaunch substitution genesis_lite does not "
+                        f"expand (only $(optenv NAME default) and $(env NAME)); expand the file with xacro first")
+
+    return _SUBSTITUTION.sub(replace, text)
 
 
 def _parse(ctx: _Context, text: bytes):
