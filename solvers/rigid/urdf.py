@@ -76,12 +76,13 @@ def load_urdf(path: str, entity_name: str | None = None, rho: float = 1000.0) ->
     path = os.fspath(path)
     rho = float(shapes.check_positive(rho, "rho", "load_urdf"))
     ctx = _Context(path, entity_name)
-    text = _substitute_env(ctx, _read(ctx))
+    text = _read(ctx)
 
     def links_and_warnings():
         return (_links(ctx, text, rho), ctx.warnings), ctx.files
 
-    inputs = [os.path.abspath(path).encode(), repr(rho).encode(), text]  # (meshes are found from its folder)
+    # (meshes are found from its folder; a substitution's variables are part of what it says)
+    inputs = [os.path.abspath(path).encode(), repr(rho).encode(), text, _environment(text)]
     specs, warnings = asset_cache.load_or_compute("urdf", inputs, links_and_warnings, _SOURCES, _PACKAGES)
     for message in warnings:
         _logger.warning(f"{ctx.where()}: {message}")
@@ -140,31 +141,43 @@ def _read(ctx: _Context) -> bytes:
         raise ctx.error(f"cannot read file: {exc.strerror or exc}") from exc
 
 
-# roslaunch's substitution args, as a URDF made by xacro may keep them (pybullet_data's husky.urdf:
-# xyz="$(optenv HUSKY_IMU_XYZ 0.19 0 0.149)")
-_SUBSTITUTION = re.compile(rb"\$\((\w+)((?:\s+[^\s()]+)*)\s*\)")
+# roslaunch's substitution args, as a URDF made by xacro may keep them in attribute values
+# (pybullet_data's husky.urdf: xyz="$(optenv HUSKY_IMU_XYZ 0.19 0 0.149)")
+_SUBSTITUTION = re.compile(r"\$\((\w+)((?:\s+[^\s()]+)*)\s*\)")
+_ENV_NAME = re.compile(rb"\$\((?:opt)?env\s+(\w+)")
 
 
-def _substitute_env(ctx: _Context, text: bytes) -> bytes:
-    """The file's bytes with roslaunch's environment substitutions done: $(optenv NAME default…)
-    → the variable NAME if set, else the default (the words after the name; none: empty), and
-    $(env NAME) → the variable, which must be set. Any other $(…) (find, arg, eval: xacro's) is
-    an AssetError saying to expand the file with xacro first. (The result, not the file, keys the
-    asset cache, so a changed variable is seen.)"""
+def _environment(text: bytes) -> bytes:
+    """The environment variables the file's $(optenv …) and $(env …) name, with their values now."""
+    names = sorted(set(_ENV_NAME.findall(text)))
+    return repr([(name, os.environ.get(name.decode())) for name in names]).encode()
+
+
+def _substitute_env(ctx: _Context, xml) -> bool:
+    """In the attribute values of the parsed file (comments aside), roslaunch's environment
+    substitutions done: $(optenv NAME default…) → the variable NAME if set, else the default (the
+    words after the name; none: empty), and $(env NAME) → the variable, which must be set. Any
+    other $(…) (find, arg, eval: xacro's) is an AssetError saying to expand the file with xacro
+    first. Returns whether anything was replaced."""
     def replace(match):
-        kind, words = match.group(1).decode(), match.group(2).split()
-        name = words[0].decode() if words else ""
+        kind, words = match.group(1), match.group(2).split()
+        name = words[0] if words else ""
         if kind == "optenv" and name:
-            value = os.environ.get(name)
-            return value.encode() if value is not None else b" ".join(words[1:])
+            return os.environ.get(name, " ".join(words[1:]))
         if kind == "env" and len(words) == 1:
             if name not in os.environ:
                 raise ctx.error(f"$(env {name}) names an environment variable that is not set")
-            return os.environ[name].encode()
-        raise ctx.error(f"{match.group(0).decode()!r} is a xacro/roslaunch substitution genesis_lite does not "
-                        f"expand (only $(optenv NAME default) and $(env NAME)); expand the file with xacro first")
+            return os.environ[name]
+        raise ctx.error(f"{match.group(0)!r} is a xacro/roslaunch substitution genesis_lite does not expand "
+                        f"(only $(optenv NAME default) and $(env NAME)); expand the file with xacro first")
 
-    return _SUBSTITUTION.sub(replace, text)
+    replaced = False
+    for element in xml.iter():  # (a comment has no attributes)
+        for key, value in element.attrib.items():
+            if "$(" in value:
+                element.set(key, _SUBSTITUTION.sub(replace, value))
+                replaced = True
+    return replaced
 
 
 def _parse(ctx: _Context, text: bytes):
@@ -176,6 +189,8 @@ def _parse(ctx: _Context, text: bytes):
     import yourdfpy  # (imported when first needed: it imports trimesh and scipy, ~0.6 s)
 
     text, xml = _strict_xml(ctx, text)
+    if _substitute_env(ctx, xml):
+        text = etree.tostring(xml)
     _check_elements(ctx, xml)
     try:
         # non-finite xyz/rpy make numpy warn while composing the origin; we reject them later
