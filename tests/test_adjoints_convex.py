@@ -46,7 +46,8 @@ BRANCHES = {"plane", "core m=0", "core m=1", "core m=2", "epa m=2", "cylinder ri
             "cap on a point", "cap on a line", "cap on a plane", "cap of geom 1", "cap of geom 2",
             "rim on a point", "rim on a line", "rim on a rim", "rim on a rim holding both ends", "rim of geom 1",
             "rim of geom 2", "rim on its side", "clip face-face", "clip edge of geom 1", "clip edge of geom 2",
-            "clip vertex", "clip edge x side plane", "clip side x side plane", "clip edge with margin"}
+            "clip vertex", "clip edge x side plane", "clip side x side plane", "clip edge with margin",
+            "cylinder standing on a box face"}
 
 
 @ti.func
@@ -155,10 +156,13 @@ def _plane_cases(harness, rng):
 
 
 # a cylinder's cap square on a face, a cap or a lying capsule (measure zero among random poses):
-# (geom 1, geom 2, geom 1's turn in geom 2's frame, geom 1's half extent along geom 2's axis)
+# (geom 1, geom 2, geom 1's turn in geom 2's frame, geom 1's half extent along geom 2's axis, geom 1's
+# sizes when not test_colliders_convex's)
 _QUARTER = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])  # a quarter turn about x: a capsule lying
-ALIGNED = [("capsule", "cylinder", _QUARTER, 0.05), ("cylinder", "cylinder", np.eye(3), 0.1),
-           ("cylinder", "box", np.eye(3), 0.1)]
+ALIGNED = [("capsule", "cylinder", _QUARTER, 0.05, None), ("cylinder", "cylinder", np.eye(3), 0.1, None),
+           ("cylinder", "box", np.eye(3), 0.1, None),
+           # a can small enough to stand on the box's face: four rim points (convex._face_cap)
+           ("cylinder", "box", np.eye(3), 0.05, (0.03, 0.05))]
 _HALF_AXIS = {"cylinder": 0.1, "box": 0.06}  # geom 2's half extent along its z axis (SIZES)
 
 
@@ -167,7 +171,7 @@ def _aligned_cases(rng, per_pair=20):
     for end), above or below geom 2 along its axis, 1..8 mm into it, up to 3 cm off centre:
     (name, types, sizes, meshes, pos, rot) as _convex_cases' (no MuJoCo contacts)."""
     cases = []
-    for kind1, kind2, turn, half1 in ALIGNED:
+    for kind1, kind2, turn, half1, size1 in ALIGNED:
         m = _model(f'<body><freejoint/>{_geom(kind1, None, 0.0)}</body>', _geom(kind2, None, 0.0))
         for _ in range(per_pair):
             rot2 = np.zeros(9)
@@ -178,7 +182,10 @@ def _aligned_cases(rng, per_pair=20):
             offset = [*rng.uniform(-0.03, 0.03, 2), side * (half1 + _HALF_AXIS[kind2] - rng.uniform(1e-3, 8e-3))]
             pos2 = rng.normal(size=3) * 0.1
             pos = np.array([pos2 + rot2 @ offset, pos2])
-            cases.append((f"{kind1}-{kind2}", (TYPES[kind1], TYPES[kind2]), m.geom_size.copy(), (-1, -1), pos,
+            sizes = m.geom_size.copy()
+            if size1 is not None:
+                sizes[0, :2] = size1
+            cases.append((f"{kind1}-{kind2}", (TYPES[kind1], TYPES[kind2]), sizes, (-1, -1), pos,
                           np.array([rot2 @ turn @ flip, rot2])))
     return cases
 
@@ -221,6 +228,8 @@ def _branch(f, types, margin):
     """The branches of the closed form a contact (feature row f, geom types) takes."""
     if f[0] == cv.KIND_PLANE:
         return {"plane"}
+    if f[0] == cv.KIND_FACE_CAP:
+        return {"cylinder standing on a box face"}
     if f[0] == cv.KIND_CLIP:
         tags = int(f[3] >= 256) + int(f[4] >= 256)
         out = {["clip face-face", "clip edge of geom 1", "clip edge of geom 2"][f[7]],
@@ -253,6 +262,8 @@ def _branch(f, types, margin):
 
 def _exact(f, types, margin):
     """Whether a contact's closed form is the forward's own computation (module doc)."""
+    if f[0] == cv.KIND_FACE_CAP:
+        return True  # (the four rim points: the forward evaluates the same closed form)
     curved = cv.CYLINDER in types or (f[0] == cv.KIND_EPA and (margin > 0 or cv.SPHERE in types
                                                                 or cv.CAPSULE in types))
     return not curved and not (f[0] == cv.KIND_CLIP and f[7] > 0 and margin > 0)
@@ -319,7 +330,7 @@ def test_replay_matches_forward(results):
               f"{np.mean(a * APPROX <= EXACT) if len(a) else 0:.0%} within {EXACT:g}")
     everything = [e for values in exact.values() for e in values]
     print(f"{len(everything)} of {len(r['rows'])} contacts have the forward's closed form")
-    assert {key[1] for key in exact} == {cv.KIND_CORE, cv.KIND_EPA, cv.KIND_CLIP, cv.KIND_PLANE}
+    assert {key[1] for key in exact} == {cv.KIND_CORE, cv.KIND_EPA, cv.KIND_CLIP, cv.KIND_PLANE, cv.KIND_FACE_CAP}
     assert max(everything) <= 1.0
     assert max(e for values in approx.values() for e in values) <= 1.0
 

@@ -53,6 +53,8 @@ def _scene(cone, n_envs=0, substeps=1, shape="box", tag="", smooth=False, ground
             path = os.path.join(tempfile.mkdtemp(), "box.obj")
             trimesh.creation.box(extents=tuple(2 * h for h in HALF)).export(path)
             body = scene.add_entity(gs.morphs.Mesh(file=path, pos=(0, 0, HALF[2])))
+        elif shape == "cylinder":  # a can as tall as the box: cylinder–box contacts on the "box" ground
+            body = scene.add_entity(gs.morphs.Cylinder(radius=HALF[0], height=2 * HALF[2], pos=(0, 0, HALF[2])))
         else:
             body = scene.add_entity(gs.morphs.Sphere(radius=0.1, pos=(0, 0, 0.1)))
         scene.build(n_envs=n_envs)
@@ -189,6 +191,14 @@ def test_mesh_on_box(f64, case, cone):
     """The box as a mesh on a fixed box: mesh–box contacts of the convex collider (GJK, EPA and
     face clipping between polytopes, whose replay is the forward's own closed form)."""
     _check(case, cone, steps=50, shape="mesh", ground="box")
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+@pytest.mark.parametrize("case", ["sliding_velocity", "tilted"])
+def test_cylinder_on_box(f64, case, cone):
+    """A can on a fixed box: sliding and spinning on its cap, or dropped tilted on its rim until it
+    stands — its contacts with the face are four rim points (convex.KIND_FACE_CAP) once it stands."""
+    _check(case, cone, steps=50, shape="cylinder", ground="box")
 
 
 def test_default_tolerance_converges_an_elliptic_slide_for_its_gradient(f64):

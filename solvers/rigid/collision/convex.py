@@ -21,7 +21,8 @@ clipping follow the 3.12 sources.
 3. Boxes and meshes (budget 4) clip two facing faces, or an edge along a face, found from the
    final EPA face's features: up to 4 contacts (the largest quadrilateral of the clipped
    polygon). Capsules (budget 2) and cylinders (budget 4) get one contact here: MuJoCo 4.0's
-   multi-contact for them (and for margins, through the shallow path) is not reproduced.
+   multi-contact for them (and for margins, through the shallow path) is not reproduced; but a
+   cylinder standing on a box's face gets four rim points of its own form (`_face_cap`).
 
 A contact is emitted when dist < margin; its position is the midpoint of the witness points, its
 normal points from geom 1 to geom 2 (MuJoCo's convention).
@@ -65,6 +66,10 @@ normal (of the EPA contact for KIND_CLIP), coded in two ints (octahedral map, ~1
   normal.
 - KIND_PLANE (plane-mesh): column 1 = mesh vertex id (the contact is that vertex, moved half its
   depth along the plane normal).
+- KIND_FACE_CAP (a cylinder standing on a box's face, `_face_cap`): column 1 = the face (0..5 =
+  +x, -x, +y, -y, +z, -z), column 2 = the rim point (0..3 = +u, -u, +v, -v: the face's in-plane
+  axes made perpendicular to the cylinder's), column 3 = 1 when the axis is flipped to point at
+  the face.
 
 Replay. `convex_evaluate` and `plane_mesh_evaluate` give a contact again from its feature row
 as a closed form of the two geom poses; `convex_evaluate_adjoint` and
@@ -111,7 +116,7 @@ CONVEX_BUDGET = {(SPHERE, MESH): 1, (CAPSULE, CYLINDER): 2, (CAPSULE, MESH): 2, 
                  (CYLINDER, BOX): 4, (CYLINDER, MESH): 4, (BOX, MESH): 4, (MESH, MESH): 4}
 CONVEX_PAIRS = tuple(CONVEX_BUDGET)
 FEATURE_SIZE = 11
-KIND_CORE, KIND_EPA, KIND_CLIP, KIND_PLANE = 1, 2, 3, 4
+KIND_CORE, KIND_EPA, KIND_CLIP, KIND_PLANE, KIND_FACE_CAP = 1, 2, 3, 4, 5
 POLYGON_MAX = 32         # vertices of a mesh polygon multi-contact can use (larger: single contact)
 
 # workspace layout (one row per env): 3-vectors, floats, ints
@@ -1688,6 +1693,11 @@ def convex_convex(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, mes
                 dist[i] = margin + ws.ccd_f[row + (_F_WIT + i,)]
                 for c in ti.static(range(FEATURE_SIZE)):
                     feature[i, c] = ws.ccd_i[row + (_I_WIT + i * FEATURE_SIZE + c,)]
+    if type1 == CYLINDER and type2 == BOX and count == 1 and feature[0, 10] % 3 != 2:  # on its cap or rim, not side
+        n_face, face_position, face_normal, face_dist, face_feature = _face_cap(
+            pos1, rot1, size1, pos2, rot2, size2, margin, ti.Vector([normal[0, c] for c in ti.static(range(3))]))
+        if n_face > 0:
+            count, position, normal, dist, feature = n_face, face_position, face_normal, face_dist, face_feature
     return count, position, normal, dist, feature
 
 
@@ -2174,6 +2184,120 @@ def _cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature,
             ti.select(first, g_pos_o, g_c), ti.select(first, g_rot_o, g_rot_c))
 
 
+# A cylinder standing on a box's face: the cap form above is one contact, at the foot of the cap's
+# centre, which holds no torque (a can on a box rocked at ~0.1 m/s), and a can a little tilted is met
+# at one rim point. Instead, a cylinder standing on the face (its axis within STANDING_TILT of the
+# face's normal) touches it at four points of the rim of its disk nearer the face: where the
+# face's two in-plane axes, made perpendicular to the cylinder's axis, point (±u, ±v), each a
+# contact when within the margin (KIND_FACE_CAP: column 1 the face, 0..5 = +x, -x, +y, -y, +z, -z;
+# column 2 the point, 0..3 = +u, -u, +v, -v; column 3 1 when the axis is flipped to point at the
+# face). Each is a smooth closed form of the two poses: the rule MuJoCo uses on a plane (the
+# lowest rim point and an inscribed triangle) follows the tilt's direction, which turns without
+# bound as the tilt vanishes (its gradients did not converge for a can sliding on its cap).
+# A point off the face (a can over the box's edge) keeps the single contact. MuJoCo 4.0 gives up
+# to 4 contacts here by its own rule, not reproduced.
+STANDING_TILT = 0.1  # rad
+
+
+@ti.func
+def _face_cap_terms(pos1, rot1, size1, pos2, rot2, size2, feature):
+    """Rim point `feature[2]` of cylinder 1 on face `feature[1]` of box 2 (see above), every
+    intermediate: (face axis, its sign, n (the face's outward normal), centre (the face's), point
+    axis, its sign, a (the axis towards the face), t (the in-plane axis), d_raw = t - (t.a) a, p
+    (the rim point), depth = (p - centre) . n)."""
+    face_axis, face_sign = feature[1] // 2, 1.0 - 2.0 * (feature[1] % 2)
+    n = face_sign * ti.Vector([rot2[0, face_axis], rot2[1, face_axis], rot2[2, face_axis]])
+    centre = pos2 + n * size2[face_axis]
+    a = (1.0 - 2.0 * feature[3]) * ti.Vector([rot1[0, 2], rot1[1, 2], rot1[2, 2]])
+    t_axis, t_sign = (face_axis + 1 + feature[2] // 2) % 3, 1.0 - 2.0 * (feature[2] % 2)
+    t = t_sign * ti.Vector([rot2[0, t_axis], rot2[1, t_axis], rot2[2, t_axis]])
+    d_raw = t - _dot(t, a) * a
+    p = pos1 + a * size1[1] + size1[0] * _normalize(d_raw)
+    return face_axis, face_sign, n, centre, t_axis, t_sign, a, t, d_raw, p, _dot(p - centre, n)
+
+
+@ti.func
+def _face_cap(pos1, rot1, size1, pos2, rot2, size2, margin, normal):
+    """The face contacts of cylinder 1 (touching along `normal`, from 1 to 2) on box 2 (see above):
+    (count, position (CONVEX_MAX, 3), normal (CONVEX_MAX, 3), dist (CONVEX_MAX,), feature
+    (CONVEX_MAX, FEATURE_SIZE)) as convex_convex's; count 0 when the cylinder does not stand on
+    the face whose outward normal is nearest -normal, or a contact falls off that face."""
+    face_axis, best = 0, -1.0
+    for k in ti.static(range(3)):
+        along = ti.abs(normal[0] * rot2[0, k] + normal[1] * rot2[1, k] + normal[2] * rot2[2, k])
+        if along > best:
+            face_axis, best = k, along
+    facing = normal[0] * rot2[0, face_axis] + normal[1] * rot2[1, face_axis] + normal[2] * rot2[2, face_axis]
+    face = 2 * face_axis + ti.select(facing < 0.0, 0, 1)  # its outward normal opposes `normal`
+    # the cosine of the angle between the cylinder's axis and the face's axis
+    aligned = rot1[0, 2] * rot2[0, face_axis] + rot1[1, 2] * rot2[1, face_axis] + rot1[2, 2] * rot2[2, face_axis]
+    flip = ti.select(aligned * (1.0 - 2.0 * (face % 2)) > 0.0, 1, 0)  # the axis turned to point into the face
+    position, out_normal = ti.Matrix.zero(float, CONVEX_MAX, 3), ti.Matrix.zero(float, CONVEX_MAX, 3)
+    dist = ti.Vector.zero(float, CONVEX_MAX)
+    feature = ti.Matrix.zero(ti.i32, CONVEX_MAX, FEATURE_SIZE)
+    count, usable = 0, ti.abs(aligned) >= ti.static(np.cos(STANDING_TILT))
+    for k in range(4):  # one evaluation in a loop: inlined once
+        row = ti.Vector([KIND_FACE_CAP, face, k, flip, 0, 0, 0, 0, 0, 0, 0])
+        point, unit, depth = _face_cap_evaluate_at(pos1, rot1, size1, pos2, rot2, size2, row)
+        if usable and depth <= margin:
+            offset = point - (pos2 + (-unit) * size2[face_axis])  # from the face's centre
+            for turn in ti.static((1, 2)):  # the face's in-plane axes
+                side_axis = (face_axis + turn) % 3
+                side = offset[0] * rot2[0, side_axis] + offset[1] * rot2[1, side_axis] + offset[2] * rot2[2, side_axis]
+                if ti.abs(side) > size2[side_axis]:
+                    usable = False
+            for c in ti.static(range(3)):
+                position[count, c], out_normal[count, c] = point[c], unit[c]
+            dist[count] = depth
+            for c in ti.static(range(FEATURE_SIZE)):
+                feature[count, c] = row[c]
+            count += 1
+    return ti.select(usable, count, 0), position, out_normal, dist, feature
+
+
+@ti.func
+def _face_cap_evaluate_at(pos1, rot1, size1, pos2, rot2, size2, feature):
+    """(position, normal from geom 1 to 2, dist) of a KIND_FACE_CAP contact: the rim point moved
+    half its depth along the face's normal, the face's inward normal, the depth."""
+    terms = _face_cap_terms(pos1, rot1, size1, pos2, rot2, size2, feature)
+    n, p, depth = terms[2], terms[9], terms[10]
+    return p - n * (0.5 * depth), -n, depth
+
+
+@ti.func
+def _face_cap_evaluate(shape1: ti.template(), shape2: ti.template(), feature):
+    return _face_cap_evaluate_at(shape1[2], shape1[3], shape1[4], shape2[2], shape2[3], shape2[4], feature)
+
+
+@ti.func
+def _face_cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature, g_position, g_normal, g_dist):
+    """Reverse of `_face_cap_evaluate`: (g_pos1, g_rot1, g_pos2, g_rot2)."""
+    size1, size2 = shape1[4], shape2[4]
+    face_axis, face_sign, n, centre, t_axis, t_sign, a, t, d_raw, p, depth = _face_cap_terms(
+        shape1[2], shape1[3], size1, shape2[2], shape2[3], size2, feature)
+    # position = p - n depth / 2, normal = -n, dist = depth = (p - centre) . n
+    g_depth = g_dist - 0.5 * _dot(g_position, n)
+    g_n = -g_normal - (0.5 * depth) * g_position + g_depth * (p - centre)
+    g_p = g_position + g_depth * n
+    g_centre = -g_depth * n
+    # p = pos1 + a h + r unit(d_raw), d_raw = t - (t . a) a
+    g_draw = _normalize_adjoint(d_raw, size1[0] * g_p)
+    g_t = g_draw - a * _dot(a, g_draw)
+    g_a = size1[1] * g_p - t * _dot(a, g_draw) - _dot(t, a) * g_draw
+    # centre = pos2 + n size2[face axis]; n = ±column face_axis of rot2, t = ±column t_axis
+    g_n += size2[face_axis] * g_centre
+    g_rot1, g_rot2 = ti.Matrix.zero(float, 3, 3), ti.Matrix.zero(float, 3, 3)
+    a_sign = 1.0 - 2.0 * feature[3]
+    for r in ti.static(range(3)):
+        g_rot1[r, 2] = a_sign * g_a[r]
+        for k in ti.static(range(3)):
+            if k == face_axis:
+                g_rot2[r, k] += face_sign * g_n[r]
+            if k == t_axis:
+                g_rot2[r, k] += t_sign * g_t[r]
+    return g_p, g_rot1, g_centre, g_rot2
+
+
 # A cylinder meeting a vertex, an edge or another cylinder's rim at its rim (m < 2 in `_core_terms`):
 # the contact is where the rim's circle comes closest to that point, line or circle, at the angles
 # where the distance is stationary. Newton on the angles from the forward's normal finds them to
@@ -2627,7 +2751,9 @@ def convex_evaluate(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, m
     geom 1 to geom 2, dist m). Arguments as convex_convex's; `hull` as there."""
     shape1, shape2 = (type1, mesh1, pos1, rot1, size1, margin), (type2, mesh2, pos2, rot2, size2, margin)
     position, normal, dist = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0]), 0.0
-    if feature[0] == KIND_CLIP:
+    if feature[0] == KIND_FACE_CAP:
+        position, normal, dist = _face_cap_evaluate(shape1, shape2, feature)
+    elif feature[0] == KIND_CLIP:
         position, normal, dist = _clip_evaluate(shape1, shape2, feature, hull)
     elif _cap_side(shape1, shape2, feature) != 0:
         position, normal, dist = _cap_evaluate(shape1, shape2, feature, hull)
@@ -2650,7 +2776,10 @@ def convex_evaluate_adjoint(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, 
     shape1, shape2 = (type1, mesh1, pos1, rot1, size1, margin), (type2, mesh2, pos2, rot2, size2, margin)
     g_pos1, g_pos2 = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
     g_rot1, g_rot2 = ti.Matrix.zero(float, 3, 3), ti.Matrix.zero(float, 3, 3)
-    if feature[0] == KIND_CLIP:
+    if feature[0] == KIND_FACE_CAP:
+        g_pos1, g_rot1, g_pos2, g_rot2 = _face_cap_evaluate_adjoint(shape1, shape2, feature, g_position, g_normal,
+                                                                    g_dist)
+    elif feature[0] == KIND_CLIP:
         g_pos1, g_rot1, g_pos2, g_rot2 = _clip_evaluate_adjoint(shape1, shape2, feature, hull, g_position,
                                                                 g_normal, g_dist)
     elif _cap_side(shape1, shape2, feature) != 0:
@@ -2681,7 +2810,8 @@ def iterated(type1, type2, margin, feature):
     round_ = type1 == SPHERE or type1 == CAPSULE or type2 == SPHERE or type2 == CAPSULE
     curved = type1 == CYLINDER or type2 == CYLINDER or (feature[0] == KIND_EPA and (margin > 0 or round_))
     corner = feature[0] == KIND_CLIP and feature[7] == 0 and feature[3] >= 256 and feature[4] >= 256 and type2 == MESH
-    return curved or (feature[0] == KIND_CLIP and feature[7] > 0 and margin > 0) or corner
+    return feature[0] != KIND_FACE_CAP and (curved or (feature[0] == KIND_CLIP and feature[7] > 0 and margin > 0)
+                                            or corner)
 
 
 @ti.func
