@@ -156,13 +156,16 @@ def _plane_cases(harness, rng):
 
 
 # a cylinder's cap square on a face, a cap or a lying capsule (measure zero among random poses):
-# (geom 1, geom 2, geom 1's turn in geom 2's frame, geom 1's half extent along geom 2's axis, geom 1's
-# sizes when not test_colliders_convex's)
+# (geom 1, geom 2, geom 1's turn in geom 2's frame, geom 1's half extent along geom 2's axis, the
+# two geoms' (radius, half-length) where not test_colliders_convex's)
 _QUARTER = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])  # a quarter turn about x: a capsule lying
 ALIGNED = [("capsule", "cylinder", _QUARTER, 0.05, None), ("cylinder", "cylinder", np.eye(3), 0.1, None),
            ("cylinder", "box", np.eye(3), 0.1, None),
-           # a can small enough to stand on the box's face: four rim points (convex._face_cap)
-           ("cylinder", "box", np.eye(3), 0.05, (0.03, 0.05))]
+           # cans small enough to stand on the box's face or the other's cap: four rim points
+           # (convex._face_cap), the standing one geom 1 or geom 2
+           ("cylinder", "box", np.eye(3), 0.05, ((0.03, 0.05), None)),
+           ("cylinder", "cylinder", np.eye(3), 0.05, ((0.03, 0.05), None)),
+           ("cylinder", "cylinder", np.eye(3), 0.1, (None, (0.03, 0.1)))]
 _HALF_AXIS = {"cylinder": 0.1, "box": 0.06}  # geom 2's half extent along its z axis (SIZES)
 
 
@@ -171,7 +174,7 @@ def _aligned_cases(rng, per_pair=20):
     for end), above or below geom 2 along its axis, 1..8 mm into it, up to 3 cm off centre:
     (name, types, sizes, meshes, pos, rot) as _convex_cases' (no MuJoCo contacts)."""
     cases = []
-    for kind1, kind2, turn, half1, size1 in ALIGNED:
+    for kind1, kind2, turn, half1, resized in ALIGNED:
         m = _model(f'<body><freejoint/>{_geom(kind1, None, 0.0)}</body>', _geom(kind2, None, 0.0))
         for _ in range(per_pair):
             rot2 = np.zeros(9)
@@ -183,8 +186,9 @@ def _aligned_cases(rng, per_pair=20):
             pos2 = rng.normal(size=3) * 0.1
             pos = np.array([pos2 + rot2 @ offset, pos2])
             sizes = m.geom_size.copy()
-            if size1 is not None:
-                sizes[0, :2] = size1
+            for g, size in enumerate(resized or (None, None)):
+                if size is not None:
+                    sizes[g, :2] = size
             cases.append((f"{kind1}-{kind2}", (TYPES[kind1], TYPES[kind2]), sizes, (-1, -1), pos,
                           np.array([rot2 @ turn @ flip, rot2])))
     return cases

@@ -22,7 +22,8 @@ clipping follow the 3.12 sources.
    final EPA face's features: up to 4 contacts (the largest quadrilateral of the clipped
    polygon). Capsules (budget 2) and cylinders (budget 4) get one contact here: MuJoCo 4.0's
    multi-contact for them (and for margins, through the shallow path) is not reproduced; but a
-   cylinder standing on a box's face gets four rim points of its own form (`_face_cap`).
+   cylinder standing on a box's face or a wider cylinder's cap gets four rim points of its own
+   form (`_face_cap`).
 
 A contact is emitted when dist < margin; its position is the midpoint of the witness points, its
 normal points from geom 1 to geom 2 (MuJoCo's convention).
@@ -66,10 +67,11 @@ normal (of the EPA contact for KIND_CLIP), coded in two ints (octahedral map, ~1
   normal.
 - KIND_PLANE (plane-mesh): column 1 = mesh vertex id (the contact is that vertex, moved half its
   depth along the plane normal).
-- KIND_FACE_CAP (a cylinder standing on a box's face, `_face_cap`): column 1 = the face (0..5 =
-  +x, -x, +y, -y, +z, -z), column 2 = the rim point (0..3 = +u, -u, +v, -v: the face's in-plane
-  axes made perpendicular to the cylinder's), column 3 = 1 when the axis is flipped to point at
-  the face.
+- KIND_FACE_CAP (a cylinder standing on a box's face or a cylinder's cap, `_face_cap`): column 1
+  = the face (0..5 = +x, -x, +y, -y, +z, -z; a cylinder's caps 4, 5), column 2 = the rim point
+  (0..3 = +u, -u, +v, -v: the face's in-plane axes made perpendicular to the standing axis),
+  column 3 = 1 when that axis is flipped to point at the face, column 4 = 1 when the standing
+  cylinder is geom 2.
 
 Replay. `convex_evaluate` and `plane_mesh_evaluate` give a contact again from its feature row
 as a closed form of the two geom poses; `convex_evaluate_adjoint` and
@@ -1693,9 +1695,15 @@ def convex_convex(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, mes
                 dist[i] = margin + ws.ccd_f[row + (_F_WIT + i,)]
                 for c in ti.static(range(FEATURE_SIZE)):
                     feature[i, c] = ws.ccd_i[row + (_I_WIT + i * FEATURE_SIZE + c,)]
-    if type1 == CYLINDER and type2 == BOX and count == 1 and feature[0, 10] % 3 != 2:  # on its cap or rim, not side
+    # a cylinder standing on a box's face or on a wider cylinder's cap (on its cap or rim, not its side)
+    mode1, mode2 = feature[0, 10] % 3, feature[0, 10] // 3
+    on_box = type2 == BOX and mode1 != 2
+    on_cap = type2 == CYLINDER and mode1 != 2 and mode2 != 2
+    if type1 == CYLINDER and count == 1 and (on_box or on_cap):
+        second = int(on_cap and size2[0] < size1[0])  # the narrower cylinder stands on the other
         n_face, face_position, face_normal, face_dist, face_feature = _face_cap(
-            pos1, rot1, size1, pos2, rot2, size2, margin, ti.Vector([normal[0, c] for c in ti.static(range(3))]))
+            (type1, mesh1, pos1, rot1, size1, margin), (type2, mesh2, pos2, rot2, size2, margin), second,
+            ti.Vector([normal[0, c] for c in ti.static(range(3))]))
         if n_face > 0:
             count, position, normal, dist, feature = n_face, face_position, face_normal, face_dist, face_feature
     return count, position, normal, dist, feature
@@ -2184,52 +2192,67 @@ def _cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature,
             ti.select(first, g_pos_o, g_c), ti.select(first, g_rot_o, g_rot_c))
 
 
-# A cylinder standing on a box's face: the cap form above is one contact, at the foot of the cap's
-# centre, which holds no torque (a can on a box rocked at ~0.1 m/s), and a can a little tilted is met
-# at one rim point. Instead, a cylinder standing on the face (its axis within STANDING_TILT of the
-# face's normal) touches it at four points of the rim of its disk nearer the face: where the
-# face's two in-plane axes, made perpendicular to the cylinder's axis, point (±u, ±v), each a
-# contact when within the margin (KIND_FACE_CAP: column 1 the face, 0..5 = +x, -x, +y, -y, +z, -z;
-# column 2 the point, 0..3 = +u, -u, +v, -v; column 3 1 when the axis is flipped to point at the
-# face). Each is a smooth closed form of the two poses: the rule MuJoCo uses on a plane (the
-# lowest rim point and an inscribed triangle) follows the tilt's direction, which turns without
-# bound as the tilt vanishes (its gradients did not converge for a can sliding on its cap).
-# A point off the face (a can over the box's edge) keeps the single contact. MuJoCo 4.0 gives up
-# to 4 contacts here by its own rule, not reproduced.
+# A cylinder standing on a box's face or on a wider cylinder's cap: the cap form above is one
+# contact, at the foot of the cap's centre, which holds no torque (a can on a box rocked at ~0.1
+# m/s), and a can a little tilted is met at one rim point. Instead, a cylinder standing on the face
+# (its axis within STANDING_TILT of the face's normal) touches it at four points of the rim of its
+# disk nearer the face: where the face's two in-plane axes (a cap's: its cylinder's x and y),
+# made perpendicular to the cylinder's axis, point (±u, ±v), each a contact when within the margin
+# (KIND_FACE_CAP: column 1 the face, 0..5 = +x, -x, +y, -y, +z, -z, a cylinder's caps 4 and 5;
+# column 2 the point, 0..3 = +u, -u, +v, -v; column 3 1 when the standing axis is flipped to point
+# at the face; column 4 1 when the standing cylinder is geom 2). Each is a smooth closed form of
+# the two poses: the rule MuJoCo uses on a plane (the lowest rim point and an inscribed triangle)
+# follows the tilt's direction, which turns without bound as the tilt vanishes (its gradients did
+# not converge for a can sliding on its cap). A point off the face (a can over the box's edge or
+# the cap's rim) keeps the single contact. Of two cylinders, the narrower stands on the other.
+# MuJoCo 4.0 gives up to 4 contacts here by its own rule, not reproduced.
 STANDING_TILT = 0.1  # rad
 
 
 @ti.func
-def _face_cap_terms(pos1, rot1, size1, pos2, rot2, size2, feature):
-    """Rim point `feature[2]` of cylinder 1 on face `feature[1]` of box 2 (see above), every
-    intermediate: (face axis, its sign, n (the face's outward normal), centre (the face's), point
-    axis, its sign, a (the axis towards the face), t (the in-plane axis), d_raw = t - (t.a) a, p
-    (the rim point), depth = (p - centre) . n)."""
+def _half_extent(base: ti.template(), axis):
+    """The base's half extent along its axis `axis` (a box's half size; a cylinder's half-length
+    along z, the only axis of its caps)."""
+    return ti.select(base[0] == CYLINDER, base[4][1], base[4][axis])
+
+
+@ti.func
+def _face_cap_terms(stand: ti.template(), base: ti.template(), feature):
+    """Rim point `feature[2]` of the standing cylinder on face `feature[1]` of the base (see
+    above), every intermediate: (face axis, its sign, n (the face's outward normal), centre (the
+    face's), point axis, its sign, a (the standing axis towards the face), t (the in-plane axis),
+    d_raw = t - (t.a) a, p (the rim point), depth = (p - centre) . n)."""
+    rot1, size1, rot2 = stand[3], stand[4], base[3]
     face_axis, face_sign = feature[1] // 2, 1.0 - 2.0 * (feature[1] % 2)
     n = face_sign * ti.Vector([rot2[0, face_axis], rot2[1, face_axis], rot2[2, face_axis]])
-    centre = pos2 + n * size2[face_axis]
+    centre = base[2] + n * _half_extent(base, face_axis)
     a = (1.0 - 2.0 * feature[3]) * ti.Vector([rot1[0, 2], rot1[1, 2], rot1[2, 2]])
     t_axis, t_sign = (face_axis + 1 + feature[2] // 2) % 3, 1.0 - 2.0 * (feature[2] % 2)
     t = t_sign * ti.Vector([rot2[0, t_axis], rot2[1, t_axis], rot2[2, t_axis]])
     d_raw = t - _dot(t, a) * a
-    p = pos1 + a * size1[1] + size1[0] * _normalize(d_raw)
+    p = stand[2] + a * size1[1] + size1[0] * _normalize(d_raw)
     return face_axis, face_sign, n, centre, t_axis, t_sign, a, t, d_raw, p, _dot(p - centre, n)
 
 
 @ti.func
-def _face_cap(pos1, rot1, size1, pos2, rot2, size2, margin, normal):
-    """The face contacts of cylinder 1 (touching along `normal`, from 1 to 2) on box 2 (see above):
+def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
+    """The face contacts of a cylinder standing on a box's face or a cylinder's cap (see above):
+    `second` 1 when the standing one is geom 2; `normal` the contact's, from geom 1 to 2. Returns
     (count, position (CONVEX_MAX, 3), normal (CONVEX_MAX, 3), dist (CONVEX_MAX,), feature
     (CONVEX_MAX, FEATURE_SIZE)) as convex_convex's; count 0 when the cylinder does not stand on
-    the face whose outward normal is nearest -normal, or a contact falls off that face."""
-    face_axis, best = 0, -1.0
-    for k in ti.static(range(3)):
-        along = ti.abs(normal[0] * rot2[0, k] + normal[1] * rot2[1, k] + normal[2] * rot2[2, k])
-        if along > best:
-            face_axis, best = k, along
-    facing = normal[0] * rot2[0, face_axis] + normal[1] * rot2[1, face_axis] + normal[2] * rot2[2, face_axis]
-    face = 2 * face_axis + ti.select(facing < 0.0, 0, 1)  # its outward normal opposes `normal`
-    # the cosine of the angle between the cylinder's axis and the face's axis
+    the base's face that meets it, or a contact falls off that face."""
+    stand, base = _pick_shape(second == 0, shape1, shape2), _pick_shape(second == 1, shape1, shape2)
+    rot1, rot2, size2 = stand[3], base[3], base[4]
+    into = normal * ti.select(second == 0, 1.0, -1.0)  # from the standing cylinder into the base
+    face_axis, best = 2, -1.0  # (a cylinder's caps: along its z axis)
+    if base[0] == BOX:
+        for k in ti.static(range(3)):
+            along = ti.abs(into[0] * rot2[0, k] + into[1] * rot2[1, k] + into[2] * rot2[2, k])
+            if along > best:
+                face_axis, best = k, along
+    facing = into[0] * rot2[0, face_axis] + into[1] * rot2[1, face_axis] + into[2] * rot2[2, face_axis]
+    face = 2 * face_axis + ti.select(facing < 0.0, 0, 1)  # its outward normal opposes `into`
+    # the cosine of the angle between the standing axis and the face's axis
     aligned = rot1[0, 2] * rot2[0, face_axis] + rot1[1, 2] * rot2[1, face_axis] + rot1[2, 2] * rot2[2, face_axis]
     flip = ti.select(aligned * (1.0 - 2.0 * (face % 2)) > 0.0, 1, 0)  # the axis turned to point into the face
     position, out_normal = ti.Matrix.zero(float, CONVEX_MAX, 3), ti.Matrix.zero(float, CONVEX_MAX, 3)
@@ -2237,15 +2260,19 @@ def _face_cap(pos1, rot1, size1, pos2, rot2, size2, margin, normal):
     feature = ti.Matrix.zero(ti.i32, CONVEX_MAX, FEATURE_SIZE)
     count, usable = 0, ti.abs(aligned) >= ti.static(np.cos(STANDING_TILT))
     for k in range(4):  # one evaluation in a loop: inlined once
-        row = ti.Vector([KIND_FACE_CAP, face, k, flip, 0, 0, 0, 0, 0, 0, 0])
-        point, unit, depth = _face_cap_evaluate_at(pos1, rot1, size1, pos2, rot2, size2, row)
-        if usable and depth <= margin:
-            offset = point - (pos2 + (-unit) * size2[face_axis])  # from the face's centre
+        row = ti.Vector([KIND_FACE_CAP, face, k, flip, second, 0, 0, 0, 0, 0, 0])
+        point, unit, depth = _face_cap_evaluate(shape1, shape2, row)
+        if usable and depth <= shape1[5]:  # (within the margin)
+            offset = point - (base[2] + unit * ti.select(second == 0, -1.0, 1.0) * _half_extent(base, face_axis))
+            inplane = ti.Vector([0.0, 0.0])  # the point from the face's centre, along its in-plane axes
             for turn in ti.static((1, 2)):  # the face's in-plane axes
                 side_axis = (face_axis + turn) % 3
-                side = offset[0] * rot2[0, side_axis] + offset[1] * rot2[1, side_axis] + offset[2] * rot2[2, side_axis]
-                if ti.abs(side) > size2[side_axis]:
+                inplane[turn - 1] = offset[0] * rot2[0, side_axis] + offset[1] * rot2[1, side_axis] + offset[
+                    2] * rot2[2, side_axis]
+                if base[0] == BOX and ti.abs(inplane[turn - 1]) > size2[side_axis]:
                     usable = False
+            if base[0] == CYLINDER and inplane.norm_sqr() > size2[0] * size2[0]:
+                usable = False
             for c in ti.static(range(3)):
                 position[count, c], out_normal[count, c] = point[c], unit[c]
             dist[count] = depth
@@ -2256,46 +2283,47 @@ def _face_cap(pos1, rot1, size1, pos2, rot2, size2, margin, normal):
 
 
 @ti.func
-def _face_cap_evaluate_at(pos1, rot1, size1, pos2, rot2, size2, feature):
-    """(position, normal from geom 1 to 2, dist) of a KIND_FACE_CAP contact: the rim point moved
-    half its depth along the face's normal, the face's inward normal, the depth."""
-    terms = _face_cap_terms(pos1, rot1, size1, pos2, rot2, size2, feature)
-    n, p, depth = terms[2], terms[9], terms[10]
-    return p - n * (0.5 * depth), -n, depth
-
-
-@ti.func
 def _face_cap_evaluate(shape1: ti.template(), shape2: ti.template(), feature):
-    return _face_cap_evaluate_at(shape1[2], shape1[3], shape1[4], shape2[2], shape2[3], shape2[4], feature)
+    """(position, normal from geom 1 to 2, dist) of a KIND_FACE_CAP contact: the rim point moved
+    half its depth along the face's normal, the face's normal into the base (from the standing
+    cylinder) or out of it (when the standing one is geom 2), the depth."""
+    second = feature[4]
+    terms = _face_cap_terms(_pick_shape(second == 0, shape1, shape2), _pick_shape(second == 1, shape1, shape2),
+                            feature)
+    n, p, depth = terms[2], terms[9], terms[10]
+    return p - n * (0.5 * depth), n * ti.select(second == 0, -1.0, 1.0), depth
 
 
 @ti.func
 def _face_cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature, g_position, g_normal, g_dist):
     """Reverse of `_face_cap_evaluate`: (g_pos1, g_rot1, g_pos2, g_rot2)."""
-    size1, size2 = shape1[4], shape2[4]
-    face_axis, face_sign, n, centre, t_axis, t_sign, a, t, d_raw, p, depth = _face_cap_terms(
-        shape1[2], shape1[3], size1, shape2[2], shape2[3], size2, feature)
-    # position = p - n depth / 2, normal = -n, dist = depth = (p - centre) . n
+    second = feature[4]
+    stand, base = _pick_shape(second == 0, shape1, shape2), _pick_shape(second == 1, shape1, shape2)
+    size1 = stand[4]
+    face_axis, face_sign, n, centre, t_axis, t_sign, a, t, d_raw, p, depth = _face_cap_terms(stand, base, feature)
+    # position = p - n depth / 2, normal = ∓n, dist = depth = (p - centre) . n
     g_depth = g_dist - 0.5 * _dot(g_position, n)
-    g_n = -g_normal - (0.5 * depth) * g_position + g_depth * (p - centre)
+    g_n = ti.select(second == 0, -1.0, 1.0) * g_normal - (0.5 * depth) * g_position + g_depth * (p - centre)
     g_p = g_position + g_depth * n
     g_centre = -g_depth * n
-    # p = pos1 + a h + r unit(d_raw), d_raw = t - (t . a) a
+    # p = stand's pos + a h + r unit(d_raw), d_raw = t - (t . a) a
     g_draw = _normalize_adjoint(d_raw, size1[0] * g_p)
     g_t = g_draw - a * _dot(a, g_draw)
     g_a = size1[1] * g_p - t * _dot(a, g_draw) - _dot(t, a) * g_draw
-    # centre = pos2 + n size2[face axis]; n = ±column face_axis of rot2, t = ±column t_axis
-    g_n += size2[face_axis] * g_centre
-    g_rot1, g_rot2 = ti.Matrix.zero(float, 3, 3), ti.Matrix.zero(float, 3, 3)
+    # centre = base's pos + n half extent; n = ±column face_axis of the base's rotation, t = ±column t_axis
+    g_n += _half_extent(base, face_axis) * g_centre
+    g_rot_stand, g_rot_base = ti.Matrix.zero(float, 3, 3), ti.Matrix.zero(float, 3, 3)
     a_sign = 1.0 - 2.0 * feature[3]
     for r in ti.static(range(3)):
-        g_rot1[r, 2] = a_sign * g_a[r]
+        g_rot_stand[r, 2] = a_sign * g_a[r]
         for k in ti.static(range(3)):
             if k == face_axis:
-                g_rot2[r, k] += face_sign * g_n[r]
+                g_rot_base[r, k] += face_sign * g_n[r]
             if k == t_axis:
-                g_rot2[r, k] += t_sign * g_t[r]
-    return g_p, g_rot1, g_centre, g_rot2
+                g_rot_base[r, k] += t_sign * g_t[r]
+    first = second == 0
+    return (ti.select(first, g_p, g_centre), ti.select(first, g_rot_stand, g_rot_base),
+            ti.select(first, g_centre, g_p), ti.select(first, g_rot_base, g_rot_stand))
 
 
 # A cylinder meeting a vertex, an edge or another cylinder's rim at its rim (m < 2 in `_core_terms`):
