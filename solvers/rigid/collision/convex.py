@@ -1701,11 +1701,31 @@ def convex_convex(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, mes
     on_cap = type2 == CYLINDER and mode1 != 2 and mode2 != 2
     if type1 == CYLINDER and count == 1 and (on_box or on_cap):
         second = int(on_cap and size2[0] < size1[0])  # the narrower cylinder stands on the other
-        n_face, face_position, face_normal, face_dist, face_feature = _face_cap(
-            (type1, mesh1, pos1, rot1, size1, margin), (type2, mesh2, pos2, rot2, size2, margin), second,
-            ti.Vector([normal[0, c] for c in ti.static(range(3))]))
+        n_face, face_position, face_normal, face_dist, face_feature, upright = _face_cap(
+            (type1, mesh1, pos1, rot1, size1, margin), (type2, mesh2, pos2, rot2, size2, margin), second)
+        # tilted beyond RIM_TILT on its rim, the rim contact stays first: the lowest rim point, which
+        # the four points (a square inscribed in the rim) reach only when the tilt is along an axis
+        keep = int(ti.select(second == 0, mode1, mode2) == 0 and upright <= ti.static(np.cos(RIM_TILT)))
+        agree = normal[0, 0] * face_normal[0, 0] + normal[0, 1] * face_normal[0, 1] + normal[0, 2] * face_normal[0, 2]
+        if keep and agree <= 0.0:
+            keep = 0  # its normal points the wrong way (the iterate at a pose exactly touching: a kick)
         if n_face > 0:
-            count, position, normal, dist, feature = n_face, face_position, face_normal, face_dist, face_feature
+            shallowest = -1
+            if keep and n_face == CONVEX_MAX:  # (the budget: the shallowest point gives way)
+                shallowest = 0
+                for i in ti.static(range(1, CONVEX_MAX)):
+                    if face_dist[i] > face_dist[shallowest]:
+                        shallowest = i
+            slot = keep
+            for i in ti.static(range(CONVEX_MAX)):
+                if i < n_face and i != shallowest:
+                    for c in ti.static(range(3)):
+                        position[slot, c], normal[slot, c] = face_position[i, c], face_normal[i, c]
+                    dist[slot] = face_dist[i]
+                    for c in ti.static(range(FEATURE_SIZE)):
+                        feature[slot, c] = face_feature[i, c]
+                    slot += 1
+            count = slot
     return count, position, normal, dist, feature
 
 
@@ -2203,10 +2223,17 @@ def _cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature,
 # at the face; column 4 1 when the standing cylinder is geom 2). Each is a smooth closed form of
 # the two poses: the rule MuJoCo uses on a plane (the lowest rim point and an inscribed triangle)
 # follows the tilt's direction, which turns without bound as the tilt vanishes (its gradients did
-# not converge for a can sliding on its cap). A point off the face (a can over the box's edge or
-# the cap's rim) keeps the single contact. Of two cylinders, the narrower stands on the other.
-# MuJoCo 4.0 gives up to 4 contacts here by its own rule, not reproduced.
+# not converge for a can sliding on its cap). Tilted more than RIM_TILT on its rim, the rim contact
+# (the lowest rim point) stays with the deepest three. The face is chosen from the poses alone. A
+# point off the face (a can over the box's edge or the cap's rim) keeps the single contact. Of two
+# cylinders, the narrower stands on the other. MuJoCo 4.0 gives up to 4 contacts here by its own
+# rule, not reproduced.
 STANDING_TILT = 0.1  # rad
+# Tilted more than this (on its rim), the cylinder keeps its rim contact (the lowest rim point) with
+# the four points: else, tilted along a diagonal, the square they form met the face 0.29 r sin(tilt)
+# higher than the rim does, a jump of ~1 mm in depth at STANDING_TILT for a 3.3 cm can (a 17 g
+# kick). Below it the rim point's direction turns too fast with the tilt for a gradient (~r/tilt).
+RIM_TILT = 0.01  # rad
 
 
 @ti.func
@@ -2235,25 +2262,27 @@ def _face_cap_terms(stand: ti.template(), base: ti.template(), feature):
 
 
 @ti.func
-def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
+def _face_cap(shape1: ti.template(), shape2: ti.template(), second):
     """The face contacts of a cylinder standing on a box's face or a cylinder's cap (see above):
-    `second` 1 when the standing one is geom 2; `normal` the contact's, from geom 1 to 2. Returns
+    `second` 1 when the standing one is geom 2. Returns
     (count, position (CONVEX_MAX, 3), normal (CONVEX_MAX, 3), dist (CONVEX_MAX,), feature
-    (CONVEX_MAX, FEATURE_SIZE)) as convex_convex's; count 0 when the cylinder does not stand on
-    the base's face that meets it, or a contact falls off that face."""
+    (CONVEX_MAX, FEATURE_SIZE)) as convex_convex's, and the cosine of the standing axis's tilt
+    from the face's normal; count 0 when the cylinder does not stand on the base's face on its
+    side, or a contact falls off that face."""
     stand, base = _pick_shape(second == 0, shape1, shape2), _pick_shape(second == 1, shape1, shape2)
     rot1, rot2, size2 = stand[3], base[3], base[4]
-    into = normal * ti.select(second == 0, 1.0, -1.0)  # from the standing cylinder into the base
-    face_axis, best = 2, -1.0  # (a cylinder's caps: along its z axis)
+    # the face from the geometry alone (the collider's normal may point the wrong way at a pose
+    # exactly touching, which picked the far face: a can launched at 10 m/s): the base's axis
+    # nearest the standing axis (a cylinder's caps: its z), on the side of the standing centre
+    face_axis, aligned = 2, rot1[0, 2] * rot2[0, 2] + rot1[1, 2] * rot2[1, 2] + rot1[2, 2] * rot2[2, 2]
     if base[0] == BOX:
-        for k in ti.static(range(3)):
-            along = ti.abs(into[0] * rot2[0, k] + into[1] * rot2[1, k] + into[2] * rot2[2, k])
-            if along > best:
-                face_axis, best = k, along
-    facing = into[0] * rot2[0, face_axis] + into[1] * rot2[1, face_axis] + into[2] * rot2[2, face_axis]
-    face = 2 * face_axis + ti.select(facing < 0.0, 0, 1)  # its outward normal opposes `into`
-    # the cosine of the angle between the standing axis and the face's axis
-    aligned = rot1[0, 2] * rot2[0, face_axis] + rot1[1, 2] * rot2[1, face_axis] + rot1[2, 2] * rot2[2, face_axis]
+        for k in ti.static(range(2)):
+            cosine = rot1[0, 2] * rot2[0, k] + rot1[1, 2] * rot2[1, k] + rot1[2, 2] * rot2[2, k]
+            if ti.abs(cosine) > ti.abs(aligned):
+                face_axis, aligned = k, cosine
+    apart = stand[2] - base[2]
+    above = apart[0] * rot2[0, face_axis] + apart[1] * rot2[1, face_axis] + apart[2] * rot2[2, face_axis]
+    face = 2 * face_axis + ti.select(above >= 0.0, 0, 1)  # the face on the standing cylinder's side
     flip = ti.select(aligned * (1.0 - 2.0 * (face % 2)) > 0.0, 1, 0)  # the axis turned to point into the face
     position, out_normal = ti.Matrix.zero(float, CONVEX_MAX, 3), ti.Matrix.zero(float, CONVEX_MAX, 3)
     dist = ti.Vector.zero(float, CONVEX_MAX)
@@ -2279,7 +2308,7 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
             for c in ti.static(range(FEATURE_SIZE)):
                 feature[count, c] = row[c]
             count += 1
-    return ti.select(usable, count, 0), position, out_normal, dist, feature
+    return ti.select(usable, count, 0), position, out_normal, dist, feature, ti.abs(aligned)
 
 
 @ti.func
