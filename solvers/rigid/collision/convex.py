@@ -1701,11 +1701,14 @@ def convex_convex(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, mes
     on_cap = type2 == CYLINDER and mode1 != 2 and mode2 != 2
     if type1 == CYLINDER and count == 1 and (on_box or on_cap):
         second = int(on_cap and size2[0] < size1[0])  # the narrower cylinder stands on the other
-        n_face, face_position, face_normal, face_dist, face_feature, upright = _face_cap(
+        n_face, face_position, face_normal, face_dist, face_feature, upright, off_face = _face_cap(
             (type1, mesh1, pos1, rot1, size1, margin), (type2, mesh2, pos2, rot2, size2, margin), second)
-        # tilted beyond RIM_TILT on its rim, the rim contact stays first: the lowest rim point, which
-        # the four points (a square inscribed in the rim) reach only when the tilt is along an axis
-        keep = int(ti.select(second == 0, mode1, mode2) == 0 and upright <= ti.static(np.cos(RIM_TILT)))
+        # the collider's contact stays first when tilted beyond RIM_TILT on its rim (the lowest rim
+        # point, which the four points, a square inscribed in the rim, reach only when the tilt is
+        # along an axis) or when some point fell off the face (the cap over the edge meets the box
+        # there or under its centre)
+        keep = int(off_face or (ti.select(second == 0, mode1, mode2) == 0
+                                and upright <= ti.static(np.cos(RIM_TILT))))
         agree = normal[0, 0] * face_normal[0, 0] + normal[0, 1] * face_normal[0, 1] + normal[0, 2] * face_normal[0, 2]
         if keep and agree <= 0.0:
             keep = 0  # its normal points the wrong way (the iterate at a pose exactly touching: a kick)
@@ -2224,10 +2227,10 @@ def _cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature,
 # the two poses: the rule MuJoCo uses on a plane (the lowest rim point and an inscribed triangle)
 # follows the tilt's direction, which turns without bound as the tilt vanishes (its gradients did
 # not converge for a can sliding on its cap). Tilted more than RIM_TILT on its rim, the rim contact
-# (the lowest rim point) stays with the deepest three. The face is chosen from the poses alone. A
-# point off the face (a can over the box's edge or the cap's rim) keeps the single contact. Of two
-# cylinders, the narrower stands on the other. MuJoCo 4.0 gives up to 4 contacts here by its own
-# rule, not reproduced.
+# (the lowest rim point) stays with the deepest three. The face is chosen from the poses alone.
+# Points off the face (a can over the box's edge or the cap's rim) are left out, and the collider's
+# own contact stays beside those on it. Of two cylinders, the narrower stands on the other. MuJoCo
+# 4.0 gives up to 4 contacts here by its own rule, not reproduced.
 STANDING_TILT = 0.1  # rad
 # Tilted more than this (on its rim), the cylinder keeps its rim contact (the lowest rim point) with
 # the four points: else, tilted along a diagonal, the square they form met the face 0.29 r sin(tilt)
@@ -2266,9 +2269,10 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second):
     """The face contacts of a cylinder standing on a box's face or a cylinder's cap (see above):
     `second` 1 when the standing one is geom 2. Returns
     (count, position (CONVEX_MAX, 3), normal (CONVEX_MAX, 3), dist (CONVEX_MAX,), feature
-    (CONVEX_MAX, FEATURE_SIZE)) as convex_convex's, and the cosine of the standing axis's tilt
-    from the face's normal; count 0 when the cylinder does not stand on the base's face on its
-    side, or a contact falls off that face."""
+    (CONVEX_MAX, FEATURE_SIZE)) as convex_convex's (the points on the face), the cosine of the
+    standing axis's tilt from the face's normal, and whether a point within the margin fell off the
+    face (a can over the box's edge); count 0 when the cylinder does not stand on the base's face
+    on its side."""
     stand, base = _pick_shape(second == 0, shape1, shape2), _pick_shape(second == 1, shape1, shape2)
     rot1, rot2, size2 = stand[3], base[3], base[4]
     # the face from the geometry alone (the collider's normal may point the wrong way at a pose
@@ -2287,28 +2291,34 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second):
     position, out_normal = ti.Matrix.zero(float, CONVEX_MAX, 3), ti.Matrix.zero(float, CONVEX_MAX, 3)
     dist = ti.Vector.zero(float, CONVEX_MAX)
     feature = ti.Matrix.zero(ti.i32, CONVEX_MAX, FEATURE_SIZE)
-    count, usable = 0, ti.abs(aligned) >= ti.static(np.cos(STANDING_TILT))
+    count, off_face = 0, False
+    # upright on the face, its centre outside the face's plane (a can lying on a box, its axis along
+    # the box's x, does not stand on the box's x face)
+    standing = ti.abs(aligned) >= ti.static(np.cos(STANDING_TILT)) and ti.abs(above) > _half_extent(base, face_axis)
     for k in range(4):  # one evaluation in a loop: inlined once
         row = ti.Vector([KIND_FACE_CAP, face, k, flip, second, 0, 0, 0, 0, 0, 0])
         point, unit, depth = _face_cap_evaluate(shape1, shape2, row)
-        if usable and depth <= shape1[5]:  # (within the margin)
+        if standing and depth <= shape1[5]:  # (within the margin)
             offset = point - (base[2] + unit * ti.select(second == 0, -1.0, 1.0) * _half_extent(base, face_axis))
             inplane = ti.Vector([0.0, 0.0])  # the point from the face's centre, along its in-plane axes
+            on_face = True
             for turn in ti.static((1, 2)):  # the face's in-plane axes
                 side_axis = (face_axis + turn) % 3
                 inplane[turn - 1] = offset[0] * rot2[0, side_axis] + offset[1] * rot2[1, side_axis] + offset[
                     2] * rot2[2, side_axis]
                 if base[0] == BOX and ti.abs(inplane[turn - 1]) > size2[side_axis]:
-                    usable = False
+                    on_face = False
             if base[0] == CYLINDER and inplane.norm_sqr() > size2[0] * size2[0]:
-                usable = False
-            for c in ti.static(range(3)):
-                position[count, c], out_normal[count, c] = point[c], unit[c]
-            dist[count] = depth
-            for c in ti.static(range(FEATURE_SIZE)):
-                feature[count, c] = row[c]
-            count += 1
-    return ti.select(usable, count, 0), position, out_normal, dist, feature, ti.abs(aligned)
+                on_face = False
+            off_face = off_face or not on_face
+            if on_face:
+                for c in ti.static(range(3)):
+                    position[count, c], out_normal[count, c] = point[c], unit[c]
+                dist[count] = depth
+                for c in ti.static(range(FEATURE_SIZE)):
+                    feature[count, c] = row[c]
+                count += 1
+    return count, position, out_normal, dist, feature, ti.abs(aligned), off_face
 
 
 @ti.func
