@@ -310,6 +310,24 @@ def test_a_can_over_the_edge_of_a_box_rests(f64):
     assert abs(can.get_pos()[2].item() - (0.4 + h / 2)) < 1e-3
 
 
+def test_a_can_touching_a_low_box_with_its_side_is_not_launched(f64):
+    """A can standing on the floor, its side 0.5 mm into a 4 cm box beside it: its centre is above
+    the box's top, but the two meet across the box's side, so the rim points on the top face are
+    not contacts (once, one of them 4 cm "deep" launched the can at 13 m/s); the can–box contact
+    stays the collider's, 0.5 mm deep."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002), show_viewer=False)
+    scene.add_entity(gs.morphs.Plane())
+    scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.04), pos=(0, 0, 0.02), fixed=True))
+    can = scene.add_entity(gs.morphs.Cylinder(radius=0.033, height=0.12, pos=(0.1 + 0.033 - 5e-4, 0, 0.06)))
+    scene.build()
+    for _ in range(5):
+        scene.step()
+    rows = scene.rigid_solver.contacts()[0].cpu().numpy()
+    with_box = rows[(rows[:, 0] >= 1) & (rows[:, 1] >= 1)]  # (the plane is geom 0)
+    assert len(with_box) == 1 and abs(with_box[0, 8]) < 2e-3 and abs(with_box[0, 9]) > 0.99, with_box
+    assert can.get_dofs_velocity().abs().max().item() < 0.1
+
+
 def test_mesh_box_rests_like_box(f64, meshes):
     """A box mesh dropped tilted on a plane falls, lands and rests as the primitive box of the
     same extents beside it (the two never touch)."""
