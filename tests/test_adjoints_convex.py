@@ -47,7 +47,7 @@ BRANCHES = {"plane", "core m=0", "core m=1", "core m=2", "epa m=2", "cylinder ri
             "rim on a point", "rim on a line", "rim on a rim", "rim on a rim holding both ends", "rim of geom 1",
             "rim of geom 2", "rim on its side", "clip face-face", "clip edge of geom 1", "clip edge of geom 2",
             "clip vertex", "clip edge x side plane", "clip side x side plane", "clip edge with margin",
-            "cylinder standing on a box face"}
+            "cylinder standing on a box face", "cylinder lying on a box face"}
 
 
 @ti.func
@@ -165,7 +165,8 @@ ALIGNED = [("capsule", "cylinder", _QUARTER, 0.05, None), ("cylinder", "cylinder
            # (convex._face_cap), the standing one geom 1 or geom 2
            ("cylinder", "box", np.eye(3), 0.05, ((0.03, 0.05), None)),
            ("cylinder", "cylinder", np.eye(3), 0.05, ((0.03, 0.05), None)),
-           ("cylinder", "cylinder", np.eye(3), 0.1, (None, (0.03, 0.1)))]
+           ("cylinder", "cylinder", np.eye(3), 0.1, (None, (0.03, 0.1))),
+           ("cylinder", "box", _QUARTER, 0.03, ((0.03, 0.05), None))]  # a small can lying on the box
 _HALF_AXIS = {"cylinder": 0.1, "box": 0.06}  # geom 2's half extent along its z axis (SIZES)
 
 
@@ -233,7 +234,7 @@ def _branch(f, types, margin):
     if f[0] == cv.KIND_PLANE:
         return {"plane"}
     if f[0] == cv.KIND_FACE_CAP:
-        return {"cylinder standing on a box face"}
+        return {"cylinder lying on a box face" if f[2] == cv.LYING else "cylinder standing on a box face"}
     if f[0] == cv.KIND_CLIP:
         tags = int(f[3] >= 256) + int(f[4] >= 256)
         out = {["clip face-face", "clip edge of geom 1", "clip edge of geom 2"][f[7]],

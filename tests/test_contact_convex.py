@@ -294,6 +294,25 @@ def test_a_tilted_can_set_exactly_on_a_box_is_not_launched(precision):
     assert speed.max().item() < 0.5, [(case, round(v, 3)) for case, v in zip(cases, speed.tolist()) if v >= 0.5]
 
 
+@pytest.mark.parametrize("precision", ["32", "64"])
+def test_a_can_lying_on_a_box_comes_to_rest(precision):
+    """A can dropped 1 mm onto a box lying on its side (axis 10° off the box's y) rests on the two
+    ends of its side's lowest line (convex.LYING): speed under 1e-3 m/s after 1 s. On the one side
+    contact it see-sawed at 0.5 m/s for good."""
+    gs.init(precision=precision, logging_level="warning")
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002), show_viewer=False)
+    scene.add_entity(gs.morphs.Box(size=(0.6, 0.6, 0.4), pos=(0, 0, 0.2), fixed=True))
+    can = scene.add_entity(gs.morphs.Cylinder(radius=0.033, height=0.12, pos=(0, 0, 0.4 + 0.033 + 1e-3),
+                                              euler=(90, 0, 10)))
+    scene.build()
+    for _ in range(500):
+        scene.step()
+    rows = scene.rigid_solver.contacts()[0].cpu().numpy()
+    rows = rows[rows[:, 0] >= 0]
+    assert len(rows) == 2 and np.abs(rows[:, 3] - rows[:, 3].mean()).min() > 0.05  # at both ends (y ±0.059)
+    assert can.get_dofs_velocity().abs().max().item() < 1e-3
+
+
 def test_a_can_over_the_edge_of_a_box_rests(f64):
     """A can standing with its centre half a radius inside a box's edge (one of its four rim points
     off the face) rests on the points on the face and the collider's own contact: it rocked at

@@ -23,7 +23,7 @@ clipping follow the 3.12 sources.
    polygon). Capsules (budget 2) and cylinders (budget 4) get one contact here: MuJoCo 4.0's
    multi-contact for them (and for margins, through the shallow path) is not reproduced; but a
    cylinder standing on a box's face or a wider cylinder's cap gets four rim points of its own
-   form (`_face_cap`).
+   form, one lying on a box's face the two ends of its side's line (`_face_cap`).
 
 A contact is emitted when dist < margin; its position is the midpoint of the witness points, its
 normal points from geom 1 to geom 2 (MuJoCo's convention).
@@ -69,9 +69,9 @@ normal (of the EPA contact for KIND_CLIP), coded in two ints (octahedral map, ~1
   depth along the plane normal).
 - KIND_FACE_CAP (a cylinder standing on a box's face or a cylinder's cap, `_face_cap`): column 1
   = the face (0..5 = +x, -x, +y, -y, +z, -z; a cylinder's caps 4, 5), column 2 = the rim point
-  (0..3 = +u, -u, +v, -v: the face's in-plane axes made perpendicular to the standing axis),
-  column 3 = 1 when that axis is flipped to point at the face, column 4 = 1 when the standing
-  cylinder is geom 2.
+  (0..3 = +u, -u, +v, -v: the face's in-plane axes made perpendicular to the standing axis; 4 =
+  LYING, an end of a lying cylinder's side line), column 3 = 1 when that axis is flipped to point
+  at the face (lying: the end), column 4 = 1 when the standing cylinder is geom 2.
 
 Replay. `convex_evaluate` and `plane_mesh_evaluate` give a contact again from its feature row
 as a closed form of the two geom poses; `convex_evaluate_adjoint` and
@@ -1697,18 +1697,19 @@ def convex_convex(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, mes
                     feature[i, c] = ws.ccd_i[row + (_I_WIT + i * FEATURE_SIZE + c,)]
     # a cylinder standing on a box's face or on a wider cylinder's cap (on its cap or rim, not its side)
     mode1, mode2 = feature[0, 10] % 3, feature[0, 10] // 3
-    on_box = type2 == BOX and mode1 != 2
+    on_box = type2 == BOX  # (standing on its cap or rim, or lying on its side)
     on_cap = type2 == CYLINDER and mode1 != 2 and mode2 != 2
     if type1 == CYLINDER and count == 1 and (on_box or on_cap):
         second = int(on_cap and size2[0] < size1[0])  # the narrower cylinder stands on the other
         n_face, face_position, face_normal, face_dist, face_feature, upright, off_face = _face_cap(
-            (type1, mesh1, pos1, rot1, size1, margin), (type2, mesh2, pos2, rot2, size2, margin), second)
+            (type1, mesh1, pos1, rot1, size1, margin), (type2, mesh2, pos2, rot2, size2, margin), second,
+            ti.Vector([normal[0, c] for c in ti.static(range(3))]))
         # the collider's contact stays first when tilted beyond RIM_TILT on its rim (the lowest rim
         # point, which the four points, a square inscribed in the rim, reach only when the tilt is
         # along an axis) or when some point fell off the face (the cap over the edge meets the box
         # there or under its centre)
         keep = int(off_face or (ti.select(second == 0, mode1, mode2) == 0
-                                and upright <= ti.static(np.cos(RIM_TILT))))
+                                and ti.static(np.cos(STANDING_TILT)) <= upright <= ti.static(np.cos(RIM_TILT))))
         agree = normal[0, 0] * face_normal[0, 0] + normal[0, 1] * face_normal[0, 1] + normal[0, 2] * face_normal[0, 2]
         if keep and agree <= 0.0:
             keep = 0  # its normal points the wrong way (the iterate at a pose exactly touching: a kick)
@@ -2240,6 +2241,15 @@ STANDING_TILT = 0.1  # rad
 # higher than the rim does, a jump of ~1 mm in depth at STANDING_TILT for a 3.3 cm can (a 17 g
 # kick). Below it the rim point's direction turns too fast with the tilt for a gradient (~r/tilt).
 RIM_TILT = 0.01  # rad
+# A cylinder lying on a box's face (its axis within LYING_TILT of the face's plane, met on its
+# side) touches it at the two ends of its side's line nearest the face (KIND_FACE_CAP with column 2
+# = LYING, column 3 the end): the same closed form with t = -n and a = ±axis. One contact (the
+# side's, wherever the iterate put it) let a lying can see-saw: 0.5 m/s for good. Tilted more, the
+# iterate's contact is the lower end's anyway and the other end is higher by 2 h sin(tilt); the
+# gate is narrow because a tenth of random poses lie within 0.1 rad of a face's plane, where the
+# contacts are compared with MuJoCo's.
+LYING = 4
+LYING_TILT = 0.02  # rad
 
 
 @ti.func
@@ -2253,14 +2263,17 @@ def _half_extent(base: ti.template(), axis):
 def _face_cap_terms(stand: ti.template(), base: ti.template(), feature):
     """Rim point `feature[2]` of the standing cylinder on face `feature[1]` of the base (see
     above), every intermediate: (face axis, its sign, n (the face's outward normal), centre (the
-    face's), point axis, its sign, a (the standing axis towards the face), t (the in-plane axis),
-    d_raw = t - (t.a) a, p (the rim point), depth = (p - centre) . n)."""
+    face's), point axis, its sign, a (the standing axis towards the face; lying, towards the end),
+    t (the in-plane axis; lying, -n), d_raw = t - (t.a) a, p (the rim point), depth = (p - centre)
+    . n)."""
     rot1, size1, rot2 = stand[3], stand[4], base[3]
     face_axis, face_sign = feature[1] // 2, 1.0 - 2.0 * (feature[1] % 2)
     n = face_sign * ti.Vector([rot2[0, face_axis], rot2[1, face_axis], rot2[2, face_axis]])
     centre = base[2] + n * _half_extent(base, face_axis)
     a = (1.0 - 2.0 * feature[3]) * ti.Vector([rot1[0, 2], rot1[1, 2], rot1[2, 2]])
     t_axis, t_sign = (face_axis + 1 + feature[2] // 2) % 3, 1.0 - 2.0 * (feature[2] % 2)
+    if feature[2] == LYING:  # the end (feature[3]) of the side's line nearest the face
+        t_axis, t_sign = face_axis, -face_sign
     t = t_sign * ti.Vector([rot2[0, t_axis], rot2[1, t_axis], rot2[2, t_axis]])
     d_raw = t - _dot(t, a) * a
     p = stand[2] + a * size1[1] + size1[0] * _normalize(d_raw)
@@ -2268,9 +2281,11 @@ def _face_cap_terms(stand: ti.template(), base: ti.template(), feature):
 
 
 @ti.func
-def _face_cap(shape1: ti.template(), shape2: ti.template(), second):
+def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
     """The face contacts of a cylinder standing on a box's face or a cylinder's cap (see above):
-    `second` 1 when the standing one is geom 2. Returns
+    `second` 1 when the standing one is geom 2; `normal` the collider's (from geom 1 to 2), whose
+    axis picks the face of a cylinder lying on a box (standing, the face comes from the poses).
+    Returns
     (count, position (CONVEX_MAX, 3), normal (CONVEX_MAX, 3), dist (CONVEX_MAX,), feature
     (CONVEX_MAX, FEATURE_SIZE)) as convex_convex's (the points on the face), the cosine of the
     standing axis's tilt from the face's normal, and whether a point within the margin fell off the
@@ -2287,6 +2302,15 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second):
             cosine = rot1[0, 2] * rot2[0, k] + rot1[1, 2] * rot2[1, k] + rot1[2, 2] * rot2[2, k]
             if ti.abs(cosine) > ti.abs(aligned):
                 face_axis, aligned = k, cosine
+    lying = False
+    if base[0] == BOX and ti.abs(aligned) < ti.static(np.cos(STANDING_TILT)):  # lying? (the face across the normal)
+        best = -1.0
+        for k in ti.static(range(3)):
+            along = ti.abs(normal[0] * rot2[0, k] + normal[1] * rot2[1, k] + normal[2] * rot2[2, k])
+            if along > best:
+                face_axis, best = k, along
+        aligned = rot1[0, 2] * rot2[0, face_axis] + rot1[1, 2] * rot2[1, face_axis] + rot1[2, 2] * rot2[2, face_axis]
+        lying = ti.abs(aligned) <= ti.static(np.sin(LYING_TILT))
     apart = stand[2] - base[2]
     above = apart[0] * rot2[0, face_axis] + apart[1] * rot2[1, face_axis] + apart[2] * rot2[2, face_axis]
     face = 2 * face_axis + ti.select(above >= 0.0, 0, 1)  # the face on the standing cylinder's side
@@ -2297,11 +2321,14 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second):
     count, off_face = 0, False
     # upright on the face, its centre outside the face's plane (a can lying on a box, its axis along
     # the box's x, does not stand on the box's x face)
-    standing = ti.abs(aligned) >= ti.static(np.cos(STANDING_TILT)) and ti.abs(above) > _half_extent(base, face_axis)
+    standing = (ti.abs(aligned) >= ti.static(np.cos(STANDING_TILT)) or lying) and ti.abs(above) > _half_extent(
+        base, face_axis)
     for k in range(4):  # one evaluation in a loop: inlined once
         row = ti.Vector([KIND_FACE_CAP, face, k, flip, second, 0, 0, 0, 0, 0, 0])
+        if lying:  # its two line ends
+            row[2], row[3] = LYING, k % 2
         point, unit, depth = _face_cap_evaluate(shape1, shape2, row)
-        if standing and depth <= shape1[5]:  # (within the margin)
+        if standing and depth <= shape1[5] and not (lying and k >= 2):  # (within the margin)
             offset = point - (base[2] + unit * ti.select(second == 0, -1.0, 1.0) * _half_extent(base, face_axis))
             inplane = ti.Vector([0.0, 0.0])  # the point from the face's centre, along its in-plane axes
             on_face = True
