@@ -313,6 +313,26 @@ def test_a_can_lying_on_a_box_comes_to_rest(precision):
     assert can.get_dofs_velocity().abs().max().item() < 1e-3
 
 
+def test_a_can_set_exactly_lying_on_a_box_slides_and_stops(f64):
+    """A can lying along the box's y axis, set exactly touching (its side at the face) and sliding
+    at 1 m/s along its axis: its contacts are the two ends of its lowest line, at depth 0 (the
+    collider's iterate there was a contact 2 r deep with its normal reversed: a 16 rad/s kick and a
+    see-saw at ±0.5 rad/s for good), and friction stops it."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002), show_viewer=False)
+    scene.add_entity(gs.morphs.Box(size=(0.6, 0.6, 0.4), pos=(0, 0, 0.2), fixed=True))
+    can = scene.add_entity(gs.morphs.Cylinder(radius=0.033, height=0.12, pos=(0, 0, 0.4 + 0.033), euler=(90, 0, 0)))
+    scene.build()
+    can.set_dofs_velocity(torch.tensor([0.0, -1.0, 0.0, 0.0, 0.0, 0.0], dtype=torch.float64))
+    scene.step()
+    rows = scene.rigid_solver.contacts()[0].cpu().numpy()
+    rows = rows[rows[:, 0] >= 0]
+    np.testing.assert_allclose(np.sort(rows[:, 3]), [-0.06, 0.06], atol=1e-9)  # y of the two ends
+    assert np.abs(rows[:, 8]).max() < 1e-6
+    for _ in range(499):
+        scene.step()
+    assert can.get_dofs_velocity().abs().max().item() < 1e-3
+
+
 def test_a_can_over_the_edge_of_a_box_rests(f64):
     """A can standing with its centre half a radius inside a box's edge (one of its four rim points
     off the face) rests on the points on the face and the collider's own contact: it rocked at

@@ -15,6 +15,7 @@ n_envs 0 and 4, substeps 2) runs under ``-m slow``.
 import os
 import tempfile
 
+import numpy as np
 import pytest
 import torch
 import trimesh
@@ -472,9 +473,12 @@ def test_curved_convex_gradients_repeat_and_batch(f64):
 
 
 def test_mujoco_compatible_curved_contacts_refuse_a_backward(f64):
-    """Under enable_mujoco_compatibility a curved convex contact stays MuJoCo's iterate (a can lying
-    on a box): a backward over it says so, never a silent zero or an approximate gradient."""
-    morph = gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0, 0, 0.049), euler=(90, 0, 0))
+    """Under enable_mujoco_compatibility a curved convex contact stays MuJoCo's iterate (a can tilted
+    0.3 rad on its rim on a box; standing or lying flat it takes rim points, closed forms): a
+    backward over it says so, never a silent zero or an approximate gradient."""
+    tilt = 0.3
+    morph = gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0, 0, 0.1 * np.cos(tilt) + 0.05 * np.sin(tilt) - 1e-3),
+                               euler=(np.degrees(tilt), 0, 0))
     scene, can = _curved_scene("box", morph, compat=True)
     velocity = torch.zeros(6, dtype=torch.float64, requires_grad=True)
     can.set_dofs_velocity(velocity)

@@ -1695,13 +1695,13 @@ def convex_convex(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, mes
                 dist[i] = margin + ws.ccd_f[row + (_F_WIT + i,)]
                 for c in ti.static(range(FEATURE_SIZE)):
                     feature[i, c] = ws.ccd_i[row + (_I_WIT + i * FEATURE_SIZE + c,)]
-    # a cylinder standing on a box's face or on a wider cylinder's cap (on its cap or rim, not its side)
+    # a cylinder standing on a box's face or a wider cylinder's cap (cap or rim), or lying on a box (side)
     mode1, mode2 = feature[0, 10] % 3, feature[0, 10] // 3
     on_box = type2 == BOX  # (standing on its cap or rim, or lying on its side)
     on_cap = type2 == CYLINDER and mode1 != 2 and mode2 != 2
     if type1 == CYLINDER and count == 1 and (on_box or on_cap):
         second = int(on_cap and size2[0] < size1[0])  # the narrower cylinder stands on the other
-        n_face, face_position, face_normal, face_dist, face_feature, upright, off_face = _face_cap(
+        n_face, face_position, face_normal, face_dist, face_feature, upright, off_face, on_face, toward = _face_cap(
             (type1, mesh1, pos1, rot1, size1, margin), (type2, mesh2, pos2, rot2, size2, margin), second,
             ti.Vector([normal[0, c] for c in ti.static(range(3))]))
         # the collider's contact stays first when tilted beyond RIM_TILT on its rim (the lowest rim
@@ -1710,13 +1710,16 @@ def convex_convex(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, mes
         # there or under its centre)
         keep = int(off_face or (ti.select(second == 0, mode1, mode2) == 0
                                 and ti.static(np.cos(STANDING_TILT)) <= upright <= ti.static(np.cos(RIM_TILT))))
-        agree = normal[0, 0] * face_normal[0, 0] + normal[0, 1] * face_normal[0, 1] + normal[0, 2] * face_normal[0, 2]
-        if keep and agree <= 0.0:
-            keep = 0  # its normal points the wrong way (the iterate at a pose exactly touching: a kick)
+        agree = normal[0, 0] * toward[0] + normal[0, 1] * toward[1] + normal[0, 2] * toward[2]
         # the collider met the cylinder across the face (else elsewhere: a can on the floor whose rim
         # touches a low box's side has its centre above the box's top, whose plane is not where
-        # they meet: a rim point on that face 4 cm "deep" launched it at 13 m/s)
-        if ti.abs(agree) >= ti.static(np.cos(STANDING_TILT)) and n_face > 0:
+        # they meet: a rim point on that face 4 cm "deep" launched it at 13 m/s); its normal may point
+        # the wrong way (its iterate at a pose exactly touching, 2 r deep: a kick of 16 rad/s), and
+        # then the face's points replace it even when there are none
+        across = on_face and ti.abs(agree) >= ti.static(np.cos(STANDING_TILT))
+        if across and agree < 0.0:
+            keep, count = 0, 0
+        if across and n_face > 0:
             shallowest = -1
             if keep and n_face == CONVEX_MAX:  # (the budget: the shallowest point gives way)
                 shallowest = 0
@@ -2288,9 +2291,9 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
     Returns
     (count, position (CONVEX_MAX, 3), normal (CONVEX_MAX, 3), dist (CONVEX_MAX,), feature
     (CONVEX_MAX, FEATURE_SIZE)) as convex_convex's (the points on the face), the cosine of the
-    standing axis's tilt from the face's normal, and whether a point within the margin fell off the
-    face (a can over the box's edge); count 0 when the cylinder does not stand on the base's face
-    on its side."""
+    standing axis's tilt from the face's normal, whether a point within the margin fell off the
+    face (a can over the box's edge), whether the cylinder stands (or lies) on the face, and the
+    face's normal from geom 1 to geom 2; count 0 when it does not stand on the face."""
     stand, base = _pick_shape(second == 0, shape1, shape2), _pick_shape(second == 1, shape1, shape2)
     rot1, rot2, size2 = stand[3], base[3], base[4]
     # the face from the geometry alone (the collider's normal may point the wrong way at a pose
@@ -2303,7 +2306,10 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
             if ti.abs(cosine) > ti.abs(aligned):
                 face_axis, aligned = k, cosine
     lying = False
-    if base[0] == BOX and ti.abs(aligned) < ti.static(np.cos(STANDING_TILT)):  # lying? (the face across the normal)
+    apart = stand[2] - base[2]
+    outside = ti.abs(apart[0] * rot2[0, face_axis] + apart[1] * rot2[1, face_axis] + apart[2] * rot2[
+        2, face_axis]) > _half_extent(base, face_axis)  # (its centre beyond that face's plane)
+    if base[0] == BOX and (ti.abs(aligned) < ti.static(np.cos(STANDING_TILT)) or not outside):  # lying? (the face across the normal)
         best = -1.0
         for k in ti.static(range(3)):
             along = ti.abs(normal[0] * rot2[0, k] + normal[1] * rot2[1, k] + normal[2] * rot2[2, k])
@@ -2311,7 +2317,6 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
                 face_axis, best = k, along
         aligned = rot1[0, 2] * rot2[0, face_axis] + rot1[1, 2] * rot2[1, face_axis] + rot1[2, 2] * rot2[2, face_axis]
         lying = ti.abs(aligned) <= ti.static(np.sin(LYING_TILT))
-    apart = stand[2] - base[2]
     above = apart[0] * rot2[0, face_axis] + apart[1] * rot2[1, face_axis] + apart[2] * rot2[2, face_axis]
     face = 2 * face_axis + ti.select(above >= 0.0, 0, 1)  # the face on the standing cylinder's side
     flip = ti.select(aligned * (1.0 - 2.0 * (face % 2)) > 0.0, 1, 0)  # the axis turned to point into the face
@@ -2348,7 +2353,9 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
                 for c in ti.static(range(FEATURE_SIZE)):
                     feature[count, c] = row[c]
                 count += 1
-    return count, position, out_normal, dist, feature, ti.abs(aligned), off_face
+    centre_dir = ti.Vector([rot2[0, face_axis], rot2[1, face_axis], rot2[2, face_axis]]) * (1.0 - 2.0 * (face % 2))
+    toward = centre_dir * ti.select(second == 0, -1.0, 1.0)  # the face's normal, from geom 1 to geom 2
+    return count, position, out_normal, dist, feature, ti.abs(aligned), off_face, standing, toward
 
 
 @ti.func
