@@ -127,6 +127,7 @@ def test_rows_scale_matches_mujoco_invweight0_f64(f64, name):
         moving = [b for b in range(1, model.nbody) if model.body(b).name in ours and model.body_invweight0[b, 0] > 0]
         assert len(moving) >= 2
         for b in moving:
-            assert np.isclose(ours[model.body(b).name], model.body_invweight0[b, 0], rtol=1e-10, atol=0), model.body(b).name
+            name = model.body(b).name
+            assert np.isclose(ours[name], model.body_invweight0[b, 0], rtol=1e-10, atol=0), name
     finally:
         scene.destroy()

@@ -2309,7 +2309,7 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
     apart = stand[2] - base[2]
     outside = ti.abs(apart[0] * rot2[0, face_axis] + apart[1] * rot2[1, face_axis] + apart[2] * rot2[
         2, face_axis]) > _half_extent(base, face_axis)  # (its centre beyond that face's plane)
-    if base[0] == BOX and (ti.abs(aligned) < ti.static(np.cos(STANDING_TILT)) or not outside):  # lying? (the face across the normal)
+    if base[0] == BOX and (ti.abs(aligned) < ti.static(np.cos(STANDING_TILT)) or not outside):  # lying?
         best = -1.0
         for k in ti.static(range(3)):
             along = ti.abs(normal[0] * rot2[0, k] + normal[1] * rot2[1, k] + normal[2] * rot2[2, k])
