@@ -2256,6 +2256,13 @@ LYING_TILT = 0.02  # rad
 
 
 @ti.func
+def _column(rot, k):
+    """Column k of a 3×3 rotation (a geom's axis k, world frame) for a run-time k (frame.column
+    takes a compile-time one, as every collider's call has)."""
+    return ti.Vector([rot[0, k], rot[1, k], rot[2, k]])
+
+
+@ti.func
 def _half_extent(base: ti.template(), axis):
     """The base's half extent along its axis `axis` (a box's half size; a cylinder's half-length
     along z, the only axis of its caps)."""
@@ -2271,13 +2278,13 @@ def _face_cap_terms(stand: ti.template(), base: ti.template(), feature):
     . n)."""
     rot1, size1, rot2 = stand[3], stand[4], base[3]
     face_axis, face_sign = feature[1] // 2, 1.0 - 2.0 * (feature[1] % 2)
-    n = face_sign * ti.Vector([rot2[0, face_axis], rot2[1, face_axis], rot2[2, face_axis]])
+    n = face_sign * _column(rot2, face_axis)
     centre = base[2] + n * _half_extent(base, face_axis)
-    a = (1.0 - 2.0 * feature[3]) * ti.Vector([rot1[0, 2], rot1[1, 2], rot1[2, 2]])
+    a = (1.0 - 2.0 * feature[3]) * _column(rot1, 2)
     t_axis, t_sign = (face_axis + 1 + feature[2] // 2) % 3, 1.0 - 2.0 * (feature[2] % 2)
     if feature[2] == LYING:  # the end (feature[3]) of the side's line nearest the face
         t_axis, t_sign = face_axis, -face_sign
-    t = t_sign * ti.Vector([rot2[0, t_axis], rot2[1, t_axis], rot2[2, t_axis]])
+    t = t_sign * _column(rot2, t_axis)
     d_raw = t - _dot(t, a) * a
     p = stand[2] + a * size1[1] + size1[0] * _normalize(d_raw)
     return face_axis, face_sign, n, centre, t_axis, t_sign, a, t, d_raw, p, _dot(p - centre, n)
@@ -2295,30 +2302,32 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
     face (a can over the box's edge), whether the cylinder stands (or lies) on the face, and the
     face's normal from geom 1 to geom 2; count 0 when it does not stand on the face."""
     stand, base = _pick_shape(second == 0, shape1, shape2), _pick_shape(second == 1, shape1, shape2)
-    rot1, rot2, size2 = stand[3], base[3], base[4]
+    rot2, size2 = base[3], base[4]
+    axis1 = _column(stand[3], 2)
     # the face from the geometry alone (the collider's normal may point the wrong way at a pose
     # exactly touching, which picked the far face: a can launched at 10 m/s): the base's axis
     # nearest the standing axis (a cylinder's caps: its z), on the side of the standing centre
-    face_axis, aligned = 2, rot1[0, 2] * rot2[0, 2] + rot1[1, 2] * rot2[1, 2] + rot1[2, 2] * rot2[2, 2]
+    face_axis, aligned = 2, _dot(axis1, _column(rot2, 2))
     if base[0] == BOX:
         for k in ti.static(range(2)):
-            cosine = rot1[0, 2] * rot2[0, k] + rot1[1, 2] * rot2[1, k] + rot1[2, 2] * rot2[2, k]
+            cosine = _dot(axis1, _column(rot2, k))
             if ti.abs(cosine) > ti.abs(aligned):
                 face_axis, aligned = k, cosine
     lying = False
     apart = stand[2] - base[2]
-    outside = ti.abs(apart[0] * rot2[0, face_axis] + apart[1] * rot2[1, face_axis] + apart[2] * rot2[
-        2, face_axis]) > _half_extent(base, face_axis)  # (its centre beyond that face's plane)
+    outside = ti.abs(_dot(apart, _column(rot2, face_axis))) > _half_extent(base, face_axis)  # (beyond the face)
     if base[0] == BOX and (ti.abs(aligned) < ti.static(np.cos(STANDING_TILT)) or not outside):  # lying?
         best = -1.0
         for k in ti.static(range(3)):
-            along = ti.abs(normal[0] * rot2[0, k] + normal[1] * rot2[1, k] + normal[2] * rot2[2, k])
+            along = ti.abs(_dot(normal, _column(rot2, k)))
             if along > best:
                 face_axis, best = k, along
-        aligned = rot1[0, 2] * rot2[0, face_axis] + rot1[1, 2] * rot2[1, face_axis] + rot1[2, 2] * rot2[2, face_axis]
+        aligned = _dot(axis1, _column(rot2, face_axis))
         lying = ti.abs(aligned) <= ti.static(np.sin(LYING_TILT))
-    above = apart[0] * rot2[0, face_axis] + apart[1] * rot2[1, face_axis] + apart[2] * rot2[2, face_axis]
+    above = _dot(apart, _column(rot2, face_axis))
     face = 2 * face_axis + ti.select(above >= 0.0, 0, 1)  # the face on the standing cylinder's side
+    outward = _column(rot2, face_axis) * (1.0 - 2.0 * (face % 2))  # its normal
+    centre = base[2] + outward * _half_extent(base, face_axis)
     flip = ti.select(aligned * (1.0 - 2.0 * (face % 2)) > 0.0, 1, 0)  # the axis turned to point into the face
     position, out_normal = ti.Matrix.zero(float, CONVEX_MAX, 3), ti.Matrix.zero(float, CONVEX_MAX, 3)
     dist = ti.Vector.zero(float, CONVEX_MAX)
@@ -2328,19 +2337,18 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
     # the box's x, does not stand on the box's x face)
     standing = (ti.abs(aligned) >= ti.static(np.cos(STANDING_TILT)) or lying) and ti.abs(above) > _half_extent(
         base, face_axis)
-    for k in range(4):  # one evaluation in a loop: inlined once
+    for k in range(ti.select(lying, 2, 4)):  # one evaluation in a loop: inlined once
         row = ti.Vector([KIND_FACE_CAP, face, k, flip, second, 0, 0, 0, 0, 0, 0])
         if lying:  # its two line ends
-            row[2], row[3] = LYING, k % 2
+            row[2], row[3] = LYING, k
         point, unit, depth = _face_cap_evaluate(shape1, shape2, row)
-        if standing and depth <= shape1[5] and not (lying and k >= 2):  # (within the margin)
-            offset = point - (base[2] + unit * ti.select(second == 0, -1.0, 1.0) * _half_extent(base, face_axis))
+        if standing and depth <= shape1[5]:  # (within the margin)
+            offset = point - centre
             inplane = ti.Vector([0.0, 0.0])  # the point from the face's centre, along its in-plane axes
             on_face = True
             for turn in ti.static((1, 2)):  # the face's in-plane axes
                 side_axis = (face_axis + turn) % 3
-                inplane[turn - 1] = offset[0] * rot2[0, side_axis] + offset[1] * rot2[1, side_axis] + offset[
-                    2] * rot2[2, side_axis]
+                inplane[turn - 1] = _dot(offset, _column(rot2, side_axis))
                 if base[0] == BOX and ti.abs(inplane[turn - 1]) > size2[side_axis]:
                     on_face = False
             if base[0] == CYLINDER and inplane.norm_sqr() > size2[0] * size2[0]:
@@ -2353,8 +2361,7 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
                 for c in ti.static(range(FEATURE_SIZE)):
                     feature[count, c] = row[c]
                 count += 1
-    centre_dir = ti.Vector([rot2[0, face_axis], rot2[1, face_axis], rot2[2, face_axis]]) * (1.0 - 2.0 * (face % 2))
-    toward = centre_dir * ti.select(second == 0, -1.0, 1.0)  # the face's normal, from geom 1 to geom 2
+    toward = outward * ti.select(second == 0, -1.0, 1.0)  # the face's normal, from geom 1 to geom 2
     return count, position, out_normal, dist, feature, ti.abs(aligned), off_face, standing, toward
 
 
