@@ -42,7 +42,13 @@ internals, which is why pyproject.toml pins taichi 1.7.* (as for solvers/launch.
    AVX-512 machines that moves scalar integer logic into mask registers: ~9 % of the library's
    time in an a1 quadruped's fresh process, its first step 1.8–1.9 → 1.4–1.6 s (float64, warm
    cache), its run time unchanged within the noise (a1 at 1 and 256 envs, boxes at 1024, KUKA at
-   1024, old and new alternating: 2026-11-28).
+   1024, old and new alternating: 2026-11-28). And it skips the scheduler that runs after register
+   allocation (``-post-RA-scheduler=false``; an out-of-order core reorders the instructions anyway):
+   ~0.1 of the ~1.6 s code generation takes in a fresh a1 process (LLVM's -time-passes), fresh
+   processes (old and new alternating, three rounds) a1 3.59–3.87 → 3.38–3.59 s, KUKA 2.46–2.47 →
+   2.26–2.38 s; run time unchanged (a1 at 1 and 64 envs, same bits), where a smaller budget for
+   the register allocator's region splitting (``-grow-region-complexity-budget``), which saved
+   0.3 s more on a Panda, cost the a1's contact step ~2 %.
 """
 import ctypes
 import functools
@@ -141,13 +147,13 @@ def _symbol_values(path, names):
 
 
 def skip_code_generation_passes():
-    """Tell the LLVM inside Taichi's library not to run loop strength reduction nor X86 domain
-    reassignment when it generates machine code (4. above): once per process, from the CPU
-    runtime's first start (``gs.init``), before any kernel is loaded. It holds for the whole
-    process, every Taichi kernel (a user's own too) and later runtimes (Taichi's CUDA path adds
-    its own strength reduction pass, which stays). Does nothing where the library is not the one
-    this reads (another platform, a stripped build, another LLVM, a file replaced since it was
-    loaded): loads are then as slow as before, nothing else."""
+    """Tell the LLVM inside Taichi's library not to run loop strength reduction, X86 domain
+    reassignment nor the scheduler after register allocation when it generates machine code (4.
+    above): once per process, from the CPU runtime's first start (``gs.init``), before any kernel
+    is loaded. It holds for the whole process, every Taichi kernel (a user's own too) and later
+    runtimes (Taichi's CUDA path adds its own strength reduction pass, which stays). Does nothing
+    where the library is not the one this reads (another platform, a stripped build, another LLVM,
+    a file replaced since it was loaded): loads are then as slow as before, nothing else."""
     library = sys.modules.get("taichi._lib.core.taichi_python")
     if library is None or getattr(library, "_code_generation_passes_skipped", False):
         return
@@ -160,7 +166,8 @@ def skip_code_generation_passes():
         entry(len(_SKIPPED_PASSES), (ctypes.c_char_p * len(_SKIPPED_PASSES))(*_SKIPPED_PASSES), None)
 
 
-_SKIPPED_PASSES = (b"genesis_lite", b"-disable-lsr", b"-disable-x86-domain-reassignment")  # (argv[0] first)
+_SKIPPED_PASSES = (b"genesis_lite", b"-disable-lsr", b"-disable-x86-domain-reassignment",
+                   b"-post-RA-scheduler=false")  # (argv[0] first)
 
 
 def _loaded_entry(path):

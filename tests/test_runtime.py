@@ -244,7 +244,7 @@ import ctypes, sys
 import genesis_lite as gs
 from genesis_lite.solvers import taichi_startup
 library = sys.modules["taichi._lib.core.taichi_python"]
-names = ("PyInit_taichi_python", "_ZL10DisableLSR", "_ZL28DisableX86DomainReassignment")
+names = ("PyInit_taichi_python", "_ZL10DisableLSR", "_ZL28DisableX86DomainReassignment", "_ZL21EnablePostRAScheduler")
 values = taichi_startup._symbol_values(library.__file__, names)
 base = ctypes.cast(ctypes.CDLL(library.__file__).PyInit_taichi_python, ctypes.c_void_p).value - values[names[0]][0]
 option = lambda: [ctypes.string_at(base + values[name][0], 64) for name in names[1:]]  # (the cl::opt<bool>s)
@@ -268,12 +268,12 @@ def _taichi_symbols(*names):
 
 
 def test_cpu_runtime_skips_code_generation_passes():
-    """gs.init on the CPU sets LLVM's -disable-lsr and -disable-x86-domain-reassignment inside
-    Taichi's library (loading cached kernels 3-5× faster): each option's object in the library's
-    memory changes at the first start and stays as it is through later starts (the options are
-    given once a process)."""
+    """gs.init on the CPU sets LLVM's -disable-lsr, -disable-x86-domain-reassignment and
+    -post-RA-scheduler=false inside Taichi's library (loading cached kernels 3-5× faster): each
+    option's object in the library's memory changes at the first start and stays as it is through
+    later starts (the options are given once a process)."""
     _taichi_symbols("PyInit_taichi_python", "_ZL10DisableLSR", "_ZL28DisableX86DomainReassignment",
-                    "LLVMParseCommandLineOptions")
+                    "_ZL21EnablePostRAScheduler", "LLVMParseCommandLineOptions")
     code = _CODEGEN_OPTIONS.format(init="gs.init(backend=gs.cpu)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr[-2000:]
