@@ -34,8 +34,9 @@ def _scene(cone, n_envs=0, substeps=1, shape="box", tag="", smooth=False, ground
     """One scene per configuration (building is the slow part). Parameters persist across
     reset(): each case sets its own, and ``tag`` gives a scene of its own. smooth:
     RigidOptions(smooth_contact=True). ground: "plane", "box": a fixed box whose top is the
-    plane z = 0 (a mesh on it goes through the convex collider), or "slab": the plane with a free
-    0.6 × 0.6 m slab SLAB thick resting on it."""
+    plane z = 0 (a mesh on it goes through the convex collider), "can": a fixed can (r 0.4 m) whose
+    cap is that plane, "pedestal": a fixed 0.16 m wide box whose top is, or "slab": the plane with a
+    free 0.6 × 0.6 m slab SLAB thick resting on it."""
     key = (cone, n_envs, substeps, shape, tag, smooth, ground, gs.runtime.epoch)
     if key not in _SCENES:
         scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, substeps=substeps, requires_grad=True),
@@ -46,6 +47,10 @@ def _scene(cone, n_envs=0, substeps=1, shape="box", tag="", smooth=False, ground
             scene.add_entity(gs.morphs.Plane())
             if ground == "slab":
                 scene.add_entity(gs.morphs.Box(size=(0.6, 0.6, SLAB), pos=(0, 0, SLAB / 2)))
+        elif ground == "can":
+            scene.add_entity(gs.morphs.Cylinder(radius=0.4, height=0.2, pos=(0, 0, -0.1), fixed=True))
+        elif ground == "pedestal":
+            scene.add_entity(gs.morphs.Box(size=(0.16, 0.16, 0.2), pos=(0, 0, -0.1), fixed=True))
         else:
             scene.add_entity(gs.morphs.Box(size=(2.0, 2.0, 0.2), pos=(0, 0, -0.1), fixed=True))
         if shape == "box":
@@ -200,6 +205,16 @@ def test_cylinder_on_box(f64, case, cone):
     """A can on a fixed box: sliding and spinning on its cap, or dropped tilted on its rim until it
     stands — its contacts with the face are four rim points (convex.KIND_FACE_CAP) once it stands."""
     _check(case, cone, steps=50, shape="cylinder", ground="box")
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+@pytest.mark.parametrize("case", ["sliding_velocity", "tilted"])
+def test_face_on_a_cap_of_another_size(f64, case, cone):
+    """The box on a wider fixed can (its face's corners on the cap: convex.CORNER), and a can
+    (r 0.1 m) on a narrower fixed box (0.16 m: its cap's points under the box's edges, convex.EDGE,
+    and rim points where the box reaches beyond the rim)."""
+    _check(case, cone, steps=50, shape="box", ground="can")
+    _check(case, cone, steps=50, shape="cylinder", ground="pedestal")
 
 
 def test_default_tolerance_converges_an_elliptic_slide_for_its_gradient(f64):

@@ -23,7 +23,8 @@ clipping follow the 3.12 sources.
    polygon). Capsules (budget 2) and cylinders (budget 4) get one contact here: MuJoCo 4.0's
    multi-contact for them (and for margins, through the shallow path) is not reproduced; but a
    cylinder standing on a box's face or a wider cylinder's cap gets four rim points of its own
-   form, one lying on a box's face the two ends of its side's line (`_face_cap`).
+   form (a box's face within the cap its four corners), one lying on a box's face the two ends of
+   its side's line (`_face_cap`).
 
 A contact is emitted when dist < margin; its position is the midpoint of the witness points, its
 normal points from geom 1 to geom 2 (MuJoCo's convention).
@@ -71,7 +72,10 @@ normal (of the EPA contact for KIND_CLIP), coded in two ints (octahedral map, ~1
   = the face (0..5 = +x, -x, +y, -y, +z, -z; a cylinder's caps 4, 5), column 2 = the rim point
   (0..3 = +u, -u, +v, -v: the face's in-plane axes made perpendicular to the standing axis; 4 =
   LYING, an end of a lying cylinder's side line), column 3 = 1 when that axis is flipped to point
-  at the face (lying: the end), column 4 = 1 when the standing cylinder is geom 2.
+  at the face (lying: the end), column 4 = 1 when the standing cylinder is geom 2, column 5 = EDGE
+  (1) when the point is the cap's point under the face's edge (the face ends inside the rim); or
+  column 2 = CORNER (5), column 5 the corner k (at the signs 1 - 2 (k % 2) of the face's first
+  in-plane half extent, 1 - 2 (k // 2) of its second) of a box's face that lies within the cap.
 
 Replay. `convex_evaluate` and `plane_mesh_evaluate` give a contact again from its feature row
 as a closed form of the two geom poses; `convex_evaluate_adjoint` and
@@ -1699,24 +1703,31 @@ def convex_convex(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, mes
     mode1, mode2 = feature[0, 10] % 3, feature[0, 10] // 3
     on_box = type2 == BOX  # (standing on its cap or rim, or lying on its side)
     on_cap = type2 == CYLINDER and mode1 != 2 and mode2 != 2
-    if type1 == CYLINDER and count == 1 and (on_box or on_cap):
+    if type1 == CYLINDER and count <= 1 and (on_box or on_cap):
         second = int(on_cap and size2[0] < size1[0])  # the narrower cylinder stands on the other
-        n_face, face_position, face_normal, face_dist, face_feature, upright, off_face, on_face, toward = _face_cap(
-            (type1, mesh1, pos1, rot1, size1, margin), (type2, mesh2, pos2, rot2, size2, margin), second,
-            ti.Vector([normal[0, c] for c in ti.static(range(3))]))
+        # the collider's normal picks a lying cylinder's face; when it found none, the centres' line
+        met = _normalize(ti.select(count == 1, ti.Vector([normal[0, c] for c in ti.static(range(3))]), pos2 - pos1))
+        n_face, face_position, face_normal, face_dist, face_feature, upright, off_face, on_face, toward, corners = \
+            _face_cap((type1, mesh1, pos1, rot1, size1, margin), (type2, mesh2, pos2, rot2, size2, margin), second,
+                      met)
         # the collider's contact stays first when tilted beyond RIM_TILT on its rim (the lowest rim
         # point, which the four points, a square inscribed in the rim, reach only when the tilt is
         # along an axis) or when some point fell off the face (the cap over the edge meets the box
-        # there or under its centre)
-        keep = int(off_face or (ti.select(second == 0, mode1, mode2) == 0
-                                and ti.static(np.cos(STANDING_TILT)) <= upright <= ti.static(np.cos(RIM_TILT))))
-        agree = normal[0, 0] * toward[0] + normal[0, 1] * toward[1] + normal[0, 2] * toward[2]
+        # there or under its centre); never beside a face's corners (the whole face is on the cap)
+        keep = int(count == 1 and not corners and (off_face or (ti.select(second == 0, mode1, mode2) == 0 and ti.static(
+            np.cos(STANDING_TILT)) <= upright <= ti.static(np.cos(RIM_TILT)))))
+        agree = met[0] * toward[0] + met[1] * toward[1] + met[2] * toward[2]
         # the collider met the cylinder across the face (else elsewhere: a can on the floor whose rim
         # touches a low box's side has its centre above the box's top, whose plane is not where
         # they meet: a rim point on that face 4 cm "deep" launched it at 13 m/s); its normal may point
         # the wrong way (its iterate at a pose exactly touching, 2 r deep: a kick of 16 rad/s), and
         # then the face's points replace it even when there are none
         across = on_face and ti.abs(agree) >= ti.static(np.cos(STANDING_TILT))
+        if count == 0:  # GJK found them apart within its tolerance: only points as shallow (MISSED_DEPTH)
+            across = on_face
+            for i in ti.static(range(CONVEX_MAX)):
+                if i < n_face and face_dist[i] < -MISSED_DEPTH:
+                    across = False
         if across and agree < 0.0:
             keep, count = 0, 0
         if across and n_face > 0:
@@ -2235,9 +2246,11 @@ def _cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature,
 # follows the tilt's direction, which turns without bound as the tilt vanishes (its gradients did
 # not converge for a can sliding on its cap). Tilted more than RIM_TILT on its rim, the rim contact
 # (the lowest rim point) stays with the deepest three. The face is chosen from the poses alone.
-# Points off the face (a can over the box's edge or the cap's rim) are left out, and the collider's
-# own contact stays beside those on it. Of two cylinders, the narrower stands on the other. MuJoCo
-# 4.0 gives up to 4 contacts here by its own rule, not reproduced.
+# Points off the face (a can over the cap's rim) are left out, and the collider's own contact stays
+# beside those on it; on a box, a point whose face ends inside the rim is the cap's point under that
+# edge instead (EDGE), and a face within the cap touches at its corners (CORNER). Of two cylinders,
+# the narrower stands on the other. MuJoCo 4.0 gives up to 4 contacts here by its own rule, not
+# reproduced.
 STANDING_TILT = 0.1  # rad
 # Tilted more than this (on its rim), the cylinder keeps its rim contact (the lowest rim point) with
 # the four points: else, tilted along a diagonal, the square they form met the face 0.29 r sin(tilt)
@@ -2253,6 +2266,23 @@ RIM_TILT = 0.01  # rad
 # contacts are compared with MuJoCo's.
 LYING = 4
 LYING_TILT = 0.02  # rad
+# A box's face that ends inside the standing cylinder's rim along a point's axis (a box on a wider
+# can's cap, a wide can on a narrower box) cuts the contact short of the rim: the point is then the
+# cap's point whose foot on the face lies on that edge (column 5 = EDGE), reach = (the face's half
+# extent − the cap centre's offset along t) / |d_raw| from the cap's centre instead of the radius —
+# the same point where the edge meets the rim, so the switch is continuous. With rim points only, a
+# 10 cm box on a 20 cm can's cap kept one contact and rocked at 1 rad/s, a 40 cm can on a 30 cm box
+# at 0.3.
+EDGE = 1
+# A box's face that lies within the standing cylinder's cap (a box on a wider can) touches it at its
+# four corners (column 2 = CORNER, column 5 the corner): dist = (corner − e) . a from the cap's plane
+# along the cap's normal, which is the normal. The points under the face's edges would let a corner
+# of a tilted box sink in first (a box set 2° tilted on a can was kicked 4 mm up in float32).
+CORNER = 5
+# GJK in float32 finds a cylinder resting on a face apart now and then (a can on a free box: 8 % of
+# its steps with no contact, rocking at 0.04 m/s): then the face's points still count when none is
+# deeper than this (resting, 0.03 mm; a rim point on a face's plane far from where they meet, cm).
+MISSED_DEPTH = 1e-4  # m
 
 
 @ti.func
@@ -2274,8 +2304,9 @@ def _face_cap_terms(stand: ti.template(), base: ti.template(), feature):
     """Rim point `feature[2]` of the standing cylinder on face `feature[1]` of the base (see
     above), every intermediate: (face axis, its sign, n (the face's outward normal), centre (the
     face's), point axis, its sign, a (the standing axis towards the face; lying, towards the end),
-    t (the in-plane axis; lying, -n), d_raw = t - (t.a) a, p (the rim point), depth = (p - centre)
-    . n)."""
+    t (the in-plane axis; lying, -n), d_raw = t - (t.a) a, e (the cap's centre; lying, the end's),
+    edge (the reach of the face's edge from e along d_raw, `EDGE`), p = e + reach unit(d_raw) (the
+    rim point, reach the radius; the edge's point, reach = edge), depth = (p - centre) . n)."""
     rot1, size1, rot2 = stand[3], stand[4], base[3]
     face_axis, face_sign = feature[1] // 2, 1.0 - 2.0 * (feature[1] % 2)
     n = face_sign * _column(rot2, face_axis)
@@ -2286,8 +2317,28 @@ def _face_cap_terms(stand: ti.template(), base: ti.template(), feature):
         t_axis, t_sign = face_axis, -face_sign
     t = t_sign * _column(rot2, t_axis)
     d_raw = t - _dot(t, a) * a
-    p = stand[2] + a * size1[1] + size1[0] * _normalize(d_raw)
-    return face_axis, face_sign, n, centre, t_axis, t_sign, a, t, d_raw, p, _dot(p - centre, n)
+    e = stand[2] + a * size1[1]
+    # (p - centre) . t = half extent where p = e + edge d_raw / |d_raw| (d_raw . t = |d_raw|²)
+    edge = (_half_extent(base, t_axis) - _dot(e - centre, t)) / ti.max(ti.sqrt(_dot(d_raw, d_raw)), _MINVAL)
+    p = e + ti.select(feature[5] == EDGE, edge, size1[0]) * _normalize(d_raw)
+    return face_axis, face_sign, n, centre, t_axis, t_sign, a, t, d_raw, e, edge, p, _dot(p - centre, n)
+
+
+@ti.func
+def _corner_terms(stand: ti.template(), base: ti.template(), feature):
+    """Corner `feature[5]` of the box's face `feature[1]` against the standing cylinder's cap (see
+    CORNER): (u axis, v axis, their signs, a, e, q (the corner), dist = (q - e) . a, its offset
+    from e across a (its squared length: whether it lies within the cap))."""
+    face_axis, face_sign = feature[1] // 2, 1.0 - 2.0 * (feature[1] % 2)
+    u_axis, v_axis = (face_axis + 1) % 3, (face_axis + 2) % 3
+    u_sign, v_sign = 1.0 - 2.0 * (feature[5] % 2), 1.0 - 2.0 * (feature[5] // 2)
+    rot2, size2 = base[3], base[4]
+    q = (base[2] + face_sign * size2[face_axis] * _column(rot2, face_axis) + u_sign * size2[u_axis] * _column(rot2, u_axis)
+         + v_sign * size2[v_axis] * _column(rot2, v_axis))
+    a = (1.0 - 2.0 * feature[3]) * _column(stand[3], 2)
+    e = stand[2] + a * stand[4][1]
+    dist = _dot(q - e, a)
+    return u_axis, v_axis, u_sign, v_sign, a, e, q, dist, (q - e) - dist * a
 
 
 @ti.func
@@ -2337,10 +2388,20 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
     # the box's x, does not stand on the box's x face)
     standing = (ti.abs(aligned) >= ti.static(np.cos(STANDING_TILT)) or lying) and ti.abs(above) > _half_extent(
         base, face_axis)
+    corners = base[0] == BOX and not lying  # the box's face within the cap: its four corners
+    for k in ti.static(range(4)):
+        offset = _corner_terms(stand, base, ti.Vector([KIND_FACE_CAP, face, CORNER, flip, second, k, 0, 0, 0, 0, 0]))[8]
+        corners = corners and _dot(offset, offset) <= stand[4][0] * stand[4][0]
     for k in range(ti.select(lying, 2, 4)):  # one evaluation in a loop: inlined once
         row = ti.Vector([KIND_FACE_CAP, face, k, flip, second, 0, 0, 0, 0, 0, 0])
         if lying:  # its two line ends
             row[2], row[3] = LYING, k
+        elif corners:
+            row[2], row[5] = CORNER, k
+        elif base[0] == BOX:  # the box's face ends inside the rim (a rim point would be off it)
+            edge = _face_cap_terms(stand, base, row)[10]
+            if -stand[4][0] < edge and edge < stand[4][0]:
+                row[5] = EDGE
         point, unit, depth = _face_cap_evaluate(shape1, shape2, row)
         if standing and depth <= shape1[5]:  # (within the margin)
             offset = point - centre
@@ -2349,7 +2410,9 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
             for turn in ti.static((1, 2)):  # the face's in-plane axes
                 side_axis = (face_axis + turn) % 3
                 inplane[turn - 1] = _dot(offset, _column(rot2, side_axis))
-                if base[0] == BOX and ti.abs(inplane[turn - 1]) > size2[side_axis]:
+                # (an edge's point is on its edge by construction, up to round-off)
+                across_edge = corners or (row[5] == EDGE and side_axis == (face_axis + 1 + k // 2) % 3)
+                if base[0] == BOX and ti.abs(inplane[turn - 1]) > size2[side_axis] and not across_edge:
                     on_face = False
             if base[0] == CYLINDER and inplane.norm_sqr() > size2[0] * size2[0]:
                 on_face = False
@@ -2362,7 +2425,7 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
                     feature[count, c] = row[c]
                 count += 1
     toward = outward * ti.select(second == 0, -1.0, 1.0)  # the face's normal, from geom 1 to geom 2
-    return count, position, out_normal, dist, feature, ti.abs(aligned), off_face, standing, toward
+    return count, position, out_normal, dist, feature, ti.abs(aligned), off_face, standing, toward, corners
 
 
 @ti.func
@@ -2371,10 +2434,15 @@ def _face_cap_evaluate(shape1: ti.template(), shape2: ti.template(), feature):
     half its depth along the face's normal, the face's normal into the base (from the standing
     cylinder) or out of it (when the standing one is geom 2), the depth."""
     second = feature[4]
-    terms = _face_cap_terms(_pick_shape(second == 0, shape1, shape2), _pick_shape(second == 1, shape1, shape2),
-                            feature)
-    n, p, depth = terms[2], terms[9], terms[10]
-    return p - n * (0.5 * depth), n * ti.select(second == 0, -1.0, 1.0), depth
+    stand, base = _pick_shape(second == 0, shape1, shape2), _pick_shape(second == 1, shape1, shape2)
+    terms = _face_cap_terms(stand, base, feature)
+    n, p, depth = terms[2], terms[11], terms[12]
+    position, unit = p - n * (0.5 * depth), -n
+    if feature[2] == CORNER:  # the corner q and the cap's normal a
+        corner = _corner_terms(stand, base, feature)
+        a, q, dist = corner[4], corner[6], corner[7]
+        position, unit, depth = q - a * (0.5 * dist), a, dist
+    return position, unit * ti.select(second == 0, 1.0, -1.0), depth
 
 
 @ti.func
@@ -2382,17 +2450,66 @@ def _face_cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), fea
     """Reverse of `_face_cap_evaluate`: (g_pos1, g_rot1, g_pos2, g_rot2)."""
     second = feature[4]
     stand, base = _pick_shape(second == 0, shape1, shape2), _pick_shape(second == 1, shape1, shape2)
+    g_stand, g_rot_stand, g_base, g_rot_base = _face_cap_adjoint(stand, base, feature, g_position, g_normal, g_dist)
+    if feature[2] == CORNER:
+        g_stand, g_rot_stand, g_base, g_rot_base = _corner_adjoint(stand, base, feature, g_position, g_normal, g_dist)
+    first = second == 0
+    return (ti.select(first, g_stand, g_base), ti.select(first, g_rot_stand, g_rot_base),
+            ti.select(first, g_base, g_stand), ti.select(first, g_rot_base, g_rot_stand))
+
+
+@ti.func
+def _corner_adjoint(stand: ti.template(), base: ti.template(), feature, g_position, g_normal, g_dist):
+    """Reverse of a CORNER contact: (g_pos, g_rot) of the standing cylinder, then of the box."""
+    u_axis, v_axis, u_sign, v_sign, a, e, q, dist, across = _corner_terms(stand, base, feature)
+    face_axis, face_sign = feature[1] // 2, 1.0 - 2.0 * (feature[1] % 2)
+    # position = q - a dist / 2, normal = ±a, dist = (q - e) . a, e = stand's pos + a h
+    g_total = g_dist - 0.5 * _dot(g_position, a)
+    g_q = g_position + g_total * a
+    g_e = -g_total * a
+    g_a = (ti.select(feature[4] == 0, 1.0, -1.0) * g_normal - (0.5 * dist) * g_position + g_total * (q - e)
+           + stand[4][1] * g_e)
+    g_rot_stand, g_rot_base = ti.Matrix.zero(float, 3, 3), ti.Matrix.zero(float, 3, 3)
+    a_sign, size2 = 1.0 - 2.0 * feature[3], base[4]
+    for r in ti.static(range(3)):
+        g_rot_stand[r, 2] = a_sign * g_a[r]
+        for k in ti.static(range(3)):  # q = box's pos + Σ sign · half size · column
+            if k == face_axis:
+                g_rot_base[r, k] += face_sign * size2[k] * g_q[r]
+            if k == u_axis:
+                g_rot_base[r, k] += u_sign * size2[k] * g_q[r]
+            if k == v_axis:
+                g_rot_base[r, k] += v_sign * size2[k] * g_q[r]
+    return g_e, g_rot_stand, g_q, g_rot_base
+
+
+@ti.func
+def _face_cap_adjoint(stand: ti.template(), base: ti.template(), feature, g_position, g_normal, g_dist):
+    """Reverse of a rim, edge or lying contact: (g_pos, g_rot) of the standing cylinder, then of the
+    base."""
+    second = feature[4]
     size1 = stand[4]
-    face_axis, face_sign, n, centre, t_axis, t_sign, a, t, d_raw, p, depth = _face_cap_terms(stand, base, feature)
+    face_axis, face_sign, n, centre, t_axis, t_sign, a, t, d_raw, e, edge, p, depth = _face_cap_terms(
+        stand, base, feature)
     # position = p - n depth / 2, normal = ∓n, dist = depth = (p - centre) . n
     g_depth = g_dist - 0.5 * _dot(g_position, n)
     g_n = ti.select(second == 0, -1.0, 1.0) * g_normal - (0.5 * depth) * g_position + g_depth * (p - centre)
     g_p = g_position + g_depth * n
     g_centre = -g_depth * n
-    # p = stand's pos + a h + r unit(d_raw), d_raw = t - (t . a) a
-    g_draw = _normalize_adjoint(d_raw, size1[0] * g_p)
-    g_t = g_draw - a * _dot(a, g_draw)
-    g_a = size1[1] * g_p - t * _dot(a, g_draw) - _dot(t, a) * g_draw
+    # p = e + reach unit(d_raw), e = stand's pos + a h, d_raw = t - (t . a) a
+    reach = ti.select(feature[5] == EDGE, edge, size1[0])
+    g_draw = _normalize_adjoint(d_raw, reach * g_p)
+    g_e, g_t = g_p, ti.Vector([0.0, 0.0, 0.0])
+    if feature[5] == EDGE:  # reach = (half extent - (e - centre) . t) / |d_raw|
+        length = ti.max(ti.sqrt(_dot(d_raw, d_raw)), _MINVAL)
+        g_reach = _dot(g_p, d_raw) / length
+        across = g_reach / length
+        g_e -= across * t
+        g_centre += across * t
+        g_t -= across * (e - centre)
+        g_draw -= (across * edge / length) * d_raw
+    g_t += g_draw - a * _dot(a, g_draw)
+    g_a = size1[1] * g_e - t * _dot(a, g_draw) - _dot(t, a) * g_draw
     # centre = base's pos + n half extent; n = ±column face_axis of the base's rotation, t = ±column t_axis
     g_n += _half_extent(base, face_axis) * g_centre
     g_rot_stand, g_rot_base = ti.Matrix.zero(float, 3, 3), ti.Matrix.zero(float, 3, 3)
@@ -2404,9 +2521,7 @@ def _face_cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), fea
                 g_rot_base[r, k] += face_sign * g_n[r]
             if k == t_axis:
                 g_rot_base[r, k] += t_sign * g_t[r]
-    first = second == 0
-    return (ti.select(first, g_p, g_centre), ti.select(first, g_rot_stand, g_rot_base),
-            ti.select(first, g_centre, g_p), ti.select(first, g_rot_base, g_rot_stand))
+    return g_e, g_rot_stand, g_centre, g_rot_base
 
 
 # A cylinder meeting a vertex, an edge or another cylinder's rim at its rim (m < 2 in `_core_terms`):
