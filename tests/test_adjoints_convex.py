@@ -47,7 +47,7 @@ BRANCHES = {"plane", "core m=0", "core m=1", "core m=2", "epa m=2", "cylinder ri
             "rim on a point", "rim on a line", "rim on a rim", "rim on a rim holding both ends", "rim of geom 1",
             "rim of geom 2", "rim on its side", "clip face-face", "clip edge of geom 1", "clip edge of geom 2",
             "clip vertex", "clip edge x side plane", "clip side x side plane", "clip edge with margin",
-            "cylinder standing on a box face", "cylinder lying on a box face", "cap under a box face's edge",
+            "cylinder standing on a box face", "cylinder lying on a face", "cap under a box face's edge",
             "box face's corner on a cap"}
 
 
@@ -168,6 +168,7 @@ ALIGNED = [("capsule", "cylinder", _QUARTER, 0.05, None), ("cylinder", "cylinder
            ("cylinder", "cylinder", np.eye(3), 0.05, ((0.03, 0.05), None)),
            ("cylinder", "cylinder", np.eye(3), 0.1, (None, (0.03, 0.1))),
            ("cylinder", "box", _QUARTER, 0.03, ((0.03, 0.05), None)),  # a small can lying on the box
+           ("cylinder", "cylinder", _QUARTER, 0.03, ((0.03, 0.05), None)),  # ... or on the other's cap
            # a box's face within a wider can's cap (its corners), or ending inside its rim (the points
            # under its edges)
            ("cylinder", "box", np.eye(3), 0.05, ((0.1, 0.05), (0.05, 0.04))),
@@ -241,7 +242,7 @@ def _branch(f, types, margin):
     if f[0] == cv.KIND_FACE_CAP:
         if f[2] == cv.CORNER:
             return {"box face's corner on a cap"}
-        return {"cylinder lying on a box face" if f[2] == cv.LYING else "cylinder standing on a box face"} | (
+        return {"cylinder lying on a face" if f[2] == cv.LYING else "cylinder standing on a box face"} | (
             {"cap under a box face's edge"} if f[2] != cv.LYING and f[5] == cv.EDGE else set())
     if f[0] == cv.KIND_CLIP:
         tags = int(f[3] >= 256) + int(f[4] >= 256)

@@ -1699,12 +1699,12 @@ def convex_convex(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, mes
                 dist[i] = margin + ws.ccd_f[row + (_F_WIT + i,)]
                 for c in ti.static(range(FEATURE_SIZE)):
                     feature[i, c] = ws.ccd_i[row + (_I_WIT + i * FEATURE_SIZE + c,)]
-    # a cylinder standing on a box's face or a wider cylinder's cap (cap or rim), or lying on a box (side)
+    # a cylinder standing on a box's face or a wider cylinder's cap (cap or rim), or lying on either (side)
     mode1, mode2 = feature[0, 10] % 3, feature[0, 10] // 3
     on_box = type2 == BOX  # (standing on its cap or rim, or lying on its side)
-    on_cap = type2 == CYLINDER and mode1 != 2 and mode2 != 2
+    second = int(type2 == CYLINDER and size2[0] < size1[0])  # the narrower cylinder stands (or lies) on the other
+    on_cap = type2 == CYLINDER and ti.select(second == 0, mode2, mode1) != 2  # (the wider met at its cap or rim)
     if type1 == CYLINDER and count <= 1 and (on_box or on_cap):
-        second = int(on_cap and size2[0] < size1[0])  # the narrower cylinder stands on the other
         # the collider's normal picks a lying cylinder's face; when it found none, the centres' line
         met = _normalize(ti.select(count == 1, ti.Vector([normal[0, c] for c in ti.static(range(3))]), pos2 - pos1))
         n_face, face_position, face_normal, face_dist, face_feature, upright, off_face, on_face, toward, corners = \
@@ -2374,6 +2374,8 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
             if along > best:
                 face_axis, best = k, along
         aligned = _dot(axis1, _column(rot2, face_axis))
+        lying = ti.abs(aligned) <= ti.static(np.sin(LYING_TILT))
+    elif base[0] == CYLINDER:  # lying on the wider cylinder's cap (its only face)
         lying = ti.abs(aligned) <= ti.static(np.sin(LYING_TILT))
     above = _dot(apart, _column(rot2, face_axis))
     face = 2 * face_axis + ti.select(above >= 0.0, 0, 1)  # the face on the standing cylinder's side
