@@ -48,7 +48,7 @@ BRANCHES = {"plane", "core m=0", "core m=1", "core m=2", "epa m=2", "cylinder ri
             "rim of geom 2", "rim on its side", "clip face-face", "clip edge of geom 1", "clip edge of geom 2",
             "clip vertex", "clip edge x side plane", "clip side x side plane", "clip edge with margin",
             "cylinder standing on a box face", "cylinder lying on a face", "cap under a box face's edge",
-            "box face's corner on a cap"}
+            "box face's corner on a cap", "rim point toward a box face's centre"}
 
 
 @ti.func
@@ -172,7 +172,9 @@ ALIGNED = [("capsule", "cylinder", _QUARTER, 0.05, None), ("cylinder", "cylinder
            # a box's face within a wider can's cap (its corners), or ending inside its rim (the points
            # under its edges)
            ("cylinder", "box", np.eye(3), 0.05, ((0.1, 0.05), (0.05, 0.04))),
-           ("cylinder", "box", np.eye(3), 0.05, ((0.12, 0.05), None))]
+           ("cylinder", "box", np.eye(3), 0.05, ((0.12, 0.05), None)),
+           # a small box's face off the can's axis (its corners within the cap, the rim point toward it)
+           ("cylinder", "box", np.eye(3), 0.05, ((0.04, 0.05), (0.02, 0.02)))]
 _HALF_AXIS = {"cylinder": 0.1, "box": 0.06}  # geom 2's half extent along its z axis (SIZES)
 
 
@@ -242,6 +244,8 @@ def _branch(f, types, margin):
     if f[0] == cv.KIND_FACE_CAP:
         if f[2] == cv.CORNER:
             return {"box face's corner on a cap"}
+        if f[2] == cv.TOWARD:
+            return {"rim point toward a box face's centre"}
         return {"cylinder lying on a face" if f[2] == cv.LYING else "cylinder standing on a box face"} | (
             {"cap under a box face's edge"} if f[2] != cv.LYING and f[5] == cv.EDGE else set())
     if f[0] == cv.KIND_CLIP:

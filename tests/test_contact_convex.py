@@ -384,13 +384,14 @@ def test_a_face_and_a_cap_of_other_sizes_rest(precision, case):
 
 
 @pytest.mark.parametrize("precision", ["32", "64"])
-@pytest.mark.parametrize("pose", [(0.07, 0.0, 0.0, 10.0), (-0.047, -0.046, 3.73, 20.3)])
+@pytest.mark.parametrize("pose", [(0.07, 0.0, 0.0, 10.0), (-0.047, -0.046, 3.73, 20.3), (0.017, -0.0714, 0.0, 52.8)])
 def test_a_box_whose_face_misses_the_cans_axis_rests(precision, pose):
     """A box (10 cm) on a can's cap (r 10 cm) with the can's axis outside its face (x, y offset,
     tilt, yaw): the rim or edge points off the face give way to the face's corners within the cap
-    (convex.FACE_CANDIDATES) and the collider's contact goes. It kept that contact beside two points
-    and rocked at 0.13 rad/s (the first pose); in float32 the contact kept at the second pose was
-    24 mm deep and threw the box off the can."""
+    (convex.FACE_CANDIDATES) with the rim point toward the face's centre (convex.TOWARD), and the
+    collider's contact goes. It kept that contact beside two points and rocked at 0.13 rad/s (the
+    first pose); in float32 the contact kept at the second pose was 24 mm deep and threw the box off
+    the can; without the rim point toward the centre the third rocked at 0.13 rad/s."""
     x, y, tilt, yaw = pose
     gs.init(precision=precision, logging_level="warning")
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002), show_viewer=False)
