@@ -35,8 +35,9 @@ def _scene(cone, n_envs=0, substeps=1, shape="box", tag="", smooth=False, ground
     reset(): each case sets its own, and ``tag`` gives a scene of its own. smooth:
     RigidOptions(smooth_contact=True). ground: "plane", "box": a fixed box whose top is the
     plane z = 0 (a mesh on it goes through the convex collider), "can": a fixed can (r 0.4 m) whose
-    cap is that plane, "pedestal": a fixed 0.16 m wide box whose top is, or "slab": the plane with a
-    free 0.6 × 0.6 m slab SLAB thick resting on it."""
+    cap is that plane, "offcan": one (r 0.2 m) whose axis, 0.17 m off the box's centre, misses the
+    box's face, "pedestal": a fixed 0.16 m wide box whose top is, or "slab": the plane with a free
+    0.6 × 0.6 m slab SLAB thick resting on it."""
     key = (cone, n_envs, substeps, shape, tag, smooth, ground, gs.runtime.epoch)
     if key not in _SCENES:
         scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, substeps=substeps, requires_grad=True),
@@ -49,6 +50,8 @@ def _scene(cone, n_envs=0, substeps=1, shape="box", tag="", smooth=False, ground
                 scene.add_entity(gs.morphs.Box(size=(0.6, 0.6, SLAB), pos=(0, 0, SLAB / 2)))
         elif ground == "can":
             scene.add_entity(gs.morphs.Cylinder(radius=0.4, height=0.2, pos=(0, 0, -0.1), fixed=True))
+        elif ground == "offcan":
+            scene.add_entity(gs.morphs.Cylinder(radius=0.2, height=0.2, pos=(0.03, 0.17, -0.1), fixed=True))
         elif ground == "pedestal":
             scene.add_entity(gs.morphs.Box(size=(0.16, 0.16, 0.2), pos=(0, 0, -0.1), fixed=True))
         else:
@@ -210,10 +213,12 @@ def test_cylinder_on_box(f64, case, cone):
 @pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
 @pytest.mark.parametrize("case", ["sliding_velocity", "tilted"])
 def test_face_on_a_cap_of_another_size(f64, case, cone):
-    """The box on a wider fixed can (its face's corners on the cap: convex.CORNER), and a can
-    (r 0.1 m) on a narrower fixed box (0.16 m: its cap's points under the box's edges, convex.EDGE,
-    and rim points where the box reaches beyond the rim)."""
+    """The box on a wider fixed can (its face's corners on the cap: convex.CORNER), on one whose
+    axis misses its face (corners within the cap, rim points and the one toward the face's centre:
+    convex.TOWARD), and a can (r 0.1 m) on a narrower fixed box (0.16 m: its cap's points under the
+    box's edges, convex.EDGE, and rim points where the box reaches beyond the rim)."""
     _check(case, cone, steps=50, shape="box", ground="can")
+    _check(case, cone, steps=50, shape="box", ground="offcan")
     _check(case, cone, steps=50, shape="cylinder", ground="pedestal")
 
 
