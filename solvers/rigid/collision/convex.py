@@ -2348,8 +2348,8 @@ def _corner_terms(stand: ti.template(), base: ti.template(), feature):
     u_axis, v_axis = (face_axis + 1) % 3, (face_axis + 2) % 3
     u_sign, v_sign = 1.0 - 2.0 * (feature[5] % 2), 1.0 - 2.0 * (feature[5] // 2)
     rot2, size2 = base[3], base[4]
-    q = (base[2] + face_sign * size2[face_axis] * _column(rot2, face_axis) + u_sign * size2[u_axis] * _column(rot2, u_axis)
-         + v_sign * size2[v_axis] * _column(rot2, v_axis))
+    q = (base[2] + face_sign * size2[face_axis] * _column(rot2, face_axis)
+         + u_sign * size2[u_axis] * _column(rot2, u_axis) + v_sign * size2[v_axis] * _column(rot2, v_axis))
     a = (1.0 - 2.0 * feature[3]) * _column(stand[3], 2)
     e = stand[2] + a * stand[4][1]
     dist = _dot(q - e, a)
