@@ -357,9 +357,9 @@ class RigidSolver(Solver):
                        f"expected enable_mujoco_compatibility=False (their converged contacts)")
             else:
                 why = (f"a contact of {names} kept the convex collider's iterate (two cylinders at their rims "
-                       f"with both ends of each in the contact's feature, or a feature whose form is not finite or "
-                       f"not converged), which has no exact gradient; expected other contact features, or "
-                       f"RigidOptions(enable_collision=False)")
+                       f"with both ends of each in the contact's feature, or a feature whose form is not finite, "
+                       f"not converged, or another stationary point far from the iterate), which has no exact "
+                       f"gradient; expected other contact features, or RigidOptions(enable_collision=False)")
             raise GradientError(f"rigid solver (entities: {', '.join(self.entity_names)}): this step had no exact "
                                 f"gradient: {why}")
 
