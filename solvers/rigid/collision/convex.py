@@ -2286,15 +2286,15 @@ CORNER = 5
 # deeper than this (resting, 0.03 mm; a rim point on a face's plane far from where they meet, cm).
 MISSED_DEPTH = 1e-4  # m
 # A box's face partly within the cap, some rim (or edge) point off it: the face's corners within the
-# cap join the points on it, rim points giving way beyond CONVEX_MAX, and the collider's contact does not (a
-# box whose face missed the can's axis kept it beside two points and rocked at 0.13 rad/s). Corners
-# are not added beside four points on the face: the deepest four of up to seven then changed from
-# step to step, and a box 3 cm off a can's axis, tilted 3°, rocked at 0.25 rad/s.
+# cap join the points on it, rim points giving way beyond CONVEX_MAX, and the collider's contact
+# does not (a box whose face missed the can's axis kept it beside two points and rocked at 0.13
+# rad/s). Corners are not added beside four points on the face: the deepest four of up to seven
+# then changed from step to step, and a box 3 cm off a can's axis, tilted 3°, rocked at 0.25 rad/s.
 FACE_CANDIDATES = 9
 # ... and the rim point toward the face's centre joins them (column 2 = TOWARD: t = the face's
-# centre − the cap's, made perpendicular to the axis), kept before rim points: the corners near the can's axis
-# and a rim point along a box axis did not surround a box centred 7–9 cm off the axis of a 10 cm
-# can (it rocked at up to 1 rad/s, in 8 of 40 random poses).
+# centre − the cap's, made perpendicular to the axis), kept before rim points: the corners near the
+# can's axis and a rim point along a box axis did not surround a box centred 7–9 cm off the axis of
+# a 10 cm can (it rocked at up to 1 rad/s, in 8 of 40 random poses).
 TOWARD = 6
 
 
@@ -2317,7 +2317,8 @@ def _face_cap_terms(stand: ti.template(), base: ti.template(), feature):
     """Rim point `feature[2]` of the standing cylinder on face `feature[1]` of the base (see
     above), every intermediate: (face axis, its sign, n (the face's outward normal), centre (the
     face's), point axis, its sign, a (the standing axis towards the face; lying, towards the end),
-    t (the in-plane axis; lying, -n), d_raw = t - (t.a) a, e (the cap's centre; lying, the end's),
+    t (the in-plane axis; lying, -n; TOWARD, the face's centre - e), d_raw = t - (t.a) a, e (the
+    cap's centre; lying, the end's),
     edge (the reach of the face's edge from e along d_raw, `EDGE`), p = e + reach unit(d_raw) (the
     rim point, reach the radius; the edge's point, reach = edge), depth = (p - centre) . n)."""
     rot1, size1, rot2 = stand[3], stand[4], base[3]
@@ -2365,8 +2366,9 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
     (count, position (CONVEX_MAX, 3), normal (CONVEX_MAX, 3), dist (CONVEX_MAX,), feature
     (CONVEX_MAX, FEATURE_SIZE)) as convex_convex's (the points on the face), the cosine of the
     standing axis's tilt from the face's normal, whether a point within the margin fell off the
-    face (a can over the box's edge), whether the cylinder stands (or lies) on the face, and the
-    face's normal from geom 1 to geom 2; count 0 when it does not stand on the face."""
+    face (a can over the box's edge), whether the cylinder stands (or lies) on the face, the
+    face's normal from geom 1 to geom 2, and whether a box face's corner is among the points;
+    count 0 when it does not stand on the face."""
     stand, base = _pick_shape(second == 0, shape1, shape2), _pick_shape(second == 1, shape1, shape2)
     rot2, size2 = base[3], base[4]
     axis1 = _column(stand[3], 2)
@@ -2412,7 +2414,7 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
         inside[k] = int(base[0] == BOX and not lying and _dot(offset, offset) <= stand[4][0] * stand[4][0])
     corners = inside.sum() == 4
     # candidates: the rim (or edge) points, then, where one fell off the face, the corners within the
-    # cap (a box whose face misses the can's axis), at most FACE_CANDIDATES
+    # cap and the rim point toward the face's centre (a box whose face misses the can's axis)
     cand_position, cand_normal = ti.Matrix.zero(float, FACE_CANDIDATES, 3), ti.Matrix.zero(float, FACE_CANDIDATES, 3)
     cand_dist = ti.Vector.zero(float, FACE_CANDIDATES)
     cand_feature = ti.Matrix.zero(ti.i32, FACE_CANDIDATES, FEATURE_SIZE)
