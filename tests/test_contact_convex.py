@@ -383,6 +383,41 @@ def test_a_face_and_a_cap_of_other_sizes_rest(precision, case):
     assert top.get_dofs_velocity().abs().max().item() < 1e-4
 
 
+@pytest.mark.parametrize("case", ["box on a wider can", "wide can on a box"])
+def test_a_face_and_a_cap_of_other_sizes_rest_where_mujoco_does(f64, case):
+    """The scenes above with MuJoCo's defaults (enable_mujoco_compatibility: its time constant 0.02 s,
+    so resting 0.11 mm deep where our default rests 0.027 mm deep), beside MuJoCo 4.0 itself: the
+    box rests on its four corners at MuJoCo's height to 1e-9 m (MuJoCo's own multi-contact gives the
+    same four corners); the wide can within 0.1 mm of it (MuJoCo's rule picks four points of unequal
+    depth, its can resting 0.04 mm lower)."""
+    quat = (0.99602, 0.01662, 0.01021, 0.08699)  # a 2°, 1°, 10° turn (x, y, z, extrinsic)
+    top_z = 0.2 + 0.025 + 1e-3
+    if case == "box on a wider can":
+        base_xml = '<geom type="cylinder" size="0.1 0.1" pos="0 0 0.1"/>'
+        top_xml = '<geom type="box" size="0.05 0.05 0.025"/>'
+        base, top = (gs.morphs.Cylinder(radius=0.1, height=0.2, pos=(0, 0, 0.1), fixed=True),
+                     gs.morphs.Box(size=(0.1, 0.1, 0.05), pos=(0.01, 0.0, top_z), quat=quat))
+    else:
+        base_xml = '<geom type="box" size="0.15 0.15 0.1" pos="0 0 0.1"/>'
+        top_xml = '<geom type="cylinder" size="0.2 0.025"/>'
+        base, top = (gs.morphs.Box(size=(0.3, 0.3, 0.2), pos=(0, 0, 0.1), fixed=True),
+                     gs.morphs.Cylinder(radius=0.2, height=0.05, pos=(0.01, 0.0, top_z), quat=quat))
+    m = mujoco.MjModel.from_xml_string(
+        f'<mujoco><option timestep="0.002"/><worldbody>{base_xml}<body pos="0.01 0 {top_z}" '
+        f'quat="{" ".join(map(str, quat))}"><freejoint/>{top_xml}</body></worldbody></mujoco>')
+    d = mujoco.MjData(m)
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002),
+                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True), show_viewer=False)
+    scene.add_entity(base)
+    body = scene.add_entity(top)
+    scene.build()
+    for _ in range(500):
+        scene.step()
+        mujoco.mj_step(m, d)
+    assert np.abs(d.qvel).max() < 1e-6 and body.get_dofs_velocity().abs().max().item() < 1e-6
+    assert abs(body.get_pos()[2].item() - d.qpos[2]) < (1e-9 if case == "box on a wider can" else 1e-4)
+
+
 @pytest.mark.parametrize("precision", ["32", "64"])
 @pytest.mark.parametrize("pose", [(0.07, 0.0, 0.0, 10.0), (-0.047, -0.046, 3.73, 20.3), (0.017, -0.0714, 0.0, 52.8)])
 def test_a_box_whose_face_misses_the_cans_axis_rests(precision, pose):

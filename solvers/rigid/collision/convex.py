@@ -2318,9 +2318,9 @@ def _face_cap_terms(stand: ti.template(), base: ti.template(), feature):
     above), every intermediate: (face axis, its sign, n (the face's outward normal), centre (the
     face's), point axis, its sign, a (the standing axis towards the face; lying, towards the end),
     t (the in-plane axis; lying, -n; TOWARD, the face's centre - e), d_raw = t - (t.a) a, e (the
-    cap's centre; lying, the end's),
-    edge (the reach of the face's edge from e along d_raw, `EDGE`), p = e + reach unit(d_raw) (the
-    rim point, reach the radius; the edge's point, reach = edge), depth = (p - centre) . n)."""
+    cap's centre; lying, the end's), edge (the reach of the face's edge from e along d_raw, `EDGE`),
+    p = e + reach unit(d_raw) (the rim point, reach the radius; the edge's point, reach = edge),
+    depth = (p - centre) . n)."""
     rot1, size1, rot2 = stand[3], stand[4], base[3]
     face_axis, face_sign = feature[1] // 2, 1.0 - 2.0 * (feature[1] % 2)
     n = face_sign * _column(rot2, face_axis)
@@ -2487,13 +2487,15 @@ def _face_cap_evaluate(shape1: ti.template(), shape2: ti.template(), feature):
     cylinder) or out of it (when the standing one is geom 2), the depth."""
     second = feature[4]
     stand, base = _pick_shape(second == 0, shape1, shape2), _pick_shape(second == 1, shape1, shape2)
-    terms = _face_cap_terms(stand, base, feature)
-    n, p, depth = terms[2], terms[11], terms[12]
-    position, unit = p - n * (0.5 * depth), -n
+    position, unit, depth = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0]), 0.0
     if feature[2] == CORNER:  # the corner q and the cap's normal a
         corner = _corner_terms(stand, base, feature)
         a, q, dist = corner[4], corner[6], corner[7]
         position, unit, depth = q - a * (0.5 * dist), a, dist
+    else:  # the rim (or edge) point p and the face's normal n
+        terms = _face_cap_terms(stand, base, feature)
+        n, p, dist = terms[2], terms[11], terms[12]
+        position, unit, depth = p - n * (0.5 * dist), -n, dist
     return position, unit * ti.select(second == 0, 1.0, -1.0), depth
 
 
@@ -2502,9 +2504,13 @@ def _face_cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), fea
     """Reverse of `_face_cap_evaluate`: (g_pos1, g_rot1, g_pos2, g_rot2)."""
     second = feature[4]
     stand, base = _pick_shape(second == 0, shape1, shape2), _pick_shape(second == 1, shape1, shape2)
-    g_stand, g_rot_stand, g_base, g_rot_base = _face_cap_adjoint(stand, base, feature, g_position, g_normal, g_dist)
+    g_stand, g_base = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+    g_rot_stand, g_rot_base = ti.Matrix.zero(float, 3, 3), ti.Matrix.zero(float, 3, 3)
     if feature[2] == CORNER:
         g_stand, g_rot_stand, g_base, g_rot_base = _corner_adjoint(stand, base, feature, g_position, g_normal, g_dist)
+    else:
+        g_stand, g_rot_stand, g_base, g_rot_base = _face_cap_adjoint(stand, base, feature, g_position, g_normal,
+                                                                     g_dist)
     first = second == 0
     return (ti.select(first, g_stand, g_base), ti.select(first, g_rot_stand, g_rot_base),
             ti.select(first, g_base, g_stand), ti.select(first, g_rot_base, g_rot_stand))
