@@ -483,6 +483,29 @@ def test_a_can_touching_a_low_box_with_its_side_is_not_launched(f64):
     assert fastest < 0.1, fastest
 
 
+def test_a_can_resting_against_a_box_side_has_a_gradient(f64):
+    """The can of the test above, pushed out of the box's side, rests against it touching to ~1e-10
+    m, where the collider's normal (its witness points' difference) has a sign of round-off: the
+    converged form of its feature, oriented by it, took the can's far side (2 r deep), was refused
+    (detect.FORM_APART) and flagged 256 of 450 steps, so the backward raised GradientError. Now the
+    form oriented the other way is taken: a differentiable rollout has its gradient, and the contact
+    with the box stays on the near side."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, requires_grad=True), show_viewer=False)
+    scene.add_entity(gs.morphs.Plane())
+    scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.04), pos=(0, 0, 0.02), fixed=True))
+    can = scene.add_entity(gs.morphs.Cylinder(radius=0.033, height=0.12, pos=(0.1 + 0.033 - 5e-4, 0, 0.06)))
+    scene.build()
+    start = torch.zeros(6, dtype=torch.float64, requires_grad=True)
+    can.set_dofs_velocity(start)
+    for _ in range(450):
+        scene.step()
+    rows = scene.rigid_solver.contacts()[0].detach().cpu().numpy()
+    with_box = rows[(rows[:, 0] >= 1) & (rows[:, 1] >= 1)]
+    assert len(with_box) == 1 and abs(with_box[0, 8]) < 1e-6 and abs(with_box[0, 2] - 0.1) < 1e-6, with_box
+    can.get_pos()[0].backward()
+    assert torch.isfinite(start.grad).all()
+
+
 def test_a_wide_can_over_a_box_corner_stays_on_in_float32(f32):
     """A can (r 0.2 m) set 3° tilted on a 0.3 m box, its rim over the box's corner, float32: the
     converged form of a collider contact was another stationary point, 113 mm deep (beside face

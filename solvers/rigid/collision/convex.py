@@ -152,7 +152,7 @@ _MINVAL2 = _MINVAL * _MINVAL
 _BIG = 1e30                         # "no value" (MuJoCo: DBL_MAX)
 _FLT_MAX = 3.4028234663852886e38    # MuJoCo's exhaustive mesh search starts at -FLT_MAX
 _GJK_EPS = 0.5 * (CCD_TOLERANCE * CCD_TOLERANCE)
-_OCTAHEDRAL = 1073741824.0          # 2^30: scale of a unit vector's two-int code (_encode_direction)
+_OCTAHEDRAL = 1073741824.0          # 2^30: scale of a unit vector's two-int code (encode_direction)
 _AXIS_TOL = 1e-9                    # a normal this close to a cylinder's axis (across it): on its cap (side)
 _FACE_TOL = 0.996                   # faces aligned within ~5.1 deg
 _EDGE_TOL = 0.0888                  # edge parallel to a face within ~5.1 deg
@@ -410,7 +410,7 @@ def _sign(x):
 
 
 @ti.func
-def _encode_direction(unit):
+def encode_direction(unit):
     """Two ints coding a unit 3-vector (octahedral map, steps of 2^-30: ~1e-9 rad)."""
     p = unit / (ti.abs(unit[0]) + ti.abs(unit[1]) + ti.abs(unit[2]))
     x, y = p[0], p[1]
@@ -420,8 +420,8 @@ def _encode_direction(unit):
 
 
 @ti.func
-def _decode_direction(code_x, code_y):
-    """The unit 3-vector of an `_encode_direction` code."""
+def decode_direction(code_x, code_y):
+    """The unit 3-vector of an `encode_direction` code."""
     x, y = code_x / _OCTAHEDRAL, code_y / _OCTAHEDRAL
     z = 1.0 - ti.abs(x) - ti.abs(y)
     if z < 0:
@@ -1592,7 +1592,7 @@ def _write_witness(shape1: ti.template(), shape2: ti.template(), ws: ti.template
     normal = _normalize(x1 - x2)
     ws.ccd_i[row + (base,)] = kind
     ws.ccd_i[row + (base + 7,)] = nslots
-    ws.ccd_i[row + (base + 8,)], ws.ccd_i[row + (base + 9,)] = _encode_direction(normal)
+    ws.ccd_i[row + (base + 8,)], ws.ccd_i[row + (base + 9,)] = encode_direction(normal)
     ws.ccd_i[row + (base + 10,)] = _cylinder_modes(shape1, shape2, normal)
     for s in range(3):
         id1, id2 = -1, -1
@@ -2002,7 +2002,7 @@ def _core_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.
     b0, b1, b2 = [_rot(shape2[3], ti.Vector([local2[j, c] for c in ti.static(range(3))])) + shape2[2]
                   for j in ti.static(range(3))]
     w0, e1, e2 = a0 - b0, (a1 - b1) - (a0 - b0), (a2 - b2) - (a0 - b0)
-    u = _decode_direction(feature[8], feature[9])
+    u = decode_direction(feature[8], feature[9])
     pre = _cross(e1, e2)
     if m == 2:
         pre = pre * _sign(_dot(pre, u))
@@ -2157,7 +2157,7 @@ def _cap_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.t
     o0, o1, o2 = [_rot(other[3], ti.Vector([o_local[j, i] for i in ti.static(range(3))])) + other[2]
                   for j in ti.static(range(3))]
     sgn = ti.select(first, 1.0, -1.0)
-    u = _decode_direction(feature[8], feature[9])
+    u = decode_direction(feature[8], feature[9])
     axis = ti.Vector([cap[3][0, 2], cap[3][1, 2], cap[3][2, 2]])
     pre = axis * _sign(_dot(axis, u))
     n = _normalize(pre)
@@ -2682,7 +2682,7 @@ def _rim_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.t
     line = m == 1
     ff = ti.select(line, _dot(f, f), 1.0)
     sgn = ti.select(first, 1.0, -1.0)
-    u = _decode_direction(feature[8], feature[9])
+    u = decode_direction(feature[8], feature[9])
     th = _start_angle(rim, sgn * u)
     k, k1, v = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
     gp, converged = 0.0, False
@@ -2784,7 +2784,7 @@ def _rims_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.
             local[j, c] = point[c]
     e1_local = ti.Vector([local[0, c] for c in ti.static(range(3))])
     e2_local = ti.Vector([local[1, c] for c in ti.static(range(3))])
-    u = _decode_direction(feature[8], feature[9])
+    u = decode_direction(feature[8], feature[9])
     a, b = _start_angle(shape1, u), _start_angle(shape2, -u)
     k_1, dk_1, k_2, dk_2 = [ti.Vector([0.0, 0.0, 0.0]) for _ in ti.static(range(4))]
     hess, converged = ti.Vector([0.0, 0.0, 0.0]), False
@@ -2914,7 +2914,7 @@ def _clip_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.
                             for j in ti.static(range(5))]
     # a clipped edge's ends are the EPA support points (feature[10]: the far end too): with a
     # margin they sit half of it out along the EPA normal u (geom 1) or against it (geom 2)
-    start = 0.5 * clip[5] * ti.select(edge_geom == 1, 1.0, ti.select(edge_geom == 2, -1.0, 0.0)) * _decode_direction(
+    start = 0.5 * clip[5] * ti.select(edge_geom == 1, 1.0, ti.select(edge_geom == 2, -1.0, 0.0)) * decode_direction(
         feature[8], feature[9])
     p0, pa, pb = [_rot(other[3], ti.Vector([local_p[j, c] for c in ti.static(range(3))])) + other[2]
                   + ti.select(poly_ids[j] == 0 or feature[10] == 1, start, ti.Vector([0.0, 0.0, 0.0]))

@@ -328,19 +328,42 @@ def converge_contacts(d: ti.template(), s, e):
         iterated, held = _iterated_kind(d, s, e, c)
         if iterated and not held:
             pair = d.con_pair[s, e, c]
-            position, normal, dist = _convex_replay(d, s, e, d.pair_geom1[pair], d.pair_geom2[pair], c)
-            total = position.sum() + normal.sum() + dist  # NaN or ±inf if any is not finite
-            # a form far from the iterate solved for another stationary point (a can beside a low box
-            # got one 2 r deep, sideways, and was launched at 18 m/s; in float32 a wide can over a
-            # box's corner one 113 mm deep): the iterate stays (up to 3 mm apart at deep random poses)
-            apart = ti.abs(dist - d.con_dist[s, e, c]) > FORM_APART * ti.min(d.geom_rbound[d.pair_geom1[pair]],
-                                                                             d.geom_rbound[d.pair_geom2[pair]])
-            if ti.math.isnan(total) or ti.math.isinf(total) or apart:
+            g1, g2 = d.pair_geom1[pair], d.pair_geom2[pair]
+            bar = FORM_APART * ti.min(d.geom_rbound[g1], d.geom_rbound[g2])
+            position, normal, dist = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3), 0.0
+            refused = True
+            for turn in range(2):  # one evaluation's call site (inlined once)
+                # at a pose touching to within the CCD tolerance, the iterate's normal (its witness
+                # points' difference, ~1e-9 m) has a sign of round-off, which orients the feature:
+                # its form then took the far side (a can resting against a box's side: 2 r deep in
+                # most steps); the form oriented the other way is taken when it agrees
+                if turn == 0 or (refused and ti.abs(d.con_dist[s, e, c]) < convex.CCD_TOLERANCE):
+                    if turn == 1:
+                        _flip_orientation(d, s, e, c)
+                    position, normal, dist = _convex_replay(d, s, e, g1, g2, c)
+                    total = position.sum() + normal.sum() + dist  # NaN or ±inf if any is not finite
+                    # a form far from the iterate solved for another stationary point (a can beside
+                    # a low box got one 2 r deep, sideways, and was launched at 18 m/s; in float32 a
+                    # wide can over a box's corner one 113 mm deep): the iterate stays (up to 3 mm
+                    # apart at deep random poses)
+                    apart = ti.abs(dist - d.con_dist[s, e, c]) > bar
+                    refused = ti.math.isnan(total) or ti.math.isinf(total) or apart
+                    if turn == 1 and refused:
+                        _flip_orientation(d, s, e, c)  # (the feature as the collider recorded it)
+            if refused:
                 d.inexact[0] = 1
             else:
                 d.con_pos[s, e, c] = position
                 d.con_frame[s, e, c] = contact_frame(normal, ti.Vector.zero(float, 3))
                 d.con_dist[s, e, c] = dist
+
+
+@ti.func
+def _flip_orientation(d: ti.template(), s, e, c):
+    """Contact c's feature oriented the other way: its normal's code (columns 8, 9) negated."""
+    at = convex.FEATURE_SIZE * c
+    flipped = convex.encode_direction(-convex.decode_direction(d.con_feature[s, e, at + 8], d.con_feature[s, e, at + 9]))
+    d.con_feature[s, e, at + 8], d.con_feature[s, e, at + 9] = flipped[0], flipped[1]
 
 
 # -- reverse: a contact's gradients (position, frame, distance) → its geoms' poses → their links ------
