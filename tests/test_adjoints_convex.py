@@ -174,8 +174,12 @@ ALIGNED = [("capsule", "cylinder", _QUARTER, 0.05, None), ("cylinder", "cylinder
            ("cylinder", "box", np.eye(3), 0.05, ((0.1, 0.05), (0.05, 0.04))),
            ("cylinder", "box", np.eye(3), 0.05, ((0.12, 0.05), None)),
            # a small box's face off the can's axis (its corners within the cap, the rim point toward it)
-           ("cylinder", "box", np.eye(3), 0.05, ((0.04, 0.05), (0.02, 0.02)))]
-_HALF_AXIS = {"cylinder": 0.1, "box": 0.06}  # geom 2's half extent along its z axis (SIZES)
+           ("cylinder", "box", np.eye(3), 0.05, ((0.04, 0.05), (0.02, 0.02))),
+           # a capsule or a can lying on a mesh's face (convex._lying_on_mesh: the two ends of its line)
+           ("capsule", "mesh", _QUARTER, 0.02, ((0.02, 0.025), None)),
+           ("cylinder", "mesh", _QUARTER, 0.02, ((0.02, 0.025), None))]
+ALIGNED_MESH = 1  # geom 2's mesh where it is one: the box mesh (half extents 0.05, 0.06, 0.08 in MuJoCo's frame)
+_HALF_AXIS = {"cylinder": 0.1, "box": 0.06, "mesh": 0.08}  # geom 2's half extent along its z axis (SIZES)
 
 
 def _aligned_cases(rng, per_pair=20):
@@ -184,7 +188,8 @@ def _aligned_cases(rng, per_pair=20):
     (name, types, sizes, meshes, pos, rot) as _convex_cases' (no MuJoCo contacts)."""
     cases = []
     for kind1, kind2, turn, half1, resized in ALIGNED:
-        m = _model(f'<body><freejoint/>{_geom(kind1, None, 0.0)}</body>', _geom(kind2, None, 0.0))
+        mesh2 = ALIGNED_MESH if kind2 == "mesh" else -1
+        m = _model(f'<body><freejoint/>{_geom(kind1, None, 0.0)}</body>', _geom(kind2, mesh2, 0.0))
         for _ in range(per_pair):
             rot2 = np.zeros(9)
             mujoco.mju_quat2Mat(rot2, _random_quat(rng))
@@ -198,7 +203,7 @@ def _aligned_cases(rng, per_pair=20):
             for g, size in enumerate(resized or (None, None)):
                 if size is not None:
                     sizes[g, :2] = size
-            cases.append((f"{kind1}-{kind2}", (TYPES[kind1], TYPES[kind2]), sizes, (-1, -1), pos,
+            cases.append((f"aligned {kind1}-{kind2}", (TYPES[kind1], TYPES[kind2]), sizes, (-1, mesh2), pos,
                           np.array([rot2 @ turn @ flip, rot2])))
     return cases
 
@@ -314,8 +319,8 @@ def results():
         scan[eps] = np.abs(grad - fd).max(axis=2) / np.maximum(1e-8, np.abs(fd).max(axis=2))
     rows = [(i, k) for i in range(n) for k in range(count[i])]
     forward_rows = np.concatenate([position, normal, dist[..., None]], axis=2)
-    return {"rows": rows, "names": names, "feature": feature, "types": batch["types"], "margins": batch["margins"],
-            "replay_error": np.abs(replay - forward_rows), "scan": scan}
+    return {"rows": rows, "names": names, "count": count, "feature": feature, "types": batch["types"],
+            "margins": batch["margins"], "replay_error": np.abs(replay - forward_rows), "scan": scan}
 
 
 def test_replay_matches_forward(results):
@@ -351,6 +356,17 @@ def test_replay_matches_forward(results):
     assert {key[1] for key in exact} == {cv.KIND_CORE, cv.KIND_EPA, cv.KIND_CLIP, cv.KIND_PLANE, cv.KIND_FACE_CAP}
     assert max(everything) <= 1.0
     assert max(e for values in approx.values() for e in values) <= 1.0
+
+
+def test_lying_on_a_mesh_face_touches_at_both_ends(results):
+    """A capsule or a can lying on a mesh's face (ALIGNED) touches it at the two ends of its line
+    (convex._lying_on_mesh; the collider alone gave one contact, and they see-sawed): two KIND_CORE
+    contacts, one end each, whose adjoints the test below checks."""
+    for name in ("aligned capsule-mesh", "aligned cylinder-mesh"):
+        cases = [i for i, n in enumerate(results["names"]) if n == name]
+        ends = [sorted({int(results["feature"][i, k, 1]) for k in range(results["count"][i])}) for i in cases]
+        assert len(cases) == 20 and all(e == [0, 1] for e in ends), (name, ends)
+        assert all(results["feature"][i, k, 0] == cv.KIND_CORE for i in cases for k in range(2))
 
 
 def test_adjoint_matches_central_differences(results):

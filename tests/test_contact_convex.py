@@ -296,18 +296,24 @@ def test_a_tilted_can_set_exactly_on_a_box_is_not_launched(precision):
 
 
 @pytest.mark.parametrize("precision", ["32", "64"])
-@pytest.mark.parametrize("base", ["box", "cylinder"])
-def test_a_can_lying_on_a_table_comes_to_rest(precision, base):
-    """A can dropped 1 mm onto a table (a box, or a round one: a wider cylinder) lying on its side
-    (axis 10° off the table's y) rests on the two ends of its side's lowest line (convex.LYING):
-    speed under 1e-3 m/s after 1 s. On the one side contact it see-sawed at 0.5 m/s for good (on
-    the round table 1.1 mm deep)."""
+@pytest.mark.parametrize("shape, base", [("can", "box"), ("can", "cylinder"), ("can", "mesh"), ("capsule", "box"),
+                                         ("capsule", "mesh")])  # (a capsule on a can's cap: one contact, not done)
+def test_lying_on_a_table_comes_to_rest(precision, shape, base, tmp_path):
+    """A can or a capsule dropped 1 mm onto a table (a box, a round one: a wider cylinder, or a
+    box mesh) lying on its side (axis 10° off the table's y) rests on the two ends of its lowest
+    line (convex.LYING, convex._lying_on_mesh; a capsule on a box: the primitive collider's two):
+    speed under 1e-3 m/s after 1 s. On one contact a can see-sawed at 0.5 m/s for good (on the
+    round table 1.1 mm deep), a can or a capsule on the mesh at 0.4 and 0.07."""
     gs.init(precision=precision, logging_level="warning")
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002), show_viewer=False)
-    scene.add_entity(gs.morphs.Box(size=(0.6, 0.6, 0.4), pos=(0, 0, 0.2), fixed=True) if base == "box" else
-                     gs.morphs.Cylinder(radius=0.3, height=0.4, pos=(0, 0, 0.2), fixed=True))
-    can = scene.add_entity(gs.morphs.Cylinder(radius=0.033, height=0.12, pos=(0, 0, 0.4 + 0.033 + 1e-3),
-                                              euler=(90, 0, 10)))
+    if base == "mesh":
+        trimesh.creation.box(extents=(0.6, 0.6, 0.4)).export(tmp_path / "table.obj")
+        scene.add_entity(gs.morphs.Mesh(file=str(tmp_path / "table.obj"), pos=(0, 0, 0.2), fixed=True))
+    else:
+        scene.add_entity(gs.morphs.Box(size=(0.6, 0.6, 0.4), pos=(0, 0, 0.2), fixed=True) if base == "box" else
+                         gs.morphs.Cylinder(radius=0.3, height=0.4, pos=(0, 0, 0.2), fixed=True))
+    morph = gs.morphs.Cylinder if shape == "can" else gs.morphs.Capsule
+    can = scene.add_entity(morph(radius=0.033, height=0.12, pos=(0, 0, 0.4 + 0.033 + 1e-3), euler=(90, 0, 10)))
     scene.build()
     for _ in range(500):
         scene.step()

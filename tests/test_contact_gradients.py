@@ -505,3 +505,31 @@ def test_mujoco_compatible_curved_contacts_refuse_a_backward(f64):
     scene.step()
     with pytest.raises(gs.GradientError, match="enable_mujoco_compatibility"):
         can.get_pos().sum().backward()
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+@pytest.mark.parametrize("shape", ["capsule", "cylinder"])
+def test_lying_on_a_mesh_face(f64, shape, cone):
+    """A capsule or a can lying on a fixed mesh table, sliding, turning and (the can) rolling: its
+    contacts are the two ends of its line (convex._lying_on_mesh, closed forms of the core's kind).
+    Initial velocity → final pose."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True),
+                     rigid_options=gs.options.RigidOptions(tolerance=1e-14, friction_cone=cone), show_viewer=False)
+    path = os.path.join(tempfile.mkdtemp(), "table.obj")
+    trimesh.creation.box(extents=(1.0, 1.0, 0.2)).export(path)
+    scene.add_entity(gs.morphs.Mesh(file=path, pos=(0, 0, -0.1), fixed=True))
+    morph = gs.morphs.Capsule if shape == "capsule" else gs.morphs.Cylinder
+    body = scene.add_entity(morph(radius=0.04, height=0.2, pos=(0, 0, 0.04 - 1e-3), euler=(90, 0, 0)))
+    scene.build()
+
+    def loss(velocity):
+        scene.reset()
+        body.set_dofs_velocity(velocity)
+        for _ in range(50):
+            scene.step()
+        return (body.get_pos() * torch.tensor([1.0, -0.7, 3.0])).sum() + body.get_quat()[1:].sum()
+
+    start = torch.tensor([0.6, 0.2, 0.0, 0.0, 0.0, 0.5], dtype=torch.float64)
+    loss(start)
+    assert len(body.get_contacts()["position"]) == 2
+    assert_converged(directional_errors(loss, start, 0), f"{shape} lying on a mesh face, {cone}")

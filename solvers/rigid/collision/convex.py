@@ -24,7 +24,8 @@ clipping follow the 3.12 sources.
    multi-contact for them (and for margins, through the shallow path) is not reproduced; but a
    cylinder standing on a box's face or a wider cylinder's cap gets four rim points of its own
    form (a box's face within the cap its four corners), one lying on a box's face the two ends of
-   its side's line (`_face_cap`).
+   its side's line (`_face_cap`); a capsule or cylinder lying on a mesh's face the two ends of its
+   line, each a KIND_CORE contact against the face's plane (`_lying_on_mesh`).
 
 A contact is emitted when dist < margin; its position is the midpoint of the witness points, its
 normal points from geom 1 to geom 2 (MuJoCo's convention).
@@ -1749,7 +1750,75 @@ def convex_convex(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, mes
                         feature[slot, c] = face_feature[i, c]
                     slot += 1
             count = slot
+    # a capsule or cylinder lying on a mesh's face: the two ends of its line (the collider's one
+    # contact let a capsule on a mesh box see-saw at 0.07 m/s for good, MuJoCo's two rest)
+    if (type1 == CAPSULE or type1 == CYLINDER) and type2 == MESH and count == 1:
+        count, position, normal, dist, feature = _lying_on_mesh(
+            (type1, mesh1, pos1, rot1, size1, margin), (type2, mesh2, pos2, rot2, size2, margin), hull, count,
+            position, normal, dist, feature)
     return count, position, normal, dist, feature
+
+
+@ti.func
+def _lying_on_mesh(shape1: ti.template(), shape2: ti.template(), hull: ti.template(), count, position, normal, dist,
+                   feature):
+    """A capsule or cylinder (geom 1) lying on a face of a mesh (geom 2): its axis within LYING_TILT
+    of the face's plane, the collider's one contact's normal (row 0 of `normal`) within _FACE_TOL of
+    the face's inward normal. Each end of its line nearest the face is a KIND_CORE contact: the end
+    (a capsule's ball, a cylinder's rim point or side) against the plane of three of the face's
+    vertices (`_core_evaluate`, its closed form, whose adjoint is the core's). When both are within
+    the margin with their feet on the face, they replace the contacts (count, position, normal,
+    dist, feature: convex_convex's), the deeper first; else those are returned as they are."""
+    rot1, rot2, mesh2, margin = shape1[3], shape2[3], shape2[1], shape1[5]
+    met = ti.Vector([normal[0, c] for c in ti.static(range(3))])
+    ends_position, ends_normal = ti.Matrix.zero(float, 2, 3), ti.Matrix.zero(float, 2, 3)
+    ends_dist = ti.Vector.zero(float, 2)
+    row = ti.Vector.zero(ti.i32, FEATURE_SIZE)
+    kept = 0
+    if ti.abs(_dot(_column(rot1, 2), met)) <= ti.static(np.sin(LYING_TILT)):
+        # the face: of the polygons at the mesh's vertex nearest geom 1, the one facing it most
+        up = _rot_t(rot2, -met)
+        vadr, padr = hull.hull_vertadr[mesh2], hull.hull_polyadr[mesh2]
+        nearest = _mesh_support(mesh2, up, -1, hull)
+        face, facing = -1, ti.static(_FACE_TOL)
+        for i in range(hull.hull_vert_polynum[vadr + nearest]):
+            poly = hull.hull_polymap[hull.hull_vert_polyadr[vadr + nearest] + i]
+            along = _dot(up, hull.hull_poly_normal[padr + poly])
+            if along > facing:
+                face, facing = poly, along
+        if face >= 0:
+            vert_adr, num = hull.hull_poly_vertadr[padr + face], hull.hull_poly_vertnum[padr + face]
+            local_n = hull.hull_poly_normal[padr + face]
+            inward = -_rot(rot2, local_n)
+            code = encode_direction(inward)
+            row = ti.Vector([KIND_CORE, 0, hull.hull_poly_vert[vert_adr], 0, hull.hull_poly_vert[vert_adr + num // 3], 0,
+                             hull.hull_poly_vert[vert_adr + 2 * num // 3], 3, code[0], code[1],
+                             _cylinder_modes(shape1, shape2, inward)])
+            for end in range(2):  # one evaluation: inlined once
+                row[1], row[3], row[5] = end, end, end
+                point, unit, depth = _core_evaluate(shape1, shape2, row, hull)
+                # the foot within the face: left of each edge, counter-clockwise seen from outside
+                foot = _rot_t(rot2, point - shape2[2])
+                on_face = True
+                for j in range(num):
+                    a = _polygon_point(hull, vadr, vert_adr, num, j)
+                    b = _polygon_point(hull, vadr, vert_adr, num, j + 1)
+                    if _dot(_cross(b - a, foot - a), local_n) < 0.0:
+                        on_face = False
+                kept += int(on_face and depth < margin)
+                for c in ti.static(range(3)):
+                    ends_position[end, c], ends_normal[end, c] = point[c], unit[c]
+                ends_dist[end] = depth
+    if kept == 2:
+        deeper = ti.select(ends_dist[1] < ends_dist[0], 1, 0)
+        for i in ti.static(range(2)):
+            end = ti.select(i == 0, deeper, 1 - deeper)
+            for c in ti.static(range(3)):
+                position[i, c], normal[i, c] = ends_position[end, c], ends_normal[end, c]
+            dist[i] = ends_dist[end]
+            for c in ti.static(range(FEATURE_SIZE)):
+                feature[i, c] = end if ti.static(c in (1, 3, 5)) else row[c]  # (its end's ids)
+    return ti.select(kept == 2, 2, count), position, normal, dist, feature
 
 
 @ti.func
