@@ -47,7 +47,8 @@ BRANCHES = {"plane", "core m=0", "core m=1", "core m=2", "epa m=2", "cylinder ri
             "rim on a point", "rim on a line", "rim on a rim", "rim on a rim holding both ends", "rim of geom 1",
             "rim of geom 2", "rim on its side", "clip face-face", "clip edge of geom 1", "clip edge of geom 2",
             "clip vertex", "clip edge x side plane", "clip side x side plane", "clip edge with margin",
-            "cylinder standing on a box face", "cylinder lying on a face", "cap under a box face's edge",
+            "cylinder standing on a box face", "cylinder standing on a mesh face", "cylinder lying on a face",
+            "cap under a box face's edge",
             "box face's corner on a cap", "rim point toward a box face's centre"}
 
 
@@ -160,6 +161,7 @@ def _plane_cases(harness, rng):
 # (geom 1, geom 2, geom 1's turn in geom 2's frame, geom 1's half extent along geom 2's axis, the
 # two geoms' (radius, half-length) where not test_colliders_convex's)
 _QUARTER = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])  # a quarter turn about x: a capsule lying
+_TILTED_QUARTER = np.array([[1.0, 0, 0], [0, np.cos(0.01), -np.sin(0.01)], [0, np.sin(0.01), np.cos(0.01)]]) @ _QUARTER
 ALIGNED = [("capsule", "cylinder", _QUARTER, 0.05, None), ("cylinder", "cylinder", np.eye(3), 0.1, None),
            ("cylinder", "box", np.eye(3), 0.1, None),
            # cans small enough to stand on the box's face or the other's cap: four rim points
@@ -175,9 +177,14 @@ ALIGNED = [("capsule", "cylinder", _QUARTER, 0.05, None), ("cylinder", "cylinder
            ("cylinder", "box", np.eye(3), 0.05, ((0.12, 0.05), None)),
            # a small box's face off the can's axis (its corners within the cap, the rim point toward it)
            ("cylinder", "box", np.eye(3), 0.05, ((0.04, 0.05), (0.02, 0.02))),
-           # a capsule or a can lying on a mesh's face (convex._lying_on_mesh: the two ends of its line)
+           # a capsule or a can lying on a mesh's face (convex._lying_on_mesh: the two ends of its line),
+           # flat and tilted 0.01 rad (a can's ends then meet it at their rims), and a can standing on it
+           # (four rim points, some off the face)
            ("capsule", "mesh", _QUARTER, 0.02, ((0.02, 0.025), None)),
-           ("cylinder", "mesh", _QUARTER, 0.02, ((0.02, 0.025), None))]
+           ("cylinder", "mesh", _QUARTER, 0.02, ((0.02, 0.025), None)),
+           ("capsule", "mesh", _TILTED_QUARTER, 0.02, ((0.02, 0.025), None)),
+           ("cylinder", "mesh", _TILTED_QUARTER, 0.02, ((0.02, 0.025), None)),
+           ("cylinder", "mesh", np.eye(3), 0.05, ((0.03, 0.05), None))]
 ALIGNED_MESH = 1  # geom 2's mesh where it is one: the box mesh (half extents 0.05, 0.06, 0.08 in MuJoCo's frame)
 _HALF_AXIS = {"cylinder": 0.1, "box": 0.06, "mesh": 0.08}  # geom 2's half extent along its z axis (SIZES)
 
@@ -251,7 +258,8 @@ def _branch(f, types, margin):
             return {"box face's corner on a cap"}
         if f[2] == cv.TOWARD:
             return {"rim point toward a box face's centre"}
-        return {"cylinder lying on a face" if f[2] == cv.LYING else "cylinder standing on a box face"} | (
+        standing = "cylinder standing on a mesh face" if types[1] == cv.MESH else "cylinder standing on a box face"
+        return {"cylinder lying on a face" if f[2] == cv.LYING else standing} | (
             {"cap under a box face's edge"} if f[2] != cv.LYING and f[5] == cv.EDGE else set())
     if f[0] == cv.KIND_CLIP:
         tags = int(f[3] >= 256) + int(f[4] >= 256)
@@ -363,10 +371,10 @@ def test_lying_on_a_mesh_face_touches_at_both_ends(results):
     (convex._lying_on_mesh; the collider alone gave one contact, and they see-sawed): two KIND_CORE
     contacts, one end each, whose adjoints the test below checks."""
     for name in ("aligned capsule-mesh", "aligned cylinder-mesh"):
-        cases = [i for i, n in enumerate(results["names"]) if n == name]
-        ends = [sorted({int(results["feature"][i, k, 1]) for k in range(results["count"][i])}) for i in cases]
-        assert len(cases) == 20 and all(e == [0, 1] for e in ends), (name, ends)
-        assert all(results["feature"][i, k, 0] == cv.KIND_CORE for i in cases for k in range(2))
+        cases = [i for i, n in enumerate(results["names"]) if n == name and results["count"][i] == 2
+                 and results["feature"][i, 0, 0] == cv.KIND_CORE]
+        ends = [sorted({int(results["feature"][i, k, 1]) for k in range(2)}) for i in cases]
+        assert len(cases) == 40 and all(e == [0, 1] for e in ends), (name, len(cases), ends)
 
 
 def test_adjoint_matches_central_differences(results):

@@ -54,6 +54,10 @@ def _scene(cone, n_envs=0, substeps=1, shape="box", tag="", smooth=False, ground
             scene.add_entity(gs.morphs.Cylinder(radius=0.2, height=0.2, pos=(0.03, 0.17, -0.1), fixed=True))
         elif ground == "pedestal":
             scene.add_entity(gs.morphs.Box(size=(0.16, 0.16, 0.2), pos=(0, 0, -0.1), fixed=True))
+        elif ground == "mesh":
+            path = os.path.join(tempfile.mkdtemp(), "table.obj")
+            trimesh.creation.box(extents=(2.0, 2.0, 0.2)).export(path)
+            scene.add_entity(gs.morphs.Mesh(file=path, pos=(0, 0, -0.1), fixed=True))
         else:
             scene.add_entity(gs.morphs.Box(size=(2.0, 2.0, 0.2), pos=(0, 0, -0.1), fixed=True))
         if shape == "box":
@@ -208,6 +212,14 @@ def test_cylinder_on_box(f64, case, cone):
     """A can on a fixed box: sliding and spinning on its cap, or dropped tilted on its rim until it
     stands — its contacts with the face are four rim points (convex.KIND_FACE_CAP) once it stands."""
     _check(case, cone, steps=50, shape="cylinder", ground="box")
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+@pytest.mark.parametrize("case", ["sliding_velocity", "tilted"])
+def test_cylinder_on_a_mesh(f64, case, cone):
+    """The can on a fixed mesh table: four rim points on the mesh's face once it stands
+    (convex._face_cap on a mesh polygon)."""
+    _check(case, cone, steps=50, shape="cylinder", ground="mesh")
 
 
 @pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])

@@ -22,10 +22,10 @@ clipping follow the 3.12 sources.
    final EPA face's features: up to 4 contacts (the largest quadrilateral of the clipped
    polygon). Capsules (budget 2) and cylinders (budget 4) get one contact here: MuJoCo 4.0's
    multi-contact for them (and for margins, through the shallow path) is not reproduced; but a
-   cylinder standing on a box's face or a wider cylinder's cap gets four rim points of its own
-   form (a box's face within the cap its four corners), one lying on a box's face the two ends of
-   its side's line (`_face_cap`); a capsule or cylinder lying on a mesh's face the two ends of its
-   line, each a KIND_CORE contact against the face's plane (`_lying_on_mesh`).
+   cylinder standing on a box's face, a mesh's face or a wider cylinder's cap gets four rim points
+   of its own form (a box's face within the cap its four corners), one lying on a box's face the
+   two ends of its side's line (`_face_cap`); a capsule or cylinder lying on a mesh's face the two
+   ends of its line, each a KIND_CORE contact against the face's plane (`_lying_on_mesh`).
 
 A contact is emitted when dist < margin; its position is the midpoint of the witness points, its
 normal points from geom 1 to geom 2 (MuJoCo's convention).
@@ -69,8 +69,9 @@ normal (of the EPA contact for KIND_CLIP), coded in two ints (octahedral map, ~1
   normal.
 - KIND_PLANE (plane-mesh): column 1 = mesh vertex id (the contact is that vertex, moved half its
   depth along the plane normal).
-- KIND_FACE_CAP (a cylinder standing on a box's face or a cylinder's cap, `_face_cap`): column 1
-  = the face (0..5 = +x, -x, +y, -y, +z, -z; a cylinder's caps 4, 5), column 2 = the rim point
+- KIND_FACE_CAP (a cylinder standing on a box's face, a mesh's face or a cylinder's cap,
+  `_face_cap`): column 1 = the face (0..5 = +x, -x, +y, -y, +z, -z; a cylinder's caps 4, 5; a
+  mesh's polygon id, its axes `_face_frame`'s), column 2 = the rim point
   (0..3 = +u, -u, +v, -v: the face's in-plane axes made perpendicular to the standing axis; 4 =
   LYING, an end of a lying cylinder's side line), column 3 = 1 when that axis is flipped to point
   at the face (lying: the end), column 4 = 1 when the standing cylinder is geom 2, column 5 = EDGE
@@ -1706,12 +1707,12 @@ def convex_convex(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, mes
     on_box = type2 == BOX  # (standing on its cap or rim, or lying on its side)
     second = int(type2 == CYLINDER and size2[0] < size1[0])  # the narrower cylinder stands (or lies) on the other
     on_cap = type2 == CYLINDER and ti.select(second == 0, mode2, mode1) != 2  # (the wider met at its cap or rim)
-    if type1 == CYLINDER and count <= 1 and (on_box or on_cap):
+    if type1 == CYLINDER and count <= 1 and (on_box or on_cap or type2 == MESH):
         # the collider's normal picks a lying cylinder's face; when it found none, the centres' line
         met = _normalize(ti.select(count == 1, ti.Vector([normal[0, c] for c in ti.static(range(3))]), pos2 - pos1))
         n_face, face_position, face_normal, face_dist, face_feature, upright, off_face, on_face, toward, corners = \
             _face_cap((type1, mesh1, pos1, rot1, size1, margin), (type2, mesh2, pos2, rot2, size2, margin), second,
-                      met)
+                      met, hull)
         # the collider's contact stays first when tilted beyond RIM_TILT on its rim (the lowest rim
         # point, which the four points, a square inscribed in the rim, reach only when the tilt is
         # along an axis) or when some point fell off the face (the cap over the edge meets the box
@@ -1766,7 +1767,7 @@ def _lying_on_mesh(shape1: ti.template(), shape2: ti.template(), hull: ti.templa
     of the face's plane, the collider's one contact's normal (row 0 of `normal`) within _FACE_TOL of
     the face's inward normal. Each end of its line nearest the face is a KIND_CORE contact: the end
     (a capsule's ball, a cylinder's rim point or side) against the plane of three of the face's
-    vertices (`_core_evaluate`, its closed form, whose adjoint is the core's). When both are within
+    vertices (`_polygon_spread`; `_core_evaluate`, its closed form, whose adjoint is the core's). When both are within
     the margin with their feet on the face, they replace the contacts (count, position, normal,
     dist, feature: convex_convex's), the deeper first; else those are returned as they are."""
     rot1, rot2, mesh2, margin = shape1[3], shape2[3], shape2[1], shape1[5]
@@ -1776,36 +1777,20 @@ def _lying_on_mesh(shape1: ti.template(), shape2: ti.template(), hull: ti.templa
     row = ti.Vector.zero(ti.i32, FEATURE_SIZE)
     kept = 0
     if ti.abs(_dot(_column(rot1, 2), met)) <= ti.static(np.sin(LYING_TILT)):
-        # the face: of the polygons at the mesh's vertex nearest geom 1, the one facing it most
-        up = _rot_t(rot2, -met)
-        vadr, padr = hull.hull_vertadr[mesh2], hull.hull_polyadr[mesh2]
-        nearest = _mesh_support(mesh2, up, -1, hull)
-        face, facing = -1, ti.static(_FACE_TOL)
-        for i in range(hull.hull_vert_polynum[vadr + nearest]):
-            poly = hull.hull_polymap[hull.hull_vert_polyadr[vadr + nearest] + i]
-            along = _dot(up, hull.hull_poly_normal[padr + poly])
-            if along > facing:
-                face, facing = poly, along
-        if face >= 0:
+        face, facing = _facing_polygon(hull, mesh2, _rot_t(rot2, -met))
+        if facing >= ti.static(_FACE_TOL):
+            padr = hull.hull_polyadr[mesh2]
             vert_adr, num = hull.hull_poly_vertadr[padr + face], hull.hull_poly_vertnum[padr + face]
-            local_n = hull.hull_poly_normal[padr + face]
-            inward = -_rot(rot2, local_n)
+            inward = -_rot(rot2, hull.hull_poly_normal[padr + face])
             code = encode_direction(inward)
-            row = ti.Vector([KIND_CORE, 0, hull.hull_poly_vert[vert_adr], 0, hull.hull_poly_vert[vert_adr + num // 3], 0,
-                             hull.hull_poly_vert[vert_adr + 2 * num // 3], 3, code[0], code[1],
+            j, k = _polygon_spread(hull, mesh2, face)
+            row = ti.Vector([KIND_CORE, 0, hull.hull_poly_vert[vert_adr], 0, hull.hull_poly_vert[vert_adr + j], 0,
+                             hull.hull_poly_vert[vert_adr + k], 3, code[0], code[1],
                              _cylinder_modes(shape1, shape2, inward)])
             for end in range(2):  # one evaluation: inlined once
                 row[1], row[3], row[5] = end, end, end
                 point, unit, depth = _core_evaluate(shape1, shape2, row, hull)
-                # the foot within the face: left of each edge, counter-clockwise seen from outside
-                foot = _rot_t(rot2, point - shape2[2])
-                on_face = True
-                for j in range(num):
-                    a = _polygon_point(hull, vadr, vert_adr, num, j)
-                    b = _polygon_point(hull, vadr, vert_adr, num, j + 1)
-                    if _dot(_cross(b - a, foot - a), local_n) < 0.0:
-                        on_face = False
-                kept += int(on_face and depth < margin)
+                kept += int(_on_polygon(hull, mesh2, face, _rot_t(rot2, point - shape2[2])) and depth < margin)
                 for c in ti.static(range(3)):
                     ends_position[end, c], ends_normal[end, c] = point[c], unit[c]
                 ends_dist[end] = depth
@@ -1819,6 +1804,57 @@ def _lying_on_mesh(shape1: ti.template(), shape2: ti.template(), hull: ti.templa
             for c in ti.static(range(FEATURE_SIZE)):
                 feature[i, c] = end if ti.static(c in (1, 3, 5)) else row[c]  # (its end's ids)
     return ti.select(kept == 2, 2, count), position, normal, dist, feature
+
+
+@ti.func
+def _facing_polygon(hull: ti.template(), mesh, up):
+    """(polygon id (mesh-local), the cosine of its normal with `up`) of the polygon that faces
+    direction `up` (the mesh's frame, unit) most among those at the mesh's vertex farthest along it."""
+    vadr, padr = hull.hull_vertadr[mesh], hull.hull_polyadr[mesh]
+    farthest = _mesh_support(mesh, up, -1, hull)
+    face, facing = 0, -2.0
+    for i in range(hull.hull_vert_polynum[vadr + farthest]):
+        poly = hull.hull_polymap[hull.hull_vert_polyadr[vadr + farthest] + i]
+        along = _dot(up, hull.hull_poly_normal[padr + poly])
+        if along > facing:
+            face, facing = poly, along
+    return face, facing
+
+
+@ti.func
+def _polygon_spread(hull: ti.template(), mesh, face):
+    """Positions (j, k) in polygon `face` of the mesh such that vertices 0, j, k span it well: j
+    the farthest from vertex 0, k the farthest from their line (three fixed positions, 0, n/3,
+    2n/3, could lie on one nearly straight edge of many vertices, whose foot was then centimetres
+    off)."""
+    poly = hull.hull_polyadr[mesh] + face
+    vadr, padr, num = hull.hull_vertadr[mesh], hull.hull_poly_vertadr[poly], hull.hull_poly_vertnum[poly]
+    first = _polygon_point(hull, vadr, padr, num, 0)
+    j, k, far, wide = 1, 2, -1.0, -1.0
+    for i in range(1, num):
+        span = _polygon_point(hull, vadr, padr, num, i) - first
+        if _dot(span, span) > far:
+            j, far = i, _dot(span, span)
+    line = _polygon_point(hull, vadr, padr, num, j) - first
+    for i in range(1, num):
+        area = _cross(line, _polygon_point(hull, vadr, padr, num, i) - first)
+        if _dot(area, area) > wide:
+            k, wide = i, _dot(area, area)
+    return j, k
+
+
+@ti.func
+def _on_polygon(hull: ti.template(), mesh, face, point):
+    """Whether `point` (the mesh's frame) lies over polygon `face` (mesh-local id) of the mesh: its
+    foot on the polygon's plane left of each edge, counter-clockwise seen from outside."""
+    poly = hull.hull_polyadr[mesh] + face
+    vadr, padr, num = hull.hull_vertadr[mesh], hull.hull_poly_vertadr[poly], hull.hull_poly_vertnum[poly]
+    inside = True
+    for j in range(num):
+        a = _polygon_point(hull, vadr, padr, num, j)
+        if _dot(_cross(_polygon_point(hull, vadr, padr, num, j + 1) - a, point - a), hull.hull_poly_normal[poly]) < 0.0:
+            inside = False
+    return inside
 
 
 @ti.func
@@ -2382,31 +2418,64 @@ def _half_extent(base: ti.template(), axis):
 
 
 @ti.func
-def _face_cap_terms(stand: ti.template(), base: ti.template(), feature):
+def _unit_axis(axis):
+    """The unit vector along axis 0, 1 or 2 (a run-time index)."""
+    return ti.Vector([ti.select(axis == 0, 1.0, 0.0), ti.select(axis == 1, 1.0, 0.0), ti.select(axis == 2, 1.0, 0.0)])
+
+
+@ti.func
+def _face_frame(base: ti.template(), feature, hull: ti.template()):
+    """Face `feature[1]` of the base and point `feature[2]`'s in-plane axis, in the base's frame:
+    (the face's outward normal, a point of the face (a box's or cap's centre, a mesh polygon's
+    vertex 0), t (point k: ± the face's first in-plane axis for k = 0, 1, ± the second for 2, 3;
+    lying, the inward normal), the base axis t is along (a box's; 0 on a mesh, whose axes are the
+    direction from its polygon's vertex 0 to the farthest, `_polygon_spread`, and the normal × it))."""
+    n_local, centre_local, t_local, t_axis = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3), \
+        ti.Vector.zero(float, 3), 0
+    if base[0] == MESH:
+        poly = hull.hull_polyadr[base[1]] + feature[1]
+        vadr, padr, num = hull.hull_vertadr[base[1]], hull.hull_poly_vertadr[poly], hull.hull_poly_vertnum[poly]
+        n_local = hull.hull_poly_normal[poly]
+        centre_local = _polygon_point(hull, vadr, padr, num, 0)
+        first = _normalize(_polygon_point(hull, vadr, padr, num, _polygon_spread(hull, base[1], feature[1])[0])
+                           - centre_local)
+        t_local = (1.0 - 2.0 * (feature[2] % 2)) * ti.select(feature[2] // 2 == 0, first, _cross(n_local, first))
+        if feature[2] == LYING:
+            t_local = -n_local
+    else:
+        face_axis, face_sign = feature[1] // 2, 1.0 - 2.0 * (feature[1] % 2)
+        n_local = face_sign * _unit_axis(face_axis)
+        centre_local = n_local * _half_extent(base, face_axis)
+        t_axis = (face_axis + 1 + feature[2] // 2) % 3
+        t_local = (1.0 - 2.0 * (feature[2] % 2)) * _unit_axis(t_axis)
+        if feature[2] == LYING:  # the end (feature[3]) of the side's line nearest the face
+            t_axis, t_local = face_axis, -n_local
+    return n_local, centre_local, t_local, t_axis
+
+
+@ti.func
+def _face_cap_terms(stand: ti.template(), base: ti.template(), feature, hull: ti.template()):
     """Rim point `feature[2]` of the standing cylinder on face `feature[1]` of the base (see
-    above), every intermediate: (face axis, its sign, n (the face's outward normal), centre (the
-    face's), point axis, its sign, a (the standing axis towards the face; lying, towards the end),
-    t (the in-plane axis; lying, -n; TOWARD, the face's centre - e), d_raw = t - (t.a) a, e (the
-    cap's centre; lying, the end's), edge (the reach of the face's edge from e along d_raw, `EDGE`),
-    p = e + reach unit(d_raw) (the rim point, reach the radius; the edge's point, reach = edge),
-    depth = (p - centre) . n)."""
+    above), every intermediate: (the face's outward normal, a point of it and t in the base's frame
+    (`_face_frame`), n (the face's outward normal), centre (that point), t's base axis, a (the
+    standing axis towards the face; lying, towards the end), t (the in-plane axis; lying, -n;
+    TOWARD, the face's centre - e), d_raw = t - (t.a) a, e (the cap's centre; lying, the end's),
+    edge (the reach of a box face's edge from e along d_raw, `EDGE`), p = e + reach unit(d_raw)
+    (the rim point, reach the radius; the edge's point, reach = edge), depth = (p - centre) . n)."""
     rot1, size1, rot2 = stand[3], stand[4], base[3]
-    face_axis, face_sign = feature[1] // 2, 1.0 - 2.0 * (feature[1] % 2)
-    n = face_sign * _column(rot2, face_axis)
-    centre = base[2] + n * _half_extent(base, face_axis)
+    n_local, centre_local, t_local, t_axis = _face_frame(base, feature, hull)
+    n = _rot(rot2, n_local)
+    centre = base[2] + _rot(rot2, centre_local)
     a = (1.0 - 2.0 * feature[3]) * _column(rot1, 2)
-    t_axis, t_sign = (face_axis + 1 + feature[2] // 2) % 3, 1.0 - 2.0 * (feature[2] % 2)
-    if feature[2] == LYING:  # the end (feature[3]) of the side's line nearest the face
-        t_axis, t_sign = face_axis, -face_sign
     e = stand[2] + a * size1[1]
-    t = t_sign * _column(rot2, t_axis)
+    t = _rot(rot2, t_local)
     if feature[2] == TOWARD:
         t = centre - e
     d_raw = t - _dot(t, a) * a
     # (p - centre) . t = half extent where p = e + edge d_raw / |d_raw| (d_raw . t = |d_raw|²)
     edge = (_half_extent(base, t_axis) - _dot(e - centre, t)) / ti.max(ti.sqrt(_dot(d_raw, d_raw)), _MINVAL)
     p = e + ti.select(feature[5] == EDGE, edge, size1[0]) * _normalize(d_raw)
-    return face_axis, face_sign, n, centre, t_axis, t_sign, a, t, d_raw, e, edge, p, _dot(p - centre, n)
+    return n_local, centre_local, t_local, n, centre, t_axis, a, t, d_raw, e, edge, p, _dot(p - centre, n)
 
 
 @ti.func
@@ -2427,7 +2496,7 @@ def _corner_terms(stand: ti.template(), base: ti.template(), feature):
 
 
 @ti.func
-def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
+def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal, hull: ti.template()):
     """The face contacts of a cylinder standing on a box's face or a cylinder's cap (see above):
     `second` 1 when the standing one is geom 2; `normal` the collider's (from geom 1 to 2), whose
     axis picks the face of a cylinder lying on a box (standing, the face comes from the poses).
@@ -2468,6 +2537,15 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
     outward = _column(rot2, face_axis) * (1.0 - 2.0 * (face % 2))  # its normal
     centre = base[2] + outward * _half_extent(base, face_axis)
     flip = ti.select(aligned * (1.0 - 2.0 * (face % 2)) > 0.0, 1, 0)  # the axis turned to point into the face
+    if base[0] == MESH:  # the polygon facing the cylinder's axis most (turned toward the cylinder)
+        face = _facing_polygon(hull, base[1], _rot_t(rot2, axis1 * _sign(_dot(axis1, apart))))[0]
+        poly = hull.hull_polyadr[base[1]] + face
+        outward = _rot(rot2, hull.hull_poly_normal[poly])
+        centre = base[2] + _rot(rot2, _polygon_point(hull, hull.hull_vertadr[base[1]], hull.hull_poly_vertadr[poly],
+                                                     hull.hull_poly_vertnum[poly], 0))
+        aligned = _dot(axis1, outward)
+        above = _dot(stand[2] - centre, outward)
+        flip = ti.select(aligned > 0.0, 1, 0)
     position, out_normal = ti.Matrix.zero(float, CONVEX_MAX, 3), ti.Matrix.zero(float, CONVEX_MAX, 3)
     dist = ti.Vector.zero(float, CONVEX_MAX)
     feature = ti.Matrix.zero(ti.i32, CONVEX_MAX, FEATURE_SIZE)
@@ -2476,6 +2554,8 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
     # the box's x, does not stand on the box's x face)
     standing = (ti.abs(aligned) >= ti.static(np.cos(STANDING_TILT)) or lying) and ti.abs(above) > _half_extent(
         base, face_axis)
+    if base[0] == MESH:  # (lying on a mesh: _lying_on_mesh)
+        standing = ti.abs(aligned) >= ti.static(np.cos(STANDING_TILT)) and above > 0.0
     # the box's corners within the cap; all four (the face within the cap): the corners alone
     inside = ti.Vector([0, 0, 0, 0])
     for k in ti.static(range(4)):
@@ -2497,10 +2577,10 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
         elif corners or k >= 4:
             row[2], row[5] = CORNER, k % 4
         elif base[0] == BOX:  # the box's face ends inside the rim (a rim point would be off it)
-            edge = _face_cap_terms(stand, base, row)[10]
+            edge = _face_cap_terms(stand, base, row, hull)[10]
             if -stand[4][0] < edge and edge < stand[4][0]:
                 row[5] = EDGE
-        point, unit, depth = _face_cap_evaluate(shape1, shape2, row)
+        point, unit, depth = _face_cap_evaluate(shape1, shape2, row, hull)
         is_corner = row[2] == CORNER
         # (within the margin; a corner within the cap, and beside rim points, as the rim point toward
         # the face's centre, only where one fell off)
@@ -2517,6 +2597,8 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
                 if base[0] == BOX and ti.abs(inplane[turn - 1]) > size2[side_axis] and not across_edge:
                     on_face = False
             if base[0] == CYLINDER and inplane.norm_sqr() > size2[0] * size2[0]:
+                on_face = False
+            if base[0] == MESH and not _on_polygon(hull, base[1], face, _rot_t(rot2, point - base[2])):
                 on_face = False
             off_face = off_face or not on_face
             if on_face:
@@ -2550,7 +2632,7 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal):
 
 
 @ti.func
-def _face_cap_evaluate(shape1: ti.template(), shape2: ti.template(), feature):
+def _face_cap_evaluate(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template()):
     """(position, normal from geom 1 to 2, dist) of a KIND_FACE_CAP contact: the rim point moved
     half its depth along the face's normal, the face's normal into the base (from the standing
     cylinder) or out of it (when the standing one is geom 2), the depth."""
@@ -2562,14 +2644,15 @@ def _face_cap_evaluate(shape1: ti.template(), shape2: ti.template(), feature):
         a, q, dist = corner[4], corner[6], corner[7]
         position, unit, depth = q - a * (0.5 * dist), a, dist
     else:  # the rim (or edge) point p and the face's normal n
-        terms = _face_cap_terms(stand, base, feature)
-        n, p, dist = terms[2], terms[11], terms[12]
+        terms = _face_cap_terms(stand, base, feature, hull)
+        n, p, dist = terms[3], terms[11], terms[12]
         position, unit, depth = p - n * (0.5 * dist), -n, dist
     return position, unit * ti.select(second == 0, 1.0, -1.0), depth
 
 
 @ti.func
-def _face_cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature, g_position, g_normal, g_dist):
+def _face_cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.template(),
+                               g_position, g_normal, g_dist):
     """Reverse of `_face_cap_evaluate`: (g_pos1, g_rot1, g_pos2, g_rot2)."""
     second = feature[4]
     stand, base = _pick_shape(second == 0, shape1, shape2), _pick_shape(second == 1, shape1, shape2)
@@ -2578,8 +2661,8 @@ def _face_cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), fea
     if feature[2] == CORNER:
         g_stand, g_rot_stand, g_base, g_rot_base = _corner_adjoint(stand, base, feature, g_position, g_normal, g_dist)
     else:
-        g_stand, g_rot_stand, g_base, g_rot_base = _face_cap_adjoint(stand, base, feature, g_position, g_normal,
-                                                                     g_dist)
+        g_stand, g_rot_stand, g_base, g_rot_base = _face_cap_adjoint(stand, base, feature, hull, g_position,
+                                                                     g_normal, g_dist)
     first = second == 0
     return (ti.select(first, g_stand, g_base), ti.select(first, g_rot_stand, g_rot_base),
             ti.select(first, g_base, g_stand), ti.select(first, g_rot_base, g_rot_stand))
@@ -2611,13 +2694,14 @@ def _corner_adjoint(stand: ti.template(), base: ti.template(), feature, g_positi
 
 
 @ti.func
-def _face_cap_adjoint(stand: ti.template(), base: ti.template(), feature, g_position, g_normal, g_dist):
+def _face_cap_adjoint(stand: ti.template(), base: ti.template(), feature, hull: ti.template(), g_position,
+                      g_normal, g_dist):
     """Reverse of a rim, edge or lying contact: (g_pos, g_rot) of the standing cylinder, then of the
     base."""
     second = feature[4]
     size1 = stand[4]
-    face_axis, face_sign, n, centre, t_axis, t_sign, a, t, d_raw, e, edge, p, depth = _face_cap_terms(
-        stand, base, feature)
+    n_local, centre_local, t_local, n, centre, t_axis, a, t, d_raw, e, edge, p, depth = _face_cap_terms(
+        stand, base, feature, hull)
     # position = p - n depth / 2, normal = ∓n, dist = depth = (p - centre) . n
     g_depth = g_dist - 0.5 * _dot(g_position, n)
     g_n = ti.select(second == 0, -1.0, 1.0) * g_normal - (0.5 * depth) * g_position + g_depth * (p - centre)
@@ -2640,17 +2724,14 @@ def _face_cap_adjoint(stand: ti.template(), base: ti.template(), feature, g_posi
         g_centre += g_t
         g_e -= g_t
     g_a = size1[1] * g_e - t * _dot(a, g_draw) - _dot(t, a) * g_draw
-    # centre = base's pos + n half extent; n = ±column face_axis of the base's rotation, t = ±column t_axis
-    g_n += _half_extent(base, face_axis) * g_centre
-    g_rot_stand, g_rot_base = ti.Matrix.zero(float, 3, 3), ti.Matrix.zero(float, 3, 3)
+    # n, centre - the base's pos and t (not TOWARD's) are the base's rotation times their local vectors
+    g_rot_stand = ti.Matrix.zero(float, 3, 3)
     a_sign = 1.0 - 2.0 * feature[3]
     for r in ti.static(range(3)):
         g_rot_stand[r, 2] = a_sign * g_a[r]
-        for k in ti.static(range(3)):
-            if k == face_axis:
-                g_rot_base[r, k] += face_sign * g_n[r]
-            if k == t_axis and feature[2] != TOWARD:
-                g_rot_base[r, k] += t_sign * g_t[r]
+    g_rot_base = g_n.outer_product(n_local) + g_centre.outer_product(centre_local)
+    if feature[2] != TOWARD:
+        g_rot_base += g_t.outer_product(t_local)
     return g_e, g_rot_stand, g_centre, g_rot_base
 
 
@@ -3108,7 +3189,7 @@ def convex_evaluate(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, m
     shape1, shape2 = (type1, mesh1, pos1, rot1, size1, margin), (type2, mesh2, pos2, rot2, size2, margin)
     position, normal, dist = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0]), 0.0
     if feature[0] == KIND_FACE_CAP:
-        position, normal, dist = _face_cap_evaluate(shape1, shape2, feature)
+        position, normal, dist = _face_cap_evaluate(shape1, shape2, feature, hull)
     elif feature[0] == KIND_CLIP:
         position, normal, dist = _clip_evaluate(shape1, shape2, feature, hull)
     elif _cap_side(shape1, shape2, feature) != 0:
@@ -3133,7 +3214,7 @@ def convex_evaluate_adjoint(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, 
     g_pos1, g_pos2 = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
     g_rot1, g_rot2 = ti.Matrix.zero(float, 3, 3), ti.Matrix.zero(float, 3, 3)
     if feature[0] == KIND_FACE_CAP:
-        g_pos1, g_rot1, g_pos2, g_rot2 = _face_cap_evaluate_adjoint(shape1, shape2, feature, g_position, g_normal,
+        g_pos1, g_rot1, g_pos2, g_rot2 = _face_cap_evaluate_adjoint(shape1, shape2, feature, hull, g_position, g_normal,
                                                                     g_dist)
     elif feature[0] == KIND_CLIP:
         g_pos1, g_rot1, g_pos2, g_rot2 = _clip_evaluate_adjoint(shape1, shape2, feature, hull, g_position,

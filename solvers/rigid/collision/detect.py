@@ -322,33 +322,39 @@ def converge_contacts(d: ti.template(), s, e):
     their feature (convex.convex_evaluate): the step is then a closed form of the poses between feature changes,
     whose reverse is exact. Not where the closed form keeps part of the iterate (convex.frozen),
     nor where it is not finite (a degenerate feature) or its distance is FORM_APART from the
-    iterate's (the inexact flag is raised: a backward over the step raises). Run after the
-    colliders, as a kernel of its own (in theirs, it compiled 7 s slower)."""
+    iterate's (the inexact flag is raised: a backward over the step raises); where the iterate
+    touches to within the CCD tolerance, the feature oriented either way, whichever form is
+    nearer the iterate. Run after the colliders, as a kernel of its own (in theirs, it compiled 7 s
+    slower)."""
     for c in range(d.n_con[s, e, 0]):
         iterated, held = _iterated_kind(d, s, e, c)
         if iterated and not held:
             pair = d.con_pair[s, e, c]
             g1, g2 = d.pair_geom1[pair], d.pair_geom2[pair]
             bar = FORM_APART * ti.min(d.geom_rbound[g1], d.geom_rbound[g2])
-            position, normal, dist = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3), 0.0
-            refused = True
+            iterate = d.con_dist[s, e, c]
+            position, normal, dist, refused, gap = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3), 0.0, True, 0.0
             for turn in range(2):  # one evaluation's call site (inlined once)
-                # at a pose touching to within the CCD tolerance, the iterate's normal (its witness
-                # points' difference, ~1e-9 m) has a sign of round-off, which orients the feature:
-                # its form then took the far side (a can resting against a box's side: 2 r deep in
-                # most steps); the form oriented the other way is taken when it agrees
-                if turn == 0 or (refused and ti.abs(d.con_dist[s, e, c]) < convex.CCD_TOLERANCE):
+                # touching to within the CCD tolerance, the iterate's normal (its witness points'
+                # difference, ~1e-9 m) has a sign of round-off, which orients the feature: its form
+                # then took the far side (a can resting against a box's side: 2 r deep in most
+                # steps; a thin rod's far side is within FORM_APART): of the two orientations, the
+                # form nearer the iterate is taken
+                if turn == 0 or ti.abs(iterate) < convex.CCD_TOLERANCE:
                     if turn == 1:
                         _flip_orientation(d, s, e, c)
-                    position, normal, dist = _convex_replay(d, s, e, g1, g2, c)
-                    total = position.sum() + normal.sum() + dist  # NaN or ±inf if any is not finite
+                    form_position, form_normal, form_dist = _convex_replay(d, s, e, g1, g2, c)
+                    total = form_position.sum() + form_normal.sum() + form_dist  # NaN or ±inf if one is not finite
                     # a form far from the iterate solved for another stationary point (a can beside
                     # a low box got one 2 r deep, sideways, and was launched at 18 m/s; in float32 a
                     # wide can over a box's corner one 113 mm deep): the iterate stays (up to 3 mm
                     # apart at deep random poses)
-                    apart = ti.abs(dist - d.con_dist[s, e, c]) > bar
-                    refused = ti.math.isnan(total) or ti.math.isinf(total) or apart
-                    if turn == 1 and refused:
+                    form_gap = ti.abs(form_dist - iterate)
+                    form_refused = ti.math.isnan(total) or ti.math.isinf(total) or form_gap > bar
+                    if turn == 0 or (not form_refused and (refused or form_gap < gap)):
+                        position, normal, dist, refused, gap = form_position, form_normal, form_dist, form_refused, \
+                            form_gap
+                    elif turn == 1:
                         _flip_orientation(d, s, e, c)  # (the feature as the collider recorded it)
             if refused:
                 d.inexact[0] = 1
@@ -362,7 +368,8 @@ def converge_contacts(d: ti.template(), s, e):
 def _flip_orientation(d: ti.template(), s, e, c):
     """Contact c's feature oriented the other way: its normal's code (columns 8, 9) negated."""
     at = convex.FEATURE_SIZE * c
-    flipped = convex.encode_direction(-convex.decode_direction(d.con_feature[s, e, at + 8], d.con_feature[s, e, at + 9]))
+    code = d.con_feature[s, e, at + 8], d.con_feature[s, e, at + 9]
+    flipped = convex.encode_direction(-convex.decode_direction(code[0], code[1]))
     d.con_feature[s, e, at + 8], d.con_feature[s, e, at + 9] = flipped[0], flipped[1]
 
 
