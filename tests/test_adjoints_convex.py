@@ -184,6 +184,9 @@ ALIGNED = [("capsule", "cylinder", _QUARTER, 0.05, None), ("cylinder", "cylinder
            ("cylinder", "mesh", _QUARTER, 0.02, ((0.02, 0.025), None)),
            ("capsule", "mesh", _TILTED_QUARTER, 0.02, ((0.02, 0.025), None)),
            ("cylinder", "mesh", _TILTED_QUARTER, 0.02, ((0.02, 0.025), None)),
+           # ... longer than the face (0.12 m along its y): the line against the edges it crosses
+           ("capsule", "mesh", _QUARTER, 0.02, ((0.02, 0.08), None)),
+           ("cylinder", "mesh", _TILTED_QUARTER, 0.02, ((0.02, 0.08), None)),
            ("cylinder", "mesh", np.eye(3), 0.05, ((0.03, 0.05), None))]
 ALIGNED_MESH = 1  # geom 2's mesh where it is one: the box mesh (half extents 0.05, 0.06, 0.08 in MuJoCo's frame)
 _HALF_AXIS = {"cylinder": 0.1, "box": 0.06, "mesh": 0.08}  # geom 2's half extent along its z axis (SIZES)
@@ -368,13 +371,17 @@ def test_replay_matches_forward(results):
 
 def test_lying_on_a_mesh_face_touches_at_both_ends(results):
     """A capsule or a can lying on a mesh's face (ALIGNED) touches it at the two ends of its line
-    (convex._lying_on_mesh; the collider alone gave one contact, and they see-sawed): two KIND_CORE
-    contacts, one end each, whose adjoints the test below checks."""
+    clipped to the face (convex._lying_on_mesh; the collider alone gave one contact, and they
+    see-sawed): two KIND_CORE contacts, each an end of the line (its id thrice) or the line where it
+    crosses an edge (both ends, two of the face's vertices), whose adjoints the test below checks."""
     for name in ("aligned capsule-mesh", "aligned cylinder-mesh"):
         cases = [i for i, n in enumerate(results["names"]) if n == name and results["count"][i] == 2
                  and results["feature"][i, 0, 0] == cv.KIND_CORE]
-        ends = [sorted({int(results["feature"][i, k, 1]) for k in range(2)}) for i in cases]
-        assert len(cases) == 40 and all(e == [0, 1] for e in ends), (name, len(cases), ends)
+        rows = [results["feature"][i, k] for i in cases for k in range(2)]
+        ends = [f for f in rows if f[1] == f[3] == f[5]]
+        crossings = [f for f in rows if (f[1], f[3], f[5]) == (0, 1, 0) and f[2] == f[4] != f[6]]
+        assert len(cases) == 60 and len(ends) + len(crossings) == 120, (name, len(cases), len(ends), len(crossings))
+        assert len(ends) >= 80 and len(crossings) >= 10, (name, len(ends), len(crossings))
 
 
 def test_adjoint_matches_central_differences(results):

@@ -521,14 +521,16 @@ def test_mujoco_compatible_curved_contacts_refuse_a_backward(f64):
 
 @pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
 @pytest.mark.parametrize("shape", ["capsule", "cylinder"])
-def test_lying_on_a_mesh_face(f64, shape, cone):
+@pytest.mark.parametrize("width", [1.0, 0.12])
+def test_lying_on_a_mesh_face(f64, shape, cone, width):
     """A capsule or a can lying on a fixed mesh table, sliding, turning and (the can) rolling: its
-    contacts are the two ends of its line (convex._lying_on_mesh, closed forms of the core's kind).
+    contacts are the two ends of its line (convex._lying_on_mesh, closed forms of the core's kind),
+    or on a table narrower than it (0.12 m along its axis) where the line crosses the table's edges.
     Initial velocity → final pose."""
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True),
                      rigid_options=gs.options.RigidOptions(tolerance=1e-14, friction_cone=cone), show_viewer=False)
     path = os.path.join(tempfile.mkdtemp(), "table.obj")
-    trimesh.creation.box(extents=(1.0, 1.0, 0.2)).export(path)
+    trimesh.creation.box(extents=(1.0, width, 0.2)).export(path)
     scene.add_entity(gs.morphs.Mesh(file=path, pos=(0, 0, -0.1), fixed=True))
     morph = gs.morphs.Capsule if shape == "capsule" else gs.morphs.Cylinder
     body = scene.add_entity(morph(radius=0.04, height=0.2, pos=(0, 0, 0.04 - 1e-3), euler=(90, 0, 0)))

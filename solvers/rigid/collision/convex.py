@@ -25,7 +25,8 @@ clipping follow the 3.12 sources.
    cylinder standing on a box's face, a mesh's face or a wider cylinder's cap gets four rim points
    of its own form (a box's face within the cap its four corners), one lying on a box's face the
    two ends of its side's line (`_face_cap`); a capsule or cylinder lying on a mesh's face the two
-   ends of its line, each a KIND_CORE contact against the face's plane (`_lying_on_mesh`).
+   ends of its line clipped to the face, each a KIND_CORE contact against the face's plane or the
+   edge it crosses (`_lying_on_mesh`).
 
 A contact is emitted when dist < margin; its position is the midpoint of the witness points, its
 normal points from geom 1 to geom 2 (MuJoCo's convention).
@@ -1765,35 +1766,60 @@ def _lying_on_mesh(shape1: ti.template(), shape2: ti.template(), hull: ti.templa
                    feature):
     """A capsule or cylinder (geom 1) lying on a face of a mesh (geom 2): its axis within LYING_TILT
     of the face's plane, the collider's one contact's normal (row 0 of `normal`) within _FACE_TOL of
-    the face's inward normal. Each end of its line nearest the face is a KIND_CORE contact: the end
-    (a capsule's ball, a cylinder's rim point or side) against the plane of three of the face's
-    vertices (`_polygon_spread`; `_core_evaluate`, its closed form, whose adjoint is the core's). When both are within
-    the margin with their feet on the face, they replace the contacts (count, position, normal,
-    dist, feature: convex_convex's), the deeper first; else those are returned as they are."""
+    the face's inward normal. Its line, clipped to the face (seen along the face's normal), touches
+    it at the clipped line's two ends, each a KIND_CORE contact (`_core_evaluate`, its closed form,
+    whose adjoint is the core's): an end of the line over the face against the plane of three of
+    the face's vertices (`_polygon_spread`), or where the line crosses an edge of the face, the
+    line against that edge (a line lying across a narrower face). When both are within the margin,
+    they replace the contacts (count, position, normal, dist, feature: convex_convex's), the deeper
+    first; else those are returned as they are."""
     rot1, rot2, mesh2, margin = shape1[3], shape2[3], shape2[1], shape1[5]
     met = ti.Vector([normal[0, c] for c in ti.static(range(3))])
     ends_position, ends_normal = ti.Matrix.zero(float, 2, 3), ti.Matrix.zero(float, 2, 3)
     ends_dist = ti.Vector.zero(float, 2)
-    row = ti.Vector.zero(ti.i32, FEATURE_SIZE)
+    rows = ti.Matrix.zero(ti.i32, 2, FEATURE_SIZE)
     kept = 0
-    if ti.abs(_dot(_column(rot1, 2), met)) <= ti.static(np.sin(LYING_TILT)):
+    axis = _column(rot1, 2)
+    if ti.abs(_dot(axis, met)) <= ti.static(np.sin(LYING_TILT)):
         face, facing = _facing_polygon(hull, mesh2, _rot_t(rot2, -met))
         if facing >= ti.static(_FACE_TOL):
-            padr = hull.hull_polyadr[mesh2]
-            vert_adr, num = hull.hull_poly_vertadr[padr + face], hull.hull_poly_vertnum[padr + face]
-            inward = -_rot(rot2, hull.hull_poly_normal[padr + face])
+            poly = hull.hull_polyadr[mesh2] + face
+            vadr, vert_adr, num = hull.hull_vertadr[mesh2], hull.hull_poly_vertadr[poly], hull.hull_poly_vertnum[poly]
+            local_n = hull.hull_poly_normal[poly]
+            inward = -_rot(rot2, local_n)
             code = encode_direction(inward)
-            j, k = _polygon_spread(hull, mesh2, face)
-            row = ti.Vector([KIND_CORE, 0, hull.hull_poly_vert[vert_adr], 0, hull.hull_poly_vert[vert_adr + j], 0,
-                             hull.hull_poly_vert[vert_adr + k], 3, code[0], code[1],
-                             _cylinder_modes(shape1, shape2, inward)])
-            for end in range(2):  # one evaluation: inlined once
-                row[1], row[3], row[5] = end, end, end
-                point, unit, depth = _core_evaluate(shape1, shape2, row, hull)
-                kept += int(_on_polygon(hull, mesh2, face, _rot_t(rot2, point - shape2[2])) and depth < margin)
-                for c in ti.static(range(3)):
-                    ends_position[end, c], ends_normal[end, c] = point[c], unit[c]
-                ends_dist[end] = depth
+            # the line (mesh frame) clipped to the face: t in [low, high] over it, and the edges cut there
+            start = _rot_t(rot2, shape1[2] - axis * shape1[4][1] - shape2[2])
+            along = _rot_t(rot2, 2.0 * shape1[4][1] * axis)
+            low, high, low_edge, high_edge = 0.0, 1.0, -1, -1
+            for i in range(num):
+                a = _polygon_point(hull, vadr, vert_adr, num, i)
+                side = _cross(_polygon_point(hull, vadr, vert_adr, num, i + 1) - a, local_n)  # (outward)
+                at, rate = -_dot(side, start - a), -_dot(side, along)  # over the face where at + rate t >= 0
+                if rate > 0.0 and -at / rate > low:
+                    low, low_edge = -at / rate, i
+                elif rate < 0.0 and -at / rate < high:
+                    high, high_edge = -at / rate, i
+                elif rate == 0.0 and at < 0.0:
+                    low = 2.0  # (parallel to this edge, outside it)
+            if low < high:
+                j, k = _polygon_spread(hull, mesh2, face)
+                for end in range(2):  # one evaluation: inlined once
+                    edge = ti.select(end == 0, low_edge, high_edge)
+                    row = ti.Vector([KIND_CORE, end, hull.hull_poly_vert[vert_adr], end,
+                                     hull.hull_poly_vert[vert_adr + j], end, hull.hull_poly_vert[vert_adr + k], 3,
+                                     code[0], code[1], _cylinder_modes(shape1, shape2, inward)])
+                    if edge >= 0:  # the line against the edge it crosses
+                        first, second = hull.hull_poly_vert[vert_adr + edge], hull.hull_poly_vert[
+                            vert_adr + _wrap(edge + 1, num)]
+                        row[1], row[2], row[3], row[4], row[5], row[6] = 0, first, 1, first, 0, second
+                    point, unit, depth = _core_evaluate(shape1, shape2, row, hull)
+                    kept += int(depth < margin)
+                    for c in ti.static(range(3)):
+                        ends_position[end, c], ends_normal[end, c] = point[c], unit[c]
+                    ends_dist[end] = depth
+                    for c in ti.static(range(FEATURE_SIZE)):
+                        rows[end, c] = row[c]
     if kept == 2:
         deeper = ti.select(ends_dist[1] < ends_dist[0], 1, 0)
         for i in ti.static(range(2)):
@@ -1802,7 +1828,7 @@ def _lying_on_mesh(shape1: ti.template(), shape2: ti.template(), hull: ti.templa
                 position[i, c], normal[i, c] = ends_position[end, c], ends_normal[end, c]
             dist[i] = ends_dist[end]
             for c in ti.static(range(FEATURE_SIZE)):
-                feature[i, c] = end if ti.static(c in (1, 3, 5)) else row[c]  # (its end's ids)
+                feature[i, c] = rows[end, c]
     return ti.select(kept == 2, 2, count), position, normal, dist, feature
 
 
