@@ -288,8 +288,12 @@ def _hull(vertices: np.ndarray) -> dict:
     polygons += [[int(i) for i in f] for f in faces[~in_facet]]
     normals = []
     for polygon in polygons:
-        a, b, c = vert[polygon[0]], vert[polygon[1]], vert[polygon[2]]
-        normal = np.cross(b - a, c - a)
+        # a merged facet's normal from all its vertices (Newell's sum about their mean): its first three
+        # can lie nearly on one line, and a top 3 µm off flat then gave one 6e-4 rad off (a can's rim
+        # points 0.18 mm deep) or 90°
+        points = vert[polygon] - vert[polygon].mean(axis=0)
+        normal = np.cross(points, np.roll(points, -1, axis=0)).sum(axis=0) if len(polygon) > 3 else np.cross(
+            vert[polygon[1]] - vert[polygon[0]], vert[polygon[2]] - vert[polygon[0]])
         normals.append(normal / np.linalg.norm(normal))
     return dict(vert=vert, climb=len(vert) >= 10, extrema=_extrema(vert, list(range(len(vert)))),
                 neighbours={v: sorted(n) for v, n in enumerate(hull.vertex_neighbors)},
