@@ -2567,14 +2567,20 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal, hull
     outward = _column(rot2, face_axis) * (1.0 - 2.0 * (face % 2))  # its normal
     centre = base[2] + outward * _half_extent(base, face_axis)
     flip = ti.select(aligned * (1.0 - 2.0 * (face % 2)) > 0.0, 1, 0)  # the axis turned to point into the face
-    if base[0] == MESH:  # the polygon facing the cylinder's axis most (turned toward the cylinder)
-        face = _facing_polygon(hull, base[1], _rot_t(rot2, axis1 * _sign(_dot(axis1, apart))))[0]
-        poly = hull.hull_polyadr[base[1]] + face
-        outward = _rot(rot2, hull.hull_poly_normal[poly])
-        centre = base[2] + _rot(rot2, _polygon_point(hull, hull.hull_vertadr[base[1]], hull.hull_poly_vertadr[poly],
-                                                     hull.hull_poly_vertnum[poly], 0))
+    if base[0] == MESH:
+        # the polygon facing the cylinder's axis most, turned toward the cylinder: the axis's way whose
+        # face has the cylinder's centre outside its plane (the mesh's origin, which the file sets
+        # anywhere, does not tell: above the can's centre it picked the bottom face)
+        for way in range(2):  # (one lookup: inlined once)
+            if way == 0 or above <= 0.0:
+                face = _facing_polygon(hull, base[1], _rot_t(rot2, axis1 * (1.0 - 2.0 * way)))[0]
+                poly = hull.hull_polyadr[base[1]] + face
+                outward = _rot(rot2, hull.hull_poly_normal[poly])
+                vertex = _polygon_point(hull, hull.hull_vertadr[base[1]], hull.hull_poly_vertadr[poly],
+                                        hull.hull_poly_vertnum[poly], 0)
+                centre = base[2] + _rot(rot2, vertex)
+                above = _dot(stand[2] - centre, outward)
         aligned = _dot(axis1, outward)
-        above = _dot(stand[2] - centre, outward)
         flip = ti.select(aligned > 0.0, 1, 0)
     position, out_normal = ti.Matrix.zero(float, CONVEX_MAX, 3), ti.Matrix.zero(float, CONVEX_MAX, 3)
     dist = ti.Vector.zero(float, CONVEX_MAX)
