@@ -48,8 +48,9 @@ BRANCHES = {"plane", "core m=0", "core m=1", "core m=2", "epa m=2", "cylinder ri
             "rim of geom 2", "rim on its side", "clip face-face", "clip edge of geom 1", "clip edge of geom 2",
             "clip vertex", "clip edge x side plane", "clip side x side plane", "clip edge with margin",
             "cylinder standing on a box face", "cylinder standing on a mesh face", "cylinder lying on a face",
-            "cap under a box face's edge",
-            "box face's corner on a cap", "rim point toward a box face's centre"}
+            "cap under a box face's edge", "cap under a mesh face's edge",
+            "box face's corner on a cap", "rim point toward a box face's centre",
+            "mesh face's corner on a cap", "rim point toward a mesh face's centre"}
 
 
 @ti.func
@@ -187,7 +188,11 @@ ALIGNED = [("capsule", "cylinder", _QUARTER, 0.05, None), ("cylinder", "cylinder
            # ... longer than the face (0.12 m along its y): the line against the edges it crosses
            ("capsule", "mesh", _QUARTER, 0.02, ((0.02, 0.08), None)),
            ("cylinder", "mesh", _TILTED_QUARTER, 0.02, ((0.02, 0.08), None)),
-           ("cylinder", "mesh", np.eye(3), 0.05, ((0.03, 0.05), None))]
+           ("cylinder", "mesh", np.eye(3), 0.05, ((0.03, 0.05), None)),
+           # a mesh's face within a wider can's cap (its polygon's vertices), or partly (those within
+           # the cap, the rim points on the face and the rim point toward the face's middle)
+           ("cylinder", "mesh", np.eye(3), 0.05, ((0.1, 0.05), None)),
+           ("cylinder", "mesh", np.eye(3), 0.05, ((0.07, 0.05), None))]
 ALIGNED_MESH = 1  # geom 2's mesh where it is one: the box mesh (half extents 0.05, 0.06, 0.08 in MuJoCo's frame)
 _HALF_AXIS = {"cylinder": 0.1, "box": 0.06, "mesh": 0.08}  # geom 2's half extent along its z axis (SIZES)
 
@@ -257,13 +262,14 @@ def _branch(f, types, margin):
     if f[0] == cv.KIND_PLANE:
         return {"plane"}
     if f[0] == cv.KIND_FACE_CAP:
+        face = "mesh face" if types[1] == cv.MESH else "box face"
         if f[2] == cv.CORNER:
-            return {"box face's corner on a cap"}
+            return {f"{face}'s corner on a cap"}
         if f[2] == cv.TOWARD:
-            return {"rim point toward a box face's centre"}
+            return {f"rim point toward a {face}'s centre"}
         standing = "cylinder standing on a mesh face" if types[1] == cv.MESH else "cylinder standing on a box face"
         return {"cylinder lying on a face" if f[2] == cv.LYING else standing} | (
-            {"cap under a box face's edge"} if f[2] != cv.LYING and f[5] == cv.EDGE else set())
+            {f"cap under a {face}'s edge"} if f[2] != cv.LYING and f[5] == cv.EDGE else set())
     if f[0] == cv.KIND_CLIP:
         tags = int(f[3] >= 256) + int(f[4] >= 256)
         out = {["clip face-face", "clip edge of geom 1", "clip edge of geom 2"][f[7]],

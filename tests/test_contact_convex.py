@@ -399,13 +399,17 @@ def test_a_can_set_exactly_lying_on_a_box_slides_and_stops(f64):
     assert can.get_dofs_velocity().abs().max().item() < 1e-3
 
 
-def test_a_can_over_the_edge_of_a_box_rests(f64):
+@pytest.mark.parametrize("base", ["box", "mesh"])
+def test_a_can_over_the_edge_of_a_box_rests(f64, base, tmp_path):
     """A can standing with its centre half a radius inside a box's edge (one of its four rim points
-    off the face: its cap's point under the edge instead, convex.EDGE) rests: it rocked at 0.065
-    m/s when a point off the face dropped it back to the collider's single contact."""
+    off the face: its cap's point under the edge instead, convex.EDGE) rests on four points: it
+    rocked at 0.065 m/s when a point off the face dropped it back to the collider's single
+    contact. On a box mesh the edge is the polygon's the point's ray leaves it through
+    (convex._exit_edge): without it, three rim points and the collider's contact (creeping at
+    2e-6 m/s)."""
     r, h = 0.033, 0.12
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002), show_viewer=False)
-    scene.add_entity(gs.morphs.Box(size=(0.6, 0.6, 0.4), pos=(0, 0, 0.2), fixed=True))
+    _add_table(scene, base, tmp_path)
     can = scene.add_entity(gs.morphs.Cylinder(radius=r, height=h, pos=(0.3 - 0.5 * r, 0.0, 0.4 + h / 2 + 0.002),
                                               euler=(2, -1, 20)))
     scene.build()
@@ -413,6 +417,7 @@ def test_a_can_over_the_edge_of_a_box_rests(f64):
         scene.step()
     assert can.get_dofs_velocity().abs().max().item() < 1e-3
     assert abs(can.get_pos()[2].item() - (0.4 + h / 2)) < 1e-3
+    assert len(can.get_contacts()["position"]) == 4
 
 
 @pytest.mark.parametrize("precision", ["32", "64"])
@@ -499,6 +504,44 @@ def test_a_box_whose_face_misses_the_cans_axis_rests(precision, pose):
         scene.step()
     assert abs(box.get_pos()[2].item() - 0.225) < 1e-3
     assert box.get_dofs_velocity().abs().max().item() < 1e-3
+
+
+@pytest.mark.parametrize("precision", ["32", "64"])
+@pytest.mark.parametrize("case", ["mesh box on a wider can", "mesh box off the can's axis", "mesh box across the rim",
+                                  "mesh box on a narrower can", "wide can on a mesh box"])
+def test_a_mesh_face_and_a_cap_of_other_sizes_rest(precision, case, tmp_path):
+    """A mesh box (16 × 12 × 10 cm) set 2 mm above a fixed can's cap, tilted 1.5°, 1°, yawed 15°:
+    on a wider can (r 15 cm), at the centre, 5 cm, 3 cm off it, or 7 cm off it (a corner beyond the
+    rim), or on a narrower can (r 7.5 cm); and a can (r 12.5 cm) on the mesh box. The polygon's
+    vertices within the cap (convex.CORNER) and the cap's points under the polygon's edges
+    (convex.EDGE, `_exit_edge`) hold it: speed under 1e-3 after 1 s, at the height of its face on
+    the cap (the box on the wider can at its four corners). With the rim points alone, off the
+    polygon, each kept the collider's one contact and rocked at 0.25-0.73 m/s for good (the
+    corners alone: the box off the axis tipped over the rim at 3 rad/s before it settled)."""
+    gs.init(precision=precision, logging_level="warning")
+    trimesh.creation.box(extents=(0.16, 0.12, 0.1)).export(tmp_path / "box.obj")
+    mesh = str(tmp_path / "box.obj")
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002), show_viewer=False)
+    if case == "wide can on a mesh box":
+        scene.add_entity(gs.morphs.Mesh(file=mesh, pos=(0, 0, 0.05), fixed=True))
+        top = scene.add_entity(gs.morphs.Cylinder(radius=0.125, height=0.15, pos=(0, 0, 0.177), euler=(1.5, -1, 15)))
+        rest_z = 0.175
+    else:
+        radius = 0.075 if case == "mesh box on a narrower can" else 0.15
+        x, y = {"mesh box off the can's axis": (0.05, 0.03), "mesh box across the rim": (0.0, 0.07)}.get(case, (0, 0))
+        scene.add_entity(gs.morphs.Cylinder(radius=radius, height=0.18, pos=(0, 0, 0.09), fixed=True))
+        top = scene.add_entity(gs.morphs.Mesh(file=mesh, pos=(x, y, 0.232), euler=(1.5, -1, 15)))
+        rest_z = 0.23
+    scene.build()
+    for _ in range(500):
+        scene.step()
+    assert top.get_dofs_velocity().abs().max().item() < 1e-3
+    assert abs(top.get_pos()[2].item() - rest_z) < 2e-4
+    if case == "mesh box on a wider can":
+        contacts = top.get_contacts()["position"].cpu().numpy()
+        across = np.linalg.norm(contacts[:, :2] - top.get_pos().cpu().numpy()[:2], axis=1)
+        assert len(contacts) == 4
+        np.testing.assert_allclose(across, 0.1, atol=2e-3)  # (the corners, 10 cm from the centre)
 
 
 def test_a_can_on_a_free_box_keeps_its_contacts_in_float32(f32):

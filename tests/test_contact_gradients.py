@@ -36,7 +36,8 @@ def _scene(cone, n_envs=0, substeps=1, shape="box", tag="", smooth=False, ground
     RigidOptions(smooth_contact=True). ground: "plane", "box": a fixed box whose top is the
     plane z = 0 (a mesh on it goes through the convex collider), "can": a fixed can (r 0.4 m) whose
     cap is that plane, "offcan": one (r 0.2 m) whose axis, 0.17 m off the box's centre, misses the
-    box's face, "pedestal": a fixed 0.16 m wide box whose top is, or "slab": the plane with a free
+    box's face, "pedestal": a fixed 0.16 m wide box whose top is ("mesh pedestal": as a mesh), or
+    "slab": the plane with a free
     0.6 × 0.6 m slab SLAB thick resting on it."""
     key = (cone, n_envs, substeps, shape, tag, smooth, ground, gs.runtime.epoch)
     if key not in _SCENES:
@@ -54,6 +55,10 @@ def _scene(cone, n_envs=0, substeps=1, shape="box", tag="", smooth=False, ground
             scene.add_entity(gs.morphs.Cylinder(radius=0.2, height=0.2, pos=(0.03, 0.17, -0.1), fixed=True))
         elif ground == "pedestal":
             scene.add_entity(gs.morphs.Box(size=(0.16, 0.16, 0.2), pos=(0, 0, -0.1), fixed=True))
+        elif ground == "mesh pedestal":
+            path = os.path.join(tempfile.mkdtemp(), "pedestal.obj")
+            trimesh.creation.box(extents=(0.16, 0.16, 0.2)).export(path)
+            scene.add_entity(gs.morphs.Mesh(file=path, pos=(0, 0, -0.1), fixed=True))
         elif ground == "mesh":
             path = os.path.join(tempfile.mkdtemp(), "table.obj")
             trimesh.creation.box(extents=(2.0, 2.0, 0.2)).export(path)
@@ -232,6 +237,18 @@ def test_face_on_a_cap_of_another_size(f64, case, cone):
     _check(case, cone, steps=50, shape="box", ground="can")
     _check(case, cone, steps=50, shape="box", ground="offcan")
     _check(case, cone, steps=50, shape="cylinder", ground="pedestal")
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+@pytest.mark.parametrize("case", ["sliding_velocity", "tilted"])
+def test_mesh_face_on_a_cap_of_another_size(f64, case, cone):
+    """As above with a mesh: the box as a mesh on the wider can (its polygon's vertices on the cap,
+    convex.CORNER), on the one whose axis misses it (its vertices within the cap, the cap's points
+    under its edges, convex.EDGE through `_exit_edge`, and the rim point toward its middle), and the
+    can on the pedestal as a mesh (the points under the polygon's edges)."""
+    _check(case, cone, steps=50, shape="mesh", ground="can")
+    _check(case, cone, steps=50, shape="mesh", ground="offcan")
+    _check(case, cone, steps=50, shape="cylinder", ground="mesh pedestal")
 
 
 def test_default_tolerance_converges_an_elliptic_slide_for_its_gradient(f64):

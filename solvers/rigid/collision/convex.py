@@ -76,9 +76,11 @@ normal (of the EPA contact for KIND_CLIP), coded in two ints (octahedral map, ~1
   (0..3 = +u, -u, +v, -v: the face's in-plane axes made perpendicular to the standing axis; 4 =
   LYING, an end of a lying cylinder's side line), column 3 = 1 when that axis is flipped to point
   at the face (lying: the end), column 4 = 1 when the standing cylinder is geom 2, column 5 = EDGE
-  (1) when the point is the cap's point under the face's edge (the face ends inside the rim); or
+  (1) when the point is the cap's point under the face's edge (the face ends inside the rim; on a
+  mesh, column 6 the edge: from the polygon's vertex at that position to the next); or
   column 2 = CORNER (5), column 5 the corner k (at the signs 1 - 2 (k % 2) of the face's first
-  in-plane half extent, 1 - 2 (k // 2) of its second) of a box's face within the cap; or column 2
+  in-plane half extent, 1 - 2 (k // 2) of its second) of a box's face within the cap, or the
+  position in a mesh polygon's vertex list of its vertex within the cap; or column 2
   = TOWARD (6), the rim point toward the face's centre.
 
 Replay. `convex_evaluate` and `plane_mesh_evaluate` give a contact again from its feature row
@@ -1874,15 +1876,17 @@ def _polygon_spread(hull: ti.template(), mesh, face):
 
 
 @ti.func
-def _on_polygon(hull: ti.template(), mesh, face, point):
+def _on_polygon(hull: ti.template(), mesh, face, point, skip):
     """Whether `point` (the mesh's frame) lies over polygon `face` (mesh-local id) of the mesh: its
-    foot on the polygon's plane left of each edge, counter-clockwise seen from outside."""
+    foot on the polygon's plane left of each edge, counter-clockwise seen from outside, but edge
+    `skip` (from vertex `skip` to the next; -1: none), which the point lies on by construction."""
     poly = hull.hull_polyadr[mesh] + face
     vadr, padr, num = hull.hull_vertadr[mesh], hull.hull_poly_vertadr[poly], hull.hull_poly_vertnum[poly]
     inside = True
     for j in range(num):
         a = _polygon_point(hull, vadr, padr, num, j)
-        if _dot(_cross(_polygon_point(hull, vadr, padr, num, j + 1) - a, point - a), hull.hull_poly_normal[poly]) < 0.0:
+        if j != skip and _dot(_cross(_polygon_point(hull, vadr, padr, num, j + 1) - a, point - a),
+                              hull.hull_poly_normal[poly]) < 0.0:
             inside = False
     return inside
 
@@ -2409,12 +2413,17 @@ LYING_TILT = 0.02  # rad
 # extent − the cap centre's offset along t) / |d_raw| from the cap's centre instead of the radius —
 # the same point where the edge meets the rim, so the switch is continuous. With rim points only, a
 # 10 cm box on a 20 cm can's cap kept one contact and rocked at 1 rad/s, a 40 cm can on a 30 cm box
-# at 0.3.
+# at 0.3. On a mesh's polygon the edge is the one the point's ray from the cap's centre leaves the
+# polygon through (`_exit_edge`), reach = (a point of its line − e) . its outward normal / (the
+# ray's direction . that normal), the box's formula for a box (`_edge_line`).
 EDGE = 1
 # A box's face that lies within the standing cylinder's cap (a box on a wider can) touches it at its
 # four corners (column 2 = CORNER, column 5 the corner): dist = (corner − e) . a from the cap's plane
 # along the cap's normal, which is the normal. The points under the face's edges would let a corner
-# of a tilted box sink in first (a box set 2° tilted on a can was kicked 4 mm up in float32).
+# of a tilted box sink in first (a box set 2° tilted on a can was kicked 4 mm up in float32). A
+# mesh's polygon touches at up to four of its vertices (`_mesh_corners`; column 5 the vertex's
+# position in the polygon's list): with the rim points alone, all off the face, a mesh box on a
+# wider can kept the collider's one contact and rocked at 0.35 m/s (MuJoCo 4.0 rests).
 CORNER = 5
 # GJK in float32 finds a cylinder resting on a face apart now and then (a can on a free box: 8 % of
 # its steps with no contact, rocking at 0.04 m/s): then the face's points still count when none is
@@ -2459,14 +2468,20 @@ def _face_frame(base: ti.template(), feature, hull: ti.template()):
     (the face's outward normal, a point of the face (a box's or cap's centre, a mesh polygon's
     vertex 0), t (point k: ± the face's first in-plane axis for k = 0, 1, ± the second for 2, 3;
     lying, the inward normal), the base axis t is along (a box's; 0 on a mesh, whose axes are the
-    direction from its polygon's vertex 0 to the farthest, `_polygon_spread`, and the normal × it))."""
+    direction from its polygon's vertex 0 to the farthest, `_polygon_spread`, and the normal × it), its
+    middle (a box face's centre, a mesh polygon's vertices' mean: where TOWARD points))."""
     n_local, centre_local, t_local, t_axis = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3), \
         ti.Vector.zero(float, 3), 0
+    middle_local = ti.Vector.zero(float, 3)
     if base[0] == MESH:
         poly = hull.hull_polyadr[base[1]] + feature[1]
         vadr, padr, num = hull.hull_vertadr[base[1]], hull.hull_poly_vertadr[poly], hull.hull_poly_vertnum[poly]
         n_local = hull.hull_poly_normal[poly]
         centre_local = _polygon_point(hull, vadr, padr, num, 0)
+        if feature[2] == TOWARD:
+            for i in range(num):
+                middle_local += _polygon_point(hull, vadr, padr, num, i)
+            middle_local /= num
         first = _normalize(_polygon_point(hull, vadr, padr, num, _polygon_spread(hull, base[1], feature[1])[0])
                            - centre_local)
         t_local = (1.0 - 2.0 * (feature[2] % 2)) * ti.select(feature[2] // 2 == 0, first, _cross(n_local, first))
@@ -2480,7 +2495,8 @@ def _face_frame(base: ti.template(), feature, hull: ti.template()):
         t_local = (1.0 - 2.0 * (feature[2] % 2)) * _unit_axis(t_axis)
         if feature[2] == LYING:  # the end (feature[3]) of the side's line nearest the face
             t_axis, t_local = face_axis, -n_local
-    return n_local, centre_local, t_local, t_axis
+        middle_local = centre_local
+    return n_local, centre_local, t_local, t_axis, middle_local
 
 
 @ti.func
@@ -2490,39 +2506,126 @@ def _face_cap_terms(stand: ti.template(), base: ti.template(), feature, hull: ti
     (`_face_frame`), n (the face's outward normal), centre (that point), t's base axis, a (the
     standing axis towards the face; lying, towards the end), t (the in-plane axis; lying, -n;
     TOWARD, the face's centre - e), d_raw = t - (t.a) a, e (the cap's centre; lying, the end's),
-    edge (the reach of a box face's edge from e along d_raw, `EDGE`), p = e + reach unit(d_raw)
-    (the rim point, reach the radius; the edge's point, reach = edge), depth = (p - centre) . n)."""
+    edge (the reach of the face's edge from e along d_raw, `EDGE`), p = e + reach unit(d_raw)
+    (the rim point, reach the radius; the edge's point, reach = edge), depth = (p - centre) . n, the
+    face's middle, the edge's line's point and normal (`_edge_line`) in the base's frame)."""
     rot1, size1, rot2 = stand[3], stand[4], base[3]
-    n_local, centre_local, t_local, t_axis = _face_frame(base, feature, hull)
+    n_local, centre_local, t_local, t_axis, middle_local = _face_frame(base, feature, hull)
     n = _rot(rot2, n_local)
     centre = base[2] + _rot(rot2, centre_local)
     a = (1.0 - 2.0 * feature[3]) * _column(rot1, 2)
     e = stand[2] + a * size1[1]
     t = _rot(rot2, t_local)
     if feature[2] == TOWARD:
-        t = centre - e
+        t = base[2] + _rot(rot2, middle_local) - e
     d_raw = t - _dot(t, a) * a
-    # (p - centre) . t = half extent where p = e + edge d_raw / |d_raw| (d_raw . t = |d_raw|²)
-    edge = (_half_extent(base, t_axis) - _dot(e - centre, t)) / ti.max(ti.sqrt(_dot(d_raw, d_raw)), _MINVAL)
-    p = e + ti.select(feature[5] == EDGE, edge, size1[0]) * _normalize(d_raw)
-    return n_local, centre_local, t_local, n, centre, t_axis, a, t, d_raw, e, edge, p, _dot(p - centre, n)
+    u = _normalize(d_raw)
+    # the edge's point p = e + edge u on its line: (p - line) . out = 0
+    line_local, out_local = _edge_line(base, feature, hull, centre_local, t_local, t_axis)
+    out = _rot(rot2, out_local)
+    edge = _dot(base[2] + _rot(rot2, line_local) - e, out) / ti.max(_dot(u, out), _MINVAL)
+    p = e + ti.select(feature[5] == EDGE, edge, size1[0]) * u
+    return (n_local, centre_local, t_local, n, centre, t_axis, a, t, d_raw, e, edge, p, _dot(p - centre, n), middle_local,
+            line_local, out_local)
 
 
 @ti.func
-def _corner_terms(stand: ti.template(), base: ti.template(), feature):
-    """Corner `feature[5]` of the box's face `feature[1]` against the standing cylinder's cap (see
-    CORNER): (u axis, v axis, their signs, a, e, q (the corner), dist = (q - e) . a, its offset
+def _edge_line(base: ti.template(), feature, hull: ti.template(), centre_local, t_local, t_axis):
+    """(a point of its line, its outward normal in the face's plane (of any length)) in the base's
+    frame, of the face's edge that an EDGE point lies on: a box face's edge across t (the face's
+    centre + half extent t, t), or a mesh polygon's edge from its vertex feature[6] to the next
+    (that vertex, (the next - it) × the polygon's normal)."""
+    line_local, out_local = centre_local + _half_extent(base, t_axis) * t_local, t_local
+    if base[0] == MESH:
+        poly = hull.hull_polyadr[base[1]] + feature[1]
+        vadr, padr, num = hull.hull_vertadr[base[1]], hull.hull_poly_vertadr[poly], hull.hull_poly_vertnum[poly]
+        line_local = _polygon_point(hull, vadr, padr, num, feature[6])
+        out_local = _cross(_polygon_point(hull, vadr, padr, num, feature[6] + 1) - line_local,
+                           hull.hull_poly_normal[poly])
+    return line_local, out_local
+
+
+@ti.func
+def _exit_edge(hull: ti.template(), mesh, face, start, direction):
+    """(j, s): the edge of polygon `face` of the mesh (from its vertex j to the next) through which
+    the ray start + s direction (the mesh's frame) leaves the polygon's prism, and its s (_BIG when
+    it leaves through none)."""
+    poly = hull.hull_polyadr[mesh] + face
+    vadr, padr, num = hull.hull_vertadr[mesh], hull.hull_poly_vertadr[poly], hull.hull_poly_vertnum[poly]
+    j_exit, s_exit = 0, _BIG
+    for j in range(num):
+        corner = _polygon_point(hull, vadr, padr, num, j)
+        out = _cross(_polygon_point(hull, vadr, padr, num, j + 1) - corner, hull.hull_poly_normal[poly])
+        heading = _dot(direction, out)
+        if heading > 0.0:
+            s = _dot(corner - start, out) / heading
+            if s < s_exit:
+                j_exit, s_exit = j, s
+    return j_exit, s_exit
+
+
+@ti.func
+def _face_corner_local(base: ti.template(), feature, hull: ti.template()):
+    """Corner `feature[5]` of the base's face `feature[1]` in the base's frame (see CORNER): a box
+    face's corner at the signs 1 - 2 (k % 2), 1 - 2 (k // 2) of its in-plane half extents, or a
+    mesh polygon's vertex at that position of its list."""
+    q_local = ti.Vector([0.0, 0.0, 0.0])
+    if base[0] == MESH:
+        poly = hull.hull_polyadr[base[1]] + feature[1]
+        q_local = _polygon_point(hull, hull.hull_vertadr[base[1]], hull.hull_poly_vertadr[poly],
+                                 hull.hull_poly_vertnum[poly], feature[5])
+    else:
+        face_axis, face_sign = feature[1] // 2, 1.0 - 2.0 * (feature[1] % 2)
+        u_axis, v_axis = (face_axis + 1) % 3, (face_axis + 2) % 3
+        u_sign, v_sign = 1.0 - 2.0 * (feature[5] % 2), 1.0 - 2.0 * (feature[5] // 2)
+        size2 = base[4]
+        for k in ti.static(range(3)):
+            if k == face_axis:
+                q_local[k] = face_sign * size2[k]
+            if k == u_axis:
+                q_local[k] = u_sign * size2[k]
+            if k == v_axis:
+                q_local[k] = v_sign * size2[k]
+    return q_local
+
+
+@ti.func
+def _corner_terms(stand: ti.template(), base: ti.template(), feature, hull: ti.template()):
+    """Corner `feature[5]` of the base's face `feature[1]` against the standing cylinder's cap (see
+    CORNER): (the corner in the base's frame, a, e, q (the corner), dist = (q - e) . a, its offset
     from e across a (its squared length: whether it lies within the cap))."""
-    face_axis, face_sign = feature[1] // 2, 1.0 - 2.0 * (feature[1] % 2)
-    u_axis, v_axis = (face_axis + 1) % 3, (face_axis + 2) % 3
-    u_sign, v_sign = 1.0 - 2.0 * (feature[5] % 2), 1.0 - 2.0 * (feature[5] // 2)
-    rot2, size2 = base[3], base[4]
-    q = (base[2] + face_sign * size2[face_axis] * _column(rot2, face_axis)
-         + u_sign * size2[u_axis] * _column(rot2, u_axis) + v_sign * size2[v_axis] * _column(rot2, v_axis))
+    q_local = _face_corner_local(base, feature, hull)
+    q = base[2] + _rot(base[3], q_local)
     a = (1.0 - 2.0 * feature[3]) * _column(stand[3], 2)
     e = stand[2] + a * stand[4][1]
     dist = _dot(q - e, a)
-    return u_axis, v_axis, u_sign, v_sign, a, e, q, dist, (q - e) - dist * a
+    return q_local, a, e, q, dist, (q - e) - dist * a
+
+
+@ti.func
+def _mesh_corners(hull: ti.template(), mesh, face):
+    """Positions in polygon `face` of the mesh of the (up to four) vertices that stand for its
+    corners against a cap (CORNER; -1 where it has fewer): all of them in a polygon of four or
+    fewer; else vertex 0, the farthest from it, the farthest from their line and the farthest on
+    that line's other side."""
+    poly = hull.hull_polyadr[mesh] + face
+    vadr, padr, num = hull.hull_vertadr[mesh], hull.hull_poly_vertadr[poly], hull.hull_poly_vertnum[poly]
+    corners = ti.Vector([0, 1, 2, 3])
+    for k in ti.static(range(4)):
+        if k >= num:
+            corners[k] = -1
+    if num > 4:
+        j, k = _polygon_spread(hull, mesh, face)
+        first = _polygon_point(hull, vadr, padr, num, 0)
+        line = _polygon_point(hull, vadr, padr, num, j) - first
+        side = _cross(line, _polygon_point(hull, vadr, padr, num, k) - first)
+        m, far = j, 0.0
+        for i in range(1, num):
+            across = -_dot(_cross(line, _polygon_point(hull, vadr, padr, num, i) - first), side)
+            if across > far:
+                m, far = i, across
+        corners = ti.Vector([0, j, k, ti.select(m == j, -1, m)])
+    return corners
 
 
 @ti.func
@@ -2592,30 +2695,44 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal, hull
         base, face_axis)
     if base[0] == MESH:  # (lying on a mesh: _lying_on_mesh)
         standing = ti.abs(aligned) >= ti.static(np.cos(STANDING_TILT)) and above > 0.0
-    # the box's corners within the cap; all four (the face within the cap): the corners alone
+    # the face's corners within the cap (a box's, or a mesh polygon's `_mesh_corners`); all of them
+    # (the face within the cap): the corners alone
+    corner_at = ti.Vector([0, 1, 2, 3])
+    if base[0] == MESH:
+        corner_at = _mesh_corners(hull, base[1], face)
     inside = ti.Vector([0, 0, 0, 0])
+    n_corners = 0
     for k in ti.static(range(4)):
-        offset = _corner_terms(stand, base, ti.Vector([KIND_FACE_CAP, face, CORNER, flip, second, k, 0, 0, 0, 0, 0]))[8]
-        inside[k] = int(base[0] == BOX and not lying and _dot(offset, offset) <= stand[4][0] * stand[4][0])
-    corners = inside.sum() == 4
+        offset = _corner_terms(stand, base, ti.Vector([KIND_FACE_CAP, face, CORNER, flip, second, ti.max(corner_at[k], 0),
+                                                       0, 0, 0, 0, 0]), hull)[5]
+        inside[k] = int(base[0] != CYLINDER and corner_at[k] >= 0 and not lying
+                        and _dot(offset, offset) <= stand[4][0] * stand[4][0])
+        n_corners += int(corner_at[k] >= 0)
+    corners = inside.sum() > 0 and inside.sum() == n_corners
     # candidates: the rim (or edge) points, then, where one fell off the face, the corners within the
     # cap and the rim point toward the face's centre (a box whose face misses the can's axis)
     cand_position, cand_normal = ti.Matrix.zero(float, FACE_CANDIDATES, 3), ti.Matrix.zero(float, FACE_CANDIDATES, 3)
     cand_dist = ti.Vector.zero(float, FACE_CANDIDATES)
     cand_feature = ti.Matrix.zero(ti.i32, FACE_CANDIDATES, FEATURE_SIZE)
     n_cand, with_corner = 0, False
-    for k in range(ti.select(lying, 2, ti.select(corners or base[0] != BOX, 4, 9))):  # one evaluation: inlined once
+    for k in range(ti.select(lying, 2, ti.select(corners or base[0] == CYLINDER, 4, 9))):  # one evaluation: inlined once
         row = ti.Vector([KIND_FACE_CAP, face, k, flip, second, 0, 0, 0, 0, 0, 0])
         if lying:  # its two line ends
             row[2], row[3] = LYING, k
         elif k == 8:
             row[2] = TOWARD
         elif corners or k >= 4:
-            row[2], row[5] = CORNER, k % 4
-        elif base[0] == BOX:  # the box's face ends inside the rim (a rim point would be off it)
-            edge = _face_cap_terms(stand, base, row, hull)[10]
+            row[2], row[5] = CORNER, ti.max(corner_at[k % 4], 0)
+        elif base[0] != CYLINDER:  # the face ends inside the rim (a rim point would be off it)
+            terms = _face_cap_terms(stand, base, row, hull)
+            edge = terms[10]
+            if base[0] == MESH:  # (the polygon's edge the point's ray leaves it through)
+                row[6], edge = _exit_edge(hull, base[1], face, _rot_t(rot2, terms[9] - base[2]),
+                                          _rot_t(rot2, _normalize(terms[8])))
             if -stand[4][0] < edge and edge < stand[4][0]:
                 row[5] = EDGE
+            else:
+                row[6] = 0
         point, unit, depth = _face_cap_evaluate(shape1, shape2, row, hull)
         is_corner = row[2] == CORNER
         # (within the margin; a corner within the cap, and beside rim points, as the rim point toward
@@ -2634,7 +2751,8 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal, hull
                     on_face = False
             if base[0] == CYLINDER and inplane.norm_sqr() > size2[0] * size2[0]:
                 on_face = False
-            if base[0] == MESH and not _on_polygon(hull, base[1], face, _rot_t(rot2, point - base[2])):
+            if base[0] == MESH and not is_corner and not _on_polygon(
+                    hull, base[1], face, _rot_t(rot2, point - base[2]), ti.select(row[5] == EDGE, row[6], -1)):
                 on_face = False
             off_face = off_face or not on_face
             if on_face:
@@ -2676,8 +2794,8 @@ def _face_cap_evaluate(shape1: ti.template(), shape2: ti.template(), feature, hu
     stand, base = _pick_shape(second == 0, shape1, shape2), _pick_shape(second == 1, shape1, shape2)
     position, unit, depth = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0]), 0.0
     if feature[2] == CORNER:  # the corner q and the cap's normal a
-        corner = _corner_terms(stand, base, feature)
-        a, q, dist = corner[4], corner[6], corner[7]
+        corner = _corner_terms(stand, base, feature, hull)
+        a, q, dist = corner[1], corner[3], corner[4]
         position, unit, depth = q - a * (0.5 * dist), a, dist
     else:  # the rim (or edge) point p and the face's normal n
         terms = _face_cap_terms(stand, base, feature, hull)
@@ -2695,7 +2813,8 @@ def _face_cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), fea
     g_stand, g_base = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
     g_rot_stand, g_rot_base = ti.Matrix.zero(float, 3, 3), ti.Matrix.zero(float, 3, 3)
     if feature[2] == CORNER:
-        g_stand, g_rot_stand, g_base, g_rot_base = _corner_adjoint(stand, base, feature, g_position, g_normal, g_dist)
+        g_stand, g_rot_stand, g_base, g_rot_base = _corner_adjoint(stand, base, feature, hull, g_position, g_normal,
+                                                                   g_dist)
     else:
         g_stand, g_rot_stand, g_base, g_rot_base = _face_cap_adjoint(stand, base, feature, hull, g_position,
                                                                      g_normal, g_dist)
@@ -2705,28 +2824,22 @@ def _face_cap_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), fea
 
 
 @ti.func
-def _corner_adjoint(stand: ti.template(), base: ti.template(), feature, g_position, g_normal, g_dist):
-    """Reverse of a CORNER contact: (g_pos, g_rot) of the standing cylinder, then of the box."""
-    u_axis, v_axis, u_sign, v_sign, a, e, q, dist, across = _corner_terms(stand, base, feature)
-    face_axis, face_sign = feature[1] // 2, 1.0 - 2.0 * (feature[1] % 2)
+def _corner_adjoint(stand: ti.template(), base: ti.template(), feature, hull: ti.template(), g_position, g_normal,
+                    g_dist):
+    """Reverse of a CORNER contact: (g_pos, g_rot) of the standing cylinder, then of the base."""
+    q_local, a, e, q, dist, across = _corner_terms(stand, base, feature, hull)
     # position = q - a dist / 2, normal = ±a, dist = (q - e) . a, e = stand's pos + a h
     g_total = g_dist - 0.5 * _dot(g_position, a)
     g_q = g_position + g_total * a
     g_e = -g_total * a
     g_a = (ti.select(feature[4] == 0, 1.0, -1.0) * g_normal - (0.5 * dist) * g_position + g_total * (q - e)
            + stand[4][1] * g_e)
-    g_rot_stand, g_rot_base = ti.Matrix.zero(float, 3, 3), ti.Matrix.zero(float, 3, 3)
-    a_sign, size2 = 1.0 - 2.0 * feature[3], base[4]
+    g_rot_stand = ti.Matrix.zero(float, 3, 3)
+    a_sign = 1.0 - 2.0 * feature[3]
     for r in ti.static(range(3)):
         g_rot_stand[r, 2] = a_sign * g_a[r]
-        for k in ti.static(range(3)):  # q = box's pos + Σ sign · half size · column
-            if k == face_axis:
-                g_rot_base[r, k] += face_sign * size2[k] * g_q[r]
-            if k == u_axis:
-                g_rot_base[r, k] += u_sign * size2[k] * g_q[r]
-            if k == v_axis:
-                g_rot_base[r, k] += v_sign * size2[k] * g_q[r]
-    return g_e, g_rot_stand, g_q, g_rot_base
+    # q = the base's pos + its rotation times the corner's local position
+    return g_e, g_rot_stand, g_q, g_q.outer_product(q_local)
 
 
 @ti.func
@@ -2736,28 +2849,31 @@ def _face_cap_adjoint(stand: ti.template(), base: ti.template(), feature, hull: 
     base."""
     second = feature[4]
     size1 = stand[4]
-    n_local, centre_local, t_local, n, centre, t_axis, a, t, d_raw, e, edge, p, depth = _face_cap_terms(
-        stand, base, feature, hull)
+    n_local, centre_local, t_local, n, centre, t_axis, a, t, d_raw, e, edge, p, depth, middle_local, line_local, \
+        out_local = _face_cap_terms(stand, base, feature, hull)
     # position = p - n depth / 2, normal = ∓n, dist = depth = (p - centre) . n
     g_depth = g_dist - 0.5 * _dot(g_position, n)
     g_n = ti.select(second == 0, -1.0, 1.0) * g_normal - (0.5 * depth) * g_position + g_depth * (p - centre)
     g_p = g_position + g_depth * n
     g_centre = -g_depth * n
-    # p = e + reach unit(d_raw), e = stand's pos + a h, d_raw = t - (t . a) a
+    # p = e + reach u, u = unit(d_raw), e = stand's pos + a h, d_raw = t - (t . a) a
     reach = ti.select(feature[5] == EDGE, edge, size1[0])
-    g_draw = _normalize_adjoint(d_raw, reach * g_p)
+    u = _normalize(d_raw)
+    g_u = reach * g_p
     g_e, g_t = g_p, ti.Vector([0.0, 0.0, 0.0])
-    if feature[5] == EDGE:  # reach = (half extent - (e - centre) . t) / |d_raw|
-        length = ti.max(ti.sqrt(_dot(d_raw, d_raw)), _MINVAL)
-        g_reach = _dot(g_p, d_raw) / length
-        across = g_reach / length
-        g_e -= across * t
-        g_centre += across * t
-        g_t -= across * (e - centre)
-        g_draw -= (across * edge / length) * d_raw
+    g_line, g_out = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+    if feature[5] == EDGE:  # reach = (line - e) . out / (u . out), line and out the edge's (`_edge_line`)
+        line, out = base[2] + _rot(base[3], line_local), _rot(base[3], out_local)
+        g_numerator = _dot(g_p, u) / ti.max(_dot(u, out), _MINVAL)
+        g_line = g_numerator * out
+        g_e -= g_line
+        g_out = g_numerator * (line - e) - (g_numerator * edge) * u
+        g_u -= (g_numerator * edge) * out
+    g_draw = _normalize_adjoint(d_raw, g_u)
     g_t += g_draw - a * _dot(a, g_draw)
-    if feature[2] == TOWARD:  # t = centre - e
-        g_centre += g_t
+    g_middle = ti.Vector([0.0, 0.0, 0.0])
+    if feature[2] == TOWARD:  # t = the base's pos + its rotation times the face's middle - e
+        g_middle = g_t
         g_e -= g_t
     g_a = size1[1] * g_e - t * _dot(a, g_draw) - _dot(t, a) * g_draw
     # n, centre - the base's pos and t (not TOWARD's) are the base's rotation times their local vectors
@@ -2765,10 +2881,13 @@ def _face_cap_adjoint(stand: ti.template(), base: ti.template(), feature, hull: 
     a_sign = 1.0 - 2.0 * feature[3]
     for r in ti.static(range(3)):
         g_rot_stand[r, 2] = a_sign * g_a[r]
-    g_rot_base = g_n.outer_product(n_local) + g_centre.outer_product(centre_local)
-    if feature[2] != TOWARD:
+    g_rot_base = (g_n.outer_product(n_local) + g_centre.outer_product(centre_local)
+                  + g_line.outer_product(line_local) + g_out.outer_product(out_local))
+    if feature[2] == TOWARD:
+        g_rot_base += g_middle.outer_product(middle_local)
+    else:
         g_rot_base += g_t.outer_product(t_local)
-    return g_e, g_rot_stand, g_centre, g_rot_base
+    return g_e, g_rot_stand, g_centre + g_middle + g_line, g_rot_base
 
 
 # A cylinder meeting a vertex, an edge or another cylinder's rim at its rim (m < 2 in `_core_terms`):
