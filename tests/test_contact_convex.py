@@ -197,14 +197,16 @@ def test_cap_contacts_lie_under_the_cap(f64):
     cap (where EPA's last face was); the converged contact is the foot of the cap's centre on the
     other geom's feature (convex._cap_terms), at the iterate's distance:
     (a can standing on a box's face or a wider cylinder's cap takes four rim points instead:
-    test_a_can_stands_on_four_rim_points);
-    - a capsule lying along y, 5 cm off a wide cylinder's axis, on its cap: on the capsule's axis
-      at the point nearest the cap's centre, (0.05, 0);
+    test_a_can_stands_on_four_rim_points; a capsule lying on a cap wider than it, at the two ends
+    of its line: test_lying_on_a_table_comes_to_rest);
+    - a capsule lying along y across a narrower cylinder's cap (its ends beyond the rim), 5 cm off
+      its axis: on the capsule's axis at the point nearest the cap's centre, (0.05, 0);
     - a box balanced on a corner, 1 mm into a wide cylinder's cap: at that corner."""
     wide = gs.morphs.Cylinder(radius=0.3, height=0.2, pos=(0, 0, -0.1), fixed=True)
     corner = np.array([-0.05, -0.05, -0.05])
     quat = _quat_turning(corner, (0, 0, -1))
-    cases = [(wide, gs.morphs.Capsule(radius=0.05, height=0.2, pos=(0.05, 0.03, 0.049), euler=(90, 0, 0)),
+    narrow = gs.morphs.Cylinder(radius=0.08, height=0.2, pos=(0, 0, -0.1), fixed=True)
+    cases = [(narrow, gs.morphs.Capsule(radius=0.05, height=0.2, pos=(0.05, 0.03, 0.049), euler=(90, 0, 0)),
               (0.05, 0.0)),
              (wide, gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.1, 0.05, np.linalg.norm(corner) - 1e-3), quat=quat),
               (0.1, 0.05))]
@@ -333,13 +335,14 @@ def test_a_can_on_a_bumpy_mesh_table_rests(precision, tmp_path):
 
 @pytest.mark.parametrize("precision", ["32", "64"])
 @pytest.mark.parametrize("shape, base", [("can", "box"), ("can", "cylinder"), ("can", "mesh"), ("capsule", "box"),
-                                         ("capsule", "mesh")])  # (a capsule on a can's cap: one contact, not done)
+                                         ("capsule", "cylinder"), ("capsule", "mesh")])
 def test_lying_on_a_table_comes_to_rest(precision, shape, base, tmp_path):
     """A can or a capsule dropped 1 mm onto a table (a box, a round one: a wider cylinder, or a
     box mesh) lying on its side (axis 10° off the table's y) rests on the two ends of its lowest
     line (convex.LYING, convex._lying_on_mesh; a capsule on a box: the primitive collider's two):
     speed under 1e-3 m/s after 1 s. On one contact a can see-sawed at 0.5 m/s for good (on the
-    round table 1.1 mm deep), a can or a capsule on the mesh at 0.4 and 0.07."""
+    round table 1.1 mm deep), a can or a capsule on the mesh at 0.4 and 0.07, a capsule on the
+    round table (float32) at 0.07."""
     gs.init(precision=precision, logging_level="warning")
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002), show_viewer=False)
     _add_table(scene, base, tmp_path)

@@ -239,10 +239,12 @@ def test_face_on_a_cap_of_another_size(f64, case, cone):
     _check(case, cone, steps=50, shape="cylinder", ground="pedestal")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
 @pytest.mark.parametrize("case", ["sliding_velocity", "tilted"])
 def test_mesh_face_on_a_cap_of_another_size(f64, case, cone):
-    """As above with a mesh: the box as a mesh on the wider can (its polygon's vertices on the cap,
+    """(Slow: 80 s; test_adjoints_convex checks these closed forms' adjoints in the default run.)
+    As above with a mesh: the box as a mesh on the wider can (its polygon's vertices on the cap,
     convex.CORNER), on the one whose axis misses it (its vertices within the cap, the cap's points
     under its edges, convex.EDGE through `_exit_edge`, and the rim point toward its middle), and the
     can on the pedestal as a mesh (the points under the polygon's edges)."""

@@ -1712,9 +1712,11 @@ def convex_convex(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, mes
     # a cylinder standing on a box's face or a wider cylinder's cap (cap or rim), or lying on either (side)
     mode1, mode2 = feature[0, 10] % 3, feature[0, 10] // 3
     on_box = type2 == BOX  # (standing on its cap or rim, or lying on its side)
-    second = int(type2 == CYLINDER and size2[0] < size1[0])  # the narrower cylinder stands (or lies) on the other
+    # the narrower cylinder stands (or lies) on the other (a capsule lies on the cylinder)
+    second = int(type1 == CYLINDER and type2 == CYLINDER and size2[0] < size1[0])
     on_cap = type2 == CYLINDER and ti.select(second == 0, mode2, mode1) != 2  # (the wider met at its cap or rim)
-    if type1 == CYLINDER and count <= 1 and (on_box or on_cap or type2 == MESH):
+    lies = type1 == CAPSULE and type2 == CYLINDER  # (a capsule on a cylinder's cap: only lying, `_face_cap`)
+    if (type1 == CYLINDER or lies) and count <= 1 and (on_box or on_cap or type2 == MESH):
         # the collider's normal picks a lying cylinder's face; when it found none, the centres' line
         met = _normalize(ti.select(count == 1, ti.Vector([normal[0, c] for c in ti.static(range(3))]), pos2 - pos1))
         n_face, face_position, face_normal, face_dist, face_feature, upright, off_face, on_face, toward, corners = \
@@ -2401,7 +2403,8 @@ RIM_TILT = 0.01  # rad
 # A cylinder lying on a box's face (its axis within LYING_TILT of the face's plane, met on its
 # side) touches it at the two ends of its side's line nearest the face (KIND_FACE_CAP with column 2
 # = LYING, column 3 the end): the same closed form with t = -n and a = ±axis. One contact (the
-# side's, wherever the iterate put it) let a lying can see-saw: 0.5 m/s for good. Tilted more, the
+# side's, wherever the iterate put it) let a lying can see-saw: 0.5 m/s for good. A capsule lying
+# on a cylinder's cap likewise (its ends' balls' lowest points: the same form, e its end's centre). Tilted more, the
 # iterate's contact is the lower end's anyway and the other end is higher by 2 h sin(tilt); the
 # gate is narrow because a tenth of random poses lie within 0.1 rad of a face's plane, where the
 # contacts are compared with MuJoCo's.
@@ -2630,7 +2633,8 @@ def _mesh_corners(hull: ti.template(), mesh, face):
 
 @ti.func
 def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal, hull: ti.template()):
-    """The face contacts of a cylinder standing on a box's face or a cylinder's cap (see above):
+    """The face contacts of a cylinder standing on a box's face or a cylinder's cap, or lying on
+    either, or a capsule lying on a cylinder's cap (see above):
     `second` 1 when the standing one is geom 2; `normal` the collider's (from geom 1 to 2), whose
     axis picks the face of a cylinder lying on a box (standing, the face comes from the poses).
     Returns
@@ -2695,6 +2699,8 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal, hull
         base, face_axis)
     if base[0] == MESH:  # (lying on a mesh: _lying_on_mesh)
         standing = ti.abs(aligned) >= ti.static(np.cos(STANDING_TILT)) and above > 0.0
+    if stand[0] == CAPSULE:  # a capsule only lies on the face (upright, its end's ball meets it at one point)
+        standing = standing and lying
     # the face's corners within the cap (a box's, or a mesh polygon's `_mesh_corners`); all of them
     # (the face within the cap): the corners alone
     corner_at = ti.Vector([0, 1, 2, 3])
