@@ -48,7 +48,7 @@ BRANCHES = {"plane", "core m=0", "core m=1", "core m=2", "epa m=2", "cylinder ri
             "rim of geom 2", "rim on its side", "clip face-face", "clip edge of geom 1", "clip edge of geom 2",
             "clip vertex", "clip edge x side plane", "clip side x side plane", "clip edge with margin",
             "cylinder standing on a box face", "cylinder standing on a mesh face", "cylinder lying on a face",
-            "cap under a box face's edge", "cap under a mesh face's edge",
+            "cap under a box face's edge", "cap under a mesh face's edge", "lying across a box face's edge",
             "box face's corner on a cap", "rim point toward a box face's centre",
             "mesh face's corner on a cap", "rim point toward a mesh face's centre"}
 
@@ -171,6 +171,7 @@ ALIGNED = [("capsule", "cylinder", _QUARTER, 0.05, None), ("cylinder", "cylinder
            ("cylinder", "cylinder", np.eye(3), 0.05, ((0.03, 0.05), None)),
            ("cylinder", "cylinder", np.eye(3), 0.1, (None, (0.03, 0.1))),
            ("cylinder", "box", _QUARTER, 0.03, ((0.03, 0.05), None)),  # a small can lying on the box
+           ("cylinder", "box", _QUARTER, 0.03, ((0.03, 0.12), None)),  # ... or across it (its ends beyond)
            ("cylinder", "cylinder", _QUARTER, 0.03, ((0.03, 0.05), None)),  # ... or on the other's cap
            # a box's face within a wider can's cap (its corners), or ending inside its rim (the points
            # under its edges)
@@ -268,8 +269,9 @@ def _branch(f, types, margin):
         if f[2] == cv.TOWARD:
             return {f"rim point toward a {face}'s centre"}
         standing = "cylinder standing on a mesh face" if types[1] == cv.MESH else "cylinder standing on a box face"
-        return {"cylinder lying on a face" if f[2] == cv.LYING else standing} | (
-            {f"cap under a {face}'s edge"} if f[2] != cv.LYING and f[5] == cv.EDGE else set())
+        if f[2] == cv.LYING:
+            return {"cylinder lying on a face"} | ({"lying across a box face's edge"} if f[5] == cv.EDGE else set())
+        return {standing} | ({f"cap under a {face}'s edge"} if f[5] == cv.EDGE else set())
     if f[0] == cv.KIND_CLIP:
         tags = int(f[3] >= 256) + int(f[4] >= 256)
         out = {["clip face-face", "clip edge of geom 1", "clip edge of geom 2"][f[7]],

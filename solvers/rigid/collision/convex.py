@@ -2404,7 +2404,12 @@ RIM_TILT = 0.01  # rad
 # side) touches it at the two ends of its side's line nearest the face (KIND_FACE_CAP with column 2
 # = LYING, column 3 the end): the same closed form with t = -n and a = ±axis. One contact (the
 # side's, wherever the iterate put it) let a lying can see-saw: 0.5 m/s for good. A capsule lying
-# on a cylinder's cap likewise (its ends' balls' lowest points: the same form, e its end's centre). Tilted more, the
+# on a cylinder's cap likewise (its ends' balls' lowest points: the same form, e its end's centre).
+# An end beyond a box face's side (a can lying across a narrower box) is slid back along the axis
+# onto that side's plane (column 5 = EDGE, column 6 the side's face code, `_lying_exit`): p = q -
+# slide a, q the end's point, slide = (q - a point of the side) . its normal / (a . its normal),
+# where the side line crosses the edge, as MuJoCo 4.0's two contacts there (on the collider's one
+# contact the can see-sawed at 0.28 m/s; now both creep in yaw alike, ~0.01 rad/s). Tilted more, the
 # iterate's contact is the lower end's anyway and the other end is higher by 2 h sin(tilt); the
 # gate is narrow because a tenth of random poses lie within 0.1 rad of a face's plane, where the
 # contacts are compared with MuJoCo's.
@@ -2471,7 +2476,8 @@ def _face_frame(base: ti.template(), feature, hull: ti.template()):
     (the face's outward normal, a point of the face (a box's or cap's centre, a mesh polygon's
     vertex 0), t (point k: ± the face's first in-plane axis for k = 0, 1, ± the second for 2, 3;
     lying, the inward normal), the base axis t is along (a box's; 0 on a mesh, whose axes are the
-    direction from its polygon's vertex 0 to the farthest, `_polygon_spread`, and the normal × it), its
+    direction of its polygon's first edge and the normal × it: a box mesh's face's axes, as a box's;
+    along the diagonal, its two edge points could lie on one line and it rocked), its
     middle (a box face's centre, a mesh polygon's vertices' mean: where TOWARD points))."""
     n_local, centre_local, t_local, t_axis = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3), \
         ti.Vector.zero(float, 3), 0
@@ -2485,8 +2491,7 @@ def _face_frame(base: ti.template(), feature, hull: ti.template()):
             for i in range(num):
                 middle_local += _polygon_point(hull, vadr, padr, num, i)
             middle_local /= num
-        first = _normalize(_polygon_point(hull, vadr, padr, num, _polygon_spread(hull, base[1], feature[1])[0])
-                           - centre_local)
+        first = _normalize(_polygon_point(hull, vadr, padr, num, 1) - centre_local)
         t_local = (1.0 - 2.0 * (feature[2] % 2)) * ti.select(feature[2] // 2 == 0, first, _cross(n_local, first))
         if feature[2] == LYING:
             t_local = -n_local
@@ -2525,9 +2530,13 @@ def _face_cap_terms(stand: ti.template(), base: ti.template(), feature, hull: ti
     u = _normalize(d_raw)
     # the edge's point p = e + edge u on its line: (p - line) . out = 0
     line_local, out_local = _edge_line(base, feature, hull, centre_local, t_local, t_axis)
-    out = _rot(rot2, out_local)
-    edge = _dot(base[2] + _rot(rot2, line_local) - e, out) / ti.max(_dot(u, out), _MINVAL)
+    line, out = base[2] + _rot(rot2, line_local), _rot(rot2, out_local)
+    edge = _dot(line - e, out) / ti.max(_dot(u, out), _MINVAL)
     p = e + ti.select(feature[5] == EDGE, edge, size1[0]) * u
+    if feature[2] == LYING:  # its end's point q, on an edge (EDGE) slid back along a onto the side's plane
+        q = e + size1[0] * u
+        edge = _dot(q - line, out) / ti.max(_dot(a, out), _MINVAL)
+        p = q - ti.select(feature[5] == EDGE, edge, 0.0) * a
     return (n_local, centre_local, t_local, n, centre, t_axis, a, t, d_raw, e, edge, p, _dot(p - centre, n), middle_local,
             line_local, out_local)
 
@@ -2539,13 +2548,34 @@ def _edge_line(base: ti.template(), feature, hull: ti.template(), centre_local, 
     centre + half extent t, t), or a mesh polygon's edge from its vertex feature[6] to the next
     (that vertex, (the next - it) × the polygon's normal)."""
     line_local, out_local = centre_local + _half_extent(base, t_axis) * t_local, t_local
-    if base[0] == MESH:
+    if feature[2] == LYING and base[0] == BOX:  # the side (face code feature[6]) the lying line crosses
+        edge_axis = feature[6] // 2
+        out_local = (1.0 - 2.0 * (feature[6] % 2)) * _unit_axis(edge_axis)
+        line_local = centre_local + base[4][edge_axis] * out_local
+    elif base[0] == MESH:
         poly = hull.hull_polyadr[base[1]] + feature[1]
         vadr, padr, num = hull.hull_vertadr[base[1]], hull.hull_poly_vertadr[poly], hull.hull_poly_vertnum[poly]
         line_local = _polygon_point(hull, vadr, padr, num, feature[6])
         out_local = _cross(_polygon_point(hull, vadr, padr, num, feature[6] + 1) - line_local,
                            hull.hull_poly_normal[poly])
     return line_local, out_local
+
+
+@ti.func
+def _lying_exit(base: ti.template(), face_axis, a, q):
+    """(face code of the box's side whose plane the lying line's end q (world) crossed going out along
+    a, how far back along a that plane lies from q (> 0: q is beyond it)): of the face's two
+    in-plane axes, the one whose side plane q lies farthest beyond, counted along a."""
+    code, back = 0, -_BIG
+    for turn in ti.static((1, 2)):
+        axis = (face_axis + turn) % 3
+        column = _column(base[3], axis)
+        heading = _dot(a, column)
+        side = ti.select(heading >= 0.0, 1.0, -1.0)
+        beyond = (side * _dot(q - base[2], column) - base[4][axis]) / ti.max(ti.abs(heading), _MINVAL)
+        if beyond > back:
+            code, back = 2 * axis + ti.select(heading >= 0.0, 0, 1), beyond
+    return code, back
 
 
 @ti.func
@@ -2606,29 +2636,45 @@ def _corner_terms(stand: ti.template(), base: ti.template(), feature, hull: ti.t
 
 
 @ti.func
-def _mesh_corners(hull: ti.template(), mesh, face):
-    """Positions in polygon `face` of the mesh of the (up to four) vertices that stand for its
-    corners against a cap (CORNER; -1 where it has fewer): all of them in a polygon of four or
-    fewer; else vertex 0, the farthest from it, the farthest from their line and the farthest on
-    that line's other side."""
-    poly = hull.hull_polyadr[mesh] + face
-    vadr, padr, num = hull.hull_vertadr[mesh], hull.hull_poly_vertadr[poly], hull.hull_poly_vertnum[poly]
-    corners = ti.Vector([0, 1, 2, 3])
-    for k in ti.static(range(4)):
-        if k >= num:
-            corners[k] = -1
-    if num > 4:
-        j, k = _polygon_spread(hull, mesh, face)
-        first = _polygon_point(hull, vadr, padr, num, 0)
-        line = _polygon_point(hull, vadr, padr, num, j) - first
-        side = _cross(line, _polygon_point(hull, vadr, padr, num, k) - first)
-        m, far = j, 0.0
-        for i in range(1, num):
-            across = -_dot(_cross(line, _polygon_point(hull, vadr, padr, num, i) - first), side)
-            if across > far:
-                m, far = i, across
-        corners = ti.Vector([0, j, k, ti.select(m == j, -1, m)])
-    return corners
+def _mesh_corners(stand: ti.template(), base: ti.template(), face, flip, hull: ti.template()):
+    """(positions in polygon `face` of the mesh base of up to four of its vertices within the
+    standing cylinder's cap (CORNER; -1 where fewer): all of them when four or fewer, else four
+    spread among them: the first, the farthest from it, the farthest from their line and the
+    farthest on that line's other side; how many of its vertices lie within the cap; its vertex
+    count). Four spread over the whole polygon left some within the cap out: an octagon across
+    a can's rim sank 5 mm on one of those, uncontacted, and rocked at 2.3 rad/s."""
+    poly = hull.hull_polyadr[base[1]] + face
+    vadr, padr, num = hull.hull_vertadr[base[1]], hull.hull_poly_vertadr[poly], hull.hull_poly_vertnum[poly]
+    corners, n_in = ti.Vector([-1, -1, -1, -1]), 0
+    line, side = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+    best = ti.Vector([-1.0, -1.0, 0.0])  # (the farthest's, the widest's, the other side's measure)
+    for step in range(4 * num):  # four passes over the vertices (one call site: inlined once)
+        sweep, i = step // num, step % num
+        offset = _corner_terms(stand, base, ti.Vector([KIND_FACE_CAP, face, CORNER, flip, 0, i, 0, 0, 0, 0, 0]),
+                               hull)[5]
+        if _dot(offset, offset) <= stand[4][0] * stand[4][0]:
+            point = _polygon_point(hull, vadr, padr, num, i)
+            span = point - _polygon_point(hull, vadr, padr, num, ti.max(corners[0], 0))
+            if sweep == 0:
+                if n_in < 4:
+                    corners[n_in] = i
+                n_in += 1
+            elif n_in > 4:
+                measure = _dot(span, span)  # sweep 1: from the first
+                if sweep == 2:
+                    measure = _cross(line, span).norm_sqr()  # from their line
+                elif sweep == 3:
+                    measure = -_dot(_cross(line, span), side)  # on its other side
+                if measure > best[sweep - 1]:
+                    best[sweep - 1] = measure
+                    corners[sweep] = i
+        if step == 2 * num - 1 and n_in > 4:  # (after sweep 1: the line from the first to the farthest)
+            line = _polygon_point(hull, vadr, padr, num, corners[1]) - _polygon_point(hull, vadr, padr, num, corners[0])
+        if step == 3 * num - 1 and n_in > 4:  # (after sweep 2; none on the other side: -1)
+            side = _cross(line, _polygon_point(hull, vadr, padr, num, corners[2])
+                          - _polygon_point(hull, vadr, padr, num, corners[0]))
+            corners[3] = -1
+    return corners, n_in, num
 
 
 @ti.func
@@ -2703,9 +2749,9 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal, hull
         standing = standing and lying
     # the face's corners within the cap (a box's, or a mesh polygon's `_mesh_corners`); all of them
     # (the face within the cap): the corners alone
-    corner_at = ti.Vector([0, 1, 2, 3])
+    corner_at, n_within, n_vertices = ti.Vector([0, 1, 2, 3]), 0, 0
     if base[0] == MESH:
-        corner_at = _mesh_corners(hull, base[1], face)
+        corner_at, n_within, n_vertices = _mesh_corners(stand, base, face, flip, hull)
     inside = ti.Vector([0, 0, 0, 0])
     n_corners = 0
     for k in ti.static(range(4)):
@@ -2714,7 +2760,7 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal, hull
         inside[k] = int(base[0] != CYLINDER and corner_at[k] >= 0 and not lying
                         and _dot(offset, offset) <= stand[4][0] * stand[4][0])
         n_corners += int(corner_at[k] >= 0)
-    corners = inside.sum() > 0 and inside.sum() == n_corners
+    corners = inside.sum() > 0 and inside.sum() == n_corners and n_within == n_vertices  # (a mesh: all within)
     # candidates: the rim (or edge) points, then, where one fell off the face, the corners within the
     # cap and the rim point toward the face's centre (a box whose face misses the can's axis)
     cand_position, cand_normal = ti.Matrix.zero(float, FACE_CANDIDATES, 3), ti.Matrix.zero(float, FACE_CANDIDATES, 3)
@@ -2729,13 +2775,16 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal, hull
             row[2] = TOWARD
         elif corners or k >= 4:
             row[2], row[5] = CORNER, ti.max(corner_at[k % 4], 0)
-        elif base[0] != CYLINDER:  # the face ends inside the rim (a rim point would be off it)
+        if row[2] <= LYING and base[0] != CYLINDER:  # the face ends inside the rim (a rim point would be off it)
             terms = _face_cap_terms(stand, base, row, hull)
-            edge = terms[10]
-            if base[0] == MESH:  # (the polygon's edge the point's ray leaves it through)
+            edge, reach = terms[10], stand[4][0]
+            if lying:  # an end beyond a box face's edge: the line where it crosses the edge (a face code)
+                row[6], edge = _lying_exit(base, face_axis, terms[6], terms[9] + stand[4][0] * _normalize(terms[8]))
+                edge, reach = stand[4][1] - edge, stand[4][1]
+            elif base[0] == MESH:  # (the polygon's edge the point's ray leaves it through)
                 row[6], edge = _exit_edge(hull, base[1], face, _rot_t(rot2, terms[9] - base[2]),
                                           _rot_t(rot2, _normalize(terms[8])))
-            if -stand[4][0] < edge and edge < stand[4][0]:
+            if -reach < edge and edge < reach:
                 row[5] = EDGE
             else:
                 row[6] = 0
@@ -2752,7 +2801,8 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal, hull
                 side_axis = (face_axis + turn) % 3
                 inplane[turn - 1] = _dot(offset, _column(rot2, side_axis))
                 # (an edge's point is on its edge, a corner on two, by construction, up to round-off)
-                across_edge = is_corner or (row[5] == EDGE and side_axis == (face_axis + 1 + k // 2) % 3)
+                across_edge = is_corner or (row[5] == EDGE and side_axis == ti.select(
+                    lying, row[6] // 2, (face_axis + 1 + k // 2) % 3))
                 if base[0] == BOX and ti.abs(inplane[turn - 1]) > size2[side_axis] and not across_edge:
                     on_face = False
             if base[0] == CYLINDER and inplane.norm_sqr() > size2[0] * size2[0]:
@@ -2863,13 +2913,21 @@ def _face_cap_adjoint(stand: ti.template(), base: ti.template(), feature, hull: 
     g_p = g_position + g_depth * n
     g_centre = -g_depth * n
     # p = e + reach u, u = unit(d_raw), e = stand's pos + a h, d_raw = t - (t . a) a
-    reach = ti.select(feature[5] == EDGE, edge, size1[0])
+    lying = feature[2] == LYING
+    reach = ti.select(feature[5] == EDGE and not lying, edge, size1[0])
     u = _normalize(d_raw)
     g_u = reach * g_p
     g_e, g_t = g_p, ti.Vector([0.0, 0.0, 0.0])
-    g_line, g_out = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
-    if feature[5] == EDGE:  # reach = (line - e) . out / (u . out), line and out the edge's (`_edge_line`)
-        line, out = base[2] + _rot(base[3], line_local), _rot(base[3], out_local)
+    g_line, g_out, g_a_slide = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+    line, out = base[2] + _rot(base[3], line_local), _rot(base[3], out_local)
+    if feature[5] == EDGE and lying:  # p = q - slide a, q = e + r u, slide = edge = (q - line) . out / (a . out)
+        g_numerator = -_dot(g_p, a) / ti.max(_dot(a, out), _MINVAL)
+        g_e += g_numerator * out
+        g_u += (size1[0] * g_numerator) * out
+        g_line = -g_numerator * out
+        g_out = g_numerator * (e + size1[0] * u - line) - (g_numerator * edge) * a
+        g_a_slide = -edge * g_p - (g_numerator * edge) * out
+    elif feature[5] == EDGE:  # reach = (line - e) . out / (u . out), line and out the edge's (`_edge_line`)
         g_numerator = _dot(g_p, u) / ti.max(_dot(u, out), _MINVAL)
         g_line = g_numerator * out
         g_e -= g_line
@@ -2881,7 +2939,7 @@ def _face_cap_adjoint(stand: ti.template(), base: ti.template(), feature, hull: 
     if feature[2] == TOWARD:  # t = the base's pos + its rotation times the face's middle - e
         g_middle = g_t
         g_e -= g_t
-    g_a = size1[1] * g_e - t * _dot(a, g_draw) - _dot(t, a) * g_draw
+    g_a = size1[1] * g_e - t * _dot(a, g_draw) - _dot(t, a) * g_draw + g_a_slide
     # n, centre - the base's pos and t (not TOWARD's) are the base's rotation times their local vectors
     g_rot_stand = ti.Matrix.zero(float, 3, 3)
     a_sign = 1.0 - 2.0 * feature[3]
