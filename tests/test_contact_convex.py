@@ -387,6 +387,31 @@ def test_lying_across_a_narrower_face_rests(precision, shape, base, tmp_path):
     assert fastest < 0.05, fastest
 
 
+def test_lying_across_a_narrower_box_touches_where_mujoco_does(f64):
+    """The can of the test above across the box, with MuJoCo's defaults, beside MuJoCo 4.0 itself:
+    after 0.2 s both have two contacts, where the can's side line crosses the box's top edges, at
+    the same points to 1 mm (the yaw creep both share moves them along the edges)."""
+    quat = tuple(float(q) for q in gs.morphs.euler_to_quat((91.5, -1, 15)))
+    m = mujoco.MjModel.from_xml_string(
+        '<mujoco><option timestep="0.002"/><worldbody><geom type="box" size="0.08 0.06 0.05" pos="0 0 0.05"/>'
+        f'<body pos="0.01 0 0.142" quat="{" ".join(map(str, quat))}"><freejoint/>'
+        '<geom type="cylinder" size="0.04 0.125"/></body></worldbody></mujoco>')
+    d = mujoco.MjData(m)
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002),
+                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True), show_viewer=False)
+    scene.add_entity(gs.morphs.Box(size=(0.16, 0.12, 0.1), pos=(0, 0, 0.05), fixed=True))
+    can = scene.add_entity(gs.morphs.Cylinder(radius=0.04, height=0.25, pos=(0.01, 0.0, 0.142), quat=quat))
+    scene.build()
+    for _ in range(100):
+        scene.step()
+        mujoco.mj_step(m, d)
+    ours = can.get_contacts()["position"].cpu().numpy()
+    theirs = np.array([d.contact[i].pos for i in range(d.ncon)])
+    assert len(ours) == len(theirs) == 2
+    np.testing.assert_allclose(ours[np.argsort(ours[:, 1])], theirs[np.argsort(theirs[:, 1])], atol=1e-3)
+    np.testing.assert_allclose(np.abs(ours[:, 1]), 0.06, atol=1e-6)  # (on the edges)
+
+
 def test_a_can_set_exactly_lying_on_a_box_slides_and_stops(f64):
     """A can lying along the box's y axis, set exactly touching (its side at the face) and sliding
     at 1 m/s along its axis: its contacts are the two ends of its lowest line, at depth 0 (the
@@ -413,7 +438,7 @@ def test_a_can_over_the_edge_of_a_box_rests(f64, base, tmp_path):
     off the face: its cap's point under the edge instead, convex.EDGE) rests on four points: it
     rocked at 0.065 m/s when a point off the face dropped it back to the collider's single
     contact. On a box mesh the edge is the polygon's the point's ray leaves it through
-    (convex._exit_edge): without it, three rim points and the collider's contact (creeping at
+    (convex._clip_line): without it, three rim points and the collider's contact (creeping at
     2e-6 m/s)."""
     r, h = 0.033, 0.12
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002), show_viewer=False)
@@ -522,7 +547,7 @@ def test_a_mesh_face_and_a_cap_of_other_sizes_rest(precision, case, tmp_path):
     on a wider can (r 15 cm), at the centre, 5 cm, 3 cm off it, or 7 cm off it (a corner beyond the
     rim), or on a narrower can (r 7.5 cm); and a can (r 12.5 cm) on the mesh box. The polygon's
     vertices within the cap (convex.CORNER) and the cap's points under the polygon's edges
-    (convex.EDGE, `_exit_edge`) hold it: speed under 1e-3 after 1 s, at the height of its face on
+    (convex.EDGE, `_clip_line`) hold it: speed under 1e-3 after 1 s, at the height of its face on
     the cap (the box on the wider can at its four corners). With the rim points alone, off the
     polygon, each kept the collider's one contact and rocked at 0.25-0.73 m/s for good (the
     corners alone: the box off the axis tipped over the rim at 3 rad/s before it settled)."""

@@ -246,7 +246,7 @@ def test_mesh_face_on_a_cap_of_another_size(f64, case, cone):
     """(Slow: 80 s; test_adjoints_convex checks these closed forms' adjoints in the default run.)
     As above with a mesh: the box as a mesh on the wider can (its polygon's vertices on the cap,
     convex.CORNER), on the one whose axis misses it (its vertices within the cap, the cap's points
-    under its edges, convex.EDGE through `_exit_edge`, and the rim point toward its middle), and the
+    under its edges, convex.EDGE through `_clip_line`, and the rim point toward its middle), and the
     can on the pedestal as a mesh (the points under the polygon's edges)."""
     _check(case, cone, steps=50, shape="mesh", ground="can")
     _check(case, cone, steps=50, shape="mesh", ground="offcan")

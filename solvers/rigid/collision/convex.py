@@ -1798,18 +1798,8 @@ def _lying_on_mesh(shape1: ti.template(), shape2: ti.template(), hull: ti.templa
             code = encode_direction(inward)
             # the line (mesh frame) clipped to the face: t in [low, high] over it, and the edges cut there
             start = _rot_t(rot2, shape1[2] - axis * shape1[4][1] - shape2[2])
-            along = _rot_t(rot2, 2.0 * shape1[4][1] * axis)
-            low, high, low_edge, high_edge = 0.0, 1.0, -1, -1
-            for i in range(num):
-                a = _polygon_point(hull, vadr, vert_adr, num, i)
-                side = _cross(_polygon_point(hull, vadr, vert_adr, num, i + 1) - a, local_n)  # (outward)
-                at, rate = -_dot(side, start - a), -_dot(side, along)  # over the face where at + rate t >= 0
-                if rate > 0.0 and -at / rate > low:
-                    low, low_edge = -at / rate, i
-                elif rate < 0.0 and -at / rate < high:
-                    high, high_edge = -at / rate, i
-                elif rate == 0.0 and at < 0.0:
-                    low = 2.0  # (parallel to this edge, outside it)
+            low, high, low_edge, high_edge = _clip_line(hull, mesh2, face, start,
+                                                        _rot_t(rot2, 2.0 * shape1[4][1] * axis), 0.0, 1.0)
             if low < high:
                 j, k = _polygon_spread(hull, mesh2, face)
                 for end in range(2):  # one evaluation: inlined once
@@ -1853,6 +1843,29 @@ def _facing_polygon(hull: ti.template(), mesh, up):
         if along > facing:
             face, facing = poly, along
     return face, facing
+
+
+@ti.func
+def _clip_line(hull: ti.template(), mesh, face, start, along, low, high):
+    """The line start + t along (the mesh's frame), t in [low, high], clipped to polygon `face`'s
+    prism (seen along its normal): (low, high) over the face (low >= high: it misses), and the
+    edges (from the polygon's vertex at that position to the next) it enters and leaves through
+    (-1 where the bound given stays). A lying line's ends (`_lying_on_mesh`), a rim point's ray
+    from the cap's centre (`_face_cap`: the edge it leaves through, EDGE)."""
+    poly = hull.hull_polyadr[mesh] + face
+    vadr, padr, num = hull.hull_vertadr[mesh], hull.hull_poly_vertadr[poly], hull.hull_poly_vertnum[poly]
+    low_edge, high_edge = -1, -1
+    for i in range(num):
+        a = _polygon_point(hull, vadr, padr, num, i)
+        side = _cross(_polygon_point(hull, vadr, padr, num, i + 1) - a, hull.hull_poly_normal[poly])  # (outward)
+        at, rate = -_dot(side, start - a), -_dot(side, along)  # over the face where at + rate t >= 0
+        if rate > 0.0 and -at / rate > low:
+            low, low_edge = -at / rate, i
+        elif rate < 0.0 and -at / rate < high:
+            high, high_edge = -at / rate, i
+        elif rate == 0.0 and at < 0.0:
+            low = high + 1.0  # (parallel to this edge, outside it)
+    return low, high, low_edge, high_edge
 
 
 @ti.func
@@ -2422,7 +2435,7 @@ LYING_TILT = 0.02  # rad
 # the same point where the edge meets the rim, so the switch is continuous. With rim points only, a
 # 10 cm box on a 20 cm can's cap kept one contact and rocked at 1 rad/s, a 40 cm can on a 30 cm box
 # at 0.3. On a mesh's polygon the edge is the one the point's ray from the cap's centre leaves the
-# polygon through (`_exit_edge`), reach = (a point of its line − e) . its outward normal / (the
+# polygon through (`_clip_line`), reach = (a point of its line − e) . its outward normal / (the
 # ray's direction . that normal), the box's formula for a box (`_edge_line`).
 EDGE = 1
 # A box's face that lies within the standing cylinder's cap (a box on a wider can) touches it at its
@@ -2576,25 +2589,6 @@ def _lying_exit(base: ti.template(), face_axis, a, q):
         if beyond > back:
             code, back = 2 * axis + ti.select(heading >= 0.0, 0, 1), beyond
     return code, back
-
-
-@ti.func
-def _exit_edge(hull: ti.template(), mesh, face, start, direction):
-    """(j, s): the edge of polygon `face` of the mesh (from its vertex j to the next) through which
-    the ray start + s direction (the mesh's frame) leaves the polygon's prism, and its s (_BIG when
-    it leaves through none)."""
-    poly = hull.hull_polyadr[mesh] + face
-    vadr, padr, num = hull.hull_vertadr[mesh], hull.hull_poly_vertadr[poly], hull.hull_poly_vertnum[poly]
-    j_exit, s_exit = 0, _BIG
-    for j in range(num):
-        corner = _polygon_point(hull, vadr, padr, num, j)
-        out = _cross(_polygon_point(hull, vadr, padr, num, j + 1) - corner, hull.hull_poly_normal[poly])
-        heading = _dot(direction, out)
-        if heading > 0.0:
-            s = _dot(corner - start, out) / heading
-            if s < s_exit:
-                j_exit, s_exit = j, s
-    return j_exit, s_exit
 
 
 @ti.func
@@ -2782,8 +2776,9 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal, hull
                 row[6], edge = _lying_exit(base, face_axis, terms[6], terms[9] + stand[4][0] * _normalize(terms[8]))
                 edge, reach = stand[4][1] - edge, stand[4][1]
             elif base[0] == MESH:  # (the polygon's edge the point's ray leaves it through)
-                row[6], edge = _exit_edge(hull, base[1], face, _rot_t(rot2, terms[9] - base[2]),
-                                          _rot_t(rot2, _normalize(terms[8])))
+                clipped = _clip_line(hull, base[1], face, _rot_t(rot2, terms[9] - base[2]),
+                                     _rot_t(rot2, _normalize(terms[8])), -_BIG, _BIG)
+                row[6], edge = ti.max(clipped[3], 0), clipped[1]  # (_BIG when it leaves through none)
             if -reach < edge and edge < reach:
                 row[5] = EDGE
             else:
