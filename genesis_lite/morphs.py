@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .options import _keywords
-from .solvers.core import InvalidInputError
+from .solvers.core import InvalidInputError, refuse_grad
 
 # Genesis 1.4.5's morph options that genesis_lite does not have (a named error says so, where
 # Python's TypeError named neither the morph nor the keyword): every morph's, the primitives',
@@ -21,7 +21,13 @@ _FILE = _MORPH + ("decimate", "decimate_face_num", "decimate_aggressiveness", "w
                   "recompute_inertia", "align", "file_meshes_are_zup", "batch_fixed_verts")
 
 
+_DIFFERENTIABLE_START = ("a morph's pose is fixed at build; a differentiable start is set after scene.build() "
+                         "with the entity's setters: set_pos, set_quat, set_dofs_position, an MPM entity's "
+                         "set_position")
+
+
 def _vec(owner, name, value, n):
+    refuse_grad(owner, name, value, _DIFFERENTIABLE_START)
     arr = np.asarray(value, dtype=np.float64)
     if arr.shape != (n,) or not np.all(np.isfinite(arr)):
         raise InvalidInputError(f"{owner}: argument '{name}' must be {n} finite numbers, got {value!r}")
@@ -29,6 +35,7 @@ def _vec(owner, name, value, n):
 
 
 def _positive(owner, name, value):
+    refuse_grad(owner, name, value, "a shape's size is fixed at build")
     arr = np.atleast_1d(np.asarray(value, dtype=np.float64))
     if not np.all(np.isfinite(arr)) or not np.all(arr > 0):
         raise InvalidInputError(f"{owner}: argument '{name}' must be positive and finite, got {value!r}")

@@ -5,10 +5,12 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from .solvers.core import InvalidInputError
+from .solvers.core import InvalidInputError, refuse_grad
 
 
 def _check_vec3(owner, name, value):
+    refuse_grad(owner, name, value, "options are fixed at build; gravity is differentiable through "
+                                    "scene.set_gravity")
     try:
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):  # a string, None, nested lists of other lengths

@@ -31,6 +31,15 @@ class GradientError(GenesisException, RuntimeError):
     """A gradient cannot be computed: non-differentiable path, stale graph, missing requires_grad."""
 
 
+def refuse_grad(owner, name, value, instead):
+    """Raise GradientError when ``value`` is a torch tensor that requires grad: ``owner``'s argument
+    ``name`` is read as plain numbers, so a graph through it would end there without a word;
+    ``instead``: where gradients do flow."""
+    if isinstance(value, torch.Tensor) and value.requires_grad:
+        raise GradientError(f"{owner}: argument '{name}' is not differentiable, got a tensor that requires grad "
+                            f"({instead}); pass it detached (.detach())")
+
+
 class SimulationError(GenesisException, RuntimeError):
     """The simulation produced a non-finite state (raised when SimOptions(check_nan=True))."""
 

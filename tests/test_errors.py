@@ -284,6 +284,20 @@ def test_requires_grad_tensor_without_requires_grad(f64, built):
     robot.set_dofs_position(target.detach())  # detaching is the other way out
 
 
+def test_requires_grad_tensor_where_no_gradient_flows():
+    """Morph poses and sizes and options are read as plain numbers: a tensor that requires grad
+    raises GradientError naming the argument and where gradients do flow (it was torch's raw
+    "Can't call numpy() on Tensor that requires grad"; found by an adversarial pass)."""
+    grad = torch.tensor([0.0, 0.0, 0.15], dtype=torch.float64, requires_grad=True)
+    raises(gs.GradientError, lambda: gs.morphs.Box(pos=grad), "Box: argument 'pos' is not differentiable",
+           "set_pos")
+    raises(gs.GradientError, lambda: gs.morphs.Box(size=grad + 1.0), "Box: argument 'size'", "fixed at build")
+    raises(gs.GradientError, lambda: gs.morphs.Sphere(radius=grad[2] * 1.0), "Sphere: argument 'radius'")
+    raises(gs.GradientError, lambda: gs.options.SimOptions(gravity=grad), "SimOptions: argument 'gravity'",
+           "scene.set_gravity")
+    assert gs.morphs.Box(pos=grad.detach()).pos.tolist() == [0.0, 0.0, 0.15]  # detached: plain values
+
+
 def test_set_pos_on_fixed_base(f64, built):
     _, robot = built
     raises(gs.InvalidInputError, lambda: robot.set_pos([0.0, 0.0, 1.0]), f"entity '{ENTITY}'", "set_pos",

@@ -552,3 +552,9 @@ def test_muscle_actuation(f64):
         with pytest.raises(gs.InvalidInputError) as info:
             call()
         assert fragment in str(info.value)
+    # fibres and groups are model data: a tensor that requires grad raises (it was detached without a
+    # word: direction.grad stayed None though the loss depends on it; found by an adversarial pass)
+    for name, value in (("muscle_direction", torch.ones(3, dtype=torch.float64, requires_grad=True)),
+                        ("muscle_group", torch.zeros(8, dtype=torch.float64, requires_grad=True))):
+        with pytest.raises(gs.GradientError, match=f"entity 'muscle': argument '{name}' is not differentiable"):
+            muscle.set_muscle(**{name: value})

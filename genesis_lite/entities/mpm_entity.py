@@ -13,7 +13,7 @@ import torch
 
 from .. import morphs as gm
 from ..materials import MPM
-from ..solvers.core import AssetError, InvalidInputError, SceneStateError, runtime
+from ..solvers.core import AssetError, InvalidInputError, SceneStateError, refuse_grad, runtime
 from ..solvers.mpm import layout, sampling
 from .common import EntityIndexing, all_finite, is_range, replace_columns
 
@@ -298,9 +298,13 @@ class MPMEntity(EntityIndexing):
     def set_muscle(self, muscle_group=None, muscle_direction=None):
         """Genesis's set_muscle: muscle_group (n_particles,) integers in [0, n_groups) (all 0 at
         first), used by the next set_actuation; muscle_direction (n_particles, 3) or (3,) fibre
-        directions (normalised here; (0, 0, 1) at first). Not differentiable."""
+        directions (normalised here; (0, 0, 1) at first). Not differentiable: a tensor that requires
+        grad raises GradientError."""
         self._require_muscle("set_muscle")
         self._sim()
+        for name, value in (("muscle_group", muscle_group), ("muscle_direction", muscle_direction)):
+            refuse_grad(f"entity '{self.name}'", name, value, "a muscle's groups and fibres are model data; its "
+                        "actuation (set_actuation) is differentiable")
         if muscle_group is not None:
             group = muscle_group.detach().cpu().numpy() if isinstance(muscle_group, torch.Tensor) else \
                 np.asarray(muscle_group)
