@@ -53,17 +53,21 @@ def euler_to_quat(euler_deg):
 
 @dataclass
 class Morph:
-    """Initial placement shared by every morph. fixed: welded to the world (no free joint)."""
+    """Initial placement shared by every morph: pos (3,) m; euler (3,) degrees (extrinsic x-y-z) or
+    quat (w, x, y, z), not both (neither: no rotation). fixed: welded to the world (no free joint)."""
     pos: tuple = (0.0, 0.0, 0.0)
-    euler: tuple = (0.0, 0.0, 0.0)
+    euler: tuple = None
     quat: tuple = None
     fixed: bool = False
 
     def __post_init__(self):
         owner = type(self).__name__
         self.pos = _vec(owner, "pos", self.pos, 3)
-        self.euler = _vec(owner, "euler", self.euler, 3)
+        if self.euler is not None and self.quat is not None:  # (as Genesis: one of them would go unused)
+            raise InvalidInputError(f"{owner}: arguments 'euler' and 'quat' cannot both be set, got euler "
+                                    f"{self.euler!r} and quat {self.quat!r}")
         if self.quat is None:
+            self.euler = _vec(owner, "euler", (0.0, 0.0, 0.0) if self.euler is None else self.euler, 3)
             self.quat = euler_to_quat(self.euler)
         else:
             q = _vec(owner, "quat", self.quat, 4)

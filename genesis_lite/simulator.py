@@ -270,13 +270,22 @@ class Simulator:
             if not (self.options.check_nan or slot.solver.watches_nonfinite) or not slot.solver.nonfinite():
                 continue
             message = (f"step {self.step_index}: the {type(slot.solver).__name__} state became non-finite "
-                       f"(entities: {', '.join(slot.solver.entity_names)}); reduce dt, check inputs and parameters")
+                       f"(entities: {', '.join(self._nonfinite_entities(slot))}); reduce dt, check inputs and "
+                       f"parameters")
             if self.options.check_nan:
                 raise SimulationError(message)
             if not slot.warned_nonfinite:
                 slot.warned_nonfinite = True
                 why = f": {slot.solver.hides_nonfinite}" if slot.solver.hides_nonfinite else ""
                 logger.warning(f"{message}{why}; SimOptions(check_nan=True) raises here")
+
+    def _nonfinite_entities(self, slot):
+        """The names of the entities whose state is not finite in some env (every entity of the
+        solver where none is: a non-finite value the state does not hold)."""
+        state = self.state(slot.solver).detach()
+        names = [name for name, columns in slot.solver.entity_columns()
+                 if not bool(torch.isfinite(state[:, torch.as_tensor(columns, device=state.device)]).all())]
+        return names or slot.solver.entity_names
 
     # -- derived quantities -------------------------------------------------------------------
     def derived(self, solver):

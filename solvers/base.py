@@ -124,6 +124,10 @@ class Solver:
         """True once a step produced a non-finite state since the last call."""
         raise NotImplementedError
 
+    def entity_columns(self):
+        """[(entity name, the int array of its state's columns)], in the order of entity_names."""
+        raise NotImplementedError
+
     def warm_start(self):
         """A copy of what a step carries over besides its state and inputs without it changing
         the result beyond a tolerance (the rigid solver's constraint-solve warm start), or None."""

@@ -100,6 +100,11 @@ def test_morph_arguments():
     raises(gs.InvalidInputError, lambda: gs.morphs.Plane(fixed=False), "Plane", "'fixed'", "must be True")
     raises(gs.InvalidInputError, lambda: gs.morphs.Capsule(radius=0.0), "Capsule: argument 'radius'", "positive")
     assert gs.morphs.Plane().fixed and not gs.morphs.Box().fixed
+    # euler and quat together: one would go unused (quat won without a word; Genesis raises too)
+    raises(gs.InvalidInputError, lambda: gs.morphs.Box(euler=(10.0, 0.0, 0.0), quat=(1.0, 0.0, 0.0, 0.0)),
+           "Box: arguments 'euler' and 'quat' cannot both be set")
+    assert np.allclose(gs.morphs.Box(euler=(0.0, 0.0, 90.0)).quat, [np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5)])
+    assert gs.morphs.Box().quat.tolist() == [1.0, 0.0, 0.0, 0.0] and gs.morphs.Box().euler.tolist() == [0.0, 0.0, 0.0]
 
 
 def test_morph_keywords():

@@ -278,6 +278,12 @@ def test_force_range_may_be_unbounded(f64, pendulum):
         assert np.isclose(float(robot.get_dofs_control_force()), -30.0, rtol=0, atol=1e-12)
         with pytest.raises(gs.InvalidInputError, match="argument 'upper' must be free of NaN"):
             robot.set_dofs_force_range([-1.0], [float("nan")])
+        # a lower bound of +inf (or an upper of -inf) clipped every force to infinity: the state went NaN
+        # (found by an adversarial pass)
+        with pytest.raises(gs.InvalidInputError, match="argument 'lower' must be finite or -inf"):
+            robot.set_dofs_force_range([float("inf")], [float("inf")])
+        with pytest.raises(gs.InvalidInputError, match="argument 'upper' must be finite or inf"):
+            robot.set_dofs_force_range([-float("inf")], [-float("inf")])
     finally:
         robot.set_dofs_force_range([-5.0], [5.0])
 

@@ -453,6 +453,10 @@ class RigidEntity(EntityIndexing):
         if bool((lo > hi).any()):
             raise InvalidInputError(f"entity '{self.name}': argument 'lower' must be ≤ 'upper', got "
                                     f"{lo.cpu().numpy()} and {hi.cpu().numpy()}")
+        for name, bound, wrong in (("lower", lo, float("inf")), ("upper", hi, -float("inf"))):
+            if bool((bound == wrong).any()):  # (both at +inf clipped every force to inf: the state NaN)
+                raise InvalidInputError(f"entity '{self.name}': argument '{name}' must be finite or "
+                                        f"{-wrong}, got {bound.detach().cpu().numpy()}")
         self._write_input("force_lo", self.dof_start + dofs, envs, lo)
         self._write_input("force_hi", self.dof_start + dofs, envs, hi)
 

@@ -273,6 +273,11 @@ class MPMSolver(MPMAdjoint, Solver):
         self.flags.zero_()
         return flagged
 
+    def entity_columns(self):
+        """Each entity's particles' rows (layout.WIDTH columns a particle)."""
+        return [(e.name, np.arange(e.start * layout.WIDTH, (e.start + len(e.positions)) * layout.WIDTH))
+                for e in self.model.entities]
+
     def warm_start(self):
         return None
 

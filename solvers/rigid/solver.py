@@ -326,6 +326,14 @@ class RigidSolver(Solver):
         # on the CPU the flag is a read of host memory; on a GPU it would wait for the device
         return self.data.flags_on_host
 
+    def entity_columns(self):
+        """Each entity's qpos columns, then its qvel columns (its links are contiguous in the model,
+        entity by entity)."""
+        m = self.model
+        first = [int(np.flatnonzero(m.link_entity == k)[0]) for k in range(len(self.entity_names))]
+        q, d = [*(int(m.link_q0[l]) for l in first), m.n_qs], [*(int(m.link_dof0[l]) for l in first), m.n_dofs]
+        return [(name, np.r_[q[k]:q[k + 1], m.n_qs + d[k]:m.n_qs + d[k + 1]]) for k, name in enumerate(self.entity_names)]
+
     def warm_start(self):
         """(B, D) copy of the constraint solve's warm start (what the next step's solve starts
         from), or None when no step can have a solve."""
