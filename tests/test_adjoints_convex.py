@@ -50,7 +50,7 @@ BRANCHES = {"plane", "core m=0", "core m=1", "core m=2", "epa m=2", "cylinder ri
             "cylinder standing on a box face", "cylinder standing on a mesh face", "cylinder lying on a face",
             "cap under a box face's edge", "cap under a mesh face's edge", "lying across a box face's edge",
             "box face's corner on a cap", "rim point toward a box face's centre",
-            "mesh face's corner on a cap", "rim point toward a mesh face's centre"}
+            "mesh face's corner on a cap", "rim point toward a mesh face's centre", "cap under another cap's rim"}
 
 
 @ti.func
@@ -193,17 +193,21 @@ ALIGNED = [("capsule", "cylinder", _QUARTER, 0.05, None), ("cylinder", "cylinder
            # a mesh's face within a wider can's cap (its polygon's vertices), or partly (those within
            # the cap, the rim points on the face and the rim point toward the face's middle)
            ("cylinder", "mesh", np.eye(3), 0.05, ((0.1, 0.05), None)),
-           ("cylinder", "mesh", np.eye(3), 0.05, ((0.07, 0.05), None))]
+           ("cylinder", "mesh", np.eye(3), 0.05, ((0.07, 0.05), None)),
+           # equal cans up to 9 cm off each other's axis (r 5 cm): the cap's points under the other's rim
+           # (EDGE), and beyond its rim (rim points off the cap) the collider's contact, a cap on a plane
+           ("cylinder", "cylinder", np.eye(3), 0.1, ((0.05, 0.1), (0.05, 0.1)), 0.09)]
 ALIGNED_MESH = 1  # geom 2's mesh where it is one: the box mesh (half extents 0.05, 0.06, 0.08 in MuJoCo's frame)
 _HALF_AXIS = {"cylinder": 0.1, "box": 0.06, "mesh": 0.08}  # geom 2's half extent along its z axis (SIZES)
 
 
 def _aligned_cases(rng, per_pair=20):
     """Poses of ALIGNED: geom 2 at a random pose, geom 1 turned as listed (or also flipped end
-    for end), above or below geom 2 along its axis, 1..8 mm into it, up to 3 cm off centre:
+    for end), above or below geom 2 along its axis, 1..8 mm into it, up to 3 cm (or the case's
+    sixth entry, m) off centre along each of geom 2's other axes:
     (name, types, sizes, meshes, pos, rot) as _convex_cases' (no MuJoCo contacts)."""
     cases = []
-    for kind1, kind2, turn, half1, resized in ALIGNED:
+    for kind1, kind2, turn, half1, resized, *spread in ALIGNED:
         mesh2 = ALIGNED_MESH if kind2 == "mesh" else -1
         m = _model(f'<body><freejoint/>{_geom(kind1, None, 0.0)}</body>', _geom(kind2, mesh2, 0.0))
         for _ in range(per_pair):
@@ -212,7 +216,8 @@ def _aligned_cases(rng, per_pair=20):
             rot2 = rot2.reshape(3, 3)
             side = rng.choice([-1.0, 1.0])
             flip = np.diag([1.0, -1.0, -1.0]) if rng.uniform() < 0.5 else np.eye(3)
-            offset = [*rng.uniform(-0.03, 0.03, 2), side * (half1 + _HALF_AXIS[kind2] - rng.uniform(1e-3, 8e-3))]
+            across = spread[0] if spread else 0.03
+            offset = [*rng.uniform(-across, across, 2), side * (half1 + _HALF_AXIS[kind2] - rng.uniform(1e-3, 8e-3))]
             pos2 = rng.normal(size=3) * 0.1
             pos = np.array([pos2 + rot2 @ offset, pos2])
             sizes = m.geom_size.copy()
@@ -271,6 +276,8 @@ def _branch(f, types, margin):
         standing = "cylinder standing on a mesh face" if types[1] == cv.MESH else "cylinder standing on a box face"
         if f[2] == cv.LYING:
             return {"cylinder lying on a face"} | ({"lying across a box face's edge"} if f[5] == cv.EDGE else set())
+        if f[5] == cv.EDGE and types[1 - f[4]] == cv.CYLINDER:  # (the base: the geom not standing)
+            return {standing, "cap under another cap's rim"}
         return {standing} | ({f"cap under a {face}'s edge"} if f[5] == cv.EDGE else set())
     if f[0] == cv.KIND_CLIP:
         tags = int(f[3] >= 256) + int(f[4] >= 256)

@@ -77,7 +77,8 @@ normal (of the EPA contact for KIND_CLIP), coded in two ints (octahedral map, ~1
   LYING, an end of a lying cylinder's side line), column 3 = 1 when that axis is flipped to point
   at the face (lying: the end), column 4 = 1 when the standing cylinder is geom 2, column 5 = EDGE
   (1) when the point is the cap's point under the face's edge (the face ends inside the rim; on a
-  mesh, column 6 the edge: from the polygon's vertex at that position to the next); or
+  mesh, column 6 the edge: from the polygon's vertex at that position to the next; on a
+  cylinder's cap, its rim where the point's ray leaves it); or
   column 2 = CORNER (5), column 5 the corner k (at the signs 1 - 2 (k % 2) of the face's first
   in-plane half extent, 1 - 2 (k // 2) of its second) of a box's face within the cap, or the
   position in a mesh polygon's vertex list of its vertex within the cap; or column 2
@@ -2542,7 +2543,8 @@ def _face_cap_terms(stand: ti.template(), base: ti.template(), feature, hull: ti
     d_raw = t - _dot(t, a) * a
     u = _normalize(d_raw)
     # the edge's point p = e + edge u on its line: (p - line) . out = 0
-    line_local, out_local = _edge_line(base, feature, hull, centre_local, t_local, t_axis)
+    line_local, out_local = _edge_line(base, feature, hull, centre_local, t_local, t_axis,
+                                       _rot_t(rot2, e - base[2]), _rot_t(rot2, u))
     line, out = base[2] + _rot(rot2, line_local), _rot(rot2, out_local)
     edge = _dot(line - e, out) / ti.max(_dot(u, out), _MINVAL)
     p = e + ti.select(feature[5] == EDGE, edge, size1[0]) * u
@@ -2555,12 +2557,28 @@ def _face_cap_terms(stand: ti.template(), base: ti.template(), feature, hull: ti
 
 
 @ti.func
-def _edge_line(base: ti.template(), feature, hull: ti.template(), centre_local, t_local, t_axis):
+def _edge_line(base: ti.template(), feature, hull: ti.template(), centre_local, t_local, t_axis, e_local, u_local):
     """(a point of its line, its outward normal in the face's plane (of any length)) in the base's
     frame, of the face's edge that an EDGE point lies on: a box face's edge across t (the face's
-    centre + half extent t, t), or a mesh polygon's edge from its vertex feature[6] to the next
-    (that vertex, (the next - it) × the polygon's normal)."""
+    centre + half extent t, t), a mesh polygon's edge from its vertex feature[6] to the next
+    (that vertex, (the next - it) × the polygon's normal), or a cylinder's cap's rim's tangent
+    where the ray from e_local along u_local (the rim point's, in the base's frame) leaves the
+    disk (the rim point there, its direction from the cap's centre; the centre and a zero normal
+    where the ray misses the disk). The tangent is recomputed from the poses at every evaluation
+    and its reverse holds it fixed in the base's frame: exact, as the ray meets the rim's circle
+    where the tangent touches it, so turning the tangent about the rim moves the ray's crossing
+    only to second order."""
     line_local, out_local = centre_local + _half_extent(base, t_axis) * t_local, t_local
+    if base[0] == CYLINDER:  # |m + reach w| = radius in the cap's plane (z: the cylinder's axis)
+        ww = u_local[0] * u_local[0] + u_local[1] * u_local[1]
+        mw = e_local[0] * u_local[0] + e_local[1] * u_local[1]
+        mm = e_local[0] * e_local[0] + e_local[1] * e_local[1]
+        discriminant = mw * mw - ww * (mm - base[4][0] * base[4][0])
+        line_local, out_local = centre_local, ti.Vector([0.0, 0.0, 0.0])
+        if discriminant >= 0.0 and ww > _MINVAL:
+            reach = (ti.sqrt(discriminant) - mw) / ww
+            out_local = ti.Vector([e_local[0] + reach * u_local[0], e_local[1] + reach * u_local[1], 0.0]) / base[4][0]
+            line_local = centre_local + base[4][0] * out_local
     if feature[2] == LYING and base[0] == BOX:  # the side (face code feature[6]) the lying line crosses
         edge_axis = feature[6] // 2
         out_local = (1.0 - 2.0 * (feature[6] % 2)) * _unit_axis(edge_axis)
@@ -2769,9 +2787,14 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal, hull
             row[2] = TOWARD
         elif corners or k >= 4:
             row[2], row[5] = CORNER, ti.max(corner_at[k % 4], 0)
-        if row[2] <= LYING and base[0] != CYLINDER:  # the face ends inside the rim (a rim point would be off it)
+        # the face ends inside the rim (a rim point would be off it): a box's or mesh's edge, a cylinder's
+        # rim (equal cans offset by 1 mm kept the collider's contact and one rim point and rocked at 0.4
+        # rad/s: the rims of ±v missed the other cap by 1e-5 m)
+        if row[2] <= LYING and not (base[0] == CYLINDER and lying):
             terms = _face_cap_terms(stand, base, row, hull)
             edge, reach = terms[10], stand[4][0]
+            if base[0] == CYLINDER and (terms[15].norm_sqr() == 0.0 or edge < 0.0):  # (the ray misses, or
+                edge = _BIG                                                          # leaves behind e)
             if lying:  # an end beyond a box face's edge: the line where it crosses the edge (a face code)
                 row[6], edge = _lying_exit(base, face_axis, terms[6], terms[9] + stand[4][0] * _normalize(terms[8]))
                 edge, reach = stand[4][1] - edge, stand[4][1]
@@ -2800,7 +2823,7 @@ def _face_cap(shape1: ti.template(), shape2: ti.template(), second, normal, hull
                     lying, row[6] // 2, (face_axis + 1 + k // 2) % 3))
                 if base[0] == BOX and ti.abs(inplane[turn - 1]) > size2[side_axis] and not across_edge:
                     on_face = False
-            if base[0] == CYLINDER and inplane.norm_sqr() > size2[0] * size2[0]:
+            if base[0] == CYLINDER and inplane.norm_sqr() > size2[0] * size2[0] and row[5] != EDGE:
                 on_face = False
             if base[0] == MESH and not is_corner and not _on_polygon(
                     hull, base[1], face, _rot_t(rot2, point - base[2]), ti.select(row[5] == EDGE, row[6], -1)):
