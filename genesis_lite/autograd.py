@@ -107,6 +107,9 @@ class _Step(torch.autograd.Function):
         if ctx.kept:
             states, inputs, warm_starts = saved[: ctx.n_states], saved[ctx.n_states:], ctx.warm_starts
         else:
+            if torch.is_grad_enabled():  # (its start states come from a detached recomputation: see _first_order)
+                raise GradientError(_second_order_message(f"step {ctx.index}") + "; with checkpoint_interval > 1 "
+                                    "create_graph=True raises at once")
             (states, warm_starts), inputs = ctx.rollout.start_states(ctx.index), saved
         with torch.no_grad():
             grads = sim.backward_step(states, inputs, grad_states, warm_starts)
@@ -173,12 +176,18 @@ def _first_order(what, grads, anchors):
     its error node hangs off the results alone, so ``torch.autograd.grad(g, inputs=...)`` pruned it
     whenever another path led to the inputs and the simulator's second-order part dropped out of a
     mixed derivative without a word (5.6 % off the finite difference, found by an adversarial
-    pass)."""
+    pass). A step that kept no start state (checkpoint_interval > 1) has none to anchor to (it is
+    recomputed, detached, from the checkpoint): its backward raises at once under create_graph
+    (the simulator's part of a mixed derivative dropped out there too, found by a review)."""
     if not torch.is_grad_enabled():
         return grads
     anchors = [a for a in anchors if isinstance(a, torch.Tensor) and a.requires_grad]
     if not anchors:
         return grads
-    message = (f"second derivatives through the simulator are not supported: the gradient of {what} was "
-               f"taken with create_graph=True and is being differentiated again")
+    message = _second_order_message(what) + " and is being differentiated again"
     return tuple(g if g is None else _NotDifferentiable.apply(message, g, *anchors) for g in grads)
+
+
+def _second_order_message(what):
+    return (f"second derivatives through the simulator are not supported: the gradient of {what} was taken "
+            f"with create_graph=True")

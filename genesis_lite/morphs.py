@@ -104,6 +104,8 @@ class URDF(Morph):
     def _check(self):
         if not isinstance(self.file, str) or not self.file:
             raise InvalidInputError(f"URDF: argument 'file' must be a path string, got {self.file!r}")
+        refuse_grad("URDF", "default_armature", self.default_armature,
+                    "it is fixed at build; set_dofs_armature is differentiable")
         try:
             armature = float(self.default_armature)
         except (TypeError, ValueError):

@@ -31,11 +31,19 @@ class GradientError(GenesisException, RuntimeError):
     """A gradient cannot be computed: non-differentiable path, stale graph, missing requires_grad."""
 
 
+def _requires_grad(value):
+    """Whether ``value`` is, or a list or tuple holds, a torch tensor that requires grad."""
+    if isinstance(value, (list, tuple)):
+        return any(_requires_grad(v) for v in value)
+    return isinstance(value, torch.Tensor) and value.requires_grad
+
+
 def refuse_grad(owner, name, value, instead):
-    """Raise GradientError when ``value`` is a torch tensor that requires grad: ``owner``'s argument
+    """Raise GradientError when ``value`` is (or a list or tuple holds) a torch tensor that requires
+    grad: ``owner``'s argument
     ``name`` is read as plain numbers, so a graph through it would end there without a word;
     ``instead``: where gradients do flow."""
-    if isinstance(value, torch.Tensor) and value.requires_grad:
+    if _requires_grad(value):
         raise GradientError(f"{owner}: argument '{name}' is not differentiable, got a tensor that requires grad "
                             f"({instead}); pass it detached (.detach())")
 

@@ -300,6 +300,9 @@ def test_requires_grad_tensor_where_no_gradient_flows():
     raises(gs.GradientError, lambda: gs.morphs.Sphere(radius=grad[2] * 1.0), "Sphere: argument 'radius'")
     raises(gs.GradientError, lambda: gs.options.SimOptions(gravity=grad), "SimOptions: argument 'gravity'",
            "scene.set_gravity")
+    raises(gs.GradientError, lambda: gs.morphs.Box(pos=[grad[0], 0.0, 0.0]), "Box: argument 'pos'")  # (in a list)
+    raises(gs.GradientError, lambda: gs.morphs.URDF(file="robot.urdf", default_armature=grad[2] * 1.0),
+           "URDF: argument 'default_armature'", "set_dofs_armature")  # (float() took it silently)
     assert gs.morphs.Box(pos=grad.detach()).pos.tolist() == [0.0, 0.0, 0.15]  # detached: plain values
 
 
