@@ -40,9 +40,8 @@ def _requires_grad(value):
 
 def refuse_grad(owner, name, value, instead):
     """Raise GradientError when ``value`` is (or a list or tuple holds) a torch tensor that requires
-    grad: ``owner``'s argument
-    ``name`` is read as plain numbers, so a graph through it would end there without a word;
-    ``instead``: where gradients do flow."""
+    grad: ``owner``'s argument ``name`` is read as plain numbers, so a graph through it would end
+    there without a word; ``instead``: why, and where gradients do flow."""
     if _requires_grad(value):
         raise GradientError(f"{owner}: argument '{name}' is not differentiable, got a tensor that requires grad "
                             f"({instead}); pass it detached (.detach())")
