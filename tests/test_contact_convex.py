@@ -544,8 +544,8 @@ def test_equal_cans_stacked_off_axis_rest(precision, offset):
 @pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
 def test_equal_cans_stacked_off_axis_rest_where_mujoco_does(f64, cone):
     """The stack above (1 mm off) with MuJoCo's defaults beside MuJoCo 4.0 itself: both at rest after
-    2 s (ours rocked at 0.05 m/s), the top can's height within 2e-5 m of MuJoCo's (its own
-    multi-contact picks other points on the lens the two caps share)."""
+    2 s (ours rocked at 0.05 m/s), the top can's height within 1e-5 m of MuJoCo's (3e-6 measured,
+    both cones: its own multi-contact picks other points on the lens the two caps share)."""
     from tests.contact_scenes import Body, ContactScene, build_mujoco, build_ours
     spec = ContactScene([Body("cylinder", (0.05, 0.1), pos=(0, 0, 0.05)),
                          Body("cylinder", (0.05, 0.1), pos=(1e-3, 0, 0.1499))], cone=cone)
@@ -557,7 +557,7 @@ def test_equal_cans_stacked_off_axis_rest_where_mujoco_does(f64, cone):
         scene.step()
         mujoco.mj_step(m, d)
     assert np.abs(d.qvel).max() < 1e-4 and top.get_dofs_velocity().abs().max().item() < 1e-5
-    assert abs(top.get_pos()[2].item() - d.qpos[9]) < 2e-5
+    assert abs(top.get_pos()[2].item() - d.qpos[9]) < 1e-5
 
 
 @pytest.mark.parametrize("precision", ["32", "64"])

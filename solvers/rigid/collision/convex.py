@@ -2568,7 +2568,7 @@ def _edge_line(base: ti.template(), feature, hull: ti.template(), centre_local, 
     and its reverse holds it fixed in the base's frame: exact, as the ray meets the rim's circle
     where the tangent touches it, so turning the tangent about the rim moves the ray's crossing
     only to second order."""
-    line_local, out_local = centre_local + _half_extent(base, t_axis) * t_local, t_local
+    line_local, out_local = centre_local + _half_extent(base, t_axis) * t_local, t_local  # (a box's)
     if base[0] == CYLINDER:  # |m + reach w| = radius in the cap's plane (z: the cylinder's axis)
         ww = u_local[0] * u_local[0] + u_local[1] * u_local[1]
         mw = e_local[0] * u_local[0] + e_local[1] * u_local[1]
@@ -2579,7 +2579,7 @@ def _edge_line(base: ti.template(), feature, hull: ti.template(), centre_local, 
             reach = (ti.sqrt(discriminant) - mw) / ww
             out_local = ti.Vector([e_local[0] + reach * u_local[0], e_local[1] + reach * u_local[1], 0.0]) / base[4][0]
             line_local = centre_local + base[4][0] * out_local
-    if feature[2] == LYING and base[0] == BOX:  # the side (face code feature[6]) the lying line crosses
+    elif feature[2] == LYING and base[0] == BOX:  # the side (face code feature[6]) the lying line crosses
         edge_axis = feature[6] // 2
         out_local = (1.0 - 2.0 * (feature[6] % 2)) * _unit_axis(edge_axis)
         line_local = centre_local + base[4][edge_axis] * out_local
