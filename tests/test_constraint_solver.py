@@ -223,6 +223,8 @@ class _View:
         self.pair_i, self.pair_j = ti.field(ti.i32, shape=self.n_pairs), ti.field(ti.i32, shape=self.n_pairs)
         self.pair_i.from_numpy(lower[:, 0])
         self.pair_j.from_numpy(lower[:, 1])
+        self.dof_pair0 = ti.field(ti.i32, shape=D)  # where each dof's pairs start (i (i + 1) / 2)
+        self.dof_pair0.from_numpy(np.array([i * (i + 1) // 2 for i in range(D)], dtype=np.int32))
         for name, (element, count) in cs.SCRATCH.items():
             setattr(self, name, ti.field(float if element == "f" else ti.i32, shape=shapes[count]))
         self.opt_iterations = ti.field(ti.i32, shape=E)
@@ -261,6 +263,7 @@ class _View:
             arrays["opt_ls_tolerance"][e] = c["opts"]["ls_tolerance"]
         for name, field in self._inputs().items():
             field.from_numpy(arrays[name])
+        self.solver_H.fill(0.0)  # the solve keeps only its blocks' envelopes: the rest reads as zero
 
     def _inputs(self):
         names = ("solver_M", "qfrc_smooth", "efc_type", "efc_dim", "efc_mu", "efc_J", "efc_R", "efc_aref",

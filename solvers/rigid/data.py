@@ -72,7 +72,7 @@ CONST = {name: k for k, name in enumerate(CONSTS)}  # where each is in the model
 MODEL = {
     "link_parent": ("i", "L"), "link_root": ("i", "L"), "link_jtype": ("i", "L"), "link_static": ("i", "L"),
     "link_dof0": ("i", "L"), "link_q0": ("i", "L"), "dof_link": ("i", "D"), "dof_q": ("i", "D"), "dof_parent": ("i", "D"),
-    "pair_i": ("i", "P"), "pair_j": ("i", "P"),
+    "pair_i": ("i", "P"), "pair_j": ("i", "P"), "dof_pair0": ("i", "D"),
     # collision geometry (geometry.py; MuJoCo's conventions) and the candidate geom pairs
     "geom_type": ("i", "G"), "geom_link": ("i", "G"), "geom_mesh": ("i", "G"), "hull_int": ("i", "HI"),
     "pair_geom1": ("i", "N"), "pair_geom2": ("i", "N"), "pair_condim": ("i", "N"),

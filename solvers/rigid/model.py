@@ -134,6 +134,11 @@ class RigidModel:
         return self.pairs[:, 1]
 
     @property
+    def dof_pair0(self):
+        """(D,) the first mass-matrix pair of each dof's row (pairs are sorted by row, then column)."""
+        return np.searchsorted(self.pairs[:, 0], np.arange(self.n_dofs)).astype(np.int32)
+
+    @property
     def n_links(self):
         return len(self.link_name)
 

@@ -25,7 +25,8 @@ import taichi as ti
 
 from ..data import accumulate
 from .rows import contact_included, contact_rows_adjoint, dof_rows_adjoint, rows_per_contact
-from .solver import CONE, LINEARNEG, LINEARPOS, QUADRATIC, cholesky_solve, cone_coordinates, cone_hessian_entry
+from .solver import CONE, LINEARNEG, LINEARPOS, QUADRATIC, add_mul_M, cholesky_solve, cone_coordinates, \
+    cone_hessian_entry
 
 
 @ti.func
@@ -49,11 +50,9 @@ def solve_adjoint(d: ti.template(), s, e):
     that times aᵀ)."""
     u, g_mass = d.solver_Mgrad, d.solver_Mv
     for i in range(d.n_dofs):  # ā = q̄acc_constrained + M q̄frc_constraint
-        acc = d.qacc_constrained.grad[s, e, i]
-        for j in range(d.n_dofs):
-            acc += d.solver_M[s, e, i, j] * d.qfrc_constraint.grad[s, e, j]
-        u[s, e, i] = acc
-    cholesky_solve(d, d.solver_H, u, s, e)
+        u[s, e, i] = d.qacc_constrained.grad[s, e, i]
+    add_mul_M(d, s, e, d.n_dofs, False, d.qfrc_constraint.grad, u)
+    cholesky_solve(d, u, s, e)
     for i in range(d.n_dofs):
         accumulate(d.qfrc_smooth.grad, ti.Vector([s, e, i]), u[s, e, i] - d.qfrc_constraint.grad[s, e, i])
         g_mass[s, e, i] = d.qfrc_constraint.grad[s, e, i] - u[s, e, i]
@@ -117,8 +116,10 @@ def _contact_adjoint(d: ti.template(), s, e, c):
     first = d.con_efc[s, e, c]
     n = rows_per_contact(d, d.pair_condim[d.con_pair[s, e, c]])
     w, force = ti.Vector.zero(float, 4), ti.Vector.zero(float, 4)
+    col0, ncol = d.efc_col0[s, e, first], d.efc_ncol[s, e, first]  # (the contact's rows share its columns)
     for j in range(n):
-        for i in range(d.n_dofs):
+        for a in range(ncol):
+            i = d.efc_cols[s, e, col0 + a]
             w[j] += d.efc_J[s, e, first + j, i] * d.solver_Mgrad[s, e, i]
         force[j] = d.efc_force[s, e, first + j]
     g_aref, g_R, g_mu = ti.Vector.zero(float, 4), ti.Vector.zero(float, 4), ti.Vector.zero(float, 4)

@@ -109,10 +109,13 @@ def contact_params(d: ti.template(), e, pair):
 
 
 @ti.func
-def _zero_rows(d: ti.template(), s, e, first, count):
+def _zero_rows(d: ti.template(), s, e, c, first, count, ncol):
+    """Rows first… (count) of contact c ← 0 in its ncol columns (efc_cols[c·D …]). No reader looks
+    past a row's columns, so the rest of the row is left as it was (zeroing whole rows cost
+    rows × dofs a substep: 86k stores with 60 boxes on a plane)."""
     for r in range(first, first + count):
-        for i in range(d.n_dofs):
-            d.efc_J[s, e, r, i] = 0.0
+        for a in range(ncol):
+            d.efc_J[s, e, r, d.efc_cols[s, e, c * d.n_dofs + a]] = 0.0
 
 
 @ti.func
@@ -179,10 +182,10 @@ def contact_rows(d: ti.template(), s, e, c, first):
     n = rows_per_contact(d, condim)
     frame, pos = d.con_frame[s, e, c], d.con_pos[s, e, c]
     l1, l2 = d.geom_link[d.pair_geom1[pair]], d.geom_link[d.pair_geom2[pair]]
-    _zero_rows(d, s, e, first, n)
+    ncol = _contact_columns(d, s, e, c, l1, l2)
+    _zero_rows(d, s, e, c, first, n, ncol)
     _add_link_jacobian(d, s, e, l1, pos, frame, -1.0, first, condim, pyramidal, mu)
     _add_link_jacobian(d, s, e, l2, pos, frame, 1.0, first, condim, pyramidal, mu)
-    ncol = _contact_columns(d, s, e, c, l1, l2)
     dist, margin = d.con_dist[s, e, c], d.pair_margin[pair]
     for j in range(n):
         r = first + j
@@ -452,9 +455,8 @@ def contact_force(d: ti.template(), s, e, c):
 @ti.func
 def _dof_row(d: ti.template(), s, e, r, i, sign, dist):
     """Row r on dof i alone (J = sign·e_i) at distance dist (m or rad; 0 for friction loss): its
-    Jacobian, R and aref, with the scene's time constant and MuJoCo's default solimp."""
-    for j in range(d.n_dofs):
-        d.efc_J[s, e, r, j] = 0.0
+    Jacobian (its one column: no reader looks past a row's columns), R and aref, with the scene's
+    time constant and MuJoCo's default solimp."""
     d.efc_J[s, e, r, i] = sign
     # its one column, in slot r after the contacts' lists (a frame has at most 2 D single-dof rows)
     d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = d.contact_capacity * d.n_dofs + r, 1

@@ -35,9 +35,11 @@ tolerance; also when the line search returns α = 0 or after ``iterations`` step
 solver_niter is the sum of the islands' iteration counts (MuJoCo's Σ d.solver_niter).
 
 **For the backward.** At exit d.solver_H holds the lower Cholesky factor L (H = L Lᵀ) of the
-whole env's final Hessian, block-diagonal over islands (M's factor on unconstrained dofs),
+whole env's final Hessian, block-diagonal over islands (M's factor on the trees no row touches),
 consistent with the final efc_state (the active set) and solver_jar = J qacc − aref (from which
-the cone blocks H_c follow). Implicit differentiation solves H u = ḡ with it.
+the cone blocks H_c follow): row i from dof solver_env[i] on, among its block's dofs; entries
+elsewhere are zero and not kept (``cholesky_solve``). Implicit differentiation solves H u = ḡ
+with it.
 
 **Checking against MuJoCo.** With islands, MuJoCo copies only the forces back from its island
 arrays: after mj_forward, d.efc_state still holds the warm-start test's states (at qacc_smooth);
@@ -46,7 +48,9 @@ the solve's final states, which ours equal, are d.iefc_state[d.map_efc2iefc].
 **Where we differ from MuJoCo.** An envelope (skyline) Cholesky of M and a fresh one of H in
 every iteration that changes a state (MuJoCo: sparse LDLᵀ, rank-one updates of H): round-off
 only. The envelope and the rows' column lists (efc_cols) skip exact zeros only, so the results
-equal the dense ones bit for bit; M·v sums over M's pairs (_mul_M), in their order. Island trees
+equal the dense ones bit for bit; M·v sums over M's pairs (add_mul_M), in their order. Every
+loop runs over an island's own dofs, rows and envelope, so the cost grows with the scene's
+size, not its square. Island trees
 from the Jacobian (above). No equality rows, no noslip, no sleeping, warm start always on.
 """
 import taichi as ti
@@ -77,7 +81,14 @@ SCRATCH = {
     "solver_row_island": ("i", "R"),  # island of a row
     "solver_dofs": ("i", "D"),        # the dofs of the island being solved, ascending
     "solver_rows": ("i", "R"),        # its used rows (elliptic tails included), ascending
-    "solver_first": ("i", "D"),       # envelope of its H: per position a, the first b with H[a, b] ≠ 0
+    "solver_pos": ("i", "D"),         # a dof's position in solver_dofs
+    "solver_first": ("i", "D"),       # envelope of its H: per position a, the first b where H[a, b] may be ≠ 0
+    "solver_reach": ("i", "D"),       # per position a, a bound on the last b whose envelope reaches a
+    "solver_inv": ("f", "D"),         # per position, 1 / L's diagonal entry (−1: a deficient pivot)
+    "solver_env": ("i", "D"),         # per dof, the first dof of its row of the final factor (the backward's)
+    "solver_head": ("i", "D"),        # per island label, its first used row (−1: none)
+    "solver_dof_next": ("i", "D"),    # the next dof of a dof's island (−1: the last)
+    "solver_row_next": ("i", "R"),    # the next used row of a row's island (−1: the last)
 }
 
 
@@ -133,23 +144,61 @@ def _find_islands(d: ti.template(), s, e):
                             label = d.solver_dof_island[s, e, i]
             for q in range(count):
                 d.solver_row_island[s, e, r + q] = label
+    _link_islands(d, s, e)
+
+
+@ti.func
+def _link_islands(d: ti.template(), s, e):
+    """Each island's dofs and used rows as ascending linked lists (solver_dof_next from the island's
+    label, its smallest dof; solver_row_next from solver_head[label]), so that selecting an island
+    costs its own size: 60 boxes apart on a plane are 60 islands, and a scan of every dof and row
+    per island cost more than their solves."""
+    for i in range(d.n_dofs):
+        d.solver_head[s, e, i] = -1
+    for q in range(d.n_dofs):  # descending, each dof put before the island's list so far
+        i = d.n_dofs - 1 - q
+        label = d.solver_dof_island[s, e, i]
+        if label != NO_ISLAND:
+            d.solver_dof_next[s, e, i] = d.solver_head[s, e, label]
+            d.solver_head[s, e, label] = i
+    for i in range(d.n_dofs):
+        d.solver_head[s, e, i] = -1
+    for q in range(d.n_efc[s, e, 0]):
+        r = d.n_efc[s, e, 0] - 1 - q
+        label = d.solver_row_island[s, e, r]
+        if d.efc_type[s, e, r] != UNUSED and label != NO_ISLAND:
+            d.solver_row_next[s, e, r] = d.solver_head[s, e, label]
+            d.solver_head[s, e, label] = r
 
 
 @ti.func
 def _select(d: ti.template(), s, e, k):
     """solver_dofs ← island k's dofs, solver_rows ← its used rows (k = ALL: every dof and used
-    row), both ascending. Returns their counts (n, m). Every loop of the solve runs over these
-    lists, and a row's products over its non-zero columns (efc_cols): the sums keep the dense
-    order, less exact zeros, so the results are the dense ones bit for bit."""
+    row), both ascending; solver_pos ← each listed dof's position. Returns their counts (n, m).
+    Every loop of the solve runs over these lists, and a row's products over its non-zero columns
+    (efc_cols): the sums keep the dense order, less exact zeros, so the results are the dense
+    ones bit for bit."""
     n, m = 0, 0
-    for i in range(d.n_dofs):
-        if k == ALL or d.solver_dof_island[s, e, i] == k:
+    if k == ALL:
+        n = d.n_dofs
+        for i in range(n):
+            d.solver_dofs[s, e, i] = d.solver_pos[s, e, i] = i
+        for r in range(d.n_efc[s, e, 0]):
+            if d.efc_type[s, e, r] != UNUSED:
+                d.solver_rows[s, e, m] = r
+                m += 1
+    else:
+        i = k
+        while i != -1:
             d.solver_dofs[s, e, n] = i
+            d.solver_pos[s, e, i] = n
             n += 1
-    for r in range(d.n_efc[s, e, 0]):
-        if d.efc_type[s, e, r] != UNUSED and (k == ALL or d.solver_row_island[s, e, r] == k):
+            i = d.solver_dof_next[s, e, i]
+        r = d.solver_head[s, e, k]
+        while r != -1:
             d.solver_rows[s, e, m] = r
             m += 1
+            r = d.solver_row_next[s, e, r]
     return n, m
 
 
@@ -164,56 +213,91 @@ def _row_dot(d: ti.template(), s, e, r, x: ti.template()):
     return acc
 
 
-# ----------------------------------------------------------------------------- dense algebra
+# ----------------------------------------------------------------------------- envelope algebra
+# H is factored within its envelope (profile): row a's entries from position solver_first[a] on,
+# where first[a] is at or before its first non-zero. A Cholesky factor has no fill-in left of it,
+# so the factor and solves skip those columns (free bodies stacked in a chain give a banded H,
+# bodies apart a block-diagonal one) and nothing left of it is written or read: the cost follows
+# the envelope, not the square of the dofs (the constraint stage of 60 boxes apart on a plane:
+# 0.43 → 0.17 ms a substep, float32).
+# The envelope is structural (the dofs' trees and the rows' columns), so it may hold exact zeros;
+# they add exact zeros, and the results are the dense ones bit for bit.
 @ti.func
-def _envelope(d: ti.template(), s, e, n):
-    """solver_first[a] ← the first position b ≤ a (in solver_dofs) where row a of solver_H's lower
-    triangle is non-zero. A Cholesky factor keeps every zero left of this envelope (no fill-in
-    there), so the factor and solves below skip those columns: free bodies stacked in a chain
-    give a banded H."""
+def _tree_envelope(d: ti.template(), s, e, n):
+    """solver_first[a] ← the position of its dof's tree root: M's envelope (M[i, j] ≠ 0 only for dof
+    j on dof i's path to the root). The n dofs of solver_dofs hold whole trees."""
     for a in range(n):
-        i = d.solver_dofs[s, e, a]
-        b = 0
-        while b < a and d.solver_H[s, e, i, d.solver_dofs[s, e, b]] == 0.0:
-            b += 1
-        d.solver_first[s, e, a] = b
+        d.solver_first[s, e, a] = d.solver_pos[s, e, d.solver_dof_tree[s, e, d.solver_dofs[s, e, a]]]
+    _reach(d, s, e, n, d.solver_first)
+
+
+@ti.func
+def _island_envelope(d: ti.template(), s, e, k, n, m):
+    """solver_first ← the envelope of island k's H = M + Jᵀ D J + cone blocks over its n dofs and m
+    rows (solver_dofs, solver_rows): M's, widened to each row's first column in the island (the
+    rows of every state: the envelope stays while the states change)."""
+    for a in range(n):
+        d.solver_first[s, e, a] = d.solver_pos[s, e, d.solver_dof_tree[s, e, d.solver_dofs[s, e, a]]]
+    for q in range(m):
+        r = d.solver_rows[s, e, q]
+        col0, low = d.efc_col0[s, e, r], -1
+        for c in range(d.efc_ncol[s, e, r]):  # ascending; a column whose entries are all exactly
+            i = d.efc_cols[s, e, col0 + c]    # zero may lie outside the island
+            if d.solver_dof_island[s, e, i] == k:
+                a = d.solver_pos[s, e, i]
+                if low == -1:
+                    low = a
+                d.solver_first[s, e, a] = ti.min(d.solver_first[s, e, a], low)
+    _reach(d, s, e, n, d.solver_first)
+
+
+@ti.func
+def _reach(d: ti.template(), s, e, n, first: ti.template()):
+    """solver_reach[a] ← max(a, the last b < n with first[s, e, b] ≤ a): no row past it has an
+    entry in column a (the backward substitution's bound). first: solver_first (positions), or
+    solver_env (dofs)."""
+    for a in range(n):
+        d.solver_reach[s, e, a] = a
+    for b in range(n):
+        f = first[s, e, b]
+        d.solver_reach[s, e, f] = ti.max(d.solver_reach[s, e, f], b)
+    for a in range(1, n):
+        d.solver_reach[s, e, a] = ti.max(d.solver_reach[s, e, a], d.solver_reach[s, e, a - 1])
 
 
 @ti.func
 def _cholesky(d: ti.template(), s, e, n):
     """In place, solver_H (lower triangle of a symmetric positive matrix on the n dofs of
-    solver_dofs, envelope in solver_first) ← its Cholesky factor L. As mju_cholFactor, a pivot
-    below MINVAL is raised to MINVAL and its column cleared."""
-    for b in range(n):
-        j, fb = d.solver_dofs[s, e, b], d.solver_first[s, e, b]
-        pivot = d.solver_H[s, e, j, j]
-        for c in range(fb, b):
-            ljc = d.solver_H[s, e, j, d.solver_dofs[s, e, c]]
-            pivot -= ljc * ljc
+    solver_dofs, envelope in solver_first) ← its Cholesky factor L, row by row. As
+    mju_cholFactor, a pivot below MINVAL is raised to MINVAL and its column cleared."""
+    for a in range(n):
+        i, fa = d.solver_dofs[s, e, a], d.solver_first[s, e, a]
+        for b in range(fa, a):
+            j, inv = d.solver_dofs[s, e, b], d.solver_inv[s, e, b]
+            value = 0.0  # (under a deficient pivot: its column cleared)
+            if not inv < 0.0:
+                acc = d.solver_H[s, e, i, j]
+                for c in range(ti.max(fa, d.solver_first[s, e, b]), b):
+                    col = d.solver_dofs[s, e, c]
+                    acc -= d.solver_H[s, e, i, col] * d.solver_H[s, e, j, col]
+                value = acc * inv
+            d.solver_H[s, e, i, j] = value
+        pivot = d.solver_H[s, e, i, i]
+        for c in range(fa, a):
+            lic = d.solver_H[s, e, i, d.solver_dofs[s, e, c]]
+            pivot -= lic * lic
         deficient = pivot < MINVAL
         if deficient:
             pivot = MINVAL
-        ljj = ti.sqrt(pivot)
-        d.solver_H[s, e, j, j] = ljj
-        inv = 1.0 / ljj
-        for a in range(b + 1, n):
-            fa = d.solver_first[s, e, a]
-            if fa <= b:  # else L[a, b] stays 0
-                i = d.solver_dofs[s, e, a]
-                if deficient:
-                    d.solver_H[s, e, i, j] = 0.0
-                else:
-                    acc = d.solver_H[s, e, i, j]
-                    for c in range(ti.max(fa, fb), b):
-                        col = d.solver_dofs[s, e, c]
-                        acc -= d.solver_H[s, e, i, col] * d.solver_H[s, e, j, col]
-                    d.solver_H[s, e, i, j] = acc * inv
+        lii = ti.sqrt(pivot)
+        d.solver_H[s, e, i, i] = lii
+        d.solver_inv[s, e, a] = ti.select(deficient, -1.0, 1.0 / lii)
 
 
 @ti.func
 def _factor_solve(d: ti.template(), x: ti.template(), s, e, n):
     """In place, x[s, e] ← (L Lᵀ)⁻¹ x[s, e] on the n dofs of solver_dofs (L in solver_H from
-    ``_cholesky``, envelope in solver_first)."""
+    ``_cholesky``, envelope in solver_first and solver_reach)."""
     for a in range(n):
         i = d.solver_dofs[s, e, a]
         acc = x[s, e, i]
@@ -225,7 +309,7 @@ def _factor_solve(d: ti.template(), x: ti.template(), s, e, n):
         a = n - 1 - q
         i = d.solver_dofs[s, e, a]
         acc = x[s, e, i]
-        for b in range(a + 1, n):
+        for b in range(a + 1, d.solver_reach[s, e, a] + 1):
             if d.solver_first[s, e, b] <= a:
                 j = d.solver_dofs[s, e, b]
                 acc -= d.solver_H[s, e, j, i] * x[s, e, j]
@@ -233,20 +317,34 @@ def _factor_solve(d: ti.template(), x: ti.template(), s, e, n):
 
 
 @ti.func
-def cholesky_solve(d: ti.template(), L: ti.template(), x: ti.template(), s, e):
-    """In place, x[s, e] ← (L Lᵀ)⁻¹ x[s, e] on every dof (L lower triangular, (D, D)): the
-    backward's solve with the final factor."""
-    for i in range(d.n_dofs):
-        acc = x[s, e, i]
-        for j in range(i):
-            acc -= L[s, e, i, j] * x[s, e, j]
-        x[s, e, i] = acc / L[s, e, i, i]
-    for q in range(d.n_dofs):
-        i = d.n_dofs - 1 - q
-        acc = x[s, e, i]
-        for j in range(i + 1, d.n_dofs):
-            acc -= L[s, e, j, i] * x[s, e, j]
-        x[s, e, i] = acc / L[s, e, i, i]
+def _block(d: ti.template(), s, e, i):
+    """The diagonal block of the final factor that dof i is in: its island's label, or its tree's
+    root where no row touches it (a tree root is its tree's smallest dof, an island's label its
+    smallest: the two never clash)."""
+    label = d.solver_dof_island[s, e, i]
+    return ti.select(label == NO_ISLAND, d.solver_dof_tree[s, e, i], label)
+
+
+@ti.func
+def cholesky_solve(d: ti.template(), x: ti.template(), s, e):
+    """In place, x[s, e] ← H⁻¹ x[s, e] on every dof with the final factor (solver_H = L, H = L Lᵀ):
+    the backward's solve. Row i of L holds its entries from dof solver_env[i] on among the dofs
+    of its block; every other entry is zero and not stored. Scratch: solver_reach (in dofs)."""
+    n = d.n_dofs
+    _reach(d, s, e, n, d.solver_env)
+    for i in range(n):
+        block, acc = _block(d, s, e, i), x[s, e, i]
+        for j in range(d.solver_env[s, e, i], i):
+            if _block(d, s, e, j) == block:
+                acc -= d.solver_H[s, e, i, j] * x[s, e, j]
+        x[s, e, i] = acc / d.solver_H[s, e, i, i]
+    for q in range(n):
+        i = n - 1 - q
+        block, acc = _block(d, s, e, i), x[s, e, i]
+        for j in range(i + 1, d.solver_reach[s, e, i] + 1):
+            if d.solver_env[s, e, j] <= i and _block(d, s, e, j) == block:
+                acc -= d.solver_H[s, e, j, i] * x[s, e, j]
+        x[s, e, i] = acc / d.solver_H[s, e, i, i]
 
 
 @ti.func
@@ -260,20 +358,32 @@ def _dot(d: ti.template(), a: ti.template(), b: ti.template(), s, e, n):
 
 
 @ti.func
-def _mul_M(d: ti.template(), s, e, k, n, x: ti.template(), out: ti.template()):
-    """out[s, e] ← M x[s, e] on island k's n dofs (solver_dofs; k = ALL: every dof), over M's
-    non-zero entries only: the model's mass-matrix pairs (dof j on dof i's path to the root),
-    which never join two islands. (A dense product: the tower's 60 dofs made 3600 terms a call,
-    its pairs 210.)"""
+def _mul_M(d: ti.template(), s, e, n, x: ti.template(), out: ti.template()):
+    """out[s, e] ← M x[s, e] on the n dofs of solver_dofs (an island's, or every dof)."""
     for p in range(n):
         out[s, e, d.solver_dofs[s, e, p]] = 0.0
-    for q in range(d.n_pairs):
-        i, j = d.pair_i[q], d.pair_j[q]
-        if k == ALL or d.solver_dof_island[s, e, i] == k:
+    add_mul_M(d, s, e, n, True, x, out)
+
+
+@ti.func
+def add_mul_M(d: ti.template(), s, e, n, listed: ti.template(), x: ti.template(), out: ti.template()):
+    """out[s, e] += M x[s, e] on n dofs (listed: those of solver_dofs; else dofs 0 … n − 1) over M's
+    non-zero entries only: the model's mass-matrix pairs (dof j on dof i's path to the root,
+    sorted by i then j; they never join two islands). Each dof's terms come in ascending column
+    order, as a dense product adds them. (A dense product: the tower's 60 dofs made 3600 terms a
+    call, its pairs 210.)"""
+    for p in range(n):
+        i = p
+        if ti.static(listed):
+            i = d.solver_dofs[s, e, p]
+        q = d.dof_pair0[i]
+        while q < d.n_pairs and d.pair_i[q] == i:
+            j = d.pair_j[q]
             m_ij = d.solver_M[s, e, i, j]
             out[s, e, i] = out[s, e, i] + m_ij * x[s, e, j]
             if i != j:
                 out[s, e, j] = out[s, e, j] + m_ij * x[s, e, i]
+            q += 1
 
 
 @ti.func
@@ -406,12 +516,13 @@ def cone_hessian_entry(d: ti.template(), s, e, r, a, b, N, T):
 
 
 @ti.func
-def _factor_hessian(d: ti.template(), s, e, n, m):
-    """solver_H ← Cholesky factor of H = M + Jᵀ D_quadratic J + cone blocks on the n dofs of
-    solver_dofs and the m rows of solver_rows (an island's)."""
+def _factor_hessian(d: ti.template(), s, e, k, n, m):
+    """solver_H ← Cholesky factor of H = M + Jᵀ D_quadratic J + cone blocks on island k's n dofs
+    (solver_dofs) and m rows (solver_rows), within its envelope (set here)."""
+    _island_envelope(d, s, e, k, n, m)
     for a in range(n):
         i = d.solver_dofs[s, e, a]
-        for b in range(a + 1):
+        for b in range(d.solver_first[s, e, a], a + 1):
             j = d.solver_dofs[s, e, b]
             d.solver_H[s, e, i, j] = d.solver_M[s, e, i, j]
     for q in range(m):
@@ -421,7 +532,6 @@ def _factor_hessian(d: ti.template(), s, e, n, m):
         if ti.static(d.elliptic):
             if d.efc_type[s, e, r] == ELLIPTIC_FIRST and d.efc_state[s, e, r] == CONE:
                 _add_cone_hessian(d, s, e, r)
-    _envelope(d, s, e, n)
     _cholesky(d, s, e, n)
 
 
@@ -655,7 +765,7 @@ def _line_search(d: ti.template(), s, e, k, n, m, tolerance, ls_iterations, scal
     alpha, improvement = 0.0, 0.0
     if snorm >= MINVAL:
         gtol = tolerance * snorm / scale
-        _mul_M(d, s, e, k, n, d.solver_search, d.solver_Mv)
+        _mul_M(d, s, e, n, d.solver_search, d.solver_Mv)
         for q in range(m):
             r = d.solver_rows[s, e, q]
             d.solver_Jv[s, e, r] = _row_dot(d, s, e, r, d.solver_search)
@@ -739,7 +849,7 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
         i = d.solver_dofs[s, e, p]
         inertia += d.solver_M[s, e, i, i]
     scale = 1.0 / inertia
-    _mul_M(d, s, e, k, n, d.qacc, d.solver_Ma)
+    _mul_M(d, s, e, n, d.qacc, d.solver_Ma)
     _set_jar(d, s, e, m)
     niter, first, improvement = 0, 1, 0.0
     while True:
@@ -756,9 +866,9 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
                 # also where the certificate stops (the backward needs it); after a step that left
                 # every state (and so H) as it was, the island's block still holds H's factor
                 if first or changed:
-                    _factor_hessian(d, s, e, n, m)
+                    _factor_hessian(d, s, e, k, n, m)
             else:  # M's factor, in the island's positions
-                _envelope(d, s, e, n)
+                _tree_envelope(d, s, e, n)
             for p in range(n):
                 i = d.solver_dofs[s, e, p]
                 d.solver_Mgrad[s, e, i] = d.solver_grad[s, e, i]
@@ -790,6 +900,8 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
             r = d.solver_rows[s, e, q]
             d.solver_jar[s, e, r] = d.solver_jar[s, e, r] + alpha * d.solver_Jv[s, e, r]
         improvement = scale * ls_improvement
+    for a in range(n):  # where the final factor's rows start, for the backward (cholesky_solve)
+        d.solver_env[s, e, d.solver_dofs[s, e, a]] = d.solver_dofs[s, e, d.solver_first[s, e, a]]
     return niter
 
 
@@ -805,7 +917,7 @@ def _warm_start(d: ti.template(), s, e, n, m):
         _set_jar(d, s, e, m)
         cost, _ = _update_constraints(d, s, e, m)
         if trial == 0:
-            _mul_M(d, s, e, ALL, n, d.qacc, d.solver_Ma)
+            _mul_M(d, s, e, n, d.qacc, d.solver_Ma)
             for i in range(d.n_dofs):
                 cost += 0.5 * (d.solver_Ma[s, e, i] - d.qfrc_smooth[s, e, i]) \
                     * (d.qacc[s, e, i] - d.qacc_smooth[s, e, i])
@@ -828,15 +940,17 @@ def newton_solve(d: ti.template(), s, e, iterations, tolerance, ls_iterations, l
     (D,), solver_niter, and the SCRATCH arrays (solver_H: the final Hessian's factor).
     iterations, ls_iterations: limits; tolerance, ls_tolerance: MuJoCo's opt values."""
     _find_islands(d, s, e)
-    for i in range(d.n_dofs):  # (the upper triangle is never written: it stays 0)
-        for j in range(i + 1):
+    n, m = _select(d, s, e, ALL)
+    _tree_envelope(d, s, e, n)
+    for i in range(d.n_dofs):  # M within its envelope (the upper triangle is never written)
+        root = d.solver_dof_tree[s, e, i]
+        for j in range(root, i + 1):
             d.solver_H[s, e, i, j] = d.solver_M[s, e, i, j]
+        d.solver_env[s, e, i] = root
         d.qacc_smooth[s, e, i] = d.qfrc_smooth[s, e, i]
         d.qfrc_constraint[s, e, i] = 0.0
     # M's factor: qacc_smooth now; each island replaces its block with its Hessian's factor,
     # unconstrained dofs keep it (H = M there)
-    n, m = _select(d, s, e, ALL)
-    _envelope(d, s, e, n)
     _cholesky(d, s, e, n)
     _factor_solve(d, d.qacc_smooth, s, e, n)
     for r in range(d.n_efc[s, e, 0]):
