@@ -112,7 +112,10 @@ class _Step(torch.autograd.Function):
                                     "create_graph=True raises at once")
             (states, warm_starts), inputs = ctx.rollout.start_states(ctx.index), saved
         with torch.no_grad():
-            grads = sim.backward_step(states, inputs, grad_states, warm_starts)
+            try:
+                grads = sim.backward_step(states, inputs, grad_states, warm_starts)
+            except GradientError as error:  # (which step of the rollout)
+                raise GradientError(f"step {ctx.index}'s backward: {error}") from None
         return (None, None, None, None, None, *_first_order(f"step {ctx.index}", grads, (*grad_states, *saved)))
 
 

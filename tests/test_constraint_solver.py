@@ -197,6 +197,7 @@ class _View:
     def __init__(self, n_envs, n_dofs, n_rows):
         self.n_envs, self.n_dofs, self.n_rows = n_envs, n_dofs, n_rows
         self.elliptic = True  # the elliptic cone's code compiled in (RigidView's cone): the scenes mix both cones
+        self.converged = 0  # MuJoCo's stop (no Newton step past it): its iterates and counts
         E, D, R = n_envs, n_dofs, n_rows
         shapes = {"D": (1, E, D), "DD": (1, E, D, D), "R": (1, E, R), "RD": (1, E, R, D)}
         for name in ("qfrc_smooth", "qacc_smooth", "qacc", "qfrc_constraint"):

@@ -526,7 +526,9 @@ def test_curved_convex_gradients_repeat_and_batch(f64):
 def test_mujoco_compatible_curved_contacts_refuse_a_backward(f64):
     """Under enable_mujoco_compatibility a curved convex contact stays MuJoCo's iterate (a can tilted
     0.3 rad on its rim on a box; standing or lying flat it takes rim points, closed forms): a
-    backward over it says so, never a silent zero or an approximate gradient."""
+    backward over it says so, never a silent zero or an approximate gradient, and names the step,
+    the contact's shapes, links and entities, its env and substep (it listed every pair kind of
+    the scene that could be inexact)."""
     tilt = 0.3
     morph = gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0, 0, 0.1 * np.cos(tilt) + 0.05 * np.sin(tilt) - 1e-3),
                                euler=(np.degrees(tilt), 0, 0))
@@ -534,8 +536,11 @@ def test_mujoco_compatible_curved_contacts_refuse_a_backward(f64):
     velocity = torch.zeros(6, dtype=torch.float64, requires_grad=True)
     can.set_dofs_velocity(velocity)
     scene.step()
-    with pytest.raises(gs.GradientError, match="enable_mujoco_compatibility"):
+    with pytest.raises(gs.GradientError, match="enable_mujoco_compatibility") as raised:
         can.get_pos().sum().backward()
+    assert str(raised.value).startswith("step 0's backward")
+    assert ("the cylinder–box contact of link 'cylinder' of entity 'cylinder_1' and link 'box' of entity 'box_0' "
+            "(env 0, substep 0)") in str(raised.value)
 
 
 @pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
@@ -616,3 +621,31 @@ def test_the_solve_reads_only_what_it_keeps(f64, cone):
     assert bodies[1].get_pos()[:, 0].min() > 0.301  # (the first box pushed the second)
     assert torch.isfinite(grad).all() and grad.abs().sum() > 0
     assert torch.equal(end, clean_end) and torch.equal(grad, clean_grad)
+
+
+def test_a_mesh_resting_on_a_mesh_by_a_polygon_vertex(f64, tmp_path):
+    """A small convex mesh (5-vertex hull) tipped onto a fixed mesh slab, pyramidal cone: its
+    contacts are clipped-polygon vertices (no side plane in their feature), whose closed form read
+    a clipping-face vertex at index −256 (convex._clip_terms) and crashed the backward (a
+    segfault here). The initial pose's gradient of the final pose agrees with finite
+    differences."""
+    trimesh.creation.box(extents=(0.4, 0.4, 0.06)).export(tmp_path / "slab.obj")
+    trimesh.convex.convex_hull(np.array([[0.05, 0, 0], [-0.04, 0.04, 0], [-0.04, -0.05, 0.01], [0, 0, 0.07],
+                                         [0.01, 0.02, -0.03]])).export(tmp_path / "tip.obj")
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True),
+                     rigid_options=gs.options.RigidOptions(tolerance=1e-14), show_viewer=False)
+    scene.add_entity(gs.morphs.Mesh(file=str(tmp_path / "slab.obj"), pos=(0, 0, 0.03), fixed=True))
+    body = scene.add_entity(gs.morphs.Mesh(file=str(tmp_path / "tip.obj"), pos=(0, 0, 0.11), euler=(10, 5, 0)))
+    scene.build()
+    start = torch.tensor([0.0249, -0.0015, 0.0743, 0.5654, 0.1719, 0.0833], dtype=torch.float64)
+    spin = torch.tensor([0.115, -0.06, -0.041, 4.28, 6.63, -4.0], dtype=torch.float64)
+
+    def loss(q):
+        scene.reset()
+        body.set_dofs_position(q)
+        body.set_dofs_velocity(spin)
+        for _ in range(15):
+            scene.step()
+        return (body.get_pos() * torch.tensor([1.0, -0.7, 3.0])).sum() + (body.get_quat() * 0.3).sum()
+
+    assert_converged(directional_errors(loss, start), "mesh on mesh")

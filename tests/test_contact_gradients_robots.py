@@ -283,3 +283,40 @@ def test_panda_presses_a_small_box_pose_gradient(f64):
     loss(q5)
     assert len(arm.get_contacts()["geom_a"]) == 8
     assert_converged(directional_errors(loss, q5), "Panda pose")
+
+
+def test_husky_drives_with_the_elliptic_cone_at_the_default_tolerance(f64):
+    """pybullet_data's husky under velocity servos on its four wheels drives on a plane for 40
+    steps (dt 10 ms, substeps 2), elliptic cone, every solve option at its default: the gradient
+    of its final pose in the wheels' kv against central differences. MuJoCo's stop left each
+    solve ~√tolerance from its solution, where the near-sticking wheels' cone Hessian changes
+    fast, and the gradient (the solution's) missed the simulated map's derivative by 6.4 % of
+    its norm (flat over eps 1e-4 … 1e-8; exact at tolerance 1e-30); one Newton step past the
+    stop (constraint/solver.py): 6e-8. Found by an exploratory pass (session 34)."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, substeps=2, requires_grad=True),
+                     rigid_options=gs.options.RigidOptions(friction_cone=gs.friction_cone.elliptic),
+                     show_viewer=False)
+    scene.add_entity(gs.morphs.Plane())
+    robot = scene.add_entity(gs.morphs.URDF(file=os.path.join(pybullet_data.getDataPath(), "husky", "husky.urdf"),
+                                            pos=(0, 0, 0.14)))
+    scene.build()
+    wheels = list(range(6, robot.n_dofs))
+    with torch.no_grad():
+        for _ in range(30):
+            scene.step()
+    q0, v0 = robot.get_dofs_position().detach().clone(), robot.get_dofs_velocity().detach().clone()
+    targets = torch.tensor([3.0, 4.0, 3.0, 4.0], dtype=torch.float64)
+
+    def loss(kv):
+        scene.reset()
+        robot.set_dofs_position(q0)
+        robot.set_dofs_velocity(v0)
+        robot.set_dofs_kv(kv, wheels)
+        for _ in range(40):
+            robot.control_dofs_velocity(targets, wheels)
+            scene.step()
+        return ((robot.get_pos() * torch.tensor([1.0, -0.7, 3.0])).sum()
+                + (robot.get_quat() * torch.tensor([0.2, 1.0, 0.5, -0.4])).sum())
+
+    kv = torch.tensor([20.0, 22.0, 18.0, 21.0], dtype=torch.float64)
+    assert_converged(directional_errors(loss, kv), "husky wheels' kv")

@@ -143,12 +143,15 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
 # sizes (``layout``). W: all inputs' width per env; GW: the differentiable ones', which come first. G geoms, N candidate
 # geom pairs, H hull vertices, C contact slots, R constraint rows per env (see RigidData); HI the meshes' hull
 # ints (geometry.py), WS 1 when the convex colliders need their workspace (CONVEX_SCRATCH), else 0; converged 1
-# when curved convex contacts are their converged closed form (collision/detect.py: converge_contacts); constrained
+# (not enable_mujoco_compatibility) when curved convex contacts are their converged closed form
+# (collision/detect.py: converge_contacts) and the elliptic solve takes a Newton step past MuJoCo's stop
+# (constraint/solver.py); constrained
 # a flag: some env of the substep has a constraint row to form (a contact, friction loss, a violated limit);
-# colliders_due a mask of the collider kernels the substep's near pairs need (collision/detect.py: KERNEL_BIT).
+# colliders_due a mask of the collider kernels the substep's near pairs need (collision/detect.py: KERNEL_BIT);
+# inexact_pair, inexact_env, inexact_substep: where the last inexact contact was (the backward's error names it).
 SIZES = ("B", "L", "D", "Q", "P", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C", "R", "cone",
          "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged", "constrained",
-         "colliders_due")
+         "colliders_due", "inexact_pair", "inexact_env", "inexact_substep")
 HEADER = {name: k for k, name in enumerate(SIZES)}
 _REGIONS = [("i", False)] + [(a, g) for g in (False, True) for a in ("f", "v3", "v4", "m3")]  # (arena, gradients?)
 
@@ -255,7 +258,7 @@ class RigidData:
                      "ls_iterations": settings["ls_iterations"], "overflow": 0, "rows_needed": 0,
                      "HI": len(model.hull_int), "WS": int(_has_convex_pairs(model)), "inexact": 0,
                      "converged": int(bool(settings["converged"])), "constrained": 0,
-                     "colliders_due": 0}
+                     "colliders_due": 0, "inexact_pair": 0, "inexact_env": 0, "inexact_substep": 0}
         self.start, stop = layout(self.size)
         length = {a: stop[a, bool(requires_grad)] for a in ARENAS}  # no gradient storage without gradients
         if max(length.values()) >= 2 ** 31:  # indices inside kernels are 32-bit
@@ -369,6 +372,7 @@ class RigidView:
         self.rows_needed = ArrayView(ints, HEADER["rows_needed"], (1,))  # set when an env's needs_rows is
         # set when a contact's collider has no exact replay (collision/detect.py: replay_exact)
         self.inexact = ArrayView(ints, HEADER["inexact"], (1,))
+        self.inexact_where = ArrayView(ints, HEADER["inexact_pair"], (1,))  # [0] pair, [1] env, [2] substep
         # set when an env of the substep has a constraint row to form (the host then runs the solve)
         self.constrained = ArrayView(ints, HEADER["constrained"], (1,))
         self.colliders_due = ArrayView(ints, HEADER["colliders_due"], (1,))  # bits of the collider kernels due

@@ -12,7 +12,7 @@ from ..core import AssetError, GradientError, SimulationError, runtime
 from ..launch import BoundKernel, BoundKernels
 from . import contact, step
 from .collision import detect
-from .data import ARENAS, BIG, ELEMENT, INPUTS, RigidData
+from .data import ARENAS, BIG, ELEMENT, HEADER, INPUTS, RigidData
 from .geometry import GEOM_CODE
 from .model import build_model
 
@@ -357,19 +357,30 @@ class RigidSolver(Solver):
 
     def substep_post_coupling_backward(self, s):
         if s == self.sim_options.substeps - 1 and self.data.take_flag("inexact"):  # the replay's contacts
-            names = ", ".join(_pair_name(kind) for kind in self.inexact_kinds)
+            where = self._inexact_contact()
             if self.rigid_options.enable_mujoco_compatibility:
-                why = (f"under RigidOptions(enable_mujoco_compatibility=True) the convex collider's contacts of "
-                       f"{names} are MuJoCo's iterates on curved shapes and margins (and its clipping corners on "
-                       f"mesh polygons), which have no exact gradient; "
-                       f"expected enable_mujoco_compatibility=False (their converged contacts)")
+                why = (f"under RigidOptions(enable_mujoco_compatibility=True) the convex collider's contacts are "
+                       f"MuJoCo's iterates on curved shapes and margins (and its clipping corners on mesh "
+                       f"polygons), which have no exact gradient: {where}; expected "
+                       f"enable_mujoco_compatibility=False (their converged contacts)")
             else:
-                why = (f"a contact of {names} kept the convex collider's iterate (two cylinders at their rims "
-                       f"with both ends of each in the contact's feature, or a feature whose form is not finite, "
-                       f"not converged, or another stationary point far from the iterate), which has no exact "
-                       f"gradient; expected other contact features, or RigidOptions(enable_collision=False)")
+                why = (f"{where} kept the convex collider's iterate (two cylinders at their rims with both ends "
+                       f"of each in the contact's feature, or a feature whose form is not finite, not converged, "
+                       f"or another stationary point far from the iterate), which has no exact gradient; expected "
+                       f"other contact features, or RigidOptions(enable_collision=False)")
             raise GradientError(f"rigid solver (entities: {', '.join(self.entity_names)}): this step had no exact "
                                 f"gradient: {why}")
+
+    def _inexact_contact(self):
+        """'the cylinder–box contact of link 'a' of entity 'A' and link 'b' of entity 'B' (env e,
+        substep s)': the last contact a replay flagged inexact (the header keeps where it was)."""
+        m, header = self.model, self.data.header
+        pair, env, substep = (int(header[HEADER[name]]) for name in ("inexact_pair", "inexact_env", "inexact_substep"))
+        g1, g2 = int(m.pair_geom1[pair]), int(m.pair_geom2[pair])
+        links = [int(m.geom_link[g]) for g in (g1, g2)]
+        sides = " and ".join(f"link '{m.link_name[l]}' of entity '{self.entity_names[m.link_entity[l]]}'" for l in links)
+        return (f"the {_pair_name((int(m.geom_type[g1]), int(m.geom_type[g2])))} contact of {sides} (env {env}, "
+                f"substep {substep})")
 
     def substep_pre_coupling_backward(self, s):
         """Substep s's reverse, as separate kernels: fused, they compile slower."""

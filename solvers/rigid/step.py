@@ -26,8 +26,8 @@ import taichi as ti
 
 from .data import ARENA_TYPES, CONST, accumulate, bind, n_batch
 from .actuation import smooth_force, smooth_force_adjoint
-from .collision.detect import (collide_adjoint_kind, collide_kind, converge_contacts, geom_poses, geom_poses_adjoint,
-                               near_pairs, replay_exact, sort_contacts)
+from .collision.detect import (collide_adjoint_kind, collide_kind, converge_contacts, flag_inexact, geom_poses,
+                               geom_poses_adjoint, near_pairs, replay_exact, sort_contacts)
 from .constraint.implicit import solve_adjoint
 from .constraint.rows import contact_force, contact_included, contact_rows, dof_rows, dof_rows_arise, limit_violated
 from .constraint.solver import newton_solve
@@ -83,7 +83,7 @@ def constraint_env(d: ti.template(), s, e):
     rows = dof_rows(d, s, e)
     for c in range(d.n_con[s, e, 0]):
         if not replay_exact(d, s, e, c):
-            d.inexact[0] = 1
+            flag_inexact(d, s, e, c)
         d.con_efc[s, e, c] = rows
         if contact_included(d, s, e, c):
             rows += contact_rows(d, s, e, c, rows)

@@ -3277,7 +3277,9 @@ def _clip_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.
         npoly = _face_size(other, feature[2], hull)
     tag0, tag1 = feature[3], feature[4]
     sides = int(tag0 >= 256) + int(tag1 >= 256)
-    side_e = ti.select(tag0 >= 256, tag0, tag1) - 256
+    # (a polygon vertex, no side plane: side 0 stands in, its vertices read and unused; tag − 256
+    # read outside the face's vertex list and crashed the backward of a mesh on a mesh)
+    side_e = ti.select(sides == 0, 0, ti.select(tag0 >= 256, tag0, tag1) - 256)
     side_f = ti.select(sides == 2, tag1 - 256, side_e)
     line = ti.select(tag0 < 256, tag0, tag1)
     first = ti.select(sides == 0, tag1, ti.select(sides == 2, 0, line))

@@ -357,7 +357,7 @@ def converge_contacts(d: ti.template(), s, e):
                     elif turn == 1:
                         _flip_orientation(d, s, e, c)  # (the feature as the collider recorded it)
             if refused:
-                d.inexact[0] = 1
+                flag_inexact(d, s, e, c)
             else:
                 d.con_pos[s, e, c] = position
                 d.con_frame[s, e, c] = contact_frame(normal, ti.Vector.zero(float, 3))
@@ -449,6 +449,14 @@ def _convex_reverse(d: ti.template(), s, e, g1, g2, c, g_position, g_normal, g_d
 # tolerance away (tests/test_adjoints_convex.py). Unless converge_contacts made the forward's
 # contact that form (and no direction is frozen), a backward over such a contact raises.
 REVERSES[ALL_CONVEX] = (_convex_replay, _convex_reverse)
+
+
+@ti.func
+def flag_inexact(d: ti.template(), s, e, c):
+    """Raise the header's inexact flag for contact c of frame s, env e, and keep where it was (the
+    backward's error names the pair, env and substep)."""
+    d.inexact[0] = 1
+    d.inexact_where[0], d.inexact_where[1], d.inexact_where[2] = d.con_pair[s, e, c], e, s
 
 
 @ti.func
