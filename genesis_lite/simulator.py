@@ -94,9 +94,10 @@ class Simulator:
     def set_input(self, solver, name, value):
         """Input ``name`` of ``solver`` ← value; the inputs derived from it (solver.derived_from:
         the rigid rows' scale from mass and armature) are recomputed, in the graph."""
-        inputs = {**self.slot(solver).inputs, name: value}
+        previous = self.slot(solver).inputs
+        inputs = {**previous, name: value}
         if name in solver.derived_from:
-            inputs = solver.derive_inputs(inputs)
+            inputs = solver.derive_inputs(inputs, previous)
         self.slot(solver).inputs = inputs
 
     def _sync(self, slot, state, inputs):

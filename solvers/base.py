@@ -29,8 +29,10 @@ Fused or not, a step gives the same bits: the same stage functions run in the sa
 class Solver:
     """Abstract solver. B is the number of environments (1 when the scene is not batched)."""
 
-    def derive_inputs(self, inputs):
-        """``inputs`` (name → (B, width)) with the inputs derived from others recomputed (none here)."""
+    def derive_inputs(self, inputs, previous=None):
+        """``inputs`` (name → (B, width)) with the inputs derived from others recomputed (none here);
+        ``previous``: the inputs before one of them was set (None: none), whose derived values an
+        env whose sources did not change may keep."""
         return inputs
 
     #: input names whose gradients ``backward`` returns, in order

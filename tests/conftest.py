@@ -24,7 +24,7 @@ def pybullet(*parts):
 
 
 FIRST = ("test_examples.py",)  # the longest file: started right after the float32 group
-# batches past data.SERIAL_SOLVE_ENVS: the thread-pool variants of the constraint solve and its
+# batches past data.SERIAL_SOLVE_WORK: the thread-pool variants of the constraint solve and its
 # reverse (~20 s of LLVM a worker, warm cache) load on one worker only; dealt out after FIRST
 POOL = ("test_batch.py", "test_compile_once.py")
 LAST = ("test_runtime.py",)  # restarts the runtime (gs.destroy, gs.init on another backend)

@@ -6,7 +6,7 @@ import torch
 
 import genesis_lite as gs
 from genesis_lite.solvers.launch import _COMPILED
-from genesis_lite.solvers.rigid.data import SERIAL_SOLVE_ENVS
+from genesis_lite.solvers.rigid.data import SERIAL_SOLVE_WORK
 from tests.conftest import asset, pybullet
 from tests import test_contact_gradients
 
@@ -60,11 +60,11 @@ def test_large_batches_share_compiled_kernels(f64):
 
 
 def test_contact_batch_on_the_pool_equals_single_envs(f64):
-    """Past data.SERIAL_SOLVE_ENVS envs the constraint solve and its reverse run on the thread
-    pool, whatever the link count: a box's gradients there equal a single-env scene's, bit for
+    """Past data.SERIAL_SOLVE_WORK (env, dof) pairs the constraint solve and its reverse run on the
+    thread pool, whatever the link count: a box's gradients there equal a single-env scene's, bit for
     bit. Here, after the test above, it reuses the pool variants of those kernels that the
     quadruped's batches compiled (on its own, 100 s of LLVM on a slow machine)."""
-    test_contact_gradients.assert_batch_equals_single(SERIAL_SOLVE_ENVS + 1)
+    test_contact_gradients.assert_batch_equals_single(SERIAL_SOLVE_WORK // 6 + 1)  # (a box: 6 dofs)
 
 
 def _boxes_on_plane(sizes, n_envs):

@@ -21,7 +21,7 @@ import torch
 import trimesh
 
 import genesis_lite as gs
-from genesis_lite.solvers.rigid.data import SERIAL_SOLVE_ENVS
+from genesis_lite.solvers.rigid.data import SERIAL_SOLVE_WORK
 from tests.conftest import pybullet
 from tests.fd_scan import assert_converged, directional_errors
 
@@ -419,11 +419,11 @@ def test_batched_equals_single_with_contact(f64):
 
 
 def assert_batch_equals_single(n_envs):
-    """A batch of n_envs gives each env's gradient of a single-env scene, bit for bit (with n_envs
-    past SERIAL_SOLVE_ENVS the solve runs on the thread pool: tests/test_compile_once.py)."""
+    """A batch of n_envs gives each env's gradient of a single-env scene, bit for bit (with n_envs ×
+    dofs past SERIAL_SOLVE_WORK the solve runs on the thread pool: tests/test_compile_once.py)."""
     batched_scene, batched_body = _scene("pyramidal", n_envs=n_envs, tag="batched")
     on_calling_thread = batched_scene.sim.slots[0].solver.data.solve_schedule[0]
-    assert on_calling_thread == (n_envs <= SERIAL_SOLVE_ENVS)
+    assert on_calling_thread == (n_envs * batched_scene.rigid_solver.model.n_dofs <= SERIAL_SOLVE_WORK)
     batched = _gradient(batched_scene, batched_body, "tilted", 30)
     scene, body = _scene("pyramidal", tag="batched")  # both with the build's parameters
     loss_of, nominal = CASES["tilted"]

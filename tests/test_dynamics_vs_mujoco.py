@@ -131,3 +131,44 @@ def test_rows_scale_matches_mujoco_invweight0_f64(f64, name):
             assert np.isclose(ours[name], model.body_invweight0[b, 0], rtol=1e-10, atol=0), name
     finally:
         scene.destroy()
+
+
+def test_rows_scale_per_tree_equals_the_dense_formula_f64(f64):
+    """contact.InvweightBasis keeps and inverts M per kinematic tree (trees of one shape batched):
+    in a scene of trees of three shapes — a free quadruped, a fixed 2-link pendulum (its base
+    welded to the world), and three free boxes and a free capsule — its rows' scale equals the dense
+    formula (M of every dof from the links' centre-of-mass Jacobians, one inverse) to round-off,
+    with masses and armature off their defaults; and it holds each tree's block only (its dense K
+    took links × dofs² numbers: 36 GiB for 512 free bodies, which could not be built)."""
+    scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False), show_viewer=False)
+    scene.add_entity(gs.morphs.Box(size=(0.1, 0.2, 0.3), pos=(1.0, 0.0, 0.5), euler=(10, 20, 30)))
+    scene.add_entity(gs.morphs.URDF(file=asset("quadruped.urdf"), pos=(0.0, 0.0, 0.6), euler=(5, -10, 20)))
+    scene.add_entity(gs.morphs.Box(size=(0.3, 0.1, 0.1), pos=(-1.0, 0.0, 0.5)))
+    scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True, pos=(0.0, 1.0, 1.0)))
+    scene.add_entity(gs.morphs.Capsule(radius=0.05, height=0.2, pos=(0.0, -1.0, 0.5), euler=(0, 40, 0)))
+    scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.2), pos=(2.0, 0.0, 0.5)))
+    scene.build()
+    solver = scene.rigid_solver
+    m, basis = solver.model, solver.invweight_basis
+    assert len(basis.groups) == 3
+    held = sum(group[2].numel() for group in basis.groups)
+    assert held < 0.2 * m.n_links * m.n_dofs ** 2  # (its trees: 0.11)
+    rng = np.random.default_rng(0)
+    mass = torch.tensor(m.link_mass0 * rng.uniform(0.5, 2.0, m.n_links))[None]
+    armature = torch.tensor(rng.uniform(0.0, 0.1, m.n_dofs))[None]
+    invweight_t, invweight_dof = basis(mass, armature, solver.check_positive_definite)
+
+    jac = torch.empty((1, m.n_links, 6, m.n_dofs), dtype=torch.float64)
+    solver.kernels.read_com_jacobians(jac)
+    J = jac[0].numpy()
+    unit_inertia = m.link_inertia0 * m.link_inv_mass0[:, None, None]
+    M = (np.einsum("l,lki,lkj->ij", mass[0].numpy(), J[:, :3], J[:, :3])
+         + np.einsum("l,lki,lkn,lnj->ij", mass[0].numpy(), J[:, 3:], unit_inertia, J[:, 3:]) + np.diag(armature[0]))
+    inverse = np.linalg.inv(M)
+    expected_t = np.einsum("lri,ij,lrj->l", J[:, :3], inverse, J[:, :3]) / 3.0 * (m.link_static == 0)
+    expected_dof = np.diag(inverse).copy()
+    for first in np.flatnonzero(m.dof_q < 0)[::3]:  # a free joint's translations, then its rotations
+        expected_dof[first: first + 3] = expected_dof[first: first + 3].mean()
+    np.testing.assert_allclose(invweight_t[0].numpy(), expected_t, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(invweight_dof[0].numpy(), expected_dof, rtol=1e-12, atol=1e-15)
+    assert (invweight_t[0].numpy()[m.link_static == 0] > 0).all()

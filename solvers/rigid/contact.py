@@ -82,51 +82,88 @@ class InvweightBasis:
     - invweight_t per link (1/kg): the mean of the translational diagonal of J_l M⁻¹ J_lᵀ; zero for
       links welded to the world (the rotational one is not read: condim ≤ 3);
     - invweight_dof per dof: the diagonal of M⁻¹, averaged over a free joint's three translations
-      and its three rotations."""
+      and its three rotations.
+    M is block-diagonal over the kinematic trees (a link's Jacobian is non-zero on its tree's dofs
+    only), so everything is kept and inverted per tree, trees of one shape batched together: a
+    dense (links, dofs, dofs) K made a scene of 192 free bodies take 14 s and 4 GB to build, and
+    one of 512 could not be built."""
 
     def __init__(self, solver):
         m = solver.model
-        D = m.n_dofs
-        jac = torch.empty((solver.n_batch, m.n_links, 6, D), dtype=runtime.tc_float, device=runtime.device)
-        solver.kernels.read_com_jacobians(jac)
+        jac = torch.empty((1, m.n_links, 6, m.n_dofs), dtype=runtime.tc_float, device=runtime.device)
+        solver.kernels.read_com_jacobians(jac)  # (env 0's: every env starts at q0)
         jac = jac[0].double().cpu().numpy()
         # M of each link alone at unit mass (M is linear in the masses): J_vᵀ J_v + J_ωᵀ (I_l / m_l) J_ω,
         # J_ω in the link's frame, where its inertia is given (a massless link's is dropped)
         unit_inertia = m.link_inertia0 * m.link_inv_mass0[:, None, None]
-        K = (np.einsum("lki,lkj->lij", jac[:, :3], jac[:, :3])
-             + np.einsum("lki,lkn,lnj->lij", jac[:, 3:], unit_inertia, jac[:, 3:]))
-        solver.check_positive_definite(np.einsum("l,lij->ij", m.link_mass0, K) + np.diag(m.dof_armature))
-        # dof_invweight0 = diag(M⁻¹) @ average: a free joint's translations and rotations averaged
-        average = np.eye(D)
-        for first in np.flatnonzero(m.dof_q < 0)[::3]:
-            average[first: first + 3, first: first + 3] = 1.0 / 3.0
-        # K (L, D, D), J (L, 3, D) the translational rows, moving (L,), average (D, D): float64
-        self.consts = [torch.as_tensor(a, dtype=torch.float64, device=runtime.device)
-                       for a in (K, jac[:, :3], (m.link_static == 0), average)]
+        self.n_links, self.n_dofs = m.n_links, m.n_dofs
+        self.groups = []  # per tree shape: (links (T, l), dofs (T, n), K (T, l, n, n), J (T, l, 3, n), average (T, n, n))
+        for links, dofs in _same_shaped_trees(m):
+            J = jac[links[:, :, None, None], np.arange(6)[None, None, :, None], dofs[:, None, None, :]]
+            K = (np.einsum("tlki,tlkj->tlij", J[:, :, :3], J[:, :, :3])
+                 + np.einsum("tlki,tlkn,tlnj->tlij", J[:, :, 3:], unit_inertia[links], J[:, :, 3:]))
+            for t in range(len(dofs)):
+                solver.check_positive_definite(np.einsum("l,lij->ij", m.link_mass0[links[t]], K[t])
+                                               + np.diag(m.dof_armature[dofs[t]]), dofs=dofs[t])
+            # dof_invweight0 = diag(M⁻¹) @ average: a free joint's translations and rotations averaged
+            average = np.tile(np.eye(dofs.shape[1]), (len(dofs), 1, 1))
+            for first in np.flatnonzero(m.dof_q[dofs[0]] < 0)[::3]:  # (the trees of a group are alike)
+                average[:, first: first + 3, first: first + 3] = 1.0 / 3.0
+            moving = (m.link_static[links] == 0)
+            self.groups.append([torch.as_tensor(a, device=runtime.device) for a in (links, dofs)]
+                               + [torch.as_tensor(a, dtype=torch.float64, device=runtime.device)
+                                  for a in (K, J[:, :, :3] * moving[:, :, None, None], average)])
 
     def __call__(self, mass, armature, check_positive_definite):
         """(invweight_t (B, L), invweight_dof (B, D)) in mass's dtype, from mass (B, L) kg and armature
         (B, D); a singular M goes to check_positive_definite (RigidSolver's: it names the link).
-        Computed in float64, one env at a time: batched linear algebra (inverse, matrix products)
-        may sum in another order for another batch size, and a batched env must equal a single-env
-        scene bit for bit (~50 µs an env, when mass or armature is set)."""
-        if mass.shape[1] == 0 or armature.shape[1] == 0:
+        Computed in float64, one env at a time (trees batched, the same batches in every env):
+        batched linear algebra over envs may sum in another order for another batch size, and a
+        batched env must equal a single-env scene bit for bit."""
+        if mass.shape[0] == 0 or mass.shape[1] == 0 or armature.shape[1] == 0:  # (no env, link or dof)
             return torch.zeros_like(mass), torch.zeros_like(armature)
-        rows = [self._one_env(mass[e: e + 1].double(), armature[e: e + 1].double(), check_positive_definite)
+        rows = [self._one_env(mass[e].double(), armature[e].double(), check_positive_definite)
                 for e in range(mass.shape[0])]
-        return (torch.cat([r[0] for r in rows]).to(mass.dtype), torch.cat([r[1] for r in rows]).to(mass.dtype))
+        return (torch.stack([r[0] for r in rows]).to(mass.dtype), torch.stack([r[1] for r in rows]).to(mass.dtype))
 
     def _one_env(self, mass, armature, check_positive_definite):
-        """(1, L), (1, D) for one env's mass (1, L) and armature (1, D); a singular M (a mass set
-        to zero) is an InvalidInputError naming the link."""
-        K, J, moving, average = self.consts
-        matrix = (mass[0, :, None, None] * K).sum(0) + torch.diag(armature[0])
-        inverse, info = torch.linalg.inv_ex(matrix)
-        if info.item() != 0:
-            check_positive_definite(matrix.detach().cpu().numpy(), InvalidInputError)
-            torch.linalg.inv(matrix)  # singular below the check's share: torch's own error
-        translational = torch.einsum("lri,ij,lrj->l", J, inverse, J) / 3.0 * moving
-        return translational[None], (torch.diagonal(inverse) @ average)[None]
+        """(L,), (D,) for one env's mass (L,) and armature (D,); a singular M (a mass set to zero)
+        is an InvalidInputError naming the link."""
+        translational = mass.new_zeros(self.n_links)
+        per_dof = mass.new_zeros(self.n_dofs)
+        for links, dofs, K, J, average in self.groups:
+            matrix = (mass[links][:, :, None, None] * K).sum(1) + torch.diag_embed(armature[dofs])
+            inverse, info = torch.linalg.inv_ex(matrix)
+            for t in torch.nonzero(info).flatten().tolist():
+                check_positive_definite(matrix[t].detach().cpu().numpy(), InvalidInputError, dofs[t].cpu().numpy())
+                torch.linalg.inv(matrix[t])  # singular below the check's share: torch's own error
+            translational = translational.index_put((links.flatten(),),
+                                                    torch.einsum("tlri,tij,tlrj->tl", J, inverse, J).flatten() / 3.0)
+            per_dof = per_dof.index_put((dofs.flatten(),),
+                                        torch.einsum("ti,tij->tj", torch.diagonal(inverse, dim1=1, dim2=2),
+                                                     average).flatten())
+        return translational, per_dof
+
+
+def _same_shaped_trees(model):
+    """[(links (T, l), dofs (T, n))]: the kinematic trees with dofs, grouped by their numbers of
+    links and dofs, ascending within each tree (a tree: the dofs under one root dof, and the links
+    whose path to the root first meets one of them; links welded to the world belong to none)."""
+    parent = model.dof_parent
+    root = np.arange(model.n_dofs)
+    for i in range(model.n_dofs):  # a dof's parent comes before it
+        if parent[i] >= 0:
+            root[i] = root[parent[i]]
+    link_root = np.full(model.n_links, -1)
+    for l in range(model.n_links):  # a parent link comes before its children
+        own = np.flatnonzero(model.dof_link == l)
+        above = model.link_parent[l]
+        link_root[l] = root[own[0]] if len(own) else (link_root[above] if above >= 0 else -1)
+    groups = {}
+    for r in np.unique(root):
+        links, dofs = np.flatnonzero(link_root == r), np.flatnonzero(root == r)
+        groups.setdefault((len(links), len(dofs)), []).append((links, dofs))
+    return [(np.array([l for l, _ in trees]), np.array([d for _, d in trees])) for trees in groups.values()]
 
 
 def _touching_pairs(solver):

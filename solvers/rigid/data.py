@@ -31,14 +31,16 @@ from .constraint.solver import SCRATCH as SOLVER_SCRATCH
 BIG = 1e30  # stands for an absent bound
 # Up to this many (env, link) pairs the kernels run on the calling thread. In a rollout, handing a
 # loop to Taichi's thread pool costs ~100 µs here (its workers fall asleep between steps), while
-# one thread does a link's substep in ~0.1 µs forward and ~0.3 µs reverse; measured on the KUKA,
-# 256 envs (2048 pairs) ran 17% faster serial, 1024 envs 50% faster on two threads.
-SERIAL_LINK_ENVS = 2048
-# Up to this many envs the constraint solve and its reverse run on the calling thread too: an env's
-# solve costs several µs (a box on a plane: 16 rows, ~5 µs), so the pool pays off sooner than for
-# the link loops. Measured on the box with 2 threads: at 64 envs 0.31 ms on the calling thread
-# against 0.57 ms on the pool (each hand-off ~140 µs), at 1024 envs 8.2 ms against 4.8 ms.
-SERIAL_SOLVE_ENVS = 128
+# one thread does a link's substep in ~0.1 µs forward and ~0.3 µs reverse. (Measured with the env
+# loops spread out, env_loop: below 513 iterations the pool ran them on one thread, which made
+# earlier measurements favour the calling thread up to 2048 pairs.)
+SERIAL_LINK_ENVS = 1024
+# Up to this many (env, dof) pairs the constraint solve and its reverse run on the calling thread
+# too: an env's solve costs several µs to tens (a box on a plane: 16 rows, ~4 µs; the 10-box tower:
+# 60 dofs, ~50 µs), so the pool pays off sooner than for the link loops. Measured with 2 threads
+# (µs an env-step, calling thread → pool): the box at 128 envs 4.2 → 4.1, 256 envs 4.5 → 2.7; the
+# a1 at 256 envs 11.2 → 8.0; the tower at 128 envs 74 → 40.
+SERIAL_SOLVE_WORK = 384
 
 # Per-step inputs: name → (width per env, differentiable). Their order is the packing order.
 INPUTS = {
@@ -232,7 +234,7 @@ class RigidData:
     ``arenas`` are the kernels' array arguments, in ARENAS order; ``schedule`` is their one
     compile-time argument: whether the compute loops and the data-moving loops run on the
     calling thread (see SERIAL_LINK_ENVS); ``solve_schedule`` is that of the kernels that run
-    the constraint solve or its reverse (SERIAL_SOLVE_ENVS).
+    the constraint solve or its reverse (SERIAL_SOLVE_WORK).
     """
 
     def __init__(self, model, n_batch, substeps, requires_grad, settings):
@@ -243,8 +245,8 @@ class RigidData:
         # every data move are (a hand-off to the pool costs more, see SERIAL_LINK_ENVS); on a GPU
         # nothing is (one GPU thread would do it all)
         self.schedule = (on_cpu and n_batch * max(1, model.n_links) <= SERIAL_LINK_ENVS, on_cpu)
-        # the same for the kernels of the constraint stage (SERIAL_SOLVE_ENVS)
-        self.solve_schedule = (self.schedule[0] and n_batch <= SERIAL_SOLVE_ENVS, on_cpu)
+        # the same for the kernels of the constraint stage (SERIAL_SOLVE_WORK)
+        self.solve_schedule = (self.schedule[0] and n_batch * max(1, model.n_dofs) <= SERIAL_SOLVE_WORK, on_cpu)
         n_geoms = len(model.geom_type)
         self.widths = [input_width(name, model.n_links, model.n_dofs, n_geoms) for name in INPUTS]
         self.input_total = sum(self.widths)
@@ -413,6 +415,34 @@ class RigidView:
 def n_batch(ints: ti.template()):
     """The number of envs (the header's first slot): the bound of every kernel's env loop."""
     return ints[0]
+
+
+@ti.func
+def env_loop(ints: ti.template(), serial: ti.template()):
+    """The iteration count of a compute kernel's env loop (its iteration t runs env ``env_of(t)``):
+    the envs, or, on the thread pool (``serial`` False), the envs spread out to 1024 iterations:
+    Taichi 1.7's CPU backend hands a parallel loop out in tasks of 512 iterations, so 129 to 512
+    envs ran on one thread (a box on a plane at 256 envs: 4.0 µs an env-step on 1.0 core, 2.6 on
+    1.7 at 1024)."""
+    n = n_batch(ints)
+    if ti.static(not serial):
+        n *= _spread(ints)
+    return n
+
+
+@ti.func
+def env_of(ints: ti.template(), t, serial: ti.template()):
+    """The env of iteration t of an ``env_loop``, or -1 for the spread's idle iterations."""
+    e = t
+    if ti.static(not serial):
+        spread = _spread(ints)
+        e = ti.select(t % spread == 0, t // spread, -1)
+    return e
+
+
+@ti.func
+def _spread(ints: ti.template()):
+    return ti.max(1, 1024 // n_batch(ints))
 
 
 def bind(ints, f1, v3, v4, m3, cone=None):

@@ -166,14 +166,19 @@ def _initial_q(spec):
 
 
 def _mass_matrix_pairs(dof_link, link_parent):
+    """(P, 2) the pairs (i, j ≤ i) with dof j on dof i's path to the root (its link or an ancestor's),
+    sorted by i then j: a walk up each dof's links (comparing every pair of dofs was quadratic:
+    seconds at a few thousand dofs)."""
+    dofs_of = {}
+    for i, l in enumerate(dof_link.tolist()):
+        dofs_of.setdefault(l, []).append(i)
     pairs = []
-    for i, li in enumerate(dof_link):
-        for j, lj in enumerate(dof_link[: i + 1]):
-            ancestor = li
-            while ancestor >= 0 and ancestor != lj:
-                ancestor = link_parent[ancestor]
-            if ancestor == lj:
-                pairs.append((i, j))
+    for i, l in enumerate(dof_link.tolist()):
+        on_path = []
+        while l >= 0:
+            on_path.extend(j for j in dofs_of.get(l, ()) if j <= i)
+            l = int(link_parent[l])
+        pairs.extend((i, j) for j in sorted(on_path))
     return np.array(pairs, dtype=np.int32).reshape(-1, 2)
 
 

@@ -24,7 +24,7 @@ of the process.
 """
 import taichi as ti
 
-from .data import ARENA_TYPES, CONST, accumulate, bind, n_batch
+from .data import ARENA_TYPES, CONST, accumulate, bind, env_loop, env_of, n_batch
 from .actuation import smooth_force, smooth_force_adjoint
 from .collision.detect import (collide_adjoint_kind, collide_kind, converge_contacts, flag_inexact, geom_poses,
                                geom_poses_adjoint, near_pairs, replay_exact, sort_contacts)
@@ -160,22 +160,24 @@ def advance(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, com
     substep stops there, uncommitted, with needs_rows set (and the header's rows_needed): the
     constrained stage kernels then take the step for it (solver.run_step)."""
     ti.loop_config(serialize=schedule[0])
-    for e in range(n_batch(ints)):
-        d = bind(ints, f1, v3, v4, m3)
-        S = d.substeps
-        if inputs.shape[0] > 0:
-            _inputs_from(d, e, inputs, 0)
-        violated = 0
-        for s in range(S):
-            if violated == 0:
-                violated = limit_violated(d, s, e)
+    for t in range(env_loop(ints, schedule[0])):
+        e = env_of(ints, t, schedule[0])
+        if e >= 0:
+            d = bind(ints, f1, v3, v4, m3)
+            S = d.substeps
+            if inputs.shape[0] > 0:
+                _inputs_from(d, e, inputs, 0)
+            violated = 0
+            for s in range(S):
                 if violated == 0:
-                    substep_env(d, s, e)
-        d.needs_rows[e, 0] = violated
-        if violated:
-            d.rows_needed[0] = 1
-        else:
-            _end_step(d, e, commit, out)
+                    violated = limit_violated(d, s, e)
+                    if violated == 0:
+                        substep_env(d, s, e)
+            d.needs_rows[e, 0] = violated
+            if violated:
+                d.rows_needed[0] = 1
+            else:
+                _end_step(d, e, commit, out)
 
 
 @ti.func
@@ -214,35 +216,41 @@ def smooth_substep(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: 
     rows (the constraint stage, if it runs, overwrites that); the header's ``constrained`` flag
     raised if the env has dof rows to form. At s = 0 the inputs (unless empty) are loaded first."""
     ti.loop_config(serialize=schedule[0])
-    for e in range(n_batch(ints)):
-        d = bind(ints, f1, v3, v4, m3)
-        if not _skipped(d, e, flagged_only):
-            if s == 0 and inputs.shape[0] > 0:
-                _inputs_from(d, e, inputs, 0)
-            smooth_env(d, s, e)
-            geom_poses(d, s, e)
-            near_pairs(d, s, e)
-            d.n_con[s, e, 0] = d.n_efc[s, e, 0] = 0
-            for i in range(d.n_dofs):
-                d.qfrc_constraint[s, e, i] = 0.0
-            if dof_rows_arise(d, s, e):
-                d.constrained[0] = 1
+    for t in range(env_loop(ints, schedule[0])):
+        e = env_of(ints, t, schedule[0])
+        if e >= 0:
+            d = bind(ints, f1, v3, v4, m3)
+            if not _skipped(d, e, flagged_only):
+                if s == 0 and inputs.shape[0] > 0:
+                    _inputs_from(d, e, inputs, 0)
+                smooth_env(d, s, e)
+                geom_poses(d, s, e)
+                near_pairs(d, s, e)
+                d.n_con[s, e, 0] = d.n_efc[s, e, 0] = 0
+                for i in range(d.n_dofs):
+                    d.qfrc_constraint[s, e, i] = 0.0
+                if dof_rows_arise(d, s, e):
+                    d.constrained[0] = 1
 
 
 @ti.kernel
 def collide(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32):
     """Frame s's contacts of the pairs of one kind; config = (schedule, (type 1, type 2))."""
     ti.loop_config(serialize=config[0][0])
-    for e in range(n_batch(ints)):
-        collide_kind(bind(ints, f1, v3, v4, m3), s, e, config[1])
+    for t in range(env_loop(ints, config[0][0])):
+        e = env_of(ints, t, config[0][0])
+        if e >= 0:
+            collide_kind(bind(ints, f1, v3, v4, m3), s, e, config[1])
 
 
 @ti.kernel
 def converge(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32):
     """Frame s's curved convex contacts made the closed form of their feature (after the colliders)."""
     ti.loop_config(serialize=schedule[0])
-    for e in range(n_batch(ints)):
-        converge_contacts(bind(ints, f1, v3, v4, m3), s, e)
+    for t in range(env_loop(ints, schedule[0])):
+        e = env_of(ints, t, schedule[0])
+        if e >= 0:
+            converge_contacts(bind(ints, f1, v3, v4, m3), s, e)
 
 
 @ti.kernel
@@ -250,10 +258,12 @@ def constrain(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: 
     """Frame s's constraint rows and solve; config = (schedule, elliptic): the cone is compiled in,
     so a scene loads only its own cone's code (the elliptic cone's is a third of the kernel)."""
     ti.loop_config(serialize=config[0][0])
-    for e in range(n_batch(ints)):
-        d = bind(ints, f1, v3, v4, m3, cone=config[1])
-        if not _skipped(d, e, flagged_only):
-            constraint_env(d, s, e)
+    for t in range(env_loop(ints, config[0][0])):
+        e = env_of(ints, t, config[0][0])
+        if e >= 0:
+            d = bind(ints, f1, v3, v4, m3, cone=config[1])
+            if not _skipped(d, e, flagged_only):
+                constraint_env(d, s, e)
 
 
 @ti.kernel
@@ -261,12 +271,14 @@ def finish_substep(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: 
                    out: A, flagged_only: ti.i32):
     """Frame s → frame s + 1; after the last substep, what advance does at the end of a step."""
     ti.loop_config(serialize=schedule[0])
-    for e in range(n_batch(ints)):
-        d = bind(ints, f1, v3, v4, m3)
-        if not _skipped(d, e, flagged_only):
-            finish_substep_env(d, s, e, True)
-            if s == d.substeps - 1:
-                _end_step(d, e, commit, out)
+    for t in range(env_loop(ints, schedule[0])):
+        e = env_of(ints, t, schedule[0])
+        if e >= 0:
+            d = bind(ints, f1, v3, v4, m3)
+            if not _skipped(d, e, flagged_only):
+                finish_substep_env(d, s, e, True)
+                if s == d.substeps - 1:
+                    _end_step(d, e, commit, out)
 
 
 @ti.kernel
@@ -289,8 +301,10 @@ def reverse_dynamics(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: 
     rows, elliptic), rows: the step had a constraint stage; elliptic: its cone (compiled in, as
     constrain's; False without rows)."""
     ti.loop_config(serialize=config[0][0])
-    for e in range(n_batch(ints)):
-        dynamics_adjoint_env(bind(ints, f1, v3, v4, m3, cone=config[2]), s, e, config[1])
+    for t in range(env_loop(ints, config[0][0])):
+        e = env_of(ints, t, config[0][0])
+        if e >= 0:
+            dynamics_adjoint_env(bind(ints, f1, v3, v4, m3, cone=config[2]), s, e, config[1])
 
 
 @ti.kernel
@@ -298,8 +312,10 @@ def collide_adjoint(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M
     """Reverse of frame s's contacts of one pair kind (into the geoms' pose gradients); config =
     (schedule, (type 1, type 2)). Runs between reverse_dynamics and reverse_kinematics."""
     ti.loop_config(serialize=config[0][0])
-    for e in range(n_batch(ints)):
-        collide_adjoint_kind(bind(ints, f1, v3, v4, m3), s, e, config[1])
+    for t in range(env_loop(ints, config[0][0])):
+        e = env_of(ints, t, config[0][0])
+        if e >= 0:
+            collide_adjoint_kind(bind(ints, f1, v3, v4, m3), s, e, config[1])
 
 
 @ti.kernel
@@ -308,21 +324,25 @@ def reverse_kinematics(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, 
     the gradients go to dst (B, state gradient | differentiable input gradients), as
     _read_grads_env lays it out."""
     ti.loop_config(serialize=schedule[0])
-    for e in range(n_batch(ints)):
-        d = bind(ints, f1, v3, v4, m3)
-        if d.n_con[s, e, 0] > 0:
-            geom_poses_adjoint(d, s, e)
-        down_sweep_adjoint_env(d, s, e)
-        if s == 0:
-            _read_grads_env(d, e, dst)
+    for t in range(env_loop(ints, schedule[0])):
+        e = env_of(ints, t, schedule[0])
+        if e >= 0:
+            d = bind(ints, f1, v3, v4, m3)
+            if d.n_con[s, e, 0] > 0:
+                geom_poses_adjoint(d, s, e)
+            down_sweep_adjoint_env(d, s, e)
+            if s == 0:
+                _read_grads_env(d, e, dst)
 
 
 @ti.kernel
 def down_sweep(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3):
     """Link poses and velocities at frame 0 (what the link getters read)."""
     ti.loop_config(serialize=schedule[0])
-    for e in range(n_batch(ints)):
-        down_sweep_env(bind(ints, f1, v3, v4, m3), 0, e)
+    for t in range(env_loop(ints, schedule[0])):
+        e = env_of(ints, t, schedule[0])
+        if e >= 0:
+            down_sweep_env(bind(ints, f1, v3, v4, m3), 0, e)
 
 
 @ti.kernel
@@ -345,18 +365,22 @@ def down_sweep_adjoint(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, 
             g_quat = ti.Vector([src[e, l, 3 + k] for k in ti.static(range(4))])
             d.xrot_grad[0, e, l] = rotation_gradient(d.xquat[0, e, l], g_quat)
     ti.loop_config(serialize=schedule[0])
-    for e in range(n_batch(ints)):
-        d = bind(ints, f1, v3, v4, m3)
-        down_sweep_adjoint_env(d, 0, e)
-        _read_grads_env(d, e, dst)
+    for t in range(env_loop(ints, schedule[0])):
+        e = env_of(ints, t, schedule[0])
+        if e >= 0:
+            d = bind(ints, f1, v3, v4, m3)
+            down_sweep_adjoint_env(d, 0, e)
+            _read_grads_env(d, e, dst)
 
 
 @ti.kernel
 def position_stages(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3):
     """Mass matrix and bias at frame 0."""
     ti.loop_config(serialize=schedule[0])
-    for e in range(n_batch(ints)):
-        position_stages_env(bind(ints, f1, v3, v4, m3), 0, e)
+    for t in range(env_loop(ints, schedule[0])):
+        e = env_of(ints, t, schedule[0])
+        if e >= 0:
+            position_stages_env(bind(ints, f1, v3, v4, m3), 0, e)
 
 
 # -- moving data: on the CPU serial loops on the calling thread. A parallel loop costs a thread-pool hand-off
@@ -491,21 +515,24 @@ def read_dofs_force(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3:
     """dst (B, D) ← qfrc_smooth at frame 0 (the position stages and the force stage run there):
     the force the next step's solve is given, at the current state and inputs."""
     ti.loop_config(serialize=schedule[0])
-    for e in range(n_batch(ints)):
-        d = bind(ints, f1, v3, v4, m3)
-        position_stages_env(d, 0, e)
-        for i in range(d.n_dofs):
-            smooth_force(d, 0, e, i)
-            dst[e, i] = d.qfrc_smooth[0, e, i]
+    for t in range(env_loop(ints, schedule[0])):
+        e = env_of(ints, t, schedule[0])
+        if e >= 0:
+            d = bind(ints, f1, v3, v4, m3)
+            position_stages_env(d, 0, e)
+            for i in range(d.n_dofs):
+                smooth_force(d, 0, e, i)
+                dst[e, i] = d.qfrc_smooth[0, e, i]
 
 
 @ti.kernel
 def read_com_jacobians(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
-    """dst (B, L, 6, D) ← each link's centre-of-mass Jacobian at the frame-0 state, after the link
-    poses there (rows: linear velocity of the com, world frame; then angular velocity, in the
-    link's own frame, where its inertia is given: M = Σ_l Jᵀ diag(m_l, I_l) J)."""
+    """dst (b, L, 6, D) ← each link's centre-of-mass Jacobian at the frame-0 state of envs 0 … b − 1
+    (b ≤ B), after the link poses there (rows: linear velocity of the com, world frame; then
+    angular velocity, in the link's own frame, where its inertia is given: M = Σ_l Jᵀ diag(m_l,
+    I_l) J)."""
     ti.loop_config(serialize=schedule[0])
-    for e in range(n_batch(ints)):
+    for e in range(dst.shape[0]):
         d = bind(ints, f1, v3, v4, m3)
         for l in range(d.n_links):  # (parents first: a link's pose needs its parent's)
             link_kinematics(d, 0, e, l)
