@@ -31,10 +31,10 @@ from .constraint.solver import SCRATCH as SOLVER_SCRATCH
 BIG = 1e30  # stands for an absent bound
 # Up to this many (env, link) pairs the kernels run on the calling thread. In a rollout, handing a
 # loop to Taichi's thread pool costs ~100 µs here (its workers fall asleep between steps), while
-# one thread does a link's substep in ~0.1 µs forward and ~0.3 µs reverse. (Measured with the env
-# loops spread out, env_loop: below 513 iterations the pool ran them on one thread, which made
-# earlier measurements favour the calling thread up to 2048 pairs.)
-SERIAL_LINK_ENVS = 1024
+# one thread does a link's substep in ~0.1 µs forward and ~0.3 µs reverse; measured on the KUKA,
+# 256 envs (2048 pairs) ran faster serial (differentiable rollout 157 ms against 196 on the pool,
+# its env loop spread out: env_loop), 1024 envs 50% faster on two threads.
+SERIAL_LINK_ENVS = 2048
 # Up to this many (env, dof) pairs the constraint solve and its reverse run on the calling thread
 # too: an env's solve costs several µs to tens (a box on a plane: 16 rows, ~4 µs; the 10-box tower:
 # 60 dofs, ~50 µs), so the pool pays off sooner than for the link loops. Measured with 2 threads
