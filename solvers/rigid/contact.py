@@ -107,7 +107,7 @@ class InvweightBasis:
                                                + np.diag(m.dof_armature[dofs[t]]), dofs=dofs[t])
             # dof_invweight0 = diag(M⁻¹) @ average: a free joint's translations and rotations averaged
             average = np.tile(np.eye(dofs.shape[1]), (len(dofs), 1, 1))
-            for first in np.flatnonzero(m.dof_q[dofs[0]] < 0)[::3]:  # (the trees of a group are alike)
+            for first in np.flatnonzero(m.dof_q[dofs[0]] < 0)[::3]:  # (alike in a group: _same_shaped_trees)
                 average[:, first: first + 3, first: first + 3] = 1.0 / 3.0
             moving = (m.link_static[links] == 0)
             self.groups.append([torch.as_tensor(a, device=runtime.device) for a in (links, dofs)]
@@ -147,8 +147,9 @@ class InvweightBasis:
 
 def _same_shaped_trees(model):
     """[(links (T, l), dofs (T, n))]: the kinematic trees with dofs, grouped by their numbers of
-    links and dofs, ascending within each tree (a tree: the dofs under one root dof, and the links
-    whose path to the root first meets one of them; links welded to the world belong to none)."""
+    links and dofs and where their free joints' dofs are, ascending within each tree (a tree: the
+    dofs under one root dof, and the links whose path to the root first meets one of them; links
+    welded to the world belong to none)."""
     parent = model.dof_parent
     root = np.arange(model.n_dofs)
     for i in range(model.n_dofs):  # a dof's parent comes before it
@@ -162,7 +163,7 @@ def _same_shaped_trees(model):
     groups = {}
     for r in np.unique(root):
         links, dofs = np.flatnonzero(link_root == r), np.flatnonzero(root == r)
-        groups.setdefault((len(links), len(dofs)), []).append((links, dofs))
+        groups.setdefault((len(links), tuple((model.dof_q[dofs] < 0).tolist())), []).append((links, dofs))
     return [(np.array([l for l, _ in trees]), np.array([d for _, d in trees])) for trees in groups.values()]
 
 
