@@ -256,3 +256,29 @@ def test_setting_one_envs_mass_recomputes_its_rows_scale_only(f64):
         assert torch.equal(after[name][0], before[name][0]), name
     assert not torch.equal(after["invweight_t"][1], before["invweight_t"][1])
     assert not torch.equal(after["invweight_dof"][2], before["invweight_dof"][2])
+
+
+def test_plain_masses_after_differentiable_ones_leave_the_old_graph(f64):
+    """Masses requiring grad, a rollout and its backward, then plain masses (one env's unchanged):
+    the rows' scale of the unchanged env was kept from the old, differentiable one, with its
+    graph, and the next rollout's backward failed through the freed graph of the first. Now the
+    scale keeps no graph, and a new rollout's backward runs."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True), show_viewer=False)
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.2), pos=(0, 0, 0.099)))
+    scene.build(n_envs=2)
+    mass = box.get_links_mass().detach().clone()
+    box.set_links_mass(mass.clone().requires_grad_(True))
+    for _ in range(3):
+        scene.step()
+    box.get_dofs_position()[:, 2].sum().backward()
+    plain = mass.clone()
+    plain[1] *= 2.0
+    box.set_links_mass(plain)
+    assert not scene.sim.inputs(scene.rigid_solver)["invweight_t"].requires_grad
+    scene.reset()
+    velocity = torch.zeros((2, 6), dtype=torch.float64, requires_grad=True)
+    box.set_dofs_velocity(velocity)
+    for _ in range(3):
+        scene.step()
+    box.get_dofs_position()[:, 2].sum().backward()
+    assert velocity.grad is not None

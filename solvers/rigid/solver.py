@@ -133,14 +133,16 @@ class RigidSolver(Solver):
     def derive_inputs(self, inputs, previous=None):
         """``inputs`` with the rows' scale (invweight_t, invweight_dof) recomputed from their mass and
         armature (contact.InvweightBasis; differentiable); zeros before the basis exists (the first
-        allocation at build, which forms no rows). With ``previous`` and neither requiring grad,
-        only the envs whose mass or armature changed are recomputed (setting one env's mass
-        recomputed all: 80 ms a call at 1024 envs)."""
+        allocation at build, which forms no rows). With ``previous`` and no gradient anywhere
+        (mass, armature, nor the previous scale: its graph would stay attached), only the envs
+        whose mass or armature changed are recomputed (setting one env's mass recomputed all: 80
+        ms a call at 1024 envs)."""
         if self.invweight_basis is None:
             return inputs
         mass, armature = inputs["mass"], inputs["armature"]
         envs = slice(None)
-        if previous is not None and not (mass.requires_grad or armature.requires_grad):
+        if previous is not None and not any(t.requires_grad for t in (
+                mass, armature, previous["invweight_t"], previous["invweight_dof"])):
             changed = (mass != previous["mass"]).any(1) | (armature != previous["armature"]).any(1)
             envs = torch.nonzero(changed).flatten()
         invweight_t, invweight_dof = self.invweight_basis(mass[envs], armature[envs], self.check_positive_definite)

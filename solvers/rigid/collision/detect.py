@@ -454,9 +454,10 @@ REVERSES[ALL_CONVEX] = (_convex_replay, _convex_reverse)
 @ti.func
 def flag_inexact(d: ti.template(), s, e, c):
     """Raise the header's inexact flag for contact c of frame s, env e, and keep where it was (the
-    backward's error names the pair, env and substep)."""
-    d.inexact[0] = 1
-    d.inexact_where[0], d.inexact_where[1], d.inexact_where[2] = d.con_pair[s, e, c], e, s
+    backward's error names the pair, env and substep): the first to raise it writes (envs on the
+    thread pool would mix their three values)."""
+    if ti.atomic_or(d.inexact[0], 1) == 0:
+        d.inexact_where[0], d.inexact_where[1], d.inexact_where[2] = d.con_pair[s, e, c], e, s
 
 
 @ti.func

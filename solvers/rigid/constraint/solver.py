@@ -547,16 +547,19 @@ def _factor_hessian(d: ti.template(), s, e, k, n, m):
 @ti.func
 def _add_outer(d: ti.template(), s, e, ra, rb, h):
     """solver_H += h J_raᵀ J_rb (lower triangle) over the non-zero columns the two rows share
-    (rows of one contact). The terms go in the dense order (i, then j ≤ i), zeros skipped."""
-    col0 = d.efc_col0[s, e, ra]
+    (rows of one contact) in their island (a listed column whose entries are all exactly zero may
+    lie outside it, beyond the kept envelope). The terms go in the dense order (i, then j ≤ i),
+    zeros skipped."""
+    col0, island = d.efc_col0[s, e, ra], d.solver_row_island[s, e, ra]
     for a in range(d.efc_ncol[s, e, ra]):
         i = d.efc_cols[s, e, col0 + a]
         hJ = h * d.efc_J[s, e, ra, i]
         if hJ != 0.0:
             for b in range(a + 1):
                 j = d.efc_cols[s, e, col0 + b]
-                # written out: an array's += is an atomic add in Taichi (a locked loop on the CPU)
-                d.solver_H[s, e, i, j] = d.solver_H[s, e, i, j] + hJ * d.efc_J[s, e, rb, j]
+                if d.solver_dof_island[s, e, j] == island:
+                    # written out: an array's += is an atomic add in Taichi (a locked loop on the CPU)
+                    d.solver_H[s, e, i, j] = d.solver_H[s, e, i, j] + hJ * d.efc_J[s, e, rb, j]
 
 
 @ti.func
