@@ -235,9 +235,14 @@ def _row_dot(d: ti.template(), s, e, r, x: ti.template()):
 def _tree_envelope(d: ti.template(), s, e, n):
     """solver_first[a] ← the position of its dof's tree root: M's envelope (M[i, j] ≠ 0 only for dof
     j on dof i's path to the root). The n dofs of solver_dofs hold whole trees."""
+    _tree_first(d, s, e, n)
+    _reach(d, s, e, n, d.solver_first)
+
+
+@ti.func
+def _tree_first(d: ti.template(), s, e, n):
     for a in range(n):
         d.solver_first[s, e, a] = d.solver_pos[s, e, d.solver_dof_tree[s, e, d.solver_dofs[s, e, a]]]
-    _reach(d, s, e, n, d.solver_first)
 
 
 @ti.func
@@ -245,8 +250,7 @@ def _island_envelope(d: ti.template(), s, e, k, n, m):
     """solver_first ← the envelope of island k's H = M + Jᵀ D J + cone blocks over its n dofs and m
     rows (solver_dofs, solver_rows): M's, widened to each row's first column in the island (the
     rows of every state: the envelope stays while the states change)."""
-    for a in range(n):
-        d.solver_first[s, e, a] = d.solver_pos[s, e, d.solver_dof_tree[s, e, d.solver_dofs[s, e, a]]]
+    _tree_first(d, s, e, n)
     for q in range(m):
         r = d.solver_rows[s, e, q]
         col0, low = d.efc_col0[s, e, r], -1
