@@ -3,8 +3,8 @@
 Each ``scene.step()`` is one ``_Step`` node: inputs are every solver's state at the start of
 the step and its differentiable inputs (controls, parameters) — all torch tensors; outputs are
 the states after the step. A node keeps only what torch saves for it (its start state and its
-inputs) and the solvers' warm starts the step started from (``solver.warm_start()``: the rigid
-constraint solve's, so that the backward's replay repeats the forward exactly), so a rollout's
+inputs) and each solver's replay record (``solver.replay_record()``: the rigid constraint solves'
+solutions, so that the backward's replay repeats the forward exactly without iterating), so a rollout's
 memory is about one state per step, and nothing outlives the graph: zeroing and freeing are
 torch's. Getters of derived quantities (link poses) are ``_Read`` nodes.
 
@@ -32,7 +32,7 @@ class Rollout:
         self.generation = sim.generation
         self.checkpoints = {}  # step index → (states at its start (tuple of tensors), warm starts)
         self.inputs = {}  # step index → inputs (only when interval > 1)
-        self._replayed = {}  # step index → (start states, warm starts) recomputed during backward
+        self._replayed = {}  # step index → (start states, warm starts, replay records) recomputed during backward
         self._last_outputs = ()  # weak references to the states the newest step returned
         self._last_inputs = ((), ())  # the newest step's inputs as given (weakly held), and as recorded
 
@@ -64,21 +64,24 @@ class Rollout:
         self._last_outputs = tuple(weakref.ref(o) for o in outputs)
 
     def start_states(self, index):
-        """(states, warm starts) at the start of step ``index``, recomputed from the checkpoint
+        """(states, warm starts, replay records) of step ``index``, recomputed from the checkpoint
         before it (from its warm starts too: the same steps again, bit for bit); the steps up to
-        the next checkpoint are kept for the calls that follow (backward goes down the steps)."""
+        the next checkpoint are kept for the calls that follow (backward goes down the steps).
+        The last of them was not taken again: its records are None (its replay solves from the
+        warm starts)."""
         if index not in self._replayed:
             first = max(k for k in self.checkpoints if k <= index)
             states, warm_starts = self.checkpoints[first]
-            self._replayed = {first: (states, warm_starts)}
+            self._replayed = {}
             sim = _alive(self.sim)
             with torch.no_grad():
                 k = first
                 while k + 1 in self.inputs and k + 1 not in self.checkpoints:
-                    states = sim.forward_step(states, self.inputs[k], warm_starts)
-                    warm_starts = sim.warm_starts()
+                    following = sim.forward_step(states, self.inputs[k], warm_starts)
+                    self._replayed[k] = (states, warm_starts, tuple(sim.replay_records))
+                    states, warm_starts = following, sim.warm_starts()
                     k += 1
-                    self._replayed[k] = (states, warm_starts)
+                self._replayed[k] = (states, warm_starts, (None,) * len(states))
         return self._replayed.pop(index)
 
 
@@ -102,8 +105,8 @@ class _Step(torch.autograd.Function):
         states, inputs = tensors[:n_states], tensors[n_states:]
         outs = sim.forward_step(states, inputs)
         ctx.sim, ctx.rollout, ctx.index, ctx.n_states, ctx.kept = weakref.ref(sim), rollout, index, n_states, kept
-        ctx.warm_starts = tuple(sim.started_from) if kept else None  # no tensors of the graph
-        rollout.record(index, states, inputs, kept, ctx.warm_starts)
+        ctx.records = tuple(sim.replay_records) if kept else None  # (no tensors of the graph)
+        rollout.record(index, states, inputs, kept, tuple(sim.started_from))
         ctx.save_for_backward(*(tensors if ctx.kept else inputs))
         return outs
 
@@ -113,16 +116,17 @@ class _Step(torch.autograd.Function):
         _check_generation(sim, ctx.rollout.generation, f"step {ctx.index}")
         sim.hold_contacts()  # the replays below overwrite what the last step found
         saved = ctx.saved_tensors
-        if ctx.kept:
-            states, inputs, warm_starts = saved[: ctx.n_states], saved[ctx.n_states:], ctx.warm_starts
+        if ctx.kept:  # (with its replay records the replay needs no warm starts)
+            states, inputs, records = saved[: ctx.n_states], saved[ctx.n_states:], ctx.records
+            warm_starts = (None,) * len(states)
         else:
             if torch.is_grad_enabled():  # (its start states come from a detached recomputation: see _first_order)
                 raise GradientError(_second_order_message(f"step {ctx.index}") + "; with checkpoint_interval > 1 "
                                     "create_graph=True raises at once")
-            (states, warm_starts), inputs = ctx.rollout.start_states(ctx.index), saved
+            (states, warm_starts, records), inputs = ctx.rollout.start_states(ctx.index), saved
         with torch.no_grad():
             try:
-                grads = sim.backward_step(states, inputs, grad_states, warm_starts)
+                grads = sim.backward_step(states, inputs, grad_states, warm_starts, records)
             except GradientError as error:  # (which step of the rollout)
                 raise GradientError(f"step {ctx.index}'s backward: {error}") from None
         return (None, None, None, None, None, *_first_order(f"step {ctx.index}", grads, (*grad_states, *saved)))

@@ -54,6 +54,7 @@ class Simulator:
         self.step_index = 0
         self.rollout = None
         self.started_from = []  # the solvers' warm starts the last forward_step started from
+        self.replay_records = []  # and each solver's replay_record() after it
         self.warned_graph_cut = False  # _warn_graph_cut warned since the last reset
 
     def build(self, n_envs):
@@ -205,7 +206,8 @@ class Simulator:
     def forward_step(self, states, flat_inputs, warm_starts=None):
         """One step from the given states and inputs (no graph), and from ``warm_starts`` when
         given (else what the solvers hold); returns the new states. ``started_from`` keeps the
-        warm starts the step started from, for its backward."""
+        warm starts the step started from (a checkpoint's, to take the steps after it again),
+        ``replay_records`` what lets its backward's replay repeat it (solver.replay_record())."""
         self.started_from, pending = [], []
         for k, (slot, state, inputs) in enumerate(zip(self.slots, states, self._split_inputs(flat_inputs))):
             self._sync_state(slot, state)  # uploading a state clears the warm start
@@ -214,6 +216,7 @@ class Simulator:
             self.started_from.append(slot.solver.warm_start())
             pending.append(self._pending_inputs(slot, inputs))
         outs = self._advance(pending, download=True)
+        self.replay_records = [slot.solver.replay_record() for slot in self.slots]
         for slot, out in zip(self.slots, outs):
             slot.uploaded_state = out
         return tuple(outs)
@@ -235,14 +238,15 @@ class Simulator:
                 solver.substep_post_coupling(s)
         return [solver.end_step(download) for solver in solvers]
 
-    def backward_step(self, states, flat_inputs, grad_states, warm_starts):
-        """Gradients of one step's states and flat inputs, given the gradients of its outputs and
-        the warm starts it started from (its replay then repeats it exactly)."""
+    def backward_step(self, states, flat_inputs, grad_states, warm_starts, records):
+        """Gradients of one step's states and flat inputs, given the gradients of its outputs and,
+        per solver, its replay record or else the warm start it started from (its replay then
+        repeats it exactly; None for both where the solver needs neither)."""
         split = self._split_inputs(flat_inputs)
         if len(self.slots) == 1:
-            results = [self.slots[0].solver.backward(states[0], split[0], grad_states[0], warm_starts[0])]
+            results = [self.slots[0].solver.backward(states[0], split[0], grad_states[0], warm_starts[0], records[0])]
         else:
-            results = self._backward_shared(states, split, grad_states, warm_starts)
+            results = self._backward_shared(states, split, grad_states, warm_starts, records)
         grads_states, grads_inputs = [], []
         for slot, inputs, (grad_state, grad_inputs) in zip(self.slots, split, results):
             slot.uploaded_state = slot.uploaded_inputs = None  # Taichi holds this old step now
@@ -250,11 +254,12 @@ class Simulator:
             grads_inputs.extend(grad_inputs.get(name) for name in inputs)
         return (*grads_states, *grads_inputs)
 
-    def _backward_shared(self, states, inputs, grad_states, warm_starts):
+    def _backward_shared(self, states, inputs, grad_states, warm_starts, records):
         """The shared substep loop's reverse (solvers/base.py): load, replay, then mirror order."""
         solvers = [slot.solver for slot in self.slots]
-        for solver, state, pending, grad, warm_start in zip(solvers, states, inputs, grad_states, warm_starts):
-            solver.begin_reverse(state, pending, grad, warm_start)
+        for solver, state, pending, grad, warm_start, record in zip(solvers, states, inputs, grad_states, warm_starts,
+                                                                    records):
+            solver.begin_reverse(state, pending, grad, warm_start, record)
         self._advance([None] * len(solvers), download=False)
         for s in reversed(range(self.options.substeps)):
             for solver in reversed(solvers):

@@ -11,7 +11,7 @@ then the coupling, then every solver's ``substep_post_coupling(s)`` (Genesis's o
 reverse runs in mirror order, after a replay of the step's forward that leaves each substep's
 intermediates in place:
 
-    begin_step(inputs)                              begin_reverse(state, inputs, grad, warm_start)
+    begin_step(inputs)                              begin_reverse(state, inputs, grad, warm_start, record)
     for s in substeps:                              (the forward loop, replaying the step)
         pre_coupling(s) of every solver             for s in reversed(substeps):
         couple(s)                                       post_coupling_backward(s), solvers reversed
@@ -88,9 +88,11 @@ class Solver:
         (B, width) when ``download`` (else None)."""
         raise NotImplementedError
 
-    def begin_reverse(self, state, inputs, grad_state_out, warm_start):
-        """Load a step's start state, inputs, the warm start it started from and the gradient of
-        its end state, for a replay (begin_step(None), the substeps) and then the reverse."""
+    def begin_reverse(self, state, inputs, grad_state_out, warm_start, record=None):
+        """Load a step's start state, inputs, the gradient of its end state and what makes its
+        replay repeat it (its ``replay_record()``, else the warm start it started from; None where
+        the step needs neither), for a replay (begin_step(None), the substeps) and then the
+        reverse."""
         raise NotImplementedError
 
     def substep_post_coupling_backward(self, s):
@@ -112,10 +114,10 @@ class Solver:
             self.substep_post_coupling(s)
         return self.end_step(download)
 
-    def backward(self, state, inputs, grad_state_out, warm_start=None):
+    def backward(self, state, inputs, grad_state_out, warm_start=None, record=None):
         """Reverse of the step from ``state`` (B, width) with ``inputs`` (name → (B, width));
         returns end_reverse()'s gradients."""
-        self.begin_reverse(state, inputs, grad_state_out, warm_start)
+        self.begin_reverse(state, inputs, grad_state_out, warm_start, record)
         self.advance()  # the replay
         for s in reversed(range(self.substeps)):
             self.substep_post_coupling_backward(s)
@@ -138,6 +140,12 @@ class Solver:
     def set_warm_start(self, warm_start):
         """Restore ``warm_start()``'s value (None: leave it)."""
         raise NotImplementedError
+
+    def replay_record(self):
+        """After a step: a copy of what lets its backward's replay repeat it without the warm start
+        (the rigid solver's constraint-solve solutions, from which the replay skips the solve's
+        iterations), or None where the replay needs nothing."""
+        return None
 
     def destroy(self):
         """Free the solver's arrays."""

@@ -200,8 +200,8 @@ class _View:
         self.converged = 0  # MuJoCo's stop (no Newton step past it): its iterates and counts
         E, D, R = n_envs, n_dofs, n_rows
         shapes = {"D": (1, E, D), "DD": (1, E, D, D), "R": (1, E, R), "RD": (1, E, R, D)}
-        for name in ("qfrc_smooth", "qacc_smooth", "qacc", "qfrc_constraint"):
-            setattr(self, name, ti.field(float, shape=(1, E, D)))
+        for name in ("qfrc_smooth", "qacc_smooth", "qacc", "qfrc_constraint", "qacc_constrained"):
+            setattr(self, name, ti.field(float, shape=(1, E, D)))  # (qacc_constrained: a replay's, not used here)
         for name in ("efc_mu", "efc_R", "efc_aref", "efc_floss", "efc_force"):
             setattr(self, name, ti.field(float, shape=(1, E, R)))
         for name in ("efc_type", "efc_dim", "efc_state"):
@@ -277,7 +277,7 @@ class _View:
 def _solve_all(v: ti.template()):
     for e in range(v.n_envs):
         cs.newton_solve(v, 0, e, v.opt_iterations[e], v.opt_tolerance[e], v.opt_ls_iterations[e],
-                        v.opt_ls_tolerance[e])
+                        v.opt_ls_tolerance[e], 0)
 
 
 @pytest.fixture(scope="module")

@@ -623,6 +623,49 @@ def test_the_solve_reads_only_what_it_keeps(f64, cone):
     assert torch.equal(end, clean_end) and torch.equal(grad, clean_grad)
 
 
+def _forget_the_solves(solver):
+    """Every frame's qacc_constrained and solver_jar ← NaN (what a replay given the record reads)."""
+    for s in range(solver.data.size["S"] + 1):
+        for name in ("qacc_constrained", "solver_jar"):
+            solver.data.frame(name, s).fill_(float("nan"))
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_a_replay_from_the_solutions_repeats_a_replay_from_the_warm_start(f64, cone):
+    """A backward replays its step to refill the frames. Given the step's solutions (the solver's
+    replay_record) the replay makes the solve's outputs from them without iterating; given the
+    warm start instead it solves again, as the forward did. At the default tolerance (a solution
+    that a further iteration would move), in a rollout in which islands form and part, with
+    friction loss, 2 envs and 2 substeps, both give the same gradients bit for bit, every step."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, substeps=2, requires_grad=True),
+                     rigid_options=gs.options.RigidOptions(friction_cone=cone), show_viewer=False)
+    scene.add_entity(gs.morphs.Plane())
+    bodies = [scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(x, 0.0, 0.0499))) for x in (0.0, 0.3)]
+    bodies.append(scene.add_entity(gs.morphs.Sphere(radius=0.04, pos=(0.3, 0.02, 0.2))))
+    scene.build(n_envs=2)
+    bodies[1].set_dofs_frictionloss(torch.full((2, 6), 0.05, dtype=torch.float64))
+    bodies[0].set_dofs_velocity(torch.tensor([[2.0, 0.1, 0.0, 0.0, 0.0, 1.0], [2.2, -0.1, 0.0, 0.0, 0.0, -1.0]],
+                                             dtype=torch.float64))
+    solver, generator = scene.rigid_solver, torch.Generator().manual_seed(0)
+    inputs = scene.sim.inputs(solver)
+    state, replays = scene.sim.state(solver), 0
+    for _ in range(30):
+        warm_start = solver.warm_start()
+        following = solver.advance(inputs, download=True)
+        record, next_warm_start = solver.replay_record(), solver.warm_start()
+        seed = torch.randn(following.shape, dtype=torch.float64, generator=generator)
+        _forget_the_solves(solver)
+        replayed = solver.backward(state, inputs, seed, record=record)
+        solved = solver.backward(state, inputs, seed, warm_start=warm_start)
+        assert torch.equal(solved[0], replayed[0])
+        assert all(torch.equal(solved[1][name], replayed[1][name]) for name in solved[1])
+        replays += record is not None
+        solver.upload_state(following)  # (the replays overwrote the forward's end)
+        solver.set_warm_start(next_warm_start)
+        state = following
+    assert replays > 20 and state[:, 7].min() > 0.301  # (the first box pushed the second: its x)
+
+
 def test_a_mesh_resting_on_a_mesh_by_a_polygon_vertex(f64, tmp_path):
     """A small convex mesh (5-vertex hull) tipped onto a fixed mesh slab, pyramidal cone: its
     contacts are clipped-polygon vertices (no side plane in their feature), whose closed form read

@@ -80,7 +80,7 @@ class MPMAdjoint:
         self.reverse_kernels = BoundKernels((False, self.serial_chores), arrays, [0] * len(arrays),
                                             *kernels.REVERSE_KERNELS)
 
-    def begin_reverse(self, state, inputs, grad_state_out, warm_start):
+    def begin_reverse(self, state, inputs, grad_state_out, warm_start, record=None):
         """Frame 0 ← the step's start state (B, N · 25), the inputs uploaded, grads ← the gradient
         of the step's end state (None: zero), the parameters' gradients zeroed; the next step
         (the replay) keeps what the reverse reads."""

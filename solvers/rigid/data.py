@@ -276,6 +276,7 @@ class RigidData:
         # int arena (~0.1 µs a read, against ~15 µs for a torch scalar read and write)
         self.header = self.arenas[0].numpy() if self.arenas[0].device.type == "cpu" else self.arenas[0]
         self.flags_on_host = isinstance(self.header, np.ndarray)  # a read costs no wait for a device
+        self._frame_views = {}  # (name, s) → frame()'s view, made once (a step reads some every time)
 
     def _fill(self, values, model, consts):
         """Header, model and consts (CONSTS) into the arenas."""
@@ -305,6 +306,15 @@ class RigidData:
         arena, count = PER_ENV[name]
         begin, n = self.start[f"env:{name}"], self.size["B"] * _counts(self.size)[count]
         return self.arenas[ARENAS.index(arena)][begin: begin + n].view(self.size["B"], -1)
+
+    def frame(self, name, s):
+        """The (B, count) torch view of frame s of a FRAMES array (its values)."""
+        if (name, s) not in self._frame_views:
+            arena, count, _ = FRAMES[name]
+            begin = self.start[f"frame:{name}"] + s * self.start[f"stride:{arena}:False"]
+            n = self.size["B"] * _counts(self.size)[count]
+            self._frame_views[name, s] = self.arenas[ARENAS.index(arena)][begin: begin + n].view(self.size["B"], -1)
+        return self._frame_views[name, s]
 
     def width(self, name):
         return self.widths[list(INPUTS).index(name)]

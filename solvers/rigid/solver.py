@@ -39,6 +39,7 @@ class RigidSolver(Solver):
         self._packed = {}  # width → the (B, width) buffer _pack_inputs writes
         self.substeps = sim_options.substeps
         self._commit = 1  # 0 while a backward replays a step: its frames stay for the reverse
+        self._replaying = 0  # 1 while a backward replays a step given its replay_record (the solutions)
         self.invweight_basis = None  # contact.InvweightBasis, taken at build
         self._clear_substep_record()
 
@@ -249,7 +250,7 @@ class RigidSolver(Solver):
         if inputs is not None:
             self._note_inputs(inputs)
         self.run_step(self._nothing if inputs is None else self._pack_inputs(inputs), out, commit=self._commit)
-        self._commit = 1
+        self._commit, self._replaying = 1, 0  # (a replay ends with its step)
         if self.data.size["N"]:
             self._check_overflow()
         return out if download else None
@@ -306,7 +307,7 @@ class RigidSolver(Solver):
         found = self.data.take_flag("constrained") if self.data.flags_on_host else 1  # read, so cleared, always
         rows = bool(flagged_only or found)
         if rows:
-            self.constrain(s, flagged_only)
+            self.constrain(s, flagged_only, self._replaying)
         self._rows_in_substep[s] = rows  # the reverse of a substep without rows skips the solve's
         self.kernels.finish_substep(s, commit, out, flagged_only)
 
@@ -325,7 +326,7 @@ class RigidSolver(Solver):
 
     def end_step(self, download):
         result = self.download_state() if download and self._commit else None
-        self._commit = 1
+        self._commit, self._replaying = 1, 0  # (a replay ends with its step)
         if self.data.size["N"]:
             self._check_overflow()
         return result
@@ -357,15 +358,36 @@ class RigidSolver(Solver):
         if warm_start is not None:
             self.data.per_env("qacc_warmstart").copy_(warm_start)
 
-    def begin_reverse(self, state, inputs, grad_state_out, warm_start):
+    def replay_record(self):
+        """What the solves of the step just taken ended at, or None when no substep had a
+        constraint stage: per substep, the constrained acceleration (B, D) and the rows' jar
+        (B, rows up to the most any env used), or None for a substep without the stage. Given it,
+        the step's replay makes the solve's outputs without iterating (constraint/solver.py,
+        "Replay")."""
+        if not any(self._rows_in_substep):
+            return None
+        record = []
+        for s, rows in enumerate(self._rows_in_substep):
+            used = int(self.data.frame("n_efc", s).max()) if rows else 0
+            record.append((self.data.frame("qacc_constrained", s).clone(),
+                           self.data.frame("solver_jar", s)[:, :used].clone()) if rows else None)
+        return record
+
+    def begin_reverse(self, state, inputs, grad_state_out, warm_start, record=None):
         """Load the step's start state, inputs and output gradient, and the warm start the forward
-        step started from: its replay (uncommitted) then repeats it exactly (see step.py)."""
+        step started from or its replay_record: its replay (uncommitted) then repeats it exactly
+        (see step.py)."""
         self._note_inputs(inputs)
         packed = self._pack_inputs(inputs, before=(state,), after=(grad_state_out,))
         self._grads = self._empty(sum(self.grad_widths))
         self.kernels.prepare_reverse(packed)
         self.data.take_flag("inexact")
         self.set_warm_start(warm_start)
+        for s, solution in enumerate(record or ()):
+            if solution is not None:
+                self.data.frame("qacc_constrained", s).copy_(solution[0])
+                self.data.frame("solver_jar", s)[:, :solution[1].shape[1]].copy_(solution[1])
+        self._replaying = int(record is not None)
         self._commit = 0
 
     def substep_post_coupling_backward(self, s):

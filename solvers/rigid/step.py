@@ -76,9 +76,10 @@ def position_stages_env(d: ti.template(), s, e):
 
 
 @ti.func
-def constraint_env(d: ti.template(), s, e):
+def constraint_env(d: ti.template(), s, e, replaying):
     """Rows of frame s (single-dof rows, then its contacts', in MuJoCo's order), then the
-    constraint solve → qacc_constrained and qfrc_constraint[s, e]."""
+    constraint solve → qacc_constrained and qfrc_constraint[s, e] (replaying: qacc_constrained
+    holds the forward's solution: constraint/solver.py's "Replay")."""
     sort_contacts(d, s, e)
     rows = dof_rows(d, s, e)
     for c in range(d.n_con[s, e, 0]):
@@ -95,7 +96,7 @@ def constraint_env(d: ti.template(), s, e):
         for i in range(d.n_dofs):
             accumulate(d.solver_M, ti.Vector([s, e, i, i]), d.armature[e, i])
         newton_solve(d, s, e, d.iterations, d.consts[CONST["tolerance"]], d.ls_iterations,
-                     d.consts[CONST["ls_tolerance"]])
+                     d.consts[CONST["ls_tolerance"]], replaying)
         for i in range(d.n_dofs):  # the next solve starts from this solution
             d.qacc_constrained[s, e, i] = d.qacc_warmstart[e, i] = d.qacc[s, e, i]
 
@@ -254,16 +255,18 @@ def converge(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s:
 
 
 @ti.kernel
-def constrain(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, flagged_only: ti.i32):
+def constrain(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, flagged_only: ti.i32,
+              replaying: ti.i32):
     """Frame s's constraint rows and solve; config = (schedule, elliptic): the cone is compiled in,
-    so a scene loads only its own cone's code (the elliptic cone's is a third of the kernel)."""
+    so a scene loads only its own cone's code (the elliptic cone's is a third of the kernel);
+    replaying: a backward's replay given the forward's solutions (constraint_env)."""
     ti.loop_config(serialize=config[0][0])
     for t in range(env_loop(ints, config[0][0])):
         e = env_of(ints, t, config[0][0])
         if e >= 0:
             d = bind(ints, f1, v3, v4, m3, cone=config[1])
             if not _skipped(d, e, flagged_only):
-                constraint_env(d, s, e)
+                constraint_env(d, s, e, replaying)
 
 
 @ti.kernel

@@ -50,6 +50,15 @@ the cone blocks H_c follow): row i from dof solver_env[i] on, among its block's 
 elsewhere are zero and not kept (``cholesky_solve``). Implicit differentiation solves H u = ḡ
 with it.
 
+**Replay.** A backward replays the step to refill its frames. Given the forward's final qacc and
+jar (the solver's ``replay_record``), the replay makes every output the solve leaves from them
+as its last pass did (``_replay_island``: states, forces, qfrc_constraint, the factor): the same
+bits without a warm start or iterations (the solve's share of a differentiable box rollout's
+backward: from ~2 Newton iterations and their line searches to one factorisation). The jar is
+the iterations' running sum, not J qacc − aref afresh: forces from a fresh jar differ by round-off
+times the stiff rows' D or a near-sticking cone's Hessian, and no longer balance qacc (they made
+a husky's forward map noisy at 1e-12, which finite differences saw).
+
 **Checking against MuJoCo.** With islands, MuJoCo copies only the forces back from its island
 arrays: after mj_forward, d.efc_state still holds the warm-start test's states (at qacc_smooth);
 the solve's final states, which ours equal, are d.iefc_state[d.map_efc2iefc].
@@ -72,6 +81,7 @@ SATISFIED, QUADRATIC, LINEARNEG, LINEARPOS, CONE = 0, 1, 2, 3, 4
 TOP, BOTTOM, MIDDLE = 1, 2, 3
 MINVAL = 1e-15  # MuJoCo's mjMINVAL
 ALL = -2        # island label standing for every dof and row
+MAX_CONTACT_ROWS = 10  # the most rows one contact has (a pyramid of condim 6)
 NO_ISLAND = -1  # label of a dof (or row) that no row touches
 
 # Work arrays of the solve, indexed [s, e, k] (D, R) or [s, e, i, j] (DD). Element "i": int32.
@@ -538,14 +548,52 @@ def _factor_hessian(d: ti.template(), s, e, k, n, m):
         for b in range(d.solver_first[s, e, a], a + 1):
             j = d.solver_dofs[s, e, b]
             d.solver_H[s, e, i, j] = d.solver_M[s, e, i, j]
-    for q in range(m):
+    q = 0
+    while q < m:  # consecutive rows sharing a column list (a contact's) together, an elliptic block alone
         r = d.solver_rows[s, e, q]
-        if d.efc_state[s, e, r] == QUADRATIC:
-            _add_outer(d, s, e, r, r, 1.0 / d.efc_R[s, e, r])
-        if ti.static(d.elliptic):
+        count = 1
+        while (q + count < m and count < MAX_CONTACT_ROWS and d.solver_rows[s, e, q + count] == r + count
+               and d.efc_col0[s, e, r + count] == d.efc_col0[s, e, r]
+               and d.efc_type[s, e, r + count] != ELLIPTIC_FIRST):
+            count += 1
+        _add_quadratic_rows(d, s, e, r, count)
+        if ti.static(d.elliptic):  # (a block's rows are all in its cone, or none)
             if d.efc_type[s, e, r] == ELLIPTIC_FIRST and d.efc_state[s, e, r] == CONE:
                 _add_cone_hessian(d, s, e, r)
+        q += count
     _cholesky(d, s, e, n)
+
+
+@ti.func
+def _add_quadratic_rows(d: ti.template(), s, e, r, count):
+    """solver_H += Σ_k J_kᵀ J_k / R_k over the QUADRATIC rows among r … r + count − 1, which share
+    one column list (a contact's rows), as ``_add_outer`` of each row in turn would add them (an
+    elliptic block's cone Hessian comes after its rows, which are then not QUADRATIC): each
+    entry takes the rows' terms in row order, zeros skipped (the same bits), but is read and
+    written once for the group and its column and island once (4 pyramid rows: a third of the
+    memory traffic; the Hessian was a third of a box's replayed solve)."""
+    col0, island = d.efc_col0[s, e, r], d.solver_row_island[s, e, r]
+    h = ti.Vector.zero(float, MAX_CONTACT_ROWS)
+    for k in ti.static(range(MAX_CONTACT_ROWS)):
+        if k < count and d.efc_state[s, e, r + k] == QUADRATIC:
+            h[k] = 1.0 / d.efc_R[s, e, r + k]
+    for a in range(d.efc_ncol[s, e, r]):
+        i = d.efc_cols[s, e, col0 + a]
+        hJ = ti.Vector.zero(float, MAX_CONTACT_ROWS)
+        live = False
+        for k in ti.static(range(MAX_CONTACT_ROWS)):
+            if k < count and h[k] != 0.0:  # (a row in another state adds nothing, NaN or not)
+                hJ[k] = h[k] * d.efc_J[s, e, r + k, i]
+                live = live or hJ[k] != 0.0
+        if live:
+            for b in range(a + 1):
+                j = d.efc_cols[s, e, col0 + b]
+                if d.solver_dof_island[s, e, j] == island:
+                    acc = d.solver_H[s, e, i, j]
+                    for k in ti.static(range(MAX_CONTACT_ROWS)):
+                        if k < count and hJ[k] != 0.0:
+                            acc = acc + hJ[k] * d.efc_J[s, e, r + k, j]
+                    d.solver_H[s, e, i, j] = acc
 
 
 @ti.func
@@ -580,7 +628,17 @@ def _add_cone_hessian(d: ti.template(), s, e, r):
 @ti.func
 def _update_gradient(d: ti.template(), s, e, n, m):
     """qfrc_constraint = Jᵀ f and grad = M qacc − qfrc_smooth − qfrc_constraint on the n dofs of
-    solver_dofs (rows: the m of solver_rows, scattered in row order)."""
+    solver_dofs (rows: the m of solver_rows)."""
+    _constraint_force(d, s, e, n, m)
+    for p in range(n):
+        i = d.solver_dofs[s, e, p]
+        d.solver_grad[s, e, i] = d.solver_Ma[s, e, i] - d.qfrc_smooth[s, e, i] - d.qfrc_constraint[s, e, i]
+
+
+@ti.func
+def _constraint_force(d: ti.template(), s, e, n, m):
+    """qfrc_constraint = Jᵀ f on the n dofs of solver_dofs (the m rows of solver_rows, scattered in
+    row order)."""
     for p in range(n):
         d.qfrc_constraint[s, e, d.solver_dofs[s, e, p]] = 0.0
     for q in range(m):
@@ -590,9 +648,6 @@ def _update_gradient(d: ti.template(), s, e, n, m):
         for a in range(d.efc_ncol[s, e, r]):
             i = d.efc_cols[s, e, col0 + a]
             d.qfrc_constraint[s, e, i] = d.qfrc_constraint[s, e, i] + d.efc_J[s, e, r, i] * f
-    for p in range(n):
-        i = d.solver_dofs[s, e, p]
-        d.solver_grad[s, e, i] = d.solver_Ma[s, e, i] - d.qfrc_smooth[s, e, i] - d.qfrc_constraint[s, e, i]
 
 
 # ----------------------------------------------------------------------------- line search
@@ -919,9 +974,28 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
             r = d.solver_rows[s, e, q]
             d.solver_jar[s, e, r] = d.solver_jar[s, e, r] + alpha * d.solver_Jv[s, e, r]
         improvement = scale * ls_improvement
-    for a in range(n):  # where the final factor's rows start, for the backward (cholesky_solve)
-        d.solver_env[s, e, d.solver_dofs[s, e, a]] = d.solver_dofs[s, e, d.solver_first[s, e, a]]
+    _note_factor_rows(d, s, e, n)
     return niter
+
+
+@ti.func
+def _note_factor_rows(d: ti.template(), s, e, n):
+    """solver_env ← where each of the n dofs' rows of the island's final factor starts, for the
+    backward (cholesky_solve)."""
+    for a in range(n):
+        d.solver_env[s, e, d.solver_dofs[s, e, a]] = d.solver_dofs[s, e, d.solver_first[s, e, a]]
+
+
+@ti.func
+def _replay_island(d: ti.template(), s, e, k):
+    """Island k's outputs made again from the forward's final qacc and jar (see "Replay"): the
+    states and forces of that jar, qfrc_constraint = Jᵀ f and H's factor, by the functions the
+    forward's last pass ran, in its order."""
+    n, m = _select(d, s, e, k)
+    _update_constraints(d, s, e, m)
+    _constraint_force(d, s, e, n, m)
+    _factor_hessian(d, s, e, k, n, m)
+    _note_factor_rows(d, s, e, n)
 
 
 @ti.func
@@ -949,8 +1023,10 @@ def _warm_start(d: ti.template(), s, e, n, m):
 
 
 @ti.func
-def newton_solve(d: ti.template(), s, e, iterations, tolerance, ls_iterations, ls_tolerance):
-    """Constrained acceleration of env e at substep frame s (see the module docstring).
+def newton_solve(d: ti.template(), s, e, iterations, tolerance, ls_iterations, ls_tolerance, replaying):
+    """Constrained acceleration of env e at substep frame s (see the module docstring); replaying:
+    qacc_constrained[s, e] and solver_jar[s, e] hold the forward's final values, from which the
+    outputs are made again without a warm start or iterations ("Replay").
 
     Reads solver_M (D, D) kg·m² / kg, qfrc_smooth (D,) N·m / N, the n_efc[s, e, 0] rows efc_type, efc_dim,
     efc_mu, efc_J (R, D) with their non-zero columns (efc_col0, efc_ncol, efc_cols), efc_R, efc_aref,
@@ -974,9 +1050,16 @@ def newton_solve(d: ti.template(), s, e, iterations, tolerance, ls_iterations, l
     _factor_solve(d, d.qacc_smooth, s, e, n)
     for r in range(d.n_efc[s, e, 0]):
         d.efc_force[s, e, r], d.efc_state[s, e, r] = 0.0, SATISFIED
-    _warm_start(d, s, e, n, m)
     niter = 0
-    for k in range(d.n_dofs):
-        if d.solver_tree[s, e, k] == k:  # k is an island's canonical root
-            niter += _solve_island(d, s, e, k, iterations, tolerance, ls_iterations, ls_tolerance)
+    if replaying:  # (solver_jar holds the forward's too)
+        for i in range(d.n_dofs):
+            d.qacc[s, e, i] = d.qacc_constrained[s, e, i]
+        for k in range(d.n_dofs):
+            if d.solver_tree[s, e, k] == k:
+                _replay_island(d, s, e, k)
+    else:
+        _warm_start(d, s, e, n, m)
+        for k in range(d.n_dofs):
+            if d.solver_tree[s, e, k] == k:  # k is an island's canonical root
+                niter += _solve_island(d, s, e, k, iterations, tolerance, ls_iterations, ls_tolerance)
     d.solver_niter[s, e] = niter
