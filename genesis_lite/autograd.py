@@ -3,8 +3,9 @@
 Each ``scene.step()`` is one ``_Step`` node: inputs are every solver's state at the start of
 the step and its differentiable inputs (controls, parameters) — all torch tensors; outputs are
 the states after the step. A node keeps only what torch saves for it (its start state and its
-inputs) and each solver's replay record (``solver.replay_record()``: the rigid constraint solves'
-solutions, so that the backward's replay repeats the forward exactly without iterating), so a rollout's
+inputs) and each solver's replay record (``solver.replay_record()``: where the rigid constraint
+solves ended, so that the backward's replay repeats the forward exactly without iterating; bounded
+to a few states, else the warm start the step started from), so a rollout's
 memory is about one state per step, and nothing outlives the graph: zeroing and freeing are
 torch's. Getters of derived quantities (link poses) are ``_Read`` nodes.
 
@@ -103,11 +104,17 @@ class _Step(torch.autograd.Function):
     @staticmethod
     def forward(ctx, sim, rollout, index, kept, n_states, *tensors):
         states, inputs = tensors[:n_states], tensors[n_states:]
-        outs = sim.forward_step(states, inputs)
+        outs = sim.forward_step(states, inputs, record=kept)
         ctx.sim, ctx.rollout, ctx.index, ctx.n_states, ctx.kept = weakref.ref(sim), rollout, index, n_states, kept
-        ctx.records = tuple(sim.replay_records) if kept else None  # (no tensors of the graph)
         rollout.record(index, states, inputs, kept, tuple(sim.started_from))
-        ctx.save_for_backward(*(tensors if ctx.kept else inputs))
+        saved, replay = list(tensors if kept else inputs), []
+        if kept:  # each solver's replay record, or where it has none the warm start its step started from
+            records = tuple(sim.replay_records)
+            warm_starts = tuple(None if record is not None else warm for warm, record in zip(sim.started_from, records))
+            ctx.replay_layout = _flatten((warm_starts, records), replay)
+        # saved as tensors, torch frees them with the graph (attributes of ctx would outlive the backward)
+        ctx.n_saved = len(saved)
+        ctx.save_for_backward(*saved, *replay)
         return outs
 
     @staticmethod
@@ -115,10 +122,10 @@ class _Step(torch.autograd.Function):
         sim = _alive(ctx.sim)
         _check_generation(sim, ctx.rollout.generation, f"step {ctx.index}")
         sim.hold_contacts()  # the replays below overwrite what the last step found
-        saved = ctx.saved_tensors
-        if ctx.kept:  # (with its replay records the replay needs no warm starts)
-            states, inputs, records = saved[: ctx.n_states], saved[ctx.n_states:], ctx.records
-            warm_starts = (None,) * len(states)
+        saved, replay = ctx.saved_tensors[: ctx.n_saved], ctx.saved_tensors[ctx.n_saved:]
+        if ctx.kept:
+            states, inputs = saved[: ctx.n_states], saved[ctx.n_states:]
+            warm_starts, records = _unflatten(ctx.replay_layout, replay)
         else:
             if torch.is_grad_enabled():  # (its start states come from a detached recomputation: see _first_order)
                 raise GradientError(_second_order_message(f"step {ctx.index}") + "; with checkpoint_interval > 1 "
@@ -130,6 +137,26 @@ class _Step(torch.autograd.Function):
             except GradientError as error:  # (which step of the rollout)
                 raise GradientError(f"step {ctx.index}'s backward: {error}") from None
         return (None, None, None, None, None, *_first_order(f"step {ctx.index}", grads, (*grad_states, *saved)))
+
+
+def _flatten(tree, tensors):
+    """``tree`` (tensors and Nones in nested tuples and lists) with each tensor replaced by its
+    index in ``tensors``, to which it is appended."""
+    if isinstance(tree, torch.Tensor):
+        tensors.append(tree)
+        return len(tensors) - 1
+    if isinstance(tree, (tuple, list)):
+        return tuple(_flatten(branch, tensors) for branch in tree)
+    return None
+
+
+def _unflatten(layout, tensors):
+    """The tree ``_flatten`` took apart (its lists as tuples)."""
+    if isinstance(layout, int):
+        return tensors[layout]
+    if isinstance(layout, tuple):
+        return tuple(_unflatten(branch, tensors) for branch in layout)
+    return None
 
 
 def step(sim, rollout, index, states, inputs):

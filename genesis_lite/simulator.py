@@ -203,11 +203,12 @@ class Simulator:
         """Each solver's warm start (solver.warm_start()), as a tuple."""
         return tuple(slot.solver.warm_start() for slot in self.slots)
 
-    def forward_step(self, states, flat_inputs, warm_starts=None):
+    def forward_step(self, states, flat_inputs, warm_starts=None, record=True):
         """One step from the given states and inputs (no graph), and from ``warm_starts`` when
         given (else what the solvers hold); returns the new states. ``started_from`` keeps the
         warm starts the step started from (a checkpoint's, to take the steps after it again),
-        ``replay_records`` what lets its backward's replay repeat it (solver.replay_record())."""
+        ``replay_records``, when ``record``, what lets its backward's replay repeat it
+        (solver.replay_record(); else Nones)."""
         self.started_from, pending = [], []
         for k, (slot, state, inputs) in enumerate(zip(self.slots, states, self._split_inputs(flat_inputs))):
             self._sync_state(slot, state)  # uploading a state clears the warm start
@@ -216,7 +217,7 @@ class Simulator:
             self.started_from.append(slot.solver.warm_start())
             pending.append(self._pending_inputs(slot, inputs))
         outs = self._advance(pending, download=True)
-        self.replay_records = [slot.solver.replay_record() for slot in self.slots]
+        self.replay_records = [slot.solver.replay_record() if record else None for slot in self.slots]
         for slot, out in zip(self.slots, outs):
             slot.uploaded_state = out
         return tuple(outs)
@@ -243,13 +244,18 @@ class Simulator:
         per solver, its replay record or else the warm start it started from (its replay then
         repeats it exactly; None for both where the solver needs neither)."""
         split = self._split_inputs(flat_inputs)
-        if len(self.slots) == 1:
-            results = [self.slots[0].solver.backward(states[0], split[0], grad_states[0], warm_starts[0], records[0])]
-        else:
-            results = self._backward_shared(states, split, grad_states, warm_starts, records)
+        try:
+            if len(self.slots) == 1:
+                results = [self.slots[0].solver.backward(states[0], split[0], grad_states[0], warm_starts[0],
+                                                         records[0])]
+            else:
+                results = self._backward_shared(states, split, grad_states, warm_starts, records)
+        finally:  # (also when it raised midway: the next step is a forward one, from its own state)
+            for slot in self.slots:
+                slot.uploaded_state = slot.uploaded_inputs = None  # Taichi holds this old step now
+                slot.solver.end_backward()
         grads_states, grads_inputs = [], []
-        for slot, inputs, (grad_state, grad_inputs) in zip(self.slots, split, results):
-            slot.uploaded_state = slot.uploaded_inputs = None  # Taichi holds this old step now
+        for inputs, (grad_state, grad_inputs) in zip(split, results):
             grads_states.append(grad_state)
             grads_inputs.extend(grad_inputs.get(name) for name in inputs)
         return (*grads_states, *grads_inputs)

@@ -124,6 +124,10 @@ class Solver:
             self.substep_pre_coupling_backward(s)
         return self.end_reverse()
 
+    def end_backward(self):
+        """After a step's backward, finished or not (an error, an interrupt): the next step is a
+        forward one (a replay's settings cleared)."""
+
     def nonfinite(self):
         """True once a step produced a non-finite state since the last call."""
         raise NotImplementedError

@@ -22,6 +22,7 @@ import trimesh
 
 import genesis_lite as gs
 from genesis_lite.solvers.rigid.data import SERIAL_SOLVE_WORK
+from genesis_lite.solvers.rigid.solver import REPLAY_RECORD_STATES
 from tests.conftest import pybullet
 from tests.fd_scan import assert_converged, directional_errors
 
@@ -664,6 +665,87 @@ def test_a_replay_from_the_solutions_repeats_a_replay_from_the_warm_start(f64, c
         solver.set_warm_start(next_warm_start)
         state = following
     assert replays > 20 and state[:, 7].min() > 0.301  # (the first box pushed the second: its x)
+
+
+def _replay_bytes(node):
+    """Bytes of the replay records (or warm starts) the graph's step nodes from ``node`` down keep;
+    0 for a node whose saved tensors torch has freed."""
+    seen, stack, total = set(), [node], 0
+    while stack:
+        fn = stack.pop()
+        if fn is None or id(fn) in seen:
+            continue
+        seen.add(id(fn))
+        if hasattr(fn, "n_saved"):
+            try:
+                total += sum(t.numel() * t.element_size() for t in fn.saved_tensors[fn.n_saved:])
+            except RuntimeError as error:  # ("... after they have already been freed")
+                assert "freed" in str(error)
+        stack.extend(following for following, _ in fn.next_functions)
+    return total
+
+
+@pytest.mark.parametrize("boxes, substeps", [(1, 1), (3, 10)])
+def test_replay_records_are_bounded_and_freed_with_the_graph(f64, boxes, substeps):
+    """A kept step's replay record (the solve's qacc and jar per substep) is saved by torch, so a
+    backward frees it; a record over REPLAY_RECORD_STATES states an env (three touching boxes,
+    10 substeps: ~17) is not kept, the step's warm start is (a dof count an env), and its replay
+    solves again: the same gradient bits as a rollout whose steps all solve again (checkpoints)."""
+    def rollout(interval):
+        scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, substeps=substeps, requires_grad=True,
+                                                           checkpoint_interval=interval), show_viewer=False)
+        scene.add_entity(gs.morphs.Plane())
+        bodies = [scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.1 * k, 0.0, 0.0499)))
+                  for k in range(boxes)]
+        scene.build(n_envs=2)
+        v = torch.tensor([[1.0, 0.2, 0.0, 0.0, 0.0, 0.5], [0.8, -0.2, 0.0, 0.0, 0.0, -0.5]], dtype=torch.float64)
+        v.requires_grad_(True)
+        bodies[0].set_dofs_velocity(v)
+        for _ in range(10):
+            scene.step()
+        loss = sum((body.get_pos() * torch.tensor([1.0, 0.5, 2.0])).sum() for body in bodies)
+        state = scene.sim.state(scene.rigid_solver)
+        kept = _replay_bytes(state.grad_fn)
+        loss.backward()
+        return v.grad, kept, _replay_bytes(state.grad_fn), state[0].numel() * state.element_size()
+
+    grad, kept, after, state_bytes = rollout(1)
+    assert after == 0
+    if boxes == 1:  # qacc and the rows' jar, 2 envs, 10 steps
+        assert 10 * 2 * 6 * 8 < kept <= 10 * 2 * REPLAY_RECORD_STATES * state_bytes
+    else:  # the warm start alone (2 envs × 18 dofs a step)
+        assert kept == 10 * 2 * 18 * 8
+    assert torch.equal(grad, rollout(1000)[0])
+
+
+def test_a_backward_that_stops_midway_leaves_the_next_steps_as_they_were(f64, monkeypatch):
+    """A backward that raises during its replay (an error, an interrupt) left the replay's
+    settings behind: the next forward step ran uncommitted and took the replay's solutions
+    (Simulator.backward_step ends every backward with Solver.end_backward). The steps after it
+    equal those of a rollout that took no backward, bit for bit."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True), show_viewer=False)
+    scene.add_entity(gs.morphs.Plane())
+    box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.0, 0.0, 0.0499)))
+    scene.build(n_envs=2)
+    velocity = torch.tensor([[1.0, 0.2, 0.0, 0.0, 0.0, 0.5], [0.8, -0.2, 0.0, 0.0, 0.0, -0.5]], dtype=torch.float64)
+
+    def rollout(interrupted):
+        scene.reset()
+        box.set_dofs_velocity(velocity.clone().requires_grad_(True))
+        for _ in range(5):
+            scene.step()
+        if interrupted:
+            def stop(*args):  # (the replay's constraint stage)
+                raise KeyboardInterrupt
+            monkeypatch.setattr(scene.rigid_solver, "constrain", stop)
+            with pytest.raises(KeyboardInterrupt):
+                box.get_pos().sum().backward()
+            monkeypatch.undo()
+        for _ in range(5):
+            scene.step()
+        return box.get_dofs_velocity().detach()
+
+    assert torch.equal(rollout(True), rollout(False))
 
 
 def test_a_mesh_resting_on_a_mesh_by_a_polygon_vertex(f64, tmp_path):

@@ -111,6 +111,9 @@ class MPMAdjoint:
             self.kernels.substep(*self._frames(s))
         self.replaying = False
 
+    def end_backward(self):
+        self.replaying = False
+
     def substep_post_coupling_backward(self, s):
         self.reverse_kernels.post_coupling_backward(s)
 

@@ -16,6 +16,11 @@ from .data import ARENAS, BIG, ELEMENT, HEADER, INPUTS, RigidData
 from .geometry import GEOM_CODE
 from .model import build_model
 
+# A step's replay record (replay_record) is kept with its graph node while it holds at most this
+# many states' worth of numbers an env: a box on a plane ~2 (qacc 6, up to 16 rows' jar, against a
+# 13-number state), the a1 standing ~1; three boxes with 10 substeps ~17, whose replay then solves
+# again from the warm start (as fast as the forward, in a state's memory).
+REPLAY_RECORD_STATES = 4
 
 def _pair_name(kind):
     """'box–mesh' for a pair kind (type 1, type 2)."""
@@ -363,15 +368,17 @@ class RigidSolver(Solver):
         constraint stage: per substep, the constrained acceleration (B, D) and the rows' jar
         (B, rows up to the most any env used), or None for a substep without the stage. Given it,
         the step's replay makes the solve's outputs without iterating (constraint/solver.py,
-        "Replay")."""
-        if not any(self._rows_in_substep):
+        "Replay"). None on a GPU (the record's row count would wait for the device every
+        substep) and where the record would exceed REPLAY_RECORD_STATES states (many rows or
+        substeps): that step's replay solves again from its warm start, which the graph keeps."""
+        if not (any(self._rows_in_substep) and self.data.flags_on_host):
             return None
-        record = []
-        for s, rows in enumerate(self._rows_in_substep):
-            used = int(self.data.frame("n_efc", s).max()) if rows else 0
-            record.append((self.data.frame("qacc_constrained", s).clone(),
-                           self.data.frame("solver_jar", s)[:, :used].clone()) if rows else None)
-        return record
+        used = [int(self.data.frame("n_efc", s).max()) if rows else 0 for s, rows in enumerate(self._rows_in_substep)]
+        width = sum(self.model.n_dofs + n for n, rows in zip(used, self._rows_in_substep) if rows)
+        if width > REPLAY_RECORD_STATES * self.state_width:
+            return None
+        return [(self.data.frame("qacc_constrained", s).clone(), self.data.frame("solver_jar", s)[:, :n].clone())
+                if rows else None for s, (n, rows) in enumerate(zip(used, self._rows_in_substep))]
 
     def begin_reverse(self, state, inputs, grad_state_out, warm_start, record=None):
         """Load the step's start state, inputs and output gradient, and the warm start the forward
@@ -416,6 +423,9 @@ class RigidSolver(Solver):
         sides = " and ".join(f"link '{m.link_name[l]}' of entity '{self.entity_names[m.link_entity[l]]}'" for l in links)
         return (f"the {_pair_name((int(m.geom_type[g1]), int(m.geom_type[g2])))} contact of {sides} (env {env}, "
                 f"substep {substep})")
+
+    def end_backward(self):
+        self._commit, self._replaying = 1, 0
 
     def substep_pre_coupling_backward(self, s):
         """Substep s's reverse, as separate kernels: fused, they compile slower."""

@@ -293,28 +293,40 @@ def _cholesky(d: ti.template(), s, e, n):
     """In place, solver_H (lower triangle of a symmetric positive matrix on the n dofs of
     solver_dofs, envelope in solver_first) ← its Cholesky factor L, row by row. As
     mju_cholFactor, a pivot below MINVAL is raised to MINVAL and its column cleared."""
+    base = d.solver_dofs[s, e, 0]  # the dofs run base, base + 1, ...: no lookup of a position's dof
+    if n == 0 or d.solver_dofs[s, e, n - 1] != base + n - 1:
+        base = -1
     for a in range(n):
         i, fa = d.solver_dofs[s, e, a], d.solver_first[s, e, a]
         for b in range(fa, a):
             j, inv = d.solver_dofs[s, e, b], d.solver_inv[s, e, b]
             value = 0.0  # (under a deficient pivot: its column cleared)
             if not inv < 0.0:
-                acc = d.solver_H[s, e, i, j]
-                for c in range(ti.max(fa, d.solver_first[s, e, b]), b):
-                    col = d.solver_dofs[s, e, c]
-                    acc -= d.solver_H[s, e, i, col] * d.solver_H[s, e, j, col]
-                value = acc * inv
+                value = _subtract_products(d, s, e, d.solver_H[s, e, i, j], i, j,
+                                           ti.max(fa, d.solver_first[s, e, b]), b, base) * inv
             d.solver_H[s, e, i, j] = value
-        pivot = d.solver_H[s, e, i, i]
-        for c in range(fa, a):
-            lic = d.solver_H[s, e, i, d.solver_dofs[s, e, c]]
-            pivot -= lic * lic
+        pivot = _subtract_products(d, s, e, d.solver_H[s, e, i, i], i, i, fa, a, base)
         deficient = pivot < MINVAL
         if deficient:
             pivot = MINVAL
         lii = ti.sqrt(pivot)
         d.solver_H[s, e, i, i] = lii
         d.solver_inv[s, e, a] = ti.select(deficient, -1.0, 1.0 / lii)
+
+
+@ti.func
+def _subtract_products(d: ti.template(), s, e, acc, i, j, lo, hi, base):
+    """acc − Σ_c H[i, k_c] H[j, k_c] over positions c = lo … hi − 1 in turn, k_c the dof at position
+    c of solver_dofs, or base + c where base ≥ 0 (the dofs run contiguously: the usual island,
+    whose inner loop then reads no position's dof)."""
+    if base >= 0:
+        for c in range(lo, hi):
+            acc -= d.solver_H[s, e, i, base + c] * d.solver_H[s, e, j, base + c]
+    else:
+        for c in range(lo, hi):
+            k = d.solver_dofs[s, e, c]
+            acc -= d.solver_H[s, e, i, k] * d.solver_H[s, e, j, k]
+    return acc
 
 
 @ti.func
