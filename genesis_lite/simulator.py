@@ -82,7 +82,7 @@ class Simulator:
         all) changed: a reset or a setter, after which those envs have no contacts until the next
         step (Genesis clears its collider when a state is set)."""
         slot = self.slot(solver)
-        solver.upload_state(state)
+        solver.upload_state(state, envs)
         if slot.replaced_envs is None:
             slot.replaced_envs = np.zeros(state.shape[0], dtype=bool)
         slot.replaced_envs[slice(None) if envs is None else envs] = True

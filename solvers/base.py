@@ -58,8 +58,10 @@ class Solver:
         """Allocate for max(1, n_envs) environments; return the initial state (B, width)."""
         raise NotImplementedError
 
-    def upload_state(self, state):
-        """Taichi state ← state (B, width)."""
+    def upload_state(self, state, envs=None):
+        """Taichi state ← state (B, width), new in ``envs`` (int array; None: every env): what a
+        solver carries over from step to step besides the state (the rigid warm start) is
+        cleared there, and only there."""
         raise NotImplementedError
 
     def download_state(self):

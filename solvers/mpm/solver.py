@@ -224,7 +224,7 @@ class MPMSolver(MPMAdjoint, Solver):
                                device=runtime.device)
 
     # -- moving data ------------------------------------------------------------------------
-    def upload_state(self, state):
+    def upload_state(self, state, envs=None):
         self.kernels.write_state(self.current, state.detach().contiguous())
 
     def download_state(self):

@@ -207,8 +207,17 @@ class RigidSolver(Solver):
     def _empty(self, width):
         return torch.empty((self.n_batch, width), dtype=runtime.tc_float, device=runtime.device)
 
-    def upload_state(self, state):
+    def upload_state(self, state, envs=None):
+        """(write_state clears every env's warm start: the other envs' are put back, so that a
+        setter or reset of some envs leaves the others' steps as they were, bit for bit.)"""
+        others = None
+        if envs is not None and self._constrained():
+            others = torch.ones(self.n_batch, dtype=torch.bool, device=runtime.device)
+            others[torch.as_tensor(envs, device=runtime.device)] = False
+            kept = self.data.per_env("qacc_warmstart")[others].clone()
         self.kernels.write_state(0, state.detach().contiguous())
+        if others is not None:
+            self.data.per_env("qacc_warmstart")[others] = kept
 
     def download_state(self):
         out = self._empty(self.state_width)
