@@ -43,6 +43,9 @@ class SolverSlot:
         # replays overwrite the solver's (None: the solver still holds them)
         self.replaced_envs = None
         self.held_contacts = None
+        # (state, warm start): the solver's warm start for that state as the forward left it, kept
+        # while a backward's replays overwrite the solver's (None: the solver holds it)
+        self.held_warm_start = None
 
 
 class Simulator:
@@ -82,12 +85,14 @@ class Simulator:
         all) changed: a reset or a setter, after which those envs have no contacts until the next
         step (Genesis clears its collider when a state is set)."""
         slot = self.slot(solver)
+        if envs is not None and slot.held_warm_start is not None and slot.held_warm_start[0] is slot.state:
+            solver.set_warm_start(slot.held_warm_start[1])  # the other envs keep theirs (upload_state)
         solver.upload_state(state, envs)
         if slot.replaced_envs is None:
             slot.replaced_envs = np.zeros(state.shape[0], dtype=bool)
         slot.replaced_envs[slice(None) if envs is None else envs] = True
         slot.state = slot.uploaded_state = state
-        slot.derived = None
+        slot.derived = slot.held_warm_start = None
 
     def inputs(self, solver):
         return self.slot(solver).inputs
@@ -110,9 +115,14 @@ class Simulator:
 
     @staticmethod
     def _sync_state(slot, state):
+        """Upload ``state`` unless Taichi holds it; uploading clears the warm start, which is put
+        back where a backward took it from this very state (so a rollout steps on after a backward
+        bit for bit as without it)."""
         if state is not None and slot.uploaded_state is not state:
             slot.solver.upload_state(state)
             slot.uploaded_state = state
+            if slot.held_warm_start is not None and slot.held_warm_start[0] is state:
+                slot.solver.set_warm_start(slot.held_warm_start[1])
 
     @staticmethod
     def _pending_inputs(slot, inputs):
@@ -173,7 +183,7 @@ class Simulator:
                 slot.state = None
                 slot.uploaded_state = None
         for slot in self.slots:
-            slot.derived = slot.replaced_envs = slot.held_contacts = None
+            slot.derived = slot.replaced_envs = slot.held_contacts = slot.held_warm_start = None
         self._check_finite()
         self.step_index += 1
 
@@ -244,6 +254,9 @@ class Simulator:
         per solver, its replay record or else the warm start it started from (its replay then
         repeats it exactly; None for both where the solver needs neither)."""
         split = self._split_inputs(flat_inputs)
+        for slot in self.slots:
+            if slot.held_warm_start is None:  # the first step of a backward: the replays overwrite it
+                slot.held_warm_start = (slot.state, slot.solver.warm_start())
         try:
             if len(self.slots) == 1:
                 results = [self.slots[0].solver.backward(states[0], split[0], grad_states[0], warm_starts[0],

@@ -30,7 +30,8 @@ import taichi as ti
 import genesis_lite as gs
 from genesis_lite.solvers.rigid.collision import convex as cv
 from tests.collider_adjoint import N_COTANGENT, N_INPUTS, _unit3, _unit33
-from tests.test_colliders_convex import MARGIN, TYPES, _convex_cases, _geom, _Harness, _model, _random_quat
+from tests.test_colliders_convex import (MARGIN, TYPES, VEC3, _convex_cases, _geom, _Harness, _hull, _model,
+                                         _random_quat)
 
 EXACT = 1e-9     # m: replays of the forward's own closed form
 APPROX = 5e-3    # m: replays of the converged closed form, against the forward's CCD iterate (measured 4.4e-3)
@@ -91,8 +92,9 @@ def _contact(types: ti.template(), sizes: ti.template(), meshes: ti.template(), 
 def _adjoint_kernel(types: ti.types.ndarray(), sizes: ti.types.ndarray(), meshes: ti.types.ndarray(),
                     pos: ti.types.ndarray(), rot: ti.types.ndarray(), margins: ti.types.ndarray(),
                     count: ti.types.ndarray(), feature: ti.types.ndarray(), cotangent: ti.types.ndarray(),
-                    hull: ti.template(), grad: ti.types.ndarray()):
+                    hull_vec: VEC3, hull_int: ti.types.ndarray(), grad: ti.types.ndarray()):
     for c, k in ti.ndrange(types.shape[0], K):
+        hull = _hull(hull_vec, hull_int)
         if k < count[c]:
             geoms, f, g_position, g_normal, g_dist = _contact(types, sizes, meshes, pos, rot, margins, feature,
                                                               cotangent, c, k)
@@ -115,8 +117,10 @@ def _adjoint_kernel(types: ti.types.ndarray(), sizes: ti.types.ndarray(), meshes
 def _replay_kernel(types: ti.types.ndarray(), sizes: ti.types.ndarray(), meshes: ti.types.ndarray(),
                    pos: ti.types.ndarray(), rot: ti.types.ndarray(), margins: ti.types.ndarray(),
                    count: ti.types.ndarray(), feature: ti.types.ndarray(), cotangent: ti.types.ndarray(),
-                   hull: ti.template(), eps: float, replay: ti.types.ndarray(), fd: ti.types.ndarray()):
+                   hull_vec: VEC3, hull_int: ti.types.ndarray(), eps: float, replay: ti.types.ndarray(),
+                   fd: ti.types.ndarray()):
     for c, k in ti.ndrange(types.shape[0], K):
+        hull = _hull(hull_vec, hull_int)
         if k < count[c]:
             geoms, f, g_position, g_normal, g_dist = _contact(types, sizes, meshes, pos, rot, margins, feature,
                                                               cotangent, c, k)
@@ -337,11 +341,11 @@ def results():
     args = (batch["types"].astype(np.int32), batch["sizes"], batch["meshes"].astype(np.int32), batch["pos"],
             batch["rot"], batch["margins"], count, feature, cotangent)
     grad = np.zeros((n, K, N_INPUTS))
-    _adjoint_kernel(*args, harness.hull, grad)
+    _adjoint_kernel(*args, harness.hull_vec, harness.hull_int, grad)
     scan = {}
     for eps in SCAN:
         replay, fd = np.zeros((n, K, 7)), np.zeros((n, K, N_INPUTS))
-        _replay_kernel(*args, harness.hull, eps, replay, fd)
+        _replay_kernel(*args, harness.hull_vec, harness.hull_int, eps, replay, fd)
         scan[eps] = np.abs(grad - fd).max(axis=2) / np.maximum(1e-8, np.abs(fd).max(axis=2))
     rows = [(i, k) for i in range(n) for k in range(count[i])]
     forward_rows = np.concatenate([position, normal, dist[..., None]], axis=2)

@@ -20,6 +20,9 @@ import trimesh
 
 import genesis_lite as gs
 from genesis_lite.solvers.rigid.collision import convex as cv
+from genesis_lite.solvers.rigid.collision.detect import HullView
+from genesis_lite.solvers.rigid.data import ArrayView
+from genesis_lite.solvers.rigid.geometry import hull_arrays
 
 MARGIN = 0.01  # the pair margin of the "with margin" runs (each geom gets half)
 TYPES = {"sphere": cv.SPHERE, "capsule": cv.CAPSULE, "cylinder": cv.CYLINDER, "box": cv.BOX, "mesh": cv.MESH}
@@ -74,12 +77,23 @@ def _mujoco_contacts(d):
     return [(c.dist, c.pos.copy(), c.frame[:3].copy()) for c in d.contact[:d.ncon]]
 
 
+class _Arrays:
+    """Arrays by name in kernel scope, as a RigidView holds the scene's (the colliders' ``d``)."""
+    _data_oriented = True  # lets Taichi keep the object itself in kernel scope
+
+    def __init__(self, **arrays):
+        self.__dict__.update(arrays)
+
+
 class _Harness:
-    """Hull fields of the test meshes, a workspace, and the two batch kernels."""
+    """The test meshes' hulls packed as the rigid model packs them (hull_vec, hull_int), a
+    workspace of ROWS rows, and the two batch kernels: ndarrays only, as the solver's kernels."""
 
     def __init__(self):
-        self.hull = cv.HullFields(cv.hulls_from_mujoco(_model("", _geom("mesh", 0, 0.0))))
-        self.ws = cv.Workspace(ROWS)
+        hulls = cv.hulls_from_mujoco(_model("", _geom("mesh", 0, 0.0)))
+        self.hull_vec, self.hull_int = hull_arrays(hulls)
+        self.ws = [np.zeros((ROWS, width, 3) if kind == "v3" else (ROWS, width), np.int32 if kind == "i" else float)
+                   for kind, width in (cv.SCRATCH[name] for name in ("ccd_v", "ccd_f", "ccd_i"))]
 
     def convex(self, types, sizes, meshes, pos, rot, margins):
         """convex_convex on a batch: types (N, 2), sizes (N, 2, 3), meshes (N, 2), pos (N, 2, 3),
@@ -89,7 +103,7 @@ class _Harness:
         out = (np.zeros(n, np.int32), np.zeros((n, cv.CONVEX_MAX, 3)), np.zeros((n, cv.CONVEX_MAX, 3)),
                np.zeros((n, cv.CONVEX_MAX)), np.zeros((n, cv.CONVEX_MAX, cv.FEATURE_SIZE), np.int32))
         _convex_kernel(np.asarray(types, np.int32), sizes, np.asarray(meshes, np.int32), pos, rot, margins,
-                       self.hull, self.ws, *out)
+                       self.hull_vec, self.hull_int, *self.ws, *out)
         return out
 
     def plane_mesh(self, meshes, pos, rot, margins):
@@ -97,8 +111,17 @@ class _Harness:
         n = len(meshes)
         out = (np.zeros(n, np.int32), np.zeros((n, cv.PLANE_MESH_MAX, 3)), np.zeros((n, cv.PLANE_MESH_MAX, 3)),
                np.zeros((n, cv.PLANE_MESH_MAX)), np.zeros((n, cv.PLANE_MESH_MAX, cv.FEATURE_SIZE), np.int32))
-        _plane_kernel(np.asarray(meshes, np.int32), pos, rot, margins, self.hull, *out)
+        _plane_kernel(np.asarray(meshes, np.int32), pos, rot, margins, self.hull_vec, self.hull_int, *out)
         return out
+
+
+VEC3 = ti.types.ndarray(dtype=ti.types.vector(3, float))
+
+
+def _hull(hull_vec, hull_int):
+    """The colliders' ``hull`` argument over the packed arrays, as the solver makes it (Python
+    run while Taichi builds the kernel)."""
+    return HullView(_Arrays(hull_vec=ArrayView(hull_vec, 0, (1,)), hull_int=ArrayView(hull_int, 0, (1,))))
 
 
 @ti.func
@@ -124,9 +147,11 @@ def _store(c, n, po, no, di, fe, count: ti.template(), position: ti.template(), 
 @ti.kernel
 def _convex_kernel(types: ti.types.ndarray(), sizes: ti.types.ndarray(), meshes: ti.types.ndarray(),
                    pos: ti.types.ndarray(), rot: ti.types.ndarray(), margins: ti.types.ndarray(),
-                   hull: ti.template(), ws: ti.template(), count: ti.types.ndarray(), position: ti.types.ndarray(),
+                   hull_vec: VEC3, hull_int: ti.types.ndarray(), ccd_v: VEC3, ccd_f: ti.types.ndarray(),
+                   ccd_i: ti.types.ndarray(), count: ti.types.ndarray(), position: ti.types.ndarray(),
                    normal: ti.types.ndarray(), dist: ti.types.ndarray(), feature: ti.types.ndarray()):
     for c in range(types.shape[0]):
+        hull, ws = _hull(hull_vec, hull_int), _Arrays(ccd_v=ccd_v, ccd_f=ccd_f, ccd_i=ccd_i)
         p1, r1 = _pose(pos, rot, c, 0)
         p2, r2 = _pose(pos, rot, c, 1)
         s1 = ti.Vector([sizes[c, 0, j] for j in ti.static(range(3))])
@@ -138,10 +163,11 @@ def _convex_kernel(types: ti.types.ndarray(), sizes: ti.types.ndarray(), meshes:
 
 @ti.kernel
 def _plane_kernel(meshes: ti.types.ndarray(), pos: ti.types.ndarray(), rot: ti.types.ndarray(),
-                  margins: ti.types.ndarray(), hull: ti.template(), count: ti.types.ndarray(),
-                  position: ti.types.ndarray(), normal: ti.types.ndarray(), dist: ti.types.ndarray(),
-                  feature: ti.types.ndarray()):
+                  margins: ti.types.ndarray(), hull_vec: VEC3, hull_int: ti.types.ndarray(),
+                  count: ti.types.ndarray(), position: ti.types.ndarray(), normal: ti.types.ndarray(),
+                  dist: ti.types.ndarray(), feature: ti.types.ndarray()):
     for c in range(meshes.shape[0]):
+        hull = _hull(hull_vec, hull_int)
         p1, r1 = _pose(pos, rot, c, 0)
         p2, r2 = _pose(pos, rot, c, 1)
         zero = ti.Vector([0.0, 0.0, 0.0])

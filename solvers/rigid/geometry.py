@@ -33,7 +33,7 @@ def _quat_mul(a, b):
     return np.concatenate([[aw * bw - av @ bv], aw * bv + bw * av + np.cross(av, bv)])
 
 
-def _hull_arrays(hulls):
+def hull_arrays(hulls):
     """The hulls (convex.MeshHulls) as two flat arrays for the kernels: hull_vec (H, 3), every
     hull vertex (m, geom frame) then every polygon's outward unit normal, and hull_int (HI,),
     HULL_HEADER slots (where each of convex.HULL_INT_FIELDS starts in hull_int, then where the
@@ -61,7 +61,7 @@ def geom_arrays(geoms, link_of, where_of):
     geom_aabb; zero for planes), centre (G, 3) m a point inside it, in the geom frame (the mean of a
     mesh hull's vertices, which a mesh file's origin need not be; the origin for a primitive), mesh
     (G,) the geom's mesh number (-1: not a mesh); and the meshes' convex hulls (convex.mesh_hull:
-    vertices, vertex graph, polygons) as hull_vec (H, 3) and hull_int (HI,) (``_hull_arrays``). A
+    vertices, vertex graph, polygons) as hull_vec (H, 3) and hull_int (HI,) (``hull_arrays``). A
     mesh collides as its convex hull; one without volume is an AssetError.
     """
     out = {k: [] for k in ("type", "link", "pos", "quat", "size", "rbound", "aabb_half", "mesh")}
@@ -108,7 +108,7 @@ def geom_arrays(geoms, link_of, where_of):
             lowest, highest = vertices.min(axis=0), vertices.max(axis=0)
             arrays["aabb_center"][k], arrays["aabb_half"][k] = (lowest + highest) / 2, (highest - lowest) / 2
             arrays["centre"][k] = vertices.mean(axis=0)  # (a box's centre can lie on the hull: a wedge's)
-    arrays["hull_vec"], arrays["hull_int"] = _hull_arrays(hulls)
+    arrays["hull_vec"], arrays["hull_int"] = hull_arrays(hulls)
     return arrays
 
 

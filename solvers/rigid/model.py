@@ -38,7 +38,7 @@ class RigidModel:
     geom_rbound (G,) bounding radius m, geom_aabb_center and geom_aabb_half (G, 3) m a bounding box
     in the geom frame (MuJoCo's geom_aabb), geom_centre (G, 3) m a point inside the geom (geom
     frame; a mesh's hull vertex mean), geom_mesh (G,) its mesh number (-1: none), the meshes'
-    convex hulls as hull_vec (H, 3) and hull_int (HI,) (geometry._hull_arrays), geom_friction (G,)
+    convex hulls as hull_vec (H, 3) and hull_int (HI,) (geometry.hull_arrays), geom_friction (G,)
     Coulomb coefficient. Per candidate geom pair (N):
     pair_geom1/pair_geom2 (ordered as MuJoCo orders them), pair_condim (1 or 3), pair_margin m.
     """

@@ -336,35 +336,6 @@ def hulls_from_mujoco(model) -> MeshHulls:
     return hulls
 
 
-@ti.data_oriented
-class HullFields:
-    """Taichi fields holding a MeshHulls (same attribute names), to pass as `hull`. Any object
-    with these attributes, indexable like Taichi fields, serves as well."""
-
-    def __init__(self, hulls: MeshHulls):
-        for name in MeshHulls.FIELDS:
-            array = getattr(hulls, name)
-            if len(array) == 0:  # Taichi fields cannot be empty
-                array = np.zeros((1,) + array.shape[1:], dtype=array.dtype)
-            if array.ndim == 2:
-                field = ti.Vector.field(3, float, shape=len(array))
-            else:
-                field = ti.field(ti.i32 if array.dtype.kind == "i" else float, shape=len(array))
-            field.from_numpy(array)
-            setattr(self, name, field)
-
-
-@ti.data_oriented
-class Workspace:
-    """Taichi fields with the collider's per-env workspace (`SCRATCH`), `rows` rows: pass it as
-    `ws` and a row tuple (row,) to the colliders."""
-
-    def __init__(self, rows: int):
-        self.ccd_v = ti.Vector.field(3, float, shape=(rows, SCRATCH["ccd_v"][1]))
-        self.ccd_f = ti.field(float, shape=(rows, SCRATCH["ccd_f"][1]))
-        self.ccd_i = ti.field(ti.i32, shape=(rows, SCRATCH["ccd_i"][1]))
-
-
 # ----------------------------------------------------------------------------- small algebra
 # Written out term by term in MuJoCo's evaluation order, so results agree to the last bit.
 

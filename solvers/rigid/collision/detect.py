@@ -181,7 +181,7 @@ class HullView:
     """Kernel-scope view of the meshes' hulls in a RigidView ``d`` with convex.MeshHulls' names
     (the ``hull`` argument of the convex colliders): d.hull_vec holds the vertices then the
     polygon normals, d.hull_int a header of where each int array starts, then the arrays
-    (geometry._hull_arrays). Each start is loaded once, into a local."""
+    (geometry.hull_arrays). Each start is loaded once, into a local."""
     _data_oriented = True
 
     def __init__(self, d):
