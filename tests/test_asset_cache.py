@@ -199,14 +199,15 @@ def test_density_is_part_of_the_key(cache, tmp_path):
 
 
 def test_warnings_are_said_each_time_with_the_entity_named(cache, tmp_path, caplog):
-    """A mimic joint's warning is said when the links come from the cache too, naming that entity."""
-    mimic = ('<link name="c"/><joint name="k" type="revolute"><parent link="b"/><child link="c"/>'
-             '<axis xyz="0 0 1"/><mimic joint="j"/></joint>')
-    path = mesh_robot(tmp_path, extra=mimic)
+    """A URDF's warning (an ignored <contact> entry) is said when the links come from the cache too,
+    naming that entity."""
+    ignored = ('<link name="c"><contact><rolling_friction value="0.1"/></contact></link><joint name="k" '
+               'type="revolute"><parent link="b"/><child link="c"/><axis xyz="0 0 1"/></joint>')
+    path = mesh_robot(tmp_path, extra=ignored)
     for name in ("first", "second"):
         caplog.clear()
         load_urdf(path, entity_name=name)
-        said = [r.getMessage() for r in caplog.records if "mimics joint 'j'" in r.getMessage()]
+        said = [r.getMessage() for r in caplog.records if "rolling_friction are not simulated" in r.getMessage()]
         assert len(said) == 1 and f"entity '{name}'" in said[0]
     assert len(entries(cache, "urdf")) == 1
 

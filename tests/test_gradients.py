@@ -18,7 +18,8 @@ from tests.conftest import asset, pybullet
 ROBOTS = {"pendulum2": (asset("pendulum2.urdf"), True), "cartpole": (pybullet("cartpole.urdf"), True),
           "kuka": (pybullet("kuka_iiwa", "model.urdf"), True),
           "kuka_free": (pybullet("kuka_iiwa", "model_free_base.urdf"), False),
-          "quadruped": (asset("quadruped.urdf"), False)}  # a floating base with four branches
+          "quadruped": (asset("quadruped.urdf"), False),  # a floating base with four branches
+          "gripper": (asset("mimic_gripper.urdf"), True)}  # two mimic joints: joint equality rows
 KINDS = ("dofs_position", "dofs_velocity", "force", "position_target", "velocity_target", "mass", "damping",
          "armature", "kp", "kv", "gravity", "frictionloss", "force_range")
 EPS = 1e-6
@@ -174,6 +175,26 @@ def test_limits_and_force_range(f64, kind):
     """Joint limits pushing (the calves start past their upper bound 0), friction loss (sliding
     and stuck dofs) and clipped forces: the constraint solve's implicit gradient."""
     _check("quadruped", kind, horizon=20, limited=True)
+
+
+@pytest.mark.parametrize("kind", ["dofs_position", "dofs_velocity", "force", "mass", "damping", "armature", "kp",
+                                  "gravity"])
+def test_joint_equalities(f64, kind):
+    """Through the joint equality rows of two mimic joints (one prismatic finger mirroring
+    another, a thumb following the wrist): their distances, velocities and diagA."""
+    _check("gripper", kind, horizon=20)
+
+
+def test_joint_equalities_repeat_bit_for_bit(f64):
+    """Two rollouts through the equality rows, batched, give the same gradient bits."""
+    scene, robot = _scene("gripper", 2, 2)
+    value, _ = _nominal("mass", robot, 2, 20, np.random.default_rng(3))
+    grads = []
+    for _ in range(2):
+        x = value.clone().requires_grad_(True)
+        _rollout(scene, robot, "mass", x, 20).backward()
+        grads.append(x.grad)
+    assert torch.equal(*grads) and grads[0].abs().sum() > 0
 
 
 def test_limits_and_force_range_are_at_work(f64):

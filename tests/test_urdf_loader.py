@@ -373,16 +373,30 @@ def test_invalid_content(tmp_path, body, words):
         assert word in str(info.value)
 
 
-def test_safety_controller_gains_and_mimic_warning(tmp_path, caplog):
+def test_safety_controller_gains_mimics_and_contact_warning(tmp_path, caplog):
     """<safety_controller k_position k_velocity> are the joint's servo gains (Genesis reads them
-    so), None without; a mimic joint warns that it moves on its own (no equality constraint yet)."""
+    so), None without; <mimic> becomes the joint's (joint, multiplier, offset), defaults 1 and 0
+    (a joint equality row: tests/test_equality_vs_mujoco.py); pybullet's <contact> entries other
+    than lateral_friction warn, once, listed."""
     gains = '<safety_controller k_position="7" k_velocity="3" soft_lower_limit="-0.5" soft_upper_limit="0.5"/>'
-    body = (LINK.format("a") + LINK.format("b") + LINK.format("c") + joint("j", "revolute", extra=gains)
-            + joint("k", "revolute", "b", "c", extra='<mimic joint="j" multiplier="-1"/>'))
+    contact = '<contact><lateral_friction value="0.5"/><rolling_friction value="0.1"/><restitution value="1"/></contact>'
+    body = (LINK.format("a") + LINK.format("b") + f'<link name="c">{contact}</link>' + '<link name="d"/>'
+            + joint("j", "revolute", extra=gains) + joint("k", "revolute", "b", "c", extra='<mimic joint="j" multiplier="-1"/>')
+            + joint("m", "prismatic", "c", "d", extra='<mimic joint="k"/>'))
     specs = by_name(load_urdf(write_urdf(tmp_path, body)))
     assert (specs["b"].kp, specs["b"].kv) == (7.0, 3.0) and (specs["c"].kp, specs["c"].kv) == (None, None)
-    assert any("joint 'k' mimics joint 'j'" in r.getMessage() and "equality constraint" in r.getMessage()
-               for r in caplog.records)
+    assert (specs["b"].mimic, specs["c"].mimic, specs["d"].mimic) == (None, ("j", -1.0, 0.0), ("k", 1.0, 0.0))
+    said = [r.getMessage() for r in caplog.records if "<contact> entries" in r.getMessage()]
+    assert len(said) == 1 and "restitution, rolling_friction are not simulated" in said[0]
+
+
+@pytest.mark.parametrize("target, given", [("k", "itself"), ("f", "a fixed joint"), ("x", "no joint of this file")])
+def test_a_mimic_of_no_scalar_joint_raises(tmp_path, target, given):
+    body = (LINK.format("a") + LINK.format("b") + LINK.format("c") + joint("f", "fixed")
+            + joint("k", "revolute", "b", "c", extra=f'<mimic joint="{target}"/>'))
+    with pytest.raises(AssetError, match=f"joint 'k' mimic expected another revolute or prismatic joint, got "
+                                         f"'{target}' \\({given}\\)"):
+        load_urdf(write_urdf(tmp_path, body))
 
 
 # ------------------------------------------------------------------ every pybullet_data URDF

@@ -82,6 +82,8 @@ MODEL = {
     "geom_pos": ("v3", "G"), "geom_size": ("v3", "G"), "hull_vec": ("v3", "H"), "geom_quat": ("v4", "G"),
     "geom_aabb_center": ("v3", "G"), "geom_aabb_half": ("v3", "G"), "geom_centre": ("v3", "G"),
     "link_inv_mass0": ("f", "L"), "dof_lower": ("f", "D"), "dof_upper": ("f", "D"),
+    # joint equalities (URDF mimic joints; RigidModel says what they hold)
+    "eq_dof1": ("i", "E"), "eq_dof2": ("i", "E"), "eq_coef": ("f", "E2"),
     # substep h (s), the time constant (s) of the joint-limit and friction-loss rows, impratio, solver
     # tolerance and line-search tolerance: runtime values like everything else (CONSTS names them)
     "consts": ("f", len(CONSTS)),
@@ -111,12 +113,12 @@ FRAMES = {
     "con_efc": ("i", "C", False),  # each contact's first row
     "n_near": ("i", 1, False), "near_pairs": ("i", "N", False),  # the broad phase's pairs (collision/detect.py)
     # constraint rows (constraint/rows.py; n_efc[s, e, 0] in use) and the solve (constraint/solver.py)
-    "n_efc": ("i", 1, False), "efc_dof_rows": ("i", 1, False),  # rows in use; of them, single-dof rows first
+    "n_efc": ("i", 1, False), "efc_dof_rows": ("i", 1, False),  # rows in use; of them, the joint rows first
     "efc_type": ("i", "R", False), "efc_dim": ("i", "R", False),
     "efc_id": ("i", "R", False), "efc_state": ("i", "R", False),
     "efc_J": ("f", "RD", False),
     # each row's non-zero columns: efc_cols[efc_col0 …] (efc_ncol of them, ascending), a contact's
-    # rows sharing its list (from c·D), a single-dof row r its one dof (at C·D + r)
+    # rows sharing its list (from c·D), a joint row r (an equality's two dofs, a single dof) at C·D + 2r
     "efc_col0": ("i", "R", False), "efc_ncol": ("i", "R", False), "efc_cols": ("i", "CD", False), "efc_R": ("f", "R", False), "efc_aref": ("f", "R", False),
     "efc_floss": ("f", "R", False), "efc_mu": ("f", "R", False), "efc_force": ("f", "R", False),
     "solver_M": ("f", "DD", False), "qacc_smooth": ("f", "D", False), "qacc_constrained": ("f", "D", True),
@@ -151,7 +153,7 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
 # a flag: some env of the substep has a constraint row to form (a contact, friction loss, a violated limit);
 # colliders_due a mask of the collider kernels the substep's near pairs need (collision/detect.py: KERNEL_BIT);
 # inexact_pair, inexact_env, inexact_substep: where the last inexact contact was (the backward's error names it).
-SIZES = ("B", "L", "D", "Q", "P", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C", "R", "cone",
+SIZES = ("B", "L", "D", "Q", "P", "E", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C", "R", "cone",
          "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged", "constrained",
          "colliders_due", "inexact_pair", "inexact_env", "inexact_substep")
 HEADER = {name: k for k, name in enumerate(SIZES)}
@@ -222,7 +224,7 @@ def _counts(size):
     D, R = size["D"], size["R"]
     return {"L": size["L"], "D": D, "Q": size["Q"], "P": size["P"], "DD": D * D, "G": size["G"], "N": size["N"],
             "H": size["H"], "C": size["C"], "CF": FEATURE_SIZE * size["C"], "HI": size["HI"], "R": R, "RD": R * D,
-            "CD": size["C"] * D + 2 * D,
+            "CD": size["C"] * D + 2 * (size["E"] + 2 * D), "E": size["E"], "E2": 2 * size["E"],
             "G2": 2 * size["G"], "G5": 5 * size["G"], 1: 1,
             len(CONSTS): len(CONSTS),
             **{f"ws:{name}": size["WS"] * n for name, (_, n) in CONVEX_SCRATCH.items()}}
@@ -253,6 +255,7 @@ class RigidData:
         self.grad_total = sum(w for w, (_, diff) in zip(self.widths, INPUTS.values()) if diff)
         self.grad_input_names = [n for n, (_, diff) in INPUTS.items() if diff] if requires_grad else []
         self.size = {"B": n_batch, "L": model.n_links, "D": model.n_dofs, "Q": model.n_qs, "P": len(model.pairs),
+                     "E": model.n_eq,
                      "S": substeps, "W": self.input_total, "GW": self.grad_total,
                      "limits": int(bool(settings["limits"])), "nonfinite": 0, "G": n_geoms,
                      "N": len(model.pair_geom1), "H": len(model.hull_vec), "C": settings["contacts"],
@@ -283,6 +286,8 @@ class RigidData:
         values["i"][: len(SIZES)] = [self.size[name] for name in SIZES]
         for name, (arena, _) in MODEL.items():
             array = np.asarray(consts if name == "consts" else getattr(model, name))
+            if arena in ("i", "f"):  # scalar arenas: a (E, 2) array goes in row by row
+                array = array.reshape(-1)
             if len(array):
                 begin = self.start[f"model:{name}"]
                 # floats finite, so no inf·0 in gradients
@@ -373,6 +378,7 @@ class RigidView:
         start = {name: impl.expr_init(value) for name, value in layout(size)[0].items()}
         self.n_batch, self.n_links, self.n_dofs, self.n_qs = size["B"], size["L"], size["D"], size["Q"]
         self.n_pairs, self.substeps, self.input_total, self.grad_total = size["P"], size["S"], size["W"], size["GW"]
+        self.n_eq = size["E"]
         self.limits_enabled = size["limits"]
         self.n_geoms, self.n_candidates = size["G"], size["N"]
         self.contact_capacity = size["C"]

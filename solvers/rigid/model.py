@@ -41,6 +41,10 @@ class RigidModel:
     convex hulls as hull_vec (H, 3) and hull_int (HI,) (geometry.hull_arrays), geom_friction (G,)
     Coulomb coefficient. Per candidate geom pair (N):
     pair_geom1/pair_geom2 (ordered as MuJoCo orders them), pair_condim (1 or 3), pair_margin m.
+    Per joint equality (E; URDF mimic joints, LinkSpec.mimic): eq_dof1 (E,) the following joint's
+    dof, eq_dof2 (E,) the followed one's, eq_coef (E, 2) (offset rad or m, multiplier): the row
+    q[eq_dof1] = offset + multiplier · q[eq_dof2] (MuJoCo's joint equality with polycoef (offset,
+    multiplier); its qpos0 is 0 for these joints, as ours).
     """
     link_name: list
     link_parent: np.ndarray
@@ -83,6 +87,9 @@ class RigidModel:
     pair_margin: np.ndarray
     pairs: np.ndarray
     qpos0: np.ndarray
+    eq_dof1: np.ndarray
+    eq_dof2: np.ndarray
+    eq_coef: np.ndarray
 
     @property
     def link_inv_mass0(self):
@@ -150,6 +157,10 @@ class RigidModel:
     def n_qs(self):
         return len(self.qpos0)
 
+    @property
+    def n_eq(self):
+        return len(self.eq_dof1)
+
 
 def _static_links(link_parent, link_jtype):
     static = np.zeros(len(link_parent), dtype=np.int32)
@@ -193,9 +204,10 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
                             "dof0", "q0", "entity")}
     dofs = {k: [] for k in ("link", "q", "damping", "armature", "lower", "upper", "effort", "frictionloss", "kp", "kv")}
     geoms, geom_links, geom_names = [], [], []
-    qpos0 = []
+    qpos0, equalities = [], []
     for entity_idx, links in enumerate(entities_links):
         link_offset = len(rows["name"])
+        joint_dof = {}  # the entity's joint names → their first dof
         for spec in links:
             code = JOINT_CODE[spec.joint_type]
             free = code == FREE
@@ -212,6 +224,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
             rows["q0"].append(len(qpos0))
             rows["entity"].append(entity_idx)
             link_idx = len(rows["name"]) - 1
+            joint_dof[spec.joint_name] = len(dofs["link"])
             for k in range(DOFS_OF[code]):
                 dofs["link"].append(link_idx)
                 dofs["q"].append(-1 if free else len(qpos0))
@@ -228,6 +241,8 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
                 geom_links.append(link_idx)
                 geom_names.append(f"link '{spec.name}' collision geom {k}")
             qpos0.extend(_initial_q(spec))
+        equalities += [(joint_dof[spec.joint_name], joint_dof[spec.mimic[0]], spec.mimic[2], spec.mimic[1])
+                       for spec in links if spec.mimic is not None]
     f = np.float64
     dof_link = np.array(dofs["link"], dtype=np.int32)
     link_parent = np.array(rows["parent"], dtype=np.int32)
@@ -250,7 +265,9 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
         dof_effort=np.array(dofs["effort"], dtype=f), dof_frictionloss=np.array(dofs["frictionloss"], dtype=f),
         **_geoms(geoms, geom_links, geom_names), **_pairs(geoms, geom_links, rows, self_collision, adjacent_collision),
         pairs=_mass_matrix_pairs(dof_link, link_parent),
-        qpos0=np.array(qpos0, dtype=f))
+        qpos0=np.array(qpos0, dtype=f), eq_dof1=np.array([q[0] for q in equalities], dtype=np.int32),
+        eq_dof2=np.array([q[1] for q in equalities], dtype=np.int32),
+        eq_coef=np.array([q[2:] for q in equalities], dtype=f).reshape(-1, 2))
 
 
 def _geoms(geoms, geom_links, geom_names):

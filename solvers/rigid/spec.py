@@ -62,6 +62,9 @@ class LinkSpec:
     error messages about names that no longer exist.
     visuals: VisualSpec list, what cameras draw of the link (URDF ``<visual>``; empty for
     primitive morphs, which are drawn from their geoms).
+    mimic: (joint name, multiplier, offset) when this scalar joint follows another of the same
+    entity, q = multiplier · q_other + offset (URDF ``<mimic>``): a joint equality constraint row
+    (constraint/rows.py), as MuJoCo's and Genesis's; None otherwise.
     """
     name: str
     parent: int
@@ -84,3 +87,4 @@ class LinkSpec:
     geoms: list = field(default_factory=list)
     merged: list = field(default_factory=list)
     visuals: list = field(default_factory=list)
+    mimic: tuple = None

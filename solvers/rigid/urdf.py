@@ -16,11 +16,12 @@ becomes the friction of that link's collision shapes (GeomSpec.friction). The jo
 friction is a friction-loss constraint row, as in MuJoCo.
 Servo gains: ``<safety_controller k_position k_velocity>`` are the joint's kp and kv, as Genesis
 reads them (LinkSpec.kp, kv; the solver's defaults otherwise).
-Mimic joints warn: they would need an equality constraint, which genesis_lite does not have yet
-(the joint moves on its own).
-Ignored: velocity limits, calibration, the safety controller's soft limits (as Genesis), and
-pybullet's other ``<contact>`` entries (rolling/spinning friction, restitution, stiffness,
-damping, cfm/erp).
+Mimic joints: ``<mimic joint multiplier offset>`` (defaults 1 and 0) makes the joint follow the
+named one, q = multiplier · q_joint + offset, by a joint equality constraint row, as MuJoCo's
+``<equality><joint>`` and Genesis's (LinkSpec.mimic); both joints revolute or prismatic.
+Ignored: velocity limits, calibration, the safety controller's soft limits (as Genesis); pybullet's
+other ``<contact>`` entries (rolling/spinning friction, restitution, stiffness, damping, cfm/erp)
+are ignored with a warning.
 Checked on the XML itself, where yourdfpy would fill in or drop (urdfdom and MuJoCo refuse):
 an ``<inertia>`` needs all six moments and a ``<mass>`` its value; ``xyz``, ``rpy`` and a box's
 ``size`` hold three numbers; an element a URDF allows once in its parent appears once.
@@ -104,6 +105,7 @@ def _links(ctx: "_Context", text: bytes, rho: float) -> list[LinkSpec]:
             geom.friction = friction.get(name)
         spec.parent = index[joint.parent] if joint is not None else -1
         specs.append(spec)
+    _check_mimics(ctx, specs)
     return specs
 
 
@@ -285,9 +287,12 @@ def _tree_order(ctx: _Context, robot):
 
 def _contact_friction(ctx: _Context, xml) -> dict:
     """Link name → ``<contact><lateral_friction value>`` (pybullet's contact friction coefficient)
-    for the links that state one; yourdfpy does not read ``<contact>``, so it comes from the XML."""
-    out = {}
+    for the links that state one; yourdfpy does not read ``<contact>``, so it comes from the XML.
+    The other entries of ``<contact>`` warn (once, listed)."""
+    out, ignored = {}, set()
     for link in xml.iterfind("link"):
+        ignored.update(child.tag for child in link.iterfind("contact/*")
+                       if isinstance(child.tag, str) and child.tag != "lateral_friction")
         element = link.find("contact/lateral_friction")
         if element is None:
             continue
@@ -295,6 +300,9 @@ def _contact_friction(ctx: _Context, xml) -> dict:
         if element.get("value") is None:
             raise ctx.error(f"{what} expected a number >= 0, got no 'value' attribute")
         out[link.get("name")] = _number(ctx, element.get("value"), 0.0, what, 0.0)
+    if ignored:
+        ctx.warnings.append(f"<contact> entries {', '.join(sorted(ignored))} are not simulated (only "
+                            f"lateral_friction is read)")
     return out
 
 
@@ -332,8 +340,22 @@ def _apply_joint(ctx: _Context, spec: LinkSpec, joint) -> None:
     spec.kp = _number(ctx, getattr(gains, "k_position", None), None, f"joint '{joint.name}' k_position", 0.0)
     spec.kv = _number(ctx, getattr(gains, "k_velocity", None), None, f"joint '{joint.name}' k_velocity", 0.0)
     if joint.mimic is not None and spec.joint_type != "fixed":
-        ctx.warnings.append(f"joint '{joint.name}' mimics joint '{joint.mimic.joint}', which needs an equality "
-                            f"constraint: genesis_lite has none yet, so it moves on its own")
+        what = f"joint '{joint.name}' mimic"
+        spec.mimic = (joint.mimic.joint, _number(ctx, joint.mimic.multiplier, 1.0, f"{what} multiplier"),
+                      _number(ctx, joint.mimic.offset, 0.0, f"{what} offset"))
+
+
+def _check_mimics(ctx: _Context, specs: list) -> None:
+    """Every mimic names another revolute or prismatic joint of the file."""
+    types = {spec.joint_name: spec.joint_type for spec in specs if spec.joint_name}
+    for spec in specs:
+        if spec.mimic is not None:
+            target = spec.mimic[0]
+            if types.get(target) not in ("revolute", "prismatic") or target == spec.joint_name:
+                given = ("itself" if target == spec.joint_name else f"a {types[target]} joint" if target in types
+                         else "no joint of this file")
+                raise ctx.error(f"joint '{spec.joint_name}' mimic expected another revolute or prismatic joint, got "
+                                f"'{target}' ({given})")
 
 
 def _axis(ctx: _Context, joint) -> np.ndarray:

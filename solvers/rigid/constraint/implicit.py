@@ -17,14 +17,14 @@ point the solve returned.
 qfrc_constraint = Jᵀ f, read by the damped integration (linalg.solve_env), equals M a −
 qfrc_smooth at the solution, so its gradient reaches a, M and qfrc_smooth through that form.
 
-Rows of single dofs (friction loss, joint limits) pass their parameters' gradients on to q, q̇
-and the friction loss (rows.dof_rows_adjoint); contact rows have no adjoint yet (the solver
-refuses a backward through a step with contacts).
+Joint rows (equalities, friction loss, joint limits) pass their parameters' gradients on to q, q̇,
+the friction loss and dof_invweight0 (rows.dof_rows_adjoint), contact rows theirs on to the
+contact's frame, position, distance and parameters (rows.contact_rows_adjoint).
 """
 import taichi as ti
 
 from ..data import accumulate
-from .rows import contact_included, contact_rows_adjoint, dof_rows_adjoint, rows_per_contact
+from .rows import contact_included, contact_rows_adjoint, dof_rows_adjoint, row_times, rows_per_contact
 from .solver import CONE, LINEARNEG, LINEARPOS, QUADRATIC, add_mul_M, cholesky_solve, cone_coordinates, \
     cone_hessian_entry
 
@@ -58,8 +58,7 @@ def solve_adjoint(d: ti.template(), s, e):
         g_mass[s, e, i] = d.qfrc_constraint.grad[s, e, i] - u[s, e, i]
     _add_mass_grad(d, s, e, g_mass, d.qacc_constrained)
     for r in range(d.efc_dof_rows[s, e, 0]):
-        i = d.efc_id[s, e, r]
-        w = d.efc_J[s, e, r, i] * u[s, e, i]
+        w = row_times(d, s, e, r, u)
         state = d.efc_state[s, e, r]
         g_aref, g_R, g_bound = 0.0, 0.0, 0.0
         if state == QUADRATIC:

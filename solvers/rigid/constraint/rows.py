@@ -16,9 +16,11 @@ distance, diagA_t = invweight_t(link 1) + invweight_t(link 2) (rotational alike)
 - aref = −B·(J q̇) − K·d·(dist − margin) on normal and pyramid rows, −B·(J q̇) on elliptic
   tangents, with K = 1/(dmax² tc² ζ²), B = 2/(dmax tc) (tc ≥ 2h) or the direct form (−k, −b).
 
-Before the contacts come, as in MuJoCo, one row per dof with friction loss F > 0 (FRICTION_LOSS,
-J = e_i, aref = −B q̇_i, bound F) and one per violated joint limit (ONE_SIDED, distance
-q − lower with J = e_i, or upper − q with J = −e_i). Their R uses diagA = dof_invweight0, their
+Before the contacts come, as in MuJoCo, the joint rows: one per joint equality (EQUALITY, always
+in its quadratic: a URDF mimic, distance q_a − offset − multiplier · q_b with J = e_a −
+multiplier · e_b, diagA the sum of the two dofs'), one per dof with friction loss F > 0
+(FRICTION_LOSS, J = e_i, aref = −B q̇_i, bound F) and one per violated joint limit (ONE_SIDED,
+distance q − lower with J = e_i, or upper − q with J = −e_i). Their R uses diagA = dof_invweight0, their
 solref is (timeconst, 1) with the scene's constraint time constant, their solimp MuJoCo's
 default. Their adjoint (``dof_rows_adjoint``) takes the solve's implicit gradient of each row's
 aref, R and bound back to q, q̇, the friction loss and dof_invweight0 (``contact_rows_adjoint``
@@ -30,7 +32,7 @@ from ..data import BIG, CONST, accumulate
 from ..kinematics import dof_count, dof_motion_at, reference
 
 # row types, as the solver reads them (interfaces agreed with solver.py)
-UNUSED, FRICTION_LOSS, ONE_SIDED, ELLIPTIC_FIRST, ELLIPTIC_REST = range(5)
+UNUSED, FRICTION_LOSS, ONE_SIDED, ELLIPTIC_FIRST, ELLIPTIC_REST, EQUALITY = range(6)
 
 MINVAL = 1e-15  # MuJoCo's mjMINVAL: a floor on every divisor
 MINMU = 1e-5  # MuJoCo's mjMINMU: a floor on friction (μ = 0 would leave a pyramid edge no regulariser)
@@ -190,7 +192,7 @@ def contact_rows(d: ti.template(), s, e, c, first):
     for j in range(n):
         r = first + j
         d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = c * d.n_dofs, ncol
-        velocity = _row_velocity(d, s, e, r)
+        velocity = row_times(d, s, e, r, d.qvel)
         kind, reg, aref = ONE_SIDED, r0, -b * velocity - k * imp * (dist - margin)
         if condim > 1 and pyramidal:
             reg = 2.0 * mu_reg * mu_reg * r0
@@ -231,14 +233,15 @@ def _contact_columns(d: ti.template(), s, e, c, l1, l2):
 
 
 @ti.func
-def _row_velocity(d: ti.template(), s, e, r):
-    """J_r · q̇ at frame s (m/s or rad/s), over the row's non-zero columns."""
-    velocity = 0.0
+def row_times(d: ti.template(), s, e, r, x: ti.template()):
+    """J_r · x[s, e] (x (D,) a frame array: q̇ gives the row's velocity, m/s or rad/s), over the
+    row's non-zero columns."""
+    out = 0.0
     col0 = d.efc_col0[s, e, r]
     for a in range(d.efc_ncol[s, e, r]):
         i = d.efc_cols[s, e, col0 + a]
-        velocity += d.efc_J[s, e, r, i] * d.qvel[s, e, i]
-    return velocity
+        out += d.efc_J[s, e, r, i] * x[s, e, i]
+    return out
 
 
 # -- reverse of a contact's rows ---------------------------------------------------------------------
@@ -394,7 +397,7 @@ def contact_rows_adjoint(d: ti.template(), s, e, c, force, g_aref, g_R, g_mu):
     dist, margin = d.con_dist[s, e, c], d.pair_margin[pair]
     g_dist = 0.0
     for j in range(n):
-        g_b -= _row_velocity(d, s, e, d.con_efc[s, e, c] + j) * g_aref[j]
+        g_b -= row_times(d, s, e, d.con_efc[s, e, c] + j, d.qvel) * g_aref[j]
         if not (d.elliptic and j > 0):  # rows with the position term −K d (dist − margin)
             g_k -= imp * (dist - margin) * g_aref[j]
             g_imp -= k * (dist - margin) * g_aref[j]
@@ -451,22 +454,54 @@ def contact_force(d: ti.template(), s, e, c):
     return out
 
 
-# -- rows of single dofs: friction loss and joint limits --------------------------------------------
+# -- joint rows: equalities, friction loss and joint limits ------------------------------------------
 @ti.func
-def _dof_row(d: ti.template(), s, e, r, i, sign, dist):
-    """Row r on dof i alone (J = sign·e_i) at distance dist (m or rad; 0 for friction loss): its
-    Jacobian (its one column: no reader looks past a row's columns), R and aref, with the scene's
-    time constant and MuJoCo's default solimp."""
-    d.efc_J[s, e, r, i] = sign
-    # its one column, in slot r after the contacts' lists (a frame has at most 2 D single-dof rows)
-    d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = d.contact_capacity * d.n_dofs + r, 1
-    d.efc_cols[s, e, d.contact_capacity * d.n_dofs + r] = i
+def _joint_row_scalars(d: ti.template(), s, e, r, dist, velocity, scale):
+    """Row r's R and aref from its distance (m or rad), velocity J·q̇ and diagA ``scale`` (the
+    dof_invweight0 of its dofs), with the scene's time constant and MuJoCo's default solimp."""
     solimp = ti.Vector(DEFAULT_SOLIMP, dt=float)
     imp = impedance(solimp, dist, 0.0)
     k, b = stiffness_damping(ti.Vector([d.consts[CONST["timeconst"]], 1.0]), solimp[1], d.consts[CONST["h"]])
-    d.efc_R[s, e, r] = ti.max(MINVAL, (1.0 - imp) / imp * d.invweight_dof[e, i])
-    d.efc_aref[s, e, r] = -b * sign * d.qvel[s, e, i] - k * imp * dist
-    d.efc_dim[s, e, r], d.efc_id[s, e, r], d.efc_mu[s, e, r] = 1, i, 0.0
+    d.efc_R[s, e, r] = ti.max(MINVAL, (1.0 - imp) / imp * scale)
+    d.efc_aref[s, e, r] = -b * velocity - k * imp * dist
+    d.efc_mu[s, e, r] = 0.0
+
+
+@ti.func
+def _dof_row(d: ti.template(), s, e, r, i, sign, dist):
+    """Row r on dof i alone (J = sign·e_i) at distance dist (m or rad; 0 for friction loss): its
+    Jacobian (its one column: no reader looks past a row's columns), R and aref."""
+    d.efc_J[s, e, r, i] = sign
+    slot = d.contact_capacity * d.n_dofs + 2 * r  # after the contacts' lists, two slots a joint row
+    d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, 1
+    d.efc_cols[s, e, slot] = i
+    _joint_row_scalars(d, s, e, r, dist, sign * d.qvel[s, e, i], d.invweight_dof[e, i])
+    d.efc_dim[s, e, r], d.efc_id[s, e, r] = 1, i
+
+
+@ti.func
+def _equality_terms(d: ti.template(), s, e, k):
+    """(a, b, multiplier, distance) of joint equality k at frame s: its dofs (the following one,
+    the followed one) and q_a − offset − multiplier · q_b (m or rad)."""
+    a, b = d.eq_dof1[k], d.eq_dof2[k]
+    multiplier = d.eq_coef[2 * k + 1]
+    dist = d.qpos[s, e, d.dof_q[a]] - d.eq_coef[2 * k] - multiplier * d.qpos[s, e, d.dof_q[b]]
+    return a, b, multiplier, dist
+
+
+@ti.func
+def _equality_row(d: ti.template(), s, e, r, k):
+    """Row r for joint equality k (MuJoCo's joint equality): J = e_a − multiplier · e_b, its
+    distance from _equality_terms, diagA the two dofs' dof_invweight0."""
+    a, b, multiplier, dist = _equality_terms(d, s, e, k)
+    d.efc_J[s, e, r, a], d.efc_J[s, e, r, b] = 1.0, -multiplier
+    slot = d.contact_capacity * d.n_dofs + 2 * r
+    d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, 2
+    d.efc_cols[s, e, slot], d.efc_cols[s, e, slot + 1] = ti.min(a, b), ti.max(a, b)
+    velocity = d.qvel[s, e, a] - multiplier * d.qvel[s, e, b]
+    _joint_row_scalars(d, s, e, r, dist, velocity, d.invweight_dof[e, a] + d.invweight_dof[e, b])
+    d.efc_dim[s, e, r], d.efc_id[s, e, r] = 1, k
+    d.efc_type[s, e, r], d.efc_floss[s, e, r] = EQUALITY, 0.0
 
 
 @ti.func
@@ -498,8 +533,11 @@ def limit_violated(d: ti.template(), s, e):
 
 @ti.func
 def dof_rows_arise(d: ti.template(), s, e):
-    """1 if env e forms dof rows at frame s (some dof has friction loss, or a limit is violated)."""
+    """1 if env e forms joint rows at frame s (a joint equality, friction loss on some dof, or a
+    violated limit)."""
     arise = limit_violated(d, s, e)
+    if d.n_eq > 0:
+        arise = 1
     for i in range(d.n_dofs):
         if d.frictionloss[e, i] > 0.0:
             arise = 1
@@ -508,9 +546,12 @@ def dof_rows_arise(d: ti.template(), s, e):
 
 @ti.func
 def dof_rows(d: ti.template(), s, e):
-    """Rows 0… of frame s: friction loss of every dof with F > 0, then every violated joint
-    limit. Returns how many (also kept in efc_dof_rows[s, e, 0])."""
+    """Rows 0… of frame s, in MuJoCo's order: every joint equality, friction loss of every dof with
+    F > 0, then every violated joint limit. Returns how many (also kept in efc_dof_rows[s, e, 0])."""
     rows = 0
+    for k in range(d.n_eq):
+        _equality_row(d, s, e, rows, k)
+        rows += 1
     for i in range(d.n_dofs):
         bound = d.frictionloss[e, i]
         if bound > 0.0:
@@ -529,27 +570,40 @@ def dof_rows(d: ti.template(), s, e):
 
 @ti.func
 def dof_rows_adjoint(d: ti.template(), s, e, r, g_aref, g_R, g_bound):
-    """Reverse of ``_dof_row`` for row r (< efc_dof_rows) given the gradients of its aref, R and
-    friction-loss bound: into q, q̇ at frame s and the friction-loss input."""
-    i = d.efc_id[s, e, r]
-    sign = d.efc_J[s, e, r, i]
+    """Reverse of ``_dof_row`` and ``_equality_row`` for row r (< efc_dof_rows) given the gradients
+    of its aref, R and friction-loss bound: into q, q̇ at frame s, the friction-loss input and
+    dof_invweight0. The row's dofs: (first, second) with Jacobian entries (c1, c2); second = −1
+    for a single-dof row. (An equality's offset and multiplier are the model's: no gradient.)"""
+    t = d.efc_type[s, e, r]
+    first, second, c1, c2, dist = d.efc_id[s, e, r], -1, 0.0, 0.0, 0.0
+    if t == EQUALITY:
+        a, b, multiplier, distance = _equality_terms(d, s, e, first)
+        first, second, c1, c2, dist = a, b, 1.0, -multiplier, distance
+    else:
+        c1 = d.efc_J[s, e, r, first]
+        if t != FRICTION_LOSS:
+            _, dist = _limit_side(d, s, e, first)
     solimp = ti.Vector(DEFAULT_SOLIMP, dt=float)
-    k, b = stiffness_damping(ti.Vector([d.consts[CONST["timeconst"]], 1.0]), solimp[1], d.consts[CONST["h"]])
-    accumulate(d.qvel.grad, ti.Vector([s, e, i]), -b * sign * g_aref)
-    dist = 0.0
-    if d.efc_type[s, e, r] != FRICTION_LOSS:
-        _, dist = _limit_side(d, s, e, i)
+    k, damping = stiffness_damping(ti.Vector([d.consts[CONST["timeconst"]], 1.0]), solimp[1], d.consts[CONST["h"]])
+    accumulate(d.qvel.grad, ti.Vector([s, e, first]), -damping * c1 * g_aref)
     imp = impedance(solimp, dist, 0.0)
-    scale = d.invweight_dof[e, i]
+    scale = d.invweight_dof[e, first]
+    if second >= 0:
+        accumulate(d.qvel.grad, ti.Vector([s, e, second]), -damping * c2 * g_aref)
+        scale += d.invweight_dof[e, second]
     on_floor = not ((1.0 - imp) / imp * scale > MINVAL)  # R at its floor: no gradient through it
-    if not on_floor:  # R = (1 − imp) / imp · dof_invweight0
-        accumulate(d.invweight_dof.grad, ti.Vector([e, i]), (1.0 - imp) / imp * g_R)
-    if d.efc_type[s, e, r] == FRICTION_LOSS:
-        accumulate(d.frictionloss.grad, ti.Vector([e, i]), g_bound)
-    else:  # a limit: aref and R depend on the distance
+    if not on_floor:  # R = (1 − imp) / imp · diagA, diagA the dofs' dof_invweight0
+        accumulate(d.invweight_dof.grad, ti.Vector([e, first]), (1.0 - imp) / imp * g_R)
+        if second >= 0:
+            accumulate(d.invweight_dof.grad, ti.Vector([e, second]), (1.0 - imp) / imp * g_R)
+    if t == FRICTION_LOSS:
+        accumulate(d.frictionloss.grad, ti.Vector([e, first]), g_bound)
+    else:  # a limit or an equality: aref and R depend on the distance
         slope, _solimp_slope = impedance_gradient(solimp, dist, 0.0)
         g_imp = -k * dist * g_aref
         if not on_floor:
             g_imp -= scale / (imp * imp) * g_R
         g_dist = -k * imp * g_aref + slope * g_imp
-        accumulate(d.qpos.grad, ti.Vector([s, e, d.dof_q[i]]), sign * g_dist)
+        accumulate(d.qpos.grad, ti.Vector([s, e, d.dof_q[first]]), c1 * g_dist)
+        if second >= 0:
+            accumulate(d.qpos.grad, ti.Vector([s, e, d.dof_q[second]]), c2 * g_dist)

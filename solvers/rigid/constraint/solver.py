@@ -74,7 +74,7 @@ from the Jacobian (above). No equality rows, no noslip, no sleeping, warm start 
 import taichi as ti
 
 # Row types (efc_type) of the interface
-UNUSED, FRICTION_LOSS, ONE_SIDED, ELLIPTIC_FIRST, ELLIPTIC_REST = 0, 1, 2, 3, 4
+UNUSED, FRICTION_LOSS, ONE_SIDED, ELLIPTIC_FIRST, ELLIPTIC_REST, EQUALITY = 0, 1, 2, 3, 4, 5
 # MuJoCo's mjtConstraintState (efc_state)
 SATISFIED, QUADRATIC, LINEARNEG, LINEARPOS, CONE = 0, 1, 2, 3, 4
 # elliptic cone zones
@@ -473,8 +473,8 @@ def _update_constraints(d: ti.template(), s, e, m):
                 else:
                     cost += 0.5 * D * jar * jar
                     d.efc_force[s, e, r], d.efc_state[s, e, r] = -D * jar, QUADRATIC
-            elif t == ONE_SIDED:
-                if jar >= 0.0:
+            elif t == ONE_SIDED or t == EQUALITY:  # an equality is always in its quadratic
+                if jar >= 0.0 and t == ONE_SIDED:
                     d.efc_force[s, e, r], d.efc_state[s, e, r] = 0.0, SATISFIED
                 else:
                     cost += 0.5 * D * jar * jar
@@ -792,13 +792,13 @@ def _eval(d: ti.template(), s, e, m, alpha, gauss1, gauss2):
                     d0 += -F * jv
                 else:
                     d0 += F * jv
-            elif t == ONE_SIDED:
+            elif t == ONE_SIDED or t == EQUALITY:
                 DJ = D * jar
                 q0 = 0.5 * (jar * DJ)
                 cost0 = 0.0
-                if jar < 0.0:
+                if jar < 0.0 or t == EQUALITY:
                     cost0 = q0
-                if jar + alpha * jv < 0.0:
+                if jar + alpha * jv < 0.0 or t == EQUALITY:
                     quad += ti.Vector([q0 - cost0, jv * DJ, 0.5 * (jv * D * jv)])
                 else:
                     cost -= cost0
