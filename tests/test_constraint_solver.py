@@ -18,9 +18,9 @@ import taichi as ti
 import genesis_lite as gs
 from genesis_lite.solvers.rigid.constraint import solver as cs
 
-FRICTION_DOF, FRICTION_TENDON, CONTACT_ELLIPTIC = (
-    int(mujoco.mjtConstraint.mjCNSTR_FRICTION_DOF), int(mujoco.mjtConstraint.mjCNSTR_FRICTION_TENDON),
-    int(mujoco.mjtConstraint.mjCNSTR_CONTACT_ELLIPTIC))
+EQUALITY, FRICTION_DOF, FRICTION_TENDON, CONTACT_ELLIPTIC = (
+    int(mujoco.mjtConstraint.mjCNSTR_EQUALITY), int(mujoco.mjtConstraint.mjCNSTR_FRICTION_DOF),
+    int(mujoco.mjtConstraint.mjCNSTR_FRICTION_TENDON), int(mujoco.mjtConstraint.mjCNSTR_CONTACT_ELLIPTIC))
 H = 0.002  # MuJoCo's default time step (s)
 SNAPSHOTS = (1, 12, 60)  # steps simulated before each snapshot
 DEFAULT = dict(iterations=100, tolerance=1e-8, ls_iterations=50, ls_tolerance=0.01)
@@ -49,13 +49,13 @@ CHAIN = """
   <worldbody>
     <geom type="plane" size="5 5 .1"/>
     <body pos="0 0 .35">
-      <joint type="hinge" axis="0 1 0" range="-30 30" frictionloss=".3"/>
+      <joint name="shoulder" type="hinge" axis="0 1 0" range="-30 30" frictionloss=".3"/>
       <geom type="capsule" fromto="0 0 0 .2 0 0" size=".03"/>
       <body pos=".2 0 0">
-        <joint type="hinge" axis="0 1 0" range="-20 60"/>
+        <joint name="elbow" type="hinge" axis="0 1 0" range="-20 60"/>
         <geom type="capsule" fromto="0 0 0 .2 0 0" size=".03"/>
         <body pos=".2 0 0">
-          <joint type="hinge" axis="1 0 0" frictionloss=".1"/>
+          <joint name="roll" type="hinge" axis="1 0 0" frictionloss=".1"/>
           <joint type="hinge" axis="0 1 0" range="-45 45" frictionloss=".05"/>
           <geom type="box" pos=".05 0 0" size=".05 .04 .03" condim="4"/>
         </body>
@@ -64,6 +64,10 @@ CHAIN = """
     <body pos=".45 0 .06"><freejoint/><geom type="box" size=".06 .06 .06" condim="6"/></body>
     <body pos="-.5 .3 .05"><freejoint/><geom type="sphere" size=".05"/></body>
   </worldbody>
+  <equality>
+    <joint joint1="elbow" joint2="shoulder" polycoef=".2 -.5 0 0 0"/>
+    <joint joint1="roll" joint2="elbow" polycoef="0 .3 0 0 0"/>
+  </equality>
 </mujoco>
 """
 
@@ -82,7 +86,7 @@ def _set_options(m, opts):
 
 def _rows(m, d):
     """MuJoCo's efc rows in the interface's terms, in MuJoCo's order: (type, dim, mu) per row.
-    FRICTION_DOF/TENDON → FRICTION_LOSS (efc_floss = efc_frictionloss); LIMIT_*, CONTACT_FRICTIONLESS
+    EQUALITY → EQUALITY; FRICTION_DOF/TENDON → FRICTION_LOSS (efc_floss = efc_frictionloss); LIMIT_*, CONTACT_FRICTIONLESS
     and CONTACT_PYRAMIDAL → ONE_SIDED; CONTACT_ELLIPTIC: row efc_address → ELLIPTIC_FIRST with the
     contact's dim and mu (the regularised cone's μ), row efc_address + j → ELLIPTIC_REST with
     mu = friction[j − 1]. efc_J, efc_R, efc_aref copy over row by row."""
@@ -91,7 +95,9 @@ def _rows(m, d):
     mu = np.zeros(d.nefc)
     for r in range(d.nefc):
         t = d.efc_type[r]
-        if t in (FRICTION_DOF, FRICTION_TENDON):
+        if t == EQUALITY:
+            kind[r] = cs.EQUALITY
+        elif t in (FRICTION_DOF, FRICTION_TENDON):
             kind[r] = cs.FRICTION_LOSS
         elif t == CONTACT_ELLIPTIC:
             c = d.efc_id[r]
@@ -313,10 +319,10 @@ def _rel(a, b):
 
 
 def test_scenes_cover_every_row_type(results):
-    """The scenes exercise friction loss, one-sided rows, elliptic blocks of dim 3, 4, 6,
-    pyramids of condim 1, 3, 4, 6, several islands and a multi-tree island."""
+    """The scenes exercise joint equalities, friction loss, one-sided rows, elliptic blocks of dim
+    3, 4, 6, pyramids of condim 1, 3, 4, 6, several islands and a multi-tree island."""
     kinds = {k for c in results for k in c["kind"]}
-    assert kinds == {cs.FRICTION_LOSS, cs.ONE_SIDED, cs.ELLIPTIC_FIRST, cs.ELLIPTIC_REST}
+    assert kinds == {cs.EQUALITY, cs.FRICTION_LOSS, cs.ONE_SIDED, cs.ELLIPTIC_FIRST, cs.ELLIPTIC_REST}
     assert {3, 4, 6} <= {int(x) for c in results for x in c["dim"]}
     assert {1, 3, 4, 6} <= set().union(*(c["condims"] for c in results if not c["dim"].any()))
     states = {int(x) for c in results for x in c["mj"]["state"]}
