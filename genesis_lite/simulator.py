@@ -332,6 +332,18 @@ class Simulator:
         self._sync(slot, state, slot.inputs)
         return solver.links_kinematics()
 
+    def kinematics_at(self, solver, state):
+        """Link kinematics (B, L, 13) at ``state`` (B, width), another state than the scene's (an
+        inverse-kinematics trial), without a graph. The scene's state stays, and so does its
+        solve's warm start: uploading clears it, so it is held for the next upload of the
+        scene's state (_sync_state)."""
+        slot = self.slot(solver)
+        current = self.state(solver)
+        if slot.held_warm_start is None:
+            slot.held_warm_start = (current, solver.warm_start())
+        with torch.no_grad():
+            return self.read_derived(solver, state)
+
     def read_derived_backward(self, solver, state, grad):
         slot = self.slot(solver)
         self._sync(slot, state, slot.inputs)

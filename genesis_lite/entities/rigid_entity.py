@@ -7,8 +7,9 @@ import numpy as np
 import torch
 
 from ..runtime import logger
-from ..solvers.core import InvalidInputError, SceneStateError, runtime
+from ..solvers.core import InvalidInputError, SceneStateError, refuse_grad, runtime
 from ..solvers.rigid.merge import merged_into
+from . import kinematics
 from .common import EntityIndexing, replace_columns as _replace
 from .rotations import euler_xyz_to_quat, quat_to_euler_xyz
 
@@ -374,6 +375,72 @@ class RigidEntity(EntityIndexing):
 
     def get_ang(self, envs_idx=None):
         return self.get_links_ang([0], envs_idx)[..., 0, :]
+
+    # -- Jacobian and inverse kinematics (entities/kinematics.py) -----------------------------------
+    def _own_link(self, link, what):
+        """The local index of ``link``, a RigidLink of this entity."""
+        if not (isinstance(link, RigidLink) and link.entity is self):
+            raise InvalidInputError(f"entity '{self.name}': {what} argument 'link' must be one of this entity's "
+                                    f"links (entity.links, entity.get_link(name)), got {link!r}")
+        return link.idx_local
+
+    def _local_point(self, local_point, what):
+        """(3,) float tensor of a point in the link frame, m (the origin when None)."""
+        if local_point is None:
+            return torch.zeros(3, dtype=runtime.tc_float, device=runtime.device)
+        point = self._tensor(local_point, "local_point", "3 numbers")
+        if point.shape != (3,):
+            raise InvalidInputError(f"entity '{self.name}': {what} argument 'local_point' must hold 3 numbers (m, "
+                                    f"in the link frame), got shape {tuple(point.shape)}")
+        return point
+
+    def get_jacobian(self, link, local_point=None):
+        """Jacobian (6, n_dofs) or (n_envs, 6, n_dofs) of the point ``local_point`` (3,) m in the
+        frame of ``link`` (a RigidLink of this entity; its origin when None): rows 0–2 map the dof
+        velocities to the point's linear velocity, rows 3–5 to the link's angular velocity, world
+        frame (entities/kinematics.py). Differentiable, as the link poses it is made of."""
+        if self.n_dofs == 0:
+            raise InvalidInputError(f"entity '{self.name}': get_jacobian expected an entity with dofs, got none")
+        local = self._own_link(link, "get_jacobian")
+        point = self._local_point(local_point, "get_jacobian")
+        pos, quat = self._links(None, None, slice(0, 3)), self._links(None, None, slice(3, 7))
+        return self._out(kinematics.jacobian(kinematics.DofMotions(self), pos, quat, local, point))
+
+    def inverse_kinematics(self, link, pos=None, quat=None, local_point=None, init_qpos=None,
+                           respect_joint_limit=True, max_samples=50, max_solver_iters=20, damping=0.01,
+                           pos_tol=5e-4, rot_tol=5e-3, pos_mask=(True, True, True), rot_mask=(True, True, True),
+                           max_step_size=0.5, seed=None, dofs_idx_local=None, return_error=False, envs_idx=None):
+        """qpos (n_qs,) or (len(envs), n_qs) that puts ``local_point`` of ``link`` at ``pos`` (3,)
+        (or one per env) and turns the link to ``quat`` (4,) (w, x, y, z), world frame; None: that
+        part is free. Genesis's arguments and defaults: damped least squares (damping) from
+        init_qpos (else the current qpos) for at most max_solver_iters steps of at most
+        max_step_size, restarted from up to max_samples draws within the joint limits until the
+        position error ≤ pos_tol m and the rotation error ≤ rot_tol rad (masked by pos_mask,
+        rot_mask); only dofs_idx_local move. return_error: also the (…, 6) error (position m,
+        rotation vector rad) of the qpos returned, the best found. The scene's state is not
+        changed; not differentiable."""
+        who = f"entity '{self.name}': inverse_kinematics"
+        for name, value in (("pos", pos), ("quat", quat), ("local_point", local_point), ("init_qpos", init_qpos)):
+            refuse_grad(who, name, value, "the solve is iterative; differentiate get_jacobian or the rollout instead")
+        if pos is None and quat is None:
+            raise InvalidInputError(f"{who} expected a target 'pos' or 'quat', got neither")
+        local = self._own_link(link, "inverse_kinematics")
+        point = self._local_point(local_point, "inverse_kinematics")
+        envs = self._envs(envs_idx)
+        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
+        goal_pos = None if pos is None else self._values(pos, 3, envs, "pos").detach()
+        goal_quat = None if quat is None else self._values(quat, 4, envs, "quat").detach()
+        if goal_quat is not None:
+            self._check_quat(goal_quat, "quat")
+            goal_quat = goal_quat / goal_quat.norm(dim=1, keepdim=True)
+        start = self._read(self._qpos_columns(), envs_idx).detach() if init_qpos is None else \
+            self._values(init_qpos, self.n_qs, envs, "init_qpos").detach()
+        options = dict(respect_joint_limit=bool(respect_joint_limit), max_samples=int(max_samples),
+                       max_solver_iters=int(max_solver_iters), damping=float(damping), pos_tol=float(pos_tol),
+                       rot_tol=float(rot_tol), max_step_size=float(max_step_size), seed=seed)
+        target = kinematics.Target(goal_pos, goal_quat, pos_mask, rot_mask)
+        qpos, error = kinematics.solve_ik(self, local, target, point, start, envs, dofs, options)
+        return (self._out(qpos), self._out(error)) if return_error else self._out(qpos)
 
     # -- parameters ---------------------------------------------------------------------------------
     def get_links_mass(self, links_idx_local=None, envs_idx=None):

@@ -1,4 +1,5 @@
-"""Intrinsic X-Y-Z Euler angles ↔ quaternion maps in torch (Genesis's free-joint dof positions).
+"""Rotations in torch: quaternion products and matrices, rotation vectors, and the intrinsic X-Y-Z
+Euler angles ↔ quaternion maps (Genesis's free-joint dof positions).
 
 A free joint's three rotational "dof positions" are intrinsic X-Y-Z Euler angles (a, b, c) in
 rad: R = Rx(a)·Ry(b)·Rz(c), scipy's ``Rotation.from_euler("XYZ", [a, b, c])``, as in Genesis
@@ -38,3 +39,28 @@ def quat_to_euler_xyz(quat):
     a = torch.where(locked, 0.0, torch.atan2(-r12, r22))
     c = torch.where(locked, torch.atan2(r10, r11), torch.atan2(-r01, r00))
     return torch.stack([a, b, c], dim=-1)
+
+
+def quat_to_mat(quat):
+    """(..., 4) unit quaternions (w, x, y, z) → (..., 3, 3) rotation matrices."""
+    w, x, y, z = quat.unbind(-1)
+    rows = [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+            2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+            2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]
+    return torch.stack(rows, -1).reshape(*quat.shape[:-1], 3, 3)
+
+
+def quat_mul(a, b):
+    """Hamilton product of (..., 4) quaternions (w, x, y, z)."""
+    aw, ax, ay, az = a.unbind(-1)
+    bw, bx, by, bz = b.unbind(-1)
+    return torch.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                        aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], -1)
+
+
+def rotation_vector(quat):
+    """(..., 4) unit quaternions → (..., 3) their rotation vectors (axis × angle, angle ≤ π)."""
+    quat = torch.where(quat[..., :1] < 0, -quat, quat)
+    sin = quat[..., 1:].norm(dim=-1, keepdim=True)
+    angle = 2 * torch.atan2(sin, quat[..., :1])
+    return quat[..., 1:] * torch.where(sin > 1e-12, angle / sin.clamp_min(1e-12), 2.0)

@@ -25,6 +25,7 @@ import numpy as np
 import torch
 
 from .. import morphs as gm
+from ..entities import rotations
 from ..solvers.core import InvalidInputError, runtime
 from ..solvers.rigid.shapes import quat_to_mat
 from ..solvers.rigid.spec import VisualSpec
@@ -115,14 +116,6 @@ def _plane(normal):
     return trimesh.Trimesh(square @ turn.T, [[0, 1, 2], [0, 2, 3]], process=False)
 
 
-def quat_to_rot(quat):
-    """(N, 4) unit quaternions (w, x, y, z) → (N, 3, 3) rotation matrices (torch)."""
-    w, x, y, z = quat.unbind(-1)
-    return torch.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-                        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-                        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], dim=-1).reshape(-1, 3, 3)
-
-
 def _particle_seg(entity, k, level, scene, n_shapes):
     """Segmentation id of the k-th particle entity: its entity index at the "entity" level; at the
     "link" and "geom" levels, one past the scene's links (shapes), then one per particle entity,
@@ -191,7 +184,7 @@ class SceneVisuals:
         if self.meshes is None or links is None:
             return None
         rows = links[self._env, self._link]
-        rot = quat_to_rot(rows[:, 3:7]).to(torch.float32)
+        rot = rotations.quat_to_mat(rows[:, 3:7]).to(torch.float32)
         return Instances(rot, rows[:, :3].to(torch.float32) + self._offset, self._color, self._seg)
 
 

@@ -1,0 +1,179 @@
+"""entity.get_jacobian and entity.inverse_kinematics (genesis_lite/entities/kinematics.py).
+
+The Jacobian against MuJoCo 4's mj_jac at random poses and points (a fixed arm, a free-base
+quadruped, prismatic and mimic joints, a batch), and its gradient against finite differences;
+inverse kinematics reaching poses the arm can reach, with its options, leaving the scene's state
+and its next steps as they were.
+"""
+import mujoco
+import numpy as np
+import pytest
+import torch
+
+import genesis_lite as gs
+from tests.conftest import asset, pybullet
+
+KUKA = pybullet("kuka_iiwa", "model.urdf")
+ROBOTS = {"kuka": (KUKA, True), "quadruped": (asset("quadruped.urdf"), False),
+          "gripper": (asset("mimic_gripper.urdf"), True)}
+
+
+def _mujoco(path, fixed):
+    spec = mujoco.MjSpec.from_file(path)
+    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    spec.compiler.fusestatic = True
+    if not fixed:
+        spec.worldbody.first_body().add_freejoint()
+    model = spec.compile()
+    return model, mujoco.MjData(model)
+
+
+def _scene(path, fixed, n_envs=0, requires_grad=False):
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=requires_grad),
+                     rigid_options=gs.options.RigidOptions(enable_collision=False), show_viewer=False)
+    robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=fixed))
+    scene.build(n_envs=n_envs)
+    return scene, robot
+
+
+def _random_qpos(rng, model):
+    q = rng.uniform(-1.0, 1.0, model.nq)
+    if model.jnt_type[0] == mujoco.mjtJoint.mjJNT_FREE:
+        q[3:7] /= np.linalg.norm(q[3:7])
+    return q
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_jacobian_matches_mujoco(f64, name):
+    """Every link, a random point on it, two random poses in a batch of two: ≤ 1e-12."""
+    path, fixed = ROBOTS[name]
+    model, data = _mujoco(path, fixed)
+    _, robot = _scene(path, fixed, n_envs=2)
+    rng = np.random.default_rng(1)
+    poses = np.array([_random_qpos(rng, model) for _ in range(2)])
+    robot.set_qpos(torch.tensor(poses))
+    compared = 0
+    for link in robot.links:
+        point = rng.normal(size=3) * 0.1
+        ours = robot.get_jacobian(link, torch.tensor(point)).numpy()
+        assert ours.shape == (2, 6, robot.n_dofs)
+        if link.name not in [model.body(b).name for b in range(model.nbody)]:
+            continue  # a fixed base: MuJoCo fused it into the world
+        body = model.body(link.name).id
+        for e in range(2):
+            data.qpos[:] = poses[e]
+            mujoco.mj_kinematics(model, data)
+            mujoco.mj_comPos(model, data)
+            jacp, jacr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
+            mujoco.mj_jac(model, data, jacp, jacr, data.xpos[body] + data.xmat[body].reshape(3, 3) @ point, body)
+            np.testing.assert_allclose(ours[e], np.vstack([jacp, jacr]), atol=1e-12)
+            compared += 1
+    assert compared >= 2 * 4
+
+
+def test_jacobian_is_differentiable(f64):
+    """d Σ W ⊙ J(q0) / dq0 through a step, against central differences."""
+    scene, robot = _scene(KUKA, True, requires_grad=True)
+    rng = np.random.default_rng(2)
+    q0 = torch.tensor(rng.uniform(-1, 1, robot.n_dofs))
+    weights = torch.tensor(rng.normal(size=(6, robot.n_dofs)))
+    direction = torch.tensor(rng.normal(size=robot.n_dofs))
+
+    def loss(q):
+        scene.reset()
+        robot.set_dofs_position(q)
+        scene.step()
+        return (robot.get_jacobian(robot.links[-1], torch.tensor([0.0, 0.05, 0.1])) * weights).sum()
+
+    x = q0.clone().requires_grad_(True)
+    loss(x).backward()
+    with torch.no_grad():
+        numeric = (loss(q0 + 1e-6 * direction) - loss(q0 - 1e-6 * direction)) / 2e-6
+    assert abs(float(x.grad @ direction) - float(numeric)) <= 1e-7 * float(x.grad.norm())
+
+
+def _reachable(robot, rng, link):
+    """A pose of ``link`` the arm reaches at a random qpos (then put back to zero)."""
+    robot.set_qpos(torch.tensor(rng.uniform(-1.0, 1.0, robot.n_qs)))
+    pos, quat = link.get_pos().clone(), link.get_quat().clone()
+    robot.set_qpos(torch.zeros(robot.n_qs))
+    return pos, quat
+
+
+def test_inverse_kinematics_reaches_poses(f64):
+    """Pose targets the KUKA can reach, from its zero pose: within Genesis's tolerances, in its
+    limits, the scene's state unchanged; batched targets per env; a position-only target."""
+    scene, robot = _scene(KUKA, True, n_envs=3)
+    rng = np.random.default_rng(3)
+    ee = robot.links[-1]
+    targets = [_reachable(robot, rng, ee) for _ in range(3)]
+    pos = torch.stack([t[0][k] for k, t in enumerate(targets)])
+    quat = torch.stack([t[1][k] for k, t in enumerate(targets)])
+    before = robot.get_qpos().clone()
+    qpos, error = robot.inverse_kinematics(ee, pos=pos, quat=quat, return_error=True)
+    assert torch.equal(robot.get_qpos(), before)
+    assert (error[:, :3].norm(dim=1) <= 5e-4).all() and (error[:, 3:].norm(dim=1) <= 5e-3).all()
+    lower, upper = (torch.tensor(robot._solver.model.dof_lower[:7]), torch.tensor(robot._solver.model.dof_upper[:7]))
+    assert ((qpos >= lower) & (qpos <= upper)).all()
+    robot.set_qpos(qpos)
+    np.testing.assert_allclose((ee.get_pos() - pos).norm(dim=1), error[:, :3].norm(dim=1), atol=1e-12)
+    point = torch.tensor([0.0, 0.0, 0.1], dtype=torch.float64)
+    only_pos = robot.inverse_kinematics(ee, pos=pos[0], local_point=point, envs_idx=[1])
+    robot.set_qpos(only_pos, envs_idx=[1])
+    tip = ee.get_pos()[1] + gs_rotate(ee.get_quat()[1], point)
+    assert (tip - pos[0]).norm() <= 5e-4
+
+
+def gs_rotate(quat, vector):
+    """quat (4,) applied to vector (3,)."""
+    from genesis_lite.entities.kinematics import quat_to_mat
+    return quat_to_mat(quat) @ vector
+
+
+def test_inverse_kinematics_moves_only_the_dofs_given(f64):
+    _, robot = _scene(KUKA, True)
+    rng = np.random.default_rng(4)
+    start = torch.tensor(rng.uniform(-0.5, 0.5, 7))
+    robot.set_qpos(start)
+    target = robot.links[-1].get_pos() + torch.tensor([0.05, -0.03, 0.02])
+    qpos = robot.inverse_kinematics(robot.links[-1], pos=target, dofs_idx_local=[0, 1, 3])
+    assert torch.equal(qpos[[2, 4, 5, 6]], start[[2, 4, 5, 6]]) and not torch.equal(qpos, start)
+
+
+def test_inverse_kinematics_keeps_the_next_steps(f64):
+    """A solve between steps of a scene with constraint rows (a box resting on the plane, limits)
+    leaves the steps after it as they were, bit for bit (the trial poses' uploads keep the
+    constraint solve's warm start)."""
+    def run(solve):
+        scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01), show_viewer=False)
+        scene.add_entity(gs.morphs.Plane())
+        box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(1.0, 0.0, 0.06)))
+        robot = scene.add_entity(gs.morphs.URDF(file=KUKA, fixed=True))
+        scene.build()
+        box.set_dofs_velocity(torch.tensor([0.3, 0.1, 0.0, 0.0, 0.0, 1.0]))
+        for step in range(10):
+            if solve and step == 5:
+                robot.inverse_kinematics(robot.links[-1], pos=torch.tensor([0.3, 0.2, 0.8]))
+            scene.step()
+        return box.get_dofs_velocity()
+    assert torch.equal(run(True), run(False))
+
+
+def test_bad_arguments_raise(f64):
+    scene = gs.Scene(show_viewer=False)
+    robot = scene.add_entity(gs.morphs.URDF(file=KUKA, fixed=True))
+    other = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(1.0, 0.0, 0.06)))
+    scene.build()
+    with pytest.raises(gs.InvalidInputError, match="argument 'link' must be one of this entity's links"):
+        robot.get_jacobian(other.links[0])
+    with pytest.raises(gs.InvalidInputError, match="'local_point' must hold 3 numbers"):
+        robot.get_jacobian(robot.links[-1], [0.0, 1.0])
+    with pytest.raises(gs.InvalidInputError, match="expected a target 'pos' or 'quat', got neither"):
+        robot.inverse_kinematics(robot.links[-1])
+    with pytest.raises(gs.InvalidInputError, match="'quat' must hold non-zero quaternions"):
+        robot.inverse_kinematics(robot.links[-1], quat=[0.0, 0.0, 0.0, 0.0])
+    fixed_box = gs.Scene(show_viewer=False)
+    static = fixed_box.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), fixed=True))
+    fixed_box.build()
+    with pytest.raises(gs.InvalidInputError, match="get_jacobian expected an entity with dofs"):
+        static.get_jacobian(static.links[0])
