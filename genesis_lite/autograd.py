@@ -121,7 +121,7 @@ class _Step(torch.autograd.Function):
     def backward(ctx, *grad_states):
         sim = _alive(ctx.sim)
         _check_generation(sim, ctx.rollout.generation, f"step {ctx.index}")
-        sim.hold_contacts()  # the replays below overwrite what the last step found
+        sim.hold_before_backward()  # the replays below overwrite what the last step found
         saved, replay = ctx.saved_tensors[: ctx.n_saved], ctx.saved_tensors[ctx.n_saved:]
         if ctx.kept:
             states, inputs = saved[: ctx.n_states], saved[ctx.n_states:]

@@ -254,9 +254,7 @@ class Simulator:
         per solver, its replay record or else the warm start it started from (its replay then
         repeats it exactly; None for both where the solver needs neither)."""
         split = self._split_inputs(flat_inputs)
-        for slot in self.slots:
-            if slot.held_warm_start is None:  # the first step of a backward: the replays overwrite it
-                slot.held_warm_start = (slot.state, slot.solver.warm_start())
+        self.hold_before_backward()
         try:
             if len(self.slots) == 1:
                 results = [self.slots[0].solver.backward(states[0], split[0], grad_states[0], warm_starts[0],
@@ -346,6 +344,7 @@ class Simulator:
 
     def read_derived_backward(self, solver, state, grad):
         slot = self.slot(solver)
+        self.hold_before_backward()  # (state may be an older one: its upload clears the warm start)
         self._sync(slot, state, slot.inputs)
         out = solver.links_kinematics_backward(grad)
         slot.uploaded_state = None
@@ -373,11 +372,15 @@ class Simulator:
             value = solver.without_contacts(value, torch.as_tensor(slot.replaced_envs, device=value.device))
         return value if slot.state is None else autograd.not_differentiable(what, slot.state, value)
 
-    def hold_contacts(self):
-        """Keep every contact solver's last-step contacts before a backward replays steps over them."""
+    def hold_before_backward(self):
+        """Keep what a backward's replays and uploads overwrite of the last step: each contact
+        solver's contacts, and each solver's warm start while Taichi still holds the scene's state
+        (the forward's then; a replayed step or an upload of an older state has cleared it)."""
         for slot in self.slots:
             if slot.held_contacts is None and hasattr(slot.solver, "contacts"):
                 slot.held_contacts = slot.solver.contacts()
+            if slot.held_warm_start is None and slot.uploaded_state is slot.state:
+                slot.held_warm_start = (slot.state, slot.solver.warm_start())
 
     def _query(self, solver, what, compute):
         """``compute()`` at the current state and inputs, as a value whose backward raises when

@@ -748,13 +748,18 @@ def test_a_backward_that_stops_midway_leaves_the_next_steps_as_they_were(f64, mo
     assert torch.equal(rollout(True), rollout(False))
 
 
-@pytest.mark.parametrize("setter", [False, True])
-def test_a_rollout_steps_on_after_a_backward_as_without_it(f64, setter):
+@pytest.mark.parametrize("setter, interval, loss_at", [(False, 1, 8), (True, 1, 8), (False, 4, 8), (True, 4, 8),
+                                                     (False, 1, 4)])
+def test_a_rollout_steps_on_after_a_backward_as_without_it(f64, setter, interval, loss_at):
     """A backward's replays overwrite the constraint solve's warm start, and the next forward step
     started from a cleared one (a stack of boxes: 1.8e-17 m/s apart after 8 steps): the simulator
-    keeps the forward's and puts it back (Simulator.backward_step, _sync_state), also for the envs
-    a setter leaves alone. The steps after a backward equal those of a rollout without it, bit for bit."""
-    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True), show_viewer=False)
+    keeps the forward's before anything of the backward runs (Simulator.hold_before_backward: the
+    recomputation of a checkpointed segment, interval 4, and the upload of an older state by a
+    getter's backward, a loss read at step 4 only, come first) and puts it back on the next upload
+    (_sync_state), also for the envs a setter leaves alone. The steps after a backward equal those
+    of a rollout without it, bit for bit."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True, checkpoint_interval=interval),
+                     show_viewer=False)
     scene.add_entity(gs.morphs.Plane())
     boxes = [scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.01 * k, 0.0, 0.05 + 0.1 * k),
                                             euler=(0, 0, 10 * k))) for k in range(3)]
@@ -764,10 +769,12 @@ def test_a_rollout_steps_on_after_a_backward_as_without_it(f64, setter):
     def rollout(backward):
         scene.reset()
         boxes[0].set_dofs_velocity(velocity.clone().requires_grad_(True))
-        for _ in range(8):
+        for step in range(8):
             scene.step()
+            if step + 1 == loss_at:
+                loss = boxes[2].get_pos().sum()
         if backward:
-            boxes[2].get_pos().sum().backward()
+            loss.backward()
         if setter:  # env 1's middle box stopped: env 0 steps on from the forward's warm start
             boxes[1].set_dofs_velocity(torch.zeros(1, 6, dtype=torch.float64), envs_idx=[1])
         for _ in range(8):

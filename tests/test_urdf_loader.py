@@ -390,6 +390,14 @@ def test_safety_controller_gains_mimics_and_contact_warning(tmp_path, caplog):
     assert len(said) == 1 and "restitution, rolling_friction are not simulated" in said[0]
 
 
+def test_a_mimic_on_a_fixed_joint_warns(tmp_path, caplog):
+    body = (LINK.format("a") + LINK.format("b") + LINK.format("c") + joint("j", "revolute")
+            + joint("f", "fixed", "b", "c", extra='<mimic joint="j"/>'))
+    specs = by_name(load_urdf(write_urdf(tmp_path, body)))
+    assert specs["c"].mimic is None
+    assert any("joint 'f' is fixed: its <mimic> is ignored" in r.getMessage() for r in caplog.records)
+
+
 @pytest.mark.parametrize("target, given", [("k", "itself"), ("f", "a fixed joint"), ("x", "no joint of this file")])
 def test_a_mimic_of_no_scalar_joint_raises(tmp_path, target, given):
     body = (LINK.format("a") + LINK.format("b") + LINK.format("c") + joint("f", "fixed")

@@ -84,7 +84,7 @@ MODEL = {
     "link_inv_mass0": ("f", "L"), "dof_lower": ("f", "D"), "dof_upper": ("f", "D"),
     # joint equalities (URDF mimic joints; RigidModel says what they hold)
     "eq_dof1": ("i", "E"), "eq_dof2": ("i", "E"), "eq_coef": ("f", "E2"),
-    # substep h (s), the time constant (s) of the joint-limit and friction-loss rows, impratio, solver
+    # substep h (s), the time constant (s) of the joint rows (equality, limit, friction loss), impratio, solver
     # tolerance and line-search tolerance: runtime values like everything else (CONSTS names them)
     "consts": ("f", len(CONSTS)),
     "link_pos0": ("v3", "L"), "link_axis": ("v3", "L"), "link_com": ("v3", "L"), "link_quat0": ("v4", "L"),
@@ -150,7 +150,8 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
 # (not enable_mujoco_compatibility) when curved convex contacts are their converged closed form
 # (collision/detect.py: converge_contacts) and the elliptic solve takes a Newton step past MuJoCo's stop
 # (constraint/solver.py); constrained
-# a flag: some env of the substep has a constraint row to form (a contact, friction loss, a violated limit);
+# a flag: some env of the substep has a constraint row to form (a contact, a joint equality, friction loss, a
+# violated limit);
 # colliders_due a mask of the collider kernels the substep's near pairs need (collision/detect.py: KERNEL_BIT);
 # inexact_pair, inexact_env, inexact_substep: where the last inexact contact was (the backward's error names it).
 SIZES = ("B", "L", "D", "Q", "P", "E", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C", "R", "cone",

@@ -77,7 +77,7 @@ def position_stages_env(d: ti.template(), s, e):
 
 @ti.func
 def constraint_env(d: ti.template(), s, e, replaying):
-    """Rows of frame s (single-dof rows, then its contacts', in MuJoCo's order), then the
+    """Rows of frame s (joint rows, then its contacts', in MuJoCo's order), then the
     constraint solve → qacc_constrained and qfrc_constraint[s, e] (replaying: qacc_constrained
     holds the forward's solution: constraint/solver.py's "Replay")."""
     sort_contacts(d, s, e)

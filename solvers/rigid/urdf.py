@@ -339,7 +339,9 @@ def _apply_joint(ctx: _Context, spec: LinkSpec, joint) -> None:
     gains = joint.safety_controller
     spec.kp = _number(ctx, getattr(gains, "k_position", None), None, f"joint '{joint.name}' k_position", 0.0)
     spec.kv = _number(ctx, getattr(gains, "k_velocity", None), None, f"joint '{joint.name}' k_velocity", 0.0)
-    if joint.mimic is not None and spec.joint_type != "fixed":
+    if joint.mimic is not None and spec.joint_type == "fixed":
+        ctx.warnings.append(f"joint '{joint.name}' is fixed: its <mimic> is ignored")
+    elif joint.mimic is not None:
         what = f"joint '{joint.name}' mimic"
         spec.mimic = (joint.mimic.joint, _number(ctx, joint.mimic.multiplier, 1.0, f"{what} multiplier"),
                       _number(ctx, joint.mimic.offset, 0.0, f"{what} offset"))

@@ -45,8 +45,8 @@ def _add_mass_grad(d: ti.template(), s, e, x: ti.template(), y: ti.template()):
 @ti.func
 def solve_adjoint(d: ti.template(), s, e):
     """Reverse of frame s's constraint solve: from the gradients of qacc_constrained and
-    qfrc_constraint into those of qfrc_smooth, the mass matrix, armature and the single-dof rows'
-    inputs. Scratch: solver_Mgrad ← u = H⁻¹ ā, solver_Mv ← q̄frc_constraint − u (M's gradient is
+    qfrc_constraint into those of qfrc_smooth, the mass matrix, armature and the joint and
+    contact rows' inputs. Scratch: solver_Mgrad ← u = H⁻¹ ā, solver_Mv ← q̄frc_constraint − u (M's gradient is
     that times aᵀ)."""
     u, g_mass = d.solver_Mgrad, d.solver_Mv
     for i in range(d.n_dofs):  # ā = q̄acc_constrained + M q̄frc_constraint

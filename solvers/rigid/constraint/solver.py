@@ -69,7 +69,7 @@ only. The envelope and the rows' column lists (efc_cols) skip exact zeros only, 
 equal the dense ones bit for bit; M·v sums over M's pairs (add_mul_M), in their order. Every
 loop runs over an island's own dofs, rows and envelope, so the cost grows with the scene's
 size, not its square. Island trees
-from the Jacobian (above). No equality rows, no noslip, no sleeping, warm start always on.
+from the Jacobian (above). No noslip, no sleeping, warm start always on.
 """
 import taichi as ti
 
