@@ -184,6 +184,9 @@ class Simulator:
                 slot.uploaded_state = None
         for slot in self.slots:
             slot.derived = slot.replaced_envs = slot.held_contacts = slot.held_warm_start = None
+            for name in slot.solver.transient_inputs:  # (the build's tensor: no upload when unused)
+                if slot.inputs[name] is not slot.solver.default_inputs[name]:
+                    slot.inputs = {**slot.inputs, name: slot.solver.default_inputs[name]}
         self._check_finite()
         self.step_index += 1
 

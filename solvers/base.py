@@ -41,6 +41,8 @@ class Solver:
     persistent_inputs = ()
     #: name → (B, width) tensor of every input's value at build (set by ``build``)
     default_inputs = None
+    #: inputs that last one step: back to their value at build after every step (an external wrench)
+    transient_inputs = ()
     #: inputs from which ``derive_inputs`` computes others (recomputed whenever one is set)
     derived_from = ()
     #: names of the solver's entities, for error messages

@@ -21,7 +21,7 @@ ROBOTS = {"pendulum2": (asset("pendulum2.urdf"), True), "cartpole": (pybullet("c
           "quadruped": (asset("quadruped.urdf"), False),  # a floating base with four branches
           "gripper": (asset("mimic_gripper.urdf"), True)}  # two mimic joints: joint equality rows
 KINDS = ("dofs_position", "dofs_velocity", "force", "position_target", "velocity_target", "mass", "damping",
-         "armature", "kp", "kv", "gravity", "frictionloss", "force_range")
+         "armature", "kp", "kv", "gravity", "frictionloss", "force_range", "wrench")
 EPS = 1e-6
 # fourth-order differences at two eps, the better one counts: round-off grows as eps shrinks
 # (measured: the limited quadruped's kp case 6e-8 at 1e-5, 1e-6 at 1e-6, 8e-6 at 1e-7)
@@ -76,6 +76,8 @@ def _nominal(kind, robot, n_envs, horizon, rng):
         "force_range": np.stack([rng.uniform(-1.8, -1.2, _batch(n_envs, n)), rng.uniform(1.2, 1.8, _batch(n_envs, n))]),
         "base_pos": rng.uniform(-1, 1, _batch(n_envs, 3)),
         "base_quat": rng.normal(size=_batch(n_envs, 4)),
+        # per step and link: a force (N), a torque (N·m) and where the force acts (link frame, m)
+        "wrench": rng.uniform(-2, 2, (horizon, *_batch(n_envs, robot.n_links, 9))) * np.repeat([1.0, 0.05], [6, 3]),
     }
     value = torch.tensor(values[kind], dtype=torch.float64)
     direction = torch.tensor(rng.normal(size=value.shape), dtype=torch.float64)
@@ -112,7 +114,9 @@ def _rollout(scene, robot, kind, value, horizon):
     if kind == "force_range":  # forces of which a share clips at either bound
         kind, value = "force", torch.tensor(rng.uniform(-2.5, 2.5, (horizon, *_batch(n_envs, robot.n_dofs))))
     controls = {"force": robot.control_dofs_force, "position_target": robot.control_dofs_position,
-                "velocity_target": robot.control_dofs_velocity}
+                "velocity_target": robot.control_dofs_velocity,
+                "wrench": lambda v, dofs: robot.apply_links_external_wrench(v[..., :3], v[..., 3:6], pos=v[..., 6:],
+                                                                            local=True)}
     dofs = np.arange(6, robot.n_dofs) if robot.is_free and kind == "position_target" else None
     loss = 0.0
     for t in range(horizon):
@@ -163,7 +167,7 @@ def test_free_base(f64, kind):
     _check("kuka_free", kind, horizon=10)
 
 
-@pytest.mark.parametrize("kind", ["base_quat", "dofs_velocity", "force", "mass", "gravity"])
+@pytest.mark.parametrize("kind", ["base_quat", "dofs_velocity", "force", "mass", "gravity", "wrench"])
 def test_branching_tree(f64, kind):
     """Sibling subtrees (the up sweep's chains) and a floating base."""
     _check("quadruped", kind, horizon=10)

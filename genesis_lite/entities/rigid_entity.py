@@ -11,7 +11,7 @@ from ..solvers.core import InvalidInputError, SceneStateError, refuse_grad, runt
 from ..solvers.rigid.merge import merged_into
 from . import kinematics
 from .common import EntityIndexing, replace_columns as _replace
-from .rotations import euler_xyz_to_quat, quat_to_euler_xyz
+from .rotations import euler_xyz_to_quat, quat_to_euler_xyz, quat_to_mat
 
 _MODES = {"force": 0, "position": 1, "velocity": 2}  # ctrl_mode codes (solvers/rigid/actuation.py)
 _NDOFS = {"fixed": 0, "revolute": 1, "prismatic": 1, "free": 6}
@@ -375,6 +375,52 @@ class RigidEntity(EntityIndexing):
 
     def get_ang(self, envs_idx=None):
         return self.get_links_ang([0], envs_idx)[..., 0, :]
+
+    # -- external wrenches ----------------------------------------------------------------------------
+    def _link_vectors(self, value, n_links, envs, arg):
+        """User (n, 3) or, batched, (len(envs), n, 3) vectors → (len(envs), n, 3)."""
+        shape = (n_links, 3) if self.scene.n_envs == 0 else (len(envs), n_links, 3)
+        tensor = self._tensor(value, arg, shape)
+        if tuple(tensor.shape) != shape:
+            raise InvalidInputError(f"entity '{self.name}': apply_links_external_wrench argument '{arg}' must have "
+                                    f"shape {shape}, got {tuple(tensor.shape)}")
+        return self._values(tensor.reshape(*shape[:-2], 3 * n_links), 3 * n_links, envs, arg).reshape(-1, n_links, 3)
+
+    def apply_links_external_wrench(self, force=None, torque=None, links_idx_local=None, envs_idx=None, *,
+                                    pos=None, ref="link_origin", local=False):
+        """Apply a force (N) and a torque (N·m) to links for the next step (Genesis's): ``force``,
+        ``torque`` (n, 3) or (len(envs), n, 3); the force acts at ``pos`` (world, or with local an
+        offset in the ref frame) else at the ref frame's origin: the link origin ("link_origin") or
+        its centre of mass ("link_com"); local: force, torque and pos in the ref frame's axes (the
+        link's). Calls before a step add up; the step applies them at each substep, the force at a
+        point fixed on the link, and then forgets them. Differentiable in force, torque and pos."""
+        who = f"entity '{self.name}': apply_links_external_wrench"
+        if force is None and torque is None:
+            raise InvalidInputError(f"{who} expected 'force' or 'torque', got neither")
+        if force is None and pos is not None:
+            raise InvalidInputError(f"{who} argument 'pos' needs a 'force' (a torque acts the same anywhere)")
+        if ref not in ("link_origin", "link_com"):
+            raise InvalidInputError(f"{who} argument 'ref' must be 'link_origin' or 'link_com', got {ref!r}")
+        links = self._local(links_idx_local, self.n_links, "links_idx_local", distinct=True)
+        envs = self._envs(envs_idx, distinct=True)
+        origin = self._links(links, envs_idx, slice(0, 3))  # (len(envs), n, 3)
+        rot = quat_to_mat(self._links(links, envs_idx, slice(3, 7)))
+        com = torch.as_tensor(self._solver.model.link_com[self.link_start + links], dtype=runtime.tc_float,
+                              device=runtime.device)
+        frame = origin if ref == "link_origin" else origin + (rot @ com[..., None])[..., 0]
+        zeros = torch.zeros_like(origin)
+        f = zeros if force is None else self._link_vectors(force, len(links), envs, "force")
+        t = zeros if torque is None else self._link_vectors(torque, len(links), envs, "torque")
+        point = frame if pos is None else self._link_vectors(pos, len(links), envs, "pos")
+        if local:
+            f, t = (rot @ f[..., None])[..., 0], (rot @ t[..., None])[..., 0]
+            point = point if pos is None else frame + (rot @ point[..., None])[..., 0]
+        wrench = torch.cat([f, t + torch.linalg.cross(point - origin, f)], dim=-1).reshape(len(envs), -1)
+        columns = (6 * (self.link_start + links)[:, None] + np.arange(6)).ravel()
+        current = self._sim().inputs(self._solver)["xfrc"]
+        rows = torch.as_tensor(envs, device=runtime.device)
+        self._write_input("xfrc", columns, envs, current[rows][:, torch.as_tensor(columns, device=runtime.device)]
+                          + wrench)
 
     # -- Jacobian and inverse kinematics (entities/kinematics.py) -----------------------------------
     def _own_link(self, link, what):

@@ -53,6 +53,9 @@ INPUTS = {
     "ctrl_force": ("D", True),  # N·m or N
     "ctrl_pos": ("D", True),    # rad or m
     "ctrl_vel": ("D", True),    # rad/s or m/s
+    # per link, for one step: an external force (N) at the link origin and a torque (N·m), world
+    # frame (entity.apply_links_external_wrench), 6 a link
+    "xfrc": ("L6", True),
     "frictionloss": ("D", True),  # N·m or N: dry joint friction, a constraint row (constraint/rows.py)
     "friction": ("G", True),    # per collision geom: Coulomb coefficient (pairs take the larger)
     "solref": ("G2", True),     # per geom: (time constant s, damping ratio), or (−stiffness, −damping)
@@ -166,7 +169,8 @@ assert [diff for _, diff in INPUTS.values()] == sorted((diff for _, diff in INPU
 
 def input_width(name, n_links, n_dofs, n_geoms):
     width = INPUTS[name][0]
-    return {"L": n_links, "D": n_dofs, "G": n_geoms, "G2": 2 * n_geoms, "G5": 5 * n_geoms}.get(width, width)
+    return {"L": n_links, "L6": 6 * n_links, "D": n_dofs, "G": n_geoms, "G2": 2 * n_geoms,
+            "G5": 5 * n_geoms}.get(width, width)
 
 
 def _region_members(arena, grads):
@@ -226,7 +230,7 @@ def _counts(size):
     return {"L": size["L"], "D": D, "Q": size["Q"], "P": size["P"], "DD": D * D, "G": size["G"], "N": size["N"],
             "H": size["H"], "C": size["C"], "CF": FEATURE_SIZE * size["C"], "HI": size["HI"], "R": R, "RD": R * D,
             "CD": size["C"] * D + 2 * (size["E"] + 2 * D), "E": size["E"], "E2": 2 * size["E"],
-            "G2": 2 * size["G"], "G5": 5 * size["G"], 1: 1,
+            "G2": 2 * size["G"], "G5": 5 * size["G"], "L6": 6 * size["L"], 1: 1,
             len(CONSTS): len(CONSTS),
             **{f"ws:{name}": size["WS"] * n for name, (_, n) in CONVEX_SCRATCH.items()}}
 

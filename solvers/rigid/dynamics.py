@@ -8,6 +8,7 @@ import taichi as ti
 
 from .model import FREE, PRISMATIC, REVOLUTE
 from .data import accumulate
+from .kinematics import reference
 from .spatial import cross_force, cross_motion, dot3, inertia_mul, inertia_mul_adjoint
 
 
@@ -47,8 +48,16 @@ def _link_motion(d: ti.template(), s, e, l):
 
 
 @ti.func
+def _external(d: ti.template(), e, l):
+    """(force N, torque N·m) applied to link l at its origin this step, world frame (xfrc)."""
+    return (ti.Vector([d.xfrc[e, 6 * l + k] for k in ti.static(range(3))]),
+            ti.Vector([d.xfrc[e, 6 * l + 3 + k] for k in ti.static(range(3))]))
+
+
+@ti.func
 def link_forces(d: ti.template(), s, e, l):
-    """cvel, cacc and the net force link l needs (f = I·a + v ×* I·v); parent first."""
+    """cvel, cacc and the net force link l needs (f = I·a + v ×* I·v, less the external wrench:
+    its torque about the reference, τ + (x_l − ref) × f, and f); parent first."""
     vw, vv, aw, av = _link_motion(d, s, e, l)
     d.cvel_w[s, e, l], d.cvel_v[s, e, l] = vw, vv
     d.cacc_w[s, e, l], d.cacc_v[s, e, l] = aw, av
@@ -56,7 +65,10 @@ def link_forces(d: ti.template(), s, e, l):
     fn, ff = inertia_mul(m, h, inertia, aw, av)
     pn, pf = inertia_mul(m, h, inertia, vw, vv)
     cn, cf = cross_force(vw, vv, pn, pf)
-    d.cfrc_n[s, e, l], d.cfrc_f[s, e, l] = fn + cn, ff + cf  # the up sweep adds the children's
+    force, torque = _external(d, e, l)
+    lever = d.xpos[s, e, l] - reference(d, s, e, l)
+    # the up sweep adds the children's
+    d.cfrc_n[s, e, l], d.cfrc_f[s, e, l] = fn + cn - (torque + lever.cross(force)), ff + cf - force
 
 
 @ti.func
@@ -173,6 +185,15 @@ def link_forces_adjoint(d: ti.template(), s, e, l):
         # (cn, cf) = (vw × pn + vv × pf, vw × pf)
         gm2, gh2, gi2, gvw, gvv = inertia_mul_adjoint(m, h, inertia, vw, vv, gn.cross(vw),
                                                       gn.cross(vv) + gf.cross(vw))
+        # the external wrench: ∂/∂τ = −gn, ∂/∂f = −gf − gn × lever, and the lever x_l − ref (as
+        # everywhere, the reference's own gradient is left out: the dynamics do not depend on it)
+        force, _ = _external(d, e, l)
+        lever = d.xpos[s, e, l] - reference(d, s, e, l)
+        accumulate(d.xpos.grad, ti.Vector([s, e, l]), gn.cross(force))
+        g_force = -gf - gn.cross(lever)
+        for k in ti.static(range(3)):
+            accumulate(d.xfrc.grad, ti.Vector([e, 6 * l + k]), g_force[k])
+            accumulate(d.xfrc.grad, ti.Vector([e, 6 * l + 3 + k]), -gn[k])
         g_m = d.crb_m.grad[s, e, l] + gm + gm2
         g_h = d.crb_h.grad[s, e, l] + gh + gh2
         g_i = d.crb_i.grad[s, e, l] + gi + gi2

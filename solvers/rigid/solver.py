@@ -35,6 +35,8 @@ class RigidSolver(Solver):
     persistent_inputs = ("mass", "damping", "armature", "kp", "kv", "gravity", "force_lo", "force_hi", "frictionloss",
                          "friction", "solref", "solimp", "invweight_t", "invweight_dof")
 
+    transient_inputs = ("xfrc",)
+
     def __init__(self, sim_options, rigid_options):
         self.sim_options, self.rigid_options = sim_options, rigid_options
         self.entity_links = []  # one list[LinkSpec] per rigid entity, in add order
@@ -123,6 +125,7 @@ class RigidSolver(Solver):
             "mass": m.link_mass0, "damping": m.dof_damping, "armature": m.dof_armature,
             "kp": m.dof_kp, "kv": m.dof_kv, "gravity": np.array(self.sim_options.gravity),
             "ctrl_force": np.zeros(m.n_dofs), "ctrl_pos": np.zeros(m.n_dofs), "ctrl_vel": np.zeros(m.n_dofs),
+            "xfrc": np.zeros(6 * m.n_links),
             "frictionloss": m.dof_frictionloss, "force_lo": -effort, "force_hi": effort,
             "ctrl_mode": np.zeros(m.n_dofs),
             "friction": m.geom_friction, "solref": np.tile([self.timeconst, 1.0], len(m.geom_type)),
