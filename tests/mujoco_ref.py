@@ -43,6 +43,22 @@ _DISABLE = (
 )
 
 
+def bare_spec(path: str, free_base: bool = False) -> mujoco.MjSpec:
+    """MjSpec of a URDF as it is written (inertias from the file, fixed links fused), without its
+    collision geometry (no geoms, no meshes), a free joint on its root when ``free_base``: to
+    compile after editing the options or adding bodies."""
+    spec = mujoco.MjSpec.from_file(path)
+    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    spec.compiler.fusestatic = True
+    for geom in list(spec.geoms):
+        spec.delete(geom)
+    for mesh in list(spec.meshes):
+        spec.delete(mesh)
+    if free_base:
+        spec.worldbody.first_body().add_freejoint()
+    return spec
+
+
 def load_model(
     urdf_path,
     free_base: bool = False,

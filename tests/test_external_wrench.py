@@ -13,19 +13,14 @@ import torch
 
 import genesis_lite as gs
 from tests.conftest import pybullet
+from tests.mujoco_ref import bare_spec
 
 KUKA = pybullet("kuka_iiwa", "model.urdf")
 DT = 0.01
 
 
 def _mujoco():
-    spec = mujoco.MjSpec.from_file(KUKA)
-    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
-    spec.compiler.fusestatic = True
-    for geom in list(spec.geoms):
-        spec.delete(geom)
-    for mesh in list(spec.meshes):
-        spec.delete(mesh)
+    spec = bare_spec(KUKA)
     mass, half = 1000.0 * 0.2 * 0.1 * 0.04, np.array([0.1, 0.05, 0.02])  # our box's (ρ 1000 kg/m³)
     box = spec.worldbody.add_body(name="box", pos=[1.0, 0.0, 0.5], ipos=[0.0, 0.0, 0.0], mass=mass,
                                   inertia=mass / 3.0 * (half @ half - half ** 2))

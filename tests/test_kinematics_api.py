@@ -12,6 +12,7 @@ import torch
 
 import genesis_lite as gs
 from tests.conftest import asset, pybullet
+from tests.mujoco_ref import bare_spec
 
 KUKA = pybullet("kuka_iiwa", "model.urdf")
 ROBOTS = {"kuka": (KUKA, True), "quadruped": (asset("quadruped.urdf"), False),
@@ -19,12 +20,7 @@ ROBOTS = {"kuka": (KUKA, True), "quadruped": (asset("quadruped.urdf"), False),
 
 
 def _mujoco(path, fixed):
-    spec = mujoco.MjSpec.from_file(path)
-    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
-    spec.compiler.fusestatic = True
-    if not fixed:
-        spec.worldbody.first_body().add_freejoint()
-    model = spec.compile()
+    model = bare_spec(path, free_base=not fixed).compile()
     return model, mujoco.MjData(model)
 
 

@@ -15,6 +15,7 @@ import torch
 
 import genesis_lite as gs
 from tests.conftest import pybullet
+from tests.mujoco_ref import bare_spec
 
 KUKA = pybullet("kuka_iiwa", "model.urdf")
 DT = 0.002
@@ -22,13 +23,7 @@ _SCENES = {}
 
 
 def _mujoco(damping, frictionloss):
-    spec = mujoco.MjSpec.from_file(KUKA)
-    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
-    spec.compiler.fusestatic = True
-    for geom in list(spec.geoms):
-        spec.delete(geom)
-    for mesh in list(spec.meshes):
-        spec.delete(mesh)
+    spec = bare_spec(KUKA)
     for joint in spec.joints:
         joint.frictionloss = frictionloss
         joint.damping = [damping, 0.0, 0.0]
