@@ -120,6 +120,24 @@ def test_inverse_kinematics_reaches_poses(f64):
     assert (tip - pos[0]).norm() <= 5e-4
 
 
+def test_inverse_kinematics_of_several_links(f64):
+    """inverse_kinematics_multilink: the elbow's position and the flange's pose of a pose the KUKA
+    reaches, at once; errors per link."""
+    _, robot = _scene(KUKA, True)
+    rng = np.random.default_rng(6)
+    elbow, flange = robot.links[4], robot.links[-1]
+    robot.set_qpos(torch.tensor(rng.uniform(-1.0, 1.0, 7)))
+    goals = elbow.get_pos().clone(), flange.get_pos().clone(), flange.get_quat().clone()
+    robot.set_qpos(torch.zeros(7))
+    qpos, error = robot.inverse_kinematics_multilink([elbow, flange], poss=[goals[0], goals[1]],
+                                                     quats=[None, goals[2]], return_error=True)
+    assert error.shape == (2, 6) and (error[:, :3].norm(dim=1) <= 5e-4).all() and error[1, 3:].norm() <= 5e-3
+    robot.set_qpos(qpos)
+    assert (elbow.get_pos() - goals[0]).norm() <= 5e-4 and (flange.get_pos() - goals[1]).norm() <= 5e-4
+    with pytest.raises(gs.InvalidInputError, match=r"argument 'poss' expected one entry per link \(2\), got 1"):
+        robot.inverse_kinematics_multilink([elbow, flange], poss=[goals[0]])
+
+
 def gs_rotate(quat, vector):
     """quat (4,) applied to vector (3,)."""
     from genesis_lite.entities.kinematics import quat_to_mat

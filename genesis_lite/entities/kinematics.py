@@ -147,26 +147,27 @@ def _poses_at(entity, q, envs):
 
 
 def _norms(error):
-    """(B', 2): the position and rotation parts' lengths of errors (B', 6)."""
-    return torch.stack([error[:, :3].norm(dim=1), error[:, 3:].norm(dim=1)], 1)
+    """(B', 2): the largest position and rotation error over the goals, of errors (B', K, 6)."""
+    return torch.stack([error[..., :3].norm(dim=-1).amax(-1), error[..., 3:].norm(dim=-1).amax(-1)], -1)
 
 
-def solve_ik(entity, link, target, local_point, start, envs, dofs, options):
+def solve_ik(entity, goals, start, envs, dofs, options):
     """Damped least squares from ``start`` (B', n_qs) in the selected envs ``envs`` (int array),
-    moving the local dofs ``dofs``. options: respect_joint_limit, max_samples, max_solver_iters,
-    damping, pos_tol, rot_tol, max_step_size, seed. Returns (the best qpos (B', n_qs) each env
-    reached, its error (B', 6))."""
+    moving the local dofs ``dofs``, toward every goal of ``goals``: (local link, Target, local
+    point (3,)) each, their errors and Jacobians stacked. options: respect_joint_limit,
+    max_samples, max_solver_iters, damping, pos_tol, rot_tol, max_step_size, seed. Returns (the
+    best qpos (B', n_qs) each env reached, its errors (B', K, 6))."""
     motions, joints = DofMotions(entity), _Joints(entity, options["respect_joint_limit"])
     generator = torch.Generator().manual_seed(0 if options["seed"] is None else int(options["seed"]))
     moving = torch.zeros(entity.n_dofs, dtype=start.dtype, device=start.device)
     moving[torch.as_tensor(dofs, device=start.device)] = 1.0
-    eye = torch.eye(6, dtype=start.dtype, device=start.device)
+    eye = torch.eye(6 * len(goals), dtype=start.dtype, device=start.device)
     q, best_q, best_error = start.clone(), start.clone(), None
     for _ in range(options["max_samples"]):
         for _ in range(options["max_solver_iters"] + 1):
             pos, quat = _poses_at(entity, q, envs)
-            point = pos[:, link] + (quat_to_mat(quat[:, link]) @ local_point[:, None])[..., 0]
-            error = target.error(point, quat[:, link])
+            error = torch.stack([target.error(pos[:, link] + (quat_to_mat(quat[:, link]) @ point[:, None])[..., 0],
+                                              quat[:, link]) for link, target, point in goals], 1)
             if best_error is None:
                 best_error = error
             better = _norms(error).sum(1) < _norms(best_error).sum(1)
@@ -175,9 +176,11 @@ def solve_ik(entity, link, target, local_point, start, envs, dofs, options):
             done = (norms[:, 0] <= options["pos_tol"]) & (norms[:, 1] <= options["rot_tol"])
             if bool(done.all()):
                 return best_q, best_error
-            J = jacobian(motions, pos, quat, link, local_point) * target.mask[:, None] * moving
+            J = torch.cat([jacobian(motions, pos, quat, link, point) * target.mask[:, None]
+                           for link, target, point in goals], 1) * moving
+            residual = error.reshape(error.shape[0], -1, 1)
             step = (J.transpose(1, 2) @ torch.linalg.solve(J @ J.transpose(1, 2) + options["damping"] ** 2 * eye,
-                                                           error[..., None]))[..., 0]
+                                                           residual))[..., 0]
             step = step * (options["max_step_size"] / step.norm(dim=1, keepdim=True).clamp_min(options["max_step_size"]))
             q = joints.moved(q, step)
         q = torch.where(done[:, None], best_q, joints.sample(start, generator, dofs))

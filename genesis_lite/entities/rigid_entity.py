@@ -465,27 +465,54 @@ class RigidEntity(EntityIndexing):
         rot_mask); only dofs_idx_local move. return_error: also the (…, 6) error (position m,
         rotation vector rad) of the qpos returned, the best found. The scene's state is not
         changed; not differentiable."""
+        out = self.inverse_kinematics_multilink(
+            [link], None if pos is None else [pos], None if quat is None else [quat],
+            None if local_point is None else [local_point], init_qpos, respect_joint_limit, max_samples,
+            max_solver_iters, damping, pos_tol, rot_tol, pos_mask, rot_mask, max_step_size, seed, dofs_idx_local,
+            return_error, envs_idx)
+        return (out[0], out[1][..., 0, :]) if return_error else out
+
+    def inverse_kinematics_multilink(self, links, poss=None, quats=None, local_points=None, init_qpos=None,
+                                     respect_joint_limit=True, max_samples=50, max_solver_iters=20, damping=0.01,
+                                     pos_tol=5e-4, rot_tol=5e-3, pos_mask=(True, True, True),
+                                     rot_mask=(True, True, True), max_step_size=0.5, seed=None, dofs_idx_local=None,
+                                     return_error=False, envs_idx=None):
+        """inverse_kinematics for several links at once (Genesis's): ``poss``, ``quats``,
+        ``local_points`` list one target (or None) per link of ``links`` (None or []: none); the
+        tolerances hold for every link, errors (…, n_links, 6)."""
         who = f"entity '{self.name}': inverse_kinematics"
-        for name, value in (("pos", pos), ("quat", quat), ("local_point", local_point), ("init_qpos", init_qpos)):
+        for name, value in (("pos", poss), ("quat", quats), ("local_point", local_points), ("init_qpos", init_qpos)):
             refuse_grad(who, name, value, "the solve is iterative; differentiate get_jacobian or the rollout instead")
-        if pos is None and quat is None:
-            raise InvalidInputError(f"{who} expected a target 'pos' or 'quat', got neither")
-        local = self._own_link(link, "inverse_kinematics")
-        point = self._local_point(local_point, "inverse_kinematics")
+        links = list(links)
         envs = self._envs(envs_idx)
+
+        def per_link(values, name):
+            values = list(values) if values is not None else []
+            if values and len(values) != len(links):
+                raise InvalidInputError(f"{who} argument '{name}' expected one entry per link ({len(links)}), got "
+                                        f"{len(values)}")
+            return values or [None] * len(links)
+
+        goals = []
+        for link, pos, quat, point in zip(links, per_link(poss, "poss"), per_link(quats, "quats"),
+                                          per_link(local_points, "local_points")):
+            goal_pos = None if pos is None else self._values(pos, 3, envs, "pos").detach()
+            goal_quat = None if quat is None else self._values(quat, 4, envs, "quat").detach()
+            if goal_quat is not None:
+                self._check_quat(goal_quat, "quat")
+                goal_quat = goal_quat / goal_quat.norm(dim=1, keepdim=True)
+            goals.append((self._own_link(link, "inverse_kinematics"),
+                          kinematics.Target(goal_pos, goal_quat, pos_mask, rot_mask),
+                          self._local_point(point, "inverse_kinematics")))
+        if not goals or all(target.pos is None and target.quat is None for _, target, _ in goals):
+            raise InvalidInputError(f"{who} expected a target 'pos' or 'quat', got neither")
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
-        goal_pos = None if pos is None else self._values(pos, 3, envs, "pos").detach()
-        goal_quat = None if quat is None else self._values(quat, 4, envs, "quat").detach()
-        if goal_quat is not None:
-            self._check_quat(goal_quat, "quat")
-            goal_quat = goal_quat / goal_quat.norm(dim=1, keepdim=True)
         start = self._read(self._qpos_columns(), envs_idx).detach() if init_qpos is None else \
             self._values(init_qpos, self.n_qs, envs, "init_qpos").detach()
         options = dict(respect_joint_limit=bool(respect_joint_limit), max_samples=int(max_samples),
                        max_solver_iters=int(max_solver_iters), damping=float(damping), pos_tol=float(pos_tol),
                        rot_tol=float(rot_tol), max_step_size=float(max_step_size), seed=seed)
-        target = kinematics.Target(goal_pos, goal_quat, pos_mask, rot_mask)
-        qpos, error = kinematics.solve_ik(self, local, target, point, start, envs, dofs, options)
+        qpos, error = kinematics.solve_ik(self, goals, start, envs, dofs, options)
         return (self._out(qpos), self._out(error)) if return_error else self._out(qpos)
 
     # -- parameters ---------------------------------------------------------------------------------
