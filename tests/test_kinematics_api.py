@@ -11,6 +11,7 @@ import pytest
 import torch
 
 import genesis_lite as gs
+from genesis_lite.entities import kinematics
 from tests.conftest import asset, pybullet
 from tests.mujoco_ref import bare_spec
 
@@ -140,8 +141,7 @@ def test_inverse_kinematics_of_several_links(f64):
 
 def gs_rotate(quat, vector):
     """quat (4,) applied to vector (3,)."""
-    from genesis_lite.entities.kinematics import quat_to_mat
-    return quat_to_mat(quat) @ vector
+    return kinematics.quat_to_mat(quat) @ vector
 
 
 def test_inverse_kinematics_moves_only_the_dofs_given(f64):
@@ -152,6 +152,61 @@ def test_inverse_kinematics_moves_only_the_dofs_given(f64):
     target = robot.links[-1].get_pos() + torch.tensor([0.05, -0.03, 0.02])
     qpos = robot.inverse_kinematics(robot.links[-1], pos=target, dofs_idx_local=[0, 1, 3])
     assert torch.equal(qpos[[2, 4, 5, 6]], start[[2, 4, 5, 6]]) and not torch.equal(qpos, start)
+
+
+def test_inverse_kinematics_aligns_one_axis(f64):
+    """rot_mask with one axis: that axis of the link turns onto the target's (Genesis's rule; a
+    rotation about it is free), here the flange's z pointing down; two axes raise."""
+    _, robot = _scene(KUKA, True)
+    flange = robot.links[-1]
+    down = torch.tensor([0.0, 1.0, 0.0, 0.0], dtype=torch.float64)  # z → −z
+    target = torch.tensor([0.45, 0.1, 0.5], dtype=torch.float64)
+    qpos, error = robot.inverse_kinematics(flange, pos=target, quat=down, rot_mask=[False, False, True],
+                                           return_error=True)
+    robot.set_qpos(qpos)
+    z_axis = kinematics.quat_to_mat(flange.get_quat())[:, 2]
+    assert float(z_axis[2]) < -np.cos(5e-3) and (flange.get_pos() - target).norm() <= 5e-4
+    assert float(error[5]) == 0.0  # (the rotation about the aligned axis does not count)
+    with pytest.raises(gs.InvalidInputError, match="'rot_mask' must align no axis, one or all three"):
+        robot.inverse_kinematics(flange, quat=down, rot_mask=[True, True, False])
+
+
+@pytest.mark.parametrize("respect_joint_limit", [True, False])
+def test_inverse_kinematics_moves_only_the_path_to_the_link(f64, respect_joint_limit):
+    """A Panda reaching for an unreachable point with its hand: its fingers (not on the path to
+    the hand) stay, limits respected or not; a dof outside dofs_idx_local that starts past its
+    limit stays there too, and the others still reach a reachable target."""
+    _, robot = _scene(pybullet("franka_panda", "panda.urdf"), True)
+    start = robot.get_qpos().clone()
+    start[-2:] = torch.tensor([0.01, 0.02])
+    robot.set_qpos(start)
+    qpos = robot.inverse_kinematics(robot.get_link("panda_link7"), pos=[3.0, 0.0, 0.5],
+                                    respect_joint_limit=respect_joint_limit, max_samples=3)
+    assert torch.isfinite(qpos).all() and torch.equal(qpos[-2:], start[-2:])
+    _, kuka = _scene(KUKA, True)
+    beyond = torch.tensor([0.2, 0.6, 0.1, -1.0, 0.3, 0.5, 3.2], dtype=torch.float64)  # joint 6's limit: ±3.05
+    kuka.set_qpos(beyond)
+    goal = kuka.links[-1].get_pos() + torch.tensor([0.02, 0.02, -0.02], dtype=torch.float64)
+    qpos, error = kuka.inverse_kinematics(kuka.links[-1], pos=goal, dofs_idx_local=[0, 1, 2, 3, 4, 5],
+                                          respect_joint_limit=respect_joint_limit, return_error=True)
+    assert float(qpos[6]) == 3.2 and error[:3].norm() <= 5e-4
+
+
+@pytest.mark.parametrize("option, value, words", [
+    ("max_samples", 0, "'max_samples' must be an integer >= 1"),
+    ("max_solver_iters", -3, "'max_solver_iters' must be an integer >= 0"),
+    ("damping", 0.0, "'damping' must be a finite number > 0"),
+    ("damping", float("nan"), "'damping' must be a finite number > 0"),
+    ("max_step_size", -1.0, "'max_step_size' must be a finite number > 0"),
+    ("pos_tol", -1e-3, "'pos_tol' must be a finite number >= 0"),
+    ("pos_mask", [1, 1], "'pos_mask' must be 3 booleans"),
+    ("respect_joint_limit", "no", "'respect_joint_limit' must be a bool"),
+    ("dofs_idx_local", [], "'dofs_idx_local' must name at least one dof"),
+])
+def test_inverse_kinematics_checks_its_options(f64, option, value, words):
+    _, robot = _scene(KUKA, True)
+    with pytest.raises(gs.InvalidInputError, match=words):
+        robot.inverse_kinematics(robot.links[-1], pos=[0.4, 0.0, 0.6], **{option: value})
 
 
 def test_inverse_kinematics_keeps_the_next_steps(f64):

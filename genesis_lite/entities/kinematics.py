@@ -9,16 +9,18 @@ x about the joint's origin o (a × (x − o) and a), a prismatic dof moves it al
 dofs not on the link's path to the root are zero. It is built from get_links_pos and
 get_links_quat, so it is differentiable wherever they are.
 
-Inverse kinematics is damped least squares (Genesis's method): from the start q, repeat
-q ← q + Jᵀ (J Jᵀ + λ² I)⁻¹ r, r the masked (position, rotation-vector) error, each step at most
-max_step_size long and clipped to the joint limits; from another start drawn inside the limits
-when a start does not converge. The poses come from the solver's own kinematics at each trial q,
-which never becomes the scene's state.
+Inverse kinematics is damped least squares (Genesis's method and rules): from the start q, repeat
+q ← q + Jᵀ (J Jᵀ + λ² I)⁻¹ r, r the masked errors (position in the world, rotation vector in the
+link's frame), each step's components within ±max_step_size, the joints clipped to their limits;
+from another start drawn inside the limits when one does not converge (only with limits
+respected). Only the dofs given that move a goal's link take part. The poses come from the
+solver's own kinematics at each trial q, which never becomes the scene's state; a mimic joint's
+equality is not a goal (the solve may part a Panda's fingers: they meet again in the next steps).
 """
 import numpy as np
 import torch
 
-from ..solvers.core import runtime
+from ..solvers.core import InvalidInputError, runtime
 from ..solvers.rigid.model import REVOLUTE
 from .rotations import quat_mul, quat_to_mat, rotation_vector
 
@@ -67,49 +69,74 @@ def jacobian(motions, pos, quat, link, local_point):
 
 
 class Target:
-    """inverse_kinematics' goal per selected env: position (B', 3) or None, quat (B', 4) or None,
-    and the masks (6,) of the error components that count."""
+    """One goal of inverse_kinematics: local link ``link``'s point ``point`` (3,) at ``pos``
+    (B', 3) and the link turned to ``quat`` (B', 4) (None: not asked), with the masks of the error
+    components that count: position along the world axes, rotation about the link's own axes;
+    one rotation axis given means that axis of the link is to be aligned with the target's, so the
+    two others are the components kept (Genesis's rule)."""
 
-    def __init__(self, pos, quat, pos_mask, rot_mask):
-        self.pos, self.quat = pos, quat
+    def __init__(self, link, point, pos, quat, pos_mask, rot_mask):
+        self.link, self.point, self.pos, self.quat = link, point, pos, quat
+        rot_mask = list(rot_mask)
+        if sum(rot_mask) == 1:
+            rot_mask = [not keep for keep in rot_mask]
         self.mask = torch.tensor([*pos_mask, *rot_mask], dtype=runtime.tc_float, device=runtime.device)
         if pos is None:
             self.mask[:3] = 0.0
         if quat is None:
             self.mask[3:] = 0.0
 
-    def error(self, point, link_quat):
-        """(B', 6) masked (position, rotation vector) from the link's pose to the goal, world frame."""
-        out = torch.zeros(point.shape[0], 6, dtype=point.dtype, device=point.device)
+    def error(self, pos, quat):
+        """(B', 6) masked (position, rotation vector) from the link's pose to the goal, given every
+        link's pose pos (B', L, 3), quat (B', L, 4): world position, rotation in the link frame."""
+        link_quat = quat[:, self.link]
+        out = torch.zeros(pos.shape[0], 6, dtype=pos.dtype, device=pos.device)
         if self.pos is not None:
-            out[:, :3] = self.pos - point
+            out[:, :3] = self.pos - (pos[:, self.link] + (quat_to_mat(link_quat) @ self.point[:, None])[..., 0])
         if self.quat is not None:
-            conjugate = link_quat * torch.tensor([1.0, -1.0, -1.0, -1.0], dtype=point.dtype, device=point.device)
-            out[:, 3:] = rotation_vector(quat_mul(self.quat, conjugate))
+            conjugate = link_quat * torch.tensor([1.0, -1.0, -1.0, -1.0], dtype=pos.dtype, device=pos.device)
+            out[:, 3:] = rotation_vector(quat_mul(conjugate, self.quat))
         return out * self.mask
+
+    def rows(self, motions, pos, quat):
+        """(B', 6, n_dofs): the error's Jacobian rows, the rotation's in the link frame, masked."""
+        J = jacobian(motions, pos, quat, self.link, self.point)
+        turn = quat_to_mat(quat[:, self.link]).transpose(1, 2)
+        return torch.cat([J[:, :3], turn @ J[:, 3:]], 1) * self.mask[:, None]
 
 
 class _Joints:
-    """The entity's qpos layout for the solve: the qs of its scalar dofs (scalar) and their
-    limits, rad or m (±inf where none, or not respected)."""
+    """The solve's view of the entity's qpos: the qs of its scalar dofs, their limits (rad or m)
+    when respected, and which of them move (``moving``: local dofs given and on the path of a
+    goal's link; only they step, are clipped and are drawn again)."""
 
-    def __init__(self, entity, respect_limits):
+    def __init__(self, entity, respect_limits, moving):
         model = entity._solver.model
         dofs = entity.dof_start + np.arange(entity.n_dofs)
         first = 6 if entity.is_free else 0
         self.free = entity.is_free
         self.dofs = np.arange(first, entity.n_dofs)
         self.qs = model.dof_q[dofs[first:]] - entity.q_start
+        self.limited = respect_limits
         device = runtime.device
         self.lower = torch.as_tensor(model.dof_lower[dofs[first:]], dtype=runtime.tc_float, device=device)
         self.upper = torch.as_tensor(model.dof_upper[dofs[first:]], dtype=runtime.tc_float, device=device)
-        if not respect_limits:
-            self.lower, self.upper = torch.full_like(self.lower, -np.inf), torch.full_like(self.upper, np.inf)
+        self.moving = torch.as_tensor(moving[first:], device=device)
+        self.revolute = torch.as_tensor(model.link_jtype[model.dof_link[dofs[first:]]] == REVOLUTE, device=device)
+
+    def clipped(self, q):
+        """q with its moving scalar joints within their limits (when respected)."""
+        if not self.limited:
+            return q
+        q = q.clone()
+        inside = torch.maximum(torch.minimum(q[:, self.qs], self.upper), self.lower)
+        q[:, self.qs] = torch.where(self.moving, inside, q[:, self.qs])
+        return q
 
     def moved(self, q, step):
         """q (B', n_qs) moved by a dof-space step (B', n_dofs): a free base's position along the
         world axes and its quaternion turned about its own (q ⊗ exp(ω/2)), the scalar joints by
-        theirs, clipped to the limits."""
+        theirs, clipped."""
         q = q.clone()
         if self.free:
             q[:, :3] += step[:, :3]
@@ -118,20 +145,19 @@ class _Joints:
             turn = torch.cat([torch.cos(angle), half * torch.sinc(angle / np.pi)], dim=1)
             quat = quat_mul(q[:, 3:7], turn)
             q[:, 3:7] = quat / quat.norm(dim=1, keepdim=True)
-        scalar = q[:, self.qs] + step[:, self.dofs]
-        q[:, self.qs] = torch.maximum(torch.minimum(scalar, self.upper), self.lower)
-        return q
+        q[:, self.qs] = q[:, self.qs] + step[:, self.dofs]
+        return self.clipped(q)
 
-    def sample(self, q, generator, moving):
-        """q with its scalar joints among the local dofs ``moving`` (int array) drawn uniformly
-        within their limits ([−π, π] where unlimited)."""
-        lower = torch.where(torch.isfinite(self.lower), self.lower, -np.pi)
-        upper = torch.where(torch.isfinite(self.upper), self.upper, np.pi)
+    def sample(self, q, generator):
+        """q with its moving scalar joints drawn uniformly within their limits (a revolute joint
+        without limits in [−π, π]; a prismatic one without keeps its value)."""
+        finite = torch.isfinite(self.lower) & torch.isfinite(self.upper)
+        lower = torch.where(finite, self.lower, -np.pi)
+        upper = torch.where(finite, self.upper, np.pi)
         draw = lower + torch.rand(q.shape[0], len(self.qs), generator=generator, dtype=q.dtype).to(q.device) * (
             upper - lower)
-        drawn = torch.as_tensor(np.isin(self.dofs, moving), device=q.device)
         q = q.clone()
-        q[:, self.qs] = torch.where(drawn, draw, q[:, self.qs])
+        q[:, self.qs] = torch.where(self.moving & (finite | self.revolute), draw, q[:, self.qs])
         return q
 
 
@@ -146,42 +172,77 @@ def _poses_at(entity, q, envs):
     return links[..., 0:3], links[..., 3:7]
 
 
-def _norms(error):
-    """(B', 2): the largest position and rotation error over the goals, of errors (B', K, 6)."""
-    return torch.stack([error[..., :3].norm(dim=-1).amax(-1), error[..., 3:].norm(dim=-1).amax(-1)], -1)
+def _norms(errors):
+    """(B', K, 2): each goal's position and rotation error lengths, of errors (B', K, 6)."""
+    return torch.stack([errors[..., :3].norm(dim=-1), errors[..., 3:].norm(dim=-1)], -1)
+
+
+def checked_mask(mask, name, who):
+    """A mask of 3 booleans, as a list."""
+    values = list(mask) if isinstance(mask, (list, tuple, np.ndarray, torch.Tensor)) else None
+    if values is None or len(values) != 3 or not all(isinstance(v, (bool, np.bool_)) or v in (0, 1) for v in values):
+        raise InvalidInputError(f"{who} argument '{name}' must be 3 booleans, got {mask!r}")
+    return [bool(v) for v in values]
+
+
+def checked_options(who, **given):
+    """The solve's options, checked: limits respected or not (a bool), at least one sample,
+    iterations ≥ 0, damping and step size > 0, tolerances ≥ 0, a seed int or None."""
+    counts = {"max_samples": 1, "max_solver_iters": 0}
+    for name, least in counts.items():
+        value = given[name]
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+            raise InvalidInputError(f"{who} argument '{name}' must be an integer >= {least}, got {value!r}")
+    for name, positive in (("damping", True), ("max_step_size", True), ("pos_tol", False), ("rot_tol", False)):
+        value = given[name]
+        ok = isinstance(value, (int, float, np.floating)) and not isinstance(value, bool) and np.isfinite(value) \
+            and (value > 0 if positive else value >= 0)
+        if not ok:
+            raise InvalidInputError(f"{who} argument '{name}' must be a finite number {'> 0' if positive else '>= 0'}, "
+                                    f"got {value!r}")
+    if not isinstance(given["respect_joint_limit"], (bool, np.bool_)):
+        raise InvalidInputError(f"{who} argument 'respect_joint_limit' must be a bool, got "
+                                f"{given['respect_joint_limit']!r}")
+    seed = given["seed"]
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer))):
+        raise InvalidInputError(f"{who} argument 'seed' must be an integer or None, got {seed!r}")
+    return {name: (float(v) if name in ("damping", "max_step_size", "pos_tol", "rot_tol") else v)
+            for name, v in given.items()}
 
 
 def solve_ik(entity, goals, start, envs, dofs, options):
     """Damped least squares from ``start`` (B', n_qs) in the selected envs ``envs`` (int array),
-    moving the local dofs ``dofs``, toward every goal of ``goals``: (local link, Target, local
-    point (3,)) each, their errors and Jacobians stacked. options: respect_joint_limit,
-    max_samples, max_solver_iters, damping, pos_tol, rot_tol, max_step_size, seed. Returns (the
-    best qpos (B', n_qs) each env reached, its errors (B', K, 6))."""
-    motions, joints = DofMotions(entity), _Joints(entity, options["respect_joint_limit"])
+    moving the local dofs ``dofs`` (those on the goals' links' paths), toward every Target of
+    ``goals``, their errors and Jacobian rows stacked; each step's components clipped to
+    ±max_step_size. A start that does not converge is followed by another drawn within the limits
+    (when respected). The best qpos is one whose every goal's position and rotation error are no
+    worse (Genesis's rule). options: respect_joint_limit, max_samples, max_solver_iters, damping,
+    pos_tol, rot_tol, max_step_size, seed. Returns (the best qpos (B', n_qs), its errors (B', K, 6))."""
+    motions = DofMotions(entity)
+    on_path = np.logical_or.reduce([motions.on_path(target.link) for target in goals])
+    moving = on_path & np.isin(np.arange(entity.n_dofs), dofs)
+    joints = _Joints(entity, options["respect_joint_limit"], moving)
     generator = torch.Generator().manual_seed(0 if options["seed"] is None else int(options["seed"]))
-    moving = torch.zeros(entity.n_dofs, dtype=start.dtype, device=start.device)
-    moving[torch.as_tensor(dofs, device=start.device)] = 1.0
+    moving_columns = torch.as_tensor(moving, dtype=start.dtype, device=start.device)
     eye = torch.eye(6 * len(goals), dtype=start.dtype, device=start.device)
-    q, best_q, best_error = start.clone(), start.clone(), None
-    for _ in range(options["max_samples"]):
+    limit = options["max_step_size"]
+    q = best_q = joints.clipped(start)
+    best_error = None
+    for sample in range(options["max_samples"] if joints.limited else 1):
         for _ in range(options["max_solver_iters"] + 1):
             pos, quat = _poses_at(entity, q, envs)
-            error = torch.stack([target.error(pos[:, link] + (quat_to_mat(quat[:, link]) @ point[:, None])[..., 0],
-                                              quat[:, link]) for link, target, point in goals], 1)
+            error = torch.stack([target.error(pos, quat) for target in goals], 1)
             if best_error is None:
-                best_error = error
-            better = _norms(error).sum(1) < _norms(best_error).sum(1)
+                best_q, best_error = q.clone(), error
+            better = (_norms(error) <= _norms(best_error)).all(-1).all(-1)
             best_q[better], best_error[better] = q[better], error[better]
-            norms = _norms(best_error)
-            done = (norms[:, 0] <= options["pos_tol"]) & (norms[:, 1] <= options["rot_tol"])
+            worst = _norms(best_error).amax(1)
+            done = (worst[:, 0] <= options["pos_tol"]) & (worst[:, 1] <= options["rot_tol"])
             if bool(done.all()):
                 return best_q, best_error
-            J = torch.cat([jacobian(motions, pos, quat, link, point) * target.mask[:, None]
-                           for link, target, point in goals], 1) * moving
-            residual = error.reshape(error.shape[0], -1, 1)
+            J = torch.cat([target.rows(motions, pos, quat) for target in goals], 1) * moving_columns
             step = (J.transpose(1, 2) @ torch.linalg.solve(J @ J.transpose(1, 2) + options["damping"] ** 2 * eye,
-                                                           residual))[..., 0]
-            step = step * (options["max_step_size"] / step.norm(dim=1, keepdim=True).clamp_min(options["max_step_size"]))
-            q = joints.moved(q, step)
-        q = torch.where(done[:, None], best_q, joints.sample(start, generator, dofs))
+                                                           error.reshape(error.shape[0], -1, 1)))[..., 0]
+            q = joints.moved(q, step * (limit / step.abs().amax(1, keepdim=True).clamp_min(limit)))
+        q = torch.where(done[:, None], best_q, joints.sample(start, generator))
     return best_q, best_error

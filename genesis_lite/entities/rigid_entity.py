@@ -391,9 +391,11 @@ class RigidEntity(EntityIndexing):
         """Apply a force (N) and a torque (N·m) to links for the next step (Genesis's): ``force``,
         ``torque`` (n, 3) or (len(envs), n, 3); the force acts at ``pos`` (world, or with local an
         offset in the ref frame) else at the ref frame's origin: the link origin ("link_origin") or
-        its centre of mass ("link_com"); local: force, torque and pos in the ref frame's axes (the
-        link's). Calls before a step add up; the step applies them at each substep, the force at a
-        point fixed on the link, and then forgets them. Differentiable in force, torque and pos."""
+        its centre of mass ("link_com"); local: force, torque and pos in the link's axes (for
+        "link_com" too; Genesis takes its inertial frame's there). Calls before a step add up; the
+        step applies them at each substep as the call left them in world axes (the force's point
+        moves with the link origin, its offset does not turn with the link) and then forgets them.
+        Differentiable in force, torque and pos."""
         who = f"entity '{self.name}': apply_links_external_wrench"
         if force is None and torque is None:
             raise InvalidInputError(f"{who} expected 'force' or 'torque', got neither")
@@ -401,6 +403,8 @@ class RigidEntity(EntityIndexing):
             raise InvalidInputError(f"{who} argument 'pos' needs a 'force' (a torque acts the same anywhere)")
         if ref not in ("link_origin", "link_com"):
             raise InvalidInputError(f"{who} argument 'ref' must be 'link_origin' or 'link_com', got {ref!r}")
+        if not isinstance(local, (bool, np.bool_)):
+            raise InvalidInputError(f"{who} argument 'local' must be a bool, got {local!r}")
         links = self._local(links_idx_local, self.n_links, "links_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         origin = self._links(links, envs_idx, slice(0, 3))  # (len(envs), n, 3)
@@ -460,11 +464,13 @@ class RigidEntity(EntityIndexing):
         (or one per env) and turns the link to ``quat`` (4,) (w, x, y, z), world frame; None: that
         part is free. Genesis's arguments and defaults: damped least squares (damping) from
         init_qpos (else the current qpos) for at most max_solver_iters steps of at most
-        max_step_size, restarted from up to max_samples draws within the joint limits until the
-        position error ≤ pos_tol m and the rotation error ≤ rot_tol rad (masked by pos_mask,
-        rot_mask); only dofs_idx_local move. return_error: also the (…, 6) error (position m,
-        rotation vector rad) of the qpos returned, the best found. The scene's state is not
-        changed; not differentiable."""
+        max_step_size, restarted from up to max_samples draws within the joint limits (with
+        respect_joint_limit) until the position error ≤ pos_tol m and the rotation error ≤ rot_tol
+        rad; pos_mask: the world axes the position counts along, rot_mask: all three, or the one
+        axis of the link to align with the target's (entities/kinematics.py); only dofs_idx_local
+        move. return_error: also the (…, 6) error (position m, world; rotation vector rad, link
+        frame) of the qpos returned, the best found. The scene's state is not changed; not
+        differentiable."""
         out = self.inverse_kinematics_multilink(
             [link], None if pos is None else [pos], None if quat is None else [quat],
             None if local_point is None else [local_point], init_qpos, respect_joint_limit, max_samples,
@@ -493,6 +499,11 @@ class RigidEntity(EntityIndexing):
                                         f"{len(values)}")
             return values or [None] * len(links)
 
+        pos_mask = kinematics.checked_mask(pos_mask, "pos_mask", who)
+        rot_mask = kinematics.checked_mask(rot_mask, "rot_mask", who)
+        if sum(rot_mask) == 2:
+            raise InvalidInputError(f"{who} argument 'rot_mask' must align no axis, one or all three (as Genesis), "
+                                    f"got {rot_mask}")
         goals = []
         for link, pos, quat, point in zip(links, per_link(poss, "poss"), per_link(quats, "quats"),
                                           per_link(local_points, "local_points")):
@@ -501,17 +512,19 @@ class RigidEntity(EntityIndexing):
             if goal_quat is not None:
                 self._check_quat(goal_quat, "quat")
                 goal_quat = goal_quat / goal_quat.norm(dim=1, keepdim=True)
-            goals.append((self._own_link(link, "inverse_kinematics"),
-                          kinematics.Target(goal_pos, goal_quat, pos_mask, rot_mask),
-                          self._local_point(point, "inverse_kinematics")))
-        if not goals or all(target.pos is None and target.quat is None for _, target, _ in goals):
+            goals.append(kinematics.Target(self._own_link(link, "inverse_kinematics"),
+                                           self._local_point(point, "inverse_kinematics"), goal_pos, goal_quat,
+                                           pos_mask, rot_mask))
+        if not goals or all(target.pos is None and target.quat is None for target in goals):
             raise InvalidInputError(f"{who} expected a target 'pos' or 'quat', got neither")
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
+        if len(dofs) == 0:
+            raise InvalidInputError(f"{who} argument 'dofs_idx_local' must name at least one dof, got none")
         start = self._read(self._qpos_columns(), envs_idx).detach() if init_qpos is None else \
             self._values(init_qpos, self.n_qs, envs, "init_qpos").detach()
-        options = dict(respect_joint_limit=bool(respect_joint_limit), max_samples=int(max_samples),
-                       max_solver_iters=int(max_solver_iters), damping=float(damping), pos_tol=float(pos_tol),
-                       rot_tol=float(rot_tol), max_step_size=float(max_step_size), seed=seed)
+        options = kinematics.checked_options(who, respect_joint_limit=respect_joint_limit, max_samples=max_samples,
+                                   max_solver_iters=max_solver_iters, damping=damping, pos_tol=pos_tol,
+                                   rot_tol=rot_tol, max_step_size=max_step_size, seed=seed)
         qpos, error = kinematics.solve_ik(self, goals, start, envs, dofs, options)
         return (self._out(qpos), self._out(error)) if return_error else self._out(qpos)
 
