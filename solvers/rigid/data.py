@@ -159,7 +159,7 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
 # inexact_pair, inexact_env, inexact_substep: where the last inexact contact was (the backward's error names it).
 SIZES = ("B", "L", "D", "Q", "P", "E", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C", "R", "cone",
          "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged", "constrained",
-         "colliders_due", "inexact_pair", "inexact_env", "inexact_substep")
+         "colliders_due", "inexact_pair", "inexact_env", "inexact_substep", "wrench")
 HEADER = {name: k for k, name in enumerate(SIZES)}
 _REGIONS = [("i", False)] + [(a, g) for g in (False, True) for a in ("f", "v3", "v4", "m3")]  # (arena, gradients?)
 
@@ -268,7 +268,7 @@ class RigidData:
                      "ls_iterations": settings["ls_iterations"], "overflow": 0, "rows_needed": 0,
                      "HI": len(model.hull_int), "WS": int(_has_convex_pairs(model)), "inexact": 0,
                      "converged": int(bool(settings["converged"])), "constrained": 0,
-                     "colliders_due": 0, "inexact_pair": 0, "inexact_env": 0, "inexact_substep": 0}
+                     "colliders_due": 0, "inexact_pair": 0, "inexact_env": 0, "inexact_substep": 0, "wrench": 0}
         self.start, stop = layout(self.size)
         length = {a: stop[a, bool(requires_grad)] for a in ARENAS}  # no gradient storage without gradients
         if max(length.values()) >= 2 ** 31:  # indices inside kernels are 32-bit
@@ -390,6 +390,7 @@ class RigidView:
         self.elliptic = size["cone"] if cone is None else bool(cone)
         self.iterations, self.ls_iterations = size["iterations"], size["ls_iterations"]
         self.converged = size["converged"]
+        self.wrench = size["wrench"]  # 1 when the step's inputs hold an external wrench (xfrc)
         self.nonfinite = ArrayView(ints, HEADER["nonfinite"], (1,))  # set by the NaN check
         self.overflow = ArrayView(ints, HEADER["overflow"], (1,))  # set when contacts exceed their slots
         self.rows_needed = ArrayView(ints, HEADER["rows_needed"], (1,))  # set when an env's needs_rows is

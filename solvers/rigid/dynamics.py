@@ -65,10 +65,11 @@ def link_forces(d: ti.template(), s, e, l):
     fn, ff = inertia_mul(m, h, inertia, aw, av)
     pn, pf = inertia_mul(m, h, inertia, vw, vv)
     cn, cf = cross_force(vw, vv, pn, pf)
-    force, torque = _external(d, e, l)
-    lever = d.xpos[s, e, l] - reference(d, s, e, l)
-    # the up sweep adds the children's
-    d.cfrc_n[s, e, l], d.cfrc_f[s, e, l] = fn + cn - (torque + lever.cross(force)), ff + cf - force
+    if d.wrench:
+        force, torque = _external(d, e, l)
+        lever = d.xpos[s, e, l] - reference(d, s, e, l)
+        fn, ff = fn - (torque + lever.cross(force)), ff - force
+    d.cfrc_n[s, e, l], d.cfrc_f[s, e, l] = fn + cn, ff + cf  # the up sweep adds the children's
 
 
 @ti.func
@@ -187,13 +188,14 @@ def link_forces_adjoint(d: ti.template(), s, e, l):
                                                       gn.cross(vv) + gf.cross(vw))
         # the external wrench: ∂/∂τ = −gn, ∂/∂f = −gf − gn × lever, and the lever x_l − ref (as
         # everywhere, the reference's own gradient is left out: the dynamics do not depend on it)
-        force, _ = _external(d, e, l)
-        lever = d.xpos[s, e, l] - reference(d, s, e, l)
-        accumulate(d.xpos.grad, ti.Vector([s, e, l]), gn.cross(force))
-        g_force = -gf - gn.cross(lever)
-        for k in ti.static(range(3)):
-            accumulate(d.xfrc.grad, ti.Vector([e, 6 * l + k]), g_force[k])
-            accumulate(d.xfrc.grad, ti.Vector([e, 6 * l + 3 + k]), -gn[k])
+        if d.wrench:
+            force, _ = _external(d, e, l)
+            lever = d.xpos[s, e, l] - reference(d, s, e, l)
+            accumulate(d.xpos.grad, ti.Vector([s, e, l]), gn.cross(force))
+            g_force = -gf - gn.cross(lever)
+            for k in ti.static(range(3)):
+                accumulate(d.xfrc.grad, ti.Vector([e, 6 * l + k]), g_force[k])
+                accumulate(d.xfrc.grad, ti.Vector([e, 6 * l + 3 + k]), -gn[k])
         g_m = d.crb_m.grad[s, e, l] + gm + gm2
         g_h = d.crb_h.grad[s, e, l] + gh + gh2
         g_i = d.crb_i.grad[s, e, l] + gi + gi2

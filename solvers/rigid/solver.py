@@ -232,11 +232,17 @@ class RigidSolver(Solver):
         self.kernels.write_inputs(self._pack_inputs(inputs))
 
     def _note_inputs(self, inputs):
-        """Keep whether the inputs Taichi holds give some dof friction loss (a constraint row).
+        """Tell the kernels whether the inputs hold an external wrench (the header's "wrench": set
+        by apply_links_external_wrench, else the build's zeros, whose force stage and its
+        gradients the kernels then skip). Keep whether they give some dof friction loss (a
+        constraint row).
         Checked again only for another frictionloss tensor, or the same one changed in place by
         torch (which counts its versions; the entity setters always give a new tensor): a rollout
         passes the same one every step, and the check costs ~15 µs of torch amid a step
         (a tenth of a small robot's differentiable step)."""
+        wrench = int(inputs["xfrc"] is not self.default_inputs["xfrc"])
+        if int(self.data.header[HEADER["wrench"]]) != wrench:
+            self.data.header[HEADER["wrench"]] = wrench
         frictionloss = inputs["frictionloss"]
         seen = self._frictionloss_seen
         if frictionloss is not seen[0] or frictionloss._version != seen[1]:
