@@ -338,10 +338,8 @@ class Simulator:
         inverse-kinematics trial), without a graph. The scene's state stays, and so does its
         solve's warm start: uploading clears it, so it is held for the next upload of the
         scene's state (_sync_state)."""
-        slot = self.slot(solver)
-        current = self.state(solver)
-        if slot.held_warm_start is None:
-            slot.held_warm_start = (current, solver.warm_start())
+        self.state(solver)  # (read back where Taichi alone holds it)
+        self._hold_warm_start(self.slot(solver))
         with torch.no_grad():
             return self.read_derived(solver, state)
 
@@ -382,8 +380,14 @@ class Simulator:
         for slot in self.slots:
             if slot.held_contacts is None and hasattr(slot.solver, "contacts"):
                 slot.held_contacts = slot.solver.contacts()
-            if slot.held_warm_start is None and slot.uploaded_state is slot.state:
-                slot.held_warm_start = (slot.state, slot.solver.warm_start())
+            self._hold_warm_start(slot)
+
+    @staticmethod
+    def _hold_warm_start(slot):
+        """Keep the solver's warm start with the scene's state while Taichi holds that state (the
+        warm start is then the forward's), unless one is kept already."""
+        if slot.held_warm_start is None and slot.uploaded_state is slot.state:
+            slot.held_warm_start = (slot.state, slot.solver.warm_start())
 
     def _query(self, solver, what, compute):
         """``compute()`` at the current state and inputs, as a value whose backward raises when
