@@ -115,6 +115,7 @@ class RigidSolver(Solver):
                                                                         arenas, element_dims))
                                   for kind in detect.differentiable_kinds(m)]
         self.limited = contact.limited_dofs(self.model, options) > 0
+        self._wrench = 0  # the header's "wrench" flag as last written (the new arenas' is 0)
         self.default_inputs = self._default_inputs()
         self.upload_inputs(self.default_inputs)
 
@@ -241,8 +242,8 @@ class RigidSolver(Solver):
         passes the same one every step, and the check costs ~15 µs of torch amid a step
         (a tenth of a small robot's differentiable step)."""
         wrench = int(inputs["xfrc"] is not self.default_inputs["xfrc"])
-        if int(self.data.header[HEADER["wrench"]]) != wrench:
-            self.data.header[HEADER["wrench"]] = wrench
+        if wrench != self._wrench:  # (kept on the host: reading a GPU header would wait for the device)
+            self.data.header[HEADER["wrench"]] = self._wrench = wrench
         frictionloss = inputs["frictionloss"]
         seen = self._frictionloss_seen
         if frictionloss is not seen[0] or frictionloss._version != seen[1]:
