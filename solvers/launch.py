@@ -9,6 +9,7 @@ compiled kernel is shared by every scene (the scene's data are array arguments),
 per kernel, not per scene. It uses Taichi 1.7's kernel internals (``_primal``, ``arguments``,
 ``compiled_kernels``, ``make_launch_context``), which is why pyproject.toml pins taichi 1.7.*.
 """
+import contextlib
 import operator
 
 import taichi as ti
@@ -34,15 +35,33 @@ def _signature(args):
     return tuple((a.dtype, a.dim()) if isinstance(a, torch.Tensor) else int for a in args)
 
 
+@contextlib.contextmanager
+def taichi_opt_level(level):
+    """Taichi's opt_level for the kernels compiled inside (a kernel compiles at its first call):
+    0 skips Taichi's whole-kernel common-subexpression elimination (LLVM's own still runs), most
+    of Taichi's compile time on the largest kernels; 1 is Taichi's default. Set on the running
+    program's config and restored, as Taichi itself sets it (kernel_impl.py); the offline cache
+    keys a compiled kernel by it."""
+    config = impl.current_cfg()
+    before = config.opt_level
+    config.opt_level = level
+    try:
+        yield
+    finally:
+        config.opt_level = before
+
+
 class BoundKernel:
     """``kernel(template, *arrays, *args)``: a kernel with one compile-time argument, then a scene's
     arrays (contiguous torch tensors whose trailing ``element_dims`` dims are each element's shape,
     as the kernel annotates them), then Python ints and contiguous torch tensors. A tensor passed
     again as the same object is taken to be the same array: never resize or re-stride one in place
-    between launches (the solvers pass their own tensors)."""
+    between launches (the solvers pass their own tensors). opt_level: Taichi's for this kernel
+    (see ``taichi_opt_level``)."""
 
-    def __init__(self, kernel, template, arrays, element_dims):
+    def __init__(self, kernel, template, arrays, element_dims, opt_level=1):
         self.kernel, self.template, self.arrays = kernel, template, list(arrays)
+        self.opt_level = opt_level
         self.arrays_signature = _signature(self.arrays)
         self._check(self.arrays, impl.current_cfg().arch == ti.cuda, first=0)
         # what a launch context takes of each array (Taichi wants its shape without the element's)
@@ -73,8 +92,9 @@ class BoundKernel:
         entry = self.compiled.get(key)
         if entry is None or entry[0] is not program:
             self._check(args, program.config().arch == ti.cuda)
-            self.kernel(self.template, *self.arrays, *args)  # compiles and checks the arguments
-            self.compiled[key] = self._resolve(program, args)
+            with taichi_opt_level(self.opt_level):
+                self.kernel(self.template, *self.arrays, *args)  # compiles and checks the arguments
+                self.compiled[key] = self._resolve(program, args)
             return
         _, kernel, code, on_cuda = entry
         if self.scalars_only:

@@ -28,7 +28,9 @@ import pytest
 import taichi as ti
 
 import genesis_lite as gs
+from genesis_lite.solvers.launch import taichi_opt_level
 from genesis_lite.solvers.rigid.collision import convex as cv
+from genesis_lite.solvers.rigid.collision.detect import CONVEX_OPT_LEVEL
 from tests.collider_adjoint import N_COTANGENT, N_INPUTS, _unit3, _unit33
 from tests.test_colliders_convex import (MARGIN, TYPES, VEC3, _convex_cases, _geom, _Harness, _hull, _model,
                                          _random_quat)
@@ -341,12 +343,13 @@ def results():
     args = (batch["types"].astype(np.int32), batch["sizes"], batch["meshes"].astype(np.int32), batch["pos"],
             batch["rot"], batch["margins"], count, feature, cotangent)
     grad = np.zeros((n, K, N_INPUTS))
-    _adjoint_kernel(*args, harness.hull_vec, harness.hull_int, grad)
-    scan = {}
-    for eps in SCAN:
-        replay, fd = np.zeros((n, K, 7)), np.zeros((n, K, N_INPUTS))
-        _replay_kernel(*args, harness.hull_vec, harness.hull_int, eps, replay, fd)
-        scan[eps] = np.abs(grad - fd).max(axis=2) / np.maximum(1e-8, np.abs(fd).max(axis=2))
+    with taichi_opt_level(CONVEX_OPT_LEVEL):  # compiled as the solver compiles its convex kernels
+        _adjoint_kernel(*args, harness.hull_vec, harness.hull_int, grad)
+        scan = {}
+        for eps in SCAN:
+            replay, fd = np.zeros((n, K, 7)), np.zeros((n, K, N_INPUTS))
+            _replay_kernel(*args, harness.hull_vec, harness.hull_int, eps, replay, fd)
+            scan[eps] = np.abs(grad - fd).max(axis=2) / np.maximum(1e-8, np.abs(fd).max(axis=2))
     rows = [(i, k) for i in range(n) for k in range(count[i])]
     forward_rows = np.concatenate([position, normal, dist[..., None]], axis=2)
     return {"rows": rows, "names": names, "count": count, "feature": feature, "types": batch["types"],

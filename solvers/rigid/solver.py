@@ -101,18 +101,19 @@ class RigidSolver(Solver):
         m = self.model
         self.inexact_kinds = detect.inexact_kinds(m)  # pair kinds whose contacts may not be closed forms
         # (bit in the header's colliders_due mask, kernel) of each collider kernel
-        self.colliders = [(detect.KERNEL_BIT[kind], BoundKernel(step.collide, (schedule, kind), arenas, element_dims))
+        self.colliders = [(detect.KERNEL_BIT[kind], BoundKernel(step.collide, (schedule, kind), arenas, element_dims,
+                                                                detect.opt_level(kind)))
                           for kind in detect.kernel_kinds(m)]
         if self.data.size["converged"] and self.inexact_kinds:  # convex contacts → their closed forms
             self.colliders.append((detect.KERNEL_BIT[detect.ALL_CONVEX],
-                                   BoundKernel(step.converge, schedule, arenas, element_dims)))
+                                   BoundKernel(step.converge, schedule, arenas, element_dims, detect.CONVEX_OPT_LEVEL)))
         # the reverse of a substep, without and with the constraint stage
         solve_schedule, elliptic = self.data.solve_schedule, bool(settings["cone"])
         self.constrain = BoundKernel(step.constrain, (solve_schedule, elliptic), arenas, element_dims)
         self.reverse_kernel = [BoundKernel(step.reverse_dynamics, (schedule, 0, False), arenas, element_dims),
                                BoundKernel(step.reverse_dynamics, (solve_schedule, 1, elliptic), arenas, element_dims)]
         self.collider_reverses = [(detect.KERNEL_BIT[kind], BoundKernel(step.collide_adjoint, (schedule, kind),
-                                                                        arenas, element_dims))
+                                                                        arenas, element_dims, detect.opt_level(kind)))
                                   for kind in detect.differentiable_kinds(m)]
         self.limited = contact.limited_dofs(self.model, options) > 0
         self._wrench = 0  # the header's "wrench" flag as last written (the new arenas' is 0)
