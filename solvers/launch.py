@@ -19,7 +19,7 @@ from taichi.types.ndarray_type import NdarrayType
 
 from .core import InvalidInputError
 
-# kernel → {(template value, argument signature): (program, compiled kernel, code, on CUDA)}
+# kernel → {(template value, opt_level, argument signature): (program, compiled kernel, code, on CUDA)}
 _COMPILED = {}
 # launch contexts a kernel of scalar arguments keeps (one per argument tuple: substep, frame...)
 MAX_SCALAR_CONTEXTS = 256
@@ -88,7 +88,7 @@ class BoundKernel:
                 map(operator.is_, args, last[1])):
             program.launch_kernel(last[2], last[3])
             return
-        key = (self.template, self.arrays_signature + _signature(args))
+        key = (self.template, self.opt_level, self.arrays_signature + _signature(args))
         entry = self.compiled.get(key)
         if entry is None or entry[0] is not program:
             self._check(args, program.config().arch == ti.cuda)

@@ -2,10 +2,14 @@
 kernels' array arguments (solvers/rigid/data.py). Other robots, batch sizes, substep counts and
 time steps, and a second live scene of the same robot, reuse every compiled kernel; a contact
 scene compiles the collider of each pair kind it has once, for every later scene."""
+import pytest
 import torch
+import trimesh
 
 import genesis_lite as gs
 from genesis_lite.solvers.launch import _COMPILED
+from genesis_lite.solvers.rigid import step
+from genesis_lite.solvers.rigid.collision import detect
 from genesis_lite.solvers.rigid.data import SERIAL_SOLVE_WORK
 from tests.conftest import asset, pybullet
 from tests import test_contact_gradients
@@ -84,3 +88,43 @@ def test_contact_scenes_share_compiled_kernels(f64):
     compiled = _n_compiled()
     _boxes_on_plane([(0.1, 0.1, 0.1)] * 5, 3)
     assert _n_compiled() == compiled, "a new contact scene compiled kernels again"
+
+
+def _convex_rollout(mesh_file):
+    """Final positions and dL/dv0 of cylinders lying on a box with icosahedra on top (every convex
+    kernel: the collider, converge, the collider's reverse), float64, 2 envs, 60 steps."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, requires_grad=True))
+    scene.add_entity(gs.morphs.Box(pos=(0, 0, 0.05), size=(1, 1, 0.1), fixed=True))
+    bodies = []
+    for k in range(2):
+        bodies.append(scene.add_entity(gs.morphs.Cylinder(pos=(0.3 * k, 0, 0.149), radius=0.05, height=0.1,
+                                                          euler=(90, 10 * k, 0))))
+        bodies.append(scene.add_entity(gs.morphs.Mesh(file=mesh_file, pos=(0.3 * k, 0.01, 0.245))))
+    scene.build(n_envs=2)
+    v0 = torch.tensor([[0.2, 0.0, -0.1, 0.0, 0.3, 0.5], [0.0, 0.1, 0.0, 1.0, 0.0, 0.0]], dtype=torch.float64,
+                      requires_grad=True)
+    for body in bodies:
+        body.set_dofs_velocity(v0)
+    for _ in range(60):
+        scene.step()
+    positions = torch.stack([body.get_pos() for body in bodies])
+    (positions.pow(2).sum() + sum(body.get_quat()[:, 1:].sum() for body in bodies)).backward()
+    return positions.detach(), v0.grad
+
+
+@pytest.mark.slow
+def test_convex_kernels_compute_the_same_bits_at_taichi_default_opt_level(f64, tmp_path, monkeypatch):
+    """The convex kernels compile at Taichi's opt_level 0 (detect.CONVEX_OPT_LEVEL: no whole-kernel
+    common-subexpression elimination, two thirds of their compile time); a rollout through them
+    and its gradients are the same bits at Taichi's default, 1."""
+    mesh_file = str(tmp_path / "ico.obj")
+    trimesh.creation.icosphere(subdivisions=1, radius=0.05).export(mesh_file)
+    light = _convex_rollout(mesh_file)
+    monkeypatch.setattr(detect, "CONVEX_OPT_LEVEL", 1)
+    monkeypatch.setattr(detect, "opt_level", lambda kind: 1)
+    default = _convex_rollout(mesh_file)
+    levels = {key[1] for key in _COMPILED[step.collide] if key[0][1] == detect.ALL_CONVEX}
+    assert levels == {0, 1}, f"the convex collider compiled at opt_level {levels}"
+    assert light[1].abs().sum() > 0
+    for a, b in zip(light, default):
+        assert torch.equal(a, b), (a - b).abs().max()
