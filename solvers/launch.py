@@ -19,7 +19,7 @@ from taichi.types.ndarray_type import NdarrayType
 
 from .core import InvalidInputError
 
-# kernel → {(template value, opt_level, argument signature): (program, compiled kernel, code, on CUDA)}
+# kernel → {(template value, argument signature): (program, compiled kernel, code, on CUDA)}
 _COMPILED = {}
 # launch contexts a kernel of scalar arguments keeps (one per argument tuple: substep, frame...)
 MAX_SCALAR_CONTEXTS = 256
@@ -40,8 +40,9 @@ def taichi_opt_level(level):
     """Taichi's opt_level for the kernels compiled inside (a kernel compiles at its first call):
     0 skips Taichi's whole-kernel common-subexpression elimination (LLVM's own still runs), most
     of Taichi's compile time on the largest kernels; 1 is Taichi's default. Set on the running
-    program's config and restored, as Taichi itself sets it (kernel_impl.py); the offline cache
-    keys a compiled kernel by it."""
+    program's config and restored, as Taichi itself sets it (kernel_impl.py). The offline cache
+    keys a compiled kernel by it, but within a runtime Taichi keeps a kernel's first compile per
+    template value (its kernel key is made once): a kernel serves one level until Taichi restarts."""
     config = impl.current_cfg()
     before = config.opt_level
     config.opt_level = level
@@ -88,7 +89,7 @@ class BoundKernel:
                 map(operator.is_, args, last[1])):
             program.launch_kernel(last[2], last[3])
             return
-        key = (self.template, self.opt_level, self.arrays_signature + _signature(args))
+        key = (self.template, self.arrays_signature + _signature(args))
         entry = self.compiled.get(key)
         if entry is None or entry[0] is not program:
             self._check(args, program.config().arch == ti.cuda)

@@ -5,9 +5,10 @@ scene compiles the collider of each pair kind it has once, for every later scene
 import pytest
 import torch
 import trimesh
+from taichi.lang import impl
 
 import genesis_lite as gs
-from genesis_lite.solvers.launch import _COMPILED
+from genesis_lite.solvers.launch import _COMPILED, BoundKernel
 from genesis_lite.solvers.rigid import step
 from genesis_lite.solvers.rigid.collision import detect
 from genesis_lite.solvers.rigid.data import SERIAL_SOLVE_WORK
@@ -112,19 +113,40 @@ def _convex_rollout(mesh_file):
     return positions.detach(), v0.grad
 
 
+def _record_convex_compiles(monkeypatch):
+    """[(kernel name, opt_level)] of each convex kernel compiled (or loaded from the offline cache)
+    from now on: BoundKernel resolves a kernel's code once per Taichi runtime."""
+    compiled = []
+    resolve = BoundKernel._resolve
+
+    def recording(self, program, args):
+        if self.kernel is step.converge or (isinstance(self.template, tuple) and self.template[1] == detect.ALL_CONVEX):
+            compiled.append((self.kernel.__name__, impl.current_cfg().opt_level))
+        return resolve(self, program, args)
+    monkeypatch.setattr(BoundKernel, "_resolve", recording)
+    return compiled
+
+
 @pytest.mark.slow
+@pytest.mark.restarts
 def test_convex_kernels_compute_the_same_bits_at_taichi_default_opt_level(f64, tmp_path, monkeypatch):
     """The convex kernels compile at Taichi's opt_level 0 (detect.CONVEX_OPT_LEVEL: no whole-kernel
     common-subexpression elimination, two thirds of their compile time); a rollout through them
-    and its gradients are the same bits at Taichi's default, 1."""
+    and its gradients are the same bits at Taichi's default, 1. Taichi keeps a kernel's first
+    compile for its runtime's life, so each rollout runs in a new runtime."""
     mesh_file = str(tmp_path / "ico.obj")
     trimesh.creation.icosphere(subdivisions=1, radius=0.05).export(mesh_file)
-    light = _convex_rollout(mesh_file)
-    monkeypatch.setattr(detect, "CONVEX_OPT_LEVEL", 1)
-    monkeypatch.setattr(detect, "opt_level", lambda kind: 1)
-    default = _convex_rollout(mesh_file)
-    levels = {key[1] for key in _COMPILED[step.collide] if key[0][1] == detect.ALL_CONVEX}
-    assert levels == {0, 1}, f"the convex collider compiled at opt_level {levels}"
+    compiled = _record_convex_compiles(monkeypatch)
+    rollouts = []
+    for level in (detect.CONVEX_OPT_LEVEL, 1):
+        monkeypatch.setattr(detect, "CONVEX_OPT_LEVEL", level)
+        monkeypatch.setattr(detect, "opt_level", lambda kind, level=level: level if kind == detect.ALL_CONVEX else 1)
+        gs.destroy()
+        gs.init(precision="64", logging_level="warning")
+        rollouts.append(_convex_rollout(mesh_file))
+        assert sorted(compiled) == [(name, level) for name in ("collide", "collide_adjoint", "converge")]
+        compiled.clear()
+    light, default = rollouts
     assert light[1].abs().sum() > 0
     for a, b in zip(light, default):
         assert torch.equal(a, b), (a - b).abs().max()

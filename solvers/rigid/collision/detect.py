@@ -238,9 +238,10 @@ ALL_CONVEX = "convex"
 COLLIDERS[ALL_CONVEX] = (_convex_convex, False)
 # Taichi's opt_level for the convex kernels (ALL_CONVEX's collider and its reverse, and step.converge):
 # 0 skips Taichi's whole-kernel common-subexpression elimination, two thirds of their compile time
-# (float32, empty cache: the collider 43 → 15 s, its reverse 31 → 8 s, converge 6.7 → 2.9 s), at no
-# run time measured (GJK and EPA are branches and loops over the workspace; LLVM's own CSE still
-# runs). The other kernels keep 1: the constraint solve ran 3-5 % slower at 0.
+# (float32, empty cache: the collider 43 → 15 s, its reverse 31 → 8 s, converge 6.7 → 2.9 s), the
+# same bits and no measurable change in run time (GJK and EPA are branches and loops over the
+# workspace; LLVM's own CSE still runs). The other kernels keep 1: the constraint solve ran 3-5 %
+# slower at 0.
 CONVEX_OPT_LEVEL = 0
 
 
