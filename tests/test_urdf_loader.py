@@ -390,6 +390,29 @@ def test_safety_controller_gains_mimics_and_contact_warning(tmp_path, caplog):
     assert len(said) == 1 and "restitution, rolling_friction are not simulated" in said[0]
 
 
+@pytest.mark.parametrize("moments", [(1.0, 1.0, 1.9), (1.0, 1.0, 2.1), (0.3, 1.0, 1.29), (0.3, 1.0, 1.31),
+                                     (0.0, 1.0, 1.0)], ids=str)
+def test_an_inertia_breaking_the_triangle_inequality_warns_where_mujoco_rejects_it(tmp_path, caplog, moments):
+    """Principal moments with A + B < C belong to no rigid body: MuJoCo's compiler rejects them,
+    our loader simulates them as given and warns (Genesis loads such URDFs: pybullet_data's xArm
+    and mini cheetah have them). The tensor is given in a turned frame (off-diagonal terms)."""
+    turn = shapes.quat_to_mat(np.array([0.9, 0.3, -0.2, 0.25]) / np.linalg.norm([0.9, 0.3, -0.2, 0.25]))
+    inertia = turn @ np.diag(moments) @ turn.T
+    values = " ".join(f'{name}="{float(inertia[i, j])!r}"' for name, (i, j) in
+                      zip(("ixx", "iyy", "izz", "ixy", "ixz", "iyz"), ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))))
+    body = (LINK.format("a") + f'<link name="b"><inertial><mass value="1"/><inertia {values}/></inertial></link>'
+            + joint("j", "revolute", extra='<axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/>'))
+    path = write_urdf(tmp_path, body)
+    load_urdf(path)
+    warned = any("link 'b' inertial" in r.getMessage() and "triangle inequality" in r.getMessage()
+                 for r in caplog.records)
+    try:
+        _mujoco_model(path, tmp_path)
+        rejected = False
+    except ValueError as error:
+        rejected = "A + B >= C" in str(error)
+    assert warned == rejected == (moments[0] + moments[1] < moments[2])
+
 def test_a_mimic_on_a_fixed_joint_warns(tmp_path, caplog):
     body = (LINK.format("a") + LINK.format("b") + LINK.format("c") + joint("j", "revolute")
             + joint("f", "fixed", "b", "c", extra='<mimic joint="j"/>'))

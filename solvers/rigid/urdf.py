@@ -471,6 +471,10 @@ def _inertial(ctx: _Context, link, geoms: list, rho: float):
     if moments[0] < -_INERTIA_RTOL * max(abs(moments[-1]), 1e-300):
         raise ctx.error(f"{what} inertia expected positive semi-definite (principal moments "
                         f">= 0), got principal moments {moments.tolist()}")
+    if moments[0] + moments[1] < moments[2] * (1.0 - _INERTIA_RTOL):  # (ascending: the one that can fail)
+        ctx.warnings.append(f"{what}: its principal moments {moments.tolist()} break the triangle inequality "
+                            f"A + B >= C that every rigid body's satisfy (MuJoCo's compiler rejects such an "
+                            f"inertia); simulated as given")
     return mass, com, inertia
 
 
