@@ -343,7 +343,7 @@ def results():
     args = (batch["types"].astype(np.int32), batch["sizes"], batch["meshes"].astype(np.int32), batch["pos"],
             batch["rot"], batch["margins"], count, feature, cotangent)
     grad = np.zeros((n, K, N_INPUTS))
-    with taichi_opt_level(CONVEX_OPT_LEVEL):  # as the solver compiles its convex kernels (plane–mesh: at 1; same bits)
+    with taichi_opt_level(CONVEX_OPT_LEVEL):  # as the solver compiles convex kernels (plane–mesh: 1; same bits)
         _adjoint_kernel(*args, harness.hull_vec, harness.hull_int, grad)
         scan = {}
         for eps in SCAN:
