@@ -523,8 +523,8 @@ class RigidEntity(EntityIndexing):
         start = self._read(self._qpos_columns(), envs_idx).detach() if init_qpos is None else \
             self._values(init_qpos, self.n_qs, envs, "init_qpos").detach()
         options = kinematics.checked_options(who, respect_joint_limit=respect_joint_limit, max_samples=max_samples,
-                                   max_solver_iters=max_solver_iters, damping=damping, pos_tol=pos_tol,
-                                   rot_tol=rot_tol, max_step_size=max_step_size, seed=seed)
+                                             max_solver_iters=max_solver_iters, damping=damping, pos_tol=pos_tol,
+                                             rot_tol=rot_tol, max_step_size=max_step_size, seed=seed)
         qpos, error = kinematics.solve_ik(self, goals, start, envs, dofs, options)
         return (self._out(qpos), self._out(error)) if return_error else self._out(qpos)
 
