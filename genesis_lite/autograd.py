@@ -102,12 +102,14 @@ def _check_generation(sim, generation, what):
 
 class _Step(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, sim, rollout, index, kept, n_states, *tensors):
-        states, inputs = tensors[:n_states], tensors[n_states:]
+    def forward(ctx, sim, rollout, index, kept, inputs, wanted, *states_and_tracked):
+        n_states = len(states_and_tracked) - sum(wanted)
+        states = states_and_tracked[:n_states]
         outs = sim.forward_step(states, inputs, record=kept)
         ctx.sim, ctx.rollout, ctx.index, ctx.n_states, ctx.kept = weakref.ref(sim), rollout, index, n_states, kept
+        ctx.wanted = wanted
         rollout.record(index, states, inputs, kept, tuple(sim.started_from))
-        saved, replay = list(tensors if kept else inputs), []
+        saved, replay = list((*states, *inputs) if kept else inputs), []
         if kept:  # each solver's replay record, or where it has none the warm start its step started from
             records = tuple(sim.replay_records)
             warm_starts = tuple(None if record is not None else warm for warm, record in zip(sim.started_from, records))
@@ -133,10 +135,11 @@ class _Step(torch.autograd.Function):
             (states, warm_starts, records), inputs = ctx.rollout.start_states(ctx.index), saved
         with torch.no_grad():
             try:
-                grads = sim.backward_step(states, inputs, grad_states, warm_starts, records)
+                grads = sim.backward_step(states, inputs, grad_states, warm_starts, records, ctx.wanted)
             except GradientError as error:  # (which step of the rollout)
                 raise GradientError(f"step {ctx.index}'s backward: {error}") from None
-        return (None, None, None, None, None, *_first_order(f"step {ctx.index}", grads, (*grad_states, *saved)))
+        grads = (*grads[: ctx.n_states], *(g for g, w in zip(grads[ctx.n_states:], ctx.wanted) if w))
+        return (None,) * 6 + _first_order(f"step {ctx.index}", grads, (*grad_states, *saved))
 
 
 def _flatten(tree, tensors):
@@ -160,8 +163,13 @@ def _unflatten(layout, tensors):
 
 
 def step(sim, rollout, index, states, inputs):
-    """Run one differentiable step; returns the new states (tuple of tensors)."""
-    outs = _Step.apply(sim, rollout, index, rollout.keeps_state(index, states), len(states), *states, *inputs)
+    """Run one differentiable step; returns the new states (tuple of tensors). The node's tensor
+    arguments are the states and the inputs that require grad; the other inputs (most of ~20
+    parameters and controls a step) reach it in a tuple: torch's bookkeeping costs per tensor
+    argument, in the forward and again in the backward."""
+    wanted = tuple(t.requires_grad for t in inputs)
+    tracked = (t for t, w in zip(inputs, wanted) if w)
+    outs = _Step.apply(sim, rollout, index, rollout.keeps_state(index, states), inputs, wanted, *states, *tracked)
     rollout.stepped(outs)
     return outs
 

@@ -53,6 +53,7 @@ class Simulator:
         self.options = sim_options
         self.requires_grad = sim_options.requires_grad
         self.slots = [SolverSlot(s) for s in solvers]
+        self._slot_of = {slot.solver: slot for slot in self.slots}  # (setters and getters look one up)
         self.generation = 0
         self.step_index = 0
         self.rollout = None
@@ -72,7 +73,7 @@ class Simulator:
 
     # -- state and inputs ---------------------------------------------------------------------
     def slot(self, solver):
-        return next(s for s in self.slots if s.solver is solver)
+        return self._slot_of[solver]
 
     def state(self, solver):
         slot = self.slot(solver)
@@ -252,10 +253,11 @@ class Simulator:
                 solver.substep_post_coupling(s)
         return [solver.end_step(download) for solver in solvers]
 
-    def backward_step(self, states, flat_inputs, grad_states, warm_starts, records):
-        """Gradients of one step's states and flat inputs, given the gradients of its outputs and,
-        per solver, its replay record or else the warm start it started from (its replay then
-        repeats it exactly; None for both where the solver needs neither)."""
+    def backward_step(self, states, flat_inputs, grad_states, warm_starts, records, wanted):
+        """Gradients of one step's states and flat inputs (None for an input whose ``wanted`` flag
+        is False), given the gradients of its outputs and, per solver, its replay record or else
+        the warm start it started from (its replay then repeats it exactly; None for both where
+        the solver needs neither)."""
         split = self._split_inputs(flat_inputs)
         self.hold_before_backward()
         try:
@@ -268,10 +270,10 @@ class Simulator:
             for slot in self.slots:
                 slot.uploaded_state = slot.uploaded_inputs = None  # Taichi holds this old step now
                 slot.solver.end_backward()
-        grads_states, grads_inputs = [], []
+        grads_states, grads_inputs, wanted = [], [], iter(wanted)
         for inputs, (grad_state, grad_inputs) in zip(split, results):
             grads_states.append(grad_state)
-            grads_inputs.extend(grad_inputs.get(name) for name in inputs)
+            grads_inputs.extend(grad_inputs.get(name) if next(wanted) else None for name in inputs)
         return (*grads_states, *grads_inputs)
 
     def _backward_shared(self, states, inputs, grad_states, warm_starts, records):

@@ -24,6 +24,7 @@ between, which a solver may fuse into fewer launches (the rigid solver takes a c
 in one launch, the MPM solver a substep in one). The simulator picks (genesis_lite/simulator.py).
 Fused or not, a step gives the same bits: the same stage functions run in the same order.
 """
+from collections.abc import Mapping
 
 
 class Solver:
@@ -106,7 +107,8 @@ class Solver:
         raise NotImplementedError
 
     def end_reverse(self):
-        """(grad of the start state (B, width), {name: grad (B, width)} for grad_input_names)."""
+        """(grad of the start state (B, width), {name: grad (B, width)} for grad_input_names: a
+        dict or a GradColumns)."""
         raise NotImplementedError
 
     # -- one step, alone ------------------------------------------------------------------------
@@ -158,3 +160,23 @@ class Solver:
     def destroy(self):
         """Free the solver's arrays."""
         raise NotImplementedError
+
+
+class GradColumns(Mapping):
+    """{input name: its (B, width) gradient}, a read-only mapping of column views of one (B, total)
+    tensor made when looked up: a step's backward wants the few inputs that require grad, of ~20
+    (a view costs about a microsecond, all of them a tenth of a small robot's backward step)."""
+
+    def __init__(self, grads, spans):
+        """grads (B, total); spans: name → (first column, end column)."""
+        self.grads, self.spans = grads, spans
+
+    def __getitem__(self, name):
+        first, end = self.spans[name]
+        return self.grads[:, first:end]
+
+    def __iter__(self):
+        return iter(self.spans)
+
+    def __len__(self):
+        return len(self.spans)

@@ -114,10 +114,12 @@ class EntityIndexing:
             raise InvalidInputError(f"{self._who}: argument '{arg}' must be real numbers of shape {expected}, "
                                     f"got {kind}")
         if isinstance(value, torch.Tensor):
-            if value.device.type == "meta":
+            if value.is_meta:
                 raise InvalidInputError(f"{self._who}: argument '{arg}' must hold values (a tensor on {runtime.device} "
                                         f"or another device with data), got a tensor on the meta device")
-            return value.as_subclass(torch.Tensor).to(device=runtime.device, dtype=runtime.tc_float)
+            if type(value) is not torch.Tensor:  # (gs tensors and other subclasses)
+                value = value.as_subclass(torch.Tensor)
+            return value.to(device=runtime.device, dtype=runtime.tc_float)
         return torch.as_tensor(array.astype(np.float64), dtype=runtime.tc_float, device=runtime.device)
 
     def _values(self, value, n_cols, envs, arg, infinite=False):
@@ -136,4 +138,4 @@ class EntityIndexing:
             what = "free of NaN" if infinite else "finite"
             raise InvalidInputError(f"{self._who}: argument '{arg}' must be {what}, got "
                                     f"{tensor.detach().cpu().numpy()}")
-        return tensor.reshape(len(envs), n_cols)
+        return tensor if tensor.dim() == 2 else tensor.reshape(len(envs), n_cols)

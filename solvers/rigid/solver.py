@@ -7,7 +7,7 @@ dofs at step time.
 import numpy as np
 import torch
 
-from ..base import Solver
+from ..base import GradColumns, Solver
 from ..core import AssetError, GradientError, SimulationError, runtime
 from ..launch import BoundKernel, BoundKernels
 from . import contact, step
@@ -79,6 +79,8 @@ class RigidSolver(Solver):
         self.grad_input_names = tuple(self.data.grad_input_names)
         # column widths of backward's output: state gradient, then each differentiable input's
         self.grad_widths = [self.state_width] + [self.data.width(name) for name in self.grad_input_names]
+        ends = np.cumsum(self.grad_widths).tolist()
+        self._grad_spans = {name: (ends[k], ends[k + 1]) for k, name in enumerate(self.grad_input_names)}
         state = self._initial_state()
         self.upload_state(state)
         return state
@@ -264,9 +266,11 @@ class RigidSolver(Solver):
         being fixed there (runtime.keep_large_blocks_off_the_heap): its page faults cost a KUKA's
         256-env differentiable rollout 18 %.)"""
         parts = [*before, *(inputs[name] for name in INPUTS), *after]
-        width = sum(part.shape[1] for part in parts)
+        width = self.data.input_total + sum(part.shape[1] for part in (*before, *after))
         if width not in self._packed:
             self._packed[width] = self._empty(width)
+        if not torch.is_grad_enabled():  # (a step's forward and backward: no context to enter)
+            return torch.cat(parts, dim=1, out=self._packed[width])
         with torch.no_grad():
             return torch.cat(parts, dim=1, out=self._packed[width])
 
@@ -460,8 +464,9 @@ class RigidSolver(Solver):
         return self._split_grads(self._grads)
 
     def _split_grads(self, out):
-        parts = out.split_with_sizes(self.grad_widths, dim=1)
-        return parts[0], dict(zip(self.grad_input_names, parts[1:]))
+        """(the state's gradient, the inputs' as a GradColumns) from out (B, sum(grad_widths)); the
+        inputs' views are made when asked for (a step's backward wants a few of ~20)."""
+        return out[:, :self.state_width], GradColumns(out, self._grad_spans)
 
     # -- derived quantities at the uploaded state ----------------------------------------------
     def links_kinematics(self):
