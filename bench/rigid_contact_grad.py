@@ -22,10 +22,10 @@ step (ms); "bwd/fwd" = (fwd+bwd − fwd) / fwd of the best times; "spread" = (wo
 over the repeats; "no-grad fwd" is the same rollout in a scene built without requires_grad.
 One warm-up rollout (compilation) before ``--repeats`` timed ones.
 
-The a1 keeps self-collision on in both engines. Its cylinder–cylinder and cylinder–box self-pairs go
-through our convex collider, whose contacts have exact gradients but for a few features (two
-cylinders touching rim on rim, among others), where a backward raises GradientError. Standing, the a1 never touches itself (its contacts
-are the feet on the plane).
+The a1 keeps self-collision on in both engines. Its cylinder–cylinder and cylinder–box self-pairs
+go through our convex collider, whose contacts have exact gradients but for a few features (two
+cylinders touching rim on rim, among others), where a backward raises GradientError. Standing,
+the a1 never touches itself (its contacts are the feet on the plane).
 
 Genesis (``genesis-world`` 1.4.5) runs the same scenes and v0 (written to .npz files) in its own
 interpreter, this script with ``--peer``: this interpreter if it imports ``genesis``, else
