@@ -34,6 +34,7 @@ class SolverSlot:
         self.solver = solver
         self.state = None  # (B, width) torch tensor; None: read lazily from Taichi
         self.inputs = None  # name → (B, width)
+        self.input_names = ()  # the inputs' names in the solver's default_inputs order (set at build)
         self.uploaded_state = None  # the tensor Taichi's frame 0 equals (None: unknown)
         self.uploaded_inputs = None  # ((tensor, ...), (version, ...)): Taichi's inputs equal
         self.derived = None  # (state, value) cache of the last derived read
@@ -64,6 +65,7 @@ class Simulator:
     def build(self, n_envs):
         for slot in self.slots:
             slot.initial_state = slot.solver.build(n_envs)
+            slot.input_names = tuple(slot.solver.default_inputs)
             # when nothing (scene or autograd graph) can reach this simulator any more, its
             # solvers' arrays are freed (a graph's nodes may still hold a solver object)
             weakref.finalize(self, slot.solver.destroy)
@@ -203,14 +205,14 @@ class Simulator:
                            f"it get none through it)")
 
     def _grad_inputs(self):
-        return tuple(slot.inputs[name] for slot in self.slots for name in slot.solver.default_inputs)
+        """Every solver's inputs, in its default_inputs' order, as one tuple."""
+        return tuple(value for slot in self.slots for value in map(slot.inputs.__getitem__, slot.input_names))
 
     def _split_inputs(self, flat):
         out, k = [], 0
         for slot in self.slots:
-            names = list(slot.solver.default_inputs)
-            out.append(dict(zip(names, flat[k: k + len(names)])))
-            k += len(names)
+            out.append(dict(zip(slot.input_names, flat[k: k + len(slot.input_names)])))
+            k += len(slot.input_names)
         return out
 
     def warm_starts(self):

@@ -285,6 +285,7 @@ class RigidData:
         self.header = self.arenas[0].numpy() if self.arenas[0].device.type == "cpu" else self.arenas[0]
         self.flags_on_host = isinstance(self.header, np.ndarray)  # a read costs no wait for a device
         self._frame_views = {}  # (name, s) → frame()'s view, made once (a step reads some every time)
+        self._env_views = {}  # name → per_env()'s view, likewise
 
     def _fill(self, values, model, consts):
         """Header, model and consts (CONSTS) into the arenas."""
@@ -312,10 +313,12 @@ class RigidData:
         return flag
 
     def per_env(self, name):
-        """The (B, count) torch view of a PER_ENV array."""
-        arena, count = PER_ENV[name]
-        begin, n = self.start[f"env:{name}"], self.size["B"] * _counts(self.size)[count]
-        return self.arenas[ARENAS.index(arena)][begin: begin + n].view(self.size["B"], -1)
+        """The (B, count) torch view of a PER_ENV array (made once: a contact step reads one twice)."""
+        if name not in self._env_views:
+            arena, count = PER_ENV[name]
+            begin, n = self.start[f"env:{name}"], self.size["B"] * _counts(self.size)[count]
+            self._env_views[name] = self.arenas[ARENAS.index(arena)][begin: begin + n].view(self.size["B"], -1)
+        return self._env_views[name]
 
     def frame(self, name, s):
         """The (B, count) torch view of frame s of a FRAMES array (its values)."""
