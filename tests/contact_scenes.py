@@ -130,3 +130,20 @@ def a1_mujoco(path, z, stand, kp, kv, dt):
     d = mujoco.MjData(m)
     d.qpos[7:] = d.ctrl[:] = stand
     return m, d
+
+
+# Two box fingers on prismatic joints of a fixed palm (sliding leaves: MuJoCo's body_simple 2)
+GRIPPER = """<?xml version="1.0"?>
+<robot name="gripper">
+  <link name="palm"><inertial><mass value="1.0"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/>
+    </inertial><collision><origin xyz="0 0 0.2"/><geometry><box size="0.05 0.2 0.02"/></geometry></collision></link>
+  <link name="left"><inertial><mass value="0.02"/><inertia ixx="1e-5" iyy="1e-5" izz="1e-5" ixy="0" ixz="0" iyz="0"/>
+    </inertial><collision><geometry><box size="0.02 0.01 0.05"/></geometry></collision></link>
+  <link name="right"><inertial><mass value="0.03"/><inertia ixx="2e-5" iyy="1.5e-5" izz="1e-5" ixy="0" ixz="0"
+    iyz="0"/></inertial><collision><geometry><box size="0.02 0.01 0.05"/></geometry></collision></link>
+  <joint name="left_slide" type="prismatic"><parent link="palm"/><child link="left"/><origin xyz="0 0.025 0.1"/>
+    <axis xyz="0 -1 0"/><limit lower="-0.05" upper="0.05" effort="100" velocity="1"/></joint>
+  <joint name="right_slide" type="prismatic"><parent link="palm"/><child link="right"/><origin xyz="0 -0.025 0.1"/>
+    <axis xyz="0 1 0"/><limit lower="-0.05" upper="0.05" effort="100" velocity="1"/></joint>
+</robot>
+"""

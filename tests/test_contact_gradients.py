@@ -24,6 +24,7 @@ import genesis_lite as gs
 from genesis_lite.solvers.rigid.data import SERIAL_SOLVE_WORK
 from genesis_lite.solvers.rigid.solver import REPLAY_RECORD_STATES
 from tests.conftest import pybullet
+from tests.contact_scenes import GRIPPER
 from tests.fd_scan import assert_converged, directional_errors
 
 _SCENES = {}
@@ -810,3 +811,30 @@ def test_a_mesh_resting_on_a_mesh_by_a_polygon_vertex(f64, tmp_path):
         return (body.get_pos() * torch.tensor([1.0, -0.7, 3.0])).sum() + (body.get_quat() * 0.3).sum()
 
     assert_converged(directional_errors(loss, start), "mesh on mesh")
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_finger_masses_reach_a_squeezed_cube_through_the_sliding_leaves_scale(f64, cone, tmp_path):
+    """The fingers' masses → where a cube they squeeze slips to: a sliding leaf's contact rows are
+    scaled by 1 / its mass (MuJoCo's body_simple 2; contact.sliding_leaves), so the mass reaches
+    the rows' R there as well as M. Central FD, eps scan (fails with that 1 / mass held constant)."""
+    path = tmp_path / "gripper.urdf"
+    path.write_text(GRIPPER)
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, requires_grad=True), show_viewer=False,
+                     rigid_options=gs.options.RigidOptions(friction_cone=cone))
+    gripper = scene.add_entity(gs.morphs.URDF(file=str(path), fixed=True))
+    cube = scene.add_entity(gs.morphs.Box(size=(0.04, 0.04, 0.04), pos=(0.0, 0.0, 0.1)))
+    scene.build()
+    assert scene.rigid_solver.invweight_basis.simple_links.tolist() == [1, 2]
+    fingers = [link.idx_local for link in gripper.links if link.name in ("left", "right")]
+
+    def loss(masses):
+        scene.reset()
+        gripper.set_links_mass(masses, fingers)
+        gripper.control_dofs_force(torch.tensor([0.5, 0.4], dtype=torch.float64))
+        _roll(scene, 40)
+        return 1e3 * (cube.get_pos() * torch.tensor([1.0, 2.0, 3.0])).sum()
+    try:
+        assert_converged(directional_errors(loss, torch.tensor([0.02, 0.03], dtype=torch.float64)), f"{cone} masses")
+    finally:
+        scene.destroy()

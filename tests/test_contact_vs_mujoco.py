@@ -14,7 +14,7 @@ import pytest
 import torch
 
 import genesis_lite as gs
-from tests.contact_scenes import Body, ContactScene, build_mujoco, build_ours
+from tests.contact_scenes import GRIPPER, Body, ContactScene, build_mujoco, build_ours
 
 N_STATES = 24
 rng_seed = 7
@@ -249,3 +249,45 @@ def test_bounding_radii_are_mujocos_bits(f64):
                     for h in halves)
     m = mujoco.MjModel.from_xml_string(f"<mujoco><worldbody>{geoms}</worldbody></mujoco>")
     assert np.array_equal(scene.rigid_solver.model.geom_rbound, m.geom_rbound)
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_a_gripper_squeezing_a_cube_moves_as_mujoco(f64, cone, tmp_path):
+    """Two prismatic fingers on a fixed palm (sliding leaves: MuJoCo scales their contact rows by
+    1 / mass, tests/test_dynamics_vs_mujoco.py) squeeze a free cube with constant forces while it
+    slips down between them: 1 s against MuJoCo loading the same URDF stays within 1e-10 (with
+    the fingers' rows scaled as every other body's: 3e-4 to 5e-4 m apart)."""
+    path = tmp_path / "gripper.urdf"
+    path.write_text(GRIPPER)
+    dt, force, steps = 0.002, np.array([0.5, 0.4]), 500
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=dt), show_viewer=False,
+                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True, friction_cone=cone))
+    gripper = scene.add_entity(gs.morphs.URDF(file=str(path), fixed=True))
+    cube = scene.add_entity(gs.morphs.Box(size=(0.04, 0.04, 0.04), pos=(0.0, 0.0, 0.1)))
+    scene.build()
+    try:
+        model = scene.rigid_solver.model
+        spec = mujoco.MjSpec.from_file(str(path))
+        spec.compiler.fusestatic = True
+        spec.option.timestep = dt
+        spec.option.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL if cone == "pyramidal" else mujoco.mjtCone.mjCONE_ELLIPTIC
+        body = spec.worldbody.add_body(name="cube", pos=[0.0, 0.0, 0.1], mass=float(model.link_mass0[-1]),
+                                       inertia=np.diag(model.link_inertia0[-1]).tolist())
+        body.explicitinertial, body.ipos = True, [0.0, 0.0, 0.0]  # (unset, it compiled 0.1 m off the origin)
+        body.add_freejoint()
+        body.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.02, 0.02, 0.02])
+        m = spec.compile()
+        assert [int(m.body(name).simple[0]) for name in ("left", "right")] == [2, 2]
+        d = mujoco.MjData(m)
+        d.qfrc_applied[:2] = force
+        gripper.control_dofs_force(force)
+        worst = 0.0
+        for _ in range(steps):
+            scene.step()
+            mujoco.mj_step(m, d)
+            ours = np.concatenate([gripper.get_qpos().numpy(), cube.get_qpos().numpy()])
+            worst = max(worst, np.abs(ours - d.qpos).max())
+        assert d.qpos[4] < 0.1 - 1e-3  # the cube slipped (2-4 mm)
+        assert worst < 1e-10, f"max |qpos - MuJoCo's| over 1 s: {worst:.3g}"
+    finally:
+        scene.destroy()

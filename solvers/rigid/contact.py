@@ -10,9 +10,11 @@ import torch
 
 from ..core import InvalidInputError, runtime
 from .collision.detect import BUDGET, COLLIDERS
+from .model import PRISMATIC
 from .constraint.rows import DEFAULT_SOLIMP, SMOOTH_SOLIMP  # noqa: F401 (the geoms' defaults, read by solver.py)
 
 _logger = logging.getLogger("genesis_lite")
+MINVAL = 1e-15  # MuJoCo's mjMINVAL: the least mass a sliding leaf's 1 / mass divides by
 MAX_PER_MOVING_LINK = 8  # default max_contacts: a box resting on a face touches at up to 8 points
 MIN_CONTACTS = 16
 
@@ -83,7 +85,9 @@ class InvweightBasis:
     - invweight_t per link (1/kg): the mean of the translational diagonal of J_l M⁻¹ J_lᵀ; zero for
       links welded to the world (the rotational one is not read: condim ≤ 3);
     - invweight_dof per dof: the diagonal of M⁻¹, averaged over a free joint's three translations
-      and its three rotations.
+      and its three rotations;
+    - but on a sliding leaf (``sliding_leaves``: MuJoCo's body_simple = 2), 1 / mass for both, as
+      MuJoCo takes them there (armature left out).
     M is block-diagonal over the kinematic trees (a link's Jacobian is non-zero on its tree's dofs
     only), so everything is kept and inverted per tree, trees of one shape batched together: a
     dense (links, dofs, dofs) K made a scene of 192 free bodies take 14 s and 4 GB to build, and
@@ -114,6 +118,10 @@ class InvweightBasis:
             self.groups.append([torch.as_tensor(a, device=runtime.device) for a in (links, dofs)]
                                + [torch.as_tensor(a, dtype=torch.float64, device=runtime.device)
                                   for a in (K, J[:, :, :3] * moving[:, :, None, None], average)])
+        simple = sliding_leaves(m)
+        self.simple_links = torch.as_tensor(np.flatnonzero(simple), device=runtime.device)
+        self.simple_dofs = torch.as_tensor(np.flatnonzero(simple[m.dof_link]), device=runtime.device)
+        self.simple_dof_links = torch.as_tensor(m.dof_link[self.simple_dofs.cpu().numpy()], device=runtime.device)
 
     def __call__(self, mass, armature, check_positive_definite):
         """(invweight_t (B, L), invweight_dof (B, D)) in mass's dtype, from mass (B, L) kg and armature
@@ -143,7 +151,46 @@ class InvweightBasis:
             per_dof = per_dof.index_put((dofs.flatten(),),
                                         torch.einsum("ti,tij->tj", torch.diagonal(inverse, dim1=1, dim2=2),
                                                      average).flatten())
+        if len(self.simple_links):
+            inverse_mass = 1.0 / mass.clamp(min=MINVAL)
+            translational = translational.index_put((self.simple_links,), inverse_mass[self.simple_links])
+            per_dof = per_dof.index_put((self.simple_dofs,), inverse_mass[self.simple_dof_links])
         return translational, per_dof
+
+
+def sliding_leaves(model):
+    """(L,) bool: the links whose rows' scale MuJoCo takes as 1 / mass (its body_simple = 2, which
+    mj_setConst special-cases), those that
+    - move on prismatic joints only, each along a link axis (one axis component above 1e-14);
+    - carry no other link (a leaf) and hang from the world or from a link welded to it directly;
+    - have their centre of mass at the link origin (1e-6 m) and their principal axes along the
+      link's, in descending order of moment: MuJoCo compiles the inertia into a principal frame
+      whose axes it orders by descending moment, and takes a body as simple only where that
+      frame is the link's own (to 1e-6 of a unit quaternion: no Jacobi rotation wider than
+      2e-6 rad; off-diagonal entries under 1e-12 rotate nothing). Taken here from the inertia in
+      the link frame: an inertial frame turned in the URDF whose turned inertia is diagonal and
+      ordered passes here and not in MuJoCo (which composes the turn into its frame)."""
+    parent, static = model.link_parent, model.link_static
+    has_child = np.zeros(model.n_links, dtype=bool)
+    has_child[parent[parent >= 0]] = True
+    out = np.zeros(model.n_links, dtype=bool)
+    for l in range(model.n_links):
+        p = parent[l]
+        attached = p < 0 or (static[p] and parent[p] < 0)
+        axis_aligned = int((np.abs(model.link_axis[l]) > 1e-14).sum()) == 1
+        out[l] = (model.link_jtype[l] == PRISMATIC and axis_aligned and not has_child[l] and attached
+                  and bool(np.all(np.abs(model.link_com[l]) < 1e-6)) and _principal_and_ordered(model.link_inertia0[l]))
+    return out
+
+
+def _principal_and_ordered(inertia):
+    """The link axes are the principal axes of ``inertia`` (3, 3), with moments descending (see
+    sliding_leaves)."""
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        off, gap = abs(inertia[i, j]), abs(inertia[j, j] - inertia[i, i])
+        if off >= 1e-12 and off >= 2e-6 * gap:  # (tan 2φ = 2 off / gap: a turn φ of 2e-6 rad or more)
+            return False
+    return bool(inertia[0, 0] + 1e-12 >= inertia[1, 1] and inertia[1, 1] + 1e-12 >= inertia[2, 2])
 
 
 def _same_shaped_trees(model):
