@@ -838,3 +838,27 @@ def test_finger_masses_reach_a_squeezed_cube_through_the_sliding_leaves_scale(f6
         assert_converged(directional_errors(loss, torch.tensor([0.02, 0.03], dtype=torch.float64)), f"{cone} masses")
     finally:
         scene.destroy()
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_tied_frictions_share_the_gradient_as_central_differences_do(f64, cone):
+    """A box and the plane at the same friction (both Genesis's default 1.0): the pair's μ, the
+    larger, follows either upward and neither downward, so central differences in either alone
+    converge to half the pair's derivative; the gradient gives each half (given all to the plane,
+    the box's friction had a gradient of exactly zero). Scanned along two random directions of
+    (box ratio, plane ratio), which pin both components."""
+    scene, body = _scene(cone, tag="tie")
+    plane = scene.entities[0]
+
+    def loss(ratios):
+        _start(body, 0, *SLIDE)
+        body.set_friction_ratio(ratios[:1])
+        plane.set_friction_ratio(ratios[1:])
+        _roll(scene, 20)
+        return body.get_pos()[0] + 0.3 * body.get_pos()[1]
+    tie = torch.tensor([1.0, 1.0], dtype=torch.float64)
+    for seed in (0, 1):
+        assert_converged(directional_errors(loss, tie, seed=seed), f"{cone} tie, direction {seed}")
+    ratios = tie.clone().requires_grad_(True)
+    loss(ratios).backward()
+    assert ratios.grad[0] != 0.0 and ratios.grad[0] == ratios.grad[1]

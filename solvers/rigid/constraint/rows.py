@@ -302,13 +302,28 @@ def _stiffness_damping_adjoint(solref, dmax, h, g_k, g_b):
 
 
 @ti.func
+def _to_extreme(grad: ti.template(), e, i, j, a, b, g):
+    """grad[e, i] or grad[e, j] += g: to the larger of the values a (at i) and b (at j), half to
+    each where they tie (see _contact_params_adjoint)."""
+    if a == b:
+        accumulate(grad, ti.Vector([e, i]), 0.5 * g)
+        accumulate(grad, ti.Vector([e, j]), 0.5 * g)
+    else:
+        accumulate(grad, ti.Vector([e, i if a > b else j]), g)
+
+
+@ti.func
 def _contact_params_adjoint(d: ti.template(), e, pair, g_mu, g_solref, g_solimp):
     """Reverse of ``contact_params``: the pair's μ, solref and (clamped) solimp gradients onto its
-    geoms' inputs in env e (μ: the geom whose friction the pair took, unless the floor MINMU won)."""
+    geoms' inputs in env e (μ: the geom whose friction the pair took, unless the floor MINMU won).
+    Where the two geoms' values tie (both at the default friction, say), the larger one follows
+    either geom's upward and neither's downward: each gets half, the derivative that central
+    differences converge to (all to one geom left the other's zero: a body's friction fitted
+    against a plane at the same default never moved)."""
     g1, g2 = d.pair_geom1[pair], d.pair_geom2[pair]
     f1, f2 = d.friction[e, g1], d.friction[e, g2]
     if ti.max(f1, f2) > MINMU:
-        accumulate(d.friction.grad, ti.Vector([e, g1 if f1 >= f2 else g2]), g_mu)
+        _to_extreme(d.friction.grad, e, g1, g2, f1, f2, g_mu)
     a0, b0 = d.solref[e, 2 * g1], d.solref[e, 2 * g2]
     for k in ti.static(range(2)):
         a, b = d.solref[e, 2 * g1 + k], d.solref[e, 2 * g2 + k]
@@ -316,7 +331,7 @@ def _contact_params_adjoint(d: ti.template(), e, pair, g_mu, g_solref, g_solimp)
             accumulate(d.solref.grad, ti.Vector([e, 2 * g1 + k]), 0.5 * g_solref[k])
             accumulate(d.solref.grad, ti.Vector([e, 2 * g2 + k]), 0.5 * g_solref[k])
         else:  # the smaller
-            accumulate(d.solref.grad, ti.Vector([e, 2 * (g1 if a <= b else g2) + k]), g_solref[k])
+            _to_extreme(d.solref.grad, e, 2 * g1 + k, 2 * g2 + k, -a, -b, g_solref[k])
     lower = ti.Vector([MINIMP, MINIMP, 0.0, MINIMP, 1.0])
     upper = ti.Vector([MAXIMP, MAXIMP, BIG, MAXIMP, BIG])
     for k in ti.static(range(5)):
