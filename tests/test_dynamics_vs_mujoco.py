@@ -192,14 +192,16 @@ SIMPLE_FINGERS = {"simple", "equal_moments", "product_under_1e-12"}
 
 
 def _fingers_urdf(path):
-    """A fixed base, a hinged arm on it, and one prismatic finger per FINGERS case."""
+    """A root link named "world" (MuJoCo's URDF reader takes it for the world), a base welded to
+    it, a hinged arm on the base, and one prismatic finger per FINGERS case."""
     def inertial(mass, moments, com):
         ixx, iyy, izz, ixy = moments
         return (f'<inertial><origin xyz="{com[0]} {com[1]} {com[2]}"/><mass value="{mass}"/><inertia ixx="{ixx}" '
                 f'iyy="{iyy}" izz="{izz}" ixy="{ixy}" ixz="0" iyz="0"/></inertial>')
-    links = [f'<link name="base">{inertial(1.0, (0.01, 0.01, 0.01, 0), (0, 0, 0))}</link>',
+    links = ['<link name="world"/>', f'<link name="base">{inertial(1.0, (0.01, 0.01, 0.01, 0), (0, 0, 0))}</link>',
              f'<link name="arm">{inertial(0.5, (3e-3, 2.5e-3, 1.5e-3, 0), (0, 0, 0))}</link>']
-    joints = ['<joint name="arm_joint" type="revolute"><parent link="base"/><child link="arm"/><origin xyz="0 0 0.3"/>'
+    joints = ['<joint name="weld" type="fixed"><parent link="world"/><child link="base"/><origin xyz="0 0 0.5"/></joint>',
+              '<joint name="arm_joint" type="revolute"><parent link="base"/><child link="arm"/><origin xyz="0 0 0.3"/>'
               '<axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="10" velocity="1"/></joint>']
     for k, (name, (moments, com, axis, parent, child)) in enumerate(FINGERS.items()):
         links.append(f'<link name="{name}">{inertial(0.02 + 0.01 * k, moments, com)}</link>')
@@ -215,30 +217,33 @@ def _fingers_urdf(path):
     return str(path)
 
 
-def test_rows_scale_of_sliding_leaves_matches_mujoco_f64(f64, tmp_path):
+@pytest.mark.parametrize("merge", [True, False], ids=["merged", "unmerged"])
+def test_rows_scale_of_sliding_leaves_matches_mujoco_f64(f64, tmp_path, merge):
     """MuJoCo takes body_invweight0 and dof_invweight0 of a sliding leaf (prismatic joints along
     link axes, no child, on a base welded to the world, centre of mass at the link origin, principal
     axes the link's in descending order of moment: its body_simple = 2) as 1 / mass, where the
     mean diagonal of J M⁻¹ Jᵀ gives a third of that for a single slider: a gripper's contacts 3×
     stiffer than MuJoCo's. Ours equals MuJoCo's in every case of FINGERS, the simple ones (MuJoCo's
-    verdict checked) and the ones one condition away from it."""
+    verdict checked) and the ones one condition away from it; with the fixed links merged (as
+    MuJoCo's fusestatic) and kept (the "world" root and the base apart: MuJoCo's without it)."""
     path = _fingers_urdf(tmp_path / "fingers.urdf")
     scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False))
-    robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=True))
+    robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=True, merge_fixed_links=merge))
     scene.build()
     try:
         solver = robot._solver
         mass = solver.default_inputs["mass"]
         invweight_link, invweight_dof = solver.invweight_basis(mass, torch.zeros((1, robot.n_dofs), dtype=mass.dtype),
                                                                solver.check_positive_definite)
-        model = mujoco_ref.load_model(path, dt=DT)
-        mujoco.mj_setConst(model, mujoco.MjData(model))
+        spec = mujoco_ref.bare_spec(path)
+        spec.compiler.fusestatic = merge
+        model = spec.compile()
         simple = {model.body(b).name for b in range(model.nbody) if model.body_simple[b] == 2}
         assert simple == SIMPLE_FINGERS
         perm = _our_dof(robot, mujoco_ref.dof_names(model))
         np.testing.assert_allclose(invweight_dof[0].numpy()[perm], model.dof_invweight0, rtol=1e-10, atol=0)
         for link in robot.links:
-            if link.name != "base":
+            if link.name not in ("world", "base"):
                 assert np.isclose(invweight_link[0, link.idx_local].item(), model.body(link.name).invweight0[0],
                                   rtol=1e-10, atol=0), link.name
     finally:

@@ -162,21 +162,22 @@ def sliding_leaves(model):
     """(L,) bool: the links whose rows' scale MuJoCo takes as 1 / mass (its body_simple = 2, which
     mj_setConst special-cases), those that
     - move on prismatic joints only, each along a link axis (one axis component above 1e-14);
-    - carry no other link (a leaf) and hang from the world or from a link welded to it directly;
+    - carry no other link (a leaf) and hang from the world or from a link welded to it directly
+      (a URDF root link named "world" is the world, as MuJoCo's URDF reader takes it);
     - have their centre of mass at the link origin (1e-6 m) and their principal axes along the
       link's, in descending order of moment: MuJoCo compiles the inertia into a principal frame
       whose axes it orders by descending moment, and takes a body as simple only where that
       frame is the link's own (to 1e-6 of a unit quaternion: no Jacobi rotation wider than
-      2e-6 rad; off-diagonal entries under 1e-12 rotate nothing). Taken here from the inertia in
-      the link frame: an inertial frame turned in the URDF whose turned inertia is diagonal and
-      ordered passes here and not in MuJoCo (which composes the turn into its frame)."""
+      2e-6 rad; off-diagonal entries under 1e-12 rotate nothing); read here from the inertia
+      about the centre of mass in the link frame."""
     parent, static = model.link_parent, model.link_static
+    world = np.array([parent[l] < 0 and model.link_name[l] == "world" for l in range(model.n_links)], dtype=bool)
     has_child = np.zeros(model.n_links, dtype=bool)
     has_child[parent[parent >= 0]] = True
     out = np.zeros(model.n_links, dtype=bool)
     for l in range(model.n_links):
         p = parent[l]
-        attached = p < 0 or (static[p] and parent[p] < 0)
+        attached = p < 0 or world[p] or (static[p] and (parent[p] < 0 or world[parent[p]]))
         axis_aligned = int((np.abs(model.link_axis[l]) > 1e-14).sum()) == 1
         out[l] = (model.link_jtype[l] == PRISMATIC and axis_aligned and not has_child[l] and attached
                   and bool(np.all(np.abs(model.link_com[l]) < 1e-6)) and _principal_and_ordered(model.link_inertia0[l]))
