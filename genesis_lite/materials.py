@@ -2,9 +2,10 @@
 from dataclasses import dataclass
 
 import numpy as np
+import torch
 
 from .options import _keywords
-from .solvers.core import InvalidInputError
+from .solvers.core import InvalidInputError, refuse_grad
 
 
 @_keywords("use_visual_raycasting", "friction_torsional", "friction_rolling", "needs_coup", "coup_friction",
@@ -20,17 +21,32 @@ class Rigid:
     friction: float = None
 
     def __post_init__(self):
-        if not (_is_real(self.rho) and np.isfinite(self.rho) and self.rho > 0):
+        rho, friction = _real("materials.Rigid", "rho", self.rho), _real("materials.Rigid", "friction", self.friction)
+        if not (rho is not None and np.isfinite(rho) and rho > 0):
             raise InvalidInputError(f"materials.Rigid: argument 'rho' must be a positive finite number, "
                                     f"got {self.rho!r}")
-        if self.friction is not None and not (_is_real(self.friction) and 0.01 <= self.friction <= 5.0):
+        if self.friction is not None and not (friction is not None and 0.01 <= friction <= 5.0):
             raise InvalidInputError(f"materials.Rigid: argument 'friction' must be a number in [0.01, 5.0] "
                                     f"(or None), got {self.friction!r}")
+        self.rho, self.friction = rho, friction
 
 
-def _is_real(value):
-    """A real number (not a bool, string or array)."""
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+def _real(owner, name, value):
+    """``value`` as a float where it is one real number — a Python or numpy scalar, or a 0-d numpy
+    array or torch tensor — else None (a bool, a string, an array). A material is model data: a
+    tensor that requires grad raises GradientError (set_material_params, set_friction... are the
+    differentiable ways)."""
+    refuse_grad(owner, name, value, "a material's values are model data; the entity's setters "
+                "(set_material_params, set_friction, set_links_mass...) take differentiable ones")
+    if isinstance(value, (bool, np.bool_)):
+        return None
+    if isinstance(value, (int, float, np.integer, np.floating)):
+        return float(value)
+    if isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "iuf":
+        return float(value)
+    if isinstance(value, torch.Tensor) and value.ndim == 0 and not (value.dtype.is_complex or value.dtype == torch.bool):
+        return float(value)
+    return None
 
 
 # -- MPM ----------------------------------------------------------------------------------------------------------
@@ -40,10 +56,11 @@ MPM_SAMPLERS = ("regular", "random")
 
 
 def _mpm_real(owner, name, value, ok, expected):
-    """``value`` as a float after checking it is a finite real number with ``ok(value)``."""
-    if not (_is_real(value) and np.isfinite(value) and ok(float(value))):
+    """``value`` as a float after checking it is a finite real number (_real) with ``ok(value)``."""
+    real = _real(owner, name, value)
+    if not (real is not None and np.isfinite(real) and ok(real)):
         raise InvalidInputError(f"{owner}: argument '{name}' must be {expected}, got {value!r}")
-    return float(value)
+    return real
 
 
 def _mpm_bool(owner, name, value):

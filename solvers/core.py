@@ -47,6 +47,16 @@ def refuse_grad(owner, name, value, instead):
                             f"({instead}); pass it detached (.detach())")
 
 
+def available_memory():
+    """Bytes of memory free now (Linux's available physical pages), else None (unknown): what a
+    large allocation is checked against before it is made, for a named error instead of a crash."""
+    try:
+        import os
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
 class SimulationError(GenesisException, RuntimeError):
     """The simulation produced a non-finite state (raised when SimOptions(check_nan=True))."""
 

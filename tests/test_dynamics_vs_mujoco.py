@@ -103,6 +103,13 @@ def test_kuka_trajectory_matches_mujoco_f32(f32):
         scene.destroy()
 
 
+def _rows_scale(robot):
+    """Our (body_invweight0 (1, L), dof_invweight0 (1, D)) at the build's masses, armature 0."""
+    solver = robot._solver
+    mass = solver.default_inputs["mass"]
+    return solver.invweight_basis(mass, torch.zeros((1, robot.n_dofs), dtype=mass.dtype), solver.check_positive_definite)
+
+
 @pytest.mark.parametrize("name", list(ROBOTS))
 def test_rows_scale_matches_mujoco_invweight0_f64(f64, name):
     """The constraint rows' scale — MuJoCo's body_invweight0 (translation) and dof_invweight0, made
@@ -113,10 +120,7 @@ def test_rows_scale_matches_mujoco_invweight0_f64(f64, name):
     robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=not free, pos=(0.1, -0.2, 0.3), euler=(30, -50, 70)))
     scene.build()
     try:
-        solver = robot._solver
-        mass = solver.default_inputs["mass"]
-        invweight_link, invweight_dof = solver.invweight_basis(mass, torch.zeros((1, robot.n_dofs), dtype=mass.dtype),
-                                                               solver.check_positive_definite)
+        invweight_link, invweight_dof = _rows_scale(robot)
         model = mujoco_ref.load_model(path, free_base=free, dt=DT)  # armature 0
         if free:
             model.qpos0[:7] = robot.get_qpos().numpy()[:7]
@@ -231,10 +235,7 @@ def test_rows_scale_of_sliding_leaves_matches_mujoco_f64(f64, tmp_path, merge):
     robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=True, merge_fixed_links=merge))
     scene.build()
     try:
-        solver = robot._solver
-        mass = solver.default_inputs["mass"]
-        invweight_link, invweight_dof = solver.invweight_basis(mass, torch.zeros((1, robot.n_dofs), dtype=mass.dtype),
-                                                               solver.check_positive_definite)
+        invweight_link, invweight_dof = _rows_scale(robot)
         spec = mujoco_ref.bare_spec(path)
         spec.compiler.fusestatic = merge
         model = spec.compile()

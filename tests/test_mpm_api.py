@@ -147,6 +147,24 @@ def test_material_errors(cls, kwargs, fragment):
     assert cls in str(info.value)
 
 
+def test_materials_take_one_number_in_any_form():
+    """A number given as a 0-d numpy array or torch tensor (int or float) is taken as a float, as a
+    Python or numpy scalar is; an array of one, a bool one and a tensor that requires grad (the
+    material is model data: set_material_params is differentiable) are refused by name."""
+    for E in (2e5, 200000, np.float32(2e5), np.array(2e5), np.array(200000), torch.tensor(2e5), torch.tensor(200000)):
+        material = MPM.Elastic(E=E)
+        assert material.E == 2e5 and type(material.E) is float, repr(E)
+    rigid = gs.materials.Rigid(rho=np.array(500.0), friction=torch.tensor(0.5))
+    assert (rigid.rho, rigid.friction) == (500.0, 0.5) and type(rigid.friction) is float
+    for bad in (np.array([2e5]), np.array(True), torch.tensor(True), torch.ones(1)):
+        with pytest.raises(gs.InvalidInputError, match="argument 'E' must be a positive finite number"):
+            MPM.Elastic(E=bad)
+    with pytest.raises(gs.GradientError, match="materials.MPM.Elastic: argument 'E' is not differentiable"):
+        MPM.Elastic(E=torch.tensor(2e5, requires_grad=True))
+    with pytest.raises(gs.GradientError, match="materials.Rigid: argument 'friction' is not differentiable"):
+        gs.materials.Rigid(friction=torch.tensor(0.5, requires_grad=True))
+
+
 def test_mpm_options(caplog):
     options = gs.options.MPMOptions()
     for key, value in OPTIONS_DEFAULTS.items():
@@ -323,6 +341,7 @@ class FakeSim:
 
     def __init__(self, n_batch, n_particles, requires_grad=True):
         self.requires_grad = requires_grad
+        self.generation = 0  # resets so far
         rows = torch.rand(n_batch, n_particles, layout.WIDTH, dtype=torch.float64)
         rows[..., 0:3] = rows[..., 0:3] * 0.2 + torch.tensor([0.0, 0.0, 0.3], dtype=torch.float64)
         self._state = rows.reshape(n_batch, -1)
@@ -423,6 +442,8 @@ def test_set_position_velocity(f64):
     torch.testing.assert_close(sand.get_particles_pos(), expected)
     grad, = torch.autograd.grad(sand.get_particles_pos()[:, 2].sum(), centre)
     torch.testing.assert_close(grad, torch.tensor([0.0, 0.0, 8.0], dtype=torch.float64))
+    sand.set_position(centre.detach()[None])  # (1, 3) in a scene without envs: a centre (as Genesis)
+    torch.testing.assert_close(sand.get_particles_pos(), expected.detach(), rtol=0, atol=0)
     per_particle = torch.rand(8, 3, dtype=torch.float64) * 0.1 + 0.3
     sand.set_position(per_particle)
     torch.testing.assert_close(sand.get_particles_pos(), per_particle)
@@ -519,6 +540,26 @@ def test_material_params(f64):
         assert fragment in str(info.value) and "entity 'sand'" in str(info.value)
     for name, value in held.items():  # nothing was written by a call that raised
         torch.testing.assert_close(sim.inputs(None)[name], value, rtol=0, atol=0)
+
+
+def test_muscle_groups_set_after_the_actuation_take_their_groups_actuation(f64):
+    """set_muscle(muscle_group=...) after set_actuation moves each particle to its new group's
+    actuation at once, as Genesis (which reads a particle's group at every step; the groups were
+    read at set_actuation only, so the call had no effect until the next one), in the graph;
+    an env whose actuation a reset cleared keeps none."""
+    scene, sim, sand, muscle = _scene(2, muscle_groups=2)
+    actu = torch.tensor([[0.5, -0.25], [1.0, 2.0]], dtype=torch.float64, requires_grad=True)
+    muscle.set_actuation(actu)
+    muscle.set_muscle(muscle_group=np.array([1, 0] * 4))
+    per_particle = sim.inputs(None)["actu"]
+    torch.testing.assert_close(per_particle[:, 8:], actu.detach()[:, [1, 0] * 4], rtol=0, atol=0)
+    grad, = torch.autograd.grad(per_particle[:, 8:].sum(), actu)
+    torch.testing.assert_close(grad, torch.full((2, 2), 4.0, dtype=torch.float64))
+    sim.generation += 1  # scene.reset(envs_idx=[0]): that env's controls cleared, a new graph
+    sim.set_input(None, "actu", torch.cat([torch.zeros(1, 16, dtype=torch.float64), per_particle[1:].detach()]))
+    muscle.set_muscle(muscle_group=np.array([1] * 8))
+    per_particle = sim.inputs(None)["actu"]
+    assert (per_particle[0, 8:] == 0).all() and (per_particle[1, 8:] == 2.0).all()
 
 
 def test_muscle_actuation(f64):

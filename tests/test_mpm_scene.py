@@ -184,13 +184,30 @@ def test_a_grid_too_large_for_memory_raises(f64):
         scene.build()
 
 
+def test_a_shape_with_too_many_particles_for_memory_raises_before_sampling(f64, monkeypatch):
+    """A particle_size that fills a shape with more candidate particles than memory holds raises a
+    named error at add_entity, before any is made (numpy's MemoryError after minutes, or the
+    machine's out-of-memory killer, before): checked against the memory free, here made 1 MiB."""
+    import genesis_lite.solvers.mpm.sampling as sampling
+
+    monkeypatch.setattr(sampling, "available_memory", lambda: 2**20)
+    scene = gs.Scene(mpm_options=gs.options.MPMOptions(**SMALL, particle_size=0.004))
+    scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.2), size=(0.04, 0.04, 0.04)), material=_jelly(), name="small")
+    for morph in (gs.morphs.Box(pos=(0.0, 0.0, 0.3), size=(0.2, 0.2, 0.2)),
+                  gs.morphs.Sphere(pos=(0.0, 0.0, 0.3), radius=0.1),
+                  gs.morphs.Cylinder(pos=(0.0, 0.0, 0.3), radius=0.1, height=0.2)):
+        with pytest.raises(gs.InvalidInputError, match=r"entity 'big': particle_size = 0.004 m fills the shape's .* "
+                                                       r"1.25e\+05 candidate particles, .* GiB free; use a larger"):
+            scene.add_entity(morph, material=_jelly(), name="big")
+
+
 def test_arrays_beyond_32_bit_indices_raise(f64, monkeypatch):
     """On a machine with memory enough for them, arrays of more than 2³¹ − 1 numbers still raise:
     the kernels' indices are 32-bit (Taichi 1.7), so such an index would wrap. 500 envs of Genesis's
     default domain at 64 cells/m: a grid of 500 × 1.08 M nodes × 4 numbers."""
     import genesis_lite.solvers.mpm.solver as mpm_solver
 
-    monkeypatch.setattr(mpm_solver, "_available_pages", lambda: 2**50)  # a machine with memory to spare
+    monkeypatch.setattr(mpm_solver, "available_memory", lambda: 2**62)  # a machine with memory to spare
 
     def allocate(self):
         raise AssertionError("allocated: the index check did not stop the build")
@@ -462,3 +479,30 @@ def test_a_5000_step_rollout_with_checkpoints_stays_in_bounded_memory(f32):
     print(f"RSS growth: forward {after_forward - start:.0f} MiB, with backward {peak - start:.0f} MiB")
     assert torch.isfinite(vel.grad).all() and vel.grad.abs().sum() > 0
     assert peak - start < 200
+
+
+def test_muscle_groups_set_after_the_actuation_move_as_set_before_it(f64):
+    """set_actuation then set_muscle(muscle_group=...) gives the same steps, bit for bit, as the
+    two calls the other way round (as in Genesis, whose kernels read each particle's group at every
+    step: the groups set after the actuation had no effect here, the block never contracted)."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT, substeps=4, gravity=(0.0, 0.0, 0.0)),
+                     mpm_options=gs.options.MPMOptions(**SMALL))
+    muscle = scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.2), size=(0.1, 0.1, 0.1)),
+                              material=gs.materials.MPM.Muscle(E=1e5, n_groups=2), name="muscle")
+    scene.build()
+    groups = np.ones(muscle.n_particles, dtype=np.int64)
+    trajectories = []
+    for actuation_first in (True, False):
+        scene.reset()
+        muscle.set_muscle(muscle_group=np.zeros(muscle.n_particles, dtype=np.int64), muscle_direction=[1.0, 0.0, 0.0])
+        if actuation_first:
+            muscle.set_actuation([0.0, 0.5])
+        muscle.set_muscle(muscle_group=groups)
+        if not actuation_first:
+            muscle.set_actuation([0.0, 0.5])
+        for _ in range(5):
+            scene.step()
+        trajectories.append(muscle.get_particles_pos())
+    assert torch.equal(trajectories[0], trajectories[1])
+    start = muscle.init_particles[:, 0]
+    assert float(trajectories[0][:, 0].max() - trajectories[0][:, 0].min()) < start.max() - start.min()  # it contracts

@@ -110,6 +110,9 @@ class MPMEntity(EntityIndexing):
             raise InvalidInputError(f"entity '{name}': argument 'particles' must have shape {(self.n_particles, 3)}, "
                                     f"got {self.init_particles.shape}")
         self._muscle_group = np.zeros(self.n_particles, dtype=np.int64)
+        # (B, n_groups) each env's group actuation as set_actuation gave it, and the simulator's
+        # generation (reset count) it was set in: set_muscle moves particles to their new groups'
+        self._group_actuation, self._actuation_generation = None, None
 
     def _on_build(self):
         """Nothing to resolve: the particle rows are known when the entity is added."""
@@ -207,8 +210,11 @@ class MPMEntity(EntityIndexing):
         """Genesis's set_position: (n_particles, 3) or (len(envs_idx), n_particles, 3) sets every
         particle (set_particles_pos); (3,) or (len(envs_idx), 3) moves the body as a whole so
         that its origin (where morph.pos put it) is there, the particles at their sampled
-        offsets. A (n, 3) value with n == n_particles is per particle (as Genesis)."""
+        offsets. A (n, 3) value with n == n_particles is per particle (as Genesis); a (1, 3) one
+        in a scene without envs, a centre (as Genesis, and as set_velocity takes it)."""
         tensor = self._tensor(value, "value", "(3,) or (n_particles, 3)")
+        if self.scene.n_envs == 0 and tuple(tensor.shape) == (1, 3) and self.n_particles != 1:
+            tensor = tensor[0]
         if tensor.dim() == 1 or (tensor.dim() == 2 and tensor.shape[0] != self.n_particles):
             if tensor.shape[-1] != 3 or (tensor.dim() == 2 and self.scene.n_envs == 0):
                 centres = "(3,)" if self.scene.n_envs == 0 else "(3,) or (len(envs_idx), 3)"
@@ -292,14 +298,42 @@ class MPMEntity(EntityIndexing):
         if not all_finite(groups.detach()):
             raise InvalidInputError(f"entity '{self.name}': argument 'actu' must be finite, got NaN or inf")
         groups = groups.broadcast_to(target).reshape(len(envs), n_groups)
+        self._group_actuation = replace_columns(self._group_actuations(), envs, np.arange(n_groups), groups)
+        self._write_actuation(envs)
+
+    def _group_actuations(self):
+        """(B, n_groups) the groups' actuation as set_actuation last set it (zeros at first);
+        detached after a reset, as the scene's parameters (a graph from the rollout before would be
+        backpropagated through again)."""
+        sim = self._sim()
+        if self._group_actuation is None:
+            n_batch = sim.inputs(self._solver)["actu"].shape[0]
+            self._group_actuation = torch.zeros(n_batch, self.material.n_groups, dtype=runtime.tc_float,
+                                                device=runtime.device)
+        elif self._actuation_generation != sim.generation:
+            self._group_actuation = self._group_actuation.detach()
+        self._actuation_generation = sim.generation
+        return self._group_actuation
+
+    def _write_actuation(self, envs):
+        """The input "actu" of the envs ``envs`` ← each particle's group's actuation."""
+        groups = self._group_actuations()[torch.as_tensor(envs, device=runtime.device)]
         per_particle = groups[:, torch.as_tensor(self._muscle_group, device=groups.device)]
         self._write_input("actu", np.arange(self.n_particles), envs, per_particle)
 
+    def _actuation_held(self):
+        """The envs (int array) whose "actu" input still holds what set_actuation wrote for this
+        entity's particles (a reset clears it to zeros)."""
+        held = self._sim().inputs(self._solver)["actu"][:, self.particle_start: self.particle_end].detach()
+        expected = self._group_actuations().detach()[:, torch.as_tensor(self._muscle_group, device=held.device)]
+        return np.flatnonzero((held == expected).all(dim=1).cpu().numpy())
+
     def set_muscle(self, muscle_group=None, muscle_direction=None):
         """Genesis's set_muscle: muscle_group (n_particles,) integers in [0, n_groups) (all 0 at
-        first), used by the next set_actuation; muscle_direction (n_particles, 3) or (3,) fibre
-        directions (normalised here; (0, 0, 1) at first). Not differentiable: a tensor that requires
-        grad raises GradientError."""
+        first): each particle takes its new group's actuation at once, as set_actuation last set it
+        (Genesis reads a particle's group at every step); muscle_direction (n_particles, 3) or (3,)
+        fibre directions (normalised here; (0, 0, 1) at first). Not differentiable: a tensor that
+        requires grad raises GradientError."""
         self._require_muscle("set_muscle")
         self._sim()
         for name, value in (("muscle_group", muscle_group), ("muscle_direction", muscle_direction)):
@@ -313,7 +347,10 @@ class MPMEntity(EntityIndexing):
                     (group.size and (group.min() < 0 or group.max() >= n_groups)):
                 raise InvalidInputError(f"entity '{self.name}': argument 'muscle_group' must be {self.n_particles} "
                                         f"integers in [0, {n_groups}), got shape {group.shape} of {group.dtype}")
+            held = self._actuation_held()  # (envs a reset cleared keep no actuation)
             self._muscle_group = group.astype(np.int64)
+            if len(held):
+                self._write_actuation(held)
         if muscle_direction is not None:
             directions = np.asarray(muscle_direction.detach().cpu().numpy() if isinstance(muscle_direction,
                                     torch.Tensor) else muscle_direction, dtype=np.float64)

@@ -18,11 +18,14 @@ Units: metres. Nothing here knows genesis_lite's morphs: the API passes plain pa
 """
 import numpy as np
 
-from ..core import AssetError, InvalidInputError
+from ..core import AssetError, InvalidInputError, available_memory
 from ..rigid.shapes import load_mesh, quat_to_mat
 
 SAMPLERS = ("regular", "random")
 SHAPES = ("box", "sphere", "cylinder", "mesh")
+# bytes a candidate particle takes while a shape is sampled: the lattice's three coordinate arrays
+# and their stacked copy, the shape's test and the placed copy (float64)
+CANDIDATE_BYTES = 96
 
 
 def candidates(lower, upper, particle_size, sampler, seed=0):
@@ -39,6 +42,18 @@ def candidates(lower, upper, particle_size, sampler, seed=0):
     axes = [np.linspace(lo + half, hi - half, n) if n > 1 else np.array([(lo + hi) / 2.0])
             for lo, hi, n in zip(lower, upper, counts)]
     return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
+def _check_candidates(extent, particle_size, owner):
+    """The candidates filling a box of ``extent`` (3,) m at ``particle_size`` must fit in the memory
+    free now (CANDIDATE_BYTES each while they are made): a named error before they are made,
+    instead of numpy's MemoryError (or the machine's out-of-memory killer) minutes later."""
+    count = float(np.prod(np.maximum(1, np.round(extent / particle_size))))
+    need, available = count * CANDIDATE_BYTES, available_memory()
+    if available is not None and need > available:
+        raise InvalidInputError(f"{owner}: particle_size = {particle_size:g} m fills the shape's {np.round(extent, 6)} "
+                                f"m bounds with {count:.3g} candidate particles, {need / 2**30:.1f} GiB to sample, "
+                                f"expected at most the {available / 2**30:.1f} GiB free; use a larger particle_size")
 
 
 def box_particles(size, particle_size, sampler, seed=0):
@@ -111,13 +126,17 @@ def sample(shape, particle_size, sampler="regular", seed=0, pos=(0.0, 0.0, 0.0),
         raise InvalidInputError(f"{owner}: argument 'particle_size' must be a positive finite number (m), "
                                 f"got {particle_size!r}")
     if shape == "box":
+        _check_candidates(np.asarray(size, dtype=np.float64), particle_size, owner)
         local = box_particles(size, particle_size, sampler, seed)
     elif shape == "sphere":
+        _check_candidates(np.full(3, 2.0 * radius), particle_size, owner)
         local = sphere_particles(radius, particle_size, sampler, seed)
     elif shape == "cylinder":
+        _check_candidates(np.array([2.0 * radius, 2.0 * radius, height]), particle_size, owner)
         local = cylinder_particles(radius, height, particle_size, sampler, seed)
     elif shape == "mesh":
         vertices, faces = load_mesh(file, scale)
+        _check_candidates(vertices.max(axis=0) - vertices.min(axis=0), particle_size, owner)
         local = mesh_particles(vertices, faces, particle_size, sampler, seed, file)
     else:
         raise InvalidInputError(f"{owner}: argument 'shape' must be one of {list(SHAPES)}, got {shape!r}")

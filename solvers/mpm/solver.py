@@ -11,7 +11,7 @@ import taichi as ti
 import torch
 
 from ..base import Solver
-from ..core import InvalidInputError, runtime
+from ..core import InvalidInputError, available_memory, runtime
 from ..launch import BoundKernels
 from . import kernels, layout
 from .adjoint import MPMAdjoint
@@ -96,14 +96,13 @@ class MPMSolver(MPMAdjoint, Solver):
     def _check_memory(self):
         """The grid and the particle arrays must fit in the memory available now (a named error,
         not a crash)."""
-        need = self._memory_bytes()
-        pages, page = _available_pages(), _page_size()
-        if pages is not None and need > pages * page:
+        need, available = self._memory_bytes(), available_memory()
+        if available is not None and need > available:
             g = self.model.grid
             raise InvalidInputError(f"MPM solver (entities: {', '.join(self.entity_names)}): the grid of "
                                     f"{' × '.join(str(int(r)) for r in g.res)} nodes and {self.model.n_particles} "
                                     f"particles × {self.n_batch} env(s) need {need / 2**30:.1f} GiB, expected at most "
-                                    f"the {pages * page / 2**30:.1f} GiB available; lower MPMOptions grid_density, "
+                                    f"the {available / 2**30:.1f} GiB available; lower MPMOptions grid_density, "
                                     f"tighten lower_bound/upper_bound or use fewer particles")
 
     def _largest_array(self):
@@ -286,17 +285,3 @@ class MPMSolver(MPMAdjoint, Solver):
 
     def destroy(self):
         self.kernels = self.reverse_kernels = self.frames = self.grid = None
-
-
-def _available_pages():
-    """Pages of memory available now (Linux), else None."""
-    try:
-        import os
-        return os.sysconf("SC_AVPHYS_PAGES")
-    except (ValueError, OSError, AttributeError):
-        return None
-
-
-def _page_size():
-    import os
-    return os.sysconf("SC_PAGE_SIZE")
