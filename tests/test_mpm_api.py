@@ -321,6 +321,12 @@ def test_particles_too_coarse_for_their_shape_warn(meshes):
         warnings.simplefilter("error")
         for morph, size, _ in cases:
             sample_particles(morph, MPM.Elastic(), size / 4, *walls, 0, "fine")
+    # two box shells overlapping: the volume counts the overlap twice, ray parity leaves it empty
+    box = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
+    path = os.path.join(os.path.dirname(meshes["ball"]), "shells.obj")
+    trimesh.util.concatenate([box, box.copy().apply_translation((0.02, 0.0, 0.0))]).export(path)
+    with pytest.warns(UserWarning, match="too coarse for the shape or its surface overlaps itself"):
+        sample_particles(gs.morphs.Mesh(file=path, pos=(0, 0, 0.5)), MPM.Elastic(), 0.005, *walls, 0, "shells")
 
 
 # -- the entity, on a fake simulator ------------------------------------------------------------------------------

@@ -58,9 +58,12 @@ def _check_volume(owner, morph, count, particle_size, volume):
     samples and weighs them alike, without a word)."""
     ratio = count * particle_size ** 3 / volume if volume > 0 else np.inf  # (a flat mesh has none)
     if not 0.5 <= ratio <= 2.0:
+        # (a mesh whose surface crosses itself: its volume counts the overlaps, its inside, by ray
+        # parity, leaves them empty)
+        overlap = " or its surface overlaps itself (the overlaps are left empty)" if isinstance(morph, gm.Mesh) else ""
         warnings.warn(f"{owner}: its {count} particle(s) of particle_size {particle_size:g} m hold {ratio:.3g}× the "
                       f"volume of its {type(morph).__name__} ({volume:.3g} m³), and its mass is ρ · that volume: "
-                      f"particle_size is too coarse for the shape; lower MPMOptions particle_size (at most "
+                      f"particle_size is too coarse for the shape{overlap}; lower MPMOptions particle_size (at most "
                       f"{volume ** (1.0 / 3.0) / 4.0:.3g} m puts 4 or more particles across it)", stacklevel=5)
 
 
