@@ -20,6 +20,23 @@ class Tensor(torch.Tensor):
         # torch formats only plain 0-dim tensors with a spec like ".2f"
         return format(self.item(), spec) if self.dim() == 0 else super().__format__(spec)
 
+    def __deepcopy__(self, memo):
+        # torch's own needs new_empty to return this class. As torch's: a leaf's data (and grad)
+        # copied, requires_grad kept, a non-leaf refused; the scene kept (it is not data)
+        if not self.is_leaf:
+            raise RuntimeError("Only Tensors created explicitly by the user (graph leaves) support the deepcopy "
+                               "protocol at the moment")
+        copied = wrap(self.detach().as_subclass(torch.Tensor).clone(), self.scene).requires_grad_(self.requires_grad)
+        if self.grad is not None:
+            copied.grad = self.grad.detach().clone()
+        memo[id(self)] = copied
+        return copied
+
+    def __reduce_ex__(self, protocol):
+        # saved (torch.save, pickle) as a plain torch tensor: loading it needs no genesis_lite, and
+        # torch.load's default weights_only=True refuses classes it does not know
+        return self.as_subclass(torch.Tensor).__reduce_ex__(protocol)
+
 
 def wrap(value, scene=None):
     """View a torch tensor as a gs.Tensor of ``scene`` (autograd history is kept)."""

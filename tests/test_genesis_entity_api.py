@@ -622,3 +622,17 @@ def test_joints_answer_genesis_deprecated_singular_names(f64, pendulum, caplog):
     assert any("dof_idx_local is deprecated" in r.getMessage() for r in caplog.records)
     with pytest.raises(AttributeError, match="no attribute 'dofs_index'"):
         hinge.dofs_index
+
+
+def test_mass_of_an_entity_leaves_out_the_links_welded_to_the_world(f64):
+    """get_mass sums the links that move, as Genesis's (a fixed base is never accelerated: its mass
+    is the world's): a fixed Panda weighs all but its 2.9 kg base, a free one every link."""
+    scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False), show_viewer=False)
+    fixed = scene.add_entity(gs.morphs.URDF(file=pybullet("franka_panda", "panda.urdf"), fixed=True))
+    free = scene.add_entity(gs.morphs.URDF(file=pybullet("franka_panda", "panda.urdf"), pos=(1.0, 0.0, 0.0)))
+    scene.build(n_envs=2)
+    links = fixed.get_links_mass()
+    assert torch.equal(fixed.get_mass(), links[:, 1:].sum(-1)) and float(links[0, 0]) > 0
+    assert torch.equal(free.get_mass(), free.get_links_mass().sum(-1))
+    fixed.set_links_mass(np.array([50.0]), [0])  # the base: no change
+    assert torch.equal(fixed.get_mass(), links[:, 1:].sum(-1))

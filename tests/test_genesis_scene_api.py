@@ -100,6 +100,28 @@ def test_get_state_is_a_snapshot_not_the_scene(f64, requires_grad):
     assert torch.equal(scene.get_state().rigid, initial)
 
 
+def test_getter_results_save_load_and_deepcopy(f64, tmp_path):
+    """A getter's gs.Tensor is saved as a plain torch tensor (torch.load's default weights_only=True
+    refused the class: Genesis's plain tensors load), and deep-copies (torch's default needed
+    new_empty to return the subclass) as torch's rules say: a leaf's data, grad and requires_grad,
+    a copy apart; a non-leaf refused."""
+    import copy
+    scene, robot = _pendulum(requires_grad=False)
+    qpos = robot.get_qpos()
+    torch.save({"qpos": qpos}, tmp_path / "state.pt")
+    loaded = torch.load(tmp_path / "state.pt")["qpos"]
+    assert type(loaded) is torch.Tensor and torch.equal(loaded, qpos.as_subclass(torch.Tensor))
+    copied = copy.deepcopy({"a": qpos, "b": [qpos]})
+    assert isinstance(copied["a"], gs.Tensor) and copied["a"] is copied["b"][0] and copied["a"].scene is scene
+    assert torch.equal(copied["a"], qpos) and copied["a"].data_ptr() != qpos.data_ptr()
+    leaf = gs.tensor([1.0, 2.0], requires_grad=True)
+    (3.0 * leaf).sum().backward()
+    twin = copy.deepcopy(leaf)
+    assert twin.is_leaf and twin.requires_grad and torch.equal(twin.grad, leaf.grad)
+    with pytest.raises(RuntimeError, match="graph leaves"):
+        copy.deepcopy(2.0 * leaf)
+
+
 def test_reset_envs_idx_restores_only_those_envs(f64):
     scene, robot = _pendulum(requires_grad=False, n_envs=3)
     initial = scene.get_state().rigid.clone()

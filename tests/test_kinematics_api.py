@@ -121,6 +121,21 @@ def test_inverse_kinematics_reaches_poses(f64):
     assert (tip - pos[0]).norm() <= 5e-4
 
 
+def test_inverse_kinematics_from_a_start_at_the_target_orientation(f64):
+    """Envs that start with the target's orientation exactly (its error 0) and 0.1 m off converge
+    (Genesis's rule: the best is a sample's last qpos, never the start; taking the start as the
+    first best kept it for ever wherever no later iterate's rotation error was as small: env 0
+    came back unmoved, 0.1 m off, beside env 1 converged)."""
+    scene, robot = _scene(KUKA, True, n_envs=2)
+    ee = robot.links[-1]
+    robot.set_qpos(torch.tensor([[0.1, 0.5, 0.0, -1.0, 0.0, 0.8, 0.0], [0.2, 0.4, 0.1, -1.1, 0.0, 0.9, 0.1]],
+                                dtype=torch.float64))
+    pos, quat = ee.get_pos().clone(), ee.get_quat().clone()
+    pos[:, 1] += 0.1
+    qpos, error = robot.inverse_kinematics(ee, pos=pos, quat=quat, return_error=True)
+    assert (error[:, :3].norm(dim=1) <= 5e-4).all() and (error[:, 3:].norm(dim=1) <= 5e-3).all(), error
+
+
 def test_inverse_kinematics_of_several_links(f64):
     """inverse_kinematics_multilink: the elbow's position and the flange's pose of a pose the KUKA
     reaches, at once; errors per link."""

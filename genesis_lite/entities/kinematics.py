@@ -213,11 +213,13 @@ def checked_options(who, **given):
 def solve_ik(entity, goals, start, envs, dofs, options):
     """Damped least squares from ``start`` (B', n_qs) in the selected envs ``envs`` (int array),
     moving the local dofs ``dofs`` (those on the goals' links' paths), toward every Target of
-    ``goals``, their errors and Jacobian rows stacked; each step's components clipped to
-    ±max_step_size. A start that does not converge is followed by another drawn within the limits
-    (when respected). The best qpos is one whose every goal's position and rotation error are no
-    worse (Genesis's rule). options: respect_joint_limit, max_samples, max_solver_iters, damping,
-    pos_tol, rot_tol, max_step_size, seed. Returns (the best qpos (B', n_qs), its errors (B', K, 6))."""
+    ``goals``, their errors and Jacobian rows stacked; each step scaled so that no component
+    exceeds max_step_size. Genesis's rule, per env: a sample runs up to max_solver_iters steps
+    and stops where every goal is within pos_tol and rot_tol (that qpos is the answer); else its
+    last qpos becomes the best where no goal's position or rotation error is worse than the best
+    one's (the first sample's always), and another start is drawn within the limits (when
+    respected). options: respect_joint_limit, max_samples, max_solver_iters, damping, pos_tol,
+    rot_tol, max_step_size, seed. Returns (the best qpos (B', n_qs), its errors (B', K, 6))."""
     motions = DofMotions(entity)
     on_path = np.logical_or.reduce([motions.on_path(target.link) for target in goals])
     moving = on_path & np.isin(np.arange(entity.n_dofs), dofs)
@@ -226,23 +228,28 @@ def solve_ik(entity, goals, start, envs, dofs, options):
     moving_columns = torch.as_tensor(moving, dtype=start.dtype, device=start.device)
     eye = torch.eye(6 * len(goals), dtype=start.dtype, device=start.device)
     limit = options["max_step_size"]
-    q = best_q = joints.clipped(start)
-    best_error = None
+    q = joints.clipped(start)
+    best_q = q.clone()
+    best_error = torch.full((len(q), len(goals), 6), float("inf"), dtype=q.dtype, device=q.device)
+    solved = torch.zeros(len(q), dtype=torch.bool, device=q.device)
     for sample in range(options["max_samples"] if joints.limited else 1):
-        for _ in range(options["max_solver_iters"] + 1):
+        for iteration in range(options["max_solver_iters"] + 1):
             pos, quat = _poses_at(entity, q, envs)
             error = torch.stack([target.error(pos, quat) for target in goals], 1)
-            if best_error is None:
-                best_q, best_error = q.clone(), error
-            better = (_norms(error) <= _norms(best_error)).all(-1).all(-1)
-            best_q[better], best_error[better] = q[better], error[better]
-            worst = _norms(best_error).amax(1)
-            done = (worst[:, 0] <= options["pos_tol"]) & (worst[:, 1] <= options["rot_tol"])
-            if bool(done.all()):
+            worst = _norms(error).amax(1)
+            now = ~solved & (worst[:, 0] <= options["pos_tol"]) & (worst[:, 1] <= options["rot_tol"])
+            best_q[now], best_error[now] = q[now], error[now]
+            solved |= now
+            if bool(solved.all()):
                 return best_q, best_error
+            if iteration == options["max_solver_iters"]:
+                break
             J = torch.cat([target.rows(motions, pos, quat) for target in goals], 1) * moving_columns
             step = (J.transpose(1, 2) @ torch.linalg.solve(J @ J.transpose(1, 2) + options["damping"] ** 2 * eye,
                                                            error.reshape(error.shape[0], -1, 1)))[..., 0]
-            q = joints.moved(q, step * (limit / step.abs().amax(1, keepdim=True).clamp_min(limit)))
-        q = torch.where(done[:, None], best_q, joints.sample(start, generator))
+            moved = joints.moved(q, step * (limit / step.abs().amax(1, keepdim=True).clamp_min(limit)))
+            q = torch.where(solved[:, None], q, moved)
+        improved = ~solved & (_norms(error) <= _norms(best_error)).all(-1).all(-1)
+        best_q[improved], best_error[improved] = q[improved], error[improved]
+        q = torch.where(solved[:, None], best_q, joints.sample(start, generator))
     return best_q, best_error

@@ -541,8 +541,11 @@ class RigidEntity(EntityIndexing):
         self._write_input("mass", self.link_start + links, envs, values)
 
     def get_mass(self, envs_idx=None):
-        """Total mass, kg: () or (n_envs,)."""
-        return self._out(self._read_input("mass", self.link_start + np.arange(self.n_links), envs_idx).sum(-1))
+        """Total mass of the links that move, kg: () or (n_envs,). As Genesis's, links welded to the
+        world are left out (never accelerated, their mass is the world's)."""
+        static = self._solver.model.link_static[self.link_start: self.link_start + self.n_links]
+        moving = self.link_start + np.flatnonzero(static == 0)
+        return self._out(self._read_input("mass", moving, envs_idx).sum(-1))
 
     def _refuse_negative(self, name, values, unit=""):
         """values (a tensor), after a named error if any is negative."""
