@@ -113,8 +113,9 @@ class MPMEntity(EntityIndexing):
             raise InvalidInputError(f"entity '{name}': argument 'particles' must have shape {(self.n_particles, 3)}, "
                                     f"got {self.init_particles.shape}")
         self._muscle_group = np.zeros(self.n_particles, dtype=np.int64)
-        # (B, n_groups) each env's group actuation as set_actuation gave it, and the simulator's
-        # generation (reset count) it was set in: set_muscle moves particles to their new groups'
+        # (B, n_groups) each env's group actuation as set_actuation gave it (None: never given), and
+        # the simulator's generation (reset count) it was set in: set_muscle moves particles to
+        # their new groups' actuation
         self._group_actuation, self._actuation_generation = None, None
 
     def _on_build(self):
@@ -350,7 +351,8 @@ class MPMEntity(EntityIndexing):
                     (group.size and (group.min() < 0 or group.max() >= n_groups)):
                 raise InvalidInputError(f"entity '{self.name}': argument 'muscle_group' must be {self.n_particles} "
                                         f"integers in [0, {n_groups}), got shape {group.shape} of {group.dtype}")
-            held = self._actuation_held()  # (envs a reset cleared keep no actuation)
+            # (the envs a reset cleared keep no actuation; none to move before set_actuation)
+            held = self._actuation_held() if self._group_actuation is not None else ()
             self._muscle_group = group.astype(np.int64)
             if len(held):
                 self._write_actuation(held)

@@ -10,11 +10,11 @@ import torch
 
 from ..core import InvalidInputError, runtime
 from .collision.detect import BUDGET, COLLIDERS
-from .model import PRISMATIC
 from .constraint.rows import DEFAULT_SOLIMP, SMOOTH_SOLIMP  # noqa: F401 (the geoms' defaults, read by solver.py)
+from .constraint.solver import MINVAL  # (the least mass a sliding leaf's 1 / mass divides by)
+from .model import PRISMATIC
 
 _logger = logging.getLogger("genesis_lite")
-MINVAL = 1e-15  # MuJoCo's mjMINVAL: the least mass a sliding leaf's 1 / mass divides by
 MAX_PER_MOVING_LINK = 8  # default max_contacts: a box resting on a face touches at up to 8 points
 MIN_CONTACTS = 16
 
