@@ -17,7 +17,9 @@ clipping follow the 3.12 sources.
 2. Otherwise GJK decides intersection, and EPA grows GJK's final simplex into a polytope around
    the origin (a hexahedron from a segment, a bipyramid from a triangle, the tetrahedron itself)
    and expands it toward the face nearest the origin: penetration depth, normal and one witness
-   point per geom.
+   point per geom. Where it stops at its iteration budget, or fails, with a sphere's centre in a
+   mesh's hull, the contact is the exact one through the hull's nearest facet instead
+   (`_sphere_in_mesh`; MuJoCo keeps its truncated iterate, which depends on its own hull data).
 3. Boxes and meshes (budget 4) clip two facing faces, or an edge along a face, found from the
    final EPA face's features: up to 4 contacts (the largest quadrilateral of the clipped
    polygon). Capsules (budget 2) and cylinders (budget 4) get one contact here: MuJoCo 4.0's
@@ -966,7 +968,7 @@ def _epa(shape1: ti.template(), shape2: ti.template(), n, cache1, cache2, hull: 
     One pass of the loop = plan (directions of 0..3 support queries, faces to attach), the
     queries, the attachments; stage _STOP ends it.
     Returns (found, face (3,) workspace slots of the final face's vertices, x1, x2 (witness
-    points, world), dist (-depth), cache1, cache2).
+    points, world), dist (-depth), truncated (1: stopped at CCD_ITERATIONS), cache1, cache2).
     """
     discrete = _discrete(shape1, shape2)
     tolerance = ti.select(discrete, _MINVAL, CCD_TOLERANCE)
@@ -974,7 +976,7 @@ def _epa(shape1: ti.template(), shape2: ti.template(), n, cache1, cache2, hull: 
     nverts, nfaces, nmap, nfree = n, 0, 0, 0
     center = ti.Vector([0.0, 0.0, 0.0])
     restart = ti.Vector([0, 1, 2])   # the triangle a _START3 pass starts from
-    found, failed, k = 0, 0, 0
+    found, failed, k, truncated = 0, 0, 0, 0
     best_verts, best_v, best_dist2 = 0, ti.Vector([0.0, 0.0, 0.0]), 0.0
     upper, upper2, lower, lower2 = _BIG, _BIG, 0.0, 0.0
     while stage != _STOP:
@@ -1013,6 +1015,7 @@ def _epa(shape1: ti.template(), shape2: ti.template(), n, cache1, cache2, hull: 
                     nearest, lower2 = face, ws.ccd_f[row + (_F_DIST2 + face,)]
             if k >= CCD_ITERATIONS or nearest < 0 or lower2 > upper2:
                 stage = _STOP  # keep the previous nearest face
+                truncated = k >= CCD_ITERATIONS
             else:
                 found = 1
                 best_verts = ws.ccd_i[row + (_I_FVERTS + nearest,)]
@@ -1126,7 +1129,46 @@ def _epa(shape1: ti.template(), shape2: ti.template(), n, cache1, cache2, hull: 
             x1 += w[s] * ws.ccd_v[row + (_V_VERT1 + face[s],)]
             x2 += w[s] * ws.ccd_v[row + (_V_VERT2 + face[s],)]
         dist = -ti.sqrt(best_dist2)
-    return found, face, x1, x2, dist, cache1, cache2
+    return found, face, x1, x2, dist, truncated, cache1, cache2
+
+
+@ti.func
+def _sphere_in_mesh(shape1: ti.template(), shape2: ti.template(), hull: ti.template(), ws: ti.template(),
+                    row: ti.template()):
+    """The exact deep contact of a sphere (shape1) whose centre c lies in a mesh's hull (shape2),
+    for where EPA stopped short of it: the foot of c on the nearest facet plane (the nearest
+    boundary point of a convex polytope from inside). The facet is the hull polygon whose
+    supporting plane (its outward normal, through its farthest vertex) is nearest c; its plane,
+    that of three of its vertices spanning it (`_polygon_spread`: a merged polygon is flat only
+    to ~0.4°), gives the contact, and the three go to workspace slots 0..2 (ids −1 for the centre,
+    as EPA's), so the feature is the closed form `_core_terms` replays. Returns (x1, x2 witness
+    points (world), dist = −(depth of the swept shapes))."""
+    mesh, centre = shape2[1], shape1[2]
+    local = _rot_t(shape2[3], centre - shape2[2])
+    vadr, first = hull.hull_vertadr[mesh], hull.hull_polyadr[mesh]
+    best, face = -_BIG, 0
+    for f in range(hull.hull_polynum[mesh]):
+        normal = hull.hull_poly_normal[first + f]
+        padr, num = hull.hull_poly_vertadr[first + f], hull.hull_poly_vertnum[first + f]
+        support = -_BIG
+        for i in range(num):
+            support = ti.max(support, _dot(normal, _polygon_point(hull, vadr, padr, num, i)))
+        if _dot(normal, local) - support > best:
+            best, face = _dot(normal, local) - support, f
+    j, k = _polygon_spread(hull, mesh, face)
+    padr = hull.hull_poly_vertadr[first + face]
+    ids = ti.Vector([hull.hull_poly_vert[padr], hull.hull_poly_vert[padr + j], hull.hull_poly_vert[padr + k]])
+    a = hull.hull_vert[vadr + ids[0]]
+    outward = _normalize(_cross(hull.hull_vert[vadr + ids[1]] - a, hull.hull_vert[vadr + ids[2]] - a))
+    outward *= _sign(_dot(outward, hull.hull_poly_normal[first + face]))
+    signed = _dot(outward, local - a)
+    outward = _rot(shape2[3], outward)
+    for v in ti.static(range(3)):
+        _put_vertex(ws, row, v, centre, _rot(shape2[3], hull.hull_vert[vadr + ids[v]]) + shape2[2], -1, ids[v])
+    half = 0.5 * shape1[5]
+    x1 = centre - (shape1[4][0] + half) * outward
+    x2 = centre - (signed - half) * outward
+    return x1, x2, signed - shape1[4][0] - shape1[5]
 
 
 # ----------------------------------------------------------------------------- multi-contact
@@ -1623,8 +1665,16 @@ def _ccd(shape1: ti.template(), shape2: ti.template(), multi, hull: ti.template(
         else:
             done = 1
             if dist <= CCD_TOLERANCE and n > 1 and not separated:
-                found, face, x1, x2, dist, cache1, cache2 = _epa(s1, s2, n, cache1, cache2, hull, ws, row)
+                found, face, x1, x2, dist, truncated, cache1, cache2 = _epa(s1, s2, n, cache1, cache2, hull, ws,
+                                                                           row)
                 nx, kind, slots, nslots = found, KIND_EPA, face, 3
+                if kind1 == SPHERE and kind2 == MESH and (truncated or not found):
+                    # a sphere's centre in a mesh's hull (pass 0: its core touches): EPA's curved
+                    # polytope around many hull facets can stop far from the nearest one (20° off,
+                    # 35 iterations, a KUKA link's hull), or fail; the exact answer is cheap here
+                    x1, x2, dist = _sphere_in_mesh(s1, s2, hull, ws, row)
+                    nx, face = 1, ti.Vector([0, 1, 2])
+                    slots = face
         if nx == 1:
             _write_witness(s1, s2, ws, row, x1, x2, dist, kind, slots, nslots)
             if multi and kind == KIND_EPA:  # MuJoCo 4.0's clipping for shallow contacts is not reproduced
