@@ -51,7 +51,9 @@ def gather_velocity(grid: ti.template(), e, base, fx, inv_dx, grid_i: ti.templat
 def gather_stage(frames: ti.template(), params: ti.template(), grid: ti.template(), grid_f: ti.template(),
                  grid_i: ti.template(), flags: ti.template(), gathered: ti.template(), src, dst, keep):
     """g2p: new velocity, affine field C and position; particles kept inside the walls. When
-    keep ≥ 0 (a replay), the gathered velocity (before the walls) → gathered's slot ``keep``."""
+    keep ≥ 0 (a replay), the gathered velocity (before the walls) → gathered's slot ``keep``; a
+    non-finite position raises flags[0] in a plain step only (a replay's repeats its forward's,
+    reported then: raised again, the next rollout's first step reported it)."""
     h, inv_dx = grid_f[0], grid_f[1]
     B, N = params.shape[0], params.shape[1]
     for e, p in ti.ndrange(B, N):
@@ -60,7 +62,7 @@ def gather_stage(frames: ti.template(), params: ti.template(), grid: ti.template
         vel, C = gather_velocity(grid, e, base, fx, inv_dx, grid_i)
         moved = pos + h * vel
         for c in ti.static(range(3)):
-            if not (ti.abs(moved[c]) < ti.math.inf):  # NaN or ±inf
+            if keep < 0 and not (ti.abs(moved[c]) < ti.math.inf):  # NaN or ±inf
                 flags[0] = 1
         pos_new, vel_new = wall_particle(moved, vel, grid_f)
         if keep >= 0:

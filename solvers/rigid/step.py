@@ -183,14 +183,16 @@ def advance(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, com
 
 @ti.func
 def _end_step(d: ti.template(), e, commit, out: ti.template()):
-    """After the last substep: flag a non-finite state, write the result to out (unless empty),
-    and with commit copy it into frame 0."""
+    """After the last substep: write the result to out (unless empty), and with commit flag a
+    non-finite state and copy it into frame 0 (uncommitted, a backward's replay: its forward step
+    flagged it already, and a flag left by the replay was reported at the next rollout's first
+    step)."""
     S = d.substeps
     for k in range(d.n_qs):
-        if not _finite(d.qpos[S, e, k]):
+        if commit and not _finite(d.qpos[S, e, k]):
             d.nonfinite[0] = 1
     for k in range(d.n_dofs):
-        if not _finite(d.qvel[S, e, k]):
+        if commit and not _finite(d.qvel[S, e, k]):
             d.nonfinite[0] = 1
     if out.shape[0] > 0:
         _state_to(d, d.qpos, d.qvel, S, e, out)
