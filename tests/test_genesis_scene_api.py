@@ -122,6 +122,39 @@ def test_getter_results_save_load_and_deepcopy(f64, tmp_path):
         copy.deepcopy(2.0 * leaf)
 
 
+
+@pytest.mark.parametrize("n_envs", [0, 2])
+def test_every_getter_returns_a_gs_tensor_whose_results_are_plain(f64, n_envs):
+    """SPEC §2: every getter of the scene, rigid entities, links and MPM entities (no-argument
+    calls, dict values and MPM state fields included) returns a gs.Tensor; what torch computes
+    from one is a plain torch tensor, as Genesis 1.4.5's getters' results (a subclass result
+    doubled the cost of each small op)."""
+    scene = gs.Scene(mpm_options=gs.options.MPMOptions(lower_bound=(-0.5, -0.5, 0.0), upper_bound=(0.5, 0.5, 1.0),
+                                                       grid_density=16))
+    scene.add_entity(gs.morphs.Plane())
+    box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.0, 0.0, 0.049)))
+    robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True, pos=(0.3, 0.0, 0.5)))
+    jelly = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(-0.2, 0.0, 0.3)),
+                             material=gs.materials.MPM.Muscle())
+    scene.build(n_envs=n_envs)
+    scene.step()
+    values = {"jelly.get_state()." + k: v for k, v in vars(jelly.get_state()).items() if isinstance(v, torch.Tensor)}
+    for name, owner in (("scene", scene), ("box", box), ("robot", robot), ("jelly", jelly),
+                        ("link", robot.get_link(robot.links[-1].name))):
+        for getter in (a for a in dir(owner) if a.startswith("get_") and a != "get_state"):
+            try:
+                value = getattr(owner, getter)()
+            except TypeError:  # it takes arguments
+                continue
+            items = value.items() if isinstance(value, dict) else enumerate(
+                value if isinstance(value, tuple) else (value,))
+            values.update({f"{name}.{getter}()[{k}]": v for k, v in items if isinstance(v, torch.Tensor)})
+    assert len(values) > 40
+    plain = [name for name, value in values.items() if not isinstance(value, gs.Tensor)]
+    assert not plain, plain
+    position = box.get_pos()
+    assert type(position * 2.0 + 1.0) is torch.Tensor and type(position[..., 0]) is torch.Tensor
+
 def test_reset_envs_idx_restores_only_those_envs(f64):
     scene, robot = _pendulum(requires_grad=False, n_envs=3)
     initial = scene.get_state().rigid.clone()

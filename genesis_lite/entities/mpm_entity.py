@@ -15,6 +15,7 @@ from .. import morphs as gm
 from ..materials import MPM
 from ..solvers.core import AssetError, InvalidInputError, SceneStateError, refuse_grad, runtime
 from ..solvers.mpm import layout, sampling
+from ..tensor import wrap
 from .common import EntityIndexing, all_finite, is_range, replace_columns
 
 
@@ -382,7 +383,7 @@ class MPMEntity(EntityIndexing):
     def get_muscle_group(self):
         """(n_particles,) int64 tensor: each particle's muscle group."""
         self._require_muscle("get_muscle_group")
-        return torch.as_tensor(self._muscle_group, device=runtime.device)
+        return wrap(torch.as_tensor(self._muscle_group, device=runtime.device), self.scene)
 
     def __repr__(self):
         return f"MPMEntity({self.name!r}, {type(self.material).__qualname__}, n_particles={self.n_particles})"

@@ -10,6 +10,7 @@ from ..runtime import logger
 from ..solvers.core import InvalidInputError, SceneStateError, refuse_grad, runtime
 from ..solvers.rigid.merge import merged_into
 from . import kinematics
+from ..tensor import wrap
 from .common import EntityIndexing, replace_columns as _replace
 from .rotations import euler_xyz_to_quat, quat_to_euler_xyz, quat_to_mat
 
@@ -56,11 +57,11 @@ class RigidLink:
 
     def get_pos(self, envs_idx=None):
         """World position of the link frame origin, m: (3,) or (n_envs, 3)."""
-        return self.entity.get_links_pos([self.idx_local], envs_idx)[..., 0, :]
+        return wrap(self.entity.get_links_pos([self.idx_local], envs_idx)[..., 0, :], self.entity.scene)
 
     def get_quat(self, envs_idx=None):
         """World orientation (w, x, y, z): (4,) or (n_envs, 4)."""
-        return self.entity.get_links_quat([self.idx_local], envs_idx)[..., 0, :]
+        return wrap(self.entity.get_links_quat([self.idx_local], envs_idx)[..., 0, :], self.entity.scene)
 
     def __repr__(self):
         return f"RigidLink({self.name!r}, idx_local={self.idx_local})"
@@ -365,16 +366,16 @@ class RigidEntity(EntityIndexing):
 
     def get_pos(self, envs_idx=None):
         """Base link position, m."""
-        return self.get_links_pos([0], envs_idx)[..., 0, :]
+        return wrap(self.get_links_pos([0], envs_idx)[..., 0, :], self.scene)
 
     def get_quat(self, envs_idx=None):
-        return self.get_links_quat([0], envs_idx)[..., 0, :]
+        return wrap(self.get_links_quat([0], envs_idx)[..., 0, :], self.scene)
 
     def get_vel(self, envs_idx=None):
-        return self.get_links_vel([0], envs_idx)[..., 0, :]
+        return wrap(self.get_links_vel([0], envs_idx)[..., 0, :], self.scene)
 
     def get_ang(self, envs_idx=None):
-        return self.get_links_ang([0], envs_idx)[..., 0, :]
+        return wrap(self.get_links_ang([0], envs_idx)[..., 0, :], self.scene)
 
     # -- external wrenches ----------------------------------------------------------------------------
     def _link_vectors(self, value, n_links, envs, arg):
@@ -656,9 +657,9 @@ class RigidEntity(EntityIndexing):
                "position": raw[..., 2:5], "normal": -raw[..., 9:12], "penetration": -raw[..., 8],
                "force_a": -raw[..., 5:8], "force_b": raw[..., 5:8]}
         if self.scene.n_envs == 0:
-            return {k: v[0][valid[0]] for k, v in out.items()}
+            return {k: wrap(v[0][valid[0]], self.scene) for k, v in out.items()}
         out["valid_mask"] = valid
-        return out
+        return {k: wrap(v, self.scene) for k, v in out.items()}
 
     def get_links_net_contact_force(self, envs_idx=None):
         """(n_links, 3) or (n_envs, n_links, 3) N, world: the sum of the contact forces of the last
