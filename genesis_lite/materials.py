@@ -4,11 +4,11 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from .options import _keywords
+from .options import named_keywords
 from .solvers.core import InvalidInputError, refuse_grad
 
 
-@_keywords("use_visual_raycasting", "friction_torsional", "friction_rolling", "needs_coup", "coup_friction",
+@named_keywords("use_visual_raycasting", "friction_torsional", "friction_rolling", "needs_coup", "coup_friction",
            "coup_softness", "coup_restitution", "sdf_cell_size", "sdf_min_res", "sdf_max_res", "gravity_compensation",
            "coup_type", "coup_links", "enable_coup_collision", "coup_collision_links", "contact_resistance")
 @dataclass
@@ -105,7 +105,7 @@ class MPM:
       values, which must stay positive), friction_angle in (0°, 90°).
     """
 
-    @_keywords()
+    @named_keywords()
     @dataclass(kw_only=True)
     class Base:
         """The base class of MPM materials (not to be made directly, as in Genesis)."""
@@ -165,7 +165,7 @@ class MPM:
             """{name: value} of the material's non-differentiable constants (Genesis's names)."""
             return {}
 
-    @_keywords()
+    @named_keywords()
     @dataclass(kw_only=True)
     class Elastic(Base):
         """Elastic material: model "corotation" (corotated linear) or "neohooken" (neo-Hookean)."""
@@ -179,7 +179,7 @@ class MPM:
         def solver_kind(self):
             return self.model
 
-    @_keywords()
+    @named_keywords()
     @dataclass(kw_only=True)
     class ElastoPlastic(Base):
         """Elasto-plastic material: von Mises yield (use_von_mises, von_mises_yield_stress, Pa) or,
@@ -206,7 +206,7 @@ class MPM:
             return {"yield_lower": self.yield_lower, "yield_higher": self.yield_higher,
                     "use_von_mises": self.use_von_mises, "von_mises_yield_stress": self.von_mises_yield_stress}
 
-    @_keywords()
+    @named_keywords()
     @dataclass(kw_only=True)
     class Snow(ElastoPlastic):
         """Snow: ElastoPlastic's clamp, hardening exp(10 (1 − Jp)) when compressed; no von Mises."""
@@ -226,7 +226,7 @@ class MPM:
         def solver_params(self):
             return {"yield_lower": self.yield_lower, "yield_higher": self.yield_higher}
 
-    @_keywords()
+    @named_keywords()
     @dataclass(kw_only=True)
     class Sand(Base):
         """Sand: Drucker–Prager plasticity (Klár et al. 2016) with ``friction_angle`` degrees."""
@@ -248,7 +248,7 @@ class MPM:
         def solver_params(self):
             return {"friction_angle": self.friction_angle}
 
-    @_keywords()
+    @named_keywords()
     @dataclass(kw_only=True)
     class Liquid(Base):
         """Liquid: pressure lam·J·(J − 1); ``viscous`` keeps the shear term (else mu = 0, as Genesis)."""
@@ -269,7 +269,7 @@ class MPM:
         def solver_params(self):
             return {"viscous": self.viscous}
 
-    @_keywords()
+    @named_keywords()
     @dataclass(kw_only=True)
     class Muscle(Elastic):
         """Muscle: Elastic (model "neohooken" by default) plus the active fibre stress

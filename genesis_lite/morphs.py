@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .options import _keywords
+from .options import named_keywords
 from .solvers.core import InvalidInputError, refuse_grad
 
 # Genesis 1.4.5's morph options that genesis_lite does not have (a named error says so, where
@@ -83,7 +83,7 @@ class Morph:
         pass
 
 
-@_keywords(*_FILE, "scale", "prioritize_urdf_material", "xacro_args")
+@named_keywords(*_FILE, "scale", "prioritize_urdf_material", "xacro_args")
 @dataclass
 class URDF(Morph):
     """A robot from a URDF file; mesh paths may be relative or ``package://``.
@@ -127,7 +127,7 @@ class URDF(Morph):
         self.merge_fixed_links, self.links_to_keep = bool(self.merge_fixed_links), tuple(keep)
 
 
-@_keywords(*_PRIMITIVE, *_TETGEN)
+@named_keywords(*_PRIMITIVE, *_TETGEN)
 @dataclass
 class Box(Morph):
     """A box; size (3,) full extents, m. Or, as Genesis, its corners ``lower`` and ``upper``
@@ -152,7 +152,7 @@ class Box(Morph):
         self.lower, self.upper = self.pos - self.size / 2.0, self.pos + self.size / 2.0
 
 
-@_keywords(*_PRIMITIVE, *_TETGEN)
+@named_keywords(*_PRIMITIVE, *_TETGEN)
 @dataclass
 class Sphere(Morph):
     """A sphere of ``radius`` m."""
@@ -162,7 +162,7 @@ class Sphere(Morph):
         _positive("Sphere", "radius", self.radius)
 
 
-@_keywords(*_PRIMITIVE, *_TETGEN)
+@named_keywords(*_PRIMITIVE, *_TETGEN)
 @dataclass
 class Cylinder(Morph):
     """A cylinder along local z: ``radius`` and ``height`` in m."""
@@ -174,13 +174,13 @@ class Cylinder(Morph):
         _positive(type(self).__name__, "height", self.height)
 
 
-@_keywords(*_PRIMITIVE, *_TETGEN)
+@named_keywords(*_PRIMITIVE, *_TETGEN)
 @dataclass
 class Capsule(Cylinder):
     """A capsule along local z: ``height`` is the length of the cylindrical part, m."""
 
 
-@_keywords(*_FILE, *_TETGEN, "contype", "conaffinity", "group_by_material",
+@named_keywords(*_FILE, *_TETGEN, "contype", "conaffinity", "group_by_material",
            "merge_submeshes_for_collision")
 @dataclass
 class Mesh(Morph):
@@ -194,7 +194,7 @@ class Mesh(Morph):
         _positive("Mesh", "scale", self.scale)
 
 
-@_keywords(*_PRIMITIVE, "plane_size", "tile_size")
+@named_keywords(*_PRIMITIVE, "plane_size", "tile_size")
 @dataclass
 class Plane(Morph):
     """The ground: an infinite static half-space (always fixed) bounded by the plane through pos

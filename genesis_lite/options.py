@@ -28,11 +28,12 @@ def _check_positive(owner, name, value, integer=False):
         raise InvalidInputError(f"{owner}: argument '{name}' must be {kind}, got {value!r}")
 
 
-def _keywords(*genesis_only):
+def named_keywords(*genesis_only):
     """Class decorator of an options dataclass: a keyword it does not have raises
     InvalidInputError naming the class, the keyword and the accepted ones (Python's TypeError
     named neither). ``genesis_only``: Genesis 1.4.5's options of that class which genesis_lite
-    does not have, so that the message says so rather than "unknown"."""
+    does not have, so that the message says so rather than "unknown". An instance's ``_given``
+    holds the names of the options its caller gave (pydantic's ``model_fields_set`` in Genesis)."""
     def decorate(cls):
         init, accepted = cls.__init__, [f.name for f in fields(cls)]
 
@@ -44,12 +45,13 @@ def _keywords(*genesis_only):
                     raise InvalidInputError(f"{cls.__qualname__}: argument '{name}' is {what}; expected one of "
                                             f"{accepted}")
             init(self, *args, **kwargs)
+            object.__setattr__(self, "_given", frozenset(accepted[:len(args)]) | frozenset(kwargs))
         cls.__init__ = checked_init
         return cls
     return decorate
 
 
-@_keywords("substeps_local", "floor_height")
+@named_keywords("substeps_local", "floor_height")
 @dataclass
 class SimOptions:
     """Time stepping and differentiability.
@@ -100,7 +102,7 @@ MUJOCO_TIMECONST, GENESIS_TIMECONST = 0.02, 0.01
 MUJOCO_ITERATIONS, GENESIS_ITERATIONS = 100, 25
 
 
-@_keywords("dt", "gravity", "disable_constraint", "max_collision_pairs", "multiplier_collision_broad_phase",
+@named_keywords("dt", "gravity", "disable_constraint", "max_collision_pairs", "multiplier_collision_broad_phase",
            "integrator", "IK_max_targets", "batch_links_info", "batch_joints_info", "batch_dofs_info",
            "noslip_iterations", "noslip_tolerance", "contact_resolution", "enable_torsional_friction",
            "enable_rolling_friction", "contact_pruning_tolerance", "sparse_solve", "box_box_detection",
@@ -197,7 +199,7 @@ class RigidOptions:
 MPM_BOUNDARY_CONDITIONS = ("slip", "sticky")
 
 
-@_keywords()
+@named_keywords()
 @dataclass
 class MPMOptions:
     """The MPM solver's options (Genesis 1.4.5's names and defaults, plus boundary_condition).
@@ -276,8 +278,9 @@ class MPMOptions:
 
     def substeps(self, sim_options):
         """The number of MPM substeps per scene step: SimOptions.substeps when dt is None, else
-        SimOptions.dt / dt, which must be an integer (as Genesis). A SimOptions.substeps other
-        than 1 (taken as "not asked for") must then agree with it."""
+        SimOptions.dt / dt, which must be an integer (as Genesis). A SimOptions.substeps its caller
+        gave, 1 too, must then agree with it (as Genesis; 1 was taken as "not asked for", and 4
+        substeps ran where substeps=1 was asked)."""
         if self.dt is None:
             return sim_options.substeps
         ratio = sim_options.dt / self.dt
@@ -285,7 +288,7 @@ class MPMOptions:
         if count < 1 or abs(count * self.dt - sim_options.dt) > 1e-9 * sim_options.dt:
             raise InvalidInputError(f"MPMOptions: argument 'dt' must divide SimOptions.dt = {sim_options.dt:g} s an "
                                     f"integer number of times, got {self.dt:g} s (ratio {ratio:g})")
-        if sim_options.substeps != 1 and count != sim_options.substeps:
+        if "substeps" in getattr(sim_options, "_given", ()) and count != sim_options.substeps:
             raise InvalidInputError(f"MPMOptions: argument 'dt' = {self.dt:g} s makes {count} substeps per step, but "
                                     f"SimOptions.substeps = {sim_options.substeps}; set one or the other")
         return count
@@ -342,7 +345,7 @@ def _check_choice(owner, name, value, choices):
     return value
 
 
-@_keywords()
+@named_keywords()
 @dataclass
 class ViewerOptions:
     """The interactive viewer's options (Genesis 1.4.5's names and defaults). No viewer exists yet
@@ -431,7 +434,7 @@ def _check_light_value(owner, name, value):
     return _check_vec3(owner, name, value)  # dir or pos
 
 
-@_keywords()
+@named_keywords()
 @dataclass
 class VisOptions:
     """What is drawn, whatever the viewer or camera (Genesis 1.4.5's names and defaults). Cameras

@@ -14,7 +14,7 @@ import torch
 
 from . import morphs as gm
 from .entities import MPMEntity, RigidEntity
-from .entities.common import EntityIndexing, envs_mask_to_idx, replace_columns
+from .entities.common import EntityIndexing, envs_mask_to_idx, named_argument_errors, replace_columns
 from .entities.mpm_entity import sample_particles
 from .solvers.core import AssetError, InvalidInputError, SceneStateError
 from .materials import MPM, Rigid
@@ -52,6 +52,7 @@ class SimState:
 
 
 
+@named_argument_errors
 class Scene:
     """Entities, options and, once built, the simulator.
 

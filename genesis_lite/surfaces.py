@@ -3,9 +3,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .options import named_keywords
 from .solvers.core import InvalidInputError
 
 
+@named_keywords("cutoff", "default_roughness", "diffuse_texture", "diffuse_trans", "double_sided", "emissive",
+                "emissive_texture", "foam_options", "generate_foam", "ior", "metallic", "metallic_texture",
+                "normal_diff_clamp", "normal_texture", "opacity", "opacity_texture", "recon_backend", "roughness",
+                "roughness_texture", "smooth", "specular_trans", "vis_mode")
 @dataclass
 class Default:
     """A plain surface. color: (r, g, b) or (r, g, b, a) in [0, 1], or None (Genesis's default):

@@ -6,6 +6,9 @@ these names (``gs.GenesisException``, ``gs.device``...).
 Every error a user can trigger is a :class:`GenesisException` subclass whose message
 names the entity, the argument, what was expected and what was given.
 """
+import sys
+import warnings
+
 import numpy as np
 import taichi as ti
 import torch
@@ -56,6 +59,14 @@ def available_memory():
     except (ValueError, OSError, AttributeError):
         return None
 
+
+def warn_user(message):
+    """warnings.warn (UserWarning) naming the user's line: the first caller outside genesis_lite,
+    however many of its frames lie between (a fixed stacklevel broke when a frame was added)."""
+    frame, level = sys._getframe(1), 2
+    while frame is not None and frame.f_globals.get("__name__", "").startswith("genesis_lite"):
+        frame, level = frame.f_back, level + 1
+    warnings.warn(message, UserWarning, stacklevel=level)
 
 class SimulationError(GenesisException, RuntimeError):
     """The simulation produced a non-finite state (raised when SimOptions(check_nan=True))."""

@@ -203,6 +203,29 @@ def test_dofs_idx_local_out_of_range(f64, built):
            "'dofs_idx_local'", "integers", "[0.5]")
 
 
+
+def test_dofs_idx_local_as_a_slice(f64, built):
+    """Genesis takes a slice of local dofs (its go2 example: slice(6, 18)); it was refused."""
+    _, robot = built
+    robot.set_dofs_position([0.3], dofs_idx_local=slice(1, 2))
+    assert robot.get_dofs_position(slice(-1, None)).tolist() == [0.3]
+    assert robot.get_dofs_position(slice(None)).shape == (2,)
+
+
+def test_arguments_a_method_does_not_take(f64, built):
+    """A Genesis argument genesis_lite does not have yet (or a typo) names the entity or scene, the
+    method, the argument and what the method takes, where Python's TypeError named neither."""
+    scene, robot = built
+    raises(gs.InvalidInputError, lambda: robot.set_qpos([0.0, 0.0], skip_forward=True), f"entity '{ENTITY}'",
+           "set_qpos", "'skip_forward'", "'qs_idx_local'", "docs/genesis_api.md")
+    raises(gs.InvalidInputError, lambda: robot.get_pos(relative=True), "get_pos", "'relative'", "['envs_idx']")
+    raises(gs.InvalidInputError, lambda: robot.get_link(robot.links[-1].name).get_pos(0, 1),
+           f"link '{robot.links[-1].name}' of entity '{ENTITY}'", "get_pos", "too many positional arguments")
+    raises(gs.InvalidInputError, lambda: scene.step(foo=1), "gs.Scene", "step", "'foo'", "'update_visualizer'")
+    raises(gs.InvalidInputError, lambda: gs.Scene(show_FPS=False), "gs.Scene", "'show_FPS'", "'sim_options'")
+    raises(gs.InvalidInputError, lambda: gs.surfaces.Default(vis_mode="visual"), "Default", "'vis_mode'",
+           "a Genesis option that genesis_lite does not have", "['color']")
+
 def test_envs_idx_without_batch(f64, built):
     _, robot = built
     raises(gs.InvalidInputError, lambda: robot.set_dofs_position([0.1, 0.2], envs_idx=[0]),

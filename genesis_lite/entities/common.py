@@ -1,5 +1,8 @@
 """What every entity kind shares: checked local and env indices, the batch axis of results, and
 out-of-place writes into the simulator's (B, W) state and input tables (so autograd sees them)."""
+import functools
+import inspect
+
 import numpy as np
 import torch
 
@@ -68,6 +71,8 @@ class EntityIndexing:
         is undefined (torch's index_put, like Genesis's parallel kernels, picks either)."""
         if idx is None:
             return np.arange(n)
+        if isinstance(idx, slice):  # as Genesis takes them (its go2 example: slice(6, 18))
+            return np.arange(n)[idx]
         arr = np.atleast_1d(idx.detach().cpu().numpy() if isinstance(idx, torch.Tensor) else np.asarray(idx))
         if arr.size == 0:  # no index (a list of none reads as floats): nothing selected, as in Genesis
             return np.zeros(0, dtype=np.int64)
@@ -139,3 +144,34 @@ class EntityIndexing:
             raise InvalidInputError(f"{self._who}: argument '{arg}' must be {what}, got "
                                     f"{tensor.detach().cpu().numpy()}")
         return tensor if tensor.dim() == 2 else tensor.reshape(len(envs), n_cols)
+
+
+def named_argument_errors(cls):
+    """Class decorator: a public method (or the constructor) called with arguments its signature
+    does not take raises InvalidInputError naming the owner, the method and the arguments it takes,
+    where Python's TypeError named neither (a Genesis argument genesis_lite does not have yet, such
+    as ``skip_forward`` or ``relative``, docs/genesis_api.md). A call that binds pays one frame: the
+    signature is checked only after a TypeError, and one raised inside the method passes on."""
+    for name, member in list(vars(cls).items()):
+        if inspect.isfunction(member) and (name == "__init__" or not name.startswith("_")):
+            setattr(cls, name, _checked_arguments(member))
+    return cls
+
+
+def _checked_arguments(method):
+    signature = inspect.signature(method)
+
+    @functools.wraps(method)
+    def call(self, *args, **kwargs):
+        try:
+            return method(self, *args, **kwargs)
+        except TypeError:
+            try:
+                signature.bind(self, *args, **kwargs)
+            except TypeError as error:
+                who = getattr(self, "_who", None) or f"gs.{type(self).__name__}"
+                where = who if method.__name__ == "__init__" else f"{who}: {method.__name__}"
+                raise InvalidInputError(f"{where}: {error}; it takes {list(signature.parameters)[1:]} (Genesis's "
+                                        f"arguments not offered yet are listed in docs/genesis_api.md)") from None
+            raise
+    return call

@@ -6,17 +6,15 @@ part of the autograd graph; every setter writes out of place, so gradients reach
 Local particle indices count within the entity; in a batched scene (n_envs > 0) results gain a
 leading batch dimension and ``envs_idx`` selects environments. Units: m, m/s, Pa, kg/m³, kg.
 """
-import warnings
-
 import numpy as np
 import torch
 
 from .. import morphs as gm
 from ..materials import MPM
-from ..solvers.core import AssetError, InvalidInputError, SceneStateError, refuse_grad, runtime
+from ..solvers.core import AssetError, InvalidInputError, SceneStateError, refuse_grad, runtime, warn_user
 from ..solvers.mpm import layout, sampling
 from ..tensor import wrap
-from .common import EntityIndexing, all_finite, is_range, replace_columns
+from .common import EntityIndexing, all_finite, is_range, named_argument_errors, replace_columns
 
 
 def sample_particles(morph, material, particle_size, wall_lower, wall_upper, seed, name):
@@ -62,10 +60,10 @@ def _check_volume(owner, morph, count, particle_size, volume):
         # (a mesh whose surface crosses itself: its volume counts the overlaps, its inside, by ray
         # parity, leaves them empty)
         overlap = " or its surface overlaps itself (the overlaps are left empty)" if isinstance(morph, gm.Mesh) else ""
-        warnings.warn(f"{owner}: its {count} particle(s) of particle_size {particle_size:g} m hold {ratio:.3g}× the "
+        warn_user(f"{owner}: its {count} particle(s) of particle_size {particle_size:g} m hold {ratio:.3g}× the "
                       f"volume of its {type(morph).__name__} ({volume:.3g} m³), and its mass is ρ · that volume: "
                       f"particle_size is too coarse for the shape{overlap}; lower MPMOptions particle_size (at most "
-                      f"{volume ** (1.0 / 3.0) / 4.0:.3g} m puts 4 or more particles across it)", stacklevel=5)
+                      f"{volume ** (1.0 / 3.0) / 4.0:.3g} m puts 4 or more particles across it)")
 
 
 def _check_inside(owner, arg, positions, wall_lower, wall_upper, strictly):
@@ -86,14 +84,15 @@ def _check_inside(owner, arg, positions, wall_lower, wall_upper, strictly):
 
 
 class MPMEntityState:
-    """One entity's particle state (torch views, differentiable): pos, vel (…, n, 3); C, F
-    (…, n, 3, 3); Jp (…, n); with a leading n_envs axis in a batched scene."""
+    """One entity's particle state (torch views, differentiable): pos, vel (B, n, 3); C, F
+    (B, n, 3, 3); Jp (B, n), B = max(1, n_envs) as Genesis's."""
 
     def __init__(self, entity, pos, vel, C, F, Jp):
         self.entity = entity
         self.pos, self.vel, self.C, self.F, self.Jp = pos, vel, C, F, Jp
 
 
+@named_argument_errors
 class MPMEntity(EntityIndexing):
     """Particles of one material in the MPM solver: rows particle_start … particle_start +
     n_particles − 1 of its state and per-particle inputs.
@@ -239,10 +238,12 @@ class MPMEntity(EntityIndexing):
         self.set_particles_vel(vels, None, envs_idx)
 
     def get_state(self):
-        """MPMEntityState of every env: pos, vel, C, F, Jp (differentiable torch views)."""
+        """MPMEntityState of every env: pos, vel, C, F, Jp (differentiable torch views), each with a
+        leading env axis, of 1 in a scene built without envs, as Genesis's (its idiom
+        ``get_state().pos[0]``, every particle of env 0, took particle 0 when the axis was dropped)."""
         rows = self._particle_rows(self._envs(None))
         lead = rows.shape[:-1]
-        field = lambda name, shape: self._out(rows[..., slice(*layout.STATE[name])].reshape(*lead, *shape))
+        field = lambda name, shape: wrap(rows[..., slice(*layout.STATE[name])].reshape(*lead, *shape), self.scene)
         return MPMEntityState(self, field("pos", (3,)), field("vel", (3,)), field("C", (3, 3)), field("F", (3, 3)),
                               field("Jp", ()))
 
@@ -337,8 +338,9 @@ class MPMEntity(EntityIndexing):
         """Genesis's set_muscle: muscle_group (n_particles,) integers in [0, n_groups) (all 0 at
         first): each particle takes its new group's actuation at once, as set_actuation last set it
         (Genesis reads a particle's group at every step); muscle_direction (n_particles, 3) or (3,)
-        fibre directions (normalised here; (0, 0, 1) at first). Not differentiable: a tensor that
-        requires grad raises GradientError."""
+        fibre directions d, taken as given, as Genesis (the active stress E·actu·(F d)(F d)ᵀ grows
+        with |d|²: one of length 2 pulls 4× as hard; (0, 0, 1) at first). Not differentiable: a
+        tensor that requires grad raises GradientError."""
         self._require_muscle("set_muscle")
         self._sim()
         for name, value in (("muscle_group", muscle_group), ("muscle_direction", muscle_direction)):
@@ -364,14 +366,13 @@ class MPMEntity(EntityIndexing):
                 raise InvalidInputError(f"entity '{self.name}': argument 'muscle_direction' must have shape (3,) or "
                                         f"{(self.n_particles, 3)}, got {directions.shape}")
             directions = np.broadcast_to(directions, (self.n_particles, 3))
-            norms = np.linalg.norm(directions, axis=1)
-            if not (np.all(np.isfinite(directions)) and np.all(norms > 0)):
-                raise InvalidInputError(f"entity '{self.name}': argument 'muscle_direction' must hold finite, non-zero "
-                                        f"vectors, got a zero or non-finite one")
-            self._write_fibers(directions / norms[:, None])
+            if not np.all(np.isfinite(directions)):
+                raise InvalidInputError(f"entity '{self.name}': argument 'muscle_direction' must hold finite "
+                                        f"vectors, got a non-finite one")
+            self._write_fibers(directions)
 
     def _write_fibers(self, directions):
-        """The solver's input "fiber" (B, N · 3; every env alike) ← the unit directions (n, 3) of
+        """The solver's input "fiber" (B, N · 3; every env alike) ← the directions (n, 3) of
         this entity's particles: an input, so that each step records the fibres it ran with."""
         sim = self._sim()
         table = sim.inputs(self._solver)["fiber"]

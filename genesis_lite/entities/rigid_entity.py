@@ -11,7 +11,7 @@ from ..solvers.core import InvalidInputError, SceneStateError, refuse_grad, runt
 from ..solvers.rigid.merge import merged_into
 from . import kinematics
 from ..tensor import wrap
-from .common import EntityIndexing, replace_columns as _replace
+from .common import EntityIndexing, named_argument_errors, replace_columns as _replace
 from .rotations import euler_xyz_to_quat, quat_to_euler_xyz, quat_to_mat
 
 _MODES = {"force": 0, "position": 1, "velocity": 2}  # ctrl_mode codes (solvers/rigid/actuation.py)
@@ -45,11 +45,16 @@ def _check_sol_params(name, p):
                                 f"power ≥ 1, got {p.tolist()}")
 
 
+@named_argument_errors
 class RigidLink:
     """A link: ``name``, ``idx`` (scene-wide), ``idx_local`` (within its entity)."""
 
     def __init__(self, entity, name, idx_local):
         self.entity, self.name, self.idx_local = entity, name, idx_local
+
+    @property
+    def _who(self):
+        return f"link '{self.name}' of entity '{self.entity.name}'"
 
     @property
     def idx(self):
@@ -103,6 +108,7 @@ class RigidJoint:
         return f"RigidJoint({self.name!r}, type={self.type!r}, dofs_idx_local={self.dofs_idx_local})"
 
 
+@named_argument_errors
 class RigidEntity(EntityIndexing):
     """A rigid entity. Units: m, rad, kg, s, N, N·m; quaternions (w, x, y, z)."""
 

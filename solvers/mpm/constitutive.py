@@ -324,7 +324,7 @@ def decompose_pair(kind_F, consts_F, F, kind_G, consts_G, G):
 @ti.func
 def constitutive(kind, consts, E, nu, actu, fiber, F_tmp, Jp):
     """One particle's material update: kind (i32, layout.KIND), consts (N_CONSTS vector, see
-    `encode`), E (Pa), nu, actu (muscle actuation, 0 elsewhere), fiber (unit 3-vector, muscle fibre
+    `encode`), E (Pa), nu, actu (muscle actuation, 0 elsewhere), fiber (3-vector, muscle fibre
     direction), F_tmp = (I + h C) F (3×3), Jp (plastic volume ratio) → (F_new (3×3), Jp_new, tau (3×3,
     Pa)) as Genesis 1.4.5 computes them (to round-off)."""
     J, U, sig, V = decompose(kind, consts, F_tmp)

@@ -4,14 +4,12 @@ State per env: every particle's row of layout.STATE, flattened (B, N · 25). Inp
 per-particle E, nu, rho, actu, the per-env gravity and the muscle fibres. Bookkeeping only: the physics is in the
 kernels of kernels.py (one launch per substep) and constitutive.py.
 """
-import warnings
-
 import numpy as np
 import taichi as ti
 import torch
 
 from ..base import Solver
-from ..core import InvalidInputError, available_memory, runtime
+from ..core import InvalidInputError, available_memory, runtime, warn_user
 from ..launch import BoundKernels
 from . import kernels, layout
 from .adjoint import MPMAdjoint
@@ -134,9 +132,9 @@ class MPMSolver(MPMAdjoint, Solver):
     def _check_substep(self):
         """At build: check_substep with the materials' parameters."""
         m = self.model
-        self.check_substep(m.defaults["E"], m.defaults["nu"], m.defaults["rho"], stacklevel=6)  # the user's build
+        self.check_substep(m.defaults["E"], m.defaults["nu"], m.defaults["rho"])
 
-    def check_substep(self, E, nu, rho, stacklevel=3):
+    def check_substep(self, E, nu, rho):
         """Warn when the substep exceeds the stability limit for particles of Young's modulus E (Pa),
         Poisson ratio nu and density rho (kg/m³), arrays of one shape: Genesis's suggested
         h ≤ 2e-2·dx, and the elastic wave's CFL bound h ≤ dx / c with c = √((λ + 2μ)/ρ) of the
@@ -147,10 +145,10 @@ class MPMSolver(MPMAdjoint, Solver):
         wave = float(np.sqrt(np.max(modulus / rho))) if modulus.size else 0.0
         limit = min(GENESIS_DT_PER_DX * m.grid.dx, m.grid.dx / wave if wave > 0 else np.inf)
         if h > limit:
-            warnings.warn(f"MPM solver (entities: {', '.join(self.entity_names)}): the substep dt / substeps = "
+            warn_user(f"MPM solver (entities: {', '.join(self.entity_names)}): the substep dt / substeps = "
                           f"{h:.3g} s exceeds the stability limit {limit:.3g} s (min of 2e-2·dx = "
                           f"{GENESIS_DT_PER_DX * m.grid.dx:.3g} s and dx / wave speed = {m.grid.dx / wave:.3g} s); "
-                          f"the simulation may blow up: raise SimOptions substeps or lower dt", stacklevel=stacklevel)
+                          f"the simulation may blow up: raise SimOptions substeps or lower dt")
 
     def _allocate(self):
         m, B, N = self.model, self.n_batch, self.model.n_particles
