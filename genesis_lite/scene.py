@@ -30,10 +30,12 @@ from .vis.visuals import DebugSpheres, SceneVisuals
 
 
 class SimState:
-    """A snapshot of every solver's state (torch tensors, kept in the graph when differentiable)."""
+    """A snapshot of every solver's state (torch tensors, kept in the graph when differentiable),
+    and of the controls Genesis keeps in its state (``inputs``: per solver, its state_inputs, such
+    as MPM's muscle actuation, which reset(state) restores)."""
 
-    def __init__(self, scene, states):
-        self.scene, self.states = scene, states
+    def __init__(self, scene, states, inputs):
+        self.scene, self.states, self.inputs = scene, states, inputs
 
     @property
     def rigid(self):
@@ -322,7 +324,8 @@ class Scene:
             given = "a SimState of another scene" if isinstance(state, SimState) else type(state).__name__
             raise InvalidInputError(f"scene.reset: argument 'state' must come from this scene's get_state(), "
                                     f"got {given}")
-        sim.reset(None if state is None else state.states, self._envs_idx("scene.reset", envs_idx))
+        sim.reset(None if state is None else state.states, self._envs_idx("scene.reset", envs_idx),
+                  None if state is None else state.inputs)
 
     def _envs_idx(self, what, envs_idx):
         """``envs_idx`` (None, int, sequence, array or tensor) as an int64 array (None stays None)."""
@@ -347,7 +350,7 @@ class Scene:
         simulator's own tensors, so that changing it in place changes neither the scene nor the
         state a plain reset() returns to (the state at build is that tensor until a step)."""
         sim = self._require_built("scene.get_state")
-        return SimState(self, [sim.state(slot.solver).clone() for slot in sim.slots])
+        return SimState(self, [sim.state(slot.solver).clone() for slot in sim.slots], sim.held_inputs())
 
     def set_gravity(self, gravity, envs_idx=None):
         """Gravity of every solver, m/s²: (3,) or (n_envs, 3); differentiable."""
@@ -375,6 +378,18 @@ class Scene:
     @property
     def dt(self):
         return self.sim_options.dt
+
+    @property
+    def substeps(self):
+        return self.sim_options.substeps
+
+    @property
+    def requires_grad(self):
+        return self.sim_options.requires_grad
+
+    @property
+    def entity_names(self):
+        return tuple(entity.name for entity in self.entities)
 
     def destroy(self):
         """Free the scene's arrays (its solvers' data) and finish the cameras' streamed recordings;

@@ -624,6 +624,23 @@ def test_joints_answer_genesis_deprecated_singular_names(f64, pendulum, caplog):
         hinge.dofs_index
 
 
+
+def test_joint_and_scene_indices_as_genesis(f64):
+    """RigidJoint's n_qs, idx_local, dof/q start and end, and the scene's substeps, requires_grad
+    and entity_names, as Genesis's (a Genesis user's port met them missing)."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(substeps=2), show_viewer=False)
+    scene.add_entity(gs.morphs.Plane(), name="floor")
+    box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.0, 0.0, 0.5)), name="box")
+    arm = scene.add_entity(gs.morphs.URDF(file=pybullet("kuka_iiwa", "model.urdf"), fixed=True), name="arm")
+    scene.build()
+    assert (scene.substeps, scene.requires_grad, scene.entity_names) == (2, False, ("floor", "box", "arm"))
+    root = box.joints[0]
+    assert (root.n_dofs, root.n_qs, root.idx_local, root.dof_start, root.dof_end, root.q_start, root.q_end) == (
+        6, 7, 0, 0, 6, 0, 7)
+    last = arm.joints[-1]
+    assert (last.n_qs, last.idx_local, last.dof_start, last.dof_end, last.q_start, last.q_end) == (
+        1, 6, 12, 13, 13, 14)
+
 def test_mass_of_an_entity_leaves_out_the_links_welded_to_the_world(f64):
     """get_mass sums the links that move, as Genesis's (a fixed base is never accelerated: its mass
     is the world's): a fixed Panda weighs all but its 2.9 kg base, a free one every link."""

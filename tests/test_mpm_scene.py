@@ -506,3 +506,29 @@ def test_muscle_groups_set_after_the_actuation_move_as_set_before_it(f64):
     assert torch.equal(trajectories[0], trajectories[1])
     start = muscle.init_particles[:, 0]
     assert float(trajectories[0][:, 0].max() - trajectories[0][:, 0].min()) < start.max() - start.min()  # it contracts
+
+
+def test_reset_to_a_state_restores_the_muscles_actuation(f64):
+    """A muscle's actuation is part of the state, as Genesis keeps it in each particle's: reset
+    to a state from get_state() goes on contracting as the rollout it came from (it cleared the
+    actuation, and the replayed muscle went slack: an MPM probe beside Genesis), so does a plain
+    reset() afterwards (the state is then the registered one), and a partial reset restores only
+    those envs' actuation."""
+    scene, muscle, _ = _scene(gs.materials.MPM.Muscle(E=1e5), n_envs=2, gravity=(0.0, 0.0, 0.0))
+    muscle.set_muscle(muscle_direction=(1.0, 0.0, 0.0))
+    muscle.set_actuation([[0.5], [0.3]])
+    for _ in range(3):
+        scene.step()
+    state = scene.get_state()
+    for _ in range(4):
+        scene.step()
+    reference = muscle.get_particles_pos().clone()
+    for reset in (lambda: scene.reset(state), lambda: scene.reset()):
+        muscle.set_actuation([[0.1], [0.1]])
+        reset()
+        for _ in range(4):
+            scene.step()
+        assert torch.equal(muscle.get_particles_pos(), reference)
+    muscle.set_actuation([[0.0], [0.0]])
+    scene.reset(envs_idx=[1])  # env 1 back to the state and its actuation 0.3; env 0 keeps 0
+    assert torch.equal(scene.sim.inputs(scene.mpm_solver)["actu"][:, 0], torch.tensor([0.0, 0.3], dtype=torch.float64))

@@ -84,6 +84,33 @@ class RigidJoint:
         return len(self.dofs_idx_local)
 
     @property
+    def n_qs(self):
+        return len(self.qs_idx_local)
+
+    @property
+    def idx_local(self):
+        """The joint's place in its entity's ``joints``."""
+        return self.entity.joints.index(self)
+
+    @property
+    def dof_start(self):
+        """Its first dof in the scene's rigid solver (once built); dof_end one past its last."""
+        return self.entity.dof_start + self.dofs_idx_local[0]
+
+    @property
+    def dof_end(self):
+        return self.dof_start + self.n_dofs
+
+    @property
+    def q_start(self):
+        """Its first coordinate in the scene's rigid solver (once built); q_end one past its last."""
+        return self.entity.q_start + self.qs_idx_local[0]
+
+    @property
+    def q_end(self):
+        return self.q_start + self.n_qs
+
+    @property
     def dofs_idx(self):
         """The joint's dofs in the scene's rigid solver (available once the scene is built)."""
         return [self.entity.dof_start + i for i in self.dofs_idx_local]
