@@ -129,7 +129,8 @@ def test_every_getter_returns_a_gs_tensor_whose_results_are_plain(f64, n_envs):
     calls, dict values and MPM state fields included) returns a gs.Tensor; what torch computes
     from one is a plain torch tensor, as Genesis 1.4.5's getters' results (a subclass result
     doubled the cost of each small op)."""
-    scene = gs.Scene(mpm_options=gs.options.MPMOptions(lower_bound=(-0.5, -0.5, 0.0), upper_bound=(0.5, 0.5, 1.0),
+    scene = gs.Scene(sim_options=gs.options.SimOptions(substeps=10),
+                     mpm_options=gs.options.MPMOptions(lower_bound=(-0.5, -0.5, 0.0), upper_bound=(0.5, 0.5, 1.0),
                                                        grid_density=16))
     scene.add_entity(gs.morphs.Plane())
     box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.0, 0.0, 0.049)))

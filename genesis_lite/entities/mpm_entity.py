@@ -365,7 +365,7 @@ class MPMEntity(EntityIndexing):
             if directions.shape not in ((3,), (self.n_particles, 3)):
                 raise InvalidInputError(f"entity '{self.name}': argument 'muscle_direction' must have shape (3,) or "
                                         f"{(self.n_particles, 3)}, got {directions.shape}")
-            directions = np.broadcast_to(directions, (self.n_particles, 3))
+            directions = np.broadcast_to(directions, (self.n_particles, 3)).copy()
             if not np.all(np.isfinite(directions)):
                 raise InvalidInputError(f"entity '{self.name}': argument 'muscle_direction' must hold finite "
                                         f"vectors, got a non-finite one")
