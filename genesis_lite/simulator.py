@@ -27,6 +27,22 @@ def _restored(table, source, envs):
     return out
 
 
+def _zero_unreached_envs(grad_outs, grads):
+    """In a batched step's ``grads`` (tensors (B, …) or None), the rows of the envs that no
+    gradient reaches (their output gradients ``grad_outs`` all exactly zero) set to zero, when some
+    gradient is not finite: envs are independent, so zero is those rows' exact value, where the
+    adjoints' 0 · NaN of an env whose state went non-finite gave NaN (and an input the envs share,
+    a policy's weight, got NaN from an env its loss left out)."""
+    grads = [g for g in grads if g is not None]
+    if grads[0].shape[0] == 1 or all(bool(torch.isfinite(g).all()) for g in grads):
+        return
+    reached = torch.zeros(grads[0].shape[0], dtype=torch.bool, device=grads[0].device)
+    for out in grad_outs:
+        reached |= (out != 0).flatten(1).any(dim=1)
+    for g in grads:
+        g[~reached] = 0.0
+
+
 class SolverSlot:
     """One solver with its current torch state/inputs and what Taichi holds of them."""
 
@@ -285,6 +301,7 @@ class Simulator:
         for inputs, (grad_state, grad_inputs) in zip(split, results):
             grads_states.append(grad_state)
             grads_inputs.extend(grad_inputs.get(name) if next(wanted) else None for name in inputs)
+        _zero_unreached_envs(grad_states, [*grads_states, *grads_inputs])
         return (*grads_states, *grads_inputs)
 
     def _backward_shared(self, states, inputs, grad_states, warm_starts, records):
@@ -362,6 +379,7 @@ class Simulator:
         self._sync(slot, state, slot.inputs)
         out = solver.links_kinematics_backward(grad)
         slot.uploaded_state = None
+        _zero_unreached_envs([grad], [out])
         return out
 
     def mass_matrix(self, solver):

@@ -148,3 +148,38 @@ def test_a_backward_through_a_blow_up_leaves_no_warning_for_the_next_rollout(f64
         warnings = [r.getMessage() for r in caplog.records if "non-finite" in r.getMessage()]
         assert len(warnings) == (2 if blow_up else 0), warnings  # once per solver
         (wild.get_dofs_position().sum() + jelly.get_particles_pos().sum()).backward()
+
+
+def test_a_diverged_env_leaves_the_others_gradients_finite(f64):
+    """Envs are independent: a loss that leaves out an env whose state went non-finite gets
+    finite, exact gradients in what the envs share (a policy's weight). The reverse of that env
+    multiplied its zero gradients by NaN partials (0 · NaN), and an external wrench's offset was
+    inf − inf at the link origin; both gave NaN (found by a gradient probe). Against central
+    differences."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True),
+                     rigid_options=gs.options.RigidOptions(enable_joint_limit=False))
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.3, 0.1), pos=(0.0, 0.0, 3.0)))
+    arm = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True, pos=(1, 0, 0)))
+    scene.build(n_envs=2)
+    force = torch.tensor([[[1.0, 0.0, 0.0]], [[0.0, 0.0, 0.0]]], dtype=torch.float64)
+    torque = torch.tensor([[[0.0, 0.0, 0.0]], [[3.0, -2.0, 1.0]]], dtype=torch.float64)  # env 1 tumbles to inf
+
+    def final_positions(gain):
+        scene.reset()
+        arm.set_dofs_force_range(-1e30 * torch.ones(2, 2), 1e30 * torch.ones(2, 2))
+        arm.set_dofs_kp([[0.0, 0.0], [1e12, 1e12]])  # env 1's explicit servo far too stiff
+        arm.control_dofs_position([[1.0, -1.0]], envs_idx=[1])
+        for _ in range(50):
+            box.apply_links_external_wrench(force=gain * force, torque=gain * torque, links_idx_local=[0])
+            arm.control_dofs_force(gain * torch.tensor([[0.3, -0.2]], dtype=torch.float64), envs_idx=[0])
+            scene.step()
+        return box.get_pos(), arm.get_dofs_position()
+
+    gain = torch.tensor(1.0, dtype=torch.float64, requires_grad=True)
+    pos, q = final_positions(gain)
+    assert not bool(torch.isfinite(pos[1]).all()) and not bool(torch.isfinite(q[1]).all())
+    (pos[0].sum() + q[0].sum()).backward()
+    with torch.no_grad():
+        ends = [final_positions(torch.tensor(1.0 + eps, dtype=torch.float64)) for eps in (1e-6, -1e-6)]
+        central = sum(float(p[0].sum() + a[0].sum()) * sign for (p, a), sign in zip(ends, (1, -1))) / 2e-6
+    assert float(gain.grad) == pytest.approx(central, rel=1e-6)

@@ -445,15 +445,21 @@ class RigidEntity(EntityIndexing):
         rot = quat_to_mat(self._links(links, envs_idx, slice(3, 7)))
         com = torch.as_tensor(self._solver.model.link_com[self.link_start + links], dtype=runtime.tc_float,
                               device=runtime.device)
-        frame = origin if ref == "link_origin" else origin + (rot @ com[..., None])[..., 0]
         zeros = torch.zeros_like(origin)
         f = zeros if force is None else self._link_vectors(force, len(links), envs, "force")
         t = zeros if torque is None else self._link_vectors(torque, len(links), envs, "torque")
-        point = frame if pos is None else self._link_vectors(pos, len(links), envs, "pos")
+        # the force's point as an offset from the link origin (world axes), none at the origin
+        # itself: taken as point − origin there, a diverged env's inf − inf made it NaN, and
+        # through the cross product the gradient of every input these envs share
+        offset = None if ref == "link_origin" else (rot @ com[..., None])[..., 0]
+        if pos is not None:
+            point = self._link_vectors(pos, len(links), envs, "pos")
+            offset = point - origin if not local else (rot @ point[..., None])[..., 0] + (
+                0.0 if offset is None else offset)
         if local:
             f, t = (rot @ f[..., None])[..., 0], (rot @ t[..., None])[..., 0]
-            point = point if pos is None else frame + (rot @ point[..., None])[..., 0]
-        wrench = torch.cat([f, t + torch.linalg.cross(point - origin, f)], dim=-1).reshape(len(envs), -1)
+        moment = t if offset is None else t + torch.linalg.cross(offset, f)
+        wrench = torch.cat([f, moment], dim=-1).reshape(len(envs), -1)
         columns = (6 * (self.link_start + links)[:, None] + np.arange(6)).ravel()
         current = self._sim().inputs(self._solver)["xfrc"]
         rows = torch.as_tensor(envs, device=runtime.device)
