@@ -83,6 +83,7 @@ class Rollout:
                     states, warm_starts = following, sim.warm_starts()
                     k += 1
                 self._replayed[k] = (states, warm_starts, (None,) * len(states))
+            sim.clear_flags()  # (those steps' forward reported their non-finite states)
         return self._replayed.pop(index)
 
 

@@ -32,8 +32,7 @@ def named_keywords(*genesis_only):
     """Class decorator of an options dataclass: a keyword it does not have raises
     InvalidInputError naming the class, the keyword and the accepted ones (Python's TypeError
     named neither). ``genesis_only``: Genesis 1.4.5's options of that class which genesis_lite
-    does not have, so that the message says so rather than "unknown". An instance's ``_given``
-    holds the names of the options its caller gave (pydantic's ``model_fields_set`` in Genesis)."""
+    does not have, so that the message says so rather than "unknown"."""
     def decorate(cls):
         init, accepted = cls.__init__, [f.name for f in fields(cls)]
 
@@ -45,7 +44,6 @@ def named_keywords(*genesis_only):
                     raise InvalidInputError(f"{cls.__qualname__}: argument '{name}' is {what}; expected one of "
                                             f"{accepted}")
             init(self, *args, **kwargs)
-            object.__setattr__(self, "_given", frozenset(accepted[:len(args)]) | frozenset(kwargs))
         cls.__init__ = checked_init
         return cls
     return decorate
@@ -278,9 +276,8 @@ class MPMOptions:
 
     def substeps(self, sim_options):
         """The number of MPM substeps per scene step: SimOptions.substeps when dt is None, else
-        SimOptions.dt / dt, which must be an integer (as Genesis). A SimOptions.substeps its caller
-        gave, 1 too, must then agree with it (as Genesis; 1 was taken as "not asked for", and 4
-        substeps ran where substeps=1 was asked)."""
+        SimOptions.dt / dt, which must be an integer (as Genesis). A SimOptions.substeps other
+        than 1 (taken as "not asked for": Genesis also refuses an explicit 1) must then agree."""
         if self.dt is None:
             return sim_options.substeps
         ratio = sim_options.dt / self.dt
@@ -288,7 +285,7 @@ class MPMOptions:
         if count < 1 or abs(count * self.dt - sim_options.dt) > 1e-9 * sim_options.dt:
             raise InvalidInputError(f"MPMOptions: argument 'dt' must divide SimOptions.dt = {sim_options.dt:g} s an "
                                     f"integer number of times, got {self.dt:g} s (ratio {ratio:g})")
-        if "substeps" in getattr(sim_options, "_given", ()) and count != sim_options.substeps:
+        if sim_options.substeps != 1 and count != sim_options.substeps:
             raise InvalidInputError(f"MPMOptions: argument 'dt' = {self.dt:g} s makes {count} substeps per step, but "
                                     f"SimOptions.substeps = {sim_options.substeps}; set one or the other")
         return count

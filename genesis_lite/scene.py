@@ -32,10 +32,11 @@ from .vis.visuals import DebugSpheres, SceneVisuals
 class SimState:
     """A snapshot of every solver's state (torch tensors, kept in the graph when differentiable),
     and of the controls Genesis keeps in its state (``inputs``: per solver, its state_inputs, such
-    as MPM's muscle actuation, which reset(state) restores)."""
+    as MPM's muscle actuation, which reset(state) restores; ``groups``: each muscle entity's
+    actuation per group, which its particles' follows)."""
 
-    def __init__(self, scene, states, inputs):
-        self.scene, self.states, self.inputs = scene, states, inputs
+    def __init__(self, scene, states, inputs, groups):
+        self.scene, self.states, self.inputs, self.groups = scene, states, inputs, groups
 
     @property
     def rigid(self):
@@ -88,6 +89,7 @@ class Scene:
                                     f"(scene.add_camera(...), camera.render(), camera.start_recording()); a viewer "
                                     f"may come in a later release, got {show_viewer!r}")
         self.show_viewer = False
+        self._initial_groups = {}  # the muscles' group actuation of the registered initial state (else zeros)
         self.entities = []
         # every solver steps with the same substeps (MPMOptions.dt may set them)
         self.sim_options = dataclasses.replace(self.sim_options,
@@ -324,8 +326,12 @@ class Scene:
             given = "a SimState of another scene" if isinstance(state, SimState) else type(state).__name__
             raise InvalidInputError(f"scene.reset: argument 'state' must come from this scene's get_state(), "
                                     f"got {given}")
-        sim.reset(None if state is None else state.states, self._envs_idx("scene.reset", envs_idx),
-                  None if state is None else state.inputs)
+        envs = self._envs_idx("scene.reset", envs_idx)
+        sim.reset(None if state is None else state.states, envs, None if state is None else state.inputs)
+        if state is not None:
+            self._initial_groups = state.groups
+        for muscle in self._muscles():
+            muscle.restore_groups(self._initial_groups.get(muscle), envs)
 
     def _envs_idx(self, what, envs_idx):
         """``envs_idx`` (None, int, sequence, array or tensor) as an int64 array (None stays None)."""
@@ -350,7 +356,11 @@ class Scene:
         simulator's own tensors, so that changing it in place changes neither the scene nor the
         state a plain reset() returns to (the state at build is that tensor until a step)."""
         sim = self._require_built("scene.get_state")
-        return SimState(self, [sim.state(slot.solver).clone() for slot in sim.slots], sim.held_inputs())
+        muscles = {entity: entity.held_groups() for entity in self._muscles()}
+        return SimState(self, [sim.state(slot.solver).clone() for slot in sim.slots], sim.held_inputs(), muscles)
+
+    def _muscles(self):
+        return [entity for entity in self.entities if isinstance(entity, MPMEntity) and entity.is_muscle]
 
     def set_gravity(self, gravity, envs_idx=None):
         """Gravity of every solver, m/s²: (3,) or (n_envs, 3); differentiable."""

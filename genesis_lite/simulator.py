@@ -171,6 +171,7 @@ class Simulator:
                 slot.initial_inputs = held
         self.generation += 1
         self.step_index = 0
+        self.clear_flags()
         self.rollout = autograd.Rollout(self, self.options.checkpoint_interval)
         self.warned_graph_cut = False
         for slot in self.slots:
@@ -183,6 +184,13 @@ class Simulator:
                            for name in defaults}
             current_state = None if envs is None else self.state(slot.solver)
             self.set_state(slot.solver, _restored(current_state, slot.initial_state, envs), envs)
+
+    def clear_flags(self):
+        """Drop the solvers' non-finite flags: steps taken again (a checkpoint's recompute) raise
+        them for states their forward reported already; left, the next rollout's first step was
+        blamed (and its one warning used up)."""
+        for slot in self.slots:
+            slot.solver.nonfinite()
 
     def held_inputs(self):
         """Per solver, its state_inputs now (name → detached copy), for a state snapshot."""

@@ -64,9 +64,9 @@ def warn_user(message):
     """warnings.warn (UserWarning) naming the user's line: the first caller outside genesis_lite,
     however many of its frames lie between (a fixed stacklevel broke when a frame was added)."""
     frame, level = sys._getframe(1), 2
-    while frame is not None and frame.f_globals.get("__name__", "").startswith("genesis_lite"):
+    while frame is not None and frame.f_globals.get("__name__", "").partition(".")[0] == "genesis_lite":
         frame, level = frame.f_back, level + 1
-    warnings.warn(message, UserWarning, stacklevel=level)
+    warnings.warn(message, UserWarning, stacklevel=level if frame is not None else 2)
 
 class SimulationError(GenesisException, RuntimeError):
     """The simulation produced a non-finite state (raised when SimOptions(check_nan=True))."""

@@ -108,6 +108,7 @@ def test_inverse_kinematics_reaches_poses(f64):
     quat = torch.stack([t[1][k] for k, t in enumerate(targets)])
     before = robot.get_qpos().clone()
     qpos, error = robot.inverse_kinematics(ee, pos=pos, quat=quat, return_error=True)
+    assert isinstance(qpos, gs.Tensor) and isinstance(error, gs.Tensor)  # (SPEC §2; the error was a plain one)
     assert torch.equal(robot.get_qpos(), before)
     assert (error[:, :3].norm(dim=1) <= 5e-4).all() and (error[:, 3:].norm(dim=1) <= 5e-3).all()
     lower, upper = (torch.tensor(robot._solver.model.dof_lower[:7]), torch.tensor(robot._solver.model.dof_upper[:7]))

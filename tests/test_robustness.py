@@ -121,11 +121,14 @@ def test_far_from_the_origin_float32_moves_as_at_the_origin(f32):
         assert (far_links_vel - links_vel).norm() / links_vel.norm() < bound, distance
 
 
-def test_a_backward_through_a_blow_up_leaves_no_warning_for_the_next_rollout(f64, caplog):
-    """A backward replays the steps of its rollout, the non-finite ones too: the replay flags
-    nothing, so the next, finite rollout is not reported non-finite at its first step (it was,
-    naming every entity, rigid and MPM alike; found by a gradient probe)."""
-    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=1e-3, substeps=2, requires_grad=True),
+@pytest.mark.parametrize("checkpoint_interval", [1, 4])
+def test_a_backward_through_a_blow_up_leaves_no_warning_for_the_next_rollout(f64, caplog, checkpoint_interval):
+    """A backward replays the steps of its rollout, the non-finite ones too (and between
+    checkpoints takes them again): that flags nothing, so the next, finite rollout is not reported
+    non-finite at its first step (it was, naming every entity, rigid and MPM alike; found by a
+    gradient probe, and with checkpoints by a review)."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=1e-3, substeps=2, requires_grad=True,
+                                                       checkpoint_interval=checkpoint_interval),
                      rigid_options=gs.options.RigidOptions(enable_joint_limit=False),
                      mpm_options=gs.options.MPMOptions(lower_bound=(-0.3, -0.3, 0.0), upper_bound=(0.3, 0.3, 0.6),
                                                        grid_density=32))

@@ -284,8 +284,25 @@ class MPMEntity(EntityIndexing):
         return self._out(rho.sum(-1) * self.particle_size ** 3)
 
     # -- muscles ---------------------------------------------------------------------------------------
+    @property
+    def is_muscle(self):
+        return isinstance(self.material, MPM.Muscle)
+
+    def held_groups(self):
+        """(B, n_groups) a detached copy of the groups' actuation, for a state snapshot."""
+        return self._group_actuations().detach().clone()
+
+    def restore_groups(self, table, envs):
+        """At a reset: the groups' actuation of the envs ``envs`` (None: all) ← ``table`` (B,
+        n_groups, a held_groups() of the registered state; None: zeros, the build's), as the reset
+        restored their particles' (so set_muscle moves what a particle holds to its new group)."""
+        current = self._group_actuations()
+        source = torch.zeros_like(current) if table is None else table
+        rows = np.arange(current.shape[0]) if envs is None else envs
+        self._group_actuation = replace_columns(current.detach(), rows, np.arange(current.shape[1]), source[rows])
+
     def _require_muscle(self, method):
-        if not isinstance(self.material, MPM.Muscle):
+        if not self.is_muscle:
             raise InvalidInputError(f"entity '{self.name}': {method} needs a gs.materials.MPM.Muscle entity, got "
                                     f"{type(self.material).__qualname__}")
 
@@ -329,7 +346,7 @@ class MPMEntity(EntityIndexing):
 
     def _actuation_held(self):
         """The envs (int array) whose "actu" input still holds what set_actuation wrote for this
-        entity's particles (a reset clears it to zeros)."""
+        entity's particles (a reset restores both, the registered state's)."""
         held = self._sim().inputs(self._solver)["actu"][:, self.particle_start: self.particle_end].detach()
         expected = self._group_actuations().detach()[:, torch.as_tensor(self._muscle_group, device=held.device)]
         return np.flatnonzero((held == expected).all(dim=1).cpu().numpy())

@@ -516,7 +516,7 @@ class RigidEntity(EntityIndexing):
             None if local_point is None else [local_point], init_qpos, respect_joint_limit, max_samples,
             max_solver_iters, damping, pos_tol, rot_tol, pos_mask, rot_mask, max_step_size, seed, dofs_idx_local,
             return_error, envs_idx)
-        return (out[0], out[1][..., 0, :]) if return_error else out
+        return (out[0], wrap(out[1][..., 0, :], self.scene)) if return_error else out
 
     def inverse_kinematics_multilink(self, links, poss=None, quats=None, local_points=None, init_qpos=None,
                                      respect_joint_limit=True, max_samples=50, max_solver_iters=20, damping=0.01,

@@ -10,8 +10,8 @@ costs far less than indexing a 3- or 4-d ndarray (B and N are read off ``params`
 - ``frames`` (S + 1 or 2, B, N, 25, flat): particle state rows (layout.STATE), one frame per
   substep boundary (all of them when the step will be differentiated, else two used in turn);
 - ``params`` (B, N, 4): E (Pa), nu, rho (kg/m³), actu per particle; ``gravity`` (B, 3) m/s²;
-- ``kinds`` (N,) int material code, ``consts`` (N, layout.N_CONSTS), ``fiber`` (N, 3) unit muscle
-  fibre directions: the model;
+- ``kinds`` (N,) int material code, ``consts`` (N, layout.N_CONSTS), ``fiber`` (N, 3) muscle fibre
+  directions (as given): the model;
 - ``affine`` (S or 1, B, N, 9, flat): each particle's APIC affine momentum matrix, N·s/m²·m, of
   the substep in progress (slot 0), or in a replay of substep s (slot s, kept for the reverse);
 - ``svd`` (S, B, N, 21, flat): a replay's SVD of each particle's F_tmp, U (9, row-major), σ (3),

@@ -10,10 +10,11 @@ each particle's row holds STATE's fields (row-major 3×3 matrices):
 
 Inputs (name → (B, width) tensor): E (B, n) Young's modulus, Pa; nu (B, n) Poisson ratio;
 rho (B, n) density, kg/m³; actu (B, n) muscle actuation, no unit (0 for other materials);
-gravity (B, 3) m/s²; fiber (B, n · 3) unit muscle fibre directions, the same in every env (the
+gravity (B, 3) m/s²; fiber (B, n · 3) muscle fibre directions (as given: not unit), the same in every env (the
 kernels read row 0; an input, not model data, so that every step records the directions it ran
 with and its backward replays them: set_muscle may change them between steps). Parameters and
-fibres keep their value across scene.reset(); actu is a control, cleared by reset. fiber has no
+fibres keep their value across scene.reset(); actu is a control, but part of the state as
+Genesis keeps it (solver.state_inputs): a reset restores the registered state's. fiber has no
 gradient.
 
 Material kinds: each particle has a kind code (KIND) and N_CONSTS constants whose meaning
