@@ -162,9 +162,10 @@ class Simulator:
         become the initial ones of every later reset. ``envs`` (int array): only those envs are
         reset, the others keep their current state (and controls).
 
-        Controls are cleared (but a solver's state_inputs, restored), parameters kept. Everything is detached, so a new graph starts:
-        a backward through the previous one raises, and a state taken mid-rollout brings no
-        graph along (nor does a parameter: set differentiable ones after reset())."""
+        Controls are cleared (but a solver's state_inputs, restored), parameters kept. Everything
+        is detached, so a new graph starts: a backward through the previous one raises, and a state
+        taken mid-rollout brings no graph along (nor does a parameter: set differentiable ones after
+        reset())."""
         if states is not None:
             for slot, state, held in zip(self.slots, states, state_inputs or [{}] * len(self.slots)):
                 slot.initial_state = state.detach().clone()  # the caller's tensor may change later

@@ -68,6 +68,7 @@ def warn_user(message):
         frame, level = frame.f_back, level + 1
     warnings.warn(message, UserWarning, stacklevel=level if frame is not None else 2)
 
+
 class SimulationError(GenesisException, RuntimeError):
     """The simulation produced a non-finite state (raised when SimOptions(check_nan=True))."""
 

@@ -61,9 +61,9 @@ def _check_volume(owner, morph, count, particle_size, volume):
         # parity, leaves them empty)
         overlap = " or its surface overlaps itself (the overlaps are left empty)" if isinstance(morph, gm.Mesh) else ""
         warn_user(f"{owner}: its {count} particle(s) of particle_size {particle_size:g} m hold {ratio:.3g}× the "
-                      f"volume of its {type(morph).__name__} ({volume:.3g} m³), and its mass is ρ · that volume: "
-                      f"particle_size is too coarse for the shape{overlap}; lower MPMOptions particle_size (at most "
-                      f"{volume ** (1.0 / 3.0) / 4.0:.3g} m puts 4 or more particles across it)")
+                  f"volume of its {type(morph).__name__} ({volume:.3g} m³), and its mass is ρ · that volume: "
+                  f"particle_size is too coarse for the shape{overlap}; lower MPMOptions particle_size (at most "
+                  f"{volume ** (1.0 / 3.0) / 4.0:.3g} m puts 4 or more particles across it)")
 
 
 def _check_inside(owner, arg, positions, wall_lower, wall_upper, strictly):

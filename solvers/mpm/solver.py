@@ -147,9 +147,9 @@ class MPMSolver(MPMAdjoint, Solver):
         limit = min(GENESIS_DT_PER_DX * m.grid.dx, m.grid.dx / wave if wave > 0 else np.inf)
         if h > limit:
             warn_user(f"MPM solver (entities: {', '.join(self.entity_names)}): the substep dt / substeps = "
-                          f"{h:.3g} s exceeds the stability limit {limit:.3g} s (min of 2e-2·dx = "
-                          f"{GENESIS_DT_PER_DX * m.grid.dx:.3g} s and dx / wave speed = {m.grid.dx / wave:.3g} s); "
-                          f"the simulation may blow up: raise SimOptions substeps or lower dt")
+                      f"{h:.3g} s exceeds the stability limit {limit:.3g} s (min of 2e-2·dx = "
+                      f"{GENESIS_DT_PER_DX * m.grid.dx:.3g} s and dx / wave speed = {m.grid.dx / wave:.3g} s); "
+                      f"the simulation may blow up: raise SimOptions substeps or lower dt")
 
     def _allocate(self):
         m, B, N = self.model, self.n_batch, self.model.n_particles
