@@ -641,6 +641,29 @@ def test_joint_and_scene_indices_as_genesis(f64):
     assert (last.n_qs, last.idx_local, last.dof_start, last.dof_end, last.q_start, last.q_end) == (
         1, 6, 12, 13, 13, 14)
 
+
+@pytest.mark.parametrize("n_envs", [0, 2])
+def test_rigid_entity_state_as_genesis(f64, n_envs):
+    """get_state() holds the base link's pos and quat with a leading env axis (of 1 without envs), as
+    Genesis's RigidEntityState (its differentiable tests' losses read box.get_state().pos); copies
+    in the graph: a loss on them backpropagates as one on get_pos()."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(requires_grad=True), show_viewer=False)
+    box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.0, 0.0, 1.0)))
+    scene.build(n_envs=n_envs)
+    B = max(1, n_envs)
+    velocity = torch.zeros((*((n_envs,) if n_envs else ()), 6), dtype=torch.float64)
+    velocity[..., 0] = 1.0
+    velocity.requires_grad_(True)
+    box.set_dofs_velocity(velocity)
+    for _ in range(3):
+        scene.step()
+    state = box.get_state()
+    assert state.pos.shape == (B, 3) and state.quat.shape == (B, 4) and isinstance(state.pos, gs.Tensor)
+    assert torch.equal(state.pos, box.get_pos().reshape(B, 3)) and torch.equal(state.quat, box.get_quat().reshape(B, 4))
+    grad, = torch.autograd.grad(state.pos[..., 0].sum(), velocity, retain_graph=True)
+    reference, = torch.autograd.grad(box.get_pos()[..., 0].sum(), velocity)
+    assert torch.equal(grad, reference) and float(grad[..., 0].sum()) > 0
+
 def test_mass_of_an_entity_leaves_out_the_links_welded_to_the_world(f64):
     """get_mass sums the links that move, as Genesis's (a fixed base is never accelerated: its mass
     is the world's): a fixed Panda weighs all but its 2.9 kg base, a free one every link."""

@@ -135,6 +135,14 @@ class RigidJoint:
         return f"RigidJoint({self.name!r}, type={self.type!r}, dofs_idx_local={self.dofs_idx_local})"
 
 
+class RigidEntityState:
+    """Genesis's RigidEntityState: the base link's pose, pos (B, 3) m and quat (B, 4) (w, x, y,
+    z), B = max(1, n_envs) as Genesis's; copies, differentiable."""
+
+    def __init__(self, entity, pos, quat):
+        self.entity, self.pos, self.quat = entity, pos, quat
+
+
 @named_argument_errors
 class RigidEntity(EntityIndexing):
     """A rigid entity. Units: m, rad, kg, s, N, N·m; quaternions (w, x, y, z)."""
@@ -381,6 +389,12 @@ class RigidEntity(EntityIndexing):
         envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
         rows = derived[envs][:, torch.as_tensor(self.link_start + links, device=runtime.device)]
         return rows[..., columns]
+
+    def get_state(self):
+        """RigidEntityState of every env: the base link's pos and quat, with a leading env axis
+        (of 1 without envs), as Genesis's (its differentiable tests read ``box.get_state().pos``)."""
+        base = self._links([0], None, slice(0, 7))[:, 0]
+        return RigidEntityState(self, wrap(base[:, :3].clone(), self.scene), wrap(base[:, 3:].clone(), self.scene))
 
     def get_links_pos(self, links_idx_local=None, envs_idx=None):
         """Link frame origins in the world, m: (n_links, 3) or (n_envs, n_links, 3)."""
