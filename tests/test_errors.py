@@ -196,9 +196,9 @@ def test_unknown_joint_name(f64, built):
 def test_dofs_idx_local_out_of_range(f64, built):
     _, robot = built
     raises(gs.InvalidInputError, lambda: robot.set_dofs_position([1.0], dofs_idx_local=[5]),
-           f"entity '{ENTITY}'", "'dofs_idx_local'", "[0, 2)", "[5]")
-    raises(gs.InvalidInputError, lambda: robot.get_dofs_velocity(dofs_idx_local=[-1]),
-           "'dofs_idx_local'", "[0, 2)", "[-1]")
+           f"entity '{ENTITY}'", "'dofs_idx_local'", "[-2, 2)", "[5]")
+    raises(gs.InvalidInputError, lambda: robot.get_dofs_velocity(dofs_idx_local=[-3]),
+           "'dofs_idx_local'", "[-2, 2)", "[-3]")
     raises(gs.InvalidInputError, lambda: robot.control_dofs_force([1.0], dofs_idx_local=[0.5]),
            "'dofs_idx_local'", "integers", "[0.5]")
 
@@ -210,6 +210,9 @@ def test_dofs_idx_local_as_a_slice(f64, built):
     robot.set_dofs_position([0.3], dofs_idx_local=slice(1, 2))
     assert robot.get_dofs_position(slice(-1, None)).tolist() == [0.3]
     assert robot.get_dofs_position(slice(None)).shape == (2,)
+    # and, as Genesis, indices from the end and boolean masks
+    assert robot.get_dofs_position(-1).tolist() == robot.get_dofs_position([-1]).tolist() == [0.3]
+    assert robot.get_dofs_position(np.array([False, True])).tolist() == [0.3]
 
 
 def test_arguments_a_method_does_not_take(f64, built):

@@ -492,7 +492,7 @@ def test_entity_state_errors(f64):
              (lambda: sand.set_particles_vel(torch.zeros(8, 2)), gs.InvalidInputError, "'vels' must have shape"),
              (lambda: sand.set_particles_vel([0.0, float("nan"), 0.0]), gs.InvalidInputError, "'vels' must be finite"),
              (lambda: sand.set_particles_pos(torch.zeros(8, 3), particles_idx_local=[8]), gs.InvalidInputError,
-              "'particles_idx_local' must be integers in [0, 8)"),
+              "'particles_idx_local' must be integers in [-8, 8)"),
              (lambda: sand.get_particles_pos(envs_idx=[2]), gs.InvalidInputError, "'envs_idx' must be integers"),
              (lambda: sand.set_particles_vel(torch.zeros(3, dtype=torch.complex128)), gs.InvalidInputError,
               "complex"),
