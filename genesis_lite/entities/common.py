@@ -98,7 +98,8 @@ class EntityIndexing:
                 raise InvalidInputError(f"{self._who}: argument 'envs_idx' must be None in a scene built "
                                         f"with n_envs=0, got {envs_idx!r}")
             return np.zeros(1, dtype=np.int64)
-        return self._local(envs_mask_to_idx(envs_idx, n_envs, self._who), n_envs, "envs_idx", distinct, from_end=False)
+        envs = envs_mask_to_idx(envs_idx, n_envs, self._who)
+        return self._local(envs, n_envs, "envs_idx", distinct, from_end=False)
 
     def _out(self, value):
         """Solver rows → user shape: drop the batch axis when the scene is not batched."""
