@@ -31,12 +31,11 @@ from .vis.visuals import DebugSpheres, SceneVisuals
 
 class SimState:
     """A snapshot of every solver's state (torch tensors, kept in the graph when differentiable),
-    and of the controls Genesis keeps in its state (``inputs``: per solver, its state_inputs, such
-    as MPM's muscle actuation, which reset(state) restores; ``groups``: each muscle entity's
-    actuation per group, which its particles' follows)."""
+    and of the control Genesis keeps in its state: ``groups``, each muscle entity's actuation per
+    group, from which reset(state) writes its particles' again."""
 
-    def __init__(self, scene, states, inputs, groups):
-        self.scene, self.states, self.inputs, self.groups = scene, states, inputs, groups
+    def __init__(self, scene, states, groups):
+        self.scene, self.states, self.groups = scene, states, groups
 
     @property
     def rigid(self):
@@ -327,7 +326,7 @@ class Scene:
             raise InvalidInputError(f"scene.reset: argument 'state' must come from this scene's get_state(), "
                                     f"got {given}")
         envs = self._envs_idx("scene.reset", envs_idx)
-        sim.reset(None if state is None else state.states, envs, None if state is None else state.inputs)
+        sim.reset(None if state is None else state.states, envs)
         if state is not None:
             self._initial_groups = state.groups
         for muscle in self._muscles():
@@ -357,7 +356,7 @@ class Scene:
         state a plain reset() returns to (the state at build is that tensor until a step)."""
         sim = self._require_built("scene.get_state")
         muscles = {entity: entity.held_groups() for entity in self._muscles()}
-        return SimState(self, [sim.state(slot.solver).clone() for slot in sim.slots], sim.held_inputs(), muscles)
+        return SimState(self, [sim.state(slot.solver).clone() for slot in sim.slots], muscles)
 
     def _muscles(self):
         return [entity for entity in self.entities if isinstance(entity, MPMEntity) and entity.is_muscle]

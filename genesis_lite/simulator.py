@@ -55,7 +55,6 @@ class SolverSlot:
         self.uploaded_inputs = None  # ((tensor, ...), (version, ...)): Taichi's inputs equal
         self.derived = None  # (state, value) cache of the last derived read
         self.warned_nonfinite = False  # _check_finite warned once since the last reset
-        self.initial_inputs = {}  # the solver's state_inputs of the registered initial state (else defaults)
         # contacts() of the last step: (B,) bool of the envs whose state a reset or setter replaced
         # since (None: none), and the contacts as the step left them, kept before a backward's
         # replays overwrite the solver's (None: the solver still holds them)
@@ -156,20 +155,17 @@ class Simulator:
         return inputs
 
     # -- stepping ---------------------------------------------------------------------------
-    def reset(self, states=None, envs=None, state_inputs=None):
-        """Back to the initial states, or to ``states`` (one (B, width) tensor per solver) and
-        ``state_inputs`` (per solver, its ``state_inputs`` as ``held_inputs`` took them), which
-        become the initial ones of every later reset. ``envs`` (int array): only those envs are
-        reset, the others keep their current state (and controls).
+    def reset(self, states=None, envs=None):
+        """Back to the initial states, or to ``states`` (one (B, width) tensor per solver), which
+        become the initial states of every later reset. ``envs`` (int array): only those envs
+        are reset, the others keep their current state (and controls).
 
-        Controls are cleared (but a solver's state_inputs, restored), parameters kept. Everything
-        is detached, so a new graph starts: a backward through the previous one raises, and a state
-        taken mid-rollout brings no graph along (nor does a parameter: set differentiable ones after
-        reset())."""
+        Controls are cleared, parameters kept. Everything is detached, so a new graph starts:
+        a backward through the previous one raises, and a state taken mid-rollout brings no
+        graph along (nor does a parameter: set differentiable ones after reset())."""
         if states is not None:
-            for slot, state, held in zip(self.slots, states, state_inputs or [{}] * len(self.slots)):
+            for slot, state in zip(self.slots, states):
                 slot.initial_state = state.detach().clone()  # the caller's tensor may change later
-                slot.initial_inputs = held
         self.generation += 1
         self.step_index = 0
         self.clear_flags()
@@ -181,8 +177,7 @@ class Simulator:
             current = slot.inputs or defaults
             # (inputs derived from persistent ones are persistent too: detached, they still match)
             slot.inputs = {name: current[name].detach() if name in slot.solver.persistent_inputs
-                           else _restored(current[name], slot.initial_inputs.get(name, defaults[name]), envs)
-                           for name in defaults}
+                           else _restored(current[name], defaults[name], envs) for name in defaults}
             current_state = None if envs is None else self.state(slot.solver)
             self.set_state(slot.solver, _restored(current_state, slot.initial_state, envs), envs)
 
@@ -192,11 +187,6 @@ class Simulator:
         blamed (and its one warning used up)."""
         for slot in self.slots:
             slot.solver.nonfinite()
-
-    def held_inputs(self):
-        """Per solver, its state_inputs now (name → detached copy), for a state snapshot."""
-        return [{name: slot.inputs[name].detach().clone() for name in slot.solver.state_inputs}
-                for slot in self.slots]
 
     def step(self):
         if self.requires_grad:

@@ -44,9 +44,6 @@ class Solver:
     default_inputs = None
     #: inputs that last one step: back to their value at build after every step (an external wrench)
     transient_inputs = ()
-    #: controls that a state from ``scene.get_state()`` carries and ``scene.reset(state)`` restores
-    #: (Genesis keeps them in its state: MPM's muscle actuation); other controls are cleared
-    state_inputs = ()
     #: inputs from which ``derive_inputs`` computes others (recomputed whenever one is set)
     derived_from = ()
     #: names of the solver's entities, for error messages

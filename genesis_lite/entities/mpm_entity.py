@@ -294,12 +294,13 @@ class MPMEntity(EntityIndexing):
 
     def restore_groups(self, table, envs):
         """At a reset: the groups' actuation of the envs ``envs`` (None: all) ← ``table`` (B,
-        n_groups, a held_groups() of the registered state; None: zeros, the build's), as the reset
-        restored their particles' (so set_muscle moves what a particle holds to its new group)."""
+        n_groups, a held_groups() of the registered state; None: zeros, the build's), and the
+        particles' actuation from it (the reset cleared it, as a control)."""
         current = self._group_actuations()
         source = torch.zeros_like(current) if table is None else table
         rows = np.arange(current.shape[0]) if envs is None else envs
         self._group_actuation = replace_columns(current.detach(), rows, np.arange(current.shape[1]), source[rows])
+        self._write_actuation(rows)
 
     def _require_muscle(self, method):
         if not self.is_muscle:
@@ -346,7 +347,7 @@ class MPMEntity(EntityIndexing):
 
     def _actuation_held(self):
         """The envs (int array) whose "actu" input still holds what set_actuation wrote for this
-        entity's particles (a reset restores both, the registered state's)."""
+        entity's particles (a reset writes both again, the registered state's)."""
         held = self._sim().inputs(self._solver)["actu"][:, self.particle_start: self.particle_end].detach()
         expected = self._group_actuations().detach()[:, torch.as_tensor(self._muscle_group, device=held.device)]
         return np.flatnonzero((held == expected).all(dim=1).cpu().numpy())

@@ -14,7 +14,8 @@ gravity (B, 3) m/s²; fiber (B, n · 3) muscle fibre directions (as given: not u
 kernels read row 0; an input, not model data, so that every step records the directions it ran
 with and its backward replays them: set_muscle may change them between steps). Parameters and
 fibres keep their value across scene.reset(); actu is a control, but part of the state as
-Genesis keeps it (solver.state_inputs): a reset restores the registered state's. fiber has no
+Genesis keeps it: a reset writes it again from each muscle's group actuation in the registered
+state (MPMEntity.restore_groups). fiber has no
 gradient.
 
 Material kinds: each particle has a kind code (KIND) and N_CONSTS constants whose meaning

@@ -30,7 +30,6 @@ SERIAL_CHORE_ENVS = 1
 
 class MPMSolver(MPMAdjoint, Solver):
     persistent_inputs = layout.PERSISTENT_INPUTS
-    state_inputs = ("actu",)
     hides_nonfinite = ("its particles are kept inside the walls (g2p.wall_particle), so their positions look "
                        "finite while velocities and deformation are NaN")
     watches_nonfinite = True
