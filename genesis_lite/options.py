@@ -118,7 +118,8 @@ class RigidOptions:
     constraint_solver: Newton (CG is not implemented). iterations (None: 25, or MuJoCo's 100
         under enable_mujoco_compatibility), tolerance (None: 1e-12 in float64, MuJoCo's 1e-8 under
         enable_mujoco_compatibility, 1e-5 in float32), ls_iterations, ls_tolerance: the solve's
-        limits. The float64 default is tighter than Genesis's 1e-8 because gradients are those
+        limits (a differentiable step whose solve stops at `iterations` before its tolerance warns
+        once: its gradient is the converged solution's). The float64 default is tighter than Genesis's 1e-8 because gradients are those
         of the exact solution: at 1e-8 MuJoCo's Newton-decrement test can stop an elliptic solve
         early (a mesh pressed into a box, sliding at one contact: the decrement 4e-9 with a
         scaled gradient of 5e-4), and the forward map's derivative then differed from the
@@ -139,6 +140,9 @@ class RigidOptions:
         iterates rather than the converged closed form of their feature (within 6e-5 m at touching
         poses; a cylinder on its cap touches at the foot of the cap's centre, the iterate anywhere
         on the cap), which have no exact gradient (a backward over one raises GradientError).
+        Not MuJoCo's either way: a cylinder standing or lying on a face gets its own rim points or
+        line ends (MuJoCo's extra contacts from geoms turned by ±1e-3 rad are not reproduced), and
+        a sphere whose centre is in a mesh's hull, where EPA stops at its budget, the nearest facet.
     smooth_contact (ours): every geom's default solimp becomes (0, 0.95, 0.001, 0.5, 2), whose
         impedance starts at zero at contact onset, so a contact's force grows from zero with depth
         instead of jumping (MuJoCo's default d0 = 0.9 jumps): the step is then a smooth map through

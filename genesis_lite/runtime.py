@@ -61,7 +61,9 @@ def init(backend=None, precision="32", seed=None, logging_level="warning", debug
     backend: ``gs.cpu``, ``gs.gpu`` (CUDA; without it, one warning and the CPU), or None, as in
         Genesis: the GPU when CUDA is present, else the CPU.
     precision: "32" or "64" — the float width of every array and every returned tensor.
-    seed: seeds torch and numpy when given.
+    seed: an int in [0, 2**32): seeds torch and numpy, and the MPM "random" sampler's draws (each
+        entity's from the seed and the entity's index; without a seed, from the index alone, so that
+        a scene samples the same particles in every run).
     debug: Taichi debug mode (bounds checks; slow).
 
     Kernels are compiled without fast math: no reassociation or contraction, so a kernel gives
@@ -81,8 +83,11 @@ def init(backend=None, precision="32", seed=None, logging_level="warning", debug
         raise InvalidInputError(
             f"gs.init: argument 'logging_level' must be one of {sorted(_LOG_LEVELS)}, got {logging_level!r}")
     if seed is not None:
-        torch.manual_seed(seed)
-        np.random.seed(seed)
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**32:
+            raise InvalidInputError(f"gs.init: argument 'seed' must be None or an int in [0, 2**32), got {seed!r}")
+        torch.manual_seed(int(seed))
+        np.random.seed(int(seed))
+    runtime.seed = None if seed is None else int(seed)
     logger.setLevel(logging_level.upper())
     arch = _requested_arch(backend)
     options = (arch, precision, bool(debug))

@@ -14,7 +14,7 @@ import torch
 
 from . import morphs as gm
 from .entities import MPMEntity, RigidEntity
-from .entities.common import EntityIndexing, envs_mask_to_idx, named_argument_errors, replace_columns
+from .entities.common import EntityIndexing, named_argument_errors, replace_columns
 from .entities.mpm_entity import sample_particles
 from .solvers.core import AssetError, InvalidInputError, SceneStateError
 from .materials import MPM, Rigid
@@ -159,8 +159,9 @@ class Scene:
                                         o.lower_bound, o.upper_bound, o.boundary_condition == "sticky",
                                         sim.requires_grad)
         solver = self.mpm_solver
+        seed = len(self.entities) if runtime.seed is None else (runtime.seed, len(self.entities))
         positions = sample_particles(morph, material, self.mpm_options.particle_size, solver.wall_lower,
-                                     solver.wall_upper, seed=len(self.entities), name=name)
+                                     solver.wall_upper, seed=seed, name=name)
         start = solver.add_entity(name, material.solver_kind, material.solver_params(), material.E, material.nu,
                                   material.rho, material.default_Jp, positions)
         entity = MPMEntity(self, len(self.entities), name, morph, material, surface or Default(), solver, start,
@@ -325,30 +326,12 @@ class Scene:
             given = "a SimState of another scene" if isinstance(state, SimState) else type(state).__name__
             raise InvalidInputError(f"scene.reset: argument 'state' must come from this scene's get_state(), "
                                     f"got {given}")
-        envs = self._envs_idx("scene.reset", envs_idx)
+        envs = None if envs_idx is None else _SceneArguments(self, "reset")._envs(envs_idx)
         sim.reset(None if state is None else state.states, envs)
         if state is not None:
             self._initial_groups = state.groups
         for muscle in self._muscles():
             muscle.restore_groups(self._initial_groups.get(muscle), envs)
-
-    def _envs_idx(self, what, envs_idx):
-        """``envs_idx`` (None, int, sequence, array or tensor) as an int64 array (None stays None)."""
-        if envs_idx is None:
-            return None
-        if self.n_envs:
-            envs_idx = envs_mask_to_idx(envs_idx, self.n_envs, what)
-        if isinstance(envs_idx, torch.Tensor):
-            envs_idx = envs_idx.detach().cpu().numpy()
-        idx = np.atleast_1d(np.asarray(envs_idx))
-        if idx.size == 0 and idx.ndim == 1:  # [] reads as floats: no env, as the entities' setters take it
-            idx = idx.astype(np.int64)
-        if self.n_envs == 0 or idx.ndim != 1 or idx.dtype.kind not in "iu" or \
-                (idx.size and (idx.min() < 0 or idx.max() >= self.n_envs)):
-            expected = "None in a scene built with n_envs=0" if self.n_envs == 0 else \
-                f"integers in [0, {self.n_envs})"
-            raise InvalidInputError(f"{what}: argument 'envs_idx' must be {expected}, got {envs_idx!r}")
-        return idx.astype(np.int64)
 
     def get_state(self):
         """A snapshot of every solver's state: copies (in the graph when differentiable), never the

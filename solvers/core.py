@@ -6,8 +6,8 @@ these names (``gs.GenesisException``, ``gs.device``...).
 Every error a user can trigger is a :class:`GenesisException` subclass whose message
 names the entity, the argument, what was expected and what was given.
 """
+import logging
 import sys
-import warnings
 
 import numpy as np
 import taichi as ti
@@ -61,12 +61,14 @@ def available_memory():
 
 
 def warn_user(message):
-    """warnings.warn (UserWarning) naming the user's line: the first caller outside genesis_lite,
-    however many of its frames lie between (a fixed stacklevel broke when a frame was added)."""
-    frame, level = sys._getframe(1), 2
+    """A warning on the "genesis_lite" logger (every warning's channel, as Genesis logs its own;
+    gs.init's logging_level silences it), ending with the user's line that led to it: the first
+    caller outside genesis_lite, however many of its frames lie between."""
+    frame = sys._getframe(1)
     while frame is not None and frame.f_globals.get("__name__", "").partition(".")[0] == "genesis_lite":
-        frame, level = frame.f_back, level + 1
-    warnings.warn(message, UserWarning, stacklevel=level if frame is not None else 2)
+        frame = frame.f_back
+    where = f" ({frame.f_code.co_filename}:{frame.f_lineno})" if frame is not None else ""
+    logging.getLogger("genesis_lite").warning(f"{message}{where}")
 
 
 class SimulationError(GenesisException, RuntimeError):
@@ -77,7 +79,8 @@ class Runtime:
     """What ``gs.init`` chose; ``epoch`` counts Taichi restarts so that stale scenes are detected.
 
     arch: the Taichi arch Taichi actually runs on (ti.cpu or ti.cuda); device: the torch device
-    of every tensor the simulator makes, always the one matching ``arch``.
+    of every tensor the simulator makes, always the one matching ``arch``; seed: gs.init's (None:
+    none given).
     """
 
     def __init__(self):
@@ -90,6 +93,7 @@ class Runtime:
         self.np_float = np.float32
         self.ti_float = ti.f32
         self.tc_int = torch.int32
+        self.seed = None
 
 
 runtime = Runtime()

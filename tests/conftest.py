@@ -1,5 +1,8 @@
 """Shared fixtures: runtime precision and the robots we test on."""
+import contextlib
+import logging
 import os
+import re
 import runpy
 import shutil
 import sys
@@ -105,6 +108,20 @@ def pytest_xdist_make_scheduler(config, log):
             return nodeid.split("::", 1)[0] if scope == nodeid else scope
 
     return FileOrGroupScheduling(config, log)
+
+
+@contextlib.contextmanager
+def warns(caplog, pattern=None):
+    """The block logs a warning on the "genesis_lite" logger (every warning's channel) matching the
+    regex ``pattern``, or, with None, logs none; yields the list its matching messages fill."""
+    start, found = len(caplog.records), []
+    yield found
+    logged = [r.getMessage() for r in caplog.records[start:]
+              if r.name == "genesis_lite" and r.levelno == logging.WARNING]
+    if pattern is None:
+        assert not logged, logged
+    found += [message for message in logged if re.search(pattern, message)]
+    assert pattern is None or found, f"no warning matching {pattern!r} among {logged}"
 
 
 @pytest.fixture

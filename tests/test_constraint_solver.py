@@ -221,6 +221,7 @@ class _View:
         self.efc_cols.from_numpy(np.tile(np.arange(D, dtype=np.int32), (1, E, 1)))
         self.qacc_warmstart = ti.field(float, shape=(E, D))
         self.solver_niter = ti.field(ti.i32, shape=(1, E))
+        self.capped = ti.field(ti.i32, shape=1)  # (the iteration-limit flag: RigidView's header entry)
         self.n_efc = ti.field(ti.i32, shape=(1, E, 1))  # rows in use: every slot (unused ones hold garbage)
         self.n_efc.fill(R)
         self.dof_parent = ti.field(ti.i32, shape=D)

@@ -286,6 +286,27 @@ def test_default_tolerance_converges_an_elliptic_slide_for_its_gradient(f64):
         assert_converged(directional_errors(loss, start, seed), f"finger pose, direction {seed}")
 
 
+def test_a_solve_stopped_at_its_iteration_limit_warns_in_a_differentiable_scene(f64, caplog):
+    """A differentiable step whose constraint solve stops at RigidOptions(iterations) before its
+    tolerance warns once, naming the option: its backward differentiates the converged solution
+    (a box sliding 30 steps with iterations=2: dx/dv0 0.67 off, its sign flipped); at the default
+    limit this scene converges and nothing is said, nor in a scene without gradients."""
+    def slide(iterations, requires_grad=True):
+        scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=requires_grad),
+                         rigid_options=gs.options.RigidOptions(iterations=iterations))
+        scene.add_entity(gs.morphs.Plane())
+        box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.3, 0.1), pos=(0.0, 0.0, 0.0495)))
+        scene.build()
+        box.set_dofs_velocity([1.0, 0.3, 0.0, 0.0, 0.0, 0.4])
+        caplog.clear()
+        for _ in range(30):
+            scene.step()
+        return [r.getMessage() for r in caplog.records if "iteration limit" in r.getMessage()]
+    capped = slide(2)
+    assert len(capped) == 1 and "RigidOptions(iterations=2)" in capped[0] and "entities: plane_0, box_1" in capped[0]
+    assert slide(None) == [] and slide(2, requires_grad=False) == []
+
+
 @pytest.mark.parametrize("case", ["tilted", "mass"])
 def test_smooth_contact(f64, case):
     """RigidOptions(smooth_contact=True) (elliptic; impedance from zero at contact onset): a

@@ -598,6 +598,23 @@ def test_boolean_masks_select_envs(f64):
         box.set_pos(torch.zeros(1, 3), envs_idx=[True, False])
 
 
+def test_negative_env_indices_count_from_the_end(f64):
+    """An env index in [-n_envs, 0) counts from the end, as Genesis's (setters, getters, scene methods,
+    reset); a setter given one env twice (as -1 and n − 1) is refused."""
+    scene = gs.Scene()
+    box = scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 1.0)))
+    scene.build(n_envs=3)
+    box.set_pos(torch.tensor([[1.0, 2.0, 3.0]]), envs_idx=-1)
+    assert box.get_pos().tolist() == [[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [1.0, 2.0, 3.0]]
+    assert box.get_pos(envs_idx=torch.tensor([-1, -3])).tolist() == [[1.0, 2.0, 3.0], [0.0, 0.0, 1.0]]
+    scene.set_gravity([0.0, 0.0, -1.0], envs_idx=[-2])
+    assert scene.get_gravity(envs_idx=[1, -1]).tolist() == [[0.0, 0.0, -1.0], [0.0, 0.0, -9.81]]
+    scene.reset(envs_idx=np.array([-1]))
+    assert box.get_pos()[2].tolist() == [0.0, 0.0, 1.0]
+    with pytest.raises(gs.InvalidInputError, match=r"'envs_idx' must not repeat an index.*\[2\]"):
+        box.set_pos(torch.zeros(2, 3), envs_idx=[2, -1])
+
+
 def test_contacts_have_genesis_normal_and_penetration(f64):
     """get_contacts' normal points from geom b to geom a and penetration is the overlap depth, as
     Genesis's; indices are int32, as Genesis's."""

@@ -179,8 +179,9 @@ def test_reset_envs_idx_restores_only_those_envs(f64):
 
 
 @pytest.mark.parametrize("n_envs, envs_idx, expected", [
-    (0, [0], "None in a scene built with n_envs=0"), (3, [3], "integers in [0, 3)"),
-    (3, [0.5], "integers in [0, 3)"), (3, [[0]], "integers in [0, 3)")])
+    (0, [0], "None in a scene built with n_envs=0"), (3, [3], "integers in [-3, 3) or a boolean mask of 3"),
+    (3, [-4], "integers in [-3, 3) or a boolean mask of 3"), (3, [0.5], "integers in [-3, 3) or a boolean mask of 3"),
+    (3, [[0]], "integers in [-3, 3) or a boolean mask of 3")])
 def test_reset_bad_envs_idx(f64, n_envs, envs_idx, expected):
     scene, _ = _pendulum(requires_grad=False, n_envs=n_envs)
     with pytest.raises(gs.InvalidInputError, match=re.escape(f"scene.reset: argument 'envs_idx' must be {expected}, "

@@ -6,7 +6,6 @@ one does (solvers/mpm/layout.py): shapes, values, out-of-place writes, gradients
 import ast
 import logging
 import os
-import warnings
 
 import numpy as np
 import pytest
@@ -19,6 +18,7 @@ from genesis_lite.entities.mpm_entity import sample_particles
 from genesis_lite.simulator import Simulator
 from genesis_lite.solvers.mpm import layout, sampling
 from genesis_lite.solvers.rigid.shapes import quat_to_mat
+from tests.conftest import warns
 
 MPM = gs.materials.MPM
 GENESIS = "/work/peers/genesis/lib/python3.11/site-packages/genesis"
@@ -260,6 +260,24 @@ def test_sampled_volume_and_inside(sampler, meshes):
     np.testing.assert_allclose(np.unique(box[:, 0].round(12))[:2], [-0.095, -0.085], atol=1e-12)
 
 
+def test_gs_init_seed_seeds_the_random_sampler():
+    """gs.init(seed) changes the "random" sampler's draws (the same seed: the same particles, as
+    Genesis, whose sampler draws from numpy's seeded global generator); without a seed a scene
+    samples the same particles in every run; a seed that is not an int in [0, 2**32) is refused."""
+    def sand(**init):
+        gs.init(precision="64", logging_level="warning", **init)
+        scene = gs.Scene(mpm_options=gs.options.MPMOptions(lower_bound=(-0.2, -0.2, 0.0), upper_bound=(0.2, 0.2, 0.3)))
+        scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.1), size=(0.05, 0.05, 0.05)), material=MPM.Sand(sampler="random"))
+        return scene.entities[0].init_particles
+    unseeded, one, two = sand(), sand(seed=1), sand(seed=2)
+    np.testing.assert_array_equal(one, sand(seed=1))
+    np.testing.assert_array_equal(unseeded, sand())
+    assert not np.array_equal(one, two) and not np.array_equal(unseeded, one)
+    for seed in (-1, 2**32, 1.5, True):
+        with pytest.raises(gs.InvalidInputError, match=r"gs.init: argument 'seed' must be None or an int in \[0, 2\*\*32\)"):
+            gs.init(precision="64", seed=seed)
+
+
 def test_random_sampler_is_seeded_and_mesh_errors(meshes):
     one = sampling.sample("sphere", P, "random", seed=1, radius=0.05)
     np.testing.assert_array_equal(one, sampling.sample("sphere", P, "random", seed=1, radius=0.05))
@@ -301,7 +319,7 @@ def test_sample_particles_from_morphs(meshes):
 
 
 
-def test_particles_too_coarse_for_their_shape_warn(meshes):
+def test_particles_too_coarse_for_their_shape_warn(meshes, caplog):
     """Particles whose volume (count · particle_size³, which makes the mass) is off the morph's by
     more than 2× warn, naming entity, morph, ratio and a particle_size that fits; the shapes'
     volumes (sampling.shape_volume) are exact, a mesh's from its surface."""
@@ -314,11 +332,10 @@ def test_particles_too_coarse_for_their_shape_warn(meshes):
              (gs.morphs.Sphere(pos=(0, 0, 0.5), radius=0.04), 0.05, "8 particle(s)"),
              (gs.morphs.Mesh(file=meshes["ball"], pos=(0, 0, 0.5)), 0.12, "8 particle(s)")]
     for morph, size, fragment in cases:
-        with pytest.warns(UserWarning, match=r"entity 'coarse': its .*too coarse.*at most") as record:
+        with warns(caplog, r"entity 'coarse': its .*too coarse.*at most") as found:
             sample_particles(morph, MPM.Elastic(), size, *walls, 0, "coarse")
-        assert fragment in str(record[0].message), str(record[0].message)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
+        assert fragment in found[0], found[0]
+    with warns(caplog, None):
         for morph, size, _ in cases:
             sample_particles(morph, MPM.Elastic(), size / 4, *walls, 0, "fine")
     # two box shells overlapping: the volume counts the overlap twice, ray parity leaves it empty
@@ -327,7 +344,7 @@ def test_particles_too_coarse_for_their_shape_warn(meshes):
     box = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
     path = os.path.join(os.path.dirname(meshes["ball"]), "shells.obj")
     trimesh.util.concatenate([box, box.copy().apply_translation((0.02, 0.013, 0.011))]).export(path)
-    with pytest.warns(UserWarning, match="too coarse for the shape or its surface overlaps itself"):
+    with warns(caplog, "too coarse for the shape or its surface overlaps itself"):
         sample_particles(gs.morphs.Mesh(file=path, pos=(0, 0, 0.5)), MPM.Elastic(), 0.005, *walls, 0, "shells")
 
 

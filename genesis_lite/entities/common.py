@@ -65,9 +65,9 @@ class EntityIndexing:
     def _sim(self):
         return self.scene._require_built(self._who)
 
-    def _local(self, idx, n, arg, distinct=False, from_end=True):
-        """Local indices (list/array/tensor/int/slice/None) → validated int64 numpy array; with
-        from_end, as Genesis's: an index in [−n, 0) counts from the end, a boolean mask of shape (n,)
+    def _local(self, idx, n, arg, distinct=False):
+        """Indices (list/array/tensor/int/slice/None; local ones or envs) → validated int64 numpy
+        array, as Genesis's: an index in [−n, 0) counts from the end, a boolean mask of shape (n,)
         selects. distinct (a setter's indices): an index given twice is refused, since which of its
         values would land is undefined (torch's index_put, like Genesis's parallel kernels, picks
         either)."""
@@ -78,12 +78,11 @@ class EntityIndexing:
         arr = np.atleast_1d(idx.detach().cpu().numpy() if isinstance(idx, torch.Tensor) else np.asarray(idx))
         if arr.size == 0:  # no index (a list of none reads as floats): nothing selected, as in Genesis
             return np.zeros(0, dtype=np.int64)
-        if from_end and arr.dtype == np.bool_ and arr.shape == (n,):
+        if arr.dtype == np.bool_ and arr.shape == (n,):
             arr = np.flatnonzero(arr)
-        low = -n if from_end else 0
-        if arr.dtype.kind not in "iu" or arr.ndim != 1 or (arr.size and (arr.min() < low or arr.max() >= n)):
-            raise InvalidInputError(f"{self._who}: argument '{arg}' must be integers in [{low}, {n})"
-                                    f"{' or a boolean mask of ' + str(n) if from_end else ''}, got {idx!r}")
+        if arr.dtype.kind not in "iu" or arr.ndim != 1 or (arr.size and (arr.min() < -n or arr.max() >= n)):
+            raise InvalidInputError(f"{self._who}: argument '{arg}' must be integers in [{-n}, {n}) or a boolean "
+                                    f"mask of {n}, got {idx!r}")
         arr = np.where(arr < 0, arr + n, arr)
         if distinct and len(set(arr.tolist())) != arr.size:  # a set: ~10× cheaper than np.unique when short
             values, counts = np.unique(arr, return_counts=True)
@@ -99,7 +98,7 @@ class EntityIndexing:
                                         f"with n_envs=0, got {envs_idx!r}")
             return np.zeros(1, dtype=np.int64)
         envs = envs_mask_to_idx(envs_idx, n_envs, self._who)
-        return self._local(envs, n_envs, "envs_idx", distinct, from_end=False)
+        return self._local(envs, n_envs, "envs_idx", distinct)
 
     def _out(self, value):
         """Solver rows → user shape: drop the batch axis when the scene is not batched."""

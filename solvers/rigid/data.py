@@ -156,10 +156,11 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
 # a flag: some env of the substep has a constraint row to form (a contact, a joint equality, friction loss, a
 # violated limit);
 # colliders_due a mask of the collider kernels the substep's near pairs need (collision/detect.py: KERNEL_BIT);
-# inexact_pair, inexact_env, inexact_substep: where the last inexact contact was (the backward's error names it).
+# inexact_pair, inexact_env, inexact_substep: where the last inexact contact was (the backward's error names it);
+# capped a flag: a constraint solve stopped at its iteration limit before its tolerance.
 SIZES = ("B", "L", "D", "Q", "P", "E", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C", "R", "cone",
          "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged", "constrained",
-         "colliders_due", "inexact_pair", "inexact_env", "inexact_substep", "wrench")
+         "colliders_due", "inexact_pair", "inexact_env", "inexact_substep", "wrench", "capped")
 HEADER = {name: k for k, name in enumerate(SIZES)}
 _REGIONS = [("i", False)] + [(a, g) for g in (False, True) for a in ("f", "v3", "v4", "m3")]  # (arena, gradients?)
 
@@ -268,7 +269,8 @@ class RigidData:
                      "ls_iterations": settings["ls_iterations"], "overflow": 0, "rows_needed": 0,
                      "HI": len(model.hull_int), "WS": int(_has_convex_pairs(model)), "inexact": 0,
                      "converged": int(bool(settings["converged"])), "constrained": 0,
-                     "colliders_due": 0, "inexact_pair": 0, "inexact_env": 0, "inexact_substep": 0, "wrench": 0}
+                     "colliders_due": 0, "inexact_pair": 0, "inexact_env": 0, "inexact_substep": 0, "wrench": 0,
+                     "capped": 0}
         self.start, stop = layout(self.size)
         length = {a: stop[a, bool(requires_grad)] for a in ARENAS}  # no gradient storage without gradients
         if max(length.values()) >= 2 ** 31:  # indices inside kernels are 32-bit
@@ -304,7 +306,8 @@ class RigidData:
         "overflow": more contacts than slots; "rows_needed": an env of the one-launch step met a
         joint limit; "inexact": a contact came from a collider whose replay is not exact;
         "constrained": a substep's smooth stage or colliders found a constraint row to form;
-        "colliders_due": the mask of collider kernels a substep needs) since the last call, which
+        "colliders_due": the mask of collider kernels a substep needs; "capped": a constraint solve
+        stopped at its iteration limit before its tolerance) since the last call, which
         clears it. Returns its value (an int, 0 when not raised)."""
         slot = HEADER[name]
         flag = int(self.header[slot])
@@ -403,6 +406,7 @@ class RigidView:
         # set when an env of the substep has a constraint row to form (the host then runs the solve)
         self.constrained = ArrayView(ints, HEADER["constrained"], (1,))
         self.colliders_due = ArrayView(ints, HEADER["colliders_due"], (1,))  # bits of the collider kernels due
+        self.capped = ArrayView(ints, HEADER["capped"], (1,))  # set when a solve stops at its iteration limit
         count = _counts(size)
         for name, (arena, _) in MODEL.items():
             setattr(self, name, ArrayView(arenas[arena], start[f"model:{name}"], (1,)))

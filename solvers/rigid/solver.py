@@ -4,6 +4,8 @@ State per env: [qpos (Q), qvel (D)]. Inputs per env: INPUTS in data.py. Everythi
 bookkeeping around the kernels of the stage modules; no Python loop runs over envs, links or
 dofs at step time.
 """
+import logging
+
 import numpy as np
 import torch
 
@@ -15,6 +17,8 @@ from .collision import detect
 from .data import ARENAS, BIG, ELEMENT, HEADER, INPUTS, RigidData
 from .geometry import GEOM_CODE
 from .model import build_model
+
+_logger = logging.getLogger("genesis_lite")
 
 # A step's replay record (replay_record) is kept with its graph node while it holds at most this
 # many states' worth of numbers an env: a box on a plane ~2 (qacc 6, up to 16 rows' jar, against a
@@ -47,6 +51,7 @@ class RigidSolver(Solver):
         self.substeps = sim_options.substeps
         self._commit = 1  # 0 while a backward replays a step: its frames stay for the reverse
         self._replaying = 0  # 1 while a backward replays a step given its replay_record (the solutions)
+        self._warned_capped = False  # _check_capped warned
         self.invweight_basis = None  # contact.InvweightBasis, taken at build
         self._clear_substep_record()
 
@@ -90,12 +95,12 @@ class RigidSolver(Solver):
         options, sim = self.rigid_options, self.sim_options
         h = sim.dt / sim.substeps
         bits = 64 if runtime.tc_float == torch.float64 else 32
-        self.timeconst, iterations, tolerance, impratio = options.resolved(bits)
+        self.timeconst, self.iterations, self.tolerance, impratio = options.resolved(bits)
         contacts, rows = contact.capacity(self.model, options)
         settings = {"limits": options.enable_joint_limit, "contacts": contacts, "rows": rows,
-                    "cone": int(options.friction_cone == "elliptic"), "iterations": iterations,
+                    "cone": int(options.friction_cone == "elliptic"), "iterations": self.iterations,
                     "ls_iterations": options.ls_iterations, "converged": not options.enable_mujoco_compatibility,
-                    "consts": [h, self.timeconst, impratio, tolerance, options.ls_tolerance]}
+                    "consts": [h, self.timeconst, impratio, self.tolerance, options.ls_tolerance]}
         self.data = RigidData(self.model, self.n_batch, sim.substeps, sim.requires_grad, settings)
         element_dims = [len(ELEMENT[a]) for a in ARENAS]
         schedule, arenas = self.data.schedule, self.data.arenas
@@ -279,11 +284,26 @@ class RigidSolver(Solver):
         out = self._empty(self.state_width) if download else self._nothing
         if inputs is not None:
             self._note_inputs(inputs)
+        forward = self._commit
         self.run_step(self._nothing if inputs is None else self._pack_inputs(inputs), out, commit=self._commit)
         self._commit, self._replaying = 1, 0  # (a replay ends with its step)
         if self.data.size["N"]:
             self._check_overflow()
+        if forward and self.sim_options.requires_grad and self.data.flags_on_host:
+            self._check_capped()
         return out if download else None
+
+    def _check_capped(self):
+        """Warn (once) when a differentiable step's constraint solve stopped at its iteration
+        limit: the backward differentiates the converged solution (constraint/implicit.py), so a
+        step short of it gets a gradient off by what the solve had left (a box sliding with
+        iterations=2: 0.67 of the gradient, the sign flipped)."""
+        if self.data.take_flag("capped") and not self._warned_capped:
+            self._warned_capped = True
+            _logger.warning(f"rigid solver (entities: {', '.join(self.entity_names)}): a constraint solve stopped at "
+                            f"its iteration limit (RigidOptions(iterations={self.iterations})) before its tolerance "
+                            f"({self.tolerance:g}); gradients through such a step are those of the converged solution, "
+                            f"not of the step taken: raise iterations (warned once)")
 
     def _check_overflow(self):
         """Raise if the step had more contacts than slots."""

@@ -924,7 +924,8 @@ def _line_search(d: ti.template(), s, e, k, n, m, tolerance, ls_iterations, scal
 # ----------------------------------------------------------------------------- drivers
 @ti.func
 def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iterations, ls_tolerance):
-    """Newton iterations on island k from the current qacc (mj_solPrimal); returns their count.
+    """Newton iterations on island k from the current qacc (mj_solPrimal); returns (their count,
+    1 when they stopped at ``iterations`` before a stopping test held, else 0).
     Leaves qacc, efc_force/state, qfrc_constraint and the factored final H of the island."""
     n, m = _select(d, s, e, k)
     inertia = 0.0
@@ -934,7 +935,7 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
     scale = 1.0 / inertia
     _mul_M(d, s, e, n, d.qacc, d.solver_Ma)
     _set_jar(d, s, e, m)
-    niter, first, improvement, polished = 0, 1, 0.0, 0
+    niter, first, improvement, polished, capped = 0, 1, 0.0, 0, 0
     while True:
         _, changed = _update_constraints(d, s, e, m)
         _update_gradient(d, s, e, n, m)
@@ -971,6 +972,7 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
                 if stop and changed and d.converged and not polished:
                     stop, polished = 0, 1
         if stop or niter >= iterations:
+            capped = int(not stop)
             break
         for p in range(n):
             i = d.solver_dofs[s, e, p]
@@ -987,7 +989,7 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
             d.solver_jar[s, e, r] = d.solver_jar[s, e, r] + alpha * d.solver_Jv[s, e, r]
         improvement = scale * ls_improvement
     _note_factor_rows(d, s, e, n)
-    return niter
+    return niter, capped
 
 
 @ti.func
@@ -1044,7 +1046,8 @@ def newton_solve(d: ti.template(), s, e, iterations, tolerance, ls_iterations, l
     efc_mu, efc_J (R, D) with their non-zero columns (efc_col0, efc_ncol, efc_cols), efc_R, efc_aref,
     efc_floss, qacc_warmstart[e] (D,) and dof_parent.
     Writes qacc_smooth, qacc (D,) rad/s² / m/s², efc_force (R,), efc_state (R,), qfrc_constraint
-    (D,), solver_niter, and the SCRATCH arrays (solver_H: the final Hessian's factor).
+    (D,), solver_niter, the capped flag (an island stopped at ``iterations``), and the SCRATCH
+    arrays (solver_H: the final Hessian's factor).
     iterations, ls_iterations: limits; tolerance, ls_tolerance: MuJoCo's opt values."""
     _find_islands(d, s, e)
     n, m = _select(d, s, e, ALL)
@@ -1073,5 +1076,8 @@ def newton_solve(d: ti.template(), s, e, iterations, tolerance, ls_iterations, l
         _warm_start(d, s, e, n, m)
         for k in range(d.n_dofs):
             if d.solver_tree[s, e, k] == k:  # k is an island's canonical root
-                niter += _solve_island(d, s, e, k, iterations, tolerance, ls_iterations, ls_tolerance)
+                island_niter, capped = _solve_island(d, s, e, k, iterations, tolerance, ls_iterations, ls_tolerance)
+                niter += island_niter
+                if capped:  # (every writer writes 1)
+                    d.capped[0] = 1
     d.solver_niter[s, e] = niter
