@@ -19,6 +19,8 @@ _TETGEN = ("order", "mindihedral", "minratio", "nobisect", "quality", "maxvolume
 _FILE = _MORPH + ("decimate", "decimate_face_num", "decimate_aggressiveness", "watertighten", "convexify",
                   "decompose_object_error_threshold", "decompose_robot_error_threshold", "coacd_options",
                   "recompute_inertia", "align", "file_meshes_are_zup", "batch_fixed_verts")
+# taken by Genesis 1.4.5 with a deprecation warning and no effect, as here
+_DEPRECATED = ("requires_jac_and_IK", "is_free")
 
 
 _DIFFERENTIABLE_START = ("a morph's pose is fixed at build; a differentiable start is set after scene.build() "
@@ -83,7 +85,7 @@ class Morph:
         pass
 
 
-@named_keywords(*_FILE, "scale", "prioritize_urdf_material", "xacro_args")
+@named_keywords(*_FILE, "scale", "prioritize_urdf_material", "xacro_args", deprecated=_DEPRECATED)
 @dataclass
 class URDF(Morph):
     """A robot from a URDF file; mesh paths may be relative or ``package://``.
@@ -127,7 +129,7 @@ class URDF(Morph):
         self.merge_fixed_links, self.links_to_keep = bool(self.merge_fixed_links), tuple(keep)
 
 
-@named_keywords(*_PRIMITIVE, *_TETGEN)
+@named_keywords(*_PRIMITIVE, *_TETGEN, deprecated=_DEPRECATED)
 @dataclass
 class Box(Morph):
     """A box; size (3,) full extents, m. Or, as Genesis, its corners ``lower`` and ``upper``
@@ -152,7 +154,7 @@ class Box(Morph):
         self.lower, self.upper = self.pos - self.size / 2.0, self.pos + self.size / 2.0
 
 
-@named_keywords(*_PRIMITIVE, *_TETGEN)
+@named_keywords(*_PRIMITIVE, *_TETGEN, deprecated=_DEPRECATED)
 @dataclass
 class Sphere(Morph):
     """A sphere of ``radius`` m."""
@@ -162,7 +164,7 @@ class Sphere(Morph):
         _positive("Sphere", "radius", self.radius)
 
 
-@named_keywords(*_PRIMITIVE, *_TETGEN)
+@named_keywords(*_PRIMITIVE, *_TETGEN, deprecated=_DEPRECATED)
 @dataclass
 class Cylinder(Morph):
     """A cylinder along local z: ``radius`` and ``height`` in m."""
@@ -174,14 +176,14 @@ class Cylinder(Morph):
         _positive(type(self).__name__, "height", self.height)
 
 
-@named_keywords(*_PRIMITIVE, *_TETGEN)
+@named_keywords(*_PRIMITIVE, *_TETGEN, deprecated=_DEPRECATED)
 @dataclass
 class Capsule(Cylinder):
     """A capsule along local z: ``height`` is the length of the cylindrical part, m."""
 
 
 @named_keywords(*_FILE, *_TETGEN, "contype", "conaffinity", "group_by_material",
-           "merge_submeshes_for_collision")
+           "merge_submeshes_for_collision", deprecated=_DEPRECATED)
 @dataclass
 class Mesh(Morph):
     """A rigid body from a mesh file (any format trimesh reads), scaled by ``scale``."""
@@ -194,7 +196,7 @@ class Mesh(Morph):
         _positive("Mesh", "scale", self.scale)
 
 
-@named_keywords(*_PRIMITIVE, "plane_size", "tile_size")
+@named_keywords(*_PRIMITIVE, "plane_size", "tile_size", deprecated=_DEPRECATED)
 @dataclass
 class Plane(Morph):
     """The ground: an infinite static half-space (always fixed) bounded by the plane through pos

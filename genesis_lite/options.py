@@ -28,16 +28,21 @@ def _check_positive(owner, name, value, integer=False):
         raise InvalidInputError(f"{owner}: argument '{name}' must be {kind}, got {value!r}")
 
 
-def named_keywords(*genesis_only):
+def named_keywords(*genesis_only, deprecated=()):
     """Class decorator of an options dataclass: a keyword it does not have raises
     InvalidInputError naming the class, the keyword and the accepted ones (Python's TypeError
     named neither). ``genesis_only``: Genesis 1.4.5's options of that class which genesis_lite
-    does not have, so that the message says so rather than "unknown"."""
+    does not have, so that the message says so rather than "unknown"; ``deprecated``: the ones
+    Genesis takes with a warning and ignores, as here."""
     def decorate(cls):
         init, accepted = cls.__init__, [f.name for f in fields(cls)]
 
         @functools.wraps(init)
         def checked_init(self, *args, **kwargs):
+            for name in [name for name in kwargs if name in deprecated]:
+                del kwargs[name]
+                logging.getLogger("genesis_lite").warning(f"{cls.__qualname__}: '{name}' is deprecated (as in Genesis) "
+                                                          f"and has no effect.")
             for name in kwargs:
                 if name not in accepted:
                     what = "a Genesis option that genesis_lite does not have" if name in genesis_only else "unknown"

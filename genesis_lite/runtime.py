@@ -67,11 +67,11 @@ def init(backend=None, precision="32", seed=None, logging_level="warning", debug
     debug: Taichi debug mode (bounds checks; slow).
 
     Kernels are compiled without fast math: no reassociation or contraction, so a kernel gives
-    the same bits whether its env loop runs on one thread or many, on any x86-64 CPU
-    (batched scenes equal single-env ones bit for bit). And without Taichi's CFG optimisation,
-    superlinear on the convex colliders (a kernel with collision/convex.py compiled in 156 s
-    with it, 11 s without); measured on the CPU, the kernels run as fast without it and
-    compile ~40 % faster. torch's device is always the one of
+    the same bits whether its env loop runs on one thread or many, on any x86-64 CPU (batched
+    scenes equal single-env ones bit for bit). They are also compiled without Taichi's CFG
+    optimisation, whose cost grows superlinearly on the convex colliders (a kernel with
+    collision/convex.py compiled in 156 s with it, 11 s without); measured on the CPU, the
+    kernels run as fast without it and compile ~40 % faster. torch's device is always the one of
     the arch Taichi actually started on.
     """
     precision = str(precision)

@@ -236,6 +236,8 @@ def test_contact_readouts_of_a_batch_with_and_without_contacts(f64):
     found = box.get_contacts()
     assert found["valid_mask"].sum(1).tolist() == [4, 0]
     assert torch.all(found["position"][~found["valid_mask"]] == 0)
+    empty = found["geom_a"] < 0  # an empty slot's geoms and links are -1, as Genesis pads (not link 0's)
+    assert empty[1].all() and all(torch.all(found[k][empty] == -1) for k in ("geom_b", "link_a", "link_b"))
     with pytest.raises(gs.InvalidInputError, match="argument 'with_entity' must be a rigid entity of the same scene"):
         box.get_contacts(with_entity=0)
     with pytest.raises(gs.InvalidInputError, match="argument 'exclude_self_contact' must be True or False"):

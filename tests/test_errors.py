@@ -12,7 +12,7 @@ import pytest
 import torch
 
 import genesis_lite as gs
-from tests.conftest import asset, pybullet
+from tests.conftest import asset, pybullet, warns
 
 ENTITY = "pendulum"
 INERTIAL = '<inertial><mass value="1"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial>'
@@ -370,6 +370,17 @@ def test_unknown_option_keyword(f64, options, name, what):
     """A keyword an options class lacks names the class, the keyword, why, and what is accepted."""
     raises(gs.InvalidInputError, lambda: getattr(gs.options, options)(**{name: 1}), options, f"'{name}'", what,
            "expected one of")
+
+
+@pytest.mark.parametrize("morph", ["Box", "Sphere", "Plane", "URDF", "Mesh"])
+def test_genesis_deprecated_morph_keywords_warn_and_are_ignored(f64, caplog, morph):
+    """requires_jac_and_IK and is_free, which Genesis 1.4.5 takes with a deprecation warning and
+    ignores, are taken so too (older Genesis scripts pass them)."""
+    with warns(caplog, f"{morph}: 'requires_jac_and_IK' is deprecated .*no effect"):
+        made = getattr(gs.morphs, morph)(requires_jac_and_IK=True, **({"file": "x"} if morph in ("URDF", "Mesh") else {}))
+    assert not hasattr(made, "requires_jac_and_IK")
+    with warns(caplog, f"{morph}: 'is_free' is deprecated"):
+        getattr(gs.morphs, morph)(is_free=False, **({"file": "x"} if morph in ("URDF", "Mesh") else {}))
 
 
 def test_smooth_contact_needs_the_elliptic_cone(f64):

@@ -111,6 +111,24 @@ def test_a_wrench_lasts_one_step_and_calls_add_up(f64):
     np.testing.assert_allclose(robot.get_dofs_velocity(), once[2], atol=1e-12)
 
 
+def test_a_wrench_broadcasts_as_genesis(f64):
+    """Genesis broadcasts a wrench: a (3,) force acts on every link given and in every env, one of
+    shape (B, 3) per env on every link (here B = 3 and 2 links: (n, 3) would be per link); the same
+    as the full (B, n, 3) array."""
+    scene, robot, _ = _ours(n_envs=3)
+
+    def velocity(force):
+        scene.reset()
+        robot.apply_links_external_wrench(force, links_idx_local=[5, 6])
+        scene.step()
+        return robot.get_dofs_velocity()
+    per_env = torch.tensor([[20.0, 5.0, 0.0], [0.0, -8.0, 3.0], [1.0, 1.0, 1.0]])
+    full = per_env[:, None, :].expand(3, 2, 3)
+    assert torch.equal(velocity(per_env), velocity(full))
+    assert torch.equal(velocity([20.0, 5.0, 0.0]), velocity(per_env[:1, None, :].expand(3, 2, 3)))
+    assert not torch.equal(velocity(per_env)[0], velocity(per_env)[1])
+
+
 def test_bad_arguments_raise(f64):
     _, robot, _ = _ours(n_envs=0)
     with pytest.raises(gs.InvalidInputError, match="expected 'force' or 'torque', got neither"):
@@ -121,5 +139,6 @@ def test_bad_arguments_raise(f64):
         robot.apply_links_external_wrench(force=[[0.0, 0.0, 1.0]], links_idx_local=[1], ref="root_com")
     with pytest.raises(gs.InvalidInputError, match="'local' must be a bool"):
         robot.apply_links_external_wrench(force=[[0.0, 0.0, 1.0]], links_idx_local=[1], local="False")
-    with pytest.raises(gs.InvalidInputError, match=r"'force' must have shape \(2, 3\), got \(1, 3\)"):
-        robot.apply_links_external_wrench(force=[[0.0, 0.0, 1.0]], links_idx_local=[1, 2])
+    with pytest.raises(gs.InvalidInputError, match=r"'force' must have shape \(2, 3\) \(or one that broadcasts to "
+                                                   r"it\), got \(3, 3\)"):
+        robot.apply_links_external_wrench(force=[[0.0, 0.0, 1.0]] * 3, links_idx_local=[1, 2])

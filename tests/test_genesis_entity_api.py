@@ -321,8 +321,19 @@ def test_batched_setters_broadcast_one_row(f64, two_robots):
     assert other.get_dofs_position().tolist() == [[0.2, -0.1], [0.2, -0.1]]
     other.set_dofs_position(_t([[0.3, 0.0], [0.4, 0.1]]))
     assert other.get_dofs_position().tolist() == [[0.3, 0.0], [0.4, 0.1]]
-    with pytest.raises(gs.InvalidInputError, match=r"\(2, 2\) or \(2,\) for every env, got \(3,\)"):
+    with pytest.raises(gs.InvalidInputError, match=r"\(2, 2\) or \(2,\) for every env \(or one that broadcasts to "
+                                                   r"it\), got \(3,\)"):
         other.set_dofs_position(_t([0.1, 0.2, 0.3]))
+    # Genesis's broadcasting: a scalar everywhere, one row (1, k) to every env, (B,) to one dof of each env
+    other.set_dofs_kp(25.0)
+    assert other.get_dofs_kp().tolist() == [[25.0, 25.0], [25.0, 25.0]]
+    other.set_dofs_position(_t([[0.5, 0.6]]))
+    assert other.get_dofs_position().tolist() == [[0.5, 0.6], [0.5, 0.6]]
+    other.set_dofs_velocity(_t([1.0, 2.0]), [1])
+    assert other.get_dofs_velocity()[:, 1].tolist() == [1.0, 2.0]
+    for bad in (_t([[0.1, 0.2, 0.3]]), _t([[[0.1, 0.2]]] * 2), _t([0.1, 0.2, 0.3])):
+        with pytest.raises(gs.InvalidInputError, match="or one that broadcasts to it"):
+            other.set_dofs_position(bad)
 
 
 def test_setters_take_the_values_at_the_call(f64, graph):

@@ -2,6 +2,7 @@
 out-of-place writes into the simulator's (B, W) state and input tables (so autograd sees them)."""
 import functools
 import inspect
+import itertools
 
 import numpy as np
 import torch
@@ -31,6 +32,30 @@ def is_range(idx, n):
     if len(idx) != n:
         return False
     return idx.tolist() == list(range(n)) if n <= 64 else bool(np.array_equal(idx, np.arange(n)))
+
+
+def broadcast(tensor, expected):
+    """``tensor`` broadcast to the shape ``expected`` as Genesis broadcasts a setter's value (its
+    broadcast_tensor), or None when it does not fit: a scalar fills it; a value of fewer dims whose
+    trailing sizes are not ``expected``'s trailing ones goes to the last placement of its dims
+    among ``expected``'s (each equal or 1) that fits, e.g. (B,) for one dof becomes (B, 1); then
+    torch's expand (sizes of 1 repeat). Differentiable (torch's expand)."""
+    if tensor.dim() > len(expected):
+        return None
+    if tensor.dim() == 0:
+        tensor = tensor[None]
+    elif tensor.dim() < len(expected) and tuple(tensor.shape) != tuple(expected[len(expected) - tensor.dim():]):
+        for dims in reversed(list(itertools.combinations(range(len(expected)), tensor.dim()))):
+            if all(tensor.shape[k] in (1, expected[d]) for k, d in enumerate(dims)):
+                shape = [1] * len(expected)
+                for k, d in enumerate(dims):
+                    shape[d] = tensor.shape[k]
+                tensor = tensor.reshape(shape)
+                break
+    try:
+        return tensor.expand(expected)
+    except RuntimeError:
+        return None
 
 
 def all_finite(tensor):
@@ -135,16 +160,15 @@ class EntityIndexing:
 
     def _values(self, value, n_cols, envs, arg, infinite=False):
         """User values → (len(envs), n_cols) float tensor on gs.device; checked shape and finiteness
-        (``infinite``: ±inf allowed, for bounds). In a batched scene (n_cols,) values apply to every
-        env of envs (Genesis broadcasts too)."""
+        (``infinite``: ±inf allowed, for bounds). Broadcast as Genesis broadcasts (``broadcast``):
+        in a batched scene (n_cols,) values apply to every env of envs, a scalar to every entry."""
         expected = (n_cols,) if self.scene.n_envs == 0 else (len(envs), n_cols)
-        tensor = self._tensor(value, arg, expected)
-        if self.scene.n_envs and tuple(tensor.shape) == (n_cols,):
-            tensor = tensor.expand(len(envs), n_cols)
-        if tuple(tensor.shape) != expected:
+        given = self._tensor(value, arg, expected)
+        tensor = broadcast(given, expected)
+        if tensor is None:
             every_env = f" or {(n_cols,)} for every env" if self.scene.n_envs else ""
-            raise InvalidInputError(f"{self._who}: argument '{arg}' must have shape {expected}{every_env}, "
-                                    f"got {tuple(tensor.shape)}")
+            raise InvalidInputError(f"{self._who}: argument '{arg}' must have shape {expected}{every_env} (or one "
+                                    f"that broadcasts to it), got {tuple(given.shape)}")
         if bool(torch.isnan(tensor.detach()).any()) if infinite else not all_finite(tensor.detach()):
             what = "free of NaN" if infinite else "finite"
             raise InvalidInputError(f"{self._who}: argument '{arg}' must be {what}, got "

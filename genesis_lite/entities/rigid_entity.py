@@ -11,7 +11,7 @@ from ..solvers.core import InvalidInputError, SceneStateError, refuse_grad, runt
 from ..solvers.rigid.merge import merged_into
 from . import kinematics
 from ..tensor import wrap
-from .common import EntityIndexing, named_argument_errors, replace_columns as _replace
+from .common import EntityIndexing, broadcast, named_argument_errors, replace_columns as _replace
 from .rotations import euler_xyz_to_quat, quat_to_euler_xyz, quat_to_mat
 
 _MODES = {"force": 0, "position": 1, "velocity": 2}  # ctrl_mode codes (solvers/rigid/actuation.py)
@@ -426,12 +426,14 @@ class RigidEntity(EntityIndexing):
 
     # -- external wrenches ----------------------------------------------------------------------------
     def _link_vectors(self, value, n_links, envs, arg):
-        """User (n, 3) or, batched, (len(envs), n, 3) vectors → (len(envs), n, 3)."""
+        """User (n, 3) or, batched, (len(envs), n, 3) vectors, or any shape that broadcasts to it as
+        Genesis's (a (3,) vector for every link and env) → (len(envs), n, 3)."""
         shape = (n_links, 3) if self.scene.n_envs == 0 else (len(envs), n_links, 3)
-        tensor = self._tensor(value, arg, shape)
-        if tuple(tensor.shape) != shape:
+        given = self._tensor(value, arg, shape)
+        tensor = broadcast(given, shape)
+        if tensor is None:
             raise InvalidInputError(f"entity '{self.name}': apply_links_external_wrench argument '{arg}' must have "
-                                    f"shape {shape}, got {tuple(tensor.shape)}")
+                                    f"shape {shape} (or one that broadcasts to it), got {tuple(given.shape)}")
         return self._values(tensor.reshape(*shape[:-2], 3 * n_links), 3 * n_links, envs, arg).reshape(-1, n_links, 3)
 
     def apply_links_external_wrench(self, force=None, torque=None, links_idx_local=None, envs_idx=None, *,
@@ -693,7 +695,8 @@ class RigidEntity(EntityIndexing):
         model = self._solver.model
         geom_a, geom_b = raw[..., 0].long(), raw[..., 1].long()
         links = torch.as_tensor(model.geom_link, device=runtime.device, dtype=torch.long)
-        link_a, link_b = links[geom_a.clamp(min=0)], links[geom_b.clamp(min=0)]
+        # an empty slot's link is -1, as its geom (Genesis's padding), not link 0's (often the ground's)
+        link_a, link_b = (torch.where(g >= 0, links[g.clamp(min=0)], -1) for g in (geom_a, geom_b))
         mine = lambda g, entity: (g >= entity.geom_start) & (g < entity.geom_start + entity.n_geoms)
         a_mine, b_mine = mine(geom_a, self), mine(geom_b, self)
         if with_entity is self:
