@@ -40,6 +40,8 @@ def broadcast(tensor, expected):
     trailing sizes are not ``expected``'s trailing ones goes to the last placement of its dims
     among ``expected``'s (each equal or 1) that fits, e.g. (B,) for one dof becomes (B, 1); then
     torch's expand (sizes of 1 repeat). Differentiable (torch's expand)."""
+    if tensor.shape == expected:  # (a step's control: the hot path)
+        return tensor
     if tensor.dim() > len(expected):
         return None
     if tensor.dim() == 0:
