@@ -22,15 +22,14 @@ clipping follow the 3.12 sources.
    (`_sphere_in_mesh`; MuJoCo keeps its truncated iterate, which depends on its own hull data).
 3. Boxes and meshes (budget 4) clip two facing faces, or an edge along a face, found from the
    final EPA face's features: up to 4 contacts (the largest quadrilateral of the clipped
-   polygon). This is MuJoCo 3.12's multicontact exactly (a numpy port of it agrees to 1e-14 at
-   240 poses of two pybullet_data meshes, as GJK and EPA agree with 4.0's); MuJoCo 4.0 changed
-   the face-on-face case, measured there (its source was not at hand): the points on the
-   clipping face's plane (x1 = v − d n1, x2 = x1 − ((x1 − v)·n2) n2, dist = d |n1·n2|, where we
-   keep x2 = v and dist = d), the most opposed pair of face normals (we take the first pair
-   within the tolerance), which together reproduce 105 of 107 face-on-face poses, and, in 25
-   of 71 poses where no face pair is aligned, a second contact (rule unknown). Not reproduced:
-   mesh–mesh and box–mesh contacts then sit 5e-5 to 1e-3 m from 4.0's, their count off in ~1 of
-   8 random poses (tests/test_colliders_convex.py's EXACT_SHARE). Capsules (budget 2) and cylinders (budget 4) get one contact here: MuJoCo 4.0's
+   polygon): MuJoCo's multicontact. Its face-on-face case is MuJoCo 4.0's as measured against
+   4.0 (its source was not at hand; GJK, EPA and the rest agree with 3.12's, which a numpy port
+   matched to 1e-14): the most opposed pair of face normals within the tolerance (3.12: the first
+   pair), and witnesses on both faces' planes (`_clip_witnesses`; 3.12: the clipped point and
+   dist d). Together they reproduced 105 of 107 face-on-face poses of two pybullet_data meshes,
+   where 3.12's rules matched none. Not reproduced: in 25 of 71 poses where no face pair aligns
+   MuJoCo 4.0 adds a second contact (rule unknown); random mesh–mesh poses at MuJoCo's hull
+   data agree exactly in 49-52 of 60 (3.12's rules: 11-38), the count off in 5-8. Capsules (budget 2) and cylinders (budget 4) get one contact here: MuJoCo 4.0's
    multi-contact for them (and for margins, through the shallow path) is not reproduced; but a
    cylinder standing on a box's face, a mesh's face or a wider cylinder's cap gets four rim points
    of its own form (a box's face within the cap its four corners), one lying on a box's face the
@@ -1397,9 +1396,9 @@ def _clip(nclip, npoly, normal, direction, ws: ti.template(), row: ti.template()
     """MuJoCo's polygonClip: clip the polygon at workspace slots _V_POLY.. (npoly points, lines
     tagged at _I_TAG) by the side planes of the face at _V_CLIP.. (nclip points, outward plane
     normal `normal`), keep the points behind the face and pick at most 4: the largest quad of
-    more than 4, the two farthest of a clipped edge. Writes the witness pairs (clipped point,
-    and it moved |dist| along `direction`) with their distances and tags at the _WIT places.
-    Returns their number."""
+    more than 4, the two farthest of a clipped edge. Writes the witness pairs of each point
+    (`_clip_witnesses`; `direction`: the clipped face's normal, or −normal for an edge) with
+    their distances and tags at the _WIT places. Returns their number."""
     is_edge = npoly == 2
     face0 = ws.ccd_v[row + (_V_CLIP,)]
     for e in range(nclip):  # side planes through each edge, containing the normal
@@ -1456,9 +1455,9 @@ def _clip(nclip, npoly, normal, direction, ws: ti.template(), row: ti.template()
                     picks[0], picks[1] = i, j
     for i in range(nx):
         point = ws.ccd_v[row + (_V_POLY + src + picks[i],)]
-        d = _dot(point - face0, normal)
-        ws.ccd_v[row + (_V_WIT + i,)] = point + direction * (-ti.abs(d))
-        ws.ccd_v[row + (_V_WIT + 4 + i,)] = point
+        x1, x2, d = _clip_witnesses(ti.select(is_edge, 2, 0), face0, normal, direction, point)
+        ws.ccd_v[row + (_V_WIT + i,)] = x1
+        ws.ccd_v[row + (_V_WIT + 4 + i,)] = x2
         ws.ccd_f[row + (_F_WIT + i,)] = d
         for t in ti.static(range(2)):
             ws.ccd_i[row + (_I_WIT + i * FEATURE_SIZE + 3 + t,)] = ws.ccd_i[row + (_I_TAG + 2 * (src + picks[i]) + t,)]
@@ -1503,15 +1502,16 @@ def _multicontact(shape1: ti.template(), shape2: ti.template(), slots, nslots, x
         dim2, ids2, pts2 = _simplex_dim(ids2, pts2)
         count1, faces1, map1 = _faces_at(shape1, dim1, ids1, x1 - x2, hull)
         count2, faces2, map2 = _faces_at(shape2, dim2, ids2, x2 - x1, hull)
-        # facing faces: the first pair (i, j) in order
+        # facing faces: the most opposed pair within the tolerance (MuJoCo 4.0, measured; 3.12
+        # took the first pair (i, j) in order)
         pair_i, pair_j, edge_geom = -1, -1, 0
+        most = -_FACE_TOL
         for i in range(count1):
             normal1 = _face_normal(shape1, _face_of(shape1, ids1[0], faces1, map1, i, hull), hull)
             for j in range(count2):
-                if pair_i < 0:
-                    normal2 = _face_normal(shape2, _face_of(shape2, ids2[0], faces2, map2, j, hull), hull)
-                    if _dot(normal1, normal2) < -_FACE_TOL:
-                        pair_i, pair_j = i, j
+                normal2 = _face_normal(shape2, _face_of(shape2, ids2[0], faces2, map2, j, hull), hull)
+                if _dot(normal1, normal2) < most:
+                    most, pair_i, pair_j = _dot(normal1, normal2), i, j
         # else an edge of the lower-dimensional feature parallel to one of the other's faces
         start = ti.Vector([pts1[0, 0], pts1[0, 1], pts1[0, 2]])
         end2 = ti.Vector([pts1[1, 0], pts1[1, 1], pts1[1, 2]])
@@ -3355,12 +3355,43 @@ def _clip_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.
 
 @ti.func
 def _clip_witnesses(edge_geom, c0, normal, face_d, point):
-    """The witness pair (x1, x2) and the distance d of a clipped point (forward's `_clip`): the
-    point, and it moved |d| against the clipped face's normal (or along the clipping face's
-    normal for a clipped edge), d = (point - c0) . normal; geom 1's witness first."""
+    """The witness pair (x1, x2, geom 1's first) and the distance of a clipped point, with d =
+    (point − c0)·N its height over the clipping face (c0 a vertex, N = ``normal`` its normal).
+    Face on face (edge_geom 0; MuJoCo 4.0's, measured: 3.12 kept the point and dist d): x1 =
+    point − d N on the clipping face's plane, x2 = x1 moved along the clipped face's normal D
+    (``face_d``) onto the clipped face's plane, dist = (x1 − point)·D = −d N·D. A clipped edge
+    (edge_geom 1, 2): the point and it moved |d| along N, dist = d."""
     d = _dot(point - c0, normal)
-    moved = point - ti.select(edge_geom == 0, face_d, -normal) * ti.abs(d)
-    return ti.select(edge_geom == 1, point, moved), ti.select(edge_geom == 1, moved, point), d
+    x1, x2, dist = point, point, d
+    if edge_geom == 0:
+        x1 = point - d * normal
+        dist = -d * _dot(normal, face_d)
+        x2 = x1 - dist * face_d
+    else:
+        moved = point + normal * ti.abs(d)
+        x1, x2 = ti.select(edge_geom == 1, point, moved), ti.select(edge_geom == 1, moved, point)
+    return x1, x2, dist
+
+
+@ti.func
+def _clip_witnesses_adjoint(edge_geom, c0, normal, face_d, point, g_x1, g_x2, g_dist):
+    """Reverse of `_clip_witnesses`: (g_c0, g_normal, g_face_d, g_point)."""
+    d = _dot(point - c0, normal)
+    g_normal, g_face_d = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+    g_point, g_d = g_x1 + g_x2, 0.0
+    if edge_geom == 0:
+        dist = -d * _dot(normal, face_d)
+        g_x1_all = g_x1 + g_x2  # (x2 = x1 − dist D)
+        g_dist_all = g_dist - _dot(g_x2, face_d)
+        g_face_d = -dist * g_x2 - d * g_dist_all * normal
+        g_normal = -d * g_dist_all * face_d - d * g_x1_all
+        g_d = -_dot(normal, face_d) * g_dist_all - _dot(g_x1_all, normal)
+        g_point = g_x1_all
+    else:
+        g_moved = ti.select(edge_geom == 1, g_x2, g_x1)
+        g_normal = ti.abs(d) * g_moved
+        g_d = g_dist + _sign(d) * _dot(g_moved, normal) * ti.select(d == 0, 0.0, 1.0)
+    return -g_d * normal, g_normal + g_d * (point - c0), g_face_d, g_point + g_d * normal
 
 
 @ti.func
@@ -3388,18 +3419,12 @@ def _clip_evaluate_adjoint(shape1: ti.template(), shape2: ti.template(), feature
     edge_geom = feature[7]
     x1, x2, d = _clip_witnesses(edge_geom, c0, normal, face_d, point)
     g_x1, g_x2 = _witness_adjoint(x1, x2, g_position, g_normal)
-    g_moved = ti.select(edge_geom == 1, g_x2, g_x1)
-    g_point = ti.select(edge_geom == 1, g_x1, g_x2) + g_moved
-    direction = ti.select(edge_geom == 0, face_d, -normal)
-    g_d = g_dist - _sign(d) * _dot(g_moved, direction) * ti.select(d == 0, 0.0, 1.0)
-    g_direction = -ti.abs(d) * g_moved
-    g_face_d = ti.select(edge_geom == 0, g_direction, ti.Vector([0.0, 0.0, 0.0]))
-    g_normal_c = ti.select(edge_geom == 0, ti.Vector([0.0, 0.0, 0.0]), -g_direction) + g_d * (point - c0)
-    g_point += g_d * normal
+    g_c0, g_normal_c, g_face_d, g_point = _clip_witnesses_adjoint(edge_geom, c0, normal, face_d, point, g_x1, g_x2,
+                                                                  g_dist)
     g_c = ti.Matrix.zero(float, 5, 3)  # rows: c0, ce, ce1, cf, cf1
     g_p = ti.Matrix.zero(float, 3, 3)  # rows: p0, pa, pb
     for c in ti.static(range(3)):
-        g_c[0, c] = -g_d * normal[c]
+        g_c[0, c] = g_c0[c]
     if sides == 0:
         for c in ti.static(range(3)):
             g_p[1, c] = g_point[c]
