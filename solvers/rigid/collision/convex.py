@@ -22,14 +22,17 @@ clipping follow the 3.12 sources.
    (`_sphere_in_mesh`; MuJoCo keeps its truncated iterate, which depends on its own hull data).
 3. Boxes and meshes (budget 4) clip two facing faces, or an edge along a face, found from the
    final EPA face's features: up to 4 contacts (the largest quadrilateral of the clipped
-   polygon): MuJoCo's multicontact. Its face-on-face case is MuJoCo 4.0's as measured against
-   4.0 (its source was not at hand; GJK, EPA and the rest agree with 3.12's, which a numpy port
-   matched to 1e-14): the most opposed pair of face normals within the tolerance (3.12: the first
-   pair), and witnesses on both faces' planes (`_clip_witnesses`; 3.12: the clipped point and
-   dist d). Together they reproduced 105 of 107 face-on-face poses of two pybullet_data meshes,
-   where 3.12's rules matched none. Not reproduced: in 25 of 71 poses where no face pair aligns
-   MuJoCo 4.0 adds a second contact (rule unknown); random mesh–mesh poses at MuJoCo's hull
-   data agree exactly in 49-52 of 60 (3.12's rules: 11-38), the count off in 5-8. Capsules (budget 2) and cylinders (budget 4) get one contact here: MuJoCo 4.0's
+   polygon): MuJoCo's multicontact, as measured against MuJoCo 4.0 (its source was not at hand;
+   GJK and EPA agree with it, the rest with 3.12's, which a numpy port matched to 1e-14), where
+   4.0 differs from 3.12 in three rules: the most opposed pair of face normals within the
+   tolerance (3.12: the first pair); witnesses on both faces' planes (`_clip_witnesses`; 3.12:
+   the clipped point and dist d); when geom 1's edge is parallel to none of geom 2's faces and
+   geom 2's feature is an edge too, geom 2's edge against geom 1's faces (3.12: the EPA contact
+   alone); and the quad's area is the diagonals' (`_quad_area`). A numpy reference of these
+   rules matched 4.0's contact sets in 3840 of 3840 random poses of two pybullet_data meshes
+   (finger tips, ducks, at MuJoCo's hull data); this collider then has 4.0's counts in all of 240
+   and its contacts in that order in 226 (order-sensitive: a clipped edge's two points come in
+   the other order in the rest; not reproduced). 3.12's rules matched 99 of the 240. Capsules (budget 2) and cylinders (budget 4) get one contact here: MuJoCo 4.0's
    multi-contact for them (and for margins, through the shallow path) is not reproduced; but a
    cylinder standing on a box's face, a mesh's face or a wider cylinder's cap gets four rim points
    of its own form (a box's face within the cap its four corners), one lying on a box's face the
@@ -1342,8 +1345,10 @@ def _put_face(shape: ti.template(), face, base, ws: ti.template(), row: ti.templ
 
 @ti.func
 def _quad_area(a, b, c, d):
-    """Area of quadrilateral abcd (half the norm of its two triangles' summed normals)."""
-    g = _cross(d - a, b - d) + _cross(c - b, a - c)
+    """Area of quadrilateral abcd, half the norm of its diagonals' cross product, in MuJoCo 4.0's
+    order of operations (read from its binary: ties between quads that share a repeated vertex
+    are decided by round-off). MuJoCo 3.12's area4 was another measure."""
+    g = _cross(a - c, b - d)
     return 0.5 * ti.sqrt(_dot(g, g))
 
 
@@ -1512,16 +1517,20 @@ def _multicontact(shape1: ti.template(), shape2: ti.template(), slots, nslots, x
                 normal2 = _face_normal(shape2, _face_of(shape2, ids2[0], faces2, map2, j, hull), hull)
                 if _dot(normal1, normal2) < most:
                     most, pair_i, pair_j = _dot(normal1, normal2), i, j
-        # else an edge of the lower-dimensional feature parallel to one of the other's faces
-        start = ti.Vector([pts1[0, 0], pts1[0, 1], pts1[0, 2]])
-        end2 = ti.Vector([pts1[1, 0], pts1[1, 1], pts1[1, 2]])
-        if pair_i < 0 and dim1 < 3 and dim1 <= dim2:
-            edge_geom = 1
-        elif pair_i < 0 and dim2 < 3:
-            edge_geom = 2
-            start = ti.Vector([pts2[0, 0], pts2[0, 1], pts2[0, 2]])
-            end2 = ti.Vector([pts2[1, 0], pts2[1, 1], pts2[1, 2]])
-        if edge_geom > 0:
+        # else an edge of the lower-dimensional feature parallel to one of the other's faces;
+        # when geom 1's finds none and geom 2's feature is an edge or a vertex too, geom 2's edge
+        # against geom 1's faces (MuJoCo 4.0, measured: 3.12 kept the EPA contact)
+        first_edge = ti.select(dim1 < 3 and dim1 <= dim2, 1, ti.select(dim2 < 3, 2, 0))
+        tries = ti.select(pair_i >= 0 or first_edge == 0, 0, ti.select(first_edge == 1 and dim2 < 3, 2, 1))
+        start, end2 = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+        for attempt in range(tries):
+            if pair_i >= 0:
+                break
+            edge_geom = ti.select(attempt == 0, first_edge, 3 - first_edge)
+            start = ti.select(edge_geom == 1, ti.Vector([pts1[0, 0], pts1[0, 1], pts1[0, 2]]),
+                              ti.Vector([pts2[0, 0], pts2[0, 1], pts2[0, 2]]))
+            end2 = ti.select(edge_geom == 1, ti.Vector([pts1[1, 0], pts1[1, 1], pts1[1, 2]]),
+                             ti.Vector([pts2[1, 0], pts2[1, 1], pts2[1, 2]]))
             nedges = ti.select(edge_geom == 1, _edge_count(shape1, dim1, ids1, hull),
                                _edge_count(shape2, dim2, ids2, hull))
             nfaces = ti.select(edge_geom == 1, count2, count1)
