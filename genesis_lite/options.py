@@ -124,8 +124,9 @@ class RigidOptions:
         under enable_mujoco_compatibility), tolerance (None: 1e-12 in float64, MuJoCo's 1e-8 under
         enable_mujoco_compatibility, 1e-5 in float32), ls_iterations, ls_tolerance: the solve's
         limits (a differentiable step whose solve stops at `iterations` before its tolerance warns
-        once: its gradient is the converged solution's). The float64 default is tighter than Genesis's 1e-8 because gradients are those
-        of the exact solution: at 1e-8 MuJoCo's Newton-decrement test can stop an elliptic solve
+        once: its gradient is the converged solution's). The float64 default is tighter than
+        Genesis's 1e-8 because gradients are those of the exact solution: at 1e-8 MuJoCo's
+        Newton-decrement test can stop an elliptic solve
         early (a mesh pressed into a box, sliding at one contact: the decrement 4e-9 with a
         scaled gradient of 5e-4), and the forward map's derivative then differed from the
         gradient by 1e-3 of its norm; one or two more Newton steps, no measurable cost in the a1
