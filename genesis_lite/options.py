@@ -5,7 +5,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from .solvers.core import InvalidInputError, refuse_grad
+from .solvers.core import InvalidInputError, refuse_grad, warn_user
 
 
 def _check_vec3(owner, name, value):
@@ -40,9 +40,8 @@ def named_keywords(*genesis_only, deprecated=()):
         @functools.wraps(init)
         def checked_init(self, *args, **kwargs):
             for name in [name for name in kwargs if name in deprecated]:
-                del kwargs[name]
-                logging.getLogger("genesis_lite").warning(f"{cls.__qualname__}: '{name}' is deprecated (as in Genesis) "
-                                                          f"and has no effect.")
+                if kwargs.pop(name) is not None:  # (Genesis says nothing of a None)
+                    warn_user(f"{cls.__qualname__}: '{name}' is deprecated (as in Genesis) and has no effect.")
             for name in kwargs:
                 if name not in accepted:
                     what = "a Genesis option that genesis_lite does not have" if name in genesis_only else "unknown"
@@ -124,7 +123,7 @@ class RigidOptions:
         under enable_mujoco_compatibility), tolerance (None: 1e-12 in float64, MuJoCo's 1e-8 under
         enable_mujoco_compatibility, 1e-5 in float32), ls_iterations, ls_tolerance: the solve's
         limits (a differentiable step whose solve stops at `iterations` before its tolerance warns
-        once: its gradient is the converged solution's). The float64 default is tighter than
+        once on the CPU: its gradient is the converged solution's). The float64 default is tighter than
         Genesis's 1e-8 because gradients are those of the exact solution: at 1e-8 MuJoCo's
         Newton-decrement test can stop an elliptic solve
         early (a mesh pressed into a box, sliding at one contact: the decrement 4e-9 with a

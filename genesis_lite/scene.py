@@ -159,7 +159,9 @@ class Scene:
                                         o.lower_bound, o.upper_bound, o.boundary_condition == "sticky",
                                         sim.requires_grad)
         solver = self.mpm_solver
-        seed = len(self.entities) if runtime.seed is None else (runtime.seed, len(self.entities))
+        # (a spawn key: SeedSequence((s, k)) would equal SeedSequence(s) at k = 0, numpy padding with zeros)
+        seed = len(self.entities) if runtime.seed is None else np.random.SeedSequence(runtime.seed,
+                                                                                        spawn_key=(len(self.entities),))
         positions = sample_particles(morph, material, self.mpm_options.particle_size, solver.wall_lower,
                                      solver.wall_upper, seed=seed, name=name)
         start = solver.add_entity(name, material.solver_kind, material.solver_params(), material.E, material.nu,

@@ -291,19 +291,26 @@ def test_a_solve_stopped_at_its_iteration_limit_warns_in_a_differentiable_scene(
     tolerance warns once, naming the option: its backward differentiates the converged solution
     (a box sliding 30 steps with iterations=2: dx/dv0 0.67 off, its sign flipped); at the default
     limit this scene converges and nothing is said, nor in a scene without gradients."""
-    def slide(iterations, requires_grad=True):
+    def slide(iterations, requires_grad=True, jelly=False):
         scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=requires_grad),
-                         rigid_options=gs.options.RigidOptions(iterations=iterations))
+                         rigid_options=gs.options.RigidOptions(iterations=iterations),
+                         mpm_options=gs.options.MPMOptions(lower_bound=(2.0, 2.0, 0.0), upper_bound=(2.5, 2.5, 0.5),
+                                                           grid_density=16))
         scene.add_entity(gs.morphs.Plane())
         box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.3, 0.1), pos=(0.0, 0.0, 0.0495)))
+        if jelly:  # (a scene of two solvers steps them in the shared substep loop)
+            scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(2.25, 2.25, 0.25)),
+                             material=gs.materials.MPM.Elastic(), name="jelly")
         scene.build()
         box.set_dofs_velocity([1.0, 0.3, 0.0, 0.0, 0.0, 0.4])
         caplog.clear()
         for _ in range(30):
             scene.step()
         return [r.getMessage() for r in caplog.records if "iteration limit" in r.getMessage()]
-    capped = slide(2)
-    assert len(capped) == 1 and "RigidOptions(iterations=2)" in capped[0] and "entities: plane_0, box_1" in capped[0]
+    for jelly in (False, True):
+        capped = slide(2, jelly=jelly)
+        assert len(capped) == 1 and "RigidOptions(iterations=2)" in capped[0]
+        assert "entities: plane_0, box_1" in capped[0]
     assert slide(None) == [] and slide(2, requires_grad=False) == []
 
 

@@ -381,6 +381,8 @@ def test_genesis_deprecated_morph_keywords_warn_and_are_ignored(f64, caplog, mor
     assert not hasattr(made, "requires_jac_and_IK")
     with warns(caplog, f"{morph}: 'is_free' is deprecated"):
         getattr(gs.morphs, morph)(is_free=False, **({"file": "x"} if morph in ("URDF", "Mesh") else {}))
+    with warns(caplog, None):  # (Genesis says nothing of a None)
+        getattr(gs.morphs, morph)(is_free=None, **({"file": "x"} if morph in ("URDF", "Mesh") else {}))
 
 
 def test_smooth_contact_needs_the_elliptic_cone(f64):

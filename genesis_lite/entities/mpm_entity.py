@@ -14,7 +14,7 @@ from ..materials import MPM
 from ..solvers.core import AssetError, InvalidInputError, SceneStateError, refuse_grad, runtime, warn_user
 from ..solvers.mpm import layout, sampling
 from ..tensor import wrap
-from .common import EntityIndexing, all_finite, is_range, named_argument_errors, replace_columns
+from .common import EntityIndexing, all_finite, broadcast, is_range, named_argument_errors, replace_columns
 
 
 def sample_particles(morph, material, particle_size, wall_lower, wall_upper, seed, name):
@@ -160,24 +160,21 @@ class MPMEntity(EntityIndexing):
         sim.set_input(self._solver, name, replace_columns(table, envs, self.particle_start + parts, values))
 
     def _particle_values(self, value, n_parts, element, envs, arg):
-        """User values → (len(envs), n_parts, *element) tensor: any shape that broadcasts to
-        (n_parts, *element) (unbatched scene) or (len(envs), n_parts, *element) (batched), so
-        (*element,) applies to every particle and (n_parts, *element) to every env; in a batched
-        scene a (len(envs), *element) value that does not broadcast so is one per env (Genesis's
-        broadcast_tensor tries the trailing axes, then a particle axis inserted). Finite."""
+        """User values → (len(envs), n_parts, *element) tensor, broadcast to (n_parts, *element)
+        (unbatched scene) or (len(envs), n_parts, *element) (batched) as Genesis broadcasts
+        (``common.broadcast``): (*element,) applies to every particle, (n_parts, *element) to every
+        env, (len(envs), *element) one per env. Finite."""
         target = (n_parts, *element) if self.scene.n_envs == 0 else (len(envs), n_parts, *element)
-        tensor = self._tensor(value, arg, target)
-        if self.scene.n_envs and not _broadcasts(tensor.shape, target) and \
-                tuple(tensor.shape) == (len(envs), *element):
-            tensor = tensor.unsqueeze(1)
-        if not _broadcasts(tensor.shape, target):
+        given = self._tensor(value, arg, target)
+        tensor = broadcast(given, target)
+        if tensor is None:
             per_env = f", {(len(envs), *element)} one per env" if self.scene.n_envs else ""
             raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must have shape {target} (or one that "
                                     f"broadcasts to it, e.g. {tuple(element) or '()'} for every particle{per_env}), "
-                                    f"got {tuple(tensor.shape)}")
+                                    f"got {tuple(given.shape)}")
         if not all_finite(tensor.detach()):
             raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be finite, got NaN or inf")
-        return tensor.broadcast_to(target).reshape(len(envs), n_parts, *element)
+        return tensor.reshape(len(envs), n_parts, *element)
 
     # -- particle state ---------------------------------------------------------------------------
     def get_particles_pos(self, envs_idx=None):
@@ -315,13 +312,14 @@ class MPMEntity(EntityIndexing):
         envs = self._envs(envs_idx, distinct=True)
         n_groups = self.material.n_groups
         target = (n_groups,) if self.scene.n_envs == 0 else (len(envs), n_groups)
-        groups = self._tensor(actu, "actu", target)
-        if not _broadcasts(groups.shape, target):
+        given = self._tensor(actu, "actu", target)
+        groups = broadcast(given, target)
+        if groups is None:
             raise InvalidInputError(f"entity '{self.name}': argument 'actu' must have shape {target} (one value per "
-                                    f"muscle group), or be one number, got {tuple(groups.shape)}")
+                                    f"muscle group), or be one number, got {tuple(given.shape)}")
         if not all_finite(groups.detach()):
             raise InvalidInputError(f"entity '{self.name}': argument 'actu' must be finite, got NaN or inf")
-        groups = groups.broadcast_to(target).reshape(len(envs), n_groups)
+        groups = groups.reshape(len(envs), n_groups)
         self._group_actuation = replace_columns(self._group_actuations(), envs, np.arange(n_groups), groups)
         self._write_actuation(envs)
 
@@ -412,10 +410,3 @@ def _span(name, skip):
     """The columns of state field ``name`` in a row from which the first ``skip`` columns were dropped."""
     first, last = layout.STATE[name]
     return slice(first - skip, last - skip)
-
-
-def _broadcasts(shape, target):
-    """A tensor of ``shape`` broadcasts to ``target`` (numpy's rules, no new dimensions beyond it)."""
-    if len(shape) > len(target):
-        return False
-    return all(have in (1, want) for have, want in zip(reversed(tuple(shape)), reversed(tuple(target))))

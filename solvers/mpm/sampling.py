@@ -8,8 +8,7 @@ n_i = max(1, round(extent_i / particle_size)) candidates per axis:
   (extent − p) / (n_i − 1) ≈ p (exactly p when the extent is a multiple of p), so each
   particle stands for a cube of volume ≈ p³ (an axis with one candidate has it in the middle);
 - "random": n_x·n_y·n_z points uniform in the box, from a generator seeded by ``seed`` (an int
-  or a tuple of ints: numpy's SeedSequence entropy; Genesis draws from numpy's global generator
-  instead).
+  or a numpy SeedSequence; Genesis draws from numpy's global generator instead).
 The candidates inside the shape are kept: box (all), sphere (|x| ≤ r), cylinder along local z
 (x² + y² ≤ r², |z| ≤ h/2), or a watertight triangle mesh (ray parity, trimesh). Genesis tests
 its primitives against their triangulated visual meshes (an icosphere, a faceted cylinder),

@@ -284,14 +284,20 @@ class RigidSolver(Solver):
         out = self._empty(self.state_width) if download else self._nothing
         if inputs is not None:
             self._note_inputs(inputs)
-        forward = self._commit
         self.run_step(self._nothing if inputs is None else self._pack_inputs(inputs), out, commit=self._commit)
-        self._commit, self._replaying = 1, 0  # (a replay ends with its step)
+        self._step_taken()
+        return out if download else None
+
+    def _step_taken(self):
+        """After a step, alone (advance) or in the shared loop (end_step): a replay ends with its
+        step; more contacts than slots raise; a differentiable forward step warns when its solve
+        stopped short (on the CPU, where the flag is read without waiting for a device)."""
+        forward = self._commit
+        self._commit, self._replaying = 1, 0
         if self.data.size["N"]:
             self._check_overflow()
         if forward and self.sim_options.requires_grad and self.data.flags_on_host:
             self._check_capped()
-        return out if download else None
 
     def _check_capped(self):
         """Warn (once) when a differentiable step's constraint solve stopped at its iteration
@@ -376,9 +382,7 @@ class RigidSolver(Solver):
 
     def end_step(self, download):
         result = self.download_state() if download and self._commit else None
-        self._commit, self._replaying = 1, 0  # (a replay ends with its step)
-        if self.data.size["N"]:
-            self._check_overflow()
+        self._step_taken()
         return result
 
     def nonfinite(self):
@@ -471,6 +475,8 @@ class RigidSolver(Solver):
 
     def end_backward(self):
         self._commit, self._replaying = 1, 0
+        if self.data.flags_on_host:  # (a replay that solved again may have raised it: not a forward step's)
+            self.data.take_flag("capped")
 
     def substep_pre_coupling_backward(self, s):
         """Substep s's reverse, as separate kernels: fused, they compile slower."""

@@ -6,8 +6,8 @@ box-mesh and mesh-mesh to `convex_convex` (MuJoCo's mjc_Convex), plane-mesh to `
 (mjc_PlaneConvex). The oracle is the installed MuJoCo 4.0.0, whose nativeccd differs from the
 3.12 sources we hold (changelog 4.0.0 item 27, "improved numerical stability of nativeccd and
 multiccd"): where they differ, the GJK, the margin handling, the contact budgets and plane-mesh
-below follow 4.0's compiled code (read from libmujoco.so's disassembly); EPA and the polytope
-clipping follow the 3.12 sources.
+below follow 4.0's compiled code (read from libmujoco.so's disassembly); EPA follows the 3.12
+sources, the polytope clipping 3.12's with three of the four rules 4.0 changed (item 3, measured).
 
 1. GJK on the Minkowski difference of two support functions, from the geom centres; the next
    iterate is the origin's exact projection on the simplex's line or plane. With a sphere or a
@@ -24,16 +24,18 @@ clipping follow the 3.12 sources.
    final EPA face's features: up to 4 contacts (the largest quadrilateral of the clipped
    polygon): MuJoCo's multicontact, as measured against MuJoCo 4.0 (its source was not at hand;
    GJK and EPA agree with it, the rest with 3.12's, which a numpy port matched to 1e-14), where
-   4.0 differs from 3.12 in three rules: the most opposed pair of face normals within the
-   tolerance (3.12: the first pair); witnesses on both faces' planes (`_clip_witnesses`; 3.12:
-   the clipped point and dist d); when geom 1's edge is parallel to none of geom 2's faces and
-   geom 2's feature is an edge too, geom 2's edge against geom 1's faces (3.12: the EPA contact
-   alone); and the quad's area is the diagonals' (`_quad_area`). A numpy reference of these
+   4.0 differs from 3.12 in four rules: the most opposed pair of face normals within the
+   tolerance (3.12: the first pair); witnesses on both faces' planes (3.12: the clipped point and
+   dist d; not taken: `_clip_witnesses` says why); when geom 1's edge is parallel to none of geom 2's faces and
+   geom 2's feature is an edge or a vertex too, geom 2's edge against geom 1's faces (3.12: the EPA contact
+   alone); and the quad's area is the diagonals' (`_quad_area`). A numpy reference of the four
    rules matched 4.0's contact sets in 3840 of 3840 random poses of two pybullet_data meshes
-   (finger tips, ducks, at MuJoCo's hull data); this collider then has 4.0's counts in all of 240
-   and its contacts in that order in 226 (order-sensitive: a clipped edge's two points come in
-   the other order in the rest; not reproduced). 3.12's rules matched 99 of the 240. Capsules (budget 2) and cylinders (budget 4) get one contact here: MuJoCo 4.0's
-   multi-contact for them (and for margins, through the shallow path) is not reproduced; but a
+   (finger tips, ducks, at MuJoCo's hull data). With all four this collider had 4.0's counts in
+   240 of 240 and its contacts in its order in 226 (in the rest a clipped edge's two points come
+   in the other order); with the three kept, 4.0's counts in 240 and its contacts in 119 (a face
+   on face's points 5e-5 to 1e-3 m off); 3.12's rules: counts in 207, contacts in 99.
+   Capsules (budget 2) and cylinders (budget 4) get one contact here: MuJoCo 4.0's multi-contact
+   for them (and for margins, through the shallow path) is not reproduced; but a
    cylinder standing on a box's face, a mesh's face or a wider cylinder's cap gets four rim points
    of its own form (a box's face within the cap its four corners), one lying on a box's face the
    two ends of its side's line (`_face_cap`); a capsule or cylinder lying on a mesh's face the two
@@ -1490,9 +1492,10 @@ def _simplex_dim(vids, points):
 def _multicontact(shape1: ti.template(), shape2: ti.template(), slots, nslots, x1, x2, hull: ti.template(),
                   ws: ti.template(), row: ti.template()):
     """MuJoCo's multi-contact between two polytopes (boxes, meshes): from the features of the
-    final EPA face on each geom (workspace slots `slots`), find two facing faces (normals within
-    ~5 deg), else an edge of the lower-dimensional feature parallel to a face of the other geom,
-    and clip one by the other (`_clip`). Writes up to 4 witness pairs at the _WIT places with
+    final EPA face on each geom (workspace slots `slots`), find the most opposed two facing faces
+    (normals within ~5 deg), else an edge of the lower-dimensional feature parallel to a face of
+    the other geom (then, when that is geom 1's and geom 2's feature is no face, geom 2's edge
+    against geom 1's faces), and clip one by the other (`_clip`). Writes up to 4 witness pairs at the _WIT places with
     KIND_CLIP features. Returns their number, 0 when nothing aligns (keep the EPA contact)."""
     nx = 0
     polytopes = (shape1[0] == BOX or shape1[0] == MESH) and (shape2[0] == BOX or shape2[0] == MESH)
@@ -3364,43 +3367,29 @@ def _clip_terms(shape1: ti.template(), shape2: ti.template(), feature, hull: ti.
 
 @ti.func
 def _clip_witnesses(edge_geom, c0, normal, face_d, point):
-    """The witness pair (x1, x2, geom 1's first) and the distance of a clipped point, with d =
-    (point − c0)·N its height over the clipping face (c0 a vertex, N = ``normal`` its normal).
-    Face on face (edge_geom 0; MuJoCo 4.0's, measured: 3.12 kept the point and dist d): x1 =
-    point − d N on the clipping face's plane, x2 = x1 moved along the clipped face's normal D
-    (``face_d``) onto the clipped face's plane, dist = (x1 − point)·D = −d N·D. A clipped edge
-    (edge_geom 1, 2): the point and it moved |d| along N, dist = d."""
+    """The witness pair (x1, x2, geom 1's first) and the distance d of a clipped point (MuJoCo
+    3.12's witnessOnFace): the point, and it moved |d| against the clipped face's normal D =
+    ``face_d`` (or along the clipping face's normal N = ``normal`` for a clipped edge), d = (point
+    − c0)·N its height over the clipping face (c0 a vertex). MuJoCo 4.0 puts a face on face's
+    witnesses on both planes instead (x1 = point − d N, x2 = x1 − ((x1 − point)·D) D, dist = −d
+    N·D, measured): tried, it made the FD scan of a KUKA pushing a box (200 steps, elliptic,
+    substeps 2) fail to converge, where this form converges; not kept."""
     d = _dot(point - c0, normal)
-    x1, x2, dist = point, point, d
-    if edge_geom == 0:
-        x1 = point - d * normal
-        dist = -d * _dot(normal, face_d)
-        x2 = x1 - dist * face_d
-    else:
-        moved = point + normal * ti.abs(d)
-        x1, x2 = ti.select(edge_geom == 1, point, moved), ti.select(edge_geom == 1, moved, point)
-    return x1, x2, dist
+    moved = point - ti.select(edge_geom == 0, face_d, -normal) * ti.abs(d)
+    return ti.select(edge_geom == 1, point, moved), ti.select(edge_geom == 1, moved, point), d
 
 
 @ti.func
 def _clip_witnesses_adjoint(edge_geom, c0, normal, face_d, point, g_x1, g_x2, g_dist):
     """Reverse of `_clip_witnesses`: (g_c0, g_normal, g_face_d, g_point)."""
     d = _dot(point - c0, normal)
-    g_normal, g_face_d = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
-    g_point, g_d = g_x1 + g_x2, 0.0
-    if edge_geom == 0:
-        dist = -d * _dot(normal, face_d)
-        g_x1_all = g_x1 + g_x2  # (x2 = x1 − dist D)
-        g_dist_all = g_dist - _dot(g_x2, face_d)
-        g_face_d = -dist * g_x2 - d * g_dist_all * normal
-        g_normal = -d * g_dist_all * face_d - d * g_x1_all
-        g_d = -_dot(normal, face_d) * g_dist_all - _dot(g_x1_all, normal)
-        g_point = g_x1_all
-    else:
-        g_moved = ti.select(edge_geom == 1, g_x2, g_x1)
-        g_normal = ti.abs(d) * g_moved
-        g_d = g_dist + _sign(d) * _dot(g_moved, normal) * ti.select(d == 0, 0.0, 1.0)
-    return -g_d * normal, g_normal + g_d * (point - c0), g_face_d, g_point + g_d * normal
+    g_moved = ti.select(edge_geom == 1, g_x2, g_x1)
+    direction = ti.select(edge_geom == 0, face_d, -normal)
+    g_d = g_dist - _sign(d) * _dot(g_moved, direction) * ti.select(d == 0, 0.0, 1.0)
+    g_direction = -ti.abs(d) * g_moved
+    g_face_d = ti.select(edge_geom == 0, g_direction, ti.Vector([0.0, 0.0, 0.0]))
+    g_normal = ti.select(edge_geom == 0, ti.Vector([0.0, 0.0, 0.0]), -g_direction) + g_d * (point - c0)
+    return -g_d * normal, g_normal, g_face_d, g_x1 + g_x2 + g_d * normal
 
 
 @ti.func

@@ -972,7 +972,7 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
                 if stop and changed and d.converged and not polished:
                     stop, polished = 0, 1
         if stop or niter >= iterations:
-            capped = int(not stop)
+            capped = int(not stop and not polished)  # (a polishing step beyond the stop is not short of it)
             break
         for p in range(n):
             i = d.solver_dofs[s, e, p]
