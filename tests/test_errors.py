@@ -376,13 +376,14 @@ def test_unknown_option_keyword(f64, options, name, what):
 def test_genesis_deprecated_morph_keywords_warn_and_are_ignored(f64, caplog, morph):
     """requires_jac_and_IK and is_free, which Genesis 1.4.5 takes with a deprecation warning and
     ignores, are taken so too (older Genesis scripts pass them)."""
+    file = {"file": "x"} if morph in ("URDF", "Mesh") else {}
     with warns(caplog, f"{morph}: 'requires_jac_and_IK' is deprecated .*no effect"):
-        made = getattr(gs.morphs, morph)(requires_jac_and_IK=True, **({"file": "x"} if morph in ("URDF", "Mesh") else {}))
+        made = getattr(gs.morphs, morph)(requires_jac_and_IK=True, **file)
     assert not hasattr(made, "requires_jac_and_IK")
     with warns(caplog, f"{morph}: 'is_free' is deprecated"):
-        getattr(gs.morphs, morph)(is_free=False, **({"file": "x"} if morph in ("URDF", "Mesh") else {}))
+        getattr(gs.morphs, morph)(is_free=False, **file)
     with warns(caplog, None):  # (Genesis says nothing of a None)
-        getattr(gs.morphs, morph)(is_free=None, **({"file": "x"} if morph in ("URDF", "Mesh") else {}))
+        getattr(gs.morphs, morph)(is_free=None, **file)
 
 
 def test_smooth_contact_needs_the_elliptic_cone(f64):

@@ -267,14 +267,16 @@ def test_gs_init_seed_seeds_the_random_sampler():
     def sand(**init):
         gs.init(precision="64", logging_level="warning", **init)
         scene = gs.Scene(mpm_options=gs.options.MPMOptions(lower_bound=(-0.2, -0.2, 0.0), upper_bound=(0.2, 0.2, 0.3)))
-        scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.1), size=(0.05, 0.05, 0.05)), material=MPM.Sand(sampler="random"))
+        scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.1), size=(0.05, 0.05, 0.05)),
+                         material=MPM.Sand(sampler="random"))
         return scene.entities[0].init_particles
     unseeded, zero, one, two = sand(), sand(seed=0), sand(seed=1), sand(seed=2)
     np.testing.assert_array_equal(one, sand(seed=1))
     np.testing.assert_array_equal(unseeded, sand())
     assert not any(np.array_equal(a, b) for a, b in ((one, two), (unseeded, one), (unseeded, zero), (zero, one)))
     for seed in (-1, 2**32, 1.5, True):
-        with pytest.raises(gs.InvalidInputError, match=r"gs.init: argument 'seed' must be None or an int in \[0, 2\*\*32\)"):
+        with pytest.raises(gs.InvalidInputError,
+                           match=r"gs.init: argument 'seed' must be None or an int in \[0, 2\*\*32\)"):
             gs.init(precision="64", seed=seed)
 
 

@@ -240,7 +240,8 @@ def test_a_substep_above_the_stability_limit_warns(f64, caplog):
     scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.3), size=(0.1, 0.1, 0.1)), material=_jelly(), name="jelly")
     with warns(caplog, "entities: jelly.*exceeds the stability limit") as found:
         scene.build()
-    assert found[0].endswith(f"({__file__}:{test_a_substep_above_the_stability_limit_warns.__code__.co_firstlineno + 4})")
+    build_line = test_a_substep_above_the_stability_limit_warns.__code__.co_firstlineno + 4
+    assert found[0].endswith(f"({__file__}:{build_line})")  # at the user's line
 
 
 def test_a_material_made_stiffer_than_the_substep_allows_warns(f64, caplog):
