@@ -19,7 +19,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 _collecting = gc.isenabled()
 gc.disable()
 try:
-    from . import materials, morphs, options, surfaces
+    from . import materials, morphs, options, surfaces, utils
     from .options import constraint_solver, friction_cone
     from .solvers.core import (AssetError, GenesisException, GradientError, InvalidInputError, SceneStateError,
                                SimulationError)

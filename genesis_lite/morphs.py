@@ -6,9 +6,11 @@ Angles: ``euler`` is (roll, pitch, yaw) in degrees, fixed axes x-y-z as in Genes
 from dataclasses import dataclass
 
 import numpy as np
+import torch
 
 from .options import named_keywords
 from .solvers.core import InvalidInputError, refuse_grad
+from .utils.rotations import euler_xyz_to_quat
 
 # Genesis 1.4.5's morph options that genesis_lite does not have (a named error says so, where
 # Python's TypeError named neither the morph nor the keyword): every morph's, the primitives',
@@ -44,13 +46,9 @@ def _positive(owner, name, value):
 
 
 def euler_to_quat(euler_deg):
-    """(roll, pitch, yaw) degrees, fixed axes x-y-z → quaternion (w, x, y, z)."""
-    r, p, y = np.radians(euler_deg) / 2.0
-    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
-    return np.array([cr * cp * cy + sr * sp * sy,
-                     sr * cp * cy - cr * sp * sy,
-                     cr * sp * cy + sr * cp * sy,
-                     cr * cp * sy - sr * sp * cy])
+    """(roll, pitch, yaw) degrees about the fixed x, y, z axes → quaternion (w, x, y, z), float64."""
+    angles = torch.as_tensor(np.radians(np.asarray(euler_deg, dtype=np.float64)))
+    return euler_xyz_to_quat(angles, rpy=True).numpy()
 
 
 @dataclass

@@ -99,20 +99,51 @@ class friction_cone:
     elliptic = "elliptic"
 
 
+class _TimeBased:
+    """A solver option ``dt`` (Genesis's TimeBasedMixin): the solver's substep, s, or None
+    (SimOptions.dt / SimOptions.substeps). A given dt must divide SimOptions.dt an integer number
+    of times, and that number is the substeps of every solver (the scene checks that the solvers
+    given one agree)."""
+
+    def _check_dt(self, owner):
+        if self.dt is not None:
+            self.dt = _check_float(owner, "dt", self.dt, 0.0, np.inf, "a positive finite number (s) or None")
+
+    def substeps(self, sim_options):
+        """The substeps per scene step: SimOptions.substeps when dt is None, else SimOptions.dt /
+        dt, which must be an integer (as Genesis). A SimOptions.substeps other than 1 (taken as
+        "not asked for": Genesis also refuses an explicit 1) must then agree."""
+        if self.dt is None:
+            return sim_options.substeps
+        owner = type(self).__name__
+        ratio = sim_options.dt / self.dt
+        count = int(round(ratio))
+        if count < 1 or abs(count * self.dt - sim_options.dt) > 1e-9 * sim_options.dt:
+            raise InvalidInputError(f"{owner}: argument 'dt' must divide SimOptions.dt = {sim_options.dt:g} s an "
+                                    f"integer number of times, got {self.dt:g} s (ratio {ratio:g})")
+        if sim_options.substeps != 1 and count != sim_options.substeps:
+            raise InvalidInputError(f"{owner}: argument 'dt' = {self.dt:g} s makes {count} substeps per step, but "
+                                    f"SimOptions.substeps = {sim_options.substeps}; set one or the other")
+        return count
+
+
 # defaults that depend on enable_mujoco_compatibility: MuJoCo's, else Genesis's
 MUJOCO_TIMECONST, GENESIS_TIMECONST = 0.02, 0.01
 MUJOCO_ITERATIONS, GENESIS_ITERATIONS = 100, 25
 
 
-@named_keywords("dt", "gravity", "disable_constraint", "max_collision_pairs", "multiplier_collision_broad_phase",
+@named_keywords("gravity", "disable_constraint", "max_collision_pairs", "multiplier_collision_broad_phase",
            "integrator", "IK_max_targets", "batch_links_info", "batch_joints_info", "batch_dofs_info",
            "noslip_iterations", "noslip_tolerance", "contact_resolution", "enable_torsional_friction",
            "enable_rolling_friction", "contact_pruning_tolerance", "sparse_solve", "box_box_detection",
            "use_hibernation", "hibernation_thresh_vel", "max_dynamic_constraints", "enable_multi_contact",
            "use_gjk_collision", "enable_contact_patch", "broadphase_traversal")
 @dataclass
-class RigidOptions:
+class RigidOptions(_TimeBased):
     """Rigid solver switches (Genesis 1.4.5's names and defaults unless said).
+
+    dt: the rigid substep, s, or None (SimOptions.dt / SimOptions.substeps), as in Genesis
+        (``_TimeBased``): RigidOptions(dt=0.01) with SimOptions(dt=0.02) steps in 2 substeps.
 
     enable_collision: contacts between collision shapes. Pair rules: enable_self_collision (two
         links of one entity), enable_adjacent_collision (parent and child links),
@@ -154,6 +185,7 @@ class RigidOptions:
         contact onset, for gradients. Needs friction_cone=elliptic (the pyramid's edges add
         kinks). Joint limits keep MuJoCo's default solimp; set_sol_params still sets any geom's.
     """
+    dt: float = None
     enable_collision: bool = True
     enable_self_collision: bool = True
     enable_adjacent_collision: bool = False
@@ -173,6 +205,7 @@ class RigidOptions:
 
     def __post_init__(self):
         owner = "RigidOptions"
+        self._check_dt(owner)
         for name in ("enable_collision", "enable_self_collision", "enable_adjacent_collision",
                      "enable_neutral_collision", "enable_joint_limit", "enable_mujoco_compatibility",
                      "smooth_contact"):
@@ -208,12 +241,10 @@ MPM_BOUNDARY_CONDITIONS = ("slip", "sticky")
 
 @named_keywords()
 @dataclass
-class MPMOptions:
+class MPMOptions(_TimeBased):
     """The MPM solver's options (Genesis 1.4.5's names and defaults, plus boundary_condition).
 
-    dt: the MPM substep, s, or None (SimOptions.dt / SimOptions.substeps). As in Genesis, a
-        given dt must divide SimOptions.dt an integer number of times and that number is the
-        substeps of every solver (substeps() says it and raises on a conflict).
+    dt: the MPM substep, s, or None (SimOptions.dt / SimOptions.substeps), as RigidOptions.dt.
     gravity: (3,) m/s² or None (SimOptions.gravity).
     particle_size: particle diameter, m; None: 0.01 · 64 / grid_density (resolved here, as
         Genesis). A particle's volume is particle_size³ and its mass rho · particle_size³.
@@ -240,8 +271,7 @@ class MPMOptions:
 
     def __post_init__(self):
         owner = "MPMOptions"
-        if self.dt is not None:
-            self.dt = _check_float(owner, "dt", self.dt, 0.0, np.inf, "a positive finite number (s) or None")
+        self._check_dt(owner)
         if self.gravity is not None:
             self.gravity = _check_vec3(owner, "gravity", self.gravity)
         self.grid_density = _check_float(owner, "grid_density", self.grid_density, 0.0, np.inf,
@@ -282,22 +312,6 @@ class MPMOptions:
         between them."""
         pad = 3.0 / self.grid_density
         return np.asarray(self.lower_bound) + pad, np.asarray(self.upper_bound) - pad
-
-    def substeps(self, sim_options):
-        """The number of MPM substeps per scene step: SimOptions.substeps when dt is None, else
-        SimOptions.dt / dt, which must be an integer (as Genesis). A SimOptions.substeps other
-        than 1 (taken as "not asked for": Genesis also refuses an explicit 1) must then agree."""
-        if self.dt is None:
-            return sim_options.substeps
-        ratio = sim_options.dt / self.dt
-        count = int(round(ratio))
-        if count < 1 or abs(count * self.dt - sim_options.dt) > 1e-9 * sim_options.dt:
-            raise InvalidInputError(f"MPMOptions: argument 'dt' must divide SimOptions.dt = {sim_options.dt:g} s an "
-                                    f"integer number of times, got {self.dt:g} s (ratio {ratio:g})")
-        if sim_options.substeps != 1 and count != sim_options.substeps:
-            raise InvalidInputError(f"MPMOptions: argument 'dt' = {self.dt:g} s makes {count} substeps per step, but "
-                                    f"SimOptions.substeps = {sim_options.substeps}; set one or the other")
-        return count
 
 
 # -- visualisation (no viewer or camera exists yet: these are validated and stored for them) ---------

@@ -90,9 +90,7 @@ class Scene:
         self.show_viewer = False
         self._initial_groups = {}  # the muscles' group actuation of the registered initial state (else zeros)
         self.entities = []
-        # every solver steps with the same substeps (MPMOptions.dt may set them)
-        self.sim_options = dataclasses.replace(self.sim_options,
-                                               substeps=self.mpm_options.substeps(self.sim_options))
+        self.sim_options = dataclasses.replace(self.sim_options, substeps=self._substeps())
         self.rigid_solver = RigidSolver(self.sim_options, self.rigid_options)
         self.mpm_solver = None  # made with the first MPM entity
         self.sim = None
@@ -103,6 +101,17 @@ class Scene:
         self._drawing = None  # SceneVisuals of the cameras, made at the first render
         self._debug_objects, self._debug_gathered = [], None  # DebugSpheres; their Spheres, made when drawn
         track(self)  # last: a scene whose options raised is no scene to end
+
+    def _substeps(self):
+        """The substeps of every solver: those a solver's dt asks for (they must agree), else
+        SimOptions.substeps. (Genesis checks only the solvers that have entities.)"""
+        asked = {type(o).__name__: o for o in (self.rigid_options, self.mpm_options) if o.dt is not None}
+        counts = {name: o.substeps(self.sim_options) for name, o in asked.items()}
+        if len(set(counts.values())) > 1:
+            said = ", ".join(f"{name} dt = {asked[name].dt:g} s ({count} substeps)" for name, count in counts.items())
+            raise InvalidInputError(f"gs.Scene: the solvers must integrate at one rate (one substep count per step), "
+                                    f"got {said}")
+        return next(iter(counts.values()), self.sim_options.substeps)
 
     # -- building ---------------------------------------------------------------------------
     @property

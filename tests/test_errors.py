@@ -278,7 +278,7 @@ def test_non_numeric_and_complex_values(f64, built):
     raises(gs.InvalidInputError, lambda: robot.set_dofs_velocity(torch.zeros(2, dtype=torch.complex64)),
            f"entity '{ENTITY}'", "'velocity'", "real", "complex")
     # what a float conversion turns into numbers (NaN, 1.0, 0.5) without a word
-    raises(gs.InvalidInputError, lambda: robot.set_dofs_velocity(None), "'velocity'", "real numbers", "NoneType")
+    raises(gs.InvalidInputError, lambda: robot.set_dofs_position(None), "'position'", "real numbers", "NoneType")
     raises(gs.InvalidInputError, lambda: robot.set_dofs_velocity([True, False]), "'velocity'", "bool")
     raises(gs.InvalidInputError, lambda: robot.set_dofs_velocity(torch.ones(2, dtype=torch.bool)), "'velocity'", "bool")
     raises(gs.InvalidInputError, lambda: robot.set_dofs_velocity(["0.5", "1"]), "'velocity'", "strings")

@@ -13,7 +13,7 @@ import torch
 from scipy.spatial.transform import Rotation
 
 import genesis_lite as gs
-from genesis_lite.entities.rotations import euler_xyz_to_quat, quat_to_euler_xyz
+from genesis_lite.utils.rotations import euler_xyz_to_quat, quat_to_euler_xyz
 from tests.conftest import asset, pybullet
 
 # A 1-dof pendulum about y: 1 kg at 0.5 m and 0.5 kg at 1 m below the hinge, so gravity pulls with
@@ -122,6 +122,22 @@ def test_zero_velocity_all_envs_by_default(f64, two_robots):
     kuka.set_dofs_position(_t([[0.1], [0.2]]), [7])
     assert not kuka.get_dofs_velocity().any()
     assert other.get_dofs_velocity().all()
+
+
+def test_zero_all_dofs_velocity_and_default_velocity_as_genesis(f64, two_robots):
+    scene, kuka, other = two_robots
+    scene.reset()
+    rng = np.random.default_rng(2)
+    kuka_v, other_v = _fill_velocities(kuka, other, rng)
+    position = kuka.get_dofs_position().clone()
+    kuka.zero_all_dofs_velocity([1])
+    assert not kuka.get_dofs_velocity()[1].any() and torch.equal(kuka.get_dofs_velocity()[0], kuka_v[0])
+    assert torch.equal(other.get_dofs_velocity(), other_v) and torch.equal(kuka.get_dofs_position(), position)
+    kuka.zero_all_dofs_velocity()
+    assert not kuka.get_dofs_velocity().any()
+    other.set_dofs_velocity(dofs_idx_local=[1], envs_idx=[0])  # velocity=None: zeros
+    assert other.get_dofs_velocity()[0, 1] == 0.0 and torch.equal(other.get_dofs_velocity()[1], other_v[1])
+    assert other.get_dofs_velocity()[0, 0] == other_v[0, 0]
 
 
 def test_zero_velocity_cuts_earlier_velocities_out_of_the_graph(f64, graph):
@@ -704,3 +720,35 @@ def test_mass_of_an_entity_leaves_out_the_links_welded_to_the_world(f64):
     assert torch.equal(free.get_mass(), free.get_links_mass().sum(-1))
     fixed.set_links_mass(np.array([50.0]), [0])  # the base: no change
     assert torch.equal(fixed.get_mass(), links[:, 1:].sum(-1))
+
+
+def test_rigid_dt_sets_the_substeps_as_genesis(f64):
+    """RigidOptions(dt) is the rigid substep (Genesis 1.4.5): SimOptions(dt=0.02) with
+    RigidOptions(dt=0.01) runs exactly as SimOptions(dt=0.02, substeps=2)."""
+    gs.init(precision="64", logging_level="warning")
+    trajectories = []
+    for sim, rigid in (({"substeps": 2}, {}), ({}, {"dt": 0.01}), ({"substeps": 2}, {"dt": 0.01})):
+        scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.02, **sim),
+                         rigid_options=gs.options.RigidOptions(**rigid))
+        robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
+        scene.build()
+        assert scene.substeps == 2
+        robot.set_dofs_position(_t([1.0, -0.5]))
+        for _ in range(20):
+            scene.step()
+        trajectories.append(robot.get_dofs_position().clone())
+        scene.destroy()
+    assert torch.equal(trajectories[0], trajectories[1]) and torch.equal(trajectories[0], trajectories[2])
+    assert not torch.equal(trajectories[0], _t([1.0, -0.5]))
+    conflicts = [({"substeps": 2}, {"dt": 0.02}, {}, "RigidOptions: argument 'dt' = 0.02 s makes 1 substeps per "
+                  "step, but SimOptions.substeps = 2"),
+                 ({}, {"dt": 0.015}, {}, "RigidOptions: argument 'dt' must divide SimOptions.dt = 0.02 s"),
+                 ({}, {"dt": 0.01}, {"dt": 0.005}, "the solvers must integrate at one rate (one substep count per "
+                  "step), got RigidOptions dt = 0.01 s (2 substeps), MPMOptions dt = 0.005 s (4 substeps)")]
+    for sim, rigid, mpm, message in conflicts:
+        with pytest.raises(gs.InvalidInputError) as info:
+            gs.Scene(sim_options=gs.options.SimOptions(dt=0.02, **sim), rigid_options=gs.options.RigidOptions(**rigid),
+                     mpm_options=gs.options.MPMOptions(**mpm))
+        assert message in str(info.value)
+    with pytest.raises(gs.InvalidInputError, match="RigidOptions: argument 'dt'"):
+        gs.options.RigidOptions(dt=-0.01)

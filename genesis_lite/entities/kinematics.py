@@ -22,7 +22,7 @@ import torch
 
 from ..solvers.core import InvalidInputError, runtime
 from ..solvers.rigid.model import REVOLUTE
-from .rotations import quat_mul, quat_to_mat, rotation_vector
+from ..utils.rotations import quat_mul, quat_to_mat, rotation_vector
 
 
 class DofMotions:

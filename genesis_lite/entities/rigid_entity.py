@@ -12,7 +12,7 @@ from ..solvers.rigid.merge import merged_into
 from . import kinematics
 from ..tensor import wrap
 from .common import EntityIndexing, broadcast, named_argument_errors, replace_columns as _replace
-from .rotations import euler_xyz_to_quat, quat_to_euler_xyz, quat_to_mat
+from ..utils.rotations import euler_xyz_to_quat, quat_to_euler_xyz, quat_to_mat
 
 _MODES = {"force": 0, "position": 1, "velocity": 2}  # ctrl_mode codes (solvers/rigid/actuation.py)
 _NDOFS = {"fixed": 0, "revolute": 1, "prismatic": 1, "free": 6}
@@ -330,11 +330,17 @@ class RigidEntity(EntityIndexing):
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
         return self._out(self._read(self._vel_columns(dofs), envs_idx))
 
-    def set_dofs_velocity(self, velocity, dofs_idx_local=None, envs_idx=None):
-        """Joint velocities, rad/s or m/s, as get_dofs_velocity gives them."""
+    def set_dofs_velocity(self, velocity=None, dofs_idx_local=None, envs_idx=None):
+        """Joint velocities, rad/s or m/s, as get_dofs_velocity gives them; None: zeros (Genesis's
+        default)."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
-        self._write(self._vel_columns(dofs), envs, self._values(velocity, len(dofs), envs, "velocity"))
+        values = self._values(0.0 if velocity is None else velocity, len(dofs), envs, "velocity")
+        self._write(self._vel_columns(dofs), envs, values)
+
+    def zero_all_dofs_velocity(self, envs_idx=None):
+        """Every dof velocity of the entity ← 0 in envs_idx (all envs if None), as Genesis's."""
+        self.set_dofs_velocity(None, None, envs_idx)
 
     def get_qpos(self, qs_idx_local=None, envs_idx=None):
         """Generalised positions (n_qs,): a free joint stores position then quaternion."""

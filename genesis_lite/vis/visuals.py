@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from .. import morphs as gm
-from ..entities import rotations
+from ..utils import rotations
 from ..solvers.core import InvalidInputError, runtime
 from ..solvers.rigid.shapes import quat_to_mat
 from ..solvers.rigid.spec import VisualSpec
