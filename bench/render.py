@@ -16,7 +16,8 @@ Recording: a KUKA rollout of ``--record-frames`` steps (dt 0.01 s, the arm falli
 joint positions and velocities, plane, no spheres) rendering a 640×480 rgb frame after every step:
 its wall time alone, then with the frames recorded, either kept in memory and written by
 ``stop_recording("….mp4", fps=60)`` (the issue's form) or streamed to ffmpeg as they come
-(Genesis 1.4.5's ``start_recording("….mp4", fps=60)``); both times include writing the file.
+(Genesis 1.4.5's ``start_recording("….mp4", fps=100)``, whose steps take the frames: a frame a
+step at dt 0.01 s, the rollout then calling no ``render()``); both times include writing the file.
 ``--repeats`` rollouts of each, interleaved. On a machine shared with other work a whole rollout's
 wall time swings by 2× from run to run, so the overhead is taken from an estimate that such spells
 barely move: the number of steps × the median wall time of a step + render (+ append) over all
@@ -106,13 +107,14 @@ def rollout(scene, robot, camera, n_steps, mode, folder):
     path = os.path.join(folder, f"{mode}.mp4")
     t0, c0 = time.perf_counter(), cpu_seconds()
     if mode is not None:
-        camera.start_recording(path if mode == "streamed" else None, 60 if mode == "streamed" else None)
+        camera.start_recording(path if mode == "streamed" else None, 100 if mode == "streamed" else None)
     file_time = time.perf_counter() - t0
     steps = np.empty(n_steps)
     for k in range(n_steps):
         t_step = time.perf_counter()
-        scene.step()
-        camera.render()
+        scene.step()  # (streamed: the step renders and records its frame)
+        if mode != "streamed":
+            camera.render()
         steps[k] = time.perf_counter() - t_step
     t_stop = time.perf_counter()
     if mode is not None:

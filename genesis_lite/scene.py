@@ -316,12 +316,15 @@ class Scene:
         """Advance by ``dt`` (``substeps`` integration substeps).
 
         update_visualizer, refresh_visualizer: Genesis's switches for the viewer and cameras,
-        accepted (True or False) and without effect: cameras draw when render() is called."""
+        accepted (True or False) and without effect: cameras draw when render() is called, and
+        when a recording started with a file takes its frame (Genesis's too)."""
         if update_visualizer is not True or refresh_visualizer is not True:  # the common case costs two tests
             check_bool("scene.step", "update_visualizer", update_visualizer)
             check_bool("scene.step", "refresh_visualizer", refresh_visualizer)
         _refuse_inference_mode("scene.step")
         self._require_built("scene.step").step()
+        for camera in self._cameras:  # a recording started with a file takes its frames as the scene steps
+            camera._after_step()
 
     def reset(self, state=None, envs_idx=None):
         """Return to the registered initial state (the state at build), or to ``state`` from

@@ -3,6 +3,7 @@ scenes, debug spheres) against references we did not write: the pinhole projecti
 corners, a sphere's analytic silhouette, trimesh's ray casts of URDF visual meshes posed by
 yourdfpy's forward kinematics, imageio reading the videos back, and (when an OpenGL context can be
 made) moderngl drawing the same triangles."""
+import logging
 import os
 
 import numpy as np
@@ -373,7 +374,7 @@ def test_follow_entity_refuses_a_camera_at_the_base_before_anything_is_built(f32
 # ------------------------------------------------------------------ recording
 
 
-def test_recording_writes_mp4_and_gif_read_back_by_imageio(f32, tmp_path):
+def test_recording_writes_mp4_and_gif_read_back_by_imageio(f32, tmp_path, caplog):
     import imageio.v2 as imageio
 
     scene = gs.Scene(**NO_CONTACT)
@@ -391,17 +392,32 @@ def test_recording_writes_mp4_and_gif_read_back_by_imageio(f32, tmp_path):
                 cam.render()
                 cam.start_recording()
         cam.stop_recording(str(tmp_path / target), fps=20)
+    # Genesis 1.4.5's: the steps take the frames, one every round(1 / (fps · dt)) = 4 steps at 25 fps, dt 0.01 s;
+    # render() adds none
+    scene.reset()
     cam.start_recording(str(tmp_path / "streamed.mp4"), fps=25)
-    for _ in range(12):
+    stepped = []
+    for k in range(12):
         scene.step()
-        cam.render()
+        if k % 4 == 3:
+            stepped.append(cam.render()[0])
     cam.stop_recording()
-    for name, fps in (("buffered.mp4", 20), ("streamed.mp4", 25)):
+    for name, fps, expected in (("buffered.mp4", 20, frames[:12]), ("streamed.mp4", 25, stepped)):
         reader = imageio.get_reader(str(tmp_path / name))
         video = np.stack([frame for frame in reader])  # list() would ask len(): inf
-        assert video.shape == (12, 122, 162, 3)  # padded to even dimensions (yuv420p)
+        assert video.shape == (len(expected), 122, 162, 3)  # padded to even dimensions (yuv420p)
         assert reader.get_meta_data()["fps"] == fps
-        assert np.abs(video[0, :121, :161].astype(int) - frames[0]).mean() < 6  # lossy, but the same picture
+        for k in (0, -1):  # lossy, but the same picture
+            assert np.abs(video[k, :121, :161].astype(int) - expected[k]).mean() < 6
+    assert len(stepped) == 3 and np.abs(stepped[0].astype(int) - stepped[-1]).mean() > 0.1  # the box fell
+    with caplog.at_level(logging.WARNING, logger="genesis_lite"):  # a frame every 3 steps: 33.3 fps
+        cam.start_recording(str(tmp_path / "rate.mp4"), fps=30)
+    assert "fps=30 is not reachable" in caplog.text and "recording at fps=33.3333 instead" in caplog.text
+    for _ in range(6):
+        scene.step()
+    cam.stop_recording()
+    rate = imageio.get_reader(str(tmp_path / "rate.mp4"))
+    assert len([frame for frame in rate]) == 2 and abs(rate.get_meta_data()["fps"] - 100 / 3) < 0.01
     gif = imageio.mimread(str(tmp_path / "buffered.gif"))
     assert len(gif) == 12 and gif[0].shape[:2] == (121, 161)
     assert np.abs(gif[-1][..., :3].astype(int) - frames[-1]).mean() < 6
@@ -433,10 +449,10 @@ def test_scenes_ending_finish_their_recordings(f32, tmp_path, caplog):
     streamed = scene.add_camera(res=(32, 24), pos=(2.0, 0.0, 0.5), lookat=(0.0, 0.0, 0.5))
     buffered = scene.add_camera(res=(32, 24), pos=(2.0, 0.0, 0.5), lookat=(0.0, 0.0, 0.5))
     scene.build()
-    streamed.start_recording(str(tmp_path / "streamed.mp4"), fps=30)
+    streamed.start_recording(str(tmp_path / "streamed.mp4"), fps=100)  # a frame a step (dt 0.01 s)
     buffered.start_recording()
     for _ in range(30):
-        streamed.render()
+        scene.step()
         buffered.render()
     gs.init(precision="64")  # a restart ends the scenes of the runtime before
     with pytest.raises(gs.SceneStateError):
@@ -495,7 +511,12 @@ def test_errors_name_the_camera_argument_and_value(f32, tmp_path):
     cam.render()
     cam.stop_recording(str(tmp_path / "a.gif"))  # the recording went on after the errors
     cam.start_recording(str(tmp_path / "b.mp4"), fps=30)
-    cam.render()
+    cam.render()  # adds no frame to a recording started with a file: its steps do
+    with pytest.raises(gs.SceneStateError, match=r"no frame was recorded; step the scene while recording \(a frame "
+                                                 r"every 3 steps\)"):
+        cam.stop_recording()
+    for _ in range(3):
+        scene.step()
     with pytest.raises(gs.InvalidInputError, match=r"stop_recording arguments 'save_to_filename' and 'fps' must be "
                                                    r"None for a recording started with a filename"):
         cam.stop_recording(str(tmp_path / "c.mp4"))

@@ -21,10 +21,12 @@ link and geom levels, the ids after the rigid ones, one per MPM entity), −1 wh
 normals, 0 where nothing is drawn. Debug spheres (``scene.draw_debug_spheres``) are drawn by
 debug cameras only (``debug=True``), as in Genesis, with segmentation −1.
 
-Recording: ``start_recording()``, then every ``render()`` appends its rgb frame, and
-``stop_recording(save_to_filename, fps)`` writes an MP4 or GIF (recorder.py); or Genesis 1.4.5's
-``start_recording(save_to_filename, fps)`` … ``stop_recording()``, which streams frames to the file
-as they are rendered. Genesis 1.4.5 records a frame at each ``scene.step`` instead of each render.
+Recording, two ways (recorder.py writes MP4 or GIF): Genesis 1.4.5's
+``start_recording(save_to_filename, fps)`` … ``stop_recording()`` takes a frame as the scene steps,
+one every round(1 / (fps · dt)) steps (at least one; the video's rate is then 1 / (steps · dt),
+with a warning where that is not fps), streamed to the file, whether or not ``render()`` is
+called; earlier Genesis's ``start_recording()``, then every ``render()`` appends its rgb frame,
+and ``stop_recording(save_to_filename, fps)`` writes the file.
 
 Not supported (clear errors): GUI windows, the thinlens and fisheye models and the raytracer's
 arguments, ``antialiasing``, VisOptions that draw more than the scene (world/link frames, camera
@@ -42,7 +44,7 @@ from ..entities import RigidEntity
 from ..options import _check_float, _check_vec3, check_bool, is_int
 from ..solvers.core import InvalidInputError, SceneStateError
 from .rasterizer import Rasterizer, View
-from .recorder import Recording
+from .recorder import Recording, check_target
 
 logger = logging.getLogger("genesis_lite")
 MAX_RES = 16384  # pixels a side (a 16k × 16k frame's buffers already take ~5 GB)
@@ -86,6 +88,7 @@ class Camera:
         self._rasterizer = Rasterizer(self._res, background=scene.vis_options.background_color)
         self._follow = None  # (entity, offset (3,) or None until build, fixed_axis, smoothing, fix_orientation)
         self._recording, self._paused = None, False
+        self._steps_per_frame = self._steps_to_frame = 1  # a recording started with a file: steps a frame
         self._is_built = False
 
     # -- life cycle ---------------------------------------------------------------------------
@@ -271,7 +274,8 @@ class Camera:
         """Draw the scene's current state: (rgb (H, W, 3) uint8, depth (H, W) float32 m,
         segmentation (H, W) int32 ids — or (H, W, 3) uint8 colours with colorize_seg —, normal
         (H, W, 3) float32), None for each one not asked for (see the module docstring).
-        force_render: accepted (every call renders). While recording, the rgb frame is appended."""
+        force_render: accepted (every call renders). While recording without a file named at
+        start, the rgb frame is appended."""
         owner = f"{self._name}.render"
         flags = dict(rgb=rgb, depth=depth, segmentation=segmentation, colorize_seg=colorize_seg, normal=normal,
                      antialiasing=antialiasing, force_render=force_render)
@@ -281,16 +285,8 @@ class Camera:
             raise InvalidInputError(f"{owner}: argument 'antialiasing' must be False (Genesis applies it with its "
                                     f"BatchRenderer only), got True")
         self._require_built("render")
-        if self._follow is not None:
-            self._update_following()
-        recording = self._recording is not None and not self._paused
-        scene = self._scene
-        drawing = scene._camera_visuals()
-        view = View(self._pos + self._offset(), self._lookat + self._offset(), self._up, self._fov, self._near,
-                    self._far, self._res)
-        images = self._rasterizer.render(view, drawing.meshes, drawing.instances(scene._link_kinematics()),
-                                         drawing.particles(scene._debug_spheres() if self._debug else None),
-                                         rgb=rgb or recording, depth=depth, segmentation=segmentation, normal=normal)
+        recording = self._recording is not None and not self._paused and not self._recording.streamed
+        images = self._draw(rgb=rgb or recording, depth=depth, segmentation=segmentation, normal=normal)
         if recording:
             self._recording.add(images["rgb"])
         if depth:
@@ -300,12 +296,24 @@ class Camera:
             seg = colorize_segmentation(seg)
         return images["rgb"] if rgb else None, images.get("depth"), seg, images.get("normal")
 
+    def _draw(self, **images):
+        """The images the rasterizer draws of the scene's current state (``images``: which)."""
+        if self._follow is not None:
+            self._update_following()
+        scene = self._scene
+        drawing = scene._camera_visuals()
+        view = View(self._pos + self._offset(), self._lookat + self._offset(), self._up, self._fov, self._near,
+                    self._far, self._res)
+        return self._rasterizer.render(view, drawing.meshes, drawing.instances(scene._link_kinematics()),
+                                       drawing.particles(scene._debug_spheres() if self._debug else None), **images)
+
     # -- recording ----------------------------------------------------------------------------
     def start_recording(self, save_to_filename=None, fps=None):
-        """Start recording: every render() appends its frame. With ``save_to_filename`` (.mp4 or
-        .gif) the frames stream to that file at ``fps`` (default 60) as they come (Genesis 1.4.5);
-        without, they are kept in memory until stop_recording names the file. After
-        pause_recording, resumes the same recording (arguments must then be None)."""
+        """Start recording. With ``save_to_filename`` (.mp4 or .gif), Genesis 1.4.5's: the scene's
+        steps take the frames, one every round(1 / (fps · dt)) steps (fps default 60), streamed to
+        that file; without, every render() appends its frame, kept in memory until stop_recording
+        names the file. After pause_recording, resumes the same recording (arguments must then be
+        None)."""
         owner = f"{self._name}.start_recording"
         self._require_built("start_recording")
         if self._recording is not None:
@@ -315,11 +323,36 @@ class Camera:
                 raise InvalidInputError(f"{owner}: resuming a paused recording keeps its file and fps: arguments "
                                         f"must be None, got {save_to_filename!r} and {fps!r}")
             self._paused = False
+            if self._recording.streamed:  # counted afresh, as Genesis's: the pause leaves no gap
+                self._steps_to_frame = self._steps_per_frame
             return
         if save_to_filename is None and fps is not None:
             raise InvalidInputError(f"{owner}: argument 'fps' needs 'save_to_filename' (without a file, give fps to "
                                     f"stop_recording), got fps={fps!r}")
+        if save_to_filename is not None:
+            save_to_filename, fps = check_target(owner, save_to_filename, fps)
+            fps = self._step_rate(fps)
         self._recording, self._paused = Recording(self._name, self._res, save_to_filename, fps), False
+
+    def _step_rate(self, fps):
+        """The video rate of a recording taking a frame every whole number of steps, as close to
+        ``fps`` as the scene's dt allows (Genesis's rule); sets the steps between frames."""
+        dt = self._scene.dt
+        self._steps_per_frame = self._steps_to_frame = max(1, round(1.0 / (fps * dt)))
+        reached = 1.0 / (self._steps_per_frame * dt)
+        if abs(reached - fps) > 1e-9 * fps:
+            logger.warning(f"{self._name}.start_recording: fps={fps:g} is not reachable with a frame every whole "
+                           f"number of steps of dt={dt:g} s; recording at fps={reached:g} instead")
+        return reached
+
+    def _after_step(self):
+        """scene.step's: a recording started with a file takes its frame every steps_per_frame steps."""
+        if self._recording is None or self._paused or not self._recording.streamed:
+            return
+        self._steps_to_frame -= 1
+        if self._steps_to_frame <= 0:
+            self._steps_to_frame = self._steps_per_frame
+            self._recording.add(self._draw(rgb=True)["rgb"])
 
     def pause_recording(self):
         """Stop appending frames until start_recording() resumes; the frames so far are kept."""
@@ -336,8 +369,10 @@ class Camera:
         if self._recording is None:
             raise SceneStateError(f"{owner}: the camera is not recording; call start_recording() first")
         if self._recording.n_frames == 0:  # the recording goes on
-            raise SceneStateError(f"{owner}: no frame was recorded; call camera.render() while recording (each "
-                                  f"render appends a frame)")
+            how = (f"step the scene while recording (a frame every {self._steps_per_frame} steps)"
+                   if self._recording.streamed else "call camera.render() while recording (each render appends a "
+                   "frame)")
+            raise SceneStateError(f"{owner}: no frame was recorded; {how}")
         if not self._recording.streamed and save_to_filename is None:
             script = os.path.splitext(os.path.basename(sys.argv[0] or "python"))[0] or "python"
             save_to_filename = f"{script}_cam_{self._idx}_{time.strftime('%Y%m%d_%H%M%S')}.mp4"
