@@ -158,6 +158,34 @@ def test_masses_set_after_build_step_like_mujoco(f64, cone):
 
 
 @pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_damped_box_lands_with_mujocos_warm_start(f64, cone):
+    """After a step without constraint rows MuJoCo's next solve starts from qacc_smooth = M⁻¹
+    qfrc_smooth, undamped even where dofs are damped (the damped acceleration is a local of its
+    integrator): a damped box falling onto the plane keeps MuJoCo's warm start every step, and
+    with the elliptic cone, whose solve stops where its start leads it, lands as MuJoCo's."""
+    spec = ContactScene([Body("box", (0.2, 0.15, 0.1), pos=(0.0, 0.0, 0.075), quat=(0.99, 0.05, 0.1, 0.0))],
+                        cone=cone)
+    scene, (box,) = build_ours(spec)
+    m = build_mujoco(spec, scene.rigid_solver.model)
+    m.dof_damping[:] = 2.0
+    box.set_dofs_damping(torch.full((6,), 2.0, dtype=torch.float64))
+    d = mujoco.MjData(m)
+    d.qpos[:] = box.get_qpos().numpy()
+    d.qvel[:] = [0.6, -0.3, 0.0, 0.0, 0.0, 4.0]
+    box.set_dofs_velocity(torch.as_tensor(d.qvel.copy()))
+    landed = False
+    for _ in range(60):
+        scene.step()
+        mujoco.mj_step(m, d)
+        landed |= d.nefc > 0
+        warm = scene.rigid_solver.warm_start()[0].numpy()
+        assert np.abs(warm - d.qacc_warmstart).max() < 1e-9 * (1.0 + np.abs(d.qacc_warmstart).max())
+    assert landed and d.nefc > 0
+    assert np.abs(box.get_qpos().numpy() - d.qpos).max() < 1e-12
+    assert np.abs(box.get_dofs_velocity().numpy() - d.qvel).max() < 1e-11
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
 def test_non_default_parameters_step_like_mujoco(f64, cone):
     _check_step(ContactScene([Body("box", (0.2, 0.3, 0.1))], cone=cone, impratio=3.0, solref=(0.05, 0.7),
                              solimp=(0.8, 0.99, 0.004, 0.3, 3.0)))

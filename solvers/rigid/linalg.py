@@ -19,15 +19,19 @@ from .data import accumulate
 
 
 @ti.func
-def _factor(d: ti.template(), s, e):
-    """factor[s, e] ← D (diagonal) and L (strictly lower, on the dof tree) of A."""
+def _factor(d: ti.template(), s, e, damped: ti.template()):
+    """factor[s, e] ← D (diagonal) and L (strictly lower, on the dof tree) of A (damped: False,
+    of M + diag(armature), MuJoCo's M)."""
     h = d.consts[0]
     for k in range(d.n_dofs):
         j = k
         while j != -1:
             d.factor[s, e, k, j] = d.mass_mat[s, e, k, j]
             j = d.dof_parent[j]
-        accumulate(d.factor, ti.Vector([s, e, k, k]), d.armature[e, k] + h * (d.damping[e, k] + servo_kv(d, e, k)))
+        diagonal = d.armature[e, k]
+        if ti.static(damped):
+            diagonal += h * (d.damping[e, k] + servo_kv(d, e, k))
+        accumulate(d.factor, ti.Vector([s, e, k, k]), diagonal)
     for r in range(d.n_dofs):
         k = d.n_dofs - 1 - r
         i = d.dof_parent[k]
@@ -64,29 +68,49 @@ def _undamped_solution(d: ti.template(), s, e):
     """Whether frame s integrates the constraint solve's own acceleration: it had rows and no dof
     is damped (joint damping or a servo's kv). MuJoCo does so; with damping the constraint force,
     solved for with M alone, goes through the damped matrix like every other force."""
-    undamped = d.n_efc[s, e, 0] > 0
+    return d.n_efc[s, e, 0] > 0 and not _damped(d, e)
+
+
+@ti.func
+def _damped(d: ti.template(), e):
+    """Whether a dof of env e is damped: joint damping or a servo's kv, A ≠ M."""
+    damped = False
     for i in range(d.n_dofs):
-        undamped = undamped and d.damping[e, i] == 0.0 and servo_kv(d, e, i) == 0.0
-    return undamped
+        damped = damped or d.damping[e, i] != 0.0 or servo_kv(d, e, i) != 0.0
+    return damped
 
 
 @ti.func
 def solve_env(d: ti.template(), s, e, rows: ti.template()):
     """qacc = A⁻¹ (qfrc_smooth + qfrc_constraint), or the solve's qacc_constrained (see
-    _undamped_solution); rows: whether the step has a constraint stage (compile time)."""
-    _factor(d, s, e)
+    _undamped_solution); rows: whether the step has a constraint stage (compile time).
+
+    The next constraint solve starts from this step's MuJoCo qacc (mj_advance's warm start): the
+    solve's, which constraint_env stored, else qacc_smooth = M⁻¹ qfrc_smooth, without damping (its
+    damped acceleration is a local of MuJoCo's integrator): factored apart only where a dof is
+    damped, before A's factor, which the reverse reads."""
+    warm_started = False
+    if ti.static(rows):
+        warm_started = d.n_efc[s, e, 0] > 0
+        if not warm_started and _damped(d, e):
+            _factor(d, s, e, False)
+            for i in range(d.n_dofs):
+                d.qacc[s, e, i] = d.qfrc_smooth[s, e, i]
+            _solve_in_place(d, s, e, d.qacc)
+            for i in range(d.n_dofs):
+                d.qacc_warmstart[e, i] = d.qacc[s, e, i]
+            warm_started = True
+    _factor(d, s, e, True)
     for i in range(d.n_dofs):
         d.qacc[s, e, i] = d.qfrc_smooth[s, e, i]
         if ti.static(rows):
             accumulate(d.qacc, ti.Vector([s, e, i]), d.qfrc_constraint[s, e, i])
     _solve_in_place(d, s, e, d.qacc)
-    solved = False  # the constraint solve set the warm start already (constraint_env)
     if ti.static(rows):
-        solved = d.n_efc[s, e, 0] > 0
         if _undamped_solution(d, s, e):
             for i in range(d.n_dofs):
                 d.qacc[s, e, i] = d.qacc_constrained[s, e, i]
-    if not solved:  # the next solve starts from this acceleration (MuJoCo's rule)
+    if not warm_started:  # undamped and without rows: qacc is M⁻¹ qfrc_smooth
         for i in range(d.n_dofs):
             d.qacc_warmstart[e, i] = d.qacc[s, e, i]
 
