@@ -177,7 +177,7 @@ class RigidOptions(_TimeBased):
         poses; a cylinder on its cap touches at the foot of the cap's centre, the iterate anywhere
         on the cap), which have no exact gradient (a backward over one raises GradientError).
         Not MuJoCo's either way: a cylinder standing or lying on a face gets its own rim points or
-        line ends (MuJoCo's extra contacts from geoms turned by ±1e-3 rad are not reproduced), and
+        line ends (on a plane: only outside compatibility mode, where MuJoCo has a rule of its own) (MuJoCo's extra contacts from geoms turned by ±1e-3 rad are not reproduced), and
         a sphere whose centre is in a mesh's hull, where EPA stops at its budget, the nearest facet.
     smooth_contact (ours): every geom's default solimp becomes (0, 0.95, 0.001, 0.5, 2), whose
         impedance starts at zero at contact onset, so a contact's force grows from zero with depth

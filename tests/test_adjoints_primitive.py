@@ -17,7 +17,7 @@ import taichi as ti
 from genesis_lite.solvers.rigid.collision import frame, primitive
 from tests.collider_adjoint import cases_from_dicts, check_adjoint, eps_scan, quat_to_mat
 from tests.test_colliders_primitive import (EXPECTED_FEATURES, PAIRS, degenerate_cases, parallel_capsule_cases,
-                                            random_cases)
+                                            random_cases, standing_cylinder_cases)
 
 TOL = 1e-6
 EPS = 1e-7  # the stand-in segment collider is well conditioned: one eps
@@ -50,6 +50,21 @@ def test_evaluate_adjoint_matches_fd(f64, name):
     assert best <= TOL, f"{name}: adjoint differs from central FD by {best:.3g} (relative)"
     # converged: the error falls from eps 1e-5 to 1e-6 unless it already sits at the rounding floor
     assert scan[1e-6] < scan[1e-5] or scan[1e-5] < 1e-9, f"{name}: FD error does not fall with eps: {scan}"
+
+
+def test_standing_cylinder_adjoint_matches_fd(f64):
+    """Our rule for a cylinder standing on a plane (outside MuJoCo compatibility): its four rim
+    points (features STANDING + 4 flipped + k), and MuJoCo's lowest rim point kept beside them
+    when tilted beyond RIM_TILT."""
+    cases = cases_from_dicts(standing_cylinder_cases(N_RANDOM, 11))
+    decide, evaluate, adjoint = (primitive.plane_cylinder_standing_decide, primitive.plane_cylinder_evaluate,
+                                 primitive.plane_cylinder_evaluate_adjoint)
+    _, features, checked = check_adjoint(decide, evaluate, adjoint, primitive.PLANE_CYLINDER_MAX, cases)
+    scan, best = eps_scan(decide, evaluate, adjoint, primitive.PLANE_CYLINDER_MAX, cases, SCAN)
+    expected = {primitive.STANDING + k for k in range(8)} | {primitive.NEAR_RIM, 4 + primitive.NEAR_RIM}
+    assert expected <= set(features.tolist()), sorted(set(features.tolist()))
+    assert best <= TOL, f"standing cylinder: adjoint differs from central FD by {best:.3g} (relative)"
+    assert scan[1e-6] < scan[1e-5] or scan[1e-5] < 1e-9, scan
 
 
 # ---------------------------------------------------------------- frame helpers for segments in [-1, 1]

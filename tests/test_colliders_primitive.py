@@ -255,6 +255,33 @@ def parallel_capsule_cases(n, seed):
     return cases
 
 
+def standing_cylinder_cases(n, seed, tilt_max=0.1):
+    """Cylinders standing on a plane (either way up), their axis tilted up to ``tilt_max`` rad
+    from the normal (a quarter within 0.01 rad, some exactly upright), spun about it, their lowest
+    rim point from 3 mm above the plane to 6 mm below."""
+    rng = np.random.default_rng(seed)
+    cases = []
+    for c in range(n):
+        q1 = _random_quats(rng, 1)[0]
+        turn = [0.0, 1.0, 0.0, 0.0] if c % 2 else [1.0, 0.0, 0.0, 0.0]
+        tilt = 0.0 if c % 10 == 0 else rng.uniform(0.0, 0.01) if c % 4 == 0 else rng.uniform(0.0, tilt_max)
+        heading, spin = rng.uniform(0.0, 2 * np.pi, 2)
+        q2 = np.zeros(4)
+        mujoco.mju_mulQuat(q2, q1, np.array(turn))
+        for step in ([np.cos(tilt / 2), np.sin(tilt / 2) * np.cos(heading), np.sin(tilt / 2) * np.sin(heading), 0.0],
+                     [np.cos(spin / 2), 0.0, 0.0, np.sin(spin / 2)]):
+            mujoco.mju_mulQuat(q2, q2.copy(), np.array(step))
+        size = np.array([_random_size(rng, PLANE), _random_size(rng, CYLINDER)])
+        rot1 = _quat_mat(q1)
+        pos1 = rng.uniform(-1, 1, 3)
+        height = size[1, 1] * np.cos(tilt) + size[1, 0] * np.sin(tilt) - rng.uniform(-0.003, 0.006)
+        pos2 = pos1 + rot1[:, :2] @ rng.uniform(-1, 1, 2) + rot1[:, 2] * height
+        margin, gap = _random_margins(rng)
+        cases.append({"pos": np.array([pos1, pos2]), "quat": np.array([q1, q2]), "size": size, "margin": margin,
+                      "gap": gap})
+    return cases
+
+
 def _quat_mat(q):
     m = np.zeros(9)
     mujoco.mju_quat2Mat(m, q)

@@ -214,6 +214,17 @@ def _convex_convex(d: ti.template(), s, e, g1, g2, margin):
                                 d.geom_size[g2], d.geom_mesh[g2], margin, HullView(d), d, (e,))
 
 
+@ti.func
+def _plane_cylinder(d: ti.template(), s, e, g1, g2, margin):
+    """primitive.plane_cylinder (MuJoCo's) under enable_mujoco_compatibility, else
+    plane_cylinder_standing (a standing cylinder on four rim points)."""
+    p1, r1, z1, p2, r2, z2 = _pair_poses(d, s, e, g1, g2)
+    count, position, normal, dist, feature = primitive.plane_cylinder(p1, r1, z1, p2, r2, z2, margin)
+    if d.converged:
+        count, position, normal, dist, feature = primitive.plane_cylinder_standing(p1, r1, z1, p2, r2, z2, margin)
+    return count, position, normal, dist, feature
+
+
 # (type 1, type 2) → (collider, its contact budget, whether MuJoCo's frame takes geom 2's axis as
 # its first tangent; the convex colliders' contacts take MuJoCo's default frame)
 P, B = primitive, box
@@ -231,7 +242,8 @@ PRIMITIVES = {(PLANE, SPHERE): (P.plane_sphere, P.PLANE_SPHERE_MAX, False),
 CONVEX = {(PLANE, MESH): (_plane_mesh, convex.PLANE_MESH_MAX, False),
           **{kind: (_convex_convex, budget, False) for kind, budget in convex.CONVEX_BUDGET.items()}}
 COLLIDERS = {**{kind: (_posed(collider), tangent) for kind, (collider, _, tangent) in PRIMITIVES.items()},
-             **{kind: (collider, tangent) for kind, (collider, _, tangent) in CONVEX.items()}}
+             **{kind: (collider, tangent) for kind, (collider, _, tangent) in CONVEX.items()},
+             (PLANE, CYLINDER): (_plane_cylinder, False)}
 BUDGET = {kind: budget for kind, (_, budget, _) in {**PRIMITIVES, **CONVEX}.items()}  # contacts a pair may give
 # One kernel may serve every convex_convex pair kind (``kernel_kinds``): it is the slowest to compile
 ALL_CONVEX = "convex"

@@ -33,9 +33,11 @@ Contact frame: every collider here passes MuJoCo a zero first tangent except pla
 which passes the capsule axis (column 2 of rot2); build the frame with
 ``frame.contact_frame(normal[k], tangent)``.
 """
+import numpy as np
 import taichi as ti
 
 from ..spatial import dot3, mat_vec
+from .convex import RIM_TILT, STANDING_TILT
 from .frame import (AT_MINUS, AT_PLUS, FREE, MINVAL, collider, column, column_adjoint, cross3, cross3_adjoint,
                     normalize3, normalize3_adjoint, segment_weight_states, segment_weight_terms,
                     segment_weight_terms_adjoint, segment_weights, segment_weights_adjoint)
@@ -315,10 +317,14 @@ def plane_cylinder_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
     """(position, normal, dist) of the plane – cylinder contact `feature`."""
     point = feature % 4
     n, axis_h, rim, dist0, axis_drop, rim_drop = _plane_cylinder_terms(
-        pos1, rot1, pos2, rot2, size2, (feature // 4) % 2, feature // 8)
+        pos1, rot1, pos2, rot2, size2, (feature // 4) % 2, (feature // 8) % 2)
     dist = 0.0
     position = ti.Vector.zero(float, 3)
-    if point == NEAR_RIM:
+    if feature >= STANDING:
+        rim_point = _standing_point(rot1, pos2, rot2, size2, (feature // 4) % 2, point)
+        dist = dot3(rim_point - pos1, n)
+        position = rim_point + n * (-dist * 0.5)
+    elif point == NEAR_RIM:
         dist = dist0 + axis_drop + rim_drop
         position = pos2 + rim + axis_h + n * (-dist * 0.5)
     elif point == FAR_RIM:
@@ -344,7 +350,23 @@ def plane_cylinder_evaluate_adjoint(pos1, rot1, size1, pos2, rot2, size2, featur
     """
     point = feature % 4
     _, _, dist = plane_cylinder_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature)
-    n, axis_h, rim, _, _, _ = _plane_cylinder_terms(pos1, rot1, pos2, rot2, size2, (feature // 4) % 2, feature // 8)
+    g_pos1, g_rot1, g_pos2, g_rot2 = ti.Vector.zero(float, 3), ti.Matrix.zero(float, 3, 3), \
+        ti.Vector.zero(float, 3), ti.Matrix.zero(float, 3, 3)
+    if feature >= STANDING:
+        g_pos1, g_rot1, g_pos2, g_rot2 = _standing_adjoint(pos1, rot1, pos2, rot2, size2, (feature // 4) % 2, point,
+                                                           dist, g_position, g_normal, g_dist)
+    else:
+        g_pos1, g_rot1, g_pos2, g_rot2 = _mujoco_points_adjoint(pos1, rot1, size1, pos2, rot2, size2, feature, dist,
+                                                                g_position, g_normal, g_dist)
+    return g_pos1, g_rot1, g_pos2, g_rot2
+
+
+@ti.func
+def _mujoco_points_adjoint(pos1, rot1, size1, pos2, rot2, size2, feature, dist, g_position, g_normal, g_dist):
+    """plane_cylinder_evaluate_adjoint for MuJoCo's points (features below STANDING)."""
+    point = feature % 4
+    n, axis_h, rim, _, _, _ = _plane_cylinder_terms(pos1, rot1, pos2, rot2, size2, (feature // 4) % 2,
+                                                    (feature // 8) % 2)
     axis_w = ti.select(point == FAR_RIM, -1.0, 1.0)
     rim_w = ti.select(point == SIDE_A or point == SIDE_B, -0.5, 1.0)
     g_dist_all = g_dist - 0.5 * dot3(g_position, n)
@@ -357,13 +379,94 @@ def plane_cylinder_evaluate_adjoint(pos1, rot1, size1, pos2, rot2, size2, featur
         g_rim += g_rim_side
         g_axis_h += g_axis_side
     g_pos1, g_rot1, g_pos2, g_rot2 = _plane_cylinder_terms_adjoint(
-        pos1, rot1, pos2, rot2, size2, (feature // 4) % 2, feature // 8, g_normal + g_position * (-dist * 0.5),
+        pos1, rot1, pos2, rot2, size2, (feature // 4) % 2, (feature // 8) % 2, g_normal + g_position * (-dist * 0.5),
         g_axis_h, g_rim, g_dist_all, g_dist_all * axis_w, g_dist_all * rim_w)
     return g_pos1, g_rot1, g_pos2 + g_position, g_rot2
 
 
 plane_cylinder = collider(plane_cylinder_decide, plane_cylinder_evaluate, PLANE_CYLINDER_MAX,
                            "Plane – cylinder (mjc_PlaneCylinder): at most 4 contacts.")
+
+
+# A cylinder standing on the plane (its axis within STANDING_TILT of the normal), outside
+# enable_mujoco_compatibility: MuJoCo's points above (the lowest rim point and an inscribed
+# triangle) turn with the direction of the tilt, which has no limit at zero tilt: the step map
+# jumps there (a can exactly upright, tilted 1e-8 rad one way or the other: its pose 30 steps
+# later 8e-4 apart) and its gradient grows as 1/tilt. As on a box's face (convex._face_cap), it
+# touches at four points of the rim of its disk nearer the plane, where the plane's x and y
+# axes, made perpendicular to the cylinder's axis, point (±u, ±v): feature STANDING + 4 flipped
+# + k, k = 0..3 for +x, -x, +y, -y, each a contact when within the margin, a smooth closed form
+# of the poses. Tilted more than RIM_TILT on its rim, MuJoCo's lowest rim point stays first with
+# the deepest three.
+STANDING = 16
+
+
+@ti.func
+def _standing_point(rot1, pos2, rot2, size2, flipped, k):
+    """Rim point k (3,) of the near disk of a standing cylinder (see STANDING)."""
+    axis = column(rot2, 2) * (1.0 - 2.0 * flipped)
+    t = ti.select(k // 2 == 0, column(rot1, 0), column(rot1, 1)) * (1.0 - 2.0 * (k % 2))
+    direction, _ = normalize3(t - axis * dot3(axis, t))
+    return pos2 + axis * size2[1] + direction * size2[0]
+
+
+@ti.func
+def _standing_adjoint(pos1, rot1, pos2, rot2, size2, flipped, k, dist, g_position, g_normal, g_dist):
+    """Reverse of a STANDING feature's evaluate: position = p - n dist / 2, dist = n·(p - pos1),
+    p = pos2 + a h + r unit(t - a (a·t))."""
+    n = column(rot1, 2)
+    sign = 1.0 - 2.0 * flipped
+    axis = column(rot2, 2) * sign
+    t_sign = 1.0 - 2.0 * (k % 2)
+    t = ti.select(k // 2 == 0, column(rot1, 0), column(rot1, 1)) * t_sign
+    rim_point = _standing_point(rot1, pos2, rot2, size2, flipped, k)
+    g_dist_all = g_dist - 0.5 * dot3(g_position, n)
+    g_point = g_position + n * g_dist_all
+    g_n = g_normal - g_position * (dist * 0.5) + (rim_point - pos1) * g_dist_all
+    along = dot3(axis, t)
+    g_raw = normalize3_adjoint(t - axis * along, g_point * size2[0], 0.0)
+    g_t = g_raw - axis * dot3(axis, g_raw)
+    g_axis = g_point * size2[1] - g_raw * along - t * dot3(axis, g_raw)
+    g_rot1 = column_adjoint(g_n, 2)
+    if k // 2 == 0:
+        g_rot1 += column_adjoint(g_t * t_sign, 0)
+    else:
+        g_rot1 += column_adjoint(g_t * t_sign, 1)
+    return -n * g_dist_all, g_rot1, g_point, column_adjoint(g_axis * sign, 2)
+
+
+@ti.func
+def plane_cylinder_standing_decide(pos1, rot1, size1, pos2, rot2, size2, margin):
+    """(count, feature (4,)): MuJoCo's plane – cylinder features, or for a standing cylinder the
+    four rim points within the margin (see STANDING), after MuJoCo's lowest rim point when it is
+    tilted beyond RIM_TILT (then the deepest three)."""
+    count, feature = plane_cylinder_decide(pos1, rot1, size1, pos2, rot2, size2, margin)
+    n = column(rot1, 2)
+    along = dot3(n, column(rot2, 2))
+    if ti.abs(along) >= ti.static(np.cos(STANDING_TILT)):
+        flipped = 1 if along > 0 else 0
+        keep = 1 if count > 0 and ti.abs(along) <= ti.static(np.cos(RIM_TILT)) else 0
+        dists = ti.Vector([dot3(_standing_point(rot1, pos2, rot2, size2, flipped, k) - pos1, n)
+                           for k in ti.static(range(4))])
+        within, shallowest, shallowest_dist = 0, 0, dists[0]
+        for k in ti.static(range(4)):
+            within += 1 if dists[k] <= margin else 0
+            if dists[k] > shallowest_dist:
+                shallowest, shallowest_dist = k, dists[k]
+        shallowest = ti.select(keep == 1 and within == 4, shallowest, -1)  # (the budget: it gives way)
+        rim_feature = feature[0]
+        feature = ti.Vector.zero(ti.i32, PLANE_CYLINDER_MAX)
+        feature[0] = rim_feature
+        count = keep
+        for k in ti.static(range(4)):
+            if dists[k] <= margin and k != shallowest:
+                feature[count] = STANDING + 4 * flipped + k
+                count += 1
+    return count, feature
+
+
+plane_cylinder_standing = collider(plane_cylinder_standing_decide, plane_cylinder_evaluate, PLANE_CYLINDER_MAX,
+                                   "Plane – cylinder, a standing cylinder on four rim points (STANDING): at most 4.")
 
 
 # ---------------------------------------------------------------- plane – box
