@@ -3,7 +3,9 @@
 MuJoCo's mjc_PlaneSphere, mjc_PlaneCapsule, mjc_PlaneCylinder, mjc_PlaneBox, mjc_SphereSphere,
 mjc_SphereCapsule, mjc_SphereCylinder and mjc_CapsuleCapsule (engine_collision_primitive.c;
 capsule–capsule as MuJoCo 4.0 does it, which is not that file: see its section), reproduced
-contact for contact: same count, order, positions, normals and distances, to the bit in float64.
+contact for contact: same count, order, positions, normals and distances, to the bit in float64
+(outside RigidOptions' enable_mujoco_compatibility a cylinder standing on a plane touches it at four
+rim points instead: STANDING, detect._plane_cylinder).
 
 Every collider has the signature and return described in the package docstring (``collision/__init__.py``)::
 
