@@ -14,7 +14,7 @@ import torch
 from taichi.lang import impl
 from taichi.lang.misc import is_arch_supported
 
-from .solvers.core import InvalidInputError, SceneStateError, runtime
+from .solvers.core import MMAP_THRESHOLD, InvalidInputError, SceneStateError, runtime
 from .solvers.launch import forget as forget_kernels
 from .solvers.taichi_startup import skip_code_generation_passes
 
@@ -154,7 +154,7 @@ def keep_large_blocks_off_the_heap():
     _threshold_fixed = True
     try:
         libc = ctypes.CDLL("libc.so.6")
-        libc.mallopt(_M_MMAP_THRESHOLD, 128 * 1024)
+        libc.mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)
     except (OSError, AttributeError):
         pass
 

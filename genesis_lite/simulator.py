@@ -81,6 +81,7 @@ class Simulator:
     def build(self, n_envs):
         for slot in self.slots:
             slot.initial_state = slot.solver.build(n_envs)
+            slot.solver.own_state_pages = self.options.requires_grad and self.options.checkpoint_interval > 1
             slot.input_names = tuple(slot.solver.default_inputs)
             # when nothing (scene or autograd graph) can reach this simulator any more, its
             # solvers' arrays are freed (a graph's nodes may still hold a solver object)

@@ -56,6 +56,9 @@ class Solver:
     #: whether the simulator reads ``nonfinite()`` after every step also without check_nan, to warn
     #: once: where reading it is cheap (no wait for a device) or a blow-up would look finite
     watches_nonfinite = False
+    #: whether ``download_state`` gives each state pages of its own (core.new_state): set by the
+    #: simulator in a checkpointed differentiable scene, whose states are freed while its graph grows
+    own_state_pages = False
 
     def build(self, n_envs):
         """Allocate for max(1, n_envs) environments; return the initial state (B, width)."""

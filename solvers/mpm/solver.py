@@ -9,7 +9,7 @@ import taichi as ti
 import torch
 
 from ..base import Solver
-from ..core import InvalidInputError, available_memory, runtime, warn_user
+from ..core import InvalidInputError, available_memory, new_state, runtime, warn_user
 from ..launch import BoundKernels
 from . import kernels, layout
 from .adjoint import MPMAdjoint
@@ -225,7 +225,7 @@ class MPMSolver(MPMAdjoint, Solver):
         self.kernels.write_state(self.current, state.detach().contiguous())
 
     def download_state(self):
-        out = torch.empty((self.n_batch, self.state_width), dtype=runtime.tc_float, device=runtime.device)
+        out = new_state((self.n_batch, self.state_width), self.own_state_pages)
         self.kernels.read_state(self.current, out)
         return out
 

@@ -10,7 +10,7 @@ import numpy as np
 import torch
 
 from ..base import GradColumns, Solver
-from ..core import AssetError, GradientError, SimulationError, runtime
+from ..core import AssetError, GradientError, SimulationError, new_state, runtime
 from ..launch import BoundKernel, BoundKernels
 from . import contact, step
 from .collision import detect
@@ -232,7 +232,7 @@ class RigidSolver(Solver):
             self.data.per_env("qacc_warmstart")[others] = kept
 
     def download_state(self):
-        out = self._empty(self.state_width)
+        out = new_state((self.n_batch, self.state_width), self.own_state_pages)
         self.kernels.read_state(0, out)
         return out
 
@@ -281,7 +281,7 @@ class RigidSolver(Solver):
 
     # -- stepping ---------------------------------------------------------------------------
     def advance(self, inputs=None, download=False):
-        out = self._empty(self.state_width) if download else self._nothing
+        out = new_state((self.n_batch, self.state_width), self.own_state_pages) if download else self._nothing
         if inputs is not None:
             self._note_inputs(inputs)
         self.run_step(self._nothing if inputs is None else self._pack_inputs(inputs), out, commit=self._commit)
