@@ -140,6 +140,8 @@ class _Step(torch.autograd.Function):
             except GradientError as error:  # (which step of the rollout)
                 raise GradientError(f"step {ctx.index}'s backward: {error}") from None
         grads = (*grads[: ctx.n_states], *(g for g, w in zip(grads[ctx.n_states:], ctx.wanted) if w))
+        if ctx.index == 0:
+            sim.check_first_gradients(grads)
         return (None,) * 6 + _first_order(f"step {ctx.index}", grads, (*grad_states, *saved))
 
 

@@ -176,16 +176,17 @@ class RigidOptions(_TimeBased):
         iterates rather than the converged closed form of their feature (within 6e-5 m at touching
         poses; a cylinder on its cap touches at the foot of the cap's centre, the iterate anywhere
         on the cap), which have no exact gradient (a backward over one raises GradientError).
-        Not MuJoCo's either way: a cylinder standing or lying on a face gets its own rim points or
-        line ends (on a plane: only outside compatibility mode, where MuJoCo has a rule of its own) (MuJoCo's extra contacts from geoms turned by ±1e-3 rad are not reproduced), and
-        a sphere whose centre is in a mesh's hull, where EPA stops at its budget, the nearest facet.
+        Not MuJoCo's either way: a cylinder standing or lying on a box, cylinder or mesh face gets
+        its own rim points or line ends (MuJoCo's extra contacts from geoms turned by ±1e-3 rad are
+        not reproduced), and a sphere whose centre is in a mesh's hull, where EPA stops at its
+        budget, the nearest facet. Outside it only, a cylinder standing on a plane touches at four
+        rim points too (MuJoCo's inscribed triangle turns with the tilt: no gradient at upright).
     smooth_contact (ours): every geom's default solimp becomes (0, 0.95, 0.001, 0.5, 2), whose
         impedance starts at zero at contact onset, so a contact's force grows from zero with depth
         instead of jumping (MuJoCo's default d0 = 0.9 jumps): the step is then a smooth map through
         contact onset, for gradients. Needs friction_cone=elliptic (the pyramid's edges add
         kinks). Joint limits keep MuJoCo's default solimp; set_sol_params still sets any geom's.
     """
-    dt: float = None
     enable_collision: bool = True
     enable_self_collision: bool = True
     enable_adjacent_collision: bool = False
@@ -202,6 +203,7 @@ class RigidOptions(_TimeBased):
     max_contacts: int = None
     enable_mujoco_compatibility: bool = False
     smooth_contact: bool = False
+    dt: float = None  # (last: the fields before keep their positions)
 
     def __post_init__(self):
         owner = "RigidOptions"

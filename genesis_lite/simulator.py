@@ -77,6 +77,7 @@ class Simulator:
         self.started_from = []  # the solvers' warm starts the last forward_step started from
         self.replay_records = []  # and each solver's replay_record() after it
         self.warned_graph_cut = False  # _warn_graph_cut warned since the last reset
+        self.warned_gradient = False  # check_first_gradients warned since the last reset
 
     def build(self, n_envs):
         for slot in self.slots:
@@ -171,7 +172,7 @@ class Simulator:
         self.step_index = 0
         self.clear_flags()
         self.rollout = autograd.Rollout(self, self.options.checkpoint_interval)
-        self.warned_graph_cut = False
+        self.warned_graph_cut = self.warned_gradient = False
         for slot in self.slots:
             slot.warned_nonfinite = False
             defaults = slot.solver.default_inputs
@@ -303,6 +304,24 @@ class Simulator:
             grads_inputs.extend(grad_inputs.get(name) if next(wanted) else None for name in inputs)
         _zero_unreached_envs(grad_states, [*grads_states, *grads_inputs])
         return (*grads_states, *grads_inputs)
+
+    def check_first_gradients(self, grads):
+        """After the backward of a rollout's first step (its gradients ``grads``, tensors or None):
+        one that is not finite raises GradientError under check_nan, else warns once a rollout. An
+        unstable forward (MPM's stability warning at build) can stay finite while its exact
+        derivative overflows (sand at E 1e8: particles at 700 m/s, the gradient inf by step 19),
+        which nothing else would say; checked once a backward, not each step (a reduction over the
+        state, a tenth of a small scene's reverse step)."""
+        if all(g is None or bool(torch.isfinite(g).all()) for g in grads):
+            return
+        message = ("the gradient reaching the rollout's first step is not finite (inf or NaN): a state went "
+                   "non-finite, or the forward is unstable and its exact derivative overflowed (reduce dt; check "
+                   "the warnings at build and in the rollout)")
+        if self.options.check_nan:
+            raise GradientError(message)
+        if not self.warned_gradient:
+            self.warned_gradient = True
+            logger.warning(message)
 
     def _backward_shared(self, states, inputs, grad_states, warm_starts, records):
         """The shared substep loop's reverse (solvers/base.py): load, replay, then mirror order."""

@@ -418,6 +418,27 @@ def test_recording_writes_mp4_and_gif_read_back_by_imageio(f32, tmp_path, caplog
     cam.stop_recording()
     rate = imageio.get_reader(str(tmp_path / "rate.mp4"))
     assert len([frame for frame in rate]) == 2 and abs(rate.get_meta_data()["fps"] - 100 / 3) < 0.01
+    # a pause takes no frame and leaves no gap: counted afresh on resuming (4 steps a frame)
+    cam.start_recording(str(tmp_path / "paused.mp4"), fps=25)
+    for steps in (2, 5, 4):
+        for _ in range(steps):
+            scene.step()
+        if steps == 2:
+            cam.pause_recording()
+        elif steps == 5:
+            cam.start_recording()
+    cam.stop_recording()
+    assert len([frame for frame in imageio.get_reader(str(tmp_path / "paused.mp4"))]) == 1
+    # a second of video shows realtime_factor seconds: at 0.5, a frame every 2 steps at 25 fps
+    slow = gs.Scene(viewer_options=gs.options.ViewerOptions(realtime_factor=0.5), **NO_CONTACT)
+    slow.add_entity(gs.morphs.Box(size=(0.3, 0.3, 0.3), pos=(0.0, 0.0, 1.0)))
+    slow_cam = slow.add_camera(res=(32, 24), pos=(2.0, 0.0, 0.5), lookat=(0.0, 0.0, 0.5))
+    slow.build()
+    slow_cam.start_recording(str(tmp_path / "slow.mp4"), fps=25)
+    for _ in range(8):
+        slow.step()
+    slow_cam.stop_recording()
+    assert len([frame for frame in imageio.get_reader(str(tmp_path / "slow.mp4"))]) == 4
     gif = imageio.mimread(str(tmp_path / "buffered.gif"))
     assert len(gif) == 12 and gif[0].shape[:2] == (121, 161)
     assert np.abs(gif[-1][..., :3].astype(int) - frames[-1]).mean() < 6

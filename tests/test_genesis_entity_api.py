@@ -10,6 +10,7 @@ import inspect
 import numpy as np
 import pytest
 import torch
+import yourdfpy
 from scipy.spatial.transform import Rotation
 
 import genesis_lite as gs
@@ -796,4 +797,36 @@ def test_aabb_bounds_the_shapes_as_genesis(f64, tmp_path):
     cylinder.set_pos(pos)
     cylinder.get_AABB()[1].sum().backward()  # upright: the rim's slope in x, y is 0, not NaN
     assert torch.equal(pos.grad, _t([1.0, 1.0, 1.0]))
+    scene.destroy()
+
+
+MERGED_BOXES = """<robot name="merged">
+  <link name="base"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0.1 0 0.05" rpy="0.3 0 0.2"/><geometry><box size="0.2 0.1 0.05"/></geometry></collision></link>
+  <link name="bracket"><inertial><mass value="0.5"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0 0.05 0" rpy="0 0.4 0"/><geometry><box size="0.05 0.3 0.1"/></geometry></collision></link>
+  <link name="arm"><inertial><mass value="0.5"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0.15 0 0" rpy="0 0 0.7"/><geometry><box size="0.3 0.04 0.04"/></geometry></collision></link>
+  <joint name="weld" type="fixed"><parent link="base"/><child link="bracket"/><origin xyz="0 0.2 0.1" rpy="0.5 0 0"/></joint>
+  <joint name="hinge" type="revolute"><parent link="bracket"/><child link="arm"/><origin xyz="0 0.3 0" rpy="0 0 0.3"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="10" velocity="10"/></joint>
+</robot>"""
+
+
+def test_aabb_of_merged_links_and_offset_shapes_matches_the_urdf(f64, tmp_path):
+    """A fixed link merged into its parent and shapes offset and turned in their links: the box of
+    the URDF's collision boxes posed by yourdfpy's forward kinematics (trimesh's bounds, exact for
+    boxes), at two joint angles."""
+    gs.init(precision="64", logging_level="warning")
+    path = tmp_path / "merged.urdf"
+    path.write_text(MERGED_BOXES)
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT))
+    robot = scene.add_entity(gs.morphs.URDF(file=str(path), fixed=True))
+    scene.build()
+    assert robot.n_links == 2  # (the bracket merged into the base)
+    reference = yourdfpy.URDF.load(str(path), build_collision_scene_graph=True, load_collision_meshes=True)
+    for angle in (0.0, 1.1):
+        robot.set_dofs_position(_t([angle]))
+        reference.update_cfg([angle])
+        assert np.abs(robot.get_AABB().numpy() - reference.collision_scene.bounds).max() < 1e-12
     scene.destroy()

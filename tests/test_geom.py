@@ -160,10 +160,18 @@ def test_types_devices_and_gradients():
     (lambda: geom.quat_to_xyz(np.zeros(3)), r"quat_to_xyz: argument 'quat' must have shape \(\.\.\., 4\), got \(3,\)"),
     (lambda: geom.transform_by_quat(np.zeros((2, 4)), np.ones(4)), r"argument 'v' must have shape \(\.\.\., 3\)"),
     (lambda: geom.inv_T(np.eye(3)), r"argument 'T' must have shape \(\.\.\., 4, 4\)"),
-    (lambda: geom.xyz_to_quat("abc"), r"argument 'xyz' must hold numbers"),
+    (lambda: geom.xyz_to_quat("abc"), r"argument 'xyz' must hold real numbers"),
     (lambda: geom.quat_to_R([[1, 0, 0, 0], [1, 0]]), r"argument 'quat' must be an array"),
     (lambda: geom.transform_by_R(np.zeros((2, 2, 2, 3)), np.eye(3)), r"transform_by_R: argument 'pos'"),
     (lambda: geom.quat_to_R(np.ones(4), out=np.empty(3)), r"argument 'out' must have the result's shape"),
+    (lambda: geom.quat_to_R(np.zeros((2, 4))), r"quat_to_R: argument 'quat' must hold non-zero finite quaternions"),
+    (lambda: geom.transform_by_quat(np.ones(3), [0.0, 0, 0, 0]), r"transform_by_quat: argument 'quat' must hold non-"),
+    (lambda: geom.quat_to_xyz([np.nan, 0, 0, 1]), r"quat_to_xyz: argument 'quat' must hold non-zero finite"),
+    (lambda: geom.slerp(np.ones((3, 4)), np.ones(4), [0.1, 0.2]), r"slerp: argument 't' must broadcast to the quat"),
+    (lambda: geom.xyz_to_quat(np.zeros(3), rpy="yes"), r"xyz_to_quat: argument 'rpy' must be True or False"),
+    (lambda: geom.quat_to_xyz(np.ones(4), degrees=1), r"quat_to_xyz: argument 'degrees' must be True or False"),
+    (lambda: geom.quat_to_R(torch.ones(4, dtype=torch.complex64)), r"argument 'quat' must hold real numbers"),
+    (lambda: geom.random_quaternion(2.5), r"random_quaternion: argument 'batch_size' must be a non-negative integer"),
 ])
 def test_bad_input_is_named(call, match):
     with pytest.raises(gs.InvalidInputError, match=match):

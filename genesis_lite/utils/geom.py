@@ -10,7 +10,8 @@ what it was given: numpy in, numpy out, float32 kept and any other dtype compute
 **Different** from Genesis: lists are taken as numpy arrays, and a numpy array or list next to a
 tensor is converted to the tensor's dtype and device (Genesis raises for both); a batch of 4×4
 matrices inverts with ``inv_T`` (Genesis's transposes the batch axes too). A quaternion need not
-have unit norm wherever it only rotates: the rotation is q/|q|'s, as in Genesis.
+have unit norm wherever it only rotates: the rotation is q/|q|'s, as in Genesis; a zero one is a
+named error (Genesis: NaN, or the identity), as are wrong shapes and non-bool flags.
 """
 import functools
 import inspect
@@ -18,6 +19,7 @@ import inspect
 import numpy as np
 import torch
 
+from ..options import check_bool, is_int
 from ..solvers.core import InvalidInputError
 from . import rotations
 
@@ -79,8 +81,13 @@ def _array(fn, name, value, shape):
         array = value if isinstance(value, torch.Tensor) else np.ascontiguousarray(value)
     except ValueError as error:  # ragged nested lists
         raise InvalidInputError(f"gs.utils.geom.{fn}: argument '{name}' must be an array, got {value!r}") from error
-    if array.dtype == torch.bool or getattr(array.dtype, "kind", "f") not in "fiu":
-        raise InvalidInputError(f"gs.utils.geom.{fn}: argument '{name}' must hold numbers, got dtype {array.dtype}")
+    if isinstance(array, torch.Tensor):
+        numbers = array.dtype != torch.bool and not array.is_complex()
+    else:
+        numbers = array.dtype.kind in "fiu"
+    if not numbers:
+        raise InvalidInputError(f"gs.utils.geom.{fn}: argument '{name}' must hold real numbers, got dtype "
+                                f"{array.dtype}")
     if len(array.shape) < len(shape) or tuple(array.shape[len(array.shape) - len(shape):]) != shape:
         expected = "(..., " + ", ".join(str(n) for n in shape) + ")"
         raise InvalidInputError(f"gs.utils.geom.{fn}: argument '{name}' must have shape {expected}, "
@@ -103,6 +110,16 @@ def _to_numpy(result):
     return result.detach().cpu().numpy()
 
 
+def _rotation(fn, name, quat):
+    """quat / |quat| (..., 4): the rotation of a quaternion of any norm; a zero (or non-finite)
+    one has none, a named error (Genesis's functions give NaN or the identity)."""
+    norm = torch.linalg.vector_norm(quat, dim=-1, keepdim=True)
+    if not bool((norm > 0).all()) or not bool(torch.isfinite(norm).all()):
+        raise InvalidInputError(f"gs.utils.geom.{fn}: argument '{name}' must hold non-zero finite quaternions "
+                                f"(w, x, y, z), got {quat.detach().cpu().numpy()}")
+    return quat / norm
+
+
 # ---- quaternions and Euler angles ----
 
 @_arrays(quat=4)
@@ -120,6 +137,8 @@ def normalize(x, eps=1e-12):
 @_arrays(xyz=3)
 def xyz_to_quat(xyz, rpy=False, degrees=False):
     """(..., 3) Euler angles → (..., 4) unit quaternions (conventions: the module's docstring)."""
+    rpy, degrees = check_bool("gs.utils.geom.xyz_to_quat", "rpy", rpy), \
+        check_bool("gs.utils.geom.xyz_to_quat", "degrees", degrees)
     return rotations.euler_xyz_to_quat(torch.deg2rad(xyz) if degrees else xyz, rpy=rpy)
 
 
@@ -127,14 +146,16 @@ def xyz_to_quat(xyz, rpy=False, degrees=False):
 def quat_to_xyz(quat, rpy=False, degrees=False):
     """(..., 4) quaternions, any non-zero norm → (..., 3) Euler angles, the first and last in
     (−π, π], the middle in [−π/2, π/2]; at gimbal lock the first is 0, as Genesis's."""
-    angles = rotations.quat_to_euler_xyz(quat, rpy=rpy)
+    rpy, degrees = check_bool("gs.utils.geom.quat_to_xyz", "rpy", rpy), \
+        check_bool("gs.utils.geom.quat_to_xyz", "degrees", degrees)
+    angles = rotations.quat_to_euler_xyz(_rotation("quat_to_xyz", "quat", quat), rpy=rpy)
     return torch.rad2deg(angles) if degrees else angles
 
 
 @_arrays(quat=4)
 def quat_to_R(quat):
     """(..., 4) quaternions, any non-zero norm → (..., 3, 3) rotation matrices."""
-    return rotations.quat_to_mat(normalize(quat))
+    return rotations.quat_to_mat(_rotation("quat_to_R", "quat", quat))
 
 
 @_arrays(R=(3, 3))
@@ -189,7 +210,7 @@ def axis_angle_to_quat(angle, axis):
 @_arrays(quat=4)
 def quat_to_rotvec(quat):
     """(..., 4) quaternions → (..., 3) rotation vectors: axis × angle, angle in [0, π]."""
-    return rotations.rotation_vector(normalize(quat))
+    return rotations.rotation_vector(_rotation("quat_to_rotvec", "quat", quat))
 
 
 @_arrays(rotvec=3)
@@ -205,7 +226,13 @@ def rotvec_to_quat(rotvec):
 def slerp(q0, q1, t):
     """Spherical linear interpolation from q0 (t = 0) to q1 (t = 1) along the shorter arc: (..., 4)
     quaternions of any non-zero norm, t (...) or a number → (..., 4) unit quaternions."""
-    q0, q1 = normalize(q0), normalize(q1)
+    q0, q1 = _rotation("slerp", "q0", q0), _rotation("slerp", "q1", q1)
+    try:
+        torch.broadcast_shapes(t.shape, q0.shape[:-1], q1.shape[:-1])
+    except RuntimeError:
+        raise InvalidInputError(f"gs.utils.geom.slerp: argument 't' must broadcast to the quaternions' batch shape "
+                                f"{tuple(torch.broadcast_shapes(q0.shape[:-1], q1.shape[:-1]))}, got "
+                                f"{tuple(t.shape)}") from None
     cos = (q0 * q1).sum(-1, keepdim=True)
     q1 = torch.where(cos < 0, -q1, q1)
     cos, t = cos.abs(), t[..., None]
@@ -220,6 +247,9 @@ def slerp(q0, q1, t):
 def random_quaternion(batch_size):
     """(batch_size, 4) unit quaternions uniform over rotations (numpy's global generator, which
     ``gs.init(seed=...)`` seeds)."""
+    if not is_int(batch_size) or batch_size < 0:
+        raise InvalidInputError(f"gs.utils.geom.random_quaternion: argument 'batch_size' must be a non-negative "
+                                f"integer, got {batch_size!r}")
     u1, u2, u3 = np.random.rand(3, batch_size)
     return np.stack([np.sqrt(1 - u1) * np.sin(2 * np.pi * u2), np.sqrt(1 - u1) * np.cos(2 * np.pi * u2),
                      np.sqrt(u1) * np.sin(2 * np.pi * u3), np.sqrt(u1) * np.cos(2 * np.pi * u3)], axis=1)
@@ -230,7 +260,7 @@ def random_quaternion(batch_size):
 @_arrays(v=3, quat=4)
 def transform_by_quat(v, quat):
     """(..., 3) vectors rotated by (..., 4) quaternions of any non-zero norm."""
-    return (quat_to_R(quat) @ v[..., None])[..., 0]
+    return (rotations.quat_to_mat(_rotation("transform_by_quat", "quat", quat)) @ v[..., None])[..., 0]
 
 
 @_arrays(pos=3, quat=4)

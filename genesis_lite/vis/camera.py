@@ -23,8 +23,9 @@ debug cameras only (``debug=True``), as in Genesis, with segmentation −1.
 
 Recording, two ways (recorder.py writes MP4 or GIF): Genesis 1.4.5's
 ``start_recording(save_to_filename, fps)`` … ``stop_recording()`` takes a frame as the scene steps,
-one every round(1 / (fps · dt)) steps (at least one; the video's rate is then 1 / (steps · dt),
-with a warning where that is not fps), streamed to the file, whether or not ``render()`` is
+one every round(realtime_factor / (fps · dt)) steps (ViewerOptions' realtime_factor, None: 1; at
+least one step; the video's rate is then realtime_factor / (steps · dt), with a warning where that
+is not fps), streamed to the file, whether or not ``render()`` is
 called; earlier Genesis's ``start_recording()``, then every ``render()`` appends its rgb frame,
 and ``stop_recording(save_to_filename, fps)`` writes the file.
 
@@ -310,10 +311,10 @@ class Camera:
     # -- recording ----------------------------------------------------------------------------
     def start_recording(self, save_to_filename=None, fps=None):
         """Start recording. With ``save_to_filename`` (.mp4 or .gif), Genesis 1.4.5's: the scene's
-        steps take the frames, one every round(1 / (fps · dt)) steps (fps default 60), streamed to
-        that file; without, every render() appends its frame, kept in memory until stop_recording
-        names the file. After pause_recording, resumes the same recording (arguments must then be
-        None)."""
+        steps take the frames, one every round(realtime_factor / (fps · dt)) steps (fps default
+        60), streamed to that file; without, every render() appends its frame, kept in memory until
+        stop_recording names the file. After pause_recording, resumes the same recording
+        (arguments must then be None)."""
         owner = f"{self._name}.start_recording"
         self._require_built("start_recording")
         if self._recording is not None:
@@ -336,10 +337,11 @@ class Camera:
 
     def _step_rate(self, fps):
         """The video rate of a recording taking a frame every whole number of steps, as close to
-        ``fps`` as the scene's dt allows (Genesis's rule); sets the steps between frames."""
-        dt = self._scene.dt
-        self._steps_per_frame = self._steps_to_frame = max(1, round(1.0 / (fps * dt)))
-        reached = 1.0 / (self._steps_per_frame * dt)
+        ``fps`` as the scene's dt allows, a second of video showing ViewerOptions.realtime_factor
+        (None: 1) seconds of simulated time (Genesis's rule); sets the steps between frames."""
+        dt, pace = self._scene.dt, self._scene.viewer_options.realtime_factor or 1.0
+        self._steps_per_frame = self._steps_to_frame = max(1, round(pace / (fps * dt)))
+        reached = pace / (self._steps_per_frame * dt)
         if abs(reached - fps) > 1e-9 * fps:
             logger.warning(f"{self._name}.start_recording: fps={fps:g} is not reachable with a frame every whole "
                            f"number of steps of dt={dt:g} s; recording at fps={reached:g} instead")

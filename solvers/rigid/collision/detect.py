@@ -219,9 +219,13 @@ def _plane_cylinder(d: ti.template(), s, e, g1, g2, margin):
     """primitive.plane_cylinder (MuJoCo's) under enable_mujoco_compatibility, else
     plane_cylinder_standing (a standing cylinder on four rim points)."""
     p1, r1, z1, p2, r2, z2 = _pair_poses(d, s, e, g1, g2)
-    count, position, normal, dist, feature = primitive.plane_cylinder(p1, r1, z1, p2, r2, z2, margin)
+    count, position, normal, dist = 0, ti.Matrix.zero(float, primitive.PLANE_CYLINDER_MAX, 3), \
+        ti.Matrix.zero(float, primitive.PLANE_CYLINDER_MAX, 3), ti.Vector.zero(float, primitive.PLANE_CYLINDER_MAX)
+    feature = ti.Vector.zero(ti.i32, primitive.PLANE_CYLINDER_MAX)
     if d.converged:
         count, position, normal, dist, feature = primitive.plane_cylinder_standing(p1, r1, z1, p2, r2, z2, margin)
+    else:
+        count, position, normal, dist, feature = primitive.plane_cylinder(p1, r1, z1, p2, r2, z2, margin)
     return count, position, normal, dist, feature
 
 

@@ -318,15 +318,27 @@ def plane_cylinder_decide(pos1, rot1, size1, pos2, rot2, size2, margin):
 def plane_cylinder_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
     """(position, normal, dist) of the plane – cylinder contact `feature`."""
     point = feature % 4
-    n, axis_h, rim, dist0, axis_drop, rim_drop = _plane_cylinder_terms(
-        pos1, rot1, pos2, rot2, size2, (feature // 4) % 2, (feature // 8) % 2)
+    n = column(rot1, 2)
     dist = 0.0
     position = ti.Vector.zero(float, 3)
     if feature >= STANDING:
         rim_point = _standing_point(rot1, pos2, rot2, size2, (feature // 4) % 2, point)
         dist = dot3(rim_point - pos1, n)
         position = rim_point + n * (-dist * 0.5)
-    elif point == NEAR_RIM:
+    else:
+        position, dist = _mujoco_point(pos1, rot1, pos2, rot2, size2, feature)
+    return position, n, dist
+
+
+@ti.func
+def _mujoco_point(pos1, rot1, pos2, rot2, size2, feature):
+    """(position, dist) of one of MuJoCo's plane – cylinder points (features below STANDING)."""
+    point = feature % 4
+    n, axis_h, rim, dist0, axis_drop, rim_drop = _plane_cylinder_terms(
+        pos1, rot1, pos2, rot2, size2, (feature // 4) % 2, (feature // 8) % 2)
+    dist = 0.0
+    position = ti.Vector.zero(float, 3)
+    if point == NEAR_RIM:
         dist = dist0 + axis_drop + rim_drop
         position = pos2 + rim + axis_h + n * (-dist * 0.5)
     elif point == FAR_RIM:
@@ -339,7 +351,7 @@ def plane_cylinder_evaluate(pos1, rot1, size1, pos2, rot2, size2, feature):
         if point == SIDE_B:
             sideways = -sideways
         position = pos2 + sideways + axis_h + rim * (-0.5) + n * (-dist * 0.5)
-    return position, n, dist
+    return position, dist
 
 
 @ti.func
