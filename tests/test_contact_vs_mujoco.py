@@ -319,3 +319,47 @@ def test_a_gripper_squeezing_a_cube_moves_as_mujoco(f64, cone, tmp_path):
         assert worst < 1e-10, f"max |qpos - MuJoCo's| over 1 s: {worst:.3g}"
     finally:
         scene.destroy()
+
+
+TWO_GEOMS = """<robot name="two"><link name="a"><inertial><mass value="1"/>
+  <inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>
+  <collision><origin xyz="-0.06 0 0"/><geometry><box size="0.1 0.1 0.1"/></geometry></collision>
+  <collision><origin xyz="0.06 0 0"/><geometry><sphere radius="0.05"/></geometry></collision></link></robot>"""
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_contacts_of_a_body_with_two_geoms_come_in_mujocos_order(f64, cone, tmp_path):
+    """A free body holding a box (geom 0) and a sphere (geom 1), a ball on each (geoms 2, 3):
+    MuJoCo lists contacts body pair by body pair, and within a pair by its ordered geoms, (1, 2)
+    then (3, 0); by geom pair, ours were (3, 0), (1, 2) (the rows permuted: the same motion to
+    round-off). Found by the MuJoCo probe."""
+    path = tmp_path / "two.urdf"
+    path.write_text(TWO_GEOMS)
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, gravity=(0, 0, -1.0)),
+                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True, friction_cone=cone))
+    body = scene.add_entity(gs.morphs.URDF(file=str(path)))
+    balls = [scene.add_entity(gs.morphs.Sphere(radius=0.04, pos=(x, 0.0, 0.088))) for x in (0.06, -0.06)]
+    scene.build()
+    model = scene.rigid_solver.model
+    spec = mujoco.MjSpec.from_file(str(path))
+    spec.compiler.alignfree = False
+    spec.worldbody.bodies[0].add_freejoint()
+    spec.option.timestep, spec.option.gravity = 0.002, [0.0, 0.0, -1.0]
+    spec.option.cone = getattr(mujoco.mjtCone, f"mjCONE_{cone.upper()}")
+    for ball in balls:
+        link = ball.link_start
+        added = spec.worldbody.add_body(pos=ball.get_pos().tolist(), mass=float(model.link_mass0[link]),
+                                        inertia=np.diag(model.link_inertia0[link]).tolist())
+        added.explicitinertial, added.ipos = True, [0.0, 0.0, 0.0]
+        added.add_freejoint()
+        added.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.04, 0.0, 0.0])
+    m = spec.compile()
+    d = mujoco.MjData(m)
+    for _ in range(3):
+        scene.step()
+        mujoco.mj_step(m, d)
+    ours = scene.rigid_solver.contacts()[0].numpy()
+    ours = [(int(row[0]), int(row[1])) for row in ours if row[0] >= 0]
+    assert ours == [tuple(int(g) for g in contact.geom) for contact in d.contact[:d.ncon]] == [(1, 2), (3, 0)]
+    state = np.concatenate([body.get_qpos().numpy()] + [ball.get_qpos().numpy() for ball in balls])
+    assert np.abs(state - d.qpos).max() < 1e-14
