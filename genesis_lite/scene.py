@@ -20,7 +20,7 @@ from .solvers.core import AssetError, InvalidInputError, SceneStateError
 from .materials import MPM, Rigid
 from .options import MPMOptions, RigidOptions, SimOptions, ViewerOptions, VisOptions, check_bool, is_int
 from .runtime import logger, require_init, runtime, track
-from .simulator import Simulator
+from .simulator import Simulator, refuse_inference_mode
 from .solvers.mpm.solver import MPMSolver
 from .solvers.rigid import merge, shapes, urdf
 from .solvers.rigid.solver import RigidSolver
@@ -195,7 +195,7 @@ class Scene:
         """
         if self.is_built:
             raise SceneStateError("scene.build: the scene is already built; build() may be called once")
-        _refuse_inference_mode("scene.build")
+        refuse_inference_mode("scene.build")
         if not is_int(n_envs) or n_envs < 0:
             raise InvalidInputError(f"scene.build: argument 'n_envs' must be an integer ≥ 0, got {n_envs!r}")
         if not self.entities:
@@ -321,7 +321,7 @@ class Scene:
         if update_visualizer is not True or refresh_visualizer is not True:  # the common case costs two tests
             check_bool("scene.step", "update_visualizer", update_visualizer)
             check_bool("scene.step", "refresh_visualizer", refresh_visualizer)
-        _refuse_inference_mode("scene.step")
+        refuse_inference_mode("scene.step")
         self._require_built("scene.step").step()
         for camera in self._cameras:  # a recording started with a file takes its frames as the scene steps
             camera._after_step()
@@ -336,6 +336,7 @@ class Scene:
         and a backward through the previous graph raises GradientError.
         """
         sim = self._require_built("scene.reset")
+        refuse_inference_mode("scene.reset")
         if state is not None and not (isinstance(state, SimState) and state.scene is self):
             given = "a SimState of another scene" if isinstance(state, SimState) else type(state).__name__
             raise InvalidInputError(f"scene.reset: argument 'state' must come from this scene's get_state(), "
@@ -486,10 +487,3 @@ class _SceneArguments(EntityIndexing):
         return f"scene.{self._method}"
 
 
-def _refuse_inference_mode(what):
-    """Raise under torch.inference_mode(): the scene tells new inputs and states from those Taichi
-    holds by their version counters, which inference tensors lack (torch raised its own error
-    from deep inside)."""
-    if torch.is_inference_mode_enabled():
-        raise SceneStateError(f"{what}: genesis_lite does not run under torch.inference_mode() (its tensors carry no "
-                              f"version counter, which the scene reads); use torch.no_grad() instead")

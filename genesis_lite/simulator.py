@@ -13,7 +13,7 @@ import torch
 
 from . import autograd
 from .runtime import keep_large_blocks_off_the_heap, logger
-from .solvers.core import GradientError, SimulationError
+from .solvers.core import GradientError, SceneStateError, SimulationError
 
 
 def _restored(table, source, envs):
@@ -41,6 +41,15 @@ def _zero_unreached_envs(grad_outs, grads):
         reached |= (out != 0).flatten(1).any(dim=1)
     for g in grads:
         g[~reached] = 0.0
+
+
+def refuse_inference_mode(what):
+    """Raise under torch.inference_mode(): the scene tells new inputs and states from those Taichi
+    holds by their version counters, which inference tensors lack (a control set there was taken,
+    and every later step, outside the mode too, raised torch's own error from deep inside)."""
+    if torch.is_inference_mode_enabled():
+        raise SceneStateError(f"{what}: genesis_lite does not run under torch.inference_mode() (its tensors carry no "
+                              f"version counter, which the scene reads); use torch.no_grad() instead")
 
 
 class SolverSlot:
@@ -105,6 +114,7 @@ class Simulator:
         """The state of ``solver`` ← state (B, width), of which the rows ``envs`` (int array; None:
         all) changed: a reset or a setter, after which those envs have no contacts until the next
         step (Genesis clears its collider when a state is set)."""
+        refuse_inference_mode(f"setting the {type(solver).__name__}'s state")
         slot = self.slot(solver)
         if envs is not None and slot.held_warm_start is not None and slot.held_warm_start[0] is slot.state:
             solver.set_warm_start(slot.held_warm_start[1])  # the other envs keep theirs (upload_state)
@@ -121,6 +131,7 @@ class Simulator:
     def set_input(self, solver, name, value):
         """Input ``name`` of ``solver`` ← value; the inputs derived from it (solver.derived_from:
         the rigid rows' scale from mass and armature) are recomputed, in the graph."""
+        refuse_inference_mode(f"setting the {type(solver).__name__}'s input '{name}'")
         previous = self.slot(solver).inputs
         inputs = {**previous, name: value}
         if name in solver.derived_from:

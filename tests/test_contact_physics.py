@@ -235,6 +235,9 @@ def test_contact_readouts_of_a_batch_with_and_without_contacts(f64):
     assert torch.equal(force[1], torch.zeros(1, 3, dtype=gs.tc_float))
     found = box.get_contacts()
     assert found["valid_mask"].sum(1).tolist() == [4, 0]
+    # as Genesis, trimmed to the most contacts in one env (4 here, not the slots); is_padded keeps the slots
+    assert found["geom_a"].shape == (2, 4) and found["position"].shape == (2, 4, 3)
+    assert box.get_contacts(is_padded=True)["valid_mask"].shape == (2, solver.data.size["C"])
     assert torch.all(found["position"][~found["valid_mask"]] == 0)
     empty = found["geom_a"] < 0  # an empty slot's geoms and links are -1, as Genesis pads (not link 0's)
     assert empty[1].all() and all(torch.all(found[k][empty] == -1) for k in ("geom_b", "link_a", "link_b"))
@@ -242,6 +245,8 @@ def test_contact_readouts_of_a_batch_with_and_without_contacts(f64):
         box.get_contacts(with_entity=0)
     with pytest.raises(gs.InvalidInputError, match="argument 'exclude_self_contact' must be True or False"):
         box.get_contacts(exclude_self_contact="no")
+    with pytest.raises(gs.InvalidInputError, match="argument 'is_padded' must be True or False"):
+        box.get_contacts(is_padded=1)
 
 
 def test_contacts_of_envs_a_reset_or_setter_replaced_are_gone_until_the_next_step(f64):

@@ -541,8 +541,8 @@ def test_scene_gravity_errors_name_the_scene_method(f64, built):
 
 
 def test_inference_mode_is_refused_by_name(f64):
-    """Under torch.inference_mode() build and step raise a SceneStateError that says to use
-    torch.no_grad() (torch's own error came from deep inside: inference tensors carry no version
+    """Under torch.inference_mode() build, step, reset, setters and controls raise a SceneStateError
+    that says to use torch.no_grad() (torch's own error came from deep inside: inference tensors carry no version
     counter, which the scene reads); under no_grad the scene steps."""
     scene = gs.Scene()
     scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True), name=ENTITY)
@@ -551,5 +551,15 @@ def test_inference_mode_is_refused_by_name(f64):
     scene.build()
     with torch.inference_mode(), pytest.raises(gs.SceneStateError, match=r"scene.step: .*inference_mode.*no_grad"):
         scene.step()
+    # a control, a setter or a reset taken there left inference tensors in the scene, and every later
+    # step, outside the mode too, raised torch's bare error (found by a Genesis port: rsl_rl steps there)
+    robot = scene.entities[0]
+    refused = {"control_dofs_position": lambda: robot.control_dofs_position(torch.zeros(2)),
+               "set_dofs_kp": lambda: robot.set_dofs_kp(torch.ones(2)),
+               "zero_all_dofs_velocity": robot.zero_all_dofs_velocity, "reset": scene.reset,
+               "set_gravity": lambda: scene.set_gravity((0.0, 0.0, -1.0))}
+    for name, call in refused.items():
+        with torch.inference_mode(), pytest.raises(gs.SceneStateError, match=r"inference_mode.*no_grad"):
+            call()
     with torch.no_grad():
         scene.step()
