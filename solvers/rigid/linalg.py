@@ -88,7 +88,10 @@ def solve_env(d: ti.template(), s, e, rows: ti.template()):
     The next constraint solve starts from this step's MuJoCo qacc (mj_advance's warm start): the
     solve's, which constraint_env stored, else qacc_smooth = M⁻¹ qfrc_smooth, without damping (its
     damped acceleration is a local of MuJoCo's integrator): factored apart only where a dof is
-    damped, before A's factor, which the reverse reads."""
+    damped, before A's factor, which the reverse reads. A step without a constraint stage (rows
+    False: a scene without contact pairs takes its row-less steps fused) keeps the damped
+    acceleration: the rows it may meet later (limits, equalities, friction loss) are piecewise
+    quadratic, which the solve ends exactly from any start."""
     warm_started = False
     if ti.static(rows):
         warm_started = d.n_efc[s, e, 0] > 0
