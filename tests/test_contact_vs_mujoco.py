@@ -327,21 +327,27 @@ TWO_GEOMS = """<robot name="two"><link name="a"><inertial><mass value="1"/>
   <collision><origin xyz="0.06 0 0"/><geometry><sphere radius="0.05"/></geometry></collision></link></robot>"""
 
 
+@pytest.mark.parametrize("plane", [False, True], ids=["no plane", "plane added last"])
 @pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
-def test_contacts_of_a_body_with_two_geoms_come_in_mujocos_order(f64, cone, tmp_path):
+def test_contacts_of_a_body_with_two_geoms_come_in_mujocos_order(f64, cone, plane, tmp_path):
     """A free body holding a box (geom 0) and a sphere (geom 1), a ball on each (geoms 2, 3):
     MuJoCo lists contacts body pair by body pair, and within a pair by its ordered geoms, (1, 2)
     then (3, 0); by geom pair, ours were (3, 0), (1, 2) (the rows permuted: the same motion to
-    round-off). Found by the MuJoCo probe."""
+    round-off). Found by the MuJoCo probe. A plane added last (our geom 4, MuJoCo's world geom 0)
+    is MuJoCo's world body: its contacts come first (a review found them after the balls')."""
     path = tmp_path / "two.urdf"
     path.write_text(TWO_GEOMS)
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, gravity=(0, 0, -1.0)),
                      rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True, friction_cone=cone))
     body = scene.add_entity(gs.morphs.URDF(file=str(path)))
     balls = [scene.add_entity(gs.morphs.Sphere(radius=0.04, pos=(x, 0.0, 0.088))) for x in (0.06, -0.06)]
+    if plane:
+        scene.add_entity(gs.morphs.Plane(pos=(0.0, 0.0, -0.05)))
     scene.build()
     model = scene.rigid_solver.model
     spec = mujoco.MjSpec.from_file(str(path))
+    if plane:
+        spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0.0, 0.0, 1.0], pos=[0.0, 0.0, -0.05])
     spec.compiler.alignfree = False
     spec.worldbody.bodies[0].add_freejoint()
     spec.option.timestep, spec.option.gravity = 0.002, [0.0, 0.0, -1.0]
@@ -359,7 +365,10 @@ def test_contacts_of_a_body_with_two_geoms_come_in_mujocos_order(f64, cone, tmp_
         scene.step()
         mujoco.mj_step(m, d)
     ours = scene.rigid_solver.contacts()[0].numpy()
-    ours = [(int(row[0]), int(row[1])) for row in ours if row[0] >= 0]
-    assert ours == [tuple(int(g) for g in contact.geom) for contact in d.contact[:d.ncon]] == [(1, 2), (3, 0)]
+    mujoco_geom = [1, 2, 3, 4, 0] if plane else [0, 1, 2, 3]  # (MuJoCo numbers the world's geoms first)
+    ours = [(mujoco_geom[int(row[0])], mujoco_geom[int(row[1])]) for row in ours if row[0] >= 0]
+    theirs = [tuple(int(g) for g in contact.geom) for contact in d.contact[:d.ncon]]
+    assert ours == theirs and theirs[-2:] == ([(2, 3), (4, 1)] if plane else [(1, 2), (3, 0)])
+    assert not plane or len(theirs) > 2
     state = np.concatenate([body.get_qpos().numpy()] + [ball.get_qpos().numpy() for ball in balls])
     assert np.abs(state - d.qpos).max() < 1e-14

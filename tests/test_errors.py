@@ -561,5 +561,13 @@ def test_inference_mode_is_refused_by_name(f64):
     for name, call in refused.items():
         with torch.inference_mode(), pytest.raises(gs.SceneStateError, match=r"inference_mode.*no_grad"):
             call()
+    # queries that only read the scene run there (and a render there leaves later renders working)
+    camera = scene.add_camera(res=(16, 12))
+    with torch.inference_mode():
+        robot.get_jacobian(robot.links[-1], local_point=torch.zeros(3))
+        robot.inverse_kinematics(robot.links[-1], pos=torch.tensor([0.1, 0.0, 0.5]))
+        robot.get_dofs_position()
+        camera.render()
+    camera.render()
     with torch.no_grad():
         scene.step()

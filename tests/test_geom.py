@@ -154,6 +154,12 @@ def test_types_devices_and_gradients():
     assert torch.isfinite(same.grad).all()
     # a list next to a tensor takes the tensor's type
     assert geom.transform_by_quat([1.0, 0.0, 0.0], quat.float()).dtype == torch.float32
+    # in a batch a zero quaternion's row is NaN (a diverged env's), the others exact, as Genesis's
+    rows = geom.transform_by_quat(np.ones((2, 3)), np.array([[0.0, 0, 0, 0], [1.0, 0, 0, 0]]))
+    assert np.isnan(rows[0]).all() and np.array_equal(rows[1], np.ones(3))
+    # float32 slerp between equal or nearly equal quaternions interpolates linearly, not 0 / 0
+    near = torch.tensor([[0.6, 0.8, 0.0, 0.0], [0.6, 0.8, 1e-4, 0.0]])
+    assert torch.isfinite(geom.slerp(near[0], near, torch.tensor([0.3, 0.7]))).all()
 
 
 @pytest.mark.parametrize("call, match", [
@@ -164,9 +170,9 @@ def test_types_devices_and_gradients():
     (lambda: geom.quat_to_R([[1, 0, 0, 0], [1, 0]]), r"argument 'quat' must be an array"),
     (lambda: geom.transform_by_R(np.zeros((2, 2, 2, 3)), np.eye(3)), r"transform_by_R: argument 'pos'"),
     (lambda: geom.quat_to_R(np.ones(4), out=np.empty(3)), r"argument 'out' must have the result's shape"),
-    (lambda: geom.quat_to_R(np.zeros((2, 4))), r"quat_to_R: argument 'quat' must hold non-zero finite quaternions"),
-    (lambda: geom.transform_by_quat(np.ones(3), [0.0, 0, 0, 0]), r"transform_by_quat: argument 'quat' must hold non-"),
-    (lambda: geom.quat_to_xyz([np.nan, 0, 0, 1]), r"quat_to_xyz: argument 'quat' must hold non-zero finite"),
+    (lambda: geom.quat_to_R(np.zeros(4)), r"quat_to_R: argument 'quat' must be a non-zero finite quaternion"),
+    (lambda: geom.transform_by_quat(np.ones(3), [0.0, 0, 0, 0]), r"transform_by_quat: argument 'quat' must be a non-"),
+    (lambda: geom.quat_to_xyz([np.nan, 0, 0, 1]), r"quat_to_xyz: argument 'quat' must be a non-zero finite"),
     (lambda: geom.slerp(np.ones((3, 4)), np.ones(4), [0.1, 0.2]), r"slerp: argument 't' must broadcast to the quat"),
     (lambda: geom.xyz_to_quat(np.zeros(3), rpy="yes"), r"xyz_to_quat: argument 'rpy' must be True or False"),
     (lambda: geom.quat_to_xyz(np.ones(4), degrees=1), r"quat_to_xyz: argument 'degrees' must be True or False"),

@@ -7,7 +7,6 @@ import itertools
 import numpy as np
 import torch
 
-from ..simulator import refuse_inference_mode
 from ..solvers.core import InvalidInputError, runtime
 from ..tensor import wrap
 
@@ -137,9 +136,7 @@ class EntityIndexing:
     def _tensor(self, value, arg, expected):
         """User values (list, numpy, torch) → a float tensor on gs.device in gs.tc_float, kept in
         the autograd graph; refused when it requires grad in a scene without gradients, or holds
-        complex numbers or non-numbers (``expected``: the shape the message states), or given under
-        torch.inference_mode() (simulator.refuse_inference_mode)."""
-        refuse_inference_mode(f"{self._who}: argument '{arg}'")
+        complex numbers or non-numbers (``expected``: the shape the message states)."""
         self._sim().check_grad_allowed(value, self.name, arg)
         if isinstance(value, torch.Tensor):
             kind = "complex" if value.is_complex() else "bool" if value.dtype == torch.bool else None

@@ -704,8 +704,8 @@ class RigidEntity(EntityIndexing):
         from geom b to geom a, as Genesis), penetration (m, > 0 when the geoms overlap), force_a and
         force_b (N, world: the contact's force on geom a and on geom b). Shapes (n, ...) in an unbatched
         scene; (n_envs, C, ...) with a valid_mask (n_envs, C) in a batched one, C the most contacts
-        of the scene in one env (as Genesis: the entity's are the valid ones), or with is_padded the
-        scene's contact slots. with_entity: only contacts with that entity (itself: self-contacts
+        of the scene in one env (as Genesis: the entity's are the valid ones); with is_padded C is
+        the scene's contact slots, and an unbatched scene's come as (C, ...) with a valid_mask too. with_entity: only contacts with that entity (itself: self-contacts
         only); exclude_self_contact: drop those. Not differentiable (a backward through position or
         forces raises)."""
         if not (with_entity is None or (isinstance(with_entity, RigidEntity) and with_entity.scene is self.scene)):
@@ -740,10 +740,10 @@ class RigidEntity(EntityIndexing):
         out = {"geom_a": geom_a.int(), "geom_b": geom_b.int(), "link_a": link_a.int(), "link_b": link_b.int(),
                "position": raw[..., 2:5], "normal": -raw[..., 9:12], "penetration": -raw[..., 8],
                "force_a": -raw[..., 5:8], "force_b": raw[..., 5:8]}
-        if self.scene.n_envs == 0:
+        if self.scene.n_envs == 0 and not is_padded:
             return {k: wrap(v[0][valid[0]], self.scene) for k, v in out.items()}
         out["valid_mask"] = valid
-        return {k: wrap(v, self.scene) for k, v in out.items()}
+        return {k: wrap(v[0] if self.scene.n_envs == 0 else v, self.scene) for k, v in out.items()}
 
     def get_links_net_contact_force(self, envs_idx=None):
         """(n_links, 3) or (n_envs, n_links, 3) N, world: the sum of the contact forces of the last

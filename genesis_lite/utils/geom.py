@@ -10,8 +10,8 @@ what it was given: numpy in, numpy out, float32 kept and any other dtype compute
 **Different** from Genesis: lists are taken as numpy arrays, and a numpy array or list next to a
 tensor is converted to the tensor's dtype and device (Genesis raises for both); a batch of 4×4
 matrices inverts with ``inv_T`` (Genesis's transposes the batch axes too). A quaternion need not
-have unit norm wherever it only rotates: the rotation is q/|q|'s, as in Genesis; a zero one is a
-named error (Genesis: NaN, or the identity), as are wrong shapes and non-bool flags.
+have unit norm wherever it only rotates: the rotation is q/|q|'s, as in Genesis; a zero one gives
+NaN in a batch (as Genesis) and a named error alone, as do wrong shapes and non-bool flags.
 """
 import functools
 import inspect
@@ -31,7 +31,7 @@ __all__ = ["inv_quat", "normalize", "xyz_to_quat", "quat_to_xyz", "quat_to_R", "
            "T_to_trans_quat", "inv_T", "transform_by_R", "transform_by_trans_R", "transform_by_T",
            "inv_transform_by_T", "random_quaternion"]
 
-_SLERP_LINEAR = 1e-15  # |cos θ| above 1 − this: the arc is too short for sin θ, interpolate linearly
+_SLERP_LINEAR = 1e-15  # |cos θ| above 1 − this (or 4 ulps of 1): the arc is too short for sin θ, interpolate linearly
 
 
 def _arrays(**trailing):
@@ -111,11 +111,12 @@ def _to_numpy(result):
 
 
 def _rotation(fn, name, quat):
-    """quat / |quat| (..., 4): the rotation of a quaternion of any norm; a zero (or non-finite)
-    one has none, a named error (Genesis's functions give NaN or the identity)."""
+    """quat / |quat| (..., 4): the rotation of a quaternion of any norm. A single zero or
+    non-finite quaternion is a named error; in a batch its row is NaN, as Genesis's (a diverged
+    env's row, which a training loop resets, and no wait for the device a check would be)."""
     norm = torch.linalg.vector_norm(quat, dim=-1, keepdim=True)
-    if not bool((norm > 0).all()) or not bool(torch.isfinite(norm).all()):
-        raise InvalidInputError(f"gs.utils.geom.{fn}: argument '{name}' must hold non-zero finite quaternions "
+    if quat.dim() == 1 and not (0 < float(norm) < torch.inf):
+        raise InvalidInputError(f"gs.utils.geom.{fn}: argument '{name}' must be a non-zero finite quaternion "
                                 f"(w, x, y, z), got {quat.detach().cpu().numpy()}")
     return quat / norm
 
@@ -236,7 +237,7 @@ def slerp(q0, q1, t):
     cos = (q0 * q1).sum(-1, keepdim=True)
     q1 = torch.where(cos < 0, -q1, q1)
     cos, t = cos.abs(), t[..., None]
-    linear = cos > 1 - _SLERP_LINEAR
+    linear = cos > 1 - max(_SLERP_LINEAR, 4 * torch.finfo(cos.dtype).eps)
     angle = torch.acos(torch.where(linear, 0.0, cos))  # (acos's slope is infinite at 1, even where unused)
     sin = torch.where(linear, 1.0, torch.sin(angle))
     w0 = torch.where(linear, 1 - t, torch.sin((1 - t) * angle) / sin)

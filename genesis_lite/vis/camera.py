@@ -40,6 +40,7 @@ import sys
 import time
 
 import numpy as np
+import torch
 
 from ..entities import RigidEntity
 from ..options import _check_float, _check_vec3, check_bool, is_int
@@ -298,15 +299,19 @@ class Camera:
         return images["rgb"] if rgb else None, images.get("depth"), seg, images.get("normal")
 
     def _draw(self, **images):
-        """The images the rasterizer draws of the scene's current state (``images``: which)."""
+        """The images the rasterizer draws of the scene's current state (``images``: which). Its
+        buffers, made at the first render and kept, are made outside torch.inference_mode() even
+        under it (inference tensors kept there broke every later render outside it)."""
         if self._follow is not None:
             self._update_following()
         scene = self._scene
-        drawing = scene._camera_visuals()
-        view = View(self._pos + self._offset(), self._lookat + self._offset(), self._up, self._fov, self._near,
-                    self._far, self._res)
-        return self._rasterizer.render(view, drawing.meshes, drawing.instances(scene._link_kinematics()),
-                                       drawing.particles(scene._debug_spheres() if self._debug else None), **images)
+        with torch.inference_mode(False):
+            drawing = scene._camera_visuals()
+            view = View(self._pos + self._offset(), self._lookat + self._offset(), self._up, self._fov, self._near,
+                        self._far, self._res)
+            return self._rasterizer.render(view, drawing.meshes, drawing.instances(scene._link_kinematics()),
+                                           drawing.particles(scene._debug_spheres() if self._debug else None),
+                                           **images)
 
     # -- recording ----------------------------------------------------------------------------
     def start_recording(self, save_to_filename=None, fps=None):

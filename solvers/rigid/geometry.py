@@ -124,8 +124,9 @@ def candidate_pairs(geom_type, geom_link, link_parent, link_static, link_entity,
                     adjacent_collision=False):
     """(N, 2) geom pairs that may collide, each ordered as MuJoCo orders it (lower type code
     first, then lower index), in MuJoCo's order: by link pair (its broad phase's body pairs,
-    lower link first), then within a link pair by the ordered geoms (its contactSort of a pair
-    whose bodies hold several geoms), so contacts come in MuJoCo's order.
+    lower link first, static links as its world body 0 whatever their index), then within a link
+    pair by the ordered geoms (its contactSort of a pair whose bodies hold several geoms), so
+    contacts come in MuJoCo's order.
 
     Rules (Genesis's, which agree with MuJoCo's defaults except where said): two geoms of one
     link never collide; nor two links both welded to the world; nor parent and child links unless
@@ -146,6 +147,7 @@ def candidate_pairs(geom_type, geom_link, link_parent, link_static, link_entity,
             if geom_type[a] == PLANE and geom_type[b] == PLANE:
                 continue  # MuJoCo has no plane-plane collider
             pairs.append((a, b) if geom_type[a] <= geom_type[b] else (b, a))
-    pairs.sort(key=lambda pair: (*sorted((geom_link[pair[0]], geom_link[pair[1]])), *pair))
+    body = [-1 if link_static[link] else link for link in range(len(link_static))]  # static: MuJoCo's world
+    pairs.sort(key=lambda pair: (*sorted((body[geom_link[pair[0]]], body[geom_link[pair[1]]])), *pair))
     return np.array(pairs, dtype=np.int32).reshape(-1, 2)
 
