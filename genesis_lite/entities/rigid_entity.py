@@ -705,9 +705,10 @@ class RigidEntity(EntityIndexing):
         force_b (N, world: the contact's force on geom a and on geom b). Shapes (n, ...) in an unbatched
         scene; (n_envs, C, ...) with a valid_mask (n_envs, C) in a batched one, C the most contacts
         of the scene in one env (as Genesis: the entity's are the valid ones); with is_padded C is
-        the scene's contact slots, and an unbatched scene's come as (C, ...) with a valid_mask too. with_entity: only contacts with that entity (itself: self-contacts
-        only); exclude_self_contact: drop those. Not differentiable (a backward through position or
-        forces raises)."""
+        the scene's contact slots, and an unbatched scene's come as (C, ...) with a valid_mask too.
+        with_entity: only contacts with that entity (itself: self-contacts only);
+        exclude_self_contact: drop those. Not differentiable (a backward through position or forces
+        raises)."""
         if not (with_entity is None or (isinstance(with_entity, RigidEntity) and with_entity.scene is self.scene)):
             raise InvalidInputError(f"entity '{self.name}': argument 'with_entity' must be a rigid entity of the same "
                                     f"scene or None, got {with_entity!r}")

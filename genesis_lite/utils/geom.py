@@ -31,7 +31,8 @@ __all__ = ["inv_quat", "normalize", "xyz_to_quat", "quat_to_xyz", "quat_to_R", "
            "T_to_trans_quat", "inv_T", "transform_by_R", "transform_by_trans_R", "transform_by_T",
            "inv_transform_by_T", "random_quaternion"]
 
-_SLERP_LINEAR = 1e-15  # |cos θ| above 1 − this (or 4 ulps of 1): the arc is too short for sin θ, interpolate linearly
+# |cos θ| above 1 − this (or 4 ulps of 1 in the dtype): the arc is too short for sin θ, interpolate linearly
+_SLERP_LINEAR = 1e-15
 
 
 def _arrays(**trailing):
