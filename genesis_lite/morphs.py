@@ -6,11 +6,10 @@ Angles: ``euler`` is (roll, pitch, yaw) in degrees, fixed axes x-y-z as in Genes
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 
 from .options import named_keywords
 from .solvers.core import InvalidInputError, refuse_grad
-from .utils.rotations import euler_xyz_to_quat
+from .utils import geom
 
 # Genesis 1.4.5's morph options that genesis_lite does not have (a named error says so, where
 # Python's TypeError named neither the morph nor the keyword): every morph's, the primitives',
@@ -45,12 +44,6 @@ def _positive(owner, name, value):
         raise InvalidInputError(f"{owner}: argument '{name}' must be positive and finite, got {value!r}")
 
 
-def euler_to_quat(euler_deg):
-    """(roll, pitch, yaw) degrees about the fixed x, y, z axes → quaternion (w, x, y, z), float64."""
-    angles = torch.as_tensor(np.radians(np.asarray(euler_deg, dtype=np.float64)))
-    return euler_xyz_to_quat(angles, rpy=True).numpy()
-
-
 @dataclass
 class Morph:
     """Initial placement shared by every morph: pos (3,) m; euler (3,) degrees (extrinsic x-y-z) or
@@ -68,7 +61,7 @@ class Morph:
                                     f"{self.euler!r} and quat {self.quat!r}")
         if self.quat is None:
             self.euler = _vec(owner, "euler", (0.0, 0.0, 0.0) if self.euler is None else self.euler, 3)
-            self.quat = euler_to_quat(self.euler)
+            self.quat = geom.euler_to_quat(self.euler)  # (Genesis's: roll-pitch-yaw, degrees)
         else:
             q = _vec(owner, "quat", self.quat, 4)
             if np.linalg.norm(q) < 1e-9:

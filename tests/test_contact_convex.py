@@ -391,7 +391,7 @@ def test_lying_across_a_narrower_box_touches_where_mujoco_does(f64):
     """The can of the test above across the box, with MuJoCo's defaults, beside MuJoCo 4.0 itself:
     after 0.2 s both have two contacts, where the can's side line crosses the box's top edges, at
     the same points to 1 mm (the yaw creep both share moves them along the edges)."""
-    quat = tuple(float(q) for q in gs.morphs.euler_to_quat((91.5, -1, 15)))
+    quat = tuple(float(q) for q in gs.utils.geom.euler_to_quat((91.5, -1, 15)))
     m = mujoco.MjModel.from_xml_string(
         '<mujoco><option timestep="0.002"/><worldbody><geom type="box" size="0.08 0.06 0.05" pos="0 0 0.05"/>'
         f'<body pos="0.01 0 0.142" quat="{" ".join(map(str, quat))}"><freejoint/>'

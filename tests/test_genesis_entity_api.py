@@ -801,6 +801,19 @@ def test_aabb_bounds_the_shapes_as_genesis(f64, tmp_path):
     cylinder.get_AABB()[1].sum().backward()  # upright: the rim's slope in x, y is 0, not NaN
     assert torch.equal(pos.grad, _t([1.0, 1.0, 1.0]))
     scene.destroy()
+    # turned, every kind against central differences (float64), in the links' positions and quaternions
+    from genesis_lite.entities.bounds import shapes_aabb
+    from genesis_lite.solvers.rigid.spec import GeomSpec
+    shapes = [(0, GeomSpec("box", np.array([0.2, 0.1, 0.4]), pos=np.array([0.1, 0.0, 0.0]))),
+              (1, GeomSpec("capsule", np.array([0.05, 0.3]))), (1, GeomSpec("cylinder", np.array([0.1, 0.4]),
+                                                                              quat=np.array([0.9, 0.3, 0.0, 0.1]))),
+              (2, GeomSpec("mesh", np.zeros(0), vertices=hull.vertices))]
+    link_pos = _t(rng.normal(size=(2, 3, 3))).requires_grad_(True)
+    link_quat = _t(rng.normal(size=(2, 3, 4)))
+    link_quat = (link_quat / link_quat.norm(dim=-1, keepdim=True)).requires_grad_(True)
+    for chosen in ([0], [1], [2], [3], [0, 1, 2, 3]):
+        assert torch.autograd.gradcheck(lambda p, q: shapes_aabb([shapes[k] for k in chosen], p, q),
+                                        (link_pos, link_quat))
 
 
 MERGED_BOXES = """<robot name="merged">
