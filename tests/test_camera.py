@@ -371,6 +371,115 @@ def test_follow_entity_refuses_a_camera_at_the_base_before_anything_is_built(f32
         gs.options.VisOptions(rendered_envs_idx=[])
 
 
+def test_pointcloud_points_lie_on_the_drawn_surfaces(f32):
+    """render_pointcloud's points, pixel by pixel, on the plane (z = 0) or on the box's faces they
+    were drawn from (segmentation), nothing where the sky is; the camera-frame cloud is the world
+    one seen through the extrinsics (OpenCV axes: z the depth)."""
+    scene = gs.Scene(**NO_CONTACT)
+    plane = scene.add_entity(gs.morphs.Plane())
+    half, centre = np.array([0.2, 0.15, 0.1]), np.array([0.1, -0.05, 0.1])
+    box = scene.add_entity(gs.morphs.Box(size=tuple(2 * half), pos=tuple(centre), fixed=True))
+    cam = scene.add_camera(res=(160, 120), pos=(1.2, 0.9, 0.8), lookat=(0.0, 0.0, 0.1), fov=50, far=6.0)
+    scene.build()
+    seg = cam.render(rgb=False, segmentation=True)[2]
+    points, mask = cam.render_pointcloud()
+    assert points.shape == (120, 160, 3) and mask.shape == (120, 160)
+    assert np.array_equal(mask, seg >= 0) and 0 < mask.mean() < 1  # the sky beyond far: masked
+    on_plane, on_box = seg == plane.links[0].idx, seg == box.links[0].idx
+    assert on_plane.sum() > 1000 and on_box.sum() > 500
+    np.testing.assert_allclose(points[on_plane][:, 2], 0.0, atol=1e-4)  # float32 depth of a 1000 m square
+    face_distance = np.abs(np.abs(points[on_box] - centre) / half).max(axis=1)  # 1 on the box's faces
+    np.testing.assert_allclose(face_distance, 1.0, atol=2e-4)
+    local, _ = cam.render_pointcloud(world_frame=False)
+    depth = cam.render(rgb=False, depth=True)[1]
+    np.testing.assert_allclose(local[..., 2], depth, rtol=1e-6)
+    world = local @ np.linalg.inv(cam.extrinsics)[:3, :3].T + np.linalg.inv(cam.extrinsics)[:3, 3]
+    np.testing.assert_allclose(world[mask], points[mask], atol=1e-5)
+
+
+def test_pose_getters_and_projection_matrix(f32):
+    """Genesis's pose getters (torch tensors) agree with the camera's properties; get_quat turns the
+    camera's axes; the projection matrix sends a corner of a box to the pixel the pinhole
+    projection gives it, near to depth −1 and far to +1 in normalised device coordinates."""
+    scene = gs.Scene(**NO_CONTACT)
+    scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.2), pos=(0.0, 0.0, 1.0)))
+    view = dict(pos=(2.0, -1.0, 1.5), lookat=(0.0, 0.3, 0.8), up=(0.0, 0.0, 1.0), fov=35, res=(200, 100))
+    cam = scene.add_camera(**view, near=0.2, far=9.0, env_idx=1)
+    scene.build(n_envs=2, env_spacing=(3.0, 3.0))
+    offset = scene.envs_offset[1]
+    for getter, value in ((cam.get_pos, cam.pos), (cam.get_lookat, cam.lookat), (cam.get_up, cam.up),
+                          (cam.get_transform, cam.transform)):
+        tensor = getter()
+        assert isinstance(tensor, torch.Tensor) and tensor.dtype == gs.tc_float
+        np.testing.assert_allclose(tensor.numpy(), value, atol=1e-6)
+    np.testing.assert_allclose(cam.get_pos().numpy(), np.array(view["pos"]) + offset, atol=1e-6)
+    axes = cam.transform[:3, :3]
+    np.testing.assert_allclose(gs.utils.geom.quat_to_R(cam.get_quat()).numpy(), axes, atol=1e-6)
+    corner = np.array([0.1, -0.1, 1.1])
+    (u, v), depth = (x[0] for x in project([corner], **view))
+    camera_frame = np.linalg.inv(cam.transform.astype(np.float64)) @ np.append(corner + offset, 1.0)
+    clip = cam.projection_matrix @ camera_frame
+    np.testing.assert_allclose(clip[:2] / clip[3], [2 * u / 200 - 1, 1 - 2 * v / 100], atol=1e-5)
+    for distance, ndc in ((0.2, -1.0), (9.0, 1.0)):
+        clip = cam.projection_matrix @ [0.0, 0.0, -distance, 1.0]
+        assert clip[2] / clip[3] == pytest.approx(ndc)
+    with pytest.raises(gs.InvalidInputError, match=r"camera 0.get_pos: argument 'envs_idx' must be None .*env 1\), "
+                                                   r"got \[0\]"):
+        cam.get_pos([0])
+
+
+def test_attached_camera_rides_its_link(f32):
+    """A camera attached to a tumbling box's link with an offset stands, at every render and every
+    recorded step, at the link's pose times the offset; the box sits where the offset says in the
+    image (its centre 0.5 m ahead along the camera's −z: the image centre, depth 0.5 − 0.1 m to the
+    face). detach keeps the pose; attach and follow_entity exclude each other; errors name the
+    argument."""
+    scene = gs.Scene(**NO_CONTACT)
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.2), pos=(0.0, 0.0, 2.0)))
+    other = gs.Scene(**NO_CONTACT).add_entity(gs.morphs.Box())
+    cam = scene.add_camera(res=(80, 60), fov=40)
+    offset = np.eye(4)
+    offset[:3, :3] = gs.utils.geom.quat_to_R(gs.utils.geom.xyz_to_quat(np.array([90.0, 0.0, 90.0]), rpy=True,
+                                                                     degrees=True))
+    offset[:3, 3] = offset[:3, :3] @ [0.0, 0.0, 0.5]  # the box's centre 0.5 m ahead of the camera
+    cam.attach(box.links[0], torch.tensor(offset))
+    scene.build()
+    box.set_dofs_velocity([0.3, -0.2, 0.5, 2.0, -1.0, 3.0])
+    for _ in range(30):
+        scene.step()
+        seg, depth = (cam.render(rgb=False, depth=True, segmentation=True)[i] for i in (2, 1))
+        link_pose = gs.utils.geom.trans_quat_to_T(box.get_pos().numpy().astype(np.float64),
+                                                  box.get_quat().numpy().astype(np.float64))
+        np.testing.assert_allclose(cam.transform, link_pose @ offset, atol=2e-5)
+        assert (seg[28:32, 38:42] == box.links[0].idx).all()
+        np.testing.assert_allclose(depth[29:31, 39:41], 0.4, atol=1e-3)
+    cam.detach()
+    still = cam.transform
+    scene.step()
+    cam.render()
+    np.testing.assert_array_equal(cam.transform, still)
+    with pytest.raises(gs.SceneStateError, match=r"camera 0.move_to_attach: the camera is not attached"):
+        cam.move_to_attach()
+    cam.follow_entity(box)
+    with pytest.raises(gs.SceneStateError, match=r"camera 0.attach: the camera follows entity 'box_0'; call "
+                                                 r"unfollow_entity\(\) first"):
+        cam.attach(box.links[0], offset)
+    cam.unfollow_entity()
+    cam.attach(box.links[0], offset)
+    with pytest.raises(gs.SceneStateError, match=r"camera 0.follow_entity: the camera is attached to link 'box' of "
+                                                 r"entity 'box_0'; call detach\(\) first"):
+        cam.follow_entity(box)
+    bad = np.eye(4)
+    bad[0, 0] = 2.0
+    for link, transform, message in ((box, offset, r"argument 'rigid_link' must be a RigidLink .*got RigidEntity"),
+                                     (other.links[0], offset, r"argument 'rigid_link' must be a link of this "
+                                                              r"camera's scene"),
+                                     (box.links[0], bad, r"argument 'offset_T' must be a finite \(4, 4\) pose"),
+                                     (box.links[0], np.eye(3), r"argument 'offset_T' must be a finite \(4, 4\)")):
+        with pytest.raises(gs.InvalidInputError, match=r"camera 0.attach: " + message):
+            cam.attach(link, transform)
+
+
 # ------------------------------------------------------------------ recording
 
 

@@ -21,6 +21,10 @@ link and geom levels, the ids after the rigid ones, one per MPM entity), −1 wh
 normals, 0 where nothing is drawn. Debug spheres (``scene.draw_debug_spheres``) are drawn by
 debug cameras only (``debug=True``), as in Genesis, with segmentation −1.
 
+A camera attached to a link (``attach(link, offset_T)``) is put at the link's pose times the
+offset before each render and recorded frame; ``render_pointcloud`` turns the depth image into
+points on the pixel-centre rays (world or OpenCV camera frame).
+
 Recording, two ways (recorder.py writes MP4 or GIF): Genesis 1.4.5's
 ``start_recording(save_to_filename, fps)`` … ``stop_recording()`` takes a frame as the scene steps,
 one every round(realtime_factor / (fps · dt)) steps (ViewerOptions' realtime_factor, None: 1; at
@@ -43,8 +47,10 @@ import numpy as np
 import torch
 
 from ..entities import RigidEntity
+from ..entities.rigid_entity import RigidLink
 from ..options import _check_float, _check_vec3, check_bool, is_int
-from ..solvers.core import InvalidInputError, SceneStateError
+from ..solvers.core import InvalidInputError, SceneStateError, runtime
+from ..utils.geom import R_to_quat, quat_to_R
 from .rasterizer import Rasterizer, View
 from .recorder import Recording, check_target
 
@@ -89,6 +95,7 @@ class Camera:
         self.set_pose(pos=pos, lookat=lookat, up=up)
         self._rasterizer = Rasterizer(self._res, background=scene.vis_options.background_color)
         self._follow = None  # (entity, offset (3,) or None until build, fixed_axis, smoothing, fix_orientation)
+        self._attached = None  # (link, (4, 4) float64 camera pose in the link's frame)
         self._recording, self._paused = None, False
         self._steps_per_frame = self._steps_to_frame = 1  # a recording started with a file: steps a frame
         self._is_built = False
@@ -166,10 +173,14 @@ class Camera:
     @property
     def transform(self):
         """(4, 4) float32: camera → world pose (columns: x right, y up, z backwards, position)."""
+        return self._world_transform().astype(np.float32)
+
+    def _world_transform(self):
+        """(4, 4) float64 camera → world pose."""
         transform = np.eye(4)
         transform[:3, :3] = _camera_axes(self._name, self._pos, self._lookat, self._up)
         transform[:3, 3] = self._pos + self._offset()
-        return transform.astype(np.float32)
+        return transform
 
     @property
     def extrinsics(self):
@@ -196,6 +207,46 @@ class Camera:
     def cy(self):
         return 0.5 * self._res[1]
 
+    @property
+    def projection_matrix(self):
+        """(4, 4) OpenGL projection (camera frame → clip space) of the field of view, aspect ratio,
+        near and far planes, as Genesis's."""
+        aspect, tan = self.aspect_ratio, np.tan(np.radians(0.5 * self._fov))
+        near, far = self._near, self._far
+        return np.array([[1.0 / (aspect * tan), 0.0, 0.0, 0.0], [0.0, 1.0 / tan, 0.0, 0.0],
+                         [0.0, 0.0, (far + near) / (near - far), 2.0 * far * near / (near - far)],
+                         [0.0, 0.0, -1.0, 0.0]])
+
+    def _pose_tensor(self, what, value, envs_idx):
+        """Genesis's pose getters: ``value`` as a torch tensor (gs.tc_float, gs.device); envs_idx must
+        be None (a rasterized camera has one pose, in its env)."""
+        if envs_idx is not None:
+            raise InvalidInputError(f"{self._name}.{what}: argument 'envs_idx' must be None (the camera has one pose, "
+                                    f"in its env {self._env_idx}), got {envs_idx!r}")
+        return torch.as_tensor(np.asarray(value, dtype=np.float64), dtype=runtime.tc_float, device=runtime.device)
+
+    def get_pos(self, envs_idx=None):
+        """(3,) m, world (the env's offset included), a torch tensor."""
+        return self._pose_tensor("get_pos", self._pos + self._offset(), envs_idx)
+
+    def get_lookat(self, envs_idx=None):
+        """(3,) m, world, a torch tensor."""
+        return self._pose_tensor("get_lookat", self._lookat + self._offset(), envs_idx)
+
+    def get_up(self, envs_idx=None):
+        """(3,): the camera's y axis in the world, a torch tensor."""
+        return self._pose_tensor("get_up", _camera_axes(self._name, self._pos, self._lookat, self._up)[:, 1],
+                                 envs_idx)
+
+    def get_quat(self, envs_idx=None):
+        """(4,) (w, x, y, z): the camera's orientation (axes as ``transform``'s), a torch tensor."""
+        return self._pose_tensor("get_quat", R_to_quat(_camera_axes(self._name, self._pos, self._lookat,
+                                                                           self._up)), envs_idx)
+
+    def get_transform(self, envs_idx=None):
+        """(4, 4) camera → world pose (as ``transform``), a torch tensor."""
+        return self._pose_tensor("get_transform", self._world_transform(), envs_idx)
+
     idx = property(lambda self: self._idx, doc="The camera's index in the scene.")
     model = property(lambda self: "pinhole")
     res = property(lambda self: self._res, doc="(width, height) pixels.")
@@ -208,6 +259,47 @@ class Camera:
     GUI = property(lambda self: False)
     is_built = property(lambda self: self._is_built)
 
+    # -- attached to a link -------------------------------------------------------------------
+    def attach(self, rigid_link, offset_T):
+        """Mount the camera on ``rigid_link`` (a RigidLink of this scene, e.g. ``entity.get_link(name)``):
+        from now on every render and recorded frame first puts the camera at the link's pose times
+        ``offset_T`` ((4, 4) camera pose in the link's frame: it looks along the offset's −z, up its
+        y), as Genesis's; ``move_to_attach()`` does so at once."""
+        owner = f"{self._name}.attach"
+        if self._follow is not None:
+            raise SceneStateError(f"{owner}: the camera follows entity '{self._follow[0].name}'; call "
+                                  f"unfollow_entity() first")
+        if not isinstance(rigid_link, RigidLink):
+            raise InvalidInputError(f"{owner}: argument 'rigid_link' must be a RigidLink (entity.get_link(name) or "
+                                    f"entity.links[i]), got {type(rigid_link).__name__}")
+        if rigid_link.entity.scene is not self._scene:
+            raise InvalidInputError(f"{owner}: argument 'rigid_link' must be a link of this camera's scene, got "
+                                    f"{rigid_link._who} of another scene")
+        if isinstance(offset_T, torch.Tensor):
+            offset_T = offset_T.detach().cpu().numpy()
+        _transform_to_pose(owner, offset_T, "offset_T")
+        self._attached = (rigid_link, np.array(offset_T, dtype=np.float64))
+
+    def detach(self):
+        """Unmount the camera; it keeps its current pose (nothing when it is not attached)."""
+        self._attached = None
+
+    def move_to_attach(self):
+        """Put the camera at its link's current pose (in the camera's env) times its offset."""
+        owner = f"{self._name}.move_to_attach"
+        if self._attached is None:
+            raise SceneStateError(f"{owner}: the camera is not attached to a link; call attach(rigid_link, offset_T) "
+                                  f"first")
+        self._require_built("move_to_attach")
+        link, offset = self._attached
+        envs_idx = None if self._scene.n_envs == 0 else [self._env_idx]
+        link_pose = np.eye(4)
+        link_pose[:3, 3] = link.get_pos(envs_idx).detach().cpu().numpy().astype(np.float64).reshape(3)
+        quat = link.get_quat(envs_idx).detach().cpu().numpy().astype(np.float64).reshape(4)
+        link_pose[:3, :3] = quat_to_R(quat)  # (normalised: a float32 pose's is unit to round-off only)
+        pos, lookat, up = _transform_to_pose(owner, link_pose @ offset)
+        self.set_pose(pos=pos, lookat=lookat, up=up)
+
     # -- following an entity ------------------------------------------------------------------
     def follow_entity(self, entity, fixed_axis=(None, None, None), smoothing=None, fix_orientation=False):
         """Follow ``entity`` (its base) from now on: at each render the camera keeps the offset it
@@ -216,6 +308,9 @@ class Camera:
         axis; smoothing: None or in [0, 1): the weight of the camera's previous position and lookat
         (exponential smoothing); fix_orientation: keep the orientation, only move."""
         owner = f"{self._name}.follow_entity"
+        if self._attached is not None:
+            raise SceneStateError(f"{owner}: the camera is attached to {self._attached[0]._who}; call detach() "
+                                  f"first")
         if not isinstance(entity, RigidEntity):
             raise InvalidInputError(f"{owner}: argument 'entity' must be a rigid entity (the camera follows its "
                                     f"base link), got {type(entity).__name__} {getattr(entity, 'name', entity)!r}")
@@ -298,11 +393,29 @@ class Camera:
             seg = colorize_segmentation(seg)
         return images["rgb"] if rgb else None, images.get("depth"), seg, images.get("normal")
 
+    def render_pointcloud(self, world_frame=True):
+        """The depth image as points, as Genesis's: ((H, W, 3) float64 m, (H, W) bool). A pixel's point
+        lies on the ray through its centre at the drawn depth: world coordinates, or with
+        world_frame False the camera's OpenCV frame (x right, y down, z forward); the mask is True
+        where something is drawn between near and far."""
+        check_bool(f"{self._name}.render_pointcloud", "world_frame", world_frame)
+        self._require_built("render_pointcloud")
+        depth = np.minimum(self._draw(depth=True)["depth"], self._far).astype(np.float64)
+        rows, cols = np.meshgrid(np.arange(self._res[1]), np.arange(self._res[0]), indexing="ij")
+        points = np.stack([depth * (cols + 0.5 - self.cx) / self.f, depth * (rows + 0.5 - self.cy) / self.f, depth],
+                          axis=-1)
+        if world_frame:
+            opencv_to_world = self._world_transform() @ np.diag([1.0, -1.0, -1.0, 1.0])
+            points = points @ opencv_to_world[:3, :3].T + opencv_to_world[:3, 3]
+        return points, (self._near < depth) & (depth < self._far * (1.0 - 1e-3))
+
     def _draw(self, **images):
         """The images the rasterizer draws of the scene's current state (``images``: which). Its
         buffers, made at the first render and kept, are made outside torch.inference_mode() even
         under it (inference tensors kept there broke every later render outside it)."""
-        if self._follow is not None:
+        if self._attached is not None:
+            self.move_to_attach()
+        elif self._follow is not None:
             self._update_following()
         scene = self._scene
         with torch.inference_mode(False):
@@ -443,13 +556,14 @@ def _camera_axes(owner, pos, lookat, up):
     return np.stack([right, np.cross(back, right), back], axis=1)
 
 
-def _transform_to_pose(owner, transform):
-    """(pos, lookat, up) of a (4, 4) camera → world transform: lookat 1 m ahead along −z, up = y."""
+def _transform_to_pose(owner, transform, name="transform"):
+    """(pos, lookat, up) of a (4, 4) camera → world transform (argument ``name``): lookat 1 m ahead
+    along −z, up = y."""
     matrix = np.asarray(transform, dtype=np.float64)
     rot = matrix[:3, :3] if matrix.shape == (4, 4) else None
     if rot is None or not np.isfinite(matrix).all() or not np.allclose(rot.T @ rot, np.eye(3), atol=1e-5) or \
             np.linalg.det(rot) < 0 or not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0], atol=1e-6):
-        raise InvalidInputError(f"{owner}: argument 'transform' must be a finite (4, 4) pose whose top-left 3×3 is a "
+        raise InvalidInputError(f"{owner}: argument '{name}' must be a finite (4, 4) pose whose top-left 3×3 is a "
                                 f"rotation (det +1) and last row (0, 0, 0, 1), got {np.asarray(transform).tolist()}")
     return matrix[:3, 3], matrix[:3, 3] - rot[:, 2], rot[:, 1]
 
