@@ -846,3 +846,53 @@ def test_aabb_of_merged_links_and_offset_shapes_matches_the_urdf(f64, tmp_path):
         reference.update_cfg([angle])
         assert np.abs(robot.get_AABB().numpy() - reference.collision_scene.bounds).max() < 1e-12
     scene.destroy()
+
+
+def test_link_level_getters_aabb_and_wrench_as_the_entity_s(f64, tmp_path):
+    """RigidLink's get_vel/get_ang/get_mass/get_AABB, parent_idx, is_fixed and
+    apply_external_force/torque/wrench (Genesis's link API) are the entity's for that link: the
+    readouts equal its rows, the links' boxes make up the entity's, parents as in the URDF, and a
+    link's wrench moves the scene as the entity's call for that link does (bit for bit)."""
+    path = tmp_path / "merged.urdf"
+    path.write_text(MERGED_BOXES)
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT), show_viewer=False)
+    robot = scene.add_entity(gs.morphs.URDF(file=str(path), fixed=True))
+    box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.2, 0.3), pos=(2.0, 0.0, 1.0)))
+    scene.build(n_envs=2)
+    robot.set_dofs_velocity(_t([[0.7], [-0.4]]))
+    box.set_dofs_velocity(_t([[0.1, 0.2, 0.3, 1.0, -2.0, 0.5], [0.0, 0.0, 0.0, 0.3, 0.0, 0.0]]))
+    scene.step()
+    for entity in (robot, box):
+        for k, link in enumerate(entity.links):
+            for getter, rows in ((link.get_vel, entity.get_links_vel), (link.get_ang, entity.get_links_ang),
+                                 (link.get_pos, entity.get_links_pos)):
+                assert torch.equal(getter(), rows()[:, k]) and torch.equal(getter([1]), rows(envs_idx=[1])[:, k])
+            assert torch.equal(link.get_mass(), entity.get_links_mass()[:, k])
+    boxes = torch.stack([link.get_AABB() for link in robot.links])
+    assert torch.equal(torch.stack([boxes[:, :, 0].amin(0), boxes[:, :, 1].amax(0)], 1), robot.get_AABB())
+    assert not torch.equal(boxes[0], boxes[1])
+    assert torch.equal(box.links[0].get_AABB(), box.get_AABB())
+    reference = yourdfpy.URDF.load(str(path))
+    child = reference.joint_map[robot.joints[0].name].child
+    assert [link.parent_idx for link in robot.links] == [-1, robot.links[0].idx] and robot.links[1].name == child
+    assert [robot.links[0].is_fixed, robot.links[1].is_fixed, box.links[0].is_fixed] == [True, False, False]
+    force, torque, pos = _t([[0.0, 3.0, 1.0], [1.0, 0.0, 0.0]]), _t([[0.5, 0.0, 0.0], [0.0, 0.0, -1.0]]), \
+        _t([[2.0, 0.1, 1.0], [2.0, 0.0, 1.2]])
+    state = scene.get_state()
+    box.apply_links_external_wrench(force[:, None], torque[:, None], [0], pos=pos[:, None])
+    scene.step()
+    expected = box.get_dofs_velocity().clone()
+    for apply in (lambda link: link.apply_external_wrench(force, torque, pos=pos),
+                  lambda link: (link.apply_external_force(force, pos=pos), link.apply_external_torque(torque))):
+        scene.reset(state)
+        apply(box.links[0])
+        scene.step()
+        assert torch.equal(box.get_dofs_velocity(), expected)
+    scene.destroy()
+    (tmp_path / "pendulum.urdf").write_text(PENDULUM)
+    scene = gs.Scene(show_viewer=False)
+    shapeless = scene.add_entity(gs.morphs.URDF(file=str(tmp_path / "pendulum.urdf"), fixed=True))
+    scene.build()
+    with pytest.raises(gs.InvalidInputError, match=r"entity 'urdf_0': get_AABB needs collision shapes, link 'arm' "
+                                                   r"has none"):
+        shapeless.links[1].get_AABB()

@@ -47,6 +47,18 @@ def _check_sol_params(name, p):
 
 
 @named_argument_errors
+def _with_link_axis(value):
+    """A link's (…, 3) vector as the entity's one-link (…, 1, 3); None, or what is no array, as
+    given (the entity's check names it)."""
+    if value is None:
+        return None
+    try:
+        tensor = value if isinstance(value, torch.Tensor) else torch.as_tensor(np.asarray(value))
+    except (TypeError, ValueError, RuntimeError):
+        return value
+    return tensor.unsqueeze(-2) if tensor.ndim >= 1 else tensor
+
+
 class RigidLink:
     """A link: ``name``, ``idx`` (scene-wide), ``idx_local`` (within its entity)."""
 
@@ -61,13 +73,60 @@ class RigidLink:
     def idx(self):
         return self.entity.link_start + self.idx_local
 
+    @property
+    def parent_idx(self):
+        """The scene-wide index of the parent link, −1 for a root (once built)."""
+        return int(self.entity._solver.model.link_parent[self.idx])
+
+    @property
+    def is_fixed(self):
+        """Whether the link is welded to the world (no moving joint between it and the world; once built)."""
+        return bool(self.entity._solver.model.link_static[self.idx])
+
+    def _one(self, values):
+        """The entity's (…, n_links, k) readout for this link alone: (…, k)."""
+        return wrap(values[..., 0, :], self.entity.scene)
+
     def get_pos(self, envs_idx=None):
         """World position of the link frame origin, m: (3,) or (n_envs, 3)."""
-        return wrap(self.entity.get_links_pos([self.idx_local], envs_idx)[..., 0, :], self.entity.scene)
+        return self._one(self.entity.get_links_pos([self.idx_local], envs_idx))
 
     def get_quat(self, envs_idx=None):
         """World orientation (w, x, y, z): (4,) or (n_envs, 4)."""
-        return wrap(self.entity.get_links_quat([self.idx_local], envs_idx)[..., 0, :], self.entity.scene)
+        return self._one(self.entity.get_links_quat([self.idx_local], envs_idx))
+
+    def get_vel(self, envs_idx=None):
+        """World linear velocity of the link frame origin, m/s: (3,) or (n_envs, 3)."""
+        return self._one(self.entity.get_links_vel([self.idx_local], envs_idx))
+
+    def get_ang(self, envs_idx=None):
+        """World angular velocity, rad/s: (3,) or (n_envs, 3)."""
+        return self._one(self.entity.get_links_ang([self.idx_local], envs_idx))
+
+    def get_mass(self, envs_idx=None):
+        """Mass, kg: () or (n_envs,)."""
+        return wrap(self.entity.get_links_mass([self.idx_local], envs_idx)[..., 0], self.entity.scene)
+
+    def get_AABB(self, envs_idx=None):
+        """The world-axes box holding the link's collision shapes, m: (2, 3) or (n_envs, 2, 3), as
+        ``RigidEntity.get_AABB`` for this link alone."""
+        return self.entity._aabb([self.idx_local], envs_idx, f"link '{self.name}'")
+
+    def apply_external_wrench(self, force=None, torque=None, envs_idx=None, *, pos=None, ref="link_origin",
+                              local=False):
+        """``RigidEntity.apply_links_external_wrench`` on this link: force (N), torque (N·m) and pos
+        (m) (3,) or, batched, (len(envs_idx), 3)."""
+        force, torque, pos = (_with_link_axis(value) for value in (force, torque, pos))
+        self.entity.apply_links_external_wrench(force, torque, [self.idx_local], envs_idx, pos=pos, ref=ref,
+                                                local=local)
+
+    def apply_external_force(self, force, envs_idx=None, *, pos=None, ref="link_origin", local=False):
+        """``apply_external_wrench`` with a force alone."""
+        self.apply_external_wrench(force, None, envs_idx, pos=pos, ref=ref, local=local)
+
+    def apply_external_torque(self, torque, envs_idx=None, *, ref="link_origin", local=False):
+        """``apply_external_wrench`` with a torque alone."""
+        self.apply_external_wrench(None, torque, envs_idx, ref=ref, local=local)
 
     def __repr__(self):
         return f"RigidLink({self.name!r}, idx_local={self.idx_local})"
@@ -439,10 +498,15 @@ class RigidEntity(EntityIndexing):
         or (n_envs, 2, 3), [lower corner, upper corner], as Genesis's. Exact for primitives (Genesis
         bounds their triangle meshes' vertices: a turned cylinder's box 1e-4 m smaller at 0.1 m
         radius); a plane is unbounded (±inf). Differentiable in the link poses."""
-        shapes = [(link, geom) for link, spec in enumerate(self._specs) for geom in spec.geoms]
+        return self._aabb(range(self.n_links), envs_idx, "the entity")
+
+    def _aabb(self, links_idx_local, envs_idx, whose):
+        """get_AABB of the shapes of ``links_idx_local`` (``whose``: what they are, for the error)."""
+        links = list(links_idx_local)
+        shapes = [(k, geom) for k, link in enumerate(links) for geom in self._specs[link].geoms]
         if not shapes:
-            raise InvalidInputError(f"entity '{self.name}': get_AABB needs collision shapes, the entity has none")
-        poses = self._links(None, envs_idx, slice(0, 7))
+            raise InvalidInputError(f"entity '{self.name}': get_AABB needs collision shapes, {whose} has none")
+        poses = self._links(links, envs_idx, slice(0, 7))
         return self._out(shapes_aabb(shapes, poses[..., :3], poses[..., 3:]))
 
     # -- external wrenches ----------------------------------------------------------------------------
