@@ -472,8 +472,8 @@ def test_attached_camera_rides_its_link(f32):
     bad = np.eye(4)
     bad[0, 0] = 2.0
     for link, transform, message in ((box, offset, r"argument 'rigid_link' must be a RigidLink .*got RigidEntity"),
-                                     (other.links[0], offset, r"argument 'rigid_link' must be a link of this "
-                                                              r"camera's scene"),
+                                     (other.links[0], offset, r"argument 'rigid_link' must be of this camera's "
+                                                              r"scene, got link 'box' of entity 'box_0' of another"),
                                      (box.links[0], bad, r"argument 'offset_T' must be a finite \(4, 4\) pose"),
                                      (box.links[0], np.eye(3), r"argument 'offset_T' must be a finite \(4, 4\)")):
         with pytest.raises(gs.InvalidInputError, match=r"camera 0.attach: " + message):

@@ -266,19 +266,31 @@ class Camera:
         ``offset_T`` ((4, 4) camera pose in the link's frame: it looks along the offset's −z, up its
         y), as Genesis's; ``move_to_attach()`` does so at once."""
         owner = f"{self._name}.attach"
-        if self._follow is not None:
-            raise SceneStateError(f"{owner}: the camera follows entity '{self._follow[0].name}'; call "
-                                  f"unfollow_entity() first")
-        if not isinstance(rigid_link, RigidLink):
-            raise InvalidInputError(f"{owner}: argument 'rigid_link' must be a RigidLink (entity.get_link(name) or "
-                                    f"entity.links[i]), got {type(rigid_link).__name__}")
-        if rigid_link.entity.scene is not self._scene:
-            raise InvalidInputError(f"{owner}: argument 'rigid_link' must be a link of this camera's scene, got "
-                                    f"{rigid_link._who} of another scene")
+        self._check_mount(owner, "rigid_link", rigid_link)
         if isinstance(offset_T, torch.Tensor):
             offset_T = offset_T.detach().cpu().numpy()
         _transform_to_pose(owner, offset_T, "offset_T")
         self._attached = (rigid_link, np.array(offset_T, dtype=np.float64))
+
+    def _check_mount(self, owner, name, target):
+        """Refuse to attach a following camera or to follow with an attached one, and a ``target``
+        (argument ``name``: attach's link, follow_entity's rigid entity) that is not of this scene."""
+        attaching = name == "rigid_link"
+        if attaching and self._follow is not None:
+            raise SceneStateError(f"{owner}: the camera follows entity '{self._follow[0].name}'; call "
+                                  f"unfollow_entity() first")
+        if not attaching and self._attached is not None:
+            raise SceneStateError(f"{owner}: the camera is attached to {self._attached[0]._who}; call detach() "
+                                  f"first")
+        kind, what = (RigidLink, "a RigidLink (entity.get_link(name) or entity.links[i])") if attaching else \
+            (RigidEntity, "a rigid entity (the camera follows its base link)")
+        if not isinstance(target, kind):
+            raise InvalidInputError(f"{owner}: argument '{name}' must be {what}, got {type(target).__name__} "
+                                    f"{getattr(target, 'name', target)!r}")
+        entity = target.entity if attaching else target
+        if entity.scene is not self._scene:
+            raise InvalidInputError(f"{owner}: argument '{name}' must be of this camera's scene, got "
+                                    f"{getattr(target, '_who', repr(entity.name))} of another scene")
 
     def detach(self):
         """Unmount the camera; it keeps its current pose (nothing when it is not attached)."""
@@ -308,15 +320,7 @@ class Camera:
         axis; smoothing: None or in [0, 1): the weight of the camera's previous position and lookat
         (exponential smoothing); fix_orientation: keep the orientation, only move."""
         owner = f"{self._name}.follow_entity"
-        if self._attached is not None:
-            raise SceneStateError(f"{owner}: the camera is attached to {self._attached[0]._who}; call detach() "
-                                  f"first")
-        if not isinstance(entity, RigidEntity):
-            raise InvalidInputError(f"{owner}: argument 'entity' must be a rigid entity (the camera follows its "
-                                    f"base link), got {type(entity).__name__} {getattr(entity, 'name', entity)!r}")
-        if entity.scene is not self._scene:
-            raise InvalidInputError(f"{owner}: argument 'entity' must be an entity of this camera's scene, got "
-                                    f"{entity.name!r} of another scene")
+        self._check_mount(owner, "entity", entity)
         if not (isinstance(fixed_axis, (tuple, list)) and len(fixed_axis) == 3):
             raise InvalidInputError(f"{owner}: argument 'fixed_axis' must be 3 entries, each None or a coordinate "
                                     f"(m), got {fixed_axis!r}")
