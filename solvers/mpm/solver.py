@@ -18,6 +18,11 @@ from .model import EntitySpec, Grid, MPMModel
 
 # Genesis's suggested bound on the substep: h ≤ 2e-2 · dx (s, dx in m)
 GENESIS_DT_PER_DX = 2e-2
+# The explicit substep's elastic wave bound is h ≤ WAVE_CFL · dx / c: measured (a block with small
+# random velocities, 100 cells/m, float32 and float64), it blew up at h·c/dx = 1.2 (ν 0.2), 0.95
+# (ν 0.45, neo-Hookean and corotated), 0.90 (ν 0.499), stable at 1.10, 0.93, 0.90, 0.85; dx/c alone
+# let a ν 0.45 beam run to NaN without a warning.
+WAVE_CFL = 0.8
 # Taichi 1.7 indexes an array with 32-bit ints (an index past this wraps: a crash or a wrong write)
 MAX_ARRAY_ELEMENTS = 2**31 - 1
 # Up to this many envs the grid's chores (adding, copying, zeroing the listed nodes: grid.py) run on
@@ -137,17 +142,18 @@ class MPMSolver(MPMAdjoint, Solver):
     def check_substep(self, E, nu, rho):
         """Warn when the substep exceeds the stability limit for particles of Young's modulus E (Pa),
         Poisson ratio nu and density rho (kg/m³), arrays of one shape: Genesis's suggested
-        h ≤ 2e-2·dx, and the elastic wave's CFL bound h ≤ dx / c with c = √((λ + 2μ)/ρ) of the
-        stiffest particle (also after set_material_params raises a stiffness)."""
+        h ≤ 2e-2·dx, and the elastic wave's CFL bound h ≤ WAVE_CFL·dx / c with c = √((λ + 2μ)/ρ)
+        of the stiffest particle (also after set_material_params raises a stiffness)."""
         m, h = self.model, self.dt / self.substeps
         E, nu, rho = np.asarray(E, dtype=np.float64), np.asarray(nu, dtype=np.float64), np.asarray(rho, dtype=np.float64)
         modulus = E * (1 - nu) / ((1 + nu) * (1 - 2 * nu))  # λ + 2μ
         wave = float(np.sqrt(np.max(modulus / rho))) if modulus.size else 0.0
-        limit = min(GENESIS_DT_PER_DX * m.grid.dx, m.grid.dx / wave if wave > 0 else np.inf)
+        wave_limit = WAVE_CFL * m.grid.dx / wave if wave > 0 else np.inf
+        limit = min(GENESIS_DT_PER_DX * m.grid.dx, wave_limit)
         if h > limit:
             warn_user(f"MPM solver (entities: {', '.join(self.entity_names)}): the substep dt / substeps = "
                       f"{h:.3g} s exceeds the stability limit {limit:.3g} s (min of 2e-2·dx = "
-                      f"{GENESIS_DT_PER_DX * m.grid.dx:.3g} s and dx / wave speed = {m.grid.dx / wave:.3g} s); "
+                      f"{GENESIS_DT_PER_DX * m.grid.dx:.3g} s and {WAVE_CFL:g}·dx / wave speed = {wave_limit:.3g} s); "
                       f"the simulation may blow up: raise SimOptions substeps or lower dt")
 
     def _allocate(self):
