@@ -133,11 +133,10 @@ MUJOCO_ITERATIONS, GENESIS_ITERATIONS = 100, 25
 
 
 @named_keywords("gravity", "disable_constraint", "max_collision_pairs", "multiplier_collision_broad_phase",
-           "integrator", "IK_max_targets", "batch_links_info", "batch_joints_info", "batch_dofs_info",
-           "noslip_iterations", "noslip_tolerance", "contact_resolution", "enable_torsional_friction",
-           "enable_rolling_friction", "contact_pruning_tolerance", "sparse_solve", "box_box_detection",
-           "use_hibernation", "hibernation_thresh_vel", "max_dynamic_constraints", "enable_multi_contact",
-           "use_gjk_collision", "enable_contact_patch", "broadphase_traversal")
+           "integrator", "IK_max_targets", "noslip_iterations", "noslip_tolerance", "contact_resolution",
+           "enable_torsional_friction", "enable_rolling_friction", "contact_pruning_tolerance", "sparse_solve",
+           "box_box_detection", "use_hibernation", "hibernation_thresh_vel", "max_dynamic_constraints",
+           "enable_multi_contact", "use_gjk_collision", "enable_contact_patch", "broadphase_traversal")
 @dataclass
 class RigidOptions(_TimeBased):
     """Rigid solver switches (Genesis 1.4.5's names and defaults unless said).
@@ -181,6 +180,9 @@ class RigidOptions(_TimeBased):
         not reproduced), and a sphere whose centre is in a mesh's hull, where EPA stops at its
         budget, the nearest facet. Outside it only, a cylinder standing on a plane touches at four
         rim points too (MuJoCo's inscribed triangle turns with the tilt: no gradient at upright).
+    batch_links_info, batch_joints_info, batch_dofs_info: Genesis's switches that let link, joint
+        and dof parameters (masses, gains, friction…) differ per env; ours always may (every
+        parameter is stored per env), so either value works, as True does in Genesis.
     smooth_contact (ours): every geom's default solimp becomes (0, 0.95, 0.001, 0.5, 2), whose
         impedance starts at zero at contact onset, so a contact's force grows from zero with depth
         instead of jumping (MuJoCo's default d0 = 0.9 jumps): the step is then a smooth map through
@@ -203,14 +205,17 @@ class RigidOptions(_TimeBased):
     max_contacts: int = None
     enable_mujoco_compatibility: bool = False
     smooth_contact: bool = False
-    dt: float = None  # (last: the fields before keep their positions)
+    dt: float = None  # (the fields before keep their positions: new ones come after)
+    batch_links_info: bool = False
+    batch_joints_info: bool = False
+    batch_dofs_info: bool = False
 
     def __post_init__(self):
         owner = "RigidOptions"
         self._check_dt(owner)
         for name in ("enable_collision", "enable_self_collision", "enable_adjacent_collision",
                      "enable_neutral_collision", "enable_joint_limit", "enable_mujoco_compatibility",
-                     "smooth_contact"):
+                     "smooth_contact", "batch_links_info", "batch_joints_info", "batch_dofs_info"):
             setattr(self, name, check_bool(owner, name, getattr(self, name)))
         if self.constraint_solver != constraint_solver.Newton:
             raise InvalidInputError(f"{owner}: argument 'constraint_solver' expected gs.constraint_solver.Newton "

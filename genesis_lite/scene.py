@@ -139,9 +139,10 @@ class Scene:
             raise InvalidInputError(f"scene.add_entity: argument 'visualize_contact' must be False (there is no "
                                     f"viewer to draw contacts in), got {visualize_contact!r}")
         drawn = "particle" if isinstance(material, MPM.Base) else "visual"
-        if vis_mode not in (None, drawn):
-            raise InvalidInputError(f"scene.add_entity: argument 'vis_mode' must be None or {drawn!r} (what the "
-                                    f"cameras draw of a {type(material).__name__} entity), got {vis_mode!r}")
+        for given, arg in ((vis_mode, "argument 'vis_mode'"), (surface and surface.vis_mode, "the surface's vis_mode")):
+            if given not in (None, drawn):
+                raise InvalidInputError(f"scene.add_entity: {arg} must be None or {drawn!r} (what the cameras draw "
+                                        f"of a {type(material).__name__} entity), got {given!r}")
         if name is not None and not isinstance(name, str):
             raise InvalidInputError(f"scene.add_entity: argument 'name' must be a str or None, got "
                                     f"{type(name).__name__} {name!r}")

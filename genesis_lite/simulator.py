@@ -64,6 +64,8 @@ class SolverSlot:
         self.uploaded_inputs = None  # ((tensor, ...), (version, ...)): Taichi's inputs equal
         self.derived = None  # (state, value) cache of the last derived read
         self.warned_nonfinite = False  # _check_finite warned once since the last reset
+        # the parameters the last reset detached from a graph and not set since (their names)
+        self.detached_params = set()
         # contacts() of the last step: (B,) bool of the envs whose state a reset or setter replaced
         # since (None: none), and the contacts as the step left them, kept before a backward's
         # replays overwrite the solver's (None: the solver still holds them)
@@ -136,7 +138,9 @@ class Simulator:
         inputs = {**previous, name: value}
         if name in solver.derived_from:
             inputs = solver.derive_inputs(inputs, previous)
-        self.slot(solver).inputs = inputs
+        slot = self.slot(solver)
+        slot.inputs = inputs
+        slot.detached_params = {n for n in slot.detached_params if inputs[n] is previous[n]}  # (set again: not)
 
     def _sync(self, slot, state, inputs):
         """Make Taichi hold ``state`` (None: what it holds) and ``inputs``, uploading only what differs."""
@@ -188,6 +192,7 @@ class Simulator:
             slot.warned_nonfinite = False
             defaults = slot.solver.default_inputs
             current = slot.inputs or defaults
+            slot.detached_params = {name for name in slot.solver.persistent_inputs if current[name].requires_grad}
             # (inputs derived from persistent ones are persistent too: detached, they still match)
             slot.inputs = {name: current[name].detach() if name in slot.solver.persistent_inputs
                            else _restored(current[name], defaults[name], envs) for name in defaults}
@@ -318,13 +323,15 @@ class Simulator:
 
     def check_first_gradients(self, grads):
         """After the backward of a rollout's first step (its gradients ``grads``, tensors or None):
-        one that is not finite warns once a rollout. An unstable forward (MPM's stability warning at
+        parameters its reset detached warn (_check_detached_parameters); a gradient that is not
+        finite warns once a rollout. An unstable forward (MPM's stability warning at
         build) can stay finite while its exact derivative overflows (sand at E 1e8: particles at 700
         m/s, the gradient inf by step 19), which nothing else would say. A warning, not an error,
         also under check_nan: the state's gradient holds columns no input requiring grad reaches
         (a loss with an infinite slope in one body's pose leaves another's inputs finite). Checked
         once a backward, not each step (a reduction over the state: a tenth of a small scene's
         reverse step)."""
+        self._check_detached_parameters()
         if self.warned_gradient or all(g is None or bool(torch.isfinite(g).all()) for g in grads):
             return
         self.warned_gradient = True
@@ -332,6 +339,21 @@ class Simulator:
                        "the loss's own slope, a state that went non-finite, or an unstable forward whose exact "
                        "derivative overflowed (reduce dt; see the warnings at build and in the rollout); check the "
                        "gradients of your inputs")
+
+    def _check_detached_parameters(self):
+        """Warn (once a rollout: the reset after it no longer finds them in a graph) when the reset
+        that began the rollout detached parameters set from tensors requiring grad and none was set
+        again: the loss being differentiated cannot reach those tensors, whose .grad then stays
+        as it was, silently (a friction set once before a loop of reset, rollout, backward)."""
+        lost = [f"{type(slot.solver).__name__}'s {', '.join(sorted(slot.detached_params))}" for slot in self.slots
+                if slot.detached_params]
+        if lost:
+            for slot in self.slots:
+                slot.detached_params = set()
+            logger.warning(f"scene.reset() detached the parameters set before it from tensors requiring grad "
+                           f"({'; '.join(lost)}), and they were not set again: this backward does not reach those "
+                           f"tensors (they keep their values, not their graph); set them after reset() to train "
+                           f"them")
 
     def _backward_shared(self, states, inputs, grad_states, warm_starts, records):
         """The shared substep loop's reverse (solvers/base.py): load, replay, then mirror order."""

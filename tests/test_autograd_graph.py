@@ -22,7 +22,8 @@ def pendulum(f64):
 
 def _final_q_of_mass(scene, robot, mass, steps=T):
     scene.reset()
-    robot.set_links_mass(mass)
+    if mass is not None:
+        robot.set_links_mass(mass)
     robot.set_dofs_position([0.4, -0.3])
     for _ in range(steps):
         scene.step()
@@ -115,6 +116,32 @@ def test_step_under_no_grad_cutting_a_graph_warns_once(pendulum, caplog):
         warnings = [r.getMessage() for r in caplog.records if "no_grad" in r.getMessage()]
         assert len(warnings) == 1 and "step 1" in warnings[0], warnings
         caplog.clear()
+
+
+def test_parameters_a_reset_detached_warn_at_the_backward(pendulum, caplog):
+    """A mass set once from a tensor requiring grad, then a loop of reset, rollout, backward: the
+    reset keeps the value, not the graph, so the mass's .grad stays None: warned at the first
+    backward (naming the input), once; not when the loop sets it again after each reset, nor when
+    the setter's value needed no gradient."""
+    scene, robot = pendulum
+    from tests.conftest import warns
+    mass = robot.get_links_mass().detach().clone().requires_grad_(True)
+    robot.set_links_mass(mass)
+    velocity = torch.tensor([0.1, 0.2], dtype=torch.float64, requires_grad=True)
+    for k in range(2):
+        with warns(caplog, r"scene.reset\(\) detached .*RigidSolver's .*mass.* set them after reset\(\)" if k == 0
+                   else None):
+            scene.reset()
+            robot.set_dofs_velocity(velocity)
+            for _ in range(3):
+                scene.step()
+            robot.get_dofs_position().sum().backward()
+    assert mass.grad is None and velocity.grad is not None
+    with warns(caplog, None):
+        for _ in range(2):
+            _final_q_of_mass(scene, robot, mass, steps=3).sum().backward()
+            robot.set_dofs_kp(torch.ones(2, dtype=torch.float64))  # (no gradient: nothing detached)
+    assert mass.grad is not None
 
 
 def test_autograd_grad_equals_backward(pendulum):

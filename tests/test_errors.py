@@ -226,8 +226,8 @@ def test_arguments_a_method_does_not_take(f64, built):
            f"link '{robot.links[-1].name}' of entity '{ENTITY}'", "get_pos", "too many positional arguments")
     raises(gs.InvalidInputError, lambda: scene.step(foo=1), "gs.Scene", "step", "'foo'", "'update_visualizer'")
     raises(gs.InvalidInputError, lambda: gs.Scene(show_FPS=False), "gs.Scene", "'show_FPS'", "'sim_options'")
-    raises(gs.InvalidInputError, lambda: gs.surfaces.Default(vis_mode="visual"), "Default", "'vis_mode'",
-           "a Genesis option that genesis_lite does not have", "['color']")
+    raises(gs.InvalidInputError, lambda: gs.surfaces.Default(smooth=False), "Default", "'smooth'",
+           "a Genesis option that genesis_lite does not have", "['color', 'vis_mode']")
 
 def test_envs_idx_without_batch(f64, built):
     _, robot = built

@@ -603,6 +603,13 @@ def test_add_entity_takes_genesis_arguments_in_genesis_order(f64):
             scene.add_entity(gs.morphs.Sphere(), **kwargs)
     with pytest.raises(gs.InvalidInputError, match="'particle'"):
         scene.add_entity(gs.morphs.Box(), gs.materials.MPM.Elastic(), vis_mode="visual")
+    # the surface's vis_mode (every Genesis MPM tutorial sets it), checked alike; add_entity's is taken first
+    scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.5), size=(0.1, 0.1, 0.1)), gs.materials.MPM.Elastic(),
+                     gs.surfaces.Default(vis_mode="particle"))
+    with pytest.raises(gs.InvalidInputError, match="the surface's vis_mode must be None or 'visual' .*got 'particle'"):
+        scene.add_entity(gs.morphs.Sphere(), surface=gs.surfaces.Default(color=(1, 0, 0), vis_mode="particle"))
+    with pytest.raises(gs.InvalidInputError, match="surfaces.Default: argument 'vis_mode' must be None or a str"):
+        gs.surfaces.Default(vis_mode=3)
 
 
 def test_tensor_without_data_is_a_named_error(f64, pendulum):
@@ -896,3 +903,22 @@ def test_link_level_getters_aabb_and_wrench_as_the_entity_s(f64, tmp_path):
     with pytest.raises(gs.InvalidInputError, match=r"entity 'urdf_0': get_AABB needs collision shapes, link 'arm' "
                                                    r"has none"):
         shapeless.links[1].get_AABB()
+
+
+def test_genesis_batch_info_switches_are_accepted(f64):
+    """RigidOptions(batch_links_info, batch_joints_info, batch_dofs_info), which every Genesis
+    domain-randomisation script sets, are accepted (ours keeps every parameter per env whatever
+    they say: per-env values work either way) and checked as booleans."""
+    for flag in (True, False):
+        options = gs.options.RigidOptions(batch_links_info=flag, batch_joints_info=flag, batch_dofs_info=flag)
+        scene = gs.Scene(rigid_options=options, show_viewer=False)
+        robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
+        scene.build(n_envs=2)
+        kp, mass = robot.get_dofs_kp().clone(), robot.get_links_mass().clone()
+        robot.set_dofs_kp(_t([[10.0, 20.0]]), envs_idx=[1])
+        robot.set_links_mass(_t([[3.0]]), [1], envs_idx=[0])
+        assert torch.equal(robot.get_dofs_kp(), torch.stack([kp[0], _t([10.0, 20.0])]))
+        assert robot.get_links_mass()[0, 1] == 3.0 and torch.equal(robot.get_links_mass()[1], mass[1])
+        scene.destroy()
+    with pytest.raises(gs.InvalidInputError, match=r"RigidOptions: argument 'batch_dofs_info' must be True or False"):
+        gs.options.RigidOptions(batch_dofs_info="yes")
