@@ -7,10 +7,10 @@ arm gets the joint torques
 
     τ_t = hold + SCALE · controls[t] + KP · (Q0 − q_t)
 
-where ``hold`` holds the start pose Q0 against gravity (``−robot.get_dofs_force()`` at rest), the
-proportional term (torch, on the simulator's state) keeps the arm's shape, and SCALE (N·m per
-unit, per joint) puts the controls of the strong shoulder joints and of the light wrist on one
-scale: Adam moves every entry by about lr. We optimise the whole sequence ``controls`` of shape
+where ``hold`` holds the start pose Q0 against gravity (``−robot.get_dofs_force()`` after a step
+from rest), the proportional term (torch, on the simulator's state) keeps the arm's shape, and
+SCALE (N·m per unit, per joint) puts the controls of the strong shoulder joints and of the light
+wrist on one scale: Adam moves every entry by about lr. We optimise the whole sequence ``controls`` of shape
 (n_steps, 7) so that the box ends at ``target`` on the plane. It starts as a constant torque on
 the base joint: the arm swings and its flange pushes the box sideways, but not far enough. The
 loss only depends on the box, so every gradient flows through the arm–box contacts (the convex
@@ -76,8 +76,10 @@ def main():
     q0, kp, scale = (torch.tensor(v, device=gs.device, dtype=gs.tc_float) for v in (Q0, KP, SCALE))
     robot.set_dofs_damping(torch.tensor(DAMPING, device=gs.device, dtype=gs.tc_float))
     robot.set_dofs_position(q0)
+    start_state = scene.get_state()
+    scene.step()  # from rest without controls: the step's dofs force is gravity's alone (nothing touches)
     hold = -robot.get_dofs_force()
-    scene.reset(scene.get_state())
+    scene.reset(start_state)
 
     # optimise the torque sequence on top of the hold
     n_steps = 100

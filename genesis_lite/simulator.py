@@ -66,11 +66,12 @@ class SolverSlot:
         self.warned_nonfinite = False  # _check_finite warned once since the last reset
         # the parameters the last reset detached from a graph and not set since (their names)
         self.detached_params = set()
-        # contacts() of the last step: (B,) bool of the envs whose state a reset or setter replaced
-        # since (None: none), and the contacts as the step left them, kept before a backward's
-        # replays overwrite the solver's (None: the solver still holds them)
+        # the last step's readouts (solver.last_step_readouts: contacts, dofs forces): (B,) bool of
+        # the envs whose state a reset or setter replaced since (None: none), and the readouts as
+        # the step left them, kept before a backward's replays overwrite the solver's (None: the
+        # solver still holds them)
         self.replaced_envs = None
-        self.held_contacts = None
+        self.held_readouts = None
         # (state, warm start): the solver's warm start for that state as the forward left it, kept
         # while a backward's replays overwrite the solver's (None: the solver holds it)
         self.held_warm_start = None
@@ -228,7 +229,7 @@ class Simulator:
                 slot.state = None
                 slot.uploaded_state = None
         for slot in self.slots:
-            slot.derived = slot.replaced_envs = slot.held_contacts = slot.held_warm_start = None
+            slot.derived = slot.replaced_envs = slot.held_readouts = slot.held_warm_start = None
             for name in slot.solver.transient_inputs:  # (the build's tensor: no upload when unused)
                 if slot.inputs[name] is not slot.solver.default_inputs[name]:
                     slot.inputs = {**slot.inputs, name: slot.solver.default_inputs[name]}
@@ -439,29 +440,33 @@ class Simulator:
         return self._query(solver, "get_mass_mat", solver.mass_matrix)
 
     def dofs_force(self, solver):
-        """(B, D) generalised dof forces of the current state and inputs (solver.dofs_force);
-        not differentiable (see _query)."""
-        return self._query(solver, "get_dofs_force", solver.dofs_force)
+        """(B, D) the last step's generalised dof forces, constraint forces included
+        (solver.dofs_force; see _last_step)."""
+        return self._last_step(solver, "get_dofs_force", "dofs_force")
 
     def contacts(self, solver, what):
-        """(B, C, 12) the last step's contacts (solver.contacts), none in the envs replaced since
-        (set_state), as a value whose backward raises when the state requires grad: contact
-        positions and forces are read-outs of the step's collision and constraint solve, not
-        differentiable (the state's gradient carries their effect), and a gradient must never stop
-        silently."""
+        """(B, C, 12) the last step's contacts (solver.contacts; see _last_step)."""
+        return self._last_step(solver, what, "contacts")
+
+    def _last_step(self, solver, what, readout):
+        """The last step's ``readout`` (one of solver.last_step_readouts), as if no step had been
+        taken in the envs replaced since (set_state: reset, setters), as a value whose backward
+        raises when the state requires grad: read-outs of the step's collision and constraint
+        solve, not differentiable (the state's gradient carries their effect), and a gradient must
+        never stop silently."""
         slot = self.slot(solver)
-        value = solver.contacts() if slot.held_contacts is None else slot.held_contacts
+        value = getattr(solver, readout)() if slot.held_readouts is None else slot.held_readouts[readout]
         if slot.replaced_envs is not None:
-            value = solver.without_contacts(value, torch.as_tensor(slot.replaced_envs, device=value.device))
+            value = solver.without_last_step(readout, value, torch.as_tensor(slot.replaced_envs, device=value.device))
         return value if slot.state is None else autograd.not_differentiable(what, slot.state, value)
 
     def hold_before_backward(self):
-        """Keep what a backward's replays and uploads overwrite of the last step: each contact
-        solver's contacts, and each solver's warm start while Taichi still holds the scene's state
-        (the forward's then; a replayed step or an upload of an older state has cleared it)."""
+        """Keep what a backward's replays and uploads overwrite of the last step: each solver's
+        last-step readouts, and its warm start while Taichi still holds the scene's state (the
+        forward's then; a replayed step or an upload of an older state has cleared it)."""
         for slot in self.slots:
-            if slot.held_contacts is None and hasattr(slot.solver, "contacts"):
-                slot.held_contacts = slot.solver.contacts()
+            if slot.held_readouts is None:
+                slot.held_readouts = {name: getattr(slot.solver, name)() for name in slot.solver.last_step_readouts}
             self._hold_warm_start(slot)
 
     @staticmethod

@@ -46,6 +46,9 @@ class Solver:
     transient_inputs = ()
     #: inputs from which ``derive_inputs`` computes others (recomputed whenever one is set)
     derived_from = ()
+    #: methods reading what the last step left (the rigid solver's contacts and dofs forces):
+    #: kept before a backward's replays overwrite it; ``without_last_step`` blanks replaced envs
+    last_step_readouts = ()
     #: names of the solver's entities, for error messages
     entity_names = ()
     #: substeps per step

@@ -14,8 +14,8 @@ Scenes:
   from the side of the box (its widest rim, at z 59 mm, meets the box's top edge, at z 60 mm);
   the input is the (steps, 7) joint-torque sequence, applied as
   ``control_dofs_force(x[t] + KP·(Q0 − q))``: x's nominal value is the gravity-compensating torque
-  at Q0 (``−get_dofs_force()`` at rest) plus PUSH N·m on the base joint, and the proportional
-  term (torch, on the state) holds the arm's shape. The arm swings, the flange pushes the box
+  at Q0 (``−get_dofs_force()`` after a step from rest) plus PUSH N·m on the base joint, and the
+  proportional term (torch, on the state) holds the arm's shape. The arm swings, the flange pushes the box
   along +y for the whole rollout (mesh–box contacts of the convex collider, 2 to 6 of them, from
   the 8th step on in 190 of 200 steps; counted), while the box slides on the plane (box–plane).
   Loss: a weighted sum of the box's final position.
@@ -90,8 +90,10 @@ def _kuka_scene(cone, n_envs=0, substeps=1):
         scene.build(n_envs=n_envs)
         arm.set_dofs_damping(_every_env(DAMPING, n_envs))
         arm.set_dofs_position(_every_env(Q0, n_envs))
-        hold = -arm.get_dofs_force()  # controls are zero, the arm at rest: gravity's joint torques
-        scene.reset(scene.get_state())
+        start = scene.get_state()
+        scene.step()  # from rest without controls: the last substep's force is (about) gravity's
+        hold = -arm.get_dofs_force()
+        scene.reset(start)
         _SCENES[key] = (scene, {"arm": arm, "box": box, "hold": hold[0] if n_envs else hold})
     return _SCENES[key]
 

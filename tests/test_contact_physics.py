@@ -278,8 +278,8 @@ def test_contacts_of_envs_a_reset_or_setter_replaced_are_gone_until_the_next_ste
 
 def test_contacts_after_a_backward_are_the_last_steps(f64):
     """A backward replays steps over the solver's contact arrays: the read-outs after it still give
-    the last step's contacts (they gave the first replayed step's: a landed box read none), and an
-    env replaced before it still has none."""
+    the last step's contacts and dofs forces (they gave the first replayed step's: a landed box read
+    none), and an env replaced before it still has none."""
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, requires_grad=True), show_viewer=False)
     scene.add_entity(gs.morphs.Plane())
     box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.1), pos=(0.0, 0.0, 0.1)))
@@ -290,10 +290,13 @@ def test_contacts_after_a_backward_are_the_last_steps(f64):
         scene.step()
     landed = box.get_contacts()["valid_mask"].sum(1).tolist()
     assert landed == [4, 4]
+    force = box.get_dofs_force().detach().clone()  # the step's, contacts included
+    assert float(force[0, 2]) > -0.5 * 9.81 * float(box.get_mass()[0])  # the contacts hold most of the weight
     loss = box.get_pos().sum()
     box.set_pos([0.0, 0.0, 1.0], envs_idx=[1])
     loss.backward()
     assert box.get_contacts()["valid_mask"].sum(1).tolist() == [4, 0]
+    assert torch.equal(box.get_dofs_force().detach(), torch.stack([force[0], torch.zeros_like(force[1])]))
 
 
 def test_contact_readouts_refuse_a_backward_in_a_differentiable_scene(f64):

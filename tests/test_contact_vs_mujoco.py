@@ -1,5 +1,6 @@
 """Contact, step for step against MuJoCo: from the same state, one step gives the same
-velocities (≤ 1e-8) and the same contacts (count, geoms, positions; the colliders' normals,
+velocities (≤ 1e-8), dofs forces (get_dofs_force: MuJoCo's qfrc_smooth + qfrc_constraint) and the
+same contacts (count, geoms, positions; the colliders' normals,
 frames and distances are compared with MuJoCo's in tests/test_colliders_*.py) for every
 primitive pair, both friction cones, default and non-default solref, solimp and impratio.
 
@@ -92,6 +93,7 @@ def _check_step(spec, n_states=N_STATES, entity=0, mass_scale=None):
     _set_ours(entities, qpos, qvel)
     scene.step()
     ours_qvel = np.concatenate([e.get_dofs_velocity().cpu().numpy() for e in entities], axis=1)
+    ours_force = np.concatenate([e.get_dofs_force().cpu().numpy() for e in entities], axis=1)
     contacts = entities[entity].get_contacts()
     geom_map = _geom_map(scene, m, spec)
     mine = set(range(entities[entity].geom_start, entities[entity].geom_start + entities[entity].n_geoms))
@@ -99,6 +101,9 @@ def _check_step(spec, n_states=N_STATES, entity=0, mass_scale=None):
     for k in range(n_states):
         d = _mujoco_step(models[k], qpos[k], qvel[k])
         assert np.allclose(ours_qvel[k], d.qvel, rtol=0, atol=1e-8), (k, ours_qvel[k] - d.qvel)
+        force = d.qfrc_smooth + d.qfrc_constraint  # Genesis's dofs force: the step's, contacts included
+        assert np.allclose(ours_force[k], force, rtol=0, atol=1e-6 * (1 + np.abs(force).max())), \
+            (k, ours_force[k] - force)
         expected = [c for c in _contacts_mujoco(d) if c[0] in mine or c[1] in mine]
         valid = contacts["valid_mask"][k]
         ours = [(int(a), int(b), p) for a, b, p in zip(contacts["geom_a"][k][valid], contacts["geom_b"][k][valid],

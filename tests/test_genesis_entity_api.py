@@ -438,71 +438,91 @@ def test_position_velocity_targets_gradient_matches_finite_differences(f64, grap
 
 # -- get_dofs_force (§Q4) ------------------------------------------------------------------------------
 def test_dofs_force_of_the_pendulum_is_analytic(f64, pendulum):
+    """The last step's force, from its start state: actuator (clipped) − damping·q̇ − gravity; zeros
+    before a step and after a setter (no step since), as Genesis's buffer before its first step."""
     scene, robot = pendulum
-    scene.reset()
     q, v = 0.3, 0.7
-    robot.set_dofs_position([q])
-    robot.set_dofs_velocity([v])
     gravity = 9.81 * np.sin(q)  # N·m, pulling back to q = 0
-    assert np.isclose(float(robot.get_dofs_force()), -0.5 * v - gravity, rtol=0, atol=1e-12)  # no control
-    robot.control_dofs_position([0.0])
-    assert np.isclose(float(robot.get_dofs_force()), -5.0 - 0.5 * v - gravity, rtol=0, atol=1e-12)  # clipped
-    robot.set_dofs_force_range([-1000.0], [1000.0])
-    try:
-        command = 100 * (0.0 - q) - 10 * v
-        assert np.isclose(float(robot.get_dofs_force()), command - 0.5 * v - gravity, rtol=0, atol=1e-12)
-    finally:
-        robot.set_dofs_force_range([-5.0], [5.0])
+    for control, expected in ((None, -0.5 * v - gravity), (0.0, -5.0 - 0.5 * v - gravity),
+                              (1000.0, 100 * (0.0 - q) - 10 * v - 0.5 * v - gravity)):
+        scene.reset()
+        robot.set_dofs_position([q])
+        robot.set_dofs_velocity([v])
+        assert float(robot.get_dofs_force()) == 0.0
+        if control is not None:
+            robot.set_dofs_force_range([-control - 5.0], [control + 5.0])
+            robot.control_dofs_position([0.0])
+        scene.step()
+        assert np.isclose(float(robot.get_dofs_force()), expected, rtol=0, atol=1e-12), control
+    robot.set_dofs_force_range([-5.0], [5.0])
 
 
-def test_dofs_force_is_what_the_next_step_applies(f64, two_robots):
-    """q̇' = q̇ + h·A⁻¹·get_dofs_force() with A = get_mass_mat() + h·diag(damping + kv of the dofs
-    in a servo mode) (semi-implicit Euler, implicit damping and servo kv, as Genesis), and the
-    actuator's share is get_dofs_control_force()."""
+def test_dofs_force_is_what_the_last_step_applied(f64, two_robots):
+    """q̇' = q̇ + h·A⁻¹·get_dofs_force() after a step, with A = get_mass_mat() + h·diag(damping + kv
+    of the dofs in a servo mode) at its start (semi-implicit Euler, implicit damping and servo kv, as
+    Genesis); the actuator's share is get_dofs_control_force() at the start (the same step without
+    the controls)."""
     scene, kuka, other = two_robots
-    scene.reset()
     rng = np.random.default_rng(6)
-    for robot in (kuka, other):
-        robot.set_dofs_position(_t(rng.uniform(-1, 1, (2, robot.n_dofs))))
-        robot.set_dofs_velocity(_t(rng.uniform(-1, 1, (2, robot.n_dofs))))
+    start = {robot: (_t(rng.uniform(-1, 1, (2, robot.n_dofs))), _t(rng.uniform(-1, 1, (2, robot.n_dofs))))
+             for robot in (kuka, other)}
     kuka_forces = _t(rng.uniform(-5, 5, (2, kuka.n_dofs)))
 
-    def control():
-        other.control_dofs_position_velocity(_t([[0.2], [0.3]]), _t([[0.5], [-0.5]]), [0])
-        other.control_dofs_velocity(_t([[1.0], [-1.0]]), [1])
-        kuka.control_dofs_force(kuka_forces)
+    def from_start(controlled):
+        scene.reset()
+        for robot, (position, velocity) in start.items():
+            robot.set_dofs_position(position)
+            robot.set_dofs_velocity(velocity)
+        if controlled:
+            other.control_dofs_position_velocity(_t([[0.2], [0.3]]), _t([[0.5], [-0.5]]), [0])
+            other.control_dofs_velocity(_t([[1.0], [-1.0]]), [1])
+            kuka.control_dofs_force(kuka_forces)
 
-    control()
-    predicted = {}
+    from_start(controlled=True)
+    predicted, actuator = {}, {}
     for robot in (kuka, other):
-        force, actuator = robot.get_dofs_force().numpy(), robot.get_dofs_control_force().numpy()
         damping, qvel = robot.get_dofs_damping().numpy(), robot.get_dofs_velocity().numpy()
         if robot is other:  # both its dofs are servoed
             damping = damping + robot.get_dofs_kv().numpy()
         matrix = robot.get_mass_mat().numpy() + DT * np.eye(robot.n_dofs) * damping[:, None, :]
-        predicted[robot.name] = qvel + DT * np.linalg.solve(matrix, force[..., None])[..., 0]
-        robot.control_dofs_force(torch.zeros(2, robot.n_dofs, dtype=torch.float64))
-        assert np.abs(force - robot.get_dofs_force().numpy() - actuator).max() <= 1e-10, robot.name
-    control()
+        predicted[robot] = lambda force, qvel=qvel, matrix=matrix: \
+            qvel + DT * np.linalg.solve(matrix, force[..., None])[..., 0]
+        actuator[robot] = robot.get_dofs_control_force().numpy()
+    scene.step()
+    forces = {robot: robot.get_dofs_force().numpy() for robot in (kuka, other)}
+    for robot in (kuka, other):
+        err = np.abs(robot.get_dofs_velocity().numpy() - predicted[robot](forces[robot])).max()
+        assert err <= 1e-10, f"{robot.name}: max |q̇' − predicted| = {err:.3g}"
+    from_start(controlled=False)
     scene.step()
     for robot in (kuka, other):
-        err = np.abs(robot.get_dofs_velocity().numpy() - predicted[robot.name]).max()
-        assert err <= 1e-10, f"{robot.name}: max |q̇' − predicted| = {err:.3g}"
+        assert np.abs(forces[robot] - robot.get_dofs_force().numpy() - actuator[robot]).max() <= 1e-10, robot.name
 
 
-def test_dofs_force_of_a_free_base_at_rest_is_its_weight(f64, two_robots):
-    scene, kuka, _ = two_robots
-    scene.reset()
-    weight = kuka.get_mass().numpy() * -9.81  # N, on the world-linear dofs
-    force = kuka.get_dofs_force().numpy()
-    assert np.abs(force[:, :2]).max() <= 1e-10
-    assert np.abs(force[:, 2] - weight).max() <= 1e-10
+def test_dofs_force_of_a_free_base_is_its_weight_then_nothing_at_rest_on_a_plane(f64):
+    """A step from rest in the air: the free base's force is its weight (Genesis's dofs force, as
+    MuJoCo's qfrc_smooth + qfrc_constraint); on a plane, once it rests: nothing (the contacts hold
+    its weight: Genesis 1.4.5 gives 0 for a resting box too)."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT), show_viewer=False)
+    plane = scene.add_entity(gs.morphs.Plane(pos=(0.0, 0.0, -1.0)))
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.2), pos=(0.0, 0.0, 0.5)))
+    scene.build(n_envs=2)
+    scene.step()
+    weight = box.get_mass().numpy() * -9.81  # N, on the world-linear dofs
+    force = box.get_dofs_force().numpy()
+    assert len(box.get_contacts(with_entity=plane)["valid_mask"].nonzero()) == 0
+    assert np.abs(force[:, [0, 1, 3, 4, 5]]).max() == 0.0 and np.abs(force[:, 2] - weight).max() <= 1e-12
+    for _ in range(200):
+        scene.step()
+    assert box.get_contacts(with_entity=plane)["valid_mask"].sum() == 8
+    assert np.abs(box.get_dofs_force().numpy()).max() < 1e-9
 
 
 def test_dofs_force_is_not_differentiable(f64, graph):
     scene, robot = graph
     scene.reset()
     robot.control_dofs_force(_t([0.1, 0.2]).requires_grad_(True))  # only an input requires grad
+    scene.step()
     with pytest.raises(gs.GradientError, match="get_dofs_force"):
         robot.get_dofs_force().sum().backward()
 

@@ -983,11 +983,12 @@ class RigidEntity(EntityIndexing):
 
     # -- dynamics queries ---------------------------------------------------------------------------
     def get_dofs_force(self, dofs_idx_local=None, envs_idx=None):
-        """Generalised force on the dofs, N·m or N: (n,) or (n_envs, n): clipped actuator force −
-        damping·q̇ − bias (gravity, Coriolis, centrifugal), at the current state and inputs: what
-        the next step's constraint solve starts from (Genesis returns what its last substep
-        applied, from that substep's start state; neither includes constraint forces: joint
-        limits, friction loss, contacts). Not differentiable."""
+        """Generalised force on the dofs in the last step's last substep, N·m or N: (n,) or
+        (n_envs, n), as Genesis 1.4.5's: clipped actuator force − damping·q̇ − bias (gravity,
+        Coriolis, centrifugal) at that substep's start, plus the constraint forces (joint limits,
+        friction loss, contacts) of its solve (MuJoCo's qfrc_smooth + qfrc_constraint): a body
+        resting on the ground feels none. Zeros in an env before its first step and after a
+        reset or setter replaced its state. Not differentiable."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
         full = self._sim().dofs_force(self._solver)
         envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)

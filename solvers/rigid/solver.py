@@ -519,8 +519,8 @@ class RigidSolver(Solver):
         return out
 
     def dofs_force(self):
-        """(B, D) generalised force at the uploaded state and inputs: clipped actuator force −
-        damping·q̇ − bias (qfrc_smooth, what the next step's constraint solve starts from)."""
+        """(B, D) the last step's last substep's generalised force, constraint forces included
+        (step.read_dofs_force; zeros before any step)."""
         out = self._empty(self.model.n_dofs)
         self.kernels.read_dofs_force(out)
         return out
@@ -533,13 +533,17 @@ class RigidSolver(Solver):
             self.kernels.read_contacts(substep % self.sim_options.substeps, out)
         return out
 
+    last_step_readouts = ("contacts", "dofs_force")
+
     @staticmethod
-    def without_contacts(contacts, envs):
-        """``contacts`` (B, C, 12) as contacts() gives them, with none in the envs of the bool mask
-        ``envs`` (B,) (their rows as the unused ones: geom −1, the rest 0)."""
-        out = contacts.clone()
+    def without_last_step(readout, value, envs):
+        """``value`` of ``readout`` (contacts (B, C, 12), dofs_force (B, D)) as if the envs of the
+        bool mask ``envs`` (B,) had taken no step: no contacts (rows as the unused ones: geom −1,
+        the rest 0), no force."""
+        out = value.clone()
         out[envs] = 0.0
-        out[envs, :, :2] = -1.0
+        if readout == "contacts":
+            out[envs, :, :2] = -1.0
         return out
 
     def destroy(self):

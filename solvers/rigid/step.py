@@ -517,17 +517,18 @@ def read_mass_matrix(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3
 
 @ti.kernel
 def read_dofs_force(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
-    """dst (B, D) ← qfrc_smooth at frame 0 (the position stages and the force stage run there):
-    the force the next step's solve is given, at the current state and inputs."""
-    ti.loop_config(serialize=schedule[0])
-    for t in range(env_loop(ints, schedule[0])):
-        e = env_of(ints, t, schedule[0])
-        if e >= 0:
-            d = bind(ints, f1, v3, v4, m3)
-            position_stages_env(d, 0, e)
-            for i in range(d.n_dofs):
-                smooth_force(d, 0, e, i)
-                dst[e, i] = d.qfrc_smooth[0, e, i]
+    """dst (B, D) ← the last step's last substep's generalised force: its smooth force (clipped
+    actuator force − damping·q̇ − bias, at that substep's start) plus its constraint force (joint
+    limits, friction loss, contacts; none where the substep had no rows: the one-launch step
+    leaves qfrc_constraint as it was), Genesis's dofs force."""
+    ti.loop_config(serialize=schedule[1])
+    for e in range(n_batch(ints)):
+        d = bind(ints, f1, v3, v4, m3)
+        s = d.substeps - 1
+        for i in range(d.n_dofs):
+            dst[e, i] = d.qfrc_smooth[s, e, i]
+            if d.n_efc[s, e, 0] > 0:
+                dst[e, i] += d.qfrc_constraint[s, e, i]
 
 
 @ti.kernel
