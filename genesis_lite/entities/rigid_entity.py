@@ -46,7 +46,6 @@ def _check_sol_params(name, p):
                                 f"power ≥ 1, got {p.tolist()}")
 
 
-@named_argument_errors
 def _with_link_axis(value):
     """A link's (…, 3) vector as the entity's one-link (…, 1, 3); None, or what is no array, as
     given (the entity's check names it)."""
@@ -59,6 +58,7 @@ def _with_link_axis(value):
     return tensor.unsqueeze(-2) if tensor.ndim >= 1 else tensor
 
 
+@named_argument_errors
 class RigidLink:
     """A link: ``name``, ``idx`` (scene-wide), ``idx_local`` (within its entity)."""
 
