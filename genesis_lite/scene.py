@@ -399,6 +399,18 @@ class Scene:
     def entity_names(self):
         return tuple(entity.name for entity in self.entities)
 
+    def get_entity(self, name=None, *, uid=None):
+        """The entity named ``name`` (Genesis's lookup; entities have no uid here, so ``uid`` must
+        stay None)."""
+        if uid is not None:
+            raise InvalidInputError(f"scene.get_entity: argument 'uid' must be None (genesis_lite's entities have no "
+                                    f"uid; look them up by name), got {uid!r}")
+        match = [entity for entity in self.entities if entity.name == name]
+        if not match:
+            raise InvalidInputError(f"scene.get_entity: argument 'name' must be the name of an entity of the scene "
+                                    f"{list(self.entity_names)}, got {name!r}")
+        return match[0]
+
     def destroy(self):
         """Free the scene's arrays (its solvers' data) and finish the cameras' streamed recordings;
         the scene cannot step afterwards."""

@@ -709,6 +709,12 @@ def test_joint_and_scene_indices_as_genesis(f64):
     arm = scene.add_entity(gs.morphs.URDF(file=pybullet("kuka_iiwa", "model.urdf"), fixed=True), name="arm")
     scene.build()
     assert (scene.substeps, scene.requires_grad, scene.entity_names) == (2, False, ("floor", "box", "arm"))
+    assert scene.get_entity("box") is box and scene.get_entity(name="arm") is arm
+    with pytest.raises(gs.InvalidInputError, match=r"get_entity: argument 'name' must be the name of an entity of the "
+                                                   r"scene \['floor', 'box', 'arm'\], got 'cup'"):
+        scene.get_entity("cup")
+    with pytest.raises(gs.InvalidInputError, match=r"get_entity: argument 'uid' must be None"):
+        scene.get_entity(uid="abc1234")
     root = box.joints[0]
     assert (root.n_dofs, root.n_qs, root.idx_local, root.dof_start, root.dof_end, root.q_start, root.q_end) == (
         6, 7, 0, 0, 6, 0, 7)
