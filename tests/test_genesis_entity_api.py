@@ -948,3 +948,33 @@ def test_genesis_batch_info_switches_are_accepted(f64):
         scene.destroy()
     with pytest.raises(gs.InvalidInputError, match=r"RigidOptions: argument 'batch_dofs_info' must be True or False"):
         gs.options.RigidOptions(batch_dofs_info="yes")
+
+
+def test_set_mass_scales_the_moving_links_as_genesis(f64):
+    """set_mass(total): the links that move keep their ratios and their inertias scale with them
+    (Genesis's), so the mass matrix scales by the same factor; per env; the welded base untouched;
+    differentiable (each link's mass is its share of the total); an all-welded entity refuses."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(requires_grad=True),
+                     rigid_options=gs.options.RigidOptions(enable_collision=False), show_viewer=False)
+    fixed = scene.add_entity(gs.morphs.URDF(file=pybullet("franka_panda", "panda.urdf"), fixed=True))
+    free = scene.add_entity(gs.morphs.URDF(file=KUKA_FREE, pos=(1.0, 0.0, 0.0)))
+    wall = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.0, 2.0, 0.0), fixed=True))
+    scene.build(n_envs=2)
+    free.set_dofs_position(_t([0.0, 0.0, 0.5, 0.3, -0.2, 0.1, 0.4, 0.5, -0.2, -1.0, 0.4, 0.8, 0.1]))
+    links, matrix, total = free.get_links_mass().clone(), free.get_mass_mat().clone(), free.get_mass().clone()
+    target = _t([2.0, 0.5]) * total
+    free.set_mass(target)
+    assert torch.allclose(free.get_mass(), target, rtol=1e-14, atol=0)
+    assert torch.allclose(free.get_links_mass(), links * _t([[2.0], [0.5]]), rtol=1e-14, atol=0)
+    assert torch.allclose(free.get_mass_mat(), matrix * _t([2.0, 0.5])[:, None, None], rtol=1e-12, atol=1e-14)
+    base = fixed.get_links_mass()[:, 0].clone()
+    share = fixed.get_links_mass()[0, 1:] / fixed.get_mass()[0]
+    mass = torch.tensor(7.0, dtype=torch.float64, requires_grad=True)
+    fixed.set_mass(mass, envs_idx=[1])
+    assert torch.equal(fixed.get_links_mass()[:, 0], base) and float(fixed.get_mass()[1]) == pytest.approx(7.0)
+    grad, = torch.autograd.grad(fixed.get_links_mass()[1, 1:].sum() + fixed.get_links_mass()[1, 3], mass)
+    assert float(grad) == pytest.approx(1.0 + float(share[2]), rel=1e-12)
+    with pytest.raises(gs.InvalidInputError, match=r"entity 'box_2': set_mass needs a link that moves"):
+        wall.set_mass(1.0)
+    with pytest.raises(gs.InvalidInputError, match=r"entity 'urdf_1': argument 'mass' must be ≥ 0 kg"):
+        free.set_mass(-1.0)

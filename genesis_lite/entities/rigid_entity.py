@@ -688,6 +688,22 @@ class RigidEntity(EntityIndexing):
         moving = self.link_start + np.flatnonzero(static == 0)
         return self._out(self._read_input("mass", moving, envs_idx).sum(-1))
 
+    def set_mass(self, mass, envs_idx=None):
+        """Total mass of the links that move, kg: () or (len(envs_idx),), as Genesis's: every such
+        link's mass (and its rotational inertia with it) scaled by one factor, their ratios kept.
+        Differentiable."""
+        static = self._solver.model.link_static[self.link_start: self.link_start + self.n_links]
+        moving = self.link_start + np.flatnonzero(static == 0)
+        if not len(moving):
+            raise InvalidInputError(f"entity '{self.name}': set_mass needs a link that moves; every link is welded "
+                                    f"to the world, whose mass it is")
+        envs = self._envs(envs_idx, distinct=True)
+        given = self._tensor(mass, "mass", () if self.scene.n_envs == 0 else (len(envs),))
+        total = self._values(given[..., None] if given.dim() == 1 else given, 1, envs, "mass")
+        self._refuse_negative("mass", total, " kg")
+        links_mass = self._read_input("mass", moving, envs_idx)
+        self._write_input("mass", moving, envs, links_mass * (total / links_mass.sum(-1, keepdim=True)))
+
     def _refuse_negative(self, name, values, unit=""):
         """values (a tensor), after a named error if any is negative."""
         if bool((values.detach() < 0).any()):
