@@ -978,3 +978,18 @@ def test_set_mass_scales_the_moving_links_as_genesis(f64):
         wall.set_mass(1.0)
     with pytest.raises(gs.InvalidInputError, match=r"entity 'urdf_1': argument 'mass' must be ≥ 0 kg"):
         free.set_mass(-1.0)
+
+
+def test_dofs_limits_as_the_urdf_gives_them(f64, two_robots):
+    """get_dofs_limit: the URDF's joint ranges (yourdfpy's reading), ±inf on the free base's dofs,
+    one row per env, a selection of dofs and envs."""
+    scene, kuka, other = two_robots
+    lower, upper = kuka.get_dofs_limit()
+    assert lower.shape == upper.shape == (2, kuka.n_dofs)
+    reference = yourdfpy.URDF.load(KUKA_FREE)
+    ranges = [(j.limit.lower, j.limit.upper) for j in reference.robot.joints if j.type == "revolute"]
+    assert np.array_equal(lower[0, 6:].numpy(), [r[0] for r in ranges])
+    assert np.array_equal(upper[1, 6:].numpy(), [r[1] for r in ranges])
+    assert np.isinf(lower[:, :6].numpy()).all() and (lower[:, :6] < 0).all() and (upper[:, :6] > 0).all()
+    low, high = kuka.get_dofs_limit([7, 9], envs_idx=[1])
+    assert torch.equal(low, lower[1:, [7, 9]]) and torch.equal(high, upper[1:, [7, 9]])

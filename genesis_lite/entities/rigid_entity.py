@@ -773,6 +773,16 @@ class RigidEntity(EntityIndexing):
         self._write_input("force_lo", self.dof_start + dofs, envs, lo)
         self._write_input("force_hi", self.dof_start + dofs, envs, hi)
 
+    def get_dofs_limit(self, dofs_idx_local=None, envs_idx=None):
+        """(lower, upper) position limits of the dofs, rad or m, each (n,) or (n_envs, n), as Genesis's:
+        the URDF's (±inf where a joint has none: continuous, free); the rows enforce them unless
+        RigidOptions(enable_joint_limit=False). Not settable yet."""
+        dofs = self.dof_start + self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
+        n_envs = len(self._envs(envs_idx))
+        model = self._solver.model
+        return tuple(self._out(torch.as_tensor(bound[dofs], dtype=runtime.tc_float, device=runtime.device)
+                               .expand(n_envs, len(dofs)).clone()) for bound in (model.dof_lower, model.dof_upper))
+
     def get_dofs_force_range(self, dofs_idx_local=None, envs_idx=None):
         return (self._get_dofs_input("force_lo", dofs_idx_local, envs_idx),
                 self._get_dofs_input("force_hi", dofs_idx_local, envs_idx))
