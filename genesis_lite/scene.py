@@ -139,10 +139,11 @@ class Scene:
             raise InvalidInputError(f"scene.add_entity: argument 'visualize_contact' must be False (there is no "
                                     f"viewer to draw contacts in), got {visualize_contact!r}")
         drawn = "particle" if isinstance(material, MPM.Base) else "visual"
-        for given, arg in ((vis_mode, "argument 'vis_mode'"), (surface and surface.vis_mode, "the surface's vis_mode")):
-            if given not in (None, drawn):
-                raise InvalidInputError(f"scene.add_entity: {arg} must be None or {drawn!r} (what the cameras draw "
-                                        f"of a {type(material).__name__} entity), got {given!r}")
+        given, arg = (vis_mode, "argument 'vis_mode'") if vis_mode is not None or surface is None else \
+            (surface.vis_mode, "the surface's vis_mode")  # (add_entity's, when given, is taken: Genesis's rule)
+        if given not in (None, drawn):
+            raise InvalidInputError(f"scene.add_entity: {arg} must be None or {drawn!r} (what the cameras draw of a "
+                                    f"{type(material).__name__} entity), got {given!r}")
         if name is not None and not isinstance(name, str):
             raise InvalidInputError(f"scene.add_entity: argument 'name' must be a str or None, got "
                                     f"{type(name).__name__} {name!r}")
@@ -405,6 +406,8 @@ class Scene:
         if uid is not None:
             raise InvalidInputError(f"scene.get_entity: argument 'uid' must be None (genesis_lite's entities have no "
                                     f"uid; look them up by name), got {uid!r}")
+        if name is None:
+            raise InvalidInputError("scene.get_entity: missing a required argument: 'name'")
         match = [entity for entity in self.entities if entity.name == name]
         if not match:
             raise InvalidInputError(f"scene.get_entity: argument 'name' must be the name of an entity of the scene "

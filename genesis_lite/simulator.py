@@ -141,7 +141,8 @@ class Simulator:
             inputs = solver.derive_inputs(inputs, previous)
         slot = self.slot(solver)
         slot.inputs = inputs
-        slot.detached_params = {n for n in slot.detached_params if inputs[n] is previous[n]}  # (set again: not)
+        # a parameter set (or derived) anew is no longer the one a reset detached
+        slot.detached_params = {n for n in slot.detached_params if inputs[n] is previous[n]}
 
     def _sync(self, slot, state, inputs):
         """Make Taichi hold ``state`` (None: what it holds) and ``inputs``, uploading only what differs."""
@@ -193,7 +194,10 @@ class Simulator:
             slot.warned_nonfinite = False
             defaults = slot.solver.default_inputs
             current = slot.inputs or defaults
-            slot.detached_params = {name for name in slot.solver.persistent_inputs if current[name].requires_grad}
+            # (kept from an earlier reset until set again or warned: a reset before the loop's first
+            # finds them detached already)
+            slot.detached_params |= {name for name in slot.solver.persistent_inputs
+                                     if current[name].requires_grad and name not in slot.solver.derived_inputs}
             # (inputs derived from persistent ones are persistent too: detached, they still match)
             slot.inputs = {name: current[name].detach() if name in slot.solver.persistent_inputs
                            else _restored(current[name], defaults[name], envs) for name in defaults}

@@ -460,6 +460,16 @@ def test_attached_camera_rides_its_link(f32):
     np.testing.assert_array_equal(cam.transform, still)
     with pytest.raises(gs.SceneStateError, match=r"camera 0.move_to_attach: the camera is not attached"):
         cam.move_to_attach()
+    cam.attach(box.links[0], offset)
+    state = scene.get_state()
+    for _ in range(5):  # a force at float32's largest: the box's pose overflows
+        box.links[0].apply_external_force([3e38, 0.0, 0.0])
+        scene.step()
+    with pytest.raises(gs.SimulationError, match=r"camera 0.move_to_attach: the pose of link 'box' of entity 'box_0' "
+                                                 r"is not finite"):
+        cam.render()
+    scene.reset(state)
+    cam.detach()
     cam.follow_entity(box)
     with pytest.raises(gs.SceneStateError, match=r"camera 0.attach: the camera follows entity 'box_0'; call "
                                                  r"unfollow_entity\(\) first"):
@@ -475,7 +485,8 @@ def test_attached_camera_rides_its_link(f32):
                                      (other.links[0], offset, r"argument 'rigid_link' must be of this camera's "
                                                               r"scene, got link 'box' of entity 'box_0' of another"),
                                      (box.links[0], bad, r"argument 'offset_T' must be a finite \(4, 4\) pose"),
-                                     (box.links[0], np.eye(3), r"argument 'offset_T' must be a finite \(4, 4\)")):
+                                     (box.links[0], np.eye(3), r"argument 'offset_T' must be a finite \(4, 4\)"),
+                                     (box.links[0], "eye", r"argument 'offset_T' must be a finite \(4, 4\)")):
         with pytest.raises(gs.InvalidInputError, match=r"camera 0.attach: " + message):
             cam.attach(link, transform)
 

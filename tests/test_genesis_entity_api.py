@@ -628,6 +628,7 @@ def test_add_entity_takes_genesis_arguments_in_genesis_order(f64):
                      gs.surfaces.Default(vis_mode="particle"))
     with pytest.raises(gs.InvalidInputError, match="the surface's vis_mode must be None or 'visual' .*got 'particle'"):
         scene.add_entity(gs.morphs.Sphere(), surface=gs.surfaces.Default(color=(1, 0, 0), vis_mode="particle"))
+    scene.add_entity(gs.morphs.Sphere(), surface=gs.surfaces.Default(vis_mode="particle"), vis_mode="visual")
     with pytest.raises(gs.InvalidInputError, match="surfaces.Default: argument 'vis_mode' must be None or a str"):
         gs.surfaces.Default(vis_mode=3)
 
@@ -929,6 +930,16 @@ def test_link_level_getters_aabb_and_wrench_as_the_entity_s(f64, tmp_path):
     with pytest.raises(gs.InvalidInputError, match=r"entity 'urdf_0': get_AABB needs collision shapes, link 'arm' "
                                                    r"has none"):
         shapeless.links[1].get_AABB()
+    for value, shape in ((1.0, r"\(\)"), ([[1.0, 2.0]], r"\(1, 2\)"), (np.zeros((1, 1, 3)), r"\(1, 1, 3\)")):
+        with pytest.raises(gs.InvalidInputError, match=r"link 'arm' of entity 'urdf_0': apply_external_wrench argument "
+                                                       r"'force' must have shape \(3,\) or \(len\(envs_idx\), 3\), "
+                                                       rf"got {shape}"):
+            shapeless.links[1].apply_external_force(value)
+    unbuilt = gs.Scene(show_viewer=False).add_entity(gs.morphs.Box())
+    for what in ("parent_idx", "is_fixed"):
+        with pytest.raises(gs.SceneStateError, match=rf"link 'box' of entity 'box_0': {what}: call scene.build\(\) "
+                                                     r"first"):
+            getattr(unbuilt.links[0], what)
 
 
 def test_genesis_batch_info_switches_are_accepted(f64):

@@ -3,7 +3,7 @@ through the scene API, with parameters a user would pick.
 
 Conventions shared by the cases
 - Float64 unless stated; 32 cells/m (Genesis's default particle_size 0.01·64/32 = 2 cm) unless a case
-  needs more; the substep obeys the solver's stability bound h ≤ 2e-2·dx (and dx / wave speed).
+  needs more; the substep obeys the solver's stability bound h ≤ 2e-2·dx (and 0.8·dx / wave speed).
 - The walls lie 3 cells inside the bounds; the floor wall is at z_floor = lower_z + 3 dx. A body at rest
   on it keeps a gap of about one cell (the grid nodes at or below the wall carry the floor), so heights
   are measured from the wall and only differences of heights are compared across resolutions.

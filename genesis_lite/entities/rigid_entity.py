@@ -46,16 +46,20 @@ def _check_sol_params(name, p):
                                 f"power ≥ 1, got {p.tolist()}")
 
 
-def _with_link_axis(value):
-    """A link's (…, 3) vector as the entity's one-link (…, 1, 3); None, or what is no array, as
-    given (the entity's check names it)."""
+def _with_link_axis(link, arg, value):
+    """``link``'s vector ``value`` (argument ``arg`` of apply_external_wrench: (3,) or (n_envs, 3))
+    as the entity's one-link (…, 1, 3); None as given, another shape a named error (what is no
+    array passes as given: the entity's check names it)."""
     if value is None:
         return None
     try:
         tensor = value if isinstance(value, torch.Tensor) else torch.as_tensor(np.asarray(value))
     except (TypeError, ValueError, RuntimeError):
         return value
-    return tensor.unsqueeze(-2) if tensor.ndim >= 1 else tensor
+    if tensor.ndim not in (1, 2) or tensor.shape[-1] != 3:
+        raise InvalidInputError(f"{link._who}: apply_external_wrench argument '{arg}' must have shape (3,) or "
+                                f"(len(envs_idx), 3), got {tuple(tensor.shape)}")
+    return tensor.unsqueeze(-2)
 
 
 @named_argument_errors
@@ -76,12 +80,17 @@ class RigidLink:
     @property
     def parent_idx(self):
         """The scene-wide index of the parent link, −1 for a root (once built)."""
-        return int(self.entity._solver.model.link_parent[self.idx])
+        return int(self._model("parent_idx").link_parent[self.idx])
 
     @property
     def is_fixed(self):
         """Whether the link is welded to the world (no moving joint between it and the world; once built)."""
-        return bool(self.entity._solver.model.link_static[self.idx])
+        return bool(self._model("is_fixed").link_static[self.idx])
+
+    def _model(self, what):
+        """The built scene's rigid model (a named error before build)."""
+        self.entity.scene._require_built(f"{self._who}: {what}")
+        return self.entity._solver.model
 
     def _one(self, values):
         """The entity's (…, n_links, k) readout for this link alone: (…, k)."""
@@ -116,7 +125,8 @@ class RigidLink:
                               local=False):
         """``RigidEntity.apply_links_external_wrench`` on this link: force (N), torque (N·m) and pos
         (m) (3,) or, batched, (len(envs_idx), 3)."""
-        force, torque, pos = (_with_link_axis(value) for value in (force, torque, pos))
+        force, torque, pos = (_with_link_axis(self, arg, value) for arg, value in
+                              (("force", force), ("torque", torque), ("pos", pos)))
         self.entity.apply_links_external_wrench(force, torque, [self.idx_local], envs_idx, pos=pos, ref=ref,
                                                 local=local)
 

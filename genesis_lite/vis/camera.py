@@ -49,7 +49,7 @@ import torch
 from ..entities import RigidEntity
 from ..entities.rigid_entity import RigidLink
 from ..options import _check_float, _check_vec3, check_bool, is_int
-from ..solvers.core import InvalidInputError, SceneStateError, runtime
+from ..solvers.core import InvalidInputError, SceneStateError, SimulationError, runtime
 from ..utils.geom import R_to_quat, quat_to_R
 from .rasterizer import Rasterizer, View
 from .recorder import Recording, check_target
@@ -221,8 +221,9 @@ class Camera:
         """Genesis's pose getters: ``value`` as a torch tensor (gs.tc_float, gs.device); envs_idx must
         be None (a rasterized camera has one pose, in its env)."""
         if envs_idx is not None:
-            raise InvalidInputError(f"{self._name}.{what}: argument 'envs_idx' must be None (the camera has one pose, "
-                                    f"in its env {self._env_idx}), got {envs_idx!r}")
+            where = "" if self._env_idx is None else f", in its env {self._env_idx}"
+            raise InvalidInputError(f"{self._name}.{what}: argument 'envs_idx' must be None (the camera has one "
+                                    f"pose{where}), got {envs_idx!r}")
         return torch.as_tensor(np.asarray(value, dtype=np.float64), dtype=runtime.tc_float, device=runtime.device)
 
     def get_pos(self, envs_idx=None):
@@ -266,16 +267,16 @@ class Camera:
         ``offset_T`` ((4, 4) camera pose in the link's frame: it looks along the offset's −z, up its
         y), as Genesis's; ``move_to_attach()`` does so at once."""
         owner = f"{self._name}.attach"
-        self._check_mount(owner, "rigid_link", rigid_link)
+        self._check_mount(owner, "rigid_link", rigid_link, attaching=True)
         if isinstance(offset_T, torch.Tensor):
             offset_T = offset_T.detach().cpu().numpy()
         _transform_to_pose(owner, offset_T, "offset_T")
         self._attached = (rigid_link, np.array(offset_T, dtype=np.float64))
 
-    def _check_mount(self, owner, name, target):
+    def _check_mount(self, owner, name, target, attaching):
         """Refuse to attach a following camera or to follow with an attached one, and a ``target``
-        (argument ``name``: attach's link, follow_entity's rigid entity) that is not of this scene."""
-        attaching = name == "rigid_link"
+        (argument ``name``: attach's link when ``attaching``, else follow_entity's rigid entity)
+        that is not of this scene."""
         if attaching and self._follow is not None:
             raise SceneStateError(f"{owner}: the camera follows entity '{self._follow[0].name}'; call "
                                   f"unfollow_entity() first")
@@ -308,6 +309,10 @@ class Camera:
         link_pose = np.eye(4)
         link_pose[:3, 3] = link.get_pos(envs_idx).detach().cpu().numpy().astype(np.float64).reshape(3)
         quat = link.get_quat(envs_idx).detach().cpu().numpy().astype(np.float64).reshape(4)
+        if not (np.isfinite(link_pose).all() and np.isfinite(quat).all()):
+            raise SimulationError(f"{owner}: the pose of {link._who} is not finite (position "
+                                  f"{link_pose[:3, 3].tolist()}, quaternion {quat.tolist()}); the camera cannot "
+                                  f"ride it")
         link_pose[:3, :3] = quat_to_R(quat)  # (normalised: a float32 pose's is unit to round-off only)
         pos, lookat, up = _transform_to_pose(owner, link_pose @ offset)
         self.set_pose(pos=pos, lookat=lookat, up=up)
@@ -320,7 +325,7 @@ class Camera:
         axis; smoothing: None or in [0, 1): the weight of the camera's previous position and lookat
         (exponential smoothing); fix_orientation: keep the orientation, only move."""
         owner = f"{self._name}.follow_entity"
-        self._check_mount(owner, "entity", entity)
+        self._check_mount(owner, "entity", entity, attaching=False)
         if not (isinstance(fixed_axis, (tuple, list)) and len(fixed_axis) == 3):
             raise InvalidInputError(f"{owner}: argument 'fixed_axis' must be 3 entries, each None or a coordinate "
                                     f"(m), got {fixed_axis!r}")
@@ -563,12 +568,15 @@ def _camera_axes(owner, pos, lookat, up):
 def _transform_to_pose(owner, transform, name="transform"):
     """(pos, lookat, up) of a (4, 4) camera → world transform (argument ``name``): lookat 1 m ahead
     along −z, up = y."""
-    matrix = np.asarray(transform, dtype=np.float64)
+    try:
+        matrix = np.asarray(transform, dtype=np.float64)
+    except (TypeError, ValueError):
+        matrix = np.full(0, np.nan)
     rot = matrix[:3, :3] if matrix.shape == (4, 4) else None
     if rot is None or not np.isfinite(matrix).all() or not np.allclose(rot.T @ rot, np.eye(3), atol=1e-5) or \
             np.linalg.det(rot) < 0 or not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0], atol=1e-6):
         raise InvalidInputError(f"{owner}: argument '{name}' must be a finite (4, 4) pose whose top-left 3×3 is a "
-                                f"rotation (det +1) and last row (0, 0, 0, 1), got {np.asarray(transform).tolist()}")
+                                f"rotation (det +1) and last row (0, 0, 0, 1), got {transform!r}")
     return matrix[:3, 3], matrix[:3, 3] - rot[:, 2], rot[:, 1]
 
 

@@ -20,8 +20,9 @@ from .model import EntitySpec, Grid, MPMModel
 GENESIS_DT_PER_DX = 2e-2
 # The explicit substep's elastic wave bound is h ≤ WAVE_CFL · dx / c: measured (a block with small
 # random velocities, 100 cells/m, float32 and float64), it blew up at h·c/dx = 1.2 (ν 0.2), 0.95
-# (ν 0.45, neo-Hookean and corotated), 0.90 (ν 0.499), stable at 1.10, 0.93, 0.90, 0.85; dx/c alone
-# let a ν 0.45 beam run to NaN without a warning.
+# (ν 0.45, neo-Hookean and corotated), 0.90 (ν 0.499), stable at 1.10, 0.93, 0.90, 0.85; a block
+# hitting the floor at 3-8 m/s blew up from 0.85 (ν 0.499), stable at 0.82. dx/c alone let a ν 0.45
+# beam run to NaN without a warning.
 WAVE_CFL = 0.8
 # Taichi 1.7 indexes an array with 32-bit ints (an index past this wraps: a crash or a wrong write)
 MAX_ARRAY_ELEMENTS = 2**31 - 1

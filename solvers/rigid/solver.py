@@ -147,6 +147,7 @@ class RigidSolver(Solver):
         return self.derive_inputs(inputs)
 
     derived_from = ("mass", "armature")
+    derived_inputs = ("invweight_t", "invweight_dof")
 
     def derive_inputs(self, inputs, previous=None):
         """``inputs`` with the rows' scale (invweight_t, invweight_dof) recomputed from their mass and
