@@ -44,8 +44,9 @@ class Solver:
     default_inputs = None
     #: inputs that last one step: back to their value at build after every step (an external wrench)
     transient_inputs = ()
-    #: inputs from which ``derive_inputs`` computes others (recomputed whenever one is set), and those others
+    #: inputs from which ``derive_inputs`` computes others (recomputed whenever one is set)
     derived_from = ()
+    #: the inputs ``derive_inputs`` computes (never set by a user)
     derived_inputs = ()
     #: methods reading what the last step left (the rigid solver's contacts and dofs forces):
     #: kept before a backward's replays overwrite it; ``without_last_step`` blanks replaced envs
