@@ -120,6 +120,23 @@ class URDF(Morph):
         self.merge_fixed_links, self.links_to_keep = bool(self.merge_fixed_links), tuple(keep)
 
 
+@named_keywords(*_FILE, "scale", deprecated=_DEPRECATED)
+@dataclass
+class MJCF(Morph):
+    """A robot from an MJCF (MuJoCo XML) file: its one body tree, read as MuJoCo's compiler reads
+    it (solvers/rigid/mjcf.py says which elements, and what is refused or ignored with a warning).
+    pos/euler/quat place the file's world frame (the root body keeps its pose in it: Genesis's
+    offset, applied on the left); the root body is free where the file gives it a free joint,
+    welded otherwise; fixed=True welds a free root where it starts. Each body is a link (none is
+    merged), its joints' parameters, its actuators' servo gains and the file's contact bit masks
+    are the file's."""
+    file: str = None
+
+    def _check(self):
+        if not isinstance(self.file, str) or not self.file:
+            raise InvalidInputError(f"MJCF: argument 'file' must be a path string, got {self.file!r}")
+
+
 @named_keywords(*_PRIMITIVE, *_TETGEN, deprecated=_DEPRECATED)
 @dataclass
 class Box(Morph):

@@ -22,7 +22,7 @@ from .options import MPMOptions, RigidOptions, SimOptions, ViewerOptions, VisOpt
 from .runtime import logger, require_init, runtime, track
 from .simulator import Simulator, refuse_inference_mode
 from .solvers.mpm.solver import MPMSolver
-from .solvers.rigid import merge, shapes, urdf
+from .solvers.rigid import merge, mjcf, shapes, urdf
 from .solvers.rigid.solver import RigidSolver
 from .surfaces import Default
 from .vis.camera import Camera
@@ -465,6 +465,15 @@ def _links_of(morph, material, name):
         for link in links:  # a motor's rotor on each joint one could drive (Genesis's rule): not a free base's
             if link.joint_type in ("revolute", "prismatic"):
                 link.armature = morph.default_armature
+    elif isinstance(morph, gm.MJCF):
+        if not os.path.isfile(morph.file):
+            raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.MJCF expected an existing MJCF file, "
+                             f"got '{morph.file}' (not found; relative paths start at {os.getcwd()})")
+        links = mjcf.load_mjcf(morph.file, entity_name=name)
+        mjcf.place_world(links, morph.pos, morph.quat)
+        if morph.fixed:
+            links[0].joint_type = "fixed"
+        return _with_material_friction(links, material)
     elif isinstance(morph, gm.Box):
         links = shapes.box_link(morph.size, material.rho)
     elif isinstance(morph, gm.Sphere):
@@ -482,12 +491,18 @@ def _links_of(morph, material, name):
         links = shapes.plane_link(morph.normal)
     else:
         raise InvalidInputError(f"scene.add_entity: morph type {type(morph).__name__} is not supported")
-    if material.friction is not None:  # the material's friction overrides the asset's, as Genesis
-        for geom in (geom for link in links for geom in link.geoms):
-            geom.friction = material.friction
     root = links[0]
     root.joint_type = "fixed" if morph.fixed else "free"
     root.pos, root.quat = np.asarray(morph.pos, dtype=float), np.asarray(morph.quat, dtype=float)
+    return _with_material_friction(links, material)
+
+
+def _with_material_friction(links, material):
+    """``links`` with the material's friction, where it states one, on every geom (it overrides
+    the asset's, as Genesis)."""
+    if material.friction is not None:
+        for geom in (geom for link in links for geom in link.geoms):
+            geom.friction = material.friction
     return links
 
 

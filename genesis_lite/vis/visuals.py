@@ -61,7 +61,8 @@ def scene_shapes(scene):
         shared = isinstance(entity.morph, gm.Plane) and _horizontal(entity.morph)
         for k, spec in enumerate(entity._specs):
             link = entity.link_start + k
-            visuals = spec.visuals if isinstance(entity.morph, gm.URDF) else [_geom_visual(g) for g in spec.geoms]
+            from_file = isinstance(entity.morph, (gm.URDF, gm.MJCF))
+            visuals = spec.visuals if from_file else [_geom_visual(g) for g in spec.geoms]
             for visual in visuals:
                 color = override if override is not None else \
                     np.asarray(DEFAULT_COLOR if visual.rgba is None else visual.rgba[:3])

@@ -121,7 +121,7 @@ def _aabb_half(geom_type, size):
 
 
 def candidate_pairs(geom_type, geom_link, link_parent, link_static, link_entity, self_collision=True,
-                    adjacent_collision=False):
+                    adjacent_collision=False, geom_masks=None):
     """(N, 2) geom pairs that may collide, each ordered as MuJoCo orders it (lower type code
     first, then lower index), in MuJoCo's order: by link pair (its broad phase's body pairs,
     lower link first, static links as its world body 0 whatever their index), then within a link
@@ -131,9 +131,11 @@ def candidate_pairs(geom_type, geom_link, link_parent, link_static, link_entity,
     Rules (Genesis's, which agree with MuJoCo's defaults except where said): two geoms of one
     link never collide; nor two links both welded to the world; nor parent and child links unless
     ``adjacent_collision`` (MuJoCo's filterparent; the world, parent -1, is nobody's parent here);
-    nor two links of one entity unless ``self_collision``. Pairs touching at the initial pose
-    are filtered later (they need the colliders).
+    nor two links of one entity unless ``self_collision``; nor two geoms whose bit masks
+    ``geom_masks`` (G, 2) (contype, conaffinity; None: all 1) share no bit, MuJoCo's rule.
+    Pairs touching at the initial pose are filtered later (they need the colliders).
     """
+    masks = np.ones((len(geom_type), 2), dtype=np.int64) if geom_masks is None else np.asarray(geom_masks)
     pairs = []
     for a in range(len(geom_type)):
         for b in range(a + 1, len(geom_type)):
@@ -146,6 +148,8 @@ def candidate_pairs(geom_type, geom_link, link_parent, link_static, link_entity,
                 continue
             if geom_type[a] == PLANE and geom_type[b] == PLANE:
                 continue  # MuJoCo has no plane-plane collider
+            if not (masks[a, 0] & masks[b, 1] or masks[b, 0] & masks[a, 1]):
+                continue
             pairs.append((a, b) if geom_type[a] <= geom_type[b] else (b, a))
     body = [-1 if link_static[link] else link for link in range(len(link_static))]  # static: MuJoCo's world
     pairs.sort(key=lambda pair: (*sorted((body[geom_link[pair[0]]], body[geom_link[pair[1]]])), *pair))

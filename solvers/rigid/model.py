@@ -282,8 +282,9 @@ def _pairs(geoms, geom_links, rows, self_collision, adjacent_collision):
     link_parent = np.array(rows["parent"], dtype=np.int32)
     static = _static_links(link_parent, np.array(rows["jtype"]))
     types = np.array([geometry.GEOM_CODE[g.type] for g in geoms], dtype=np.int32)
+    masks = np.array([(g.contype, g.conaffinity) for g in geoms], dtype=np.int64).reshape(-1, 2)
     pairs = geometry.candidate_pairs(types, np.array(geom_links, dtype=np.int32), link_parent, static,
-                                     np.array(rows["entity"]), self_collision, adjacent_collision)
+                                     np.array(rows["entity"]), self_collision, adjacent_collision, masks)
     n = len(pairs)
     return {"pair_geom1": pairs[:, 0].copy(), "pair_geom2": pairs[:, 1].copy(),
             "pair_condim": np.full(n, 3, dtype=np.int32), "pair_margin": np.zeros(n)}

@@ -32,8 +32,11 @@ class ShapeSpec:
 class GeomSpec(ShapeSpec):
     """A collision shape. friction: Coulomb coefficient of contacts on this shape
     (dimensionless); None when neither the asset nor the material states one (the model then
-    uses its default)."""
+    uses its default). contype, conaffinity: MuJoCo's collision bit masks (MJCF); two shapes may
+    touch when (contype₁ & conaffinity₂) | (contype₂ & conaffinity₁) is non-zero."""
     friction: float = None
+    contype: int = 1
+    conaffinity: int = 1
 
 
 @dataclass

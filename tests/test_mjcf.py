@@ -1,0 +1,206 @@
+"""gs.morphs.MJCF against MuJoCo 4 reading the same file (float64).
+
+assets/mjcf/arm.xml (fixed base; default classes, degrees, every orientation form, joint anchors
+off the body origin, a body with two joints, a welded body, inertias stated and from geoms, joint
+damping / armature / friction loss / limits, position and affine general actuators, an included
+file) and assets/mjcf/crawler.xml (free root, hinged legs, contact bit masks: only the feet touch
+the ground, per-geom friction). Each runs under sinusoidal servo targets in both engines, MuJoCo
+with the implicitfast integrator (our servos' kv is implicit) and its ground plane from the
+file, ours with gs.morphs.Plane: the trajectories agree to round-off (measured: arm 2.7e-15 over
+400 steps with limit and friction-loss rows active; crawler 6e-14 pyramidal, 3e-13 elliptic over
+500 steps with 1-3 foot contacts).
+"""
+import logging
+
+import mujoco
+import numpy as np
+import pytest
+import torch
+
+import genesis_lite as gs
+from genesis_lite.solvers.core import AssetError, InvalidInputError
+from tests.conftest import asset
+
+ARM, CRAWLER = asset("mjcf", "arm.xml"), asset("mjcf", "crawler.xml")
+
+
+def _pair(path, cone="pyramidal", plane=False):
+    """(MuJoCo model, data, our scene, our entity) of the file."""
+    m = mujoco.MjModel.from_xml_path(path)
+    m.opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    m.opt.cone = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL, "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC}[cone]
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=m.opt.timestep),
+                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True, friction_cone=cone))
+    if plane:
+        scene.add_entity(gs.morphs.Plane())
+    robot = scene.add_entity(gs.morphs.MJCF(file=path))
+    scene.build()
+    return m, mujoco.MjData(m), scene, robot
+
+
+def test_arm_masses_frames_and_trajectory_match_mujoco(f64):
+    m, d, scene, robot = _pair(ARM)
+    links = {link.name: link for link in robot.links}
+    assert [link.name for link in robot.links] == ["base", "shoulder", "upper:pitch", "upper", "mount", "wrist"]
+    for body in range(1, m.nbody):
+        assert float(links[m.body(body).name].get_mass()) == pytest.approx(m.body_mass[body], rel=1e-14)
+    assert robot.get_dofs_kp().tolist() == [40.0, 60.0, 300.0, 5.0]
+    assert robot.get_dofs_kv().tolist() == [2.0, 3.0, 20.0, 0.3]
+    worst, rows = 0.0, 0
+    for t in range(400):
+        target = 0.5 * np.sin(np.arange(4) + 3.0 * t * m.opt.timestep) * np.array([1.0, 1.0, 0.1, 1.0])
+        d.ctrl[:] = target
+        robot.control_dofs_position(torch.tensor(target))
+        mujoco.mj_step(m, d)
+        scene.step()
+        worst = max(worst, np.abs(robot.get_dofs_position().numpy() - d.qpos).max(),
+                    np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max())
+        rows = max(rows, d.nefc)
+    assert rows == 5  # four friction-loss rows and the slide's lower limit: not a free run
+    assert worst < 1e-12
+    mujoco.mj_kinematics(m, d)  # (mj_step leaves the frames of the state it started from)
+    for body in range(1, m.nbody):  # a link's origin is its last joint's anchor in the body frame
+        joints = np.flatnonzero(m.jnt_bodyid == body)
+        anchor = m.jnt_pos[joints[-1]] if len(joints) else np.zeros(3)
+        link = links[m.body(body).name]
+        np.testing.assert_allclose(link.get_pos().numpy(), d.xpos[body] + d.xmat[body].reshape(3, 3) @ anchor,
+                                   atol=1e-12)
+        assert abs(abs(link.get_quat().numpy() @ d.xquat[body]) - 1.0) < 1e-12
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_crawler_with_contact_masks_matches_mujoco(f64, cone):
+    m, d, scene, robot = _pair(CRAWLER, cone, plane=True)
+    assert float(robot.get_mass()) == pytest.approx(m.body_mass.sum(), rel=1e-14)
+    worst, counts = 0.0, set()
+    for t in range(500):
+        target = 0.4 * np.sin(np.arange(8) * 0.7 + 8.0 * t * m.opt.timestep)
+        d.ctrl[:] = target
+        robot.control_dofs_position(torch.tensor(target), dofs_idx_local=list(range(6, 14)))
+        mujoco.mj_step(m, d)
+        scene.step()
+        worst = max(worst, np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max(),
+                    np.abs(robot.get_dofs_position().numpy()[6:] - d.qpos[7:]).max(),
+                    np.abs(robot.get_pos().numpy() - d.qpos[:3]).max())
+        counts.add(d.ncon)
+        # only feet touch the plane (the legs' masks share no bit with anything)
+        assert all(m.geom(c.geom2).name == "" and m.geom_type[c.geom2] == mujoco.mjtGeom.mjGEOM_SPHERE
+                   for c in d.contact[:d.ncon])
+    assert counts >= {1, 2, 3}
+    assert worst < 1e-11
+
+
+def test_contact_masks_keep_legs_out_of_the_ground(f64):
+    """The crawler's legs, lowered into the ground with its feet, make contacts only at the feet."""
+    scene = gs.Scene()
+    scene.add_entity(gs.morphs.Plane())
+    robot = scene.add_entity(gs.morphs.MJCF(file=CRAWLER, pos=(0.0, 0.0, -0.1)))
+    scene.build()
+    scene.step()
+    contacts = robot.get_contacts()
+    links = {robot.links[k - robot.link_start].name for k in contacts["link_b"].tolist() + contacts["link_a"].tolist()
+             if k >= robot.link_start}
+    assert len(contacts["position"]) == 4 and links <= {"leg_fl", "leg_fr", "leg_bl", "leg_br"}  # one a foot
+
+
+def test_morph_pose_places_the_files_world_and_fixed_welds_the_free_root(f64):
+    scene = gs.Scene(sim_options=gs.options.SimOptions(gravity=(0.0, 0.0, -9.81)))
+    free = scene.add_entity(gs.morphs.MJCF(file=CRAWLER, pos=(1.0, 2.0, 0.5), euler=(0.0, 0.0, 90.0)))
+    welded = scene.add_entity(gs.morphs.MJCF(file=CRAWLER, pos=(-1.0, 0.0, 0.0), fixed=True))
+    scene.build()
+    assert free.n_dofs == 14 and welded.n_dofs == 8
+    np.testing.assert_allclose(free.get_pos().numpy(), [1.0, 2.0, 0.75], atol=1e-15)  # root at 0.25 in the file
+    np.testing.assert_allclose(free.get_quat().numpy(), [np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5)], atol=1e-15)
+    for _ in range(10):
+        scene.step()
+    assert free.get_pos().numpy()[2] < 0.74 and welded.get_pos().numpy().tolist() == [-1.0, 0.0, 0.25]
+
+
+def _write(tmp_path, body, extra=""):
+    path = tmp_path / "robot.xml"
+    path.write_text(f"<mujoco>{extra}<worldbody>{body}</worldbody></mujoco>")
+    return str(path)
+
+
+LINK = '<geom type="sphere" size="0.1"/>'
+
+
+@pytest.mark.parametrize("body, extra, said", [
+    (f'<body name="b"><joint name="j" type="ball"/>{LINK}</body>', "", "joint 'j': type expected hinge or slide"),
+    (f'<body name="b"><joint name="j" stiffness="3"/>{LINK}</body>', "", "joint springs are not supported"),
+    (f'<body name="a">{LINK}</body><body name="b">{LINK}</body>', "", "expected one body tree"),
+    (f'<body name="b"><geom type="ellipsoid" size="0.1 0.2 0.3"/></body>', "", "geom type expected one of"),
+    (f'<body name="b"><geom type="mesh" mesh="nope"/></body>', "", "mesh 'nope' is not an <asset><mesh>"),
+    (f'<body name="b" childclass="x">{LINK}</body>', "", "class 'x' is not a <default> class"),
+    (f'<body name="b"><inertial mass="1" quat="1 0 0 0" fullinertia="1 1 1 0 0 0"/>{LINK}</body>', "",
+     "fullinertia expected without an orientation"),
+    (f'<body name="b"><joint name="j" range="1"/>{LINK}</body>', "", "attribute 'range' expected 2 finite numbers"),
+    (f'<body name="b"><body name="c"><joint name="j"/><freejoint/>{LINK}</body></body>', "", "type expected hinge"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><weld body1="b"/></equality>',
+     "<equality><weld> is not supported"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<actuator><position joint="j" forcerange="-1 2"/></actuator>',
+     "forcerange expected a symmetric range"),
+])
+def test_unsupported_or_malformed_files_are_named(f64, tmp_path, body, extra, said):
+    scene = gs.Scene()
+    with pytest.raises(AssetError, match=f"MJCF '.*robot.xml' \\(entity '.*'\\): .*{_escaped(said)}"):
+        scene.add_entity(gs.morphs.MJCF(file=_write(tmp_path, body, extra)))
+
+
+def _escaped(text):
+    return "".join("\\" + c if c in "()[]<>.*'" else c for c in text)
+
+
+def test_what_is_ignored_is_said_once(f64, tmp_path, caplog):
+    extra = ('<option timestep="0.01"/><tendon><fixed name="t"><joint joint="j" coef="1"/></fixed></tendon>'
+             '<actuator><motor tendon="t"/></actuator>')
+    path = _write(tmp_path, f'<geom type="plane" size="1 1 1"/><body name="b"><joint name="j" margin="0.1"/>{LINK}'
+                            f'</body>', extra)
+    with caplog.at_level(logging.WARNING, logger="genesis_lite"):
+        gs.Scene().add_entity(gs.morphs.MJCF(file=path))
+    said = [r.getMessage() for r in caplog.records if "ignored" in r.getMessage()]
+    assert len(said) == 1
+    for part in ("<option>", "<tendon>", "<joint margin>", "<worldbody> geoms", "<actuator><motor"):
+        assert part in said[0]
+
+
+def test_a_hinge_on_the_world_hangs_from_a_static_world_link_and_angles_follow_the_compiler(f64, tmp_path):
+    body = (f'<body name="pendulum" pos="0 0 1" euler="0 0 90"><joint name="swing" axis="1 0 0" range="-45 45"/>'
+            f'<geom type="capsule" fromto="0 0 0 0 0 -0.5" size="0.02"/></body>')
+    for angle, limit in (("degree", np.pi / 4), ("radian", 45.0)):
+        path = _write(tmp_path, body, f'<compiler angle="{angle}"/>')
+        scene = gs.Scene()
+        robot = scene.add_entity(gs.morphs.MJCF(file=path))
+        scene.build()
+        assert [link.name for link in robot.links] == ["world", "pendulum"] and robot.n_dofs == 1
+        assert robot.get_dofs_limit()[1].tolist() == pytest.approx([limit], rel=1e-15)
+        quat = robot.get_link("pendulum").get_quat().numpy()
+        expected = [np.sqrt(0.5), 0, 0, np.sqrt(0.5)] if angle == "degree" else [np.cos(45), 0, 0, np.sin(45)]
+        np.testing.assert_allclose(quat * np.sign(quat[0]), np.array(expected) * np.sign(expected[0]), atol=1e-15)
+
+
+def test_morph_arguments_are_checked(f64):
+    with pytest.raises(InvalidInputError, match="MJCF: argument 'file' must be a path string"):
+        gs.morphs.MJCF(file=3)
+    with pytest.raises(AssetError, match="argument 'file' of gs.morphs.MJCF expected an existing MJCF file"):
+        gs.Scene().add_entity(gs.morphs.MJCF(file="no_such.xml"))
+    with pytest.raises(InvalidInputError, match="scale"):
+        gs.morphs.MJCF(file=ARM, scale=2.0)
+
+
+def test_joint_equality_follows_polycoef_as_mujoco(f64, tmp_path):
+    """Two pendulums hinged on the world's static link, the second held to c0 + c1 · the first."""
+    arms = "".join(f'<body name="arm{k}" pos="{0.3 * k} 0 1"><joint name="j{k}" axis="0 1 0" damping="0.01"/>'
+                   f'<geom type="capsule" fromto="0 0 0 0.2 0 -0.3" size="0.02"/></body>' for k in (1, 2))
+    path = _write(tmp_path, f'<body name="frame"><geom type="box" size="0.05 0.05 0.05"/>{arms}</body>',
+                  '<equality><joint joint1="j2" joint2="j1" polycoef="0.2 -0.5 0 0 0"/></equality>')
+    m, d, scene, robot = _pair(path)
+    assert robot.n_dofs == 2
+    worst = 0.0
+    for _ in range(500):
+        mujoco.mj_step(m, d)
+        scene.step()
+        worst = max(worst, np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max())
+    q = robot.get_dofs_position().numpy()
+    assert abs(q[1] - (0.2 - 0.5 * q[0])) < 0.01 and abs(q[0]) > 0.1  # held while it swings
+    assert worst < 1e-11
