@@ -41,7 +41,8 @@ def _pair(path, cone="pyramidal", plane=False):
 def test_arm_masses_frames_and_trajectory_match_mujoco(f64):
     m, d, scene, robot = _pair(ARM)
     links = {link.name: link for link in robot.links}
-    assert [link.name for link in robot.links] == ["base", "shoulder", "upper:pitch", "upper", "mount", "wrist"]
+    assert [link.name for link in robot.links] == ["base", "shoulder:yaw", "shoulder", "upper:pitch", "upper",
+                                                   "mount", "wrist"]
     for body in range(1, m.nbody):
         assert float(links[m.body(body).name].get_mass()) == pytest.approx(m.body_mass[body], rel=1e-14)
     assert robot.get_dofs_kp().tolist() == [40.0, 60.0, 300.0, 5.0]
@@ -59,13 +60,11 @@ def test_arm_masses_frames_and_trajectory_match_mujoco(f64):
     assert rows == 5  # four friction-loss rows and the slide's lower limit: not a free run
     assert worst < 1e-12
     mujoco.mj_kinematics(m, d)  # (mj_step leaves the frames of the state it started from)
-    for body in range(1, m.nbody):  # a link's origin is its last joint's anchor in the body frame
-        joints = np.flatnonzero(m.jnt_bodyid == body)
-        anchor = m.jnt_pos[joints[-1]] if len(joints) else np.zeros(3)
+    for body in range(1, m.nbody):  # a body's link is its frame, wherever its joints' anchors are
         link = links[m.body(body).name]
-        np.testing.assert_allclose(link.get_pos().numpy(), d.xpos[body] + d.xmat[body].reshape(3, 3) @ anchor,
-                                   atol=1e-12)
+        np.testing.assert_allclose(link.get_pos().numpy(), d.xpos[body], atol=1e-12)
         assert abs(abs(link.get_quat().numpy() @ d.xquat[body]) - 1.0) < 1e-12
+    np.testing.assert_allclose(links["shoulder:yaw"].get_pos().numpy(), d.xanchor[0], atol=1e-12)
 
 
 @pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
@@ -204,3 +203,22 @@ def test_joint_equality_follows_polycoef_as_mujoco(f64, tmp_path):
     q = robot.get_dofs_position().numpy()
     assert abs(q[1] - (0.2 - 0.5 * q[0])) < 0.01 and abs(q[0]) > 0.1  # held while it swings
     assert worst < 1e-11
+
+
+def test_a_bodys_links_are_one_body_to_contacts(f64, tmp_path):
+    """A forearm hinged off its origin, turned after build onto its parent (pairs touching at the
+    build pose are filtered anyway): parent and child bodies do not collide (MuJoCo's
+    filterparent), though the forearm's link hangs from a massless anchor link."""
+    path = _write(tmp_path, '<body name="base"><geom type="box" size="0.05 0.05 0.05" pos="0 0 -0.2"/>'
+                            '<body name="upper"><joint name="j1" axis="0 1 0"/><geom type="capsule" '
+                            'fromto="0 0 0 0 0 0.3" size="0.03"/><body name="fore" pos="0 0 0.4">'
+                            '<joint name="j2" pos="0 0 -0.03" axis="0 1 0"/><geom type="capsule" '
+                            'fromto="0.02 0 0 0.25 0 0" size="0.03"/></body></body></body>')
+    m, d, scene, robot = _pair(path)
+    assert [link.name for link in robot.links] == ["base", "upper", "fore:j2", "fore"]
+    d.qpos[:] = [0.0, np.pi / 2]  # the forearm down along the upper arm, 3 cm from its axis
+    robot.set_dofs_position(torch.tensor(d.qpos))
+    mujoco.mj_step(m, d)
+    scene.step()
+    assert d.ncon == 0 and len(robot.get_contacts()["position"]) == 0
+    assert np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max() < 1e-14

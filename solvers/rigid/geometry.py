@@ -121,7 +121,7 @@ def _aabb_half(geom_type, size):
 
 
 def candidate_pairs(geom_type, geom_link, link_parent, link_static, link_entity, self_collision=True,
-                    adjacent_collision=False, geom_masks=None):
+                    adjacent_collision=False, geom_masks=None, link_body=None):
     """(N, 2) geom pairs that may collide, each ordered as MuJoCo orders it (lower type code
     first, then lower index), in MuJoCo's order: by link pair (its broad phase's body pairs,
     lower link first, static links as its world body 0 whatever their index), then within a link
@@ -133,16 +133,20 @@ def candidate_pairs(geom_type, geom_link, link_parent, link_static, link_entity,
     ``adjacent_collision`` (MuJoCo's filterparent; the world, parent -1, is nobody's parent here);
     nor two links of one entity unless ``self_collision``; nor two geoms whose bit masks
     ``geom_masks`` (G, 2) (contype, conaffinity; None: all 1) share no bit, MuJoCo's rule.
+    "Link" is a body here: ``link_body`` (L,) names each link's body by its first link (None:
+    every link its own; an MJCF body whose joints split it into several links is one body).
     Pairs touching at the initial pose are filtered later (they need the colliders).
     """
     masks = np.ones((len(geom_type), 2), dtype=np.int64) if geom_masks is None else np.asarray(geom_masks)
+    body_of = np.arange(len(link_parent)) if link_body is None else np.asarray(link_body)
+    parent_body = np.array([body_of[p] if p >= 0 else -1 for p in link_parent], dtype=np.int64)
     pairs = []
     for a in range(len(geom_type)):
         for b in range(a + 1, len(geom_type)):
-            la, lb = geom_link[a], geom_link[b]
+            la, lb = body_of[geom_link[a]], body_of[geom_link[b]]
             if la == lb or (link_static[la] and link_static[lb]):
                 continue
-            if not adjacent_collision and (link_parent[la] == lb or link_parent[lb] == la):
+            if not adjacent_collision and (parent_body[la] == lb or parent_body[lb] == la):
                 continue
             if not self_collision and link_entity[la] == link_entity[lb]:
                 continue
@@ -151,7 +155,7 @@ def candidate_pairs(geom_type, geom_link, link_parent, link_static, link_entity,
             if not (masks[a, 0] & masks[b, 1] or masks[b, 0] & masks[a, 1]):
                 continue
             pairs.append((a, b) if geom_type[a] <= geom_type[b] else (b, a))
-    body = [-1 if link_static[link] else link for link in range(len(link_static))]  # static: MuJoCo's world
+    body = [-1 if link_static[link] else body_of[link] for link in range(len(link_static))]  # static: MuJoCo's world
     pairs.sort(key=lambda pair: (*sorted((body[geom_link[pair[0]]], body[geom_link[pair[1]]])), *pair))
     return np.array(pairs, dtype=np.int32).reshape(-1, 2)
 

@@ -6,11 +6,13 @@ inertiafromgeom>``, every orientation form (quat, axisangle, euler, xyaxes, zaxi
 
 Tree: ``<worldbody>`` holds one body tree (one entity). Its root body is the entity's root link:
 free with a ``<freejoint>`` (or a joint of type free), welded where it has no joint; a root body
-hinged or sliding on the world hangs from a static link named "world". A body's joints
-(hinge → revolute, slide → prismatic) each become a link whose frame sits at the joint's anchor
-(LinkSpec joints turn about their link origin): a body with k joints is k links, the first k − 1
-massless, named ``body:joint``; the last keeps the body's name. A body without a joint is a link
-welded to its parent (not merged: MuJoCo and Genesis keep it).
+hinged or sliding on the world hangs from a static link named "world". Each body is a link
+named as the body, at the body's frame (MuJoCo's and Genesis's): a body without a joint is welded
+to its parent (not merged, as MuJoCo and Genesis keep it); a body's joints (hinge → revolute,
+slide → prismatic) turn massless links named ``body:joint`` at their anchors, since a LinkSpec
+joint turns about its link's origin, and the body's link hangs welded from the last of them, or
+is that last link where its joint's anchor is the body origin (no extra link: the usual case).
+Contacts take a body's links as one body (LinkSpec.same_body).
 
 Bodies: mass, com and inertia from ``<inertial>`` (diaginertia with its frame, or fullinertia),
 else from the body's geoms as solids of their density (or stated mass), as MuJoCo's
@@ -276,23 +278,22 @@ class _Reader:
         if worldbody.findall("geom"):
             self.ignored.add("<worldbody> geoms (add the ground as gs.morphs.Plane)")
         links = []
-        self._body(bodies[0], parent=-1, parent_anchor=np.zeros(3), childclass="main", links=links)
+        self._body(bodies[0], parent=-1, childclass="main", links=links)
         self._equalities(links)
         self._actuators(links)
         return links
 
-    def _body(self, body, parent: int, parent_anchor: np.ndarray, childclass: str, links: list):
-        """Append the links of `body` (its joints' chain) and of its subtree. parent_anchor: where
-        the parent link's origin sits in the parent body's frame (same axes)."""
+    def _body(self, body, parent: int, childclass: str, links: list):
+        """Append the links of `body` and of its subtree: the body's link at its MuJoCo frame,
+        after a massless link at the anchor of each joint whose anchor or place in the chain
+        keeps it from being the body's (a LinkSpec joint turns about its link's origin)."""
         attrs = self.attrs(body, childclass)
         childclass = body.get("childclass", childclass)
         name = attrs.get("name") or f"body{len(links)}"
         what = f"body {name!r}"
         self.ignore_unread(body, attrs)
         pos, quat = self.frame(attrs, what)
-        pos = pos - parent_anchor
         joints = [j for j in body if j.tag in ("joint", "freejoint")]
-        anchor = np.zeros(3)  # where the body's last link's origin sits in the body frame
         if parent < 0 and (not joints or self._is_free(joints[0], childclass)):
             if len(joints) > 1:
                 raise self.error(f"{what}: a free joint must be its body's only joint, got {len(joints)} joints")
@@ -302,21 +303,32 @@ class _Reader:
             if parent < 0:  # hinged or sliding on the world
                 links.append(_link("world", -1, "", "fixed", np.zeros(3), _IDENTITY.copy()))
                 parent = 0
-            if not joints:
-                links.append(_link(name, parent, f"{name}_fixed", "fixed", pos, quat))
-            for k, joint in enumerate(joints):
-                link_name = name if k == len(joints) - 1 else f"{name}:{joint.get('name') or k}"
-                spec = self._joint(joint, childclass, link_name, what)
-                offset = self._anchor(joint, childclass)
-                spec.parent = len(links) - 1 if k else parent
-                spec.pos, spec.quat = (offset - anchor, _IDENTITY.copy()) if k else \
-                    (pos + shapes.quat_to_mat(quat) @ offset, quat)
-                anchor = offset
-                links.append(spec)
-        self._contents(body, childclass, links[-1], anchor, what)
+            self._joint_chain(joints, childclass, name, what, parent, pos, quat, links)
+        self._contents(body, childclass, links[-1], what)
         index = len(links) - 1
         for child in body.findall("body"):
-            self._body(child, index, anchor, childclass, links)
+            self._body(child, index, childclass, links)
+
+    def _joint_chain(self, joints, childclass, name, what, parent, pos, quat, links):
+        """The links of a body with `joints` (maybe none) hanging from link `parent`, at (pos, quat)
+        in its frame: one a joint, at the joint's anchor (the chain's later ones in the frame the
+        earlier joints turned, as MuJoCo composes them), then the body's own link welded at the body
+        frame unless the last joint's anchor is the body origin."""
+        anchor = np.zeros(3)
+        for k, joint in enumerate(joints):
+            offset = self._anchor(joint, childclass)
+            last = k == len(joints) - 1 and not np.any(offset)
+            spec = self._joint(joint, childclass, name if last else f"{name}:{joint.get('name') or k}", what)
+            spec.parent, spec.same_body = (len(links) - 1, True) if k else (parent, False)
+            spec.pos, spec.quat = (offset - anchor, _IDENTITY.copy()) if k else \
+                (pos + shapes.quat_to_mat(quat) @ offset, quat)
+            anchor = offset
+            links.append(spec)
+        if not joints:
+            links.append(_link(name, parent, f"{name}_fixed", "fixed", pos, quat))
+        elif np.any(anchor):
+            links.append(_link(name, len(links) - 1, f"{name}_fixed", "fixed", -anchor, _IDENTITY.copy()))
+            links[-1].same_body = True
 
     def _is_free(self, joint, childclass) -> bool:
         return joint.tag == "freejoint" or self.attrs(joint, childclass).get("type") == "free"
@@ -370,15 +382,13 @@ class _Reader:
 
     # ---------------------------------------------------------------- a body's contents
 
-    def _contents(self, body, childclass: str, link: LinkSpec, anchor: np.ndarray, what: str):
-        """The body's geoms, visuals and mass properties on `link`, whose origin sits at `anchor`
-        in the body frame."""
+    def _contents(self, body, childclass: str, link: LinkSpec, what: str):
+        """The body's geoms, visuals and mass properties on its link (at the body frame)."""
         solids = []
         for k, element in enumerate(body.findall("geom")):
             attrs = self.attrs(element, childclass)
             self.ignore_unread(element, attrs)
             geom, density, mass = self._geom(attrs, f"{what} geom {attrs.get('name') or k}")
-            geom.pos = geom.pos - anchor
             solids.append((geom, density, mass))
             contype, conaffinity = int(attrs.get("contype", 1)), int(attrs.get("conaffinity", 1))
             if contype or conaffinity:
@@ -391,7 +401,6 @@ class _Reader:
             link.mass, link.com, link.inertia = self._inertial(inertial, what)
         elif self.inertiafromgeom != "false":
             link.mass, link.com, link.inertia = _solids_mass_properties(solids)
-        link.com = link.com - anchor
 
     def _geom(self, attrs: dict, what: str):
         """(GeomSpec in the body frame, density kg/m³, stated mass kg or None) of a <geom>."""

@@ -201,7 +201,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
     self_collision / adjacent_collision: the pair rules of geometry.candidate_pairs.
     """
     rows = {k: [] for k in ("name", "parent", "jtype", "pos0", "quat0", "axis", "com", "inertia0", "mass0",
-                            "dof0", "q0", "entity")}
+                            "dof0", "q0", "entity", "same_body")}
     dofs = {k: [] for k in ("link", "q", "damping", "armature", "lower", "upper", "effort", "frictionloss", "kp", "kv")}
     geoms, geom_links, geom_names = [], [], []
     qpos0, equalities = [], []
@@ -223,6 +223,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
             rows["dof0"].append(len(dofs["link"]))
             rows["q0"].append(len(qpos0))
             rows["entity"].append(entity_idx)
+            rows["same_body"].append(spec.same_body)
             link_idx = len(rows["name"]) - 1
             joint_dof[spec.joint_name] = len(dofs["link"])
             for k in range(DOFS_OF[code]):
@@ -283,8 +284,11 @@ def _pairs(geoms, geom_links, rows, self_collision, adjacent_collision):
     static = _static_links(link_parent, np.array(rows["jtype"]))
     types = np.array([geometry.GEOM_CODE[g.type] for g in geoms], dtype=np.int32)
     masks = np.array([(g.contype, g.conaffinity) for g in geoms], dtype=np.int64).reshape(-1, 2)
+    body = np.arange(len(link_parent))
+    for link, same in enumerate(rows["same_body"]):  # (parents first)
+        body[link] = body[link_parent[link]] if same else link
     pairs = geometry.candidate_pairs(types, np.array(geom_links, dtype=np.int32), link_parent, static,
-                                     np.array(rows["entity"]), self_collision, adjacent_collision, masks)
+                                     np.array(rows["entity"]), self_collision, adjacent_collision, masks, body)
     n = len(pairs)
     return {"pair_geom1": pairs[:, 0].copy(), "pair_geom2": pairs[:, 1].copy(),
             "pair_condim": np.full(n, 3, dtype=np.int32), "pair_margin": np.zeros(n)}

@@ -68,6 +68,8 @@ class LinkSpec:
     mimic: (joint name, multiplier, offset) when this scalar joint follows another of the same
     entity, q = multiplier · q_other + offset (URDF ``<mimic>``): a joint equality constraint row
     (constraint/rows.py), as MuJoCo's and Genesis's; None otherwise.
+    same_body: the link continues its parent's body (MJCF: the links of one body's joints, which
+    LinkSpec joints' frames split): contact rules take the two as one body.
     """
     name: str
     parent: int
@@ -91,3 +93,4 @@ class LinkSpec:
     merged: list = field(default_factory=list)
     visuals: list = field(default_factory=list)
     mimic: tuple = None
+    same_body: bool = False
