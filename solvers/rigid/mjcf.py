@@ -57,7 +57,7 @@ _READ = {
               "actuatorfrcrange", "actuatorfrclimited", "stiffness", "ref", "group", "user"),
     "freejoint": ("name", "group"),
     "geom": _FRAME + _NAMES + ("type", "size", "fromto", "mesh", "friction", "contype", "conaffinity", "density",
-                               "mass", "shellinertia"),
+                               "mass"),
     "inertial": _FRAME + ("mass", "diaginertia", "fullinertia"),
 }
 _JOINTS = {"hinge": "revolute", "slide": "prismatic"}
@@ -121,7 +121,7 @@ class _Reader:
 
     def _inlined(self, path: str, seen=()):
         """The root element of `path` with every ``<include file>`` replaced by the children of
-        the included file's root (paths relative to the including file, as MuJoCo)."""
+        the included file's root (paths relative to the main file's folder, as MuJoCo's)."""
         if path in seen:
             raise AssetError(f"MJCF '{self.path}': <include> cycle through '{path}'")
         try:
@@ -132,7 +132,7 @@ class _Reader:
             file = include.get("file")
             if not file:
                 raise AssetError(f"MJCF '{path}': <include> expected a 'file' attribute")
-            child = self._inlined(os.path.join(os.path.dirname(os.path.abspath(path)), file), seen + (path,))
+            child = self._inlined(os.path.join(os.path.dirname(os.path.abspath(self.path)), file), seen + (path,))
             parent, at = include.getparent(), include.getparent().index(include)
             parent.remove(include)
             for k, element in enumerate(child):
@@ -346,7 +346,7 @@ class _Reader:
         if kind not in _JOINTS:
             raise self.error(f"{what}: type expected hinge or slide (or free on the root body), got {kind!r}")
         for key in ("stiffness", "ref"):
-            if float(attrs.get(key, 0.0)) != 0.0:
+            if self.numbers(attrs, key, 1, what, default=[0.0])[0] != 0.0:
                 raise self.error(f"{what}: joint springs are not supported (attribute {key!r} = {attrs[key]!r})")
         axis = self.numbers(attrs, "axis", 3, what, default=[0.0, 0.0, 1.0])
         axis = axis / _norm(self, axis, what)
@@ -388,13 +388,15 @@ class _Reader:
         for k, element in enumerate(body.findall("geom")):
             attrs = self.attrs(element, childclass)
             self.ignore_unread(element, attrs)
-            geom, density, mass = self._geom(attrs, f"{what} geom {attrs.get('name') or k}")
+            where = f"{what} geom {attrs.get('name') or k}"
+            geom, density, mass = self._geom(attrs, where)
             solids.append((geom, density, mass))
-            contype, conaffinity = int(attrs.get("contype", 1)), int(attrs.get("conaffinity", 1))
+            contype, conaffinity = (int(self.numbers(attrs, key, 1, where, default=[1])[0]) for key in
+                                    ("contype", "conaffinity"))
             if contype or conaffinity:
                 geom.contype, geom.conaffinity = contype, conaffinity
                 link.geoms.append(geom)
-            if int(attrs.get("group", 0)) <= 2:
+            if self.numbers(attrs, "group", 1, where, default=[0])[0] <= 2:
                 link.visuals.append(self._visual(geom, attrs))
         inertial = body.find("inertial")
         if inertial is not None and self.inertiafromgeom != "true":
@@ -428,7 +430,7 @@ class _Reader:
         friction = self.numbers(attrs, "friction", (1, 2, 3), what, default=[1.0])
         geom.friction = float(friction[0])
         density = self.numbers(attrs, "density", 1, what, default=[1000.0])[0]
-        mass = float(attrs["mass"]) if "mass" in attrs else None
+        mass = self.numbers(attrs, "mass", 1, what)[0] if "mass" in attrs else None
         return geom, density, mass
 
     def _visual(self, geom: GeomSpec, attrs: dict) -> VisualSpec:
