@@ -487,7 +487,9 @@ class _Reader:
         for section in self.root.iter("actuator"):
             for element in section:
                 attrs = self.attrs(element, "main")
-                what = f"<actuator><{element.tag} name={attrs.get('name')!r}>"
+                named = f"name={attrs['name']!r}" if attrs.get("name") else \
+                    " ".join(f"{k}={attrs[k]!r}" for k in ("joint", "tendon", "site", "body") if k in attrs)
+                what = f"<actuator><{element.tag} {named}>"
                 link = by_joint.get(attrs.get("joint"))
                 if link is None or link.joint_type not in ("revolute", "prismatic"):
                     self.ignored.add(f"{what} (it drives no hinge or slide joint)")
@@ -513,7 +515,7 @@ class _Reader:
             self.ignored.add(f"{what} (type {kind})")
             return
         if "gear" in attrs and np.any(self.numbers(attrs, "gear", (1, 6), what)[:1] != 1):
-            self.ignored.add(f"{what} gear (controls are joint forces and positions)")
+            self.ignored.add("<actuator gear> (controls are the joints' forces and positions)")
         bound = self._force_bound(attrs, "forcerange", "forcelimited", what)
         link.effort = min(link.effort, bound)
         for key in ("ctrlrange", "ctrllimited"):
