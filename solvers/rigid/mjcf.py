@@ -65,6 +65,9 @@ _PRIMITIVES = ("sphere", "capsule", "cylinder", "box")
 _ACTUATORS = ("general", "motor", "position", "velocity", "intvelocity", "damper", "cylinder", "muscle", "adhesion",
               "plugin")
 _MJ_RGBA = np.array([0.5, 0.5, 0.5, 1.0])  # MuJoCo's default geom colour
+# MuJoCo's defaults of attributes not read here, which genesis_lite's contacts and rows have
+_MJ_DEFAULTS = {"condim": [3.0], "margin": [0.0], "gap": [0.0], "priority": [0.0], "solmix": [1.0],
+                "solref": [0.02, 1.0], "solimp": [0.9, 0.95, 0.001, 0.5, 2.0]}
 
 
 def load_mjcf(path: str, entity_name: str | None = None) -> list[LinkSpec]:
@@ -194,8 +197,10 @@ class _Reader:
         return values
 
     def ignore_unread(self, element, attrs: dict):
-        for key in attrs:
-            if key not in _READ[element.tag]:
+        """Note the element's attributes not read here, but those at MuJoCo's default (which the
+        simulation has: nothing is lost)."""
+        for key, value in attrs.items():
+            if key not in _READ[element.tag] and not _is_default(key, value):
                 self.ignored.add(f"<{element.tag} {key}>")
 
     # ---------------------------------------------------------------- frames
@@ -557,6 +562,14 @@ def _solids_mass_properties(solids) -> tuple[float, np.ndarray, np.ndarray]:
     com = sum(m * c for m, c, _ in parts) / total
     inertia = sum(i + m * ((c - com) @ (c - com) * np.eye(3) - np.outer(c - com, c - com)) for m, c, i in parts)
     return float(total), com, inertia
+
+
+def _is_default(key: str, value: str) -> bool:
+    """Whether attribute `key` holds MuJoCo's default (_MJ_DEFAULTS)."""
+    try:
+        return key in _MJ_DEFAULTS and [float(v) for v in value.split()] == _MJ_DEFAULTS[key]
+    except ValueError:
+        return False
 
 
 def _norm(reader: _Reader, v: np.ndarray, what: str) -> float:
