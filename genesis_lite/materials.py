@@ -183,7 +183,10 @@ class MPM:
     @dataclass(kw_only=True)
     class ElastoPlastic(Base):
         """Elasto-plastic material: von Mises yield (use_von_mises, von_mises_yield_stress, Pa) or,
-        without it, singular values of F clamped to [1 − yield_lower, 1 + yield_higher]."""
+        without it, singular values of F clamped to [1 − yield_lower, 1 + yield_higher].
+        von_mises_yield_stress σ_y is Genesis's parameter: the deviatoric log strain's norm is held
+        at σ_y / 2μ, so a bar in uniaxial tension or compression yields at √(3/2)·σ_y ≈ 1.22 σ_y
+        (measured 1214 Pa at σ_y 1e3, as Genesis); pass σ_uniaxial / 1.22 for a textbook yield."""
         yield_lower: float = 2.5e-2
         yield_higher: float = 4.5e-3
         use_von_mises: bool = True
@@ -209,7 +212,10 @@ class MPM:
     @named_keywords()
     @dataclass(kw_only=True)
     class Snow(ElastoPlastic):
-        """Snow: ElastoPlastic's clamp, hardening exp(10 (1 − Jp)) when compressed; no von Mises."""
+        """Snow: ElastoPlastic's clamp and Lamé parameters scaled by exp(10 (1 − Jp)), Jp the
+        plastic volume ratio (as Genesis): harder where compressed (Jp < 1), softer where stretched
+        (Jp > 1: a block crushed without confinement, whose sides stretch, loses its strength); no
+        von Mises."""
         sampler: str = "random"
         use_von_mises: bool = False
 

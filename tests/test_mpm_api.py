@@ -361,6 +361,9 @@ class FakeSolver:
     def check_substep(self, E, nu, rho):
         self.checked = (E, nu, rho)
 
+    def check_speed(self, speed, who):
+        pass
+
 
 class FakeSim:
     """The simulator's state/input interface: (B, N·WIDTH) state, (B, N) per-particle inputs."""

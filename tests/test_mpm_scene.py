@@ -272,6 +272,28 @@ def test_the_wave_bound_keeps_a_margin_below_dx_over_c(f64, caplog, ratio, warne
         scene.build()
 
 
+@pytest.mark.parametrize("cells, warned", [(0.8, False), (1.2, True)])
+def test_a_speed_past_a_cell_a_substep_warns(f64, caplog, cells, warned):
+    """Explicit MPM is unstable past one grid cell a substep (measured: a neo-Hookean block thrown at
+    1.6 cells a substep turned to NaN at its first step, unwarned): set_velocity says so."""
+    scene, blob, _ = _scene(_jelly())
+    speed = cells * (1.0 / SMALL["grid_density"]) / (DT / SUBSTEPS)
+    with warns(caplog, "entity 'blob': set_particles_vel: .* crosses 1.2 grid cells a substep" if warned else None):
+        blob.set_velocity([0.0, speed, 0.0])
+
+
+@pytest.mark.parametrize("size, warned", [(0.9, False), (1.5, True)])
+def test_particles_coarser_than_the_cells_warn(f64, caplog, size, warned):
+    """particle_size above the cell size dx: a body's particles couple weakly through the grid (from
+    3·dx on not at all: measured, a pushed particle moves none of its neighbours)."""
+    dx = 1.0 / SMALL["grid_density"]
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT, substeps=SUBSTEPS),
+                     mpm_options=gs.options.MPMOptions(**SMALL, particle_size=size * dx))
+    scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.3), size=(0.2, 0.2, 0.2)), material=_jelly(), name="block")
+    with warns(caplog, "entities: block.*particle_size .* exceeds the grid's cell size" if warned else None):
+        scene.build()
+
+
 @pytest.mark.parametrize("scale", [1.0, 2.0])
 def test_cameras_draw_the_particles(f64, scale):
     """A camera draws each particle as a sphere of half the particle size (times

@@ -205,7 +205,11 @@ class MPMEntity(EntityIndexing):
         particle's). Differentiable in ``vels``."""
         parts = self._local(particles_idx_local, self.n_particles, "particles_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
-        self._write_fields(("vel",), parts, envs, self._particle_values(vels, len(parts), (3,), envs, "vels"))
+        values = self._particle_values(vels, len(parts), (3,), envs, "vels")
+        if values.numel():
+            speed = float(values.detach().norm(dim=-1).max())
+            self._solver.check_speed(speed, f"entity '{self.name}': set_particles_vel")
+        self._write_fields(("vel",), parts, envs, values)
 
     def set_position(self, value, envs_idx=None):
         """Genesis's set_position: (n_particles, 3) or (len(envs_idx), n_particles, 3) sets every
