@@ -296,6 +296,42 @@ def test_default_tolerance_converges_an_elliptic_slide_for_its_gradient(f64):
         assert_converged(directional_errors(loss, start, seed), f"finger pose, direction {seed}")
 
 
+def test_a_loose_tolerance_keeps_the_pyramidal_solve_exact(f64):
+    """The KUKA pushing a box under moving PD targets, pyramidal cone, at tolerance 1e-5 (float32's
+    default) and 1e-12 in lockstep: a stop on a small improvement right after the rows' states
+    changed left the line search's point (the two parted by 1.2e-3 m/s at step 30, and 200
+    steps' gradient was 31 % off); one more Newton step with the final states ends the piecewise-
+    quadratic solve exactly, so the loose solve stays on the tight one's trajectory."""
+    q0 = np.array([0.0, 1.26232841, 0.0, -1.35617325, 0.0, 0.52309098, 0.0])
+
+    def make(tolerance):
+        scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01),
+                         rigid_options=gs.options.RigidOptions(tolerance=tolerance))
+        scene.add_entity(gs.morphs.Plane())
+        arm = scene.add_entity(gs.morphs.URDF(file=pybullet("kuka_iiwa", "model.urdf"), fixed=True))
+        box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.06), pos=(0.6, 0.1523, 0.03)),
+                               material=gs.materials.Rigid(rho=500.0))
+        scene.build()
+        arm.set_dofs_kp(torch.tensor([3000.0, 3000.0, 1000.0, 2000.0, 300.0, 300.0, 50.0], dtype=torch.float64))
+        arm.set_dofs_kv(torch.tensor([300.0, 300.0, 100.0, 200.0, 30.0, 30.0, 5.0], dtype=torch.float64))
+        arm.set_dofs_position(torch.tensor(q0))
+        return scene, arm, box
+
+    tight, loose = make(1e-12), make(1e-5)
+    worst, touched = 0.0, False
+    for t in range(60):
+        s = t / 2000.0
+        target = torch.tensor(q0 + [0.25 * s, 0.02 * np.sin(6 * np.pi * s), 0.0, 0.02 * np.sin(4 * np.pi * s), 0.0,
+                                    0.02 * np.sin(10 * np.pi * s), 0.1 * np.sin(2 * np.pi * s)])
+        for scene, arm, _ in (tight, loose):
+            arm.control_dofs_position(target)
+            scene.step()
+        touched |= len(tight[2].get_contacts(with_entity=tight[1])["geom_a"]) > 0
+        worst = max(worst, float((tight[2].get_dofs_velocity() - loose[2].get_dofs_velocity()).abs().max()))
+    assert touched  # the arm pushes the box
+    assert worst < 1e-9
+
+
 def test_a_solve_stopped_at_its_iteration_limit_warns_in_a_differentiable_scene(f64, caplog):
     """A differentiable step whose constraint solve stops at RigidOptions(iterations) before its
     tolerance warns once, naming the option: its backward differentiates the converged solution

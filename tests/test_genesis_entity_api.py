@@ -284,6 +284,21 @@ def test_control_force_is_the_command_at_the_current_state(f64, pendulum):
     assert robot.get_dofs_control_force().tolist() == [5.0]  # Genesis: clipped to the effort 5
 
 
+def test_control_force_on_its_bound_has_the_steps_gradient(f64, tmp_path):
+    """A force command exactly on its bound is the bound, in its gradient too: none to the command,
+    all to the bound, as the step's reverse takes it (actuation.py; torch.minimum split it 0.5 / 0.5)."""
+    path = tmp_path / "pendulum.urdf"
+    path.write_text(PENDULUM)
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT, requires_grad=True))
+    robot = scene.add_entity(gs.morphs.URDF(file=str(path), fixed=True))
+    scene.build()
+    command, bound = (torch.tensor([5.0], dtype=torch.float64, requires_grad=True) for _ in range(2))
+    robot.set_dofs_force_range(-bound, bound)
+    robot.control_dofs_force(command)
+    grads = torch.autograd.grad(robot.get_dofs_control_force().sum(), (command, bound))
+    assert [float(g) for g in grads] == [0.0, 1.0]
+
+
 def test_force_range_may_be_unbounded(f64, pendulum):
     """±inf is no bound, as Genesis's default (a Genesis script restoring it works); NaN is refused."""
     scene, robot = pendulum
@@ -989,6 +1004,14 @@ def test_set_mass_scales_the_moving_links_as_genesis(f64):
         wall.set_mass(1.0)
     with pytest.raises(gs.InvalidInputError, match=r"entity 'urdf_1': argument 'mass' must be ≥ 0 kg"):
         free.set_mass(-1.0)
+
+
+def test_set_mass_takes_a_one_element_tensor_in_a_scene_without_envs(f64):
+    scene = gs.Scene(show_viewer=False)
+    box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1)))
+    scene.build()
+    box.set_mass(torch.tensor([1.3], dtype=torch.float64))  # (as set_links_mass takes it; it raised)
+    assert float(box.get_mass()) == pytest.approx(1.3, rel=1e-15)
 
 
 def test_dofs_limits_as_the_urdf_gives_them(f64, two_robots):

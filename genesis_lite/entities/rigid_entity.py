@@ -709,6 +709,8 @@ class RigidEntity(EntityIndexing):
                                     f"to the world, whose mass it is")
         envs = self._envs(envs_idx, distinct=True)
         given = self._tensor(mass, "mass", () if self.scene.n_envs == 0 else (len(envs),))
+        if self.scene.n_envs == 0 and tuple(given.shape) == (1,):  # (a one-element tensor, as set_links_mass takes)
+            given = given[0]
         total = self._values(given[..., None] if given.dim() == 1 else given, 1, envs, "mass")
         self._refuse_negative("mass", total, " kg")
         links_mass = self._read_input("mass", moving, envs_idx)
@@ -978,7 +980,9 @@ class RigidEntity(EntityIndexing):
         return not held.any() or not held[envs[:, None], columns].any()  # the first test is cheaper
 
     def control_dofs_force(self, force, dofs_idx_local=None, envs_idx=None):
-        """Apply joint forces (N·m or N) during the next steps, until changed."""
+        """Apply joint forces (N·m or N) during the next steps, until changed; clipped to the force
+        range (set_dofs_force_range). Differentiable: a clipped command gets no gradient, one
+        exactly on its bound none either (the derivative from outside; step inside to optimise)."""
         self._control("control_dofs_force", "force", {"ctrl_force": (force, "force")}, dofs_idx_local, envs_idx)
 
     def control_dofs_position(self, position, dofs_idx_local=None, envs_idx=None):
@@ -1015,7 +1019,9 @@ class RigidEntity(EntityIndexing):
         mode = read["ctrl_mode"]
         force = torch.where(mode == _MODES["position"], read["kp"] * (read["ctrl_pos"] - q) + servo,
                             torch.where(mode == _MODES["velocity"], servo, read["ctrl_force"]))
-        return self._out(torch.minimum(torch.maximum(force, read["force_lo"]), read["force_hi"]))
+        lo, hi = read["force_lo"], read["force_hi"]
+        # a force on its bound is the bound, in its gradient too (the step's convention, actuation.py)
+        return self._out(torch.where((lo < force) & (force < hi), force, torch.where(force <= lo, lo, hi)))
 
     # -- dynamics queries ---------------------------------------------------------------------------
     def get_dofs_force(self, dofs_idx_local=None, envs_idx=None):

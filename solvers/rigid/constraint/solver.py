@@ -22,8 +22,11 @@ Newton decrement, quadratic in the error, under the tolerance) leaves qacc ~√t
 solution. The backward differentiates the solution (implicit.py), and the forward map's
 derivative differs from it by that error times the Hessian's change, large where a contact
 nearly sticks (1/T²): a husky driving on a plane, 40 steps, missed the map's derivative by 6 %
-of |g|. One more Newton step squares the error: 1e-8 of |g| there. (A pyramidal solve ends
-exact: its cost is piecewise quadratic.)
+of |g|. One more Newton step squares the error: 1e-8 of |g| there. A pyramidal cost is piecewise
+quadratic, so a Newton step with the final states ends exact, but a stop on a small improvement
+right after the states changed leaves the line search's point (tolerance 1e-5, float32's default:
+a KUKA pushing a box left its 1e-12 trajectory by 1.2e-3 m/s at step 30, and 200 steps' gradient
+was 31 % off): both cones take the one more step where the last states changed.
 
 **Warm start** (mj_fwdConstraint): the whole env's cost at qacc_warmstart (constraints + Gauss)
 against the constraint cost at qacc_smooth; the lower one starts every island.
@@ -968,9 +971,8 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
             niter += 1
             stop = (improvement > 0.0 and improvement < tolerance) or gradient < tolerance \
                 or decrement < tolerance
-            if ti.static(d.elliptic):  # (see "Past MuJoCo's stop" above)
-                if stop and changed and d.converged and not polished:
-                    stop, polished = 0, 1
+            if stop and changed and d.converged and not polished:  # (see "Past MuJoCo's stop" above)
+                stop, polished = 0, 1
         if stop or niter >= iterations:
             capped = int(not stop and not polished)  # (a polishing step beyond the stop is not short of it)
             break
