@@ -223,3 +223,59 @@ def test_a_bodys_links_are_one_body_to_contacts(f64, tmp_path):
     scene.step()
     assert d.ncon == 0 and len(robot.get_contacts()["position"]) == 0
     assert np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max() < 1e-14
+
+
+def test_welded_children_and_excluded_bodies_do_not_collide_as_mujoco(f64, tmp_path):
+    """MuJoCo's filter by weld group: a hand welded to the forearm is the forearm's body, so it
+    never meets the upper arm (the forearm's parent) though it lies in it; <contact><exclude>
+    turns the upper arm and a side arm across it off, and without it they touch, in both engines."""
+    arm = ('<body name="base"><geom type="box" size="0.05 0.05 0.05" pos="0 0 -0.3"/>'
+           '<body name="upper"><joint name="j1" axis="0 1 0"/><geom type="capsule" fromto="0 0 0 0 0 0.3" size="0.03"/>'
+           '<body name="fore" pos="0 0 0.3"><joint name="j2" axis="0 1 0"/><geom type="capsule" '
+           'fromto="0 0 0 0.1 0 0" size="0.02"/><body name="hand" pos="0.1 0 0"><geom type="box" '
+           'size="0.03 0.03 0.03" pos="0.05 0 0"/></body>'
+           '<body name="side" pos="0 0.1 0"><joint name="j3" axis="1 0 0"/><geom type="capsule" '
+           'fromto="0 0 0 0 0 0.2" size="0.03"/></body></body></body></body>')
+    for exclude, expected in (('<contact><exclude body1="upper" body2="side"/></contact>', 0), ("", 1)):
+        m, d, scene, robot = _pair(_write(tmp_path, arm, exclude))
+        assert [link.name for link in robot.links] == ["base", "upper", "fore", "hand", "side"]
+        d.qpos[:] = [0.0, 1.5, 1.0]  # the hand folded onto the upper arm, the side arm across it
+        robot.set_dofs_position(torch.tensor(d.qpos))
+        mujoco.mj_step(m, d)
+        scene.step()
+        ours = robot.get_contacts()
+        assert d.ncon == len(ours["position"]) == expected
+        assert np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max() < 1e-12
+
+
+def test_sections_merge_and_free_root_joints_and_box_segments_read_as_mujoco(f64, tmp_path):
+    """Two <default> and two <worldbody> sections (one from an include), a free root joint's
+    damping and armature, a box from a segment (square section, MuJoCo 4): the compiled masses,
+    inertias and a fall with drag equal MuJoCo's."""
+    (tmp_path / "more.xml").write_text('<mujoco><default><geom density="500"/></default>'
+                                       '<worldbody><geom type="plane" size="1 1 1"/></worldbody></mujoco>')
+    path = tmp_path / "robot.xml"
+    path.write_text('<mujoco><default><joint damping="0.5" armature="0.02"/></default><include file="more.xml"/>'
+                    '<option gravity="0 0 -9.81"/><worldbody><body name="b" pos="0 0 1"><joint type="free"/>'
+                    '<geom type="box" fromto="0 0 0 0.3 0.1 0" size="0.02 0.05"/>'
+                    '<body name="c" pos="0.3 0 0"><joint name="h" axis="0 0 1"/><geom type="sphere" size="0.05"/>'
+                    '</body></body></worldbody></mujoco>')
+    m, d, scene, robot = _pair(str(path))
+    assert [float(link.get_mass()) for link in robot.links] == pytest.approx(m.body_mass[1:].tolist(), rel=1e-14)
+    assert robot.get_dofs_damping().tolist() == [0.5] * 7 and robot.get_dofs_armature().tolist() == [0.02] * 7
+    d.qvel[:] = robot.get_dofs_velocity().numpy()
+    d.qvel[6] = 3.0
+    robot.set_dofs_velocity(torch.tensor(d.qvel))
+    for _ in range(100):
+        mujoco.mj_step(m, d)
+        scene.step()
+    assert np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max() < 1e-12
+
+
+@pytest.mark.parametrize("element", ['<frame pos="0 0 1"><geom type="sphere" size="0.1"/></frame>',
+                                     '<replicate count="3" offset="0.1 0 0"><geom type="sphere" size="0.1"/>'
+                                     '</replicate>'])
+def test_elements_that_would_add_bodies_or_geoms_unread_are_refused(f64, tmp_path, element):
+    path = _write(tmp_path, f'<body name="b"><joint name="j"/>{LINK}{element}</body>')
+    with pytest.raises(AssetError, match=r"body 'b': \['(frame|replicate)'\] not supported"):
+        gs.Scene().add_entity(gs.morphs.MJCF(file=path))

@@ -121,7 +121,8 @@ def _aabb_half(geom_type, size):
 
 
 def candidate_pairs(geom_type, geom_link, link_parent, link_static, link_entity, self_collision=True,
-                    adjacent_collision=False, geom_masks=None, link_body=None):
+                    adjacent_collision=False, geom_masks=None, link_body=None, link_weld=None,
+                    link_exclusions=None):
     """(N, 2) geom pairs that may collide, each ordered as MuJoCo orders it (lower type code
     first, then lower index), in MuJoCo's order: by link pair (its broad phase's body pairs,
     lower link first, static links as its world body 0 whatever their index), then within a link
@@ -133,26 +134,36 @@ def candidate_pairs(geom_type, geom_link, link_parent, link_static, link_entity,
     ``adjacent_collision`` (MuJoCo's filterparent; the world, parent -1, is nobody's parent here);
     nor two links of one entity unless ``self_collision``; nor two geoms whose bit masks
     ``geom_masks`` (G, 2) (contype, conaffinity; None: all 1) share no bit, MuJoCo's rule.
-    "Link" is a body here: ``link_body`` (L,) names each link's body by its first link (None:
-    every link its own; an MJCF body whose joints split it into several links is one body).
+    The rules take links by weld group, as MuJoCo's and Genesis's filters do: ``link_weld`` (L,)
+    names each link's group by its first link (a link welded to its parent by a fixed joint, or
+    continuing its parent's body, is in its parent's group; None: every link its own), so a
+    welded child never meets its parent's parent either; the world-welded links are the static
+    ones. ``link_body`` (L,): each link's body by its first link, for the order (None: every link
+    its own; an MJCF body whose joints split it into several links is one body).
+    ``link_exclusions``: per link, a set of (lower, higher) link pairs that never collide (MJCF
+    ``<contact><exclude>``), or None.
     Pairs touching at the initial pose are filtered later (they need the colliders).
     """
+    excluded = set().union(*link_exclusions) if link_exclusions else set()
     masks = np.ones((len(geom_type), 2), dtype=np.int64) if geom_masks is None else np.asarray(geom_masks)
     body_of = np.arange(len(link_parent)) if link_body is None else np.asarray(link_body)
-    parent_body = np.array([body_of[p] if p >= 0 else -1 for p in link_parent], dtype=np.int64)
+    weld_of = np.arange(len(link_parent)) if link_weld is None else np.asarray(link_weld)
+    parent_weld = np.array([weld_of[p] if p >= 0 else -1 for p in link_parent], dtype=np.int64)
     pairs = []
     for a in range(len(geom_type)):
         for b in range(a + 1, len(geom_type)):
-            la, lb = body_of[geom_link[a]], body_of[geom_link[b]]
+            la, lb = weld_of[geom_link[a]], weld_of[geom_link[b]]
             if la == lb or (link_static[la] and link_static[lb]):
                 continue
-            if not adjacent_collision and (parent_body[la] == lb or parent_body[lb] == la):
+            if not adjacent_collision and (parent_weld[la] == lb or parent_weld[lb] == la):
                 continue
             if not self_collision and link_entity[la] == link_entity[lb]:
                 continue
             if geom_type[a] == PLANE and geom_type[b] == PLANE:
                 continue  # MuJoCo has no plane-plane collider
             if not (masks[a, 0] & masks[b, 1] or masks[b, 0] & masks[a, 1]):
+                continue
+            if (min(geom_link[a], geom_link[b]), max(geom_link[a], geom_link[b])) in excluded:
                 continue
             pairs.append((a, b) if geom_type[a] <= geom_type[b] else (b, a))
     body = [-1 if link_static[link] else body_of[link] for link in range(len(link_static))]  # static: MuJoCo's world

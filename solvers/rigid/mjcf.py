@@ -1,25 +1,29 @@
 """MJCF (MuJoCo's XML) → ``list[LinkSpec]``: the part of the format an articulated rigid robot needs.
 
-Read as MuJoCo's compiler reads it: ``<include>`` files inlined, ``<default>`` classes (nested,
-``class`` and ``childclass``), ``<compiler angle meshdir assetdir autolimits eulerseq
-inertiafromgeom>``, every orientation form (quat, axisangle, euler, xyaxes, zaxis).
+Read as MuJoCo's compiler reads it: ``<include>`` files inlined (several ``<default>`` and
+``<worldbody>`` sections merge), ``<default>`` classes (nested, ``class`` and ``childclass``),
+``<compiler angle meshdir assetdir autolimits eulerseq inertiafromgeom>``, every orientation form
+(quat, axisangle, euler, xyaxes, zaxis).
 
 Tree: ``<worldbody>`` holds one body tree (one entity). Its root body is the entity's root link:
-free with a ``<freejoint>`` (or a joint of type free), welded where it has no joint; a root body
-hinged or sliding on the world hangs from a static link named "world". Each body is a link
-named as the body, at the body's frame (MuJoCo's and Genesis's): a body without a joint is welded
-to its parent (not merged, as MuJoCo and Genesis keep it); a body's joints (hinge → revolute,
-slide → prismatic) turn massless links named ``body:joint`` at their anchors, since a LinkSpec
-joint turns about its link's origin, and the body's link hangs welded from the last of them, or
-is that last link where its joint's anchor is the body origin (no extra link: the usual case).
-Contacts take a body's links as one body (LinkSpec.same_body).
+free with a ``<freejoint>`` (or a joint of type free, its damping and armature read), welded
+where it has no joint; a root body hinged or sliding on the world hangs from a static link named
+"world". Each body is a link named as the body, at the body's frame (MuJoCo's and Genesis's): a
+body without a joint is welded to its parent (not merged, as MuJoCo and Genesis keep it); a
+body's joints (hinge → revolute, slide → prismatic) turn massless links named ``body:joint`` at
+their anchors, since a LinkSpec joint turns about its link's origin, and the body's link hangs
+welded from the last of them, or is that last link where its joint's anchor is the body origin
+(no extra link: the usual case). Contacts take a body's links as one body (LinkSpec.same_body),
+and, as MuJoCo's and Genesis's filters, a welded body as part of its parent.
 
 Bodies: mass, com and inertia from ``<inertial>`` (diaginertia with its frame, or fullinertia),
 else from the body's geoms as solids of their density (or stated mass), as MuJoCo's
-``inertiafromgeom="auto"``. Geoms: sphere, capsule, cylinder, box (sizes, or ``fromto``), mesh
-(``<mesh file scale>`` assets, in the file's own coordinates: MuJoCo's re-centring moves the
-geom frame, not the surface); contype/conaffinity masks (MuJoCo's pair rule); friction (the
-sliding coefficient); a geom with contype = conaffinity = 0 only weighs and is drawn; a geom
+``inertiafromgeom="auto"`` (a mesh: its solid, exact when closed, else its convex hull; MuJoCo's
+legacy formula differs for non-convex meshes). Geoms: sphere, capsule, cylinder, box (sizes, or
+``fromto``), mesh (``<mesh file scale>`` assets, in the file's own coordinates: MuJoCo's
+re-centring moves the geom frame, not the surface; found in meshdir or beside the file that
+included them); contype/conaffinity masks (MuJoCo's pair rule); ``<contact><exclude>``; friction
+(the sliding coefficient); a geom with contype = conaffinity = 0 only weighs and is drawn; a geom
 drawn where its group is 0-2 (MuJoCo's visible groups), coloured by its rgba or material.
 Joints: axis, pos, range (limited: MuJoCo's autolimits), damping, armature, frictionloss,
 actuatorfrcrange (|force| bound).
@@ -29,10 +33,13 @@ the |force| bound; a ``motor`` is force control (control_dofs_force).
 ``<equality><joint>`` with polycoef (c0, c1) makes joint1 follow joint2, q1 = c0 + c1 q2 (LinkSpec.mimic).
 
 Refused (AssetError naming the element): ball and further free joints, joint springs (stiffness,
-ref), ellipsoid / hfield / sdf geoms, welds and connects, several bodies in ``<worldbody>``.
-Ignored with one warning naming them: worldbody geoms (the ground is ``gs.morphs.Plane``),
-tendons and what acts on them, ``<contact>`` pairs and exclusions, ``<option>`` (the scene's
-options rule), and attributes that tune MuJoCo's solver (solref, solimp, margin, condim...).
+ref), ellipsoid / hfield / sdf geoms, welds and connects, several bodies in ``<worldbody>``,
+elements that would add or move bodies and geoms unread (``<frame>``, ``<replicate>``,
+``<composite>``…). Ignored with one warning naming them: worldbody geoms (the ground is
+``gs.morphs.Plane``), tendons and what acts on them, ``<contact><pair>``, ``<option>`` (the
+scene's options rule), and attributes that tune MuJoCo's solver, actuator dynamics or the
+compiler's mass bounds (solref, solimp, margin, condim, dampratio, timeconst, boundmass…) unless
+they hold MuJoCo's defaults.
 """
 import logging
 import os
@@ -55,12 +62,21 @@ _READ = {
     "body": _FRAME + ("name", "childclass", "user"),
     "joint": ("name", "class", "type", "pos", "axis", "range", "limited", "damping", "armature", "frictionloss",
               "actuatorfrcrange", "actuatorfrclimited", "stiffness", "ref", "group", "user"),
-    "freejoint": ("name", "group"),
+    "freejoint": ("name", "group", "type"),
     "geom": _FRAME + _NAMES + ("type", "size", "fromto", "mesh", "friction", "contype", "conaffinity", "density",
                                "mass"),
     "inertial": _FRAME + ("mass", "diaginertia", "fullinertia"),
 }
 _JOINTS = {"hinge": "revolute", "slide": "prismatic"}
+# what a body (or the worldbody) may hold: read here, or nothing the physics sees
+_BODY_CHILDREN = {"body", "joint", "freejoint", "geom", "inertial", "site", "camera", "light"}
+# the top-level sections: read here, warned of (_note_ignored_sections), or nothing the physics sees
+_SECTIONS = {"compiler", "option", "size", "visual", "statistic", "default", "custom", "extension", "asset",
+             "worldbody", "contact", "equality", "tendon", "actuator", "sensor", "keyframe"}
+# compiler attributes read here, or with no effect on the model read (paths, threads, frames' storage)
+_COMPILER = {"angle", "coordinate", "meshdir", "assetdir", "texturedir", "autolimits", "eulerseq",
+             "inertiafromgeom", "strippath", "usethread", "alignfree", "discardvisual", "fusestatic", "fitaabb",
+             "saveinertial"}
 _PRIMITIVES = ("sphere", "capsule", "cylinder", "box")
 _ACTUATORS = ("general", "motor", "position", "velocity", "intvelocity", "damper", "cylinder", "muscle", "adhesion",
               "plugin")
@@ -92,11 +108,19 @@ class _Reader:
     def __init__(self, path: str, entity_name: str | None):
         self.path, self.entity = path, entity_name
         self.ignored = set()  # what the warning lists
+        self.included_from = {}  # an included file's <mesh> elements → that file's folder
         root = self._inlined(path)
         if root.tag != "mujoco":
             raise self.error(f"root element expected <mujoco>, got <{root.tag}>")
         self.root = root
+        unknown = [child.tag for child in root if child.tag not in _SECTIONS]
+        if unknown:
+            raise self.error(f"<mujoco> holds sections genesis_lite does not read: {unknown} (it reads "
+                             f"{sorted(_SECTIONS)})")
         compiler = {k: v for c in root.iter("compiler") for k, v in c.attrib.items()}
+        for key in compiler:
+            if key not in _COMPILER:
+                self.ignored.add(f"<compiler {key}>")
         self.degree = compiler.get("angle", "degree") == "degree"
         if compiler.get("coordinate", "local") != "local":
             raise self.error("<compiler coordinate> expected 'local' (MuJoCo 2.3.3 and later's only one), got "
@@ -107,7 +131,8 @@ class _Reader:
             raise self.error(f"<compiler eulerseq> expected 3 of x, y, z, X, Y, Z, got {self.eulerseq!r}")
         self.inertiafromgeom = compiler.get("inertiafromgeom", "auto")
         folder = os.path.dirname(os.path.abspath(path))
-        self.meshdir = os.path.join(folder, compiler.get("meshdir", compiler.get("assetdir", "")))
+        self.meshdir_given = compiler.get("meshdir", compiler.get("assetdir", ""))
+        self.meshdir = os.path.join(folder, self.meshdir_given)
         self.defaults = {}
         for default in root.findall("default"):
             self._read_defaults(default, {}, "main")
@@ -135,7 +160,10 @@ class _Reader:
             file = include.get("file")
             if not file:
                 raise AssetError(f"MJCF '{path}': <include> expected a 'file' attribute")
-            child = self._inlined(os.path.join(os.path.dirname(os.path.abspath(self.path)), file), seen + (path,))
+            included = os.path.join(os.path.dirname(os.path.abspath(self.path)), file)
+            child = self._inlined(included, seen + (path,))
+            for mesh in child.iter("mesh"):
+                self.included_from.setdefault(mesh, os.path.dirname(os.path.abspath(included)))
             parent, at = include.getparent(), include.getparent().index(include)
             parent.remove(include)
             for k, element in enumerate(child):
@@ -143,7 +171,7 @@ class _Reader:
         return root
 
     def _note_ignored_sections(self):
-        for tag in ("tendon", "contact", "option", "sensor"):
+        for tag in ("tendon", "option", "sensor"):
             if self.root.find(tag) is not None and len(self.root.find(tag)) + len(self.root.find(tag).attrib):
                 self.ignored.add(f"<{tag}>" + (" (the scene's SimOptions and RigidOptions rule)" if tag == "option"
                                                else ""))
@@ -155,13 +183,15 @@ class _Reader:
     # ---------------------------------------------------------------- defaults and attributes
 
     def _read_defaults(self, element, inherited: dict, name: str):
-        own = {tag: dict(attrs) for tag, attrs in inherited.items()}
+        """Class `name` from its <default> element over the `inherited` class; the top-level
+        <default> sections (several, through includes) all add to the main class, as MuJoCo's."""
+        if name in self.defaults and name != "main":
+            raise self.error(f"<default class={name!r}> defined twice")
+        own = self.defaults.get(name) or {tag: dict(attrs) for tag, attrs in inherited.items()}
         for child in element:
             if child.tag == "default":
                 continue
             own.setdefault(child.tag, {}).update(child.attrib)
-        if name in self.defaults:
-            raise self.error(f"<default class={name!r}> defined twice")
         self.defaults[name] = own
         for child in element.findall("default"):
             if "class" not in child.attrib:
@@ -251,8 +281,14 @@ class _Reader:
                     raise self.error(f"<mesh name={attrs.get('name')!r}>: only meshes from a file are supported "
                                      f"(attribute 'file' missing)")
                 name = attrs.get("name", os.path.splitext(os.path.basename(attrs["file"]))[0])
+                for key in attrs:
+                    if key not in ("name", "class", "file", "scale", "content_type"):
+                        self.ignored.add(f"<mesh {key}> (a mesh's volume and inertia are its solid's, exact for "
+                                         f"a closed mesh, its convex hull's for an open one)")
                 scale = self.numbers(attrs, "scale", 3, f"<mesh name={name!r}>", default=np.ones(3))
-                meshes[name] = (os.path.join(self.meshdir, attrs["file"]), scale)
+                folders = [self.meshdir] + ([os.path.join(self.included_from[mesh], self.meshdir_given),
+                                             self.included_from[mesh]] if mesh in self.included_from else [])
+                meshes[name] = ([os.path.join(folder, attrs["file"]) for folder in folders], scale)
             for material in asset.findall("material"):
                 attrs = self.attrs(material, "main")
                 if "name" in attrs and "rgba" in attrs:
@@ -262,9 +298,11 @@ class _Reader:
     def mesh(self, name: str, what: str):
         if name not in self.meshes:
             raise self.error(f"{what}: mesh {name!r} is not an <asset><mesh>")
-        file, scale = self.meshes[name]
-        if not os.path.isfile(file):
-            raise self.error(f"{what}: mesh file '{file}' not found")
+        candidates, scale = self.meshes[name]
+        found = [file for file in candidates if os.path.isfile(file)]
+        if not found:  # (MuJoCo looks in meshdir, and beside the file that included the mesh)
+            raise self.error(f"{what}: mesh file not found; tried {candidates}")
+        file = found[0]
         try:
             return shapes.load_mesh(file, scale)
         except AssetError as exc:
@@ -273,19 +311,22 @@ class _Reader:
     # ---------------------------------------------------------------- tree
 
     def links(self) -> list[LinkSpec]:
-        worldbody = self.root.find("worldbody")
-        if worldbody is None:
+        worldbodies = self.root.findall("worldbody")  # (several sections, through includes, make one)
+        if not worldbodies:
             raise self.error("<worldbody> is missing")
-        bodies = worldbody.findall("body")
+        bodies = [body for worldbody in worldbodies for body in worldbody.findall("body")]
         if len(bodies) != 1:
             raise self.error(f"<worldbody> expected one body tree (one entity), got {len(bodies)} bodies "
                              f"{[b.get('name') for b in bodies]}; load each as its own entity")
-        if worldbody.findall("geom"):
+        if any(worldbody.findall("geom") for worldbody in worldbodies):
             self.ignored.add("<worldbody> geoms (add the ground as gs.morphs.Plane)")
+        for worldbody in worldbodies:
+            self._check_children(worldbody, "<worldbody>")
         links = []
         self._body(bodies[0], parent=-1, childclass="main", links=links)
         self._equalities(links)
         self._actuators(links)
+        self._exclusions(links)
         return links
 
     def _body(self, body, parent: int, childclass: str, links: list):
@@ -297,6 +338,7 @@ class _Reader:
         name = attrs.get("name") or f"body{len(links)}"
         what = f"body {name!r}"
         self.ignore_unread(body, attrs)
+        self._check_children(body, what)
         pos, quat = self.frame(attrs, what)
         joints = [j for j in body if j.tag in ("joint", "freejoint")]
         if parent < 0 and (not joints or self._is_free(joints[0], childclass)):
@@ -304,6 +346,8 @@ class _Reader:
                 raise self.error(f"{what}: a free joint must be its body's only joint, got {len(joints)} joints")
             links.append(_link(name, -1, (joints[0].get("name") or name) if joints else "",
                                "free" if joints else "fixed", pos, quat))
+            if joints:
+                self._free_joint(joints[0], childclass, links[-1], what)
         else:
             if parent < 0:  # hinged or sliding on the world
                 links.append(_link("world", -1, "", "fixed", np.zeros(3), _IDENTITY.copy()))
@@ -335,8 +379,24 @@ class _Reader:
             links.append(_link(name, len(links) - 1, f"{name}_fixed", "fixed", -anchor, _IDENTITY.copy()))
             links[-1].same_body = True
 
+    def _check_children(self, element, what: str):
+        """Refuse what a body (or the worldbody) holds that is not read here and changes the model
+        (<frame>, <replicate>, <composite>, …: their bodies and geoms would go missing)."""
+        unknown = [child.tag for child in element if child.tag not in _BODY_CHILDREN]
+        if unknown:
+            raise self.error(f"{what}: {unknown} not supported (a body may hold {sorted(_BODY_CHILDREN)})")
+
     def _is_free(self, joint, childclass) -> bool:
         return joint.tag == "freejoint" or self.attrs(joint, childclass).get("type") == "free"
+
+    def _free_joint(self, joint, childclass, link: LinkSpec, what: str):
+        """A free root joint's damping and armature (on its six dofs, as MuJoCo's)."""
+        attrs = self.attrs(joint, childclass)
+        what = f"{what} joint {attrs.get('name') or link.name!r}"
+        self.ignore_unread(joint, {k: v for k, v in attrs.items() if k not in ("damping", "armature")})
+        link.damping, link.armature = (self._non_negative(attrs, key, what) for key in ("damping", "armature"))
+        if self.numbers(attrs, "frictionloss", 1, what, default=[0.0])[0] != 0:
+            self.ignored.add("<joint frictionloss> of a free joint")
 
     def _anchor(self, joint, childclass) -> np.ndarray:
         attrs = self.attrs(joint, childclass)
@@ -419,6 +479,8 @@ class _Reader:
             ends = self.numbers(attrs, "fromto", 6, what)
             axis = ends[3:] - ends[:3]
             size[2 if kind == "box" else 1] = np.linalg.norm(axis) / 2.0
+            if kind == "box":  # (MuJoCo 4: a square section of half side size[0])
+                size[1] = size[0]
             pos, quat = (ends[:3] + ends[3:]) / 2.0, _quat_z_to(axis / _norm(self, axis, what))
         if kind == "mesh":
             vertices, faces = self.mesh(attrs.get("mesh"), what)
@@ -487,6 +549,22 @@ class _Reader:
                         self.ignored.add(f"<equality><joint {key}> (the scene's constraint time constant rules)")
                 by_joint[attrs["joint1"]].mimic = (attrs["joint2"], float(coef[1]), float(coef[0]))
 
+    def _exclusions(self, links: list[LinkSpec]):
+        """<contact><exclude body1 body2>: the two bodies' shapes never collide; <contact><pair>
+        (pairs with their own parameters) is not read (said in the warning)."""
+        by_body = {link.name: link for link in links}
+        for section in self.root.iter("contact"):
+            for element in section:
+                if element.tag != "exclude":
+                    self.ignored.add(f"<contact><{element.tag}>")
+                    continue
+                names = [element.get(key) for key in ("body1", "body2")]
+                for name in names:
+                    if name not in by_body:
+                        raise self.error(f"<contact><exclude body1={names[0]!r} body2={names[1]!r}>: expected bodies "
+                                         f"of the file, got {name!r}")
+                by_body[names[0]].excluded += (names[1],)
+
     def _actuators(self, links: list[LinkSpec]):
         by_joint = {link.joint_name: link for link in links}
         for section in self.root.iter("actuator"):
@@ -503,6 +581,10 @@ class _Reader:
 
     def _servo(self, kind: str, attrs: dict, link: LinkSpec, what: str):
         """The joint's servo gains and force bound from an actuator (Genesis's reading)."""
+        for key in ("dampratio", "timeconst", "dyntype", "dynprm", "gaintype", "inheritrange"):
+            if key in attrs and not (key == "dyntype" and attrs[key] == "none") \
+                    and not (key == "gaintype" and attrs[key] == "fixed"):
+                self.ignored.add(f"<actuator {key}> (servos act at once, kv as given)")
         if kind == "position":
             link.kp = self.numbers(attrs, "kp", 1, what, default=[1.0])[0]
             link.kv = self.numbers(attrs, "kv", 1, what, default=[0.0])[0]
@@ -516,6 +598,9 @@ class _Reader:
             if bias[0] != 0 or gain[0] != -bias[1]:
                 self.ignored.add(f"{what}: gain {gain[0]} and bias {bias[:3].tolist()} (a servo here pulls to its "
                                  f"target with kp = -biasprm[1] = {-bias[1]}, the target in joint units)")
+        elif kind == "general" and np.any(self.numbers(attrs, "gainprm", tuple(range(1, 11)), what,
+                                                       default=[1.0])[:1] != 1):
+            self.ignored.add(f"{what}: gainprm (a motor's force is the joint force given)")
         elif kind != "motor" and kind != "general":
             self.ignored.add(f"{what} (type {kind})")
             return

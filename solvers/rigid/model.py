@@ -201,7 +201,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
     self_collision / adjacent_collision: the pair rules of geometry.candidate_pairs.
     """
     rows = {k: [] for k in ("name", "parent", "jtype", "pos0", "quat0", "axis", "com", "inertia0", "mass0",
-                            "dof0", "q0", "entity", "same_body")}
+                            "dof0", "q0", "entity", "same_body", "excluded")}
     dofs = {k: [] for k in ("link", "q", "damping", "armature", "lower", "upper", "effort", "frictionloss", "kp", "kv")}
     geoms, geom_links, geom_names = [], [], []
     qpos0, equalities = [], []
@@ -244,6 +244,9 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
             qpos0.extend(_initial_q(spec))
         equalities += [(joint_dof[spec.joint_name], joint_dof[spec.mimic[0]], spec.mimic[2], spec.mimic[1])
                        for spec in links if spec.mimic is not None]
+        index = {spec.name: link_offset + k for k, spec in enumerate(links)}
+        rows["excluded"] += [{(min(link_offset + k, index[other]), max(link_offset + k, index[other]))
+                              for other in spec.excluded} for k, spec in enumerate(links)]
     f = np.float64
     dof_link = np.array(dofs["link"], dtype=np.int32)
     link_parent = np.array(rows["parent"], dtype=np.int32)
@@ -284,11 +287,14 @@ def _pairs(geoms, geom_links, rows, self_collision, adjacent_collision):
     static = _static_links(link_parent, np.array(rows["jtype"]))
     types = np.array([geometry.GEOM_CODE[g.type] for g in geoms], dtype=np.int32)
     masks = np.array([(g.contype, g.conaffinity) for g in geoms], dtype=np.int64).reshape(-1, 2)
-    body = np.arange(len(link_parent))
+    body, weld = np.arange(len(link_parent)), np.arange(len(link_parent))
     for link, same in enumerate(rows["same_body"]):  # (parents first)
-        body[link] = body[link_parent[link]] if same else link
+        parent = link_parent[link]
+        body[link] = body[parent] if same else link
+        weld[link] = weld[parent] if parent >= 0 and (same or rows["jtype"][link] == FIXED) else link
     pairs = geometry.candidate_pairs(types, np.array(geom_links, dtype=np.int32), link_parent, static,
-                                     np.array(rows["entity"]), self_collision, adjacent_collision, masks, body)
+                                     np.array(rows["entity"]), self_collision, adjacent_collision, masks, body, weld,
+                                     rows["excluded"])
     n = len(pairs)
     return {"pair_geom1": pairs[:, 0].copy(), "pair_geom2": pairs[:, 1].copy(),
             "pair_condim": np.full(n, 3, dtype=np.int32), "pair_margin": np.zeros(n)}

@@ -70,6 +70,8 @@ class LinkSpec:
     (constraint/rows.py), as MuJoCo's and Genesis's; None otherwise.
     same_body: the link continues its parent's body (MJCF: the links of one body's joints, which
     LinkSpec joints' frames split): contact rules take the two as one body.
+    excluded: names of links of the same entity this link's shapes never collide with (MJCF
+    ``<contact><exclude>``).
     """
     name: str
     parent: int
@@ -94,3 +96,4 @@ class LinkSpec:
     visuals: list = field(default_factory=list)
     mimic: tuple = None
     same_body: bool = False
+    excluded: tuple = ()
