@@ -139,6 +139,13 @@ LINK = '<geom type="sphere" size="0.1"/>'
      "<equality><weld> is not supported"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<actuator><position joint="j" forcerange="-1 2"/></actuator>',
      "forcerange expected a symmetric range"),
+    (f'<body name="b"><freejoint/><joint type="free" name="f" stiffness="2"/>{LINK}</body>', "",
+     "a free joint must be its body's only joint"),
+    (f'<body name="b"><joint type="free" name="f" stiffness="2"/>{LINK}</body>', "", "joint springs are not supported"),
+    (f'<body name="b"><joint name="j"/>{LINK}<body name="b">{LINK}</body></body>', "",
+     "body names expected unique, got repeated names ['b']"),
+    (f'<body name="b"><joint name="j"/><geom type="sphere" size="0.1" contype="1.5"/></body>', "",
+     "attribute 'contype' expected a non-negative integer"),
 ])
 def test_unsupported_or_malformed_files_are_named(f64, tmp_path, body, extra, said):
     scene = gs.Scene()
@@ -186,6 +193,20 @@ def test_morph_arguments_are_checked(f64):
         gs.Scene().add_entity(gs.morphs.MJCF(file="no_such.xml"))
     with pytest.raises(InvalidInputError, match="scale"):
         gs.morphs.MJCF(file=ARM, scale=2.0)
+
+
+def test_an_inactive_joint_equality_is_not_loaded(f64, tmp_path, caplog):
+    arms = "".join(f'<body name="arm{k}" pos="{0.3 * k} 0 1"><joint name="j{k}" axis="0 1 0"/>'
+                   f'<geom type="capsule" fromto="0 0 0 0.2 0 -0.3" size="0.02"/></body>' for k in (1, 2))
+    path = _write(tmp_path, f'<body name="frame"><geom type="box" size="0.05 0.05 0.05"/>{arms}</body>',
+                  '<equality><joint joint1="j2" joint2="j1" polycoef="0.2 -0.5 0 0 0" active="false"/></equality>')
+    with caplog.at_level(logging.WARNING, logger="genesis_lite"):
+        m, d, scene, robot = _pair(path)
+    assert any("inactive: not loaded" in r.getMessage() for r in caplog.records)
+    for _ in range(100):
+        mujoco.mj_step(m, d)
+        scene.step()
+    assert np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max() < 1e-12
 
 
 def test_joint_equality_follows_polycoef_as_mujoco(f64, tmp_path):
@@ -269,6 +290,29 @@ def test_sections_merge_and_free_root_joints_and_box_segments_read_as_mujoco(f64
     for _ in range(100):
         mujoco.mj_step(m, d)
         scene.step()
+    assert np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max() < 1e-12
+
+
+@pytest.mark.parametrize("case, contacts", [("two_joints", 0), ("static_sibling", 1)])
+def test_pair_rules_follow_mujocos_bodies(f64, tmp_path, case, contacts):
+    """A body with two hinges folded onto its parent: one body to contacts (its two links), so it
+    does not collide with its parent (MuJoCo's filterparent); an arm swung into a stand welded to
+    its static root: the stand is the world's to MuJoCo, whose parent filter skips the world, so
+    they collide (its group is not the root's)."""
+    body = {"two_joints": '<body name="P"><joint name="jp" axis="0 1 0"/><geom type="capsule" fromto="0 0 0 0 0 '
+                          '0.3" size="0.03"/><body name="B" pos="0 0 0.3"><joint name="b1" axis="0 1 0"/><joint '
+                          'name="b2" axis="1 0 0"/><geom type="capsule" fromto="0.08 0 0 0.3 0 0" size="0.03"/>'
+                          '</body></body>',
+            "static_sibling": '<body name="stand" pos="0.25 0 0.1"><geom type="box" size="0.05 0.05 0.15"/></body>'
+                              '<body name="l1" pos="0 0 0.1"><joint name="j" axis="0 1 0"/><geom type="capsule" '
+                              'fromto="0 0 0 0 0 0.3" size="0.02"/></body>'}[case]
+    path = _write(tmp_path, f'<body name="base"><geom type="box" size="0.05 0.05 0.05" pos="0 0 -0.3"/>{body}</body>')
+    m, d, scene, robot = _pair(path)
+    d.qpos[:] = [0.0, 1.6, 0.0] if case == "two_joints" else [1.2]  # folded onto the parent / into the stand
+    robot.set_dofs_position(torch.tensor(d.qpos))
+    mujoco.mj_step(m, d)
+    scene.step()
+    assert d.ncon == len(robot.get_contacts()["position"]) == contacts
     assert np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max() < 1e-12
 
 

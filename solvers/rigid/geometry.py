@@ -134,12 +134,13 @@ def candidate_pairs(geom_type, geom_link, link_parent, link_static, link_entity,
     ``adjacent_collision`` (MuJoCo's filterparent; the world, parent -1, is nobody's parent here);
     nor two links of one entity unless ``self_collision``; nor two geoms whose bit masks
     ``geom_masks`` (G, 2) (contype, conaffinity; None: all 1) share no bit, MuJoCo's rule.
-    The rules take links by weld group, as MuJoCo's and Genesis's filters do: ``link_weld`` (L,)
-    names each link's group by its first link (a link welded to its parent by a fixed joint, or
+    The rules take links by weld group, as MuJoCo's filter does: ``link_weld`` (L,) names each
+    link's group by its first link (a link welded to a moving parent by a fixed joint, or
     continuing its parent's body, is in its parent's group; None: every link its own), so a
-    welded child never meets its parent's parent either; the world-welded links are the static
-    ones. ``link_body`` (L,): each link's body by its first link, for the order (None: every link
-    its own; an MJCF body whose joints split it into several links is one body).
+    welded child never meets its parent's parent either; a link welded to the world stays its
+    own group (MuJoCo's parent filter skips the world). ``link_body`` (L,): each link's body by
+    its first link, for the order (None: every link its own; an MJCF body whose joints split it
+    into several links is one body).
     ``link_exclusions``: per link, a set of (lower, higher) link pairs that never collide (MJCF
     ``<contact><exclude>``), or None.
     Pairs touching at the initial pose are filtered later (they need the colliders).

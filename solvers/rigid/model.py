@@ -291,7 +291,9 @@ def _pairs(geoms, geom_links, rows, self_collision, adjacent_collision):
     for link, same in enumerate(rows["same_body"]):  # (parents first)
         parent = link_parent[link]
         body[link] = body[parent] if same else link
-        weld[link] = weld[parent] if parent >= 0 and (same or rows["jtype"][link] == FIXED) else link
+        # (a link welded to the world stays its own group: MuJoCo's parent filter skips the world)
+        welded = same or (rows["jtype"][link] == FIXED and not static[link])
+        weld[link] = weld[parent] if parent >= 0 and welded else link
     pairs = geometry.candidate_pairs(types, np.array(geom_links, dtype=np.int32), link_parent, static,
                                      np.array(rows["entity"]), self_collision, adjacent_collision, masks, body, weld,
                                      rows["excluded"])

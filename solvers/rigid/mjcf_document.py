@@ -1,0 +1,280 @@
+"""An MJCF file as MuJoCo's compiler reads it before its bodies (mjcf.py builds the links).
+
+``<include>`` files inlined, the top-level sections checked, the compiler's settings, the
+``<default>`` classes (several top-level sections make the main class), an element's attributes
+over its class, numbers and frames (every orientation form) read with named errors, the mesh
+and material assets, and the record of what is ignored (said in one warning).
+"""
+import os
+
+import numpy as np
+from lxml import etree
+
+from ..core import AssetError
+from . import shapes
+from .urdf import mat_to_quat
+
+IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
+ORIENTATIONS = ("quat", "axisangle", "euler", "xyaxes", "zaxis")
+# the top-level sections: read here, warned of (_note_ignored_sections), or nothing the physics sees
+_SECTIONS = {"compiler", "option", "size", "visual", "statistic", "default", "custom", "extension", "asset",
+             "worldbody", "contact", "equality", "tendon", "actuator", "sensor", "keyframe"}
+# compiler attributes read here, or with no effect on the model read (paths, threads, frames' storage)
+_COMPILER = {"angle", "coordinate", "meshdir", "assetdir", "texturedir", "autolimits", "eulerseq",
+             "inertiafromgeom", "strippath", "usethread", "discardvisual", "fusestatic", "fitaabb",
+             "saveinertial"}
+_ACTUATORS = ("general", "motor", "position", "velocity", "intvelocity", "damper", "cylinder", "muscle", "adhesion",
+              "plugin")
+# MuJoCo's defaults of attributes not read here, which genesis_lite's contacts and rows have
+_MJ_DEFAULTS = {"condim": [3.0], "margin": [0.0], "gap": [0.0], "priority": [0.0], "solmix": [1.0],
+                "solref": [0.02, 1.0], "solimp": [0.9, 0.95, 0.001, 0.5, 2.0]}
+
+
+class MJCFDocument:
+    """One file's reading: where errors happen, the compiler's settings, the default classes and
+    the assets, and what is ignored."""
+
+    def __init__(self, path: str, entity_name: str | None):
+        self.path, self.entity = path, entity_name
+        self.ignored = set()  # what the warning lists
+        self.included_from = {}  # an included file's <mesh> elements → that file's folder
+        root = self._inlined(path)
+        if root.tag != "mujoco":
+            raise self.error(f"root element expected <mujoco>, got <{root.tag}>")
+        self.root = root
+        unknown = [child.tag for child in root if child.tag not in _SECTIONS]
+        if unknown:
+            raise self.error(f"<mujoco> holds sections genesis_lite does not read: {unknown} (it reads "
+                             f"{sorted(_SECTIONS)})")
+        compiler = {k: v for c in root.iter("compiler") for k, v in c.attrib.items()}
+        for key in compiler:
+            if key not in _COMPILER:
+                self.ignored.add(f"<compiler {key}>")
+        self.degree = compiler.get("angle", "degree") == "degree"
+        if compiler.get("coordinate", "local") != "local":
+            raise self.error("<compiler coordinate> expected 'local' (MuJoCo 2.3.3 and later's only one), got "
+                             f"{compiler['coordinate']!r}")
+        self.autolimits = compiler.get("autolimits", "true") == "true"
+        self.eulerseq = compiler.get("eulerseq", "xyz")
+        if len(self.eulerseq) != 3 or any(c not in "xyzXYZ" for c in self.eulerseq):
+            raise self.error(f"<compiler eulerseq> expected 3 of x, y, z, X, Y, Z, got {self.eulerseq!r}")
+        self.inertiafromgeom = compiler.get("inertiafromgeom", "auto")
+        folder = os.path.dirname(os.path.abspath(path))
+        self.meshdir_given = compiler.get("meshdir", compiler.get("assetdir", ""))
+        self.meshdir = os.path.join(folder, self.meshdir_given)
+        self.defaults = {}
+        for default in root.findall("default"):
+            self._read_defaults(default, {}, "main")
+        self.meshes, self.materials = self._assets()
+        self._note_ignored_sections()
+
+    # ---------------------------------------------------------------- file, messages
+
+    def where(self) -> str:
+        return f"MJCF '{self.path}'" + (f" (entity '{self.entity}')" if self.entity else "")
+
+    def error(self, msg: str) -> AssetError:
+        return AssetError(f"{self.where()}: {msg}")
+
+    def _inlined(self, path: str, seen=()):
+        """The root element of `path` with every ``<include file>`` replaced by the children of
+        the included file's root (paths relative to the main file's folder, else to the including
+        file's, as MuJoCo takes them)."""
+        if path in seen:
+            raise AssetError(f"MJCF '{self.path}': <include> cycle through '{path}'")
+        try:
+            root = etree.parse(path, etree.XMLParser(remove_comments=True)).getroot()
+        except (OSError, etree.XMLSyntaxError) as exc:
+            raise AssetError(f"MJCF '{path}': not a readable XML file ({exc})") from exc
+        for include in list(root.iter("include")):
+            file = include.get("file")
+            if not file:
+                raise AssetError(f"MJCF '{path}': <include> expected a 'file' attribute")
+            included = os.path.join(os.path.dirname(os.path.abspath(self.path)), file)
+            if not os.path.isfile(included):  # (MuJoCo also takes a path relative to the including file)
+                included = os.path.join(os.path.dirname(os.path.abspath(path)), file)
+            child = self._inlined(included, seen + (path,))
+            for mesh in child.iter("mesh"):
+                self.included_from.setdefault(mesh, os.path.dirname(os.path.abspath(included)))
+            parent, at = include.getparent(), include.getparent().index(include)
+            parent.remove(include)
+            for k, element in enumerate(child):
+                parent.insert(at + k, element)
+        return root
+
+    def _note_ignored_sections(self):
+        for tag in ("tendon", "option", "sensor"):
+            if self.root.find(tag) is not None and len(self.root.find(tag)) + len(self.root.find(tag).attrib):
+                self.ignored.add(f"<{tag}>" + (" (the scene's SimOptions and RigidOptions rule)" if tag == "option"
+                                               else ""))
+        for element in self.root.iter("equality"):
+            for constraint in element:
+                if constraint.tag != "joint":
+                    raise self.error(f"<equality><{constraint.tag}> is not supported (only <joint> equalities)")
+
+    # ---------------------------------------------------------------- defaults and attributes
+
+    def _read_defaults(self, element, inherited: dict, name: str):
+        """Class `name` from its <default> element over the `inherited` class; the top-level
+        <default> sections (several, through includes) all add to the main class, as MuJoCo's."""
+        if name in self.defaults and name != "main":
+            raise self.error(f"<default class={name!r}> defined twice")
+        own = self.defaults.get(name) or {tag: dict(attrs) for tag, attrs in inherited.items()}
+        for child in element:
+            if child.tag == "default":
+                continue
+            own.setdefault(child.tag, {}).update(child.attrib)
+        self.defaults[name] = own
+        for child in element.findall("default"):
+            if "class" not in child.attrib:
+                raise self.error("a nested <default> expected a 'class' attribute")
+            self._read_defaults(child, own, child.get("class"))
+
+    def attrs(self, element, childclass: str) -> dict:
+        """The element's attributes over those of its default class (its own ``class``, else the
+        enclosing body's childclass, else the main class)."""
+        cls = element.get("class", childclass)
+        if cls not in self.defaults and cls != "main":
+            raise self.error(f"<{element.tag} name={element.get('name')!r}>: class {cls!r} is not a <default> class")
+        classes = self.defaults.get(cls, {})
+        out = dict(classes.get("general", {})) if element.tag in _ACTUATORS else {}
+        out.update(classes.get(element.tag, {}))
+        out.update(element.attrib)
+        return out
+
+    def numbers(self, attrs: dict, key: str, n: int | tuple, what: str, default=None) -> np.ndarray:
+        """(n,) finite numbers of attribute `key` (n may be a tuple of allowed counts)."""
+        if key not in attrs:
+            if default is None:
+                raise self.error(f"{what}: attribute '{key}' is missing")
+            return np.asarray(default, dtype=np.float64)
+        try:
+            values = np.array([float(v) for v in attrs[key].split()], dtype=np.float64)
+        except ValueError:
+            values = np.full(0, np.nan)
+        counts = n if isinstance(n, tuple) else (n,)
+        if len(values) not in counts or not np.all(np.isfinite(values)):
+            raise self.error(f"{what}: attribute '{key}' expected {' or '.join(map(str, counts))} finite numbers, "
+                             f"got {attrs[key]!r}")
+        return values
+
+    # ---------------------------------------------------------------- frames
+
+    def frame(self, attrs: dict, what: str) -> tuple[np.ndarray, np.ndarray]:
+        """Position (3,) m and w-x-y-z quaternion (4,) of an element's frame."""
+        pos = self.numbers(attrs, "pos", 3, what, default=np.zeros(3))
+        given = [k for k in ORIENTATIONS if k in attrs]
+        if len(given) > 1:
+            raise self.error(f"{what}: expected at most one orientation, got {given}")
+        if not given:
+            return pos, IDENTITY.copy()
+        kind = given[0]
+        if kind == "quat":
+            q = self.numbers(attrs, "quat", 4, what)
+        elif kind == "axisangle":
+            v = self.numbers(attrs, "axisangle", 4, what)
+            q = _axis_angle(v[:3], self._angle(v[3]))
+        elif kind == "euler":
+            q = IDENTITY.copy()
+            for axis_name, angle in zip(self.eulerseq, self.numbers(attrs, "euler", 3, what)):
+                turn = _axis_angle(np.eye(3)["xyz".index(axis_name.lower())], self._angle(angle))
+                q = quat_mul(q, turn) if axis_name.islower() else quat_mul(turn, q)
+        elif kind == "xyaxes":
+            v = self.numbers(attrs, "xyaxes", 6, what)
+            x = v[:3] / norm(self, v[:3], what)
+            y = v[3:] - x * (x @ v[3:])
+            y = y / norm(self, y, what)
+            q = mat_to_quat(np.stack([x, y, np.cross(x, y)], axis=1))
+        else:
+            z = self.numbers(attrs, "zaxis", 3, what)
+            q = quat_z_to(z / norm(self, z, what))
+        if not np.linalg.norm(q) > 1e-12:
+            raise self.error(f"{what}: attribute {kind!r} expected a non-zero rotation, got {attrs[kind]!r}")
+        return pos, q / np.linalg.norm(q)
+
+    def _angle(self, value: float) -> float:
+        return np.deg2rad(value) if self.degree else float(value)
+
+    # ---------------------------------------------------------------- assets
+
+    def _assets(self):
+        meshes, materials = {}, {}
+        for asset in self.root.findall("asset"):
+            for mesh in asset.findall("mesh"):
+                attrs = self.attrs(mesh, "main")
+                if "file" not in attrs:
+                    raise self.error(f"<mesh name={attrs.get('name')!r}>: only meshes from a file are supported "
+                                     f"(attribute 'file' missing)")
+                name = attrs.get("name", os.path.splitext(os.path.basename(attrs["file"]))[0])
+                for key in attrs:
+                    if key not in ("name", "class", "file", "scale", "content_type"):
+                        self.ignored.add(f"<mesh {key}> (a mesh's volume and inertia are its solid's, exact for "
+                                         f"a closed mesh, its convex hull's for an open one)")
+                scale = self.numbers(attrs, "scale", 3, f"<mesh name={name!r}>", default=np.ones(3))
+                folders = [self.meshdir] + ([os.path.join(self.included_from[mesh], self.meshdir_given),
+                                             self.included_from[mesh]] if mesh in self.included_from else [])
+                meshes[name] = ([os.path.join(folder, attrs["file"]) for folder in folders], scale)
+            for material in asset.findall("material"):
+                attrs = self.attrs(material, "main")
+                if "name" in attrs and "rgba" in attrs:
+                    materials[attrs["name"]] = self.numbers(attrs, "rgba", 4, f"<material name={attrs['name']!r}>")
+        return meshes, materials
+
+    def mesh(self, name: str, what: str):
+        if name not in self.meshes:
+            raise self.error(f"{what}: mesh {name!r} is not an <asset><mesh>")
+        candidates, scale = self.meshes[name]
+        found = [file for file in candidates if os.path.isfile(file)]
+        if not found:  # (MuJoCo looks in meshdir, and beside the file that included the mesh)
+            raise self.error(f"{what}: mesh file not found; tried {candidates}")
+        file = found[0]
+        try:
+            return shapes.load_mesh(file, scale)
+        except AssetError as exc:
+            raise self.error(f"{what}: {exc}") from exc
+
+    def _non_negative(self, attrs, key, what) -> float:
+        value = self.numbers(attrs, key, 1, what, default=[0.0])[0]
+        if value < 0:
+            raise self.error(f"{what}: attribute {key!r} expected >= 0, got {attrs[key]!r}")
+        return float(value)
+
+    def _bits(self, attrs: dict, key: str, what: str) -> int:
+        """A contact bit mask: a non-negative integer (1 by default)."""
+        value = self.numbers(attrs, key, 1, what, default=[1])[0]
+        if value != int(value) or value < 0:
+            raise self.error(f"{what}: attribute {key!r} expected a non-negative integer, got {attrs[key]!r}")
+        return int(value)
+
+
+def is_default(key: str, value: str) -> bool:
+    """Whether attribute `key` holds MuJoCo's default (_MJ_DEFAULTS)."""
+    try:
+        return key in _MJ_DEFAULTS and [float(v) for v in value.split()] == _MJ_DEFAULTS[key]
+    except ValueError:
+        return False
+
+
+def norm(reader: MJCFDocument, v: np.ndarray, what: str) -> float:
+    n = float(np.linalg.norm(v))
+    if not n > 1e-12:
+        raise reader.error(f"{what}: expected a non-zero vector, got {v.tolist()}")
+    return n
+
+
+def _axis_angle(axis, angle: float) -> np.ndarray:
+    axis = np.asarray(axis, dtype=np.float64)
+    return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis / np.linalg.norm(axis)])
+
+
+def quat_mul(a, b) -> np.ndarray:
+    return np.concatenate([[a[0] * b[0] - a[1:] @ b[1:]], a[0] * b[1:] + b[0] * a[1:] + np.cross(a[1:], b[1:])])
+
+
+def quat_z_to(z: np.ndarray) -> np.ndarray:
+    """The smallest turn taking +z onto the unit vector z (MuJoCo's mju_quatZ2Vec)."""
+    w = 1.0 + z[2]
+    if w < 1e-14:
+        return np.array([0.0, 1.0, 0.0, 0.0])
+    q = np.array([w, -z[1], z[0], 0.0])
+    return q / np.linalg.norm(q)
