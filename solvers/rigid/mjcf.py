@@ -95,9 +95,11 @@ class _Reader(MJCFDocument):
         for key, value in attrs.items():
             if key not in _READ[element.tag] and not is_default(key, value):
                 self.ignored.add(f"<{element.tag} {key}>")
+
     # ---------------------------------------------------------------- tree
 
     def links(self) -> list[LinkSpec]:
+        """The file's links (load_mjcf's), equalities, servos and exclusions on them."""
         worldbodies = self.root.findall("worldbody")  # (several sections, through includes, make one)
         if not worldbodies:
             raise self.error("<worldbody> is missing")
@@ -191,10 +193,13 @@ class _Reader(MJCFDocument):
             self.ignored.add("<joint frictionloss> of a free joint")
 
     def _anchor(self, joint, childclass) -> np.ndarray:
+        """(3,) m: where the joint turns, in its body's frame."""
         attrs = self.attrs(joint, childclass)
         return self.numbers(attrs, "pos", 3, f"joint {attrs.get('name')!r}", default=np.zeros(3))
 
     def _joint(self, joint, childclass: str, link_name: str, what: str) -> LinkSpec:
+        """A massless link named `link_name` that the hinge or slide `joint` turns (its frame and
+        parent are the chain's to set): axis, limits, damping, armature, friction loss, force bound."""
         attrs = self.attrs(joint, childclass)
         name = attrs.get("name") or link_name
         what = f"{what} joint {name!r}"

@@ -103,6 +103,8 @@ class MJCFDocument:
         return root
 
     def _note_ignored_sections(self):
+        """Note the sections that act on the model and are not read; refuse equalities other
+        than joints'."""
         for tag in ("tendon", "option", "sensor"):
             if self.root.find(tag) is not None and len(self.root.find(tag)) + len(self.root.find(tag).attrib):
                 self.ignored.add(f"<{tag}>" + (" (the scene's SimOptions and RigidOptions rule)" if tag == "option"
@@ -198,6 +200,7 @@ class MJCFDocument:
     # ---------------------------------------------------------------- assets
 
     def _assets(self):
+        """({mesh name: (candidate files, scale (3,))}, {material name: rgba (4,)})."""
         meshes, materials = {}, {}
         for asset in self.root.findall("asset"):
             for mesh in asset.findall("mesh"):
@@ -221,6 +224,7 @@ class MJCFDocument:
         return meshes, materials
 
     def mesh(self, name: str, what: str):
+        """(vertices (V, 3) m, faces (F, 3)) of the mesh asset `name`, scaled."""
         if name not in self.meshes:
             raise self.error(f"{what}: mesh {name!r} is not an <asset><mesh>")
         candidates, scale = self.meshes[name]
@@ -234,6 +238,7 @@ class MJCFDocument:
             raise self.error(f"{what}: {exc}") from exc
 
     def _non_negative(self, attrs, key, what) -> float:
+        """Attribute `key` as a number ≥ 0 (0 by default)."""
         value = self.numbers(attrs, key, 1, what, default=[0.0])[0]
         if value < 0:
             raise self.error(f"{what}: attribute {key!r} expected >= 0, got {attrs[key]!r}")
