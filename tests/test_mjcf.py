@@ -20,6 +20,7 @@ import torch
 import genesis_lite as gs
 from genesis_lite.solvers.core import AssetError, InvalidInputError
 from tests.conftest import asset
+from tests.fd_scan import assert_converged, directional_errors
 
 ARM, CRAWLER = asset("mjcf", "arm.xml"), asset("mjcf", "crawler.xml")
 
@@ -323,3 +324,37 @@ def test_elements_that_would_add_bodies_or_geoms_unread_are_refused(f64, tmp_pat
     path = _write(tmp_path, f'<body name="b"><joint name="j"/>{LINK}{element}</body>')
     with pytest.raises(AssetError, match=r"body 'b': \['(frame|replicate)'\] not supported"):
         gs.Scene().add_entity(gs.morphs.MJCF(file=path))
+
+
+@pytest.mark.parametrize("what", ["targets", "masses"])
+def test_gradients_through_an_mjcf_robot_match_finite_differences(f64, what):
+    """The crawler (free root, legs at anchors, contacts on its feet only) driven by per-step servo
+    targets for 60 steps: the gradient of its final pose w.r.t. the targets and the links' masses
+    against central differences (its massless anchor links and contact masks in the reverse too)."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.005, requires_grad=True))
+    scene.add_entity(gs.morphs.Plane())
+    robot = scene.add_entity(gs.morphs.MJCF(file=CRAWLER, pos=(0.0, 0.0, -0.04)))
+    scene.build()
+    steps, legs = 60, list(range(6, 14))
+    heavy = [k for k, link in enumerate(robot.links) if float(link.get_mass()) > 0]  # (not the anchor links)
+    weights = torch.tensor([0.7, -1.1, 0.4, 0.9, -0.3, 0.5, 0.8], dtype=torch.float64)
+    start = {"targets": 0.3 * torch.sin(torch.arange(steps * 8, dtype=torch.float64) * 0.1).reshape(steps, 8),
+             "masses": robot.get_links_mass().detach().clone()[heavy]}[what]
+
+    touching = []
+
+    def loss(x):
+        scene.reset()
+        if what == "masses":
+            robot.set_links_mass(x, links_idx_local=heavy)
+        for t in range(steps):
+            robot.control_dofs_position(x[t] if what == "targets" else start_targets[t], dofs_idx_local=legs)
+            scene.step()
+            touching.append(len(robot.get_contacts()["position"]))
+        return (torch.cat([robot.get_pos(), robot.get_quat()]) * weights).sum()
+
+    start_targets = 0.3 * torch.sin(torch.arange(steps * 8, dtype=torch.float64) * 0.1).reshape(steps, 8)
+    loss(start)
+    assert max(touching) >= 2  # the feet on the ground
+    for seed in range(2):
+        assert_converged(directional_errors(loss, start, seed), f"crawler {what}, direction {seed}")
