@@ -317,13 +317,40 @@ def test_pair_rules_follow_mujocos_bodies(f64, tmp_path, case, contacts):
     assert np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max() < 1e-12
 
 
-@pytest.mark.parametrize("element", ['<frame pos="0 0 1"><geom type="sphere" size="0.1"/></frame>',
-                                     '<replicate count="3" offset="0.1 0 0"><geom type="sphere" size="0.1"/>'
-                                     '</replicate>'])
+@pytest.mark.parametrize("element", ['<replicate count="3" offset="0.1 0 0"><geom type="sphere" size="0.1"/>'
+                                     '</replicate>', '<frame><replicate count="2"/></frame>'])
 def test_elements_that_would_add_bodies_or_geoms_unread_are_refused(f64, tmp_path, element):
     path = _write(tmp_path, f'<body name="b"><joint name="j"/>{LINK}{element}</body>')
-    with pytest.raises(AssetError, match=r"body 'b': \['(frame|replicate)'\] not supported"):
+    with pytest.raises(AssetError, match=r"\['replicate'\] not supported"):
         gs.Scene().add_entity(gs.morphs.MJCF(file=path))
+
+
+def test_frames_place_their_bodies_and_geoms_as_mujoco(f64, tmp_path):
+    """Nested <frame>s around the root body, geoms and a body (each turned: euler, axisangle), one
+    with a childclass its geoms take: frames and masses as MuJoCo compiles them, 300 steps of the
+    hinged arm (a geom of it in a frame: its inertia) to round-off."""
+    body = ('<frame pos="0 0 0.2" euler="0 0 30"><body name="base" pos="0.1 0 0">'
+            '<geom type="box" size="0.05 0.05 0.05" pos="0 0 -0.3"/>'
+            '<frame pos="0 0 0.1" euler="20 0 0" childclass="red">'
+            '<geom type="capsule" fromto="0 -0.3 0 0.1 -0.3 0.1" size="0.02"/>'
+            '<frame pos="0 0.05 0" axisangle="1 0 0 15"><body name="arm" pos="0 0 0.05">'
+            '<joint name="j" axis="0 1 0" pos="0.01 0 0"/><geom type="capsule" fromto="0 0 0 0.2 0 0" size="0.02"/>'
+            '<frame pos="0.2 0 0" euler="0 30 0"><geom type="box" size="0.02 0.01 0.03" pos="0 0 0.04"/></frame>'
+            '</body></frame></frame></body></frame>')
+    m, d, scene, robot = _pair(_write(tmp_path, body, '<default><default class="red"><geom density="700"/></default>'
+                                                      '</default>'))
+    mujoco.mj_forward(m, d)
+    for name in ("base", "arm"):
+        body_id, link = m.body(name).id, robot.get_link(name)
+        assert float(link.get_mass()) == pytest.approx(m.body_mass[body_id], rel=1e-14)
+        np.testing.assert_allclose(link.get_pos().numpy(), d.xpos[body_id], atol=1e-14)
+        assert abs(abs(link.get_quat().numpy() @ d.xquat[body_id]) - 1.0) < 1e-14
+    worst = 0.0
+    for _ in range(300):
+        mujoco.mj_step(m, d)
+        scene.step()
+        worst = max(worst, np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max())
+    assert worst < 1e-12
 
 
 @pytest.mark.parametrize("what", ["targets", "masses"])

@@ -34,12 +34,12 @@ the |force| bound; a ``motor`` is force control (control_dofs_force).
 
 Refused (AssetError naming the element): ball and further free joints, joint springs (stiffness,
 ref), ellipsoid / hfield / sdf geoms, welds and connects, several bodies in ``<worldbody>``,
-elements that would add or move bodies and geoms unread (``<frame>``, ``<replicate>``,
-``<composite>``…). Ignored with one warning naming them: worldbody geoms (the ground is
-``gs.morphs.Plane``), tendons and what acts on them, ``<contact><pair>``, ``<option>`` (the
-scene's options rule), and attributes that tune MuJoCo's solver, actuator dynamics or the
-compiler's mass bounds (solref, solimp, margin, condim, dampratio, timeconst, boundmass…) unless
-they hold MuJoCo's defaults.
+elements that would add or move bodies and geoms unread (``<replicate>``, ``<composite>``…;
+``<frame>`` is read: it places its bodies and geoms, and its childclass is theirs). Ignored with
+one warning naming them: worldbody geoms (the ground is ``gs.morphs.Plane``), tendons and what
+acts on them, ``<contact><pair>``, ``<option>`` (the scene's options rule), and attributes that
+tune MuJoCo's solver, actuator dynamics or the compiler's mass bounds (solref, solimp, margin,
+condim, dampratio, timeconst, boundmass…) unless they hold MuJoCo's defaults.
 """
 import logging
 import os
@@ -66,7 +66,8 @@ _READ = {
 }
 _JOINTS = {"hinge": "revolute", "slide": "prismatic"}
 # what a body (or the worldbody) may hold: read here, or nothing the physics sees
-_BODY_CHILDREN = {"body", "joint", "freejoint", "geom", "inertial", "site", "camera", "light"}
+_BODY_CHILDREN = {"body", "joint", "freejoint", "geom", "inertial", "site", "camera", "light", "frame"}
+_FRAME_CHILDREN = {"body", "geom", "site", "camera", "light", "frame"}
 _PRIMITIVES = ("sphere", "capsule", "cylinder", "box")
 _MJ_RGBA = np.array([0.5, 0.5, 0.5, 1.0])  # MuJoCo's default geom colour
 
@@ -103,16 +104,17 @@ class _Reader(MJCFDocument):
         worldbodies = self.root.findall("worldbody")  # (several sections, through includes, make one)
         if not worldbodies:
             raise self.error("<worldbody> is missing")
-        bodies = [body for worldbody in worldbodies for body in worldbody.findall("body")]
+        bodies = [member for worldbody in worldbodies for member in self._members(worldbody, "body", "main")]
         if len(bodies) != 1:
             raise self.error(f"<worldbody> expected one body tree (one entity), got {len(bodies)} bodies "
-                             f"{[b.get('name') for b in bodies]}; load each as its own entity")
-        if any(worldbody.findall("geom") for worldbody in worldbodies):
+                             f"{[b[0].get('name') for b in bodies]}; load each as its own entity")
+        if any(list(self._members(worldbody, "geom", "main")) for worldbody in worldbodies):
             self.ignored.add("<worldbody> geoms (add the ground as gs.morphs.Plane)")
         for worldbody in worldbodies:
             self._check_children(worldbody, "<worldbody>")
         links = []
-        self._body(bodies[0], parent=-1, childclass="main", links=links)
+        root, childclass, outer = bodies[0]
+        self._body(root, -1, childclass, links, outer)
         names = [link.name for link in links]
         repeated = sorted({name for name in names if names.count(name) > 1})
         if repeated:  # (MuJoCo refuses them too)
@@ -122,17 +124,18 @@ class _Reader(MJCFDocument):
         self._exclusions(links)
         return links
 
-    def _body(self, body, parent: int, childclass: str, links: list):
+    def _body(self, body, parent: int, childclass: str, links: list, outer):
         """Append the links of `body` and of its subtree: the body's link at its MuJoCo frame,
         after a massless link at the anchor of each joint whose anchor or place in the chain
-        keeps it from being the body's (a LinkSpec joint turns about its link's origin)."""
+        keeps it from being the body's (a LinkSpec joint turns about its link's origin).
+        outer: (pos, quat) of the <frame>s it sits in, in its parent's frame."""
         attrs = self.attrs(body, childclass)
         childclass = body.get("childclass", childclass)
         name = attrs.get("name") or f"body{len(links)}"
         what = f"body {name!r}"
         self.ignore_unread(body, attrs)
         self._check_children(body, what)
-        pos, quat = self.frame(attrs, what)
+        pos, quat = compose(outer, self.frame(attrs, what))
         joints = [j for j in body if j.tag in ("joint", "freejoint")]
         if parent < 0 and (not joints or self._is_free(joints[0], childclass)):
             if len(joints) > 1:
@@ -148,8 +151,8 @@ class _Reader(MJCFDocument):
             self._joint_chain(joints, childclass, name, what, parent, pos, quat, links)
         self._contents(body, childclass, links[-1], what)
         index = len(links) - 1
-        for child in body.findall("body"):
-            self._body(child, index, childclass, links)
+        for child, child_class, child_outer in self._members(body, "body", childclass):
+            self._body(child, index, child_class, links, child_outer)
 
     def _joint_chain(self, joints, childclass, name, what, parent, pos, quat, links):
         """The links of a body with `joints` (maybe none) hanging from link `parent`, at (pos, quat)
@@ -172,12 +175,26 @@ class _Reader(MJCFDocument):
             links.append(_link(name, len(links) - 1, f"{name}_fixed", "fixed", -anchor, IDENTITY.copy()))
             links[-1].same_body = True
 
-    def _check_children(self, element, what: str):
-        """Refuse what a body (or the worldbody) holds that is not read here and changes the model
-        (<frame>, <replicate>, <composite>, …: their bodies and geoms would go missing)."""
-        unknown = [child.tag for child in element if child.tag not in _BODY_CHILDREN]
+    def _members(self, element, tag: str, childclass: str, outer=(np.zeros(3), IDENTITY)):
+        """(child, its class context, (pos, quat) of the <frame>s around it) of the children named
+        `tag` of a body, the worldbody or a <frame>, those inside <frame>s too (a frame places its
+        children, and its childclass is theirs), in the file's order."""
+        for child in element:
+            if child.tag == tag:
+                yield child, childclass, outer
+            elif child.tag == "frame":
+                attrs = self.attrs(child, childclass)
+                self._check_children(child, f"<frame name={attrs.get('name')!r}>", _FRAME_CHILDREN)
+                placed = compose(outer, self.frame(attrs, f"<frame name={attrs.get('name')!r}>"))
+                yield from self._members(child, tag, child.get("childclass", childclass), placed)
+
+    def _check_children(self, element, what: str, allowed=None):
+        """Refuse what a body (or the worldbody, a frame) holds that is not read here and changes
+        the model (<replicate>, <composite>, …: their bodies and geoms would go missing)."""
+        allowed = _BODY_CHILDREN if allowed is None else allowed
+        unknown = [child.tag for child in element if child.tag not in allowed]
         if unknown:
-            raise self.error(f"{what}: {unknown} not supported (a body may hold {sorted(_BODY_CHILDREN)})")
+            raise self.error(f"{what}: {unknown} not supported (it may hold {sorted(allowed)})")
 
     def _is_free(self, joint, childclass) -> bool:
         return joint.tag == "freejoint" or self.attrs(joint, childclass).get("type") == "free"
@@ -244,11 +261,12 @@ class _Reader(MJCFDocument):
     def _contents(self, body, childclass: str, link: LinkSpec, what: str):
         """The body's geoms, visuals and mass properties on its link (at the body frame)."""
         solids = []
-        for k, element in enumerate(body.findall("geom")):
-            attrs = self.attrs(element, childclass)
+        for k, (element, geom_class, outer) in enumerate(self._members(body, "geom", childclass)):
+            attrs = self.attrs(element, geom_class)
             self.ignore_unread(element, attrs)
             where = f"{what} geom {attrs.get('name') or k}"
             geom, density, mass = self._geom(attrs, where)
+            geom.pos, geom.quat = compose(outer, (geom.pos, geom.quat))
             solids.append((geom, density, mass))
             contype, conaffinity = (self._bits(attrs, key, where) for key in ("contype", "conaffinity"))
             if contype or conaffinity:
@@ -414,12 +432,17 @@ class _Reader(MJCFDocument):
                 self.ignored.add(f"<actuator {key}>")
 
 
+def compose(outer, inner) -> tuple[np.ndarray, np.ndarray]:
+    """(pos (3,), quat (4,)) of the frame `inner` given in the frame `outer`, both (pos, quat)."""
+    return outer[0] + shapes.quat_to_mat(outer[1]) @ inner[0], quat_mul(outer[1], inner[1])
+
+
 def place_world(links: list[LinkSpec], pos, quat) -> None:
     """Place the file's world frame at `pos` (3,) m, `quat` (4,) w-x-y-z: the root link's pose
     becomes (pos, quat) ∘ its pose in the file."""
     root = links[0]
-    root.pos = np.asarray(pos, dtype=np.float64) + shapes.quat_to_mat(quat) @ root.pos
-    root.quat = quat_mul(np.asarray(quat, dtype=np.float64), root.quat)
+    root.pos, root.quat = compose((np.asarray(pos, dtype=np.float64), np.asarray(quat, dtype=np.float64)),
+                                  (root.pos, root.quat))
 
 
 # -------------------------------------------------------------------- helpers
