@@ -11,26 +11,12 @@ import math
 import numpy as np
 
 from ..core import AssetError
+from . import shapes
 from .collision import convex
 
 # MuJoCo's mjtGeom codes (its collision table is indexed by them)
 PLANE, SPHERE, CAPSULE, CYLINDER, BOX, MESH = 0, 2, 3, 5, 6, 7
 GEOM_CODE = {"plane": PLANE, "sphere": SPHERE, "capsule": CAPSULE, "cylinder": CYLINDER, "box": BOX, "mesh": MESH}
-
-
-def _quat_z_to(normal):
-    """(4,) w-x-y-z quaternion turning +z onto the unit vector ``normal``."""
-    n = np.asarray(normal, dtype=np.float64) / np.linalg.norm(normal)
-    w = 1.0 + n[2]
-    if w < 1e-12:  # normal = −z: half a turn about x
-        return np.array([0.0, 1.0, 0.0, 0.0])
-    q = np.array([w, -n[1], n[0], 0.0])  # (1 + z·n, z × n), normalised
-    return q / np.linalg.norm(q)
-
-
-def _quat_mul(a, b):
-    aw, av, bw, bv = a[0], np.asarray(a[1:]), b[0], np.asarray(b[1:])
-    return np.concatenate([[aw * bw - av @ bv], aw * bv + bw * av + np.cross(av, bv)])
 
 
 def hull_arrays(hulls):
@@ -78,7 +64,7 @@ def geom_arrays(geoms, link_of, where_of):
             size[:2] = s[0], s[1] / 2
             rbound = size[0] + size[1] if geom.type == "capsule" else math.sqrt(size[0] * size[0] + size[1] * size[1])
         elif geom.type == "plane":
-            quat, rbound = _quat_mul(quat, _quat_z_to(s)), 0.0
+            quat, rbound = shapes.quat_mul(quat, shapes.quat_z_to(s)), 0.0
         else:  # mesh
             mesh = len(meshes)
             try:

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..core import InvalidInputError
-from .shapes import quat_to_mat
+from .shapes import compose, quat_to_mat
 from .spec import LinkSpec, ShapeSpec
 
 
@@ -105,24 +105,11 @@ def combine_inertia(a, b):
 def _reparent(spec: LinkSpec, removed: LinkSpec) -> None:
     """``spec`` was a child of ``removed``: attach it to ``removed``'s parent, same world pose."""
     spec.parent = removed.parent
-    spec.pos, spec.quat = _compose(removed.pos, removed.quat, spec.pos, spec.quat)
+    spec.pos, spec.quat = compose(removed.pos, removed.quat, spec.pos, spec.quat)
 
 
 def _moved(geom: ShapeSpec, pos, quat) -> ShapeSpec:
     """A copy of ``geom`` (a collision geom or a visual) placed in the frame in which (pos, quat)
     is the pose of its old frame."""
-    new_pos, new_quat = _compose(pos, quat, geom.pos, geom.quat)
+    new_pos, new_quat = compose(pos, quat, geom.pos, geom.quat)
     return replace(geom, pos=new_pos, quat=new_quat)
-
-
-def _compose(pos_a, quat_a, pos_b, quat_b):
-    """Pose b expressed in frame a's parent: (pos_a + R_a pos_b, quat_a ⊗ quat_b), w ≥ 0."""
-    pos = np.asarray(pos_a) + quat_to_mat(quat_a) @ np.asarray(pos_b)
-    w1, x1, y1, z1 = quat_a
-    w2, x2, y2, z2 = quat_b
-    quat = np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-                     w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-                     w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
-    quat /= np.linalg.norm(quat)
-    return pos, (-quat if quat[0] < 0 else quat)

@@ -48,7 +48,7 @@ import numpy as np
 
 from ..core import InvalidInputError
 from . import shapes
-from .mjcf_document import IDENTITY, ORIENTATIONS, MJCFDocument, is_default, norm, quat_mul, quat_z_to
+from .mjcf_document import IDENTITY, ORIENTATIONS, MJCFDocument, is_default, norm
 from .spec import GeomSpec, LinkSpec, VisualSpec
 
 _logger = logging.getLogger("genesis_lite")
@@ -135,7 +135,7 @@ class _Reader(MJCFDocument):
         what = f"body {name!r}"
         self.ignore_unread(body, attrs)
         self._check_children(body, what)
-        pos, quat = compose(outer, self.frame(attrs, what))
+        pos, quat = shapes.compose(*outer, *self.frame(attrs, what))
         joints = [j for j in body if j.tag in ("joint", "freejoint")]
         if parent < 0 and (not joints or self._is_free(joints[0], childclass)):
             if len(joints) > 1:
@@ -185,7 +185,7 @@ class _Reader(MJCFDocument):
             elif child.tag == "frame":
                 attrs = self.attrs(child, childclass)
                 self._check_children(child, f"<frame name={attrs.get('name')!r}>", _FRAME_CHILDREN)
-                placed = compose(outer, self.frame(attrs, f"<frame name={attrs.get('name')!r}>"))
+                placed = shapes.compose(*outer, *self.frame(attrs, f"<frame name={attrs.get('name')!r}>"))
                 yield from self._members(child, tag, child.get("childclass", childclass), placed)
 
     def _check_children(self, element, what: str, allowed=None):
@@ -266,8 +266,8 @@ class _Reader(MJCFDocument):
             self.ignore_unread(element, attrs)
             where = f"{what} geom {attrs.get('name') or k}"
             geom, density, mass = self._geom(attrs, where)
-            geom.pos, geom.quat = compose(outer, (geom.pos, geom.quat))
-            solids.append((geom, density, mass))
+            geom.pos, geom.quat = shapes.compose(*outer, geom.pos, geom.quat)
+            solids.append((geom, *_solid(geom, density, mass)))
             contype, conaffinity = (self._bits(attrs, key, where) for key in ("contype", "conaffinity"))
             if contype or conaffinity:
                 geom.contype, geom.conaffinity = contype, conaffinity
@@ -278,7 +278,7 @@ class _Reader(MJCFDocument):
         if inertial is not None and self.inertiafromgeom != "true":
             link.mass, link.com, link.inertia = self._inertial(inertial, what)
         elif self.inertiafromgeom != "false":
-            link.mass, link.com, link.inertia = _solids_mass_properties(solids)
+            link.mass, link.com, link.inertia = shapes.combined_mass_properties(solids)
 
     def _geom(self, attrs: dict, what: str):
         """(GeomSpec in the body frame, density kg/m³, stated mass kg or None) of a <geom>."""
@@ -292,7 +292,7 @@ class _Reader(MJCFDocument):
             size[2 if kind == "box" else 1] = np.linalg.norm(axis) / 2.0
             if kind == "box":  # (MuJoCo 4: a square section of half side size[0])
                 size[1] = size[0]
-            pos, quat = (ends[:3] + ends[3:]) / 2.0, quat_z_to(axis / norm(self, axis, what))
+            pos, quat = (ends[:3] + ends[3:]) / 2.0, shapes.quat_z_to(axis / norm(self, axis, what))
         if kind == "mesh":
             vertices, faces = self.mesh(attrs.get("mesh"), what)
             geom = GeomSpec("mesh", np.zeros(0), pos, quat, vertices=vertices, faces=faces)
@@ -432,17 +432,11 @@ class _Reader(MJCFDocument):
                 self.ignored.add(f"<actuator {key}>")
 
 
-def compose(outer, inner) -> tuple[np.ndarray, np.ndarray]:
-    """(pos (3,), quat (4,)) of the frame `inner` given in the frame `outer`, both (pos, quat)."""
-    return outer[0] + shapes.quat_to_mat(outer[1]) @ inner[0], quat_mul(outer[1], inner[1])
-
-
 def place_world(links: list[LinkSpec], pos, quat) -> None:
     """Place the file's world frame at `pos` (3,) m, `quat` (4,) w-x-y-z: the root link's pose
     becomes (pos, quat) ∘ its pose in the file."""
     root = links[0]
-    root.pos, root.quat = compose((np.asarray(pos, dtype=np.float64), np.asarray(quat, dtype=np.float64)),
-                                  (root.pos, root.quat))
+    root.pos, root.quat = shapes.compose(pos, quat, root.pos, root.quat)
 
 
 # -------------------------------------------------------------------- helpers
@@ -454,20 +448,10 @@ def _link(name, parent, joint_name, joint_type, pos, quat, axis=(0.0, 0.0, 1.0))
                     axis=np.asarray(axis, dtype=np.float64), mass=0.0, com=np.zeros(3), inertia=np.zeros((3, 3)))
 
 
-def _solids_mass_properties(solids) -> tuple[float, np.ndarray, np.ndarray]:
-    """Mass, com and inertia about the com (body frame) of [(GeomSpec, density, stated mass or
-    None)]: each geom a solid of its density, or scaled to its stated mass (MuJoCo's rule)."""
-    parts = []
-    for geom, density, mass in solids:
-        own_mass, com, inertia = shapes.geom_mass_properties(geom, density)
-        if mass is not None:
-            inertia = inertia * (mass / own_mass) if own_mass > 0 else np.zeros((3, 3))
-            own_mass = mass
-        rot = shapes.quat_to_mat(geom.quat)
-        parts.append((own_mass, geom.pos + rot @ com, rot @ inertia @ rot.T))
-    total = sum(m for m, _, _ in parts)
-    if total <= 0:
-        return 0.0, np.zeros(3), np.zeros((3, 3))
-    com = sum(m * c for m, c, _ in parts) / total
-    inertia = sum(i + m * ((c - com) @ (c - com) * np.eye(3) - np.outer(c - com, c - com)) for m, c, i in parts)
-    return float(total), com, inertia
+def _solid(geom: GeomSpec, density: float, mass: float | None):
+    """(mass kg, com (3,) m, inertia (3, 3) kg·m²) of a geom in its own frame: a solid of its
+    density, or scaled to its stated mass (MuJoCo's rule)."""
+    own_mass, com, inertia = shapes.geom_mass_properties(geom, density)
+    if mass is None:
+        return own_mass, com, inertia
+    return mass, com, inertia * (mass / own_mass) if own_mass > 0 else np.zeros((3, 3))

@@ -180,7 +180,7 @@ class MJCFDocument:
             q = IDENTITY.copy()
             for axis_name, angle in zip(self.eulerseq, self.numbers(attrs, "euler", 3, what)):
                 turn = _axis_angle(np.eye(3)["xyz".index(axis_name.lower())], self._angle(angle))
-                q = quat_mul(q, turn) if axis_name.islower() else quat_mul(turn, q)
+                q = shapes.quat_mul(q, turn) if axis_name.islower() else shapes.quat_mul(turn, q)
         elif kind == "xyaxes":
             v = self.numbers(attrs, "xyaxes", 6, what)
             x = v[:3] / norm(self, v[:3], what)
@@ -189,7 +189,7 @@ class MJCFDocument:
             q = mat_to_quat(np.stack([x, y, np.cross(x, y)], axis=1))
         else:
             z = self.numbers(attrs, "zaxis", 3, what)
-            q = quat_z_to(z / norm(self, z, what))
+            q = shapes.quat_z_to(z / norm(self, z, what))
         if not np.linalg.norm(q) > 1e-12:
             raise self.error(f"{what}: attribute {kind!r} expected a non-zero rotation, got {attrs[kind]!r}")
         return pos, q / np.linalg.norm(q)
@@ -270,16 +270,3 @@ def norm(reader: MJCFDocument, v: np.ndarray, what: str) -> float:
 def _axis_angle(axis, angle: float) -> np.ndarray:
     axis = np.asarray(axis, dtype=np.float64)
     return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis / np.linalg.norm(axis)])
-
-
-def quat_mul(a, b) -> np.ndarray:
-    return np.concatenate([[a[0] * b[0] - a[1:] @ b[1:]], a[0] * b[1:] + b[0] * a[1:] + np.cross(a[1:], b[1:])])
-
-
-def quat_z_to(z: np.ndarray) -> np.ndarray:
-    """The smallest turn taking +z onto the unit vector z (MuJoCo's mju_quatZ2Vec)."""
-    w = 1.0 + z[2]
-    if w < 1e-14:
-        return np.array([0.0, 1.0, 0.0, 0.0])
-    q = np.array([w, -z[1], z[0], 0.0])
-    return q / np.linalg.norm(q)

@@ -5,7 +5,9 @@ Every builder returns a one-element ``list[LinkSpec]``: a root link with joint_t
 origin. Units: metres, kilograms, kg/m³ for densities, kg·m² for inertias.
 
 ``geometry_mass_properties`` is also what the URDF loader uses for links without
-``<inertial>``.
+``<inertial>`` (and ``combined_mass_properties`` the MJCF loader, whose geoms have densities of
+their own). The loaders' frame arithmetic is here too: ``quat_to_mat``, ``quat_mul``,
+``quat_z_to``, ``compose``.
 """
 import functools
 import os
@@ -61,6 +63,32 @@ def quat_to_mat(quat) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ analytic inertias
+
+
+def quat_mul(a, b) -> np.ndarray:
+    """Hamilton product a ⊗ b of w-x-y-z quaternions (4,)."""
+    aw, av, bw, bv = a[0], np.asarray(a[1:]), b[0], np.asarray(b[1:])
+    return np.concatenate([[aw * bw - av @ bv], aw * bv + bw * av + np.cross(av, bv)])
+
+
+def quat_z_to(direction) -> np.ndarray:
+    """(4,) w-x-y-z quaternion of the smallest turn taking +z onto ``direction`` (3,) (MuJoCo's
+    mju_quatZ2Vec)."""
+    n = np.asarray(direction, dtype=np.float64) / np.linalg.norm(direction)
+    w = 1.0 + n[2]
+    if w < 1e-12:  # −z: half a turn about x
+        return np.array([0.0, 1.0, 0.0, 0.0])
+    q = np.array([w, -n[1], n[0], 0.0])  # (1 + z·n, z × n), normalised
+    return q / np.linalg.norm(q)
+
+
+def compose(pos_a, quat_a, pos_b, quat_b) -> tuple[np.ndarray, np.ndarray]:
+    """Pose b (pos (3,), quat (4,)) given in frame a, expressed in frame a's parent:
+    (pos_a + R_a pos_b, quat_a ⊗ quat_b), unit, w ≥ 0."""
+    pos = np.asarray(pos_a, dtype=np.float64) + quat_to_mat(quat_a) @ np.asarray(pos_b, dtype=np.float64)
+    quat = quat_mul(np.asarray(quat_a, dtype=np.float64), np.asarray(quat_b, dtype=np.float64))
+    quat /= np.linalg.norm(quat)
+    return pos, (-quat if quat[0] < 0 else quat)
 
 
 def box_inertia(size, mass: float) -> np.ndarray:
@@ -217,17 +245,23 @@ def geometry_mass_properties(geoms, rho: float) -> tuple[float, np.ndarray, np.n
     Overlapping geoms are counted twice, as in MuJoCo. No geoms (or only planes) → mass 0,
     com 0, zero inertia.
     """
-    parts = []
-    for geom in geoms:
-        mass, com, inertia = geom_mass_properties(geom, rho)
+    return combined_mass_properties([(geom, *geom_mass_properties(geom, rho)) for geom in geoms])
+
+
+def combined_mass_properties(parts) -> tuple[float, np.ndarray, np.ndarray]:
+    """Mass (kg), com (3,) m and inertia (3, 3) kg·m² about the com, in the link frame, of
+    [(GeomSpec, mass, com (3,), inertia (3, 3))]: each part's mass properties in its geom's own
+    frame, placed at the geom's pos/quat. No mass → 0, com 0, zero inertia."""
+    placed = []
+    for geom, mass, com, inertia in parts:
         rot = quat_to_mat(geom.quat)
-        parts.append((mass, np.asarray(geom.pos) + rot @ com, rot @ inertia @ rot.T))
-    total = sum(m for m, _, _ in parts)
+        placed.append((mass, np.asarray(geom.pos) + rot @ com, rot @ inertia @ rot.T))
+    total = sum(m for m, _, _ in placed)
     if total <= 0:
         return 0.0, np.zeros(3), np.zeros((3, 3))
-    com = sum(m * c for m, c, _ in parts) / total
+    com = sum(m * c for m, c, _ in placed) / total
     inertia = np.zeros((3, 3))
-    for mass, c, rot_inertia in parts:
+    for mass, c, rot_inertia in placed:
         d = c - com
         # parallel-axis theorem: shift each part's inertia from its own com to the link com
         inertia += rot_inertia + mass * (d @ d * np.eye(3) - np.outer(d, d))
