@@ -605,6 +605,50 @@ def test_frictionloss_holds_and_releases_the_pendulum(f64, pendulum):
         robot.set_dofs_frictionloss([-1.0])
 
 
+# -- joint springs -------------------------------------------------------------------------------------
+def test_joint_spring_is_the_damped_oscillator_and_refuses_bad_values(f64, pendulum):
+    """get/set_dofs_stiffness round trip (a URDF has no springs: 0), persistent through reset, as the
+    other dof parameters. Without gravity the pendulum (damping b = 0.5) on a spring k is the
+    oscillator I q̈ = −k q − b q̇, I = M[0, 0] (constant for one revolute joint); the step is its
+    semi-implicit Euler with the damping implicit and the spring explicit (MuJoCo's and Genesis's
+    rule): q̇⁺ = q̇ + h (−k q − b q̇) / (I + h b), q⁺ = q + h q̇⁺. 150 steps from q0 = 0.3 rad at rest
+    (two periods) follow that recurrence to round-off. Negative stiffness is refused by name."""
+    scene, robot = pendulum
+    scene.reset()
+    assert robot.get_dofs_stiffness().tolist() == [0.0]
+    stiffness, damping = 7.0, float(robot.get_dofs_damping()[0])
+    robot.set_dofs_stiffness([stiffness])
+    scene.reset()
+    assert robot.get_dofs_stiffness().tolist() == [stiffness] and damping == 0.5
+    scene.set_gravity((0.0, 0.0, 0.0))
+    try:
+        robot.set_dofs_position([0.3])
+        inertia = float(robot.get_mass_mat()[0, 0])
+        q, qd, worst = 0.3, 0.0, 0.0
+        for _ in range(150):
+            scene.step()
+            qd += DT * (-stiffness * q - damping * qd) / (inertia + DT * damping)
+            q += DT * qd
+            worst = max(worst, abs(robot.get_dofs_position().item() - q), abs(robot.get_dofs_velocity().item() - qd))
+        assert worst < 1e-13, worst
+    finally:
+        scene.set_gravity((0.0, 0.0, -9.81))
+        robot.set_dofs_stiffness([0.0])
+    with pytest.raises(gs.InvalidInputError, match="entity 'pendulum': argument 'stiffness' must be ≥ 0"):
+        robot.set_dofs_stiffness([-1.0])
+
+
+def test_a_free_joint_takes_no_spring(f64):
+    scene = gs.Scene()
+    box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1)), name="box")
+    scene.build()
+    box.set_dofs_stiffness(0.0)
+    with pytest.raises(gs.InvalidInputError, match=r"entity 'box': argument 'stiffness' must be 0 on the free "
+                                                   r"joint's dofs \(local \[2\]\)"):
+        box.set_dofs_stiffness([3.0], dofs_idx_local=[2])
+    scene.destroy()
+
+
 def test_genesis_franka_gains_hold_the_arm(f64):
     """Genesis's control_franka tutorial gains (kp up to 4500, kv up to 450) on pybullet's Panda at
     dt 10 ms: the servos' kv is implicit, as Genesis's default integrator makes it, so the arm holds

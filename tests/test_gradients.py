@@ -21,7 +21,7 @@ ROBOTS = {"pendulum2": (asset("pendulum2.urdf"), True), "cartpole": (pybullet("c
           "quadruped": (asset("quadruped.urdf"), False),  # a floating base with four branches
           "gripper": (asset("mimic_gripper.urdf"), True)}  # two mimic joints: joint equality rows
 KINDS = ("dofs_position", "dofs_velocity", "force", "position_target", "velocity_target", "mass", "damping",
-         "armature", "kp", "kv", "gravity", "frictionloss", "force_range", "wrench")
+         "armature", "stiffness", "kp", "kv", "gravity", "frictionloss", "force_range", "wrench")
 EPS = 1e-6
 # fourth-order differences at two eps, the better one counts: round-off grows as eps shrinks
 # (measured: the limited quadruped's kp case 6e-8 at 1e-5, 1e-6 at 1e-6, 8e-6 at 1e-7)
@@ -69,6 +69,8 @@ def _nominal(kind, robot, n_envs, horizon, rng):
         "mass": robot.get_links_mass().detach().numpy() * rng.uniform(0.8, 1.2, _batch(n_envs, robot.n_links)),
         "damping": rng.uniform(0.1, 1.0, _batch(n_envs, n)),
         "armature": rng.uniform(0.01, 0.1, _batch(n_envs, n)),
+        # a free joint's dofs have no spring
+        "stiffness": rng.uniform(0.5, 5.0, _batch(n_envs, n)) * (np.arange(n) >= (6 if robot.is_free else 0)),
         "kp": rng.uniform(5, 15, _batch(n_envs, n)),
         "kv": rng.uniform(0.2, 1, _batch(n_envs, n)),
         "gravity": np.array([0.5, -0.3, -9.81]) + np.zeros(_batch(n_envs, 3)),
@@ -81,8 +83,8 @@ def _nominal(kind, robot, n_envs, horizon, rng):
     }
     value = torch.tensor(values[kind], dtype=torch.float64)
     direction = torch.tensor(rng.normal(size=value.shape), dtype=torch.float64)
-    if kind == "mass":  # massless links stay massless (a negative mass is rejected)
-        direction = direction * (value > 0)
+    if kind in ("mass", "stiffness"):  # massless links stay massless (a negative mass is rejected), free dofs
+        direction = direction * (value > 0)  # springless
     return value, direction / direction.norm()
 
 
@@ -98,7 +100,7 @@ def _rollout(scene, robot, kind, value, horizon):
     robot.set_dofs_position(value if kind == "dofs_position" else q0)
     robot.set_dofs_velocity(value if kind == "dofs_velocity" else qd0)
     setters = {"mass": robot.set_links_mass, "damping": robot.set_dofs_damping, "armature": robot.set_dofs_armature,
-               "frictionloss": robot.set_dofs_frictionloss,
+               "stiffness": robot.set_dofs_stiffness, "frictionloss": robot.set_dofs_frictionloss,
                "kp": robot.set_dofs_kp, "kv": robot.set_dofs_kv, "gravity": scene.set_gravity,
                "force_range": lambda v: robot.set_dofs_force_range(v[0], v[1]),
                # the base setters come after the velocities: keep them (set_pos/set_quat zero them by default)
@@ -157,12 +159,12 @@ def test_pendulum_batched(f64, kind):
 
 
 @pytest.mark.parametrize("robot_name", ["cartpole", "kuka"])
-@pytest.mark.parametrize("kind", ["dofs_position", "force", "mass", "damping", "armature"])
+@pytest.mark.parametrize("kind", ["dofs_position", "force", "mass", "damping", "armature", "stiffness"])
 def test_robots(f64, robot_name, kind):
     _check(robot_name, kind, horizon=10)
 
 
-@pytest.mark.parametrize("kind", ["base_pos", "base_quat", "dofs_velocity", "force", "position_target"])
+@pytest.mark.parametrize("kind", ["base_pos", "base_quat", "dofs_velocity", "force", "position_target", "stiffness"])
 def test_free_base(f64, kind):
     _check("kuka_free", kind, horizon=10)
 

@@ -2,7 +2,7 @@
 
 assets/mjcf/arm.xml (fixed base; default classes, degrees, every orientation form, joint anchors
 off the body origin, a body with two joints, a welded body, inertias stated and from geoms, joint
-damping / armature / friction loss / limits, position and affine general actuators, an included
+damping / armature / friction loss / limits / springs (stiffness, springref in degrees), position and affine general actuators, an included
 file) and assets/mjcf/crawler.xml (free root, hinged legs, contact bit masks: only the feet touch
 the ground, per-geom friction). Each runs under sinusoidal servo targets in both engines, MuJoCo
 with the implicitfast integrator (our servos' kv is implicit) and its ground plane from the
@@ -127,7 +127,7 @@ LINK = '<geom type="sphere" size="0.1"/>'
 
 @pytest.mark.parametrize("body, extra, said", [
     (f'<body name="b"><joint name="j" type="ball"/>{LINK}</body>', "", "joint 'j': type expected hinge or slide"),
-    (f'<body name="b"><joint name="j" stiffness="3"/>{LINK}</body>', "", "joint springs are not supported"),
+    (f'<body name="b"><joint name="j" ref="3"/>{LINK}</body>', "", "a joint reference position is not supported"),
     (f'<body name="a">{LINK}</body><body name="b">{LINK}</body>', "", "expected one body tree"),
     (f'<body name="b"><geom type="ellipsoid" size="0.1 0.2 0.3"/></body>', "", "geom type expected one of"),
     (f'<body name="b"><geom type="mesh" mesh="nope"/></body>', "", "mesh 'nope' is not an <asset><mesh>"),
@@ -142,7 +142,9 @@ LINK = '<geom type="sphere" size="0.1"/>'
      "forcerange expected a symmetric range"),
     (f'<body name="b"><freejoint/><joint type="free" name="f" stiffness="2"/>{LINK}</body>', "",
      "a free joint must be its body's only joint"),
-    (f'<body name="b"><joint type="free" name="f" stiffness="2"/>{LINK}</body>', "", "joint springs are not supported"),
+    (f'<body name="b"><joint type="free" name="f" stiffness="2"/>{LINK}</body>', "",
+     "a free joint's spring is not supported"),
+    (f'<body name="b"><joint name="j" stiffness="-2"/>{LINK}</body>', "", "attribute 'stiffness' expected >= 0"),
     (f'<body name="b"><joint name="j"/>{LINK}<body name="b">{LINK}</body></body>', "",
      "body names expected unique, got repeated names ['b']"),
     (f'<body name="b"><joint name="j"/><geom type="sphere" size="0.1" contype="1.5"/></body>', "",
@@ -353,11 +355,12 @@ def test_frames_place_their_bodies_and_geoms_as_mujoco(f64, tmp_path):
     assert worst < 1e-12
 
 
-@pytest.mark.parametrize("what", ["targets", "masses"])
+@pytest.mark.parametrize("what", ["targets", "masses", "stiffness"])
 def test_gradients_through_an_mjcf_robot_match_finite_differences(f64, what):
     """The crawler (free root, legs at anchors, contacts on its feet only) driven by per-step servo
-    targets for 60 steps: the gradient of its final pose w.r.t. the targets and the links' masses
-    against central differences (its massless anchor links and contact masks in the reverse too)."""
+    targets for 60 steps: the gradient of its final pose w.r.t. the targets, the links' masses and
+    joint springs on the legs against central differences (its massless anchor links and contact
+    masks in the reverse too)."""
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.005, requires_grad=True))
     scene.add_entity(gs.morphs.Plane())
     robot = scene.add_entity(gs.morphs.MJCF(file=CRAWLER, pos=(0.0, 0.0, -0.04)))
@@ -366,7 +369,8 @@ def test_gradients_through_an_mjcf_robot_match_finite_differences(f64, what):
     heavy = [k for k, link in enumerate(robot.links) if float(link.get_mass()) > 0]  # (not the anchor links)
     weights = torch.tensor([0.7, -1.1, 0.4, 0.9, -0.3, 0.5, 0.8], dtype=torch.float64)
     start = {"targets": 0.3 * torch.sin(torch.arange(steps * 8, dtype=torch.float64) * 0.1).reshape(steps, 8),
-             "masses": robot.get_links_mass().detach().clone()[heavy]}[what]
+             "masses": robot.get_links_mass().detach().clone()[heavy],
+             "stiffness": torch.linspace(0.5, 2.0, 8, dtype=torch.float64)}[what]
 
     touching = []
 
@@ -374,6 +378,7 @@ def test_gradients_through_an_mjcf_robot_match_finite_differences(f64, what):
         scene.reset()
         if what == "masses":
             robot.set_links_mass(x, links_idx_local=heavy)
+        robot.set_dofs_stiffness(x if what == "stiffness" else 0.0, dofs_idx_local=legs)
         for t in range(steps):
             robot.control_dofs_position(x[t] if what == "targets" else start_targets[t], dofs_idx_local=legs)
             scene.step()

@@ -743,6 +743,20 @@ class RigidEntity(EntityIndexing):
         """Joint damping, N·m·s/rad or N·s/m."""
         self._nonnegative("damping")(damping, dofs_idx_local, envs_idx)
 
+    def set_dofs_stiffness(self, stiffness, dofs_idx_local=None, envs_idx=None):
+        """Joint spring stiffness, N·m/rad or N/m: a passive force −stiffness·(q − springref) on each
+        dof, springref the asset's (MJCF ``springref``) or 0 (Genesis springs to qpos0, 0 here
+        too). Explicit in the step, as in MuJoCo and Genesis. A free joint's dofs take none (0 only).
+        Differentiable."""
+        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
+        envs = self._envs(envs_idx, distinct=True)
+        values = self._refuse_negative("stiffness", self._values(stiffness, len(dofs), envs, "stiffness"))
+        free = self._solver.model.dof_q[self.dof_start + dofs] < 0
+        if free.any() and bool((values.detach()[:, torch.as_tensor(free, device=values.device)] != 0).any()):
+            raise InvalidInputError(f"entity '{self.name}': argument 'stiffness' must be 0 on the free joint's dofs "
+                                    f"(local {dofs[free].tolist()}), got {values.detach().cpu().numpy()}")
+        self._write_input("stiffness", self.dof_start + dofs, envs, values)
+
     def set_dofs_frictionloss(self, frictionloss, dofs_idx_local=None, envs_idx=None):
         """Dry joint friction, N·m or N: a friction-loss constraint row (MuJoCo's) resisting the
         dof's motion up to this bound. Differentiable where positive (at 0 the dof has no row and
@@ -761,6 +775,9 @@ class RigidEntity(EntityIndexing):
 
     def get_dofs_damping(self, dofs_idx_local=None, envs_idx=None):
         return self._get_dofs_input("damping", dofs_idx_local, envs_idx)
+
+    def get_dofs_stiffness(self, dofs_idx_local=None, envs_idx=None):
+        return self._get_dofs_input("stiffness", dofs_idx_local, envs_idx)
 
     def get_dofs_frictionloss(self, dofs_idx_local=None, envs_idx=None):
         return self._get_dofs_input("frictionloss", dofs_idx_local, envs_idx)

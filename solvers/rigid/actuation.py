@@ -1,10 +1,13 @@
-"""Force stage: controls, PD servos and joint damping → qfrc_smooth (joint limits and friction
-loss are constraint rows: constraint/rows.py).
+"""Force stage: controls, PD servos, joint springs and damping → qfrc_smooth (joint limits and
+friction loss are constraint rows: constraint/rows.py).
 
 Control modes per dof (as in Genesis): 0 force (``control_dofs_force``), 1 position
 (τ = kp·(q* − q) + kv·(q̇* − q̇), with q̇* = ``ctrl_vel``: 0 after ``control_dofs_position``,
 the target of ``control_dofs_position_velocity``), 2 velocity (τ = kv·(q̇* − q̇)); the result is
-clipped to the dof's force range. Damping −b·q̇ is passive. Both velocity terms are treated
+clipped to the dof's force range. Damping −b·q̇ and a joint spring −k·(q − q_ref) (q_ref: the
+model's springref, MuJoCo's qpos_spring) are passive; the spring is explicit, as MuJoCo's and
+Genesis's integrators take it (neither puts stiffness into the implicit matrix; Genesis's spring
+rests at qpos0, which is 0 here). Both velocity terms are treated
 implicitly by the acceleration stage (linalg.py: h·(b + kv) on A's diagonal, kv of a dof in a
 servo mode), as Genesis's default integrator does (approximate_implicitfast, clipped or not;
 MuJoCo's implicitfast likewise but without the kv of an actuator clamped by its force range, its
@@ -53,6 +56,8 @@ def smooth_force(d: ti.template(), s, e, i):
     mode = ti.cast(d.ctrl_mode[e, i], ti.i32)
     force = ti.min(ti.max(actuator_force(d, e, i, mode, q, qd), d.force_lo[e, i]), d.force_hi[e, i])
     force -= d.damping[e, i] * qd
+    if qi >= 0:  # free-joint dofs have no spring
+        force -= d.stiffness[e, i] * (q - d.dof_springref[i])
     d.qfrc_smooth[s, e, i] = force - d.qfrc_bias[s, e, i]
 
 
@@ -68,6 +73,9 @@ def smooth_force_adjoint(d: ti.template(), s, e, i):
     g_q, g_qd = 0.0, -g * d.damping[e, i]
     accumulate(d.qfrc_bias.grad, ti.Vector([s, e, i]), -g)
     accumulate(d.damping.grad, ti.Vector([e, i]), -g * qd)
+    if qi >= 0:
+        accumulate(d.stiffness.grad, ti.Vector([e, i]), -g * (q - d.dof_springref[i]))
+        g_q -= g * d.stiffness[e, i]
     force = actuator_force(d, e, i, mode, q, qd)
     g_force = 0.0  # a clipped force is its bound (at the bound itself too)
     if d.force_lo[e, i] < force and force < d.force_hi[e, i]:

@@ -47,6 +47,7 @@ INPUTS = {
     "mass": ("L", True),        # kg
     "damping": ("D", True),     # N·m·s/rad or N·s/m
     "armature": ("D", True),    # kg·m² or kg
+    "stiffness": ("D", True),   # N·m/rad or N/m: a joint spring −stiffness·(q − springref) (actuation.py)
     "kp": ("D", True),          # N·m/rad or N/m
     "kv": ("D", True),          # N·m·s/rad or N·s/m
     "gravity": (3, True),       # m/s²
@@ -85,6 +86,7 @@ MODEL = {
     "geom_pos": ("v3", "G"), "geom_size": ("v3", "G"), "hull_vec": ("v3", "H"), "geom_quat": ("v4", "G"),
     "geom_aabb_center": ("v3", "G"), "geom_aabb_half": ("v3", "G"), "geom_centre": ("v3", "G"),
     "link_inv_mass0": ("f", "L"), "dof_lower": ("f", "D"), "dof_upper": ("f", "D"),
+    "dof_springref": ("f", "D"),  # rad or m: where a joint spring is at rest
     # joint equalities (URDF mimic joints; RigidModel says what they hold)
     "eq_dof1": ("i", "E"), "eq_dof2": ("i", "E"), "eq_coef": ("f", "E2"),
     # substep h (s), the time constant (s) of the joint rows (equality, limit, friction loss), impratio, solver

@@ -26,15 +26,16 @@ included them); contype/conaffinity masks (MuJoCo's pair rule); ``<contact><excl
 (the sliding coefficient); a geom with contype = conaffinity = 0 only weighs and is drawn; a geom
 drawn where its group is 0-2 (MuJoCo's visible groups), coloured by its rgba or material.
 Joints: axis, pos, range (limited: MuJoCo's autolimits), damping, armature, frictionloss,
-actuatorfrcrange (|force| bound).
+actuatorfrcrange (|force| bound), stiffness and springref (a spring −stiffness·(q − springref), as
+MuJoCo's; Genesis's loader springs to qpos0 whatever springref says).
 Actuators on a joint give its servo (as Genesis reads them): ``position`` kp, kv; ``general``
 with an affine bias, kp = −biasprm[1], kv = −biasprm[2]; ``velocity`` kv; forcerange (symmetric)
 the |force| bound; a ``motor`` is force control (control_dofs_force).
 ``<equality><joint>`` with polycoef (c0, c1) makes joint1 follow joint2, q1 = c0 + c1 q2 (LinkSpec.mimic).
 
-Refused (AssetError naming the element): ball and further free joints, joint springs (stiffness,
-ref), ellipsoid / hfield / sdf geoms, welds and connects, several bodies in ``<worldbody>``,
-elements that would add or move bodies and geoms unread (``<replicate>``, ``<composite>``…;
+Refused (AssetError naming the element): ball and further free joints, a joint's ``ref``, a free
+joint's stiffness, ellipsoid / hfield / sdf geoms, welds and connects, several bodies in
+``<worldbody>``, elements that would add or move bodies and geoms unread (``<replicate>``, ``<composite>``…;
 ``<frame>`` is read: it places its bodies and geoms, and its childclass is theirs). Ignored with
 one warning naming them: worldbody geoms (the ground is ``gs.morphs.Plane``), tendons and what
 acts on them, ``<contact><pair>``, ``<option>`` (the scene's options rule), and attributes that
@@ -58,7 +59,7 @@ _NAMES = ("name", "class", "group", "user", "rgba", "material")  # read, or harm
 _READ = {
     "body": _FRAME + ("name", "childclass", "user"),
     "joint": ("name", "class", "type", "pos", "axis", "range", "limited", "damping", "armature", "frictionloss",
-              "actuatorfrcrange", "actuatorfrclimited", "stiffness", "ref", "group", "user"),
+              "actuatorfrcrange", "actuatorfrclimited", "stiffness", "springref", "ref", "group", "user"),
     "freejoint": ("name", "group", "type"),
     "geom": _FRAME + _NAMES + ("type", "size", "fromto", "mesh", "friction", "contype", "conaffinity", "density",
                                "mass"),
@@ -204,7 +205,8 @@ class _Reader(MJCFDocument):
         attrs = self.attrs(joint, childclass)
         what = f"{what} joint {attrs.get('name') or link.name!r}"
         self.ignore_unread(joint, {k: v for k, v in attrs.items() if k not in ("damping", "armature")})
-        self._refuse_springs(attrs, what)
+        if self._non_negative(attrs, "stiffness", what) != 0.0:  # (MuJoCo's would spring the pose; Genesis refuses)
+            raise self.error(f"{what}: a free joint's spring is not supported (stiffness = {attrs['stiffness']!r})")
         link.damping, link.armature = (self._non_negative(attrs, key, what) for key in ("damping", "armature"))
         if self.numbers(attrs, "frictionloss", 1, what, default=[0.0])[0] != 0:
             self.ignored.add("<joint frictionloss> of a free joint")
@@ -224,26 +226,28 @@ class _Reader(MJCFDocument):
         kind = "free" if joint.tag == "freejoint" else attrs.get("type", "hinge")
         if kind not in _JOINTS:
             raise self.error(f"{what}: type expected hinge or slide (or free on the root body), got {kind!r}")
-        self._refuse_springs(attrs, what)
+        self._refuse_ref(attrs, what)
         axis = self.numbers(attrs, "axis", 3, what, default=[0.0, 0.0, 1.0])
         axis = axis / norm(self, axis, what)
         spec = _link(link_name, -1, name, _JOINTS[kind], np.zeros(3), IDENTITY.copy(), axis)
-        for key in ("damping", "armature", "frictionloss"):
+        for key in ("damping", "armature", "frictionloss", "stiffness"):
             setattr(spec, key, self._non_negative(attrs, key, what))
+        scale = np.deg2rad(1.0) if kind == "hinge" and self.degree else 1.0  # angles in the file → rad
+        spec.springref = self.numbers(attrs, "springref", 1, what, default=[0.0])[0] * scale
         limited = attrs.get("limited", "auto")
         if limited == "true" or (limited == "auto" and self.autolimits and "range" in attrs):
             low, high = self.numbers(attrs, "range", 2, what, default=[0.0, 0.0])
-            scale = np.deg2rad(1.0) if kind == "hinge" and self.degree else 1.0
             if not low < high:
                 raise self.error(f"{what}: range expected lower < upper, got {attrs.get('range')!r}")
             spec.lower, spec.upper = low * scale, high * scale
         spec.effort = self._force_bound(attrs, "actuatorfrcrange", "actuatorfrclimited", what)
         return spec
 
-    def _refuse_springs(self, attrs: dict, what: str):
-        for key in ("stiffness", "ref"):
-            if self.numbers(attrs, key, 1, what, default=[0.0])[0] != 0.0:
-                raise self.error(f"{what}: joint springs are not supported (attribute {key!r} = {attrs[key]!r})")
+    def _refuse_ref(self, attrs: dict, what: str):
+        """A joint's ``ref`` (its qpos0, where the body's frame holds) other than 0 is refused."""
+        if self.numbers(attrs, "ref", 1, what, default=[0.0])[0] != 0.0:
+            raise self.error(f"{what}: a joint reference position is not supported (attribute 'ref' = "
+                             f"{attrs['ref']!r}; the body frame is at q = 0)")
 
     def _force_bound(self, attrs, key: str, limited_key: str, what: str) -> float:
         """|force| bound (N·m or N) of a force range, inf when there is none."""

@@ -30,6 +30,7 @@ class RigidModel:
     joint frame in the parent, axis (L, 3) in the link frame, com (L, 3) m, inertia0 (L, 3, 3)
     kg·m² about the com, mass0 (L,) kg, dof0/q0 (L,) first dof/q, entity (L,) owner index.
     Per dof: link (D,), q (D,) its q index (-1 inside a free joint), damping, armature, kp, kv,
+    stiffness (N·m/rad or N/m) and springref (rad or m) of a joint spring −stiffness·(q − springref),
     lower/upper limits (rad or m), effort bound, frictionloss (N·m or N, dry joint friction: a
     constraint row). pairs (P, 2): (i, j), j ≤ i, dof j on the path from dof i to the root — the
     structural non-zeros of the lower mass matrix.
@@ -62,6 +63,8 @@ class RigidModel:
     dof_q: np.ndarray
     dof_damping: np.ndarray
     dof_armature: np.ndarray
+    dof_stiffness: np.ndarray
+    dof_springref: np.ndarray
     dof_kp: np.ndarray
     dof_kv: np.ndarray
     dof_lower: np.ndarray
@@ -202,7 +205,8 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
     """
     rows = {k: [] for k in ("name", "parent", "jtype", "pos0", "quat0", "axis", "com", "inertia0", "mass0",
                             "dof0", "q0", "entity", "same_body", "excluded")}
-    dofs = {k: [] for k in ("link", "q", "damping", "armature", "lower", "upper", "effort", "frictionloss", "kp", "kv")}
+    dofs = {k: [] for k in ("link", "q", "damping", "armature", "stiffness", "springref", "lower", "upper", "effort",
+                            "frictionloss", "kp", "kv")}
     geoms, geom_links, geom_names = [], [], []
     qpos0, equalities = [], []
     for entity_idx, links in enumerate(entities_links):
@@ -231,6 +235,8 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
                 dofs["q"].append(-1 if free else len(qpos0))
                 dofs["damping"].append(spec.damping)
                 dofs["armature"].append(spec.armature)
+                dofs["stiffness"].append(0.0 if free else spec.stiffness)
+                dofs["springref"].append(0.0 if free else spec.springref)
                 dofs["lower"].append(-np.inf if free else spec.lower)
                 dofs["upper"].append(np.inf if free else spec.upper)
                 dofs["effort"].append(np.inf if free else spec.effort)
@@ -264,6 +270,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
         link_entity=np.array(rows["entity"], dtype=np.int32),
         dof_link=dof_link, dof_q=np.array(dofs["q"], dtype=np.int32),
         dof_damping=np.array(dofs["damping"], dtype=f), dof_armature=np.array(dofs["armature"], dtype=f),
+        dof_stiffness=np.array(dofs["stiffness"], dtype=f), dof_springref=np.array(dofs["springref"], dtype=f),
         dof_kp=np.array(dofs["kp"], dtype=f), dof_kv=np.array(dofs["kv"], dtype=f),
         dof_lower=np.array(dofs["lower"], dtype=f), dof_upper=np.array(dofs["upper"], dtype=f),
         dof_effort=np.array(dofs["effort"], dtype=f), dof_frictionloss=np.array(dofs["frictionloss"], dtype=f),

@@ -36,8 +36,8 @@ class RigidSolver(Solver):
     """Owns the rigid model (immutable), its Taichi data and the default inputs."""
 
     #: inputs that keep their value across ``scene.reset()`` (controls do not)
-    persistent_inputs = ("mass", "damping", "armature", "kp", "kv", "gravity", "force_lo", "force_hi", "frictionloss",
-                         "friction", "solref", "solimp", "invweight_t", "invweight_dof")
+    persistent_inputs = ("mass", "damping", "armature", "stiffness", "kp", "kv", "gravity", "force_lo", "force_hi",
+                         "frictionloss", "friction", "solref", "solimp", "invweight_t", "invweight_dof")
 
     transient_inputs = ("xfrc",)
 
@@ -132,7 +132,7 @@ class RigidSolver(Solver):
         effort = np.minimum(m.dof_effort, BIG)
         per_env = {
             "mass": m.link_mass0, "damping": m.dof_damping, "armature": m.dof_armature,
-            "kp": m.dof_kp, "kv": m.dof_kv, "gravity": np.array(self.sim_options.gravity),
+            "stiffness": m.dof_stiffness, "kp": m.dof_kp, "kv": m.dof_kv, "gravity": np.array(self.sim_options.gravity),
             "ctrl_force": np.zeros(m.n_dofs), "ctrl_pos": np.zeros(m.n_dofs), "ctrl_vel": np.zeros(m.n_dofs),
             "xfrc": np.zeros(6 * m.n_links),
             "frictionloss": m.dof_frictionloss, "force_lo": -effort, "force_hi": effort,

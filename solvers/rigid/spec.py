@@ -58,6 +58,8 @@ class LinkSpec:
     mass kg; com (3,) m in the link frame; inertia (3, 3) kg·m² about the com, link-frame axes.
     damping N·m·s/rad (or N·s/m); armature kg·m² (or kg); frictionloss N·m (or N): the joint's
     dry friction (URDF ``<dynamics friction>``; a friction-loss constraint row).
+    stiffness N·m/rad (or N/m) and springref rad (or m): a joint spring −stiffness·(q − springref)
+    (MJCF ``stiffness``, ``springref``); a free joint has none.
     lower/upper: joint limits, rad or m (-inf/inf when unlimited); effort: |force| bound (inf when none).
     kp N·m/rad (or N/m), kv N·m·s/rad (or N·s/m): the joint's servo gains, None for the solver's
     defaults.
@@ -86,6 +88,8 @@ class LinkSpec:
     damping: float = 0.0
     frictionloss: float = 0.0
     armature: float = 0.0
+    stiffness: float = 0.0
+    springref: float = 0.0
     lower: float = -np.inf
     upper: float = np.inf
     effort: float = np.inf
