@@ -123,11 +123,12 @@ class URDF(Morph):
 @named_keywords(*_FILE, "scale", deprecated=_DEPRECATED)
 @dataclass
 class MJCF(Morph):
-    """A robot from an MJCF (MuJoCo XML) file: its one body tree, read as MuJoCo's compiler reads
+    """A robot (or a scene of bodies) from an MJCF (MuJoCo XML) file: the bodies in its worldbody
+    are the trees of one entity, the first one's root its base, read as MuJoCo's compiler reads
     it (solvers/rigid/mjcf.py says which elements, and what is refused or ignored with a warning).
-    pos/euler/quat place the file's world frame (the root body keeps its pose in it: Genesis's
-    offset, applied on the left); the root body is free where the file gives it a free joint,
-    welded otherwise; fixed=True welds a free root where it starts. Each body is a link (none is
+    pos/euler/quat place the file's world frame (each root body keeps its pose in it: Genesis's
+    offset, applied on the left); a root body is free where the file gives it a free joint,
+    welded otherwise; fixed=True welds the base where it starts. Each body is a link (none is
     merged), its joints' parameters, its actuators' servo gains and the file's contact bit masks
     are the file's."""
     file: str = None

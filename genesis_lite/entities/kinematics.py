@@ -2,7 +2,7 @@
 ``inverse_kinematics``), in torch over the solver's link poses.
 
 The Jacobian maps the entity's dof velocities (``get_dofs_velocity``'s convention, MuJoCo's: a
-free base moves along the world axes, then turns about its own axes) to the linear velocity of a
+free joint moves along the world axes, then turns about its own axes) to the linear velocity of a
 point fixed on a link (rows 0–2, m/s) and the link's angular velocity (rows 3–5, rad/s), both in
 the world frame. Column i is dof i's motion: a revolute dof's world axis a turns the point at
 x about the joint's origin o (a × (x − o) and a), a prismatic dof moves it along a (a and 0);
@@ -27,8 +27,8 @@ from ..utils.rotations import quat_mul, quat_to_mat, rotation_vector
 
 class DofMotions:
     """What the columns of an entity's Jacobian are made of (numpy, per local dof): the local link
-    it moves, its axis (in that link's frame, or the world's for a free base's translations), and
-    whether it turns (revolute, a free base's rotations) or slides."""
+    it moves, its axis (in that link's frame, or the world's for a free joint's translations), and
+    whether it turns (revolute, a free joint's rotations) or slides."""
 
     def __init__(self, entity):
         model = entity._solver.model
@@ -37,9 +37,9 @@ class DofMotions:
         self.axis = model.link_axis[links].astype(np.float64)
         self.turns = model.link_jtype[links] == REVOLUTE
         self.in_world = np.zeros(entity.n_dofs, dtype=bool)
-        if entity.is_free:  # MuJoCo's free joint: world translations, then turns about the body's axes
-            self.axis[:6] = np.vstack([np.eye(3), np.eye(3)])
-            self.turns[:6], self.in_world[:3] = [False] * 3 + [True] * 3, True
+        for dof, _ in entity._free_joints:  # MuJoCo's free joint: world translations, then turns about its axes
+            self.axis[dof: dof + 6] = np.vstack([np.eye(3), np.eye(3)])
+            self.turns[dof: dof + 6], self.in_world[dof: dof + 3] = [False] * 3 + [True] * 3, True
         self.parent = model.link_parent[entity.link_start: entity.link_start + entity.n_links] - entity.link_start
 
     def on_path(self, link):
@@ -112,17 +112,17 @@ class _Joints:
 
     def __init__(self, entity, respect_limits, moving):
         model = entity._solver.model
-        dofs = entity.dof_start + np.arange(entity.n_dofs)
-        first = 6 if entity.is_free else 0
-        self.free = entity.is_free
-        self.dofs = np.arange(first, entity.n_dofs)
-        self.qs = model.dof_q[dofs[first:]] - entity.q_start
+        self.free = entity._free_joints  # (first local dof, first local q) of each free joint
+        scalar = ~np.isin(np.arange(entity.n_dofs), [dof + k for dof, _ in self.free for k in range(6)])
+        self.dofs = np.flatnonzero(scalar)
+        dofs = entity.dof_start + self.dofs
+        self.qs = model.dof_q[dofs] - entity.q_start
         self.limited = respect_limits
         device = runtime.device
-        self.lower = torch.as_tensor(model.dof_lower[dofs[first:]], dtype=runtime.tc_float, device=device)
-        self.upper = torch.as_tensor(model.dof_upper[dofs[first:]], dtype=runtime.tc_float, device=device)
-        self.moving = torch.as_tensor(moving[first:], device=device)
-        self.revolute = torch.as_tensor(model.link_jtype[model.dof_link[dofs[first:]]] == REVOLUTE, device=device)
+        self.lower = torch.as_tensor(model.dof_lower[dofs], dtype=runtime.tc_float, device=device)
+        self.upper = torch.as_tensor(model.dof_upper[dofs], dtype=runtime.tc_float, device=device)
+        self.moving = torch.as_tensor(moving[self.dofs], device=device)
+        self.revolute = torch.as_tensor(model.link_jtype[model.dof_link[dofs]] == REVOLUTE, device=device)
 
     def clipped(self, q):
         """q with its moving scalar joints within their limits (when respected)."""
@@ -134,17 +134,17 @@ class _Joints:
         return q
 
     def moved(self, q, step):
-        """q (B', n_qs) moved by a dof-space step (B', n_dofs): a free base's position along the
+        """q (B', n_qs) moved by a dof-space step (B', n_dofs): a free joint's position along the
         world axes and its quaternion turned about its own (q ⊗ exp(ω/2)), the scalar joints by
         theirs, clipped."""
         q = q.clone()
-        if self.free:
-            q[:, :3] += step[:, :3]
-            half = step[:, 3:6] / 2
+        for dof, first in self.free:
+            q[:, first: first + 3] += step[:, dof: dof + 3]
+            half = step[:, dof + 3: dof + 6] / 2
             angle = half.norm(dim=1, keepdim=True)
             turn = torch.cat([torch.cos(angle), half * torch.sinc(angle / np.pi)], dim=1)
-            quat = quat_mul(q[:, 3:7], turn)
-            q[:, 3:7] = quat / quat.norm(dim=1, keepdim=True)
+            quat = quat_mul(q[:, first + 3: first + 7], turn)
+            q[:, first + 3: first + 7] = quat / quat.norm(dim=1, keepdim=True)
         q[:, self.qs] = q[:, self.qs] + step[:, self.dofs]
         return self.clipped(q)
 

@@ -9,6 +9,7 @@ import torch
 from ..runtime import logger
 from ..solvers.core import InvalidInputError, SceneStateError, refuse_grad, runtime
 from ..solvers.rigid.merge import merged_into
+from ..solvers.rigid.model import FREE
 from . import kinematics
 from .bounds import shapes_aabb
 from ..tensor import wrap
@@ -246,7 +247,7 @@ class RigidEntity(EntityIndexing):
                                               list(range(q, q + nq))))
             dof, q = dof + nd, q + nq
 
-    _BUILD_ATTRS = ("link_start", "dof_start", "q_start", "geom_start", "_dof_q")
+    _BUILD_ATTRS = ("link_start", "dof_start", "q_start", "geom_start", "_dof_q", "_free_joints")
 
     def __getattr__(self, attr):
         # only reached when normal lookup fails: a build-time attribute used before build()
@@ -265,11 +266,16 @@ class RigidEntity(EntityIndexing):
         self.q_start = int(model.link_q0[mine[0]])
         # the entity's geoms are contiguous: the model lists them link by link, entity by entity
         self.geom_start = int(np.searchsorted(model.geom_link, mine[0]))
-        # per local dof: its column in the state's qpos; a free base's linear dofs are its origin's
+        # (first local dof, first local q) of each free joint: the base's, and those of later trees'
+        # free roots (an MJCF with several bodies in its worldbody)
+        free = mine[model.link_jtype[mine] == FREE]
+        self._free_joints = [(int(model.link_dof0[l]) - self.dof_start, int(model.link_q0[l]) - self.q_start)
+                             for l in free]
+        # per local dof: its column in the state's qpos; a free joint's linear dofs are its origin's
         # columns, its rotational dofs (Euler angles, stored as a quaternion) -1
         self._dof_q = model.dof_q[self.dof_start: self.dof_start + self.n_dofs].astype(np.int64)
-        if self._free:
-            self._dof_q[:3] = self.q_start + np.arange(3)
+        for dof, q in self._free_joints:
+            self._dof_q[dof: dof + 3] = self.q_start + q + np.arange(3)
 
     @property
     def n_joints(self):
@@ -355,12 +361,14 @@ class RigidEntity(EntityIndexing):
         return self._solver.model.n_qs + self.dof_start + dofs
 
     def _dofs_position_all(self, envs_idx):
-        """(B', n_dofs) dof positions; a free base's are its origin and Euler angles."""
+        """(B', n_dofs) dof positions; a free joint's are its origin and Euler angles."""
         qpos = self._read(self._qpos_columns(), envs_idx)
         scalar = qpos[:, torch.as_tensor(np.maximum(self._dof_q - self.q_start, 0), device=runtime.device)]
-        if not self._free:
-            return scalar
-        return torch.cat([scalar[:, 0:3], quat_to_euler_xyz(qpos[:, 3:7]), scalar[:, 6:]], dim=1)
+        pieces, done = [], 0
+        for dof, q in self._free_joints:
+            pieces += [scalar[:, done: dof + 3], quat_to_euler_xyz(qpos[:, q + 3: q + 7])]
+            done = dof + 6
+        return torch.cat(pieces + [scalar[:, done:]], dim=1) if pieces else scalar
 
     def get_dofs_position(self, dofs_idx_local=None, envs_idx=None):
         """Joint positions, rad or m: (n,) or (n_envs, n). A free base's dofs 0-2 are the world
@@ -381,21 +389,25 @@ class RigidEntity(EntityIndexing):
         envs = self._envs(envs_idx, distinct=True)
         values = self._values(position, len(dofs), envs, "position")
         columns = self._dof_q[dofs]
-        turned = columns < 0  # a free base's Euler angles
-        if turned.any():
-            quat = euler_xyz_to_quat(self._base_euler(envs, dofs[turned] - 3, values[:, turned]))
-            columns = np.concatenate([columns[~turned], self._solver_q([3, 4, 5, 6])])
-            values = torch.cat([values[:, ~turned], quat], dim=1)
-        self._write(columns, envs, values, zero_velocity)
+        turned = columns < 0  # free joints' Euler angles
+        kept_columns, kept_values = [columns[~turned]], [values[:, ~turned]]
+        for dof, q in self._free_joints:
+            mine = turned & (dofs >= dof + 3) & (dofs < dof + 6)
+            if mine.any():
+                quat_columns = self._solver_q(q + np.arange(3, 7))
+                kept_columns.append(quat_columns)
+                kept_values.append(euler_xyz_to_quat(self._free_euler(envs, quat_columns, dofs[mine] - dof - 3,
+                                                                      values[:, mine])))
+        self._write(np.concatenate(kept_columns), envs, torch.cat(kept_values, dim=1), zero_velocity)
 
-    def _base_euler(self, envs, axes, angles):
-        """(len(envs), 3) Euler angles of the free base: ``angles`` (len(envs), k) at ``axes``
-        (k ints in 0-2), the current ones elsewhere."""
+    def _free_euler(self, envs, quat_columns, axes, angles):
+        """(len(envs), 3) Euler angles of the free joint whose quaternion is in ``quat_columns``:
+        ``angles`` (len(envs), k) at ``axes`` (k ints in 0-2), the current ones elsewhere."""
         rows = torch.arange(len(envs), device=runtime.device)[:, None]
         axes = torch.as_tensor(axes, device=runtime.device)[None, :]
         if len(set(axes.flatten().tolist())) == 3:  # all set: the current orientation is not read
             return angles.new_zeros(len(envs), 3).index_put((rows, axes), angles)
-        current = quat_to_euler_xyz(self._rows(self._solver_q([3, 4, 5, 6]), envs))
+        current = quat_to_euler_xyz(self._rows(quat_columns, envs))
         return current.index_put((rows, axes), angles)
 
     def get_dofs_velocity(self, dofs_idx_local=None, envs_idx=None):
@@ -425,11 +437,12 @@ class RigidEntity(EntityIndexing):
         qs = self._local(qs_idx_local, self.n_qs, "qs_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         values = self._values(qpos, len(qs), envs, "qpos")
-        written = [k for k in range(3, 7) if k in qs.tolist()]
-        if self._free and written:  # the free base's quaternion this write leaves
-            quats = self._rows(self._solver_q(np.arange(3, 7)), envs).detach().clone()
-            quats[:, [k - 3 for k in written]] = values[:, [qs.tolist().index(k) for k in written]].detach()
-            self._check_quat(quats, "qpos")
+        for _, q in self._free_joints:  # each free joint's quaternion as this write leaves it
+            written = [k for k in range(q + 3, q + 7) if k in qs.tolist()]
+            if written:
+                quats = self._rows(self._solver_q(np.arange(q + 3, q + 7)), envs).detach().clone()
+                quats[:, [k - q - 3 for k in written]] = values[:, [qs.tolist().index(k) for k in written]].detach()
+                self._check_quat(quats, "qpos")
         self._write(self._solver_q(qs), envs, values, zero_velocity)
 
     def _check_quat(self, quats, arg):
@@ -967,9 +980,10 @@ class RigidEntity(EntityIndexing):
         """Switch the dofs to ``mode`` with ``targets``: {input name: (value, argument name)}; a value
         None is the constant 0 (written only where the input holds something else)."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
-        if mode == "position" and self._free and bool((dofs < 6).any()):
+        free = [dof + k for dof, _ in self._free_joints for k in range(6)]
+        if mode == "position" and np.isin(dofs, free).any():
             raise InvalidInputError(f"entity '{self.name}': {method} cannot drive free-joint dofs "
-                                    f"(dofs_idx_local 0-5); got {dofs.tolist()}")
+                                    f"(dofs_idx_local {free}); got {dofs.tolist()}")
         envs = self._envs(envs_idx, distinct=True)
         columns = self.dof_start + dofs
         checked = {name: self._values(value, len(dofs), envs, arg) for name, (value, arg) in targets.items()

@@ -5,12 +5,13 @@ Read as MuJoCo's compiler reads it: ``<include>`` files inlined (several ``<defa
 ``<compiler angle meshdir assetdir autolimits eulerseq inertiafromgeom>``, every orientation form
 (quat, axisangle, euler, xyaxes, zaxis).
 
-Tree: ``<worldbody>`` holds one body tree (one entity). Its root body is the entity's root link:
-free with a ``<freejoint>`` (or a joint of type free, its damping and armature read), welded
-where it has no joint; a root body hinged or sliding on the world hangs from a static link named
-"world". Each body is a link named as the body, at the body's frame (MuJoCo's and Genesis's): a
-body without a joint is welded to its parent (not merged, as MuJoCo and Genesis keep it); a
-body's joints (hinge → revolute, slide → prismatic) turn massless links named ``body:joint`` at
+Trees: the bodies in ``<worldbody>`` are the roots of one entity's trees, in the file's order
+(MuJoCo's body and dof order; the first tree's root is the entity's base, as in Genesis). A root
+body is a root link: free with a ``<freejoint>`` (or a joint of type free, its damping and armature
+read), welded where it has no joint; root bodies hinged or sliding on the world hang from one
+static link named "world", added before the first of them. Each body is a link named as the
+body, at the body's frame (MuJoCo's and Genesis's): a body without a joint is welded to its
+parent (not merged, as MuJoCo and Genesis keep it); a body's joints (hinge → revolute, slide → prismatic) turn massless links named ``body:joint`` at
 their anchors, since a LinkSpec joint turns about its link's origin, and the body's link hangs
 welded from the last of them, or is that last link where its joint's anchor is the body origin
 (no extra link: the usual case). Contacts take a body's links as one body (LinkSpec.same_body),
@@ -33,14 +34,14 @@ with an affine bias, kp = −biasprm[1], kv = −biasprm[2]; ``velocity`` kv; fo
 the |force| bound; a ``motor`` is force control (control_dofs_force).
 ``<equality><joint>`` with polycoef (c0, c1) makes joint1 follow joint2, q1 = c0 + c1 q2 (LinkSpec.mimic).
 
-Refused (AssetError naming the element): ball and further free joints, a joint's ``ref``, a free
-joint's stiffness, ellipsoid / hfield / sdf geoms, welds and connects, several bodies in
-``<worldbody>``, elements that would add or move bodies and geoms unread (``<replicate>``, ``<composite>``…;
-``<frame>`` is read: it places its bodies and geoms, and its childclass is theirs). Ignored with
-one warning naming them: worldbody geoms (the ground is ``gs.morphs.Plane``), tendons and what
-acts on them, ``<contact><pair>``, ``<option>`` (the scene's options rule), and attributes that
-tune MuJoCo's solver, actuator dynamics or the compiler's mass bounds (solref, solimp, margin,
-condim, dampratio, timeconst, boundmass…) unless they hold MuJoCo's defaults.
+Refused (AssetError naming the element): ball joints, a free joint below a root body, a joint's
+``ref``, ``springdamper`` and ``springyield``, a free joint's stiffness, ellipsoid / hfield / sdf
+geoms, welds and connects, elements that would add or move bodies and geoms unread (``<replicate>``,
+``<composite>``…; ``<frame>`` is read: it places its bodies and geoms, and its childclass is
+theirs). Ignored with one warning naming them: worldbody geoms (the ground is ``gs.morphs.Plane``),
+tendons and what acts on them, ``<contact><pair>``, ``<option>`` (the scene's options rule), and
+attributes that tune MuJoCo's solver, actuator dynamics or the compiler's mass bounds (solref,
+solimp, margin, condim, dampratio, timeconst, boundmass…) unless they hold MuJoCo's defaults.
 """
 import logging
 import os
@@ -59,7 +60,8 @@ _NAMES = ("name", "class", "group", "user", "rgba", "material")  # read, or harm
 _READ = {
     "body": _FRAME + ("name", "childclass", "user"),
     "joint": ("name", "class", "type", "pos", "axis", "range", "limited", "damping", "armature", "frictionloss",
-              "actuatorfrcrange", "actuatorfrclimited", "stiffness", "springref", "ref", "group", "user"),
+              "actuatorfrcrange", "actuatorfrclimited", "stiffness", "springref", "ref", "springdamper", "springyield",
+              "group", "user"),
     "freejoint": ("name", "group", "type"),
     "geom": _FRAME + _NAMES + ("type", "size", "fromto", "mesh", "friction", "contype", "conaffinity", "density",
                                "mass"),
@@ -75,8 +77,8 @@ _MJ_RGBA = np.array([0.5, 0.5, 0.5, 1.0])  # MuJoCo's default geom colour
 
 def load_mjcf(path: str, entity_name: str | None = None) -> list[LinkSpec]:
     """Links of the MJCF file `path` in tree order (MuJoCo's body order, parent index < child
-    index). The root link's joint is "free" or "fixed" as the file says, at the root body's pose
-    (in the world frame of the file). entity_name: only used in messages.
+    index), one tree a root body. A root link's joint is "free" or "fixed" as the file says, at
+    its body's pose (in the world frame of the file). entity_name: only used in messages.
     Raises InvalidInputError for bad arguments and AssetError for anything wrong with the file."""
     if not isinstance(path, (str, os.PathLike)):
         raise InvalidInputError(f"load_mjcf: argument 'path' expected a file path, got {path!r}")
@@ -106,16 +108,16 @@ class _Reader(MJCFDocument):
         if not worldbodies:
             raise self.error("<worldbody> is missing")
         bodies = [member for worldbody in worldbodies for member in self._members(worldbody, "body", "main")]
-        if len(bodies) != 1:
-            raise self.error(f"<worldbody> expected one body tree (one entity), got {len(bodies)} bodies "
-                             f"{[b[0].get('name') for b in bodies]}; load each as its own entity")
+        if not bodies:
+            raise self.error("<worldbody> expected at least one <body>, got none")
         if any(list(self._members(worldbody, "geom", "main")) for worldbody in worldbodies):
             self.ignored.add("<worldbody> geoms (add the ground as gs.morphs.Plane)")
         for worldbody in worldbodies:
             self._check_children(worldbody, "<worldbody>")
         links = []
-        root, childclass, outer = bodies[0]
-        self._body(root, -1, childclass, links, outer)
+        self._world = None  # the index of the static "world" link that trees hinged on the world share
+        for root, childclass, outer in bodies:  # several trees: one entity, as Genesis and MuJoCo load them
+            self._body(root, -1, childclass, links, outer)
         names = [link.name for link in links]
         repeated = sorted({name for name in names if names.count(name) > 1})
         if repeated:  # (MuJoCo refuses them too)
@@ -146,9 +148,11 @@ class _Reader(MJCFDocument):
             if joints:
                 self._free_joint(joints[0], childclass, links[-1], what)
         else:
-            if parent < 0:  # hinged or sliding on the world
-                links.append(_link("world", -1, "", "fixed", np.zeros(3), IDENTITY.copy()))
-                parent = 0
+            if parent < 0:  # hinged or sliding on the world: on a static link at the world's origin
+                if self._world is None:
+                    links.append(_link("world", -1, "", "fixed", np.zeros(3), IDENTITY.copy()))
+                    self._world = len(links) - 1
+                parent = self._world
             self._joint_chain(joints, childclass, name, what, parent, pos, quat, links)
         self._contents(body, childclass, links[-1], what)
         index = len(links) - 1
@@ -205,6 +209,7 @@ class _Reader(MJCFDocument):
         attrs = self.attrs(joint, childclass)
         what = f"{what} joint {attrs.get('name') or link.name!r}"
         self.ignore_unread(joint, {k: v for k, v in attrs.items() if k not in ("damping", "armature")})
+        self._refuse_unmodelled(attrs, what)
         if self._non_negative(attrs, "stiffness", what) != 0.0:  # (MuJoCo's would spring the pose; Genesis refuses)
             raise self.error(f"{what}: a free joint's spring is not supported (stiffness = {attrs['stiffness']!r})")
         link.damping, link.armature = (self._non_negative(attrs, key, what) for key in ("damping", "armature"))
@@ -226,7 +231,7 @@ class _Reader(MJCFDocument):
         kind = "free" if joint.tag == "freejoint" else attrs.get("type", "hinge")
         if kind not in _JOINTS:
             raise self.error(f"{what}: type expected hinge or slide (or free on the root body), got {kind!r}")
-        self._refuse_ref(attrs, what)
+        self._refuse_unmodelled(attrs, what)
         axis = self.numbers(attrs, "axis", 3, what, default=[0.0, 0.0, 1.0])
         axis = axis / norm(self, axis, what)
         spec = _link(link_name, -1, name, _JOINTS[kind], np.zeros(3), IDENTITY.copy(), axis)
@@ -243,11 +248,16 @@ class _Reader(MJCFDocument):
         spec.effort = self._force_bound(attrs, "actuatorfrcrange", "actuatorfrclimited", what)
         return spec
 
-    def _refuse_ref(self, attrs: dict, what: str):
-        """A joint's ``ref`` (its qpos0, where the body's frame holds) other than 0 is refused."""
-        if self.numbers(attrs, "ref", 1, what, default=[0.0])[0] != 0.0:
-            raise self.error(f"{what}: a joint reference position is not supported (attribute 'ref' = "
-                             f"{attrs['ref']!r}; the body frame is at q = 0)")
+    def _refuse_unmodelled(self, attrs: dict, what: str):
+        """Refuse what would move the joint otherwise if it were dropped: a ``ref`` other than 0 (its
+        qpos0, where the body's frame holds), a spring from ``springdamper`` (MuJoCo derives its
+        stiffness and damping from the joint's inertia) or one that yields (``springyield``)."""
+        for key, width, what_it_is in (("ref", 1, "a joint reference position (the body frame is at q = 0)"),
+                                       ("springdamper", 2, "a spring from springdamper (state stiffness and "
+                                                           "damping instead)"),
+                                       ("springyield", 1, "a yielding spring")):
+            if np.any(self.numbers(attrs, key, width, what, default=np.zeros(width)) != 0.0):
+                raise self.error(f"{what}: {what_it_is} is not supported (attribute {key!r} = {attrs[key]!r})")
 
     def _force_bound(self, attrs, key: str, limited_key: str, what: str) -> float:
         """|force| bound (N·m or N) of a force range, inf when there is none."""
@@ -437,10 +447,10 @@ class _Reader(MJCFDocument):
 
 
 def place_world(links: list[LinkSpec], pos, quat) -> None:
-    """Place the file's world frame at `pos` (3,) m, `quat` (4,) w-x-y-z: the root link's pose
-    becomes (pos, quat) ∘ its pose in the file."""
-    root = links[0]
-    root.pos, root.quat = shapes.compose(pos, quat, root.pos, root.quat)
+    """Place the file's world frame at `pos` (3,) m, `quat` (4,) w-x-y-z: each root link's pose
+    (one a body tree) becomes (pos, quat) ∘ its pose in the file."""
+    for root in (link for link in links if link.parent < 0):
+        root.pos, root.quat = shapes.compose(pos, quat, root.pos, root.quat)
 
 
 # -------------------------------------------------------------------- helpers
