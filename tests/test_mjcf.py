@@ -1,14 +1,14 @@
 """gs.morphs.MJCF against MuJoCo 4 reading the same file (float64).
 
-assets/mjcf/arm.xml (fixed base; default classes, degrees, every orientation form, joint anchors
-off the body origin, a body with two joints, a welded body, inertias stated and from geoms, joint
-damping / armature / friction loss / limits / springs (stiffness, springref in degrees), position and affine general actuators, an included
-file) and assets/mjcf/crawler.xml (free root, hinged legs, contact bit masks: only the feet touch
-the ground, per-geom friction). Each runs under sinusoidal servo targets in both engines, MuJoCo
-with the implicitfast integrator (our servos' kv is implicit) and its ground plane from the
-file, ours with gs.morphs.Plane: the trajectories agree to round-off (measured: arm 2.7e-15 over
-400 steps with limit and friction-loss rows active; crawler 6e-14 pyramidal, 3e-13 elliptic over
-500 steps with 1-3 foot contacts).
+assets/mjcf/arm.xml (fixed base; default classes, degrees, every orientation form, joint anchors off
+the body origin, a body with two joints, a welded body, inertias stated and from geoms, joint
+damping / armature / friction loss / limits / springs (stiffness, springref in degrees) / ref,
+position and affine general actuators, an included file) and assets/mjcf/crawler.xml (free root,
+hinged legs, contact bit masks: only the feet touch the ground, per-geom friction). Each runs under
+sinusoidal servo targets in both engines, MuJoCo with the implicitfast integrator (our servos' kv is
+implicit) and its ground plane from the file, ours with gs.morphs.Plane: the trajectories agree to
+round-off (measured: arm 2.7e-15 over 400 steps with limit and friction-loss rows active; crawler
+6e-14 pyramidal, 3e-13 elliptic over 500 steps with 1-3 foot contacts).
 """
 import logging
 
@@ -48,6 +48,10 @@ def test_arm_masses_frames_and_trajectory_match_mujoco(f64):
         assert float(links[m.body(body).name].get_mass()) == pytest.approx(m.body_mass[body], rel=1e-14)
     assert robot.get_dofs_kp().tolist() == [40.0, 60.0, 300.0, 5.0]
     assert robot.get_dofs_kv().tolist() == [2.0, 3.0, 20.0, 0.3]
+    np.testing.assert_allclose(robot.get_qpos().numpy(), m.qpos0, atol=1e-15)  # the refs: 10°, 0.03 m
+    mujoco.mj_kinematics(m, d)
+    for body in range(1, m.nbody):  # at q = ref the bodies are where the file puts them
+        np.testing.assert_allclose(links[m.body(body).name].get_pos().numpy(), d.xpos[body], atol=1e-14)
     worst, rows = 0.0, 0
     for t in range(400):
         target = 0.5 * np.sin(np.arange(4) + 3.0 * t * m.opt.timestep) * np.array([1.0, 1.0, 0.1, 1.0])
@@ -127,7 +131,6 @@ LINK = '<geom type="sphere" size="0.1"/>'
 
 @pytest.mark.parametrize("body, extra, said", [
     (f'<body name="b"><joint name="j" type="ball"/>{LINK}</body>', "", "joint 'j': type expected hinge or slide"),
-    (f'<body name="b"><joint name="j" ref="3"/>{LINK}</body>', "", "a joint reference position (the body frame"),
     (f'<body name="b"><joint name="j" springdamper="0.2 1"/>{LINK}</body>', "", "a spring from springdamper"),
     (f'<body name="b"><joint name="j" stiffness="3" springyield="5"/>{LINK}</body>', "", "a yielding spring"),
     ("", "", "<worldbody> expected at least one <body>, got none"),
@@ -214,20 +217,26 @@ def test_an_inactive_joint_equality_is_not_loaded(f64, tmp_path, caplog):
     assert np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max() < 1e-12
 
 
-def test_joint_equality_follows_polycoef_as_mujoco(f64, tmp_path):
-    """Two pendulums hinged on the world's static link, the second held to c0 + c1 · the first."""
-    arms = "".join(f'<body name="arm{k}" pos="{0.3 * k} 0 1"><joint name="j{k}" axis="0 1 0" damping="0.01"/>'
-                   f'<geom type="capsule" fromto="0 0 0 0.2 0 -0.3" size="0.02"/></body>' for k in (1, 2))
+@pytest.mark.parametrize("refs", [(0.0, 0.0), (20.0, -35.0)])
+def test_joint_equality_follows_polycoef_as_mujoco(f64, tmp_path, refs):
+    """Two pendulums hinged on the world's static link, the second held to c0 + c1 · the first;
+    with joint refs (degrees) MuJoCo's row relates the positions relative to them, q2 − ref2 =
+    c0 + c1 (q1 − ref1), and the bodies start at their file poses with q = ref."""
+    arms = "".join(f'<body name="arm{k}" pos="{0.3 * k} 0 1"><joint name="j{k}" axis="0 1 0" damping="0.01" '
+                   f'ref="{ref}"/><geom type="capsule" fromto="0 0 0 0.2 0 -0.3" size="0.02"/></body>'
+                   for k, ref in zip((1, 2), refs))
     path = _write(tmp_path, f'<body name="frame"><geom type="box" size="0.05 0.05 0.05"/>{arms}</body>',
                   '<equality><joint joint1="j2" joint2="j1" polycoef="0.2 -0.5 0 0 0"/></equality>')
     m, d, scene, robot = _pair(path)
     assert robot.n_dofs == 2
+    np.testing.assert_allclose(robot.get_dofs_position().numpy(), np.deg2rad(refs), atol=1e-15)
     worst = 0.0
     for _ in range(500):
         mujoco.mj_step(m, d)
         scene.step()
-        worst = max(worst, np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max())
-    q = robot.get_dofs_position().numpy()
+        worst = max(worst, np.abs(robot.get_dofs_position().numpy() - d.qpos).max(),
+                    np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max())
+    q = robot.get_dofs_position().numpy() - np.deg2rad(refs)
     assert abs(q[1] - (0.2 - 0.5 * q[0])) < 0.01 and abs(q[0]) > 0.1  # held while it swings
     assert worst < 1e-11
 

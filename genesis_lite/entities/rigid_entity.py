@@ -758,9 +758,9 @@ class RigidEntity(EntityIndexing):
 
     def set_dofs_stiffness(self, stiffness, dofs_idx_local=None, envs_idx=None):
         """Joint spring stiffness, N·m/rad or N/m: a passive force −stiffness·(q − springref) on each
-        dof, springref the asset's (MJCF ``springref``) or 0 (Genesis springs to qpos0, 0 here
-        too). Explicit in the step, as in MuJoCo and Genesis. A free joint's dofs take none (0 only).
-        Differentiable."""
+        dof, springref the asset's (MJCF ``springref``) or 0 (Genesis springs to qpos0, the
+        initial position: an MJCF's ``ref``, else 0). Explicit in the step, as in MuJoCo and
+        Genesis. A free joint's dofs take none (0 only). Differentiable."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         values = self._refuse_negative("stiffness", self._values(stiffness, len(dofs), envs, "stiffness"))

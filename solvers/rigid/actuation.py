@@ -7,7 +7,7 @@ the target of ``control_dofs_position_velocity``), 2 velocity (τ = kv·(q̇* �
 clipped to the dof's force range. Damping −b·q̇ and a joint spring −k·(q − q_ref) (q_ref: the
 model's springref, MuJoCo's qpos_spring) are passive; the spring is explicit, as MuJoCo's and
 Genesis's integrators take it (neither puts stiffness into the implicit matrix; Genesis's spring
-rests at qpos0, which is 0 here). Both velocity terms are treated
+rests at qpos0, the initial position, whatever springref says). Both velocity terms are treated
 implicitly by the acceleration stage (linalg.py: h·(b + kv) on A's diagonal, kv of a dof in a
 servo mode), as Genesis's default integrator does (approximate_implicitfast, clipped or not;
 MuJoCo's implicitfast likewise but without the kv of an actuator clamped by its force range, its

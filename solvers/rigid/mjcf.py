@@ -8,14 +8,14 @@ Read as MuJoCo's compiler reads it: ``<include>`` files inlined (several ``<defa
 Trees: the bodies in ``<worldbody>`` are the roots of one entity's trees, in the file's order
 (MuJoCo's body and dof order; the first tree's root is the entity's base, as in Genesis). A root
 body is a root link: free with a ``<freejoint>`` (or a joint of type free, its damping and armature
-read), welded where it has no joint; root bodies hinged or sliding on the world hang from one
-static link named "world", added before the first of them. Each body is a link named as the
-body, at the body's frame (MuJoCo's and Genesis's): a body without a joint is welded to its
-parent (not merged, as MuJoCo and Genesis keep it); a body's joints (hinge → revolute, slide → prismatic) turn massless links named ``body:joint`` at
-their anchors, since a LinkSpec joint turns about its link's origin, and the body's link hangs
-welded from the last of them, or is that last link where its joint's anchor is the body origin
-(no extra link: the usual case). Contacts take a body's links as one body (LinkSpec.same_body),
-and, as MuJoCo's filter, a body welded to a moving parent as part of it.
+read), welded where it has no joint; root bodies hinged or sliding on the world hang from one static
+link named "world", added before the first of them. Each body is a link named as the body, at the
+body's frame (MuJoCo's and Genesis's): a body without a joint is welded to its parent (not merged,
+as MuJoCo and Genesis keep it); a body's joints (hinge → revolute, slide → prismatic) turn massless
+links named ``body:joint`` at their anchors, since a LinkSpec joint turns about its link's origin,
+and the body's link hangs welded from the last of them, or is that last link where its joint's
+anchor is the body origin (no extra link: the usual case). Contacts take a body's links as one body
+(LinkSpec.same_body), and, as MuJoCo's filter, a body welded to a moving parent as part of it.
 
 Bodies: mass, com and inertia from ``<inertial>`` (diaginertia with its frame, or fullinertia),
 else from the body's geoms as solids of their density (or stated mass), as MuJoCo's
@@ -28,15 +28,17 @@ included them); contype/conaffinity masks (MuJoCo's pair rule); ``<contact><excl
 drawn where its group is 0-2 (MuJoCo's visible groups), coloured by its rgba or material.
 Joints: axis, pos, range (limited: MuJoCo's autolimits), damping, armature, frictionloss,
 actuatorfrcrange (|force| bound), stiffness and springref (a spring −stiffness·(q − springref), as
-MuJoCo's; Genesis's loader springs to qpos0 whatever springref says).
+MuJoCo's; Genesis's loader springs to qpos0 whatever springref says), ref (the initial q, at which
+the body is where the file puts it: LinkSpec.q0).
 Actuators on a joint give its servo (as Genesis reads them): ``position`` kp, kv; ``general``
 with an affine bias, kp = −biasprm[1], kv = −biasprm[2]; ``velocity`` kv; forcerange (symmetric)
 the |force| bound; a ``motor`` is force control (control_dofs_force).
-``<equality><joint>`` with polycoef (c0, c1) makes joint1 follow joint2, q1 = c0 + c1 q2 (LinkSpec.mimic).
+``<equality><joint>`` with polycoef (c0, c1) makes joint1 follow joint2, q1 − ref1 = c0 + c1 (q2 −
+ref2) (LinkSpec.mimic).
 
 Refused (AssetError naming the element): ball joints, a free joint below a root body, a joint's
-``ref``, ``springdamper`` and ``springyield``, a free joint's stiffness, ellipsoid / hfield / sdf
-geoms, welds and connects, elements that would add or move bodies and geoms unread (``<replicate>``,
+``springdamper`` and ``springyield``, a free joint's stiffness, ellipsoid / hfield / sdf geoms,
+welds and connects, elements that would add or move bodies and geoms unread (``<replicate>``,
 ``<composite>``…; ``<frame>`` is read: it places its bodies and geoms, and its childclass is
 theirs). Ignored with one warning naming them: worldbody geoms (the ground is ``gs.morphs.Plane``),
 tendons and what acts on them, ``<contact><pair>``, ``<option>`` (the scene's options rule), and
@@ -50,7 +52,7 @@ import numpy as np
 
 from ..core import InvalidInputError
 from . import shapes
-from .mjcf_document import IDENTITY, ORIENTATIONS, MJCFDocument, is_default, norm
+from .mjcf_document import IDENTITY, ORIENTATIONS, MJCFDocument, axis_angle, is_default, norm
 from .spec import GeomSpec, LinkSpec, VisualSpec
 
 _logger = logging.getLogger("genesis_lite")
@@ -172,6 +174,7 @@ class _Reader(MJCFDocument):
             spec.parent, spec.same_body = (len(links) - 1, True) if k else (parent, False)
             spec.pos, spec.quat = (offset - anchor, IDENTITY.copy()) if k else \
                 (pos + shapes.quat_to_mat(quat) @ offset, quat)
+            self._at_ref(spec)
             anchor = offset
             links.append(spec)
         if not joints:
@@ -179,6 +182,16 @@ class _Reader(MJCFDocument):
         elif np.any(anchor):
             links.append(_link(name, len(links) - 1, f"{name}_fixed", "fixed", -anchor, IDENTITY.copy()))
             links[-1].same_body = True
+
+    @staticmethod
+    def _at_ref(spec: LinkSpec):
+        """MuJoCo's body frame is (pos, quat) when the joint is at its ``ref`` (spec.q0): the link's
+        frame, which a LinkSpec joint moves from q = 0, is that frame turned (or slid) by −ref about
+        the joint's axis, which the joint's own motion commutes with."""
+        if spec.joint_type == "revolute":
+            spec.quat = shapes.quat_mul(spec.quat, axis_angle(spec.axis, -spec.q0))
+        else:
+            spec.pos = spec.pos - spec.q0 * shapes.quat_to_mat(spec.quat) @ spec.axis
 
     def _members(self, element, tag: str, childclass: str, outer=(np.zeros(3), IDENTITY)):
         """(child, its class context, (pos, quat) of the <frame>s around it) of the children named
@@ -239,6 +252,7 @@ class _Reader(MJCFDocument):
             setattr(spec, key, self._non_negative(attrs, key, what))
         scale = np.deg2rad(1.0) if kind == "hinge" and self.degree else 1.0  # angles in the file → rad
         spec.springref = self.numbers(attrs, "springref", 1, what, default=[0.0])[0] * scale
+        spec.q0 = self.numbers(attrs, "ref", 1, what, default=[0.0])[0] * scale
         limited = attrs.get("limited", "auto")
         if limited == "true" or (limited == "auto" and self.autolimits and "range" in attrs):
             low, high = self.numbers(attrs, "range", 2, what, default=[0.0, 0.0])
@@ -249,11 +263,10 @@ class _Reader(MJCFDocument):
         return spec
 
     def _refuse_unmodelled(self, attrs: dict, what: str):
-        """Refuse what would move the joint otherwise if it were dropped: a ``ref`` other than 0 (its
-        qpos0, where the body's frame holds), a spring from ``springdamper`` (MuJoCo derives its
-        stiffness and damping from the joint's inertia) or one that yields (``springyield``)."""
-        for key, width, what_it_is in (("ref", 1, "a joint reference position (the body frame is at q = 0)"),
-                                       ("springdamper", 2, "a spring from springdamper (state stiffness and "
+        """Refuse what would move the joint otherwise if it were dropped: a spring from
+        ``springdamper`` (MuJoCo derives its stiffness and damping from the joint's inertia) or one
+        that yields (``springyield``)."""
+        for key, width, what_it_is in (("springdamper", 2, "a spring from springdamper (state stiffness and "
                                                            "damping instead)"),
                                        ("springyield", 1, "a yielding spring")):
             if np.any(self.numbers(attrs, key, width, what, default=np.zeros(width)) != 0.0):
@@ -378,7 +391,10 @@ class _Reader(MJCFDocument):
                 for key in ("solref", "solimp"):
                     if key in attrs:
                         self.ignored.add(f"<equality><joint {key}> (the scene's constraint time constant rules)")
-                by_joint[attrs["joint1"]].mimic = (attrs["joint2"], float(coef[1]), float(coef[0]))
+                # MuJoCo's row holds q1 − ref1 = c0 + c1 (q2 − ref2): an offset c0 + ref1 − c1 ref2 on q
+                ref1, ref2 = by_joint[attrs["joint1"]].q0, by_joint[attrs["joint2"]].q0
+                by_joint[attrs["joint1"]].mimic = (attrs["joint2"], float(coef[1]),
+                                                   float(coef[0] + ref1 - coef[1] * ref2))
 
     def _exclusions(self, links: list[LinkSpec]):
         """<contact><exclude body1 body2>: the two bodies' shapes never collide; <contact><pair>

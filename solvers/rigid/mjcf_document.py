@@ -175,11 +175,11 @@ class MJCFDocument:
             q = self.numbers(attrs, "quat", 4, what)
         elif kind == "axisangle":
             v = self.numbers(attrs, "axisangle", 4, what)
-            q = _axis_angle(v[:3], self._angle(v[3]))
+            q = axis_angle(v[:3], self._angle(v[3]))
         elif kind == "euler":
             q = IDENTITY.copy()
             for axis_name, angle in zip(self.eulerseq, self.numbers(attrs, "euler", 3, what)):
-                turn = _axis_angle(np.eye(3)["xyz".index(axis_name.lower())], self._angle(angle))
+                turn = axis_angle(np.eye(3)["xyz".index(axis_name.lower())], self._angle(angle))
                 q = shapes.quat_mul(q, turn) if axis_name.islower() else shapes.quat_mul(turn, q)
         elif kind == "xyaxes":
             v = self.numbers(attrs, "xyaxes", 6, what)
@@ -267,6 +267,6 @@ def norm(reader: MJCFDocument, v: np.ndarray, what: str) -> float:
     return n
 
 
-def _axis_angle(axis, angle: float) -> np.ndarray:
+def axis_angle(axis, angle: float) -> np.ndarray:
     axis = np.asarray(axis, dtype=np.float64)
     return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis / np.linalg.norm(axis)])

@@ -176,7 +176,7 @@ def _static_links(link_parent, link_jtype):
 def _initial_q(spec):
     if spec.joint_type == "free":
         return list(spec.pos) + list(spec.quat)
-    return [0.0] * QS_OF[JOINT_CODE[spec.joint_type]]
+    return [spec.q0] * QS_OF[JOINT_CODE[spec.joint_type]]
 
 
 def _mass_matrix_pairs(dof_link, link_parent):

@@ -60,6 +60,8 @@ class LinkSpec:
     dry friction (URDF ``<dynamics friction>``; a friction-loss constraint row).
     stiffness N·m/rad (or N/m) and springref rad (or m): a joint spring −stiffness·(q − springref)
     (MJCF ``stiffness``, ``springref``); a free joint has none.
+    q0 rad (or m): a revolute or prismatic joint's initial position (MJCF ``ref``: the link frame is
+    (pos, quat) at q = 0 whatever q0 is; the loader moved it).
     lower/upper: joint limits, rad or m (-inf/inf when unlimited); effort: |force| bound (inf when none).
     kp N·m/rad (or N/m), kv N·m·s/rad (or N·s/m): the joint's servo gains, None for the solver's
     defaults.
@@ -90,6 +92,7 @@ class LinkSpec:
     armature: float = 0.0
     stiffness: float = 0.0
     springref: float = 0.0
+    q0: float = 0.0
     lower: float = -np.inf
     upper: float = np.inf
     effort: float = np.inf
