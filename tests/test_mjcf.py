@@ -490,3 +490,40 @@ def test_gradients_through_several_trees_match_finite_differences(f64):
     start = torch.tensor([0.1, -0.05, -0.5, 0.3, 0.2, -0.1], dtype=torch.float64)
     for seed in range(2):
         assert_converged(directional_errors(loss, start, seed), f"trees, direction {seed}")
+
+
+# -- energy ---------------------------------------------------------------------------------------------
+def test_energy_matches_mujoco_and_differentiates(f64):
+    """get_kinetic_energy / get_potential_energy of the arm (armature, springs with springref, a base
+    welded to the world) at random states in a batch of two against MuJoCo 4's energy (mjENBL_ENERGY):
+    kinetic equal (½ q̇ᵀ M q̇, armature on M), potential equal but for the welded base's constant
+    gravity term, which MuJoCo counts and Genesis (and ours) leave out. Gradients: ∂KE/∂q̇ = M q̇ and
+    ∂PE/∂stiffness = ½ (q − springref)², exactly."""
+    m = mujoco.MjModel.from_xml_path(ARM)
+    m.opt.enableflags |= mujoco.mjtEnableBit.mjENBL_ENERGY
+    d = mujoco.MjData(m)
+    scene = gs.Scene(sim_options=gs.options.SimOptions(requires_grad=True))
+    robot = scene.add_entity(gs.morphs.MJCF(file=ARM))
+    scene.build(n_envs=2)
+    rng = np.random.default_rng(0)
+    qpos = m.qpos0 + rng.uniform(-0.3, 0.3, (2, m.nq)) * np.array([1.0, 1.0, 0.1, 1.0])
+    qvel = torch.tensor(rng.uniform(-1.0, 1.0, (2, m.nv)), requires_grad=True)
+    stiffness = torch.tensor(rng.uniform(1.0, 5.0, (2, m.nv)), requires_grad=True)
+    robot.set_qpos(torch.tensor(qpos))
+    robot.set_dofs_velocity(qvel)
+    robot.set_dofs_stiffness(stiffness)
+    kinetic, potential = robot.get_kinetic_energy(), robot.get_potential_energy()
+    assert kinetic.shape == potential.shape == (2,)
+    torch.testing.assert_close(robot.get_total_energy(), kinetic + potential, rtol=0, atol=0)
+    for e in range(2):
+        m.jnt_stiffness[:] = stiffness[e].detach().numpy()
+        d.qpos[:], d.qvel[:] = qpos[e], qvel[e].detach().numpy()
+        mujoco.mj_forward(m, d)
+        welded = -sum(m.body_mass[b] * m.opt.gravity @ d.xipos[b] for b in range(1, m.nbody) if m.body_weldid[b] == 0)
+        assert abs(float(kinetic[e]) - d.energy[1]) < 1e-14
+        assert abs(float(potential[e]) - (d.energy[0] - welded)) < 1e-13
+    (kinetic.sum() + potential.sum()).backward()
+    mass = robot.get_mass_mat().detach()
+    torch.testing.assert_close(qvel.grad, (mass @ qvel.detach()[..., None])[..., 0], rtol=1e-13, atol=1e-15)
+    rest = torch.tensor(m.qpos_spring)
+    torch.testing.assert_close(stiffness.grad, 0.5 * (torch.tensor(qpos) - rest) ** 2, rtol=1e-13, atol=1e-15)

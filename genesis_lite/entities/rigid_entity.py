@@ -10,7 +10,7 @@ from ..runtime import logger
 from ..solvers.core import InvalidInputError, SceneStateError, refuse_grad, runtime
 from ..solvers.rigid.merge import merged_into
 from ..solvers.rigid.model import FREE
-from . import kinematics
+from . import energy, kinematics
 from .bounds import shapes_aabb
 from ..tensor import wrap
 from .common import EntityIndexing, broadcast, named_argument_errors, replace_columns as _replace
@@ -691,6 +691,22 @@ class RigidEntity(EntityIndexing):
                                              rot_tol=rot_tol, max_step_size=max_step_size, seed=seed)
         qpos, error = kinematics.solve_ik(self, goals, start, envs, dofs, options)
         return (self._out(qpos), self._out(error)) if return_error else self._out(qpos)
+
+    # -- energy -------------------------------------------------------------------------------------
+    def get_kinetic_energy(self, envs_idx=None):
+        """Kinetic energy of the entity, J: () or (len(envs_idx),), as Genesis's (the links' and their
+        rotors' through armature: MuJoCo's ½ q̇ᵀ M q̇; energy.py). Differentiable."""
+        return self._out(energy.kinetic(self, envs_idx))
+
+    def get_potential_energy(self, envs_idx=None):
+        """Potential energy of the entity, J: () or (len(envs_idx),), as Genesis's: gravity on the
+        links that move, −Σ m g · p_com, and the joint springs, Σ ½ stiffness (q − springref)²
+        (Genesis's about qpos0; energy.py). Differentiable."""
+        return self._out(energy.potential(self, envs_idx))
+
+    def get_total_energy(self, envs_idx=None):
+        """Kinetic plus potential energy, J: () or (len(envs_idx),). Differentiable."""
+        return self._out(energy.kinetic(self, envs_idx) + energy.potential(self, envs_idx))
 
     # -- parameters ---------------------------------------------------------------------------------
     def get_links_mass(self, links_idx_local=None, envs_idx=None):

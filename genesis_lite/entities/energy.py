@@ -1,0 +1,59 @@
+"""A rigid entity's mechanical energy (Genesis's ``get_kinetic_energy``, ``get_potential_energy``
+and ``get_total_energy``), in torch over the solver's link states and the entity's inputs, so it is
+differentiable wherever they are.
+
+Kinetic: Σ ½ m |v_c|² + ½ ωᵀ I_c ω over the links (v_c the velocity of the link's centre of mass,
+I_c its inertia about it in world axes, which scales with the link's mass as the step's does) plus
+Σ ½ armature · q̇² over the dofs (the rotors): MuJoCo's ½ q̇ᵀ M q̇, armature on M's diagonal.
+Potential: −Σ m g · p_c over the links that move (a link welded to the world adds a constant, left
+out as Genesis leaves it out) plus Σ ½ stiffness (q − springref)² over the joint springs.
+"""
+import numpy as np
+import torch
+
+from ..solvers.core import runtime
+from ..utils.rotations import quat_to_mat
+
+
+def _links(entity, envs_idx):
+    """(mass (B', L) kg, centre-of-mass position (B', L, 3) m, its velocity (B', L, 3) m/s, angular
+    velocity (B', L, 3) rad/s, world rotation (B', L, 3, 3)) of the entity's links."""
+    state = entity._links(None, envs_idx, slice(0, 13))
+    pos, rot, ang, vel = state[..., :3], quat_to_mat(state[..., 3:7]), state[..., 7:10], state[..., 10:13]
+    model = entity._solver.model
+    links = entity.link_start + np.arange(entity.n_links)
+    com = torch.as_tensor(model.link_com[links], dtype=pos.dtype, device=pos.device)
+    lever = (rot @ com[..., None])[..., 0]
+    mass = entity._read_input("mass", links, envs_idx)
+    return mass, pos + lever, vel + torch.linalg.cross(ang, lever), ang, rot
+
+
+def kinetic(entity, envs_idx):
+    """(B',) J: the entity's kinetic energy."""
+    mass, _, com_vel, ang, rot = _links(entity, envs_idx)
+    model = entity._solver.model
+    links = entity.link_start + np.arange(entity.n_links)
+    unit = torch.as_tensor(model.link_inertia0[links] * model.link_inv_mass0[links][:, None, None],
+                           dtype=mass.dtype, device=mass.device)  # inertia per kg of the link's mass
+    inertia = rot @ (unit * mass[..., None, None]) @ rot.transpose(-1, -2)
+    spin = (ang[..., None, :] @ inertia @ ang[..., :, None])[..., 0, 0]
+    dofs = np.arange(entity.n_dofs)
+    armature = entity._read_input("armature", entity.dof_start + dofs, envs_idx)
+    qd = entity._read(entity._vel_columns(dofs), envs_idx)
+    return 0.5 * ((mass * (com_vel ** 2).sum(-1) + spin).sum(-1) + (armature * qd ** 2).sum(-1))
+
+
+def potential(entity, envs_idx):
+    """(B',) J: the entity's gravitational energy (links that move) and its joint springs'."""
+    mass, com_pos, _, _, _ = _links(entity, envs_idx)
+    model = entity._solver.model
+    moving = torch.as_tensor(model.link_static[entity.link_start + np.arange(entity.n_links)] == 0,
+                             device=runtime.device)
+    gravity = entity._read_input("gravity", np.arange(3), envs_idx)
+    height = -(mass * moving * (com_pos * gravity[:, None, :]).sum(-1)).sum(-1)
+    dofs = entity.dof_start + np.arange(entity.n_dofs)
+    dofs = dofs[model.dof_q[dofs] >= 0]  # the scalar joints' (a free joint has no spring)
+    q = entity._read(model.dof_q[dofs], envs_idx)
+    stiffness = entity._read_input("stiffness", dofs, envs_idx)
+    rest = torch.as_tensor(model.dof_springref[dofs], dtype=q.dtype, device=q.device)
+    return height + 0.5 * (stiffness * (q - rest) ** 2).sum(-1)
