@@ -428,6 +428,7 @@ def test_several_trees_are_one_entity_and_match_mujoco(f64, cone):
     m, d, scene, robot = _trees(cone)
     assert [link.name for link in robot.links] == ["post", "box", "world", "pendulum", "tip", "ball", "slider"]
     assert robot.n_dofs == m.nv and robot.n_qs == m.nq and not robot.is_free  # the base: the static post
+    assert robot.base_link.name == "post"
     np.testing.assert_allclose(robot.get_qpos().numpy(), d.qpos, atol=1e-15)
     worst, pairs = 0.0, set()
     for t in range(1500):

@@ -285,6 +285,11 @@ class RigidEntity(EntityIndexing):
     def is_free(self):
         return self._free
 
+    @property
+    def base_link(self):
+        """The entity's first link (its first tree's root), as Genesis's."""
+        return self.links[0]
+
     def get_link(self, name):
         for link in self.links:
             if link.name == name:
