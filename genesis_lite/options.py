@@ -145,8 +145,9 @@ class RigidOptions(_TimeBased):
         (``_TimeBased``): RigidOptions(dt=0.01) with SimOptions(dt=0.02) steps in 2 substeps.
 
     enable_collision: contacts between collision shapes. Pair rules: enable_self_collision (two
-        links of one entity), enable_adjacent_collision (parent and child links),
-        enable_neutral_collision (pairs of one entity already touching at the initial pose).
+        links of one kinematic tree: an entity, or one of an MJCF's root bodies' trees, as Genesis's
+        rule is per root), enable_adjacent_collision (parent and child links),
+        enable_neutral_collision (pairs of one tree already touching at the initial pose).
     enable_joint_limit: joint limits, as constraint rows of the contact solve (time constant
         constraint_timeconst, critically damped, MuJoCo's default solimp).
     constraint_solver: Newton (CG is not implemented). iterations (None: 25, or MuJoCo's 100

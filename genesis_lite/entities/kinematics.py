@@ -113,8 +113,7 @@ class _Joints:
     def __init__(self, entity, respect_limits, moving):
         model = entity._solver.model
         self.free = entity._free_joints  # (first local dof, first local q) of each free joint
-        scalar = ~np.isin(np.arange(entity.n_dofs), [dof + k for dof, _ in self.free for k in range(6)])
-        self.dofs = np.flatnonzero(scalar)
+        self.dofs = np.flatnonzero(~np.isin(np.arange(entity.n_dofs), entity._free_dofs))
         dofs = entity.dof_start + self.dofs
         self.qs = model.dof_q[dofs] - entity.q_start
         self.limited = respect_limits

@@ -247,7 +247,7 @@ class RigidEntity(EntityIndexing):
                                               list(range(q, q + nq))))
             dof, q = dof + nd, q + nq
 
-    _BUILD_ATTRS = ("link_start", "dof_start", "q_start", "geom_start", "_dof_q", "_free_joints")
+    _BUILD_ATTRS = ("link_start", "dof_start", "q_start", "geom_start", "_dof_q", "_free_joints", "_free_dofs")
 
     def __getattr__(self, attr):
         # only reached when normal lookup fails: a build-time attribute used before build()
@@ -271,6 +271,7 @@ class RigidEntity(EntityIndexing):
         free = mine[model.link_jtype[mine] == FREE]
         self._free_joints = [(int(model.link_dof0[l]) - self.dof_start, int(model.link_q0[l]) - self.q_start)
                              for l in free]
+        self._free_dofs = np.array([dof + k for dof, _ in self._free_joints for k in range(6)], dtype=np.int64)
         # per local dof: its column in the state's qpos; a free joint's linear dofs are its origin's
         # columns, its rotational dofs (Euler angles, stored as a quaternion) -1
         self._dof_q = model.dof_q[self.dof_start: self.dof_start + self.n_dofs].astype(np.int64)
@@ -376,17 +377,19 @@ class RigidEntity(EntityIndexing):
         return torch.cat(pieces + [scalar[:, done:]], dim=1) if pieces else scalar
 
     def get_dofs_position(self, dofs_idx_local=None, envs_idx=None):
-        """Joint positions, rad or m: (n,) or (n_envs, n). A free base's dofs 0-2 are the world
-        position of its link origin (m), 3-5 its orientation as intrinsic X-Y-Z Euler angles
-        (rad, R = Rx(a)·Ry(b)·Rz(c), as in Genesis); get_qpos gives the quaternion."""
+        """Joint positions, rad or m: (n,) or (n_envs, n), each joint's q as MuJoCo's qpos (an MJCF
+        joint with a ``ref``: absolute, not relative to it as Genesis's). A free joint's first three
+        dofs are the world position of its link origin (m), the next three its orientation as
+        intrinsic X-Y-Z Euler angles (rad, R = Rx(a)·Ry(b)·Rz(c), as in Genesis); get_qpos gives the
+        quaternion."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
         columns = self._dof_q[dofs]
-        if (columns >= 0).all():  # no free base's Euler angle asked for: the state's columns (5x faster)
+        if (columns >= 0).all():  # no free joint's Euler angle asked for: the state's columns (5x faster)
             return self._out(self._read(columns, envs_idx))
         return self._out(self._dofs_position_all(envs_idx)[:, torch.as_tensor(dofs, device=runtime.device)])
 
     def set_dofs_position(self, position, dofs_idx_local=None, envs_idx=None, *, zero_velocity=True):
-        """Set joint positions, rad or m: (n,) or (len(envs_idx), n); a free base's dofs as in
+        """Set joint positions, rad or m: (n,) or (len(envs_idx), n); a free joint's dofs as in
         get_dofs_position. Setting some of its Euler angles keeps the others' current values
         (read back from its quaternion). zero_velocity (Genesis's default after a jump): first
         set every dof velocity of the entity to 0 in the selected envs (all if envs_idx is None)."""
@@ -461,7 +464,8 @@ class RigidEntity(EntityIndexing):
         if not self._free:
             raise InvalidInputError(f"entity '{self.name}': {what} needs a free base (a morph with fixed=False), "
                                     f"got a fixed one; place a fixed entity with its morph's pos/euler before "
-                                    f"scene.build(), or create it with fixed=False to move it")
+                                    f"scene.build(), or create it with fixed=False to move it (an MJCF tree "
+                                    f"other than the first moves by set_dofs_position or set_qpos)")
 
     def set_pos(self, pos, envs_idx=None, *, zero_velocity=True):
         """Base position in the world, m: (3,) or (len(envs_idx), 3) (free base only);
@@ -785,7 +789,7 @@ class RigidEntity(EntityIndexing):
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         values = self._refuse_negative("stiffness", self._values(stiffness, len(dofs), envs, "stiffness"))
-        free = self._solver.model.dof_q[self.dof_start + dofs] < 0
+        free = np.isin(dofs, self._free_dofs)
         if free.any() and bool((values.detach()[:, torch.as_tensor(free, device=values.device)] != 0).any()):
             raise InvalidInputError(f"entity '{self.name}': argument 'stiffness' must be 0 on the free joint's dofs "
                                     f"(local {dofs[free].tolist()}), got {values.detach().cpu().numpy()}")
@@ -1001,10 +1005,9 @@ class RigidEntity(EntityIndexing):
         """Switch the dofs to ``mode`` with ``targets``: {input name: (value, argument name)}; a value
         None is the constant 0 (written only where the input holds something else)."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
-        free = [dof + k for dof, _ in self._free_joints for k in range(6)]
-        if mode == "position" and np.isin(dofs, free).any():
+        if mode == "position" and np.isin(dofs, self._free_dofs).any():
             raise InvalidInputError(f"entity '{self.name}': {method} cannot drive free-joint dofs "
-                                    f"(dofs_idx_local {free}); got {dofs.tolist()}")
+                                    f"(dofs_idx_local {self._free_dofs.tolist()}); got {dofs.tolist()}")
         envs = self._envs(envs_idx, distinct=True)
         columns = self.dof_start + dofs
         checked = {name: self._values(value, len(dofs), envs, arg) for name, (value, arg) in targets.items()
@@ -1078,8 +1081,8 @@ class RigidEntity(EntityIndexing):
     # -- dynamics queries ---------------------------------------------------------------------------
     def get_dofs_force(self, dofs_idx_local=None, envs_idx=None):
         """Generalised force on the dofs in the last step's last substep, N·m or N: (n,) or
-        (n_envs, n), as Genesis 1.4.5's: clipped actuator force − damping·q̇ − bias (gravity,
-        Coriolis, centrifugal) at that substep's start, plus the constraint forces (joint limits,
+        (n_envs, n), as Genesis 1.4.5's: clipped actuator force − damping·q̇ − the joint springs'
+        stiffness·(q − springref) − bias (gravity, Coriolis, centrifugal) at that substep's start, plus the constraint forces (joint limits,
         friction loss, contacts) of its solve (MuJoCo's qfrc_smooth + qfrc_constraint): a body
         resting on the ground feels none. Zeros in an env before its first step and after a
         reset or setter replaced its state. Not differentiable."""

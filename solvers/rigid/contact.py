@@ -235,13 +235,14 @@ def _touching_pairs(solver):
 
 def at_initial_pose(solver, neutral_collision):
     """(The basis of the rows' scale, solver.invweight_basis, set;) the solver's model without, unless
-    ``neutral_collision``, the pairs of one entity touching at the initial pose (Genesis's rule).
+    ``neutral_collision``, the pairs of one kinematic tree touching at the initial pose (Genesis's
+    rule, per root: an MJCF's separate root bodies may start touching, a box resting on a post).
     The solver's storage must hold the initial state."""
     solver.upload_state(solver._initial_state())
     solver.invweight_basis = InvweightBasis(solver)
     model = solver.model
     if neutral_collision or not len(model.pair_geom1):
         return model
-    entity = model.link_entity[model.geom_link]
-    same = entity[model.pair_geom1] == entity[model.pair_geom2]
+    tree = model.link_root[model.geom_link]
+    same = tree[model.pair_geom1] == tree[model.pair_geom2]
     return without_pairs(model, ~(same & _touching_pairs(solver)))

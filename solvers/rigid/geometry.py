@@ -106,7 +106,7 @@ def _aabb_half(geom_type, size):
             "cylinder": np.array([radius, radius, half_length])}.get(geom_type, np.zeros(3))
 
 
-def candidate_pairs(geom_type, geom_link, link_parent, link_static, link_entity, self_collision=True,
+def candidate_pairs(geom_type, geom_link, link_parent, link_static, link_tree, self_collision=True,
                     adjacent_collision=False, geom_masks=None, link_body=None, link_weld=None,
                     link_exclusions=None):
     """(N, 2) geom pairs that may collide, each ordered as MuJoCo orders it (lower type code
@@ -118,7 +118,9 @@ def candidate_pairs(geom_type, geom_link, link_parent, link_static, link_entity,
     Rules (Genesis's, which agree with MuJoCo's defaults except where said): two geoms of one
     link never collide; nor two links both welded to the world; nor parent and child links unless
     ``adjacent_collision`` (MuJoCo's filterparent; the world, parent -1, is nobody's parent here);
-    nor two links of one entity unless ``self_collision``; nor two geoms whose bit masks
+    nor two links of one kinematic tree (``link_tree`` (L,): its root link) unless ``self_collision``
+    (an entity is one tree, or several for an MJCF with several root bodies: Genesis's rule is per
+    root); nor two geoms whose bit masks
     ``geom_masks`` (G, 2) (contype, conaffinity; None: all 1) share no bit, MuJoCo's rule.
     The rules take links by weld group, as MuJoCo's filter does: ``link_weld`` (L,) names each
     link's group by its first link (a link welded to a moving parent by a fixed joint, or
@@ -144,7 +146,7 @@ def candidate_pairs(geom_type, geom_link, link_parent, link_static, link_entity,
                 continue
             if not adjacent_collision and (parent_weld[la] == lb or parent_weld[lb] == la):
                 continue
-            if not self_collision and link_entity[la] == link_entity[lb]:
+            if not self_collision and link_tree[la] == link_tree[lb]:
                 continue
             if geom_type[a] == PLANE and geom_type[b] == PLANE:
                 continue  # MuJoCo has no plane-plane collider

@@ -8,14 +8,15 @@ Read as MuJoCo's compiler reads it: ``<include>`` files inlined (several ``<defa
 Trees: the bodies in ``<worldbody>`` are the roots of one entity's trees, in the file's order
 (MuJoCo's body and dof order; the first tree's root is the entity's base, as in Genesis). A root
 body is a root link: free with a ``<freejoint>`` (or a joint of type free, its damping and armature
-read), welded where it has no joint; root bodies hinged or sliding on the world hang from one static
-link named "world", added before the first of them. Each body is a link named as the body, at the
-body's frame (MuJoCo's and Genesis's): a body without a joint is welded to its parent (not merged,
-as MuJoCo and Genesis keep it); a body's joints (hinge → revolute, slide → prismatic) turn massless
-links named ``body:joint`` at their anchors, since a LinkSpec joint turns about its link's origin,
-and the body's link hangs welded from the last of them, or is that last link where its joint's
-anchor is the body origin (no extra link: the usual case). Contacts take a body's links as one body
-(LinkSpec.same_body), and, as MuJoCo's filter, a body welded to a moving parent as part of it.
+read), welded where it has no joint; a root body hinged or sliding on the world hangs from a static
+link at the world's origin, named "world" (the first; later ones "world:body"). Each body is a link
+named as the body, at the body's frame (MuJoCo's and Genesis's): a body without a joint is welded to
+its parent (not merged, as MuJoCo and Genesis keep it); a body's joints (hinge → revolute, slide →
+prismatic) turn massless links named ``body:joint`` at their anchors, since a LinkSpec joint turns
+about its link's origin, and the body's link hangs welded from the last of them, or is that last
+link where its joint's anchor is the body origin (no extra link: the usual case). Contacts take a
+body's links as one body (LinkSpec.same_body), and, as MuJoCo's filter, a body welded to a moving
+parent as part of it.
 
 Bodies: mass, com and inertia from ``<inertial>`` (diaginertia with its frame, or fullinertia),
 else from the body's geoms as solids of their density (or stated mass), as MuJoCo's
@@ -37,13 +38,14 @@ the |force| bound; a ``motor`` is force control (control_dofs_force).
 ref2) (LinkSpec.mimic).
 
 Refused (AssetError naming the element): ball joints, a free joint below a root body, a joint's
-``springdamper`` and ``springyield``, a free joint's stiffness, ellipsoid / hfield / sdf geoms,
-welds and connects, elements that would add or move bodies and geoms unread (``<replicate>``,
-``<composite>``…; ``<frame>`` is read: it places its bodies and geoms, and its childclass is
-theirs). Ignored with one warning naming them: worldbody geoms (the ground is ``gs.morphs.Plane``),
-tendons and what acts on them, ``<contact><pair>``, ``<option>`` (the scene's options rule), and
-attributes that tune MuJoCo's solver, actuator dynamics or the compiler's mass bounds (solref,
-solimp, margin, condim, dampratio, timeconst, boundmass…) unless they hold MuJoCo's defaults.
+``springdamper`` and ``springyield``, a polynomial stiffness, a free joint's stiffness, ellipsoid /
+hfield / sdf geoms, welds and connects, elements that would add or move bodies and geoms unread
+(``<replicate>``, ``<composite>``…; ``<frame>`` is read: it places its bodies and geoms, and its
+childclass is theirs). Ignored with one warning naming them: worldbody geoms (the ground is
+``gs.morphs.Plane``), tendons and what acts on them, ``<contact><pair>``, ``<option>`` (the scene's
+options rule), and attributes that tune MuJoCo's solver, actuator dynamics or the compiler's mass
+bounds (solref, solimp, margin, condim, dampratio, timeconst, boundmass…) unless they hold MuJoCo's
+defaults.
 """
 import logging
 import os
@@ -117,7 +119,6 @@ class _Reader(MJCFDocument):
         for worldbody in worldbodies:
             self._check_children(worldbody, "<worldbody>")
         links = []
-        self._world = None  # the index of the static "world" link that trees hinged on the world share
         for root, childclass, outer in bodies:  # several trees: one entity, as Genesis and MuJoCo load them
             self._body(root, -1, childclass, links, outer)
         names = [link.name for link in links]
@@ -150,11 +151,11 @@ class _Reader(MJCFDocument):
             if joints:
                 self._free_joint(joints[0], childclass, links[-1], what)
         else:
-            if parent < 0:  # hinged or sliding on the world: on a static link at the world's origin
-                if self._world is None:
-                    links.append(_link("world", -1, "", "fixed", np.zeros(3), IDENTITY.copy()))
-                    self._world = len(links) - 1
-                parent = self._world
+            if parent < 0:  # hinged or sliding on the world: on a static link at the world's origin, one
+                # a tree, so that each root body stays a tree of its own (the pair rules go by tree)
+                world = "world" if not any(link.name == "world" for link in links) else f"world:{name}"
+                links.append(_link(world, -1, "", "fixed", np.zeros(3), IDENTITY.copy()))
+                parent = len(links) - 1
             self._joint_chain(joints, childclass, name, what, parent, pos, quat, links)
         self._contents(body, childclass, links[-1], what)
         index = len(links) - 1

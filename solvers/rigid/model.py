@@ -45,7 +45,7 @@ class RigidModel:
     Per joint equality (E; URDF mimic joints, LinkSpec.mimic): eq_dof1 (E,) the following joint's
     dof, eq_dof2 (E,) the followed one's, eq_coef (E, 2) (offset rad or m, multiplier): the row
     q[eq_dof1] = offset + multiplier · q[eq_dof2] (MuJoCo's joint equality with polycoef (offset,
-    multiplier); its qpos0 is 0 for these joints, as ours).
+    multiplier), which relates q − qpos0: the MJCF loader folds the joints' refs into the offset).
     """
     link_name: list
     link_parent: np.ndarray
@@ -109,11 +109,7 @@ class RigidModel:
     def link_root(self):
         """(L,) int32: the root link of each link's kinematic tree (the link itself for a root).
         The tree's spatial quantities are taken about the root link's origin (kinematics.py)."""
-        root = np.arange(self.n_links, dtype=np.int32)
-        for l in range(self.n_links):  # a parent comes before its children
-            if self.link_parent[l] >= 0:
-                root[l] = root[self.link_parent[l]]
-        return root
+        return _roots(self.link_parent)
 
     @property
     def dof_parent(self):
@@ -177,6 +173,15 @@ def _initial_q(spec):
     if spec.joint_type == "free":
         return list(spec.pos) + list(spec.quat)
     return [spec.q0] * QS_OF[JOINT_CODE[spec.joint_type]]
+
+
+def _roots(link_parent):
+    """(L,) int32: the root link of each link's tree, a parent listed before its children."""
+    root = np.arange(len(link_parent), dtype=np.int32)
+    for l, parent in enumerate(link_parent):
+        if parent >= 0:
+            root[l] = root[parent]
+    return root
 
 
 def _mass_matrix_pairs(dof_link, link_parent):
@@ -302,7 +307,7 @@ def _pairs(geoms, geom_links, rows, self_collision, adjacent_collision):
         welded = same or (rows["jtype"][link] == FIXED and not static[link])
         weld[link] = weld[parent] if parent >= 0 and welded else link
     pairs = geometry.candidate_pairs(types, np.array(geom_links, dtype=np.int32), link_parent, static,
-                                     np.array(rows["entity"]), self_collision, adjacent_collision, masks, body, weld,
+                                     _roots(link_parent), self_collision, adjacent_collision, masks, body, weld,
                                      rows["excluded"])
     n = len(pairs)
     return {"pair_geom1": pairs[:, 0].copy(), "pair_geom2": pairs[:, 1].copy(),

@@ -518,7 +518,7 @@ def read_mass_matrix(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3
 @ti.kernel
 def read_dofs_force(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
     """dst (B, D) ← the last step's last substep's generalised force: its smooth force (clipped
-    actuator force − damping·q̇ − bias, at that substep's start) plus its constraint force (joint
+    actuator force − damping·q̇ − joint springs − bias, at that substep's start) plus its constraint force (joint
     limits, friction loss, contacts; none where the substep had no rows: the one-launch step
     leaves qfrc_constraint as it was), Genesis's dofs force."""
     ti.loop_config(serialize=schedule[1])
