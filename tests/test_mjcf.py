@@ -568,3 +568,30 @@ def test_energy_matches_mujoco_and_differentiates(f64):
     torch.testing.assert_close(qvel.grad, (mass @ qvel.detach()[..., None])[..., 0], rtol=1e-13, atol=1e-15)
     rest = torch.tensor(m.qpos_spring)
     torch.testing.assert_close(stiffness.grad, 0.5 * (torch.tensor(qpos) - rest) ** 2, rtol=1e-13, atol=1e-15)
+
+
+def test_a_unit_quaternion_keeps_its_bits_as_in_mujoco(f64, tmp_path):
+    """A free joint's quaternion within 1e-15 of unit length is used as it is, not divided by its
+    norm (MuJoCo's mju_normalize4): a cylinder lying nearly flat on the plane (tilt 5e-7 rad), whose
+    plane contacts MuJoCo's formula takes from the frame with a 1/tilt gain, gets MuJoCo's depths to
+    the bit; divided by a norm of 1 − 1.1e-16 they moved by 4e-11 m and the next velocity by 4.5e-9."""
+    path = tmp_path / "puck.xml"
+    path.write_text('<mujoco><worldbody><geom type="plane" size="5 5 .1"/><body name="puck" pos="0 0 0.2">'
+                    '<freejoint/><geom type="cylinder" size="0.05 0.02"/></body></worldbody></mujoco>')
+    qpos = np.array([0.3, 0.18, 0.016758054649733983, 0.9999999999999677, 2.404238666617504e-11,
+                     -2.539800566832556e-07, -6.589691763852792e-13])
+    assert 0 < abs(np.linalg.norm(qpos[3:]) - 1.0) < 1e-15
+    m = mujoco.MjModel.from_xml_path(str(path))
+    m.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
+    d = mujoco.MjData(m)
+    d.qpos[:] = qpos
+    mujoco.mj_step(m, d)
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=m.opt.timestep),
+                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True))
+    scene.add_entity(gs.morphs.Plane())
+    robot = scene.add_entity(gs.morphs.MJCF(file=str(path)))
+    scene.build()
+    robot.set_qpos(torch.tensor(qpos))
+    scene.step()
+    assert sorted(robot.get_contacts()["penetration"].tolist()) == sorted(-c.dist for c in d.contact[:d.ncon])
+    assert np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max() < 1e-15
