@@ -448,6 +448,10 @@ class Simulator:
         (solver.dofs_force; see _last_step)."""
         return self._last_step(solver, "get_dofs_force", "dofs_force")
 
+    def dofs_acc(self, solver):
+        """(B, D) the accelerations the last step integrated (solver.dofs_acc; see _last_step)."""
+        return self._last_step(solver, "get_dofs_acc", "dofs_acc")
+
     def contacts(self, solver, what):
         """(B, C, 12) the last step's contacts (solver.contacts; see _last_step)."""
         return self._last_step(solver, what, "contacts")

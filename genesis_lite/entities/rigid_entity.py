@@ -1082,12 +1082,24 @@ class RigidEntity(EntityIndexing):
     def get_dofs_force(self, dofs_idx_local=None, envs_idx=None):
         """Generalised force on the dofs in the last step's last substep, N·m or N: (n,) or
         (n_envs, n), as Genesis 1.4.5's: clipped actuator force − damping·q̇ − the joint springs'
-        stiffness·(q − springref) − bias (gravity, Coriolis, centrifugal) at that substep's start, plus the constraint forces (joint limits,
-        friction loss, contacts) of its solve (MuJoCo's qfrc_smooth + qfrc_constraint): a body
-        resting on the ground feels none. Zeros in an env before its first step and after a
-        reset or setter replaced its state. Not differentiable."""
+        stiffness·(q − springref) − bias (gravity, Coriolis, centrifugal) at that substep's start,
+        plus the constraint forces (joint limits, friction loss, contacts) of its solve (MuJoCo's
+        qfrc_smooth + qfrc_constraint): a body resting on the ground feels none. Zeros in an env
+        before its first step and after a reset or setter replaced its state. Not differentiable."""
+        return self._last_step_dofs(self._sim().dofs_force(self._solver), dofs_idx_local, envs_idx)
+
+    def get_dofs_acc(self, dofs_idx_local=None, envs_idx=None):
+        """Accelerations the last step's last substep integrated, rad/s² or m/s²: (n,) or
+        (n_envs, n), as Genesis 1.4.5's: q̇' = q̇ + h·q̈ (a free joint's as its velocities: world
+        linear, body-frame angular), joint damping and servo kv implicit in it (MuJoCo's qacc
+        leaves its Euler integrator's implicit damping out: equal where no dof is damped). Zeros
+        in an env before its first step and after a reset or setter replaced its state. Not
+        differentiable (the next state's velocity carries it)."""
+        return self._last_step_dofs(self._sim().dofs_acc(self._solver), dofs_idx_local, envs_idx)
+
+    def _last_step_dofs(self, full, dofs_idx_local, envs_idx):
+        """The entity's columns ``dofs_idx_local`` and rows ``envs_idx`` of a (B, D) readout."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
-        full = self._sim().dofs_force(self._solver)
         envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
         return self._out(full[envs][:, torch.as_tensor(self.dof_start + dofs, device=runtime.device)])
 

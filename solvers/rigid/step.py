@@ -516,19 +516,21 @@ def read_mass_matrix(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3
 
 
 @ti.kernel
-def read_dofs_force(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
-    """dst (B, D) ← the last step's last substep's generalised force: its smooth force (clipped
-    actuator force − damping·q̇ − joint springs − bias, at that substep's start) plus its constraint force (joint
-    limits, friction loss, contacts; none where the substep had no rows: the one-launch step
-    leaves qfrc_constraint as it was), Genesis's dofs force."""
+def read_dofs_dynamics(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
+    """dst (B, 2, D) ← the last step's last substep's generalised force (row 0: its smooth force,
+    clipped actuator force − damping·q̇ − joint springs − bias at that substep's start, plus its
+    constraint force: joint limits, friction loss, contacts, none where the substep had no rows,
+    as the one-launch step leaves qfrc_constraint as it was; Genesis's dofs force) and the
+    acceleration it integrated (row 1: q̇' = q̇ + h·q̈, implicit damping included)."""
     ti.loop_config(serialize=schedule[1])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
         s = d.substeps - 1
         for i in range(d.n_dofs):
-            dst[e, i] = d.qfrc_smooth[s, e, i]
+            dst[e, 0, i] = d.qfrc_smooth[s, e, i]
             if d.n_efc[s, e, 0] > 0:
-                dst[e, i] += d.qfrc_constraint[s, e, i]
+                dst[e, 0, i] += d.qfrc_constraint[s, e, i]
+            dst[e, 1, i] = d.qacc[s, e, i]
 
 
 @ti.kernel
@@ -585,5 +587,5 @@ def read_contacts(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M
 #: what solver.py launches (through solvers.launch, with the scene's arenas; reverse_dynamics,
 #: collide and constrain with a config of their own: constrain's is the solve's schedule and the cone)
 KERNELS = (advance, prepare_reverse, reverse_kinematics, down_sweep, down_sweep_adjoint,
-           position_stages, write_state, read_state, write_inputs, read_links, read_mass_matrix, read_dofs_force,
+           position_stages, write_state, read_state, write_inputs, read_links, read_mass_matrix, read_dofs_dynamics,
            read_com_jacobians, read_contacts, smooth_substep, finish_substep)
