@@ -7,16 +7,16 @@ Read as MuJoCo's compiler reads it: ``<include>`` files inlined (several ``<defa
 
 Trees: the bodies in ``<worldbody>`` are the roots of one entity's trees, in the file's order
 (MuJoCo's body and dof order; the first tree's root is the entity's base, as in Genesis). A root
-body is a root link: free with a ``<freejoint>`` (or a joint of type free, its damping and armature
-read), welded where it has no joint; a root body hinged or sliding on the world hangs from a static
-link at the world's origin, named "world" (the first; later ones "world:body"). Each body is a link
-named as the body, at the body's frame (MuJoCo's and Genesis's): a body without a joint is welded to
-its parent (not merged, as MuJoCo and Genesis keep it); a body's joints (hinge → revolute, slide →
-prismatic) turn massless links named ``body:joint`` at their anchors, since a LinkSpec joint turns
-about its link's origin, and the body's link hangs welded from the last of them, or is that last
-link where its joint's anchor is the body origin (no extra link: the usual case). Contacts take a
-body's links as one body (LinkSpec.same_body), and, as MuJoCo's filter, a body welded to a moving
-parent as part of it.
+body is a root link: free with a ``<freejoint>`` (or a joint of type free, its damping, armature and
+frictionloss read), welded where it has no joint; a root body hinged or sliding on the world hangs
+from a static link at the world's origin, named "world" (the first; later ones "world:body"). Each
+body is a link named as the body, at the body's frame (MuJoCo's and Genesis's): a body without a
+joint is welded to its parent (not merged, as MuJoCo and Genesis keep it); a body's joints (hinge →
+revolute, slide → prismatic) turn massless links named ``body:joint`` at their anchors, since a
+LinkSpec joint turns about its link's origin, and the body's link hangs welded from the last of
+them, or is that last link where its joint's anchor is the body origin (no extra link: the usual
+case). Contacts take a body's links as one body (LinkSpec.same_body), and, as MuJoCo's filter, a
+body welded to a moving parent as part of it.
 
 Bodies: mass, com and inertia from ``<inertial>`` (diaginertia with its frame, or fullinertia),
 else from the body's geoms as solids of their density (or stated mass), as MuJoCo's
@@ -219,16 +219,15 @@ class _Reader(MJCFDocument):
         return joint.tag == "freejoint" or self.attrs(joint, childclass).get("type") == "free"
 
     def _free_joint(self, joint, childclass, link: LinkSpec, what: str):
-        """A free root joint's damping and armature (on its six dofs, as MuJoCo's)."""
+        """A free root joint's damping, armature and friction loss (on its six dofs, as MuJoCo's)."""
         attrs = self.attrs(joint, childclass)
         what = f"{what} joint {attrs.get('name') or link.name!r}"
-        self.ignore_unread(joint, {k: v for k, v in attrs.items() if k not in ("damping", "armature")})
+        self.ignore_unread(joint, {k: v for k, v in attrs.items() if k not in ("damping", "armature", "frictionloss")})
         self._refuse_unmodelled(attrs, what)
         if self._non_negative(attrs, "stiffness", what) != 0.0:  # (MuJoCo's would spring the pose; Genesis refuses)
             raise self.error(f"{what}: a free joint's spring is not supported (stiffness = {attrs['stiffness']!r})")
-        link.damping, link.armature = (self._non_negative(attrs, key, what) for key in ("damping", "armature"))
-        if self.numbers(attrs, "frictionloss", 1, what, default=[0.0])[0] != 0:
-            self.ignored.add("<joint frictionloss> of a free joint")
+        for key in ("damping", "armature", "frictionloss"):
+            setattr(link, key, self._non_negative(attrs, key, what))
 
     def _anchor(self, joint, childclass) -> np.ndarray:
         """(3,) m: where the joint turns, in its body's frame."""

@@ -245,7 +245,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
                 dofs["lower"].append(-np.inf if free else spec.lower)
                 dofs["upper"].append(np.inf if free else spec.upper)
                 dofs["effort"].append(np.inf if free else spec.effort)
-                dofs["frictionloss"].append(0.0 if free else spec.frictionloss)
+                dofs["frictionloss"].append(spec.frictionloss)  # (a free joint's on its six dofs, as MuJoCo's)
                 dofs["kp"].append(DEFAULT_KP if free or spec.kp is None else spec.kp)
                 dofs["kv"].append(DEFAULT_KV if free or spec.kv is None else spec.kv)
             for k, geom in enumerate(spec.geoms):
