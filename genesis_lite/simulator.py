@@ -66,7 +66,7 @@ class SolverSlot:
         self.warned_nonfinite = False  # _check_finite warned once since the last reset
         # the parameters the last reset detached from a graph and not set since (their names)
         self.detached_params = set()
-        # the last step's readouts (solver.last_step_readouts: contacts, dofs forces): (B,) bool of
+        # the last step's readouts (solver.last_step_readouts: contacts, dofs forces and accelerations): (B,) bool of
         # the envs whose state a reset or setter replaced since (None: none), and the readouts as
         # the step left them, kept before a backward's replays overwrite the solver's (None: the
         # solver still holds them)
@@ -445,12 +445,13 @@ class Simulator:
 
     def dofs_force(self, solver):
         """(B, D) the last step's generalised dof forces, constraint forces included
-        (solver.dofs_force; see _last_step)."""
-        return self._last_step(solver, "get_dofs_force", "dofs_force")
+        (solver.dofs_dynamics' row 0; see _last_step)."""
+        return self._last_step(solver, "get_dofs_force", "dofs_dynamics")[:, 0]
 
     def dofs_acc(self, solver):
-        """(B, D) the accelerations the last step integrated (solver.dofs_acc; see _last_step)."""
-        return self._last_step(solver, "get_dofs_acc", "dofs_acc")
+        """(B, D) the accelerations the last step integrated (solver.dofs_dynamics' row 1; see
+        _last_step)."""
+        return self._last_step(solver, "get_dofs_acc", "dofs_dynamics")[:, 1]
 
     def contacts(self, solver, what):
         """(B, C, 12) the last step's contacts (solver.contacts; see _last_step)."""

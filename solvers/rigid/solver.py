@@ -519,17 +519,10 @@ class RigidSolver(Solver):
         self.kernels.read_mass_matrix(out)
         return out
 
-    def dofs_force(self):
-        """(B, D) the last step's last substep's generalised force, constraint forces included
-        (step.read_dofs_dynamics; zeros before any step)."""
-        return self._dofs_dynamics()[:, 0]
-
-    def dofs_acc(self):
-        """(B, D) the acceleration the last step's last substep integrated (step.read_dofs_dynamics;
-        zeros before any step)."""
-        return self._dofs_dynamics()[:, 1]
-
-    def _dofs_dynamics(self):
+    def dofs_dynamics(self):
+        """(B, 2, D) the last step's last substep's generalised force, constraint forces included
+        (row 0), and the acceleration it integrated (row 1) (step.read_dofs_dynamics; zeros before
+        any step)."""
         out = torch.empty((self.n_batch, 2, self.model.n_dofs), dtype=runtime.tc_float, device=runtime.device)
         self.kernels.read_dofs_dynamics(out)
         return out
@@ -542,13 +535,13 @@ class RigidSolver(Solver):
             self.kernels.read_contacts(substep % self.sim_options.substeps, out)
         return out
 
-    last_step_readouts = ("contacts", "dofs_force", "dofs_acc")
+    last_step_readouts = ("contacts", "dofs_dynamics")
 
     @staticmethod
     def without_last_step(readout, value, envs):
-        """``value`` of ``readout`` (contacts (B, C, 12), dofs_force or dofs_acc (B, D)) as if the
-        envs of the bool mask ``envs`` (B,) had taken no step: no contacts (rows as the unused ones:
-        geom −1, the rest 0), no force, no acceleration."""
+        """``value`` of ``readout`` (contacts (B, C, 12), dofs_dynamics (B, 2, D)) as if the envs of
+        the bool mask ``envs`` (B,) had taken no step: no contacts (rows as the unused ones: geom −1,
+        the rest 0), no force, no acceleration."""
         out = value.clone()
         out[envs] = 0.0
         if readout == "contacts":
