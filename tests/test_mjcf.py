@@ -149,7 +149,11 @@ LINK = '<geom type="sphere" size="0.1"/>'
 
 
 @pytest.mark.parametrize("body, extra, said", [
-    (f'<body name="b"><joint name="j" type="ball"/>{LINK}</body>', "", "joint 'j': type expected hinge or slide"),
+    (f'<body name="b"><joint name="j" type="cone"/>{LINK}</body>', "", "joint 'j': type expected hinge, slide or ball"),
+    (f'<body name="b"><joint name="j" type="ball" actuatorfrcrange="-1 1"/>{LINK}</body>', "",
+     "a ball joint's actuatorfrcrange is not supported yet"),
+    (f'<body name="b"><joint name="j" type="ball" range="-30 -10"/>{LINK}</body>', "",
+     "a ball joint's range expected a largest angle >= 0"),
     (f'<body name="b"><joint name="j" springdamper="0.2 1"/>{LINK}</body>', "", "a spring from springdamper"),
     (f'<body name="b"><joint name="j" stiffness="3" springyield="5"/>{LINK}</body>', "", "a yielding spring"),
     ("", "", "<worldbody> expected at least one <body>, got none"),
@@ -497,7 +501,7 @@ def test_the_state_api_reads_every_free_tree(f64):
     assert abs(np.linalg.norm(quat) - 1.0) < 1e-14 and abs(quat[0] - 1.0) > 1e-3
     with pytest.raises(InvalidInputError, match="non-zero quaternions"):
         robot.set_qpos(torch.zeros(4, dtype=torch.float64), qs_idx_local=[12, 13, 14, 15])
-    with pytest.raises(InvalidInputError, match=r"cannot drive free-joint dofs \(dofs_idx_local \[0, 1, 2, 3, 4, 5, "
+    with pytest.raises(InvalidInputError, match=r"cannot drive the dofs of free and ball joints \(dofs_idx_local \[0, 1, 2, 3, 4, 5, "
                                                 r"8, 9, 10, 11, 12, 13\]\)"):
         robot.control_dofs_position(torch.zeros(2, dtype=torch.float64), dofs_idx_local=[7, 9])
     with pytest.raises(InvalidInputError, match="set_pos needs a free base"):

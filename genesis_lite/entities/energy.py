@@ -6,13 +6,14 @@ Kinetic: Σ ½ m |v_c|² + ½ ωᵀ I_c ω over the links (v_c the velocity of t
 I_c its inertia about it in world axes, which scales with the link's mass as the step's does) plus
 Σ ½ armature · q̇² over the dofs (the rotors): MuJoCo's ½ q̇ᵀ M q̇, armature on M's diagonal.
 Potential: −Σ m g · p_c over the links that move (a link welded to the world adds a constant, left
-out as Genesis leaves it out) plus Σ ½ stiffness (q − springref)² over the joint springs.
+out as Genesis leaves it out) plus Σ ½ stiffness (q − springref)² over the joint springs (a ball
+joint's: Σ_a ½ stiffness_a r_a², r the rotation vector of its turn, MuJoCo's).
 """
 import numpy as np
 import torch
 
 from ..solvers.core import runtime
-from ..utils.rotations import quat_to_mat
+from ..utils.rotations import quat_to_mat, rotation_vector
 
 
 def _links(entity, envs_idx):
@@ -51,8 +52,14 @@ def potential(entity, envs_idx):
                              device=runtime.device)
     gravity = entity._read_input("gravity", np.arange(3), envs_idx)
     height = -(mass * moving * (com_pos * gravity[:, None, :]).sum(-1)).sum(-1)
-    dofs = entity.dof_start + np.flatnonzero(~np.isin(np.arange(entity.n_dofs), entity._free_dofs))
-    q = entity._read(model.dof_q[dofs], envs_idx)  # the scalar joints' (a free joint has no spring)
+    dofs = entity.dof_start + np.flatnonzero(~np.isin(np.arange(entity.n_dofs), entity._quat_joint_dofs))
+    q = entity._read(model.dof_q[dofs], envs_idx)  # the scalar joints' (free and ball joints have no spring)
     stiffness = entity._read_input("stiffness", dofs, envs_idx)
     rest = torch.as_tensor(model.dof_springref[dofs], dtype=q.dtype, device=q.device)
-    return height + 0.5 * (stiffness * (q - rest) ** 2).sum(-1)
+    springs = 0.5 * (stiffness * (q - rest) ** 2).sum(-1)
+    for dof, first in entity._ball_joints:
+        quat = entity._read(entity._solver_q(first + np.arange(4)), envs_idx)
+        turn = rotation_vector(quat / quat.norm(dim=-1, keepdim=True))
+        springs = springs + 0.5 * (entity._read_input("stiffness", entity.dof_start + dof + np.arange(3), envs_idx)
+                                   * turn ** 2).sum(-1)
+    return height + springs

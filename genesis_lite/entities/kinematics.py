@@ -11,9 +11,10 @@ get_links_quat, so it is differentiable wherever they are.
 
 Inverse kinematics is damped least squares (Genesis's method and rules): from the start q, repeat
 q ← q + Jᵀ (J Jᵀ + λ² I)⁻¹ r, r the masked errors (position in the world, rotation vector in the
-link's frame), each step's components within ±max_step_size, the joints clipped to their limits;
-from another start drawn inside the limits when one does not converge (only with limits
-respected). Only the dofs given that move a goal's link take part. The poses come from the
+link's frame), each step's components within ±max_step_size, the scalar joints clipped to their
+limits (a ball joint turns about its own axes, its cone limit not a goal: the step's rows push it
+back); from another start drawn inside the limits when one does not converge (only with limits
+respected; ball joints start again where they were). Only the dofs given that move a goal's link take part. The poses come from the
 solver's own kinematics at each trial q, which never becomes the scene's state; a mimic joint's
 equality is not a goal (the solve may part a Panda's fingers: they meet again in the next steps).
 """
@@ -28,7 +29,7 @@ from ..utils.rotations import quat_mul, quat_to_mat, rotation_vector
 class DofMotions:
     """What the columns of an entity's Jacobian are made of (numpy, per local dof): the local link
     it moves, its axis (in that link's frame, or the world's for a free joint's translations), and
-    whether it turns (revolute, a free joint's rotations) or slides."""
+    whether it turns (revolute, a free joint's rotations, a ball joint's) or slides."""
 
     def __init__(self, entity):
         model = entity._solver.model
@@ -38,8 +39,10 @@ class DofMotions:
         self.turns = model.link_jtype[links] == REVOLUTE
         self.in_world = np.zeros(entity.n_dofs, dtype=bool)
         for dof, _ in entity._free_joints:  # MuJoCo's free joint: world translations, then turns about its axes
-            self.axis[dof: dof + 6] = np.vstack([np.eye(3), np.eye(3)])
-            self.turns[dof: dof + 6], self.in_world[dof: dof + 3] = [False] * 3 + [True] * 3, True
+            self.axis[dof: dof + 3] = np.eye(3)
+            self.turns[dof: dof + 3], self.in_world[dof: dof + 3] = False, True
+        for dof, _ in entity._turns:  # a free or ball joint's turns about the link's own axes
+            self.axis[dof: dof + 3], self.turns[dof: dof + 3] = np.eye(3), True
         self.parent = model.link_parent[entity.link_start: entity.link_start + entity.n_links] - entity.link_start
 
     def on_path(self, link):
@@ -113,7 +116,8 @@ class _Joints:
     def __init__(self, entity, respect_limits, moving):
         model = entity._solver.model
         self.free = entity._free_joints  # (first local dof, first local q) of each free joint
-        self.dofs = np.flatnonzero(~np.isin(np.arange(entity.n_dofs), entity._free_dofs))
+        self.turns = entity._turns  # and of each joint's rotation stored as a quaternion (free, ball)
+        self.dofs = np.flatnonzero(~np.isin(np.arange(entity.n_dofs), entity._quat_joint_dofs))
         dofs = entity.dof_start + self.dofs
         self.qs = model.dof_q[dofs] - entity.q_start
         self.limited = respect_limits
@@ -134,16 +138,17 @@ class _Joints:
 
     def moved(self, q, step):
         """q (B', n_qs) moved by a dof-space step (B', n_dofs): a free joint's position along the
-        world axes and its quaternion turned about its own (q ⊗ exp(ω/2)), the scalar joints by
-        theirs, clipped."""
+        world axes, its quaternion (a ball joint's too) turned about its own axes (q ⊗ exp(ω/2)),
+        the scalar joints by theirs, clipped."""
         q = q.clone()
         for dof, first in self.free:
             q[:, first: first + 3] += step[:, dof: dof + 3]
-            half = step[:, dof + 3: dof + 6] / 2
+        for dof, first in self.turns:
+            half = step[:, dof: dof + 3] / 2
             angle = half.norm(dim=1, keepdim=True)
             turn = torch.cat([torch.cos(angle), half * torch.sinc(angle / np.pi)], dim=1)
-            quat = quat_mul(q[:, first + 3: first + 7], turn)
-            q[:, first + 3: first + 7] = quat / quat.norm(dim=1, keepdim=True)
+            quat = quat_mul(q[:, first: first + 4], turn)
+            q[:, first: first + 4] = quat / quat.norm(dim=1, keepdim=True)
         q[:, self.qs] = q[:, self.qs] + step[:, self.dofs]
         return self.clipped(q)
 

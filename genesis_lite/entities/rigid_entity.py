@@ -9,7 +9,7 @@ import torch
 from ..runtime import logger
 from ..solvers.core import InvalidInputError, SceneStateError, refuse_grad, runtime
 from ..solvers.rigid.merge import merged_into
-from ..solvers.rigid.model import FREE
+from ..solvers.rigid.model import BALL, FREE
 from . import energy, kinematics
 from .bounds import shapes_aabb
 from ..tensor import wrap
@@ -17,8 +17,8 @@ from .common import EntityIndexing, broadcast, named_argument_errors, replace_co
 from ..utils.rotations import euler_xyz_to_quat, quat_to_euler_xyz, quat_to_mat
 
 _MODES = {"force": 0, "position": 1, "velocity": 2}  # ctrl_mode codes (solvers/rigid/actuation.py)
-_NDOFS = {"fixed": 0, "revolute": 1, "prismatic": 1, "free": 6}
-_NQS = {"fixed": 0, "revolute": 1, "prismatic": 1, "free": 7}
+_NDOFS = {"fixed": 0, "revolute": 1, "prismatic": 1, "free": 6, "ball": 3}
+_NQS = {"fixed": 0, "revolute": 1, "prismatic": 1, "free": 7, "ball": 4}
 
 
 def _ltdl(mass, entity):
@@ -144,7 +144,7 @@ class RigidLink:
 
 
 class RigidJoint:
-    """The joint attaching a link to its parent: ``type`` is "fixed", "revolute", "prismatic" or "free"."""
+    """The joint attaching a link to its parent: ``type`` is "fixed", "revolute", "prismatic", "ball" or "free"."""
 
     def __init__(self, entity, name, type, link, dofs_idx_local, qs_idx_local):
         self.entity, self.name, self.type, self.link = entity, name, type, link
@@ -247,7 +247,8 @@ class RigidEntity(EntityIndexing):
                                               list(range(q, q + nq))))
             dof, q = dof + nd, q + nq
 
-    _BUILD_ATTRS = ("link_start", "dof_start", "q_start", "geom_start", "_dof_q", "_free_joints", "_free_dofs")
+    _BUILD_ATTRS = ("link_start", "dof_start", "q_start", "geom_start", "_dof_q", "_free_joints", "_ball_joints",
+                    "_turns", "_quat_joint_dofs")
 
     def __getattr__(self, attr):
         # only reached when normal lookup fails: a build-time attribute used before build()
@@ -268,12 +269,18 @@ class RigidEntity(EntityIndexing):
         self.geom_start = int(np.searchsorted(model.geom_link, mine[0]))
         # (first local dof, first local q) of each free joint: the base's, and those of later trees'
         # free roots (an MJCF with several bodies in its worldbody)
-        free = mine[model.link_jtype[mine] == FREE]
-        self._free_joints = [(int(model.link_dof0[l]) - self.dof_start, int(model.link_q0[l]) - self.q_start)
-                             for l in free]
-        self._free_dofs = np.array([dof + k for dof, _ in self._free_joints for k in range(6)], dtype=np.int64)
+        first = [(int(model.link_dof0[l]) - self.dof_start, int(model.link_q0[l]) - self.q_start) for l in mine]
+        jtype = model.link_jtype[mine]
+        self._free_joints = [at for at, jt in zip(first, jtype) if jt == FREE]
+        self._ball_joints = [at for at, jt in zip(first, jtype) if jt == BALL]
+        # (first local dof, first local q) of every joint's rotation stored as a quaternion: a free
+        # joint's last three dofs, a ball joint's three
+        self._turns = sorted([(dof + 3, q + 3) for dof, q in self._free_joints] + self._ball_joints)
+        # the dofs of free and ball joints: no scalar coordinate, so no spring and no position servo
+        self._quat_joint_dofs = np.array([dof + k for (dof, _), jt in zip(first, jtype) if jt in (FREE, BALL)
+                                          for k in range(6 if jt == FREE else 3)], dtype=np.int64)
         # per local dof: its column in the state's qpos; a free joint's linear dofs are its origin's
-        # columns, its rotational dofs (Euler angles, stored as a quaternion) -1
+        # columns, rotational dofs (Euler angles, stored as a quaternion) -1
         self._dof_q = model.dof_q[self.dof_start: self.dof_start + self.n_dofs].astype(np.int64)
         for dof, q in self._free_joints:
             self._dof_q[dof: dof + 3] = self.q_start + q + np.arange(3)
@@ -367,13 +374,14 @@ class RigidEntity(EntityIndexing):
         return self._solver.model.n_qs + self.dof_start + dofs
 
     def _dofs_position_all(self, envs_idx):
-        """(B', n_dofs) dof positions; a free joint's are its origin and Euler angles."""
+        """(B', n_dofs) dof positions; a free joint's are its origin and Euler angles, a ball
+        joint's Euler angles."""
         qpos = self._read(self._qpos_columns(), envs_idx)
         scalar = qpos[:, torch.as_tensor(np.maximum(self._dof_q - self.q_start, 0), device=runtime.device)]
         pieces, done = [], 0
-        for dof, q in self._free_joints:
-            pieces += [scalar[:, done: dof + 3], quat_to_euler_xyz(qpos[:, q + 3: q + 7])]
-            done = dof + 6
+        for dof, q in self._turns:
+            pieces += [scalar[:, done: dof], quat_to_euler_xyz(qpos[:, q: q + 4])]
+            done = dof + 3
         return torch.cat(pieces + [scalar[:, done:]], dim=1) if pieces else scalar
 
     def get_dofs_position(self, dofs_idx_local=None, envs_idx=None):
@@ -381,10 +389,11 @@ class RigidEntity(EntityIndexing):
         joint with a ``ref``: absolute, not relative to it as Genesis's). A free joint's first three
         dofs are the world position of its link origin (m), the next three its orientation as
         intrinsic X-Y-Z Euler angles (rad, R = Rx(a)·Ry(b)·Rz(c), as in Genesis); get_qpos gives the
-        quaternion."""
+        quaternion. A ball joint's three dofs are its turn from the joint frame, as intrinsic X-Y-Z
+        Euler angles too (Genesis's)."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
         columns = self._dof_q[dofs]
-        if (columns >= 0).all():  # no free joint's Euler angle asked for: the state's columns (5x faster)
+        if (columns >= 0).all():  # no Euler angle asked for: the state's columns (5x faster)
             return self._out(self._read(columns, envs_idx))
         return self._out(self._dofs_position_all(envs_idx)[:, torch.as_tensor(dofs, device=runtime.device)])
 
@@ -397,19 +406,19 @@ class RigidEntity(EntityIndexing):
         envs = self._envs(envs_idx, distinct=True)
         values = self._values(position, len(dofs), envs, "position")
         columns = self._dof_q[dofs]
-        turned = columns < 0  # free joints' Euler angles
+        turned = columns < 0  # Euler angles of free and ball joints
         kept_columns, kept_values = [columns[~turned]], [values[:, ~turned]]
-        for dof, q in self._free_joints:
-            mine = turned & (dofs >= dof + 3) & (dofs < dof + 6)
+        for dof, q in self._turns:
+            mine = turned & (dofs >= dof) & (dofs < dof + 3)
             if mine.any():
-                quat_columns = self._solver_q(q + np.arange(3, 7))
+                quat_columns = self._solver_q(q + np.arange(4))
                 kept_columns.append(quat_columns)
-                kept_values.append(euler_xyz_to_quat(self._free_euler(envs, quat_columns, dofs[mine] - dof - 3,
+                kept_values.append(euler_xyz_to_quat(self._turn_euler(envs, quat_columns, dofs[mine] - dof,
                                                                       values[:, mine])))
         self._write(np.concatenate(kept_columns), envs, torch.cat(kept_values, dim=1), zero_velocity)
 
-    def _free_euler(self, envs, quat_columns, axes, angles):
-        """(len(envs), 3) Euler angles of the free joint whose quaternion is in ``quat_columns``:
+    def _turn_euler(self, envs, quat_columns, axes, angles):
+        """(len(envs), 3) Euler angles of the free or ball joint whose quaternion is in ``quat_columns``:
         ``angles`` (len(envs), k) at ``axes`` (k ints in 0-2), the current ones elsewhere."""
         rows = torch.arange(len(envs), device=runtime.device)[:, None]
         axes = torch.as_tensor(axes, device=runtime.device)[None, :]
@@ -445,11 +454,11 @@ class RigidEntity(EntityIndexing):
         qs = self._local(qs_idx_local, self.n_qs, "qs_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         values = self._values(qpos, len(qs), envs, "qpos")
-        for _, q in self._free_joints:  # each free joint's quaternion as this write leaves it
-            written = [k for k in range(q + 3, q + 7) if k in qs.tolist()]
+        for _, q in self._turns:  # each free or ball joint's quaternion as this write leaves it
+            written = [k for k in range(q, q + 4) if k in qs.tolist()]
             if written:
-                quats = self._rows(self._solver_q(np.arange(q + 3, q + 7)), envs).detach().clone()
-                quats[:, [k - q - 3 for k in written]] = values[:, [qs.tolist().index(k) for k in written]].detach()
+                quats = self._rows(self._solver_q(np.arange(q, q + 4)), envs).detach().clone()
+                quats[:, [k - q for k in written]] = values[:, [qs.tolist().index(k) for k in written]].detach()
                 self._check_quat(quats, "qpos")
         self._write(self._solver_q(qs), envs, values, zero_velocity)
 
@@ -785,11 +794,13 @@ class RigidEntity(EntityIndexing):
         """Joint spring stiffness, N·m/rad or N/m: a passive force −stiffness·(q − springref) on each
         dof, springref the asset's (MJCF ``springref``) or 0 (Genesis springs to qpos0, the
         initial position: an MJCF's ``ref``, else 0). Explicit in the step, as in MuJoCo and
-        Genesis. A free joint's dofs take none (0 only). Differentiable."""
+        Genesis. A ball joint's dof a is pulled by −stiffness·r_a, r the rotation vector of its turn
+        (MuJoCo's ball spring; Genesis: −stiffness times its Euler angle). A free joint's dofs take
+        none (0 only). Differentiable."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         values = self._refuse_negative("stiffness", self._values(stiffness, len(dofs), envs, "stiffness"))
-        free = np.isin(dofs, self._free_dofs)
+        free = np.isin(dofs, [dof + k for dof, _ in self._free_joints for k in range(6)])
         if free.any() and bool((values.detach()[:, torch.as_tensor(free, device=values.device)] != 0).any()):
             raise InvalidInputError(f"entity '{self.name}': argument 'stiffness' must be 0 on the free joint's dofs "
                                     f"(local {dofs[free].tolist()}), got {values.detach().cpu().numpy()}")
@@ -842,7 +853,8 @@ class RigidEntity(EntityIndexing):
 
     def get_dofs_limit(self, dofs_idx_local=None, envs_idx=None):
         """(lower, upper) position limits of the dofs, rad or m, each (n,) or (n_envs, n), as Genesis's:
-        the URDF's (±inf where a joint has none: continuous, free); the rows enforce them unless
+        the URDF's (±inf where a joint has none: continuous, free); a ball joint's dofs (−inf, its
+        cone limit's angle) each (Genesis: ±inf, it ignores the limit); the rows enforce them unless
         RigidOptions(enable_joint_limit=False). Not settable yet."""
         dofs = self.dof_start + self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
         n_envs = len(self._envs(envs_idx))
@@ -1005,9 +1017,9 @@ class RigidEntity(EntityIndexing):
         """Switch the dofs to ``mode`` with ``targets``: {input name: (value, argument name)}; a value
         None is the constant 0 (written only where the input holds something else)."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
-        if mode == "position" and np.isin(dofs, self._free_dofs).any():
-            raise InvalidInputError(f"entity '{self.name}': {method} cannot drive free-joint dofs "
-                                    f"(dofs_idx_local {self._free_dofs.tolist()}); got {dofs.tolist()}")
+        if mode == "position" and np.isin(dofs, self._quat_joint_dofs).any():
+            raise InvalidInputError(f"entity '{self.name}': {method} cannot drive the dofs of free and ball joints "
+                                    f"(dofs_idx_local {self._quat_joint_dofs.tolist()}); got {dofs.tolist()}")
         envs = self._envs(envs_idx, distinct=True)
         columns = self.dof_start + dofs
         checked = {name: self._values(value, len(dofs), envs, arg) for name, (value, arg) in targets.items()

@@ -5,7 +5,8 @@ Control modes per dof (as in Genesis): 0 force (``control_dofs_force``), 1 posit
 (τ = kp·(q* − q) + kv·(q̇* − q̇), with q̇* = ``ctrl_vel``: 0 after ``control_dofs_position``,
 the target of ``control_dofs_position_velocity``), 2 velocity (τ = kv·(q̇* − q̇)); the result is
 clipped to the dof's force range. Damping −b·q̇ and a joint spring −k·(q − q_ref) (q_ref: the
-model's springref, MuJoCo's qpos_spring) are passive; the spring is explicit, as MuJoCo's and
+model's springref, MuJoCo's qpos_spring; a ball joint's dof a: −k·r_a, r the rotation vector of
+its turn, MuJoCo's ball spring) are passive; the spring is explicit, as MuJoCo's and
 Genesis's integrators take it (neither puts stiffness into the implicit matrix; Genesis's spring
 rests at qpos0, the initial position, whatever springref says). Both velocity terms are treated
 implicitly by the acceleration stage (linalg.py: h·(b + kv) on A's diagonal, kv of a dof in a
@@ -17,6 +18,9 @@ inertia, which the gains of Genesis's examples do at its time steps.
 import taichi as ti
 
 from .data import accumulate
+from .kinematics import ball_quat
+from .model import BALL
+from .spatial import quat_rotation_vector, quat_rotation_vector_adjoint
 
 FORCE, POSITION, VELOCITY = 0, 1, 2
 
@@ -49,15 +53,44 @@ def actuator_force(d: ti.template(), e, i, mode, q, qd):
 
 
 @ti.func
+def _spring_stretch(d: ti.template(), s, e, i):
+    """What dof i's spring pulls back at frame s: q − springref (rad or m), a ball joint dof's
+    component of its turn's rotation vector (rad), 0 on a free joint."""
+    qi = d.dof_q[i]
+    stretch = 0.0
+    if qi >= 0:
+        stretch = d.qpos[s, e, qi] - d.dof_springref[i]
+    elif d.link_jtype[d.dof_link[i]] == BALL:
+        link = d.dof_link[i]
+        stretch = quat_rotation_vector(ball_quat(d, s, e, link))[i - d.link_dof0[link]]
+    return stretch
+
+
+@ti.func
+def _spring_stretch_adjoint(d: ti.template(), s, e, i, g):
+    """Reverse of _spring_stretch: g = ∂L/∂stretch into the state's qpos."""
+    qi = d.dof_q[i]
+    if qi >= 0:
+        accumulate(d.qpos.grad, ti.Vector([s, e, qi]), g)
+    elif d.link_jtype[d.dof_link[i]] == BALL:
+        link = d.dof_link[i]
+        g_turn = ti.Vector.zero(float, 3)
+        g_turn[i - d.link_dof0[link]] = g
+        g_raw = quat_rotation_vector_adjoint(ball_quat(d, s, e, link), g_turn)
+        for k in ti.static(range(4)):
+            accumulate(d.qpos.grad, ti.Vector([s, e, d.link_q0[link] + k]), g_raw[k])
+
+
+@ti.func
 def smooth_force(d: ti.template(), s, e, i):
     qd = d.qvel[s, e, i]
     qi = d.dof_q[i]
-    q = d.qpos[s, e, ti.max(qi, 0)]  # free-joint dofs have no scalar q; never used for them
+    q = d.qpos[s, e, ti.max(qi, 0)]  # free and ball joints' dofs have no scalar q; never used for them
     mode = ti.cast(d.ctrl_mode[e, i], ti.i32)
     force = ti.min(ti.max(actuator_force(d, e, i, mode, q, qd), d.force_lo[e, i]), d.force_hi[e, i])
     force -= d.damping[e, i] * qd
-    if qi >= 0:  # free-joint dofs have no spring
-        force -= d.stiffness[e, i] * (q - d.dof_springref[i])
+    if d.stiffness[e, i] != 0.0:  # (a free joint's is 0)
+        force -= d.stiffness[e, i] * _spring_stretch(d, s, e, i)
     d.qfrc_smooth[s, e, i] = force - d.qfrc_bias[s, e, i]
 
 
@@ -73,9 +106,9 @@ def smooth_force_adjoint(d: ti.template(), s, e, i):
     g_q, g_qd = 0.0, -g * d.damping[e, i]
     accumulate(d.qfrc_bias.grad, ti.Vector([s, e, i]), -g)
     accumulate(d.damping.grad, ti.Vector([e, i]), -g * qd)
-    if qi >= 0:
-        accumulate(d.stiffness.grad, ti.Vector([e, i]), -g * (q - d.dof_springref[i]))
-        g_q -= g * d.stiffness[e, i]
+    if d.stiffness[e, i] != 0.0:
+        _spring_stretch_adjoint(d, s, e, i, -g * d.stiffness[e, i])
+    accumulate(d.stiffness.grad, ti.Vector([e, i]), -g * _spring_stretch(d, s, e, i))
     force = actuator_force(d, e, i, mode, q, qd)
     g_force = 0.0  # a clipped force is its bound (at the bound itself too)
     if d.force_lo[e, i] < force and force < d.force_hi[e, i]:

@@ -12,7 +12,7 @@ from ..core import InvalidInputError, runtime
 from .collision.detect import BUDGET, COLLIDERS
 from .constraint.rows import DEFAULT_SOLIMP, SMOOTH_SOLIMP  # noqa: F401 (the geoms' defaults, read by solver.py)
 from .constraint.solver import MINVAL  # (the least mass a sliding leaf's 1 / mass divides by)
-from .model import PRISMATIC
+from .model import BALL, PRISMATIC
 
 _logger = logging.getLogger("genesis_lite")
 MAX_PER_MOVING_LINK = 8  # default max_contacts: a box resting on a face touches at up to 8 points
@@ -45,11 +45,15 @@ def _pair_budget(model, k):
 
 
 def limited_dofs(model, options):
-    """Dofs whose joint limits may make a row: scalar joints with a finite bound, limits on."""
+    """Joint-limit rows a scene may make at once, limits on: one per scalar joint with a finite
+    bound (at most one of its two is violated), one per ball joint with a cone limit (its first
+    dof's upper bound)."""
     if not options.enable_joint_limit:
         return 0
     finite = np.isfinite(model.dof_lower) | np.isfinite(model.dof_upper)
-    return int((finite & (model.dof_q >= 0)).sum())
+    first_of_ball = (model.link_jtype[model.dof_link] == BALL) & (model.link_dof0[model.dof_link] == np.arange(
+        model.n_dofs))
+    return int((finite & (model.dof_q >= 0)).sum() + (np.isfinite(model.dof_upper) & first_of_ball).sum())
 
 
 def worst_case_contacts(model):

@@ -96,6 +96,8 @@ MODEL = {
     "link_inertia0": ("m3", "L"),
 }
 
+JOINT_ROW_SLOTS = 3  # columns a joint row may have (constraint/rows.py): a ball joint's cone limit, three
+
 # Per-frame arrays: name → (arena, count per env, has a gradient). "DD": a (D, D) matrix per env.
 FRAMES = {
     "qpos": ("f", "Q", True), "qvel": ("f", "D", True),
@@ -123,7 +125,8 @@ FRAMES = {
     "efc_id": ("i", "R", False), "efc_state": ("i", "R", False),
     "efc_J": ("f", "RD", False),
     # each row's non-zero columns: efc_cols[efc_col0 …] (efc_ncol of them, ascending), a contact's
-    # rows sharing its list (from c·D), a joint row r (an equality's two dofs, a single dof) at C·D + 2r
+    # rows sharing its list (from c·D), a joint row r (an equality's two dofs, a single dof, a ball joint's
+    # three) at C·D + JOINT_ROW_SLOTS·r
     "efc_col0": ("i", "R", False), "efc_ncol": ("i", "R", False), "efc_cols": ("i", "CD", False), "efc_R": ("f", "R", False), "efc_aref": ("f", "R", False),
     "efc_floss": ("f", "R", False), "efc_mu": ("f", "R", False), "efc_force": ("f", "R", False),
     "solver_M": ("f", "DD", False), "qacc_smooth": ("f", "D", False), "qacc_constrained": ("f", "D", True),
@@ -232,7 +235,7 @@ def _counts(size):
     D, R = size["D"], size["R"]
     return {"L": size["L"], "D": D, "Q": size["Q"], "P": size["P"], "DD": D * D, "G": size["G"], "N": size["N"],
             "H": size["H"], "C": size["C"], "CF": FEATURE_SIZE * size["C"], "HI": size["HI"], "R": R, "RD": R * D,
-            "CD": size["C"] * D + 2 * (size["E"] + 2 * D), "E": size["E"], "E2": 2 * size["E"],
+            "CD": size["C"] * D + JOINT_ROW_SLOTS * (size["E"] + 2 * D), "E": size["E"], "E2": 2 * size["E"],
             "G2": 2 * size["G"], "G5": 5 * size["G"], "L6": 6 * size["L"], 1: 1,
             len(CONSTS): len(CONSTS),
             **{f"ws:{name}": size["WS"] * n for name, (_, n) in CONVEX_SCRATCH.items()}}

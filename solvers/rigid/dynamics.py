@@ -6,7 +6,7 @@ Each forward function has its hand-written reverse further down (see docs/archit
 """
 import taichi as ti
 
-from .model import FREE, PRISMATIC, REVOLUTE
+from .model import BALL, FREE, PRISMATIC, REVOLUTE
 from .data import accumulate
 from .kinematics import reference
 from .spatial import cross_force, cross_motion, dot3, inertia_mul, inertia_mul_adjoint
@@ -36,13 +36,18 @@ def _link_motion(d: ti.template(), s, e, l):
     if jt == REVOLUTE or jt == PRISMATIC:  # the axis moves with the parent
         w1, v1, dw1, dv1 = _dof_motion(d, s, e, dof0, vw, vv)
         w, v, dw, dv = vw + w1, vv + v1, aw + dw1, av + dv1
-    elif jt == FREE:
+    elif jt == FREE or jt == BALL:
         # translation dofs are fixed world axes; the rotation axes move with the translating
-        # frame (their own rotation adds ω × ω = 0), as in MuJoCo's mj_comVel
-        vt = vv + ti.Vector([d.qvel[s, e, dof0 + k] for k in ti.static(range(3))])
+        # frame (their own rotation adds ω × ω = 0), as in MuJoCo's mj_comVel (a ball joint: the
+        # rotations alone, with the parent's velocity)
+        vt = vv
+        turn0 = dof0
+        if jt == FREE:
+            vt = vv + ti.Vector([d.qvel[s, e, dof0 + k] for k in ti.static(range(3))])
+            turn0 = dof0 + 3
         v = vt
         for k in ti.static(range(3)):
-            wk, vk, dwk, dvk = _dof_motion(d, s, e, dof0 + 3 + k, vw, vt)
+            wk, vk, dwk, dvk = _dof_motion(d, s, e, turn0 + k, vw, vt)
             w, v, dw, dv = w + wk, v + vk, dw + dwk, dv + dvk
     return w, v, dw, dv
 
@@ -147,15 +152,20 @@ def _link_motion_adjoint(d: ti.template(), s, e, l, gw, gv, gaw, gav):
         w, v = _one_dof_adjoint(d, s, e, dof0, vw, vv, gw, gv, gaw, gav)
         g_vw += w
         g_vv += v
-    elif jt == FREE:
-        vt = vv + ti.Vector([d.qvel[s, e, dof0 + k] for k in ti.static(range(3))])
+    elif jt == FREE or jt == BALL:
+        vt = vv
+        turn0 = dof0
+        if jt == FREE:
+            vt = vv + ti.Vector([d.qvel[s, e, dof0 + k] for k in ti.static(range(3))])
+            turn0 = dof0 + 3
         g_vt = gv
         for k in ti.static(range(3)):
-            w, v = _one_dof_adjoint(d, s, e, dof0 + 3 + k, vw, vt, gw, gv, gaw, gav)
+            w, v = _one_dof_adjoint(d, s, e, turn0 + k, vw, vt, gw, gv, gaw, gav)
             g_vw += w
             g_vt += v
-        for k in ti.static(range(3)):
-            accumulate(d.qvel.grad, ti.Vector([s, e, dof0 + k]), g_vt[k])
+        if jt == FREE:
+            for k in ti.static(range(3)):
+                accumulate(d.qvel.grad, ti.Vector([s, e, dof0 + k]), g_vt[k])
         g_vv = g_vt
     if p >= 0:
         accumulate(d.cvel_w.grad, ti.Vector([s, e, p]), g_vw)

@@ -1,12 +1,12 @@
 """Integration stage: semi-implicit Euler as MuJoCo's default integrator.
 
 q̇' = q̇ + h·q̈, then q' = q ⊕ h·q̇' (positions use the *new* velocity). A free joint's
-position moves with its world linear velocity and its quaternion rotates by the body-frame
-angular velocity: quat' = quat ⊗ exp(h·ω/2), renormalised.
+position moves with its world linear velocity and its quaternion (a ball joint's too) rotates by
+the body-frame angular velocity: quat' = quat ⊗ exp(h·ω/2), renormalised.
 """
 import taichi as ti
 
-from .model import FREE, PRISMATIC, REVOLUTE
+from .model import BALL, FREE, PRISMATIC, REVOLUTE
 from .data import accumulate
 from .spatial import quat_integrate, quat_integrate_adjoint
 
@@ -30,14 +30,17 @@ def integrate_link(d: ti.template(), s, e, l):
         qd = d.qvel[s, e, dof0] + h * d.qacc[s, e, dof0]
         d.qvel[s + 1, e, dof0] = qd
         d.qpos[s + 1, e, q0] = d.qpos[s, e, q0] + h * qd
-    elif jt == FREE:
+    elif jt == FREE or jt == BALL:
+        shift = 3 if jt == FREE else 0  # the rotation's first dof and q past the translation's
         for k in ti.static(range(6)):
-            d.qvel[s + 1, e, dof0 + k] = d.qvel[s, e, dof0 + k] + h * d.qacc[s, e, dof0 + k]
+            if k < 3 + shift:
+                d.qvel[s + 1, e, dof0 + k] = d.qvel[s, e, dof0 + k] + h * d.qacc[s, e, dof0 + k]
         for k in ti.static(range(3)):
-            d.qpos[s + 1, e, q0 + k] = d.qpos[s, e, q0 + k] + h * d.qvel[s + 1, e, dof0 + k]
-        quat = quat_integrate(_quat_at(d, s, e, q0 + 3), _omega_at(d, s + 1, e, dof0 + 3), h)
+            if k < shift:
+                d.qpos[s + 1, e, q0 + k] = d.qpos[s, e, q0 + k] + h * d.qvel[s + 1, e, dof0 + k]
+        quat = quat_integrate(_quat_at(d, s, e, q0 + shift), _omega_at(d, s + 1, e, dof0 + shift), h)
         for k in ti.static(range(4)):
-            d.qpos[s + 1, e, q0 + 3 + k] = quat[k]
+            d.qpos[s + 1, e, q0 + shift + k] = quat[k]
 
 
 @ti.func
@@ -57,13 +60,16 @@ def integrate_link_adjoint(d: ti.template(), s, e, l):
     if jt == REVOLUTE or jt == PRISMATIC:
         accumulate(gq, ti.Vector([s, e, q0]), gq[s + 1, e, q0])
         _velocity_adjoint(d, s, e, dof0, gv[s + 1, e, dof0] + h * gq[s + 1, e, q0])
-    elif jt == FREE:
-        g_quat_new = ti.Vector([gq[s + 1, e, q0 + 3 + k] for k in ti.static(range(4))])
-        g_quat, g_omega = quat_integrate_adjoint(_quat_at(d, s, e, q0 + 3), _omega_at(d, s + 1, e, dof0 + 3), h,
-                                                 g_quat_new)
+    elif jt == FREE or jt == BALL:
+        shift = 3 if jt == FREE else 0
+        g_quat_new = ti.Vector([gq[s + 1, e, q0 + shift + k] for k in ti.static(range(4))])
+        g_quat, g_omega = quat_integrate_adjoint(_quat_at(d, s, e, q0 + shift), _omega_at(d, s + 1, e, dof0 + shift),
+                                                 h, g_quat_new)
         for k in ti.static(range(3)):
-            accumulate(gq, ti.Vector([s, e, q0 + k]), gq[s + 1, e, q0 + k])
-            _velocity_adjoint(d, s, e, dof0 + k, gv[s + 1, e, dof0 + k] + h * gq[s + 1, e, q0 + k])
-            _velocity_adjoint(d, s, e, dof0 + 3 + k, gv[s + 1, e, dof0 + 3 + k] + g_omega[k])
+            if k < shift:
+                accumulate(gq, ti.Vector([s, e, q0 + k]), gq[s + 1, e, q0 + k])
+                _velocity_adjoint(d, s, e, dof0 + k, gv[s + 1, e, dof0 + k] + h * gq[s + 1, e, q0 + k])
+        for k in ti.static(range(3)):
+            _velocity_adjoint(d, s, e, dof0 + shift + k, gv[s + 1, e, dof0 + shift + k] + g_omega[k])
         for k in ti.static(range(4)):
-            accumulate(gq, ti.Vector([s, e, q0 + 3 + k]), g_quat[k])
+            accumulate(gq, ti.Vector([s, e, q0 + shift + k]), g_quat[k])

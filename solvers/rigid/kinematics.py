@@ -14,7 +14,7 @@ Each forward function has its hand-written reverse below it (see docs/architectu
 import taichi as ti
 
 from .data import accumulate
-from .model import FREE, PRISMATIC, REVOLUTE
+from .model import BALL, FREE, PRISMATIC, REVOLUTE
 from .spatial import (axis_angle_quat, mat_mul, mat_vec, normalized_adjoint, quat_conj, quat_mul, quat_normalized,
                       quat_to_mat)
 
@@ -40,7 +40,16 @@ def _joint_pose(d: ti.template(), s, e, l):
             quat = quat_mul(quat, axis_angle_quat(d.link_axis[l], d.qpos[s, e, q0]))
         elif jt == PRISMATIC:
             pos = pos + mat_vec(quat_to_mat(quat), d.link_axis[l]) * d.qpos[s, e, q0]
+        elif jt == BALL:  # turned about its origin by its quaternion, in the joint frame
+            quat = quat_mul(quat, quat_normalized(ball_quat(d, s, e, l)))
     return pos, quat
+
+
+@ti.func
+def ball_quat(d: ti.template(), s, e, l):
+    """The raw (unnormalised) quaternion (4,) of link l's ball joint at frame s."""
+    q0 = d.link_q0[l]
+    return ti.Vector([d.qpos[s, e, q0 + k] for k in ti.static(range(4))])
 
 
 @ti.func
@@ -79,14 +88,17 @@ def _motion_subspace(d: ti.template(), s, e, l, pos, rot):
     elif jt == PRISMATIC:
         d.cdof_w[s, e, dof0] = ti.Vector.zero(float, 3)
         d.cdof_v[s, e, dof0] = mat_vec(rot, d.link_axis[l])
-    elif jt == FREE:
-        # MuJoCo's free joint: world-frame translation, then rotation about body-frame axes.
+    elif jt == FREE or jt == BALL:
+        # MuJoCo's free joint: world-frame translation, then rotation about body-frame axes; a
+        # ball joint: those rotations alone
+        turn0 = dof0 + (3 if jt == FREE else 0)
         for k in ti.static(range(3)):
             axis = ti.Vector([rot[0, k], rot[1, k], rot[2, k]])
-            d.cdof_w[s, e, dof0 + k] = ti.Vector.zero(float, 3)
-            d.cdof_v[s, e, dof0 + k] = ti.Vector.unit(3, k, float)
-            d.cdof_w[s, e, dof0 + 3 + k] = axis
-            d.cdof_v[s, e, dof0 + 3 + k] = pos.cross(axis)
+            if jt == FREE:
+                d.cdof_w[s, e, dof0 + k] = ti.Vector.zero(float, 3)
+                d.cdof_v[s, e, dof0 + k] = ti.Vector.unit(3, k, float)
+            d.cdof_w[s, e, turn0 + k] = axis
+            d.cdof_v[s, e, turn0 + k] = pos.cross(axis)
 
 
 @ti.func
@@ -121,12 +133,13 @@ def _motion_subspace_adjoint(d: ti.template(), s, e, l, pos, rot):
         g_rot = axis.cross(d.cdof_w.grad[s, e, dof0] + gv.cross(pos))
     elif jt == PRISMATIC:
         g_rot = d.cdof_v[s, e, dof0].cross(d.cdof_v.grad[s, e, dof0])
-    elif jt == FREE:
+    elif jt == FREE or jt == BALL:
+        turn0 = dof0 + (3 if jt == FREE else 0)
         for k in ti.static(range(3)):  # rotation axes are rot's columns; translations are constant
-            gv = d.cdof_v.grad[s, e, dof0 + 3 + k]
+            gv = d.cdof_v.grad[s, e, turn0 + k]
             axis = ti.Vector([rot[0, k], rot[1, k], rot[2, k]])
             g_pos += axis.cross(gv)
-            g_rot += axis.cross(d.cdof_w.grad[s, e, dof0 + 3 + k] + gv.cross(pos))
+            g_rot += axis.cross(d.cdof_w.grad[s, e, turn0 + k] + gv.cross(pos))
     return g_pos, g_rot
 
 
@@ -169,6 +182,16 @@ def _joint_pose_adjoint(d: ti.template(), s, e, l, pos, quat, g_pos, g_rot):
             accumulate(d.qpos.grad, ti.Vector([s, e, q0 + k]), g_pos[k])
         for k in ti.static(range(4)):
             accumulate(d.qpos.grad, ti.Vector([s, e, q0 + 3 + k]), g_raw[k])
+    elif jt == BALL:  # quat = before ⊗ n, n = raw / |raw|: δn = ½ (0, R_beforeᵀ δθ) ⊗ n
+        raw = ball_quat(d, s, e, l)
+        before = d.link_quat0[l]  # the joint frame's world orientation
+        if p >= 0:
+            before = quat_mul(d.xquat[s, e, p], before)
+        local = mat_vec(quat_to_mat(before).transpose(), g_rot)
+        g_raw = normalized_adjoint(raw, 2.0 * quat_mul(ti.Vector([0.0, local[0], local[1], local[2]]),
+                                                       quat_normalized(raw)))
+        for k in ti.static(range(4)):
+            accumulate(d.qpos.grad, ti.Vector([s, e, q0 + k]), g_raw[k])
     if p >= 0 and jt != FREE:  # a free joint's pose does not depend on its parent's
         accumulate(d.xpos.grad, ti.Vector([s, e, p]), g_pos)
         accumulate(d.xrot_grad, ti.Vector([s, e, p]), g_rot + (pos - d.xpos[s, e, p]).cross(g_pos))
@@ -197,9 +220,9 @@ def link_kinematics_adjoint(d: ti.template(), s, e, l, g_m, g_h, g_i):
 
 @ti.func
 def dof_count(d: ti.template(), link):
-    """Dofs of a link's joint: 6 (free), 1 (hinge, slide) or 0 (fixed)."""
+    """Dofs of a link's joint: 6 (free), 3 (ball), 1 (hinge, slide) or 0 (fixed)."""
     jt = d.link_jtype[link]
-    return 6 if jt == FREE else (1 if jt == REVOLUTE or jt == PRISMATIC else 0)
+    return 6 if jt == FREE else (3 if jt == BALL else (1 if jt == REVOLUTE or jt == PRISMATIC else 0))
 
 
 @ti.func

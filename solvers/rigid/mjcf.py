@@ -37,7 +37,10 @@ the |force| bound; a ``motor`` is force control (control_dofs_force).
 ``<equality><joint>`` with polycoef (c0, c1) makes joint1 follow joint2, q1 − ref1 = c0 + c1 (q2 −
 ref2) (LinkSpec.mimic).
 
-Refused (AssetError naming the element): ball joints, a free joint below a root body, a joint's
+Ball joints (MuJoCo's: a quaternion, three dofs about the body's own axes) with damping, armature,
+friction loss, a spring (stiffness) and MuJoCo's cone limit (range: the larger value is the
+largest angle of the turn).
+Refused (AssetError naming the element): a ball joint's force range, a free joint below a root body, a joint's
 ``springdamper`` and ``springyield``, a polynomial stiffness, a free joint's stiffness, ellipsoid /
 hfield / sdf geoms, welds and connects, elements that would add or move bodies and geoms unread
 (``<replicate>``, ``<composite>``…; ``<frame>`` is read: it places its bodies and geoms, and its
@@ -71,7 +74,7 @@ _READ = {
                                "mass"),
     "inertial": _FRAME + ("mass", "diaginertia", "fullinertia"),
 }
-_JOINTS = {"hinge": "revolute", "slide": "prismatic"}
+_JOINTS = {"hinge": "revolute", "slide": "prismatic", "ball": "ball"}
 # what a body (or the worldbody) may hold: read here, or nothing the physics sees
 _BODY_CHILDREN = {"body", "joint", "freejoint", "geom", "inertial", "site", "camera", "light", "frame"}
 _FRAME_CHILDREN = {"body", "geom", "site", "camera", "light", "frame"}
@@ -191,7 +194,7 @@ class _Reader(MJCFDocument):
         the joint's axis, which the joint's own motion commutes with."""
         if spec.joint_type == "revolute":
             spec.quat = shapes.quat_mul(spec.quat, axis_angle(spec.axis, -spec.q0))
-        else:
+        elif spec.joint_type == "prismatic":
             spec.pos = spec.pos - spec.q0 * shapes.quat_to_mat(spec.quat) @ spec.axis
 
     def _members(self, element, tag: str, childclass: str, outer=(np.zeros(3), IDENTITY)):
@@ -243,8 +246,10 @@ class _Reader(MJCFDocument):
         self.ignore_unread(joint, attrs)
         kind = "free" if joint.tag == "freejoint" else attrs.get("type", "hinge")
         if kind not in _JOINTS:
-            raise self.error(f"{what}: type expected hinge or slide (or free on the root body), got {kind!r}")
+            raise self.error(f"{what}: type expected hinge, slide or ball (or free on the root body), got {kind!r}")
         self._refuse_unmodelled(attrs, what)
+        if kind == "ball":
+            return self._ball(attrs, link_name, name, what)
         axis = self.numbers(attrs, "axis", 3, what, default=[0.0, 0.0, 1.0])
         axis = axis / norm(self, axis, what)
         spec = _link(link_name, -1, name, _JOINTS[kind], np.zeros(3), IDENTITY.copy(), axis)
@@ -260,6 +265,27 @@ class _Reader(MJCFDocument):
                 raise self.error(f"{what}: range expected lower < upper, got {attrs.get('range')!r}")
             spec.lower, spec.upper = low * scale, high * scale
         spec.effort = self._force_bound(attrs, "actuatorfrcrange", "actuatorfrclimited", what)
+        return spec
+
+    def _ball(self, attrs: dict, link_name: str, name: str, what: str) -> LinkSpec:
+        """A ball joint's massless link (MuJoCo's ball: its axis, ref and springref unread, as
+        MuJoCo's): damping, armature, friction loss and stiffness (MuJoCo's ball spring, to the
+        identity) on its three dofs; limited, a cone limit at the larger of its range's two values
+        (the largest angle of its turn, as MuJoCo reads it)."""
+        spec = _link(link_name, -1, name, "ball", np.zeros(3), IDENTITY.copy())
+        for key in ("damping", "armature", "frictionloss", "stiffness"):
+            setattr(spec, key, self._non_negative(attrs, key, what))
+        limited = attrs.get("limited", "auto")
+        if limited == "true" or (limited == "auto" and self.autolimits and "range" in attrs):
+            angle = max(self.numbers(attrs, "range", 2, what, default=[0.0, 0.0])) * (
+                np.deg2rad(1.0) if self.degree else 1.0)
+            if angle < 0:
+                raise self.error(f"{what}: a ball joint's range expected a largest angle >= 0, got "
+                                 f"{attrs.get('range')!r}")
+            spec.upper = angle
+        if self._force_bound(attrs, "actuatorfrcrange", "actuatorfrclimited", what) < np.inf:
+            raise self.error(f"{what}: a ball joint's actuatorfrcrange is not supported yet, got "
+                             f"{attrs['actuatorfrcrange']!r}")
         return spec
 
     def _refuse_unmodelled(self, attrs: dict, what: str):

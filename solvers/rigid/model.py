@@ -11,10 +11,10 @@ import numpy as np
 from . import geometry
 from .spec import JOINT_TYPES
 
-FIXED, REVOLUTE, PRISMATIC, FREE = range(4)
+FIXED, REVOLUTE, PRISMATIC, FREE, BALL = range(5)
 JOINT_CODE = {name: code for code, name in enumerate(JOINT_TYPES)}
-DOFS_OF = {FIXED: 0, REVOLUTE: 1, PRISMATIC: 1, FREE: 6}
-QS_OF = {FIXED: 0, REVOLUTE: 1, PRISMATIC: 1, FREE: 7}
+DOFS_OF = {FIXED: 0, REVOLUTE: 1, PRISMATIC: 1, FREE: 6, BALL: 3}
+QS_OF = {FIXED: 0, REVOLUTE: 1, PRISMATIC: 1, FREE: 7, BALL: 4}
 
 DEFAULT_KP = 100.0  # N·m/rad (or N/m), as Genesis
 DEFAULT_KV = 10.0   # N·m·s/rad (or N·s/m)
@@ -29,10 +29,11 @@ class RigidModel:
     Per link: parent (L,) (-1: the world), jtype (L,) joint code, pos0 (L, 3) m and quat0 (L, 4)
     joint frame in the parent, axis (L, 3) in the link frame, com (L, 3) m, inertia0 (L, 3, 3)
     kg·m² about the com, mass0 (L,) kg, dof0/q0 (L,) first dof/q, entity (L,) owner index.
-    Per dof: link (D,), q (D,) its q index (-1 inside a free joint), damping, armature, kp, kv,
-    stiffness (N·m/rad or N/m) and springref (rad or m) of a joint spring −stiffness·(q − springref),
-    lower/upper limits (rad or m), effort bound, frictionloss (N·m or N, dry joint friction: a
-    constraint row). pairs (P, 2): (i, j), j ≤ i, dof j on the path from dof i to the root — the
+    Per dof: link (D,), q (D,) its q index (-1 inside a free or ball joint: no scalar coordinate),
+    damping, armature, kp, kv, stiffness (N·m/rad or N/m) and springref (rad or m) of a joint
+    spring −stiffness·(q − springref), lower/upper limits (rad or m; a ball joint's upper: its cone
+    limit's angle, rad), effort bound, frictionloss (N·m or N, dry joint friction: a constraint
+    row). pairs (P, 2): (i, j), j ≤ i, dof j on the path from dof i to the root — the
     structural non-zeros of the lower mass matrix.
     Per collision geom (geometry.py, MuJoCo's conventions): geom_type (G,) code, geom_link (G,),
     geom_pos (G, 3) m and geom_quat (G, 4) in the link frame, geom_size (G, 3) half sizes m,
@@ -172,6 +173,8 @@ def _static_links(link_parent, link_jtype):
 def _initial_q(spec):
     if spec.joint_type == "free":
         return list(spec.pos) + list(spec.quat)
+    if spec.joint_type == "ball":
+        return [1.0, 0.0, 0.0, 0.0]
     return [spec.q0] * QS_OF[JOINT_CODE[spec.joint_type]]
 
 
@@ -220,6 +223,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
         for spec in links:
             code = JOINT_CODE[spec.joint_type]
             free = code == FREE
+            vector = code in (FREE, BALL)  # dofs without a scalar coordinate: no scalar limit or servo target
             rows["name"].append(spec.name)
             rows["parent"].append(spec.parent + link_offset if spec.parent >= 0 else -1)
             rows["jtype"].append(code)
@@ -237,17 +241,17 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
             joint_dof[spec.joint_name] = len(dofs["link"])
             for k in range(DOFS_OF[code]):
                 dofs["link"].append(link_idx)
-                dofs["q"].append(-1 if free else len(qpos0))
+                dofs["q"].append(-1 if vector else len(qpos0))
                 dofs["damping"].append(spec.damping)
                 dofs["armature"].append(spec.armature)
-                dofs["stiffness"].append(0.0 if free else spec.stiffness)
-                dofs["springref"].append(0.0 if free else spec.springref)
-                dofs["lower"].append(-np.inf if free else spec.lower)
-                dofs["upper"].append(np.inf if free else spec.upper)
-                dofs["effort"].append(np.inf if free else spec.effort)
-                dofs["frictionloss"].append(spec.frictionloss)  # (a free joint's on its six dofs, as MuJoCo's)
-                dofs["kp"].append(DEFAULT_KP if free or spec.kp is None else spec.kp)
-                dofs["kv"].append(DEFAULT_KV if free or spec.kv is None else spec.kv)
+                dofs["stiffness"].append(0.0 if free else spec.stiffness)  # (a ball joint's: MuJoCo's ball spring)
+                dofs["springref"].append(0.0 if vector else spec.springref)
+                dofs["lower"].append(-np.inf if vector else spec.lower)
+                dofs["upper"].append(np.inf if free else spec.upper)  # (a ball joint's: its cone's angle)
+                dofs["effort"].append(np.inf if vector else spec.effort)
+                dofs["frictionloss"].append(spec.frictionloss)  # (a free or ball joint's on each dof, as MuJoCo's)
+                dofs["kp"].append(DEFAULT_KP if vector or spec.kp is None else spec.kp)
+                dofs["kv"].append(DEFAULT_KV if vector or spec.kv is None else spec.kv)
             for k, geom in enumerate(spec.geoms):
                 geoms.append(geom)
                 geom_links.append(link_idx)

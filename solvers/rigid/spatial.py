@@ -6,6 +6,8 @@ angular velocity w and the linear velocity v of the body point at o; a *force* (
 n about o and a force f. A link's spatial inertia about o is (m, h, I): mass m (kg), first moment
 h = m·(c − o) (kg·m, c the world com) and rotational inertia I about o (kg·m², 3x3).
 """
+import math
+
 import taichi as ti
 
 # Products are written out as single expressions: Taichi's ``@`` accumulates into a local.
@@ -71,6 +73,48 @@ def axis_angle_quat(axis, angle):
 
 
 @ti.func
+def quat_turn(q):
+    """(θ rad in [0, π], unit axis (3,), sign) of the rotation by the raw quaternion q, as MuJoCo's
+    mju_quat2Vel of q / |q| = (c, v): θ = 2 atan2(|v|, c), taken through −2π past π, where the
+    axis v / |v| flips (sign −1); the axis is (1, 0, 0) at no turn. θ · axis is the rotation
+    vector (MuJoCo's mju_subQuat from the identity)."""
+    n = quat_normalized(q)
+    v = ti.Vector([n[1], n[2], n[3]])
+    length = v.norm()
+    axis = ti.Vector([1.0, 0.0, 0.0])
+    if length >= 1e-15:  # (MuJoCo's mjMINVAL)
+        axis = v / length
+    angle = 2.0 * ti.atan2(length, n[0])
+    sign = 1.0
+    if angle > math.pi:
+        angle, sign = 2.0 * math.pi - angle, -1.0
+    return angle, sign * axis, sign
+
+
+@ti.func
+def _turn_terms(q):
+    """(sign, c, v, l) of the raw quaternion q: q / |q| = sign (c, v) with c ≥ 0 (the turn of at
+    most π), l = |v|."""
+    n = quat_normalized(q)
+    sign = 1.0
+    if n[0] < 0.0:
+        sign = -1.0
+    v = sign * ti.Vector([n[1], n[2], n[3]])
+    return sign, sign * n[0], v, v.norm()
+
+
+@ti.func
+def quat_rotation_vector(q):
+    """The rotation vector r (3,) rad of the raw quaternion q: θ · axis, θ ≤ π, as quat_turn's, but
+    written r = v · f with f = 2 atan2(l, c) / l (→ 2 / c at no turn), smooth through no turn."""
+    _sign, c, v, l = _turn_terms(q)
+    f = 2.0 / c
+    if l > 1e-15:
+        f = 2.0 * ti.atan2(l, c) / l
+    return v * f
+
+
+@ti.func
 def quat_integrate(q, omega, h):
     """q ⊗ exp(h·omega/2): rotate by the body-frame angular velocity omega (rad/s) for h s.
 
@@ -120,6 +164,39 @@ def normalized_adjoint(q, g):
     norm = ti.sqrt(q.dot(q))
     unit = q / norm
     return (g - unit * unit.dot(g)) / norm
+
+
+@ti.func
+def quat_turn_adjoint(q, sign, g_angle, g_axis):
+    """Gradient of the raw quaternion q from the gradients of quat_turn's angle and axis: with
+    (c, v) = q / |q|, l = |v|, θ = 2 atan2(l, c) (the angle is θ, or 2π − θ where sign = −1), axis
+    = sign v / l: ∂θ/∂l = 2c / (l² + c²), ∂θ/∂c = −2l / (l² + c²), ∂(v / l)/∂v = (I − â âᵀ) / l."""
+    n = quat_normalized(q)
+    v = ti.Vector([n[1], n[2], n[3]])
+    length = v.norm()
+    g_theta = sign * g_angle
+    square = length * length + n[0] * n[0]
+    g_v = ti.Vector.zero(float, 3)
+    if length >= 1e-15:  # (no turn: the axis is a constant, and θ's slope along v, 2c v / l, is 0 · g)
+        unit = v / length
+        g_v = 2.0 * n[0] / square * g_theta * unit + sign * (g_axis - unit * unit.dot(g_axis)) / length
+    return normalized_adjoint(q, ti.Vector([-2.0 * length / square * g_theta, g_v[0], g_v[1], g_v[2]]))
+
+
+@ti.func
+def quat_rotation_vector_adjoint(q, g):
+    """Gradient of the raw quaternion q from g = ∂L/∂quat_rotation_vector(q): with r = v f(l, c),
+    ∂r/∂v = f I + (f_l / l) v vᵀ, ∂r/∂c = v f_c, f_l / l = (2c / (l² + c²) − f) / l² (bounded by
+    4 / (3c³); its round-off, times v vᵀ, stays that of g) and f_c = −2 / (l² + c²)."""
+    sign, c, v, l = _turn_terms(q)
+    square = l * l + c * c
+    f, f_l = 2.0 / c, 0.0
+    if l > 1e-15:
+        f = 2.0 * ti.atan2(l, c) / l
+        f_l = (2.0 * c / square - f) / (l * l)
+    along = v.dot(g)
+    g_v = f * g + f_l * along * v
+    return sign * normalized_adjoint(q, ti.Vector([-2.0 / square * along, g_v[0], g_v[1], g_v[2]]))
 
 
 @ti.func

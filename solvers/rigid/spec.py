@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-JOINT_TYPES = ("fixed", "revolute", "prismatic", "free")
+JOINT_TYPES = ("fixed", "revolute", "prismatic", "free", "ball")
 
 
 @dataclass
@@ -52,17 +52,21 @@ class LinkSpec:
     """One link and the joint that attaches it to its parent.
 
     parent: index of the parent link in the list, -1 for the root.
-    joint_type: one of JOINT_TYPES; "free" only for a root (6 dofs, 7 qs).
+    joint_type: one of JOINT_TYPES; "free" only for a root (6 dofs, 7 qs); "ball" (MuJoCo's ball
+    joint: 3 dofs, the angular velocity in the link frame; 4 qs, the unit quaternion turning the
+    link frame from (pos, quat), identity at start) anywhere.
     pos (3,) m, quat (4,) w-x-y-z: joint frame in the parent link frame (for the root: in the world).
     axis (3,): unit joint axis in the joint frame (= the child link frame).
     mass kg; com (3,) m in the link frame; inertia (3, 3) kg·m² about the com, link-frame axes.
     damping N·m·s/rad (or N·s/m); armature kg·m² (or kg); frictionloss N·m (or N): the joint's
     dry friction (URDF ``<dynamics friction>``; a friction-loss constraint row).
     stiffness N·m/rad (or N/m) and springref rad (or m): a joint spring −stiffness·(q − springref)
-    (MJCF ``stiffness``, ``springref``); a free joint has none.
+    (MJCF ``stiffness``, ``springref``); a ball joint's is −stiffness·r on its dofs, r the
+    rotation vector of its turn (MuJoCo's ball spring); a free joint has none.
     q0 rad (or m): a revolute or prismatic joint's initial position (MJCF ``ref``: the link frame is
     (pos, quat) at q = 0 whatever q0 is; the loader moved it).
-    lower/upper: joint limits, rad or m (-inf/inf when unlimited); effort: |force| bound (inf when none).
+    lower/upper: joint limits, rad or m (-inf/inf when unlimited; a ball joint's upper: the largest
+    angle of its turn, MuJoCo's cone limit); effort: |force| bound (inf when none).
     kp N·m/rad (or N/m), kv N·m·s/rad (or N·s/m): the joint's servo gains, None for the solver's
     defaults.
     merged: (link name, fixed joint name) of every link merged into this one (merge.py), for

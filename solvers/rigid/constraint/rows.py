@@ -20,7 +20,9 @@ Before the contacts come, as in MuJoCo, the joint rows: one per joint equality (
 in its quadratic: a URDF mimic, distance q_a − offset − multiplier · q_b with J = e_a −
 multiplier · e_b, diagA the sum of the two dofs'), one per dof with friction loss F > 0
 (FRICTION_LOSS, J = e_i, aref = −B q̇_i, bound F) and one per violated joint limit (ONE_SIDED,
-distance q − lower with J = e_i, or upper − q with J = −e_i). Their R uses diagA = dof_invweight0, their
+distance q − lower with J = e_i, or upper − q with J = −e_i; a ball joint's cone limit, MuJoCo's:
+distance θmax − θ with J = −axis on its three dofs, θ and axis its turn's angle and unit axis).
+Their R uses diagA = dof_invweight0 (a ball joint's first dof's), their
 solref is (timeconst, 1) with the scene's constraint time constant, their solimp MuJoCo's
 default. Their adjoint (``dof_rows_adjoint``) takes the solve's implicit gradient of each row's
 aref, R and bound back to q, q̇, the friction loss and dof_invweight0 (``contact_rows_adjoint``
@@ -28,8 +30,10 @@ likewise for contact rows, into body_invweight0 among others).
 """
 import taichi as ti
 
-from ..data import BIG, CONST, accumulate
-from ..kinematics import dof_count, dof_motion_at, reference
+from ..data import BIG, CONST, JOINT_ROW_SLOTS, accumulate
+from ..kinematics import ball_quat, dof_count, dof_motion_at, reference
+from ..model import BALL
+from ..spatial import quat_turn, quat_turn_adjoint
 
 # row types, as the solver reads them (interfaces agreed with solver.py)
 UNUSED, FRICTION_LOSS, ONE_SIDED, ELLIPTIC_FIRST, ELLIPTIC_REST, EQUALITY = range(6)
@@ -487,7 +491,7 @@ def _dof_row(d: ti.template(), s, e, r, i, sign, dist):
     """Row r on dof i alone (J = sign·e_i) at distance dist (m or rad; 0 for friction loss): its
     Jacobian (its one column: no reader looks past a row's columns), R and aref."""
     d.efc_J[s, e, r, i] = sign
-    slot = d.contact_capacity * d.n_dofs + 2 * r  # after the contacts' lists, two slots a joint row
+    slot = d.contact_capacity * d.n_dofs + JOINT_ROW_SLOTS * r  # after the contacts' lists
     d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, 1
     d.efc_cols[s, e, slot] = i
     _joint_row_scalars(d, s, e, r, dist, sign * d.qvel[s, e, i], d.invweight_dof[e, i])
@@ -510,7 +514,7 @@ def _equality_row(d: ti.template(), s, e, r, k):
     distance from _equality_terms, diagA the two dofs' dof_invweight0."""
     a, b, multiplier, dist = _equality_terms(d, s, e, k)
     d.efc_J[s, e, r, a], d.efc_J[s, e, r, b] = 1.0, -multiplier
-    slot = d.contact_capacity * d.n_dofs + 2 * r
+    slot = d.contact_capacity * d.n_dofs + JOINT_ROW_SLOTS * r
     d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, 2
     d.efc_cols[s, e, slot], d.efc_cols[s, e, slot + 1] = ti.min(a, b), ti.max(a, b)
     velocity = d.qvel[s, e, a] - multiplier * d.qvel[s, e, b]
@@ -535,13 +539,28 @@ def _limit_side(d: ti.template(), s, e, i):
 
 
 @ti.func
+def _ball_limit(d: ti.template(), s, e, i):
+    """(1 if violated else 0, distance θmax − θ rad, unit axis (3,)) of the cone limit of the ball
+    joint whose first dof is i at frame s; 0 where dof i is no limited ball joint's first dof."""
+    violated, dist, axis = 0, 0.0, ti.Vector.zero(float, 3)
+    link = d.dof_link[i]
+    if d.limits_enabled and d.link_jtype[link] == BALL and d.link_dof0[link] == i and d.dof_upper[i] < BIG:
+        angle, turn_axis, _sign = quat_turn(ball_quat(d, s, e, link))
+        dist, axis = d.dof_upper[i] - angle, turn_axis
+        if dist < 0.0:
+            violated = 1
+    return violated, dist, axis
+
+
+@ti.func
 def limit_violated(d: ti.template(), s, e):
     """1 if some joint limit of env e is violated at frame s (a limit row would arise), else 0."""
     violated = 0
     if d.limits_enabled:
         for i in range(d.n_dofs):
-            sign, _ = _limit_side(d, s, e, i)
-            if sign != 0.0:
+            sign, _dist = _limit_side(d, s, e, i)
+            cone, _cone_dist, _axis = _ball_limit(d, s, e, i)  # (Taichi: one name, one type)
+            if sign != 0.0 or cone != 0:
                 violated = 1
     return violated
 
@@ -580,8 +599,28 @@ def dof_rows(d: ti.template(), s, e):
             _dof_row(d, s, e, rows, i, sign, dist)
             d.efc_type[s, e, rows], d.efc_floss[s, e, rows] = ONE_SIDED, 0.0
             rows += 1
+        cone, cone_dist, axis = _ball_limit(d, s, e, i)
+        if cone != 0:
+            _ball_limit_row(d, s, e, rows, i, cone_dist, axis)
+            rows += 1
     d.efc_dof_rows[s, e, 0] = rows
     return rows
+
+
+@ti.func
+def _ball_limit_row(d: ti.template(), s, e, r, i, dist, axis):
+    """Row r for the cone limit of the ball joint whose first dof is i: J = −axis on its three
+    dofs, at distance dist (rad), diagA its first dof's dof_invweight0 (MuJoCo's)."""
+    slot = d.contact_capacity * d.n_dofs + JOINT_ROW_SLOTS * r
+    d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, 3
+    velocity = 0.0
+    for k in ti.static(range(3)):
+        d.efc_J[s, e, r, i + k] = -axis[k]
+        d.efc_cols[s, e, slot + k] = i + k
+        velocity -= axis[k] * d.qvel[s, e, i + k]
+    _joint_row_scalars(d, s, e, r, dist, velocity, d.invweight_dof[e, i])
+    d.efc_dim[s, e, r], d.efc_id[s, e, r] = 1, i
+    d.efc_type[s, e, r], d.efc_floss[s, e, r] = ONE_SIDED, 0.0
 
 
 @ti.func
@@ -589,8 +628,18 @@ def dof_rows_adjoint(d: ti.template(), s, e, r, g_aref, g_R, g_bound):
     """Reverse of ``_dof_row`` and ``_equality_row`` for row r (< efc_dof_rows) given the gradients
     of its aref, R and friction-loss bound: into q, q̇ at frame s, the friction-loss input and
     dof_invweight0. The row's dofs: (first, second) with Jacobian entries (c1, c2); second = −1
-    for a single-dof row. (An equality's offset and multiplier are the model's: no gradient.)"""
+    for a single-dof row. (An equality's offset and multiplier are the model's: no gradient.) A
+    ball joint's cone limit: _ball_limit_adjoint."""
     t = d.efc_type[s, e, r]
+    if t == ONE_SIDED and d.link_jtype[d.dof_link[d.efc_id[s, e, r]]] == BALL:
+        _ball_limit_adjoint(d, s, e, r, g_aref, g_R)
+    else:
+        _scalar_row_adjoint(d, s, e, r, t, g_aref, g_R, g_bound)
+
+
+@ti.func
+def _scalar_row_adjoint(d: ti.template(), s, e, r, t, g_aref, g_R, g_bound):
+    """dof_rows_adjoint for a row of type t on one dof, or an equality's two."""
     first, second, c1, c2, dist = d.efc_id[s, e, r], -1, 0.0, 0.0, 0.0
     if t == EQUALITY:
         a, b, multiplier, distance = _equality_terms(d, s, e, first)
@@ -599,27 +648,56 @@ def dof_rows_adjoint(d: ti.template(), s, e, r, g_aref, g_R, g_bound):
         c1 = d.efc_J[s, e, r, first]
         if t != FRICTION_LOSS:
             _, dist = _limit_side(d, s, e, first)
-    solimp = ti.Vector(DEFAULT_SOLIMP, dt=float)
-    k, damping = stiffness_damping(ti.Vector([d.consts[CONST["timeconst"]], 1.0]), solimp[1], d.consts[CONST["h"]])
+    scale = d.invweight_dof[e, first] + (d.invweight_dof[e, second] if second >= 0 else 0.0)
+    g_dist, damping = _joint_row_scalars_adjoint(d, e, dist, scale, g_aref, g_R, first, second)
     accumulate(d.qvel.grad, ti.Vector([s, e, first]), -damping * c1 * g_aref)
-    imp = impedance(solimp, dist, 0.0)
-    scale = d.invweight_dof[e, first]
     if second >= 0:
         accumulate(d.qvel.grad, ti.Vector([s, e, second]), -damping * c2 * g_aref)
-        scale += d.invweight_dof[e, second]
-    on_floor = not ((1.0 - imp) / imp * scale > MINVAL)  # R at its floor: no gradient through it
-    if not on_floor:  # R = (1 − imp) / imp · diagA, diagA the dofs' dof_invweight0
-        accumulate(d.invweight_dof.grad, ti.Vector([e, first]), (1.0 - imp) / imp * g_R)
-        if second >= 0:
-            accumulate(d.invweight_dof.grad, ti.Vector([e, second]), (1.0 - imp) / imp * g_R)
     if t == FRICTION_LOSS:
         accumulate(d.frictionloss.grad, ti.Vector([e, first]), g_bound)
     else:  # a limit or an equality: aref and R depend on the distance
-        slope, _solimp_slope = impedance_gradient(solimp, dist, 0.0)
-        g_imp = -k * dist * g_aref
-        if not on_floor:
-            g_imp -= scale / (imp * imp) * g_R
-        g_dist = -k * imp * g_aref + slope * g_imp
         accumulate(d.qpos.grad, ti.Vector([s, e, d.dof_q[first]]), c1 * g_dist)
         if second >= 0:
             accumulate(d.qpos.grad, ti.Vector([s, e, d.dof_q[second]]), c2 * g_dist)
+
+
+@ti.func
+def _joint_row_scalars_adjoint(d: ti.template(), e, dist, scale, g_aref, g_R, first, second):
+    """Reverse of _joint_row_scalars' R = (1 − imp)/imp · scale and aref's −K imp dist: returns
+    (∂L/∂dist, B); R's gradient into the dof_invweight0 of dofs first and second (when ≥ 0), unless
+    R is at its floor."""
+    solimp = ti.Vector(DEFAULT_SOLIMP, dt=float)
+    k, damping = stiffness_damping(ti.Vector([d.consts[CONST["timeconst"]], 1.0]), solimp[1], d.consts[CONST["h"]])
+    imp = impedance(solimp, dist, 0.0)
+    g_imp = -k * dist * g_aref
+    if (1.0 - imp) / imp * scale > MINVAL:
+        accumulate(d.invweight_dof.grad, ti.Vector([e, first]), (1.0 - imp) / imp * g_R)
+        if second >= 0:
+            accumulate(d.invweight_dof.grad, ti.Vector([e, second]), (1.0 - imp) / imp * g_R)
+        g_imp -= scale / (imp * imp) * g_R
+    slope, _solimp_slope = impedance_gradient(solimp, dist, 0.0)
+    return -k * imp * g_aref + slope * g_imp, damping
+
+
+@ti.func
+def _ball_limit_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
+    """Reverse of _ball_limit_row for row r: from its implicit gradients (aref, R) and, as the row's
+    Jacobian −axis depends on q, J̄_k = f u_k − āref (qacc_k + B q̇_k) (the solve's stationarity,
+    and aref's −B J q̇; u = H⁻¹ā in solver_Mgrad), into the ball joint's quaternion, q̇ and its
+    first dof's dof_invweight0."""
+    i = d.efc_id[s, e, r]
+    raw = ball_quat(d, s, e, d.dof_link[i])
+    angle, axis, sign = quat_turn(raw)
+    g_dist, damping = _joint_row_scalars_adjoint(d, e, d.dof_upper[i] - angle, d.invweight_dof[e, i], g_aref, g_R,
+                                                 i, -1)
+    g_angle = -g_dist  # dist = θmax − θ
+    force = d.efc_force[s, e, r]
+    g_axis = ti.Vector.zero(float, 3)
+    for a in ti.static(range(3)):
+        w = d.qacc_constrained[s, e, i + a] + damping * d.qvel[s, e, i + a]
+        g_axis[a] = -(force * d.solver_Mgrad[s, e, i + a] - g_aref * w)  # J = −axis
+        accumulate(d.qvel.grad, ti.Vector([s, e, i + a]), damping * axis[a] * g_aref)  # aref ∋ −B (−axis) · q̇
+    g_raw = quat_turn_adjoint(raw, sign, g_angle, g_axis)
+    q0 = d.link_q0[d.dof_link[i]]
+    for k in ti.static(range(4)):
+        accumulate(d.qpos.grad, ti.Vector([s, e, q0 + k]), g_raw[k])
