@@ -23,6 +23,19 @@ def _dof_motion(d: ti.template(), s, e, dof, vw, vv):
 
 
 @ti.func
+def _turning_frame(d: ti.template(), s, e, jt, dof0, vv):
+    """(vt (3,) m/s, first rotation dof) of a free or ball joint whose dofs start at dof0, vv its
+    parent's linear velocity: a free joint's translation dofs are fixed world axes, and its
+    rotation axes move with the translating frame (their own rotation adds ω × ω = 0), as in
+    MuJoCo's mj_comVel; a ball joint's rotations move with the parent."""
+    vt, turn0 = vv, dof0
+    if jt == FREE:
+        vt = vv + ti.Vector([d.qvel[s, e, dof0 + k] for k in ti.static(range(3))])
+        turn0 = dof0 + 3
+    return vt, turn0
+
+
+@ti.func
 def _link_motion(d: ti.template(), s, e, l):
     """Spatial velocity and acceleration (at zero qacc, gravity as a base acceleration) of link l."""
     p = d.link_parent[l]
@@ -37,14 +50,7 @@ def _link_motion(d: ti.template(), s, e, l):
         w1, v1, dw1, dv1 = _dof_motion(d, s, e, dof0, vw, vv)
         w, v, dw, dv = vw + w1, vv + v1, aw + dw1, av + dv1
     elif jt == FREE or jt == BALL:
-        # translation dofs are fixed world axes; the rotation axes move with the translating
-        # frame (their own rotation adds ω × ω = 0), as in MuJoCo's mj_comVel (a ball joint: the
-        # rotations alone, with the parent's velocity)
-        vt = vv
-        turn0 = dof0
-        if jt == FREE:
-            vt = vv + ti.Vector([d.qvel[s, e, dof0 + k] for k in ti.static(range(3))])
-            turn0 = dof0 + 3
+        vt, turn0 = _turning_frame(d, s, e, jt, dof0, vv)
         v = vt
         for k in ti.static(range(3)):
             wk, vk, dwk, dvk = _dof_motion(d, s, e, turn0 + k, vw, vt)
@@ -153,11 +159,7 @@ def _link_motion_adjoint(d: ti.template(), s, e, l, gw, gv, gaw, gav):
         g_vw += w
         g_vv += v
     elif jt == FREE or jt == BALL:
-        vt = vv
-        turn0 = dof0
-        if jt == FREE:
-            vt = vv + ti.Vector([d.qvel[s, e, dof0 + k] for k in ti.static(range(3))])
-            turn0 = dof0 + 3
+        vt, turn0 = _turning_frame(d, s, e, jt, dof0, vv)
         g_vt = gv
         for k in ti.static(range(3)):
             w, v = _one_dof_adjoint(d, s, e, turn0 + k, vw, vt, gw, gv, gaw, gav)
