@@ -5,9 +5,11 @@ assets/mjcf/balls.xml has two trees: an arm hanging from the world by a ball joi
 limit, a spring), a hinge, and a box on a ball joint anchored off its body origin (friction loss,
 armature, a spring, a 25° cone); and a free sphere dragging four capsules on ball joints onto the
 ground. From random velocities both engines run 3 s side by side, cone limits and contacts active
-(measured: 1.7e-13 either cone); a spherical pendulum keeps its energy and vertical angular
-momentum to first order in the time step, and swings at the physical pendulum's period; gradients
-through the cone limits, the springs and the contacts match central differences.
+(measured: 1.7e-13 either cone); so do cone limits alone, a turn stored as −q (w < 0), and a ball
+joint beside a hinge or slide in one body; ranges are read as MuJoCo's compiler reads them. A
+spherical pendulum keeps its energy and vertical angular momentum to first order in the time
+step and swings at the physical pendulum's period; gradients through the cone limits, the springs
+and the contacts match central differences.
 """
 import mujoco
 import numpy as np
@@ -69,6 +71,72 @@ def test_cone_limits_alone_match_mujoco(f64, tmp_path):
     limits = []
     assert _lockstep(m, d, scene, robot, 1500, lambda: limits.append(d.nl)) < 1e-10
     assert max(limits) == 2
+
+
+def test_a_turn_stored_past_half_a_turn_reads_as_mujocos(f64):
+    """A quaternion with w < 0 (the same turn as −q) and not of unit length: the shoulder turned
+    50° against its 40° cone, its spring pulling; MuJoCo 4 reads the turn through its wrap past π
+    alike (200 steps), and the gradient w.r.t. that quaternion matches central differences."""
+    m, d, scene, robot = _pair(BALLS, plane=True, integrator="euler", requires_grad=True)
+    turn = -1.3 * euler_xyz_to_quat(torch.tensor([0.0, np.deg2rad(50.0), 0.0], dtype=torch.float64))
+    qpos = robot.get_qpos().detach().clone()
+    qpos[0:4] = turn
+    d.qpos[:] = qpos.numpy()
+    robot.set_qpos(qpos)
+    limits = []
+    assert _lockstep(m, d, scene, robot, 200, lambda: limits.append(d.nl)) < 1e-10
+    assert limits[0] >= 1
+    weights = torch.tensor(np.random.default_rng(8).normal(size=(robot.n_links, 7)))
+
+    def loss(x):
+        scene.reset()
+        robot.set_qpos(x)
+        for _ in range(100):
+            scene.step()
+        return (torch.cat([robot.get_links_pos(), robot.get_links_quat()], -1) * weights).sum()
+
+    for seed in range(2):
+        assert_converged(directional_errors(loss, qpos, seed), f"w < 0, direction {seed}")
+
+
+@pytest.mark.parametrize("joint, compiler, cone", [
+    ('range="0 40"', "", 40.0), ('range="40 0"', "", None), ('range="0 0"', "", None), ('limited="true"', "", 0.0),
+    ('limited="true" range="0 -10"', "", 0.0), ('limited="false" range="0 40"', "", None),
+    ('range="0 0.5"', 'angle="radian"', np.rad2deg(0.5)),
+])
+def test_a_ball_joints_range_is_read_as_mujocos_compiler_reads_it(f64, tmp_path, joint, compiler, cone):
+    """Limited when limited="true", or by autolimits where range[0] < range[1]; the cone's angle
+    the larger value (0 holds the joint): each dof's upper bound from get_dofs_limit, checked
+    against MuJoCo's jnt_limited and jnt_range."""
+    path = _write(tmp_path, f'<body><joint name="b" type="ball" {joint}/><geom type="sphere" size="0.1"/></body>',
+                  f"<compiler {compiler}/>")
+    m = mujoco.MjModel.from_xml_path(path)
+    assert bool(m.jnt_limited[0]) == (cone is not None)
+    scene = gs.Scene()
+    robot = scene.add_entity(gs.morphs.MJCF(file=path))
+    scene.build()
+    lower, upper = robot.get_dofs_limit()
+    expected = np.inf if cone is None else np.deg2rad(cone)
+    assert torch.equal(lower, torch.full((3,), -np.inf, dtype=torch.float64))
+    torch.testing.assert_close(upper, torch.full((3,), expected, dtype=torch.float64), rtol=1e-15, atol=0)
+    if cone is not None:
+        assert np.isclose(max(m.jnt_range[0]), max(0.0, np.deg2rad(cone)), rtol=1e-15, atol=0)
+
+
+@pytest.mark.parametrize("joints", [("hinge", "ball"), ("slide", "ball"), ("ball", "slide")])
+def test_a_ball_joint_beside_another_in_one_body_moves_as_mujocos(f64, tmp_path, joints):
+    """A body's joints are composed in order (a ball joint after a hinge turns about the hinge's
+    turned frame; a slide after a ball slides along its turned axis), anchors off the origin: 1 s
+    from random velocities, to round-off."""
+    chain = "".join(f'<joint name="j{k}" type="{kind}" axis="0.3 1 0.2" pos="0.01 0.02 {0.03 * k}"/>'
+                    for k, kind in enumerate(joints))
+    path = _write(tmp_path, f'<body name="a" pos="0 0 1" euler="10 20 30">{chain}<geom type="capsule" '
+                            f'fromto="0 0 0 0.3 0.1 0" size="0.03"/></body>')
+    m, d, scene, robot = _pair(path)
+    velocity = np.random.default_rng(9).normal(size=m.nv)
+    d.qvel[:] = velocity
+    robot.set_dofs_velocity(torch.tensor(velocity))
+    assert _lockstep(m, d, scene, robot, 500) < 1e-10
 
 
 def _pendulum(tmp_path, dt):
@@ -234,6 +302,7 @@ def test_a_ball_joints_dofs_read_and_set_euler_angles(f64):
     scene = gs.Scene()
     robot = scene.add_entity(gs.morphs.MJCF(file=BALLS))
     scene.build()
+    robot.set_qpos(euler_xyz_to_quat(torch.tensor([-0.4, 0.7, 0.2], dtype=torch.float64)), qs_idx_local=[0, 1, 2, 3])
     angles = torch.tensor([0.3, -0.2, 0.5], dtype=torch.float64)
     robot.set_dofs_position(angles, dofs_idx_local=[4, 5, 6])
     torch.testing.assert_close(robot.get_qpos()[5:9], euler_xyz_to_quat(angles), rtol=0, atol=1e-15)
@@ -241,8 +310,8 @@ def test_a_ball_joints_dofs_read_and_set_euler_angles(f64):
     robot.set_dofs_position(torch.tensor([0.1], dtype=torch.float64), dofs_idx_local=[5])
     torch.testing.assert_close(robot.get_dofs_position([4, 5, 6]), torch.tensor([0.3, 0.1, 0.5], dtype=torch.float64),
                                rtol=0, atol=1e-14)
-    torch.testing.assert_close(quat_to_euler_xyz(robot.get_qpos()[0:4]), robot.get_dofs_position([0, 1, 2]),
-                               rtol=0, atol=0)
+    torch.testing.assert_close(robot.get_dofs_position([0, 1, 2]), torch.tensor([-0.4, 0.7, 0.2], dtype=torch.float64),
+                               rtol=0, atol=1e-14)
     omega = torch.tensor([0.4, -1.0, 2.0], dtype=torch.float64)
     robot.set_dofs_velocity(omega, dofs_idx_local=[4, 5, 6])
     hand = robot.get_link("hand")

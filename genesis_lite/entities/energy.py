@@ -53,7 +53,7 @@ def potential(entity, envs_idx):
     gravity = entity._read_input("gravity", np.arange(3), envs_idx)
     height = -(mass * moving * (com_pos * gravity[:, None, :]).sum(-1)).sum(-1)
     dofs = entity.dof_start + np.flatnonzero(~np.isin(np.arange(entity.n_dofs), entity._quat_joint_dofs))
-    q = entity._read(model.dof_q[dofs], envs_idx)  # the scalar joints' (free and ball joints have no spring)
+    q = entity._read(model.dof_q[dofs], envs_idx)  # the scalar joints' (a ball joint's spring below; a free one has none)
     stiffness = entity._read_input("stiffness", dofs, envs_idx)
     rest = torch.as_tensor(model.dof_springref[dofs], dtype=q.dtype, device=q.device)
     springs = 0.5 * (stiffness * (q - rest) ** 2).sum(-1)

@@ -428,7 +428,8 @@ class RigidEntity(EntityIndexing):
         return current.index_put((rows, axes), angles)
 
     def get_dofs_velocity(self, dofs_idx_local=None, envs_idx=None):
-        """Joint velocities, rad/s or m/s (a free joint: world linear, body-frame angular)."""
+        """Joint velocities, rad/s or m/s (a free joint: world linear, body-frame angular; a ball
+        joint: body-frame angular)."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
         return self._out(self._read(self._vel_columns(dofs), envs_idx))
 
@@ -445,7 +446,8 @@ class RigidEntity(EntityIndexing):
         self.set_dofs_velocity(None, None, envs_idx)
 
     def get_qpos(self, qs_idx_local=None, envs_idx=None):
-        """Generalised positions (n_qs,): a free joint stores position then quaternion."""
+        """Generalised positions (n_qs,): a free joint stores position then quaternion, a ball joint
+        its quaternion."""
         qs = self._local(qs_idx_local, self.n_qs, "qs_idx_local")
         return self._out(self._read(self._solver_q(qs), envs_idx))
 
@@ -719,7 +721,8 @@ class RigidEntity(EntityIndexing):
     def get_potential_energy(self, envs_idx=None):
         """Potential energy of the entity, J: () or (len(envs_idx),), as Genesis's: gravity on the
         links that move, −Σ m g · p_com, and the joint springs, Σ ½ stiffness (q − springref)²
-        (Genesis's about qpos0; energy.py). Differentiable."""
+        (Genesis's about qpos0; a ball joint's Σ ½ stiffness r², r its turn's rotation vector, as
+        MuJoCo's; energy.py). Differentiable."""
         return self._out(energy.potential(self, envs_idx))
 
     def get_total_energy(self, envs_idx=None):
@@ -1094,7 +1097,7 @@ class RigidEntity(EntityIndexing):
     def get_dofs_force(self, dofs_idx_local=None, envs_idx=None):
         """Generalised force on the dofs in the last step's last substep, N·m or N: (n,) or
         (n_envs, n), as Genesis 1.4.5's: clipped actuator force − damping·q̇ − the joint springs'
-        stiffness·(q − springref) − bias (gravity, Coriolis, centrifugal) at that substep's start,
+        stiffness·(q − springref) (a ball joint's stiffness·r) − bias (gravity, Coriolis, centrifugal) at that substep's start,
         plus the constraint forces (joint limits, friction loss, contacts) of its solve (MuJoCo's
         qfrc_smooth + qfrc_constraint): a body resting on the ground feels none. Zeros in an env
         before its first step and after a reset or setter replaced its state. Not differentiable."""

@@ -89,7 +89,7 @@ class InvweightBasis:
     - invweight_t per link (1/kg): the mean of the translational diagonal of J_l M⁻¹ J_lᵀ; zero for
       links welded to the world (the rotational one is not read: condim ≤ 3);
     - invweight_dof per dof: the diagonal of M⁻¹, averaged over a free joint's three translations
-      and its three rotations;
+      and its three rotations, and over a ball joint's three rotations;
     - but on a sliding leaf (``sliding_leaves``: MuJoCo's body_simple = 2), 1 / mass for both, as
       MuJoCo takes them there (armature left out).
     M is block-diagonal over the kinematic trees (a link's Jacobian is non-zero on its tree's dofs
@@ -114,7 +114,8 @@ class InvweightBasis:
             for t in range(len(dofs)):
                 solver.check_positive_definite(np.einsum("l,lij->ij", m.link_mass0[links[t]], K[t])
                                                + np.diag(m.dof_armature[dofs[t]]), dofs=dofs[t])
-            # dof_invweight0 = diag(M⁻¹) @ average: a free joint's translations and rotations averaged
+            # dof_invweight0 = diag(M⁻¹) @ average: a free joint's translations and rotations, a ball
+            # joint's rotations averaged
             average = np.tile(np.eye(dofs.shape[1]), (len(dofs), 1, 1))
             for first in np.flatnonzero(m.dof_q[dofs[0]] < 0)[::3]:  # (alike in a group: _same_shaped_trees)
                 average[:, first: first + 3, first: first + 3] = 1.0 / 3.0
@@ -200,7 +201,7 @@ def _principal_and_ordered(inertia):
 
 def _same_shaped_trees(model):
     """[(links (T, l), dofs (T, n))]: the kinematic trees with dofs, grouped by their numbers of
-    links and dofs and where their free joints' dofs are, ascending within each tree (a tree: the
+    links and dofs and where their free and ball joints' dofs are, ascending within each tree (a tree: the
     dofs under one root dof, and the links whose path to the root first meets one of them; links
     welded to the world belong to none)."""
     parent = model.dof_parent

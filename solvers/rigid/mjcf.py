@@ -8,11 +8,11 @@ Read as MuJoCo's compiler reads it: ``<include>`` files inlined (several ``<defa
 Trees: the bodies in ``<worldbody>`` are the roots of one entity's trees, in the file's order
 (MuJoCo's body and dof order; the first tree's root is the entity's base, as in Genesis). A root
 body is a root link: free with a ``<freejoint>`` (or a joint of type free, its damping, armature and
-frictionloss read), welded where it has no joint; a root body hinged or sliding on the world hangs
+frictionloss read), welded where it has no joint; a root body hinged, sliding or on a ball joint on the world hangs
 from a static link at the world's origin, named "world" (the first; later ones "world:body"). Each
 body is a link named as the body, at the body's frame (MuJoCo's and Genesis's): a body without a
 joint is welded to its parent (not merged, as MuJoCo and Genesis keep it); a body's joints (hinge →
-revolute, slide → prismatic) turn massless links named ``body:joint`` at their anchors, since a
+revolute, slide → prismatic, ball → ball) turn massless links named ``body:joint`` at their anchors, since a
 LinkSpec joint turns about its link's origin, and the body's link hangs welded from the last of
 them, or is that last link where its joint's anchor is the body origin (no extra link: the usual
 case). Contacts take a body's links as one body (LinkSpec.same_body), and, as MuJoCo's filter, a
@@ -170,6 +170,10 @@ class _Reader(MJCFDocument):
         in its frame: one a joint, at the joint's anchor (the chain's later ones in the frame the
         earlier joints turned, as MuJoCo composes them), then the body's own link welded at the body
         frame unless the last joint's anchor is the body origin."""
+        kinds = [self.attrs(joint, childclass).get("type", "hinge") for joint in joints]
+        if "ball" in kinds and any(kind in ("hinge", "ball") for kind in kinds[kinds.index("ball") + 1:]):
+            raise self.error(f"{what}: a ball joint followed by a hinge or ball joint in one body is refused, as "
+                             f"MuJoCo refuses it, got joints of types {kinds}")
         anchor = np.zeros(3)
         for k, joint in enumerate(joints):
             offset = self._anchor(joint, childclass)
@@ -238,8 +242,9 @@ class _Reader(MJCFDocument):
         return self.numbers(attrs, "pos", 3, f"joint {attrs.get('name')!r}", default=np.zeros(3))
 
     def _joint(self, joint, childclass: str, link_name: str, what: str) -> LinkSpec:
-        """A massless link named `link_name` that the hinge or slide `joint` turns (its frame and
-        parent are the chain's to set): axis, limits, damping, armature, friction loss, force bound."""
+        """A massless link named `link_name` that the hinge, slide or ball `joint` turns (its frame
+        and parent are the chain's to set): axis, limits, damping, armature, friction loss, force
+        bound (a ball joint: _ball)."""
         attrs = self.attrs(joint, childclass)
         name = attrs.get("name") or link_name
         what = f"{what} joint {name!r}"
@@ -270,19 +275,19 @@ class _Reader(MJCFDocument):
     def _ball(self, attrs: dict, link_name: str, name: str, what: str) -> LinkSpec:
         """A ball joint's massless link (MuJoCo's ball: its axis, ref and springref unread, as
         MuJoCo's): damping, armature, friction loss and stiffness (MuJoCo's ball spring, to the
-        identity) on its three dofs; limited, a cone limit at the larger of its range's two values
-        (the largest angle of its turn, as MuJoCo reads it)."""
+        identity) on its three dofs; a cone limit as MuJoCo's compiler reads ``range``: limited
+        when ``limited="true"``, or by autolimits where range[0] < range[1]; then range[0] must be
+        0 and the larger value is the largest angle of the turn (0 or less: the joint is held)."""
         spec = _link(link_name, -1, name, "ball", np.zeros(3), IDENTITY.copy())
         for key in ("damping", "armature", "frictionloss", "stiffness"):
             setattr(spec, key, self._non_negative(attrs, key, what))
+        low, high = self.numbers(attrs, "range", 2, what, default=[0.0, 0.0])
         limited = attrs.get("limited", "auto")
-        if limited == "true" or (limited == "auto" and self.autolimits and "range" in attrs):
-            angle = max(self.numbers(attrs, "range", 2, what, default=[0.0, 0.0])) * (
-                np.deg2rad(1.0) if self.degree else 1.0)
-            if angle < 0:
-                raise self.error(f"{what}: a ball joint's range expected a largest angle >= 0, got "
+        if limited == "true" or (limited == "auto" and self.autolimits and "range" in attrs and low < high):
+            if low != 0.0:
+                raise self.error(f"{what}: a ball joint's range expected (0, largest angle), as MuJoCo's, got "
                                  f"{attrs.get('range')!r}")
-            spec.upper = angle
+            spec.upper = max(0.0, high) * (np.deg2rad(1.0) if self.degree else 1.0)
         if self._force_bound(attrs, "actuatorfrcrange", "actuatorfrclimited", what) < np.inf:
             raise self.error(f"{what}: a ball joint's actuatorfrcrange is not supported yet, got "
                              f"{attrs['actuatorfrcrange']!r}")
