@@ -4,7 +4,7 @@ against MuJoCo 4, closed forms and finite differences (float64).
 assets/mjcf/balls.xml has two trees: an arm hanging from the world by a ball joint (a 40° cone
 limit, a spring), a hinge, and a box on a ball joint anchored off its body origin (friction loss,
 armature, a spring, a 25° cone); and a free sphere dragging four capsules on ball joints onto the
-ground. From random velocities both engines run 3 s side by side, cone limits and contacts active
+ground. From random velocities both engines run 2 s side by side, cone limits and contacts active
 (measured: 1.7e-13 either cone); so do cone limits alone, a turn stored as −q (w < 0), and a ball
 joint beside a hinge or slide in one body; ranges are read as MuJoCo's compiler reads them. A
 spherical pendulum keeps its energy and vertical angular momentum to first order in the time
@@ -50,7 +50,7 @@ def test_ball_joints_match_mujoco(f64, cone):
         seen["limits"] = max(seen["limits"], d.nl)
         seen["contacts"] = max(seen["contacts"], len(robot.get_contacts()["position"]))
 
-    assert _lockstep(m, d, scene, robot, 1500, note) < 1e-10
+    assert _lockstep(m, d, scene, robot, 1000, note) < 1e-10
     assert seen["limits"] >= 2 and seen["contacts"] >= 4, seen
 
 
@@ -152,11 +152,12 @@ def _pendulum(tmp_path, dt):
 def test_spherical_pendulum_conserves_energy_and_vertical_momentum_to_first_order(f64, tmp_path):
     """Tilted 0.3 rad and spinning (body-frame ω (0, 1, 2) rad/s): gravity has no moment about the
     vertical through the pivot, so L_z is conserved, and so is the energy. The semi-implicit Euler
-    step keeps both to O(h): over 4 s the largest deviation halves with the time step (measured
-    ratios 0.50, 0.50; MuJoCo's Euler integrator drifts alike, the same bits to 1e-8), and is at
-    h = 0.5 ms under 1 % (L_z) and 2e-4 (energy) of their values (measured 0.49 %, 1.0e-4)."""
+    step keeps both to O(h): over 4 s the largest deviation (sampled every 5 steps) halves with the
+    time step (measured ratios 0.50, 0.50; MuJoCo's Euler integrator drifts alike, the same bits to
+    1e-8), and is at h = 1 ms under 2 % (L_z) and 4e-4 (energy) of their values (measured 0.97 %,
+    2.0e-4)."""
     deviations = []
-    for dt in (1e-3, 5e-4):
+    for dt in (2e-3, 1e-3):
         scene, robot = _pendulum(tmp_path, dt)
         mass, radius, arm = float(robot.links[1].get_mass()), 0.05, 0.5
         spin = 0.4 * mass * radius ** 2
@@ -170,14 +171,15 @@ def test_spherical_pendulum_conserves_energy_and_vertical_momentum_to_first_orde
 
         momentum, energy = vertical_momentum(), float(robot.get_total_energy())
         worst = np.zeros(2)
-        for _ in range(int(round(4.0 / dt))):
-            scene.step()
+        for _ in range(int(round(4.0 / dt / 5))):
+            for _ in range(5):
+                scene.step()
             worst = np.maximum(worst, [abs(vertical_momentum() - momentum), abs(float(robot.get_total_energy())
                                                                                    - energy)])
         deviations.append(worst / [abs(momentum), abs(energy)])
     ratio = deviations[1] / deviations[0]
     assert np.all((0.45 < ratio) & (ratio < 0.55)), f"deviation ratios (L_z, E) at h/2: {ratio}"
-    assert deviations[1][0] < 1e-2 and deviations[1][1] < 2e-4, deviations
+    assert deviations[1][0] < 2e-2 and deviations[1][1] < 4e-4, deviations
 
 
 def test_spherical_pendulum_swings_at_the_physical_pendulums_period(f64, tmp_path):
@@ -283,13 +285,21 @@ def test_batched_ball_joints_equal_single_envs_bitwise(f64):
     (batched, robot_b), (single, robot_s) = built
     n_envs = batched.n_envs
     velocity = torch.tensor(np.random.default_rng(6).normal(0.0, 2.0, (n_envs, robot_b.n_dofs)))
+    velocity[:, 7:13] *= 0.1  # (the rope's free root gently: it stays on the ground)
+    qpos = robot_s.get_qpos().detach().clone()
+    qpos[11] = 0.05  # the rope's root near the ground: it lands at once
+    robot_b.set_qpos(qpos.expand(n_envs, -1))
     robot_b.set_dofs_velocity(velocity)
-    for _ in range(100):
+    touched = torch.zeros(n_envs, dtype=torch.bool)
+    for _ in range(40):
         batched.step()
+        touched |= robot_b.get_contacts()["valid_mask"].any(1).cpu()
+    assert bool(touched.all())
     for e in (0, n_envs // 2, n_envs - 1):
         single.reset()
+        robot_s.set_qpos(qpos)
         robot_s.set_dofs_velocity(velocity[e])
-        for _ in range(100):
+        for _ in range(40):
             single.step()
         assert torch.equal(robot_s.get_qpos(), robot_b.get_qpos()[e])
         assert torch.equal(robot_s.get_dofs_velocity(), robot_b.get_dofs_velocity()[e])
