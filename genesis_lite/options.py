@@ -160,7 +160,10 @@ class RigidOptions(_TimeBased):
         early (a mesh pressed into a box, sliding at one contact: the decrement 4e-9 with a
         scaled gradient of 5e-4), and the forward map's derivative then differed from the
         gradient by 1e-3 of its norm; one or two more Newton steps, no measurable cost in the a1
-        and box-tower scenes.
+        and box-tower scenes. So under enable_mujoco_compatibility (1e-8) a gradient through rows
+        the solve leaves that loose can be off by 1e-4 … 2e-3 of its norm (a chain of ball joints
+        with friction loss on every dof, measured 2026-11-30); give ``tolerance=1e-14`` there when
+        the gradients matter.
     friction_cone: pyramidal or elliptic. impratio: friction-to-normal impedance ratio (None: 1
         with the pyramidal cone, 100 with the elliptic one, as Genesis; 1 with
         enable_mujoco_compatibility).

@@ -225,8 +225,9 @@ def test_gradients_through_ball_joints_match_finite_differences(f64, what):
     start_qpos[0:4] = euler_xyz_to_quat(torch.tensor([0.2, -0.3, 0.1], dtype=torch.float64)) * 1.1  # (not unit)
     start_qpos[11] = 0.1  # the rope's root lower: it lands within the rollout
     springs = [k for k in range(dofs) if not 7 <= k < 13]  # (the rope's free root has none)
+    spring_dofs = torch.tensor([3, 1, 3, 3, 3, 3, 3])  # one stiffness a joint: shoulder, elbow, wrist, the rope's
     start = {"qpos": start_qpos, "velocity": velocity,
-             "stiffness": torch.linspace(0.1, 0.6, len(springs), dtype=torch.float64),
+             "stiffness": torch.linspace(0.1, 0.6, len(spring_dofs), dtype=torch.float64),
              "damping": torch.full((dofs,), 0.02, dtype=torch.float64),
              "mass": robot.get_links_mass().detach().clone()[heavy],
              "force": torch.tensor(rng.normal(0.0, 0.05, (steps, dofs)))}[what]
@@ -237,7 +238,7 @@ def test_gradients_through_ball_joints_match_finite_differences(f64, what):
         robot.set_qpos(x if what == "qpos" else start_qpos)
         robot.set_dofs_velocity(x if what == "velocity" else velocity)
         if what == "stiffness":
-            robot.set_dofs_stiffness(x, dofs_idx_local=springs)
+            robot.set_dofs_stiffness(x.repeat_interleave(spring_dofs), dofs_idx_local=springs)
         elif what == "damping":
             robot.set_dofs_damping(x)
         elif what == "mass":
@@ -388,8 +389,9 @@ def test_inverse_kinematics_turns_ball_joints(f64):
 
 
 def test_ball_joint_inputs_are_checked(f64):
-    """A zero quaternion and a position servo on a ball joint's dofs are named errors; a ball spring
-    is accepted, a free joint's is not (the MJCF attributes a ball joint does not take:
+    """A zero quaternion, a position servo on a ball joint's dofs and unequal stiffness on its
+    three dofs (a spring no energy has) are named errors; a ball spring is accepted, a free
+    joint's is not (the MJCF attributes a ball joint does not take:
     test_mjcf.test_unsupported_or_malformed_files_are_named)."""
     scene = gs.Scene()
     robot = scene.add_entity(gs.morphs.MJCF(file=BALLS))
@@ -401,3 +403,7 @@ def test_ball_joint_inputs_are_checked(f64):
     robot.set_dofs_stiffness(torch.ones(3), dofs_idx_local=[4, 5, 6])
     with pytest.raises(InvalidInputError, match="free joint's dofs"):
         robot.set_dofs_stiffness(torch.ones(3), dofs_idx_local=[7, 8, 9])
+    for values, dofs in (([1.0, 2.0, 1.0], [4, 5, 6]), ([2.0], [5])):  # (one spring a ball joint, as MuJoCo's)
+        with pytest.raises(InvalidInputError, match="equal on the three dofs of a ball joint"):
+            robot.set_dofs_stiffness(torch.tensor(values), dofs_idx_local=dofs)
+    robot.set_dofs_stiffness(torch.tensor([2.0, 2.0, 2.0, 0.5]), dofs_idx_local=[4, 5, 6, 3])

@@ -798,8 +798,9 @@ class RigidEntity(EntityIndexing):
         dof, springref the asset's (MJCF ``springref``) or 0 (Genesis springs to qpos0, the
         initial position: an MJCF's ``ref``, else 0). Explicit in the step, as in MuJoCo and
         Genesis. A ball joint's dof a is pulled by −stiffness·r_a, r the rotation vector of its turn
-        (MuJoCo's ball spring; Genesis: −stiffness times its Euler angle). A free joint's dofs take
-        none (0 only). Differentiable."""
+        (MuJoCo's ball spring; Genesis: −stiffness times its Euler angle), one stiffness for its
+        three dofs (MuJoCo's: another on each would push with a force no energy has). A free joint's
+        dofs take none (0 only). Differentiable."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         values = self._refuse_negative("stiffness", self._values(stiffness, len(dofs), envs, "stiffness"))
@@ -807,6 +808,17 @@ class RigidEntity(EntityIndexing):
         if free.any() and bool((values.detach()[:, torch.as_tensor(free, device=values.device)] != 0).any()):
             raise InvalidInputError(f"entity '{self.name}': argument 'stiffness' must be 0 on the free joint's dofs "
                                     f"(local {dofs[free].tolist()}), got {values.detach().cpu().numpy()}")
+        for dof, _ in self._ball_joints:
+            mine = (dofs >= dof) & (dofs < dof + 3)
+            if mine.any():
+                current = self._sim().inputs(self._solver)["stiffness"][torch.as_tensor(envs, device=runtime.device)]
+                after = current[:, self.dof_start + dof: self.dof_start + dof + 3].detach().clone()
+                after[:, torch.as_tensor(dofs[mine] - dof, device=after.device)] = values.detach()[
+                    :, torch.as_tensor(mine, device=after.device)]
+                if bool((after != after[:, :1]).any()):
+                    raise InvalidInputError(f"entity '{self.name}': argument 'stiffness' must be equal on the three "
+                                            f"dofs of a ball joint (local {list(range(dof, dof + 3))}: one spring, "
+                                            f"as MuJoCo's), would be {after.cpu().numpy()}")
         self._write_input("stiffness", self.dof_start + dofs, envs, values)
 
     def set_dofs_frictionloss(self, frictionloss, dofs_idx_local=None, envs_idx=None):
