@@ -276,7 +276,7 @@ class RigidEntity(EntityIndexing):
         # (first local dof, first local q) of every joint's rotation stored as a quaternion: a free
         # joint's last three dofs, a ball joint's three
         self._turns = sorted([(dof + 3, q + 3) for dof, q in self._free_joints] + self._ball_joints)
-        # the dofs of free and ball joints: no scalar coordinate, so no spring and no position servo
+        # the dofs of free and ball joints: no scalar coordinate, so no position servo (and no scalar spring)
         self._quat_joint_dofs = np.array([dof + k for (dof, _), jt in zip(first, jtype) if jt in (FREE, BALL)
                                           for k in range(6 if jt == FREE else 3)], dtype=np.int64)
         # per local dof: its column in the state's qpos; a free joint's linear dofs are its origin's

@@ -6,8 +6,6 @@ angular velocity w and the linear velocity v of the body point at o; a *force* (
 n about o and a force f. A link's spatial inertia about o is (m, h, I): mass m (kg), first moment
 h = m·(c − o) (kg·m, c the world com) and rotational inertia I about o (kg·m², 3x3).
 """
-import math
-
 import taichi as ti
 
 # Products are written out as single expressions: Taichi's ``@`` accumulates into a local.
@@ -73,25 +71,6 @@ def axis_angle_quat(axis, angle):
 
 
 @ti.func
-def quat_turn(q):
-    """(θ rad in [0, π], unit axis (3,), sign) of the rotation by the raw quaternion q, as MuJoCo's
-    mju_quat2Vel of q / |q| = (c, v): θ = 2 atan2(|v|, c), taken through −2π past π, where the
-    axis v / |v| flips (sign −1); the axis is (1, 0, 0) at no turn. θ · axis is the rotation
-    vector (MuJoCo's mju_subQuat from the identity)."""
-    n = quat_normalized(q)
-    v = ti.Vector([n[1], n[2], n[3]])
-    length = v.norm()
-    axis = ti.Vector([1.0, 0.0, 0.0])
-    if length >= 1e-15:  # (MuJoCo's mjMINVAL)
-        axis = v / length
-    angle = 2.0 * ti.atan2(length, n[0])
-    sign = 1.0
-    if angle > math.pi:
-        angle, sign = 2.0 * math.pi - angle, -1.0
-    return angle, sign * axis, sign
-
-
-@ti.func
 def _turn_terms(q):
     """(sign, c, v, l) of the raw quaternion q: q / |q| = sign (c, v) with c ≥ 0 (the turn of at
     most π), l = |v|."""
@@ -101,6 +80,18 @@ def _turn_terms(q):
         sign = -1.0
     v = sign * ti.Vector([n[1], n[2], n[3]])
     return sign, sign * n[0], v, v.norm()
+
+
+@ti.func
+def quat_turn(q):
+    """(θ rad in [0, π], unit axis (3,)) of the rotation by the raw quaternion q, as MuJoCo's
+    mju_quat2Vel of q / |q|: with (c, v) = ±q / |q|, c ≥ 0, θ = 2 atan2(|v|, c) and the axis
+    v / |v| ((1, 0, 0) at no turn). θ · axis is the rotation vector (quat_rotation_vector)."""
+    _sign, c, v, l = _turn_terms(q)
+    axis = ti.Vector([1.0, 0.0, 0.0])
+    if l >= 1e-15:  # (MuJoCo's mjMINVAL)
+        axis = v / l
+    return 2.0 * ti.atan2(l, c), axis
 
 
 @ti.func
@@ -167,20 +158,17 @@ def normalized_adjoint(q, g):
 
 
 @ti.func
-def quat_turn_adjoint(q, sign, g_angle, g_axis):
+def quat_turn_adjoint(q, g_angle, g_axis):
     """Gradient of the raw quaternion q from the gradients of quat_turn's angle and axis: with
-    (c, v) = q / |q|, l = |v|, θ = 2 atan2(l, c) (the angle is θ, or 2π − θ where sign = −1), axis
-    = sign v / l: ∂θ/∂l = 2c / (l² + c²), ∂θ/∂c = −2l / (l² + c²), ∂(v / l)/∂v = (I − â âᵀ) / l."""
-    n = quat_normalized(q)
-    v = ti.Vector([n[1], n[2], n[3]])
-    length = v.norm()
-    g_theta = sign * g_angle
-    square = length * length + n[0] * n[0]
+    l = |v|, ∂θ/∂l = 2c / (l² + c²), ∂θ/∂c = −2l / (l² + c²), ∂(v / l)/∂v = (I − â âᵀ) / l, and
+    (c, v) = sign · q / |q|."""
+    sign, c, v, l = _turn_terms(q)
+    square = l * l + c * c
     g_v = ti.Vector.zero(float, 3)
-    if length >= 1e-15:  # (no turn: the axis is a constant, and θ's slope along v, 2c v / l, is 0 · g)
-        unit = v / length
-        g_v = 2.0 * n[0] / square * g_theta * unit + sign * (g_axis - unit * unit.dot(g_axis)) / length
-    return normalized_adjoint(q, ti.Vector([-2.0 * length / square * g_theta, g_v[0], g_v[1], g_v[2]]))
+    if l >= 1e-15:  # (no turn: the axis is a constant, and θ's slope along v, 2c v / l, is 0 · g)
+        unit = v / l
+        g_v = 2.0 * c / square * g_angle * unit + (g_axis - unit * unit.dot(g_axis)) / l
+    return sign * normalized_adjoint(q, ti.Vector([-2.0 * l / square * g_angle, g_v[0], g_v[1], g_v[2]]))
 
 
 @ti.func

@@ -545,7 +545,7 @@ def _ball_limit(d: ti.template(), s, e, i):
     violated, dist, axis = 0, 0.0, ti.Vector.zero(float, 3)
     link = d.dof_link[i]
     if d.limits_enabled and d.link_jtype[link] == BALL and d.link_dof0[link] == i and d.dof_upper[i] < BIG:
-        angle, turn_axis, _sign = quat_turn(ball_quat(d, s, e, link))
+        angle, turn_axis = quat_turn(ball_quat(d, s, e, link))
         dist, axis = d.dof_upper[i] - angle, turn_axis
         if dist < 0.0:
             violated = 1
@@ -687,7 +687,7 @@ def _ball_limit_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
     first dof's dof_invweight0."""
     i = d.efc_id[s, e, r]
     raw = ball_quat(d, s, e, d.dof_link[i])
-    angle, axis, sign = quat_turn(raw)
+    angle, axis = quat_turn(raw)
     g_dist, damping = _joint_row_scalars_adjoint(d, e, d.dof_upper[i] - angle, d.invweight_dof[e, i], g_aref, g_R,
                                                  i, -1)
     g_angle = -g_dist  # dist = θmax − θ
@@ -697,7 +697,7 @@ def _ball_limit_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
         w = d.qacc_constrained[s, e, i + a] + damping * d.qvel[s, e, i + a]
         g_axis[a] = -(force * d.solver_Mgrad[s, e, i + a] - g_aref * w)  # J = −axis
         accumulate(d.qvel.grad, ti.Vector([s, e, i + a]), damping * axis[a] * g_aref)  # aref ∋ −B (−axis) · q̇
-    g_raw = quat_turn_adjoint(raw, sign, g_angle, g_axis)
+    g_raw = quat_turn_adjoint(raw, g_angle, g_axis)
     q0 = d.link_q0[d.dof_link[i]]
     for k in ti.static(range(4)):
         accumulate(d.qpos.grad, ti.Vector([s, e, q0 + k]), g_raw[k])
