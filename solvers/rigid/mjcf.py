@@ -38,9 +38,11 @@ the |force| bound; a ``motor`` is force control (control_dofs_force).
 ref2) (LinkSpec.mimic).
 
 Ball joints (MuJoCo's: a quaternion, three dofs about the body's own axes) with damping, armature,
-friction loss, a spring (stiffness) and MuJoCo's cone limit (range: the larger value is the
-largest angle of the turn).
-Refused (AssetError naming the element): a ball joint's force range, a free joint below a root body, a joint's
+friction loss, a spring (stiffness) and MuJoCo's cone limit (range (0, θ): θ the largest angle of
+the turn; limited by autolimits only where range[0] < range[1], as MuJoCo's compiler).
+Refused (AssetError naming the element): a ball joint's force range, a limited ball joint's range
+not starting at 0, a ball joint followed by a hinge or ball in one body (as MuJoCo refuses them),
+a free joint below a root body, a joint's
 ``springdamper`` and ``springyield``, a polynomial stiffness, a free joint's stiffness, ellipsoid /
 hfield / sdf geoms, welds and connects, elements that would add or move bodies and geoms unread
 (``<replicate>``, ``<composite>``…; ``<frame>`` is read: it places its bodies and geoms, and its
