@@ -18,7 +18,7 @@ inertia, which the gains of Genesis's examples do at its time steps.
 import taichi as ti
 
 from .data import accumulate
-from .kinematics import ball_quat
+from .kinematics import joint_quat
 from .model import BALL
 from .spatial import quat_rotation_vector, quat_rotation_vector_adjoint
 
@@ -62,7 +62,7 @@ def _spring_stretch(d: ti.template(), s, e, i):
         stretch = d.qpos[s, e, qi] - d.dof_springref[i]
     elif d.link_jtype[d.dof_link[i]] == BALL:
         link = d.dof_link[i]
-        stretch = quat_rotation_vector(ball_quat(d, s, e, link))[i - d.link_dof0[link]]
+        stretch = quat_rotation_vector(joint_quat(d, s, e, link))[i - d.link_dof0[link]]
     return stretch
 
 
@@ -76,7 +76,7 @@ def _spring_stretch_adjoint(d: ti.template(), s, e, i, g):
         link = d.dof_link[i]
         g_turn = ti.Vector.zero(float, 3)
         g_turn[i - d.link_dof0[link]] = g
-        g_raw = quat_rotation_vector_adjoint(ball_quat(d, s, e, link), g_turn)
+        g_raw = quat_rotation_vector_adjoint(joint_quat(d, s, e, link), g_turn)
         for k in ti.static(range(4)):
             accumulate(d.qpos.grad, ti.Vector([s, e, d.link_q0[link] + k]), g_raw[k])
 

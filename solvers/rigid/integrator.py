@@ -8,12 +8,8 @@ import taichi as ti
 
 from .model import BALL, FREE, PRISMATIC, REVOLUTE
 from .data import accumulate
+from .kinematics import joint_quat
 from .spatial import quat_integrate, quat_integrate_adjoint
-
-
-@ti.func
-def _quat_at(d: ti.template(), s, e, k):
-    return ti.Vector([d.qpos[s, e, k + j] for j in ti.static(range(4))])
 
 
 @ti.func
@@ -38,7 +34,7 @@ def integrate_link(d: ti.template(), s, e, l):
         for k in ti.static(range(3)):
             if k < shift:
                 d.qpos[s + 1, e, q0 + k] = d.qpos[s, e, q0 + k] + h * d.qvel[s + 1, e, dof0 + k]
-        quat = quat_integrate(_quat_at(d, s, e, q0 + shift), _omega_at(d, s + 1, e, dof0 + shift), h)
+        quat = quat_integrate(joint_quat(d, s, e, l), _omega_at(d, s + 1, e, dof0 + shift), h)
         for k in ti.static(range(4)):
             d.qpos[s + 1, e, q0 + shift + k] = quat[k]
 
@@ -63,7 +59,7 @@ def integrate_link_adjoint(d: ti.template(), s, e, l):
     elif jt == FREE or jt == BALL:
         shift = 3 if jt == FREE else 0
         g_quat_new = ti.Vector([gq[s + 1, e, q0 + shift + k] for k in ti.static(range(4))])
-        g_quat, g_omega = quat_integrate_adjoint(_quat_at(d, s, e, q0 + shift), _omega_at(d, s + 1, e, dof0 + shift),
+        g_quat, g_omega = quat_integrate_adjoint(joint_quat(d, s, e, l), _omega_at(d, s + 1, e, dof0 + shift),
                                                  h, g_quat_new)
         for k in ti.static(range(3)):
             if k < shift:

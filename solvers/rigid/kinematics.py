@@ -28,7 +28,7 @@ def _joint_pose(d: ti.template(), s, e, l):
     quat = ti.Vector([1.0, 0.0, 0.0, 0.0])
     if jt == FREE:  # the coordinates are the world pose, whatever the parent
         pos = ti.Vector([d.qpos[s, e, q0 + k] for k in ti.static(range(3))])
-        quat = quat_normalized(ti.Vector([d.qpos[s, e, q0 + 3 + k] for k in ti.static(range(4))]))
+        quat = quat_normalized(joint_quat(d, s, e, l))
     else:
         p = d.link_parent[l]
         if p >= 0:
@@ -41,14 +41,15 @@ def _joint_pose(d: ti.template(), s, e, l):
         elif jt == PRISMATIC:
             pos = pos + mat_vec(quat_to_mat(quat), d.link_axis[l]) * d.qpos[s, e, q0]
         elif jt == BALL:  # turned about its origin by its quaternion, in the joint frame
-            quat = quat_mul(quat, quat_normalized(ball_quat(d, s, e, l)))
+            quat = quat_mul(quat, quat_normalized(joint_quat(d, s, e, l)))
     return pos, quat
 
 
 @ti.func
-def ball_quat(d: ti.template(), s, e, l):
-    """The raw (unnormalised) quaternion (4,) of link l's ball joint at frame s."""
-    q0 = d.link_q0[l]
+def joint_quat(d: ti.template(), s, e, l):
+    """The raw (unnormalised) quaternion (4,) of link l's free or ball joint at frame s (a free
+    joint's after its position)."""
+    q0 = d.link_q0[l] + (3 if d.link_jtype[l] == FREE else 0)
     return ti.Vector([d.qpos[s, e, q0 + k] for k in ti.static(range(4))])
 
 
@@ -176,14 +177,14 @@ def _joint_pose_adjoint(d: ti.template(), s, e, l, pos, quat, g_pos, g_rot):
     elif jt == PRISMATIC:
         accumulate(d.qpos.grad, ti.Vector([s, e, q0]), g_pos.dot(d.cdof_v[s, e, d.link_dof0[l]]))
     elif jt == FREE:  # δquat = ½ (0, δθ) ⊗ quat, quat = raw / |raw|
-        raw = ti.Vector([d.qpos[s, e, q0 + 3 + k] for k in ti.static(range(4))])
+        raw = joint_quat(d, s, e, l)
         g_raw = normalized_adjoint(raw, 2.0 * quat_mul(ti.Vector([0.0, g_rot[0], g_rot[1], g_rot[2]]), quat))
         for k in ti.static(range(3)):
             accumulate(d.qpos.grad, ti.Vector([s, e, q0 + k]), g_pos[k])
         for k in ti.static(range(4)):
             accumulate(d.qpos.grad, ti.Vector([s, e, q0 + 3 + k]), g_raw[k])
     elif jt == BALL:  # quat = before ⊗ n, n = raw / |raw|: δn = ½ (0, R_beforeᵀ δθ) ⊗ n
-        raw = ball_quat(d, s, e, l)
+        raw = joint_quat(d, s, e, l)
         before = d.link_quat0[l]  # the joint frame's world orientation
         if p >= 0:
             before = quat_mul(d.xquat[s, e, p], before)

@@ -31,7 +31,7 @@ likewise for contact rows, into body_invweight0 among others).
 import taichi as ti
 
 from ..data import BIG, CONST, JOINT_ROW_SLOTS, accumulate
-from ..kinematics import ball_quat, dof_count, dof_motion_at, reference
+from ..kinematics import dof_count, dof_motion_at, joint_quat, reference
 from ..model import BALL
 from ..spatial import quat_turn, quat_turn_adjoint
 
@@ -545,7 +545,7 @@ def _ball_limit(d: ti.template(), s, e, i):
     violated, dist, axis = 0, 0.0, ti.Vector.zero(float, 3)
     link = d.dof_link[i]
     if d.limits_enabled and d.link_jtype[link] == BALL and d.link_dof0[link] == i and d.dof_upper[i] < BIG:
-        angle, turn_axis = quat_turn(ball_quat(d, s, e, link))
+        angle, turn_axis = quat_turn(joint_quat(d, s, e, link))
         dist, axis = d.dof_upper[i] - angle, turn_axis
         if dist < 0.0:
             violated = 1
@@ -686,7 +686,7 @@ def _ball_limit_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
     and aref's −B J q̇; u = H⁻¹ā in solver_Mgrad), into the ball joint's quaternion, q̇ and its
     first dof's dof_invweight0."""
     i = d.efc_id[s, e, r]
-    raw = ball_quat(d, s, e, d.dof_link[i])
+    raw = joint_quat(d, s, e, d.dof_link[i])
     angle, axis = quat_turn(raw)
     g_dist, damping = _joint_row_scalars_adjoint(d, e, d.dof_upper[i] - angle, d.invweight_dof[e, i], g_aref, g_R,
                                                  i, -1)
