@@ -168,6 +168,18 @@ LINK = '<geom type="sphere" size="0.1"/>'
     (f'<body name="b"><body name="c"><joint name="j"/><freejoint/>{LINK}</body></body>', "", "type expected hinge"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><weld body1="b"/></equality>',
      "<equality><weld> is not supported"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><connect body1="b" body2="c" anchor="0 0 0"/>'
+     '</equality>', "<equality><connect name=None>: body2 expected a body of the file, got 'c'"),
+    (f'<body name="b"><joint name="j"/>{LINK}<site name="s"/></body>', '<equality><connect site1="s" site2="t"/>'
+     '</equality>', "site2 expected a site of the file, got 't'"),
+    (f'<body name="b"><joint name="j"/>{LINK}<site name="s"/></body>',
+     '<equality><connect site1="s" site2="s"/></equality>', "expected two different bodies, got 'b' twice"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><connect body1="world" body2="b" anchor="0 0 0"/>'
+     '</equality>', "body1 expected a body of the file, got the world (name it as body2)"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><connect body1="b"/></equality>',
+     "attribute 'anchor' is missing"),
+    (f'<body name="b"><joint name="j"/>{LINK}<site name="s"/></body>',
+     '<equality><connect site1="s" site2="s" body1="b"/></equality>', "expected sites or bodies, got site1/site2 with"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<actuator><position joint="j" forcerange="-1 2"/></actuator>',
      "forcerange expected a symmetric range"),
     (f'<body name="b"><freejoint/><joint type="free" name="f" stiffness="2"/>{LINK}</body>', "",

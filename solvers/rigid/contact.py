@@ -64,9 +64,9 @@ def worst_case_contacts(model):
 def capacity(model, options):
     """(contact slots C, row slots R) per env: C the pairs' worst case, capped by max_contacts
     (default: MAX_PER_MOVING_LINK per moving link with geometry, at least MIN_CONTACTS); R
-    enough rows for C contacts of the largest condim under the cone, one per joint equality, one
-    per limited dof (at most one of its two bounds is violated) and one per dof for friction loss
-    (settable on any)."""
+    enough rows for C contacts of the largest condim under the cone, one per joint equality, three
+    per connect, one per limited dof (at most one of its two bounds is violated) and one per dof
+    for friction loss (settable on any)."""
     worst = worst_case_contacts(model)
     if options.max_contacts is not None:
         cap = int(options.max_contacts)
@@ -76,7 +76,8 @@ def capacity(model, options):
     contacts = min(worst, cap)
     condim = int(model.pair_condim.max()) if len(model.pair_condim) else 1
     rows_per_contact = condim if options.friction_cone == "elliptic" or condim == 1 else 2 * (condim - 1)
-    return contacts, contacts * rows_per_contact + model.n_eq + limited_dofs(model, options) + model.n_dofs
+    joint_rows = model.n_eq + 3 * model.n_connect + limited_dofs(model, options) + model.n_dofs
+    return contacts, contacts * rows_per_contact + joint_rows
 
 
 class InvweightBasis:

@@ -89,6 +89,8 @@ MODEL = {
     "dof_springref": ("f", "D"),  # rad or m: where a joint spring is at rest
     # joint equalities (URDF mimic joints; RigidModel says what they hold)
     "eq_dof1": ("i", "E"), "eq_dof2": ("i", "E"), "eq_coef": ("f", "E2"),
+    # connects (points of two links held together; RigidModel says what they hold)
+    "connect_link": ("i", "K2"), "connect_anchor": ("v3", "K2"),
     # substep h (s), the time constant (s) of the joint rows (equality, limit, friction loss), impratio, solver
     # tolerance and line-search tolerance: runtime values like everything else (CONSTS names them)
     "consts": ("f", len(CONSTS)),
@@ -126,7 +128,8 @@ FRAMES = {
     "efc_J": ("f", "RD", False),
     # each row's non-zero columns: efc_cols[efc_col0 …] (efc_ncol of them, ascending), a contact's
     # rows sharing its list (from c·D), a joint row r (an equality's two dofs, a single dof, a ball joint's
-    # three) at C·D + JOINT_ROW_SLOTS·r
+    # three) at joint_row_columns + JOINT_ROW_SLOTS·r, a connect k's three rows sharing a list at
+    # connect_columns + k·D
     "efc_col0": ("i", "R", False), "efc_ncol": ("i", "R", False), "efc_cols": ("i", "CD", False), "efc_R": ("f", "R", False), "efc_aref": ("f", "R", False),
     "efc_floss": ("f", "R", False), "efc_mu": ("f", "R", False), "efc_force": ("f", "R", False),
     "solver_M": ("f", "DD", False), "qacc_smooth": ("f", "D", False), "qacc_constrained": ("f", "D", True),
@@ -163,7 +166,7 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
 # colliders_due a mask of the collider kernels the substep's near pairs need (collision/detect.py: KERNEL_BIT);
 # inexact_pair, inexact_env, inexact_substep: where the last inexact contact was (the backward's error names it);
 # capped a flag: a constraint solve stopped at its iteration limit before its tolerance.
-SIZES = ("B", "L", "D", "Q", "P", "E", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C", "R", "cone",
+SIZES = ("B", "L", "D", "Q", "P", "E", "K", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C", "R", "cone",
          "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged", "constrained",
          "colliders_due", "inexact_pair", "inexact_env", "inexact_substep", "wrench", "capped")
 HEADER = {name: k for k, name in enumerate(SIZES)}
@@ -230,12 +233,24 @@ def _has_convex_pairs(model):
     return any(kind in CONVEX_PAIRS for kind in kinds)
 
 
+def joint_row_columns(size):
+    """Where the joint rows' column slots start in efc_cols (JOINT_ROW_SLOTS a row, from row 0):
+    after the contacts' lists (D a contact)."""
+    return size["C"] * size["D"]
+
+
+def connect_columns(size):
+    """Where the connects' column lists start in efc_cols (D a connect: its three rows' list):
+    after the joint rows' slots (at most a row per joint equality, three per connect, two per dof)."""
+    return joint_row_columns(size) + JOINT_ROW_SLOTS * (size["E"] + 3 * size["K"] + 2 * size["D"])
+
+
 def _counts(size):
     """Element count per env of each count name used in MODEL and FRAMES."""
     D, R = size["D"], size["R"]
     return {"L": size["L"], "D": D, "Q": size["Q"], "P": size["P"], "DD": D * D, "G": size["G"], "N": size["N"],
             "H": size["H"], "C": size["C"], "CF": FEATURE_SIZE * size["C"], "HI": size["HI"], "R": R, "RD": R * D,
-            "CD": size["C"] * D + JOINT_ROW_SLOTS * (size["E"] + 2 * D), "E": size["E"], "E2": 2 * size["E"],
+            "CD": connect_columns(size) + size["K"] * D, "E": size["E"], "E2": 2 * size["E"], "K2": 2 * size["K"],
             "G2": 2 * size["G"], "G5": 5 * size["G"], "L6": 6 * size["L"], 1: 1,
             len(CONSTS): len(CONSTS),
             **{f"ws:{name}": size["WS"] * n for name, (_, n) in CONVEX_SCRATCH.items()}}
@@ -266,7 +281,7 @@ class RigidData:
         self.grad_total = sum(w for w, (_, diff) in zip(self.widths, INPUTS.values()) if diff)
         self.grad_input_names = [n for n, (_, diff) in INPUTS.items() if diff] if requires_grad else []
         self.size = {"B": n_batch, "L": model.n_links, "D": model.n_dofs, "Q": model.n_qs, "P": len(model.pairs),
-                     "E": model.n_eq,
+                     "E": model.n_eq, "K": model.n_connect,
                      "S": substeps, "W": self.input_total, "GW": self.grad_total,
                      "limits": int(bool(settings["limits"])), "nonfinite": 0, "G": n_geoms,
                      "N": len(model.pair_geom1), "H": len(model.hull_vec), "C": settings["contacts"],
@@ -394,7 +409,8 @@ class RigidView:
         start = {name: impl.expr_init(value) for name, value in layout(size)[0].items()}
         self.n_batch, self.n_links, self.n_dofs, self.n_qs = size["B"], size["L"], size["D"], size["Q"]
         self.n_pairs, self.substeps, self.input_total, self.grad_total = size["P"], size["S"], size["W"], size["GW"]
-        self.n_eq = size["E"]
+        self.n_eq, self.n_connect = size["E"], size["K"]
+        self.joint_columns, self.connect_columns = joint_row_columns(size), connect_columns(size)
         self.limits_enabled = size["limits"]
         self.n_geoms, self.n_candidates = size["G"], size["N"]
         self.contact_capacity = size["C"]

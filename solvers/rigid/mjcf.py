@@ -35,7 +35,10 @@ Actuators on a joint give its servo (as Genesis reads them): ``position`` kp, kv
 with an affine bias, kp = −biasprm[1], kv = −biasprm[2]; ``velocity`` kv; forcerange (symmetric)
 the |force| bound; a ``motor`` is force control (control_dofs_force).
 ``<equality><joint>`` with polycoef (c0, c1) makes joint1 follow joint2, q1 − ref1 = c0 + c1 (q2 −
-ref2) (LinkSpec.mimic).
+ref2) (LinkSpec.mimic). ``<equality><connect>`` holds a point of body1 on body2 (or the world): by
+bodies (anchor in body1's frame; body2's anchor where that point is at qpos0) or by sites (their
+positions in their bodies) (LinkSpec.connects). An equality's solref and solimp are not read (the
+scene's constraint time constant rules; a warning says so); an inactive one is not loaded.
 
 Ball joints (MuJoCo's: a quaternion, three dofs about the body's own axes) with damping, armature,
 friction loss, a spring (stiffness) and MuJoCo's cone limit (range (0, θ): θ the largest angle of
@@ -44,7 +47,8 @@ Refused (AssetError naming the element): a ball joint's force range, a limited b
 not starting at 0, a ball joint followed by a hinge or ball in one body (as MuJoCo refuses them),
 a free joint below a root body, a joint's
 ``springdamper`` and ``springyield``, a polynomial stiffness, a free joint's stiffness, ellipsoid /
-hfield / sdf geoms, welds and connects, elements that would add or move bodies and geoms unread
+hfield / sdf geoms, welds and other equalities but joints' and connects, a connect by bodies with
+body1 the world, elements that would add or move bodies and geoms unread
 (``<replicate>``, ``<composite>``…; ``<frame>`` is read: it places its bodies and geoms, and its
 childclass is theirs). Ignored with one warning naming them: worldbody geoms (the ground is
 ``gs.morphs.Plane``), tendons and what acts on them, ``<contact><pair>``, ``<option>`` (the scene's
@@ -124,6 +128,9 @@ class _Reader(MJCFDocument):
         for worldbody in worldbodies:
             self._check_children(worldbody, "<worldbody>")
         links = []
+        self.sites = {}  # site name → (its body's name, its position (3,) m in the body's frame)
+        for worldbody in worldbodies:
+            self._sites(worldbody, "main", "world")
         for root, childclass, outer in bodies:  # several trees: one entity, as Genesis and MuJoCo load them
             self._body(root, -1, childclass, links, outer)
         names = [link.name for link in links]
@@ -163,9 +170,21 @@ class _Reader(MJCFDocument):
                 parent = len(links) - 1
             self._joint_chain(joints, childclass, name, what, parent, pos, quat, links)
         self._contents(body, childclass, links[-1], what)
+        self._sites(body, childclass, name)
         index = len(links) - 1
         for child, child_class, child_outer in self._members(body, "body", childclass):
             self._body(child, index, child_class, links, child_outer)
+
+    def _sites(self, body, childclass: str, name: str):
+        """Note the positions of the body's sites (in its frame; a ``fromto`` site at its middle)."""
+        for element, site_class, outer in self._members(body, "site", childclass):
+            attrs = self.attrs(element, site_class)
+            what = f"body {name!r} site {attrs.get('name')!r}"
+            pos, quat = self.frame(attrs, what)
+            if "fromto" in attrs:
+                pos = self.numbers(attrs, "fromto", 6, what).reshape(2, 3).mean(axis=0)
+            if attrs.get("name") is not None:
+                self.sites[attrs["name"]] = (name, shapes.compose(*outer, pos, quat)[0])
 
     def _joint_chain(self, joints, childclass, name, what, parent, pos, quat, links):
         """The links of a body with `joints` (maybe none) hanging from link `parent`, at (pos, quat)
@@ -403,31 +422,69 @@ class _Reader(MJCFDocument):
     # ---------------------------------------------------------------- equalities and actuators
 
     def _equalities(self, links: list[LinkSpec]):
-        by_joint = {link.joint_name: link for link in links if link.joint_type in ("revolute", "prismatic")}
+        """<equality>: <joint> (a mimic) and <connect> (LinkSpec.connects); only <joint> and <connect>
+        get here (MJCFDocument refuses the others)."""
         for equality in self.root.iter("equality"):
             for element in equality:
                 attrs = self.attrs(element, "main")
-                what = f"<equality><joint joint1={attrs.get('joint1')!r}>"
-                for key in ("joint1", "joint2"):
-                    if attrs.get(key) not in by_joint:
-                        raise self.error(f"{what}: {key} expected a hinge or slide joint of the file, "
-                                         f"got {attrs.get(key)!r}")
+                what = f"<equality><{element.tag} name={attrs.get('name')!r}>"
                 if attrs.get("active", "true") == "false":  # (MuJoCo can switch it on later; here it stays off)
                     self.ignored.add(f"{what} (inactive: not loaded)")
                     continue
-                for key in attrs:
-                    if key not in ("name", "class", "joint1", "joint2", "polycoef", "active", "solref", "solimp"):
-                        self.ignored.add(f"<equality><joint {key}>")
-                coef = self.numbers(attrs, "polycoef", 5, what, default=[0, 1, 0, 0, 0])
-                if np.any(coef[2:] != 0):
-                    raise self.error(f"{what}: polycoef expected a linear map (its last three 0), got {coef.tolist()}")
                 for key in ("solref", "solimp"):
                     if key in attrs:
-                        self.ignored.add(f"<equality><joint {key}> (the scene's constraint time constant rules)")
-                # MuJoCo's row holds q1 − ref1 = c0 + c1 (q2 − ref2): an offset c0 + ref1 − c1 ref2 on q
-                ref1, ref2 = by_joint[attrs["joint1"]].q0, by_joint[attrs["joint2"]].q0
-                by_joint[attrs["joint1"]].mimic = (attrs["joint2"], float(coef[1]),
-                                                   float(coef[0] + ref1 - coef[1] * ref2))
+                        self.ignored.add(f"<equality><{element.tag} {key}> (the scene's constraint time constant rules)")
+                if element.tag == "joint":
+                    self._joint_equality(attrs, links, what)
+                else:
+                    self._connect(attrs, links, what)
+
+    def _joint_equality(self, attrs: dict, links: list[LinkSpec], what: str):
+        """<equality><joint joint1 joint2 polycoef>: joint1 follows joint2 (LinkSpec.mimic)."""
+        by_joint = {link.joint_name: link for link in links if link.joint_type in ("revolute", "prismatic")}
+        for key in ("joint1", "joint2"):
+            if attrs.get(key) not in by_joint:
+                raise self.error(f"{what}: {key} expected a hinge or slide joint of the file, got {attrs.get(key)!r}")
+        for key in attrs:
+            if key not in ("name", "class", "joint1", "joint2", "polycoef", "active", "solref", "solimp"):
+                self.ignored.add(f"<equality><joint {key}>")
+        coef = self.numbers(attrs, "polycoef", 5, what, default=[0, 1, 0, 0, 0])
+        if np.any(coef[2:] != 0):
+            raise self.error(f"{what}: polycoef expected a linear map (its last three 0), got {coef.tolist()}")
+        # MuJoCo's row holds q1 − ref1 = c0 + c1 (q2 − ref2): an offset c0 + ref1 − c1 ref2 on q
+        ref1, ref2 = by_joint[attrs["joint1"]].q0, by_joint[attrs["joint2"]].q0
+        by_joint[attrs["joint1"]].mimic = (attrs["joint2"], float(coef[1]), float(coef[0] + ref1 - coef[1] * ref2))
+
+    def _connect(self, attrs: dict, links: list[LinkSpec], what: str):
+        """<equality><connect>: by bodies (body1, body2 or the world, anchor in body1's frame: body2's
+        anchor is where that point is at qpos0) or by sites (site1, site2: their positions), as
+        MuJoCo's compiler reads them."""
+        for key in attrs:
+            if key not in ("name", "class", "body1", "body2", "anchor", "site1", "site2", "active", "solref", "solimp"):
+                self.ignored.add(f"<equality><connect {key}>")
+        by_body = {link.name: link for link in links}
+        by_body["world"] = None
+        if "site1" in attrs or "site2" in attrs:
+            for key in ("body1", "body2", "anchor"):
+                if key in attrs:
+                    raise self.error(f"{what}: expected sites or bodies, got site1/site2 with {key!r}")
+            for key in ("site1", "site2"):
+                if attrs.get(key) not in self.sites:
+                    raise self.error(f"{what}: {key} expected a site of the file, got {attrs.get(key)!r}")
+            (body1, anchor1), (body2, anchor2) = self.sites[attrs["site1"]], self.sites[attrs["site2"]]
+        else:
+            body1, body2 = attrs.get("body1"), attrs.get("body2", "world")
+            for key, name in (("body1", body1), ("body2", body2)):
+                if name not in by_body:
+                    raise self.error(f"{what}: {key} expected a body of the file, got {name!r}")
+            anchor1, anchor2 = self.numbers(attrs, "anchor", 3, what), None
+        if body1 == body2:
+            raise self.error(f"{what}: expected two different bodies, got {body1!r} twice")
+        if body1 == "world" and anchor2 is not None:  # sites: the same rows, with the opposite sign
+            (body1, anchor1), (body2, anchor2) = (body2, anchor2), (body1, anchor1)
+        elif body1 == "world":  # (the world's anchor is known there and body2's is not)
+            raise self.error(f"{what}: body1 expected a body of the file, got the world (name it as body2)")
+        by_body[body1].connects += (("" if body2 == "world" else body2, anchor1, anchor2),)
 
     def _exclusions(self, links: list[LinkSpec]):
         """<contact><exclude body1 body2>: the two bodies' shapes never collide; <contact><pair>

@@ -104,15 +104,16 @@ class MJCFDocument:
 
     def _note_ignored_sections(self):
         """Note the sections that act on the model and are not read; refuse equalities other
-        than joints'."""
+        than joints' and connects."""
         for tag in ("tendon", "option", "sensor"):
             if self.root.find(tag) is not None and len(self.root.find(tag)) + len(self.root.find(tag).attrib):
                 self.ignored.add(f"<{tag}>" + (" (the scene's SimOptions and RigidOptions rule)" if tag == "option"
                                                else ""))
         for element in self.root.iter("equality"):
             for constraint in element:
-                if constraint.tag != "joint":
-                    raise self.error(f"<equality><{constraint.tag}> is not supported (only <joint> equalities)")
+                if constraint.tag not in ("joint", "connect"):
+                    raise self.error(f"<equality><{constraint.tag}> is not supported (only <joint> and <connect> "
+                                     f"equalities)")
 
     # ---------------------------------------------------------------- defaults and attributes
 

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import geometry
+from . import geometry, shapes
 from .spec import JOINT_TYPES
 
 FIXED, REVOLUTE, PRISMATIC, FREE, BALL = range(5)
@@ -47,6 +47,10 @@ class RigidModel:
     dof, eq_dof2 (E,) the followed one's, eq_coef (E, 2) (offset rad or m, multiplier): the row
     q[eq_dof1] = offset + multiplier · q[eq_dof2] (MuJoCo's joint equality with polycoef (offset,
     multiplier), which relates q − qpos0: the MJCF loader folds the joints' refs into the offset).
+    Per connect (K; LinkSpec.connects, MuJoCo's connect equality): connect_link (K, 2) its two links
+    (-1: the world), connect_anchor (2K, 3) m, rows 2k and 2k + 1 the anchors of connect k in its
+    first and second link's frame (the world's: world coordinates); the rows hold the two points
+    together.
     """
     link_name: list
     link_parent: np.ndarray
@@ -94,6 +98,8 @@ class RigidModel:
     eq_dof1: np.ndarray
     eq_dof2: np.ndarray
     eq_coef: np.ndarray
+    connect_link: np.ndarray
+    connect_anchor: np.ndarray
 
     @property
     def link_inv_mass0(self):
@@ -161,6 +167,15 @@ class RigidModel:
     def n_eq(self):
         return len(self.eq_dof1)
 
+    @property
+    def n_connect(self):
+        return len(self.connect_link)
+
+    @property
+    def has_equalities(self):
+        """Whether some equality row is always formed (a joint equality or a connect)."""
+        return self.n_eq + self.n_connect > 0
+
 
 def _static_links(link_parent, link_jtype):
     static = np.zeros(len(link_parent), dtype=np.int32)
@@ -216,7 +231,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
     dofs = {k: [] for k in ("link", "q", "damping", "armature", "stiffness", "springref", "lower", "upper", "effort",
                             "frictionloss", "kp", "kv")}
     geoms, geom_links, geom_names = [], [], []
-    qpos0, equalities = [], []
+    qpos0, equalities, connects = [], [], []
     for entity_idx, links in enumerate(entities_links):
         link_offset = len(rows["name"])
         joint_dof = {}  # the entity's joint names → their first dof
@@ -260,6 +275,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
         equalities += [(joint_dof[spec.joint_name], joint_dof[spec.mimic[0]], spec.mimic[2], spec.mimic[1])
                        for spec in links if spec.mimic is not None]
         index = {spec.name: link_offset + k for k, spec in enumerate(links)}
+        connects += _connects(links, index)
         rows["excluded"] += [{(min(link_offset + k, index[other]), max(link_offset + k, index[other]))
                               for other in spec.excluded} for k, spec in enumerate(links)]
     f = np.float64
@@ -287,7 +303,42 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
         pairs=_mass_matrix_pairs(dof_link, link_parent),
         qpos0=np.array(qpos0, dtype=f), eq_dof1=np.array([q[0] for q in equalities], dtype=np.int32),
         eq_dof2=np.array([q[1] for q in equalities], dtype=np.int32),
-        eq_coef=np.array([q[2:] for q in equalities], dtype=f).reshape(-1, 2))
+        eq_coef=np.array([q[2:] for q in equalities], dtype=f).reshape(-1, 2),
+        connect_link=np.array([c[:2] for c in connects], dtype=np.int32).reshape(-1, 2),
+        connect_anchor=np.array([c[2:] for c in connects], dtype=f).reshape(-1, 3))
+
+
+def _connects(links, index):
+    """(link 1, link 2, anchor 1 (3,), anchor 2 (3,)) per connect of an entity's links (LinkSpec.connects),
+    links as model indices (``index``: name → index; the world -1), a missing second anchor where the
+    first is at q0 (MuJoCo's compiler: at qpos0)."""
+    if not any(spec.connects for spec in links):
+        return []
+    poses = dict(zip((spec.name for spec in links), _initial_poses(links)))
+    poses[""] = (np.zeros(3), np.eye(3))  # the world
+    out = []
+    for spec in links:
+        for other, anchor, other_anchor in spec.connects:
+            if other_anchor is None:
+                (pos1, rot1), (pos2, rot2) = poses[spec.name], poses[other]
+                other_anchor = rot2.T @ (pos1 + rot1 @ anchor - pos2)
+            out.append((index[spec.name], index.get(other, -1), np.asarray(anchor, dtype=np.float64),
+                        np.asarray(other_anchor, dtype=np.float64)))
+    return out
+
+
+def _initial_poses(links):
+    """[(position (3,) m, rotation (3, 3))] of each link in the world at q0 (a tree in order)."""
+    poses = []
+    for spec in links:
+        pos, rot = (np.zeros(3), np.eye(3)) if spec.parent < 0 else poses[spec.parent]
+        pos, rot = pos + rot @ spec.pos, rot @ shapes.quat_to_mat(spec.quat)
+        if spec.joint_type == "revolute":
+            rot = rot @ shapes.quat_to_mat(np.array([np.cos(spec.q0 / 2), *np.sin(spec.q0 / 2) * spec.axis]))
+        elif spec.joint_type == "prismatic":
+            pos = pos + rot @ spec.axis * spec.q0
+        poses.append((pos, rot))
+    return poses
 
 
 def _geoms(geoms, geom_links, geom_names):

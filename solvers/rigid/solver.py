@@ -260,9 +260,9 @@ class RigidSolver(Solver):
             self._frictionloss_seen = (frictionloss, frictionloss._version)  # (held: its id stays its own)
 
     def _constrained(self):
-        """Whether a step may have constraint rows: contact pairs, joint equalities, joint limits or
-        friction loss."""
-        return bool(self.colliders) or self.model.n_eq > 0 or self.limited or self.friction
+        """Whether a step may have constraint rows: contact pairs, joint equalities, connects, joint
+        limits or friction loss."""
+        return bool(self.colliders) or self.model.has_equalities or self.limited or self.friction
 
     def _pack_inputs(self, inputs, before=(), after=()):
         """(B, width) of ``before``, every input in INPUTS order, ``after``. The kernels read values
@@ -322,12 +322,12 @@ class RigidSolver(Solver):
                                   f"{contact.MAX_PER_MOVING_LINK} per moving link)")
 
     def run_step(self, inputs, out, commit):
-        """One step's kernels. Without contact pairs, joint equalities or friction loss, one launch
+        """One step's kernels. Without contact pairs, equalities or friction loss, one launch
         for all substeps (advance), which leaves the envs meeting a joint limit to the constraint
         stage; else, or for those envs, the stage kernels of each substep (_substep)."""
         flagged_only = 0
         self._clear_substep_record()
-        if not (self.colliders or self.model.n_eq or self.friction):
+        if not (self.colliders or self.model.has_equalities or self.friction):
             self.kernels.advance(commit, inputs, out)
             if not (self.limited and self.data.take_flag("rows_needed")):
                 return

@@ -80,6 +80,10 @@ class LinkSpec:
     LinkSpec joints' frames split): contact rules take the two as one body.
     excluded: names of links of the same entity this link's shapes never collide with (MJCF
     ``<contact><exclude>``).
+    connects: (other link's name, or "" for the world; anchor (3,) m in this link's frame; the
+    other's anchor (3,) m in its frame, or None: where this anchor is at q0) per ball-and-socket
+    constraint holding a point of this link on a point of another (MJCF ``<equality><connect>``,
+    MuJoCo's connect: three equality rows, constraint/rows.py).
     """
     name: str
     parent: int
@@ -108,3 +112,4 @@ class LinkSpec:
     mimic: tuple = None
     same_body: bool = False
     excluded: tuple = ()
+    connects: tuple = ()

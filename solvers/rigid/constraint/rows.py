@@ -33,7 +33,7 @@ import taichi as ti
 from ..data import BIG, CONST, JOINT_ROW_SLOTS, accumulate
 from ..kinematics import dof_count, dof_motion_at, joint_quat, reference
 from ..model import BALL
-from ..spatial import quat_turn, quat_turn_adjoint
+from ..spatial import quat_to_mat, quat_turn, quat_turn_adjoint
 
 # row types, as the solver reads them (interfaces agreed with solver.py)
 UNUSED, FRICTION_LOSS, ONE_SIDED, ELLIPTIC_FIRST, ELLIPTIC_REST, EQUALITY = range(6)
@@ -115,13 +115,13 @@ def contact_params(d: ti.template(), e, pair):
 
 
 @ti.func
-def _zero_rows(d: ti.template(), s, e, c, first, count, ncol):
-    """Rows first… (count) of contact c ← 0 in its ncol columns (efc_cols[c·D …]). No reader looks
+def _zero_rows(d: ti.template(), s, e, base, first, count, ncol):
+    """Rows first… (count) ← 0 in their ncol columns (efc_cols[base …]). No reader looks
     past a row's columns, so the rest of the row is left as it was (zeroing whole rows cost
     rows × dofs a substep: 86k stores with 60 boxes on a plane)."""
     for r in range(first, first + count):
         for a in range(ncol):
-            d.efc_J[s, e, r, d.efc_cols[s, e, c * d.n_dofs + a]] = 0.0
+            d.efc_J[s, e, r, d.efc_cols[s, e, base + a]] = 0.0
 
 
 @ti.func
@@ -188,8 +188,8 @@ def contact_rows(d: ti.template(), s, e, c, first):
     n = rows_per_contact(d, condim)
     frame, pos = d.con_frame[s, e, c], d.con_pos[s, e, c]
     l1, l2 = d.geom_link[d.pair_geom1[pair]], d.geom_link[d.pair_geom2[pair]]
-    ncol = _contact_columns(d, s, e, c, l1, l2)
-    _zero_rows(d, s, e, c, first, n, ncol)
+    ncol = _path_columns(d, s, e, c * d.n_dofs, l1, l2)
+    _zero_rows(d, s, e, c * d.n_dofs, first, n, ncol)
     _add_link_jacobian(d, s, e, l1, pos, frame, -1.0, first, condim, pyramidal, mu)
     _add_link_jacobian(d, s, e, l2, pos, frame, 1.0, first, condim, pyramidal, mu)
     dist, margin = d.con_dist[s, e, c], d.pair_margin[pair]
@@ -211,13 +211,13 @@ def contact_rows(d: ti.template(), s, e, c, first):
 
 
 @ti.func
-def _contact_columns(d: ti.template(), s, e, c, l1, l2):
-    """The columns where contact c's rows can be non-zero (the dofs on the paths of links l1 and
-    l2 to the root: MuJoCo's sparse Jacobian), ascending, into efc_cols[s, e, c·D …]. Returns
-    their count. The two paths are walked together, the larger link first (a parent comes before
+def _path_columns(d: ti.template(), s, e, base, l1, l2):
+    """The columns where rows between links l1 and l2 (-1: the world) can be non-zero (the dofs on
+    their paths to the root: MuJoCo's sparse Jacobian), ascending, into efc_cols[s, e, base …].
+    Returns their count. The two paths are walked together, the larger link first (a parent comes before
     its children, and a link's dofs after its parent's), which lists the dofs descending; then
     the list is reversed."""
-    base, n = c * d.n_dofs, 0
+    n = 0
     a, b = l1, l2
     while a >= 0 or b >= 0:
         link = ti.max(a, b)
@@ -362,12 +362,12 @@ def _frame_coefficients(d: ti.template(), n, mu, by_row):
 
 
 @ti.func
-def _jacobian_adjoint(d: ti.template(), s, e, c, link, sign, g_u, g_w, b):
-    """Reverse of one link's share of contact c's rows (``_add_link_jacobian``): with J̄_f = g_u[f]
-    u − g_w[f] w̃ per frame direction f (u = H⁻¹ā, w̃ = qacc + B q̇; see contact_rows_adjoint),
-    into cdof_v, cdof_w and q̇ (aref's velocity term −B J q̇) at frame s. Returns (∂L/∂frame
-    (3, 3), ∂L/∂pos (3,), Σ_i J_f,i u_i (3,), Σ_i J_f,i w̃_i (3,))."""
-    frame, pos = d.con_frame[s, e, c], d.con_pos[s, e, c]
+def _jacobian_adjoint(d: ti.template(), s, e, frame, pos, link, sign, g_u, g_w, b):
+    """Reverse of one link's share of rows in ``frame`` (3, 3) at point ``pos`` (3,) m
+    (``_add_link_jacobian``): with J̄_f = g_u[f] u − g_w[f] w̃ per frame direction f (u = H⁻¹ā,
+    w̃ = qacc + B q̇; see contact_rows_adjoint), into cdof_v, cdof_w and q̇ (aref's velocity term
+    −B J q̇) at frame s. Returns (∂L/∂frame (3, 3), ∂L/∂pos (3,), Σ_i J_f,i u_i (3,), Σ_i J_f,i w̃_i
+    (3,))."""
     g_frame, g_pos = ti.Matrix.zero(float, 3, 3), ti.Vector.zero(float, 3)
     j_u, j_w = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)
     a = link
@@ -405,8 +405,9 @@ def contact_rows_adjoint(d: ti.template(), s, e, c, force, g_aref, g_R, g_mu):
     pyramid = condim > 1 and not d.elliptic
     g_u, g_w = _frame_coefficients(d, n, mu, force), _frame_coefficients(d, n, mu, g_aref)
     l1, l2 = d.geom_link[d.pair_geom1[pair]], d.geom_link[d.pair_geom2[pair]]
-    f1, p1, u1, w1 = _jacobian_adjoint(d, s, e, c, l1, -1.0, g_u, g_w, b)
-    f2, p2, u2, w2 = _jacobian_adjoint(d, s, e, c, l2, 1.0, g_u, g_w, b)
+    frame, pos = d.con_frame[s, e, c], d.con_pos[s, e, c]
+    f1, p1, u1, w1 = _jacobian_adjoint(d, s, e, frame, pos, l1, -1.0, g_u, g_w, b)
+    f2, p2, u2, w2 = _jacobian_adjoint(d, s, e, frame, pos, l2, 1.0, g_u, g_w, b)
     j_u, j_w = u1 + u2, w1 + w2
     g_mu_total, g_mu_reg, g_r0, g_k, g_b, g_imp = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     if pyramid:  # J_n ± μ J_tk
@@ -491,7 +492,7 @@ def _dof_row(d: ti.template(), s, e, r, i, sign, dist):
     """Row r on dof i alone (J = sign·e_i) at distance dist (m or rad; 0 for friction loss): its
     Jacobian (its one column: no reader looks past a row's columns), R and aref."""
     d.efc_J[s, e, r, i] = sign
-    slot = d.contact_capacity * d.n_dofs + JOINT_ROW_SLOTS * r  # after the contacts' lists
+    slot = d.joint_columns + JOINT_ROW_SLOTS * r
     d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, 1
     d.efc_cols[s, e, slot] = i
     _joint_row_scalars(d, s, e, r, dist, sign * d.qvel[s, e, i], d.invweight_dof[e, i])
@@ -514,7 +515,7 @@ def _equality_row(d: ti.template(), s, e, r, k):
     distance from _equality_terms, diagA the two dofs' dof_invweight0."""
     a, b, multiplier, dist = _equality_terms(d, s, e, k)
     d.efc_J[s, e, r, a], d.efc_J[s, e, r, b] = 1.0, -multiplier
-    slot = d.contact_capacity * d.n_dofs + JOINT_ROW_SLOTS * r
+    slot = d.joint_columns + JOINT_ROW_SLOTS * r
     d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, 2
     d.efc_cols[s, e, slot], d.efc_cols[s, e, slot + 1] = ti.min(a, b), ti.max(a, b)
     velocity = d.qvel[s, e, a] - multiplier * d.qvel[s, e, b]
@@ -567,10 +568,10 @@ def limit_violated(d: ti.template(), s, e):
 
 @ti.func
 def dof_rows_arise(d: ti.template(), s, e):
-    """1 if env e forms joint rows at frame s (a joint equality, friction loss on some dof, or a
-    violated limit)."""
+    """1 if env e forms joint rows at frame s (a joint equality or connect, friction loss on some
+    dof, or a violated limit)."""
     arise = limit_violated(d, s, e)
-    if d.n_eq > 0:
+    if d.n_eq > 0 or d.n_connect > 0:
         arise = 1
     for i in range(d.n_dofs):
         if d.frictionloss[e, i] > 0.0:
@@ -582,11 +583,15 @@ def dof_rows_arise(d: ti.template(), s, e):
 def dof_rows(d: ti.template(), s, e):
     """Rows 0… of frame s, in MuJoCo's order: every joint equality (in tree order; MuJoCo lists a
     URDF's mimics in the file's joint order: the same rows, rounded otherwise where they differ),
-    friction loss of every dof with F > 0, then every violated joint limit. Returns how many (also kept in efc_dof_rows[s, e, 0])."""
+    every connect's three, friction loss of every dof with F > 0, then every violated joint limit.
+    Returns how many (also kept in efc_dof_rows[s, e, 0])."""
     rows = 0
     for k in range(d.n_eq):
         _equality_row(d, s, e, rows, k)
         rows += 1
+    for k in range(d.n_connect):
+        _connect_rows(d, s, e, rows, k)
+        rows += 3
     for i in range(d.n_dofs):
         bound = d.frictionloss[e, i]
         if bound > 0.0:
@@ -611,7 +616,7 @@ def dof_rows(d: ti.template(), s, e):
 def _ball_limit_row(d: ti.template(), s, e, r, i, dist, axis):
     """Row r for the cone limit of the ball joint whose first dof is i: J = −axis on its three
     dofs, at distance dist (rad), diagA its first dof's dof_invweight0 (MuJoCo's)."""
-    slot = d.contact_capacity * d.n_dofs + JOINT_ROW_SLOTS * r
+    slot = d.joint_columns + JOINT_ROW_SLOTS * r
     d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, 3
     velocity = 0.0
     for k in ti.static(range(3)):
@@ -629,9 +634,11 @@ def dof_rows_adjoint(d: ti.template(), s, e, r, g_aref, g_R, g_bound):
     of its aref, R and friction-loss bound: into q, q̇ at frame s, the friction-loss input and
     dof_invweight0. The row's dofs: (first, second) with Jacobian entries (c1, c2); second = −1
     for a single-dof row. (An equality's offset and multiplier are the model's: no gradient.) A
-    ball joint's cone limit: _ball_limit_adjoint."""
+    ball joint's cone limit: _ball_limit_adjoint; a connect's rows: _connect_row_adjoint."""
     t = d.efc_type[s, e, r]
-    if t == ONE_SIDED and d.link_jtype[d.dof_link[d.efc_id[s, e, r]]] == BALL:
+    if d.n_eq <= r and r < d.n_eq + 3 * d.n_connect:
+        _connect_row_adjoint(d, s, e, r, g_aref, g_R)
+    elif t == ONE_SIDED and d.link_jtype[d.dof_link[d.efc_id[s, e, r]]] == BALL:
         _ball_limit_adjoint(d, s, e, r, g_aref, g_R)
     else:
         _scalar_row_adjoint(d, s, e, r, t, g_aref, g_R, g_bound)
@@ -701,3 +708,137 @@ def _ball_limit_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
     q0 = d.link_q0[d.dof_link[i]]
     for k in ti.static(range(4)):
         accumulate(d.qpos.grad, ti.Vector([s, e, q0 + k]), g_raw[k])
+
+
+# -- connects: two links' points held together ------------------------------------------------------
+@ti.func
+def _link_point(d: ti.template(), s, e, link, anchor):
+    """World position (3,) m at frame s of the point at ``anchor`` (3,) m in the link's frame (the
+    world's, link -1: the anchor itself)."""
+    out = anchor
+    if link >= 0:
+        out = d.xpos[s, e, link] + quat_to_mat(d.xquat[s, e, link]) @ anchor
+    return out
+
+
+@ti.func
+def _link_point_adjoint(d: ti.template(), s, e, link, point, g_point):
+    """Reverse of _link_point: ∂L/∂point (3,) onto the link's origin and small world-frame turn."""
+    if link >= 0:
+        accumulate(d.xpos.grad, ti.Vector([s, e, link]), g_point)
+        accumulate(d.xrot_grad, ti.Vector([s, e, link]), (point - d.xpos[s, e, link]).cross(g_point))
+
+
+@ti.func
+def _point_bias_acceleration(d: ti.template(), s, e, link, point):
+    """J̇ q̇ (3,) m/s² of a point fixed on the link (at ``point`` (3,) m at frame s): its acceleration
+    at zero qacc without gravity, a + α × o + ω × (v + ω × o), o the point's offset from the tree's
+    reference and (ω, v), (α, a) the link's velocity and velocity-product acceleration there (cacc
+    less the base's −gravity; MuJoCo's mj_jacDot · q̇). The world's: 0."""
+    out = ti.Vector.zero(float, 3)
+    if link >= 0:
+        offset = point - reference(d, s, e, link)
+        w = d.cvel_w[s, e, link]
+        gravity = ti.Vector([d.gravity[e, k] for k in ti.static(range(3))])
+        out = (d.cacc_v[s, e, link] + gravity + d.cacc_w[s, e, link].cross(offset)
+               + w.cross(d.cvel_v[s, e, link] + w.cross(offset)))
+    return out
+
+
+@ti.func
+def _point_bias_acceleration_adjoint(d: ti.template(), s, e, link, point, g_acc):
+    """Reverse of _point_bias_acceleration: ∂L/∂(J̇ q̇) (3,) into the link's cvel, cacc and gravity;
+    returns ∂L/∂point (3,) (the reference is a constant of the reverse, as everywhere)."""
+    g_point = ti.Vector.zero(float, 3)
+    if link >= 0:
+        offset = point - reference(d, s, e, link)
+        w, alpha = d.cvel_w[s, e, link], d.cacc_w[s, e, link]
+        pvel = d.cvel_v[s, e, link] + w.cross(offset)
+        g_pvel = g_acc.cross(w)
+        accumulate(d.cacc_v.grad, ti.Vector([s, e, link]), g_acc)
+        accumulate(d.cacc_w.grad, ti.Vector([s, e, link]), offset.cross(g_acc))
+        accumulate(d.cvel_w.grad, ti.Vector([s, e, link]), pvel.cross(g_acc) + offset.cross(g_pvel))
+        accumulate(d.cvel_v.grad, ti.Vector([s, e, link]), g_pvel)
+        for k in ti.static(range(3)):
+            accumulate(d.gravity.grad, ti.Vector([e, k]), g_acc[k])
+        g_point = g_acc.cross(alpha) + g_pvel.cross(w)
+    return g_point
+
+
+@ti.func
+def _connect_terms(d: ti.template(), s, e, k):
+    """(link 1, link 2, point 1 (3,) m, point 2 (3,) m) of connect k at frame s: its two anchors in
+    the world."""
+    l1, l2 = d.connect_link[2 * k], d.connect_link[2 * k + 1]
+    return (l1, l2, _link_point(d, s, e, l1, d.connect_anchor[2 * k]),
+            _link_point(d, s, e, l2, d.connect_anchor[2 * k + 1]))
+
+
+@ti.func
+def _connect_scalars(d: ti.template(), e, l1, l2, gap):
+    """(impedance, K 1/s², B 1/s, R, diagA) of a connect's rows at gap p1 − p2 (3,) m, as MuJoCo
+    makes them: the impedance of |gap|, diagA the two links' invweight_t (the world's 0), the
+    scene's time constant and MuJoCo's default solimp (as the other joint rows)."""
+    solimp = ti.Vector(DEFAULT_SOLIMP, dt=float)
+    imp = impedance(solimp, gap.norm(), 0.0)
+    k, b = stiffness_damping(ti.Vector([d.consts[CONST["timeconst"]], 1.0]), solimp[1], d.consts[CONST["h"]])
+    scale = 0.0
+    for link in ti.static((l1, l2)):
+        if link >= 0:
+            scale += d.invweight_t[e, link]
+    return imp, k, b, ti.max(MINVAL, (1.0 - imp) / imp * scale), scale
+
+
+@ti.func
+def _connect_rows(d: ti.template(), s, e, first, k):
+    """Rows first… first + 2 of connect k (MuJoCo's connect): row j holds p1 − p2 along world axis j,
+    J = J_p(link 1, p1) − J_p(link 2, p2) (the two points' Jacobians), aref = −B J q̇ − K d gap_j −
+    J̇ q̇ (MuJoCo 4's: the rows ask J q̈ + J̇ q̇, the gap's acceleration, to follow the reference)."""
+    l1, l2, p1, p2 = _connect_terms(d, s, e, k)
+    base = d.connect_columns + k * d.n_dofs
+    ncol = _path_columns(d, s, e, base, l1, l2)
+    _zero_rows(d, s, e, base, first, 3, ncol)
+    world = ti.Matrix.identity(float, 3)
+    _add_link_jacobian(d, s, e, l1, p1, world, 1.0, first, 3, False, 0.0)
+    _add_link_jacobian(d, s, e, l2, p2, world, -1.0, first, 3, False, 0.0)
+    gap = p1 - p2
+    imp, stiffness, damping, reg, _scale = _connect_scalars(d, e, l1, l2, gap)
+    bias = _point_bias_acceleration(d, s, e, l1, p1) - _point_bias_acceleration(d, s, e, l2, p2)
+    for j in ti.static(range(3)):
+        r = first + j
+        d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = base, ncol
+        d.efc_R[s, e, r] = reg
+        d.efc_aref[s, e, r] = -damping * row_times(d, s, e, r, d.qvel) - stiffness * imp * gap[j] - bias[j]
+        d.efc_type[s, e, r], d.efc_floss[s, e, r], d.efc_mu[s, e, r] = EQUALITY, 0.0, 0.0
+        d.efc_dim[s, e, r], d.efc_id[s, e, r] = 1, k
+
+
+@ti.func
+def _connect_row_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
+    """Reverse of _connect_rows for row r (axis j of connect k) from its implicit gradients (aref,
+    R) and, as its Jacobian depends on q, J̄ = f u − āref (qacc + B q̇) (as the contact rows'): into
+    cdof, q̇, both links' poses (through the points), their cvel and cacc (J̇ q̇), gravity and
+    invweight_t at frame s."""
+    k, j = (r - d.n_eq) // 3, (r - d.n_eq) % 3
+    l1, l2, p1, p2 = _connect_terms(d, s, e, k)
+    gap = p1 - p2
+    imp, stiffness, damping, _reg, scale = _connect_scalars(d, e, l1, l2, gap)
+    axis = ti.Vector([1.0 if j == a else 0.0 for a in ti.static(range(3))], dt=float)
+    g_imp = -stiffness * gap.dot(axis) * g_aref
+    if (1.0 - imp) / imp * scale > MINVAL:  # else R is its floor
+        for link in ti.static((l1, l2)):
+            if link >= 0:
+                accumulate(d.invweight_t.grad, ti.Vector([e, link]), (1.0 - imp) / imp * g_R)
+        g_imp -= scale / (imp * imp) * g_R
+    g_gap = -stiffness * imp * g_aref * axis
+    dist = gap.norm()
+    if dist > MINVAL:  # (the impedance is flat at no gap)
+        slope, _solimp_slope = impedance_gradient(ti.Vector(DEFAULT_SOLIMP, dt=float), dist, 0.0)
+        g_gap += slope * g_imp / dist * gap
+    force, world = d.efc_force[s, e, r], ti.Matrix.identity(float, 3)
+    _f1, g_p1, _u1, _w1 = _jacobian_adjoint(d, s, e, world, p1, l1, 1.0, force * axis, g_aref * axis, damping)
+    _f2, g_p2, _u2, _w2 = _jacobian_adjoint(d, s, e, world, p2, l2, -1.0, force * axis, g_aref * axis, damping)
+    g_p1 += _point_bias_acceleration_adjoint(d, s, e, l1, p1, -g_aref * axis)
+    g_p2 += _point_bias_acceleration_adjoint(d, s, e, l2, p2, g_aref * axis)
+    _link_point_adjoint(d, s, e, l1, p1, g_gap + g_p1)
+    _link_point_adjoint(d, s, e, l2, p2, g_p2 - g_gap)
