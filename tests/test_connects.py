@@ -2,8 +2,8 @@
 another, or of the world) against MuJoCo 4 and finite differences (float64).
 
 assets/mjcf/fourbar.xml: a planar four-bar linkage, three hinges closed on the world by a connect.
-assets/mjcf/connects.xml: a ball–hinge–ball arm whose tip site is held on a world site (site
-semantics), and a free box and a free sphere joined by a connect (body semantics: the sphere's
+assets/mjcf/connects.xml: a ball–hinge–ball arm whose tip site is held on a world site 1 cm
+away at the start (site semantics), and a free box and a free sphere joined by a connect (body semantics: the sphere's
 anchor, off its centre, and where that point is on the box at qpos0) that fall onto the floor.
 MuJoCo 4's connect rows ask the gap's acceleration J q̈ + J̇ q̇ to follow the reference (its
 mj_Jdotv): without the J̇ q̇ term ours drifted 6e-4 from MuJoCo in one step.
@@ -52,7 +52,7 @@ def test_four_bar_linkage_matches_mujoco(f64):
 @pytest.mark.parametrize("cone", ["pyramidal", pytest.param("elliptic", marks=pytest.mark.slow)])
 def test_connects_by_sites_and_bodies_match_mujoco(f64, cone):
     """Both connects, both bodies of the second free, landing on the floor (contacts): 2 s in both
-    engines (MuJoCo's Euler integrator: free bodies turn). Measured 4e-9 (pyramidal) and 2e-8
+    engines (MuJoCo's Euler integrator: free bodies turn). Measured 3e-11 (pyramidal) and 6e-11
     (elliptic): the solves' tolerance once contacts come."""
     m, d, scene, robot = _pair(CONNECTS, cone, plane=True, integrator="euler")
     model = scene.sim.slots[0].solver.model
@@ -68,7 +68,7 @@ def test_connects_by_sites_and_bodies_match_mujoco(f64, cone):
         seen["rows"] = min(seen["rows"], d.ne)
         seen["contacts"] = max(seen["contacts"], len(robot.get_contacts()["position"]))
 
-    assert _lockstep(m, d, scene, robot, 1000, note) < 1e-6
+    assert _lockstep(m, d, scene, robot, 1000, note) < 1e-8
     assert seen == {"rows": 6, "contacts": seen["contacts"]} and seen["contacts"] >= 4, seen
     assert _gaps(scene, robot).max() < 1e-3
 
@@ -150,3 +150,36 @@ def test_batched_connects_equal_single_envs_bitwise(f64):
         for _ in range(100):
             single.step()
         assert torch.equal(robot_b.get_qpos()[e], robot_s.get_qpos())
+
+
+def test_placed_connects_hold_the_same_points(f64):
+    """A morph placed with pos and quat moves every point a connect holds, those given in the world
+    (a <worldbody> site) too: each gap at build is the unplaced file's, and stays finite."""
+    gaps = []
+    for pos, euler in (((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)), ((1.0, 2.0, 0.5), (0.0, 0.0, 45.0))):
+        scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002))
+        robot = scene.add_entity(gs.morphs.MJCF(file=CONNECTS, pos=pos, euler=euler))
+        scene.build()
+        gaps.append(_gaps(scene, robot))
+        for _ in range(50):
+            scene.step()
+        assert bool(torch.isfinite(robot.get_qpos()).all())
+    np.testing.assert_allclose(gaps[1], gaps[0], atol=1e-12)
+    assert gaps[0][0] > 0.005  # (the arm starts a little off its hook: the file's site points differ)
+
+
+@pytest.mark.parametrize("default, loaded", [('<equality active="false"/>', 0), ('<equality solref="0.05 1"/>', 1)])
+def test_equality_defaults_are_read(f64, tmp_path, caplog, default, loaded):
+    """MuJoCo's <default><equality> (every equality type's active, solref, solimp) applies to a
+    connect: an inactive one is not loaded, a solref is said to be ignored."""
+    path = tmp_path / "robot.xml"
+    path.write_text(f'<mujoco><default>{default}</default><worldbody><body name="b"><joint name="j"/>'
+                    f'<geom type="sphere" size="0.1"/></body></worldbody>'
+                    f'<equality><connect body1="b" anchor="0.1 0 0"/></equality></mujoco>')
+    scene = gs.Scene()
+    with caplog.at_level("WARNING", logger="genesis_lite"):
+        scene.add_entity(gs.morphs.MJCF(file=str(path)))
+    scene.build()
+    assert scene.sim.slots[0].solver.model.n_connect == loaded
+    said = " ".join(r.getMessage() for r in caplog.records)
+    assert ("inactive: not loaded" if not loaded else "<equality><connect solref>") in said, said

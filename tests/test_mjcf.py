@@ -180,6 +180,8 @@ LINK = '<geom type="sphere" size="0.1"/>'
      "attribute 'anchor' is missing"),
     (f'<body name="b"><joint name="j"/>{LINK}<site name="s"/></body>',
      '<equality><connect site1="s" site2="s" body1="b"/></equality>', "expected sites or bodies, got site1/site2 with"),
+    (f'<site name="s"/><body name="b"><joint name="j"/>{LINK}<site name="s"/></body>', "",
+     "site names expected unique, got 's' twice"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<actuator><position joint="j" forcerange="-1 2"/></actuator>',
      "forcerange expected a symmetric range"),
     (f'<body name="b"><freejoint/><joint type="free" name="f" stiffness="2"/>{LINK}</body>', "",

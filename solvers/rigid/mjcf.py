@@ -183,6 +183,8 @@ class _Reader(MJCFDocument):
             pos, quat = self.frame(attrs, what)
             if "fromto" in attrs:
                 pos = self.numbers(attrs, "fromto", 6, what).reshape(2, 3).mean(axis=0)
+            if attrs.get("name") in self.sites:  # (MuJoCo refuses them too)
+                raise self.error(f"{what}: site names expected unique, got {attrs['name']!r} twice")
             if attrs.get("name") is not None:
                 self.sites[attrs["name"]] = (name, shapes.compose(*outer, pos, quat)[0])
 
@@ -426,7 +428,7 @@ class _Reader(MJCFDocument):
         get here (MJCFDocument refuses the others)."""
         for equality in self.root.iter("equality"):
             for element in equality:
-                attrs = self.attrs(element, "main")
+                attrs = self._equality_attrs(element)
                 what = f"<equality><{element.tag} name={attrs.get('name')!r}>"
                 if attrs.get("active", "true") == "false":  # (MuJoCo can switch it on later; here it stays off)
                     self.ignored.add(f"{what} (inactive: not loaded)")
@@ -438,6 +440,14 @@ class _Reader(MJCFDocument):
                     self._joint_equality(attrs, links, what)
                 else:
                     self._connect(attrs, links, what)
+
+    def _equality_attrs(self, element) -> dict:
+        """An equality's attributes over its class's ``<default><equality>`` (MuJoCo's defaults
+        for every equality type: active, solref, solimp)."""
+        cls = element.get("class", "main")
+        if cls not in self.defaults and cls != "main":
+            raise self.error(f"<equality><{element.tag}>: class {cls!r} is not a <default> class")
+        return {**self.defaults.get(cls, {}).get("equality", {}), **element.attrib}
 
     def _joint_equality(self, attrs: dict, links: list[LinkSpec], what: str):
         """<equality><joint joint1 joint2 polycoef>: joint1 follows joint2 (LinkSpec.mimic)."""
@@ -554,9 +564,14 @@ class _Reader(MJCFDocument):
 
 def place_world(links: list[LinkSpec], pos, quat) -> None:
     """Place the file's world frame at `pos` (3,) m, `quat` (4,) w-x-y-z: each root link's pose
-    (one a body tree) becomes (pos, quat) ∘ its pose in the file."""
+    (one a body tree) becomes (pos, quat) ∘ its pose in the file, and so does each point a connect
+    holds in the world."""
     for root in (link for link in links if link.parent < 0):
         root.pos, root.quat = shapes.compose(pos, quat, root.pos, root.quat)
+    for link in links:  # a connect's point given in the world (a <worldbody> site) moves with it too
+        link.connects = tuple((other, anchor, shapes.compose(pos, quat, other_anchor, IDENTITY)[0]
+                               if other == "" and other_anchor is not None else other_anchor)
+                              for other, anchor, other_anchor in link.connects)
 
 
 # -------------------------------------------------------------------- helpers

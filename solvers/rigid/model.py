@@ -322,13 +322,14 @@ def _connects(links, index):
             if other_anchor is None:
                 (pos1, rot1), (pos2, rot2) = poses[spec.name], poses[other]
                 other_anchor = rot2.T @ (pos1 + rot1 @ anchor - pos2)
-            out.append((index[spec.name], index.get(other, -1), np.asarray(anchor, dtype=np.float64),
+            out.append((index[spec.name], index[other] if other else -1, np.asarray(anchor, dtype=np.float64),
                         np.asarray(other_anchor, dtype=np.float64)))
     return out
 
 
 def _initial_poses(links):
-    """[(position (3,) m, rotation (3, 3))] of each link in the world at q0 (a tree in order)."""
+    """[(position (3,) m, rotation (3, 3))] of each link in the world at q0 (a tree in order): a
+    free root at its spec's pose, a ball joint unturned (its q0), a hinge or slide at its q0."""
     poses = []
     for spec in links:
         pos, rot = (np.zeros(3), np.eye(3)) if spec.parent < 0 else poses[spec.parent]

@@ -581,9 +581,10 @@ def dof_rows_arise(d: ti.template(), s, e):
 
 @ti.func
 def dof_rows(d: ti.template(), s, e):
-    """Rows 0… of frame s, in MuJoCo's order: every joint equality (in tree order; MuJoCo lists a
-    URDF's mimics in the file's joint order: the same rows, rounded otherwise where they differ),
-    every connect's three, friction loss of every dof with F > 0, then every violated joint limit.
+    """Rows 0… of frame s, in MuJoCo's order of kinds: every joint equality (in tree order; MuJoCo
+    lists a URDF's mimics in the file's joint order), every connect's three (in tree order; MuJoCo
+    lists equalities in the file's order, mixing kinds: the same rows, rounded otherwise where
+    the orders differ), friction loss of every dof with F > 0, then every violated joint limit.
     Returns how many (also kept in efc_dof_rows[s, e, 0])."""
     rows = 0
     for k in range(d.n_eq):
