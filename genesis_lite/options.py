@@ -168,7 +168,7 @@ class RigidOptions(_TimeBased):
         with the pyramidal cone, 100 with the elliptic one, as Genesis; 1 with
         enable_mujoco_compatibility).
     constraint_timeconst: time constant s of the joint rows (joint equalities of URDF mimic joints,
-        MJCF connects, joint limits, friction loss) and of every
+        MJCF connects and welds, joint limits, friction loss) and of every
         geom without its own solref (None: 0.01 as Genesis, or MuJoCo's 0.02 under
         enable_mujoco_compatibility).
     max_contacts: contact slots per env (None: the candidate pairs' worst case, at most 8 per

@@ -166,8 +166,12 @@ LINK = '<geom type="sphere" size="0.1"/>'
      "fullinertia expected without an orientation"),
     (f'<body name="b"><joint name="j" range="1"/>{LINK}</body>', "", "attribute 'range' expected 2 finite numbers"),
     (f'<body name="b"><body name="c"><joint name="j"/><freejoint/>{LINK}</body></body>', "", "type expected hinge"),
-    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><weld body1="b"/></equality>',
-     "<equality><weld> is not supported"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><tendon tendon1="t"/></equality>',
+     "<equality><tendon> is not supported"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><weld body1="b" relpose="0 0 0 1"/></equality>',
+     "<equality><weld name=None>: attribute 'relpose' expected 7 finite numbers"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><weld body1="world" body2="b"/></equality>',
+     "<equality><weld name=None>: body1 expected a body of the file, got the world"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><connect body1="b" body2="c" anchor="0 0 0"/>'
      '</equality>', "<equality><connect name=None>: body2 expected a body of the file, got 'c'"),
     (f'<body name="b"><joint name="j"/>{LINK}<site name="s"/></body>', '<equality><connect site1="s" site2="t"/>'

@@ -65,7 +65,7 @@ def capacity(model, options):
     """(contact slots C, row slots R) per env: C the pairs' worst case, capped by max_contacts
     (default: MAX_PER_MOVING_LINK per moving link with geometry, at least MIN_CONTACTS); R
     enough rows for C contacts of the largest condim under the cone, one per joint equality, three
-    per connect, one per limited dof (at most one of its two bounds is violated) and one per dof
+    per connect, six per weld, one per limited dof (at most one of its two bounds is violated) and one per dof
     for friction loss (settable on any)."""
     worst = worst_case_contacts(model)
     if options.max_contacts is not None:
@@ -76,7 +76,7 @@ def capacity(model, options):
     contacts = min(worst, cap)
     condim = int(model.pair_condim.max()) if len(model.pair_condim) else 1
     rows_per_contact = condim if options.friction_cone == "elliptic" or condim == 1 else 2 * (condim - 1)
-    joint_rows = model.n_eq + 3 * model.n_connect + limited_dofs(model, options) + model.n_dofs
+    joint_rows = model.n_eq + 3 * model.n_body_eq + 3 * model.n_weld + limited_dofs(model, options) + model.n_dofs
     return contacts, contacts * rows_per_contact + joint_rows
 
 
@@ -87,12 +87,14 @@ class InvweightBasis:
     J_l (6, D) the Jacobian of link l's centre of mass. ``__call__`` gives the rows' scale per env
     from the mass and armature inputs, in torch, so that their gradients reach mass and armature
     (Genesis recomputes them when those change, as mj_setConst does):
-    - invweight_t per link (1/kg): the mean of the translational diagonal of J_l M⁻¹ J_lᵀ; zero for
-      links welded to the world (the rotational one is not read: condim ≤ 3);
+    - invweight_t per link (1/kg): the mean of the translational diagonal of J_l M⁻¹ J_lᵀ, and
+      invweight_r (1/(kg·m²)) of its rotational one (read by welds' turn rows: contacts have
+      condim ≤ 3); zero for links welded to the world;
     - invweight_dof per dof: the diagonal of M⁻¹, averaged over a free joint's three translations
       and its three rotations, and over a ball joint's three rotations;
-    - but on a sliding leaf (``sliding_leaves``: MuJoCo's body_simple = 2), 1 / mass for both, as
-      MuJoCo takes them there (armature left out).
+    - but on a sliding leaf (``sliding_leaves``: MuJoCo's body_simple = 2), 1 / mass for
+      invweight_t and invweight_dof, and 0 for invweight_r, as MuJoCo takes them there (armature
+      left out).
     M is block-diagonal over the kinematic trees (a link's Jacobian is non-zero on its tree's dofs
     only), so everything is kept and inverted per tree, trees of one shape batched together: a
     dense (links, dofs, dofs) K made a scene of 192 free bodies take 14 s and 4 GB to build, and
@@ -107,7 +109,7 @@ class InvweightBasis:
         # J_ω in the link's frame, where its inertia is given (a massless link's is dropped)
         unit_inertia = m.link_inertia0 * m.link_inv_mass0[:, None, None]
         self.n_links, self.n_dofs = m.n_links, m.n_dofs
-        self.groups = []  # per tree shape: (links (T, l), dofs (T, n), K (T, l, n, n), J (T, l, 3, n), average (T, n, n))
+        self.groups = []  # per tree shape: (links (T, l), dofs (T, n), K (T, l, n, n), J (T, l, 6, n), average (T, n, n))
         for links, dofs in _same_shaped_trees(m):
             J = jac[links[:, :, None, None], np.arange(6)[None, None, :, None], dofs[:, None, None, :]]
             K = (np.einsum("tlki,tlkj->tlij", J[:, :, :3], J[:, :, :3])
@@ -123,28 +125,28 @@ class InvweightBasis:
             moving = (m.link_static[links] == 0)
             self.groups.append([torch.as_tensor(a, device=runtime.device) for a in (links, dofs)]
                                + [torch.as_tensor(a, dtype=torch.float64, device=runtime.device)
-                                  for a in (K, J[:, :, :3] * moving[:, :, None, None], average)])
+                                  for a in (K, J * moving[:, :, None, None], average)])
         simple = sliding_leaves(m)
         self.simple_links = torch.as_tensor(np.flatnonzero(simple), device=runtime.device)
         self.simple_dofs = torch.as_tensor(np.flatnonzero(simple[m.dof_link]), device=runtime.device)
         self.simple_dof_links = torch.as_tensor(m.dof_link[self.simple_dofs.cpu().numpy()], device=runtime.device)
 
     def __call__(self, mass, armature, check_positive_definite):
-        """(invweight_t (B, L), invweight_dof (B, D)) in mass's dtype, from mass (B, L) kg and armature
+        """(invweight_t (B, L), invweight_r (B, L), invweight_dof (B, D)) in mass's dtype, from mass (B, L) kg and armature
         (B, D); a singular M goes to check_positive_definite (RigidSolver's: it names the link).
         Computed in float64, one env at a time (trees batched, the same batches in every env):
         batched linear algebra over envs may sum in another order for another batch size, and a
         batched env must equal a single-env scene bit for bit."""
         if mass.shape[0] == 0 or mass.shape[1] == 0 or armature.shape[1] == 0:  # (no env, link or dof)
-            return torch.zeros_like(mass), torch.zeros_like(armature)
+            return torch.zeros_like(mass), torch.zeros_like(mass), torch.zeros_like(armature)
         rows = [self._one_env(mass[e].double(), armature[e].double(), check_positive_definite)
                 for e in range(mass.shape[0])]
-        return (torch.stack([r[0] for r in rows]).to(mass.dtype), torch.stack([r[1] for r in rows]).to(mass.dtype))
+        return tuple(torch.stack([r[k] for r in rows]).to(mass.dtype) for k in range(3))
 
     def _one_env(self, mass, armature, check_positive_definite):
-        """(L,), (D,) for one env's mass (L,) and armature (D,); a singular M (a mass set to zero)
-        is an InvalidInputError naming the link."""
-        translational = mass.new_zeros(self.n_links)
+        """(L,), (L,), (D,) for one env's mass (L,) and armature (D,); a singular M (a mass set to
+        zero) is an InvalidInputError naming the link."""
+        translational, rotational = mass.new_zeros(self.n_links), mass.new_zeros(self.n_links)
         per_dof = mass.new_zeros(self.n_dofs)
         for links, dofs, K, J, average in self.groups:
             matrix = (mass[links][:, :, None, None] * K).sum(1) + torch.diag_embed(armature[dofs])
@@ -152,16 +154,18 @@ class InvweightBasis:
             for t in torch.nonzero(info).flatten().tolist():
                 check_positive_definite(matrix[t].detach().cpu().numpy(), InvalidInputError, dofs[t].cpu().numpy())
                 torch.linalg.inv(matrix[t])  # singular below the check's share: torch's own error
-            translational = translational.index_put((links.flatten(),),
-                                                    torch.einsum("tlri,tij,tlrj->tl", J, inverse, J).flatten() / 3.0)
+            diagonal = torch.einsum("tlri,tij,tlrj->tlr", J, inverse, J)  # (a block's trace is its frame's choice-free: J_ω is in the link's)
+            translational = translational.index_put((links.flatten(),), diagonal[..., :3].sum(-1).flatten() / 3.0)
+            rotational = rotational.index_put((links.flatten(),), diagonal[..., 3:].sum(-1).flatten() / 3.0)
             per_dof = per_dof.index_put((dofs.flatten(),),
                                         torch.einsum("ti,tij->tj", torch.diagonal(inverse, dim1=1, dim2=2),
                                                      average).flatten())
         if len(self.simple_links):
             inverse_mass = 1.0 / mass.clamp(min=MINVAL)
             translational = translational.index_put((self.simple_links,), inverse_mass[self.simple_links])
+            rotational = rotational.index_put((self.simple_links,), mass.new_zeros(len(self.simple_links)))
             per_dof = per_dof.index_put((self.simple_dofs,), inverse_mass[self.simple_dof_links])
-        return translational, per_dof
+        return translational, rotational, per_dof
 
 
 def sliding_leaves(model):

@@ -65,6 +65,7 @@ INPUTS = {
     # 1/(kg·m²)): the rows' scale (constraint/rows.py), derived from mass and armature at the initial
     # pose (contact.invweight), never set by hand
     "invweight_t": ("L", True),
+    "invweight_r": ("L", True),  # rotation, 1/(kg·m²): a weld's turn rows
     "invweight_dof": ("D", True),
     "force_lo": ("D", True),    # N·m or N: the actuator force's bounds
     "force_hi": ("D", True),
@@ -89,8 +90,9 @@ MODEL = {
     "dof_springref": ("f", "D"),  # rad or m: where a joint spring is at rest
     # joint equalities (URDF mimic joints; RigidModel says what they hold)
     "eq_dof1": ("i", "E"), "eq_dof2": ("i", "E"), "eq_coef": ("f", "E2"),
-    # connects (points of two links held together; RigidModel says what they hold)
-    "connect_link": ("i", "K2"), "connect_anchor": ("v3", "K2"),
+    # connects and welds (points and frames of two links held together; RigidModel says what they hold)
+    "body_eq_link": ("i", "K2"), "body_eq_anchor": ("v3", "K2"), "weld_turn": ("v4", "WD2"),
+    "weld_torquescale": ("f", "WD"),
     # substep h (s), the time constant (s) of the joint rows (equality, limit, friction loss), impratio, solver
     # tolerance and line-search tolerance: runtime values like everything else (CONSTS names them)
     "consts": ("f", len(CONSTS)),
@@ -128,8 +130,8 @@ FRAMES = {
     "efc_J": ("f", "RD", False),
     # each row's non-zero columns: efc_cols[efc_col0 …] (efc_ncol of them, ascending), a contact's
     # rows sharing its list (from c·D), a joint row r (an equality's two dofs, a single dof, a ball joint's
-    # three) at joint_row_columns + JOINT_ROW_SLOTS·r, a connect k's three rows sharing a list at
-    # connect_columns + k·D
+    # three) at joint_row_columns + JOINT_ROW_SLOTS·r, a connect's or weld's rows (body equality k)
+    # sharing a list at body_eq_columns + k·D
     "efc_col0": ("i", "R", False), "efc_ncol": ("i", "R", False), "efc_cols": ("i", "CD", False), "efc_R": ("f", "R", False), "efc_aref": ("f", "R", False),
     "efc_floss": ("f", "R", False), "efc_mu": ("f", "R", False), "efc_force": ("f", "R", False),
     "solver_M": ("f", "DD", False), "qacc_smooth": ("f", "D", False), "qacc_constrained": ("f", "D", True),
@@ -155,7 +157,8 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
                ti.types.ndarray(dtype=ti.types.vector(4, float), ndim=1),
                ti.types.ndarray(dtype=ti.types.matrix(3, 3, float), ndim=1))
 # The int arena starts with a header of sizes and flags; every array's place follows from the
-# sizes (``layout``). W: all inputs' width per env; GW: the differentiable ones', which come first. G geoms, N candidate
+# sizes (``layout``). E joint equalities, K connects and welds, WD welds of them (RigidModel). W: all inputs'
+# width per env; GW: the differentiable ones', which come first. G geoms, N candidate
 # geom pairs, H hull vertices, C contact slots, R constraint rows per env (see RigidData); HI the meshes' hull
 # ints (geometry.py), WS 1 when the convex colliders need their workspace (CONVEX_SCRATCH), else 0; converged 1
 # (not enable_mujoco_compatibility) when curved convex contacts are their converged closed form
@@ -166,10 +169,11 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
 # colliders_due a mask of the collider kernels the substep's near pairs need (collision/detect.py: KERNEL_BIT);
 # inexact_pair, inexact_env, inexact_substep: where the last inexact contact was (the backward's error names it);
 # capped a flag: a constraint solve stopped at its iteration limit before its tolerance.
-SIZES = ("B", "L", "D", "Q", "P", "E", "K", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C", "R", "cone",
+SIZES = ("B", "L", "D", "Q", "P", "E", "K", "WD", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C", "R", "cone",
          "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged", "constrained",
          "colliders_due", "inexact_pair", "inexact_env", "inexact_substep", "wrench", "capped")
 HEADER = {name: k for k, name in enumerate(SIZES)}
+assert len(HEADER) == len(SIZES), "one slot a size"
 _REGIONS = [("i", False)] + [(a, g) for g in (False, True) for a in ("f", "v3", "v4", "m3")]  # (arena, gradients?)
 
 assert [diff for _, diff in INPUTS.values()] == sorted((diff for _, diff in INPUTS.values()), reverse=True), \
@@ -239,10 +243,11 @@ def joint_row_columns(size):
     return size["C"] * size["D"]
 
 
-def connect_columns(size):
-    """Where the connects' column lists start in efc_cols (D a connect: its three rows' list):
-    after the joint rows' slots (at most a row per joint equality, three per connect, two per dof)."""
-    return joint_row_columns(size) + JOINT_ROW_SLOTS * (size["E"] + 3 * size["K"] + 2 * size["D"])
+def body_eq_columns(size):
+    """Where the connects' and welds' column lists start in efc_cols (D each: its rows' list):
+    after the joint rows' slots (at most a row per joint equality, three per connect, six per weld,
+    two per dof). K counts connects and welds, WD the welds."""
+    return joint_row_columns(size) + JOINT_ROW_SLOTS * (size["E"] + 3 * size["K"] + 3 * size["WD"] + 2 * size["D"])
 
 
 def _counts(size):
@@ -250,7 +255,8 @@ def _counts(size):
     D, R = size["D"], size["R"]
     return {"L": size["L"], "D": D, "Q": size["Q"], "P": size["P"], "DD": D * D, "G": size["G"], "N": size["N"],
             "H": size["H"], "C": size["C"], "CF": FEATURE_SIZE * size["C"], "HI": size["HI"], "R": R, "RD": R * D,
-            "CD": connect_columns(size) + size["K"] * D, "E": size["E"], "E2": 2 * size["E"], "K2": 2 * size["K"],
+            "CD": body_eq_columns(size) + size["K"] * D, "E": size["E"], "E2": 2 * size["E"], "K2": 2 * size["K"],
+            "WD": size["WD"], "WD2": 2 * size["WD"],
             "G2": 2 * size["G"], "G5": 5 * size["G"], "L6": 6 * size["L"], 1: 1,
             len(CONSTS): len(CONSTS),
             **{f"ws:{name}": size["WS"] * n for name, (_, n) in CONVEX_SCRATCH.items()}}
@@ -281,7 +287,7 @@ class RigidData:
         self.grad_total = sum(w for w, (_, diff) in zip(self.widths, INPUTS.values()) if diff)
         self.grad_input_names = [n for n, (_, diff) in INPUTS.items() if diff] if requires_grad else []
         self.size = {"B": n_batch, "L": model.n_links, "D": model.n_dofs, "Q": model.n_qs, "P": len(model.pairs),
-                     "E": model.n_eq, "K": model.n_connect,
+                     "E": model.n_eq, "K": model.n_body_eq, "WD": model.n_weld,
                      "S": substeps, "W": self.input_total, "GW": self.grad_total,
                      "limits": int(bool(settings["limits"])), "nonfinite": 0, "G": n_geoms,
                      "N": len(model.pair_geom1), "H": len(model.hull_vec), "C": settings["contacts"],
@@ -409,8 +415,8 @@ class RigidView:
         start = {name: impl.expr_init(value) for name, value in layout(size)[0].items()}
         self.n_batch, self.n_links, self.n_dofs, self.n_qs = size["B"], size["L"], size["D"], size["Q"]
         self.n_pairs, self.substeps, self.input_total, self.grad_total = size["P"], size["S"], size["W"], size["GW"]
-        self.n_eq, self.n_connect = size["E"], size["K"]
-        self.joint_columns, self.connect_columns = joint_row_columns(size), connect_columns(size)
+        self.n_eq, self.n_body_eq, self.n_weld = size["E"], size["K"], size["WD"]
+        self.joint_columns, self.body_eq_columns = joint_row_columns(size), body_eq_columns(size)
         self.limits_enabled = size["limits"]
         self.n_geoms, self.n_candidates = size["G"], size["N"]
         self.contact_capacity = size["C"]

@@ -37,8 +37,12 @@ the |force| bound; a ``motor`` is force control (control_dofs_force).
 ``<equality><joint>`` with polycoef (c0, c1) makes joint1 follow joint2, q1 − ref1 = c0 + c1 (q2 −
 ref2) (LinkSpec.mimic). ``<equality><connect>`` holds a point of body1 on body2 (or the world): by
 bodies (anchor in body1's frame; body2's anchor where that point is at qpos0) or by sites (their
-positions in their bodies) (LinkSpec.connects). An equality's solref and solimp are not read (the
-scene's constraint time constant rules; a warning says so); an inactive one is not loaded.
+positions in their bodies) (LinkSpec.connects). ``<equality><weld>`` holds a frame of body1 on one
+of body2 (or the world), position and orientation: by bodies (anchor in body2's frame; relpose the
+pose of body2's frame in body1's, taken at qpos0 where its quaternion is zero, MuJoCo's default)
+or by sites (their frames), its turn rows scaled by torquescale (LinkSpec.welds). An equality's
+solref and solimp are not read (the scene's constraint time constant rules; a warning says so);
+an inactive one is not loaded; ``<default><equality>`` applies.
 
 Ball joints (MuJoCo's: a quaternion, three dofs about the body's own axes) with damping, armature,
 friction loss, a spring (stiffness) and MuJoCo's cone limit (range (0, θ): θ the largest angle of
@@ -47,8 +51,8 @@ Refused (AssetError naming the element): a ball joint's force range, a limited b
 not starting at 0, a ball joint followed by a hinge or ball in one body (as MuJoCo refuses them),
 a free joint below a root body, a joint's
 ``springdamper`` and ``springyield``, a polynomial stiffness, a free joint's stiffness, ellipsoid /
-hfield / sdf geoms, welds and other equalities but joints' and connects, a connect by bodies with
-body1 the world, elements that would add or move bodies and geoms unread
+hfield / sdf geoms, equalities other than joints', connects and welds, a connect or weld by
+bodies with body1 the world, elements that would add or move bodies and geoms unread
 (``<replicate>``, ``<composite>``…; ``<frame>`` is read: it places its bodies and geoms, and its
 childclass is theirs). Ignored with one warning naming them: worldbody geoms (the ground is
 ``gs.morphs.Plane``), tendons and what acts on them, ``<contact><pair>``, ``<option>`` (the scene's
@@ -128,7 +132,7 @@ class _Reader(MJCFDocument):
         for worldbody in worldbodies:
             self._check_children(worldbody, "<worldbody>")
         links = []
-        self.sites = {}  # site name → (its body's name, its position (3,) m in the body's frame)
+        self.sites = {}  # site name → (its body's name, its position (3,) m and turn (4,) in the body's frame)
         for worldbody in worldbodies:
             self._sites(worldbody, "main", "world")
         for root, childclass, outer in bodies:  # several trees: one entity, as Genesis and MuJoCo load them
@@ -186,7 +190,7 @@ class _Reader(MJCFDocument):
             if attrs.get("name") in self.sites:  # (MuJoCo refuses them too)
                 raise self.error(f"{what}: site names expected unique, got {attrs['name']!r} twice")
             if attrs.get("name") is not None:
-                self.sites[attrs["name"]] = (name, shapes.compose(*outer, pos, quat)[0])
+                self.sites[attrs["name"]] = (name, *shapes.compose(*outer, pos, quat))
 
     def _joint_chain(self, joints, childclass, name, what, parent, pos, quat, links):
         """The links of a body with `joints` (maybe none) hanging from link `parent`, at (pos, quat)
@@ -424,7 +428,7 @@ class _Reader(MJCFDocument):
     # ---------------------------------------------------------------- equalities and actuators
 
     def _equalities(self, links: list[LinkSpec]):
-        """<equality>: <joint> (a mimic) and <connect> (LinkSpec.connects); only <joint> and <connect>
+        """<equality>: <joint> (a mimic), <connect> and <weld> (LinkSpec.connects, .welds); only those
         get here (MJCFDocument refuses the others)."""
         for equality in self.root.iter("equality"):
             for element in equality:
@@ -438,8 +442,10 @@ class _Reader(MJCFDocument):
                         self.ignored.add(f"<equality><{element.tag} {key}> (the scene's constraint time constant rules)")
                 if element.tag == "joint":
                     self._joint_equality(attrs, links, what)
-                else:
+                elif element.tag == "connect":
                     self._connect(attrs, links, what)
+                else:
+                    self._weld(attrs, links, what)
 
     def _equality_attrs(self, element) -> dict:
         """An equality's attributes over its class's ``<default><equality>`` (MuJoCo's defaults
@@ -469,32 +475,73 @@ class _Reader(MJCFDocument):
         """<equality><connect>: by bodies (body1, body2 or the world, anchor in body1's frame: body2's
         anchor is where that point is at qpos0) or by sites (site1, site2: their positions), as
         MuJoCo's compiler reads them."""
-        for key in attrs:
-            if key not in ("name", "class", "body1", "body2", "anchor", "site1", "site2", "active", "solref", "solimp"):
-                self.ignored.add(f"<equality><connect {key}>")
-        by_body = {link.name: link for link in links}
-        by_body["world"] = None
+        self._only(attrs, "connect", ("anchor",))
         if "site1" in attrs or "site2" in attrs:
-            for key in ("body1", "body2", "anchor"):
-                if key in attrs:
-                    raise self.error(f"{what}: expected sites or bodies, got site1/site2 with {key!r}")
-            for key in ("site1", "site2"):
-                if attrs.get(key) not in self.sites:
-                    raise self.error(f"{what}: {key} expected a site of the file, got {attrs.get(key)!r}")
-            (body1, anchor1), (body2, anchor2) = self.sites[attrs["site1"]], self.sites[attrs["site2"]]
+            (body1, anchor1, _), (body2, anchor2, _) = self._site_pair(attrs, ("body1", "body2", "anchor"), what)
         else:
-            body1, body2 = attrs.get("body1"), attrs.get("body2", "world")
-            for key, name in (("body1", body1), ("body2", body2)):
-                if name not in by_body:
-                    raise self.error(f"{what}: {key} expected a body of the file, got {name!r}")
+            body1, body2 = self._body_pair(attrs, links, what)
             anchor1, anchor2 = self.numbers(attrs, "anchor", 3, what), None
-        if body1 == body2:
-            raise self.error(f"{what}: expected two different bodies, got {body1!r} twice")
         if body1 == "world" and anchor2 is not None:  # sites: the same rows, with the opposite sign
             (body1, anchor1), (body2, anchor2) = (body2, anchor2), (body1, anchor1)
-        elif body1 == "world":  # (the world's anchor is known there and body2's is not)
+        self._by_body(links)[body1].connects += (("" if body2 == "world" else body2, anchor1, anchor2),)
+
+    def _weld(self, attrs: dict, links: list[LinkSpec], what: str):
+        """<equality><weld>: by bodies (body1, body2 or the world; anchor (default 0) in body2's frame;
+        relpose (pos in body1's frame, quat): where its quat is zero, MuJoCo's default, both taken as
+        they are at qpos0) or by sites (site1, site2: their frames), and torquescale, as MuJoCo's
+        compiler reads them."""
+        self._only(attrs, "weld", ("anchor", "relpose", "torquescale"))
+        torquescale = float(self.numbers(attrs, "torquescale", 1, what, default=[1.0])[0])
+        identity = np.array([1.0, 0.0, 0.0, 0.0])
+        if "site1" in attrs or "site2" in attrs:
+            first, second = self._site_pair(attrs, ("body1", "body2", "anchor", "relpose"), what)
+            if first[0] == "world":  # the same rows, with the opposite sign
+                first, second = second, first
+            (body1, anchor1, turn1), (body2, anchor2, turn2) = first, second
+        else:
+            body1, body2 = self._body_pair(attrs, links, what)
+            relpose = self.numbers(attrs, "relpose", 7, what, default=[0, 1, 0, 0, 0, 0, 0])
+            anchor2, turn2 = self.numbers(attrs, "anchor", 3, what, default=np.zeros(3)), identity
+            anchor1, turn1 = (relpose[:3], relpose[3:]) if np.any(relpose[3:]) else (None, None)
+        self._by_body(links)[body1].welds += (("" if body2 == "world" else body2, anchor1, anchor2, turn1, turn2,
+                                               torquescale),)
+
+    def _only(self, attrs: dict, tag: str, own: tuple):
+        """Note an equality's attributes that are not read (``own``: its kind's besides the common)."""
+        for key in attrs:
+            if key not in ("name", "class", "body1", "body2", "site1", "site2", "active", "solref", "solimp") + own:
+                self.ignored.add(f"<equality><{tag} {key}>")
+
+    @staticmethod
+    def _by_body(links: list[LinkSpec]) -> dict:
+        return {link.name: link for link in links}
+
+    def _body_pair(self, attrs: dict, links: list[LinkSpec], what: str) -> tuple[str, str]:
+        """(body1, body2) of an equality by bodies: bodies of the file (body2 may be, and is by
+        default, the world; body1 may not: MuJoCo's anchors are given in its frame)."""
+        names = set(self._by_body(links)) | {"world"}
+        body1, body2 = attrs.get("body1"), attrs.get("body2", "world")
+        for key, name in (("body1", body1), ("body2", body2)):
+            if name not in names:
+                raise self.error(f"{what}: {key} expected a body of the file, got {name!r}")
+        if body1 == "world":
             raise self.error(f"{what}: body1 expected a body of the file, got the world (name it as body2)")
-        by_body[body1].connects += (("" if body2 == "world" else body2, anchor1, anchor2),)
+        if body1 == body2:
+            raise self.error(f"{what}: expected two different bodies, got {body1!r} twice")
+        return body1, body2
+
+    def _site_pair(self, attrs: dict, refused: tuple, what: str):
+        """((body, position (3,), turn (4,)) of site1, the same of site2) of an equality by sites."""
+        for key in refused:
+            if key in attrs:
+                raise self.error(f"{what}: expected sites or bodies, got site1/site2 with {key!r}")
+        for key in ("site1", "site2"):
+            if attrs.get(key) not in self.sites:
+                raise self.error(f"{what}: {key} expected a site of the file, got {attrs.get(key)!r}")
+        first, second = self.sites[attrs["site1"]], self.sites[attrs["site2"]]
+        if first[0] == second[0]:
+            raise self.error(f"{what}: expected two different bodies, got {first[0]!r} twice")
+        return first, second
 
     def _exclusions(self, links: list[LinkSpec]):
         """<contact><exclude body1 body2>: the two bodies' shapes never collide; <contact><pair>
@@ -568,10 +615,16 @@ def place_world(links: list[LinkSpec], pos, quat) -> None:
     holds in the world."""
     for root in (link for link in links if link.parent < 0):
         root.pos, root.quat = shapes.compose(pos, quat, root.pos, root.quat)
-    for link in links:  # a connect's point given in the world (a <worldbody> site) moves with it too
+    for link in links:  # a connect's or weld's point and frame given in the world move with it too
         link.connects = tuple((other, anchor, shapes.compose(pos, quat, other_anchor, IDENTITY)[0]
                                if other == "" and other_anchor is not None else other_anchor)
                               for other, anchor, other_anchor in link.connects)
+        welds = []
+        for other, anchor, other_anchor, turn, other_turn, torquescale in link.welds:
+            if other == "":
+                other_anchor, other_turn = shapes.compose(pos, quat, other_anchor, other_turn)
+            welds.append((other, anchor, other_anchor, turn, other_turn, torquescale))
+        link.welds = tuple(welds)
 
 
 # -------------------------------------------------------------------- helpers

@@ -104,16 +104,16 @@ class MJCFDocument:
 
     def _note_ignored_sections(self):
         """Note the sections that act on the model and are not read; refuse equalities other
-        than joints' and connects."""
+        than joints', connects and welds."""
         for tag in ("tendon", "option", "sensor"):
             if self.root.find(tag) is not None and len(self.root.find(tag)) + len(self.root.find(tag).attrib):
                 self.ignored.add(f"<{tag}>" + (" (the scene's SimOptions and RigidOptions rule)" if tag == "option"
                                                else ""))
         for element in self.root.iter("equality"):
             for constraint in element:
-                if constraint.tag not in ("joint", "connect"):
-                    raise self.error(f"<equality><{constraint.tag}> is not supported (only <joint> and <connect> "
-                                     f"equalities)")
+                if constraint.tag not in ("joint", "connect", "weld"):
+                    raise self.error(f"<equality><{constraint.tag}> is not supported (only <joint>, <connect> and "
+                                     f"<weld> equalities)")
 
     # ---------------------------------------------------------------- defaults and attributes
 

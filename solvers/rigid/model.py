@@ -47,10 +47,12 @@ class RigidModel:
     dof, eq_dof2 (E,) the followed one's, eq_coef (E, 2) (offset rad or m, multiplier): the row
     q[eq_dof1] = offset + multiplier · q[eq_dof2] (MuJoCo's joint equality with polycoef (offset,
     multiplier), which relates q − qpos0: the MJCF loader folds the joints' refs into the offset).
-    Per connect (K; LinkSpec.connects, MuJoCo's connect equality): connect_link (K, 2) its two links
-    (-1: the world), connect_anchor (2K, 3) m, rows 2k and 2k + 1 the anchors of connect k in its
-    first and second link's frame (the world's: world coordinates); the rows hold the two points
-    together.
+    Per connect or weld (K of them, the connects first, then the W welds; LinkSpec.connects and
+    .welds, MuJoCo's connect and weld equalities): body_eq_link (K, 2) its two links (-1: the
+    world), body_eq_anchor (2K, 3) m, rows 2k and 2k + 1 the points held together in their links'
+    frames (the world's: world coordinates); per weld w: weld_turn (2W, 4) w-x-y-z, rows 2w and 2w
+    + 1 the held frames' turns r1, r2 in their links' frames (q1 ⊗ r1 is held to q2 ⊗ r2),
+    weld_torquescale (W,) the scale of its turn rows.
     """
     link_name: list
     link_parent: np.ndarray
@@ -98,8 +100,10 @@ class RigidModel:
     eq_dof1: np.ndarray
     eq_dof2: np.ndarray
     eq_coef: np.ndarray
-    connect_link: np.ndarray
-    connect_anchor: np.ndarray
+    body_eq_link: np.ndarray
+    body_eq_anchor: np.ndarray
+    weld_turn: np.ndarray
+    weld_torquescale: np.ndarray
 
     @property
     def link_inv_mass0(self):
@@ -168,13 +172,18 @@ class RigidModel:
         return len(self.eq_dof1)
 
     @property
-    def n_connect(self):
-        return len(self.connect_link)
+    def n_body_eq(self):
+        """Connects and welds."""
+        return len(self.body_eq_link)
+
+    @property
+    def n_weld(self):
+        return len(self.weld_torquescale)
 
     @property
     def has_equalities(self):
-        """Whether some equality row is always formed (a joint equality or a connect)."""
-        return self.n_eq + self.n_connect > 0
+        """Whether some equality row is always formed (a joint equality, a connect or a weld)."""
+        return self.n_eq + self.n_body_eq > 0
 
 
 def _static_links(link_parent, link_jtype):
@@ -231,7 +240,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
     dofs = {k: [] for k in ("link", "q", "damping", "armature", "stiffness", "springref", "lower", "upper", "effort",
                             "frictionloss", "kp", "kv")}
     geoms, geom_links, geom_names = [], [], []
-    qpos0, equalities, connects = [], [], []
+    qpos0, equalities, connects, welds = [], [], [], []
     for entity_idx, links in enumerate(entities_links):
         link_offset = len(rows["name"])
         joint_dof = {}  # the entity's joint names → their first dof
@@ -275,7 +284,8 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
         equalities += [(joint_dof[spec.joint_name], joint_dof[spec.mimic[0]], spec.mimic[2], spec.mimic[1])
                        for spec in links if spec.mimic is not None]
         index = {spec.name: link_offset + k for k, spec in enumerate(links)}
-        connects += _connects(links, index)
+        entity_connects, entity_welds = _body_equalities(links, index)
+        connects, welds = connects + entity_connects, welds + entity_welds
         rows["excluded"] += [{(min(link_offset + k, index[other]), max(link_offset + k, index[other]))
                               for other in spec.excluded} for k, spec in enumerate(links)]
     f = np.float64
@@ -304,41 +314,64 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
         qpos0=np.array(qpos0, dtype=f), eq_dof1=np.array([q[0] for q in equalities], dtype=np.int32),
         eq_dof2=np.array([q[1] for q in equalities], dtype=np.int32),
         eq_coef=np.array([q[2:] for q in equalities], dtype=f).reshape(-1, 2),
-        connect_link=np.array([c[:2] for c in connects], dtype=np.int32).reshape(-1, 2),
-        connect_anchor=np.array([c[2:] for c in connects], dtype=f).reshape(-1, 3))
+        body_eq_link=np.array([c[:2] for c in connects + welds], dtype=np.int32).reshape(-1, 2),
+        body_eq_anchor=np.array([c[2:4] for c in connects + welds], dtype=f).reshape(-1, 3),
+        weld_turn=np.array([w[4:6] for w in welds], dtype=f).reshape(-1, 4),
+        weld_torquescale=np.array([w[6] for w in welds], dtype=f))
 
 
-def _connects(links, index):
-    """(link 1, link 2, anchor 1 (3,), anchor 2 (3,)) per connect of an entity's links (LinkSpec.connects),
-    links as model indices (``index``: name → index; the world -1), a missing second anchor where the
-    first is at q0 (MuJoCo's compiler: at qpos0)."""
-    if not any(spec.connects for spec in links):
-        return []
+def _body_equalities(links, index):
+    """(connects, welds) of an entity's links (LinkSpec.connects, .welds): (link 1, link 2, anchor 1
+    (3,), anchor 2 (3,)) per connect, and those and (turn 1 (4,), turn 2 (4,), torquescale) per weld,
+    links as model indices (``index``: name → index; the world -1), what is missing from the pose at
+    q0 (MuJoCo's compiler: at qpos0)."""
+    if not any(spec.connects or spec.welds for spec in links):
+        return [], []
     poses = dict(zip((spec.name for spec in links), _initial_poses(links)))
-    poses[""] = (np.zeros(3), np.eye(3))  # the world
-    out = []
+    poses[""] = (np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]))  # the world
+    connects, welds = [], []
     for spec in links:
+        this = poses[spec.name]
         for other, anchor, other_anchor in spec.connects:
+            anchor = np.asarray(anchor, dtype=np.float64)
             if other_anchor is None:
-                (pos1, rot1), (pos2, rot2) = poses[spec.name], poses[other]
-                other_anchor = rot2.T @ (pos1 + rot1 @ anchor - pos2)
-            out.append((index[spec.name], index[other] if other else -1, np.asarray(anchor, dtype=np.float64),
-                        np.asarray(other_anchor, dtype=np.float64)))
-    return out
+                other_anchor = _in_frame(poses[other], _at(this, anchor))
+            connects.append((index[spec.name], index[other] if other else -1, anchor,
+                             np.asarray(other_anchor, dtype=np.float64)))
+        for other, anchor, other_anchor, turn, other_turn, torquescale in spec.welds:
+            other_anchor, other_turn = (np.asarray(v, dtype=np.float64) for v in (other_anchor, other_turn))
+            if anchor is None:
+                anchor = _in_frame(this, _at(poses[other], other_anchor))
+            if turn is None:  # q1 ⊗ r1 = q2 ⊗ r2 at q0
+                turn = shapes.quat_mul(shapes.quat_mul(this[1] * [1, -1, -1, -1], poses[other][1]), other_turn)
+            welds.append((index[spec.name], index[other] if other else -1, np.asarray(anchor, dtype=np.float64),
+                          other_anchor, np.asarray(turn, dtype=np.float64) / np.linalg.norm(turn),
+                          other_turn / np.linalg.norm(other_turn), float(torquescale)))
+    return connects, welds
+
+
+def _at(pose, point):
+    """World position (3,) of ``point`` (3,) given in the frame pose = (position (3,), w-x-y-z (4,))."""
+    return pose[0] + shapes.quat_to_mat(pose[1]) @ point
+
+
+def _in_frame(pose, point):
+    """``point`` (3,) in the world → in the frame pose = (position (3,), w-x-y-z (4,))."""
+    return shapes.quat_to_mat(pose[1]).T @ (point - pose[0])
 
 
 def _initial_poses(links):
-    """[(position (3,) m, rotation (3, 3))] of each link in the world at q0 (a tree in order): a
-    free root at its spec's pose, a ball joint unturned (its q0), a hinge or slide at its q0."""
+    """[(position (3,) m, w-x-y-z (4,))] of each link in the world at q0 (a tree in order): a free
+    root at its spec's pose, a ball joint unturned (its q0), a hinge or slide at its q0."""
     poses = []
     for spec in links:
-        pos, rot = (np.zeros(3), np.eye(3)) if spec.parent < 0 else poses[spec.parent]
-        pos, rot = pos + rot @ spec.pos, rot @ shapes.quat_to_mat(spec.quat)
+        parent = (np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])) if spec.parent < 0 else poses[spec.parent]
+        pos, quat = shapes.compose(*parent, spec.pos, spec.quat)
         if spec.joint_type == "revolute":
-            rot = rot @ shapes.quat_to_mat(np.array([np.cos(spec.q0 / 2), *np.sin(spec.q0 / 2) * spec.axis]))
+            quat = shapes.quat_mul(quat, np.array([np.cos(spec.q0 / 2), *np.sin(spec.q0 / 2) * spec.axis]))
         elif spec.joint_type == "prismatic":
-            pos = pos + rot @ spec.axis * spec.q0
-        poses.append((pos, rot))
+            pos = pos + shapes.quat_to_mat(quat) @ spec.axis * spec.q0
+        poses.append((pos, quat))
     return poses
 
 

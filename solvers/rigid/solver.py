@@ -37,7 +37,7 @@ class RigidSolver(Solver):
 
     #: inputs that keep their value across ``scene.reset()`` (controls do not)
     persistent_inputs = ("mass", "damping", "armature", "stiffness", "kp", "kv", "gravity", "force_lo", "force_hi",
-                         "frictionloss", "friction", "solref", "solimp", "invweight_t", "invweight_dof")
+                         "frictionloss", "friction", "solref", "solimp", "invweight_t", "invweight_r", "invweight_dof")
 
     transient_inputs = ("xfrc",)
 
@@ -140,17 +140,17 @@ class RigidSolver(Solver):
             "friction": m.geom_friction, "solref": np.tile([self.timeconst, 1.0], len(m.geom_type)),
             "solimp": np.tile(contact.SMOOTH_SOLIMP if self.rigid_options.smooth_contact else contact.DEFAULT_SOLIMP,
                               len(m.geom_type)),
-            "invweight_t": np.zeros(m.n_links), "invweight_dof": np.zeros(m.n_dofs)}
+            "invweight_t": np.zeros(m.n_links), "invweight_r": np.zeros(m.n_links), "invweight_dof": np.zeros(m.n_dofs)}
         assert per_env.keys() == INPUTS.keys()
         inputs = {name: torch.as_tensor(np.tile(np.asarray(v, dtype=np.float64), (B, 1)), dtype=runtime.tc_float,
                                         device=runtime.device) for name, v in per_env.items()}
         return self.derive_inputs(inputs)
 
     derived_from = ("mass", "armature")
-    derived_inputs = ("invweight_t", "invweight_dof")
+    derived_inputs = ("invweight_t", "invweight_r", "invweight_dof")
 
     def derive_inputs(self, inputs, previous=None):
-        """``inputs`` with the rows' scale (invweight_t, invweight_dof) recomputed from their mass and
+        """``inputs`` with the rows' scale (invweight_t, invweight_r, invweight_dof) recomputed from their mass and
         armature (contact.InvweightBasis; differentiable); zeros before the basis exists (the first
         allocation at build, which forms no rows). With ``previous`` and no gradient anywhere
         (mass, armature, nor the previous scale: its graph would stay attached), only the envs
@@ -161,14 +161,14 @@ class RigidSolver(Solver):
         mass, armature = inputs["mass"], inputs["armature"]
         envs = slice(None)
         if previous is not None and not any(t.requires_grad for t in (
-                mass, armature, previous["invweight_t"], previous["invweight_dof"])):
+                mass, armature, *(previous[name] for name in self.derived_inputs))):
             changed = (mass != previous["mass"]).any(1) | (armature != previous["armature"]).any(1)
             envs = torch.nonzero(changed).flatten()
-        invweight_t, invweight_dof = self.invweight_basis(mass[envs], armature[envs], self.check_positive_definite)
+        derived = dict(zip(self.derived_inputs, self.invweight_basis(mass[envs], armature[envs],
+                                                                     self.check_positive_definite)))
         if isinstance(envs, torch.Tensor):  # (the others keep theirs)
-            invweight_t = previous["invweight_t"].index_put((envs,), invweight_t)
-            invweight_dof = previous["invweight_dof"].index_put((envs,), invweight_dof)
-        return {**inputs, "invweight_t": invweight_t, "invweight_dof": invweight_dof}
+            derived = {name: previous[name].index_put((envs,), value) for name, value in derived.items()}
+        return {**inputs, **derived}
 
     def _initial_state(self):
         qpos = np.tile(self.model.qpos0, (self.n_batch, 1))

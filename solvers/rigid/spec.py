@@ -84,6 +84,12 @@ class LinkSpec:
     other's anchor (3,) m in its frame, or None: where this anchor is at q0) per ball-and-socket
     constraint holding a point of this link on a point of another (MJCF ``<equality><connect>``,
     MuJoCo's connect: three equality rows, constraint/rows.py).
+    welds: (other link's name, or "" for the world; anchor (3,) m in this link's frame, or None:
+    where the other's anchor is at q0; the other's anchor (3,) m in its frame; turn (4,) w-x-y-z
+    of this link's held frame in its frame, or None: the one that makes the two held frames one
+    at q0; the other's (4,); torquescale) per weld holding a frame of this link on a frame of
+    another, position and orientation (MJCF ``<equality><weld>``, MuJoCo's weld: six equality
+    rows, the turn's three scaled by torquescale).
     """
     name: str
     parent: int
@@ -113,3 +119,4 @@ class LinkSpec:
     same_body: bool = False
     excluded: tuple = ()
     connects: tuple = ()
+    welds: tuple = ()

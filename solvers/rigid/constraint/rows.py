@@ -33,7 +33,7 @@ import taichi as ti
 from ..data import BIG, CONST, JOINT_ROW_SLOTS, accumulate
 from ..kinematics import dof_count, dof_motion_at, joint_quat, reference
 from ..model import BALL
-from ..spatial import quat_to_mat, quat_turn, quat_turn_adjoint
+from ..spatial import quat_conj, quat_mul, quat_to_mat, quat_turn, quat_turn_adjoint
 
 # row types, as the solver reads them (interfaces agreed with solver.py)
 UNUSED, FRICTION_LOSS, ONE_SIDED, ELLIPTIC_FIRST, ELLIPTIC_REST, EQUALITY = range(6)
@@ -568,10 +568,10 @@ def limit_violated(d: ti.template(), s, e):
 
 @ti.func
 def dof_rows_arise(d: ti.template(), s, e):
-    """1 if env e forms joint rows at frame s (a joint equality or connect, friction loss on some
-    dof, or a violated limit)."""
+    """1 if env e forms joint rows at frame s (a joint equality, connect or weld, friction loss on
+    some dof, or a violated limit)."""
     arise = limit_violated(d, s, e)
-    if d.n_eq > 0 or d.n_connect > 0:
+    if d.n_eq > 0 or d.n_body_eq > 0:
         arise = 1
     for i in range(d.n_dofs):
         if d.frictionloss[e, i] > 0.0:
@@ -582,17 +582,16 @@ def dof_rows_arise(d: ti.template(), s, e):
 @ti.func
 def dof_rows(d: ti.template(), s, e):
     """Rows 0… of frame s, in MuJoCo's order of kinds: every joint equality (in tree order; MuJoCo
-    lists a URDF's mimics in the file's joint order), every connect's three (in tree order; MuJoCo
-    lists equalities in the file's order, mixing kinds: the same rows, rounded otherwise where
-    the orders differ), friction loss of every dof with F > 0, then every violated joint limit.
+    lists a URDF's mimics in the file's joint order), every connect's three, every weld's six (in
+    tree order; MuJoCo lists equalities in the file's order, mixing kinds: the same rows, rounded
+    otherwise where the orders differ), friction loss of every dof with F > 0, then every violated joint limit.
     Returns how many (also kept in efc_dof_rows[s, e, 0])."""
     rows = 0
     for k in range(d.n_eq):
         _equality_row(d, s, e, rows, k)
         rows += 1
-    for k in range(d.n_connect):
-        _connect_rows(d, s, e, rows, k)
-        rows += 3
+    for k in range(d.n_body_eq):
+        rows += _body_eq_rows(d, s, e, rows, k)
     for i in range(d.n_dofs):
         bound = d.frictionloss[e, i]
         if bound > 0.0:
@@ -635,10 +634,10 @@ def dof_rows_adjoint(d: ti.template(), s, e, r, g_aref, g_R, g_bound):
     of its aref, R and friction-loss bound: into q, q̇ at frame s, the friction-loss input and
     dof_invweight0. The row's dofs: (first, second) with Jacobian entries (c1, c2); second = −1
     for a single-dof row. (An equality's offset and multiplier are the model's: no gradient.) A
-    ball joint's cone limit: _ball_limit_adjoint; a connect's rows: _connect_row_adjoint."""
+    ball joint's cone limit: _ball_limit_adjoint; a connect's or weld's rows: _body_eq_row_adjoint."""
     t = d.efc_type[s, e, r]
-    if d.n_eq <= r and r < d.n_eq + 3 * d.n_connect:
-        _connect_row_adjoint(d, s, e, r, g_aref, g_R)
+    if d.n_eq <= r and r < d.n_eq + 3 * d.n_body_eq + 3 * d.n_weld:
+        _body_eq_row_adjoint(d, s, e, r, g_aref, g_R)
     elif t == ONE_SIDED and d.link_jtype[d.dof_link[d.efc_id[s, e, r]]] == BALL:
         _ball_limit_adjoint(d, s, e, r, g_aref, g_R)
     else:
@@ -711,7 +710,11 @@ def _ball_limit_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
         accumulate(d.qpos.grad, ti.Vector([s, e, q0 + k]), g_raw[k])
 
 
-# -- connects: two links' points held together ------------------------------------------------------
+# -- connects and welds: two links' points (and frames) held together ------------------------------
+# A weld's turn rows hold e = τ vec(a ⊗ b), a = (q2 ⊗ r2)⁻¹ and b = q1 ⊗ r1 (q the links' quaternions, r the
+# held frames' turns in them, τ the torquescale), as MuJoCo's; a world-frame turn δ of link 1 makes b
+# (1, δ/2) ⊗ b and of link 2 makes a a ⊗ (1, −δ/2), so ė = ½ τ vec(a ⊗ (0, ω1 − ω2) ⊗ b): the rows'
+# Jacobian.
 @ti.func
 def _link_point(d: ti.template(), s, e, link, anchor):
     """World position (3,) m at frame s of the point at ``anchor`` (3,) m in the link's frame (the
@@ -728,6 +731,16 @@ def _link_point_adjoint(d: ti.template(), s, e, link, point, g_point):
     if link >= 0:
         accumulate(d.xpos.grad, ti.Vector([s, e, link]), g_point)
         accumulate(d.xrot_grad, ti.Vector([s, e, link]), (point - d.xpos[s, e, link]).cross(g_point))
+
+
+@ti.func
+def _link_rotation(d: ti.template(), s, e, link):
+    """(quaternion (4,), angular velocity (3,) rad/s, velocity-product angular acceleration (3,)
+    rad/s²) of the link at frame s, world frame; the world's: (identity, 0, 0)."""
+    quat, w, alpha = ti.Vector([1.0, 0.0, 0.0, 0.0], dt=float), ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)
+    if link >= 0:
+        quat, w, alpha = d.xquat[s, e, link], d.cvel_w[s, e, link], d.cacc_w[s, e, link]
+    return quat, w, alpha
 
 
 @ti.func
@@ -767,79 +780,235 @@ def _point_bias_acceleration_adjoint(d: ti.template(), s, e, link, point, g_acc)
 
 
 @ti.func
-def _connect_terms(d: ti.template(), s, e, k):
-    """(link 1, link 2, point 1 (3,) m, point 2 (3,) m) of connect k at frame s: its two anchors in
-    the world."""
-    l1, l2 = d.connect_link[2 * k], d.connect_link[2 * k + 1]
-    return (l1, l2, _link_point(d, s, e, l1, d.connect_anchor[2 * k]),
-            _link_point(d, s, e, l2, d.connect_anchor[2 * k + 1]))
+def _pure(v):
+    """The quaternion (0, v) of a 3-vector."""
+    return ti.Vector([0.0, v[0], v[1], v[2]], dt=float)
 
 
 @ti.func
-def _connect_scalars(d: ti.template(), e, l1, l2, gap):
-    """(impedance, K 1/s², B 1/s, R, diagA) of a connect's rows at gap p1 − p2 (3,) m, as MuJoCo
-    makes them: the impedance of |gap|, diagA the two links' invweight_t (the world's 0), the
-    scene's time constant and MuJoCo's default solimp (as the other joint rows)."""
+def _sandwich(a, y, b):
+    """vec(a ⊗ y ⊗ b) (3,): the vector part."""
+    q = quat_mul(quat_mul(a, y), b)
+    return ti.Vector([q[1], q[2], q[3]])
+
+
+@ti.func
+def _sandwich_adjoint(a, y, b, g):
+    """Reverse of _sandwich for unit a, b given ∂L/∂vec (3,): (∂L/∂y (4,), ∂L/∂δ1 (3,), ∂L/∂δ2
+    (3,)), δ1 a world turn of b ((1, δ1/2) ⊗ b) and δ2 of a (a ⊗ (1, −δ2/2))."""
+    y_bar = quat_mul(quat_mul(quat_conj(a), _pure(g)), quat_conj(b))
+    yv, bv = ti.Vector([y[1], y[2], y[3]]), ti.Vector([y_bar[1], y_bar[2], y_bar[3]])
+    g1 = 0.5 * (-y_bar[0] * yv + y[0] * bv + bv.cross(yv))
+    g2 = 0.5 * (y_bar[0] * yv - y[0] * bv - yv.cross(bv))
+    return y_bar, g1, g2
+
+
+@ti.func
+def _body_eq_terms(d: ti.template(), s, e, k):
+    """(link 1, link 2, point 1 (3,) m, point 2 (3,) m) of connect or weld k at frame s: its two
+    anchors in the world."""
+    l1, l2 = d.body_eq_link[2 * k], d.body_eq_link[2 * k + 1]
+    return (l1, l2, _link_point(d, s, e, l1, d.body_eq_anchor[2 * k]),
+            _link_point(d, s, e, l2, d.body_eq_anchor[2 * k + 1]))
+
+
+@ti.func
+def _weld_frames(d: ti.template(), s, e, w, l1, l2):
+    """(a (4,), b (4,), τ) of weld w at frame s (see above), b's sign the one that makes a ⊗ b's
+    w ≥ 0: both signs are one turn, and the rows hold the nearer (MuJoCo's take b as it comes: the
+    same while the two frames stay within half a turn of each other)."""
+    q1, _w1, _a1 = _link_rotation(d, s, e, l1)
+    q2, _w2, _a2 = _link_rotation(d, s, e, l2)
+    a = quat_conj(quat_mul(q2, d.weld_turn[2 * w + 1]))
+    b = quat_mul(q1, d.weld_turn[2 * w])
+    if quat_mul(a, b)[0] < 0.0:
+        b = -b
+    return a, b, d.weld_torquescale[w]
+
+
+@ti.func
+def _turn_bias(d: ti.template(), s, e, l1, l2):
+    """y (4,) of a weld's J̇ q̇ = ½ τ vec(a ⊗ y ⊗ b) (MuJoCo's mj_Jdotv: ė's time derivative at zero
+    qacc): y = −½ (0, ω2) ⊗ (0, Δω) + (0, Δα) + ½ (0, Δω) ⊗ (0, ω1), Δ link 1's less link 2's."""
+    _q1, w1, alpha1 = _link_rotation(d, s, e, l1)
+    _q2, w2, alpha2 = _link_rotation(d, s, e, l2)
+    dw = w1 - w2
+    return -0.5 * quat_mul(_pure(w2), _pure(dw)) + _pure(alpha1 - alpha2) + 0.5 * quat_mul(_pure(dw), _pure(w1))
+
+
+@ti.func
+def _turn_bias_adjoint(d: ti.template(), s, e, l1, l2, y_bar):
+    """Reverse of _turn_bias's y given ∂L/∂y (4,): into both links' cvel_w and cacc_w."""
+    _q1, w1, _alpha1 = _link_rotation(d, s, e, l1)
+    _q2, w2, _alpha2 = _link_rotation(d, s, e, l2)
+    dw = w1 - w2
+    yw, yv = y_bar[0], ti.Vector([y_bar[1], y_bar[2], y_bar[3]])
+    # (0, p) ⊗ (0, r) = (−p·r, p × r): ∂/∂p = −ȳ_w r + r × ȳ_v, ∂/∂r = −ȳ_w p + ȳ_v × p
+    g_w2 = -0.5 * (-yw * dw + dw.cross(yv))
+    g_dw = -0.5 * (-yw * w2 + yv.cross(w2)) + 0.5 * (-yw * w1 + w1.cross(yv))
+    g_w1 = 0.5 * (-yw * dw + yv.cross(dw)) + g_dw
+    g_w2 -= g_dw
+    for link, g_w, g_alpha in ti.static(((l1, g_w1, yv), (l2, g_w2, -yv))):
+        if link >= 0:
+            accumulate(d.cvel_w.grad, ti.Vector([s, e, link]), g_w)
+            accumulate(d.cacc_w.grad, ti.Vector([s, e, link]), g_alpha)
+
+
+@ti.func
+def _add_turn_jacobian(d: ti.template(), s, e, link, a, b, scale, first):
+    """Add the turn rows' Jacobian of the link's path into rows first… first + 2: ``scale`` (½ τ
+    for link 1, −½ τ for link 2) × vec(a ⊗ (0, cdof_w) ⊗ b) per dof."""
+    l = link
+    while l >= 0:
+        dof0 = d.link_dof0[l]
+        for i in range(dof0, dof0 + dof_count(d, l)):
+            v = scale * _sandwich(a, _pure(d.cdof_w[s, e, i]), b)
+            for k in ti.static(range(3)):
+                accumulate(d.efc_J, ti.Vector([s, e, first + k, i]), v[k])
+        l = d.link_parent[l]
+
+
+@ti.func
+def _turn_jacobian_adjoint(d: ti.template(), s, e, link, a, b, scale, k, force, g_aref, damping):
+    """Reverse of _add_turn_jacobian for turn row k of the link's path: J̄ = f u − āref (qacc + B q̇)
+    per dof, into cdof_w and q̇; returns ∂L/∂δ1, ∂L/∂δ2 (3,) (a's and b's turns, _sandwich_adjoint)."""
+    g1, g2 = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)
+    axis = ti.Vector([1.0 if k == c else 0.0 for c in ti.static(range(3))], dt=float)
+    l = link
+    while l >= 0:
+        dof0 = d.link_dof0[l]
+        for i in range(dof0, dof0 + dof_count(d, l)):
+            y = _pure(d.cdof_w[s, e, i])
+            u, w = d.solver_Mgrad[s, e, i], d.qacc_constrained[s, e, i] + damping * d.qvel[s, e, i]
+            y_bar, h1, h2 = _sandwich_adjoint(a, y, b, scale * (force * u - g_aref * w) * axis)
+            accumulate(d.cdof_w.grad, ti.Vector([s, e, i]), ti.Vector([y_bar[1], y_bar[2], y_bar[3]]))
+            accumulate(d.qvel.grad, ti.Vector([s, e, i]), -damping * g_aref * scale * _sandwich(a, y, b).dot(axis))
+            g1 += h1
+            g2 += h2
+        l = d.link_parent[l]
+    return g1, g2
+
+
+@ti.func
+def _turn_error(d: ti.template(), s, e, k, l1, l2):
+    """(turn error e (3,), a (4,), b (4,), τ) of connect or weld k (links l1, l2) at frame s (a
+    connect's: 0, its a, b and τ unused)."""
+    a, b = ti.Vector([1.0, 0.0, 0.0, 0.0], dt=float), ti.Vector([1.0, 0.0, 0.0, 0.0], dt=float)
+    turn, torquescale = ti.Vector.zero(float, 3), 0.0
+    weld = k - (d.n_body_eq - d.n_weld)
+    if weld >= 0:
+        a, b, torquescale = _weld_frames(d, s, e, weld, l1, l2)
+        turn = torquescale * _sandwich(a, ti.Vector([1.0, 0.0, 0.0, 0.0], dt=float), b)
+    return turn, a, b, torquescale
+
+
+@ti.func
+def _body_eq_scalars(d: ti.template(), e, l1, l2, dist):
+    """(impedance, K 1/s², B 1/s, diagA of the point rows, of the turn rows) of a connect's or weld's
+    rows at |error| = dist, as MuJoCo makes them: the impedance of the whole error's norm, diagA
+    the two links' invweight_t (turn rows: invweight_r; the world's 0), the scene's time constant
+    and MuJoCo's default solimp (as the other joint rows)."""
     solimp = ti.Vector(DEFAULT_SOLIMP, dt=float)
-    imp = impedance(solimp, gap.norm(), 0.0)
+    imp = impedance(solimp, dist, 0.0)
     k, b = stiffness_damping(ti.Vector([d.consts[CONST["timeconst"]], 1.0]), solimp[1], d.consts[CONST["h"]])
-    scale = 0.0
+    translation, rotation = 0.0, 0.0
     for link in ti.static((l1, l2)):
         if link >= 0:
-            scale += d.invweight_t[e, link]
-    return imp, k, b, ti.max(MINVAL, (1.0 - imp) / imp * scale), scale
+            translation += d.invweight_t[e, link]
+            rotation += d.invweight_r[e, link]
+    return imp, k, b, translation, rotation
 
 
 @ti.func
-def _connect_rows(d: ti.template(), s, e, first, k):
-    """Rows first… first + 2 of connect k (MuJoCo's connect): row j holds p1 − p2 along world axis j,
-    J = J_p(link 1, p1) − J_p(link 2, p2) (the two points' Jacobians), aref = −B J q̇ − K d gap_j −
-    J̇ q̇ (MuJoCo 4's: the rows ask J q̈ + J̇ q̇, the gap's acceleration, to follow the reference)."""
-    l1, l2, p1, p2 = _connect_terms(d, s, e, k)
-    base = d.connect_columns + k * d.n_dofs
+def _body_eq_rows(d: ti.template(), s, e, first, k):
+    """Rows first… of connect or weld k (MuJoCo's): row j < 3 holds p1 − p2 along world axis j, J =
+    J_p(link 1, p1) − J_p(link 2, p2) (the two points' Jacobians); a weld's rows 3… 5 its turn error
+    e (see above). aref = −B J q̇ − K d error_j − J̇ q̇ (MuJoCo 4's: the rows ask the error's
+    acceleration J q̈ + J̇ q̇ to follow the reference). Returns how many rows (3 or 6)."""
+    l1, l2, p1, p2 = _body_eq_terms(d, s, e, k)
+    gap = p1 - p2
+    turn, a, b, torquescale = _turn_error(d, s, e, k, l1, l2)
+    n = 3 if k < d.n_body_eq - d.n_weld else 6
+    base = d.body_eq_columns + k * d.n_dofs
     ncol = _path_columns(d, s, e, base, l1, l2)
-    _zero_rows(d, s, e, base, first, 3, ncol)
+    _zero_rows(d, s, e, base, first, n, ncol)
     world = ti.Matrix.identity(float, 3)
     _add_link_jacobian(d, s, e, l1, p1, world, 1.0, first, 3, False, 0.0)
     _add_link_jacobian(d, s, e, l2, p2, world, -1.0, first, 3, False, 0.0)
-    gap = p1 - p2
-    imp, stiffness, damping, reg, _scale = _connect_scalars(d, e, l1, l2, gap)
+    imp, stiffness, damping, translation, rotation = _body_eq_scalars(d, e, l1, l2, ti.sqrt(gap.dot(gap) + turn.dot(turn)))
     bias = _point_bias_acceleration(d, s, e, l1, p1) - _point_bias_acceleration(d, s, e, l2, p2)
-    for j in ti.static(range(3)):
-        r = first + j
-        d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = base, ncol
-        d.efc_R[s, e, r] = reg
-        d.efc_aref[s, e, r] = -damping * row_times(d, s, e, r, d.qvel) - stiffness * imp * gap[j] - bias[j]
-        d.efc_type[s, e, r], d.efc_floss[s, e, r], d.efc_mu[s, e, r] = EQUALITY, 0.0, 0.0
-        d.efc_dim[s, e, r], d.efc_id[s, e, r] = 1, k
+    turn_bias = ti.Vector.zero(float, 3)
+    if n == 6:
+        _add_turn_jacobian(d, s, e, l1, a, b, 0.5 * torquescale, first + 3)
+        _add_turn_jacobian(d, s, e, l2, a, b, -0.5 * torquescale, first + 3)
+        turn_bias = 0.5 * torquescale * _sandwich(a, _turn_bias(d, s, e, l1, l2), b)
+    for j in ti.static(range(6)):
+        if j < n:
+            r = first + j
+            error, scale, jdv = gap[j % 3], translation, bias[j % 3]
+            if ti.static(j >= 3):
+                error, scale, jdv = turn[j - 3], rotation, turn_bias[j - 3]
+            d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = base, ncol
+            d.efc_R[s, e, r] = ti.max(MINVAL, (1.0 - imp) / imp * scale)
+            d.efc_aref[s, e, r] = -damping * row_times(d, s, e, r, d.qvel) - stiffness * imp * error - jdv
+            d.efc_type[s, e, r], d.efc_floss[s, e, r], d.efc_mu[s, e, r] = EQUALITY, 0.0, 0.0
+            d.efc_dim[s, e, r], d.efc_id[s, e, r] = 1, k
+    return n
 
 
 @ti.func
-def _connect_row_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
-    """Reverse of _connect_rows for row r (axis j of connect k) from its implicit gradients (aref,
-    R) and, as its Jacobian depends on q, J̄ = f u − āref (qacc + B q̇) (as the contact rows'): into
-    cdof, q̇, both links' poses (through the points), their cvel and cacc (J̇ q̇), gravity and
-    invweight_t at frame s."""
-    k, j = (r - d.n_eq) // 3, (r - d.n_eq) % 3
-    l1, l2, p1, p2 = _connect_terms(d, s, e, k)
+def _body_eq_row_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
+    """Reverse of _body_eq_rows for row r (row j of connect or weld k) from its implicit gradients
+    (aref, R) and, as its Jacobian depends on q, J̄ = f u − āref (qacc + B q̇) (as the contact
+    rows'): into cdof, q̇, both links' poses (through the points and the turn), their cvel and cacc
+    (J̇ q̇), gravity, invweight_t and invweight_r at frame s."""
+    k = d.efc_id[s, e, r]
+    j = r - d.n_eq - 3 * k - 3 * ti.max(0, k - (d.n_body_eq - d.n_weld))  # (a weld's rows: six)
+    l1, l2, p1, p2 = _body_eq_terms(d, s, e, k)
     gap = p1 - p2
-    imp, stiffness, damping, _reg, scale = _connect_scalars(d, e, l1, l2, gap)
-    axis = ti.Vector([1.0 if j == a else 0.0 for a in ti.static(range(3))], dt=float)
-    g_imp = -stiffness * gap.dot(axis) * g_aref
+    turn, a, b, torquescale = _turn_error(d, s, e, k, l1, l2)
+    dist = ti.sqrt(gap.dot(gap) + turn.dot(turn))
+    imp, stiffness, damping, translation, rotation = _body_eq_scalars(d, e, l1, l2, dist)
+    axis = ti.Vector([1.0 if j % 3 == c else 0.0 for c in ti.static(range(3))], dt=float)
+    error, scale = gap.dot(axis), translation
+    if j >= 3:
+        error, scale = turn.dot(axis), rotation
+    g_imp = -stiffness * error * g_aref
     if (1.0 - imp) / imp * scale > MINVAL:  # else R is its floor
         for link in ti.static((l1, l2)):
             if link >= 0:
-                accumulate(d.invweight_t.grad, ti.Vector([e, link]), (1.0 - imp) / imp * g_R)
+                if j < 3:
+                    accumulate(d.invweight_t.grad, ti.Vector([e, link]), (1.0 - imp) / imp * g_R)
+                else:
+                    accumulate(d.invweight_r.grad, ti.Vector([e, link]), (1.0 - imp) / imp * g_R)
         g_imp -= scale / (imp * imp) * g_R
-    g_gap = -stiffness * imp * g_aref * axis
-    dist = gap.norm()
-    if dist > MINVAL:  # (the impedance is flat at no gap)
+    slope = 0.0
+    if dist > MINVAL:  # (the impedance is flat at no error)
         slope, _solimp_slope = impedance_gradient(ti.Vector(DEFAULT_SOLIMP, dt=float), dist, 0.0)
-        g_gap += slope * g_imp / dist * gap
+        slope /= dist
+    g_gap, g_turn = slope * g_imp * gap, slope * g_imp * turn
     force, world = d.efc_force[s, e, r], ti.Matrix.identity(float, 3)
-    _f1, g_p1, _u1, _w1 = _jacobian_adjoint(d, s, e, world, p1, l1, 1.0, force * axis, g_aref * axis, damping)
-    _f2, g_p2, _u2, _w2 = _jacobian_adjoint(d, s, e, world, p2, l2, -1.0, force * axis, g_aref * axis, damping)
-    g_p1 += _point_bias_acceleration_adjoint(d, s, e, l1, p1, -g_aref * axis)
-    g_p2 += _point_bias_acceleration_adjoint(d, s, e, l2, p2, g_aref * axis)
+    g_p1, g_p2 = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)
+    g_turn1, g_turn2 = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)  # ∂L/∂ the links' world turns
+    if j < 3:
+        g_gap -= stiffness * imp * g_aref * axis
+        _f1, g_p1, _u1, _w1 = _jacobian_adjoint(d, s, e, world, p1, l1, 1.0, force * axis, g_aref * axis, damping)
+        _f2, g_p2, _u2, _w2 = _jacobian_adjoint(d, s, e, world, p2, l2, -1.0, force * axis, g_aref * axis, damping)
+        g_p1 += _point_bias_acceleration_adjoint(d, s, e, l1, p1, -g_aref * axis)
+        g_p2 += _point_bias_acceleration_adjoint(d, s, e, l2, p2, g_aref * axis)
+    else:
+        g_turn -= stiffness * imp * g_aref * axis
+        h1, h2 = _turn_jacobian_adjoint(d, s, e, l1, a, b, 0.5 * torquescale, j - 3, force, g_aref, damping)
+        m1, m2 = _turn_jacobian_adjoint(d, s, e, l2, a, b, -0.5 * torquescale, j - 3, force, g_aref, damping)
+        y_bar, n1, n2 = _sandwich_adjoint(a, _turn_bias(d, s, e, l1, l2), b, -0.5 * torquescale * g_aref * axis)
+        _turn_bias_adjoint(d, s, e, l1, l2, y_bar)
+        g_turn1, g_turn2 = h1 + m1 + n1, h2 + m2 + n2
+    if k >= d.n_body_eq - d.n_weld:  # the turn error's own dependence on the two frames
+        _y_bar, e1, e2 = _sandwich_adjoint(a, ti.Vector([1.0, 0.0, 0.0, 0.0], dt=float), b, torquescale * g_turn)
+        g_turn1 += e1
+        g_turn2 += e2
     _link_point_adjoint(d, s, e, l1, p1, g_gap + g_p1)
     _link_point_adjoint(d, s, e, l2, p2, g_p2 - g_gap)
+    for link, g in ti.static(((l1, g_turn1), (l2, g_turn2))):
+        if link >= 0:
+            accumulate(d.xrot_grad, ti.Vector([s, e, link]), g)
