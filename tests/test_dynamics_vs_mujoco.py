@@ -104,7 +104,8 @@ def test_kuka_trajectory_matches_mujoco_f32(f32):
 
 
 def _rows_scale(robot):
-    """Our (body_invweight0 (1, L), dof_invweight0 (1, D)) at the build's masses, armature 0."""
+    """Our (body_invweight0 (1, L) translational, rotational, dof_invweight0 (1, D)) at the build's
+    masses, armature 0."""
     solver = robot._solver
     mass = solver.default_inputs["mass"]
     return solver.invweight_basis(mass, torch.zeros((1, robot.n_dofs), dtype=mass.dtype), solver.check_positive_definite)
@@ -112,7 +113,7 @@ def _rows_scale(robot):
 
 @pytest.mark.parametrize("name", list(ROBOTS))
 def test_rows_scale_matches_mujoco_invweight0_f64(f64, name):
-    """The constraint rows' scale — MuJoCo's body_invweight0 (translation) and dof_invweight0, made
+    """The constraint rows' scale — MuJoCo's body_invweight0 (translation, rotation) and dof_invweight0, made
     from M at the initial pose (contact.InvweightBasis, which assembles M from the links' centre-of-
     mass Jacobians) — equals mj_setConst's, a free base turned so that no link's frame is the world's."""
     path, free = ROBOTS[name]
@@ -120,19 +121,20 @@ def test_rows_scale_matches_mujoco_invweight0_f64(f64, name):
     robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=not free, pos=(0.1, -0.2, 0.3), euler=(30, -50, 70)))
     scene.build()
     try:
-        invweight_link, invweight_dof = _rows_scale(robot)
+        invweight_link, invweight_turn, invweight_dof = _rows_scale(robot)
         model = mujoco_ref.load_model(path, free_base=free, dt=DT)  # armature 0
         if free:
             model.qpos0[:7] = robot.get_qpos().numpy()[:7]
         mujoco.mj_setConst(model, mujoco.MjData(model))
         perm = _our_dof(robot, mujoco_ref.dof_names(model))
         assert np.allclose(invweight_dof[0].numpy()[perm], model.dof_invweight0, rtol=1e-10, atol=0)
-        ours = {link.name: invweight_link[0, link.idx_local].item() for link in robot.links}
+        ours = {link.name: (invweight_link[0, link.idx_local].item(), invweight_turn[0, link.idx_local].item())
+                for link in robot.links}
         moving = [b for b in range(1, model.nbody) if model.body(b).name in ours and model.body_invweight0[b, 0] > 0]
         assert len(moving) >= 2
         for b in moving:
             name = model.body(b).name
-            assert np.isclose(ours[name], model.body_invweight0[b, 0], rtol=1e-10, atol=0), name
+            assert np.allclose(ours[name], model.body_invweight0[b], rtol=1e-10, atol=0), name
     finally:
         scene.destroy()
 
@@ -160,7 +162,7 @@ def test_rows_scale_per_tree_equals_the_dense_formula_f64(f64):
     rng = np.random.default_rng(0)
     mass = torch.tensor(m.link_mass0 * rng.uniform(0.5, 2.0, m.n_links))[None]
     armature = torch.tensor(rng.uniform(0.0, 0.1, m.n_dofs))[None]
-    invweight_t, invweight_dof = basis(mass, armature, solver.check_positive_definite)
+    invweight_t, invweight_r, invweight_dof = basis(mass, armature, solver.check_positive_definite)
 
     jac = torch.empty((1, m.n_links, 6, m.n_dofs), dtype=torch.float64)
     solver.kernels.read_com_jacobians(jac)
@@ -169,11 +171,13 @@ def test_rows_scale_per_tree_equals_the_dense_formula_f64(f64):
     M = (np.einsum("l,lki,lkj->ij", mass[0].numpy(), J[:, :3], J[:, :3])
          + np.einsum("l,lki,lkn,lnj->ij", mass[0].numpy(), J[:, 3:], unit_inertia, J[:, 3:]) + np.diag(armature[0]))
     inverse = np.linalg.inv(M)
-    expected_t = np.einsum("lri,ij,lrj->l", J[:, :3], inverse, J[:, :3]) / 3.0 * (m.link_static == 0)
+    expected_t, expected_r = (np.einsum("lri,ij,lrj->l", J[:, rows], inverse, J[:, rows]) / 3.0 * (m.link_static == 0)
+                              for rows in (slice(0, 3), slice(3, 6)))
     expected_dof = np.diag(inverse).copy()
     for first in np.flatnonzero(m.dof_q < 0)[::3]:  # a free joint's translations, then its rotations
         expected_dof[first: first + 3] = expected_dof[first: first + 3].mean()
     np.testing.assert_allclose(invweight_t[0].numpy(), expected_t, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(invweight_r[0].numpy(), expected_r, rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(invweight_dof[0].numpy(), expected_dof, rtol=1e-12, atol=1e-15)
     assert (invweight_t[0].numpy()[m.link_static == 0] > 0).all()
 
@@ -235,7 +239,7 @@ def test_rows_scale_of_sliding_leaves_matches_mujoco_f64(f64, tmp_path, merge):
     robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=True, merge_fixed_links=merge))
     scene.build()
     try:
-        invweight_link, invweight_dof = _rows_scale(robot)
+        invweight_link, invweight_turn, invweight_dof = _rows_scale(robot)
         spec = mujoco_ref.bare_spec(path)
         spec.compiler.fusestatic = merge
         model = spec.compile()
