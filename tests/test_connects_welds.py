@@ -69,7 +69,7 @@ def test_connects_and_welds_by_sites_and_bodies_match_mujoco(f64, path, cone):
     contacts come."""
     m, d, scene, robot = _pair(path, cone, plane=True, integrator="euler")
     model = scene.sim.slots[0].solver.model
-    mujoco.mj_setConst(m, d)
+    mujoco.mj_setConst(m, mujoco.MjData(m))  # (on data of its own: it leaves qpos at qpos0's)
     # body semantics: what is not given is taken at qpos0, as MuJoCo's compiler takes it (a weld's
     # anchors are in the other order there; its turn r1 is MuJoCo's relpose, up to its sign)
     data = m.eq_data[1]
@@ -220,14 +220,19 @@ def test_equality_defaults_are_read(f64, tmp_path, caplog, default, loaded):
 
 def test_a_weld_with_its_relpose_matches_mujoco(f64, tmp_path):
     """A free box welded to the world at a given relpose (not its start pose: it is pulled there),
-    and a slid body welded to it with an anchor: 0.6 s in both engines."""
+    a slid body welded to it with an anchor, and a free capsule held by a ``fromto`` site (its z
+    axis along the segment, as MuJoCo places it) on a world site: 0.6 s in both engines."""
     path = tmp_path / "robot.xml"
-    path.write_text('<mujoco><worldbody><body name="box" pos="0.1 0 1" euler="0 10 0"><freejoint/>'
+    path.write_text('<mujoco><worldbody><site name="w" pos="1 0 1.1" euler="0 80 5"/>'
+                    '<body name="box" pos="0.1 0 1" euler="0 10 0"><freejoint/>'
                     '<geom type="box" size="0.1 0.2 0.05"/></body>'
                     '<body name="slider" pos="0 0.5 1"><joint name="s" type="slide" axis="0 1 0"/>'
-                    '<geom type="sphere" size="0.05"/></body></worldbody>'
+                    '<geom type="sphere" size="0.05"/></body>'
+                    '<body name="cap" pos="1 0 1"><freejoint/><geom type="capsule" fromto="0 0 0 0.2 0 0" size="0.03"/>'
+                    '<site name="f" type="capsule" size="0.01" fromto="0 0 0 0.2 0 0.02"/></body></worldbody>'
                     '<equality><weld body1="box" relpose="0.05 0 1.02 0.99 0 0.1 0.05" torquescale="2"/>'
-                    '<weld body1="slider" body2="box" anchor="0.02 0.4 0"/></equality></mujoco>')
+                    '<weld body1="slider" body2="box" anchor="0.02 0.4 0"/><weld site1="f" site2="w"/></equality>'
+                    '</mujoco>')
     m, d, scene, robot = _pair(str(path), integrator="euler")
     assert _lockstep(m, d, scene, robot, 300) < 1e-10
-    assert d.ne == 12
+    assert d.ne == 18

@@ -179,7 +179,7 @@ LINK = '<geom type="sphere" size="0.1"/>'
     (f'<body name="b"><joint name="j"/>{LINK}<site name="s"/></body>',
      '<equality><connect site1="s" site2="s"/></equality>', "expected two different bodies, got 'b' twice"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><connect body1="world" body2="b" anchor="0 0 0"/>'
-     '</equality>', "body1 expected a body of the file, got the world (name it as body2)"),
+     '</equality>', "body1 expected a body of the file, got the world (not supported: give the world as body2)"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><connect body1="b"/></equality>',
      "attribute 'anchor' is missing"),
     (f'<body name="b"><joint name="j"/>{LINK}<site name="s"/></body>',

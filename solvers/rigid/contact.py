@@ -88,8 +88,8 @@ class InvweightBasis:
     from the mass and armature inputs, in torch, so that their gradients reach mass and armature
     (Genesis recomputes them when those change, as mj_setConst does):
     - invweight_t per link (1/kg): the mean of the translational diagonal of J_l M⁻¹ J_lᵀ, and
-      invweight_r (1/(kg·m²)) of its rotational one (read by welds' turn rows: contacts have
-      condim ≤ 3); zero for links welded to the world;
+      invweight_r (1/(kg·m²)) of its rotational one (read by welds' turn rows only: contacts have
+      condim ≤ 3; zero in a scene without welds); zero for links welded to the world;
     - invweight_dof per dof: the diagonal of M⁻¹, averaged over a free joint's three translations
       and its three rotations, and over a ball joint's three rotations;
     - but on a sliding leaf (``sliding_leaves``: MuJoCo's body_simple = 2), 1 / mass for
@@ -109,6 +109,7 @@ class InvweightBasis:
         # J_ω in the link's frame, where its inertia is given (a massless link's is dropped)
         unit_inertia = m.link_inertia0 * m.link_inv_mass0[:, None, None]
         self.n_links, self.n_dofs = m.n_links, m.n_dofs
+        self.rows = 6 if m.n_weld else 3  # (J's rows whose J M⁻¹ Jᵀ diagonal is read)
         self.groups = []  # per tree shape: (links (T, l), dofs (T, n), K (T, l, n, n), J (T, l, 6, n), average (T, n, n))
         for links, dofs in _same_shaped_trees(m):
             J = jac[links[:, :, None, None], np.arange(6)[None, None, :, None], dofs[:, None, None, :]]
@@ -154,7 +155,8 @@ class InvweightBasis:
             for t in torch.nonzero(info).flatten().tolist():
                 check_positive_definite(matrix[t].detach().cpu().numpy(), InvalidInputError, dofs[t].cpu().numpy())
                 torch.linalg.inv(matrix[t])  # singular below the check's share: torch's own error
-            diagonal = torch.einsum("tlri,tij,tlrj->tlr", J, inverse, J)  # (a block's trace is its frame's choice-free: J_ω is in the link's)
+            rows = J[:, :, : self.rows]
+            diagonal = torch.einsum("tlri,tij,tlrj->tlr", rows, inverse, rows)  # (a block's trace is frame-free: J_ω is in the link's)
             translational = translational.index_put((links.flatten(),), diagonal[..., :3].sum(-1).flatten() / 3.0)
             rotational = rotational.index_put((links.flatten(),), diagonal[..., 3:].sum(-1).flatten() / 3.0)
             per_dof = per_dof.index_put((dofs.flatten(),),

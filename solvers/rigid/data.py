@@ -404,10 +404,12 @@ class RigidView:
     """Kernel-scope view of one scene's arenas: sizes (``n_links``...) as local variables and
     every array of MODEL, INPUTS, FRAMES and GRAD_ONLY as an :class:`ArrayView`. ``cone``: the
     friction cone as a compile-time value (True: elliptic), for the kernels of the constraint
-    solve and its reverse, which then leave the other cone's code out; None: read at run time."""
+    solve and its reverse, which then leave the other cone's code out; None: read at run time.
+    ``body_eqs``: whether connects' and welds' rows are compiled into those kernels (a compile-time
+    value: their code made a cold compile of a box on a plane's 15-20 s longer each)."""
     _data_oriented = True
 
-    def __init__(self, ints, f1, v3, v4, m3, cone=None):
+    def __init__(self, ints, f1, v3, v4, m3, cone=None, body_eqs=True):
         arenas = dict(zip(ARENAS, (ints, f1, v3, v4, m3)))
         size = {name: impl.expr_init(_subscript(ints, k)) for name, k in HEADER.items()}
         # each start held in a local: spelled out at every access instead, the IR grew so much that
@@ -416,6 +418,7 @@ class RigidView:
         self.n_batch, self.n_links, self.n_dofs, self.n_qs = size["B"], size["L"], size["D"], size["Q"]
         self.n_pairs, self.substeps, self.input_total, self.grad_total = size["P"], size["S"], size["W"], size["GW"]
         self.n_eq, self.n_body_eq, self.n_weld = size["E"], size["K"], size["WD"]
+        self.n_connect, self.body_eqs = size["K"] - size["WD"], body_eqs  # (the connects come first)
         self.joint_columns, self.body_eq_columns = joint_row_columns(size), body_eq_columns(size)
         self.limits_enabled = size["limits"]
         self.n_geoms, self.n_candidates = size["G"], size["N"]
@@ -501,10 +504,10 @@ def _spread(ints: ti.template()):
     return ti.max(1, 1024 // n_batch(ints))
 
 
-def bind(ints, f1, v3, v4, m3, cone=None):
-    """Called inside a kernel (in the env loop): the :class:`RigidView` of the arenas (cone: see
-    RigidView)."""
-    return RigidView(ints, f1, v3, v4, m3, cone)
+def bind(ints, f1, v3, v4, m3, cone=None, body_eqs=True):
+    """Called inside a kernel (in the env loop): the :class:`RigidView` of the arenas (cone,
+    body_eqs: see RigidView)."""
+    return RigidView(ints, f1, v3, v4, m3, cone, body_eqs)
 
 
 # bind runs as Python while Taichi builds a kernel, on purpose: it only creates the view

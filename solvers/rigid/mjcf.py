@@ -180,13 +180,16 @@ class _Reader(MJCFDocument):
             self._body(child, index, child_class, links, child_outer)
 
     def _sites(self, body, childclass: str, name: str):
-        """Note the positions of the body's sites (in its frame; a ``fromto`` site at its middle)."""
+        """Note the frames of the body's sites (in its frame; a ``fromto`` site at its middle, its z
+        axis from ``to`` to ``from``, as MuJoCo 4's compiler turns it)."""
         for element, site_class, outer in self._members(body, "site", childclass):
             attrs = self.attrs(element, site_class)
             what = f"body {name!r} site {attrs.get('name')!r}"
             pos, quat = self.frame(attrs, what)
             if "fromto" in attrs:
-                pos = self.numbers(attrs, "fromto", 6, what).reshape(2, 3).mean(axis=0)
+                ends = self.numbers(attrs, "fromto", 6, what)
+                axis = ends[3:] - ends[:3]
+                pos, quat = (ends[:3] + ends[3:]) / 2.0, shapes.quat_z_to(-axis / norm(self, axis, what))
             if attrs.get("name") in self.sites:  # (MuJoCo refuses them too)
                 raise self.error(f"{what}: site names expected unique, got {attrs['name']!r} twice")
             if attrs.get("name") is not None:
@@ -449,11 +452,12 @@ class _Reader(MJCFDocument):
 
     def _equality_attrs(self, element) -> dict:
         """An equality's attributes over its class's ``<default><equality>`` (MuJoCo's defaults
-        for every equality type: active, solref, solimp)."""
+        for every equality type: active, solref, solimp; MuJoCo's schema allows no other there)."""
         cls = element.get("class", "main")
         if cls not in self.defaults and cls != "main":
             raise self.error(f"<equality><{element.tag}>: class {cls!r} is not a <default> class")
-        return {**self.defaults.get(cls, {}).get("equality", {}), **element.attrib}
+        default = self.defaults.get(cls, {}).get("equality", {})
+        return {**{k: v for k, v in default.items() if k in ("active", "solref", "solimp")}, **element.attrib}
 
     def _joint_equality(self, attrs: dict, links: list[LinkSpec], what: str):
         """<equality><joint joint1 joint2 polycoef>: joint1 follows joint2 (LinkSpec.mimic)."""
@@ -525,7 +529,8 @@ class _Reader(MJCFDocument):
             if name not in names:
                 raise self.error(f"{what}: {key} expected a body of the file, got {name!r}")
         if body1 == "world":
-            raise self.error(f"{what}: body1 expected a body of the file, got the world (name it as body2)")
+            raise self.error(f"{what}: body1 expected a body of the file, got the world (not supported: give the "
+                             f"world as body2)")
         if body1 == body2:
             raise self.error(f"{what}: expected two different bodies, got {body1!r} twice")
         return body1, body2

@@ -115,10 +115,11 @@ class RigidSolver(Solver):
             self.colliders.append((detect.KERNEL_BIT[detect.ALL_CONVEX],
                                    BoundKernel(step.converge, schedule, arenas, element_dims, detect.CONVEX_OPT_LEVEL)))
         # the reverse of a substep, without and with the constraint stage
-        solve_schedule, elliptic = self.data.solve_schedule, bool(settings["cone"])
-        self.constrain = BoundKernel(step.constrain, (solve_schedule, elliptic), arenas, element_dims)
-        self.reverse_kernel = [BoundKernel(step.reverse_dynamics, (schedule, 0, False), arenas, element_dims),
-                               BoundKernel(step.reverse_dynamics, (solve_schedule, 1, elliptic), arenas, element_dims)]
+        solve_schedule, elliptic, body_eqs = self.data.solve_schedule, bool(settings["cone"]), m.n_body_eq > 0
+        self.constrain = BoundKernel(step.constrain, (solve_schedule, elliptic, body_eqs), arenas, element_dims)
+        self.reverse_kernel = [BoundKernel(step.reverse_dynamics, (schedule, 0, False, False), arenas, element_dims),
+                               BoundKernel(step.reverse_dynamics, (solve_schedule, 1, elliptic, body_eqs), arenas,
+                                           element_dims)]
         self.collider_reverses = [(detect.KERNEL_BIT[kind], BoundKernel(step.collide_adjoint, (schedule, kind),
                                                                         arenas, element_dims, detect.opt_level(kind)))
                                   for kind in detect.differentiable_kinds(m)]

@@ -259,14 +259,15 @@ def converge(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s:
 @ti.kernel
 def constrain(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, flagged_only: ti.i32,
               replaying: ti.i32):
-    """Frame s's constraint rows and solve; config = (schedule, elliptic): the cone is compiled in,
-    so a scene loads only its own cone's code (the elliptic cone's is a third of the kernel);
+    """Frame s's constraint rows and solve; config = (schedule, elliptic, body_eqs): the cone is
+    compiled in, so a scene loads only its own cone's code (the elliptic cone's is a third of the
+    kernel), and the connects' and welds' rows only where the scene has some (RigidView);
     replaying: a backward's replay given the forward's solutions (constraint_env)."""
     ti.loop_config(serialize=config[0][0])
     for t in range(env_loop(ints, config[0][0])):
         e = env_of(ints, t, config[0][0])
         if e >= 0:
-            d = bind(ints, f1, v3, v4, m3, cone=config[1])
+            d = bind(ints, f1, v3, v4, m3, cone=config[1], body_eqs=config[2])
             if not _skipped(d, e, flagged_only):
                 constraint_env(d, s, e, replaying)
 
@@ -303,13 +304,13 @@ def prepare_reverse(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3:
 @ti.kernel
 def reverse_dynamics(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32):
     """Adjoints of substep s from the integration back to the subtree sums; config = (schedule,
-    rows, elliptic), rows: the step had a constraint stage; elliptic: its cone (compiled in, as
-    constrain's; False without rows)."""
+    rows, elliptic, body_eqs), rows: the step had a constraint stage; elliptic, body_eqs: compiled
+    in, as constrain's (False without rows)."""
     ti.loop_config(serialize=config[0][0])
     for t in range(env_loop(ints, config[0][0])):
         e = env_of(ints, t, config[0][0])
         if e >= 0:
-            dynamics_adjoint_env(bind(ints, f1, v3, v4, m3, cone=config[2]), s, e, config[1])
+            dynamics_adjoint_env(bind(ints, f1, v3, v4, m3, cone=config[2], body_eqs=config[3]), s, e, config[1])
 
 
 @ti.kernel

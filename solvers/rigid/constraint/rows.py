@@ -590,8 +590,9 @@ def dof_rows(d: ti.template(), s, e):
     for k in range(d.n_eq):
         _equality_row(d, s, e, rows, k)
         rows += 1
-    for k in range(d.n_body_eq):
-        rows += _body_eq_rows(d, s, e, rows, k)
+    if ti.static(d.body_eqs):
+        for k in range(d.n_body_eq):
+            rows += _body_eq_rows(d, s, e, rows, k)
     for i in range(d.n_dofs):
         bound = d.frictionloss[e, i]
         if bound > 0.0:
@@ -636,12 +637,16 @@ def dof_rows_adjoint(d: ti.template(), s, e, r, g_aref, g_R, g_bound):
     for a single-dof row. (An equality's offset and multiplier are the model's: no gradient.) A
     ball joint's cone limit: _ball_limit_adjoint; a connect's or weld's rows: _body_eq_row_adjoint."""
     t = d.efc_type[s, e, r]
-    if d.n_eq <= r and r < d.n_eq + 3 * d.n_body_eq + 3 * d.n_weld:
-        _body_eq_row_adjoint(d, s, e, r, g_aref, g_R)
-    elif t == ONE_SIDED and d.link_jtype[d.dof_link[d.efc_id[s, e, r]]] == BALL:
-        _ball_limit_adjoint(d, s, e, r, g_aref, g_R)
-    else:
-        _scalar_row_adjoint(d, s, e, r, t, g_aref, g_R, g_bound)
+    body_eq = 0
+    if ti.static(d.body_eqs):
+        if d.n_eq <= r and r < d.n_eq + 3 * d.n_connect + 6 * d.n_weld:
+            _body_eq_row_adjoint(d, s, e, r, g_aref, g_R)
+            body_eq = 1
+    if body_eq == 0:
+        if t == ONE_SIDED and d.link_jtype[d.dof_link[d.efc_id[s, e, r]]] == BALL:
+            _ball_limit_adjoint(d, s, e, r, g_aref, g_R)
+        else:
+            _scalar_row_adjoint(d, s, e, r, t, g_aref, g_R, g_bound)
 
 
 @ti.func
@@ -814,16 +819,11 @@ def _body_eq_terms(d: ti.template(), s, e, k):
 
 @ti.func
 def _weld_frames(d: ti.template(), s, e, w, l1, l2):
-    """(a (4,), b (4,), τ) of weld w at frame s (see above), b's sign the one that makes a ⊗ b's
-    w ≥ 0: both signs are one turn, and the rows hold the nearer (MuJoCo's take b as it comes: the
-    same while the two frames stay within half a turn of each other)."""
+    """(a (4,), b (4,), τ) of weld w at frame s (see above). (Either sign of a quaternion gives the
+    same force: a sign flips e, J and J̇ q̇ together, and Jᵀ f with them.)"""
     q1, _w1, _a1 = _link_rotation(d, s, e, l1)
     q2, _w2, _a2 = _link_rotation(d, s, e, l2)
-    a = quat_conj(quat_mul(q2, d.weld_turn[2 * w + 1]))
-    b = quat_mul(q1, d.weld_turn[2 * w])
-    if quat_mul(a, b)[0] < 0.0:
-        b = -b
-    return a, b, d.weld_torquescale[w]
+    return quat_conj(quat_mul(q2, d.weld_turn[2 * w + 1])), quat_mul(q1, d.weld_turn[2 * w]), d.weld_torquescale[w]
 
 
 @ti.func
@@ -895,7 +895,7 @@ def _turn_error(d: ti.template(), s, e, k, l1, l2):
     connect's: 0, its a, b and τ unused)."""
     a, b = ti.Vector([1.0, 0.0, 0.0, 0.0], dt=float), ti.Vector([1.0, 0.0, 0.0, 0.0], dt=float)
     turn, torquescale = ti.Vector.zero(float, 3), 0.0
-    weld = k - (d.n_body_eq - d.n_weld)
+    weld = k - d.n_connect
     if weld >= 0:
         a, b, torquescale = _weld_frames(d, s, e, weld, l1, l2)
         turn = torquescale * _sandwich(a, ti.Vector([1.0, 0.0, 0.0, 0.0], dt=float), b)
@@ -928,7 +928,7 @@ def _body_eq_rows(d: ti.template(), s, e, first, k):
     l1, l2, p1, p2 = _body_eq_terms(d, s, e, k)
     gap = p1 - p2
     turn, a, b, torquescale = _turn_error(d, s, e, k, l1, l2)
-    n = 3 if k < d.n_body_eq - d.n_weld else 6
+    n = 3 if k < d.n_connect else 6
     base = d.body_eq_columns + k * d.n_dofs
     ncol = _path_columns(d, s, e, base, l1, l2)
     _zero_rows(d, s, e, base, first, n, ncol)
@@ -963,7 +963,7 @@ def _body_eq_row_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
     rows'): into cdof, q̇, both links' poses (through the points and the turn), their cvel and cacc
     (J̇ q̇), gravity, invweight_t and invweight_r at frame s."""
     k = d.efc_id[s, e, r]
-    j = r - d.n_eq - 3 * k - 3 * ti.max(0, k - (d.n_body_eq - d.n_weld))  # (a weld's rows: six)
+    j = r - d.n_eq - 3 * k - 3 * ti.max(0, k - d.n_connect)  # (a weld's rows: six)
     l1, l2, p1, p2 = _body_eq_terms(d, s, e, k)
     gap = p1 - p2
     turn, a, b, torquescale = _turn_error(d, s, e, k, l1, l2)
@@ -1003,7 +1003,7 @@ def _body_eq_row_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
         y_bar, n1, n2 = _sandwich_adjoint(a, _turn_bias(d, s, e, l1, l2), b, -0.5 * torquescale * g_aref * axis)
         _turn_bias_adjoint(d, s, e, l1, l2, y_bar)
         g_turn1, g_turn2 = h1 + m1 + n1, h2 + m2 + n2
-    if k >= d.n_body_eq - d.n_weld:  # the turn error's own dependence on the two frames
+    if k >= d.n_connect:  # the turn error's own dependence on the two frames
         _y_bar, e1, e2 = _sandwich_adjoint(a, ti.Vector([1.0, 0.0, 0.0, 0.0], dt=float), b, torquescale * g_turn)
         g_turn1 += e1
         g_turn2 += e2
