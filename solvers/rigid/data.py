@@ -100,6 +100,10 @@ MODEL = {
     "link_inertia0": ("m3", "L"),
 }
 
+# the model arrays only the connects' and welds' rows read (compiled in where a scene has some):
+# their starts are spelled out where they are read (RigidView)
+RARELY_READ = {f"model:{name}" for name in ("body_eq_link", "body_eq_anchor", "weld_turn", "weld_torquescale")}
+
 JOINT_ROW_SLOTS = 3  # columns a joint row may have (constraint/rows.py): a ball joint's cone limit, three
 
 # Per-frame arrays: name → (arena, count per env, has a gradient). "DD": a (D, D) matrix per env.
@@ -413,8 +417,11 @@ class RigidView:
         arenas = dict(zip(ARENAS, (ints, f1, v3, v4, m3)))
         size = {name: impl.expr_init(_subscript(ints, k)) for name, k in HEADER.items()}
         # each start held in a local: spelled out at every access instead, the IR grew so much that
-        # compiling the reverse kernels took 4-14x longer (reverse_dynamics: 21.5 s → 1.6 s here)
-        start = {name: impl.expr_init(value) for name, value in layout(size)[0].items()}
+        # compiling the reverse kernels took 4-14x longer (reverse_dynamics: 21.5 s → 1.6 s here);
+        # but those of RARELY_READ, which held in locals made every kernel compile longer (a box on a
+        # plane's cold compile 6 s forward, 6 s backward)
+        start = {name: value if name in RARELY_READ else impl.expr_init(value)
+                 for name, value in layout(size)[0].items()}
         self.n_batch, self.n_links, self.n_dofs, self.n_qs = size["B"], size["L"], size["D"], size["Q"]
         self.n_pairs, self.substeps, self.input_total, self.grad_total = size["P"], size["S"], size["W"], size["GW"]
         self.n_eq, self.n_body_eq, self.n_weld = size["E"], size["K"], size["WD"]
