@@ -159,6 +159,7 @@ def test_repeated_rollouts_give_bit_identical_connect_and_weld_gradients(f64, pa
     assert torch.equal(grads[0], grads[1]) and bool(grads[0].abs().sum() > 0)
 
 
+@pytest.mark.slow  # (its own constraint kernels, on the thread pool: 50 s of compiling)
 def test_batched_welds_equal_single_envs_bitwise(f64):
     """On the thread pool (enough envs) and alone: the same bits, welds (their point rows are a
     connect's) and contacts included."""
