@@ -616,8 +616,8 @@ class _Reader(MJCFDocument):
 
 def place_world(links: list[LinkSpec], pos, quat) -> None:
     """Place the file's world frame at `pos` (3,) m, `quat` (4,) w-x-y-z: each root link's pose
-    (one a body tree) becomes (pos, quat) ∘ its pose in the file, and so does each point a connect
-    holds in the world."""
+    (one a body tree) becomes (pos, quat) ∘ its pose in the file, and so does each point and frame
+    a connect or weld holds in the world."""
     for root in (link for link in links if link.parent < 0):
         root.pos, root.quat = shapes.compose(pos, quat, root.pos, root.quat)
     for link in links:  # a connect's or weld's point and frame given in the world move with it too
