@@ -419,7 +419,7 @@ class RigidView:
         # each start held in a local: spelled out at every access instead, the IR grew so much that
         # compiling the reverse kernels took 4-14x longer (reverse_dynamics: 21.5 s → 1.6 s here);
         # but those of RARELY_READ, which held in locals made every kernel compile longer (a box on a
-        # plane's cold compile 6 s forward, 6 s backward)
+        # plane's cold compile 2-3 s forward, 2-3 s backward)
         start = {name: value if name in RARELY_READ else impl.expr_init(value)
                  for name, value in layout(size)[0].items()}
         self.n_batch, self.n_links, self.n_dofs, self.n_qs = size["B"], size["L"], size["D"], size["Q"]
