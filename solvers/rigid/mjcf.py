@@ -496,7 +496,6 @@ class _Reader(MJCFDocument):
         compiler reads them."""
         self._only(attrs, "weld", ("anchor", "relpose", "torquescale"))
         torquescale = float(self.numbers(attrs, "torquescale", 1, what, default=[1.0])[0])
-        identity = np.array([1.0, 0.0, 0.0, 0.0])
         if "site1" in attrs or "site2" in attrs:
             first, second = self._site_pair(attrs, ("body1", "body2", "anchor", "relpose"), what)
             if first[0] == "world":  # the same rows, with the opposite sign
@@ -505,7 +504,7 @@ class _Reader(MJCFDocument):
         else:
             body1, body2 = self._body_pair(attrs, links, what)
             relpose = self.numbers(attrs, "relpose", 7, what, default=[0, 1, 0, 0, 0, 0, 0])
-            anchor2, turn2 = self.numbers(attrs, "anchor", 3, what, default=np.zeros(3)), identity
+            anchor2, turn2 = self.numbers(attrs, "anchor", 3, what, default=np.zeros(3)), IDENTITY.copy()
             anchor1, turn1 = (relpose[:3], relpose[3:]) if np.any(relpose[3:]) else (None, None)
         self._by_body(links)[body1].welds += (("" if body2 == "world" else body2, anchor1, anchor2, turn1, turn2,
                                                torquescale),)
