@@ -100,10 +100,6 @@ MODEL = {
     "link_inertia0": ("m3", "L"),
 }
 
-# the model arrays only the connects' and welds' rows read (compiled in where a scene has some):
-# their starts are spelled out where they are read (RigidView)
-RARELY_READ = {f"model:{name}" for name in ("body_eq_link", "body_eq_anchor", "weld_turn", "weld_torquescale")}
-
 JOINT_ROW_SLOTS = 3  # columns a joint row may have (constraint/rows.py): a ball joint's cone limit, three
 
 # Per-frame arrays: name → (arena, count per env, has a gradient). "DD": a (D, D) matrix per env.
@@ -198,10 +194,12 @@ def _region_members(arena, grads):
             + [(n, c) for n, (a, c) in GRAD_ONLY.items() if a == arena])
 
 
-def layout(size):
+def layout(size, hold=lambda value: value):
     """Where every array starts in its arena, from the sizes ``size`` (name → value, SIZES):
     Python ints at build time, Taichi expressions inside kernels — the same arithmetic, so
-    both sides agree by construction, and a kernel loads only the few sizes.
+    both sides agree by construction, and a kernel loads only the few sizes. ``hold`` keeps each
+    array's end: inside kernels in a local, so the next start is that local plus one term (spelled
+    out, start k would repeat the k terms before it: the kernels' IR quadratic in the arrays).
 
     Returns (start, end): start["model:NAME"], ["inputs"], ["inputs.grad"] (B, W),
     ["frame:NAME"], ["grad:NAME"], and per frame region ["region:ARENA:GRADS"] and
@@ -216,21 +214,21 @@ def layout(size):
     start = {}
     for name, (arena, c) in MODEL.items():
         start[f"model:{name}"] = end[arena]
-        end[arena] = end[arena] + count[c]
-    start["inputs"], start["inputs.grad"] = end["f"], end["f"] + B * size["W"]
-    end["f"] = end["f"] + 2 * B * size["W"]
+        end[arena] = hold(end[arena] + count[c])
+    start["inputs"], start["inputs.grad"] = end["f"], hold(end["f"] + B * size["W"])
+    end["f"] = hold(start["inputs.grad"] + B * size["W"])
     for name, (arena, c) in PER_ENV.items():
         start[f"env:{name}"] = end[arena]
-        end[arena] = end[arena] + B * count[c]
+        end[arena] = hold(end[arena] + B * count[c])
     stop = {("i", False): end["i"], ("i", True): end["i"]}
     for arena, grads in _REGIONS:
         region = end[arena]
         offset = region
         for name, c in _region_members(arena, grads):
             start[f"{'grad' if grads else 'frame'}:{name}"] = offset
-            offset = offset + B * count[c]
-        start[f"region:{arena}:{grads}"], start[f"stride:{arena}:{grads}"] = region, offset - region
-        end[arena] = stop[arena, grads] = region + (size["S"] + 1) * (offset - region)
+            offset = hold(offset + B * count[c])
+        start[f"region:{arena}:{grads}"], start[f"stride:{arena}:{grads}"] = region, hold(offset - region)
+        end[arena] = stop[arena, grads] = hold(region + (size["S"] + 1) * start[f"stride:{arena}:{grads}"])
     stop["i", True] = stop["i", False]  # no integer array has a gradient
     return start, stop
 
@@ -416,12 +414,11 @@ class RigidView:
     def __init__(self, ints, f1, v3, v4, m3, cone=None, body_eqs=True):
         arenas = dict(zip(ARENAS, (ints, f1, v3, v4, m3)))
         size = {name: impl.expr_init(_subscript(ints, k)) for name, k in HEADER.items()}
-        # each start held in a local: spelled out at every access instead, the IR grew so much that
-        # compiling the reverse kernels took 4-14x longer (reverse_dynamics: 21.5 s → 1.6 s here);
-        # but those of RARELY_READ, which held in locals made every kernel compile longer (a box on a
-        # plane's cold compile 2-3 s forward, 2-3 s backward)
-        start = {name: value if name in RARELY_READ else impl.expr_init(value)
-                 for name, value in layout(size)[0].items()}
+        # each start a local, the previous array's end plus one term: spelled out at every access
+        # instead, the IR grew so much that compiling the reverse kernels took 4-14x longer
+        # (reverse_dynamics: 21.5 s → 1.6 s); each start's whole sum held in its own local, a box on
+        # a plane's cold compile (first step, 30 more and a backward) took 87 s against 72 s
+        start = layout(size, hold=impl.expr_init)[0]
         self.n_batch, self.n_links, self.n_dofs, self.n_qs = size["B"], size["L"], size["D"], size["Q"]
         self.n_pairs, self.substeps, self.input_total, self.grad_total = size["P"], size["S"], size["W"], size["GW"]
         self.n_eq, self.n_body_eq, self.n_weld = size["E"], size["K"], size["WD"]
