@@ -55,8 +55,9 @@ with it.
 
 **Replay.** A backward replays the step to refill its frames. Given the forward's final qacc and
 jar (the solver's ``replay_record``), the replay makes every output the solve leaves from them
-as its last pass did (``_replay_island``: states, forces, qfrc_constraint, the factor): the same
-bits without a warm start or iterations (the solve's share of a differentiable box rollout's
+as its last pass did (``_solve_island``'s first pass, then a stop: states, forces,
+qfrc_constraint, the factor): the same bits without a warm start or iterations (the solve's
+share of a differentiable box rollout's
 backward: from ~2 Newton iterations and their line searches to one factorisation). The jar is
 the iterations' running sum, not J qacc − aref afresh: forces from a fresh jar differ by round-off
 times the stiff rows' D or a near-sticking cone's Hessian, and no longer balance qacc (they made
@@ -926,10 +927,13 @@ def _line_search(d: ti.template(), s, e, k, n, m, tolerance, ls_iterations, scal
 
 # ----------------------------------------------------------------------------- drivers
 @ti.func
-def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iterations, ls_tolerance):
+def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iterations, ls_tolerance, replaying):
     """Newton iterations on island k from the current qacc (mj_solPrimal); returns (their count,
     1 when they stopped at ``iterations`` before a stopping test held, else 0).
-    Leaves qacc, efc_force/state, qfrc_constraint and the factored final H of the island."""
+    Leaves qacc, efc_force/state, qfrc_constraint and the factored final H of the island.
+    replaying: qacc and solver_jar hold the forward's final values ("Replay"): the first pass,
+    which then is the forward's last, makes the outputs again (one copy of the pass's code in the
+    kernel, not two: a cold compile of the solve ~5 s shorter)."""
     n, m = _select(d, s, e, k)
     inertia = 0.0
     for p in range(n):
@@ -937,7 +941,8 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
         inertia += d.solver_M[s, e, i, i]
     scale = 1.0 / inertia
     _mul_M(d, s, e, n, d.qacc, d.solver_Ma)
-    _set_jar(d, s, e, m)
+    if not replaying:
+        _set_jar(d, s, e, m)
     niter, first, improvement, polished, capped = 0, 1, 0.0, 0, 0
     while True:
         _, changed = _update_constraints(d, s, e, m)
@@ -947,7 +952,7 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
         # pass solves with it for the duality gap ½ gᵀM⁻¹g (a good warm start needs no Newton
         # step), then with H for the Newton decrement ½ gᵀH⁻¹g; later passes only with H.
         certificate, decrement = 0, 0.0
-        n_solves = 1 + first
+        n_solves = 1 + (first and not replaying)
         for attempt in range(n_solves):
             if attempt == n_solves - 1:
                 # also where the certificate stops (the backward needs it); after a step that left
@@ -963,6 +968,8 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
             decrement = ti.max(0.0, 0.5 * scale * _dot(d, d.solver_grad, d.solver_Mgrad, s, e, n))
             if attempt == 0 and first:
                 certificate = decrement < tolerance and gradient < tolerance
+        if replaying:
+            break
         stop = 0
         if first:
             stop = certificate or (gradient < tolerance and decrement < tolerance)
@@ -1000,18 +1007,6 @@ def _note_factor_rows(d: ti.template(), s, e, n):
     backward (cholesky_solve)."""
     for a in range(n):
         d.solver_env[s, e, d.solver_dofs[s, e, a]] = d.solver_dofs[s, e, d.solver_first[s, e, a]]
-
-
-@ti.func
-def _replay_island(d: ti.template(), s, e, k):
-    """Island k's outputs made again from the forward's final qacc and jar (see "Replay"): the
-    states and forces of that jar, qfrc_constraint = Jᵀ f and H's factor, by the functions the
-    forward's last pass ran, in its order."""
-    n, m = _select(d, s, e, k)
-    _update_constraints(d, s, e, m)
-    _constraint_force(d, s, e, n, m)
-    _factor_hessian(d, s, e, k, n, m)
-    _note_factor_rows(d, s, e, n)
 
 
 @ti.func
@@ -1071,15 +1066,13 @@ def newton_solve(d: ti.template(), s, e, iterations, tolerance, ls_iterations, l
     if replaying:  # (solver_jar holds the forward's too)
         for i in range(d.n_dofs):
             d.qacc[s, e, i] = d.qacc_constrained[s, e, i]
-        for k in range(d.n_dofs):
-            if d.solver_tree[s, e, k] == k:
-                _replay_island(d, s, e, k)
     else:
         _warm_start(d, s, e, n, m)
-        for k in range(d.n_dofs):
-            if d.solver_tree[s, e, k] == k:  # k is an island's canonical root
-                island_niter, capped = _solve_island(d, s, e, k, iterations, tolerance, ls_iterations, ls_tolerance)
-                niter += island_niter
-                if capped:  # (every writer writes 1)
-                    d.capped[0] = 1
+    for k in range(d.n_dofs):
+        if d.solver_tree[s, e, k] == k:  # k is an island's canonical root
+            island_niter, capped = _solve_island(d, s, e, k, iterations, tolerance, ls_iterations, ls_tolerance,
+                                                 replaying)
+            niter += island_niter
+            if capped:  # (every writer writes 1)
+                d.capped[0] = 1
     d.solver_niter[s, e] = niter
