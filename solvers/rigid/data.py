@@ -417,7 +417,7 @@ class RigidView:
         # each start a local, the previous array's end plus one term: spelled out at every access
         # instead, the IR grew so much that compiling the reverse kernels took 4-14x longer
         # (reverse_dynamics: 21.5 s → 1.6 s); each start's whole sum held in its own local, a box on
-        # a plane's cold compile (first step, 30 more and a backward) took 87 s against 72 s
+        # a plane's cold compile (first step, 30 more and a backward) took 87 s against 71 s
         start = layout(size, hold=impl.expr_init)[0]
         self.n_batch, self.n_links, self.n_dofs, self.n_qs = size["B"], size["L"], size["D"], size["Q"]
         self.n_pairs, self.substeps, self.input_total, self.grad_total = size["P"], size["S"], size["W"], size["GW"]

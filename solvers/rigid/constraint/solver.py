@@ -57,8 +57,8 @@ with it.
 jar (the solver's ``replay_record``), the replay makes every output the solve leaves from them
 as its last pass did (``_solve_island``'s first pass, then a stop: states, forces,
 qfrc_constraint, the factor): the same bits without a warm start or iterations (the solve's
-share of a differentiable box rollout's
-backward: from ~2 Newton iterations and their line searches to one factorisation). The jar is
+share of a differentiable box rollout's backward: from ~2 Newton iterations and their line
+searches to one pass: a factorisation, an M·qacc product and a solve with the factor). The jar is
 the iterations' running sum, not J qacc − aref afresh: forces from a fresh jar differ by round-off
 times the stiff rows' D or a near-sticking cone's Hessian, and no longer balance qacc (they made
 a husky's forward map noisy at 1e-12, which finite differences saw).
@@ -932,8 +932,9 @@ def _solve_island(d: ti.template(), s, e, k, iterations, tolerance, ls_iteration
     1 when they stopped at ``iterations`` before a stopping test held, else 0).
     Leaves qacc, efc_force/state, qfrc_constraint and the factored final H of the island.
     replaying: qacc and solver_jar hold the forward's final values ("Replay"): the first pass,
-    which then is the forward's last, makes the outputs again (one copy of the pass's code in the
-    kernel, not two: a cold compile of the solve ~5 s shorter)."""
+    which then is the forward's last, makes the outputs again and returns (0, 0) (one copy of the
+    pass's code in the kernel, not two: the constraint solve's kernel compiled in 27.6 s instead of
+    34.6, a box on a plane, float64)."""
     n, m = _select(d, s, e, k)
     inertia = 0.0
     for p in range(n):
