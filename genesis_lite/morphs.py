@@ -130,12 +130,19 @@ class MJCF(Morph):
     offset, applied on the left); a root body is free where the file gives it a free joint,
     welded otherwise; fixed=True welds the base where it starts. Each body is a link (none is
     merged), its joints' parameters, its actuators' servo gains and the file's contact bit masks
-    are the file's."""
+    are the file's. The worldbody's geoms (a floor, obstacles) are a static link "world", the
+    entity's last; exclude_ground_plane=True leaves out its planes (Genesis's option: for a scene
+    that has a ground of its own, e.g. gs.morphs.Plane)."""
     file: str = None
+    exclude_ground_plane: bool = False
 
     def _check(self):
         if not isinstance(self.file, str) or not self.file:
             raise InvalidInputError(f"MJCF: argument 'file' must be a path string, got {self.file!r}")
+        if not isinstance(self.exclude_ground_plane, (bool, np.bool_)):
+            raise InvalidInputError(f"MJCF: argument 'exclude_ground_plane' must be True or False, "
+                                    f"got {self.exclude_ground_plane!r}")
+        self.exclude_ground_plane = bool(self.exclude_ground_plane)
 
 
 @named_keywords(*_PRIMITIVE, *_TETGEN, deprecated=_DEPRECATED)

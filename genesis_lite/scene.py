@@ -469,7 +469,7 @@ def _links_of(morph, material, name):
         if not os.path.isfile(morph.file):
             raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.MJCF expected an existing MJCF file, "
                              f"got '{morph.file}' (not found; relative paths start at {os.getcwd()})")
-        links = mjcf.load_mjcf(morph.file, entity_name=name)
+        links = mjcf.load_mjcf(morph.file, entity_name=name, exclude_ground_plane=morph.exclude_ground_plane)
         mjcf.place_world(links, morph.pos, morph.quat)
         if morph.fixed:
             links[0].joint_type = "fixed"

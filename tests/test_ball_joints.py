@@ -37,9 +37,9 @@ def _turn(quat):
 def test_ball_joints_match_mujoco(f64, cone):
     """Both trees from the same random velocities for 3 s in both engines (MuJoCo's Euler
     integrator: the rope's free root turns), with MuJoCo's cone-limit rows and contacts seen."""
-    m, d, scene, robot = _pair(BALLS, cone, plane=True, integrator="euler")
-    assert [link.name for link in robot.links] == ["world", "arm", "forearm", "hand:wrist", "hand", "rope", "seg1",
-                                                   "seg2", "seg3", "seg4"]
+    m, d, scene, robot = _pair(BALLS, cone, integrator="euler")
+    assert [link.name for link in robot.links] == ["world:arm", "arm", "forearm", "hand:wrist", "hand", "rope",
+                                                   "seg1", "seg2", "seg3", "seg4", "world"]  # (last: the floor's)
     assert (robot.n_dofs, robot.n_qs) == (m.nv, m.nq) == (25, 32)
     velocity = np.random.default_rng(0).normal(size=m.nv)
     d.qvel[:] = velocity
@@ -77,7 +77,7 @@ def test_a_turn_stored_past_half_a_turn_reads_as_mujocos(f64):
     """A quaternion with w < 0 (the same turn as −q) and not of unit length: the shoulder turned
     50° against its 40° cone, its spring pulling; MuJoCo 4 reads the turn through its wrap past π
     alike (200 steps), and the gradient w.r.t. that quaternion matches central differences."""
-    m, d, scene, robot = _pair(BALLS, plane=True, integrator="euler", requires_grad=True)
+    m, d, scene, robot = _pair(BALLS, integrator="euler", requires_grad=True)
     turn = -1.3 * euler_xyz_to_quat(torch.tensor([0.0, np.deg2rad(50.0), 0.0], dtype=torch.float64))
     qpos = robot.get_qpos().detach().clone()
     qpos[0:4] = turn
@@ -213,7 +213,6 @@ def test_gradients_through_ball_joints_match_finite_differences(f64, what):
     """Every differentiable input a ball joint touches, 0.4 s from a fast start: the arm against
     both cone limits, the rope landing (contacts); loss a fixed weighting of every link's pose."""
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, requires_grad=True))
-    scene.add_entity(gs.morphs.Plane())
     robot = scene.add_entity(gs.morphs.MJCF(file=BALLS))
     scene.build()
     steps, dofs = 200, robot.n_dofs
@@ -259,7 +258,6 @@ def test_gradients_through_ball_joints_match_finite_differences(f64, what):
 
 def test_repeated_rollouts_give_bit_identical_ball_joint_gradients(f64):
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, requires_grad=True))
-    scene.add_entity(gs.morphs.Plane())
     robot = scene.add_entity(gs.morphs.MJCF(file=BALLS))
     scene.build()
     velocity = torch.tensor(np.random.default_rng(4).normal(0.0, 2.0, robot.n_dofs))
@@ -280,7 +278,6 @@ def test_batched_ball_joints_equal_single_envs_bitwise(f64):
     built = []
     for n_envs in (SERIAL_LINK_ENVS // 10 + 1, 0):
         scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, substeps=2))
-        scene.add_entity(gs.morphs.Plane())
         built.append((scene, scene.add_entity(gs.morphs.MJCF(file=BALLS))))
         scene.build(n_envs=n_envs)
     (batched, robot_b), (single, robot_s) = built

@@ -67,7 +67,7 @@ def test_connects_and_welds_by_sites_and_bodies_match_mujoco(f64, path, cone):
     both engines (MuJoCo's Euler integrator: free bodies turn). Measured 3e-11 (pyramidal) and
     6e-11 (elliptic) with the connects, 2.3e-12 with the welds: the solves' tolerance once
     contacts come."""
-    m, d, scene, robot = _pair(path, cone, plane=True, integrator="euler")
+    m, d, scene, robot = _pair(path, cone, integrator="euler")
     model = scene.sim.slots[0].solver.model
     mujoco.mj_setConst(m, mujoco.MjData(m))  # (on data of its own: it leaves qpos at qpos0's)
     # body semantics: what is not given is taken at qpos0, as MuJoCo's compiler takes it (a weld's
@@ -105,7 +105,6 @@ def test_gradients_through_connects_and_welds_match_finite_differences(f64, path
     together, the pair landing: contacts); loss a fixed weighting of every link's pose. (Both
     assets' trees have the same joints.)"""
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, requires_grad=True))
-    scene.add_entity(gs.morphs.Plane())
     robot = scene.add_entity(gs.morphs.MJCF(file=path))
     scene.build()
     steps, dofs = 150, robot.n_dofs
@@ -166,7 +165,6 @@ def test_batched_welds_equal_single_envs_bitwise(f64):
     built = []
     for n_envs in (SERIAL_LINK_ENVS // 10 + 1, 0):
         scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002))
-        scene.add_entity(gs.morphs.Plane())
         built.append((scene, scene.add_entity(gs.morphs.MJCF(file=WELDS))))
         scene.build(n_envs=n_envs)
     (batched, robot_b), (single, robot_s) = built

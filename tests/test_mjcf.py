@@ -6,7 +6,7 @@ damping / armature / friction loss / limits / springs (stiffness, springref in d
 position and affine general actuators, an included file) and assets/mjcf/crawler.xml (free root,
 hinged legs, contact bit masks: only the feet touch the ground, per-geom friction). Each runs under
 sinusoidal servo targets in both engines, MuJoCo with the implicitfast integrator (our servos' kv is
-implicit) and its ground plane from the file, ours with gs.morphs.Plane: the trajectories agree to
+implicit), both with the ground plane of the file's worldbody: the trajectories agree to
 round-off (measured: arm 2.7e-15 over 400 steps with limit and friction-loss rows active; crawler
 6e-14 pyramidal, 3e-13 elliptic over 500 steps with 1-3 foot contacts).
 """
@@ -23,23 +23,27 @@ from tests.conftest import asset
 from tests.fd_scan import assert_converged, directional_errors
 
 ARM, CRAWLER, TREES = asset("mjcf", "arm.xml"), asset("mjcf", "crawler.xml"), asset("mjcf", "trees.xml")
+WORLDBODY = asset("mjcf", "worldbody.xml")
 
 
-def _pair(path, cone="pyramidal", plane=False, integrator="implicitfast", requires_grad=False, **rigid_options):
-    """(MuJoCo model, data, our scene, our entity) of the file; MuJoCo with ``integrator``
-    (implicitfast: our servos' kv is implicit; euler where free bodies turn, which MuJoCo 4's
-    implicitfast integrates otherwise than its Euler integrator and ours), ours with MuJoCo's
-    contact defaults and ``rigid_options``, on gs.morphs.Plane where ``plane``."""
+def _pair(path, cone="pyramidal", integrator="implicitfast", requires_grad=False, exclude_ground_plane=False,
+          **rigid_options):
+    """(MuJoCo model, data, our scene, our entity) of the file (its worldbody's geoms, the floor, in
+    both; with ``exclude_ground_plane``, MuJoCo's worldbody planes collide with nothing); MuJoCo with
+    ``integrator`` (implicitfast: our servos' kv is implicit; euler where free bodies turn, which
+    MuJoCo 4's implicitfast integrates otherwise than its Euler integrator and ours), ours with
+    MuJoCo's contact defaults and ``rigid_options``."""
     m = mujoco.MjModel.from_xml_path(str(path))
     m.opt.integrator = {"implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST,
                         "euler": mujoco.mjtIntegrator.mjINT_EULER}[integrator]
     m.opt.cone = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL, "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC}[cone]
+    if exclude_ground_plane:
+        planes = (m.geom_bodyid == 0) & (m.geom_type == mujoco.mjtGeom.mjGEOM_PLANE)
+        m.geom_contype[planes] = m.geom_conaffinity[planes] = 0
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=m.opt.timestep, requires_grad=requires_grad),
                      rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True, friction_cone=cone,
                                                            **rigid_options))
-    if plane:
-        scene.add_entity(gs.morphs.Plane())
-    robot = scene.add_entity(gs.morphs.MJCF(file=str(path)))
+    robot = scene.add_entity(gs.morphs.MJCF(file=str(path), exclude_ground_plane=exclude_ground_plane))
     scene.build()
     return m, mujoco.MjData(m), scene, robot
 
@@ -93,7 +97,7 @@ def test_arm_masses_frames_and_trajectory_match_mujoco(f64):
 
 @pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
 def test_crawler_with_contact_masks_matches_mujoco(f64, cone):
-    m, d, scene, robot = _pair(CRAWLER, cone, plane=True)
+    m, d, scene, robot = _pair(CRAWLER, cone)
     assert float(robot.get_mass()) == pytest.approx(m.body_mass.sum(), rel=1e-14)
     worst, counts = 0.0, set()
     for t in range(500):
@@ -113,11 +117,73 @@ def test_crawler_with_contact_masks_matches_mujoco(f64, cone):
     assert worst < 1e-11
 
 
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_worldbody_geoms_are_a_static_world_link_and_match_mujoco(f64, cone):
+    """assets/mjcf/worldbody.xml: the worldbody's floor, ramp and bar (in a <frame>) are one static
+    massless link, "world", the entity's last; a block slides on the ramp, a ball lands on the bar,
+    a pendulum hinged on the world swings into the floor (MuJoCo's parent filter skips the world),
+    a ball excluded from the world (<contact><exclude>) falls through. 1.5 s against MuJoCo 4:
+    equal to round-off (measured 6.3e-14 pyramidal, 6.8e-14 elliptic)."""
+    m, d, scene, robot = _pair(WORLDBODY, cone, integrator="euler")
+    assert [link.name for link in robot.links] == ["block", "ball", "world:pendulum", "pendulum", "ghost", "world"]
+    world = robot.links[-1]
+    assert world.is_fixed and float(world.get_mass()) == 0.0 and robot.n_geoms == m.ngeom == 7
+    assert robot.base_link.name == "block"  # (the bodies keep the file's order and indices)
+    velocity = np.zeros(m.nv)
+    velocity[m.jnt_dofadr[m.joint("swing").id]] = 4.0
+    d.qvel[:] = velocity
+    robot.set_dofs_velocity(torch.tensor(velocity))
+    ours, theirs = set(), set()
+
+    def note():
+        contacts = robot.get_contacts()
+        ours.update(frozenset(robot.links[k - robot.link_start].name for k in (int(a), int(b)))
+                    for a, b in zip(contacts["link_a"], contacts["link_b"]))
+        theirs.update(m.geom(c.geom1).name or m.geom(c.geom2).name for c in d.contact[:d.ncon])
+
+    assert _lockstep(m, d, scene, robot, 750, note) < 1e-10
+    assert ours == {frozenset(("world", name)) for name in ("block", "ball", "pendulum")}
+    assert theirs == {"floor", "ramp", "bar"}  # (every world geom met a body)
+    assert float(robot.get_link("ghost").get_pos()[2]) < -5.0
+
+
+def test_exclude_ground_plane_leaves_out_the_worldbodys_planes(f64):
+    """Genesis's option: the floor is gone (the pendulum swings through it), the ramp and the bar
+    stay; against MuJoCo with the floor colliding with nothing."""
+    m, d, scene, robot = _pair(WORLDBODY, integrator="euler", exclude_ground_plane=True)
+    assert robot.n_geoms == m.ngeom - 1
+    velocity = np.zeros(m.nv)
+    velocity[m.jnt_dofadr[m.joint("swing").id]] = 4.0
+    d.qvel[:] = velocity
+    robot.set_dofs_velocity(torch.tensor(velocity))
+    met = set()
+
+    def note():
+        met.update(m.geom(c.geom1).name or m.geom(c.geom2).name for c in d.contact[:d.ncon])
+        contacts = robot.get_contacts()
+        assert robot.get_link("pendulum").idx not in contacts["link_a"].tolist() + contacts["link_b"].tolist()
+
+    assert _lockstep(m, d, scene, robot, 750, note) < 1e-10
+    assert met == {"ramp", "bar"}
+
+
+def test_a_plane_on_a_body_welded_to_the_world_is_loaded_as_mujoco(f64, tmp_path):
+    """MuJoCo's compiler takes a plane on a static body (here a welded root's welded child, tilted
+    20°, the plane tilted 30° more in it): a box dropped onto it slides as in MuJoCo."""
+    path = _write(tmp_path, '<body name="base" pos="0 0 -0.2"><body name="slope" euler="20 0 0">'
+                            '<geom type="plane" size="1 1 0.1" euler="30 0 0"/></body></body><body name="box" pos="0 0 0.1">'
+                            '<freejoint/><geom type="box" size="0.05 0.05 0.05"/></body>')
+    m, d, scene, robot = _pair(path, integrator="euler")
+    assert robot.get_link("slope").is_fixed and robot.n_links == 3  # (no worldbody geoms: no world link)
+    assert _lockstep(m, d, scene, robot, 300) < 1e-10
+    assert float(robot.get_link("box").get_pos()[1]) < -0.05  # it slid down the slope
+
+
 def test_contact_masks_keep_legs_out_of_the_ground(f64):
     """The crawler's legs, lowered into the ground with its feet, make contacts only at the feet."""
     scene = gs.Scene()
     scene.add_entity(gs.morphs.Plane())
-    robot = scene.add_entity(gs.morphs.MJCF(file=CRAWLER, pos=(0.0, 0.0, -0.1)))
+    robot = scene.add_entity(gs.morphs.MJCF(file=CRAWLER, pos=(0.0, 0.0, -0.1), exclude_ground_plane=True))
     scene.build()
     scene.step()
     contacts = robot.get_contacts()
@@ -160,6 +226,11 @@ LINK = '<geom type="sphere" size="0.1"/>'
     (f'<body name="b"><joint name="j" stiffness="3" springyield="5"/>{LINK}</body>', "", "a yielding spring"),
     ("", "", "<worldbody> expected at least one <body>, got none"),
     (f'<body name="b"><geom type="ellipsoid" size="0.1 0.2 0.3"/></body>', "", "geom type expected one of"),
+    (f'<geom type="hfield"/><body name="b">{LINK}</body>', "", "<worldbody> geom 0: geom type expected one of"),
+    (f'<body name="b"><joint name="j"/>{LINK}<geom name="p" type="plane" size="1 1 1"/></body>', "",
+     "body 'b' geom p: a plane only in the worldbody or a body welded to it"),
+    (f'<body name="b"><body name="c"><joint name="k"/>{LINK}<geom type="plane" size="1 1 1"/></body></body>', "",
+     "body 'c' geom 1: a plane only in the worldbody or a body welded to it"),
     (f'<body name="b"><geom type="mesh" mesh="nope"/></body>', "", "mesh 'nope' is not an <asset><mesh>"),
     (f'<body name="b" childclass="x">{LINK}</body>', "", "class 'x' is not a <default> class"),
     (f'<body name="b"><inertial mass="1" quat="1 0 0 0" fullinertia="1 1 1 0 0 0"/>{LINK}</body>', "",
@@ -217,7 +288,7 @@ def test_what_is_ignored_is_said_once(f64, tmp_path, caplog):
         gs.Scene().add_entity(gs.morphs.MJCF(file=path))
     said = [r.getMessage() for r in caplog.records if "ignored" in r.getMessage()]
     assert len(said) == 1
-    for part in ("<option>", "<tendon>", "<joint margin>", "<worldbody> geoms", "<actuator><motor"):
+    for part in ("<option>", "<tendon>", "<joint margin>", "<actuator><motor"):
         assert part in said[0]
     assert "condim" not in said[0] and "solref" not in said[0]  # MuJoCo's defaults: nothing is lost
 
@@ -244,6 +315,8 @@ def test_morph_arguments_are_checked(f64):
         gs.Scene().add_entity(gs.morphs.MJCF(file="no_such.xml"))
     with pytest.raises(InvalidInputError, match="scale"):
         gs.morphs.MJCF(file=ARM, scale=2.0)
+    with pytest.raises(InvalidInputError, match="MJCF: argument 'exclude_ground_plane' must be True or False"):
+        gs.morphs.MJCF(file=ARM, exclude_ground_plane="yes")
 
 
 def test_an_inactive_joint_equality_is_not_loaded(f64, tmp_path, caplog):
@@ -334,7 +407,8 @@ def test_sections_merge_and_free_root_joints_and_box_segments_read_as_mujoco(f64
                     '<body name="c" pos="0.3 0 0"><joint name="h" axis="0 0 1"/><geom type="sphere" size="0.05"/>'
                     '</body></body></worldbody></mujoco>')
     m, d, scene, robot = _pair(str(path))
-    assert [float(link.get_mass()) for link in robot.links] == pytest.approx(m.body_mass[1:].tolist(), rel=1e-14)
+    # (the included floor: the static world link, last, massless as MuJoCo's body 0)
+    assert [float(link.get_mass()) for link in robot.links] == pytest.approx(np.roll(m.body_mass, -1).tolist(), rel=1e-14)
     assert robot.get_dofs_damping().tolist() == [0.5] * 7 and robot.get_dofs_armature().tolist() == [0.02] * 7
     d.qvel[:] = robot.get_dofs_velocity().numpy()
     d.qvel[6] = 3.0
@@ -412,7 +486,7 @@ def test_gradients_through_an_mjcf_robot_match_finite_differences(f64, what):
     masks in the reverse too)."""
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.005, requires_grad=True))
     scene.add_entity(gs.morphs.Plane())
-    robot = scene.add_entity(gs.morphs.MJCF(file=CRAWLER, pos=(0.0, 0.0, -0.04)))
+    robot = scene.add_entity(gs.morphs.MJCF(file=CRAWLER, pos=(0.0, 0.0, -0.04), exclude_ground_plane=True))
     scene.build()
     steps, legs = 60, list(range(6, 14))
     heavy = [k for k, link in enumerate(robot.links) if float(link.get_mass()) > 0]  # (not the anchor links)
@@ -446,7 +520,7 @@ def _trees(cone="pyramidal", requires_grad=False):
     """(MuJoCo model and data with the Euler integrator, our scene, entity) of assets/mjcf/trees.xml;
     the free bodies turn, and MuJoCo 4's implicitfast integrates a turning free body otherwise than
     its Euler integrator (ours: Euler with implicit damping), so the reference is Euler here."""
-    return _pair(TREES, cone, plane=True, integrator="euler", requires_grad=requires_grad)
+    return _pair(TREES, cone, integrator="euler", requires_grad=requires_grad)
 
 
 @pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
@@ -456,8 +530,8 @@ def test_several_trees_are_one_entity_and_match_mujoco(f64, cone):
     4, the ball landing on the box, both on the floor: equal to round-off (measured 1.7e-11
     pyramidal, 8e-13 elliptic)."""
     m, d, scene, robot = _trees(cone)
-    assert [link.name for link in robot.links] == ["post", "box", "world", "pendulum", "tip", "ball", "world:slider",
-                                                   "slider"]
+    assert [link.name for link in robot.links] == ["post", "box", "world:pendulum", "pendulum", "tip", "ball",
+                                                   "world:slider", "slider", "world"]  # (last: the floor's)
     assert robot.n_dofs == m.nv and robot.n_qs == m.nq and not robot.is_free  # the base: the static post
     assert robot.base_link.name == "post"
     np.testing.assert_allclose(robot.get_qpos().numpy(), d.qpos, atol=1e-15)
@@ -485,7 +559,7 @@ def test_root_bodies_touching_at_the_start_are_separate_trees(f64, tmp_path, sel
               '<geom type="capsule" fromto="0 0 0 0.212 0 0.212" size="0.03"/></body>'
               '<body name="arm2" pos="-0.02 0.5 0.7"><joint axis="0 1 0"/>'  # hanging
               '<geom type="capsule" fromto="0 0 0 0 0 -0.3" size="0.03"/></body>')
-    m, d, scene, robot = _pair(_write(tmp_path, bodies), plane=True, integrator="euler",
+    m, d, scene, robot = _pair(_write(tmp_path, bodies), integrator="euler",
                                enable_self_collision=self_collision)
     assert [link.name for link in robot.links] == ["post", "box", "world", "arm1", "world:arm2", "arm2"]
     arms = {robot.get_link(name).idx for name in ("arm1", "arm2")}
@@ -604,7 +678,7 @@ def test_a_unit_quaternion_keeps_its_bits_as_in_mujoco(f64, tmp_path):
     qpos = np.array([0.3, 0.18, 0.016758054649733983, 0.9999999999999677, 2.404238666617504e-11,
                      -2.539800566832556e-07, -6.589691763852792e-13])
     assert 0 < abs(np.linalg.norm(qpos[3:]) - 1.0) < 1e-15
-    m, d, scene, robot = _pair(path, plane=True, integrator="euler")
+    m, d, scene, robot = _pair(path, integrator="euler")
     d.qpos[:] = qpos
     mujoco.mj_step(m, d)
     robot.set_qpos(torch.tensor(qpos))
@@ -649,7 +723,7 @@ def test_a_free_joints_friction_loss_is_read_as_mujoco(f64, tmp_path):
     path.write_text('<mujoco><option timestep="0.002"/><worldbody><geom type="plane" size="5 5 .1"/>'
                     '<body name="box" pos="0 0 0.5" euler="10 20 30"><joint type="free" frictionloss="0.3"/>'
                     '<geom type="box" size="0.1 0.08 0.05"/></body></worldbody></mujoco>')
-    m, d, scene, robot = _pair(path, plane=True, integrator="euler")
+    m, d, scene, robot = _pair(path, integrator="euler")
     assert robot.get_dofs_frictionloss().tolist() == [0.3] * 6
     d.qvel[:] = [1.0, 0.5, 2.0, 3.0, -2.0, 1.0]
     robot.set_dofs_velocity(torch.tensor(d.qvel.copy()))

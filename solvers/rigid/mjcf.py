@@ -6,10 +6,15 @@ Read as MuJoCo's compiler reads it: ``<include>`` files inlined (several ``<defa
 (quat, axisangle, euler, xyaxes, zaxis).
 
 Trees: the bodies in ``<worldbody>`` are the roots of one entity's trees, in the file's order
-(MuJoCo's body and dof order; the first tree's root is the entity's base, as in Genesis). A root
+(MuJoCo's body and dof order; the first tree's root is the entity's base, as in Genesis); the
+worldbody's own geoms (a floor, obstacles) are on a static massless link named "world" after
+them (MuJoCo's body 0; Genesis's link 0: last here, so that the base and every body's index are
+those of the file without them), which collides with every tree (MuJoCo's parent filter skips the
+world). A root
 body is a root link: free with a ``<freejoint>`` (or a joint of type free, its damping, armature and
 frictionloss read), welded where it has no joint; a root body hinged, sliding or on a ball joint on the world hangs
-from a static link at the world's origin, named "world" (the first; later ones "world:body"). Each
+from a static link at the world's origin, named "world" (the first, unless the worldbody's geoms'
+link has that name; the others "world:body"). Each
 body is a link named as the body, at the body's frame (MuJoCo's and Genesis's): a body without a
 joint is welded to its parent (not merged, as MuJoCo and Genesis keep it); a body's joints (hinge →
 revolute, slide → prismatic, ball → ball) turn massless links named ``body:joint`` at their anchors, since a
@@ -25,7 +30,9 @@ legacy formula differs for non-convex meshes). Geoms: sphere, capsule, cylinder,
 ``fromto``), mesh (``<mesh file scale>`` assets, in the file's own coordinates: MuJoCo's
 re-centring moves the geom frame, not the surface; found in meshdir or beside the file that
 included them); contype/conaffinity masks (MuJoCo's pair rule); ``<contact><exclude>``; friction
-(the sliding coefficient); a geom with contype = conaffinity = 0 only weighs and is drawn; a geom
+(the sliding coefficient); planes (infinite, as MuJoCo's colliders take them; drawn as
+gs.morphs.Plane) in the worldbody or a body welded to it; a geom with contype = conaffinity = 0
+only weighs and is drawn; a geom
 drawn where its group is 0-2 (MuJoCo's visible groups), coloured by its rgba or material.
 Joints: axis, pos, range (limited: MuJoCo's autolimits), damping, armature, frictionloss,
 actuatorfrcrange (|force| bound), stiffness and springref (a spring −stiffness·(q − springref), as
@@ -54,8 +61,8 @@ a free joint below a root body, a joint's
 hfield / sdf geoms, equalities other than joints', connects and welds, a connect or weld by
 bodies with body1 the world, elements that would add or move bodies and geoms unread
 (``<replicate>``, ``<composite>``…; ``<frame>`` is read: it places its bodies and geoms, and its
-childclass is theirs). Ignored with one warning naming them: worldbody geoms (the ground is
-``gs.morphs.Plane``), tendons and what acts on them, ``<contact><pair>``, ``<option>`` (the scene's
+childclass is theirs), a plane on a moving body (as MuJoCo's compiler). Ignored with one warning
+naming them: tendons and what acts on them, ``<contact><pair>``, ``<option>`` (the scene's
 options rule), and attributes that tune MuJoCo's solver, actuator dynamics or the compiler's mass
 bounds (solref, solimp, margin, condim, dampratio, timeconst, boundmass…) unless they hold MuJoCo's
 defaults.
@@ -92,14 +99,17 @@ _PRIMITIVES = ("sphere", "capsule", "cylinder", "box")
 _MJ_RGBA = np.array([0.5, 0.5, 0.5, 1.0])  # MuJoCo's default geom colour
 
 
-def load_mjcf(path: str, entity_name: str | None = None) -> list[LinkSpec]:
+def load_mjcf(path: str, entity_name: str | None = None, exclude_ground_plane: bool = False) -> list[LinkSpec]:
     """Links of the MJCF file `path` in tree order (MuJoCo's body order, parent index < child
-    index), one tree a root body. A root link's joint is "free" or "fixed" as the file says, at
-    its body's pose (in the world frame of the file). entity_name: only used in messages.
-    Raises InvalidInputError for bad arguments and AssetError for anything wrong with the file."""
+    index), one tree a root body, then the static "world" link of the worldbody's geoms if it has
+    some. A root link's joint is "free" or "fixed" as the file says, at its body's pose (in the
+    world frame of the file). entity_name: only used in messages. exclude_ground_plane: leave out
+    the plane geoms directly in the worldbody (Genesis's option: for a scene with a ground of its
+    own). Raises InvalidInputError for bad arguments and AssetError for anything wrong with the file."""
     if not isinstance(path, (str, os.PathLike)):
         raise InvalidInputError(f"load_mjcf: argument 'path' expected a file path, got {path!r}")
     reader = _Reader(os.fspath(path), entity_name)
+    reader.exclude_ground_plane = exclude_ground_plane
     links = reader.links()
     if reader.ignored:
         _logger.warning(f"{reader.where()}: ignored (genesis_lite does not model them): "
@@ -127,16 +137,21 @@ class _Reader(MJCFDocument):
         bodies = [member for worldbody in worldbodies for member in self._members(worldbody, "body", "main")]
         if not bodies:
             raise self.error("<worldbody> expected at least one <body>, got none")
-        if any(list(self._members(worldbody, "geom", "main")) for worldbody in worldbodies):
-            self.ignored.add("<worldbody> geoms (add the ground as gs.morphs.Plane)")
         for worldbody in worldbodies:
             self._check_children(worldbody, "<worldbody>")
+        world_geoms = [member for worldbody in worldbodies for member in self._world_geoms(worldbody)]
         links = []
+        self.static_links = set()  # the links welded to the world (the only ones a plane may be on)
         self.sites = {}  # site name → (its body's name, its position (3,) m and turn (4,) in the body's frame)
         for worldbody in worldbodies:
             self._sites(worldbody, "main", "world")
+        self.world_name = "world" if world_geoms else None  # (the world's geoms' link takes the name)
         for root, childclass, outer in bodies:  # several trees: one entity, as Genesis and MuJoCo load them
             self._body(root, -1, childclass, links, outer)
+        if world_geoms:  # MuJoCo's body 0: static, massless, its geoms collide with every tree's
+            links.append(_link("world", -1, "", "fixed", np.zeros(3), IDENTITY.copy()))
+            self.static_links.add(len(links) - 1)
+            self._geoms(world_geoms, links[-1], "<worldbody>", static=True)
         names = [link.name for link in links]
         repeated = sorted({name for name in names if names.count(name) > 1})
         if repeated:  # (MuJoCo refuses them too)
@@ -166,14 +181,19 @@ class _Reader(MJCFDocument):
                                "free" if joints else "fixed", pos, quat))
             if joints:
                 self._free_joint(joints[0], childclass, links[-1], what)
+            else:
+                self.static_links.add(len(links) - 1)
         else:
             if parent < 0:  # hinged or sliding on the world: on a static link at the world's origin, one
                 # a tree, so that each root body stays a tree of its own (the pair rules go by tree)
-                world = "world" if not any(link.name == "world" for link in links) else f"world:{name}"
+                taken = self.world_name or any(link.name == "world" for link in links)
+                world = f"world:{name}" if taken else "world"
                 links.append(_link(world, -1, "", "fixed", np.zeros(3), IDENTITY.copy()))
                 parent = len(links) - 1
             self._joint_chain(joints, childclass, name, what, parent, pos, quat, links)
-        self._contents(body, childclass, links[-1], what)
+            if not joints and parent in self.static_links:
+                self.static_links.add(len(links) - 1)
+        self._contents(body, childclass, links[-1], what, len(links) - 1 in self.static_links)
         self._sites(body, childclass, name)
         index = len(links) - 1
         for child, child_class, child_outer in self._members(body, "body", childclass):
@@ -346,14 +366,36 @@ class _Reader(MJCFDocument):
 
     # ---------------------------------------------------------------- a body's contents
 
-    def _contents(self, body, childclass: str, link: LinkSpec, what: str):
-        """The body's geoms, visuals and mass properties on its link (at the body frame)."""
+    def _contents(self, body, childclass: str, link: LinkSpec, what: str, static: bool):
+        """The body's geoms, visuals and mass properties on its link (at the body frame; static:
+        welded to the world)."""
+        solids = self._geoms(self._members(body, "geom", childclass), link, what, static)
+        inertial = body.find("inertial")
+        if inertial is not None and self.inertiafromgeom != "true":
+            link.mass, link.com, link.inertia = self._inertial(inertial, what)
+        elif self.inertiafromgeom != "false":
+            link.mass, link.com, link.inertia = shapes.combined_mass_properties(solids)
+
+    def _world_geoms(self, worldbody):
+        """The worldbody's geoms as _members gives them, without its planes if exclude_ground_plane."""
+        for element, geom_class, outer in self._members(worldbody, "geom", "main"):
+            if not (self.exclude_ground_plane and self.attrs(element, geom_class).get("type") == "plane"):
+                yield element, geom_class, outer
+
+    def _geoms(self, members, link: LinkSpec, what: str, static: bool) -> list:
+        """Put the geoms ``members`` (_members's) on the link, as collision shapes (unless both
+        their contype and conaffinity are 0) and as visuals (groups 0-2, MuJoCo's visible ones);
+        returns each one's (GeomSpec, mass kg, com (3,), inertia (3, 3)) in its own frame. A plane
+        only on a link welded to the world (MuJoCo's compiler refuses it elsewhere)."""
         solids = []
-        for k, (element, geom_class, outer) in enumerate(self._members(body, "geom", childclass)):
+        for k, (element, geom_class, outer) in enumerate(members):
             attrs = self.attrs(element, geom_class)
             self.ignore_unread(element, attrs)
             where = f"{what} geom {attrs.get('name') or k}"
             geom, density, mass = self._geom(attrs, where)
+            if geom.type == "plane" and not static:
+                raise self.error(f"{where}: a plane only in the worldbody or a body welded to it (MuJoCo's compiler "
+                                 f"refuses it elsewhere), got one on a moving body")
             geom.pos, geom.quat = shapes.compose(*outer, geom.pos, geom.quat)
             solids.append((geom, *_solid(geom, density, mass)))
             contype, conaffinity = (self._bits(attrs, key, where) for key in ("contype", "conaffinity"))
@@ -362,11 +404,7 @@ class _Reader(MJCFDocument):
                 link.geoms.append(geom)
             if self.numbers(attrs, "group", 1, where, default=[0])[0] <= 2:
                 link.visuals.append(self._visual(geom, attrs))
-        inertial = body.find("inertial")
-        if inertial is not None and self.inertiafromgeom != "true":
-            link.mass, link.com, link.inertia = self._inertial(inertial, what)
-        elif self.inertiafromgeom != "false":
-            link.mass, link.com, link.inertia = shapes.combined_mass_properties(solids)
+        return solids
 
     def _geom(self, attrs: dict, what: str):
         """(GeomSpec in the body frame, density kg/m³, stated mass kg or None) of a <geom>."""
@@ -381,7 +419,9 @@ class _Reader(MJCFDocument):
             if kind == "box":  # (MuJoCo 4: a square section of half side size[0])
                 size[1] = size[0]
             pos, quat = (ends[:3] + ends[3:]) / 2.0, shapes.quat_z_to(axis / norm(self, axis, what))
-        if kind == "mesh":
+        if kind == "plane":  # infinite to the colliders, as MuJoCo's (its size only draws it)
+            geom = GeomSpec("plane", np.array([0.0, 0.0, 1.0]), pos, quat)
+        elif kind == "mesh":
             vertices, faces = self.mesh(attrs.get("mesh"), what)
             geom = GeomSpec("mesh", np.zeros(0), pos, quat, vertices=vertices, faces=faces)
         elif kind in _PRIMITIVES:
@@ -392,7 +432,7 @@ class _Reader(MJCFDocument):
                     "box": size * 2}[kind]
             geom = GeomSpec(kind, full, pos, quat)
         else:
-            raise self.error(f"{what}: geom type expected one of {_PRIMITIVES + ('mesh',)}, got {kind!r}")
+            raise self.error(f"{what}: geom type expected one of {_PRIMITIVES + ('mesh', 'plane')}, got {kind!r}")
         friction = self.numbers(attrs, "friction", (1, 2, 3), what, default=[1.0])
         geom.friction = float(friction[0])
         density = self.numbers(attrs, "density", 1, what, default=[1000.0])[0]
@@ -557,7 +597,7 @@ class _Reader(MJCFDocument):
                     self.ignored.add(f"<contact><{element.tag}>")
                     continue
                 names = [element.get(key) for key in ("body1", "body2")]
-                if "world" in names and "world" not in by_body:  # (the world's geoms are not loaded)
+                if "world" in names and "world" not in by_body:  # (the worldbody has no geoms)
                     continue
                 for name in names:
                     if name not in by_body:
