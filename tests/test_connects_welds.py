@@ -235,3 +235,30 @@ def test_a_weld_with_its_relpose_matches_mujoco(f64, tmp_path):
     m, d, scene, robot = _pair(str(path), integrator="euler")
     assert _lockstep(m, d, scene, robot, 300) < 1e-10
     assert d.ne == 18
+
+
+def test_the_world_as_body1_matches_mujoco(f64, tmp_path):
+    """The world as body1 of equalities by bodies (MuJoCo's anchors then given in the world): a free
+    box hung on a world point by a connect, a free box welded to the world at a given relpose (it
+    is pulled there) and one welded where it starts (relpose left to MuJoCo's compiler: at qpos0),
+    with an anchor; 0.6 s in both engines. Placed with a morph pose, the gaps at build are the
+    unplaced file's."""
+    path = tmp_path / "robot.xml"
+    path.write_text('<mujoco><worldbody>'
+                    '<body name="hung" pos="0 0 1" euler="0 20 0"><freejoint/><geom type="box" size="0.1 0.05 0.05"/>'
+                    '</body>'
+                    '<body name="pulled" pos="1 0 1"><freejoint/><geom type="box" size="0.1 0.2 0.05"/></body>'
+                    '<body name="held" pos="0 1 1" euler="30 0 0"><freejoint/><geom type="capsule" size="0.03" '
+                    'fromto="0 0 0 0.2 0 0"/></body></worldbody>'
+                    '<equality><connect body1="world" body2="hung" anchor="0.1 0 1.05"/>'
+                    '<weld body1="world" body2="pulled" relpose="1.05 0 1.02 0.99 0 0.1 0.05" torquescale="2"/>'
+                    '<weld body1="world" body2="held" anchor="0.2 0 0"/></equality></mujoco>')
+    m, d, scene, robot = _pair(str(path), integrator="euler")
+    gaps = _gaps(scene, robot)
+    assert gaps[[0, 2]].max() < 1e-15 and gaps[1] > 0.05  # (hung and held where they start; pulled not)
+    assert _lockstep(m, d, scene, robot, 300) < 1e-10
+    assert d.ne == 15
+    placed = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002))
+    placed_robot = placed.add_entity(gs.morphs.MJCF(file=str(path), pos=(1.0, 2.0, 0.5), euler=(10.0, 0.0, 45.0)))
+    placed.build()
+    np.testing.assert_allclose(_gaps(placed, placed_robot), gaps, atol=1e-12)

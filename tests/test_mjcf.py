@@ -241,18 +241,16 @@ LINK = '<geom type="sphere" size="0.1"/>'
      "<equality><tendon> is not supported"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><weld body1="b" relpose="0 0 0 1"/></equality>',
      "<equality><weld name=None>: attribute 'relpose' expected 7 finite numbers"),
-    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><weld body1="world" body2="b"/></equality>',
-     "<equality><weld name=None>: body1 expected a body of the file, got the world"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><connect body1="b" body2="c" anchor="0 0 0"/>'
      '</equality>', "<equality><connect name=None>: body2 expected a body of the file, got 'c'"),
     (f'<body name="b"><joint name="j"/>{LINK}<site name="s"/></body>', '<equality><connect site1="s" site2="t"/>'
      '</equality>', "site2 expected a site of the file, got 't'"),
     (f'<body name="b"><joint name="j"/>{LINK}<site name="s"/></body>',
      '<equality><connect site1="s" site2="s"/></equality>', "expected two different bodies, got 'b' twice"),
-    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><connect body1="world" body2="b" anchor="0 0 0"/>'
-     '</equality>', "body1 expected a body of the file, got the world (not supported: give the world as body2)"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><connect body1="b"/></equality>',
      "attribute 'anchor' is missing"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><weld body1="world"/></equality>',
+     "<equality><weld name=None>: expected two different bodies, got 'world' twice"),
     (f'<body name="b"><joint name="j"/>{LINK}<site name="s"/></body>',
      '<equality><connect site1="s" site2="s" body1="b"/></equality>', "expected sites or bodies, got site1/site2 with"),
     (f'<site name="s"/><body name="b"><joint name="j"/>{LINK}<site name="s"/></body>', "",

@@ -47,7 +47,8 @@ bodies (anchor in body1's frame; body2's anchor where that point is at qpos0) or
 positions in their bodies) (LinkSpec.connects). ``<equality><weld>`` holds a frame of body1 on one
 of body2 (or the world), position and orientation: by bodies (anchor in body2's frame; relpose the
 pose of body2's frame in body1's, taken at qpos0 where its quaternion is zero, MuJoCo's default)
-or by sites (their frames), its turn rows scaled by torquescale (LinkSpec.welds). An equality's
+or by sites (their frames), its turn rows scaled by torquescale (LinkSpec.welds). Either body may
+be the world (body1 the world: the same rows with the other sign, the file's body first). An equality's
 solref and solimp are not read (the scene's constraint time constant rules; a warning says so);
 an inactive one is not loaded; ``<default><equality>`` applies.
 
@@ -58,8 +59,7 @@ Refused (AssetError naming the element): a ball joint's force range, a limited b
 not starting at 0, a ball joint followed by a hinge or ball in one body (as MuJoCo refuses them),
 a free joint below a root body, a joint's
 ``springdamper`` and ``springyield``, a polynomial stiffness, a free joint's stiffness, ellipsoid /
-hfield / sdf geoms, equalities other than joints', connects and welds, a connect or weld by
-bodies with body1 the world, elements that would add or move bodies and geoms unread
+hfield / sdf geoms, equalities other than joints', connects and welds, elements that would add or move bodies and geoms unread
 (``<replicate>``, ``<composite>``…; ``<frame>`` is read: it places its bodies and geoms, and its
 childclass is theirs), a plane on a moving body (as MuJoCo's compiler). Ignored with one warning
 naming them: tendons and what acts on them, ``<contact><pair>``, ``<option>`` (the scene's
@@ -525,7 +525,7 @@ class _Reader(MJCFDocument):
         else:
             body1, body2 = self._body_pair(attrs, links, what)
             anchor1, anchor2 = self.numbers(attrs, "anchor", 3, what), None
-        if body1 == "world" and anchor2 is not None:  # sites: the same rows, with the opposite sign
+        if body1 == "world":  # the same rows, with the opposite sign
             (body1, anchor1), (body2, anchor2) = (body2, anchor2), (body1, anchor1)
         self._by_body(links)[body1].connects += (("" if body2 == "world" else body2, anchor1, anchor2),)
 
@@ -538,14 +538,14 @@ class _Reader(MJCFDocument):
         torquescale = float(self.numbers(attrs, "torquescale", 1, what, default=[1.0])[0])
         if "site1" in attrs or "site2" in attrs:
             first, second = self._site_pair(attrs, ("body1", "body2", "anchor", "relpose"), what)
-            if first[0] == "world":  # the same rows, with the opposite sign
-                first, second = second, first
-            (body1, anchor1, turn1), (body2, anchor2, turn2) = first, second
         else:
             body1, body2 = self._body_pair(attrs, links, what)
             relpose = self.numbers(attrs, "relpose", 7, what, default=[0, 1, 0, 0, 0, 0, 0])
-            anchor2, turn2 = self.numbers(attrs, "anchor", 3, what, default=np.zeros(3)), IDENTITY.copy()
-            anchor1, turn1 = (relpose[:3], relpose[3:]) if np.any(relpose[3:]) else (None, None)
+            first = (body1, *((relpose[:3], relpose[3:]) if np.any(relpose[3:]) else (None, None)))
+            second = (body2, self.numbers(attrs, "anchor", 3, what, default=np.zeros(3)), IDENTITY.copy())
+        if first[0] == "world":  # the same rows, with the opposite sign
+            first, second = second, first
+        (body1, anchor1, turn1), (body2, anchor2, turn2) = first, second
         self._by_body(links)[body1].welds += (("" if body2 == "world" else body2, anchor1, anchor2, turn1, turn2,
                                                torquescale),)
 
@@ -560,16 +560,12 @@ class _Reader(MJCFDocument):
         return {link.name: link for link in links}
 
     def _body_pair(self, attrs: dict, links: list[LinkSpec], what: str) -> tuple[str, str]:
-        """(body1, body2) of an equality by bodies: bodies of the file (body2 may be, and is by
-        default, the world; body1 may not: MuJoCo's anchors are given in its frame)."""
+        """(body1, body2) of an equality by bodies: bodies of the file or the world (body2's default)."""
         names = set(self._by_body(links)) | {"world"}
         body1, body2 = attrs.get("body1"), attrs.get("body2", "world")
         for key, name in (("body1", body1), ("body2", body2)):
             if name not in names:
                 raise self.error(f"{what}: {key} expected a body of the file, got {name!r}")
-        if body1 == "world":
-            raise self.error(f"{what}: body1 expected a body of the file, got the world (not supported: give the "
-                             f"world as body2)")
         if body1 == body2:
             raise self.error(f"{what}: expected two different bodies, got {body1!r} twice")
         return body1, body2
@@ -665,7 +661,7 @@ def place_world(links: list[LinkSpec], pos, quat) -> None:
                               for other, anchor, other_anchor in link.connects)
         welds = []
         for other, anchor, other_anchor, turn, other_turn, torquescale in link.welds:
-            if other == "":
+            if other == "" and other_anchor is not None:  # (None: this link's frame at q0, already placed)
                 other_anchor, other_turn = shapes.compose(pos, quat, other_anchor, other_turn)
             welds.append((other, anchor, other_anchor, turn, other_turn, torquescale))
         link.welds = tuple(welds)

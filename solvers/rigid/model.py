@@ -323,8 +323,8 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
 def _body_equalities(links, index):
     """(connects, welds) of an entity's links (LinkSpec.connects, .welds): (link 1, link 2, anchor 1
     (3,), anchor 2 (3,)) per connect, and those and (turn 1 (4,), turn 2 (4,), torquescale) per weld,
-    links as model indices (``index``: name → index; the world -1), what is missing from the pose at
-    q0 (MuJoCo's compiler: at qpos0)."""
+    links as model indices (``index``: name → index; the world -1), what is missing (one side's
+    anchor, or frame) from the other side's at q0 (MuJoCo's compiler: at qpos0)."""
     if not any(spec.connects or spec.welds for spec in links):
         return [], []
     poses = dict(zip((spec.name for spec in links), _initial_poses(links)))
@@ -333,21 +333,31 @@ def _body_equalities(links, index):
     for spec in links:
         this = poses[spec.name]
         for other, anchor, other_anchor in spec.connects:
-            anchor = np.asarray(anchor, dtype=np.float64)
+            if anchor is None:
+                anchor = _in_frame(this, _at(poses[other], other_anchor))
             if other_anchor is None:
                 other_anchor = _in_frame(poses[other], _at(this, anchor))
-            connects.append((index[spec.name], index[other] if other else -1, anchor,
+            connects.append((index[spec.name], index[other] if other else -1, np.asarray(anchor, dtype=np.float64),
                              np.asarray(other_anchor, dtype=np.float64)))
         for other, anchor, other_anchor, turn, other_turn, torquescale in spec.welds:
+            if other_anchor is None:  # (then this link's frame is given)
+                other_anchor = _in_frame(poses[other], _at(this, anchor))
+                other_turn = _turn_onto(poses[other], this, turn)
             other_anchor, other_turn = (np.asarray(v, dtype=np.float64) for v in (other_anchor, other_turn))
             if anchor is None:
                 anchor = _in_frame(this, _at(poses[other], other_anchor))
-            if turn is None:  # q1 ⊗ r1 = q2 ⊗ r2 at q0
-                turn = shapes.quat_mul(shapes.quat_mul(this[1] * [1, -1, -1, -1], poses[other][1]), other_turn)
+            if turn is None:
+                turn = _turn_onto(this, poses[other], other_turn)
             welds.append((index[spec.name], index[other] if other else -1, np.asarray(anchor, dtype=np.float64),
                           other_anchor, np.asarray(turn, dtype=np.float64) / np.linalg.norm(turn),
                           other_turn / np.linalg.norm(other_turn), float(torquescale)))
     return connects, welds
+
+
+def _turn_onto(pose, other_pose, other_turn):
+    """The turn r (4,) w-x-y-z of a frame held at ``pose`` that is the frame ``other_turn`` held at
+    ``other_pose`` (q ⊗ r = q_other ⊗ r_other; poses (position (3,), w-x-y-z (4,)))."""
+    return shapes.quat_mul(shapes.quat_mul(pose[1] * [1, -1, -1, -1], other_pose[1]), other_turn)
 
 
 def _at(pose, point):

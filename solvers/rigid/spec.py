@@ -80,14 +80,16 @@ class LinkSpec:
     LinkSpec joints' frames split): contact rules take the two as one body.
     excluded: names of links of the same entity this link's shapes never collide with (MJCF
     ``<contact><exclude>``).
-    connects: (other link's name, or "" for the world; anchor (3,) m in this link's frame; the
-    other's anchor (3,) m in its frame, or None: where this anchor is at q0) per ball-and-socket
+    connects: (other link's name, or "" for the world; anchor (3,) m in this link's frame, or None:
+    where the other's anchor is at q0; the other's anchor (3,) m in its frame, or None: where this
+    anchor is at q0; not both None) per ball-and-socket
     constraint holding a point of this link on a point of another (MJCF ``<equality><connect>``,
     MuJoCo's connect: three equality rows, constraint/rows.py).
     welds: (other link's name, or "" for the world; anchor (3,) m in this link's frame, or None:
     where the other's anchor is at q0; the other's anchor (3,) m in its frame; turn (4,) w-x-y-z
     of this link's held frame in its frame, or None: the one that makes the two held frames one
-    at q0; the other's (4,); torquescale) per weld holding a frame of this link on a frame of
+    at q0; the other's (4,); torquescale; the other's anchor and turn may be None instead, then
+    this link's are given and the other's held frame is theirs at q0) per weld holding a frame of this link on a frame of
     another, position and orientation (MJCF ``<equality><weld>``, MuJoCo's weld: six equality
     rows, the turn's three scaled by torquescale).
     """
