@@ -15,6 +15,7 @@ import yourdfpy
 import genesis_lite as gs
 from genesis_lite.solvers.rigid import merge
 from genesis_lite.solvers.rigid.urdf import load_urdf
+from genesis_lite.vis.visuals import scene_shapes
 from tests.conftest import pybullet
 
 KUKA, R2D2 = pybullet("kuka_iiwa", "model.urdf"), pybullet("r2d2.urdf")
@@ -709,3 +710,23 @@ def test_silhouette_matches_opengl(f32):
     silhouette = gl_silhouette(mesh.vertices[mesh.faces], **view)
     assert silhouette.sum() > 2000
     assert iou(seg >= 0, silhouette) >= 0.98
+
+
+def test_an_mjcf_worldbodys_planes_are_drawn_as_mujoco_sizes_them(f32, tmp_path):
+    """An MJCF worldbody's plane of size 0 is an unbounded floor, drawn once for every env (as a
+    Plane morph's); one of half sizes (x, y) is that rectangle: a camera looking down at a 0.4 m
+    tile's edge sees the tile on one side and the floor 1 m below it on the other."""
+    path = tmp_path / "scene.xml"
+    path.write_text('<mujoco><worldbody><geom type="plane" size="0 0 1"/>'
+                    '<geom type="plane" size="0.2 0.2 0.1" pos="0.2 0 1" contype="0" conaffinity="0"/>'
+                    '<body name="b" pos="3 0 0.5"><freejoint/><geom type="sphere" size="0.1"/></body>'
+                    '</worldbody></mujoco>')
+    scene = gs.Scene(**NO_CONTACT)
+    scene.add_entity(gs.morphs.MJCF(file=str(path)))
+    cam = scene.add_camera(res=(32, 24), pos=(0.0, 0.0, 3.0), lookat=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0))
+    scene.build(n_envs=2)
+    shapes = scene_shapes(scene)
+    assert [shape.shared for shape in shapes] == [False, True, False]  # (the sphere, the floor, the tile)
+    depth = cam.render(rgb=False, depth=True)[1]
+    assert depth[12, 20] == pytest.approx(2.0, abs=1e-3)  # the tile (x > 0)
+    assert depth[12, 10] == pytest.approx(3.0, abs=1e-3)  # the floor beside it

@@ -179,6 +179,25 @@ def test_a_plane_on_a_body_welded_to_the_world_is_loaded_as_mujoco(f64, tmp_path
     assert float(robot.get_link("box").get_pos()[1]) < -0.05  # it slid down the slope
 
 
+def test_a_worldbody_of_geoms_alone_is_one_static_link_and_planes_weigh_nothing(f64, tmp_path):
+    """A file of worldbody geoms only (a terrain) is an entity of one static link, which a box
+    lands on; a plane's stated mass is no mass (MuJoCo's compiler: 0 on a welded body)."""
+    terrain = _write(tmp_path, '<geom type="plane" size="0 0 1"/><geom type="box" size="0.3 0.3 0.1" pos="0 0 0.1"/>')
+    scene = gs.Scene()
+    ground = scene.add_entity(gs.morphs.MJCF(file=terrain))
+    box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.0, 0.0, 0.4)))
+    scene.build()
+    assert [link.name for link in ground.links] == ["world"] and ground.n_dofs == 0 and ground.n_geoms == 2
+    for _ in range(150):
+        scene.step()
+    assert float(box.get_pos()[2]) == pytest.approx(0.25, abs=2e-3)  # on the box, not the plane
+    path = _write(tmp_path, '<body name="base"><geom type="plane" size="1 1 1" mass="2"/></body>'
+                            '<body name="b" pos="0 0 1"><freejoint/><geom type="sphere" size="0.1"/></body>')
+    m, _, _, robot = _pair(path)
+    assert [float(link.get_mass()) for link in robot.links] == pytest.approx(m.body_mass[1:].tolist(), rel=1e-14)
+    assert m.body_mass[1] == 0.0
+
+
 def test_contact_masks_keep_legs_out_of_the_ground(f64):
     """The crawler's legs, lowered into the ground with its feet, make contacts only at the feet."""
     scene = gs.Scene()
@@ -224,7 +243,7 @@ LINK = '<geom type="sphere" size="0.1"/>'
      "a ball joint followed by a hinge or ball joint in one body is refused"),
     (f'<body name="b"><joint name="j" springdamper="0.2 1"/>{LINK}</body>', "", "a spring from springdamper"),
     (f'<body name="b"><joint name="j" stiffness="3" springyield="5"/>{LINK}</body>', "", "a yielding spring"),
-    ("", "", "<worldbody> expected at least one <body>, got none"),
+    ("", "", "<worldbody> expected at least one <body> or geom, got none"),
     (f'<body name="b"><geom type="ellipsoid" size="0.1 0.2 0.3"/></body>', "", "geom type expected one of"),
     (f'<geom type="hfield"/><body name="b">{LINK}</body>', "", "<worldbody> geom 0: geom type expected one of"),
     (f'<body name="b"><joint name="j"/>{LINK}<geom name="p" type="plane" size="1 1 1"/></body>', "",

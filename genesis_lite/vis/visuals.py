@@ -58,7 +58,6 @@ def scene_shapes(scene):
         if not hasattr(entity, "_specs"):  # particles: SceneVisuals.particles draws them
             continue
         override = None if entity.surface.color is None else np.asarray(entity.surface.color[:3])
-        shared = isinstance(entity.morph, gm.Plane) and _horizontal(entity.morph)
         for k, spec in enumerate(entity._specs):
             link = entity.link_start + k
             from_file = isinstance(entity.morph, (gm.URDF, gm.MJCF))
@@ -67,13 +66,16 @@ def scene_shapes(scene):
                 color = override if override is not None else \
                     np.asarray(DEFAULT_COLOR if visual.rgba is None else visual.rgba[:3])
                 seg = {"entity": entity.idx, "link": link, "geom": len(shapes)}
-                shapes.append(Shape(link, tessellate(visual), color, seg, shared))
+                shapes.append(Shape(link, tessellate(visual), color, seg, _horizontal_plane(spec, visual)))
     return shapes
 
 
-def _horizontal(plane):
-    """Whether a Plane morph's world normal is ±z (its quat turns its normal)."""
-    normal = quat_to_mat(plane.quat) @ np.asarray(plane.normal, dtype=np.float64)
+def _horizontal_plane(spec, visual):
+    """Whether ``visual`` is an unbounded plane on a root link welded to the world (a Plane morph's,
+    an MJCF worldbody's) whose world normal is ±z (the link's and the visual's turns turn it)."""
+    if visual.type != "plane" or spec.parent >= 0 or spec.joint_type != "fixed":
+        return False
+    normal = quat_to_mat(spec.quat) @ quat_to_mat(visual.quat) @ np.asarray(visual.size, dtype=np.float64)
     return bool(np.all(np.abs(normal[:2]) <= 1e-9 * np.linalg.norm(normal)))
 
 

@@ -30,8 +30,8 @@ legacy formula differs for non-convex meshes). Geoms: sphere, capsule, cylinder,
 ``fromto``), mesh (``<mesh file scale>`` assets, in the file's own coordinates: MuJoCo's
 re-centring moves the geom frame, not the surface; found in meshdir or beside the file that
 included them); contype/conaffinity masks (MuJoCo's pair rule); ``<contact><exclude>``; friction
-(the sliding coefficient); planes (infinite, as MuJoCo's colliders take them; drawn as
-gs.morphs.Plane) in the worldbody or a body welded to it; a geom with contype = conaffinity = 0
+(the sliding coefficient); planes (infinite, as MuJoCo's colliders take them, massless; drawn as
+MuJoCo sizes them) in the worldbody or a body welded to it; a geom with contype = conaffinity = 0
 only weighs and is drawn; a geom
 drawn where its group is 0-2 (MuJoCo's visible groups), coloured by its rgba or material.
 Joints: axis, pos, range (limited: MuJoCo's autolimits), damping, armature, frictionloss,
@@ -104,13 +104,17 @@ def load_mjcf(path: str, entity_name: str | None = None, exclude_ground_plane: b
     index), one tree a root body, then the static "world" link of the worldbody's geoms if it has
     some. A root link's joint is "free" or "fixed" as the file says, at its body's pose (in the
     world frame of the file). entity_name: only used in messages. exclude_ground_plane: leave out
-    the plane geoms directly in the worldbody (Genesis's option: for a scene with a ground of its
-    own). Raises InvalidInputError for bad arguments and AssetError for anything wrong with the file."""
+    the worldbody's plane geoms, those in its <frame>s and those a default class makes planes too
+    (Genesis's option, which leaves out only the worldbody's own children written type="plane"):
+    for a scene with a ground of its own. Raises InvalidInputError for bad arguments and
+    AssetError for anything wrong with the file."""
     if not isinstance(path, (str, os.PathLike)):
         raise InvalidInputError(f"load_mjcf: argument 'path' expected a file path, got {path!r}")
+    if not isinstance(exclude_ground_plane, (bool, np.bool_)):
+        raise InvalidInputError(f"load_mjcf: argument 'exclude_ground_plane' expected True or False, got "
+                                f"{exclude_ground_plane!r}")
     reader = _Reader(os.fspath(path), entity_name)
-    reader.exclude_ground_plane = exclude_ground_plane
-    links = reader.links()
+    links = reader.links(bool(exclude_ground_plane))
     if reader.ignored:
         _logger.warning(f"{reader.where()}: ignored (genesis_lite does not model them): "
                         + "; ".join(sorted(reader.ignored)))
@@ -129,23 +133,24 @@ class _Reader(MJCFDocument):
 
     # ---------------------------------------------------------------- tree
 
-    def links(self) -> list[LinkSpec]:
+    def links(self, exclude_ground_plane: bool) -> list[LinkSpec]:
         """The file's links (load_mjcf's), equalities, servos and exclusions on them."""
         worldbodies = self.root.findall("worldbody")  # (several sections, through includes, make one)
         if not worldbodies:
             raise self.error("<worldbody> is missing")
         bodies = [member for worldbody in worldbodies for member in self._members(worldbody, "body", "main")]
-        if not bodies:
-            raise self.error("<worldbody> expected at least one <body>, got none")
         for worldbody in worldbodies:
             self._check_children(worldbody, "<worldbody>")
-        world_geoms = [member for worldbody in worldbodies for member in self._world_geoms(worldbody)]
+        world_geoms = [member for worldbody in worldbodies for member in self._members(worldbody, "geom", "main")
+                       if not (exclude_ground_plane and self.attrs(*member[:2]).get("type") == "plane")]
+        if not bodies and not world_geoms:
+            raise self.error("<worldbody> expected at least one <body> or geom, got none")
         links = []
         self.static_links = set()  # the links welded to the world (the only ones a plane may be on)
         self.sites = {}  # site name → (its body's name, its position (3,) m and turn (4,) in the body's frame)
         for worldbody in worldbodies:
             self._sites(worldbody, "main", "world")
-        self.world_name = "world" if world_geoms else None  # (the world's geoms' link takes the name)
+        self.world_link = bool(world_geoms)  # (the world's geoms' link takes the name "world")
         for root, childclass, outer in bodies:  # several trees: one entity, as Genesis and MuJoCo load them
             self._body(root, -1, childclass, links, outer)
         if world_geoms:  # MuJoCo's body 0: static, massless, its geoms collide with every tree's
@@ -186,7 +191,7 @@ class _Reader(MJCFDocument):
         else:
             if parent < 0:  # hinged or sliding on the world: on a static link at the world's origin, one
                 # a tree, so that each root body stays a tree of its own (the pair rules go by tree)
-                taken = self.world_name or any(link.name == "world" for link in links)
+                taken = self.world_link or any(link.name == "world" for link in links)
                 world = f"world:{name}" if taken else "world"
                 links.append(_link(world, -1, "", "fixed", np.zeros(3), IDENTITY.copy()))
                 parent = len(links) - 1
@@ -376,12 +381,6 @@ class _Reader(MJCFDocument):
         elif self.inertiafromgeom != "false":
             link.mass, link.com, link.inertia = shapes.combined_mass_properties(solids)
 
-    def _world_geoms(self, worldbody):
-        """The worldbody's geoms as _members gives them, without its planes if exclude_ground_plane."""
-        for element, geom_class, outer in self._members(worldbody, "geom", "main"):
-            if not (self.exclude_ground_plane and self.attrs(element, geom_class).get("type") == "plane"):
-                yield element, geom_class, outer
-
     def _geoms(self, members, link: LinkSpec, what: str, static: bool) -> list:
         """Put the geoms ``members`` (_members's) on the link, as collision shapes (unless both
         their contype and conaffinity are 0) and as visuals (groups 0-2, MuJoCo's visible ones);
@@ -440,13 +439,20 @@ class _Reader(MJCFDocument):
         return geom, density, mass
 
     def _visual(self, geom: GeomSpec, attrs: dict) -> VisualSpec:
+        """The geom as drawn: its shape, but a plane of positive half sizes (MuJoCo's x, y) as that
+        rectangle (a mesh), one with a zero as an unbounded plane (visuals.py)."""
         rgba = None
         if "rgba" in attrs:
             rgba = self.numbers(attrs, "rgba", 4, "geom")
         elif attrs.get("material") in self.materials:
             rgba = self.materials[attrs["material"]]
-        return VisualSpec(geom.type, geom.size, geom.pos, geom.quat, geom.vertices, geom.faces,
-                          rgba if rgba is None or not np.array_equal(rgba, _MJ_RGBA) else None)
+        rgba = rgba if rgba is None or not np.array_equal(rgba, _MJ_RGBA) else None
+        half = self.numbers(attrs, "size", (1, 2, 3), "geom", default=np.zeros(3))[:2]
+        if geom.type == "plane" and len(half) == 2 and np.all(half > 0):
+            corners = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]])
+            return VisualSpec("mesh", np.zeros(0), geom.pos, geom.quat, corners * [*half, 0.0],
+                              np.array([[0, 1, 2], [0, 2, 3]]), rgba)
+        return VisualSpec(geom.type, geom.size, geom.pos, geom.quat, geom.vertices, geom.faces, rgba)
 
     def _inertial(self, inertial, what: str):
         attrs = dict(inertial.attrib)
@@ -680,6 +686,6 @@ def _solid(geom: GeomSpec, density: float, mass: float | None):
     """(mass kg, com (3,) m, inertia (3, 3) kg·m²) of a geom in its own frame: a solid of its
     density, or scaled to its stated mass (MuJoCo's rule)."""
     own_mass, com, inertia = shapes.geom_mass_properties(geom, density)
-    if mass is None:
+    if mass is None or geom.type == "plane":  # (a plane weighs nothing, its stated mass too: MuJoCo's)
         return own_mass, com, inertia
     return mass, com, inertia * (mass / own_mass) if own_mass > 0 else np.zeros((3, 3))
