@@ -135,8 +135,8 @@ MUJOCO_ITERATIONS, GENESIS_ITERATIONS = 100, 25
 @named_keywords("gravity", "disable_constraint", "max_collision_pairs", "multiplier_collision_broad_phase",
            "integrator", "IK_max_targets", "noslip_iterations", "noslip_tolerance", "contact_resolution",
            "enable_torsional_friction", "enable_rolling_friction", "contact_pruning_tolerance", "sparse_solve",
-           "box_box_detection", "use_hibernation", "hibernation_thresh_vel", "max_dynamic_constraints",
-           "enable_multi_contact", "use_gjk_collision", "enable_contact_patch", "broadphase_traversal")
+           "box_box_detection", "use_hibernation", "hibernation_thresh_vel", "enable_multi_contact",
+           "use_gjk_collision", "enable_contact_patch", "broadphase_traversal")
 @dataclass
 class RigidOptions(_TimeBased):
     """Rigid solver switches (Genesis 1.4.5's names and defaults unless said).
@@ -184,6 +184,10 @@ class RigidOptions(_TimeBased):
         not reproduced), and a sphere whose centre is in a mesh's hull, where EPA stops at its
         budget, the nearest facet. Outside it only, a cylinder standing on a plane touches at four
         rim points too (MuJoCo's inscribed triangle turns with the tilt: no gradient at upright).
+    max_dynamic_constraints: weld slots per env for welds made at run time
+        (``scene.sim.rigid_solver.add_weld_constraint``); 0 by default, where Genesis's is 8: each slot
+        adds six rows to every env's constraint capacity, and a scene with slots compiles the weld
+        rows into its constraint kernels (seconds of a cold compile), so a scene asks for them.
     batch_links_info, batch_joints_info, batch_dofs_info: Genesis's switches that let link, joint
         and dof parameters (masses, gains, friction…) differ per env; ours always may (every
         parameter is stored per env), so either value works, as True does in Genesis.
@@ -213,9 +217,15 @@ class RigidOptions(_TimeBased):
     batch_links_info: bool = False
     batch_joints_info: bool = False
     batch_dofs_info: bool = False
+    max_dynamic_constraints: int = 0
 
     def __post_init__(self):
         owner = "RigidOptions"
+        if not (isinstance(self.max_dynamic_constraints, (int, np.integer)) and not isinstance(
+                self.max_dynamic_constraints, (bool, np.bool_)) and self.max_dynamic_constraints >= 0):
+            raise InvalidInputError(f"{owner}: argument 'max_dynamic_constraints' must be an integer >= 0, got "
+                                    f"{self.max_dynamic_constraints!r}")
+        self.max_dynamic_constraints = int(self.max_dynamic_constraints)
         self._check_dt(owner)
         for name in ("enable_collision", "enable_self_collision", "enable_adjacent_collision",
                      "enable_neutral_collision", "enable_joint_limit", "enable_mujoco_compatibility",

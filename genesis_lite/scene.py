@@ -19,6 +19,7 @@ from .entities.mpm_entity import sample_particles
 from .solvers.core import AssetError, InvalidInputError, SceneStateError
 from .materials import MPM, Rigid
 from .options import MPMOptions, RigidOptions, SimOptions, ViewerOptions, VisOptions, check_bool, is_int
+from .rigid_solver import RigidSolverView
 from .runtime import logger, require_init, runtime, track
 from .simulator import Simulator, refuse_inference_mode
 from .solvers.mpm.solver import MPMSolver
@@ -225,6 +226,8 @@ class Scene:
                 solver.destroy()
             raise
         self.sim = sim
+        if self.rigid_solver in solvers:
+            sim.rigid_solver = RigidSolverView(self)
         for entity in self.entities:
             entity._on_build()
         for camera in self._cameras:

@@ -90,6 +90,7 @@ class Simulator:
         self.replay_records = []  # and each solver's replay_record() after it
         self.warned_graph_cut = False  # _warn_graph_cut warned since the last reset
         self.warned_gradient = False  # check_first_gradients warned since the last reset
+        self.rigid_solver = None  # Genesis's scene.sim.rigid_solver (rigid_solver.RigidSolverView), set by the scene
 
     def build(self, n_envs):
         for slot in self.slots:

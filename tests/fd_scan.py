@@ -34,3 +34,16 @@ def assert_converged(errors, what):
     scan = ", ".join(f"{eps:.0e}: {err:.1e}" for eps, err in errors.items())
     converged = [min(abs(errors[a]), abs(errors[b])) for a, b in zip(EPS, EPS[1:]) if abs(errors[a] - errors[b]) < BAR]
     assert converged and min(converged) <= BAR, f"{what}: relative errors per eps {scan}"
+
+
+def repeated_gradients(scene, robot, velocity, rollout):
+    """The gradients of ``rollout()`` (a loss) in the robot's initial dof velocities ``velocity``
+    (numpy) from two rollouts, each after scene.reset(): a repeat's gradient must keep its bits."""
+    grads = []
+    for _ in range(2):
+        scene.reset()
+        start = torch.tensor(velocity, requires_grad=True)
+        robot.set_dofs_velocity(start)
+        rollout().backward()
+        grads.append(start.grad)
+    return grads

@@ -20,7 +20,7 @@ import genesis_lite as gs
 from genesis_lite.solvers.rigid.data import SERIAL_LINK_ENVS
 from genesis_lite.utils.rotations import quat_to_mat
 from tests.conftest import asset
-from tests.fd_scan import assert_converged, directional_errors
+from tests.fd_scan import assert_converged, directional_errors, repeated_gradients
 from tests.test_mjcf import _lockstep, _pair
 
 FOURBAR, CONNECTS, WELDS = (asset("mjcf", name) for name in ("fourbar.xml", "connects.xml", "welds.xml"))
@@ -146,15 +146,13 @@ def test_repeated_rollouts_give_bit_identical_connect_and_weld_gradients(f64, pa
     robot = scene.add_entity(gs.morphs.MJCF(file=path))
     scene.build()
     velocity = np.random.default_rng(1).normal(0.0, 0.5, robot.n_dofs)
-    grads = []
-    for _ in range(2):
-        scene.reset()
-        start = torch.tensor(velocity, requires_grad=True)
-        robot.set_dofs_velocity(start)
+
+    def rollout():
         for _ in range(100):
             scene.step()
-        robot.get_qpos().sum().backward()
-        grads.append(start.grad)
+        return robot.get_qpos().sum()
+
+    grads = repeated_gradients(scene, robot, velocity, rollout)
     assert torch.equal(grads[0], grads[1]) and bool(grads[0].abs().sum() > 0)
 
 

@@ -65,7 +65,8 @@ def capacity(model, options):
     """(contact slots C, row slots R) per env: C the pairs' worst case, capped by max_contacts
     (default: MAX_PER_MOVING_LINK per moving link with geometry, at least MIN_CONTACTS); R
     enough rows for C contacts of the largest condim under the cone, one per joint equality, three
-    per connect, six per weld, one per limited dof (at most one of its two bounds is violated) and one per dof
+    per connect, six per weld (and run-time weld slot), one per limited dof (at most one of its two
+    bounds is violated) and one per dof
     for friction loss (settable on any)."""
     worst = worst_case_contacts(model)
     if options.max_contacts is not None:
@@ -76,7 +77,8 @@ def capacity(model, options):
     contacts = min(worst, cap)
     condim = int(model.pair_condim.max()) if len(model.pair_condim) else 1
     rows_per_contact = condim if options.friction_cone == "elliptic" or condim == 1 else 2 * (condim - 1)
-    joint_rows = model.n_eq + 3 * model.n_body_eq + 3 * model.n_weld + limited_dofs(model, options) + model.n_dofs
+    joint_rows = (model.n_eq + 3 * model.n_body_eq + 3 * model.n_weld + 6 * options.max_dynamic_constraints
+                  + limited_dofs(model, options) + model.n_dofs)
     return contacts, contacts * rows_per_contact + joint_rows
 
 
@@ -89,7 +91,7 @@ class InvweightBasis:
     (Genesis recomputes them when those change, as mj_setConst does):
     - invweight_t per link (1/kg): the mean of the translational diagonal of J_l M⁻¹ J_lᵀ, and
       invweight_r (1/(kg·m²)) of its rotational one (read by welds' turn rows only: contacts have
-      condim ≤ 3; zero in a scene without welds); zero for links welded to the world;
+      condim ≤ 3; zero in a scene without welds nor run-time weld slots); zero for links welded to the world;
     - invweight_dof per dof: the diagonal of M⁻¹, averaged over a free joint's three translations
       and its three rotations, and over a ball joint's three rotations;
     - but on a sliding leaf (``sliding_leaves``: MuJoCo's body_simple = 2), 1 / mass for
@@ -109,7 +111,8 @@ class InvweightBasis:
         # J_ω in the link's frame, where its inertia is given (a massless link's is dropped)
         unit_inertia = m.link_inertia0 * m.link_inv_mass0[:, None, None]
         self.n_links, self.n_dofs = m.n_links, m.n_dofs
-        self.rows = 6 if m.n_weld else 3  # (J's rows whose J M⁻¹ Jᵀ diagonal is read)
+        welds = m.n_weld or solver.rigid_options.max_dynamic_constraints
+        self.rows = 6 if welds else 3  # (J's rows whose J M⁻¹ Jᵀ diagonal is read)
         self.groups = []  # per tree shape: (links (T, l), dofs (T, n), K (T, l, n, n), J (T, l, 6, n), average (T, n, n))
         for links, dofs in _same_shaped_trees(m):
             J = jac[links[:, :, None, None], np.arange(6)[None, None, :, None], dofs[:, None, None, :]]

@@ -69,8 +69,14 @@ INPUTS = {
     "invweight_dof": ("D", True),
     "force_lo": ("D", True),    # N·m or N: the actuator force's bounds
     "force_hi": ("D", True),
+    # welds made at run time (RigidOptions.max_dynamic_constraints slots, DW): how many are on, then
+    # per slot (the first that many on) its two links (model indices, as floats), each link's anchor
+    # (3,) m in its frame and each link's held frame's turn (4,) w-x-y-z in its frame: 1 + 16·DW;
+    # differentiable in the anchors and turns (taken from the state where a weld is made)
+    "dyn_welds": ("DWW", True),
     "ctrl_mode": ("D", False),  # 0 force, 1 position, 2 velocity (see actuation.py)
 }
+DYN_WELD = 16  # the floats of one run-time weld in dyn_welds
 
 CONSTS = ("h", "timeconst", "impratio", "tolerance", "ls_tolerance")
 CONST = {name: k for k, name in enumerate(CONSTS)}  # where each is in the model's "consts"
@@ -157,7 +163,8 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
                ti.types.ndarray(dtype=ti.types.vector(4, float), ndim=1),
                ti.types.ndarray(dtype=ti.types.matrix(3, 3, float), ndim=1))
 # The int arena starts with a header of sizes and flags; every array's place follows from the
-# sizes (``layout``). E joint equalities, K connects and welds, WD welds of them (RigidModel). W: all inputs'
+# sizes (``layout``). E joint equalities, K connects and welds, WD welds of them (RigidModel), DW run-time weld
+# slots (RigidOptions.max_dynamic_constraints; their data are the input dyn_welds). W: all inputs'
 # width per env; GW: the differentiable ones', which come first. G geoms, N candidate
 # geom pairs, H hull vertices, C contact slots, R constraint rows per env (see RigidData); HI the meshes' hull
 # ints (geometry.py), WS 1 when the convex colliders need their workspace (CONVEX_SCRATCH), else 0; converged 1
@@ -169,9 +176,9 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
 # colliders_due a mask of the collider kernels the substep's near pairs need (collision/detect.py: KERNEL_BIT);
 # inexact_pair, inexact_env, inexact_substep: where the last inexact contact was (the backward's error names it);
 # capped a flag: a constraint solve stopped at its iteration limit before its tolerance.
-SIZES = ("B", "L", "D", "Q", "P", "E", "K", "WD", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C", "R", "cone",
-         "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged", "constrained",
-         "colliders_due", "inexact_pair", "inexact_env", "inexact_substep", "wrench", "capped")
+SIZES = ("B", "L", "D", "Q", "P", "E", "K", "WD", "DW", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C",
+         "R", "cone", "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged",
+         "constrained", "colliders_due", "inexact_pair", "inexact_env", "inexact_substep", "wrench", "capped")
 HEADER = {name: k for k, name in enumerate(SIZES)}
 assert len(HEADER) == len(SIZES), "one slot a size"
 _REGIONS = [("i", False)] + [(a, g) for g in (False, True) for a in ("f", "v3", "v4", "m3")]  # (arena, gradients?)
@@ -180,10 +187,10 @@ assert [diff for _, diff in INPUTS.values()] == sorted((diff for _, diff in INPU
     "differentiable inputs come first"
 
 
-def input_width(name, n_links, n_dofs, n_geoms):
+def input_width(name, n_links, n_dofs, n_geoms, n_dyn_welds):
     width = INPUTS[name][0]
     return {"L": n_links, "L6": 6 * n_links, "D": n_dofs, "G": n_geoms, "G2": 2 * n_geoms,
-            "G5": 5 * n_geoms}.get(width, width)
+            "G5": 5 * n_geoms, "DWW": 1 + DYN_WELD * n_dyn_welds}.get(width, width)
 
 
 def _region_members(arena, grads):
@@ -246,10 +253,12 @@ def joint_row_columns(size):
 
 
 def body_eq_columns(size):
-    """Where the connects' and welds' column lists start in efc_cols (D each: its rows' list):
-    after the joint rows' slots (at most a row per joint equality, three per connect, six per weld,
-    two per dof). K counts connects and welds, WD the welds."""
-    return joint_row_columns(size) + JOINT_ROW_SLOTS * (size["E"] + 3 * size["K"] + 3 * size["WD"] + 2 * size["D"])
+    """Where the connects' and welds' column lists start in efc_cols (D each: its rows' list; the
+    run-time welds' after the model's): after the joint rows' slots (at most a row per joint
+    equality, three per connect, six per weld, two per dof). K counts connects and welds, WD the
+    welds, DW the run-time weld slots."""
+    rows = size["E"] + 3 * size["K"] + 3 * size["WD"] + 6 * size["DW"] + 2 * size["D"]
+    return joint_row_columns(size) + JOINT_ROW_SLOTS * rows
 
 
 def _counts(size):
@@ -257,7 +266,8 @@ def _counts(size):
     D, R = size["D"], size["R"]
     return {"L": size["L"], "D": D, "Q": size["Q"], "P": size["P"], "DD": D * D, "G": size["G"], "N": size["N"],
             "H": size["H"], "C": size["C"], "CF": FEATURE_SIZE * size["C"], "HI": size["HI"], "R": R, "RD": R * D,
-            "CD": body_eq_columns(size) + size["K"] * D, "E": size["E"], "E2": 2 * size["E"], "K2": 2 * size["K"],
+            "CD": body_eq_columns(size) + (size["K"] + size["DW"]) * D, "DWW": 1 + DYN_WELD * size["DW"],
+            "E": size["E"], "E2": 2 * size["E"], "K2": 2 * size["K"],
             "WD": size["WD"], "WD2": 2 * size["WD"],
             "G2": 2 * size["G"], "G5": 5 * size["G"], "L6": 6 * size["L"], 1: 1,
             len(CONSTS): len(CONSTS),
@@ -284,12 +294,13 @@ class RigidData:
         # the same for the kernels of the constraint stage (SERIAL_SOLVE_WORK)
         self.solve_schedule = (self.schedule[0] and n_batch * max(1, model.n_dofs) <= SERIAL_SOLVE_WORK, on_cpu)
         n_geoms = len(model.geom_type)
-        self.widths = [input_width(name, model.n_links, model.n_dofs, n_geoms) for name in INPUTS]
+        self.widths = [input_width(name, model.n_links, model.n_dofs, n_geoms, settings["dyn_welds"])
+                       for name in INPUTS]
         self.input_total = sum(self.widths)
         self.grad_total = sum(w for w, (_, diff) in zip(self.widths, INPUTS.values()) if diff)
         self.grad_input_names = [n for n, (_, diff) in INPUTS.items() if diff] if requires_grad else []
         self.size = {"B": n_batch, "L": model.n_links, "D": model.n_dofs, "Q": model.n_qs, "P": len(model.pairs),
-                     "E": model.n_eq, "K": model.n_body_eq, "WD": model.n_weld,
+                     "E": model.n_eq, "K": model.n_body_eq, "WD": model.n_weld, "DW": settings["dyn_welds"],
                      "S": substeps, "W": self.input_total, "GW": self.grad_total,
                      "limits": int(bool(settings["limits"])), "nonfinite": 0, "G": n_geoms,
                      "N": len(model.pair_geom1), "H": len(model.hull_vec), "C": settings["contacts"],
@@ -421,7 +432,7 @@ class RigidView:
         start = layout(size, hold=impl.expr_init)[0]
         self.n_batch, self.n_links, self.n_dofs, self.n_qs = size["B"], size["L"], size["D"], size["Q"]
         self.n_pairs, self.substeps, self.input_total, self.grad_total = size["P"], size["S"], size["W"], size["GW"]
-        self.n_eq, self.n_body_eq, self.n_weld = size["E"], size["K"], size["WD"]
+        self.n_eq, self.n_body_eq, self.n_weld, self.n_dyn_slots = size["E"], size["K"], size["WD"], size["DW"]
         self.n_connect, self.body_eqs = size["K"] - size["WD"], body_eqs  # (the connects come first)
         self.joint_columns, self.body_eq_columns = joint_row_columns(size), body_eq_columns(size)
         self.limits_enabled = size["limits"]

@@ -14,7 +14,7 @@ from ..core import AssetError, GradientError, SimulationError, new_state, runtim
 from ..launch import BoundKernel, BoundKernels
 from . import contact, step
 from .collision import detect
-from .data import ARENAS, BIG, ELEMENT, HEADER, INPUTS, RigidData
+from .data import ARENAS, BIG, DYN_WELD, ELEMENT, HEADER, INPUTS, RigidData
 from .geometry import GEOM_CODE
 from .model import build_model
 
@@ -37,7 +37,8 @@ class RigidSolver(Solver):
 
     #: inputs that keep their value across ``scene.reset()`` (controls do not)
     persistent_inputs = ("mass", "damping", "armature", "stiffness", "kp", "kv", "gravity", "force_lo", "force_hi",
-                         "frictionloss", "friction", "solref", "solimp", "invweight_t", "invweight_r", "invweight_dof")
+                         "frictionloss", "friction", "solref", "solimp", "invweight_t", "invweight_r", "invweight_dof",
+                         "dyn_welds")
 
     transient_inputs = ("xfrc",)
 
@@ -46,7 +47,8 @@ class RigidSolver(Solver):
         self.entity_links = []  # one list[LinkSpec] per rigid entity, in add order
         self.entity_names = []
         self.model = self.data = None
-        self._frictionloss_seen = (None, None)  # the frictionloss input _note_inputs last checked, its version
+        self._inputs_seen = {}  # name → (the input tensor _note_inputs last checked, its version)
+        self.friction = self.welds_on = False  # some dof has friction loss; some env a run-time weld
         self._packed = {}  # width → the (B, width) buffer _pack_inputs writes
         self.substeps = sim_options.substeps
         self._commit = 1  # 0 while a backward replays a step: its frames stay for the reverse
@@ -100,6 +102,7 @@ class RigidSolver(Solver):
         settings = {"limits": options.enable_joint_limit, "contacts": contacts, "rows": rows,
                     "cone": int(options.friction_cone == "elliptic"), "iterations": self.iterations,
                     "ls_iterations": options.ls_iterations, "converged": not options.enable_mujoco_compatibility,
+                    "dyn_welds": options.max_dynamic_constraints,
                     "consts": [h, self.timeconst, impratio, self.tolerance, options.ls_tolerance]}
         self.data = RigidData(self.model, self.n_batch, sim.substeps, sim.requires_grad, settings)
         element_dims = [len(ELEMENT[a]) for a in ARENAS]
@@ -115,7 +118,8 @@ class RigidSolver(Solver):
             self.colliders.append((detect.KERNEL_BIT[detect.ALL_CONVEX],
                                    BoundKernel(step.converge, schedule, arenas, element_dims, detect.CONVEX_OPT_LEVEL)))
         # the reverse of a substep, without and with the constraint stage
-        solve_schedule, elliptic, body_eqs = self.data.solve_schedule, bool(settings["cone"]), m.n_body_eq > 0
+        solve_schedule, elliptic = self.data.solve_schedule, bool(settings["cone"])
+        body_eqs = m.n_body_eq > 0 or options.max_dynamic_constraints > 0
         self.constrain = BoundKernel(step.constrain, (solve_schedule, elliptic, body_eqs), arenas, element_dims)
         self.reverse_kernel = [BoundKernel(step.reverse_dynamics, (schedule, 0, False, False), arenas, element_dims),
                                BoundKernel(step.reverse_dynamics, (solve_schedule, 1, elliptic, body_eqs), arenas,
@@ -129,7 +133,7 @@ class RigidSolver(Solver):
         self.upload_inputs(self.default_inputs)
 
     def _default_inputs(self):
-        m, B = self.model, self.n_batch
+        m, B, slots = self.model, self.n_batch, self.rigid_options.max_dynamic_constraints
         effort = np.minimum(m.dof_effort, BIG)
         per_env = {
             "mass": m.link_mass0, "damping": m.dof_damping, "armature": m.dof_armature,
@@ -137,7 +141,7 @@ class RigidSolver(Solver):
             "ctrl_force": np.zeros(m.n_dofs), "ctrl_pos": np.zeros(m.n_dofs), "ctrl_vel": np.zeros(m.n_dofs),
             "xfrc": np.zeros(6 * m.n_links),
             "frictionloss": m.dof_frictionloss, "force_lo": -effort, "force_hi": effort,
-            "ctrl_mode": np.zeros(m.n_dofs),
+            "ctrl_mode": np.zeros(m.n_dofs), "dyn_welds": np.zeros(1 + DYN_WELD * slots),
             "friction": m.geom_friction, "solref": np.tile([self.timeconst, 1.0], len(m.geom_type)),
             "solimp": np.tile(contact.SMOOTH_SOLIMP if self.rigid_options.smooth_contact else contact.DEFAULT_SOLIMP,
                               len(m.geom_type)),
@@ -245,25 +249,32 @@ class RigidSolver(Solver):
     def _note_inputs(self, inputs):
         """Tell the kernels whether the inputs hold an external wrench (the header's "wrench": set
         by apply_links_external_wrench, else the build's zeros, whose force stage and its
-        gradients the kernels then skip). Keep whether they give some dof friction loss (a
-        constraint row).
-        Checked again only for another frictionloss tensor, or the same one changed in place by
-        torch (which counts its versions; the entity setters always give a new tensor): a rollout
+        gradients the kernels then skip). Keep whether they give some dof friction loss, and
+        some env a run-time weld (constraint rows).
+        Checked again only for another frictionloss (dyn_welds) tensor, or the same one changed in
+        place by torch (which counts its versions; the setters always give a new tensor): a rollout
         passes the same one every step, and the check costs ~15 µs of torch amid a step
         (a tenth of a small robot's differentiable step)."""
         wrench = int(inputs["xfrc"] is not self.default_inputs["xfrc"])
         if wrench != self._wrench:  # (kept on the host: reading a GPU header would wait for the device)
             self.data.header[HEADER["wrench"]] = self._wrench = wrench
-        frictionloss = inputs["frictionloss"]
-        seen = self._frictionloss_seen
-        if frictionloss is not seen[0] or frictionloss._version != seen[1]:
-            self.friction = bool((frictionloss > 0).any())
-            self._frictionloss_seen = (frictionloss, frictionloss._version)  # (held: its id stays its own)
+        if self._changed(inputs, "frictionloss"):
+            self.friction = bool((inputs["frictionloss"] > 0).any())
+        if self._changed(inputs, "dyn_welds"):
+            self.welds_on = bool((inputs["dyn_welds"][:, 0] > 0).any())
+
+    def _changed(self, inputs, name):
+        """Whether inputs[name] is another tensor than at the last call, or was changed in place."""
+        tensor, seen = inputs[name], self._inputs_seen.get(name)
+        if seen is not None and tensor is seen[0] and tensor._version == seen[1]:
+            return False
+        self._inputs_seen[name] = (tensor, tensor._version)  # (held: its id stays its own)
+        return True
 
     def _constrained(self):
-        """Whether a step may have constraint rows: contact pairs, joint equalities, connects, joint
-        limits or friction loss."""
-        return bool(self.colliders) or self.model.has_equalities or self.limited or self.friction
+        """Whether a step may have constraint rows: contact pairs, joint equalities, connects, welds,
+        joint limits or friction loss."""
+        return bool(self.colliders) or self.model.has_equalities or self.limited or self.friction or self.welds_on
 
     def _pack_inputs(self, inputs, before=(), after=()):
         """(B, width) of ``before``, every input in INPUTS order, ``after``. The kernels read values
@@ -328,7 +339,7 @@ class RigidSolver(Solver):
         stage; else, or for those envs, the stage kernels of each substep (_substep)."""
         flagged_only = 0
         self._clear_substep_record()
-        if not (self.colliders or self.model.has_equalities or self.friction):
+        if not (self.colliders or self.model.has_equalities or self.friction or self.welds_on):
             self.kernels.advance(commit, inputs, out)
             if not (self.limited and self.data.take_flag("rows_needed")):
                 return
@@ -552,4 +563,4 @@ class RigidSolver(Solver):
     def destroy(self):
         """Free the arenas and the input packs (the compiled kernels stay, for every later scene)."""
         self.data = self.kernels = None
-        self._packed, self._frictionloss_seen = {}, (None, None)
+        self._packed, self._inputs_seen = {}, {}

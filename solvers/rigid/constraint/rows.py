@@ -30,7 +30,7 @@ likewise for contact rows, into body_invweight0 among others).
 """
 import taichi as ti
 
-from ..data import BIG, CONST, JOINT_ROW_SLOTS, accumulate
+from ..data import BIG, CONST, DYN_WELD, JOINT_ROW_SLOTS, accumulate
 from ..kinematics import dof_count, dof_motion_at, joint_quat, reference
 from ..model import BALL
 from ..spatial import quat_conj, quat_mul, quat_to_mat, quat_turn, quat_turn_adjoint
@@ -568,10 +568,10 @@ def limit_violated(d: ti.template(), s, e):
 
 @ti.func
 def dof_rows_arise(d: ti.template(), s, e):
-    """1 if env e forms joint rows at frame s (a joint equality, connect or weld, friction loss on
-    some dof, or a violated limit)."""
+    """1 if env e forms joint rows at frame s (a joint equality, connect or weld, a run-time weld,
+    friction loss on some dof, or a violated limit)."""
     arise = limit_violated(d, s, e)
-    if d.n_eq > 0 or d.n_body_eq > 0:
+    if d.n_eq > 0 or d.n_body_eq > 0 or dynamic_welds(d, e) > 0:
         arise = 1
     for i in range(d.n_dofs):
         if d.frictionloss[e, i] > 0.0:
@@ -584,14 +584,15 @@ def dof_rows(d: ti.template(), s, e):
     """Rows 0… of frame s, in MuJoCo's order of kinds: every joint equality (in tree order; MuJoCo
     lists a URDF's mimics in the file's joint order), every connect's three, every weld's six (in
     tree order; MuJoCo lists equalities in the file's order, mixing kinds: the same rows, rounded
-    otherwise where the orders differ), friction loss of every dof with F > 0, then every violated joint limit.
+    otherwise where the orders differ), the run-time welds' six in the order they were made,
+    friction loss of every dof with F > 0, then every violated joint limit.
     Returns how many (also kept in efc_dof_rows[s, e, 0])."""
     rows = 0
     for k in range(d.n_eq):
         _equality_row(d, s, e, rows, k)
         rows += 1
     if ti.static(d.body_eqs):
-        for k in range(d.n_body_eq):
+        for k in range(d.n_body_eq + dynamic_welds(d, e)):
             rows += _body_eq_rows(d, s, e, rows, k)
     for i in range(d.n_dofs):
         bound = d.frictionloss[e, i]
@@ -639,7 +640,7 @@ def dof_rows_adjoint(d: ti.template(), s, e, r, g_aref, g_R, g_bound):
     t = d.efc_type[s, e, r]
     body_eq = 0
     if ti.static(d.body_eqs):
-        if d.n_eq <= r and r < d.n_eq + 3 * d.n_connect + 6 * d.n_weld:
+        if d.n_eq <= r and r < d.n_eq + 3 * d.n_connect + 6 * (d.n_weld + dynamic_welds(d, e)):
             _body_eq_row_adjoint(d, s, e, r, g_aref, g_R)
             body_eq = 1
     if body_eq == 0:
@@ -809,21 +810,58 @@ def _sandwich_adjoint(a, y, b, g):
 
 
 @ti.func
-def _body_eq_terms(d: ti.template(), s, e, k):
-    """(link 1, link 2, point 1 (3,) m, point 2 (3,) m) of connect or weld k at frame s: its two
-    anchors in the world."""
-    l1, l2 = d.body_eq_link[2 * k], d.body_eq_link[2 * k + 1]
-    return (l1, l2, _link_point(d, s, e, l1, d.body_eq_anchor[2 * k]),
-            _link_point(d, s, e, l2, d.body_eq_anchor[2 * k + 1]))
+def dynamic_welds(d: ti.template(), e):
+    """How many run-time welds env e has (their rows follow the model's connects' and welds')."""
+    count = 0
+    if ti.static(d.body_eqs):
+        count = ti.cast(d.dyn_welds[e, 0], ti.i32)
+    return count
 
 
 @ti.func
-def _weld_frames(d: ti.template(), s, e, w, l1, l2):
-    """(a (4,), b (4,), τ) of weld w at frame s (see above). (Either sign of a quaternion gives the
-    same force: a sign flips e, J and J̇ q̇ together, and Jᵀ f with them.)"""
+def _dynamic_weld(d: ti.template(), k, first):
+    """Column in dyn_welds of body equality k's float ``first`` (data.INPUTS' dyn_welds: 0, 1 its
+    links; 2… its anchors; 8… its turns), k ≥ n_body_eq (a run-time weld)."""
+    return 1 + DYN_WELD * (k - d.n_body_eq) + first
+
+
+@ti.func
+def _vector_at(d: ti.template(), e, column, n: ti.template()):
+    return ti.Vector([d.dyn_welds[e, column + c] for c in ti.static(range(n))], dt=float)
+
+
+@ti.func
+def _body_eq_terms(d: ti.template(), s, e, k):
+    """(link 1, link 2, point 1 (3,) m, point 2 (3,) m) of connect or weld k at frame s (the model's,
+    then env e's run-time welds): its two anchors in the world."""
+    l1, l2 = 0, 0
+    anchor1, anchor2 = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)
+    if k < d.n_body_eq:
+        l1, l2 = d.body_eq_link[2 * k], d.body_eq_link[2 * k + 1]
+        anchor1, anchor2 = d.body_eq_anchor[2 * k], d.body_eq_anchor[2 * k + 1]
+    else:
+        l1 = ti.cast(d.dyn_welds[e, _dynamic_weld(d, k, 0)], ti.i32)
+        l2 = ti.cast(d.dyn_welds[e, _dynamic_weld(d, k, 1)], ti.i32)
+        anchor1 = _vector_at(d, e, _dynamic_weld(d, k, 2), 3)
+        anchor2 = _vector_at(d, e, _dynamic_weld(d, k, 5), 3)
+    return l1, l2, _link_point(d, s, e, l1, anchor1), _link_point(d, s, e, l2, anchor2)
+
+
+@ti.func
+def _weld_frames(d: ti.template(), s, e, k, l1, l2):
+    """(a (4,), b (4,), τ) of weld k (a body equality: the model's, then env e's run-time welds,
+    whose τ is 1) at frame s (see above). (Either sign of a quaternion gives the same force: a
+    sign flips e, J and J̇ q̇ together, and Jᵀ f with them.)"""
     q1, _w1, _a1 = _link_rotation(d, s, e, l1)
     q2, _w2, _a2 = _link_rotation(d, s, e, l2)
-    return quat_conj(quat_mul(q2, d.weld_turn[2 * w + 1])), quat_mul(q1, d.weld_turn[2 * w]), d.weld_torquescale[w]
+    turn1, turn2, torquescale = ti.Vector.zero(float, 4), ti.Vector.zero(float, 4), 1.0
+    if k < d.n_body_eq:
+        w = k - d.n_connect
+        turn1, turn2, torquescale = d.weld_turn[2 * w], d.weld_turn[2 * w + 1], d.weld_torquescale[w]
+    else:
+        turn1 = _vector_at(d, e, _dynamic_weld(d, k, 8), 4)
+        turn2 = _vector_at(d, e, _dynamic_weld(d, k, 12), 4)
+    return quat_conj(quat_mul(q2, turn2)), quat_mul(q1, turn1), torquescale
 
 
 @ti.func
@@ -895,28 +933,30 @@ def _turn_error(d: ti.template(), s, e, k, l1, l2):
     connect's: 0, its a, b and τ unused)."""
     a, b = ti.Vector([1.0, 0.0, 0.0, 0.0], dt=float), ti.Vector([1.0, 0.0, 0.0, 0.0], dt=float)
     turn, torquescale = ti.Vector.zero(float, 3), 0.0
-    weld = k - d.n_connect
-    if weld >= 0:
-        a, b, torquescale = _weld_frames(d, s, e, weld, l1, l2)
+    if k >= d.n_connect:
+        a, b, torquescale = _weld_frames(d, s, e, k, l1, l2)
         turn = torquescale * _sandwich(a, ti.Vector([1.0, 0.0, 0.0, 0.0], dt=float), b)
     return turn, a, b, torquescale
 
 
 @ti.func
-def _body_eq_scalars(d: ti.template(), e, l1, l2, dist):
-    """(impedance, K 1/s², B 1/s, diagA of the point rows, of the turn rows) of a connect's or weld's
-    rows at |error| = dist, as MuJoCo makes them: the impedance of the whole error's norm, diagA
-    the two links' invweight_t (turn rows: invweight_r; the world's 0), the scene's time constant
-    and MuJoCo's default solimp (as the other joint rows)."""
+def _body_eq_scalars(d: ti.template(), e, k, l1, l2, dist):
+    """(impedance, K 1/s², B 1/s, diagA of the point rows, of the turn rows) of body equality k's
+    rows (links l1, l2) at |error| = dist, as MuJoCo makes them: the impedance of the whole error's
+    norm, diagA the two links' invweight_t (turn rows: invweight_r; the world's 0), MuJoCo's
+    default solimp (as the other joint rows) and the scene's time constant, or, for a run-time
+    weld, two substeps (Genesis's: as stiff as MuJoCo lets a row be)."""
     solimp = ti.Vector(DEFAULT_SOLIMP, dt=float)
     imp = impedance(solimp, dist, 0.0)
-    k, b = stiffness_damping(ti.Vector([d.consts[CONST["timeconst"]], 1.0]), solimp[1], d.consts[CONST["h"]])
+    h = d.consts[CONST["h"]]
+    timeconst = ti.select(k < d.n_body_eq, d.consts[CONST["timeconst"]], 2.0 * h)
+    stiffness, b = stiffness_damping(ti.Vector([timeconst, 1.0]), solimp[1], h)
     translation, rotation = 0.0, 0.0
     for link in ti.static((l1, l2)):
         if link >= 0:
             translation += d.invweight_t[e, link]
             rotation += d.invweight_r[e, link]
-    return imp, k, b, translation, rotation
+    return imp, stiffness, b, translation, rotation
 
 
 @ti.func
@@ -935,7 +975,8 @@ def _body_eq_rows(d: ti.template(), s, e, first, k):
     world = ti.Matrix.identity(float, 3)
     _add_link_jacobian(d, s, e, l1, p1, world, 1.0, first, 3, False, 0.0)
     _add_link_jacobian(d, s, e, l2, p2, world, -1.0, first, 3, False, 0.0)
-    imp, stiffness, damping, translation, rotation = _body_eq_scalars(d, e, l1, l2, ti.sqrt(gap.dot(gap) + turn.dot(turn)))
+    dist = ti.sqrt(gap.dot(gap) + turn.dot(turn))
+    imp, stiffness, damping, translation, rotation = _body_eq_scalars(d, e, k, l1, l2, dist)
     bias = _point_bias_acceleration(d, s, e, l1, p1) - _point_bias_acceleration(d, s, e, l2, p2)
     turn_bias = ti.Vector.zero(float, 3)
     if n == 6:
@@ -968,7 +1009,7 @@ def _body_eq_row_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
     gap = p1 - p2
     turn, a, b, torquescale = _turn_error(d, s, e, k, l1, l2)
     dist = ti.sqrt(gap.dot(gap) + turn.dot(turn))
-    imp, stiffness, damping, translation, rotation = _body_eq_scalars(d, e, l1, l2, dist)
+    imp, stiffness, damping, translation, rotation = _body_eq_scalars(d, e, k, l1, l2, dist)
     axis = ti.Vector([1.0 if j % 3 == c else 0.0 for c in ti.static(range(3))], dt=float)
     error, scale = gap.dot(axis), translation
     if j >= 3:
@@ -1012,3 +1053,23 @@ def _body_eq_row_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
     for link, g in ti.static(((l1, g_turn1), (l2, g_turn2))):
         if link >= 0:
             accumulate(d.xrot_grad, ti.Vector([s, e, link]), g)
+    if k >= d.n_body_eq:
+        _dynamic_weld_adjoint(d, s, e, k, l1, l2, g_gap + g_p1, g_p2 - g_gap, g_turn1, g_turn2)
+
+
+@ti.func
+def _dynamic_weld_adjoint(d: ti.template(), s, e, k, l1, l2, g_point1, g_point2, g_turn1, g_turn2):
+    """Into run-time weld k's data (dyn_welds.grad; the links' model indices, both ≥ 0): each
+    anchor's gradient R_lᵀ ∂L/∂point from its world point's, and each held frame's turn r's from
+    the gradient of that frame's world turn δ (b = q1 ⊗ r1 turned to (1, δ1/2) ⊗ b: ∂L/∂r1 =
+    2 conj(q1) ⊗ (0, ∂L/∂δ1) ⊗ b, tangent to the unit sphere; a's likewise for r2, conj(a) = q2 ⊗ r2)."""
+    a, b, _torquescale = _weld_frames(d, s, e, k, l1, l2)
+    q1, _w1, _a1 = _link_rotation(d, s, e, l1)
+    q2, _w2, _a2 = _link_rotation(d, s, e, l2)
+    pulls = ((_dynamic_weld(d, k, 2), quat_to_mat(q1).transpose() @ g_point1),
+             (_dynamic_weld(d, k, 5), quat_to_mat(q2).transpose() @ g_point2))
+    turns = ((_dynamic_weld(d, k, 8), 2.0 * quat_mul(quat_mul(quat_conj(q1), _pure(g_turn1)), b)),
+             (_dynamic_weld(d, k, 12), 2.0 * quat_mul(quat_mul(quat_conj(q2), _pure(g_turn2)), quat_conj(a))))
+    for column, g in ti.static(pulls + turns):
+        for c in ti.static(range(g.n)):
+            accumulate(d.dyn_welds.grad, ti.Vector([e, column + c]), g[c])

@@ -1,0 +1,116 @@
+"""Genesis's ``scene.sim.rigid_solver``: the solver-level calls genesis_lite has — welds made at
+run time (Genesis's suction cup: ``add_weld_constraint`` / ``delete_weld_constraint``).
+
+A run-time weld holds two links where they are when it is made: link 1's origin on the same point
+of link 2, and their relative turn, by six equality rows (solvers/rigid/constraint/rows.py, as an
+MJCF weld's, torquescale 1) stiff as MuJoCo lets a row be (time constant two substeps, Genesis's).
+Each env has RigidOptions.max_dynamic_constraints slots; a weld is the rigid solver's input
+``dyn_welds`` (solvers/rigid/data.py), so a differentiable rollout's backward replays each step
+with the welds it had. Where a weld is made is taken from the state in the graph: a gradient
+reaches the state of that step through the weld's anchor and turn as well as through its rows.
+"""
+import numpy as np
+import torch
+
+from .entities.common import EntityIndexing
+from .solvers.core import InvalidInputError, runtime
+from .solvers.rigid.data import DYN_WELD
+from .utils.rotations import quat_mul, quat_to_mat
+
+_CONJUGATE = torch.tensor([1.0, -1.0, -1.0, -1.0])
+
+
+class RigidSolverView(EntityIndexing):
+    """``scene.sim.rigid_solver`` of a built scene with rigid entities (Genesis's name)."""
+
+    name = "rigid_solver"
+
+    def __init__(self, scene):
+        self.scene = scene
+        self._solver = scene.rigid_solver
+
+    @property
+    def _who(self):
+        return "scene.sim.rigid_solver"
+
+    def add_weld_constraint(self, link1_idx, link2_idx, envs_idx=None):
+        """Weld link ``link2_idx`` to link ``link1_idx`` (scene-wide link indices, Genesis's
+        ``link.idx``) as they are now, in the envs ``envs_idx`` (None: every env): see the module.
+        Refused (InvalidInputError) for one link twice, two links welded to the world, a pair
+        already welded in a selected env, or an env without a free slot."""
+        links, envs, table = self._pair(link1_idx, link2_idx, envs_idx, "add_weld_constraint")
+        welded = self._slots_of(table, envs, links) >= 0
+        if welded.any():
+            raise InvalidInputError(f"{self._who}.add_weld_constraint: links {links} are already welded in envs "
+                                    f"{envs[welded].tolist()}; expected a pair not welded there")
+        count = table[torch.as_tensor(envs, device=table.device), 0].detach().long()
+        full = (count >= self._solver.rigid_options.max_dynamic_constraints).cpu().numpy()
+        if full.any():
+            raise InvalidInputError(f"{self._who}.add_weld_constraint: no free weld slot in envs "
+                                    f"{envs[full].tolist()}: expected fewer than "
+                                    f"RigidOptions(max_dynamic_constraints="
+                                    f"{self._solver.rigid_options.max_dynamic_constraints}) welds there")
+        # (in the graph when the state requires grad: where the weld is made depends on it)
+        kinematics = self.scene.sim.derived(self._solver)[torch.as_tensor(envs, device=runtime.device)]
+        (p1, q1), (p2, q2) = ((kinematics[:, link, :3], kinematics[:, link, 3:7]) for link in links)
+        anchor2 = (quat_to_mat(q2).transpose(-1, -2) @ (p1 - p2)[:, :, None])[:, :, 0]  # link 1's origin, on link 2
+        turn1 = quat_mul(q1 * _CONJUGATE.to(q1), q2)  # link 2's frame in link 1's
+        identity = torch.zeros_like(q2)
+        identity[:, 0] = 1.0
+        weld = torch.cat([torch.tensor(links).to(p1).expand(len(envs), 2), torch.zeros_like(p1), anchor2, turn1,
+                          identity], dim=1)
+        rows = torch.as_tensor(envs, device=table.device)
+        columns = 1 + DYN_WELD * count[:, None] + torch.arange(DYN_WELD, device=table.device)
+        table[rows[:, None], columns] = weld
+        table[rows, 0] += 1.0
+        self.scene.sim.set_input(self._solver, "dyn_welds", table)
+
+    def delete_weld_constraint(self, link1_idx, link2_idx, envs_idx=None):
+        """Remove the weld of the two links (either order) in the envs ``envs_idx`` (None: every
+        env); the env's later welds move up a slot. Refused (InvalidInputError) where the pair
+        is not welded (Genesis passes over such an env)."""
+        links, envs, table = self._pair(link1_idx, link2_idx, envs_idx, "delete_weld_constraint")
+        slots = self._slots_of(table, envs, links)
+        if (slots < 0).any():
+            raise InvalidInputError(f"{self._who}.delete_weld_constraint: links {links} are not welded in envs "
+                                    f"{envs[slots < 0].tolist()}; expected a welded pair (add_weld_constraint)")
+        for env, slot in zip(envs.tolist(), slots.tolist()):
+            count = int(table[env, 0].detach())
+            start, end = 1 + DYN_WELD * slot, 1 + DYN_WELD * count
+            table[env, start: end - DYN_WELD] = table[env, start + DYN_WELD: end].clone()
+            table[env, end - DYN_WELD: end] = 0.0
+            table[env, 0] = count - 1
+        self.scene.sim.set_input(self._solver, "dyn_welds", table)
+
+    def _pair(self, link1_idx, link2_idx, envs_idx, call):
+        """((link 1, link 2) as ints, the envs (int64 array), a copy of the welds' input) of a call."""
+        self.scene._require_built(f"{self._who}.{call}")
+        n_links = self._solver.model.n_links
+        links = tuple(int(self._local(idx, n_links, arg)[0]) if np.ndim(idx) == 0 or np.size(idx) == 1 else None
+                      for idx, arg in ((link1_idx, "link1_idx"), (link2_idx, "link2_idx")))
+        if None in links:
+            raise InvalidInputError(f"{self._who}.{call}: arguments 'link1_idx' and 'link2_idx' must be one link "
+                                    f"index each, got {link1_idx!r} and {link2_idx!r}")
+        if links[0] == links[1]:
+            raise InvalidInputError(f"{self._who}.{call}: expected two different links, got link {links[0]} twice")
+        static = self._solver.model.link_static[list(links)]
+        if static.all():
+            raise InvalidInputError(f"{self._who}.{call}: links {links} are both welded to the world; expected "
+                                    f"one that moves")
+        if not self._solver.rigid_options.max_dynamic_constraints:
+            raise InvalidInputError(f"{self._who}.{call}: the scene has no run-time weld slots; expected "
+                                    f"RigidOptions(max_dynamic_constraints=n) with n ≥ 1 (0 by default here, "
+                                    f"Genesis's 8)")
+        envs = self._envs(envs_idx, distinct=True)
+        return links, envs, self.scene.sim.inputs(self._solver)["dyn_welds"].clone()
+
+    @staticmethod
+    def _slots_of(table, envs, links):
+        """(len(envs),) numpy: each env's slot holding the pair (either order), -1 where none does."""
+        rows = table[torch.as_tensor(envs, device=table.device)].detach().cpu()
+        count = rows[:, 0].long()
+        pairs = rows[:, 1:].reshape(len(envs), -1, DYN_WELD)[:, :, :2].long()  # (n, slots, 2)
+        on = torch.arange(pairs.shape[1])[None, :] < count[:, None]
+        match = on & (((pairs[..., 0] == links[0]) & (pairs[..., 1] == links[1]))
+                      | ((pairs[..., 0] == links[1]) & (pairs[..., 1] == links[0])))
+        return torch.where(match.any(1), match.int().argmax(1), -1).numpy()
