@@ -115,16 +115,14 @@ def test_welds_per_env_and_batched_equal_single_envs_bitwise(f64, tmp_path):
 
 
 def _rollout(scene, robot, steps, weld_at):
-    """A rollout's loss: from the scene's reset, the boxes welded at step ``weld_at`` (and the weld
-    deleted after the last step, so that the next rollout starts without it)."""
+    """A rollout's loss: from the scene's reset (which clears the welds), the boxes welded at step
+    ``weld_at``."""
     a, b = robot.get_link("a").idx, robot.get_link("b").idx
     for t in range(steps):
         if t == weld_at:
             scene.sim.rigid_solver.add_weld_constraint(a, b)
         scene.step()
-    loss = (robot.get_qpos() * torch.linspace(-1.0, 1.0, robot.n_qs, dtype=torch.float64)).sum()
-    scene.sim.rigid_solver.delete_weld_constraint(a, b)
-    return loss
+    return (robot.get_qpos() * torch.linspace(-1.0, 1.0, robot.n_qs, dtype=torch.float64)).sum()
 
 
 @pytest.mark.parametrize("what", ["velocity", "mass", pytest.param("gravity", marks=pytest.mark.slow)])
@@ -168,8 +166,10 @@ def test_bad_welds_are_named(f64, tmp_path):
         solver.add_weld_constraint(a, a)
     with pytest.raises(InvalidInputError, match=r"are both welded to the world; expected one that moves"):
         solver.add_weld_constraint(world, floor)
-    with pytest.raises(InvalidInputError, match=r"argument 'link1_idx' must be integers in \[-\d+, \d+\)"):
-        solver.add_weld_constraint(99, a)
+    for bad in (99, -1, [a, b], 1.0):
+        with pytest.raises(InvalidInputError, match=r"argument 'link1_idx' must be one link index in \[0, \d+\) "
+                                                    r"\(a link's idx; the world is not a link\)"):
+            solver.add_weld_constraint(bad, a)
     with pytest.raises(InvalidInputError, match=r"argument 'envs_idx' must be None in a scene built with n_envs=0"):
         solver.add_weld_constraint(a, b, envs_idx=[0])
     with pytest.raises(InvalidInputError, match=r"links \(\d+, \d+\) are not welded in envs \[0\]"):
@@ -186,3 +186,25 @@ def test_bad_welds_are_named(f64, tmp_path):
         plain.sim.rigid_solver.add_weld_constraint(a, b)
     with pytest.raises(InvalidInputError, match=r"'max_dynamic_constraints' must be an integer >= 0, got -1"):
         gs.options.RigidOptions(max_dynamic_constraints=-1)
+
+
+def test_a_reset_clears_the_welds_of_the_envs_it_resets(f64, tmp_path):
+    """As Genesis's: scene.reset() clears every env's welds, reset(envs_idx) those envs' only; an
+    empty envs_idx welds nothing; deleting a weld moves the env's last into its slot (Genesis's)."""
+    _, _, scene, robot = _scenes(tmp_path, n_envs=2, slots=3)
+    solver = scene.sim.rigid_solver
+    a, b, arm = (robot.get_link(name).idx for name in ("a", "b", "arm"))
+    solver.add_weld_constraint(a, b, envs_idx=[])
+    assert scene.sim.inputs(scene.rigid_solver)["dyn_welds"][:, 0].tolist() == [0.0, 0.0]
+    solver.add_weld_constraint(a, b)
+    solver.add_weld_constraint(b, arm)
+    solver.add_weld_constraint(a, arm, envs_idx=[1])
+    solver.delete_weld_constraint(b, a, envs_idx=[1])
+    table = scene.sim.inputs(scene.rigid_solver)["dyn_welds"]
+    assert table[:, 0].tolist() == [2.0, 2.0]
+    assert table[1, [1, 2, 17, 18]].tolist() == [a, arm, b, arm]  # (the last, a–arm, in the gap)
+    scene.reset(envs_idx=[0])
+    assert scene.sim.inputs(scene.rigid_solver)["dyn_welds"][:, 0].tolist() == [0.0, 2.0]
+    solver.add_weld_constraint(a, b, envs_idx=[0])  # (free again in env 0)
+    scene.reset()
+    assert scene.sim.inputs(scene.rigid_solver)["dyn_welds"][:, 0].tolist() == [0.0, 0.0]

@@ -37,8 +37,7 @@ class RigidSolver(Solver):
 
     #: inputs that keep their value across ``scene.reset()`` (controls do not)
     persistent_inputs = ("mass", "damping", "armature", "stiffness", "kp", "kv", "gravity", "force_lo", "force_hi",
-                         "frictionloss", "friction", "solref", "solimp", "invweight_t", "invweight_r", "invweight_dof",
-                         "dyn_welds")
+                         "frictionloss", "friction", "solref", "solimp", "invweight_t", "invweight_r", "invweight_dof")
 
     transient_inputs = ("xfrc",)
 
