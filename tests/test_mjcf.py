@@ -117,7 +117,7 @@ def test_crawler_with_contact_masks_matches_mujoco(f64, cone):
     assert worst < 1e-11
 
 
-@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+@pytest.mark.parametrize("cone", ["pyramidal", pytest.param("elliptic", marks=pytest.mark.slow)])
 def test_worldbody_geoms_are_a_static_world_link_and_match_mujoco(f64, cone):
     """assets/mjcf/worldbody.xml: the worldbody's floor, ramp and bar (in a <frame>) are one static
     massless link, "world", the entity's last; a block slides on the ramp, a ball lands on the bar,
