@@ -9,8 +9,9 @@ Each env has RigidOptions.max_dynamic_constraints slots; a weld is the rigid sol
 with the welds it had; a reset clears the welds of the envs it resets, as Genesis's does.
 The held point is link 1's origin (Genesis's choice): a weld holds tightest with the link nearer
 the other's origin as link 1 (a box welded as link 2 to a static link whose origin is 0.8 m
-away sagged 3.9 cm in 0.2 s, as 1.7e-5 m the other way round; MuJoCo's weld alike). Where a weld is made is taken from the state in the graph: a gradient
-reaches the state of that step through the weld's anchor and turn as well as through its rows.
+away sagged 3.9 cm in 0.2 s, as 1.7e-5 m the other way round; MuJoCo's weld alike).
+Where a weld is made is taken from the state in the graph: a gradient reaches the state of that
+step through the weld's anchor and turn as well as through its rows.
 """
 import numpy as np
 import torch

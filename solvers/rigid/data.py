@@ -255,8 +255,8 @@ def joint_row_columns(size):
 def body_eq_columns(size):
     """Where the connects' and welds' column lists start in efc_cols (D each: its rows' list; the
     run-time welds' after the model's): after the joint rows' slots (at most a row per joint
-    equality, three per connect, six per weld, two per dof). K counts connects and welds, WD the
-    welds, DW the run-time weld slots."""
+    equality, three per connect, six per weld and per run-time weld slot, two per dof). K counts
+    connects and welds, WD the welds, DW the run-time weld slots."""
     rows = size["E"] + 3 * size["K"] + 3 * size["WD"] + 6 * size["DW"] + 2 * size["D"]
     return joint_row_columns(size) + JOINT_ROW_SLOTS * rows
 
@@ -432,7 +432,7 @@ class RigidView:
         start = layout(size, hold=impl.expr_init)[0]
         self.n_batch, self.n_links, self.n_dofs, self.n_qs = size["B"], size["L"], size["D"], size["Q"]
         self.n_pairs, self.substeps, self.input_total, self.grad_total = size["P"], size["S"], size["W"], size["GW"]
-        self.n_eq, self.n_body_eq, self.n_weld, self.n_dyn_slots = size["E"], size["K"], size["WD"], size["DW"]
+        self.n_eq, self.n_body_eq, self.n_weld = size["E"], size["K"], size["WD"]
         self.n_connect, self.body_eqs = size["K"] - size["WD"], body_eqs  # (the connects come first)
         self.joint_columns, self.body_eq_columns = joint_row_columns(size), body_eq_columns(size)
         self.limits_enabled = size["limits"]

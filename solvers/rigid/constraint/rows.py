@@ -827,6 +827,7 @@ def _dynamic_weld(d: ti.template(), k, first):
 
 @ti.func
 def _vector_at(d: ti.template(), e, column, n: ti.template()):
+    """The n floats of env e's dyn_welds from ``column``, as a vector."""
     return ti.Vector([d.dyn_welds[e, column + c] for c in ti.static(range(n))], dt=float)
 
 
