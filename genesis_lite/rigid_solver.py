@@ -19,15 +19,12 @@ import torch
 from .entities.common import EntityIndexing
 from .solvers.core import InvalidInputError, runtime
 from .solvers.rigid.data import DYN_WELD
-from .utils.rotations import quat_mul, quat_to_mat
-
-_CONJUGATE = torch.tensor([1.0, -1.0, -1.0, -1.0])
+from .utils.geom import inv_quat, inv_transform_by_trans_quat
+from .utils.rotations import quat_mul
 
 
 class RigidSolverView(EntityIndexing):
     """``scene.sim.rigid_solver`` of a built scene with rigid entities (Genesis's name)."""
-
-    name = "rigid_solver"
 
     def __init__(self, scene):
         self.scene = scene
@@ -59,8 +56,8 @@ class RigidSolverView(EntityIndexing):
         # (in the graph when the state requires grad: where the weld is made depends on it)
         kinematics = self.scene.sim.derived(self._solver)[torch.as_tensor(envs, device=runtime.device)]
         (p1, q1), (p2, q2) = ((kinematics[:, link, :3], kinematics[:, link, 3:7]) for link in links)
-        anchor2 = (quat_to_mat(q2).transpose(-1, -2) @ (p1 - p2)[:, :, None])[:, :, 0]  # link 1's origin, on link 2
-        turn1 = quat_mul(q1 * _CONJUGATE.to(q1), q2)  # link 2's frame in link 1's
+        anchor2 = inv_transform_by_trans_quat(p1, p2, q2)  # link 1's origin, on link 2
+        turn1 = quat_mul(inv_quat(q1), q2)  # link 2's frame in link 1's
         identity = torch.zeros_like(q2)
         identity[:, 0] = 1.0
         weld = torch.cat([torch.tensor(links).to(p1).expand(len(envs), 2), torch.zeros_like(p1), anchor2, turn1,

@@ -134,7 +134,8 @@ class _Reader(MJCFDocument):
     # ---------------------------------------------------------------- tree
 
     def links(self, exclude_ground_plane: bool) -> list[LinkSpec]:
-        """The file's links (load_mjcf's), equalities, servos and exclusions on them."""
+        """The file's links (load_mjcf's), equalities, servos and exclusions on them (without the
+        worldbody's planes if ``exclude_ground_plane``)."""
         worldbodies = self.root.findall("worldbody")  # (several sections, through includes, make one)
         if not worldbodies:
             raise self.error("<worldbody> is missing")

@@ -89,8 +89,8 @@ class LinkSpec:
     where the other's anchor is at q0; the other's anchor (3,) m in its frame; turn (4,) w-x-y-z
     of this link's held frame in its frame, or None: the one that makes the two held frames one
     at q0; the other's (4,); torquescale; the other's anchor and turn may be None instead, then
-    this link's are given and the other's held frame is theirs at q0) per weld holding a frame of this link on a frame of
-    another, position and orientation (MJCF ``<equality><weld>``, MuJoCo's weld: six equality
+    this link's are given and the other's held frame is theirs at q0) per weld holding a frame of
+    this link on a frame of another, position and orientation (MJCF ``<equality><weld>``, MuJoCo's weld: six equality
     rows, the turn's three scaled by torquescale).
     """
     name: str
