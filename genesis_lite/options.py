@@ -191,11 +191,12 @@ class RigidOptions(_TimeBased):
     batch_links_info, batch_joints_info, batch_dofs_info: Genesis's switches that let link, joint
         and dof parameters (masses, gains, friction…) differ per env; ours always may (every
         parameter is stored per env), so either value works, as True does in Genesis.
-    smooth_contact (ours): every geom's default solimp becomes (0, 0.95, 0.001, 0.5, 2), whose
-        impedance starts at zero at contact onset, so a contact's force grows from zero with depth
-        instead of jumping (MuJoCo's default d0 = 0.9 jumps): the step is then a smooth map through
-        contact onset, for gradients. Needs friction_cone=elliptic (the pyramid's edges add
-        kinks). Joint limits keep MuJoCo's default solimp; set_sol_params still sets any geom's.
+    smooth_contact (ours): the solimp of every geom whose asset states none (an MJCF geom's
+        solimp is kept) becomes (0, 0.95, 0.001, 0.5, 2), whose impedance starts at zero at
+        contact onset, so a contact's force grows from zero with depth instead of jumping
+        (MuJoCo's default d0 = 0.9 jumps): the step is then a smooth map through contact onset,
+        for gradients. Needs friction_cone=elliptic (the pyramid's edges add kinks). Joint limits
+        keep MuJoCo's default solimp; set_sol_params still sets any geom's.
     """
     enable_collision: bool = True
     enable_self_collision: bool = True

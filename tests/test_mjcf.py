@@ -19,11 +19,13 @@ import torch
 
 import genesis_lite as gs
 from genesis_lite.solvers.core import AssetError, InvalidInputError
+from genesis_lite.solvers.rigid import contact
 from tests.conftest import asset
 from tests.fd_scan import assert_converged, directional_errors
 
 ARM, CRAWLER, TREES = asset("mjcf", "arm.xml"), asset("mjcf", "crawler.xml"), asset("mjcf", "trees.xml")
-WORLDBODY = asset("mjcf", "worldbody.xml")
+WORLDBODY, CONTACT_PARAMS = asset("mjcf", "worldbody.xml"), asset("mjcf", "contact_params.xml")
+JOINT_SOFTNESS = asset("mjcf", "joint_softness.xml")
 
 
 def _pair(path, cone="pyramidal", integrator="implicitfast", requires_grad=False, exclude_ground_plane=False,
@@ -145,6 +147,130 @@ def test_worldbody_geoms_are_a_static_world_link_and_match_mujoco(f64, cone):
     assert ours == {frozenset(("world", name)) for name in ("block", "ball", "pendulum")}
     assert theirs == {"floor", "ramp", "bar"}  # (every world geom met a body)
     assert float(robot.get_link("ghost").get_pos()[2]) < -5.0
+
+
+def _launch(m, d, robot):
+    """Start contact_params.xml's bodies moving (both engines): the capsule rolling off, the
+    prioritised box sliding, the sphere rolling, the last box spinning."""
+    velocity = np.zeros(m.nv)
+    for body, dof, value in (("frictionless", 0, 1.0), ("prioritised", 0, -0.5), ("mixed", 1, 0.8),
+                             ("direct", 0, 0.6), ("spinning", 5, 10.0)):
+        velocity[m.jnt_dofadr[m.body(body).jntadr[0]] + dof] = value
+    d.qvel[:] = velocity
+    robot.set_dofs_velocity(torch.tensor(velocity))
+
+
+def _mujoco_geoms(m, scene, robot):
+    """MuJoCo's index of each of the entity's geoms (matched by body, in the body's order)."""
+    model, seen, order = scene.rigid_solver.model, {}, []
+    for g in range(robot.geom_start, robot.geom_start + robot.n_geoms):
+        body = robot.links[int(model.geom_link[g]) - robot.link_start].name
+        order.append(m.body(body).geomadr[0] + seen.get(body, 0))
+        seen[body] = seen.get(body, 0) + 1
+    return order
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_geoms_contact_parameters_combine_as_mujocos(f64, cone):
+    """assets/mjcf/contact_params.xml: each geom's condim, priority, solmix, solref (standard and
+    direct form) and solimp (a partial one over its class's) are read as MuJoCo's compiler reads
+    them, and a pair combines them as mj_contactParam (the higher priority's, else condim the
+    larger, solref and solimp weighted by solmix, the direct form's solref the smaller, friction
+    the larger): a capsule and a ramp of condim 1 slide without friction; 1 s beside MuJoCo 4 with
+    the bodies launched, equal to round-off (measured 1.6e-12 pyramidal, 2.0e-13 elliptic)."""
+    m, d, scene, robot = _pair(CONTACT_PARAMS, cone, integrator="euler")
+    mine, inputs = _mujoco_geoms(m, scene, robot), scene.sim.inputs(scene.rigid_solver)
+    np.testing.assert_array_equal(inputs["solref"][0].reshape(-1, 2).numpy(), m.geom_solref[mine])
+    np.testing.assert_array_equal(inputs["solimp"][0].reshape(-1, 5).numpy(), m.geom_solimp[mine])
+    _launch(m, d, robot)
+    dims = set()
+    assert _lockstep(m, d, scene, robot, 500, lambda: dims.update(d.contact.dim[:d.ncon].tolist())) < 1e-10
+    assert dims == {1, 3} and set(scene.rigid_solver.model.pair_condim.tolist()) == {1, 3}
+
+
+def test_gradients_through_geoms_contact_parameters_match_finite_differences(f64):
+    """contact_params.xml's bodies landing and sliding for 0.2 s (condim-1 contacts, priorities,
+    solmix weights, a direct solref): the gradient of their final poses w.r.t. every geom's
+    sol_params, and w.r.t. the links' friction ratios, against central differences."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, requires_grad=True),
+                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True, tolerance=1e-14))
+    robot = scene.add_entity(gs.morphs.MJCF(file=CONTACT_PARAMS))
+    scene.build()
+    m = mujoco.MjModel.from_xml_path(CONTACT_PARAMS)
+    start_sol = torch.tensor(np.concatenate([m.geom_solref, m.geom_solimp], axis=1)[_mujoco_geoms(m, scene, robot)])
+    moving = [k for k, link in enumerate(robot.links) if not link.is_fixed]
+    weights = torch.tensor(np.random.default_rng(3).normal(size=(len(moving), 7)))
+
+    def loss(x, what):
+        scene.reset()
+        _launch(m, mujoco.MjData(m), robot)
+        if what == "sol_params":
+            for g in range(robot.n_geoms):
+                robot.set_sol_params(x[g], geoms_idx_local=[g])
+        else:
+            robot.set_friction_ratio(x, links_idx_local=moving)
+        for _ in range(100):
+            scene.step()
+        links = torch.cat([robot.get_links_pos(moving), robot.get_links_quat(moving)], dim=-1)
+        return (links * weights).sum()
+
+    for what, start in (("sol_params", start_sol), ("friction", torch.linspace(0.6, 1.4, len(moving)))):
+        assert_converged(directional_errors(lambda x: loss(x, what), start), f"contact parameters: {what}")
+
+
+def _swing(m, d, robot):
+    """Start joint_softness.xml's joints towards their limits (both engines)."""
+    velocity = np.zeros(m.nv)
+    velocity[:12] = [3.0, -4.0, 1.0, 2.0, -3.0, 1.0, 0.5, 0.0, 0.0, 0.0, 0.0, 2.0]
+    d.qvel[:] = velocity
+    robot.set_dofs_velocity(torch.tensor(velocity))
+    return velocity
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_joint_limit_and_friction_loss_softness_as_mujocos(f64, cone):
+    """assets/mjcf/joint_softness.xml: each joint's solreflimit, solimplimit, solreffriction and
+    solimpfriction (standard and direct forms, partial values over a default class's, a ball
+    joint's cone limit, a free joint's friction loss) are read as MuJoCo's compiler reads them
+    (clamped as its runtime clamps them) and soften the joint's limit and friction-loss rows: 1.5 s
+    beside MuJoCo 4 with the joints swung into their limits, equal to round-off (measured 4.9e-13
+    pyramidal, 4.1e-12 elliptic)."""
+    m, d, scene, robot = _pair(JOINT_SOFTNESS, cone, integrator="euler")
+    solver = scene.rigid_solver
+    model = contact.with_joint_softness(solver.model, solver.timeconst)
+    dofs = slice(robot.dof_start, robot.dof_start + robot.n_dofs)
+    limit = np.concatenate([m.jnt_solref, m.jnt_solimp], axis=1)[m.dof_jntid]  # (MuJoCo's: per joint)
+    friction = np.concatenate([m.dof_solref, m.dof_solimp], axis=1)
+    for ours, theirs in ((model.dof_limit_sol, limit), (model.dof_frictionloss_sol, friction)):
+        theirs[:, 2:] = np.clip(theirs[:, 2:], [1e-4, 1e-4, 0.0, 1e-4, 1.0], [0.9999, 0.9999, np.inf, 0.9999, np.inf])
+        np.testing.assert_array_equal(ours[dofs], theirs)
+    _swing(m, d, robot)
+    rows = set()
+    assert _lockstep(m, d, scene, robot, 750, lambda: rows.update(d.efc_type[:d.nefc].tolist())) < 1e-10
+    assert {mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT, mujoco.mjtConstraint.mjCNSTR_FRICTION_DOF} <= rows
+
+
+def test_gradients_through_soft_joint_limits_match_finite_differences(f64):
+    """joint_softness.xml's joints swung into their limits for 0.3 s (limit rows of either form, a
+    ball joint's cone, friction loss, each with the file's softness): the gradient of the final
+    pose w.r.t. the initial velocities against central differences."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, requires_grad=True),
+                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True, tolerance=1e-14))
+    robot = scene.add_entity(gs.morphs.MJCF(file=JOINT_SOFTNESS))
+    scene.build()
+    m = mujoco.MjModel.from_xml_path(JOINT_SOFTNESS)
+    start = torch.tensor(_swing(m, mujoco.MjData(m), robot))
+    weights = torch.tensor(np.random.default_rng(5).normal(size=m.nq))
+
+    def loss(velocity):
+        scene.reset()
+        robot.set_dofs_velocity(velocity)
+        for _ in range(150):
+            scene.step()
+        return (robot.get_qpos() * weights).sum()
+
+    for seed in range(2):
+        assert_converged(directional_errors(loss, start, seed), f"soft joint limits, direction {seed}")
 
 
 def test_exclude_ground_plane_leaves_out_the_worldbodys_planes(f64):
@@ -285,6 +411,12 @@ LINK = '<geom type="sphere" size="0.1"/>'
      "body names expected unique, got repeated names ['b']"),
     (f'<body name="b"><joint name="j"/><geom type="sphere" size="0.1" contype="1.5"/></body>', "",
      "attribute 'contype' expected a non-negative integer"),
+    (f'<body name="b"><joint name="j"/><geom type="sphere" size="0.1" condim="2"/></body>', "",
+     "attribute 'condim' expected 1, 3, 4 or 6 (as MuJoCo's compiler), got '2'"),
+    (f'<body name="b"><joint name="j"/><geom type="sphere" size="0.1" priority="0.5"/></body>', "",
+     "attribute 'priority' expected an integer, got '0.5'"),
+    (f'<body name="b"><joint name="j"/><geom type="sphere" size="0.1" solimp="0.9 0.95 0.001 0.5 2 3"/></body>', "",
+     "attribute 'solimp' expected 1 or 2 or 3 or 4 or 5 finite numbers"),
 ])
 def test_unsupported_or_malformed_files_are_named(f64, tmp_path, body, extra, said):
     scene = gs.Scene()

@@ -1004,8 +1004,8 @@ class RigidEntity(EntityIndexing):
         """Contact softness of the entity's geoms (all by default): 7 numbers, Genesis's and
         MuJoCo's (timeconst s, dampratio, dmin, dmax, width m, midpoint, power) = solref then
         solimp, for every env of envs_idx or (len(envs_idx), 7) one row per env; timeconst and
-        dampratio both ≤ 0 mean MuJoCo's direct form (−stiffness, −damping). A contact averages
-        its two geoms' values. Differentiable (a time constant held at 2·dt/substeps has none)."""
+        dampratio both ≤ 0 mean MuJoCo's direct form (−stiffness, −damping). A contact combines
+        its two geoms' values as MuJoCo does (averaged, unless an MJCF priority or solmix says otherwise). Differentiable (a time constant held at 2·dt/substeps has none)."""
         geoms = self._local(geoms_idx_local, self.n_geoms, "geoms_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         self._sim().check_grad_allowed(sol_params, self.name, "sol_params")

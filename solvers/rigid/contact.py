@@ -10,20 +10,33 @@ import torch
 
 from ..core import InvalidInputError, runtime
 from .collision.detect import BUDGET, COLLIDERS
-from .constraint.rows import DEFAULT_SOLIMP, SMOOTH_SOLIMP  # noqa: F401 (the geoms' defaults, read by solver.py)
+from .constraint.rows import DEFAULT_SOLIMP, MAXIMP, MINIMP, SMOOTH_SOLIMP  # noqa: F401 (SMOOTH_SOLIMP: solver.py's)
 from .constraint.solver import MINVAL  # (the least mass a sliding leaf's 1 / mass divides by)
 from .model import BALL, PRISMATIC
 
 _logger = logging.getLogger("genesis_lite")
 MAX_PER_MOVING_LINK = 8  # default max_contacts: a box resting on a face touches at up to 8 points
 MIN_CONTACTS = 16
+PAIR_ARRAYS = ("pair_geom1", "pair_geom2", "pair_condim", "pair_mix", "pair_copy", "pair_margin")
 
 
 def without_pairs(model, keep=None):
     """The model with only the candidate pairs ``keep`` (bool (N,); None: none, collision off)."""
     keep = np.zeros(len(model.pair_geom1), dtype=bool) if keep is None else keep
-    return replace(model, pair_geom1=model.pair_geom1[keep], pair_geom2=model.pair_geom2[keep],
-                   pair_condim=model.pair_condim[keep], pair_margin=model.pair_margin[keep])
+    return replace(model, **{name: getattr(model, name)[keep] for name in PAIR_ARRAYS})
+
+
+def with_joint_softness(model, timeconst):
+    """The model with its dofs' limit and friction-loss softness (dof_limit_sol,
+    dof_frictionloss_sol) complete: what the asset left unstated (NaN) the scene's (timeconst s,
+    1) and MuJoCo's default solimp, and every solimp within MuJoCo's bounds (its runtime clamps
+    them so; the kernels read them as they are)."""
+    default = np.array([timeconst, 1.0, *DEFAULT_SOLIMP])
+    lower = [-np.inf, -np.inf, MINIMP, MINIMP, 0.0, MINIMP, 1.0]
+    upper = [np.inf, np.inf, MAXIMP, MAXIMP, np.inf, MAXIMP, np.inf]
+    complete = lambda table: np.clip(np.where(np.isnan(table), default, table), lower, upper)  # noqa: E731
+    return replace(model, dof_limit_sol=complete(model.dof_limit_sol),
+                   dof_frictionloss_sol=complete(model.dof_frictionloss_sol))
 
 
 def without_uncollidable(model, names):

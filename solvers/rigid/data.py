@@ -88,12 +88,13 @@ MODEL = {
     "pair_i": ("i", "P"), "pair_j": ("i", "P"), "dof_pair0": ("i", "D"),
     # collision geometry (geometry.py; MuJoCo's conventions) and the candidate geom pairs
     "geom_type": ("i", "G"), "geom_link": ("i", "G"), "geom_mesh": ("i", "G"), "hull_int": ("i", "HI"),
-    "pair_geom1": ("i", "N"), "pair_geom2": ("i", "N"), "pair_condim": ("i", "N"),
-    "geom_rbound": ("f", "G"), "pair_margin": ("f", "N"),
+    "pair_geom1": ("i", "N"), "pair_geom2": ("i", "N"), "pair_condim": ("i", "N"), "pair_copy": ("i", "N"),
+    "geom_rbound": ("f", "G"), "pair_margin": ("f", "N"), "pair_mix": ("f", "N"),
     "geom_pos": ("v3", "G"), "geom_size": ("v3", "G"), "hull_vec": ("v3", "H"), "geom_quat": ("v4", "G"),
     "geom_aabb_center": ("v3", "G"), "geom_aabb_half": ("v3", "G"), "geom_centre": ("v3", "G"),
     "link_inv_mass0": ("f", "L"), "dof_lower": ("f", "D"), "dof_upper": ("f", "D"),
     "dof_springref": ("f", "D"),  # rad or m: where a joint spring is at rest
+    "dof_limit_sol": ("f", "D7"), "dof_frictionloss_sol": ("f", "D7"),  # (solref, solimp) of a dof's rows
     # joint equalities (URDF mimic joints; RigidModel says what they hold)
     "eq_dof1": ("i", "E"), "eq_dof2": ("i", "E"), "eq_coef": ("f", "E2"),
     # connects and welds (points and frames of two links held together; RigidModel says what they hold)
@@ -269,7 +270,7 @@ def _counts(size):
             "CD": body_eq_columns(size) + (size["K"] + size["DW"]) * D, "DWW": 1 + DYN_WELD * size["DW"],
             "E": size["E"], "E2": 2 * size["E"], "K2": 2 * size["K"],
             "WD": size["WD"], "WD2": 2 * size["WD"],
-            "G2": 2 * size["G"], "G5": 5 * size["G"], "L6": 6 * size["L"], 1: 1,
+            "G2": 2 * size["G"], "G5": 5 * size["G"], "L6": 6 * size["L"], "D7": 7 * D, 1: 1,
             len(CONSTS): len(CONSTS),
             **{f"ws:{name}": size["WS"] * n for name, (_, n) in CONVEX_SCRATCH.items()}}
 

@@ -30,11 +30,14 @@ legacy formula differs for non-convex meshes). Geoms: sphere, capsule, cylinder,
 ``fromto``), mesh (``<mesh file scale>`` assets, in the file's own coordinates: MuJoCo's
 re-centring moves the geom frame, not the surface; found in meshdir or beside the file that
 included them); contype/conaffinity masks (MuJoCo's pair rule); ``<contact><exclude>``; friction
-(the sliding coefficient); planes (infinite, as MuJoCo's colliders take them, massless; drawn as
+(the sliding coefficient), condim (1 or 3; 4 and 6 taken as 3, with a warning), solref, solimp,
+priority and solmix, which a pair combines as MuJoCo's mj_contactParam (GeomSpec); planes (infinite, as MuJoCo's colliders take them, massless; drawn as
 MuJoCo sizes them) in the worldbody or a body welded to it; a geom with contype = conaffinity = 0
 only weighs and is drawn; a geom
 drawn where its group is 0-2 (MuJoCo's visible groups), coloured by its rgba or material.
 Joints: axis, pos, range (limited: MuJoCo's autolimits), damping, armature, frictionloss,
+solreflimit, solimplimit, solreffriction and solimpfriction (the softness of its limit and
+friction-loss rows),
 actuatorfrcrange (|force| bound), stiffness and springref (a spring −stiffness·(q − springref), as
 MuJoCo's; Genesis's loader springs to qpos0 whatever springref says), ref (the initial q, at which
 the body is where the file puts it: LinkSpec.q0).
@@ -64,8 +67,8 @@ hfield / sdf geoms, equalities other than joints', connects and welds, elements 
 childclass is theirs), a plane on a moving body (as MuJoCo's compiler). Ignored with one warning
 naming them: tendons and what acts on them, ``<contact><pair>``, ``<option>`` (the scene's
 options rule), and attributes that tune MuJoCo's solver, actuator dynamics or the compiler's mass
-bounds (solref, solimp, margin, condim, dampratio, timeconst, boundmass…) unless they hold MuJoCo's
-defaults.
+bounds (a joint's solreflimit, a geom's margin and gap, dampratio, timeconst, boundmass…) unless
+they hold MuJoCo's defaults.
 """
 import logging
 import os
@@ -74,7 +77,7 @@ import numpy as np
 
 from ..core import InvalidInputError
 from . import shapes
-from .mjcf_document import IDENTITY, ORIENTATIONS, MJCFDocument, axis_angle, is_default, norm
+from .mjcf_document import IDENTITY, MJ_DEFAULTS, ORIENTATIONS, MJCFDocument, axis_angle, is_default, norm
 from .spec import GeomSpec, LinkSpec, VisualSpec
 
 _logger = logging.getLogger("genesis_lite")
@@ -85,10 +88,10 @@ _READ = {
     "body": _FRAME + ("name", "childclass", "user"),
     "joint": ("name", "class", "type", "pos", "axis", "range", "limited", "damping", "armature", "frictionloss",
               "actuatorfrcrange", "actuatorfrclimited", "stiffness", "springref", "ref", "springdamper", "springyield",
-              "group", "user"),
+              "group", "user", "solreflimit", "solimplimit", "solreffriction", "solimpfriction"),
     "freejoint": ("name", "group", "type"),
     "geom": _FRAME + _NAMES + ("type", "size", "fromto", "mesh", "friction", "contype", "conaffinity", "density",
-                               "mass"),
+                               "mass", "condim", "solref", "solimp", "priority", "solmix"),
     "inertial": _FRAME + ("mass", "diaginertia", "fullinertia"),
 }
 _JOINTS = {"hinge": "revolute", "slide": "prismatic", "ball": "ball"}
@@ -282,15 +285,18 @@ class _Reader(MJCFDocument):
         return joint.tag == "freejoint" or self.attrs(joint, childclass).get("type") == "free"
 
     def _free_joint(self, joint, childclass, link: LinkSpec, what: str):
-        """A free root joint's damping, armature and friction loss (on its six dofs, as MuJoCo's)."""
+        """A free root joint's damping, armature and friction loss (on its six dofs, as MuJoCo's),
+        and the friction loss's softness (a limit's: a free joint has none, as in MuJoCo)."""
         attrs = self.attrs(joint, childclass)
         what = f"{what} joint {attrs.get('name') or link.name!r}"
-        self.ignore_unread(joint, {k: v for k, v in attrs.items() if k not in ("damping", "armature", "frictionloss")})
+        read = ("damping", "armature", "frictionloss", "solreflimit", "solimplimit", "solreffriction", "solimpfriction")
+        self.ignore_unread(joint, {k: v for k, v in attrs.items() if k not in read})
         self._refuse_unmodelled(attrs, what)
         if self._non_negative(attrs, "stiffness", what) != 0.0:  # (MuJoCo's would spring the pose; Genesis refuses)
             raise self.error(f"{what}: a free joint's spring is not supported (stiffness = {attrs['stiffness']!r})")
         for key in ("damping", "armature", "frictionloss"):
             setattr(link, key, self._non_negative(attrs, key, what))
+        self._joint_softness(link, attrs, what)
 
     def _anchor(self, joint, childclass) -> np.ndarray:
         """(3,) m: where the joint turns, in its body's frame."""
@@ -326,6 +332,7 @@ class _Reader(MJCFDocument):
                 raise self.error(f"{what}: range expected lower < upper, got {attrs.get('range')!r}")
             spec.lower, spec.upper = low * scale, high * scale
         spec.effort = self._force_bound(attrs, "actuatorfrcrange", "actuatorfrclimited", what)
+        self._joint_softness(spec, attrs, what)
         return spec
 
     def _ball(self, attrs: dict, link_name: str, name: str, what: str) -> LinkSpec:
@@ -347,6 +354,7 @@ class _Reader(MJCFDocument):
         if self._force_bound(attrs, "actuatorfrcrange", "actuatorfrclimited", what) < np.inf:
             raise self.error(f"{what}: a ball joint's actuatorfrcrange is not supported yet, got "
                              f"{attrs['actuatorfrcrange']!r}")
+        self._joint_softness(spec, attrs, what)
         return spec
 
     def _refuse_unmodelled(self, attrs: dict, what: str):
@@ -435,9 +443,45 @@ class _Reader(MJCFDocument):
             raise self.error(f"{what}: geom type expected one of {_PRIMITIVES + ('mesh', 'plane')}, got {kind!r}")
         friction = self.numbers(attrs, "friction", (1, 2, 3), what, default=[1.0])
         geom.friction = float(friction[0])
+        self._contact_params(geom, attrs, what)
         density = self.numbers(attrs, "density", 1, what, default=[1000.0])[0]
         mass = self._non_negative(attrs, "mass", what) if "mass" in attrs else None
         return geom, density, mass
+
+    def _contact_params(self, geom: GeomSpec, attrs: dict, what: str):
+        """The geom's condim, solref, solimp (where the file states them: a partial solimp ends in
+        MuJoCo's defaults), priority and solmix; condim 4 and 6 (torsional and rolling friction)
+        are taken as 3, with a warning."""
+        condim = self.numbers(attrs, "condim", 1, what, default=[3])[0]
+        if condim not in (1, 3, 4, 6):
+            raise self.error(f"{what}: attribute 'condim' expected 1, 3, 4 or 6 (as MuJoCo's compiler), "
+                             f"got {attrs['condim']!r}")
+        if condim > 3:
+            self.ignored.add("<geom condim> 4 and 6: torsional and rolling friction (their contacts have condim 3)")
+        geom.condim = min(int(condim), 3)
+        geom.solref, geom.solimp = (self._softness(attrs, key, what) for key in ("solref", "solimp"))
+        priority = self.numbers(attrs, "priority", 1, what, default=[0])[0]
+        if priority != int(priority):
+            raise self.error(f"{what}: attribute 'priority' expected an integer, got {attrs['priority']!r}")
+        geom.priority = int(priority)
+        geom.solmix = float(self.numbers(attrs, "solmix", 1, what, default=[1.0])[0])
+
+    def _softness(self, attrs: dict, key: str, what: str):
+        """Attribute ``key`` (a solref (2,) or solimp (5,) by its name) where the file states it, a
+        partial one ending in MuJoCo's defaults; else None."""
+        if key not in attrs:
+            return None
+        default = MJ_DEFAULTS["solref" if key.startswith("solref") else "solimp"]
+        given = self.numbers(attrs, key, tuple(range(1, len(default) + 1)), what)
+        return np.concatenate([given, default[len(given):]])
+
+    def _joint_softness(self, spec: LinkSpec, attrs: dict, what: str):
+        """The joint's limit and friction-loss solref and solimp (LinkSpec.limit_sol,
+        .frictionloss_sol), NaN where the file states none."""
+        for kind, key in (("limit", "limit_sol"), ("friction", "frictionloss_sol")):
+            ref, imp = (self._softness(attrs, f"{name}{kind}", what) for name in ("solref", "solimp"))
+            setattr(spec, key, np.concatenate([np.full(2, np.nan) if ref is None else ref,
+                                               np.full(5, np.nan) if imp is None else imp]))
 
     def _visual(self, geom: GeomSpec, attrs: dict) -> VisualSpec:
         """The geom as drawn: its shape, but a plane of positive half sizes (MuJoCo's x, y) as that

@@ -25,9 +25,12 @@ _COMPILER = {"angle", "coordinate", "meshdir", "assetdir", "texturedir", "autoli
              "saveinertial"}
 _ACTUATORS = ("general", "motor", "position", "velocity", "intvelocity", "damper", "cylinder", "muscle", "adhesion",
               "plugin")
-# MuJoCo's defaults of attributes not read here, which genesis_lite's contacts and rows have
-_MJ_DEFAULTS = {"condim": [3.0], "margin": [0.0], "gap": [0.0], "priority": [0.0], "solmix": [1.0],
-                "solref": [0.02, 1.0], "solimp": [0.9, 0.95, 0.001, 0.5, 2.0]}
+# MuJoCo's defaults of solver attributes: where one is not read, genesis_lite's rows have it
+MJ_DEFAULTS = {"condim": [3.0], "margin": [0.0], "gap": [0.0], "priority": [0.0], "solmix": [1.0],
+               "solref": [0.02, 1.0], "solimp": [0.9, 0.95, 0.001, 0.5, 2.0]}
+
+# array attributes MuJoCo reads in part, the rest left as its default class has them
+_PARTIAL = ("friction", "solref", "solimp", "solreflimit", "solimplimit", "solreffriction", "solimpfriction")
 
 
 class MJCFDocument:
@@ -126,7 +129,7 @@ class MJCFDocument:
         for child in element:
             if child.tag == "default":
                 continue
-            own.setdefault(child.tag, {}).update(child.attrib)
+            own[child.tag] = _over(own.get(child.tag, {}), child.attrib)
         self.defaults[name] = own
         for child in element.findall("default"):
             if "class" not in child.attrib:
@@ -141,9 +144,7 @@ class MJCFDocument:
             raise self.error(f"<{element.tag} name={element.get('name')!r}>: class {cls!r} is not a <default> class")
         classes = self.defaults.get(cls, {})
         out = dict(classes.get("general", {})) if element.tag in _ACTUATORS else {}
-        out.update(classes.get(element.tag, {}))
-        out.update(element.attrib)
-        return out
+        return _over(_over(out, classes.get(element.tag, {})), element.attrib)
 
     def numbers(self, attrs: dict, key: str, n: int | tuple, what: str, default=None) -> np.ndarray:
         """(n,) finite numbers of attribute `key` (n may be a tuple of allowed counts)."""
@@ -253,10 +254,21 @@ class MJCFDocument:
         return int(value)
 
 
+def _over(below: dict, above: dict) -> dict:
+    """Attributes ``above`` over ``below``; a value of a _PARTIAL key with fewer numbers than the
+    one below replaces only its first ones (MuJoCo reads such arrays into its default's)."""
+    out = dict(below)
+    for key, value in above.items():
+        under = below.get(key, "").split() if key in _PARTIAL else []
+        given = value.split()
+        out[key] = " ".join(given + under[len(given):]) if len(given) < len(under) else value
+    return out
+
+
 def is_default(key: str, value: str) -> bool:
-    """Whether attribute `key` holds MuJoCo's default (_MJ_DEFAULTS)."""
+    """Whether attribute `key` holds MuJoCo's default (MJ_DEFAULTS)."""
     try:
-        return key in _MJ_DEFAULTS and [float(v) for v in value.split()] == _MJ_DEFAULTS[key]
+        return key in MJ_DEFAULTS and [float(v) for v in value.split()] == MJ_DEFAULTS[key]
     except ValueError:
         return False
 

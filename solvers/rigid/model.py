@@ -18,6 +18,7 @@ QS_OF = {FIXED: 0, REVOLUTE: 1, PRISMATIC: 1, FREE: 7, BALL: 4}
 
 DEFAULT_KP = 100.0  # N·m/rad (or N/m), as Genesis
 DEFAULT_KV = 10.0   # N·m·s/rad (or N·s/m)
+MJ_MINVAL = 1e-15  # MuJoCo's mjMINVAL: a solmix weight below it counts as none
 DEFAULT_FRICTION = 1.0  # contact friction coefficient where neither asset nor material states one, as Genesis
 
 
@@ -33,16 +34,23 @@ class RigidModel:
     damping, armature, kp, kv, stiffness (N·m/rad or N/m) and springref (rad or m) of a joint
     spring −stiffness·(q − springref), lower/upper limits (rad or m; a ball joint's upper: its cone
     limit's angle, rad), effort bound, frictionloss (N·m or N, dry joint friction: a constraint
-    row). pairs (P, 2): (i, j), j ≤ i, dof j on the path from dof i to the root — the
-    structural non-zeros of the lower mass matrix.
+    row), limit_sol and frictionloss_sol (D, 7) the solref and solimp of its limit and friction-loss
+    rows (LinkSpec's; NaN: the scene's default, which the solver fills in). pairs (P, 2): (i, j),
+    j ≤ i, dof j on the path from dof i to the root — the structural non-zeros of the lower mass
+    matrix.
     Per collision geom (geometry.py, MuJoCo's conventions): geom_type (G,) code, geom_link (G,),
     geom_pos (G, 3) m and geom_quat (G, 4) in the link frame, geom_size (G, 3) half sizes m,
     geom_rbound (G,) bounding radius m, geom_aabb_center and geom_aabb_half (G, 3) m a bounding box
     in the geom frame (MuJoCo's geom_aabb), geom_centre (G, 3) m a point inside the geom (geom
     frame; a mesh's hull vertex mean), geom_mesh (G,) its mesh number (-1: none), the meshes'
     convex hulls as hull_vec (H, 3) and hull_int (HI,) (geometry.hull_arrays), geom_friction (G,)
-    Coulomb coefficient. Per candidate geom pair (N):
-    pair_geom1/pair_geom2 (ordered as MuJoCo orders them), pair_condim (1 or 3), pair_margin m.
+    Coulomb coefficient, geom_solref (G, 2) and geom_solimp (G, 5) the asset's (NaN rows: the
+    scene's default). Per candidate geom pair (N): pair_geom1/pair_geom2 (ordered as MuJoCo
+    orders them), pair_condim (1 or 3), pair_mix the weight of geom1's solref and solimp in the
+    pair's (1 − it geom2's), pair_copy 1 where the geoms' priorities differ (the pair copies the
+    higher one's friction, solref and solimp: pair_mix 1 or 0 says whose), else 0 (solimp mixed,
+    solref mixed in the standard form and the smaller in the direct form, friction the larger:
+    MuJoCo's mj_contactParam), pair_margin m.
     Per joint equality (E; URDF mimic joints, LinkSpec.mimic): eq_dof1 (E,) the following joint's
     dof, eq_dof2 (E,) the followed one's, eq_coef (E, 2) (offset rad or m, multiplier): the row
     q[eq_dof1] = offset + multiplier · q[eq_dof2] (MuJoCo's joint equality with polycoef (offset,
@@ -78,6 +86,8 @@ class RigidModel:
     dof_upper: np.ndarray
     dof_effort: np.ndarray
     dof_frictionloss: np.ndarray
+    dof_limit_sol: np.ndarray
+    dof_frictionloss_sol: np.ndarray
     geom_type: np.ndarray
     geom_link: np.ndarray
     geom_pos: np.ndarray
@@ -91,9 +101,13 @@ class RigidModel:
     hull_vec: np.ndarray
     hull_int: np.ndarray
     geom_friction: np.ndarray
+    geom_solref: np.ndarray
+    geom_solimp: np.ndarray
     pair_geom1: np.ndarray
     pair_geom2: np.ndarray
     pair_condim: np.ndarray
+    pair_mix: np.ndarray
+    pair_copy: np.ndarray
     pair_margin: np.ndarray
     pairs: np.ndarray
     qpos0: np.ndarray
@@ -238,7 +252,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
     rows = {k: [] for k in ("name", "parent", "jtype", "pos0", "quat0", "axis", "com", "inertia0", "mass0",
                             "dof0", "q0", "entity", "same_body", "excluded")}
     dofs = {k: [] for k in ("link", "q", "damping", "armature", "stiffness", "springref", "lower", "upper", "effort",
-                            "frictionloss", "kp", "kv")}
+                            "frictionloss", "kp", "kv", "limit_sol", "frictionloss_sol")}
     geoms, geom_links, geom_names = [], [], []
     qpos0, equalities, connects, welds = [], [], [], []
     for entity_idx, links in enumerate(entities_links):
@@ -276,6 +290,8 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
                 dofs["frictionloss"].append(spec.frictionloss)  # (a free or ball joint's on each dof, as MuJoCo's)
                 dofs["kp"].append(DEFAULT_KP if vector or spec.kp is None else spec.kp)
                 dofs["kv"].append(DEFAULT_KV if vector or spec.kv is None else spec.kv)
+                for key in ("limit_sol", "frictionloss_sol"):
+                    dofs[key].append(np.full(7, np.nan) if getattr(spec, key) is None else getattr(spec, key))
             for k, geom in enumerate(spec.geoms):
                 geoms.append(geom)
                 geom_links.append(link_idx)
@@ -309,6 +325,8 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
         dof_kp=np.array(dofs["kp"], dtype=f), dof_kv=np.array(dofs["kv"], dtype=f),
         dof_lower=np.array(dofs["lower"], dtype=f), dof_upper=np.array(dofs["upper"], dtype=f),
         dof_effort=np.array(dofs["effort"], dtype=f), dof_frictionloss=np.array(dofs["frictionloss"], dtype=f),
+        dof_limit_sol=np.array(dofs["limit_sol"], dtype=f).reshape(-1, 7),
+        dof_frictionloss_sol=np.array(dofs["frictionloss_sol"], dtype=f).reshape(-1, 7),
         **_geoms(geoms, geom_links, geom_names), **_pairs(geoms, geom_links, rows, self_collision, adjacent_collision),
         pairs=_mass_matrix_pairs(dof_link, link_parent),
         qpos0=np.array(qpos0, dtype=f), eq_dof1=np.array([q[0] for q in equalities], dtype=np.int32),
@@ -390,6 +408,9 @@ def _geoms(geoms, geom_links, geom_names):
     out = {k if k.startswith("hull_") else f"geom_{k}": v for k, v in arrays.items()}
     out["geom_friction"] = np.array([DEFAULT_FRICTION if g.friction is None else g.friction for g in geoms],
                                     dtype=np.float64)
+    for name, n in (("solref", 2), ("solimp", 5)):
+        out[f"geom_{name}"] = np.array([np.full(n, np.nan) if getattr(g, name) is None else getattr(g, name)
+                                        for g in geoms], dtype=np.float64).reshape(-1, n)
     return out
 
 
@@ -408,6 +429,23 @@ def _pairs(geoms, geom_links, rows, self_collision, adjacent_collision):
     pairs = geometry.candidate_pairs(types, np.array(geom_links, dtype=np.int32), link_parent, static,
                                      _roots(link_parent), self_collision, adjacent_collision, masks, body, weld,
                                      rows["excluded"])
-    n = len(pairs)
-    return {"pair_geom1": pairs[:, 0].copy(), "pair_geom2": pairs[:, 1].copy(),
-            "pair_condim": np.full(n, 3, dtype=np.int32), "pair_margin": np.zeros(n)}
+    return {"pair_geom1": pairs[:, 0].copy(), "pair_geom2": pairs[:, 1].copy(), **_pair_params(geoms, pairs),
+            "pair_margin": np.zeros(len(pairs))}
+
+
+def _pair_params(geoms, pairs):
+    """pair_condim, pair_mix, pair_copy (RigidModel) of the (N, 2) geom pairs, as MuJoCo's
+    mj_contactParam combines two geoms: the higher priority's, or at equal priority the larger
+    condim and solmix weights (a weight below MuJoCo's mjMINVAL counts as zero; both zero: 0.5)."""
+    condim, mix, copy = (np.zeros(len(pairs), dtype=t) for t in (np.int32, np.float64, np.int32))
+    for k, (a, b) in enumerate(pairs.tolist()):
+        g1, g2 = geoms[a], geoms[b]
+        if g1.priority != g2.priority:
+            first = g1.priority > g2.priority
+            condim[k], mix[k], copy[k] = (g1 if first else g2).condim, float(first), 1
+            continue
+        condim[k] = max(g1.condim, g2.condim)
+        weighs1, weighs2 = g1.solmix >= MJ_MINVAL, g2.solmix >= MJ_MINVAL
+        mix[k] = (g1.solmix / (g1.solmix + g2.solmix) if weighs1 and weighs2
+                  else 0.5 if weighs1 == weighs2 else float(weighs1))
+    return {"pair_condim": condim, "pair_mix": mix, "pair_copy": copy}

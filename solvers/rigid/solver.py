@@ -103,7 +103,8 @@ class RigidSolver(Solver):
                     "ls_iterations": options.ls_iterations, "converged": not options.enable_mujoco_compatibility,
                     "dyn_welds": options.max_dynamic_constraints,
                     "consts": [h, self.timeconst, impratio, self.tolerance, options.ls_tolerance]}
-        self.data = RigidData(self.model, self.n_batch, sim.substeps, sim.requires_grad, settings)
+        self.data = RigidData(contact.with_joint_softness(self.model, self.timeconst), self.n_batch, sim.substeps,
+                              sim.requires_grad, settings)
         element_dims = [len(ELEMENT[a]) for a in ARENAS]
         schedule, arenas = self.data.schedule, self.data.arenas
         self.kernels = BoundKernels(schedule, arenas, element_dims, *step.KERNELS)
@@ -141,14 +142,20 @@ class RigidSolver(Solver):
             "xfrc": np.zeros(6 * m.n_links),
             "frictionloss": m.dof_frictionloss, "force_lo": -effort, "force_hi": effort,
             "ctrl_mode": np.zeros(m.n_dofs), "dyn_welds": np.zeros(1 + DYN_WELD * slots),
-            "friction": m.geom_friction, "solref": np.tile([self.timeconst, 1.0], len(m.geom_type)),
-            "solimp": np.tile(contact.SMOOTH_SOLIMP if self.rigid_options.smooth_contact else contact.DEFAULT_SOLIMP,
-                              len(m.geom_type)),
+            "friction": m.geom_friction, **self._default_softness(),
             "invweight_t": np.zeros(m.n_links), "invweight_r": np.zeros(m.n_links), "invweight_dof": np.zeros(m.n_dofs)}
         assert per_env.keys() == INPUTS.keys()
         inputs = {name: torch.as_tensor(np.tile(np.asarray(v, dtype=np.float64), (B, 1)), dtype=runtime.tc_float,
                                         device=runtime.device) for name, v in per_env.items()}
         return self.derive_inputs(inputs)
+
+    def _default_softness(self):
+        """The inputs "solref" and "solimp": each geom's from its asset, else the scene's default."""
+        m = self.model
+        default = {"solref": [self.timeconst, 1.0],
+                   "solimp": contact.SMOOTH_SOLIMP if self.rigid_options.smooth_contact else contact.DEFAULT_SOLIMP}
+        return {name: np.where(np.isnan(given), np.asarray(default[name], dtype=np.float64), given).ravel()
+                for name, given in (("solref", m.geom_solref), ("solimp", m.geom_solimp))}
 
     derived_from = ("mass", "armature")
     derived_inputs = ("invweight_t", "invweight_r", "invweight_dof")

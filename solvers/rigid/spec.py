@@ -33,10 +33,21 @@ class GeomSpec(ShapeSpec):
     """A collision shape. friction: Coulomb coefficient of contacts on this shape
     (dimensionless); None when neither the asset nor the material states one (the model then
     uses its default). contype, conaffinity: MuJoCo's collision bit masks (MJCF); two shapes may
-    touch when (contype₁ & conaffinity₂) | (contype₂ & conaffinity₁) is non-zero."""
+    touch when (contype₁ & conaffinity₂) | (contype₂ & conaffinity₁) is non-zero.
+    MuJoCo's contact parameters (MJCF; a pair of geoms combines them as mj_contactParam does):
+    condim 1 (frictionless) or 3 (sliding friction); solref (2,) (timeconst s, dampratio), or
+    (−stiffness, −damping) in the direct form, and solimp (5,) (dmin, dmax, width m, midpoint,
+    power), each None for the scene's default; priority: the pair takes the parameters of its
+    geom of higher priority; solmix: at equal priority, the weight of this geom's solref and
+    solimp in the pair's."""
     friction: float = None
     contype: int = 1
     conaffinity: int = 1
+    condim: int = 3
+    solref: np.ndarray = None
+    solimp: np.ndarray = None
+    priority: int = 0
+    solmix: float = 1.0
 
 
 @dataclass
@@ -69,6 +80,10 @@ class LinkSpec:
     angle of its turn, MuJoCo's cone limit); effort: |force| bound (inf when none).
     kp N·m/rad (or N/m), kv N·m·s/rad (or N·s/m): the joint's servo gains, None for the solver's
     defaults.
+    limit_sol, frictionloss_sol: (7,) the solref (2,) then solimp (5,) of the joint's limit and
+    friction-loss rows (MJCF solreflimit, solimplimit, solreffriction, solimpfriction; MuJoCo's
+    solref and solimp forms), NaN where the asset states none (the scene's default then), or
+    None for all NaN.
     merged: (link name, fixed joint name) of every link merged into this one (merge.py), for
     error messages about names that no longer exist.
     visuals: VisualSpec list, what cameras draw of the link (URDF ``<visual>``; empty for
@@ -114,6 +129,8 @@ class LinkSpec:
     effort: float = np.inf
     kp: float = None
     kv: float = None
+    limit_sol: np.ndarray = None
+    frictionloss_sol: np.ndarray = None
     geoms: list = field(default_factory=list)
     merged: list = field(default_factory=list)
     visuals: list = field(default_factory=list)

@@ -8,7 +8,7 @@ Rows are appended in contact order from row 0; n_efc[s, e, 0] counts them. Row t
 solver's (solver.py): ONE_SIDED for a frictionless contact or a pyramid edge, ELLIPTIC_FIRST and
 ELLIPTIC_REST for an elliptic cone's block (normal first, then the tangents).
 
-Per contact with condim c, friction μ (pair: the larger geom value), impedance d from the
+Per contact with condim c, friction μ (its geoms' combined: contact_params), impedance d from the
 distance, diagA_t = invweight_t(link 1) + invweight_t(link 2) (rotational alike):
 - pyramidal (c > 1): rows J_n ± μ_k J_tk for k < c − 1, each with R = 2 μ_r² R_0, where
   R_0 = (1 − d)/d · diagA_t (1 + μ²) and μ_r = μ / √impratio (MuJoCo's regularised cone);
@@ -22,9 +22,11 @@ multiplier · e_b, diagA the sum of the two dofs'), one per dof with friction lo
 (FRICTION_LOSS, J = e_i, aref = −B q̇_i, bound F) and one per violated joint limit (ONE_SIDED,
 distance q − lower with J = e_i, or upper − q with J = −e_i; a ball joint's cone limit, MuJoCo's:
 distance θmax − θ with J = −axis on its three dofs, θ and axis its turn's angle and unit axis).
-Their R uses diagA = dof_invweight0 (a ball joint's first dof's), their
-solref is (timeconst, 1) with the scene's constraint time constant, their solimp MuJoCo's
-default. Their adjoint (``dof_rows_adjoint``) takes the solve's implicit gradient of each row's
+Their R uses diagA = dof_invweight0 (a ball joint's first dof's); a limit's and a friction
+loss's solref and solimp are the dof's (the model's dof_limit_sol and dof_frictionloss_sol:
+MJCF's solreflimit, solimplimit, solreffriction, solimpfriction, else the scene's), an
+equality's (timeconst, 1) with the scene's constraint time constant and MuJoCo's default solimp.
+Their adjoint (``dof_rows_adjoint``) takes the solve's implicit gradient of each row's
 aref, R and bound back to q, q̇, the friction loss and dof_invweight0 (``contact_rows_adjoint``
 likewise for contact rows, into body_invweight0 among others).
 """
@@ -101,17 +103,23 @@ def stiffness_damping(solref, dmax, h):
 
 @ti.func
 def contact_params(d: ti.template(), e, pair):
-    """(friction, solref (2,), solimp (5,)) of a geom pair in env e: the larger friction (at
-    least MINMU), the average of the solrefs (their minimum in direct form) and of the solimps,
-    as MuJoCo mixes two geoms of equal solmix and priority."""
-    g1, g2 = d.pair_geom1[pair], d.pair_geom2[pair]
+    """(friction, solref (2,), solimp (5,)) of a geom pair in env e, as MuJoCo's mj_contactParam
+    combines its geoms' (at least MINMU of friction): with w the pair's mix (geom1's weight), the
+    solimps mixed, w·solimp₁ + (1 − w)·solimp₂; where the priorities differ (pair_copy, w 1 or 0)
+    the friction and solref of the higher one too; else the larger friction and the solrefs mixed
+    (their minimum in direct form)."""
+    g1, g2, w, copy = d.pair_geom1[pair], d.pair_geom2[pair], d.pair_mix[pair], d.pair_copy[pair]
     a = ti.Vector([d.solref[e, 2 * g1], d.solref[e, 2 * g1 + 1]])
     b = ti.Vector([d.solref[e, 2 * g2], d.solref[e, 2 * g2 + 1]])
     solref = ti.min(a, b)
-    if a[0] > 0 and b[0] > 0:
-        solref = 0.5 * a + 0.5 * b
-    solimp = ti.Vector([0.5 * d.solimp[e, 5 * g1 + k] + 0.5 * d.solimp[e, 5 * g2 + k] for k in ti.static(range(5))])
-    return ti.max(MINMU, d.friction[e, g1], d.friction[e, g2]), solref, _clamped_solimp(solimp)
+    if copy or (a[0] > 0 and b[0] > 0):
+        solref = w * a + (1.0 - w) * b
+    solimp = ti.Vector([w * d.solimp[e, 5 * g1 + k] + (1.0 - w) * d.solimp[e, 5 * g2 + k]
+                        for k in ti.static(range(5))])
+    mu = ti.max(d.friction[e, g1], d.friction[e, g2])
+    if copy:
+        mu = w * d.friction[e, g1] + (1.0 - w) * d.friction[e, g2]
+    return ti.max(MINMU, mu), solref, _clamped_solimp(solimp)
 
 
 @ti.func
@@ -320,29 +328,37 @@ def _to_extreme(grad: ti.template(), e, i, j, a, b, g):
 def _contact_params_adjoint(d: ti.template(), e, pair, g_mu, g_solref, g_solimp):
     """Reverse of ``contact_params``: the pair's μ, solref and (clamped) solimp gradients onto its
     geoms' inputs in env e (μ: the geom whose friction the pair took, unless the floor MINMU won).
-    Where the two geoms' values tie (both at the default friction, say), the larger one follows
-    either geom's upward and neither's downward: each gets half, the derivative that central
-    differences converge to (all to one geom left the other's zero: a body's friction fitted
-    against a plane at the same default never moved)."""
-    g1, g2 = d.pair_geom1[pair], d.pair_geom2[pair]
+    Where the larger of two geoms' values is taken and they tie (both at the default friction,
+    say), it follows either geom's upward and neither's downward: each gets half, the derivative
+    that central differences converge to (all to one geom left the other's zero: a body's
+    friction fitted against a plane at the same default never moved)."""
+    g1, g2, w, copy = d.pair_geom1[pair], d.pair_geom2[pair], d.pair_mix[pair], d.pair_copy[pair]
     f1, f2 = d.friction[e, g1], d.friction[e, g2]
-    if ti.max(f1, f2) > MINMU:
+    if copy:
+        if w * f1 + (1.0 - w) * f2 > MINMU:
+            _to_mix(d.friction.grad, e, g1, g2, w, g_mu)
+    elif ti.max(f1, f2) > MINMU:
         _to_extreme(d.friction.grad, e, g1, g2, f1, f2, g_mu)
     a0, b0 = d.solref[e, 2 * g1], d.solref[e, 2 * g2]
     for k in ti.static(range(2)):
         a, b = d.solref[e, 2 * g1 + k], d.solref[e, 2 * g2 + k]
-        if a0 > 0 and b0 > 0:  # the average
-            accumulate(d.solref.grad, ti.Vector([e, 2 * g1 + k]), 0.5 * g_solref[k])
-            accumulate(d.solref.grad, ti.Vector([e, 2 * g2 + k]), 0.5 * g_solref[k])
+        if copy or (a0 > 0 and b0 > 0):  # mixed
+            _to_mix(d.solref.grad, e, 2 * g1 + k, 2 * g2 + k, w, g_solref[k])
         else:  # the smaller
             _to_extreme(d.solref.grad, e, 2 * g1 + k, 2 * g2 + k, -a, -b, g_solref[k])
     lower = ti.Vector([MINIMP, MINIMP, 0.0, MINIMP, 1.0])
     upper = ti.Vector([MAXIMP, MAXIMP, BIG, MAXIMP, BIG])
     for k in ti.static(range(5)):
-        mixed = 0.5 * d.solimp[e, 5 * g1 + k] + 0.5 * d.solimp[e, 5 * g2 + k]
+        mixed = w * d.solimp[e, 5 * g1 + k] + (1.0 - w) * d.solimp[e, 5 * g2 + k]
         if lower[k] <= mixed and mixed <= upper[k]:  # else clamped
-            for g in ti.static((g1, g2)):
-                accumulate(d.solimp.grad, ti.Vector([e, 5 * g + k]), 0.5 * g_solimp[k])
+            _to_mix(d.solimp.grad, e, 5 * g1 + k, 5 * g2 + k, w, g_solimp[k])
+
+
+@ti.func
+def _to_mix(grad: ti.template(), e, i, j, w, g):
+    """grad[e, i] += w·g and grad[e, j] += (1 − w)·g: the reverse of w·a + (1 − w)·b."""
+    accumulate(grad, ti.Vector([e, i]), w * g)
+    accumulate(grad, ti.Vector([e, j]), (1.0 - w) * g)
 
 
 @ti.func
@@ -476,26 +492,42 @@ def contact_force(d: ti.template(), s, e, c):
 
 # -- joint rows: equalities, friction loss and joint limits ------------------------------------------
 @ti.func
-def _joint_row_scalars(d: ti.template(), s, e, r, dist, velocity, scale):
-    """Row r's R and aref from its distance (m or rad), velocity J·q̇ and diagA ``scale`` (the
-    dof_invweight0 of its dofs), with the scene's time constant and MuJoCo's default solimp."""
-    solimp = ti.Vector(DEFAULT_SOLIMP, dt=float)
+def _scene_softness(d: ti.template()):
+    """(solref (2,), solimp (5,)) of the joint equalities' rows: the scene's time constant,
+    critically damped, and MuJoCo's default solimp."""
+    return ti.Vector([d.consts[CONST["timeconst"]], 1.0]), ti.Vector(DEFAULT_SOLIMP, dt=float)
+
+
+@ti.func
+def _dof_softness(table: ti.template(), i):
+    """(solref (2,), solimp (5,)) of dof i's rows of a kind: ``table`` the model's 7 numbers per
+    dof for that kind (dof_limit_sol, dof_frictionloss_sol; solimp clamped at build)."""
+    return (ti.Vector([table[7 * i + k] for k in ti.static(range(2))]),
+            ti.Vector([table[7 * i + 2 + k] for k in ti.static(range(5))]))
+
+
+@ti.func
+def _joint_row_scalars(d: ti.template(), s, e, r, dist, velocity, scale, solref, solimp):
+    """Row r's R and aref from its distance (m or rad), velocity J·q̇, diagA ``scale`` (the
+    dof_invweight0 of its dofs) and its softness (solref (2,), solimp (5,))."""
     imp = impedance(solimp, dist, 0.0)
-    k, b = stiffness_damping(ti.Vector([d.consts[CONST["timeconst"]], 1.0]), solimp[1], d.consts[CONST["h"]])
+    k, b = stiffness_damping(solref, solimp[1], d.consts[CONST["h"]])
     d.efc_R[s, e, r] = ti.max(MINVAL, (1.0 - imp) / imp * scale)
     d.efc_aref[s, e, r] = -b * velocity - k * imp * dist
     d.efc_mu[s, e, r] = 0.0
 
 
 @ti.func
-def _dof_row(d: ti.template(), s, e, r, i, sign, dist):
+def _dof_row(d: ti.template(), s, e, r, i, sign, dist, softness: ti.template()):
     """Row r on dof i alone (J = sign·e_i) at distance dist (m or rad; 0 for friction loss): its
-    Jacobian (its one column: no reader looks past a row's columns), R and aref."""
+    Jacobian (its one column: no reader looks past a row's columns), R and aref, its softness dof
+    i's in the model table ``softness`` (_dof_softness)."""
     d.efc_J[s, e, r, i] = sign
     slot = d.joint_columns + JOINT_ROW_SLOTS * r
     d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, 1
     d.efc_cols[s, e, slot] = i
-    _joint_row_scalars(d, s, e, r, dist, sign * d.qvel[s, e, i], d.invweight_dof[e, i])
+    solref, solimp = _dof_softness(softness, i)
+    _joint_row_scalars(d, s, e, r, dist, sign * d.qvel[s, e, i], d.invweight_dof[e, i], solref, solimp)
     d.efc_dim[s, e, r], d.efc_id[s, e, r] = 1, i
 
 
@@ -519,7 +551,8 @@ def _equality_row(d: ti.template(), s, e, r, k):
     d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, 2
     d.efc_cols[s, e, slot], d.efc_cols[s, e, slot + 1] = ti.min(a, b), ti.max(a, b)
     velocity = d.qvel[s, e, a] - multiplier * d.qvel[s, e, b]
-    _joint_row_scalars(d, s, e, r, dist, velocity, d.invweight_dof[e, a] + d.invweight_dof[e, b])
+    solref, solimp = _scene_softness(d)
+    _joint_row_scalars(d, s, e, r, dist, velocity, d.invweight_dof[e, a] + d.invweight_dof[e, b], solref, solimp)
     d.efc_dim[s, e, r], d.efc_id[s, e, r] = 1, k
     d.efc_type[s, e, r], d.efc_floss[s, e, r] = EQUALITY, 0.0
 
@@ -597,13 +630,13 @@ def dof_rows(d: ti.template(), s, e):
     for i in range(d.n_dofs):
         bound = d.frictionloss[e, i]
         if bound > 0.0:
-            _dof_row(d, s, e, rows, i, 1.0, 0.0)
+            _dof_row(d, s, e, rows, i, 1.0, 0.0, d.dof_frictionloss_sol)
             d.efc_type[s, e, rows], d.efc_floss[s, e, rows] = FRICTION_LOSS, bound
             rows += 1
     for i in range(d.n_dofs):
         sign, dist = _limit_side(d, s, e, i)
         if sign != 0.0:
-            _dof_row(d, s, e, rows, i, sign, dist)
+            _dof_row(d, s, e, rows, i, sign, dist, d.dof_limit_sol)
             d.efc_type[s, e, rows], d.efc_floss[s, e, rows] = ONE_SIDED, 0.0
             rows += 1
         cone, cone_dist, axis = _ball_limit(d, s, e, i)
@@ -625,7 +658,8 @@ def _ball_limit_row(d: ti.template(), s, e, r, i, dist, axis):
         d.efc_J[s, e, r, i + k] = -axis[k]
         d.efc_cols[s, e, slot + k] = i + k
         velocity -= axis[k] * d.qvel[s, e, i + k]
-    _joint_row_scalars(d, s, e, r, dist, velocity, d.invweight_dof[e, i])
+    solref, solimp = _dof_softness(d.dof_limit_sol, i)
+    _joint_row_scalars(d, s, e, r, dist, velocity, d.invweight_dof[e, i], solref, solimp)
     d.efc_dim[s, e, r], d.efc_id[s, e, r] = 1, i
     d.efc_type[s, e, r], d.efc_floss[s, e, r] = ONE_SIDED, 0.0
 
@@ -654,15 +688,19 @@ def dof_rows_adjoint(d: ti.template(), s, e, r, g_aref, g_R, g_bound):
 def _scalar_row_adjoint(d: ti.template(), s, e, r, t, g_aref, g_R, g_bound):
     """dof_rows_adjoint for a row of type t on one dof, or an equality's two."""
     first, second, c1, c2, dist = d.efc_id[s, e, r], -1, 0.0, 0.0, 0.0
+    solref, solimp = _scene_softness(d)
     if t == EQUALITY:
         a, b, multiplier, distance = _equality_terms(d, s, e, first)
         first, second, c1, c2, dist = a, b, 1.0, -multiplier, distance
     else:
         c1 = d.efc_J[s, e, r, first]
-        if t != FRICTION_LOSS:
+        if t == FRICTION_LOSS:
+            solref, solimp = _dof_softness(d.dof_frictionloss_sol, first)
+        else:
             _, dist = _limit_side(d, s, e, first)
+            solref, solimp = _dof_softness(d.dof_limit_sol, first)
     scale = d.invweight_dof[e, first] + (d.invweight_dof[e, second] if second >= 0 else 0.0)
-    g_dist, damping = _joint_row_scalars_adjoint(d, e, dist, scale, g_aref, g_R, first, second)
+    g_dist, damping = _joint_row_scalars_adjoint(d, e, dist, scale, g_aref, g_R, first, second, solref, solimp)
     accumulate(d.qvel.grad, ti.Vector([s, e, first]), -damping * c1 * g_aref)
     if second >= 0:
         accumulate(d.qvel.grad, ti.Vector([s, e, second]), -damping * c2 * g_aref)
@@ -675,12 +713,11 @@ def _scalar_row_adjoint(d: ti.template(), s, e, r, t, g_aref, g_R, g_bound):
 
 
 @ti.func
-def _joint_row_scalars_adjoint(d: ti.template(), e, dist, scale, g_aref, g_R, first, second):
-    """Reverse of _joint_row_scalars' R = (1 − imp)/imp · scale and aref's −K imp dist: returns
-    (∂L/∂dist, B); R's gradient into the dof_invweight0 of dofs first and second (when ≥ 0), unless
-    R is at its floor."""
-    solimp = ti.Vector(DEFAULT_SOLIMP, dt=float)
-    k, damping = stiffness_damping(ti.Vector([d.consts[CONST["timeconst"]], 1.0]), solimp[1], d.consts[CONST["h"]])
+def _joint_row_scalars_adjoint(d: ti.template(), e, dist, scale, g_aref, g_R, first, second, solref, solimp):
+    """Reverse of _joint_row_scalars' R = (1 − imp)/imp · scale and aref's −K imp dist (its
+    softness solref, solimp: the model's, no gradient): returns (∂L/∂dist, B); R's gradient into
+    the dof_invweight0 of dofs first and second (when ≥ 0), unless R is at its floor."""
+    k, damping = stiffness_damping(solref, solimp[1], d.consts[CONST["h"]])
     imp = impedance(solimp, dist, 0.0)
     g_imp = -k * dist * g_aref
     if (1.0 - imp) / imp * scale > MINVAL:
@@ -701,8 +738,9 @@ def _ball_limit_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
     i = d.efc_id[s, e, r]
     raw = joint_quat(d, s, e, d.dof_link[i])
     angle, axis = quat_turn(raw)
+    solref, solimp = _dof_softness(d.dof_limit_sol, i)
     g_dist, damping = _joint_row_scalars_adjoint(d, e, d.dof_upper[i] - angle, d.invweight_dof[e, i], g_aref, g_R,
-                                                 i, -1)
+                                                 i, -1, solref, solimp)
     g_angle = -g_dist  # dist = θmax − θ
     force = d.efc_force[s, e, r]
     g_axis = ti.Vector.zero(float, 3)
