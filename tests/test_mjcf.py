@@ -237,7 +237,7 @@ def test_joint_limit_and_friction_loss_softness_as_mujocos(f64, cone):
     pyramidal, 4.1e-12 elliptic)."""
     m, d, scene, robot = _pair(JOINT_SOFTNESS, cone, integrator="euler")
     solver = scene.rigid_solver
-    model = contact.with_joint_softness(solver.model, solver.timeconst)
+    model = contact.with_row_softness(solver.model, solver.timeconst)
     dofs = slice(robot.dof_start, robot.dof_start + robot.n_dofs)
     limit = np.concatenate([m.jnt_solref, m.jnt_solimp], axis=1)[m.dof_jntid]  # (MuJoCo's: per joint)
     friction = np.concatenate([m.dof_solref, m.dof_solimp], axis=1)

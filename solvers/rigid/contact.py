@@ -26,17 +26,19 @@ def without_pairs(model, keep=None):
     return replace(model, **{name: getattr(model, name)[keep] for name in PAIR_ARRAYS})
 
 
-def with_joint_softness(model, timeconst):
-    """The model with its dofs' limit and friction-loss softness (dof_limit_sol,
-    dof_frictionloss_sol) complete: what the asset left unstated (NaN) the scene's (timeconst s,
-    1) and MuJoCo's default solimp, and every solimp within MuJoCo's bounds (its runtime clamps
-    them so; the kernels read them as they are)."""
+SOFTNESS_TABLES = ("dof_limit_sol", "dof_frictionloss_sol", "eq_sol", "body_eq_sol")
+
+
+def with_row_softness(model, timeconst):
+    """The model with the softness of its joint rows (SOFTNESS_TABLES: solref then solimp per dof
+    limit, dof friction loss, joint equality, connect or weld) complete: what the asset left
+    unstated (NaN) the scene's (timeconst s, 1) and MuJoCo's default solimp, and every solimp
+    within MuJoCo's bounds (its runtime clamps them so; the kernels read them as they are)."""
     default = np.array([timeconst, 1.0, *DEFAULT_SOLIMP])
     lower = [-np.inf, -np.inf, MINIMP, MINIMP, 0.0, MINIMP, 1.0]
     upper = [np.inf, np.inf, MAXIMP, MAXIMP, np.inf, MAXIMP, np.inf]
     complete = lambda table: np.clip(np.where(np.isnan(table), default, table), lower, upper)  # noqa: E731
-    return replace(model, dof_limit_sol=complete(model.dof_limit_sol),
-                   dof_frictionloss_sol=complete(model.dof_frictionloss_sol))
+    return replace(model, **{name: complete(getattr(model, name)) for name in SOFTNESS_TABLES})
 
 
 def without_uncollidable(model, names):

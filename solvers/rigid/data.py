@@ -96,10 +96,10 @@ MODEL = {
     "dof_springref": ("f", "D"),  # rad or m: where a joint spring is at rest
     "dof_limit_sol": ("f", "D7"), "dof_frictionloss_sol": ("f", "D7"),  # (solref, solimp) of a dof's rows
     # joint equalities (URDF mimic joints; RigidModel says what they hold)
-    "eq_dof1": ("i", "E"), "eq_dof2": ("i", "E"), "eq_coef": ("f", "E2"),
+    "eq_dof1": ("i", "E"), "eq_dof2": ("i", "E"), "eq_coef": ("f", "E2"), "eq_sol": ("f", "E7"),
     # connects and welds (points and frames of two links held together; RigidModel says what they hold)
     "body_eq_link": ("i", "K2"), "body_eq_anchor": ("v3", "K2"), "weld_turn": ("v4", "WD2"),
-    "weld_torquescale": ("f", "WD"),
+    "weld_torquescale": ("f", "WD"), "body_eq_sol": ("f", "K7"),
     # substep h (s), the time constant (s) of the joint rows (equality, limit, friction loss), impratio, solver
     # tolerance and line-search tolerance: runtime values like everything else (CONSTS names them)
     "consts": ("f", len(CONSTS)),
@@ -268,7 +268,7 @@ def _counts(size):
     return {"L": size["L"], "D": D, "Q": size["Q"], "P": size["P"], "DD": D * D, "G": size["G"], "N": size["N"],
             "H": size["H"], "C": size["C"], "CF": FEATURE_SIZE * size["C"], "HI": size["HI"], "R": R, "RD": R * D,
             "CD": body_eq_columns(size) + (size["K"] + size["DW"]) * D, "DWW": 1 + DYN_WELD * size["DW"],
-            "E": size["E"], "E2": 2 * size["E"], "K2": 2 * size["K"],
+            "E": size["E"], "E2": 2 * size["E"], "E7": 7 * size["E"], "K2": 2 * size["K"], "K7": 7 * size["K"],
             "WD": size["WD"], "WD2": 2 * size["WD"],
             "G2": 2 * size["G"], "G5": 5 * size["G"], "L6": 6 * size["L"], "D7": 7 * D, 1: 1,
             len(CONSTS): len(CONSTS),

@@ -52,8 +52,7 @@ of body2 (or the world), position and orientation: by bodies (anchor in body2's 
 pose of body2's frame in body1's, taken at qpos0 where its quaternion is zero, MuJoCo's default)
 or by sites (their frames), its turn rows scaled by torquescale (LinkSpec.welds). Either body may
 be the world (body1 the world: the same rows with the other sign, the file's body first). An equality's
-solref and solimp are not read (the scene's constraint time constant rules; a warning says so);
-an inactive one is not loaded; ``<default><equality>`` applies.
+solref and solimp soften its rows; an inactive one is not loaded; ``<default><equality>`` applies.
 
 Ball joints (MuJoCo's: a quaternion, three dofs about the body's own axes) with damping, armature,
 friction loss, a spring (stiffness) and MuJoCo's cone limit (range (0, θ): θ the largest angle of
@@ -77,7 +76,7 @@ import numpy as np
 
 from ..core import InvalidInputError
 from . import shapes
-from .mjcf_document import IDENTITY, MJ_DEFAULTS, ORIENTATIONS, MJCFDocument, axis_angle, is_default, norm
+from .mjcf_document import IDENTITY, MJ_DEFAULTS, ORIENTATIONS, MJCFDocument, axis_angle, is_default, norm, over
 from .spec import GeomSpec, LinkSpec, VisualSpec
 
 _logger = logging.getLogger("genesis_lite")
@@ -477,11 +476,15 @@ class _Reader(MJCFDocument):
 
     def _joint_softness(self, spec: LinkSpec, attrs: dict, what: str):
         """The joint's limit and friction-loss solref and solimp (LinkSpec.limit_sol,
-        .frictionloss_sol), NaN where the file states none."""
-        for kind, key in (("limit", "limit_sol"), ("friction", "frictionloss_sol")):
-            ref, imp = (self._softness(attrs, f"{name}{kind}", what) for name in ("solref", "solimp"))
-            setattr(spec, key, np.concatenate([np.full(2, np.nan) if ref is None else ref,
-                                               np.full(5, np.nan) if imp is None else imp]))
+        .frictionloss_sol)."""
+        spec.limit_sol = self._row_softness(attrs, "solreflimit", "solimplimit", what)
+        spec.frictionloss_sol = self._row_softness(attrs, "solreffriction", "solimpfriction", what)
+
+    def _row_softness(self, attrs: dict, ref_key: str, imp_key: str, what: str) -> np.ndarray:
+        """(7,) a row's solref then solimp from attributes ``ref_key`` and ``imp_key``, NaN where the
+        file states neither (the scene's default then)."""
+        ref, imp = self._softness(attrs, ref_key, what), self._softness(attrs, imp_key, what)
+        return np.concatenate([np.full(2, np.nan) if ref is None else ref, np.full(5, np.nan) if imp is None else imp])
 
     def _visual(self, geom: GeomSpec, attrs: dict) -> VisualSpec:
         """The geom as drawn: its shape, but a plane of positive half sizes (MuJoCo's x, y) as that
@@ -531,15 +534,13 @@ class _Reader(MJCFDocument):
                 if attrs.get("active", "true") == "false":  # (MuJoCo can switch it on later; here it stays off)
                     self.ignored.add(f"{what} (inactive: not loaded)")
                     continue
-                for key in ("solref", "solimp"):
-                    if key in attrs:
-                        self.ignored.add(f"<equality><{element.tag} {key}> (the scene's constraint time constant rules)")
+                softness = self._row_softness(attrs, "solref", "solimp", what)
                 if element.tag == "joint":
-                    self._joint_equality(attrs, links, what)
+                    self._joint_equality(attrs, links, what, softness)
                 elif element.tag == "connect":
-                    self._connect(attrs, links, what)
+                    self._connect(attrs, links, what, softness)
                 else:
-                    self._weld(attrs, links, what)
+                    self._weld(attrs, links, what, softness)
 
     def _equality_attrs(self, element) -> dict:
         """An equality's attributes over its class's ``<default><equality>`` (MuJoCo's defaults
@@ -548,10 +549,11 @@ class _Reader(MJCFDocument):
         if cls not in self.defaults and cls != "main":
             raise self.error(f"<equality><{element.tag}>: class {cls!r} is not a <default> class")
         default = self.defaults.get(cls, {}).get("equality", {})
-        return {**{k: v for k, v in default.items() if k in ("active", "solref", "solimp")}, **element.attrib}
+        return over({k: v for k, v in default.items() if k in ("active", "solref", "solimp")}, element.attrib)
 
-    def _joint_equality(self, attrs: dict, links: list[LinkSpec], what: str):
-        """<equality><joint joint1 joint2 polycoef>: joint1 follows joint2 (LinkSpec.mimic)."""
+    def _joint_equality(self, attrs: dict, links: list[LinkSpec], what: str, softness: np.ndarray):
+        """<equality><joint joint1 joint2 polycoef>: joint1 follows joint2 (LinkSpec.mimic), its row
+        as soft as ``softness`` says (LinkSpec.mimic_sol)."""
         by_joint = {link.joint_name: link for link in links if link.joint_type in ("revolute", "prismatic")}
         for key in ("joint1", "joint2"):
             if attrs.get(key) not in by_joint:
@@ -565,11 +567,12 @@ class _Reader(MJCFDocument):
         # MuJoCo's row holds q1 − ref1 = c0 + c1 (q2 − ref2): an offset c0 + ref1 − c1 ref2 on q
         ref1, ref2 = by_joint[attrs["joint1"]].q0, by_joint[attrs["joint2"]].q0
         by_joint[attrs["joint1"]].mimic = (attrs["joint2"], float(coef[1]), float(coef[0] + ref1 - coef[1] * ref2))
+        by_joint[attrs["joint1"]].mimic_sol = softness
 
-    def _connect(self, attrs: dict, links: list[LinkSpec], what: str):
+    def _connect(self, attrs: dict, links: list[LinkSpec], what: str, softness: np.ndarray):
         """<equality><connect>: by bodies (body1, body2 or the world, anchor in body1's frame: body2's
         anchor is where that point is at qpos0) or by sites (site1, site2: their positions), as
-        MuJoCo's compiler reads them."""
+        MuJoCo's compiler reads them; its rows as soft as ``softness`` says."""
         self._only(attrs, "connect", ("anchor",))
         if "site1" in attrs or "site2" in attrs:
             (body1, anchor1, _), (body2, anchor2, _) = self._site_pair(attrs, ("body1", "body2", "anchor"), what)
@@ -578,13 +581,13 @@ class _Reader(MJCFDocument):
             anchor1, anchor2 = self.numbers(attrs, "anchor", 3, what), None
         if body1 == "world":  # the same rows, with the opposite sign
             (body1, anchor1), (body2, anchor2) = (body2, anchor2), (body1, anchor1)
-        self._by_body(links)[body1].connects += (("" if body2 == "world" else body2, anchor1, anchor2),)
+        self._by_body(links)[body1].connects += (("" if body2 == "world" else body2, anchor1, anchor2, softness),)
 
-    def _weld(self, attrs: dict, links: list[LinkSpec], what: str):
+    def _weld(self, attrs: dict, links: list[LinkSpec], what: str, softness: np.ndarray):
         """<equality><weld>: by bodies (body1, body2 or the world; anchor (default 0) in body2's frame;
         relpose (pos in body1's frame, quat): where its quat is zero, MuJoCo's default, both taken as
         they are at qpos0) or by sites (site1, site2: their frames), and torquescale, as MuJoCo's
-        compiler reads them."""
+        compiler reads them; its rows as soft as ``softness`` says."""
         self._only(attrs, "weld", ("anchor", "relpose", "torquescale"))
         torquescale = float(self.numbers(attrs, "torquescale", 1, what, default=[1.0])[0])
         if "site1" in attrs or "site2" in attrs:
@@ -598,7 +601,7 @@ class _Reader(MJCFDocument):
             first, second = second, first
         (body1, anchor1, turn1), (body2, anchor2, turn2) = first, second
         self._by_body(links)[body1].welds += (("" if body2 == "world" else body2, anchor1, anchor2, turn1, turn2,
-                                               torquescale),)
+                                               torquescale, softness),)
 
     def _only(self, attrs: dict, tag: str, own: tuple):
         """Note an equality's attributes that are not read (``own``: its kind's besides the common)."""
@@ -708,13 +711,13 @@ def place_world(links: list[LinkSpec], pos, quat) -> None:
         root.pos, root.quat = shapes.compose(pos, quat, root.pos, root.quat)
     for link in links:  # a connect's or weld's point and frame given in the world move with it too
         link.connects = tuple((other, anchor, shapes.compose(pos, quat, other_anchor, IDENTITY)[0]
-                               if other == "" and other_anchor is not None else other_anchor)
-                              for other, anchor, other_anchor in link.connects)
+                               if other == "" and other_anchor is not None else other_anchor, softness)
+                              for other, anchor, other_anchor, softness in link.connects)
         welds = []
-        for other, anchor, other_anchor, turn, other_turn, torquescale in link.welds:
+        for other, anchor, other_anchor, turn, other_turn, torquescale, softness in link.welds:
             if other == "" and other_anchor is not None:  # (None: this link's frame at q0, already placed)
                 other_anchor, other_turn = shapes.compose(pos, quat, other_anchor, other_turn)
-            welds.append((other, anchor, other_anchor, turn, other_turn, torquescale))
+            welds.append((other, anchor, other_anchor, turn, other_turn, torquescale, softness))
         link.welds = tuple(welds)
 
 

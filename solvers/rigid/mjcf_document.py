@@ -129,7 +129,7 @@ class MJCFDocument:
         for child in element:
             if child.tag == "default":
                 continue
-            own[child.tag] = _over(own.get(child.tag, {}), child.attrib)
+            own[child.tag] = over(own.get(child.tag, {}), child.attrib)
         self.defaults[name] = own
         for child in element.findall("default"):
             if "class" not in child.attrib:
@@ -144,7 +144,7 @@ class MJCFDocument:
             raise self.error(f"<{element.tag} name={element.get('name')!r}>: class {cls!r} is not a <default> class")
         classes = self.defaults.get(cls, {})
         out = dict(classes.get("general", {})) if element.tag in _ACTUATORS else {}
-        return _over(_over(out, classes.get(element.tag, {})), element.attrib)
+        return over(over(out, classes.get(element.tag, {})), element.attrib)
 
     def numbers(self, attrs: dict, key: str, n: int | tuple, what: str, default=None) -> np.ndarray:
         """(n,) finite numbers of attribute `key` (n may be a tuple of allowed counts)."""
@@ -254,7 +254,7 @@ class MJCFDocument:
         return int(value)
 
 
-def _over(below: dict, above: dict) -> dict:
+def over(below: dict, above: dict) -> dict:
     """Attributes ``above`` over ``below``; a value of a _PARTIAL key with fewer numbers than the
     one below replaces only its first ones (MuJoCo reads such arrays into its default's)."""
     out = dict(below)

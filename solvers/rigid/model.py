@@ -54,13 +54,15 @@ class RigidModel:
     Per joint equality (E; URDF mimic joints, LinkSpec.mimic): eq_dof1 (E,) the following joint's
     dof, eq_dof2 (E,) the followed one's, eq_coef (E, 2) (offset rad or m, multiplier): the row
     q[eq_dof1] = offset + multiplier · q[eq_dof2] (MuJoCo's joint equality with polycoef (offset,
-    multiplier), which relates q − qpos0: the MJCF loader folds the joints' refs into the offset).
+    multiplier), which relates q − qpos0: the MJCF loader folds the joints' refs into the offset),
+    eq_sol (E, 7) its row's solref and solimp (NaN: the scene's, which the solver fills in).
     Per connect or weld (K of them, the connects first, then the W welds; LinkSpec.connects and
     .welds, MuJoCo's connect and weld equalities): body_eq_link (K, 2) its two links (-1: the
     world), body_eq_anchor (2K, 3) m, rows 2k and 2k + 1 the points held together in their links'
     frames (the world's: world coordinates); per weld w: weld_turn (2W, 4) w-x-y-z, rows 2w and 2w
     + 1 the held frames' turns r1, r2 in their links' frames (q1 ⊗ r1 is held to q2 ⊗ r2),
-    weld_torquescale (W,) the scale of its turn rows.
+    weld_torquescale (W,) the scale of its turn rows; body_eq_sol (K, 7) their rows' solref and
+    solimp, as eq_sol.
     """
     link_name: list
     link_parent: np.ndarray
@@ -114,10 +116,12 @@ class RigidModel:
     eq_dof1: np.ndarray
     eq_dof2: np.ndarray
     eq_coef: np.ndarray
+    eq_sol: np.ndarray
     body_eq_link: np.ndarray
     body_eq_anchor: np.ndarray
     weld_turn: np.ndarray
     weld_torquescale: np.ndarray
+    body_eq_sol: np.ndarray
 
     @property
     def link_inv_mass0(self):
@@ -291,14 +295,14 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
                 dofs["kp"].append(DEFAULT_KP if vector or spec.kp is None else spec.kp)
                 dofs["kv"].append(DEFAULT_KV if vector or spec.kv is None else spec.kv)
                 for key in ("limit_sol", "frictionloss_sol"):
-                    dofs[key].append(np.full(7, np.nan) if getattr(spec, key) is None else getattr(spec, key))
+                    dofs[key].append(_softness(getattr(spec, key)))
             for k, geom in enumerate(spec.geoms):
                 geoms.append(geom)
                 geom_links.append(link_idx)
                 geom_names.append(f"link '{spec.name}' collision geom {k}")
             qpos0.extend(_initial_q(spec))
-        equalities += [(joint_dof[spec.joint_name], joint_dof[spec.mimic[0]], spec.mimic[2], spec.mimic[1])
-                       for spec in links if spec.mimic is not None]
+        equalities += [(joint_dof[spec.joint_name], joint_dof[spec.mimic[0]], spec.mimic[2], spec.mimic[1],
+                        _softness(spec.mimic_sol)) for spec in links if spec.mimic is not None]
         index = {spec.name: link_offset + k for k, spec in enumerate(links)}
         entity_connects, entity_welds = _body_equalities(links, index)
         connects, welds = connects + entity_connects, welds + entity_welds
@@ -331,11 +335,13 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
         pairs=_mass_matrix_pairs(dof_link, link_parent),
         qpos0=np.array(qpos0, dtype=f), eq_dof1=np.array([q[0] for q in equalities], dtype=np.int32),
         eq_dof2=np.array([q[1] for q in equalities], dtype=np.int32),
-        eq_coef=np.array([q[2:] for q in equalities], dtype=f).reshape(-1, 2),
+        eq_coef=np.array([q[2:4] for q in equalities], dtype=f).reshape(-1, 2),
+        eq_sol=np.array([q[4] for q in equalities], dtype=f).reshape(-1, 7),
         body_eq_link=np.array([c[:2] for c in connects + welds], dtype=np.int32).reshape(-1, 2),
         body_eq_anchor=np.array([c[2:4] for c in connects + welds], dtype=f).reshape(-1, 3),
         weld_turn=np.array([w[4:6] for w in welds], dtype=f).reshape(-1, 4),
-        weld_torquescale=np.array([w[6] for w in welds], dtype=f))
+        weld_torquescale=np.array([w[6] for w in welds], dtype=f),
+        body_eq_sol=np.array([c[-1] for c in connects + welds], dtype=f).reshape(-1, 7))
 
 
 def _body_equalities(links, index):
@@ -350,14 +356,14 @@ def _body_equalities(links, index):
     connects, welds = [], []
     for spec in links:
         this = poses[spec.name]
-        for other, anchor, other_anchor in spec.connects:
+        for other, anchor, other_anchor, softness in spec.connects:
             if anchor is None:
                 anchor = _in_frame(this, _at(poses[other], other_anchor))
             if other_anchor is None:
                 other_anchor = _in_frame(poses[other], _at(this, anchor))
             connects.append((index[spec.name], index[other] if other else -1, np.asarray(anchor, dtype=np.float64),
-                             np.asarray(other_anchor, dtype=np.float64)))
-        for other, anchor, other_anchor, turn, other_turn, torquescale in spec.welds:
+                             np.asarray(other_anchor, dtype=np.float64), _softness(softness)))
+        for other, anchor, other_anchor, turn, other_turn, torquescale, softness in spec.welds:
             if other_anchor is None:  # (then this link's frame is given)
                 other_anchor = _in_frame(poses[other], _at(this, anchor))
                 other_turn = _turn_onto(poses[other], this, turn)
@@ -368,8 +374,13 @@ def _body_equalities(links, index):
                 turn = _turn_onto(this, poses[other], other_turn)
             welds.append((index[spec.name], index[other] if other else -1, np.asarray(anchor, dtype=np.float64),
                           other_anchor, np.asarray(turn, dtype=np.float64) / np.linalg.norm(turn),
-                          other_turn / np.linalg.norm(other_turn), float(torquescale)))
+                          other_turn / np.linalg.norm(other_turn), float(torquescale), _softness(softness)))
     return connects, welds
+
+
+def _softness(given):
+    """(7,) a row's solref and solimp as LinkSpec gives them (None: all NaN, the scene's)."""
+    return np.full(7, np.nan) if given is None else np.asarray(given, dtype=np.float64)
 
 
 def _turn_onto(pose, other_pose, other_turn):

@@ -103,7 +103,7 @@ class RigidSolver(Solver):
                     "ls_iterations": options.ls_iterations, "converged": not options.enable_mujoco_compatibility,
                     "dyn_welds": options.max_dynamic_constraints,
                     "consts": [h, self.timeconst, impratio, self.tolerance, options.ls_tolerance]}
-        self.data = RigidData(contact.with_joint_softness(self.model, self.timeconst), self.n_batch, sim.substeps,
+        self.data = RigidData(contact.with_row_softness(self.model, self.timeconst), self.n_batch, sim.substeps,
                               sim.requires_grad, settings)
         element_dims = [len(ELEMENT[a]) for a in ARENAS]
         schedule, arenas = self.data.schedule, self.data.arenas

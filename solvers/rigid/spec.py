@@ -90,23 +90,25 @@ class LinkSpec:
     primitive morphs, which are drawn from their geoms).
     mimic: (joint name, multiplier, offset) when this scalar joint follows another of the same
     entity, q = multiplier · q_other + offset (URDF ``<mimic>``): a joint equality constraint row
-    (constraint/rows.py), as MuJoCo's and Genesis's; None otherwise.
+    (constraint/rows.py), as MuJoCo's and Genesis's; None otherwise. mimic_sol: (7,) its row's
+    solref then solimp, as limit_sol (MJCF's equality solref and solimp), or None.
     same_body: the link continues its parent's body (MJCF: the links of one body's joints, which
     LinkSpec joints' frames split): contact rules take the two as one body.
     excluded: names of links of the same entity this link's shapes never collide with (MJCF
     ``<contact><exclude>``).
     connects: (other link's name, or "" for the world; anchor (3,) m in this link's frame, or None:
     where the other's anchor is at q0; the other's anchor (3,) m in its frame, or None: where this
-    anchor is at q0; not both None) per ball-and-socket
-    constraint holding a point of this link on a point of another (MJCF ``<equality><connect>``,
+    anchor is at q0; not both None; its rows' solref then solimp (7,) as limit_sol, or None) per
+    ball-and-socket constraint holding a point of this link on a point of another (MJCF ``<equality><connect>``,
     MuJoCo's connect: three equality rows, constraint/rows.py).
     welds: (other link's name, or "" for the world; anchor (3,) m in this link's frame, or None:
     where the other's anchor is at q0; the other's anchor (3,) m in its frame; turn (4,) w-x-y-z
     of this link's held frame in its frame, or None: the one that makes the two held frames one
-    at q0; the other's (4,); torquescale; the other's anchor and turn may be None instead, then
-    this link's are given and the other's held frame is theirs at q0) per weld holding a frame of
-    this link on a frame of another, position and orientation (MJCF ``<equality><weld>``, MuJoCo's weld: six equality
-    rows, the turn's three scaled by torquescale).
+    at q0; the other's (4,); torquescale; its rows' solref and solimp as a connect's; the other's
+    anchor and turn may be None instead, then this link's are given and the other's held frame is
+    theirs at q0) per weld holding a frame of this link on a frame of another, position and
+    orientation (MJCF ``<equality><weld>``, MuJoCo's weld: six equality rows, the turn's three
+    scaled by torquescale).
     """
     name: str
     parent: int
@@ -135,6 +137,7 @@ class LinkSpec:
     merged: list = field(default_factory=list)
     visuals: list = field(default_factory=list)
     mimic: tuple = None
+    mimic_sol: np.ndarray = None
     same_body: bool = False
     excluded: tuple = ()
     connects: tuple = ()

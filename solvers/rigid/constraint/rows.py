@@ -22,10 +22,10 @@ multiplier · e_b, diagA the sum of the two dofs'), one per dof with friction lo
 (FRICTION_LOSS, J = e_i, aref = −B q̇_i, bound F) and one per violated joint limit (ONE_SIDED,
 distance q − lower with J = e_i, or upper − q with J = −e_i; a ball joint's cone limit, MuJoCo's:
 distance θmax − θ with J = −axis on its three dofs, θ and axis its turn's angle and unit axis).
-Their R uses diagA = dof_invweight0 (a ball joint's first dof's); a limit's and a friction
-loss's solref and solimp are the dof's (the model's dof_limit_sol and dof_frictionloss_sol:
-MJCF's solreflimit, solimplimit, solreffriction, solimpfriction, else the scene's), an
-equality's (timeconst, 1) with the scene's constraint time constant and MuJoCo's default solimp.
+Their R uses diagA = dof_invweight0 (a ball joint's first dof's); their solref and solimp are
+the model's per row owner (dof_limit_sol, dof_frictionloss_sol, eq_sol: MJCF's solreflimit,
+solimplimit, solreffriction, solimpfriction, an equality's solref and solimp; else the scene's
+(timeconst, 1) with its constraint time constant and MuJoCo's default solimp).
 Their adjoint (``dof_rows_adjoint``) takes the solve's implicit gradient of each row's
 aref, R and bound back to q, q̇, the friction loss and dof_invweight0 (``contact_rows_adjoint``
 likewise for contact rows, into body_invweight0 among others).
@@ -492,16 +492,10 @@ def contact_force(d: ti.template(), s, e, c):
 
 # -- joint rows: equalities, friction loss and joint limits ------------------------------------------
 @ti.func
-def _scene_softness(d: ti.template()):
-    """(solref (2,), solimp (5,)) of the joint equalities' rows: the scene's time constant,
-    critically damped, and MuJoCo's default solimp."""
-    return ti.Vector([d.consts[CONST["timeconst"]], 1.0]), ti.Vector(DEFAULT_SOLIMP, dt=float)
-
-
-@ti.func
-def _dof_softness(table: ti.template(), i):
-    """(solref (2,), solimp (5,)) of dof i's rows of a kind: ``table`` the model's 7 numbers per
-    dof for that kind (dof_limit_sol, dof_frictionloss_sol; solimp clamped at build)."""
+def _softness(table: ti.template(), i):
+    """(solref (2,), solimp (5,)) of the rows of owner i (a dof, an equality): ``table`` the model's
+    7 numbers per owner for that kind of row (dof_limit_sol, dof_frictionloss_sol, eq_sol,
+    body_eq_sol; complete and clamped at build: contact.with_row_softness)."""
     return (ti.Vector([table[7 * i + k] for k in ti.static(range(2))]),
             ti.Vector([table[7 * i + 2 + k] for k in ti.static(range(5))]))
 
@@ -521,12 +515,12 @@ def _joint_row_scalars(d: ti.template(), s, e, r, dist, velocity, scale, solref,
 def _dof_row(d: ti.template(), s, e, r, i, sign, dist, softness: ti.template()):
     """Row r on dof i alone (J = sign·e_i) at distance dist (m or rad; 0 for friction loss): its
     Jacobian (its one column: no reader looks past a row's columns), R and aref, its softness dof
-    i's in the model table ``softness`` (_dof_softness)."""
+    i's in the model table ``softness`` (_softness)."""
     d.efc_J[s, e, r, i] = sign
     slot = d.joint_columns + JOINT_ROW_SLOTS * r
     d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, 1
     d.efc_cols[s, e, slot] = i
-    solref, solimp = _dof_softness(softness, i)
+    solref, solimp = _softness(softness, i)
     _joint_row_scalars(d, s, e, r, dist, sign * d.qvel[s, e, i], d.invweight_dof[e, i], solref, solimp)
     d.efc_dim[s, e, r], d.efc_id[s, e, r] = 1, i
 
@@ -551,7 +545,7 @@ def _equality_row(d: ti.template(), s, e, r, k):
     d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, 2
     d.efc_cols[s, e, slot], d.efc_cols[s, e, slot + 1] = ti.min(a, b), ti.max(a, b)
     velocity = d.qvel[s, e, a] - multiplier * d.qvel[s, e, b]
-    solref, solimp = _scene_softness(d)
+    solref, solimp = _softness(d.eq_sol, k)
     _joint_row_scalars(d, s, e, r, dist, velocity, d.invweight_dof[e, a] + d.invweight_dof[e, b], solref, solimp)
     d.efc_dim[s, e, r], d.efc_id[s, e, r] = 1, k
     d.efc_type[s, e, r], d.efc_floss[s, e, r] = EQUALITY, 0.0
@@ -658,7 +652,7 @@ def _ball_limit_row(d: ti.template(), s, e, r, i, dist, axis):
         d.efc_J[s, e, r, i + k] = -axis[k]
         d.efc_cols[s, e, slot + k] = i + k
         velocity -= axis[k] * d.qvel[s, e, i + k]
-    solref, solimp = _dof_softness(d.dof_limit_sol, i)
+    solref, solimp = _softness(d.dof_limit_sol, i)
     _joint_row_scalars(d, s, e, r, dist, velocity, d.invweight_dof[e, i], solref, solimp)
     d.efc_dim[s, e, r], d.efc_id[s, e, r] = 1, i
     d.efc_type[s, e, r], d.efc_floss[s, e, r] = ONE_SIDED, 0.0
@@ -688,17 +682,16 @@ def dof_rows_adjoint(d: ti.template(), s, e, r, g_aref, g_R, g_bound):
 def _scalar_row_adjoint(d: ti.template(), s, e, r, t, g_aref, g_R, g_bound):
     """dof_rows_adjoint for a row of type t on one dof, or an equality's two."""
     first, second, c1, c2, dist = d.efc_id[s, e, r], -1, 0.0, 0.0, 0.0
-    solref, solimp = _scene_softness(d)
+    solref, solimp = _softness(d.dof_frictionloss_sol, first)
     if t == EQUALITY:
+        solref, solimp = _softness(d.eq_sol, first)
         a, b, multiplier, distance = _equality_terms(d, s, e, first)
         first, second, c1, c2, dist = a, b, 1.0, -multiplier, distance
     else:
         c1 = d.efc_J[s, e, r, first]
-        if t == FRICTION_LOSS:
-            solref, solimp = _dof_softness(d.dof_frictionloss_sol, first)
-        else:
+        if t != FRICTION_LOSS:
             _, dist = _limit_side(d, s, e, first)
-            solref, solimp = _dof_softness(d.dof_limit_sol, first)
+            solref, solimp = _softness(d.dof_limit_sol, first)
     scale = d.invweight_dof[e, first] + (d.invweight_dof[e, second] if second >= 0 else 0.0)
     g_dist, damping = _joint_row_scalars_adjoint(d, e, dist, scale, g_aref, g_R, first, second, solref, solimp)
     accumulate(d.qvel.grad, ti.Vector([s, e, first]), -damping * c1 * g_aref)
@@ -738,7 +731,7 @@ def _ball_limit_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
     i = d.efc_id[s, e, r]
     raw = joint_quat(d, s, e, d.dof_link[i])
     angle, axis = quat_turn(raw)
-    solref, solimp = _dof_softness(d.dof_limit_sol, i)
+    solref, solimp = _softness(d.dof_limit_sol, i)
     g_dist, damping = _joint_row_scalars_adjoint(d, e, d.dof_upper[i] - angle, d.invweight_dof[e, i], g_aref, g_R,
                                                  i, -1, solref, solimp)
     g_angle = -g_dist  # dist = θmax − θ
@@ -979,17 +972,25 @@ def _turn_error(d: ti.template(), s, e, k, l1, l2):
 
 
 @ti.func
+def _body_eq_softness(d: ti.template(), k):
+    """(solref (2,), solimp (5,)) of body equality k's rows: the model's (body_eq_sol), or for a
+    run-time weld a time constant of two substeps (Genesis's: as stiff as MuJoCo lets a row be)
+    and MuJoCo's default solimp."""
+    solref, solimp = ti.Vector([2.0 * d.consts[CONST["h"]], 1.0]), ti.Vector(DEFAULT_SOLIMP, dt=float)
+    if k < d.n_body_eq:
+        solref, solimp = _softness(d.body_eq_sol, k)
+    return solref, solimp
+
+
+@ti.func
 def _body_eq_scalars(d: ti.template(), e, k, l1, l2, dist):
     """(impedance, K 1/s², B 1/s, diagA of the point rows, of the turn rows) of body equality k's
     rows (links l1, l2) at |error| = dist, as MuJoCo makes them: the impedance of the whole error's
-    norm, diagA the two links' invweight_t (turn rows: invweight_r; the world's 0), MuJoCo's
-    default solimp (as the other joint rows) and the scene's time constant, or, for a run-time
-    weld, two substeps (Genesis's: as stiff as MuJoCo lets a row be)."""
-    solimp = ti.Vector(DEFAULT_SOLIMP, dt=float)
+    norm, diagA the two links' invweight_t (turn rows: invweight_r; the world's 0), its softness
+    _body_eq_softness's."""
+    solref, solimp = _body_eq_softness(d, k)
     imp = impedance(solimp, dist, 0.0)
-    h = d.consts[CONST["h"]]
-    timeconst = ti.select(k < d.n_body_eq, d.consts[CONST["timeconst"]], 2.0 * h)
-    stiffness, b = stiffness_damping(ti.Vector([timeconst, 1.0]), solimp[1], h)
+    stiffness, b = stiffness_damping(solref, solimp[1], d.consts[CONST["h"]])
     translation, rotation = 0.0, 0.0
     for link in ti.static((l1, l2)):
         if link >= 0:
@@ -1064,7 +1065,8 @@ def _body_eq_row_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
         g_imp -= scale / (imp * imp) * g_R
     slope = 0.0
     if dist > MINVAL:  # (the impedance is flat at no error)
-        slope, _solimp_slope = impedance_gradient(ti.Vector(DEFAULT_SOLIMP, dt=float), dist, 0.0)
+        _solref, solimp = _body_eq_softness(d, k)
+        slope, _solimp_slope = impedance_gradient(solimp, dist, 0.0)
         slope /= dist
     g_gap, g_turn = slope * g_imp * gap, slope * g_imp * turn
     force, world = d.efc_force[s, e, r], ti.Matrix.identity(float, 3)
