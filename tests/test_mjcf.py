@@ -25,7 +25,7 @@ from tests.fd_scan import assert_converged, directional_errors
 
 ARM, CRAWLER, TREES = asset("mjcf", "arm.xml"), asset("mjcf", "crawler.xml"), asset("mjcf", "trees.xml")
 WORLDBODY, CONTACT_PARAMS = asset("mjcf", "worldbody.xml"), asset("mjcf", "contact_params.xml")
-JOINT_SOFTNESS = asset("mjcf", "joint_softness.xml")
+JOINT_SOFTNESS, REPLICATE = asset("mjcf", "joint_softness.xml"), asset("mjcf", "replicate.xml")
 
 
 def _pair(path, cone="pyramidal", integrator="implicitfast", requires_grad=False, exclude_ground_plane=False,
@@ -413,8 +413,17 @@ LINK = '<geom type="sphere" size="0.1"/>'
      "attribute 'contype' expected a non-negative integer"),
     (f'<body name="b"><joint name="j"/><geom type="sphere" size="0.1" condim="2"/></body>', "",
      "attribute 'condim' expected 1, 3, 4 or 6 (as MuJoCo's compiler), got '2'"),
-    (f'<body name="b"><joint name="j"/><geom type="sphere" size="0.1" priority="0.5"/></body>', "",
-     "attribute 'priority' expected an integer, got '0.5'"),
+    (f'<body name="b"><joint name="j"/><geom type="sphere" size="0.1" priority="1e3"/></body>', "",
+     "attribute 'priority' expected an integer, got '1e3'"),
+    (f'<body name="b"><joint name="j"/><geom type="sphere" size="0.1" condim="3.0"/></body>', "",
+     "attribute 'condim' expected an integer, got '3.0'"),
+    (f'<body name="b"><joint name="j"/><geom type="sphere" size="0.1" solref="0.02 0"/></body>', "",
+     "attribute 'solref' expected both numbers > 0 (time constant, damping ratio) or both ≤ 0"),
+    (f'<body name="b"><joint name="j" range="-1 1" solreflimit="-800 10"/>{LINK}</body>', "",
+     "joint 'j': attribute 'solreflimit' expected both numbers > 0"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<replicate count="0"/>', "<mujoco> holds sections"),
+    (f'<replicate count="2.5"><body name="b">{LINK}</body></replicate>', "",
+     "<replicate>: attribute 'count' expected a positive integer, got '2.5'"),
     (f'<body name="b"><joint name="j"/><geom type="sphere" size="0.1" solimp="0.9 0.95 0.001 0.5 2 3"/></body>', "",
      "attribute 'solimp' expected 1 or 2 or 3 or 4 or 5 finite numbers"),
 ])
@@ -591,12 +600,52 @@ def test_pair_rules_follow_mujocos_bodies(f64, tmp_path, case, contacts):
     assert np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max() < 1e-12
 
 
-@pytest.mark.parametrize("element", ['<replicate count="3" offset="0.1 0 0"><geom type="sphere" size="0.1"/>'
-                                     '</replicate>', '<frame><replicate count="2"/></frame>'])
+@pytest.mark.parametrize("element", ['<composite type="particle" count="2 2 2" spacing="0.1"><geom size="0.01"/>'
+                                     '</composite>', '<frame><composite type="particle" count="2 1 1"/></frame>'])
 def test_elements_that_would_add_bodies_or_geoms_unread_are_refused(f64, tmp_path, element):
     path = _write(tmp_path, f'<body name="b"><joint name="j"/>{LINK}{element}</body>')
-    with pytest.raises(AssetError, match=r"\['replicate'\] not supported"):
+    with pytest.raises(AssetError, match=r"\['composite'\] not supported"):
         gs.Scene().add_entity(gs.morphs.MJCF(file=path))
+
+
+def test_partial_arrays_end_as_their_default_classes_as_mujocos(f64, tmp_path):
+    """A value of fewer numbers than its default class's replaces only its first ones (an actuator's
+    biasprm over <default><general>'s, a geom's solimp); an empty solimp is none: as MuJoCo."""
+    path = _write(tmp_path, '<body name="b"><joint name="j" axis="0 1 0"/><geom type="sphere" size="0.1" solimp="0.8"/>'
+                            '<geom type="box" size="0.1 0.1 0.1" solimp=""/></body>',
+                  '<default><general biastype="affine" biasprm="0 -100 -10"/><geom solimp="0.7 0.8 0.01 0.3 3"/>'
+                  '</default><actuator><general joint="j" gainprm="50" biasprm="0 -50"/></actuator>')
+    m = mujoco.MjModel.from_xml_path(path)
+    scene = gs.Scene()
+    robot = scene.add_entity(gs.morphs.MJCF(file=path))
+    scene.build()
+    assert (float(robot.get_dofs_kp()[0]), float(robot.get_dofs_kv()[0])) == (50.0, 10.0) == tuple(-m.actuator_biasprm[0, 1:3])
+    mine = _mujoco_geoms(m, scene, robot)
+    np.testing.assert_array_equal(scene.sim.inputs(scene.rigid_solver)["solimp"][0].reshape(-1, 5).numpy(),
+                                  m.geom_solimp[mine])
+
+
+def test_replicate_expands_as_mujocos_reader(f64):
+    """assets/mjcf/replicate.xml: nested replicas turned and offset, one inside a body and one in a
+    frame with a childclass; the links are MuJoCo's bodies (names suffixed as its reader suffixes
+    them, poses to round-off), the connect, servos and contact exclusion naming replicated bodies
+    are copied per replica (MuJoCo's counts), and 0.5 s with the servos driving match MuJoCo 4."""
+    m, d, scene, robot = _pair(REPLICATE, integrator="euler")
+    model = scene.rigid_solver.model
+    bodies = {m.body(b).name: b for b in range(1, m.nbody)}
+    ours = {link.name: k for k, link in enumerate(robot.links) if ":" not in link.name and link.name != "world"}
+    assert set(ours) == set(bodies) and "block1_2" in ours and "pendulum09" in ours and "peg3" in ours
+    mujoco.mj_forward(m, d)
+    for name, k in ours.items():
+        np.testing.assert_allclose(robot.links[k].get_pos().numpy(), d.xpos[bodies[name]], atol=1e-14)
+        np.testing.assert_allclose(robot.links[k].get_quat().numpy(), d.xquat[bodies[name]], atol=1e-14)
+    assert (model.n_body_eq, int((model.dof_kp[robot.dof_start:] == 10.0).sum())) == (m.neq, m.nu) == (6, 10)
+    pegs, rack = [ours[f"peg{k}"] + robot.link_start for k in range(4)], ours["rack"] + robot.link_start
+    pairs = set(zip(model.geom_link[model.pair_geom1].tolist(), model.geom_link[model.pair_geom2].tolist()))
+    assert not pairs & {(a, b) for peg in pegs for a, b in ((rack, peg), (peg, rack))}
+    robot.control_dofs_position(np.full(10, 0.4), [robot.get_joint(f"hinge{k:02d}").dof_idx_local for k in range(10)])
+    d.ctrl[:] = 0.4
+    assert _lockstep(m, d, scene, robot, 250) < 1e-10
 
 
 def test_frames_place_their_bodies_and_geoms_as_mujoco(f64, tmp_path):

@@ -61,13 +61,15 @@ Refused (AssetError naming the element): a ball joint's force range, a limited b
 not starting at 0, a ball joint followed by a hinge or ball in one body (as MuJoCo refuses them),
 a free joint below a root body, a joint's
 ``springdamper`` and ``springyield``, a polynomial stiffness, a free joint's stiffness, ellipsoid /
-hfield / sdf geoms, equalities other than joints', connects and welds, elements that would add or move bodies and geoms unread
-(``<replicate>``, ``<composite>``…; ``<frame>`` is read: it places its bodies and geoms, and its
-childclass is theirs), a plane on a moving body (as MuJoCo's compiler). Ignored with one warning
+hfield / sdf geoms, equalities other than joints', connects and welds, elements that would add or
+move bodies and geoms unread (``<composite>``, ``<flexcomp>``…; ``<frame>`` is read: it places its
+bodies and geoms, and its childclass is theirs; so is ``<replicate>``, as copies in frames:
+MJCFDocument), a solref of mixed form (one number > 0, the other not: MuJoCo warns and takes its
+default), a plane on a moving body (as MuJoCo's compiler). Ignored with one warning
 naming them: tendons and what acts on them, ``<contact><pair>``, ``<option>`` (the scene's
 options rule), and attributes that tune MuJoCo's solver, actuator dynamics or the compiler's mass
-bounds (a joint's solreflimit, a geom's margin and gap, dampratio, timeconst, boundmass…) unless
-they hold MuJoCo's defaults.
+bounds (a geom's margin and gap, dampratio, timeconst, boundmass…) unless they hold MuJoCo's
+defaults.
 """
 import logging
 import os
@@ -274,7 +276,7 @@ class _Reader(MJCFDocument):
 
     def _check_children(self, element, what: str, allowed=None):
         """Refuse what a body (or the worldbody, a frame) holds that is not read here and changes
-        the model (<replicate>, <composite>, …: their bodies and geoms would go missing)."""
+        the model (<composite>, <flexcomp>, …: their bodies and geoms would go missing)."""
         allowed = _BODY_CHILDREN if allowed is None else allowed
         unknown = [child.tag for child in element if child.tag not in allowed]
         if unknown:
@@ -451,28 +453,37 @@ class _Reader(MJCFDocument):
         """The geom's condim, solref, solimp (where the file states them: a partial solimp ends in
         MuJoCo's defaults), priority and solmix; condim 4 and 6 (torsional and rolling friction)
         are taken as 3, with a warning."""
-        condim = self.numbers(attrs, "condim", 1, what, default=[3])[0]
+        condim = self._integer(attrs, "condim", 3, what)
         if condim not in (1, 3, 4, 6):
             raise self.error(f"{what}: attribute 'condim' expected 1, 3, 4 or 6 (as MuJoCo's compiler), "
                              f"got {attrs['condim']!r}")
         if condim > 3:
             self.ignored.add("<geom condim> 4 and 6: torsional and rolling friction (their contacts have condim 3)")
-        geom.condim = min(int(condim), 3)
+        geom.condim = min(condim, 3)
         geom.solref, geom.solimp = (self._softness(attrs, key, what) for key in ("solref", "solimp"))
-        priority = self.numbers(attrs, "priority", 1, what, default=[0])[0]
-        if priority != int(priority):
-            raise self.error(f"{what}: attribute 'priority' expected an integer, got {attrs['priority']!r}")
-        geom.priority = int(priority)
+        geom.priority = self._integer(attrs, "priority", 0, what)
         geom.solmix = float(self.numbers(attrs, "solmix", 1, what, default=[1.0])[0])
 
     def _softness(self, attrs: dict, key: str, what: str):
         """Attribute ``key`` (a solref (2,) or solimp (5,) by its name) where the file states it, a
         partial one ending in MuJoCo's defaults; else None."""
-        if key not in attrs:
+        if not attrs.get(key, "").split():  # (MuJoCo takes an empty value as none)
             return None
         default = MJ_DEFAULTS["solref" if key.startswith("solref") else "solimp"]
         given = self.numbers(attrs, key, tuple(range(1, len(default) + 1)), what)
-        return np.concatenate([given, default[len(given):]])
+        value = np.concatenate([given, default[len(given):]])
+        if key.startswith("solref") and (value[0] > 0) != (value[1] > 0):
+            raise self.error(f"{what}: attribute {key!r} expected both numbers > 0 (time constant, damping ratio) "
+                             f"or both ≤ 0 (−stiffness, −damping), got {attrs[key]!r} (MuJoCo warns of a mixed "
+                             f"format and takes its default)")
+        return value
+
+    def _integer(self, attrs: dict, key: str, default: int, what: str) -> int:
+        """Attribute ``key`` as MuJoCo reads an int: digits only (not 1.0, nor 1e3)."""
+        text = attrs.get(key, str(default)).strip()
+        if not text.lstrip("+-").isdigit():
+            raise self.error(f"{what}: attribute {key!r} expected an integer, got {attrs[key]!r}")
+        return int(text)
 
     def _joint_softness(self, spec: LinkSpec, attrs: dict, what: str):
         """The joint's limit and friction-loss solref and solimp (LinkSpec.limit_sol,

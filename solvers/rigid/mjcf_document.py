@@ -6,6 +6,7 @@ over its class, numbers and frames (every orientation form) read with named erro
 and material assets, and the record of what is ignored (said in one warning).
 """
 import os
+from copy import deepcopy as copy_element
 
 import numpy as np
 from lxml import etree
@@ -29,8 +30,10 @@ _ACTUATORS = ("general", "motor", "position", "velocity", "intvelocity", "damper
 MJ_DEFAULTS = {"condim": [3.0], "margin": [0.0], "gap": [0.0], "priority": [0.0], "solmix": [1.0],
                "solref": [0.02, 1.0], "solimp": [0.9, 0.95, 0.001, 0.5, 2.0]}
 
-# array attributes MuJoCo reads in part, the rest left as its default class has them
-_PARTIAL = ("friction", "solref", "solimp", "solreflimit", "solimplimit", "solreffriction", "solimpfriction")
+# array attributes MuJoCo reads in part, the rest left as its default class has them (for an
+# actuator, the <general> class's)
+_PARTIAL = ("friction", "solref", "solimp", "solreflimit", "solimplimit", "solreffriction", "solimpfriction",
+            "gainprm", "biasprm")
 
 
 class MJCFDocument:
@@ -62,6 +65,8 @@ class MJCFDocument:
         if len(self.eulerseq) != 3 or any(c not in "xyzXYZ" for c in self.eulerseq):
             raise self.error(f"<compiler eulerseq> expected 3 of x, y, z, X, Y, Z, got {self.eulerseq!r}")
         self.inertiafromgeom = compiler.get("inertiafromgeom", "auto")
+        for replicate in reversed(list(root.iter("replicate"))):  # (the innermost first: its suffix comes first)
+            self._replicate(replicate)
         folder = os.path.dirname(os.path.abspath(path))
         self.meshdir_given = compiler.get("meshdir", compiler.get("assetdir", ""))
         self.meshdir = os.path.join(folder, self.meshdir_given)
@@ -104,6 +109,43 @@ class MJCFDocument:
             for k, element in enumerate(child):
                 parent.insert(at + k, element)
         return root
+
+    def _replicate(self, replicate):
+        """A <replicate count offset euler sep childclass> as ``count`` <frame>s (with its childclass)
+        holding copies of its children, as MuJoCo's reader attaches them: copy i turned by the
+        orientation of i·euler (the compiler's angle unit and eulerseq), placed at the sum of the
+        offsets each turned by the copies before it, every name in it suffixed by sep then i in as
+        many digits as count has; an element of <equality>, <actuator>, <contact>, <tendon> or
+        <sensor> that names something inside is copied per copy, its names suffixed alike."""
+        what = "<replicate>"
+        unknown = sorted(set(replicate.attrib) - {"count", "offset", "euler", "sep", "childclass"})
+        if unknown:
+            raise self.error(f"{what}: attributes expected among count, offset, euler, sep, childclass, got {unknown}")
+        count = replicate.get("count", "")
+        if not count.strip().isdigit() or int(count) < 1:
+            raise self.error(f"{what}: attribute 'count' expected a positive integer, got {count!r}")
+        count = int(count)
+        offset = self.numbers(replicate.attrib, "offset", 3, what, default=np.zeros(3))
+        euler = self.numbers(replicate.attrib, "euler", 3, what, default=np.zeros(3))
+        inside = {e.get("name") for e in replicate.iter() if e is not replicate and e.get("name")}
+        suffixes = [replicate.get("sep", "") + str(i).zfill(len(str(count))) for i in range(count)]
+        parent, at, pos = replicate.getparent(), replicate.getparent().index(replicate), np.zeros(3)
+        parent.remove(replicate)
+        for i, suffix in enumerate(suffixes):
+            _, quat = self.frame({"euler": " ".join(repr(float(i * a)) for a in euler)}, what)
+            frame = etree.Element("frame", pos=" ".join(map(repr, pos.tolist())), quat=" ".join(map(repr, quat.tolist())))
+            if "childclass" in replicate.attrib:
+                frame.set("childclass", replicate.get("childclass"))
+            for child in replicate:
+                frame.append(_renamed(child, set(), suffix, every_name=True))
+            parent.insert(at + i, frame)
+            pos = pos + shapes.quat_to_mat(quat) @ offset  # (MuJoCo's frameaccum)
+        for section in (s for s in self.root if s.tag in ("equality", "actuator", "contact", "tendon", "sensor")):
+            for element in [e for e in section if _names_any(e, inside)]:
+                at = section.index(element)
+                section.remove(element)
+                for i, suffix in enumerate(suffixes):
+                    section.insert(at + i, _renamed(element, inside, suffix))
 
     def _note_ignored_sections(self):
         """Note the sections that act on the model and are not read; refuse equalities other
@@ -252,6 +294,23 @@ class MJCFDocument:
         if value != int(value) or value < 0:
             raise self.error(f"{what}: attribute {key!r} expected a non-negative integer, got {attrs[key]!r}")
         return int(value)
+
+
+def _names_any(element, names: set) -> bool:
+    """Whether an attribute of ``element`` or of an element inside it (but a name or class) is one
+    of ``names``."""
+    return any(v in names for e in element.iter() for k, v in e.attrib.items() if k not in ("name", "class"))
+
+
+def _renamed(element, names: set, suffix: str, every_name: bool = False):
+    """A copy of ``element`` whose attributes naming one of ``names`` (its own names too, or with
+    ``every_name`` every name attribute inside) end in ``suffix``."""
+    copy = copy_element(element)
+    for e in copy.iter():
+        for key, value in list(e.attrib.items()):
+            if (key == "name" and (every_name or names)) or (key != "class" and value in names):
+                e.set(key, value + suffix)
+    return copy
 
 
 def over(below: dict, above: dict) -> dict:
