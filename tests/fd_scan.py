@@ -47,3 +47,15 @@ def repeated_gradients(scene, robot, velocity, rollout):
         rollout().backward()
         grads.append(start.grad)
     return grads
+
+
+def pose_loss(scene, robot, weights, steps, start):
+    """loss(x): ``start(x)`` after scene.reset() (it sets the rollout's input), ``steps`` steps,
+    then every link's pose (position, quaternion) weighted by ``weights`` (n_links, 7) and summed."""
+    def loss(x):
+        scene.reset()
+        start(x)
+        for _ in range(steps):
+            scene.step()
+        return (torch.cat([robot.get_links_pos(), robot.get_links_quat()], -1) * weights).sum()
+    return loss

@@ -21,7 +21,7 @@ from genesis_lite.solvers.core import InvalidInputError
 from genesis_lite.solvers.rigid.data import SERIAL_LINK_ENVS
 from genesis_lite.utils.rotations import euler_xyz_to_quat, quat_to_euler_xyz, quat_to_mat
 from tests.conftest import asset
-from tests.fd_scan import assert_converged, directional_errors
+from tests.fd_scan import assert_converged, directional_errors, pose_loss
 from tests.test_mjcf import _lockstep, _pair, _write
 
 BALLS = asset("mjcf", "balls.xml")
@@ -87,13 +87,7 @@ def test_a_turn_stored_past_half_a_turn_reads_as_mujocos(f64):
     assert _lockstep(m, d, scene, robot, 200, lambda: limits.append(d.nl)) < 1e-10
     assert limits[0] >= 1
     weights = torch.tensor(np.random.default_rng(8).normal(size=(robot.n_links, 7)))
-
-    def loss(x):
-        scene.reset()
-        robot.set_qpos(x)
-        for _ in range(100):
-            scene.step()
-        return (torch.cat([robot.get_links_pos(), robot.get_links_quat()], -1) * weights).sum()
+    loss = pose_loss(scene, robot, weights, 100, robot.set_qpos)
 
     for seed in range(2):
         assert_converged(directional_errors(loss, qpos, seed), f"w < 0, direction {seed}")

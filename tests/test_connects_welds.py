@@ -21,7 +21,7 @@ from genesis_lite.solvers.rigid import contact
 from genesis_lite.solvers.rigid.data import SERIAL_LINK_ENVS
 from genesis_lite.utils.rotations import quat_to_mat
 from tests.conftest import asset
-from tests.fd_scan import assert_converged, directional_errors, repeated_gradients
+from tests.fd_scan import assert_converged, directional_errors, pose_loss, repeated_gradients
 from tests.test_mjcf import _lockstep, _pair
 
 FOURBAR, CONNECTS, WELDS = (asset("mjcf", name) for name in ("fourbar.xml", "connects.xml", "welds.xml"))
@@ -266,14 +266,7 @@ def test_gradients_through_soft_equalities_match_finite_differences(f64, tmp_pat
     scene.build()
     rng = np.random.default_rng(4)
     start, weights = torch.tensor(rng.normal(0.0, 1.0, robot.n_dofs)), torch.tensor(rng.normal(size=(robot.n_links, 7)))
-
-    def loss(velocity):
-        scene.reset()
-        robot.set_dofs_velocity(velocity)
-        for _ in range(150):
-            scene.step()
-        return (torch.cat([robot.get_links_pos(), robot.get_links_quat()], -1) * weights).sum()
-
+    loss = pose_loss(scene, robot, weights, 150, robot.set_dofs_velocity)
     assert_converged(directional_errors(loss, start), f"soft equalities of {path}")
 
 
