@@ -424,6 +424,9 @@ LINK = '<geom type="sphere" size="0.1"/>'
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<replicate count="0"/>', "<mujoco> holds sections"),
     (f'<replicate count="2.5"><body name="b">{LINK}</body></replicate>', "",
      "<replicate>: attribute 'count' expected a positive integer, got '2.5'"),
+    (f'<body name="base">{LINK}</body><replicate count="3"><body name="b"><freejoint/>{LINK}</body></replicate>',
+     '<equality><connect body1="b" body2="base" anchor="0 0 0"/></equality>',
+     "<equality><connect name=None>: names ['b'] inside a <replicate> and ['base'] outside it"),
     (f'<body name="b"><joint name="j"/><geom type="sphere" size="0.1" solimp="0.9 0.95 0.001 0.5 2 3"/></body>', "",
      "attribute 'solimp' expected 1 or 2 or 3 or 4 or 5 finite numbers"),
 ])
@@ -623,6 +626,20 @@ def test_partial_arrays_end_as_their_default_classes_as_mujocos(f64, tmp_path):
     mine = _mujoco_geoms(m, scene, robot)
     np.testing.assert_array_equal(scene.sim.inputs(scene.rigid_solver)["solimp"][0].reshape(-1, 5).numpy(),
                                   m.geom_solimp[mine])
+
+
+def test_a_replicated_name_is_resolved_against_its_own_kind(f64, tmp_path):
+    """A servo on a hinge named like a replicated body drives that hinge, once (MuJoCo resolves a
+    joint name against joints only)."""
+    path = _write(tmp_path, f'<body name="base"><joint name="arm"/>{LINK}</body>'
+                            f'<replicate count="3" offset="0.3 0 0"><body name="arm"><freejoint/>{LINK}</body></replicate>',
+                  '<actuator><position name="servo" joint="arm" kp="7"/></actuator>')
+    m = mujoco.MjModel.from_xml_path(path)
+    scene = gs.Scene()
+    robot = scene.add_entity(gs.morphs.MJCF(file=path))
+    scene.build()
+    kp = robot.get_dofs_kp().numpy()
+    assert m.nu == 1 and robot.n_dofs == 1 + 3 * 6 and kp[0] == 7.0 and (kp[1:] != 7.0).all()
 
 
 def test_replicate_expands_as_mujocos_reader(f64):

@@ -66,7 +66,7 @@ move bodies and geoms unread (``<composite>``, ``<flexcomp>``…; ``<frame>`` is
 bodies and geoms, and its childclass is theirs; so is ``<replicate>``, as copies in frames:
 MJCFDocument), a solref of mixed form (one number > 0, the other not: MuJoCo warns and takes its
 default), a plane on a moving body (as MuJoCo's compiler). Ignored with one warning
-naming them: tendons and what acts on them, ``<contact><pair>``, ``<option>`` (the scene's
+naming them: tendons and what acts on them, ``<contact><pair>``, ``<keyframe>``, ``<option>`` (the scene's
 options rule), and attributes that tune MuJoCo's solver, actuator dynamics or the compiler's mass
 bounds (a geom's margin and gap, dampratio, timeconst, boundmass…) unless they hold MuJoCo's
 defaults.

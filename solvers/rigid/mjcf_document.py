@@ -30,6 +30,11 @@ _ACTUATORS = ("general", "motor", "position", "velocity", "intvelocity", "damper
 MJ_DEFAULTS = {"condim": [3.0], "margin": [0.0], "gap": [0.0], "priority": [0.0], "solmix": [1.0],
                "solref": [0.02, 1.0], "solimp": [0.9, 0.95, 0.001, 0.5, 2.0]}
 
+# the attributes of <equality>, <actuator> and <contact> elements that name a body, joint, site or
+# geom: the kind each is resolved against (a <replicate>'s copies are named per kind)
+_REFERS = {"body1": "body", "body2": "body", "body": "body", "site1": "site", "site2": "site", "site": "site",
+           "refsite": "site", "joint1": "joint", "joint2": "joint", "joint": "joint", "jointinparent": "joint",
+           "geom1": "geom", "geom2": "geom"}
 # array attributes MuJoCo reads in part, the rest left as its default class has them (for an
 # actuator, the <general> class's)
 _PARTIAL = ("friction", "solref", "solimp", "solreflimit", "solimplimit", "solreffriction", "solimpfriction",
@@ -115,8 +120,7 @@ class MJCFDocument:
         holding copies of its children, as MuJoCo's reader attaches them: copy i turned by the
         orientation of i·euler (the compiler's angle unit and eulerseq), placed at the sum of the
         offsets each turned by the copies before it, every name in it suffixed by sep then i in as
-        many digits as count has; an element of <equality>, <actuator>, <contact>, <tendon> or
-        <sensor> that names something inside is copied per copy, its names suffixed alike."""
+        many digits as count has; then the elements that name something inside (_replicate_refs)."""
         what = "<replicate>"
         unknown = sorted(set(replicate.attrib) - {"count", "offset", "euler", "sep", "childclass"})
         if unknown:
@@ -127,7 +131,6 @@ class MJCFDocument:
         count = int(count)
         offset = self.numbers(replicate.attrib, "offset", 3, what, default=np.zeros(3))
         euler = self.numbers(replicate.attrib, "euler", 3, what, default=np.zeros(3))
-        inside = {e.get("name") for e in replicate.iter() if e is not replicate and e.get("name")}
         suffixes = [replicate.get("sep", "") + str(i).zfill(len(str(count))) for i in range(count)]
         parent, at, pos = replicate.getparent(), replicate.getparent().index(replicate), np.zeros(3)
         parent.remove(replicate)
@@ -137,20 +140,50 @@ class MJCFDocument:
             if "childclass" in replicate.attrib:
                 frame.set("childclass", replicate.get("childclass"))
             for child in replicate:
-                frame.append(_renamed(child, set(), suffix, every_name=True))
+                copy = copy_element(child)
+                for element in (e for e in copy.iter() if "name" in e.attrib):
+                    element.set("name", element.get("name") + suffix)
+                frame.append(copy)
             parent.insert(at + i, frame)
             pos = pos + shapes.quat_to_mat(quat) @ offset  # (MuJoCo's frameaccum)
-        for section in (s for s in self.root if s.tag in ("equality", "actuator", "contact", "tendon", "sensor")):
-            for element in [e for e in section if _names_any(e, inside)]:
+        self._replicate_refs(replicate, suffixes)
+
+    def _replicate_refs(self, replicate, suffixes: list):
+        """Copy per replica (``suffixes``) each <equality>, <actuator> and <contact> element that
+        names a body, joint, site or geom inside ``replicate`` (each name against its own kind, as
+        MuJoCo resolves them), those names and its own suffixed alike (MuJoCo's self-attach). An
+        equality or actuator naming things both inside and outside (but the world) is refused:
+        MuJoCo drops it from the copies without a word. An exclusion's names outside stay as they
+        are (MuJoCo's)."""
+        inside = {kind: set() for kind in ("body", "joint", "site", "geom")}
+        for element in replicate.iter():
+            kind = "joint" if element.tag == "freejoint" else element.tag
+            if kind in inside and element.get("name"):
+                inside[kind].add(element.get("name"))
+        for section in (s for s in self.root if s.tag in ("equality", "actuator", "contact")):
+            for element in list(section):
+                refs = {key: _REFERS[key] for key in element.attrib if key in _REFERS}
+                ours = [key for key, kind in refs.items() if element.get(key) in inside[kind]]
+                if not ours:
+                    continue
+                others = [key for key in refs if key not in ours and element.get(key) != "world"]
+                if others and section.tag != "contact":
+                    raise self.error(f"<{section.tag}><{element.tag} name={element.get('name')!r}>: names "
+                                     f"{[element.get(k) for k in ours]} inside a <replicate> and "
+                                     f"{[element.get(k) for k in others]} outside it (MuJoCo leaves such an "
+                                     f"element out without a word); expected all inside, or the world")
                 at = section.index(element)
                 section.remove(element)
                 for i, suffix in enumerate(suffixes):
-                    section.insert(at + i, _renamed(element, inside, suffix))
+                    copy = copy_element(element)
+                    for key in ours + (["name"] if "name" in copy.attrib else []):
+                        copy.set(key, copy.get(key) + suffix)
+                    section.insert(at + i, copy)
 
     def _note_ignored_sections(self):
         """Note the sections that act on the model and are not read; refuse equalities other
         than joints', connects and welds."""
-        for tag in ("tendon", "option", "sensor"):
+        for tag in ("tendon", "option", "sensor", "keyframe"):
             if self.root.find(tag) is not None and len(self.root.find(tag)) + len(self.root.find(tag).attrib):
                 self.ignored.add(f"<{tag}>" + (" (the scene's SimOptions and RigidOptions rule)" if tag == "option"
                                                else ""))
@@ -294,23 +327,6 @@ class MJCFDocument:
         if value != int(value) or value < 0:
             raise self.error(f"{what}: attribute {key!r} expected a non-negative integer, got {attrs[key]!r}")
         return int(value)
-
-
-def _names_any(element, names: set) -> bool:
-    """Whether an attribute of ``element`` or of an element inside it (but a name or class) is one
-    of ``names``."""
-    return any(v in names for e in element.iter() for k, v in e.attrib.items() if k not in ("name", "class"))
-
-
-def _renamed(element, names: set, suffix: str, every_name: bool = False):
-    """A copy of ``element`` whose attributes naming one of ``names`` (its own names too, or with
-    ``every_name`` every name attribute inside) end in ``suffix``."""
-    copy = copy_element(element)
-    for e in copy.iter():
-        for key, value in list(e.attrib.items()):
-            if (key == "name" and (every_name or names)) or (key != "class" and value in names):
-                e.set(key, value + suffix)
-    return copy
 
 
 def over(below: dict, above: dict) -> dict:
