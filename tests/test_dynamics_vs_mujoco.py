@@ -105,11 +105,12 @@ def test_kuka_trajectory_matches_mujoco_f32(f32):
 
 def _rows_scale(robot):
     """Our (body_invweight0 (1, L) translational, rotational, dof_invweight0 (1, D)) at the build's
-    masses, armature 0."""
+    masses, armature 0 (these robots have no tendon)."""
     solver = robot._solver
     mass = solver.default_inputs["mass"]
     solver.invweight_basis.rows = 6  # (the rotational half too: a scene without welds leaves it out)
-    return solver.invweight_basis(mass, torch.zeros((1, robot.n_dofs), dtype=mass.dtype), solver.check_positive_definite)
+    return solver.invweight_basis(mass, torch.zeros((1, robot.n_dofs), dtype=mass.dtype),
+                                  solver.check_positive_definite)[:3]
 
 
 @pytest.mark.parametrize("name", list(ROBOTS))
@@ -164,7 +165,7 @@ def test_rows_scale_per_tree_equals_the_dense_formula_f64(f64):
     mass = torch.tensor(m.link_mass0 * rng.uniform(0.5, 2.0, m.n_links))[None]
     armature = torch.tensor(rng.uniform(0.0, 0.1, m.n_dofs))[None]
     basis.rows = 6  # (the rotational half too: a scene without welds leaves it out)
-    invweight_t, invweight_r, invweight_dof = basis(mass, armature, solver.check_positive_definite)
+    invweight_t, invweight_r, invweight_dof, _ = basis(mass, armature, solver.check_positive_definite)
 
     jac = torch.empty((1, m.n_links, 6, m.n_dofs), dtype=torch.float64)
     solver.kernels.read_com_jacobians(jac)

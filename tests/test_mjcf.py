@@ -21,11 +21,12 @@ import genesis_lite as gs
 from genesis_lite.solvers.core import AssetError, InvalidInputError
 from genesis_lite.solvers.rigid import contact
 from tests.conftest import asset
-from tests.fd_scan import assert_converged, directional_errors
+from tests.fd_scan import assert_converged, directional_errors, pose_loss
 
 ARM, CRAWLER, TREES = asset("mjcf", "arm.xml"), asset("mjcf", "crawler.xml"), asset("mjcf", "trees.xml")
 WORLDBODY, CONTACT_PARAMS = asset("mjcf", "worldbody.xml"), asset("mjcf", "contact_params.xml")
 JOINT_SOFTNESS, REPLICATE = asset("mjcf", "joint_softness.xml"), asset("mjcf", "replicate.xml")
+TENDONS = asset("mjcf", "tendons.xml")
 
 
 def _pair(path, cone="pyramidal", integrator="implicitfast", requires_grad=False, exclude_ground_plane=False,
@@ -273,6 +274,50 @@ def test_gradients_through_soft_joint_limits_match_finite_differences(f64):
         assert_converged(directional_errors(loss, start, seed), f"soft joint limits, direction {seed}")
 
 
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_fixed_tendon_limits_match_mujoco(f64, cone):
+    """assets/mjcf/tendons.xml: limited fixed tendons (two joints, three with a slide and their own
+    softness, two trees', a <default><tendon>) hold their length Σ coef·q in range by limit rows
+    whose scale is MuJoCo's tendon_invweight0 (J M⁻¹ Jᵀ, here from the mass and armature inputs);
+    1.5 s from random velocities beside MuJoCo 4, equal to round-off (measured 7.6e-13)."""
+    m, d, scene, robot = _pair(TENDONS, cone, integrator="euler")
+    mujoco.mj_setConst(m, mujoco.MjData(m))
+    limited = np.flatnonzero(m.tendon_limited)
+    np.testing.assert_allclose(scene.sim.inputs(scene.rigid_solver)["invweight_ten"][0].numpy(),
+                               m.tendon_invweight0[limited], rtol=1e-12)
+    velocity = np.random.default_rng(0).normal(0.0, 3.0, m.nv)
+    velocity[:2] = 4.0, -4.0  # (hip and knee: the hamstring stretches)
+    d.qvel[:] = velocity
+    robot.set_dofs_velocity(torch.tensor(velocity))
+    met = set()
+    assert _lockstep(m, d, scene, robot, 750, lambda: met.update(d.efc_id[:d.nefc][d.efc_type[:d.nefc] == 4])) < 1e-10
+    assert met == set(limited.tolist()) and len(met) == 3  # (every limited tendon met its limit)
+
+
+@pytest.mark.parametrize("what", ["velocity", "mass"])
+def test_gradients_through_tendon_limits_match_finite_differences(f64, what):
+    """tendons.xml swung into its tendons' limits for 0.3 s: the gradient of every link's pose w.r.t.
+    the initial velocities and the links' masses (through the rows' scale, J M⁻¹ Jᵀ) against
+    central differences."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, requires_grad=True),
+                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True, tolerance=1e-14))
+    robot = scene.add_entity(gs.morphs.MJCF(file=TENDONS))
+    scene.build()
+    rng = np.random.default_rng(1)
+    velocity, weights = torch.tensor(rng.normal(0.0, 3.0, robot.n_dofs)), torch.tensor(rng.normal(size=(robot.n_links, 7)))
+    heavy = [k for k, link in enumerate(robot.links) if float(link.get_mass()) > 0]
+    if what == "velocity":
+        start, apply = velocity, robot.set_dofs_velocity
+    else:
+        start = robot.get_links_mass().detach().clone()[heavy]
+
+        def apply(mass):
+            robot.set_links_mass(mass, links_idx_local=heavy)
+            robot.set_dofs_velocity(velocity)
+    loss = pose_loss(scene, robot, weights, 150, apply)
+    assert_converged(directional_errors(loss, start), f"tendon limits: {what}")
+
+
 def test_exclude_ground_plane_leaves_out_the_worldbodys_planes(f64):
     """Genesis's option: the floor is gone (the pendulum swings through it), the ramp and the bar
     stay; against MuJoCo with the floor colliding with nothing."""
@@ -422,6 +467,15 @@ LINK = '<geom type="sphere" size="0.1"/>'
     (f'<body name="b"><joint name="j" range="-1 1" solreflimit="-800 10"/>{LINK}</body>', "",
      "joint 'j': attribute 'solreflimit' expected both numbers > 0"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<replicate count="0"/>', "<mujoco> holds sections"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>',
+     '<tendon><fixed range="0 1"><joint joint="j" coef="1"/><joint joint="j" coef="2"/></fixed></tendon>',
+     "<tendon><fixed name=None>: joints expected once each, got ['j'] repeated"),
+    (f'<body name="b"><joint name="j"/>{LINK}<body name="c"><joint name="k"/>{LINK}<body name="e"><joint name="l"/>'
+     f'{LINK}<body name="f"><joint name="n"/>{LINK}</body></body></body></body>',
+     '<tendon><fixed range="0 1">' + "".join(f'<joint joint="{j}" coef="1"/>' for j in "jkln") + '</fixed></tendon>',
+     "a limited fixed tendon expected 1 to 3 joints (more are not supported yet), got 4"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<tendon><fixed range="0 1"><joint joint="x"/></fixed></tendon>',
+     "expected <joint joint coef> children naming hinge or slide joints of the file, got <joint joint='x'>"),
     (f'<replicate count="2.5"><body name="b">{LINK}</body></replicate>', "",
      "<replicate>: attribute 'count' expected a positive integer, got '2.5'"),
     (f'<body name="base">{LINK}</body><replicate count="3"><body name="b"><freejoint/>{LINK}</body></replicate>',
@@ -449,7 +503,7 @@ def test_what_is_ignored_is_said_once(f64, tmp_path, caplog):
         gs.Scene().add_entity(gs.morphs.MJCF(file=path))
     said = [r.getMessage() for r in caplog.records if "ignored" in r.getMessage()]
     assert len(said) == 1
-    for part in ("<option>", "<tendon>", "<joint margin>", "<actuator><motor"):
+    for part in ("<option>", "<joint margin>", "<actuator><motor"):  # (an unlimited fixed tendon does nothing)
         assert part in said[0]
     assert "condim" not in said[0] and "solref" not in said[0]  # MuJoCo's defaults: nothing is lost
 

@@ -26,7 +26,7 @@ def without_pairs(model, keep=None):
     return replace(model, **{name: getattr(model, name)[keep] for name in PAIR_ARRAYS})
 
 
-SOFTNESS_TABLES = ("dof_limit_sol", "dof_frictionloss_sol", "eq_sol", "body_eq_sol")
+SOFTNESS_TABLES = ("dof_limit_sol", "dof_frictionloss_sol", "eq_sol", "body_eq_sol", "ten_limit_sol")
 
 
 def with_row_softness(model, timeconst):
@@ -59,16 +59,17 @@ def _pair_budget(model, k):
     return BUDGET[int(model.geom_type[model.pair_geom1[k]]), int(model.geom_type[model.pair_geom2[k]])]
 
 
-def limited_dofs(model, options):
-    """Joint-limit rows a scene may make at once, limits on: one per scalar joint with a finite
-    bound (at most one of its two is violated), one per ball joint with a cone limit (its first
-    dof's upper bound)."""
+def limit_rows(model, options):
+    """Limit rows a scene may make at once, limits on: one per scalar joint with a finite bound (at
+    most one of its two is violated), one per ball joint with a cone limit (its first dof's upper
+    bound), one per limited fixed tendon."""
     if not options.enable_joint_limit:
         return 0
     finite = np.isfinite(model.dof_lower) | np.isfinite(model.dof_upper)
     first_of_ball = (model.link_jtype[model.dof_link] == BALL) & (model.link_dof0[model.dof_link] == np.arange(
         model.n_dofs))
-    return int((finite & (model.dof_q >= 0)).sum() + (np.isfinite(model.dof_upper) & first_of_ball).sum())
+    return int((finite & (model.dof_q >= 0)).sum() + (np.isfinite(model.dof_upper) & first_of_ball).sum()
+               + model.n_tendons)
 
 
 def worst_case_contacts(model):
@@ -93,7 +94,7 @@ def capacity(model, options):
     condim = int(model.pair_condim.max()) if len(model.pair_condim) else 1
     rows_per_contact = condim if options.friction_cone == "elliptic" or condim == 1 else 2 * (condim - 1)
     joint_rows = (model.n_eq + 3 * model.n_body_eq + 3 * model.n_weld + 6 * options.max_dynamic_constraints
-                  + limited_dofs(model, options) + model.n_dofs)
+                  + limit_rows(model, options) + model.n_dofs)
     return contacts, contacts * rows_per_contact + joint_rows
 
 
@@ -109,6 +110,8 @@ class InvweightBasis:
       condim ≤ 3; zero in a scene without welds nor run-time weld slots); zero for links welded to the world;
     - invweight_dof per dof: the diagonal of M⁻¹, averaged over a free joint's three translations
       and its three rotations, and over a ball joint's three rotations;
+    - invweight_ten per limited fixed tendon: J M⁻¹ Jᵀ, J its coefficients on its dofs (MuJoCo's
+      tendon_invweight0, never simplified);
     - but on a sliding leaf (``sliding_leaves``: MuJoCo's body_simple = 2), 1 / mass for
       invweight_t and invweight_dof, and 0 for invweight_r, as MuJoCo takes them there (armature
       left out).
@@ -145,28 +148,34 @@ class InvweightBasis:
             self.groups.append([torch.as_tensor(a, device=runtime.device) for a in (links, dofs)]
                                + [torch.as_tensor(a, dtype=torch.float64, device=runtime.device)
                                   for a in (K, J * moving[:, :, None, None], average)])
+        ten_J = np.zeros((m.n_tendons, m.n_dofs))
+        for t in range(m.n_tendons):
+            span = slice(m.ten_adr[t], m.ten_adr[t + 1])
+            ten_J[t, m.ten_dof[span]] = m.ten_coef[span]
+        self.ten_J = torch.as_tensor(ten_J, device=runtime.device)
         simple = sliding_leaves(m)
         self.simple_links = torch.as_tensor(np.flatnonzero(simple), device=runtime.device)
         self.simple_dofs = torch.as_tensor(np.flatnonzero(simple[m.dof_link]), device=runtime.device)
         self.simple_dof_links = torch.as_tensor(m.dof_link[self.simple_dofs.cpu().numpy()], device=runtime.device)
 
     def __call__(self, mass, armature, check_positive_definite):
-        """(invweight_t (B, L), invweight_r (B, L), invweight_dof (B, D)) in mass's dtype, from mass (B, L) kg and armature
-        (B, D); a singular M goes to check_positive_definite (RigidSolver's: it names the link).
+        """(invweight_t (B, L), invweight_r (B, L), invweight_dof (B, D), invweight_ten (B, T)) in mass's dtype, from mass
+        (B, L) kg and armature (B, D); a singular M goes to check_positive_definite (RigidSolver's: it names the link).
         Computed in float64, one env at a time (trees batched, the same batches in every env):
         batched linear algebra over envs may sum in another order for another batch size, and a
         batched env must equal a single-env scene bit for bit."""
         if mass.shape[0] == 0 or mass.shape[1] == 0 or armature.shape[1] == 0:  # (no env, link or dof)
-            return torch.zeros_like(mass), torch.zeros_like(mass), torch.zeros_like(armature)
+            return (torch.zeros_like(mass), torch.zeros_like(mass), torch.zeros_like(armature),
+                    mass.new_zeros((mass.shape[0], len(self.ten_J))))
         rows = [self._one_env(mass[e].double(), armature[e].double(), check_positive_definite)
                 for e in range(mass.shape[0])]
-        return tuple(torch.stack([r[k] for r in rows]).to(mass.dtype) for k in range(3))
+        return tuple(torch.stack([r[k] for r in rows]).to(mass.dtype) for k in range(4))
 
     def _one_env(self, mass, armature, check_positive_definite):
-        """(L,), (L,), (D,) for one env's mass (L,) and armature (D,); a singular M (a mass set to
-        zero) is an InvalidInputError naming the link."""
+        """(L,), (L,), (D,), (T,) for one env's mass (L,) and armature (D,); a singular M (a mass set
+        to zero) is an InvalidInputError naming the link."""
         translational, rotational = mass.new_zeros(self.n_links), mass.new_zeros(self.n_links)
-        per_dof = mass.new_zeros(self.n_dofs)
+        per_dof, per_tendon = mass.new_zeros(self.n_dofs), mass.new_zeros(len(self.ten_J))
         for links, dofs, K, J, average in self.groups:
             matrix = (mass[links][:, :, None, None] * K).sum(1) + torch.diag_embed(armature[dofs])
             inverse, info = torch.linalg.inv_ex(matrix)
@@ -180,12 +189,15 @@ class InvweightBasis:
             per_dof = per_dof.index_put((dofs.flatten(),),
                                         torch.einsum("ti,tij->tj", torch.diagonal(inverse, dim1=1, dim2=2),
                                                      average).flatten())
+            if len(self.ten_J):  # (M block-diagonal: each tree's share of J M⁻¹ Jᵀ)
+                on_trees = self.ten_J[:, dofs]
+                per_tendon = per_tendon + torch.einsum("kti,tij,ktj->k", on_trees, inverse, on_trees)
         if len(self.simple_links):
             inverse_mass = 1.0 / mass.clamp(min=MINVAL)
             translational = translational.index_put((self.simple_links,), inverse_mass[self.simple_links])
             rotational = rotational.index_put((self.simple_links,), mass.new_zeros(len(self.simple_links)))
             per_dof = per_dof.index_put((self.simple_dofs,), inverse_mass[self.simple_dof_links])
-        return translational, rotational, per_dof
+        return translational, rotational, per_dof, per_tendon
 
 
 def sliding_leaves(model):

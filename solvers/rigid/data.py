@@ -67,6 +67,7 @@ INPUTS = {
     "invweight_t": ("L", True),
     "invweight_r": ("L", True),  # rotation, 1/(kg·m²): a weld's turn rows
     "invweight_dof": ("D", True),
+    "invweight_ten": ("T", True),  # MuJoCo's tendon_invweight0 per limited fixed tendon: J M⁻¹ Jᵀ at q0
     "force_lo": ("D", True),    # N·m or N: the actuator force's bounds
     "force_hi": ("D", True),
     # welds made at run time (RigidOptions.max_dynamic_constraints slots, DW): how many are on, then
@@ -100,6 +101,9 @@ MODEL = {
     # connects and welds (points and frames of two links held together; RigidModel says what they hold)
     "body_eq_link": ("i", "K2"), "body_eq_anchor": ("v3", "K2"), "weld_turn": ("v4", "WD2"),
     "weld_torquescale": ("f", "WD"), "body_eq_sol": ("f", "K7"),
+    # limited fixed tendons (RigidModel says what they hold)
+    "ten_adr": ("i", "T1"), "ten_dof": ("i", "TN"), "ten_coef": ("f", "TN"), "ten_lower": ("f", "T"),
+    "ten_upper": ("f", "T"), "ten_limit_sol": ("f", "T7"),
     # substep h (s), the time constant (s) of the joint rows (equality, limit, friction loss), impratio, solver
     # tolerance and line-search tolerance: runtime values like everything else (CONSTS names them)
     "consts": ("f", len(CONSTS)),
@@ -177,8 +181,8 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
 # colliders_due a mask of the collider kernels the substep's near pairs need (collision/detect.py: KERNEL_BIT);
 # inexact_pair, inexact_env, inexact_substep: where the last inexact contact was (the backward's error names it);
 # capped a flag: a constraint solve stopped at its iteration limit before its tolerance.
-SIZES = ("B", "L", "D", "Q", "P", "E", "K", "WD", "DW", "S", "W", "GW", "limits", "nonfinite", "G", "N", "H", "C",
-         "R", "cone", "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged",
+SIZES = ("B", "L", "D", "Q", "P", "E", "K", "WD", "DW", "T", "TN", "S", "W", "GW", "limits", "nonfinite", "G", "N",
+         "H", "C", "R", "cone", "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged",
          "constrained", "colliders_due", "inexact_pair", "inexact_env", "inexact_substep", "wrench", "capped")
 HEADER = {name: k for k, name in enumerate(SIZES)}
 assert len(HEADER) == len(SIZES), "one slot a size"
@@ -188,10 +192,10 @@ assert [diff for _, diff in INPUTS.values()] == sorted((diff for _, diff in INPU
     "differentiable inputs come first"
 
 
-def input_width(name, n_links, n_dofs, n_geoms, n_dyn_welds):
-    width = INPUTS[name][0]
-    return {"L": n_links, "L6": 6 * n_links, "D": n_dofs, "G": n_geoms, "G2": 2 * n_geoms,
-            "G5": 5 * n_geoms, "DWW": 1 + DYN_WELD * n_dyn_welds}.get(width, width)
+def input_width(name, model, n_dyn_welds):
+    width, n_geoms = INPUTS[name][0], len(model.geom_type)
+    return {"L": model.n_links, "L6": 6 * model.n_links, "D": model.n_dofs, "G": n_geoms, "G2": 2 * n_geoms,
+            "G5": 5 * n_geoms, "T": model.n_tendons, "DWW": 1 + DYN_WELD * n_dyn_welds}.get(width, width)
 
 
 def _region_members(arena, grads):
@@ -256,9 +260,10 @@ def joint_row_columns(size):
 def body_eq_columns(size):
     """Where the connects' and welds' column lists start in efc_cols (D each: its rows' list; the
     run-time welds' after the model's): after the joint rows' slots (at most a row per joint
-    equality, three per connect, six per weld and per run-time weld slot, two per dof). K counts
+    equality, three per connect, six per weld and per run-time weld slot, two per dof, one per limited
+    tendon). K counts
     connects and welds, WD the welds, DW the run-time weld slots."""
-    rows = size["E"] + 3 * size["K"] + 3 * size["WD"] + 6 * size["DW"] + 2 * size["D"]
+    rows = size["E"] + 3 * size["K"] + 3 * size["WD"] + 6 * size["DW"] + 2 * size["D"] + size["T"]
     return joint_row_columns(size) + JOINT_ROW_SLOTS * rows
 
 
@@ -269,6 +274,7 @@ def _counts(size):
             "H": size["H"], "C": size["C"], "CF": FEATURE_SIZE * size["C"], "HI": size["HI"], "R": R, "RD": R * D,
             "CD": body_eq_columns(size) + (size["K"] + size["DW"]) * D, "DWW": 1 + DYN_WELD * size["DW"],
             "E": size["E"], "E2": 2 * size["E"], "E7": 7 * size["E"], "K2": 2 * size["K"], "K7": 7 * size["K"],
+            "T": size["T"], "T1": size["T"] + 1, "TN": size["TN"], "T7": 7 * size["T"],
             "WD": size["WD"], "WD2": 2 * size["WD"],
             "G2": 2 * size["G"], "G5": 5 * size["G"], "L6": 6 * size["L"], "D7": 7 * D, 1: 1,
             len(CONSTS): len(CONSTS),
@@ -295,13 +301,13 @@ class RigidData:
         # the same for the kernels of the constraint stage (SERIAL_SOLVE_WORK)
         self.solve_schedule = (self.schedule[0] and n_batch * max(1, model.n_dofs) <= SERIAL_SOLVE_WORK, on_cpu)
         n_geoms = len(model.geom_type)
-        self.widths = [input_width(name, model.n_links, model.n_dofs, n_geoms, settings["dyn_welds"])
-                       for name in INPUTS]
+        self.widths = [input_width(name, model, settings["dyn_welds"]) for name in INPUTS]
         self.input_total = sum(self.widths)
         self.grad_total = sum(w for w, (_, diff) in zip(self.widths, INPUTS.values()) if diff)
         self.grad_input_names = [n for n, (_, diff) in INPUTS.items() if diff] if requires_grad else []
         self.size = {"B": n_batch, "L": model.n_links, "D": model.n_dofs, "Q": model.n_qs, "P": len(model.pairs),
                      "E": model.n_eq, "K": model.n_body_eq, "WD": model.n_weld, "DW": settings["dyn_welds"],
+                     "T": model.n_tendons, "TN": len(model.ten_dof),
                      "S": substeps, "W": self.input_total, "GW": self.grad_total,
                      "limits": int(bool(settings["limits"])), "nonfinite": 0, "G": n_geoms,
                      "N": len(model.pair_geom1), "H": len(model.hull_vec), "C": settings["contacts"],
@@ -433,7 +439,7 @@ class RigidView:
         start = layout(size, hold=impl.expr_init)[0]
         self.n_batch, self.n_links, self.n_dofs, self.n_qs = size["B"], size["L"], size["D"], size["Q"]
         self.n_pairs, self.substeps, self.input_total, self.grad_total = size["P"], size["S"], size["W"], size["GW"]
-        self.n_eq, self.n_body_eq, self.n_weld = size["E"], size["K"], size["WD"]
+        self.n_eq, self.n_body_eq, self.n_weld, self.n_tendons = size["E"], size["K"], size["WD"], size["T"]
         self.n_connect, self.body_eqs = size["K"] - size["WD"], body_eqs  # (the connects come first)
         self.joint_columns, self.body_eq_columns = joint_row_columns(size), body_eq_columns(size)
         self.limits_enabled = size["limits"]

@@ -35,6 +35,9 @@ priority and solmix, which a pair combines as MuJoCo's mj_contactParam (GeomSpec
 MuJoCo sizes them) in the worldbody or a body welded to it; a geom with contype = conaffinity = 0
 only weighs and is drawn; a geom
 drawn where its group is 0-2 (MuJoCo's visible groups), coloured by its rgba or material.
+Fixed tendons (``<tendon><fixed>``, up to three hinge or slide joints): their limits (range,
+solreflimit, solimplimit; a ``<default><tendon>`` class), as MuJoCo's limit rows on the length Σ
+coef·q (LinkSpec.tendons).
 Joints: axis, pos, range (limited: MuJoCo's autolimits), damping, armature, frictionloss,
 solreflimit, solimplimit, solreffriction and solimpfriction (the softness of its limit and
 friction-loss rows),
@@ -66,7 +69,8 @@ move bodies and geoms unread (``<composite>``, ``<flexcomp>``…; ``<frame>`` is
 bodies and geoms, and its childclass is theirs; so is ``<replicate>``, as copies in frames:
 MJCFDocument), a solref of mixed form (one number > 0, the other not: MuJoCo warns and takes its
 default), a plane on a moving body (as MuJoCo's compiler). Ignored with one warning
-naming them: tendons and what acts on them, ``<contact><pair>``, ``<keyframe>``, ``<option>`` (the scene's
+naming them: spatial tendons, a fixed tendon's spring, damping and friction loss, what acts on a
+tendon, ``<contact><pair>``, ``<keyframe>``, ``<option>`` (the scene's
 options rule), and attributes that tune MuJoCo's solver, actuator dynamics or the compiler's mass
 bounds (a geom's margin and gap, dampratio, timeconst, boundmass…) unless they hold MuJoCo's
 defaults.
@@ -79,6 +83,7 @@ import numpy as np
 from ..core import InvalidInputError
 from . import shapes
 from .mjcf_document import IDENTITY, MJ_DEFAULTS, ORIENTATIONS, MJCFDocument, axis_angle, is_default, norm, over
+from .data import JOINT_ROW_SLOTS as TENDON_JOINTS
 from .spec import GeomSpec, LinkSpec, VisualSpec
 
 _logger = logging.getLogger("genesis_lite")
@@ -167,6 +172,7 @@ class _Reader(MJCFDocument):
         if repeated:  # (MuJoCo refuses them too)
             raise self.error(f"body names expected unique, got repeated names {repeated}")
         self._equalities(links)
+        self._tendons(links)
         self._actuators(links)
         self._exclusions(links)
         return links
@@ -665,6 +671,52 @@ class _Reader(MJCFDocument):
                         raise self.error(f"<contact><exclude body1={names[0]!r} body2={names[1]!r}>: expected bodies "
                                          f"of the file, got {name!r}")
                 by_body[names[0]].excluded += (names[1],)
+
+    def _tendons(self, links: list[LinkSpec]):
+        """<tendon><fixed>: a limited one (its length Σ coef·q of hinge and slide joints, range,
+        solreflimit, solimplimit) on the link of its first joint (LinkSpec.tendons); its other
+        attributes (stiffness, damping, frictionloss…) and spatial tendons are named in the warning
+        of what is ignored (an unlimited fixed tendon without them does nothing, as in MuJoCo)."""
+        by_joint = {link.joint_name: link for link in links if link.joint_type in ("revolute", "prismatic")}
+        for section in self.root.iter("tendon"):
+            for element in section:
+                attrs = self.attrs(element, "main")
+                what = f"<tendon><{element.tag} name={attrs.get('name')!r}>"
+                if element.tag != "fixed":
+                    self.ignored.add(f"<tendon><{element.tag}>")
+                    continue
+                for key, value in attrs.items():
+                    if key not in ("name", "class", "limited", "range", "solreflimit", "solimplimit", "group",
+                                   "rgba", "width", "material", "user") and not is_default(key, value):
+                        self.ignored.add(f"<tendon><fixed {key}>")
+                limited = attrs.get("limited", "auto")
+                if not (limited == "true" or (limited == "auto" and self.autolimits and "range" in attrs)):
+                    continue
+                lower, upper = self.numbers(attrs, "range", 2, what, default=[0.0, 0.0])
+                if not lower < upper:
+                    raise self.error(f"{what}: range expected lower < upper, got {attrs.get('range')!r}")
+                joints, coefs = self._tendon_joints(element, by_joint, what)
+                by_joint[joints[0]].tendons += ((tuple(joints), tuple(coefs), float(lower), float(upper),
+                                                 self._row_softness(attrs, "solreflimit", "solimplimit", what)),)
+
+    def _tendon_joints(self, element, by_joint: dict, what: str):
+        """(joint names, coefficients) of a fixed tendon's <joint joint coef> children (hinge or
+        slide joints of the file; at most TENDON_JOINTS of them)."""
+        joints, coefs = [], []
+        for child in element:
+            attrs = self.attrs(child, "main")
+            if child.tag != "joint" or attrs.get("joint") not in by_joint:
+                raise self.error(f"{what}: expected <joint joint coef> children naming hinge or slide joints of the "
+                                 f"file, got <{child.tag} joint={attrs.get('joint')!r}>")
+            joints.append(attrs["joint"])
+            coefs.append(float(self.numbers(attrs, "coef", 1, what, default=[0.0])[0]))
+        repeated = sorted({joint for joint in joints if joints.count(joint) > 1})
+        if repeated:  # (MuJoCo refuses them too)
+            raise self.error(f"{what}: joints expected once each, got {repeated} repeated")
+        if not 0 < len(joints) <= TENDON_JOINTS:
+            raise self.error(f"{what}: a limited fixed tendon expected 1 to {TENDON_JOINTS} joints (more are not "
+                             f"supported yet), got {len(joints)}")
+        return joints, coefs
 
     def _actuators(self, links: list[LinkSpec]):
         by_joint = {link.joint_name: link for link in links}

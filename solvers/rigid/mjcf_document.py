@@ -183,7 +183,7 @@ class MJCFDocument:
     def _note_ignored_sections(self):
         """Note the sections that act on the model and are not read; refuse equalities other
         than joints', connects and welds."""
-        for tag in ("tendon", "option", "sensor", "keyframe"):
+        for tag in ("option", "sensor", "keyframe"):
             if self.root.find(tag) is not None and len(self.root.find(tag)) + len(self.root.find(tag).attrib):
                 self.ignored.add(f"<{tag}>" + (" (the scene's SimOptions and RigidOptions rule)" if tag == "option"
                                                else ""))
@@ -219,7 +219,8 @@ class MJCFDocument:
             raise self.error(f"<{element.tag} name={element.get('name')!r}>: class {cls!r} is not a <default> class")
         classes = self.defaults.get(cls, {})
         out = dict(classes.get("general", {})) if element.tag in _ACTUATORS else {}
-        return over(over(out, classes.get(element.tag, {})), element.attrib)
+        tag = "tendon" if element.getparent() is not None and element.getparent().tag == "tendon" else element.tag
+        return over(over(out, classes.get(tag, {})), element.attrib)
 
     def numbers(self, attrs: dict, key: str, n: int | tuple, what: str, default=None) -> np.ndarray:
         """(n,) finite numbers of attribute `key` (n may be a tuple of allowed counts)."""

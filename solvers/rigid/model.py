@@ -63,6 +63,9 @@ class RigidModel:
     + 1 the held frames' turns r1, r2 in their links' frames (q1 ⊗ r1 is held to q2 ⊗ r2),
     weld_torquescale (W,) the scale of its turn rows; body_eq_sol (K, 7) their rows' solref and
     solimp, as eq_sol.
+    Per limited fixed tendon (T; LinkSpec.tendons, MuJoCo's): its length Σ ten_coef·q over dofs
+    ten_dof[ten_adr[t]:ten_adr[t + 1]] (ascending), held in [ten_lower, ten_upper] (m or rad) by a
+    limit row of softness ten_limit_sol (T, 7), as eq_sol.
     """
     link_name: list
     link_parent: np.ndarray
@@ -122,6 +125,16 @@ class RigidModel:
     weld_turn: np.ndarray
     weld_torquescale: np.ndarray
     body_eq_sol: np.ndarray
+    ten_adr: np.ndarray
+    ten_dof: np.ndarray
+    ten_coef: np.ndarray
+    ten_lower: np.ndarray
+    ten_upper: np.ndarray
+    ten_limit_sol: np.ndarray
+
+    @property
+    def n_tendons(self):
+        return len(self.ten_lower)
 
     @property
     def link_inv_mass0(self):
@@ -258,7 +271,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
     dofs = {k: [] for k in ("link", "q", "damping", "armature", "stiffness", "springref", "lower", "upper", "effort",
                             "frictionloss", "kp", "kv", "limit_sol", "frictionloss_sol")}
     geoms, geom_links, geom_names = [], [], []
-    qpos0, equalities, connects, welds = [], [], [], []
+    qpos0, equalities, connects, welds, tendons = [], [], [], [], []
     for entity_idx, links in enumerate(entities_links):
         link_offset = len(rows["name"])
         joint_dof = {}  # the entity's joint names → their first dof
@@ -303,6 +316,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
             qpos0.extend(_initial_q(spec))
         equalities += [(joint_dof[spec.joint_name], joint_dof[spec.mimic[0]], spec.mimic[2], spec.mimic[1],
                         _softness(spec.mimic_sol)) for spec in links if spec.mimic is not None]
+        tendons += [_tendon(tendon, joint_dof) for spec in links for tendon in spec.tendons]
         index = {spec.name: link_offset + k for k, spec in enumerate(links)}
         entity_connects, entity_welds = _body_equalities(links, index)
         connects, welds = connects + entity_connects, welds + entity_welds
@@ -341,7 +355,12 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
         body_eq_anchor=np.array([c[2:4] for c in connects + welds], dtype=f).reshape(-1, 3),
         weld_turn=np.array([w[4:6] for w in welds], dtype=f).reshape(-1, 4),
         weld_torquescale=np.array([w[6] for w in welds], dtype=f),
-        body_eq_sol=np.array([c[-1] for c in connects + welds], dtype=f).reshape(-1, 7))
+        body_eq_sol=np.array([c[-1] for c in connects + welds], dtype=f).reshape(-1, 7),
+        ten_adr=np.cumsum([0] + [len(t[0]) for t in tendons]).astype(np.int32),
+        ten_dof=np.array([d for t in tendons for d in t[0]], dtype=np.int32),
+        ten_coef=np.array([c for t in tendons for c in t[1]], dtype=f),
+        ten_lower=np.array([t[2] for t in tendons], dtype=f), ten_upper=np.array([t[3] for t in tendons], dtype=f),
+        ten_limit_sol=np.array([t[4] for t in tendons], dtype=f).reshape(-1, 7))
 
 
 def _body_equalities(links, index):
@@ -376,6 +395,14 @@ def _body_equalities(links, index):
                           other_anchor, np.asarray(turn, dtype=np.float64) / np.linalg.norm(turn),
                           other_turn / np.linalg.norm(other_turn), float(torquescale), _softness(softness)))
     return connects, welds
+
+
+def _tendon(tendon, joint_dof):
+    """(dofs, coefficients, lower, upper, softness) of a LinkSpec tendon, its joints' dofs in
+    ascending order (the row's columns)."""
+    joints, coefs, lower, upper, softness = tendon
+    order = sorted(range(len(joints)), key=lambda k: joint_dof[joints[k]])
+    return [joint_dof[joints[k]] for k in order], [coefs[k] for k in order], lower, upper, _softness(softness)
 
 
 def _softness(given):

@@ -37,7 +37,8 @@ class RigidSolver(Solver):
 
     #: inputs that keep their value across ``scene.reset()`` (controls do not)
     persistent_inputs = ("mass", "damping", "armature", "stiffness", "kp", "kv", "gravity", "force_lo", "force_hi",
-                         "frictionloss", "friction", "solref", "solimp", "invweight_t", "invweight_r", "invweight_dof")
+                         "frictionloss", "friction", "solref", "solimp", "invweight_t", "invweight_r", "invweight_dof",
+                         "invweight_ten")
 
     transient_inputs = ("xfrc",)
 
@@ -127,7 +128,7 @@ class RigidSolver(Solver):
         self.collider_reverses = [(detect.KERNEL_BIT[kind], BoundKernel(step.collide_adjoint, (schedule, kind),
                                                                         arenas, element_dims, detect.opt_level(kind)))
                                   for kind in detect.differentiable_kinds(m)]
-        self.limited = contact.limited_dofs(self.model, options) > 0
+        self.limited = contact.limit_rows(self.model, options) > 0
         self._wrench = 0  # the header's "wrench" flag as last written (the new arenas' is 0)
         self.default_inputs = self._default_inputs()
         self.upload_inputs(self.default_inputs)
@@ -143,7 +144,8 @@ class RigidSolver(Solver):
             "frictionloss": m.dof_frictionloss, "force_lo": -effort, "force_hi": effort,
             "ctrl_mode": np.zeros(m.n_dofs), "dyn_welds": np.zeros(1 + DYN_WELD * slots),
             "friction": m.geom_friction, **self._default_softness(),
-            "invweight_t": np.zeros(m.n_links), "invweight_r": np.zeros(m.n_links), "invweight_dof": np.zeros(m.n_dofs)}
+            "invweight_t": np.zeros(m.n_links), "invweight_r": np.zeros(m.n_links), "invweight_dof": np.zeros(m.n_dofs),
+            "invweight_ten": np.zeros(m.n_tendons)}
         assert per_env.keys() == INPUTS.keys()
         inputs = {name: torch.as_tensor(np.tile(np.asarray(v, dtype=np.float64), (B, 1)), dtype=runtime.tc_float,
                                         device=runtime.device) for name, v in per_env.items()}
@@ -158,11 +160,11 @@ class RigidSolver(Solver):
                 for name, given in (("solref", m.geom_solref), ("solimp", m.geom_solimp))}
 
     derived_from = ("mass", "armature")
-    derived_inputs = ("invweight_t", "invweight_r", "invweight_dof")
+    derived_inputs = ("invweight_t", "invweight_r", "invweight_dof", "invweight_ten")
 
     def derive_inputs(self, inputs, previous=None):
-        """``inputs`` with the rows' scale (invweight_t, invweight_r, invweight_dof) recomputed from their mass and
-        armature (contact.InvweightBasis; differentiable); zeros before the basis exists (the first
+        """``inputs`` with the rows' scale (invweight_t, invweight_r, invweight_dof, invweight_ten) recomputed from
+        their mass and armature (contact.InvweightBasis; differentiable); zeros before the basis exists (the first
         allocation at build, which forms no rows). With ``previous`` and no gradient anywhere
         (mass, armature, nor the previous scale: its graph would stay attached), only the envs
         whose mass or armature changed are recomputed (setting one env's mass recomputed all: 80

@@ -94,6 +94,9 @@ class LinkSpec:
     solref then solimp, as limit_sol (MJCF's equality solref and solimp), or None.
     same_body: the link continues its parent's body (MJCF: the links of one body's joints, which
     LinkSpec joints' frames split): contact rules take the two as one body.
+    tendons: (joint names, their coefficients, lower, upper, softness (7,) as limit_sol) per
+    limited fixed tendon whose first joint is this link's (MJCF ``<tendon><fixed>``, MuJoCo's: its
+    length Σ coef·q, in [lower, upper] m or rad by a limit row, constraint/rows.py).
     excluded: names of links of the same entity this link's shapes never collide with (MJCF
     ``<contact><exclude>``).
     connects: (other link's name, or "" for the world; anchor (3,) m in this link's frame, or None:
@@ -138,6 +141,7 @@ class LinkSpec:
     visuals: list = field(default_factory=list)
     mimic: tuple = None
     mimic_sol: np.ndarray = None
+    tendons: tuple = ()
     same_body: bool = False
     excluded: tuple = ()
     connects: tuple = ()

@@ -21,7 +21,9 @@ in its quadratic: a URDF mimic, distance q_a − offset − multiplier · q_b wi
 multiplier · e_b, diagA the sum of the two dofs'), one per dof with friction loss F > 0
 (FRICTION_LOSS, J = e_i, aref = −B q̇_i, bound F) and one per violated joint limit (ONE_SIDED,
 distance q − lower with J = e_i, or upper − q with J = −e_i; a ball joint's cone limit, MuJoCo's:
-distance θmax − θ with J = −axis on its three dofs, θ and axis its turn's angle and unit axis).
+distance θmax − θ with J = −axis on its three dofs, θ and axis its turn's angle and unit axis),
+then one per violated limit of a fixed tendon (its length L = Σ coef·q: L − lower with J = coef
+on its dofs, or upper − L with J = −coef; diagA its invweight_ten, MuJoCo's tendon_invweight0).
 Their R uses diagA = dof_invweight0 (a ball joint's first dof's); their solref and solimp are
 the model's per row owner (dof_limit_sol, dof_frictionloss_sol, eq_sol: MJCF's solreflimit,
 solimplimit, solreffriction, solimpfriction, an equality's solref and solimp; else the scene's
@@ -581,14 +583,35 @@ def _ball_limit(d: ti.template(), s, e, i):
 
 
 @ti.func
+def _tendon_side(d: ti.template(), s, e, t):
+    """(sign, distance) of tendon t's violated limit at frame s, its length L = Σ coef·q: (1, L −
+    lower) below it, (−1, upper − L) above it, (0, 0) within or with limits off (no row)."""
+    sign, dist = 0.0, 0.0
+    if d.limits_enabled:
+        length = 0.0
+        for k in range(d.ten_adr[t], d.ten_adr[t + 1]):
+            length += d.ten_coef[k] * d.qpos[s, e, d.dof_q[d.ten_dof[k]]]
+        if length - d.ten_lower[t] < 0.0:
+            sign, dist = 1.0, length - d.ten_lower[t]
+        elif d.ten_upper[t] - length < 0.0:
+            sign, dist = -1.0, d.ten_upper[t] - length
+    return sign, dist
+
+
+@ti.func
 def limit_violated(d: ti.template(), s, e):
-    """1 if some joint limit of env e is violated at frame s (a limit row would arise), else 0."""
+    """1 if some joint or tendon limit of env e is violated at frame s (a limit row would arise),
+    else 0."""
     violated = 0
     if d.limits_enabled:
         for i in range(d.n_dofs):
             sign, _dist = _limit_side(d, s, e, i)
             cone, _cone_dist, _axis = _ball_limit(d, s, e, i)  # (Taichi: one name, one type)
             if sign != 0.0 or cone != 0:
+                violated = 1
+        for t in range(d.n_tendons):
+            tendon_sign, _tendon_dist = _tendon_side(d, s, e, t)
+            if tendon_sign != 0.0:
                 violated = 1
     return violated
 
@@ -612,7 +635,8 @@ def dof_rows(d: ti.template(), s, e):
     lists a URDF's mimics in the file's joint order), every connect's three, every weld's six (in
     tree order; MuJoCo lists equalities in the file's order, mixing kinds: the same rows, rounded
     otherwise where the orders differ), the run-time welds' six in the order they were made,
-    friction loss of every dof with F > 0, then every violated joint limit.
+    friction loss of every dof with F > 0, then every violated joint limit, then every violated
+    tendon limit (MuJoCo's order).
     Returns how many (also kept in efc_dof_rows[s, e, 0])."""
     rows = 0
     for k in range(d.n_eq):
@@ -637,8 +661,47 @@ def dof_rows(d: ti.template(), s, e):
         if cone != 0:
             _ball_limit_row(d, s, e, rows, i, cone_dist, axis)
             rows += 1
+    for t in range(d.n_tendons):
+        tendon_sign, tendon_dist = _tendon_side(d, s, e, t)
+        if tendon_sign != 0.0:
+            _tendon_row(d, s, e, rows, t, tendon_sign, tendon_dist)
+            rows += 1
     d.efc_dof_rows[s, e, 0] = rows
     return rows
+
+
+@ti.func
+def _tendon_row(d: ti.template(), s, e, r, t, sign, dist):
+    """Row r for tendon t's violated limit (MuJoCo's): J = sign·coef on its dofs (ascending: its
+    columns), at distance dist (m or rad), diagA its invweight_ten (tendon_invweight0); its id
+    n_dofs + t (the reverse tells it from a dof's limit so)."""
+    slot, first = d.joint_columns + JOINT_ROW_SLOTS * r, d.ten_adr[t]
+    d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, d.ten_adr[t + 1] - first
+    velocity = 0.0
+    for k in range(first, d.ten_adr[t + 1]):
+        i = d.ten_dof[k]
+        d.efc_J[s, e, r, i] = sign * d.ten_coef[k]
+        d.efc_cols[s, e, slot + k - first] = i
+        velocity += sign * d.ten_coef[k] * d.qvel[s, e, i]
+    solref, solimp = _softness(d.ten_limit_sol, t)
+    _joint_row_scalars(d, s, e, r, dist, velocity, d.invweight_ten[e, t], solref, solimp)
+    d.efc_dim[s, e, r], d.efc_id[s, e, r] = 1, d.n_dofs + t
+    d.efc_type[s, e, r], d.efc_floss[s, e, r] = ONE_SIDED, 0.0
+
+
+@ti.func
+def _tendon_limit_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
+    """Reverse of _tendon_row for row r from its implicit gradients (aref, R): into q and q̇ of the
+    tendon's dofs at frame s and its invweight_ten (its Jacobian is constant)."""
+    t = d.efc_id[s, e, r] - d.n_dofs
+    sign, dist = _tendon_side(d, s, e, t)
+    solref, solimp = _softness(d.ten_limit_sol, t)
+    g_dist, damping, g_scale = _joint_row_scalars_adjoint(d, dist, d.invweight_ten[e, t], g_aref, g_R, solref, solimp)
+    accumulate(d.invweight_ten.grad, ti.Vector([e, t]), g_scale)
+    for k in range(d.ten_adr[t], d.ten_adr[t + 1]):
+        i, c = d.ten_dof[k], sign * d.ten_coef[k]
+        accumulate(d.qvel.grad, ti.Vector([s, e, i]), -damping * c * g_aref)
+        accumulate(d.qpos.grad, ti.Vector([s, e, d.dof_q[i]]), c * g_dist)
 
 
 @ti.func
@@ -672,10 +735,13 @@ def dof_rows_adjoint(d: ti.template(), s, e, r, g_aref, g_R, g_bound):
             _body_eq_row_adjoint(d, s, e, r, g_aref, g_R)
             body_eq = 1
     if body_eq == 0:
-        if t == ONE_SIDED and d.link_jtype[d.dof_link[d.efc_id[s, e, r]]] == BALL:
-            _ball_limit_adjoint(d, s, e, r, g_aref, g_R)
-        else:
-            _scalar_row_adjoint(d, s, e, r, t, g_aref, g_R, g_bound)
+        if t == ONE_SIDED and d.efc_id[s, e, r] >= d.n_dofs:
+            _tendon_limit_adjoint(d, s, e, r, g_aref, g_R)
+        else:  # (nested: Taichi's `and` would read dof_link past its end for a tendon's id)
+            if t == ONE_SIDED and d.link_jtype[d.dof_link[d.efc_id[s, e, r]]] == BALL:
+                _ball_limit_adjoint(d, s, e, r, g_aref, g_R)
+            else:
+                _scalar_row_adjoint(d, s, e, r, t, g_aref, g_R, g_bound)
 
 
 @ti.func
@@ -693,7 +759,10 @@ def _scalar_row_adjoint(d: ti.template(), s, e, r, t, g_aref, g_R, g_bound):
             _, dist = _limit_side(d, s, e, first)
             solref, solimp = _softness(d.dof_limit_sol, first)
     scale = d.invweight_dof[e, first] + (d.invweight_dof[e, second] if second >= 0 else 0.0)
-    g_dist, damping = _joint_row_scalars_adjoint(d, e, dist, scale, g_aref, g_R, first, second, solref, solimp)
+    g_dist, damping, g_scale = _joint_row_scalars_adjoint(d, dist, scale, g_aref, g_R, solref, solimp)
+    accumulate(d.invweight_dof.grad, ti.Vector([e, first]), g_scale)
+    if second >= 0:
+        accumulate(d.invweight_dof.grad, ti.Vector([e, second]), g_scale)
     accumulate(d.qvel.grad, ti.Vector([s, e, first]), -damping * c1 * g_aref)
     if second >= 0:
         accumulate(d.qvel.grad, ti.Vector([s, e, second]), -damping * c2 * g_aref)
@@ -706,20 +775,18 @@ def _scalar_row_adjoint(d: ti.template(), s, e, r, t, g_aref, g_R, g_bound):
 
 
 @ti.func
-def _joint_row_scalars_adjoint(d: ti.template(), e, dist, scale, g_aref, g_R, first, second, solref, solimp):
+def _joint_row_scalars_adjoint(d: ti.template(), dist, scale, g_aref, g_R, solref, solimp):
     """Reverse of _joint_row_scalars' R = (1 − imp)/imp · scale and aref's −K imp dist (its
-    softness solref, solimp: the model's, no gradient): returns (∂L/∂dist, B); R's gradient into
-    the dof_invweight0 of dofs first and second (when ≥ 0), unless R is at its floor."""
+    softness solref, solimp: the model's, no gradient): returns (∂L/∂dist, B, ∂L/∂scale), the last
+    0 where R is at its floor."""
     k, damping = stiffness_damping(solref, solimp[1], d.consts[CONST["h"]])
     imp = impedance(solimp, dist, 0.0)
-    g_imp = -k * dist * g_aref
+    g_imp, g_scale = -k * dist * g_aref, 0.0
     if (1.0 - imp) / imp * scale > MINVAL:
-        accumulate(d.invweight_dof.grad, ti.Vector([e, first]), (1.0 - imp) / imp * g_R)
-        if second >= 0:
-            accumulate(d.invweight_dof.grad, ti.Vector([e, second]), (1.0 - imp) / imp * g_R)
+        g_scale = (1.0 - imp) / imp * g_R
         g_imp -= scale / (imp * imp) * g_R
     slope, _solimp_slope = impedance_gradient(solimp, dist, 0.0)
-    return -k * imp * g_aref + slope * g_imp, damping
+    return -k * imp * g_aref + slope * g_imp, damping, g_scale
 
 
 @ti.func
@@ -732,8 +799,9 @@ def _ball_limit_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
     raw = joint_quat(d, s, e, d.dof_link[i])
     angle, axis = quat_turn(raw)
     solref, solimp = _softness(d.dof_limit_sol, i)
-    g_dist, damping = _joint_row_scalars_adjoint(d, e, d.dof_upper[i] - angle, d.invweight_dof[e, i], g_aref, g_R,
-                                                 i, -1, solref, solimp)
+    g_dist, damping, g_scale = _joint_row_scalars_adjoint(d, d.dof_upper[i] - angle, d.invweight_dof[e, i], g_aref,
+                                                          g_R, solref, solimp)
+    accumulate(d.invweight_dof.grad, ti.Vector([e, i]), g_scale)
     g_angle = -g_dist  # dist = θmax − θ
     force = d.efc_force[s, e, r]
     g_axis = ti.Vector.zero(float, 3)
