@@ -150,8 +150,7 @@ class InvweightBasis:
                                   for a in (K, J * moving[:, :, None, None], average)])
         ten_J = np.zeros((m.n_tendons, m.n_dofs))
         for t in range(m.n_tendons):
-            span = slice(m.ten_adr[t], m.ten_adr[t + 1])
-            ten_J[t, m.ten_dof[span]] = m.ten_coef[span]
+            ten_J[t, m.ten_dof[t, :m.ten_nnz[t]]] = m.ten_coef[t, :m.ten_nnz[t]]
         self.ten_J = torch.as_tensor(ten_J, device=runtime.device)
         simple = sliding_leaves(m)
         self.simple_links = torch.as_tensor(np.flatnonzero(simple), device=runtime.device)

@@ -24,6 +24,7 @@ from taichi.lang import impl
 from taichi.lang.expr import Expr
 
 from ..core import InvalidInputError, runtime
+from .spec import TENDON_JOINTS
 from .collision.convex import CONVEX_PAIRS, FEATURE_SIZE
 from .collision.convex import SCRATCH as CONVEX_SCRATCH
 from .constraint.solver import SCRATCH as SOLVER_SCRATCH
@@ -102,8 +103,10 @@ MODEL = {
     "body_eq_link": ("i", "K2"), "body_eq_anchor": ("v3", "K2"), "weld_turn": ("v4", "WD2"),
     "weld_torquescale": ("f", "WD"), "body_eq_sol": ("f", "K7"),
     # limited fixed tendons (RigidModel says what they hold)
-    "ten_adr": ("i", "T1"), "ten_dof": ("i", "TN"), "ten_coef": ("f", "TN"), "ten_lower": ("f", "T"),
-    "ten_upper": ("f", "T"), "ten_limit_sol": ("f", "T7"),
+    # (sized by the dofs, tendons ≤ dofs: a size of their own made every kernel's cold compile ~45 %
+    # longer, measured; JOINT_ROW_SLOTS a tendon's joints)
+    "ten_nnz": ("i", "D"), "ten_dof": ("i", "D3"), "ten_coef": ("f", "D3"), "ten_lower": ("f", "D"),
+    "ten_upper": ("f", "D"), "ten_limit_sol": ("f", "D7"),
     # substep h (s), the time constant (s) of the joint rows (equality, limit, friction loss), impratio, solver
     # tolerance and line-search tolerance: runtime values like everything else (CONSTS names them)
     "consts": ("f", len(CONSTS)),
@@ -111,7 +114,7 @@ MODEL = {
     "link_inertia0": ("m3", "L"),
 }
 
-JOINT_ROW_SLOTS = 3  # columns a joint row may have (constraint/rows.py): a ball joint's cone limit, three
+JOINT_ROW_SLOTS = max(3, TENDON_JOINTS)  # columns a joint row may have (constraint/rows.py): a ball joint's cone limit, three
 
 # Per-frame arrays: name → (arena, count per env, has a gradient). "DD": a (D, D) matrix per env.
 FRAMES = {
@@ -181,7 +184,7 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
 # colliders_due a mask of the collider kernels the substep's near pairs need (collision/detect.py: KERNEL_BIT);
 # inexact_pair, inexact_env, inexact_substep: where the last inexact contact was (the backward's error names it);
 # capped a flag: a constraint solve stopped at its iteration limit before its tolerance.
-SIZES = ("B", "L", "D", "Q", "P", "E", "K", "WD", "DW", "T", "TN", "S", "W", "GW", "limits", "nonfinite", "G", "N",
+SIZES = ("B", "L", "D", "Q", "P", "E", "K", "WD", "DW", "T", "S", "W", "GW", "limits", "nonfinite", "G", "N",
          "H", "C", "R", "cone", "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged",
          "constrained", "colliders_due", "inexact_pair", "inexact_env", "inexact_substep", "wrench", "capped")
 HEADER = {name: k for k, name in enumerate(SIZES)}
@@ -274,7 +277,7 @@ def _counts(size):
             "H": size["H"], "C": size["C"], "CF": FEATURE_SIZE * size["C"], "HI": size["HI"], "R": R, "RD": R * D,
             "CD": body_eq_columns(size) + (size["K"] + size["DW"]) * D, "DWW": 1 + DYN_WELD * size["DW"],
             "E": size["E"], "E2": 2 * size["E"], "E7": 7 * size["E"], "K2": 2 * size["K"], "K7": 7 * size["K"],
-            "T": size["T"], "T1": size["T"] + 1, "TN": size["TN"], "T7": 7 * size["T"],
+            "T": size["T"], "D3": TENDON_JOINTS * D,
             "WD": size["WD"], "WD2": 2 * size["WD"],
             "G2": 2 * size["G"], "G5": 5 * size["G"], "L6": 6 * size["L"], "D7": 7 * D, 1: 1,
             len(CONSTS): len(CONSTS),
@@ -307,7 +310,7 @@ class RigidData:
         self.grad_input_names = [n for n, (_, diff) in INPUTS.items() if diff] if requires_grad else []
         self.size = {"B": n_batch, "L": model.n_links, "D": model.n_dofs, "Q": model.n_qs, "P": len(model.pairs),
                      "E": model.n_eq, "K": model.n_body_eq, "WD": model.n_weld, "DW": settings["dyn_welds"],
-                     "T": model.n_tendons, "TN": len(model.ten_dof),
+                     "T": model.n_tendons,
                      "S": substeps, "W": self.input_total, "GW": self.grad_total,
                      "limits": int(bool(settings["limits"])), "nonfinite": 0, "G": n_geoms,
                      "N": len(model.pair_geom1), "H": len(model.hull_vec), "C": settings["contacts"],

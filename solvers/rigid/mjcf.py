@@ -83,8 +83,7 @@ import numpy as np
 from ..core import InvalidInputError
 from . import shapes
 from .mjcf_document import IDENTITY, MJ_DEFAULTS, ORIENTATIONS, MJCFDocument, axis_angle, is_default, norm, over
-from .data import JOINT_ROW_SLOTS as TENDON_JOINTS
-from .spec import GeomSpec, LinkSpec, VisualSpec
+from .spec import TENDON_JOINTS, GeomSpec, LinkSpec, VisualSpec
 
 _logger = logging.getLogger("genesis_lite")
 _FRAME = ("pos",) + ORIENTATIONS

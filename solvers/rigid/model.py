@@ -9,7 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import geometry, shapes
-from .spec import JOINT_TYPES
+from ..core import AssetError
+from .spec import JOINT_TYPES, TENDON_JOINTS
 
 FIXED, REVOLUTE, PRISMATIC, FREE, BALL = range(5)
 JOINT_CODE = {name: code for code, name in enumerate(JOINT_TYPES)}
@@ -63,8 +64,9 @@ class RigidModel:
     + 1 the held frames' turns r1, r2 in their links' frames (q1 ⊗ r1 is held to q2 ⊗ r2),
     weld_torquescale (W,) the scale of its turn rows; body_eq_sol (K, 7) their rows' solref and
     solimp, as eq_sol.
-    Per limited fixed tendon (T; LinkSpec.tendons, MuJoCo's): its length Σ ten_coef·q over dofs
-    ten_dof[ten_adr[t]:ten_adr[t + 1]] (ascending), held in [ten_lower, ten_upper] (m or rad) by a
+    Per limited fixed tendon (T ≤ D; LinkSpec.tendons, MuJoCo's): its length Σ ten_coef·q over its
+    ten_nnz (T,) dofs ten_dof (T, 3) (ascending; ten_coef (T, 3), padded with 0), held in
+    [ten_lower, ten_upper] (m or rad) by a
     limit row of softness ten_limit_sol (T, 7), as eq_sol.
     """
     link_name: list
@@ -125,7 +127,7 @@ class RigidModel:
     weld_turn: np.ndarray
     weld_torquescale: np.ndarray
     body_eq_sol: np.ndarray
-    ten_adr: np.ndarray
+    ten_nnz: np.ndarray
     ten_dof: np.ndarray
     ten_coef: np.ndarray
     ten_lower: np.ndarray
@@ -317,6 +319,9 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
         equalities += [(joint_dof[spec.joint_name], joint_dof[spec.mimic[0]], spec.mimic[2], spec.mimic[1],
                         _softness(spec.mimic_sol)) for spec in links if spec.mimic is not None]
         tendons += [_tendon(tendon, joint_dof) for spec in links for tendon in spec.tendons]
+        if len(tendons) > len(dofs["link"]):
+            raise AssetError(f"rigid model: {len(tendons)} limited fixed tendons expected at most one per dof "
+                             f"({len(dofs['link'])}; more are not supported yet)")
         index = {spec.name: link_offset + k for k, spec in enumerate(links)}
         entity_connects, entity_welds = _body_equalities(links, index)
         connects, welds = connects + entity_connects, welds + entity_welds
@@ -356,9 +361,9 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
         weld_turn=np.array([w[4:6] for w in welds], dtype=f).reshape(-1, 4),
         weld_torquescale=np.array([w[6] for w in welds], dtype=f),
         body_eq_sol=np.array([c[-1] for c in connects + welds], dtype=f).reshape(-1, 7),
-        ten_adr=np.cumsum([0] + [len(t[0]) for t in tendons]).astype(np.int32),
-        ten_dof=np.array([d for t in tendons for d in t[0]], dtype=np.int32),
-        ten_coef=np.array([c for t in tendons for c in t[1]], dtype=f),
+        ten_nnz=np.array([len(t[0]) for t in tendons], dtype=np.int32),
+        ten_dof=np.array([_padded(t[0], 0) for t in tendons], dtype=np.int32).reshape(-1, TENDON_JOINTS),
+        ten_coef=np.array([_padded(t[1], 0.0) for t in tendons], dtype=f).reshape(-1, TENDON_JOINTS),
         ten_lower=np.array([t[2] for t in tendons], dtype=f), ten_upper=np.array([t[3] for t in tendons], dtype=f),
         ten_limit_sol=np.array([t[4] for t in tendons], dtype=f).reshape(-1, 7))
 
@@ -403,6 +408,10 @@ def _tendon(tendon, joint_dof):
     joints, coefs, lower, upper, softness = tendon
     order = sorted(range(len(joints)), key=lambda k: joint_dof[joints[k]])
     return [joint_dof[joints[k]] for k in order], [coefs[k] for k in order], lower, upper, _softness(softness)
+
+
+def _padded(values, pad):
+    return list(values) + [pad] * (TENDON_JOINTS - len(values))
 
 
 def _softness(given):

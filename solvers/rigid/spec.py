@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 JOINT_TYPES = ("fixed", "revolute", "prismatic", "free", "ball")
+TENDON_JOINTS = 3  # the most joints of a limited fixed tendon (its row's column slots, data.JOINT_ROW_SLOTS)
 
 
 @dataclass

@@ -37,6 +37,7 @@ import taichi as ti
 from ..data import BIG, CONST, DYN_WELD, JOINT_ROW_SLOTS, accumulate
 from ..kinematics import dof_count, dof_motion_at, joint_quat, reference
 from ..model import BALL
+from ..spec import TENDON_JOINTS
 from ..spatial import quat_conj, quat_mul, quat_to_mat, quat_turn, quat_turn_adjoint
 
 # row types, as the solver reads them (interfaces agreed with solver.py)
@@ -589,7 +590,7 @@ def _tendon_side(d: ti.template(), s, e, t):
     sign, dist = 0.0, 0.0
     if d.limits_enabled:
         length = 0.0
-        for k in range(d.ten_adr[t], d.ten_adr[t + 1]):
+        for k in range(TENDON_JOINTS * t, TENDON_JOINTS * t + d.ten_nnz[t]):
             length += d.ten_coef[k] * d.qpos[s, e, d.dof_q[d.ten_dof[k]]]
         if length - d.ten_lower[t] < 0.0:
             sign, dist = 1.0, length - d.ten_lower[t]
@@ -675,10 +676,10 @@ def _tendon_row(d: ti.template(), s, e, r, t, sign, dist):
     """Row r for tendon t's violated limit (MuJoCo's): J = sign·coef on its dofs (ascending: its
     columns), at distance dist (m or rad), diagA its invweight_ten (tendon_invweight0); its id
     n_dofs + t (the reverse tells it from a dof's limit so)."""
-    slot, first = d.joint_columns + JOINT_ROW_SLOTS * r, d.ten_adr[t]
-    d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, d.ten_adr[t + 1] - first
+    slot, first = d.joint_columns + JOINT_ROW_SLOTS * r, TENDON_JOINTS * t
+    d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, d.ten_nnz[t]
     velocity = 0.0
-    for k in range(first, d.ten_adr[t + 1]):
+    for k in range(first, first + d.ten_nnz[t]):
         i = d.ten_dof[k]
         d.efc_J[s, e, r, i] = sign * d.ten_coef[k]
         d.efc_cols[s, e, slot + k - first] = i
@@ -698,7 +699,7 @@ def _tendon_limit_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
     solref, solimp = _softness(d.ten_limit_sol, t)
     g_dist, damping, g_scale = _joint_row_scalars_adjoint(d, dist, d.invweight_ten[e, t], g_aref, g_R, solref, solimp)
     accumulate(d.invweight_ten.grad, ti.Vector([e, t]), g_scale)
-    for k in range(d.ten_adr[t], d.ten_adr[t + 1]):
+    for k in range(TENDON_JOINTS * t, TENDON_JOINTS * t + d.ten_nnz[t]):
         i, c = d.ten_dof[k], sign * d.ten_coef[k]
         accumulate(d.qvel.grad, ti.Vector([s, e, i]), -damping * c * g_aref)
         accumulate(d.qpos.grad, ti.Vector([s, e, d.dof_q[i]]), c * g_dist)
