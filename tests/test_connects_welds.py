@@ -256,7 +256,7 @@ def test_equalities_solref_and_solimp_soften_their_rows_as_mujocos(f64, tmp_path
     assert _lockstep(m, d, scene, robot, 500) < 1e-10
 
 
-@pytest.mark.parametrize("path", [CONNECTS, WELDS])
+@pytest.mark.parametrize("path", [pytest.param(CONNECTS, marks=pytest.mark.slow), WELDS])
 def test_gradients_through_soft_equalities_match_finite_differences(f64, tmp_path, path):
     """_softened's equalities, 0.3 s from a fast start: the gradient of every link's pose w.r.t. the
     initial velocities against central differences (the rows' softness in the reverse too)."""

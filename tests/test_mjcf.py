@@ -171,7 +171,7 @@ def _mujoco_geoms(m, scene, robot):
     return order
 
 
-@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+@pytest.mark.parametrize("cone", ["pyramidal", pytest.param("elliptic", marks=pytest.mark.slow)])
 def test_geoms_contact_parameters_combine_as_mujocos(f64, cone):
     """assets/mjcf/contact_params.xml: each geom's condim, priority, solmix, solref (standard and
     direct form) and solimp (a partial one over its class's) are read as MuJoCo's compiler reads
@@ -228,7 +228,7 @@ def _swing(m, d, robot):
     return velocity
 
 
-@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+@pytest.mark.parametrize("cone", ["pyramidal", pytest.param("elliptic", marks=pytest.mark.slow)])
 def test_joint_limit_and_friction_loss_softness_as_mujocos(f64, cone):
     """assets/mjcf/joint_softness.xml: each joint's solreflimit, solimplimit, solreffriction and
     solimpfriction (standard and direct forms, partial values over a default class's, a ball
@@ -274,7 +274,7 @@ def test_gradients_through_soft_joint_limits_match_finite_differences(f64):
         assert_converged(directional_errors(loss, start, seed), f"soft joint limits, direction {seed}")
 
 
-@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+@pytest.mark.parametrize("cone", ["pyramidal", pytest.param("elliptic", marks=pytest.mark.slow)])
 def test_fixed_tendon_limits_match_mujoco(f64, cone):
     """assets/mjcf/tendons.xml: limited fixed tendons (two joints, three with a slide and their own
     softness, two trees', a <default><tendon>) hold their length Σ coef·q in range by limit rows
@@ -294,7 +294,7 @@ def test_fixed_tendon_limits_match_mujoco(f64, cone):
     assert met == set(limited.tolist()) and len(met) == 3  # (every limited tendon met its limit)
 
 
-@pytest.mark.parametrize("what", ["velocity", "mass"])
+@pytest.mark.parametrize("what", [pytest.param("velocity", marks=pytest.mark.slow), "mass"])
 def test_gradients_through_tendon_limits_match_finite_differences(f64, what):
     """tendons.xml swung into its tendons' limits for 0.3 s: the gradient of every link's pose w.r.t.
     the initial velocities and the links' masses (through the rows' scale, J M⁻¹ Jᵀ) against
