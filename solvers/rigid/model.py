@@ -66,8 +66,7 @@ class RigidModel:
     solimp, as eq_sol.
     Per limited fixed tendon (T ≤ D; LinkSpec.tendons, MuJoCo's): its length Σ ten_coef·q over its
     ten_nnz (T,) dofs ten_dof (T, 3) (ascending; ten_coef (T, 3), padded with 0), held in
-    [ten_lower, ten_upper] (m or rad) by a
-    limit row of softness ten_limit_sol (T, 7), as eq_sol.
+    [ten_lower, ten_upper] (m or rad) by a limit row of softness ten_limit_sol (T, 7), as eq_sol.
     """
     link_name: list
     link_parent: np.ndarray
@@ -411,6 +410,7 @@ def _tendon(tendon, joint_dof):
 
 
 def _padded(values, pad):
+    """``values`` filled with ``pad`` to TENDON_JOINTS entries (a tendon's row of ten_dof, ten_coef)."""
     return list(values) + [pad] * (TENDON_JOINTS - len(values))
 
 
