@@ -495,7 +495,7 @@ def _escaped(text):
 
 
 def test_what_is_ignored_is_said_once(f64, tmp_path, caplog):
-    extra = ('<option timestep="0.01"/><tendon><fixed name="t"><joint joint="j" coef="1"/></fixed></tendon>'
+    extra = ('<option timestep="0.01"/><tendon><fixed name="t" stiffness="0" frictionloss="0.5"><joint joint="j" coef="1"/></fixed></tendon>'
              '<actuator><motor tendon="t"/></actuator>')
     path = _write(tmp_path, f'<geom type="plane" size="1 1 1"/><body name="b"><joint name="j" margin="0.1"/>{LINK}'
                             f'<geom type="box" size="0.1 0.1 0.1" condim="3" solref="0.02 1"/></body>', extra)
@@ -503,9 +503,10 @@ def test_what_is_ignored_is_said_once(f64, tmp_path, caplog):
         gs.Scene().add_entity(gs.morphs.MJCF(file=path))
     said = [r.getMessage() for r in caplog.records if "ignored" in r.getMessage()]
     assert len(said) == 1
-    for part in ("<option>", "<joint margin>", "<actuator><motor"):  # (an unlimited fixed tendon does nothing)
+    for part in ("<option>", "<joint margin>", "<actuator><motor", "<tendon><fixed frictionloss>"):
         assert part in said[0]
     assert "condim" not in said[0] and "solref" not in said[0]  # MuJoCo's defaults: nothing is lost
+    assert "stiffness" not in said[0]  # (a tendon's zero spring is MuJoCo's default: nothing is lost)
 
 
 def test_a_hinge_on_the_world_hangs_from_a_static_world_link_and_angles_follow_the_compiler(f64, tmp_path):

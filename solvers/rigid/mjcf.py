@@ -685,8 +685,10 @@ class _Reader(MJCFDocument):
                     self.ignored.add(f"<tendon><{element.tag}>")
                     continue
                 for key, value in attrs.items():
+                    at_zero = key in ("stiffness", "damping", "frictionloss", "margin", "armature") and \
+                        not any(self.numbers(attrs, key, (1, 2), what))  # (MuJoCo's default: no effect)
                     if key not in ("name", "class", "limited", "range", "solreflimit", "solimplimit", "group",
-                                   "rgba", "width", "material", "user") and not is_default(key, value):
+                                   "rgba", "width", "material", "user") and not is_default(key, value) and not at_zero:
                         self.ignored.add(f"<tendon><fixed {key}>")
                 limited = attrs.get("limited", "auto")
                 if not (limited == "true" or (limited == "auto" and self.autolimits and "range" in attrs)):
