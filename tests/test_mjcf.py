@@ -294,6 +294,24 @@ def test_fixed_tendon_limits_match_mujoco(f64, cone):
     assert met == set(limited.tolist()) and len(met) == 3  # (every limited tendon met its limit)
 
 
+def test_more_tendons_than_dofs_match_mujoco(f64, tmp_path):
+    """Three limited fixed tendons on one hinge (q ≥ -0.3 by the first, q ≤ 0.4 by the second,
+    q ≤ 0.41 by the third, which the swing's soft limit reaches too), beside MuJoCo 4 for 1 s:
+    more tendons than dofs (their arrays sized by the tendons)."""
+    tendons = ('<option timestep="0.002"/><tendon>'
+               '<fixed range="-0.3 2"><joint joint="j" coef="1"/></fixed>'
+               '<fixed range="-2 0.8"><joint joint="j" coef="2"/></fixed>'
+               '<fixed range="-0.41 5"><joint joint="j" coef="-1"/></fixed></tendon>')
+    path = _write(tmp_path, f'<body name="b" pos="0 0 1"><joint name="j" axis="0 1 0"/>'
+                            f'<geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03"/></body>', tendons)
+    m, d, scene, robot = _pair(path, integrator="euler")
+    d.qvel[:] = -6.0  # (into the first tendon's limit; then gravity swings it into the others')
+    robot.set_dofs_velocity(torch.tensor([-6.0]))
+    met = set()
+    assert _lockstep(m, d, scene, robot, 500, lambda: met.update(d.efc_id[:d.nefc][d.efc_type[:d.nefc] == 4])) < 1e-10
+    assert robot.n_dofs == 1 and met == {0, 1, 2}
+
+
 @pytest.mark.parametrize("what", [pytest.param("velocity", marks=pytest.mark.slow), "mass"])
 def test_gradients_through_tendon_limits_match_finite_differences(f64, what):
     """tendons.xml swung into its tendons' limits for 0.3 s: the gradient of every link's pose w.r.t.

@@ -8,12 +8,12 @@ storage (Taichi's autodiff is not used).
 
 **Compiled once for every scene.** All of a scene's data lives in five torch tensors, one per
 element type (``ARENAS``: int, float, 3-vector, 4-vector, 3×3 matrix), passed to every kernel as
-arguments. Sizes (envs, links, dofs...) and where each array starts are runtime values in the
-int arena's header, so a kernel is compiled once per float precision and serves every robot,
-batch size and substep count; Taichi compiles field-based kernels per field instance instead
-(a second scene of the same robot recompiled everything: 20 s). Inside a kernel, ``bind``
-turns the arenas into a :class:`RigidView` whose arrays index like fields:
-``d.xpos[s, e, l]``, ``d.mass.grad[e, l]``, ``d.mass_mat[s, e, i, j]``.
+arguments. Sizes (envs, links, dofs...) and where each array starts are runtime values at the
+int arena's start (its header and offsets table), so a kernel is compiled once per float
+precision and serves every robot, batch size and substep count; Taichi compiles field-based
+kernels per field instance instead (a second scene of the same robot recompiled everything:
+20 s). Inside a kernel, ``bind`` turns the arenas into a :class:`RigidView` whose arrays index
+like fields: ``d.xpos[s, e, l]``, ``d.mass.grad[e, l]``, ``d.mass_mat[s, e, i, j]``.
 """
 import warnings
 
@@ -102,11 +102,9 @@ MODEL = {
     # connects and welds (points and frames of two links held together; RigidModel says what they hold)
     "body_eq_link": ("i", "K2"), "body_eq_anchor": ("v3", "K2"), "weld_turn": ("v4", "WD2"),
     "weld_torquescale": ("f", "WD"), "body_eq_sol": ("f", "K7"),
-    # limited fixed tendons (RigidModel says what they hold)
-    # (sized by the dofs, tendons ≤ dofs: a size of their own made every kernel's cold compile ~45 %
-    # longer, measured; JOINT_ROW_SLOTS a tendon's joints)
-    "ten_nnz": ("i", "D"), "ten_dof": ("i", "D3"), "ten_coef": ("f", "D3"), "ten_lower": ("f", "D"),
-    "ten_upper": ("f", "D"), "ten_limit_sol": ("f", "D7"),
+    # limited fixed tendons (RigidModel says what they hold; TENDON_JOINTS a tendon's joints)
+    "ten_nnz": ("i", "T"), "ten_dof": ("i", "T3"), "ten_coef": ("f", "T3"), "ten_lower": ("f", "T"),
+    "ten_upper": ("f", "T"), "ten_limit_sol": ("f", "T7"),
     # substep h (s), the time constant (s) of the joint rows (equality, limit, friction loss), impratio, solver
     # tolerance and line-search tolerance: runtime values like everything else (CONSTS names them)
     "consts": ("f", len(CONSTS)),
@@ -170,20 +168,21 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
                ti.types.ndarray(dtype=ti.types.vector(3, float), ndim=1),
                ti.types.ndarray(dtype=ti.types.vector(4, float), ndim=1),
                ti.types.ndarray(dtype=ti.types.matrix(3, 3, float), ndim=1))
-# The int arena starts with a header of sizes and flags; every array's place follows from the
-# sizes (``layout``). E joint equalities, K connects and welds, WD welds of them (RigidModel), DW run-time weld
-# slots (RigidOptions.max_dynamic_constraints; their data are the input dyn_welds). W: all inputs'
-# width per env; GW: the differentiable ones', which come first. G geoms, N candidate
-# geom pairs, H hull vertices, C contact slots, R constraint rows per env (see RigidData); HI the meshes' hull
-# ints (geometry.py), WS 1 when the convex colliders need their workspace (CONVEX_SCRATCH), else 0; converged 1
-# (not enable_mujoco_compatibility) when curved convex contacts are their converged closed form
-# (collision/detect.py: converge_contacts) and the elliptic solve takes a Newton step past MuJoCo's stop
-# (constraint/solver.py); constrained
-# a flag: some env of the substep has a constraint row to form (a contact, a joint equality, friction loss, a
-# violated limit);
-# colliders_due a mask of the collider kernels the substep's near pairs need (collision/detect.py: KERNEL_BIT);
-# inexact_pair, inexact_env, inexact_substep: where the last inexact contact was (the backward's error names it);
-# capped a flag: a constraint solve stopped at its iteration limit before its tolerance.
+# The int arena starts with a header of sizes and flags, then the offsets table (OFFSETS: where
+# every array starts, which follows from the sizes by ``layout``, and the strides kernels need).
+# E joint equalities, K connects and welds, WD welds of them (RigidModel), DW run-time weld slots
+# (RigidOptions.max_dynamic_constraints; their data are the input dyn_welds), T limited fixed
+# tendons. W: all inputs' width per env; GW: the differentiable ones', which come first. G geoms,
+# N candidate geom pairs, H hull vertices, C contact slots, R constraint rows per env (see
+# RigidData); HI the meshes' hull ints (geometry.py), WS 1 when the convex colliders need their
+# workspace (CONVEX_SCRATCH), else 0; converged 1 (not enable_mujoco_compatibility) when curved
+# convex contacts are their converged closed form (collision/detect.py: converge_contacts) and the
+# elliptic solve takes a Newton step past MuJoCo's stop (constraint/solver.py); constrained a flag:
+# some env of the substep has a constraint row to form (a contact, a joint equality, friction
+# loss, a violated limit); colliders_due a mask of the collider kernels the substep's near pairs
+# need (collision/detect.py: KERNEL_BIT); inexact_pair, inexact_env, inexact_substep: where the
+# last inexact contact was (the backward's error names it); capped a flag: a constraint solve
+# stopped at its iteration limit before its tolerance.
 SIZES = ("B", "L", "D", "Q", "P", "E", "K", "WD", "DW", "T", "S", "W", "GW", "limits", "nonfinite", "G", "N",
          "H", "C", "R", "cone", "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged",
          "constrained", "colliders_due", "inexact_pair", "inexact_env", "inexact_substep", "wrench", "capped")
@@ -209,12 +208,9 @@ def _region_members(arena, grads):
             + [(n, c) for n, (a, c) in GRAD_ONLY.items() if a == arena])
 
 
-def layout(size, hold=lambda value: value):
-    """Where every array starts in its arena, from the sizes ``size`` (name → value, SIZES):
-    Python ints at build time, Taichi expressions inside kernels — the same arithmetic, so
-    both sides agree by construction, and a kernel loads only the few sizes. ``hold`` keeps each
-    array's end: inside kernels in a local, so the next start is that local plus one term (spelled
-    out, start k would repeat the k terms before it: the kernels' IR quadratic in the arrays).
+def layout(size, ints_begin):
+    """Where every array starts in its arena, from the sizes ``size`` (name → value, SIZES), the
+    int arena's arrays from ``ints_begin`` on (after the header and the offsets table).
 
     Returns (start, end): start["model:NAME"], ["inputs"], ["inputs.grad"] (B, W),
     ["frame:NAME"], ["grad:NAME"], and per frame region ["region:ARENA:GRADS"] and
@@ -225,27 +221,48 @@ def layout(size, hold=lambda value: value):
     frames 0 … k − 1 is one contiguous sweep per arena."""
     B = size["B"]
     count = _counts(size)
-    end = {"i": len(SIZES), "f": 0, "v3": 0, "v4": 0, "m3": 0}
+    end = {"i": ints_begin, "f": 0, "v3": 0, "v4": 0, "m3": 0}
     start = {}
     for name, (arena, c) in MODEL.items():
         start[f"model:{name}"] = end[arena]
-        end[arena] = hold(end[arena] + count[c])
-    start["inputs"], start["inputs.grad"] = end["f"], hold(end["f"] + B * size["W"])
-    end["f"] = hold(start["inputs.grad"] + B * size["W"])
+        end[arena] += count[c]
+    start["inputs"], start["inputs.grad"] = end["f"], end["f"] + B * size["W"]
+    end["f"] = start["inputs.grad"] + B * size["W"]
     for name, (arena, c) in PER_ENV.items():
         start[f"env:{name}"] = end[arena]
-        end[arena] = hold(end[arena] + B * count[c])
+        end[arena] += B * count[c]
     stop = {("i", False): end["i"], ("i", True): end["i"]}
     for arena, grads in _REGIONS:
-        region = end[arena]
-        offset = region
+        region = offset = end[arena]
         for name, c in _region_members(arena, grads):
             start[f"{'grad' if grads else 'frame'}:{name}"] = offset
-            offset = hold(offset + B * count[c])
-        start[f"region:{arena}:{grads}"], start[f"stride:{arena}:{grads}"] = region, hold(offset - region)
-        end[arena] = stop[arena, grads] = hold(region + (size["S"] + 1) * start[f"stride:{arena}:{grads}"])
+            offset += B * count[c]
+        start[f"region:{arena}:{grads}"], start[f"stride:{arena}:{grads}"] = region, offset - region
+        end[arena] = stop[arena, grads] = region + (size["S"] + 1) * (offset - region)
     stop["i", True] = stop["i", False]  # no integer array has a gradient
     return start, stop
+
+
+def offsets(size, ints_begin):
+    """What the kernels read of the offsets table (OFFSETS, in the int arena after the header):
+    every array's start (``layout``), each input's column and its gradient's, the per-env count
+    of every frame and per-env array (their env stride) and where the constraint rows' column
+    lists start. Computed here once, each a single load inside a kernel: summed there from the
+    sizes, every array access carried its start's whole sum (dozens of size products) into LLVM's
+    scalar evolution, whose loop strength reduction was most of a kernel's cold compile."""
+    start, _ = layout(size, ints_begin)
+    count = _counts(size)
+    table = dict(start)
+    column = 0
+    for name, (width, _) in INPUTS.items():
+        table[f"input:{name}"] = start["inputs"] + column
+        table[f"input.grad:{name}"] = start["inputs.grad"] + column
+        column += count.get(width, width)
+    for c in dict.fromkeys([c for _, c, _ in FRAMES.values()] + [c for _, c in PER_ENV.values()]
+                           + [c for _, c in GRAD_ONLY.values()]):
+        table[f"count:{c}"] = count[c]
+    table["joint_columns"], table["body_eq_columns"] = joint_row_columns(size), body_eq_columns(size)
+    return table
 
 
 def _has_convex_pairs(model):
@@ -277,11 +294,17 @@ def _counts(size):
             "H": size["H"], "C": size["C"], "CF": FEATURE_SIZE * size["C"], "HI": size["HI"], "R": R, "RD": R * D,
             "CD": body_eq_columns(size) + (size["K"] + size["DW"]) * D, "DWW": 1 + DYN_WELD * size["DW"],
             "E": size["E"], "E2": 2 * size["E"], "E7": 7 * size["E"], "K2": 2 * size["K"], "K7": 7 * size["K"],
-            "T": size["T"], "D3": TENDON_JOINTS * D,
+            "T": size["T"], "T3": TENDON_JOINTS * size["T"], "T7": 7 * size["T"],
             "WD": size["WD"], "WD2": 2 * size["WD"],
             "G2": 2 * size["G"], "G5": 5 * size["G"], "L6": 6 * size["L"], "D7": 7 * D, 1: 1,
             len(CONSTS): len(CONSTS),
             **{f"ws:{name}": size["WS"] * n for name, (_, n) in CONVEX_SCRATCH.items()}}
+
+
+# the offsets table's slots in the int arena, after the header (its entries' values depend on the
+# sizes, their names do not); the int arena's arrays start after it
+OFFSETS = {key: len(SIZES) + k for k, key in enumerate(offsets(dict.fromkeys(SIZES, 1), 0))}
+INTS_BEGIN = len(SIZES) + len(OFFSETS)
 
 
 class RigidData:
@@ -320,7 +343,7 @@ class RigidData:
                      "converged": int(bool(settings["converged"])), "constrained": 0,
                      "colliders_due": 0, "inexact_pair": 0, "inexact_env": 0, "inexact_substep": 0, "wrench": 0,
                      "capped": 0}
-        self.start, stop = layout(self.size)
+        self.start, stop = layout(self.size, INTS_BEGIN)
         length = {a: stop[a, bool(requires_grad)] for a in ARENAS}  # no gradient storage without gradients
         if max(length.values()) >= 2 ** 31:  # indices inside kernels are 32-bit
             raise InvalidInputError(f"rigid solver: n_envs={n_batch} with substeps={substeps} (requires_grad="
@@ -341,6 +364,8 @@ class RigidData:
     def _fill(self, values, model, consts):
         """Header, model and consts (CONSTS) into the arenas."""
         values["i"][: len(SIZES)] = [self.size[name] for name in SIZES]
+        table = offsets(self.size, INTS_BEGIN)
+        values["i"][len(SIZES): INTS_BEGIN] = [table[key] for key in OFFSETS]
         for name, (arena, _) in MODEL.items():
             array = np.asarray(consts if name == "consts" else getattr(model, name))
             if arena in ("i", "f"):  # scalar arenas: a (E, 2) array goes in row by row
@@ -435,16 +460,12 @@ class RigidView:
     def __init__(self, ints, f1, v3, v4, m3, cone=None, body_eqs=True):
         arenas = dict(zip(ARENAS, (ints, f1, v3, v4, m3)))
         size = {name: impl.expr_init(_subscript(ints, k)) for name, k in HEADER.items()}
-        # each start a local, the previous array's end plus one term: spelled out at every access
-        # instead, the IR grew so much that compiling the reverse kernels took 4-14x longer
-        # (reverse_dynamics: 21.5 s → 1.6 s); each start's whole sum held in its own local, a box on
-        # a plane's cold compile (first step, 30 more and a backward) took 87 s against 71 s
-        start = layout(size, hold=impl.expr_init)[0]
+        at = {key: impl.expr_init(_subscript(ints, k)) for key, k in OFFSETS.items()}  # (see offsets)
         self.n_batch, self.n_links, self.n_dofs, self.n_qs = size["B"], size["L"], size["D"], size["Q"]
         self.n_pairs, self.substeps, self.input_total, self.grad_total = size["P"], size["S"], size["W"], size["GW"]
         self.n_eq, self.n_body_eq, self.n_weld, self.n_tendons = size["E"], size["K"], size["WD"], size["T"]
         self.n_connect, self.body_eqs = size["K"] - size["WD"], body_eqs  # (the connects come first)
-        self.joint_columns, self.body_eq_columns = joint_row_columns(size), body_eq_columns(size)
+        self.joint_columns, self.body_eq_columns = at["joint_columns"], at["body_eq_columns"]
         self.limits_enabled = size["limits"]
         self.n_geoms, self.n_candidates = size["G"], size["N"]
         self.contact_capacity = size["C"]
@@ -462,37 +483,32 @@ class RigidView:
         self.constrained = ArrayView(ints, HEADER["constrained"], (1,))
         self.colliders_due = ArrayView(ints, HEADER["colliders_due"], (1,))  # bits of the collider kernels due
         self.capped = ArrayView(ints, HEADER["capped"], (1,))  # set when a solve stops at its iteration limit
-        count = _counts(size)
         for name, (arena, _) in MODEL.items():
-            setattr(self, name, ArrayView(arenas[arena], start[f"model:{name}"], (1,)))
+            setattr(self, name, ArrayView(arenas[arena], at[f"model:{name}"], (1,)))
         row = (self.input_total, 1)  # [e, column]
-        self.inputs = ArrayView(f1, start["inputs"], row, ArrayView(f1, start["inputs.grad"], row))
-        column = 0  # where the input starts in a row: a local, as the starts (the reverse kernels ~1 s shorter)
-        for name, (width, _) in INPUTS.items():
-            grad = ArrayView(f1, start["inputs.grad"] + column, row)
-            setattr(self, name, ArrayView(f1, start["inputs"] + column, row, grad))
-            column = impl.expr_init(column + count.get(width, width))
+        self.inputs = ArrayView(f1, at["inputs"], row, ArrayView(f1, at["inputs.grad"], row))
+        for name in INPUTS:
+            setattr(self, name, ArrayView(f1, at[f"input:{name}"], row, ArrayView(f1, at[f"input.grad:{name}"], row)))
         for name, (arena, c) in PER_ENV.items():
-            setattr(self, name, ArrayView(arenas[arena], start[f"env:{name}"], (count[c], 1)))
+            setattr(self, name, ArrayView(arenas[arena], at[f"env:{name}"], (at[f"count:{c}"], 1)))
         for name, (arena, c, has_grad) in FRAMES.items():
             grad = None
             if has_grad:
-                grad = ArrayView(arenas[arena], start[f"grad:{name}"],
-                                 self._frame_strides(start, arena, c, count, True))
-            setattr(self, name, ArrayView(arenas[arena], start[f"frame:{name}"],
-                                          self._frame_strides(start, arena, c, count, False), grad))
+                grad = ArrayView(arenas[arena], at[f"grad:{name}"], self._frame_strides(at, arena, c, size, True))
+            setattr(self, name, ArrayView(arenas[arena], at[f"frame:{name}"],
+                                          self._frame_strides(at, arena, c, size, False), grad))
         for name, (arena, c) in GRAD_ONLY.items():
-            setattr(self, name, ArrayView(arenas[arena], start[f"grad:{name}"],
-                                          self._frame_strides(start, arena, c, count, True)))
-        self.regions = [Region(arenas[a], start[f"region:{a}:True"], start[f"stride:{a}:True"], ELEMENT[a])
+            setattr(self, name, ArrayView(arenas[arena], at[f"grad:{name}"],
+                                          self._frame_strides(at, arena, c, size, True)))
+        self.regions = [Region(arenas[a], at[f"region:{a}:True"], at[f"stride:{a}:True"], ELEMENT[a])
                         for a in ARENAS[1:]]
 
     @staticmethod
-    def _frame_strides(start, arena, c, count, grads):
-        frame = start[f"stride:{arena}:{grads}"]
+    def _frame_strides(at, arena, c, size, grads):
+        frame = at[f"stride:{arena}:{grads}"]
         if c in ("DD", "RD"):  # [s, e, i, j]
-            return frame, count[c], count["D"], 1
-        return frame, count[c], 1  # [s, e, k]
+            return frame, at[f"count:{c}"], size["D"], 1
+        return frame, at[f"count:{c}"], 1  # [s, e, k]
 
 
 @ti.func

@@ -64,7 +64,7 @@ class RigidModel:
     + 1 the held frames' turns r1, r2 in their links' frames (q1 ⊗ r1 is held to q2 ⊗ r2),
     weld_torquescale (W,) the scale of its turn rows; body_eq_sol (K, 7) their rows' solref and
     solimp, as eq_sol.
-    Per limited fixed tendon (T ≤ D; LinkSpec.tendons, MuJoCo's): its length Σ ten_coef·q over its
+    Per limited fixed tendon (LinkSpec.tendons, MuJoCo's): its length Σ ten_coef·q over its
     ten_nnz (T,) dofs ten_dof (T, 3) (ascending; ten_coef (T, 3), padded with 0), held in
     [ten_lower, ten_upper] (m or rad) by a limit row of softness ten_limit_sol (T, 7), as eq_sol.
     """
@@ -318,9 +318,6 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
         equalities += [(joint_dof[spec.joint_name], joint_dof[spec.mimic[0]], spec.mimic[2], spec.mimic[1],
                         _softness(spec.mimic_sol)) for spec in links if spec.mimic is not None]
         tendons += [_tendon(tendon, joint_dof) for spec in links for tendon in spec.tendons]
-        if len(tendons) > len(dofs["link"]):
-            raise AssetError(f"rigid model: {len(tendons)} limited fixed tendons expected at most one per dof "
-                             f"({len(dofs['link'])}; more are not supported yet)")
         index = {spec.name: link_offset + k for k, spec in enumerate(links)}
         entity_connects, entity_welds = _body_equalities(links, index)
         connects, welds = connects + entity_connects, welds + entity_welds
