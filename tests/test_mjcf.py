@@ -457,6 +457,11 @@ LINK = '<geom type="sphere" size="0.1"/>'
      '<equality><connect site1="s" site2="s"/></equality>', "expected two different bodies, got 'b' twice"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><connect body1="b"/></equality>',
      "attribute 'anchor' is missing"),
+    (f'<body name="b"><joint name="j"/>{LINK}<body name="c"><joint name="k"/>{LINK}</body></body>',
+     '<equality><joint joint1="j" joint2="k"/><joint joint1="j" polycoef="0.1 0 0 0 0"/></equality>',
+     "joint1 'j' expected in one joint equality as joint1, got a second"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><joint joint2="j"/></equality>',
+     "joint1 expected a hinge or slide joint of the file, got None"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><weld body1="world"/></equality>',
      "<equality><weld name=None>: expected two different bodies, got 'world' twice"),
     (f'<body name="b"><joint name="j"/>{LINK}<site name="s"/></body>',
@@ -584,6 +589,49 @@ def test_joint_equality_follows_polycoef_as_mujoco(f64, tmp_path, refs):
     q = robot.get_dofs_position().numpy() - np.deg2rad(refs)
     assert abs(q[1] - (0.2 - 0.5 * q[0])) < 0.01 and abs(q[0]) > 0.1  # held while it swings
     assert worst < 1e-11
+
+
+HELD = ('<body name="a" pos="0 0 1"><joint name="j1" axis="0 1 0" ref="10" damping="0.02"/>'
+        '<geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03"/><body name="b" pos="0.3 0 0">'
+        '<joint name="j2" axis="0 1 0"/><geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03"/>'
+        '<body name="c" pos="0.3 0 0"><joint name="j3" type="slide" axis="1 0 0"/>'
+        '<geom type="box" size="0.05 0.03 0.03"/></body></body></body>')
+# j1 held at ref + 0.3 rad (MuJoCo reads no coefficient but c0 without joint2), j3 following j2
+HELD_EQUALITIES = ('<equality><joint joint1="j1" polycoef="0.3 5 1 0 0"/>'
+                   '<joint joint1="j3" joint2="j2" polycoef="0.05 0.1 0 0 0" solref="0.05 1"/></equality>')
+
+
+def test_a_joint_equality_without_joint2_holds_the_joint_as_mujoco(f64, tmp_path):
+    """MuJoCo's joint equality without joint2 holds joint1 at q1 − ref1 = polycoef[0] (a row on
+    that one dof, diagA its dof_invweight0): a chain whose first hinge starts 0.3 rad off its held
+    angle and swings there, beside MuJoCo 4 for 1 s."""
+    m, d, scene, robot = _pair(_write(tmp_path, HELD, HELD_EQUALITIES), integrator="euler")
+    worst = _lockstep(m, d, scene, robot, 500)
+    assert abs(robot.get_dofs_position()[0].item() - np.deg2rad(10) - 0.3) < 0.01  # held
+    assert worst < 1e-11
+
+
+@pytest.mark.parametrize("what", ["velocity", pytest.param("mass", marks=pytest.mark.slow)])
+def test_gradients_through_a_held_joint_match_finite_differences(f64, tmp_path, what):
+    """The held chain above for 0.3 s: the gradient of every link's pose w.r.t. the initial
+    velocities and the links' masses (through the rows' scale) against central differences."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, requires_grad=True),
+                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True, tolerance=1e-14))
+    robot = scene.add_entity(gs.morphs.MJCF(file=_write(tmp_path, HELD, HELD_EQUALITIES)))
+    scene.build()
+    rng = np.random.default_rng(2)
+    velocity, weights = torch.tensor(rng.normal(0.0, 2.0, robot.n_dofs)), torch.tensor(rng.normal(size=(robot.n_links, 7)))
+    heavy = [k for k, link in enumerate(robot.links) if float(link.get_mass()) > 0]
+    if what == "velocity":
+        start, apply = velocity, robot.set_dofs_velocity
+    else:
+        start = robot.get_links_mass().detach().clone()[heavy]
+
+        def apply(mass):
+            robot.set_links_mass(mass, links_idx_local=heavy)
+            robot.set_dofs_velocity(velocity)
+    loss = pose_loss(scene, robot, weights, 150, apply)
+    assert_converged(directional_errors(loss, start), f"held joint: {what}")
 
 
 def test_a_bodys_links_are_one_body_to_contacts(f64, tmp_path):

@@ -48,7 +48,7 @@ Actuators on a joint give its servo (as Genesis reads them): ``position`` kp, kv
 with an affine bias, kp = −biasprm[1], kv = −biasprm[2]; ``velocity`` kv; forcerange (symmetric)
 the |force| bound; a ``motor`` is force control (control_dofs_force).
 ``<equality><joint>`` with polycoef (c0, c1) makes joint1 follow joint2, q1 − ref1 = c0 + c1 (q2 −
-ref2) (LinkSpec.mimic). ``<equality><connect>`` holds a point of body1 on body2 (or the world): by
+ref2), or without joint2 holds it at q1 − ref1 = c0 (LinkSpec.mimic). ``<equality><connect>`` holds a point of body1 on body2 (or the world): by
 bodies (anchor in body1's frame; body2's anchor where that point is at qpos0) or by sites (their
 positions in their bodies) (LinkSpec.connects). ``<equality><weld>`` holds a frame of body1 on one
 of body2 (or the world), position and orientation: by bodies (anchor in body2's frame; relpose the
@@ -568,21 +568,28 @@ class _Reader(MJCFDocument):
         return over({k: v for k, v in default.items() if k in ("active", "solref", "solimp")}, element.attrib)
 
     def _joint_equality(self, attrs: dict, links: list[LinkSpec], what: str, softness: np.ndarray):
-        """<equality><joint joint1 joint2 polycoef>: joint1 follows joint2 (LinkSpec.mimic), its row
-        as soft as ``softness`` says (LinkSpec.mimic_sol)."""
+        """<equality><joint joint1 joint2 polycoef>: joint1 follows joint2 (LinkSpec.mimic), or without
+        joint2 is held at q1 − ref1 = polycoef[0], its row as soft as ``softness`` says
+        (LinkSpec.mimic_sol)."""
         by_joint = {link.joint_name: link for link in links if link.joint_type in ("revolute", "prismatic")}
-        for key in ("joint1", "joint2"):
+        followed = attrs.get("joint2")
+        for key in ("joint1", "joint2") if followed is not None else ("joint1",):
             if attrs.get(key) not in by_joint:
                 raise self.error(f"{what}: {key} expected a hinge or slide joint of the file, got {attrs.get(key)!r}")
         for key in attrs:
             if key not in ("name", "class", "joint1", "joint2", "polycoef", "active", "solref", "solimp"):
                 self.ignored.add(f"<equality><joint {key}>")
+        if by_joint[attrs["joint1"]].mimic is not None:
+            raise self.error(f"{what}: joint1 {attrs['joint1']!r} expected in one joint equality as joint1, got a "
+                             f"second (more are not supported yet)")
         coef = self.numbers(attrs, "polycoef", 5, what, default=[0, 1, 0, 0, 0])
-        if np.any(coef[2:] != 0):
+        if followed is not None and np.any(coef[2:] != 0):
             raise self.error(f"{what}: polycoef expected a linear map (its last three 0), got {coef.tolist()}")
-        # MuJoCo's row holds q1 − ref1 = c0 + c1 (q2 − ref2): an offset c0 + ref1 − c1 ref2 on q
-        ref1, ref2 = by_joint[attrs["joint1"]].q0, by_joint[attrs["joint2"]].q0
-        by_joint[attrs["joint1"]].mimic = (attrs["joint2"], float(coef[1]), float(coef[0] + ref1 - coef[1] * ref2))
+        # MuJoCo's row holds q1 − ref1 = c0 + c1 (q2 − ref2): an offset c0 + ref1 − c1 ref2 on q;
+        # without joint2, q1 − ref1 = c0 (MuJoCo reads no other coefficient)
+        multiplier, ref2 = (0.0, 0.0) if followed is None else (float(coef[1]), by_joint[followed].q0)
+        offset = float(coef[0] + by_joint[attrs["joint1"]].q0 - multiplier * ref2)
+        by_joint[attrs["joint1"]].mimic = (followed, multiplier, offset)
         by_joint[attrs["joint1"]].mimic_sol = softness
 
     def _connect(self, attrs: dict, links: list[LinkSpec], what: str, softness: np.ndarray):

@@ -53,7 +53,8 @@ class RigidModel:
     solref mixed in the standard form and the smaller in the direct form, friction the larger:
     MuJoCo's mj_contactParam), pair_margin m.
     Per joint equality (E; URDF mimic joints, LinkSpec.mimic): eq_dof1 (E,) the following joint's
-    dof, eq_dof2 (E,) the followed one's, eq_coef (E, 2) (offset rad or m, multiplier): the row
+    dof, eq_dof2 (E,) the followed one's (−1: none, the joint is held at the offset: MuJoCo's
+    joint equality without joint2), eq_coef (E, 2) (offset rad or m, multiplier): the row
     q[eq_dof1] = offset + multiplier · q[eq_dof2] (MuJoCo's joint equality with polycoef (offset,
     multiplier), which relates q − qpos0: the MJCF loader folds the joints' refs into the offset),
     eq_sol (E, 7) its row's solref and solimp (NaN: the scene's, which the solver fills in).
@@ -315,8 +316,9 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
                 geom_links.append(link_idx)
                 geom_names.append(f"link '{spec.name}' collision geom {k}")
             qpos0.extend(_initial_q(spec))
-        equalities += [(joint_dof[spec.joint_name], joint_dof[spec.mimic[0]], spec.mimic[2], spec.mimic[1],
-                        _softness(spec.mimic_sol)) for spec in links if spec.mimic is not None]
+        equalities += [(joint_dof[spec.joint_name], -1 if spec.mimic[0] is None else joint_dof[spec.mimic[0]],
+                        spec.mimic[2], spec.mimic[1], _softness(spec.mimic_sol))
+                       for spec in links if spec.mimic is not None]
         tendons += [_tendon(tendon, joint_dof) for spec in links for tendon in spec.tendons]
         index = {spec.name: link_offset + k for k, spec in enumerate(links)}
         entity_connects, entity_welds = _body_equalities(links, index)

@@ -91,7 +91,8 @@ class LinkSpec:
     primitive morphs, which are drawn from their geoms).
     mimic: (joint name, multiplier, offset) when this scalar joint follows another of the same
     entity, q = multiplier · q_other + offset (URDF ``<mimic>``): a joint equality constraint row
-    (constraint/rows.py), as MuJoCo's and Genesis's; None otherwise. mimic_sol: (7,) its row's
+    (constraint/rows.py), as MuJoCo's and Genesis's; (None, 0, offset): the joint is held at q =
+    offset (MJCF's joint equality without joint2); None otherwise. mimic_sol: (7,) its row's
     solref then solimp, as limit_sol (MJCF's equality solref and solimp), or None.
     same_body: the link continues its parent's body (MJCF: the links of one body's joints, which
     LinkSpec joints' frames split): contact rules take the two as one body.

@@ -531,25 +531,33 @@ def _dof_row(d: ti.template(), s, e, r, i, sign, dist, softness: ti.template()):
 @ti.func
 def _equality_terms(d: ti.template(), s, e, k):
     """(a, b, multiplier, distance) of joint equality k at frame s: its dofs (the following one,
-    the followed one) and q_a − offset − multiplier · q_b (m or rad)."""
+    the followed one, −1 when it is held at its offset alone) and q_a − offset − multiplier · q_b
+    (m or rad)."""
     a, b = d.eq_dof1[k], d.eq_dof2[k]
     multiplier = d.eq_coef[2 * k + 1]
-    dist = d.qpos[s, e, d.dof_q[a]] - d.eq_coef[2 * k] - multiplier * d.qpos[s, e, d.dof_q[b]]
+    followed = d.qpos[s, e, d.dof_q[ti.max(b, 0)]]  # (dof 0's when none: not used)
+    dist = d.qpos[s, e, d.dof_q[a]] - d.eq_coef[2 * k] - (multiplier * followed if b >= 0 else 0.0)
     return a, b, multiplier, dist
 
 
 @ti.func
 def _equality_row(d: ti.template(), s, e, r, k):
-    """Row r for joint equality k (MuJoCo's joint equality): J = e_a − multiplier · e_b, its
-    distance from _equality_terms, diagA the two dofs' dof_invweight0."""
+    """Row r for joint equality k (MuJoCo's joint equality): J = e_a − multiplier · e_b (e_a alone
+    without b), its distance from _equality_terms, diagA its dofs' dof_invweight0."""
     a, b, multiplier, dist = _equality_terms(d, s, e, k)
-    d.efc_J[s, e, r, a], d.efc_J[s, e, r, b] = 1.0, -multiplier
+    d.efc_J[s, e, r, a] = 1.0
     slot = d.joint_columns + JOINT_ROW_SLOTS * r
-    d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, 2
-    d.efc_cols[s, e, slot], d.efc_cols[s, e, slot + 1] = ti.min(a, b), ti.max(a, b)
-    velocity = d.qvel[s, e, a] - multiplier * d.qvel[s, e, b]
+    d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, 1
+    d.efc_cols[s, e, slot] = a
+    velocity, scale = d.qvel[s, e, a], d.invweight_dof[e, a]
+    if b >= 0:
+        d.efc_J[s, e, r, b] = -multiplier
+        d.efc_ncol[s, e, r] = 2
+        d.efc_cols[s, e, slot], d.efc_cols[s, e, slot + 1] = ti.min(a, b), ti.max(a, b)
+        velocity -= multiplier * d.qvel[s, e, b]
+        scale += d.invweight_dof[e, b]
     solref, solimp = _softness(d.eq_sol, k)
-    _joint_row_scalars(d, s, e, r, dist, velocity, d.invweight_dof[e, a] + d.invweight_dof[e, b], solref, solimp)
+    _joint_row_scalars(d, s, e, r, dist, velocity, scale, solref, solimp)
     d.efc_dim[s, e, r], d.efc_id[s, e, r] = 1, k
     d.efc_type[s, e, r], d.efc_floss[s, e, r] = EQUALITY, 0.0
 
