@@ -440,6 +440,17 @@ LINK = '<geom type="sphere" size="0.1"/>'
     (f'<body name="b"><body name="c"><joint name="k"/>{LINK}<geom type="plane" size="1 1 1"/></body></body>', "",
      "body 'c' geom 1: a plane only in the worldbody or a body welded to it"),
     (f'<body name="b"><geom type="mesh" mesh="nope"/></body>', "", "mesh 'nope' is not an <asset><mesh>"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<asset><mesh name="m" vertex="0 0 0 1 0 0 0 1 0 0 0"/></asset>',
+     "<mesh name='m'>: attribute 'vertex' expected at least four vertices of three numbers, got 11 numbers"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<asset><mesh name="m" vertex="0 0 0 1 0 0 0 1 0 1 1 0"/></asset>',
+     "<mesh name='m'>: the convex hull of 4 vertices spans no volume"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>',
+     '<asset><mesh name="m" vertex="0 0 0 1 0 0 0 1 0 0 0 1" face="0 1 4"/></asset>',
+     "<mesh name='m'>: attribute 'face' expected triangles of vertex indices in [0, 4), got '0 1 4'"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<asset><mesh vertex="0 0 0 1 0 0 0 1 0 0 0 1"/></asset>',
+     "a mesh without a file expected a name"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<asset><mesh name="m" builtin="sphere" params="3"/></asset>',
+     "expected a mesh from a file or from its vertices (attribute 'file' or 'vertex'), got neither (builtin"),
     (f'<body name="b" childclass="x">{LINK}</body>', "", "class 'x' is not a <default> class"),
     (f'<body name="b"><inertial mass="1" quat="1 0 0 0" fullinertia="1 1 1 0 0 0"/>{LINK}</body>', "",
      "fullinertia expected without an orientation"),
@@ -632,6 +643,29 @@ def test_gradients_through_a_held_joint_match_finite_differences(f64, tmp_path, 
             robot.set_dofs_velocity(velocity)
     loss = pose_loss(scene, robot, weights, 150, apply)
     assert_converged(directional_errors(loss, start), f"held joint: {what}")
+
+
+def test_meshes_given_by_their_vertices_match_mujoco(f64, tmp_path):
+    """<mesh vertex face>: a box given by its corners and an inner point, no faces (MuJoCo's
+    compiler takes their convex hull), scaled; an octahedron with its faces. Both dropped on a
+    plane, tilted, beside MuJoCo 4 for 2 s (dyadic coordinates: MuJoCo keeps mesh vertices in
+    float32; meshes symmetric about their principal axes: MuJoCo re-centres a mesh's frame on them)."""
+    corners = " ".join(f"{x} {y} {z}" for x in (-1, 1) for y in (-1, 1) for z in (-1, 1))
+    half = np.array([0.125, 0.0625, 0.09375])
+    octahedron = " ".join(f"{sign * h * (axis == k)}" for axis, h in enumerate(half) for sign in (1, -1) for k in range(3))
+    faces = " ".join(" ".join(map(str, (x, y, z) if (x == 0) ^ (y == 3) ^ (z == 5) else (x, z, y)))
+                     for x in (0, 1) for y in (2, 3) for z in (4, 5))  # (outwards: by the octant's sign)
+    extra = (f'<option timestep="0.002"/><asset><mesh name="box" vertex="{corners} 0 0.5 0" scale="0.0625 0.125 0.0625"/>'
+             f'<mesh name="octahedron" vertex="{octahedron}" face="{faces}"/></asset>')
+    body = ('<geom type="plane" size="0 0 1"/><body name="box" pos="0 0 0.3" euler="5 10 0"><freejoint/>'
+            '<geom type="mesh" mesh="box"/></body><body name="octahedron" pos="0.4 0 0.3" euler="10 20 30">'
+            '<freejoint/><geom type="mesh" mesh="octahedron"/></body>')
+    m, d, scene, robot = _pair(_write(tmp_path, body, extra), integrator="euler")
+    masses = {link.name: float(link.get_mass()) for link in robot.links}
+    assert masses["box"] == m.body_mass[1] == 1000 * 0.125 * 0.25 * 0.125
+    assert masses["octahedron"] == pytest.approx(m.body_mass[2], rel=1e-15)
+    assert _lockstep(m, d, scene, robot, 1000) < 1e-11
+    assert robot.get_qpos()[2].item() == pytest.approx(0.0625, abs=1e-3)  # (the box at rest on a face)
 
 
 def test_a_bodys_links_are_one_body_to_contacts(f64, tmp_path):

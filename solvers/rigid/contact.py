@@ -81,9 +81,9 @@ def capacity(model, options):
     """(contact slots C, row slots R) per env: C the pairs' worst case, capped by max_contacts
     (default: MAX_PER_MOVING_LINK per moving link with geometry, at least MIN_CONTACTS); R
     enough rows for C contacts of the largest condim under the cone, one per joint equality, three
-    per connect, six per weld (and run-time weld slot), one per limited dof (at most one of its two
-    bounds is violated) and one per dof
-    for friction loss (settable on any)."""
+    per connect, six per weld (and run-time weld slot), one per limited dof and limited fixed
+    tendon (at most one of its two bounds is violated) and one per dof for friction loss
+    (settable on any)."""
     worst = worst_case_contacts(model)
     if options.max_contacts is not None:
         cap = int(options.max_contacts)

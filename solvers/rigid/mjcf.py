@@ -29,7 +29,7 @@ else from the body's geoms as solids of their density (or stated mass), as MuJoC
 legacy formula differs for non-convex meshes). Geoms: sphere, capsule, cylinder, box (sizes, or
 ``fromto``), mesh (``<mesh file scale>`` assets, in the file's own coordinates: MuJoCo's
 re-centring moves the geom frame, not the surface; found in meshdir or beside the file that
-included them); contype/conaffinity masks (MuJoCo's pair rule); ``<contact><exclude>``; friction
+included them; or given by ``vertex`` and ``face``, without faces the vertices' convex hull); contype/conaffinity masks (MuJoCo's pair rule); ``<contact><exclude>``; friction
 (the sliding coefficient), condim (1 or 3; 4 and 6 taken as 3, with a warning), solref, solimp,
 priority and solmix, which a pair combines as MuJoCo's mj_contactParam (GeomSpec); planes (infinite, as MuJoCo's colliders take them, massless; drawn as
 MuJoCo sizes them) in the worldbody or a body welded to it; a geom with contype = conaffinity = 0

@@ -278,34 +278,65 @@ class MJCFDocument:
     # ---------------------------------------------------------------- assets
 
     def _assets(self):
-        """({mesh name: (candidate files, scale (3,))}, {material name: rgba (4,)})."""
+        """({mesh name: (source, scale (3,))}, {material name: rgba (4,)}); a mesh's source: its
+        candidate files, or (vertices (V, 3), faces (F, 3)) given in the file (``vertex``, ``face``;
+        without faces, the vertices' convex hull, as MuJoCo's compiler takes it)."""
         meshes, materials = {}, {}
         for asset in self.root.findall("asset"):
             for mesh in asset.findall("mesh"):
                 attrs = self.attrs(mesh, "main")
-                if "file" not in attrs:
-                    raise self.error(f"<mesh name={attrs.get('name')!r}>: only meshes from a file are supported "
-                                     f"(attribute 'file' missing)")
-                name = attrs.get("name", os.path.splitext(os.path.basename(attrs["file"]))[0])
+                if "file" not in attrs and "vertex" not in attrs:
+                    raise self.error(f"<mesh name={attrs.get('name')!r}>: expected a mesh from a file or from its "
+                                     f"vertices (attribute 'file' or 'vertex'), got neither"
+                                     + (" (builtin meshes are not supported yet)" if "builtin" in attrs else ""))
+                if "file" not in attrs and "name" not in attrs:  # (MuJoCo's compiler refuses it too)
+                    raise self.error("<mesh vertex=...>: a mesh without a file expected a name, got none")
+                name = attrs.get("name") or os.path.splitext(os.path.basename(attrs["file"]))[0]
                 for key in attrs:
-                    if key not in ("name", "class", "file", "scale", "content_type"):
+                    if key not in ("name", "class", "file", "scale", "content_type", "vertex", "face"):
                         self.ignored.add(f"<mesh {key}> (a mesh's volume and inertia are its solid's, exact for "
                                          f"a closed mesh, its convex hull's for an open one)")
-                scale = self.numbers(attrs, "scale", 3, f"<mesh name={name!r}>", default=np.ones(3))
-                folders = [self.meshdir] + ([os.path.join(self.included_from[mesh], self.meshdir_given),
-                                             self.included_from[mesh]] if mesh in self.included_from else [])
-                meshes[name] = ([os.path.join(folder, attrs["file"]) for folder in folders], scale)
+                what = f"<mesh name={name!r}>"
+                scale = self.numbers(attrs, "scale", 3, what, default=np.ones(3))
+                if "file" in attrs:
+                    folders = [self.meshdir] + ([os.path.join(self.included_from[mesh], self.meshdir_given),
+                                                 self.included_from[mesh]] if mesh in self.included_from else [])
+                    meshes[name] = ([os.path.join(folder, attrs["file"]) for folder in folders], scale)
+                else:
+                    meshes[name] = (self._given_mesh(attrs, what), scale)
             for material in asset.findall("material"):
                 attrs = self.attrs(material, "main")
                 if "name" in attrs and "rgba" in attrs:
                     materials[attrs["name"]] = self.numbers(attrs, "rgba", 4, f"<material name={attrs['name']!r}>")
         return meshes, materials
 
+    def _given_mesh(self, attrs: dict, what: str):
+        """(vertices (V, 3), faces (F, 3)) of a mesh given by its ``vertex`` and ``face`` attributes."""
+        vertices = self.numbers(attrs, "vertex", len(attrs["vertex"].split()), what)
+        if len(vertices) % 3 or len(vertices) < 12:
+            raise self.error(f"{what}: attribute 'vertex' expected at least four vertices of three numbers, "
+                             f"got {len(vertices)} numbers")
+        vertices = vertices.reshape(-1, 3)
+        if "face" not in attrs:
+            try:
+                return shapes.hull_mesh(vertices)
+            except AssetError as exc:
+                raise self.error(f"{what}: {exc}") from exc
+        faces = self.numbers(attrs, "face", len(attrs["face"].split()), what)
+        if (len(faces) % 3 or not len(faces) or np.any(faces != np.round(faces)) or np.any(faces < 0)
+                or np.any(faces >= len(vertices))):
+            raise self.error(f"{what}: attribute 'face' expected triangles of vertex indices in [0, "
+                             f"{len(vertices)}), got {attrs['face']!r}")
+        return vertices, faces.astype(np.int64).reshape(-1, 3)
+
     def mesh(self, name: str, what: str):
         """(vertices (V, 3) m, faces (F, 3)) of the mesh asset `name`, scaled."""
         if name not in self.meshes:
             raise self.error(f"{what}: mesh {name!r} is not an <asset><mesh>")
-        candidates, scale = self.meshes[name]
+        source, scale = self.meshes[name]
+        if isinstance(source, tuple):
+            return shapes.scaled_mesh(*source, scale)
+        candidates = source
         found = [file for file in candidates if os.path.isfile(file)]
         if not found:  # (MuJoCo looks in meshdir, and beside the file that included the mesh)
             raise self.error(f"{what}: mesh file not found; tried {candidates}")

@@ -175,9 +175,33 @@ def load_mesh(path: str, scale=1.0) -> tuple[np.ndarray, np.ndarray]:
         raise AssetError(f"mesh file '{path}' has no triangles")
     if not np.all(np.isfinite(vertices)):
         raise AssetError(f"mesh file '{path}' has non-finite (NaN or inf) vertex coordinates")
+    return scaled_mesh(vertices, faces, scale)
+
+
+def scaled_mesh(vertices, faces, scale=1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) scaled by ``scale`` (one number or (3,) per-axis factors) and faces (F, 3),
+    flipped when the scale mirrors (an odd number of negative factors), so that normals keep
+    pointing outwards."""
     scale = np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,))
     faces = faces[:, ::-1] if np.prod(np.sign(scale)) < 0 else faces
     return vertices * scale, faces.copy()
+
+
+def hull_mesh(vertices) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (H, 3) and outward faces (F, 3) of the convex hull of ``vertices`` (V, 3).
+    Raises AssetError when they span no volume (fewer than four, or coplanar)."""
+    import trimesh
+    vertices = np.asarray(vertices, dtype=np.float64)
+    extent = float(np.ptp(vertices, axis=0).max()) if len(vertices) else 0.0
+    try:
+        with np.errstate(all="ignore"):  # (trimesh divides by a flat hull's zero volume)
+            hull = trimesh.Trimesh(vertices, process=False).convex_hull
+            volume = float(hull.volume)
+    except Exception:  # qhull fails on fewer than four points
+        volume = 0.0
+    if not volume > 1e-9 * extent ** 3:  # (qhull joggles coplanar points into a sliver)
+        raise AssetError(f"the convex hull of {len(vertices)} vertices spans no volume")
+    return np.asarray(hull.vertices, dtype=np.float64), np.asarray(hull.faces, dtype=np.int64)
 
 
 def mesh_mass_properties(vertices, faces, rho: float) -> tuple[float, np.ndarray, np.ndarray]:
