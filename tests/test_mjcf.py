@@ -312,17 +312,16 @@ def test_more_tendons_than_dofs_match_mujoco(f64, tmp_path):
     assert robot.n_dofs == 1 and met == {0, 1, 2}
 
 
-@pytest.mark.parametrize("what", [pytest.param("velocity", marks=pytest.mark.slow), "mass"])
-def test_gradients_through_tendon_limits_match_finite_differences(f64, what):
-    """tendons.xml swung into its tendons' limits for 0.3 s: the gradient of every link's pose w.r.t.
-    the initial velocities and the links' masses (through the rows' scale, J M⁻¹ Jᵀ) against
-    central differences."""
+def _assert_pose_gradients_converge(path, what, speed, seed, label):
+    """The MJCF file's entity 0.3 s from random initial velocities (``speed`` rad/s or m/s, one
+    sigma): the gradient of every link's pose w.r.t. those velocities (``what`` "velocity") or
+    the masses of the links that have one ("mass") against central differences."""
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, requires_grad=True),
                      rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True, tolerance=1e-14))
-    robot = scene.add_entity(gs.morphs.MJCF(file=TENDONS))
+    robot = scene.add_entity(gs.morphs.MJCF(file=path))
     scene.build()
-    rng = np.random.default_rng(1)
-    velocity, weights = torch.tensor(rng.normal(0.0, 3.0, robot.n_dofs)), torch.tensor(rng.normal(size=(robot.n_links, 7)))
+    rng = np.random.default_rng(seed)
+    velocity, weights = torch.tensor(rng.normal(0.0, speed, robot.n_dofs)), torch.tensor(rng.normal(size=(robot.n_links, 7)))
     heavy = [k for k, link in enumerate(robot.links) if float(link.get_mass()) > 0]
     if what == "velocity":
         start, apply = velocity, robot.set_dofs_velocity
@@ -333,7 +332,15 @@ def test_gradients_through_tendon_limits_match_finite_differences(f64, what):
             robot.set_links_mass(mass, links_idx_local=heavy)
             robot.set_dofs_velocity(velocity)
     loss = pose_loss(scene, robot, weights, 150, apply)
-    assert_converged(directional_errors(loss, start), f"tendon limits: {what}")
+    assert_converged(directional_errors(loss, start), f"{label}: {what}")
+
+
+@pytest.mark.parametrize("what", [pytest.param("velocity", marks=pytest.mark.slow), "mass"])
+def test_gradients_through_tendon_limits_match_finite_differences(f64, what):
+    """tendons.xml swung into its tendons' limits for 0.3 s: the gradient of every link's pose w.r.t.
+    the initial velocities and the links' masses (through the rows' scale, J M⁻¹ Jᵀ) against
+    central differences."""
+    _assert_pose_gradients_converge(TENDONS, what, 3.0, 1, "tendon limits")
 
 
 def test_exclude_ground_plane_leaves_out_the_worldbodys_planes(f64):
@@ -626,23 +633,7 @@ def test_a_joint_equality_without_joint2_holds_the_joint_as_mujoco(f64, tmp_path
 def test_gradients_through_a_held_joint_match_finite_differences(f64, tmp_path, what):
     """The held chain above for 0.3 s: the gradient of every link's pose w.r.t. the initial
     velocities and the links' masses (through the rows' scale) against central differences."""
-    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, requires_grad=True),
-                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True, tolerance=1e-14))
-    robot = scene.add_entity(gs.morphs.MJCF(file=_write(tmp_path, HELD, HELD_EQUALITIES)))
-    scene.build()
-    rng = np.random.default_rng(2)
-    velocity, weights = torch.tensor(rng.normal(0.0, 2.0, robot.n_dofs)), torch.tensor(rng.normal(size=(robot.n_links, 7)))
-    heavy = [k for k, link in enumerate(robot.links) if float(link.get_mass()) > 0]
-    if what == "velocity":
-        start, apply = velocity, robot.set_dofs_velocity
-    else:
-        start = robot.get_links_mass().detach().clone()[heavy]
-
-        def apply(mass):
-            robot.set_links_mass(mass, links_idx_local=heavy)
-            robot.set_dofs_velocity(velocity)
-    loss = pose_loss(scene, robot, weights, 150, apply)
-    assert_converged(directional_errors(loss, start), f"held joint: {what}")
+    _assert_pose_gradients_converge(_write(tmp_path, HELD, HELD_EQUALITIES), what, 2.0, 2, "held joint")
 
 
 def test_meshes_given_by_their_vertices_match_mujoco(f64, tmp_path):
