@@ -582,7 +582,9 @@ class _Reader(MJCFDocument):
         if by_joint[attrs["joint1"]].mimic is not None:
             raise self.error(f"{what}: joint1 {attrs['joint1']!r} expected in one joint equality as joint1, got a "
                              f"second (more are not supported yet)")
-        coef = self.numbers(attrs, "polycoef", 5, what, default=[0, 1, 0, 0, 0])
+        coef = np.array([0.0, 1.0, 0.0, 0.0, 0.0])  # (MuJoCo's; a shorter polycoef keeps the rest)
+        given = self.numbers(attrs, "polycoef", (1, 2, 3, 4, 5), what, default=[])
+        coef[:len(given)] = given
         if followed is not None and np.any(coef[2:] != 0):
             raise self.error(f"{what}: polycoef expected a linear map (its last three 0), got {coef.tolist()}")
         # MuJoCo's row holds q1 − ref1 = c0 + c1 (q2 − ref2): an offset c0 + ref1 − c1 ref2 on q;

@@ -322,12 +322,15 @@ class MJCFDocument:
                 return shapes.hull_mesh(vertices)
             except AssetError as exc:
                 raise self.error(f"{what}: {exc}") from exc
-        faces = self.numbers(attrs, "face", len(attrs["face"].split()), what)
-        if (len(faces) % 3 or not len(faces) or np.any(faces != np.round(faces)) or np.any(faces < 0)
-                or np.any(faces >= len(vertices))):
+        words = attrs["face"].split()
+        faces = np.array([int(word) if word.lstrip("-").isdigit() else -1 for word in words], dtype=np.int64)
+        if len(faces) % 3 or not len(faces) or np.any(faces < 0) or np.any(faces >= len(vertices)):
             raise self.error(f"{what}: attribute 'face' expected triangles of vertex indices in [0, "
                              f"{len(vertices)}), got {attrs['face']!r}")
-        return vertices, faces.astype(np.int64).reshape(-1, 3)
+        faces = faces.reshape(-1, 3)
+        if not abs(shapes.enclosed_volume(vertices, faces)) > 1e-9 * np.ptp(vertices, axis=0).max() ** 3:
+            raise self.error(f"{what}: its faces enclose no volume (MuJoCo's compiler refuses it too)")
+        return vertices, faces
 
     def mesh(self, name: str, what: str):
         """(vertices (V, 3) m, faces (F, 3)) of the mesh asset `name`, scaled."""

@@ -187,6 +187,17 @@ def scaled_mesh(vertices, faces, scale=1.0) -> tuple[np.ndarray, np.ndarray]:
     return vertices * scale, faces.copy()
 
 
+def enclosed_volume(vertices, faces) -> float:
+    """Signed volume (m³) the triangles ``faces`` (F, 3) of ``vertices`` (V, 3) sweep from their
+    area-weighted centroid, as MuJoCo's compiler measures a mesh: a closed outward mesh's volume;
+    0 for flat ones (one triangle, a plane of them)."""
+    corners = np.asarray(vertices, dtype=np.float64)[faces]  # (F, 3 corners, 3)
+    areas = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    centre = (areas[:, None] * corners.mean(axis=1)).sum(axis=0) / max(areas.sum(), 1e-300)
+    arms = corners - centre
+    return float(np.einsum("fi,fi->", arms[:, 0], np.cross(arms[:, 1], arms[:, 2])) / 6.0)
+
+
 def hull_mesh(vertices) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (H, 3) and outward faces (F, 3) of the convex hull of ``vertices`` (V, 3).
     Raises AssetError when they span no volume (fewer than four, or coplanar)."""
