@@ -29,8 +29,14 @@ EPS_SCAN = (1e-5, 1e-6)
 _SCENES = {}
 
 
+# the parameters a test may set, which keep their value across reset() (as Genesis's): restored
+# from the build's before a scene is reused, so that no test depends on the ones run before it
+PARAMETERS = ("links_mass", "dofs_damping", "dofs_armature", "dofs_stiffness", "dofs_kp", "dofs_kv",
+              "dofs_frictionloss")
+
+
 def _scene(robot_name, n_envs, substeps, checkpoint_interval=1, limited=False):
-    """One scene per configuration (building is the slow part); reset() makes it fresh.
+    """One scene per configuration (building is the slow part), its parameters as built.
     ``limited``: joint limits on, friction loss 0.05 on every dof and every force clipped to ±1.5
     (a share of the controls clips). The constraint solve runs to 1e-14: the gradient is that of
     the exact solution, and finite differences of a solve stopped at 1e-8 see its stopping
@@ -49,8 +55,16 @@ def _scene(robot_name, n_envs, substeps, checkpoint_interval=1, limited=False):
             bound = torch.full(_batch(n_envs, robot.n_dofs), 1.5, dtype=torch.float64)
             robot.set_dofs_force_range(-bound, bound)
             robot.set_dofs_frictionloss(torch.full(_batch(n_envs, robot.n_dofs), 0.05, dtype=torch.float64))
-        _SCENES[key] = (scene, robot)
-    return _SCENES[key]
+        built = {name: getattr(robot, f"get_{name}")().detach().clone() for name in PARAMETERS}
+        force_range = tuple(bound.clone() for bound in robot.get_dofs_force_range())
+        _SCENES[key] = (scene, robot, built, force_range, scene.get_gravity().clone())
+    scene, robot, built, force_range, gravity = _SCENES[key]
+    for name, value in built.items():
+        getattr(robot, f"set_{name}")(value)
+    robot.set_dofs_force_range(*force_range)
+    scene.set_gravity(gravity)
+    scene.reset()
+    return scene, robot
 
 
 def _batch(n_envs, *shape):
