@@ -9,7 +9,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import geometry, shapes
-from ..core import AssetError
 from .spec import JOINT_TYPES, TENDON_JOINTS
 
 FIXED, REVOLUTE, PRISMATIC, FREE, BALL = range(5)
