@@ -556,6 +556,19 @@ def test_what_is_ignored_is_said_once(f64, tmp_path, caplog):
     assert "stiffness" not in said[0]  # (a tendon's zero spring is MuJoCo's default: nothing is lost)
 
 
+def test_an_open_mesh_weighing_its_hull_is_said(f64, tmp_path, caplog):
+    """A body weighed from an open mesh (a tetrahedron missing a face) is named: its mass is its
+    convex hull's here, MuJoCo integrates the open surface; a closed one is not named."""
+    tetrahedron = '<mesh name="{}" vertex="0 0 0  .1 0 0  0 .1 0  0 0 .1" face="0 2 1  0 1 3  0 3 2{}"/>'
+    extra = f'<asset>{tetrahedron.format("open", "")}{tetrahedron.format("closed", "  1 2 3")}</asset>'
+    path = _write(tmp_path, '<body name="a"><freejoint/><geom type="mesh" mesh="open"/></body>'
+                            '<body name="b" pos="1 0 0"><freejoint/><geom type="mesh" mesh="closed"/></body>', extra)
+    with caplog.at_level(logging.WARNING, logger="genesis_lite"):
+        gs.Scene().add_entity(gs.morphs.MJCF(file=path))
+    said = " ".join(r.getMessage() for r in caplog.records)
+    assert "body 'a': an open mesh's own inertia" in said and "body 'b'" not in said
+
+
 def test_a_hinge_on_the_world_hangs_from_a_static_world_link_and_angles_follow_the_compiler(f64, tmp_path):
     body = (f'<body name="pendulum" pos="0 0 1" euler="0 0 90"><joint name="swing" axis="1 0 0" range="-45 45"/>'
             f'<geom type="capsule" fromto="0 0 0 0 0 -0.5" size="0.02"/></body>')

@@ -395,6 +395,9 @@ class _Reader(MJCFDocument):
             link.mass, link.com, link.inertia = self._inertial(inertial, what)
         elif self.inertiafromgeom != "false":
             link.mass, link.com, link.inertia = shapes.combined_mass_properties(solids)
+            if any(geom.type == "mesh" and not shapes.encloses_solid(geom.vertices, geom.faces) for geom, *_ in solids):
+                self.ignored.add(f"{what}: an open mesh's own inertia (here its convex hull's; MuJoCo integrates "
+                                 f"the open surface)")
 
     def _geoms(self, members, link: LinkSpec, what: str, static: bool) -> list:
         """Put the geoms ``members`` (_members's) on the link, as collision shapes (unless both

@@ -198,6 +198,20 @@ def enclosed_volume(vertices, faces) -> float:
     return float(np.einsum("fi,fi->", arms[:, 0], np.cross(arms[:, 1], arms[:, 2])) / 6.0)
 
 
+def encloses_solid(vertices, faces) -> bool:
+    """Whether the triangles ``faces`` (F, 3) of ``vertices`` (V, 3) bound a solid, outwards: with
+    equal vertices merged, every edge met twice, once each way, and a positive enclosed volume
+    (mesh_mass_properties integrates such a mesh; any other, its convex hull)."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    _, index = np.unique(vertices, axis=0, return_inverse=True)
+    corners = index.reshape(-1)[np.asarray(faces)]
+    edges = np.concatenate([corners[:, [0, 1]], corners[:, [1, 2]], corners[:, [2, 0]]])
+    directed, counts = np.unique(edges, axis=0, return_counts=True)
+    reverse = {tuple(edge) for edge in directed[:, ::-1].tolist()}
+    paired = all(tuple(edge) in reverse for edge in directed.tolist())
+    return bool(np.all(counts == 1) and paired and enclosed_volume(vertices, faces) > 0)
+
+
 def hull_mesh(vertices) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (H, 3) and outward faces (F, 3) of the convex hull of ``vertices`` (V, 3).
     Raises AssetError when they span no volume (fewer than four, or coplanar)."""
