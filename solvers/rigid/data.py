@@ -246,11 +246,11 @@ def layout(size, ints_begin):
 def offsets(size, ints_begin):
     """What the kernels read of the offsets table (OFFSETS, in the int arena after the header):
     every array's start (``layout``), each input's start and its gradient's (the inputs' start
-    plus the input's column), the per-env count
-    of every frame and per-env array (their env stride) and where the constraint rows' column
-    lists start. Computed here once, each a single load inside a kernel: summed there from the
-    sizes, every array access carried its start's whole sum (dozens of size products) into LLVM's
-    scalar evolution, whose loop strength reduction was most of a kernel's cold compile."""
+    plus the input's column), the per-env count of every frame and per-env array (their env
+    stride) and where the constraint rows' column lists start. Computed here once, each a single
+    load inside a kernel: summed there from the sizes, every array access carried its start's
+    whole sum (dozens of size products) into LLVM's scalar evolution, whose loop strength
+    reduction was most of a kernel's cold compile."""
     start, _ = layout(size, ints_begin)
     count = _counts(size)
     table = dict(start)
