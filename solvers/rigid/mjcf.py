@@ -29,7 +29,8 @@ else from the body's geoms as solids of their density (or stated mass), as MuJoC
 legacy formula differs for non-convex meshes). Geoms: sphere, capsule, cylinder, box (sizes, or
 ``fromto``), mesh (``<mesh file scale>`` assets, in the file's own coordinates: MuJoCo's
 re-centring moves the geom frame, not the surface; found in meshdir or beside the file that
-included them; or given by ``vertex`` and ``face``, without faces the vertices' convex hull); contype/conaffinity masks (MuJoCo's pair rule); ``<contact><exclude>``; friction
+included them; or given by ``vertex`` and ``face``, without faces the vertices' convex hull);
+contype/conaffinity masks (MuJoCo's pair rule); ``<contact><exclude>``; friction
 (the sliding coefficient), condim (1 or 3; 4 and 6 taken as 3, with a warning), solref, solimp,
 priority and solmix, which a pair combines as MuJoCo's mj_contactParam (GeomSpec); planes (infinite, as MuJoCo's colliders take them, massless; drawn as
 MuJoCo sizes them) in the worldbody or a body welded to it; a geom with contype = conaffinity = 0
@@ -48,9 +49,10 @@ Actuators on a joint give its servo (as Genesis reads them): ``position`` kp, kv
 with an affine bias, kp = −biasprm[1], kv = −biasprm[2]; ``velocity`` kv; forcerange (symmetric)
 the |force| bound; a ``motor`` is force control (control_dofs_force).
 ``<equality><joint>`` with polycoef (c0, c1) makes joint1 follow joint2, q1 − ref1 = c0 + c1 (q2 −
-ref2), or without joint2 holds it at q1 − ref1 = c0 (LinkSpec.mimic). ``<equality><connect>`` holds a point of body1 on body2 (or the world): by
-bodies (anchor in body1's frame; body2's anchor where that point is at qpos0) or by sites (their
-positions in their bodies) (LinkSpec.connects). ``<equality><weld>`` holds a frame of body1 on one
+ref2), or without joint2 holds it at q1 − ref1 = c0 (LinkSpec.mimic). ``<equality><connect>``
+holds a point of body1 on body2 (or the world): by bodies (anchor in body1's frame; body2's
+anchor where that point is at qpos0) or by sites (their positions in their bodies)
+(LinkSpec.connects). ``<equality><weld>`` holds a frame of body1 on one
 of body2 (or the world), position and orientation: by bodies (anchor in body2's frame; relpose the
 pose of body2's frame in body1's, taken at qpos0 where its quaternion is zero, MuJoCo's default)
 or by sites (their frames), its turn rows scaled by torquescale (LinkSpec.welds). Either body may

@@ -201,7 +201,8 @@ def enclosed_volume(vertices, faces) -> float:
 def encloses_solid(vertices, faces) -> bool:
     """Whether the triangles ``faces`` (F, 3) of ``vertices`` (V, 3) bound a solid, outwards: with
     equal vertices merged, every edge met twice, once each way, and a positive enclosed volume
-    (mesh_mass_properties integrates such a mesh; any other, its convex hull)."""
+    (mesh_mass_properties integrates such a mesh, any other its convex hull; the MJCF loader names
+    those)."""
     vertices = np.asarray(vertices, dtype=np.float64)
     _, index = np.unique(vertices, axis=0, return_inverse=True)
     corners = index.reshape(-1)[np.asarray(faces)]
@@ -248,7 +249,7 @@ def _mesh_mass_properties(vertices, faces, rho: float) -> tuple[float, np.ndarra
     import trimesh
 
     mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=True)
-    if not mesh.is_volume:
+    if not encloses_solid(vertices, faces):
         try:
             mesh = mesh.convex_hull
         except Exception:  # qhull fails on coplanar points: the shape has no volume
