@@ -39,9 +39,22 @@ def _vec(owner, name, value, n):
 
 def _positive(owner, name, value):
     refuse_grad(owner, name, value, "a shape's size is fixed at build")
-    arr = np.atleast_1d(np.asarray(value, dtype=np.float64))
+    try:
+        arr = np.atleast_1d(np.asarray(value, dtype=np.float64))
+    except (TypeError, ValueError):  # (not numbers)
+        arr = np.full(1, np.nan)
     if not np.all(np.isfinite(arr)) or not np.all(arr > 0):
         raise InvalidInputError(f"{owner}: argument '{name}' must be positive and finite, got {value!r}")
+
+
+def _isotropic_scale(owner, value):
+    """``value`` as one positive factor: a number, or a sequence of three equal ones."""
+    _positive(owner, "scale", value)
+    factors = np.atleast_1d(np.asarray(value, dtype=np.float64))
+    if factors.shape not in ((1,), (3,)) or np.ptp(factors) > 1e-12 * factors.max():
+        raise InvalidInputError(f"{owner}: argument 'scale' must be one positive number or three equal ones (the same "
+                                f"factor along every axis), got {value!r}")
+    return float(factors[0])
 
 
 @dataclass
@@ -76,11 +89,15 @@ class Morph:
         pass
 
 
-@named_keywords(*_FILE, "scale", "prioritize_urdf_material", "xacro_args", deprecated=_DEPRECATED)
+@named_keywords(*_FILE, "prioritize_urdf_material", "xacro_args", deprecated=_DEPRECATED)
 @dataclass
 class URDF(Morph):
     """A robot from a URDF file; mesh paths may be relative or ``package://``.
 
+    scale: the robot grown by this factor, of the same densities, as Genesis's (lengths × s,
+    masses × s³, inertias × s⁵; gains, damping, friction and effort limits the file's:
+    solvers/rigid/scale.py). A positive number, or three equal ones (Genesis's rule: a URDF scales
+    the same along every axis).
     default_armature: armature (kg·m² or kg) of every revolute and prismatic dof (a motor's rotor;
     as Genesis, not a free base's), as URDF has no tag for it. Genesis defaults to 0.1; 0 here,
     so that the dynamics are the file's (and MuJoCo's).
@@ -90,6 +107,7 @@ class URDF(Morph):
     links_to_keep: names of links that must not be merged away (sequence of str).
     (solvers/rigid/merge.py says how, and where the link order differs from Genesis's.)"""
     file: str = None
+    scale: float = 1.0
     default_armature: float = 0.0
     merge_fixed_links: bool = True
     links_to_keep: tuple = ()
@@ -97,6 +115,7 @@ class URDF(Morph):
     def _check(self):
         if not isinstance(self.file, str) or not self.file:
             raise InvalidInputError(f"URDF: argument 'file' must be a path string, got {self.file!r}")
+        self.scale = _isotropic_scale("URDF", self.scale)
         refuse_grad("URDF", "default_armature", self.default_armature,
                     "it is fixed at build; set_dofs_armature is differentiable")
         try:

@@ -23,7 +23,7 @@ from .rigid_solver import RigidSolverView
 from .runtime import logger, require_init, runtime, track
 from .simulator import Simulator, refuse_inference_mode
 from .solvers.mpm.solver import MPMSolver
-from .solvers.rigid import merge, mjcf, shapes, urdf
+from .solvers.rigid import merge, mjcf, scale, shapes, urdf
 from .solvers.rigid.solver import RigidSolver
 from .surfaces import Default
 from .vis.camera import Camera
@@ -465,6 +465,8 @@ def _links_of(morph, material, name):
         links = urdf.load_urdf(morph.file, entity_name=name, rho=material.rho)
         if morph.merge_fixed_links:
             links = merge.merge_fixed_links(links, morph.links_to_keep, owner=f"entity '{name}': gs.morphs.URDF")
+        if morph.scale != 1.0:
+            links = scale.scaled_links(links, morph.scale)
         for link in links:  # a motor's rotor on each joint one could drive (Genesis's rule): not a free base's
             if link.joint_type in ("revolute", "prismatic"):
                 link.armature = morph.default_armature
