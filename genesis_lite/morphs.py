@@ -139,7 +139,7 @@ class URDF(Morph):
         self.merge_fixed_links, self.links_to_keep = bool(self.merge_fixed_links), tuple(keep)
 
 
-@named_keywords(*_FILE, "scale", deprecated=_DEPRECATED)
+@named_keywords(*_FILE, deprecated=_DEPRECATED)
 @dataclass
 class MJCF(Morph):
     """A robot (or a scene of bodies) from an MJCF (MuJoCo XML) file: the bodies in its worldbody
@@ -151,13 +151,17 @@ class MJCF(Morph):
     merged), its joints' parameters, its actuators' servo gains and the file's contact bit masks
     are the file's. The worldbody's geoms (a floor, obstacles) are a static link "world", the
     entity's last; exclude_ground_plane=True leaves out its planes (Genesis's option: for a scene
-    that has a ground of its own, e.g. gs.morphs.Plane)."""
+    that has a ground of its own, e.g. gs.morphs.Plane). scale: the bodies grown by this factor,
+    as Genesis's (URDF's scale; an actuator's gains times scale³, Genesis's MJCF rule:
+    solvers/rigid/scale.py)."""
     file: str = None
+    scale: float = 1.0
     exclude_ground_plane: bool = False
 
     def _check(self):
         if not isinstance(self.file, str) or not self.file:
             raise InvalidInputError(f"MJCF: argument 'file' must be a path string, got {self.file!r}")
+        self.scale = _isotropic_scale("MJCF", self.scale)
         if not isinstance(self.exclude_ground_plane, (bool, np.bool_)):
             raise InvalidInputError(f"MJCF: argument 'exclude_ground_plane' must be True or False, "
                                     f"got {self.exclude_ground_plane!r}")

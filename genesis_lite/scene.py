@@ -466,7 +466,7 @@ def _links_of(morph, material, name):
         if morph.merge_fixed_links:
             links = merge.merge_fixed_links(links, morph.links_to_keep, owner=f"entity '{name}': gs.morphs.URDF")
         if morph.scale != 1.0:
-            links = scale.scaled_links(links, morph.scale)
+            links = scale.scaled_links(links, morph.scale)  # (a URDF's gains: the file's, as Genesis's)
         for link in links:  # a motor's rotor on each joint one could drive (Genesis's rule): not a free base's
             if link.joint_type in ("revolute", "prismatic"):
                 link.armature = morph.default_armature
@@ -475,6 +475,8 @@ def _links_of(morph, material, name):
             raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.MJCF expected an existing MJCF file, "
                              f"got '{morph.file}' (not found; relative paths start at {os.getcwd()})")
         links = mjcf.load_mjcf(morph.file, entity_name=name, exclude_ground_plane=morph.exclude_ground_plane)
+        if morph.scale != 1.0:
+            links = scale.scaled_links(links, morph.scale, gains=morph.scale ** 3)
         mjcf.place_world(links, morph.pos, morph.quat)
         if morph.fixed:
             links[0].joint_type = "fixed"

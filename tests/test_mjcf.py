@@ -589,8 +589,8 @@ def test_morph_arguments_are_checked(f64):
         gs.morphs.MJCF(file=3)
     with pytest.raises(AssetError, match="argument 'file' of gs.morphs.MJCF expected an existing MJCF file"):
         gs.Scene().add_entity(gs.morphs.MJCF(file="no_such.xml"))
-    with pytest.raises(InvalidInputError, match="scale"):
-        gs.morphs.MJCF(file=ARM, scale=2.0)
+    with pytest.raises(InvalidInputError, match="MJCF: argument 'scale' must be one positive number or three equal"):
+        gs.morphs.MJCF(file=ARM, scale=(1.0, 2.0, 1.0))
     with pytest.raises(InvalidInputError, match="MJCF: argument 'exclude_ground_plane' must be True or False"):
         gs.morphs.MJCF(file=ARM, exclude_ground_plane="yes")
 

@@ -1,4 +1,4 @@
-"""URDF(scale=s): the robot grown by s, of the same densities (Genesis's morph scale).
+"""URDF(scale=s) and MJCF(scale=s): the robot grown by s, of the same densities (Genesis's morph scale).
 
 Pinned by dynamic similarity, which needs nothing of ours: a body s times larger of the same
 density, under the same gravity, moves as the original at √s its pace. Every joint torque and
@@ -71,6 +71,22 @@ def _scene(file, s, dt, **rigid):
     return scene, robot
 
 
+def _assert_similar(original, grown, length, rate, steps, what):
+    """Step both scenes ``steps`` times: the grown robot's positions ÷ length and velocities ÷ rate
+    (each coordinate's scale) are the original's to round-off at every step, and it moved."""
+    worst, travel, q0 = 0.0, 0.0, original.get_dofs_position()
+    for _ in range(steps):
+        original.scene.step()
+        grown.scene.step()
+        q = original.get_dofs_position()
+        worst = max(worst, float((grown.get_dofs_position() / length - q).abs().max()),
+                    float((grown.get_dofs_velocity() / rate - original.get_dofs_velocity()).abs().max()))
+        travel = max(travel, float((q - q0).abs().max()))
+    print(f"\n{what}: worst |Δ| {worst:.2e} over a travel of {travel:.2f}")
+    assert travel > 0.2  # it moved
+    assert worst < 1e-9, worst
+
+
 @pytest.mark.parametrize("s", [0.35, 2.5])
 def test_scaled_chain_moves_as_the_original_at_root_s_its_pace(f64, tmp_path, s):
     """q_s(t) = q(t / √s) for angles, s · q(t / √s) for lengths: the scaled chain stepped with
@@ -87,16 +103,7 @@ def test_scaled_chain_moves_as_the_original_at_root_s_its_pace(f64, tmp_path, s)
     for robot, scale, velocity_scale in ((original, 1.0, 1.0), (grown, length, rate)):
         robot.set_dofs_position(q0 * scale)
         robot.set_dofs_velocity(v0 * velocity_scale)
-    worst, travel = 0.0, 0.0
-    for _ in range(steps):
-        original.scene.step()
-        grown.scene.step()
-        q = original.get_dofs_position()
-        worst = max(worst, float((grown.get_dofs_position() / length - q).abs().max()),
-                    float((grown.get_dofs_velocity() / rate - original.get_dofs_velocity()).abs().max()))
-        travel = max(travel, float((q - q0).abs().max()))
-    assert travel > 0.3  # it swung
-    assert worst < 1e-9, worst
+    _assert_similar(original, grown, length, rate, steps, f"URDF scale {s}")
 
 
 @pytest.mark.parametrize("s", [0.5, 3.0])
@@ -167,3 +174,97 @@ def test_bad_scale_is_a_named_error(f64, scale):
 
 def test_isotropic_triple_is_taken(f64):
     assert gs.morphs.URDF(file=KUKA, scale=(2.0, 2.0, 2.0)).scale == 2.0
+
+
+# -- MJCF(scale) -----------------------------------------------------------------------------------
+# a hinge, slide, hinge chain whose tip holds a free box by a connect (no violation at the start:
+# MuJoCo's anchor on the box is where the tip's is at q0), a fixed tendon of a hinge and the slide
+# (not met), and a position actuator; the connect's impedance constant (dmin = dmax) and its time
+# constant TC, so that a scaled file with TC·√s is dynamically similar
+CHAIN_MJCF = """<mujoco>
+  <worldbody>
+    <body name="arm" pos="0 0 1">
+      <joint name="shoulder" type="hinge" axis="0 1 0"/>
+      <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03"/>
+      <body name="slider" pos="0.3 0 0" euler="0 20 0">
+        <joint name="extend" type="slide" axis="1 0 0"/>
+        <geom type="box" size="0.05 0.02 0.02"/>
+        <body name="tip" pos="0.1 0 0">
+          <joint name="elbow" type="hinge" axis="0 0 1"/>
+          <geom type="sphere" size="0.04" pos="0.05 0 0"/>
+        </body>
+      </body>
+    </body>
+    <body name="box" pos="0.55 0.02 0.93">
+      <freejoint/>
+      <geom type="box" size="0.05 0.03 0.02"/>
+    </body>
+  </worldbody>
+  <equality>
+    <connect body1="tip" body2="box" anchor="0.1 0 0" solref="TC 1" solimp="0.95 0.95 0.001 0.5 2"/>
+  </equality>
+  <tendon>
+    <fixed name="reach" limited="true" range="-5 5"><joint joint="shoulder" coef="1"/><joint joint="extend" coef="2"/></fixed>
+  </tendon>
+  <actuator><position joint="shoulder" kp="50"/></actuator>
+</mujoco>
+"""
+MJCF_LENGTH_DOFS = np.array([False, True, False, True, True, True, False, False, False])  # the box's x, y, z
+
+
+def _mjcf(tmp_path, name, timeconst):
+    path = tmp_path / name
+    path.write_text(CHAIN_MJCF.replace("TC", repr(timeconst)))
+    return str(path)
+
+
+def _mjcf_scene(file, s, dt):
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=dt, gravity=(0.0, 0.0, -9.81)),
+                     rigid_options=gs.options.RigidOptions(enable_collision=False, enable_joint_limit=False))
+    robot = scene.add_entity(gs.morphs.MJCF(file=file, scale=s))
+    scene.build()
+    return scene, robot
+
+
+@pytest.mark.parametrize("s", [0.4, 3.0])
+def test_scaled_mjcf_with_a_connect_moves_as_the_original_at_root_s_its_pace(f64, tmp_path, s):
+    """As the URDF chain above, for an MJCF with a free body held by a connect: the scaled file
+    (its connect's time constant × √s, a property of the scene rather than of the robot) moves as
+    the original at √s its pace, the connect holding, over 0.5 s."""
+    dt, steps, timeconst = 0.002, 250, 0.02
+    _, original = _mjcf_scene(_mjcf(tmp_path, "a.xml", timeconst), 1.0, dt)
+    _, grown = _mjcf_scene(_mjcf(tmp_path, "b.xml", timeconst * math.sqrt(s)), s, dt * math.sqrt(s))
+    assert original.n_dofs == len(MJCF_LENGTH_DOFS)
+    length = torch.tensor(np.where(MJCF_LENGTH_DOFS, s, 1.0))
+    rate = length / math.sqrt(s)
+    rng = np.random.default_rng(5)
+    v0 = torch.tensor(rng.normal(size=original.n_dofs) * 0.5)
+    original.set_dofs_velocity(v0)
+    grown.set_dofs_velocity(v0 * rate)
+    _assert_similar(original, grown, length, rate, steps, f"MJCF scale {s}")
+
+
+def test_scaled_mjcf_gains_tendon_and_anchors(f64, tmp_path):
+    """Genesis's MJCF rule for an actuator: kp × s³; the tendon of a hinge and a slide keeps its
+    hinge's unit (the slide's coefficient ÷ s, its range the file's); a connect's anchor × s."""
+    file = _mjcf(tmp_path, "a.xml", 0.02)
+    _, original = _mjcf_scene(file, 1.0, 0.01)
+    _, grown = _mjcf_scene(file, 2.0, 0.01)
+    np.testing.assert_allclose(grown.get_dofs_kp()[0], 8.0 * original.get_dofs_kp()[0], rtol=1e-15)
+    from genesis_lite.solvers.rigid import mjcf
+    links = mjcf.load_mjcf(file)
+    (tendon,) = [t for link in links for t in link.tendons]
+    (connect,) = [c for link in links for c in link.connects]
+    scaled = scaled_links(links, 2.0, gains=8.0)
+    (scaled_tendon,) = [t for link in scaled for t in link.tendons]
+    (scaled_connect,) = [c for link in scaled for c in link.connects]
+    assert scaled_tendon[1] == (tendon[1][0], tendon[1][1] / 2.0) and scaled_tendon[2:4] == tendon[2:4]
+    np.testing.assert_array_equal(scaled_connect[1], 2.0 * np.asarray(connect[1]))
+
+
+def test_scaled_slide_tendon_is_a_length():
+    """A tendon of slide joints only is a length: its range × s, its coefficients the file's."""
+    links = [_link("base", -1, "", "fixed"), _link("a", 0, "x", "prismatic"), _link("b", 1, "y", "prismatic")]
+    links[1].tendons = ((("x", "y"), (1.0, -0.5), -0.2, 0.3, None),)
+    (tendon,) = scaled_links(links, 3.0)[1].tendons
+    assert tendon[1] == (1.0, -0.5) and np.allclose(tendon[2:4], (-0.6, 0.9))
