@@ -204,7 +204,9 @@ CHAIN_MJCF = """<mujoco>
     <connect body1="tip" body2="box" anchor="0.1 0 0" solref="TC 1" solimp="0.95 0.95 0.001 0.5 2"/>
   </equality>
   <tendon>
-    <fixed name="reach" limited="true" range="-5 5"><joint joint="shoulder" coef="1"/><joint joint="extend" coef="2"/></fixed>
+    <fixed name="reach" limited="true" range="-5 5">
+      <joint joint="shoulder" coef="1"/><joint joint="extend" coef="2"/>
+    </fixed>
   </tendon>
   <actuator><position joint="shoulder" kp="50"/></actuator>
 </mujoco>
