@@ -19,7 +19,7 @@ _PRIMITIVE = _MORPH + ("batch_fixed_verts", "contype", "conaffinity")
 _TETGEN = ("order", "mindihedral", "minratio", "nobisect", "quality", "maxvolume", "verbose", "force_retet")
 _FILE = _MORPH + ("decimate", "decimate_face_num", "decimate_aggressiveness", "watertighten", "convexify",
                   "decompose_object_error_threshold", "decompose_robot_error_threshold", "coacd_options",
-                  "recompute_inertia", "align", "file_meshes_are_zup", "batch_fixed_verts")
+                  "recompute_inertia", "align", "batch_fixed_verts")
 # taken by Genesis 1.4.5 with a deprecation warning and no effect, as here
 _DEPRECATED = ("requires_jac_and_IK", "is_free")
 
@@ -45,6 +45,18 @@ def _positive(owner, name, value):
         arr = np.full(1, np.nan)
     if not np.all(np.isfinite(arr)) or not np.all(arr > 0):
         raise InvalidInputError(f"{owner}: argument '{name}' must be positive and finite, got {value!r}")
+
+
+def _meshes_zup(owner, value):
+    """Genesis's ``file_meshes_are_zup``: True (its default) is how meshes are read here, as they are
+    (Z-up); False, its Y-up conversion, is refused rather than ignored."""
+    if value is True or value is np.True_:
+        return True
+    if value is False or value is np.False_:
+        raise InvalidInputError(f"{owner}: argument 'file_meshes_are_zup' False (meshes turned from Y-up, "
+                                f"(X, Y, Z) → (X, −Z, Y)) is not supported yet; meshes are read as they are, Z-up "
+                                f"(Genesis's default, True)")
+    raise InvalidInputError(f"{owner}: argument 'file_meshes_are_zup' must be True or False, got {value!r}")
 
 
 def _isotropic_scale(owner, value):
@@ -98,6 +110,8 @@ class URDF(Morph):
     masses × s³, inertias × s⁵; gains, damping, friction and effort limits the file's:
     solvers/rigid/scale.py). A positive number, or three equal ones (Genesis's rule: a URDF scales
     the same along every axis).
+    file_meshes_are_zup: True, Genesis's default: meshes are read as they are (Z-up); False (its
+    Y-up conversion) is refused.
     default_armature: armature (kg·m² or kg) of every revolute and prismatic dof (a motor's rotor;
     as Genesis, not a free base's), as URDF has no tag for it. Genesis defaults to 0.1; 0 here,
     so that the dynamics are the file's (and MuJoCo's).
@@ -111,11 +125,13 @@ class URDF(Morph):
     default_armature: float = 0.0
     merge_fixed_links: bool = True
     links_to_keep: tuple = ()
+    file_meshes_are_zup: bool = True
 
     def _check(self):
         if not isinstance(self.file, str) or not self.file:
             raise InvalidInputError(f"URDF: argument 'file' must be a path string, got {self.file!r}")
         self.scale = _isotropic_scale("URDF", self.scale)
+        self.file_meshes_are_zup = _meshes_zup("URDF", self.file_meshes_are_zup)
         refuse_grad("URDF", "default_armature", self.default_armature,
                     "it is fixed at build; set_dofs_armature is differentiable")
         try:
@@ -153,15 +169,17 @@ class MJCF(Morph):
     entity's last; exclude_ground_plane=True leaves out its planes (Genesis's option: for a scene
     that has a ground of its own, e.g. gs.morphs.Plane). scale: the bodies grown by this factor,
     as Genesis's (URDF's scale; an actuator's gains times scale³, Genesis's MJCF rule:
-    solvers/rigid/scale.py)."""
+    solvers/rigid/scale.py). file_meshes_are_zup: as URDF's."""
     file: str = None
     scale: float = 1.0
     exclude_ground_plane: bool = False
+    file_meshes_are_zup: bool = True
 
     def _check(self):
         if not isinstance(self.file, str) or not self.file:
             raise InvalidInputError(f"MJCF: argument 'file' must be a path string, got {self.file!r}")
         self.scale = _isotropic_scale("MJCF", self.scale)
+        self.file_meshes_are_zup = _meshes_zup("MJCF", self.file_meshes_are_zup)
         if not isinstance(self.exclude_ground_plane, (bool, np.bool_)):
             raise InvalidInputError(f"MJCF: argument 'exclude_ground_plane' must be True or False, "
                                     f"got {self.exclude_ground_plane!r}")
@@ -225,14 +243,17 @@ class Capsule(Cylinder):
            "merge_submeshes_for_collision", deprecated=_DEPRECATED)
 @dataclass
 class Mesh(Morph):
-    """A rigid body from a mesh file (any format trimesh reads), scaled by ``scale``."""
+    """A rigid body from a mesh file (any format trimesh reads), scaled by ``scale``, read Z-up
+    (``file_meshes_are_zup``: Genesis's default True; False is refused)."""
     file: str = None
     scale: float = 1.0
+    file_meshes_are_zup: bool = True
 
     def _check(self):
         if not isinstance(self.file, str) or not self.file:
             raise InvalidInputError(f"Mesh: argument 'file' must be a path string, got {self.file!r}")
         _positive("Mesh", "scale", self.scale)
+        self.file_meshes_are_zup = _meshes_zup("Mesh", self.file_meshes_are_zup)
 
 
 @named_keywords(*_PRIMITIVE, "plane_size", "tile_size", deprecated=_DEPRECATED)

@@ -500,7 +500,9 @@ def _links_of(morph, material, name):
         raise InvalidInputError(f"scene.add_entity: morph type {type(morph).__name__} is not supported")
     root = links[0]
     root.joint_type = "fixed" if morph.fixed else "free"
-    root.pos, root.quat = np.asarray(morph.pos, dtype=float), np.asarray(morph.quat, dtype=float)
+    # (the root's pose in the file: the origin, or a URDF's floating joint's; urdf._floating_root)
+    root.pos, root.quat = shapes.compose(np.asarray(morph.pos, dtype=float), np.asarray(morph.quat, dtype=float),
+                                         root.pos, root.quat)
     return _with_material_friction(links, material)
 
 

@@ -118,6 +118,18 @@ def test_morph_keywords():
     assert gs.morphs.Sphere((0, 0, 1), radius=0.2).radius == 0.2  # positional arguments still work
 
 
+@pytest.mark.parametrize("morph", ["URDF", "MJCF", "Mesh"])
+def test_file_meshes_are_zup(morph):
+    """Genesis's default (True) is how meshes are read; its Y-up conversion (False) is refused,
+    not ignored; anything else is a named error."""
+    make = getattr(gs.morphs, morph)
+    assert make(file="a.file", file_meshes_are_zup=True).file_meshes_are_zup is True
+    raises(gs.InvalidInputError, lambda: make(file="a.file", file_meshes_are_zup=False), morph,
+           "'file_meshes_are_zup' False", "not supported yet")
+    raises(gs.InvalidInputError, lambda: make(file="a.file", file_meshes_are_zup="yes"), morph,
+           "'file_meshes_are_zup' must be True or False")
+
+
 def test_rigid_material_keywords():
     """An unknown keyword of gs.materials.Rigid is a named error (Python's TypeError named nothing),
     and Genesis's own that genesis_lite does not have say so (its coupling ones come with coupling)."""

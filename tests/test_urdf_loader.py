@@ -314,7 +314,7 @@ def test_malformed_xml(tmp_path):
         load_urdf(str(path))
 
 
-@pytest.mark.parametrize("jtype", ["planar", "floating", "ball"])
+@pytest.mark.parametrize("jtype", ["planar", "ball"])
 def test_unsupported_joint_type(tmp_path, jtype):
     path = write_urdf(tmp_path, LINK.format("a") + LINK.format("b") + joint("hip", jtype))
     with pytest.raises(AssetError) as info:
@@ -507,3 +507,62 @@ def test_roslaunch_environment_substitutions_are_expanded(tmp_path, monkeypatch)
     found = write_urdf(tmp_path, LINK.format("a").replace('value="1"', 'value="$(arg mass)"', 1), name="arg.urdf")
     with pytest.raises(AssetError, match="expand the file with xacro"):
         load_urdf(found)
+
+
+# ------------------------------------------------------------------ a floating root, a massless <inertial>
+FLOATING = ('<link name="world"/>'
+            '<joint name="float" type="floating"><parent link="world"/><child link="box"/>'
+            '<origin xyz="0.1 0 0.2" rpy="0 0 0.5"/></joint>'
+            '<link name="box"><inertial><inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial>'
+            '<collision><geometry><box size="0.1 0.2 0.3"/></geometry></collision></link>')
+
+
+def test_floating_joint_under_an_empty_root_makes_its_child_the_root(tmp_path, caplog):
+    """Genesis's tower assets: an empty "world" root holds the body on a floating joint. The body
+    is the root (the empty one left out), at the joint's origin, named by it; its <inertial> states
+    no mass, so it is weighed from its box at rho (no warning: its inertia is all zeros)."""
+    (box,) = load_urdf(write_urdf(tmp_path, FLOATING), rho=500.0)
+    assert (box.name, box.parent, box.joint_name, box.joint_type) == ("box", -1, "float", "fixed")
+    np.testing.assert_allclose(box.pos, [0.1, 0.0, 0.2])
+    np.testing.assert_allclose(box.quat, [np.cos(0.25), 0, 0, np.sin(0.25)], atol=1e-15)
+    mass = 500.0 * 0.1 * 0.2 * 0.3
+    np.testing.assert_allclose(box.mass, mass, rtol=1e-14)
+    np.testing.assert_allclose(box.inertia, mass / 12 * np.diag([0.13, 0.10, 0.05]), rtol=1e-12)
+    assert not [r for r in caplog.records if r.levelname == "WARNING"]
+
+
+@pytest.mark.parametrize("body", [
+    FLOATING.replace('<link name="world"/>', LINK.format("world")),  # a root with mass
+    LINK.format("a") + LINK.format("b") + LINK.format("c") + joint("j", "revolute", "a", "b", '<axis xyz="0 0 1"/>')
+    + joint("float", "floating", "b", "c"),  # below a moving link
+])
+def test_other_floating_joints_raise(tmp_path, body):
+    with pytest.raises(AssetError, match=r"joint 'float' is floating: expected the file's one floating joint"):
+        load_urdf(write_urdf(tmp_path, body), entity_name="ball")
+
+
+def test_inertial_without_mass_is_weighed_from_shapes_with_a_warning(tmp_path, caplog):
+    body = ('<link name="a"><inertial><origin xyz="0 0 1"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/>'
+            '</inertial><collision><geometry><sphere radius="0.1"/></geometry></collision></link>')
+    (a,) = load_urdf(write_urdf(tmp_path, body))
+    np.testing.assert_allclose(a.mass, 1000 * 4 / 3 * np.pi * 1e-3)
+    np.testing.assert_allclose(a.com, 0.0, atol=1e-15)
+    assert any("states no <mass>" in r.getMessage() for r in caplog.records)
+
+
+def test_floating_urdf_entity_falls_freely(f64, tmp_path):
+    """The floating body is the entity's base: free, at the morph pose composed with the joint's
+    origin, falling as semi-implicit Euler integrates gravity (z_n = z_0 − g·dt²·n(n+1)/2); fixed=True
+    welds it."""
+    import genesis_lite as gs
+    path = write_urdf(tmp_path, FLOATING)
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, gravity=(0.0, 0.0, -9.81)))
+    free = scene.add_entity(gs.morphs.URDF(file=path, pos=(1.0, 0.0, 2.0)))
+    welded = scene.add_entity(gs.morphs.URDF(file=path, pos=(-1.0, 0.0, 2.0), fixed=True))
+    scene.build()
+    assert free.n_dofs == 6 and welded.n_dofs == 0 and [link.name for link in free.links] == ["box"]
+    np.testing.assert_allclose(free.get_pos(), [1.1, 0.0, 2.2], atol=1e-15)
+    for _ in range(20):
+        scene.step()
+    np.testing.assert_allclose(free.get_pos(), [1.1, 0.0, 2.2 - 9.81 * 0.01 ** 2 * 20 * 21 / 2], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(welded.get_pos(), [-0.9, 0.0, 2.2], atol=1e-15)

@@ -5,7 +5,9 @@ happens here so that every problem with a file surfaces as an ``AssetError`` tha
 file, the link or joint, what was expected and what was found. A file's links are kept in the
 asset cache (solvers/asset_cache.py): a file read before, with the same meshes, is not parsed again.
 
-Supported joints: revolute, continuous (a revolute without limits), prismatic, fixed.
+Supported joints: revolute, continuous (a revolute without limits), prismatic, fixed, and a floating
+joint that holds the only child of an empty root link ("world"): that child is the entity's base,
+free (Genesis's free joint; the empty root is left out).
 Supported collision shapes: box, sphere, cylinder, mesh (any format trimesh reads).
 Visuals (``<visual>``, what cameras draw; the physics ignores them): the same shapes, with the
 colour of their ``<material>``, given in place or by the name of a material defined at robot
@@ -65,7 +67,8 @@ def load_urdf(path: str, entity_name: str | None = None, rho: float = 1000.0) ->
 
     Order is depth-first from the root, children in the order their joints appear in the
     file (MuJoCo's body order). The root link gets joint_type "fixed" at the origin with
-    joint_name "": the entity builder decides how the base is attached.
+    joint_name "" (a floating root: at its joint's origin, named by it; _floating_root): the
+    entity builder decides how the base is attached, and places it.
     rho: density (kg/m³) used for links without <inertial>, from their collision shapes
     (else their visual shapes); links with neither get mass 0.
     entity_name: only used in error messages.
@@ -94,6 +97,7 @@ def _links(ctx: "_Context", text: bytes, rho: float) -> list[LinkSpec]:
     """load_urdf's links, from the file's bytes `text`."""
     robot, xml = _parse(ctx, text)
     links, parent_joint, order = _tree_order(ctx, robot)
+    order, parent_joint, floating = _floating_root(ctx, links, parent_joint, order)
     friction = _contact_friction(ctx, xml)
     colors = _material_colors(ctx, robot)
     index = {name: i for i, name in enumerate(order)}
@@ -105,8 +109,32 @@ def _links(ctx: "_Context", text: bytes, rho: float) -> list[LinkSpec]:
             geom.friction = friction.get(name)
         spec.parent = index[joint.parent] if joint is not None else -1
         specs.append(spec)
+    if floating is not None:  # the root floats where the joint puts it in the file's frame
+        specs[0].joint_name = floating.name
+        specs[0].pos, specs[0].quat = _pose(ctx, floating.origin, f"joint '{floating.name}' origin")
     _check_mimics(ctx, specs)
     return specs
+
+
+def _floating_root(ctx: "_Context", links, parent_joint, order):
+    """(order, parent_joint, the floating joint or None) of a file whose root is an empty link (no
+    mass, collision or visual shapes: a "world") holding its one child on a ``floating`` joint: that
+    child floats in the world (Genesis's free joint), so the empty root is left out and the child
+    becomes the root, at the joint's origin (the entity's base: free unless the morph fixes it).
+    Any other floating joint raises: a free joint below a body is not modelled (MuJoCo's compiler
+    refuses one too)."""
+    floating = [joint for joint in parent_joint.values() if joint.type == "floating"]
+    if not floating:
+        return order, parent_joint, None
+    root, joint = links[order[0]], floating[0]
+    children = [child for child, parent in parent_joint.items() if parent.parent == root.name]
+    empty = (root.inertial is None or not root.inertial.mass) and not root.collisions and not root.visuals
+    if len(floating) > 1 or joint.parent != root.name or len(children) != 1 or not empty:
+        raise ctx.error(f"joint '{joint.name}' is floating: expected the file's one floating joint, holding the only "
+                        f"child of an empty root link (no mass, collision or visual shapes), which then floats in the "
+                        f"world; got {len(floating)} floating joint(s), this one on link '{joint.parent}' (root "
+                        f"'{root.name}': {len(children)} child link(s), {'empty' if empty else 'not empty'})")
+    return order[1:], {child: parent for child, parent in parent_joint.items() if parent is not joint}, joint
 
 
 class _Context:
@@ -446,11 +474,17 @@ def mat_to_quat(rot: np.ndarray) -> np.ndarray:
 def _inertial(ctx: _Context, link, geoms: list, rho: float):
     """(mass kg, com (3,) m, inertia (3, 3) kg·m² about the com in link axes) of a link.
 
-    From <inertial> when present (inertia rotated by the inertial origin: R I Rᵀ); otherwise
-    from the collision geoms, else the visual geoms (a flat or empty one holds no volume), as
-    solids of density rho.
+    From <inertial> when present and stating a mass (inertia rotated by the inertial origin:
+    R I Rᵀ); otherwise from the collision geoms, else the visual geoms (a flat or empty one holds no
+    volume), as solids of density rho (Genesis too weighs a link whose <inertial> has no <mass>).
     """
     inertial = link.inertial
+    if inertial is not None and inertial.mass is None:  # (an inertia scales with the mass: alone it says nothing)
+        stated = inertial.origin is not None or (inertial.inertia is not None and np.any(inertial.inertia))
+        if stated:
+            ctx.warnings.append(f"link '{link.name}': its <inertial> states no <mass>, so its mass, centre of mass "
+                                f"and inertia come from its shapes (its <origin> and <inertia> are not used)")
+        inertial = None
     if inertial is None:
         if not geoms:
             geoms = [_geom(ctx, link.name, v.geometry, v.origin, visual=True) for v in link.visuals]
