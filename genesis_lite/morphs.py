@@ -40,23 +40,31 @@ def _vec(owner, name, value, n):
 def _positive(owner, name, value):
     refuse_grad(owner, name, value, "a shape's size is fixed at build")
     try:
-        arr = np.atleast_1d(np.asarray(value, dtype=np.float64))
-    except (TypeError, ValueError):  # (not numbers)
+        arr = np.atleast_1d(np.asarray(value))
+    except (TypeError, ValueError):  # (ragged)
+        arr = np.full(1, np.nan)
+    if arr.dtype.kind not in "iuf":  # (no bools, strings or objects: numpy would turn "2" and True into 2.0, 1.0)
         arr = np.full(1, np.nan)
     if not np.all(np.isfinite(arr)) or not np.all(arr > 0):
         raise InvalidInputError(f"{owner}: argument '{name}' must be positive and finite, got {value!r}")
 
 
-def _meshes_zup(owner, value):
-    """Genesis's ``file_meshes_are_zup``: True (its default) is how meshes are read here, as they are
-    (Z-up); False, its Y-up conversion, is refused rather than ignored."""
-    if value is True or value is np.True_:
-        return True
-    if value is False or value is np.False_:
-        raise InvalidInputError(f"{owner}: argument 'file_meshes_are_zup' False (meshes turned from Y-up, "
-                                f"(X, Y, Z) → (X, −Z, Y)) is not supported yet; meshes are read as they are, Z-up "
-                                f"(Genesis's default, True)")
-    raise InvalidInputError(f"{owner}: argument 'file_meshes_are_zup' must be True or False, got {value!r}")
+_GLTF = (".glb", ".gltf")
+
+
+def _meshes_zup(owner, value, file, default):
+    """Genesis's ``file_meshes_are_zup`` where it reads meshes as they are (Z-up), which is how they
+    are read here: True, or ``default`` for None (Genesis's Mesh: True except for a glTF file, which
+    Genesis turns from Y-up). Where Genesis would turn the meshes ((X, Y, Z) → (X, −Z, Y)), a named
+    error says that is not supported yet rather than reading them otherwise."""
+    if value is not None and not isinstance(value, (bool, np.bool_)):
+        raise InvalidInputError(f"{owner}: argument 'file_meshes_are_zup' must be True, False or None, got {value!r}")
+    as_they_are = value if value is not None else default and not str(file).lower().endswith(_GLTF)
+    if not as_they_are:
+        raise InvalidInputError(f"{owner}: argument 'file_meshes_are_zup' {value!r} for {file!r}: Genesis turns such "
+                                f"meshes from Y-up ((X, Y, Z) → (X, −Z, Y)), which is not supported yet; meshes are "
+                                f"read as they are, Z-up (file_meshes_are_zup=True)")
+    return True
 
 
 def _isotropic_scale(owner, value):
@@ -110,8 +118,8 @@ class URDF(Morph):
     masses × s³, inertias × s⁵; gains, damping, friction and effort limits the file's:
     solvers/rigid/scale.py). A positive number, or three equal ones (Genesis's rule: a URDF scales
     the same along every axis).
-    file_meshes_are_zup: True, Genesis's default: meshes are read as they are (Z-up); False (its
-    Y-up conversion) is refused.
+    file_meshes_are_zup: True, Genesis's default: meshes are read as they are (Z-up); False or None
+    (Genesis turns the meshes from Y-up) are refused: not supported yet.
     default_armature: armature (kg·m² or kg) of every revolute and prismatic dof (a motor's rotor;
     as Genesis, not a free base's), as URDF has no tag for it. Genesis defaults to 0.1; 0 here,
     so that the dynamics are the file's (and MuJoCo's).
@@ -131,7 +139,7 @@ class URDF(Morph):
         if not isinstance(self.file, str) or not self.file:
             raise InvalidInputError(f"URDF: argument 'file' must be a path string, got {self.file!r}")
         self.scale = _isotropic_scale("URDF", self.scale)
-        self.file_meshes_are_zup = _meshes_zup("URDF", self.file_meshes_are_zup)
+        self.file_meshes_are_zup = _meshes_zup("URDF", self.file_meshes_are_zup, self.file, False)
         refuse_grad("URDF", "default_armature", self.default_armature,
                     "it is fixed at build; set_dofs_armature is differentiable")
         try:
@@ -169,7 +177,7 @@ class MJCF(Morph):
     entity's last; exclude_ground_plane=True leaves out its planes (Genesis's option: for a scene
     that has a ground of its own, e.g. gs.morphs.Plane). scale: the bodies grown by this factor,
     as Genesis's (URDF's scale; an actuator's gains times scale³, Genesis's MJCF rule:
-    solvers/rigid/scale.py). file_meshes_are_zup: as URDF's."""
+    solvers/rigid/scale.py). file_meshes_are_zup: taken and not read, as Genesis's MJCF loader."""
     file: str = None
     scale: float = 1.0
     exclude_ground_plane: bool = False
@@ -179,7 +187,9 @@ class MJCF(Morph):
         if not isinstance(self.file, str) or not self.file:
             raise InvalidInputError(f"MJCF: argument 'file' must be a path string, got {self.file!r}")
         self.scale = _isotropic_scale("MJCF", self.scale)
-        self.file_meshes_are_zup = _meshes_zup("MJCF", self.file_meshes_are_zup)
+        if self.file_meshes_are_zup is not None and not isinstance(self.file_meshes_are_zup, (bool, np.bool_)):
+            raise InvalidInputError(f"MJCF: argument 'file_meshes_are_zup' must be True, False or None, got "
+                                    f"{self.file_meshes_are_zup!r}")
         if not isinstance(self.exclude_ground_plane, (bool, np.bool_)):
             raise InvalidInputError(f"MJCF: argument 'exclude_ground_plane' must be True or False, "
                                     f"got {self.exclude_ground_plane!r}")
@@ -244,16 +254,17 @@ class Capsule(Cylinder):
 @dataclass
 class Mesh(Morph):
     """A rigid body from a mesh file (any format trimesh reads), scaled by ``scale``, read Z-up
-    (``file_meshes_are_zup``: Genesis's default True; False is refused)."""
+    (``file_meshes_are_zup``: None, Genesis's default, or True; where Genesis would turn the mesh
+    from Y-up, False or a glTF file's None, a named error: not supported yet)."""
     file: str = None
     scale: float = 1.0
-    file_meshes_are_zup: bool = True
+    file_meshes_are_zup: bool = None
 
     def _check(self):
         if not isinstance(self.file, str) or not self.file:
             raise InvalidInputError(f"Mesh: argument 'file' must be a path string, got {self.file!r}")
         _positive("Mesh", "scale", self.scale)
-        self.file_meshes_are_zup = _meshes_zup("Mesh", self.file_meshes_are_zup)
+        self.file_meshes_are_zup = _meshes_zup("Mesh", self.file_meshes_are_zup, self.file, True)
 
 
 @named_keywords(*_PRIMITIVE, "plane_size", "tile_size", deprecated=_DEPRECATED)

@@ -500,9 +500,10 @@ def _links_of(morph, material, name):
         raise InvalidInputError(f"scene.add_entity: morph type {type(morph).__name__} is not supported")
     root = links[0]
     root.joint_type = "fixed" if morph.fixed else "free"
-    # (the root's pose in the file: the origin, or a URDF's floating joint's; urdf._floating_root)
-    root.pos, root.quat = shapes.compose(np.asarray(morph.pos, dtype=float), np.asarray(morph.quat, dtype=float),
-                                         root.pos, root.quat)
+    pos, quat = np.asarray(morph.pos, dtype=float), np.asarray(morph.quat, dtype=float)
+    if np.any(root.pos) or np.any(root.quat != (1.0, 0.0, 0.0, 0.0)):  # a URDF's floating root (urdf.py)
+        pos, quat = shapes.compose(pos, quat, root.pos, root.quat)
+    root.pos, root.quat = pos, quat  # (else the morph's quaternion as given: compose would renormalise and flip it)
     return _with_material_friction(links, material)
 
 

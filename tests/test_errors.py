@@ -118,16 +118,25 @@ def test_morph_keywords():
     assert gs.morphs.Sphere((0, 0, 1), radius=0.2).radius == 0.2  # positional arguments still work
 
 
-@pytest.mark.parametrize("morph", ["URDF", "MJCF", "Mesh"])
-def test_file_meshes_are_zup(morph):
-    """Genesis's default (True) is how meshes are read; its Y-up conversion (False) is refused,
-    not ignored; anything else is a named error."""
+@pytest.mark.parametrize("morph, file, refused", [
+    ("URDF", "a.urdf", (False, None)),   # Genesis's URDF turns meshes unless True
+    ("Mesh", "a.obj", (False,)),         # its Mesh: None is True but for glTF
+    ("Mesh", "a.glb", (False, None)),
+    ("MJCF", "a.xml", ()),               # its MJCF loader does not read the flag
+])
+def test_file_meshes_are_zup(morph, file, refused):
+    """Where Genesis reads meshes as they are (Z-up), so does genesis_lite; where it would turn them
+    from Y-up, a named error says that is not supported yet (never read otherwise); anything else
+    is a named error."""
     make = getattr(gs.morphs, morph)
-    assert make(file="a.file", file_meshes_are_zup=True).file_meshes_are_zup is True
-    raises(gs.InvalidInputError, lambda: make(file="a.file", file_meshes_are_zup=False), morph,
-           "'file_meshes_are_zup' False", "not supported yet")
-    raises(gs.InvalidInputError, lambda: make(file="a.file", file_meshes_are_zup="yes"), morph,
-           "'file_meshes_are_zup' must be True or False")
+    for value in (True, False, None):
+        if value in refused:
+            raises(gs.InvalidInputError, lambda: make(file=file, file_meshes_are_zup=value), morph,
+                   f"'file_meshes_are_zup' {value!r}", "not supported yet")
+        else:
+            make(file=file, file_meshes_are_zup=value)
+    raises(gs.InvalidInputError, lambda: make(file=file, file_meshes_are_zup="yes"), morph,
+           "'file_meshes_are_zup' must be True, False or None")
 
 
 def test_rigid_material_keywords():

@@ -166,7 +166,7 @@ def test_scaled_mimic_keeps_its_meaning(follower, followed, multiplier, offset):
     assert links[2].mimic == ("driver", 2.0, 0.1) and links[1].mass == 1.0  # the file's specs untouched
 
 
-@pytest.mark.parametrize("scale", [0.0, -1.0, float("nan"), (1.0, 2.0, 1.0), (1.0, 1.0), "big"])
+@pytest.mark.parametrize("scale", [0.0, -1.0, float("nan"), (1.0, 2.0, 1.0), (1.0, 1.0), "big", "2", True])
 def test_bad_scale_is_a_named_error(f64, scale):
     with pytest.raises(InvalidInputError, match=r"URDF: argument 'scale'"):
         gs.morphs.URDF(file=KUKA, scale=scale)

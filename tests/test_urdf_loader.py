@@ -566,3 +566,17 @@ def test_floating_urdf_entity_falls_freely(f64, tmp_path):
         scene.step()
     np.testing.assert_allclose(free.get_pos(), [1.1, 0.0, 2.2 - 9.81 * 0.01 ** 2 * 20 * 21 / 2], rtol=0, atol=1e-12)
     np.testing.assert_allclose(welded.get_pos(), [-0.9, 0.0, 2.2], atol=1e-15)
+
+
+def test_a_root_at_the_files_origin_keeps_the_morphs_quaternion(f64):
+    """Only a floating root's file pose is composed with the morph's: other roots take the morph's
+    quaternion as given, sign and bits (composing renormalised it and turned w ≥ 0)."""
+    import genesis_lite as gs
+    scene = gs.Scene()
+    quat = np.array([-0.5, 0.5, 0.5, 0.5])
+    boxes = [scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(k, 0.0, 1.0), quat=quat)) for k in range(2)]
+    turned = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(2.0, 0.0, 1.0), euler=(0.0, 0.0, 270.0)))
+    scene.build()
+    np.testing.assert_array_equal(boxes[0].get_quat(), quat)
+    np.testing.assert_array_equal(turned.get_quat(), turned.morph.quat)
+    assert turned.morph.quat[0] < 0  # (Genesis's quaternion for that turn)

@@ -6,9 +6,10 @@ limits, start and spring reference, the anchors of connects and welds), every ma
 inertia times s⁵. What is not a length, mass or inertia stays the file's, as in Genesis: joint
 damping, stiffness, friction loss, effort limits, friction, the softness of constraint rows; so do
 a URDF's servo gains, while an MJCF actuator's gains take s³ (Genesis's MJCF loader: its gain and
-bias times s³). So, with no damping, servos, springs, armature, limits met or contacts, the scaled
-robot under the same gravity moves as the file's at √s its pace: q_s(t) = q(t / √s) for angles,
-s · q(t / √s) for lengths (tests/test_morph_scale.py checks exactly that).
+bias times s³). So, with no damping, servos, springs, armature, limits met, contacts or equality rows
+(the softness of constraint rows, time constants and solimp widths, is the scene's, not scaled), the
+scaled robot under the same gravity moves as the file's at √s its pace: q_s(t) = q(t / √s) for
+angles, s · q(t / √s) for lengths (tests/test_morph_scale.py checks exactly that).
 
 A relation between joints keeps its meaning in the scaled coordinates (lengths × s): a mimic's
 offset takes s_f and its multiplier s_f / s_d (s for a length coordinate, 1 for an angle; f the
