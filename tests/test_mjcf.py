@@ -556,6 +556,33 @@ def test_what_is_ignored_is_said_once(f64, tmp_path, caplog):
     assert "stiffness" not in said[0]  # (a tendon's zero spring is MuJoCo's default: nothing is lost)
 
 
+
+def test_an_actuator_on_a_tendon_drives_its_joints_as_genesis_approximates_it(f64, tmp_path, caplog):
+    """The menagerie Panda's gripper: a position actuator on a fixed tendon of two slide joints.
+    Genesis puts its gains and force bound on each of the tendon's joints; so does genesis_lite,
+    except on a joint an actuator drives directly (here the first, whatever the order in the file),
+    and says so; an actuator on a tendon of another joint kind is only named."""
+    fingers = "".join(f'<body name="f{k}" pos="{0.1 * k} 0 0"><joint name="s{k}" type="slide" axis="1 0 0"/>{LINK}'
+                      f'</body>' for k in range(3))
+    extra = ('<tendon><fixed name="split"><joint joint="s1" coef="0.5"/><joint joint="s2" coef="0.5"/></fixed>'
+             '<fixed name="whole"><joint joint="s0" coef="1"/><joint joint="s1" coef="1"/></fixed></tendon>'
+             '<actuator><position tendon="whole" kp="30" kv="3" forcerange="-5 5"/>'
+             '<position joint="s0" kp="7" kv="0.7"/>'
+             '<general tendon="split" biastype="affine" gainprm="100" biasprm="0 -100 -10" forcerange="-20 20"/>'
+             '<motor tendon="nothing"/></actuator>')
+    with caplog.at_level(logging.WARNING, logger="genesis_lite"):
+        scene = gs.Scene()
+        robot = scene.add_entity(gs.morphs.MJCF(file=_write(tmp_path, f'<body name="base">{LINK}{fingers}</body>',
+                                                          extra)))
+        scene.build()
+    assert robot.get_dofs_kp().tolist() == [7.0, 100.0, 100.0]  # s1: the later of its two tendon actuators
+    assert robot.get_dofs_kv().tolist() == [0.7, 10.0, 10.0]
+    upper = robot.get_dofs_force_range()[1].tolist()
+    assert upper[0] >= 1e30 and upper[1:] == [5.0, 20.0]  # unbounded; the tighter of s1's two; s2's
+    said = " ".join(r.getMessage() for r in caplog.records)
+    assert "approximated as Genesis does" in said and "['s1', 's2']" in said and "['s1']" in said
+    assert "tendon='nothing'> (it drives no fixed tendon" in said
+
 def test_an_open_mesh_weighing_its_hull_is_said(f64, tmp_path, caplog):
     """A body weighed from an open mesh (a tetrahedron missing a face) is named: its mass is its
     convex hull's here, MuJoCo integrates the open surface; a closed one is not named."""

@@ -47,7 +47,10 @@ MuJoCo's; Genesis's loader springs to qpos0 whatever springref says), ref (the i
 the body is where the file puts it: LinkSpec.q0).
 Actuators on a joint give its servo (as Genesis reads them): ``position`` kp, kv; ``general``
 with an affine bias, kp = −biasprm[1], kv = −biasprm[2]; ``velocity`` kv; forcerange (symmetric)
-the |force| bound; a ``motor`` is force control (control_dofs_force).
+the |force| bound; a ``motor`` is force control (control_dofs_force). An actuator on a fixed
+tendon of hinge and slide joints (the menagerie Panda's gripper) gives the same servo to each of
+the tendon's joints that no actuator drives directly, as Genesis approximates it (MuJoCo drives the
+tendon, each joint by its coefficient; said in the load's warning).
 ``<equality><joint>`` with polycoef (c0, c1) makes joint1 follow joint2, q1 − ref1 = c0 + c1 (q2 −
 ref2), or without joint2 holds it at q1 − ref1 = c0 (LinkSpec.mimic). ``<equality><connect>``
 holds a point of body1 on body2 (or the world): by bodies (anchor in body1's frame; body2's
@@ -71,8 +74,8 @@ move bodies and geoms unread (``<composite>``, ``<flexcomp>``…; ``<frame>`` is
 bodies and geoms, and its childclass is theirs; so is ``<replicate>``, as copies in frames:
 MJCFDocument), a solref of mixed form (one number > 0, the other not: MuJoCo warns and takes its
 default), a plane on a moving body (as MuJoCo's compiler). Ignored with one warning
-naming them: spatial tendons, a fixed tendon's spring, damping and friction loss, what acts on a
-tendon, ``<contact><pair>``, ``<keyframe>``, ``<option>`` (the scene's
+naming them: spatial tendons, a fixed tendon's spring, damping and friction loss, an actuator on
+another tendon, ``<contact><pair>``, ``<keyframe>``, ``<option>`` (the scene's
 options rule), and attributes that tune MuJoCo's solver, actuator dynamics or the compiler's mass
 bounds (a geom's margin and gap, dampratio, timeconst, boundmass…) unless they hold MuJoCo's
 defaults.
@@ -734,18 +737,44 @@ class _Reader(MJCFDocument):
         return joints, coefs
 
     def _actuators(self, links: list[LinkSpec]):
-        by_joint = {link.joint_name: link for link in links}
+        """Each actuator of a hinge or slide joint as the joint's servo (_servo); then each one of a
+        fixed tendon (_tendon_servo), for the joints no actuator drives directly."""
+        by_joint = {link.joint_name: link for link in links if link.joint_type in ("revolute", "prismatic")}
+        on_tendons, driven = [], set()
         for section in self.root.iter("actuator"):
             for element in section:
                 attrs = self.attrs(element, "main")
                 named = f"name={attrs['name']!r}" if attrs.get("name") else \
                     " ".join(f"{k}={attrs[k]!r}" for k in ("joint", "tendon", "site", "body") if k in attrs)
                 what = f"<actuator><{element.tag} {named}>"
-                link = by_joint.get(attrs.get("joint"))
-                if link is None or link.joint_type not in ("revolute", "prismatic"):
+                if "tendon" in attrs:
+                    on_tendons.append((element.tag, attrs, what))
+                elif attrs.get("joint") in by_joint:
+                    self._servo(element.tag, attrs, by_joint[attrs["joint"]], what)
+                    driven.add(attrs["joint"])
+                else:
                     self.ignored.add(f"{what} (it drives no hinge or slide joint)")
-                    continue
-                self._servo(element.tag, attrs, link, what)
+        for kind, attrs, what in on_tendons:
+            self._tendon_servo(kind, attrs, what, by_joint, driven)
+
+    def _tendon_servo(self, kind: str, attrs: dict, what: str, by_joint: dict, driven: set):
+        """An actuator of a fixed tendon of hinge and slide joints, as Genesis approximates it: its
+        servo gains and force bound on each of the tendon's joints that no actuator drives directly
+        (MuJoCo applies one tendon force, times each joint's coefficient: not modelled; named in the
+        load's warning)."""
+        joints = None
+        for section in self.root.iter("tendon"):
+            for element in section:
+                if element.tag == "fixed" and self.attrs(element, "main").get("name") == attrs["tendon"]:
+                    joints = [self.attrs(child, "main").get("joint") for child in element if child.tag == "joint"]
+        if not joints or any(joint not in by_joint for joint in joints):
+            self.ignored.add(f"{what} (it drives no fixed tendon of hinge and slide joints)")
+            return
+        free = [joint for joint in joints if joint not in driven]
+        self.ignored.add(f"{what}: approximated as Genesis does, its gains and force bound on each of the "
+                         f"tendon's joints {free} (MuJoCo drives the tendon, each joint by its coefficient)")
+        for joint in free:
+            self._servo(kind, attrs, by_joint[joint], what)
 
     def _servo(self, kind: str, attrs: dict, link: LinkSpec, what: str):
         """The joint's servo gains and force bound from an actuator (Genesis's reading)."""
