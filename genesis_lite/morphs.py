@@ -53,18 +53,14 @@ _GLTF = (".glb", ".gltf")
 
 
 def _meshes_zup(owner, value, file, default):
-    """Genesis's ``file_meshes_are_zup`` where it reads meshes as they are (Z-up), which is how they
-    are read here: True, or ``default`` for None (Genesis's Mesh: True except for a glTF file, which
-    Genesis turns from Y-up). Where Genesis would turn the meshes ((X, Y, Z) → (X, −Z, Y)), a named
-    error says that is not supported yet rather than reading them otherwise."""
+    """Genesis's ``file_meshes_are_zup`` as a bool: True, meshes read as they are (Z-up); False,
+    turned from Y-up, (X, Y, Z) → (X, −Z, Y) (shapes.load_mesh's y_up); None: ``default``, except a
+    glTF file's, False (Genesis's Mesh: glTF is Y-up by its standard)."""
     if value is not None and not isinstance(value, (bool, np.bool_)):
         raise InvalidInputError(f"{owner}: argument 'file_meshes_are_zup' must be True, False or None, got {value!r}")
-    as_they_are = value if value is not None else default and not str(file).lower().endswith(_GLTF)
-    if not as_they_are:
-        raise InvalidInputError(f"{owner}: argument 'file_meshes_are_zup' {value!r} for {file!r}: Genesis turns such "
-                                f"meshes from Y-up ((X, Y, Z) → (X, −Z, Y)), which is not supported yet; meshes are "
-                                f"read as they are, Z-up (file_meshes_are_zup=True)")
-    return True
+    if value is None:
+        return default and not str(file).lower().endswith(_GLTF)
+    return bool(value)
 
 
 def _isotropic_scale(owner, value):
@@ -118,8 +114,8 @@ class URDF(Morph):
     masses × s³, inertias × s⁵; gains, damping, friction and effort limits the file's:
     solvers/rigid/scale.py). A positive number, or three equal ones (Genesis's rule: a URDF scales
     the same along every axis).
-    file_meshes_are_zup: True, Genesis's default: meshes are read as they are (Z-up); False or None
-    (Genesis turns the meshes from Y-up) are refused: not supported yet.
+    file_meshes_are_zup: True (Genesis's default): meshes are read as they are (Z-up); False or None:
+    every mesh of the file is turned from Y-up, (X, Y, Z) → (X, −Z, Y), as Genesis's loader.
     default_armature: armature (kg·m² or kg) of every revolute and prismatic dof (a motor's rotor;
     as Genesis, not a free base's), as URDF has no tag for it. Genesis defaults to 0.1; 0 here,
     so that the dynamics are the file's (and MuJoCo's).
@@ -253,9 +249,10 @@ class Capsule(Cylinder):
            "merge_submeshes_for_collision", deprecated=_DEPRECATED)
 @dataclass
 class Mesh(Morph):
-    """A rigid body from a mesh file (any format trimesh reads), scaled by ``scale``, read Z-up
-    (``file_meshes_are_zup``: None, Genesis's default, or True; where Genesis would turn the mesh
-    from Y-up, False or a glTF file's None, a named error: not supported yet)."""
+    """A rigid body (or an MPM body's particles) from a mesh file (any format trimesh reads),
+    scaled by ``scale``. file_meshes_are_zup, as Genesis's: True, read as it is (Z-up); False, turned
+    from Y-up first, (X, Y, Z) → (X, −Z, Y); None (the default): True, but False for a glTF file
+    (.glb, .gltf: Y-up by its standard)."""
     file: str = None
     scale: float = 1.0
     file_meshes_are_zup: bool = None

@@ -462,7 +462,7 @@ def _links_of(morph, material, name):
             # name the argument and what was expected, as every error message does
             raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.URDF expected an existing URDF file, "
                              f"got '{morph.file}' (not found; relative paths start at {os.getcwd()})")
-        links = urdf.load_urdf(morph.file, entity_name=name, rho=material.rho)
+        links = urdf.load_urdf(morph.file, entity_name=name, rho=material.rho, y_up=not morph.file_meshes_are_zup)
         if morph.merge_fixed_links:
             links = merge.merge_fixed_links(links, morph.links_to_keep, owner=f"entity '{name}': gs.morphs.URDF")
         if morph.scale != 1.0:
@@ -491,7 +491,7 @@ def _links_of(morph, material, name):
         links = shapes.cylinder_link(morph.radius, morph.height, material.rho)
     elif isinstance(morph, gm.Mesh):
         try:
-            links = shapes.mesh_link(morph.file, morph.scale, material.rho)
+            links = shapes.mesh_link(morph.file, morph.scale, material.rho, y_up=not morph.file_meshes_are_zup)
         except AssetError as exc:  # shapes does not know the entity: add it to the message
             raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.Mesh: {exc}") from exc
     elif isinstance(morph, gm.Plane):

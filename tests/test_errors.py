@@ -118,25 +118,22 @@ def test_morph_keywords():
     assert gs.morphs.Sphere((0, 0, 1), radius=0.2).radius == 0.2  # positional arguments still work
 
 
-@pytest.mark.parametrize("morph, file, refused", [
-    ("URDF", "a.urdf", (False, None)),   # Genesis's URDF turns meshes unless True
-    ("Mesh", "a.obj", (False,)),         # its Mesh: None is True but for glTF
-    ("Mesh", "a.glb", (False, None)),
-    ("MJCF", "a.xml", ()),               # its MJCF loader does not read the flag
+@pytest.mark.parametrize("morph, file, resolved", [
+    ("URDF", "a.urdf", (True, False, False)),   # Genesis's URDF turns meshes unless True
+    ("Mesh", "a.obj", (True, False, True)),     # its Mesh: None is True but for glTF
+    ("Mesh", "a.glb", (True, False, False)),
 ])
-def test_file_meshes_are_zup(morph, file, refused):
-    """Where Genesis reads meshes as they are (Z-up), so does genesis_lite; where it would turn them
-    from Y-up, a named error says that is not supported yet (never read otherwise); anything else
-    is a named error."""
+def test_file_meshes_are_zup(morph, file, resolved):
+    """Genesis's file_meshes_are_zup resolved per morph as Genesis resolves it (True, False, None →
+    read as they are or turned from Y-up: tests/test_urdf_loader.py checks the turn); the MJCF
+    loader takes it and does not read it, as Genesis's; anything else is a named error."""
     make = getattr(gs.morphs, morph)
-    for value in (True, False, None):
-        if value in refused:
-            raises(gs.InvalidInputError, lambda: make(file=file, file_meshes_are_zup=value), morph,
-                   f"'file_meshes_are_zup' {value!r}", "not supported yet")
-        else:
-            make(file=file, file_meshes_are_zup=value)
-    raises(gs.InvalidInputError, lambda: make(file=file, file_meshes_are_zup="yes"), morph,
-           "'file_meshes_are_zup' must be True, False or None")
+    for value, as_they_are in zip((True, False, None), resolved):
+        assert make(file=file, file_meshes_are_zup=value).file_meshes_are_zup is as_they_are
+    gs.morphs.MJCF(file="a.xml", file_meshes_are_zup=False)
+    for maker in (make, gs.morphs.MJCF):
+        raises(gs.InvalidInputError, lambda: maker(file=file, file_meshes_are_zup="yes"),
+               "'file_meshes_are_zup' must be True, False or None")
 
 
 def test_rigid_material_keywords():

@@ -580,3 +580,51 @@ def test_a_root_at_the_files_origin_keeps_the_morphs_quaternion(f64):
     np.testing.assert_array_equal(boxes[0].get_quat(), quat)
     np.testing.assert_array_equal(turned.get_quat(), turned.morph.quat)
     assert turned.morph.quat[0] < 0  # (Genesis's quaternion for that turn)
+
+
+
+# ------------------------------------------------------------------ Y-up mesh files (file_meshes_are_zup)
+def _box_files(tmp_path):
+    """An .obj and a .glb of one box, extents 0.1 × 0.2 × 0.3 m, its centre at (0.01, 0.02, 0.03)."""
+    box = trimesh.creation.box(extents=(0.1, 0.2, 0.3))
+    box.apply_translation((0.01, 0.02, 0.03))
+    paths = {kind: str(tmp_path / f"box.{kind}") for kind in ("obj", "glb")}
+    for kind, path in paths.items():
+        box.export(path)
+    return paths
+
+
+def test_y_up_meshes_are_turned_to_z_up(f64, tmp_path):
+    """A Y-up mesh is turned (X, Y, Z) → (X, −Z, Y) before anything else reads it, as Genesis's
+    file_meshes_are_zup=False: a rigid Mesh, a URDF's meshes (collision and weighed) and an MPM
+    body's particles; a glTF Mesh is Y-up unless told otherwise (Genesis's None)."""
+    import genesis_lite as gs
+    paths = _box_files(tmp_path)
+    urdf = write_urdf(tmp_path, '<link name="box"><collision><geometry><mesh filename="box.obj"/></geometry>'
+                                '</collision></link>')
+    scene = gs.Scene()
+    at = (0.0, 0.0, 0.5)
+    entities = {
+        "obj as it is": scene.add_entity(gs.morphs.Mesh(file=paths["obj"], pos=at, fixed=True)),
+        "obj turned": scene.add_entity(gs.morphs.Mesh(file=paths["obj"], pos=at, fixed=True, file_meshes_are_zup=False)),
+        "glb (None: turned)": scene.add_entity(gs.morphs.Mesh(file=paths["glb"], pos=at, fixed=True)),
+        "glb as it is": scene.add_entity(gs.morphs.Mesh(file=paths["glb"], pos=at, fixed=True, file_meshes_are_zup=True)),
+        "urdf as it is": scene.add_entity(gs.morphs.URDF(file=urdf, pos=at, fixed=True)),
+        "urdf turned": scene.add_entity(gs.morphs.URDF(file=urdf, pos=at, fixed=True, file_meshes_are_zup=False)),
+    }
+    scene.build()
+    mpm = gs.Scene(mpm_options=gs.options.MPMOptions(lower_bound=(-1.0, -1.0, 0.0), upper_bound=(1.0, 1.0, 1.0)))
+    particles = mpm.add_entity(gs.morphs.Mesh(file=paths["obj"], pos=at, file_meshes_are_zup=False),
+                               material=gs.materials.MPM.Elastic())
+    mpm.build()
+    as_it_is = np.array([[0.01, 0.02, 0.03], [0.1, 0.2, 0.3]])  # (centre, extents)
+    turned = np.array([[0.01, -0.03, 0.02], [0.1, 0.3, 0.2]])
+    for name, entity in entities.items():
+        low, high = entity.get_AABB().numpy()
+        expected = as_it_is if "as it is" in name else turned
+        np.testing.assert_allclose([(low + high) / 2 - at, high - low], expected, atol=1e-7, err_msg=name)  # (glb: f32)
+    mass = gs.materials.Rigid().rho * 0.1 * 0.2 * 0.3
+    for name in ("urdf as it is", "urdf turned"):  # (weighed from the turned box: the same mass, its com turned)
+        np.testing.assert_allclose(entities[name].get_links_mass().numpy(), [mass], rtol=1e-9)
+    spread = particles.get_particles_pos().numpy()
+    np.testing.assert_allclose(spread.max(axis=0) - spread.min(axis=0), [0.1, 0.3, 0.2], atol=0.03)

@@ -48,7 +48,7 @@ def _shape(morph):
         return "sphere", {"radius": float(morph.radius)}
     if isinstance(morph, gm.Cylinder):
         return "cylinder", {"radius": float(morph.radius), "height": float(morph.height)}
-    return "mesh", {"file": morph.file, "scale": morph.scale}
+    return "mesh", {"file": morph.file, "scale": morph.scale, "y_up": not morph.file_meshes_are_zup}
 
 
 def _check_volume(owner, morph, count, particle_size, volume):

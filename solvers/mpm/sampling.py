@@ -97,7 +97,7 @@ def place(points, pos, quat):
     return points @ rotation.T + np.asarray(pos, dtype=np.float64)
 
 
-def shape_volume(shape, *, size=None, radius=None, height=None, file=None, scale=1.0):
+def shape_volume(shape, *, size=None, radius=None, height=None, file=None, scale=1.0, y_up=False):
     """Volume, m³, of the shape ``sample`` fills (its parameters; a mesh's from its closed
     surface by the divergence theorem)."""
     if shape == "box":
@@ -106,16 +106,17 @@ def shape_volume(shape, *, size=None, radius=None, height=None, file=None, scale
         return 4.0 / 3.0 * np.pi * radius ** 3
     if shape == "cylinder":
         return np.pi * radius ** 2 * height
-    vertices, faces = load_mesh(file, scale)
+    vertices, faces = load_mesh(file, scale, y_up)
     corners = vertices[faces]  # (F, 3 corners, 3)
     return abs(float(np.einsum("ij,ij->", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])))) / 6.0
 
 
 def sample(shape, particle_size, sampler="regular", seed=0, pos=(0.0, 0.0, 0.0), quat=(1.0, 0.0, 0.0, 0.0), *,
-           size=None, radius=None, height=None, file=None, scale=1.0, owner="sampling"):
+           size=None, radius=None, height=None, file=None, scale=1.0, y_up=False, owner="sampling"):
     """World particle positions (n, 3) float64, m, of ``shape`` ("box": size (3,); "sphere":
     radius; "cylinder": radius, height (along local z); "mesh": file and scale, one number or
-    (3,)) posed at pos (3,) m and quat (4,) w-x-y-z, at ``particle_size`` (m) spacing.
+    (3,), y_up: a Y-up file, shapes.load_mesh) posed at pos (3,) m and quat (4,) w-x-y-z, at
+    ``particle_size`` (m) spacing.
 
     Raises InvalidInputError (naming ``owner``) for an unknown shape or sampler, or when the
     shape is too small to hold one particle; AssetError for a missing, unreadable or open mesh.
@@ -135,7 +136,7 @@ def sample(shape, particle_size, sampler="regular", seed=0, pos=(0.0, 0.0, 0.0),
         _check_candidates(np.array([2.0 * radius, 2.0 * radius, height]), particle_size, owner)
         local = cylinder_particles(radius, height, particle_size, sampler, seed)
     elif shape == "mesh":
-        vertices, faces = load_mesh(file, scale)
+        vertices, faces = load_mesh(file, scale, y_up)
         _check_candidates(vertices.max(axis=0) - vertices.min(axis=0), particle_size, owner)
         local = mesh_particles(vertices, faces, particle_size, sampler, seed, file)
     else:

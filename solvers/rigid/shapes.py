@@ -158,11 +158,13 @@ def _read_mesh(path: str) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
 
 
-def load_mesh(path: str, scale=1.0) -> tuple[np.ndarray, np.ndarray]:
+def load_mesh(path: str, scale=1.0, y_up=False) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (V, 3) m and triangle faces (F, 3) of the mesh file `path`, scaled by `scale`.
 
     scale: one number or (3,) per-axis factors. A mirroring scale (odd number of negative
     factors) flips the faces so that normals keep pointing outwards.
+    y_up: the file is Y-up: its vertices are turned to Z-up first, (X, Y, Z) → (X, −Z, Y) (a turn
+    about x: faces keep their orientation), then scaled, as Genesis's file_meshes_are_zup=False.
     Raises AssetError when the file is missing, unreadable or holds no triangles.
     """
     if not os.path.isfile(path):
@@ -175,6 +177,8 @@ def load_mesh(path: str, scale=1.0) -> tuple[np.ndarray, np.ndarray]:
         raise AssetError(f"mesh file '{path}' has no triangles")
     if not np.all(np.isfinite(vertices)):
         raise AssetError(f"mesh file '{path}' has non-finite (NaN or inf) vertex coordinates")
+    if y_up:
+        vertices = np.stack([vertices[:, 0], -vertices[:, 2], vertices[:, 1]], axis=1)
     return scaled_mesh(vertices, faces, scale)
 
 
@@ -364,9 +368,10 @@ def capsule_link(radius: float, height: float, rho: float = 1000.0,
     return _single_link(name, GeomSpec("capsule", np.array([radius, height])), float(rho))
 
 
-def mesh_link(file: str, scale=1.0, rho: float = 1000.0, name: str | None = None) -> list[LinkSpec]:
+def mesh_link(file: str, scale=1.0, rho: float = 1000.0, name: str | None = None, y_up=False) -> list[LinkSpec]:
     """A solid triangle mesh read from `file` (any format trimesh reads), scaled by `scale`
-    (one number or (3,) per axis), with the mesh's own origin as the link origin.
+    (one number or (3,) per axis), with the mesh's own origin as the link origin (y_up: a Y-up
+    file, turned to Z-up first: load_mesh).
 
     Watertight, outward-oriented meshes get their exact solid mass properties; other meshes
     (open, badly wound) use their convex hull's. The geom keeps the original triangles.
@@ -377,7 +382,7 @@ def mesh_link(file: str, scale=1.0, rho: float = 1000.0, name: str | None = None
         raise InvalidInputError(f"mesh_link: argument 'file' expected a path, got {file!r}")
     scale = _scale3(scale, "mesh_link")
     rho = check_positive(rho, "rho", "mesh_link")
-    vertices, faces = load_mesh(os.fspath(file), scale)
+    vertices, faces = load_mesh(os.fspath(file), scale, y_up)
     name = name or os.path.splitext(os.path.basename(os.fspath(file)))[0]
     geom = GeomSpec("mesh", np.zeros(0), vertices=vertices, faces=faces)
     return _single_link(name, geom, float(rho))

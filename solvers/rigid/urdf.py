@@ -62,7 +62,7 @@ _DEFAULT_AXIS = np.array([1.0, 0.0, 0.0])  # URDF spec default
 _INERTIA_RTOL = 1e-6
 
 
-def load_urdf(path: str, entity_name: str | None = None, rho: float = 1000.0) -> list[LinkSpec]:
+def load_urdf(path: str, entity_name: str | None = None, rho: float = 1000.0, y_up: bool = False) -> list[LinkSpec]:
     """Links of the URDF file `path` in tree order (root first, parent index < child index).
 
     Order is depth-first from the root, children in the order their joints appear in the
@@ -71,6 +71,8 @@ def load_urdf(path: str, entity_name: str | None = None, rho: float = 1000.0) ->
     entity builder decides how the base is attached, and places it.
     rho: density (kg/m³) used for links without <inertial>, from their collision shapes
     (else their visual shapes); links with neither get mass 0.
+    y_up: the mesh files are Y-up: each is turned to Z-up when read (shapes.load_mesh; Genesis's
+    file_meshes_are_zup=False), before its scale, origin and mass properties.
     entity_name: only used in error messages.
     Raises InvalidInputError for bad arguments and AssetError for anything wrong with the
     file or the meshes it references.
@@ -79,14 +81,14 @@ def load_urdf(path: str, entity_name: str | None = None, rho: float = 1000.0) ->
         raise InvalidInputError(f"load_urdf: argument 'path' expected a file path, got {path!r}")
     path = os.fspath(path)
     rho = float(shapes.check_positive(rho, "rho", "load_urdf"))
-    ctx = _Context(path, entity_name)
+    ctx = _Context(path, entity_name, bool(y_up))
     text = _read(ctx)
 
     def links_and_warnings():
         return (_links(ctx, text, rho), ctx.warnings), ctx.files
 
     # (meshes are found from its folder; a substitution's variables are part of what it says)
-    inputs = [os.path.abspath(path).encode(), repr(rho).encode(), text, _environment(text)]
+    inputs = [os.path.abspath(path).encode(), repr(rho).encode(), text, _environment(text), repr(bool(y_up)).encode()]
     specs, warnings = asset_cache.load_or_compute("urdf", inputs, links_and_warnings, _SOURCES, _PACKAGES)
     for message in warnings:
         _logger.warning(f"{ctx.where()}: {message}")
@@ -138,10 +140,11 @@ def _floating_root(ctx: "_Context", links, parent_joint, order):
 
 
 class _Context:
-    """Where an error happened: the file, its folder and the entity, for messages."""
+    """Where an error happened (the file, its folder and the entity, for messages), and whether its
+    meshes are read as Y-up (load_urdf's y_up)."""
 
-    def __init__(self, path: str, entity_name: str | None):
-        self.path = path
+    def __init__(self, path: str, entity_name: str | None, y_up: bool = False):
+        self.path, self.y_up = path, y_up  # (y_up: the mesh files are Y-up, see load_urdf)
         self.folder = os.path.dirname(os.path.abspath(path))
         self.entity = entity_name
         self.files = []  # asset_cache.snapshot of the mesh files read and of the places looked at before; None:
@@ -609,7 +612,7 @@ def _mesh(ctx: _Context, link_name: str, mesh) -> tuple[np.ndarray, np.ndarray]:
     else:
         ctx.files = None
     try:
-        return shapes.load_mesh(found, np.broadcast_to(scale, (3,)))
+        return shapes.load_mesh(found, np.broadcast_to(scale, (3,)), ctx.y_up)
     except AssetError as exc:
         raise ctx.error(f"link '{link_name}': {exc}") from exc
 
