@@ -559,9 +559,11 @@ def test_what_is_ignored_is_said_once(f64, tmp_path, caplog):
 
 def test_an_actuator_on_a_tendon_drives_its_joints_as_genesis_approximates_it(f64, tmp_path, caplog):
     """The menagerie Panda's gripper: a position actuator on a fixed tendon of two slide joints.
-    Genesis puts its gains and force bound on each of the tendon's joints; so does genesis_lite,
-    except on a joint an actuator drives directly (here the first, whatever the order in the file),
-    and says so; an actuator on a tendon of another joint kind is only named."""
+    Genesis puts its gains and force bound on each of the tendon's joints but one an actuator drives
+    directly (here the first, whatever the order in the file); so does genesis_lite, and says so; an
+    actuator on an unknown tendon is only named. Where several actuators reach one joint (s1: two
+    tendons), the later's gains and the tightest bound act, as for a joint's own actuators (Genesis
+    parses none there: s1 would keep no servo)."""
     fingers = "".join(f'<body name="f{k}" pos="{0.1 * k} 0 0"><joint name="s{k}" type="slide" axis="1 0 0"/>{LINK}'
                       f'</body>' for k in range(3))
     extra = ('<tendon><fixed name="split"><joint joint="s1" coef="0.5"/><joint joint="s2" coef="0.5"/></fixed>'

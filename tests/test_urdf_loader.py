@@ -596,8 +596,10 @@ def _box_files(tmp_path):
 
 def test_y_up_meshes_are_turned_to_z_up(f64, tmp_path):
     """A Y-up mesh is turned (X, Y, Z) → (X, −Z, Y) before anything else reads it, as Genesis's
-    file_meshes_are_zup=False: a rigid Mesh, a URDF's meshes (collision and weighed) and an MPM
-    body's particles; a glTF Mesh is Y-up unless told otherwise (Genesis's None)."""
+    file_meshes_are_zup=False: a rigid Mesh, an MPM body's particles, and a URDF's meshes, collision
+    and weighed too (Genesis 1.4.5 turns only a URDF's visual meshes: its collision shapes and masses
+    come from MuJoCo's reading, unturned; here the shape drawn is the one that collides); a glTF Mesh
+    is Y-up unless told otherwise (Genesis's None)."""
     import genesis_lite as gs
     paths = _box_files(tmp_path)
     urdf = write_urdf(tmp_path, '<link name="box"><collision><geometry><mesh filename="box.obj"/></geometry>'
