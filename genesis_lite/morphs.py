@@ -183,9 +183,7 @@ class MJCF(Morph):
         if not isinstance(self.file, str) or not self.file:
             raise InvalidInputError(f"MJCF: argument 'file' must be a path string, got {self.file!r}")
         self.scale = _isotropic_scale("MJCF", self.scale)
-        if self.file_meshes_are_zup is not None and not isinstance(self.file_meshes_are_zup, (bool, np.bool_)):
-            raise InvalidInputError(f"MJCF: argument 'file_meshes_are_zup' must be True, False or None, got "
-                                    f"{self.file_meshes_are_zup!r}")
+        _meshes_zup("MJCF", self.file_meshes_are_zup, self.file, True)  # (checked; not read, as Genesis's loader)
         if not isinstance(self.exclude_ground_plane, (bool, np.bool_)):
             raise InvalidInputError(f"MJCF: argument 'exclude_ground_plane' must be True or False, "
                                     f"got {self.exclude_ground_plane!r}")
