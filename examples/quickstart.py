@@ -54,8 +54,9 @@ def main():
 
     n_steps = 100
     target = torch.tensor([0.25, 0.15, 0.05], device=gs.device, dtype=gs.tc_float)
-    # shoulder torque (N·m), slider force (N; the slider, hand and ee weigh 4.2 N), wrist torque (N·m)
-    forces = torch.tensor([0.1, 4.3, 0.001], device=gs.device, dtype=gs.tc_float, requires_grad=True)
+    # shoulder torque (N·m), slider force (N; the slider, hand and ee weigh 9.3 N: the slider has no
+    # <inertial>, so it is weighed from its box at Genesis's density of a robot's links), wrist torque (N·m)
+    forces = torch.tensor([0.1, 9.4, 0.001], device=gs.device, dtype=gs.tc_float, requires_grad=True)
     ee = robot.get_link("ee")
 
     def rollout(initial_pos, after_step=None):

@@ -13,22 +13,25 @@ from .solvers.core import InvalidInputError, refuse_grad
            "coup_type", "coup_links", "enable_coup_collision", "coup_collision_links", "contact_resistance")
 @dataclass
 class Rigid:
-    """A rigid body. rho: density, kg/m³ (used where a link has no inertial);
+    """A rigid body. rho: density, kg/m³, of the shapes of links whose mass the asset does not
+    state (primitives, meshes, URDF links without <inertial>; an MJCF's are MuJoCo's); None:
+    Genesis's default, 1000 under RigidOptions(enable_mujoco_compatibility=True), else 600 for a
+    plain object and 1500 for an articulated robot's links (urdf.load_urdf says which);
     friction: Coulomb coefficient of every collision shape of the entity, in [0.01, 5] as Genesis
     (None: the asset's, e.g. a URDF link's <contact><lateral_friction>, else 1.0); a contact
     takes the larger of its two shapes' values."""
-    rho: float = 200.0
+    rho: float = None
     friction: float = None
 
     def __post_init__(self):
         rho, friction = _real("materials.Rigid", "rho", self.rho), _real("materials.Rigid", "friction", self.friction)
-        if not (rho is not None and np.isfinite(rho) and rho > 0):
-            raise InvalidInputError(f"materials.Rigid: argument 'rho' must be a positive finite number, "
-                                    f"got {self.rho!r}")
+        if self.rho is not None and not (rho is not None and np.isfinite(rho) and rho > 0):
+            raise InvalidInputError(f"materials.Rigid: argument 'rho' must be a positive finite number "
+                                    f"(or None), got {self.rho!r}")
         if self.friction is not None and not (friction is not None and 0.01 <= friction <= 5.0):
             raise InvalidInputError(f"materials.Rigid: argument 'friction' must be a number in [0.01, 5.0] "
                                     f"(or None), got {self.friction!r}")
-        self.rho, self.friction = rho, friction
+        self.rho, self.friction = None if self.rho is None else rho, friction
 
 
 def _real(owner, name, value):

@@ -157,7 +157,7 @@ class Scene:
                                     f"entities, got {name!r}, which entity {taken.index(name)} has")
         if isinstance(material, MPM.Base):
             return self._add_mpm_entity(morph, material, surface, name)
-        links = _links_of(morph, material, name)
+        links = _links_of(morph, material, name, self.rigid_options.enable_mujoco_compatibility)
         entity = RigidEntity(self, len(self.entities), name, morph, material, surface or Default(), links,
                              self.rigid_solver)
         self.entities.append(entity)
@@ -454,15 +454,20 @@ def _envs_layout(n_batch, env_spacing, n_envs_per_row, center):
     return per_row, offset
 
 
-def _links_of(morph, material, name):
+def _links_of(morph, material, name, mujoco_compatible):
     """The morph's LinkSpec list (fixed links merged when the morph asks, friction from the
-    material when it states one), its root joint set from the morph's placement."""
+    material when it states one), its root joint set from the morph's placement. Where a mass
+    comes from the shapes and the material states no density, Genesis's default density:
+    shapes.MUJOCO_DENSITY under enable_mujoco_compatibility, else a URDF's by articulation
+    (urdf.load_urdf) and shapes.OBJECT_DENSITY for a primitive or a mesh."""
+    rho = material.rho if material.rho is not None else shapes.MUJOCO_DENSITY if mujoco_compatible else None
+    object_rho = rho or shapes.OBJECT_DENSITY  # (a primitive or a mesh is an object)
     if isinstance(morph, gm.URDF):
         if not os.path.isfile(morph.file):
             # name the argument and what was expected, as every error message does
             raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.URDF expected an existing URDF file, "
                              f"got '{morph.file}' (not found; relative paths start at {os.getcwd()})")
-        links = urdf.load_urdf(morph.file, entity_name=name, rho=material.rho, y_up=not morph.file_meshes_are_zup)
+        links = urdf.load_urdf(morph.file, entity_name=name, rho=rho, y_up=not morph.file_meshes_are_zup)
         if morph.merge_fixed_links:
             links = merge.merge_fixed_links(links, morph.links_to_keep, owner=f"entity '{name}': gs.morphs.URDF")
         if morph.scale != 1.0:
@@ -482,16 +487,16 @@ def _links_of(morph, material, name):
             links[0].joint_type = "fixed"
         return _with_material_friction(links, material)
     elif isinstance(morph, gm.Box):
-        links = shapes.box_link(morph.size, material.rho)
+        links = shapes.box_link(morph.size, object_rho)
     elif isinstance(morph, gm.Sphere):
-        links = shapes.sphere_link(morph.radius, material.rho)
+        links = shapes.sphere_link(morph.radius, object_rho)
     elif isinstance(morph, gm.Capsule):
-        links = shapes.capsule_link(morph.radius, morph.height, material.rho)
+        links = shapes.capsule_link(morph.radius, morph.height, object_rho)
     elif isinstance(morph, gm.Cylinder):
-        links = shapes.cylinder_link(morph.radius, morph.height, material.rho)
+        links = shapes.cylinder_link(morph.radius, morph.height, object_rho)
     elif isinstance(morph, gm.Mesh):
         try:
-            links = shapes.mesh_link(morph.file, morph.scale, material.rho, y_up=not morph.file_meshes_are_zup)
+            links = shapes.mesh_link(morph.file, morph.scale, object_rho, y_up=not morph.file_meshes_are_zup)
         except AssetError as exc:  # shapes does not know the entity: add it to the message
             raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.Mesh: {exc}") from exc
     elif isinstance(morph, gm.Plane):

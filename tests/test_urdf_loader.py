@@ -159,7 +159,7 @@ def _mujoco_model(urdf_path, tmp_path):
     os.path.join(ASSETS, "quadruped.urdf"), os.path.join(PYBULLET, "cartpole.urdf"),
     os.path.join(PYBULLET, "kuka_iiwa", "model.urdf")], ids=os.path.basename)
 def test_matches_mujoco_urdf_compiler(path, tmp_path):
-    specs = load_urdf(path)
+    specs = load_urdf(path, rho=shapes.MUJOCO_DENSITY)  # (MuJoCo's compiler weighs at its density)
     model = _mujoco_model(path, tmp_path)
     assert [model.body(i).name for i in range(1, model.nbody)] == [s.name for s in specs]
     for i, spec in enumerate(specs[1:], start=2):
@@ -196,7 +196,7 @@ def test_link_without_inertial_or_geometry_is_massless(tmp_path):
 
 def test_inertia_from_visual_when_no_collision(tmp_path):
     body = '<link name="a"><visual><geometry><sphere radius="0.1"/></geometry></visual></link>'
-    (a,) = load_urdf(write_urdf(tmp_path, body))
+    (a,) = load_urdf(write_urdf(tmp_path, body), rho=1000.0)
     np.testing.assert_allclose(a.mass, 1000 * 4 / 3 * np.pi * 1e-3)
     assert a.geoms == []  # visuals never collide
 
@@ -270,7 +270,7 @@ def test_bad_arguments(call, arg):
 
 
 def test_package_and_relative_mesh_paths():
-    specs = by_name(load_urdf(os.path.join(ASSETS, "mesh_robot", "urdf", "mesh_robot.urdf")))
+    specs = by_name(load_urdf(os.path.join(ASSETS, "mesh_robot", "urdf", "mesh_robot.urdf"), rho=1000.0))
     box = trimesh.load(BOX_OBJ, force="mesh")
     np.testing.assert_allclose(specs["base"].geoms[0].vertices, box.vertices)
     np.testing.assert_allclose(specs["arm"].geoms[0].vertices, box.vertices * [1, 1, 2])
@@ -294,7 +294,7 @@ def test_package_uri_found_in_ancestor_folder(tmp_path):
 
 def test_absolute_mesh_path(tmp_path):
     body = f'<link name="a"><collision><geometry><mesh filename="{BOX_OBJ}"/></geometry></collision></link>'
-    (a,) = load_urdf(write_urdf(tmp_path, body))
+    (a,) = load_urdf(write_urdf(tmp_path, body), rho=1000.0)
     np.testing.assert_allclose(a.mass, 1000 * 0.002)
 
 
@@ -470,10 +470,10 @@ def test_a_visual_of_zero_size_weighs_nothing_and_draws_what_it_has(tmp_path, sh
     and so does a collision shape of zero size."""
     marker = f'<visual><geometry>{shape}</geometry></visual>'
     solid = '<visual><geometry><sphere radius="0.1"/></geometry></visual>'
-    (a,) = load_urdf(write_urdf(tmp_path, f'<link name="a">{marker}{solid}</link>'))
+    (a,) = load_urdf(write_urdf(tmp_path, f'<link name="a">{marker}{solid}</link>'), rho=1000.0)
     assert [v.type for v in a.visuals] == ([shape[1:4].replace("cyl", "cylinder")] if drawn else []) + ["sphere"]
     np.testing.assert_allclose(a.mass, 1000 * 4 / 3 * np.pi * 1e-3)  # the solid sphere's alone
-    (b,) = load_urdf(write_urdf(tmp_path, f'<link name="b">{marker}</link>', name="marker_only.urdf"))
+    (b,) = load_urdf(write_urdf(tmp_path, f'<link name="b">{marker}</link>', name="marker_only.urdf"), rho=1000.0)
     assert len(b.visuals) == drawn and b.mass == 0
     with pytest.raises(AssetError, match="non-negative finite"):
         negative = shape.replace('"0"', '"-0.1"').replace(" 0 ", " -0.1 ").replace(" 0\"", " -0.1\"")
@@ -544,7 +544,7 @@ def test_other_floating_joints_raise(tmp_path, body):
 def test_inertial_without_mass_is_weighed_from_shapes_with_a_warning(tmp_path, caplog):
     body = ('<link name="a"><inertial><origin xyz="0 0 1"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/>'
             '</inertial><collision><geometry><sphere radius="0.1"/></geometry></collision></link>')
-    (a,) = load_urdf(write_urdf(tmp_path, body))
+    (a,) = load_urdf(write_urdf(tmp_path, body), rho=1000.0)
     np.testing.assert_allclose(a.mass, 1000 * 4 / 3 * np.pi * 1e-3)
     np.testing.assert_allclose(a.com, 0.0, atol=1e-15)
     assert any("states no <mass>" in r.getMessage() for r in caplog.records)
@@ -625,7 +625,7 @@ def test_y_up_meshes_are_turned_to_z_up(f64, tmp_path):
         low, high = entity.get_AABB().numpy()
         expected = as_it_is if "as it is" in name else turned
         np.testing.assert_allclose([(low + high) / 2 - at, high - low], expected, atol=1e-7, err_msg=name)  # (glb: f32)
-    mass = gs.materials.Rigid().rho * 0.1 * 0.2 * 0.3
+    mass = shapes.OBJECT_DENSITY * 0.1 * 0.2 * 0.3  # (a lone link: Genesis's density of a plain object)
     for name in ("urdf as it is", "urdf turned"):  # (weighed from the turned box: the same mass, its com turned)
         np.testing.assert_allclose(entities[name].get_links_mass().numpy(), [mass], rtol=1e-9)
     spread = particles.get_particles_pos().numpy()

@@ -20,6 +20,12 @@ from .spec import GeomSpec, LinkSpec
 
 _IDENTITY_QUAT = (1.0, 0.0, 0.0, 0.0)
 
+# Genesis 1.4.5's densities (kg/m³) for a body whose material states none (materials.Rigid(rho=None)),
+# where a mass must come from the shapes: a plain object (a primitive, a mesh, a URDF link outside
+# any articulation), an articulated robot's link, and any link under enable_mujoco_compatibility
+# (MuJoCo's own default density)
+OBJECT_DENSITY, ROBOT_DENSITY, MUJOCO_DENSITY = 600.0, 1500.0, 1000.0
+
 
 # ------------------------------------------------------------------ argument checks
 

@@ -62,7 +62,8 @@ _DEFAULT_AXIS = np.array([1.0, 0.0, 0.0])  # URDF spec default
 _INERTIA_RTOL = 1e-6
 
 
-def load_urdf(path: str, entity_name: str | None = None, rho: float = 1000.0, y_up: bool = False) -> list[LinkSpec]:
+def load_urdf(path: str, entity_name: str | None = None, rho: float | None = None,
+              y_up: bool = False) -> list[LinkSpec]:
     """Links of the URDF file `path` in tree order (root first, parent index < child index).
 
     Order is depth-first from the root, children in the order their joints appear in the
@@ -70,7 +71,9 @@ def load_urdf(path: str, entity_name: str | None = None, rho: float = 1000.0, y_
     joint_name "" (a floating root: at its joint's origin, named by it; _floating_root): the
     entity builder decides how the base is attached, and places it.
     rho: density (kg/m³) used for links without <inertial>, from their collision shapes
-    (else their visual shapes); links with neither get mass 0.
+    (else their visual shapes); links with neither get mass 0. None: Genesis's default, per link
+    (_articulated_links): shapes.ROBOT_DENSITY for a link of the articulation,
+    shapes.OBJECT_DENSITY for one outside it.
     y_up: the mesh files are Y-up: each is turned to Z-up when read (shapes.load_mesh; Genesis's
     file_meshes_are_zup=False), before its scale, origin and mass properties.
     entity_name: only used in error messages.
@@ -80,7 +83,7 @@ def load_urdf(path: str, entity_name: str | None = None, rho: float = 1000.0, y_
     if not isinstance(path, (str, os.PathLike)):
         raise InvalidInputError(f"load_urdf: argument 'path' expected a file path, got {path!r}")
     path = os.fspath(path)
-    rho = float(shapes.check_positive(rho, "rho", "load_urdf"))
+    rho = None if rho is None else float(shapes.check_positive(rho, "rho", "load_urdf"))
     ctx = _Context(path, entity_name, bool(y_up))
     text = _read(ctx)
 
@@ -95,7 +98,7 @@ def load_urdf(path: str, entity_name: str | None = None, rho: float = 1000.0, y_
     return specs
 
 
-def _links(ctx: "_Context", text: bytes, rho: float) -> list[LinkSpec]:
+def _links(ctx: "_Context", text: bytes, rho: float | None) -> list[LinkSpec]:
     """load_urdf's links, from the file's bytes `text`."""
     robot, xml = _parse(ctx, text)
     links, parent_joint, order = _tree_order(ctx, robot)
@@ -103,10 +106,12 @@ def _links(ctx: "_Context", text: bytes, rho: float) -> list[LinkSpec]:
     friction = _contact_friction(ctx, xml)
     colors = _material_colors(ctx, robot)
     index = {name: i for i, name in enumerate(order)}
+    articulated = _articulated_links(order, parent_joint)
     specs = []
     for name in order:
         joint = parent_joint.get(name)
-        spec = _link_spec(ctx, links[name], joint, rho, colors)
+        density = rho if rho is not None else (shapes.ROBOT_DENSITY if name in articulated else shapes.OBJECT_DENSITY)
+        spec = _link_spec(ctx, links[name], joint, density, colors)
         for geom in spec.geoms:
             geom.friction = friction.get(name)
         spec.parent = index[joint.parent] if joint is not None else -1
@@ -116,6 +121,25 @@ def _links(ctx: "_Context", text: bytes, rho: float) -> list[LinkSpec]:
         specs[0].pos, specs[0].quat = _pose(ctx, floating.origin, f"joint '{floating.name}' origin")
     _check_mimics(ctx, specs)
     return specs
+
+
+def _articulated_links(order, parent_joint) -> set:
+    """The names of the links Genesis 1.4.5 weighs as a robot's (its is_robot flag, which picks
+    the default density): links rigidly joined (by fixed joints) form a group, started by the root,
+    a floating joint or a moving joint; a group is articulated when a moving joint (revolute,
+    continuous, prismatic) starts it or hangs from one of its links. So an arm's base, its
+    links and the gripper fixed to its flange are articulated, a free box's links are not."""
+    group = {}  # link name → its group: a one-element list holding the flag (shared by the group)
+    for name in order:  # (parents first)
+        joint = parent_joint.get(name)
+        if joint is None or joint.type == "floating":
+            group[name] = [False]
+        elif joint.type == "fixed":
+            group[name] = group[joint.parent]
+        else:
+            group[name] = [True]
+            group[joint.parent][0] = True
+    return {name for name in order if group[name][0]}
 
 
 def _floating_root(ctx: "_Context", links, parent_joint, order):
