@@ -27,7 +27,9 @@ Bodies: mass, com and inertia from ``<inertial>`` (diaginertia with its frame, o
 else from the body's geoms as solids of their density (or stated mass), as MuJoCo's
 ``inertiafromgeom="auto"`` (a mesh: its solid, exact when closed, else its convex hull; MuJoCo's
 legacy formula differs for non-convex meshes). Geoms: sphere, capsule, cylinder, box (sizes, or
-``fromto``), mesh (``<mesh file scale>`` assets, in the file's own coordinates: MuJoCo's
+``fromto``), ellipsoid (weighed as the ellipsoid; it collides as an inscribed polytope,
+shapes.ellipsoid_mesh, with a warning; MuJoCo and Genesis use its exact surface; three equal
+semi-axes make a sphere), mesh (``<mesh file scale>`` assets, in the file's own coordinates: MuJoCo's
 re-centring moves the geom frame, not the surface; found in meshdir or beside the file that
 included them; or given by ``vertex`` and ``face``, without faces the vertices' convex hull);
 contype/conaffinity masks (MuJoCo's pair rule); ``<contact><exclude>``; friction
@@ -68,8 +70,8 @@ the turn; limited by autolimits only where range[0] < range[1], as MuJoCo's comp
 Refused (AssetError naming the element): a ball joint's force range, a limited ball joint's range
 not starting at 0, a ball joint followed by a hinge or ball in one body (as MuJoCo refuses them),
 a free joint below a root body, a joint's
-``springdamper`` and ``springyield``, a polynomial stiffness, a free joint's stiffness, ellipsoid /
-hfield / sdf geoms, equalities other than joints', connects and welds, elements that would add or
+``springdamper`` and ``springyield``, a polynomial stiffness, a free joint's stiffness, hfield /
+sdf geoms, equalities other than joints', connects and welds, elements that would add or
 move bodies and geoms unread (``<composite>``, ``<flexcomp>``…; ``<frame>`` is read: it places its
 bodies and geoms, and its childclass is theirs; so is ``<replicate>``, as copies in frames:
 MJCFDocument), a solref of mixed form (one number > 0, the other not: MuJoCo warns and takes its
@@ -414,12 +416,12 @@ class _Reader(MJCFDocument):
             attrs = self.attrs(element, geom_class)
             self.ignore_unread(element, attrs)
             where = f"{what} geom {attrs.get('name') or k}"
-            geom, density, mass = self._geom(attrs, where)
+            geom, density, mass, axes = self._geom(attrs, where)
             if geom.type == "plane" and not static:
                 raise self.error(f"{where}: a plane only in the worldbody or a body welded to it (MuJoCo's compiler "
                                  f"refuses it elsewhere), got one on a moving body")
             geom.pos, geom.quat = shapes.compose(*outer, geom.pos, geom.quat)
-            solids.append((geom, *_solid(geom, density, mass)))
+            solids.append((geom, *_solid(geom, density, mass, axes)))
             contype, conaffinity = (self._bits(attrs, key, where) for key in ("contype", "conaffinity"))
             if contype or conaffinity:
                 geom.contype, geom.conaffinity = contype, conaffinity
@@ -429,7 +431,8 @@ class _Reader(MJCFDocument):
         return solids
 
     def _geom(self, attrs: dict, what: str):
-        """(GeomSpec in the body frame, density kg/m³, stated mass kg or None) of a <geom>."""
+        """(GeomSpec in the body frame, density kg/m³, stated mass kg or None, an ellipsoid's semi-axes
+        (3,) m where the GeomSpec is its polytope, else None) of a <geom>."""
         kind = attrs.get("type", "sphere")
         pos, quat = self.frame(attrs, what)
         size = self.numbers(attrs, "size", (1, 2, 3), what, default=np.zeros(3))
@@ -446,7 +449,16 @@ class _Reader(MJCFDocument):
         elif kind == "mesh":
             vertices, faces = self.mesh(attrs.get("mesh"), what)
             geom = GeomSpec("mesh", np.zeros(0), pos, quat, vertices=vertices, faces=faces)
-        elif kind in _PRIMITIVES:
+        elif kind == "ellipsoid" and not np.all(size > 0):
+            raise self.error(f"{what}: ellipsoid size expected 3 positive numbers, got {attrs.get('size')!r}")
+        elif kind == "ellipsoid" and not (size[0] == size[1] == size[2]):
+            vertices, faces = shapes.ellipsoid_mesh(size)
+            geom = GeomSpec("mesh", np.zeros(0), pos, quat, vertices=vertices, faces=faces)
+            self.ignored.add("<geom type='ellipsoid'>: its surface (it collides as the inscribed polytope of "
+                             f"{len(vertices)} vertices, within 0.39 % of its surface; its mass and "
+                             f"inertia are the ellipsoid's)")
+        elif kind in _PRIMITIVES or kind == "ellipsoid":  # (an ellipsoid of three equal semi-axes: a sphere)
+            kind = "sphere" if kind == "ellipsoid" else kind
             n = {"sphere": 1, "capsule": 2, "cylinder": 2, "box": 3}[kind]
             if not np.all(size[:n] > 0):
                 raise self.error(f"{what}: {kind} size expected {n} positive numbers, got {attrs.get('size')!r}")
@@ -454,13 +466,14 @@ class _Reader(MJCFDocument):
                     "box": size * 2}[kind]
             geom = GeomSpec(kind, full, pos, quat)
         else:
-            raise self.error(f"{what}: geom type expected one of {_PRIMITIVES + ('mesh', 'plane')}, got {kind!r}")
+            raise self.error(f"{what}: geom type expected one of {_PRIMITIVES + ('ellipsoid', 'mesh', 'plane')}, "
+                             f"got {kind!r}")
         friction = self.numbers(attrs, "friction", (1, 2, 3), what, default=[1.0])
         geom.friction = float(friction[0])
         self._contact_params(geom, attrs, what)
         density = self.numbers(attrs, "density", 1, what, default=[1000.0])[0]
         mass = self._non_negative(attrs, "mass", what) if "mass" in attrs else None
-        return geom, density, mass
+        return geom, density, mass, size if geom.type == "mesh" and kind == "ellipsoid" else None
 
     def _contact_params(self, geom: GeomSpec, attrs: dict, what: str):
         """The geom's condim, solref, solimp (where the file states them: a partial solimp ends in
@@ -837,10 +850,14 @@ def _link(name, parent, joint_name, joint_type, pos, quat, axis=(0.0, 0.0, 1.0))
                     axis=np.asarray(axis, dtype=np.float64), mass=0.0, com=np.zeros(3), inertia=np.zeros((3, 3)))
 
 
-def _solid(geom: GeomSpec, density: float, mass: float | None):
+def _solid(geom: GeomSpec, density: float, mass: float | None, ellipsoid=None):
     """(mass kg, com (3,) m, inertia (3, 3) kg·m²) of a geom in its own frame: a solid of its
-    density, or scaled to its stated mass (MuJoCo's rule)."""
-    own_mass, com, inertia = shapes.geom_mass_properties(geom, density)
+    density, or scaled to its stated mass (MuJoCo's rule); ``ellipsoid``: the semi-axes (3,) m of
+    the ellipsoid whose polytope the geom is (weighed as the ellipsoid)."""
+    if ellipsoid is not None:
+        (own_mass, inertia), com = shapes.ellipsoid_mass_inertia(ellipsoid, density), np.zeros(3)
+    else:
+        own_mass, com, inertia = shapes.geom_mass_properties(geom, density)
     if mass is None or geom.type == "plane":  # (a plane weighs nothing, its stated mass too: MuJoCo's)
         return own_mass, com, inertia
     return mass, com, inertia * (mass / own_mass) if own_mass > 0 else np.zeros((3, 3))
