@@ -24,6 +24,34 @@ _FILE = _MORPH + ("decimate", "decimate_face_num", "decimate_aggressiveness", "w
 _DEPRECATED = ("requires_jac_and_IK", "is_free")
 
 
+class _GenesisArmature:
+    """default_armature's default (URDF, MJCF): Genesis's 0.1 kg·m² (or kg), or none under
+    RigidOptions(enable_mujoco_compatibility=True), where the file's dynamics are MuJoCo's; the
+    scene resolves it (a value given, even 0.1, is taken as given, as Genesis does)."""
+
+    def __repr__(self):
+        return "0.1 (none under enable_mujoco_compatibility)"
+
+
+GENESIS_ARMATURE = _GenesisArmature()
+
+
+def _armature(owner, value):
+    """A morph's default_armature checked: the GENESIS_ARMATURE default, None (none: 0.0) or a
+    finite number ≥ 0, as a float."""
+    if value is GENESIS_ARMATURE:
+        return value
+    refuse_grad(owner, "default_armature", value, "it is fixed at build; set_dofs_armature is differentiable")
+    try:
+        armature = 0.0 if value is None else float(value)
+    except (TypeError, ValueError):
+        armature = np.nan
+    if isinstance(value, (bool, np.bool_, str)) or not np.isfinite(armature) or armature < 0:
+        raise InvalidInputError(f"{owner}: argument 'default_armature' must be a finite number ≥ 0 (kg·m² or kg) "
+                                f"or None, got {value!r}")
+    return armature
+
+
 _DIFFERENTIABLE_START = ("a morph's pose is fixed at build; a differentiable start is set after scene.build() "
                          "with the entity's setters: set_pos, set_quat, set_dofs_position, an MPM entity's "
                          "set_position")
@@ -117,8 +145,8 @@ class URDF(Morph):
     file_meshes_are_zup: True (Genesis's default): meshes are read as they are (Z-up); False or None:
     every mesh of the file is turned from Y-up, (X, Y, Z) → (X, −Z, Y), as Genesis's loader.
     default_armature: armature (kg·m² or kg) of every revolute and prismatic dof (a motor's rotor;
-    as Genesis, not a free base's), as URDF has no tag for it. Genesis defaults to 0.1; 0 here,
-    so that the dynamics are the file's (and MuJoCo's).
+    as Genesis, not a free base's), as URDF has no tag for it; None: none. Genesis's default: 0.1,
+    none under RigidOptions(enable_mujoco_compatibility=True) (GENESIS_ARMATURE).
     merge_fixed_links: merge every link attached by a fixed joint into its parent, as Genesis
     (and MuJoCo) do: one rigid body, same physics, fewer links. The merged link keeps the
     parent's name; the merged-away names no longer exist. The root link is never merged.
@@ -126,7 +154,7 @@ class URDF(Morph):
     (solvers/rigid/merge.py says how, and where the link order differs from Genesis's.)"""
     file: str = None
     scale: float = 1.0
-    default_armature: float = 0.0
+    default_armature: float = GENESIS_ARMATURE
     merge_fixed_links: bool = True
     links_to_keep: tuple = ()
     file_meshes_are_zup: bool = True
@@ -136,15 +164,7 @@ class URDF(Morph):
             raise InvalidInputError(f"URDF: argument 'file' must be a path string, got {self.file!r}")
         self.scale = _isotropic_scale("URDF", self.scale)
         self.file_meshes_are_zup = _meshes_zup("URDF", self.file_meshes_are_zup, self.file, False)
-        refuse_grad("URDF", "default_armature", self.default_armature,
-                    "it is fixed at build; set_dofs_armature is differentiable")
-        try:
-            armature = float(self.default_armature)
-        except (TypeError, ValueError):
-            armature = np.nan
-        if not np.isfinite(armature) or armature < 0:
-            raise InvalidInputError(f"URDF: argument 'default_armature' must be a finite number ≥ 0 (kg·m² or kg), "
-                                    f"got {self.default_armature!r}")
+        self.default_armature = _armature("URDF", self.default_armature)
         if not isinstance(self.merge_fixed_links, (bool, np.bool_)):
             raise InvalidInputError(f"URDF: argument 'merge_fixed_links' must be True or False, "
                                     f"got {self.merge_fixed_links!r}")
@@ -173,11 +193,15 @@ class MJCF(Morph):
     entity's last; exclude_ground_plane=True leaves out its planes (Genesis's option: for a scene
     that has a ground of its own, e.g. gs.morphs.Plane). scale: the bodies grown by this factor,
     as Genesis's (URDF's scale; an actuator's gains times scale³, Genesis's MJCF rule:
-    solvers/rigid/scale.py). file_meshes_are_zup: taken and not read, as Genesis's MJCF loader."""
+    solvers/rigid/scale.py). file_meshes_are_zup: taken and not read, as Genesis's MJCF loader.
+    default_armature: armature (kg·m² or kg) of every hinge and slide dof whose armature the file
+    leaves at 0 (a motor's rotor; the file's own armature is kept), as Genesis; None: none.
+    Genesis's default: 0.1, none under RigidOptions(enable_mujoco_compatibility=True)."""
     file: str = None
     scale: float = 1.0
     exclude_ground_plane: bool = False
     file_meshes_are_zup: bool = True
+    default_armature: float = GENESIS_ARMATURE
 
     def _check(self):
         if not isinstance(self.file, str) or not self.file:
@@ -188,6 +212,7 @@ class MJCF(Morph):
             raise InvalidInputError(f"MJCF: argument 'exclude_ground_plane' must be True or False, "
                                     f"got {self.exclude_ground_plane!r}")
         self.exclude_ground_plane = bool(self.exclude_ground_plane)
+        self.default_armature = _armature("MJCF", self.default_armature)
 
 
 @named_keywords(*_PRIMITIVE, *_TETGEN, deprecated=_DEPRECATED)

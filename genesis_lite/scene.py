@@ -454,6 +454,18 @@ def _envs_layout(n_batch, env_spacing, n_envs_per_row, center):
     return per_row, offset
 
 
+def _add_rotor_armature(links, morph, mujoco_compatible):
+    """A motor's rotor on each joint one could drive, as Genesis's loader adds it: the morph's
+    default_armature on every revolute and prismatic dof whose armature the file leaves at 0 (not
+    a free base's); its default (morphs.GENESIS_ARMATURE) 0.1, none under MuJoCo compatibility."""
+    armature = morph.default_armature
+    if armature is gm.GENESIS_ARMATURE:
+        armature = 0.0 if mujoco_compatible else 0.1
+    for link in links:
+        if link.joint_type in ("revolute", "prismatic") and not link.armature:
+            link.armature = armature
+
+
 def _links_of(morph, material, name, mujoco_compatible):
     """The morph's LinkSpec list (fixed links merged when the morph asks, friction from the
     material when it states one), its root joint set from the morph's placement. Where a mass
@@ -472,9 +484,7 @@ def _links_of(morph, material, name, mujoco_compatible):
             links = merge.merge_fixed_links(links, morph.links_to_keep, owner=f"entity '{name}': gs.morphs.URDF")
         if morph.scale != 1.0:
             links = scale.scaled_links(links, morph.scale)  # (a URDF's gains: the file's, as Genesis's)
-        for link in links:  # a motor's rotor on each joint one could drive (Genesis's rule): not a free base's
-            if link.joint_type in ("revolute", "prismatic"):
-                link.armature = morph.default_armature
+        _add_rotor_armature(links, morph, mujoco_compatible)
     elif isinstance(morph, gm.MJCF):
         if not os.path.isfile(morph.file):
             raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.MJCF expected an existing MJCF file, "
@@ -482,6 +492,7 @@ def _links_of(morph, material, name, mujoco_compatible):
         links = mjcf.load_mjcf(morph.file, entity_name=name, exclude_ground_plane=morph.exclude_ground_plane)
         if morph.scale != 1.0:
             links = scale.scaled_links(links, morph.scale, gains=morph.scale ** 3)
+        _add_rotor_armature(links, morph, mujoco_compatible)
         mjcf.place_world(links, morph.pos, morph.quat)
         if morph.fixed:
             links[0].joint_type = "fixed"

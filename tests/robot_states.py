@@ -10,7 +10,7 @@ def limit_free_scene(path, free, dt, n_envs=0):
     """The robot without joint limits and contacts (as mujoco_ref loads it)."""
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=dt),
                      rigid_options=gs.options.RigidOptions(enable_joint_limit=False, enable_collision=False))
-    robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=not free), name="robot")
+    robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=not free, default_armature=0.0), name="robot")
     scene.build(n_envs=n_envs)
     return scene, robot
 

@@ -111,7 +111,7 @@ def _slider(urdf_dir, substeps):
         path = _one_joint_urdf(urdf_dir, "slider", "prismatic", "1 0 0", (-100, 100), "0 0 0", SLIDER_MASS,
                                (0.01, 0.01, 0.01))
         scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, substeps=substeps))
-        robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=True))
+        robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=True, default_armature=0.0))
         scene.build()
         robot.set_dofs_kp([KP])
         robot.set_dofs_kv([KV])
@@ -180,7 +180,7 @@ def _pendulum(urdf_dir, limits_on):
                                PEND_MASS, (PEND_ICOM, PEND_ICOM, 1e-4))
         scene = gs.Scene(sim_options=gs.options.SimOptions(dt=PEND_DT),
                          rigid_options=gs.options.RigidOptions(enable_joint_limit=limits_on))
-        robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=True))
+        robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=True, default_armature=0.0))
         scene.build()
         return scene, robot, _urdf_coms(path, robot)
     return _cached(("pendulum", limits_on), make)
@@ -307,7 +307,7 @@ def _double_pendulum(substeps):
         path = asset("pendulum2.urdf")
         scene = gs.Scene(sim_options=gs.options.SimOptions(dt=1e-3, substeps=substeps),
                          rigid_options=gs.options.RigidOptions(enable_joint_limit=False))
-        robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=True))
+        robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=True, default_armature=0.0))
         scene.build()
         robot.set_dofs_damping([0.0, 0.0])
         return scene, robot, _urdf_coms(path, robot)

@@ -120,7 +120,8 @@ def test_rows_scale_matches_mujoco_invweight0_f64(f64, name):
     mass Jacobians) — equals mj_setConst's, a free base turned so that no link's frame is the world's."""
     path, free = ROBOTS[name]
     scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False))
-    robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=not free, pos=(0.1, -0.2, 0.3), euler=(30, -50, 70)))
+    robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=not free, pos=(0.1, -0.2, 0.3), euler=(30, -50, 70),
+                                            default_armature=0.0))
     scene.build()
     try:
         invweight_link, invweight_turn, invweight_dof = _rows_scale(robot)
@@ -239,7 +240,7 @@ def test_rows_scale_of_sliding_leaves_matches_mujoco_f64(f64, tmp_path, merge):
     MuJoCo's fusestatic) and kept (the "world" root and the base apart: MuJoCo's without it)."""
     path = _fingers_urdf(tmp_path / "fingers.urdf")
     scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False))
-    robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=True, merge_fixed_links=merge))
+    robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=True, merge_fixed_links=merge, default_armature=0.0))
     scene.build()
     try:
         invweight_link, invweight_turn, invweight_dof = _rows_scale(robot)

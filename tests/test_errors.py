@@ -146,7 +146,8 @@ def test_rigid_material_keywords():
 def test_moving_massless_link_raises_at_build(f64, tmp_path):
     path = write_urdf(tmp_path, LINK_A + '<link name="b"/>' + joint("hinge", "revolute"))
     scene = gs.Scene()
-    scene.add_entity(gs.morphs.URDF(file=path, fixed=True), name="bot")  # loading is fine...
+    # (no rotor armature: Genesis's default 0.1 would give the hinge an inertia of its own)
+    scene.add_entity(gs.morphs.URDF(file=path, fixed=True, default_armature=None), name="bot")  # loading is fine...
     try:
         raises(gs.AssetError, scene.build, "entity 'bot'", "link 'b'", "no mass or inertia", "expected")
         assert not scene.is_built
@@ -414,10 +415,12 @@ def test_invalid_options_object(f64):
            "dict")
 
 
-@pytest.mark.parametrize("value", [-0.1, math.nan, "heavy"])
+@pytest.mark.parametrize("value", [-0.1, math.nan, "heavy", True])
 def test_invalid_default_armature(f64, value):
     raises(gs.InvalidInputError, lambda: gs.morphs.URDF(file=asset("pendulum2.urdf"), default_armature=value),
            "URDF", "'default_armature'", "≥ 0", repr(value))
+    raises(gs.InvalidInputError, lambda: gs.morphs.MJCF(file=asset("mjcf", "arm.xml"), default_armature=value),
+           "MJCF", "'default_armature'", "≥ 0", repr(value))
 
 
 def test_default_armature_reaches_every_joint_dof(f64):
@@ -524,17 +527,18 @@ def test_singular_mass_matrix_names_the_link(f64, path, link):
     """A free base on a massless root (cartpole's slideBar carries the cart's prismatic joint: the
     cart moves no mass the base does not), or an inertia with a zero principal moment (izz = 0
     under a free joint's rotation), makes M singular: a named AssetError at build, not numpy's
-    LinAlgError or a NaN on the first step."""
+    LinAlgError or a NaN on the first step (no rotor armature, which would give the dofs an inertia)."""
     scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False))
-    scene.add_entity(gs.morphs.URDF(file=path, fixed=False), name="bot")
+    scene.add_entity(gs.morphs.URDF(file=path, fixed=False, default_armature=None), name="bot")
     raises(gs.AssetError, scene.build, "entity 'bot'", f"link '{link}'", "positive definite mass matrix")
 
 
 def test_zero_mass_set_after_build_names_the_link(f64):
     """A mass set to zero where it leaves M singular (a wheel's spin dof moves nothing else): a
-    named InvalidInputError, not torch's LinAlgError, and the masses stay as they were."""
+    named InvalidInputError, not torch's LinAlgError, and the masses stay as they were (no rotor
+    armature, which would give the wheel's dof an inertia)."""
     scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False))
-    robot = scene.add_entity(gs.morphs.URDF(file=pybullet("r2d2.urdf")), name="r2d2")
+    robot = scene.add_entity(gs.morphs.URDF(file=pybullet("r2d2.urdf"), default_armature=None), name="r2d2")
     scene.build(n_envs=2)
     before = robot.get_links_mass().clone()
     wheel = [link.name for link in robot.links].index("left_front_wheel")

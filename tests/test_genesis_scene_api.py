@@ -508,6 +508,29 @@ def test_material_friction_range_is_genesis(friction):
         gs.materials.Rigid(friction=friction)
 
 
+def test_default_armature_is_genesis_rotor_unless_mujoco_compatible(f64, tmp_path):
+    """Genesis 1.4.5's default_armature (URDF and MJCF): 0.1 on every hinge and slide dof whose
+    armature the file leaves at 0 (an MJCF's own armature kept; a free joint's dofs and a ball's
+    none); none under enable_mujoco_compatibility unless given; None: none."""
+    mjcf = tmp_path / "chain.xml"
+    mjcf.write_text('<mujoco><worldbody><body name="a"><freejoint/><geom size="0.1"/>'
+                    '<body name="b" pos="0 0 0.3"><joint name="h" armature="0.02"/><geom size="0.1"/>'
+                    '<body name="c" pos="0 0 0.3"><joint name="s" type="slide"/><geom size="0.1"/>'
+                    '<body name="d" pos="0 0 0.3"><joint name="k" type="ball"/><geom size="0.1"/>'
+                    '</body></body></body></body></worldbody></mujoco>')
+    cases = [({}, False, 0.1), ({}, True, 0.0), ({"default_armature": 0.1}, True, 0.1),
+             ({"default_armature": None}, False, 0.0), ({"default_armature": 0.03}, False, 0.03)]
+    for given, compatible, rotor in cases:
+        scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False,
+                                                               enable_mujoco_compatibility=compatible))
+        urdf = scene.add_entity(gs.morphs.URDF(file=asset("arm3.urdf"), fixed=True, **given))
+        chain = scene.add_entity(gs.morphs.MJCF(file=str(mjcf), **given))
+        scene.build()
+        assert urdf.get_dofs_armature().tolist() == [rotor] * 3, (given, compatible)
+        assert chain.get_dofs_armature().tolist() == [0.0] * 6 + [0.02, rotor] + [0.0] * 3, (given, compatible)
+        scene.destroy()
+
+
 def test_default_armature_on_motor_joints_only_and_urdf_gains(f64):
     """As Genesis: URDF(default_armature) goes to revolute and prismatic dofs, not to a free base's
     (which then falls at exactly g: one Euler step from rest, vz = −g·dt); the Panda's

@@ -66,7 +66,7 @@ def _chain(tmp_path):
 def _scene(file, s, dt, **rigid):
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=dt, gravity=(0.0, 0.0, -9.81)),
                      rigid_options=gs.options.RigidOptions(enable_collision=False, **rigid))
-    robot = scene.add_entity(gs.morphs.URDF(file=file, fixed=True, scale=s))
+    robot = scene.add_entity(gs.morphs.URDF(file=file, fixed=True, scale=s, default_armature=0.0))
     scene.build()
     return scene, robot
 
@@ -223,7 +223,7 @@ def _mjcf(tmp_path, name, timeconst):
 def _mjcf_scene(file, s, dt):
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=dt, gravity=(0.0, 0.0, -9.81)),
                      rigid_options=gs.options.RigidOptions(enable_collision=False, enable_joint_limit=False))
-    robot = scene.add_entity(gs.morphs.MJCF(file=file, scale=s))
+    robot = scene.add_entity(gs.morphs.MJCF(file=file, scale=s, default_armature=0.0))
     scene.build()
     return scene, robot
 
