@@ -9,7 +9,8 @@ at 0.305 m, legs at the standing pose under position servos (kp 100, kv 2; targe
 step), kicked by a small initial velocity: the base settles and sways (height 0.3046 to
 0.3078 m), on its four feet (4 contacts in every env and step). Each env gets its own initial
 velocity v0 (box: vx, vy in ±1 m/s, yaw rate ±2 rad/s; a1: base vx, vy ±0.3 m/s, yaw rate
-±0.5 rad/s, legs ±1 rad/s). Both engines run with their default RigidOptions (ours are
+±0.5 rad/s, legs ±1 rad/s); the a1 with ``URDF(default_armature=0.0)`` in both (the URDF's own
+dynamics; Genesis's default adds a 0.1 rotor, ours too). Both engines run with their default RigidOptions (ours are
 Genesis's: pyramidal cone, impratio 1, time constant 0.01 s, MuJoCo's default solimp, friction 1,
 Newton with at most 25 iterations; tolerance 1e-5 in ours, 1e-6 in Genesis on its own scale).
 
@@ -33,9 +34,7 @@ interpreter, this script with ``--peer``: this interpreter if it imports ``genes
 backend cpu, differs from ours in: its integrator (``approximate_implicitfast``, the only one it
 differentiates; ours makes damping and servo kv implicit as it does, but solves contact with M and
 integrates the constraint force through the damped matrix, as MuJoCo's implicitfast), its own
-colliders (ours: MuJoCo's),
-``URDF(default_armature=0.0)`` (its default adds
-armature 0.1), legs set with a grad-requiring tensor (given one that does not, 1.4.5 ignores
+colliders (ours: MuJoCo's), legs set with a grad-requiring tensor (given one that does not, 1.4.5 ignores
 ``set_dofs_position`` or crashes in a requires_grad scene) and its differentiable read-out
 ``rigid_solver.get_state()``. Its rows add "vs ours" (its fwd+bwd time / ours; goal ≥ 10),
 max |Δq| (largest difference of the final qpos from ours) and "Δgrad" (|g − g_ours| / |g_ours|
@@ -93,8 +92,8 @@ def build(gs, case, requires_grad, ours):
     if case["scene"] == "box":
         entity = scene.add_entity(gs.morphs.Box(size=BOX_SIZE, pos=(0.0, 0.0, BOX_Z)))
     else:
-        armature = {} if ours else {"default_armature": 0.0}  # Genesis: no armature, as the URDF
-        entity = scene.add_entity(gs.morphs.URDF(file=str(case["urdf"]), pos=(0.0, 0.0, A1_Z), **armature))
+        # no rotor armature in either engine (Genesis's default adds 0.1 a dof), as the URDF
+        entity = scene.add_entity(gs.morphs.URDF(file=str(case["urdf"]), pos=(0.0, 0.0, A1_Z), default_armature=0.0))
     n_envs = int(case["n_envs"])
     scene.build(n_envs=n_envs)
     legs = None

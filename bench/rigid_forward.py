@@ -145,7 +145,7 @@ def main():
     for n_envs in args.envs:
         scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT),
                          rigid_options=gs.options.RigidOptions(enable_collision=False, enable_joint_limit=False))
-        robot = scene.add_entity(gs.morphs.URDF(file=KUKA, fixed=True))
+        robot = scene.add_entity(gs.morphs.URDF(file=KUKA, fixed=True, default_armature=0.0))  # (as MuJoCo's)
         t0 = time.perf_counter()
         scene.build(n_envs=n_envs)
         build = time.perf_counter() - t0

@@ -52,7 +52,7 @@ PEERS = [("Genesis", "genesis", "GENESIS_PYTHON"), ("Newton", "newton", "NEWTON_
 def make_scene(path, n_envs, requires_grad):
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT, requires_grad=requires_grad),
                      rigid_options=gs.options.RigidOptions(enable_collision=False, enable_joint_limit=False))
-    robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=True))
+    robot = scene.add_entity(gs.morphs.URDF(file=path, fixed=True, default_armature=0.0))  # (as the peers')
     scene.build(n_envs=n_envs)
     return scene, robot
 
