@@ -37,6 +37,6 @@ __version__ = "0.1.0"
 
 def __getattr__(name):
     # gs.device and the dtypes depend on gs.init(), so they are looked up when asked for
-    if name in ("device", "tc_float", "np_float", "ti_float", "tc_int"):
+    if name in ("device", "tc_float", "np_float", "ti_float", "tc_int", "np_int", "tc_bool", "np_bool"):
         return getattr(runtime, name)
     raise AttributeError(f"module 'genesis_lite' has no attribute {name!r}")

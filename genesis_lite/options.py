@@ -132,10 +132,10 @@ MUJOCO_TIMECONST, GENESIS_TIMECONST = 0.02, 0.01
 MUJOCO_ITERATIONS, GENESIS_ITERATIONS = 100, 25
 
 
-@named_keywords("gravity", "disable_constraint", "max_collision_pairs", "multiplier_collision_broad_phase",
+@named_keywords("gravity", "disable_constraint", "multiplier_collision_broad_phase",
            "integrator", "IK_max_targets", "noslip_iterations", "noslip_tolerance", "contact_resolution",
            "enable_torsional_friction", "enable_rolling_friction", "contact_pruning_tolerance", "sparse_solve",
-           "box_box_detection", "use_hibernation", "hibernation_thresh_vel", "enable_multi_contact",
+           "use_hibernation", "hibernation_thresh_vel", "enable_multi_contact",
            "use_gjk_collision", "enable_contact_patch", "broadphase_traversal")
 @dataclass
 class RigidOptions(_TimeBased):
@@ -188,6 +188,12 @@ class RigidOptions(_TimeBased):
         (``scene.sim.rigid_solver.add_weld_constraint``); 0 by default, where Genesis's is 8: each slot
         adds six rows to every env's constraint capacity, and a scene with slots compiles the weld
         rows into its constraint kernels (seconds of a cold compile), so a scene asks for them.
+    max_collision_pairs: Genesis's capacity of its broad phase's candidate pairs (a non-negative
+        integer, default 150): taken, with nothing to size here (every candidate pair of the
+        scene is listed at build; max_contacts bounds the contacts).
+    box_box_detection: Genesis's switch to MuJoCo's box–box collider for box pairs (its default
+        False collides them by its generic convex collider): ours always uses MuJoCo's, so True
+        is taken and False (given) raises; None (default): ours.
     batch_links_info, batch_joints_info, batch_dofs_info: Genesis's switches that let link, joint
         and dof parameters (masses, gains, friction…) differ per env; ours always may (every
         parameter is stored per env), so either value works, as True does in Genesis.
@@ -219,9 +225,20 @@ class RigidOptions(_TimeBased):
     batch_joints_info: bool = False
     batch_dofs_info: bool = False
     max_dynamic_constraints: int = 0
+    max_collision_pairs: int = 150
+    box_box_detection: bool = None
 
     def __post_init__(self):
         owner = "RigidOptions"
+        if isinstance(self.max_collision_pairs, (bool, np.bool_)) or not isinstance(
+                self.max_collision_pairs, (int, np.integer)) or self.max_collision_pairs < 0:
+            raise InvalidInputError(f"{owner}: argument 'max_collision_pairs' must be an integer >= 0, got "
+                                    f"{self.max_collision_pairs!r}")
+        if self.box_box_detection is not None and not (isinstance(self.box_box_detection, (bool, np.bool_))
+                                                       and self.box_box_detection):
+            raise InvalidInputError(f"{owner}: argument 'box_box_detection' must be True or None: box pairs always "
+                                    f"collide by MuJoCo's box–box collider here (Genesis's True), got "
+                                    f"{self.box_box_detection!r}")
         if not (isinstance(self.max_dynamic_constraints, (int, np.integer)) and not isinstance(
                 self.max_dynamic_constraints, (bool, np.bool_)) and self.max_dynamic_constraints >= 0):
             raise InvalidInputError(f"{owner}: argument 'max_dynamic_constraints' must be an integer >= 0, got "

@@ -34,6 +34,16 @@ class RigidSolverView(EntityIndexing):
     def _who(self):
         return "scene.sim.rigid_solver"
 
+    def __getattr__(self, name):
+        # (only for names not found: Genesis's other solver-level calls say where to look)
+        if name.startswith("_"):
+            raise AttributeError(name)
+        raise AttributeError(f"{self._who} has no '{name}' (its calls here: add_weld_constraint, "
+                             f"delete_weld_constraint); Genesis's other solver-level getters and setters "
+                             f"are the entities' here (entity.get_links_pos, entity.get_qpos, "
+                             f"entity.set_dofs_kp..., scene-wide link and dof indices as link.idx, "
+                             f"entity.dof_start): docs/genesis_api.md lists them")
+
     def add_weld_constraint(self, link1_idx, link2_idx, envs_idx=None):
         """Weld link ``link2_idx`` to link ``link1_idx`` (scene-wide link indices, Genesis's
         ``link.idx``) as they are now, in the envs ``envs_idx`` (None: every env): see the module.

@@ -55,7 +55,8 @@ def _finish_recordings():
         scene._finish_recordings()
 
 
-def init(backend=None, precision="32", seed=None, logging_level="warning", debug=False):
+def init(backend=None, precision="32", seed=None, logging_level="warning", debug=False, *, eps=1e-15, theme="dark",
+         logger_verbose_time=False, performance_mode=False, use_deterministic_algorithms=None):
     """Start the simulator runtime.
 
     backend: ``gs.cpu``, ``gs.gpu`` (CUDA; without it, one warning and the CPU), or None, as in
@@ -65,6 +66,12 @@ def init(backend=None, precision="32", seed=None, logging_level="warning", debug
         entity's from the seed and the entity's index; without a seed, from the index alone, so that
         a scene samples the same particles in every run).
     debug: Taichi debug mode (bounds checks; slow).
+    Genesis's other arguments are taken for its scripts, checked, with nothing to change here:
+    theme and logger_verbose_time style Genesis's coloured log (this one logs plain lines);
+    performance_mode picks how Genesis compiles its kernels (faster runs, slower compiles; ours
+    compile one way); use_deterministic_algorithms (None, True or False): ours are deterministic
+    always (the same bits on every run, thread count and x86-64 CPU). eps, Genesis's epsilon of
+    its geometry, only at its default 1e-15 (the kernels' tolerances here are their own).
 
     Kernels are compiled without fast math: no reassociation or contraction, so a kernel gives
     the same bits whether its env loop runs on one thread or many, on any x86-64 CPU (batched
@@ -82,6 +89,7 @@ def init(backend=None, precision="32", seed=None, logging_level="warning", debug
     if logging_level not in _LOG_LEVELS:
         raise InvalidInputError(
             f"gs.init: argument 'logging_level' must be one of {sorted(_LOG_LEVELS)}, got {logging_level!r}")
+    _check_genesis_extras(eps, theme, logger_verbose_time, performance_mode, use_deterministic_algorithms)
     if seed is not None:
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**32:
             raise InvalidInputError(f"gs.init: argument 'seed' must be None or an int in [0, 2**32), got {seed!r}")
@@ -113,6 +121,21 @@ def init(backend=None, precision="32", seed=None, logging_level="warning", debug
     runtime.ti_float = ti_float
     runtime.tc_float = torch.float64 if precision == "64" else torch.float32
     runtime.np_float = np.float64 if precision == "64" else np.float32
+
+
+def _check_genesis_extras(eps, theme, logger_verbose_time, performance_mode, use_deterministic_algorithms):
+    """gs.init's Genesis-only arguments (see init): their types, and eps at Genesis's default."""
+    for name, value in (("logger_verbose_time", logger_verbose_time), ("performance_mode", performance_mode)):
+        if not isinstance(value, (bool, np.bool_)):
+            raise InvalidInputError(f"gs.init: argument '{name}' must be True or False, got {value!r}")
+    if use_deterministic_algorithms is not None and not isinstance(use_deterministic_algorithms, (bool, np.bool_)):
+        raise InvalidInputError(f"gs.init: argument 'use_deterministic_algorithms' must be None, True or False, "
+                                f"got {use_deterministic_algorithms!r}")
+    if theme not in ("dark", "light", "dumb"):
+        raise InvalidInputError(f"gs.init: argument 'theme' must be 'dark', 'light' or 'dumb', got {theme!r}")
+    if isinstance(eps, bool) or not isinstance(eps, (int, float, np.floating)) or eps != 1e-15:
+        raise InvalidInputError(f"gs.init: argument 'eps' other than Genesis's default 1e-15 is not supported "
+                                f"(the kernels' tolerances are their own), got {eps!r}")
 
 
 def _requested_arch(backend):

@@ -16,7 +16,7 @@ from . import morphs as gm
 from .entities import MPMEntity, RigidEntity
 from .entities.common import EntityIndexing, named_argument_errors, replace_columns
 from .entities.mpm_entity import sample_particles
-from .solvers.core import AssetError, InvalidInputError, SceneStateError
+from .solvers.core import AssetError, InvalidInputError, SceneStateError, warn_user
 from .materials import MPM, Rigid
 from .options import MPMOptions, RigidOptions, SimOptions, ViewerOptions, VisOptions, check_bool, is_int
 from .rigid_solver import RigidSolverView
@@ -64,11 +64,17 @@ class Scene:
     viewer_options, vis_options: gs.options.ViewerOptions / VisOptions (None: defaults); the
     cameras read vis_options, viewer_options are kept for an interactive viewer of a later release.
     show_viewer: False or None (Genesis's default); True raises, as there is no interactive viewer.
+    show_FPS: Genesis's (deprecated there): no FPS line is printed here, so True warns once.
     """
 
     def __init__(self, sim_options=None, rigid_options=None, viewer_options=None, vis_options=None,
-                 show_viewer=False, mpm_options=None):
+                 show_viewer=False, mpm_options=None, show_FPS=None):
         require_init("gs.Scene")
+        if show_FPS is not None and not isinstance(show_FPS, (bool, np.bool_)):
+            raise InvalidInputError(f"gs.Scene: argument 'show_FPS' must be True, False or None, got {show_FPS!r}")
+        if show_FPS:
+            warn_user("gs.Scene: show_FPS=True prints nothing here (genesis_lite logs no FPS line; Genesis 1.4.5 "
+                      "deprecates the argument too)")
         self.sim_options = sim_options or SimOptions()
         self.rigid_options = rigid_options or RigidOptions()
         self.viewer_options = viewer_options or ViewerOptions()

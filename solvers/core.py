@@ -118,7 +118,8 @@ class Runtime:
         self.tc_float = torch.float32
         self.np_float = np.float32
         self.ti_float = ti.f32
-        self.tc_int = torch.int32
+        self.tc_int, self.np_int = torch.int32, np.int32  # (Genesis's integer and boolean dtypes)
+        self.tc_bool, self.np_bool = torch.bool, np.bool_
         self.seed = None
 
 

@@ -4,6 +4,7 @@ what was expected and what was given (SPEC §5). One test per kind of mistake.
 Most tests share one built scene (a 2-dof pendulum named "pendulum"): building compiles
 Taichi kernels, which takes seconds.
 """
+import logging
 import math
 import os
 
@@ -238,15 +239,47 @@ def test_arguments_a_method_does_not_take(f64, built):
     """A Genesis argument genesis_lite does not have yet (or a typo) names the entity or scene, the
     method, the argument and what the method takes, where Python's TypeError named neither."""
     scene, robot = built
-    raises(gs.InvalidInputError, lambda: robot.set_qpos([0.0, 0.0], skip_forward=True), f"entity '{ENTITY}'",
-           "set_qpos", "'skip_forward'", "'qs_idx_local'", "docs/genesis_api.md")
+    raises(gs.InvalidInputError, lambda: robot.set_qpos([0.0, 0.0], relative=True), f"entity '{ENTITY}'",
+           "set_qpos", "'relative'", "'qs_idx_local'", "docs/genesis_api.md")
     raises(gs.InvalidInputError, lambda: robot.get_pos(relative=True), "get_pos", "'relative'", "['envs_idx']")
     raises(gs.InvalidInputError, lambda: robot.get_link(robot.links[-1].name).get_pos(0, 1),
            f"link '{robot.links[-1].name}' of entity '{ENTITY}'", "get_pos", "too many positional arguments")
     raises(gs.InvalidInputError, lambda: scene.step(foo=1), "gs.Scene", "step", "'foo'", "'update_visualizer'")
-    raises(gs.InvalidInputError, lambda: gs.Scene(show_FPS=False), "gs.Scene", "'show_FPS'", "'sim_options'")
+    raises(gs.InvalidInputError, lambda: gs.Scene(profiling_options=None), "gs.Scene", "'profiling_options'",
+           "'sim_options'")
     raises(gs.InvalidInputError, lambda: gs.surfaces.Default(smooth=False), "Default", "'smooth'",
            "a Genesis option that genesis_lite does not have", "['color', 'vis_mode']")
+
+def test_genesis_arguments_with_nothing_to_do_here_are_taken_and_checked(f64, built, caplog):
+    """Genesis's arguments that change nothing here (how it compiles, logs or sizes its buffers,
+    readouts it defers) are taken, checked; those that would change something raise."""
+    scene, robot = built
+    gs.init(precision="64", logging_level="warning", performance_mode=True, theme="light", logger_verbose_time=True,
+            use_deterministic_algorithms=False, eps=1e-15)
+    assert scene.is_built  # (the same runtime: nothing restarted)
+    raises(gs.InvalidInputError, lambda: gs.init(precision="64", eps=1e-12), "gs.init", "'eps'", "1e-15")
+    raises(gs.InvalidInputError, lambda: gs.init(precision="64", performance_mode="yes"), "'performance_mode'")
+    raises(gs.InvalidInputError, lambda: gs.init(precision="64", theme="blue"), "'theme'")
+    assert (gs.tc_bool, gs.np_bool, gs.tc_int, gs.np_int) == (torch.bool, np.bool_, torch.int32, np.int32)
+    options = gs.options.RigidOptions(max_collision_pairs=300, box_box_detection=True)
+    assert (options.max_collision_pairs, options.box_box_detection) == (300, True)
+    raises(gs.InvalidInputError, lambda: gs.options.RigidOptions(box_box_detection=False), "'box_box_detection'",
+           "MuJoCo's box–box collider")
+    raises(gs.InvalidInputError, lambda: gs.options.RigidOptions(max_collision_pairs=-1), "'max_collision_pairs'")
+    with caplog.at_level(logging.WARNING, logger="genesis_lite"):
+        gs.Scene(show_FPS=False)
+        assert not caplog.records
+        gs.Scene(show_FPS=True)
+    assert "show_FPS=True prints nothing here" in caplog.records[-1].getMessage()
+    robot.set_qpos([0.1, 0.2], skip_forward=True)
+    robot.set_dofs_velocity([0.5, 0.0], skip_forward=True)
+    assert robot.get_qpos().tolist() == [0.1, 0.2] and robot.get_dofs_velocity().tolist() == [0.5, 0.0]
+    robot.zero_all_dofs_velocity(skip_forward=False)
+    raises(gs.InvalidInputError, lambda: robot.set_qpos([0.1, 0.2], skip_forward=1), "'skip_forward'", "True or False")
+    with pytest.raises(AttributeError, match="scene.sim.rigid_solver has no 'get_links_pos'.*entity.get_links_pos"):
+        scene.sim.rigid_solver.get_links_pos()
+    assert not hasattr(scene.sim.rigid_solver, "links_info")
+
 
 def test_envs_idx_without_batch(f64, built):
     _, robot = built

@@ -63,6 +63,12 @@ def _with_link_axis(link, arg, value):
     return tensor.unsqueeze(-2)
 
 
+def _check_skip_forward(entity, skip_forward):
+    if not isinstance(skip_forward, (bool, np.bool_)):
+        raise InvalidInputError(f"entity '{entity.name}': argument 'skip_forward' must be True or False, "
+                                f"got {skip_forward!r}")
+
+
 @named_argument_errors
 class RigidLink:
     """A link: ``name``, ``idx`` (scene-wide), ``idx_local`` (within its entity)."""
@@ -433,17 +439,19 @@ class RigidEntity(EntityIndexing):
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
         return self._out(self._read(self._vel_columns(dofs), envs_idx))
 
-    def set_dofs_velocity(self, velocity=None, dofs_idx_local=None, envs_idx=None):
+    def set_dofs_velocity(self, velocity=None, dofs_idx_local=None, envs_idx=None, *, skip_forward=False):
         """Joint velocities, rad/s or m/s, as get_dofs_velocity gives them; None: zeros (Genesis's
-        default)."""
+        default). skip_forward: Genesis's (a setter's links' poses and velocities then wait for
+        the next step there): taken, as a bool; here the readouts always follow the state set."""
+        _check_skip_forward(self, skip_forward)
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         values = self._values(0.0 if velocity is None else velocity, len(dofs), envs, "velocity")
         self._write(self._vel_columns(dofs), envs, values)
 
-    def zero_all_dofs_velocity(self, envs_idx=None):
+    def zero_all_dofs_velocity(self, envs_idx=None, *, skip_forward=False):
         """Every dof velocity of the entity ← 0 in envs_idx (all envs if None), as Genesis's."""
-        self.set_dofs_velocity(None, None, envs_idx)
+        self.set_dofs_velocity(None, None, envs_idx, skip_forward=skip_forward)
 
     def get_qpos(self, qs_idx_local=None, envs_idx=None):
         """Generalised positions (n_qs,): a free joint stores position then quaternion, a ball joint
@@ -451,8 +459,10 @@ class RigidEntity(EntityIndexing):
         qs = self._local(qs_idx_local, self.n_qs, "qs_idx_local")
         return self._out(self._read(self._solver_q(qs), envs_idx))
 
-    def set_qpos(self, qpos, qs_idx_local=None, envs_idx=None, *, zero_velocity=True):
-        """Generalised positions (n,) or (len(envs_idx), n); zero_velocity as in set_dofs_position."""
+    def set_qpos(self, qpos, qs_idx_local=None, envs_idx=None, *, zero_velocity=True, skip_forward=False):
+        """Generalised positions (n,) or (len(envs_idx), n); zero_velocity as in set_dofs_position,
+        skip_forward as in set_dofs_velocity."""
+        _check_skip_forward(self, skip_forward)
         qs = self._local(qs_idx_local, self.n_qs, "qs_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         values = self._values(qpos, len(qs), envs, "qpos")
@@ -478,16 +488,18 @@ class RigidEntity(EntityIndexing):
                                     f"scene.build(), or create it with fixed=False to move it (an MJCF tree "
                                     f"other than the first moves by set_dofs_position or set_qpos)")
 
-    def set_pos(self, pos, envs_idx=None, *, zero_velocity=True):
+    def set_pos(self, pos, envs_idx=None, *, zero_velocity=True, skip_forward=False):
         """Base position in the world, m: (3,) or (len(envs_idx), 3) (free base only);
-        zero_velocity as in set_dofs_position."""
+        zero_velocity as in set_dofs_position, skip_forward as in set_dofs_velocity."""
+        _check_skip_forward(self, skip_forward)
         self._require_free("set_pos")
         envs = self._envs(envs_idx, distinct=True)
         self._write(self._solver_q([0, 1, 2]), envs, self._values(pos, 3, envs, "pos"), zero_velocity)
 
-    def set_quat(self, quat, envs_idx=None, *, zero_velocity=True):
+    def set_quat(self, quat, envs_idx=None, *, zero_velocity=True, skip_forward=False):
         """Base orientation (w, x, y, z): (4,) or (len(envs_idx), 4) (free base only); normalised by
-        the kinematics; zero_velocity as in set_dofs_position."""
+        the kinematics; zero_velocity as in set_dofs_position, skip_forward as in set_dofs_velocity."""
+        _check_skip_forward(self, skip_forward)
         self._require_free("set_quat")
         envs = self._envs(envs_idx, distinct=True)
         values = self._values(quat, 4, envs, "quat")
