@@ -15,7 +15,7 @@ from .utils import geom
 # Python's TypeError named neither the morph nor the keyword): every morph's, the primitives',
 # the tetrahedral meshing ones (FEM, not here) and the file morphs'
 _MORPH = ("offset_pos", "offset_euler", "offset_quat", "visualization", "collision", "enable_custom_vverts")
-_PRIMITIVE = _MORPH + ("batch_fixed_verts", "contype", "conaffinity")
+_PRIMITIVE = _MORPH + ("batch_fixed_verts",)
 _TETGEN = ("order", "mindihedral", "minratio", "nobisect", "quality", "maxvolume", "verbose", "force_retet")
 _FILE = _MORPH + ("decimate", "decimate_face_num", "decimate_aggressiveness", "watertighten", "convexify",
                   "decompose_object_error_threshold", "decompose_robot_error_threshold", "coacd_options",
@@ -99,6 +99,20 @@ def _isotropic_scale(owner, value):
         raise InvalidInputError(f"{owner}: argument 'scale' must be one positive number or three equal ones (the same "
                                 f"factor along every axis), got {value!r}")
     return float(factors[0])
+
+
+def _check_masks(owner, morph):
+    """A primitive's or mesh's contype and conaffinity (Genesis's collision bit masks, default
+    0xFFFF): integers in [0, 0xFFFFFFFF]. A geom pair may touch when (contype₁ & conaffinity₂) |
+    (contype₂ & conaffinity₁) ≠ 0 (MuJoCo's rule; a URDF's shapes have 1 and 1, an MJCF's its
+    own); both 0: the body collides with nothing (Genesis makes it no collision shape)."""
+    for name in ("contype", "conaffinity"):
+        value = getattr(morph, name)
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or not (
+                0 <= value <= 0xFFFFFFFF):
+            raise InvalidInputError(f"{owner}: argument '{name}' must be an integer bit mask in [0, 0xFFFFFFFF], "
+                                    f"got {value!r}")
+        setattr(morph, name, int(value))
 
 
 @dataclass
@@ -224,8 +238,11 @@ class Box(Morph):
     size: tuple = (1.0, 1.0, 1.0)
     lower: tuple = None
     upper: tuple = None
+    contype: int = 0xFFFF
+    conaffinity: int = 0xFFFF
 
     def _check(self):
+        _check_masks("Box", self)
         if (self.lower is None) != (self.upper is None):
             raise InvalidInputError(f"Box: arguments 'lower' and 'upper' must be given together, got lower="
                                     f"{self.lower!r} and upper={self.upper!r}")
@@ -245,8 +262,11 @@ class Box(Morph):
 class Sphere(Morph):
     """A sphere of ``radius`` m."""
     radius: float = 0.5
+    contype: int = 0xFFFF
+    conaffinity: int = 0xFFFF
 
     def _check(self):
+        _check_masks("Sphere", self)
         _positive("Sphere", "radius", self.radius)
 
 
@@ -256,8 +276,11 @@ class Cylinder(Morph):
     """A cylinder along local z: ``radius`` and ``height`` in m."""
     radius: float = 0.5
     height: float = 1.0
+    contype: int = 0xFFFF
+    conaffinity: int = 0xFFFF
 
     def _check(self):
+        _check_masks(type(self).__name__, self)
         _positive(type(self).__name__, "radius", self.radius)
         _positive(type(self).__name__, "height", self.height)
 
@@ -268,7 +291,7 @@ class Capsule(Cylinder):
     """A capsule along local z: ``height`` is the length of the cylindrical part, m."""
 
 
-@named_keywords(*_FILE, *_TETGEN, "contype", "conaffinity", "group_by_material",
+@named_keywords(*_FILE, *_TETGEN, "group_by_material",
            "merge_submeshes_for_collision", deprecated=_DEPRECATED)
 @dataclass
 class Mesh(Morph):
@@ -279,8 +302,11 @@ class Mesh(Morph):
     file: str = None
     scale: float = 1.0
     file_meshes_are_zup: bool = None
+    contype: int = 0xFFFF
+    conaffinity: int = 0xFFFF
 
     def _check(self):
+        _check_masks("Mesh", self)
         if not isinstance(self.file, str) or not self.file:
             raise InvalidInputError(f"Mesh: argument 'file' must be a path string, got {self.file!r}")
         _positive("Mesh", "scale", self.scale)
@@ -295,8 +321,11 @@ class Plane(Morph):
     the solid side: by default +z, the half-space below z = pos[2]."""
     fixed: bool = True
     normal: tuple = (0.0, 0.0, 1.0)
+    contype: int = 0xFFFF
+    conaffinity: int = 0xFFFF
 
     def _check(self):
+        _check_masks("Plane", self)
         if not self.fixed:  # (Genesis's rule too)
             raise InvalidInputError("Plane: argument 'fixed' must be True (a plane is always fixed), got False")
         normal = _vec("Plane", "normal", self.normal, 3)

@@ -520,6 +520,9 @@ def _links_of(morph, material, name, mujoco_compatible):
         links = shapes.plane_link(morph.normal)
     else:
         raise InvalidInputError(f"scene.add_entity: morph type {type(morph).__name__} is not supported")
+    if not isinstance(morph, gm.URDF):  # a primitive's or mesh's bit masks (both 0: in no pair, drawn still)
+        for geom in links[0].geoms:
+            geom.contype, geom.conaffinity = morph.contype, morph.conaffinity
     root = links[0]
     root.joint_type = "fixed" if morph.fixed else "free"
     pos, quat = np.asarray(morph.pos, dtype=float), np.asarray(morph.quat, dtype=float)

@@ -508,6 +508,35 @@ def test_material_friction_range_is_genesis(friction):
         gs.materials.Rigid(friction=friction)
 
 
+def test_primitive_bit_masks_filter_contacts_as_genesis(f64):
+    """Genesis's collision/contype.py: primitives' contype and conaffinity (default 0xFFFF, the
+    plane's too) pick the pairs that touch, (contype₁ & conaffinity₂) | (contype₂ & conaffinity₁)
+    ≠ 0: red (1) and green (2) pass through each other onto the floor, blue (3) lands on both; a
+    box of masks 0 falls through everything and a default one lands on blue."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01))
+    scene.add_entity(gs.morphs.Plane())
+    boxes = {name: scene.add_entity(gs.morphs.Box(pos=(x, 0.0, z), size=(0.1, 0.1, 0.1), **masks))
+             for name, x, z, masks in (("red", 0.025, 0.5, dict(contype=1, conaffinity=1)),
+                                       ("green", -0.025, 1.0, dict(contype=2, conaffinity=2)),
+                                       ("blue", 0.0, 1.5, dict(contype=3, conaffinity=3)),
+                                       ("ghost", 0.5, 0.5, dict(contype=0, conaffinity=0)),
+                                       ("plain", 0.0, 2.0, {}))}
+    scene.build()
+    for _ in range(200):
+        scene.step()
+    z = {name: box.get_pos()[2].item() for name, box in boxes.items()}
+    assert z["red"] == pytest.approx(0.05, abs=2e-3) and z["green"] == pytest.approx(0.05, abs=2e-3), z
+    assert z["blue"] == pytest.approx(0.15, abs=3e-3) and z["plain"] == pytest.approx(0.25, abs=4e-3), z
+    assert z["ghost"] < -1.0  # (through the floor)
+    for bad in (-1, 2 ** 32, 1.5, True):
+        with pytest.raises(gs.InvalidInputError, match="argument 'contype' must be an integer bit mask"):
+            gs.morphs.Sphere(contype=bad)
+    particles = gs.Scene(mpm_options=gs.options.MPMOptions(lower_bound=(-1, -1, 0), upper_bound=(1, 1, 1)))
+    with pytest.raises(gs.InvalidInputError, match="'contype' and 'conaffinity' of gs.morphs.Box filter rigid"):
+        particles.add_entity(gs.morphs.Box(pos=(0, 0, 0.5), size=(0.1, 0.1, 0.1), contype=2),
+                             material=gs.materials.MPM.Elastic())
+
+
 def test_default_armature_is_genesis_rotor_unless_mujoco_compatible(f64, tmp_path):
     """Genesis 1.4.5's default_armature (URDF and MJCF): 0.1 on every hinge and slide dof whose
     armature the file leaves at 0 (an MJCF's own armature kept; a free joint's dofs and a ball's
