@@ -14,7 +14,7 @@ from .utils import geom
 # Genesis 1.4.5's morph options that genesis_lite does not have (a named error says so, where
 # Python's TypeError named neither the morph nor the keyword): every morph's, the primitives',
 # the tetrahedral meshing ones (FEM, not here) and the file morphs'
-_MORPH = ("offset_pos", "offset_euler", "offset_quat", "visualization", "collision", "enable_custom_vverts")
+_MORPH = ("offset_pos", "offset_euler", "offset_quat", "enable_custom_vverts")
 _PRIMITIVE = _MORPH + ("batch_fixed_verts",)
 _TETGEN = ("order", "mindihedral", "minratio", "nobisect", "quality", "maxvolume", "verbose", "force_retet")
 _FILE = _MORPH + ("decimate", "decimate_face_num", "decimate_aggressiveness", "watertighten", "convexify",
@@ -118,11 +118,15 @@ def _check_masks(owner, morph):
 @dataclass
 class Morph:
     """Initial placement shared by every morph: pos (3,) m; euler (3,) degrees (extrinsic x-y-z) or
-    quat (w, x, y, z), not both (neither: no rotation). fixed: welded to the world (no free joint)."""
+    quat (w, x, y, z), not both (neither: no rotation). fixed: welded to the world (no free joint).
+    visualization, collision (a rigid entity's, as Genesis's; not both False): drawn by cameras;
+    its shapes collide (False: in no contact pair)."""
     pos: tuple = (0.0, 0.0, 0.0)
     euler: tuple = None
     quat: tuple = None
     fixed: bool = False
+    visualization: bool = True
+    collision: bool = True
 
     def __post_init__(self):
         owner = type(self).__name__
@@ -139,8 +143,12 @@ class Morph:
                 raise InvalidInputError(f"{owner}: argument 'quat' must be a non-zero quaternion (w, x, y, z), "
                                         f"got {self.quat!r}")
             self.quat = q / np.linalg.norm(q)
-        if not isinstance(self.fixed, (bool, np.bool_)):  # ('no' would weld the body)
-            raise InvalidInputError(f"{owner}: argument 'fixed' must be True or False, got {self.fixed!r}")
+        for name in ("fixed", "visualization", "collision"):  # ('no' would weld the body)
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise InvalidInputError(f"{owner}: argument '{name}' must be True or False, got {getattr(self, name)!r}")
+            setattr(self, name, bool(getattr(self, name)))
+        if not (self.visualization or self.collision):  # (Genesis's rule: the entity would be nothing)
+            raise InvalidInputError(f"{owner}: arguments 'visualization' and 'collision' cannot both be False")
         self._check()
 
     def _check(self):

@@ -164,6 +164,9 @@ class Scene:
         if isinstance(material, MPM.Base):
             return self._add_mpm_entity(morph, material, surface, name)
         links = _links_of(morph, material, name, self.rigid_options.enable_mujoco_compatibility)
+        if not morph.collision:  # (Genesis's morph option: its shapes in no contact pair)
+            for geom in (geom for link in links for geom in link.geoms):
+                geom.contype = geom.conaffinity = 0
         entity = RigidEntity(self, len(self.entities), name, morph, material, surface or Default(), links,
                              self.rigid_solver)
         self.entities.append(entity)

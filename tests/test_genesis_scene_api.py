@@ -532,9 +532,30 @@ def test_primitive_bit_masks_filter_contacts_as_genesis(f64):
         with pytest.raises(gs.InvalidInputError, match="argument 'contype' must be an integer bit mask"):
             gs.morphs.Sphere(contype=bad)
     particles = gs.Scene(mpm_options=gs.options.MPMOptions(lower_bound=(-1, -1, 0), upper_bound=(1, 1, 1)))
-    with pytest.raises(gs.InvalidInputError, match="'contype' and 'conaffinity' of gs.morphs.Box filter rigid"):
+    with pytest.raises(gs.InvalidInputError, match="'contype', 'conaffinity', 'collision' and 'visualization' of "
+                                                   "gs.morphs.Box are a rigid entity's"):
         particles.add_entity(gs.morphs.Box(pos=(0, 0, 0.5), size=(0.1, 0.1, 0.1), contype=2),
                              material=gs.materials.MPM.Elastic())
+
+
+def test_morph_collision_and_visualization_switches_as_genesis(f64):
+    """Morph(collision=False): the entity's shapes in no contact pair (a URDF robot falls through
+    the floor); visualization=False: cameras do not draw it (its pixels are the floor's); both False
+    is refused, as in Genesis."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01),
+                     vis_options=gs.options.VisOptions(segmentation_level="entity"))
+    plane = scene.add_entity(gs.morphs.Plane())
+    ghost = scene.add_entity(gs.morphs.URDF(file=pybullet("r2d2.urdf"), pos=(0, 0, 0.6), collision=False))
+    hidden = scene.add_entity(gs.morphs.Box(pos=(2.0, 0.0, 0.05), size=(0.1, 0.1, 0.1), visualization=False))
+    camera = scene.add_camera(res=(32, 32), pos=(2.0, 0.0, 1.0), lookat=(2.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=20)
+    scene.build()
+    for _ in range(100):
+        scene.step()
+    assert ghost.get_pos()[2].item() < -1.0 and hidden.get_pos()[2].item() == pytest.approx(0.05, abs=2e-3)
+    segmentation = camera.render(rgb=False, segmentation=True)[2]
+    assert np.unique(np.asarray(segmentation)).tolist() == [plane.idx]  # (the box below the camera: not drawn)
+    with pytest.raises(gs.InvalidInputError, match="'visualization' and 'collision' cannot both be False"):
+        gs.morphs.Sphere(visualization=False, collision=False)
 
 
 def test_default_armature_is_genesis_rotor_unless_mujoco_compatible(f64, tmp_path):

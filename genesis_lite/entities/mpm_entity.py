@@ -29,10 +29,11 @@ def sample_particles(morph, material, particle_size, wall_lower, wall_upper, see
     if isinstance(morph, gm.Capsule) or not isinstance(morph, (gm.Box, gm.Sphere, gm.Cylinder, gm.Mesh)):
         raise InvalidInputError(f"{owner}: argument 'morph' of an MPM entity must be gs.morphs.Box, Sphere, Cylinder "
                                 f"or Mesh, got {type(morph).__name__}")
-    if (morph.contype, morph.conaffinity) != (0xFFFF, 0xFFFF):  # (rigid shapes' masks: Genesis ignores them here)
-        raise InvalidInputError(f"{owner}: arguments 'contype' and 'conaffinity' of gs.morphs.{type(morph).__name__} "
-                                f"filter rigid contacts: an MPM entity takes the defaults (0xFFFF), got "
-                                f"{morph.contype:#x} and {morph.conaffinity:#x}")
+    if (morph.contype, morph.conaffinity, morph.collision, morph.visualization) != (0xFFFF, 0xFFFF, True, True):
+        raise InvalidInputError(f"{owner}: arguments 'contype', 'conaffinity', 'collision' and 'visualization' of "
+                                f"gs.morphs.{type(morph).__name__} are a rigid entity's (Genesis ignores them here): an "
+                                f"MPM entity takes the defaults (0xFFFF, 0xFFFF, True, True), got {morph.contype:#x}, "
+                                f"{morph.conaffinity:#x}, {morph.collision}, {morph.visualization}")
     shape, dims = _shape(morph)
     try:
         particles = sampling.sample(shape, particle_size, material.sampler, seed, morph.pos, morph.quat, owner=owner,

@@ -55,7 +55,7 @@ def scene_shapes(scene):
     the "geom" segmentation id is the shape's index in that list."""
     shapes = []
     for entity in scene.entities:
-        if not hasattr(entity, "_specs"):  # particles: SceneVisuals.particles draws them
+        if not hasattr(entity, "_specs") or not entity.morph.visualization:  # (particles: SceneVisuals.particles)
             continue
         override = None if entity.surface.color is None else np.asarray(entity.surface.color[:3])
         for k, spec in enumerate(entity._specs):
