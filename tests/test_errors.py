@@ -115,7 +115,7 @@ def test_morph_keywords():
     raises(gs.InvalidInputError, lambda: gs.morphs.Mesh(file="a.obj", convexify=False), "Mesh", "'convexify' is a Genesis")
     raises(gs.InvalidInputError, lambda: gs.morphs.MJCF(file="a.xml", decimate=True), "MJCF", "'decimate' is a Genesis")
     raises(gs.InvalidInputError, lambda: gs.morphs.Plane(plane_size=(5, 5)), "Plane", "'plane_size' is a Genesis")
-    raises(gs.InvalidInputError, lambda: gs.morphs.Capsule(collision=False), "Capsule", "'collision' is a Genesis")
+    raises(gs.InvalidInputError, lambda: gs.morphs.Capsule(offset_pos=(0, 0, 1)), "Capsule", "'offset_pos' is a Genesis")
     assert gs.morphs.Sphere((0, 0, 1), radius=0.2).radius == 0.2  # positional arguments still work
 
 
