@@ -131,8 +131,8 @@ def _check_genesis_extras(eps, theme, logger_verbose_time, performance_mode, use
     if use_deterministic_algorithms is not None and not isinstance(use_deterministic_algorithms, (bool, np.bool_)):
         raise InvalidInputError(f"gs.init: argument 'use_deterministic_algorithms' must be None, True or False, "
                                 f"got {use_deterministic_algorithms!r}")
-    if theme not in ("dark", "light", "dumb"):
-        raise InvalidInputError(f"gs.init: argument 'theme' must be 'dark', 'light' or 'dumb', got {theme!r}")
+    if theme not in ("dark", "light", "raw"):  # (Genesis's styles.THEME)
+        raise InvalidInputError(f"gs.init: argument 'theme' must be 'dark', 'light' or 'raw', got {theme!r}")
     if isinstance(eps, bool) or not isinstance(eps, (int, float, np.floating)) or eps != 1e-15:
         raise InvalidInputError(f"gs.init: argument 'eps' other than Genesis's default 1e-15 is not supported "
                                 f"(the kernels' tolerances are their own), got {eps!r}")

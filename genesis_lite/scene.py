@@ -6,6 +6,7 @@ only before); they read ``vis_options`` and draw the debug spheres of ``draw_deb
 There is no interactive viewer: ``show_viewer=True`` raises rather than being ignored, and
 ``viewer_options`` are validated and kept for it.
 """
+import collections
 import dataclasses
 import os
 
@@ -465,13 +466,19 @@ def _envs_layout(n_batch, env_spacing, n_envs_per_row, center):
 
 def _add_rotor_armature(links, morph, mujoco_compatible):
     """A motor's rotor on each joint one could drive, as Genesis's loader adds it: the morph's
-    default_armature on every revolute and prismatic dof whose armature the file leaves at 0 (not
-    a free base's); its default (morphs.GENESIS_ARMATURE) 0.1, none under MuJoCo compatibility."""
+    default_armature on the revolute or prismatic dof of every body moving by that one dof (not a
+    free base's, nor those of an MJCF body of several joints, whose links here share its body:
+    LinkSpec.same_body), where the file leaves its armature at 0; its default
+    (morphs.GENESIS_ARMATURE) 0.1, none under MuJoCo compatibility."""
     armature = morph.default_armature
     if armature is gm.GENESIS_ARMATURE:
         armature = 0.0 if mujoco_compatible else 0.1
-    for link in links:
-        if link.joint_type in ("revolute", "prismatic") and not link.armature:
+    body = list(range(len(links)))
+    for k, link in enumerate(links):  # (parents first)
+        body[k] = body[link.parent] if link.same_body else k
+    joints_of = collections.Counter(body[k] for k, link in enumerate(links) if link.joint_type != "fixed")
+    for k, link in enumerate(links):
+        if link.joint_type in ("revolute", "prismatic") and joints_of[body[k]] == 1 and not link.armature:
             link.armature = armature
 
 

@@ -254,7 +254,7 @@ def test_genesis_arguments_with_nothing_to_do_here_are_taken_and_checked(f64, bu
     """Genesis's arguments that change nothing here (how it compiles, logs or sizes its buffers,
     readouts it defers) are taken, checked; those that would change something raise."""
     scene, robot = built
-    gs.init(precision="64", logging_level="warning", performance_mode=True, theme="light", logger_verbose_time=True,
+    gs.init(precision="64", logging_level="warning", performance_mode=True, theme="raw", logger_verbose_time=True,
             use_deterministic_algorithms=False, eps=1e-15)
     assert scene.is_built  # (the same runtime: nothing restarted)
     raises(gs.InvalidInputError, lambda: gs.init(precision="64", eps=1e-12), "gs.init", "'eps'", "1e-15")

@@ -744,6 +744,14 @@ def test_ellipsoids_weigh_and_move_as_mujocos_and_rest_on_their_polytope(f64, tm
         # vertex and its neighbours make 3-4 contacts sharing the weight, each sinking less
         assert robot.get_qpos()[2].item() == pytest.approx(d.qpos[2], abs=2.5e-4), (size, euler)
     assert any("<geom type='ellipsoid'>: its surface" in r.getMessage() for r in caplog.records)
+    along = _write(tmp_path, '<body name="b"><freejoint/><geom type="ellipsoid" size="0.03" fromto="0 0 0 0.2 0 0.2"/>'
+                              '</body>')  # (fromto: the third semi-axis half its length, the section round)
+    m, scene_along = mujoco.MjModel.from_xml_path(along), gs.Scene()
+    link = scene_along.add_entity(gs.morphs.MJCF(file=along)).links[0]
+    scene_along.build()
+    assert float(link.get_mass()) == pytest.approx(m.body_mass[1], rel=1e-14)
+    (spec,) = mjcf.load_mjcf(along)
+    np.testing.assert_allclose(spec.com, m.body_ipos[1], atol=1e-15)
     ball = _write(tmp_path, '<body name="b"><freejoint/><geom type="ellipsoid" size="0.1 0.1 0.1"/></body>')
     (link,) = mjcf.load_mjcf(ball)
     assert [geom.type for geom in link.geoms] == ["sphere"] and link.geoms[0].size.tolist() == [0.1]

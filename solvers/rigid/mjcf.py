@@ -29,7 +29,8 @@ else from the body's geoms as solids of their density (or stated mass), as MuJoC
 legacy formula differs for non-convex meshes). Geoms: sphere, capsule, cylinder, box (sizes, or
 ``fromto``), ellipsoid (weighed as the ellipsoid; it collides as an inscribed polytope,
 shapes.ellipsoid_mesh, with a warning; MuJoCo and Genesis use its exact surface; three equal
-semi-axes make a sphere), mesh (``<mesh file scale>`` assets, in the file's own coordinates: MuJoCo's
+semi-axes make a sphere; its ``fromto`` as MuJoCo's: the third semi-axis half its length, the
+section round of size[0]), mesh (``<mesh file scale>`` assets, in the file's own coordinates: MuJoCo's
 re-centring moves the geom frame, not the surface; found in meshdir or beside the file that
 included them; or given by ``vertex`` and ``face``, without faces the vertices' convex hull);
 contype/conaffinity masks (MuJoCo's pair rule); ``<contact><exclude>``; friction
@@ -437,11 +438,11 @@ class _Reader(MJCFDocument):
         pos, quat = self.frame(attrs, what)
         size = self.numbers(attrs, "size", (1, 2, 3), what, default=np.zeros(3))
         size = np.concatenate([size, np.zeros(3 - len(size))])
-        if "fromto" in attrs and kind in ("capsule", "cylinder", "box"):
+        if "fromto" in attrs and kind in ("capsule", "cylinder", "box", "ellipsoid"):
             ends = self.numbers(attrs, "fromto", 6, what)
             axis = ends[3:] - ends[:3]
-            size[2 if kind == "box" else 1] = np.linalg.norm(axis) / 2.0
-            if kind == "box":  # (MuJoCo 4: a square section of half side size[0])
+            size[2 if kind in ("box", "ellipsoid") else 1] = np.linalg.norm(axis) / 2.0
+            if kind in ("box", "ellipsoid"):  # (MuJoCo 4: a square, or round, section of half side size[0])
                 size[1] = size[0]
             pos, quat = (ends[:3] + ends[3:]) / 2.0, shapes.quat_z_to(axis / norm(self, axis, what))
         if kind == "plane":  # infinite to the colliders, as MuJoCo's (its size only draws it)
