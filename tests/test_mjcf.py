@@ -395,9 +395,10 @@ def test_a_worldbody_of_geoms_alone_is_one_static_link_and_planes_weigh_nothing(
 
 
 def test_contact_masks_keep_legs_out_of_the_ground(f64):
-    """The crawler's legs, lowered into the ground with its feet, make contacts only at the feet."""
+    """The crawler's legs, lowered into the ground with its feet, make contacts only at the feet (the
+    Plane given the file's floor masks: Genesis's default 0xFFFF would meet the legs' bit 2)."""
     scene = gs.Scene()
-    scene.add_entity(gs.morphs.Plane())
+    scene.add_entity(gs.morphs.Plane(contype=1, conaffinity=1))
     robot = scene.add_entity(gs.morphs.MJCF(file=CRAWLER, pos=(0.0, 0.0, -0.1), exclude_ground_plane=True))
     scene.build()
     scene.step()

@@ -15,7 +15,7 @@ import pytest
 import trimesh
 
 from genesis_lite.solvers.core import AssetError, GenesisException, InvalidInputError
-from genesis_lite.solvers.rigid import shapes
+from genesis_lite.solvers.rigid import merge, shapes
 from genesis_lite.solvers.rigid.spec import JOINT_TYPES, GeomSpec
 from genesis_lite.solvers.rigid.urdf import load_urdf, mat_to_quat, resolve_mesh_path
 
@@ -630,3 +630,28 @@ def test_y_up_meshes_are_turned_to_z_up(f64, tmp_path):
         np.testing.assert_allclose(entities[name].get_links_mass().numpy(), [mass], rtol=1e-9)
     spread = particles.get_particles_pos().numpy()
     np.testing.assert_allclose(spread.max(axis=0) - spread.min(axis=0), [0.1, 0.3, 0.2], atol=0.03)
+
+
+def test_merging_a_weighed_part_into_a_stated_one_keeps_the_stated_mass_as_genesis(tmp_path):
+    """Genesis's merge_inertia: a fixed child without <inertial> adds no mass to a parent whose
+    file states one (a pad on r: r keeps its 2 kg), a parent without one takes its stated child's
+    alone (arm, no <inertial>, takes its tip's 0.5 kg at the tip), two weighed parts weigh together
+    (the sensor and the bracket on base). Genesis 1.4.5 on the first two: r 2.0 kg, arm 0.5 kg."""
+    stated = '<inertial><mass value="{}"/><inertia ixx="0.01" iyy="0.02" izz="0.03" ixy="0" ixz="0" iyz="0"/></inertial>'
+    box = '<collision><geometry><box size="{0} {0} {0}"/></geometry></collision>'
+    fixed = '<joint name="{}" type="fixed"><parent link="{}"/><child link="{}"/><origin xyz="0 0 0.2"/></joint>'
+    body = (f'<link name="r">{stated.format(2.0)}{box.format(0.1)}</link><link name="pad">{box.format(0.06)}</link>'
+            f'<link name="arm">{box.format(0.05)}</link><link name="tip">{stated.format(0.5)}{box.format(0.04)}</link>'
+            f'<link name="base">{box.format(0.1)}</link><link name="sensor">{box.format(0.02)}</link>'
+            '<joint name="h" type="revolute"><parent link="r"/><child link="arm"/><origin xyz="0 0 0.2"/>'
+            '<axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="10" velocity="1"/></joint>'
+            '<joint name="k" type="continuous"><parent link="r"/><child link="base"/><axis xyz="1 0 0"/></joint>'
+            + fixed.format("t", "arm", "tip") + fixed.format("p", "r", "pad") + fixed.format("s", "base", "sensor"))
+    path = write_urdf(tmp_path, body)
+    merged = by_name(merge.merge_fixed_links(load_urdf(path, rho=1000.0)))
+    assert list(merged) == ["r", "arm", "base"]
+    assert merged["r"].mass == 2.0 and np.allclose(merged["r"].com, 0) and np.allclose(merged["r"].inertia, np.diag(
+        [0.01, 0.02, 0.03]))
+    assert merged["arm"].mass == 0.5 and np.allclose(merged["arm"].com, [0, 0, 0.2])
+    assert np.allclose(merged["arm"].inertia, np.diag([0.01, 0.02, 0.03]))
+    assert merged["base"].mass == pytest.approx(1000.0 * (0.1 ** 3 + 0.02 ** 3), rel=1e-12)

@@ -22,7 +22,8 @@ def merge_fixed_links(links: list[LinkSpec], links_to_keep=(), owner: str = "mer
     com and inertia become those of the two bodies together (parallel-axis theorem). The merged link
     keeps P's name and joint; ``P.merged`` records C's name and its fixed joint's name.
     A massless part adds nothing, not even its inertia, as the model drops the inertia of
-    massless links (MuJoCo does the same).
+    massless links (MuJoCo does the same); nor does a part weighed from its shapes (a URDF link
+    without <inertial>) merged with one whose mass the file states, as in Genesis (_merge_into).
 
     Never merged: the root (links[0]) and the links named in ``links_to_keep`` (their own fixed
     children are still merged into them). The remaining links keep their relative order, so a
@@ -77,11 +78,17 @@ def _copy(spec: LinkSpec) -> LinkSpec:
 
 
 def _merge_into(parent: LinkSpec, child: LinkSpec) -> None:
-    """Add ``child`` (welded to ``parent`` at its joint frame) to ``parent``, in place."""
+    """Add ``child`` (welded to ``parent`` at its joint frame) to ``parent``, in place. Masses as
+    Genesis's merge_inertia: where one of the two states its mass and the other was weighed from
+    its shapes (LinkSpec.mass_stated), the stated one's alone (the shapes move, their weight
+    does not); else both together."""
     rot = quat_to_mat(child.quat)
-    parent.mass, parent.com, parent.inertia = combine_inertia(
-        (parent.mass, parent.com, parent.inertia),
-        (child.mass, child.pos + rot @ child.com, rot @ child.inertia @ rot.T))
+    placed = (child.mass, child.pos + rot @ child.com, rot @ child.inertia @ rot.T)
+    if child.mass_stated and not parent.mass_stated:
+        parent.mass, parent.com, parent.inertia = placed
+    elif child.mass_stated == parent.mass_stated:
+        parent.mass, parent.com, parent.inertia = combine_inertia((parent.mass, parent.com, parent.inertia), placed)
+    parent.mass_stated = parent.mass_stated or child.mass_stated
     parent.geoms = parent.geoms + [_moved(geom, child.pos, child.quat) for geom in child.geoms]
     parent.visuals = parent.visuals + [_moved(visual, child.pos, child.quat) for visual in child.visuals]
     parent.merged = parent.merged + [(child.name, child.joint_name)] + child.merged

@@ -96,6 +96,9 @@ class LinkSpec:
     solref then solimp, as limit_sol (MJCF's equality solref and solimp), or None.
     same_body: the link continues its parent's body (MJCF: the links of one body's joints, which
     LinkSpec joints' frames split): contact rules take the two as one body.
+    mass_stated: the asset states the link's mass (False: weighed from its shapes, a URDF link
+    without <inertial> or its <mass>); merging fixed links adds a weighed part to a stated one
+    not (merge.py).
     tendons: (joint names, their coefficients, lower, upper, softness (7,) as limit_sol) per
     limited fixed tendon whose first joint is this link's (MJCF ``<tendon><fixed>``, MuJoCo's: its
     length Σ coef·q, in [lower, upper] m or rad by a limit row, constraint/rows.py).
@@ -145,6 +148,7 @@ class LinkSpec:
     mimic_sol: np.ndarray = None
     tendons: tuple = ()
     same_body: bool = False
+    mass_stated: bool = True
     excluded: tuple = ()
     connects: tuple = ()
     welds: tuple = ()

@@ -373,7 +373,7 @@ def _link_spec(ctx: _Context, link, joint, rho: float, colors: dict) -> LinkSpec
     spec = LinkSpec(name=link.name, parent=-1, joint_name="", joint_type="fixed",
                     pos=np.zeros(3), quat=np.array([1.0, 0.0, 0.0, 0.0]),
                     axis=_DEFAULT_AXIS.copy(), mass=mass, com=com, inertia=inertia, geoms=geoms,
-                    visuals=visuals)
+                    visuals=visuals, mass_stated=link.inertial is not None and link.inertial.mass is not None)
     if joint is not None:
         _apply_joint(ctx, spec, joint)
     return spec
