@@ -165,7 +165,7 @@ class Scene:
         if isinstance(material, MPM.Base):
             return self._add_mpm_entity(morph, material, surface, name)
         links = _links_of(morph, material, name, self.rigid_options.enable_mujoco_compatibility)
-        if not morph.collision:  # (Genesis's morph option: its shapes in no contact pair)
+        if not morph.collision:  # (Genesis's morph option: its shapes in no contact pair; a URDF's are left out)
             for geom in (geom for link in links for geom in link.geoms):
                 geom.contype = geom.conaffinity = 0
         entity = RigidEntity(self, len(self.entities), name, morph, material, surface or Default(), links,
@@ -495,7 +495,8 @@ def _links_of(morph, material, name, mujoco_compatible):
             # name the argument and what was expected, as every error message does
             raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.URDF expected an existing URDF file, "
                              f"got '{morph.file}' (not found; relative paths start at {os.getcwd()})")
-        links = urdf.load_urdf(morph.file, entity_name=name, rho=rho, y_up=not morph.file_meshes_are_zup)
+        links = urdf.load_urdf(morph.file, entity_name=name, rho=rho, y_up=not morph.file_meshes_are_zup,
+                               collision=morph.collision)
         if morph.merge_fixed_links:
             links = merge.merge_fixed_links(links, morph.links_to_keep, owner=f"entity '{name}': gs.morphs.URDF")
         if morph.scale != 1.0:

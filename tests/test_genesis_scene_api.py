@@ -558,6 +558,21 @@ def test_morph_collision_and_visualization_switches_as_genesis(f64):
         gs.morphs.Sphere(visualization=False, collision=False)
 
 
+def test_a_urdf_without_collision_is_weighed_from_its_visuals_as_genesis(f64, tmp_path):
+    """URDF(collision=False) leaves the <collision> elements out, as Genesis does: a link without
+    <inertial> is then weighed from its visuals (Genesis 1.4.5: 0.6 kg for this 0.1 m visual box,
+    its 0.2 m collision box aside)."""
+    path = tmp_path / "two_boxes.urdf"
+    path.write_text('<robot name="r"><link name="l"><collision><geometry><box size="0.2 0.2 0.2"/></geometry>'
+                    '</collision><visual><geometry><box size="0.1 0.1 0.1"/></geometry></visual></link></robot>')
+    scene = gs.Scene()
+    plain = scene.add_entity(gs.morphs.URDF(file=str(path)))
+    ghost = scene.add_entity(gs.morphs.URDF(file=str(path), pos=(1, 0, 0), collision=False))
+    scene.build()
+    assert float(plain.get_mass()) == pytest.approx(600.0 * 0.2 ** 3, rel=1e-12)
+    assert float(ghost.get_mass()) == pytest.approx(600.0 * 0.1 ** 3, rel=1e-12) and ghost.n_geoms == 0
+
+
 def test_default_armature_is_genesis_rotor_unless_mujoco_compatible(f64, tmp_path):
     """Genesis 1.4.5's default_armature (URDF and MJCF): 0.1 on every hinge and slide dof whose
     armature the file leaves at 0 (an MJCF's own armature kept; a free joint's dofs and a ball's

@@ -655,3 +655,9 @@ def test_merging_a_weighed_part_into_a_stated_one_keeps_the_stated_mass_as_genes
     assert merged["arm"].mass == 0.5 and np.allclose(merged["arm"].com, [0, 0, 0.2])
     assert np.allclose(merged["arm"].inertia, np.diag([0.01, 0.02, 0.03]))
     assert merged["base"].mass == pytest.approx(1000.0 * (0.1 ** 3 + 0.02 ** 3), rel=1e-12)
+    # a massless stated child leaves its weighed parent weighed (Genesis weighs a moving link of
+    # mass 0 from its shapes again)
+    path = write_urdf(tmp_path, f'<link name="a">{box.format(0.1)}</link><link name="z">{stated.format(0.0)}</link>'
+                                + fixed.format("f", "a", "z"), name="zero.urdf")
+    (alone,) = merge.merge_fixed_links(load_urdf(path, rho=1000.0))
+    assert alone.mass == pytest.approx(1.0, rel=1e-12) and not alone.mass_stated

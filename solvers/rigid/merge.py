@@ -81,14 +81,15 @@ def _merge_into(parent: LinkSpec, child: LinkSpec) -> None:
     """Add ``child`` (welded to ``parent`` at its joint frame) to ``parent``, in place. Masses as
     Genesis's merge_inertia: where one of the two states its mass and the other was weighed from
     its shapes (LinkSpec.mass_stated), the stated one's alone (the shapes move, their weight
-    does not); else both together."""
+    does not), unless the stated one is massless (Genesis weighs a moving link of mass 0 from its
+    shapes again); else both together."""
     rot = quat_to_mat(child.quat)
     placed = (child.mass, child.pos + rot @ child.com, rot @ child.inertia @ rot.T)
-    if child.mass_stated and not parent.mass_stated:
+    if child.mass_stated and not parent.mass_stated and child.mass > 0:
         parent.mass, parent.com, parent.inertia = placed
+        parent.mass_stated = True
     elif child.mass_stated == parent.mass_stated:
         parent.mass, parent.com, parent.inertia = combine_inertia((parent.mass, parent.com, parent.inertia), placed)
-    parent.mass_stated = parent.mass_stated or child.mass_stated
     parent.geoms = parent.geoms + [_moved(geom, child.pos, child.quat) for geom in child.geoms]
     parent.visuals = parent.visuals + [_moved(visual, child.pos, child.quat) for visual in child.visuals]
     parent.merged = parent.merged + [(child.name, child.joint_name)] + child.merged

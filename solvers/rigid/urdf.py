@@ -63,7 +63,7 @@ _INERTIA_RTOL = 1e-6
 
 
 def load_urdf(path: str, entity_name: str | None = None, rho: float | None = None,
-              y_up: bool = False) -> list[LinkSpec]:
+              y_up: bool = False, collision: bool = True) -> list[LinkSpec]:
     """Links of the URDF file `path` in tree order (root first, parent index < child index).
 
     Order is depth-first from the root, children in the order their joints appear in the
@@ -74,6 +74,8 @@ def load_urdf(path: str, entity_name: str | None = None, rho: float | None = Non
     (else their visual shapes); links with neither get mass 0. None: Genesis's default, per link
     (_articulated_links): shapes.ROBOT_DENSITY for a link of the articulation,
     shapes.OBJECT_DENSITY for one outside it.
+    collision: False leaves every <collision> out (no collision shapes; a link without <inertial> is
+    then weighed from its visuals), as Genesis's morph option.
     y_up: the mesh files are Y-up: each is turned to Z-up when read (shapes.load_mesh; Genesis's
     file_meshes_are_zup=False), before its scale, origin and mass properties.
     entity_name: only used in error messages.
@@ -84,14 +86,15 @@ def load_urdf(path: str, entity_name: str | None = None, rho: float | None = Non
         raise InvalidInputError(f"load_urdf: argument 'path' expected a file path, got {path!r}")
     path = os.fspath(path)
     rho = None if rho is None else float(shapes.check_positive(rho, "rho", "load_urdf"))
-    ctx = _Context(path, entity_name, bool(y_up))
+    ctx = _Context(path, entity_name, bool(y_up), bool(collision))
     text = _read(ctx)
 
     def links_and_warnings():
         return (_links(ctx, text, rho), ctx.warnings), ctx.files
 
     # (meshes are found from its folder; a substitution's variables are part of what it says)
-    inputs = [os.path.abspath(path).encode(), repr(rho).encode(), text, _environment(text), repr(bool(y_up)).encode()]
+    inputs = [os.path.abspath(path).encode(), repr(rho).encode(), text, _environment(text), repr(bool(y_up)).encode(),
+              repr(bool(collision)).encode()]
     specs, warnings = asset_cache.load_or_compute("urdf", inputs, links_and_warnings, _SOURCES, _PACKAGES)
     for message in warnings:
         _logger.warning(f"{ctx.where()}: {message}")
@@ -167,8 +170,9 @@ class _Context:
     """Where an error happened (the file, its folder and the entity, for messages), and whether its
     meshes are read as Y-up (load_urdf's y_up)."""
 
-    def __init__(self, path: str, entity_name: str | None, y_up: bool = False):
+    def __init__(self, path: str, entity_name: str | None, y_up: bool = False, collision: bool = True):
         self.path, self.y_up = path, y_up  # (y_up: the mesh files are Y-up, see load_urdf)
+        self.collision = collision  # (False: the <collision> elements are left out, see load_urdf)
         self.folder = os.path.dirname(os.path.abspath(path))
         self.entity = entity_name
         self.files = []  # asset_cache.snapshot of the mesh files read and of the places looked at before; None:
@@ -367,7 +371,7 @@ def _contact_friction(ctx: _Context, xml) -> dict:
 def _link_spec(ctx: _Context, link, joint, rho: float, colors: dict) -> LinkSpec:
     """LinkSpec of `link` attached by `joint` (None for the root); `parent` is set by the caller.
     colors: material name → rgba (see _material_colors)."""
-    geoms = [_geom(ctx, link.name, c.geometry, c.origin) for c in link.collisions]
+    geoms = [_geom(ctx, link.name, c.geometry, c.origin) for c in link.collisions] if ctx.collision else []
     visuals = [v for v in (_visual(ctx, link.name, v, colors) for v in link.visuals) if _drawable(v)]
     mass, com, inertia = _inertial(ctx, link, geoms, rho)
     spec = LinkSpec(name=link.name, parent=-1, joint_name="", joint_type="fixed",
