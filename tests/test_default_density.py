@@ -92,3 +92,21 @@ def test_scene_defaults_are_genesis_masses(f64, tmp_path):
     for bad in (0.0, -1.0, float("nan"), True, "600"):
         with pytest.raises(gs.InvalidInputError, match="materials.Rigid: argument 'rho' must be a positive finite"):
             gs.materials.Rigid(rho=bad)
+
+
+def test_a_moving_link_of_mass_zero_is_weighed_from_its_shapes_as_genesis(tmp_path, caplog):
+    """A link on a moving joint whose <inertial> states mass 0 but which has shapes is weighed
+    from them, with a warning, as Genesis 1.4.5 weighs it (1.5 kg for this hinged 0.1 m box at the
+    robot density); one on a fixed joint keeps its 0 (Genesis too)."""
+    zero = '<inertial><mass value="0"/><inertia ixx="0" iyy="0" izz="0" ixy="0" ixz="0" iyz="0"/></inertial>'
+    box = '<collision><geometry><box size="0.1 0.1 0.1"/></geometry></collision>'
+    path = _write(tmp_path, "zero.urdf", f"""<robot name="z"><link name="base">{box}</link>
+      <link name="arm">{zero}{box}</link><link name="tag">{zero}{box}</link>
+      <joint name="h" type="revolute"><parent link="base"/><child link="arm"/><axis xyz="0 1 0"/>
+        <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+      <joint name="f" type="fixed"><parent link="base"/><child link="tag"/></joint></robot>""")
+    with caplog.at_level("WARNING", logger="genesis_lite"):
+        links = {link.name: link for link in load_urdf(path)}
+    assert links["arm"].mass == pytest.approx(1.5, rel=1e-12) and not links["arm"].mass_stated
+    assert links["tag"].mass == 0.0 and links["tag"].mass_stated
+    assert any("link 'arm' moves and its <inertial> states mass 0" in r.getMessage() for r in caplog.records)

@@ -373,11 +373,12 @@ def _link_spec(ctx: _Context, link, joint, rho: float, colors: dict) -> LinkSpec
     colors: material name → rgba (see _material_colors)."""
     geoms = [_geom(ctx, link.name, c.geometry, c.origin) for c in link.collisions] if ctx.collision else []
     visuals = [v for v in (_visual(ctx, link.name, v, colors) for v in link.visuals) if _drawable(v)]
-    mass, com, inertia = _inertial(ctx, link, geoms, rho)
+    moving = joint is not None and joint.type != "fixed"
+    mass, com, inertia, stated = _inertial(ctx, link, geoms, rho, moving)
     spec = LinkSpec(name=link.name, parent=-1, joint_name="", joint_type="fixed",
                     pos=np.zeros(3), quat=np.array([1.0, 0.0, 0.0, 0.0]),
                     axis=_DEFAULT_AXIS.copy(), mass=mass, com=com, inertia=inertia, geoms=geoms,
-                    visuals=visuals, mass_stated=link.inertial is not None and link.inertial.mass is not None)
+                    visuals=visuals, mass_stated=stated)
     if joint is not None:
         _apply_joint(ctx, spec, joint)
     return spec
@@ -502,14 +503,21 @@ def mat_to_quat(rot: np.ndarray) -> np.ndarray:
 # ------------------------------------------------------------------ inertial
 
 
-def _inertial(ctx: _Context, link, geoms: list, rho: float):
-    """(mass kg, com (3,) m, inertia (3, 3) kg·m² about the com in link axes) of a link.
+def _inertial(ctx: _Context, link, geoms: list, rho: float, moving: bool):
+    """(mass kg, com (3,) m, inertia (3, 3) kg·m² about the com in link axes, whether the file
+    states the mass) of a link.
 
     From <inertial> when present and stating a mass (inertia rotated by the inertial origin:
     R I Rᵀ); otherwise from the collision geoms, else the visual geoms (a flat or empty one holds no
-    volume), as solids of density rho (Genesis too weighs a link whose <inertial> has no <mass>).
+    volume), as solids of density rho (Genesis too weighs a link whose <inertial> has no <mass>,
+    and a ``moving`` one (on a joint that is not fixed) whose stated mass is 0 and that has shapes).
     """
     inertial = link.inertial
+    if (moving and inertial is not None and inertial.mass is not None and (geoms or link.visuals)
+            and _number(ctx, inertial.mass, 0.0, f"link '{link.name}' inertial mass") == 0.0):
+        ctx.warnings.append(f"link '{link.name}' moves and its <inertial> states mass 0: weighed from its shapes, "
+                            f"as Genesis weighs it")
+        inertial = None
     if inertial is not None and inertial.mass is None:  # (an inertia scales with the mass: alone it says nothing)
         stated = inertial.origin is not None or (inertial.inertia is not None and np.any(inertial.inertia))
         if stated:
@@ -520,7 +528,7 @@ def _inertial(ctx: _Context, link, geoms: list, rho: float):
         if not geoms:
             geoms = [_geom(ctx, link.name, v.geometry, v.origin, visual=True) for v in link.visuals]
         mass, com, inertia = shapes.geometry_mass_properties(geoms, rho)
-        return mass, com, inertia
+        return mass, com, inertia, False
     what = f"link '{link.name}' inertial"
     mass = _number(ctx, inertial.mass, 0.0, f"{what} mass")
     if mass < 0:
@@ -540,7 +548,7 @@ def _inertial(ctx: _Context, link, geoms: list, rho: float):
         ctx.warnings.append(f"{what}: its principal moments {moments.tolist()} break the triangle inequality "
                             f"A + B >= C that every rigid body's satisfy (MuJoCo's compiler rejects such an "
                             f"inertia); simulated as given")
-    return mass, com, inertia
+    return mass, com, inertia, True
 
 
 # ------------------------------------------------------------------ geometry
