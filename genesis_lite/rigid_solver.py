@@ -1,5 +1,8 @@
-"""Genesis's ``scene.sim.rigid_solver``: the solver-level calls genesis_lite has — welds made at
-run time (Genesis's suction cup: ``add_weld_constraint`` / ``delete_weld_constraint``).
+"""Genesis's ``scene.sim.rigid_solver``: the solver-level calls genesis_lite has — the scene-wide
+readouts (``n_links``, ``n_dofs``, ``n_qs``, ``get_links_pos/quat/vel/ang``, ``get_dofs_position/
+velocity``, ``get_qpos``: the rigid entities' own readouts side by side, in scene-wide link, dof
+and q order, so differentiable as theirs; ``get_error_envs_mask``) and welds made at run time
+(Genesis's suction cup: ``add_weld_constraint`` / ``delete_weld_constraint``).
 
 A run-time weld holds two links where they are when it is made: link 1's origin on the same point
 of link 2, and their relative turn, by six equality rows (solvers/rigid/constraint/rows.py, as an
@@ -16,9 +19,11 @@ step through the weld's anchor and turn as well as through its rows.
 import numpy as np
 import torch
 
+from .entities import RigidEntity
 from .entities.common import EntityIndexing
 from .solvers.core import InvalidInputError, runtime
 from .solvers.rigid.data import DYN_WELD
+from .tensor import wrap
 from .utils.geom import inv_quat, inv_transform_by_trans_quat
 from .utils.rotations import quat_mul
 
@@ -38,11 +43,77 @@ class RigidSolverView(EntityIndexing):
         # (only for names not found: Genesis's other solver-level calls say where to look)
         if name.startswith("_"):
             raise AttributeError(name)
-        raise AttributeError(f"{self._who} has no '{name}' (its calls here: add_weld_constraint, "
-                             f"delete_weld_constraint); Genesis's other solver-level getters and setters "
-                             f"are the entities' here (entity.get_links_pos, entity.get_qpos, "
-                             f"entity.set_dofs_kp..., scene-wide link and dof indices as link.idx, "
-                             f"entity.dof_start): docs/genesis_api.md lists them")
+        raise AttributeError(f"{self._who} has no '{name}' (its calls here: the scene-wide readouts "
+                             f"get_links_pos/quat/vel/ang, get_dofs_position/velocity, get_qpos, "
+                             f"get_error_envs_mask, and add_weld_constraint, delete_weld_constraint); "
+                             f"Genesis's other solver-level calls are the entities' here (entity.set_dofs_kp..., "
+                             f"scene-wide link and dof indices as link.idx, entity.dof_start): "
+                             f"docs/genesis_api.md lists them")
+
+    # -- scene-wide readouts: the rigid entities' side by side ---------------------------------------
+    def _rigid_entities(self):
+        return [entity for entity in self.scene.entities if isinstance(entity, RigidEntity)]
+
+    @property
+    def n_links(self):
+        return sum(entity.n_links for entity in self._rigid_entities())
+
+    @property
+    def n_dofs(self):
+        return sum(entity.n_dofs for entity in self._rigid_entities())
+
+    @property
+    def n_qs(self):
+        return sum(entity.n_qs for entity in self._rigid_entities())
+
+    def _joined(self, getter, idx, n, arg, envs_idx):
+        """Every rigid entity's ``getter(None, envs_idx)`` (…, n_k[, width]) joined along its entity
+        axis (links: −2, dofs and qs: −1), then the scene-wide indices ``idx`` (None: all)."""
+        self._envs(envs_idx)  # (its errors name this solver)
+        picked = self._local(idx, n, arg)
+        parts = [getattr(entity, getter)(None, envs_idx) for entity in self._rigid_entities()]
+        axis = -2 if arg == "links_idx" else -1
+        joined = torch.cat([part.as_subclass(torch.Tensor) for part in parts], dim=axis)
+        index = torch.as_tensor(picked, device=joined.device)
+        return wrap(joined.index_select(joined.dim() + axis, index), self.scene)
+
+    def get_links_pos(self, links_idx=None, envs_idx=None):
+        """World positions of the links' origins, m: (n, 3) or (n_envs, n, 3), scene-wide link
+        indices (link.idx) ``links_idx`` (None: all)."""
+        return self._joined("get_links_pos", links_idx, self.n_links, "links_idx", envs_idx)
+
+    def get_links_quat(self, links_idx=None, envs_idx=None):
+        """World orientations (w, x, y, z): (n, 4) or (n_envs, n, 4)."""
+        return self._joined("get_links_quat", links_idx, self.n_links, "links_idx", envs_idx)
+
+    def get_links_vel(self, links_idx=None, envs_idx=None):
+        """World linear velocities of the links' origins, m/s: (n, 3) or (n_envs, n, 3)."""
+        return self._joined("get_links_vel", links_idx, self.n_links, "links_idx", envs_idx)
+
+    def get_links_ang(self, links_idx=None, envs_idx=None):
+        """World angular velocities, rad/s: (n, 3) or (n_envs, n, 3)."""
+        return self._joined("get_links_ang", links_idx, self.n_links, "links_idx", envs_idx)
+
+    def get_dofs_position(self, dofs_idx=None, envs_idx=None):
+        """Dof positions (rad or m; a free or ball joint's turn as Euler angles, as the entities'):
+        (n,) or (n_envs, n), scene-wide dof indices (entity.dof_start + local)."""
+        return self._joined("get_dofs_position", dofs_idx, self.n_dofs, "dofs_idx", envs_idx)
+
+    def get_dofs_velocity(self, dofs_idx=None, envs_idx=None):
+        """Dof velocities (rad/s or m/s): (n,) or (n_envs, n)."""
+        return self._joined("get_dofs_velocity", dofs_idx, self.n_dofs, "dofs_idx", envs_idx)
+
+    def get_qpos(self, qs_idx=None, envs_idx=None):
+        """Generalised positions (n,) or (n_envs, n), scene-wide q indices."""
+        return self._joined("get_qpos", qs_idx, self.n_qs, "qs_idx", envs_idx)
+
+    def get_error_envs_mask(self):
+        """(max(n_envs, 1),) bool: the envs whose rigid state is not finite (Genesis's mask of the
+        envs in error, to reset)."""
+        rows = [torch.cat([entity.get_qpos().as_subclass(torch.Tensor).detach(),
+                           entity.get_dofs_velocity().as_subclass(torch.Tensor).detach()], dim=-1).reshape(
+            max(self.scene.n_envs, 1), -1) for entity in self._rigid_entities()]
+        return ~torch.isfinite(torch.cat(rows, dim=-1)).all(dim=-1)
 
     def add_weld_constraint(self, link1_idx, link2_idx, envs_idx=None):
         """Weld link ``link2_idx`` to link ``link1_idx`` (scene-wide link indices, Genesis's

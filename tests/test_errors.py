@@ -276,8 +276,8 @@ def test_genesis_arguments_with_nothing_to_do_here_are_taken_and_checked(f64, bu
     assert robot.get_qpos().tolist() == [0.1, 0.2] and robot.get_dofs_velocity().tolist() == [0.5, 0.0]
     robot.zero_all_dofs_velocity(skip_forward=False)
     raises(gs.InvalidInputError, lambda: robot.set_qpos([0.1, 0.2], skip_forward=1), "'skip_forward'", "True or False")
-    with pytest.raises(AttributeError, match="scene.sim.rigid_solver has no 'get_links_pos'.*entity.get_links_pos"):
-        scene.sim.rigid_solver.get_links_pos()
+    with pytest.raises(AttributeError, match="scene.sim.rigid_solver has no 'set_dofs_kp'.*entity.set_dofs_kp"):
+        scene.sim.rigid_solver.set_dofs_kp()
     assert not hasattr(scene.sim.rigid_solver, "links_info")
 
 

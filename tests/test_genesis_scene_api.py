@@ -573,6 +573,48 @@ def test_a_urdf_without_collision_is_weighed_from_its_visuals_as_genesis(f64, tm
     assert float(ghost.get_mass()) == pytest.approx(600.0 * 0.1 ** 3, rel=1e-12) and ghost.n_geoms == 0
 
 
+def test_solver_level_readouts_are_the_entities_side_by_side(f64):
+    """scene.sim.rigid_solver's get_links_pos/quat/vel/ang, get_dofs_position/velocity and get_qpos
+    by scene-wide indices (link.idx, entity.dof_start + local) equal the entities' own readouts,
+    batched or not, differentiable as theirs; get_error_envs_mask flags the env whose state went
+    non-finite (a box tumbling to inf under a torque, as in test_robustness)."""
+    for n_envs in (0, 2):
+        scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True))
+        scene.add_entity(gs.morphs.Plane())
+        arm = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True, pos=(0, 0, 1)))
+        box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(1, 0, 0.5)))
+        scene.build(n_envs=n_envs)
+        solver = scene.sim.rigid_solver
+        assert (solver.n_links, solver.n_dofs, solver.n_qs) == (1 + arm.n_links + 1, arm.n_dofs + 6, arm.n_qs + 7)
+        speed = torch.tensor(0.7, dtype=torch.float64, requires_grad=True)
+        arm.set_dofs_velocity(speed * torch.ones(arm.n_dofs, dtype=torch.float64).expand(
+            *([n_envs] if n_envs else []), arm.n_dofs))
+        for _ in range(3):
+            scene.step()
+        links, dofs = [box.links[0].idx, arm.links[-1].idx], [box.dof_start + 2, arm.dof_start + 1]
+        for name in ("pos", "quat", "vel", "ang"):
+            mine = getattr(solver, f"get_links_{name}")(links)
+            theirs = torch.stack([getattr(box, f"get_links_{name}")()[..., 0, :],
+                                  getattr(arm, f"get_links_{name}")()[..., -1, :]], dim=-2)
+            assert torch.equal(mine, theirs), name
+        assert torch.equal(solver.get_dofs_position(dofs), torch.stack(
+            [box.get_dofs_position()[..., 2], arm.get_dofs_position()[..., 1]], dim=-1))
+        assert torch.equal(solver.get_qpos()[..., box.q_start:box.q_start + 7], box.get_qpos())
+        grad, = torch.autograd.grad(solver.get_links_pos(links[1:]).sum(), speed, retain_graph=True)
+        expected, = torch.autograd.grad(arm.get_links_pos()[..., -1, :].sum(), speed)
+        assert torch.equal(grad, expected) and float(grad) != 0.0
+        assert not solver.get_error_envs_mask().any()
+        with pytest.raises(gs.InvalidInputError, match="scene.sim.rigid_solver"):
+            solver.get_links_pos([solver.n_links])
+    heavy = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01))
+    tumbler = heavy.add_entity(gs.morphs.Box(size=(0.2, 0.3, 0.1), pos=(0, 0, 3)), material=gs.materials.Rigid(rho=200.0))
+    heavy.build(n_envs=2)
+    for _ in range(50):
+        tumbler.apply_links_external_wrench(torque=[[[0.0, 0.0, 0.0]], [[3.0, -2.0, 1.0]]], links_idx_local=[0])
+        heavy.step()
+    assert heavy.sim.rigid_solver.get_error_envs_mask().tolist() == [False, True]
+
+
 def test_default_armature_is_genesis_rotor_unless_mujoco_compatible(f64, tmp_path):
     """Genesis 1.4.5's default_armature (URDF and MJCF): 0.1 on every hinge and slide dof whose
     armature the file leaves at 0 (an MJCF's own armature kept; a free joint's dofs and a ball's
