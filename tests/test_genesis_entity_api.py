@@ -6,6 +6,7 @@ of its targets) and the mass matrix with armature and its LᵀDL decomposition.
 Numbers quoted from Genesis were measured on the same 1-dof pendulum (PENDULUM below).
 """
 import inspect
+import logging
 
 import numpy as np
 import pytest
@@ -1049,6 +1050,27 @@ def test_set_mass_scales_the_moving_links_as_genesis(f64):
         wall.set_mass(1.0)
     with pytest.raises(gs.InvalidInputError, match=r"entity 'urdf_1': argument 'mass' must be ≥ 0 kg"):
         free.set_mass(-1.0)
+
+
+def test_link_set_mass_is_set_links_mass_of_that_link(f64, caplog):
+    """RigidLink.set_mass (Genesis's): a number for every env or one per env, differentiable, as the
+    entity's set_links_mass of that link; a link welded to the world is skipped with a warning."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(requires_grad=True))
+    arm = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
+    scene.build(n_envs=2)
+    link, before = arm.links[-1], arm.get_links_mass().detach().clone()
+    link.set_mass(2.5)
+    assert arm.get_links_mass()[:, -1].tolist() == [2.5, 2.5]
+    mass = torch.tensor([1.0, 3.0], dtype=torch.float64, requires_grad=True)
+    link.set_mass(mass)
+    masses = arm.get_links_mass()
+    assert masses[:, -1].tolist() == [1.0, 3.0] and torch.equal(masses[:, :-1], before[:, :-1])
+    grad, = torch.autograd.grad(masses[:, -1].sum(), mass)
+    assert grad.tolist() == [1.0, 1.0]
+    with caplog.at_level(logging.WARNING, logger="genesis_lite"):
+        arm.links[0].set_mass(4.0)
+    assert "welded to the world changes nothing" in caplog.records[-1].getMessage()
+    assert torch.equal(arm.get_links_mass()[:, 0], before[:, 0])
 
 
 def test_set_mass_takes_a_one_element_tensor_in_a_scene_without_envs(f64):

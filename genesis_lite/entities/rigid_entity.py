@@ -7,7 +7,7 @@ import numpy as np
 import torch
 
 from ..runtime import logger
-from ..solvers.core import InvalidInputError, SceneStateError, refuse_grad, runtime
+from ..solvers.core import InvalidInputError, SceneStateError, refuse_grad, runtime, warn_user
 from ..solvers.rigid.merge import merged_into
 from ..solvers.rigid.model import BALL, FREE
 from . import energy, kinematics
@@ -122,6 +122,23 @@ class RigidLink:
     def get_mass(self, envs_idx=None):
         """Mass, kg: () or (n_envs,)."""
         return wrap(self.entity.get_links_mass([self.idx_local], envs_idx)[..., 0], self.entity.scene)
+
+    def set_mass(self, mass):
+        """Mass, kg: a number, or (n_envs,) one per env; the entity's ``set_links_mass`` for this link
+        (differentiable). **Different** from Genesis's: the rotational inertia scales with the mass (a
+        body of the same shape made heavier; Genesis's keeps it). A link welded to the world is
+        skipped with a warning, as Genesis."""
+        if self.is_fixed:
+            warn_user(f"{self._who}: set_mass of a link welded to the world changes nothing (it is never "
+                      f"accelerated), skipped as Genesis skips it")
+            return
+        per_env = np.ndim(mass) == 1 if not isinstance(mass, torch.Tensor) else mass.dim() == 1
+        if per_env and self.entity.scene.n_envs == 0:
+            raise InvalidInputError(f"{self._who}: set_mass takes one number in a scene without envs, got "
+                                    f"{len(mass)} values")
+        value = (mass.reshape(-1, 1) if isinstance(mass, torch.Tensor) else np.reshape(mass, (-1, 1))) if per_env \
+            else [mass]
+        self.entity.set_links_mass(value, [self.idx_local])
 
     def get_AABB(self, envs_idx=None):
         """The world-axes box holding the link's collision shapes, m: (2, 3) or (n_envs, 2, 3), as
