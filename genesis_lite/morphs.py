@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .options import named_keywords
+from .options import check_bool, is_int, named_keywords
 from .solvers.core import InvalidInputError, refuse_grad
 from .utils import geom
 
@@ -108,8 +108,7 @@ def _check_masks(owner, morph):
     own); both 0: the body collides with nothing (Genesis makes it no collision shape)."""
     for name in ("contype", "conaffinity"):
         value = getattr(morph, name)
-        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or not (
-                0 <= value <= 0xFFFFFFFF):
+        if not (is_int(value) and 0 <= value <= 0xFFFFFFFF):
             raise InvalidInputError(f"{owner}: argument '{name}' must be an integer bit mask in [0, 0xFFFFFFFF], "
                                     f"got {value!r}")
         setattr(morph, name, int(value))
@@ -144,9 +143,7 @@ class Morph:
                                         f"got {self.quat!r}")
             self.quat = q / np.linalg.norm(q)
         for name in ("fixed", "visualization", "collision"):  # ('no' would weld the body)
-            if not isinstance(getattr(self, name), (bool, np.bool_)):
-                raise InvalidInputError(f"{owner}: argument '{name}' must be True or False, got {getattr(self, name)!r}")
-            setattr(self, name, bool(getattr(self, name)))
+            setattr(self, name, check_bool(owner, name, getattr(self, name)))
         if not (self.visualization or self.collision):  # (Genesis's rule: the entity would be nothing)
             raise InvalidInputError(f"{owner}: arguments 'visualization' and 'collision' cannot both be False")
         self._check()

@@ -230,8 +230,7 @@ class RigidOptions(_TimeBased):
 
     def __post_init__(self):
         owner = "RigidOptions"
-        if isinstance(self.max_collision_pairs, (bool, np.bool_)) or not isinstance(
-                self.max_collision_pairs, (int, np.integer)) or self.max_collision_pairs < 0:
+        if not (is_int(self.max_collision_pairs) and self.max_collision_pairs >= 0):
             raise InvalidInputError(f"{owner}: argument 'max_collision_pairs' must be an integer >= 0, got "
                                     f"{self.max_collision_pairs!r}")
         if self.box_box_detection is not None and not (isinstance(self.box_box_detection, (bool, np.bool_))

@@ -14,6 +14,7 @@ import torch
 from taichi.lang import impl
 from taichi.lang.misc import is_arch_supported
 
+from .options import check_bool
 from .solvers.core import MMAP_THRESHOLD, InvalidInputError, SceneStateError, runtime
 from .solvers.launch import forget as forget_kernels
 from .solvers.taichi_startup import skip_code_generation_passes
@@ -125,12 +126,10 @@ def init(backend=None, precision="32", seed=None, logging_level="warning", debug
 
 def _check_genesis_extras(eps, theme, logger_verbose_time, performance_mode, use_deterministic_algorithms):
     """gs.init's Genesis-only arguments (see init): their types, and eps at Genesis's default."""
-    for name, value in (("logger_verbose_time", logger_verbose_time), ("performance_mode", performance_mode)):
-        if not isinstance(value, (bool, np.bool_)):
-            raise InvalidInputError(f"gs.init: argument '{name}' must be True or False, got {value!r}")
-    if use_deterministic_algorithms is not None and not isinstance(use_deterministic_algorithms, (bool, np.bool_)):
-        raise InvalidInputError(f"gs.init: argument 'use_deterministic_algorithms' must be None, True or False, "
-                                f"got {use_deterministic_algorithms!r}")
+    check_bool("gs.init", "logger_verbose_time", logger_verbose_time)
+    check_bool("gs.init", "performance_mode", performance_mode)
+    if use_deterministic_algorithms is not None:
+        check_bool("gs.init", "use_deterministic_algorithms", use_deterministic_algorithms)
     if theme not in ("dark", "light", "raw"):  # (Genesis's styles.THEME)
         raise InvalidInputError(f"gs.init: argument 'theme' must be 'dark', 'light' or 'raw', got {theme!r}")
     if isinstance(eps, bool) or not isinstance(eps, (int, float, np.floating)) or eps != 1e-15:

@@ -71,9 +71,7 @@ class Scene:
     def __init__(self, sim_options=None, rigid_options=None, viewer_options=None, vis_options=None,
                  show_viewer=False, mpm_options=None, show_FPS=None):
         require_init("gs.Scene")
-        if show_FPS is not None and not isinstance(show_FPS, (bool, np.bool_)):
-            raise InvalidInputError(f"gs.Scene: argument 'show_FPS' must be True, False or None, got {show_FPS!r}")
-        if show_FPS:
+        if show_FPS is not None and check_bool("gs.Scene", "show_FPS", show_FPS):
             warn_user("gs.Scene: show_FPS=True prints nothing here (genesis_lite logs no FPS line; Genesis 1.4.5 "
                       "deprecates the argument too)")
         self.sim_options = sim_options or SimOptions()

@@ -6,6 +6,7 @@ batch dimension.
 import numpy as np
 import torch
 
+from ..options import check_bool
 from ..runtime import logger
 from ..solvers.core import InvalidInputError, SceneStateError, refuse_grad, runtime, warn_user
 from ..solvers.rigid.merge import merged_into
@@ -61,12 +62,6 @@ def _with_link_axis(link, arg, value):
         raise InvalidInputError(f"{link._who}: apply_external_wrench argument '{arg}' must have shape (3,) or "
                                 f"(len(envs_idx), 3), got {tuple(tensor.shape)}")
     return tensor.unsqueeze(-2)
-
-
-def _check_skip_forward(entity, skip_forward):
-    if not isinstance(skip_forward, (bool, np.bool_)):
-        raise InvalidInputError(f"entity '{entity.name}': argument 'skip_forward' must be True or False, "
-                                f"got {skip_forward!r}")
 
 
 @named_argument_errors
@@ -460,7 +455,7 @@ class RigidEntity(EntityIndexing):
         """Joint velocities, rad/s or m/s, as get_dofs_velocity gives them; None: zeros (Genesis's
         default). skip_forward: Genesis's (a setter's links' poses and velocities then wait for
         the next step there): taken, as a bool; here the readouts always follow the state set."""
-        _check_skip_forward(self, skip_forward)
+        check_bool(self._who, "skip_forward", skip_forward)
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         values = self._values(0.0 if velocity is None else velocity, len(dofs), envs, "velocity")
@@ -479,7 +474,7 @@ class RigidEntity(EntityIndexing):
     def set_qpos(self, qpos, qs_idx_local=None, envs_idx=None, *, zero_velocity=True, skip_forward=False):
         """Generalised positions (n,) or (len(envs_idx), n); zero_velocity as in set_dofs_position,
         skip_forward as in set_dofs_velocity."""
-        _check_skip_forward(self, skip_forward)
+        check_bool(self._who, "skip_forward", skip_forward)
         qs = self._local(qs_idx_local, self.n_qs, "qs_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         values = self._values(qpos, len(qs), envs, "qpos")
@@ -508,7 +503,7 @@ class RigidEntity(EntityIndexing):
     def set_pos(self, pos, envs_idx=None, *, zero_velocity=True, skip_forward=False):
         """Base position in the world, m: (3,) or (len(envs_idx), 3) (free base only);
         zero_velocity as in set_dofs_position, skip_forward as in set_dofs_velocity."""
-        _check_skip_forward(self, skip_forward)
+        check_bool(self._who, "skip_forward", skip_forward)
         self._require_free("set_pos")
         envs = self._envs(envs_idx, distinct=True)
         self._write(self._solver_q([0, 1, 2]), envs, self._values(pos, 3, envs, "pos"), zero_velocity)
@@ -516,7 +511,7 @@ class RigidEntity(EntityIndexing):
     def set_quat(self, quat, envs_idx=None, *, zero_velocity=True, skip_forward=False):
         """Base orientation (w, x, y, z): (4,) or (len(envs_idx), 4) (free base only); normalised by
         the kinematics; zero_velocity as in set_dofs_position, skip_forward as in set_dofs_velocity."""
-        _check_skip_forward(self, skip_forward)
+        check_bool(self._who, "skip_forward", skip_forward)
         self._require_free("set_quat")
         envs = self._envs(envs_idx, distinct=True)
         values = self._values(quat, 4, envs, "quat")
