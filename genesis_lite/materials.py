@@ -9,8 +9,7 @@ from .solvers.core import InvalidInputError, refuse_grad
 
 
 @named_keywords("use_visual_raycasting", "friction_torsional", "friction_rolling", "needs_coup", "coup_friction",
-           "coup_softness", "coup_restitution", "sdf_cell_size", "sdf_min_res", "sdf_max_res", "gravity_compensation",
-           "coup_type", "coup_links", "enable_coup_collision", "coup_collision_links", "contact_resistance")
+           "coup_softness", "coup_restitution", "sdf_cell_size", "sdf_min_res", "sdf_max_res", "coup_type", "coup_links", "enable_coup_collision", "coup_collision_links", "contact_resistance")
 @dataclass
 class Rigid:
     """A rigid body. rho: density, kg/m³, of the shapes of links whose mass the asset does not
@@ -19,12 +18,21 @@ class Rigid:
     plain object and 1500 for an articulated robot's links (urdf.load_urdf says which);
     friction: Coulomb coefficient of every collision shape of the entity, in [0.01, 5] as Genesis
     (None: the asset's, e.g. a URDF link's <contact><lateral_friction>, else 1.0); a contact
-    takes the larger of its two shapes' values."""
+    takes the larger of its two shapes' values; gravity_compensation: the share of every link's
+    weight a force at its centre of mass cancels (Genesis's: 1 cancels gravity on the entity, 0
+    none; above 1 lifts it, below 0 adds weight), None: the asset's (an MJCF body's ``gravcomp``,
+    else 0)."""
     rho: float = None
     friction: float = None
+    gravity_compensation: float = None
 
     def __post_init__(self):
         rho, friction = _real("materials.Rigid", "rho", self.rho), _real("materials.Rigid", "friction", self.friction)
+        compensation = _real("materials.Rigid", "gravity_compensation", self.gravity_compensation)
+        if self.gravity_compensation is not None and not (compensation is not None and np.isfinite(compensation)):
+            raise InvalidInputError(f"materials.Rigid: argument 'gravity_compensation' must be a finite number "
+                                    f"(or None), got {self.gravity_compensation!r}")
+        self.gravity_compensation = compensation
         if self.rho is not None and not (rho is not None and np.isfinite(rho) and rho > 0):
             raise InvalidInputError(f"materials.Rigid: argument 'rho' must be a positive finite number "
                                     f"(or None), got {self.rho!r}")

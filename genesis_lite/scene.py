@@ -481,8 +481,8 @@ def _add_rotor_armature(links, morph, mujoco_compatible):
 
 
 def _links_of(morph, material, name, mujoco_compatible):
-    """The morph's LinkSpec list (fixed links merged when the morph asks, friction from the
-    material when it states one), its root joint set from the morph's placement. Where a mass
+    """The morph's LinkSpec list (fixed links merged when the morph asks, friction and gravity
+    compensation from the material when it states them), its root joint set from the morph's placement. Where a mass
     comes from the shapes and the material states no density, Genesis's default density:
     shapes.MUJOCO_DENSITY under enable_mujoco_compatibility, else a URDF's by articulation
     (urdf.load_urdf) and shapes.OBJECT_DENSITY for a primitive or a mesh."""
@@ -511,7 +511,7 @@ def _links_of(morph, material, name, mujoco_compatible):
         mjcf.place_world(links, morph.pos, morph.quat)
         if morph.fixed:
             links[0].joint_type = "fixed"
-        return _with_material_friction(links, material)
+        return _with_material(links, material)
     elif isinstance(morph, gm.Box):
         links = shapes.box_link(morph.size, object_rho)
     elif isinstance(morph, gm.Sphere):
@@ -538,15 +538,18 @@ def _links_of(morph, material, name, mujoco_compatible):
     if np.any(root.pos) or np.any(root.quat != (1.0, 0.0, 0.0, 0.0)):  # a URDF's floating root (urdf.py)
         pos, quat = shapes.compose(pos, quat, root.pos, root.quat)
     root.pos, root.quat = pos, quat  # (else the morph's quaternion as given: compose would renormalise and flip it)
-    return _with_material_friction(links, material)
+    return _with_material(links, material)
 
 
-def _with_material_friction(links, material):
-    """``links`` with the material's friction, where it states one, on every geom (it overrides
-    the asset's, as Genesis)."""
+def _with_material(links, material):
+    """``links`` with the material's friction, where it states one, on every geom, and its gravity
+    compensation, where it states one, on every link (each overrides the asset's, as Genesis)."""
     if material.friction is not None:
         for geom in (geom for link in links for geom in link.geoms):
             geom.friction = material.friction
+    if material.gravity_compensation is not None:
+        for link in links:
+            link.gravcomp = material.gravity_compensation
     return links
 
 

@@ -1094,3 +1094,43 @@ def test_dofs_limits_as_the_urdf_gives_them(f64, two_robots):
     assert np.isinf(lower[:, :6].numpy()).all() and (lower[:, :6] < 0).all() and (upper[:, :6] > 0).all()
     low, high = kuka.get_dofs_limit([7, 9], envs_idx=[1])
     assert torch.equal(low, lower[1:, [7, 9]]) and torch.equal(high, upper[1:, [7, 9]])
+
+
+def test_gravity_compensation_cancels_its_share_of_gravity_on_its_entity_alone(f64):
+    """materials.Rigid(gravity_compensation=c), Genesis's: the entity moves as under gravity × (1 − c)
+    (Genesis scales its entity's gravity so), every link of it (a URDF arm's and a free box's), while
+    an entity beside it keeps the whole of gravity; c = 1 holds an arm at rest where it is."""
+    kuka = pybullet("kuka_iiwa", "model.urdf")
+    gravity = np.array([0.4, -0.3, -9.81])
+    pose = torch.tensor([0.3, 0.5, -0.2, -1.0, 0.4, 0.6, 0.1], dtype=torch.float64)
+
+    def run(compensation, scale):
+        scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, gravity=tuple(gravity * scale)),
+                         rigid_options=gs.options.RigidOptions(enable_collision=False), show_viewer=False)
+        material = gs.materials.Rigid(gravity_compensation=compensation)
+        arm = scene.add_entity(gs.morphs.URDF(file=kuka, fixed=True), material=material)
+        box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.1, 0.05), pos=(1.0, 0.0, 1.0)), material=material)
+        free = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(-1.0, 0.0, 1.0)))  # uncompensated
+        scene.build()
+        arm.set_dofs_position(pose)
+        box.set_dofs_velocity([0.1, 0.0, 0.2, 0.5, 0.2, 1.0])
+        free.set_dofs_velocity([0.0, 0.3, 0.1, 0.2, 0.0, 0.4])
+        for _ in range(60):
+            scene.step()
+        return [entity.get_qpos() for entity in (arm, box, free)]
+
+    for compensation in (0.3, 1.0, 1.6):
+        arm, box, free = run(compensation, 1.0)
+        arm_scaled, box_scaled, _ = run(None, 1.0 - compensation)
+        _, _, free_alone = run(None, 1.0)
+        assert torch.allclose(arm, arm_scaled, rtol=0, atol=1e-13) and torch.allclose(box, box_scaled, rtol=0, atol=1e-13)
+        assert torch.equal(free, free_alone)
+        if compensation == 1.0:
+            assert torch.allclose(arm, pose, rtol=0, atol=1e-14)
+    assert not torch.allclose(run(0.3, 1.0)[0], run(None, 1.0)[0], atol=1e-3)  # (it does act)
+
+
+@pytest.mark.parametrize("value", ["high", float("nan"), float("inf"), [0.5], True])
+def test_gravity_compensation_must_be_a_finite_number(value):
+    with pytest.raises(gs.InvalidInputError, match="materials.Rigid: argument 'gravity_compensation' must be a finite"):
+        gs.materials.Rigid(gravity_compensation=value)

@@ -94,7 +94,7 @@ MODEL = {
     "geom_rbound": ("f", "G"), "pair_margin": ("f", "N"), "pair_mix": ("f", "N"),
     "geom_pos": ("v3", "G"), "geom_size": ("v3", "G"), "hull_vec": ("v3", "H"), "geom_quat": ("v4", "G"),
     "geom_aabb_center": ("v3", "G"), "geom_aabb_half": ("v3", "G"), "geom_centre": ("v3", "G"),
-    "link_inv_mass0": ("f", "L"), "dof_lower": ("f", "D"), "dof_upper": ("f", "D"),
+    "link_inv_mass0": ("f", "L"), "link_gravcomp": ("f", "L"), "dof_lower": ("f", "D"), "dof_upper": ("f", "D"),
     "dof_springref": ("f", "D"),  # rad or m: where a joint spring is at rest
     "dof_limit_sol": ("f", "D7"), "dof_frictionloss_sol": ("f", "D7"),  # (solref, solimp) of a dof's rows
     # joint equalities (URDF mimic joints; RigidModel says what they hold)
@@ -182,10 +182,11 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
 # loss, a violated limit); colliders_due a mask of the collider kernels the substep's near pairs
 # need (collision/detect.py: KERNEL_BIT); inexact_pair, inexact_env, inexact_substep: where the
 # last inexact contact was (the backward's error names it); capped a flag: a constraint solve
-# stopped at its iteration limit before its tolerance.
+# stopped at its iteration limit before its tolerance; gravcomp 1 when some link's gravity is
+# compensated (RigidModel.link_gravcomp), else its force stage is skipped.
 SIZES = ("B", "L", "D", "Q", "P", "E", "K", "WD", "DW", "T", "S", "W", "GW", "limits", "nonfinite", "G", "N",
          "H", "C", "R", "cone", "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged",
-         "constrained", "colliders_due", "inexact_pair", "inexact_env", "inexact_substep", "wrench", "capped")
+         "constrained", "colliders_due", "inexact_pair", "inexact_env", "inexact_substep", "wrench", "capped", "gravcomp")
 HEADER = {name: k for k, name in enumerate(SIZES)}
 assert len(HEADER) == len(SIZES), "one slot a size"
 _REGIONS = [("i", False)] + [(a, g) for g in (False, True) for a in ("f", "v3", "v4", "m3")]  # (arena, gradients?)
@@ -343,7 +344,7 @@ class RigidData:
                      "HI": len(model.hull_int), "WS": int(_has_convex_pairs(model)), "inexact": 0,
                      "converged": int(bool(settings["converged"])), "constrained": 0,
                      "colliders_due": 0, "inexact_pair": 0, "inexact_env": 0, "inexact_substep": 0, "wrench": 0,
-                     "capped": 0}
+                     "capped": 0, "gravcomp": int(np.any(model.link_gravcomp != 0))}
         self.start, stop = layout(self.size, INTS_BEGIN)
         length = {a: stop[a, bool(requires_grad)] for a in ARENAS}  # no gradient storage without gradients
         if max(length.values()) >= 2 ** 31:  # indices inside kernels are 32-bit
@@ -474,6 +475,7 @@ class RigidView:
         self.iterations, self.ls_iterations = size["iterations"], size["ls_iterations"]
         self.converged = size["converged"]
         self.wrench = size["wrench"]  # 1 when the step's inputs hold an external wrench (xfrc)
+        self.gravcomp = size["gravcomp"]  # 1 when some link's gravity is compensated (link_gravcomp)
         self.nonfinite = ArrayView(ints, HEADER["nonfinite"], (1,))  # set by the NaN check
         self.overflow = ArrayView(ints, HEADER["overflow"], (1,))  # set when contacts exceed their slots
         self.rows_needed = ArrayView(ints, HEADER["rows_needed"], (1,))  # set when an env's needs_rows is

@@ -68,7 +68,8 @@ def _external(d: ti.template(), e, l):
 @ti.func
 def link_forces(d: ti.template(), s, e, l):
     """cvel, cacc and the net force link l needs (f = I·a + v ×* I·v, less the external wrench:
-    its torque about the reference, τ + (x_l − ref) × f, and f); parent first."""
+    its torque about the reference, τ + (x_l − ref) × f, and f, and less the gravity compensation's
+    force at the centre of mass); parent first."""
     vw, vv, aw, av = _link_motion(d, s, e, l)
     d.cvel_w[s, e, l], d.cvel_v[s, e, l] = vw, vv
     d.cacc_w[s, e, l], d.cacc_v[s, e, l] = aw, av
@@ -80,7 +81,19 @@ def link_forces(d: ti.template(), s, e, l):
         force, torque = _external(d, e, l)
         lever = d.xpos[s, e, l] - reference(d, s, e, l)
         fn, ff = fn - (torque + lever.cross(force)), ff - force
+    if d.gravcomp:
+        lift = _gravity_compensated(d, e, l)
+        fn, ff = fn + h.cross(lift), ff + m * lift
     d.cfrc_n[s, e, l], d.cfrc_f[s, e, l] = fn + cn, ff + cf  # the up sweep adds the children's
+
+
+@ti.func
+def _gravity_compensated(d: ti.template(), e, l):
+    """c·g (3,) m/s², the share c = link_gravcomp[l] of gravity a force −c·m·g at link l's centre of
+    mass cancels (MuJoCo's body gravcomp, Genesis's gravity_compensation). The base acceleration −g
+    puts (−h × g, −m g) into the link's force (inertia_mul at zero turn rate); the compensation takes
+    (−h × c g, −m c g) out of it, i.e. the force the link needs loses m c g at its centre of mass."""
+    return d.link_gravcomp[l] * ti.Vector([d.gravity[e, k] for k in ti.static(range(3))])
 
 
 @ti.func
@@ -208,6 +221,13 @@ def link_forces_adjoint(d: ti.template(), s, e, l):
             for k in ti.static(range(3)):
                 accumulate(d.xfrc.grad, ti.Vector([e, 6 * l + k]), g_force[k])
                 accumulate(d.xfrc.grad, ti.Vector([e, 6 * l + 3 + k]), -gn[k])
+        if d.gravcomp:  # (h × c g, m c g): ∂/∂m = gf · c g, ∂/∂h = c g × gn, ∂/∂g = c (gn × h + m gf)
+            lift = _gravity_compensated(d, e, l)
+            gm += dot3(gf, lift)
+            gh += lift.cross(gn)
+            g_lift = d.link_gravcomp[l] * (gn.cross(h) + m * gf)
+            for k in ti.static(range(3)):
+                accumulate(d.gravity.grad, ti.Vector([e, k]), g_lift[k])
         g_m = d.crb_m.grad[s, e, l] + gm + gm2
         g_h = d.crb_h.grad[s, e, l] + gh + gh2
         g_i = d.crb_i.grad[s, e, l] + gi + gi2

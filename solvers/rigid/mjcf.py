@@ -98,7 +98,7 @@ _FRAME = ("pos",) + ORIENTATIONS
 _NAMES = ("name", "class", "group", "user", "rgba", "material")  # read, or harmless to the physics
 # per element: the attributes read here (others are named in the warning of what is ignored)
 _READ = {
-    "body": _FRAME + ("name", "childclass", "user"),
+    "body": _FRAME + ("name", "childclass", "user", "gravcomp"),
     "joint": ("name", "class", "type", "pos", "axis", "range", "limited", "damping", "armature", "frictionloss",
               "actuatorfrcrange", "actuatorfrclimited", "stiffness", "springref", "ref", "springdamper", "springyield",
               "group", "user", "solreflimit", "solimplimit", "solreffriction", "solimpfriction"),
@@ -217,6 +217,7 @@ class _Reader(MJCFDocument):
             if not joints and parent in self.static_links:
                 self.static_links.add(len(links) - 1)
         self._contents(body, childclass, links[-1], what, len(links) - 1 in self.static_links)
+        links[-1].gravcomp = self.numbers(attrs, "gravcomp", 1, what, default=[0.0])[0]  # (on the link of its mass)
         self._sites(body, childclass, name)
         index = len(links) - 1
         for child, child_class, child_outer in self._members(body, "body", childclass):

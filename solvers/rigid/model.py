@@ -29,7 +29,8 @@ class RigidModel:
 
     Per link: parent (L,) (-1: the world), jtype (L,) joint code, pos0 (L, 3) m and quat0 (L, 4)
     joint frame in the parent, axis (L, 3) in the link frame, com (L, 3) m, inertia0 (L, 3, 3)
-    kg·m² about the com, mass0 (L,) kg, dof0/q0 (L,) first dof/q, entity (L,) owner index.
+    kg·m² about the com, mass0 (L,) kg, dof0/q0 (L,) first dof/q, entity (L,) owner index,
+    gravcomp (L,) the share of its weight a force at its com cancels (LinkSpec.gravcomp).
     Per dof: link (D,), q (D,) its q index (-1 inside a free or ball joint: no scalar coordinate),
     damping, armature, kp, kv, stiffness (N·m/rad or N/m) and springref (rad or m) of a joint
     spring −stiffness·(q − springref), lower/upper limits (rad or m; a ball joint's upper: its cone
@@ -80,6 +81,7 @@ class RigidModel:
     link_dof0: np.ndarray
     link_q0: np.ndarray
     link_entity: np.ndarray
+    link_gravcomp: np.ndarray
     dof_link: np.ndarray
     dof_q: np.ndarray
     dof_damping: np.ndarray
@@ -268,7 +270,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
     self_collision / adjacent_collision: the pair rules of geometry.candidate_pairs.
     """
     rows = {k: [] for k in ("name", "parent", "jtype", "pos0", "quat0", "axis", "com", "inertia0", "mass0",
-                            "dof0", "q0", "entity", "same_body", "excluded")}
+                            "dof0", "q0", "entity", "gravcomp", "same_body", "excluded")}
     dofs = {k: [] for k in ("link", "q", "damping", "armature", "stiffness", "springref", "lower", "upper", "effort",
                             "frictionloss", "kp", "kv", "limit_sol", "frictionloss_sol")}
     geoms, geom_links, geom_names = [], [], []
@@ -292,6 +294,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
             rows["dof0"].append(len(dofs["link"]))
             rows["q0"].append(len(qpos0))
             rows["entity"].append(entity_idx)
+            rows["gravcomp"].append(spec.gravcomp)
             rows["same_body"].append(spec.same_body)
             link_idx = len(rows["name"]) - 1
             joint_dof[spec.joint_name] = len(dofs["link"])
@@ -338,7 +341,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
         link_inertia0=np.array(rows["inertia0"], dtype=f).reshape(-1, 3, 3),
         link_mass0=np.array(rows["mass0"], dtype=f),
         link_dof0=np.array(rows["dof0"], dtype=np.int32), link_q0=np.array(rows["q0"], dtype=np.int32),
-        link_entity=np.array(rows["entity"], dtype=np.int32),
+        link_entity=np.array(rows["entity"], dtype=np.int32), link_gravcomp=np.array(rows["gravcomp"], dtype=f),
         dof_link=dof_link, dof_q=np.array(dofs["q"], dtype=np.int32),
         dof_damping=np.array(dofs["damping"], dtype=f), dof_armature=np.array(dofs["armature"], dtype=f),
         dof_stiffness=np.array(dofs["stiffness"], dtype=f), dof_springref=np.array(dofs["springref"], dtype=f),

@@ -117,6 +117,9 @@ class LinkSpec:
     theirs at q0) per weld holding a frame of this link on a frame of another, position and
     orientation (MJCF ``<equality><weld>``, MuJoCo's weld: six equality rows, the turn's three
     scaled by torquescale).
+    gravcomp: the share of the link's weight a force at its centre of mass cancels, −gravcomp·m·g
+    (MJCF ``<body gravcomp>``, MuJoCo's passive gravity compensation; Genesis's material
+    ``gravity_compensation`` sets it on every link of an entity): 0 none, 1 all, above 1 buoyancy.
     """
     name: str
     parent: int
@@ -152,3 +155,4 @@ class LinkSpec:
     excluded: tuple = ()
     connects: tuple = ()
     welds: tuple = ()
+    gravcomp: float = 0.0
