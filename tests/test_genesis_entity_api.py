@@ -1134,3 +1134,23 @@ def test_gravity_compensation_cancels_its_share_of_gravity_on_its_entity_alone(f
 def test_gravity_compensation_must_be_a_finite_number(value):
     with pytest.raises(gs.InvalidInputError, match="materials.Rigid: argument 'gravity_compensation' must be a finite"):
         gs.materials.Rigid(gravity_compensation=value)
+
+
+def test_dofs_invweight_is_genesis_and_follows_the_mass(f64):
+    """get_dofs_invweight: the diagonal of M⁻¹ at the initial pose, a free joint's averaged over its
+    translations and its rotations (MuJoCo's dof_invweight0): the KUKA's as Genesis 1.4.5 gives them
+    (measured: the same 12 digits), a free box's from its mass and inertia, halved with a doubled mass."""
+    scene = gs.Scene()
+    arm = scene.add_entity(gs.morphs.URDF(file=pybullet("kuka_iiwa", "model.urdf"), fixed=True))
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.1, 0.05), pos=(1.0, 0.0, 1.0)), material=gs.materials.Rigid(rho=600.0))
+    scene.build(n_envs=2)
+    genesis = [5.730415972718, 0.72402122071, 7.801932128421, 3.96298012273, 9.165145388492, 9.255846263355,
+               9.902734720426]
+    np.testing.assert_allclose(arm.get_dofs_invweight(envs_idx=[1])[0].numpy(), genesis, rtol=1e-10)
+    mass, sides = 600.0 * 0.2 * 0.1 * 0.05, np.array([0.2, 0.1, 0.05])
+    inertia = mass / 12.0 * (sides @ sides - sides ** 2)
+    expected = [1.0 / mass] * 3 + [np.mean(1.0 / inertia)] * 3
+    np.testing.assert_allclose(box.get_dofs_invweight().numpy(), [expected] * 2, rtol=1e-12)
+    box.set_links_mass([2.0 * mass], envs_idx=[1])
+    first = np.array([expected[0], expected[3]])  # (dofs 0 and 3: a translation, a rotation)
+    np.testing.assert_allclose(box.get_dofs_invweight([0, 3]).numpy(), [first, first / 2.0], rtol=1e-12)

@@ -873,6 +873,13 @@ class RigidEntity(EntityIndexing):
     def get_dofs_armature(self, dofs_idx_local=None, envs_idx=None):
         return self._get_dofs_input("armature", dofs_idx_local, envs_idx)
 
+    def get_dofs_invweight(self, dofs_idx_local=None, envs_idx=None):
+        """Each dof's inverse weight, 1/kg or 1/(kg·m²), as Genesis's and MuJoCo's dof_invweight0: the
+        diagonal of M⁻¹ at the initial pose (a free joint's averaged over its three translations and
+        over its three rotations, a ball joint's over its rotations), which scales the constraint
+        rows' softness; recomputed when masses or armature change (differentiable)."""
+        return self._get_dofs_input("invweight_dof", dofs_idx_local, envs_idx)
+
     def set_dofs_force_range(self, lower, upper, dofs_idx_local=None, envs_idx=None):
         """Bounds on the actuator force, N·m or N (±inf: none, Genesis's default); differentiable (a
         clipped force is its bound)."""
