@@ -171,8 +171,9 @@ class RigidOptions(_TimeBased):
         MJCF connects and welds, joint limits, friction loss) and of every
         geom without its own solref (None: 0.01 as Genesis, or MuJoCo's 0.02 under
         enable_mujoco_compatibility).
-    max_contacts: contact slots per env (None: the candidate pairs' worst case, at most 8 per
-        moving link and at least 16); more contacts stop the simulation with an error.
+    max_contacts: contact slots per env, more contacts stop the simulation with an error; None:
+        8 per moving link (at least 16, at most the candidate pairs' worst case) to start with,
+        doubled whenever a substep finds more (on the CPU; a GPU keeps them), up to the worst case.
     enable_mujoco_compatibility: MuJoCo's defaults exactly (time constant 0.02 s, 100
         iterations, impratio 1), for scenes compared with MuJoCo; and the convex collider's contacts
         on curved shapes (with a cylinder; a sphere or capsule deep in a mesh) are MuJoCo's CCD

@@ -388,3 +388,55 @@ def test_more_contacts_than_slots_is_a_named_error(f64, caplog):
     scene = boxes(worst)
     for _ in range(5):
         scene.step()
+
+
+def _pile(max_contacts, requires_grad=False):
+    """3 × 3 boxes (0.25 m, 1 mm apart) on the plane, 2 × 2 above them, side by side (0.25 mm into
+    each other), each over the corners of four lower ones, and one over the corners of those, each
+    layer 5 cm above the one below (two envs, each its own start), 4 substeps a step: landing, each
+    upper box touches four lower ones, and the pile comes to more contacts than the 8 per moving
+    link the slots start at."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, substeps=4, requires_grad=requires_grad),
+                     rigid_options=gs.options.RigidOptions(max_contacts=max_contacts))
+    scene.add_entity(gs.morphs.Plane())
+    size = 0.25
+    lower = [(1.004 * size * i, 1.004 * size * j, 0.5 * size) for j in range(3) for i in range(3)]
+    upper = [(0.999 * size * (i - 0.5) + 1.004 * size, 0.999 * size * (j - 0.5) + 1.004 * size, 1.7 * size)
+             for j in range(2) for i in range(2)]
+    top = [(1.004 * size, 1.004 * size, 2.9 * size)]
+    boxes = [scene.add_entity(gs.morphs.Box(size=(size,) * 3, pos=pos)) for pos in lower + upper + top]
+    scene.build(n_envs=2)
+    return scene, boxes
+
+
+def test_contact_slots_grow_as_a_pile_forms_and_keep_its_trajectory(f64):
+    """RigidOptions(max_contacts=None): the slots double whenever a substep's colliders find more
+    contacts than they hold (on the CPU), instead of the step raising; the pile then moves bit for bit
+    as in a scene sized for the pairs' worst case from the start, and its gradients are those too."""
+    grown, sized = _pile(None), _pile(10 ** 4)
+    start = grown[0].rigid_solver.data.size["C"]
+    velocity = torch.tensor(np.random.default_rng(0).normal(size=(2, 6)) * 0.05)
+    for scene, boxes in (grown, sized):
+        for box in boxes:
+            box.set_dofs_velocity(velocity)
+    for step in range(60):
+        for scene, boxes in (grown, sized):  # (the step's wrench flag rides through the growth too)
+            boxes[-1].apply_links_external_wrench(torch.tensor([[[2.0, 1.0, 0.0]]] * 2))
+            scene.step()
+        for a, b in zip(grown[1], sized[1]):
+            assert torch.equal(a.get_qpos(), b.get_qpos()), step
+    slots = grown[0].rigid_solver.data.size["C"]
+    assert slots > start and max(int(n) for n in grown[0].rigid_solver.contacts(substep=3)[:, :, 0].ge(0).sum(1)) > start
+    assert slots < sized[0].rigid_solver.data.size["C"]  # (the worst case: what the pile never needed)
+
+    grads = []
+    for max_contacts in (None, 10 ** 4):
+        scene, boxes = _pile(max_contacts, requires_grad=True)
+        v0 = velocity.clone().requires_grad_(True)
+        for box in boxes:
+            box.set_dofs_velocity(v0)
+        for _ in range(40):
+            scene.step()
+        sum(box.get_pos()[:, 2].sum() for box in boxes).backward()
+        grads.append(v0.grad)
+    assert torch.isfinite(grads[0]).all() and torch.equal(grads[0], grads[1])

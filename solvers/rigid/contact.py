@@ -77,15 +77,18 @@ def worst_case_contacts(model):
     return sum(_pair_budget(model, k) for k in range(len(model.pair_geom1)))
 
 
-def capacity(model, options):
+def capacity(model, options, contacts=None):
     """(contact slots C, row slots R) per env: C the pairs' worst case, capped by max_contacts
-    (default: MAX_PER_MOVING_LINK per moving link with geometry, at least MIN_CONTACTS); R
+    (default: MAX_PER_MOVING_LINK per moving link with geometry, at least MIN_CONTACTS, which the
+    solver doubles while a step finds more: the given ``contacts`` then); R
     enough rows for C contacts of the largest condim under the cone, one per joint equality, three
     per connect, six per weld (and run-time weld slot), one per limited dof and limited fixed
     tendon (at most one of its two bounds is violated) and one per dof for friction loss
     (settable on any)."""
     worst = worst_case_contacts(model)
-    if options.max_contacts is not None:
+    if contacts is not None:
+        cap = contacts
+    elif options.max_contacts is not None:
         cap = int(options.max_contacts)
     else:
         moving = len(set(model.geom_link[model.link_static[model.geom_link] == 0].tolist()))

@@ -188,6 +188,9 @@ SIZES = ("B", "L", "D", "Q", "P", "E", "K", "WD", "DW", "T", "S", "W", "GW", "li
          "H", "C", "R", "cone", "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged",
          "constrained", "colliders_due", "inexact_pair", "inexact_env", "inexact_substep", "wrench", "capped", "gravcomp")
 HEADER = {name: k for k, name in enumerate(SIZES)}
+# the header's slots a step raises or the host sets, not sizes (what a grown copy keeps: take_over)
+FLAGS = ("nonfinite", "overflow", "rows_needed", "inexact", "constrained", "colliders_due", "inexact_pair",
+         "inexact_env", "inexact_substep", "wrench", "capped")
 assert len(HEADER) == len(SIZES), "one slot a size"
 _REGIONS = [("i", False)] + [(a, g) for g in (False, True) for a in ("f", "v3", "v4", "m3")]  # (arena, gradients?)
 
@@ -410,6 +413,24 @@ class RigidData:
 
     def width(self, name):
         return self.widths[list(INPUTS).index(name)]
+
+    def take_over(self, old):
+        """Copy what ``old`` (the same model and batch, fewer contact slots) holds: the header's flags,
+        the inputs, the per-env arrays and every frame's values, an array of contacts or rows into
+        the first slots of its longer one. Gradients are not copied: every reverse zeroes them first
+        (step.prepare_reverse). efc_cols, whose joint rows' slots follow the contacts' lists, is copied
+        so too: a substep's lists are written by its constraint stage and read by nothing after it (a
+        backward replays the step), so earlier substeps' lists out of place are never read."""
+        for name in FLAGS:
+            self.header[HEADER[name]] = old.header[HEADER[name]]
+        begin, end = self.start["inputs"], self.start["inputs.grad"]
+        self.arenas[ARENAS.index("f")][begin:end] = old.arenas[ARENAS.index("f")][old.start["inputs"]:old.start["inputs.grad"]]
+        for name in PER_ENV:
+            self.per_env(name).copy_(old.per_env(name))
+        for name in FRAMES:
+            for s in range(self.size["S"] + 1):
+                before = old.frame(name, s)
+                self.frame(name, s)[:, :before.shape[1]] = before
 
 
 # -- inside kernels ------------------------------------------------------------------------------

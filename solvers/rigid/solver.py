@@ -80,9 +80,11 @@ class RigidSolver(Solver):
         self._nothing = torch.empty((0, 0), dtype=runtime.tc_float, device=runtime.device)  # an unused array argument
         self.state_width = self.model.n_qs + self.model.n_dofs
         self._check_mass_matrix()
+        self.worst_contacts = contact.worst_case_contacts(self.model)  # (what the slots may grow to)
         self._allocate()  # what needs kernels at the initial pose: then the final storage
         self.model = contact.at_initial_pose(self, options.enable_neutral_collision)
-        self._allocate()
+        self.worst_contacts = contact.worst_case_contacts(self.model)
+        self._allocate(self.data.size["C"])  # (as many slots as the initial pose took)
         self.grad_input_names = tuple(self.data.grad_input_names)
         # column widths of backward's output: state gradient, then each differentiable input's
         self.grad_widths = [self.state_width] + [self.data.width(name) for name in self.grad_input_names]
@@ -92,13 +94,22 @@ class RigidSolver(Solver):
         self.upload_state(state)
         return state
 
-    def _allocate(self):
-        """The scene's arenas and kernels for the current model, holding the default inputs."""
+    def _allocate(self, contacts=None):
+        """The scene's arenas and kernels for the current model, holding the default inputs;
+        contacts: see _make_storage."""
+        self._make_storage(contacts)
+        self._wrench = 0  # the header's "wrench" flag as last written (the new arenas' is 0)
+        self.default_inputs = self._default_inputs()
+        self.upload_inputs(self.default_inputs)
+
+    def _make_storage(self, contacts=None):
+        """self.data (RigidData) for the current model with ``contacts`` slots per env (None: the
+        options' capacity, contact.capacity), and the kernels bound to its arenas."""
         options, sim = self.rigid_options, self.sim_options
         h = sim.dt / sim.substeps
         bits = 64 if runtime.tc_float == torch.float64 else 32
         self.timeconst, self.iterations, self.tolerance, impratio = options.resolved(bits)
-        contacts, rows = contact.capacity(self.model, options)
+        contacts, rows = contact.capacity(self.model, options, contacts)
         settings = {"limits": options.enable_joint_limit, "contacts": contacts, "rows": rows,
                     "cone": int(options.friction_cone == "elliptic"), "iterations": self.iterations,
                     "ls_iterations": options.ls_iterations, "converged": not options.enable_mujoco_compatibility,
@@ -129,9 +140,6 @@ class RigidSolver(Solver):
                                                                         arenas, element_dims, detect.opt_level(kind)))
                                   for kind in detect.differentiable_kinds(m)]
         self.limited = contact.limit_rows(self.model, options) > 0
-        self._wrench = 0  # the header's "wrench" flag as last written (the new arenas' is 0)
-        self.default_inputs = self._default_inputs()
-        self.upload_inputs(self.default_inputs)
 
     def _default_inputs(self):
         m, B, slots = self.model, self.n_batch, self.rigid_options.max_dynamic_constraints
@@ -338,8 +346,8 @@ class RigidSolver(Solver):
             raise SimulationError(f"rigid solver (entities: {', '.join(self.entity_names)}): more contacts than the "
                                   f"{self.data.size['C']} slots per env in this step (it was taken without the "
                                   f"extra ones); expected RigidOptions(max_contacts=...) above that (this scene's "
-                                  f"pairs can make up to {contact.worst_case_contacts(self.model)}; the default is "
-                                  f"{contact.MAX_PER_MOVING_LINK} per moving link)")
+                                  f"pairs can make up to {self.worst_contacts}; the default, None, grows the slots "
+                                  f"as needed on the CPU and gives a GPU {contact.MAX_PER_MOVING_LINK} per moving link)")
 
     def run_step(self, inputs, out, commit):
         """One step's kernels. Without contact pairs, equalities or friction loss, one launch
@@ -358,9 +366,35 @@ class RigidSolver(Solver):
     def detect_contacts(self):
         """Frame 0's contacts at the uploaded state (the first substep's stages up to the colliders;
         no step is taken)."""
-        self.kernels.smooth_substep(0, self._nothing, 0)
-        self._collide(0)
+        self._smooth_and_collide(0, self._nothing, 0)
         self.data.take_flag("constrained")
+
+    def _smooth_and_collide(self, s, inputs, flagged_only):
+        """Frame s's smooth stage and colliders (inputs and flagged_only: see _substep). Where an env
+        found more contacts than slots and the slots may grow (RigidOptions(max_contacts=None), up to
+        the pairs' worst case; on the CPU, where the flag is read without waiting for a device), they
+        double (_grow_contacts) and the two stages run again from frame s, which the growth kept: a
+        pile gets its slots as it forms, with the trajectory of a scene sized for it from the start."""
+        self.kernels.smooth_substep(s, inputs, flagged_only)
+        self._collide(s)
+        while self.data.flags_on_host and self.data.header[HEADER["overflow"]] and self._may_grow():
+            self._grow_contacts()
+            self.kernels.smooth_substep(s, self._nothing, flagged_only)  # (the inputs came over with the growth)
+            self._collide(s)
+
+    def _may_grow(self):
+        return self.rigid_options.max_contacts is None and self.data.size["C"] < self.worst_contacts
+
+    def _grow_contacts(self):
+        """Twice the contact slots (at most the worst case) and the rows they need: new arenas holding
+        everything the old ones did (RigidData.take_over), the kernels bound to them; the overflow
+        flag cleared."""
+        old = self.data
+        self._make_storage(min(2 * old.size["C"], self.worst_contacts))
+        self.data.take_over(old)
+        self.data.take_flag("overflow")
+        _logger.debug(f"rigid solver (entities: {', '.join(self.entity_names)}): contact slots per env grown from "
+                      f"{old.size['C']} to {self.data.size['C']}")
 
     def _collide(self, s):
         """Frame s's collider kernels that its near pairs need (every one on a GPU, where reading
@@ -376,8 +410,7 @@ class RigidSolver(Solver):
         per pair kind: see collision/detect.py); inputs (loaded when not empty), out (the result,
         at the last substep, when not empty), commit: see step.finish_substep; flagged_only: only
         the envs that advance left to the constraint stage."""
-        self.kernels.smooth_substep(s, inputs, flagged_only)
-        self._collide(s)
+        self._smooth_and_collide(s, inputs, flagged_only)
         # the solve only where some env has a row to form (the frame is one without rows until
         # then): a scene out of contact never loads the solve's kernel (tens of seconds of LLVM in
         # a fresh process) nor runs it; on a GPU the flag is not read (a wait for the device)
