@@ -10,6 +10,7 @@ from ..options import check_bool
 from ..runtime import logger
 from ..solvers.core import InvalidInputError, SceneStateError, refuse_grad, runtime, warn_user
 from ..solvers.rigid.merge import merged_into
+from ..solvers.rigid import shapes
 from ..solvers.rigid.model import BALL, FREE
 from . import energy, kinematics
 from .bounds import shapes_aabb
@@ -35,6 +36,16 @@ def _ltdl(mass, entity):
     root = torch.diagonal(chol, dim1=-2, dim2=-1)
     lower = (chol / root[..., None, :]).transpose(-2, -1).flip(-2, -1)
     return lower, 1.0 / root.flip(-1) ** 2
+
+
+def _mount_vector(who, name, value, n, default):
+    """attach's pos or quat: n finite numbers (a quaternion non-zero, normalised), or the default for None."""
+    refuse_grad(who, name, value, "where an entity is attached is model data, fixed at build")
+    array = np.asarray(default if value is None else value, dtype=np.float64)
+    if array.shape != (n,) or not np.all(np.isfinite(array)) or (n == 4 and np.linalg.norm(array) < 1e-9):
+        raise InvalidInputError(f"{who} argument '{name}' must be {n} finite numbers"
+                                f"{' (a non-zero quaternion w, x, y, z)' if n == 4 else ''}, got {value!r}")
+    return array / np.linalg.norm(array) if n == 4 else array
 
 
 def _check_sol_params(name, p):
@@ -242,28 +253,78 @@ class RigidEntity(EntityIndexing):
         self._specs = link_specs
         self._solver = solver
         self._solver_idx = solver.add_entity(name, link_specs)
-        # The structure is known from the specs as soon as the entity is added (as in Genesis),
-        # so n_dofs & co. and argument checks work before build; the scene-wide offsets
-        # (link_start, dof_start, q_start) only exist after build (see __getattr__).
+        self.attached_to = None  # (parent entity, its RigidLink) once attach hangs this one from it
         self.n_links = len(link_specs)
-        self.n_dofs = sum(_NDOFS[spec.joint_type] for spec in link_specs)
-        self.n_qs = sum(_NQS[spec.joint_type] for spec in link_specs)
         self.n_geoms = sum(len(spec.geoms) for spec in link_specs)
         self._link_geoms = np.cumsum([0] + [len(spec.geoms) for spec in link_specs])  # local geoms per link
         self._friction = self._friction_ratio = None  # set_friction's and set_friction_ratio's (_friction_ratios)
         self._friction_generation = None  # the rollout they were set in
-        self._free = link_specs[0].joint_type == "free"
         self.links = [RigidLink(self, spec.name, k) for k, spec in enumerate(link_specs)]
+        self._take_joints()
+
+    def _take_joints(self):
+        """n_dofs, n_qs, whether the base is free and the joints, from the specs. The structure is
+        known as soon as the entity is added (as in Genesis), so argument checks work before build;
+        the scene-wide offsets (link_start, dof_start, q_start) only exist after build (see
+        __getattr__)."""
+        specs = self._specs
+        self.n_dofs = sum(_NDOFS[spec.joint_type] for spec in specs)
+        self.n_qs = sum(_NQS[spec.joint_type] for spec in specs)
+        self._free = specs[0].joint_type == "free"
         # Joints that move (a free root's too), as in Genesis: a fixed joint is no RigidJoint. Same
         # local numbering as _on_build derives from the model.
         self.joints, dof, q = [], 0, 0
-        for link, spec in zip(self.links, link_specs):
+        for link, spec in zip(self.links, specs):
             nd, nq = _NDOFS[spec.joint_type], _NQS[spec.joint_type]
             if nd:
                 name = spec.joint_name or ("root_joint" if spec.joint_type == "free" else f"{spec.name}_joint")
                 self.joints.append(RigidJoint(self, name, spec.joint_type, link, list(range(dof, dof + nd)),
                                               list(range(q, q + nq))))
             dof, q = dof + nd, q + nq
+
+    def attach(self, parent_entity, parent_link_name=None, pos=None, quat=None):
+        """Hang this entity's base link from a link of ``parent_entity`` (added before it), before
+        build, as Genesis's: the base's free joint goes (it is welded to that link), and the two
+        are one kinematic tree (one body to the contact rules where welded: a gripper's base and
+        the arm's flange never collide). parent_link_name: that link's name (None: the parent's
+        last link that is not a static root). pos (3,) m and quat (4,) w-x-y-z: the base's pose in
+        that link's frame; neither given: the morph's pos and quat (with the file's own base pose
+        after them, as at load), only one given: the other's identity. Differentiable as any
+        scene (Genesis refuses requires_grad)."""
+        who = f"entity '{self.name}': attach"
+        if self.scene.is_built:
+            raise SceneStateError(f"{who}: the scene is already built; attach entities before scene.build()")
+        if not isinstance(parent_entity, RigidEntity) or parent_entity.scene is not self.scene:
+            raise InvalidInputError(f"{who} argument 'parent_entity' must be a rigid entity of the same scene, got "
+                                    f"{parent_entity!r}")
+        if parent_entity is self or parent_entity.idx > self.idx:
+            raise InvalidInputError(f"{who} argument 'parent_entity' must be an entity added before this one (Genesis's "
+                                    f"rule), got entity '{parent_entity.name}' (added "
+                                    f"{'as this one' if parent_entity is self else 'after it'})")
+        if self.attached_to is not None:
+            raise InvalidInputError(f"{who}: the entity is already attached to entity '{self.attached_to[0].name}'")
+        link = parent_entity._default_mount_link() if parent_link_name is None else parent_entity.get_link(parent_link_name)
+        base = self._specs[0]
+        if pos is not None or quat is not None:
+            morph_pos, morph_quat = self.morph.pos, self.morph.quat
+            # the file's own base pose, which the loader put after the morph's: kept after the mount
+            offset = shapes.compose(-shapes.quat_to_mat(morph_quat).T @ morph_pos, morph_quat * [1.0, -1.0, -1.0, -1.0],
+                                    base.pos, base.quat)
+            mount = (_mount_vector(who, "pos", pos, 3, (0.0, 0.0, 0.0)),
+                     _mount_vector(who, "quat", quat, 4, (1.0, 0.0, 0.0, 0.0)))
+            base.pos, base.quat = shapes.compose(*mount, *offset)
+        base.joint_type = "fixed"
+        self._take_joints()
+        self._solver.attach(self._solver_idx, parent_entity._solver_idx, link.idx_local)
+        self.attached_to = (parent_entity, link)
+
+    def _default_mount_link(self):
+        """The link attach takes when none is named: the last that is not a root welded in place
+        (an MJCF's static link of its worldbody's geoms comes last), Genesis's "latest link"."""
+        for link, spec in zip(reversed(self.links), reversed(self._specs)):
+            if spec.parent >= 0 or spec.joint_type != "fixed":
+                return link
+        return self.links[-1]
 
     _BUILD_ATTRS = ("link_start", "dof_start", "q_start", "geom_start", "_dof_q", "_free_joints", "_ball_joints",
                     "_turns", "_quat_joint_dofs")

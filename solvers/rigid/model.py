@@ -262,12 +262,15 @@ def _mass_matrix_pairs(dof_link, link_parent):
     return np.array(pairs, dtype=np.int32).reshape(-1, 2)
 
 
-def build_model(entities_links, self_collision=True, adjacent_collision=False):
+def build_model(entities_links, self_collision=True, adjacent_collision=False, attachments=None):
     """Concatenate entities' link lists (each in tree order) into one RigidModel.
 
     entities_links: list of ``list[LinkSpec]``; a free root joint takes its initial pose from
     the root spec's pos/quat, which are then reset to identity (the qs carry the pose).
     self_collision / adjacent_collision: the pair rules of geometry.candidate_pairs.
+    attachments: {entity index: (parent entity index, its link index)}: that entity's first link
+    hangs from that link of an earlier entity (its spec's pos/quat: where, in that link's frame;
+    its joint fixed), one kinematic tree with it (Genesis's RigidEntity.attach).
     """
     rows = {k: [] for k in ("name", "parent", "jtype", "pos0", "quat0", "axis", "com", "inertia0", "mass0",
                             "dof0", "q0", "entity", "gravcomp", "same_body", "excluded")}
@@ -275,15 +278,21 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False):
                             "frictionloss", "kp", "kv", "limit_sol", "frictionloss_sol")}
     geoms, geom_links, geom_names = [], [], []
     qpos0, equalities, connects, welds, tendons = [], [], [], [], []
+    entity_offsets = []
     for entity_idx, links in enumerate(entities_links):
         link_offset = len(rows["name"])
+        entity_offsets.append(link_offset)
+        attached = (attachments or {}).get(entity_idx)
         joint_dof = {}  # the entity's joint names → their first dof
         for spec in links:
             code = JOINT_CODE[spec.joint_type]
             free = code == FREE
             vector = code in (FREE, BALL)  # dofs without a scalar coordinate: no scalar limit or servo target
             rows["name"].append(spec.name)
-            rows["parent"].append(spec.parent + link_offset if spec.parent >= 0 else -1)
+            if attached is not None and spec is links[0]:
+                rows["parent"].append(entity_offsets[attached[0]] + attached[1])
+            else:
+                rows["parent"].append(spec.parent + link_offset if spec.parent >= 0 else -1)
             rows["jtype"].append(code)
             rows["pos0"].append(np.zeros(3) if free else spec.pos)
             rows["quat0"].append(np.array([1.0, 0, 0, 0]) if free else spec.quat)

@@ -46,6 +46,7 @@ class RigidSolver(Solver):
         self.sim_options, self.rigid_options = sim_options, rigid_options
         self.entity_links = []  # one list[LinkSpec] per rigid entity, in add order
         self.entity_names = []
+        self.attachments = {}  # entity index → (parent entity index, its link index): see attach
         self.model = self.data = None
         self._inputs_seen = {}  # name → (the input tensor _note_inputs last checked, its version)
         self.friction = self.welds_on = False  # some dof has friction loss; some env a run-time weld
@@ -69,10 +70,17 @@ class RigidSolver(Solver):
         self.entity_names.append(name)
         return len(self.entity_links) - 1
 
+    def attach(self, entity, parent_entity, parent_link):
+        """Hang entity's first link (its joint fixed, its spec's pose the mount in the parent link's
+        frame) from link ``parent_link`` of the earlier entity ``parent_entity`` (indices as
+        add_entity returns them), before build."""
+        self.attachments[entity] = (parent_entity, parent_link)
+
     def build(self, n_envs):
         options = self.rigid_options
         self.invweight_basis = None  # until at_initial_pose takes it for this model
-        self.model = build_model(self.entity_links, options.enable_self_collision, options.enable_adjacent_collision)
+        self.model = build_model(self.entity_links, options.enable_self_collision, options.enable_adjacent_collision,
+                                 self.attachments)
         if not options.enable_collision:
             self.model = contact.without_pairs(self.model)
         self.model = contact.without_uncollidable(self.model, {v: k for k, v in GEOM_CODE.items()})
