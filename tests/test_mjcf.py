@@ -1223,6 +1223,24 @@ def test_body_gravcomp_lifts_its_share_of_the_weight_as_mujocos(f64, tmp_path):
         assert float(robot.get_link(body).get_pos()[2]) == pytest.approx(expected, abs=1e-12)
 
 
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_gravcomp_bodies_in_contact_move_as_mujocos(f64, tmp_path, cone):
+    """A compensated box sliding and spinning on the floor (lighter on it: less friction; it rocks on
+    its edges, then rests) and a compensated pendulum swinging onto it, 400 steps: MuJoCo's
+    trajectory (measured 7e-15)."""
+    body = ('<geom type="plane" size="5 5 0.1"/>'
+            '<body name="box" pos="0 0 0.05" gravcomp="0.6"><freejoint/><geom type="box" size="0.1 0.05 0.05" '
+            'friction="0.5"/></body>'
+            '<body name="arm" pos="0.35 0 0.3" gravcomp="0.3"><joint type="hinge" axis="0 1 0"/>'
+            '<geom type="capsule" fromto="0 0 0 0.3 0 -0.2" size="0.03"/></body>')
+    m, d, scene, robot = _pair(_write(tmp_path, body), cone=cone, integrator="euler")
+    d.qvel[:] = [0.8, 0.3, 0.0, 0.0, 0.0, 1.5, 0.0]
+    robot.set_dofs_velocity(torch.tensor(d.qvel))
+    contacts = []
+    assert _lockstep(m, d, scene, robot, 400, after_step=lambda: contacts.append(d.ncon)) < 1e-12
+    assert sum(n > 0 for n in contacts) > 300 and contacts[-1] == 5  # (rocking, then at rest, the arm on the box)
+
+
 @pytest.mark.parametrize("what", ["masses", "gravity", "velocity"])
 def test_gradients_through_gravity_compensation_match_finite_differences(f64, tmp_path, what):
     """The bodies above (each compensated differently, a ball joint and free bodies among them), 150
