@@ -21,10 +21,8 @@ def _links(entity, envs_idx):
     velocity (B', L, 3) rad/s, world rotation (B', L, 3, 3)) of the entity's links."""
     state = entity._links(None, envs_idx, slice(0, 13))
     pos, rot, ang, vel = state[..., :3], quat_to_mat(state[..., 3:7]), state[..., 7:10], state[..., 10:13]
-    model = entity._solver.model
     links = entity.link_start + np.arange(entity.n_links)
-    com = torch.as_tensor(model.link_com[links], dtype=pos.dtype, device=pos.device)
-    lever = (rot @ com[..., None])[..., 0]
+    lever = (rot @ entity._links_com(np.arange(entity.n_links), envs_idx)[..., None])[..., 0]
     mass = entity._read_input("mass", links, envs_idx)
     return mass, pos + lever, vel + torch.linalg.cross(ang, lever), ang, rot
 

@@ -429,6 +429,12 @@ class RigidEntity(EntityIndexing):
         value = self._sim().inputs(self._solver)[name]
         return value[envs][:, torch.as_tensor(columns, device=runtime.device)]
 
+    def _links_com(self, links, envs_idx):
+        """(B', len(links), 3) m: the links' centres of mass in their frames (the input com)."""
+        columns = (3 * (self.link_start + np.asarray(links))[:, None] + np.arange(3)).reshape(-1)
+        value = self._read_input("com", columns, envs_idx)
+        return value.reshape(value.shape[0], len(links), 3)
+
     def _write_input(self, name, columns, envs, values):
         sim = self._sim()
         sim.set_input(self._solver, name, _replace(sim.inputs(self._solver)[name], envs, columns, values))
@@ -638,14 +644,14 @@ class RigidEntity(EntityIndexing):
         return self._out(shapes_aabb(shapes, poses[..., :3], poses[..., 3:]))
 
     # -- external wrenches ----------------------------------------------------------------------------
-    def _link_vectors(self, value, n_links, envs, arg):
+    def _link_vectors(self, value, n_links, envs, arg, method="apply_links_external_wrench"):
         """User (n, 3) or, batched, (len(envs), n, 3) vectors, or any shape that broadcasts to it as
-        Genesis's (a (3,) vector for every link and env) → (len(envs), n, 3)."""
+        Genesis's (a (3,) vector for every link and env) → (len(envs), n, 3); method: whose argument."""
         shape = (n_links, 3) if self.scene.n_envs == 0 else (len(envs), n_links, 3)
         given = self._tensor(value, arg, shape)
         tensor = broadcast(given, shape)
         if tensor is None:
-            raise InvalidInputError(f"entity '{self.name}': apply_links_external_wrench argument '{arg}' must have "
+            raise InvalidInputError(f"entity '{self.name}': {method} argument '{arg}' must have "
                                     f"shape {shape} (or one that broadcasts to it), got {tuple(given.shape)}")
         return self._values(tensor.reshape(*shape[:-2], 3 * n_links), 3 * n_links, envs, arg).reshape(-1, n_links, 3)
 
@@ -672,8 +678,7 @@ class RigidEntity(EntityIndexing):
         envs = self._envs(envs_idx, distinct=True)
         origin = self._links(links, envs_idx, slice(0, 3))  # (len(envs), n, 3)
         rot = quat_to_mat(self._links(links, envs_idx, slice(3, 7)))
-        com = torch.as_tensor(self._solver.model.link_com[self.link_start + links], dtype=runtime.tc_float,
-                              device=runtime.device)
+        com = self._links_com(links, envs_idx)
         zeros = torch.zeros_like(origin)
         f = zeros if force is None else self._link_vectors(force, len(links), envs, "force")
         t = zeros if torque is None else self._link_vectors(torque, len(links), envs, "torque")
@@ -825,6 +830,22 @@ class RigidEntity(EntityIndexing):
         envs = self._envs(envs_idx, distinct=True)
         values = self._refuse_negative("mass", self._values(mass, len(links), envs, "mass"), " kg")
         self._write_input("mass", self.link_start + links, envs, values)
+
+    def get_links_COM(self, links_idx_local=None, envs_idx=None):
+        """Each link's centre of mass in its frame, m: (n, 3) or (n_envs, n, 3), as Genesis's."""
+        links = self._local(links_idx_local, self.n_links, "links_idx_local")
+        return self._out(self._links_com(links, envs_idx))
+
+    def set_links_COM(self, com, links_idx_local=None, envs_idx=None):
+        """Each link's centre of mass in its frame, m: (n, 3) or (n_envs, n, 3) (Genesis's); its
+        inertia stays the same about it. Differentiable. The constraint rows' scale (MuJoCo's
+        body_invweight0, get_dofs_invweight) stays that of the build's centres of mass, as MuJoCo's
+        stays its compiled one (Genesis recomputes it)."""
+        links = self._local(links_idx_local, self.n_links, "links_idx_local", distinct=True)
+        envs = self._envs(envs_idx, distinct=True)
+        values = self._link_vectors(com, len(links), envs, "com", "set_links_COM")
+        columns = (3 * (self.link_start + links)[:, None] + np.arange(3)).reshape(-1)
+        self._write_input("com", columns, envs, values.reshape(len(envs), -1))
 
     def get_mass(self, envs_idx=None):
         """Total mass of the links that move, kg: () or (n_envs,). As Genesis's, links welded to the

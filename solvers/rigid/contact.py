@@ -104,7 +104,8 @@ def capacity(model, options, contacts=None):
 class InvweightBasis:
     """What MuJoCo's body_invweight0 and dof_invweight0 (mj_setConst) are made of at the initial
     pose q0, where they depend on nothing but the masses and the armature: M(q0) = Σ_l mass_l K_l +
-    diag(armature) (a link's inertia scales with its mass: K_l is M of link l alone at 1 kg), and
+    diag(armature) (a link's inertia scales with its mass: K_l is M of link l alone at 1 kg, with
+    its build's centre of mass: set_links_COM leaves the scale as MuJoCo leaves its compiled one), and
     J_l (6, D) the Jacobian of link l's centre of mass. ``__call__`` gives the rows' scale per env
     from the mass and armature inputs, in torch, so that their gradients reach mass and armature
     (Genesis recomputes them when those change, as mj_setConst does):

@@ -46,6 +46,7 @@ SERIAL_SOLVE_WORK = 384
 # Per-step inputs: name → (width per env, differentiable). Their order is the packing order.
 INPUTS = {
     "mass": ("L", True),        # kg
+    "com": ("L3", True),        # m: each link's centre of mass in its frame (x, y, z a link)
     "damping": ("D", True),     # N·m·s/rad or N·s/m
     "armature": ("D", True),    # kg·m² or kg
     "stiffness": ("D", True),   # N·m/rad or N/m: a joint spring −stiffness·(q − springref) (actuation.py)
@@ -64,7 +65,7 @@ INPUTS = {
     "solimp": ("G5", True),     # per geom: (d0, dwidth, width m, midpoint, power) of the impedance
     # MuJoCo's body_invweight0 (translation, 1/kg) per link and dof_invweight0 per dof (1/kg or
     # 1/(kg·m²)): the rows' scale (constraint/rows.py), derived from mass and armature at the initial
-    # pose (contact.invweight), never set by hand
+    # pose (contact.InvweightBasis, with the build's centres of mass), never set by hand
     "invweight_t": ("L", True),
     "invweight_r": ("L", True),  # rotation, 1/(kg·m²): a weld's turn rows
     "invweight_dof": ("D", True),
@@ -200,7 +201,7 @@ assert [diff for _, diff in INPUTS.values()] == sorted((diff for _, diff in INPU
 
 def input_width(name, model, n_dyn_welds):
     width, n_geoms = INPUTS[name][0], len(model.geom_type)
-    return {"L": model.n_links, "L6": 6 * model.n_links, "D": model.n_dofs, "G": n_geoms, "G2": 2 * n_geoms,
+    return {"L": model.n_links, "L3": 3 * model.n_links, "L6": 6 * model.n_links, "D": model.n_dofs, "G": n_geoms, "G2": 2 * n_geoms,
             "G5": 5 * n_geoms, "T": model.n_tendons, "DWW": 1 + DYN_WELD * n_dyn_welds}.get(width, width)
 
 
@@ -301,7 +302,7 @@ def _counts(size):
             "E": size["E"], "E2": 2 * size["E"], "E7": 7 * size["E"], "K2": 2 * size["K"], "K7": 7 * size["K"],
             "T": size["T"], "T3": TENDON_JOINTS * size["T"], "T7": 7 * size["T"],
             "WD": size["WD"], "WD2": 2 * size["WD"],
-            "G2": 2 * size["G"], "G5": 5 * size["G"], "L6": 6 * size["L"], "D7": 7 * D, 1: 1,
+            "G2": 2 * size["G"], "G5": 5 * size["G"], "L3": 3 * size["L"], "L6": 6 * size["L"], "D7": 7 * D, 1: 1,
             len(CONSTS): len(CONSTS),
             **{f"ws:{name}": size["WS"] * n for name, (_, n) in CONVEX_SCRATCH.items()}}
 

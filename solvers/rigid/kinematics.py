@@ -61,11 +61,17 @@ def reference(d: ti.template(), s, e, l):
 
 
 @ti.func
+def _link_com(d: ti.template(), e, l):
+    """Link l's centre of mass in its frame (m): the input com."""
+    return ti.Vector([d.com[e, 3 * l + k] for k in ti.static(range(3))])
+
+
+@ti.func
 def _link_inertia(d: ti.template(), s, e, l, pos, rot):
     """Spatial inertia (m, h, I about the reference) of link l alone; pos: its origin relative to
     the reference."""
     m = d.mass[e, l]
-    com = pos + mat_vec(rot, d.link_com[l])
+    com = pos + mat_vec(rot, _link_com(d, e, l))
     inertia_com = mat_mul(mat_mul(rot, d.link_inertia0[l] * (m * d.link_inv_mass0[l])), rot.transpose())
     inertia = inertia_com + m * ((com[0] ** 2 + com[1] ** 2 + com[2] ** 2) * ti.Matrix.identity(float, 3)
                                  - com.outer_product(com))
@@ -149,7 +155,7 @@ def _link_inertia_adjoint(d: ti.template(), s, e, l, pos, rot, g_m, g_h, g_i):
     """(g_pos, g_rot) from the gradient (g_m, g_h, g_i) of link l's spatial inertia; the mass's
     is stored (pos relative to the reference, a constant here)."""
     m = d.mass[e, l]
-    arm = mat_vec(rot, d.link_com[l])  # com − pos, rotating with the link
+    arm = mat_vec(rot, _link_com(d, e, l))  # com − pos, rotating with the link
     com = pos + arm
     trace = g_i.trace()
     g_sym = g_i + g_i.transpose()
@@ -161,6 +167,9 @@ def _link_inertia_adjoint(d: ti.template(), s, e, l, pos, rot, g_m, g_h, g_i):
     g_mass = (g_m + g_h.dot(com) + trace * com.dot(com) - com.dot(mat_vec(g_i, com))
               + 0.5 * (g_sym * unit).sum())
     accumulate(d.mass.grad, ti.Vector([e, l]), g_mass)
+    g_local = mat_vec(rot.transpose(), g_com)  # the com input turns with the link
+    for k in ti.static(range(3)):
+        accumulate(d.com.grad, ti.Vector([e, 3 * l + k]), g_local[k])
     g_rot = arm.cross(g_com) + m * ti.Vector([p[1, 2] - p[2, 1], p[2, 0] - p[0, 2], p[0, 1] - p[1, 0]])
     return g_com, g_rot
 

@@ -36,7 +36,7 @@ class RigidSolver(Solver):
     """Owns the rigid model (immutable), its Taichi data and the default inputs."""
 
     #: inputs that keep their value across ``scene.reset()`` (controls do not)
-    persistent_inputs = ("mass", "damping", "armature", "stiffness", "kp", "kv", "gravity", "force_lo", "force_hi",
+    persistent_inputs = ("mass", "com", "damping", "armature", "stiffness", "kp", "kv", "gravity", "force_lo", "force_hi",
                          "frictionloss", "friction", "solref", "solimp", "invweight_t", "invweight_r", "invweight_dof",
                          "invweight_ten")
 
@@ -153,7 +153,7 @@ class RigidSolver(Solver):
         m, B, slots = self.model, self.n_batch, self.rigid_options.max_dynamic_constraints
         effort = np.minimum(m.dof_effort, BIG)
         per_env = {
-            "mass": m.link_mass0, "damping": m.dof_damping, "armature": m.dof_armature,
+            "mass": m.link_mass0, "com": m.link_com.reshape(-1), "damping": m.dof_damping, "armature": m.dof_armature,
             "stiffness": m.dof_stiffness, "kp": m.dof_kp, "kv": m.dof_kv, "gravity": np.array(self.sim_options.gravity),
             "ctrl_force": np.zeros(m.n_dofs), "ctrl_pos": np.zeros(m.n_dofs), "ctrl_vel": np.zeros(m.n_dofs),
             "xfrc": np.zeros(6 * m.n_links),
