@@ -36,6 +36,20 @@ def assert_converged(errors, what):
     assert converged and min(converged) <= BAR, f"{what}: relative errors per eps {scan}"
 
 
+def checked_gradient(loss, value, what, seeds=2):
+    """The gradient of loss at ``value``, after checking it against central differences along
+    ``seeds`` random directions (assert_converged) and that a repeated rollout keeps its bits."""
+    for seed in range(seeds):
+        assert_converged(directional_errors(loss, value, seed), f"{what}, direction {seed}")
+    grads = []
+    for _ in range(2):
+        x = value.clone().requires_grad_(True)
+        loss(x).backward()
+        grads.append(x.grad)
+    assert torch.equal(grads[0], grads[1]), f"{what}: a repeated rollout's gradient changed"
+    return grads[0]
+
+
 def repeated_gradients(scene, robot, velocity, rollout):
     """The gradients of ``rollout()`` (a loss) in the robot's initial dof velocities ``velocity``
     (numpy) from two rollouts, each after scene.reset(): a repeat's gradient must keep its bits."""
