@@ -211,24 +211,43 @@ def test_attach_arguments_are_checked(f64, tmp_path):
         later.attach(arm)
 
 
-def test_a_mount_comes_before_the_files_own_base_pose(f64, tmp_path):
-    """attach(pos, quat) replaces the morph's placement only: an MJCF whose base body the file puts at
-    (0.1, 0, 0.05), turned, hangs at mount ∘ that pose in the parent link's frame (Genesis composes the
-    mount with the file's base offset so)."""
+def test_a_mount_replaces_the_files_own_base_pose_as_genesis(f64, tmp_path):
+    """attach(pos, quat) is the base's pose in the parent link's frame, whatever the morph and the file
+    put it at: an MJCF whose base body the file puts at (0.1, 0, 0.05), turned 90°, hangs exactly at the
+    mount (Genesis 1.4.5, measured on a body at (0, 0, 1) with pos=(0.2, 0, 0): the tool at (0.2, 0,
+    1.0), unturned). Without pos and quat, the file's pose stays after the morph's, as at load."""
     body = ('<mujoco><worldbody><body name="tool" pos="0.1 0 0.05" euler="0 0 90"><freejoint/>'
             '<geom type="box" size="0.02 0.03 0.04"/></body></worldbody></mujoco>')
     path = tmp_path / "tool.xml"
     path.write_text(body)
     scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False), show_viewer=False)
     arm = scene.add_entity(gs.morphs.URDF(file=_write(tmp_path, "arm", ARM), fixed=True, merge_fixed_links=False))
-    tool = scene.add_entity(gs.morphs.MJCF(file=str(path), pos=(1.0, 2.0, 3.0), euler=(30.0, 0.0, 0.0)))
+    mounted = scene.add_entity(gs.morphs.MJCF(file=str(path), pos=(1.0, 2.0, 3.0), euler=(30.0, 0.0, 0.0)))
+    placed = scene.add_entity(gs.morphs.MJCF(file=str(path), pos=MOUNT_XYZ, quat=_rpy_quat(MOUNT_RPY)))
     mount_quat = _rpy_quat(MOUNT_RPY)
-    tool.attach(arm, "flange", pos=MOUNT_XYZ, quat=mount_quat)
+    mounted.attach(arm, "flange", pos=MOUNT_XYZ, quat=mount_quat)
+    placed.attach(arm, "flange")
     scene.build()
     flange = arm.get_link("flange")
-    at_mount = gs.utils.geom.transform_by_quat(np.array([0.1, 0.0, 0.05]), mount_quat) + np.array(MOUNT_XYZ)
-    expected = flange.get_pos().numpy() + gs.utils.geom.transform_by_quat(at_mount, flange.get_quat().numpy())
-    np.testing.assert_allclose(tool.get_pos().numpy(), expected, atol=1e-14)
-    turn = gs.utils.geom.transform_quat_by_quat(np.array([np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5)]), mount_quat)
-    expected_quat = gs.utils.geom.transform_quat_by_quat(turn, flange.get_quat().numpy())
-    assert abs(abs(tool.get_quat().numpy() @ expected_quat) - 1.0) < 1e-14
+    rotate = gs.utils.geom.transform_by_quat
+    for tool, at, turn in ((mounted, np.array(MOUNT_XYZ), mount_quat),
+                           (placed, np.array(MOUNT_XYZ) + rotate(np.array([0.1, 0.0, 0.05]), mount_quat),
+                            gs.utils.geom.transform_quat_by_quat(np.array([np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5)]),
+                                                                 mount_quat))):
+        expected = flange.get_pos().numpy() + rotate(at, flange.get_quat().numpy())
+        np.testing.assert_allclose(tool.get_pos().numpy(), expected, atol=1e-14)
+        expected_quat = gs.utils.geom.transform_quat_by_quat(turn, flange.get_quat().numpy())
+        assert abs(abs(tool.get_quat().numpy() @ expected_quat) - 1.0) < 1e-14
+
+
+def test_a_camera_follows_an_attached_entity_from_where_it_hangs(f64, tmp_path):
+    """A camera told before build to follow an attached entity measures its offset from where the base
+    hangs once built, not from the morph's position (where this camera stands)."""
+    scene = gs.Scene(show_viewer=False)
+    arm = scene.add_entity(gs.morphs.URDF(file=_write(tmp_path, "arm", ARM), fixed=True, merge_fixed_links=False))
+    box = scene.add_entity(gs.morphs.Box(size=(0.05, 0.05, 0.05), pos=(2.0, 0.0, 1.0)))
+    box.attach(arm, pos=(0.03, 0.0, 0.0))
+    camera = scene.add_camera(pos=(2.0, 0.0, 1.0), lookat=(0.0, 0.0, 0.5), res=(32, 32))
+    camera.follow_entity(box)
+    scene.build()
+    np.testing.assert_allclose(camera._follow[1], np.array([2.0, 0.0, 1.0]) - box.get_pos().numpy(), atol=1e-12)

@@ -10,7 +10,6 @@ from ..options import check_bool
 from ..runtime import logger
 from ..solvers.core import InvalidInputError, SceneStateError, refuse_grad, runtime, warn_user
 from ..solvers.rigid.merge import merged_into
-from ..solvers.rigid import shapes
 from ..solvers.rigid.model import BALL, FREE
 from . import energy, kinematics
 from .bounds import shapes_aabb
@@ -287,10 +286,12 @@ class RigidEntity(EntityIndexing):
         build, as Genesis's: the base's free joint goes (it is welded to that link), and the two
         are one kinematic tree (one body to the contact rules where welded: a gripper's base and
         the arm's flange never collide). parent_link_name: that link's name (None: the parent's
-        last link that is not a static root). pos (3,) m and quat (4,) w-x-y-z: the base's pose in
-        that link's frame; neither given: the morph's pos and quat (with the file's own base pose
-        after them, as at load), only one given: the other's identity. Differentiable as any
-        scene (Genesis refuses requires_grad)."""
+        last link that is not a static root; Genesis 1.4.5 raises). pos (3,) m and quat (4,) w-x-y-z:
+        the base's pose in that link's frame, as Genesis places it (a base pose the file states goes,
+        as the morph's does); neither given: the morph's pos and quat and the file's base pose after
+        them, as at load; one given: the other's identity. Gravity compensation stays each entity's
+        own (Genesis's follows the tree's root entity). Differentiable as any scene (Genesis refuses
+        requires_grad)."""
         who = f"entity '{self.name}': attach"
         if self.scene.is_built:
             raise SceneStateError(f"{who}: the scene is already built; attach entities before scene.build()")
@@ -305,14 +306,9 @@ class RigidEntity(EntityIndexing):
             raise InvalidInputError(f"{who}: the entity is already attached to entity '{self.attached_to[0].name}'")
         link = parent_entity._default_mount_link() if parent_link_name is None else parent_entity.get_link(parent_link_name)
         base = self._specs[0]
-        if pos is not None or quat is not None:
-            morph_pos, morph_quat = self.morph.pos, self.morph.quat
-            # the file's own base pose, which the loader put after the morph's: kept after the mount
-            offset = shapes.compose(-shapes.quat_to_mat(morph_quat).T @ morph_pos, morph_quat * [1.0, -1.0, -1.0, -1.0],
-                                    base.pos, base.quat)
-            mount = (_mount_vector(who, "pos", pos, 3, (0.0, 0.0, 0.0)),
-                     _mount_vector(who, "quat", quat, 4, (1.0, 0.0, 0.0, 0.0)))
-            base.pos, base.quat = shapes.compose(*mount, *offset)
+        if pos is not None or quat is not None:  # (the file's own base pose goes with the morph's, as in Genesis)
+            base.pos = _mount_vector(who, "pos", pos, 3, (0.0, 0.0, 0.0))
+            base.quat = _mount_vector(who, "quat", quat, 4, (1.0, 0.0, 0.0, 0.0))
         base.joint_type = "fixed"
         self._take_joints()
         self._solver.attach(self._solver_idx, parent_entity._solver_idx, link.idx_local)

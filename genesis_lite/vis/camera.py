@@ -117,8 +117,10 @@ class Camera:
             raise InvalidInputError(f"{self._name}: argument 'env_idx' must be one of the rendered envs "
                                     f"{rendered.tolist()} (VisOptions.rendered_envs_idx, n_envs={self._scene.n_envs}), "
                                     f"got {self._env_idx}")
-        if self._follow is not None and self._follow[1] is None:  # followed before build: the base starts at
-            self._apart(f"{self._name}.follow_entity", self._follow[0], self._follow[0].morph.pos)  # its morph's pos
+        followed = None if self._follow is None or self._follow[1] is not None else self._follow[0]
+        if followed is not None and getattr(followed, "attached_to", None) is None:  # followed before build: the
+            self._apart(f"{self._name}.follow_entity", followed, followed.morph.pos)  # base starts at its morph's pos
+        # (an attached entity's base starts where its parent link puts it: _on_build measures it there)
 
     def _on_build(self):
         """The scene is built: the camera can render."""
