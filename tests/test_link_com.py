@@ -113,3 +113,42 @@ def test_set_links_com_checks_its_arguments(f64, tmp_path):
     robot.set_links_COM([0.0, 0.1, 0.0], links_idx_local=[1], envs_idx=[1])  # (a (3,) vector broadcasts)
     com = robot.get_links_COM(links_idx_local=[1])
     assert com.shape == (2, 1, 3) and com[1, 0].tolist() == [0.0, 0.1, 0.0] and com[0, 0].tolist() != [0.0, 0.1, 0.0]
+
+
+def test_mass_and_com_shifts_move_from_the_builds_values_as_genesis(f64, tmp_path):
+    """Genesis's domain randomisation (examples/rigid/domain_randomization.py): set_mass_shift and
+    set_COM_shift set the build's values plus the shift (not cumulative), per env, and differentiate
+    as set_links_mass and set_links_COM do (the gradient of a rollout w.r.t. the shift is theirs)."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.004, requires_grad=True))
+    robot = scene.add_entity(gs.morphs.MJCF(file=_write(tmp_path, BODIES)))
+    scene.build(n_envs=2)
+    mass0, com0 = robot.get_links_mass().detach().clone(), robot.get_links_COM().detach().clone()
+    heavy = [robot.get_link(name).idx_local for name in ("arm", "bob", "box")]
+    mass_shift, com_shift = torch.tensor([[0.1, -0.05, 0.2]] * 2), torch.tensor([[[0.01, 0.0, -0.02]] * 3] * 2)
+    for _ in range(2):  # (twice: not cumulative)
+        robot.set_mass_shift(mass_shift, links_idx_local=heavy)
+        robot.set_COM_shift(com_shift, links_idx_local=heavy)
+    assert torch.allclose(robot.get_links_mass()[:, heavy], mass0[:, heavy] + mass_shift, rtol=0, atol=1e-15)
+    assert torch.allclose(robot.get_links_COM()[:, heavy], com0[:, heavy] + com_shift, rtol=0, atol=1e-15)
+
+    def final_height(setter, value):
+        scene.reset()
+        setter(value)
+        for _ in range(40):
+            scene.step()
+        return robot.get_links_pos()[..., 2].sum()
+
+    for shift_setter, setter, base in (
+            (lambda x: robot.set_mass_shift(x, links_idx_local=heavy),
+             lambda x: robot.set_links_mass(x, links_idx_local=heavy), mass0[:, heavy]),
+            (lambda x: robot.set_COM_shift(x, links_idx_local=heavy),
+             lambda x: robot.set_links_COM(x, links_idx_local=heavy), com0[:, heavy])):
+        shift = torch.zeros_like(base, requires_grad=True)
+        final_height(shift_setter, shift).backward()
+        value = base.clone().requires_grad_(True)
+        final_height(setter, value).backward()
+        assert shift.grad.abs().max() > 0 and torch.equal(shift.grad, value.grad)
+    with pytest.raises(gs.InvalidInputError, match="'mass_shift' must leave every mass ≥ 0 kg"):
+        robot.set_mass_shift([-100.0, 0.0, 0.0], links_idx_local=heavy)
+    with pytest.raises(gs.InvalidInputError, match=r"set_COM_shift argument 'com_shift' must have shape"):
+        robot.set_COM_shift(torch.zeros(2, 2, 3), links_idx_local=heavy)

@@ -827,6 +827,30 @@ class RigidEntity(EntityIndexing):
         values = self._refuse_negative("mass", self._values(mass, len(links), envs, "mass"), " kg")
         self._write_input("mass", self.link_start + links, envs, values)
 
+    def set_mass_shift(self, mass_shift, links_idx_local=None, envs_idx=None):
+        """Genesis's domain randomisation: each link's mass ← the build's + mass_shift, kg ((n,) or
+        (n_envs, n)); not cumulative. As set_links_mass (whose rule it follows: the link's inertia
+        scales with its mass; Genesis's shift leaves the inertia) and differentiable."""
+        links = self._local(links_idx_local, self.n_links, "links_idx_local", distinct=True)
+        envs = self._envs(envs_idx, distinct=True)
+        build = torch.as_tensor(self._solver.model.link_mass0[self.link_start + links], dtype=runtime.tc_float,
+                                device=runtime.device)
+        values = build + self._values(mass_shift, len(links), envs, "mass_shift")
+        if bool((values.detach() < 0).any()):
+            raise InvalidInputError(f"entity '{self.name}': argument 'mass_shift' must leave every mass ≥ 0 kg (the "
+                                    f"build's {build.cpu().numpy()} kg), got masses {values.detach().cpu().numpy()}")
+        self._write_input("mass", self.link_start + links, envs, values)
+
+    def set_COM_shift(self, com_shift, links_idx_local=None, envs_idx=None):
+        """Genesis's domain randomisation: each link's centre of mass ← the build's + com_shift, m
+        ((n, 3) or (n_envs, n, 3), in the link's frame); not cumulative. As set_links_COM, differentiable."""
+        links = self._local(links_idx_local, self.n_links, "links_idx_local", distinct=True)
+        envs = self._envs(envs_idx, distinct=True)
+        build = torch.as_tensor(self._solver.model.link_com[self.link_start + links], dtype=runtime.tc_float,
+                                device=runtime.device)
+        self._write_links_com(links, envs, build + self._link_vectors(com_shift, len(links), envs, "com_shift",
+                                                                      "set_COM_shift"))
+
     def get_links_COM(self, links_idx_local=None, envs_idx=None):
         """Each link's centre of mass in its frame, m: (n, 3) or (n_envs, n, 3), as Genesis's."""
         links = self._local(links_idx_local, self.n_links, "links_idx_local")
@@ -839,7 +863,10 @@ class RigidEntity(EntityIndexing):
         stays its compiled one (Genesis recomputes it)."""
         links = self._local(links_idx_local, self.n_links, "links_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
-        values = self._link_vectors(com, len(links), envs, "com", "set_links_COM")
+        self._write_links_com(links, envs, self._link_vectors(com, len(links), envs, "com", "set_links_COM"))
+
+    def _write_links_com(self, links, envs, values):
+        """The input com of ``links`` in ``envs`` ← values (len(envs), len(links), 3) m."""
         columns = (3 * (self.link_start + links)[:, None] + np.arange(3)).reshape(-1)
         self._write_input("com", columns, envs, values.reshape(len(envs), -1))
 
