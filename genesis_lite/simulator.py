@@ -454,6 +454,10 @@ class Simulator:
         _last_step)."""
         return self._last_step(solver, "get_dofs_acc", "dofs_dynamics")[:, 1]
 
+    def links_acc(self, solver):
+        """(B, L, 3) the last step's links' classical linear accelerations (solver.links_acc; see _last_step)."""
+        return self._last_step(solver, "get_links_acc", "links_acc")
+
     def contacts(self, solver, what):
         """(B, C, 12) the last step's contacts (solver.contacts; see _last_step)."""
         return self._last_step(solver, what, "contacts")

@@ -1260,6 +1260,19 @@ class RigidEntity(EntityIndexing):
         differentiable (the next state's velocity carries it)."""
         return self._last_step_dofs(self._sim().dofs_acc(self._solver), dofs_idx_local, envs_idx)
 
+    def get_links_acc(self, links_idx_local=None, envs_idx=None, *, relative=True):
+        """Classical linear acceleration of each link's origin, world frame, m/s²: (n, 3) or
+        (n_envs, n, 3), as Genesis's, in the last step's last substep (the state it started from and
+        the acceleration it integrated; gravity not in it: a body at rest reads 0, a falling one g).
+        relative: Genesis's choice between the authored link origin and its solver's internal one;
+        ours are one, so both read the same. Zeros in an env before its first step and after a reset
+        or setter replaced its state. Not differentiable."""
+        check_bool(f"entity '{self.name}': get_links_acc", "relative", relative)
+        links = self._local(links_idx_local, self.n_links, "links_idx_local")
+        full = self._sim().links_acc(self._solver)
+        envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
+        return self._out(full[envs][:, torch.as_tensor(self.link_start + links, device=runtime.device)])
+
     def _last_step_dofs(self, full, dofs_idx_local, envs_idx):
         """The entity's columns ``dofs_idx_local`` and rows ``envs_idx`` of a (B, D) readout."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")

@@ -55,6 +55,7 @@ class RigidSolver(Solver):
         self._commit = 1  # 0 while a backward replays a step: its frames stay for the reverse
         self._replaying = 0  # 1 while a backward replays a step given its replay_record (the solutions)
         self._warned_capped = False  # _check_capped warned
+        self._stepped = False  # a step was taken (the last step's readouts are zeros before)
         self.invweight_basis = None  # contact.InvweightBasis, taken at build
         self._clear_substep_record()
 
@@ -330,7 +331,7 @@ class RigidSolver(Solver):
         step; more contacts than slots raise; a differentiable forward step warns when its solve
         stopped short (on the CPU, where the flag is read without waiting for a device)."""
         forward = self._commit
-        self._commit, self._replaying = 1, 0
+        self._commit, self._replaying, self._stepped = 1, 0, True
         if self.data.size["N"]:
             self._check_overflow()
         if forward and self.sim_options.requires_grad and self.data.flags_on_host:
@@ -588,6 +589,14 @@ class RigidSolver(Solver):
         self.kernels.read_dofs_dynamics(out)
         return out
 
+    def links_acc(self):
+        """(B, L, 3) m/s² the last step's last substep's classical linear acceleration of each link's
+        origin, world frame, gravity out (step.read_links_acc; zeros before any step)."""
+        out = torch.zeros((self.n_batch, self.model.n_links, 3), dtype=runtime.tc_float, device=runtime.device)
+        if self._stepped:
+            self.kernels.read_links_acc(out)
+        return out
+
     def contacts(self, substep=-1):
         """(B, C, 12) the contacts of the last step's ``substep`` (see step.read_contacts; rows past
         each env's count have geom −1 and zeros), C = 0 without candidate pairs."""
@@ -596,13 +605,13 @@ class RigidSolver(Solver):
             self.kernels.read_contacts(substep % self.sim_options.substeps, out)
         return out
 
-    last_step_readouts = ("contacts", "dofs_dynamics")
+    last_step_readouts = ("contacts", "dofs_dynamics", "links_acc")
 
     @staticmethod
     def without_last_step(readout, value, envs):
-        """``value`` of ``readout`` (contacts (B, C, 12), dofs_dynamics (B, 2, D)) as if the envs of
-        the bool mask ``envs`` (B,) had taken no step: no contacts (rows as the unused ones: geom −1,
-        the rest 0), no force, no acceleration."""
+        """``value`` of ``readout`` (contacts (B, C, 12), dofs_dynamics (B, 2, D), links_acc (B, L, 3))
+        as if the envs of the bool mask ``envs`` (B,) had taken no step: no contacts (rows as the
+        unused ones: geom −1, the rest 0), no force, no acceleration."""
         out = value.clone()
         out[envs] = 0.0
         if readout == "contacts":

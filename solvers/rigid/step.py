@@ -508,6 +508,32 @@ def read_links(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, 
 
 
 @ti.kernel
+def read_links_acc(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
+    """dst (B, L, 3) ← each link origin's classical linear acceleration (m/s², world frame) in the
+    last step's last substep: the link's spatial acceleration at its tree's reference — cacc (the
+    velocity products and the base's −gravity, taken back out here) plus Σ cdof·q̈ over the dofs
+    from the root down to it — moved to the origin, a + α × r + ω × (v + ω × r), r = origin −
+    reference (as _point_bias_acceleration moves it, q̈ added)."""
+    ti.loop_config(serialize=schedule[1])
+    for e in range(n_batch(ints)):
+        d = bind(ints, f1, v3, v4, m3)
+        s = d.substeps - 1
+        gravity = ti.Vector([d.gravity[e, k] for k in ti.static(range(3))])
+        for l in range(d.n_links):
+            alpha, acc = d.cacc_w[s, e, l], d.cacc_v[s, e, l] + gravity
+            j = l
+            while j >= 0:  # (the dofs from link l up to its root)
+                for i in range(d.link_dof0[j], d.link_dof0[j] + dof_count(d, j)):
+                    alpha += d.cdof_w[s, e, i] * d.qacc[s, e, i]
+                    acc += d.cdof_v[s, e, i] * d.qacc[s, e, i]
+                j = d.link_parent[j]
+            w, r = d.cvel_w[s, e, l], d.xpos[s, e, l] - reference(d, s, e, l)
+            out = acc + alpha.cross(r) + w.cross(d.cvel_v[s, e, l] + w.cross(r))
+            for k in ti.static(range(3)):
+                dst[e, l, k] = out[k]
+
+
+@ti.kernel
 def read_mass_matrix(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
     ti.loop_config(serialize=schedule[1])
     for e in range(n_batch(ints)):
@@ -588,5 +614,6 @@ def read_contacts(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M
 #: what solver.py launches (through solvers.launch, with the scene's arenas; reverse_dynamics,
 #: collide and constrain with a config of their own: constrain's is the solve's schedule and the cone)
 KERNELS = (advance, prepare_reverse, reverse_kinematics, down_sweep, down_sweep_adjoint,
-           position_stages, write_state, read_state, write_inputs, read_links, read_mass_matrix, read_dofs_dynamics,
+           position_stages, write_state, read_state, write_inputs, read_links, read_links_acc, read_mass_matrix,
+           read_dofs_dynamics,
            read_com_jacobians, read_contacts, smooth_substep, finish_substep)
