@@ -1279,8 +1279,10 @@ def test_links_acc_is_each_origins_acceleration_as_mujocos(f64, tmp_path):
     """get_links_acc: the classical linear acceleration of each link origin in the last step (its start
     state, the acceleration it integrated), gravity out: MuJoCo 4's mj_objectAcceleration of the body
     frame (after mj_rnePostConstraint) plus gravity, for a hinge, slide and ball chain swinging and a
-    box (its centre of mass off its origin) landing and spinning on the floor, 200 steps; zeros before
-    the first step and after a reset; a box at rest reads zero."""
+    box (its centre of mass off its origin) landing and spinning on the floor, 200 steps, read after
+    the link poses and the mass matrix at the new state were; zeros before the first step and after
+    a reset; a box at rest reads zero. (The state's integrated acceleration: MuJoCo's where no joint
+    is damped, as here; damping makes ours the implicitly damped one, as get_dofs_acc's.)"""
     m, d, scene, robot = _pair(_write(tmp_path, ACC_BODIES), integrator="euler")
     assert torch.equal(robot.get_links_acc(), torch.zeros(robot.n_links, 3, dtype=torch.float64))
     d.qvel[:] = np.random.default_rng(1).normal(size=m.nv)
@@ -1297,6 +1299,7 @@ def test_links_acc_is_each_origins_acceleration_as_mujocos(f64, tmp_path):
         touching += d.ncon > 0
         mujoco.mj_step(m, d)
         scene.step()
+        robot.get_links_pos(), robot.get_mass_mat()  # (readouts at the new state leave the last step's be)
         ours = robot.get_links_acc(links_idx_local=[robot.get_link(name).idx_local for name in names]).numpy()
         worst = max(worst, np.abs(ours - np.array(expected)).max())
     print(f"\nget_links_acc against MuJoCo: {worst:.1e} m/s² at worst")

@@ -1263,7 +1263,8 @@ class RigidEntity(EntityIndexing):
     def get_links_acc(self, links_idx_local=None, envs_idx=None, *, relative=True):
         """Classical linear acceleration of each link's origin, world frame, m/s²: (n, 3) or
         (n_envs, n, 3), as Genesis's, in the last step's last substep (the state it started from and
-        the acceleration it integrated; gravity not in it: a body at rest reads 0, a falling one g).
+        the acceleration it integrated, as get_dofs_acc's: with joint damping the implicitly damped
+        one; gravity not in it: a body at rest reads 0, a falling one g).
         relative: Genesis's choice between the authored link origin and its solver's internal one;
         ours are one, so both read the same. Zeros in an env before its first step and after a reset
         or setter replaced its state. Not differentiable."""

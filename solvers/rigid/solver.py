@@ -561,24 +561,25 @@ class RigidSolver(Solver):
     def links_kinematics(self):
         """(B, L, 13): link origin pos (3), quat (4), angular velocity ω (3) and the link origin's linear
         velocity v (3), world frame."""
-        self.kernels.down_sweep()  # poses and velocities need this sweep only
+        last = self.substeps  # (the frame no stage of a step uses: the last step's stay, step.down_sweep)
+        self.kernels.down_sweep(last)  # poses and velocities need this sweep only
         out = torch.empty((self.n_batch, self.model.n_links, 13), dtype=runtime.tc_float, device=runtime.device)
-        self.kernels.read_links(out)
+        self.kernels.read_links(last, out)
         return out
 
     def links_kinematics_backward(self, grad_links):
         """Gradient of the uploaded state from a gradient of ``links_kinematics``'s output."""
-        self.kernels.down_sweep()
+        self.kernels.down_sweep(0)
         out = self._empty(sum(self.grad_widths))
         self.kernels.down_sweep_adjoint(grad_links.contiguous(), out)
         return self._split_grads(out)[0]
 
     def mass_matrix(self):
         """(B, D, D) joint-space mass matrix (armature excluded) at the uploaded state."""
-        self.kernels.position_stages()
+        self.kernels.position_stages(self.substeps)  # (see links_kinematics)
         out = torch.empty((self.n_batch, self.model.n_dofs, self.model.n_dofs), dtype=runtime.tc_float,
                           device=runtime.device)
-        self.kernels.read_mass_matrix(out)
+        self.kernels.read_mass_matrix(self.substeps, out)
         return out
 
     def dofs_dynamics(self):

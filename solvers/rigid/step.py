@@ -342,13 +342,28 @@ def reverse_kinematics(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, 
 
 
 @ti.kernel
-def down_sweep(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3):
-    """Link poses and velocities at frame 0 (what the link getters read)."""
+def down_sweep(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, f: ti.i32):
+    """Link poses and velocities of the state (frame 0) at frame f (what the link getters read):
+    the getters take the last frame, which no substep's stages use, so that the last step's
+    intermediates stay for its readouts (read_links_acc, read_contacts...) and its reverse; the
+    adjoint of a getter takes frame 0 (down_sweep_adjoint)."""
     ti.loop_config(serialize=schedule[0])
     for t in range(env_loop(ints, schedule[0])):
         e = env_of(ints, t, schedule[0])
         if e >= 0:
-            down_sweep_env(bind(ints, f1, v3, v4, m3), 0, e)
+            d = bind(ints, f1, v3, v4, m3)
+            _state_at(d, e, f)
+            down_sweep_env(d, f, e)
+
+
+@ti.func
+def _state_at(d: ti.template(), e, f):
+    """Frame f's (qpos, qvel) of env e ← frame 0's, the state (f = 0: nothing to do)."""
+    if f != 0:
+        for k in range(d.n_qs):
+            d.qpos[f, e, k] = d.qpos[0, e, k]
+        for k in range(d.n_dofs):
+            d.qvel[f, e, k] = d.qvel[0, e, k]
 
 
 @ti.kernel
@@ -380,13 +395,15 @@ def down_sweep_adjoint(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, 
 
 
 @ti.kernel
-def position_stages(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3):
-    """Mass matrix and bias at frame 0."""
+def position_stages(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, f: ti.i32):
+    """Mass matrix and bias of the state (frame 0) at frame f (see down_sweep)."""
     ti.loop_config(serialize=schedule[0])
     for t in range(env_loop(ints, schedule[0])):
         e = env_of(ints, t, schedule[0])
         if e >= 0:
-            position_stages_env(bind(ints, f1, v3, v4, m3), 0, e)
+            d = bind(ints, f1, v3, v4, m3)
+            _state_at(d, e, f)
+            position_stages_env(d, f, e)
 
 
 # -- moving data: on the CPU serial loops on the calling thread. A parallel loop costs a thread-pool hand-off
@@ -491,20 +508,20 @@ def _zero_grads(d: ti.template(), frames):
 
 
 @ti.kernel
-def read_links(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
-    """dst (B, L, 13) ← frame-0 link pos, quat, ω and v of the link origin (world frame)."""
+def read_links(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, f: ti.i32, dst: A):
+    """dst (B, L, 13) ← frame f's link pos, quat, ω and v of the link origin (world frame)."""
     ti.loop_config(serialize=schedule[1])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
         for l in range(d.n_links):
-            w, pos = d.cvel_w[0, e, l], d.xpos[0, e, l]
-            v = d.cvel_v[0, e, l] + w.cross(pos - reference(d, 0, e, l))
+            w, pos = d.cvel_w[f, e, l], d.xpos[f, e, l]
+            v = d.cvel_v[f, e, l] + w.cross(pos - reference(d, f, e, l))
             for k in ti.static(range(3)):
                 dst[e, l, k] = pos[k]
                 dst[e, l, 7 + k] = w[k]
                 dst[e, l, 10 + k] = v[k]
             for k in ti.static(range(4)):
-                dst[e, l, 3 + k] = d.xquat[0, e, l][k]
+                dst[e, l, 3 + k] = d.xquat[f, e, l][k]
 
 
 @ti.kernel
@@ -534,12 +551,13 @@ def read_links_acc(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: 
 
 
 @ti.kernel
-def read_mass_matrix(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
+def read_mass_matrix(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, f: ti.i32, dst: A):
+    """dst (B, D, D) ← frame f's mass matrix."""
     ti.loop_config(serialize=schedule[1])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
         for i, j in ti.ndrange(d.n_dofs, d.n_dofs):
-            dst[e, i, j] = d.mass_mat[0, e, i, j]
+            dst[e, i, j] = d.mass_mat[f, e, i, j]
 
 
 @ti.kernel
