@@ -299,12 +299,13 @@ class RigidEntity(EntityIndexing):
             raise InvalidInputError(f"{who} argument 'parent_entity' must be a rigid entity of the same scene, got "
                                     f"{parent_entity!r}")
         if parent_entity is self or parent_entity.idx > self.idx:
-            raise InvalidInputError(f"{who} argument 'parent_entity' must be an entity added before this one (Genesis's "
-                                    f"rule), got entity '{parent_entity.name}' (added "
+            raise InvalidInputError(f"{who} argument 'parent_entity' must be an entity added before this one "
+                                    f"(Genesis's rule), got entity '{parent_entity.name}' (added "
                                     f"{'as this one' if parent_entity is self else 'after it'})")
         if self.attached_to is not None:
             raise InvalidInputError(f"{who}: the entity is already attached to entity '{self.attached_to[0].name}'")
-        link = parent_entity._default_mount_link() if parent_link_name is None else parent_entity.get_link(parent_link_name)
+        link = (parent_entity._default_mount_link() if parent_link_name is None
+                else parent_entity.get_link(parent_link_name))
         base = self._specs[0]
         if pos is not None or quat is not None:  # (the file's own base pose goes with the morph's, as in Genesis)
             base.pos = _mount_vector(who, "pos", pos, 3, (0.0, 0.0, 0.0))
