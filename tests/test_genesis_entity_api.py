@@ -1154,3 +1154,25 @@ def test_dofs_invweight_is_genesis_and_follows_the_mass(f64):
     box.set_links_mass([2.0 * mass], envs_idx=[1])
     first = np.array([expected[0], expected[3]])  # (dofs 0 and 3: a translation, a rotation)
     np.testing.assert_allclose(box.get_dofs_invweight([0, 3]).numpy(), [first, first / 2.0], rtol=1e-12)
+
+
+def test_links_invweight_is_genesis_and_mujocos_body_invweight0(f64):
+    """get_links_invweight: (translational, rotational) per link, the means of the two diagonals of
+    J M⁻¹ Jᵀ at the initial pose (J the Jacobian of the link's centre of mass; MuJoCo's
+    body_invweight0): the KUKA's as Genesis 1.4.5 gives them (measured: the same 12 digits; its
+    base, welded to the world, 0), a free box's (1/m, the mean of 1/I), batched shapes."""
+    scene = gs.Scene()
+    arm = scene.add_entity(gs.morphs.URDF(file=pybullet("kuka_iiwa", "model.urdf"), fixed=True))
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.1, 0.05), pos=(1.0, 0.0, 1.0)), material=gs.materials.Rigid(rho=600.0))
+    scene.build(n_envs=2)
+    genesis = [[0.0, 0.0], [1.719124791815e-03, 1.910138657573], [4.192814266018e-03, 2.151479064476],
+               [3.048313478522e-02, 3.763862842595], [3.786127982366e-02, 4.207191533463],
+               [4.692571091148e-02, 6.616963451510], [8.598418947399e-02, 9.481771350234],
+               [1.524314942187e-01, 1.266521174839e+01]]
+    invweight = arm.get_links_invweight()
+    assert invweight.shape == (2, arm.n_links, 2)
+    np.testing.assert_allclose(invweight[1].numpy(), genesis, rtol=1e-10, atol=1e-15)
+    mass, sides = 600.0 * 0.2 * 0.1 * 0.05, np.array([0.2, 0.1, 0.05])
+    inertia = mass / 12.0 * (sides @ sides - sides ** 2)
+    np.testing.assert_allclose(box.get_links_invweight(envs_idx=[0]).numpy(), [[[1.0 / mass, np.mean(1.0 / inertia)]]],
+                               rtol=1e-12)

@@ -979,6 +979,16 @@ class RigidEntity(EntityIndexing):
     def get_dofs_armature(self, dofs_idx_local=None, envs_idx=None):
         return self._get_dofs_input("armature", dofs_idx_local, envs_idx)
 
+    def get_links_invweight(self, links_idx_local=None, envs_idx=None):
+        """Each link's inverse weights, translational (1/kg) and rotational (1/(kg·m²)): (n, 2) or
+        (n_envs, n, 2), as Genesis's and MuJoCo's body_invweight0: the mean of the translational and
+        of the rotational diagonal of J M⁻¹ Jᵀ at the initial pose, J the Jacobian of the link's
+        centre of mass (0 for a link welded to the world); recomputed when masses or armature change
+        (differentiable)."""
+        links = self.link_start + self._local(links_idx_local, self.n_links, "links_idx_local")
+        pair = [self._read_input(name, links, envs_idx) for name in ("invweight_t", "invweight_r")]
+        return self._out(torch.stack(pair, dim=-1))
+
     def get_dofs_invweight(self, dofs_idx_local=None, envs_idx=None):
         """Each dof's inverse weight, 1/kg or 1/(kg·m²), as Genesis's and MuJoCo's dof_invweight0: the
         diagonal of M⁻¹ at the initial pose (a free joint's averaged over its three translations and

@@ -111,7 +111,7 @@ class InvweightBasis:
     (Genesis recomputes them when those change, as mj_setConst does):
     - invweight_t per link (1/kg): the mean of the translational diagonal of J_l M⁻¹ J_lᵀ, and
       invweight_r (1/(kg·m²)) of its rotational one (read by welds' turn rows only: contacts have
-      condim ≤ 3; zero in a scene without welds nor run-time weld slots); zero for links welded to the world;
+      condim ≤ 3; and by get_links_invweight); zero for links welded to the world;
     - invweight_dof per dof: the diagonal of M⁻¹, averaged over a free joint's three translations
       and its three rotations, and over a ball joint's three rotations;
     - invweight_ten per limited fixed tendon: J M⁻¹ Jᵀ, J its coefficients on its dofs (MuJoCo's
@@ -133,8 +133,6 @@ class InvweightBasis:
         # J_ω in the link's frame, where its inertia is given (a massless link's is dropped)
         unit_inertia = m.link_inertia0 * m.link_inv_mass0[:, None, None]
         self.n_links, self.n_dofs = m.n_links, m.n_dofs
-        welds = m.n_weld or solver.rigid_options.max_dynamic_constraints
-        self.rows = 6 if welds else 3  # (J's rows whose J M⁻¹ Jᵀ diagonal is read)
         self.groups = []  # per tree shape: (links (T, l), dofs (T, n), K (T, l, n, n), J (T, l, 6, n), average (T, n, n))
         for links, dofs in _same_shaped_trees(m):
             J = jac[links[:, :, None, None], np.arange(6)[None, None, :, None], dofs[:, None, None, :]]
@@ -185,10 +183,12 @@ class InvweightBasis:
             for t in torch.nonzero(info).flatten().tolist():
                 check_positive_definite(matrix[t].detach().cpu().numpy(), InvalidInputError, dofs[t].cpu().numpy())
                 torch.linalg.inv(matrix[t])  # singular below the check's share: torch's own error
-            rows = J[:, :, : self.rows]
-            diagonal = torch.einsum("tlri,tij,tlrj->tlr", rows, inverse, rows)  # (a block's trace is frame-free: J_ω is in the link's)
-            translational = translational.index_put((links.flatten(),), diagonal[..., :3].sum(-1).flatten() / 3.0)
-            rotational = rotational.index_put((links.flatten(),), diagonal[..., 3:].sum(-1).flatten() / 3.0)
+            # the means of J M⁻¹ Jᵀ's translational and rotational diagonals, each by an einsum of its own
+            # (one of six rows sums in another order) (a block's trace is frame-free: J_ω is in the link's)
+            translation, rotation = [torch.einsum("tlri,tij,tlrj->tlr", J[:, :, rows], inverse, J[:, :, rows])
+                                     .sum(-1).flatten() / 3.0 for rows in (slice(0, 3), slice(3, 6))]
+            translational = translational.index_put((links.flatten(),), translation)
+            rotational = rotational.index_put((links.flatten(),), rotation)
             per_dof = per_dof.index_put((dofs.flatten(),),
                                         torch.einsum("ti,tij->tj", torch.diagonal(inverse, dim1=1, dim2=2),
                                                      average).flatten())
