@@ -189,7 +189,7 @@ def test_an_attached_free_body_rides_its_link_and_weighs_on_it(f64, tmp_path):
 def test_attach_arguments_are_checked(f64, tmp_path):
     scene = gs.Scene(show_viewer=False)
     arm = scene.add_entity(gs.morphs.URDF(file=_write(tmp_path, "arm", ARM), fixed=True, merge_fixed_links=False))
-    box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1)))
+    box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.3, 0.2, 0.1)))
     later = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(1.0, 0.0, 0.0)))
     other = gs.Scene(show_viewer=False).add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1)))
     checks = [(lambda: box.attach(box), "added before this one"), (lambda: box.attach(later), "added before this one"),
@@ -202,8 +202,9 @@ def test_attach_arguments_are_checked(f64, tmp_path):
             call()
     with pytest.raises(GradientError, match="'pos' is not differentiable"):
         box.attach(arm, pos=torch.zeros(3, dtype=torch.float64, requires_grad=True))
-    box.attach(arm)
+    box.attach(arm)  # (after the failed calls above: the morph's pose, which none of them touched)
     assert box.attached_to == (arm, arm.get_link("flange"))  # (the last link: Genesis's default)
+    assert box._specs[0].pos.tolist() == [0.3, 0.2, 0.1] and box._specs[0].quat.tolist() == [1.0, 0.0, 0.0, 0.0]
     with pytest.raises(gs.InvalidInputError, match="already attached to entity"):
         box.attach(arm)
     scene.build()

@@ -308,8 +308,9 @@ class RigidEntity(EntityIndexing):
                 else parent_entity.get_link(parent_link_name))
         base = self._specs[0]
         if pos is not None or quat is not None:  # (the file's own base pose goes with the morph's, as in Genesis)
-            base.pos = _mount_vector(who, "pos", pos, 3, (0.0, 0.0, 0.0))
-            base.quat = _mount_vector(who, "quat", quat, 4, (1.0, 0.0, 0.0, 0.0))
+            mount = (_mount_vector(who, "pos", pos, 3, (0.0, 0.0, 0.0)),
+                     _mount_vector(who, "quat", quat, 4, (1.0, 0.0, 0.0, 0.0)))  # (both checked before either is set)
+            base.pos, base.quat = mount
         base.joint_type = "fixed"
         self._take_joints()
         self._solver.attach(self._solver_idx, parent_entity._solver_idx, link.idx_local)
