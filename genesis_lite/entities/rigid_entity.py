@@ -427,10 +427,13 @@ class RigidEntity(EntityIndexing):
         value = self._sim().inputs(self._solver)[name]
         return value[envs][:, torch.as_tensor(columns, device=runtime.device)]
 
+    def _com_columns(self, links):
+        """The input com's columns of the entity's ``links`` (local indices): x, y, z a link."""
+        return (3 * (self.link_start + np.asarray(links))[:, None] + np.arange(3)).reshape(-1)
+
     def _links_com(self, links, envs_idx):
         """(B', len(links), 3) m: the links' centres of mass in their frames (the input com)."""
-        columns = (3 * (self.link_start + np.asarray(links))[:, None] + np.arange(3)).reshape(-1)
-        value = self._read_input("com", columns, envs_idx)
+        value = self._read_input("com", self._com_columns(links), envs_idx)
         return value.reshape(value.shape[0], len(links), 3)
 
     def _write_input(self, name, columns, envs, values):
@@ -869,8 +872,7 @@ class RigidEntity(EntityIndexing):
 
     def _write_links_com(self, links, envs, values):
         """The input com of ``links`` in ``envs`` ← values (len(envs), len(links), 3) m."""
-        columns = (3 * (self.link_start + links)[:, None] + np.arange(3)).reshape(-1)
-        self._write_input("com", columns, envs, values.reshape(len(envs), -1))
+        self._write_input("com", self._com_columns(links), envs, values.reshape(len(envs), -1))
 
     def get_mass(self, envs_idx=None):
         """Total mass of the links that move, kg: () or (n_envs,). As Genesis's, links welded to the

@@ -187,7 +187,8 @@ ARENA_TYPES = (ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(ndim=1),
 # compensated (RigidModel.link_gravcomp), else its force stage is skipped.
 SIZES = ("B", "L", "D", "Q", "P", "E", "K", "WD", "DW", "T", "S", "W", "GW", "limits", "nonfinite", "G", "N",
          "H", "C", "R", "cone", "iterations", "ls_iterations", "overflow", "rows_needed", "HI", "WS", "inexact", "converged",
-         "constrained", "colliders_due", "inexact_pair", "inexact_env", "inexact_substep", "wrench", "capped", "gravcomp")
+         "constrained", "colliders_due", "inexact_pair", "inexact_env", "inexact_substep", "wrench", "capped",
+         "gravcomp")
 HEADER = {name: k for k, name in enumerate(SIZES)}
 # the header's slots a step raises or the host sets, not sizes (what a grown copy keeps: take_over)
 FLAGS = ("nonfinite", "overflow", "rows_needed", "inexact", "constrained", "colliders_due", "inexact_pair",
@@ -201,8 +202,9 @@ assert [diff for _, diff in INPUTS.values()] == sorted((diff for _, diff in INPU
 
 def input_width(name, model, n_dyn_welds):
     width, n_geoms = INPUTS[name][0], len(model.geom_type)
-    return {"L": model.n_links, "L3": 3 * model.n_links, "L6": 6 * model.n_links, "D": model.n_dofs, "G": n_geoms, "G2": 2 * n_geoms,
-            "G5": 5 * n_geoms, "T": model.n_tendons, "DWW": 1 + DYN_WELD * n_dyn_welds}.get(width, width)
+    return {"L": model.n_links, "L3": 3 * model.n_links, "L6": 6 * model.n_links, "D": model.n_dofs, "G": n_geoms,
+            "G2": 2 * n_geoms, "G5": 5 * n_geoms, "T": model.n_tendons,
+            "DWW": 1 + DYN_WELD * n_dyn_welds}.get(width, width)
 
 
 def _region_members(arena, grads):
@@ -424,8 +426,9 @@ class RigidData:
         backward replays the step), so earlier substeps' lists out of place are never read."""
         for name in FLAGS:
             self.header[HEADER[name]] = old.header[HEADER[name]]
-        begin, end = self.start["inputs"], self.start["inputs.grad"]
-        self.arenas[ARENAS.index("f")][begin:end] = old.arenas[ARENAS.index("f")][old.start["inputs"]:old.start["inputs.grad"]]
+        floats = ARENAS.index("f")
+        self.arenas[floats][self.start["inputs"]:self.start["inputs.grad"]] = \
+            old.arenas[floats][old.start["inputs"]:old.start["inputs.grad"]]
         for name in PER_ENV:
             self.per_env(name).copy_(old.per_env(name))
         for name in FRAMES:

@@ -36,9 +36,9 @@ class RigidSolver(Solver):
     """Owns the rigid model (immutable), its Taichi data and the default inputs."""
 
     #: inputs that keep their value across ``scene.reset()`` (controls do not)
-    persistent_inputs = ("mass", "com", "damping", "armature", "stiffness", "kp", "kv", "gravity", "force_lo", "force_hi",
-                         "frictionloss", "friction", "solref", "solimp", "invweight_t", "invweight_r", "invweight_dof",
-                         "invweight_ten")
+    persistent_inputs = ("mass", "com", "damping", "armature", "stiffness", "kp", "kv", "gravity", "force_lo",
+                         "force_hi", "frictionloss", "friction", "solref", "solimp", "invweight_t", "invweight_r",
+                         "invweight_dof", "invweight_ten")
 
     transient_inputs = ("xfrc",)
 
