@@ -12,9 +12,10 @@ EPS = (1e-5, 1e-6, 1e-7, 1e-8)
 BAR = 1e-5  # relative to ‖g‖
 
 
-def directional_errors(loss, value, seed=0):
-    """{eps: (g·v − (L(x + εv) − L(x − εv)) / 2ε) / ‖g‖} at x = value for a random unit v, where
-    g = ∇L(x) by backward. loss(x) runs one rollout from its start (it resets the scene)."""
+def directional_errors(loss, value, seed=0, eps=EPS):
+    """{ε: (g·v − (L(x + εv) − L(x − εv)) / 2ε) / ‖g‖} for each ε of ``eps`` at x = value for a random
+    unit v, where g = ∇L(x) by backward. loss(x) runs one rollout from its start (it resets the
+    scene). ``eps`` in x's units: an input of another scale than 1 takes EPS scaled alike."""
     direction = torch.tensor(np.random.default_rng(seed).normal(size=value.shape))
     direction = direction / direction.norm()
     x = value.clone().requires_grad_(True)
@@ -23,16 +24,18 @@ def directional_errors(loss, value, seed=0):
     assert scale > 0.0, "zero gradient cannot be checked"
     errors = {}
     with torch.no_grad():
-        for eps in EPS:
-            central = (float(loss(value + eps * direction)) - float(loss(value - eps * direction))) / (2 * eps)
-            errors[eps] = (analytic - central) / scale
+        for step in eps:
+            central = (float(loss(value + step * direction)) - float(loss(value - step * direction))) / (2 * step)
+            errors[step] = (analytic - central) / scale
     return errors
 
 
 def assert_converged(errors, what):
-    """Two neighbouring eps agree to BAR, and there the error is ≤ BAR."""
+    """Two neighbouring eps (the scan's, in its order) agree to BAR, and there the error is ≤ BAR."""
     scan = ", ".join(f"{eps:.0e}: {err:.1e}" for eps, err in errors.items())
-    converged = [min(abs(errors[a]), abs(errors[b])) for a, b in zip(EPS, EPS[1:]) if abs(errors[a] - errors[b]) < BAR]
+    steps = list(errors)
+    converged = [min(abs(errors[a]), abs(errors[b])) for a, b in zip(steps, steps[1:])
+                 if abs(errors[a] - errors[b]) < BAR]
     assert converged and min(converged) <= BAR, f"{what}: relative errors per eps {scan}"
 
 

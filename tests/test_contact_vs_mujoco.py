@@ -88,8 +88,7 @@ def _check_step(spec, n_states=N_STATES, entity=0, mass_scale=None):
     if mass_scale is not None:
         models = [_scaled(m, scales) for scales in mass_scale]
         for b, body in enumerate(entities):
-            mass = body.get_links_mass().cpu().numpy() * mass_scale[:, b: b + 1]
-            body.set_links_mass(torch.as_tensor(mass, dtype=gs.tc_float))
+            body.set_mass(body.get_mass() * torch.as_tensor(mass_scale[:, b], dtype=gs.tc_float))  # (inertia too)
     _set_ours(entities, qpos, qvel)
     scene.step()
     ours_qvel = np.concatenate([e.get_dofs_velocity().cpu().numpy() for e in entities], axis=1)

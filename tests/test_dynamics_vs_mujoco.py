@@ -108,8 +108,7 @@ def _rows_scale(robot):
     masses, armature 0 (these robots have no tendon)."""
     solver = robot._solver
     mass = solver.default_inputs["mass"]
-    solver.invweight_basis.rows = 6  # (the rotational half too: a scene without welds leaves it out)
-    return solver.invweight_basis(mass, torch.zeros((1, robot.n_dofs), dtype=mass.dtype),
+    return solver.invweight_basis(mass, solver.default_inputs["inertia"], torch.zeros((1, robot.n_dofs), dtype=mass.dtype),
                                   solver.check_positive_definite)[:3]
 
 
@@ -147,7 +146,7 @@ def test_rows_scale_per_tree_equals_the_dense_formula_f64(f64):
     in a scene of trees of three shapes — a free quadruped, a fixed 2-link pendulum (its base
     welded to the world), and three free boxes and a free capsule — its rows' scale equals the dense
     formula (M of every dof from the links' centre-of-mass Jacobians, one inverse) to round-off,
-    with masses and armature off their defaults; and it holds each tree's block only (its dense K
+    with masses, inertias and armature off their defaults; and it holds each tree's block only (its dense K
     took links × dofs² numbers: 36 GiB for 512 free bodies, which could not be built)."""
     scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False), show_viewer=False)
     scene.add_entity(gs.morphs.Box(size=(0.1, 0.2, 0.3), pos=(1.0, 0.0, 0.5), euler=(10, 20, 30)))
@@ -164,16 +163,16 @@ def test_rows_scale_per_tree_equals_the_dense_formula_f64(f64):
     assert held < 0.2 * m.n_links * m.n_dofs ** 2  # (its trees: 0.11)
     rng = np.random.default_rng(0)
     mass = torch.tensor(m.link_mass0 * rng.uniform(0.5, 2.0, m.n_links))[None]
+    inertia = m.link_inertia * rng.uniform(0.5, 2.0, m.n_links)[:, None, None]
     armature = torch.tensor(rng.uniform(0.0, 0.1, m.n_dofs))[None]
-    basis.rows = 6  # (the rotational half too: a scene without welds leaves it out)
-    invweight_t, invweight_r, invweight_dof, _ = basis(mass, armature, solver.check_positive_definite)
+    invweight_t, invweight_r, invweight_dof, _ = basis(mass, torch.tensor(inertia.reshape(1, -1)), armature,
+                                                       solver.check_positive_definite)
 
     jac = torch.empty((1, m.n_links, 6, m.n_dofs), dtype=torch.float64)
     solver.kernels.read_com_jacobians(jac)
     J = jac[0].numpy()
-    unit_inertia = m.link_inertia0 * m.link_inv_mass0[:, None, None]
     M = (np.einsum("l,lki,lkj->ij", mass[0].numpy(), J[:, :3], J[:, :3])
-         + np.einsum("l,lki,lkn,lnj->ij", mass[0].numpy(), J[:, 3:], unit_inertia, J[:, 3:]) + np.diag(armature[0]))
+         + np.einsum("lki,lkn,lnj->ij", J[:, 3:], inertia, J[:, 3:]) + np.diag(armature[0]))
     inverse = np.linalg.inv(M)
     expected_t, expected_r = (np.einsum("lri,ij,lrj->l", J[:, rows], inverse, J[:, rows]) / 3.0 * (m.link_static == 0)
                               for rows in (slice(0, 3), slice(3, 6)))

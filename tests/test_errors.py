@@ -566,18 +566,20 @@ def test_singular_mass_matrix_names_the_link(f64, path, link):
     raises(gs.AssetError, scene.build, "entity 'bot'", f"link '{link}'", "positive definite mass matrix")
 
 
-def test_zero_mass_set_after_build_names_the_link(f64):
-    """A mass set to zero where it leaves M singular (a wheel's spin dof moves nothing else): a
-    named InvalidInputError, not torch's LinAlgError, and the masses stay as they were (no rotor
-    armature, which would give the wheel's dof an inertia)."""
+def test_zero_inertia_set_after_build_names_the_link(f64):
+    """An inertia set to zero where it leaves M singular (a wheel's spin dof moves nothing else; its
+    mass does not turn it): a named InvalidInputError, not torch's LinAlgError, and the inertias
+    stay as they were (no rotor armature, which would give the wheel's dof an inertia)."""
     scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False))
     robot = scene.add_entity(gs.morphs.URDF(file=pybullet("r2d2.urdf"), default_armature=None), name="r2d2")
     scene.build(n_envs=2)
-    before = robot.get_links_mass().clone()
+    before = robot.get_links_inertia().clone()
     wheel = [link.name for link in robot.links].index("left_front_wheel")
-    raises(gs.InvalidInputError, lambda: robot.set_links_mass([0.0], links_idx_local=[wheel], envs_idx=[1]),
+    raises(gs.InvalidInputError, lambda: robot.set_links_inertia(np.zeros((3, 3)), links_idx_local=[wheel],
+                                                                 envs_idx=[1]),
            "entity 'r2d2'", "link 'left_front_wheel'", "positive definite mass matrix")
-    assert torch.equal(robot.get_links_mass(), before)
+    assert torch.equal(robot.get_links_inertia(), before)
+    before = robot.get_links_mass().clone()
     # no env selected (RL code passes done.nonzero()[:, 0], empty on most steps): nothing changes
     qpos = robot.get_qpos().clone()
     robot.set_links_mass([1.0], links_idx_local=[0], envs_idx=[])

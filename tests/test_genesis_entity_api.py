@@ -1139,7 +1139,9 @@ def test_gravity_compensation_must_be_a_finite_number(value):
 def test_dofs_invweight_is_genesis_and_follows_the_mass(f64):
     """get_dofs_invweight: the diagonal of M⁻¹ at the initial pose, a free joint's averaged over its
     translations and its rotations (MuJoCo's dof_invweight0): the KUKA's as Genesis 1.4.5 gives them
-    (measured: the same 12 digits), a free box's from its mass and inertia, halved with a doubled mass."""
+    (measured: the same 12 digits), a free box's from its mass and inertia: a doubled link mass halves
+    its translations' (the inertia stays, as Genesis's), a doubled entity mass both (set_mass scales
+    the inertia with it)."""
     scene = gs.Scene()
     arm = scene.add_entity(gs.morphs.URDF(file=pybullet("kuka_iiwa", "model.urdf"), fixed=True))
     box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.1, 0.05), pos=(1.0, 0.0, 1.0)), material=gs.materials.Rigid(rho=600.0))
@@ -1153,6 +1155,9 @@ def test_dofs_invweight_is_genesis_and_follows_the_mass(f64):
     np.testing.assert_allclose(box.get_dofs_invweight().numpy(), [expected] * 2, rtol=1e-12)
     box.set_links_mass([2.0 * mass], envs_idx=[1])
     first = np.array([expected[0], expected[3]])  # (dofs 0 and 3: a translation, a rotation)
+    np.testing.assert_allclose(box.get_dofs_invweight([0, 3]).numpy(), [first, first / [2.0, 1.0]], rtol=1e-12)
+    box.set_links_mass([mass], envs_idx=[1])
+    box.set_mass(2.0 * mass, envs_idx=[1])
     np.testing.assert_allclose(box.get_dofs_invweight([0, 3]).numpy(), [first, first / 2.0], rtol=1e-12)
 
 

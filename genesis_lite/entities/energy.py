@@ -30,11 +30,7 @@ def _links(entity, envs_idx):
 def kinetic(entity, envs_idx):
     """(B',) J: the entity's kinetic energy."""
     mass, _, com_vel, ang, rot = _links(entity, envs_idx)
-    model = entity._solver.model
-    links = entity.link_start + np.arange(entity.n_links)
-    unit = torch.as_tensor(model.link_inertia0[links] * model.link_inv_mass0[links][:, None, None],
-                           dtype=mass.dtype, device=mass.device)  # inertia per kg of the link's mass
-    inertia = rot @ (unit * mass[..., None, None]) @ rot.transpose(-1, -2)
+    inertia = rot @ entity._links_inertia(np.arange(entity.n_links), envs_idx) @ rot.transpose(-1, -2)
     spin = (ang[..., None, :] @ inertia @ ang[..., :, None])[..., 0, 0]
     dofs = np.arange(entity.n_dofs)
     armature = entity._read_input("armature", entity.dof_start + dofs, envs_idx)

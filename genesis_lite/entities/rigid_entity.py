@@ -130,20 +130,40 @@ class RigidLink:
 
     def set_mass(self, mass):
         """Mass, kg: a number, or (n_envs,) one per env; the entity's ``set_links_mass`` for this link
-        (differentiable). **Different** from Genesis's: the rotational inertia scales with the mass (a
-        body of the same shape made heavier; Genesis's keeps it). A link welded to the world is
-        skipped with a warning, as Genesis."""
+        (differentiable): its inertia stays, as Genesis's. A link welded to the world is skipped with
+        a warning, as Genesis."""
         if self.is_fixed:
             warn_user(f"{self._who}: set_mass of a link welded to the world changes nothing (it is never "
                       f"accelerated), skipped as Genesis skips it")
             return
-        per_env = np.ndim(mass) == 1 if not isinstance(mass, torch.Tensor) else mass.dim() == 1
+        self.entity.set_links_mass(self._one_link_value(mass, "set_mass", "mass", 0), [self.idx_local])
+
+    def set_inertia(self, inertia):
+        """Rotational inertia about the centre of mass, in the link's frame, kg·m²: (3, 3), or
+        (n_envs, 3, 3) one per env; the entity's ``set_links_inertia`` for this link (differentiable)."""
+        self.entity.set_links_inertia(self._one_link_value(inertia, "set_inertia", "inertia", 2), [self.idx_local])
+
+    def set_COM(self, com):
+        """Centre of mass in the link's frame, m: (3,), or (n_envs, 3) one per env; the entity's
+        ``set_links_COM`` for this link (differentiable)."""
+        self.entity.set_links_COM(self._one_link_value(com, "set_COM", "com", 1), [self.idx_local])
+
+    def get_invweight(self, envs_idx=None):
+        """Inverse weights, translational (1/kg) and rotational (1/(kg·m²)): (2,) or (n_envs, 2), as
+        ``RigidEntity.get_links_invweight`` for this link."""
+        return self._one(self.entity.get_links_invweight([self.idx_local], envs_idx))
+
+    def _one_link_value(self, value, method, arg, element_dims):
+        """A link setter's ``value`` (one element of ``element_dims`` dims, or one per env) as the
+        entity's setter takes it for this one link: (1, *element) or (n_envs, 1, *element)."""
+        dims = value.dim() if isinstance(value, torch.Tensor) else np.ndim(value)
+        per_env = dims == element_dims + 1
         if per_env and self.entity.scene.n_envs == 0:
-            raise InvalidInputError(f"{self._who}: set_mass takes one number in a scene without envs, got "
-                                    f"{len(mass)} values")
-        value = (mass.reshape(-1, 1) if isinstance(mass, torch.Tensor) else np.reshape(mass, (-1, 1))) if per_env \
-            else [mass]
-        self.entity.set_links_mass(value, [self.idx_local])
+            raise InvalidInputError(f"{self._who}: {method} argument '{arg}' takes one value in a scene without "
+                                    f"envs, got {len(value)}")
+        if isinstance(value, torch.Tensor):  # (kept in the autograd graph)
+            return value[:, None] if per_env else value[None]
+        return np.expand_dims(np.asarray(value), 1) if per_env else [value]
 
     def get_AABB(self, envs_idx=None):
         """The world-axes box holding the link's collision shapes, m: (2, 3) or (n_envs, 2, 3), as
@@ -427,14 +447,21 @@ class RigidEntity(EntityIndexing):
         value = self._sim().inputs(self._solver)[name]
         return value[envs][:, torch.as_tensor(columns, device=runtime.device)]
 
-    def _com_columns(self, links):
-        """The input com's columns of the entity's ``links`` (local indices): x, y, z a link."""
-        return (3 * (self.link_start + np.asarray(links))[:, None] + np.arange(3)).reshape(-1)
+    def _link_columns(self, links, width):
+        """The columns of the entity's ``links`` (local indices) in a per-link input of ``width``
+        values a link (com: x, y, z; inertia: its 3 × 3 row-major)."""
+        return (width * (self.link_start + np.asarray(links))[:, None] + np.arange(width)).reshape(-1)
 
     def _links_com(self, links, envs_idx):
         """(B', len(links), 3) m: the links' centres of mass in their frames (the input com)."""
-        value = self._read_input("com", self._com_columns(links), envs_idx)
+        value = self._read_input("com", self._link_columns(links, 3), envs_idx)
         return value.reshape(value.shape[0], len(links), 3)
+
+    def _links_inertia(self, links, envs_idx):
+        """(B', len(links), 3, 3) kg·m²: the links' rotational inertias about their centres of mass,
+        in their frames (the input inertia)."""
+        value = self._read_input("inertia", self._link_columns(links, 9), envs_idx)
+        return value.reshape(value.shape[0], len(links), 3, 3)
 
     def _write_input(self, name, columns, envs, values):
         sim = self._sim()
@@ -645,16 +672,19 @@ class RigidEntity(EntityIndexing):
         return self._out(shapes_aabb(shapes, poses[..., :3], poses[..., 3:]))
 
     # -- external wrenches ----------------------------------------------------------------------------
-    def _link_vectors(self, value, n_links, envs, arg, method="apply_links_external_wrench"):
-        """User (n, 3) or, batched, (len(envs), n, 3) vectors, or any shape that broadcasts to it as
-        Genesis's (a (3,) vector for every link and env) → (len(envs), n, 3); method: whose argument."""
-        shape = (n_links, 3) if self.scene.n_envs == 0 else (len(envs), n_links, 3)
+    def _link_vectors(self, value, n_links, envs, arg, method="apply_links_external_wrench", element=(3,)):
+        """User (n, *element) or, batched, (len(envs), n, *element) values, or any shape that broadcasts
+        to it as Genesis's (a (3,) vector for every link and env) → (len(envs), n, *element); method:
+        whose argument."""
+        shape = (n_links, *element) if self.scene.n_envs == 0 else (len(envs), n_links, *element)
         given = self._tensor(value, arg, shape)
         tensor = broadcast(given, shape)
         if tensor is None:
             raise InvalidInputError(f"entity '{self.name}': {method} argument '{arg}' must have "
                                     f"shape {shape} (or one that broadcasts to it), got {tuple(given.shape)}")
-        return self._values(tensor.reshape(*shape[:-2], 3 * n_links), 3 * n_links, envs, arg).reshape(-1, n_links, 3)
+        width = n_links * int(np.prod(element))
+        flat = tensor.reshape(*shape[:-1 - len(element)], width)
+        return self._values(flat, width, envs, arg).reshape(-1, n_links, *element)
 
     def apply_links_external_wrench(self, force=None, torque=None, links_idx_local=None, envs_idx=None, *,
                                     pos=None, ref="link_origin", local=False):
@@ -826,7 +856,8 @@ class RigidEntity(EntityIndexing):
         return self._out(self._read_input("mass", self.link_start + links, envs_idx))
 
     def set_links_mass(self, mass, links_idx_local=None, envs_idx=None):
-        """Link masses, kg (rotational inertia scales with them: same shape, other density)."""
+        """Link masses, kg; their rotational inertias stay as they are, as Genesis's (set_mass scales
+        them with the mass; set_links_inertia sets them). Differentiable."""
         links = self._local(links_idx_local, self.n_links, "links_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         values = self._refuse_negative("mass", self._values(mass, len(links), envs, "mass"), " kg")
@@ -834,8 +865,7 @@ class RigidEntity(EntityIndexing):
 
     def set_mass_shift(self, mass_shift, links_idx_local=None, envs_idx=None):
         """Genesis's domain randomisation: each link's mass ← the build's + mass_shift, kg ((n,) or
-        (n_envs, n)); not cumulative. As set_links_mass (whose rule it follows: the link's inertia
-        scales with its mass; Genesis's shift leaves the inertia) and differentiable."""
+        (n_envs, n)); not cumulative. As set_links_mass: the inertia stays; differentiable."""
         links = self._local(links_idx_local, self.n_links, "links_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         build = torch.as_tensor(self._solver.model.link_mass0[self.link_start + links], dtype=runtime.tc_float,
@@ -872,7 +902,44 @@ class RigidEntity(EntityIndexing):
 
     def _write_links_com(self, links, envs, values):
         """The input com of ``links`` in ``envs`` ← values (len(envs), len(links), 3) m."""
-        self._write_input("com", self._com_columns(links), envs, values.reshape(len(envs), -1))
+        self._write_input("com", self._link_columns(links, 3), envs, values.reshape(len(envs), -1))
+
+    def get_links_inertia(self, links_idx_local=None, envs_idx=None):
+        """Each link's rotational inertia about its centre of mass, in its frame, kg·m²: (n, 3, 3) or
+        (n_envs, n, 3, 3) (Genesis's in its inertial frame: the same where the asset's inertial
+        frame is the link's, as in most URDFs; MJCF's principal frames differ). A massless link's is 0."""
+        links = self._local(links_idx_local, self.n_links, "links_idx_local")
+        return self._out(self._links_inertia(links, envs_idx))
+
+    def set_links_inertia(self, inertia, links_idx_local=None, envs_idx=None):
+        """Each link's rotational inertia about its centre of mass, in its frame, kg·m²: (n, 3, 3) or
+        (n_envs, n, 3, 3) (Genesis's); symmetric (taken as (I + Iᵀ)/2) with principal moments ≥ 0
+        that satisfy the triangle inequality A + B ≥ C (MuJoCo's compiler's check: a rigid body's
+        moments do), else a named error. The constraint rows' scale (get_dofs_invweight) follows it, as
+        with the masses. Differentiable."""
+        links = self._local(links_idx_local, self.n_links, "links_idx_local", distinct=True)
+        envs = self._envs(envs_idx, distinct=True)
+        values = self._link_vectors(inertia, len(links), envs, "inertia", "set_links_inertia", element=(3, 3))
+        self._check_inertia(values.detach(), links)
+        values = 0.5 * (values + values.transpose(-1, -2))
+        self._write_input("inertia", self._link_columns(links, 9), envs, values.reshape(len(envs), -1))
+
+    def _check_inertia(self, inertia, links):
+        """A named error unless every (3, 3) of ``inertia`` (B, n, 3, 3) is symmetric with moments ≥ 0
+        meeting A + B ≥ C (to round-off: 1e-6 of the largest entry, or of 1e-12 kg·m²)."""
+        scale = inertia.abs().amax(dim=(-2, -1)).clamp(min=1e-12)
+        tolerance = 1e-6 * scale
+        asymmetry = (inertia - inertia.transpose(-1, -2)).abs().amax(dim=(-2, -1))
+        moments = torch.linalg.eigvalsh(0.5 * (inertia + inertia.transpose(-1, -2)).double())
+        triangle = moments[..., 0] + moments[..., 1] - moments[..., 2]
+        bad = (asymmetry > tolerance) | (moments[..., 0] < -tolerance) | (triangle < -tolerance)
+        if bool(bad.any()):
+            env, k = (int(i) for i in torch.nonzero(bad)[0])
+            name = self.links[int(links[k])].name
+            raise InvalidInputError(
+                f"entity '{self.name}': set_links_inertia argument 'inertia' of link '{name}' must be a symmetric "
+                f"3 × 3 with principal moments ≥ 0 kg·m² meeting A + B ≥ C (a rigid body's), got "
+                f"{inertia[env, k].cpu().numpy().tolist()} (moments {moments[env, k].cpu().numpy().tolist()})")
 
     def get_mass(self, envs_idx=None):
         """Total mass of the links that move, kg: () or (n_envs,). As Genesis's, links welded to the
@@ -897,7 +964,11 @@ class RigidEntity(EntityIndexing):
         total = self._values(given[..., None] if given.dim() == 1 else given, 1, envs, "mass")
         self._refuse_negative("mass", total, " kg")
         links_mass = self._read_input("mass", moving, envs_idx)
-        self._write_input("mass", moving, envs, links_mass * (total / links_mass.sum(-1, keepdim=True)))
+        ratio = total / links_mass.sum(-1, keepdim=True)
+        self._write_input("mass", moving, envs, links_mass * ratio)
+        local = moving - self.link_start  # (a body of the same shape made heavier: its inertias scale alike)
+        inertia = self._links_inertia(local, envs_idx) * ratio[:, :, None, None]
+        self._write_input("inertia", self._link_columns(local, 9), envs, inertia.reshape(len(envs), -1))
 
     def _refuse_negative(self, name, values, unit=""):
         """values (a tensor), after a named error if any is negative."""

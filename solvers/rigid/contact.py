@@ -103,12 +103,13 @@ def capacity(model, options, contacts=None):
 
 class InvweightBasis:
     """What MuJoCo's body_invweight0 and dof_invweight0 (mj_setConst) are made of at the initial
-    pose q0, where they depend on nothing but the masses and the armature: M(q0) = Σ_l mass_l K_l +
-    diag(armature) (a link's inertia scales with its mass: K_l is M of link l alone at 1 kg, with
-    its build's centre of mass: set_links_COM leaves the scale as MuJoCo leaves its compiled one), and
-    J_l (6, D) the Jacobian of link l's centre of mass. ``__call__`` gives the rows' scale per env
-    from the mass and armature inputs, in torch, so that their gradients reach mass and armature
-    (Genesis recomputes them when those change, as mj_setConst does):
+    pose q0, where they depend on nothing but the masses, the rotational inertias and the armature:
+    M(q0) = Σ_l (mass_l K_l + J_ω,lᵀ I_l J_ω,l) + diag(armature), K_l = J_v,lᵀ J_v,l, with J_l (6, D)
+    the Jacobian of link l's centre of mass (J_ω in the link's frame, where its inertia I_l is
+    given), taken with its build's centre of mass (set_links_COM leaves the scale as MuJoCo leaves
+    its compiled one). ``__call__`` gives the rows' scale per env from the mass, inertia and
+    armature inputs, in torch, so that their gradients reach them (Genesis recomputes the scale
+    when those change, as mj_setConst does):
     - invweight_t per link (1/kg): the mean of the translational diagonal of J_l M⁻¹ J_lᵀ, and
       invweight_r (1/(kg·m²)) of its rotational one (read by welds' turn rows only: contacts have
       condim ≤ 3; and by get_links_invweight); zero for links welded to the world;
@@ -129,18 +130,14 @@ class InvweightBasis:
         jac = torch.empty((1, m.n_links, 6, m.n_dofs), dtype=runtime.tc_float, device=runtime.device)
         solver.kernels.read_com_jacobians(jac)  # (env 0's: every env starts at q0)
         jac = jac[0].double().cpu().numpy()
-        # M of each link alone at unit mass (M is linear in the masses): J_vᵀ J_v + J_ωᵀ (I_l / m_l) J_ω,
-        # J_ω in the link's frame, where its inertia is given (a massless link's is dropped)
-        unit_inertia = m.link_inertia0 * m.link_inv_mass0[:, None, None]
         self.n_links, self.n_dofs = m.n_links, m.n_dofs
         self.groups = []  # per tree shape: (links (T, l), dofs (T, n), K (T, l, n, n), J (T, l, 6, n), average (T, n, n))
         for links, dofs in _same_shaped_trees(m):
             J = jac[links[:, :, None, None], np.arange(6)[None, None, :, None], dofs[:, None, None, :]]
-            K = (np.einsum("tlki,tlkj->tlij", J[:, :, :3], J[:, :, :3])
-                 + np.einsum("tlki,tlkn,tlnj->tlij", J[:, :, 3:], unit_inertia[links], J[:, :, 3:]))
+            K = np.einsum("tlki,tlkj->tlij", J[:, :, :3], J[:, :, :3])
             for t in range(len(dofs)):
-                solver.check_positive_definite(np.einsum("l,lij->ij", m.link_mass0[links[t]], K[t])
-                                               + np.diag(m.dof_armature[dofs[t]]), dofs=dofs[t])
+                solver.check_positive_definite(_mass_matrix(np, m.link_mass0[links[t]], m.link_inertia[links[t]],
+                                                            m.dof_armature[dofs[t]], K[t], J[t]), dofs=dofs[t])
             # dof_invweight0 = diag(M⁻¹) @ average: a free joint's translations and rotations, a ball
             # joint's rotations averaged
             average = np.tile(np.eye(dofs.shape[1]), (len(dofs), 1, 1))
@@ -159,26 +156,28 @@ class InvweightBasis:
         self.simple_dofs = torch.as_tensor(np.flatnonzero(simple[m.dof_link]), device=runtime.device)
         self.simple_dof_links = torch.as_tensor(m.dof_link[self.simple_dofs.cpu().numpy()], device=runtime.device)
 
-    def __call__(self, mass, armature, check_positive_definite):
+    def __call__(self, mass, inertia, armature, check_positive_definite):
         """(invweight_t (B, L), invweight_r (B, L), invweight_dof (B, D), invweight_ten (B, T)) in mass's dtype, from mass
-        (B, L) kg and armature (B, D); a singular M goes to check_positive_definite (RigidSolver's: it names the link).
+        (B, L) kg, inertia (B, 9 L) kg·m² (the input's layout) and armature (B, D); a singular M goes to
+        check_positive_definite (RigidSolver's: it names the link).
         Computed in float64, one env at a time (trees batched, the same batches in every env):
         batched linear algebra over envs may sum in another order for another batch size, and a
         batched env must equal a single-env scene bit for bit."""
         if mass.shape[0] == 0 or mass.shape[1] == 0 or armature.shape[1] == 0:  # (no env, link or dof)
             return (torch.zeros_like(mass), torch.zeros_like(mass), torch.zeros_like(armature),
                     mass.new_zeros((mass.shape[0], len(self.ten_J))))
-        rows = [self._one_env(mass[e].double(), armature[e].double(), check_positive_definite)
+        inertia = inertia.reshape(inertia.shape[0], -1, 3, 3)
+        rows = [self._one_env(mass[e].double(), inertia[e].double(), armature[e].double(), check_positive_definite)
                 for e in range(mass.shape[0])]
         return tuple(torch.stack([r[k] for r in rows]).to(mass.dtype) for k in range(4))
 
-    def _one_env(self, mass, armature, check_positive_definite):
-        """(L,), (L,), (D,), (T,) for one env's mass (L,) and armature (D,); a singular M (a mass set
-        to zero) is an InvalidInputError naming the link."""
+    def _one_env(self, mass, inertia, armature, check_positive_definite):
+        """(L,), (L,), (D,), (T,) for one env's mass (L,), inertia (L, 3, 3) and armature (D,); a
+        singular M (a mass set to zero) is an InvalidInputError naming the link."""
         translational, rotational = mass.new_zeros(self.n_links), mass.new_zeros(self.n_links)
         per_dof, per_tendon = mass.new_zeros(self.n_dofs), mass.new_zeros(len(self.ten_J))
         for links, dofs, K, J, average in self.groups:
-            matrix = (mass[links][:, :, None, None] * K).sum(1) + torch.diag_embed(armature[dofs])
+            matrix = _mass_matrix(torch, mass[links], inertia[links], armature[dofs], K, J)
             inverse, info = torch.linalg.inv_ex(matrix)
             for t in torch.nonzero(info).flatten().tolist():
                 check_positive_definite(matrix[t].detach().cpu().numpy(), InvalidInputError, dofs[t].cpu().numpy())
@@ -201,6 +200,14 @@ class InvweightBasis:
             rotational = rotational.index_put((self.simple_links,), mass.new_zeros(len(self.simple_links)))
             per_dof = per_dof.index_put((self.simple_dofs,), inverse_mass[self.simple_dof_links])
         return translational, rotational, per_dof, per_tendon
+
+
+def _mass_matrix(xp, mass, inertia, armature, K, J):
+    """M at q0 of trees of one shape, in numpy or torch (xp): mass (..., l) kg, inertia (..., l, 3, 3)
+    kg·m², armature (..., n) and K (..., l, n, n), J (..., l, 6, n) as InvweightBasis keeps them."""
+    rotation = J[..., 3:, :]
+    links = (mass[..., None, None] * K).sum(-3) + xp.einsum("...lai,...lab,...lbj->...ij", rotation, inertia, rotation)
+    return links + (np.diag(armature) if xp is np else torch.diag_embed(armature))
 
 
 def sliding_leaves(model):

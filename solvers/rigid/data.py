@@ -47,6 +47,8 @@ SERIAL_SOLVE_WORK = 384
 INPUTS = {
     "mass": ("L", True),        # kg
     "com": ("L3", True),        # m: each link's centre of mass in its frame (x, y, z a link)
+    # kg·m²: each link's rotational inertia about its centre of mass, in its frame (3 × 3 row-major a link)
+    "inertia": ("L9", True),
     "damping": ("D", True),     # N·m·s/rad or N·s/m
     "armature": ("D", True),    # kg·m² or kg
     "stiffness": ("D", True),   # N·m/rad or N/m: a joint spring −stiffness·(q − springref) (actuation.py)
@@ -95,7 +97,7 @@ MODEL = {
     "geom_rbound": ("f", "G"), "pair_margin": ("f", "N"), "pair_mix": ("f", "N"),
     "geom_pos": ("v3", "G"), "geom_size": ("v3", "G"), "hull_vec": ("v3", "H"), "geom_quat": ("v4", "G"),
     "geom_aabb_center": ("v3", "G"), "geom_aabb_half": ("v3", "G"), "geom_centre": ("v3", "G"),
-    "link_inv_mass0": ("f", "L"), "link_gravcomp": ("f", "L"), "dof_lower": ("f", "D"), "dof_upper": ("f", "D"),
+    "link_gravcomp": ("f", "L"), "dof_lower": ("f", "D"), "dof_upper": ("f", "D"),
     "dof_springref": ("f", "D"),  # rad or m: where a joint spring is at rest
     "dof_limit_sol": ("f", "D7"), "dof_frictionloss_sol": ("f", "D7"),  # (solref, solimp) of a dof's rows
     # joint equalities (URDF mimic joints; RigidModel says what they hold)
@@ -110,7 +112,6 @@ MODEL = {
     # tolerance and line-search tolerance: runtime values like everything else (CONSTS names them)
     "consts": ("f", len(CONSTS)),
     "link_pos0": ("v3", "L"), "link_axis": ("v3", "L"), "link_com": ("v3", "L"), "link_quat0": ("v4", "L"),
-    "link_inertia0": ("m3", "L"),
 }
 
 JOINT_ROW_SLOTS = max(3, TENDON_JOINTS)  # columns a joint row may have (constraint/rows.py): a ball joint's cone limit, three
@@ -202,7 +203,8 @@ assert [diff for _, diff in INPUTS.values()] == sorted((diff for _, diff in INPU
 
 def input_width(name, model, n_dyn_welds):
     width, n_geoms = INPUTS[name][0], len(model.geom_type)
-    return {"L": model.n_links, "L3": 3 * model.n_links, "L6": 6 * model.n_links, "D": model.n_dofs, "G": n_geoms,
+    return {"L": model.n_links, "L3": 3 * model.n_links, "L6": 6 * model.n_links, "L9": 9 * model.n_links,
+            "D": model.n_dofs, "G": n_geoms,
             "G2": 2 * n_geoms, "G5": 5 * n_geoms, "T": model.n_tendons,
             "DWW": 1 + DYN_WELD * n_dyn_welds}.get(width, width)
 
@@ -304,7 +306,8 @@ def _counts(size):
             "E": size["E"], "E2": 2 * size["E"], "E7": 7 * size["E"], "K2": 2 * size["K"], "K7": 7 * size["K"],
             "T": size["T"], "T3": TENDON_JOINTS * size["T"], "T7": 7 * size["T"],
             "WD": size["WD"], "WD2": 2 * size["WD"],
-            "G2": 2 * size["G"], "G5": 5 * size["G"], "L3": 3 * size["L"], "L6": 6 * size["L"], "D7": 7 * D, 1: 1,
+            "G2": 2 * size["G"], "G5": 5 * size["G"], "L3": 3 * size["L"], "L6": 6 * size["L"], "L9": 9 * size["L"],
+            "D7": 7 * D, 1: 1,
             len(CONSTS): len(CONSTS),
             **{f"ws:{name}": size["WS"] * n for name, (_, n) in CONVEX_SCRATCH.items()}}
 

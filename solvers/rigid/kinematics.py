@@ -5,9 +5,9 @@ root link's origin (MuJoCo's ``cdof`` and ``cinert`` idea, about the root's subt
 mass there), so later stages are plain sweeps over the links. About the world origin instead, a
 robot far from it pays for it in round-off: a float32 quadruped at x = 300 m had a mass matrix
 that was not positive definite. The outputs of a step do not depend on the point (only their
-round-off does), so the reverse takes it as a constant: the gradients stay exact. Inertias are derived from
-the *current* masses here, inside the differentiated step: a link's rotational inertia scales
-with its mass (constant shape, uniform density change).
+round-off does), so the reverse takes it as a constant: the gradients stay exact. Inertias are formed
+from the *current* inputs here, inside the differentiated step: each link's mass, centre of mass
+and rotational inertia (the entity's setters choose whether a new mass scales the inertia).
 
 Each forward function has its hand-written reverse below it (see docs/architecture.md).
 """
@@ -67,12 +67,18 @@ def _link_com(d: ti.template(), e, l):
 
 
 @ti.func
+def _link_rotational_inertia(d: ti.template(), e, l):
+    """Link l's rotational inertia about its centre of mass in its frame (kg·m²): the input inertia."""
+    return ti.Matrix([[d.inertia[e, 9 * l + 3 * a + b] for b in ti.static(range(3))] for a in ti.static(range(3))])
+
+
+@ti.func
 def _link_inertia(d: ti.template(), s, e, l, pos, rot):
     """Spatial inertia (m, h, I about the reference) of link l alone; pos: its origin relative to
     the reference."""
     m = d.mass[e, l]
     com = pos + mat_vec(rot, _link_com(d, e, l))
-    inertia_com = mat_mul(mat_mul(rot, d.link_inertia0[l] * (m * d.link_inv_mass0[l])), rot.transpose())
+    inertia_com = mat_mul(mat_mul(rot, _link_rotational_inertia(d, e, l)), rot.transpose())
     inertia = inertia_com + m * ((com[0] ** 2 + com[1] ** 2 + com[2] ** 2) * ti.Matrix.identity(float, 3)
                                  - com.outer_product(com))
     d.cinert_m[s, e, l] = m
@@ -160,17 +166,18 @@ def _link_inertia_adjoint(d: ti.template(), s, e, l, pos, rot, g_m, g_h, g_i):
     trace = g_i.trace()
     g_sym = g_i + g_i.transpose()
     g_com = m * (g_h + 2.0 * trace * com - mat_vec(g_sym, com))
-    # rotated inertia about the com: m·U with U = R I0 Rᵀ / m0 symmetric, and a rotation moves
-    # it by δU = [δθ]× U − U [δθ]×, so ∂L/∂δθ is m times the axial vector of P − Pᵀ, P = U g_sym
-    unit = mat_mul(mat_mul(rot, d.link_inertia0[l]), rot.transpose()) * d.link_inv_mass0[l]
-    p = mat_mul(unit, g_sym)
-    g_mass = (g_m + g_h.dot(com) + trace * com.dot(com) - com.dot(mat_vec(g_i, com))
-              + 0.5 * (g_sym * unit).sum())
+    # rotated inertia about the com: W = R I Rᵀ symmetric, and a rotation moves it by
+    # δW = [δθ]× W − W [δθ]×, so ∂L/∂δθ is the axial vector of P − Pᵀ, P = W g_sym
+    p = mat_mul(mat_mul(mat_mul(rot, _link_rotational_inertia(d, e, l)), rot.transpose()), g_sym)
+    g_mass = g_m + g_h.dot(com) + trace * com.dot(com) - com.dot(mat_vec(g_i, com))
     accumulate(d.mass.grad, ti.Vector([e, l]), g_mass)
     g_local = mat_vec(rot.transpose(), g_com)  # the com input turns with the link
     for k in ti.static(range(3)):
         accumulate(d.com.grad, ti.Vector([e, 3 * l + k]), g_local[k])
-    g_rot = arm.cross(g_com) + m * ti.Vector([p[1, 2] - p[2, 1], p[2, 0] - p[0, 2], p[0, 1] - p[1, 0]])
+    g_inertia = mat_mul(mat_mul(rot.transpose(), g_i), rot)  # the inertia input turns with the link
+    for a, b in ti.static(ti.ndrange(3, 3)):
+        accumulate(d.inertia.grad, ti.Vector([e, 9 * l + 3 * a + b]), g_inertia[a, b])
+    g_rot = arm.cross(g_com) + ti.Vector([p[1, 2] - p[2, 1], p[2, 0] - p[0, 2], p[0, 1] - p[1, 0]])
     return g_com, g_rot
 
 

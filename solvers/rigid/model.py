@@ -140,9 +140,10 @@ class RigidModel:
         return len(self.ten_lower)
 
     @property
-    def link_inv_mass0(self):
-        """1 / mass0, 0 for massless links (their inertia is dropped, as MuJoCo does)."""
-        return np.divide(1.0, self.link_mass0, out=np.zeros_like(self.link_mass0), where=self.link_mass0 > 0)
+    def link_inertia(self):
+        """(L, 3, 3) kg·m²: the rotational inertia each link starts with (the input "inertia"):
+        inertia0, and 0 for a massless link (its stated inertia is dropped, as MuJoCo does)."""
+        return self.link_inertia0 * (self.link_mass0 > 0)[:, None, None]
 
     @property
     def link_static(self):

@@ -36,7 +36,7 @@ class RigidSolver(Solver):
     """Owns the rigid model (immutable), its Taichi data and the default inputs."""
 
     #: inputs that keep their value across ``scene.reset()`` (controls do not)
-    persistent_inputs = ("mass", "com", "damping", "armature", "stiffness", "kp", "kv", "gravity", "force_lo",
+    persistent_inputs = ("mass", "com", "inertia", "damping", "armature", "stiffness", "kp", "kv", "gravity", "force_lo",
                          "force_hi", "frictionloss", "friction", "solref", "solimp", "invweight_t", "invweight_r",
                          "invweight_dof", "invweight_ten")
 
@@ -154,7 +154,8 @@ class RigidSolver(Solver):
         m, B, slots = self.model, self.n_batch, self.rigid_options.max_dynamic_constraints
         effort = np.minimum(m.dof_effort, BIG)
         per_env = {
-            "mass": m.link_mass0, "com": m.link_com.reshape(-1), "damping": m.dof_damping, "armature": m.dof_armature,
+            "mass": m.link_mass0, "com": m.link_com.reshape(-1), "inertia": m.link_inertia.reshape(-1),
+            "damping": m.dof_damping, "armature": m.dof_armature,
             "stiffness": m.dof_stiffness, "kp": m.dof_kp, "kv": m.dof_kv, "gravity": np.array(self.sim_options.gravity),
             "ctrl_force": np.zeros(m.n_dofs), "ctrl_pos": np.zeros(m.n_dofs), "ctrl_vel": np.zeros(m.n_dofs),
             "xfrc": np.zeros(6 * m.n_links),
@@ -176,25 +177,25 @@ class RigidSolver(Solver):
         return {name: np.where(np.isnan(given), np.asarray(default[name], dtype=np.float64), given).ravel()
                 for name, given in (("solref", m.geom_solref), ("solimp", m.geom_solimp))}
 
-    derived_from = ("mass", "armature")
+    derived_from = ("mass", "inertia", "armature")
     derived_inputs = ("invweight_t", "invweight_r", "invweight_dof", "invweight_ten")
 
     def derive_inputs(self, inputs, previous=None):
         """``inputs`` with the rows' scale (invweight_t, invweight_r, invweight_dof, invweight_ten) recomputed from
-        their mass and armature (contact.InvweightBasis; differentiable); zeros before the basis exists (the first
-        allocation at build, which forms no rows). With ``previous`` and no gradient anywhere
-        (mass, armature, nor the previous scale: its graph would stay attached), only the envs
-        whose mass or armature changed are recomputed (setting one env's mass recomputed all: 80
+        their mass, inertia and armature (contact.InvweightBasis; differentiable); zeros before the basis exists
+        (the first allocation at build, which forms no rows). With ``previous`` and no gradient anywhere
+        (those inputs, nor the previous scale: its graph would stay attached), only the envs
+        where one of them changed are recomputed (setting one env's mass recomputed all: 80
         ms a call at 1024 envs)."""
         if self.invweight_basis is None:
             return inputs
-        mass, armature = inputs["mass"], inputs["armature"]
+        sources = [inputs[name] for name in self.derived_from]
         envs = slice(None)
         if previous is not None and not any(t.requires_grad for t in (
-                mass, armature, *(previous[name] for name in self.derived_inputs))):
-            changed = (mass != previous["mass"]).any(1) | (armature != previous["armature"]).any(1)
+                *sources, *(previous[name] for name in self.derived_inputs))):
+            changed = torch.stack([(inputs[name] != previous[name]).any(1) for name in self.derived_from]).any(0)
             envs = torch.nonzero(changed).flatten()
-        derived = dict(zip(self.derived_inputs, self.invweight_basis(mass[envs], armature[envs],
+        derived = dict(zip(self.derived_inputs, self.invweight_basis(*(t[envs] for t in sources),
                                                                      self.check_positive_definite)))
         if isinstance(envs, torch.Tensor):  # (the others keep theirs)
             derived = {name: previous[name].index_put((envs,), value) for name, value in derived.items()}
