@@ -108,8 +108,8 @@ def _rows_scale(robot):
     masses, armature 0 (these robots have no tendon)."""
     solver = robot._solver
     mass = solver.default_inputs["mass"]
-    return solver.invweight_basis(mass, solver.default_inputs["inertia"], torch.zeros((1, robot.n_dofs), dtype=mass.dtype),
-                                  solver.check_positive_definite)[:3]
+    return solver.invweight_basis(mass, solver.default_inputs["inertia"],
+                                  torch.zeros((1, robot.n_dofs), dtype=mass.dtype), solver.check_positive_definite)[:3]
 
 
 @pytest.mark.parametrize("name", list(ROBOTS))

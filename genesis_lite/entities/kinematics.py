@@ -109,11 +109,12 @@ class Target:
 
 
 class _Joints:
-    """The solve's view of the entity's qpos: the qs of its scalar dofs, their limits (rad or m)
-    when respected, and which of them move (``moving``: local dofs given and on the path of a
-    goal's link; only they step, are clipped and are drawn again)."""
+    """The solve's view of the entity's qpos: the qs of its scalar dofs, their limits (rad or m;
+    each env's of ``envs``, as set_dofs_limit left them) when respected, and which of them move
+    (``moving``: local dofs given and on the path of a goal's link; only they step, are clipped and
+    are drawn again)."""
 
-    def __init__(self, entity, respect_limits, moving):
+    def __init__(self, entity, respect_limits, moving, envs):
         model = entity._solver.model
         self.free = entity._free_joints  # (first local dof, first local q) of each free joint
         self.turns = entity._turns  # and of each joint's rotation stored as a quaternion (free, ball)
@@ -122,8 +123,9 @@ class _Joints:
         self.qs = model.dof_q[dofs] - entity.q_start
         self.limited = respect_limits
         device = runtime.device
-        self.lower = torch.as_tensor(model.dof_lower[dofs], dtype=runtime.tc_float, device=device)
-        self.upper = torch.as_tensor(model.dof_upper[dofs], dtype=runtime.tc_float, device=device)
+        inputs = entity._sim().inputs(entity._solver)
+        rows, columns = (torch.as_tensor(index, device=device) for index in (envs, dofs))
+        self.lower, self.upper = (inputs[name][rows][:, columns].detach() for name in ("limit_lower", "limit_upper"))
         self.moving = torch.as_tensor(moving[self.dofs], device=device)
         self.revolute = torch.as_tensor(model.link_jtype[model.dof_link[dofs]] == REVOLUTE, device=device)
 
@@ -227,7 +229,7 @@ def solve_ik(entity, goals, start, envs, dofs, options):
     motions = DofMotions(entity)
     on_path = np.logical_or.reduce([motions.on_path(target.link) for target in goals])
     moving = on_path & np.isin(np.arange(entity.n_dofs), dofs)
-    joints = _Joints(entity, options["respect_joint_limit"], moving)
+    joints = _Joints(entity, options["respect_joint_limit"], moving, envs)
     generator = torch.Generator().manual_seed(0 if options["seed"] is None else int(options["seed"]))
     moving_columns = torch.as_tensor(moving, dtype=start.dtype, device=start.device)
     eye = torch.eye(6 * len(goals), dtype=start.dtype, device=start.device)

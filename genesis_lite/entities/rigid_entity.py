@@ -3,6 +3,8 @@ and controls. Local indices (links, dofs, qs) count within the entity; envs_idx 
 environments when the scene is batched (n_envs > 0), and every result then gains a leading
 batch dimension.
 """
+import math
+
 import numpy as np
 import torch
 
@@ -1089,14 +1091,33 @@ class RigidEntity(EntityIndexing):
 
     def get_dofs_limit(self, dofs_idx_local=None, envs_idx=None):
         """(lower, upper) position limits of the dofs, rad or m, each (n,) or (n_envs, n), as Genesis's:
-        the URDF's (±inf where a joint has none: continuous, free); a ball joint's dofs (−inf, its
-        cone limit's angle) each (Genesis: ±inf, it ignores the limit); the rows enforce them unless
-        RigidOptions(enable_joint_limit=False). Not settable yet."""
-        dofs = self.dof_start + self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
-        n_envs = len(self._envs(envs_idx))
-        model = self._solver.model
-        return tuple(self._out(torch.as_tensor(bound[dofs], dtype=runtime.tc_float, device=runtime.device)
-                               .expand(n_envs, len(dofs)).clone()) for bound in (model.dof_lower, model.dof_upper))
+        the asset's or set_dofs_limit's (±inf where a joint has none: continuous, free); a ball
+        joint's dofs (−inf, its cone limit's angle) each (Genesis: ±inf, it ignores the limit); the
+        rows enforce them unless RigidOptions(enable_joint_limit=False)."""
+        return (self._get_dofs_input("limit_lower", dofs_idx_local, envs_idx),
+                self._get_dofs_input("limit_upper", dofs_idx_local, envs_idx))
+
+    def set_dofs_limit(self, lower, upper, dofs_idx_local=None, envs_idx=None):
+        """Position limits of scalar dofs (hinge, slide), rad or m: lower and upper each (n,) or
+        (n_envs, n), as Genesis's (±inf: no bound), on a dof limited by its asset or not; a limit
+        row holds them (MuJoCo's, with the joint's limit softness). A ball or free joint's dofs
+        have no position of their own to bound: refused. Differentiable (a met bound moves the
+        row's reference)."""
+        dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
+        envs = self._envs(envs_idx, distinct=True)
+        turning = dofs[np.isin(dofs, self._quat_joint_dofs)]
+        if len(turning):
+            raise InvalidInputError(f"entity '{self.name}': set_dofs_limit got dofs {turning.tolist()} of a ball or "
+                                    f"free joint (a turn, no scalar position to bound); expected hinge or slide dofs")
+        lo = self._values(lower, len(dofs), envs, "lower", infinite=True)
+        hi = self._values(upper, len(dofs), envs, "upper", infinite=True)
+        if bool((lo.detach() > hi.detach()).any() or (lo.detach() == math.inf).any()
+                or (hi.detach() == -math.inf).any()):
+            raise InvalidInputError(f"entity '{self.name}': set_dofs_limit argument 'lower' must be ≤ 'upper', "
+                                    f"lower < +inf and upper > −inf, got {lo.detach().cpu().numpy()} and "
+                                    f"{hi.detach().cpu().numpy()}")
+        self._write_input("limit_lower", self.dof_start + dofs, envs, lo)
+        self._write_input("limit_upper", self.dof_start + dofs, envs, hi)
 
     def get_dofs_force_range(self, dofs_idx_local=None, envs_idx=None):
         return (self._get_dofs_input("force_lo", dofs_idx_local, envs_idx),

@@ -60,16 +60,14 @@ def _pair_budget(model, k):
 
 
 def limit_rows(model, options):
-    """Limit rows a scene may make at once, limits on: one per scalar joint with a finite bound (at
-    most one of its two is violated), one per ball joint with a cone limit (its first dof's upper
-    bound), one per limited fixed tendon."""
+    """Limit rows a scene may make at once, limits on: one per scalar dof (at most one of its two
+    bounds is violated; settable on any, set_dofs_limit), one per ball joint with a cone limit (its
+    first dof's upper bound), one per limited fixed tendon."""
     if not options.enable_joint_limit:
         return 0
-    finite = np.isfinite(model.dof_lower) | np.isfinite(model.dof_upper)
     first_of_ball = (model.link_jtype[model.dof_link] == BALL) & (model.link_dof0[model.dof_link] == np.arange(
         model.n_dofs))
-    return int((finite & (model.dof_q >= 0)).sum() + (np.isfinite(model.dof_upper) & first_of_ball).sum()
-               + model.n_tendons)
+    return int((model.dof_q >= 0).sum() + (np.isfinite(model.dof_upper) & first_of_ball).sum() + model.n_tendons)
 
 
 def worst_case_contacts(model):

@@ -74,6 +74,10 @@ INPUTS = {
     "invweight_ten": ("T", True),  # MuJoCo's tendon_invweight0 per limited fixed tendon: J M⁻¹ Jᵀ at q0
     "force_lo": ("D", True),    # N·m or N: the actuator force's bounds
     "force_hi": ("D", True),
+    # rad or m: each scalar dof's position limits (±inf: none); a ball joint's first dof's upper: its
+    # cone limit's angle, rad (constraint/rows.py)
+    "limit_lower": ("D", True),
+    "limit_upper": ("D", True),
     # welds made at run time (RigidOptions.max_dynamic_constraints slots, DW): how many are on, then
     # per slot (the first that many on) its two links (model indices, as floats), each link's anchor
     # (3,) m in its frame and each link's held frame's turn (4,) w-x-y-z in its frame: 1 + 16·DW;
@@ -97,7 +101,7 @@ MODEL = {
     "geom_rbound": ("f", "G"), "pair_margin": ("f", "N"), "pair_mix": ("f", "N"),
     "geom_pos": ("v3", "G"), "geom_size": ("v3", "G"), "hull_vec": ("v3", "H"), "geom_quat": ("v4", "G"),
     "geom_aabb_center": ("v3", "G"), "geom_aabb_half": ("v3", "G"), "geom_centre": ("v3", "G"),
-    "link_gravcomp": ("f", "L"), "dof_lower": ("f", "D"), "dof_upper": ("f", "D"),
+    "link_gravcomp": ("f", "L"),
     "dof_springref": ("f", "D"),  # rad or m: where a joint spring is at rest
     "dof_limit_sol": ("f", "D7"), "dof_frictionloss_sol": ("f", "D7"),  # (solref, solimp) of a dof's rows
     # joint equalities (URDF mimic joints; RigidModel says what they hold)

@@ -5,6 +5,7 @@ bookkeeping around the kernels of the stage modules; no Python loop runs over en
 dofs at step time.
 """
 import logging
+import math
 
 import numpy as np
 import torch
@@ -36,9 +37,9 @@ class RigidSolver(Solver):
     """Owns the rigid model (immutable), its Taichi data and the default inputs."""
 
     #: inputs that keep their value across ``scene.reset()`` (controls do not)
-    persistent_inputs = ("mass", "com", "inertia", "damping", "armature", "stiffness", "kp", "kv", "gravity", "force_lo",
-                         "force_hi", "frictionloss", "friction", "solref", "solimp", "invweight_t", "invweight_r",
-                         "invweight_dof", "invweight_ten")
+    persistent_inputs = ("mass", "com", "inertia", "damping", "armature", "stiffness", "kp", "kv", "gravity",
+                         "force_lo", "force_hi", "limit_lower", "limit_upper", "frictionloss", "friction", "solref",
+                         "solimp", "invweight_t", "invweight_r", "invweight_dof", "invweight_ten")
 
     transient_inputs = ("xfrc",)
 
@@ -148,7 +149,6 @@ class RigidSolver(Solver):
         self.collider_reverses = [(detect.KERNEL_BIT[kind], BoundKernel(step.collide_adjoint, (schedule, kind),
                                                                         arenas, element_dims, detect.opt_level(kind)))
                                   for kind in detect.differentiable_kinds(m)]
-        self.limited = contact.limit_rows(self.model, options) > 0
 
     def _default_inputs(self):
         m, B, slots = self.model, self.n_batch, self.rigid_options.max_dynamic_constraints
@@ -160,6 +160,7 @@ class RigidSolver(Solver):
             "ctrl_force": np.zeros(m.n_dofs), "ctrl_pos": np.zeros(m.n_dofs), "ctrl_vel": np.zeros(m.n_dofs),
             "xfrc": np.zeros(6 * m.n_links),
             "frictionloss": m.dof_frictionloss, "force_lo": -effort, "force_hi": effort,
+            "limit_lower": m.dof_lower, "limit_upper": m.dof_upper,
             "ctrl_mode": np.zeros(m.n_dofs), "dyn_welds": np.zeros(1 + DYN_WELD * slots),
             "friction": m.geom_friction, **self._default_softness(),
             "invweight_t": np.zeros(m.n_links), "invweight_r": np.zeros(m.n_links), "invweight_dof": np.zeros(m.n_dofs),
@@ -275,9 +276,9 @@ class RigidSolver(Solver):
     def _note_inputs(self, inputs):
         """Tell the kernels whether the inputs hold an external wrench (the header's "wrench": set
         by apply_links_external_wrench, else the build's zeros, whose force stage and its
-        gradients the kernels then skip). Keep whether they give some dof friction loss, and
-        some env a run-time weld (constraint rows).
-        Checked again only for another frictionloss (dyn_welds) tensor, or the same one changed in
+        gradients the kernels then skip). Keep whether they give some dof friction loss or a
+        limit (or the model a limited tendon), and some env a run-time weld (constraint rows).
+        Checked again only for another frictionloss (limit, dyn_welds) tensor, or the same one changed in
         place by torch (which counts its versions; the setters always give a new tensor): a rollout
         passes the same one every step, and the check costs ~15 µs of torch amid a step
         (a tenth of a small robot's differentiable step)."""
@@ -286,6 +287,9 @@ class RigidSolver(Solver):
             self.data.header[HEADER["wrench"]] = self._wrench = wrench
         if self._changed(inputs, "frictionloss"):
             self.friction = bool((inputs["frictionloss"] > 0).any())
+        if self._changed(inputs, "limit_lower") | self._changed(inputs, "limit_upper"):  # (both noted)
+            self.limited = self.rigid_options.enable_joint_limit and (self.model.n_tendons > 0 or bool(
+                (inputs["limit_lower"] > -math.inf).any() or (inputs["limit_upper"] < math.inf).any()))
         if self._changed(inputs, "dyn_welds"):
             self.welds_on = bool((inputs["dyn_welds"][:, 0] > 0).any())
 

@@ -570,10 +570,10 @@ def _limit_side(d: ti.template(), s, e, i):
     qi = d.dof_q[i]
     if d.limits_enabled and qi >= 0:
         q = d.qpos[s, e, qi]
-        if q - d.dof_lower[i] < 0.0:
-            sign, dist = 1.0, q - d.dof_lower[i]
-        elif d.dof_upper[i] - q < 0.0:
-            sign, dist = -1.0, d.dof_upper[i] - q
+        if q - d.limit_lower[e, i] < 0.0:
+            sign, dist = 1.0, q - d.limit_lower[e, i]
+        elif d.limit_upper[e, i] - q < 0.0:
+            sign, dist = -1.0, d.limit_upper[e, i] - q
     return sign, dist
 
 
@@ -583,9 +583,9 @@ def _ball_limit(d: ti.template(), s, e, i):
     joint whose first dof is i at frame s; 0 where dof i is no limited ball joint's first dof."""
     violated, dist, axis = 0, 0.0, ti.Vector.zero(float, 3)
     link = d.dof_link[i]
-    if d.limits_enabled and d.link_jtype[link] == BALL and d.link_dof0[link] == i and d.dof_upper[i] < BIG:
+    if d.limits_enabled and d.link_jtype[link] == BALL and d.link_dof0[link] == i and d.limit_upper[e, i] < BIG:
         angle, turn_axis = quat_turn(joint_quat(d, s, e, link))
-        dist, axis = d.dof_upper[i] - angle, turn_axis
+        dist, axis = d.limit_upper[e, i] - angle, turn_axis
         if dist < 0.0:
             violated = 1
     return violated, dist, axis
@@ -733,8 +733,8 @@ def _ball_limit_row(d: ti.template(), s, e, r, i, dist, axis):
 @ti.func
 def dof_rows_adjoint(d: ti.template(), s, e, r, g_aref, g_R, g_bound):
     """Reverse of ``_dof_row`` and ``_equality_row`` for row r (< efc_dof_rows) given the gradients
-    of its aref, R and friction-loss bound: into q, q̇ at frame s, the friction-loss input and
-    dof_invweight0. The row's dofs: (first, second) with Jacobian entries (c1, c2); second = −1
+    of its aref, R and friction-loss bound: into q, q̇ at frame s, the friction-loss and limit
+    inputs and dof_invweight0. The row's dofs: (first, second) with Jacobian entries (c1, c2); second = −1
     for a single-dof row. (An equality's offset and multiplier are the model's: no gradient.) A
     ball joint's cone limit: _ball_limit_adjoint; a connect's or weld's rows: _body_eq_row_adjoint."""
     t = d.efc_type[s, e, r]
@@ -781,6 +781,11 @@ def _scalar_row_adjoint(d: ti.template(), s, e, r, t, g_aref, g_R, g_bound):
         accumulate(d.qpos.grad, ti.Vector([s, e, d.dof_q[first]]), c1 * g_dist)
         if second >= 0:
             accumulate(d.qpos.grad, ti.Vector([s, e, d.dof_q[second]]), c2 * g_dist)
+        elif t == ONE_SIDED:  # a limit: dist = q − lower (c1 = 1) or upper − q (c1 = −1)
+            if c1 > 0.0:
+                accumulate(d.limit_lower.grad, ti.Vector([e, first]), -g_dist)
+            else:
+                accumulate(d.limit_upper.grad, ti.Vector([e, first]), g_dist)
 
 
 @ti.func
@@ -803,13 +808,13 @@ def _ball_limit_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
     """Reverse of _ball_limit_row for row r: from its implicit gradients (aref, R) and, as the row's
     Jacobian −axis depends on q, J̄_k = f u_k − āref (qacc_k + B q̇_k) (the solve's stationarity,
     and aref's −B J q̇; u = H⁻¹ā in solver_Mgrad), into the ball joint's quaternion, q̇ and its
-    first dof's dof_invweight0."""
+    first dof's dof_invweight0 (the cone's angle is the model's: set_dofs_limit refuses a ball joint)."""
     i = d.efc_id[s, e, r]
     raw = joint_quat(d, s, e, d.dof_link[i])
     angle, axis = quat_turn(raw)
     solref, solimp = _softness(d.dof_limit_sol, i)
-    g_dist, damping, g_scale = _joint_row_scalars_adjoint(d, d.dof_upper[i] - angle, d.invweight_dof[e, i], g_aref,
-                                                          g_R, solref, solimp)
+    g_dist, damping, g_scale = _joint_row_scalars_adjoint(d, d.limit_upper[e, i] - angle, d.invweight_dof[e, i],
+                                                          g_aref, g_R, solref, solimp)
     accumulate(d.invweight_dof.grad, ti.Vector([e, i]), g_scale)
     g_angle = -g_dist  # dist = θmax − θ
     force = d.efc_force[s, e, r]
