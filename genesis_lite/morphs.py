@@ -3,6 +3,9 @@
 Angles: ``euler`` is (roll, pitch, yaw) in degrees, fixed axes x-y-z as in Genesis;
 ``quat`` (w, x, y, z) overrides it when given. Lengths in metres.
 """
+import functools
+import importlib.util
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,6 +25,30 @@ _FILE = _MORPH + ("decimate", "decimate_face_num", "decimate_aggressiveness", "w
                   "recompute_inertia", "align", "batch_fixed_verts")
 # taken by Genesis 1.4.5 with a deprecation warning and no effect, as here
 _DEPRECATED = ("requires_jac_and_IK", "is_free")
+
+
+@functools.cache
+def genesis_assets():
+    """The folder of genesis-world's bundled assets (Genesis's get_assets_dir(): its xml/, urdf/,
+    meshes/…) when that package is installed, else None. Found without importing it."""
+    spec = importlib.util.find_spec("genesis")
+    folders = list(spec.submodule_search_locations or []) if spec is not None else []
+    return next((os.path.join(f, "assets") for f in folders if os.path.isdir(os.path.join(f, "assets"))), None)
+
+
+def _file_path(owner, file):
+    """A file morph's ``file`` (a path string or os.PathLike) as Genesis resolves it: the path as
+    given where it exists (a relative one from the working directory), else in genesis-world's
+    bundled assets (genesis_assets) where it is there, else as given (scene.add_entity says it was
+    not found)."""
+    if isinstance(file, os.PathLike):
+        file = os.fspath(file)
+    if not isinstance(file, str) or not file:
+        raise InvalidInputError(f"{owner}: argument 'file' must be a path (a string or os.PathLike), got {file!r}")
+    assets = None if os.path.exists(file) else genesis_assets()
+    if assets is not None and os.path.exists(os.path.join(assets, file)):
+        return os.path.join(assets, file)
+    return file
 
 
 class _GenesisArmature:
@@ -155,7 +182,9 @@ class Morph:
 @named_keywords(*_FILE, "prioritize_urdf_material", "xacro_args", deprecated=_DEPRECATED)
 @dataclass
 class URDF(Morph):
-    """A robot from a URDF file; mesh paths may be relative or ``package://``.
+    """A robot from a URDF file; mesh paths may be relative or ``package://``. ``file``: a path (str or
+    os.PathLike), found as given, else among genesis-world's bundled assets when that package is
+    installed (Genesis's rule: "urdf/go2/urdf/go2.urdf"); so are MJCF's and Mesh's.
 
     scale: the robot grown by this factor, of the same densities, as Genesis's (lengths × s,
     masses × s³, inertias × s⁵; gains, damping, friction and effort limits the file's:
@@ -179,8 +208,7 @@ class URDF(Morph):
     file_meshes_are_zup: bool = True
 
     def _check(self):
-        if not isinstance(self.file, str) or not self.file:
-            raise InvalidInputError(f"URDF: argument 'file' must be a path string, got {self.file!r}")
+        self.file = _file_path("URDF", self.file)
         self.scale = _isotropic_scale("URDF", self.scale)
         self.file_meshes_are_zup = _meshes_zup("URDF", self.file_meshes_are_zup, self.file, False)
         self.default_armature = _armature("URDF", self.default_armature)
@@ -223,8 +251,7 @@ class MJCF(Morph):
     default_armature: float = GENESIS_ARMATURE
 
     def _check(self):
-        if not isinstance(self.file, str) or not self.file:
-            raise InvalidInputError(f"MJCF: argument 'file' must be a path string, got {self.file!r}")
+        self.file = _file_path("MJCF", self.file)
         self.scale = _isotropic_scale("MJCF", self.scale)
         _meshes_zup("MJCF", self.file_meshes_are_zup, self.file, True)  # (checked; not read, as Genesis's loader)
         if not isinstance(self.exclude_ground_plane, (bool, np.bool_)):
@@ -312,8 +339,7 @@ class Mesh(Morph):
 
     def _check(self):
         _check_masks("Mesh", self)
-        if not isinstance(self.file, str) or not self.file:
-            raise InvalidInputError(f"Mesh: argument 'file' must be a path string, got {self.file!r}")
+        self.file = _file_path("Mesh", self.file)
         _positive("Mesh", "scale", self.scale)
         self.file_meshes_are_zup = _meshes_zup("Mesh", self.file_meshes_are_zup, self.file, True)
 

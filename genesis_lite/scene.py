@@ -480,6 +480,14 @@ def _add_rotor_armature(links, morph, mujoco_compatible):
             link.armature = armature
 
 
+def _not_found():
+    """Where a file morph's relative path was looked for (gm._file_path), for its error."""
+    assets = gm.genesis_assets()
+    return (f"not found; relative paths start at {os.getcwd()}, then "
+            + (f"genesis-world's bundled assets, {assets}" if assets else
+               "genesis-world's bundled assets where that package is installed (it is not)"))
+
+
 def _links_of(morph, material, name, mujoco_compatible):
     """The morph's LinkSpec list (fixed links merged when the morph asks, friction and gravity
     compensation from the material when it states them), its root joint set from the morph's placement. Where a mass
@@ -492,7 +500,7 @@ def _links_of(morph, material, name, mujoco_compatible):
         if not os.path.isfile(morph.file):
             # name the argument and what was expected, as every error message does
             raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.URDF expected an existing URDF file, "
-                             f"got '{morph.file}' (not found; relative paths start at {os.getcwd()})")
+                             f"got '{morph.file}' ({_not_found()})")
         links = urdf.load_urdf(morph.file, entity_name=name, rho=rho, y_up=not morph.file_meshes_are_zup,
                                collision=morph.collision)
         if morph.merge_fixed_links:
@@ -503,7 +511,7 @@ def _links_of(morph, material, name, mujoco_compatible):
     elif isinstance(morph, gm.MJCF):
         if not os.path.isfile(morph.file):
             raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.MJCF expected an existing MJCF file, "
-                             f"got '{morph.file}' (not found; relative paths start at {os.getcwd()})")
+                             f"got '{morph.file}' ({_not_found()})")
         links = mjcf.load_mjcf(morph.file, entity_name=name, exclude_ground_plane=morph.exclude_ground_plane)
         if morph.scale != 1.0:
             links = scale.scaled_links(links, morph.scale, gains=morph.scale ** 3)

@@ -616,7 +616,7 @@ def test_a_hinge_on_the_world_hangs_from_a_static_world_link_and_angles_follow_t
 
 
 def test_morph_arguments_are_checked(f64):
-    with pytest.raises(InvalidInputError, match="MJCF: argument 'file' must be a path string"):
+    with pytest.raises(InvalidInputError, match=r"MJCF: argument 'file' must be a path \(a string or os.PathLike\)"):
         gs.morphs.MJCF(file=3)
     with pytest.raises(AssetError, match="argument 'file' of gs.morphs.MJCF expected an existing MJCF file"):
         gs.Scene().add_entity(gs.morphs.MJCF(file="no_such.xml"))

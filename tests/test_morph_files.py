@@ -1,0 +1,65 @@
+"""Where a file morph's path leads, as Genesis resolves it (its FileMorph): a path string or an
+os.PathLike, found as given (relative to the working directory), else among genesis-world's
+bundled assets when that package is installed ("xml/franka_emika_panda/panda.xml"); a path found
+in neither is a named error saying where it was looked for."""
+import pathlib
+
+import pytest
+
+import genesis_lite as gs
+from genesis_lite import morphs
+from tests.conftest import asset
+
+PENDULUM = asset("pendulum2.urdf")
+
+
+@pytest.fixture
+def genesis_package(tmp_path, monkeypatch):
+    """A stand-in genesis-world package (its assets folder holding a copy of our pendulum and a
+    one-body MJCF) found on sys.path, as an installed one is."""
+    assets = tmp_path / "site" / "genesis" / "assets"
+    (assets / "urdf").mkdir(parents=True)
+    (assets / "xml").mkdir()
+    (tmp_path / "site" / "genesis" / "__init__.py").write_text("raise ImportError('never imported')\n")
+    (assets / "urdf" / "pendulum.urdf").write_text(pathlib.Path(PENDULUM).read_text())
+    (assets / "xml" / "ball.xml").write_text('<mujoco><worldbody><body name="ball"><freejoint/>'
+                                             '<geom type="sphere" size="0.1"/></body></worldbody></mujoco>')
+    monkeypatch.syspath_prepend(str(tmp_path / "site"))
+    morphs.genesis_assets.cache_clear()
+    yield str(assets)
+    morphs.genesis_assets.cache_clear()
+
+
+def test_genesis_asset_paths_resolve_to_its_bundled_assets(f64, genesis_package, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # (no urdf/ or xml/ folder here)
+    assert gs.morphs.URDF(file="urdf/pendulum.urdf").file == f"{genesis_package}/urdf/pendulum.urdf"
+    scene = gs.Scene()
+    pendulum = scene.add_entity(gs.morphs.URDF(file="urdf/pendulum.urdf", fixed=True))
+    ball = scene.add_entity(gs.morphs.MJCF(file=pathlib.Path("xml/ball.xml")))
+    scene.build()
+    assert pendulum.n_dofs == 2 and ball.n_dofs == 6
+    (tmp_path / "xml").mkdir()  # a file of that path here comes first, as in Genesis
+    (tmp_path / "xml" / "ball.xml").write_text('<mujoco><worldbody><body name="box"><freejoint/>'
+                                               '<geom type="box" size="0.1 0.1 0.1"/></body></worldbody></mujoco>')
+    assert gs.morphs.MJCF(file="xml/ball.xml").file == "xml/ball.xml"
+
+
+def test_paths_found_nowhere_say_where_they_were_looked_for(f64, genesis_package, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(gs.AssetError, match=f"'urdf/go2.urdf' \\(not found; relative paths start at {tmp_path}, then "
+                                            f"genesis-world's bundled assets, {genesis_package}\\)"):
+        gs.Scene().add_entity(gs.morphs.URDF(file="urdf/go2.urdf"))
+    monkeypatch.setattr(morphs.importlib.util, "find_spec", lambda name: None)
+    morphs.genesis_assets.cache_clear()
+    with pytest.raises(gs.AssetError, match="genesis-world's bundled assets where that package is installed "
+                                            r"\(it is not\)"):
+        gs.Scene().add_entity(gs.morphs.MJCF(file="xml/franka_emika_panda/panda.xml"))
+
+
+def test_a_pathlike_file_is_taken_as_its_path(f64):
+    scene = gs.Scene()
+    robot = scene.add_entity(gs.morphs.URDF(file=pathlib.Path(PENDULUM), fixed=True))
+    scene.build()
+    assert robot.n_dofs == 2 and gs.morphs.Mesh(file=pathlib.Path("a.obj")).file == "a.obj"
+    with pytest.raises(gs.InvalidInputError, match=r"Mesh: argument 'file' must be a path \(a string or os.PathLike\)"):
+        gs.morphs.Mesh(file=None)
