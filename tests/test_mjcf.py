@@ -615,6 +615,43 @@ def test_a_hinge_on_the_world_hangs_from_a_static_world_link_and_angles_follow_t
         np.testing.assert_allclose(quat * np.sign(quat[0]), np.array(expected) * np.sign(expected[0]), atol=1e-15)
 
 
+@pytest.mark.parametrize("path", [ARM, REPLICATE, "bodies"])
+def test_joint_anchors_and_axes_are_mujocos(f64, tmp_path, path):
+    """RigidJoint.get_anchor_pos / get_anchor_axis (Genesis's) equal MuJoCo's xanchor / xaxis at a
+    random pose: hinges and slides with anchors off their body origins and refs (arm.xml: a slide's
+    anchor stays where its ref puts it), replicated hinges in turned frames, a ball joint (its
+    parent side's z) and a free joint (its position, the world's z), in every env."""
+    from tests.test_link_com import BODIES
+    path = _write(tmp_path, BODIES) if path == "bodies" else path
+    m = mujoco.MjModel.from_xml_path(path)
+    d = mujoco.MjData(m)
+    scene = gs.Scene()
+    robot = scene.add_entity(gs.morphs.MJCF(file=path))
+    scene.build(n_envs=2)
+    rng = np.random.default_rng(0)
+    d.qpos[:] = m.qpos0
+    for j in range(m.njnt):
+        kind, q = int(m.jnt_type[j]), d.qpos[m.jnt_qposadr[j]:]
+        if kind in (mujoco.mjtJoint.mjJNT_HINGE.value, mujoco.mjtJoint.mjJNT_SLIDE.value):
+            q[0] += rng.normal(0.0, 0.3)
+        else:  # a ball's or a free joint's turn
+            turn = rng.normal(size=4)
+            q[0 if kind == mujoco.mjtJoint.mjJNT_BALL.value else 3:][:4] = turn / np.linalg.norm(turn)
+    robot.set_qpos(torch.tensor(np.stack([d.qpos, m.qpos0])))
+    mujoco.mj_kinematics(m, d)
+    kinds = set()
+    names = {m.joint(k).name for k in range(m.njnt)}
+    for joint in robot.joints:  # (an unnamed joint: its body's only one)
+        j = m.joint(joint.name).id if joint.name in names else int(m.body(joint.link.name).jntadr[0])
+        pos, axis = joint.get_anchor_pos(), joint.get_anchor_axis()
+        assert pos.shape == axis.shape == (2, 3)
+        np.testing.assert_allclose(pos[0].numpy(), d.xanchor[j], atol=1e-14)
+        np.testing.assert_allclose(axis[0].numpy(), d.xaxis[j], atol=1e-14)
+        kinds.add(joint.type)
+    assert kinds >= ({"revolute", "prismatic"} if path == ARM else {"revolute"} if path == REPLICATE
+                     else {"revolute", "prismatic", "ball", "free"})
+
+
 def test_morph_arguments_are_checked(f64):
     with pytest.raises(InvalidInputError, match=r"MJCF: argument 'file' must be a path \(a string or os.PathLike\)"):
         gs.morphs.MJCF(file=3)

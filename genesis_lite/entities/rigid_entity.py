@@ -3,6 +3,7 @@ and controls. Local indices (links, dofs, qs) count within the entity; envs_idx 
 environments when the scene is batched (n_envs > 0), and every result then gains a leading
 batch dimension.
 """
+import functools
 import math
 
 import numpy as np
@@ -240,6 +241,38 @@ class RigidJoint:
     def qs_idx(self):
         """The joint's generalized coordinates in the scene's rigid solver (once built)."""
         return [self.entity.q_start + i for i in self.qs_idx_local]
+
+    def get_anchor_pos(self, envs_idx=None):
+        """The joint's anchor in the world, m: (3,) or (n_envs, 3), as Genesis's and MuJoCo's xanchor:
+        the point of its parent's side where it sits, taken at its coordinate's initial value (a
+        slide's does not move with its own coordinate); a free joint's, its body's position."""
+        return wrap(self._anchor(envs_idx)[0], self.entity.scene)
+
+    def get_anchor_axis(self, envs_idx=None):
+        """The joint's axis in the world: (3,) or (n_envs, 3), as Genesis's and MuJoCo's xaxis: a
+        hinge's or slide's axis; a ball joint's its parent side's z axis; a free joint's the world's z."""
+        return wrap(self._anchor(envs_idx)[1], self.entity.scene)
+
+    def _anchor(self, envs_idx):
+        """(anchor (B', 3) m, axis (B', 3)) of the joint in the world (the entity's envs_idx rows)."""
+        entity = self.entity
+        model, link = entity._solver.model, entity.link_start + self.link.idx_local
+        envs = torch.as_tensor(entity._envs(envs_idx), device=runtime.device)
+        poses = entity._sim().derived(entity._solver)[envs]  # (B', L, 13): every link of the solver
+        as_tensor = functools.partial(torch.as_tensor, dtype=poses.dtype, device=poses.device)
+        z = as_tensor([0.0, 0.0, 1.0]).expand(len(envs), 3)
+        if self.type == "free":
+            return poses[:, link, :3], z
+        parent = int(model.link_parent[link])  # (the world where it has none: the root's pos0 is its placement)
+        origin = poses[:, parent, :3] if parent >= 0 else torch.zeros_like(z)
+        turn = quat_to_mat(poses[:, parent, 3:7]) if parent >= 0 else torch.eye(3, dtype=z.dtype, device=z.device).expand(
+            len(z), 3, 3)
+        frame = turn @ quat_to_mat(as_tensor(model.link_quat0[link]))
+        axis = frame @ (z[0] if self.type == "ball" else as_tensor(model.link_axis[link]))
+        anchor = origin + turn @ as_tensor(model.link_pos0[link])
+        if self.type == "prismatic":  # (at its initial coordinate, where an MJCF ref puts the body)
+            anchor = anchor + axis * float(model.qpos0[model.dof_q[entity.dof_start + self.dofs_idx_local[0]]])
+        return anchor, axis
 
     def __getattr__(self, name):
         """Genesis's deprecated singular names (dof_idx_local, dof_idx, q_idx_local, q_idx): an int
