@@ -6,6 +6,7 @@ Angles: ``euler`` is (roll, pitch, yaw) in degrees, fixed axes x-y-z as in Genes
 import functools
 import importlib.util
 import os
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,15 +37,33 @@ def genesis_assets():
     return next((os.path.join(f, "assets") for f in folders if os.path.isdir(os.path.join(f, "assets"))), None)
 
 
-def _file_path(owner, file):
+def inline_xml(file):
+    """Whether a file morph's ``file`` is an XML document itself (Genesis's inline MJCF or URDF: a
+    string that parses as XML) rather than a path."""
+    if not (isinstance(file, str) and file.lstrip().startswith("<")):
+        return False
+    try:
+        ET.fromstring(file)
+    except ET.ParseError:
+        return False
+    return True
+
+
+def _file_path(owner, file, xml=False):
     """A file morph's ``file`` (a path string or os.PathLike) as Genesis resolves it: the path as
     given where it exists (a relative one from the working directory), else in genesis-world's
     bundled assets (genesis_assets) where it is there, else as given (scene.add_entity says it was
-    not found)."""
+    not found). xml (MJCF, URDF): also, as Genesis's, the document itself, as a string (inline_xml)
+    or an xml.etree Element or ElementTree (taken as its string)."""
+    if xml and isinstance(file, (ET.Element, ET.ElementTree)):
+        return ET.tostring(file.getroot() if isinstance(file, ET.ElementTree) else file, encoding="unicode")
     if isinstance(file, os.PathLike):
         file = os.fspath(file)
+    what = "a path (a string or os.PathLike)" + (", or the XML document itself" if xml else "")
     if not isinstance(file, str) or not file:
-        raise InvalidInputError(f"{owner}: argument 'file' must be a path (a string or os.PathLike), got {file!r}")
+        raise InvalidInputError(f"{owner}: argument 'file' must be {what}, got {file!r}")
+    if xml and inline_xml(file):
+        return file
     assets = None if os.path.exists(file) else genesis_assets()
     if assets is not None and os.path.exists(os.path.join(assets, file)):
         return os.path.join(assets, file)
@@ -184,7 +203,9 @@ class Morph:
 class URDF(Morph):
     """A robot from a URDF file; mesh paths may be relative or ``package://``. ``file``: a path (str or
     os.PathLike), found as given, else among genesis-world's bundled assets when that package is
-    installed (Genesis's rule: "urdf/go2/urdf/go2.urdf"); so are MJCF's and Mesh's.
+    installed (Genesis's rule: "urdf/go2/urdf/go2.urdf"); so are MJCF's and Mesh's. A URDF's or
+    MJCF's ``file`` may also be the XML document itself (a string, or an xml.etree Element), as
+    Genesis's: its relative paths (meshes, includes) then start at the working directory.
 
     scale: the robot grown by this factor, of the same densities, as Genesis's (lengths × s,
     masses × s³, inertias × s⁵; gains, damping, friction and effort limits the file's:
@@ -208,7 +229,7 @@ class URDF(Morph):
     file_meshes_are_zup: bool = True
 
     def _check(self):
-        self.file = _file_path("URDF", self.file)
+        self.file = _file_path("URDF", self.file, xml=True)
         self.scale = _isotropic_scale("URDF", self.scale)
         self.file_meshes_are_zup = _meshes_zup("URDF", self.file_meshes_are_zup, self.file, False)
         self.default_armature = _armature("URDF", self.default_armature)
@@ -251,7 +272,7 @@ class MJCF(Morph):
     default_armature: float = GENESIS_ARMATURE
 
     def _check(self):
-        self.file = _file_path("MJCF", self.file)
+        self.file = _file_path("MJCF", self.file, xml=True)
         self.scale = _isotropic_scale("MJCF", self.scale)
         _meshes_zup("MJCF", self.file_meshes_are_zup, self.file, True)  # (checked; not read, as Genesis's loader)
         if not isinstance(self.exclude_ground_plane, (bool, np.bool_)):

@@ -5,6 +5,7 @@ in neither is a named error saying where it was looked for."""
 import pathlib
 
 import pytest
+import torch
 
 import genesis_lite as gs
 from genesis_lite import morphs
@@ -63,3 +64,29 @@ def test_a_pathlike_file_is_taken_as_its_path(f64):
     assert robot.n_dofs == 2 and gs.morphs.Mesh(file=pathlib.Path("a.obj")).file == "a.obj"
     with pytest.raises(gs.InvalidInputError, match=r"Mesh: argument 'file' must be a path \(a string or os.PathLike\)"):
         gs.morphs.Mesh(file=None)
+
+
+def test_an_inline_document_loads_as_its_file(f64, tmp_path, monkeypatch):
+    """Genesis's inline MJCF and URDF: the document as a string, or an xml.etree Element, builds the
+    robot its file builds (the same trajectory, bit for bit), its relative mesh paths from the
+    working directory."""
+    import xml.etree.ElementTree as ET
+    arm = pathlib.Path(asset("mjcf", "crawler.xml")).read_text()
+    mesh_robot = pathlib.Path(asset("mesh_robot", "urdf", "mesh_robot.urdf"))
+    monkeypatch.chdir(mesh_robot.parent)  # (its meshes: "../meshes/link.obj" and a package:// one)
+    trajectories = []
+    for morphs_of in ((lambda: gs.morphs.MJCF(file=asset("mjcf", "crawler.xml")),
+                       lambda: gs.morphs.URDF(file=str(mesh_robot))),
+                      (lambda: gs.morphs.MJCF(file=arm), lambda: gs.morphs.URDF(file=mesh_robot.read_text())),
+                      (lambda: gs.morphs.MJCF(file=ET.fromstring(arm)),
+                       lambda: gs.morphs.URDF(file=ET.ElementTree(ET.fromstring(mesh_robot.read_text()))))):
+        scene = gs.Scene(show_viewer=False)
+        crawler = scene.add_entity(morphs_of[0]())
+        robot = scene.add_entity(morphs_of[1]())
+        scene.build()
+        for _ in range(20):
+            scene.step()
+        trajectories.append(torch.cat([crawler.get_qpos(), robot.get_qpos()]))
+    assert torch.equal(trajectories[0], trajectories[1]) and torch.equal(trajectories[0], trajectories[2])
+    with pytest.raises(gs.AssetError, match=r"MJCF '<inline MJCF>' \(entity 'bad'\): root element expected <mujoco>"):
+        gs.Scene().add_entity(gs.morphs.MJCF(file="<robot/>"), name="bad")

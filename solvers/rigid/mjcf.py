@@ -115,21 +115,23 @@ _PRIMITIVES = ("sphere", "capsule", "cylinder", "box")
 _MJ_RGBA = np.array([0.5, 0.5, 0.5, 1.0])  # MuJoCo's default geom colour
 
 
-def load_mjcf(path: str, entity_name: str | None = None, exclude_ground_plane: bool = False) -> list[LinkSpec]:
+def load_mjcf(path: str, entity_name: str | None = None, exclude_ground_plane: bool = False,
+              text: str | None = None) -> list[LinkSpec]:
     """Links of the MJCF file `path` in tree order (MuJoCo's body order, parent index < child
     index), one tree a root body, then the static "world" link of the worldbody's geoms if it has
     some. A root link's joint is "free" or "fixed" as the file says, at its body's pose (in the
     world frame of the file). entity_name: only used in messages. exclude_ground_plane: leave out
     the worldbody's plane geoms, those in its <frame>s and those a default class makes planes too
     (Genesis's option, which leaves out only the worldbody's own children written type="plane"):
-    for a scene with a ground of its own. Raises InvalidInputError for bad arguments and
-    AssetError for anything wrong with the file."""
+    for a scene with a ground of its own. text: the document itself (Genesis's inline MJCF; `path`
+    then only names it in messages, and relative paths start at the working directory). Raises
+    InvalidInputError for bad arguments and AssetError for anything wrong with the file."""
     if not isinstance(path, (str, os.PathLike)):
         raise InvalidInputError(f"load_mjcf: argument 'path' expected a file path, got {path!r}")
     if not isinstance(exclude_ground_plane, (bool, np.bool_)):
         raise InvalidInputError(f"load_mjcf: argument 'exclude_ground_plane' expected True or False, got "
                                 f"{exclude_ground_plane!r}")
-    reader = _Reader(os.fspath(path), entity_name)
+    reader = _Reader(os.fspath(path), entity_name, text)
     links = reader.links(bool(exclude_ground_plane))
     if reader.ignored:
         _logger.warning(f"{reader.where()}: ignored (genesis_lite does not model them): "

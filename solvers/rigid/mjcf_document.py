@@ -45,11 +45,14 @@ class MJCFDocument:
     """One file's reading: where errors happen, the compiler's settings, the default classes and
     the assets, and what is ignored."""
 
-    def __init__(self, path: str, entity_name: str | None):
+    def __init__(self, path: str, entity_name: str | None, text: str | None = None):
+        """path: the file's, or with ``text`` (the document itself, Genesis's inline MJCF) what messages
+        call it; its relative paths (includes, meshes) then start at the working directory."""
         self.path, self.entity = path, entity_name
+        self.folder = os.getcwd() if text is not None else os.path.dirname(os.path.abspath(path))
         self.ignored = set()  # what the warning lists
         self.included_from = {}  # an included file's <mesh> elements → that file's folder
-        root = self._inlined(path)
+        root = self._inlined(path, text=text)
         if root.tag != "mujoco":
             raise self.error(f"root element expected <mujoco>, got <{root.tag}>")
         self.root = root
@@ -72,9 +75,8 @@ class MJCFDocument:
         self.inertiafromgeom = compiler.get("inertiafromgeom", "auto")
         for replicate in reversed(list(root.iter("replicate"))):  # (the innermost first: its suffix comes first)
             self._replicate(replicate)
-        folder = os.path.dirname(os.path.abspath(path))
         self.meshdir_given = compiler.get("meshdir", compiler.get("assetdir", ""))
-        self.meshdir = os.path.join(folder, self.meshdir_given)
+        self.meshdir = os.path.join(self.folder, self.meshdir_given)
         self.defaults = {}
         for default in root.findall("default"):
             self._read_defaults(default, {}, "main")
@@ -89,22 +91,23 @@ class MJCFDocument:
     def error(self, msg: str) -> AssetError:
         return AssetError(f"{self.where()}: {msg}")
 
-    def _inlined(self, path: str, seen=()):
-        """The root element of `path` with every ``<include file>`` replaced by the children of
-        the included file's root (paths relative to the main file's folder, else to the including
-        file's, as MuJoCo takes them)."""
+    def _inlined(self, path: str, seen=(), text=None):
+        """The root element of `path` (or of the document ``text``) with every ``<include file>``
+        replaced by the children of the included file's root (paths relative to the main file's
+        folder, else to the including file's, as MuJoCo takes them)."""
         if path in seen:
             raise AssetError(f"MJCF '{self.path}': <include> cycle through '{path}'")
+        parser = etree.XMLParser(remove_comments=True)
         try:
-            root = etree.parse(path, etree.XMLParser(remove_comments=True)).getroot()
+            root = etree.parse(path, parser).getroot() if text is None else etree.fromstring(text.encode(), parser)
         except (OSError, etree.XMLSyntaxError) as exc:
             raise AssetError(f"MJCF '{path}': not a readable XML file ({exc})") from exc
         for include in list(root.iter("include")):
             file = include.get("file")
             if not file:
                 raise AssetError(f"MJCF '{path}': <include> expected a 'file' attribute")
-            included = os.path.join(os.path.dirname(os.path.abspath(self.path)), file)
-            if not os.path.isfile(included):  # (MuJoCo also takes a path relative to the including file)
+            included = os.path.join(self.folder, file)
+            if not os.path.isfile(included) and text is None:  # (MuJoCo also takes one relative to the including file)
                 included = os.path.join(os.path.dirname(os.path.abspath(path)), file)
             child = self._inlined(included, seen + (path,))
             for mesh in child.iter("mesh"):

@@ -63,7 +63,7 @@ _INERTIA_RTOL = 1e-6
 
 
 def load_urdf(path: str, entity_name: str | None = None, rho: float | None = None,
-              y_up: bool = False, collision: bool = True) -> list[LinkSpec]:
+              y_up: bool = False, collision: bool = True, text: str | None = None) -> list[LinkSpec]:
     """Links of the URDF file `path` in tree order (root first, parent index < child index).
 
     Order is depth-first from the root, children in the order their joints appear in the
@@ -79,6 +79,8 @@ def load_urdf(path: str, entity_name: str | None = None, rho: float | None = Non
     y_up: the mesh files are Y-up: each is turned to Z-up when read (shapes.load_mesh; Genesis's
     file_meshes_are_zup=False), before its scale, origin and mass properties.
     entity_name: only used in error messages.
+    text: the document itself (Genesis's inline URDF; `path` then only names it in messages, and
+    its meshes' relative paths start at the working directory).
     Raises InvalidInputError for bad arguments and AssetError for anything wrong with the
     file or the meshes it references.
     """
@@ -86,14 +88,15 @@ def load_urdf(path: str, entity_name: str | None = None, rho: float | None = Non
         raise InvalidInputError(f"load_urdf: argument 'path' expected a file path, got {path!r}")
     path = os.fspath(path)
     rho = None if rho is None else float(shapes.check_positive(rho, "rho", "load_urdf"))
-    ctx = _Context(path, entity_name, bool(y_up), bool(collision))
-    text = _read(ctx)
+    ctx = _Context(path, entity_name, bool(y_up), bool(collision), inline=text is not None)
+    where = os.path.abspath(path) if text is None else ctx.folder  # (what names the meshes' places)
+    text = _read(ctx) if text is None else text.encode()
 
     def links_and_warnings():
         return (_links(ctx, text, rho), ctx.warnings), ctx.files
 
     # (meshes are found from its folder; a substitution's variables are part of what it says)
-    inputs = [os.path.abspath(path).encode(), repr(rho).encode(), text, _environment(text), repr(bool(y_up)).encode(),
+    inputs = [where.encode(), repr(rho).encode(), text, _environment(text), repr(bool(y_up)).encode(),
               repr(bool(collision)).encode()]
     specs, warnings = asset_cache.load_or_compute("urdf", inputs, links_and_warnings, _SOURCES, _PACKAGES)
     for message in warnings:
@@ -170,10 +173,11 @@ class _Context:
     """Where an error happened (the file, its folder and the entity, for messages), and whether its
     meshes are read as Y-up (load_urdf's y_up)."""
 
-    def __init__(self, path: str, entity_name: str | None, y_up: bool = False, collision: bool = True):
+    def __init__(self, path: str, entity_name: str | None, y_up: bool = False, collision: bool = True,
+                 inline: bool = False):
         self.path, self.y_up = path, y_up  # (y_up: the mesh files are Y-up, see load_urdf)
         self.collision = collision  # (False: the <collision> elements are left out, see load_urdf)
-        self.folder = os.path.dirname(os.path.abspath(path))
+        self.folder = os.getcwd() if inline else os.path.dirname(os.path.abspath(path))  # (meshes start here)
         self.entity = entity_name
         self.files = []  # asset_cache.snapshot of the mesh files read and of the places looked at before; None:
         # a mesh file may name others (the links are not to be cached)
