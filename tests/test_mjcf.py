@@ -615,6 +615,22 @@ def test_a_hinge_on_the_world_hangs_from_a_static_world_link_and_angles_follow_t
         np.testing.assert_allclose(quat * np.sign(quat[0]), np.array(expected) * np.sign(expected[0]), atol=1e-15)
 
 
+def test_settotalmass_scales_every_body_as_mujocos_compiler(f64, tmp_path):
+    """<compiler settotalmass> (dm_control's cheetah): every body's mass and inertia scaled by one
+    factor to that total, as MuJoCo 4's compiler (it warns the attribute is deprecated): the masses
+    and 200 steps (the box sliding on the floor) as MuJoCo's."""
+    from tests.test_link_com import BODIES
+    path = _write(tmp_path, BODIES, '<compiler settotalmass="7.5"/>')
+    m, d, scene, robot = _pair(path, integrator="euler")
+    assert m.body_mass.sum() == pytest.approx(7.5, rel=1e-14)
+    for link in robot.links:
+        if link.name in {m.body(b).name for b in range(m.nbody)}:
+            assert float(link.get_mass()) == pytest.approx(m.body_mass[m.body(link.name).id], rel=1e-14)
+    d.qvel[:] = np.random.default_rng(2).normal(size=m.nv) * 0.5
+    robot.set_dofs_velocity(torch.tensor(d.qvel))
+    assert _lockstep(m, d, scene, robot, 200) < 1e-11
+
+
 @pytest.mark.parametrize("path", [ARM, REPLICATE, "bodies"])
 def test_joint_anchors_and_axes_are_mujocos(f64, tmp_path, path):
     """RigidJoint.get_anchor_pos / get_anchor_axis (Genesis's) equal MuJoCo's xanchor / xaxis at a

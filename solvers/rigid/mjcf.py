@@ -2,7 +2,7 @@
 
 Read as MuJoCo's compiler reads it: ``<include>`` files inlined (several ``<default>`` and
 ``<worldbody>`` sections merge), ``<default>`` classes (nested, ``class`` and ``childclass``),
-``<compiler angle meshdir assetdir autolimits eulerseq inertiafromgeom>``, every orientation form
+``<compiler angle meshdir assetdir autolimits eulerseq inertiafromgeom settotalmass>``, every orientation form
 (quat, axisangle, euler, xyaxes, zaxis).
 
 Trees: the bodies in ``<worldbody>`` are the roots of one entity's trees, in the file's order
@@ -180,11 +180,20 @@ class _Reader(MJCFDocument):
         repeated = sorted({name for name in names if names.count(name) > 1})
         if repeated:  # (MuJoCo refuses them too)
             raise self.error(f"body names expected unique, got repeated names {repeated}")
+        self._set_total_mass(links)
         self._equalities(links)
         self._tendons(links)
         self._actuators(links)
         self._exclusions(links)
         return links
+
+    def _set_total_mass(self, links):
+        """``<compiler settotalmass>`` > 0: every body's mass and inertia scaled by one factor, so that
+        they sum to it (MuJoCo's compiler; deprecated in MuJoCo 3.3, still applied by MuJoCo 4)."""
+        total = sum(link.mass for link in links)
+        if self.settotalmass > 0 and total > 0:
+            for link in links:
+                link.mass, link.inertia = link.mass * self.settotalmass / total, link.inertia * self.settotalmass / total
 
     def _body(self, body, parent: int, childclass: str, links: list, outer):
         """Append the links of `body` and of its subtree: the body's link at its MuJoCo frame,

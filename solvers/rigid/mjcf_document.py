@@ -22,7 +22,7 @@ _SECTIONS = {"compiler", "option", "size", "visual", "statistic", "default", "cu
              "worldbody", "contact", "equality", "tendon", "actuator", "sensor", "keyframe"}
 # compiler attributes read here, or with no effect on the model read (paths, threads, frames' storage)
 _COMPILER = {"angle", "coordinate", "meshdir", "assetdir", "texturedir", "autolimits", "eulerseq",
-             "inertiafromgeom", "strippath", "usethread", "discardvisual", "fusestatic", "fitaabb",
+             "inertiafromgeom", "settotalmass", "strippath", "usethread", "discardvisual", "fusestatic", "fitaabb",
              "saveinertial"}
 _ACTUATORS = ("general", "motor", "position", "velocity", "intvelocity", "damper", "cylinder", "muscle", "adhesion",
               "plugin")
@@ -73,6 +73,7 @@ class MJCFDocument:
         if len(self.eulerseq) != 3 or any(c not in "xyzXYZ" for c in self.eulerseq):
             raise self.error(f"<compiler eulerseq> expected 3 of x, y, z, X, Y, Z, got {self.eulerseq!r}")
         self.inertiafromgeom = compiler.get("inertiafromgeom", "auto")
+        self.settotalmass = float(self.numbers(compiler, "settotalmass", 1, "<compiler>", default=[-1.0])[0])
         for replicate in reversed(list(root.iter("replicate"))):  # (the innermost first: its suffix comes first)
             self._replicate(replicate)
         self.meshdir_given = compiler.get("meshdir", compiler.get("assetdir", ""))
