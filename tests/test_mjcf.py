@@ -312,6 +312,60 @@ def test_more_tendons_than_dofs_match_mujoco(f64, tmp_path):
     assert robot.n_dofs == 1 and met == {0, 1, 2}
 
 
+# A hip-knee-ankle chain whose fixed tendon "coupling" (quadruped's of dm_control) an <equality>
+# <tendon> holds at its length at qpos0 (the knee's ref in it), with a default class's softness,
+# and a second tendon held 1 cm off its rest length, beyond its limit (both rows act)
+HELD_TENDONS = ('<body name="thigh" pos="0 0 1"><joint name="hip" axis="0 1 0"/>'
+                '<geom type="capsule" fromto="0 0 0 0 0 -0.3" size="0.04"/>'
+                '<body name="shin" pos="0 0 -0.3"><joint name="knee" axis="0 1 0" ref="0.2"/>'
+                '<geom type="capsule" fromto="0 0 0 0 0 -0.3" size="0.035"/>'
+                '<body name="foot" pos="0 0 -0.3"><joint name="ankle" axis="0 1 0"/>'
+                '<joint name="toe" type="slide" axis="1 0 0"/>'
+                '<geom type="box" size="0.08 0.03 0.02" pos="0.04 0 0"/></body></body></body>')
+HELD_TENDONS_EXTRA = ('<option timestep="0.002"/><default><joint damping="0.02"/><default class="coupling">'
+                      '<equality solref="0.005 0.5" solimp="0.9 0.95 0.001"/></default></default>'
+                      '<tendon><fixed name="coupling"><joint joint="hip" coef=".333"/><joint joint="knee" coef=".333"/>'
+                      '<joint joint="ankle" coef=".333"/></fixed><fixed name="slider" range="-0.05 0.005">'
+                      '<joint joint="toe" coef="1"/><joint joint="ankle" coef="-0.1"/></fixed></tendon>'
+                      '<equality><tendon name="coupling" tendon1="coupling" class="coupling"/>'
+                      '<tendon tendon1="slider" polycoef="0.01"/></equality>')
+
+
+def test_tendon_equalities_hold_as_mujocos(f64, tmp_path):
+    """<equality><tendon tendon1 polycoef> (dm_control's quadruped, manipulator and stacker): a fixed
+    tendon held at its length at qpos0 plus polycoef[0] by an equality row of its class's softness,
+    scaled by MuJoCo's tendon_invweight0; 1 s from fast random velocities beside MuJoCo 4 (both
+    rows acting, the second tendon's limit met too)."""
+    path = _write(tmp_path, HELD_TENDONS, HELD_TENDONS_EXTRA)
+    m, d, scene, robot = _pair(path, integrator="euler")
+    d.qvel[:] = velocity = np.random.default_rng(0).normal(0.0, 3.0, m.nv)
+    robot.set_dofs_velocity(torch.tensor(velocity))
+    kinds = set()
+    assert _lockstep(m, d, scene, robot, 500, lambda: kinds.update(d.efc_type[:d.nefc].tolist())) < 1e-10
+    assert {mujoco.mjtConstraint.mjCNSTR_EQUALITY, mujoco.mjtConstraint.mjCNSTR_LIMIT_TENDON} <= kinds
+    mujoco.mj_forward(m, d)
+    assert abs(d.ten_length[0] - m.tendon_length0[0]) < 0.02  # (held, softly)
+
+
+@pytest.mark.parametrize("what", ["velocity", "mass"])
+def test_gradients_through_tendon_equalities_match_finite_differences(f64, tmp_path, what):
+    """The held tendons' chain for 0.3 s: the gradient of every link's pose w.r.t. the initial
+    velocities and the masses (through the rows' scale) against central differences."""
+    _assert_pose_gradients_converge(_write(tmp_path, HELD_TENDONS, HELD_TENDONS_EXTRA), what, 3.0, 1,
+                                    "tendon equalities")
+
+
+@pytest.mark.parametrize("equality, said", [
+    ('<tendon tendon1="coupling" tendon2="slider"/>', r"tendon2 \(one tendon's length a polynomial of another's\)"),
+    ('<tendon tendon1="nowhere"/>', r"tendon1 expected a fixed tendon of the file, got \['nowhere'\]"),
+    ('<tendon tendon1="coupling"/><tendon tendon1="coupling"/>', "tendon1 'coupling' expected in one tendon"),
+])
+def test_tendon_equalities_refuse_what_is_not_supported(f64, tmp_path, equality, said):
+    extra = HELD_TENDONS_EXTRA.split("<equality>")[0] + f"<equality>{equality}</equality>"
+    with pytest.raises(AssetError, match=said):
+        mjcf.load_mjcf(_write(tmp_path, HELD_TENDONS, extra))
+
+
 def _assert_pose_gradients_converge(path, what, speed, seed, label):
     """The MJCF file's entity 0.3 s from random initial velocities (``speed`` rad/s or m/s, one
     sigma): the gradient of every link's pose w.r.t. those velocities (``what`` "velocity") or
@@ -471,8 +525,8 @@ LINK = '<geom type="sphere" size="0.1"/>'
      "fullinertia expected without an orientation"),
     (f'<body name="b"><joint name="j" range="1"/>{LINK}</body>', "", "attribute 'range' expected 2 finite numbers"),
     (f'<body name="b"><body name="c"><joint name="j"/><freejoint/>{LINK}</body></body>', "", "type expected hinge"),
-    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><tendon tendon1="t"/></equality>',
-     "<equality><tendon> is not supported"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><flex flex="f"/></equality>',
+     "<equality><flex> is not supported"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><weld body1="b" relpose="0 0 0 1"/></equality>',
      "<equality><weld name=None>: attribute 'relpose' expected 7 finite numbers"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<equality><connect body1="b" body2="c" anchor="0 0 0"/>'
@@ -522,7 +576,7 @@ LINK = '<geom type="sphere" size="0.1"/>'
     (f'<body name="b"><joint name="j"/>{LINK}<body name="c"><joint name="k"/>{LINK}<body name="e"><joint name="l"/>'
      f'{LINK}<body name="f"><joint name="n"/>{LINK}</body></body></body></body>',
      '<tendon><fixed range="0 1">' + "".join(f'<joint joint="{j}" coef="1"/>' for j in "jkln") + '</fixed></tendon>',
-     "a limited fixed tendon expected 1 to 3 joints (more are not supported yet), got 4"),
+     "a limited or held fixed tendon expected 1 to 3 joints (more are not supported yet), got 4"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<tendon><fixed range="0 1"><joint joint="x"/></fixed></tendon>',
      "expected <joint joint coef> children naming hinge or slide joints of the file, got <joint joint='x'>"),
     (f'<replicate count="2.5"><body name="b">{LINK}</body></replicate>', "",

@@ -265,8 +265,9 @@ def test_scaled_mjcf_gains_tendon_and_anchors(f64, tmp_path):
 
 
 def test_scaled_slide_tendon_is_a_length():
-    """A tendon of slide joints only is a length: its range × s, its coefficients the file's."""
+    """A tendon of slide joints only is a length: its range and held length × s, its coefficients the
+    file's."""
     links = [_link("base", -1, "", "fixed"), _link("a", 0, "x", "prismatic"), _link("b", 1, "y", "prismatic")]
-    links[1].tendons = ((("x", "y"), (1.0, -0.5), -0.2, 0.3, None),)
+    links[1].tendons = ((("x", "y"), (1.0, -0.5), -0.2, 0.3, None, (0.05, None)),)
     (tendon,) = scaled_links(links, 3.0)[1].tendons
-    assert tendon[1] == (1.0, -0.5) and np.allclose(tendon[2:4], (-0.6, 0.9))
+    assert tendon[1] == (1.0, -0.5) and np.allclose(tendon[2:4], (-0.6, 0.9)) and np.isclose(tendon[5][0], 0.15)

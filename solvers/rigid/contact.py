@@ -26,12 +26,12 @@ def without_pairs(model, keep=None):
     return replace(model, **{name: getattr(model, name)[keep] for name in PAIR_ARRAYS})
 
 
-SOFTNESS_TABLES = ("dof_limit_sol", "dof_frictionloss_sol", "eq_sol", "body_eq_sol", "ten_limit_sol")
+SOFTNESS_TABLES = ("dof_limit_sol", "dof_frictionloss_sol", "eq_sol", "body_eq_sol", "ten_limit_sol", "ten_eq_sol")
 
 
 def with_row_softness(model, timeconst):
     """The model with the softness of its joint rows (SOFTNESS_TABLES: solref then solimp per dof
-    limit, dof friction loss, joint equality, connect or weld) complete: what the asset left
+    limit, dof friction loss, joint equality, connect or weld, tendon limit or equality) complete: what the asset left
     unstated (NaN) the scene's (timeconst s, 1) and MuJoCo's default solimp, and every solimp
     within MuJoCo's bounds (its runtime clamps them so; the kernels read them as they are)."""
     default = np.array([timeconst, 1.0, *DEFAULT_SOLIMP])
@@ -67,7 +67,8 @@ def limit_rows(model, options):
         return 0
     first_of_ball = (model.link_jtype[model.dof_link] == BALL) & (model.link_dof0[model.dof_link] == np.arange(
         model.n_dofs))
-    return int((model.dof_q >= 0).sum() + (np.isfinite(model.dof_upper) & first_of_ball).sum() + model.n_tendons)
+    return int((model.dof_q >= 0).sum() + (np.isfinite(model.dof_upper) & first_of_ball).sum()
+               + (np.isfinite(model.ten_lower) | np.isfinite(model.ten_upper)).sum())
 
 
 def worst_case_contacts(model):
@@ -80,9 +81,9 @@ def capacity(model, options, contacts=None):
     (default: MAX_PER_MOVING_LINK per moving link with geometry, at least MIN_CONTACTS, which the
     solver doubles while a step finds more: the given ``contacts`` then); R
     enough rows for C contacts of the largest condim under the cone, one per joint equality, three
-    per connect, six per weld (and run-time weld slot), one per limited dof and limited fixed
-    tendon (at most one of its two bounds is violated) and one per dof for friction loss
-    (settable on any)."""
+    per connect, six per weld (and run-time weld slot), one per held fixed tendon, one per limited
+    dof and limited fixed tendon (at most one of its two bounds is violated) and one per dof for
+    friction loss (settable on any)."""
     worst = worst_case_contacts(model)
     if contacts is not None:
         cap = contacts
@@ -95,7 +96,7 @@ def capacity(model, options, contacts=None):
     condim = int(model.pair_condim.max()) if len(model.pair_condim) else 1
     rows_per_contact = condim if options.friction_cone == "elliptic" or condim == 1 else 2 * (condim - 1)
     joint_rows = (model.n_eq + 3 * model.n_body_eq + 3 * model.n_weld + 6 * options.max_dynamic_constraints
-                  + limit_rows(model, options) + model.n_dofs)
+                  + int(model.ten_eq.sum()) + limit_rows(model, options) + model.n_dofs)
     return contacts, contacts * rows_per_contact + joint_rows
 
 

@@ -109,9 +109,10 @@ MODEL = {
     # connects and welds (points and frames of two links held together; RigidModel says what they hold)
     "body_eq_link": ("i", "K2"), "body_eq_anchor": ("v3", "K2"), "weld_turn": ("v4", "WD2"),
     "weld_torquescale": ("f", "WD"), "body_eq_sol": ("f", "K7"),
-    # limited fixed tendons (RigidModel says what they hold; TENDON_JOINTS a tendon's joints)
+    # limited or held fixed tendons (RigidModel says what they hold; TENDON_JOINTS a tendon's joints)
     "ten_nnz": ("i", "T"), "ten_dof": ("i", "T3"), "ten_coef": ("f", "T3"), "ten_lower": ("f", "T"),
-    "ten_upper": ("f", "T"), "ten_limit_sol": ("f", "T7"),
+    "ten_upper": ("f", "T"), "ten_limit_sol": ("f", "T7"), "ten_eq": ("i", "T"), "ten_eq_length": ("f", "T"),
+    "ten_eq_sol": ("f", "T7"),
     # substep h (s), the time constant (s) of the joint rows (equality, limit, friction loss), impratio, solver
     # tolerance and line-search tolerance: runtime values like everything else (CONSTS names them)
     "consts": ("f", len(CONSTS)),

@@ -41,7 +41,8 @@ only weighs and is drawn; a geom
 drawn where its group is 0-2 (MuJoCo's visible groups), coloured by its rgba or material.
 Fixed tendons (``<tendon><fixed>``, up to three hinge or slide joints): their limits (range,
 solreflimit, solimplimit; a ``<default><tendon>`` class), as MuJoCo's limit rows on the length Σ
-coef·q (LinkSpec.tendons).
+coef·q, and ``<equality><tendon tendon1 polycoef>``, which holds that length at its value at qpos0
+plus polycoef[0] by an equality row (LinkSpec.tendons; tendon2 is refused).
 Joints: axis, pos, range (limited: MuJoCo's autolimits), damping, armature, frictionloss,
 solreflimit, solimplimit, solreffriction and solimpfriction (the softness of its limit and
 friction-loss rows),
@@ -575,8 +576,10 @@ class _Reader(MJCFDocument):
     # ---------------------------------------------------------------- equalities and actuators
 
     def _equalities(self, links: list[LinkSpec]):
-        """<equality>: <joint> (a mimic), <connect> and <weld> (LinkSpec.connects, .welds); only those
-        get here (MJCFDocument refuses the others)."""
+        """<equality>: <joint> (a mimic), <connect> and <weld> (LinkSpec.connects, .welds), <tendon>
+        (self.tendon_equalities, which _tendons reads); only those get here (MJCFDocument refuses the
+        others)."""
+        self.tendon_equalities = {}  # fixed tendon's name → (offset m or rad, softness (7,))
         for equality in self.root.iter("equality"):
             for element in equality:
                 attrs = self._equality_attrs(element)
@@ -587,6 +590,8 @@ class _Reader(MJCFDocument):
                 softness = self._row_softness(attrs, "solref", "solimp", what)
                 if element.tag == "joint":
                     self._joint_equality(attrs, links, what, softness)
+                elif element.tag == "tendon":
+                    self._tendon_equality(attrs, what, softness)
                 elif element.tag == "connect":
                     self._connect(attrs, links, what, softness)
                 else:
@@ -627,6 +632,20 @@ class _Reader(MJCFDocument):
         offset = float(coef[0] + by_joint[attrs["joint1"]].q0 - multiplier * ref2)
         by_joint[attrs["joint1"]].mimic = (followed, multiplier, offset)
         by_joint[attrs["joint1"]].mimic_sol = softness
+
+    def _tendon_equality(self, attrs: dict, what: str, softness: np.ndarray):
+        """<equality><tendon tendon1 polycoef>: fixed tendon1's length L held at L0 + polycoef[0] (L0:
+        its length at qpos0), MuJoCo's row; tendon2 (L a polynomial of another's) is not supported yet."""
+        for key in attrs:
+            if key not in ("name", "class", "tendon1", "tendon2", "polycoef", "active", "solref", "solimp"):
+                self.ignored.add(f"<equality><tendon {key}>")
+        if "tendon2" in attrs:
+            raise self.error(f"{what}: tendon2 (one tendon's length a polynomial of another's) is not supported yet")
+        tendon = attrs.get("tendon1")
+        if tendon in self.tendon_equalities:
+            raise self.error(f"{what}: tendon1 {tendon!r} expected in one tendon equality, got a second")
+        offset = self.numbers(attrs, "polycoef", (1, 2, 3, 4, 5), what, default=[0.0])[0]
+        self.tendon_equalities[tendon] = (float(offset), softness)
 
     def _connect(self, attrs: dict, links: list[LinkSpec], what: str, softness: np.ndarray):
         """<equality><connect>: by bodies (body1, body2 or the world, anchor in body1's frame: body2's
@@ -716,15 +735,20 @@ class _Reader(MJCFDocument):
 
     def _tendons(self, links: list[LinkSpec]):
         """<tendon><fixed>: a limited one (its length Σ coef·q of hinge and slide joints, range,
-        solreflimit, solimplimit) on the link of its first joint (LinkSpec.tendons); its other
-        attributes (stiffness, damping, frictionloss…) and spatial tendons are named in the warning
-        of what is ignored (an unlimited fixed tendon without them does nothing, as in MuJoCo)."""
+        solreflimit, solimplimit) or one a tendon equality holds (self.tendon_equalities) on the link
+        of its first joint (LinkSpec.tendons); its other attributes (stiffness, damping,
+        frictionloss…) and spatial tendons are named in the warning of what is ignored (an
+        unlimited fixed tendon without them does nothing, as in MuJoCo)."""
         by_joint = {link.joint_name: link for link in links if link.joint_type in ("revolute", "prismatic")}
+        held = dict(self.tendon_equalities)
         for section in self.root.iter("tendon"):
             for element in section:
                 attrs = self.attrs(element, "main")
                 what = f"<tendon><{element.tag} name={attrs.get('name')!r}>"
                 if element.tag != "fixed":
+                    if attrs.get("name") in held:
+                        raise self.error(f"<equality><tendon tendon1={attrs['name']!r}>: tendon1 expected a fixed "
+                                         f"tendon (a {element.tag} one is not supported yet)")
                     self.ignored.add(f"<tendon><{element.tag}>")
                     continue
                 for key, value in attrs.items():
@@ -734,14 +758,22 @@ class _Reader(MJCFDocument):
                                    "rgba", "width", "material", "user") and not is_default(key, value) and not at_zero:
                         self.ignored.add(f"<tendon><fixed {key}>")
                 limited = attrs.get("limited", "auto")
-                if not (limited == "true" or (limited == "auto" and self.autolimits and "range" in attrs)):
+                limited = limited == "true" or (limited == "auto" and self.autolimits and "range" in attrs)
+                equality = held.pop(attrs.get("name"), None)
+                if not (limited or equality):
                     continue
-                lower, upper = self.numbers(attrs, "range", 2, what, default=[0.0, 0.0])
+                lower, upper = self.numbers(attrs, "range", 2, what, default=[0.0, 0.0]) if limited else (-np.inf, np.inf)
                 if not lower < upper:
                     raise self.error(f"{what}: range expected lower < upper, got {attrs.get('range')!r}")
                 joints, coefs = self._tendon_joints(element, by_joint, what)
+                if equality is not None:  # (held at its length at qpos0 plus the offset)
+                    rest = sum(c * by_joint[joint].q0 for joint, c in zip(joints, coefs))
+                    equality = (rest + equality[0], equality[1])
                 by_joint[joints[0]].tendons += ((tuple(joints), tuple(coefs), float(lower), float(upper),
-                                                 self._row_softness(attrs, "solreflimit", "solimplimit", what)),)
+                                                 self._row_softness(attrs, "solreflimit", "solimplimit", what),
+                                                 equality),)
+        if held:
+            raise self.error(f"<equality><tendon>: tendon1 expected a fixed tendon of the file, got {sorted(held)}")
 
     def _tendon_joints(self, element, by_joint: dict, what: str):
         """(joint names, coefficients) of a fixed tendon's <joint joint coef> children (hinge or
@@ -758,8 +790,8 @@ class _Reader(MJCFDocument):
         if repeated:  # (MuJoCo refuses them too)
             raise self.error(f"{what}: joints expected once each, got {repeated} repeated")
         if not 0 < len(joints) <= TENDON_JOINTS:
-            raise self.error(f"{what}: a limited fixed tendon expected 1 to {TENDON_JOINTS} joints (more are not "
-                             f"supported yet), got {len(joints)}")
+            raise self.error(f"{what}: a limited or held fixed tendon expected 1 to {TENDON_JOINTS} joints (more are "
+                             f"not supported yet), got {len(joints)}")
         return joints, coefs
 
     def _actuators(self, links: list[LinkSpec]):

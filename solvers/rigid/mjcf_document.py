@@ -193,9 +193,9 @@ class MJCFDocument:
                                                else ""))
         for element in self.root.iter("equality"):
             for constraint in element:
-                if constraint.tag not in ("joint", "connect", "weld"):
-                    raise self.error(f"<equality><{constraint.tag}> is not supported (only <joint>, <connect> and "
-                                     f"<weld> equalities)")
+                if constraint.tag not in ("joint", "connect", "weld", "tendon"):
+                    raise self.error(f"<equality><{constraint.tag}> is not supported (only <joint>, <connect>, "
+                                     f"<weld> and <tendon> equalities)")
 
     # ---------------------------------------------------------------- defaults and attributes
 

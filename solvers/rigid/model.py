@@ -65,9 +65,11 @@ class RigidModel:
     + 1 the held frames' turns r1, r2 in their links' frames (q1 ⊗ r1 is held to q2 ⊗ r2),
     weld_torquescale (W,) the scale of its turn rows; body_eq_sol (K, 7) their rows' solref and
     solimp, as eq_sol.
-    Per limited fixed tendon (LinkSpec.tendons, MuJoCo's): its length Σ ten_coef·q over its
+    Per limited or held fixed tendon (LinkSpec.tendons, MuJoCo's): its length Σ ten_coef·q over its
     ten_nnz (T,) dofs ten_dof (T, 3) (ascending; ten_coef (T, 3), padded with 0), held in
-    [ten_lower, ten_upper] (m or rad) by a limit row of softness ten_limit_sol (T, 7), as eq_sol.
+    [ten_lower, ten_upper] (m or rad; ±inf: no bound) by a limit row of softness ten_limit_sol (T,
+    7), as eq_sol; where ten_eq (T,) is 1, held at ten_eq_length (T,) by an equality row of
+    softness ten_eq_sol (T, 7) (MuJoCo's tendon equality without tendon2).
     """
     link_name: list
     link_parent: np.ndarray
@@ -134,6 +136,9 @@ class RigidModel:
     ten_lower: np.ndarray
     ten_upper: np.ndarray
     ten_limit_sol: np.ndarray
+    ten_eq: np.ndarray
+    ten_eq_length: np.ndarray
+    ten_eq_sol: np.ndarray
 
     @property
     def n_tendons(self):
@@ -217,8 +222,9 @@ class RigidModel:
 
     @property
     def has_equalities(self):
-        """Whether some equality row is always formed (a joint equality, a connect or a weld)."""
-        return self.n_eq + self.n_body_eq > 0
+        """Whether some equality row is always formed (a joint equality, a connect, a weld or a held
+        tendon)."""
+        return self.n_eq + self.n_body_eq + int(self.ten_eq.sum()) > 0
 
 
 def _static_links(link_parent, link_jtype):
@@ -375,7 +381,9 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False, a
         ten_dof=np.array([_padded(t[0], 0) for t in tendons], dtype=np.int32).reshape(-1, TENDON_JOINTS),
         ten_coef=np.array([_padded(t[1], 0.0) for t in tendons], dtype=f).reshape(-1, TENDON_JOINTS),
         ten_lower=np.array([t[2] for t in tendons], dtype=f), ten_upper=np.array([t[3] for t in tendons], dtype=f),
-        ten_limit_sol=np.array([t[4] for t in tendons], dtype=f).reshape(-1, 7))
+        ten_limit_sol=np.array([t[4] for t in tendons], dtype=f).reshape(-1, 7),
+        ten_eq=np.array([t[5] for t in tendons], dtype=np.int32), ten_eq_length=np.array([t[6] for t in tendons], dtype=f),
+        ten_eq_sol=np.array([t[7] for t in tendons], dtype=f).reshape(-1, 7))
 
 
 def _body_equalities(links, index):
@@ -413,11 +421,12 @@ def _body_equalities(links, index):
 
 
 def _tendon(tendon, joint_dof):
-    """(dofs, coefficients, lower, upper, softness) of a LinkSpec tendon, its joints' dofs in
-    ascending order (the row's columns)."""
-    joints, coefs, lower, upper, softness = tendon
+    """(dofs, coefficients, lower, upper, softness, held (0 or 1), held length, its softness) of a
+    LinkSpec tendon, its joints' dofs in ascending order (the row's columns)."""
+    joints, coefs, lower, upper, softness, equality = tendon
     order = sorted(range(len(joints)), key=lambda k: joint_dof[joints[k]])
-    return [joint_dof[joints[k]] for k in order], [coefs[k] for k in order], lower, upper, _softness(softness)
+    held = (1, equality[0], _softness(equality[1])) if equality is not None else (0, 0.0, _softness(None))
+    return [joint_dof[joints[k]] for k in order], [coefs[k] for k in order], lower, upper, _softness(softness), *held
 
 
 def _padded(values, pad):

@@ -61,12 +61,14 @@ def _scaled_shape(shape: ShapeSpec, s: float) -> ShapeSpec:
 
 
 def _scaled_tendon(tendon, s, joint_scale):
-    """A fixed tendon (joints, coefficients, lower, upper, softness) in the scaled coordinates."""
-    joints, coefs, lower, upper, softness = tendon
+    """A fixed tendon (joints, coefficients, lower, upper, softness, equality) in the scaled
+    coordinates."""
+    joints, coefs, lower, upper, softness, equality = tendon
     scales = np.array([joint_scale[joint] for joint in joints])
-    if np.all(scales == s):  # a length: its range grows
-        return joints, tuple(coefs), lower * s, upper * s, softness
-    return joints, tuple(float(c) for c in np.asarray(coefs, dtype=np.float64) / scales), lower, upper, softness
+    if np.all(scales == s):  # a length: its range and held length grow
+        return joints, tuple(coefs), lower * s, upper * s, softness, equality and (equality[0] * s, equality[1])
+    return (joints, tuple(float(c) for c in np.asarray(coefs, dtype=np.float64) / scales), lower, upper, softness,
+            equality)
 
 
 def _scaled_anchors(constraint, s):

@@ -277,7 +277,7 @@ class RigidSolver(Solver):
         """Tell the kernels whether the inputs hold an external wrench (the header's "wrench": set
         by apply_links_external_wrench, else the build's zeros, whose force stage and its
         gradients the kernels then skip). Keep whether they give some dof friction loss or a
-        limit (or the model a limited tendon), and some env a run-time weld (constraint rows).
+        limit (or the model a tendon limit), and some env a run-time weld (constraint rows).
         Checked again only for another frictionloss (limit, dyn_welds) tensor, or the same one changed in
         place by torch (which counts its versions; the setters always give a new tensor): a rollout
         passes the same one every step, and the check costs ~15 µs of torch amid a step
@@ -288,7 +288,8 @@ class RigidSolver(Solver):
         if self._changed(inputs, "frictionloss"):
             self.friction = bool((inputs["frictionloss"] > 0).any())
         if self._changed(inputs, "limit_lower") | self._changed(inputs, "limit_upper"):  # (both noted)
-            self.limited = self.rigid_options.enable_joint_limit and (self.model.n_tendons > 0 or bool(
+            tendon_limits = np.isfinite(self.model.ten_lower).any() or np.isfinite(self.model.ten_upper).any()
+            self.limited = self.rigid_options.enable_joint_limit and (bool(tendon_limits) or bool(
                 (inputs["limit_lower"] > -math.inf).any() or (inputs["limit_upper"] < math.inf).any()))
         if self._changed(inputs, "dyn_welds"):
             self.welds_on = bool((inputs["dyn_welds"][:, 0] > 0).any())

@@ -592,14 +592,21 @@ def _ball_limit(d: ti.template(), s, e, i):
 
 
 @ti.func
+def _tendon_length(d: ti.template(), s, e, t):
+    """Tendon t's length L = Σ coef·q at frame s (m or rad)."""
+    length = 0.0
+    for k in range(TENDON_JOINTS * t, TENDON_JOINTS * t + d.ten_nnz[t]):
+        length += d.ten_coef[k] * d.qpos[s, e, d.dof_q[d.ten_dof[k]]]
+    return length
+
+
+@ti.func
 def _tendon_side(d: ti.template(), s, e, t):
     """(sign, distance) of tendon t's violated limit at frame s, its length L = Σ coef·q: (1, L −
     lower) below it, (−1, upper − L) above it, (0, 0) within or with limits off (no row)."""
     sign, dist = 0.0, 0.0
     if d.limits_enabled:
-        length = 0.0
-        for k in range(TENDON_JOINTS * t, TENDON_JOINTS * t + d.ten_nnz[t]):
-            length += d.ten_coef[k] * d.qpos[s, e, d.dof_q[d.ten_dof[k]]]
+        length = _tendon_length(d, s, e, t)
         if length - d.ten_lower[t] < 0.0:
             sign, dist = 1.0, length - d.ten_lower[t]
         elif d.ten_upper[t] - length < 0.0:
@@ -632,6 +639,9 @@ def dof_rows_arise(d: ti.template(), s, e):
     arise = limit_violated(d, s, e)
     if d.n_eq > 0 or d.n_body_eq > 0 or dynamic_welds(d, e) > 0:
         arise = 1
+    for t in range(d.n_tendons):
+        if d.ten_eq[t]:
+            arise = 1
     for i in range(d.n_dofs):
         if d.frictionloss[e, i] > 0.0:
             arise = 1
@@ -654,6 +664,11 @@ def dof_rows(d: ti.template(), s, e):
     if ti.static(d.body_eqs):
         for k in range(d.n_body_eq + dynamic_welds(d, e)):
             rows += _body_eq_rows(d, s, e, rows, k)
+    for t in range(d.n_tendons):
+        if d.ten_eq[t]:
+            _tendon_row(d, s, e, rows, t, 1.0, _tendon_length(d, s, e, t) - d.ten_eq_length[t], EQUALITY,
+                        d.ten_eq_sol)
+            rows += 1
     for i in range(d.n_dofs):
         bound = d.frictionloss[e, i]
         if bound > 0.0:
@@ -673,17 +688,18 @@ def dof_rows(d: ti.template(), s, e):
     for t in range(d.n_tendons):
         tendon_sign, tendon_dist = _tendon_side(d, s, e, t)
         if tendon_sign != 0.0:
-            _tendon_row(d, s, e, rows, t, tendon_sign, tendon_dist)
+            _tendon_row(d, s, e, rows, t, tendon_sign, tendon_dist, ONE_SIDED, d.ten_limit_sol)
             rows += 1
     d.efc_dof_rows[s, e, 0] = rows
     return rows
 
 
 @ti.func
-def _tendon_row(d: ti.template(), s, e, r, t, sign, dist):
-    """Row r for tendon t's violated limit (MuJoCo's): J = sign·coef on its dofs (ascending: its
-    columns), at distance dist (m or rad), diagA its invweight_ten (tendon_invweight0); its id
-    n_dofs + t (the reverse tells it from a dof's limit so)."""
+def _tendon_row(d: ti.template(), s, e, r, t, sign, dist, kind, sol: ti.template()):
+    """Row r for tendon t (MuJoCo's), a violated limit (kind ONE_SIDED, softness sol ten_limit_sol)
+    or its equality (EQUALITY, ten_eq_sol): J = sign·coef on its dofs (ascending: its columns), at
+    distance dist (m or rad), diagA its invweight_ten (tendon_invweight0); its id n_dofs + t (the
+    reverse tells it from a dof's row so)."""
     slot, first = d.joint_columns + JOINT_ROW_SLOTS * r, TENDON_JOINTS * t
     d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, d.ten_nnz[t]
     velocity = 0.0
@@ -692,19 +708,23 @@ def _tendon_row(d: ti.template(), s, e, r, t, sign, dist):
         d.efc_J[s, e, r, i] = sign * d.ten_coef[k]
         d.efc_cols[s, e, slot + k - first] = i
         velocity += sign * d.ten_coef[k] * d.qvel[s, e, i]
-    solref, solimp = _softness(d.ten_limit_sol, t)
+    solref, solimp = _softness(sol, t)
     _joint_row_scalars(d, s, e, r, dist, velocity, d.invweight_ten[e, t], solref, solimp)
     d.efc_dim[s, e, r], d.efc_id[s, e, r] = 1, d.n_dofs + t
-    d.efc_type[s, e, r], d.efc_floss[s, e, r] = ONE_SIDED, 0.0
+    d.efc_type[s, e, r], d.efc_floss[s, e, r] = kind, 0.0
 
 
 @ti.func
-def _tendon_limit_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
-    """Reverse of _tendon_row for row r from its implicit gradients (aref, R): into q and q̇ of the
-    tendon's dofs at frame s and its invweight_ten (its Jacobian is constant)."""
+def _tendon_row_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
+    """Reverse of _tendon_row for row r (a limit's or an equality's) from its implicit gradients
+    (aref, R): into q and q̇ of the tendon's dofs at frame s and its invweight_ten (its Jacobian is
+    constant)."""
     t = d.efc_id[s, e, r] - d.n_dofs
     sign, dist = _tendon_side(d, s, e, t)
     solref, solimp = _softness(d.ten_limit_sol, t)
+    if d.efc_type[s, e, r] == EQUALITY:
+        sign, dist = 1.0, _tendon_length(d, s, e, t) - d.ten_eq_length[t]
+        solref, solimp = _softness(d.ten_eq_sol, t)
     g_dist, damping, g_scale = _joint_row_scalars_adjoint(d, dist, d.invweight_ten[e, t], g_aref, g_R, solref, solimp)
     accumulate(d.invweight_ten.grad, ti.Vector([e, t]), g_scale)
     for k in range(TENDON_JOINTS * t, TENDON_JOINTS * t + d.ten_nnz[t]):
@@ -744,8 +764,8 @@ def dof_rows_adjoint(d: ti.template(), s, e, r, g_aref, g_R, g_bound):
             _body_eq_row_adjoint(d, s, e, r, g_aref, g_R)
             body_eq = 1
     if body_eq == 0:
-        if t == ONE_SIDED and d.efc_id[s, e, r] >= d.n_dofs:
-            _tendon_limit_adjoint(d, s, e, r, g_aref, g_R)
+        if d.efc_id[s, e, r] >= d.n_dofs:  # (a joint equality's id is its index: below n_dofs)
+            _tendon_row_adjoint(d, s, e, r, g_aref, g_R)
         else:  # (nested: Taichi's `and` would read dof_link past its end for a tendon's id)
             if t == ONE_SIDED and d.link_jtype[d.dof_link[d.efc_id[s, e, r]]] == BALL:
                 _ball_limit_adjoint(d, s, e, r, g_aref, g_R)
