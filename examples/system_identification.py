@@ -10,10 +10,10 @@
    excitation and back-propagates the trajectory error through every step into the parameters.
 
 Parameters live in log-space (positive by construction, relative steps). Joint 1's URDF damping
-is 0, which has no logarithm, so its estimate starts at 0.01 N·m·s/rad. A link's rotational
-inertia scales with its mass (``set_links_mass`` keeps the shape), so two masses and two damping
-coefficients describe the whole difference between model and reality. The base link is fixed,
-its mass has no effect and is not fitted.
+is 0, which has no logarithm, so its estimate starts at 0.01 N·m·s/rad. ``set_links_mass`` leaves
+each link's rotational inertia as it is (Genesis's rule; ``set_links_inertia`` would set it), so
+two masses and two damping coefficients describe the whole difference between model and reality.
+The base link is fixed, its mass has no effect and is not fitted.
 
 Outputs (in ``--out DIR``, default ./outputs): ``system_identification.mp4``, the fitted model's
 rollout, its tip retracing the observed tip's path (green dots), and

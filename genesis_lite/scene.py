@@ -498,11 +498,12 @@ def _links_of(morph, material, name, mujoco_compatible):
     object_rho = rho or shapes.OBJECT_DENSITY  # (a primitive or a mesh is an object)
     text = morph.file if isinstance(morph, (gm.URDF, gm.MJCF)) and gm.inline_xml(morph.file) else None
     path = f"<inline {type(morph).__name__}>" if text is not None else getattr(morph, "file", None)
+    if text is None and isinstance(morph, (gm.URDF, gm.MJCF, gm.Mesh)) and not os.path.isfile(path):
+        # name the argument and what was expected, as every error message does
+        kind = type(morph).__name__
+        raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.{kind} expected an existing "
+                         f"{'mesh' if kind == 'Mesh' else kind} file, got '{morph.file}' ({_not_found()})")
     if isinstance(morph, gm.URDF):
-        if text is None and not os.path.isfile(path):
-            # name the argument and what was expected, as every error message does
-            raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.URDF expected an existing URDF file, "
-                             f"got '{morph.file}' ({_not_found()})")
         links = urdf.load_urdf(path, entity_name=name, rho=rho, y_up=not morph.file_meshes_are_zup,
                                collision=morph.collision, text=text)
         if morph.merge_fixed_links:
@@ -511,9 +512,6 @@ def _links_of(morph, material, name, mujoco_compatible):
             links = scale.scaled_links(links, morph.scale)  # (a URDF's gains: the file's, as Genesis's)
         _add_rotor_armature(links, morph, mujoco_compatible)
     elif isinstance(morph, gm.MJCF):
-        if text is None and not os.path.isfile(path):
-            raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.MJCF expected an existing MJCF file, "
-                             f"got '{morph.file}' ({_not_found()})")
         links = mjcf.load_mjcf(path, entity_name=name, exclude_ground_plane=morph.exclude_ground_plane, text=text)
         if morph.scale != 1.0:
             links = scale.scaled_links(links, morph.scale, gains=morph.scale ** 3)

@@ -91,7 +91,7 @@ def test_missing_mesh_morph(f64, tmp_path):
     path = str(tmp_path / "missing.obj")
     scene = gs.Scene()
     raises(gs.AssetError, lambda: scene.add_entity(gs.morphs.Mesh(file=path), name="blob"),
-           "entity 'blob'", "'file'", path, "does not exist")
+           "entity 'blob'", "'file'", path, "expected an existing mesh file", "not found")
 
 
 def test_morph_arguments():

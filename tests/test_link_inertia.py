@@ -138,6 +138,21 @@ def test_set_links_inertia_refuses_what_no_rigid_body_has(f64, tmp_path, inertia
     assert torch.equal(robot.get_links_inertia(), before)
 
 
+def test_an_inertia_leaving_a_free_body_unturnable_is_refused(f64, tmp_path):
+    """A free box given a principal moment of 0 about a turned axis (no pivot of M is exactly zero:
+    M⁻¹'s entries were 1e18, the state NaN at the fourth step; in float32 the rotational invweight
+    came out negative) raises the named error of a singular mass matrix, the inertia unchanged."""
+    scene = gs.Scene()
+    robot = scene.add_entity(gs.morphs.MJCF(file=_write(tmp_path, BODIES)))
+    scene.build()
+    before = robot.get_links_inertia().clone()
+    turn = np.linalg.qr(np.random.default_rng(0).normal(size=(3, 3)))[0]
+    flat = turn @ np.diag([0.0, 1e-3, 1e-3]) @ turn.T
+    with pytest.raises(gs.InvalidInputError, match="link 'box' .* expected a positive definite mass matrix"):
+        robot.set_links_inertia(flat, links_idx_local=[robot.get_link("box").idx_local])
+    assert torch.equal(robot.get_links_inertia(), before)
+
+
 def test_set_links_inertia_checks_its_shapes(f64, tmp_path):
     scene = gs.Scene()
     robot = scene.add_entity(gs.morphs.MJCF(file=_write(tmp_path, BODIES)))

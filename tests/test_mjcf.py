@@ -669,11 +669,13 @@ def test_a_hinge_on_the_world_hangs_from_a_static_world_link_and_angles_follow_t
         np.testing.assert_allclose(quat * np.sign(quat[0]), np.array(expected) * np.sign(expected[0]), atol=1e-15)
 
 
-def test_settotalmass_scales_every_body_as_mujocos_compiler(f64, tmp_path):
+def test_settotalmass_scales_every_body_as_mujocos_compiler(f64, tmp_path, monkeypatch):
     """<compiler settotalmass> (dm_control's cheetah): every body's mass and inertia scaled by one
-    factor to that total, as MuJoCo 4's compiler (it warns the attribute is deprecated): the masses
-    and 200 steps (the box sliding on the floor) as MuJoCo's."""
+    factor to that total, as MuJoCo 4's compiler (it warns the attribute is deprecated, into a
+    MUJOCO_LOG.TXT of the working directory: the test's own folder): the masses and 200 steps (the
+    box sliding on the floor) as MuJoCo's."""
     from tests.test_link_com import BODIES
+    monkeypatch.chdir(tmp_path)
     path = _write(tmp_path, BODIES, '<compiler settotalmass="7.5"/>')
     m, d, scene, robot = _pair(path, integrator="euler")
     assert m.body_mass.sum() == pytest.approx(7.5, rel=1e-14)

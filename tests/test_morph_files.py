@@ -50,6 +50,9 @@ def test_paths_found_nowhere_say_where_they_were_looked_for(f64, genesis_package
     with pytest.raises(gs.AssetError, match=f"'urdf/go2.urdf' \\(not found; relative paths start at {tmp_path}, then "
                                             f"genesis-world's bundled assets, {genesis_package}\\)"):
         gs.Scene().add_entity(gs.morphs.URDF(file="urdf/go2.urdf"))
+    with pytest.raises(gs.AssetError, match="gs.morphs.Mesh expected an existing mesh file, got 'meshes/no.obj' "
+                                            r"\(not found; relative paths start at"):
+        gs.Scene().add_entity(gs.morphs.Mesh(file="meshes/no.obj"))
     monkeypatch.setattr(morphs.importlib.util, "find_spec", lambda name: None)
     morphs.genesis_assets.cache_clear()
     with pytest.raises(gs.AssetError, match="genesis-world's bundled assets where that package is installed "

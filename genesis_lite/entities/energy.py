@@ -3,7 +3,7 @@ and ``get_total_energy``), in torch over the solver's link states and the entity
 differentiable wherever they are.
 
 Kinetic: Σ ½ m |v_c|² + ½ ωᵀ I_c ω over the links (v_c the velocity of the link's centre of mass,
-I_c its inertia about it in world axes, which scales with the link's mass as the step's does) plus
+I_c its inertia about it in world axes: the input inertia, turned, as the step's) plus
 Σ ½ armature · q̇² over the dofs (the rotors): MuJoCo's ½ q̇ᵀ M q̇, armature on M's diagonal.
 Potential: −Σ m g · p_c over the links that move (a link welded to the world adds a constant, left
 out as Genesis leaves it out) plus Σ ½ stiffness (q − springref)² over the joint springs (a ball

@@ -177,10 +177,15 @@ class InvweightBasis:
         per_dof, per_tendon = mass.new_zeros(self.n_dofs), mass.new_zeros(len(self.ten_J))
         for links, dofs, K, J, average in self.groups:
             matrix = _mass_matrix(torch, mass[links], inertia[links], armature[dofs], K, J)
-            inverse, info = torch.linalg.inv_ex(matrix)
-            for t in torch.nonzero(info).flatten().tolist():
+            # a tree whose M is near singular (a pivot of its LDLᵀ, Cholesky's L_ii², under 1e-5 of its
+            # diagonal: the float32 check's share, above float64's) goes to the check, which raises where
+            # the scene's precision cannot step it (an inertia with a zero principal moment, turned:
+            # no pivot is exactly zero, M⁻¹'s entries are 1e18)
+            factor, info = torch.linalg.cholesky_ex(matrix.detach())
+            pivots, diagonal = (torch.diagonal(a, dim1=-2, dim2=-1) for a in (factor ** 2, matrix.detach()))
+            for t in torch.nonzero((info != 0) | (pivots <= 1e-5 * diagonal).any(-1)).flatten().tolist():
                 check_positive_definite(matrix[t].detach().cpu().numpy(), InvalidInputError, dofs[t].cpu().numpy())
-                torch.linalg.inv(matrix[t])  # singular below the check's share: torch's own error
+            inverse = torch.linalg.inv(matrix)
             # the means of J M⁻¹ Jᵀ's translational and rotational diagonals, each by an einsum of its own
             # (one of six rows sums in another order) (a block's trace is frame-free: J_ω is in the link's)
             translation, rotation = [torch.einsum("tlri,tij,tlrj->tlr", J[:, :, rows], inverse, J[:, :, rows])
