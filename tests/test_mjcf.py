@@ -492,7 +492,7 @@ LINK = '<geom type="sphere" size="0.1"/>'
      "a ball joint's range expected (0, largest angle)"),
     (f'<body name="b"><joint name="j" type="ball"/><joint name="k"/>{LINK}</body>', "",
      "a ball joint followed by a hinge or ball joint in one body is refused"),
-    (f'<body name="b"><joint name="j" springdamper="0.2 1"/>{LINK}</body>', "", "a spring from springdamper"),
+    (f'<body name="b"><freejoint springdamper="0.2 1"/>{LINK}</body>', "", "a free joint's spring"),
     (f'<body name="b"><joint name="j" stiffness="3" springyield="5"/>{LINK}</body>', "", "a yielding spring"),
     ("", "", "<worldbody> expected at least one <body> or geom, got none"),
     (f'<body name="b"><geom type="sdf" size="0.1 0.2 0.3"/></body>', "", "geom type expected one of"),
@@ -667,6 +667,33 @@ def test_a_hinge_on_the_world_hangs_from_a_static_world_link_and_angles_follow_t
         quat = robot.get_link("pendulum").get_quat().numpy()
         expected = [np.sqrt(0.5), 0, 0, np.sqrt(0.5)] if angle == "degree" else [np.cos(45), 0, 0, np.sin(45)]
         np.testing.assert_allclose(quat * np.sign(quat[0]), np.array(expected) * np.sign(expected[0]), atol=1e-15)
+
+
+def test_springdamper_sets_stiffness_and_damping_as_mujocos_compiler(f64, tmp_path):
+    """<joint springdamper="tc ζ"> (dm_control's dog): stiffness I / (tc ζ)² and damping 2 I / tc,
+    I = n / Σ dof_invweight0 over the joint's dofs at qpos0 (MuJoCo's compiler: a hinge and a slide
+    of a chain, a ball joint's three dofs, a default class's, a joint's own stiffness replaced, one
+    of class main left as it is); the values and 300 steps as MuJoCo 4's. A pair with a non-positive
+    value does nothing, as in MuJoCo."""
+    body = ('<body name="arm" pos="0 0 1"><joint name="hinge" axis="0 1 0" springdamper="0.1 0.7" stiffness="5"/>'
+            '<geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03"/>'
+            '<body name="slider" pos="0.3 0 0" childclass="sd"><joint name="slide" type="slide" axis="1 0 1"/>'
+            '<geom type="box" size="0.04 0.03 0.02" pos="0.05 0 0.01"/>'
+            '<body name="bob" pos="0.1 0 0"><joint name="ball" type="ball" springdamper="0.05 1.2"/>'
+            '<geom type="capsule" fromto="0 0 0 0 0.1 -0.2" size="0.02"/>'
+            '<body name="tip" pos="0 0.1 -0.2"><joint name="wrist" class="main" axis="1 0 0" damping="0.3"/>'
+            '<geom type="sphere" size="0.03"/></body></body></body></body>')
+    extra = ('<default><default class="sd"><joint springdamper="0.2 0.5"/></default></default>'
+             '<compiler angle="radian"/>')
+    m, d, scene, robot = _pair(_write(tmp_path, body, extra), integrator="euler")
+    dofs = [robot.get_joint(m.joint(j).name).dofs_idx_local[0] for j in range(m.njnt)]
+    for j in range(m.njnt):  # (MuJoCo keeps a ball's stiffness per joint, its damping per dof)
+        assert float(robot.get_dofs_stiffness()[dofs[j]]) == pytest.approx(m.jnt_stiffness[j], rel=1e-12)
+    np.testing.assert_allclose(robot.get_dofs_damping().numpy(), m.dof_damping, rtol=1e-12)
+    assert m.dof_damping[-1] == 0.3 and m.jnt_stiffness[0] != 5.0  # (the wrist's own; the hinge's replaced)
+    d.qvel[:] = np.random.default_rng(3).normal(size=m.nv)
+    robot.set_dofs_velocity(torch.tensor(d.qvel))
+    assert _lockstep(m, d, scene, robot, 300) < 1e-10
 
 
 def test_settotalmass_scales_every_body_as_mujocos_compiler(f64, tmp_path, monkeypatch):

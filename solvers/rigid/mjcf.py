@@ -47,8 +47,9 @@ Joints: axis, pos, range (limited: MuJoCo's autolimits), damping, armature, fric
 solreflimit, solimplimit, solreffriction and solimpfriction (the softness of its limit and
 friction-loss rows),
 actuatorfrcrange (|force| bound), stiffness and springref (a spring −stiffness·(q − springref), as
-MuJoCo's; Genesis's loader springs to qpos0 whatever springref says), ref (the initial q, at which
-the body is where the file puts it: LinkSpec.q0).
+MuJoCo's; Genesis's loader springs to qpos0 whatever springref says), springdamper (stiffness and
+damping set at build from the joint's inertia at qpos0, as MuJoCo's compiler: LinkSpec.springdamper),
+ref (the initial q, at which the body is where the file puts it: LinkSpec.q0).
 Actuators on a joint give its servo (as Genesis reads them): ``position`` kp, kv; ``general``
 with an affine bias, kp = −biasprm[1], kv = −biasprm[2]; ``velocity`` kv; forcerange (symmetric)
 the |force| bound; a ``motor`` is force control (control_dofs_force). An actuator on a fixed
@@ -72,8 +73,8 @@ the turn; limited by autolimits only where range[0] < range[1], as MuJoCo's comp
 Refused (AssetError naming the element): a ball joint's force range, a limited ball joint's range
 not starting at 0, a ball joint followed by a hinge or ball in one body (as MuJoCo refuses them),
 a free joint below a root body, a joint's
-``springdamper`` and ``springyield``, a polynomial stiffness, a free joint's stiffness, hfield /
-sdf geoms, equalities other than joints', connects and welds, elements that would add or
+``springyield``, a polynomial stiffness, a free joint's stiffness or springdamper, hfield /
+sdf geoms, equalities other than joints', connects, welds and tendons', elements that would add or
 move bodies and geoms unread (``<composite>``, ``<flexcomp>``…; ``<frame>`` is read: it places its
 bodies and geoms, and its childclass is theirs; so is ``<replicate>``, as copies in frames:
 MJCFDocument), a solref of mixed form (one number > 0, the other not: MuJoCo warns and takes its
@@ -319,8 +320,9 @@ class _Reader(MJCFDocument):
         read = ("damping", "armature", "frictionloss", "solreflimit", "solimplimit", "solreffriction", "solimpfriction")
         self.ignore_unread(joint, {k: v for k, v in attrs.items() if k not in read})
         self._refuse_unmodelled(attrs, what)
-        if self._non_negative(attrs, "stiffness", what) != 0.0:  # (MuJoCo's would spring the pose; Genesis refuses)
-            raise self.error(f"{what}: a free joint's spring is not supported (stiffness = {attrs['stiffness']!r})")
+        if self._non_negative(attrs, "stiffness", what) != 0.0 or self._springdamper(attrs, what) is not None:
+            # (MuJoCo's would spring the pose; Genesis refuses)
+            raise self.error(f"{what}: a free joint's spring is not supported (stiffness or springdamper given)")
         for key in ("damping", "armature", "frictionloss"):
             setattr(link, key, self._non_negative(attrs, key, what))
         self._joint_softness(link, attrs, what)
@@ -349,6 +351,7 @@ class _Reader(MJCFDocument):
         spec = _link(link_name, -1, name, _JOINTS[kind], np.zeros(3), IDENTITY.copy(), axis)
         for key in ("damping", "armature", "frictionloss", "stiffness"):
             setattr(spec, key, self._non_negative(attrs, key, what))
+        spec.springdamper = self._springdamper(attrs, what)
         scale = np.deg2rad(1.0) if kind == "hinge" and self.degree else 1.0  # angles in the file → rad
         spec.springref = self.numbers(attrs, "springref", 1, what, default=[0.0])[0] * scale
         spec.q0 = self.numbers(attrs, "ref", 1, what, default=[0.0])[0] * scale
@@ -371,6 +374,7 @@ class _Reader(MJCFDocument):
         spec = _link(link_name, -1, name, "ball", np.zeros(3), IDENTITY.copy())
         for key in ("damping", "armature", "frictionloss", "stiffness"):
             setattr(spec, key, self._non_negative(attrs, key, what))
+        spec.springdamper = self._springdamper(attrs, what)
         low, high = self.numbers(attrs, "range", 2, what, default=[0.0, 0.0])
         limited = attrs.get("limited", "auto")
         if limited == "true" or (limited == "auto" and self.autolimits and "range" in attrs and low < high):
@@ -385,14 +389,22 @@ class _Reader(MJCFDocument):
         return spec
 
     def _refuse_unmodelled(self, attrs: dict, what: str):
-        """Refuse what would move the joint otherwise if it were dropped: a spring from
-        ``springdamper`` (MuJoCo derives its stiffness and damping from the joint's inertia) or one
-        that yields (``springyield``)."""
-        for key, width, what_it_is in (("springdamper", 2, "a spring from springdamper (state stiffness and "
-                                                           "damping instead)"),
-                                       ("springyield", 1, "a yielding spring")):
-            if np.any(self.numbers(attrs, key, width, what, default=np.zeros(width)) != 0.0):
-                raise self.error(f"{what}: {what_it_is} is not supported (attribute {key!r} = {attrs[key]!r})")
+        """Refuse what would move the joint otherwise if it were dropped: a spring that yields
+        (``springyield``)."""
+        if np.any(self.numbers(attrs, "springyield", 1, what, default=np.zeros(1)) != 0.0):
+            raise self.error(f"{what}: a yielding spring is not supported (attribute 'springyield' = "
+                             f"{attrs['springyield']!r})")
+
+    def _springdamper(self, attrs: dict, what: str):
+        """A joint's ``springdamper`` (time constant s, damping ratio) where both are positive: then
+        the solver sets its stiffness and damping at build from its inertia at qpos0 (MuJoCo's
+        compiler, which leaves the joint's own where either is not; said in the warning)."""
+        given = self.numbers(attrs, "springdamper", 2, what, default=np.zeros(2))
+        if np.all(given > 0):
+            return float(given[0]), float(given[1])
+        if np.any(given != 0):
+            self.ignored.add(f"<joint springdamper> {attrs['springdamper']!r} (both values positive or none, as MuJoCo)")
+        return None
 
     def _force_bound(self, attrs, key: str, limited_key: str, what: str) -> float:
         """|force| bound (N·m or N) of a force range, inf when there is none."""

@@ -33,7 +33,8 @@ class RigidModel:
     gravcomp (L,) the share of its weight a force at its com cancels (LinkSpec.gravcomp).
     Per dof: link (D,), q (D,) its q index (-1 inside a free or ball joint: no scalar coordinate),
     damping, armature, kp, kv, stiffness (N·m/rad or N/m) and springref (rad or m) of a joint
-    spring −stiffness·(q − springref), lower/upper limits (rad or m; a ball joint's upper: its cone
+    spring −stiffness·(q − springref), springdamper (D, 2) (time constant s, damping ratio; 0: none)
+    from which the solver sets the spring's stiffness and the damping at build, lower/upper limits (rad or m; a ball joint's upper: its cone
     limit's angle, rad), effort bound, frictionloss (N·m or N, dry joint friction: a constraint
     row), limit_sol and frictionloss_sol (D, 7) the solref and solimp of its limit and friction-loss
     rows (LinkSpec's; NaN: the scene's default, which the solver fills in). pairs (P, 2): (i, j),
@@ -89,6 +90,7 @@ class RigidModel:
     dof_damping: np.ndarray
     dof_armature: np.ndarray
     dof_stiffness: np.ndarray
+    dof_springdamper: np.ndarray
     dof_springref: np.ndarray
     dof_kp: np.ndarray
     dof_kv: np.ndarray
@@ -281,8 +283,8 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False, a
     """
     rows = {k: [] for k in ("name", "parent", "jtype", "pos0", "quat0", "axis", "com", "inertia0", "mass0",
                             "dof0", "q0", "entity", "gravcomp", "same_body", "excluded")}
-    dofs = {k: [] for k in ("link", "q", "damping", "armature", "stiffness", "springref", "lower", "upper", "effort",
-                            "frictionloss", "kp", "kv", "limit_sol", "frictionloss_sol")}
+    dofs = {k: [] for k in ("link", "q", "damping", "armature", "stiffness", "springref", "springdamper", "lower",
+                            "upper", "effort", "frictionloss", "kp", "kv", "limit_sol", "frictionloss_sol")}
     geoms, geom_links, geom_names = [], [], []
     qpos0, equalities, connects, welds, tendons = [], [], [], [], []
     entity_offsets = []
@@ -321,6 +323,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False, a
                 dofs["armature"].append(spec.armature)
                 dofs["stiffness"].append(0.0 if free else spec.stiffness)  # (a ball joint's: MuJoCo's ball spring)
                 dofs["springref"].append(0.0 if vector else spec.springref)
+                dofs["springdamper"].append((0.0, 0.0) if spec.springdamper is None else spec.springdamper)
                 dofs["lower"].append(-np.inf if vector else spec.lower)
                 dofs["upper"].append(np.inf if free else spec.upper)  # (a ball joint's: its cone's angle)
                 dofs["effort"].append(np.inf if vector else spec.effort)
@@ -361,6 +364,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False, a
         dof_link=dof_link, dof_q=np.array(dofs["q"], dtype=np.int32),
         dof_damping=np.array(dofs["damping"], dtype=f), dof_armature=np.array(dofs["armature"], dtype=f),
         dof_stiffness=np.array(dofs["stiffness"], dtype=f), dof_springref=np.array(dofs["springref"], dtype=f),
+        dof_springdamper=np.array(dofs["springdamper"], dtype=f).reshape(-1, 2),
         dof_kp=np.array(dofs["kp"], dtype=f), dof_kv=np.array(dofs["kv"], dtype=f),
         dof_lower=np.array(dofs["lower"], dtype=f), dof_upper=np.array(dofs["upper"], dtype=f),
         dof_effort=np.array(dofs["effort"], dtype=f), dof_frictionloss=np.array(dofs["frictionloss"], dtype=f),

@@ -15,6 +15,7 @@ from ..core import AssetError, GradientError, SimulationError, new_state, runtim
 from ..launch import BoundKernel, BoundKernels
 from . import contact, step
 from .collision import detect
+from .constraint.solver import MINVAL
 from .data import ARENAS, BIG, DYN_WELD, ELEMENT, HEADER, INPUTS, RigidData
 from .geometry import GEOM_CODE
 from .model import build_model
@@ -168,7 +169,27 @@ class RigidSolver(Solver):
         assert per_env.keys() == INPUTS.keys()
         inputs = {name: torch.as_tensor(np.tile(np.asarray(v, dtype=np.float64), (B, 1)), dtype=runtime.tc_float,
                                         device=runtime.device) for name, v in per_env.items()}
-        return self.derive_inputs(inputs)
+        return self._with_springdamper(self.derive_inputs(inputs))
+
+    def _with_springdamper(self, inputs):
+        """``inputs`` with the stiffness and damping of every joint given a springdamper (time constant
+        tc, damping ratio ζ; model.dof_springdamper) as MuJoCo's compiler sets them (AutoSpringDamper)
+        from the joint's inertia I = n / Σ dof_invweight0 over its n dofs: stiffness I / (tc ζ)²,
+        damping 2 I / tc, on each of its dofs. Once, from the build's scale (the inputs' defaults),
+        as MuJoCo's compile: later mass or armature changes leave them."""
+        m = self.model
+        given = np.flatnonzero((m.dof_springdamper > 0).all(1))
+        if not len(given) or self.invweight_basis is None:  # (no scale before the basis: the first allocation)
+            return inputs
+        invweight = inputs["invweight_dof"].double()
+        stiffness, damping = inputs["stiffness"].clone(), inputs["damping"].clone()
+        for link in np.unique(m.dof_link[given]):
+            dofs = torch.as_tensor(np.flatnonzero(m.dof_link == link), device=runtime.device)
+            timeconst, ratio = m.dof_springdamper[int(dofs[0])]
+            inertia = len(dofs) / invweight[:, dofs].sum(1, keepdim=True).clamp(min=MINVAL)
+            stiffness[:, dofs] = (inertia / max(MINVAL, (timeconst * ratio) ** 2)).to(stiffness.dtype)
+            damping[:, dofs] = (2.0 * inertia / max(MINVAL, timeconst)).to(damping.dtype)
+        return {**inputs, "stiffness": stiffness, "damping": damping}
 
     def _default_softness(self):
         """The inputs "solref" and "solimp": each geom's from its asset, else the scene's default."""

@@ -75,6 +75,9 @@ class LinkSpec:
     stiffness N·m/rad (or N/m) and springref rad (or m): a joint spring −stiffness·(q − springref)
     (MJCF ``stiffness``, ``springref``); a ball joint's is −stiffness·r on its dofs, r the
     rotation vector of its turn (MuJoCo's ball spring); a free joint has none.
+    springdamper (2,) (time constant s, damping ratio) or None: MJCF ``springdamper``, which sets
+    stiffness and damping at build from the joint's inertia at q0 (MuJoCo's compiler; see
+    RigidSolver._with_springdamper).
     q0 rad (or m): a revolute or prismatic joint's initial position (MJCF ``ref``: the link frame is
     (pos, quat) at q = 0 whatever q0 is; the loader moved it).
     lower/upper: joint limits, rad or m (-inf/inf when unlimited; a ball joint's upper: the largest
@@ -138,6 +141,7 @@ class LinkSpec:
     armature: float = 0.0
     stiffness: float = 0.0
     springref: float = 0.0
+    springdamper: tuple = None
     q0: float = 0.0
     lower: float = -np.inf
     upper: float = np.inf
