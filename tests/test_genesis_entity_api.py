@@ -1181,3 +1181,22 @@ def test_links_invweight_is_genesis_and_mujocos_body_invweight0(f64):
     inertia = mass / 12.0 * (sides @ sides - sides ** 2)
     np.testing.assert_allclose(box.get_links_invweight(envs_idx=[0]).numpy(), [[[1.0 / mass, np.mean(1.0 / inertia)]]],
                                rtol=1e-12)
+
+
+def test_entity_build_facts_are_genesis(f64):
+    """is_built, is_attached, base_link_idx and init_qpos (Genesis's properties): the qpos at build,
+    an MJCF joint's ref and a free base's placement in it, MuJoCo's qpos0; a named error before build."""
+    import mujoco
+    scene = gs.Scene()
+    arm = scene.add_entity(gs.morphs.MJCF(file=asset("mjcf", "arm.xml")))
+    box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.5, 0.2, 0.3)))
+    gripper = scene.add_entity(gs.morphs.Box(size=(0.05, 0.05, 0.05)))
+    gripper.attach(arm, "wrist")
+    assert not arm.is_built and gripper.is_attached and not box.is_attached
+    with pytest.raises(gs.SceneStateError, match="init_qpos"):
+        arm.init_qpos
+    scene.build()
+    assert arm.is_built and box.base_link_idx == box.link_start == arm.n_links
+    np.testing.assert_allclose(arm.init_qpos, mujoco.MjModel.from_xml_path(asset("mjcf", "arm.xml")).qpos0,
+                               atol=1e-15)
+    assert box.init_qpos.tolist() == [0.5, 0.2, 0.3, 1.0, 0.0, 0.0, 0.0] and gripper.init_qpos.size == 0

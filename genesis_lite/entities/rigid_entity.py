@@ -430,6 +430,28 @@ class RigidEntity(EntityIndexing):
         """The entity's first link (its first tree's root), as Genesis's."""
         return self.links[0]
 
+    @property
+    def base_link_idx(self):
+        """The base link's index in the scene's rigid solver (once built), as Genesis's."""
+        return self.base_link.idx
+
+    @property
+    def is_built(self):
+        """Whether the entity's scene is built, as Genesis's."""
+        return self.scene.is_built
+
+    @property
+    def is_attached(self):
+        """Whether ``attach`` hung this entity from another, as Genesis's."""
+        return self.attached_to is not None
+
+    @property
+    def init_qpos(self):
+        """(n_qs,) numpy: the entity's qpos at build (each joint's initial position: an MJCF ref, a
+        free base's placement), as Genesis's."""
+        self.scene._require_built(f"entity '{self.name}': init_qpos")
+        return self._solver.model.qpos0[self.q_start: self.q_start + self.n_qs].copy()
+
     def get_link(self, name):
         for link in self.links:
             if link.name == name:
