@@ -4,6 +4,7 @@ Built once from every rigid entity's ``LinkSpec`` list; plain numpy, never chang
 build. Parameters a user may set and differentiate (masses, damping, gains...) start from the
 defaults here and live in the solver's input tensors.
 """
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -222,10 +223,10 @@ class RigidModel:
     def n_weld(self):
         return len(self.weld_torquescale)
 
-    @property
+    @functools.cached_property
     def has_equalities(self):
         """Whether some equality row is always formed (a joint equality, a connect, a weld or a held
-        tendon)."""
+        tendon). Kept: every step asks."""
         return self.n_eq + self.n_body_eq + int(self.ten_eq.sum()) > 0
 
 
