@@ -39,19 +39,20 @@ def genesis_assets():
 
 def inline_xml(file):
     """Whether a file morph's ``file`` is an XML document itself (Genesis's inline MJCF or URDF: a
-    string that parses as XML) rather than a path."""
+    string that parses as XML, here also after leading white space, as a triple-quoted document
+    starts) rather than a path."""
     if not (isinstance(file, str) and file.lstrip().startswith("<")):
         return False
     try:
-        ET.fromstring(file)
+        ET.fromstring(file.strip())
     except ET.ParseError:
         return False
     return True
 
 
 def _file_path(owner, file, xml=False):
-    """A file morph's ``file`` (a path string or os.PathLike) as Genesis resolves it: the path as
-    given where it exists (a relative one from the working directory), else in genesis-world's
+    """A file morph's ``file`` (a path string or os.PathLike) as Genesis resolves it: the path made
+    absolute where it exists (a relative one from the working directory), else in genesis-world's
     bundled assets (genesis_assets) where it is there, else as given (scene.add_entity says it was
     not found). xml (MJCF, URDF): also, as Genesis's, the document itself, as a string (inline_xml)
     or an xml.etree Element or ElementTree (taken as its string)."""
@@ -64,7 +65,9 @@ def _file_path(owner, file, xml=False):
         raise InvalidInputError(f"{owner}: argument 'file' must be {what}, got {file!r}")
     if xml and inline_xml(file):
         return file
-    assets = None if os.path.exists(file) else genesis_assets()
+    if os.path.exists(file):  # (absolute, as Genesis keeps it: the working directory may change before build)
+        return os.path.abspath(file)
+    assets = genesis_assets()
     if assets is not None and os.path.exists(os.path.join(assets, file)):
         return os.path.join(assets, file)
     return file

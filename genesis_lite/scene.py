@@ -9,6 +9,8 @@ There is no interactive viewer: ``show_viewer=True`` raises rather than being ig
 import collections
 import dataclasses
 import os
+import re
+import xml.etree.ElementTree as ET
 
 import numpy as np
 import torch
@@ -480,6 +482,18 @@ def _add_rotor_armature(links, morph, mujoco_compatible):
             link.armature = armature
 
 
+_XML_DECLARATION = re.compile(r"^<\?xml[^>]*\?>")
+
+
+def _xml_error(text):
+    """Why ``text`` does not parse as XML (ElementTree's message: what and where)."""
+    try:
+        ET.fromstring(text)
+    except ET.ParseError as err:
+        return str(err)
+    return "it parses"
+
+
 def _not_found():
     """Where a file morph's relative path was looked for (gm._file_path), for its error."""
     assets = gm.genesis_assets()
@@ -496,13 +510,19 @@ def _links_of(morph, material, name, mujoco_compatible):
     (urdf.load_urdf) and shapes.OBJECT_DENSITY for a primitive or a mesh."""
     rho = material.rho if material.rho is not None else shapes.MUJOCO_DENSITY if mujoco_compatible else None
     object_rho = rho or shapes.OBJECT_DENSITY  # (a primitive or a mesh is an object)
-    text = morph.file if isinstance(morph, (gm.URDF, gm.MJCF)) and gm.inline_xml(morph.file) else None
-    path = f"<inline {type(morph).__name__}>" if text is not None else getattr(morph, "file", None)
-    if text is None and isinstance(morph, (gm.URDF, gm.MJCF, gm.Mesh)) and not os.path.isfile(path):
+    inline = isinstance(morph, (gm.URDF, gm.MJCF)) and gm.inline_xml(morph.file)
+    # (a str is decoded already: its declaration's encoding would mislead the loaders' byte parsers)
+    text = _XML_DECLARATION.sub("", morph.file.strip(), count=1) if inline else None
+    path = f"<inline {type(morph).__name__}>" if inline else getattr(morph, "file", None)
+    if not inline and isinstance(morph, (gm.URDF, gm.MJCF, gm.Mesh)) and not os.path.isfile(path):
         # name the argument and what was expected, as every error message does
         kind = type(morph).__name__
-        raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.{kind} expected an existing "
-                         f"{'mesh' if kind == 'Mesh' else kind} file, got '{morph.file}' ({_not_found()})")
+        expected = f"an existing {'mesh' if kind == 'Mesh' else kind} file"
+        if kind != "Mesh" and morph.file.lstrip().startswith("<"):  # (an inline document that does not parse)
+            raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.{kind} expected {expected} or an XML "
+                             f"document, got text that is not well-formed XML ({_xml_error(morph.file)})")
+        raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.{kind} expected {expected}, got "
+                         f"'{morph.file}' ({_not_found()})")
     if isinstance(morph, gm.URDF):
         links = urdf.load_urdf(path, entity_name=name, rho=rho, y_up=not morph.file_meshes_are_zup,
                                collision=morph.collision, text=text)

@@ -347,6 +347,23 @@ def test_tendon_equalities_hold_as_mujocos(f64, tmp_path):
     assert abs(d.ten_length[0] - m.tendon_length0[0]) < 0.02  # (held, softly)
 
 
+def test_the_most_joint_rows_a_step_can_form_fit_their_slots(f64, tmp_path):
+    """Friction loss and a violated limit on every dof and a tendon both held and past its limit
+    (two rows of one tendon): every joint row's columns have their slots (the held tendon's row
+    once wrote past them: 0.1 apart from MuJoCo), 200 steps as MuJoCo 4's."""
+    body = ('<body name="a" pos="0 0 1"><joint name="j1" axis="0 1 0"/>'
+            '<geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03" mass="1"/>'
+            '<body name="b" pos="0.3 0 0"><joint name="j2" axis="1 0 0"/>'
+            '<geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03" mass="1"/></body></body>')
+    extra = ('<option timestep="0.002"/><default><joint frictionloss="0.05" range="0.5 1"/></default>'
+             '<tendon><fixed name="t" range="0.3 2"><joint joint="j1" coef="1"/><joint joint="j2" coef="1"/></fixed>'
+             '</tendon><equality><tendon tendon1="t"/></equality>')
+    m, d, scene, robot = _pair(_write(tmp_path, body, extra), integrator="euler")
+    rows = []
+    assert _lockstep(m, d, scene, robot, 200, lambda: rows.append(d.nefc)) < 1e-10
+    assert max(rows) == 6  # (2 friction loss, 2 joint limits, the tendon's equality and limit)
+
+
 @pytest.mark.parametrize("what", ["velocity", "mass"])
 def test_gradients_through_tendon_equalities_match_finite_differences(f64, tmp_path, what):
     """The held tendons' chain for 0.3 s: the gradient of every link's pose w.r.t. the initial
@@ -493,6 +510,8 @@ LINK = '<geom type="sphere" size="0.1"/>'
     (f'<body name="b"><joint name="j" type="ball"/><joint name="k"/>{LINK}</body>', "",
      "a ball joint followed by a hinge or ball joint in one body is refused"),
     (f'<body name="b"><freejoint springdamper="0.2 1"/>{LINK}</body>', "", "a free joint's spring"),
+    (f'<body name="b"><joint name="j" springdamper="0.1 0"/>{LINK}</body>', "",
+     "springdamper expected two positive values"),
     (f'<body name="b"><joint name="j" stiffness="3" springyield="5"/>{LINK}</body>', "", "a yielding spring"),
     ("", "", "<worldbody> expected at least one <body> or geom, got none"),
     (f'<body name="b"><geom type="sdf" size="0.1 0.2 0.3"/></body>', "", "geom type expected one of"),
@@ -673,8 +692,7 @@ def test_springdamper_sets_stiffness_and_damping_as_mujocos_compiler(f64, tmp_pa
     """<joint springdamper="tc ζ"> (dm_control's dog): stiffness I / (tc ζ)² and damping 2 I / tc,
     I = n / Σ dof_invweight0 over the joint's dofs at qpos0 (MuJoCo's compiler: a hinge and a slide
     of a chain, a ball joint's three dofs, a default class's, a joint's own stiffness replaced, one
-    of class main left as it is); the values and 300 steps as MuJoCo 4's. A pair with a non-positive
-    value does nothing, as in MuJoCo."""
+    of class main left as it is); the values and 300 steps as MuJoCo 4's."""
     body = ('<body name="arm" pos="0 0 1"><joint name="hinge" axis="0 1 0" springdamper="0.1 0.7" stiffness="5"/>'
             '<geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03"/>'
             '<body name="slider" pos="0.3 0 0" childclass="sd"><joint name="slide" type="slide" axis="1 0 1"/>'

@@ -42,7 +42,11 @@ def test_genesis_asset_paths_resolve_to_its_bundled_assets(f64, genesis_package,
     (tmp_path / "xml").mkdir()  # a file of that path here comes first, as in Genesis
     (tmp_path / "xml" / "ball.xml").write_text('<mujoco><worldbody><body name="box"><freejoint/>'
                                                '<geom type="box" size="0.1 0.1 0.1"/></body></worldbody></mujoco>')
-    assert gs.morphs.MJCF(file="xml/ball.xml").file == "xml/ball.xml"
+    morph = gs.morphs.MJCF(file="xml/ball.xml")
+    assert morph.file == str(tmp_path / "xml" / "ball.xml")  # (absolute, as Genesis's: a later chdir keeps it)
+    monkeypatch.chdir(genesis_package)
+    scene = gs.Scene()
+    assert scene.add_entity(morph).links[0].name == "box"
 
 
 def test_paths_found_nowhere_say_where_they_were_looked_for(f64, genesis_package, tmp_path, monkeypatch):
@@ -64,7 +68,7 @@ def test_a_pathlike_file_is_taken_as_its_path(f64):
     scene = gs.Scene()
     robot = scene.add_entity(gs.morphs.URDF(file=pathlib.Path(PENDULUM), fixed=True))
     scene.build()
-    assert robot.n_dofs == 2 and gs.morphs.Mesh(file=pathlib.Path("a.obj")).file == "a.obj"
+    assert robot.n_dofs == 2 and gs.morphs.Mesh(file=pathlib.Path("a.obj")).file == "a.obj"  # (not found: as given)
     with pytest.raises(gs.InvalidInputError, match=r"Mesh: argument 'file' must be a path \(a string or os.PathLike\)"):
         gs.morphs.Mesh(file=None)
 
@@ -93,3 +97,21 @@ def test_an_inline_document_loads_as_its_file(f64, tmp_path, monkeypatch):
     assert torch.equal(trajectories[0], trajectories[1]) and torch.equal(trajectories[0], trajectories[2])
     with pytest.raises(gs.AssetError, match=r"MJCF '<inline MJCF>' \(entity 'bad'\): root element expected <mujoco>"):
         gs.Scene().add_entity(gs.morphs.MJCF(file="<robot/>"), name="bad")
+
+
+def test_inline_documents_as_written_in_code(f64):
+    """A triple-quoted document (leading white space, an XML declaration naming another encoding than
+    the str's: the names as written), and text that is not well-formed XML or not the morph's kind
+    named as such, not as a missing file."""
+    body = '''
+        <?xml version="1.0" encoding="ISO-8859-1"?>
+        <mujoco><worldbody><body name="bé"><freejoint/><geom type="sphere" size="0.1"/></body></worldbody></mujoco>
+    '''
+    scene = gs.Scene()
+    ball = scene.add_entity(gs.morphs.MJCF(file=body))
+    assert [link.name for link in ball.links] == ["bé"]
+    with pytest.raises(gs.AssetError, match=r"gs.morphs.MJCF expected an existing MJCF file or an XML document, "
+                                            r"got text that is not well-formed XML \(mismatched tag: line 1"):
+        gs.Scene().add_entity(gs.morphs.MJCF(file="<mujoco><worldbody><body></worldbody></mujoco>"))
+    with pytest.raises(gs.AssetError, match=r"URDF '<inline URDF>'.*root element expected <robot>, got <mujoco>"):
+        gs.Scene().add_entity(gs.morphs.URDF(file=body))

@@ -295,10 +295,10 @@ def joint_row_columns(size):
 def body_eq_columns(size):
     """Where the connects' and welds' column lists start in efc_cols (D each: its rows' list; the
     run-time welds' after the model's): after the joint rows' slots (at most a row per joint
-    equality, three per connect, six per weld and per run-time weld slot, two per dof, one per limited
-    tendon). K counts
-    connects and welds, WD the welds, DW the run-time weld slots."""
-    rows = size["E"] + 3 * size["K"] + 3 * size["WD"] + 6 * size["DW"] + 2 * size["D"] + size["T"]
+    equality, three per connect, six per weld and per run-time weld slot, two per dof, two per
+    tendon: its equality's and its limit's). K counts connects and welds, WD the welds, DW the
+    run-time weld slots."""
+    rows = size["E"] + 3 * size["K"] + 3 * size["WD"] + 6 * size["DW"] + 2 * size["D"] + 2 * size["T"]
     return joint_row_columns(size) + JOINT_ROW_SLOTS * rows
 
 

@@ -396,15 +396,16 @@ class _Reader(MJCFDocument):
                              f"{attrs['springyield']!r})")
 
     def _springdamper(self, attrs: dict, what: str):
-        """A joint's ``springdamper`` (time constant s, damping ratio) where both are positive: then
-        the solver sets its stiffness and damping at build from its inertia at qpos0 (MuJoCo's
-        compiler, which leaves the joint's own where either is not; said in the warning)."""
+        """A joint's ``springdamper`` (time constant s, damping ratio): None for none (0 0), else both
+        positive, as MuJoCo 4's compiler requires; the solver then sets the joint's stiffness and
+        damping at build from its inertia at qpos0."""
         given = self.numbers(attrs, "springdamper", 2, what, default=np.zeros(2))
-        if np.all(given > 0):
-            return float(given[0]), float(given[1])
-        if np.any(given != 0):
-            self.ignored.add(f"<joint springdamper> {attrs['springdamper']!r} (both values positive or none, as MuJoCo)")
-        return None
+        if np.all(given == 0):
+            return None
+        if not np.all(given > 0):
+            raise self.error(f"{what}: springdamper expected two positive values (or 0 0: none), as MuJoCo's, "
+                             f"got {attrs['springdamper']!r}")
+        return float(given[0]), float(given[1])
 
     def _force_bound(self, attrs, key: str, limited_key: str, what: str) -> float:
         """|force| bound (N·m or N) of a force range, inf when there is none."""

@@ -254,6 +254,8 @@ def _parse(ctx: _Context, text: bytes):
     import yourdfpy  # (imported when first needed: it imports trimesh and scipy, ~0.6 s)
 
     text, xml = _strict_xml(ctx, text)
+    if xml.tag != "robot":
+        raise ctx.error(f"root element expected <robot>, got <{xml.tag}>")
     if _substitute_env(ctx, xml):
         text = etree.tostring(xml)
     _check_elements(ctx, xml)
