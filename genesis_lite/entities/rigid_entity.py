@@ -263,10 +263,11 @@ class RigidJoint:
         z = as_tensor([0.0, 0.0, 1.0]).expand(len(envs), 3)
         if self.type == "free":
             return poses[:, link, :3], z
-        parent = int(model.link_parent[link])  # (the world where it has none: the root's pos0 is its placement)
-        origin = poses[:, parent, :3] if parent >= 0 else torch.zeros_like(z)
-        turn = quat_to_mat(poses[:, parent, 3:7]) if parent >= 0 else torch.eye(3, dtype=z.dtype, device=z.device).expand(
-            len(z), 3, 3)
+        parent = int(model.link_parent[link])
+        if parent >= 0:
+            origin, turn = poses[:, parent, :3], quat_to_mat(poses[:, parent, 3:7])
+        else:  # (the world: a root's pos0 is its placement)
+            origin, turn = torch.zeros_like(z), torch.eye(3, dtype=z.dtype, device=z.device).expand(len(z), 3, 3)
         frame = turn @ quat_to_mat(as_tensor(model.link_quat0[link]))
         axis = frame @ (z[0] if self.type == "ball" else as_tensor(model.link_axis[link]))
         anchor = origin + turn @ as_tensor(model.link_pos0[link])
@@ -964,7 +965,8 @@ class RigidEntity(EntityIndexing):
     def get_links_inertia(self, links_idx_local=None, envs_idx=None):
         """Each link's rotational inertia about its centre of mass, in its frame, kg·m²: (n, 3, 3) or
         (n_envs, n, 3, 3) (Genesis's in its inertial frame: the same where the asset's inertial
-        frame is the link's, as in most URDFs; MJCF's principal frames differ). A massless link's is 0."""
+        frame is the link's, as in most URDFs; MJCF's principal frames differ). A massless link's
+        starts at 0 (its stated inertia dropped, as MuJoCo drops it)."""
         links = self._local(links_idx_local, self.n_links, "links_idx_local")
         return self._out(self._links_inertia(links, envs_idx))
 
