@@ -195,7 +195,8 @@ class _Reader(MJCFDocument):
         total = sum(link.mass for link in links)
         if self.settotalmass > 0 and total > 0:
             for link in links:
-                link.mass, link.inertia = link.mass * self.settotalmass / total, link.inertia * self.settotalmass / total
+                scale = self.settotalmass / total
+                link.mass, link.inertia = link.mass * scale, link.inertia * scale
 
     def _body(self, body, parent: int, childclass: str, links: list, outer):
         """Append the links of `body` and of its subtree: the body's link at its MuJoCo frame,
@@ -775,7 +776,8 @@ class _Reader(MJCFDocument):
                 equality = held.pop(attrs.get("name"), None)
                 if not (limited or equality):
                     continue
-                lower, upper = self.numbers(attrs, "range", 2, what, default=[0.0, 0.0]) if limited else (-np.inf, np.inf)
+                lower, upper = (self.numbers(attrs, "range", 2, what, default=[0.0, 0.0]) if limited
+                                else (-np.inf, np.inf))
                 if not lower < upper:
                     raise self.error(f"{what}: range expected lower < upper, got {attrs.get('range')!r}")
                 joints, coefs = self._tendon_joints(element, by_joint, what)

@@ -35,8 +35,8 @@ class RigidModel:
     Per dof: link (D,), q (D,) its q index (-1 inside a free or ball joint: no scalar coordinate),
     damping, armature, kp, kv, stiffness (N·m/rad or N/m) and springref (rad or m) of a joint
     spring −stiffness·(q − springref), springdamper (D, 2) (time constant s, damping ratio; 0: none)
-    from which the solver sets the spring's stiffness and the damping at build, lower/upper limits (rad or m; a ball joint's upper: its cone
-    limit's angle, rad), effort bound, frictionloss (N·m or N, dry joint friction: a constraint
+    from which the solver sets the spring's stiffness and the damping at build, lower/upper limits
+    (rad or m; a ball joint's upper: its cone limit's angle, rad; the limit inputs' defaults), effort bound, frictionloss (N·m or N, dry joint friction: a constraint
     row), limit_sol and frictionloss_sol (D, 7) the solref and solimp of its limit and friction-loss
     rows (LinkSpec's; NaN: the scene's default, which the solver fills in). pairs (P, 2): (i, j),
     j ≤ i, dof j on the path from dof i to the root — the structural non-zeros of the lower mass
@@ -387,7 +387,8 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False, a
         ten_coef=np.array([_padded(t[1], 0.0) for t in tendons], dtype=f).reshape(-1, TENDON_JOINTS),
         ten_lower=np.array([t[2] for t in tendons], dtype=f), ten_upper=np.array([t[3] for t in tendons], dtype=f),
         ten_limit_sol=np.array([t[4] for t in tendons], dtype=f).reshape(-1, 7),
-        ten_eq=np.array([t[5] for t in tendons], dtype=np.int32), ten_eq_length=np.array([t[6] for t in tendons], dtype=f),
+        ten_eq=np.array([t[5] for t in tendons], dtype=np.int32),
+        ten_eq_length=np.array([t[6] for t in tendons], dtype=f),
         ten_eq_sol=np.array([t[7] for t in tendons], dtype=f).reshape(-1, 7))
 
 
