@@ -1185,7 +1185,7 @@ def test_links_invweight_is_genesis_and_mujocos_body_invweight0(f64):
 
 def test_entity_build_facts_are_genesis(f64):
     """is_built, is_attached, base_link_idx and init_qpos (Genesis's properties): the qpos at build,
-    an MJCF joint's ref and a free base's placement in it, MuJoCo's qpos0; a named error before build."""
+    an MJCF joint's ref and a free base's placement in it, MuJoCo's qpos0; the same before build."""
     import mujoco
     scene = gs.Scene()
     arm = scene.add_entity(gs.morphs.MJCF(file=asset("mjcf", "arm.xml")))
@@ -1193,9 +1193,9 @@ def test_entity_build_facts_are_genesis(f64):
     gripper = scene.add_entity(gs.morphs.Box(size=(0.05, 0.05, 0.05)))
     gripper.attach(arm, "wrist")
     assert not arm.is_built and gripper.is_attached and not box.is_attached
-    with pytest.raises(gs.SceneStateError, match="init_qpos"):
-        arm.init_qpos
+    before = [entity.init_qpos for entity in (arm, box, gripper)]
     scene.build()
+    assert all(np.array_equal(a, entity.init_qpos) for a, entity in zip(before, (arm, box, gripper)))
     assert arm.is_built and box.base_link_idx == box.link_start == arm.n_links
     np.testing.assert_allclose(arm.init_qpos, mujoco.MjModel.from_xml_path(asset("mjcf", "arm.xml")).qpos0,
                                atol=1e-15)

@@ -13,7 +13,7 @@ from ..options import check_bool
 from ..runtime import logger
 from ..solvers.core import InvalidInputError, SceneStateError, refuse_grad, runtime, warn_user
 from ..solvers.rigid.merge import merged_into
-from ..solvers.rigid.model import BALL, FREE
+from ..solvers.rigid.model import BALL, FREE, initial_q
 from . import energy, kinematics
 from .bounds import shapes_aabb
 from ..tensor import wrap
@@ -449,8 +449,9 @@ class RigidEntity(EntityIndexing):
     @property
     def init_qpos(self):
         """(n_qs,) numpy: the entity's qpos at build (each joint's initial position: an MJCF ref, a
-        free base's placement), as Genesis's."""
-        self.scene._require_built(f"entity '{self.name}': init_qpos")
+        free base's placement), as Genesis's; before build from its links' joints."""
+        if not self.scene.is_built:
+            return np.array([q for spec in self._specs for q in initial_q(spec)], dtype=np.float64)
         return self._solver.model.qpos0[self.q_start: self.q_start + self.n_qs].copy()
 
     def get_link(self, name):

@@ -238,7 +238,9 @@ def _static_links(link_parent, link_jtype):
     return static
 
 
-def _initial_q(spec):
+def initial_q(spec):
+    """A LinkSpec joint's qpos at build: a free joint's placement (pos, quat), a ball's identity
+    quaternion, a hinge's or slide's q0 (an MJCF ref), none for a fixed joint."""
     if spec.joint_type == "free":
         return list(spec.pos) + list(spec.quat)
     if spec.joint_type == "ball":
@@ -337,7 +339,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False, a
                 geoms.append(geom)
                 geom_links.append(link_idx)
                 geom_names.append(f"link '{spec.name}' collision geom {k}")
-            qpos0.extend(_initial_q(spec))
+            qpos0.extend(initial_q(spec))
         equalities += [(joint_dof[spec.joint_name], -1 if spec.mimic[0] is None else joint_dof[spec.mimic[0]],
                         spec.mimic[2], spec.mimic[1], _softness(spec.mimic_sol))
                        for spec in links if spec.mimic is not None]
