@@ -194,8 +194,8 @@ class _Reader(MJCFDocument):
         they sum to it (MuJoCo's compiler; deprecated in MuJoCo 3.3, still applied by MuJoCo 4)."""
         total = sum(link.mass for link in links)
         if self.settotalmass > 0 and total > 0:
+            scale = self.settotalmass / total
             for link in links:
-                scale = self.settotalmass / total
                 link.mass, link.inertia = link.mass * scale, link.inertia * scale
 
     def _body(self, body, parent: int, childclass: str, links: list, outer):
