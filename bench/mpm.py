@@ -290,19 +290,24 @@ def run_worker(python, engine, mode, case, args, tmp):
     out = os.path.join(tmp, f"{engine}-{mode}-{case}.json")
     command = [python, os.path.abspath(__file__), "--worker", engine, mode, case, out,
                "--precision", args.precision, "--repeats", str(args.repeats), "--horizon", str(args.horizon)]
-    # both engines with torch's OpenMP threads waiting passively (genesis_lite's import sets it, where
-    # torch comes in through it; Genesis's does not): neither engine's kernels share the cores with
-    # spinning threads
+    result = run_json(command, out)
+    if "error" not in result and os.path.exists(out + ".npy"):
+        result["array"] = np.load(out + ".npy")
+    return result
+
+
+def run_json(command, out):
+    """Run a worker process ``command`` that writes its result to the JSON file ``out``; return the
+    result, or {"error": …} with the last line of its stderr. Torch's OpenMP threads wait passively
+    in both engines (genesis_lite's import sets it where torch comes in through it; Genesis's does
+    not): neither engine's kernels share the cores with spinning threads."""
     env = {**os.environ, "OMP_WAIT_POLICY": os.environ.get("OMP_WAIT_POLICY", "PASSIVE")}
     proc = subprocess.run(command, capture_output=True, text=True, env=env)
     if proc.returncode != 0 or not os.path.exists(out):
         lines = [line for line in proc.stderr.strip().splitlines() if line.strip()] or ["no output"]
         return {"error": f"exit code {proc.returncode}: {lines[-1][:300]}"}
     with open(out) as file:
-        result = json.load(file)
-    if os.path.exists(out + ".npy"):
-        result["array"] = np.load(out + ".npy")
-    return result
+        return json.load(file)
 
 
 def run_case(python, engine, case, args, tmp):

@@ -24,13 +24,12 @@ import argparse
 import json
 import math
 import os
-import subprocess
 import sys
 import tempfile
 
 import numpy as np
 
-from mpm import genesis_python, init_engine
+from mpm import genesis_python, init_engine, run_json
 
 DENSITY, DT, SUBSTEPS, G = 32, 2e-3, 4, 9.81
 RADIUS = HEIGHT = 0.15                       # m: the column
@@ -103,12 +102,7 @@ def run_worker(python, engine, friction_angle, friction, steps, tmp):
     out = os.path.join(tmp, f"{engine}-{friction_angle}-{friction}.json")
     command = [python, os.path.abspath(__file__), "--steps", str(steps),
                "--worker", engine, str(friction_angle), str(friction), out]
-    proc = subprocess.run(command, capture_output=True, text=True)
-    if proc.returncode != 0 or not os.path.exists(out):
-        lines = [line for line in proc.stderr.strip().splitlines() if line.strip()] or ["no output"]
-        return {"error": f"exit code {proc.returncode}: {lines[-1][:300]}"}
-    with open(out) as file:
-        return json.load(file)
+    return run_json(command, out)
 
 
 def main():

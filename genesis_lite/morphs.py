@@ -28,6 +28,11 @@ _FILE = _MORPH + ("decimate", "decimate_face_num", "decimate_aggressiveness", "w
 _DEPRECATED = ("requires_jac_and_IK", "is_free")
 
 
+# the assets genesis_lite ships (its drones: urdf/drones/cf2x.urdf, cf2p.urdf, racer.urdf), found
+# before genesis-world's under the same relative paths
+BUNDLED_ASSETS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "assets")
+
+
 @functools.cache
 def genesis_assets():
     """The folder of genesis-world's bundled assets (Genesis's get_assets_dir(): its xml/, urdf/,
@@ -52,9 +57,9 @@ def inline_xml(file):
 
 def _file_path(owner, file, xml=False):
     """A file morph's ``file`` (a path string or os.PathLike) as Genesis resolves it: the path made
-    absolute where it exists (a relative one from the working directory), else in genesis-world's
-    bundled assets (genesis_assets) where it is there, else as given (scene.add_entity says it was
-    not found). xml (MJCF, URDF): also, as Genesis's, the document itself, as a string (inline_xml)
+    absolute where it exists (a relative one from the working directory), else in genesis_lite's
+    own assets (BUNDLED_ASSETS) or genesis-world's (genesis_assets) where it is there, else as given
+    (scene.add_entity says it was not found). xml (MJCF, URDF): also, as Genesis's, the document itself, as a string (inline_xml)
     or an xml.etree Element or ElementTree (taken as its string)."""
     if xml and isinstance(file, (ET.Element, ET.ElementTree)):
         return ET.tostring(file.getroot() if isinstance(file, ET.ElementTree) else file, encoding="unicode")
@@ -67,9 +72,9 @@ def _file_path(owner, file, xml=False):
         return file
     if os.path.exists(file):  # (absolute, as Genesis keeps it: the working directory may change before build)
         return os.path.abspath(file)
-    assets = genesis_assets()
-    if assets is not None and os.path.exists(os.path.join(assets, file)):
-        return os.path.join(assets, file)
+    for assets in (BUNDLED_ASSETS, genesis_assets()):
+        if assets is not None and os.path.exists(os.path.join(assets, file)):
+            return os.path.join(assets, file)
     return file
 
 
@@ -232,22 +237,91 @@ class URDF(Morph):
     file_meshes_are_zup: bool = True
 
     def _check(self):
-        self.file = _file_path("URDF", self.file, xml=True)
-        self.scale = _isotropic_scale("URDF", self.scale)
-        self.file_meshes_are_zup = _meshes_zup("URDF", self.file_meshes_are_zup, self.file, False)
-        self.default_armature = _armature("URDF", self.default_armature)
+        owner = type(self).__name__
+        self.file = _file_path(owner, self.file, xml=True)
+        self.scale = _isotropic_scale(owner, self.scale)
+        self.file_meshes_are_zup = _meshes_zup(owner, self.file_meshes_are_zup, self.file, False)
+        self.default_armature = _armature(owner, self.default_armature)
         if not isinstance(self.merge_fixed_links, (bool, np.bool_)):
-            raise InvalidInputError(f"URDF: argument 'merge_fixed_links' must be True or False, "
+            raise InvalidInputError(f"{owner}: argument 'merge_fixed_links' must be True or False, "
                                     f"got {self.merge_fixed_links!r}")
         keep = self.links_to_keep
         if not isinstance(keep, (list, tuple, set, frozenset)) or not all(isinstance(name, str) for name in keep):
-            raise InvalidInputError(f"URDF: argument 'links_to_keep' must be a sequence of link names (str), "
+            raise InvalidInputError(f"{owner}: argument 'links_to_keep' must be a sequence of link names (str), "
                                     f"got {keep!r}")
         if keep and not self.merge_fixed_links:  # it would be ignored: say so instead
-            raise InvalidInputError(f"URDF: argument 'links_to_keep' names links to keep from merging, so it needs "
+            raise InvalidInputError(f"{owner}: argument 'links_to_keep' names links to keep from merging, so it needs "
                                     f"merge_fixed_links=True, got links_to_keep={tuple(keep)!r} with "
                                     f"merge_fixed_links=False")
         self.merge_fixed_links, self.links_to_keep = bool(self.merge_fixed_links), tuple(keep)
+
+
+@named_keywords(*_FILE, "prioritize_urdf_material", "propellers_link_names", deprecated=_DEPRECATED + ("COM_link_name",))
+@dataclass
+class Drone(URDF):
+    """A multirotor from a URDF whose ``<properties>`` element states its rotors' coefficients kf
+    (thrust per rpm², N) and km (drag torque per rpm², N·m), as Genesis's drones; scene.add_entity
+    makes it a DroneEntity, flown by set_propellers_rpm. genesis_lite ships three (written here,
+    from the published figures): "urdf/drones/cf2x.urdf" (a Crazyflie 2.x, rotors in an X), "cf2p.urdf"
+    (in a +) and "racer.urdf", found under those relative paths as Genesis's bundled ones are.
+
+    Its base is always free (Genesis's rule: ``fixed`` is refused). propellers_link_name: the
+    rotors' links (kept from merging); each rotor's thrust acts along its link's z axis at its
+    centre of mass, its drag torque about that axis with the sign of propellers_spin (1:
+    counter-clockwise, −1: clockwise, seen from above), reversed for model "RACE" (Genesis's
+    models "CF2X", "CF2P", "RACE"). default_base_ang_damping_scale: the free base's rotational
+    dofs get damping (N·m·s/rad) of this times the drone's mass (Genesis's 1e-5; None: none).
+    The rest as URDF's."""
+    model: str = "CF2X"
+    propellers_link_name: tuple = ("prop0_link", "prop1_link", "prop2_link", "prop3_link")
+    propellers_spin: tuple = (-1, 1, -1, 1)
+    default_base_ang_damping_scale: float = 1e-5
+
+    def _check(self):
+        if self.fixed:
+            raise InvalidInputError("Drone: argument 'fixed' must be False (a drone's base is free, as Genesis's), "
+                                    "got True")
+        if self.model not in ("CF2X", "CF2P", "RACE"):
+            raise InvalidInputError(f"Drone: argument 'model' must be 'CF2X', 'CF2P' or 'RACE', got {self.model!r}")
+        names = self.propellers_link_name
+        if isinstance(names, str) or not isinstance(names, (list, tuple)) or not names or \
+                not all(isinstance(n, str) for n in names) or len(set(names)) != len(names):
+            raise InvalidInputError(f"Drone: argument 'propellers_link_name' must be a sequence of distinct link names "
+                                    f"(str), got {names!r}")
+        spin = self.propellers_spin
+        if not isinstance(spin, (list, tuple, np.ndarray)) or len(spin) != len(names) or \
+                not all(is_int(k) and k in (-1, 1) for k in spin):
+            raise InvalidInputError(f"Drone: argument 'propellers_spin' must hold 1 (counter-clockwise) or -1 "
+                                    f"(clockwise) for each of the {len(names)} propellers, got {spin!r}")
+        scale = self.default_base_ang_damping_scale
+        refuse_grad("Drone", "default_base_ang_damping_scale", scale, "it is fixed at build; set_dofs_damping is "
+                    "differentiable")
+        if scale is not None and not (isinstance(scale, (int, float, np.floating, np.integer)) and
+                                      not isinstance(scale, bool) and np.isfinite(scale) and scale >= 0):
+            raise InvalidInputError(f"Drone: argument 'default_base_ang_damping_scale' must be a finite number ≥ 0 "
+                                    f"(N·m·s/rad per kg) or None, got {scale!r}")
+        self.propellers_link_name, self.propellers_spin = tuple(names), tuple(int(k) for k in spin)
+        if self.merge_fixed_links:  # (the rotors' links carry their thrust: never merged away)
+            self.links_to_keep = tuple(dict.fromkeys((*self.links_to_keep, *names)))
+        super()._check()
+
+
+def rotor_coefficients(file, who):
+    """(kf N/rpm², km N·m/rpm²) of a drone's URDF (a path to a file that exists, or the document
+    itself): its <properties kf km> element's, positive numbers; ``who`` names the entity."""
+    root = ET.fromstring(file.strip()) if inline_xml(file) else ET.parse(file).getroot()
+    properties = root.find("properties")
+    attrs = {} if properties is None else properties.attrib
+    try:
+        kf, km = float(attrs["kf"]), float(attrs["km"])
+    except (KeyError, ValueError):
+        kf = km = float("nan")
+    if not (np.isfinite(kf) and np.isfinite(km) and kf > 0 and km > 0):
+        where = "<inline URDF>" if inline_xml(file) else repr(file)
+        raise InvalidInputError(f"{who}: argument 'file' of gs.morphs.Drone expected a URDF whose <properties> element "
+                                f"states the rotors' kf and km (positive numbers), got {where} with "
+                                f"<properties {attrs}>")
+    return kf, km
 
 
 @named_keywords(*_FILE, deprecated=_DEPRECATED)

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from . import morphs as gm
-from .entities import MPMEntity, RigidEntity
+from .entities import DroneEntity, MPMEntity, RigidEntity
 from .entities.common import EntityIndexing, named_argument_errors, replace_columns
 from .entities.mpm_entity import sample_particles
 from .solvers.core import AssetError, InvalidInputError, SceneStateError, warn_user
@@ -168,8 +168,8 @@ class Scene:
         if not morph.collision:  # (Genesis's morph option: its shapes in no contact pair; a URDF's are left out)
             for geom in (geom for link in links for geom in link.geoms):
                 geom.contype = geom.conaffinity = 0
-        entity = RigidEntity(self, len(self.entities), name, morph, material, surface or Default(), links,
-                             self.rigid_solver)
+        kind = DroneEntity if isinstance(morph, gm.Drone) else RigidEntity
+        entity = kind(self, len(self.entities), name, morph, material, surface or Default(), links, self.rigid_solver)
         self.entities.append(entity)
         return entity
 
@@ -497,9 +497,9 @@ def _xml_error(text):
 def _not_found():
     """Where a file morph's relative path was looked for (gm._file_path), for its error."""
     assets = gm.genesis_assets()
-    return (f"not found; relative paths start at {os.getcwd()}, then "
-            + (f"genesis-world's bundled assets, {assets}" if assets else
-               "genesis-world's bundled assets where that package is installed (it is not)"))
+    return (f"not found; relative paths start at {os.getcwd()}, then genesis_lite's assets, {gm.BUNDLED_ASSETS}, "
+            + (f"then genesis-world's bundled assets, {assets}" if assets else
+               "then genesis-world's bundled assets where that package is installed (it is not)"))
 
 
 def _links_of(morph, material, name, mujoco_compatible):
@@ -526,8 +526,11 @@ def _links_of(morph, material, name, mujoco_compatible):
     if isinstance(morph, gm.URDF):
         links = urdf.load_urdf(path, entity_name=name, rho=rho, y_up=not morph.file_meshes_are_zup,
                                collision=morph.collision, text=text)
+        if isinstance(morph, gm.Drone):
+            _check_rotors(links, morph, name)
         if morph.merge_fixed_links:
-            links = merge.merge_fixed_links(links, morph.links_to_keep, owner=f"entity '{name}': gs.morphs.URDF")
+            links = merge.merge_fixed_links(links, morph.links_to_keep,
+                                            owner=f"entity '{name}': gs.morphs.{type(morph).__name__}")
         if morph.scale != 1.0:
             links = scale.scaled_links(links, morph.scale)  # (a URDF's gains: the file's, as Genesis's)
         _add_rotor_armature(links, morph, mujoco_compatible)
@@ -566,7 +569,18 @@ def _links_of(morph, material, name, mujoco_compatible):
     if np.any(root.pos) or np.any(root.quat != (1.0, 0.0, 0.0, 0.0)):  # a URDF's floating root (urdf.py)
         pos, quat = shapes.compose(pos, quat, root.pos, root.quat)
     root.pos, root.quat = pos, quat  # (else the morph's quaternion as given: compose would renormalise and flip it)
+    if isinstance(morph, gm.Drone) and morph.default_base_ang_damping_scale:  # (Genesis's, by the drone's mass)
+        root.damping = (0.0,) * 3 + (morph.default_base_ang_damping_scale * sum(link.mass for link in links),) * 3
     return _with_material(links, material)
+
+
+def _check_rotors(links, morph, name):
+    """A drone's propellers_link_name names links of its file."""
+    names = [link.name for link in links]
+    missing = [n for n in morph.propellers_link_name if n not in names]
+    if missing:
+        raise InvalidInputError(f"entity '{name}': argument 'propellers_link_name' of gs.morphs.Drone expected links "
+                                f"of the file, got {missing} (its links: {names})")
 
 
 def _with_material(links, material):

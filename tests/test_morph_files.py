@@ -52,7 +52,8 @@ def test_genesis_asset_paths_resolve_to_its_bundled_assets(f64, genesis_package,
 def test_paths_found_nowhere_say_where_they_were_looked_for(f64, genesis_package, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     with pytest.raises(gs.AssetError, match=f"'urdf/go2.urdf' \\(not found; relative paths start at {tmp_path}, then "
-                                            f"genesis-world's bundled assets, {genesis_package}\\)"):
+                                            f"genesis_lite's assets, {morphs.BUNDLED_ASSETS}, then genesis-world's "
+                                            f"bundled assets, {genesis_package}\\)"):
         gs.Scene().add_entity(gs.morphs.URDF(file="urdf/go2.urdf"))
     with pytest.raises(gs.AssetError, match="gs.morphs.Mesh expected an existing mesh file, got 'meshes/no.obj' "
                                             r"\(not found; relative paths start at"):

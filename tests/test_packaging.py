@@ -13,7 +13,8 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 
 def test_wheel_installs_only_genesis_lite(tmp_path):
     """The wheel (built from a copy of the source tree, which it leaves untouched) holds every
-    module of genesis_lite/ and solvers/, all under genesis_lite/: no top-level 'solvers'."""
+    module of genesis_lite/ and solvers/ and the assets genesis_lite ships, all under genesis_lite/:
+    no top-level 'solvers'."""
     source = tmp_path / "source"
     shutil.copytree(ROOT, source, ignore=shutil.ignore_patterns(".git", "build", "*.egg-info", "__pycache__",
                                                                ".pytest_cache"))
@@ -30,6 +31,10 @@ def test_wheel_installs_only_genesis_lite(tmp_path):
     expected |= {f"genesis_lite/solvers/{path.relative_to(ROOT / 'solvers').as_posix()}"
                  for path in (ROOT / "solvers").rglob("*.py")}
     assert expected <= names, f"modules missing from the wheel: {sorted(expected - names)}"
+    assets = {f"genesis_lite/{path.relative_to(ROOT / 'genesis_lite').as_posix()}"
+              for path in (ROOT / "genesis_lite" / "assets").rglob("*") if path.is_file()}
+    assert "genesis_lite/assets/urdf/drones/cf2x.urdf" in assets
+    assert assets <= names, f"assets missing from the wheel: {sorted(assets - names)}"
 
 
 def test_solvers_import_first_outside_the_source_tree(tmp_path):

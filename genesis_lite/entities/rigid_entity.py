@@ -1461,4 +1461,4 @@ class RigidEntity(EntityIndexing):
         return self._out(lower), self._out(d_inv)
 
     def __repr__(self):
-        return f"RigidEntity({self.name!r}, n_links={len(self._specs)})"
+        return f"{type(self).__name__}({self.name!r}, n_links={len(self._specs)})"

@@ -322,7 +322,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False, a
             for k in range(DOFS_OF[code]):
                 dofs["link"].append(link_idx)
                 dofs["q"].append(-1 if vector else len(qpos0))
-                dofs["damping"].append(spec.damping)
+                dofs["damping"].append(float(np.broadcast_to(spec.damping, DOFS_OF[code])[k]))  # (one, or per dof)
                 dofs["armature"].append(spec.armature)
                 dofs["stiffness"].append(0.0 if free else spec.stiffness)  # (a ball joint's: MuJoCo's ball spring)
                 dofs["springref"].append(0.0 if vector else spec.springref)

@@ -1,0 +1,103 @@
+"""A multirotor: a rigid entity flown by its rotors' speeds (Genesis's DroneEntity).
+
+Each rotor k turning at ω_k rpm pushes its link along the link's z axis with the thrust
+kf·ω_k² (N) at the link's centre of mass, and turns it about that axis with the drag torque
+spin_k·km·ω_k² (N·m) (reversed for model "RACE"), as Genesis's drones. The rotors' wrench is
+an external wrench for the next step (RigidEntity.apply_links_external_wrench): differentiable
+in the speeds, and through the link poses it is computed from, in the state.
+"""
+import numpy as np
+import torch
+
+from ..morphs import rotor_coefficients
+from ..runtime import runtime
+from ..solvers.core import InvalidInputError, SceneStateError
+from .common import named_argument_errors
+from .rigid_entity import RigidEntity
+
+
+@named_argument_errors
+class DroneEntity(RigidEntity):
+    """A rigid entity from gs.morphs.Drone. Units: rpm, N, N·m."""
+
+    def __init__(self, scene, idx, name, morph, material, surface, link_specs, solver):
+        super().__init__(scene, idx, name, morph, material, surface, link_specs, solver)
+        self._KF, self._KM = rotor_coefficients(morph.file, f"entity '{name}'")
+        names = [link.name for link in self.links]  # (the rotors' among them: scene._check_rotors)
+        self._propellers_local = np.array([names.index(n) for n in morph.propellers_link_name], dtype=np.int64)
+        # the drag torque's sign per rotor (Genesis's model "RACE" turns the other way)
+        self._spin = torch.tensor(morph.propellers_spin, dtype=torch.float64) * (-1.0 if morph.model == "RACE" else 1.0)
+        self._rpm_step = None  # (rollout, step) of the last set_propellers_rpm: once a step
+
+    @property
+    def KF(self):
+        """Thrust coefficient kf, N/rpm² (the URDF's <properties kf>)."""
+        return self._KF
+
+    @property
+    def KM(self):
+        """Drag torque coefficient km, N·m/rpm² (the URDF's <properties km>)."""
+        return self._KM
+
+    @property
+    def model(self):
+        """The morph's model: "CF2X", "CF2P" or "RACE"."""
+        return self.morph.model
+
+    @property
+    def n_propellers(self):
+        return len(self._propellers_local)
+
+    @property
+    def propellers_idx(self):
+        """The rotors' links, scene-wide indices (Genesis's)."""
+        return torch.as_tensor(self.link_start + self._propellers_local, device=runtime.device)
+
+    @property
+    def propellers_spin(self):
+        """Each rotor's spin: 1 counter-clockwise, −1 clockwise (the morph's)."""
+        return torch.tensor(self.morph.propellers_spin, dtype=runtime.tc_float, device=runtime.device)
+
+    def set_propellers_rpm(self, propellers_rpm):
+        """The rotors' speeds for the next step, rpm ≥ 0: (n_propellers,) or, batched, (n_envs,
+        n_propellers) (or what broadcasts to it); at most one call a step (Genesis's rule: a second
+        would add its wrench to the first's). Differentiable."""
+        sim = self._sim()
+        who = f"entity '{self.name}': set_propellers_rpm"
+        step = (sim.generation, sim.step_index)
+        if self._rpm_step == step:
+            raise SceneStateError(f"{who} can only be called once per step (Genesis's rule), got a second call before "
+                                  f"scene.step()")
+        envs = self._envs(None)
+        rpm = self._values(propellers_rpm, self.n_propellers, envs, "propellers_rpm")  # (B, n) finite
+        if bool((rpm.detach() < 0).any()):
+            raise InvalidInputError(f"{who} argument 'propellers_rpm' must be ≥ 0 (rpm), got "
+                                    f"{rpm.detach().cpu().numpy()}")
+        squared = (rpm * rpm)[..., None]
+        rotors = sim.derived(self._solver)[:, self._rotor_links]  # (B, n, 13): pos, quat, …
+        com = sim.inputs(self._solver)["com"][:, self._com_columns].reshape(-1, self.n_propellers, 1, 3)
+        # each rotor's axis (its link's z) and centre of mass (from the link origin) in world axes
+        axis, offset = _rotated(rotors[..., 3:7], torch.cat([self._z.expand_as(com), com], dim=-2)).unbind(-2)
+        force = self._KF * squared * axis
+        moment = self._KM * self._spin.to(squared)[:, None] * squared * axis + torch.linalg.cross(offset, force)
+        wrench = torch.cat([force, moment], dim=-1).reshape(len(envs), -1)  # (B, 6 n): the input xfrc's layout
+        current = sim.inputs(self._solver)["xfrc"]
+        self._write_input("xfrc", self._xfrc_columns, envs, current[:, self._xfrc_columns_t] + wrench)
+        self._rpm_step = step
+
+    def _on_build(self):
+        super()._on_build()
+        links = self.link_start + self._propellers_local
+        self._rotor_links = torch.as_tensor(links, device=runtime.device)
+        self._com_columns = torch.as_tensor(self._link_columns(self._propellers_local, 3), device=runtime.device)
+        self._xfrc_columns = (6 * links[:, None] + np.arange(6)).reshape(-1)
+        self._xfrc_columns_t = torch.as_tensor(self._xfrc_columns, device=runtime.device)
+        self._z = torch.tensor([0.0, 0.0, 1.0], dtype=runtime.tc_float, device=runtime.device)
+
+
+def _rotated(quat, vectors):
+    """(B, n, k, 3) ``vectors`` turned by the (B, n, 4) unit quaternions (w, x, y, z):
+    v + 2w (u × v) + 2 u × (u × v), u = (x, y, z)."""
+    w, u = quat[..., None, :1], quat[..., None, 1:].expand_as(vectors)
+    turn = 2.0 * torch.linalg.cross(u, vectors)
+    return vectors + w * turn + torch.linalg.cross(u, turn)
