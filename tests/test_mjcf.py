@@ -347,6 +347,70 @@ def test_tendon_equalities_hold_as_mujocos(f64, tmp_path):
     assert abs(d.ten_length[0] - m.tendon_length0[0]) < 0.02  # (held, softly)
 
 
+# A hip-knee chain with a slide at its end and a pendulum beside it, and fixed tendons with
+# MuJoCo's passive springs and dampers: one resting where the joints' springrefs put it (the
+# default springlength), one with a dead band (two springlengths), one damper alone (one
+# springlength), one limited and sprung, and one with an unlimited range and frictionloss 0
+SPRUNG_TENDONS = ('<body name="thigh" pos="0 0 1"><joint name="hip" axis="0 1 0" springref="0.3"/>'
+                  '<geom type="capsule" fromto="0 0 0 0 0 -0.3" size="0.04"/>'
+                  '<body name="shin" pos="0 0 -0.3"><joint name="knee" axis="0 1 0" springref="-0.2"/>'
+                  '<geom type="capsule" fromto="0 0 0 0 0 -0.3" size="0.035"/>'
+                  '<body name="foot" pos="0 0 -0.3"><joint name="toe" type="slide" axis="1 0 0"/>'
+                  '<geom type="box" size="0.08 0.03 0.02" pos="0.04 0 0"/></body></body></body>'
+                  '<body name="bob" pos="0.6 0 1"><joint name="swing" axis="1 0 0"/>'
+                  '<geom type="capsule" fromto="0 0 0 0 0.3 0" size="0.03"/></body>')
+SPRUNG_TENDONS_EXTRA = ('<option timestep="0.002"/><default><joint damping="0.01"/></default><tendon>'
+                        '<fixed name="rest" stiffness="8" damping="0.05"><joint joint="hip" coef="0.5"/>'
+                        '<joint joint="knee" coef="-0.5"/></fixed>'
+                        '<fixed name="band" stiffness="20" springlength="-0.1 0.05"><joint joint="knee" coef="1"/>'
+                        '<joint joint="toe" coef="2"/><joint joint="swing" coef="0.3"/></fixed>'
+                        '<fixed name="damper" damping="0.3" springlength="0.2"><joint joint="swing" coef="1"/></fixed>'
+                        '<fixed name="both" stiffness="3" range="-0.6 0.6" springlength="0.1">'
+                        '<joint joint="hip" coef="1"/><joint joint="swing" coef="-1"/></fixed>'
+                        '</tendon>')
+
+
+def test_fixed_tendon_springs_and_dampers_act_as_mujocos(f64, tmp_path):
+    """MuJoCo's passive tendon force −k·(L − the nearer end of springlength, 0 inside it) − b·L̇
+    along each tendon (its joints' generalised forces c_j·f): the default rest length at the joints'
+    springrefs (qpos_spring), a dead band, a damper alone, a spring on a limited tendon; 1 s from
+    random velocities beside MuJoCo 4 (Euler: both explicit there), and the potential energy with
+    the tendons' spring energy (mjENBL_ENERGY)."""
+    path = _write(tmp_path, SPRUNG_TENDONS, SPRUNG_TENDONS_EXTRA)
+    m, d, scene, robot = _pair(path, integrator="euler")
+    rest = np.deg2rad(0.5 * 0.3 - 0.5 * -0.2)  # (springrefs in the compiler's degrees)
+    ours = sorted(scene.rigid_solver.model.ten_spring.tolist())  # (ours listed by first joint, MuJoCo's as written)
+    np.testing.assert_allclose(ours, sorted([[rest, rest], [-0.1, 0.05], [0.2, 0.2], [0.1, 0.1]]), rtol=1e-15)
+    np.testing.assert_allclose(ours, sorted(m.tendon_lengthspring.tolist()), rtol=1e-15)
+    d.qvel[:] = velocity = np.random.default_rng(2).normal(0.0, 3.0, m.nv)
+    robot.set_dofs_velocity(torch.tensor(velocity))
+    band = []
+    assert _lockstep(m, d, scene, robot, 500, lambda: band.append(d.ten_length[1])) < 1e-10
+    assert min(band) < -0.1 and max(band) > 0.05  # (the dead band's both ends were passed)
+    m.opt.enableflags |= mujoco.mjtEnableBit.mjENBL_ENERGY
+    mujoco.mj_forward(m, d)
+    welded = -sum(m.body_mass[b] * m.opt.gravity @ d.xipos[b] for b in range(1, m.nbody) if m.body_weldid[b] == 0)
+    assert abs(float(robot.get_potential_energy()) - (d.energy[0] - welded)) < 1e-12
+    rest = m.tendon_lengthspring
+    stretch = d.ten_length - np.clip(d.ten_length, rest[:, 0], rest[:, 1])
+    assert 0.5 * (m.tendon_stiffness * stretch ** 2).sum() > 1e-3  # (the tendons' share is there to check)
+
+
+@pytest.mark.parametrize("what", ["velocity", "mass"])
+def test_gradients_through_tendon_springs_match_finite_differences(f64, tmp_path, what):
+    """The sprung tendons' chain for 0.3 s: the gradient of every link's pose w.r.t. the initial
+    velocities and the masses against central differences."""
+    _assert_pose_gradients_converge(_write(tmp_path, SPRUNG_TENDONS, SPRUNG_TENDONS_EXTRA), what, 3.0, 2,
+                                    "tendon springs")
+
+
+def test_a_springlength_above_its_upper_end_is_refused_as_mujoco(f64, tmp_path):
+    extra = SPRUNG_TENDONS_EXTRA.replace('springlength="-0.1 0.05"', 'springlength="0.05 -0.1"')
+    with pytest.raises(AssetError, match=r"<tendon><fixed name='band'>: springlength expected lower ≤ upper, got "
+                                         r"'0.05 -0.1'"):
+        mjcf.load_mjcf(_write(tmp_path, SPRUNG_TENDONS, extra))
+
+
 def test_the_most_joint_rows_a_step_can_form_fit_their_slots(f64, tmp_path):
     """Friction loss and a violated limit on every dof and a tendon both held and past its limit
     (two rows of one tendon): every joint row's columns have their slots (the held tendon's row

@@ -7,7 +7,8 @@ I_c its inertia about it in world axes: the input inertia, turned, as the step's
 Σ ½ armature · q̇² over the dofs (the rotors): MuJoCo's ½ q̇ᵀ M q̇, armature on M's diagonal.
 Potential: −Σ m g · p_c over the links that move (a link welded to the world adds a constant, left
 out as Genesis leaves it out) plus Σ ½ stiffness (q − springref)² over the joint springs (a ball
-joint's: Σ_a ½ stiffness_a r_a², r the rotation vector of its turn, MuJoCo's).
+joint's: Σ_a ½ stiffness_a r_a², r the rotation vector of its turn, MuJoCo's) and Σ ½ k x² over
+the fixed tendons' springs (x: the length's distance from its rest range, MuJoCo's).
 """
 import numpy as np
 import torch
@@ -56,4 +57,22 @@ def potential(entity, envs_idx):
         turn = rotation_vector(quat / quat.norm(dim=-1, keepdim=True))
         springs = springs + 0.5 * (entity._read_input("stiffness", entity.dof_start + dof + np.arange(3), envs_idx)
                                    * turn ** 2).sum(-1)
-    return height + springs
+    return height + springs + _tendon_springs(entity, envs_idx)
+
+
+def _tendon_springs(entity, envs_idx):
+    """(B',) J: Σ ½ k x² over the entity's sprung fixed tendons, x = L − clamp(L, rest lower, rest
+    upper), L = Σ c_j q_j."""
+    model = entity._solver.model
+    mine = (model.ten_dof[:, 0] >= entity.dof_start) & (model.ten_dof[:, 0] < entity.dof_start + entity.n_dofs)
+    tendons = np.flatnonzero(mine & (model.ten_stiffness != 0))
+    if not len(tendons):
+        return 0.0
+    coef = torch.as_tensor(model.ten_coef[tendons], device=runtime.device)  # (T', 3), 0 past a tendon's joints
+    columns = np.maximum(model.dof_q[model.ten_dof[tendons]], 0)  # (a padding slot's column, its coef 0)
+    q = entity._read(columns.reshape(-1), envs_idx).reshape(-1, *coef.shape)
+    length = (coef.to(q.dtype) * q).sum(-1)
+    rest = torch.as_tensor(model.ten_spring[tendons], dtype=q.dtype, device=q.device)
+    stretch = length - torch.minimum(torch.maximum(length, rest[:, 0]), rest[:, 1])
+    stiffness = torch.as_tensor(model.ten_stiffness[tendons], dtype=q.dtype, device=q.device)
+    return 0.5 * (stiffness * stretch ** 2).sum(-1)

@@ -1,5 +1,5 @@
-"""Force stage: controls, PD servos, joint springs and damping → qfrc_smooth (joint limits and
-friction loss are constraint rows: constraint/rows.py).
+"""Force stage: controls, PD servos, joint springs and damping, fixed tendons' springs and dampers
+→ qfrc_smooth (joint limits and friction loss are constraint rows: constraint/rows.py).
 
 Control modes per dof (as in Genesis): 0 force (``control_dofs_force``), 1 position
 (τ = kp·(q* − q) + kv·(q̇* − q̇), with q̇* = ``ctrl_vel``: 0 after ``control_dofs_position``,
@@ -13,13 +13,16 @@ implicitly by the acceleration stage (linalg.py: h·(b + kv) on A's diagonal, kv
 servo mode), as Genesis's default integrator does (approximate_implicitfast, clipped or not;
 MuJoCo's implicitfast likewise but without the kv of an actuator clamped by its force range, its
 Euler integrator only b): an explicit kv is unstable once h·kv exceeds about twice the dof's
-inertia, which the gains of Genesis's examples do at its time steps.
+inertia, which the gains of Genesis's examples do at its time steps. A fixed tendon's spring
+and damper (MuJoCo's passive tendon force, on its length L = Σ c_j q_j) are explicit, both, as in
+MuJoCo's Euler integrator (its implicitfast would take the damper implicitly).
 """
 import taichi as ti
 
 from .data import accumulate
-from .kinematics import joint_quat
+from .kinematics import joint_quat, tendon_length, tendon_rate
 from .model import BALL
+from .spec import TENDON_JOINTS
 from .spatial import quat_rotation_vector, quat_rotation_vector_adjoint
 
 FORCE, POSITION, VELOCITY = 0, 1, 2
@@ -129,3 +132,43 @@ def smooth_force_adjoint(d: ti.template(), s, e, i):
         g_q -= g_force * kp
     accumulate(d.qpos.grad, ti.Vector([s, e, ti.max(qi, 0)]), g_q)
     accumulate(d.qvel.grad, ti.Vector([s, e, i]), g_qd)
+
+
+@ti.func
+def _tendon_stretch(d: ti.template(), s, e, t):
+    """Fixed tendon t's length at frame s less the nearer end of its spring's rest range, 0 inside
+    it (m or rad)."""
+    length, stretch = tendon_length(d, s, e, t), 0.0
+    if length > d.ten_spring[2 * t + 1]:
+        stretch = length - d.ten_spring[2 * t + 1]
+    elif length < d.ten_spring[2 * t]:
+        stretch = length - d.ten_spring[2 * t]
+    return stretch
+
+
+@ti.func
+def tendon_spring(d: ti.template(), s, e, t):
+    """Add fixed tendon t's spring and damper, f = −k·stretch − b·L̇ along the tendon (N or N·m), to
+    qfrc_smooth: c_j·f on each of its dofs j (after smooth_force has written them)."""
+    if d.ten_stiffness[t] != 0.0 or d.ten_damping[t] != 0.0:
+        force = -d.ten_stiffness[t] * _tendon_stretch(d, s, e, t) - d.ten_damping[t] * tendon_rate(d, s, e, t)
+        for k in range(TENDON_JOINTS * t, TENDON_JOINTS * t + d.ten_nnz[t]):
+            d.qfrc_smooth[s, e, d.ten_dof[k]] += d.ten_coef[k] * force
+
+
+@ti.func
+def tendon_spring_adjoint(d: ti.template(), s, e, t):
+    """Reverse of tendon_spring: ∂L/∂qfrc_smooth → the state's qpos and qvel (g_f = Σ c_j g_j; the
+    stretch's slope is 1 outside the rest range, 0 inside)."""
+    if d.ten_stiffness[t] != 0.0 or d.ten_damping[t] != 0.0:
+        g_force = 0.0
+        for k in range(TENDON_JOINTS * t, TENDON_JOINTS * t + d.ten_nnz[t]):
+            g_force += d.ten_coef[k] * d.qfrc_smooth.grad[s, e, d.ten_dof[k]]
+        g_length = 0.0
+        if _tendon_stretch(d, s, e, t) != 0.0:
+            g_length = -d.ten_stiffness[t] * g_force
+        g_rate = -d.ten_damping[t] * g_force
+        for k in range(TENDON_JOINTS * t, TENDON_JOINTS * t + d.ten_nnz[t]):
+            dof, coef = d.ten_dof[k], d.ten_coef[k]
+            accumulate(d.qpos.grad, ti.Vector([s, e, d.dof_q[dof]]), coef * g_length)
+            accumulate(d.qvel.grad, ti.Vector([s, e, dof]), coef * g_rate)

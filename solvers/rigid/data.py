@@ -109,10 +109,10 @@ MODEL = {
     # connects and welds (points and frames of two links held together; RigidModel says what they hold)
     "body_eq_link": ("i", "K2"), "body_eq_anchor": ("v3", "K2"), "weld_turn": ("v4", "WD2"),
     "weld_torquescale": ("f", "WD"), "body_eq_sol": ("f", "K7"),
-    # limited or held fixed tendons (RigidModel says what they hold; TENDON_JOINTS a tendon's joints)
+    # limited, held or sprung fixed tendons (RigidModel says what they hold; TENDON_JOINTS a tendon's joints)
     "ten_nnz": ("i", "T"), "ten_dof": ("i", "T3"), "ten_coef": ("f", "T3"), "ten_lower": ("f", "T"),
     "ten_upper": ("f", "T"), "ten_limit_sol": ("f", "T7"), "ten_eq": ("i", "T"), "ten_eq_length": ("f", "T"),
-    "ten_eq_sol": ("f", "T7"),
+    "ten_eq_sol": ("f", "T7"), "ten_stiffness": ("f", "T"), "ten_damping": ("f", "T"), "ten_spring": ("f", "T2"),
     # substep h (s), the time constant (s) of the joint rows (equality, limit, friction loss), impratio, solver
     # tolerance and line-search tolerance: runtime values like everything else (CONSTS names them)
     "consts": ("f", len(CONSTS)),
@@ -309,7 +309,7 @@ def _counts(size):
             "H": size["H"], "C": size["C"], "CF": FEATURE_SIZE * size["C"], "HI": size["HI"], "R": R, "RD": R * D,
             "CD": body_eq_columns(size) + (size["K"] + size["DW"]) * D, "DWW": 1 + DYN_WELD * size["DW"],
             "E": size["E"], "E2": 2 * size["E"], "E7": 7 * size["E"], "K2": 2 * size["K"], "K7": 7 * size["K"],
-            "T": size["T"], "T3": TENDON_JOINTS * size["T"], "T7": 7 * size["T"],
+            "T": size["T"], "T2": 2 * size["T"], "T3": TENDON_JOINTS * size["T"], "T7": 7 * size["T"],
             "WD": size["WD"], "WD2": 2 * size["WD"],
             "G2": 2 * size["G"], "G5": 5 * size["G"], "L3": 3 * size["L"], "L6": 6 * size["L"], "L9": 9 * size["L"],
             "D7": 7 * D, 1: 1,

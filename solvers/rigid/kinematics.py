@@ -15,6 +15,7 @@ import taichi as ti
 
 from .data import accumulate
 from .model import BALL, FREE, PRISMATIC, REVOLUTE
+from .spec import TENDON_JOINTS
 from .spatial import (axis_angle_quat, mat_mul, mat_vec, normalized_adjoint, quat_conj, quat_mul, quat_normalized,
                       quat_to_mat)
 
@@ -249,3 +250,21 @@ def dof_motion_at(d: ti.template(), s, e, i, point):
     reference, moved to the point)."""
     angular = d.cdof_w[s, e, i]
     return d.cdof_v[s, e, i] + angular.cross(point - reference(d, s, e, d.dof_link[i])), angular
+
+
+@ti.func
+def tendon_length(d: ti.template(), s, e, t):
+    """Fixed tendon t's length L = Σ c_j q_j at frame s (m or rad; its joints hinge or slide)."""
+    length = 0.0
+    for k in range(TENDON_JOINTS * t, TENDON_JOINTS * t + d.ten_nnz[t]):
+        length += d.ten_coef[k] * d.qpos[s, e, d.dof_q[d.ten_dof[k]]]
+    return length
+
+
+@ti.func
+def tendon_rate(d: ti.template(), s, e, t):
+    """Fixed tendon t's rate L̇ = Σ c_j q̇_j at frame s (m/s or rad/s)."""
+    rate = 0.0
+    for k in range(TENDON_JOINTS * t, TENDON_JOINTS * t + d.ten_nnz[t]):
+        rate += d.ten_coef[k] * d.qvel[s, e, d.ten_dof[k]]
+    return rate

@@ -41,8 +41,10 @@ only weighs and is drawn; a geom
 drawn where its group is 0-2 (MuJoCo's visible groups), coloured by its rgba or material.
 Fixed tendons (``<tendon><fixed>``, up to three hinge or slide joints): their limits (range,
 solreflimit, solimplimit; a ``<default><tendon>`` class), as MuJoCo's limit rows on the length Σ
-coef·q, and ``<equality><tendon tendon1 polycoef>``, which holds that length at its value at qpos0
-plus polycoef[0] by an equality row (LinkSpec.tendons; tendon2 is refused).
+coef·q, ``<equality><tendon tendon1 polycoef>``, which holds that length at its value at qpos0
+plus polycoef[0] by an equality row (LinkSpec.tendons; tendon2 is refused), and their passive
+spring and damper (stiffness, damping, springlength: one rest length or a dead band; by default
+the length at the joints' springrefs, MuJoCo's qpos_spring).
 Joints: axis, pos, range (limited: MuJoCo's autolimits), damping, armature, frictionloss,
 solreflimit, solimplimit, solreffriction and solimpfriction (the softness of its limit and
 friction-loss rows),
@@ -79,7 +81,7 @@ move bodies and geoms unread (``<composite>``, ``<flexcomp>``…; ``<frame>`` is
 bodies and geoms, and its childclass is theirs; so is ``<replicate>``, as copies in frames:
 MJCFDocument), a solref of mixed form (one number > 0, the other not: MuJoCo warns and takes its
 default), a plane on a moving body (as MuJoCo's compiler). Ignored with one warning
-naming them: spatial tendons, a fixed tendon's spring, damping and friction loss, an actuator on
+naming them: spatial tendons, a fixed tendon's friction loss and armature, an actuator on
 another tendon, ``<contact><pair>``, ``<keyframe>``, ``<option>`` (the scene's
 options rule), and attributes that tune MuJoCo's solver, actuator dynamics or the compiler's mass
 bounds (a geom's margin and gap, dampratio, timeconst, boundmass…) unless they hold MuJoCo's
@@ -749,10 +751,11 @@ class _Reader(MJCFDocument):
 
     def _tendons(self, links: list[LinkSpec]):
         """<tendon><fixed>: a limited one (its length Σ coef·q of hinge and slide joints, range,
-        solreflimit, solimplimit) or one a tendon equality holds (self.tendon_equalities) on the link
-        of its first joint (LinkSpec.tendons); its other attributes (stiffness, damping,
-        frictionloss…) and spatial tendons are named in the warning of what is ignored (an
-        unlimited fixed tendon without them does nothing, as in MuJoCo)."""
+        solreflimit, solimplimit), one a tendon equality holds (self.tendon_equalities) or one with
+        a spring or damper (stiffness, damping, springlength: _tendon_spring) on the link of its
+        first joint (LinkSpec.tendons); its other attributes (frictionloss, armature…) and spatial
+        tendons are named in the warning of what is ignored (a fixed tendon without any of them
+        does nothing, as in MuJoCo)."""
         by_joint = {link.joint_name: link for link in links if link.joint_type in ("revolute", "prismatic")}
         held = dict(self.tendon_equalities)
         for section in self.root.iter("tendon"):
@@ -766,15 +769,18 @@ class _Reader(MJCFDocument):
                     self.ignored.add(f"<tendon><{element.tag}>")
                     continue
                 for key, value in attrs.items():
-                    at_zero = key in ("stiffness", "damping", "frictionloss", "margin", "armature") and \
+                    at_zero = key in ("frictionloss", "margin", "armature") and \
                         not any(self.numbers(attrs, key, (1, 2), what))  # (MuJoCo's default: no effect)
                     if key not in ("name", "class", "limited", "range", "solreflimit", "solimplimit", "group",
-                                   "rgba", "width", "material", "user") and not is_default(key, value) and not at_zero:
+                                   "rgba", "width", "material", "user", "stiffness", "damping", "springlength") \
+                            and not is_default(key, value) and not at_zero:
                         self.ignored.add(f"<tendon><fixed {key}>")
                 limited = attrs.get("limited", "auto")
                 limited = limited == "true" or (limited == "auto" and self.autolimits and "range" in attrs)
                 equality = held.pop(attrs.get("name"), None)
-                if not (limited or equality):
+                stiffness, damping = (float(self.numbers(attrs, key, 1, what, default=[0.0])[0])
+                                      for key in ("stiffness", "damping"))
+                if not (limited or equality or stiffness or damping):
                     continue
                 lower, upper = (self.numbers(attrs, "range", 2, what, default=[0.0, 0.0]) if limited
                                 else (-np.inf, np.inf))
@@ -784,11 +790,26 @@ class _Reader(MJCFDocument):
                 if equality is not None:  # (held at its length at qpos0 plus the offset)
                     rest = sum(c * by_joint[joint].q0 for joint, c in zip(joints, coefs))
                     equality = (rest + equality[0], equality[1])
+                spring = None
+                if stiffness or damping:
+                    spring = (stiffness, damping, *self._spring_length(attrs, joints, coefs, by_joint, what))
                 by_joint[joints[0]].tendons += ((tuple(joints), tuple(coefs), float(lower), float(upper),
                                                  self._row_softness(attrs, "solreflimit", "solimplimit", what),
-                                                 equality),)
+                                                 equality, spring),)
         if held:
             raise self.error(f"<equality><tendon>: tendon1 expected a fixed tendon of the file, got {sorted(held)}")
+
+    def _spring_length(self, attrs: dict, joints, coefs, by_joint: dict, what: str):
+        """(lower, upper) m or rad: where a fixed tendon's spring rests (MuJoCo's springlength: one
+        value for both; "-1 -1", the default, its length at the joints' springrefs, MuJoCo's
+        qpos_spring)."""
+        given = self.numbers(attrs, "springlength", (1, 2), what, default=[-1.0, -1.0])
+        lower, upper = float(given[0]), float(given[-1])
+        if lower == -1.0 and upper == -1.0:
+            lower = upper = float(sum(c * by_joint[joint].springref for joint, c in zip(joints, coefs)))
+        if lower > upper:  # (MuJoCo's compiler refuses it too)
+            raise self.error(f"{what}: springlength expected lower ≤ upper, got {attrs.get('springlength')!r}")
+        return lower, upper
 
     def _tendon_joints(self, element, by_joint: dict, what: str):
         """(joint names, coefficients) of a fixed tendon's <joint joint coef> children (hinge or

@@ -102,11 +102,13 @@ class LinkSpec:
     mass_stated: the asset states the link's mass (False: weighed from its shapes, a URDF link
     without <inertial> or its <mass>); merging fixed links adds a weighed part to a stated one
     not (merge.py).
-    tendons: (joint names, their coefficients, lower, upper, softness (7,) as limit_sol, equality)
-    per limited or held fixed tendon whose first joint is this link's (MJCF ``<tendon><fixed>``,
-    MuJoCo's: its length Σ coef·q, in [lower, upper] m or rad by a limit row (±inf: none),
-    constraint/rows.py); equality: None, or (length m or rad, softness (7,)) where an ``<equality>
-    <tendon>`` holds it at that length.
+    tendons: (joint names, their coefficients, lower, upper, softness (7,) as limit_sol, equality,
+    spring) per limited, held or sprung fixed tendon whose first joint is this link's (MJCF
+    ``<tendon><fixed>``, MuJoCo's: its length L = Σ coef·q, in [lower, upper] m or rad by a limit
+    row (±inf: none), constraint/rows.py); equality: None, or (length m or rad, softness (7,))
+    where an ``<equality><tendon>`` holds it at that length; spring: None, or (stiffness, damping,
+    rest lower, rest upper): MuJoCo's passive tendon force −stiffness·(L − the nearer rest end, 0
+    between them) − damping·L̇ (actuation.py).
     excluded: names of links of the same entity this link's shapes never collide with (MJCF
     ``<contact><exclude>``).
     connects: (other link's name, or "" for the world; anchor (3,) m in this link's frame, or None:
@@ -136,7 +138,7 @@ class LinkSpec:
     mass: float
     com: np.ndarray
     inertia: np.ndarray
-    damping: float = 0.0
+    damping: float | tuple = 0.0
     frictionloss: float = 0.0
     armature: float = 0.0
     stiffness: float = 0.0

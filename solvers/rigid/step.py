@@ -25,7 +25,7 @@ of the process.
 import taichi as ti
 
 from .data import ARENA_TYPES, CONST, accumulate, bind, env_loop, env_of, n_batch
-from .actuation import smooth_force, smooth_force_adjoint
+from .actuation import smooth_force, smooth_force_adjoint, tendon_spring, tendon_spring_adjoint
 from .collision.detect import (collide_adjoint_kind, collide_kind, converge_contacts, flag_inexact, geom_poses,
                                geom_poses_adjoint, near_pairs, replay_exact, sort_contacts)
 from .constraint.implicit import solve_adjoint
@@ -107,6 +107,8 @@ def smooth_env(d: ti.template(), s, e):
     position_stages_env(d, s, e)
     for i in range(d.n_dofs):
         smooth_force(d, s, e, i)
+    for t in range(d.n_tendons):
+        tendon_spring(d, s, e, t)
 
 
 @ti.func
@@ -135,6 +137,8 @@ def dynamics_adjoint_env(d: ti.template(), s, e, rows: ti.template()):
     if ti.static(rows):
         if d.n_efc[s, e, 0] > 0:
             solve_adjoint(d, s, e)
+    for t in range(d.n_tendons):
+        tendon_spring_adjoint(d, s, e, t)
     for i in range(d.n_dofs):
         smooth_force_adjoint(d, s, e, i)
     for i in range(d.n_dofs):

@@ -35,7 +35,7 @@ likewise for contact rows, into body_invweight0 among others).
 import taichi as ti
 
 from ..data import BIG, CONST, DYN_WELD, JOINT_ROW_SLOTS, accumulate
-from ..kinematics import dof_count, dof_motion_at, joint_quat, reference
+from ..kinematics import dof_count, dof_motion_at, joint_quat, reference, tendon_length
 from ..model import BALL
 from ..spec import TENDON_JOINTS
 from ..spatial import quat_conj, quat_mul, quat_to_mat, quat_turn, quat_turn_adjoint
@@ -592,21 +592,12 @@ def _ball_limit(d: ti.template(), s, e, i):
 
 
 @ti.func
-def _tendon_length(d: ti.template(), s, e, t):
-    """Tendon t's length L = Σ coef·q at frame s (m or rad)."""
-    length = 0.0
-    for k in range(TENDON_JOINTS * t, TENDON_JOINTS * t + d.ten_nnz[t]):
-        length += d.ten_coef[k] * d.qpos[s, e, d.dof_q[d.ten_dof[k]]]
-    return length
-
-
-@ti.func
 def _tendon_side(d: ti.template(), s, e, t):
     """(sign, distance) of tendon t's violated limit at frame s, its length L = Σ coef·q: (1, L −
     lower) below it, (−1, upper − L) above it, (0, 0) within or with limits off (no row)."""
     sign, dist = 0.0, 0.0
     if d.limits_enabled:
-        length = _tendon_length(d, s, e, t)
+        length = tendon_length(d, s, e, t)
         if length - d.ten_lower[t] < 0.0:
             sign, dist = 1.0, length - d.ten_lower[t]
         elif d.ten_upper[t] - length < 0.0:
@@ -666,7 +657,7 @@ def dof_rows(d: ti.template(), s, e):
             rows += _body_eq_rows(d, s, e, rows, k)
     for t in range(d.n_tendons):
         if d.ten_eq[t]:
-            _tendon_row(d, s, e, rows, t, 1.0, _tendon_length(d, s, e, t) - d.ten_eq_length[t], EQUALITY,
+            _tendon_row(d, s, e, rows, t, 1.0, tendon_length(d, s, e, t) - d.ten_eq_length[t], EQUALITY,
                         d.ten_eq_sol)
             rows += 1
     for i in range(d.n_dofs):
@@ -723,7 +714,7 @@ def _tendon_row_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
     sign, dist = _tendon_side(d, s, e, t)
     solref, solimp = _softness(d.ten_limit_sol, t)
     if d.efc_type[s, e, r] == EQUALITY:
-        sign, dist = 1.0, _tendon_length(d, s, e, t) - d.ten_eq_length[t]
+        sign, dist = 1.0, tendon_length(d, s, e, t) - d.ten_eq_length[t]
         solref, solimp = _softness(d.ten_eq_sol, t)
     g_dist, damping, g_scale = _joint_row_scalars_adjoint(d, dist, d.invweight_ten[e, t], g_aref, g_R, solref, solimp)
     accumulate(d.invweight_ten.grad, ti.Vector([e, t]), g_scale)
