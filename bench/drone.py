@@ -64,8 +64,7 @@ def worker(engine, n_envs, precision, repeats, out):
         return scene, drone
 
     scene, drone = build(False)
-    mass = float(drone.get_mass().reshape(-1)[0]) if hasattr(drone, "get_mass") else 0.027
-    rpm = schedule(n_envs, np.sqrt(mass * G / (4.0 * drone.KF)))
+    rpm = schedule(n_envs, np.sqrt(float(drone.get_mass().reshape(-1)[0]) * G / (4.0 * drone.KF)))
     poses = fly(gs, drone, scene, rpm, n_envs).cpu().numpy()
     times = []
     for _ in range(repeats):

@@ -269,7 +269,8 @@ class Drone(URDF):
     rotors' links (kept from merging); each rotor's thrust acts along its link's z axis at its
     centre of mass, its drag torque about that axis with the sign of propellers_spin (1:
     counter-clockwise, −1: clockwise, seen from above), reversed for model "RACE" (Genesis's
-    models "CF2X", "CF2P", "RACE"). default_base_ang_damping_scale: the free base's rotational
+    models "CF2X", "CF2P", "RACE"). (Genesis turns them by the link's inertial frame: the same
+    for massless rotors, as its drones' and ours, or an inertial frame without rpy.) default_base_ang_damping_scale: the free base's rotational
     dofs get damping (N·m·s/rad) of this times the drone's mass (Genesis's 1e-5; None: none).
     The rest as URDF's."""
     model: str = "CF2X"
@@ -290,7 +291,8 @@ class Drone(URDF):
                                     f"(str), got {names!r}")
         spin = self.propellers_spin
         if not isinstance(spin, (list, tuple, np.ndarray)) or len(spin) != len(names) or \
-                not all(is_int(k) and k in (-1, 1) for k in spin):
+                not all(isinstance(k, (int, float, np.integer, np.floating)) and not isinstance(k, bool) and
+                        k in (-1, 1) for k in spin):
             raise InvalidInputError(f"Drone: argument 'propellers_spin' must hold 1 (counter-clockwise) or -1 "
                                     f"(clockwise) for each of the {len(names)} propellers, got {spin!r}")
         scale = self.default_base_ang_damping_scale
@@ -308,7 +310,7 @@ class Drone(URDF):
 
 def rotor_coefficients(file, who):
     """(kf N/rpm², km N·m/rpm²) of a drone's URDF (a path to a file that exists, or the document
-    itself): its <properties kf km> element's, positive numbers; ``who`` names the entity."""
+    itself): its <properties kf km> element's, numbers ≥ 0; ``who`` names the entity."""
     root = ET.fromstring(file.strip()) if inline_xml(file) else ET.parse(file).getroot()
     properties = root.find("properties")
     attrs = {} if properties is None else properties.attrib
@@ -316,10 +318,10 @@ def rotor_coefficients(file, who):
         kf, km = float(attrs["kf"]), float(attrs["km"])
     except (KeyError, ValueError):
         kf = km = float("nan")
-    if not (np.isfinite(kf) and np.isfinite(km) and kf > 0 and km > 0):
+    if not (np.isfinite(kf) and np.isfinite(km) and kf >= 0 and km >= 0):
         where = "<inline URDF>" if inline_xml(file) else repr(file)
         raise InvalidInputError(f"{who}: argument 'file' of gs.morphs.Drone expected a URDF whose <properties> element "
-                                f"states the rotors' kf and km (positive numbers), got {where} with "
+                                f"states the rotors' kf and km (numbers ≥ 0), got {where} with "
                                 f"<properties {attrs}>")
     return kf, km
 

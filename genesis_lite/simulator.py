@@ -85,6 +85,10 @@ class Simulator:
         self._slot_of = {slot.solver: slot for slot in self.slots}  # (setters and getters look one up)
         self.generation = 0
         self.step_index = 0
+        # each step and full reset clears every env's transient inputs (an external wrench): the
+        # count of those clears tells whether one set before is still pending (a partial reset keeps
+        # the other envs')
+        self.transient_clears = 0
         self.rollout = None
         self.started_from = []  # the solvers' warm starts the last forward_step started from
         self.replay_records = []  # and each solver's replay_record() after it
@@ -188,6 +192,7 @@ class Simulator:
                 slot.initial_state = state.detach().clone()  # the caller's tensor may change later
         self.generation += 1
         self.step_index = 0
+        self.transient_clears += envs is None
         self.clear_flags()
         self.rollout = autograd.Rollout(self, self.options.checkpoint_interval)
         self.warned_graph_cut = self.warned_gradient = False
@@ -240,6 +245,7 @@ class Simulator:
                     slot.inputs = {**slot.inputs, name: slot.solver.default_inputs[name]}
         self._check_finite()
         self.step_index += 1
+        self.transient_clears += 1
 
     def _warn_graph_cut(self, tensors):
         """A step under torch.no_grad() is not recorded, as any torch op there: what required grad

@@ -179,6 +179,42 @@ def test_gradients_through_rotor_speeds_match_finite_differences(f64, n_envs):
     assert grad.abs().max() > 0.0 and grad[0].abs().max() > 0.0  # (the first step's speeds matter)
 
 
+def test_gradients_through_the_start_pose_the_rotors_turn_with(f64):
+    """The rotors' wrench is turned into world axes by the rotor links' poses: the gradient of the
+    final pose and turn rate w.r.t. the base's start quaternion (set_quat) flows through them as
+    through the dynamics; central differences, 20 steps of uneven speeds."""
+    scene, drone = _scene(requires_grad=True, euler=(0.0, 0.0, 0.0))
+    hover = _hover(drone)
+    rpm = torch.tensor(hover * (1.0 + 0.1 * np.random.default_rng(9).uniform(-1, 1, size=(20, 4))))
+    quat0 = torch.tensor([0.95, 0.2, -0.15, 0.1], dtype=torch.float64)
+    quat0 = quat0 / quat0.norm()
+
+    def loss(quat):
+        scene.reset()
+        drone.set_quat(quat)
+        for t in range(rpm.shape[0]):
+            drone.set_propellers_rpm(rpm[t])
+            scene.step()
+        return (drone.get_pos() ** 2).sum() + (drone.get_ang() ** 2).sum() + (drone.get_quat() * quat0).sum()
+
+    checked_gradient(loss, quat0, "drone start quaternion")
+
+
+def test_a_partial_reset_keeps_the_others_rotor_speeds_pending(f64):
+    """Speeds set, then some envs reset: the others' wrench is still pending, so a second call before
+    the step is refused (it would double their thrust); after the step one call is allowed."""
+    scene, drone = _scene(n_envs=2, euler=(0.0, 0.0, 0.0))
+    hover = _hover(drone)
+    drone.set_propellers_rpm([hover] * 4)
+    scene.reset(envs_idx=[0])
+    with pytest.raises(gs.SceneStateError, match="once per step .*a reset of some envs keeps the others'"):
+        drone.set_propellers_rpm([hover] * 4)
+    scene.step()
+    vz = drone.get_vel()[:, 2]
+    assert float(vz[0]) == pytest.approx(-G * DT, rel=1e-12) and abs(float(vz[1])) < 1e-12  # (env 0's cleared)
+    drone.set_propellers_rpm([hover] * 4)
+
+
 def test_batched_drones_fly_as_single_ones(f64):
     """Env e of a batch of 3 gives the bits of a single-env scene with env e's speeds."""
     scene, drone = _scene(n_envs=3)
@@ -218,6 +254,7 @@ def test_bad_drone_input_raises(f64, tmp_path):
         gs.morphs.Drone(file=CF2X, propellers_spin=(1, -1, 1))
     with pytest.raises(gs.InvalidInputError, match="argument 'propellers_spin' must hold 1"):
         gs.morphs.Drone(file=CF2X, propellers_spin=(1, -1, 1, 0.5))
+    assert gs.morphs.Drone(file=CF2X, propellers_spin=(1.0, -1.0, 1, -1)).propellers_spin == (1, -1, 1, -1)
     with pytest.raises(gs.InvalidInputError, match="argument 'propellers_link_name' must be a sequence of distinct"):
         gs.morphs.Drone(file=CF2X, propellers_link_name="prop0_link")
     with pytest.raises(gs.InvalidInputError, match="'default_base_ang_damping_scale' must be a finite number ≥ 0"):
@@ -231,10 +268,10 @@ def test_bad_drone_input_raises(f64, tmp_path):
     plain = tmp_path / "plain.urdf"
     plain.write_text(open(gs.morphs.Drone(file=CF2X).file).read().replace('kf="3.16e-10" ', ""))
     with pytest.raises(gs.InvalidInputError, match="expected a URDF whose <properties> element states the rotors' kf "
-                                                   "and km"):
+                                                   r"and km \(numbers ≥ 0\)"):
         gs.Scene().add_entity(gs.morphs.Drone(file=str(plain)))
     scene, drone = _scene()
-    with pytest.raises(gs.InvalidInputError, match="set_propellers_rpm argument 'propellers_rpm' must be ≥ 0"):
+    with pytest.raises(gs.InvalidInputError, match="entity 'drone_0': argument 'propellers_rpm' must be ≥ 0"):
         drone.set_propellers_rpm([1.0, -1.0, 1.0, 1.0])
     with pytest.raises(gs.InvalidInputError, match="argument 'propellers_rpm' must be finite"):
         drone.set_propellers_rpm([1.0, np.nan, 1.0, 1.0])

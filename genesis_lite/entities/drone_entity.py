@@ -26,8 +26,9 @@ class DroneEntity(RigidEntity):
         names = [link.name for link in self.links]  # (the rotors' among them: scene._check_rotors)
         self._propellers_local = np.array([names.index(n) for n in morph.propellers_link_name], dtype=np.int64)
         # the drag torque's sign per rotor (Genesis's model "RACE" turns the other way)
-        self._spin = torch.tensor(morph.propellers_spin, dtype=torch.float64) * (-1.0 if morph.model == "RACE" else 1.0)
-        self._rpm_step = None  # (rollout, step) of the last set_propellers_rpm: once a step
+        sign = -1.0 if morph.model == "RACE" else 1.0
+        self._torque_sign = sign * torch.tensor(morph.propellers_spin, dtype=runtime.tc_float, device=runtime.device)
+        self._rpm_set_at = None  # the simulator's transient_clears at the last set_propellers_rpm: once a step
 
     @property
     def KF(self):
@@ -46,6 +47,7 @@ class DroneEntity(RigidEntity):
 
     @property
     def n_propellers(self):
+        """The number of rotors."""
         return len(self._propellers_local)
 
     @property
@@ -64,40 +66,17 @@ class DroneEntity(RigidEntity):
         would add its wrench to the first's). Differentiable."""
         sim = self._sim()
         who = f"entity '{self.name}': set_propellers_rpm"
-        step = (sim.generation, sim.step_index)
-        if self._rpm_step == step:
+        if self._rpm_set_at == sim.transient_clears:
             raise SceneStateError(f"{who} can only be called once per step (Genesis's rule), got a second call before "
-                                  f"scene.step()")
+                                  f"scene.step() (a reset of some envs keeps the others' rotor speeds)")
         envs = self._envs(None)
         rpm = self._values(propellers_rpm, self.n_propellers, envs, "propellers_rpm")  # (B, n) finite
         if bool((rpm.detach() < 0).any()):
-            raise InvalidInputError(f"{who} argument 'propellers_rpm' must be ≥ 0 (rpm), got "
+            raise InvalidInputError(f"entity '{self.name}': argument 'propellers_rpm' must be ≥ 0 (rpm), got "
                                     f"{rpm.detach().cpu().numpy()}")
-        squared = (rpm * rpm)[..., None]
-        rotors = sim.derived(self._solver)[:, self._rotor_links]  # (B, n, 13): pos, quat, …
-        com = sim.inputs(self._solver)["com"][:, self._com_columns].reshape(-1, self.n_propellers, 1, 3)
-        # each rotor's axis (its link's z) and centre of mass (from the link origin) in world axes
-        axis, offset = _rotated(rotors[..., 3:7], torch.cat([self._z.expand_as(com), com], dim=-2)).unbind(-2)
-        force = self._KF * squared * axis
-        moment = self._KM * self._spin.to(squared)[:, None] * squared * axis + torch.linalg.cross(offset, force)
-        wrench = torch.cat([force, moment], dim=-1).reshape(len(envs), -1)  # (B, 6 n): the input xfrc's layout
-        current = sim.inputs(self._solver)["xfrc"]
-        self._write_input("xfrc", self._xfrc_columns, envs, current[:, self._xfrc_columns_t] + wrench)
-        self._rpm_step = step
-
-    def _on_build(self):
-        super()._on_build()
-        links = self.link_start + self._propellers_local
-        self._rotor_links = torch.as_tensor(links, device=runtime.device)
-        self._com_columns = torch.as_tensor(self._link_columns(self._propellers_local, 3), device=runtime.device)
-        self._xfrc_columns = (6 * links[:, None] + np.arange(6)).reshape(-1)
-        self._xfrc_columns_t = torch.as_tensor(self._xfrc_columns, device=runtime.device)
-        self._z = torch.tensor([0.0, 0.0, 1.0], dtype=runtime.tc_float, device=runtime.device)
-
-
-def _rotated(quat, vectors):
-    """(B, n, k, 3) ``vectors`` turned by the (B, n, 4) unit quaternions (w, x, y, z):
-    v + 2w (u × v) + 2 u × (u × v), u = (x, y, z)."""
-    w, u = quat[..., None, :1], quat[..., None, 1:].expand_as(vectors)
-    turn = 2.0 * torch.linalg.cross(u, vectors)
-    return vectors + w * turn + torch.linalg.cross(u, turn)
+        squared = (rpm * rpm)[..., None]  # (B, n, 1)
+        along_z = torch.tensor([0.0, 0.0, 1.0], dtype=squared.dtype, device=squared.device)
+        force = self._KF * squared * along_z  # (B, n, 3) in each rotor's axes
+        torque = self._KM * self._torque_sign[:, None] * squared * along_z
+        self._apply_wrench(self._propellers_local, None, force, torque, None, "link_com", True)
+        self._rpm_set_at = sim.transient_clears

@@ -18,7 +18,7 @@ from . import energy, kinematics
 from .bounds import shapes_aabb
 from ..tensor import wrap
 from .common import EntityIndexing, broadcast, named_argument_errors, replace_columns as _replace
-from ..utils.rotations import euler_xyz_to_quat, quat_to_euler_xyz, quat_to_mat
+from ..utils.rotations import euler_xyz_to_quat, quat_to_euler_xyz, quat_to_mat, rotate
 
 _MODES = {"force": 0, "position": 1, "velocity": 2}  # ctrl_mode codes (solvers/rigid/actuation.py)
 _NDOFS = {"fixed": 0, "revolute": 1, "prismatic": 1, "free": 6, "ball": 3}
@@ -766,22 +766,31 @@ class RigidEntity(EntityIndexing):
             raise InvalidInputError(f"{who} argument 'local' must be a bool, got {local!r}")
         links = self._local(links_idx_local, self.n_links, "links_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
-        origin = self._links(links, envs_idx, slice(0, 3))  # (len(envs), n, 3)
-        rot = quat_to_mat(self._links(links, envs_idx, slice(3, 7)))
-        com = self._links_com(links, envs_idx)
-        zeros = torch.zeros_like(origin)
-        f = zeros if force is None else self._link_vectors(force, len(links), envs, "force")
-        t = zeros if torque is None else self._link_vectors(torque, len(links), envs, "torque")
+        vectors = [None if value is None else self._link_vectors(value, len(links), envs, name)
+                   for value, name in ((force, "force"), (torque, "torque"), (pos, "pos"))]
+        self._apply_wrench(links, envs_idx, *vectors, ref, local)
+
+    def _apply_wrench(self, links, envs_idx, f, t, point, ref, local):
+        """apply_links_external_wrench of checked arguments: local link indices ``links`` (n,), f, t
+        and point (len(envs), n, 3) or None (force, torque, pos; not both f and t None)."""
+        envs = self._envs(envs_idx)
+        pose = self._links(links, envs_idx, slice(0, 7))  # (len(envs), n, 7): origin, quaternion
+        origin = pose[..., :3]
+        f = torch.zeros_like(origin) if f is None else f
+        t = torch.zeros_like(origin) if t is None else t
+        # what is given in the link's axes, turned into the world's in one rotation: the force and
+        # torque (local), the centre of mass (ref "link_com"), the point's offset (pos, local)
+        given = ([f, t] if local else []) + ([self._links_com(links, envs_idx)] if ref == "link_com" else []) \
+            + ([point] if point is not None and local else [])
+        turned = list(rotate(pose[..., None, 3:], torch.stack(given, dim=-2)).unbind(-2)) if given else []
+        if local:
+            f, t = turned.pop(0), turned.pop(0)
         # the force's point as an offset from the link origin (world axes), none at the origin
         # itself: taken as point − origin there, a diverged env's inf − inf made it NaN, and
         # through the cross product the gradient of every input these envs share
-        offset = None if ref == "link_origin" else (rot @ com[..., None])[..., 0]
-        if pos is not None:
-            point = self._link_vectors(pos, len(links), envs, "pos")
-            offset = point - origin if not local else (rot @ point[..., None])[..., 0] + (
-                0.0 if offset is None else offset)
-        if local:
-            f, t = (rot @ f[..., None])[..., 0], (rot @ t[..., None])[..., 0]
+        offset = turned.pop(0) if ref == "link_com" else None
+        if point is not None:
+            offset = point - origin if not local else turned.pop(0) + (0.0 if offset is None else offset)
         moment = t if offset is None else t + torch.linalg.cross(offset, f)
         wrench = torch.cat([f, moment], dim=-1).reshape(len(envs), -1)
         columns = (6 * (self.link_start + links)[:, None] + np.arange(6)).ravel()

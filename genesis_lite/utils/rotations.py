@@ -58,6 +58,15 @@ def quat_to_mat(quat):
     return torch.stack(rows, -1).reshape(*quat.shape[:-1], 3, 3)
 
 
+def rotate(quat, vectors):
+    """(..., 3) ``vectors`` turned by (..., 4) unit quaternions (w, x, y, z), broadcast together:
+    v + 2w (u × v) + u × (2 u × v), u = (x, y, z): fewer operations than through quat_to_mat."""
+    w, u = quat[..., :1], quat[..., 1:]
+    u = u.expand(*torch.broadcast_shapes(u.shape, vectors.shape))
+    turn = 2.0 * torch.linalg.cross(u, vectors.expand_as(u))
+    return vectors + w * turn + torch.linalg.cross(u, turn)
+
+
 def quat_mul(a, b):
     """Hamilton product of (..., 4) quaternions (w, x, y, z)."""
     aw, ax, ay, az = a.unbind(-1)
