@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .options import check_bool, is_int, named_keywords
-from .solvers.core import InvalidInputError, refuse_grad
+from .solvers.core import InvalidInputError, refuse_grad, warn_user
 from .utils import geom
 
 # Genesis 1.4.5's morph options that genesis_lite does not have (a named error says so, where
@@ -256,7 +256,7 @@ class URDF(Morph):
         self.merge_fixed_links, self.links_to_keep = bool(self.merge_fixed_links), tuple(keep)
 
 
-@named_keywords(*_FILE, "prioritize_urdf_material", "propellers_link_names", deprecated=_DEPRECATED + ("COM_link_name",))
+@named_keywords(*_FILE, "prioritize_urdf_material", deprecated=_DEPRECATED + ("COM_link_name",))
 @dataclass
 class Drone(URDF):
     """A multirotor from a URDF whose ``<properties>`` element states its rotors' coefficients kf
@@ -270,15 +270,23 @@ class Drone(URDF):
     centre of mass, its drag torque about that axis with the sign of propellers_spin (1:
     counter-clockwise, −1: clockwise, seen from above), reversed for model "RACE" (Genesis's
     models "CF2X", "CF2P", "RACE"). (Genesis turns them by the link's inertial frame: the same
-    for massless rotors, as its drones' and ours, or an inertial frame without rpy.) default_base_ang_damping_scale: the free base's rotational
+    for massless rotors, as its drones' and ours, or an inertial frame without rpy.)
+    propellers_link_names: Genesis's deprecated name of propellers_link_name (a warning). default_base_ang_damping_scale: the free base's rotational
     dofs get damping (N·m·s/rad) of this times the drone's mass (Genesis's 1e-5; None: none).
     The rest as URDF's."""
     model: str = "CF2X"
     propellers_link_name: tuple = ("prop0_link", "prop1_link", "prop2_link", "prop3_link")
     propellers_spin: tuple = (-1, 1, -1, 1)
     default_base_ang_damping_scale: float = 1e-5
+    propellers_link_names: tuple = None
 
     def _check(self):
+        if self.propellers_link_names is not None:  # (Genesis's deprecated alias)
+            warn_user("Drone: 'propellers_link_names' is deprecated (as in Genesis); use 'propellers_link_name'")
+            if tuple(self.propellers_link_name) != Drone.propellers_link_name:
+                raise InvalidInputError("Drone: arguments 'propellers_link_names' and 'propellers_link_name' cannot both "
+                                        f"be given, got {self.propellers_link_names!r} and {self.propellers_link_name!r}")
+            self.propellers_link_name, self.propellers_link_names = self.propellers_link_names, None
         if self.fixed:
             raise InvalidInputError("Drone: argument 'fixed' must be False (a drone's base is free, as Genesis's), "
                                     "got True")

@@ -11,6 +11,7 @@ import pytest
 import torch
 
 import genesis_lite as gs
+from tests.conftest import warns
 from tests.fd_scan import checked_gradient
 
 DT, G = 0.01, 9.81
@@ -232,6 +233,14 @@ def test_batched_drones_fly_as_single_ones(f64):
         assert torch.equal(torch.cat([drone.get_pos(), drone.get_quat()]), batched[e])
 
 
+def test_deprecated_morph_arguments_warn_as_genesis(f64, caplog):
+    with warns(caplog, "'propellers_link_names' is deprecated"):
+        morph = gs.morphs.Drone(file=CF2X, propellers_link_names=("prop1_link", "prop0_link"), propellers_spin=(1, -1))
+    assert morph.propellers_link_name == ("prop1_link", "prop0_link") and morph.propellers_link_names is None
+    with warns(caplog, "'COM_link_name' is deprecated"):
+        gs.morphs.Drone(file=CF2X, COM_link_name="center_of_mass_link")
+
+
 def test_drone_properties_as_genesis(f64):
     scene, drone = _scene()
     assert isinstance(drone, gs.entities.DroneEntity) and isinstance(drone, gs.entities.RigidEntity)
@@ -259,8 +268,8 @@ def test_bad_drone_input_raises(f64, tmp_path):
         gs.morphs.Drone(file=CF2X, propellers_link_name="prop0_link")
     with pytest.raises(gs.InvalidInputError, match="'default_base_ang_damping_scale' must be a finite number ≥ 0"):
         gs.morphs.Drone(file=CF2X, default_base_ang_damping_scale=-1.0)
-    with pytest.raises(gs.InvalidInputError, match="'propellers_link_names' is a Genesis option that genesis_lite"):
-        gs.morphs.Drone(file=CF2X, propellers_link_names=("a",))
+    with pytest.raises(gs.InvalidInputError, match="'propellers_link_names' and 'propellers_link_name' cannot both"):
+        gs.morphs.Drone(file=CF2X, propellers_link_names=("a",), propellers_link_name=("b",), propellers_spin=(1,))
     with pytest.raises(gs.InvalidInputError, match=r"entity 'drone_0': argument 'propellers_link_name' of "
                                                    r"gs.morphs.Drone expected links of the file, got \['rotor'\]"):
         gs.Scene().add_entity(gs.morphs.Drone(file=CF2X, propellers_link_name=("prop0_link", "rotor"),

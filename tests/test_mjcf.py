@@ -20,7 +20,7 @@ import torch
 import genesis_lite as gs
 from genesis_lite.solvers.core import AssetError, InvalidInputError
 from genesis_lite.solvers.rigid import contact, mjcf
-from tests.conftest import asset
+from tests.conftest import asset, warns
 from tests.fd_scan import assert_converged, checked_gradient, directional_errors, pose_loss
 
 ARM, CRAWLER, TREES = asset("mjcf", "arm.xml"), asset("mjcf", "crawler.xml"), asset("mjcf", "trees.xml")
@@ -349,11 +349,11 @@ def test_tendon_equalities_hold_as_mujocos(f64, tmp_path):
 
 # A hip-knee chain with a slide at its end and a pendulum beside it, and fixed tendons with
 # MuJoCo's passive springs and dampers: one resting where the joints' springrefs put it (the
-# default springlength), one with a dead band (two springlengths), one damper alone (one
-# springlength), one limited and sprung, and one with an unlimited range and frictionloss 0
+# default springlength; the knee's ref, its initial angle, elsewhere), one with a dead band (two
+# springlengths), one damper alone (one springlength), one limited and sprung
 SPRUNG_TENDONS = ('<body name="thigh" pos="0 0 1"><joint name="hip" axis="0 1 0" springref="0.3"/>'
                   '<geom type="capsule" fromto="0 0 0 0 0 -0.3" size="0.04"/>'
-                  '<body name="shin" pos="0 0 -0.3"><joint name="knee" axis="0 1 0" springref="-0.2"/>'
+                  '<body name="shin" pos="0 0 -0.3"><joint name="knee" axis="0 1 0" ref="10" springref="-0.2"/>'
                   '<geom type="capsule" fromto="0 0 0 0 0 -0.3" size="0.035"/>'
                   '<body name="foot" pos="0 0 -0.3"><joint name="toe" type="slide" axis="1 0 0"/>'
                   '<geom type="box" size="0.08 0.03 0.02" pos="0.04 0 0"/></body></body></body>'
@@ -385,7 +385,7 @@ def test_fixed_tendon_springs_and_dampers_act_as_mujocos(f64, tmp_path):
     d.qvel[:] = velocity = np.random.default_rng(2).normal(0.0, 3.0, m.nv)
     robot.set_dofs_velocity(torch.tensor(velocity))
     band = []
-    assert _lockstep(m, d, scene, robot, 500, lambda: band.append(d.ten_length[1])) < 1e-10
+    assert _lockstep(m, d, scene, robot, 500, lambda: band.append(d.ten_length[1])) < 1e-12
     assert min(band) < -0.1 and max(band) > 0.05  # (the dead band's both ends were passed)
     m.opt.enableflags |= mujoco.mjtEnableBit.mjENBL_ENERGY
     mujoco.mj_forward(m, d)
@@ -404,11 +404,31 @@ def test_gradients_through_tendon_springs_match_finite_differences(f64, tmp_path
                                     "tendon springs")
 
 
-def test_a_springlength_above_its_upper_end_is_refused_as_mujoco(f64, tmp_path):
-    extra = SPRUNG_TENDONS_EXTRA.replace('springlength="-0.1 0.05"', 'springlength="0.05 -0.1"')
-    with pytest.raises(AssetError, match=r"<tendon><fixed name='band'>: springlength expected lower ≤ upper, got "
-                                         r"'0.05 -0.1'"):
-        mjcf.load_mjcf(_write(tmp_path, SPRUNG_TENDONS, extra))
+@pytest.mark.parametrize("change, said", [
+    (('springlength="-0.1 0.05"', 'springlength="0.05 -0.1"'),
+     r"<tendon><fixed name='band'>: springlength expected lower ≤ upper, got '0.05 -0.1'"),
+    (('stiffness="20"', 'stiffness="20" springyield="1"'),
+     r"<tendon><fixed name='band'>: a yielding spring is not supported \(attribute 'springyield' = '1'\)"),
+    (('stiffness="20"', 'stiffness="20 3"'), r"<tendon><fixed name='band'>: a polynomial stiffness is not supported"),
+    (('damping="0.3"', 'damping="0.3 1"'), r"<tendon><fixed name='damper'>: a polynomial damping is not supported"),
+])
+def test_tendon_springs_refuse_what_is_not_modelled(f64, tmp_path, change, said):
+    """As MuJoCo's compiler, a springlength above its upper end; not modelled yet, MuJoCo 4's
+    yielding (plastic) tendon spring and polynomial stiffness and damping (dropped, they would move
+    the tendon otherwise)."""
+    with pytest.raises(AssetError, match=said):
+        mjcf.load_mjcf(_write(tmp_path, SPRUNG_TENDONS, SPRUNG_TENDONS_EXTRA.replace(*change)))
+
+
+def test_an_actuators_damping_and_armature_are_named_where_ignored(f64, tmp_path, caplog):
+    """MuJoCo 4 adds an actuator's damping and armature to the joint (or tendon) it drives; not read
+    here, they are named in the load's warning rather than dropped without a word."""
+    body = f'<body name="b"><joint name="j" axis="0 1 0"/>{LINK}</body>'
+    with warns(caplog, r"<actuator (armature|damping)> \(MuJoCo adds it") as said:
+        mjcf.load_mjcf(_write(tmp_path, body, '<actuator><motor joint="j" damping="2" armature="0.1"/></actuator>'))
+    assert "<actuator armature> (MuJoCo" in said[0] and "<actuator damping> (MuJoCo" in said[0]
+    with warns(caplog, None):
+        mjcf.load_mjcf(_write(tmp_path, body, '<actuator><motor joint="j" damping="0"/></actuator>'))
 
 
 def test_the_most_joint_rows_a_step_can_form_fit_their_slots(f64, tmp_path):
@@ -659,7 +679,7 @@ LINK = '<geom type="sphere" size="0.1"/>'
     (f'<body name="b"><joint name="j"/>{LINK}<body name="c"><joint name="k"/>{LINK}<body name="e"><joint name="l"/>'
      f'{LINK}<body name="f"><joint name="n"/>{LINK}</body></body></body></body>',
      '<tendon><fixed range="0 1">' + "".join(f'<joint joint="{j}" coef="1"/>' for j in "jkln") + '</fixed></tendon>',
-     "a limited or held fixed tendon expected 1 to 3 joints (more are not supported yet), got 4"),
+     "a limited, held or sprung fixed tendon expected 1 to 3 joints (more are not supported yet), got 4"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<tendon><fixed range="0 1"><joint joint="x"/></fixed></tendon>',
      "expected <joint joint coef> children naming hinge or slide joints of the file, got <joint joint='x'>"),
     (f'<replicate count="2.5"><body name="b">{LINK}</body></replicate>', "",

@@ -1418,7 +1418,8 @@ class RigidEntity(EntityIndexing):
     def get_dofs_force(self, dofs_idx_local=None, envs_idx=None):
         """Generalised force on the dofs in the last step's last substep, N·m or N: (n,) or
         (n_envs, n), as Genesis 1.4.5's: clipped actuator force − damping·q̇ − the joint springs'
-        stiffness·(q − springref) (a ball joint's stiffness·r) − bias (gravity less its compensation,
+        stiffness·(q − springref) (a ball joint's stiffness·r) + the fixed tendons' springs and
+        dampers (MJCF) − bias (gravity less its compensation,
         Coriolis, centrifugal) at that substep's start, plus the constraint forces (joint limits, friction loss, contacts) of its solve (MuJoCo's
         qfrc_smooth + qfrc_constraint): a body resting on the ground feels none. Zeros in an env
         before its first step and after a reset or setter replaced its state. Not differentiable."""

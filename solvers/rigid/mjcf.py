@@ -74,14 +74,16 @@ friction loss, a spring (stiffness) and MuJoCo's cone limit (range (0, θ): θ t
 the turn; limited by autolimits only where range[0] < range[1], as MuJoCo's compiler).
 Refused (AssetError naming the element): a ball joint's force range, a limited ball joint's range
 not starting at 0, a ball joint followed by a hinge or ball in one body (as MuJoCo refuses them),
-a free joint below a root body, a joint's
-``springyield``, a polynomial stiffness, a free joint's stiffness or springdamper, hfield /
+a free joint below a root body, a
+``springyield`` (a joint's or a sprung tendon's), a polynomial stiffness (a joint's or a
+tendon's; a tendon's damping too), a free joint's stiffness or springdamper, hfield /
 sdf geoms, equalities other than joints', connects, welds and tendons', elements that would add or
 move bodies and geoms unread (``<composite>``, ``<flexcomp>``…; ``<frame>`` is read: it places its
 bodies and geoms, and its childclass is theirs; so is ``<replicate>``, as copies in frames:
 MJCFDocument), a solref of mixed form (one number > 0, the other not: MuJoCo warns and takes its
 default), a plane on a moving body (as MuJoCo's compiler). Ignored with one warning
-naming them: spatial tendons, a fixed tendon's friction loss and armature, an actuator on
+naming them: spatial tendons, a fixed tendon's friction loss and armature, an actuator's damping
+and armature (MuJoCo 4 adds them to the joint or tendon it drives), an actuator on
 another tendon, ``<contact><pair>``, ``<keyframe>``, ``<option>`` (the scene's
 options rule), and attributes that tune MuJoCo's solver, actuator dynamics or the compiler's mass
 bounds (a geom's margin and gap, dampratio, timeconst, boundmass…) unless they hold MuJoCo's
@@ -392,8 +394,8 @@ class _Reader(MJCFDocument):
         return spec
 
     def _refuse_unmodelled(self, attrs: dict, what: str):
-        """Refuse what would move the joint otherwise if it were dropped: a spring that yields
-        (``springyield``)."""
+        """Refuse what would move the joint or tendon otherwise if it were dropped: a spring that
+        yields (``springyield``)."""
         if np.any(self.numbers(attrs, "springyield", 1, what, default=np.zeros(1)) != 0.0):
             raise self.error(f"{what}: a yielding spring is not supported (attribute 'springyield' = "
                              f"{attrs['springyield']!r})")
@@ -752,7 +754,7 @@ class _Reader(MJCFDocument):
     def _tendons(self, links: list[LinkSpec]):
         """<tendon><fixed>: a limited one (its length Σ coef·q of hinge and slide joints, range,
         solreflimit, solimplimit), one a tendon equality holds (self.tendon_equalities) or one with
-        a spring or damper (stiffness, damping, springlength: _tendon_spring) on the link of its
+        a spring or damper (stiffness, damping, springlength: _spring_length) on the link of its
         first joint (LinkSpec.tendons); its other attributes (frictionloss, armature…) and spatial
         tendons are named in the warning of what is ignored (a fixed tendon without any of them
         does nothing, as in MuJoCo)."""
@@ -778,8 +780,9 @@ class _Reader(MJCFDocument):
                 limited = attrs.get("limited", "auto")
                 limited = limited == "true" or (limited == "auto" and self.autolimits and "range" in attrs)
                 equality = held.pop(attrs.get("name"), None)
-                stiffness, damping = (float(self.numbers(attrs, key, 1, what, default=[0.0])[0])
-                                      for key in ("stiffness", "damping"))
+                stiffness, damping = (self._tendon_coefficient(attrs, key, what) for key in ("stiffness", "damping"))
+                if stiffness:
+                    self._refuse_unmodelled(attrs, what)
                 if not (limited or equality or stiffness or damping):
                     continue
                 lower, upper = (self.numbers(attrs, "range", 2, what, default=[0.0, 0.0]) if limited
@@ -798,6 +801,14 @@ class _Reader(MJCFDocument):
                                                  equality, spring),)
         if held:
             raise self.error(f"<equality><tendon>: tendon1 expected a fixed tendon of the file, got {sorted(held)}")
+
+    def _tendon_coefficient(self, attrs: dict, key: str, what: str):
+        """A fixed tendon's stiffness or damping (N/m or N·m/rad, per unit of its length); MuJoCo's
+        polynomial form (several numbers) is refused."""
+        values = self.numbers(attrs, key, tuple(range(1, 5)), what, default=[0.0])
+        if len(values) > 1:
+            raise self.error(f"{what}: a polynomial {key} is not supported yet, got {attrs[key]!r}")
+        return float(values[0])
 
     def _spring_length(self, attrs: dict, joints, coefs, by_joint: dict, what: str):
         """(lower, upper) m or rad: where a fixed tendon's spring rests (MuJoCo's springlength: one
@@ -826,8 +837,8 @@ class _Reader(MJCFDocument):
         if repeated:  # (MuJoCo refuses them too)
             raise self.error(f"{what}: joints expected once each, got {repeated} repeated")
         if not 0 < len(joints) <= TENDON_JOINTS:
-            raise self.error(f"{what}: a limited or held fixed tendon expected 1 to {TENDON_JOINTS} joints (more are "
-                             f"not supported yet), got {len(joints)}")
+            raise self.error(f"{what}: a limited, held or sprung fixed tendon expected 1 to {TENDON_JOINTS} joints "
+                             f"(more are not supported yet), got {len(joints)}")
         return joints, coefs
 
     def _actuators(self, links: list[LinkSpec]):
@@ -902,6 +913,9 @@ class _Reader(MJCFDocument):
         for key in ("ctrlrange", "ctrllimited"):
             if key in attrs:
                 self.ignored.add(f"<actuator {key}>")
+        for key in ("damping", "armature"):  # (MuJoCo 4 adds them to what the actuator drives)
+            if np.any(self.numbers(attrs, key, (1, 2, 3), what, default=[0.0]) != 0.0):
+                self.ignored.add(f"<actuator {key}> (MuJoCo adds it to the driven joint's or tendon's)")
 
 
 def place_world(links: list[LinkSpec], pos, quat) -> None:

@@ -567,8 +567,9 @@ def read_mass_matrix(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3
 @ti.kernel
 def read_dofs_dynamics(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
     """dst (B, 2, D) ← the last step's last substep's generalised force (row 0: its smooth force,
-    clipped actuator force − damping·q̇ − joint springs − bias at that substep's start, plus its
-    constraint force: joint limits, friction loss, contacts, none where the substep had no rows,
+    clipped actuator force − damping·q̇ − joint springs + tendon springs and dampers − bias at that
+    substep's start, plus its constraint force: joint limits, friction loss, contacts, none where
+    the substep had no rows,
     as the one-launch step leaves qfrc_constraint as it was; Genesis's dofs force) and the
     acceleration it integrated (row 1: q̇' = q̇ + h·q̈, implicit damping included)."""
     ti.loop_config(serialize=schedule[1])
