@@ -404,6 +404,37 @@ def test_gradients_through_tendon_springs_match_finite_differences(f64, tmp_path
                                     "tendon springs")
 
 
+# The sprung tendons and two that rub: one with its own solreffriction and solimpfriction, one of
+# the scene's softness, across a hinge and the slide
+RUBBING_TENDONS_EXTRA = SPRUNG_TENDONS_EXTRA.replace('</tendon>', (
+    '<fixed name="rub" frictionloss="0.4" solreffriction="0.01 0.7" solimpfriction="0.8 0.95 0.002">'
+    '<joint joint="hip" coef="1"/><joint joint="swing" coef="0.5"/></fixed>'
+    '<fixed name="drag" frictionloss="0.2"><joint joint="knee" coef="-0.7"/><joint joint="toe" coef="3"/></fixed>'
+    '</tendon>'))
+
+
+def test_fixed_tendon_friction_loss_acts_as_mujocos(f64, tmp_path):
+    """MuJoCo's tendon friction loss: a friction row on the tendon's rate (J = its coefficients,
+    bound frictionloss, its solreffriction and solimpfriction or the scene's, scaled by
+    tendon_invweight0), after the dofs' friction rows; 1 s from random velocities beside MuJoCo 4,
+    both tendons' rows present."""
+    m, d, scene, robot = _pair(_write(tmp_path, SPRUNG_TENDONS, RUBBING_TENDONS_EXTRA), integrator="euler")
+    d.qvel[:] = velocity = np.random.default_rng(4).normal(0.0, 3.0, m.nv)
+    robot.set_dofs_velocity(torch.tensor(velocity))
+    rubbed = set()
+    friction = mujoco.mjtConstraint.mjCNSTR_FRICTION_TENDON
+    assert _lockstep(m, d, scene, robot, 500, lambda: rubbed.update(d.efc_id[:d.nefc][d.efc_type[:d.nefc] == friction])) \
+        < 1e-12
+    assert rubbed == {4, 5}  # (MuJoCo's tendon ids: the file's order)
+
+
+def test_gradients_through_tendon_friction_loss_match_finite_differences(f64, tmp_path):
+    """The rubbing tendons' chain for 0.3 s: the gradient of every link's pose w.r.t. the initial
+    velocities against central differences."""
+    _assert_pose_gradients_converge(_write(tmp_path, SPRUNG_TENDONS, RUBBING_TENDONS_EXTRA), "velocity", 3.0, 3,
+                                    "tendon friction loss")
+
+
 @pytest.mark.parametrize("change, said", [
     (('springlength="-0.1 0.05"', 'springlength="0.05 -0.1"'),
      r"<tendon><fixed name='band'>: springlength expected lower ≤ upper, got '0.05 -0.1'"),
@@ -679,7 +710,7 @@ LINK = '<geom type="sphere" size="0.1"/>'
     (f'<body name="b"><joint name="j"/>{LINK}<body name="c"><joint name="k"/>{LINK}<body name="e"><joint name="l"/>'
      f'{LINK}<body name="f"><joint name="n"/>{LINK}</body></body></body></body>',
      '<tendon><fixed range="0 1">' + "".join(f'<joint joint="{j}" coef="1"/>' for j in "jkln") + '</fixed></tendon>',
-     "a limited, held or sprung fixed tendon expected 1 to 3 joints (more are not supported yet), got 4"),
+     "a limited, held, sprung or rubbing fixed tendon expected 1 to 3 joints (more are not supported yet), got 4"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<tendon><fixed range="0 1"><joint joint="x"/></fixed></tendon>',
      "expected <joint joint coef> children naming hinge or slide joints of the file, got <joint joint='x'>"),
     (f'<replicate count="2.5"><body name="b">{LINK}</body></replicate>', "",
@@ -701,15 +732,15 @@ def _escaped(text):
 
 
 def test_what_is_ignored_is_said_once(f64, tmp_path, caplog):
-    extra = ('<option timestep="0.01"/><tendon><fixed name="t" stiffness="0" frictionloss="0.5"><joint joint="j" coef="1"/></fixed></tendon>'
-             '<actuator><motor tendon="t"/></actuator>')
+    extra = ('<option timestep="0.01"/><tendon><fixed name="t" stiffness="0" armature="0.5"><joint joint="j" coef="1"/>'
+             '</fixed></tendon><actuator><motor tendon="t"/></actuator>')
     path = _write(tmp_path, f'<geom type="plane" size="1 1 1"/><body name="b"><joint name="j" margin="0.1"/>{LINK}'
                             f'<geom type="box" size="0.1 0.1 0.1" condim="3" solref="0.02 1"/></body>', extra)
     with caplog.at_level(logging.WARNING, logger="genesis_lite"):
         gs.Scene().add_entity(gs.morphs.MJCF(file=path))
     said = [r.getMessage() for r in caplog.records if "ignored" in r.getMessage()]
     assert len(said) == 1
-    for part in ("<option>", "<joint margin>", "<actuator><motor", "<tendon><fixed frictionloss>"):
+    for part in ("<option>", "<joint margin>", "<actuator><motor", "<tendon><fixed armature>"):
         assert part in said[0]
     assert "condim" not in said[0] and "solref" not in said[0]  # MuJoCo's defaults: nothing is lost
     assert "stiffness" not in said[0]  # (a tendon's zero spring is MuJoCo's default: nothing is lost)

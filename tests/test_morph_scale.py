@@ -266,12 +266,12 @@ def test_scaled_mjcf_gains_tendon_and_anchors(f64, tmp_path):
 
 def test_scaled_slide_tendon_is_a_length():
     """A tendon of slide joints only is a length: its range, held length and spring's rest range × s,
-    its coefficients, stiffness and damping the file's; a hinge's keeps its unit."""
+    its coefficients, stiffness, damping and friction loss the file's; a hinge's keeps its unit."""
     links = [_link("base", -1, "", "fixed"), _link("a", 0, "x", "prismatic"), _link("b", 1, "y", "prismatic")]
-    links[1].tendons = ((("x", "y"), (1.0, -0.5), -0.2, 0.3, None, (0.05, None), (7.0, 0.5, -0.01, 0.02)),)
+    links[1].tendons = ((("x", "y"), (1.0, -0.5), -0.2, 0.3, None, (0.05, None), (7.0, 0.5, -0.01, 0.02), (0.4, None)),)
     (tendon,) = scaled_links(links, 3.0)[1].tendons
     assert tendon[1] == (1.0, -0.5) and np.allclose(tendon[2:4], (-0.6, 0.9)) and np.isclose(tendon[5][0], 0.15)
-    assert tendon[6][:2] == (7.0, 0.5) and np.allclose(tendon[6][2:], (-0.03, 0.06))
+    assert tendon[6][:2] == (7.0, 0.5) and np.allclose(tendon[6][2:], (-0.03, 0.06)) and tendon[7] == (0.4, None)
     links[2].joint_type = "revolute"
     (tendon,) = scaled_links(links, 3.0)[1].tendons
     assert tendon[1] == (1.0 / 3.0, -0.5) and tendon[6] == (7.0, 0.5, -0.01, 0.02)

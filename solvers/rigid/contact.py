@@ -26,12 +26,14 @@ def without_pairs(model, keep=None):
     return replace(model, **{name: getattr(model, name)[keep] for name in PAIR_ARRAYS})
 
 
-SOFTNESS_TABLES = ("dof_limit_sol", "dof_frictionloss_sol", "eq_sol", "body_eq_sol", "ten_limit_sol", "ten_eq_sol")
+SOFTNESS_TABLES = ("dof_limit_sol", "dof_frictionloss_sol", "eq_sol", "body_eq_sol", "ten_limit_sol", "ten_eq_sol",
+                   "ten_friction_sol")
 
 
 def with_row_softness(model, timeconst):
     """The model with the softness of its joint rows (SOFTNESS_TABLES: solref then solimp per dof
-    limit, dof friction loss, joint equality, connect or weld, tendon limit or equality) complete: what the asset left
+    limit, dof friction loss, joint equality, connect or weld, tendon limit, equality or friction
+    loss) complete: what the asset left
     unstated (NaN) the scene's (timeconst s, 1) and MuJoCo's default solimp, and every solimp
     within MuJoCo's bounds (its runtime clamps them so; the kernels read them as they are)."""
     default = np.array([timeconst, 1.0, *DEFAULT_SOLIMP])

@@ -109,10 +109,11 @@ MODEL = {
     # connects and welds (points and frames of two links held together; RigidModel says what they hold)
     "body_eq_link": ("i", "K2"), "body_eq_anchor": ("v3", "K2"), "weld_turn": ("v4", "WD2"),
     "weld_torquescale": ("f", "WD"), "body_eq_sol": ("f", "K7"),
-    # limited, held or sprung fixed tendons (RigidModel says what they hold; TENDON_JOINTS a tendon's joints)
+    # limited, held, sprung or rubbing fixed tendons (RigidModel says what they hold; TENDON_JOINTS a tendon's joints)
     "ten_nnz": ("i", "T"), "ten_dof": ("i", "T3"), "ten_coef": ("f", "T3"), "ten_lower": ("f", "T"),
     "ten_upper": ("f", "T"), "ten_limit_sol": ("f", "T7"), "ten_eq": ("i", "T"), "ten_eq_length": ("f", "T"),
     "ten_eq_sol": ("f", "T7"), "ten_stiffness": ("f", "T"), "ten_damping": ("f", "T"), "ten_spring": ("f", "T2"),
+    "ten_frictionloss": ("f", "T"), "ten_friction_sol": ("f", "T7"),
     # substep h (s), the time constant (s) of the joint rows (equality, limit, friction loss), impratio, solver
     # tolerance and line-search tolerance: runtime values like everything else (CONSTS names them)
     "consts": ("f", len(CONSTS)),
@@ -295,10 +296,10 @@ def joint_row_columns(size):
 def body_eq_columns(size):
     """Where the connects' and welds' column lists start in efc_cols (D each: its rows' list; the
     run-time welds' after the model's): after the joint rows' slots (at most a row per joint
-    equality, three per connect, six per weld and per run-time weld slot, two per dof, two per
-    tendon: its equality's and its limit's). K counts connects and welds, WD the welds, DW the
-    run-time weld slots."""
-    rows = size["E"] + 3 * size["K"] + 3 * size["WD"] + 6 * size["DW"] + 2 * size["D"] + 2 * size["T"]
+    equality, three per connect, six per weld and per run-time weld slot, two per dof, three per
+    tendon: its equality's, its friction loss's and its limit's). K counts connects and welds, WD
+    the welds, DW the run-time weld slots."""
+    rows = size["E"] + 3 * size["K"] + 3 * size["WD"] + 6 * size["DW"] + 2 * size["D"] + 3 * size["T"]
     return joint_row_columns(size) + JOINT_ROW_SLOTS * rows
 
 

@@ -44,7 +44,8 @@ solreflimit, solimplimit; a ``<default><tendon>`` class), as MuJoCo's limit rows
 coef·q, ``<equality><tendon tendon1 polycoef>``, which holds that length at its value at qpos0
 plus polycoef[0] by an equality row (LinkSpec.tendons; tendon2 is refused), and their passive
 spring and damper (stiffness, damping, springlength: one rest length or a dead band; by default
-the length at the joints' springrefs, MuJoCo's qpos_spring).
+the length at the joints' springrefs, MuJoCo's qpos_spring) and friction loss (frictionloss,
+solreffriction, solimpfriction: MuJoCo's friction row on the tendon's rate).
 Joints: axis, pos, range (limited: MuJoCo's autolimits), damping, armature, frictionloss,
 solreflimit, solimplimit, solreffriction and solimpfriction (the softness of its limit and
 friction-loss rows),
@@ -82,7 +83,7 @@ move bodies and geoms unread (``<composite>``, ``<flexcomp>``…; ``<frame>`` is
 bodies and geoms, and its childclass is theirs; so is ``<replicate>``, as copies in frames:
 MJCFDocument), a solref of mixed form (one number > 0, the other not: MuJoCo warns and takes its
 default), a plane on a moving body (as MuJoCo's compiler). Ignored with one warning
-naming them: spatial tendons, a fixed tendon's friction loss and armature, an actuator's damping
+naming them: spatial tendons, a fixed tendon's armature, an actuator's damping
 and armature (MuJoCo 4 adds them to the joint or tendon it drives), an actuator on
 another tendon, ``<contact><pair>``, ``<keyframe>``, ``<option>`` (the scene's
 options rule), and attributes that tune MuJoCo's solver, actuator dynamics or the compiler's mass
@@ -753,11 +754,12 @@ class _Reader(MJCFDocument):
 
     def _tendons(self, links: list[LinkSpec]):
         """<tendon><fixed>: a limited one (its length Σ coef·q of hinge and slide joints, range,
-        solreflimit, solimplimit), one a tendon equality holds (self.tendon_equalities) or one with
-        a spring or damper (stiffness, damping, springlength: _spring_length) on the link of its
-        first joint (LinkSpec.tendons); its other attributes (frictionloss, armature…) and spatial
-        tendons are named in the warning of what is ignored (a fixed tendon without any of them
-        does nothing, as in MuJoCo)."""
+        solreflimit, solimplimit), one a tendon equality holds (self.tendon_equalities), one with
+        a spring or damper (stiffness, damping, springlength: _spring_length) or friction loss
+        (frictionloss, solreffriction, solimpfriction) on the link of its first joint
+        (LinkSpec.tendons); its other attributes (armature…) and spatial tendons are named in the
+        warning of what is ignored (a fixed tendon without any of them does nothing, as in
+        MuJoCo)."""
         by_joint = {link.joint_name: link for link in links if link.joint_type in ("revolute", "prismatic")}
         held = dict(self.tendon_equalities)
         for section in self.root.iter("tendon"):
@@ -771,10 +773,11 @@ class _Reader(MJCFDocument):
                     self.ignored.add(f"<tendon><{element.tag}>")
                     continue
                 for key, value in attrs.items():
-                    at_zero = key in ("frictionloss", "margin", "armature") and \
+                    at_zero = key in ("margin", "armature") and \
                         not any(self.numbers(attrs, key, (1, 2), what))  # (MuJoCo's default: no effect)
                     if key not in ("name", "class", "limited", "range", "solreflimit", "solimplimit", "group",
-                                   "rgba", "width", "material", "user", "stiffness", "damping", "springlength") \
+                                   "rgba", "width", "material", "user", "stiffness", "damping", "springlength",
+                                   "frictionloss", "solreffriction", "solimpfriction") \
                             and not is_default(key, value) and not at_zero:
                         self.ignored.add(f"<tendon><fixed {key}>")
                 limited = attrs.get("limited", "auto")
@@ -783,7 +786,10 @@ class _Reader(MJCFDocument):
                 stiffness, damping = (self._tendon_coefficient(attrs, key, what) for key in ("stiffness", "damping"))
                 if stiffness:
                     self._refuse_unmodelled(attrs, what)
-                if not (limited or equality or stiffness or damping):
+                frictionloss = float(self.numbers(attrs, "frictionloss", 1, what, default=[0.0])[0])
+                if frictionloss < 0:  # (MuJoCo's compiler refuses it too)
+                    raise self.error(f"{what}: frictionloss expected ≥ 0, got {attrs['frictionloss']!r}")
+                if not (limited or equality or stiffness or damping or frictionloss):
                     continue
                 lower, upper = (self.numbers(attrs, "range", 2, what, default=[0.0, 0.0]) if limited
                                 else (-np.inf, np.inf))
@@ -796,9 +802,12 @@ class _Reader(MJCFDocument):
                 spring = None
                 if stiffness or damping:
                     spring = (stiffness, damping, *self._spring_length(attrs, joints, coefs, by_joint, what))
+                friction = None
+                if frictionloss:
+                    friction = (frictionloss, self._row_softness(attrs, "solreffriction", "solimpfriction", what))
                 by_joint[joints[0]].tendons += ((tuple(joints), tuple(coefs), float(lower), float(upper),
                                                  self._row_softness(attrs, "solreflimit", "solimplimit", what),
-                                                 equality, spring),)
+                                                 equality, spring, friction),)
         if held:
             raise self.error(f"<equality><tendon>: tendon1 expected a fixed tendon of the file, got {sorted(held)}")
 
@@ -837,7 +846,7 @@ class _Reader(MJCFDocument):
         if repeated:  # (MuJoCo refuses them too)
             raise self.error(f"{what}: joints expected once each, got {repeated} repeated")
         if not 0 < len(joints) <= TENDON_JOINTS:
-            raise self.error(f"{what}: a limited, held or sprung fixed tendon expected 1 to {TENDON_JOINTS} joints "
+            raise self.error(f"{what}: a limited, held, sprung or rubbing fixed tendon expected 1 to {TENDON_JOINTS} joints "
                              f"(more are not supported yet), got {len(joints)}")
         return joints, coefs
 

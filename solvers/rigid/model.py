@@ -67,13 +67,15 @@ class RigidModel:
     + 1 the held frames' turns r1, r2 in their links' frames (q1 ⊗ r1 is held to q2 ⊗ r2),
     weld_torquescale (W,) the scale of its turn rows; body_eq_sol (K, 7) their rows' solref and
     solimp, as eq_sol.
-    Per limited, held or sprung fixed tendon (LinkSpec.tendons, MuJoCo's): its length Σ ten_coef·q over its
+    Per limited, held, sprung or rubbing fixed tendon (LinkSpec.tendons, MuJoCo's): its length Σ ten_coef·q over its
     ten_nnz (T,) dofs ten_dof (T, 3) (ascending; ten_coef (T, 3), padded with 0), held in
     [ten_lower, ten_upper] (m or rad; ±inf: no bound) by a limit row of softness ten_limit_sol (T,
     7), as eq_sol; where ten_eq (T,) is 1, held at ten_eq_length (T,) by an equality row of
     softness ten_eq_sol (T, 7) (MuJoCo's tendon equality without tendon2); pulled back by MuJoCo's
     passive tendon spring −ten_stiffness (T,) · (L − rest), rest the nearer end of ten_spring
-    (T, 2) (lower, upper; 0 between), and damper −ten_damping (T,) · L̇ (N or N·m, per unit of L).
+    (T, 2) (lower, upper; 0 between), and damper −ten_damping (T,) · L̇ (N or N·m, per unit of L);
+    held back by a friction row of bound ten_frictionloss (T,) (N or N·m; 0: none) and softness
+    ten_friction_sol (T, 7), as eq_sol (MuJoCo's tendon friction loss).
     """
     link_name: list
     link_parent: np.ndarray
@@ -147,6 +149,8 @@ class RigidModel:
     ten_stiffness: np.ndarray
     ten_damping: np.ndarray
     ten_spring: np.ndarray
+    ten_frictionloss: np.ndarray
+    ten_friction_sol: np.ndarray
 
     @property
     def n_tendons(self):
@@ -398,7 +402,9 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False, a
         ten_eq_sol=np.array([t[7] for t in tendons], dtype=f).reshape(-1, 7),
         ten_stiffness=np.array([t[8][0] for t in tendons], dtype=f),
         ten_damping=np.array([t[8][1] for t in tendons], dtype=f),
-        ten_spring=np.array([t[8][2:] for t in tendons], dtype=f).reshape(-1, 2))
+        ten_spring=np.array([t[8][2:] for t in tendons], dtype=f).reshape(-1, 2),
+        ten_frictionloss=np.array([t[9] for t in tendons], dtype=f),
+        ten_friction_sol=np.array([t[10] for t in tendons], dtype=f).reshape(-1, 7))
 
 
 def _body_equalities(links, index):
@@ -437,13 +443,14 @@ def _body_equalities(links, index):
 
 def _tendon(tendon, joint_dof):
     """(dofs, coefficients, lower, upper, softness, held (0 or 1), held length, its softness, spring
-    (stiffness, damping, rest lower, rest upper)) of a LinkSpec tendon, its joints' dofs in
-    ascending order (the row's columns)."""
-    joints, coefs, lower, upper, softness, equality, spring = tendon
+    (stiffness, damping, rest lower, rest upper), friction loss, its softness) of a LinkSpec tendon,
+    its joints' dofs in ascending order (the rows' columns)."""
+    joints, coefs, lower, upper, softness, equality, spring, friction = tendon
     order = sorted(range(len(joints)), key=lambda k: joint_dof[joints[k]])
     held = (1, equality[0], _softness(equality[1])) if equality is not None else (0, 0.0, _softness(None))
+    rubbing = (friction[0], _softness(friction[1])) if friction is not None else (0.0, _softness(None))
     return ([joint_dof[joints[k]] for k in order], [coefs[k] for k in order], lower, upper, _softness(softness),
-            *held, (0.0, 0.0, 0.0, 0.0) if spring is None else tuple(spring))
+            *held, (0.0, 0.0, 0.0, 0.0) if spring is None else tuple(spring), *rubbing)
 
 
 def _padded(values, pad):

@@ -61,15 +61,16 @@ def _scaled_shape(shape: ShapeSpec, s: float) -> ShapeSpec:
 
 
 def _scaled_tendon(tendon, s, joint_scale):
-    """A fixed tendon (joints, coefficients, lower, upper, softness, equality, spring) in the scaled
-    coordinates (its spring's stiffness and damping the file's, as a joint's)."""
-    joints, coefs, lower, upper, softness, equality, spring = tendon
+    """A fixed tendon (joints, coefficients, lower, upper, softness, equality, spring, friction) in
+    the scaled coordinates (its spring's stiffness and damping and its friction loss the file's, as
+    a joint's)."""
+    joints, coefs, lower, upper, softness, equality, spring, friction = tendon
     scales = np.array([joint_scale[joint] for joint in joints])
     if np.all(scales == s):  # a length: its range, held length and spring's rest grow
         return (joints, tuple(coefs), lower * s, upper * s, softness, equality and (equality[0] * s, equality[1]),
-                spring and (*spring[:2], spring[2] * s, spring[3] * s))
+                spring and (*spring[:2], spring[2] * s, spring[3] * s), friction)
     return (joints, tuple(float(c) for c in np.asarray(coefs, dtype=np.float64) / scales), lower, upper, softness,
-            equality, spring)
+            equality, spring, friction)
 
 
 def _scaled_anchors(constraint, s):

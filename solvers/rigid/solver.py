@@ -297,8 +297,9 @@ class RigidSolver(Solver):
     def _note_inputs(self, inputs):
         """Tell the kernels whether the inputs hold an external wrench (the header's "wrench": set
         by apply_links_external_wrench, else the build's zeros, whose force stage and its
-        gradients the kernels then skip). Keep whether they give some dof friction loss or a
-        limit (or the model a tendon limit), and some env a run-time weld (constraint rows).
+        gradients the kernels then skip). Keep whether they give some dof friction loss (or the
+        model a tendon's) or a limit (or the model a tendon limit), and some env a run-time weld
+        (constraint rows).
         Checked again only for another frictionloss (limit, dyn_welds) tensor, or the same one changed in
         place by torch (which counts its versions; the setters always give a new tensor): a rollout
         passes the same one every step, and the check costs ~15 µs of torch amid a step
@@ -306,8 +307,8 @@ class RigidSolver(Solver):
         wrench = int(inputs["xfrc"] is not self.default_inputs["xfrc"])
         if wrench != self._wrench:  # (kept on the host: reading a GPU header would wait for the device)
             self.data.header[HEADER["wrench"]] = self._wrench = wrench
-        if self._changed(inputs, "frictionloss"):
-            self.friction = bool((inputs["frictionloss"] > 0).any())
+        if self._changed(inputs, "frictionloss"):  # (or the model a tendon's)
+            self.friction = bool((inputs["frictionloss"] > 0).any()) or bool((self.model.ten_frictionloss > 0).any())
         if self._changed(inputs, "limit_lower") | self._changed(inputs, "limit_upper"):  # (both noted)
             tendon_limits = np.isfinite(self.model.ten_lower).any() or np.isfinite(self.model.ten_upper).any()
             self.limited = self.rigid_options.enable_joint_limit and (bool(tendon_limits) or bool(

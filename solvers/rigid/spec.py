@@ -103,12 +103,14 @@ class LinkSpec:
     without <inertial> or its <mass>); merging fixed links adds a weighed part to a stated one
     not (merge.py).
     tendons: (joint names, their coefficients, lower, upper, softness (7,) as limit_sol, equality,
-    spring) per limited, held or sprung fixed tendon whose first joint is this link's (MJCF
+    spring, friction) per limited, held, sprung or rubbing fixed tendon whose first joint is this
+    link's (MJCF
     ``<tendon><fixed>``, MuJoCo's: its length L = Σ coef·q, in [lower, upper] m or rad by a limit
     row (±inf: none), constraint/rows.py); equality: None, or (length m or rad, softness (7,))
     where an ``<equality><tendon>`` holds it at that length; spring: None, or (stiffness, damping,
     rest lower, rest upper): MuJoCo's passive tendon force −stiffness·(L − the nearer rest end, 0
-    between them) − damping·L̇ (actuation.py).
+    between them) − damping·L̇ (actuation.py); friction: None, or (friction loss N or N·m, softness
+    (7,)): MuJoCo's friction row on L̇ (constraint/rows.py).
     excluded: names of links of the same entity this link's shapes never collide with (MJCF
     ``<contact><exclude>``).
     connects: (other link's name, or "" for the world; anchor (3,) m in this link's frame, or None:

@@ -23,7 +23,8 @@ multiplier · e_b, diagA the sum of the two dofs'), one per dof with friction lo
 distance q − lower with J = e_i, or upper − q with J = −e_i; a ball joint's cone limit, MuJoCo's:
 distance θmax − θ with J = −axis on its three dofs, θ and axis its turn's angle and unit axis),
 then one per violated limit of a fixed tendon (its length L = Σ coef·q: L − lower with J = coef
-on its dofs, or upper − L with J = −coef; diagA its invweight_ten, MuJoCo's tendon_invweight0).
+on its dofs, or upper − L with J = −coef; diagA its invweight_ten, MuJoCo's tendon_invweight0);
+a tendon's friction loss (FRICTION_LOSS, J = coef) comes after the dofs'.
 Their R uses diagA = dof_invweight0 (a ball joint's first dof's); their solref and solimp are
 the model's per row owner (dof_limit_sol, dof_frictionloss_sol, eq_sol: MJCF's solreflimit,
 solimplimit, solreffriction, solimpfriction, an equality's solref and solimp; else the scene's
@@ -631,7 +632,7 @@ def dof_rows_arise(d: ti.template(), s, e):
     if d.n_eq > 0 or d.n_body_eq > 0 or dynamic_welds(d, e) > 0:
         arise = 1
     for t in range(d.n_tendons):
-        if d.ten_eq[t]:
+        if d.ten_eq[t] or d.ten_frictionloss[t] > 0.0:
             arise = 1
     for i in range(d.n_dofs):
         if d.frictionloss[e, i] > 0.0:
@@ -645,8 +646,8 @@ def dof_rows(d: ti.template(), s, e):
     lists a URDF's mimics in the file's joint order), every connect's three, every weld's six (in
     tree order; MuJoCo lists equalities in the file's order, mixing kinds: the same rows, rounded
     otherwise where the orders differ), the run-time welds' six in the order they were made,
-    friction loss of every dof with F > 0, then every violated joint limit, then every violated
-    tendon limit (MuJoCo's order).
+    friction loss of every dof with F > 0, then of every tendon with F > 0, then every violated
+    joint limit, then every violated tendon limit (MuJoCo's order).
     Returns how many (also kept in efc_dof_rows[s, e, 0])."""
     rows = 0
     for k in range(d.n_eq):
@@ -665,6 +666,11 @@ def dof_rows(d: ti.template(), s, e):
         if bound > 0.0:
             _dof_row(d, s, e, rows, i, 1.0, 0.0, d.dof_frictionloss_sol)
             d.efc_type[s, e, rows], d.efc_floss[s, e, rows] = FRICTION_LOSS, bound
+            rows += 1
+    for t in range(d.n_tendons):
+        if d.ten_frictionloss[t] > 0.0:
+            _tendon_row(d, s, e, rows, t, 1.0, 0.0, FRICTION_LOSS, d.ten_friction_sol)
+            d.efc_floss[s, e, rows] = d.ten_frictionloss[t]
             rows += 1
     for i in range(d.n_dofs):
         sign, dist = _limit_side(d, s, e, i)
@@ -687,10 +693,11 @@ def dof_rows(d: ti.template(), s, e):
 
 @ti.func
 def _tendon_row(d: ti.template(), s, e, r, t, sign, dist, kind, sol: ti.template()):
-    """Row r for tendon t (MuJoCo's), a violated limit (kind ONE_SIDED, softness sol ten_limit_sol)
-    or its equality (EQUALITY, ten_eq_sol): J = sign·coef on its dofs (ascending: its columns), at
-    distance dist (m or rad), diagA its invweight_ten (tendon_invweight0); its id n_dofs + t (the
-    reverse tells it from a dof's row so)."""
+    """Row r for tendon t (MuJoCo's), a violated limit (kind ONE_SIDED, softness sol ten_limit_sol),
+    its equality (EQUALITY, ten_eq_sol) or its friction loss (FRICTION_LOSS, ten_friction_sol; the
+    caller sets the bound): J = sign·coef on its dofs (ascending: its columns), at distance dist (m
+    or rad), diagA its invweight_ten (tendon_invweight0); its id n_dofs + t (the reverse tells it
+    from a dof's row so)."""
     slot, first = d.joint_columns + JOINT_ROW_SLOTS * r, TENDON_JOINTS * t
     d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = slot, d.ten_nnz[t]
     velocity = 0.0
@@ -707,17 +714,22 @@ def _tendon_row(d: ti.template(), s, e, r, t, sign, dist, kind, sol: ti.template
 
 @ti.func
 def _tendon_row_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
-    """Reverse of _tendon_row for row r (a limit's or an equality's) from its implicit gradients
-    (aref, R): into q and q̇ of the tendon's dofs at frame s and its invweight_ten (its Jacobian is
-    constant)."""
+    """Reverse of _tendon_row for row r (a limit's, an equality's or a friction loss's) from its
+    implicit gradients (aref, R): into q and q̇ of the tendon's dofs at frame s and its
+    invweight_ten (its Jacobian is constant; its friction loss the model's)."""
     t = d.efc_id[s, e, r] - d.n_dofs
-    sign, dist = _tendon_side(d, s, e, t)
-    solref, solimp = _softness(d.ten_limit_sol, t)
+    sign, dist = 1.0, 0.0  # (a friction loss's row: J = coef, no distance)
+    solref, solimp = _softness(d.ten_friction_sol, t)
     if d.efc_type[s, e, r] == EQUALITY:
-        sign, dist = 1.0, tendon_length(d, s, e, t) - d.ten_eq_length[t]
+        dist = tendon_length(d, s, e, t) - d.ten_eq_length[t]
         solref, solimp = _softness(d.ten_eq_sol, t)
+    elif d.efc_type[s, e, r] == ONE_SIDED:
+        sign, dist = _tendon_side(d, s, e, t)
+        solref, solimp = _softness(d.ten_limit_sol, t)
     g_dist, damping, g_scale = _joint_row_scalars_adjoint(d, dist, d.invweight_ten[e, t], g_aref, g_R, solref, solimp)
     accumulate(d.invweight_ten.grad, ti.Vector([e, t]), g_scale)
+    if d.efc_type[s, e, r] == FRICTION_LOSS:  # (its distance is no function of q)
+        g_dist = 0.0
     for k in range(TENDON_JOINTS * t, TENDON_JOINTS * t + d.ten_nnz[t]):
         i, c = d.ten_dof[k], sign * d.ten_coef[k]
         accumulate(d.qvel.grad, ti.Vector([s, e, i]), -damping * c * g_aref)
