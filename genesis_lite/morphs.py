@@ -262,8 +262,9 @@ class Drone(URDF):
     """A multirotor from a URDF whose ``<properties>`` element states its rotors' coefficients kf
     (thrust per rpm², N) and km (drag torque per rpm², N·m), as Genesis's drones; scene.add_entity
     makes it a DroneEntity, flown by set_propellers_rpm. genesis_lite ships three (written here,
-    from the published figures): "urdf/drones/cf2x.urdf" (a Crazyflie 2.x, rotors in an X), "cf2p.urdf"
-    (in a +) and "racer.urdf", found under those relative paths as Genesis's bundled ones are.
+    from the published figures): "urdf/drones/cf2x.urdf" (a Crazyflie 2.x, rotors in an X),
+    "cf2p.urdf" (in a +) and "racer.urdf", found under those relative paths as Genesis's bundled
+    ones are.
 
     Its base is always free (Genesis's rule: ``fixed`` is refused). propellers_link_name: the
     rotors' links (kept from merging); each rotor's thrust acts along its link's z axis at its
@@ -271,9 +272,9 @@ class Drone(URDF):
     counter-clockwise, −1: clockwise, seen from above), reversed for model "RACE" (Genesis's
     models "CF2X", "CF2P", "RACE"). (Genesis turns them by the link's inertial frame: the same
     for massless rotors, as its drones' and ours, or an inertial frame without rpy.)
-    propellers_link_names: Genesis's deprecated name of propellers_link_name (a warning). default_base_ang_damping_scale: the free base's rotational
-    dofs get damping (N·m·s/rad) of this times the drone's mass (Genesis's 1e-5; None: none).
-    The rest as URDF's."""
+    default_base_ang_damping_scale: the free base's rotational dofs get damping (N·m·s/rad) of
+    this times the drone's mass (Genesis's 1e-5; None: none). propellers_link_names: Genesis's
+    deprecated name of propellers_link_name (a warning). The rest as URDF's."""
     model: str = "CF2X"
     propellers_link_name: tuple = ("prop0_link", "prop1_link", "prop2_link", "prop3_link")
     propellers_spin: tuple = (-1, 1, -1, 1)
@@ -284,8 +285,9 @@ class Drone(URDF):
         if self.propellers_link_names is not None:  # (Genesis's deprecated alias)
             warn_user("Drone: 'propellers_link_names' is deprecated (as in Genesis); use 'propellers_link_name'")
             if tuple(self.propellers_link_name) != Drone.propellers_link_name:
-                raise InvalidInputError("Drone: arguments 'propellers_link_names' and 'propellers_link_name' cannot both "
-                                        f"be given, got {self.propellers_link_names!r} and {self.propellers_link_name!r}")
+                raise InvalidInputError("Drone: arguments 'propellers_link_names' and 'propellers_link_name' cannot "
+                                        f"both be given, got {self.propellers_link_names!r} and "
+                                        f"{self.propellers_link_name!r}")
             self.propellers_link_name, self.propellers_link_names = self.propellers_link_names, None
         if self.fixed:
             raise InvalidInputError("Drone: argument 'fixed' must be False (a drone's base is free, as Genesis's), "

@@ -83,10 +83,11 @@ def test_drone_flies_as_mujocos_body_under_its_rotors_wrench(f64, file, spin_sig
         drone.set_propellers_rpm(rpm[step] if n_envs else rpm[step, 0])
         scene.step()
         for e, data in enumerate(datas):
-            data.xfrc_applied[1] = np.concatenate(_rotor_wrench(model, data, rotors, rpm[step, e], drone.KF, drone.KM, spin))
+            wrench = _rotor_wrench(model, data, rotors, rpm[step, e], drone.KF, drone.KM, spin)
+            data.xfrc_applied[1] = np.concatenate(wrench)
             mujoco.mj_step(model, data)
-    ours = np.concatenate([drone.get_pos().numpy().reshape(batch, 3), drone.get_quat().numpy().reshape(batch, 4),
-                           drone.get_vel().numpy().reshape(batch, 3), drone.get_ang().numpy().reshape(batch, 3)], axis=1)
+    ours = np.concatenate([getter().numpy().reshape(batch, -1) for getter in
+                           (drone.get_pos, drone.get_quat, drone.get_vel, drone.get_ang)], axis=1)
     for e, data in enumerate(datas):
         mujoco.mj_kinematics(model, data)
         theirs = np.concatenate([data.qpos, data.qvel[:3], data.xmat[1].reshape(3, 3) @ data.qvel[3:]])

@@ -421,10 +421,9 @@ def test_fixed_tendon_friction_loss_acts_as_mujocos(f64, tmp_path):
     m, d, scene, robot = _pair(_write(tmp_path, SPRUNG_TENDONS, RUBBING_TENDONS_EXTRA), integrator="euler")
     d.qvel[:] = velocity = np.random.default_rng(4).normal(0.0, 3.0, m.nv)
     robot.set_dofs_velocity(torch.tensor(velocity))
-    rubbed = set()
-    friction = mujoco.mjtConstraint.mjCNSTR_FRICTION_TENDON
-    assert _lockstep(m, d, scene, robot, 500, lambda: rubbed.update(d.efc_id[:d.nefc][d.efc_type[:d.nefc] == friction])) \
-        < 1e-12
+    rubbed, friction = set(), mujoco.mjtConstraint.mjCNSTR_FRICTION_TENDON
+    note = lambda: rubbed.update(d.efc_id[:d.nefc][d.efc_type[:d.nefc] == friction])  # noqa: E731
+    assert _lockstep(m, d, scene, robot, 500, note) < 1e-12
     assert rubbed == {4, 5}  # (MuJoCo's tendon ids: the file's order)
 
 

@@ -846,8 +846,8 @@ class _Reader(MJCFDocument):
         if repeated:  # (MuJoCo refuses them too)
             raise self.error(f"{what}: joints expected once each, got {repeated} repeated")
         if not 0 < len(joints) <= TENDON_JOINTS:
-            raise self.error(f"{what}: a limited, held, sprung or rubbing fixed tendon expected 1 to {TENDON_JOINTS} joints "
-                             f"(more are not supported yet), got {len(joints)}")
+            raise self.error(f"{what}: a limited, held, sprung or rubbing fixed tendon expected 1 to {TENDON_JOINTS} "
+                             f"joints (more are not supported yet), got {len(joints)}")
         return joints, coefs
 
     def _actuators(self, links: list[LinkSpec]):

@@ -70,8 +70,9 @@ class LinkSpec:
     pos (3,) m, quat (4,) w-x-y-z: joint frame in the parent link frame (for the root: in the world).
     axis (3,): unit joint axis in the joint frame (= the child link frame).
     mass kg; com (3,) m in the link frame; inertia (3, 3) kg·m² about the com, link-frame axes.
-    damping N·m·s/rad (or N·s/m), one value for all the joint's dofs or one per dof; armature kg·m² (or kg); frictionloss N·m (or N): the joint's
-    dry friction (URDF ``<dynamics friction>``; a friction-loss constraint row).
+    damping N·m·s/rad (or N·s/m), one value for all the joint's dofs or one per dof; armature kg·m²
+    (or kg); frictionloss N·m (or N): the joint's dry friction (URDF ``<dynamics friction>``; a
+    friction-loss constraint row).
     stiffness N·m/rad (or N/m) and springref rad (or m): a joint spring −stiffness·(q − springref)
     (MJCF ``stiffness``, ``springref``); a ball joint's is −stiffness·r on its dofs, r the
     rotation vector of its turn (MuJoCo's ball spring); a free joint has none.
