@@ -427,6 +427,23 @@ def test_fixed_tendon_friction_loss_acts_as_mujocos(f64, tmp_path):
     assert rubbed == {4, 5}  # (MuJoCo's tendon ids: the file's order)
 
 
+def test_tendon_friction_rows_have_their_row_slots(f64, tmp_path):
+    """A hinge with friction loss started into its limit and a tendon on it with friction loss:
+    three rows at once (the dof's friction, the tendon's, the limit), which the row slots count
+    (the tendon's had been left out: it wrote past them, 4.2 rad/s from MuJoCo)."""
+    body = ('<body name="b" pos="0 0 1"><joint name="j" axis="0 1 0" range="-0.2 0.2" frictionloss="0.05"/>'
+            '<geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03"/></body>')
+    extra = ('<option timestep="0.002"/><compiler angle="radian"/><tendon><fixed frictionloss="0.1">'
+             '<joint joint="j" coef="1"/></fixed></tendon>')
+    m, d, scene, robot = _pair(_write(tmp_path, body, extra), integrator="euler")
+    d.qpos[:], d.qvel[:] = 0.19, 4.0
+    robot.set_qpos(torch.tensor([0.19]))
+    robot.set_dofs_velocity(torch.tensor([4.0]))
+    rows = []
+    assert _lockstep(m, d, scene, robot, 200, lambda: rows.append(d.nefc)) < 1e-6  # (the solves' tolerance)
+    assert max(rows) == 3
+
+
 def test_gradients_through_tendon_friction_loss_match_finite_differences(f64, tmp_path):
     """The rubbing tendons' chain for 0.3 s: the gradient of every link's pose w.r.t. the initial
     velocities against central differences."""

@@ -84,8 +84,8 @@ def capacity(model, options, contacts=None):
     solver doubles while a step finds more: the given ``contacts`` then); R
     enough rows for C contacts of the largest condim under the cone, one per joint equality, three
     per connect, six per weld (and run-time weld slot), one per held fixed tendon, one per limited
-    dof and limited fixed tendon (at most one of its two bounds is violated) and one per dof for
-    friction loss (settable on any)."""
+    dof and limited fixed tendon (at most one of its two bounds is violated), one per dof for
+    friction loss (settable on any) and one per fixed tendon with friction loss."""
     worst = worst_case_contacts(model)
     if contacts is not None:
         cap = contacts
@@ -98,7 +98,8 @@ def capacity(model, options, contacts=None):
     condim = int(model.pair_condim.max()) if len(model.pair_condim) else 1
     rows_per_contact = condim if options.friction_cone == "elliptic" or condim == 1 else 2 * (condim - 1)
     joint_rows = (model.n_eq + 3 * model.n_body_eq + 3 * model.n_weld + 6 * options.max_dynamic_constraints
-                  + int(model.ten_eq.sum()) + limit_rows(model, options) + model.n_dofs)
+                  + int(model.ten_eq.sum()) + limit_rows(model, options) + model.n_dofs
+                  + int((model.ten_frictionloss > 0).sum()))
     return contacts, contacts * rows_per_contact + joint_rows
 
 
@@ -116,7 +117,7 @@ class InvweightBasis:
       condim ≤ 3; and by get_links_invweight); zero for links welded to the world;
     - invweight_dof per dof: the diagonal of M⁻¹, averaged over a free joint's three translations
       and its three rotations, and over a ball joint's three rotations;
-    - invweight_ten per limited fixed tendon: J M⁻¹ Jᵀ, J its coefficients on its dofs (MuJoCo's
+    - invweight_ten per fixed tendon: J M⁻¹ Jᵀ, J its coefficients on its dofs (MuJoCo's
       tendon_invweight0, never simplified);
     - but on a sliding leaf (``sliding_leaves``: MuJoCo's body_simple = 2), 1 / mass for
       invweight_t and invweight_dof, and 0 for invweight_r, as MuJoCo takes them there (armature
