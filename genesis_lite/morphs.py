@@ -59,8 +59,9 @@ def _file_path(owner, file, xml=False):
     """A file morph's ``file`` (a path string or os.PathLike) as Genesis resolves it: the path made
     absolute where it exists (a relative one from the working directory), else in genesis_lite's
     own assets (BUNDLED_ASSETS) or genesis-world's (genesis_assets) where it is there, else as given
-    (scene.add_entity says it was not found). xml (MJCF, URDF): also, as Genesis's, the document itself, as a string (inline_xml)
-    or an xml.etree Element or ElementTree (taken as its string)."""
+    (scene.add_entity says it was not found). xml (MJCF, URDF): also, as Genesis's, the document
+    itself, as a string (inline_xml) or an xml.etree Element or ElementTree (taken as its
+    string)."""
     if xml and isinstance(file, (ET.Element, ET.ElementTree)):
         return ET.tostring(file.getroot() if isinstance(file, ET.ElementTree) else file, encoding="unicode")
     if isinstance(file, os.PathLike):
