@@ -787,7 +787,7 @@ class _Reader(MJCFDocument):
                 if stiffness:
                     self._refuse_unmodelled(attrs, what)
                 frictionloss = float(self.numbers(attrs, "frictionloss", 1, what, default=[0.0])[0])
-                if frictionloss < 0:  # (MuJoCo's compiler refuses it too)
+                if frictionloss < 0:  # (MuJoCo takes it and forms no row: refused rather than dropped)
                     raise self.error(f"{what}: frictionloss expected ≥ 0, got {attrs['frictionloss']!r}")
                 if not (limited or equality or stiffness or damping or frictionloss):
                     continue
