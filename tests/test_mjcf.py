@@ -458,13 +458,14 @@ def test_gradients_through_tendon_friction_loss_match_finite_differences(f64, tm
      r"<tendon><fixed name='band'>: a yielding spring is not supported \(attribute 'springyield' = '1'\)"),
     (('stiffness="20"', 'stiffness="20 3"'), r"<tendon><fixed name='band'>: a polynomial stiffness is not supported"),
     (('damping="0.3"', 'damping="0.3 1"'), r"<tendon><fixed name='damper'>: a polynomial damping is not supported"),
+    (('frictionloss="0.2"', 'frictionloss="-0.2"'), r"<tendon><fixed name='drag'>: frictionloss expected ≥ 0"),
 ])
 def test_tendon_springs_refuse_what_is_not_modelled(f64, tmp_path, change, said):
     """As MuJoCo's compiler, a springlength above its upper end; not modelled yet, MuJoCo 4's
     yielding (plastic) tendon spring and polynomial stiffness and damping (dropped, they would move
-    the tendon otherwise)."""
+    the tendon otherwise); a negative friction loss (MuJoCo forms no row: refused, not dropped)."""
     with pytest.raises(AssetError, match=said):
-        mjcf.load_mjcf(_write(tmp_path, SPRUNG_TENDONS, SPRUNG_TENDONS_EXTRA.replace(*change)))
+        mjcf.load_mjcf(_write(tmp_path, SPRUNG_TENDONS, RUBBING_TENDONS_EXTRA.replace(*change)))
 
 
 def test_an_actuators_damping_and_armature_are_named_where_ignored(f64, tmp_path, caplog):
