@@ -111,9 +111,8 @@ def test_hover_speed_holds_the_drone_and_a_yaw_command_turns_it_by_the_closed_fo
     turn = drone.get_ang().numpy()
     w_a, w_b = hover * np.sqrt(0.9), hover * np.sqrt(1.1)
     tau = 2.0 * drone.KM * (w_b ** 2 - w_a ** 2)
-    axis = drone.get_links_quat()[0]  # the body's z in the world: the yaw axis
-    w, x, y, z = axis.tolist()
-    body_z = np.array([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)])
+    w, x, y, z = drone.get_links_quat()[0].tolist()
+    body_z = np.array([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)])  # the yaw axis
     omega = 0.0
     for _ in range(50):
         drone.set_propellers_rpm([w_a, w_b, w_a, w_b])
