@@ -28,6 +28,7 @@ class DroneEntity(RigidEntity):
         # the drag torque's sign per rotor (Genesis's model "RACE" turns the other way)
         sign = -1.0 if morph.model == "RACE" else 1.0
         self._torque_sign = sign * torch.tensor(morph.propellers_spin, dtype=runtime.tc_float, device=runtime.device)
+        self._along_z = torch.tensor([0.0, 0.0, 1.0], dtype=runtime.tc_float, device=runtime.device)  # a rotor's axis
         self._rpm_set_at = None  # the simulator's transient_clears at the last set_propellers_rpm: once a step
 
     @property
@@ -75,8 +76,7 @@ class DroneEntity(RigidEntity):
             raise InvalidInputError(f"entity '{self.name}': argument 'propellers_rpm' must be ≥ 0 (rpm), got "
                                     f"{rpm.detach().cpu().numpy()}")
         squared = (rpm * rpm)[..., None]  # (B, n, 1)
-        along_z = torch.tensor([0.0, 0.0, 1.0], dtype=squared.dtype, device=squared.device)
-        force = self._KF * squared * along_z  # (B, n, 3) in each rotor's axes
-        torque = self._KM * self._torque_sign[:, None] * squared * along_z
+        force = self._KF * squared * self._along_z  # (B, n, 3) in each rotor's axes
+        torque = self._KM * self._torque_sign[:, None] * squared * self._along_z
         self._apply_wrench(self._propellers_local, None, force, torque, None, "link_com", True)
         self._rpm_set_at = sim.transient_clears
