@@ -70,7 +70,7 @@ def time_ours(scene, steps, repeats):
         start = time.perf_counter()
         for _ in range(steps):
             scene.step()
-        scene.rigid_solver.download_state()  # the work is done when the state can be read
+        scene._rigid_solver.download_state()  # the work is done when the state can be read
         best = min(best, time.perf_counter() - start)
     return best
 
@@ -110,7 +110,7 @@ def main():
                 spec = box_scene() if name == "box" else tower_scene()
                 spec.n_envs = n_envs if n_envs > 1 else 0
                 scene, _ = build_ours(spec)
-                m = build_mujoco(spec, scene.rigid_solver.model)
+                m = build_mujoco(spec, scene._rigid_solver.model)
                 d = mujoco.MjData(m)
             ours = n_envs * args.steps / time_ours(scene, args.steps, args.repeats)
             theirs = n_envs * args.steps / time_mujoco(m, d, n_envs, args.steps, args.repeats)

@@ -33,7 +33,7 @@ class RigidSolverView(EntityIndexing):
 
     def __init__(self, scene):
         self.scene = scene
-        self._solver = scene.rigid_solver
+        self._solver = scene._rigid_solver
 
     @property
     def _who(self):

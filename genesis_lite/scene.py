@@ -44,7 +44,7 @@ class SimState:
     @property
     def rigid(self):
         """The rigid solver's state (B, n_qs + n_dofs), or None without rigid entities."""
-        return self._of(self.scene.rigid_solver)
+        return self._of(self.scene._rigid_solver)
 
     @property
     def mpm(self):
@@ -99,7 +99,7 @@ class Scene:
         self._initial_groups = {}  # the muscles' group actuation of the registered initial state (else zeros)
         self.entities = []
         self.sim_options = dataclasses.replace(self.sim_options, substeps=self._substeps())
-        self.rigid_solver = RigidSolver(self.sim_options, self.rigid_options)
+        self._rigid_solver = RigidSolver(self.sim_options, self.rigid_options)
         self.mpm_solver = None  # made with the first MPM entity
         self.sim = None
         self.n_envs = 0
@@ -125,6 +125,17 @@ class Scene:
     @property
     def is_built(self):
         return self.sim is not None
+
+    @property
+    def rigid_solver(self):
+        """Genesis's ``scene.rigid_solver``: the same object as ``scene.sim.rigid_solver``
+        (genesis_lite/rigid_solver.py: its scene-wide readouts, ``get_error_envs_mask``, run-time
+        welds), once the scene is built with rigid entities."""
+        if self.sim is None or self.sim.rigid_solver is None:
+            why = "has no rigid entity" if self.sim is not None else "is not built yet (scene.build())"
+            raise SceneStateError(f"scene.rigid_solver: the scene {why}; the rigid solver's calls need a built "
+                                  f"scene with rigid entities")
+        return self.sim.rigid_solver
 
     def add_entity(self, morph, material=None, surface=None, visualize_contact=False, vis_mode=None, name=None):
         """Add an entity from a morph: rigid (material gs.materials.Rigid, the default) or MPM
@@ -169,7 +180,7 @@ class Scene:
             for geom in (geom for link in links for geom in link.geoms):
                 geom.contype = geom.conaffinity = 0
         kind = DroneEntity if isinstance(morph, gm.Drone) else RigidEntity
-        entity = kind(self, len(self.entities), name, morph, material, surface or Default(), links, self.rigid_solver)
+        entity = kind(self, len(self.entities), name, morph, material, surface or Default(), links, self._rigid_solver)
         self.entities.append(entity)
         return entity
 
@@ -196,7 +207,7 @@ class Scene:
     def _solvers(self):
         """The solvers that have entities, rigid first."""
         rigid = any(isinstance(e, RigidEntity) for e in self.entities)
-        return [s for s in (self.rigid_solver if rigid else None, self.mpm_solver) if s is not None]
+        return [s for s in (self._rigid_solver if rigid else None, self.mpm_solver) if s is not None]
 
     def build(self, n_envs=0, env_spacing=(0.0, 0.0), n_envs_per_row=None, center_envs_at_origin=True):
         """Allocate and compile for ``n_envs`` environments (0: no batch dimension).
@@ -236,7 +247,7 @@ class Scene:
                 solver.destroy()
             raise
         self.sim = sim
-        if self.rigid_solver in solvers:
+        if self._rigid_solver in solvers:
             sim.rigid_solver = RigidSolverView(self)
         for entity in self.entities:
             entity._on_build()
@@ -320,11 +331,11 @@ class Scene:
         """(B, L, 13) link kinematics of the current state, read where the state lives: from the
         solver when it holds the state (after an ordinary step; nothing is downloaded), else from
         the state tensor (detached); None without rigid entities."""
-        if self.rigid_solver not in self._solvers():
+        if self._rigid_solver not in self._solvers():
             return None
-        if self.sim.slot(self.rigid_solver).state is None:
-            return self.rigid_solver.links_kinematics()
-        return self.sim.derived(self.rigid_solver).detach()
+        if self.sim.slot(self._rigid_solver).state is None:
+            return self._rigid_solver.links_kinematics()
+        return self.sim.derived(self._rigid_solver).detach()
 
     # -- running ----------------------------------------------------------------------------
     def step(self, update_visualizer=True, refresh_visualizer=True):

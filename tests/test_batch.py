@@ -1,6 +1,8 @@
 """Batched scenes (n_envs > 0): every env evolves exactly as it would alone, getters gain a
 leading batch dimension, and envs_idx restricts setters to the given envs.
 """
+import inspect
+
 import numpy as np
 import pytest
 import torch
@@ -112,6 +114,32 @@ def test_getters_have_batch_dim(f64, scenes):
     assert robot.get_links_pos(envs_idx=envs).shape == (3, L, 3)
     assert robot.get_mass_mat(envs_idx=envs).shape == (3, D, D)
     assert robot.get_dofs_position(dofs_idx_local=[1, 3], envs_idx=[7]).shape == (1, 2)
+
+
+def test_getters_of_every_env_equal_those_of_listed_envs_and_are_copies(f64, scenes):
+    """Every getter that takes envs_idx: None (every env, read without an env gather) equals all
+    envs listed, and a listed subset equals those rows of it, in the order given; a result is the
+    caller's own copy (writing into it changes no later read)."""
+    batched, robot, _, _ = scenes
+    batched.reset()
+    robot.set_dofs_velocity(torch.linspace(-1.0, 1.0, N_ENVS * robot.n_dofs, dtype=torch.float64).reshape(N_ENVS, -1))
+    batched.step()
+    envs = [5, 2, 63]
+    getters = [name for name in dir(robot) if name.startswith("get_")
+               and "envs_idx" in inspect.signature(getattr(robot, name)).parameters]
+    assert {"get_pos", "get_links_pos", "get_dofs_position", "get_qpos", "get_links_mass"} <= set(getters)
+    for name in getters:
+        getter = getattr(robot, name)
+        every = getter()
+        for part, listed, subset in zip(*(value if isinstance(value, tuple) else (value,) for value in
+                                          (every, getter(envs_idx=list(range(N_ENVS))), getter(envs_idx=envs)))):
+            assert torch.equal(part, listed), name
+            assert torch.equal(part[envs], subset), name
+        first = every[0] if isinstance(every, tuple) else every
+        kept = first.clone()
+        first.add_(1.0)
+        again = getter()
+        assert torch.equal(again[0] if isinstance(again, tuple) else again, kept), name
 
 
 def test_envs_idx_setters_change_only_those_envs(f64, scenes):
@@ -245,7 +273,7 @@ def test_setting_one_envs_mass_recomputes_its_rows_scale_only(f64):
     box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.3, 0.1), pos=(0, 0, 0.05)))
     arm = scene.add_entity(gs.morphs.URDF(file=asset("arm3.urdf"), fixed=True, pos=(1, 0, 0)))
     scene.build(n_envs=3)
-    solver = scene.rigid_solver
+    solver = scene._rigid_solver
     before = scene.sim.inputs(solver)
     box.set_links_mass(torch.tensor([[2.5]], dtype=torch.float64), envs_idx=[1])
     arm.set_dofs_armature(torch.tensor([[0.1, 0.2, 0.3]], dtype=torch.float64), envs_idx=[2])
@@ -274,7 +302,7 @@ def test_plain_masses_after_differentiable_ones_leave_the_old_graph(f64):
     plain = mass.clone()
     plain[1] *= 2.0
     box.set_links_mass(plain)
-    assert not scene.sim.inputs(scene.rigid_solver)["invweight_t"].requires_grad
+    assert not scene.sim.inputs(scene._rigid_solver)["invweight_t"].requires_grad
     scene.reset()
     velocity = torch.zeros((2, 6), dtype=torch.float64, requires_grad=True)
     box.set_dofs_velocity(velocity)

@@ -249,7 +249,7 @@ def test_equalities_solref_and_solimp_soften_their_rows_as_mujocos(f64, tmp_path
     file = _softened(path, tmp_path)
     m, d, scene, robot = _pair(file, integrator="euler", tolerance=1e-14)
     m.opt.tolerance = 1e-14
-    model = contact.with_row_softness(scene.rigid_solver.model, scene.rigid_solver.timeconst)
+    model = contact.with_row_softness(scene._rigid_solver.model, scene._rigid_solver.timeconst)
     ours = np.concatenate([model.eq_sol, model.body_eq_sol])
     theirs = np.concatenate([m.eq_solref, np.clip(m.eq_solimp, [1e-4, 1e-4, 0, 1e-4, 1], [0.9999, 0.9999, 1, 0.9999, 9])],
                             axis=1)

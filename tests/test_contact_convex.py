@@ -134,13 +134,13 @@ def _same_contacts(ours, d):
 def test_convex_pairs_step_like_mujoco(f64, meshes, case):
     plane, bodies = CASES[case]
     scene, entities = _build_ours(plane, bodies, meshes, N_STATES)
-    m = _build_mujoco(plane, bodies, meshes, scene.rigid_solver.model)
+    m = _build_mujoco(plane, bodies, meshes, scene._rigid_solver.model)
     states = _touching_states(m, np.random.default_rng(SEED), N_STATES)
     qpos, qvel = np.array([q for q, _ in states]), np.array([v for _, v in states])
     _set_ours(entities, qpos, qvel)
     scene.step()
     ours_qvel = np.concatenate([e.get_dofs_velocity().cpu().numpy() for e in entities], axis=1)
-    contacts = scene.rigid_solver.contacts().cpu().numpy()
+    contacts = scene._rigid_solver.contacts().cpu().numpy()
     touching = exact = 0
     for k in range(N_STATES):
         d = _mujoco_step(m, qpos[k], qvel[k])
@@ -166,14 +166,14 @@ def test_converged_contacts_stay_near_mujocos(f64, meshes, case):
     CONVERGED_APPROX of the iterate in position and distance, and some of them moved."""
     plane, bodies = CASES[case]
     scenes = [_build_ours(plane, bodies, meshes, N_STATES, compat) for compat in (True, False)]
-    m = _build_mujoco(plane, bodies, meshes, scenes[0][0].rigid_solver.model)
+    m = _build_mujoco(plane, bodies, meshes, scenes[0][0]._rigid_solver.model)
     states = _touching_states(m, np.random.default_rng(SEED), N_STATES)
     qpos, qvel = np.array([q for q, _ in states]), np.array([v for _, v in states])
     contacts = []
     for scene, entities in scenes:
         _set_ours(entities, qpos, qvel)
         scene.step()
-        contacts.append(scene.rigid_solver.contacts().cpu().numpy())
+        contacts.append(scene._rigid_solver.contacts().cpu().numpy())
     iterate, converged = contacts
     assert np.array_equal(iterate[..., :2], converged[..., :2]), "the same contacts, in the same order"
     on = iterate[..., 0] >= 0
@@ -219,7 +219,7 @@ def test_cap_contacts_lie_under_the_cap(f64):
             scene.add_entity(body)
             scene.build()
             scene.step()
-            rows = scene.rigid_solver.contacts()[0].cpu().numpy()
+            rows = scene._rigid_solver.contacts()[0].cpu().numpy()
             contacts.append(rows[rows[:, 0] >= 0][:, [0, 1, 2, 3, 4, 8]])  # geoms, position, distance
         iterate, converged = contacts
         assert len(iterate) == len(converged) == 1 and np.array_equal(iterate[:, :2], converged[:, :2]), body
@@ -241,7 +241,7 @@ def test_a_can_stands_on_four_rim_points(f64, base, compat):
     scene.add_entity(gs.morphs.Cylinder(radius=0.05, height=0.2, pos=(0.01, 0.02, 0.099), euler=(0, 0, 30)))
     scene.build()
     scene.step()
-    rows = scene.rigid_solver.contacts()[0].cpu().numpy()
+    rows = scene._rigid_solver.contacts()[0].cpu().numpy()
     rows = rows[rows[:, 0] >= 0]
     expected = [(0.06, 0.02), (-0.04, 0.02), (0.01, 0.07), (0.01, -0.03)]  # ±u, ±v of the box: not the can's axes
     np.testing.assert_allclose(rows[:, 2:4], expected, atol=1e-9)
@@ -351,7 +351,7 @@ def test_lying_on_a_table_comes_to_rest(precision, shape, base, tmp_path):
     scene.build()
     for _ in range(500):
         scene.step()
-    rows = scene.rigid_solver.contacts()[0].cpu().numpy()
+    rows = scene._rigid_solver.contacts()[0].cpu().numpy()
     rows = rows[rows[:, 0] >= 0]
     assert len(rows) == 2 and np.abs(rows[:, 3] - rows[:, 3].mean()).min() > 0.05  # at both ends (y ±0.059)
     assert can.get_dofs_velocity().abs().max().item() < 1e-3
@@ -423,7 +423,7 @@ def test_a_can_set_exactly_lying_on_a_box_slides_and_stops(f64):
     scene.build()
     can.set_dofs_velocity(torch.tensor([0.0, -1.0, 0.0, 0.0, 0.0, 0.0], dtype=torch.float64))
     scene.step()
-    rows = scene.rigid_solver.contacts()[0].cpu().numpy()
+    rows = scene._rigid_solver.contacts()[0].cpu().numpy()
     rows = rows[rows[:, 0] >= 0]
     np.testing.assert_allclose(np.sort(rows[:, 3]), [-0.06, 0.06], atol=1e-9)  # y of the two ends
     assert np.abs(rows[:, 8]).max() < 1e-6
@@ -550,7 +550,7 @@ def test_equal_cans_stacked_off_axis_rest_where_mujoco_does(f64, cone):
     spec = ContactScene([Body("cylinder", (0.05, 0.1), pos=(0, 0, 0.05)),
                          Body("cylinder", (0.05, 0.1), pos=(1e-3, 0, 0.1499))], cone=cone)
     scene, (bottom, top) = build_ours(spec)
-    m = build_mujoco(spec, scene.rigid_solver.model)
+    m = build_mujoco(spec, scene._rigid_solver.model)
     d = mujoco.MjData(m)
     d.qpos[:] = np.concatenate([e.get_qpos().cpu().numpy() for e in (bottom, top)])
     for _ in range(1000):
@@ -649,7 +649,7 @@ def test_a_can_touching_a_low_box_with_its_side_is_not_launched(f64):
     scene.build()
     for _ in range(5):
         scene.step()
-    rows = scene.rigid_solver.contacts()[0].cpu().numpy()
+    rows = scene._rigid_solver.contacts()[0].cpu().numpy()
     with_box = rows[(rows[:, 0] >= 1) & (rows[:, 1] >= 1)]  # (the plane is geom 0)
     assert len(with_box) == 1 and abs(with_box[0, 8]) < 2e-3 and abs(with_box[0, 9]) > 0.99, with_box
     assert can.get_dofs_velocity().abs().max().item() < 0.1
@@ -685,8 +685,8 @@ def test_a_can_resting_against_a_box_side_keeps_its_converged_contact(f64):
     flagged = 0
     for _ in range(450):
         scene.step()
-        flagged += scene.rigid_solver.data.take_flag("inexact")
-    rows = scene.rigid_solver.contacts()[0].cpu().numpy()
+        flagged += scene._rigid_solver.data.take_flag("inexact")
+    rows = scene._rigid_solver.contacts()[0].cpu().numpy()
     with_box = rows[(rows[:, 0] >= 1) & (rows[:, 1] >= 1)]
     assert flagged == 0
     assert len(with_box) == 1 and abs(with_box[0, 8]) < 1e-6 and abs(with_box[0, 2] - 0.1) < 1e-6, with_box
@@ -702,7 +702,7 @@ def test_a_thin_rod_touching_a_box_side_is_not_kicked(f64):
     fastest = 0.0
     for _ in range(100):
         scene.step()
-        rows = scene.rigid_solver.contacts()[0].cpu().numpy()
+        rows = scene._rigid_solver.contacts()[0].cpu().numpy()
         with_box = rows[(rows[:, 0] >= 1) & (rows[:, 1] >= 1)]
         assert (with_box[:, 9] < 0).all() and (with_box[:, 8] > -1e-3).all(), with_box  # normal toward the box
         fastest = max(fastest, rod.get_dofs_velocity().abs().max().item())
@@ -802,7 +802,7 @@ def test_bounding_boxes_keep_apart_pairs_from_their_colliders(f64, tmp_path, mon
     box_bar = scene.add_entity(gs.morphs.Box(size=(1.0, 0.04, 0.04), pos=(0.0, 0.0, 0.03)))
     mesh_bar = scene.add_entity(gs.morphs.Mesh(file=str(tmp_path / "bar.obj"), pos=(-0.3, 0.06, 0.03)))
     scene.build()
-    box_radius, mesh_radius = scene.rigid_solver.model.geom_rbound[1:3]  # geoms: plane, box bar, mesh bar
+    box_radius, mesh_radius = scene._rigid_solver.model.geom_rbound[1:3]  # geoms: plane, box bar, mesh bar
     assert np.hypot(0.3, 0.06) < box_radius + mesh_radius and min(box_radius, mesh_radius) > 0.03
     for _ in range(3):
         scene.step()

@@ -427,7 +427,7 @@ def test_set_friction_is_the_differentiable_ratio_input(f64):
     set_friction_ratio scales (the box's build friction is 1): the same loss and gradient bits,
     so the ratio's finite-difference test covers it."""
     scene, body = _scene("pyramidal")
-    assert scene.rigid_solver.model.geom_friction[body.geom_start] == 1.0
+    assert scene._rigid_solver.model.geom_friction[body.geom_start] == 1.0
     results = []
     ones = torch.ones(body.n_links, dtype=torch.float64)  # (the scene is shared: another test's ratio is kept)
     for set_friction in (lambda x: (body.set_friction_ratio(ones), body.set_friction(x[0])),
@@ -455,7 +455,7 @@ def test_friction_is_friction_times_ratio_whichever_is_set_last(f32):
     scene.build(n_envs=2)
 
     def friction():
-        return scene.sim.inputs(scene.rigid_solver)["friction"][:, box.geom_start].tolist()
+        return scene.sim.inputs(scene._rigid_solver)["friction"][:, box.geom_start].tolist()
 
     box.set_friction(0.25)
     box.set_friction_ratio([[2.0], [3.0]])
@@ -499,7 +499,7 @@ def assert_batch_equals_single(n_envs):
     dofs past SERIAL_SOLVE_WORK the solve runs on the thread pool: tests/test_compile_once.py)."""
     batched_scene, batched_body = _scene("pyramidal", n_envs=n_envs, tag="batched")
     on_calling_thread = batched_scene.sim.slots[0].solver.data.solve_schedule[0]
-    assert on_calling_thread == (n_envs * batched_scene.rigid_solver.model.n_dofs <= SERIAL_SOLVE_WORK)
+    assert on_calling_thread == (n_envs * batched_scene._rigid_solver.model.n_dofs <= SERIAL_SOLVE_WORK)
     batched = _gradient(batched_scene, batched_body, "tilted", 30)
     scene, body = _scene("pyramidal", tag="batched")  # both with the build's parameters
     loss_of, nominal = CASES["tilted"]
@@ -569,7 +569,7 @@ def test_curved_convex_pairs(f64, case, cone):
         touching.clear()
         for _ in range(40):
             scene.step()
-            touching.append(bool((scene.rigid_solver.contacts()[..., 0] >= 0).any()))
+            touching.append(bool((scene._rigid_solver.contacts()[..., 0] >= 0).any()))
         return (body.get_pos() * torch.tensor([1.0, 2.0, 5.0])).sum() + body.get_quat()[1:].sum()
 
     assert_converged(directional_errors(loss, torch.tensor(SPIN, dtype=torch.float64)), f"{case} {cone}")
@@ -687,7 +687,7 @@ def test_the_solve_reads_only_what_it_keeps(f64, cone):
         bodies[0].set_dofs_velocity(v)
         for _ in range(30):
             if poisoned:
-                _poison_unkept(scene.rigid_solver)
+                _poison_unkept(scene._rigid_solver)
             scene.step()
         end = torch.cat([body.get_pos() for body in bodies], dim=1)
         (end * torch.linspace(0.5, 1.5, end.shape[1], dtype=torch.float64)).sum().backward()
@@ -722,7 +722,7 @@ def test_a_replay_from_the_solutions_repeats_a_replay_from_the_warm_start(f64, c
     bodies[1].set_dofs_frictionloss(torch.full((2, 6), 0.05, dtype=torch.float64))
     bodies[0].set_dofs_velocity(torch.tensor([[2.0, 0.1, 0.0, 0.0, 0.0, 1.0], [2.2, -0.1, 0.0, 0.0, 0.0, -1.0]],
                                              dtype=torch.float64))
-    solver, generator = scene.rigid_solver, torch.Generator().manual_seed(0)
+    solver, generator = scene._rigid_solver, torch.Generator().manual_seed(0)
     inputs = scene.sim.inputs(solver)
     state, replays = scene.sim.state(solver), 0
     for _ in range(30):
@@ -779,7 +779,7 @@ def test_replay_records_are_bounded_and_freed_with_the_graph(f64, boxes, substep
         for _ in range(10):
             scene.step()
         loss = sum((body.get_pos() * torch.tensor([1.0, 0.5, 2.0])).sum() for body in bodies)
-        state = scene.sim.state(scene.rigid_solver)
+        state = scene.sim.state(scene._rigid_solver)
         kept = _replay_bytes(state.grad_fn)
         loss.backward()
         return v.grad, kept, _replay_bytes(state.grad_fn), state[0].numel() * state.element_size()
@@ -812,7 +812,7 @@ def test_a_backward_that_stops_midway_leaves_the_next_steps_as_they_were(f64, mo
         if interrupted:
             def stop(*args):  # (the replay's constraint stage)
                 raise KeyboardInterrupt
-            monkeypatch.setattr(scene.rigid_solver, "constrain", stop)
+            monkeypatch.setattr(scene._rigid_solver, "constrain", stop)
             with pytest.raises(KeyboardInterrupt):
                 box.get_pos().sum().backward()
             monkeypatch.undo()
@@ -899,7 +899,7 @@ def test_finger_masses_reach_a_squeezed_cube_through_the_sliding_leaves_scale(f6
     gripper = scene.add_entity(gs.morphs.URDF(file=str(path), fixed=True))
     cube = scene.add_entity(gs.morphs.Box(size=(0.04, 0.04, 0.04), pos=(0.0, 0.0, 0.1)))
     scene.build()
-    assert scene.rigid_solver.invweight_basis.simple_links.tolist() == [1, 2]
+    assert scene._rigid_solver.invweight_basis.simple_links.tolist() == [1, 2]
     fingers = [link.idx_local for link in gripper.links if link.name in ("left", "right")]
 
     def loss(masses):

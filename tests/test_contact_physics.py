@@ -22,11 +22,11 @@ def _run(spec, steps, before_step=None, mujoco_spec=None):
     scene, entities = build_ours(spec)
     if before_step:
         before_step(scene, entities)
-    m = build_mujoco(mujoco_spec or spec, scene.rigid_solver.model)
+    m = build_mujoco(mujoco_spec or spec, scene._rigid_solver.model)
     d = mujoco.MjData(m)
     if before_step:
-        m.opt.gravity[:] = scene.rigid_solver.default_inputs["gravity"][0].cpu().numpy()
-        m.geom_friction[:, 0] = scene.sim.inputs(scene.rigid_solver)["friction"][0].cpu().numpy()
+        m.opt.gravity[:] = scene._rigid_solver.default_inputs["gravity"][0].cpu().numpy()
+        m.geom_friction[:, 0] = scene.sim.inputs(scene._rigid_solver)["friction"][0].cpu().numpy()
     d.qpos[:] = np.concatenate([e.get_qpos().cpu().numpy() for e in entities])
     d.qvel[:] = np.concatenate([e.get_dofs_velocity().cpu().numpy() for e in entities])
     mujoco.mj_forward(m, d)
@@ -119,7 +119,7 @@ def test_sphere_on_incline(f64, rolling):
     def incline(scene, entities):
         for e in scene.entities:
             e.set_friction_ratio(np.ones(e.n_links) * (1.0 if rolling else 0.0))
-        solver = scene.rigid_solver
+        solver = scene._rigid_solver
         gravity = torch.tensor([G * np.sin(theta), 0.0, -G * np.cos(theta)], dtype=gs.tc_float)
         solver.default_inputs["gravity"][:] = gravity
         scene.sim.set_input(solver, "gravity", gravity.expand(1, 3).clone())
@@ -223,7 +223,7 @@ def test_contact_readouts_of_a_batch_with_and_without_contacts(f64):
     box.set_pos(torch.tensor([[0.0, 0.0, 0.05], [0.0, 0.0, 1.0]], dtype=gs.tc_float))
     for _ in range(200):  # settled; the second box falls 0.2 m, still in the air
         scene.step()
-    solver = scene.rigid_solver
+    solver = scene._rigid_solver
     raw = torch.full((2, solver.data.size["C"], 12), float("nan"), dtype=gs.tc_float)
     solver.kernels.read_contacts(0, raw)  # every element written, the unused rows too
     assert torch.equal(raw, solver.contacts())
@@ -355,7 +355,7 @@ def test_contact_stages_run_only_in_substeps_that_need_them(f64, monkeypatch):
         scene.step()
         solves.append(launched.count("constrain"))
         collides.append(launched.count("collide"))
-        touching.append(sum(bool((scene.rigid_solver.contacts(substep=s)[:, :, 0] >= 0).any()) for s in range(2)))
+        touching.append(sum(bool((scene._rigid_solver.contacts(substep=s)[:, :, 0] >= 0).any()) for s in range(2)))
     assert solves == touching and collides == touching, (solves, collides, touching)
     assert touching[0] == 0 and touching[-1] == 2  # in the air, then resting
     launched.clear()
@@ -380,7 +380,7 @@ def test_more_contacts_than_slots_is_a_named_error(f64, caplog):
 
     caplog.clear()
     scene = boxes(6)
-    worst = contact.worst_case_contacts(scene.rigid_solver.model)
+    worst = contact.worst_case_contacts(scene._rigid_solver.model)
     assert any("max_contacts" in r.getMessage() and f"up to {worst}" in r.getMessage() for r in caplog.records)
     with pytest.raises(gs.SimulationError, match=rf"entities: .*low, high.* more contacts than the 6 slots per env.*"
                                                  rf"max_contacts=.*up to {worst}"):
@@ -414,7 +414,7 @@ def test_contact_slots_grow_as_a_pile_forms_and_keep_its_trajectory(f64):
     contacts than they hold (on the CPU), instead of the step raising; the pile then moves bit for bit
     as in a scene sized for the pairs' worst case from the start, and its gradients are those too."""
     grown, sized = _pile(None), _pile(10 ** 4)
-    start = grown[0].rigid_solver.data.size["C"]
+    start = grown[0]._rigid_solver.data.size["C"]
     velocity = torch.tensor(np.random.default_rng(0).normal(size=(2, 6)) * 0.05)
     for scene, boxes in (grown, sized):
         for box in boxes:
@@ -425,9 +425,9 @@ def test_contact_slots_grow_as_a_pile_forms_and_keep_its_trajectory(f64):
             scene.step()
         for a, b in zip(grown[1], sized[1]):
             assert torch.equal(a.get_qpos(), b.get_qpos()), step
-    slots = grown[0].rigid_solver.data.size["C"]
-    assert slots > start and max(int(n) for n in grown[0].rigid_solver.contacts(substep=3)[:, :, 0].ge(0).sum(1)) > start
-    assert slots < sized[0].rigid_solver.data.size["C"]  # (the worst case: what the pile never needed)
+    slots = grown[0]._rigid_solver.data.size["C"]
+    assert slots > start and max(int(n) for n in grown[0]._rigid_solver.contacts(substep=3)[:, :, 0].ge(0).sum(1)) > start
+    assert slots < sized[0]._rigid_solver.data.size["C"]  # (the worst case: what the pile never needed)
 
     grads = []
     for max_contacts in (None, 10 ** 4):

@@ -79,7 +79,7 @@ def _check_step(spec, n_states=N_STATES, entity=0, mass_scale=None):
     model per env with body_mass and body_inertia scaled and mj_setConst (body_invweight0 anew)."""
     spec.n_envs = n_states
     scene, entities = build_ours(spec)
-    m = build_mujoco(spec, scene.rigid_solver.model)
+    m = build_mujoco(spec, scene._rigid_solver.model)
     rng = np.random.default_rng(rng_seed)
     states = _touching_states(m, rng, n_states)
     qpos = np.array([q for q, _ in states])
@@ -170,7 +170,7 @@ def test_damped_box_lands_with_mujocos_warm_start(f64, cone):
     spec = ContactScene([Body("box", (0.2, 0.15, 0.1), pos=(0.0, 0.0, 0.075), quat=(0.99, 0.05, 0.1, 0.0))],
                         cone=cone)
     scene, (box,) = build_ours(spec)
-    m = build_mujoco(spec, scene.rigid_solver.model)
+    m = build_mujoco(spec, scene._rigid_solver.model)
     m.dof_damping[:] = 2.0
     box.set_dofs_damping(torch.full((6,), 2.0, dtype=torch.float64))
     d = mujoco.MjData(m)
@@ -182,7 +182,7 @@ def test_damped_box_lands_with_mujocos_warm_start(f64, cone):
         scene.step()
         mujoco.mj_step(m, d)
         landed |= d.nefc > 0
-        warm = scene.rigid_solver.warm_start()[0].numpy()
+        warm = scene._rigid_solver.warm_start()[0].numpy()
         assert np.abs(warm - d.qacc_warmstart).max() < 1e-9 * (1.0 + np.abs(d.qacc_warmstart).max())
     assert landed and d.nefc > 0
     assert np.abs(box.get_qpos().numpy() - d.qpos).max() < 1e-12
@@ -224,7 +224,7 @@ def test_bodies_placed_exactly_on_the_plane_step_like_mujoco(f64, shape, size):
         z = size[0] if shape != "box" else size[2] / 2.0
         spec = ContactScene([Body(shape, size, pos=(0.0, 0.0, z), quat=quat)])
         scene, (body,) = build_ours(spec)
-        m = build_mujoco(spec, scene.rigid_solver.model)
+        m = build_mujoco(spec, scene._rigid_solver.model)
         d = mujoco.MjData(m)
         d.qpos[:] = body.get_qpos().numpy()
         scene.step()
@@ -280,7 +280,7 @@ def test_bounding_radii_are_mujocos_bits(f64):
     geoms = "".join(f'<geom type="box" size="{h[0]!r} {h[1]!r} {h[2]!r}"/><geom type="cylinder" size="{h[0]!r} {h[1]!r}"/>'
                     for h in halves)
     m = mujoco.MjModel.from_xml_string(f"<mujoco><worldbody>{geoms}</worldbody></mujoco>")
-    assert np.array_equal(scene.rigid_solver.model.geom_rbound, m.geom_rbound)
+    assert np.array_equal(scene._rigid_solver.model.geom_rbound, m.geom_rbound)
 
 
 @pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
@@ -298,7 +298,7 @@ def test_a_gripper_squeezing_a_cube_moves_as_mujoco(f64, cone, tmp_path):
     cube = scene.add_entity(gs.morphs.Box(size=(0.04, 0.04, 0.04), pos=(0.0, 0.0, 0.1)))
     scene.build()
     try:
-        model = scene.rigid_solver.model
+        model = scene._rigid_solver.model
         spec = mujoco.MjSpec.from_file(str(path))
         spec.compiler.fusestatic = True
         spec.option.timestep = dt
@@ -348,7 +348,7 @@ def test_contacts_of_a_body_with_two_geoms_come_in_mujocos_order(f64, cone, plan
     if plane:
         scene.add_entity(gs.morphs.Plane(pos=(0.0, 0.0, -0.05)))
     scene.build()
-    model = scene.rigid_solver.model
+    model = scene._rigid_solver.model
     spec = mujoco.MjSpec.from_file(str(path))
     if plane:
         spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0.0, 0.0, 1.0], pos=[0.0, 0.0, -0.05])
@@ -368,7 +368,7 @@ def test_contacts_of_a_body_with_two_geoms_come_in_mujocos_order(f64, cone, plan
     for _ in range(3):
         scene.step()
         mujoco.mj_step(m, d)
-    ours = scene.rigid_solver.contacts()[0].numpy()
+    ours = scene._rigid_solver.contacts()[0].numpy()
     mujoco_geom = [1, 2, 3, 4, 0] if plane else [0, 1, 2, 3]  # (MuJoCo numbers the world's geoms first)
     ours = [(mujoco_geom[int(row[0])], mujoco_geom[int(row[1])]) for row in ours if row[0] >= 0]
     theirs = [tuple(int(g) for g in contact.geom) for contact in d.contact[:d.ncon]]

@@ -156,7 +156,7 @@ def test_rows_scale_per_tree_equals_the_dense_formula_f64(f64):
     scene.add_entity(gs.morphs.Capsule(radius=0.05, height=0.2, pos=(0.0, -1.0, 0.5), euler=(0, 40, 0)))
     scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.2), pos=(2.0, 0.0, 0.5)))
     scene.build()
-    solver = scene.rigid_solver
+    solver = scene._rigid_solver
     m, basis = solver.model, solver.invweight_basis
     assert len(basis.groups) == 3
     held = sum(group[2].numel() for group in basis.groups)

@@ -746,7 +746,7 @@ def test_contacts_have_genesis_normal_and_penetration(f64):
     assert torch.allclose(contacts["penetration"], torch.full((4,), 0.0005, dtype=torch.float64), atol=1e-4)
     assert (contacts["penetration"] > 0).all() and (contacts["force_b"][:, 2] > 0).all()
     padded = box.get_contacts(with_entity=plane, is_padded=True)  # the slots, and a valid_mask, as Genesis
-    assert padded["valid_mask"].shape == padded["geom_a"].shape == (scene.rigid_solver.data.size["C"],)
+    assert padded["valid_mask"].shape == padded["geom_a"].shape == (scene._rigid_solver.data.size["C"],)
     assert torch.equal(padded["position"][padded["valid_mask"]], contacts["position"])
 
 

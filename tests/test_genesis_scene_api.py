@@ -442,7 +442,7 @@ def _candidate_pairs(morphs, **options):
     for morph in morphs:
         scene.add_entity(morph)
     scene.build()
-    model = scene.rigid_solver.model
+    model = scene._rigid_solver.model
     return list(zip(model.pair_geom1.tolist(), model.pair_geom2.tolist()))
 
 
@@ -489,7 +489,7 @@ def test_friction_kept_in_the_model(f64, tmp_path):
     scene.add_entity(gs.morphs.URDF(file=path, fixed=True), material=gs.materials.Rigid(friction=0.5))
     scene.add_entity(gs.morphs.Box(), material=gs.materials.Rigid(friction=2.0))
     scene.build()
-    model = scene.rigid_solver.model
+    model = scene._rigid_solver.model
     # file: link a states nothing (Genesis's default 1.0), b's <contact><lateral_friction> 0.3; the material wins
     np.testing.assert_array_equal(model.geom_friction, [1.0, 0.3, 0.3, 0.5, 0.5, 0.5, 2.0])
     np.testing.assert_array_equal(model.geom_link, [0, 1, 1, 2, 3, 3, 4])
@@ -577,7 +577,8 @@ def test_solver_level_readouts_are_the_entities_side_by_side(f64):
     """scene.sim.rigid_solver's get_links_pos/quat/vel/ang, get_dofs_position/velocity and get_qpos
     by scene-wide indices (link.idx, entity.dof_start + local) equal the entities' own readouts,
     batched or not, differentiable as theirs; get_error_envs_mask flags the env whose state went
-    non-finite (a box tumbling to inf under a torque, as in test_robustness)."""
+    non-finite (a box tumbling to inf under a torque, as in test_robustness); scene.rigid_solver is
+    that object, as Genesis's (a named error before build)."""
     for n_envs in (0, 2):
         scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True))
         scene.add_entity(gs.morphs.Plane())
@@ -608,11 +609,16 @@ def test_solver_level_readouts_are_the_entities_side_by_side(f64):
             solver.get_links_pos([solver.n_links])
     heavy = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01))
     tumbler = heavy.add_entity(gs.morphs.Box(size=(0.2, 0.3, 0.1), pos=(0, 0, 3)), material=gs.materials.Rigid(rho=200.0))
+    with pytest.raises(gs.SceneStateError, match="scene.rigid_solver: the scene is not built"):
+        heavy.rigid_solver
     heavy.build(n_envs=2)
     for _ in range(50):
         tumbler.apply_links_external_wrench(torque=[[[0.0, 0.0, 0.0]], [[3.0, -2.0, 1.0]]], links_idx_local=[0])
         heavy.step()
     assert heavy.sim.rigid_solver.get_error_envs_mask().tolist() == [False, True]
+    # Genesis's go2 example asks scene.rigid_solver itself (the same object as scene.sim.rigid_solver)
+    assert heavy.rigid_solver is heavy.sim.rigid_solver
+    assert heavy.rigid_solver.get_error_envs_mask().tolist() == [False, True]
 
 
 def test_default_armature_is_genesis_rotor_unless_mujoco_compatible(f64, tmp_path):

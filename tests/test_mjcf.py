@@ -163,7 +163,7 @@ def _launch(m, d, robot):
 
 def _mujoco_geoms(m, scene, robot):
     """MuJoCo's index of each of the entity's geoms (matched by body, in the body's order)."""
-    model, seen, order = scene.rigid_solver.model, {}, []
+    model, seen, order = scene._rigid_solver.model, {}, []
     for g in range(robot.geom_start, robot.geom_start + robot.n_geoms):
         body = robot.links[int(model.geom_link[g]) - robot.link_start].name
         order.append(m.body(body).geomadr[0] + seen.get(body, 0))
@@ -180,13 +180,13 @@ def test_geoms_contact_parameters_combine_as_mujocos(f64, cone):
     the larger): a capsule and a ramp of condim 1 slide without friction; 1 s beside MuJoCo 4 with
     the bodies launched, equal to round-off (measured 1.6e-12 pyramidal, 2.0e-13 elliptic)."""
     m, d, scene, robot = _pair(CONTACT_PARAMS, cone, integrator="euler")
-    mine, inputs = _mujoco_geoms(m, scene, robot), scene.sim.inputs(scene.rigid_solver)
+    mine, inputs = _mujoco_geoms(m, scene, robot), scene.sim.inputs(scene._rigid_solver)
     np.testing.assert_array_equal(inputs["solref"][0].reshape(-1, 2).numpy(), m.geom_solref[mine])
     np.testing.assert_array_equal(inputs["solimp"][0].reshape(-1, 5).numpy(), m.geom_solimp[mine])
     _launch(m, d, robot)
     dims = set()
     assert _lockstep(m, d, scene, robot, 500, lambda: dims.update(d.contact.dim[:d.ncon].tolist())) < 1e-10
-    assert dims == {1, 3} and set(scene.rigid_solver.model.pair_condim.tolist()) == {1, 3}
+    assert dims == {1, 3} and set(scene._rigid_solver.model.pair_condim.tolist()) == {1, 3}
 
 
 def test_gradients_through_geoms_contact_parameters_match_finite_differences(f64):
@@ -237,7 +237,7 @@ def test_joint_limit_and_friction_loss_softness_as_mujocos(f64, cone):
     beside MuJoCo 4 with the joints swung into their limits, equal to round-off (measured 4.9e-13
     pyramidal, 4.1e-12 elliptic)."""
     m, d, scene, robot = _pair(JOINT_SOFTNESS, cone, integrator="euler")
-    solver = scene.rigid_solver
+    solver = scene._rigid_solver
     model = contact.with_row_softness(solver.model, solver.timeconst)
     dofs = slice(robot.dof_start, robot.dof_start + robot.n_dofs)
     limit = np.concatenate([m.jnt_solref, m.jnt_solimp], axis=1)[m.dof_jntid]  # (MuJoCo's: per joint)
@@ -283,7 +283,7 @@ def test_fixed_tendon_limits_match_mujoco(f64, cone):
     m, d, scene, robot = _pair(TENDONS, cone, integrator="euler")
     mujoco.mj_setConst(m, mujoco.MjData(m))
     limited = np.flatnonzero(m.tendon_limited)
-    np.testing.assert_allclose(scene.sim.inputs(scene.rigid_solver)["invweight_ten"][0].numpy(),
+    np.testing.assert_allclose(scene.sim.inputs(scene._rigid_solver)["invweight_ten"][0].numpy(),
                                m.tendon_invweight0[limited], rtol=1e-12)
     velocity = np.random.default_rng(0).normal(0.0, 3.0, m.nv)
     velocity[:2] = 4.0, -4.0  # (hip and knee: the hamstring stretches)
@@ -379,7 +379,7 @@ def test_fixed_tendon_springs_and_dampers_act_as_mujocos(f64, tmp_path):
     path = _write(tmp_path, SPRUNG_TENDONS, SPRUNG_TENDONS_EXTRA)
     m, d, scene, robot = _pair(path, integrator="euler")
     rest = np.deg2rad(0.5 * 0.3 - 0.5 * -0.2)  # (springrefs in the compiler's degrees)
-    ours = sorted(scene.rigid_solver.model.ten_spring.tolist())  # (ours listed by first joint, MuJoCo's as written)
+    ours = sorted(scene._rigid_solver.model.ten_spring.tolist())  # (ours listed by first joint, MuJoCo's as written)
     np.testing.assert_allclose(ours, sorted([[rest, rest], [-0.1, 0.05], [0.2, 0.2], [0.1, 0.1]]), rtol=1e-15)
     np.testing.assert_allclose(ours, sorted(m.tendon_lengthspring.tolist()), rtol=1e-15)
     d.qvel[:] = velocity = np.random.default_rng(2).normal(0.0, 3.0, m.nv)
@@ -1155,7 +1155,7 @@ def test_partial_arrays_end_as_their_default_classes_as_mujocos(f64, tmp_path):
     scene.build()
     assert (float(robot.get_dofs_kp()[0]), float(robot.get_dofs_kv()[0])) == (50.0, 10.0) == tuple(-m.actuator_biasprm[0, 1:3])
     mine = _mujoco_geoms(m, scene, robot)
-    np.testing.assert_array_equal(scene.sim.inputs(scene.rigid_solver)["solimp"][0].reshape(-1, 5).numpy(),
+    np.testing.assert_array_equal(scene.sim.inputs(scene._rigid_solver)["solimp"][0].reshape(-1, 5).numpy(),
                                   m.geom_solimp[mine])
 
 
@@ -1179,7 +1179,7 @@ def test_replicate_expands_as_mujocos_reader(f64):
     them, poses to round-off), the connect, servos and contact exclusion naming replicated bodies
     are copied per replica (MuJoCo's counts), and 0.5 s with the servos driving match MuJoCo 4."""
     m, d, scene, robot = _pair(REPLICATE, integrator="euler")
-    model = scene.rigid_solver.model
+    model = scene._rigid_solver.model
     bodies = {m.body(b).name: b for b in range(1, m.nbody)}
     ours = {link.name: k for k, link in enumerate(robot.links) if ":" not in link.name and link.name != "world"}
     assert set(ours) == set(bodies) and "block1_2" in ours and "pendulum09" in ours and "peg3" in ours

@@ -195,16 +195,16 @@ def test_a_reset_clears_the_welds_of_the_envs_it_resets(f64, tmp_path):
     solver = scene.sim.rigid_solver
     a, b, arm = (robot.get_link(name).idx for name in ("a", "b", "arm"))
     solver.add_weld_constraint(a, b, envs_idx=[])
-    assert scene.sim.inputs(scene.rigid_solver)["dyn_welds"][:, 0].tolist() == [0.0, 0.0]
+    assert scene.sim.inputs(scene._rigid_solver)["dyn_welds"][:, 0].tolist() == [0.0, 0.0]
     solver.add_weld_constraint(a, b)
     solver.add_weld_constraint(b, arm)
     solver.add_weld_constraint(a, arm, envs_idx=[1])
     solver.delete_weld_constraint(b, a, envs_idx=[1])
-    table = scene.sim.inputs(scene.rigid_solver)["dyn_welds"]
+    table = scene.sim.inputs(scene._rigid_solver)["dyn_welds"]
     assert table[:, 0].tolist() == [2.0, 2.0]
     assert table[1, [1, 2, 17, 18]].tolist() == [a, arm, b, arm]  # (the last, a–arm, in the gap)
     scene.reset(envs_idx=[0])
-    assert scene.sim.inputs(scene.rigid_solver)["dyn_welds"][:, 0].tolist() == [0.0, 2.0]
+    assert scene.sim.inputs(scene._rigid_solver)["dyn_welds"][:, 0].tolist() == [0.0, 2.0]
     solver.add_weld_constraint(a, b, envs_idx=[0])  # (free again in env 0)
     scene.reset()
-    assert scene.sim.inputs(scene.rigid_solver)["dyn_welds"][:, 0].tolist() == [0.0, 0.0]
+    assert scene.sim.inputs(scene._rigid_solver)["dyn_welds"][:, 0].tolist() == [0.0, 0.0]

@@ -66,7 +66,7 @@ def _hull_vertices(model, mesh):
 def _lowest_point(robot, geoms=None):
     """Lowest world z (m) of the robot's collision shapes ``geoms`` (global indices; None: all of
     them) at its current pose; None without any."""
-    model = robot.scene.rigid_solver.model
+    model = robot.scene._rigid_solver.model
     link_pos = robot.get_links_pos().cpu().numpy()
     link_quat = robot.get_links_quat().cpu().numpy()
     lowest = None
@@ -102,7 +102,7 @@ def _collision_elements(path):
 def _plane_held(robot, plane):
     """The robot's geoms (global indices) that collide with the plane: those of a candidate
     pair with it that the solver simulates (pairs without a collider are dropped at build)."""
-    model = robot.scene.rigid_solver.model
+    model = robot.scene._rigid_solver.model
     pairs = zip(model.pair_geom1.tolist(), model.pair_geom2.tolist())
     return sorted({a + b - plane.geom_start for a, b in pairs if plane.geom_start in (a, b)})
 

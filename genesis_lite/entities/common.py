@@ -26,6 +26,15 @@ def replace_columns(table, envs, columns, values):
     return table.index_put((rows, cols), values)
 
 
+def take(table, envs, index, axis=1):
+    """A new tensor: ``table``'s (B, …) rows ``envs`` (int array; None: every row, not gathered)
+    and its entries ``index`` (int array) along ``axis``. index_select: a getter's read in one or
+    two torch calls (indexing with tensors cost four and an extra copy of the table)."""
+    if envs is not None:
+        table = table.index_select(0, torch.as_tensor(envs, device=table.device))
+    return table.index_select(axis, torch.as_tensor(index, device=table.device))
+
+
 def is_range(idx, n):
     """``idx`` (int numpy array) is exactly 0, 1, …, n − 1 (Python lists compare short arrays
     ~10× faster than numpy)."""

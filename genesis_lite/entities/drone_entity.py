@@ -13,6 +13,7 @@ from ..morphs import rotor_coefficients
 from ..runtime import runtime
 from ..solvers.core import InvalidInputError, SceneStateError
 from .common import named_argument_errors
+from ..utils.rotations import rotate
 from .rigid_entity import RigidEntity
 
 
@@ -28,7 +29,6 @@ class DroneEntity(RigidEntity):
         # the drag torque's sign per rotor (Genesis's model "RACE" turns the other way)
         sign = -1.0 if morph.model == "RACE" else 1.0
         self._torque_sign = sign * torch.tensor(morph.propellers_spin, dtype=runtime.tc_float, device=runtime.device)
-        self._along_z = torch.tensor([0.0, 0.0, 1.0], dtype=runtime.tc_float, device=runtime.device)  # a rotor's axis
         self._rpm_set_at = None  # the simulator's transient_clears at the last set_propellers_rpm: once a step
 
     @property
@@ -75,8 +75,18 @@ class DroneEntity(RigidEntity):
         if bool((rpm.detach() < 0).any()):
             raise InvalidInputError(f"entity '{self.name}': argument 'propellers_rpm' must be ≥ 0 (rpm), got "
                                     f"{rpm.detach().cpu().numpy()}")
-        squared = (rpm * rpm)[..., None]  # (B, n, 1)
-        force = self._KF * squared * self._along_z  # (B, n, 3) in each rotor's axes
-        torque = self._KM * self._torque_sign[:, None] * squared * self._along_z
-        self._apply_wrench(self._propellers_local, None, force, torque, None, "link_com", True)
+        self._add_wrench(self._propellers_local, envs, self._rotors_wrench(rpm))
         self._rpm_set_at = sim.transient_clears
+
+    def _rotors_wrench(self, rpm):
+        """(B, 6 n) N, N·m: each rotor's force and moment about its link's origin, world axes, from
+        its speed ``rpm`` (B, n). In the link's axes the thrust (0, 0, F) acts at the centre of mass
+        c, so its moment about the origin is c × (0, 0, F) = (c_y F, −c_x F, 0), and the drag
+        torque is (0, 0, τ): one rotation by the link's quaternion turns both into the world's."""
+        squared = rpm * rpm
+        thrust, drag = self._KF * squared, self._KM * self._torque_sign * squared
+        com = self._links_com(self._propellers_local, None)  # (B, n, 3) m, link axes
+        zero = torch.zeros_like(thrust)
+        local = torch.stack([zero, zero, thrust, com[..., 1] * thrust, -com[..., 0] * thrust, drag], dim=-1)
+        quat = self._link_rows(self._propellers_local, None, slice(3, 7))  # (B, n, 4)
+        return rotate(quat[..., None, :], local.reshape(*rpm.shape, 2, 3)).reshape(len(rpm), -1)

@@ -17,8 +17,10 @@ from ..solvers.rigid.model import BALL, FREE, initial_q
 from . import energy, kinematics
 from .bounds import shapes_aabb
 from ..tensor import wrap
-from .common import EntityIndexing, broadcast, named_argument_errors, replace_columns as _replace
+from .common import EntityIndexing, broadcast, named_argument_errors, replace_columns as _replace, take
 from ..utils.rotations import euler_xyz_to_quat, quat_to_euler_xyz, quat_to_mat, rotate
+
+_BASE = np.zeros(1, dtype=np.int64)  # the base link's local index, as an index array
 
 _MODES = {"force": 0, "position": 1, "velocity": 2}  # ctrl_mode codes (solvers/rigid/actuation.py)
 _NDOFS = {"fixed": 0, "revolute": 1, "prismatic": 1, "free": 6, "ball": 3}
@@ -483,13 +485,12 @@ class RigidEntity(EntityIndexing):
     # -- argument checking ----------------------------------------------------------------------
     # -- raw state/input access -------------------------------------------------------------------
     def _read(self, columns, envs_idx):
-        return self._rows(columns, self._envs(envs_idx))
+        return self._rows(columns, None if envs_idx is None else self._envs(envs_idx))
 
     def _rows(self, columns, envs):
-        """State columns of the envs ``envs`` (int array): (len(envs), len(columns))."""
-        state = self._sim().state(self._solver)
-        envs = torch.as_tensor(envs, device=runtime.device)
-        return state[envs][:, torch.as_tensor(columns, device=runtime.device)]
+        """State columns of the envs ``envs`` (int array; None: every env): (len(envs) or B,
+        len(columns))."""
+        return take(self._sim().state(self._solver), envs, columns)
 
     def _write(self, columns, envs, values, zero_velocity=False):
         """State columns ← values (len(envs), len(columns)) in envs, out of place. zero_velocity:
@@ -502,9 +503,8 @@ class RigidEntity(EntityIndexing):
         sim.set_state(self._solver, _replace(sim.state(self._solver), envs, columns, values), envs)
 
     def _read_input(self, name, columns, envs_idx):
-        envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
-        value = self._sim().inputs(self._solver)[name]
-        return value[envs][:, torch.as_tensor(columns, device=runtime.device)]
+        envs = None if envs_idx is None else self._envs(envs_idx)
+        return take(self._sim().inputs(self._solver)[name], envs, columns)
 
     def _link_columns(self, links, width):
         """The columns of the entity's ``links`` (local indices) in a per-link input of ``width``
@@ -675,15 +675,17 @@ class RigidEntity(EntityIndexing):
     # -- link kinematics ----------------------------------------------------------------------------
     def _links(self, links_idx_local, envs_idx, columns):
         links = self._local(links_idx_local, self.n_links, "links_idx_local")
-        derived = self._sim().derived(self._solver)
-        envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
-        rows = derived[envs][:, torch.as_tensor(self.link_start + links, device=runtime.device)]
-        return rows[..., columns]
+        return self._link_rows(links, envs_idx, columns)
+
+    def _link_rows(self, links, envs_idx, columns):
+        """_links of checked local link indices ``links`` (int array)."""
+        envs = None if envs_idx is None else self._envs(envs_idx)
+        return take(self._sim().derived(self._solver), envs, self.link_start + links)[..., columns]
 
     def get_state(self):
         """RigidEntityState of every env: the base link's pos and quat, with a leading env axis
         (of 1 without envs), as Genesis's (its differentiable tests read ``box.get_state().pos``)."""
-        base = self._links([0], None, slice(0, 7))[:, 0]
+        base = self._link_rows(_BASE, None, slice(0, 7))[:, 0]
         return RigidEntityState(self, wrap(base[:, :3].clone(), self.scene), wrap(base[:, 3:].clone(), self.scene))
 
     def get_links_pos(self, links_idx_local=None, envs_idx=None):
@@ -701,18 +703,22 @@ class RigidEntity(EntityIndexing):
         """Linear velocities of the link frame origins in the world frame, m/s."""
         return self._out(self._links(links_idx_local, envs_idx, slice(10, 13)))
 
+    def _base(self, envs_idx, columns):
+        """The base link's ``columns`` of its kinematics: (k,) or (len(envs), k)."""
+        return self._out(self._link_rows(_BASE, envs_idx, columns)[..., 0, :])
+
     def get_pos(self, envs_idx=None):
         """Base link position, m."""
-        return wrap(self.get_links_pos([0], envs_idx)[..., 0, :], self.scene)
+        return self._base(envs_idx, slice(0, 3))
 
     def get_quat(self, envs_idx=None):
-        return wrap(self.get_links_quat([0], envs_idx)[..., 0, :], self.scene)
+        return self._base(envs_idx, slice(3, 7))
 
     def get_vel(self, envs_idx=None):
-        return wrap(self.get_links_vel([0], envs_idx)[..., 0, :], self.scene)
+        return self._base(envs_idx, slice(10, 13))
 
     def get_ang(self, envs_idx=None):
-        return wrap(self.get_links_ang([0], envs_idx)[..., 0, :], self.scene)
+        return self._base(envs_idx, slice(7, 10))
 
     def get_AABB(self, envs_idx=None):
         """The world-axes box holding the entity's collision shapes at their current poses, m: (2, 3)
@@ -792,12 +798,13 @@ class RigidEntity(EntityIndexing):
         if point is not None:
             offset = point - origin if not local else turned.pop(0) + (0.0 if offset is None else offset)
         moment = t if offset is None else t + torch.linalg.cross(offset, f)
-        wrench = torch.cat([f, moment], dim=-1).reshape(len(envs), -1)
+        self._add_wrench(links, envs, torch.cat([f, moment], dim=-1).reshape(len(envs), -1))
+
+    def _add_wrench(self, links, envs, wrench):
+        """The step's external wrench of local links ``links`` (n,) in envs ``envs`` (int array)
+        += ``wrench`` (len(envs), 6n): per link force then moment about its origin, world axes."""
         columns = (6 * (self.link_start + links)[:, None] + np.arange(6)).ravel()
-        current = self._sim().inputs(self._solver)["xfrc"]
-        rows = torch.as_tensor(envs, device=runtime.device)
-        self._write_input("xfrc", columns, envs, current[rows][:, torch.as_tensor(columns, device=runtime.device)]
-                          + wrench)
+        self._write_input("xfrc", columns, envs, take(self._sim().inputs(self._solver)["xfrc"], envs, columns) + wrench)
 
     # -- Jacobian and inverse kinematics (entities/kinematics.py) -----------------------------------
     def _own_link(self, link, what):

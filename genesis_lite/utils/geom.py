@@ -262,7 +262,7 @@ def random_quaternion(batch_size):
 @_arrays(v=3, quat=4)
 def transform_by_quat(v, quat):
     """(..., 3) vectors rotated by (..., 4) quaternions of any non-zero norm."""
-    return (rotations.quat_to_mat(_rotation("transform_by_quat", "quat", quat)) @ v[..., None])[..., 0]
+    return rotations.rotate(_rotation("transform_by_quat", "quat", quat), v)
 
 
 @_arrays(pos=3, quat=4)

@@ -62,8 +62,10 @@ def rotate(quat, vectors):
     """(..., 3) ``vectors`` turned by (..., 4) unit quaternions (w, x, y, z), broadcast together:
     v + 2w (u × v) + u × (2 u × v), u = (x, y, z): fewer operations than through quat_to_mat."""
     w, u = quat[..., :1], quat[..., 1:]
-    u = u.expand(*torch.broadcast_shapes(u.shape, vectors.shape))
-    turn = 2.0 * torch.linalg.cross(u, vectors.expand_as(u))
+    # (linalg.cross broadcasts batch axes of as many dims: the fewer get leading ones)
+    u = u.reshape((1,) * (vectors.dim() - u.dim()) + u.shape)
+    vectors = vectors.reshape((1,) * (u.dim() - vectors.dim()) + vectors.shape)
+    turn = 2.0 * torch.linalg.cross(u, vectors)
     return vectors + w * turn + torch.linalg.cross(u, turn)
 
 
