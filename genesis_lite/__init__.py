@@ -23,7 +23,7 @@ try:
     from .options import constraint_solver, friction_cone
     from .solvers.core import (AssetError, GenesisException, GradientError, InvalidInputError, SceneStateError,
                                SimulationError)
-    from .runtime import cpu, destroy, gpu, init, runtime
+    from .runtime import cpu, destroy, gpu, init, logger, runtime
     from .scene import Scene, SimState
     from .tensor import (Tensor, from_numpy, from_torch, ones, ones_like, rand, randn, tensor, zeros,
                          zeros_like)

@@ -132,7 +132,7 @@ MUJOCO_TIMECONST, GENESIS_TIMECONST = 0.02, 0.01
 MUJOCO_ITERATIONS, GENESIS_ITERATIONS = 100, 25
 
 
-@named_keywords("gravity", "disable_constraint", "multiplier_collision_broad_phase",
+@named_keywords("disable_constraint", "multiplier_collision_broad_phase",
            "integrator", "IK_max_targets", "noslip_iterations", "noslip_tolerance", "contact_resolution",
            "enable_torsional_friction", "enable_rolling_friction", "contact_pruning_tolerance", "sparse_solve",
            "use_hibernation", "hibernation_thresh_vel", "enable_multi_contact",
@@ -198,6 +198,9 @@ class RigidOptions(_TimeBased):
     batch_links_info, batch_joints_info, batch_dofs_info: Genesis's switches that let link, joint
         and dof parameters (masses, gains, friction…) differ per env; ours always may (every
         parameter is stored per env), so either value works, as True does in Genesis.
+    gravity: (3,) m/s² or None (SimOptions.gravity): the rigid bodies' own gravity, as Genesis's
+        (its IK examples float a robot with (0, 0, 0)); scene.set_gravity sets it with every
+        solver's.
     smooth_contact (ours): the solimp of every geom whose asset states none (an MJCF geom's
         solimp is kept) becomes (0, 0.95, 0.001, 0.5, 2), whose impedance starts at zero at
         contact onset, so a contact's force grows from zero with depth instead of jumping
@@ -228,9 +231,12 @@ class RigidOptions(_TimeBased):
     max_dynamic_constraints: int = 0
     max_collision_pairs: int = 150
     box_box_detection: bool = None
+    gravity: tuple = None
 
     def __post_init__(self):
         owner = "RigidOptions"
+        if self.gravity is not None:
+            self.gravity = _check_vec3(owner, "gravity", self.gravity)
         if not (is_int(self.max_collision_pairs) and self.max_collision_pairs >= 0):
             raise InvalidInputError(f"{owner}: argument 'max_collision_pairs' must be an integer >= 0, got "
                                     f"{self.max_collision_pairs!r}")

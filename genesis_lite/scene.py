@@ -425,17 +425,22 @@ class Scene:
         return tuple(entity.name for entity in self.entities)
 
     def get_entity(self, name=None, *, uid=None):
-        """The entity named ``name`` (Genesis's lookup; entities have no uid here, so ``uid`` must
-        stay None)."""
-        if uid is not None:
-            raise InvalidInputError(f"scene.get_entity: argument 'uid' must be None (genesis_lite's entities have no "
-                                    f"uid; look them up by name), got {uid!r}")
-        if name is None:
-            raise InvalidInputError("scene.get_entity: missing a required argument: 'name'")
-        match = [entity for entity in self.entities if entity.name == name]
+        """The entity named ``name``, or whose uid's short form (``entity.uid.short()``, seven hex
+        digits) is ``uid``: one of the two, as Genesis's lookup."""
+        if name is None and uid is None:
+            raise InvalidInputError("scene.get_entity: missing a required argument: 'name' or 'uid'")
+        if name is not None and uid is not None:
+            raise InvalidInputError(f"scene.get_entity: expected one of the arguments 'name' and 'uid', got both "
+                                    f"(name={name!r}, uid={uid!r})")
+        if name is not None:
+            match = [entity for entity in self.entities if entity.name == name]
+            known = f"the name of an entity of the scene {list(self.entity_names)}"
+        else:
+            match = [entity for entity in self.entities if entity.uid.match(uid, short_only=True)]
+            known = f"the short uid of an entity of the scene {[e.uid.short() for e in self.entities]}"
         if not match:
-            raise InvalidInputError(f"scene.get_entity: argument 'name' must be the name of an entity of the scene "
-                                    f"{list(self.entity_names)}, got {name!r}")
+            raise InvalidInputError(f"scene.get_entity: argument '{'name' if name is not None else 'uid'}' must be "
+                                    f"{known}, got {name if name is not None else uid!r}")
         return match[0]
 
     def destroy(self):

@@ -691,6 +691,20 @@ def test_add_entity_takes_genesis_arguments_in_genesis_order(f64):
     scene.add_entity(gs.morphs.Sphere(), surface=gs.surfaces.Default(vis_mode="particle"), vis_mode="visual")
     with pytest.raises(gs.InvalidInputError, match="surfaces.Default: argument 'vis_mode' must be None or a str"):
         gs.surfaces.Default(vis_mode=3)
+    # Genesis's surface kinds: Default's arguments and drawing, Genesis's default colours, their look refused by name
+    kinds = ["BSDF", "Plastic", "Rough", "Smooth", "Reflective", "Collision", "Metal", "Iron", "Aluminium", "Copper",
+             "Gold", "Glass", "Water", "Emission"]
+    for kind in kinds:
+        surface = getattr(gs.surfaces, kind)(color=(0.2, 0.4, 0.6))
+        assert isinstance(surface, gs.surfaces.Default) and surface.color == (0.2, 0.4, 0.6)
+        with pytest.raises(gs.InvalidInputError, match=f"{kind}: argument 'roughness' is a Genesis option"):
+            getattr(gs.surfaces, kind)(roughness=0.5)
+        with pytest.raises(gs.InvalidInputError, match=f"surfaces.{kind}: argument 'color'"):
+            getattr(gs.surfaces, kind)(color=(2.0, 0.0, 0.0))
+    assert gs.surfaces.Collision().color == (0.5, 0.5, 0.5) and gs.surfaces.Water().color == (0.61, 0.98, 0.93)
+    assert gs.surfaces.Rough().color is None  # (the asset's own colours)
+    tinted = scene.add_entity(gs.morphs.Sphere(pos=(1.0, 0.0, 0.5)), surface=gs.surfaces.Rough(color=(1, 0, 0)))
+    assert tinted.surface.color == (1.0, 0.0, 0.0)
 
 
 def test_tensor_without_data_is_a_named_error(f64, pendulum):
@@ -762,8 +776,9 @@ def test_joints_answer_genesis_deprecated_singular_names(f64, pendulum, caplog):
 
 
 def test_joint_and_scene_indices_as_genesis(f64):
-    """RigidJoint's n_qs, idx_local, dof/q start and end, and the scene's substeps, requires_grad
-    and entity_names, as Genesis's (a Genesis user's port met them missing)."""
+    """RigidJoint's n_qs, idx_local, dof/q start and end, and the scene's substeps, requires_grad,
+    entity_names, get_entity (by name or uid) and base_joint, as Genesis's (a Genesis user's port met them
+    missing)."""
     scene = gs.Scene(sim_options=gs.options.SimOptions(substeps=2), show_viewer=False)
     scene.add_entity(gs.morphs.Plane(), name="floor")
     box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.0, 0.0, 0.5)), name="box")
@@ -774,11 +789,21 @@ def test_joint_and_scene_indices_as_genesis(f64):
     with pytest.raises(gs.InvalidInputError, match=r"get_entity: argument 'name' must be the name of an entity of the "
                                                    r"scene \['floor', 'box', 'arm'\], got 'cup'"):
         scene.get_entity("cup")
-    with pytest.raises(gs.InvalidInputError, match=r"get_entity: argument 'uid' must be None"):
-        scene.get_entity(uid="abc1234")
+    # Genesis's uid: 32 random hex digits, looked up by their first seven (its entity_name tutorial)
+    uids = [entity.uid for entity in (scene.get_entity("floor"), box, arm)]
+    assert len({str(uid) for uid in uids}) == 3 and all(len(str(uid)) == 32 for uid in uids)
+    assert scene.get_entity(uid=box.uid.short()) is box and box.uid.match(str(box.uid))
+    assert f"{box.uid}" == f"<{box.uid.short()}>" and box.uid.full() == f"{str(box.uid)[:7]}-{str(box.uid)[7:]}"
+    with pytest.raises(gs.InvalidInputError, match=r"get_entity: argument 'uid' must be the short uid of an entity"):
+        scene.get_entity(uid="zzzzzzz")
+    with pytest.raises(gs.InvalidInputError, match=r"get_entity: expected one of the arguments 'name' and 'uid'"):
+        scene.get_entity("box", uid=box.uid.short())
     root = box.joints[0]
     assert (root.n_dofs, root.n_qs, root.idx_local, root.dof_start, root.dof_end, root.q_start, root.q_end) == (
         6, 7, 0, 0, 6, 0, 7)
+    assert box.base_joint is root and list(box.base_joint.dofs_idx) == list(range(6))
+    with pytest.raises(gs.InvalidInputError, match=r"entity 'arm': base_joint: the base link .* is welded"):
+        arm.base_joint
     last = arm.joints[-1]
     assert (last.n_qs, last.idx_local, last.dof_start, last.dof_end, last.q_start, last.q_end) == (
         1, 6, 12, 13, 13, 14)

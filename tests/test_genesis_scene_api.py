@@ -660,3 +660,25 @@ def test_default_armature_on_motor_joints_only_and_urdf_gains(f64):
     assert arm.get_dofs_velocity()[2].item() == pytest.approx(-9.81 * 0.01, rel=1e-12)
     assert panda.get_dofs_kp().tolist() == [100.0] * 9
     assert panda.get_dofs_kv().tolist() == [40.0] * 7 + [10.0] * 2  # the fingers have no safety controller
+
+
+def test_rigid_options_gravity_is_the_rigid_bodies_own(f64):
+    """RigidOptions(gravity=...) (Genesis's; its IK examples float a robot with (0, 0, 0)) is the
+    rigid solver's gravity in place of SimOptions.gravity: a free box falls by it, z_n = z_0 +
+    g dt² n(n + 1)/2 (semi-implicit Euler), none at all with zeros; get_gravity reports it and
+    set_gravity still sets it; a bad one is a named error."""
+    dt, steps = 0.01, 20
+    for g in (-2.0, 0.0):
+        scene = gs.Scene(sim_options=gs.options.SimOptions(dt=dt, gravity=(0.0, 0.0, -9.81)),
+                         rigid_options=gs.options.RigidOptions(gravity=(0.0, 0.0, g)))
+        box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.0, 0.0, 5.0)))
+        scene.build()
+        assert scene.get_gravity().tolist() == [0.0, 0.0, g]
+        for _ in range(steps):
+            scene.step()
+        assert float(box.get_pos()[2]) == pytest.approx(5.0 + g * dt ** 2 * steps * (steps + 1) / 2, abs=1e-12)
+        assert box.get_pos()[:2].abs().max() == 0.0
+    scene.set_gravity((0.0, 0.0, -1.0))
+    assert scene.get_gravity().tolist() == [0.0, 0.0, -1.0]
+    with pytest.raises(gs.InvalidInputError, match="RigidOptions: argument 'gravity'"):
+        gs.options.RigidOptions(gravity=(0.0, -9.81))

@@ -319,3 +319,12 @@ def test_the_import_leaves_the_garbage_collector_as_it_found_it(collecting):
             "print(gc.isenabled(), hasattr(genesis_lite, '_collecting'))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip().splitlines()[-1] == f"{collecting} False"
+
+
+def test_gs_logger_is_genesis_lite_s_logger(caplog):
+    """gs.logger (Genesis's examples log through it): the 'genesis_lite' logger, Genesis's calls."""
+    with caplog.at_level(logging.INFO, logger="genesis_lite"):
+        gs.logger.info("from a script")
+        gs.logger.warning("careful")
+    assert [record.getMessage() for record in caplog.records][-2:] == ["from a script", "careful"]
+    assert all(callable(getattr(gs.logger, name)) for name in ("debug", "info", "warning", "error", "critical"))

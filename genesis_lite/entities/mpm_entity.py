@@ -14,6 +14,7 @@ from ..materials import MPM
 from ..solvers.core import AssetError, InvalidInputError, SceneStateError, refuse_grad, runtime, warn_user
 from ..solvers.mpm import layout, sampling
 from ..tensor import wrap
+from ..utils.uid import UID
 from .common import EntityIndexing, all_finite, broadcast, is_range, named_argument_errors, replace_columns
 
 
@@ -111,6 +112,7 @@ class MPMEntity(EntityIndexing):
                  particles=None):
         self.scene, self.idx, self.name = scene, idx, name
         self.morph, self.material, self.surface = morph, material, surface
+        self.uid = UID()  # (Genesis's: scene.get_entity(uid=...) finds the entity by its short form)
         self._solver = solver
         self.particle_start, self.n_particles = int(particle_start), int(n_particles)
         self.init_particles = None if particles is None else np.asarray(particles, dtype=np.float64)

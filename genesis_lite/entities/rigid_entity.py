@@ -18,6 +18,7 @@ from . import energy, kinematics
 from .bounds import shapes_aabb
 from ..tensor import wrap
 from .common import EntityIndexing, broadcast, named_argument_errors, replace_columns as _replace, take
+from ..utils.uid import UID
 from ..utils.rotations import euler_xyz_to_quat, quat_to_euler_xyz, quat_to_mat, rotate
 
 _BASE = np.zeros(1, dtype=np.int64)  # the base link's local index, as an index array
@@ -307,6 +308,7 @@ class RigidEntity(EntityIndexing):
     def __init__(self, scene, idx, name, morph, material, surface, link_specs, solver):
         self.scene, self.idx, self.name = scene, idx, name
         self.morph, self.material, self.surface = morph, material, surface
+        self.uid = UID()  # (Genesis's: scene.get_entity(uid=...) finds the entity by its short form)
         self._specs = link_specs
         self._solver = solver
         self._solver_idx = solver.add_entity(name, link_specs)
@@ -432,6 +434,16 @@ class RigidEntity(EntityIndexing):
     def base_link(self):
         """The entity's first link (its first tree's root), as Genesis's."""
         return self.links[0]
+
+    @property
+    def base_joint(self):
+        """The base link's joint, as Genesis's (a free base's: its 6 dofs). A base welded to the
+        world has no RigidJoint here (Genesis keeps a fixed joint object): a named error."""
+        if not self.joints or self.joints[0].link is not self.base_link:
+            raise InvalidInputError(f"entity '{self.name}': base_joint: the base link '{self.base_link.name}' is "
+                                    f"welded to the world; only joints that move are RigidJoints here "
+                                    f"({[joint.name for joint in self.joints]})")
+        return self.joints[0]
 
     @property
     def base_link_idx(self):

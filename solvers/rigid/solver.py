@@ -54,6 +54,7 @@ class RigidSolver(Solver):
         self.friction = self.welds_on = False  # some dof has friction loss; some env a run-time weld
         self._packed = {}  # width → the (B, width) buffer _pack_inputs writes
         self.substeps = sim_options.substeps
+        self.gravity = rigid_options.gravity or sim_options.gravity  # (3,) m/s²: the default input
         self._commit = 1  # 0 while a backward replays a step: its frames stay for the reverse
         self._replaying = 0  # 1 while a backward replays a step given its replay_record (the solutions)
         self._warned_capped = False  # _check_capped warned
@@ -157,7 +158,7 @@ class RigidSolver(Solver):
         per_env = {
             "mass": m.link_mass0, "com": m.link_com.reshape(-1), "inertia": m.link_inertia.reshape(-1),
             "damping": m.dof_damping, "armature": m.dof_armature,
-            "stiffness": m.dof_stiffness, "kp": m.dof_kp, "kv": m.dof_kv, "gravity": np.array(self.sim_options.gravity),
+            "stiffness": m.dof_stiffness, "kp": m.dof_kp, "kv": m.dof_kv, "gravity": np.array(self.gravity),
             "ctrl_force": np.zeros(m.n_dofs), "ctrl_pos": np.zeros(m.n_dofs), "ctrl_vel": np.zeros(m.n_dofs),
             "xfrc": np.zeros(6 * m.n_links),
             "frictionloss": m.dof_frictionloss, "force_lo": -effort, "force_hi": effort,
