@@ -20,11 +20,12 @@ _collecting = gc.isenabled()
 gc.disable()
 try:
     from . import materials, morphs, options, surfaces, utils
-    from .options import constraint_solver, friction_cone
+    from .options import constraint_solver, friction_cone, link_ref_frame
     from .solvers.core import (AssetError, GenesisException, GradientError, InvalidInputError, SceneStateError,
                                SimulationError)
     from .runtime import cpu, destroy, gpu, init, logger, runtime
     from .scene import Scene, SimState
+    from .utils.geom import *  # noqa: F401,F403 (Genesis's gs.<name> of every gs.utils.geom function)
     from .tensor import (Tensor, from_numpy, from_torch, ones, ones_like, rand, randn, tensor, zeros,
                          zeros_like)
 finally:

@@ -99,6 +99,15 @@ class friction_cone:
     elliptic = "elliptic"
 
 
+class link_ref_frame:
+    """``gs.link_ref_frame``: where a per-link quantity is taken: the link frame's origin, the
+    link's centre of mass (link_COM), or the centre of mass of the kinematic tree the link is in
+    (root_COM), as Genesis's (whose members are IntEnums)."""
+    root_COM = "root_com"
+    link_COM = "link_com"
+    link_origin = "link_origin"
+
+
 class _TimeBased:
     """A solver option ``dt`` (Genesis's TimeBasedMixin): the solver's substep, s, or None
     (SimOptions.dt / SimOptions.substeps). A given dt must divide SimOptions.dt an integer number

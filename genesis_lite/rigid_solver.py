@@ -66,29 +66,33 @@ class RigidSolverView(EntityIndexing):
     def n_qs(self):
         return sum(entity.n_qs for entity in self._rigid_entities())
 
-    def _joined(self, getter, idx, n, arg, envs_idx):
-        """Every rigid entity's ``getter(None, envs_idx)`` (…, n_k[, width]) joined along its entity
-        axis (links: −2, dofs and qs: −1), then the scene-wide indices ``idx`` (None: all)."""
+    def _joined(self, getter, idx, n, arg, envs_idx, **options):
+        """Every rigid entity's ``getter(None, envs_idx, **options)`` (…, n_k[, width]) joined
+        along its entity axis (links: −2, dofs and qs: −1), then the scene-wide indices ``idx``
+        (None: all)."""
         self._envs(envs_idx)  # (its errors name this solver)
         picked = self._local(idx, n, arg)
-        parts = [getattr(entity, getter)(None, envs_idx) for entity in self._rigid_entities()]
+        parts = [getattr(entity, getter)(None, envs_idx, **options) for entity in self._rigid_entities()]
         axis = -2 if arg == "links_idx" else -1
         joined = torch.cat([part.as_subclass(torch.Tensor) for part in parts], dim=axis)
         index = torch.as_tensor(picked, device=joined.device)
         return wrap(joined.index_select(joined.dim() + axis, index), self.scene)
 
-    def get_links_pos(self, links_idx=None, envs_idx=None):
-        """World positions of the links' origins, m: (n, 3) or (n_envs, n, 3), scene-wide link
-        indices (link.idx) ``links_idx`` (None: all)."""
-        return self._joined("get_links_pos", links_idx, self.n_links, "links_idx", envs_idx)
+    def get_links_pos(self, links_idx=None, envs_idx=None, *, ref="link_origin", relative=True):
+        """World positions of the links at ``ref`` (the entities' get_links_pos), m: (n, 3) or
+        (n_envs, n, 3), scene-wide link indices (link.idx) ``links_idx`` (None: all)."""
+        return self._joined("get_links_pos", links_idx, self.n_links, "links_idx", envs_idx, ref=ref,
+                            relative=relative)
 
     def get_links_quat(self, links_idx=None, envs_idx=None):
         """World orientations (w, x, y, z): (n, 4) or (n_envs, n, 4)."""
         return self._joined("get_links_quat", links_idx, self.n_links, "links_idx", envs_idx)
 
-    def get_links_vel(self, links_idx=None, envs_idx=None):
-        """World linear velocities of the links' origins, m/s: (n, 3) or (n_envs, n, 3)."""
-        return self._joined("get_links_vel", links_idx, self.n_links, "links_idx", envs_idx)
+    def get_links_vel(self, links_idx=None, envs_idx=None, *, ref="link_origin", relative=True):
+        """World linear velocities of the links at ``ref`` (the entities' get_links_vel), m/s: (n, 3)
+        or (n_envs, n, 3)."""
+        return self._joined("get_links_vel", links_idx, self.n_links, "links_idx", envs_idx, ref=ref,
+                            relative=relative)
 
     def get_links_ang(self, links_idx=None, envs_idx=None):
         """World angular velocities, rad/s: (n, 3) or (n_envs, n, 3)."""

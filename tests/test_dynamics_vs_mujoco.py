@@ -256,3 +256,41 @@ def test_rows_scale_of_sliding_leaves_matches_mujoco_f64(f64, tmp_path, merge):
                                   rtol=1e-10, atol=0), link.name
     finally:
         scene.destroy()
+
+
+@pytest.mark.parametrize("name", ["kuka", "quadruped"])
+def test_links_at_their_centres_of_mass_match_mujoco_f64(f64, name):
+    """get_links_pos/get_links_vel at gs.link_ref_frame.link_COM equal MuJoCo's body inertial
+    frames (xipos, mj_objectVelocity of mjOBJ_BODY), and at root_COM the robot's centre of mass
+    (subtree_com of MuJoCo's root body), at random states; a link MuJoCo fuses into its parent is
+    left out."""
+    path, free = ROBOTS[name]
+    scene, robot = limit_free_scene(path, free, DT)
+    try:
+        model = mujoco_ref.load_model(path, free_base=free, dt=DT)
+        data = mujoco.MjData(model)
+        rng = np.random.default_rng(7)
+        for _ in range(3):
+            joints, base = random_state(robot, rng, free, q_range=1.5)
+            set_state(robot, joints, base)
+            mujoco_ref._set_state(model, data, {j: v[0] for j, v in joints.items()}, {j: v[1] for j, v in joints.items()},
+                                  None if base is None else base[0], None if base is None else base[1])
+            mujoco.mj_forward(model, data)
+            com = robot.get_links_pos(ref=gs.link_ref_frame.link_COM).numpy()
+            com_vel = robot.get_links_vel(ref=gs.link_ref_frame.link_COM).numpy()
+            tree = robot.get_links_pos(ref=gs.link_ref_frame.root_COM).numpy()
+            compared = 0
+            for k, link in enumerate(robot.links):
+                body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, link.name)
+                if body < 0 or model.body_mass[body] == 0.0:
+                    continue
+                velocity = np.zeros(6)
+                mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, body, velocity, 0)
+                assert np.abs(com[k] - data.xipos[body]).max() < 1e-12, link.name
+                assert np.abs(com_vel[k] - velocity[3:]).max() < 1e-11, link.name
+                compared += 1
+            assert compared >= 5
+            root = int(model.body_rootid[1])
+            assert np.abs(tree - data.subtree_com[root]).max() < 1e-12
+    finally:
+        scene.destroy()

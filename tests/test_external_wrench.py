@@ -135,7 +135,7 @@ def test_bad_arguments_raise(f64):
         robot.apply_links_external_wrench()
     with pytest.raises(gs.InvalidInputError, match="'pos' needs a 'force'"):
         robot.apply_links_external_wrench(torque=[[0.0, 0.0, 1.0]], links_idx_local=[1], pos=[[0.0, 0.0, 0.0]])
-    with pytest.raises(gs.InvalidInputError, match="'ref' must be 'link_origin' or 'link_com'"):
+    with pytest.raises(gs.InvalidInputError, match="'ref' must be gs.link_ref_frame.link_origin"):
         robot.apply_links_external_wrench(force=[[0.0, 0.0, 1.0]], links_idx_local=[1], ref="root_com")
     with pytest.raises(gs.InvalidInputError, match="'local' must be a bool"):
         robot.apply_links_external_wrench(force=[[0.0, 0.0, 1.0]], links_idx_local=[1], local="False")

@@ -1225,3 +1225,29 @@ def test_entity_build_facts_are_genesis(f64):
     np.testing.assert_allclose(arm.init_qpos, mujoco.MjModel.from_xml_path(asset("mjcf", "arm.xml")).qpos0,
                                atol=1e-15)
     assert box.init_qpos.tolist() == [0.5, 0.2, 0.3, 1.0, 0.0, 0.0, 0.0] and gripper.init_qpos.size == 0
+
+
+def test_link_reference_frames_batched_and_checked(f64):
+    """gs.link_ref_frame in get_links_pos/vel (and the solver's scene-wide ones): batched with
+    envs_idx as the all-env read's rows; a box's centre of mass is its origin, and its tree's the
+    two boxes' own (separate trees); root_COM refused for velocities, a bad ref or relative by name."""
+    scene = gs.Scene()
+    boxes = [scene.add_entity(gs.morphs.Box(size=(0.1, 0.2, 0.3), pos=(x, 0.0, 1.0))) for x in (0.0, 1.0)]
+    scene.build(n_envs=3)
+    box = boxes[1]
+    box.set_dofs_velocity(torch.tensor([[0.1, 0.2, 0.3, 1.0, -2.0, 0.5]], dtype=torch.float64).repeat(3, 1))
+    scene.step()
+    for ref in ("link_origin", "link_COM", "root_COM"):
+        every = box.get_links_pos(ref=getattr(gs.link_ref_frame, ref))
+        assert every.shape == (3, 1, 3) and torch.equal(box.get_links_pos(envs_idx=[2, 0], ref=getattr(
+            gs.link_ref_frame, ref)), every[[2, 0]])
+        assert torch.allclose(every, box.get_links_pos(), atol=1e-15, rtol=0)
+    assert torch.equal(scene.sim.rigid_solver.get_links_pos([1], ref=gs.link_ref_frame.link_COM, relative=False),
+                       box.get_links_pos(ref=gs.link_ref_frame.link_COM))
+    assert torch.allclose(box.get_links_vel(ref=gs.link_ref_frame.link_COM), box.get_links_vel(), atol=1e-15, rtol=0)
+    with pytest.raises(gs.InvalidInputError, match="get_links_vel argument 'ref' must be one of"):
+        box.get_links_vel(ref=gs.link_ref_frame.root_COM)
+    with pytest.raises(gs.InvalidInputError, match="get_links_pos argument 'ref'"):
+        box.get_links_pos(ref="centre")
+    with pytest.raises(gs.InvalidInputError, match="'relative'"):
+        box.get_links_pos(relative=1)

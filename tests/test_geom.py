@@ -187,3 +187,9 @@ def test_genesis_names():
     assert gs.utils.geom is geom
     for name in ("quat_to_xyz", "transform_by_quat", "inv_quat", "transform_quat_by_quat", "xyz_to_quat"):
         assert callable(getattr(gs.utils.geom, name))
+
+
+def test_every_function_is_at_gs_top_level_too():
+    """Genesis's ``from .utils.geom import *``: its examples call gs.transform_quat_by_quat etc."""
+    for name in geom.__all__:
+        assert getattr(gs, name) is getattr(geom, name), name

@@ -700,9 +700,21 @@ class RigidEntity(EntityIndexing):
         base = self._link_rows(_BASE, None, slice(0, 7))[:, 0]
         return RigidEntityState(self, wrap(base[:, :3].clone(), self.scene), wrap(base[:, 3:].clone(), self.scene))
 
-    def get_links_pos(self, links_idx_local=None, envs_idx=None):
-        """Link frame origins in the world, m: (n_links, 3) or (n_envs, n_links, 3)."""
-        return self._out(self._links(links_idx_local, envs_idx, slice(0, 3)))
+    def get_links_pos(self, links_idx_local=None, envs_idx=None, *, ref="link_origin", relative=True):
+        """Link positions in the world, m: (n_links, 3) or (n_envs, n_links, 3), at ``ref``
+        (gs.link_ref_frame, as Genesis's): the link frame's origin ("link_origin"), the link's
+        centre of mass ("link_com", Genesis's link_COM) or the centre of mass of the kinematic tree
+        the link is in ("root_com", root_COM: every link with the same root, welded base
+        included). relative: Genesis's choice between its authored and its internal link origins
+        (shifted by its morphs' offsets and inertial alignment), which are the same here (a
+        bool)."""
+        links = self._local(links_idx_local, self.n_links, "links_idx_local")
+        ref = self._link_ref(ref, "get_links_pos", relative, roots=True)
+        if ref == "link_origin":
+            return self._out(self._link_rows(links, envs_idx, slice(0, 3)))
+        if ref == "link_com":
+            return self._out(self._coms_world(links, envs_idx)[0])
+        return self._out(self._trees_com(links, envs_idx))
 
     def get_links_quat(self, links_idx_local=None, envs_idx=None):
         return self._out(self._links(links_idx_local, envs_idx, slice(3, 7)))
@@ -711,9 +723,46 @@ class RigidEntity(EntityIndexing):
         """Link angular velocities in the world frame, rad/s."""
         return self._out(self._links(links_idx_local, envs_idx, slice(7, 10)))
 
-    def get_links_vel(self, links_idx_local=None, envs_idx=None):
-        """Linear velocities of the link frame origins in the world frame, m/s."""
-        return self._out(self._links(links_idx_local, envs_idx, slice(10, 13)))
+    def get_links_vel(self, links_idx_local=None, envs_idx=None, *, ref="link_origin", relative=True):
+        """Linear velocities in the world frame, m/s, of the link frame origins ("link_origin") or
+        of the links' centres of mass ("link_com": v + ω × (R c)), as Genesis's; relative as in
+        get_links_pos."""
+        links = self._local(links_idx_local, self.n_links, "links_idx_local")
+        if self._link_ref(ref, "get_links_vel", relative, roots=False) == "link_origin":
+            return self._out(self._link_rows(links, envs_idx, slice(10, 13)))
+        offset, kinematics = self._coms_world(links, envs_idx)[1:]
+        return self._out(kinematics[..., 10:13] + torch.linalg.cross(kinematics[..., 7:10], offset))
+
+    def _link_ref(self, ref, method, relative, roots):
+        """``ref`` checked (a gs.link_ref_frame; root_com where ``roots``) and ``relative`` a bool."""
+        check_bool(self._who, "relative", relative)
+        allowed = ("link_origin", "link_com") + (("root_com",) if roots else ())
+        if ref not in allowed:
+            raise InvalidInputError(f"{self._who}: {method} argument 'ref' must be one of gs.link_ref_frame's "
+                                    f"{allowed}, got {ref!r}")
+        return ref
+
+    def _coms_world(self, links, envs_idx):
+        """The links' centres of mass in the world (B', n, 3) m, their offsets from the link origins
+        (world axes) and the links' kinematics (B', n, 13)."""
+        kinematics = self._link_rows(links, envs_idx, slice(0, 13))
+        offset = rotate(kinematics[..., 3:7], self._links_com(links, envs_idx))
+        return kinematics[..., :3] + offset, offset, kinematics
+
+    def _trees_com(self, links, envs_idx):
+        """(B', n, 3) m: the centre of mass of each link's kinematic tree (every link of the scene
+        with the same root link, the model's link_root), mass-weighted."""
+        model = self._solver.model
+        roots = model.link_root
+        members = torch.as_tensor(roots[None, :] == roots[self.link_start + links][:, None], dtype=runtime.tc_float,
+                                  device=runtime.device)  # (n, L) scene links in each link's tree
+        sim, every = self._sim(), np.arange(model.n_links)
+        envs = None if envs_idx is None else self._envs(envs_idx)
+        kinematics = take(sim.derived(self._solver), envs, every)
+        com = take(sim.inputs(self._solver)["com"], envs, np.arange(3 * model.n_links)).reshape(-1, model.n_links, 3)
+        mass = take(sim.inputs(self._solver)["mass"], envs, every)  # (B', L) kg
+        centres = kinematics[..., :3] + rotate(kinematics[..., 3:7], com)
+        return ((mass[..., None, :] * members) @ centres) / (mass @ members.T)[..., None]
 
     def _base(self, envs_idx, columns):
         """The base link's ``columns`` of its kinematics: (k,) or (len(envs), k)."""
@@ -779,7 +828,8 @@ class RigidEntity(EntityIndexing):
         if force is None and pos is not None:
             raise InvalidInputError(f"{who} argument 'pos' needs a 'force' (a torque acts the same anywhere)")
         if ref not in ("link_origin", "link_com"):
-            raise InvalidInputError(f"{who} argument 'ref' must be 'link_origin' or 'link_com', got {ref!r}")
+            raise InvalidInputError(f"{who} argument 'ref' must be gs.link_ref_frame.link_origin ('link_origin') or "
+                                    f"link_COM ('link_com'), got {ref!r}")
         if not isinstance(local, (bool, np.bool_)):
             raise InvalidInputError(f"{who} argument 'local' must be a bool, got {local!r}")
         links = self._local(links_idx_local, self.n_links, "links_idx_local", distinct=True)
