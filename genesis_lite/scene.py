@@ -31,6 +31,7 @@ from .solvers.rigid.solver import RigidSolver
 from .surfaces import Default
 from .vis.camera import Camera
 from .vis.visuals import DebugSpheres, SceneVisuals
+from .vis.visualizer import Visualizer
 
 
 class SimState:
@@ -106,6 +107,7 @@ class Scene:
         self._epoch = runtime.epoch
         self._destroyed = False
         self._cameras = []
+        self.visualizer = Visualizer(self)  # (Genesis's scene.visualizer: its headless calls)
         self._drawing = None  # SceneVisuals of the cameras, made at the first render
         self._debug_objects, self._debug_gathered = [], None  # DebugSpheres; their Spheres, made when drawn
         track(self)  # last: a scene whose options raised is no scene to end

@@ -730,3 +730,26 @@ def test_an_mjcf_worldbodys_planes_are_drawn_as_mujoco_sizes_them(f32, tmp_path)
     depth = cam.render(rgb=False, depth=True)[1]
     assert depth[12, 20] == pytest.approx(2.0, abs=1e-3)  # the tile (x > 0)
     assert depth[12, 10] == pytest.approx(3.0, abs=1e-3)  # the floor beside it
+
+
+def test_visualizer_update_after_setters_and_render_shows_them(f32):
+    """Genesis's headless scripts move a robot by setters, call scene.visualizer.update() and
+    render: the render shows the moved state (every render draws the current state, so update has
+    nothing to sync); its arguments are checked, cameras listed, viewer None, other names a named
+    AttributeError."""
+    scene = gs.Scene(**NO_CONTACT)
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.2), pos=(0.0, 0.0, 2.0)))
+    cam = scene.add_camera(res=(80, 60), pos=(3.0, 0.0, 2.0), lookat=(0.0, 0.0, 2.0), fov=40)
+    scene.build()
+    before = cam.render(rgb=False, segmentation=True)[2]
+    box.set_pos([0.0, 0.5, 2.0])
+    scene.visualizer.update()
+    scene.visualizer.update(force=False, auto=True)
+    after = cam.render(rgb=False, segmentation=True)[2]
+    columns = [np.nonzero(seg == box.links[0].idx)[1].mean() for seg in (before, after)]
+    assert columns[1] > columns[0] + 5  # moved right in the image (+y is right, looking along −x)
+    assert scene.visualizer.cameras == [cam] and scene.visualizer.viewer is None
+    with pytest.raises(gs.InvalidInputError, match="scene.visualizer.update: argument 'force'"):
+        scene.visualizer.update(force=1)
+    with pytest.raises(AttributeError, match="scene.visualizer has no 'context'"):
+        scene.visualizer.context
