@@ -57,6 +57,9 @@ class SimState:
         return next((state for slot, state in zip(slots, self.states) if slot.solver is solver), None)
 
 
+class _NoRigidSolver(SceneStateError, AttributeError):
+    """scene.rigid_solver where there is none yet: a SceneStateError that hasattr() and
+    getattr(scene, "rigid_solver", default) read as an absent attribute."""
 
 
 @named_argument_errors
@@ -135,8 +138,8 @@ class Scene:
         welds), once the scene is built with rigid entities."""
         if self.sim is None or self.sim.rigid_solver is None:
             why = "has no rigid entity" if self.sim is not None else "is not built yet (scene.build())"
-            raise SceneStateError(f"scene.rigid_solver: the scene {why}; the rigid solver's calls need a built "
-                                  f"scene with rigid entities")
+            raise _NoRigidSolver(f"scene.rigid_solver: the scene {why}; the rigid solver's calls need a built "
+                                 f"scene with rigid entities")
         return self.sim.rigid_solver
 
     def add_entity(self, morph, material=None, surface=None, visualize_contact=False, vis_mode=None, name=None):

@@ -54,7 +54,8 @@ def _kind(name, base, doc, color=None):
     return named_keywords(*_LOOK_OPTIONS)(dataclass(type(name, (base,), namespace)))
 
 
-BSDF = _kind("BSDF", Default, "Genesis's BSDF surface (its Default), drawn as Default.")
+BSDF = _kind("BSDF", Default, "Genesis's BSDF surface, drawn as Default (Genesis's Default is a BSDF; here BSDF is a "
+                            "Default).")
 Plastic = _kind("Plastic", Default, "Genesis's plastic surface, drawn as Default.")
 Rough = _kind("Rough", Plastic, "Genesis's rough plastic, drawn as Default.")
 Smooth = _kind("Smooth", Plastic, "Genesis's smooth plastic, drawn as Default.")

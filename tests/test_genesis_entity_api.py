@@ -1229,22 +1229,36 @@ def test_entity_build_facts_are_genesis(f64):
 
 def test_link_reference_frames_batched_and_checked(f64):
     """gs.link_ref_frame in get_links_pos/vel (and the solver's scene-wide ones): batched with
-    envs_idx as the all-env read's rows; a box's centre of mass is its origin, and its tree's the
-    two boxes' own (separate trees); root_COM refused for velocities, a bad ref or relative by name."""
+    envs_idx as the all-env read's rows; a box's centre of mass moved per env (set_links_COM) is
+    where the reads put it, its velocity v + ω × r, its tree's its own (the other box is another
+    tree), a plane's its origin; root_COM refused for velocities, a bad ref or relative by name,
+    before build a SceneStateError."""
     scene = gs.Scene()
+    plane = scene.add_entity(gs.morphs.Plane())
     boxes = [scene.add_entity(gs.morphs.Box(size=(0.1, 0.2, 0.3), pos=(x, 0.0, 1.0))) for x in (0.0, 1.0)]
+    with pytest.raises(gs.SceneStateError):
+        boxes[0].get_links_pos(ref=gs.link_ref_frame.root_COM)
     scene.build(n_envs=3)
     box = boxes[1]
+    shifts = torch.tensor([[[0.01, -0.02, 0.03]], [[0.0, 0.0, 0.0]], [[-0.03, 0.02, 0.01]]], dtype=torch.float64)
+    box.set_links_COM(shifts)  # a centre of mass of its own in each env
     box.set_dofs_velocity(torch.tensor([[0.1, 0.2, 0.3, 1.0, -2.0, 0.5]], dtype=torch.float64).repeat(3, 1))
     scene.step()
-    for ref in ("link_origin", "link_COM", "root_COM"):
+    origin, quat = box.get_links_pos(), box.get_links_quat()
+    centre = origin + gs.transform_by_quat(shifts, quat)
+    for ref, expected in (("link_origin", origin), ("link_COM", centre), ("root_COM", centre)):
         every = box.get_links_pos(ref=getattr(gs.link_ref_frame, ref))
         assert every.shape == (3, 1, 3) and torch.equal(box.get_links_pos(envs_idx=[2, 0], ref=getattr(
             gs.link_ref_frame, ref)), every[[2, 0]])
-        assert torch.allclose(every, box.get_links_pos(), atol=1e-15, rtol=0)
-    assert torch.equal(scene.sim.rigid_solver.get_links_pos([1], ref=gs.link_ref_frame.link_COM, relative=False),
+        assert torch.allclose(every, expected, atol=1e-14, rtol=0), ref
+    assert torch.equal(scene.sim.rigid_solver.get_links_pos([2], ref=gs.link_ref_frame.link_COM, relative=False),
                        box.get_links_pos(ref=gs.link_ref_frame.link_COM))
-    assert torch.allclose(box.get_links_vel(ref=gs.link_ref_frame.link_COM), box.get_links_vel(), atol=1e-15, rtol=0)
+    velocity = box.get_links_vel() + torch.linalg.cross(box.get_links_ang(), centre - origin)
+    assert torch.allclose(box.get_links_vel(ref=gs.link_ref_frame.link_COM), velocity, atol=1e-14, rtol=0)
+    assert torch.equal(box.get_links_vel(envs_idx=[1, 2], ref=gs.link_ref_frame.link_COM),
+                       box.get_links_vel(ref=gs.link_ref_frame.link_COM)[[1, 2]])
+    # a massless tree (the plane): its link origin, not 0/0
+    assert torch.equal(plane.get_links_pos(ref=gs.link_ref_frame.root_COM), plane.get_links_pos())
     with pytest.raises(gs.InvalidInputError, match="get_links_vel argument 'ref' must be one of"):
         box.get_links_vel(ref=gs.link_ref_frame.root_COM)
     with pytest.raises(gs.InvalidInputError, match="get_links_pos argument 'ref'"):

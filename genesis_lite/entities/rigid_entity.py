@@ -707,7 +707,7 @@ class RigidEntity(EntityIndexing):
         the link is in ("root_com", root_COM: every link with the same root, welded base
         included). relative: Genesis's choice between its authored and its internal link origins
         (shifted by its morphs' offsets and inertial alignment), which are the same here (a
-        bool)."""
+        bool). A massless tree's (a plane's) centre of mass is its link origin."""
         links = self._local(links_idx_local, self.n_links, "links_idx_local")
         ref = self._link_ref(ref, "get_links_pos", relative, roots=True)
         if ref == "link_origin":
@@ -751,18 +751,22 @@ class RigidEntity(EntityIndexing):
 
     def _trees_com(self, links, envs_idx):
         """(B', n, 3) m: the centre of mass of each link's kinematic tree (every link of the scene
-        with the same root link, the model's link_root), mass-weighted."""
+        with the same root link, the model's link_root), mass-weighted; a massless tree's (a
+        plane's) is the link's origin."""
+        sim = self._sim()
         model = self._solver.model
         roots = model.link_root
         members = torch.as_tensor(roots[None, :] == roots[self.link_start + links][:, None], dtype=runtime.tc_float,
                                   device=runtime.device)  # (n, L) scene links in each link's tree
-        sim, every = self._sim(), np.arange(model.n_links)
+        every = np.arange(model.n_links)
         envs = None if envs_idx is None else self._envs(envs_idx)
         kinematics = take(sim.derived(self._solver), envs, every)
         com = take(sim.inputs(self._solver)["com"], envs, np.arange(3 * model.n_links)).reshape(-1, model.n_links, 3)
         mass = take(sim.inputs(self._solver)["mass"], envs, every)  # (B', L) kg
         centres = kinematics[..., :3] + rotate(kinematics[..., 3:7], com)
-        return ((mass[..., None, :] * members) @ centres) / (mass @ members.T)[..., None]
+        tree_mass = (mass @ members.T)[..., None]  # (B', n, 1)
+        weighted = ((mass[..., None, :] * members) @ centres) / torch.where(tree_mass > 0, tree_mass, 1.0)
+        return torch.where(tree_mass > 0, weighted, kinematics[:, self.link_start + links, :3])
 
     def _base(self, envs_idx, columns):
         """The base link's ``columns`` of its kinematics: (k,) or (len(envs), k)."""
