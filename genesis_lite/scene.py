@@ -2,7 +2,7 @@
 
 Lifecycle errors (step before build, build twice, add after build) raise SceneStateError.
 Cameras (``add_camera``, vis/camera.py) render the scene headless, before or after build (Genesis
-only before); they read ``vis_options`` and draw the debug spheres of ``draw_debug_spheres``.
+only before); they read ``vis_options`` and draw the debug objects of ``draw_debug_*``.
 There is no interactive viewer: ``show_viewer=True`` raises rather than being ignored, and
 ``viewer_options`` are validated and kept for it.
 """
@@ -30,7 +30,8 @@ from .solvers.rigid import merge, mjcf, scale, shapes, urdf
 from .solvers.rigid.solver import RigidSolver
 from .surfaces import Default
 from .vis.camera import Camera
-from .vis.visuals import DebugSpheres, SceneVisuals
+from .vis import debug as debug_draw
+from .vis.visuals import SceneVisuals
 from .vis.visualizer import Visualizer
 
 
@@ -112,7 +113,7 @@ class Scene:
         self._cameras = []
         self.visualizer = Visualizer(self)  # (Genesis's scene.visualizer: its headless calls)
         self._drawing = None  # SceneVisuals of the cameras, made at the first render
-        self._debug_objects, self._debug_gathered = [], None  # DebugSpheres; their Spheres, made when drawn
+        self._debug_objects, self._debug_gathered = [], None  # vis/debug.py's; gathered for drawing when drawn
         track(self)  # last: a scene whose options raised is no scene to end
 
     def _substeps(self):
@@ -287,26 +288,64 @@ class Scene:
 
     def draw_debug_sphere(self, pos, radius=0.01, color=(1.0, 0.0, 0.0, 0.5)):
         """One debug sphere at ``pos`` (3,) m world; see draw_debug_spheres."""
-        return self._add_debug_spheres("scene.draw_debug_sphere", pos, radius, color)
+        return self._add_debug("scene.draw_debug_sphere",
+                               lambda owner: debug_draw.DebugSpheres(owner, pos, radius, color))
 
     def draw_debug_spheres(self, poss, radius=0.01, color=(1.0, 0.0, 0.0, 0.5)):
         """Spheres of ``radius`` m at ``poss`` (N, 3) m world (numpy or torch; copied now), drawn by
         debug cameras (``add_camera(debug=True)``) until cleared; color (r, g, b[, a]) in [0, 1],
-        alpha not drawn. Returns the object to pass to clear_debug_object."""
-        return self._add_debug_spheres("scene.draw_debug_spheres", poss, radius, color)
+        alpha not drawn (vis/debug.py). Returns the object to pass to clear_debug_object."""
+        return self._add_debug("scene.draw_debug_spheres",
+                               lambda owner: debug_draw.DebugSpheres(owner, poss, radius, color))
 
-    def _add_debug_spheres(self, owner, poss, radius, color):
+    def draw_debug_line(self, start, end, radius=0.002, color=(1.0, 0.0, 0.0, 0.5)):
+        """A cylinder of ``radius`` m from ``start`` to ``end`` (3,) m world, as draw_debug_spheres."""
+        return self._add_debug("scene.draw_debug_line",
+                               lambda owner: debug_draw.line(owner, start, end, radius, color))
+
+    def draw_debug_arrow(self, pos, vec=(0, 0, 1), radius=0.01, color=(1.0, 0.0, 0.0, 0.5)):
+        """An arrow from ``pos`` along ``vec`` (3,) m world (body radius m), as draw_debug_spheres;
+        a zero ``vec`` draws nothing and returns None, as Genesis's."""
+        return self._add_debug("scene.draw_debug_arrow",
+                               lambda owner: debug_draw.arrow(owner, pos, vec, radius, color))
+
+    def draw_debug_frame(self, T, axis_length=1.0, origin_size=0.015, axis_radius=0.01, color=None):
+        """A coordinate frame at the pose ``T`` (4, 4): x, y, z arrows of ``axis_length`` m, red,
+        green and blue (or all ``color``), and a sphere of ``origin_size`` m at its origin."""
+        return self._add_debug("scene.draw_debug_frame", lambda owner: debug_draw.frames(
+            owner, np.reshape(T, (1, 4, 4)) if np.shape(T) == (4, 4) else T, axis_length, origin_size, axis_radius,
+            color))
+
+    def draw_debug_frames(self, Ts, axis_length=1.0, origin_size=0.015, axis_radius=0.01, color=None):
+        """Frames at the poses ``Ts`` (N, 4, 4), as draw_debug_frame, as one object."""
+        return self._add_debug("scene.draw_debug_frames", lambda owner: debug_draw.frames(
+            owner, Ts, axis_length, origin_size, axis_radius, color))
+
+    def draw_debug_box(self, bounds, color=(1.0, 0.0, 0.0, 1.0), wireframe=True, wireframe_radius=0.0015):
+        """The world-axes box ``bounds`` (2, 3) m [lower, upper] (get_AABB's form): its edges as
+        cylinders of ``wireframe_radius`` m, or solid (wireframe False)."""
+        return self._add_debug("scene.draw_debug_box",
+                               lambda owner: debug_draw.box(owner, bounds, color, wireframe, wireframe_radius))
+
+    def draw_debug_trajectory(self, poss, radius=0.002, color=(1.0, 0.5, 0.0, 0.8)):
+        """Cylinders of ``radius`` m joining the consecutive points ``poss`` (N, 3) m world."""
+        return self._add_debug("scene.draw_debug_trajectory",
+                               lambda owner: debug_draw.trajectory(owner, poss, radius, color))
+
+    def _add_debug(self, owner, make):
+        """Keep the debug object ``make(owner)`` (checked there; None: nothing to draw) for debug cameras."""
         self._require_built(owner)
-        spheres = DebugSpheres(owner, poss, radius, color)
-        self._debug_objects.append(spheres)
-        self._debug_gathered = None
-        return spheres
+        obj = make(owner)
+        if obj is not None:
+            self._debug_objects.append(obj)
+            self._debug_gathered = None
+        return obj
 
     def clear_debug_object(self, obj):
-        """Stop drawing one object returned by draw_debug_sphere(s)."""
+        """Stop drawing one object returned by a draw_debug_* call."""
         if not any(obj is mine for mine in self._debug_objects):
             raise InvalidInputError(f"scene.clear_debug_object: argument 'obj' must be a debug object of this scene "
-                                    f"(returned by draw_debug_spheres and not cleared yet), got {obj!r}")
+                                    f"(returned by a draw_debug_* call and not cleared yet), got {obj!r}")
         self._debug_objects = [mine for mine in self._debug_objects if mine is not obj]
         self._debug_gathered = None
 
@@ -314,11 +353,14 @@ class Scene:
         """Stop drawing every debug object."""
         self._debug_objects, self._debug_gathered = [], None
 
-    def _debug_spheres(self):
-        """The rasterizer's Spheres of every debug object (None when there is none), gathered once
-        per change."""
-        if self._debug_gathered is None and self._debug_objects:
-            self._debug_gathered = DebugSpheres.gather(self._debug_objects)
+    def _debug_drawing(self):
+        """(the Spheres of the debug spheres or None, DebugMesh.instances of the debug meshes or
+        None), gathered once per change."""
+        if self._debug_gathered is None:
+            objects = self._debug_objects
+            spheres = [o for o in objects if isinstance(o, debug_draw.DebugSpheres)]
+            meshes = [o for o in objects if isinstance(o, debug_draw.DebugMesh)]
+            self._debug_gathered = (debug_draw.DebugSpheres.gather(spheres), debug_draw.DebugMesh.instances(meshes))
         return self._debug_gathered
 
     def _rendered_envs(self):

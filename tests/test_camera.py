@@ -255,6 +255,66 @@ def test_debug_spheres_are_drawn_by_debug_cameras(f32):
         scene.clear_debug_object(red)
 
 
+def test_debug_arrows_lines_frames_boxes_and_trajectories(f32):
+    """Genesis's draw_debug_arrow/line/frame(s)/box/trajectory: triangle meshes in world
+    coordinates that debug cameras draw (seg −1) where they were put, with Genesis's arrow
+    proportions (the head a quarter of the length, 1.5× the body's radius), a frame's axes red,
+    green and blue, a box's edges only; cleared by clear_debug_object(s); bad arguments named."""
+    scene = gs.Scene(**NO_CONTACT)
+    scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(5.0, 5.0, -5.0)), gs.materials.Rigid(rho=1000))
+    view = dict(pos=(0.0, 0.0, 5.0), lookat=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=40, res=(240, 240))
+    cam, plain = scene.add_camera(**view, debug=True), scene.add_camera(**view)
+    scene.build()
+
+    def drawn(camera=cam):
+        points, hit = camera.render_pointcloud()
+        return points[hit], camera.render()[0][hit]
+
+    arrow = scene.draw_debug_arrow((-1.0, 0.0, 0.0), (2.0, 0.0, 0.0), radius=0.05, color=(0.0, 1.0, 0.0, 1.0))
+    points, colours = drawn()
+    assert len(drawn(plain)[0]) == 0 and (colours[:, 1] > colours[:, 0]).all() and (colours[:, 2] == 0).all()
+    assert points[:, 0].min() == pytest.approx(-1.0, abs=0.02)
+    assert points[:, 0].max() == pytest.approx(1.0, abs=0.06)  # (the tip: thinner than a pixel of 1.5 cm)
+    pixel = 2 * 5.0 * np.tan(np.radians(20.0)) / 240  # m: the drawn widths are within a pixel of these
+    body, head = points[points[:, 0] < 0.4], points[(points[:, 0] > 0.5) & (points[:, 0] < 0.55)]
+    assert 0.05 - pixel <= np.abs(body[:, 1]).max() <= 0.05
+    assert 0.075 * (1 - 0.05 / 0.5) - pixel <= np.abs(head[:, 1]).max() <= 0.075  # the cone near its base
+    assert scene.draw_debug_arrow((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)) is None  # nothing to draw, as Genesis
+    scene.clear_debug_object(arrow)
+    assert len(drawn()[0]) == 0
+
+    scene.draw_debug_frame(np.eye(4), axis_length=1.0, origin_size=0.05, axis_radius=0.03)
+    points, colours = drawn()
+    x_axis = (points[:, 0] > 0.3) & (np.abs(points[:, 1]) < 0.1)
+    y_axis = (points[:, 1] > 0.3) & (np.abs(points[:, 0]) < 0.1)
+    assert (colours[x_axis].argmax(1) == 0).all() and (colours[y_axis].argmax(1) == 1).all()
+    assert x_axis.sum() > 100 and y_axis.sum() > 100
+    scene.clear_debug_objects()
+
+    scene.draw_debug_box([[-1.0, -1.0, -0.5], [1.0, 1.0, 0.5]], wireframe_radius=0.02)
+    points = drawn()[0]
+    assert len(points) > 100 and np.abs(points[:, :2]).min(1).max() <= 1.03  # none inside: the edges only
+    assert (np.abs(points[:, :2]).max(1) > 0.97).all()
+    scene.clear_debug_objects()
+    scene.draw_debug_box([[-1.0, -1.0, -0.5], [1.0, 1.0, 0.5]], wireframe=False)
+    assert np.abs(drawn()[0][:, 2] - 0.5).max() < 1e-2  # the solid box's top face hides the rest
+    scene.clear_debug_objects()
+
+    scene.draw_debug_line((0.0, -1.0, 0.0), (0.0, 1.0, 0.0), radius=0.02)
+    scene.draw_debug_trajectory(np.array([[0.5, -1.0, 0.0], [0.5, 0.0, 0.0], [1.0, 0.0, 0.0]]), radius=0.02)
+    points = drawn()[0]
+    on_line = np.abs(points[:, 0]) < 0.03
+    assert on_line.sum() > 50 and np.abs(points[~on_line, 0] - 0.5).min() < 0.03 and points[:, 0].max() > 0.97
+    for call, match in ((lambda: scene.draw_debug_line((0, 0, 0), (0, 0, 0)), "'start' and 'end' must differ"),
+                        (lambda: scene.draw_debug_arrow((0, 0, 0), (1, 0, 0), radius=-1), "'radius'"),
+                        (lambda: scene.draw_debug_box([[0, 0, 0], [-1, 1, 1]]), "'bounds'"),
+                        (lambda: scene.draw_debug_frame(np.eye(3)), "'T'"),
+                        (lambda: scene.draw_debug_trajectory([[0, 0, 0]]), "'poss'"),
+                        (lambda: scene.draw_debug_line((0, 0, 0), (1, 0, 0), color=(2, 0, 0)), "'color'")):
+        with pytest.raises(gs.InvalidInputError, match=match):
+            call()
+
+
 def test_near_plane_clipping(f32):
     scene = gs.Scene(**NO_CONTACT)
     plane = scene.add_entity(gs.morphs.Plane())

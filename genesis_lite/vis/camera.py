@@ -18,7 +18,7 @@ Images, as Genesis returns them: rgb (H, W, 3) uint8; depth (H, W) float32 m alo
 "entity": entity.idx; "geom": the drawn shape's scene-wide index; an MPM entity's particles, at the
 link and geom levels, the ids after the rigid ones, one per MPM entity), −1 where nothing is drawn
 (Genesis returns its own compacted indices instead, 0 for nothing); normal (H, W, 3) float32 world-frame unit
-normals, 0 where nothing is drawn. Debug spheres (``scene.draw_debug_spheres``) are drawn by
+normals, 0 where nothing is drawn. Debug objects (``scene.draw_debug_*``: vis/debug.py) are drawn by
 debug cameras only (``debug=True``), as in Genesis, with segmentation −1.
 
 A camera attached to a link (``attach(link, offset_T)``) is put at the link's pose times the
@@ -433,9 +433,11 @@ class Camera:
             drawing = scene._camera_visuals()
             view = View(self._pos + self._offset(), self._lookat + self._offset(), self._up, self._fov, self._near,
                         self._far, self._res)
-            return self._rasterizer.render(view, drawing.meshes, drawing.instances(scene._link_kinematics()),
-                                           drawing.particles(scene._debug_spheres() if self._debug else None),
-                                           **images)
+            meshes, instances = drawing.meshes, drawing.instances(scene._link_kinematics())
+            spheres, debug_meshes = scene._debug_drawing() if self._debug else (None, None)
+            if debug_meshes is not None:
+                meshes, instances = drawing.with_debug(instances, debug_meshes)
+            return self._rasterizer.render(view, meshes, instances, drawing.particles(spheres), **images)
 
     # -- recording ----------------------------------------------------------------------------
     def start_recording(self, save_to_filename=None, fps=None):

@@ -16,8 +16,8 @@ crisp. A Plane is drawn as a square of PLANE_SIZE m (Genesis's default plane_siz
 every shape of every drawn env in its link frame (a horizontal plane once: the envs' drawing
 offsets are horizontal, so it is the same plane in every env; another plane once per env),
 built once, and per frame the Instances: each shape at its link's world pose, read from the rigid
-solver, moved by its env's drawing offset (``scene.envs_offset``). ``DebugSpheres`` are the
-spheres of ``scene.draw_debug_spheres``.
+solver, moved by its env's drawing offset (``scene.envs_offset``), then, for a debug camera, the
+debug meshes of debug.py (``with_debug``).
 """
 from dataclasses import dataclass
 
@@ -137,7 +137,8 @@ class SceneVisuals:
     def __init__(self, scene, envs, segmentation_level):
         shapes = scene_shapes(scene)
         rows = [(env, shape) for shape in shapes for env in (envs[:1] if shape.shared else envs)]
-        self.meshes = MeshSet.from_parts([shape.mesh for _, shape in rows]) if rows else None
+        self.parts = [shape.mesh for _, shape in rows]  # (a debug camera's MeshSet adds the debug meshes' to them)
+        self.meshes = MeshSet.from_parts(self.parts) if rows else None
         device = runtime.device
         env = np.array([env for env, _ in rows], dtype=np.int64)
         self._env = torch.as_tensor(env, device=device)
@@ -190,38 +191,16 @@ class SceneVisuals:
         rot = rotations.quat_to_mat(rows[:, 3:7]).to(torch.float32)
         return Instances(rot, rows[:, :3].to(torch.float32) + self._offset, self._color, self._seg)
 
+    def with_debug(self, instances, debug):
+        """(MeshSet, Instances) of the scene's shapes (their frame's ``instances``, None when
+        nothing has a shape) followed by the debug meshes ``debug`` (DebugMesh.instances' pair):
+        the MeshSet built once per set of debug meshes and kept."""
+        parts, extra = debug
+        if getattr(self, "_debug_key", None) is not parts:
+            self._debug_key, self._debug_meshes = parts, MeshSet.from_parts(self.parts + parts)
+        if instances is None:
+            return self._debug_meshes, extra
+        joined = [torch.cat([getattr(instances, name), getattr(extra, name)])
+                  for name in ("rot", "pos", "color", "seg")]
+        return self._debug_meshes, Instances(*joined)
 
-class DebugSpheres:
-    """Spheres of ``scene.draw_debug_spheres``, drawn by debug cameras: pos (N, 3) float32 m world,
-    radius m, color (r, g, b[, a]) in [0, 1] (alpha not drawn)."""
-
-    def __init__(self, owner, poss, radius, color):
-        if isinstance(poss, torch.Tensor):
-            poss = poss.detach().cpu().numpy()
-        pos = np.asarray(poss, dtype=np.float64)
-        pos = pos.reshape(1, 3) if pos.shape == (3,) else pos
-        if pos.ndim != 2 or pos.shape[1] != 3 or not np.isfinite(pos).all():
-            raise InvalidInputError(f"{owner}: argument 'poss' must be finite positions of shape (N, 3) m, "
-                                    f"got shape {np.shape(poss)}")
-        if not (isinstance(radius, (int, float, np.integer, np.floating)) and 0 < radius < np.inf):
-            raise InvalidInputError(f"{owner}: argument 'radius' must be a positive finite number (m), got {radius!r}")
-        rgba = np.asarray(color, dtype=np.float64) if np.ndim(color) == 1 else np.full(0, np.nan)
-        if rgba.shape not in ((3,), (4,)) or not np.all((rgba >= 0) & (rgba <= 1)):
-            raise InvalidInputError(f"{owner}: argument 'color' must be (r, g, b) or (r, g, b, a) in [0, 1], "
-                                    f"got {color!r}")
-        self.pos = torch.as_tensor(pos, dtype=torch.float32, device=runtime.device)
-        self.radius, self.color = float(radius), rgba
-
-    @staticmethod
-    def gather(objects):
-        """The Spheres of a list of DebugSpheres (seg −1: they belong to no entity); None if none."""
-        if not objects:
-            return None
-        n = [len(obj.pos) for obj in objects]
-        device = runtime.device
-        radius = torch.cat([torch.full((k,), obj.radius, dtype=torch.float32, device=device)
-                            for k, obj in zip(n, objects)])
-        color = torch.cat([torch.as_tensor(obj.color[:3], dtype=torch.float32, device=device).expand(k, 3)
-                           for k, obj in zip(n, objects)])
-        return Spheres(torch.cat([obj.pos for obj in objects]), radius, color,
-                       torch.full((sum(n),), -1, dtype=torch.int32, device=device))

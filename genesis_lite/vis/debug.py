@@ -1,0 +1,186 @@
+"""Debug drawing (Genesis's ``scene.draw_debug_*``), drawn by debug cameras
+(``scene.add_camera(debug=True)``) until cleared: spheres, and triangle meshes made once in world
+coordinates — lines and trajectories (cylinders), arrows (a cylinder and a cone whose length is a
+quarter of the arrow's and whose radius 1.5 times the body's, Genesis's proportions), coordinate
+frames (x, y, z arrows red, green and blue, a sphere at the origin) and boxes (solid, or their
+twelve edges). They keep the colour given (alpha is not drawn), have segmentation id −1, stay
+where they are drawn while the scene moves, and are drawn once (not per env, as Genesis's tiles
+them at each env's offset)."""
+import numpy as np
+import torch
+
+from ..solvers.core import InvalidInputError, runtime
+from .rasterizer import Instances, Spheres
+
+SECTIONS = 12  # sides of a debug cylinder or cone (Genesis's)
+SPHERE_SUBDIVISIONS = 2
+AXIS_COLORS = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))  # a frame's x, y, z
+
+
+def _color(owner, color):
+    """(3,) rgb in [0, 1] of a (r, g, b[, a]) colour (a named error otherwise)."""
+    rgba = np.asarray(color, dtype=np.float64) if np.ndim(color) == 1 else np.full(0, np.nan)
+    if rgba.shape not in ((3,), (4,)) or not np.all((rgba >= 0) & (rgba <= 1)):
+        raise InvalidInputError(f"{owner}: argument 'color' must be (r, g, b) or (r, g, b, a) in [0, 1], got {color!r}")
+    return rgba[:3]
+
+
+def _positive(owner, name, value):
+    if not (isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+            and 0 < value < np.inf):
+        raise InvalidInputError(f"{owner}: argument '{name}' must be a positive finite number (m), got {value!r}")
+    return float(value)
+
+
+def _points(owner, name, value, shape):
+    """``value`` (numpy, list or torch) as a finite float64 array of ``shape`` (None: any length)."""
+    if isinstance(value, torch.Tensor):
+        value = value.detach().cpu().numpy()
+    array = np.asarray(value, dtype=np.float64)
+    if array.ndim != len(shape) or any(n is not None and n != k for n, k in zip(shape, array.shape)) \
+            or not np.isfinite(array).all():
+        expected = "(" + ", ".join("N" if n is None else str(n) for n in shape) + ")"
+        raise InvalidInputError(f"{owner}: argument '{name}' must be finite numbers of shape {expected}, got "
+                                f"shape {np.shape(value)}")
+    return array
+
+
+class DebugSpheres:
+    """Spheres of ``scene.draw_debug_spheres``: pos (N, 3) float32 m world, radius m, color rgb."""
+
+    def __init__(self, owner, poss, radius, color):
+        pos = _points(owner, "poss", np.reshape(poss, (1, 3)) if np.shape(poss) == (3,) else poss, (None, 3))
+        self.pos = torch.as_tensor(pos, dtype=torch.float32, device=runtime.device)
+        self.radius, self.color = _positive(owner, "radius", radius), _color(owner, color)
+
+    @staticmethod
+    def gather(objects):
+        """The Spheres of a list of DebugSpheres (seg −1: they belong to no entity); None if none."""
+        if not objects:
+            return None
+        n = [len(obj.pos) for obj in objects]
+        device = runtime.device
+        radius = torch.cat([torch.full((k,), obj.radius, dtype=torch.float32, device=device)
+                            for k, obj in zip(n, objects)])
+        color = torch.cat([torch.as_tensor(obj.color, dtype=torch.float32, device=device).expand(k, 3)
+                           for k, obj in zip(n, objects)])
+        return Spheres(torch.cat([obj.pos for obj in objects]), radius, color,
+                       torch.full((sum(n),), -1, dtype=torch.int32, device=device))
+
+
+class DebugMesh:
+    """Triangles of a debug line, arrow, frame, box or trajectory: ``parts``, a list of
+    ((vertices (V, 3) m world, unit normals (V, 3), faces (F, 3)), rgb (3,)) pairs."""
+
+    def __init__(self, parts):
+        self.parts = parts
+
+    @staticmethod
+    def instances(objects):
+        """(the parts' meshes, their Instances: identity poses, their colours, seg −1) of a list of
+        DebugMesh; None if none."""
+        parts = [part for obj in objects for part in obj.parts]
+        if not parts:
+            return None
+        device, n = runtime.device, len(parts)
+        rot = torch.eye(3, dtype=torch.float32, device=device).expand(n, 3, 3)
+        color = torch.as_tensor(np.array([rgb for _, rgb in parts]), dtype=torch.float32, device=device)
+        return [mesh for mesh, _ in parts], Instances(rot, torch.zeros(n, 3, dtype=torch.float32, device=device), color,
+                                                      torch.full((n,), -1, dtype=torch.int32, device=device))
+
+
+def _mesh(trimesh_mesh):
+    return (np.asarray(trimesh_mesh.vertices), np.asarray(trimesh_mesh.vertex_normals),
+            np.asarray(trimesh_mesh.faces))
+
+
+def _cylinder(start, end, radius):
+    import trimesh
+
+    return _mesh(trimesh.creation.cylinder(radius=radius, segment=np.stack([start, end]), sections=SECTIONS))
+
+
+def _cone(base, apex, radius):
+    """A cone standing on its base disc (centre ``base``) with its tip at ``apex``."""
+    import trimesh
+
+    axis = apex - base
+    cone = trimesh.creation.cone(radius=radius, height=float(np.linalg.norm(axis)), sections=SECTIONS)
+    turn = trimesh.geometry.align_vectors([0.0, 0.0, 1.0], axis)
+    turn[:3, 3] = base
+    return _mesh(cone.apply_transform(turn))
+
+
+def _sphere(centre, radius):
+    import trimesh
+
+    return _mesh(trimesh.creation.icosphere(subdivisions=SPHERE_SUBDIVISIONS, radius=radius).apply_translation(centre))
+
+
+def line(owner, start, end, radius, color):
+    """A cylinder of ``radius`` from ``start`` to ``end`` (3,) m."""
+    start, end = _points(owner, "start", start, (3,)), _points(owner, "end", end, (3,))
+    if np.linalg.norm(end - start) == 0:
+        raise InvalidInputError(f"{owner}: arguments 'start' and 'end' must differ, got {start.tolist()} twice")
+    return DebugMesh([(_cylinder(start, end, _positive(owner, "radius", radius)), _color(owner, color))])
+
+
+def _arrow_parts(pos, vec, radius, rgb):
+    head = pos + 0.75 * vec
+    return [(_cylinder(pos, head, radius), rgb), (_cone(head, pos + vec, 1.5 * radius), rgb)]
+
+
+def arrow(owner, pos, vec, radius, color):
+    """An arrow from ``pos`` along ``vec`` (3,) m; None for a zero vector (nothing drawn, as Genesis)."""
+    pos, vec = _points(owner, "pos", pos, (3,)), _points(owner, "vec", vec, (3,))
+    radius, rgb = _positive(owner, "radius", radius), _color(owner, color)
+    if np.linalg.norm(vec) == 0:
+        return None
+    return DebugMesh(_arrow_parts(pos, vec, radius, rgb))
+
+
+def frames(owner, Ts, axis_length, origin_size, axis_radius, color):
+    """Coordinate frames at the (N, 4, 4) poses ``Ts``: x, y, z arrows of ``axis_length`` m
+    (red, green, blue, or all ``color``) and a sphere of radius ``origin_size`` m at the origin."""
+    Ts = _points(owner, "T", Ts, (None, 4, 4))
+    length, size = _positive(owner, "axis_length", axis_length), _positive(owner, "origin_size", origin_size)
+    radius = _positive(owner, "axis_radius", axis_radius)
+    rgbs = AXIS_COLORS if color is None else [_color(owner, color)] * 3
+    parts = []
+    for T in Ts:
+        origin = T[:3, 3]
+        parts.append((_sphere(origin, size), np.ones(3) if color is None else rgbs[0]))
+        parts += [part for k in range(3) for part in _arrow_parts(origin, length * T[:3, k], radius, rgbs[k])]
+    return DebugMesh(parts)
+
+
+def box(owner, bounds, color, wireframe, wireframe_radius):
+    """The axis-aligned box ``bounds`` (2, 3) m [lower, upper]: solid, or its 12 edges as
+    cylinders of ``wireframe_radius``."""
+    import trimesh
+
+    bounds = _points(owner, "bounds", bounds, (2, 3))
+    if not np.all(bounds[1] > bounds[0]):
+        raise InvalidInputError(f"{owner}: argument 'bounds' must be [lower, upper] with lower < upper on each axis, "
+                                f"got {bounds.tolist()}")
+    if not isinstance(wireframe, (bool, np.bool_)):
+        raise InvalidInputError(f"{owner}: argument 'wireframe' must be a bool, got {wireframe!r}")
+    rgb = _color(owner, color)
+    if not wireframe:
+        return DebugMesh([(_mesh(trimesh.creation.box(bounds=bounds)), rgb)])
+    radius = _positive(owner, "wireframe_radius", wireframe_radius)
+    corners = np.array([[bounds[i, 0], bounds[j, 1], bounds[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+    edges = [(a, b) for a in range(8) for b in range(a + 1, 8) if bin(a ^ b).count("1") == 1]  # differ on one axis
+    return DebugMesh([(_cylinder(corners[a], corners[b], radius), rgb) for a, b in edges])
+
+
+def trajectory(owner, poss, radius, color):
+    """Cylinders of ``radius`` joining the consecutive points of ``poss`` (N ≥ 2, 3) m (repeated
+    points skipped)."""
+    poss = _points(owner, "poss", poss, (None, 3))
+    radius, rgb = _positive(owner, "radius", radius), _color(owner, color)
+    pairs = [(a, b) for a, b in zip(poss[:-1], poss[1:]) if np.linalg.norm(b - a) > 0]
+    if not pairs:
+        raise InvalidInputError(f"{owner}: argument 'poss' must hold at least two distinct consecutive points, got "
+                                f"{len(poss)} point(s)")
+    return DebugMesh([(_cylinder(a, b, radius), rgb) for a, b in pairs])
