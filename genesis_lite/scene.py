@@ -146,8 +146,9 @@ class Scene:
     def add_entity(self, morph, material=None, surface=None, visualize_contact=False, vis_mode=None, name=None):
         """Add an entity from a morph: rigid (material gs.materials.Rigid, the default) or MPM
         particles (a gs.materials.MPM material); returns the entity. Genesis's arguments in
-        Genesis's order; with no viewer, visualize_contact can only be False and vis_mode only the
-        one the cameras draw (None, or "visual" for a rigid entity, "particle" for particles)."""
+        Genesis's order; with no viewer, visualize_contact can only be False; vis_mode is what the
+        cameras draw (None: "visual" for a rigid entity, its visual shapes, or "collision", its
+        collision shapes, as Genesis's; "particle" for particles)."""
         if self.is_built:
             raise SceneStateError("scene.add_entity: the scene is already built; add every entity before build()")
         if not isinstance(morph, gm.Morph):
@@ -163,12 +164,12 @@ class Scene:
         if not (isinstance(visualize_contact, (bool, np.bool_)) and not visualize_contact):
             raise InvalidInputError(f"scene.add_entity: argument 'visualize_contact' must be False (there is no "
                                     f"viewer to draw contacts in), got {visualize_contact!r}")
-        drawn = "particle" if isinstance(material, MPM.Base) else "visual"
+        drawn = ("particle",) if isinstance(material, MPM.Base) else ("visual", "collision")
         given, arg = (vis_mode, "argument 'vis_mode'") if vis_mode is not None or surface is None else \
             (surface.vis_mode, "the surface's vis_mode")  # (add_entity's, when given, is taken: Genesis's rule)
-        if given not in (None, drawn):
-            raise InvalidInputError(f"scene.add_entity: {arg} must be None or {drawn!r} (what the cameras draw of a "
-                                    f"{type(material).__name__} entity), got {given!r}")
+        if given not in (None, *drawn):
+            raise InvalidInputError(f"scene.add_entity: {arg} must be None or {' or '.join(map(repr, drawn))} (what "
+                                    f"the cameras draw of a {type(material).__name__} entity), got {given!r}")
         if name is not None and not isinstance(name, str):
             raise InvalidInputError(f"scene.add_entity: argument 'name' must be a str or None, got "
                                     f"{type(name).__name__} {name!r}")
@@ -187,6 +188,7 @@ class Scene:
                 geom.contype = geom.conaffinity = 0
         kind = DroneEntity if isinstance(morph, gm.Drone) else RigidEntity
         entity = kind(self, len(self.entities), name, morph, material, surface or Default(), links, self._rigid_solver)
+        entity.vis_mode = given or "visual"  # (what the cameras draw of it: vis/visuals.py)
         self.entities.append(entity)
         return entity
 

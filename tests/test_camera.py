@@ -315,6 +315,26 @@ def test_debug_arrows_lines_frames_boxes_and_trajectories(f32):
             call()
 
 
+def test_vis_mode_collision_draws_the_collision_shapes(f32, tmp_path):
+    """add_entity(vis_mode="collision") (or the surface's), as Genesis's: the cameras draw the
+    entity's collision shapes instead of its visual ones (a URDF whose visual box hides inside its
+    collision sphere: the depth on the view axis is the sphere's top, not the box's)."""
+    urdf = tmp_path / "two_faces.urdf"
+    urdf.write_text('<robot name="two_faces"><link name="body"><inertial><mass value="1"/><inertia ixx="1" iyy="1" '
+                    'izz="1" ixy="0" ixz="0" iyz="0"/></inertial><visual><geometry><box size="0.1 0.1 0.1"/></geometry>'
+                    '</visual><collision><geometry><sphere radius="0.3"/></geometry></collision></link></robot>')
+    view = dict(pos=(0.0, 0.0, 3.0), lookat=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=30, res=(64, 64))
+    depths = {}
+    for mode in ("visual", "collision"):
+        scene = gs.Scene(**NO_CONTACT)
+        scene.add_entity(gs.morphs.URDF(file=str(urdf), fixed=True), surface=gs.surfaces.Default(vis_mode=mode))
+        cam = scene.add_camera(**view)
+        scene.build()
+        depths[mode] = float(cam.render(rgb=False, depth=True)[1][32, 32])
+    assert depths["visual"] == pytest.approx(3.0 - 0.05, abs=2e-3)
+    assert depths["collision"] == pytest.approx(3.0 - 0.3, abs=5e-3)
+
+
 def test_near_plane_clipping(f32):
     scene = gs.Scene(**NO_CONTACT)
     plane = scene.add_entity(gs.morphs.Plane())

@@ -677,7 +677,7 @@ def test_add_entity_takes_genesis_arguments_in_genesis_order(f64):
     scene = gs.Scene()
     box = scene.add_entity(gs.morphs.Box(), None, None, False, "visual")
     assert box.name == "box_0" and scene.add_entity(gs.morphs.Sphere(), visualize_contact=np.False_).name == "sphere_1"
-    for kwargs, arg in [({"visualize_contact": True}, "visualize_contact"), ({"vis_mode": "collision"}, "vis_mode"),
+    for kwargs, arg in [({"visualize_contact": True}, "visualize_contact"), ({"vis_mode": "sdf"}, "vis_mode"),
                         ({"name": 5}, "name")]:
         with pytest.raises(gs.InvalidInputError, match=f"argument '{arg}'"):
             scene.add_entity(gs.morphs.Sphere(), **kwargs)

@@ -60,7 +60,7 @@ def scene_shapes(scene):
         override = None if entity.surface.color is None else np.asarray(entity.surface.color[:3])
         for k, spec in enumerate(entity._specs):
             link = entity.link_start + k
-            from_file = isinstance(entity.morph, (gm.URDF, gm.MJCF))
+            from_file = isinstance(entity.morph, (gm.URDF, gm.MJCF)) and entity.vis_mode == "visual"
             visuals = spec.visuals if from_file else [_geom_visual(g) for g in spec.geoms]
             for visual in visuals:
                 color = override if override is not None else \
