@@ -301,7 +301,8 @@ class Scene:
                                lambda owner: debug_draw.DebugSpheres(owner, poss, radius, color))
 
     def draw_debug_line(self, start, end, radius=0.002, color=(1.0, 0.0, 0.0, 0.5)):
-        """A cylinder of ``radius`` m from ``start`` to ``end`` (3,) m world, as draw_debug_spheres."""
+        """A cylinder of ``radius`` m from ``start`` to ``end`` (3,) m world, as draw_debug_spheres
+        (equal ends: nothing drawn, None)."""
         return self._add_debug("scene.draw_debug_line",
                                lambda owner: debug_draw.line(owner, start, end, radius, color))
 
@@ -312,8 +313,9 @@ class Scene:
                                lambda owner: debug_draw.arrow(owner, pos, vec, radius, color))
 
     def draw_debug_frame(self, T, axis_length=1.0, origin_size=0.015, axis_radius=0.01, color=None):
-        """A coordinate frame at the pose ``T`` (4, 4): x, y, z arrows of ``axis_length`` m, red,
-        green and blue (or all ``color``), and a sphere of ``origin_size`` m at its origin."""
+        """A coordinate frame at the pose ``T`` (4, 4): its x, y, z axes as cylinders of
+        ``axis_length`` m and radius ``axis_radius``, red, green and blue (or all ``color``), and a
+        sphere of ``origin_size`` m at its origin."""
         return self._add_debug("scene.draw_debug_frame", lambda owner: debug_draw.frames(
             owner, np.reshape(T, (1, 4, 4)) if np.shape(T) == (4, 4) else T, axis_length, origin_size, axis_radius,
             color))
@@ -330,7 +332,8 @@ class Scene:
                                lambda owner: debug_draw.box(owner, bounds, color, wireframe, wireframe_radius))
 
     def draw_debug_trajectory(self, poss, radius=0.002, color=(1.0, 0.5, 0.0, 0.8)):
-        """Cylinders of ``radius`` m joining the consecutive points ``poss`` (N, 3) m world."""
+        """Cylinders of ``radius`` m joining the consecutive points ``poss`` (N, 3) m world (none
+        distinct: nothing drawn, None)."""
         return self._add_debug("scene.draw_debug_trajectory",
                                lambda owner: debug_draw.trajectory(owner, poss, radius, color))
 

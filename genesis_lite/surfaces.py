@@ -25,9 +25,9 @@ class Default:
     """A plain surface. color: (r, g, b) or (r, g, b, a) in [0, 1], or None (Genesis's default):
     the asset's own colours (a URDF's materials), else grey. A colour given here paints the whole
     entity, URDF materials included, as in Genesis. Cameras draw opaque surfaces: alpha is kept
-    but not drawn. vis_mode: None, or what the cameras draw of the entity ("visual" for a rigid
-    entity, "particle" for particles), checked by scene.add_entity (its own vis_mode argument, when
-    given, is the one taken, as Genesis)."""
+    but not drawn. vis_mode: None, or what the cameras draw of the entity ("visual" or "collision"
+    for a rigid entity, "particle" for particles), checked by scene.add_entity (its own vis_mode
+    argument, when given, is the one taken, as Genesis)."""
     color: tuple = None
     vis_mode: str = None
 

@@ -283,21 +283,25 @@ def test_debug_arrows_lines_frames_boxes_and_trajectories(f32):
     scene.clear_debug_object(arrow)
     assert len(drawn()[0]) == 0
 
-    scene.draw_debug_frame(np.eye(4), axis_length=1.0, origin_size=0.05, axis_radius=0.03)
+    turned = np.eye(4)
+    turned[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]  # its x axis along world y, y along −x
+    scene.draw_debug_frame(turned, axis_length=1.0, origin_size=0.05, axis_radius=0.03)
     points, colours = drawn()
-    x_axis = (points[:, 0] > 0.3) & (np.abs(points[:, 1]) < 0.1)
-    y_axis = (points[:, 1] > 0.3) & (np.abs(points[:, 0]) < 0.1)
-    assert (colours[x_axis].argmax(1) == 0).all() and (colours[y_axis].argmax(1) == 1).all()
-    assert x_axis.sum() > 100 and y_axis.sum() > 100
+    along_y = (points[:, 1] > 0.3) & (np.abs(points[:, 0]) < 0.1)
+    along_minus_x = (points[:, 0] < -0.3) & (np.abs(points[:, 1]) < 0.1)
+    assert (colours[along_y].argmax(1) == 0).all() and (colours[along_minus_x].argmax(1) == 1).all()
+    assert along_y.sum() > 100 and along_minus_x.sum() > 100 and not ((points[:, 0] > 0.3).any())
+    assert points[:, :2].max() == pytest.approx(1.0, abs=0.02)  # cylinders: no arrow head beyond
     scene.clear_debug_objects()
 
     scene.draw_debug_box([[-1.0, -1.0, -0.5], [1.0, 1.0, 0.5]], wireframe_radius=0.02)
     points = drawn()[0]
-    assert len(points) > 100 and np.abs(points[:, :2]).min(1).max() <= 1.03  # none inside: the edges only
-    assert (np.abs(points[:, :2]).max(1) > 0.97).all()
+    assert len(points) > 100 and (np.abs(points[:, :2]).max(1) > 0.97).all()  # none inside: the edges only
     scene.clear_debug_objects()
     scene.draw_debug_box([[-1.0, -1.0, -0.5], [1.0, 1.0, 0.5]], wireframe=False)
     assert np.abs(drawn()[0][:, 2] - 0.5).max() < 1e-2  # the solid box's top face hides the rest
+    normals = cam.render(rgb=False, normal=True)[3][120, 120]
+    np.testing.assert_allclose(normals, [0.0, 0.0, 1.0], atol=1e-3)  # flat faces, not corner-averaged normals
     scene.clear_debug_objects()
 
     scene.draw_debug_line((0.0, -1.0, 0.0), (0.0, 1.0, 0.0), radius=0.02)
@@ -305,11 +309,12 @@ def test_debug_arrows_lines_frames_boxes_and_trajectories(f32):
     points = drawn()[0]
     on_line = np.abs(points[:, 0]) < 0.03
     assert on_line.sum() > 50 and np.abs(points[~on_line, 0] - 0.5).min() < 0.03 and points[:, 0].max() > 0.97
-    for call, match in ((lambda: scene.draw_debug_line((0, 0, 0), (0, 0, 0)), "'start' and 'end' must differ"),
-                        (lambda: scene.draw_debug_arrow((0, 0, 0), (1, 0, 0), radius=-1), "'radius'"),
+    assert scene.draw_debug_line((0, 0, 0), (0, 0, 0)) is None  # nothing to draw, as a zero arrow
+    assert scene.draw_debug_trajectory([[0.0, 0.0, 0.0]]) is None
+    for call, match in ((lambda: scene.draw_debug_arrow((0, 0, 0), (1, 0, 0), radius=-1), "'radius'"),
                         (lambda: scene.draw_debug_box([[0, 0, 0], [-1, 1, 1]]), "'bounds'"),
                         (lambda: scene.draw_debug_frame(np.eye(3)), "'T'"),
-                        (lambda: scene.draw_debug_trajectory([[0, 0, 0]]), "'poss'"),
+                        (lambda: scene.draw_debug_trajectory([0, 0, 0]), "'poss'"),
                         (lambda: scene.draw_debug_line((0, 0, 0), (1, 0, 0), color=(2, 0, 0)), "'color'")):
         with pytest.raises(gs.InvalidInputError, match=match):
             call()
@@ -318,21 +323,37 @@ def test_debug_arrows_lines_frames_boxes_and_trajectories(f32):
 def test_vis_mode_collision_draws_the_collision_shapes(f32, tmp_path):
     """add_entity(vis_mode="collision") (or the surface's), as Genesis's: the cameras draw the
     entity's collision shapes instead of its visual ones (a URDF whose visual box hides inside its
-    collision sphere: the depth on the view axis is the sphere's top, not the box's)."""
+    collision sphere: the depth on the view axis is the sphere's top, not the box's), a mesh as the
+    convex hull it collides as (a ring's hole filled)."""
     urdf = tmp_path / "two_faces.urdf"
     urdf.write_text('<robot name="two_faces"><link name="body"><inertial><mass value="1"/><inertia ixx="1" iyy="1" '
                     'izz="1" ixy="0" ixz="0" iyz="0"/></inertial><visual><geometry><box size="0.1 0.1 0.1"/></geometry>'
                     '</visual><collision><geometry><sphere radius="0.3"/></geometry></collision></link></robot>')
     view = dict(pos=(0.0, 0.0, 3.0), lookat=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), fov=30, res=(64, 64))
     depths = {}
-    for mode in ("visual", "collision"):
+    for mode, given_to_add_entity in (("visual", False), ("collision", False), ("collision", True)):
         scene = gs.Scene(**NO_CONTACT)
-        scene.add_entity(gs.morphs.URDF(file=str(urdf), fixed=True), surface=gs.surfaces.Default(vis_mode=mode))
+        morph = gs.morphs.URDF(file=str(urdf), fixed=True)
+        if given_to_add_entity:
+            scene.add_entity(morph, vis_mode=mode)
+        else:
+            scene.add_entity(morph, surface=gs.surfaces.Default(vis_mode=mode))
         cam = scene.add_camera(**view)
         scene.build()
-        depths[mode] = float(cam.render(rgb=False, depth=True)[1][32, 32])
-    assert depths["visual"] == pytest.approx(3.0 - 0.05, abs=2e-3)
-    assert depths["collision"] == pytest.approx(3.0 - 0.3, abs=5e-3)
+        depths[mode, given_to_add_entity] = float(cam.render(rgb=False, depth=True)[1][32, 32])
+    assert depths["visual", False] == pytest.approx(3.0 - 0.05, abs=2e-3)
+    assert depths["collision", False] == depths["collision", True] == pytest.approx(3.0 - 0.3, abs=5e-3)
+    # a mesh collides as its convex hull, and is drawn so: a ring's hole is filled
+    import trimesh
+    ring = tmp_path / "ring.obj"
+    trimesh.creation.torus(major_radius=0.3, minor_radius=0.1).export(ring)
+    for mode, hole_depth in (("visual", None), ("collision", 3.0 - 0.1)):
+        scene = gs.Scene(**NO_CONTACT)
+        scene.add_entity(gs.morphs.Mesh(file=str(ring), fixed=True), vis_mode=mode)
+        cam = scene.add_camera(**view)
+        scene.build()
+        depth = float(cam.render(rgb=False, depth=True)[1][32, 32])
+        assert depth == pytest.approx(hole_depth, abs=5e-3) if hole_depth else depth >= cam.far * 0.99, (mode, depth)
 
 
 def test_near_plane_clipping(f32):

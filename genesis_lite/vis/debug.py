@@ -2,8 +2,9 @@
 (``scene.add_camera(debug=True)``) until cleared: spheres, and triangle meshes made once in world
 coordinates — lines and trajectories (cylinders), arrows (a cylinder and a cone whose length is a
 quarter of the arrow's and whose radius 1.5 times the body's, Genesis's proportions), coordinate
-frames (x, y, z arrows red, green and blue, a sphere at the origin) and boxes (solid, or their
-twelve edges). They keep the colour given (alpha is not drawn), have segmentation id −1, stay
+frames (x, y, z axes as cylinders red, green and blue, a sphere at the origin, as Genesis's) and
+boxes (solid, or their twelve edges). A line of zero length, an arrow of zero vector and a
+trajectory without two distinct consecutive points draw nothing (None, as Genesis's arrow). They keep the colour given (alpha is not drawn), have segmentation id −1, stay
 where they are drawn while the scene moves, and are drawn once (not per env, as Genesis's tiles
 them at each env's offset)."""
 import numpy as np
@@ -11,6 +12,7 @@ import torch
 
 from ..solvers.core import InvalidInputError, runtime
 from .rasterizer import Instances, Spheres
+from .visuals import SHARP_EDGE
 
 SECTIONS = 12  # sides of a debug cylinder or cone (Genesis's)
 SPHERE_SUBDIVISIONS = 2
@@ -90,8 +92,12 @@ class DebugMesh:
 
 
 def _mesh(trimesh_mesh):
-    return (np.asarray(trimesh_mesh.vertices), np.asarray(trimesh_mesh.vertex_normals),
-            np.asarray(trimesh_mesh.faces))
+    """(vertices, normals, faces), split at sharp edges as the scene's shapes (visuals.tessellate):
+    a box's faces and a cylinder's caps shaded flat, its side smooth."""
+    import trimesh
+
+    mesh = trimesh.graph.smooth_shade(trimesh_mesh, angle=SHARP_EDGE, facet_minarea=None)
+    return np.asarray(mesh.vertices), np.asarray(mesh.vertex_normals), np.asarray(mesh.faces)
 
 
 def _cylinder(start, end, radius):
@@ -120,14 +126,10 @@ def _sphere(centre, radius):
 def line(owner, start, end, radius, color):
     """A cylinder of ``radius`` from ``start`` to ``end`` (3,) m."""
     start, end = _points(owner, "start", start, (3,)), _points(owner, "end", end, (3,))
+    radius, rgb = _positive(owner, "radius", radius), _color(owner, color)
     if np.linalg.norm(end - start) == 0:
-        raise InvalidInputError(f"{owner}: arguments 'start' and 'end' must differ, got {start.tolist()} twice")
-    return DebugMesh([(_cylinder(start, end, _positive(owner, "radius", radius)), _color(owner, color))])
-
-
-def _arrow_parts(pos, vec, radius, rgb):
-    head = pos + 0.75 * vec
-    return [(_cylinder(pos, head, radius), rgb), (_cone(head, pos + vec, 1.5 * radius), rgb)]
+        return None
+    return DebugMesh([(_cylinder(start, end, radius), rgb)])
 
 
 def arrow(owner, pos, vec, radius, color):
@@ -136,12 +138,14 @@ def arrow(owner, pos, vec, radius, color):
     radius, rgb = _positive(owner, "radius", radius), _color(owner, color)
     if np.linalg.norm(vec) == 0:
         return None
-    return DebugMesh(_arrow_parts(pos, vec, radius, rgb))
+    head = pos + 0.75 * vec
+    return DebugMesh([(_cylinder(pos, head, radius), rgb), (_cone(head, pos + vec, 1.5 * radius), rgb)])
 
 
 def frames(owner, Ts, axis_length, origin_size, axis_radius, color):
-    """Coordinate frames at the (N, 4, 4) poses ``Ts``: x, y, z arrows of ``axis_length`` m
-    (red, green, blue, or all ``color``) and a sphere of radius ``origin_size`` m at the origin."""
+    """Coordinate frames at the (N, 4, 4) poses ``Ts``: x, y, z axes, cylinders of ``axis_length``
+    m along T's columns (red, green, blue, or all ``color``), and a sphere of radius
+    ``origin_size`` m at the origin (white, or ``color``)."""
     Ts = _points(owner, "T", Ts, (None, 4, 4))
     length, size = _positive(owner, "axis_length", axis_length), _positive(owner, "origin_size", origin_size)
     radius = _positive(owner, "axis_radius", axis_radius)
@@ -150,7 +154,7 @@ def frames(owner, Ts, axis_length, origin_size, axis_radius, color):
     for T in Ts:
         origin = T[:3, 3]
         parts.append((_sphere(origin, size), np.ones(3) if color is None else rgbs[0]))
-        parts += [part for k in range(3) for part in _arrow_parts(origin, length * T[:3, k], radius, rgbs[k])]
+        parts += [(_cylinder(origin, origin + length * T[:3, k], radius), rgbs[k]) for k in range(3)]
     return DebugMesh(parts)
 
 
@@ -175,12 +179,9 @@ def box(owner, bounds, color, wireframe, wireframe_radius):
 
 
 def trajectory(owner, poss, radius, color):
-    """Cylinders of ``radius`` joining the consecutive points of ``poss`` (N ≥ 2, 3) m (repeated
-    points skipped)."""
+    """Cylinders of ``radius`` joining the consecutive points of ``poss`` (N, 3) m (repeated points
+    skipped)."""
     poss = _points(owner, "poss", poss, (None, 3))
     radius, rgb = _positive(owner, "radius", radius), _color(owner, color)
     pairs = [(a, b) for a, b in zip(poss[:-1], poss[1:]) if np.linalg.norm(b - a) > 0]
-    if not pairs:
-        raise InvalidInputError(f"{owner}: argument 'poss' must hold at least two distinct consecutive points, got "
-                                f"{len(poss)} point(s)")
-    return DebugMesh([(_cylinder(a, b, radius), rgb) for a, b in pairs])
+    return DebugMesh([(_cylinder(a, b, radius), rgb) for a, b in pairs]) if pairs else None

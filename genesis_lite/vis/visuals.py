@@ -17,7 +17,8 @@ every shape of every drawn env in its link frame (a horizontal plane once: the e
 offsets are horizontal, so it is the same plane in every env; another plane once per env),
 built once, and per frame the Instances: each shape at its link's world pose, read from the rigid
 solver, moved by its env's drawing offset (``scene.envs_offset``), then, for a debug camera, the
-debug meshes of debug.py (``with_debug``).
+debug meshes of debug.py (``with_debug``). An entity drawn with vis_mode "collision" shows its
+collision shapes (a mesh as its convex hull) instead of its visual ones.
 """
 from dataclasses import dataclass
 
@@ -27,7 +28,7 @@ import torch
 from .. import morphs as gm
 from ..utils import rotations
 from ..solvers.core import InvalidInputError, runtime
-from ..solvers.rigid.shapes import quat_to_mat
+from ..solvers.rigid.shapes import hull_mesh, quat_to_mat
 from ..solvers.rigid.spec import VisualSpec
 from .rasterizer import Instances, MeshSet, Spheres
 
@@ -60,8 +61,12 @@ def scene_shapes(scene):
         override = None if entity.surface.color is None else np.asarray(entity.surface.color[:3])
         for k, spec in enumerate(entity._specs):
             link = entity.link_start + k
-            from_file = isinstance(entity.morph, (gm.URDF, gm.MJCF)) and entity.vis_mode == "visual"
-            visuals = spec.visuals if from_file else [_geom_visual(g) for g in spec.geoms]
+            if entity.vis_mode == "collision":  # (what collides: a shape in some pair, a mesh as its hull)
+                visuals = [_geom_visual(g, hull=True) for g in spec.geoms if g.contype or g.conaffinity]
+            elif isinstance(entity.morph, (gm.URDF, gm.MJCF)):
+                visuals = spec.visuals
+            else:
+                visuals = [_geom_visual(g) for g in spec.geoms]
             for visual in visuals:
                 color = override if override is not None else \
                     np.asarray(DEFAULT_COLOR if visual.rgba is None else visual.rgba[:3])
@@ -79,9 +84,13 @@ def _horizontal_plane(spec, visual):
     return bool(np.all(np.abs(normal[:2]) <= 1e-9 * np.linalg.norm(normal)))
 
 
-def _geom_visual(geom):
-    """A primitive morph's collision geom as the VisualSpec that draws it (no colour of its own)."""
-    return VisualSpec(geom.type, geom.size, geom.pos, geom.quat, geom.vertices, geom.faces)
+def _geom_visual(geom, hull=False):
+    """A collision geom as the VisualSpec that draws it (no colour of its own); hull: a mesh as the
+    convex hull the colliders take."""
+    vertices, faces = geom.vertices, geom.faces
+    if hull and geom.type == "mesh":
+        vertices, faces = hull_mesh(vertices)
+    return VisualSpec(geom.type, geom.size, geom.pos, geom.quat, vertices, faces)
 
 
 def tessellate(visual):
@@ -194,10 +203,11 @@ class SceneVisuals:
     def with_debug(self, instances, debug):
         """(MeshSet, Instances) of the scene's shapes (their frame's ``instances``, None when
         nothing has a shape) followed by the debug meshes ``debug`` (DebugMesh.instances' pair):
-        the MeshSet built once per set of debug meshes and kept."""
+        the MeshSet built again only when the debug meshes' parts change."""
         parts, extra = debug
-        if getattr(self, "_debug_key", None) is not parts:
-            self._debug_key, self._debug_meshes = parts, MeshSet.from_parts(self.parts + parts)
+        kept = getattr(self, "_debug_parts", None)
+        if kept is None or len(kept) != len(parts) or any(a is not b for a, b in zip(kept, parts)):
+            self._debug_parts, self._debug_meshes = parts, MeshSet.from_parts(self.parts + parts)
         if instances is None:
             return self._debug_meshes, extra
         joined = [torch.cat([getattr(instances, name), getattr(extra, name)])
