@@ -146,9 +146,10 @@ class Scene:
     def add_entity(self, morph, material=None, surface=None, visualize_contact=False, vis_mode=None, name=None):
         """Add an entity from a morph: rigid (material gs.materials.Rigid, the default) or MPM
         particles (a gs.materials.MPM material); returns the entity. Genesis's arguments in
-        Genesis's order; with no viewer, visualize_contact can only be False; vis_mode is what the
-        cameras draw (None: "visual" for a rigid entity, its visual shapes, or "collision", its
-        collision shapes, as Genesis's; "particle" for particles)."""
+        Genesis's order; visualize_contact (a rigid entity): the cameras draw an arrow of each
+        contact force on it (vis/debug.py); vis_mode is what the cameras draw (None: "visual" for a
+        rigid entity, its visual shapes, or "collision", its collision shapes, as Genesis's;
+        "particle" for particles)."""
         if self.is_built:
             raise SceneStateError("scene.add_entity: the scene is already built; add every entity before build()")
         if not isinstance(morph, gm.Morph):
@@ -161,9 +162,11 @@ class Scene:
         if surface is not None and not isinstance(surface, Default):
             raise InvalidInputError(f"scene.add_entity: argument 'surface' must be gs.surfaces.Default or None, "
                                     f"got {type(surface).__name__}")
-        if not (isinstance(visualize_contact, (bool, np.bool_)) and not visualize_contact):
-            raise InvalidInputError(f"scene.add_entity: argument 'visualize_contact' must be False (there is no "
-                                    f"viewer to draw contacts in), got {visualize_contact!r}")
+        particles = isinstance(material, MPM.Base)
+        if not isinstance(visualize_contact, (bool, np.bool_)) or (visualize_contact and particles):
+            raise InvalidInputError(f"scene.add_entity: argument 'visualize_contact' must be a bool (True: the cameras "
+                                    f"draw the contact forces on a rigid entity), got {visualize_contact!r} for a "
+                                    f"{type(material).__name__} entity")
         drawn = ("particle",) if isinstance(material, MPM.Base) else ("visual", "collision")
         given, arg = (vis_mode, "argument 'vis_mode'") if vis_mode is not None or surface is None else \
             (surface.vis_mode, "the surface's vis_mode")  # (add_entity's, when given, is taken: Genesis's rule)
@@ -189,6 +192,7 @@ class Scene:
         kind = DroneEntity if isinstance(morph, gm.Drone) else RigidEntity
         entity = kind(self, len(self.entities), name, morph, material, surface or Default(), links, self._rigid_solver)
         entity.vis_mode = given or "visual"  # (what the cameras draw of it: vis/visuals.py)
+        entity.visualize_contact = bool(visualize_contact)  # (arrows of its contact forces: vis/debug.py)
         self.entities.append(entity)
         return entity
 
@@ -359,14 +363,24 @@ class Scene:
         self._debug_objects, self._debug_gathered = [], None
 
     def _debug_drawing(self):
-        """(the Spheres of the debug spheres or None, DebugMesh.instances of the debug meshes or
-        None), gathered once per change."""
+        """(the Spheres of the debug spheres or None, the list of DebugMesh), gathered once per change."""
         if self._debug_gathered is None:
             objects = self._debug_objects
             spheres = [o for o in objects if isinstance(o, debug_draw.DebugSpheres)]
             meshes = [o for o in objects if isinstance(o, debug_draw.DebugMesh)]
-            self._debug_gathered = (debug_draw.DebugSpheres.gather(spheres), debug_draw.DebugMesh.instances(meshes))
+            self._debug_gathered = (debug_draw.DebugSpheres.gather(spheres), meshes)
         return self._debug_gathered
+
+    def _contact_arrows(self):
+        """The DebugMesh arrows of the contact forces on the entities added with
+        visualize_contact, in the drawn envs (each at its env's drawing offset)."""
+        flagged = [entity for entity in self.entities if getattr(entity, "visualize_contact", False)]
+        if not flagged:
+            return []
+        scale = self.vis_options.contact_force_scale
+        envs = self._rendered_envs()
+        return [arrow for entity in flagged
+                for arrow in debug_draw.contact_arrows(entity, envs, self.envs_offset[envs], scale)]
 
     def _rendered_envs(self):
         """The envs cameras draw (batch rows): VisOptions.rendered_envs_idx, else all."""

@@ -672,12 +672,12 @@ def test_genesis_franka_gains_hold_the_arm(f64):
 # -- found porting Genesis scripts (2026-11-28) ------------------------------------------------------
 def test_add_entity_takes_genesis_arguments_in_genesis_order(f64):
     """add_entity(morph, material, surface, visualize_contact, vis_mode, name): Genesis's order, so a
-    positional visualize_contact is not taken for a name; what has no effect without a viewer is
-    refused unless it is the default, and a name must be a string."""
+    positional visualize_contact is not taken for a name; it must be a bool, vis_mode what the
+    cameras can draw, and a name a string."""
     scene = gs.Scene()
     box = scene.add_entity(gs.morphs.Box(), None, None, False, "visual")
     assert box.name == "box_0" and scene.add_entity(gs.morphs.Sphere(), visualize_contact=np.False_).name == "sphere_1"
-    for kwargs, arg in [({"visualize_contact": True}, "visualize_contact"), ({"vis_mode": "sdf"}, "vis_mode"),
+    for kwargs, arg in [({"visualize_contact": 1}, "visualize_contact"), ({"vis_mode": "sdf"}, "vis_mode"),
                         ({"name": 5}, "name")]:
         with pytest.raises(gs.InvalidInputError, match=f"argument '{arg}'"):
             scene.add_entity(gs.morphs.Sphere(), **kwargs)

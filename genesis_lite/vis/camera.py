@@ -19,7 +19,8 @@ Images, as Genesis returns them: rgb (H, W, 3) uint8; depth (H, W) float32 m alo
 link and geom levels, the ids after the rigid ones, one per MPM entity), −1 where nothing is drawn
 (Genesis returns its own compacted indices instead, 0 for nothing); normal (H, W, 3) float32 world-frame unit
 normals, 0 where nothing is drawn. Debug objects (``scene.draw_debug_*``: vis/debug.py) are drawn by
-debug cameras only (``debug=True``), as in Genesis, with segmentation −1.
+debug cameras only (``debug=True``), as in Genesis, with segmentation −1; the contact-force arrows
+of entities added with ``visualize_contact`` by every camera.
 
 A camera attached to a link (``attach(link, offset_T)``) is put at the link's pose times the
 offset before each render and recorded frame; ``render_pointcloud`` turns the depth image into
@@ -51,6 +52,7 @@ from ..entities.rigid_entity import RigidLink
 from ..options import _check_float, _check_vec3, check_bool, is_int
 from ..solvers.core import InvalidInputError, SceneStateError, SimulationError, runtime
 from ..utils.geom import R_to_quat, quat_to_R
+from .debug import DebugMesh
 from .rasterizer import Rasterizer, View
 from .recorder import Recording, check_target
 
@@ -434,9 +436,10 @@ class Camera:
             view = View(self._pos + self._offset(), self._lookat + self._offset(), self._up, self._fov, self._near,
                         self._far, self._res)
             meshes, instances = drawing.meshes, drawing.instances(scene._link_kinematics())
-            spheres, debug_meshes = scene._debug_drawing() if self._debug else (None, None)
-            if debug_meshes is not None:
-                meshes, instances = drawing.with_debug(instances, debug_meshes)
+            spheres, debug_meshes = scene._debug_drawing() if self._debug else (None, [])
+            extra = DebugMesh.instances(debug_meshes + scene._contact_arrows())
+            if extra is not None:
+                meshes, instances = drawing.with_debug(instances, extra)
             return self._rasterizer.render(view, meshes, instances, drawing.particles(spheres), **images)
 
     # -- recording ----------------------------------------------------------------------------

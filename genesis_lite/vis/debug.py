@@ -4,9 +4,11 @@ coordinates — lines and trajectories (cylinders), arrows (a cylinder and a con
 quarter of the arrow's and whose radius 1.5 times the body's, Genesis's proportions), coordinate
 frames (x, y, z axes as cylinders red, green and blue, a sphere at the origin, as Genesis's) and
 boxes (solid, or their twelve edges). A line of zero length, an arrow of zero vector and a
-trajectory without two distinct consecutive points draw nothing (None, as Genesis's arrow). They keep the colour given (alpha is not drawn), have segmentation id −1, stay
-where they are drawn while the scene moves, and are drawn once (not per env, as Genesis's tiles
-them at each env's offset)."""
+trajectory without two distinct consecutive points draw nothing (None, as Genesis's arrow). They
+keep the colour given (alpha is not drawn), have segmentation id −1, stay where they are drawn
+while the scene moves, and are drawn once (not per env, as Genesis's tiles them at each env's
+offset). The contact-force arrows of an entity added with visualize_contact (``contact_arrows``)
+are made at each render, by every camera, in each drawn env at its offset."""
 import numpy as np
 import torch
 
@@ -185,3 +187,31 @@ def trajectory(owner, poss, radius, color):
     radius, rgb = _positive(owner, "radius", radius), _color(owner, color)
     pairs = [(a, b) for a, b in zip(poss[:-1], poss[1:]) if np.linalg.norm(b - a) > 0]
     return DebugMesh([(_cylinder(a, b, radius), rgb) for a, b in pairs]) if pairs else None
+
+
+CONTACT_FORCE_COLOR = (0.0, 0.9, 0.8)  # Genesis's
+CONTACT_ARROW_RADIUS = 0.005  # m (Genesis's, which thins it for links smaller than 12.5 cm)
+
+
+def contact_arrows(entity, envs, offsets, scale):
+    """Arrows (DebugMesh list) of the contact forces on ``entity``'s links in the last step's last
+    substep (get_contacts' force_a / force_b on its side of each contact), from each contact's
+    position, ``scale`` m/N long, in the envs ``envs`` (batch rows) moved by ``offsets`` (len(envs),
+    3) m; a zero force draws nothing."""
+    contacts = {name: value.detach().cpu().numpy() if hasattr(value, "detach") else value
+                for name, value in entity.get_contacts(is_padded=entity.scene.n_envs == 0).items()}
+    valid = contacts.get("valid_mask", np.ones(contacts["link_a"].shape, dtype=bool))
+    if entity.scene.n_envs == 0:
+        contacts = {name: value[None] for name, value in contacts.items()}
+        valid = valid[None]
+    links = range(entity.link_start, entity.link_start + entity.n_links)
+    arrows = []
+    for env, offset in zip(envs, offsets):
+        for side in ("a", "b"):
+            mine = valid[env] & np.isin(contacts[f"link_{side}"][env], links)
+            for pos, force in zip(contacts["position"][env][mine], contacts[f"force_{side}"][env][mine]):
+                drawn = arrow("visualize_contact", pos + offset, scale * force, CONTACT_ARROW_RADIUS,
+                              CONTACT_FORCE_COLOR)
+                if drawn is not None:
+                    arrows.append(drawn)
+    return arrows
