@@ -513,8 +513,8 @@ def _check_light_value(owner, name, value):
 class VisOptions:
     """What is drawn, whatever the viewer or camera (Genesis 1.4.5's names and defaults). Cameras
     (genesis_lite/vis/camera.py) read background_color, segmentation_level, rendered_envs_idx,
-    particle_size_scale and contact_force_scale (the arrows of an entity added with
-    visualize_contact); adding a camera raises for non-default values of what they cannot draw
+    particle_size_scale and contact_force_scale (the arrows a debug camera draws of an entity
+    added with visualize_contact); adding a camera raises for non-default values of what they cannot draw
     yet (world, link and camera frames, plane reflection, split_envs, ambient_light, lights, the
     MPM boundary); shadow draws no shadow. As Genesis's rasterizer, they draw particles as spheres
     whatever render_particle_as (the raytracer's).

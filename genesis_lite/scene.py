@@ -114,6 +114,7 @@ class Scene:
         self.visualizer = Visualizer(self)  # (Genesis's scene.visualizer: its headless calls)
         self._drawing = None  # SceneVisuals of the cameras, made at the first render
         self._debug_objects, self._debug_gathered = [], None  # vis/debug.py's; gathered for drawing when drawn
+        self._contact_drawing = None  # (starts, vectors, arrows) of visualize_contact's last drawn contacts
         track(self)  # last: a scene whose options raised is no scene to end
 
     def _substeps(self):
@@ -146,7 +147,7 @@ class Scene:
     def add_entity(self, morph, material=None, surface=None, visualize_contact=False, vis_mode=None, name=None):
         """Add an entity from a morph: rigid (material gs.materials.Rigid, the default) or MPM
         particles (a gs.materials.MPM material); returns the entity. Genesis's arguments in
-        Genesis's order; visualize_contact (a rigid entity): the cameras draw an arrow of each
+        Genesis's order; visualize_contact (a rigid entity): debug cameras draw an arrow of each
         contact force on it (vis/debug.py); vis_mode is what the cameras draw (None: "visual" for a
         rigid entity, its visual shapes, or "collision", its collision shapes, as Genesis's;
         "particle" for particles)."""
@@ -164,9 +165,9 @@ class Scene:
                                     f"got {type(surface).__name__}")
         particles = isinstance(material, MPM.Base)
         if not isinstance(visualize_contact, (bool, np.bool_)) or (visualize_contact and particles):
-            raise InvalidInputError(f"scene.add_entity: argument 'visualize_contact' must be a bool (True: the cameras "
-                                    f"draw the contact forces on a rigid entity), got {visualize_contact!r} for a "
-                                    f"{type(material).__name__} entity")
+            raise InvalidInputError(f"scene.add_entity: argument 'visualize_contact' must be a bool (True: debug "
+                                    f"cameras draw the contact forces on a rigid entity), got {visualize_contact!r} "
+                                    f"for a {type(material).__name__} entity")
         drawn = ("particle",) if isinstance(material, MPM.Base) else ("visual", "collision")
         given, arg = (vis_mode, "argument 'vis_mode'") if vis_mode is not None or surface is None else \
             (surface.vis_mode, "the surface's vis_mode")  # (add_entity's, when given, is taken: Genesis's rule)
@@ -373,14 +374,19 @@ class Scene:
 
     def _contact_arrows(self):
         """The DebugMesh arrows of the contact forces on the entities added with
-        visualize_contact, in the drawn envs (each at its env's drawing offset)."""
+        visualize_contact, in the drawn envs (each at its env's drawing offset); the same objects
+        while the contacts stay the same (the debug cameras' MeshSet is then kept)."""
         flagged = [entity for entity in self.entities if getattr(entity, "visualize_contact", False)]
         if not flagged:
             return []
-        scale = self.vis_options.contact_force_scale
         envs = self._rendered_envs()
-        return [arrow for entity in flagged
-                for arrow in debug_draw.contact_arrows(entity, envs, self.envs_offset[envs], scale)]
+        segments = [debug_draw.contact_segments(entity, envs, self.envs_offset[envs],
+                                                self.vis_options.contact_force_scale) for entity in flagged]
+        starts, vectors = (np.concatenate(part) for part in zip(*segments))
+        kept = self._contact_drawing
+        if kept is None or not (np.array_equal(kept[0], starts) and np.array_equal(kept[1], vectors)):
+            self._contact_drawing = kept = (starts, vectors, debug_draw.contact_arrows(starts, vectors))
+        return kept[2]
 
     def _rendered_envs(self):
         """The envs cameras draw (batch rows): VisOptions.rendered_envs_idx, else all."""

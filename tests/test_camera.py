@@ -357,16 +357,18 @@ def test_vis_mode_collision_draws_the_collision_shapes(f32, tmp_path):
 
 
 def test_visualize_contact_draws_each_contact_force_on_the_entity(f32):
-    """add_entity(visualize_contact=True) (Genesis's): every camera draws an arrow of each contact
+    """add_entity(visualize_contact=True) (Genesis's): a debug camera draws an arrow of each contact
     force on the entity, from the contact point, VisOptions.contact_force_scale m/N long (a box
     at rest on a plane: four arrows up from its bottom corners, a quarter of its weight each, out
-    through its top); an entity without the flag, and MPM particles, draw none (the latter refused)."""
+    through its top), as Genesis's markers only its debug cameras draw; an entity without the
+    flag, and MPM particles, draw none (the latter refused)."""
     scale, size = 0.05, 0.2
     scene = gs.Scene(vis_options=gs.options.VisOptions(contact_force_scale=scale))
     scene.add_entity(gs.morphs.Plane())
     box = scene.add_entity(gs.morphs.Box(size=(size, size, size), pos=(0.0, 0.0, size / 2)), visualize_contact=True)
     other = scene.add_entity(gs.morphs.Box(size=(size, size, size), pos=(1.0, 0.0, size / 2)))
-    cam = scene.add_camera(pos=(0.5, -1.6, 0.4), lookat=(0.5, 0.0, 0.4), up=(0.0, 0.0, 1.0), fov=50, res=(320, 320))
+    view = dict(pos=(0.5, -1.6, 0.4), lookat=(0.5, 0.0, 0.4), up=(0.0, 0.0, 1.0), fov=50, res=(320, 320))
+    cam, plain = scene.add_camera(**view, debug=True), scene.add_camera(**view)
     scene.build()
     for _ in range(50):
         scene.step()
@@ -378,6 +380,10 @@ def test_visualize_contact_draws_each_contact_force_on_the_entity(f32):
     assert len(above) > 50 and np.abs(np.abs(above[:, 0]) - size / 2).max() < 0.02  # at the corners' x
     assert above[:, 2].max() == pytest.approx(scale * weight / 4, abs=0.03)  # the arrow's tip
     assert not (cyan & (np.abs(points[..., 0] - 1.0) < 0.2)).any()  # the other box has none
+    rgb = plain.render()[0]
+    assert not ((rgb[..., 1] > 120) & (rgb[..., 2] > 120) & (rgb[..., 0] < 60)).any()  # not a debug camera
+    drawn = scene._contact_arrows()
+    assert drawn and scene._contact_arrows() is drawn  # kept while the contacts stay
     fresh = gs.Scene()
     with pytest.raises(gs.InvalidInputError, match="'visualize_contact' must be a bool"):
         fresh.add_entity(gs.morphs.Box(), visualize_contact="yes")

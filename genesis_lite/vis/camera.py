@@ -19,8 +19,8 @@ Images, as Genesis returns them: rgb (H, W, 3) uint8; depth (H, W) float32 m alo
 link and geom levels, the ids after the rigid ones, one per MPM entity), −1 where nothing is drawn
 (Genesis returns its own compacted indices instead, 0 for nothing); normal (H, W, 3) float32 world-frame unit
 normals, 0 where nothing is drawn. Debug objects (``scene.draw_debug_*``: vis/debug.py) are drawn by
-debug cameras only (``debug=True``), as in Genesis, with segmentation −1; the contact-force arrows
-of entities added with ``visualize_contact`` by every camera.
+debug cameras only (``debug=True``), as in Genesis, with segmentation −1, and so are the
+contact-force arrows of entities added with ``visualize_contact`` (Genesis's markers).
 
 A camera attached to a link (``attach(link, offset_T)``) is put at the link's pose times the
 offset before each render and recorded frame; ``render_pointcloud`` turns the depth image into
@@ -437,7 +437,7 @@ class Camera:
                         self._far, self._res)
             meshes, instances = drawing.meshes, drawing.instances(scene._link_kinematics())
             spheres, debug_meshes = scene._debug_drawing() if self._debug else (None, [])
-            extra = DebugMesh.instances(debug_meshes + scene._contact_arrows())
+            extra = DebugMesh.instances(debug_meshes + scene._contact_arrows()) if self._debug else None
             if extra is not None:
                 meshes, instances = drawing.with_debug(instances, extra)
             return self._rasterizer.render(view, meshes, instances, drawing.particles(spheres), **images)

@@ -8,7 +8,9 @@ trajectory without two distinct consecutive points draw nothing (None, as Genesi
 keep the colour given (alpha is not drawn), have segmentation id −1, stay where they are drawn
 while the scene moves, and are drawn once (not per env, as Genesis's tiles them at each env's
 offset). The contact-force arrows of an entity added with visualize_contact (``contact_arrows``)
-are made at each render, by every camera, in each drawn env at its offset."""
+are drawn by debug cameras too, in each drawn env at its offset (Genesis's markers)."""
+import functools
+
 import numpy as np
 import torch
 
@@ -108,17 +110,6 @@ def _cylinder(start, end, radius):
     return _mesh(trimesh.creation.cylinder(radius=radius, segment=np.stack([start, end]), sections=SECTIONS))
 
 
-def _cone(base, apex, radius):
-    """A cone standing on its base disc (centre ``base``) with its tip at ``apex``."""
-    import trimesh
-
-    axis = apex - base
-    cone = trimesh.creation.cone(radius=radius, height=float(np.linalg.norm(axis)), sections=SECTIONS)
-    turn = trimesh.geometry.align_vectors([0.0, 0.0, 1.0], axis)
-    turn[:3, 3] = base
-    return _mesh(cone.apply_transform(turn))
-
-
 def _sphere(centre, radius):
     import trimesh
 
@@ -134,14 +125,35 @@ def line(owner, start, end, radius, color):
     return DebugMesh([(_cylinder(start, end, radius), rgb)])
 
 
+@functools.cache
+def _unit_arrow():
+    """(vertices, normals, faces) of an arrow along +z from 0 to 1: a shaft of radius 1 to 0.75,
+    a cone of radius 1.5 from there to the tip (Genesis's proportions once scaled by
+    diag(radius, radius, length)), split at sharp edges; made once."""
+    import trimesh
+
+    shaft = trimesh.creation.cylinder(radius=1.0, segment=[[0.0, 0.0, 0.0], [0.0, 0.0, 0.75]], sections=SECTIONS)
+    head = trimesh.creation.cone(radius=1.5, height=0.25, sections=SECTIONS).apply_translation([0.0, 0.0, 0.75])
+    return _mesh(trimesh.util.concatenate([shaft, head]))
+
+
 def arrow(owner, pos, vec, radius, color):
-    """An arrow from ``pos`` along ``vec`` (3,) m; None for a zero vector (nothing drawn, as Genesis)."""
+    """An arrow from ``pos`` along ``vec`` (3,) m, its shaft of ``radius`` m; None for a zero
+    vector (nothing drawn, as Genesis). The unit arrow scaled by diag(radius, radius, |vec|) and
+    turned onto vec (its normals by the inverse scale, renormalised)."""
+    import trimesh
+
     pos, vec = _points(owner, "pos", pos, (3,)), _points(owner, "vec", vec, (3,))
     radius, rgb = _positive(owner, "radius", radius), _color(owner, color)
-    if np.linalg.norm(vec) == 0:
+    length = float(np.linalg.norm(vec))
+    if length == 0:
         return None
-    head = pos + 0.75 * vec
-    return DebugMesh([(_cylinder(pos, head, radius), rgb), (_cone(head, pos + vec, 1.5 * radius), rgb)])
+    vertices, normals, faces = _unit_arrow()
+    turn = trimesh.geometry.align_vectors([0.0, 0.0, 1.0], vec / length)[:3, :3]
+    scale = np.array([radius, radius, length])
+    normals = normals / scale
+    normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
+    return DebugMesh([(((vertices * scale) @ turn.T + pos, normals @ turn.T, faces), rgb)])
 
 
 def frames(owner, Ts, axis_length, origin_size, axis_radius, color):
@@ -193,25 +205,32 @@ CONTACT_FORCE_COLOR = (0.0, 0.9, 0.8)  # Genesis's
 CONTACT_ARROW_RADIUS = 0.005  # m (Genesis's, which thins it for links smaller than 12.5 cm)
 
 
-def contact_arrows(entity, envs, offsets, scale):
-    """Arrows (DebugMesh list) of the contact forces on ``entity``'s links in the last step's last
-    substep (get_contacts' force_a / force_b on its side of each contact), from each contact's
-    position, ``scale`` m/N long, in the envs ``envs`` (batch rows) moved by ``offsets`` (len(envs),
-    3) m; a zero force draws nothing."""
+def contact_segments(entity, envs, offsets, scale):
+    """(starts (N, 3), vectors (N, 3)) m of the arrows of the contact forces on ``entity``'s
+    links in the last step's last substep (get_contacts' force_a / force_b on its side of each
+    contact), from each contact's position, ``scale`` m/N long, in the envs ``envs`` (batch rows)
+    moved by ``offsets`` (len(envs), 3) m; non-finite ones (a diverged env's) left out."""
     contacts = {name: value.detach().cpu().numpy() if hasattr(value, "detach") else value
                 for name, value in entity.get_contacts(is_padded=entity.scene.n_envs == 0).items()}
     valid = contacts.get("valid_mask", np.ones(contacts["link_a"].shape, dtype=bool))
     if entity.scene.n_envs == 0:
         contacts = {name: value[None] for name, value in contacts.items()}
         valid = valid[None]
-    links = range(entity.link_start, entity.link_start + entity.n_links)
-    arrows = []
+    links = np.arange(entity.link_start, entity.link_start + entity.n_links)
+    starts, vectors = [np.zeros((0, 3))], [np.zeros((0, 3))]
     for env, offset in zip(envs, offsets):
         for side in ("a", "b"):
             mine = valid[env] & np.isin(contacts[f"link_{side}"][env], links)
-            for pos, force in zip(contacts["position"][env][mine], contacts[f"force_{side}"][env][mine]):
-                drawn = arrow("visualize_contact", pos + offset, scale * force, CONTACT_ARROW_RADIUS,
-                              CONTACT_FORCE_COLOR)
-                if drawn is not None:
-                    arrows.append(drawn)
-    return arrows
+            starts.append(contacts["position"][env][mine] + offset)
+            vectors.append(scale * contacts[f"force_{side}"][env][mine])
+    starts, vectors = np.concatenate(starts), np.concatenate(vectors)
+    finite = np.isfinite(starts).all(1) & np.isfinite(vectors).all(1)
+    return starts[finite], vectors[finite]
+
+
+def contact_arrows(starts, vectors):
+    """The DebugMesh arrows of contact_segments (Genesis's cyan, CONTACT_ARROW_RADIUS; zero
+    forces draw nothing)."""
+    arrows = (arrow("visualize_contact", start, vector, CONTACT_ARROW_RADIUS, CONTACT_FORCE_COLOR)
+              for start, vector in zip(starts, vectors))
+    return [drawn for drawn in arrows if drawn is not None]
