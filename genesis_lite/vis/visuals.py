@@ -148,6 +148,7 @@ class SceneVisuals:
         rows = [(env, shape) for shape in shapes for env in (envs[:1] if shape.shared else envs)]
         self.parts = [shape.mesh for _, shape in rows]  # (a debug camera's MeshSet adds the debug meshes' to them)
         self.meshes = MeshSet.from_parts(self.parts) if rows else None
+        self._debug_parts = self._debug_meshes = None  # with_debug's last debug parts and their MeshSet
         device = runtime.device
         env = np.array([env for env, _ in rows], dtype=np.int64)
         self._env = torch.as_tensor(env, device=device)
@@ -205,7 +206,7 @@ class SceneVisuals:
         nothing has a shape) followed by the debug meshes ``debug`` (DebugMesh.instances' pair):
         the MeshSet built again only when the debug meshes' parts change."""
         parts, extra = debug
-        kept = getattr(self, "_debug_parts", None)
+        kept = self._debug_parts
         if kept is None or len(kept) != len(parts) or any(a is not b for a, b in zip(kept, parts)):
             self._debug_parts, self._debug_meshes = parts, MeshSet.from_parts(self.parts + parts)
         if instances is None:
