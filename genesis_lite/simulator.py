@@ -426,15 +426,13 @@ class Simulator:
         self._sync(slot, state, slot.inputs)
         return solver.links_kinematics()
 
-    def kinematics_at(self, solver, state):
-        """Link kinematics (B, L, 13) at ``state`` (B, width), another state than the scene's (an
-        inverse-kinematics trial), without a graph. The scene's state stays, and so does its
-        solve's warm start: uploading clears it, so it is held for the next upload of the
-        scene's state (_sync_state)."""
-        self.state(solver)  # (read back where Taichi alone holds it)
-        self._hold_warm_start(self.slot(solver))
-        with torch.no_grad():
-            return self.read_derived(solver, state)
+    def at_state(self, solver, compute):
+        """``compute()`` with Taichi holding the scene's current state and inputs of ``solver``
+        (a kernel that reads them and makes no graph: inverse kinematics)."""
+        state = self.state(solver)
+        slot = self.slot(solver)
+        self._sync(slot, state, slot.inputs)
+        return compute()
 
     def read_derived_backward(self, solver, state, grad):
         slot = self.slot(solver)
@@ -500,10 +498,8 @@ class Simulator:
         """``compute()`` at the current state and inputs, as a value whose backward raises when
         the state or any input requires grad: it depends on all of them, and a gradient must
         never stop silently."""
-        state = self.state(solver)
-        slot = self.slot(solver)
-        self._sync(slot, state, slot.inputs)
-        value = compute()
+        value = self.at_state(solver, compute)
+        state, slot = self.state(solver), self.slot(solver)
         anchor = next((t for t in (state, *slot.inputs.values()) if t.requires_grad), state)
         return autograd.not_differentiable(what, anchor, value)
 

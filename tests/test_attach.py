@@ -252,3 +252,22 @@ def test_a_camera_follows_an_attached_entity_from_where_it_hangs(f64, tmp_path):
     camera.follow_entity(box)
     scene.build()
     np.testing.assert_allclose(camera._follow[1], np.array([2.0, 0.0, 1.0]) - box.get_pos().numpy(), atol=1e-12)
+
+
+def test_inverse_kinematics_of_an_attached_hand_starts_from_its_parents_pose(f64, tmp_path):
+    """The hand's IK (its finger only) poses the arm it hangs from as the state has it, not as the
+    last link getter left the frame the solve uses: the finger's point with the arm at pose A is
+    reached (finger at 0.02 m) after the arm was read at pose B and set back to A unread."""
+    scene, (arm, hand) = _scenes(tmp_path, "mount")
+    finger = hand.get_link("finger")
+    pose_a, pose_b = torch.tensor([0.4, -0.7], dtype=torch.float64), torch.tensor([-0.9, 1.1], dtype=torch.float64)
+    out = torch.tensor([0.02], dtype=torch.float64)
+    arm.set_qpos(pose_a)
+    hand.set_qpos(out)
+    target = finger.get_pos().clone()
+    arm.set_qpos(pose_b)
+    assert (finger.get_pos() - target).norm() > 0.1  # (the frame now holds pose B)
+    arm.set_qpos(pose_a)
+    hand.set_qpos(torch.zeros(1, dtype=torch.float64))
+    qpos, error = hand.inverse_kinematics(finger, pos=target, pos_tol=1e-10, return_error=True)
+    assert error.norm() <= 1e-6 and abs(float(qpos[0]) - 0.02) <= 1e-6

@@ -262,3 +262,23 @@ def test_bad_arguments_raise(f64):
     fixed_box.build()
     with pytest.raises(gs.InvalidInputError, match="get_jacobian expected an entity with dofs"):
         static.get_jacobian(static.links[0])
+
+
+def test_inverse_kinematics_of_many_envs_is_each_envs_own(f64):
+    """130 envs (the thread pool's loop; 130 × 8 links) each solve their own reachable pose as that
+    env alone does, bit for bit; an env given twice (solved one row after the other, on one frame)
+    solves both of its targets, each as alone."""
+    scene, robot = _scene(KUKA, True, n_envs=130)
+    rng = np.random.default_rng(8)
+    ee = robot.links[-1]
+    robot.set_qpos(torch.tensor(rng.uniform(-1.0, 1.0, (130, 7))))
+    pos, quat = ee.get_pos().clone(), ee.get_quat().clone()
+    robot.set_qpos(torch.zeros(130, 7, dtype=torch.float64))
+    qpos, error = robot.inverse_kinematics(ee, pos=pos, quat=quat, return_error=True)
+    assert (error[:, :3].norm(dim=1) <= 5e-4).all() and (error[:, 3:].norm(dim=1) <= 5e-3).all()
+    for env in (0, 77, 129):
+        alone = robot.inverse_kinematics(ee, pos=pos[env], quat=quat[env], envs_idx=[env])
+        assert torch.equal(alone[0], qpos[env])
+    twice = robot.inverse_kinematics(ee, pos=pos[[3, 4]], quat=quat[[3, 4]], envs_idx=[5, 5])
+    for row, goal in enumerate((3, 4)):
+        assert torch.equal(twice[row], robot.inverse_kinematics(ee, pos=pos[goal], quat=quat[goal], envs_idx=[5])[0])

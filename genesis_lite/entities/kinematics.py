@@ -1,5 +1,6 @@
 """A rigid entity's point Jacobian and inverse kinematics (Genesis's ``get_jacobian`` and
-``inverse_kinematics``), in torch over the solver's link poses.
+``inverse_kinematics``): the Jacobian in torch over the solver's link poses, inverse
+kinematics in one kernel (solvers/rigid/ik.py) given the arrays made here.
 
 The Jacobian maps the entity's dof velocities (``get_dofs_velocity``'s convention, MuJoCo's: a
 free joint moves along the world axes, then turns about its own axes) to the linear velocity of a
@@ -14,16 +15,18 @@ q ← q + Jᵀ (J Jᵀ + λ² I)⁻¹ r, r the masked errors (position in the wo
 link's frame), each step's components within ±max_step_size, the scalar joints clipped to their
 limits (a ball joint turns about its own axes, its cone limit not a goal: the step's rows push it
 back); from another start drawn inside the limits when one does not converge (only with limits
-respected; ball joints start again where they were). Only the dofs given that move a goal's link take part. The poses come from the
-solver's own kinematics at each trial q, which never becomes the scene's state; a mimic joint's
+respected; ball joints start again where they were). Only the dofs given that move a goal's link
+take part. The poses come from the solver's own kinematics at each trial q, in the frame the link
+getters use, so the trial q never becomes the scene's state; a mimic joint's
 equality is not a goal (the solve may part a Panda's fingers: they meet again in the next steps).
 """
 import numpy as np
 import torch
 
 from ..solvers.core import InvalidInputError, runtime
+from ..solvers.rigid import ik
 from ..solvers.rigid.model import REVOLUTE
-from ..utils.rotations import quat_mul, quat_to_mat, rotation_vector
+from ..utils.rotations import quat_to_mat
 
 
 class DofMotions:
@@ -89,24 +92,6 @@ class Target:
         if quat is None:
             self.mask[3:] = 0.0
 
-    def error(self, pos, quat):
-        """(B', 6) masked (position, rotation vector) from the link's pose to the goal, given every
-        link's pose pos (B', L, 3), quat (B', L, 4): world position, rotation in the link frame."""
-        link_quat = quat[:, self.link]
-        out = torch.zeros(pos.shape[0], 6, dtype=pos.dtype, device=pos.device)
-        if self.pos is not None:
-            out[:, :3] = self.pos - (pos[:, self.link] + (quat_to_mat(link_quat) @ self.point[:, None])[..., 0])
-        if self.quat is not None:
-            conjugate = link_quat * torch.tensor([1.0, -1.0, -1.0, -1.0], dtype=pos.dtype, device=pos.device)
-            out[:, 3:] = rotation_vector(quat_mul(conjugate, self.quat))
-        return out * self.mask
-
-    def rows(self, motions, pos, quat):
-        """(B', 6, n_dofs): the error's Jacobian rows, the rotation's in the link frame, masked."""
-        J = jacobian(motions, pos, quat, self.link, self.point)
-        turn = quat_to_mat(quat[:, self.link]).transpose(1, 2)
-        return torch.cat([J[:, :3], turn @ J[:, 3:]], 1) * self.mask[:, None]
-
 
 class _Joints:
     """The solve's view of the entity's qpos: the qs of its scalar dofs, their limits (rad or m;
@@ -128,6 +113,10 @@ class _Joints:
         self.lower, self.upper = (inputs[name][rows][:, columns].detach() for name in ("limit_lower", "limit_upper"))
         self.moving = torch.as_tensor(moving[self.dofs], device=device)
         self.revolute = torch.as_tensor(model.link_jtype[model.dof_link[dofs]] == REVOLUTE, device=device)
+        # the kernel's joints (ik.py): (kind, local dof, local q, index among the scalar ones)
+        self.table = ([[ik.FREE_MOVE, dof, q, -1] for dof, q in self.free] + [[ik.TURN, dof, q, -1] for dof, q in self.turns]
+                      + [[ik.SCALAR, dof, q, k] for k, (dof, q) in enumerate(zip(self.dofs.tolist(), self.qs.tolist()))])
+        self.limits = torch.stack([self.lower, self.upper], -1)  # (B', scalar dofs, 2)
 
     def clipped(self, q):
         """q with its moving scalar joints within their limits (when respected)."""
@@ -138,49 +127,17 @@ class _Joints:
         q[:, self.qs] = torch.where(self.moving, inside, q[:, self.qs])
         return q
 
-    def moved(self, q, step):
-        """q (B', n_qs) moved by a dof-space step (B', n_dofs): a free joint's position along the
-        world axes, its quaternion (a ball joint's too) turned about its own axes (q ⊗ exp(ω/2)),
-        the scalar joints by theirs, clipped."""
-        q = q.clone()
-        for dof, first in self.free:
-            q[:, first: first + 3] += step[:, dof: dof + 3]
-        for dof, first in self.turns:
-            half = step[:, dof: dof + 3] / 2
-            angle = half.norm(dim=1, keepdim=True)
-            turn = torch.cat([torch.cos(angle), half * torch.sinc(angle / np.pi)], dim=1)
-            quat = quat_mul(q[:, first: first + 4], turn)
-            q[:, first: first + 4] = quat / quat.norm(dim=1, keepdim=True)
-        q[:, self.qs] = q[:, self.qs] + step[:, self.dofs]
-        return self.clipped(q)
-
-    def sample(self, q, generator):
-        """q with its moving scalar joints drawn uniformly within their limits (a revolute joint
-        without limits in [−π, π]; a prismatic one without keeps its value)."""
+    def samples(self, q, generator, count):
+        """(count, B', n_qs): q with its moving scalar joints drawn uniformly within their limits (a
+        revolute joint without limits in [−π, π]; a prismatic one without keeps its value)."""
         finite = torch.isfinite(self.lower) & torch.isfinite(self.upper)
         lower = torch.where(finite, self.lower, -np.pi)
         upper = torch.where(finite, self.upper, np.pi)
-        draw = lower + torch.rand(q.shape[0], len(self.qs), generator=generator, dtype=q.dtype).to(q.device) * (
+        draw = lower + torch.rand(count, q.shape[0], len(self.qs), generator=generator, dtype=q.dtype).to(q.device) * (
             upper - lower)
-        q = q.clone()
-        q[:, self.qs] = torch.where(self.moving & (finite | self.revolute), draw, q[:, self.qs])
-        return q
-
-
-def _poses_at(entity, q, envs):
-    """World poses (pos (B', L, 3), quat (B', L, 4)) of the entity's links with its qpos at q
-    (B', n_qs) in envs, from the solver's kinematics; the scene's state is not changed."""
-    sim = entity._sim()
-    state = sim.state(entity._solver).detach().clone()
-    rows = torch.as_tensor(envs, device=state.device)
-    state[rows[:, None], torch.as_tensor(entity._qpos_columns(), device=state.device)] = q
-    links = sim.kinematics_at(entity._solver, state)[rows, entity.link_start: entity.link_start + entity.n_links]
-    return links[..., 0:3], links[..., 3:7]
-
-
-def _norms(errors):
-    """(B', K, 2): each goal's position and rotation error lengths, of errors (B', K, 6)."""
-    return torch.stack([errors[..., :3].norm(dim=-1), errors[..., 3:].norm(dim=-1)], -1)
+        out = q.expand(count, *q.shape).clone()
+        out[..., self.qs] = torch.where(self.moving & (finite | self.revolute), draw, out[..., self.qs])
+        return out
 
 
 def checked_mask(mask, name, who):
@@ -224,38 +181,36 @@ def solve_ik(entity, goals, start, envs, dofs, options):
     and stops where every goal is within pos_tol and rot_tol (that qpos is the answer); else its
     last qpos becomes the best where no goal's position or rotation error is worse than the best
     one's (the first sample's always), and another start is drawn within the limits (when
-    respected). options: respect_joint_limit, max_samples, max_solver_iters, damping, pos_tol,
-    rot_tol, max_step_size, seed. Returns (the best qpos (B', n_qs), its errors (B', K, 6))."""
+    respected). One kernel runs it all (solvers/rigid/ik.py), the starts drawn beforehand.
+    options: respect_joint_limit, max_samples, max_solver_iters, damping, pos_tol, rot_tol,
+    max_step_size, seed. Returns (the best qpos (B', n_qs), its errors (B', K, 6))."""
     motions = DofMotions(entity)
     on_path = np.logical_or.reduce([motions.on_path(target.link) for target in goals])
     moving = on_path & np.isin(np.arange(entity.n_dofs), dofs)
     joints = _Joints(entity, options["respect_joint_limit"], moving, envs)
     generator = torch.Generator().manual_seed(0 if options["seed"] is None else int(options["seed"]))
-    moving_columns = torch.as_tensor(moving, dtype=start.dtype, device=start.device)
-    eye = torch.eye(6 * len(goals), dtype=start.dtype, device=start.device)
-    limit = options["max_step_size"]
-    q = joints.clipped(start)
-    best_q = q.clone()
-    best_error = torch.full((len(q), len(goals), 6), float("inf"), dtype=q.dtype, device=q.device)
-    solved = torch.zeros(len(q), dtype=torch.bool, device=q.device)
-    for sample in range(options["max_samples"] if joints.limited else 1):
-        for iteration in range(options["max_solver_iters"] + 1):
-            pos, quat = _poses_at(entity, q, envs)
-            error = torch.stack([target.error(pos, quat) for target in goals], 1)
-            worst = _norms(error).amax(1)
-            now = ~solved & (worst[:, 0] <= options["pos_tol"]) & (worst[:, 1] <= options["rot_tol"])
-            best_q[now], best_error[now] = q[now], error[now]
-            solved |= now
-            if bool(solved.all()):
-                return best_q, best_error
-            if iteration == options["max_solver_iters"]:
-                break
-            J = torch.cat([target.rows(motions, pos, quat) for target in goals], 1) * moving_columns
-            step = (J.transpose(1, 2) @ torch.linalg.solve(J @ J.transpose(1, 2) + options["damping"] ** 2 * eye,
-                                                           error.reshape(error.shape[0], -1, 1)))[..., 0]
-            moved = joints.moved(q, step * (limit / step.abs().amax(1, keepdim=True).clamp_min(limit)))
-            q = torch.where(solved[:, None], q, moved)
-        improved = ~solved & (_norms(error) <= _norms(best_error)).all(-1).all(-1)
-        best_q[improved], best_error[improved] = q[improved], error[improved]
-        q = torch.where(solved[:, None], best_q, joints.sample(start, generator))
-    return best_q, best_error
+    samples = options["max_samples"] if joints.limited else 1
+    starts = torch.cat([joints.clipped(start)[None], joints.samples(start, generator, samples - 1)])
+    rows, K, D = len(envs), len(goals), entity.n_dofs
+    solver = entity._solver
+    ints = lambda values: torch.tensor(values, dtype=torch.int32, device=start.device)  # noqa: E731
+    floats = lambda *shape: torch.zeros(shape, dtype=start.dtype, device=start.device)  # noqa: E731
+    serial = len(np.unique(envs)) < rows or bool(solver.data.schedule[0])  # (an env met twice: one frame)
+    sizes = ints([entity.q_start, entity.dof_start, entity.link_start, entity.link_start + entity.n_links, samples,
+                  options["max_solver_iters"], int(joints.limited), 1 if serial else max(1, 1024 // rows),
+                  len(joints.table)])
+    spec = torch.cat([torch.stack([target.point.to(start.dtype) for target in goals]),
+                      torch.stack([target.mask.to(start.dtype) for target in goals])], 1).contiguous()
+    identity = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=start.dtype, device=start.device)
+    targets = torch.stack([torch.cat([floats(rows, 3) if target.pos is None else target.pos.to(start.dtype),
+                                      identity.expand(rows, 4) if target.quat is None else target.quat.to(start.dtype)],
+                                     1) for target in goals], 1).contiguous()
+    options_array = torch.tensor([options["damping"], options["pos_tol"], options["rot_tol"], options["max_step_size"]],
+                                 dtype=start.dtype, device=start.device)
+    best_q, best_err = floats(rows, entity.n_qs), floats(rows, K, 6)
+    arrays = (ints(envs), sizes, ints(joints.table).reshape(-1, 4), joints.limits.contiguous(), ints(moving),
+              ints([entity.link_start + target.link for target in goals]), spec, targets, starts.contiguous(),
+              options_array, floats(rows, 6 * K, D), floats(rows, 6 * K, 6 * K), floats(rows, 6 * K, 2),
+              floats(rows, entity.n_qs), floats(rows, D), best_q, best_err)
+    entity._sim().at_state(solver, lambda: solver.inverse_kinematics(serial, *arrays))
+    return best_q, best_err

@@ -13,7 +13,7 @@ import torch
 from ..base import GradColumns, Solver
 from ..core import AssetError, GradientError, SimulationError, new_state, runtime
 from ..launch import BoundKernel, BoundKernels
-from . import contact, step
+from . import contact, ik, step
 from .collision import detect
 from .constraint.solver import MINVAL
 from .data import ARENAS, BIG, DYN_WELD, ELEMENT, HEADER, INPUTS, RigidData
@@ -151,6 +151,8 @@ class RigidSolver(Solver):
         self.collider_reverses = [(detect.KERNEL_BIT[kind], BoundKernel(step.collide_adjoint, (schedule, kind),
                                                                         arenas, element_dims, detect.opt_level(kind)))
                                   for kind in detect.differentiable_kinds(m)]
+        self._inverse_kinematics = {serial: BoundKernel(ik.inverse_kinematics, serial, arenas, element_dims)
+                                    for serial in (False, True)}
 
     def _default_inputs(self):
         m, B, slots = self.model, self.n_batch, self.rigid_options.max_dynamic_constraints
@@ -602,6 +604,11 @@ class RigidSolver(Solver):
         out = self._empty(sum(self.grad_widths))
         self.kernels.down_sweep_adjoint(grad_links.contiguous(), out)
         return self._split_grads(out)[0]
+
+    def inverse_kinematics(self, serial, *arrays):
+        """Inverse kinematics of one entity at the uploaded state (ik.py: what ``arrays`` hold;
+        serial: the envs one after another on the calling thread, as an env met twice needs)."""
+        self._inverse_kinematics[serial](*arrays)
 
     def mass_matrix(self):
         """(B, D, D) joint-space mass matrix (armature excluded) at the uploaded state."""
