@@ -19,7 +19,7 @@ from .bounds import shapes_aabb
 from ..tensor import wrap
 from .common import EntityIndexing, broadcast, named_argument_errors, replace_columns as _replace, take
 from ..utils.uid import UID
-from ..utils.rotations import euler_xyz_to_quat, quat_to_euler_xyz, quat_to_mat, rotate
+from ..utils.rotations import euler_xyz_to_quat, quat_mul, quat_to_euler_xyz, quat_to_mat, rotate, rotation_vector
 
 _BASE = np.zeros(1, dtype=np.int64)  # the base link's local index, as an index array
 
@@ -1414,9 +1414,13 @@ class RigidEntity(EntityIndexing):
         """Switch the dofs to ``mode`` with ``targets``: {input name: (value, argument name)}; a value
         None is the constant 0 (written only where the input holds something else)."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
-        if mode == "position" and np.isin(dofs, self._quat_joint_dofs).any():
-            raise InvalidInputError(f"entity '{self.name}': {method} cannot drive the dofs of free and ball joints "
-                                    f"(dofs_idx_local {self._quat_joint_dofs.tolist()}); got {dofs.tolist()}")
+        for dof, _ in self._turns if mode == "position" else ():
+            given = np.isin(np.arange(dof, dof + 3), dofs)
+            if given.any() and not given.all():
+                raise InvalidInputError(f"entity '{self.name}': {method} drives a free or ball joint's three rotation "
+                                        f"dofs together (their targets are one orientation, as Euler angles): "
+                                        f"dofs_idx_local expected all of {list(range(dof, dof + 3))} or none, got "
+                                        f"{dofs.tolist()}")
         envs = self._envs(envs_idx, distinct=True)
         columns = self.dof_start + dofs
         checked = {name: self._values(value, len(dofs), envs, arg) for name, (value, arg) in targets.items()
@@ -1451,7 +1455,10 @@ class RigidEntity(EntityIndexing):
 
     def control_dofs_position(self, position, dofs_idx_local=None, envs_idx=None):
         """PD servo to target positions (rad or m) at rest: τ = kp·(target − q) − kv·q̇, clipped to
-        the force range."""
+        the force range. A free or ball joint's three rotation dofs take a target orientation as
+        get_dofs_position gives it (intrinsic X-Y-Z Euler angles), all three together, and
+        target − q is the rotation vector of the turn from the joint's orientation to it, in the
+        joint's axes (Genesis's: a free joint's, in world axes)."""
         self._control("control_dofs_position", "position", {"ctrl_pos": (position, "position"),
                                                             "ctrl_vel": (None, "velocity")}, dofs_idx_local, envs_idx)
 
@@ -1476,16 +1483,33 @@ class RigidEntity(EntityIndexing):
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local")
         columns = self.dof_start + dofs
         read = {name: self._read_input(name, columns, envs_idx) for name in
-                ("ctrl_mode", "ctrl_force", "ctrl_pos", "ctrl_vel", "kp", "kv", "force_lo", "force_hi")}
-        q = self._dofs_position_all(envs_idx)[:, torch.as_tensor(dofs, device=runtime.device)]
+                ("ctrl_mode", "ctrl_force", "ctrl_vel", "kp", "kv", "force_lo", "force_hi")}
+        error = self._servo_error(envs_idx)[:, torch.as_tensor(dofs, device=runtime.device)]
         qd = self._read(self._vel_columns(dofs), envs_idx)
         servo = read["kv"] * (read["ctrl_vel"] - qd)
         mode = read["ctrl_mode"]
-        force = torch.where(mode == _MODES["position"], read["kp"] * (read["ctrl_pos"] - q) + servo,
+        force = torch.where(mode == _MODES["position"], read["kp"] * error + servo,
                             torch.where(mode == _MODES["velocity"], servo, read["ctrl_force"]))
         lo, hi = read["force_lo"], read["force_hi"]
         # a force on its bound is the bound, in its gradient too (the step's convention, actuation.py)
         return self._out(torch.where((lo < force) & (force < hi), force, torch.where(force <= lo, lo, hi)))
+
+    def _servo_error(self, envs_idx):
+        """(B', n_dofs) what each dof's position servo pulls by (solvers/rigid/actuation.py):
+        target − q; a free or ball joint's rotation dofs: the rotation vector of q⁻¹ ⊗ q*, q* the
+        quaternion of their three targets (Euler angles), in the joint's axes."""
+        target = self._read_input("ctrl_pos", self.dof_start + np.arange(self.n_dofs), envs_idx)
+        error = target - self._dofs_position_all(envs_idx)
+        if not self._turns:
+            return error
+        qpos = self._read(self._qpos_columns(), envs_idx)
+        pieces, done = [], 0
+        for dof, q in self._turns:
+            quat = qpos[:, q: q + 4] / qpos[:, q: q + 4].norm(dim=1, keepdim=True)
+            turn = quat_mul(quat * quat.new_tensor([1.0, -1.0, -1.0, -1.0]), euler_xyz_to_quat(target[:, dof: dof + 3]))
+            pieces += [error[:, done: dof], rotation_vector(turn)]
+            done = dof + 3
+        return torch.cat(pieces + [error[:, done:]], dim=1)
 
     # -- dynamics queries ---------------------------------------------------------------------------
     def get_dofs_force(self, dofs_idx_local=None, envs_idx=None):

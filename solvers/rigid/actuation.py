@@ -4,7 +4,10 @@
 Control modes per dof (as in Genesis): 0 force (``control_dofs_force``), 1 position
 (τ = kp·(q* − q) + kv·(q̇* − q̇), with q̇* = ``ctrl_vel``: 0 after ``control_dofs_position``,
 the target of ``control_dofs_position_velocity``), 2 velocity (τ = kv·(q̇* − q̇)); the result is
-clipped to the dof's force range. Damping −b·q̇ and a joint spring −k·(q − q_ref) (q_ref: the
+clipped to the dof's force range. A free or ball joint's rotation dofs take the joint's target
+orientation as intrinsic X-Y-Z Euler angles (get_dofs_position's), and q* − q is the rotation
+vector of the turn from the joint's quaternion q to the target's, rotvec(q⁻¹ ⊗ q*), in the
+joint's own axes, which its dofs turn about (Genesis: the same turn in world axes, on its dofs). Damping −b·q̇ and a joint spring −k·(q − q_ref) (q_ref: the
 model's springref, MuJoCo's qpos_spring; a ball joint's dof a: −k·r_a, r the rotation vector of
 its turn, MuJoCo's ball spring) are passive; the spring is explicit, as MuJoCo's and
 Genesis's integrators take it (neither puts stiffness into the implicit matrix; Genesis's spring
@@ -21,9 +24,10 @@ import taichi as ti
 
 from .data import accumulate
 from .kinematics import joint_quat, tendon_length, tendon_rate
-from .model import BALL
+from .model import BALL, FREE
 from .spec import TENDON_JOINTS
-from .spatial import quat_rotation_vector, quat_rotation_vector_adjoint
+from .spatial import (euler_xyz_quat, euler_xyz_quat_adjoint, quat_conj, quat_mul, quat_mul_adjoint,
+                      quat_rotation_vector, quat_rotation_vector_adjoint)
 
 FORCE, POSITION, VELOCITY = 0, 1, 2
 
@@ -45,14 +49,67 @@ def servo_kv(d: ti.template(), e, i):
 
 
 @ti.func
-def actuator_force(d: ti.template(), e, i, mode, q, qd):
-    """Dof i's actuator command in env e before clipping."""
+def actuator_force(d: ti.template(), s, e, i, mode, qd):
+    """Dof i's actuator command in env e at frame s before clipping."""
     force = d.ctrl_force[e, i]
     if mode != FORCE:
         force = d.kv[e, i] * (d.ctrl_vel[e, i] - qd)
         if mode == POSITION:
-            force += d.kp[e, i] * (d.ctrl_pos[e, i] - q)
+            force += d.kp[e, i] * _servo_error(d, s, e, i)
     return force
+
+
+@ti.func
+def _turn_target(d: ti.template(), e, link):
+    """(the first rotation dof of link l's free or ball joint, its servo's target quaternion from
+    the targets of its three rotation dofs: intrinsic X-Y-Z Euler angles, rad)."""
+    turn0 = d.link_dof0[link] + (3 if d.link_jtype[link] == FREE else 0)
+    return turn0, euler_xyz_quat(ti.Vector([d.ctrl_pos[e, turn0 + k] for k in ti.static(range(3))]))
+
+
+@ti.func
+def _servo_error(d: ti.template(), s, e, i):
+    """What dof i's position servo pulls by at frame s: q* − q (rad or m); a free joint's position
+    dof: its target less its origin's coordinate; a free or ball joint's rotation dof: its
+    component (in the joint's own axes, as its dofs) of the rotation vector of the turn from the
+    joint's quaternion to the target's, rotvec(q⁻¹ ⊗ q*)."""
+    qi, link = d.dof_q[i], d.dof_link[i]
+    error = 0.0
+    if qi >= 0:
+        error = d.ctrl_pos[e, i] - d.qpos[s, e, qi]
+    elif d.link_jtype[link] == FREE and i < d.link_dof0[link] + 3:
+        error = d.ctrl_pos[e, i] - d.qpos[s, e, d.link_q0[link] + i - d.link_dof0[link]]
+    else:
+        turn0, target = _turn_target(d, e, link)
+        error = quat_rotation_vector(quat_mul(quat_conj(joint_quat(d, s, e, link)), target))[i - turn0]
+    return error
+
+
+@ti.func
+def _servo_error_adjoint(d: ti.template(), s, e, i, g):
+    """Reverse of _servo_error: g = ∂L/∂error into the state's qpos and the targets ctrl_pos."""
+    qi, link = d.dof_q[i], d.dof_link[i]
+    if qi >= 0:
+        accumulate(d.ctrl_pos.grad, ti.Vector([e, i]), g)
+        accumulate(d.qpos.grad, ti.Vector([s, e, qi]), -g)
+    elif d.link_jtype[link] == FREE and i < d.link_dof0[link] + 3:
+        accumulate(d.ctrl_pos.grad, ti.Vector([e, i]), g)
+        accumulate(d.qpos.grad, ti.Vector([s, e, d.link_q0[link] + i - d.link_dof0[link]]), -g)
+    else:
+        turn0, target = _turn_target(d, e, link)
+        inverse = quat_conj(joint_quat(d, s, e, link))
+        g_turn = ti.Vector.zero(float, 3)
+        g_turn[i - turn0] = g
+        g_inverse, g_target = quat_mul_adjoint(inverse, target, quat_rotation_vector_adjoint(
+            quat_mul(inverse, target), g_turn))
+        g_quat = quat_conj(g_inverse)
+        q0 = d.link_q0[link] + (3 if d.link_jtype[link] == FREE else 0)
+        for k in ti.static(range(4)):
+            accumulate(d.qpos.grad, ti.Vector([s, e, q0 + k]), g_quat[k])
+        g_angles = euler_xyz_quat_adjoint(ti.Vector([d.ctrl_pos[e, turn0 + k] for k in ti.static(range(3))]),
+                                          g_target)
+        for k in ti.static(range(3)):
+            accumulate(d.ctrl_pos.grad, ti.Vector([e, turn0 + k]), g_angles[k])
 
 
 @ti.func
@@ -87,10 +144,8 @@ def _spring_stretch_adjoint(d: ti.template(), s, e, i, g):
 @ti.func
 def smooth_force(d: ti.template(), s, e, i):
     qd = d.qvel[s, e, i]
-    qi = d.dof_q[i]
-    q = d.qpos[s, e, ti.max(qi, 0)]  # free and ball joints' dofs have no scalar q; never used for them
     mode = ti.cast(d.ctrl_mode[e, i], ti.i32)
-    force = ti.min(ti.max(actuator_force(d, e, i, mode, q, qd), d.force_lo[e, i]), d.force_hi[e, i])
+    force = ti.min(ti.max(actuator_force(d, s, e, i, mode, qd), d.force_lo[e, i]), d.force_hi[e, i])
     force -= d.damping[e, i] * qd
     if d.stiffness[e, i] != 0.0:  # (a free joint's is 0)
         force -= d.stiffness[e, i] * _spring_stretch(d, s, e, i)
@@ -102,17 +157,15 @@ def smooth_force_adjoint(d: ti.template(), s, e, i):
     """Reverse of smooth_force: ∂L/∂qfrc_smooth[s, e, i] → state, bias and the inputs."""
     g = d.qfrc_smooth.grad[s, e, i]
     qd = d.qvel[s, e, i]
-    qi = d.dof_q[i]
-    q = d.qpos[s, e, ti.max(qi, 0)]
     mode = ti.cast(d.ctrl_mode[e, i], ti.i32)
     kp, kv = d.kp[e, i], d.kv[e, i]
-    g_q, g_qd = 0.0, -g * d.damping[e, i]
+    g_qd = -g * d.damping[e, i]
     accumulate(d.qfrc_bias.grad, ti.Vector([s, e, i]), -g)
     accumulate(d.damping.grad, ti.Vector([e, i]), -g * qd)
     if d.stiffness[e, i] != 0.0:
         _spring_stretch_adjoint(d, s, e, i, -g * d.stiffness[e, i])
     accumulate(d.stiffness.grad, ti.Vector([e, i]), -g * _spring_stretch(d, s, e, i))
-    force = actuator_force(d, e, i, mode, q, qd)
+    force = actuator_force(d, s, e, i, mode, qd)
     g_force = 0.0  # a clipped force is its bound (at the bound itself too)
     if d.force_lo[e, i] < force and force < d.force_hi[e, i]:
         g_force = g
@@ -127,10 +180,8 @@ def smooth_force_adjoint(d: ti.template(), s, e, i):
         accumulate(d.ctrl_vel.grad, ti.Vector([e, i]), g_force * kv)
         g_qd -= g_force * kv
     if mode == POSITION:
-        accumulate(d.kp.grad, ti.Vector([e, i]), g_force * (d.ctrl_pos[e, i] - q))
-        accumulate(d.ctrl_pos.grad, ti.Vector([e, i]), g_force * kp)
-        g_q -= g_force * kp
-    accumulate(d.qpos.grad, ti.Vector([s, e, ti.max(qi, 0)]), g_q)
+        accumulate(d.kp.grad, ti.Vector([e, i]), g_force * _servo_error(d, s, e, i))
+        _servo_error_adjoint(d, s, e, i, g_force * kp)
     accumulate(d.qvel.grad, ti.Vector([s, e, i]), g_qd)
 
 

@@ -71,6 +71,21 @@ def axis_angle_quat(axis, angle):
 
 
 @ti.func
+def _euler_factors(angles):
+    """The quaternions of the turns by angles (a, b, c) rad about x, y and z, in turn."""
+    c, s = ti.cos(0.5 * angles), ti.sin(0.5 * angles)
+    return (ti.Vector([c[0], s[0], 0.0, 0.0]), ti.Vector([c[1], 0.0, s[1], 0.0]),
+            ti.Vector([c[2], 0.0, 0.0, s[2]]))
+
+
+@ti.func
+def euler_xyz_quat(angles):
+    """The unit quaternion of intrinsic X-Y-Z Euler angles (a, b, c) rad: R = Rx(a) Ry(b) Rz(c)."""
+    qx, qy, qz = _euler_factors(angles)
+    return quat_mul(quat_mul(qx, qy), qz)
+
+
+@ti.func
 def _turn_terms(q):
     """(sign, c, v, l) of the raw quaternion q: q / |q| = sign (c, v) with c ≥ 0 (the turn of at
     most π), l = |v|."""
@@ -185,6 +200,17 @@ def quat_rotation_vector_adjoint(q, g):
     along = v.dot(g)
     g_v = f * g + f_l * along * v
     return sign * normalized_adjoint(q, ti.Vector([-2.0 / square * along, g_v[0], g_v[1], g_v[2]]))
+
+
+@ti.func
+def euler_xyz_quat_adjoint(angles, g):
+    """Gradient of the angles (3,) from g = ∂L/∂euler_xyz_quat(angles) (each factor's derivative is
+    half its turn's quarter turn ahead: ∂(cos, sin)(θ/2)/∂θ = ½ (−sin, cos))."""
+    qx, qy, qz = _euler_factors(angles)
+    g_xy, g_z = quat_mul_adjoint(quat_mul(qx, qy), qz, g)
+    g_x, g_y = quat_mul_adjoint(qx, qy, g_xy)
+    return 0.5 * ti.Vector([g_x[1] * qx[0] - g_x[0] * qx[1], g_y[2] * qy[0] - g_y[0] * qy[2],
+                            g_z[3] * qz[0] - g_z[0] * qz[3]])
 
 
 @ti.func
