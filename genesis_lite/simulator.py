@@ -462,18 +462,19 @@ class Simulator:
         """(B, L, 3) the last step's links' classical linear accelerations (solver.links_acc; see _last_step)."""
         return self._last_step(solver, "get_links_acc", "links_acc")
 
-    def contacts(self, solver, what):
-        """(B, C, 12) the last step's contacts (solver.contacts; see _last_step)."""
-        return self._last_step(solver, what, "contacts")
+    def contacts(self, solver, what, trimmed=False):
+        """(B, W, 12) the last step's contacts (solver.contacts, trimmed or not; see _last_step: after
+        a backward, the held ones, all C slots)."""
+        return self._last_step(solver, what, "contacts", trimmed=trimmed)
 
-    def _last_step(self, solver, what, readout):
+    def _last_step(self, solver, what, readout, **options):
         """The last step's ``readout`` (one of solver.last_step_readouts), as if no step had been
         taken in the envs replaced since (set_state: reset, setters), as a value whose backward
         raises when the state requires grad: read-outs of the step's collision and constraint
         solve, not differentiable (the state's gradient carries their effect), and a gradient must
         never stop silently."""
         slot = self.slot(solver)
-        value = getattr(solver, readout)() if slot.held_readouts is None else slot.held_readouts[readout]
+        value = getattr(solver, readout)(**options) if slot.held_readouts is None else slot.held_readouts[readout]
         if slot.replaced_envs is not None:
             value = solver.without_last_step(readout, value, torch.as_tensor(slot.replaced_envs, device=value.device))
         return value if slot.state is None else autograd.not_differentiable(what, slot.state, value)

@@ -1284,7 +1284,7 @@ class RigidEntity(EntityIndexing):
         if not isinstance(is_padded, (bool, np.bool_)):
             raise InvalidInputError(f"entity '{self.name}': argument 'is_padded' must be True or False, got "
                                     f"{is_padded!r}")
-        raw = self._sim().contacts(self._solver, "get_contacts")
+        raw = self._sim().contacts(self._solver, "get_contacts", trimmed=not is_padded)
         if self.scene.n_envs and not is_padded:  # (each env's contacts come first in its slots)
             raw = raw[:, :int((raw[..., 0] >= 0).sum(dim=-1).max())]
         model = self._solver.model
@@ -1315,10 +1315,11 @@ class RigidEntity(EntityIndexing):
     def get_links_net_contact_force(self, envs_idx=None):
         """(n_links, 3) or (n_envs, n_links, 3) N, world: the sum of the contact forces of the last
         step's last substep on each link of the entity. Not differentiable (a backward raises)."""
-        envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
-        raw = self._sim().contacts(self._solver, "get_links_net_contact_force")[envs]
+        raw = self._sim().contacts(self._solver, "get_links_net_contact_force", trimmed=True)
+        if envs_idx is not None:
+            raw = raw[torch.as_tensor(self._envs(envs_idx), device=runtime.device)]
         links = torch.as_tensor(self._solver.model.geom_link, device=runtime.device, dtype=torch.long)
-        total = raw.new_zeros(len(envs), self._solver.model.n_links, 3)
+        total = raw.new_zeros(len(raw), self._solver.model.n_links, 3)
         for side, sign in ((0, -1.0), (1, 1.0)):
             geom = raw[..., side].long()
             valid = (geom >= 0).unsqueeze(-1)

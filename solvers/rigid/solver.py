@@ -634,12 +634,18 @@ class RigidSolver(Solver):
             self.kernels.read_links_acc(out)
         return out
 
-    def contacts(self, substep=-1):
-        """(B, C, 12) the contacts of the last step's ``substep`` (see step.read_contacts; rows past
-        each env's count have geom −1 and zeros), C = 0 without candidate pairs."""
-        out = torch.empty((self.n_batch, self.data.size["C"], 12), dtype=runtime.tc_float, device=runtime.device)
-        if self.data.size["C"]:
-            self.kernels.read_contacts(substep % self.sim_options.substeps, out)
+    def contacts(self, substep=-1, trimmed=False):
+        """(B, W, 12) the contacts of the last step's ``substep`` (see step.read_contacts; each env's
+        come first in its slots, rows past its count have geom −1 and zeros): W = C, the contact
+        slots (0 without candidate pairs), or with ``trimmed`` the most contacts of one env (a
+        1024-env step's readout of its few contacts a fraction of the slots' C)."""
+        substep %= self.sim_options.substeps
+        width = self.data.size["C"]
+        if trimmed and width:
+            width = int(self.data.frame("n_con", substep).max())
+        out = torch.empty((self.n_batch, width, 12), dtype=runtime.tc_float, device=runtime.device)
+        if width:
+            self.kernels.read_contacts(substep, out)
         return out
 
     last_step_readouts = ("contacts", "dofs_dynamics", "links_acc")

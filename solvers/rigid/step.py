@@ -613,13 +613,13 @@ def read_com_jacobians(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, 
 
 @ti.kernel
 def read_contacts(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, dst: A):
-    """dst (B, C, 12) ← substep s's contacts: geom 1, geom 2 (as floats), position (3, m), force on
-    geom 2 (3, N, world; −it acts on geom 1), distance (m), normal (3, geom 1 → geom 2); rows past
-    n_con: geom −1, the rest 0."""
+    """dst (B, W, 12) ← substep s's contacts in the first W slots (W ≤ C): geom 1, geom 2 (as
+    floats), position (3, m), force on geom 2 (3, N, world; −it acts on geom 1), distance (m),
+    normal (3, geom 1 → geom 2); rows past n_con: geom −1, the rest 0."""
     ti.loop_config(serialize=schedule[1])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
-        for c in range(d.contact_capacity):
+        for c in range(dst.shape[1]):
             dst[e, c, 0], dst[e, c, 1] = -1.0, -1.0
             for k in ti.static(range(2, 12)):
                 dst[e, c, k] = 0.0
