@@ -26,13 +26,14 @@ import torch
 from ..solvers.core import InvalidInputError, runtime
 from ..solvers.rigid import ik
 from ..solvers.rigid.model import REVOLUTE
-from ..utils.rotations import quat_to_mat
+from ..utils.rotations import rotate
 
 
 class DofMotions:
     """What the columns of an entity's Jacobian are made of (numpy, per local dof): the local link
     it moves, its axis (in that link's frame, or the world's for a free joint's translations), and
-    whether it turns (revolute, a free joint's rotations, a ball joint's) or slides."""
+    whether it turns (revolute, a free joint's rotations, a ball joint's) or slides. Made once per
+    entity at build (entity._dof_motions); the torch copies and path masks are kept as asked."""
 
     def __init__(self, entity):
         model = entity._solver.model
@@ -47,30 +48,39 @@ class DofMotions:
         for dof, _ in entity._turns:  # a free or ball joint's turns about the link's own axes
             self.axis[dof: dof + 3], self.turns[dof: dof + 3] = np.eye(3), True
         self.parent = model.link_parent[entity.link_start: entity.link_start + entity.n_links] - entity.link_start
+        self._paths, self._tensors = {}, {}
 
     def on_path(self, link):
         """(n_dofs,) bool: the dofs on the path from local link ``link`` to the root."""
-        path, l = set(), link
-        while l >= 0:
-            path.add(l)
-            l = self.parent[l]
-        return np.isin(self.link, list(path))
+        if link not in self._paths:
+            path, l = set(), link
+            while l >= 0:
+                path.add(l)
+                l = self.parent[l]
+            self._paths[link] = np.isin(self.link, list(path))
+        return self._paths[link]
+
+    def tensors(self, dtype, device, link):
+        """(axis (n, 3), in_world (n, 1), turns (n, 1), the path mask of local link ``link`` (n, 1))
+        as torch tensors of ``dtype`` on ``device``."""
+        key = (dtype, device, link)
+        if key not in self._tensors:
+            self._tensors[key] = (torch.as_tensor(self.axis, dtype=dtype, device=device),
+                                  torch.as_tensor(self.in_world, device=device)[:, None],
+                                  torch.as_tensor(self.turns, device=device)[:, None],
+                                  torch.as_tensor(self.on_path(link), dtype=dtype, device=device)[:, None])
+        return self._tensors[key]
 
 
 def jacobian(motions, pos, quat, link, local_point):
     """(..., 6, n_dofs) Jacobian of the point ``local_point`` (3,) of local link ``link``, given
     every link's world pose pos (..., L, 3), quat (..., L, 4)."""
-    rot = quat_to_mat(quat)
-    point = pos[..., link, :] + (rot[..., link, :, :] @ local_point[:, None])[..., 0]
-    axis = torch.as_tensor(motions.axis, dtype=pos.dtype, device=pos.device)
-    link_rot = rot[..., motions.link, :, :]  # (..., n, 3, 3)
-    world_axis = torch.where(torch.as_tensor(motions.in_world, device=pos.device)[:, None], axis,
-                             (link_rot @ axis[:, :, None])[..., 0])
-    turns = torch.as_tensor(motions.turns, device=pos.device)[:, None]
+    axis, in_world, turns, mask = motions.tensors(pos.dtype, pos.device, link)
+    point = pos[..., link, :] + rotate(quat[..., link, :], local_point)
+    world_axis = torch.where(in_world, axis, rotate(quat[..., motions.link, :], axis))
     lever = point[..., None, :] - pos[..., motions.link, :]
     linear = torch.where(turns, torch.linalg.cross(world_axis, lever), world_axis)
     angular = torch.where(turns, world_axis, torch.zeros_like(world_axis))
-    mask = torch.as_tensor(motions.on_path(link), dtype=pos.dtype, device=pos.device)[:, None]
     return torch.cat([linear * mask, angular * mask], dim=-1).transpose(-1, -2)
 
 
@@ -184,7 +194,7 @@ def solve_ik(entity, goals, start, envs, dofs, options):
     respected). One kernel runs it all (solvers/rigid/ik.py), the starts drawn beforehand.
     options: respect_joint_limit, max_samples, max_solver_iters, damping, pos_tol, rot_tol,
     max_step_size, seed. Returns (the best qpos (B', n_qs), its errors (B', K, 6))."""
-    motions = DofMotions(entity)
+    motions = entity._dof_motions
     on_path = np.logical_or.reduce([motions.on_path(target.link) for target in goals])
     moving = on_path & np.isin(np.arange(entity.n_dofs), dofs)
     joints = _Joints(entity, options["respect_joint_limit"], moving, envs)

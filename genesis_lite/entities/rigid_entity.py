@@ -385,7 +385,7 @@ class RigidEntity(EntityIndexing):
         return self.links[-1]
 
     _BUILD_ATTRS = ("link_start", "dof_start", "q_start", "geom_start", "_dof_q", "_free_joints", "_ball_joints",
-                    "_turns", "_quat_joint_dofs")
+                    "_turns", "_quat_joint_dofs", "_dof_motions")
 
     def __getattr__(self, attr):
         # only reached when normal lookup fails: a build-time attribute used before build()
@@ -421,6 +421,7 @@ class RigidEntity(EntityIndexing):
         self._dof_q = model.dof_q[self.dof_start: self.dof_start + self.n_dofs].astype(np.int64)
         for dof, q in self._free_joints:
             self._dof_q[dof: dof + 3] = self.q_start + q + np.arange(3)
+        self._dof_motions = kinematics.DofMotions(self)  # (the Jacobian's columns: get_jacobian, inverse kinematics)
 
     @property
     def n_joints(self):
@@ -900,7 +901,7 @@ class RigidEntity(EntityIndexing):
         local = self._own_link(link, "get_jacobian")
         point = self._local_point(local_point, "get_jacobian")
         pos, quat = self._links(None, None, slice(0, 3)), self._links(None, None, slice(3, 7))
-        return self._out(kinematics.jacobian(kinematics.DofMotions(self), pos, quat, local, point))
+        return self._out(kinematics.jacobian(self._dof_motions, pos, quat, local, point))
 
     def inverse_kinematics(self, link, pos=None, quat=None, local_point=None, init_qpos=None,
                            respect_joint_limit=True, max_samples=50, max_solver_iters=20, damping=0.01,
