@@ -125,3 +125,75 @@ def test_rotation_dofs_are_driven_together(f64):
                                                    r"none, got \[0, 1, 2, 5\]"):
         box.control_dofs_position(torch.zeros(4), dofs_idx_local=[0, 1, 2, 5])
     box.control_dofs_position(torch.zeros(3), dofs_idx_local=[0, 1, 2])  # (the position dofs alone)
+    box.control_dofs_position(torch.zeros(6))
+    with pytest.raises(gs.InvalidInputError, match=r"together in or out of position control"):
+        box.control_dofs_force(torch.zeros(1), dofs_idx_local=[5])  # (dofs 3, 4 would turn to a stale target)
+    box.control_dofs_force(torch.zeros(3), dofs_idx_local=[3, 4, 5])
+    box.control_dofs_velocity(torch.zeros(1), dofs_idx_local=[5])  # (none of them in position control now)
+
+
+BALL_ON_HINGE = ('<mujoco><worldbody><body pos="0 0 1"><joint type="hinge" axis="0 1 0"/>'
+                 '<geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03" mass="1"/>'
+                 '<body pos="0.3 0 0" quat="0.9 0.3 0.2 0.1"><joint type="ball"/>'
+                 '<geom type="capsule" fromto="0 0 0 0 0.1 -0.4" size="0.03" mass="0.7"/></body></body>'
+                 '</worldbody></mujoco>')
+
+
+def _ball_on_hinge(requires_grad=False, gravity=(0.0, 0.0, -9.81)):
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT, requires_grad=requires_grad),
+                     rigid_options=gs.options.RigidOptions(gravity=gravity, enable_collision=False),
+                     show_viewer=False)
+    robot = scene.add_entity(gs.morphs.MJCF(file=BALL_ON_HINGE))
+    scene.build(n_envs=2)
+    return scene, robot
+
+
+def _quat_matrix(q):
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def test_a_ball_joint_servo_turns_from_the_joints_own_orientation(f64):
+    """A ball joint below a hinge, its body turned in the parent: the servo's force on its three dofs
+    is kp times the axis-angle of R_jointᵀ R(q*), R_joint the ball's own turn (its qpos), not the
+    link's world orientation (2 envs at random poses; at rest, no gravity, no kv: get_dofs_force,
+    the kernel's, is that force alone)."""
+    scene, robot = _ball_on_hinge(gravity=(0.0, 0.0, 0.0))
+    qpos = torch.tensor([[0.3, 0.7, -0.2, 0.4, 0.5], [-1.0, 0.1, 0.9, -0.3, 0.2]], dtype=torch.float64)
+    qpos[:, 1:] /= qpos[:, 1:].norm(dim=1, keepdim=True)
+    robot.set_qpos(qpos)
+    kp = torch.tensor([0.0, 2.0, 3.0, 4.0], dtype=torch.float64)
+    robot.set_dofs_kp(kp)
+    robot.set_dofs_kv(torch.zeros(4, dtype=torch.float64))
+    targets = torch.tensor([[0.2, -0.5, 0.9], [2.5, 1.2, -2.9]], dtype=torch.float64)
+    robot.control_dofs_position(targets, dofs_idx_local=[1, 2, 3])
+    expected = torch.tensor(np.array([_axis_angle(_quat_matrix(qpos[e, 1:].numpy()).T @ _matrix(targets[e].numpy()))
+                                      for e in range(2)])) * kp[1:]
+    torch.testing.assert_close(robot.get_dofs_control_force()[:, 1:], expected, rtol=0, atol=1e-12)
+    scene.step()
+    torch.testing.assert_close(robot.get_dofs_force()[:, 1:], expected, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("what", ["targets", "start"])
+def test_ball_joint_servo_gradients_match_central_differences(f64, what):
+    """20 steps of the ball on the hinge under gravity with its servo; gradients in the three Euler
+    targets (both envs) and in the initial velocities, against central differences."""
+    scene, robot = _ball_on_hinge(requires_grad=True)
+    base = {"targets": torch.tensor([[0.2, -0.5, 0.9], [2.5, 1.2, -2.9]], dtype=torch.float64),
+            "start": torch.tensor([[0.5, 1.0, -2.0, 0.7], [-0.3, 0.4, 0.2, -1.5]], dtype=torch.float64)}
+    weights = torch.tensor(np.random.default_rng(1).normal(size=(2, 9)))
+
+    def loss(value):
+        inputs = {**base, what: value}
+        scene.reset()
+        robot.set_dofs_kp(torch.tensor([0.0, 2.0, 3.0, 4.0], dtype=torch.float64))
+        robot.set_dofs_kv(torch.tensor([0.0, 0.1, 0.1, 0.1], dtype=torch.float64))
+        robot.set_dofs_velocity(inputs["start"])
+        robot.control_dofs_position(inputs["targets"], dofs_idx_local=[1, 2, 3])
+        for _ in range(20):
+            scene.step()
+        return (torch.cat([robot.get_qpos(), robot.get_dofs_velocity()], dim=1) * weights).sum()
+
+    checked_gradient(loss, base[what], f"ball-joint servo, {what}")

@@ -262,23 +262,46 @@ def test_bad_arguments_raise(f64):
     fixed_box.build()
     with pytest.raises(gs.InvalidInputError, match="get_jacobian expected an entity with dofs"):
         static.get_jacobian(static.links[0])
+    with pytest.raises(gs.InvalidInputError, match="'init_qpos' must hold non-zero quaternions"):
+        other.inverse_kinematics(other.links[0], pos=[0.0, 0.0, 0.5], init_qpos=torch.zeros(7))
 
 
 def test_inverse_kinematics_of_many_envs_is_each_envs_own(f64):
-    """130 envs (the thread pool's loop; 130 × 8 links) each solve their own reachable pose as that
-    env alone does, bit for bit; an env given twice (solved one row after the other, on one frame)
-    solves both of its targets, each as alone."""
-    scene, robot = _scene(KUKA, True, n_envs=130)
+    """300 envs (rows on the thread pool) each solve their own reachable pose as that env alone does
+    (one row, on the calling thread), bit for bit; an env given twice (solved one row after the
+    other, on one frame) solves both of its targets, each as alone."""
+    scene, robot = _scene(KUKA, True, n_envs=300)
     rng = np.random.default_rng(8)
     ee = robot.links[-1]
-    robot.set_qpos(torch.tensor(rng.uniform(-1.0, 1.0, (130, 7))))
+    robot.set_qpos(torch.tensor(rng.uniform(-1.0, 1.0, (300, 7))))
     pos, quat = ee.get_pos().clone(), ee.get_quat().clone()
-    robot.set_qpos(torch.zeros(130, 7, dtype=torch.float64))
+    robot.set_qpos(torch.zeros(300, 7, dtype=torch.float64))
     qpos, error = robot.inverse_kinematics(ee, pos=pos, quat=quat, return_error=True)
     assert (error[:, :3].norm(dim=1) <= 5e-4).all() and (error[:, 3:].norm(dim=1) <= 5e-3).all()
-    for env in (0, 77, 129):
+    for env in (0, 151, 299):
         alone = robot.inverse_kinematics(ee, pos=pos[env], quat=quat[env], envs_idx=[env])
         assert torch.equal(alone[0], qpos[env])
     twice = robot.inverse_kinematics(ee, pos=pos[[3, 4]], quat=quat[[3, 4]], envs_idx=[5, 5])
     for row, goal in enumerate((3, 4)):
         assert torch.equal(twice[row], robot.inverse_kinematics(ee, pos=pos[goal], quat=quat[goal], envs_idx=[5])[0])
+
+
+def test_inverse_kinematics_mid_rollout_keeps_the_gradient(f64):
+    """A solve between steps of a differentiable rollout (its trial poses in the getters' frame)
+    leaves the loss and its gradient in the initial velocities as without it, bit for bit."""
+    scene, robot = _scene(KUKA, True, requires_grad=True)
+    ee = robot.links[-1]
+
+    def run(solve):
+        scene.reset()
+        v0 = torch.tensor([0.3, -0.2, 0.1, 0.4, -0.1, 0.2, 0.3], dtype=torch.float64, requires_grad=True)
+        robot.set_dofs_velocity(v0)
+        for step in range(8):
+            if solve and step == 4:
+                robot.inverse_kinematics(ee, pos=torch.tensor([0.3, 0.2, 0.8]))
+            scene.step()
+        loss = (ee.get_pos() ** 2).sum() + (robot.get_dofs_velocity() ** 2).sum()
+        loss.backward()
+        return loss.detach(), v0.grad
+    (loss, grad), (loss_ik, grad_ik) = run(False), run(True)
+    assert torch.equal(loss, loss_ik) and torch.equal(grad, grad_ik)

@@ -205,7 +205,9 @@ def solve_ik(entity, goals, start, envs, dofs, options):
     solver = entity._solver
     ints = lambda values: torch.tensor(values, dtype=torch.int32, device=start.device)  # noqa: E731
     floats = lambda *shape: torch.zeros(shape, dtype=start.dtype, device=start.device)  # noqa: E731
-    serial = len(np.unique(envs)) < rows or bool(solver.data.schedule[0])  # (an env met twice: one frame)
+    # one env's frame holds one row's trial poses: an env met twice takes its rows in turn; else the
+    # rows go to the thread pool from two on (a row's solve outweighs a hand-off, unlike a link's substep)
+    serial = rows < 2 or len(np.unique(envs)) < rows
     sizes = ints([entity.q_start, entity.dof_start, entity.link_start, entity.link_start + entity.n_links, samples,
                   options["max_solver_iters"], int(joints.limited), 1 if serial else max(1, 1024 // rows),
                   len(joints.table)])

@@ -969,6 +969,8 @@ class RigidEntity(EntityIndexing):
             raise InvalidInputError(f"{who} argument 'dofs_idx_local' must name at least one dof, got none")
         start = self._read(self._qpos_columns(), envs_idx).detach() if init_qpos is None else \
             self._values(init_qpos, self.n_qs, envs, "init_qpos").detach()
+        for _, q in self._turns if init_qpos is not None else ():
+            self._check_quat(start[:, q: q + 4], "init_qpos")
         options = kinematics.checked_options(who, respect_joint_limit=respect_joint_limit, max_samples=max_samples,
                                              max_solver_iters=max_solver_iters, damping=damping, pos_tol=pos_tol,
                                              rot_tol=rot_tol, max_step_size=max_step_size, seed=seed)
@@ -1416,15 +1418,17 @@ class RigidEntity(EntityIndexing):
         """Switch the dofs to ``mode`` with ``targets``: {input name: (value, argument name)}; a value
         None is the constant 0 (written only where the input holds something else)."""
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
-        for dof, _ in self._turns if mode == "position" else ():
-            given = np.isin(np.arange(dof, dof + 3), dofs)
-            if given.any() and not given.all():
-                raise InvalidInputError(f"entity '{self.name}': {method} drives a free or ball joint's three rotation "
-                                        f"dofs together (their targets are one orientation, as Euler angles): "
-                                        f"dofs_idx_local expected all of {list(range(dof, dof + 3))} or none, got "
-                                        f"{dofs.tolist()}")
         envs = self._envs(envs_idx, distinct=True)
         columns = self.dof_start + dofs
+        modes = self._sim().inputs(self._solver)["ctrl_mode"].cpu().numpy()  # never differentiable
+        for dof, _ in self._turns:
+            given = np.isin(np.arange(dof, dof + 3), dofs)
+            if given.any() and not given.all() and (mode == "position" or (
+                    modes[envs[:, None], self.dof_start + dof + np.arange(3)] == _MODES["position"]).any()):
+                raise InvalidInputError(f"entity '{self.name}': {method} drives a free or ball joint's three rotation "
+                                        f"dofs together in or out of position control (their targets are one "
+                                        f"orientation, as Euler angles): dofs_idx_local expected all of "
+                                        f"{list(range(dof, dof + 3))} or none, got {dofs.tolist()}")
         checked = {name: self._values(value, len(dofs), envs, arg) for name, (value, arg) in targets.items()
                    if value is not None}  # every argument checked before anything is written
         for name in targets:
@@ -1434,7 +1438,6 @@ class RigidEntity(EntityIndexing):
                 self._write_input(name, columns, envs, torch.zeros(len(envs), len(dofs), dtype=runtime.tc_float,
                                                                    device=runtime.device))
         code = _MODES[mode]
-        modes = self._sim().inputs(self._solver)["ctrl_mode"].cpu().numpy()  # never differentiable
         held = modes[:, self.dof_start: self.dof_start + self.n_dofs] if dofs_idx_local is None and envs_idx is None \
             else modes[envs[:, None], columns]  # (a slice is a fifth of a gather's cost)
         if not (held == code).all():  # a new tensor only on a change
@@ -1460,7 +1463,8 @@ class RigidEntity(EntityIndexing):
         the force range. A free or ball joint's three rotation dofs take a target orientation as
         get_dofs_position gives it (intrinsic X-Y-Z Euler angles), all three together, and
         target − q is the rotation vector of the turn from the joint's orientation to it, in the
-        joint's axes (Genesis's: a free joint's, in world axes)."""
+        joint's axes (Genesis's free joint the same; its ball joint takes each Euler angle's
+        difference)."""
         self._control("control_dofs_position", "position", {"ctrl_pos": (position, "position"),
                                                             "ctrl_vel": (None, "velocity")}, dofs_idx_local, envs_idx)
 

@@ -7,7 +7,8 @@ the target of ``control_dofs_position_velocity``), 2 velocity (τ = kv·(q̇* �
 clipped to the dof's force range. A free or ball joint's rotation dofs take the joint's target
 orientation as intrinsic X-Y-Z Euler angles (get_dofs_position's), and q* − q is the rotation
 vector of the turn from the joint's quaternion q to the target's, rotvec(q⁻¹ ⊗ q*), in the
-joint's own axes, which its dofs turn about (Genesis: the same turn in world axes, on its dofs). Damping −b·q̇ and a joint spring −k·(q − q_ref) (q_ref: the
+joint's own axes, which its dofs turn about (Genesis's free joint the same; its ball joint
+takes each Euler angle's difference). Damping −b·q̇ and a joint spring −k·(q − q_ref) (q_ref: the
 model's springref, MuJoCo's qpos_spring; a ball joint's dof a: −k·r_a, r the rotation vector of
 its turn, MuJoCo's ball spring) are passive; the spring is explicit, as MuJoCo's and
 Genesis's integrators take it (neither puts stiffness into the implicit matrix; Genesis's spring

@@ -119,7 +119,7 @@ def _errors(d: ti.template(), f, e, r, goal_link: ti.template(), goal_spec: ti.t
             vec[r, 6 * g + c, 0], vec[r, 6 * g + 3 + c, 0] = pos_c, rot_c
             pos_sq += pos_c * pos_c
             rot_sq += rot_c * rot_c
-        if ti.sqrt(pos_sq) > options[1] or ti.sqrt(rot_sq) > options[2]:
+        if not (ti.sqrt(pos_sq) <= options[1] and ti.sqrt(rot_sq) <= options[2]):  # (NaN: not within)
             within = False
     return within
 
@@ -219,7 +219,7 @@ def _improved(r, vec: ti.template(), best_err: ti.template()):
             now_rot += vec[r, 6 * g + 3 + c, 0] ** 2
             best_pos += best_err[r, g, c] ** 2
             best_rot += best_err[r, g, 3 + c] ** 2
-        if now_pos > best_pos or now_rot > best_rot:
+        if not (now_pos <= best_pos and now_rot <= best_rot):  # (NaN: not better)
             better = False
     return better
 
