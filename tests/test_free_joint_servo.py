@@ -131,6 +131,14 @@ def test_rotation_dofs_are_driven_together(f64):
     box.control_dofs_force(torch.zeros(3), dofs_idx_local=[3, 4, 5])
     box.control_dofs_velocity(torch.zeros(1), dofs_idx_local=[5])  # (none of them in position control now)
 
+    scene = gs.Scene(show_viewer=False)  # per env: only the envs whose rotation dofs are in position control
+    boxes = scene.add_entity(gs.morphs.Box(size=(0.2, 0.1, 0.05), pos=(0.0, 0.0, 0.5)))
+    scene.build(n_envs=2)
+    boxes.control_dofs_position(torch.zeros(1, 6), envs_idx=[0])
+    boxes.control_dofs_force(torch.zeros(1, 1), dofs_idx_local=[5], envs_idx=[1])
+    with pytest.raises(gs.InvalidInputError, match=r"together in or out of position control"):
+        boxes.control_dofs_force(torch.zeros(2, 1), dofs_idx_local=[5])
+
 
 BALL_ON_HINGE = ('<mujoco><worldbody><body pos="0 0 1"><joint type="hinge" axis="0 1 0"/>'
                  '<geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03" mass="1"/>'

@@ -1422,8 +1422,8 @@ class RigidEntity(EntityIndexing):
         columns = self.dof_start + dofs
         modes = self._sim().inputs(self._solver)["ctrl_mode"].cpu().numpy()  # never differentiable
         for dof, _ in self._turns:
-            given = np.isin(np.arange(dof, dof + 3), dofs)
-            if given.any() and not given.all() and (mode == "position" or (
+            given = np.count_nonzero((dofs >= dof) & (dofs < dof + 3))  # (dofs are distinct)
+            if 0 < given < 3 and (mode == "position" or (
                     modes[envs[:, None], self.dof_start + dof + np.arange(3)] == _MODES["position"]).any()):
                 raise InvalidInputError(f"entity '{self.name}': {method} drives a free or ball joint's three rotation "
                                         f"dofs together in or out of position control (their targets are one "
