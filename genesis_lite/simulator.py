@@ -467,6 +467,11 @@ class Simulator:
         a backward, the held ones, all C slots)."""
         return self._last_step(solver, what, "contacts", trimmed=trimmed)
 
+    def links_contact_force(self, solver, what):
+        """(B, L, 3) the last step's contact force on each link (solver.links_contact_force; see
+        _last_step)."""
+        return self._last_step(solver, what, "links_contact_force")
+
     def _last_step(self, solver, what, readout, **options):
         """The last step's ``readout`` (one of solver.last_step_readouts), as if no step had been
         taken in the envs replaced since (set_state: reset, setters), as a value whose backward

@@ -249,6 +249,33 @@ def test_contact_readouts_of_a_batch_with_and_without_contacts(f64):
         box.get_contacts(is_padded=1)
 
 
+def test_net_contact_force_of_each_link_is_the_sum_of_its_contacts(f64):
+    """Three boxes stacked on the plane in two envs (the middle one is geom 1 of one pair and geom 2
+    of another): get_links_net_contact_force (a kernel's sum per link) equals the sum of
+    every contact's force_a on link_a and force_b on link_b (get_contacts' rows, the entity's or not),
+    per env and link; each box's net contact force holds its own weight (the bottom one's: the
+    plane's push of all three less the two boxes above)."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002), show_viewer=False)
+    scene.add_entity(gs.morphs.Plane())
+    boxes = [scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.1), pos=(0.01 * k, 0.0, 0.05 + 0.1 * k)))
+             for k in range(3)]
+    scene.build(n_envs=2)
+    for _ in range(100):
+        scene.step()
+    found = boxes[0].get_contacts()
+    n_links = scene._rigid_solver.model.n_links
+    expected = torch.zeros(2, n_links, 3, dtype=gs.tc_float)
+    for side in ("a", "b"):
+        links, forces = found[f"link_{side}"].long(), found[f"force_{side}"] * (found["geom_a"] >= 0)[..., None]
+        expected.scatter_add_(1, links.clamp(min=0)[..., None].expand(-1, -1, 3), forces)
+    for box in boxes:
+        torch.testing.assert_close(box.get_links_net_contact_force()[:, 0], expected[:, box.link_start], rtol=0,
+                                   atol=1e-9)
+    weight = float(boxes[0].get_mass()[0]) * 9.81
+    np.testing.assert_allclose(boxes[0].get_links_net_contact_force()[:, 0, 2].numpy(), [weight] * 2, rtol=1e-3)
+    np.testing.assert_allclose(boxes[2].get_links_net_contact_force()[:, 0, 2].numpy(), [weight] * 2, rtol=1e-3)
+
+
 def test_contacts_of_envs_a_reset_or_setter_replaced_are_gone_until_the_next_step(f64):
     """Two envs with a box resting on the plane: after reset(envs_idx=[1]) and after set_pos, the
     envs whose state was replaced report no contact and no contact force (the last step's held

@@ -1318,16 +1318,9 @@ class RigidEntity(EntityIndexing):
     def get_links_net_contact_force(self, envs_idx=None):
         """(n_links, 3) or (n_envs, n_links, 3) N, world: the sum of the contact forces of the last
         step's last substep on each link of the entity. Not differentiable (a backward raises)."""
-        raw = self._sim().contacts(self._solver, "get_links_net_contact_force", trimmed=True)
+        total = self._sim().links_contact_force(self._solver, "get_links_net_contact_force")
         if envs_idx is not None:
-            raw = raw[torch.as_tensor(self._envs(envs_idx), device=runtime.device)]
-        links = torch.as_tensor(self._solver.model.geom_link, device=runtime.device, dtype=torch.long)
-        total = raw.new_zeros(len(raw), self._solver.model.n_links, 3)
-        for side, sign in ((0, -1.0), (1, 1.0)):
-            geom = raw[..., side].long()
-            valid = (geom >= 0).unsqueeze(-1)
-            link = links[geom.clamp(min=0)]
-            total.scatter_add_(1, link.unsqueeze(-1).expand(-1, -1, 3), sign * raw[..., 5:8] * valid)
+            total = total[torch.as_tensor(self._envs(envs_idx), device=runtime.device)]
         return self._out(total[:, self.link_start: self.link_start + self.n_links])
 
     # -- contact parameters -----------------------------------------------------------------------

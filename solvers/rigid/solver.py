@@ -648,7 +648,15 @@ class RigidSolver(Solver):
             self.kernels.read_contacts(substep, out)
         return out
 
-    last_step_readouts = ("contacts", "dofs_dynamics", "links_acc")
+    def links_contact_force(self, substep=-1):
+        """(B, L, 3) N, world: the sum of the contact forces on each link in the last step's
+        ``substep`` (step.read_links_contact_force; zeros without candidate pairs)."""
+        out = torch.zeros((self.n_batch, self.model.n_links, 3), dtype=runtime.tc_float, device=runtime.device)
+        if self.data.size["C"]:
+            self.kernels.read_links_contact_force(substep % self.sim_options.substeps, out)
+        return out
+
+    last_step_readouts = ("contacts", "links_contact_force", "dofs_dynamics", "links_acc")
 
     @staticmethod
     def without_last_step(readout, value, envs):

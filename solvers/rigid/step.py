@@ -634,9 +634,27 @@ def read_contacts(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M
                 dst[e, c, 8] = d.con_dist[s, e, c]
 
 
+@ti.kernel
+def read_links_contact_force(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, dst: A):
+    """dst (B, L, 3) ← the sum of substep s's contact forces on each link (N, world): a contact's
+    force on geom 2 (read_contacts') on its link, its opposite on geom 1's, in contact order."""
+    ti.loop_config(serialize=schedule[1])
+    for e in range(n_batch(ints)):
+        d = bind(ints, f1, v3, v4, m3)
+        for l, k in ti.ndrange(d.n_links, 3):
+            dst[e, l, k] = 0.0
+        for c in range(d.n_con[s, e, 0]):
+            pair = d.con_pair[s, e, c]
+            force = d.con_frame[s, e, c].transpose() @ contact_force(d, s, e, c)
+            first, second = d.geom_link[d.pair_geom1[pair]], d.geom_link[d.pair_geom2[pair]]
+            for k in ti.static(range(3)):
+                dst[e, first, k] = dst[e, first, k] - force[k]
+                dst[e, second, k] = dst[e, second, k] + force[k]
+
+
 #: what solver.py launches (through solvers.launch, with the scene's arenas; reverse_dynamics,
 #: collide and constrain with a config of their own: constrain's is the solve's schedule and the cone)
 KERNELS = (advance, prepare_reverse, reverse_kinematics, down_sweep, down_sweep_adjoint,
            position_stages, write_state, read_state, write_inputs, read_links, read_links_acc, read_mass_matrix,
            read_dofs_dynamics,
-           read_com_jacobians, read_contacts, smooth_substep, finish_substep)
+           read_com_jacobians, read_contacts, read_links_contact_force, smooth_substep, finish_substep)
