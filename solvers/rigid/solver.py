@@ -651,8 +651,9 @@ class RigidSolver(Solver):
     def links_contact_force(self, substep=-1):
         """(B, L, 3) N, world: the sum of the contact forces on each link in the last step's
         ``substep`` (step.read_links_contact_force; zeros without candidate pairs)."""
-        out = torch.zeros((self.n_batch, self.model.n_links, 3), dtype=runtime.tc_float, device=runtime.device)
-        if self.data.size["C"]:
+        shape, due = (self.n_batch, self.model.n_links, 3), bool(self.data.size["C"])
+        out = (torch.empty if due else torch.zeros)(shape, dtype=runtime.tc_float, device=runtime.device)
+        if due:  # (the kernel writes every element)
             self.kernels.read_links_contact_force(substep % self.sim_options.substeps, out)
         return out
 
