@@ -62,8 +62,8 @@ def actuator_force(d: ti.template(), s, e, i, mode, qd):
 
 @ti.func
 def _turn_target(d: ti.template(), e, link):
-    """(the first rotation dof of link l's free or ball joint, its servo's target quaternion from
-    the targets of its three rotation dofs: intrinsic X-Y-Z Euler angles, rad)."""
+    """(the first rotation dof of the free or ball joint of link ``link``, its servo's target
+    quaternion from the targets of its three rotation dofs: intrinsic X-Y-Z Euler angles, rad)."""
     turn0 = d.link_dof0[link] + (3 if d.link_jtype[link] == FREE else 0)
     return turn0, euler_xyz_quat(ti.Vector([d.ctrl_pos[e, turn0 + k] for k in ti.static(range(3))]))
 
