@@ -1498,10 +1498,11 @@ class RigidEntity(EntityIndexing):
         target − q; a free or ball joint's rotation dofs: the rotation vector of q⁻¹ ⊗ q*, q* the
         quaternion of their three targets (Euler angles), in the joint's axes."""
         target = self._read_input("ctrl_pos", self.dof_start + np.arange(self.n_dofs), envs_idx)
-        error = target - self._dofs_position_all(envs_idx)
+        qpos = self._read(self._qpos_columns(), envs_idx)
+        # each dof's q column (a turn's: column 0, replaced below)
+        error = target - qpos[:, torch.as_tensor(np.maximum(self._dof_q - self.q_start, 0), device=runtime.device)]
         if not self._turns:
             return error
-        qpos = self._read(self._qpos_columns(), envs_idx)
         pieces, done = [], 0
         for dof, q in self._turns:
             quat = qpos[:, q: q + 4] / qpos[:, q: q + 4].norm(dim=1, keepdim=True)
