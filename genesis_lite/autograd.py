@@ -18,11 +18,15 @@ Nodes hold the simulator weakly: the simulator holds the newest state, whose gra
 and a strong link back would be a cycle through torch's C++ graph that Python's collector
 cannot see (every scene would live for ever).
 """
+import itertools
+import operator
 import weakref
 
 import torch
 
 from .solvers.core import GradientError
+
+_REQUIRES_GRAD = operator.attrgetter("requires_grad")
 
 
 class Rollout:
@@ -139,7 +143,7 @@ class _Step(torch.autograd.Function):
                 grads = sim.backward_step(states, inputs, grad_states, warm_starts, records, ctx.wanted)
             except GradientError as error:  # (which step of the rollout)
                 raise GradientError(f"step {ctx.index}'s backward: {error}") from None
-        grads = (*grads[: ctx.n_states], *(g for g, w in zip(grads[ctx.n_states:], ctx.wanted) if w))
+        grads = (*grads[: ctx.n_states], *itertools.compress(grads[ctx.n_states:], ctx.wanted))
         if ctx.index == 0:
             sim.check_first_gradients(grads)
         return (None,) * 6 + _first_order(f"step {ctx.index}", grads, (*grad_states, *saved))
@@ -170,8 +174,8 @@ def step(sim, rollout, index, states, inputs):
     arguments are the states and the inputs that require grad; the other inputs (most of ~20
     parameters and controls a step) reach it in a tuple: torch's bookkeeping costs per tensor
     argument, in the forward and again in the backward."""
-    wanted = tuple(t.requires_grad for t in inputs)
-    tracked = (t for t, w in zip(inputs, wanted) if w)
+    wanted = tuple(map(_REQUIRES_GRAD, inputs))
+    tracked = itertools.compress(inputs, wanted)
     outs = _Step.apply(sim, rollout, index, rollout.keeps_state(index, states), inputs, wanted, *states, *tracked)
     rollout.stepped(outs)
     return outs

@@ -5,6 +5,7 @@ The Taichi copy of a solver's state is authoritative between steps when no graph
 (torch reads it lazily); with ``requires_grad`` the torch tensor is (it is the graph's node
 value) and Taichi is re-synchronised only when something else (a backward pass) used it.
 """
+import itertools
 import operator
 import weakref
 
@@ -14,6 +15,8 @@ import torch
 from . import autograd
 from .runtime import keep_large_blocks_off_the_heap, logger
 from .solvers.core import GradientError, SceneStateError, SimulationError
+
+_VERSION = operator.attrgetter("_version")  # torch's in-place change counter of a tensor
 
 
 def _restored(table, source, envs):
@@ -95,6 +98,7 @@ class Simulator:
         self.warned_graph_cut = False  # _warn_graph_cut warned since the last reset
         self.warned_gradient = False  # check_first_gradients warned since the last reset
         self.rigid_solver = None  # Genesis's scene.sim.rigid_solver (rigid_solver.RigidSolverView), set by the scene
+        self.flat_input_names = ()  # (solver index, input name) of each of _grad_inputs' inputs (set at build)
 
     def build(self, n_envs):
         for slot in self.slots:
@@ -104,6 +108,7 @@ class Simulator:
             # when nothing (scene or autograd graph) can reach this simulator any more, its
             # solvers' arrays are freed (a graph's nodes may still hold a solver object)
             weakref.finalize(self, slot.solver.destroy)
+        self.flat_input_names = tuple((k, name) for k, slot in enumerate(self.slots) for name in slot.input_names)
         if self.requires_grad:  # a rollout frees a state a step: keep its memory returnable
             keep_large_blocks_off_the_heap()
         self.reset()
@@ -171,7 +176,7 @@ class Simulator:
     def _pending_inputs(slot, inputs):
         """``inputs`` if Taichi does not hold them yet (recorded as held from now on), else None."""
         tensors = tuple(inputs.values())
-        versions = tuple([t._version for t in tensors])
+        versions = tuple(map(_VERSION, tensors))
         known = slot.uploaded_inputs
         if known is not None and known[1] == versions and all(map(operator.is_, tensors, known[0])):
             return None
@@ -260,9 +265,13 @@ class Simulator:
 
     def _grad_inputs(self):
         """Every solver's inputs, in its default_inputs' order, as one tuple."""
+        if len(self.slots) == 1:  # (one solver: a step's ~30 inputs in C-level calls)
+            return tuple(map(self.slots[0].inputs.__getitem__, self.slots[0].input_names))
         return tuple(value for slot in self.slots for value in map(slot.inputs.__getitem__, slot.input_names))
 
     def _split_inputs(self, flat):
+        if len(self.slots) == 1:
+            return [dict(zip(self.slots[0].input_names, flat))]
         out, k = [], 0
         for slot in self.slots:
             out.append(dict(zip(slot.input_names, flat[k: k + len(slot.input_names)])))
@@ -326,10 +335,11 @@ class Simulator:
             for slot in self.slots:
                 slot.uploaded_state = slot.uploaded_inputs = None  # Taichi holds this old step now
                 slot.solver.end_backward()
-        grads_states, grads_inputs, wanted = [], [], iter(wanted)
-        for inputs, (grad_state, grad_inputs) in zip(split, results):
-            grads_states.append(grad_state)
-            grads_inputs.extend(grad_inputs.get(name) if next(wanted) else None for name in inputs)
+        grads_states = [grad_state for grad_state, _ in results]
+        grads_inputs = [None] * len(flat_inputs)
+        for k in itertools.compress(range(len(flat_inputs)), wanted):  # (a few of ~30 inputs a solver)
+            solver, name = self.flat_input_names[k]
+            grads_inputs[k] = results[solver][1].get(name)
         _zero_unreached_envs(grad_states, [*grads_states, *grads_inputs])
         return (*grads_states, *grads_inputs)
 
@@ -444,7 +454,7 @@ class Simulator:
         return out
 
     def mass_matrix(self, solver):
-        """(B, D, D) joint-space mass matrix without armature at the current state
+        """(B, D, D) joint-space mass matrix, armature on its diagonal, at the current state
         (solver.mass_matrix); not differentiable (see _query)."""
         return self._query(solver, "get_mass_mat", solver.mass_matrix)
 

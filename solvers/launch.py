@@ -76,7 +76,7 @@ class BoundKernel:
         parameters = kernel._primal.arguments[1 + len(self.arrays):]
         self.scalars_only = not any(isinstance(p.annotation, NdarrayType) for p in parameters)
         self.by_scalars = {}  # scalar arguments → (program, code, launch context)
-        self.last = None      # (program, arguments, code, launch context) of the last call
+        self.last = None      # (program, arguments, code, launch context, on CUDA) of the last call
 
     def __call__(self, *args):
         program = impl.get_runtime().prog
@@ -85,10 +85,12 @@ class BoundKernel:
             if ready is not None and ready[0] is program:
                 program.launch_kernel(ready[1], ready[2])
                 return
-        elif (last := self.last) is not None and last[0] is program and len(args) == len(last[1]) and all(
-                map(operator.is_, args, last[1])):
-            program.launch_kernel(last[2], last[3])
-            return
+        elif (last := self.last) is not None and last[0] is program and len(args) == len(last[1]):
+            if all(map(operator.is_, args, last[1])):
+                program.launch_kernel(last[2], last[3])
+                return
+            if self._relaunch(args, last):
+                return
         key = (self.template, self.arrays_signature + _signature(args))
         entry = self.compiled.get(key)
         if entry is None or entry[0] is not program:
@@ -102,18 +104,46 @@ class BoundKernel:
             if len(self.by_scalars) >= MAX_SCALAR_CONTEXTS:
                 self.by_scalars.clear()
             context = self._new_context(entry)
-            self.by_scalars[args] = (program, code, context)
+            self._set_args(context, args, range(len(args)))
+            self.by_scalars[args] = (program, code, context)  # (once set: an argument that raised leaves none)
         else:
             self._check(args, on_cuda)
             context = self._context(entry)
-            self.last = (program, args, code, context)
-        for k, arg in enumerate(args, start=len(self.arrays)):
+            self.last = None  # (until every argument is set: one that raised leaves the context unrecorded)
+            self._set_args(context, args, range(len(args)))
+            self.last = (program, args, code, context, on_cuda)
+        program.launch_kernel(code, context)
+
+    def _relaunch(self, args, last):
+        """Launch with the last call's context, setting again only the arguments that are other
+        objects, when each is of the same kind (a tensor of the same dtype and dims, or an int): the
+        compiled kernel is then the same. A differentiable step downloads into a new state tensor
+        and a backward's launches take new gradient tensors: setting every argument again cost
+        ~7 µs such a launch. False (nothing done) when some argument changed kind."""
+        program, held, code, context, on_cuda = last
+        changed = [k for k, (arg, before) in enumerate(zip(args, held)) if arg is not before]
+        for k in changed:
+            arg, before = args[k], held[k]
+            if isinstance(arg, torch.Tensor) != isinstance(before, torch.Tensor) or (
+                    isinstance(arg, torch.Tensor) and (arg.dtype != before.dtype or arg.dim() != before.dim())):
+                return False
+        for k in changed:
+            self._check((args[k],), on_cuda, first=len(self.arrays) + k)
+        self.last = None  # (as in __call__)
+        self._set_args(context, args, changed)
+        self.last = (program, args, code, context, on_cuda)
+        program.launch_kernel(code, context)
+        return True
+
+    def _set_args(self, context, args, which):
+        """Set args[k] (after the arrays) in ``context`` for each k in ``which``."""
+        for k in which:
+            arg, index = args[k], len(self.arrays) + k
             if isinstance(arg, torch.Tensor):
-                context.set_arg_external_array_with_shape((k,), arg.data_ptr(), arg.element_size() * arg.numel(),
+                context.set_arg_external_array_with_shape((index,), arg.data_ptr(), arg.element_size() * arg.numel(),
                                                           tuple(arg.shape), 0)
             else:
-                context.set_arg_int((k,), int(arg))
-        program.launch_kernel(code, context)
+                context.set_arg_int((index,), int(arg))
 
     def _context(self, entry):
         """A launch context of the compiled ``entry`` holding this scene's arrays. It is made once

@@ -549,6 +549,8 @@ def test_mass_matrix_includes_armature(f64, pendulum):
     scene.reset()
     assert robot.get_dofs_armature().tolist() == [0.1]  # (Genesis's default_armature)
     assert np.isclose(float(robot.get_mass_mat()), 0.852, rtol=0, atol=1e-12)  # Genesis: 0.752 + armature
+    robot.get_mass_mat().zero_()  # a copy: the next call computes it again
+    assert np.isclose(float(robot.get_mass_mat()), 0.852, rtol=0, atol=1e-12)
     robot.set_dofs_armature([0.0])
     try:
         assert np.isclose(float(robot.get_mass_mat()), 0.752, rtol=0, atol=1e-12)  # 1·0.5² + 0.001 + 0.5·1² + 0.001
@@ -577,6 +579,14 @@ def test_mass_matrix_decomposition(f64, two_robots):
         kuka.set_dofs_armature(armature)
     lower, d_inv = other.get_mass_mat(decompose=True)  # a two-link chain: d_inv[1] = 1 / M[1, 1]
     assert torch.allclose(d_inv[:, 1], 1.0 / other.get_mass_mat()[:, 1, 1], rtol=1e-14, atol=0)
+    # one entity's block of a two-entity scene, its own armature on the diagonal, per env
+    before, other_armature = other.get_mass_mat(), other.get_dofs_armature().clone()
+    other.set_dofs_armature(other_armature + _t([[0.5, 0.0], [0.0, 0.25]]))
+    try:
+        added = other.get_mass_mat() - before
+        assert torch.allclose(added, torch.diag_embed(_t([[0.5, 0.0], [0.0, 0.25]])), rtol=0, atol=1e-12)
+    finally:
+        other.set_dofs_armature(other_armature)
 
 
 # -- friction loss -------------------------------------------------------------------------------------

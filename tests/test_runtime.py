@@ -115,6 +115,15 @@ def test_repeated_launches_take_each_calls_arguments(f64):
         out.zero_()
         copy(out, s)
         assert out[0] == arena[s] + 100, (s, out)
+    # a tensor of another dtype is another compiled kernel; each call still writes its own output
+    c = torch.zeros(1, dtype=torch.float32)
+    for out, s in [(c, 0), (a, 1), (c, 2), (c, 1), (b, 0)]:
+        out.zero_()
+        copy(out, s)
+        assert out[0] == arena[s] + 100, (s, out)
+    # a new tensor where the last call had another is checked as on a first call
+    with pytest.raises(gs.InvalidInputError, match="argument 1 must be a contiguous tensor"):
+        copy(torch.zeros(2, 2, dtype=torch.float64)[:, :1].t()[0], 0)
 
 
 def test_destroy_ends_scenes_and_init_starts_again(f64):

@@ -17,7 +17,7 @@ from ..solvers.rigid.model import BALL, FREE, initial_q
 from . import energy, kinematics
 from .bounds import shapes_aabb
 from ..tensor import wrap
-from .common import EntityIndexing, broadcast, named_argument_errors, replace_columns as _replace, take
+from .common import EntityIndexing, broadcast, is_range, named_argument_errors, replace_columns as _replace, take
 from ..utils.uid import UID
 from ..utils.rotations import euler_xyz_to_quat, quat_mul, quat_to_euler_xyz, quat_to_mat, rotate, rotation_vector
 
@@ -422,6 +422,7 @@ class RigidEntity(EntityIndexing):
         for dof, q in self._free_joints:
             self._dof_q[dof: dof + 3] = self.q_start + q + np.arange(3)
         self._dof_motions = kinematics.DofMotions(self)  # (the Jacobian's columns: get_jacobian, inverse kinematics)
+        self._inputs_held = {}  # input name → (tensor, its version, as numpy, memo): _input_array
 
     @property
     def n_joints(self):
@@ -1413,7 +1414,7 @@ class RigidEntity(EntityIndexing):
         dofs = self._local(dofs_idx_local, self.n_dofs, "dofs_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         columns = self.dof_start + dofs
-        modes = self._sim().inputs(self._solver)["ctrl_mode"].cpu().numpy()  # never differentiable
+        modes, every_dof_in = self._input_array("ctrl_mode")  # (memo: {mode code: every dof in it}; no graph)
         for dof, _ in self._turns:
             given = np.count_nonzero((dofs >= dof) & (dofs < dof + 3))  # (dofs are distinct)
             if 0 < given < 3 and (mode == "position" or (
@@ -1431,19 +1432,34 @@ class RigidEntity(EntityIndexing):
                 self._write_input(name, columns, envs, torch.zeros(len(envs), len(dofs), dtype=runtime.tc_float,
                                                                    device=runtime.device))
         code = _MODES[mode]
-        held = modes[:, self.dof_start: self.dof_start + self.n_dofs] if dofs_idx_local is None and envs_idx is None \
-            else modes[envs[:, None], columns]  # (a slice is a fifth of a gather's cost)
-        if not (held == code).all():  # a new tensor only on a change
+        if dofs_idx_local is None and envs_idx is None:  # (a control call every step: answered once per modes)
+            if code not in every_dof_in:
+                every_dof_in[code] = bool((modes[:, self.dof_start: self.dof_start + self.n_dofs] == code).all())
+            held = every_dof_in[code]
+        else:
+            held = bool((modes[envs[:, None], columns] == code).all())
+        if not held:  # a new tensor only on a change
             self._write_input("ctrl_mode", columns, envs, torch.full((len(envs), len(dofs)), float(code),
                                                                      dtype=runtime.tc_float, device=runtime.device))
 
+    def _input_array(self, name):
+        """(the solver's input ``name`` as a numpy array (B, W), a memo dict for answers about it),
+        kept while the input is the same tensor, unchanged: a control call every step reads the
+        modes, and the targets it zeroes, ~3 µs each."""
+        tensor = self._sim().inputs(self._solver)[name]
+        held = self._inputs_held.get(name)
+        if held is None or held[0] is not tensor or held[1] != tensor._version:
+            held = self._inputs_held[name] = (tensor, tensor._version, tensor.detach().cpu().numpy(), {})
+        return held[2], held[3]
+
     def _holds_zeros(self, name, columns, envs):
         """The input ``name`` is 0 at (envs, columns) and no graph stands behind it."""
-        value = self._sim().inputs(self._solver)[name]
-        if value.requires_grad:
+        if self._sim().inputs(self._solver)[name].requires_grad:
             return False
-        held = value.cpu().numpy()
-        return not held.any() or not held[envs[:, None], columns].any()  # the first test is cheaper
+        held, memo = self._input_array(name)
+        if "zero" not in memo:
+            memo["zero"] = not held.any()
+        return memo["zero"] or not held[envs[:, None], columns].any()  # (the first test is cheaper)
 
     def control_dofs_force(self, force, dofs_idx_local=None, envs_idx=None):
         """Apply joint forces (N·m or N) during the next steps, until changed; clipped to the force
@@ -1556,12 +1572,12 @@ class RigidEntity(EntityIndexing):
         (n_dofs, n_dofs) or (n_envs, n_dofs, n_dofs); Genesis also adds dt·damping and dt·kv there
         after a step, ours never. decompose: (L, D_inv) instead, L (…, n, n) unit lower triangular
         and D_inv (…, n) such that M = Lᵀ·diag(1 / D_inv)·L. Not differentiable."""
-        full = self._sim().mass_matrix(self._solver)
-        envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
-        block = slice(self.dof_start, self.dof_start + self.n_dofs)
-        armature = self._read_input("armature", self.dof_start + np.arange(self.n_dofs), envs_idx)
-        # the armature's graph meets full's non-differentiable anchor: a backward raises
-        mass = full[envs][:, block, block] + torch.diag_embed(armature)
+        full = self._sim().mass_matrix(self._solver)  # (its backward raises)
+        envs = self._envs(envs_idx)
+        mass = full if is_range(envs, full.shape[0]) else full[torch.as_tensor(envs, device=runtime.device)]
+        if self.n_dofs != full.shape[1]:
+            block = slice(self.dof_start, self.dof_start + self.n_dofs)
+            mass = mass[:, block, block].contiguous()
         if not decompose:
             return self._out(mass)
         lower, d_inv = _ltdl(mass, self.name)

@@ -5,8 +5,10 @@ bookkeeping around the kernels of the stage modules; no Python loop runs over en
 dofs at step time.
 """
 import functools
+import itertools
 import logging
 import math
+import operator
 
 import numpy as np
 import torch
@@ -53,7 +55,8 @@ class RigidSolver(Solver):
         self.model = self.data = None
         self._inputs_seen = {}  # name → (the input tensor _note_inputs last checked, its version)
         self.friction = self.welds_on = False  # some dof has friction loss; some env a run-time weld
-        self._packed = {}  # width → (the (B, width) buffer _pack_inputs writes, {input: (tensor, version) it holds})
+        self._packed = {}  # width → (the (B, width) buffer _pack_inputs writes, views of its inputs' columns,
+        #                    [the inputs' tensors, versions] it holds)
         self.substeps = sim_options.substeps
         self.gravity = rigid_options.gravity or sim_options.gravity  # (3,) m/s²: the default input
         self._commit = 1  # 0 while a backward replays a step: its frames stay for the reverse
@@ -340,27 +343,32 @@ class RigidSolver(Solver):
         new tensor a step was a new memory mapping once it reached 128 KiB, glibc's mmap threshold
         being fixed there (runtime.keep_large_blocks_off_the_heap): its page faults cost a KUKA's
         256-env differentiable rollout 18 %.) The inputs alone (a forward step's) are copied only
-        where another tensor or an in-place change replaced one since its buffer took it: a
-        control call each step copies its own columns (a 1024-env KUKA: 310 µs a step for all)."""
+        where another tensor or an in-place change replaced one since its buffer took it, each into
+        a view of its columns made with the buffer: a control call each step copies its own
+        columns (a 1024-env KUKA: 310 µs a step for all). Which ones changed is found by C-level
+        maps: a loop over the ~30 inputs in Python cost more than the copy."""
         width = self.data.input_total + sum(part.shape[1] for part in (*before, *after))
         if width not in self._packed:
-            self._packed[width] = (self._empty(width), {})
-        buffer, held = self._packed[width]
-        with torch.no_grad():
-            if before or after:
-                return torch.cat([*before, *(inputs[name] for name in INPUTS), *after], dim=1, out=buffer)
-            for name, (start, end) in self._input_spans.items():
-                tensor, seen = inputs[name], held.get(name)
-                if seen is None or seen[0] is not tensor or seen[1] != tensor._version:
-                    buffer[:, start:end].copy_(tensor)
-                    held[name] = (tensor, tensor._version)
+            buffer = self._empty(width)
+            columns = [buffer[:, start:end] for start, end in self._input_spans]
+            self._packed[width] = (buffer, columns, [[None] * len(INPUTS), [None] * len(INPUTS)])
+        buffer, columns, held = self._packed[width]
+        if before or after:
+            with torch.no_grad():
+                return torch.cat([*before, *map(inputs.__getitem__, INPUTS), *after], dim=1, out=buffer)
+        tensors = list(map(inputs.__getitem__, INPUTS))
+        versions = list(map(operator.attrgetter("_version"), tensors))
+        for k in itertools.compress(range(len(tensors)), map(operator.or_, map(operator.is_not, tensors, held[0]),
+                                                                map(operator.ne, versions, held[1]))):
+            columns[k].copy_(tensors[k].detach())
+        held[:] = tensors, versions
         return buffer
 
     @functools.cached_property
     def _input_spans(self):
-        """{input name: (first, last + 1) column in the packed inputs}, INPUTS order."""
+        """[(first, last + 1) column of each input in the packed inputs], INPUTS order."""
         ends = np.cumsum([self.data.width(name) for name in INPUTS]).tolist()
-        return {name: (end - self.data.width(name), end) for name, end in zip(INPUTS, ends)}
+        return [(end - self.data.width(name), end) for name, end in zip(INPUTS, ends)]
 
     # -- stepping ---------------------------------------------------------------------------
     def advance(self, inputs=None, download=False):
@@ -625,11 +633,10 @@ class RigidSolver(Solver):
         self._inverse_kinematics[serial](*arrays)
 
     def mass_matrix(self):
-        """(B, D, D) joint-space mass matrix (armature excluded) at the uploaded state."""
-        self.kernels.position_stages(self.substeps)  # (see links_kinematics)
+        """(B, D, D) joint-space mass matrix, armature on its diagonal, at the uploaded state."""
         out = torch.empty((self.n_batch, self.model.n_dofs, self.model.n_dofs), dtype=runtime.tc_float,
                           device=runtime.device)
-        self.kernels.read_mass_matrix(self.substeps, out)
+        self.kernels.read_mass_matrix(self.substeps, out)  # (at the last frame: see links_kinematics)
         return out
 
     def dofs_dynamics(self):

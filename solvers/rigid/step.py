@@ -398,18 +398,6 @@ def down_sweep_adjoint(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, 
             _read_grads_env(d, e, dst)
 
 
-@ti.kernel
-def position_stages(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, f: ti.i32):
-    """Mass matrix and bias of the state (frame 0) at frame f (see down_sweep)."""
-    ti.loop_config(serialize=schedule[0])
-    for t in range(env_loop(ints, schedule[0])):
-        e = env_of(ints, t, schedule[0])
-        if e >= 0:
-            d = bind(ints, f1, v3, v4, m3)
-            _state_at(d, e, f)
-            position_stages_env(d, f, e)
-
-
 # -- moving data: on the CPU serial loops on the calling thread. A parallel loop costs a thread-pool hand-off
 # -- (~100 µs here in a rollout) whatever its size, more than copying a few floats of every env
 @ti.func
@@ -556,12 +544,20 @@ def read_links_acc(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: 
 
 @ti.kernel
 def read_mass_matrix(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, f: ti.i32, dst: A):
-    """dst (B, D, D) ← frame f's mass matrix."""
-    ti.loop_config(serialize=schedule[1])
-    for e in range(n_batch(ints)):
-        d = bind(ints, f1, v3, v4, m3)
-        for i, j in ti.ndrange(d.n_dofs, d.n_dofs):
-            dst[e, i, j] = d.mass_mat[f, e, i, j]
+    """dst (B, D, D) ← the mass matrix of the state (frame 0), armature on its diagonal, computed
+    at frame f (see down_sweep) by the position stages and written out by the env's own thread
+    (one launch: as two, stages and copy, get_mass_mat of a one-env KUKA took 60 µs, now 22)."""
+    ti.loop_config(serialize=schedule[0])
+    for t in range(env_loop(ints, schedule[0])):
+        e = env_of(ints, t, schedule[0])
+        if e >= 0:
+            d = bind(ints, f1, v3, v4, m3)
+            _state_at(d, e, f)
+            position_stages_env(d, f, e)
+            for i, j in ti.ndrange(d.n_dofs, d.n_dofs):
+                dst[e, i, j] = d.mass_mat[f, e, i, j]
+            for i in range(d.n_dofs):
+                dst[e, i, i] += d.armature[e, i]
 
 
 @ti.kernel
@@ -655,6 +651,6 @@ def read_links_contact_force(schedule: ti.template(), ints: I, f1: F, v3: V3, v4
 #: what solver.py launches (through solvers.launch, with the scene's arenas; reverse_dynamics,
 #: collide and constrain with a config of their own: constrain's is the solve's schedule and the cone)
 KERNELS = (advance, prepare_reverse, reverse_kinematics, down_sweep, down_sweep_adjoint,
-           position_stages, write_state, read_state, write_inputs, read_links, read_links_acc, read_mass_matrix,
+           write_state, read_state, write_inputs, read_links, read_links_acc, read_mass_matrix,
            read_dofs_dynamics,
            read_com_jacobians, read_contacts, read_links_contact_force, smooth_substep, finish_substep)
