@@ -614,10 +614,9 @@ class RigidSolver(Solver):
     def links_kinematics(self):
         """(B, L, 13): link origin pos (3), quat (4), angular velocity ω (3) and the link origin's linear
         velocity v (3), world frame."""
-        last = self.substeps  # (the frame no stage of a step uses: the last step's stay, step.down_sweep)
-        self.kernels.down_sweep(last)  # poses and velocities need this sweep only
         out = torch.empty((self.n_batch, self.model.n_links, 13), dtype=runtime.tc_float, device=runtime.device)
-        self.kernels.read_links(last, out)
+        # (swept at the frame no stage of a step uses: the last step's stay, step.down_sweep)
+        self.kernels.read_links(self.substeps, out)
         return out
 
     def links_kinematics_backward(self, grad_links):

@@ -501,19 +501,25 @@ def _zero_grads(d: ti.template(), frames):
 
 @ti.kernel
 def read_links(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, f: ti.i32, dst: A):
-    """dst (B, L, 13) ← frame f's link pos, quat, ω and v of the link origin (world frame)."""
-    ti.loop_config(serialize=schedule[1])
-    for e in range(n_batch(ints)):
-        d = bind(ints, f1, v3, v4, m3)
-        for l in range(d.n_links):
-            w, pos = d.cvel_w[f, e, l], d.xpos[f, e, l]
-            v = d.cvel_v[f, e, l] + w.cross(pos - reference(d, f, e, l))
-            for k in ti.static(range(3)):
-                dst[e, l, k] = pos[k]
-                dst[e, l, 7 + k] = w[k]
-                dst[e, l, 10 + k] = v[k]
-            for k in ti.static(range(4)):
-                dst[e, l, 3 + k] = d.xquat[f, e, l][k]
+    """dst (B, L, 13) ← the link pos, quat, ω and v of the link origin (world frame) of the state
+    (frame 0), swept at frame f (see down_sweep) by the env's own thread (one launch: as two,
+    the sweep and the copy, a link getter after a step took ~3 µs more of launching)."""
+    ti.loop_config(serialize=schedule[0])
+    for t in range(env_loop(ints, schedule[0])):
+        e = env_of(ints, t, schedule[0])
+        if e >= 0:
+            d = bind(ints, f1, v3, v4, m3)
+            _state_at(d, e, f)
+            down_sweep_env(d, f, e)
+            for l in range(d.n_links):
+                w, pos = d.cvel_w[f, e, l], d.xpos[f, e, l]
+                v = d.cvel_v[f, e, l] + w.cross(pos - reference(d, f, e, l))
+                for k in ti.static(range(3)):
+                    dst[e, l, k] = pos[k]
+                    dst[e, l, 7 + k] = w[k]
+                    dst[e, l, 10 + k] = v[k]
+                for k in ti.static(range(4)):
+                    dst[e, l, 3 + k] = d.xquat[f, e, l][k]
 
 
 @ti.kernel
