@@ -468,20 +468,21 @@ class RigidSolver(Solver):
                 collide(s)
 
     def _substep(self, s, inputs, out, commit, flagged_only):
-        """Substep s as three stage kernels with the colliders between the first two (one kernel
-        per pair kind: see collision/detect.py); inputs (loaded when not empty), out (the result,
-        at the last substep, when not empty), commit: see step.finish_substep; flagged_only: only
-        the envs that advance left to the constraint stage."""
+        """Substep s as two stage kernels (smooth, then constrain or, without rows, finish) with the
+        colliders between them (one kernel per pair kind: see collision/detect.py); inputs (loaded
+        when not empty), out (the result, at the last substep, when not empty), commit: see
+        step.finish_substep; flagged_only: only the envs that advance left to the constraint stage."""
         self._smooth_and_collide(s, inputs, flagged_only)
         # the solve only where some env has a row to form (the frame is one without rows until
         # then): a scene out of contact never loads the solve's kernel (tens of seconds of LLVM in
         # a fresh process) nor runs it; on a GPU the flag is not read (a wait for the device)
         found = self.data.take_flag("constrained") if self.data.flags_on_host else 1  # read, so cleared, always
         rows = bool(flagged_only or found)
-        if rows:
-            self.constrain(s, flagged_only, self._replaying)
         self._rows_in_substep[s] = rows  # the reverse of a substep without rows skips the solve's
-        self.kernels.finish_substep(s, commit, out, flagged_only)
+        if rows:  # (which then also finishes the substep)
+            self.constrain(s, flagged_only, self._replaying, commit, out)
+        else:
+            self.kernels.finish_substep(s, commit, out, flagged_only)
 
     # -- the shared substep loop (solvers/base.py): the whole rigid substep comes before coupling --
     def begin_step(self, inputs):

@@ -3,10 +3,11 @@ scene's arenas and torch.
 
 Forward runs every substep of every env in one launch (``advance``, which can also load the
 inputs and write out the result) when no constraint row arises: no contact pair, no friction
-loss, and (checked per env and substep) no violated joint limit. Otherwise a substep is three
-stage kernels (smooth, constrain, finish; constrain only when some env has a row to form, the
-header's ``constrained`` flag) and one collider kernel per pair kind between the first two (see
-below; the constraint solve inlined into ``advance`` took LLVM 100 s to compile); an env that
+loss, and (checked per env and substep) no violated joint limit. Otherwise a substep is two
+stage kernels: smooth, then constrain (the rows, the solve and finish's integration) when some
+env has a row to form (the header's ``constrained`` flag), else finish; and one collider kernel
+per pair kind between the two (see below; the constraint solve inlined into ``advance`` took
+LLVM 100 s to compile); an env that
 advance stops at a limit is taken again from its start by those, which then skip the other
 envs. Both ways give the same bits when no row arises.
 
@@ -262,11 +263,13 @@ def converge(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s:
 
 @ti.kernel
 def constrain(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32, flagged_only: ti.i32,
-              replaying: ti.i32):
-    """Frame s's constraint rows and solve; config = (schedule, elliptic, body_eqs): the cone is
-    compiled in, so a scene loads only its own cone's code (the elliptic cone's is a third of the
-    kernel), and the connects' and welds' rows only where the scene has some (RigidView);
-    replaying: a backward's replay given the forward's solutions (constraint_env)."""
+              replaying: ti.i32, commit: ti.i32, out: A):
+    """Frame s's constraint rows and solve, then what finish_substep does (frame s → s + 1, and
+    after the last substep the end of a step): one launch where two took ~3 µs more at one env.
+    config = (schedule, elliptic, body_eqs): the cone is compiled in, so a scene loads only its
+    own cone's code (the elliptic cone's is a third of the kernel), and the connects' and welds'
+    rows only where the scene has some (RigidView); replaying: a backward's replay given the
+    forward's solutions (constraint_env)."""
     ti.loop_config(serialize=config[0][0])
     for t in range(env_loop(ints, config[0][0])):
         e = env_of(ints, t, config[0][0])
@@ -274,6 +277,7 @@ def constrain(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: 
             d = bind(ints, f1, v3, v4, m3, cone=config[1], body_eqs=config[2])
             if not _skipped(d, e, flagged_only):
                 constraint_env(d, s, e, replaying)
+                _finish_env(d, s, e, commit, out)
 
 
 @ti.kernel
@@ -286,9 +290,15 @@ def finish_substep(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: 
         if e >= 0:
             d = bind(ints, f1, v3, v4, m3)
             if not _skipped(d, e, flagged_only):
-                finish_substep_env(d, s, e, True)
-                if s == d.substeps - 1:
-                    _end_step(d, e, commit, out)
+                _finish_env(d, s, e, commit, out)
+
+
+@ti.func
+def _finish_env(d: ti.template(), s, e, commit, out: ti.template()):
+    """Frame s → frame s + 1 after a constraint stage; after the last substep, _end_step."""
+    finish_substep_env(d, s, e, True)
+    if s == d.substeps - 1:
+        _end_step(d, e, commit, out)
 
 
 @ti.kernel
