@@ -295,7 +295,7 @@ def finish_substep(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: 
 
 @ti.func
 def _finish_env(d: ti.template(), s, e, commit, out: ti.template()):
-    """Frame s → frame s + 1 after a constraint stage; after the last substep, _end_step."""
+    """Frame s → frame s + 1 (rows or not: n_efc says); after the last substep, _end_step."""
     finish_substep_env(d, s, e, True)
     if s == d.substeps - 1:
         _end_step(d, e, commit, out)
@@ -357,10 +357,10 @@ def reverse_kinematics(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, 
 
 @ti.kernel
 def down_sweep(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, f: ti.i32):
-    """Link poses and velocities of the state (frame 0) at frame f (what the link getters read):
-    the getters take the last frame, which no substep's stages use, so that the last step's
-    intermediates stay for its readouts (read_links_acc, read_contacts...) and its reverse; the
-    adjoint of a getter takes frame 0 (down_sweep_adjoint)."""
+    """Link poses and velocities of the state (frame 0) at frame f, for the adjoint of a link
+    getter (down_sweep_adjoint), which takes frame 0. The getters themselves (read_links, and
+    read_mass_matrix) sweep the last frame, which no substep's stages use, so that the last
+    step's intermediates stay for its readouts (read_links_acc, read_contacts...) and its reverse."""
     ti.loop_config(serialize=schedule[0])
     for t in range(env_loop(ints, schedule[0])):
         e = env_of(ints, t, schedule[0])
