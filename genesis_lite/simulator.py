@@ -265,13 +265,11 @@ class Simulator:
 
     def _grad_inputs(self):
         """Every solver's inputs, in its default_inputs' order, as one tuple."""
-        if len(self.slots) == 1:  # (one solver: a step's ~30 inputs in C-level calls)
-            return tuple(map(self.slots[0].inputs.__getitem__, self.slots[0].input_names))
-        return tuple(value for slot in self.slots for value in map(slot.inputs.__getitem__, slot.input_names))
+        # (C-level calls: a step's ~30 inputs a solver)
+        return tuple(itertools.chain.from_iterable(map(slot.inputs.__getitem__, slot.input_names)
+                                                   for slot in self.slots))
 
     def _split_inputs(self, flat):
-        if len(self.slots) == 1:
-            return [dict(zip(self.slots[0].input_names, flat))]
         out, k = [], 0
         for slot in self.slots:
             out.append(dict(zip(slot.input_names, flat[k: k + len(slot.input_names)])))
