@@ -8,7 +8,7 @@ from .options import named_keywords
 from .solvers.core import InvalidInputError, refuse_grad
 
 
-@named_keywords("use_visual_raycasting", "friction_torsional", "friction_rolling", "needs_coup", "coup_friction",
+@named_keywords("use_visual_raycasting", "needs_coup", "coup_friction",
            "coup_softness", "coup_restitution", "sdf_cell_size", "sdf_min_res", "sdf_max_res", "coup_type", "coup_links", "enable_coup_collision", "coup_collision_links", "contact_resistance")
 @dataclass
 class Rigid:
@@ -18,13 +18,19 @@ class Rigid:
     plain object and 1500 for an articulated robot's links (urdf.load_urdf says which);
     friction: Coulomb coefficient of every collision shape of the entity, in [0.01, 5] as Genesis
     (None: the asset's, e.g. a URDF link's <contact><lateral_friction>, else 1.0); a contact
-    takes the larger of its two shapes' values; gravity_compensation: the share of every link's
+    takes the larger of its two shapes' values; friction_torsional, friction_rolling (m, ≥ 0):
+    every shape's torsional and rolling friction (None: the asset's, an MJCF geom's friction's
+    second and third, else MuJoCo's and Genesis's 0.005 and 0.0001), acting where a contact has
+    condim 4 or 6 (RigidOptions' enable_torsional_friction, enable_rolling_friction, or the MJCF
+    geom's condim); gravity_compensation: the share of every link's
     weight a force at its centre of mass cancels (Genesis's: 1 cancels gravity on the entity, 0
     none; above 1 lifts it, below 0 adds weight), None: the asset's (an MJCF body's ``gravcomp``,
     else 0)."""
     rho: float = None
     friction: float = None
     gravity_compensation: float = None
+    friction_torsional: float = None
+    friction_rolling: float = None
 
     def __post_init__(self):
         rho, friction = _real("materials.Rigid", "rho", self.rho), _real("materials.Rigid", "friction", self.friction)
@@ -40,6 +46,13 @@ class Rigid:
             raise InvalidInputError(f"materials.Rigid: argument 'friction' must be a number in [0.01, 5.0] "
                                     f"(or None), got {self.friction!r}")
         self.rho, self.friction = None if self.rho is None else rho, friction
+        for name in ("friction_torsional", "friction_rolling"):
+            given = getattr(self, name)
+            value = _real("materials.Rigid", name, given)
+            if given is not None and not (value is not None and 0.0 <= value < float("inf")):
+                raise InvalidInputError(f"materials.Rigid: argument '{name}' must be a finite number >= 0 (m) "
+                                        f"(or None), got {given!r}")
+            setattr(self, name, value)
 
 
 def _real(owner, name, value):

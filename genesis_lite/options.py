@@ -143,7 +143,7 @@ MUJOCO_ITERATIONS, GENESIS_ITERATIONS = 100, 25
 
 @named_keywords("disable_constraint", "multiplier_collision_broad_phase",
            "integrator", "IK_max_targets", "noslip_iterations", "noslip_tolerance", "contact_resolution",
-           "enable_torsional_friction", "enable_rolling_friction", "contact_pruning_tolerance", "sparse_solve",
+           "contact_pruning_tolerance", "sparse_solve",
            "use_hibernation", "hibernation_thresh_vel", "enable_multi_contact",
            "use_gjk_collision", "enable_contact_patch", "broadphase_traversal")
 @dataclass
@@ -210,6 +210,12 @@ class RigidOptions(_TimeBased):
     gravity: (3,) m/s² or None (SimOptions.gravity): the rigid bodies' own gravity, as Genesis's
         (its IK examples float a robot with (0, 0, 0)); scene.set_gravity sets it with every
         solver's.
+    enable_torsional_friction, enable_rolling_friction: contacts also resist spin about their
+        normal (condim 4), and rolling about their tangents too (condim 6; needs torsional), with
+        the torsional and rolling friction (m) of materials.Rigid (set_friction_torsional,
+        set_friction_rolling), as Genesis's switches; rows and cones as MuJoCo's condim 4 and 6.
+        They raise every geom's condim of 3 or more (an MJCF geom's own condim 4 or 6 holds
+        without them, as in MuJoCo; Genesis ignores the file's condim).
     smooth_contact (ours): the solimp of every geom whose asset states none (an MJCF geom's
         solimp is kept) becomes (0, 0.95, 0.001, 0.5, 2), whose impedance starts at zero at
         contact onset, so a contact's force grows from zero with depth instead of jumping
@@ -241,6 +247,8 @@ class RigidOptions(_TimeBased):
     max_collision_pairs: int = 150
     box_box_detection: bool = None
     gravity: tuple = None
+    enable_torsional_friction: bool = False
+    enable_rolling_friction: bool = False
 
     def __post_init__(self):
         owner = "RigidOptions"
@@ -262,8 +270,13 @@ class RigidOptions(_TimeBased):
         self._check_dt(owner)
         for name in ("enable_collision", "enable_self_collision", "enable_adjacent_collision",
                      "enable_neutral_collision", "enable_joint_limit", "enable_mujoco_compatibility",
-                     "smooth_contact", "batch_links_info", "batch_joints_info", "batch_dofs_info"):
+                     "smooth_contact", "batch_links_info", "batch_joints_info", "batch_dofs_info",
+                     "enable_torsional_friction", "enable_rolling_friction"):
             setattr(self, name, check_bool(owner, name, getattr(self, name)))
+        if self.enable_rolling_friction and not self.enable_torsional_friction:
+            raise InvalidInputError(f"{owner}: argument 'enable_rolling_friction' requires "
+                                    f"enable_torsional_friction=True (as Genesis: MuJoCo's condim 6 adds rolling "
+                                    f"to condim 4's torsional friction)")
         if self.constraint_solver != constraint_solver.Newton:
             raise InvalidInputError(f"{owner}: argument 'constraint_solver' expected gs.constraint_solver.Newton "
                                     f"(CG is not implemented), got {self.constraint_solver!r}")

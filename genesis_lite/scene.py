@@ -672,11 +672,13 @@ def _check_rotors(links, morph, name):
 
 
 def _with_material(links, material):
-    """``links`` with the material's friction, where it states one, on every geom, and its gravity
-    compensation, where it states one, on every link (each overrides the asset's, as Genesis)."""
-    if material.friction is not None:
-        for geom in (geom for link in links for geom in link.geoms):
-            geom.friction = material.friction
+    """``links`` with the material's frictions (sliding, torsional, rolling), where it states them,
+    on every geom, and its gravity compensation, where it states one, on every link (each
+    overrides the asset's, as Genesis)."""
+    for name in ("friction", "friction_torsional", "friction_rolling"):
+        if getattr(material, name) is not None:
+            for geom in (geom for link in links for geom in link.geoms):
+                setattr(geom, name, getattr(material, name))
     if material.gravity_compensation is not None:
         for link in links:
             link.gravcomp = material.gravity_compensation

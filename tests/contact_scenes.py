@@ -34,6 +34,8 @@ class ContactScene:
     sol_per_geom: list = None  # one (solref, solimp) 7-tuple per geom (plane first): overrides solref/solimp
     n_envs: int = 0
     options: dict = field(default_factory=dict)
+    condim: int = 3        # every geom's: 4 and 6 by RigidOptions' enable_torsional/rolling_friction
+    friction: tuple = None  # every geom's (sliding, torsional, rolling), None: MuJoCo's default
 
 
 def _morph(body):
@@ -51,10 +53,16 @@ def build_ours(spec):
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=spec.dt),
                      rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True,
                                                            friction_cone=spec.cone, impratio=spec.impratio,
+                                                           enable_torsional_friction=spec.condim >= 4,
+                                                           enable_rolling_friction=spec.condim == 6,
                                                            **spec.options),
                      show_viewer=False)
-    plane = scene.add_entity(gs.morphs.Plane()) if spec.plane else None
-    entities = [scene.add_entity(_morph(b)) for b in spec.bodies]
+    material = None
+    if spec.friction is not None:
+        material = gs.materials.Rigid(friction=spec.friction[0], friction_torsional=spec.friction[1],
+                                      friction_rolling=spec.friction[2])
+    plane = scene.add_entity(gs.morphs.Plane(), material=material) if spec.plane else None
+    entities = [scene.add_entity(_morph(b), material=material) for b in spec.bodies]
     scene.build(n_envs=spec.n_envs)
     for entity, params in zip(([plane] if spec.plane else []) + entities, _sol_params(spec)):
         if params is not None:
@@ -90,7 +98,8 @@ def _geom_xml(body):
 
 def build_mujoco(spec, model):
     """MuJoCo's model of the scene, mass properties from our RigidModel ``model``."""
-    sols = [_sol_xml(params) for params in _sol_params(spec)]
+    friction = "" if spec.friction is None else ' friction="' + " ".join(map(str, spec.friction)) + '"'
+    sols = [_sol_xml(params) + f' condim="{spec.condim}"' + friction for params in _sol_params(spec)]
     plane_sol, body_sols = (sols[0], sols[1:]) if spec.plane else ("", sols)
     moving = [l for l in range(model.n_links) if model.link_jtype[l] != 0]
     bodies = []

@@ -32,7 +32,7 @@ HALF = (0.1, 0.15, 0.05)  # box half extents, m
 SLAB = 0.04  # thickness (m) of the free slab the "mass" case's box lands on
 
 
-def _scene(cone, n_envs=0, substeps=1, shape="box", tag="", smooth=False, ground="plane"):
+def _scene(cone, n_envs=0, substeps=1, shape="box", tag="", smooth=False, ground="plane", condim=3):
     """One scene per configuration (building is the slow part). Parameters persist across
     reset(): each case sets its own, and ``tag`` gives a scene of its own. smooth:
     RigidOptions(smooth_contact=True). ground: "plane", "box": a fixed box whose top is the
@@ -40,13 +40,17 @@ def _scene(cone, n_envs=0, substeps=1, shape="box", tag="", smooth=False, ground
     cap is that plane, "offcan": one (r 0.2 m) whose axis, 0.17 m off the box's centre, misses the
     box's face, "pedestal": a fixed 0.16 m wide box whose top is ("mesh pedestal": as a mesh), or
     "slab": the plane with a free
-    0.6 × 0.6 m slab SLAB thick resting on it."""
-    key = (cone, n_envs, substeps, shape, tag, smooth, ground, gs.runtime.epoch)
+    0.6 × 0.6 m slab SLAB thick resting on it. condim 4 or 6: torsional (and rolling) friction on
+    (SPIN_ROLL: large enough to act)."""
+    key = (cone, n_envs, substeps, shape, tag, smooth, ground, condim, gs.runtime.epoch)
     if key not in _SCENES:
         scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, substeps=substeps, requires_grad=True),
                          rigid_options=gs.options.RigidOptions(tolerance=1e-14, friction_cone=cone,
-                                                               smooth_contact=smooth),
+                                                               smooth_contact=smooth,
+                                                               enable_torsional_friction=condim >= 4,
+                                                               enable_rolling_friction=condim == 6),
                          show_viewer=False)
+        material = gs.materials.Rigid(friction_torsional=SPIN_ROLL[0], friction_rolling=SPIN_ROLL[1])
         if ground in ("plane", "slab"):
             scene.add_entity(gs.morphs.Plane())
             if ground == "slab":
@@ -68,7 +72,8 @@ def _scene(cone, n_envs=0, substeps=1, shape="box", tag="", smooth=False, ground
         else:
             scene.add_entity(gs.morphs.Box(size=(2.0, 2.0, 0.2), pos=(0, 0, -0.1), fixed=True))
         if shape == "box":
-            body = scene.add_entity(gs.morphs.Box(size=tuple(2 * h for h in HALF), pos=(0, 0, HALF[2])))
+            body = scene.add_entity(gs.morphs.Box(size=tuple(2 * h for h in HALF), pos=(0, 0, HALF[2])),
+                                    material=material)
         elif shape == "mesh":  # the same box as a mesh: plane–mesh contacts (its hull's vertices)
             path = os.path.join(tempfile.mkdtemp(), "box.obj")
             trimesh.creation.box(extents=tuple(2 * h for h in HALF)).export(path)
@@ -76,7 +81,7 @@ def _scene(cone, n_envs=0, substeps=1, shape="box", tag="", smooth=False, ground
         elif shape == "cylinder":  # a can as tall as the box: cylinder–box contacts on the "box" ground
             body = scene.add_entity(gs.morphs.Cylinder(radius=HALF[0], height=2 * HALF[2], pos=(0, 0, HALF[2])))
         else:
-            body = scene.add_entity(gs.morphs.Sphere(radius=0.1, pos=(0, 0, 0.1)))
+            body = scene.add_entity(gs.morphs.Sphere(radius=0.1, pos=(0, 0, 0.1)), material=material)
         scene.build(n_envs=n_envs)
         _SCENES[key] = (scene, body)
     return _SCENES[key]
@@ -106,6 +111,7 @@ def _start(body, n_envs, pos, quat, vel, gravity=(0.0, 0.0, -9.81)):
 
 
 SLIDE = ((0, 0, HALF[2] - 1e-3), (1, 0, 0, 0), (1.0, 0.3, 0.0, 0.0, 0.0, 0.4))
+SPIN_ROLL = (0.02, 0.01)  # the bodies' torsional and rolling friction, m (where condim 4 and 6 use them)
 
 
 def _sliding_velocity(scene, body, x, steps):
@@ -165,6 +171,34 @@ def _sliding_softness(scene, body, x, steps):
     return body.get_pos()[..., 0].sum() + 1e2 * body.get_pos()[..., 2].sum()
 
 
+def _rolling(scene, body, x, steps, base=0.0):
+    """A sphere rolling and spinning on the plane (or on a ground whose top is at ``base`` m): its
+    initial velocity (6), torsional and rolling friction (m) → its final position, orientation and
+    velocity (the spin slows under the torsional row, the roll under the rolling rows; in a
+    pyramid each edge mixes them with the normal)."""
+    _start(body, scene.n_envs, (0, 0, 0.1 - 1e-4 + base), (1, 0, 0, 0), (0.0,) * 6)
+    body.set_dofs_velocity(x[..., :6])
+    body.set_friction_torsional(x[6])
+    body.set_friction_rolling(x[7])
+    _roll(scene, steps)
+    return ((body.get_pos() * torch.tensor([1.0, -0.7, 30.0])).sum() + body.get_quat()[..., 1:].sum()
+            + (body.get_dofs_velocity() * torch.tensor([0.3, 0.2, 1.0, 0.05, -0.04, 0.1])).sum())
+
+
+def _creep(scene, body, x, steps):
+    """A resting sphere turned by a torque below what its torsional and rolling friction (x (2,),
+    m) hold (0.2 N·m about z, 0.1 about x: μ_t N ≈ 0.49 and μ_r N ≈ 0.25 N·m) → how far it creeps:
+    the soft contact's stuck rows give way at a rate set by their R, in an elliptic cone R_k =
+    R_1 μ² / μ_k² (the gradient in μ_k goes through R_k), in a pyramid through its edges."""
+    _start(body, scene.n_envs, (0, 0, 0.1 - 1e-4), (1, 0, 0, 0), (0.0,) * 6)
+    body.set_friction_torsional(x[0])
+    body.set_friction_rolling(x[1])
+    for _ in range(steps):
+        body.apply_links_external_wrench(torque=torch.tensor([[0.1, 0.0, 0.2]], dtype=torch.float64))
+        scene.step()
+    return 1e3 * ((body.get_pos() * torch.tensor([1.0, -1.0, 1.0])).sum() + body.get_quat()[..., 1:].sum())
+
+
 CASES = {"sliding_velocity": (_sliding_velocity, lambda: torch.tensor(SLIDE[2], dtype=torch.float64)),
          "friction": (_friction, lambda: torch.tensor([1.3], dtype=torch.float64)),
          "mass": (_mass, lambda: torch.tensor([1.4], dtype=torch.float64)),
@@ -172,7 +206,16 @@ CASES = {"sliding_velocity": (_sliding_velocity, lambda: torch.tensor(SLIDE[2], 
          # time constants whose average with the plane's stays above 2h (held there, no gradient)
          "softness": (_softness, lambda: torch.tensor([0.05, 0.9, 0.8, 0.95, 0.004, 0.4, 2.5], dtype=torch.float64)),
          "sliding_softness": (_sliding_softness,
-                              lambda: torch.tensor([0.05, 1.1, 0.8, 0.95, 0.01, 0.5, 2.0], dtype=torch.float64))}
+                              lambda: torch.tensor([0.05, 1.1, 0.8, 0.95, 0.01, 0.5, 2.0], dtype=torch.float64)),
+         # rolling at 0.8 m/s (ω = v/r) and spinning at 5 rad/s; frictions SPIN_ROLL
+         "rolling": (_rolling, lambda: torch.tensor([0.8, 0.3, 0.0, -3.0, 8.0, 5.0, *SPIN_ROLL], dtype=torch.float64)),
+         "creep": (_creep, lambda: torch.tensor(SPIN_ROLL, dtype=torch.float64)),
+         # on the free slab, which tilts and slides under it: the contact frame moves with the slab
+         "rolling_on_slab": (lambda scene, body, x, steps: _rolling(scene, body, x, steps, base=SLAB),
+                             lambda: torch.tensor([0.8, 0.3, 0.0, -3.0, 8.0, 5.0, *SPIN_ROLL], dtype=torch.float64))}
+
+
+BOX_CASES = [case for case in CASES if case not in ("rolling", "creep", "rolling_on_slab")]  # (these: a sphere)
 
 
 def _roll(scene, steps):
@@ -180,11 +223,12 @@ def _roll(scene, steps):
         scene.step()
 
 
-GROUND = {"mass": "slab"}  # the cases that need another ground than the plane
+GROUND = {"mass": "slab", "rolling_on_slab": "slab"}  # the cases that need another ground than the plane
 
 
-def _check(case, cone, steps, n_envs=0, substeps=1, seed=0, shape="box", smooth=False, ground="plane"):
-    scene, body = _scene(cone, n_envs, substeps, shape, smooth=smooth, ground=GROUND.get(case, ground))
+def _check(case, cone, steps, n_envs=0, substeps=1, seed=0, shape="box", smooth=False, ground="plane", condim=3):
+    scene, body = _scene(cone, n_envs, substeps, shape, smooth=smooth, ground=GROUND.get(case, ground),
+                         condim=condim)
     loss_of, nominal = CASES[case]
 
     def loss(x):
@@ -195,9 +239,32 @@ def _check(case, cone, steps, n_envs=0, substeps=1, seed=0, shape="box", smooth=
 
 
 @pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
-@pytest.mark.parametrize("case", list(CASES))
+@pytest.mark.parametrize("case", BOX_CASES)
 def test_box_on_plane(f64, case, cone):
     _check(case, cone, steps=50)
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+@pytest.mark.parametrize("condim", [4, 6])
+@pytest.mark.parametrize("case", ["sliding_velocity", "rolling", "creep", "rolling_on_slab"])
+def test_torsional_and_rolling_friction(f64, case, condim, cone):
+    """Contacts of condim 4 and 6 (RigidOptions' enable_torsional_friction, enable_rolling_friction):
+    a box sliding and spinning on its four corners, a sphere rolling and spinning whose torsional
+    and rolling friction are inputs too (set_friction_torsional, set_friction_rolling), one held by
+    them against a torque, and one rolling on a free slab (the angular rows' frame moves: their
+    adjoint into the frame)."""
+    _check(case, cone, steps=50, shape="box" if case == "sliding_velocity" else "sphere", condim=condim)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+@pytest.mark.parametrize("case,steps,n_envs,substeps", [
+    ("sliding_velocity", 200, 0, 1), ("sliding_velocity", 50, 4, 1), ("sliding_velocity", 200, 4, 1),
+    ("sliding_velocity", 50, 0, 2), ("rolling", 200, 0, 1), ("rolling", 50, 0, 2), ("creep", 200, 0, 1),
+    ("creep", 50, 0, 2)])
+def test_torsional_and_rolling_friction_matrix(f64, case, cone, steps, n_envs, substeps):
+    """The issue's matrix at condim 6 (the sphere cases set one friction for every env: n_envs 0)."""
+    _check(case, cone, steps, n_envs, substeps, shape="box" if case == "sliding_velocity" else "sphere", condim=6)
 
 
 @pytest.mark.parametrize("case", ["sliding_velocity", "tilted"])
@@ -376,7 +443,7 @@ def test_smooth_contact_matrix(f64, case, steps, n_envs, substeps):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
-@pytest.mark.parametrize("case", list(CASES))
+@pytest.mark.parametrize("case", BOX_CASES)
 @pytest.mark.parametrize("steps,n_envs,substeps", [(200, 0, 1), (50, 4, 1), (200, 4, 1), (50, 0, 2), (200, 0, 2)])
 def test_box_on_plane_matrix(f64, case, cone, steps, n_envs, substeps):
     if case == "sliding_softness" and steps > 50:
@@ -422,12 +489,20 @@ def test_repeated_rollouts_bit_identical(f64, cone):
         assert torch.equal(first, second), case
 
 
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_repeated_rollouts_bit_identical_with_torsional_and_rolling_friction(f64, cone):
+    scene, body = _scene(cone, shape="sphere", condim=6)
+    for case in ("rolling", "creep"):
+        first, second = _gradient(scene, body, case, 30), _gradient(scene, body, case, 30)
+        assert torch.equal(first, second), case
+
+
 def test_set_friction_is_the_differentiable_ratio_input(f64):
     """set_friction with a 0-d tensor requiring grad (it took numbers only) writes the input that
     set_friction_ratio scales (the box's build friction is 1): the same loss and gradient bits,
     so the ratio's finite-difference test covers it."""
     scene, body = _scene("pyramidal")
-    assert scene._rigid_solver.model.geom_friction[body.geom_start] == 1.0
+    assert scene._rigid_solver.model.geom_friction[body.geom_start, 0] == 1.0
     results = []
     ones = torch.ones(body.n_links, dtype=torch.float64)  # (the scene is shared: another test's ratio is kept)
     for set_friction in (lambda x: (body.set_friction_ratio(ones), body.set_friction(x[0])),
@@ -454,11 +529,16 @@ def test_friction_is_friction_times_ratio_whichever_is_set_last(f32):
     box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.1), pos=(0.0, 0.0, 0.05)))
     scene.build(n_envs=2)
 
-    def friction():
-        return scene.sim.inputs(scene._rigid_solver)["friction"][:, box.geom_start].tolist()
+    def friction(kind=0):  # (0 sliding, 1 torsional, 2 rolling)
+        return scene.sim.inputs(scene._rigid_solver)["friction"][:, 3 * box.geom_start + kind].tolist()
 
     box.set_friction(0.25)
     box.set_friction_ratio([[2.0], [3.0]])
+    assert friction() == pytest.approx([0.5, 0.75])
+    assert friction(1) == pytest.approx([0.01, 0.015]) and friction(2) == pytest.approx([2e-4, 3e-4])  # (as Genesis)
+    box.set_friction_torsional(0.02)
+    box.set_friction_rolling(0.001)
+    assert friction(1) == pytest.approx([0.04, 0.06]) and friction(2) == pytest.approx([0.002, 0.003])
     assert friction() == pytest.approx([0.5, 0.75])
     box.set_friction(0.8)
     assert friction() == pytest.approx([1.6, 2.4])
@@ -494,15 +574,20 @@ def test_batched_equals_single_with_contact(f64):
     assert_batch_equals_single(4)
 
 
-def assert_batch_equals_single(n_envs):
+def test_batched_equals_single_with_torsional_and_rolling_friction(f64):
+    """The same with condim 6 contacts (elliptic cone), a box sliding and spinning."""
+    assert_batch_equals_single(3, cone="elliptic", condim=6, case="sliding_velocity")
+
+
+def assert_batch_equals_single(n_envs, cone="pyramidal", condim=3, case="tilted"):
     """A batch of n_envs gives each env's gradient of a single-env scene, bit for bit (with n_envs ×
     dofs past SERIAL_SOLVE_WORK the solve runs on the thread pool: tests/test_compile_once.py)."""
-    batched_scene, batched_body = _scene("pyramidal", n_envs=n_envs, tag="batched")
+    batched_scene, batched_body = _scene(cone, n_envs=n_envs, tag="batched", condim=condim)
     on_calling_thread = batched_scene.sim.slots[0].solver.data.solve_schedule[0]
     assert on_calling_thread == (n_envs * batched_scene._rigid_solver.model.n_dofs <= SERIAL_SOLVE_WORK)
-    batched = _gradient(batched_scene, batched_body, "tilted", 30)
-    scene, body = _scene("pyramidal", tag="batched")  # both with the build's parameters
-    loss_of, nominal = CASES["tilted"]
+    batched = _gradient(batched_scene, batched_body, case, 30)
+    scene, body = _scene(cone, tag="batched", condim=condim)  # both with the build's parameters
+    loss_of, nominal = CASES[case]
     for e in sorted({0, n_envs // 3, 2 * n_envs // 3, n_envs - 1}):
         x = _batch(n_envs, nominal())[e].clone().requires_grad_(True)
         scene.reset()

@@ -26,7 +26,7 @@ def _run(spec, steps, before_step=None, mujoco_spec=None):
     d = mujoco.MjData(m)
     if before_step:
         m.opt.gravity[:] = scene._rigid_solver.default_inputs["gravity"][0].cpu().numpy()
-        m.geom_friction[:, 0] = scene.sim.inputs(scene._rigid_solver)["friction"][0].cpu().numpy()
+        m.geom_friction[:] = scene.sim.inputs(scene._rigid_solver)["friction"][0].cpu().numpy().reshape(-1, 3)
     d.qpos[:] = np.concatenate([e.get_qpos().cpu().numpy() for e in entities])
     d.qvel[:] = np.concatenate([e.get_dofs_velocity().cpu().numpy() for e in entities])
     mujoco.mj_forward(m, d)

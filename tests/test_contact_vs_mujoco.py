@@ -152,6 +152,25 @@ def test_body_pairs_step_like_mujoco(f64, pair, cone):
     _check_step(ContactScene([SHAPE[pair[0]], SHAPE[pair[1]]], plane=False, cone=cone))
 
 
+TORSION_ROLL_SCENES = {"sphere-plane": ([SHAPE["sphere"]], True), "box-plane": ([SHAPE["box"]], True),
+                       "capsule-box": ([SHAPE["capsule"], SHAPE["box"]], False),
+                       "box-box": ([SHAPE["box"], Body("box", (0.1, 0.15, 0.08))], True)}
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+@pytest.mark.parametrize("condim", [4, 6])
+@pytest.mark.parametrize("scene_name", list(TORSION_ROLL_SCENES))
+def test_torsional_and_rolling_friction_step_like_mujoco(f64, scene_name, condim, cone):
+    """Contacts of condim 4 (torsional friction: a row on the turn about the normal) and 6 (and
+    rolling: rows on the turns about the tangents), by RigidOptions' enable_torsional_friction and
+    enable_rolling_friction and materials.Rigid's friction_torsional and friction_rolling, step as
+    MuJoCo's geoms of that condim and friction (large enough to act: 0.03 m and 0.02 m), with
+    impratio 3 (the elliptic rows' R_k = R_1 μ²/μ_k²)."""
+    bodies, plane = TORSION_ROLL_SCENES[scene_name]
+    _check_step(ContactScene(bodies, plane=plane, cone=cone, condim=condim, friction=(0.8, 0.03, 0.02),
+                             impratio=3.0))
+
+
 @pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
 def test_masses_set_after_build_step_like_mujoco(f64, cone):
     """A box on a box on the plane, each env its own masses, set after build: the rows' scale

@@ -491,7 +491,8 @@ def test_friction_kept_in_the_model(f64, tmp_path):
     scene.build()
     model = scene._rigid_solver.model
     # file: link a states nothing (Genesis's default 1.0), b's <contact><lateral_friction> 0.3; the material wins
-    np.testing.assert_array_equal(model.geom_friction, [1.0, 0.3, 0.3, 0.5, 0.5, 0.5, 2.0])
+    np.testing.assert_array_equal(model.geom_friction[:, 0], [1.0, 0.3, 0.3, 0.5, 0.5, 0.5, 2.0])
+    np.testing.assert_array_equal(model.geom_friction[:, 1:], [[0.005, 0.0001]] * 7)  # MuJoCo's and Genesis's defaults
     np.testing.assert_array_equal(model.geom_link, [0, 1, 1, 2, 3, 3, 4])
     np.testing.assert_array_equal(model.dof_frictionloss, [0.7, 0.7, 0, 0, 0, 0, 0, 0])  # the box's free dofs: 0
 

@@ -1338,8 +1338,40 @@ class RigidEntity(EntityIndexing):
         if value is None or value.dim() != 0 or not 0.01 * (1 - 1e-6) <= float(value.detach()) <= 5.0:
             raise InvalidInputError(f"entity '{self.name}': argument 'friction' must be a number in [0.01, 5.0], "
                                     f"got {friction!r}")
-        self._friction_ratios()  # (made from the build's values at the first call)
-        self._friction = value.expand(self.n_geoms)
+        self._set_friction_kind(0, value)
+
+    def set_friction_torsional(self, friction_torsional):
+        """Torsional friction (m: the radius of the patch sliding friction acts over) of every
+        collision geom of the entity, ≥ 0, as Genesis's: a number or a 0-d tensor, differentiable.
+        A contact takes the larger of its geoms' values; it resists spin at condim 4 and 6
+        (RigidOptions(enable_torsional_friction=True), or an MJCF geom's condim). Scaled by the
+        friction ratio (set_friction_ratio), as Genesis."""
+        self._set_friction_kind(1, self._friction_length(friction_torsional, "friction_torsional"))
+
+    def set_friction_rolling(self, friction_rolling):
+        """Rolling friction (m) of every collision geom of the entity, ≥ 0, as Genesis's: a number
+        or a 0-d tensor, differentiable. A contact takes the larger of its geoms' values; it resists
+        rolling at condim 6 (RigidOptions(enable_rolling_friction=True), or an MJCF geom's condim).
+        Scaled by the friction ratio (set_friction_ratio), as Genesis."""
+        self._set_friction_kind(2, self._friction_length(friction_rolling, "friction_rolling"))
+
+    def _friction_length(self, value, arg):
+        """``value`` (torsional or rolling friction, m) as a 0-d tensor; a named error unless it is
+        one finite number ≥ 0."""
+        try:
+            out = None if isinstance(value, (bool, np.bool_)) else self._tensor(value, arg, "()")
+        except InvalidInputError:
+            out = None
+        if out is None or out.dim() != 0 or not 0.0 <= float(out.detach()) < float("inf"):
+            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be a finite number >= 0 (m), "
+                                    f"got {value!r}")
+        return out
+
+    def _set_friction_kind(self, kind, value):
+        """Friction of kind ``kind`` (0 sliding, 1 torsional, 2 rolling) of every geom ← value (0-d)."""
+        friction, _ratio = self._friction_ratios()  # (made from the build's values at the first call)
+        columns = [value.expand(self.n_geoms) if k == kind else friction[:, k] for k in range(3)]
+        self._friction = torch.stack(columns, dim=1)
         self._write_friction(np.arange(self.n_geoms), self._envs(None))
 
     def set_friction_ratio(self, friction_ratio, links_idx_local=None, envs_idx=None):
@@ -1358,7 +1390,8 @@ class RigidEntity(EntityIndexing):
         self._write_friction(geoms, envs)
 
     def _friction_ratios(self):
-        """(friction (n_geoms,), ratio (B, n_geoms)) of the entity's geoms, made at the first call
+        """(friction (n_geoms, 3): sliding, torsional, rolling; ratio (B, n_geoms)) of the entity's
+        geoms, made at the first call
         from the build's friction and ratios of 1; detached after a reset, as the scene's
         parameters (a graph from the rollout before would be backpropagated through again)."""
         generation = self._sim().generation
@@ -1374,11 +1407,14 @@ class RigidEntity(EntityIndexing):
         return self._friction, self._friction_ratio
 
     def _write_friction(self, geoms, envs):
-        """The input "friction" of the entity's geoms ``geoms`` (local) in ``envs`` ← friction × ratio."""
+        """The input "friction" of the entity's geoms ``geoms`` (local) in ``envs`` ← friction × ratio
+        (each of its three kinds)."""
         friction, ratio = self._friction_ratios()
         index = torch.as_tensor(geoms, device=runtime.device, dtype=torch.long)
         rows = torch.as_tensor(envs, device=runtime.device, dtype=torch.long)
-        self._write_input("friction", self.geom_start + geoms, envs, friction[index] * ratio[rows][:, index])
+        values = friction[index] * ratio[rows][:, index, None]  # (envs, geoms, 3)
+        columns = (3 * (self.geom_start + np.asarray(geoms, dtype=np.int64))[:, None] + np.arange(3)).ravel()
+        self._write_input("friction", columns, envs, values.reshape(len(envs), -1))
 
     def set_sol_params(self, sol_params, geoms_idx_local=None, envs_idx=None):
         """Contact softness of the entity's geoms (all by default): 7 numbers, Genesis's and

@@ -62,7 +62,9 @@ INPUTS = {
     # frame (entity.apply_links_external_wrench), 6 a link
     "xfrc": ("L6", True),
     "frictionloss": ("D", True),  # N·m or N: dry joint friction, a constraint row (constraint/rows.py)
-    "friction": ("G", True),    # per collision geom: Coulomb coefficient (pairs take the larger)
+    # per collision geom: (sliding Coulomb coefficient, torsional m, rolling m), MuJoCo's geom_friction
+    # (a pair takes the larger of each; the torsional and rolling ones act at condim 4 and 6)
+    "friction": ("G3", True),
     "solref": ("G2", True),     # per geom: (time constant s, damping ratio), or (−stiffness, −damping)
     "solimp": ("G5", True),     # per geom: (d0, dwidth, width m, midpoint, power) of the impedance
     # MuJoCo's body_invweight0 (translation, 1/kg) per link and dof_invweight0 per dof (1/kg or
@@ -211,7 +213,7 @@ def input_width(name, model, n_dyn_welds):
     width, n_geoms = INPUTS[name][0], len(model.geom_type)
     return {"L": model.n_links, "L3": 3 * model.n_links, "L6": 6 * model.n_links, "L9": 9 * model.n_links,
             "D": model.n_dofs, "G": n_geoms,
-            "G2": 2 * n_geoms, "G5": 5 * n_geoms, "T": model.n_tendons,
+            "G2": 2 * n_geoms, "G3": 3 * n_geoms, "G5": 5 * n_geoms, "T": model.n_tendons,
             "DWW": 1 + DYN_WELD * n_dyn_welds}.get(width, width)
 
 
@@ -312,7 +314,8 @@ def _counts(size):
             "E": size["E"], "E2": 2 * size["E"], "E7": 7 * size["E"], "K2": 2 * size["K"], "K7": 7 * size["K"],
             "T": size["T"], "T2": 2 * size["T"], "T3": TENDON_JOINTS * size["T"], "T7": 7 * size["T"],
             "WD": size["WD"], "WD2": 2 * size["WD"],
-            "G2": 2 * size["G"], "G5": 5 * size["G"], "L3": 3 * size["L"], "L6": 6 * size["L"], "L9": 9 * size["L"],
+            "G2": 2 * size["G"], "G3": 3 * size["G"], "G5": 5 * size["G"],
+            "L3": 3 * size["L"], "L6": 6 * size["L"], "L9": 9 * size["L"],
             "D7": 7 * D, 1: 1,
             len(CONSTS): len(CONSTS),
             **{f"ws:{name}": size["WS"] * n for name, (_, n) in CONVEX_SCRATCH.items()}}
@@ -490,10 +493,14 @@ class RigidView:
     friction cone as a compile-time value (True: elliptic), for the kernels of the constraint
     solve and its reverse, which then leave the other cone's code out; None: read at run time.
     ``body_eqs``: whether connects' and welds' rows are compiled into those kernels (a compile-time
-    value: their code made a cold compile of a box on a plane's 15-20 s longer each)."""
+    value: their code made a cold compile of a box on a plane's 15-20 s longer each).
+    ``max_condim``: the largest contact condim those kernels handle (3: the torsional and rolling
+    rows' code left out, as a scene without them needs: the box's constrain ran ~15 % slower at
+    1024 envs with it in); ``row_slots`` the most rows a contact then has (a pyramid's
+    2 (condim − 1)), the length of the reverse's per-row vectors."""
     _data_oriented = True
 
-    def __init__(self, ints, f1, v3, v4, m3, cone=None, body_eqs=True):
+    def __init__(self, ints, f1, v3, v4, m3, cone=None, body_eqs=True, max_condim=6):
         arenas = dict(zip(ARENAS, (ints, f1, v3, v4, m3)))
         size = {name: impl.expr_init(_subscript(ints, k)) for name, k in HEADER.items()}
         at = {key: impl.expr_init(_subscript(ints, k)) for key, k in OFFSETS.items()}  # (see offsets)
@@ -501,6 +508,7 @@ class RigidView:
         self.n_pairs, self.substeps, self.input_total, self.grad_total = size["P"], size["S"], size["W"], size["GW"]
         self.n_eq, self.n_body_eq, self.n_weld, self.n_tendons = size["E"], size["K"], size["WD"], size["T"]
         self.n_connect, self.body_eqs = size["K"] - size["WD"], body_eqs  # (the connects come first)
+        self.max_condim, self.row_slots = max_condim, 2 * (max_condim - 1)
         self.joint_columns, self.body_eq_columns = at["joint_columns"], at["body_eq_columns"]
         self.limits_enabled = size["limits"]
         self.n_geoms, self.n_candidates = size["G"], size["N"]
@@ -582,10 +590,10 @@ def _spread(ints: ti.template()):
     return ti.max(1, 1024 // n_batch(ints))
 
 
-def bind(ints, f1, v3, v4, m3, cone=None, body_eqs=True):
+def bind(ints, f1, v3, v4, m3, cone=None, body_eqs=True, max_condim=6):
     """Called inside a kernel (in the env loop): the :class:`RigidView` of the arenas (cone,
-    body_eqs: see RigidView)."""
-    return RigidView(ints, f1, v3, v4, m3, cone, body_eqs)
+    body_eqs, max_condim: see RigidView)."""
+    return RigidView(ints, f1, v3, v4, m3, cone, body_eqs, max_condim)
 
 
 # bind runs as Python while Taichi builds a kernel, on purpose: it only creates the view

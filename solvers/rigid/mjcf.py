@@ -34,7 +34,7 @@ section round of size[0]), mesh (``<mesh file scale>`` assets, in the file's own
 re-centring moves the geom frame, not the surface; found in meshdir or beside the file that
 included them; or given by ``vertex`` and ``face``, without faces the vertices' convex hull);
 contype/conaffinity masks (MuJoCo's pair rule); ``<contact><exclude>``; friction
-(the sliding coefficient), condim (1 or 3; 4 and 6 taken as 3, with a warning), solref, solimp,
+(sliding, torsional, rolling), condim (1, 3, 4 or 6), solref, solimp,
 priority and solmix, which a pair combines as MuJoCo's mj_contactParam (GeomSpec); planes (infinite, as MuJoCo's colliders take them, massless; drawn as
 MuJoCo sizes them) in the worldbody or a body welded to it; a geom with contype = conaffinity = 0
 only weighs and is drawn; a geom
@@ -119,6 +119,7 @@ _JOINTS = {"hinge": "revolute", "slide": "prismatic", "ball": "ball"}
 _BODY_CHILDREN = {"body", "joint", "freejoint", "geom", "inertial", "site", "camera", "light", "frame"}
 _FRAME_CHILDREN = {"body", "geom", "site", "camera", "light", "frame"}
 _PRIMITIVES = ("sphere", "capsule", "cylinder", "box")
+MJ_FRICTION = (1.0, 0.005, 0.0001)  # MuJoCo's default geom friction: sliding, torsional m, rolling m
 _MJ_RGBA = np.array([0.5, 0.5, 0.5, 1.0])  # MuJoCo's default geom colour
 
 
@@ -502,7 +503,9 @@ class _Reader(MJCFDocument):
             raise self.error(f"{what}: geom type expected one of {_PRIMITIVES + ('ellipsoid', 'mesh', 'plane')}, "
                              f"got {kind!r}")
         friction = self.numbers(attrs, "friction", (1, 2, 3), what, default=[1.0])
-        geom.friction = float(friction[0])
+        # (a partial one ends in MuJoCo's defaults; a value under MuJoCo's floor 1e-5 acts as it, as there)
+        friction = [*friction, *MJ_FRICTION[len(friction):]]
+        geom.friction, geom.friction_torsional, geom.friction_rolling = (float(f) for f in friction)
         self._contact_params(geom, attrs, what)
         density = self.numbers(attrs, "density", 1, what, default=[1000.0])[0]
         mass = self._non_negative(attrs, "mass", what) if "mass" in attrs else None
@@ -510,15 +513,12 @@ class _Reader(MJCFDocument):
 
     def _contact_params(self, geom: GeomSpec, attrs: dict, what: str):
         """The geom's condim, solref, solimp (where the file states them: a partial solimp ends in
-        MuJoCo's defaults), priority and solmix; condim 4 and 6 (torsional and rolling friction)
-        are taken as 3, with a warning."""
+        MuJoCo's defaults), priority and solmix."""
         condim = self._integer(attrs, "condim", 3, what)
         if condim not in (1, 3, 4, 6):
             raise self.error(f"{what}: attribute 'condim' expected 1, 3, 4 or 6 (as MuJoCo's compiler), "
                              f"got {attrs['condim']!r}")
-        if condim > 3:
-            self.ignored.add("<geom condim> 4 and 6: torsional and rolling friction (their contacts have condim 3)")
-        geom.condim = min(condim, 3)
+        geom.condim = condim
         geom.solref, geom.solimp = (self._softness(attrs, key, what) for key in ("solref", "solimp"))
         geom.priority = self._integer(attrs, "priority", 0, what)
         geom.solmix = float(self.numbers(attrs, "solmix", 1, what, default=[1.0])[0])

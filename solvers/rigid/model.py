@@ -21,6 +21,8 @@ DEFAULT_KP = 100.0  # N·m/rad (or N/m), as Genesis
 DEFAULT_KV = 10.0   # N·m·s/rad (or N·s/m)
 MJ_MINVAL = 1e-15  # MuJoCo's mjMINVAL: a solmix weight below it counts as none
 DEFAULT_FRICTION = 1.0  # contact friction coefficient where neither asset nor material states one, as Genesis
+# torsional and rolling friction (m) where neither states one: MuJoCo's and Genesis's defaults
+DEFAULT_FRICTION_TORSIONAL, DEFAULT_FRICTION_ROLLING = 0.005, 0.0001
 
 
 @dataclass
@@ -46,10 +48,10 @@ class RigidModel:
     geom_rbound (G,) bounding radius m, geom_aabb_center and geom_aabb_half (G, 3) m a bounding box
     in the geom frame (MuJoCo's geom_aabb), geom_centre (G, 3) m a point inside the geom (geom
     frame; a mesh's hull vertex mean), geom_mesh (G,) its mesh number (-1: none), the meshes'
-    convex hulls as hull_vec (H, 3) and hull_int (HI,) (geometry.hull_arrays), geom_friction (G,)
-    Coulomb coefficient, geom_solref (G, 2) and geom_solimp (G, 5) the asset's (NaN rows: the
+    convex hulls as hull_vec (H, 3) and hull_int (HI,) (geometry.hull_arrays), geom_friction (G, 3)
+    (sliding Coulomb coefficient, torsional m, rolling m), geom_solref (G, 2) and geom_solimp (G, 5) the asset's (NaN rows: the
     scene's default). Per candidate geom pair (N): pair_geom1/pair_geom2 (ordered as MuJoCo
-    orders them), pair_condim (1 or 3), pair_mix the weight of geom1's solref and solimp in the
+    orders them), pair_condim (1, 3, 4 or 6), pair_mix the weight of geom1's solref and solimp in the
     pair's (1 − it geom2's), pair_copy 1 where the geoms' priorities differ (the pair copies the
     higher one's friction, solref and solimp: pair_mix 1 or 0 says whose), else 0 (solimp mixed,
     solref mixed in the standard form and the smaller in the direct form, friction the larger:
@@ -283,12 +285,14 @@ def _mass_matrix_pairs(dof_link, link_parent):
     return np.array(pairs, dtype=np.int32).reshape(-1, 2)
 
 
-def build_model(entities_links, self_collision=True, adjacent_collision=False, attachments=None):
+def build_model(entities_links, self_collision=True, adjacent_collision=False, attachments=None, condim_floor=3):
     """Concatenate entities' link lists (each in tree order) into one RigidModel.
 
     entities_links: list of ``list[LinkSpec]``; a free root joint takes its initial pose from
     the root spec's pos/quat, which are then reset to identity (the qs carry the pose).
     self_collision / adjacent_collision: the pair rules of geometry.candidate_pairs.
+    condim_floor: 3, or 4 (torsional friction) or 6 (and rolling) on every geom whose condim is
+    less but 3 or more (RigidOptions' enable_torsional_friction, enable_rolling_friction).
     attachments: {entity index: (parent entity index, its link index)}: that entity's first link
     hangs from that link of an earlier entity (its spec's pos/quat: where, in that link's frame;
     its joint fixed), one kinematic tree with it (Genesis's RigidEntity.attach).
@@ -381,7 +385,8 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False, a
         dof_effort=np.array(dofs["effort"], dtype=f), dof_frictionloss=np.array(dofs["frictionloss"], dtype=f),
         dof_limit_sol=np.array(dofs["limit_sol"], dtype=f).reshape(-1, 7),
         dof_frictionloss_sol=np.array(dofs["frictionloss_sol"], dtype=f).reshape(-1, 7),
-        **_geoms(geoms, geom_links, geom_names), **_pairs(geoms, geom_links, rows, self_collision, adjacent_collision),
+        **_geoms(geoms, geom_links, geom_names), **_pairs(geoms, geom_links, rows, self_collision, adjacent_collision,
+                                                      condim_floor),
         pairs=_mass_matrix_pairs(dof_link, link_parent),
         qpos0=np.array(qpos0, dtype=f), eq_dof1=np.array([q[0] for q in equalities], dtype=np.int32),
         eq_dof2=np.array([q[1] for q in equalities], dtype=np.int32),
@@ -497,15 +502,18 @@ def _initial_poses(links):
 def _geoms(geoms, geom_links, geom_names):
     arrays = geometry.geom_arrays(geoms, geom_links, lambda k: geom_names[k])
     out = {k if k.startswith("hull_") else f"geom_{k}": v for k, v in arrays.items()}
-    out["geom_friction"] = np.array([DEFAULT_FRICTION if g.friction is None else g.friction for g in geoms],
-                                    dtype=np.float64)
+    defaults = (DEFAULT_FRICTION, DEFAULT_FRICTION_TORSIONAL, DEFAULT_FRICTION_ROLLING)
+    out["geom_friction"] = np.array(
+        [[default if value is None else value
+          for value, default in zip((g.friction, g.friction_torsional, g.friction_rolling), defaults)]
+         for g in geoms], dtype=np.float64).reshape(-1, 3)
     for name, n in (("solref", 2), ("solimp", 5)):
         out[f"geom_{name}"] = np.array([np.full(n, np.nan) if getattr(g, name) is None else getattr(g, name)
                                         for g in geoms], dtype=np.float64).reshape(-1, n)
     return out
 
 
-def _pairs(geoms, geom_links, rows, self_collision, adjacent_collision):
+def _pairs(geoms, geom_links, rows, self_collision, adjacent_collision, condim_floor):
     link_parent = np.array(rows["parent"], dtype=np.int32)
     static = _static_links(link_parent, np.array(rows["jtype"]))
     types = np.array([geometry.GEOM_CODE[g.type] for g in geoms], dtype=np.int32)
@@ -520,22 +528,25 @@ def _pairs(geoms, geom_links, rows, self_collision, adjacent_collision):
     pairs = geometry.candidate_pairs(types, np.array(geom_links, dtype=np.int32), link_parent, static,
                                      _roots(link_parent), self_collision, adjacent_collision, masks, body, weld,
                                      rows["excluded"])
-    return {"pair_geom1": pairs[:, 0].copy(), "pair_geom2": pairs[:, 1].copy(), **_pair_params(geoms, pairs),
+    return {"pair_geom1": pairs[:, 0].copy(), "pair_geom2": pairs[:, 1].copy(),
+            **_pair_params(geoms, pairs, condim_floor),
             "pair_margin": np.zeros(len(pairs))}
 
 
-def _pair_params(geoms, pairs):
+def _pair_params(geoms, pairs, condim_floor):
     """pair_condim, pair_mix, pair_copy (RigidModel) of the (N, 2) geom pairs, as MuJoCo's
     mj_contactParam combines two geoms: the higher priority's, or at equal priority the larger
-    condim and solmix weights (a weight below MuJoCo's mjMINVAL counts as zero; both zero: 0.5)."""
+    condim and solmix weights (a weight below MuJoCo's mjMINVAL counts as zero; both zero: 0.5);
+    a geom's condim raised to condim_floor where it is 3 or more (build_model)."""
     condim, mix, copy = (np.zeros(len(pairs), dtype=t) for t in (np.int32, np.float64, np.int32))
+    dims = [max(g.condim, condim_floor) if g.condim >= 3 else g.condim for g in geoms]
     for k, (a, b) in enumerate(pairs.tolist()):
         g1, g2 = geoms[a], geoms[b]
         if g1.priority != g2.priority:
             first = g1.priority > g2.priority
-            condim[k], mix[k], copy[k] = (g1 if first else g2).condim, float(first), 1
+            condim[k], mix[k], copy[k] = dims[a if first else b], float(first), 1
             continue
-        condim[k] = max(g1.condim, g2.condim)
+        condim[k] = max(dims[a], dims[b])
         weighs1, weighs2 = g1.solmix >= MJ_MINVAL, g2.solmix >= MJ_MINVAL
         mix[k] = (g1.solmix / (g1.solmix + g2.solmix) if weighs1 and weighs2
                   else 0.5 if weighs1 == weighs2 else float(weighs1))

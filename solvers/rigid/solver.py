@@ -87,8 +87,9 @@ class RigidSolver(Solver):
     def build(self, n_envs):
         options = self.rigid_options
         self.invweight_basis = None  # until at_initial_pose takes it for this model
+        condim_floor = 6 if options.enable_rolling_friction else 4 if options.enable_torsional_friction else 3
         self.model = build_model(self.entity_links, options.enable_self_collision, options.enable_adjacent_collision,
-                                 self.attachments)
+                                 self.attachments, condim_floor)
         if not options.enable_collision:
             self.model = contact.without_pairs(self.model)
         self.model = contact.without_uncollidable(self.model, {v: k for k, v in GEOM_CODE.items()})
@@ -148,10 +149,13 @@ class RigidSolver(Solver):
         # the reverse of a substep, without and with the constraint stage
         solve_schedule, elliptic = self.data.solve_schedule, bool(settings["cone"])
         body_eqs = m.n_body_eq > 0 or options.max_dynamic_constraints > 0
-        self.constrain = BoundKernel(step.constrain, (solve_schedule, elliptic, body_eqs), arenas, element_dims)
-        self.reverse_kernel = [BoundKernel(step.reverse_dynamics, (schedule, 0, False, False), arenas, element_dims),
-                               BoundKernel(step.reverse_dynamics, (solve_schedule, 1, elliptic, body_eqs), arenas,
-                                           element_dims)]
+        max_condim = max(3, int(m.pair_condim.max(initial=3)))  # (4, 6: torsional, rolling rows compiled in)
+        self.constrain = BoundKernel(step.constrain, (solve_schedule, elliptic, body_eqs, max_condim), arenas,
+                                     element_dims)
+        self.reverse_kernel = [BoundKernel(step.reverse_dynamics, (schedule, 0, False, False, 3), arenas,
+                                           element_dims),
+                               BoundKernel(step.reverse_dynamics, (solve_schedule, 1, elliptic, body_eqs, max_condim),
+                                           arenas, element_dims)]
         self.collider_reverses = [(detect.KERNEL_BIT[kind], BoundKernel(step.collide_adjoint, (schedule, kind),
                                                                         arenas, element_dims, detect.opt_level(kind)))
                                   for kind in detect.differentiable_kinds(m)]
@@ -170,7 +174,7 @@ class RigidSolver(Solver):
             "frictionloss": m.dof_frictionloss, "force_lo": -effort, "force_hi": effort,
             "limit_lower": m.dof_lower, "limit_upper": m.dof_upper,
             "ctrl_mode": np.zeros(m.n_dofs), "dyn_welds": np.zeros(1 + DYN_WELD * slots),
-            "friction": m.geom_friction, **self._default_softness(),
+            "friction": m.geom_friction.reshape(-1), **self._default_softness(),
             "invweight_t": np.zeros(m.n_links), "invweight_r": np.zeros(m.n_links), "invweight_dof": np.zeros(m.n_dofs),
             "invweight_ten": np.zeros(m.n_tendons)}
         assert per_env.keys() == INPUTS.keys()

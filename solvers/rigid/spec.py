@@ -32,16 +32,22 @@ class ShapeSpec:
 @dataclass
 class GeomSpec(ShapeSpec):
     """A collision shape. friction: Coulomb coefficient of contacts on this shape
-    (dimensionless); None when neither the asset nor the material states one (the model then
-    uses its default). contype, conaffinity: MuJoCo's collision bit masks (MJCF); two shapes may
+    (dimensionless); friction_torsional, friction_rolling (m): its torsional and rolling friction
+    (MuJoCo's geom friction's second and third, acting at condim 4 and 6); each None when
+    neither the asset nor the material states one (the model then uses its default).
+    contype, conaffinity: MuJoCo's collision bit masks (MJCF); two shapes may
     touch when (contype₁ & conaffinity₂) | (contype₂ & conaffinity₁) is non-zero.
     MuJoCo's contact parameters (MJCF; a pair of geoms combines them as mj_contactParam does):
-    condim 1 (frictionless) or 3 (sliding friction); solref (2,) (timeconst s, dampratio), or
+    condim 1 (frictionless), 3 (sliding friction), 4 (and torsional) or 6 (and rolling; at
+    least RigidOptions' enable_torsional_friction / enable_rolling_friction make it where it is
+    3 or more); solref (2,) (timeconst s, dampratio), or
     (−stiffness, −damping) in the direct form, and solimp (5,) (dmin, dmax, width m, midpoint,
     power), each None for the scene's default; priority: the pair takes the parameters of its
     geom of higher priority; solmix: at equal priority, the weight of this geom's solref and
     solimp in the pair's."""
     friction: float = None
+    friction_torsional: float = None
+    friction_rolling: float = None
     contype: int = 1
     conaffinity: int = 1
     condim: int = 3

@@ -265,15 +265,15 @@ def constrain(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: 
               replaying: ti.i32, commit: ti.i32, out: A):
     """Frame s's constraint rows and solve, then what finish_substep does (frame s → s + 1, and
     after the last substep the end of a step): one launch where two took ~3 µs more at one env.
-    config = (schedule, elliptic, body_eqs): the cone is compiled in, so a scene loads only its
-    own cone's code (the elliptic cone's is a third of the kernel), and the connects' and welds'
-    rows only where the scene has some (RigidView); replaying: a backward's replay given the
-    forward's solutions (constraint_env)."""
+    config = (schedule, elliptic, body_eqs, max_condim): the cone is compiled in, so a scene loads
+    only its own cone's code (the elliptic cone's is a third of the kernel), the connects' and
+    welds' rows only where the scene has some, the torsional and rolling rows where it has them
+    (RigidView); replaying: a backward's replay given the forward's solutions (constraint_env)."""
     ti.loop_config(serialize=config[0][0])
     for t in range(env_loop(ints, config[0][0])):
         e = env_of(ints, t, config[0][0])
         if e >= 0:
-            d = bind(ints, f1, v3, v4, m3, cone=config[1], body_eqs=config[2])
+            d = bind(ints, f1, v3, v4, m3, cone=config[1], body_eqs=config[2], max_condim=config[3])
             if not _skipped(d, e, flagged_only):
                 constraint_env(d, s, e, replaying)
                 _finish_env(d, s, e, commit, out)
@@ -317,13 +317,14 @@ def prepare_reverse(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3:
 @ti.kernel
 def reverse_dynamics(config: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, s: ti.i32):
     """Adjoints of substep s from the integration back to the subtree sums; config = (schedule,
-    rows, elliptic, body_eqs), rows: the step had a constraint stage; elliptic, body_eqs: compiled
-    in, as constrain's (False without rows)."""
+    rows, elliptic, body_eqs, max_condim), rows: the step had a constraint stage; the rest compiled
+    in, as constrain's (False, False, 3 without rows)."""
     ti.loop_config(serialize=config[0][0])
     for t in range(env_loop(ints, config[0][0])):
         e = env_of(ints, t, config[0][0])
         if e >= 0:
-            dynamics_adjoint_env(bind(ints, f1, v3, v4, m3, cone=config[2], body_eqs=config[3]), s, e, config[1])
+            d = bind(ints, f1, v3, v4, m3, cone=config[2], body_eqs=config[3], max_condim=config[4])
+            dynamics_adjoint_env(d, s, e, config[1])
 
 
 @ti.kernel

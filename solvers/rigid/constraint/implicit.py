@@ -82,14 +82,16 @@ def _quadratic_row(d: ti.template(), s, e, r, w):
 
 @ti.func
 def _cone_adjoint(d: ti.template(), s, e, r, w):
-    """(āref, R̄, μ̄) (each (4,)) of the elliptic block at row r in the middle zone, w_j = J_j·u.
+    """(āref, R̄, μ̄) (each (d.row_slots,)) of the elliptic block at row r in the middle zone,
+    w_j = J_j·u.
     There f_0 = −D_0 (jar_0 − T) / (1 + μ²) and f_j = −f_0 μ_j² jar_j / T (T = |μ_j jar_j|,
     μ = efc_mu of the normal row, μ_j of tangent j): āref = H_c w (H_c the block's Hessian
     in jar, as the solve has it), R̄_0 = −(w·f)/R_0, μ̄ = −2μ (w·f)/(1 + μ²), and μ̄_j through T."""
     dim, mu = d.efc_dim[s, e, r], d.efc_mu[s, e, r]
     N, Tsqr = cone_coordinates(d, s, e, r)
     T = ti.sqrt(Tsqr)
-    g_aref, g_R, g_mu = ti.Vector.zero(float, 4), ti.Vector.zero(float, 4), ti.Vector.zero(float, 4)
+    g_aref = ti.Vector.zero(float, d.row_slots)
+    g_R, g_mu = ti.Vector.zero(float, d.row_slots), ti.Vector.zero(float, d.row_slots)
     w_force, tangential = 0.0, 0.0  # w·f, and S = Σ_{k≥1} w_k μ_k² jar_k
     for a in range(dim):
         for b in range(dim):
@@ -114,14 +116,15 @@ def _contact_adjoint(d: ti.template(), s, e, c):
     its middle zone by _cone_adjoint, satisfied rows none), then rows.contact_rows_adjoint."""
     first = d.con_efc[s, e, c]
     n = rows_per_contact(d, d.pair_condim[d.con_pair[s, e, c]])
-    w, force = ti.Vector.zero(float, 4), ti.Vector.zero(float, 4)
+    w, force = ti.Vector.zero(float, d.row_slots), ti.Vector.zero(float, d.row_slots)
     col0, ncol = d.efc_col0[s, e, first], d.efc_ncol[s, e, first]  # (the contact's rows share its columns)
     for j in range(n):
         for a in range(ncol):
             i = d.efc_cols[s, e, col0 + a]
             w[j] += d.efc_J[s, e, first + j, i] * d.solver_Mgrad[s, e, i]
         force[j] = d.efc_force[s, e, first + j]
-    g_aref, g_R, g_mu = ti.Vector.zero(float, 4), ti.Vector.zero(float, 4), ti.Vector.zero(float, 4)
+    g_aref = ti.Vector.zero(float, d.row_slots)
+    g_R, g_mu = ti.Vector.zero(float, d.row_slots), ti.Vector.zero(float, d.row_slots)
     in_cone = False
     if ti.static(d.elliptic):  # (a pyramidal solve has no cone state: its kernels leave this out)
         in_cone = d.efc_state[s, e, first] == CONE

@@ -8,11 +8,16 @@ Rows are appended in contact order from row 0; n_efc[s, e, 0] counts them. Row t
 solver's (solver.py): ONE_SIDED for a frictionless contact or a pyramid edge, ELLIPTIC_FIRST and
 ELLIPTIC_REST for an elliptic cone's block (normal first, then the tangents).
 
-Per contact with condim c, friction μ (its geoms' combined: contact_params), impedance d from the
-distance, diagA_t = invweight_t(link 1) + invweight_t(link 2) (rotational alike):
-- pyramidal (c > 1): rows J_n ± μ_k J_tk for k < c − 1, each with R = 2 μ_r² R_0, where
-  R_0 = (1 − d)/d · diagA_t (1 + μ²) and μ_r = μ / √impratio (MuJoCo's regularised cone);
-- elliptic: rows J_n, J_t1, ... with R_n = (1 − d)/d · diagA_t and R_t = R_n / impratio;
+Per contact with condim c (1 normal; 3 and two sliding tangents; 4 and a torsional direction,
+the turn about the normal; 6 and two rolling directions, the turns about the tangents: MuJoCo's
+directions, in which J_k is the contact frame's row k of the linear Jacobian for k < 3 and of
+the angular one after), friction μ_k of direction k (sliding μ, torsional, rolling: its geoms'
+combined, contact_params), impedance d from the distance, diagA_t = invweight_t(link 1) +
+invweight_t(link 2) (rotational alike):
+- pyramidal (c > 1): rows J_n ± μ_k J_k for the c − 1 directions k after the normal, each with R =
+  2 μ_r² R_0, where R_0 = (1 − d)/d · diagA_t (1 + μ²) and μ_r = μ / √impratio (MuJoCo's
+  regularised cone);
+- elliptic: rows J_n, J_1, ... with R_n = (1 − d)/d · diagA_t and R_k = R_n / impratio · μ² / μ_k²;
 - aref = −B·(J q̇) − K·d·(dist − margin) on normal and pyramid rows, −B·(J q̇) on elliptic
   tangents, with K = 1/(dmax² tc² ζ²), B = 2/(dmax tc) (tc ≥ 2h) or the direct form (−k, −b).
 
@@ -107,11 +112,11 @@ def stiffness_damping(solref, dmax, h):
 
 @ti.func
 def contact_params(d: ti.template(), e, pair):
-    """(friction, solref (2,), solimp (5,)) of a geom pair in env e, as MuJoCo's mj_contactParam
-    combines its geoms' (at least MINMU of friction): with w the pair's mix (geom1's weight), the
-    solimps mixed, w·solimp₁ + (1 − w)·solimp₂; where the priorities differ (pair_copy, w 1 or 0)
-    the friction and solref of the higher one too; else the larger friction and the solrefs mixed
-    (their minimum in direct form)."""
+    """(friction (3,): sliding, torsional m, rolling m; solref (2,), solimp (5,)) of a geom pair in
+    env e, as MuJoCo's mj_contactParam combines its geoms' (each friction at least MINMU): with w
+    the pair's mix (geom1's weight), the solimps mixed, w·solimp₁ + (1 − w)·solimp₂; where the
+    priorities differ (pair_copy, w 1 or 0) the friction and solref of the higher one too; else
+    the larger friction of each kind and the solrefs mixed (their minimum in direct form)."""
     g1, g2, w, copy = d.pair_geom1[pair], d.pair_geom2[pair], d.pair_mix[pair], d.pair_copy[pair]
     a = ti.Vector([d.solref[e, 2 * g1], d.solref[e, 2 * g1 + 1]])
     b = ti.Vector([d.solref[e, 2 * g2], d.solref[e, 2 * g2 + 1]])
@@ -120,10 +125,18 @@ def contact_params(d: ti.template(), e, pair):
         solref = w * a + (1.0 - w) * b
     solimp = ti.Vector([w * d.solimp[e, 5 * g1 + k] + (1.0 - w) * d.solimp[e, 5 * g2 + k]
                         for k in ti.static(range(5))])
-    mu = ti.max(d.friction[e, g1], d.friction[e, g2])
-    if copy:
-        mu = w * d.friction[e, g1] + (1.0 - w) * d.friction[e, g2]
-    return ti.max(MINMU, mu), solref, _clamped_solimp(solimp)
+    friction = ti.Vector([MINMU, MINMU, MINMU])
+    for k in ti.static(range(3 if d.max_condim > 3 else 1)):  # (the sliding one alone where no row takes the rest)
+        f1, f2 = d.friction[e, 3 * g1 + k], d.friction[e, 3 * g2 + k]
+        friction[k] = ti.max(MINMU, w * f1 + (1.0 - w) * f2 if copy else ti.max(f1, f2))
+    return friction, solref, _clamped_solimp(solimp)
+
+
+@ti.func
+def direction_friction(friction, k):
+    """μ_k of contact direction k after the normal (0, 1 sliding; 2 torsional; 3, 4 rolling) from
+    the pair's friction (3,) (contact_params)."""
+    return friction[0] if k < 2 else (friction[1] if k == 2 else friction[2])
 
 
 @ti.func
@@ -137,26 +150,41 @@ def _zero_rows(d: ti.template(), s, e, base, first, count, ncol):
 
 
 @ti.func
-def _add_link_jacobian(d: ti.template(), s, e, link, pos, frame, sign, first, condim, pyramidal, mu):
-    """Add sign × (link's point Jacobian at pos, in the contact frame) into the contact's rows
+def _add_link_jacobian(d: ti.template(), s, e, link, pos, frame, sign, first, condim, pyramidal, friction):
+    """Add sign × (link's Jacobian at pos in the contact's directions) into the contact's rows
     first…: every dof on the link's path to the root moves the point by cdof_v + cdof_w × (pos −
-    reference) (kinematics.dof_motion_at)."""
+    reference) and turns it by cdof_w (kinematics.dof_motion_at); the directions are the frame's
+    rows, of the linear motion then (condim > 3) of the angular one."""
     a = link
     while a >= 0:
         dof0 = d.link_dof0[a]
         for i in range(dof0, dof0 + dof_count(d, a)):
-            linear, _ = dof_motion_at(d, s, e, i, pos)
-            v = frame @ linear
+            linear, angular = dof_motion_at(d, s, e, i, pos)
+            v = _directions(d, frame, linear, angular, condim)
             if condim == 1:
                 accumulate(d.efc_J, ti.Vector([s, e, first, i]), sign * v[0])
             elif pyramidal:
-                for k in ti.static(range(2)):  # condim 3: two tangents
-                    accumulate(d.efc_J, ti.Vector([s, e, first + 2 * k, i]), sign * (v[0] + mu * v[k + 1]))
-                    accumulate(d.efc_J, ti.Vector([s, e, first + 2 * k + 1, i]), sign * (v[0] - mu * v[k + 1]))
+                for k in ti.static(range(d.max_condim - 1)):  # edge pair k: J_n ± μ_k J_k
+                    if k < condim - 1:
+                        mu_k = direction_friction(friction, k)
+                        accumulate(d.efc_J, ti.Vector([s, e, first + 2 * k, i]), sign * (v[0] + mu_k * v[k + 1]))
+                        accumulate(d.efc_J, ti.Vector([s, e, first + 2 * k + 1, i]), sign * (v[0] - mu_k * v[k + 1]))
             else:
-                for k in ti.static(range(3)):
-                    accumulate(d.efc_J, ti.Vector([s, e, first + k, i]), sign * v[k])
+                for k in ti.static(range(d.max_condim)):
+                    if k < condim:
+                        accumulate(d.efc_J, ti.Vector([s, e, first + k, i]), sign * v[k])
         a = d.link_parent[a]
+
+
+@ti.func
+def _directions(d: ti.template(), frame, linear, angular, condim):
+    """(6,) a motion's components along the contact's directions: frame @ linear, then (condim >
+    3; else zeros) frame @ angular."""
+    v, w = frame @ linear, ti.Vector.zero(float, 3)
+    if ti.static(d.max_condim > 3):
+        if condim > 3:
+            w = frame @ angular
+    return ti.Vector([v[0], v[1], v[2], w[0], w[1], w[2]])
 
 
 @ti.func
@@ -169,19 +197,20 @@ def rows_per_contact(d: ti.template(), condim):
 
 @ti.func
 def _contact_scalars(d: ti.template(), s, e, c):
-    """What contact c's rows are made of besides its Jacobian: (condim, μ, solref, solimp,
-    impedance, K, B, R_0, R_1, μ_reg, diagA_t): R_0 = (1 − d)/d · diagA_t (times 1 + μ² on a
-    pyramid), R_1 = R_0 / impratio, μ_reg = μ √(R_1/R_0)."""
+    """What contact c's rows are made of besides its Jacobian: (condim, friction (3,) (sliding μ,
+    torsional, rolling), solref, solimp, impedance, K, B, R_0, R_1, μ_reg, diagA_t): R_0 = (1 −
+    d)/d · diagA_t (times 1 + μ² on a pyramid), R_1 = R_0 / impratio, μ_reg = μ √(R_1/R_0)."""
     pair = d.con_pair[s, e, c]
     condim = d.pair_condim[pair]
-    mu, solref, solimp = contact_params(d, e, pair)
+    friction, solref, solimp = contact_params(d, e, pair)
+    mu = friction[0]
     l1, l2 = d.geom_link[d.pair_geom1[pair]], d.geom_link[d.pair_geom2[pair]]
     tran = d.invweight_t[e, l1] + d.invweight_t[e, l2]
     imp = impedance(solimp, d.con_dist[s, e, c], d.pair_margin[pair])
     k, b = stiffness_damping(solref, solimp[1], d.consts[CONST["h"]])
     r0 = ti.max(MINVAL, (1.0 - imp) * (tran + mu * mu * tran if condim > 1 and not d.elliptic else tran) / imp)
     r1 = r0 / ti.max(MINVAL, d.consts[CONST["impratio"]])
-    return condim, mu, solref, solimp, imp, k, b, r0, r1, mu * ti.sqrt(r1 / r0), tran
+    return condim, friction, solref, solimp, imp, k, b, r0, r1, mu * ti.sqrt(r1 / r0), tran
 
 
 @ti.func
@@ -196,29 +225,34 @@ def contact_rows(d: ti.template(), s, e, c, first):
     """Rows first… of contact c at frame s: Jacobian, R, aref, type. Returns how many rows."""
     pair = d.con_pair[s, e, c]
     pyramidal = not d.elliptic
-    condim, mu, _solref, _solimp, imp, k, b, r0, r1, mu_reg, _tran = _contact_scalars(d, s, e, c)
+    condim, friction, _solref, _solimp, imp, k, b, r0, r1, mu_reg, _tran = _contact_scalars(d, s, e, c)
+    mu = friction[0]
     n = rows_per_contact(d, condim)
     frame, pos = d.con_frame[s, e, c], d.con_pos[s, e, c]
     l1, l2 = d.geom_link[d.pair_geom1[pair]], d.geom_link[d.pair_geom2[pair]]
     ncol = _path_columns(d, s, e, c * d.n_dofs, l1, l2)
     _zero_rows(d, s, e, c * d.n_dofs, first, n, ncol)
-    _add_link_jacobian(d, s, e, l1, pos, frame, -1.0, first, condim, pyramidal, mu)
-    _add_link_jacobian(d, s, e, l2, pos, frame, 1.0, first, condim, pyramidal, mu)
+    _add_link_jacobian(d, s, e, l1, pos, frame, -1.0, first, condim, pyramidal, friction)
+    _add_link_jacobian(d, s, e, l2, pos, frame, 1.0, first, condim, pyramidal, friction)
     dist, margin = d.con_dist[s, e, c], d.pair_margin[pair]
     for j in range(n):
         r = first + j
         d.efc_col0[s, e, r], d.efc_ncol[s, e, r] = c * d.n_dofs, ncol
         velocity = row_times(d, s, e, r, d.qvel)
         kind, reg, aref = ONE_SIDED, r0, -b * velocity - k * imp * (dist - margin)
+        mu_row = mu_reg  # efc_mu: the normal row's μ_reg; a pyramid edge's, an elliptic row's μ_k
         if condim > 1 and pyramidal:
             reg = 2.0 * mu_reg * mu_reg * r0
+            if j > 0:
+                mu_row = direction_friction(friction, j // 2)
         elif condim > 1:
             kind = ELLIPTIC_FIRST if j == 0 else ELLIPTIC_REST
-            if j > 0:  # tangent rows: no position term, R_t = R_n / impratio
-                reg, aref = r1, -b * velocity
+            if j > 0:  # the other directions: no position term, R_k = R_1 μ² / μ_k²
+                mu_row = direction_friction(friction, j - 1)
+                reg, aref = r1 * mu * mu / (mu_row * mu_row), -b * velocity
         d.efc_type[s, e, r], d.efc_R[s, e, r], d.efc_aref[s, e, r] = kind, reg, aref
         d.efc_dim[s, e, r], d.efc_id[s, e, r], d.efc_floss[s, e, r] = condim, c, 0.0
-        d.efc_mu[s, e, r] = mu_reg if j == 0 else mu
+        d.efc_mu[s, e, r] = mu_row
     return n
 
 
@@ -329,20 +363,22 @@ def _to_extreme(grad: ti.template(), e, i, j, a, b, g):
 
 
 @ti.func
-def _contact_params_adjoint(d: ti.template(), e, pair, g_mu, g_solref, g_solimp):
-    """Reverse of ``contact_params``: the pair's μ, solref and (clamped) solimp gradients onto its
-    geoms' inputs in env e (μ: the geom whose friction the pair took, unless the floor MINMU won).
+def _contact_params_adjoint(d: ti.template(), e, pair, g_friction, g_solref, g_solimp):
+    """Reverse of ``contact_params``: the pair's friction (3,), solref and (clamped) solimp
+    gradients onto its geoms' inputs in env e (each friction: the geom whose value the pair took,
+    unless the floor MINMU won).
     Where the larger of two geoms' values is taken and they tie (both at the default friction,
     say), it follows either geom's upward and neither's downward: each gets half, the derivative
     that central differences converge to (all to one geom left the other's zero: a body's
     friction fitted against a plane at the same default never moved)."""
     g1, g2, w, copy = d.pair_geom1[pair], d.pair_geom2[pair], d.pair_mix[pair], d.pair_copy[pair]
-    f1, f2 = d.friction[e, g1], d.friction[e, g2]
-    if copy:
-        if w * f1 + (1.0 - w) * f2 > MINMU:
-            _to_mix(d.friction.grad, e, g1, g2, w, g_mu)
-    elif ti.max(f1, f2) > MINMU:
-        _to_extreme(d.friction.grad, e, g1, g2, f1, f2, g_mu)
+    for k in ti.static(range(3 if d.max_condim > 3 else 1)):
+        f1, f2 = d.friction[e, 3 * g1 + k], d.friction[e, 3 * g2 + k]
+        if copy:
+            if w * f1 + (1.0 - w) * f2 > MINMU:
+                _to_mix(d.friction.grad, e, 3 * g1 + k, 3 * g2 + k, w, g_friction[k])
+        elif ti.max(f1, f2) > MINMU:
+            _to_extreme(d.friction.grad, e, 3 * g1 + k, 3 * g2 + k, f1, f2, g_friction[k])
     a0, b0 = d.solref[e, 2 * g1], d.solref[e, 2 * g2]
     for k in ti.static(range(2)):
         a, b = d.solref[e, 2 * g1 + k], d.solref[e, 2 * g2 + k]
@@ -366,44 +402,53 @@ def _to_mix(grad: ti.template(), e, i, j, w, g):
 
 
 @ti.func
-def _frame_coefficients(d: ti.template(), n, mu, by_row):
-    """Σ_rows c_rf by_row[r] per frame direction f (n, t1, t2), where row r's Jacobian is Σ_f c_rf
-    J_f: one row (condim 1), the pyramid's edges J_n ± μ J_tk, or the elliptic rows J_f."""
-    out = ti.Vector.zero(float, 3)
+def _frame_coefficients(d: ti.template(), n, condim, friction, by_row):
+    """Σ_rows c_rk by_row[r] per contact direction k (6,: normal, tangents, then the turns about
+    them: _directions), where row r's Jacobian is Σ_k c_rk J_k: one row (condim 1), the pyramid's
+    edges J_n ± μ_k J_k, or the elliptic rows J_k."""
+    out = ti.Vector.zero(float, 6)
     if n == 1 or d.elliptic:
-        for j in ti.static(range(3)):
+        for j in ti.static(range(d.max_condim)):
             out[j] = by_row[j] if j < n else 0.0
     else:
-        for k in ti.static(range(2)):
-            plus, minus = by_row[2 * k], by_row[2 * k + 1]
-            out[0] += plus + minus
-            out[k + 1] = mu * (plus - minus)
+        for k in ti.static(range(d.max_condim - 1)):
+            if k < condim - 1:
+                plus, minus = by_row[2 * k], by_row[2 * k + 1]
+                out[0] += plus + minus
+                out[k + 1] = direction_friction(friction, k) * (plus - minus)
     return out
 
 
 @ti.func
-def _jacobian_adjoint(d: ti.template(), s, e, frame, pos, link, sign, g_u, g_w, b):
+def _jacobian_adjoint(d: ti.template(), s, e, frame, pos, link, sign, g_u, g_w, b, condim):
     """Reverse of one link's share of rows in ``frame`` (3, 3) at point ``pos`` (3,) m
-    (``_add_link_jacobian``): with J̄_f = g_u[f] u − g_w[f] w̃ per frame direction f (u = H⁻¹ā,
-    w̃ = qacc + B q̇; see contact_rows_adjoint), into cdof_v, cdof_w and q̇ (aref's velocity term
-    −B J q̇) at frame s. Returns (∂L/∂frame (3, 3), ∂L/∂pos (3,), Σ_i J_f,i u_i (3,), Σ_i J_f,i w̃_i
-    (3,))."""
+    (``_add_link_jacobian``): with J̄_k = g_u[k] u − g_w[k] w̃ per contact direction k (6,; u =
+    H⁻¹ā, w̃ = qacc + B q̇; see contact_rows_adjoint), into cdof_v, cdof_w and q̇ (aref's velocity
+    term −B J q̇) at frame s. Returns (∂L/∂frame (3, 3), ∂L/∂pos (3,), Σ_i J_k,i u_i (6,), Σ_i
+    J_k,i w̃_i (6,))."""
     g_frame, g_pos = ti.Matrix.zero(float, 3, 3), ti.Vector.zero(float, 3)
-    j_u, j_w = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)
+    j_u, j_w = ti.Vector.zero(float, 6), ti.Vector.zero(float, 6)
     a = link
     while a >= 0:
         dof0 = d.link_dof0[a]
         for i in range(dof0, dof0 + dof_count(d, a)):
             linear, angular = dof_motion_at(d, s, e, i, pos)
             u, w = d.solver_Mgrad[s, e, i], d.qacc_constrained[s, e, i] + b * d.qvel[s, e, i]
-            g_rows = sign * (g_u * u - g_w * w)  # ∂L/∂(frame @ linear)
-            g_frame += g_rows.outer_product(linear)
-            g_linear = frame.transpose() @ g_rows
-            accumulate(d.cdof_v.grad, ti.Vector([s, e, i]), g_linear)
+            g_rows = sign * (g_u * u - g_w * w)  # ∂L/∂(J_k,i) per direction k
+            g_linear_rows = ti.Vector([g_rows[0], g_rows[1], g_rows[2]])  # ∂L/∂(frame @ linear)
+            g_frame += g_linear_rows.outer_product(linear)
+            g_linear = frame.transpose() @ g_linear_rows
             arm = pos - reference(d, s, e, a)  # (the reference is a constant of the reverse: kinematics.py)
-            accumulate(d.cdof_w.grad, ti.Vector([s, e, i]), arm.cross(g_linear))
+            g_angular = arm.cross(g_linear)
+            if ti.static(d.max_condim > 3):
+                if condim > 3:  # ∂L/∂(frame @ angular)
+                    g_angular_rows = ti.Vector([g_rows[3], g_rows[4], g_rows[5]])
+                    g_frame += g_angular_rows.outer_product(angular)
+                    g_angular += frame.transpose() @ g_angular_rows
+            accumulate(d.cdof_v.grad, ti.Vector([s, e, i]), g_linear)
+            accumulate(d.cdof_w.grad, ti.Vector([s, e, i]), g_angular)
             g_pos += g_linear.cross(angular)
-            along = sign * (frame @ linear)  # J_f,i
+            along = sign * _directions(d, frame, linear, angular, condim)  # J_k,i
             accumulate(d.qvel.grad, ti.Vector([s, e, i]), -b * g_w.dot(along))
             j_u += along * u
             j_w += along * w
@@ -412,28 +457,39 @@ def _jacobian_adjoint(d: ti.template(), s, e, frame, pos, link, sign, g_u, g_w, 
 
 
 @ti.func
+def _linear_only(g):
+    """(6,) per-direction coefficients of _jacobian_adjoint from the linear directions' g (3,)."""
+    return ti.Vector([g[0], g[1], g[2], 0.0, 0.0, 0.0])
+
+
+@ti.func
 def contact_rows_adjoint(d: ti.template(), s, e, c, force, g_aref, g_R, g_mu):
     """Reverse of ``contact_rows`` for contact c at frame s, from its rows' solved forces f_j and
-    the solve's implicit gradients of their aref, R and efc_mu (each (4,), rows past the
-    contact's unused), with u = H⁻¹ā in solver_Mgrad. The Jacobian's gradient is J̄_j = f_j u −
-    āref_j (qacc + B q̇) (the solve's stationarity, and aref's −B J q̇). Into: con_pos, con_frame
-    and con_dist's gradients (the collider's reverse takes them on), cdof and q̇ at frame s, and
-    the friction, solref and solimp inputs."""
+    the solve's implicit gradients of their aref, R and efc_mu (each (d.row_slots,), rows past
+    the contact's unused), with u = H⁻¹ā in solver_Mgrad. The Jacobian's gradient is J̄_j =
+    f_j u − āref_j (qacc + B q̇) (the solve's stationarity, and aref's −B J q̇). Into: con_pos,
+    con_frame and con_dist's gradients (the collider's reverse takes them on), cdof and q̇ at frame
+    s, and the friction, solref and solimp inputs."""
     pair = d.con_pair[s, e, c]
-    condim, mu, solref, solimp, imp, k, b, r0, r1, mu_reg, tran = _contact_scalars(d, s, e, c)
+    condim, friction, solref, solimp, imp, k, b, r0, r1, mu_reg, tran = _contact_scalars(d, s, e, c)
+    mu = friction[0]
     n = rows_per_contact(d, condim)
     pyramid = condim > 1 and not d.elliptic
-    g_u, g_w = _frame_coefficients(d, n, mu, force), _frame_coefficients(d, n, mu, g_aref)
+    g_u = _frame_coefficients(d, n, condim, friction, force)
+    g_w = _frame_coefficients(d, n, condim, friction, g_aref)
     l1, l2 = d.geom_link[d.pair_geom1[pair]], d.geom_link[d.pair_geom2[pair]]
     frame, pos = d.con_frame[s, e, c], d.con_pos[s, e, c]
-    f1, p1, u1, w1 = _jacobian_adjoint(d, s, e, frame, pos, l1, -1.0, g_u, g_w, b)
-    f2, p2, u2, w2 = _jacobian_adjoint(d, s, e, frame, pos, l2, 1.0, g_u, g_w, b)
+    f1, p1, u1, w1 = _jacobian_adjoint(d, s, e, frame, pos, l1, -1.0, g_u, g_w, b, condim)
+    f2, p2, u2, w2 = _jacobian_adjoint(d, s, e, frame, pos, l2, 1.0, g_u, g_w, b, condim)
     j_u, j_w = u1 + u2, w1 + w2
-    g_mu_total, g_mu_reg, g_r0, g_k, g_b, g_imp = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    if pyramid:  # J_n ± μ J_tk
-        for t in ti.static(range(2)):
-            g_mu_total += ((force[2 * t] - force[2 * t + 1]) * j_u[t + 1]
-                           - (g_aref[2 * t] - g_aref[2 * t + 1]) * j_w[t + 1])
+    g_friction = ti.Vector.zero(float, 3)  # ∂L/∂(sliding μ, torsional, rolling) of the pair
+    g_mu_reg, g_r0, g_k, g_b, g_imp = 0.0, 0.0, 0.0, 0.0, 0.0
+    if pyramid:  # J_n ± μ_k J_k
+        for t in ti.static(range(d.max_condim - 1)):
+            if t < condim - 1:
+                kind = ti.static(0 if t < 2 else (1 if t == 2 else 2))
+                g_friction[kind] += ((force[2 * t] - force[2 * t + 1]) * j_u[t + 1]
+                                     - (g_aref[2 * t] - g_aref[2 * t + 1]) * j_w[t + 1])
     dist, margin = d.con_dist[s, e, c], d.pair_margin[pair]
     g_dist = 0.0
     for j in range(n):
@@ -448,15 +504,21 @@ def contact_rows_adjoint(d: ti.template(), s, e, c, force, g_aref, g_R, g_mu):
         elif j == 0:  # R_0, and the cone's μ_reg
             g_r0 += g_R[j]
             g_mu_reg += g_mu[j]
-        else:  # elliptic tangents: R_1 = R_0 / impratio, μ
-            g_r0 += g_R[j] * r1 / r0
-            g_mu_total += g_mu[j]
-    g_mu_total += g_mu_reg * ti.sqrt(r1 / r0)
+        else:  # elliptic direction j − 1: R_j = R_0 / impratio · μ² / μ_j², and its μ_j
+            kind = 0 if j < 3 else (1 if j == 3 else 2)
+            mu_j = direction_friction(friction, j - 1)
+            R_j = r1 * mu * mu / (mu_j * mu_j)
+            g_r0 += g_R[j] * R_j / r0
+            if kind > 0:  # (a sliding direction's μ² / μ_j² is 1)
+                g_friction[0] += g_R[j] * 2.0 * R_j / mu
+                g_friction[kind] -= g_R[j] * 2.0 * R_j / mu_j
+            g_friction[kind] += g_mu[j]
+    g_friction[0] += g_mu_reg * ti.sqrt(r1 / r0)
     scale = tran + mu * mu * tran if pyramid else tran
     if (1.0 - imp) * scale / imp > MINVAL:  # else R_0 is its floor
         g_imp -= scale / (imp * imp) * g_r0
         if pyramid:
-            g_mu_total += (1.0 - imp) / imp * 2.0 * mu * tran * g_r0
+            g_friction[0] += (1.0 - imp) / imp * 2.0 * mu * tran * g_r0
         # diagA = invweight_t of both links (body_invweight0, from their masses: contact.InvweightBasis)
         g_tran = (1.0 - imp) / imp * (1.0 + mu * mu if pyramid else 1.0) * g_r0
         accumulate(d.invweight_t.grad, ti.Vector([e, l1]), g_tran)
@@ -466,7 +528,7 @@ def contact_rows_adjoint(d: ti.template(), s, e, c, force, g_aref, g_R, g_mu):
     g_solimp *= g_imp
     g_solref, g_dmax = _stiffness_damping_adjoint(solref, solimp[1], d.consts[CONST["h"]], g_k, g_b)
     g_solimp[1] += g_dmax
-    _contact_params_adjoint(d, e, pair, g_mu_total, g_solref, g_solimp)
+    _contact_params_adjoint(d, e, pair, g_friction, g_solref, g_solimp)
     accumulate(d.con_pos.grad, ti.Vector([s, e, c]), p1 + p2)
     accumulate(d.con_frame.grad, ti.Vector([s, e, c]), f1 + f2)
     accumulate(d.con_dist.grad, ti.Vector([s, e, c]), g_dist)
@@ -476,7 +538,8 @@ def contact_rows_adjoint(d: ti.template(), s, e, c, force, g_aref, g_R, g_mu):
 def contact_force(d: ti.template(), s, e, c):
     """Force of contact c on its second geom in the contact frame (normal, tangent 1, tangent 2;
     N) from its rows' solved forces: a pyramid's normal force is the sum of its edges', its
-    friction along tangent k the difference of edge pair k's times μ (MuJoCo's mj_contactForce)."""
+    friction along tangent k the difference of edge pair k's times μ (MuJoCo's mj_contactForce;
+    the torsional and rolling torques of condim 4 and 6 are left out, as Genesis's readouts)."""
     first = d.con_efc[s, e, c]
     condim = d.pair_condim[d.con_pair[s, e, c]]
     out = ti.Vector.zero(float, 3)  # (a contact without rows pushes nothing)
@@ -487,10 +550,12 @@ def contact_force(d: ti.template(), s, e, c):
             out = ti.Vector([d.efc_force[s, e, first + k] for k in ti.static(range(3))])
         else:
             mu = d.efc_mu[s, e, first + 1]
-            for k in ti.static(range(2)):
-                plus, minus = d.efc_force[s, e, first + 2 * k], d.efc_force[s, e, first + 2 * k + 1]
-                out[0] += plus + minus
-                out[k + 1] = (plus - minus) * mu
+            for k in ti.static(range(d.max_condim - 1)):
+                if k < condim - 1:
+                    plus, minus = d.efc_force[s, e, first + 2 * k], d.efc_force[s, e, first + 2 * k + 1]
+                    out[0] += plus + minus
+                    if ti.static(k < 2):
+                        out[k + 1] = (plus - minus) * mu
     return out
 
 
@@ -1118,8 +1183,8 @@ def _body_eq_rows(d: ti.template(), s, e, first, k):
     ncol = _path_columns(d, s, e, base, l1, l2)
     _zero_rows(d, s, e, base, first, n, ncol)
     world = ti.Matrix.identity(float, 3)
-    _add_link_jacobian(d, s, e, l1, p1, world, 1.0, first, 3, False, 0.0)
-    _add_link_jacobian(d, s, e, l2, p2, world, -1.0, first, 3, False, 0.0)
+    _add_link_jacobian(d, s, e, l1, p1, world, 1.0, first, 3, False, ti.Vector.zero(float, 3))
+    _add_link_jacobian(d, s, e, l2, p2, world, -1.0, first, 3, False, ti.Vector.zero(float, 3))
     dist = ti.sqrt(gap.dot(gap) + turn.dot(turn))
     imp, stiffness, damping, translation, rotation = _body_eq_scalars(d, e, k, l1, l2, dist)
     bias = _point_bias_acceleration(d, s, e, l1, p1) - _point_bias_acceleration(d, s, e, l2, p2)
@@ -1179,8 +1244,9 @@ def _body_eq_row_adjoint(d: ti.template(), s, e, r, g_aref, g_R):
     g_turn1, g_turn2 = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)  # ∂L/∂ the links' world turns
     if j < 3:
         g_gap -= stiffness * imp * g_aref * axis
-        _f1, g_p1, _u1, _w1 = _jacobian_adjoint(d, s, e, world, p1, l1, 1.0, force * axis, g_aref * axis, damping)
-        _f2, g_p2, _u2, _w2 = _jacobian_adjoint(d, s, e, world, p2, l2, -1.0, force * axis, g_aref * axis, damping)
+        g_u, g_w = _linear_only(force * axis), _linear_only(g_aref * axis)
+        _f1, g_p1, _u1, _w1 = _jacobian_adjoint(d, s, e, world, p1, l1, 1.0, g_u, g_w, damping, 3)
+        _f2, g_p2, _u2, _w2 = _jacobian_adjoint(d, s, e, world, p2, l2, -1.0, g_u, g_w, damping, 3)
         g_p1 += _point_bias_acceleration_adjoint(d, s, e, l1, p1, -g_aref * axis)
         g_p2 += _point_bias_acceleration_adjoint(d, s, e, l2, p2, g_aref * axis)
     else:
