@@ -149,7 +149,8 @@ class RigidSolver(Solver):
         # the reverse of a substep, without and with the constraint stage
         solve_schedule, elliptic = self.data.solve_schedule, bool(settings["cone"])
         body_eqs = m.n_body_eq > 0 or options.max_dynamic_constraints > 0
-        max_condim = max(3, int(m.pair_condim.max(initial=3)))  # (4, 6: torsional, rolling rows compiled in)
+        # 6: the torsional and rolling rows compiled in (condim 4 too: one kernel fewer to compile), 3: not
+        max_condim = 6 if m.pair_condim.max(initial=3) > 3 else 3
         self.constrain = BoundKernel(step.constrain, (solve_schedule, elliptic, body_eqs, max_condim), arenas,
                                      element_dims)
         self.reverse_kernel = [BoundKernel(step.reverse_dynamics, (schedule, 0, False, False, 3), arenas,
