@@ -496,8 +496,9 @@ class RigidView:
     value: their code made a cold compile of a box on a plane's 15-20 s longer each).
     ``max_condim``: the largest contact condim those kernels handle, 3 or 6 (3: the torsional and
     rolling rows' code left out, as a scene without them needs: the box's constrain ran ~15 %
-    slower at 1024 envs with it in; a scene of condim 4 takes 6's kernels); ``row_slots`` the most rows a contact then has (a pyramid's
-    2 (condim − 1)), the length of the reverse's per-row vectors."""
+    slower at 1024 envs with it in; a scene of condim 4 takes 6's kernels); ``row_slots`` the
+    most rows a contact then has (a pyramid's 2 (condim − 1)), the length of the reverse's
+    per-row vectors."""
     _data_oriented = True
 
     def __init__(self, ints, f1, v3, v4, m3, cone=None, body_eqs=True, max_condim=6):

@@ -49,8 +49,8 @@ class RigidModel:
     in the geom frame (MuJoCo's geom_aabb), geom_centre (G, 3) m a point inside the geom (geom
     frame; a mesh's hull vertex mean), geom_mesh (G,) its mesh number (-1: none), the meshes'
     convex hulls as hull_vec (H, 3) and hull_int (HI,) (geometry.hull_arrays), geom_friction (G, 3)
-    (sliding Coulomb coefficient, torsional m, rolling m), geom_solref (G, 2) and geom_solimp (G, 5) the asset's (NaN rows: the
-    scene's default). Per candidate geom pair (N): pair_geom1/pair_geom2 (ordered as MuJoCo
+    (sliding Coulomb coefficient, torsional m, rolling m), geom_solref (G, 2) and geom_solimp
+    (G, 5) the asset's (NaN rows: the scene's default). Per candidate geom pair (N): pair_geom1/pair_geom2 (ordered as MuJoCo
     orders them), pair_condim (1, 3, 4 or 6), pair_mix the weight of geom1's solref and solimp in the
     pair's (1 − it geom2's), pair_copy 1 where the geoms' priorities differ (the pair copies the
     higher one's friction, solref and solimp: pair_mix 1 or 0 says whose), else 0 (solimp mixed,
