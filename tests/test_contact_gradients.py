@@ -453,6 +453,43 @@ def test_box_on_plane_matrix(f64, case, cone, steps, n_envs, substeps):
     _check(case, cone, steps, n_envs, substeps)
 
 
+PRIORITY_MJCF = """<mujoco><worldbody>
+  <geom type="plane" size="0 0 1" condim="3" friction="0.6 0.001 0.00001"/>
+  <body pos="0 0 0.0999"><freejoint/><geom type="sphere" size="0.1" condim="6" priority="1" friction="0.9 0.02 0.01"/></body>
+</worldbody></mujoco>"""
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_priority_pair_torsional_and_rolling_gradients(f64, cone, tmp_path):
+    """An MJCF sphere of priority 1 and condim 6 on a plane of priority 0 and condim 3: the pair
+    copies the sphere's condim and frictions (MuJoCo's mj_contactParam), so their gradients go
+    through the copy path to the sphere's geom alone. Inputs: initial velocity, then the entity's
+    torsional and rolling friction (set_friction_torsional/rolling: every geom of the file's
+    entity, the plane's included, whose values the pair ignores)."""
+    path = tmp_path / "priority.xml"
+    path.write_text(PRIORITY_MJCF)
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True),
+                     rigid_options=gs.options.RigidOptions(tolerance=1e-14, friction_cone=cone), show_viewer=False)
+    entity = scene.add_entity(gs.morphs.MJCF(file=str(path)))
+    scene.build()
+    assert scene._rigid_solver.model.pair_condim.tolist() == [6]
+
+    def loss(x):
+        scene.reset()
+        entity.set_dofs_velocity(x[:6])
+        entity.set_friction_torsional(x[6])
+        entity.set_friction_rolling(x[7])
+        for _ in range(50):
+            entity.apply_links_external_wrench(torque=torch.tensor([[0.0, 0.0, 0.0], [0.05, 0.0, 0.1]],
+                                                                   dtype=torch.float64))
+            scene.step()
+        return ((entity.get_dofs_position() * torch.tensor([1.0, -0.7, 30.0, 0.3, 0.2, 1.0])).sum()
+                + (entity.get_dofs_velocity() * torch.tensor([0.3, 0.2, 1.0, 0.05, -0.04, 0.1])).sum())
+
+    nominal = torch.tensor([0.5, 0.2, 0.0, -2.0, 5.0, 3.0, 0.02, 0.01], dtype=torch.float64)
+    assert_converged(directional_errors(loss, nominal), f"priority pair {cone}")
+
+
 def test_rolling_sphere_gradcheck(f64):
     """torch.autograd.gradcheck of a sphere rolling on a plane for 10 steps: initial velocity →
     final state (elliptic cone)."""
