@@ -53,6 +53,11 @@ def _mount_vector(who, name, value, n, default):
     return array / np.linalg.norm(array) if n == 4 else array
 
 
+def _finite_length(value):
+    """Whether a torsional or rolling friction (m) is allowed: finite and ≥ 0 (NaN is not)."""
+    return 0.0 <= value < float("inf")
+
+
 def _check_sol_params(name, p):
     """(timeconst, dampratio, dmin, dmax, width, midpoint, power) within MuJoCo's ranges."""
     standard, direct = p[0] > 0 and p[1] > 0, p[0] <= 0 and p[1] <= 0
@@ -1330,14 +1335,9 @@ class RigidEntity(EntityIndexing):
         larger of its two geoms' values), in [0.01, 5] as Genesis: a number, or a 0-d tensor,
         differentiable. As Genesis's, it keeps each env's friction ratio: a geom's friction is
         friction × ratio (set_friction_ratio)."""
-        try:
-            value = None if isinstance(friction, (bool, np.bool_)) else self._tensor(friction, "friction", "()")
-        except InvalidInputError:  # not numbers: the message below says what is expected
-            value = None
         # (float32 holds 0.01 a little below it, 5.0 exactly: bounds within float32's round-off)
-        if value is None or value.dim() != 0 or not 0.01 * (1 - 1e-6) <= float(value.detach()) <= 5.0:
-            raise InvalidInputError(f"entity '{self.name}': argument 'friction' must be a number in [0.01, 5.0], "
-                                    f"got {friction!r}")
+        value = self._friction_scalar(friction, "friction", lambda v: 0.01 * (1 - 1e-6) <= v <= 5.0,
+                                      "a number in [0.01, 5.0]")
         self._set_friction_kind(0, value)
 
     def set_friction_torsional(self, friction_torsional):
@@ -1346,25 +1346,26 @@ class RigidEntity(EntityIndexing):
         A contact takes the larger of its geoms' values; it resists spin at condim 4 and 6
         (RigidOptions(enable_torsional_friction=True), or an MJCF geom's condim). Scaled by the
         friction ratio (set_friction_ratio), as Genesis."""
-        self._set_friction_kind(1, self._friction_length(friction_torsional, "friction_torsional"))
+        self._set_friction_kind(1, self._friction_scalar(friction_torsional, "friction_torsional", _finite_length,
+                                                         "a finite number >= 0 (m)"))
 
     def set_friction_rolling(self, friction_rolling):
         """Rolling friction (m) of every collision geom of the entity, ≥ 0, as Genesis's: a number
         or a 0-d tensor, differentiable. A contact takes the larger of its geoms' values; it resists
         rolling at condim 6 (RigidOptions(enable_rolling_friction=True), or an MJCF geom's condim).
         Scaled by the friction ratio (set_friction_ratio), as Genesis."""
-        self._set_friction_kind(2, self._friction_length(friction_rolling, "friction_rolling"))
+        self._set_friction_kind(2, self._friction_scalar(friction_rolling, "friction_rolling", _finite_length,
+                                                         "a finite number >= 0 (m)"))
 
-    def _friction_length(self, value, arg):
-        """``value`` (torsional or rolling friction, m) as a 0-d tensor; a named error unless it is
-        one finite number ≥ 0."""
+    def _friction_scalar(self, value, arg, ok, expected):
+        """``value`` as a 0-d tensor (kept in the graph); a named error saying ``expected`` unless
+        it is one number with ok(number)."""
         try:
             out = None if isinstance(value, (bool, np.bool_)) else self._tensor(value, arg, "()")
-        except InvalidInputError:
+        except InvalidInputError:  # not numbers: the message below says what is expected
             out = None
-        if out is None or out.dim() != 0 or not 0.0 <= float(out.detach()) < float("inf"):
-            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be a finite number >= 0 (m), "
-                                    f"got {value!r}")
+        if out is None or out.dim() != 0 or not ok(float(out.detach())):
+            raise InvalidInputError(f"entity '{self.name}': argument '{arg}' must be {expected}, got {value!r}")
         return out
 
     def _set_friction_kind(self, kind, value):
