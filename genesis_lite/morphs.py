@@ -474,3 +474,55 @@ class Plane(Morph):
         if not np.linalg.norm(normal) > 1e-9:
             raise InvalidInputError(f"Plane: argument 'normal' must be a non-zero 3-vector, got {self.normal!r}")
         self.normal = normal / np.linalg.norm(normal)
+
+
+# Genesis 1.4.5's terrain generation: its subterrains (made here when height_field is not given)
+_SUBTERRAIN = ("randomize", "n_subterrains", "subterrain_size", "subterrain_types", "subterrain_parameters", "name",
+               "from_stored", "uv_scale")
+
+
+@named_keywords(*_MORPH, *_SUBTERRAIN, "batch_fixed_verts")
+@dataclass
+class Terrain(Morph):
+    """Static ground of varying height: a height field (Genesis's Terrain, MuJoCo's hfield;
+    solvers/rigid/collision/hfield.py). height_field (nx, ny): heights in units of
+    ``vertical_scale`` (m) at grid points ``horizontal_scale`` (m) apart, point (i, j) at
+    (i·horizontal_scale, j·horizontal_scale) in the morph's frame (pos, euler / quat), as Genesis's.
+    Each grid cell is two triangles; the ground is solid beneath them, down to ``BASE`` below its
+    lowest point (Genesis's prisms end at its lowest point: a body pressed below it there is in
+    none). Always fixed. Genesis's generated subterrains (height_field None) are not made yet."""
+    fixed: bool = True
+    height_field: object = None
+    horizontal_scale: float = 0.25
+    vertical_scale: float = 0.005
+    contype: int = 0xFFFF
+    conaffinity: int = 0xFFFF
+
+    BASE = 1.0  # m: how deep the ground is solid below its lowest point
+
+    def _check(self):
+        _check_masks("Terrain", self)
+        if not self.fixed:
+            raise InvalidInputError("Terrain: argument 'fixed' must be True (a terrain is always fixed), got False")
+        _positive("Terrain", "horizontal_scale", self.horizontal_scale)
+        _positive("Terrain", "vertical_scale", self.vertical_scale)
+        if self.height_field is None:
+            raise InvalidInputError("Terrain: argument 'height_field' must be given (Genesis's generated subterrains "
+                                    "are not made yet), got None")
+        refuse_grad("Terrain", "height_field", self.height_field, "a terrain's heights are fixed at build")
+        try:
+            heights = np.asarray(self.height_field.cpu() if hasattr(self.height_field, "cpu") else self.height_field,
+                                 dtype=np.float64)
+        except (TypeError, ValueError):
+            heights = np.full(1, np.nan)
+        if heights.ndim != 2 or min(heights.shape) < 2 or not np.all(np.isfinite(heights)):
+            raise InvalidInputError(f"Terrain: argument 'height_field' must be a 2-d array of finite heights of at "
+                                    f"least 2 × 2 points, got {_described(self.height_field)}")
+        self.height_field = heights
+        self.horizontal_scale, self.vertical_scale = float(self.horizontal_scale), float(self.vertical_scale)
+
+
+def _described(value):
+    """A short description of an array-like argument for an error message: its shape, or its repr."""
+    shape = getattr(value, "shape", None)
+    return f"shape {tuple(shape)}" if shape is not None else repr(value)[:80]

@@ -646,6 +646,8 @@ def _links_of(morph, material, name, mujoco_compatible):
             raise AssetError(f"entity '{name}': argument 'file' of gs.morphs.Mesh: {exc}") from exc
     elif isinstance(morph, gm.Plane):
         links = shapes.plane_link(morph.normal)
+    elif isinstance(morph, gm.Terrain):
+        links = shapes.terrain_link(morph.height_field * morph.vertical_scale, morph.horizontal_scale, morph.BASE)
     else:
         raise InvalidInputError(f"scene.add_entity: morph type {type(morph).__name__} is not supported")
     if not isinstance(morph, gm.URDF):  # a primitive's or mesh's bit masks (both 0: in no pair, drawn still)

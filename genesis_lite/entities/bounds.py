@@ -3,11 +3,13 @@ in the poses): what ``RigidEntity.get_AABB`` returns.
 
 Each primitive's box is exact: a box's corners, a sphere's radius, a capsule's segment ends
 widened by its radius, a cylinder's two rim circles (along world axis i a circle of radius r
-about axis a reaches r·√(1 − a_i²)); a mesh's is its vertices'. A plane is unbounded: ±inf.
+about axis a reaches r·√(1 − a_i²)); a mesh's is its vertices', a height field's its grid's
+(top and base). A plane is unbounded: ±inf.
 """
 import numpy as np
 import torch
 
+from ..solvers.rigid.collision import hfield
 from ..utils.rotations import quat_to_mat
 
 
@@ -19,8 +21,9 @@ def shapes_aabb(shapes, link_pos, link_quat):
         link_rot = quat_to_mat(link_quat[:, link])
         rot = link_rot @ quat_to_mat(_like(shape.quat, link_pos))  # (B, 3, 3): the shape's axes in the world
         centre = link_pos[:, link] + link_rot @ _like(shape.pos, link_pos)
-        if shape.type == "mesh":
-            points = centre[:, None] + _like(shape.vertices, link_pos) @ rot.transpose(-1, -2)
+        if shape.type in ("mesh", "hfield"):
+            vertices = shape.vertices if shape.type == "mesh" else hfield.grid_hull(shape.size, shape.elevation)["vert"]
+            points = centre[:, None] + _like(vertices, link_pos) @ rot.transpose(-1, -2)
             lows.append(points.amin(dim=1))
             highs.append(points.amax(dim=1))
             continue

@@ -2,7 +2,8 @@
 
 A URDF entity is drawn from its ``<visual>`` elements (``LinkSpec.visuals``: loaded by
 solvers/rigid/urdf.py, moved with their link when fixed links merge); a primitive morph (Box,
-Sphere, Cylinder, Capsule, Mesh, Plane) from its own shape, i.e. its collision geom. Colours, as in
+Sphere, Cylinder, Capsule, Mesh, Plane, Terrain) from its own shape, i.e. its collision geom (a
+Terrain's height field as the triangles of its top). Colours, as in
 Genesis: the entity's ``surface.color`` when given (it paints the whole entity), else the URDF
 material's colour, else DEFAULT_COLOR. Alpha is not drawn (surfaces are opaque).
 
@@ -29,6 +30,7 @@ from .. import morphs as gm
 from ..utils import rotations
 from ..solvers.core import InvalidInputError, runtime
 from ..solvers.rigid.shapes import hull_mesh, quat_to_mat
+from ..solvers.rigid.collision import hfield
 from ..solvers.rigid.spec import VisualSpec
 from .rasterizer import Instances, MeshSet, Spheres
 
@@ -90,6 +92,8 @@ def _geom_visual(geom, hull=False):
     vertices, faces = geom.vertices, geom.faces
     if hull and geom.type == "mesh":
         vertices, faces = hull_mesh(vertices)
+    if geom.type == "hfield":  # (its top, as its prisms split the cells)
+        return VisualSpec("mesh", np.zeros(0), geom.pos, geom.quat, *hfield.surface(geom.size, geom.elevation))
     return VisualSpec(geom.type, geom.size, geom.pos, geom.quat, vertices, faces)
 
 

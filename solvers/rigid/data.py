@@ -25,7 +25,7 @@ from taichi.lang.expr import Expr
 
 from ..core import InvalidInputError, runtime
 from .spec import TENDON_JOINTS
-from .collision.convex import CONVEX_PAIRS, FEATURE_SIZE
+from .collision.convex import CONVEX_PAIRS, FEATURE_SIZE, HFIELD
 from .collision.convex import SCRATCH as CONVEX_SCRATCH
 from .constraint.solver import SCRATCH as SOLVER_SCRATCH
 
@@ -284,9 +284,10 @@ def offsets(size, ints_begin):
 
 
 def _has_convex_pairs(model):
-    """Whether a candidate pair goes to convex_convex (its workspace is then allocated)."""
+    """Whether a candidate pair goes to convex CCD (convex_convex, or a height field's prisms: its
+    workspace is then allocated)."""
     kinds = zip(model.geom_type[model.pair_geom1].tolist(), model.geom_type[model.pair_geom2].tolist())
-    return any(kind in CONVEX_PAIRS for kind in kinds)
+    return any(kind in CONVEX_PAIRS or kind[0] == HFIELD for kind in kinds)
 
 
 def joint_row_columns(size):

@@ -4,7 +4,7 @@ collide. Built once at scene build (plain numpy).
 MuJoCo's conventions are kept so that the colliders can be checked against MuJoCo directly:
 type codes (``GEOM_CODE``), half sizes, a plane's normal along its frame's z axis, a pair
 ordered by type with the normal pointing from its first geom to its second. Meshes collide as
-their convex hull (trimesh).
+their convex hull (trimesh); height fields as the prisms of their grid (collision/hfield.py).
 """
 import math
 
@@ -12,11 +12,12 @@ import numpy as np
 
 from ..core import AssetError
 from . import shapes
-from .collision import convex
+from .collision import convex, hfield
 
 # MuJoCo's mjtGeom codes (its collision table is indexed by them)
-PLANE, SPHERE, CAPSULE, CYLINDER, BOX, MESH = 0, 2, 3, 5, 6, 7
-GEOM_CODE = {"plane": PLANE, "sphere": SPHERE, "capsule": CAPSULE, "cylinder": CYLINDER, "box": BOX, "mesh": MESH}
+PLANE, HFIELD, SPHERE, CAPSULE, CYLINDER, BOX, MESH = 0, 1, 2, 3, 5, 6, 7
+GEOM_CODE = {"plane": PLANE, "hfield": HFIELD, "sphere": SPHERE, "capsule": CAPSULE, "cylinder": CYLINDER,
+             "box": BOX, "mesh": MESH}
 
 
 def hull_arrays(hulls):
@@ -41,14 +42,16 @@ def geom_arrays(geoms, link_of, where_of):
 
     geoms: list of GeomSpec; link_of[k]: its link; where_of(k): a name for error messages.
     Returns a dict: type (G,) code, link (G,), pos (G, 3) m and quat (G, 4) the geom frame in the
-    link frame, size (G, 3) MuJoCo sizes (half extents, radius and half length), rbound (G,) m
+    link frame, size (G, 3) MuJoCo sizes (half extents, radius and half length; a height field's
+    half extents x, y and its grid's column count), rbound (G,) m
     radius of a sphere about the geom origin holding it (0 for planes: unbounded), aabb_center and
     aabb_half (G, 3) m the centre and half extents of a box holding it in the geom frame (MuJoCo's
     geom_aabb; zero for planes), centre (G, 3) m a point inside it, in the geom frame (the mean of a
     mesh hull's vertices, which a mesh file's origin need not be; the origin for a primitive), mesh
-    (G,) the geom's mesh number (-1: not a mesh); and the meshes' convex hulls (convex.mesh_hull:
-    vertices, vertex graph, polygons) as hull_vec (H, 3) and hull_int (HI,) (``hull_arrays``). A
-    mesh collides as its convex hull; one without volume is an AssetError.
+    (G,) the geom's number among the hulls (-1: not a mesh or height field); and the meshes' convex
+    hulls (convex.mesh_hull: vertices, vertex graph, polygons) and the height fields' grids
+    (hfield.grid_hull) as hull_vec (H, 3) and hull_int (HI,) (``hull_arrays``). A mesh collides as
+    its convex hull; one without volume is an AssetError.
     """
     out = {k: [] for k in ("type", "link", "pos", "quat", "size", "rbound", "aabb_half", "mesh")}
     meshes = []
@@ -65,6 +68,10 @@ def geom_arrays(geoms, link_of, where_of):
             rbound = size[0] + size[1] if geom.type == "capsule" else math.sqrt(size[0] * size[0] + size[1] * size[1])
         elif geom.type == "plane":
             quat, rbound = shapes.quat_mul(quat, shapes.quat_z_to(s)), 0.0
+        elif geom.type == "hfield":  # its grid is a hull entry (hfield.grid_hull); bounds from it below
+            mesh, rbound = len(meshes), 0.0
+            meshes.append(hfield.grid_hull(s, geom.elevation))
+            size[:] = s[0], s[1], geom.elevation.shape[1]
         else:  # mesh
             mesh = len(meshes)
             try:

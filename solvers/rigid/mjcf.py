@@ -33,6 +33,8 @@ semi-axes make a sphere; its ``fromto`` as MuJoCo's: the third semi-axis half it
 section round of size[0]), mesh (``<mesh file scale>`` assets, in the file's own coordinates: MuJoCo's
 re-centring moves the geom frame, not the surface; found in meshdir or beside the file that
 included them; or given by ``vertex`` and ``face``, without faces the vertices' convex hull);
+height fields (``<hfield nrow ncol size elevation>`` assets, read as MuJoCo 4's compiler reads
+them: MJCFDocument._hfields; massless, in the worldbody or a body welded to it);
 contype/conaffinity masks (MuJoCo's pair rule); ``<contact><exclude>``; friction
 (sliding, torsional, rolling), condim (1, 3, 4 or 6), solref, solimp,
 priority and solmix, which a pair combines as MuJoCo's mj_contactParam (GeomSpec); planes (infinite, as MuJoCo's colliders take them, massless; drawn as
@@ -77,10 +79,11 @@ Refused (AssetError naming the element): a ball joint's force range, a limited b
 not starting at 0, a ball joint followed by a hinge or ball in one body (as MuJoCo refuses them),
 a free joint below a root body, a
 ``springyield`` (a joint's or a sprung tendon's), a polynomial stiffness (a joint's or a
-tendon's; a tendon's damping too), a free joint's stiffness or springdamper, hfield /
-sdf geoms, equalities other than joints', connects, welds and tendons', elements that would add or
-move bodies and geoms unread (``<composite>``, ``<flexcomp>``…; ``<frame>`` is read: it places its
-bodies and geoms, and its childclass is theirs; so is ``<replicate>``, as copies in frames:
+tendon's; a tendon's damping too), a free joint's stiffness or springdamper, sdf geoms, a height
+field from a file or on a moving body, equalities other than joints', connects, welds and
+tendons', elements that would add or move bodies and geoms unread (``<composite>``,
+``<flexcomp>``…; ``<frame>`` is read: it places its bodies and geoms, and its childclass is
+theirs; so is ``<replicate>``, as copies in frames:
 MJCFDocument), a solref of mixed form (one number > 0, the other not: MuJoCo warns and takes its
 default), a plane on a moving body (as MuJoCo's compiler). Ignored with one warning
 naming them: spatial tendons, a fixed tendon's armature, an actuator's damping
@@ -97,6 +100,7 @@ import numpy as np
 
 from ..core import InvalidInputError
 from . import shapes
+from .collision import hfield
 from .mjcf_document import IDENTITY, MJ_DEFAULTS, ORIENTATIONS, MJCFDocument, axis_angle, is_default, norm, over
 from .spec import TENDON_JOINTS, GeomSpec, LinkSpec, VisualSpec
 
@@ -110,8 +114,8 @@ _READ = {
               "actuatorfrcrange", "actuatorfrclimited", "stiffness", "springref", "ref", "springdamper", "springyield",
               "group", "user", "solreflimit", "solimplimit", "solreffriction", "solimpfriction"),
     "freejoint": ("name", "group", "type"),
-    "geom": _FRAME + _NAMES + ("type", "size", "fromto", "mesh", "friction", "contype", "conaffinity", "density",
-                               "mass", "condim", "solref", "solimp", "priority", "solmix"),
+    "geom": _FRAME + _NAMES + ("type", "size", "fromto", "mesh", "hfield", "friction", "contype", "conaffinity",
+                               "density", "mass", "condim", "solref", "solimp", "priority", "solmix"),
     "inertial": _FRAME + ("mass", "diaginertia", "fullinertia"),
 }
 _JOINTS = {"hinge": "revolute", "slide": "prismatic", "ball": "ball"}
@@ -454,6 +458,9 @@ class _Reader(MJCFDocument):
             if geom.type == "plane" and not static:
                 raise self.error(f"{where}: a plane only in the worldbody or a body welded to it (MuJoCo's compiler "
                                  f"refuses it elsewhere), got one on a moving body")
+            if geom.type == "hfield" and not static:
+                raise self.error(f"{where}: a height field only in the worldbody or a body welded to it (on a moving "
+                                 f"body: not yet), got one on a moving body")
             geom.pos, geom.quat = shapes.compose(*outer, geom.pos, geom.quat)
             solids.append((geom, *_solid(geom, density, mass, axes)))
             contype, conaffinity = (self._bits(attrs, key, where) for key in ("contype", "conaffinity"))
@@ -483,6 +490,9 @@ class _Reader(MJCFDocument):
         elif kind == "mesh":
             vertices, faces = self.mesh(attrs.get("mesh"), what)
             geom = GeomSpec("mesh", np.zeros(0), pos, quat, vertices=vertices, faces=faces)
+        elif kind == "hfield":  # (its size is its asset's: the geom's own is not read, as MuJoCo's)
+            hfield_size, elevation = self.hfield(attrs.get("hfield"), what)
+            geom = GeomSpec("hfield", hfield_size, pos, quat, elevation=elevation)
         elif kind == "ellipsoid" and not np.all(size > 0):
             raise self.error(f"{what}: ellipsoid size expected 3 positive numbers, got {attrs.get('size')!r}")
         elif kind == "ellipsoid" and not (size[0] == size[1] == size[2]):
@@ -500,8 +510,8 @@ class _Reader(MJCFDocument):
                     "box": size * 2}[kind]
             geom = GeomSpec(kind, full, pos, quat)
         else:
-            raise self.error(f"{what}: geom type expected one of {_PRIMITIVES + ('ellipsoid', 'mesh', 'plane')}, "
-                             f"got {kind!r}")
+            kinds = _PRIMITIVES + ("ellipsoid", "mesh", "plane", "hfield")
+            raise self.error(f"{what}: geom type expected one of {kinds}, got {kind!r}")
         friction = self.numbers(attrs, "friction", (1, 2, 3), what, default=[1.0])
         # (a partial one ends in MuJoCo's defaults; a value under MuJoCo's floor 1e-5 acts as it, as there)
         friction = [*friction, *MJ_FRICTION[len(friction):]]
@@ -565,6 +575,9 @@ class _Reader(MJCFDocument):
         elif attrs.get("material") in self.materials:
             rgba = self.materials[attrs["material"]]
         rgba = rgba if rgba is None or not np.array_equal(rgba, _MJ_RGBA) else None
+        if geom.type == "hfield":
+            vertices, faces = hfield.surface(geom.size, geom.elevation)
+            return VisualSpec("mesh", np.zeros(0), geom.pos, geom.quat, vertices, faces, rgba)
         half = self.numbers(attrs, "size", (1, 2, 3), "geom", default=np.zeros(3))[:2]
         if geom.type == "plane" and len(half) == 2 and np.all(half > 0):
             corners = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]])
@@ -962,6 +975,6 @@ def _solid(geom: GeomSpec, density: float, mass: float | None, ellipsoid=None):
         (own_mass, inertia), com = shapes.ellipsoid_mass_inertia(ellipsoid, density), np.zeros(3)
     else:
         own_mass, com, inertia = shapes.geom_mass_properties(geom, density)
-    if mass is None or geom.type == "plane":  # (a plane weighs nothing, its stated mass too: MuJoCo's)
+    if mass is None or geom.type in ("plane", "hfield"):  # (no weight, its stated mass neither: a static ground)
         return own_mass, com, inertia
     return mass, com, inertia * (mass / own_mass) if own_mass > 0 else np.zeros((3, 3))

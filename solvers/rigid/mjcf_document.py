@@ -13,6 +13,7 @@ from lxml import etree
 
 from ..core import AssetError
 from . import shapes
+from .collision import hfield
 from .urdf import mat_to_quat
 
 IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
@@ -82,6 +83,7 @@ class MJCFDocument:
         for default in root.findall("default"):
             self._read_defaults(default, {}, "main")
         self.meshes, self.materials = self._assets()
+        self.hfields = self._hfields()
         self._note_ignored_sections()
 
     # ---------------------------------------------------------------- file, messages
@@ -313,6 +315,48 @@ class MJCFDocument:
                 if "name" in attrs and "rgba" in attrs:
                     materials[attrs["name"]] = self.numbers(attrs, "rgba", 4, f"<material name={attrs['name']!r}>")
         return meshes, materials
+
+    def _hfields(self):
+        """{name: (size (4,) m, elevation (nrow, ncol) normalised)} of the ``<asset><hfield>``s given
+        by nrow, ncol, size and (optional, else flat) elevation, as MuJoCo 4's compiler reads them
+        (its rows from the far edge, y = +size y, then hfield.normalised); one from a file (PNG or
+        MuJoCo's binary) is not read yet."""
+        hfields = {}
+        for asset in self.root.findall("asset"):
+            for element in asset.findall("hfield"):
+                attrs = self.attrs(element, "main")
+                what = f"<hfield name={attrs.get('name')!r}>"
+                if "file" in attrs:
+                    raise self.error(f"{what}: a height field from a file is not supported yet; give nrow, ncol and "
+                                     f"elevation")
+                if "name" not in attrs:
+                    raise self.error(f"{what}: expected a name, got none")
+                nrow, ncol = (self._grid_count(attrs, key, what) for key in ("nrow", "ncol"))
+                size = self.numbers(attrs, "size", 4, what)
+                if not np.all(size > 0):  # (MuJoCo's compiler refuses it too)
+                    raise self.error(f"{what}: attribute 'size' expected 4 positive numbers, got {attrs['size']!r}")
+                elevation = (self.numbers(attrs, "elevation", nrow * ncol, what) if "elevation" in attrs
+                             else np.zeros(nrow * ncol))
+                try:
+                    # (the file's first row is the grid's last, at y = +size y: MuJoCo 4's compiler flips them)
+                    grid = np.reshape(elevation, (nrow, ncol))[::-1]
+                    hfields[attrs["name"]] = (size, hfield.normalised(grid, what))
+                except AssetError as exc:
+                    raise self.error(str(exc)) from exc
+        return hfields
+
+    def _grid_count(self, attrs: dict, key: str, what: str) -> int:
+        """A height field's ``nrow`` or ``ncol``: an integer ≥ 2 (MuJoCo refuses other numbers)."""
+        text = attrs.get(key, "").strip()
+        if not (text.lstrip("+").isdigit() and int(text) >= 2):
+            raise self.error(f"{what}: attribute {key!r} expected an integer >= 2, got {attrs.get(key)!r}")
+        return int(text)
+
+    def hfield(self, name: str, what: str):
+        """(size (4,) m, normalised elevation (nrow, ncol)) of the height field asset ``name``."""
+        if name not in self.hfields:
+            raise self.error(f"{what}: height field {name!r} is not an <asset><hfield>")
+        return self.hfields[name]
 
     def _given_mesh(self, attrs: dict, what: str):
         """(vertices (V, 3), faces (F, 3)) of a mesh given by its ``vertex`` and ``face`` attributes."""

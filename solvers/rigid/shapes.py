@@ -323,10 +323,10 @@ def geom_mass_properties(geom: GeomSpec, rho: float) -> tuple[float, np.ndarray,
         return mass, zero, inertia
     if geom.type == "mesh":
         return mesh_mass_properties(geom.vertices, geom.faces, rho)
-    if geom.type == "plane":
+    if geom.type in ("plane", "hfield"):  # (static ground: no mass)
         return 0.0, zero, np.zeros((3, 3))
     raise InvalidInputError(f"geom_mass_properties: geom type expected one of box, sphere, "
-                            f"cylinder, capsule, mesh, plane, got {geom.type!r}")
+                            f"cylinder, capsule, mesh, plane, hfield, got {geom.type!r}")
 
 
 def geometry_mass_properties(geoms, rho: float) -> tuple[float, np.ndarray, np.ndarray]:
@@ -423,6 +423,23 @@ def mesh_link(file: str, scale=1.0, rho: float = 1000.0, name: str | None = None
     name = name or os.path.splitext(os.path.basename(os.fspath(file)))[0]
     geom = GeomSpec("mesh", np.zeros(0), vertices=vertices, faces=faces)
     return _single_link(name, geom, float(rho))
+
+
+def terrain_link(heights, horizontal_scale: float, base: float, name: str = "terrain") -> list[LinkSpec]:
+    """A static height field (mass 0) of ``heights`` (nx, ny) m at grid points ``horizontal_scale``
+    m apart, point (i, j) at (i·horizontal_scale, j·horizontal_scale, heights[i, j]) in the link
+    frame (Genesis's Terrain), solid down to ``base`` m below its lowest point: a MuJoCo hfield
+    geom (collision/hfield.py: its grid's rows run along y, so its elevation is heights
+    transposed, normalised to [0, 1] over the heights' range)."""
+    from .collision import hfield
+
+    heights = np.asarray(heights, dtype=np.float64)
+    low, high = heights.min(), heights.max()
+    elevation = hfield.normalised(heights.T, f"{name}: height field")
+    half = (np.array(heights.shape, dtype=np.float64) - 1) * horizontal_scale / 2
+    size = np.array([half[0], half[1], high - low if high > low else 1.0, base])
+    geom = GeomSpec("hfield", size, pos=np.array([half[0], half[1], low]), elevation=elevation)
+    return _single_link(name, geom, 1.0)
 
 
 def plane_link(normal=(0.0, 0.0, 1.0), name: str = "plane") -> list[LinkSpec]:

@@ -139,13 +139,14 @@ class RigidSolver(Solver):
         self.kernels = BoundKernels(schedule, arenas, element_dims, *step.KERNELS)
         m = self.model
         self.inexact_kinds = detect.inexact_kinds(m)  # pair kinds whose contacts may not be closed forms
-        # (bit in the header's colliders_due mask, kernel) of each collider kernel
-        self.colliders = [(detect.KERNEL_BIT[kind], BoundKernel(step.collide, (schedule, kind), arenas, element_dims,
-                                                                detect.opt_level(kind)))
+        # (its bits in the header's colliders_due mask, kernel) of each collider kernel
+        self.colliders = [(1 << detect.KERNEL_BIT[kind], BoundKernel(step.collide, (schedule, kind), arenas,
+                                                                     element_dims, detect.opt_level(kind)))
                           for kind in detect.kernel_kinds(m)]
         if self.data.size["converged"] and self.inexact_kinds:  # convex contacts → their closed forms
-            self.colliders.append((detect.KERNEL_BIT[detect.ALL_CONVEX],
-                                   BoundKernel(step.converge, schedule, arenas, element_dims, detect.CONVEX_OPT_LEVEL)))
+            ccd = (1 << detect.KERNEL_BIT[detect.ALL_CONVEX]) | (1 << detect.KERNEL_BIT[detect.ALL_HFIELD])
+            self.colliders.append((ccd, BoundKernel(step.converge, schedule, arenas, element_dims,
+                                                    detect.CONVEX_OPT_LEVEL)))
         # the reverse of a substep, without and with the constraint stage
         solve_schedule, elliptic = self.data.solve_schedule, bool(settings["cone"])
         body_eqs = m.n_body_eq > 0 or options.max_dynamic_constraints > 0
@@ -468,8 +469,8 @@ class RigidSolver(Solver):
         the mask would wait for the device)."""
         due = self.data.take_flag("colliders_due") if self.data.flags_on_host else -1
         self._colliders_in_substep[s] = due
-        for bit, collide in self.colliders:
-            if due >> bit & 1:
+        for bits, collide in self.colliders:
+            if due & bits:
                 collide(s)
 
     def _substep(self, s, inputs, out, commit, flagged_only):

@@ -15,9 +15,10 @@ TENDON_JOINTS = 3  # the most joints of a limited fixed tendon (its row's column
 class ShapeSpec:
     """A shape attached to a link.
 
-    type: "box" | "sphere" | "cylinder" | "capsule" | "mesh" | "plane"
+    type: "box" | "sphere" | "cylinder" | "capsule" | "mesh" | "plane" | "hfield"
     size: box (3,) full extents (m); sphere (1,) radius; cylinder/capsule (2,) radius, length
-          (axis along local z); plane (3,) normal; mesh: empty.
+          (axis along local z); plane (3,) normal; mesh: empty; hfield (4,) MuJoCo's size: half
+          extents x, y, the top's height at elevation 1, the base's depth (m).
     pos (3,) m and quat (4,) w-x-y-z: the shape's frame in the link frame.
     vertices (V, 3) m and faces (F, 3): the triangle mesh (mesh shapes only, else None).
     """
@@ -44,7 +45,8 @@ class GeomSpec(ShapeSpec):
     (−stiffness, −damping) in the direct form, and solimp (5,) (dmin, dmax, width m, midpoint,
     power), each None for the scene's default; priority: the pair takes the parameters of its
     geom of higher priority; solmix: at equal priority, the weight of this geom's solref and
-    solimp in the pair's."""
+    solimp in the pair's. elevation: a height field's grid (row r at y = −size y + 2 size y ·
+    r / (nrow − 1)), else None."""
     friction: float = None
     friction_torsional: float = None
     friction_rolling: float = None
@@ -55,6 +57,7 @@ class GeomSpec(ShapeSpec):
     solimp: np.ndarray = None
     priority: int = 0
     solmix: float = 1.0
+    elevation: np.ndarray = None  # a height field's normalised grid (nrow, ncol) float32 in [0, 1] (hfield.py)
 
 
 @dataclass

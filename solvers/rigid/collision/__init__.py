@@ -1,8 +1,9 @@
 """Narrow-phase colliders reproducing MuJoCo's, as Taichi functions on one environment.
 
 One module per family of colliders (``primitive``: planes, spheres, capsules, cylinders;
-``box``; ``convex``: meshes and cylinder pairs, not wired into the step yet), ``frame`` for the
-contact frame and the helpers they share, ``detect`` for the stage that calls them.
+``box``; ``convex``: meshes and cylinder pairs; ``hfield``: height fields, as prisms for
+``convex``'s CCD), ``frame`` for the contact frame and the helpers they share, ``detect`` for the
+stage that calls them.
 
 A collider takes two geoms in MuJoCo's conventions (type codes ordered type 1 ≤ type 2; world
 position (3,) m; rotation (3, 3) whose columns are the geom's axes; MuJoCo's sizes: radius, half

@@ -130,7 +130,7 @@ from ... import asset_cache
 from ...core import AssetError
 
 # MuJoCo geom type codes (mjtGeom), and two internal "cores": sphere -> point, capsule -> segment
-PLANE, SPHERE, CAPSULE, CYLINDER, BOX, MESH = 0, 2, 3, 5, 6, 7
+PLANE, HFIELD, SPHERE, CAPSULE, CYLINDER, BOX, MESH = 0, 1, 2, 3, 5, 6, 7
 _POINT, _SEGMENT = 100, 101
 
 CCD_ITERATIONS = 35      # mjOption.ccd_iterations (MuJoCo's default): GJK and EPA iterations
@@ -488,7 +488,10 @@ def _combine(weights, ws: ti.template(), row: ti.template(), base, slot):
 # ----------------------------------------------------------------------------- support functions
 # A shape is the tuple (kind, mesh, pos, rot, size, margin): kind a geom type or a core, mesh the
 # mesh id (-1 if none), pos (3,) m and rot (3, 3) its world pose, size MuJoCo's geom size, margin
-# the pair margin (each shape grows by margin / 2).
+# the pair margin (each shape grows by margin / 2). A height field's prism (kind HFIELD, hfield.py)
+# is the triangular prism under one triangle of its grid: mesh its grid's number among the hulls
+# (hfield.grid_hull: the grid's top vertices, then the same under the base), pos and rot the
+# height field's pose, size the triangle's three top vertex ids (as floats, in MuJoCo's prism order).
 
 @ti.func
 def _mesh_support(mesh, local_dir, cache, hull: ti.template()):
@@ -531,10 +534,43 @@ def _mesh_support(mesh, local_dir, cache, hull: ti.template()):
 
 
 @ti.func
+def _prism_support(grid, triangle, local_dir, hull: ti.template()):
+    """Vertex id (in the height field's grid hull) of a prism farthest along local_dir (the
+    height field's frame), as MuJoCo's mjc_prism_support: among the top triangle's three
+    vertices (`triangle`, ids as floats), or the three under them on the base when local_dir
+    points down; ties keep the first in MuJoCo's prism order."""
+    adr, under = hull.hull_vertadr[grid], hull.hull_vertnum[grid] // 2
+    base = ti.select(local_dir[2] < 0, under, 0)
+    best = base + int(triangle[0])
+    best_dot = _dot(local_dir, hull.hull_vert[adr + best])
+    for k in ti.static(range(1, 3)):
+        vid = base + int(triangle[k])
+        d = _dot(local_dir, hull.hull_vert[adr + vid])
+        if d > best_dot:
+            best, best_dot = vid, d
+    return best
+
+
+@ti.func
+def _centre(shape: ti.template(), hull: ti.template()):
+    """Where GJK starts on a shape (world, m), MuJoCo's mjc_center: its geom's position; a
+    prism's centroid (its six vertices' mean: base, then top)."""
+    centre = shape[2]
+    if shape[0] == HFIELD:
+        adr, under = hull.hull_vertadr[shape[1]], hull.hull_vertnum[shape[1]] // 2
+        total = ti.Vector([0.0, 0.0, 0.0])
+        for k in ti.static(range(6)):
+            total += hull.hull_vert[adr + ti.select(k < 3, under, 0) + int(shape[4][k % 3])]
+        centre = _rot(shape[3], total * (1.0 / 6.0)) + shape[2]
+    return centre
+
+
+@ti.func
 def _support(shape: ti.template(), direction, cache, hull: ti.template()):
     """Farthest point (world, m) of `shape` along the unit `direction`, and its discrete id
-    (box corner bits, mesh vertex, 1 / 0 for the +z / -z end of a segment, capsule or cylinder;
-    a sphere or point keeps `cache`, as MuJoCo's vertindex). Only a mesh reads `cache`."""
+    (box corner bits, mesh vertex, a prism's vertex in its grid, 1 / 0 for the +z / -z end of a
+    segment, capsule or cylinder; a sphere or point keeps `cache`, as MuJoCo's vertindex). Only a
+    mesh reads `cache`."""
     kind, mesh, pos, rot, size, margin = shape
     point = pos
     feature = cache
@@ -563,6 +599,9 @@ def _support(shape: ti.template(), direction, cache, hull: ti.template()):
             feature = positive[0] + 2 * positive[1] + 4 * positive[2]
         elif kind == MESH:
             feature = _mesh_support(mesh, local_dir, cache, hull)
+            local = hull.hull_vert[hull.hull_vertadr[mesh] + feature]
+        elif kind == HFIELD:
+            feature = _prism_support(mesh, size, local_dir, hull)
             local = hull.hull_vert[hull.hull_vertadr[mesh] + feature]
         point = _rot(rot, local) + pos
     if margin > 0:
@@ -598,10 +637,10 @@ def _minkowski(shape1: ti.template(), shape2: ti.template(), direction, cache1, 
 
 @ti.func
 def _discrete(shape1: ti.template(), shape2: ti.template()):
-    """True when both shapes are polytopes (box or mesh) without margin: GJK and EPA then
+    """True when both shapes are polytopes (box, mesh or prism) without margin: GJK and EPA then
     converge exactly and use tolerance 0 / 1e-15."""
-    return ((shape1[0] == BOX or shape1[0] == MESH) and (shape2[0] == BOX or shape2[0] == MESH)
-            and shape1[5] == 0 and shape2[5] == 0)
+    return ((shape1[0] == BOX or shape1[0] == MESH or shape1[0] == HFIELD)
+            and (shape2[0] == BOX or shape2[0] == MESH or shape2[0] == HFIELD) and shape1[5] == 0 and shape2[5] == 0)
 
 
 # ----------------------------------------------------------------------------- GJK
@@ -749,7 +788,7 @@ def _gjk(shape1: ti.template(), shape2: ti.template(), get_dist, dist_cutoff, ca
     discrete = _discrete(shape1, shape2)
     epsilon = ti.select(discrete, 0.0, _GJK_EPS)
     min_norm = ti.select(discrete or get_dist, _MINVAL, CCD_TOLERANCE)
-    x1, x2 = shape1[2], shape2[2]
+    x1, x2 = _centre(shape1, hull), _centre(shape2, hull)
     x_k = x1 - x2
     x_norm = ti.sqrt(_dot(x_k, x_k))
     if x_norm < _MINVAL:  # coincident centres: start along x
@@ -1812,6 +1851,30 @@ def convex_convex(type1, pos1, rot1, size1, mesh1, type2, pos2, rot2, size2, mes
 
 
 @ti.func
+def prism_convex(pos1, rot1, grid, triangle, type2, pos2, rot2, size2, mesh2, hull: ti.template(),
+                 ws: ti.template(), row: ti.template()):
+    """The contact of one height-field prism (geom 1: the prism under `triangle` of the grid hull
+    `grid`, hfield.py) with a convex geom (geom 2), as MuJoCo's mjc_ConvexHField takes it from
+    mjc_penetration: one mjc_ccd run without multi-contact, no margin. Arguments and the contact
+    (found, position (1, 3), normal (1, 3), dist (1,), feature (1, FEATURE_SIZE)) as
+    convex_convex's, for at most one contact."""
+    position, normal = ti.Matrix.zero(float, 1, 3), ti.Matrix.zero(float, 1, 3)
+    dist, feature = ti.Vector.zero(float, 1), ti.Matrix.zero(ti.i32, 1, FEATURE_SIZE)
+    nx = _ccd((HFIELD, grid, pos1, rot1, triangle, 0.0), (type2, mesh2, pos2, rot2, size2, 0.0), False, hull, ws,
+              row)
+    found = nx > 0 and ws.ccd_f[row + (_F_WIT,)] < 0
+    if found:
+        x1, x2 = ws.ccd_v[row + (_V_WIT,)], ws.ccd_v[row + (_V_WIT + 4,)]
+        point, unit = (x1 + x2) * 0.5, _normalize(x1 - x2)
+        for c in ti.static(range(3)):
+            position[0, c], normal[0, c] = point[c], unit[c]
+        dist[0] = ws.ccd_f[row + (_F_WIT,)]
+        for c in ti.static(range(FEATURE_SIZE)):
+            feature[0, c] = ws.ccd_i[row + (_I_WIT + c,)]
+    return int(found), position, normal, dist, feature
+
+
+@ti.func
 def _lying_on_mesh(shape1: ti.template(), shape2: ti.template(), hull: ti.template(), count, position, normal, dist,
                    feature):
     """A capsule or cylinder (geom 1) lying on a face of a mesh (geom 2): its axis within LYING_TILT
@@ -2081,14 +2144,14 @@ def _witness_adjoint(x1, x2, g_position, g_normal):
 
 @ti.func
 def _support_local(shape: ti.template(), vid, hull: ti.template()):
-    """Geom-frame point of a `_support` id: box corner, mesh vertex, the +z (1) / -z (0) end of
+    """Geom-frame point of a `_support` id: box corner, mesh or prism vertex, the +z (1) / -z (0) end of
     a capsule's or cylinder's segment (size[1] from the centre); the centre for a sphere or
     id < 0."""
     local = ti.Vector([0.0, 0.0, 0.0])
     if vid >= 0:
         if shape[0] == BOX:
             local = _corner_local(shape[4], vid)
-        elif shape[0] == MESH:
+        elif shape[0] == MESH or shape[0] == HFIELD:
             local = hull.hull_vert[hull.hull_vertadr[shape[1]] + vid]
         elif shape[0] == CAPSULE or shape[0] == CYLINDER:
             local[2] = ti.select(vid == 1, shape[4][1], -shape[4][1])

@@ -21,9 +21,9 @@ import taichi as ti
 from taichi.lang import impl
 
 from ..data import ArrayView, accumulate
-from ..geometry import BOX, CAPSULE, CYLINDER, MESH, PLANE, SPHERE
+from ..geometry import BOX, CAPSULE, CYLINDER, HFIELD, MESH, PLANE, SPHERE
 from ..spatial import mat_mul, mat_vec, quat_to_mat
-from . import box, convex, primitive
+from . import box, convex, hfield, primitive
 from .frame import column, contact_frame, contact_frame_adjoint
 
 
@@ -229,6 +229,36 @@ def _plane_cylinder(d: ti.template(), s, e, g1, g2, margin):
     return count, position, normal, dist, feature
 
 
+@ti.func
+def _hfield_collide(d: ti.template(), s, e, pair, g1, g2):
+    """Frame s's contacts of a height field (g1) with a convex geom (g2), appended (hfield.py):
+    the prisms of the cells under g2's bounding box whose top reaches its bottom, row by row, one
+    convex CCD each (convex.prism_convex), at most hfield.HFIELD_MAX contacts, in MuJoCo's order.
+    Without the pair's margin: every pair's is 0 (model.pair_margin; MuJoCo's height field raises
+    the prisms' tops by it and grows g2 by half of it, which a margin here would have to take)."""
+    pos1, rot1, size1, grid = d.geom_xpos[s, e, g1], d.geom_xmat[s, e, g1], d.geom_size[g1], d.geom_mesh[g1]
+    pos2, rot2 = d.geom_xpos[s, e, g2], d.geom_xmat[s, e, g2]
+    hull = HullView(d)
+    ncol = int(size1[2])
+    nrow = hull.hull_vertnum[grid] // 2 // ncol
+    lowest, highest = hfield.local_box(pos1, rot1, pos2, rot2, d.geom_aabb_center[g2], d.geom_aabb_half[g2])
+    rmin, rmax, cmin, cmax = hfield.cell_range(size1, nrow, lowest, highest)
+    adr, count = hull.hull_vertadr[grid], 0
+    for r in range(rmin, rmax):
+        for c in range(cmin + 1, cmax + 1):
+            for i in range(2):
+                triangle = hfield.triangle(r, c, i, ncol)
+                top = ti.max(hull.hull_vert[adr + int(triangle[0])][2], hull.hull_vert[adr + int(triangle[1])][2],
+                             hull.hull_vert[adr + int(triangle[2])][2])
+                if count < hfield.HFIELD_MAX and top >= lowest[2]:  # (MuJoCo's prism height test)
+                    found, position, normal, dist, feature = convex.prism_convex(
+                        pos1, rot1, grid, triangle, d.geom_type[g2], pos2, rot2, d.geom_size[g2], d.geom_mesh[g2],
+                        hull, d, (e,))
+                    if found:
+                        _append(d, s, e, pair, 1, position, normal, dist, feature, ti.Vector.zero(float, 3))
+                        count += 1
+
+
 # (type 1, type 2) → (collider, its contact budget, whether MuJoCo's frame takes geom 2's axis as
 # its first tangent; the convex colliders' contacts take MuJoCo's default frame)
 P, B = primitive, box
@@ -252,6 +282,12 @@ BUDGET = {kind: budget for kind, (_, budget, _) in {**PRIMITIVES, **CONVEX}.item
 # One kernel may serve every convex_convex pair kind (``kernel_kinds``): it is the slowest to compile
 ALL_CONVEX = "convex"
 COLLIDERS[ALL_CONVEX] = (_convex_convex, False)
+# and one every height field's pair kind (a convex geom on a height field: _hfield_collide, which appends)
+HFIELD_PAIRS = tuple((HFIELD, kind) for kind in (SPHERE, CAPSULE, CYLINDER, BOX, MESH))
+ALL_HFIELD = "hfield"
+COLLIDERS.update({kind: (None, False) for kind in (*HFIELD_PAIRS, ALL_HFIELD)})
+BUDGET.update({kind: hfield.HFIELD_MAX for kind in HFIELD_PAIRS})
+GROUPS = {ALL_CONVEX: convex.CONVEX_PAIRS, ALL_HFIELD: HFIELD_PAIRS}  # the kernels that serve several kinds
 # Taichi's opt_level for the convex kernels (ALL_CONVEX's collider and its reverse, and step.converge):
 # 0 skips Taichi's whole-kernel common-subexpression elimination, two thirds of their compile time
 # (float32, empty cache: the collider 43 → 15 s, its reverse 31 → 8 s, converge 6.7 → 2.9 s), the
@@ -263,12 +299,12 @@ CONVEX_OPT_LEVEL = 0
 
 def opt_level(kind):
     """Taichi's opt_level for the collider kernel of ``kind`` and its reverse."""
-    return CONVEX_OPT_LEVEL if kind == ALL_CONVEX else 1
+    return CONVEX_OPT_LEVEL if kind in GROUPS else 1
 
 
 # Each collider kernel's bit in the header's colliders_due mask: a kernel runs in a substep only
 # when the broad phase (near_pairs) found a pair of its kind in some env
-KERNEL_BIT = {kind: bit for bit, kind in enumerate([*sorted(PRIMITIVES), (PLANE, MESH), ALL_CONVEX])}
+KERNEL_BIT = {kind: bit for bit, kind in enumerate([*sorted(PRIMITIVES), (PLANE, MESH), ALL_CONVEX, ALL_HFIELD])}
 
 
 @ti.func
@@ -290,20 +326,26 @@ def near_pairs(d: ti.template(), s, e):
         ti.atomic_or(d.colliders_due[0], due)
 
 
+def _model_kinds(model):
+    """The (type 1, type 2) kinds of the model's candidate pairs."""
+    return {(int(model.geom_type[a]), int(model.geom_type[b])) for a, b in zip(model.pair_geom1, model.pair_geom2)}
+
+
 def kernel_kinds(model):
     """The collider kernels a model needs: a pair kind (type 1, type 2) each, except that every
-    convex_convex pair is handled by one kernel (ALL_CONVEX), primitive kinds first, sorted."""
-    kinds = {(int(model.geom_type[a]), int(model.geom_type[b])) for a, b in zip(model.pair_geom1, model.pair_geom2)}
-    convex_kinds = kinds & set(convex.CONVEX_PAIRS)
-    return sorted(kinds - convex_kinds) + ([ALL_CONVEX] if convex_kinds else [])
+    convex_convex pair is handled by one kernel (ALL_CONVEX) and every height field pair by
+    another (ALL_HFIELD), primitive kinds first, sorted."""
+    kinds = _model_kinds(model)
+    grouped = [group for group, members in GROUPS.items() if kinds & set(members)]
+    return sorted(kinds - set(convex.CONVEX_PAIRS) - set(HFIELD_PAIRS)) + grouped
 
 
 @ti.func
 def _of_kind(type1, type2, kind: ti.template()):
     """Whether a pair of geom types (type1 <= type2) is handled by the kernel of ``kind``."""
     match = False
-    if ti.static(kind == ALL_CONVEX):
-        for other in ti.static(convex.CONVEX_PAIRS):
+    if ti.static(kind in GROUPS):
+        for other in ti.static(GROUPS[kind]):
             match = match or (type1 == other[0] and type2 == other[1])
     else:
         match = type1 == kind[0] and type2 == kind[1]
@@ -318,7 +360,10 @@ def collide_kind(d: ti.template(), s, e, kind: ti.template()):
     for q in range(d.n_near[s, e, 0]):  # the broad phase's pairs (near_pairs)
         pair = d.near_pairs[s, e, q]
         g1, g2 = d.pair_geom1[pair], d.pair_geom2[pair]
-        if _of_kind(d.geom_type[g1], d.geom_type[g2], kind):
+        if ti.static(kind == ALL_HFIELD):
+            if _of_kind(d.geom_type[g1], d.geom_type[g2], kind):
+                _hfield_collide(d, s, e, pair, g1, g2)
+        elif _of_kind(d.geom_type[g1], d.geom_type[g2], kind):
             count, position, normal, dist, feature = collider(d, s, e, g1, g2, d.pair_margin[pair])
             tangent = ti.Vector.zero(float, 3)
             if ti.static(axis_tangent):
@@ -333,7 +378,7 @@ def _iterated_kind(d: ti.template(), s, e, c):
     pair = d.con_pair[s, e, c]
     type1, type2 = d.geom_type[d.pair_geom1[pair]], d.geom_type[d.pair_geom2[pair]]
     iterated, held = False, False
-    if _of_kind(type1, type2, ALL_CONVEX):
+    if _of_kind(type1, type2, ALL_CONVEX) or _of_kind(type1, type2, ALL_HFIELD):
         feature, margin = _feature_row(d, s, e, c), d.pair_margin[pair]
         iterated, held = convex.iterated(type1, type2, margin, feature), convex.frozen(type1, type2, margin, feature)
     return iterated, held
@@ -476,7 +521,7 @@ def _convex_reverse(d: ti.template(), s, e, g1, g2, c, g_position, g_normal, g_d
 # samples the balls, the cylinder's rim) and the replay is the converged form, up to the CCD
 # tolerance away (tests/test_adjoints_convex.py). Unless converge_contacts made the forward's
 # contact that form (and no direction is frozen), a backward over such a contact raises.
-REVERSES[ALL_CONVEX] = (_convex_replay, _convex_reverse)
+REVERSES[ALL_CONVEX] = REVERSES[ALL_HFIELD] = (_convex_replay, _convex_reverse)
 
 
 @ti.func
@@ -499,11 +544,9 @@ def replay_exact(d: ti.template(), s, e, c):
 def inexact_kinds(model):
     """The model's candidate pair kinds (type 1, type 2) whose contacts may not be their closed
     form (convex.iterated): every convex_convex kind, with or without a margin, as each has a
-    curved geom (CCD iterates) or a mesh (clipping corners on its polygons); box–box goes to
-    box.py, whose contacts are closed forms."""
-    kinds = {(int(model.geom_type[a]), int(model.geom_type[b])) for a, b in zip(model.pair_geom1,
-                                                                                model.pair_geom2)}
-    return sorted(kind for kind in kinds if kind in convex.CONVEX_PAIRS)
+    curved geom (CCD iterates) or a mesh (clipping corners on its polygons), and every height
+    field kind (CCD too); box–box goes to box.py, whose contacts are closed forms."""
+    return sorted(kind for kind in _model_kinds(model) if kind in convex.CONVEX_PAIRS or kind in HFIELD_PAIRS)
 
 
 
