@@ -13,7 +13,7 @@ import numpy as np
 
 from .options import check_bool, is_int, named_keywords
 from .solvers.core import InvalidInputError, refuse_grad, warn_user
-from .utils import geom
+from .utils import geom, terrain
 
 # Genesis 1.4.5's morph options that genesis_lite does not have (a named error says so, where
 # Python's TypeError named neither the morph nor the keyword): every morph's, the primitives',
@@ -476,25 +476,33 @@ class Plane(Morph):
         self.normal = normal / np.linalg.norm(normal)
 
 
-# Genesis 1.4.5's terrain generation: its subterrains (made here when height_field is not given)
-_SUBTERRAIN = ("randomize", "n_subterrains", "subterrain_size", "subterrain_types", "subterrain_parameters", "name",
-               "from_stored", "uv_scale")
-
-
-@named_keywords(*_MORPH, *_SUBTERRAIN, "batch_fixed_verts")
+@named_keywords(*_MORPH, "from_stored", "uv_scale", "batch_fixed_verts")
 @dataclass
 class Terrain(Morph):
     """Static ground of varying height: a height field (Genesis's Terrain, MuJoCo's hfield;
-    solvers/rigid/collision/hfield.py). height_field (nx, ny): heights in units of
-    ``vertical_scale`` (m) at grid points ``horizontal_scale`` (m) apart, point (i, j) at
-    (i·horizontal_scale, j·horizontal_scale) in the morph's frame (pos, euler / quat), as Genesis's.
-    Each grid cell is two triangles; the ground is solid beneath them, down to ``BASE`` below its
-    lowest point (Genesis's prisms end at its lowest point: a body pressed below it there is in
-    none). Always fixed. Genesis's generated subterrains (height_field None) are not made yet."""
+    solvers/rigid/collision/hfield.py). Its heights, in units of ``vertical_scale`` (m), at grid
+    points ``horizontal_scale`` (m) apart, point (i, j) at (i·horizontal_scale, j·horizontal_scale)
+    in the morph's frame (pos, euler / quat), as Genesis's: ``height_field`` (nx, ny) when given,
+    else Genesis's generated subterrains (genesis_lite/utils/terrain.py): n_subterrains (x, y) of
+    subterrain_size (x, y) m, each of its kind in subterrain_types (one name, or a list of
+    n_subterrains[0] lists of n_subterrains[1]), with subterrain_parameters {kind: {name: value}}
+    over the kinds' defaults, drawn at random (the random kinds) from a generator seeded 0 unless
+    ``randomize``. Each grid cell is two triangles; the ground is solid beneath them, down to
+    ``BASE`` below its lowest point (Genesis's prisms end at its lowest point: a body pressed below
+    it there is in none). Always fixed. ``name``: Genesis's key of its cache of generated terrains
+    (none here: a terrain is generated at each add_entity, in milliseconds)."""
     fixed: bool = True
     height_field: object = None
     horizontal_scale: float = 0.25
     vertical_scale: float = 0.005
+    n_subterrains: tuple = (3, 3)
+    subterrain_size: tuple = (12.0, 12.0)
+    subterrain_types: object = (("flat_terrain", "random_uniform_terrain", "stepping_stones_terrain"),
+                                ("pyramid_sloped_terrain", "discrete_obstacles_terrain", "wave_terrain"),
+                                ("random_uniform_terrain", "pyramid_stairs_terrain", "sloped_terrain"))
+    subterrain_parameters: dict = None
+    randomize: bool = False
+    name: str = None
     contype: int = 0xFFFF
     conaffinity: int = 0xFFFF
 
@@ -506,9 +514,12 @@ class Terrain(Morph):
             raise InvalidInputError("Terrain: argument 'fixed' must be True (a terrain is always fixed), got False")
         _positive("Terrain", "horizontal_scale", self.horizontal_scale)
         _positive("Terrain", "vertical_scale", self.vertical_scale)
+        self.horizontal_scale, self.vertical_scale = float(self.horizontal_scale), float(self.vertical_scale)
+        if self.name is not None and not isinstance(self.name, str):
+            raise InvalidInputError(f"Terrain: argument 'name' must be a string or None, got {self.name!r}")
+        self.randomize = check_bool("Terrain", "randomize", self.randomize)
         if self.height_field is None:
-            raise InvalidInputError("Terrain: argument 'height_field' must be given (Genesis's generated subterrains "
-                                    "are not made yet), got None")
+            self.height_field = self._generated()
         refuse_grad("Terrain", "height_field", self.height_field, "a terrain's heights are fixed at build")
         try:
             heights = np.asarray(self.height_field.cpu() if hasattr(self.height_field, "cpu") else self.height_field,
@@ -519,7 +530,44 @@ class Terrain(Morph):
             raise InvalidInputError(f"Terrain: argument 'height_field' must be a 2-d array of finite heights of at "
                                     f"least 2 × 2 points, got {_described(self.height_field)}")
         self.height_field = heights
-        self.horizontal_scale, self.vertical_scale = float(self.horizontal_scale), float(self.vertical_scale)
+
+    def _generated(self):
+        """The heights of Genesis's subterrains (terrain.height_field), the arguments checked."""
+        counts = np.asarray(self.n_subterrains) if np.ndim(self.n_subterrains) == 1 else None
+        if counts is None or counts.shape != (2,) or not all(is_int(n) and n >= 1 for n in self.n_subterrains):
+            raise InvalidInputError(f"Terrain: argument 'n_subterrains' must be two integers >= 1, got "
+                                    f"{self.n_subterrains!r}")
+        size = _vec("Terrain", "subterrain_size", self.subterrain_size, 2)
+        cells = size / self.horizontal_scale
+        if not np.all(size > 0) or np.abs(cells - np.round(cells)).max() > 1e-9 * cells.max():
+            raise InvalidInputError(f"Terrain: argument 'subterrain_size' must be positive multiples of "
+                                    f"horizontal_scale = {self.horizontal_scale:g} m, got {self.subterrain_size!r}")
+        kinds = self.subterrain_types
+        if isinstance(kinds, str):
+            kinds = [[kinds] * int(counts[1]) for _ in range(int(counts[0]))]
+        rows = [list(row) for row in kinds] if not isinstance(kinds, str) else []
+        if len(rows) != counts[0] or any(len(row) != counts[1] for row in rows):
+            raise InvalidInputError(f"Terrain: argument 'subterrain_types' must be a kind's name or "
+                                    f"n_subterrains = {tuple(counts)} of them (a list of lists), got {kinds!r}")
+        unknown = sorted({kind for row in rows for kind in row if kind not in terrain.DEFAULTS}, key=str)
+        if unknown:
+            raise InvalidInputError(f"Terrain: argument 'subterrain_types' expected kinds among "
+                                    f"{list(terrain.DEFAULTS)}, got {unknown}")
+        parameters = {kind: dict(values) for kind, values in terrain.DEFAULTS.items()}
+        given = self.subterrain_parameters or {}
+        if not isinstance(given, dict):
+            raise InvalidInputError(f"Terrain: argument 'subterrain_parameters' must be a dict {{kind: {{name: "
+                                    f"value}}}}, got {given!r}")
+        for kind, values in given.items():
+            wrong = sorted(set(values) - set(parameters.get(kind, {}))) if isinstance(values, dict) else values
+            if kind not in parameters or wrong:
+                raise InvalidInputError(f"Terrain: argument 'subterrain_parameters' expected, per kind among "
+                                        f"{list(parameters)}, a dict of its parameters "
+                                        f"{parameters.get(kind, {})}, got {kind!r}: {values!r}")
+            parameters[kind].update(values)
+        rng = np.random.default_rng(None if self.randomize else 0)
+        return terrain.height_field(counts.astype(int), size, rows, parameters, self.horizontal_scale,
+                                    self.vertical_scale, rng)
 
 
 def _described(value):

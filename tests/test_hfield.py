@@ -251,12 +251,10 @@ def test_terrain_in_a_batch_steps_each_env_as_alone(f64):
 
 
 @pytest.mark.parametrize("kwargs, said", [
-    ({}, "argument 'height_field' must be given"),
     ({"height_field": np.zeros(4)}, "2-d array of finite heights"),
     ({"height_field": np.array([[0.0, np.nan], [0.0, 0.0]])}, "2-d array of finite heights"),
     ({"height_field": np.zeros((3, 3)), "horizontal_scale": -1.0}, "'horizontal_scale' must be positive"),
     ({"height_field": np.zeros((3, 3)), "fixed": False}, "always fixed"),
-    ({"height_field": np.zeros((3, 3)), "n_subterrains": (2, 2)}, "'n_subterrains' is a Genesis option"),
 ])
 def test_terrain_bad_input_is_named(kwargs, said):
     with pytest.raises(InvalidInputError, match=said):
@@ -308,3 +306,71 @@ def test_prisms_take_mujocos_vertex_order(f64):
             for i in range(2):
                 register.append((r + 1 - i) * ncol + c)
                 assert list(table[r, c - 1, i]) == register[-3:], (r, c, i)
+
+
+def test_generated_subterrains_have_their_shapes(f64):
+    """gs.morphs.Terrain without a height_field: Genesis's subterrain grid (shared edges), each
+    kind's shape as defined (genesis_lite/utils/terrain.py; the kinds without chance measured equal
+    to Genesis 1.4.5's heights to float32 rounding), reproducible unless randomize."""
+    hs, vs = 0.25, 0.005
+    default = gs.morphs.Terrain()
+    assert default.height_field.shape == (3 * 48 + 1, 3 * 48 + 1)
+    assert np.array_equal(default.height_field, gs.morphs.Terrain().height_field)
+    assert not np.array_equal(default.height_field, gs.morphs.Terrain(randomize=True).height_field)
+    kinds = [["sloped_terrain", "stairs_terrain"], ["pyramid_stairs_terrain", "wave_terrain"]]
+    field = gs.morphs.Terrain(n_subterrains=(2, 2), subterrain_size=(4.0, 3.0), subterrain_types=kinds,
+                              subterrain_parameters={"sloped_terrain": {"slope": 0.4}}).height_field
+    rows, cols = 17, 13
+    assert field.shape == (2 * rows - 1, 2 * cols - 1)
+    sloped = field[:rows - 1, :cols - 1]  # (the shared edges take the higher neighbour)
+    top = int(0.4 * hs / vs * rows)
+    assert np.allclose(sloped, (top * np.arange(rows - 1) / rows)[:, None])
+    stairs = field[:rows - 1, cols:]
+    width, rise = int(0.75 / hs), int(-0.1 / vs)
+    assert np.array_equal(stairs[:, 0], [rise * (k // width + 1) if k < rows // width * width else 0
+                                         for k in range(rows - 1)])
+    pyramid = gs.morphs.Terrain(n_subterrains=(1, 1), subterrain_size=(4.0, 4.0),
+                                subterrain_types="pyramid_stairs_terrain").height_field
+    levels = sorted(set(pyramid.ravel()), reverse=True)  # (down from the rim: step -0.1 m)
+    assert levels == [rise * k for k in range(len(levels))] and len(levels) == 3
+    assert np.array_equal(pyramid, pyramid[::-1, ::-1]) and pyramid[8, 8] == levels[-1]
+    wave = field[rows:, cols:]
+    assert np.abs(wave).max() <= 0.1 / vs + 1e-9 and np.abs(wave).max() > 0.05 / vs
+    stones = gs.morphs.Terrain(n_subterrains=(1, 1), subterrain_size=(6.0, 6.0),
+                               subterrain_types="stepping_stones_terrain").height_field
+    assert stones.min() == int(-10.0 / vs) and stones.max() <= 0.2 / vs
+    uniform = gs.morphs.Terrain(n_subterrains=(1, 1), subterrain_size=(6.0, 6.0),
+                                subterrain_types="random_uniform_terrain").height_field
+    assert np.array_equal(uniform, np.rint(uniform)) and np.abs(uniform).max() <= 0.1 / vs
+
+
+def test_a_ball_rolls_down_generated_stairs_and_a_box_rests_on_flat_ground(f64):
+    """Stairs going down along x (Genesis's default step -0.1 m): a ball set on the top step at
+    the far edge rolls off and ends lower; a box on the flat subterrain comes to rest on it."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01))
+    scene.add_entity(gs.morphs.Terrain(n_subterrains=(2, 1), subterrain_size=(3.0, 3.0),
+                                       subterrain_types=[["stairs_terrain"], ["flat_terrain"]]))
+    ball = scene.add_entity(gs.morphs.Sphere(radius=0.1, pos=(0.3, 1.5, 0.0)))
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.2), pos=(4.5, 1.5, 0.2)))
+    scene.build()
+    ball.set_dofs_velocity(torch.tensor([1.5, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    for _ in range(200):
+        scene.step()
+    assert float(ball.get_pos()[2]) < -0.2 and float(ball.get_pos()[0]) > 1.0
+    assert float(box.get_pos()[2]) == pytest.approx(0.1, abs=2e-3)
+    assert float(np.linalg.norm(box.get_vel().numpy())) < 1e-3
+
+
+@pytest.mark.parametrize("kwargs, said", [
+    ({"n_subterrains": (0, 2)}, "'n_subterrains' must be two integers >= 1"),
+    ({"subterrain_size": (1.1, 2.0)}, "'subterrain_size' must be positive multiples"),
+    ({"n_subterrains": (1, 2), "subterrain_types": [["flat_terrain"]]}, "'subterrain_types' must be"),
+    ({"subterrain_types": "lava_terrain"}, "expected kinds among"),
+    ({"subterrain_parameters": {"wave_terrain": {"waves": 3}}}, "'subterrain_parameters' expected"),
+    ({"randomize": "yes"}, "'randomize'"),
+    ({"name": 3}, "'name' must be a string"),
+    ({"uv_scale": 2.0}, "'uv_scale' is a Genesis option"),
+])
+def test_generated_terrain_bad_input_is_named(kwargs, said):
+    with pytest.raises(InvalidInputError, match=said):
+        gs.morphs.Terrain(**kwargs)
