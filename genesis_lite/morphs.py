@@ -533,41 +533,56 @@ class Terrain(Morph):
 
     def _generated(self):
         """The heights of Genesis's subterrains (terrain.height_field), the arguments checked."""
-        counts = np.asarray(self.n_subterrains) if np.ndim(self.n_subterrains) == 1 else None
-        if counts is None or counts.shape != (2,) or not all(is_int(n) and n >= 1 for n in self.n_subterrains):
-            raise InvalidInputError(f"Terrain: argument 'n_subterrains' must be two integers >= 1, got "
-                                    f"{self.n_subterrains!r}")
-        size = _vec("Terrain", "subterrain_size", self.subterrain_size, 2)
+        counts = self.n_subterrains
+        if not (isinstance(counts, (tuple, list, np.ndarray)) and len(counts) == 2
+                and all(is_int(n) and n >= 1 for n in counts)):
+            raise InvalidInputError(f"Terrain: argument 'n_subterrains' must be two integers >= 1, got {counts!r}")
+        counts = [int(n) for n in counts]
+        try:
+            size = np.asarray(self.subterrain_size, dtype=np.float64)
+        except (TypeError, ValueError):
+            size = np.full(1, np.nan)
         cells = size / self.horizontal_scale
-        if not np.all(size > 0) or np.abs(cells - np.round(cells)).max() > 1e-9 * cells.max():
-            raise InvalidInputError(f"Terrain: argument 'subterrain_size' must be positive multiples of "
+        if size.shape != (2,) or not np.all(np.isfinite(size)) or not np.all(np.round(cells) >= 1) \
+                or np.abs(cells - np.round(cells)).max() > 1e-9 * max(cells.max(), 1.0):
+            raise InvalidInputError(f"Terrain: argument 'subterrain_size' must be two positive multiples of "
                                     f"horizontal_scale = {self.horizontal_scale:g} m, got {self.subterrain_size!r}")
+        return terrain.height_field(counts, size, self._kinds(counts), self._parameters(), self.horizontal_scale,
+                                    self.vertical_scale, np.random.default_rng(None if self.randomize else 0))
+
+    def _kinds(self, counts):
+        """subterrain_types as n_subterrains[0] lists of n_subterrains[1] known kinds."""
         kinds = self.subterrain_types
         if isinstance(kinds, str):
-            kinds = [[kinds] * int(counts[1]) for _ in range(int(counts[0]))]
-        rows = [list(row) for row in kinds] if not isinstance(kinds, str) else []
-        if len(rows) != counts[0] or any(len(row) != counts[1] for row in rows):
-            raise InvalidInputError(f"Terrain: argument 'subterrain_types' must be a kind's name or "
-                                    f"n_subterrains = {tuple(counts)} of them (a list of lists), got {kinds!r}")
-        unknown = sorted({kind for row in rows for kind in row if kind not in terrain.DEFAULTS}, key=str)
+            kinds = [[kinds] * counts[1] for _ in range(counts[0])]
+        shaped = (isinstance(kinds, (tuple, list)) and len(kinds) == counts[0]
+                  and all(isinstance(row, (tuple, list)) and len(row) == counts[1] for row in kinds))
+        if not shaped:
+            raise InvalidInputError(f"Terrain: argument 'subterrain_types' must be a kind's name or n_subterrains = "
+                                    f"{tuple(counts)} of them (a list of lists), got {kinds!r}")
+        unknown = [kind for row in kinds for kind in row if not (isinstance(kind, str) and kind in terrain.DEFAULTS)]
         if unknown:
             raise InvalidInputError(f"Terrain: argument 'subterrain_types' expected kinds among "
                                     f"{list(terrain.DEFAULTS)}, got {unknown}")
+        return [list(row) for row in kinds]
+
+    def _parameters(self):
+        """Every kind's parameters: the defaults, updated by subterrain_parameters, checked."""
         parameters = {kind: dict(values) for kind, values in terrain.DEFAULTS.items()}
-        given = self.subterrain_parameters or {}
+        given = {} if self.subterrain_parameters is None else self.subterrain_parameters
         if not isinstance(given, dict):
             raise InvalidInputError(f"Terrain: argument 'subterrain_parameters' must be a dict {{kind: {{name: "
-                                    f"value}}}}, got {given!r}")
+                                    f"value}}}} or None, got {given!r}")
         for kind, values in given.items():
-            wrong = sorted(set(values) - set(parameters.get(kind, {}))) if isinstance(values, dict) else values
-            if kind not in parameters or wrong:
+            if kind not in parameters or not isinstance(values, dict) or not set(values) <= set(parameters[kind]):
                 raise InvalidInputError(f"Terrain: argument 'subterrain_parameters' expected, per kind among "
                                         f"{list(parameters)}, a dict of its parameters "
                                         f"{parameters.get(kind, {})}, got {kind!r}: {values!r}")
             parameters[kind].update(values)
-        rng = np.random.default_rng(None if self.randomize else 0)
-        return terrain.height_field(counts.astype(int), size, rows, parameters, self.horizontal_scale,
-                                    self.vertical_scale, rng)
+            wrong = terrain.problem(kind, parameters[kind], self.horizontal_scale)
+            if wrong:
+                raise InvalidInputError(f"Terrain: argument 'subterrain_parameters': {wrong}")
+        return parameters
 
 
 def _described(value):

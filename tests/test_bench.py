@@ -19,6 +19,7 @@ SMALLEST = {
     "sand_pile": ["--only", "ours", "--angles", "30", "--steps", "2"],
     "ik": ["--only", "ours", "--envs", "0", "--repeats", "1"],
     "drone": ["--only", "ours", "--envs", "0", "--repeats", "1"],
+    "terrain": ["--only", "ours", "--kinds", "sloped_terrain", "--envs", "4", "--repeats", "1"],
 }
 
 

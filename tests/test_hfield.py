@@ -344,6 +344,20 @@ def test_generated_subterrains_have_their_shapes(f64):
     assert np.array_equal(uniform, np.rint(uniform)) and np.abs(uniform).max() <= 0.1 / vs
 
 
+def test_every_kind_builds_on_the_smallest_subterrains(f64):
+    """Each kind on subterrains of one cell (2 × 2 points), and of one cell by many, is finite."""
+    for kind in terrain_kinds():
+        for size in ((0.25, 0.25), (0.25, 3.0), (3.0, 0.25)):
+            heights = gs.morphs.Terrain(n_subterrains=(2, 1), subterrain_size=size, subterrain_types=kind).height_field
+            assert np.isfinite(heights).all() and heights.shape == (2 * round(size[0] / 0.25) + 1,
+                                                                   round(size[1] / 0.25) + 1), kind
+
+
+def terrain_kinds():
+    from genesis_lite.utils import terrain
+    return list(terrain.DEFAULTS)
+
+
 def test_a_ball_rolls_down_generated_stairs_and_a_box_rests_on_flat_ground(f64):
     """Stairs going down along x (Genesis's default step -0.1 m): a ball set on the top step at
     the far edge rolls off and ends lower; a box on the flat subterrain comes to rest on it."""
@@ -363,13 +377,30 @@ def test_a_ball_rolls_down_generated_stairs_and_a_box_rests_on_flat_ground(f64):
 
 @pytest.mark.parametrize("kwargs, said", [
     ({"n_subterrains": (0, 2)}, "'n_subterrains' must be two integers >= 1"),
-    ({"subterrain_size": (1.1, 2.0)}, "'subterrain_size' must be positive multiples"),
+    ({"subterrain_size": (1.1, 2.0)}, "'subterrain_size' must be two positive multiples"),
     ({"n_subterrains": (1, 2), "subterrain_types": [["flat_terrain"]]}, "'subterrain_types' must be"),
     ({"subterrain_types": "lava_terrain"}, "expected kinds among"),
     ({"subterrain_parameters": {"wave_terrain": {"waves": 3}}}, "'subterrain_parameters' expected"),
     ({"randomize": "yes"}, "'randomize'"),
     ({"name": 3}, "'name' must be a string"),
     ({"uv_scale": 2.0}, "'uv_scale' is a Genesis option"),
+    ({"n_subterrains": [1, [2]]}, "'n_subterrains' must be two integers"),
+    ({"subterrain_size": ("a", "b")}, "'subterrain_size' must be two positive multiples"),
+    ({"subterrain_size": (1e-12, 12.0)}, "'subterrain_size' must be two positive multiples"),
+    ({"subterrain_types": None}, "'subterrain_types' must be"),
+    ({"n_subterrains": (1, 1), "subterrain_types": [[["flat_terrain"]]]}, "expected kinds among"),
+    ({"subterrain_parameters": 0}, "'subterrain_parameters' must be a dict"),
+    ({"subterrain_parameters": {"wave_terrain": None}}, "'subterrain_parameters' expected"),
+    ({"subterrain_parameters": {"pyramid_stairs_terrain": {"step_width": 0.1}}}, "'step_width' of pyramid_stairs"),
+    ({"subterrain_parameters": {"stairs_terrain": {"step_width": -1.0}}}, "'step_width' of stairs"),
+    ({"subterrain_parameters": {"stepping_stones_terrain": {"stone_distance": -0.25}}}, "'stone_distance'"),
+    ({"subterrain_parameters": {"random_uniform_terrain": {"min_height": 0.2}}}, "'max_height' of random"),
+    ({"subterrain_parameters": {"random_uniform_terrain": {"downsampled_scale": 0}}}, "'downsampled_scale'"),
+    ({"subterrain_parameters": {"fractal_terrain": {"levels": 64}}}, "'levels' of fractal"),
+    ({"subterrain_parameters": {"sloped_terrain": {"slope": float("nan")}}}, "'slope' of sloped_terrain must be a"),
+    ({"subterrain_parameters": {"wave_terrain": {"amplitude": None}}}, "'amplitude' of wave_terrain must be a"),
+    ({"subterrain_parameters": {"wave_terrain": {"num_waves": float("inf")}}}, "'num_waves' of wave_terrain"),
+    ({"subterrain_parameters": {"discrete_obstacles_terrain": {"max_size": 0.5}}}, "'max_size' of discrete"),
 ])
 def test_generated_terrain_bad_input_is_named(kwargs, said):
     with pytest.raises(InvalidInputError, match=said):

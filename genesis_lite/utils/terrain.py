@@ -5,8 +5,8 @@ Heights are in units of the terrain's vertical_scale, at grid points horizontal_
 subterrain of subterrain_size (x, y) m has size / horizontal_scale + 1 points a side, and
 neighbours share their edge points (the higher one is kept), as Genesis lays them out (IsaacGym's
 terrain kinds). The kinds without chance (flat, sloped, pyramid_sloped, wave, stairs,
-pyramid_stairs) give Genesis 1.4.5's heights (measured equal, bench/terrain probe in the note of
-2026-12-01); those drawn at random (random_uniform, discrete_obstacles, stepping_stones, fractal)
+pyramid_stairs) give Genesis 1.4.5's heights (bench/terrain.py: equal, to Genesis's float32
+rounding); those drawn at random (random_uniform, discrete_obstacles, stepping_stones, fractal)
 are the same kinds of ground drawn by this module's own rules, from a generator seeded 0 unless
 ``randomize`` (Genesis seeds numpy's global generator with 0 likewise): not Genesis's heights.
 """
@@ -27,6 +27,42 @@ DEFAULTS = {
 }
 PLATFORM = 1.0  # m: the flat square left at the centre of the pyramids and obstacle fields (IsaacGym's default)
 STONE_DEPTH = -10.0  # m: the ground between stepping stones
+MAX_LEVELS = 20  # fractal octaves (each halves the spacing: 2^20 cells apart is beyond any grid)
+
+
+# each kind's conditions on its parameters: (name, holds(values, horizontal_scale), what is expected)
+_RULES = {
+    "fractal_terrain": [("levels", lambda v, hs: float(v["levels"]).is_integer() and 1 <= v["levels"] <= MAX_LEVELS,
+                         f"an integer in [1, {MAX_LEVELS}]")],
+    "random_uniform_terrain": [("max_height", lambda v, hs: v["max_height"] >= v["min_height"], "at least min_height"),
+                               ("step", lambda v, hs: v["step"] > 0, "positive"),
+                               ("downsampled_scale", lambda v, hs: v["downsampled_scale"] > 0, "positive")],
+    "discrete_obstacles_terrain": [("min_size", lambda v, hs: v["min_size"] >= hs, "at least horizontal_scale"),
+                                   ("max_size", lambda v, hs: v["max_size"] >= v["min_size"], "at least min_size"),
+                                   ("num_rects",
+                                    lambda v, hs: float(v["num_rects"]).is_integer() and v["num_rects"] >= 0,
+                                    "an integer >= 0")],
+    "wave_terrain": [("num_waves", lambda v, hs: v["num_waves"] >= 0, ">= 0")],
+    "stairs_terrain": [("step_width", lambda v, hs: v["step_width"] >= hs, "at least horizontal_scale")],
+    "pyramid_stairs_terrain": [("step_width", lambda v, hs: v["step_width"] >= hs, "at least horizontal_scale")],
+    "stepping_stones_terrain": [("stone_size", lambda v, hs: v["stone_size"] >= hs, "at least horizontal_scale"),
+                                ("stone_distance", lambda v, hs: v["stone_distance"] >= 0, ">= 0"),
+                                ("platform_size", lambda v, hs: v["platform_size"] >= 0, ">= 0")],
+}
+
+
+def problem(kind, values, horizontal_scale):
+    """What is wrong with a kind's parameters ``values`` {name: value} (complete), as a phrase
+    for an error message ("'name' of kind must be …, got …"), or None. Every value is a finite
+    real number; lengths that become cell counts are at least one cell (horizontal_scale)."""
+    for name, value in values.items():
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(value):
+            return f"'{name}' of {kind} must be a finite number, got {value!r}"
+    for name, holds, expected in _RULES.get(kind, []):
+        if not holds(values, horizontal_scale):
+            return f"'{name}' of {kind} must be {expected}, got {values[name]!r}"
+    return None
 
 
 def height_field(n_subterrains, subterrain_size, subterrain_types, parameters, horizontal_scale, vertical_scale,
@@ -67,7 +103,7 @@ def _pyramid_sloped(rows, cols, hs, vs, rng, slope):
     top = int(slope * (hs / vs) * (rows / 2))
     heights = top * _tent(rows)[:, None] * _tent(cols)[None, :]
     half = int(PLATFORM / hs / 2)
-    corner = heights[rows // 2 - half, cols // 2 - half]
+    corner = heights[max(rows // 2 - half, 0), max(cols // 2 - half, 0)]  # (a subterrain narrower than it: 0)
     return np.clip(heights, min(corner, 0), max(corner, 0))
 
 
