@@ -3,6 +3,7 @@
 Angles: ``euler`` is (roll, pitch, yaw) in degrees, fixed axes x-y-z as in Genesis;
 ``quat`` (w, x, y, z) overrides it when given. Lengths in metres.
 """
+import dataclasses
 import functools
 import importlib.util
 import os
@@ -490,7 +491,8 @@ class Terrain(Morph):
     ``randomize``. Each grid cell is two triangles; the ground is solid beneath them, down to
     ``BASE`` below its lowest point (Genesis's prisms end at its lowest point: a body pressed below
     it there is in none). Always fixed. ``name``: Genesis's key of its cache of generated terrains
-    (none here: a terrain is generated at each add_entity, in milliseconds)."""
+    (none here: a terrain is generated when its morph is made, in milliseconds). A height_field
+    given with subterrain arguments away from their defaults is refused (Genesis ignores them)."""
     fixed: bool = True
     height_field: object = None
     horizontal_scale: float = 0.25
@@ -520,6 +522,8 @@ class Terrain(Morph):
         self.randomize = check_bool("Terrain", "randomize", self.randomize)
         if self.height_field is None:
             self.height_field = self._generated()
+        else:
+            self._no_subterrains()
         refuse_grad("Terrain", "height_field", self.height_field, "a terrain's heights are fixed at build")
         try:
             heights = np.asarray(self.height_field.cpu() if hasattr(self.height_field, "cpu") else self.height_field,
@@ -549,6 +553,15 @@ class Terrain(Morph):
                                     f"horizontal_scale = {self.horizontal_scale:g} m, got {self.subterrain_size!r}")
         return terrain.height_field(counts, size, self._kinds(counts), self._parameters(), self.horizontal_scale,
                                     self.vertical_scale, np.random.default_rng(None if self.randomize else 0))
+
+    def _no_subterrains(self):
+        """With a height_field given, the subterrain arguments left at their defaults (they would go
+        unused)."""
+        defaults = {f.name: f.default for f in dataclasses.fields(Terrain) if f.name in _SUBTERRAIN_ARGS}
+        changed = [name for name, value in defaults.items() if not _same(getattr(self, name), value)]
+        if changed:
+            raise InvalidInputError(f"Terrain: arguments {changed} generate subterrains, which a given height_field "
+                                    f"replaces; give one or the other")
 
     def _kinds(self, counts):
         """subterrain_types as n_subterrains[0] lists of n_subterrains[1] known kinds."""
@@ -583,6 +596,18 @@ class Terrain(Morph):
             if wrong:
                 raise InvalidInputError(f"Terrain: argument 'subterrain_parameters': {wrong}")
         return parameters
+
+
+_SUBTERRAIN_ARGS = ("n_subterrains", "subterrain_size", "subterrain_types", "subterrain_parameters", "randomize")
+
+
+def _same(value, default):
+    """Whether an argument equals its default (sequences compared as nested lists)."""
+    try:
+        return bool(np.array_equal(np.asarray(value, dtype=object), np.asarray(default, dtype=object))) \
+            if isinstance(default, tuple) else value == default
+    except (TypeError, ValueError):
+        return False
 
 
 def _described(value):

@@ -255,6 +255,8 @@ def test_terrain_in_a_batch_steps_each_env_as_alone(f64):
     ({"height_field": np.array([[0.0, np.nan], [0.0, 0.0]])}, "2-d array of finite heights"),
     ({"height_field": np.zeros((3, 3)), "horizontal_scale": -1.0}, "'horizontal_scale' must be positive"),
     ({"height_field": np.zeros((3, 3)), "fixed": False}, "always fixed"),
+    ({"height_field": np.zeros((3, 3)), "n_subterrains": (2, 2)}, r"\['n_subterrains'\] generate subterrains"),
+    ({"height_field": np.zeros((3, 3)), "subterrain_types": "wave_terrain"}, "give one or the other"),
 ])
 def test_terrain_bad_input_is_named(kwargs, said):
     with pytest.raises(InvalidInputError, match=said):
