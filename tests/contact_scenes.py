@@ -117,17 +117,21 @@ def build_mujoco(spec, model):
     return mujoco.MjModel.from_xml_string(xml)
 
 
-def a1_mujoco(path, z, stand, kp, kv, dt):
-    """MuJoCo's model and data of a URDF quadruped (pybullet_data's a1) on a plane: a free base at
-    height z (m), position actuators (kp, kv) on every other joint, targets and joints at
-    ``stand`` (rad); the implicitfast integrator."""
+def a1_mujoco(path, z, stand, kp, kv, dt, ground=None):
+    """MuJoCo's model and data of a URDF quadruped (pybullet_data's a1) on a plane (or what
+    ``ground(spec)`` adds to the MjSpec's worldbody instead): a free base at height z (m), position
+    actuators (kp, kv) on every other joint, targets and joints at ``stand`` (rad); the
+    implicitfast integrator."""
     spec = mujoco.MjSpec.from_file(path)
     spec.compiler.fusestatic = True
     spec.compiler.alignfree = False
     root = spec.worldbody.bodies[0]
     root.add_freejoint()
     root.pos = [0.0, 0.0, z]
-    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
+    if ground is None:
+        spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
+    else:
+        ground(spec)
     spec.option.timestep = dt
     # the servos' kv implicit, as ours (actuation.py): MuJoCo's implicitfast (no force range here, so no
     # actuator is clamped, where implicitfast would drop its kv); its Euler treats only damping so

@@ -1,9 +1,10 @@
 """Height fields: MJCF <hfield> geoms and gs.morphs.Terrain (solvers/rigid/collision/hfield.py).
 
 Oracles, all outside this code:
-- MuJoCo 4.0's own height field (the same MJCF file, re-synced before every step): equal
-  contacts and velocities after the step for spheres and capsules, equal contacts for a box face
-  parallel to a flat field;
+- MuJoCo 4.0's own height field (the same MJCF file, or pybullet_data's a1 on bumpy ground;
+  re-synced before every step): equal contacts and velocities after the step for spheres and
+  capsules (the a1's feet: 2e-14 … 5e-13 over 1 s), equal contacts for a box face parallel to a
+  flat field;
 - MuJoCo 4.0's convex collider on each prism given to it as a mesh: our per-prism contacts are its
   contacts (MuJoCo's own height field path gives other ones for polytopes turned against the
   grid, not the prism's least-penetration contact: `test_prisms_collide_as_mujocos_convex_meshes`);
@@ -407,3 +408,74 @@ def test_a_ball_rolls_down_generated_stairs_and_a_box_rests_on_flat_ground(f64):
 def test_generated_terrain_bad_input_is_named(kwargs, said):
     with pytest.raises(InvalidInputError, match=said):
         gs.morphs.Terrain(**kwargs)
+
+
+def _a1_on_terrain_mujoco(path, heights, hs, corner, cone):
+    """tests.contact_scenes.a1_mujoco's a1 with its plane replaced by MuJoCo's height field of
+    ``heights`` (nx, ny) m at corner + (i, j)·hs, as gs.morphs.Terrain lays it: rows along y (an
+    MjSpec's data from the near edge: only MuJoCo's XML reader flips the rows), its lowest point at
+    the geom's z, base 1 m."""
+    from tests.contact_scenes import a1_mujoco
+    from tests.test_a1_vs_mujoco import DT, KP, KV, STAND, Z
+
+    nx, ny = heights.shape
+    low, high = heights.min(), heights.max()
+    half = ((nx - 1) * hs / 2, (ny - 1) * hs / 2)
+
+    def ground(spec):
+        field = spec.add_hfield(name="terrain", nrow=ny, ncol=nx, size=[half[0], half[1], high - low, 1.0],
+                                userdata=np.asarray(heights.T, dtype=np.float32).ravel().tolist())
+        spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname=field.name,
+                                pos=[corner[0] + half[0], corner[1] + half[1], low])
+
+    m, d = a1_mujoco(path, Z, STAND, KP, KV, DT, ground)
+    m.opt.cone = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL, "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC}[cone]
+    return m, d
+
+
+@pytest.mark.parametrize("cone", ["pyramidal", pytest.param("elliptic", marks=pytest.mark.slow)])
+def test_a1_on_a_height_field_steps_like_mujoco(f64, cone):
+    """pybullet_data's a1 under moving PD targets on bumpy ground (a Terrain of ±4 mm heights,
+    10 cm apart, under it; MuJoCo's height field of the same data), re-synced from MuJoCo before
+    each of 500 steps: in every step whose contacts are the feet's (spheres, whose height-field
+    contacts are MuJoCo 4.0's; most steps), qvel and qpos ≤ 1e-7 from MuJoCo's and the same
+    contacts (count, positions to 1e-9 m)."""
+    from tests.conftest import pybullet
+    from tests.test_a1_vs_mujoco import DT, KP, KV, STEPS, Z, _targets
+
+    path = pybullet("a1", "a1.urdf")
+    heights = np.random.default_rng(2).uniform(-0.004, 0.004, (21, 21))
+    hs = 0.1
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT),
+                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True, friction_cone=cone))
+    scene.add_entity(gs.morphs.Terrain(height_field=heights, horizontal_scale=hs, vertical_scale=1.0,
+                                       pos=(-1.0, -1.0, 0.0)))
+    robot = scene.add_entity(gs.morphs.URDF(file=path, pos=(0, 0, Z)))
+    scene.build()
+    legs = np.arange(6, robot.n_dofs)
+    robot.set_dofs_kp(np.full(len(legs), KP), legs)
+    robot.set_dofs_kv(np.full(len(legs), KV), legs)
+    m, d = _a1_on_terrain_mujoco(path, heights, hs, (-1.0, -1.0), cone)
+    as_ours = lambda a: torch.as_tensor(a, dtype=gs.tc_float)  # noqa: E731
+    feet = {g for g in range(m.ngeom) if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE}
+    compared = 0
+    for step in range(STEPS):
+        d.ctrl[:] = _targets(step * DT)
+        robot.set_qpos(as_ours(d.qpos), zero_velocity=False)
+        robot.set_dofs_velocity(as_ours(d.qvel))
+        robot.control_dofs_position(as_ours(d.ctrl), legs)
+        d.qacc_warmstart[:] = 0.0
+        scene.step()
+        mujoco.mj_step(m, d)
+        if not {int(c.geom[1]) for c in d.contact[:d.ncon]} <= feet:
+            continue  # (a calf box or the trunk on the ground: MuJoCo 4.0's polytope contacts, module docstring)
+        dv = np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max()
+        dq = np.abs(robot.get_qpos().numpy() - d.qpos).max()
+        assert dv <= 1e-7 and dq <= 1e-7, (step, dv, dq)
+        contacts = robot.get_contacts()
+        assert len(contacts["position"]) == d.ncon, step
+        if d.ncon:
+            theirs = np.array([c.pos for c in d.contact[:d.ncon]])
+            assert np.abs(contacts["position"].numpy() - theirs).max() <= 1e-9, step
+            compared += 1
+    assert compared > 0.8 * STEPS, compared
