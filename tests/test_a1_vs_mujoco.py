@@ -52,19 +52,35 @@ def _targets(t):
     return STAND + AMPLITUDE * np.sin(2 * np.pi * FREQUENCY * t + PHASE)
 
 
-def _build_ours(path, cone):
-    """(scene, robot, leg dof indices): a plane and the URDF's a1 with a free base at height Z,
-    MuJoCo's defaults, PD gains KP and KV on the legs."""
+def _build_ours(path, cone, ground=None):
+    """(scene, robot, leg dof indices): a plane (or the morph ``ground``) and the URDF's a1 with a
+    free base at height Z, MuJoCo's defaults, PD gains KP and KV on the legs."""
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT),
                      rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True, friction_cone=cone),
                      show_viewer=False)
-    scene.add_entity(gs.morphs.Plane())
+    scene.add_entity(gs.morphs.Plane() if ground is None else ground)
     robot = scene.add_entity(gs.morphs.URDF(file=path, pos=(0, 0, Z)))
     scene.build()
     legs = np.arange(6, robot.n_dofs)
     robot.set_dofs_kp(np.full(len(legs), KP), legs)
     robot.set_dofs_kv(np.full(len(legs), KV), legs)
     return scene, robot, legs
+
+
+def resynced_step(scene, robot, legs, m, d, step):
+    """One step of both engines from MuJoCo's state (qpos, qvel; its warm start cleared, as setting
+    ours clears ours) under the PD targets of ``step``; returns the largest |qvel| and |qpos|
+    difference after it."""
+    as_ours = lambda a: torch.as_tensor(a, dtype=gs.tc_float)  # noqa: E731
+    d.ctrl[:] = _targets(step * DT)
+    robot.set_qpos(as_ours(d.qpos), zero_velocity=False)
+    robot.set_dofs_velocity(as_ours(d.qvel))
+    robot.control_dofs_position(as_ours(d.ctrl), legs)
+    d.qacc_warmstart[:] = 0.0
+    scene.step()
+    mujoco.mj_step(m, d)
+    return (np.abs(robot.get_dofs_velocity().cpu().numpy() - d.qvel).max(),
+            np.abs(robot.get_qpos().cpu().numpy() - d.qpos).max())
 
 
 def _mujoco_contacts(m, d):
@@ -93,18 +109,9 @@ def test_a1_steps_like_mujoco(f64, cone):
     m, d = a1_mujoco(path, Z, STAND, KP, KV, DT)
     m.opt.cone = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL, "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC}[cone]
     lower, upper = m.jnt_range[1:, 0], m.jnt_range[1:, 1]
-    as_ours = lambda a: torch.as_tensor(a, dtype=gs.tc_float)
     counts, touched, limit_gap, base_start = [], set(), np.inf, d.qpos[:3].copy()
     for step in range(STEPS):
-        d.ctrl[:] = _targets(step * DT)
-        robot.set_qpos(as_ours(d.qpos), zero_velocity=False)
-        robot.set_dofs_velocity(as_ours(d.qvel))
-        robot.control_dofs_position(as_ours(d.ctrl), legs)
-        d.qacc_warmstart[:] = 0.0
-        scene.step()
-        mujoco.mj_step(m, d)
-        dv = np.abs(robot.get_dofs_velocity().cpu().numpy() - d.qvel).max()
-        dq = np.abs(robot.get_qpos().cpu().numpy() - d.qpos).max()
+        dv, dq = resynced_step(scene, robot, legs, m, d, step)
         assert dv <= 1e-7 and dq <= 1e-7, (step, dv, dq)
         ours, theirs = _ours_contacts(robot), _mujoco_contacts(m, d)
         assert len(ours) == len(theirs), (step, ours, theirs)

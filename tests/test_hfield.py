@@ -441,36 +441,20 @@ def test_a1_on_a_height_field_steps_like_mujoco(f64, cone):
     contacts are MuJoCo 4.0's; most steps), qvel and qpos ≤ 1e-7 from MuJoCo's and the same
     contacts (count, positions to 1e-9 m)."""
     from tests.conftest import pybullet
-    from tests.test_a1_vs_mujoco import DT, KP, KV, STEPS, Z, _targets
+    from tests.test_a1_vs_mujoco import STEPS, _build_ours, resynced_step
 
     path = pybullet("a1", "a1.urdf")
     heights = np.random.default_rng(2).uniform(-0.004, 0.004, (21, 21))
     hs = 0.1
-    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=DT),
-                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True, friction_cone=cone))
-    scene.add_entity(gs.morphs.Terrain(height_field=heights, horizontal_scale=hs, vertical_scale=1.0,
-                                       pos=(-1.0, -1.0, 0.0)))
-    robot = scene.add_entity(gs.morphs.URDF(file=path, pos=(0, 0, Z)))
-    scene.build()
-    legs = np.arange(6, robot.n_dofs)
-    robot.set_dofs_kp(np.full(len(legs), KP), legs)
-    robot.set_dofs_kv(np.full(len(legs), KV), legs)
+    scene, robot, legs = _build_ours(path, cone, gs.morphs.Terrain(height_field=heights, horizontal_scale=hs,
+                                                                   vertical_scale=1.0, pos=(-1.0, -1.0, 0.0)))
     m, d = _a1_on_terrain_mujoco(path, heights, hs, (-1.0, -1.0), cone)
-    as_ours = lambda a: torch.as_tensor(a, dtype=gs.tc_float)  # noqa: E731
     feet = {g for g in range(m.ngeom) if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE}
     compared = 0
     for step in range(STEPS):
-        d.ctrl[:] = _targets(step * DT)
-        robot.set_qpos(as_ours(d.qpos), zero_velocity=False)
-        robot.set_dofs_velocity(as_ours(d.qvel))
-        robot.control_dofs_position(as_ours(d.ctrl), legs)
-        d.qacc_warmstart[:] = 0.0
-        scene.step()
-        mujoco.mj_step(m, d)
+        dv, dq = resynced_step(scene, robot, legs, m, d, step)
         if not {int(c.geom[1]) for c in d.contact[:d.ncon]} <= feet:
             continue  # (a calf box or the trunk on the ground: MuJoCo 4.0's polytope contacts, module docstring)
-        dv = np.abs(robot.get_dofs_velocity().numpy() - d.qvel).max()
-        dq = np.abs(robot.get_qpos().numpy() - d.qpos).max()
         assert dv <= 1e-7 and dq <= 1e-7, (step, dv, dq)
         contacts = robot.get_contacts()
         assert len(contacts["position"]) == d.ncon, step

@@ -16,6 +16,7 @@ import numpy as np
 
 from .. import asset_cache
 from ..core import AssetError, InvalidInputError
+from .collision import hfield
 from .spec import GeomSpec, LinkSpec
 
 _IDENTITY_QUAT = (1.0, 0.0, 0.0, 0.0)
@@ -431,8 +432,6 @@ def terrain_link(heights, horizontal_scale: float, base: float, name: str = "ter
     frame (Genesis's Terrain), solid down to ``base`` m below its lowest point: a MuJoCo hfield
     geom (collision/hfield.py: its grid's rows run along y, so its elevation is heights
     transposed, normalised to [0, 1] over the heights' range)."""
-    from .collision import hfield
-
     heights = np.asarray(heights, dtype=np.float64)
     low, high = heights.min(), heights.max()
     elevation = hfield.normalised(heights.T, f"{name}: height field")
