@@ -34,7 +34,7 @@ from mpm import genesis_python, init_engine, run_json
 DENSITY, DT, SUBSTEPS, G = 32, 2e-3, 4, 9.81
 RADIUS = HEIGHT = 0.15                       # m: the column
 LOWER, UPPER = (-0.5, -0.5, 0.0), (0.5, 0.5, 0.4)
-GENESIS_FRICTIONS = (5.0, 100.0)             # the plane's coup_friction in Genesis's runs
+PLANE_FRICTIONS = (5.0, 100.0)               # the plane's coup_friction in the runs on a plane
 
 
 def pile_slope(points, floor, dx):
@@ -59,12 +59,12 @@ def pile_slope(points, floor, dx):
     return math.degrees(math.atan(-slope)), radii, heights
 
 
-def column(gs, engine, friction_angle, friction=None):
-    """(scene, sand entity, floor height m) of the column in engine ``gs`` ("ours": sticky walls, the
-    floor wall 3 cells above the lower bound; "genesis": a plane at z = 0 with coup_friction
-    ``friction``, its walls below), built with n_envs = 0."""
+def column(gs, friction_angle, friction=None):
+    """(scene, sand entity, floor height m) of the column in engine ``gs``: with friction None
+    (ours only), on sticky walls, the floor wall 3 cells above the lower bound; else on a plane at
+    z = 0 with coup_friction ``friction``, the walls below; built with n_envs = 0."""
     sim = gs.options.SimOptions(dt=DT, substeps=SUBSTEPS, gravity=(0.0, 0.0, -G))
-    if engine == "ours":
+    if friction is None:
         floor, lower = LOWER[2] + 3.0 / DENSITY, LOWER
         mpm = gs.options.MPMOptions(lower_bound=lower, upper_bound=UPPER, grid_density=DENSITY,
                                     boundary_condition="sticky")
@@ -72,7 +72,7 @@ def column(gs, engine, friction_angle, friction=None):
         floor, lower = 0.0, (LOWER[0], LOWER[1], -0.1)
         mpm = gs.options.MPMOptions(lower_bound=lower, upper_bound=UPPER, grid_density=DENSITY)
     scene = gs.Scene(sim_options=sim, mpm_options=mpm, show_viewer=False)
-    if engine == "genesis":
+    if friction is not None:
         scene.add_entity(gs.morphs.Plane(), material=gs.materials.Rigid(coup_friction=friction))
     sand = scene.add_entity(gs.morphs.Cylinder(pos=(0.0, 0.0, floor + HEIGHT / 2 + 0.001), radius=RADIUS,
                                                height=HEIGHT),
@@ -91,7 +91,7 @@ def collapse(scene, sand, floor, steps):
 
 def worker(engine, friction_angle, friction, steps, out):
     gs, version = init_engine(engine, "64")
-    scene, sand, floor = column(gs, engine, friction_angle, friction)
+    scene, sand, floor = column(gs, friction_angle, friction)
     slope, radii, heights = collapse(scene, sand, floor, steps)
     with open(out, "w") as file:
         json.dump({"version": version, "n": sand.n_particles, "slope": slope, "radii": radii.tolist(),
@@ -110,15 +110,17 @@ def main():
     parser.add_argument("--only", choices=["ours", "genesis"])
     parser.add_argument("--angles", nargs="+", type=float, default=[30.0, 45.0], help="friction angles, degrees")
     parser.add_argument("--steps", type=int, default=500, help="steps of 2 ms")
+    parser.add_argument("--frictions", nargs="*", type=float, default=list(PLANE_FRICTIONS),
+                        help="the plane's coup_friction in the runs on a plane (both engines)")
     parser.add_argument("--worker", nargs=4, metavar=("ENGINE", "ANGLE", "FRICTION", "OUT"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
         engine, angle, friction, out = args.worker
-        return worker(engine, float(angle), float(friction) if engine == "genesis" else None, args.steps, out)
+        return worker(engine, float(angle), None if friction == "None" else float(friction), args.steps, out)
 
     pythons = {"ours": sys.executable, "genesis": genesis_python()}
-    runs = [("ours", None)] * (args.only != "genesis") + [("genesis", f) for f in GENESIS_FRICTIONS] * (
-        args.only != "ours" and pythons["genesis"] is not None)
+    runs = [("ours", f) for f in (None, *args.frictions)] * (args.only != "genesis") + [
+        ("genesis", f) for f in args.frictions] * (args.only != "ours" and pythons["genesis"] is not None)
     print(f"sand column r {RADIUS} m, h {HEIGHT} m, {DENSITY} cells/m, float64, {args.steps} steps of {DT} s; "
           f"Genesis: {pythons['genesis'] or 'not installed (set GENESIS_PYTHON)'}", flush=True)
     print(f"{'φ °':>5} | {'engine':>8} | {'floor':>24} | {'N':>5} | {'slope °':>7} | {'φ − slope':>9} | heights (cm) per 3.1 cm of radius")
@@ -126,7 +128,7 @@ def main():
         for angle in args.angles:
             for engine, friction in runs:
                 r = run_worker(pythons[engine], engine, angle, friction, args.steps, tmp)
-                floor = "sticky wall" if engine == "ours" else f"plane, coup_friction {friction:g}"
+                floor = "sticky wall" if friction is None else f"plane, coup_friction {friction:g}"
                 if "error" in r:
                     print(f"{angle:5.0f} | {engine:>8} | {floor:>24} | {r['error']}")
                     continue

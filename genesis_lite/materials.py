@@ -8,8 +8,8 @@ from .options import named_keywords
 from .solvers.core import InvalidInputError, refuse_grad
 
 
-@named_keywords("use_visual_raycasting", "needs_coup", "coup_friction",
-           "coup_softness", "coup_restitution", "sdf_cell_size", "sdf_min_res", "sdf_max_res", "coup_type", "coup_links", "enable_coup_collision", "coup_collision_links", "contact_resistance")
+@named_keywords("use_visual_raycasting", "sdf_cell_size", "sdf_min_res", "sdf_max_res", "coup_type", "coup_links",
+                "enable_coup_collision", "coup_collision_links", "contact_resistance")
 @dataclass
 class Rigid:
     """A rigid body. rho: density, kg/m³, of the shapes of links whose mass the asset does not
@@ -25,12 +25,19 @@ class Rigid:
     geom's condim); gravity_compensation: the share of every link's
     weight a force at its centre of mass cancels (Genesis's: 1 cancels gravity on the entity, 0
     none; above 1 lifts it, below 0 adds weight), None: the asset's (an MJCF body's ``gravcomp``,
-    else 0)."""
+    else 0). Coupling with MPM particles, as Genesis's (solvers/mpm/colliders.py): needs_coup
+    whether the entity's shapes meet them, coup_friction (≥ 0) their Coulomb friction,
+    coup_softness (m, ≥ 0) how far outside a shape its influence reaches, coup_restitution in
+    [0, 1] the share of the normal velocity bounced back."""
     rho: float = None
     friction: float = None
     gravity_compensation: float = None
     friction_torsional: float = None
     friction_rolling: float = None
+    needs_coup: bool = True
+    coup_friction: float = 0.1
+    coup_softness: float = 0.002
+    coup_restitution: float = 0.0
 
     def __post_init__(self):
         rho, friction = _real("materials.Rigid", "rho", self.rho), _real("materials.Rigid", "friction", self.friction)
@@ -52,6 +59,18 @@ class Rigid:
             if given is not None and not (value is not None and 0.0 <= value < float("inf")):
                 raise InvalidInputError(f"materials.Rigid: argument '{name}' must be a finite number >= 0 (m) "
                                         f"(or None), got {given!r}")
+            setattr(self, name, value)
+        if not isinstance(self.needs_coup, (bool, np.bool_)):
+            raise InvalidInputError(f"materials.Rigid: argument 'needs_coup' must be a bool, got {self.needs_coup!r}")
+        self.needs_coup = bool(self.needs_coup)
+        for name, upper in (("coup_friction", float("inf")), ("coup_softness", float("inf")),
+                            ("coup_restitution", 1.0)):
+            given = getattr(self, name)
+            value = _real("materials.Rigid", name, given)
+            if value is None or not 0.0 <= value <= upper or value == float("inf"):
+                bound = "in [0, 1]" if upper == 1.0 else ">= 0"
+                raise InvalidInputError(f"materials.Rigid: argument '{name}' must be a finite number {bound}, "
+                                        f"got {given!r}")
             setattr(self, name, value)
 
 

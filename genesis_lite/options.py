@@ -316,7 +316,7 @@ class MPMOptions(_TimeBased):
     particle_size: particle diameter, m; None: 0.01 · 64 / grid_density (resolved here, as
         Genesis). A particle's volume is particle_size³ and its mass rho · particle_size³.
     grid_density: grid cells per metre (dx = 1 / grid_density).
-    enable_CPIC: Genesis's compatible PIC for thin rigid colliders; only False (no coupling yet).
+    enable_CPIC: Genesis's compatible PIC for thin rigid colliders; only False (not yet).
     lower_bound, upper_bound: (3,) m, the domain. Its walls lie 3 cells inside it
         (wall_bounds()): particles are clamped to them, and a particle must start strictly
         between them.
@@ -349,7 +349,7 @@ class MPMOptions(_TimeBased):
                                           "a positive finite number (m) or None")
         if check_bool(owner, "enable_CPIC", self.enable_CPIC):
             raise InvalidInputError(f"{owner}: argument 'enable_CPIC' must be False: CPIC couples MPM with thin "
-                                    f"rigid objects, and genesis_lite has no MPM-rigid coupling yet, got True")
+                                    f"rigid objects, which genesis_lite does not have yet, got True")
         self.enable_CPIC = False
         self.lower_bound = _check_vec3(owner, "lower_bound", self.lower_bound)
         self.upper_bound = _check_vec3(owner, "upper_bound", self.upper_bound)

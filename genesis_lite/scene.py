@@ -25,6 +25,7 @@ from .options import MPMOptions, RigidOptions, SimOptions, ViewerOptions, VisOpt
 from .rigid_solver import RigidSolverView
 from .runtime import logger, require_init, runtime, track
 from .simulator import Simulator, refuse_inference_mode
+from .solvers.coupling import Coupling, static_colliders
 from .solvers.mpm.solver import MPMSolver
 from .solvers.rigid import merge, mjcf, scale, shapes, urdf
 from .solvers.rigid.solver import RigidSolver
@@ -248,13 +249,11 @@ class Scene:
         for camera in self._cameras:  # their env_idx checked before anything is allocated
             camera._bind_env()
         solvers = self._solvers()
-        if len(solvers) > 1:  # accepted, so say what does not happen yet
-            logger.warning("scene.build: rigid and MPM entities share the substep loop but do not interact yet (no "
-                           "rigid–MPM coupling): particles pass through rigid bodies and the rigid ground, and the MPM "
-                           "walls hold the particles only")
         sim = Simulator(self.sim_options, solvers)
         try:
             sim.build(self.n_envs)
+            if len(solvers) > 1:
+                self._couple()
         except Exception:  # e.g. a massless moving link: free the arrays allocated so far
             for solver in solvers:
                 solver.destroy()
@@ -266,6 +265,23 @@ class Scene:
             entity._on_build()
         for camera in self._cameras:
             camera._on_build()
+
+    def _couple(self):
+        """Rigid–MPM coupling (solvers/coupling.py): the coupled rigid shapes fixed to the world become
+        the MPM grid's colliders; the coupled shapes it cannot take yet are named in a warning."""
+        rigid = self._rigid_solver
+        couplings = [Coupling(e.material.coup_friction, e.material.coup_softness, e.material.coup_restitution)
+                     if e.material.needs_coup else None for e in self.entities if isinstance(e, RigidEntity)]
+        rows, left_out = static_colliders(rigid.model, couplings)
+        self.mpm_solver.set_colliders(rows)
+        if left_out:
+            names = [f"{kind} of link '{rigid.model.link_name[link]}' of entity "
+                     f"'{rigid.entity_names[rigid.model.link_entity[link]]}' ({why})" for link, kind, why in left_out]
+            logger.warning(f"scene.build: MPM particles pass through these rigid shapes: {'; '.join(names)}. The "
+                           f"particles meet the primitive shapes (plane, sphere, capsule, cylinder, box) of links "
+                           f"fixed to the world only (no rigid–MPM coupling with moving links, meshes or height "
+                           f"fields yet); materials.Rigid(needs_coup=False) leaves an entity out without this "
+                           f"warning")
 
     def _require_built(self, what):
         if self._destroyed:

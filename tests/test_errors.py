@@ -139,9 +139,9 @@ def test_file_meshes_are_zup(morph, file, resolved):
 
 def test_rigid_material_keywords():
     """An unknown keyword of gs.materials.Rigid is a named error (Python's TypeError named nothing),
-    and Genesis's own that genesis_lite does not have say so (its coupling ones come with coupling)."""
+    and Genesis's own that genesis_lite does not have say so (its SDF-grid and IPC ones)."""
     raises(gs.InvalidInputError, lambda: gs.materials.Rigid(foo=1), "Rigid", "'foo' is unknown", "'rho', 'friction'")
-    raises(gs.InvalidInputError, lambda: gs.materials.Rigid(coup_friction=0.5), "'coup_friction' is a Genesis option")
+    raises(gs.InvalidInputError, lambda: gs.materials.Rigid(sdf_cell_size=0.01), "'sdf_cell_size' is a Genesis option")
 
 
 def test_moving_massless_link_raises_at_build(f64, tmp_path):

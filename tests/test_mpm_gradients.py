@@ -49,10 +49,14 @@ class Rollout:
     Sand at F = 0.99 I: at F = I it would sit on its cone's apex, the kink between tension and
     compression, where round-off picks the branch)."""
 
-    def __init__(self, kind, params, n_envs, start, seed=0, requires_grad=True, sticky=False, throw=(0.0, 0.0, 0.0)):
-        """throw (3,) m/s: added to every particle's initial velocity."""
+    def __init__(self, kind, params, n_envs, start, seed=0, requires_grad=True, sticky=False, throw=(0.0, 0.0, 0.0),
+                 colliders=None):
+        """throw (3,) m/s: added to every particle's initial velocity; colliders: rigid shapes at rest
+        (solvers/mpm/colliders.py rows)."""
         self.solver = MPMSolver(DT, SUBSTEPS, (0.0, 0.0, -9.81), DENSITY, SPACING, LOWER, UPPER, sticky,
                                 requires_grad)
+        if colliders is not None:
+            self.solver.set_colliders(colliders)
         lattice = np.arange(5) * SPACING
         block = np.stack(np.meshgrid(lattice, lattice, lattice, indexing="ij"), -1).reshape(-1, 3)
         jp = 0.0 if kind == "sand" else 1.0  # Sand's Jp is a log-volume correction (Genesis's _default_Jp)
@@ -185,12 +189,17 @@ def test_walls_match_fd(sticky):
 
 
 def test_gradients_are_bitwise_reproducible():
-    """Repeated rollouts, and env 0 of a batch against a single-env scene, give the same bits."""
-    single = Rollout("neohooken", {}, 0, "generic")
+    assert_bitwise_reproducible()
+
+
+def assert_bitwise_reproducible(**rollout_args):
+    """Repeated rollouts, and env 0 of a batch against a single-env scene, give the same bits
+    (neohooken blocks; rollout_args: more of Rollout's arguments)."""
+    single = Rollout("neohooken", {}, 0, "generic", **rollout_args)
     first, again = single.gradients(), single.gradients()
     assert torch.equal(first[0], again[0])
     assert all(torch.equal(first[1][name], again[1][name]) for name in first[1])
-    batch = Rollout("neohooken", {}, 2, "generic", seed=5)  # env 1 differs; env 0 ← the single scene's
+    batch = Rollout("neohooken", {}, 2, "generic", seed=5, **rollout_args)  # env 1 differs; env 0 ← the single's
     batch.state[0], batch.weights[0] = single.state[0], single.weights[0]
     for name in batch.inputs:
         batch.inputs[name][0] = single.inputs[name][0]

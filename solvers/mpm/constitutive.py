@@ -96,7 +96,7 @@ def encode(kind_name, params):
     return KIND[kind_name], consts
 
 
-def _genesis_eps():
+def genesis_eps():
     """Genesis's gs.EPS for the current float type (the guard inside its norms)."""
     return max(1e-15, unit_roundoff())
 
@@ -161,7 +161,7 @@ def _von_mises(ys, mu, sig):
     dfloor = ti.select(sig > _VON_MISES_FLOOR, 1.0, 0.0)
     eps = ti.log(floor)
     eps_hat = eps - eps.sum() / 3.0
-    norm = ti.sqrt(eps_hat.norm_sqr() + ti.static(_genesis_eps()))
+    norm = ti.sqrt(eps_hat.norm_sqr() + ti.static(genesis_eps()))
     moved = 0
     f = sig
     df = ti.Matrix.identity(float, 3)
@@ -199,7 +199,7 @@ def _sand(alpha, mu, lam, sig, Jp):
         dJp_new = ti.Vector.zero(float, 3)
         dJp_new_dJp = 0.0
         eps_hat = eps - trace / 3.0
-        norm = ti.sqrt(eps_hat.norm_sqr() + ti.static(_genesis_eps()))
+        norm = ti.sqrt(eps_hat.norm_sqr() + ti.static(genesis_eps()))
         kappa = (3.0 * lam + 2.0 * mu) / (2.0 * mu)
         gamma = norm + kappa * trace * alpha
         f = ti.exp(eps - (ti.max(0.0, gamma) / norm) * eps_hat)

@@ -1,10 +1,12 @@
-"""The grid update: nodal momentum to velocity, gravity, and the domain walls (Genesis's grid op);
-then the touched nodes are cleared for the next substep; and the update's adjoint.
+"""The grid update: nodal momentum to velocity, gravity, the rigid colliders and the domain
+walls (Genesis's grid op); then the touched nodes are cleared for the next substep; and the
+update's adjoint.
 
-Forward, per listed node i: v_i = mask_i ⊙ (P_i / M_i + h g), mask_i zeroing the components a
-wall stops. The adjoint reads the mask off the updated grid (see ``wall_mask``), so the grid a
-replay keeps (its listed nodes' (v, M), ``saved_grid``, and the list, ``saved_nodes``) is all
-the reverse needs: ``restore_stage`` puts it back.
+Forward, per listed node i: v_i = mask_i ⊙ collide(P_i / M_i + h g), collide the rigid shapes at
+rest (colliders.py; none: the identity), mask_i zeroing the components a wall stops. The adjoint
+reads the mask off the updated grid (see ``wall_mask``), so the grid a replay keeps (its listed
+nodes' (v, M), with colliders also the velocity they were given, ``saved_grid``, and the list,
+``saved_nodes``) is all the reverse needs: ``restore_stage`` puts it back.
 
 The loops that only move, add or zero the listed nodes' values (``serial``, a compile-time
 argument: in a single-env scene on the CPU, solver.SERIAL_CHORE_ENVS) and those over the envs'
@@ -17,6 +19,7 @@ substep's small tasks went from 0.15 to 0.05 ms (medians; kernel profiler). The 
 """
 import taichi as ti
 
+from .colliders import collide, collide_adjoint
 from .stencil import node_count, node_at, node_vector
 
 
@@ -55,22 +58,27 @@ def largest_count(active: ti.template()):
 
 
 @ti.func
-def grid_stage(grid: ti.template(), active: ti.template(), gravity: ti.template(), grid_f: ti.template(),
-               grid_i: ti.template(), saved_grid: ti.template(), saved_nodes: ti.template(), keep):
-    """Momentum → velocity, gravity, then the walls (Genesis's grid op, restitution 0). When
-    keep ≥ 0 (a replay), the updated grid is also kept for the reverse: its listed nodes' (v, M)
-    and the lists into slot ``keep`` of saved_grid / saved_nodes, as far as their capacity goes
-    (the counts are kept whole: the solver grows the capacity and replays again when one
-    exceeds it)."""
+def grid_stage(colliders: ti.template(), grid: ti.template(), active: ti.template(), gravity: ti.template(),
+               grid_f: ti.template(), grid_i: ti.template(), saved_grid: ti.template(), saved_nodes: ti.template(),
+               keep):
+    """Momentum → velocity, gravity, the rigid colliders (colliders.py; compiled in when ``colliders``),
+    then the walls (Genesis's grid op, restitution 0). When keep ≥ 0 (a replay), the updated grid is
+    also kept for the reverse: its listed nodes' (v, M), and with colliders the velocity before them
+    (3), and the lists into slot ``keep`` of saved_grid / saved_nodes, as far as their capacity goes
+    (the counts are kept whole: the solver grows the capacity and replays again when one exceeds
+    it)."""
     h, dx, K = grid_f[0], 1.0 / grid_f[1], node_count(grid_i)
     B = active.shape[0] - 1
     for e, k in ti.ndrange(B, active[B, 0]):
         if k < active[e, 0]:
             n = active[e, k + 1]
             at = node_at(e, n, K)
-            v = node_vector(grid, at) / grid[at + 3]
-            v += h * ti.Vector([gravity[e, 0], gravity[e, 1], gravity[e, 2]])
-            v = wall_velocity(node_position(n, dx, grid_i), v, grid_f, grid_i[6])
+            free = node_vector(grid, at) / grid[at + 3] + h * ti.Vector([gravity[e, 0], gravity[e, 1], gravity[e, 2]])
+            pos = node_position(n, dx, grid_i)
+            v = free
+            if ti.static(colliders):
+                v = collide(grid_f, grid_i[7], pos, free)
+            v = wall_velocity(pos, v, grid_f, grid_i[6])
             for c in ti.static(range(3)):
                 grid[at + c] = v[c]
             if keep >= 0 and k < saved_grid.shape[2]:
@@ -78,6 +86,9 @@ def grid_stage(grid: ti.template(), active: ti.template(), gravity: ti.template(
                 for c in ti.static(range(3)):
                     saved_grid[keep, e, k, c] = v[c]
                 saved_grid[keep, e, k, 3] = grid[at + 3]
+                if ti.static(colliders):  # their input, for their adjoint
+                    for c in ti.static(range(3)):
+                        saved_grid[keep, e, k, 4 + c] = free[c]
     if keep >= 0:
         for e in range(B + 1):
             saved_nodes[keep, e, 0] = active[e, 0]
@@ -156,11 +167,12 @@ def wall_mask(pos, v, grid_f: ti.template(), sticky):
 
 
 @ti.func
-def grid_adjoint_stage(grid: ti.template(), grad_grid: ti.template(), active: ti.template(), gravity: ti.template(),
-                       grid_f: ti.template(), grid_i: ti.template()):
-    """Reverse of the update, per listed node (parallel): grad_grid's velocity gradient (0:3) →
-    (∂L/∂P (0:3), ∂L/∂M (3)); the grid's velocity is replaced by mask ⊙ ∂L/∂v for the gravity
-    sum (gravity_adjoint_stage)."""
+def grid_adjoint_stage(colliders: ti.template(), grid: ti.template(), grad_grid: ti.template(), active: ti.template(),
+                       gravity: ti.template(), grid_f: ti.template(), grid_i: ti.template(), saved_grid: ti.template(),
+                       s):
+    """Reverse of substep s's update, per listed node (parallel): grad_grid's velocity gradient
+    (0:3) → (∂L/∂P (0:3), ∂L/∂M (3)); the grid's velocity is replaced by the gradient of the
+    velocity after gravity, for the gravity sum (gravity_adjoint_stage)."""
     h, dx, K = grid_f[0], 1.0 / grid_f[1], node_count(grid_i)
     B = active.shape[0] - 1
     for e, k in ti.ndrange(B, active[B, 0]):
@@ -169,9 +181,13 @@ def grid_adjoint_stage(grid: ti.template(), grad_grid: ti.template(), active: ti
             at = node_at(e, n, K)
             v = node_vector(grid, at)
             mass = grid[at + 3]
-            g_v = wall_mask(node_position(n, dx, grid_i), v, grid_f, grid_i[6]) * node_vector(grad_grid, at)
-            # where the mask passes, v = P / M + h g: P / M = v − h g
-            velocity = v - h * ti.Vector([gravity[e, 0], gravity[e, 1], gravity[e, 2]])
+            pos = node_position(n, dx, grid_i)
+            g_v = wall_mask(pos, v, grid_f, grid_i[6]) * node_vector(grad_grid, at)
+            free = v  # where the mask passes and no collider acts, v = P / M + h g
+            if ti.static(colliders):
+                free = ti.Vector([saved_grid[s, e, k, 4 + c] for c in ti.static(range(3))])
+                g_v = collide_adjoint(grid_f, grid_i[7], pos, free, g_v)
+            velocity = free - h * ti.Vector([gravity[e, 0], gravity[e, 1], gravity[e, 2]])  # P / M
             for c in ti.static(range(3)):
                 grad_grid[at + c] = g_v[c] / mass
                 grid[at + c] = g_v[c]

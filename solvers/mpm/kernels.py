@@ -24,22 +24,25 @@ costs far less than indexing a 3- or 4-d ndarray (B and N are read off ``params`
 - ``part_grid`` (B, K, 4, flat), ``part_nodes`` (B + 1, K + 1) int: the second half of the
   particles' scatter (p2g's, then in the reverse g2p's) and its node list, added into grid
   (grad_grid) at once and zeroed (stencil.scatter_spread);
-- ``grid_f`` (9,): h (s), inv_dx (1/m), vol (m³), walls' lower (3) and upper (3) corners (m);
-- ``grid_i`` (7,): the grid's lowest node in cells (3), nodes per axis (3), sticky walls (0/1);
+- ``grid_f`` (9 + 19 C,): h (s), inv_dx (1/m), vol (m³), walls' lower (3) and upper (3) corners
+  (m), then C rigid colliders' rows (colliders.py);
+- ``grid_i`` (8,): the grid's lowest node in cells (3), nodes per axis (3), sticky walls (0/1), C;
 - ``flags`` (1,) int: set to 1 when a particle's new state is not finite;
 - what a replay keeps for the reverse, per substep s (1-sized dummies when the solver does not
-  differentiate): ``gathered`` (S, B, N, 3, flat) each particle's gathered velocity (m/s, before
-  the walls); ``saved_grid`` (S, B, cap, 4) the updated grid's listed nodes, (v (3) m/s, M kg) in
-  list order; ``saved_nodes`` (S, B + 1, cap + 1) int their lists, laid out as ``active`` (the
-  counts are whole even where they exceed cap: the solver then grows cap and replays again).
+  differentiate): ``gathered`` (S, B, N, 3, flat) each particle's gathered velocity (m/s, before the
+  walls); ``saved_grid`` (S, B, cap, 4 or 7) the updated grid's listed nodes, (v (3) m/s, M kg, with
+  colliders the velocity before them (3)) in list order; ``saved_nodes`` (S, B + 1, cap + 1) int
+  their lists, laid out as ``active`` (the counts are whole even where they exceed cap: the solver
+  then grows cap and replays again).
 
 The forward kernels take, after the arrays, src and dst (frames) and keep: −1 in a plain step, s
 in a replay of substep s (which then keeps what the reverse reads; a plain step pays nothing).
-Every kernel's compile-time argument is a scene's ``config`` = (takes_svd, serial): whether any
-of its materials takes an SVD (p2g.stress_stage: pairs of particles with interleaved SVDs, or one
-particle at a time with none; only the kernels that run the stress, STRESS_KERNELS, are bound
-with it, the others with False), and whether the grid's chores (adding, copying, zeroing listed
-nodes) run on the calling thread (grid.py; solver.SERIAL_CHORE_ENVS).
+Every kernel's compile-time argument is a scene's ``config`` = (takes_svd, serial, colliders):
+whether any of its materials takes an SVD (p2g.stress_stage: pairs of particles with interleaved
+SVDs, or one particle at a time with none; only the kernels that run the stress, STRESS_KERNELS,
+are bound with it, the others with False), whether the grid's chores (adding, copying, zeroing
+listed nodes) run on the calling thread (grid.py; solver.SERIAL_CHORE_ENVS), and whether the grid
+meets rigid colliders (colliders.py; a scene without them compiles none of their code).
 
 The reverse kernels (REVERSE_KERNELS) take five more arrays:
 - ``grads`` (1, B, N, 25, flat): the gradient of the loss w.r.t. a frame's particle rows — of
@@ -86,7 +89,7 @@ def substep(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, c
     scatter_stage(frames, params, affine, grid, active, part_grid, part_nodes, grid_f, grid_i, src, ti.max(keep, 0))
     merge_stage(config[1], grid, active, part_grid, part_nodes, grid_i)
     largest_count(active)
-    grid_stage(grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
+    grid_stage(config[2], grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
     gather_stage(frames, params, grid, grid_f, grid_i, flags, gathered, src, dst, keep)
     clear_stage(config[1], grid, active, grid_i)
 
@@ -109,7 +112,7 @@ def post_coupling(config: ti.template(), frames: A, params: A, gravity: A, kinds
                   grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                   src: ti.i32, dst: ti.i32, keep: ti.i32):
     """The rest of the substep: grid update, g2p, grid cleared."""
-    grid_stage(grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
+    grid_stage(config[2], grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
     gather_stage(frames, params, grid, grid_f, grid_i, flags, gathered, src, dst, keep)
     clear_stage(config[1], grid, active, grid_i)
 
@@ -155,7 +158,7 @@ def post_coupling_backward(config: ti.template(), frames: A, params: A, gravity:
     restore_stage(config[1], grid, active, saved_grid, saved_nodes, grid_i, src)
     gather_adjoint_stage(config[1], frames, params, grid, gathered, grads, scratch, grad_grid, part_grid, active,
                          grid_f, grid_i, src)
-    grid_adjoint_stage(grid, grad_grid, active, gravity, grid_f, grid_i)
+    grid_adjoint_stage(config[2], grid, grad_grid, active, gravity, grid_f, grid_i, saved_grid, src)
     gravity_adjoint_stage(config[1], grid, active, grad_gravity, grid_f, grid_i)
 
 

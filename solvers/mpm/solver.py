@@ -11,7 +11,7 @@ import torch
 from ..base import Solver
 from ..core import InvalidInputError, available_memory, new_state, runtime, warn_user
 from ..launch import BoundKernels
-from . import kernels, layout
+from . import colliders, kernels, layout
 from .adjoint import MPMAdjoint
 from .constitutive import any_needs_svd, encode
 from .model import EntitySpec, Grid, MPMModel
@@ -53,6 +53,17 @@ class MPMSolver(MPMAdjoint, Solver):
         self.model = MPMModel(grid, self.particle_size ** 3, bool(sticky))
         self.entity_names = []
         self.wall_lower, self.wall_upper = grid.wall_lower, grid.wall_upper
+        self.collider_rows = np.zeros((0, colliders.WIDTH))
+
+    def set_colliders(self, rows):
+        """Rigid shapes at rest the grid meets (colliders.py rows (C, colliders.WIDTH)), before the
+        first step."""
+        self.collider_rows = np.asarray(rows, dtype=np.float64).reshape(-1, colliders.WIDTH)
+        if hasattr(self, "grid_f"):  # built: the boundary arrays again
+            self._allocate_boundaries()
+            if self.requires_grad:
+                self._allocate_saved_grid(self.saved_grid.shape[2])
+            self._bind()
 
     # -- building ---------------------------------------------------------------------------
     def add_entity(self, name, kind, params, E, nu, rho, Jp, positions):
@@ -201,10 +212,7 @@ class MPMSolver(MPMAdjoint, Solver):
         self.grid = floats(B, g.n_nodes, 4)
         self.active = ints(B + 1, g.n_nodes + 1)
         self.part_grid, self.part_nodes = floats(B, g.n_nodes, 4), ints(B + 1, g.n_nodes + 1)  # p2g's second half
-        h = self.dt / self.substeps
-        self.grid_f = torch.as_tensor([h, g.density, m.vol, *g.wall_lower, *g.wall_upper], dtype=runtime.tc_float,
-                                      device=runtime.device)
-        self.grid_i = torch.as_tensor([*g.lowest, *g.res, int(m.sticky)], dtype=torch.int32, device=runtime.device)
+        self._allocate_boundaries()
         self.flags = ints(1)
         self.current = 0  # the frame holding the current state
         self.replaying = False  # set by begin_reverse until the replay's end_step: keep what the reverse reads
@@ -214,6 +222,18 @@ class MPMSolver(MPMAdjoint, Solver):
             self.svd, self.gathered = floats(1, 1, 1, 21), floats(1, 1, 1, 3)
             self.saved_grid, self.saved_nodes = floats(1, 1, 1, 4), ints(1, 1, 1)
         self._bind()
+
+    @property
+    def has_colliders(self):
+        return len(self.collider_rows) > 0
+
+    def _allocate_boundaries(self):
+        """grid_f and grid_i (kernels.py): the step, the grid, the walls and the colliders."""
+        m, g = self.model, self.model.grid
+        self.grid_f = torch.as_tensor([self.dt / self.substeps, g.density, m.vol, *g.wall_lower, *g.wall_upper,
+                                       *self.collider_rows.ravel()], dtype=runtime.tc_float, device=runtime.device)
+        self.grid_i = torch.as_tensor([*g.lowest, *g.res, int(m.sticky), len(self.collider_rows)], dtype=torch.int32,
+                                      device=runtime.device)
 
     def _arrays(self):
         """The forward kernels' arrays, in their order; the particle rows and the grids flat
@@ -228,8 +248,9 @@ class MPMSolver(MPMAdjoint, Solver):
         arrays = self._arrays()
         dims = [0] * len(arrays)
         takes_svd = any_needs_svd(self.model.kinds, self.model.consts)
-        self.kernels = BoundKernels((False, self.serial_chores), arrays, dims, *kernels.KERNELS).bind(
-            (takes_svd, self.serial_chores), arrays, dims, *kernels.STRESS_KERNELS)
+        self.kernels = BoundKernels((False, self.serial_chores, self.has_colliders), arrays, dims,
+                                    *kernels.KERNELS).bind((takes_svd, self.serial_chores, self.has_colliders), arrays,
+                                                           dims, *kernels.STRESS_KERNELS)
         if self.requires_grad:
             self._bind_reverse()
 

@@ -50,10 +50,12 @@ class RigidModel:
     frame; a mesh's hull vertex mean), geom_mesh (G,) its mesh number (-1: none), the meshes'
     convex hulls as hull_vec (H, 3) and hull_int (HI,) (geometry.hull_arrays), geom_friction (G, 3)
     (sliding Coulomb coefficient, torsional m, rolling m), geom_solref (G, 2) and geom_solimp
-    (G, 5) the asset's (NaN rows: the scene's default). Per candidate geom pair (N): pair_geom1/pair_geom2 (ordered as MuJoCo
-    orders them), pair_condim (1, 3, 4 or 6), pair_mix the weight of geom1's solref and solimp in the
-    pair's (1 − it geom2's), pair_copy 1 where the geoms' priorities differ (the pair copies the
-    higher one's friction, solref and solimp: pair_mix 1 or 0 says whose), else 0 (solimp mixed,
+    (G, 5) the asset's (NaN rows: the scene's default), geom_collides (G,) bool whether its contype or
+    conaffinity is set (else it is in no pair: a morph with collision=False). Per candidate geom
+    pair (N): pair_geom1/pair_geom2 (ordered as MuJoCo orders them), pair_condim (1, 3, 4 or 6),
+    pair_mix the weight of geom1's solref and solimp in the pair's (1 − it geom2's), pair_copy 1
+    where the geoms' priorities differ (the pair copies the higher one's friction, solref and
+    solimp: pair_mix 1 or 0 says whose), else 0 (solimp mixed,
     solref mixed in the standard form and the smaller in the direct form, friction the larger:
     MuJoCo's mj_contactParam), pair_margin m.
     Per joint equality (E; URDF mimic joints, LinkSpec.mimic): eq_dof1 (E,) the following joint's
@@ -122,6 +124,7 @@ class RigidModel:
     geom_friction: np.ndarray
     geom_solref: np.ndarray
     geom_solimp: np.ndarray
+    geom_collides: np.ndarray
     pair_geom1: np.ndarray
     pair_geom2: np.ndarray
     pair_condim: np.ndarray
@@ -510,6 +513,7 @@ def _geoms(geoms, geom_links, geom_names):
     for name, n in (("solref", 2), ("solimp", 5)):
         out[f"geom_{name}"] = np.array([np.full(n, np.nan) if getattr(g, name) is None else getattr(g, name)
                                         for g in geoms], dtype=np.float64).reshape(-1, n)
+    out["geom_collides"] = np.array([bool(g.contype or g.conaffinity) for g in geoms], dtype=bool)
     return out
 
 

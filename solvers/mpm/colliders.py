@@ -1,0 +1,176 @@
+"""Rigid shapes at rest that the MPM grid meets: the rigid side of Genesis's rigid–MPM coupling
+(its LegacyCoupler) for shapes fixed to the world — a ground plane, a table, an obstacle — and
+its adjoint.
+
+In the grid update, after gravity and before the walls (Genesis's order), each node's velocity v
+meets every collider in turn. With the collider's signed distance d and outward unit normal n at
+the node (analytic: plane, sphere, capsule, cylinder, box) and the rigid material's coupling
+friction μ, softness ς and restitution e (coup_friction, coup_softness, coup_restitution), as
+Genesis's ``_func_collide_in_rigid_geom`` with the rigid velocity zero:
+
+    w = min(exp(−d / max(ς, 1e-10)), 1)                    the collider's influence
+    where w > 0.1 and v·n < 0 (moving into the shape):
+        t = v − (v·n) n,  T = sqrt(|t|² + ε)               tangential part (ε: Genesis's gs.EPS)
+        t' = t / T · max(0, T + μ v·n)                      Coulomb: slowed by μ times the normal stop
+        v ← w (t' − e (v·n) n) + (1 − w) v
+
+A collider is at rest and a node does not move, so d, n and w are constants of the node: the map
+is of v alone, piecewise smooth (kinks where v·n = 0 and where the friction stops the node), and
+its adjoint (``collide_adjoint``) replays the colliders before each one to find its input.
+
+Rows live in ``grid_f`` after the walls (COLLIDERS_AT, WIDTH numbers each: kind, position (3) m,
+rotation (9, row-major, world from shape), size (3) m, μ, ς, e), their count in ``grid_i[7]``.
+Sizes follow the rigid geoms' (MuJoCo's) convention: sphere (radius), capsule (radius, half
+length of the segment along z), cylinder (radius, half height along z), box (half sizes); a
+plane is the half-space below its z = 0 plane (infinite, as in Genesis).
+"""
+import taichi as ti
+
+from .constitutive import genesis_eps
+
+PLANE, SPHERE, CAPSULE, CYLINDER, BOX = range(5)
+WIDTH = 19
+COLLIDERS_AT = 9  # grid_f: h, inv_dx, vol, the walls' lower (3) and upper (3) corners, then the colliders
+INFLUENCE_CUTOFF = 0.1  # Genesis's: a collider acts on a node where its influence exceeds this
+
+
+@ti.func
+def _rotation(grid_f: ti.template(), at):
+    return ti.Matrix([[grid_f[at + 4 + 3 * i + j] for j in ti.static(range(3))] for i in ti.static(range(3))])
+
+
+@ti.func
+def _box_distance(p, half):
+    """(d, n) of the point p (3,) in a box's frame: exact distance outside (to the nearest face,
+    edge or corner), the nearest face's inside."""
+    q = ti.abs(p) - half
+    side = ti.Vector([1.0 if p[i] >= 0.0 else -1.0 for i in ti.static(range(3))])
+    out = ti.max(q, 0.0)
+    d = out.norm()
+    n = ti.Vector([0.0, 0.0, 1.0])
+    if d > 0.0:
+        n = side * out / d
+    else:
+        axis, d = 0, q[0]
+        for i in ti.static(range(1, 3)):
+            if q[i] > d:
+                axis, d = i, q[i]
+        n = ti.Vector([side[i] if i == axis else 0.0 for i in ti.static(range(3))])
+    return d, n
+
+
+@ti.func
+def _cylinder_distance(p, radius, half_height):
+    """(d, n) of the point p (3,) in a cylinder's frame (axis z): exact, with the rim's corner
+    region outside."""
+    rho = ti.sqrt(p[0] * p[0] + p[1] * p[1])
+    radial = ti.Vector([1.0, 0.0, 0.0])  # (on the axis: any direction across it)
+    if rho > 0.0:
+        radial = ti.Vector([p[0] / rho, p[1] / rho, 0.0])
+    axial = ti.Vector([0.0, 0.0, 1.0 if p[2] >= 0.0 else -1.0])
+    d_side, d_cap = rho - radius, ti.abs(p[2]) - half_height
+    d = ti.max(d_side, d_cap)
+    n = axial
+    if d_side > 0.0 and d_cap > 0.0:
+        d = ti.sqrt(d_side * d_side + d_cap * d_cap)
+        n = (d_side * radial + d_cap * axial) / d
+    elif d_side > d_cap:
+        n = radial
+    return d, n
+
+
+@ti.func
+def signed_distance(grid_f: ti.template(), at, x):
+    """(d m, n (3,) world) of the point x (3,) m to the collider whose row starts at grid_f[at]."""
+    kind = ti.cast(grid_f[at], ti.i32)
+    R = _rotation(grid_f, at)
+    p = R.transpose() @ (x - ti.Vector([grid_f[at + 1], grid_f[at + 2], grid_f[at + 3]]))
+    a, b = grid_f[at + 13], grid_f[at + 14]
+    d, n = p[2], ti.Vector([0.0, 0.0, 1.0])  # PLANE
+    if kind == SPHERE:
+        r = p.norm()
+        d = r - a
+        if r > 0.0:
+            n = p / r
+    elif kind == CAPSULE:
+        q = p - ti.Vector([0.0, 0.0, ti.min(ti.max(p[2], -b), b)])
+        r = q.norm()
+        d, n = r - a, ti.Vector([1.0, 0.0, 0.0])
+        if r > 0.0:
+            n = q / r
+    elif kind == CYLINDER:
+        d, n = _cylinder_distance(p, a, b)
+    elif kind == BOX:
+        d, n = _box_distance(p, ti.Vector([a, b, grid_f[at + 15]]))
+    return d, R @ n
+
+
+@ti.func
+def _contact(grid_f: ti.template(), c, x):
+    """(acts, n, w, μ, e) of collider c at the node x: acts where its influence w passes the cutoff."""
+    at = COLLIDERS_AT + c * WIDTH
+    d, n = signed_distance(grid_f, at, x)
+    w = ti.min(ti.exp(-d / ti.max(grid_f[at + 17], 1e-10)), 1.0)
+    return w > INFLUENCE_CUTOFF, n, w, grid_f[at + 16], grid_f[at + 18]
+
+
+@ti.func
+def _respond(v, n, w, mu, e):
+    """The node's velocity after one collider (the module's rule; v unchanged unless v·n < 0)."""
+    out = v
+    vn = v.dot(n)
+    if vn < 0.0:
+        t = v - vn * n
+        T = ti.sqrt(t.dot(t) + ti.static(genesis_eps()))
+        slid = t / T * ti.max(0.0, T + vn * mu)
+        out = w * (slid - e * vn * n) + (1.0 - w) * v
+    return out
+
+
+@ti.func
+def _respond_adjoint(v, n, w, mu, e, g):
+    """∂L/∂v of _respond at v from g = ∂L/∂(its output)."""
+    out = g
+    vn = v.dot(n)
+    if vn < 0.0:
+        t = v - vn * n
+        T = ti.sqrt(t.dot(t) + ti.static(genesis_eps()))
+        G = w * g
+        g_vn = -e * n.dot(G)
+        g_t = ti.Vector.zero(float, 3)
+        if T + vn * mu > 0.0:  # slid = t (1 + μ vn / T)
+            tg = t.dot(G)
+            g_t = (1.0 + mu * vn / T) * G - (mu * vn * tg / (T * T * T)) * t
+            g_vn += mu * tg / T
+        out = (1.0 - w) * g + g_t - n.dot(g_t) * n + g_vn * n
+    return out
+
+
+@ti.func
+def collide(grid_f: ti.template(), count, x, v):
+    """The velocity v (3,) m/s of the node at x (3,) m after the ``count`` colliders, in order."""
+    out = v
+    for c in range(count):
+        acts, n, w, mu, e = _contact(grid_f, c, x)
+        if acts:
+            out = _respond(out, n, w, mu, e)
+    return out
+
+
+@ti.func
+def collide_adjoint(grid_f: ti.template(), count, x, v, g):
+    """∂L/∂v of ``collide`` at the node x whose velocity before the colliders was v, from
+    g = ∂L/∂(its output): collider c's input is found by replaying colliders 0 … c − 1 (a node
+    meets few)."""
+    out = g
+    for back in range(count):
+        c = count - 1 - back
+        acts, n, w, mu, e = _contact(grid_f, c, x)
+        if acts:
+            before = v
+            for k in range(c):
+                acts_k, n_k, w_k, mu_k, e_k = _contact(grid_f, k, x)
+                if acts_k:
+                    before = _respond(before, n_k, w_k, mu_k, e_k)
+            out = _respond_adjoint(before, n, w, mu, e, out)
+    return out

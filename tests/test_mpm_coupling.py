@@ -1,0 +1,244 @@
+"""Rigid–MPM coupling with rigid shapes at rest (solvers/mpm/colliders.py, solvers/coupling.py):
+the particles meet the primitive shapes of links fixed to the world by Genesis's rule.
+
+Checked against references no one here wrote: Genesis 1.4.5 moves the particles the same (its
+positions stored by bench/coupling.py); a plane without friction or softness is the MPM
+walls' slip boundary (Genesis's and ours), bit for bit up to round-off; a block on an incline
+slides with Coulomb's acceleration g (sin θ − μ cos θ) or sticks where μ > tan θ; particles dropped
+on each primitive end outside it (trimesh's signed distance). Gradients: float64 central finite
+differences through every shape, with friction, restitution and partial influence, and the bits
+of a repeated or batched rollout.
+"""
+import json
+import os
+import runpy
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+
+import genesis_lite as gs
+from genesis_lite.solvers.core import InvalidInputError
+from genesis_lite.solvers.mpm import colliders as C
+
+from .conftest import warns
+from .test_mpm_gradients import Rollout, assert_bitwise_reproducible, check_all
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+@pytest.fixture(scope="module", autouse=True)
+def f64_module():
+    gs.init(precision="64", logging_level="warning")
+
+
+def rotation(axis, degrees):
+    """(3, 3) rotation about the unit axis (3,) by degrees."""
+    axis = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
+    a = np.radians(degrees)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
+
+
+def collider(kind, pos, rot, size, friction=0.3, softness=0.002, restitution=0.2):
+    return [kind, *pos, *np.asarray(rot).ravel(), *size, friction, softness, restitution]
+
+
+# under the gradient tests' block (x, y in ±4 cm, z from 10.4 to 18.4 cm, floor wall at 9.4 cm),
+# thrown down at 3 m/s: each shape turned off the grid's axes, reached in the 20 steps
+SHAPES = {
+    "plane": collider(C.PLANE, (0.0, 0.0, 0.1), rotation((1, 2, 0), 15), (0, 0, 0)),
+    "sphere": collider(C.SPHERE, (0.01, -0.005, 0.07), np.eye(3), (0.035, 0, 0)),
+    "capsule": collider(C.CAPSULE, (0.0, 0.0, 0.085), rotation((0, 1, 0.3), 80), (0.015, 0.03, 0)),
+    "cylinder": collider(C.CYLINDER, (0.0, 0.01, 0.08), rotation((1, 0, 0.2), 70), (0.02, 0.04, 0)),
+    "box": collider(C.BOX, (0.0, 0.0, 0.08), rotation((1, 0.5, 0.2), 10), (0.05, 0.03, 0.02)),
+}
+
+
+@pytest.mark.parametrize("shape", list(SHAPES))
+def test_gradients_through_each_shape_match_fd(shape):
+    rollout = Rollout("neohooken", {}, 0, "generic", seed=2, throw=(0.0, 0.0, -3.0), colliders=[SHAPES[shape]])
+    free = Rollout("neohooken", {}, 0, "generic", seed=2, throw=(0.0, 0.0, -3.0))
+    met = rollout.run(rollout.state, rollout.inputs)[0] - free.run(free.state, free.inputs)[0]
+    assert abs(met) > 1.0, f"{shape}: the block must meet the shape (loss changed by {met})"
+    check_all(rollout, rollout.gradients(), shape, per_particle_only=True)
+
+
+@pytest.mark.parametrize("friction, softness, restitution", [(0.0, 0.0, 0.0), (2.0, 0.01, 0.0), (0.5, 0.0, 1.0)])
+def test_gradients_with_other_coupling_parameters_match_fd(friction, softness, restitution):
+    """No friction and a sharp surface; friction that stops nodes with a wide partial influence;
+    a full bounce: with a plane and a box, which a node may meet both of."""
+    shapes = [collider(C.PLANE, (0.0, 0.0, 0.1), rotation((1, 2, 0), 15), (0, 0, 0), friction, softness, restitution),
+              collider(C.BOX, (0.02, 0.0, 0.1), rotation((0, 0, 1), 30), (0.02, 0.02, 0.02), friction, softness,
+                       restitution)]
+    rollout = Rollout("neohooken", {}, 0, "generic", seed=3, throw=(0.0, 0.0, -3.0), colliders=shapes)
+    check_all(rollout, rollout.gradients(), f"μ={friction} ς={softness} e={restitution}", per_particle_only=True)
+
+
+def test_gradients_with_colliders_are_bitwise_reproducible_and_batched_as_single():
+    assert_bitwise_reproducible(throw=(0.0, 0.0, -3.0), colliders=[SHAPES["plane"], SHAPES["box"]])
+
+
+# -- scenes --------------------------------------------------------------------------------------
+
+DX = 1 / 32
+
+
+def block_scene(rigid=None, material=None, lower_z=-0.2, euler=(0, 0, 0), requires_grad=False):
+    """A 10 cm elastic block (2 cm particles, 32 cells/m) at z 0.15–0.25 m above a rigid entity
+    ``rigid`` (a morph; None: none) of ``material``; the MPM domain's floor wall 3 cells above
+    lower_z."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=2e-3, substeps=8, requires_grad=requires_grad),
+                     mpm_options=gs.options.MPMOptions(lower_bound=(-0.5, -0.5, lower_z), upper_bound=(0.5, 0.5, 0.6),
+                                                       grid_density=32, particle_size=0.02))
+    if rigid is not None:
+        scene.add_entity(rigid, material=material or gs.materials.Rigid())
+    block = scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.2), size=(0.1, 0.1, 0.1), euler=euler),
+                             material=gs.materials.MPM.Elastic(E=3e4))
+    return scene, block
+
+
+def trajectory(scene, block, steps, velocity=(0.0, 0.0, 0.0)):
+    scene.build()
+    block.set_velocity(torch.tensor(velocity, dtype=torch.float64))
+    out = []
+    for _ in range(steps):
+        scene.step()
+        out.append(block.get_particles_pos().clone())
+    return torch.stack(out)
+
+
+def test_a_plane_without_friction_or_softness_is_the_slip_wall():
+    """The floor wall at z = h and a frictionless, sharp plane at z = h (with the wall far below)
+    stop the same nodes' same velocity components: the same trajectory to round-off, for a
+    tilted block thrown sideways into it."""
+    h = 0.1
+    sharp = gs.materials.Rigid(coup_friction=0.0, coup_softness=0.0)
+    on_plane = trajectory(*block_scene(gs.morphs.Plane(pos=(0, 0, h)), sharp, euler=(20, 30, 0)), 60, (1.0, 0.5, 0.0))
+    on_wall = trajectory(*block_scene(lower_z=h - 3 * DX, euler=(20, 30, 0)), 60, (1.0, 0.5, 0.0))
+    assert float(on_wall[..., 2].min()) < h + 0.5 * DX  # it lands
+    assert float((on_plane - on_wall).abs().max()) < 1e-12
+
+
+@pytest.mark.parametrize("friction", [0.2, 0.8])
+def test_a_block_on_an_incline_slides_as_coulomb_or_sticks(friction):
+    """A block resting on a 30° incline (the plane's normal turned about x) slides down it with
+    acceleration g (sin θ − μ cos θ) when μ < tan θ = 0.577, and stays when μ > tan θ: its mean
+    velocity along the slope after it settles, against Coulomb's."""
+    theta = np.radians(30.0)
+    normal, down = np.array([0.0, -np.sin(theta), np.cos(theta)]), np.array([0.0, -np.cos(theta), -np.sin(theta)])
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=1e-3, substeps=8),
+                     mpm_options=gs.options.MPMOptions(lower_bound=(-0.6, -0.6, -0.6), upper_bound=(0.6, 0.6, 0.6),
+                                                       grid_density=48, particle_size=0.01))
+    scene.add_entity(gs.morphs.Plane(normal=tuple(normal)),
+                     material=gs.materials.Rigid(coup_friction=friction, coup_softness=0.0))
+    centre = 0.04 * normal + 0.1 * (-down)  # resting on the plane (8 cm cube), up the slope
+    block = scene.add_entity(gs.morphs.Box(pos=tuple(centre), size=(0.08, 0.08, 0.08), euler=(30, 0, 0)),
+                             material=gs.materials.MPM.Elastic(E=1e6, rho=1000.0))
+    scene.build()
+    speeds = []
+    for step in range(200):
+        scene.step()
+        if step in (99, 199):
+            speeds.append(float(block.get_particles_vel().mean(dim=0) @ torch.tensor(down)))
+    expected = max(0.0, 9.81 * (np.sin(theta) - friction * np.cos(theta)))
+    measured = (speeds[1] - speeds[0]) / 0.1
+    assert abs(measured - expected) < 0.1, (measured, expected)
+
+
+MESHES = {  # trimesh's primitives, for its signed distance
+    "sphere": lambda size: trimesh.creation.icosphere(subdivisions=5, radius=size[0]),
+    "capsule": lambda size: trimesh.creation.capsule(height=2 * size[1], radius=size[0], count=[64, 64]),
+    "cylinder": lambda size: trimesh.creation.cylinder(radius=size[0], height=2 * size[1], sections=128),
+    "box": lambda size: trimesh.creation.box(extents=2 * np.asarray(size)),
+}
+MORPHS = {
+    "sphere": lambda: gs.morphs.Sphere(pos=(0.01, 0.0, 0.0), radius=0.06, fixed=True),
+    "capsule": lambda: gs.morphs.Capsule(pos=(0.0, 0.0, 0.0), radius=0.04, height=0.2, euler=(0, 80, 20), fixed=True),
+    "cylinder": lambda: gs.morphs.Cylinder(pos=(0.0, 0.01, 0.0), radius=0.05, height=0.12, euler=(70, 0, 0),
+                                           fixed=True),
+    "box": lambda: gs.morphs.Box(pos=(0.0, 0.0, 0.0), size=(0.16, 0.1, 0.06), euler=(10, 5, 30), fixed=True),
+}
+
+
+@pytest.mark.parametrize("shape", list(MORPHS))
+def test_particles_dropped_on_a_fixed_shape_stay_outside_it(shape):
+    """A block dropped on a fixed primitive (Genesis's morph, its collision shape) comes to lie on
+    it: after 0.3 s no particle is inside it by more than half a cell (trimesh's signed distance to
+    the same shape), and the block has stopped above it (it would fall through to z < −0.1)."""
+    scene, block = block_scene(MORPHS[shape](), lower_z=-0.4)
+    positions = trajectory(scene, block, 150)[-1].numpy()
+    model, row = scene._rigid_solver.model, scene.mpm_solver.collider_rows[0]
+    assert {2: "sphere", 3: "capsule", 5: "cylinder", 6: "box"}[int(model.geom_type[0])] == shape
+    local = (positions - row[1:4]) @ row[4:13].reshape(3, 3)  # in the shape's frame
+    depth = trimesh.proximity.signed_distance(MESHES[shape](model.geom_size[0]), local)  # > 0 inside
+    assert depth.max() < 0.5 * DX, f"{shape}: a particle {depth.max():.4f} m inside"
+    assert positions[:, 2].min() > -0.1
+
+
+@pytest.mark.parametrize("n_envs", [0, 2])
+def test_loss_backward_through_a_scene_with_a_ground_plane_matches_fd(n_envs):
+    """loss.backward() through a rigid–MPM scene (the shared substep loop, the autograd node) with
+    a tilted ground: the initial velocities' gradient against central differences."""
+    from .fd_scan import assert_converged, directional_errors
+    scene, block = block_scene(gs.morphs.Plane(pos=(0.0, 0.0, 0.12), normal=(0.1, 0.2, 1.0)),
+                               gs.materials.Rigid(coup_friction=0.4, coup_softness=0.005), requires_grad=True)
+    scene.build(n_envs=n_envs)
+    rng = np.random.default_rng(0)
+    weights = torch.as_tensor(rng.normal(size=(block.n_particles, 3)))
+
+    def loss(vel):
+        scene.reset()
+        block.set_particles_vel(vel)
+        for _ in range(15):
+            scene.step()
+        return (block.get_particles_pos() * weights).sum()
+
+    shape = (block.n_particles, 3) if n_envs == 0 else (n_envs, block.n_particles, 3)
+    vel = torch.as_tensor(rng.normal(0.0, 0.3, shape)) + torch.tensor([0.5, 0.0, -2.0], dtype=torch.float64)
+    assert_converged(directional_errors(loss, vel), "initial velocities")
+
+
+def test_particles_move_as_genesis_moves_them(monkeypatch):
+    """bench/coupling.py's block thrown onto a tilted plane and a fixed sphere (friction, softness,
+    restitution): its particles at steps 50 and 100 against Genesis 1.4.5's (stored by that script;
+    measured there 2.1e-9 and 3.9e-9 m apart, round-off grown by the rollout)."""
+    bench = os.path.join(ROOT, "bench")
+    monkeypatch.syspath_prepend(bench)
+    scene, block = runpy.run_path(os.path.join(bench, "coupling.py"))["scene_of"](gs)
+    with open(os.path.join(ROOT, "tests", "data", "genesis_coupling.json")) as file:
+        reference = json.load(file)
+    block.set_velocity(torch.tensor([1.5, 0.0, -1.0], dtype=torch.float64).repeat(block.n_particles, 1))
+    for step in range(1, 101):
+        scene.step()
+        if step in reference["steps"]:
+            expected = np.array(reference["positions"][reference["steps"].index(step)])
+            gap = np.linalg.norm(block.get_particles_pos().numpy() - expected, axis=1).max()
+            assert gap < 1e-6, f"step {step}: {gap:.3g} m from Genesis"
+
+
+def test_which_shapes_couple(caplog):
+    """Fixed primitives of coupling materials do; needs_coup=False, collision=False and a moving body
+    do not (the moving one named in a warning)."""
+    scene = gs.Scene(mpm_options=gs.options.MPMOptions(lower_bound=(-0.5, -0.5, -0.2), upper_bound=(0.5, 0.5, 0.6)))
+    scene.add_entity(gs.morphs.Plane(), material=gs.materials.Rigid(coup_friction=0.7, coup_softness=0.01,
+                                                                     coup_restitution=0.5))
+    scene.add_entity(gs.morphs.Box(pos=(0.3, 0.0, 0.05), size=(0.1, 0.1, 0.1), fixed=True),
+                     material=gs.materials.Rigid(needs_coup=False))
+    scene.add_entity(gs.morphs.Box(pos=(0.0, 0.3, 0.05), size=(0.1, 0.1, 0.1), fixed=True, collision=False))
+    scene.add_entity(gs.morphs.Sphere(pos=(-0.3, 0.0, 0.3), radius=0.05), name="ball")
+    scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.2), size=(0.05, 0.05, 0.05)), material=gs.materials.MPM.Sand())
+    with warns(caplog, r"pass through these rigid shapes: sphere of link .* of entity 'ball' \(on a moving link\)\."):
+        scene.build()
+    rows = scene.mpm_solver.collider_rows
+    assert rows.shape == (1, C.WIDTH) and rows[0, 0] == C.PLANE
+    np.testing.assert_array_equal(rows[0, 16:19], [0.7, 0.01, 0.5])
+
+
+@pytest.mark.parametrize("name, value", [("coup_friction", -0.1), ("coup_softness", float("nan")),
+                                         ("coup_restitution", 1.5), ("coup_friction", "high"),
+                                         ("needs_coup", 1)])
+def test_bad_coupling_parameters_are_refused(name, value):
+    with pytest.raises(InvalidInputError, match=f"materials.Rigid: argument '{name}'"):
+        gs.materials.Rigid(**{name: value})
