@@ -7,15 +7,17 @@ with Klár et al.'s volume correction, which we follow) is told apart from what 
 - a cylinder (radius 15 cm, height 15 cm, aspect 1) of ``Sand(friction_angle=φ)`` (E 1e6, ν 0.2,
   ρ 1000, random sampler) released at rest 1 mm above a rough floor, float64, 32 cells/m
   (particle size 2 cm), dt 2 ms in 4 substeps (Genesis's bound 2e-2·dx), g 9.81 m/s², for 1 s;
-- the floor: ours a sticky floor wall; Genesis has slip walls only, so its floor is a rigid plane
-  coupled to the particles (its legacy coupler: Coulomb friction ``coup_friction`` on the
-  particles' velocity towards the plane), run at two frictions, 5 and 100 (rough and rougher);
+- the floor: a rigid plane coupled to the particles in both engines (the legacy coupler's rule:
+  Coulomb friction ``coup_friction`` on the particles' velocity towards the plane), run at two
+  frictions, 5 and 100 (rough and rougher); ours also on a sticky floor wall (Genesis has slip
+  walls only);
 - the slope: ``pile_slope`` (also tests/test_mpm_physics.py's measure).
 
-Measured (2026-11-28, Genesis 1.4.5, two runs; its random sampler draws other particles in each
-run, ours the same): φ 30°: ours 21.3°, Genesis 21.7–22.2°; φ 45°: ours 28.5°, Genesis 26.8–29.6°
-(friction 5: 26.8°, 26.9°; 100: 29.6°, 28.1°). The piles' profiles agree within a few mm, and
-both engines' slopes lie below φ − 7° at 45° (and at 30°, by ~1°).
+Measured (2026-11-28 and 12-01, Genesis 1.4.5, three runs; its random sampler draws other
+particles in each run, ours the same): φ 30°: ours 21.3° (sticky wall; on the plane 21.3° at both
+frictions), Genesis 20.3–22.2°; φ 45°: ours 28.5° (on the plane 26.0°), Genesis 26.8–29.6°
+(friction 5: 26.8°, 26.9°, 29.2°; 100: 29.6°, 28.1°, 28.8°). The piles' profiles agree within a
+few mm, and both engines' slopes lie below φ − 7° at 45° (and at 30°, by ~1°).
 
 Run:  python bench/sand_pile.py [--only ours|genesis] [--angles 30 45] [--steps 500]
 (engines are imported inside the worker: the same file runs in Genesis's interpreter.)
