@@ -272,16 +272,15 @@ class Scene:
         rigid = self._rigid_solver
         couplings = [Coupling(e.material.coup_friction, e.material.coup_softness, e.material.coup_restitution)
                      if e.material.needs_coup else None for e in self.entities if isinstance(e, RigidEntity)]
-        rows, left_out = static_colliders(rigid.model, couplings)
-        self.mpm_solver.set_colliders(rows)
+        rows, planes, left_out = static_colliders(rigid.model, couplings)
+        self.mpm_solver.set_colliders(rows, planes)
         if left_out:
             names = [f"{kind} of link '{rigid.model.link_name[link]}' of entity "
                      f"'{rigid.entity_names[rigid.model.link_entity[link]]}' ({why})" for link, kind, why in left_out]
             logger.warning(f"scene.build: MPM particles pass through these rigid shapes: {'; '.join(names)}. The "
-                           f"particles meet the primitive shapes (plane, sphere, capsule, cylinder, box) of links "
-                           f"fixed to the world only (no rigid–MPM coupling with moving links, meshes or height "
-                           f"fields yet); materials.Rigid(needs_coup=False) leaves an entity out without this "
-                           f"warning")
+                           f"particles meet the shapes of links fixed to the world only, and no height field (no "
+                           f"rigid–MPM coupling with moving links or height fields yet); "
+                           f"materials.Rigid(needs_coup=False) leaves an entity out without this warning")
 
     def _require_built(self, what):
         if self._destroyed:

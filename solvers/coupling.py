@@ -1,12 +1,11 @@
 """Rigid–MPM coupling: which rigid collision shapes the MPM grid meets, as the MPM solver's
 colliders (mpm/colliders.py: Genesis's LegacyCoupler rule, rigid side).
 
-Coupled today: the primitive shapes (plane, sphere, capsule, cylinder, box) of links fixed to the
-world — a chain of fixed joints up to it — of entities whose material couples (Genesis's
+Coupled today: the primitive shapes (plane, sphere, capsule, cylinder, box) and the meshes (as the
+rigid solver takes them: their convex hulls) of links fixed to the world — a chain of fixed joints up to it — of entities whose material couples (Genesis's
 ``needs_coup``), where the shape collides (a contype or conaffinity; not a morph's collision=False).
 Left out, and said so by the scene: shapes on moving links (the particles would need the rigid
-velocity and would push back: not yet), and meshes and height fields (Genesis couples them through
-SDF grids: not yet).
+velocity and would push back: not yet), and height fields (not yet).
 """
 from dataclasses import dataclass
 
@@ -14,12 +13,13 @@ import numpy as np
 
 from .mpm import colliders
 from .rigid import geometry
+from .rigid.collision import convex
 from .rigid.model import FIXED
 from .rigid.shapes import quat_to_mat
 
 COLLIDER_KIND = {geometry.PLANE: colliders.PLANE, geometry.SPHERE: colliders.SPHERE,
                  geometry.CAPSULE: colliders.CAPSULE, geometry.CYLINDER: colliders.CYLINDER,
-                 geometry.BOX: colliders.BOX}
+                 geometry.BOX: colliders.BOX, geometry.MESH: colliders.HULL}
 KIND_NAME = {code: name for name, code in geometry.GEOM_CODE.items()}
 
 
@@ -43,11 +43,31 @@ def _world_fixed_poses(model):
     return poses
 
 
+def _hull_vertices(model, mesh):
+    """(V, 3) m: the vertices of the model's convex hull number ``mesh`` (geometry.hull_arrays)."""
+    header = model.hull_int
+    adr = header[header[convex.HULL_INT_FIELDS.index("hull_vertadr")] + mesh]
+    num = header[header[convex.HULL_INT_FIELDS.index("hull_vertnum")] + mesh]
+    return model.hull_vec[adr: adr + num]
+
+
+def hull_planes(vertices):
+    """(F, 4): the face planes (outward unit normal, offset m; n·p + offset ≤ 0 inside) of the
+    convex hull of ``vertices`` (V, 3), coplanar triangles' once."""
+    import trimesh  # (imported when first needed: with scipy it takes ~0.6 s)
+
+    hull = trimesh.Trimesh(vertices=vertices).convex_hull
+    planes = np.hstack([hull.face_normals, -np.einsum("ij,ij->i", hull.face_normals, hull.triangles[:, 0])[:, None]])
+    _, first = np.unique(np.round(planes, 9), axis=0, return_index=True)
+    return planes[np.sort(first)]
+
+
 def static_colliders(model, couplings):
-    """The MPM collider rows (C, colliders.WIDTH) of the rigid model's coupled shapes, and the
-    left-out ones as (link, geom type name, why) triples. couplings: per rigid entity (the
-    model's link_entity numbers), a Coupling or None (the entity does not couple)."""
-    poses, rows, left_out = _world_fixed_poses(model), [], []
+    """The MPM colliders of the rigid model's coupled shapes: rows (C, colliders.WIDTH) and the
+    hulls' face planes (P, 4) (colliders.py), and the left-out shapes as (link, geom type name,
+    why) triples. couplings: per rigid entity (the model's link_entity numbers), a Coupling or None
+    (the entity does not couple)."""
+    poses, rows, planes, left_out = _world_fixed_poses(model), [], [], []
     for g, (kind, link) in enumerate(zip(model.geom_type, model.geom_link)):
         coupling = couplings[model.link_entity[link]]
         if coupling is None or not model.geom_collides[g]:
@@ -56,10 +76,16 @@ def static_colliders(model, couplings):
             left_out.append((int(link), KIND_NAME[int(kind)], "on a moving link"))
             continue
         if int(kind) not in COLLIDER_KIND:
-            left_out.append((int(link), KIND_NAME[int(kind)], "not a primitive shape"))
+            left_out.append((int(link), KIND_NAME[int(kind)], "a height field"))
             continue
         pos, rot = poses[link]
+        size = model.geom_size[g]
+        if kind == geometry.MESH:  # where its planes start among all, and how many
+            faces = hull_planes(_hull_vertices(model, model.geom_mesh[g]))
+            size = (len(planes), len(faces), 0.0)
+            planes.extend(faces)
         rows.append([COLLIDER_KIND[int(kind)], *(pos + rot @ model.geom_pos[g]),
-                     *(rot @ quat_to_mat(model.geom_quat[g])).ravel(), *model.geom_size[g],
+                     *(rot @ quat_to_mat(model.geom_quat[g])).ravel(), *size,
                      coupling.friction, coupling.softness, coupling.restitution])
-    return np.array(rows, dtype=np.float64).reshape(-1, colliders.WIDTH), left_out
+    return (np.array(rows, dtype=np.float64).reshape(-1, colliders.WIDTH),
+            np.array(planes, dtype=np.float64).reshape(-1, 4), left_out)

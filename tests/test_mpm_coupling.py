@@ -20,6 +20,7 @@ import trimesh
 
 import genesis_lite as gs
 from genesis_lite.solvers.core import InvalidInputError
+from genesis_lite.solvers.coupling import hull_planes
 from genesis_lite.solvers.mpm import colliders as C
 
 from .conftest import warns
@@ -56,9 +57,16 @@ SHAPES = {
 }
 
 
+# a convex hull of 12 random points (its faces' planes, in its frame), turned and lowered under the block
+HULL_PLANES = hull_planes(np.random.default_rng(7).normal(size=(12, 3)) * [0.05, 0.04, 0.02])
+SHAPES["hull"] = collider(C.HULL, (0.0, 0.0, 0.08), rotation((0.3, 1, 0.1), 20), (0, len(HULL_PLANES), 0))
+
+
 @pytest.mark.parametrize("shape", list(SHAPES))
 def test_gradients_through_each_shape_match_fd(shape):
-    rollout = Rollout("neohooken", {}, 0, "generic", seed=2, throw=(0.0, 0.0, -3.0), colliders=[SHAPES[shape]])
+    planes = HULL_PLANES if shape == "hull" else ()
+    rollout = Rollout("neohooken", {}, 0, "generic", seed=2, throw=(0.0, 0.0, -3.0), colliders=[SHAPES[shape]],
+                      planes=planes)
     free = Rollout("neohooken", {}, 0, "generic", seed=2, throw=(0.0, 0.0, -3.0))
     met = rollout.run(rollout.state, rollout.inputs)[0] - free.run(free.state, free.inputs)[0]
     assert abs(met) > 1.0, f"{shape}: the block must meet the shape (loss changed by {met})"
@@ -147,30 +155,41 @@ def test_a_block_on_an_incline_slides_as_coulomb_or_sticks(friction):
     assert abs(measured - expected) < 0.1, (measured, expected)
 
 
+GEM = trimesh.creation.icosahedron().apply_scale((0.09, 0.07, 0.05))  # a convex mesh
 MESHES = {  # trimesh's primitives, for its signed distance
     "sphere": lambda size: trimesh.creation.icosphere(subdivisions=5, radius=size[0]),
     "capsule": lambda size: trimesh.creation.capsule(height=2 * size[1], radius=size[0], count=[64, 64]),
     "cylinder": lambda size: trimesh.creation.cylinder(radius=size[0], height=2 * size[1], sections=128),
     "box": lambda size: trimesh.creation.box(extents=2 * np.asarray(size)),
+    "mesh": lambda size: GEM,
 }
 MORPHS = {
-    "sphere": lambda: gs.morphs.Sphere(pos=(0.01, 0.0, 0.0), radius=0.06, fixed=True),
-    "capsule": lambda: gs.morphs.Capsule(pos=(0.0, 0.0, 0.0), radius=0.04, height=0.2, euler=(0, 80, 20), fixed=True),
-    "cylinder": lambda: gs.morphs.Cylinder(pos=(0.0, 0.01, 0.0), radius=0.05, height=0.12, euler=(70, 0, 0),
-                                           fixed=True),
-    "box": lambda: gs.morphs.Box(pos=(0.0, 0.0, 0.0), size=(0.16, 0.1, 0.06), euler=(10, 5, 30), fixed=True),
+    "sphere": lambda path: gs.morphs.Sphere(pos=(0.01, 0.0, 0.0), radius=0.06, fixed=True),
+    "capsule": lambda path: gs.morphs.Capsule(pos=(0.0, 0.0, 0.0), radius=0.04, height=0.2, euler=(0, 80, 20),
+                                              fixed=True),
+    "cylinder": lambda path: gs.morphs.Cylinder(pos=(0.0, 0.01, 0.0), radius=0.05, height=0.12, euler=(70, 0, 0),
+                                                fixed=True),
+    "box": lambda path: gs.morphs.Box(pos=(0.0, 0.0, 0.0), size=(0.16, 0.1, 0.06), euler=(10, 5, 30), fixed=True),
+    "mesh": lambda path: gs.morphs.Mesh(file=exported(GEM, path), pos=(0.0, 0.01, 0.0), euler=(15, 0, 40), fixed=True),
 }
+
+
+def exported(mesh, path):
+    """``path``, where ``mesh`` (trimesh) is written."""
+    mesh.export(path)
+    return path
 
 
 @pytest.mark.parametrize("shape", list(MORPHS))
-def test_particles_dropped_on_a_fixed_shape_stay_outside_it(shape):
-    """A block dropped on a fixed primitive (Genesis's morph, its collision shape) comes to lie on
-    it: after 0.3 s no particle is inside it by more than half a cell (trimesh's signed distance to
-    the same shape), and the block has stopped above it (it would fall through to z < −0.1)."""
-    scene, block = block_scene(MORPHS[shape](), lower_z=-0.4)
+def test_particles_dropped_on_a_fixed_shape_stay_outside_it(shape, tmp_path):
+    """A block dropped on a fixed primitive or convex mesh (Genesis's morph, its collision shape)
+    comes to lie on it: after 0.3 s no particle is inside it by more than half a cell (trimesh's
+    signed distance to the same shape), and the block has stopped above it (it would fall through
+    to z < −0.1)."""
+    scene, block = block_scene(MORPHS[shape](str(tmp_path / "gem.obj")), lower_z=-0.4)
     positions = trajectory(scene, block, 150)[-1].numpy()
     model, row = scene._rigid_solver.model, scene.mpm_solver.collider_rows[0]
-    assert {2: "sphere", 3: "capsule", 5: "cylinder", 6: "box"}[int(model.geom_type[0])] == shape
+    assert {2: "sphere", 3: "capsule", 5: "cylinder", 6: "box", 7: "mesh"}[int(model.geom_type[0])] == shape
     local = (positions - row[1:4]) @ row[4:13].reshape(3, 3)  # in the shape's frame
     depth = trimesh.proximity.signed_distance(MESHES[shape](model.geom_size[0]), local)  # > 0 inside
     assert depth.max() < 0.5 * DX, f"{shape}: a particle {depth.max():.4f} m inside"
@@ -216,6 +235,18 @@ def test_particles_move_as_genesis_moves_them(monkeypatch):
             expected = np.array(reference["positions"][reference["steps"].index(step)])
             gap = np.linalg.norm(block.get_particles_pos().numpy() - expected, axis=1).max()
             assert gap < 1e-6, f"step {step}: {gap:.3g} m from Genesis"
+
+
+def test_a_box_mesh_is_the_box(tmp_path):
+    """A fixed mesh of a box (its convex hull's six face planes) and the Box primitive in the same
+    pose give the particles the same bits (its centre off the grid's nodes: a node equidistant from
+    two faces takes either face's normal, which the two shapes break differently)."""
+    path = exported(trimesh.creation.box(extents=(0.16, 0.1, 0.06)), str(tmp_path / "box.obj"))
+    pose = dict(pos=(0.005, 0.003, 0.002), euler=(10, 5, 30), fixed=True)
+    positions = [trajectory(*block_scene(morph, gs.materials.Rigid(coup_softness=0.0)), 60)
+                 for morph in (gs.morphs.Mesh(file=path, **pose), gs.morphs.Box(size=(0.16, 0.1, 0.06), **pose))]
+    assert torch.equal(*positions)
+    assert float(positions[0][..., 2].min()) > 0.0  # on the box (it would fall through to the floor at −0.1)
 
 
 def test_which_shapes_couple(caplog):

@@ -50,13 +50,12 @@ class Rollout:
     compression, where round-off picks the branch)."""
 
     def __init__(self, kind, params, n_envs, start, seed=0, requires_grad=True, sticky=False, throw=(0.0, 0.0, 0.0),
-                 colliders=None):
-        """throw (3,) m/s: added to every particle's initial velocity; colliders: rigid shapes at rest
-        (solvers/mpm/colliders.py rows)."""
+                 colliders=(), planes=()):
+        """throw (3,) m/s: added to every particle's initial velocity; colliders, planes: rigid shapes
+        at rest (solvers/mpm/colliders.py rows and hull planes)."""
         self.solver = MPMSolver(DT, SUBSTEPS, (0.0, 0.0, -9.81), DENSITY, SPACING, LOWER, UPPER, sticky,
                                 requires_grad)
-        if colliders is not None:
-            self.solver.set_colliders(colliders)
+        self.solver.set_colliders(colliders, planes)
         lattice = np.arange(5) * SPACING
         block = np.stack(np.meshgrid(lattice, lattice, lattice, indexing="ij"), -1).reshape(-1, 3)
         jp = 0.0 if kind == "sand" else 1.0  # Sand's Jp is a log-volume correction (Genesis's _default_Jp)

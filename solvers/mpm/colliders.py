@@ -22,16 +22,32 @@ Rows live in ``grid_f`` after the walls (COLLIDERS_AT, WIDTH numbers each: kind,
 rotation (9, row-major, world from shape), size (3) m, μ, ς, e), their count in ``grid_i[7]``.
 Sizes follow the rigid geoms' (MuJoCo's) convention: sphere (radius), capsule (radius, half
 length of the segment along z), cylinder (radius, half height along z), box (half sizes); a
-plane is the half-space below its z = 0 plane (infinite, as in Genesis).
+plane is the half-space below its z = 0 plane (infinite, as in Genesis). A convex mesh (HULL: the
+rigid solver's convex hull of a mesh) is the intersection of its faces' half-spaces: its size
+holds where its face planes start in ``grid_f`` (after the rows: normal (3), offset (1) m each, in
+the shape's frame, n·p + offset ≤ 0 inside) and how many there are; its signed distance is the
+largest of the planes' — exact inside and beside a face, a lower bound beside an edge or corner
+(which lets the influence reach up to √3 times further there; Genesis samples a mesh's distance
+from an SDF grid).
 """
+import numpy as np
 import taichi as ti
 
 from .constitutive import genesis_eps
 
-PLANE, SPHERE, CAPSULE, CYLINDER, BOX = range(5)
+PLANE, SPHERE, CAPSULE, CYLINDER, BOX, HULL = range(6)
 WIDTH = 19
 COLLIDERS_AT = 9  # grid_f: h, inv_dx, vol, the walls' lower (3) and upper (3) corners, then the colliders
 INFLUENCE_CUTOFF = 0.1  # Genesis's: a collider acts on a node where its influence exceeds this
+
+
+def packed(rows, planes):
+    """The colliders' part of grid_f: rows (C, WIDTH), then the hulls' face planes (P, 4); a HULL
+    row's size[0], given as the number of its first plane, becomes that plane's index in grid_f."""
+    rows = np.array(rows, dtype=np.float64).reshape(-1, WIDTH)
+    hulls = rows[:, 0] == HULL
+    rows[hulls, 13] = COLLIDERS_AT + rows.size + 4 * rows[hulls, 13]
+    return np.concatenate([rows.ravel(), np.asarray(planes, dtype=np.float64).ravel()])
 
 
 @ti.func
@@ -102,7 +118,24 @@ def signed_distance(grid_f: ti.template(), at, x):
         d, n = _cylinder_distance(p, a, b)
     elif kind == BOX:
         d, n = _box_distance(p, ti.Vector([a, b, grid_f[at + 15]]))
+    elif kind == HULL:
+        d, n = _hull_distance(grid_f, ti.cast(a, ti.i32), ti.cast(b, ti.i32), p)
     return d, R @ n
+
+
+@ti.func
+def _hull_distance(grid_f: ti.template(), first, count, p):
+    """(d, n) of the point p (3,) in a convex hull's frame: the largest of its ``count`` face planes'
+    signed distances (those from grid_f[first]) and that face's normal (the first of ties)."""
+    n = ti.Vector([grid_f[first], grid_f[first + 1], grid_f[first + 2]])
+    d = n.dot(p) + grid_f[first + 3]
+    for f in range(1, count):
+        at = first + 4 * f
+        normal = ti.Vector([grid_f[at], grid_f[at + 1], grid_f[at + 2]])
+        distance = normal.dot(p) + grid_f[at + 3]
+        if distance > d:
+            d, n = distance, normal
+    return d, n
 
 
 @ti.func

@@ -53,12 +53,13 @@ class MPMSolver(MPMAdjoint, Solver):
         self.model = MPMModel(grid, self.particle_size ** 3, bool(sticky))
         self.entity_names = []
         self.wall_lower, self.wall_upper = grid.wall_lower, grid.wall_upper
-        self.collider_rows = np.zeros((0, colliders.WIDTH))
+        self.collider_rows, self.collider_planes = np.zeros((0, colliders.WIDTH)), np.zeros((0, 4))
 
-    def set_colliders(self, rows):
-        """Rigid shapes at rest the grid meets (colliders.py rows (C, colliders.WIDTH)), before the
-        first step."""
+    def set_colliders(self, rows, planes=()):
+        """Rigid shapes at rest the grid meets, before the first step: colliders.py's rows (C,
+        colliders.WIDTH) and its hulls' face planes (P, 4) (colliders.packed)."""
         self.collider_rows = np.asarray(rows, dtype=np.float64).reshape(-1, colliders.WIDTH)
+        self.collider_planes = np.asarray(planes, dtype=np.float64).reshape(-1, 4)
         if hasattr(self, "grid_f"):  # built: the boundary arrays again
             self._allocate_boundaries()
             if self.requires_grad:
@@ -231,7 +232,8 @@ class MPMSolver(MPMAdjoint, Solver):
         """grid_f and grid_i (kernels.py): the step, the grid, the walls and the colliders."""
         m, g = self.model, self.model.grid
         self.grid_f = torch.as_tensor([self.dt / self.substeps, g.density, m.vol, *g.wall_lower, *g.wall_upper,
-                                       *self.collider_rows.ravel()], dtype=runtime.tc_float, device=runtime.device)
+                                       *colliders.packed(self.collider_rows, self.collider_planes)],
+                                      dtype=runtime.tc_float, device=runtime.device)
         self.grid_i = torch.as_tensor([*g.lowest, *g.res, int(m.sticky), len(self.collider_rows)], dtype=torch.int32,
                                       device=runtime.device)
 
