@@ -8,7 +8,8 @@ two engines' particles every 10 steps, and the block's centre at the end. Both e
 plane's and the sphere's signed distance analytically (Genesis samples other shapes' from SDF
 grids), so the particles should agree to round-off amplified by the rollout.
 
-Measured (2026-12-01, Genesis 1.4.5): 4.4e-13 m after 10 steps, 3.6e-9 m after 100.
+Measured (2026-12-01, Genesis 1.4.5, two runs): 4.4e-13 and 5.5e-13 m after 10 steps, 3.6e-9 and
+3.9e-9 m after 100.
 
 ``--save PATH`` writes Genesis's particle positions at steps 50 and 100 (JSON), the reference of
 tests/test_mpm_coupling.py (tests/data/genesis_coupling.json).

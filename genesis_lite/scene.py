@@ -275,8 +275,11 @@ class Scene:
         rows, planes, left_out = static_colliders(rigid.model, couplings)
         self.mpm_solver.set_colliders(rows, planes)
         if left_out:
-            names = [f"{kind} of link '{rigid.model.link_name[link]}' of entity "
-                     f"'{rigid.entity_names[rigid.model.link_entity[link]]}' ({why})" for link, kind, why in left_out]
+            shapes = collections.defaultdict(list)  # entity → its shapes left out, by link (a robot has many)
+            for link, kind, why in left_out:
+                shapes[rigid.entity_names[rigid.model.link_entity[link]]].append(
+                    f"{kind} of link '{rigid.model.link_name[link]}' ({why})")
+            names = [f"entity '{entity}': {', '.join(kinds)}" for entity, kinds in shapes.items()]
             logger.warning(f"scene.build: MPM particles pass through these rigid shapes: {'; '.join(names)}. The "
                            f"particles meet the shapes of links fixed to the world only, and no height field (no "
                            f"rigid–MPM coupling with moving links or height fields yet); "

@@ -84,8 +84,9 @@ def static_colliders(model, couplings):
             faces = hull_planes(_hull_vertices(model, model.geom_mesh[g]))
             size = (len(planes), len(faces), 0.0)
             planes.extend(faces)
+        bound = np.inf if kind == geometry.PLANE else model.geom_rbound[g]
         rows.append([COLLIDER_KIND[int(kind)], *(pos + rot @ model.geom_pos[g]),
                      *(rot @ quat_to_mat(model.geom_quat[g])).ravel(), *size,
-                     coupling.friction, coupling.softness, coupling.restitution])
+                     coupling.friction, coupling.softness, coupling.restitution, bound])
     return (np.array(rows, dtype=np.float64).reshape(-1, colliders.WIDTH),
             np.array(planes, dtype=np.float64).reshape(-1, 4), left_out)

@@ -15,6 +15,7 @@ import runpy
 
 import numpy as np
 import pytest
+import taichi as ti
 import torch
 import trimesh
 
@@ -22,6 +23,7 @@ import genesis_lite as gs
 from genesis_lite.solvers.core import InvalidInputError
 from genesis_lite.solvers.coupling import hull_planes
 from genesis_lite.solvers.mpm import colliders as C
+from genesis_lite.solvers.rigid.shapes import quat_to_mat
 
 from .conftest import warns
 from .test_mpm_gradients import Rollout, assert_bitwise_reproducible, check_all
@@ -42,8 +44,10 @@ def rotation(axis, degrees):
     return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
 
 
-def collider(kind, pos, rot, size, friction=0.3, softness=0.002, restitution=0.2):
-    return [kind, *pos, *np.asarray(rot).ravel(), *size, friction, softness, restitution]
+def collider(kind, pos, rot, size, friction=0.3, softness=0.002, restitution=0.2, bound=np.inf):
+    """A collider row (solvers/mpm/colliders.py); bound: its bounding radius, m (inf: every node
+    takes its distance)."""
+    return [kind, *pos, *np.asarray(rot).ravel(), *size, friction, softness, restitution, bound]
 
 
 # under the gradient tests' block (x, y in ±4 cm, z from 10.4 to 18.4 cm, floor wall at 9.4 cm),
@@ -75,8 +79,8 @@ def test_gradients_through_each_shape_match_fd(shape):
 
 @pytest.mark.parametrize("friction, softness, restitution", [(0.0, 0.0, 0.0), (2.0, 0.01, 0.0), (0.5, 0.0, 1.0)])
 def test_gradients_with_other_coupling_parameters_match_fd(friction, softness, restitution):
-    """No friction and a sharp surface; friction that stops nodes with a wide partial influence;
-    a full bounce: with a plane and a box, which a node may meet both of."""
+    """No friction and a sharp surface; high friction with a wide softness (nodes outside the
+    shapes partly influenced); a full bounce: with a plane and a box crossing it."""
     shapes = [collider(C.PLANE, (0.0, 0.0, 0.1), rotation((1, 2, 0), 15), (0, 0, 0), friction, softness, restitution),
               collider(C.BOX, (0.02, 0.0, 0.1), rotation((0, 0, 1), 30), (0.02, 0.02, 0.02), friction, softness,
                        restitution)]
@@ -86,6 +90,129 @@ def test_gradients_with_other_coupling_parameters_match_fd(friction, softness, r
 
 def test_gradients_with_colliders_are_bitwise_reproducible_and_batched_as_single():
     assert_bitwise_reproducible(throw=(0.0, 0.0, -3.0), colliders=[SHAPES["plane"], SHAPES["box"]])
+
+
+# -- the shapes' signed distances and poses ------------------------------------------------------
+
+@ti.kernel
+def distances(grid_f: ti.types.ndarray(), points: ti.types.ndarray(), out: ti.types.ndarray()):
+    """out (P, 4) ← (d, n) of the first collider of grid_f at each of points (P, 3)."""
+    for i in range(points.shape[0]):
+        d, n = C.signed_distance(grid_f, C.COLLIDERS_AT, ti.Vector([points[i, 0], points[i, 1], points[i, 2]]))
+        out[i, 0] = d
+        for k in ti.static(range(3)):
+            out[i, 1 + k] = n[k]
+
+
+def distances_of(row, planes, points):
+    """(d (P,), n (P, 3)) of the collider ``row`` (with its hull's ``planes``) at points (P, 3)."""
+    grid_f = torch.as_tensor(np.concatenate([np.zeros(C.COLLIDERS_AT), C.packed([row], planes)]))
+    out = torch.zeros(len(points), 4, dtype=torch.float64)
+    distances(grid_f, torch.as_tensor(points), out)
+    return out[:, 0].numpy(), out[:, 1:].numpy()
+
+
+# each shape as its morph states it, and as trimesh builds it (its own frame)
+SHAPE_MESHES = {
+    "sphere": (C.SPHERE, (0.05, 0, 0), lambda: trimesh.creation.icosphere(subdivisions=6, radius=0.05)),
+    "capsule": (C.CAPSULE, (0.03, 0.04, 0), lambda: trimesh.creation.capsule(height=0.08, radius=0.03, count=[96, 96])),
+    "cylinder": (C.CYLINDER, (0.04, 0.03, 0), lambda: trimesh.creation.cylinder(radius=0.04, height=0.06,
+                                                                                 sections=256)),
+    "box": (C.BOX, (0.05, 0.03, 0.02), lambda: trimesh.creation.box(extents=(0.1, 0.06, 0.04))),
+    "hull": (C.HULL, None, lambda: trimesh.convex.convex_hull(np.random.default_rng(3).normal(size=(20, 3)) * 0.04)),
+}
+
+
+@pytest.mark.parametrize("shape", list(SHAPE_MESHES))
+def test_signed_distances_and_normals_are_the_shapes(shape):
+    """At 4000 points around each shape, turned and moved: the signed distance against trimesh's
+    (of the same shape as a mesh; the curved ones tessellated finely) and the normal against the
+    distance's own gradient (central differences, where the distance is smooth). A hull's
+    distance is exact inside and a lower bound outside."""
+    kind, size, mesh_of = SHAPE_MESHES[shape]
+    mesh = mesh_of()
+    planes = hull_planes(mesh.vertices) if kind == C.HULL else ()
+    size = (0, len(planes), 0) if kind == C.HULL else size
+    rot, pos = rotation((1, -2, 0.5), 35), np.array([0.1, -0.2, 0.3])
+    row = collider(kind, pos, rot, size)
+    local = np.random.default_rng(0).uniform(-0.08, 0.08, (4000, 3))
+    d, n = distances_of(row, planes, local @ rot.T + pos)
+    expected = -trimesh.proximity.signed_distance(mesh, local)  # trimesh: > 0 inside
+    # the curved shapes' tessellation; trimesh's own closest points on a box miss by 1.6e-6 m at 2 of the points
+    tessellation = 1e-5 if kind in (C.BOX, C.HULL) else 2e-4
+    inside = expected < 0
+    np.testing.assert_allclose(d[inside], expected[inside], atol=tessellation + 1e-12)
+    if kind == C.HULL:
+        assert np.all(d[~inside] <= expected[~inside] + 1e-12) and np.all(d[~inside] > 0)
+    else:
+        np.testing.assert_allclose(d[~inside], expected[~inside], atol=tessellation + 1e-12)
+    h = 1e-7
+    steps = [distances_of(row, planes, local @ rot.T + pos + sign * h * axis)[0] for axis in np.eye(3)
+             for sign in (1, -1)]
+    gradient = np.stack([(steps[2 * k] - steps[2 * k + 1]) / (2 * h) for k in range(3)], axis=1)
+    smooth = np.abs(np.linalg.norm(gradient, axis=1) - 1) < 1e-6  # (not across a kink of the distance)
+    assert smooth.mean() > 0.9
+    np.testing.assert_allclose(n[smooth], gradient[smooth], atol=1e-6)
+
+
+MJCF_STATIC = """<mujoco><worldbody>
+<geom type="box" size="0.05 0.06 0.07" pos="0.1 0 0" euler="10 20 30"/>
+<body name="a" pos="0.2 0.1 0.0" euler="0 0 45">
+  <geom type="capsule" size="0.02 0.05" pos="0 0.05 0" euler="90 0 0"/>
+  <body name="b" pos="0.1 0 0.05" euler="30 0 0">
+    <geom type="cylinder" size="0.03 0.04" pos="0.02 0 0" euler="0 30 0"/>
+    <geom type="sphere" size="0.03" pos="0 0.1 0"/>
+  </body>
+</body>
+<body name="c" pos="0 -0.2 0.1"><joint type="hinge"/><geom type="sphere" size="0.02"/></body>
+</worldbody></mujoco>"""
+INERTIAL = '<inertial><mass value="1"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial>'
+URDF_FIXED_CHAIN = f"""<robot name="r">
+<link name="base"><collision><origin xyz="0 0 0.01" rpy="0.1 0.2 0.3"/><geometry><box size="0.1 0.1 0.02"/></geometry>
+</collision>{INERTIAL}</link>
+<link name="arm"><collision><origin xyz="0.05 0 0" rpy="0 1.2 0"/><geometry><cylinder radius="0.01" length="0.1"/>
+</geometry></collision>{INERTIAL}</link>
+<joint name="j" type="fixed"><parent link="base"/><child link="arm"/><origin xyz="0.1 0 0.05" rpy="0.3 0 0.5"/></joint>
+</robot>"""
+
+
+def _attached(scene):
+    table = scene.add_entity(gs.morphs.Box(pos=(0.1, 0.0, 0.1), size=(0.1, 0.1, 0.1), euler=(10, 0, 30), fixed=True))
+    ball = scene.add_entity(gs.morphs.Sphere(radius=0.03, pos=(0.3, 0.3, 0.3)))
+    ball.attach(table, pos=(0.05, 0.02, 0.07), quat=(0.9, 0.1, 0.2, 0.3))
+    return [table, ball]
+
+
+@pytest.mark.parametrize("assets, n_envs", [("mjcf", 0), ("urdf", 0), ("attached", 2)])
+def test_colliders_stand_where_the_rigid_solver_puts_the_shapes(assets, n_envs, tmp_path):
+    """Every static collision shape's collider row: its pose is the rigid solver's link pose
+    (get_links_pos, get_links_quat) composed with the shape's pose in its link, its size the
+    shape's: nested, turned MJCF bodies welded to the world (not the hinged one), a URDF chain of
+    fixed joints placed by the morph, a sphere attached to a fixed box."""
+    scene = gs.Scene(mpm_options=gs.options.MPMOptions(lower_bound=(-0.5, -0.5, -0.2), upper_bound=(0.5, 0.5, 0.6)))
+    if assets == "attached":
+        entities = _attached(scene)
+    else:
+        path = tmp_path / ("r.xml" if assets == "mjcf" else "r.urdf")
+        path.write_text(MJCF_STATIC if assets == "mjcf" else URDF_FIXED_CHAIN)
+        morph = gs.morphs.MJCF(file=str(path), pos=(0.01, 0.02, 0.03), euler=(5, 10, 15)) if assets == "mjcf" else \
+            gs.morphs.URDF(file=str(path), pos=(0.0, 0.1, 0.0), euler=(0, 0, 20), fixed=True)
+        entities = [scene.add_entity(morph)]
+    scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.3), size=(0.05, 0.05, 0.05)), material=gs.materials.MPM.Elastic())
+    scene.build(n_envs=n_envs)
+    model, rows = scene._rigid_solver.model, scene.mpm_solver.collider_rows
+    link_pos = np.concatenate([e.get_links_pos().reshape(-1, max(1, n_envs), 3)[:, 0].numpy() if n_envs else
+                               e.get_links_pos().numpy() for e in entities])
+    link_quat = np.concatenate([e.get_links_quat().reshape(-1, max(1, n_envs), 4)[:, 0].numpy() if n_envs else
+                                e.get_links_quat().numpy() for e in entities])
+    static = [g for g in range(len(model.geom_type)) if model.link_static[model.geom_link[g]]]
+    assert len(rows) == len(static) == {"mjcf": 4, "urdf": 2, "attached": 2}[assets]
+    for row, g in zip(rows, static):
+        link = model.geom_link[g]
+        rot = quat_to_mat(link_quat[link])
+        np.testing.assert_allclose(row[1:4], link_pos[link] + rot @ model.geom_pos[g], atol=1e-12)
+        np.testing.assert_allclose(row[4:13], (rot @ quat_to_mat(model.geom_quat[g])).ravel(), atol=1e-12)
+        np.testing.assert_array_equal(row[13:16], model.geom_size[g])
 
 
 # -- scenes --------------------------------------------------------------------------------------
@@ -152,7 +279,7 @@ def test_a_block_on_an_incline_slides_as_coulomb_or_sticks(friction):
             speeds.append(float(block.get_particles_vel().mean(dim=0) @ torch.tensor(down)))
     expected = max(0.0, 9.81 * (np.sin(theta) - friction * np.cos(theta)))
     measured = (speeds[1] - speeds[0]) / 0.1
-    assert abs(measured - expected) < 0.1, (measured, expected)
+    assert abs(measured - expected) < (0.1 if expected > 0 else 0.02), (measured, expected)
 
 
 GEM = trimesh.creation.icosahedron().apply_scale((0.09, 0.07, 0.05))  # a convex mesh
@@ -260,11 +387,11 @@ def test_which_shapes_couple(caplog):
     scene.add_entity(gs.morphs.Box(pos=(0.0, 0.3, 0.05), size=(0.1, 0.1, 0.1), fixed=True, collision=False))
     scene.add_entity(gs.morphs.Sphere(pos=(-0.3, 0.0, 0.3), radius=0.05), name="ball")
     scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.2), size=(0.05, 0.05, 0.05)), material=gs.materials.MPM.Sand())
-    with warns(caplog, r"pass through these rigid shapes: sphere of link .* of entity 'ball' \(on a moving link\)\."):
+    with warns(caplog, r"pass through these rigid shapes: entity 'ball': sphere of link '\w+' \(on a moving link\)\."):
         scene.build()
     rows = scene.mpm_solver.collider_rows
     assert rows.shape == (1, C.WIDTH) and rows[0, 0] == C.PLANE
-    np.testing.assert_array_equal(rows[0, 16:19], [0.7, 0.01, 0.5])
+    np.testing.assert_array_equal(rows[0, 16:20], [0.7, 0.01, 0.5, np.inf])  # (a plane: no bounding radius)
 
 
 @pytest.mark.parametrize("name, value", [("coup_friction", -0.1), ("coup_softness", float("nan")),

@@ -101,8 +101,9 @@ class MPMAdjoint:
     def end_replay(self):
         """The replay's end (from end_step, before ``current`` moves): if a substep listed more
         nodes than the saved grid holds, grow it to the margin times the largest count and
-        replay the step again, alone (same bits: frame 0 and the inputs are untouched). When the
-        rigid–MPM coupler comes, this second replay must run the shared loop with it."""
+        replay the step again, alone (same bits: frame 0 and the inputs are untouched; the colliders
+        are the MPM solver's own, in its fused substep). A coupler that moves state between solvers
+        would need this second replay to run the shared loop with it."""
         self.replaying = False
         need = int(self.saved_nodes[:, self.n_batch, 0].max())
         if need <= self.saved_grid.shape[2]:

@@ -19,7 +19,11 @@ is of v alone, piecewise smooth (kinks where v·n = 0 and where the friction sto
 its adjoint (``collide_adjoint``) replays the colliders before each one to find its input.
 
 Rows live in ``grid_f`` after the walls (COLLIDERS_AT, WIDTH numbers each: kind, position (3) m,
-rotation (9, row-major, world from shape), size (3) m, μ, ς, e), their count in ``grid_i[7]``.
+rotation (9, row-major, world from shape), size (3) m, μ, ς, e, bounding radius m about the
+position (a plane's: infinite)), their count in ``grid_i[7]``. A node farther than the bounding
+radius plus the influence's reach (ς ln 10, where w falls to the cutoff; twice that, for round-off)
+skips the collider's distance: it cannot act there (a scene of many small shapes pays for the
+few a node is near).
 Sizes follow the rigid geoms' (MuJoCo's) convention: sphere (radius), capsule (radius, half
 length of the segment along z), cylinder (radius, half height along z), box (half sizes); a
 plane is the half-space below its z = 0 plane (infinite, as in Genesis). A convex mesh (HULL: the
@@ -36,7 +40,7 @@ import taichi as ti
 from .constitutive import genesis_eps
 
 PLANE, SPHERE, CAPSULE, CYLINDER, BOX, HULL = range(6)
-WIDTH = 19
+WIDTH = 20
 COLLIDERS_AT = 9  # grid_f: h, inv_dx, vol, the walls' lower (3) and upper (3) corners, then the colliders
 INFLUENCE_CUTOFF = 0.1  # Genesis's: a collider acts on a node where its influence exceeds this
 
@@ -142,9 +146,14 @@ def _hull_distance(grid_f: ti.template(), first, count, p):
 def _contact(grid_f: ti.template(), c, x):
     """(acts, n, w, μ, e) of collider c at the node x: acts where its influence w passes the cutoff."""
     at = COLLIDERS_AT + c * WIDTH
-    d, n = signed_distance(grid_f, at, x)
-    w = ti.min(ti.exp(-d / ti.max(grid_f[at + 17], 1e-10)), 1.0)
-    return w > INFLUENCE_CUTOFF, n, w, grid_f[at + 16], grid_f[at + 18]
+    softness = ti.max(grid_f[at + 17], 1e-10)
+    acts, n, w = 0, ti.Vector([0.0, 0.0, 1.0]), 0.0
+    centre = ti.Vector([grid_f[at + 1], grid_f[at + 2], grid_f[at + 3]])
+    if (x - centre).norm() - grid_f[at + 19] < 2.0 * ti.static(np.log(1.0 / INFLUENCE_CUTOFF)) * softness:
+        d, normal = signed_distance(grid_f, at, x)
+        n, w = normal, ti.min(ti.exp(-d / softness), 1.0)
+        acts = w > INFLUENCE_CUTOFF
+    return acts, n, w, grid_f[at + 16], grid_f[at + 18]
 
 
 @ti.func

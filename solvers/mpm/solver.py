@@ -61,6 +61,7 @@ class MPMSolver(MPMAdjoint, Solver):
         self.collider_rows = np.asarray(rows, dtype=np.float64).reshape(-1, colliders.WIDTH)
         self.collider_planes = np.asarray(planes, dtype=np.float64).reshape(-1, 4)
         if hasattr(self, "grid_f"):  # built: the boundary arrays again
+            self._check_indices()  # (the saved grid keeps more a node with colliders)
             self._allocate_boundaries()
             if self.requires_grad:
                 self._allocate_saved_grid(self.saved_grid.shape[2])
@@ -129,7 +130,7 @@ class MPMSolver(MPMAdjoint, Solver):
         frames = S + 1 if self.requires_grad else 2
         sizes = {"the particle frames": frames * B * N * layout.WIDTH, "the grid": B * K * 4}
         if self.requires_grad:
-            sizes["the replay's saved grid"] = S * B * K * 4
+            sizes["the replay's saved grid"] = S * B * K * (7 if self.has_colliders else 4)
             if any_needs_svd(self.model.kinds, self.model.consts):
                 sizes["the replay's SVDs"] = S * B * N * layout.SVD_WIDTH
         name = max(sizes, key=sizes.get)
