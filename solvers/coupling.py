@@ -2,10 +2,11 @@
 colliders (mpm/colliders.py: Genesis's LegacyCoupler rule, rigid side).
 
 Coupled today: the primitive shapes (plane, sphere, capsule, cylinder, box) and the meshes (as the
-rigid solver takes them: their convex hulls) of links fixed to the world — a chain of fixed joints up to it — of entities whose material couples (Genesis's
-``needs_coup``), where the shape collides (a contype or conaffinity; not a morph's collision=False).
-Left out, and said so by the scene: shapes on moving links (the particles would need the rigid
-velocity and would push back: not yet), and height fields (not yet).
+rigid solver takes them: their convex hulls) of links fixed to the world — a chain of fixed joints
+up to it — of entities whose material couples (Genesis's ``needs_coup``), where the shape collides
+(a contype or conaffinity; not a morph's collision=False). Left out, and said so by the scene:
+shapes on moving links (the particles would need the rigid velocity and would push back: not yet),
+and height fields (not yet).
 """
 from dataclasses import dataclass
 

@@ -3,10 +3,10 @@
 its adjoint.
 
 In the grid update, after gravity and before the walls (Genesis's order), each node's velocity v
-meets every collider in turn. With the collider's signed distance d and outward unit normal n at
-the node (analytic: plane, sphere, capsule, cylinder, box) and the rigid material's coupling
-friction μ, softness ς and restitution e (coup_friction, coup_softness, coup_restitution), as
-Genesis's ``_func_collide_in_rigid_geom`` with the rigid velocity zero:
+meets every collider in turn. With the collider's signed distance d and outward unit normal n at the
+node (analytic: plane, sphere, capsule, cylinder, box, convex mesh) and the rigid material's
+coupling friction μ, softness ς and restitution e (coup_friction, coup_softness, coup_restitution),
+as Genesis's ``_func_collide_in_rigid_geom`` with the rigid velocity zero:
 
     w = min(exp(−d / max(ς, 1e-10)), 1)                    the collider's influence
     where w > 0.1 and v·n < 0 (moving into the shape):
