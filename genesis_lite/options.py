@@ -434,6 +434,27 @@ def _check_choice(owner, name, value, choices):
 
 @named_keywords()
 @dataclass
+class LegacyCouplerOptions:
+    """Which solvers interact (Genesis 1.4.5's names and defaults: all True). rigid_mpm: the MPM
+    particles meet the rigid shapes (solvers/coupling.py); False: they pass through them, as
+    Genesis's. The other pairs name solvers genesis_lite does not have (SPH, PBD, FEM): in
+    Genesis, too, a pair without both its solvers in the scene does nothing."""
+    rigid_mpm: bool = True
+    rigid_sph: bool = True
+    rigid_pbd: bool = True
+    rigid_fem: bool = True
+    mpm_sph: bool = True
+    mpm_pbd: bool = True
+    fem_mpm: bool = True
+    fem_sph: bool = True
+
+    def __post_init__(self):
+        for name in ("rigid_mpm", "rigid_sph", "rigid_pbd", "rigid_fem", "mpm_sph", "mpm_pbd", "fem_mpm", "fem_sph"):
+            setattr(self, name, check_bool("LegacyCouplerOptions", name, getattr(self, name)))
+
+
+@named_keywords()
+@dataclass
 class ViewerOptions:
     """The interactive viewer's options (Genesis 1.4.5's names and defaults). No viewer exists yet
     (cameras are headless: scene.add_camera): ``gs.Scene(show_viewer=True)`` raises; these are

@@ -21,7 +21,8 @@ from .entities.common import EntityIndexing, named_argument_errors, replace_colu
 from .entities.mpm_entity import sample_particles
 from .solvers.core import AssetError, InvalidInputError, SceneStateError, warn_user
 from .materials import MPM, Rigid
-from .options import MPMOptions, RigidOptions, SimOptions, ViewerOptions, VisOptions, check_bool, is_int
+from .options import (LegacyCouplerOptions, MPMOptions, RigidOptions, SimOptions, ViewerOptions, VisOptions,
+                      check_bool, is_int)
 from .rigid_solver import RigidSolverView
 from .runtime import logger, require_init, runtime, track
 from .simulator import Simulator, refuse_inference_mode
@@ -74,10 +75,12 @@ class Scene:
     cameras read vis_options, viewer_options are kept for an interactive viewer of a later release.
     show_viewer: False or None (Genesis's default); True raises, as there is no interactive viewer.
     show_FPS: Genesis's (deprecated there): no FPS line is printed here, so True warns once.
+    coupler_options: gs.options.LegacyCouplerOptions (None: defaults): whether the MPM particles
+    meet the rigid shapes (rigid_mpm).
     """
 
     def __init__(self, sim_options=None, rigid_options=None, viewer_options=None, vis_options=None,
-                 show_viewer=False, mpm_options=None, show_FPS=None):
+                 show_viewer=False, mpm_options=None, show_FPS=None, coupler_options=None):
         require_init("gs.Scene")
         if show_FPS is not None and check_bool("gs.Scene", "show_FPS", show_FPS):
             warn_user("gs.Scene: show_FPS=True prints nothing here (genesis_lite logs no FPS line; Genesis 1.4.5 "
@@ -87,9 +90,11 @@ class Scene:
         self.viewer_options = viewer_options or ViewerOptions()
         self.vis_options = vis_options or VisOptions()
         self.mpm_options = mpm_options or MPMOptions()
+        self.coupler_options = coupler_options or LegacyCouplerOptions()
         for arg, value, kind in (("sim_options", self.sim_options, SimOptions),
                                  ("rigid_options", self.rigid_options, RigidOptions),
                                  ("mpm_options", self.mpm_options, MPMOptions),
+                                 ("coupler_options", self.coupler_options, LegacyCouplerOptions),
                                  ("viewer_options", self.viewer_options, ViewerOptions),
                                  ("vis_options", self.vis_options, VisOptions)):
             if not isinstance(value, kind):
@@ -252,7 +257,7 @@ class Scene:
         sim = Simulator(self.sim_options, solvers)
         try:
             sim.build(self.n_envs)
-            if len(solvers) > 1:
+            if len(solvers) > 1 and self.coupler_options.rigid_mpm:
                 self._couple()
         except Exception:  # e.g. a massless moving link: free the arrays allocated so far
             for solver in solvers:

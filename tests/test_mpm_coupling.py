@@ -412,6 +412,32 @@ def test_which_shapes_couple(caplog):
     np.testing.assert_array_equal(rows[0, 16:20], [0.7, 0.01, 0.5, np.inf])  # (a plane: no bounding radius)
 
 
+def test_coupler_options_rigid_mpm_false_lets_the_particles_through(caplog):
+    """Genesis's LegacyCouplerOptions(rigid_mpm=False): no collider, no warning; the block falls
+    through the plane; a wrong type or value is a named error."""
+    block_z = []
+    for rigid_mpm in (True, False):
+        scene = gs.Scene(sim_options=gs.options.SimOptions(dt=2e-3, substeps=8),
+                         mpm_options=gs.options.MPMOptions(lower_bound=(-0.5, -0.5, -0.2), upper_bound=(0.5, 0.5, 0.6),
+                                                           grid_density=32, particle_size=0.02),
+                         coupler_options=gs.options.LegacyCouplerOptions(rigid_mpm=rigid_mpm))
+        scene.add_entity(gs.morphs.Plane(pos=(0.0, 0.0, 0.1)))
+        scene.add_entity(gs.morphs.Sphere(pos=(0.3, 0.0, 0.3), radius=0.05), name="ball")
+        block = scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.2), size=(0.1, 0.1, 0.1)),
+                                 material=gs.materials.MPM.Elastic(E=3e4))
+        with warns(caplog, "entity 'ball'" if rigid_mpm else None):
+            scene.build()
+        assert len(scene.mpm_solver.collider_rows) == int(rigid_mpm)
+        for _ in range(100):
+            scene.step()
+        block_z.append(float(block.get_particles_pos()[:, 2].min()))
+    assert block_z[0] > 0.1 - 0.5 * DX and block_z[1] < 0.0  # on the plane; through it, 10 cm below
+    with pytest.raises(InvalidInputError, match="LegacyCouplerOptions: argument 'rigid_mpm' must be True or False"):
+        gs.options.LegacyCouplerOptions(rigid_mpm=1)
+    with pytest.raises(InvalidInputError, match="'coupler_options' must be gs.options.LegacyCouplerOptions"):
+        gs.Scene(coupler_options=gs.options.SimOptions())
+
+
 @pytest.mark.parametrize("name, value", [("coup_friction", -0.1), ("coup_softness", float("nan")),
                                          ("coup_restitution", 1.5), ("coup_friction", "high"),
                                          ("needs_coup", 1)])
