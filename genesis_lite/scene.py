@@ -277,8 +277,8 @@ class Scene:
         rigid = self._rigid_solver
         couplings = [Coupling(e.material.coup_friction, e.material.coup_softness, e.material.coup_restitution)
                      if e.material.needs_coup else None for e in self.entities if isinstance(e, RigidEntity)]
-        rows, planes, left_out = static_colliders(rigid.model, couplings)
-        self.mpm_solver.set_colliders(rows, planes)
+        rows, data, left_out = static_colliders(rigid.model, couplings)
+        self.mpm_solver.set_colliders(rows, data)
         if left_out:
             shapes = collections.defaultdict(list)  # entity → its shapes left out, by link (a robot has many)
             for link, kind, why in left_out:
@@ -286,9 +286,9 @@ class Scene:
                     f"{kind} of link '{rigid.model.link_name[link]}' ({why})")
             names = [f"entity '{entity}': {', '.join(kinds)}" for entity, kinds in shapes.items()]
             logger.warning(f"scene.build: MPM particles pass through these rigid shapes: {'; '.join(names)}. The "
-                           f"particles meet the shapes of links fixed to the world only, and no height field (no "
-                           f"rigid–MPM coupling with moving links or height fields yet); "
-                           f"materials.Rigid(needs_coup=False) leaves an entity out without this warning")
+                           f"particles meet the shapes of links fixed to the world only (no rigid–MPM coupling with "
+                           f"moving links yet); materials.Rigid(needs_coup=False) leaves an entity out without this "
+                           f"warning")
 
     def _require_built(self, what):
         if self._destroyed:

@@ -1,12 +1,11 @@
 """Rigid–MPM coupling: which rigid collision shapes the MPM grid meets, as the MPM solver's
 colliders (mpm/colliders.py: Genesis's LegacyCoupler rule, rigid side).
 
-Coupled today: the primitive shapes (plane, sphere, capsule, cylinder, box) and the meshes (as the
-rigid solver takes them: their convex hulls) of links fixed to the world — a chain of fixed joints
-up to it — of entities whose material couples (Genesis's ``needs_coup``), where the shape collides
-(a contype or conaffinity; not a morph's collision=False). Left out, and said so by the scene:
-shapes on moving links (the particles would need the rigid velocity and would push back: not yet),
-and height fields (not yet).
+Coupled today: the shapes of links fixed to the world — a chain of fixed joints up to it — (plane,
+sphere, capsule, cylinder, box; meshes as the rigid solver takes them, their convex hulls; height
+fields) of entities whose material couples (Genesis's ``needs_coup``), where the shape collides (a
+contype or conaffinity; not a morph's collision=False). Left out, and said so by the scene: shapes
+on moving links (the particles would need the rigid velocity and would push back: not yet).
 """
 from dataclasses import dataclass
 
@@ -20,7 +19,7 @@ from .rigid.shapes import quat_to_mat
 
 COLLIDER_KIND = {geometry.PLANE: colliders.PLANE, geometry.SPHERE: colliders.SPHERE,
                  geometry.CAPSULE: colliders.CAPSULE, geometry.CYLINDER: colliders.CYLINDER,
-                 geometry.BOX: colliders.BOX, geometry.MESH: colliders.HULL}
+                 geometry.BOX: colliders.BOX, geometry.MESH: colliders.HULL, geometry.HFIELD: colliders.HFIELD}
 KIND_NAME = {code: name for name, code in geometry.GEOM_CODE.items()}
 
 
@@ -63,12 +62,28 @@ def hull_planes(vertices):
     return planes[np.sort(first)]
 
 
+def _shape_data(model, g, start):
+    """(size (3,), data (D,), bounding radius m) of geom g's collider (colliders.py), its data to be
+    placed at ``start`` among all colliders' data: a mesh's hull's face planes, a height field's
+    grid; none for a primitive, whose size is the geom's."""
+    kind, size = model.geom_type[g], model.geom_size[g]
+    if kind == geometry.MESH:
+        faces = hull_planes(_hull_vertices(model, model.geom_mesh[g]))
+        return (start, len(faces), 0.0), faces.ravel(), model.geom_rbound[g]
+    if kind == geometry.HFIELD:
+        points = _hull_vertices(model, model.geom_mesh[g])  # its top grid, then its base
+        top, ncol = points[: len(points) // 2], int(size[2])
+        grid = np.array([size[0], size[1], len(top) // ncol, ncol, *top[:, 2]])
+        return (start, 0.0, 0.0), grid, float(np.linalg.norm(points, axis=1).max())
+    return size, np.zeros(0), np.inf if kind == geometry.PLANE else model.geom_rbound[g]
+
+
 def static_colliders(model, couplings):
-    """The MPM colliders of the rigid model's coupled shapes: rows (C, colliders.WIDTH) and the
-    hulls' face planes (P, 4) (colliders.py), and the left-out shapes as (link, geom type name,
-    why) triples. couplings: per rigid entity (the model's link_entity numbers), a Coupling or None
-    (the entity does not couple)."""
-    poses, rows, planes, left_out = _world_fixed_poses(model), [], [], []
+    """The MPM colliders of the rigid model's coupled shapes: rows (C, colliders.WIDTH) and the data
+    of its hulls and height fields (D,) (colliders.packed), and the left-out shapes as (link, geom
+    type name, why) triples. couplings: per rigid entity (the model's link_entity numbers), a
+    Coupling or None (the entity does not couple)."""
+    poses, rows, data, left_out = _world_fixed_poses(model), [], [], []
     for g, (kind, link) in enumerate(zip(model.geom_type, model.geom_link)):
         coupling = couplings[model.link_entity[link]]
         if coupling is None or not model.geom_collides[g]:
@@ -76,18 +91,11 @@ def static_colliders(model, couplings):
         if link not in poses:
             left_out.append((int(link), KIND_NAME[int(kind)], "on a moving link"))
             continue
-        if int(kind) not in COLLIDER_KIND:
-            left_out.append((int(link), KIND_NAME[int(kind)], "a height field"))
-            continue
         pos, rot = poses[link]
-        size = model.geom_size[g]
-        if kind == geometry.MESH:  # where its planes start among all, and how many
-            faces = hull_planes(_hull_vertices(model, model.geom_mesh[g]))
-            size = (len(planes), len(faces), 0.0)
-            planes.extend(faces)
-        bound = np.inf if kind == geometry.PLANE else model.geom_rbound[g]
+        size, shape_data, bound = _shape_data(model, g, sum(len(d) for d in data))
+        data.append(shape_data)
         rows.append([COLLIDER_KIND[int(kind)], *(pos + rot @ model.geom_pos[g]),
                      *(rot @ quat_to_mat(model.geom_quat[g])).ravel(), *size,
                      coupling.friction, coupling.softness, coupling.restitution, bound])
-    return (np.array(rows, dtype=np.float64).reshape(-1, colliders.WIDTH),
-            np.array(planes, dtype=np.float64).reshape(-1, 4), left_out)
+    return (np.array(rows, dtype=np.float64).reshape(-1, colliders.WIDTH), np.concatenate([np.zeros(0), *data]),
+            left_out)

@@ -23,6 +23,7 @@ import genesis_lite as gs
 from genesis_lite.solvers.core import InvalidInputError
 from genesis_lite.solvers.coupling import hull_planes
 from genesis_lite.solvers.mpm import colliders as C
+from genesis_lite.solvers.rigid.collision import hfield
 from genesis_lite.solvers.rigid.shapes import quat_to_mat
 
 from .conftest import warns
@@ -66,9 +67,14 @@ HULL_PLANES = hull_planes(np.random.default_rng(7).normal(size=(12, 3)) * [0.05,
 SHAPES["hull"] = collider(C.HULL, (0.0, 0.0, 0.08), rotation((0.3, 1, 0.1), 20), (0, len(HULL_PLANES), 0))
 
 
+# a 6 × 5 height field 24 × 16 cm (its data: size x, size y, nrow, ncol, heights), turned, under the block
+HFIELD_DATA = np.array([0.12, 0.08, 6, 5, *(0.03 * np.random.default_rng(8).random(30))])
+SHAPES["hfield"] = collider(C.HFIELD, (0.0, 0.0, 0.06), rotation((0.2, 1, 0), 10), (0, 0, 0))
+
+
 @pytest.mark.parametrize("shape", list(SHAPES))
 def test_gradients_through_each_shape_match_fd(shape):
-    planes = HULL_PLANES if shape == "hull" else ()
+    planes = {"hull": HULL_PLANES, "hfield": HFIELD_DATA}.get(shape, ())
     rollout = Rollout("neohooken", {}, 0, "generic", seed=2, throw=(0.0, 0.0, -3.0), colliders=[SHAPES[shape]],
                       planes=planes)
     free = Rollout("neohooken", {}, 0, "generic", seed=2, throw=(0.0, 0.0, -3.0))
@@ -153,6 +159,65 @@ def test_signed_distances_and_normals_are_the_shapes(shape):
     smooth = np.abs(np.linalg.norm(gradient, axis=1) - 1) < 1e-6  # (not across a kink of the distance)
     assert smooth.mean() > 0.9
     np.testing.assert_allclose(n[smooth], gradient[smooth], atol=1e-6)
+
+
+def surface_heights(vertices, faces, xy):
+    """(P,) m: the height of the triangle mesh (vertices, faces) over each point xy (P, 2), by
+    trimesh's ray casting (NaN where no triangle is under or over it)."""
+    mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
+    origins = np.column_stack([xy, np.full(len(xy), 10.0)])
+    locations, rays, _ = mesh.ray.intersects_location(origins, np.tile([0.0, 0.0, -1.0], (len(xy), 1)),
+                                                      multiple_hits=False)
+    heights = np.full(len(xy), np.nan)
+    heights[rays] = locations[:, 2]
+    return heights
+
+
+def test_a_height_field_distance_is_to_the_triangle_under_the_point():
+    """A height field (the rigid solver's grid and triangles, hfield.surface) turned and moved: at
+    2000 points over and beside it, the distance along the normal ends on the surface trimesh's rays
+    find (d / n_z = z − height), the normal is the distance's gradient, and beside the rectangle
+    the field is far."""
+    elevation = np.random.default_rng(4).random((7, 9))
+    size = (0.16, 0.09, 0.05, 0.02)
+    vertices, faces = hfield.surface(size, elevation)
+    grid = [size[0], size[1], 7, 9, *vertices[:, 2]]
+    rot, pos = rotation((0.3, -0.4, 1.0), 40), np.array([0.1, 0.0, 0.2])
+    row = collider(C.HFIELD, pos, rot, (0, 0, 0))
+    local = np.random.default_rng(1).uniform([-0.2, -0.12, -0.05], [0.2, 0.12, 0.1], (2000, 3))
+    d, n = distances_of(row, grid, local @ rot.T + pos)
+    over = (np.abs(local[:, 0]) <= size[0]) & (np.abs(local[:, 1]) <= size[1])
+    assert np.all(d[~over] == C.FAR) and over.mean() > 0.5
+    normal = n[over] @ rot  # in the field's frame
+    heights = surface_heights(vertices, faces, local[over, :2])
+    np.testing.assert_allclose(local[over, 2] - d[over] / normal[:, 2], heights, atol=1e-12)
+    h = 1e-7
+    steps = [distances_of(row, grid, local[over] @ rot.T + pos + sign * h * axis)[0] for axis in np.eye(3)
+             for sign in (1, -1)]
+    gradient = np.stack([(steps[2 * k] - steps[2 * k + 1]) / (2 * h) for k in range(3)], axis=1)
+    smooth = np.abs(np.linalg.norm(gradient, axis=1) - 1) < 1e-6  # (not across a triangle's edge)
+    assert smooth.mean() > 0.9
+    np.testing.assert_allclose(n[over][smooth], gradient[smooth], atol=1e-6)
+
+
+def test_particles_dropped_on_a_terrain_rest_on_it():
+    """A block dropped on a fixed gs.morphs.Terrain (a height field) lies on it after 0.3 s: no
+    particle below the surface (trimesh's rays on the terrain's triangles, in the world) by more
+    than half a cell."""
+    terrain = gs.morphs.Terrain(pos=(-0.4, -0.4, -0.05), horizontal_scale=0.1, vertical_scale=0.01,
+                                height_field=np.random.default_rng(0).integers(0, 6, (9, 9)))
+    scene, block = block_scene(terrain)
+    positions = trajectory(scene, block, 150)[-1].numpy()
+    model, row = scene._rigid_solver.model, scene.mpm_solver.collider_rows[0]
+    assert row[0] == C.HFIELD
+    data = scene.mpm_solver.collider_data
+    nrow, ncol = int(data[2]), int(data[3])
+    size = (data[0], data[1], 1.0, 0.0)
+    vertices, faces = hfield.surface(size, data[4: 4 + nrow * ncol].reshape(nrow, ncol))
+    world = vertices @ row[4:13].reshape(3, 3).T + row[1:4]
+    heights = surface_heights(world, faces, positions[:, :2])
+    assert np.all(np.isfinite(heights)) and np.all(positions[:, 2] > heights - 0.5 * DX)
+    assert positions[:, 2].min() < heights.max() + 2 * DX  # on it, not held above it
 
 
 MJCF_STATIC = """<mujoco><worldbody>

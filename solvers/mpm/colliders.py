@@ -32,26 +32,32 @@ holds where its face planes start in ``grid_f`` (after the rows: normal (3), off
 the shape's frame, n·p + offset ≤ 0 inside) and how many there are; its signed distance is the
 largest of the planes' — exact inside and beside a face, a lower bound beside an edge or corner
 (which lets the influence reach up to √3 times further there; Genesis samples a mesh's distance
-from an SDF grid).
+from an SDF grid). A height field (HFIELD; the rigid solver's: MuJoCo's grid, two triangles a cell)
+keeps its data after the rows too: size x, size y (m), nrow, ncol, then the nrow·ncol heights (m,
+its frame, row by row), its size[0] where they start; its signed distance is to the plane of the
+triangle above or below the point (the surface's normal there), over its rectangle only (beside
+it: FAR) — a solid below the surface, also under its base.
 """
 import numpy as np
 import taichi as ti
 
 from .constitutive import genesis_eps
 
-PLANE, SPHERE, CAPSULE, CYLINDER, BOX, HULL = range(6)
+PLANE, SPHERE, CAPSULE, CYLINDER, BOX, HULL, HFIELD = range(7)
+FAR = 1e6  # m: a height field's distance beside its rectangle (no influence)
 WIDTH = 20
 COLLIDERS_AT = 9  # grid_f: h, inv_dx, vol, the walls' lower (3) and upper (3) corners, then the colliders
 INFLUENCE_CUTOFF = 0.1  # Genesis's: a collider acts on a node where its influence exceeds this
 
 
-def packed(rows, planes):
-    """The colliders' part of grid_f: rows (C, WIDTH), then the hulls' face planes (P, 4); a HULL
-    row's size[0], given as the number of its first plane, becomes that plane's index in grid_f."""
+def packed(rows, data):
+    """The colliders' part of grid_f: rows (C, WIDTH), then the data of the hulls and height fields
+    (D,) (their face planes, 4 numbers each; their grids); the size[0] of a HULL or HFIELD row, given
+    as where its data start in ``data``, becomes their index in grid_f."""
     rows = np.array(rows, dtype=np.float64).reshape(-1, WIDTH)
-    hulls = rows[:, 0] == HULL
-    rows[hulls, 13] = COLLIDERS_AT + rows.size + 4 * rows[hulls, 13]
-    return np.concatenate([rows.ravel(), np.asarray(planes, dtype=np.float64).ravel()])
+    with_data = (rows[:, 0] == HULL) | (rows[:, 0] == HFIELD)
+    rows[with_data, 13] = COLLIDERS_AT + rows.size + rows[with_data, 13]
+    return np.concatenate([rows.ravel(), np.asarray(data, dtype=np.float64).ravel()])
 
 
 @ti.func
@@ -124,7 +130,33 @@ def signed_distance(grid_f: ti.template(), at, x):
         d, n = _box_distance(p, ti.Vector([a, b, grid_f[at + 15]]))
     elif kind == HULL:
         d, n = _hull_distance(grid_f, ti.cast(a, ti.i32), ti.cast(b, ti.i32), p)
+    elif kind == HFIELD:
+        d, n = _hfield_distance(grid_f, ti.cast(a, ti.i32), p)
     return d, R @ n
+
+
+@ti.func
+def _hfield_distance(grid_f: ti.template(), first, p):
+    """(d, n) of the point p (3,) in a height field's frame (its data from grid_f[first]): over its
+    rectangle, the signed distance to the plane of the grid triangle above or below p and that
+    plane's upward normal; beside it, FAR."""
+    sx, sy = grid_f[first], grid_f[first + 1]
+    nrow, ncol = ti.cast(grid_f[first + 2], ti.i32), ti.cast(grid_f[first + 3], ti.i32)
+    d, n = FAR, ti.Vector([0.0, 0.0, 1.0])
+    if ti.abs(p[0]) <= sx and ti.abs(p[1]) <= sy:
+        dx, dy = 2.0 * sx / (ncol - 1), 2.0 * sy / (nrow - 1)
+        fu, fv = (p[0] + sx) / dx, (p[1] + sy) / dy
+        c, r = ti.min(ti.cast(ti.floor(fu), ti.i32), ncol - 2), ti.min(ti.cast(ti.floor(fv), ti.i32), nrow - 2)
+        u, v = fu - c, fv - r
+        at = first + 4 + r * ncol + c  # the cell's corner (r, c); MuJoCo's diagonal joins it to (r + 1, c + 1)
+        h00, h10, h01, h11 = grid_f[at], grid_f[at + 1], grid_f[at + ncol], grid_f[at + ncol + 1]
+        slope_u, slope_v = h11 - h01, h01 - h00  # the triangle (r, c), (r + 1, c), (r + 1, c + 1)
+        if v < u:  # the triangle (r, c), (r, c + 1), (r + 1, c + 1)
+            slope_u, slope_v = h10 - h00, h11 - h10
+        up = ti.Vector([-slope_u / dx, -slope_v / dy, 1.0])
+        n = up / up.norm()
+        d = (p[2] - (h00 + slope_u * u + slope_v * v)) * n[2]
+    return d, n
 
 
 @ti.func

@@ -53,13 +53,13 @@ class MPMSolver(MPMAdjoint, Solver):
         self.model = MPMModel(grid, self.particle_size ** 3, bool(sticky))
         self.entity_names = []
         self.wall_lower, self.wall_upper = grid.wall_lower, grid.wall_upper
-        self.collider_rows, self.collider_planes = np.zeros((0, colliders.WIDTH)), np.zeros((0, 4))
+        self.collider_rows, self.collider_data = np.zeros((0, colliders.WIDTH)), np.zeros(0)
 
-    def set_colliders(self, rows, planes=()):
+    def set_colliders(self, rows, data=()):
         """Rigid shapes at rest the grid meets, before the first step: colliders.py's rows (C,
-        colliders.WIDTH) and its hulls' face planes (P, 4) (colliders.packed)."""
+        colliders.WIDTH) and the data of its hulls and height fields (colliders.packed)."""
         self.collider_rows = np.asarray(rows, dtype=np.float64).reshape(-1, colliders.WIDTH)
-        self.collider_planes = np.asarray(planes, dtype=np.float64).reshape(-1, 4)
+        self.collider_data = np.asarray(data, dtype=np.float64).ravel()
         if hasattr(self, "grid_f"):  # built: the boundary arrays again
             self._check_indices()  # (the saved grid keeps more a node with colliders)
             self._allocate_boundaries()
@@ -233,7 +233,7 @@ class MPMSolver(MPMAdjoint, Solver):
         """grid_f and grid_i (kernels.py): the step, the grid, the walls and the colliders."""
         m, g = self.model, self.model.grid
         self.grid_f = torch.as_tensor([self.dt / self.substeps, g.density, m.vol, *g.wall_lower, *g.wall_upper,
-                                       *colliders.packed(self.collider_rows, self.collider_planes)],
+                                       *colliders.packed(self.collider_rows, self.collider_data)],
                                       dtype=runtime.tc_float, device=runtime.device)
         self.grid_i = torch.as_tensor([*g.lowest, *g.res, int(m.sticky), len(self.collider_rows)], dtype=torch.int32,
                                       device=runtime.device)
