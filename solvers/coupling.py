@@ -14,7 +14,6 @@ import numpy as np
 from .mpm import colliders
 from .rigid import geometry
 from .rigid.collision import convex
-from .rigid.model import FIXED
 from .rigid.shapes import quat_to_mat
 
 COLLIDER_KIND = {geometry.PLANE: colliders.PLANE, geometry.SPHERE: colliders.SPHERE,
@@ -32,34 +31,40 @@ class Coupling:
     restitution: float
 
 
-def _world_fixed_poses(model):
-    """{link: (pos (3,) m, rotation (3, 3))} of the links fixed to the world (parents first)."""
+def _static_poses(model):
+    """{link: (pos (3,) m, rotation (3, 3))} of the links welded to the world (model.link_static;
+    parents first, each static link's parent static too)."""
     poses = {}
-    for link, parent in enumerate(model.link_parent):
-        if model.link_jtype[link] != FIXED or (parent >= 0 and parent not in poses):
-            continue
+    for link in np.flatnonzero(model.link_static):
+        parent = model.link_parent[link]
         pos, rot = (np.zeros(3), np.eye(3)) if parent < 0 else poses[parent]
         poses[link] = (pos + rot @ model.link_pos0[link], rot @ quat_to_mat(model.link_quat0[link]))
     return poses
 
 
-def _hull_vertices(model, mesh):
-    """(V, 3) m: the vertices of the model's convex hull number ``mesh`` (geometry.hull_arrays)."""
+def _hull_field(model, name, k):
+    """Entry k of the model's hull int array ``name`` (convex.HULL_INT_FIELDS; geometry.hull_arrays)."""
     header = model.hull_int
-    adr = header[header[convex.HULL_INT_FIELDS.index("hull_vertadr")] + mesh]
-    num = header[header[convex.HULL_INT_FIELDS.index("hull_vertnum")] + mesh]
-    return model.hull_vec[adr: adr + num]
+    return int(header[header[convex.HULL_INT_FIELDS.index(name)] + k])
 
 
-def hull_planes(vertices):
+def _hull_vertices(model, mesh):
+    """(V, 3) m: the vertices of the model's convex hull number ``mesh``."""
+    adr = _hull_field(model, "hull_vertadr", mesh)
+    return model.hull_vec[adr: adr + _hull_field(model, "hull_vertnum", mesh)]
+
+
+def _hull_planes(model, mesh):
     """(F, 4): the face planes (outward unit normal, offset m; n·p + offset ≤ 0 inside) of the
-    convex hull of ``vertices`` (V, 3), coplanar triangles' once."""
-    import trimesh  # (imported when first needed: with scipy it takes ~0.6 s)
-
-    hull = trimesh.Trimesh(vertices=vertices).convex_hull
-    planes = np.hstack([hull.face_normals, -np.einsum("ij,ij->i", hull.face_normals, hull.triangles[:, 0])[:, None]])
-    _, first = np.unique(np.round(planes, 9), axis=0, return_index=True)
-    return planes[np.sort(first)]
+    model's convex hull number ``mesh``: its polygons, as the rigid colliders take them."""
+    vertices, first = _hull_vertices(model, mesh), _hull_field(model, "hull_polyadr", mesh)
+    normals_at = int(model.hull_int[convex.HULL_HEADER - 1])  # (the normals follow the vertices in hull_vec)
+    planes = []
+    for p in range(first, first + _hull_field(model, "hull_polynum", mesh)):
+        normal = model.hull_vec[normals_at + p]
+        corner = vertices[_hull_field(model, "hull_poly_vert", _hull_field(model, "hull_poly_vertadr", p))]
+        planes.append([*normal, -normal @ corner])
+    return np.array(planes)
 
 
 def _shape_data(model, g, start):
@@ -68,7 +73,7 @@ def _shape_data(model, g, start):
     grid; none for a primitive, whose size is the geom's."""
     kind, size = model.geom_type[g], model.geom_size[g]
     if kind == geometry.MESH:
-        faces = hull_planes(_hull_vertices(model, model.geom_mesh[g]))
+        faces = _hull_planes(model, model.geom_mesh[g])
         return (start, len(faces), 0.0), faces.ravel(), model.geom_rbound[g]
     if kind == geometry.HFIELD:
         points = _hull_vertices(model, model.geom_mesh[g])  # its top grid, then its base
@@ -83,7 +88,7 @@ def static_colliders(model, couplings):
     of its hulls and height fields (D,) (colliders.packed), and the left-out shapes as (link, geom
     type name, why) triples. couplings: per rigid entity (the model's link_entity numbers), a
     Coupling or None (the entity does not couple)."""
-    poses, rows, data, left_out = _world_fixed_poses(model), [], [], []
+    poses, rows, data, left_out = _static_poses(model), [], [], []
     for g, (kind, link) in enumerate(zip(model.geom_type, model.geom_link)):
         coupling = couplings[model.link_entity[link]]
         if coupling is None or not model.geom_collides[g]:
