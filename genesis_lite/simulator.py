@@ -98,6 +98,7 @@ class Simulator:
         self.warned_graph_cut = False  # _warn_graph_cut warned since the last reset
         self.warned_gradient = False  # check_first_gradients warned since the last reset
         self.rigid_solver = None  # Genesis's scene.sim.rigid_solver (rigid_solver.RigidSolverView), set by the scene
+        self.coupler = None  # the coupling stage of the shared substep loop (solvers/coupler.py), set by the scene
         self.flat_input_names = ()  # (solver index, input name) of each of _grad_inputs' inputs (set at build)
 
     def build(self, n_envs):
@@ -311,7 +312,8 @@ class Simulator:
         for s in range(self.options.substeps):
             for solver in solvers:
                 solver.substep_pre_coupling(s)
-            # rigid–MPM coupling (the next issue) acts here, on the solvers' substep s
+            if self.coupler is not None:  # rigid shapes of moving links and the MPM grid (solvers/coupler.py)
+                self.coupler.couple(s)
             for solver in solvers:
                 solver.substep_post_coupling(s)
         return [solver.end_step(download) for solver in solvers]

@@ -1,11 +1,11 @@
-"""Rigid–MPM coupling: which rigid collision shapes the MPM grid meets, as the MPM solver's
-colliders (mpm/colliders.py: Genesis's LegacyCoupler rule, rigid side).
+"""Rigid–MPM coupling: which rigid collision shapes the MPM grid meets, as colliders (mpm/colliders.py:
+Genesis's LegacyCoupler rule, rigid side).
 
-Coupled today: the shapes of links fixed to the world — a chain of fixed joints up to it — (plane,
-sphere, capsule, cylinder, box; meshes as the rigid solver takes them, their convex hulls; height
-fields) of entities whose material couples (Genesis's ``needs_coup``), where the shape collides (a
-contype or conaffinity; not a morph's collision=False). Left out, and said so by the scene: shapes
-on moving links (the particles would need the rigid velocity and would push back: not yet).
+Coupled: the shapes (plane, sphere, capsule, cylinder, box; meshes as the rigid solver takes them,
+their convex hulls; height fields) of entities whose material couples (Genesis's ``needs_coup``),
+where the shape collides (a contype or conaffinity; not a morph's collision=False). Those of links
+fixed to the world (a chain of fixed joints up to it) are the MPM solver's colliders at rest; those
+of moving links meet the grid in the coupling stage (solvers/coupler.py), both ways.
 """
 from dataclasses import dataclass
 
@@ -19,7 +19,7 @@ from .rigid.shapes import quat_to_mat
 COLLIDER_KIND = {geometry.PLANE: colliders.PLANE, geometry.SPHERE: colliders.SPHERE,
                  geometry.CAPSULE: colliders.CAPSULE, geometry.CYLINDER: colliders.CYLINDER,
                  geometry.BOX: colliders.BOX, geometry.MESH: colliders.HULL, geometry.HFIELD: colliders.HFIELD}
-KIND_NAME = {code: name for name, code in geometry.GEOM_CODE.items()}
+KIND_NAME = {code: name for name, code in geometry.GEOM_CODE.items()}  # a geom type's name, for messages
 
 
 @dataclass(frozen=True)
@@ -83,24 +83,32 @@ def _shape_data(model, g, start):
     return size, np.zeros(0), np.inf if kind == geometry.PLANE else model.geom_rbound[g]
 
 
-def static_colliders(model, couplings):
-    """The MPM colliders of the rigid model's coupled shapes: rows (C, colliders.WIDTH) and the data
-    of its hulls and height fields (D,) (colliders.packed), and the left-out shapes as (link, geom
-    type name, why) triples. couplings: per rigid entity (the model's link_entity numbers), a
-    Coupling or None (the entity does not couple)."""
-    poses, rows, data, left_out = _static_poses(model), [], [], []
+def rigid_colliders(model, couplings):
+    """The colliders of the rigid model's coupled shapes: (static, moving). static: (rows (C, colliders.WIDTH),
+    data (D,)) of the shapes fixed to the world (colliders.packed); moving: (rows, data, geoms (C', 2) int:
+    each row's rigid geom and its link) of the others, whose rows' poses are unused (the rigid frame's
+    are taken: coupler.py). couplings: per rigid entity (the model's link_entity numbers), a Coupling
+    or None (the entity does not couple)."""
+    poses = _static_poses(model)
+    tables = {True: ([], [], []), False: ([], [], [])}  # at rest? → (rows, data, geoms)
     for g, (kind, link) in enumerate(zip(model.geom_type, model.geom_link)):
         coupling = couplings[model.link_entity[link]]
         if coupling is None or not model.geom_collides[g]:
             continue
-        if link not in poses:
-            left_out.append((int(link), KIND_NAME[int(kind)], "on a moving link"))
-            continue
-        pos, rot = poses[link]
+        rows, data, geoms = tables[link in poses]
+        pos, rot = np.zeros(3), np.eye(3)
+        if link in poses:
+            link_pos, link_rot = poses[link]
+            pos, rot = link_pos + link_rot @ model.geom_pos[g], link_rot @ quat_to_mat(model.geom_quat[g])
         size, shape_data, bound = _shape_data(model, g, sum(len(d) for d in data))
         data.append(shape_data)
-        rows.append([COLLIDER_KIND[int(kind)], *(pos + rot @ model.geom_pos[g]),
-                     *(rot @ quat_to_mat(model.geom_quat[g])).ravel(), *size,
-                     coupling.friction, coupling.softness, coupling.restitution, bound])
-    return (np.array(rows, dtype=np.float64).reshape(-1, colliders.WIDTH), np.concatenate([np.zeros(0), *data]),
-            left_out)
+        geoms.append((g, link))
+        rows.append([COLLIDER_KIND[int(kind)], *pos, *rot.ravel(), *size, coupling.friction, coupling.softness,
+                     coupling.restitution, bound])
+
+    def packed(rows, data, geoms):
+        return (np.array(rows, dtype=np.float64).reshape(-1, colliders.WIDTH), np.concatenate([np.zeros(0), *data]),
+                np.array(geoms, dtype=np.int32).reshape(-1, 2))
+
+    static, moving = packed(*tables[True]), packed(*tables[False])
+    return static[:2], moving

@@ -25,7 +25,6 @@ from genesis_lite.solvers.mpm import colliders as C
 from genesis_lite.solvers.rigid.collision import hfield
 from genesis_lite.solvers.rigid.shapes import quat_to_mat
 
-from .conftest import warns
 from .test_mpm_gradients import Rollout, assert_bitwise_reproducible, check_all
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -126,7 +125,7 @@ def distances_of(row, planes, points):
 
 # each shape as its morph states it, and as trimesh builds it (its own frame)
 SHAPE_MESHES = {
-    "sphere": (C.SPHERE, (0.05, 0, 0), lambda: trimesh.creation.icosphere(subdivisions=6, radius=0.05)),
+    "sphere": (C.SPHERE, (0.05, 0, 0), lambda: trimesh.creation.icosphere(subdivisions=4, radius=0.05)),
     "capsule": (C.CAPSULE, (0.03, 0.04, 0), lambda: trimesh.creation.capsule(height=0.08, radius=0.03, count=[96, 96])),
     "cylinder": (C.CYLINDER, (0.04, 0.03, 0), lambda: trimesh.creation.cylinder(radius=0.04, height=0.06,
                                                                                  sections=256)),
@@ -423,7 +422,7 @@ def test_particles_move_as_genesis_moves_them(monkeypatch):
     measured there 2.1e-9 and 3.9e-9 m apart, round-off grown by the rollout)."""
     bench = os.path.join(ROOT, "bench")
     monkeypatch.syspath_prepend(bench)
-    scene, block = runpy.run_path(os.path.join(bench, "coupling.py"))["scene_of"](gs)
+    scene, block, _ = runpy.run_path(os.path.join(bench, "coupling.py"))["scene_of"](gs, "static")
     with open(os.path.join(ROOT, "tests", "data", "genesis_coupling.json")) as file:
         reference = json.load(file)
     block.set_velocity(torch.tensor([1.5, 0.0, -1.0], dtype=torch.float64).repeat(block.n_particles, 1))
@@ -466,9 +465,10 @@ def test_float32_batched_envs_with_colliders_agree_bit_for_bit(f32):
     assert torch.isfinite(vel.grad).all() and torch.equal(vel.grad[0], vel.grad[1]) and vel.grad.abs().sum() > 0
 
 
-def test_which_shapes_couple(caplog):
-    """Fixed primitives of coupling materials do; needs_coup=False, collision=False and a moving body
-    do not (the moving one named in a warning)."""
+def test_which_shapes_couple():
+    """Fixed primitives of coupling materials are the MPM solver's colliders; a moving body's meet the
+    grid in the coupling stage (test_mpm_coupler.py); needs_coup=False and collision=False do not
+    couple."""
     scene = gs.Scene(mpm_options=gs.options.MPMOptions(lower_bound=(-0.5, -0.5, -0.2), upper_bound=(0.5, 0.5, 0.6)))
     scene.add_entity(gs.morphs.Plane(), material=gs.materials.Rigid(coup_friction=0.7, coup_softness=0.01,
                                                                      coup_restitution=0.5))
@@ -477,15 +477,16 @@ def test_which_shapes_couple(caplog):
     scene.add_entity(gs.morphs.Box(pos=(0.0, 0.3, 0.05), size=(0.1, 0.1, 0.1), fixed=True, collision=False))
     scene.add_entity(gs.morphs.Sphere(pos=(-0.3, 0.0, 0.3), radius=0.05), name="ball")
     scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.2), size=(0.05, 0.05, 0.05)), material=gs.materials.MPM.Sand())
-    with warns(caplog, r"pass through these rigid shapes: entity 'ball': sphere of link '\w+' \(on a moving link\)\."):
-        scene.build()
+    scene.build()
     rows = scene.mpm_solver.collider_rows
     assert rows.shape == (1, C.WIDTH) and rows[0, 0] == C.PLANE
     np.testing.assert_array_equal(rows[0, 16:20], [0.7, 0.01, 0.5, np.inf])  # (a plane: no bounding radius)
+    ball = scene.sim.coupler.rigid.model.link_entity[scene.sim.coupler.geoms[:, 1].numpy()]
+    assert scene.sim.coupler.geoms.shape == (1, 2) and ball[0] == 3  # the fourth rigid entity's sphere
 
 
-def test_coupler_options_rigid_mpm_false_lets_the_particles_through(caplog):
-    """Genesis's LegacyCouplerOptions(rigid_mpm=False): no collider, no warning; the block falls
+def test_coupler_options_rigid_mpm_false_lets_the_particles_through():
+    """Genesis's LegacyCouplerOptions(rigid_mpm=False): no collider, no coupling stage; the block falls
     through the plane; a wrong type or value is a named error."""
     block_z = []
     for rigid_mpm in (True, False):
@@ -497,9 +498,8 @@ def test_coupler_options_rigid_mpm_false_lets_the_particles_through(caplog):
         scene.add_entity(gs.morphs.Sphere(pos=(0.3, 0.0, 0.3), radius=0.05), name="ball")
         block = scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.2), size=(0.1, 0.1, 0.1)),
                                  material=gs.materials.MPM.Elastic(E=3e4))
-        with warns(caplog, "entity 'ball'" if rigid_mpm else None):
-            scene.build()
-        assert len(scene.mpm_solver.collider_rows) == int(rigid_mpm)
+        scene.build()
+        assert len(scene.mpm_solver.collider_rows) == int(rigid_mpm) and (scene.sim.coupler is None) != rigid_mpm
         for _ in range(100):
             scene.step()
         block_z.append(float(block.get_particles_pos()[:, 2].min()))

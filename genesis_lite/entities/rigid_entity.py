@@ -1570,8 +1570,10 @@ class RigidEntity(EntityIndexing):
         (n_envs, n), as Genesis 1.4.5's: clipped actuator force − damping·q̇ − the joint springs'
         stiffness·(q − springref) (a ball joint's stiffness·r) + the fixed tendons' springs and
         dampers (MJCF) − bias (gravity less its compensation,
-        Coriolis, centrifugal) at that substep's start, plus the constraint forces (joint limits, friction loss, contacts) of its solve (MuJoCo's
-        qfrc_smooth + qfrc_constraint): a body resting on the ground feels none. Zeros in an env
+        Coriolis, centrifugal) at that substep's start, + the MPM particles' push on coupled shapes of
+        moving links (solvers/coupler.py), plus the constraint forces (joint limits, friction loss,
+        contacts) of its solve (MuJoCo's qfrc_smooth + qfrc_constraint): a body resting on the ground
+        feels none. Zeros in an env
         before its first step and after a reset or setter replaced its state. Not differentiable."""
         return self._last_step_dofs(self._sim().dofs_force(self._solver), dofs_idx_local, envs_idx)
 

@@ -79,7 +79,7 @@ class MPMAdjoint:
     def _bind_reverse(self):
         arrays = self._arrays() + [self.grads.view(-1), self.grad_params, self.grad_gravity, self.grad_grid.view(-1),
                                    self.scratch.view(-1)]
-        config = (False, self.serial_chores, self.has_colliders)
+        config = (False, self.serial_chores, self.has_colliders, False)
         self.reverse_kernels = BoundKernels(config, arrays, [0] * len(arrays), *kernels.REVERSE_KERNELS)
 
     def begin_reverse(self, state, inputs, grad_state_out, warm_start, record=None):

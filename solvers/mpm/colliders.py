@@ -1,6 +1,7 @@
 """Rigid shapes at rest that the MPM grid meets: the rigid side of Genesis's rigid–MPM coupling
 (its LegacyCoupler) for shapes fixed to the world — a ground plane, a table, an obstacle — and
-its adjoint.
+its adjoint. The shapes' distances (posed_distance, posed_contact) and the rule (respond) serve
+the shapes of moving links too, posed by the rigid solver's frame (solvers/coupler.py).
 
 In the grid update, after gravity and before the walls (Genesis's order), each node's velocity v
 meets every collider in turn. With the collider's signed distance d and outward unit normal n at the
@@ -50,13 +51,14 @@ COLLIDERS_AT = 9  # grid_f: h, inv_dx, vol, the walls' lower (3) and upper (3) c
 INFLUENCE_CUTOFF = 0.1  # Genesis's: a collider acts on a node where its influence exceeds this
 
 
-def packed(rows, data):
-    """The colliders' part of grid_f: rows (C, WIDTH), then the data of the hulls and height fields
-    (D,) (their face planes, 4 numbers each; their grids); the size[0] of a HULL or HFIELD row, given
-    as where its data start in ``data``, becomes their index in grid_f."""
+def packed(rows, data, at=COLLIDERS_AT):
+    """The colliders' part of grid_f (a table starting at grid_f[at]): rows (C, WIDTH), then the data
+    of the hulls and height fields (D,) (their face planes, 4 numbers each; their grids); the size[0]
+    of a HULL or HFIELD row, given as where its data start in ``data``, becomes their index in the
+    whole array."""
     rows = np.array(rows, dtype=np.float64).reshape(-1, WIDTH)
     with_data = (rows[:, 0] == HULL) | (rows[:, 0] == HFIELD)
-    rows[with_data, 13] = COLLIDERS_AT + rows.size + rows[with_data, 13]
+    rows[with_data, 13] = at + rows.size + rows[with_data, 13]
     return np.concatenate([rows.ravel(), np.asarray(data, dtype=np.float64).ravel()])
 
 
@@ -108,9 +110,27 @@ def _cylinder_distance(p, radius, half_height):
 @ti.func
 def signed_distance(grid_f: ti.template(), at, x):
     """(d m, n (3,) world) of the point x (3,) m to the collider whose row starts at grid_f[at]."""
+    return posed_distance(grid_f, at, _rotation(grid_f, at), _position(grid_f, at), x)
+
+
+@ti.func
+def posed_distance(grid_f: ti.template(), at, R, pos, x):
+    """(d m, n (3,) world) of the point x (3,) m to the shape of the row at grid_f[at] posed at pos
+    (3,) m, turned by R (3, 3, world from shape): the row's own pose, or a moving link's."""
+    d, n = shape_distance(grid_f, at, R.transpose() @ (x - pos))
+    return d, R @ n
+
+
+@ti.func
+def _position(grid_f: ti.template(), at):
+    return ti.Vector([grid_f[at + 1], grid_f[at + 2], grid_f[at + 3]])
+
+
+@ti.func
+def shape_distance(grid_f: ti.template(), at, p):
+    """(d m, n (3,) in the shape's frame) of the point p (3,) m, in the shape's frame, to the shape
+    of the row at grid_f[at]."""
     kind = ti.cast(grid_f[at], ti.i32)
-    R = _rotation(grid_f, at)
-    p = R.transpose() @ (x - ti.Vector([grid_f[at + 1], grid_f[at + 2], grid_f[at + 3]]))
     a, b = grid_f[at + 13], grid_f[at + 14]
     d, n = p[2], ti.Vector([0.0, 0.0, 1.0])  # PLANE
     if kind == SPHERE:
@@ -132,7 +152,7 @@ def signed_distance(grid_f: ti.template(), at, x):
         d, n = _hull_distance(grid_f, ti.cast(a, ti.i32), ti.cast(b, ti.i32), p)
     elif kind == HFIELD:
         d, n = _hfield_distance(grid_f, ti.cast(a, ti.i32), p)
-    return d, R @ n
+    return d, n
 
 
 @ti.func
@@ -178,18 +198,31 @@ def _hull_distance(grid_f: ti.template(), first, count, p):
 def _contact(grid_f: ti.template(), c, x):
     """(acts, n, w, μ, e) of collider c at the node x: acts where its influence w passes the cutoff."""
     at = COLLIDERS_AT + c * WIDTH
+    return posed_contact(grid_f, at, _rotation(grid_f, at), _position(grid_f, at), x)
+
+
+@ti.func
+def reach(grid_f: ti.template(), at):
+    """How far (m) from its position the shape of the row at grid_f[at] can act: its bounding radius
+    and the influence's reach (twice ς ln(1 / cutoff), for round-off)."""
+    return grid_f[at + 19] + 2.0 * ti.static(np.log(1.0 / INFLUENCE_CUTOFF)) * ti.max(grid_f[at + 17], 1e-10)
+
+
+@ti.func
+def posed_contact(grid_f: ti.template(), at, R, pos, x):
+    """(acts, n, w, μ, e) at the node x of the shape of the row at grid_f[at] posed at pos (3,) m,
+    turned by R (posed_distance): acts where its influence w passes the cutoff."""
     softness = ti.max(grid_f[at + 17], 1e-10)
     acts, n, w = 0, ti.Vector([0.0, 0.0, 1.0]), 0.0
-    centre = ti.Vector([grid_f[at + 1], grid_f[at + 2], grid_f[at + 3]])
-    if (x - centre).norm() - grid_f[at + 19] < 2.0 * ti.static(np.log(1.0 / INFLUENCE_CUTOFF)) * softness:
-        d, normal = signed_distance(grid_f, at, x)
+    if (x - pos).norm() < reach(grid_f, at):
+        d, normal = posed_distance(grid_f, at, R, pos, x)
         n, w = normal, ti.min(ti.exp(-d / softness), 1.0)
         acts = w > INFLUENCE_CUTOFF
     return acts, n, w, grid_f[at + 16], grid_f[at + 18]
 
 
 @ti.func
-def _respond(v, n, w, mu, e):
+def respond(v, n, w, mu, e):
     """The node's velocity after one collider (the module's rule; v unchanged unless v·n < 0)."""
     out = v
     vn = v.dot(n)
@@ -203,7 +236,7 @@ def _respond(v, n, w, mu, e):
 
 @ti.func
 def _respond_adjoint(v, n, w, mu, e, g):
-    """∂L/∂v of _respond at v from g = ∂L/∂(its output)."""
+    """∂L/∂v of respond at v from g = ∂L/∂(its output)."""
     out = g
     vn = v.dot(n)
     if vn < 0.0:
@@ -227,7 +260,7 @@ def collide(grid_f: ti.template(), count, x, v):
     for c in range(count):
         acts, n, w, mu, e = _contact(grid_f, c, x)
         if acts:
-            out = _respond(out, n, w, mu, e)
+            out = respond(out, n, w, mu, e)
     return out
 
 
@@ -245,6 +278,6 @@ def collide_adjoint(grid_f: ti.template(), count, x, v, g):
             for k in range(c):
                 acts_k, n_k, w_k, mu_k, e_k = _contact(grid_f, k, x)
                 if acts_k:
-                    before = _respond(before, n_k, w_k, mu_k, e_k)
+                    before = respond(before, n_k, w_k, mu_k, e_k)
             out = _respond_adjoint(before, n, w, mu, e, out)
     return out

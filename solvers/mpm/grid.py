@@ -58,15 +58,16 @@ def largest_count(active: ti.template()):
 
 
 @ti.func
-def grid_stage(colliders: ti.template(), grid: ti.template(), active: ti.template(), gravity: ti.template(),
-               grid_f: ti.template(), grid_i: ti.template(), saved_grid: ti.template(), saved_nodes: ti.template(),
-               keep):
-    """Momentum → velocity, gravity, the rigid colliders (colliders.py; compiled in when ``colliders``),
-    then the walls (Genesis's grid op, restitution 0). When keep ≥ 0 (a replay), the updated grid is
-    also kept for the reverse: its listed nodes' (v, M), and with colliders the velocity before them
-    (3), and the lists into slot ``keep`` of saved_grid / saved_nodes, as far as their capacity goes
-    (the counts are kept whole: the solver grows the capacity and replays again when one exceeds
-    it)."""
+def grid_stage(colliders: ti.template(), walls: ti.template(), grid: ti.template(), active: ti.template(),
+               gravity: ti.template(), grid_f: ti.template(), grid_i: ti.template(), saved_grid: ti.template(),
+               saved_nodes: ti.template(), keep):
+    """Momentum → velocity, gravity, the rigid colliders at rest (colliders.py; compiled in when
+    ``colliders``), then the walls (Genesis's grid op, restitution 0) unless ``walls`` is False (the
+    shapes of moving links come first: solvers/coupler.py, then walls_stage). When keep ≥ 0 (a
+    replay), the updated grid is also kept for the reverse: its listed nodes' (v, M), and with
+    colliders the velocity before them (3), and the lists into slot ``keep`` of saved_grid /
+    saved_nodes, as far as their capacity goes (the counts are kept whole: the solver grows the
+    capacity and replays again when one exceeds it)."""
     h, dx, K = grid_f[0], 1.0 / grid_f[1], node_count(grid_i)
     B = active.shape[0] - 1
     for e, k in ti.ndrange(B, active[B, 0]):
@@ -78,7 +79,8 @@ def grid_stage(colliders: ti.template(), grid: ti.template(), active: ti.templat
             v = free
             if ti.static(colliders):
                 v = collide(grid_f, grid_i[7], pos, free)
-            v = wall_velocity(pos, v, grid_f, grid_i[6])
+            if ti.static(walls):
+                v = wall_velocity(pos, v, grid_f, grid_i[6])
             for c in ti.static(range(3)):
                 grid[at + c] = v[c]
             if keep >= 0 and k < saved_grid.shape[2]:
@@ -92,6 +94,21 @@ def grid_stage(colliders: ti.template(), grid: ti.template(), active: ti.templat
     if keep >= 0:
         for e in range(B + 1):
             saved_nodes[keep, e, 0] = active[e, 0]
+
+
+@ti.func
+def walls_stage(grid: ti.template(), active: ti.template(), grid_f: ti.template(), grid_i: ti.template()):
+    """The walls on the updated grid's listed nodes (grid_stage's last part, where the shapes of
+    moving links come between; forward only)."""
+    dx, K = 1.0 / grid_f[1], node_count(grid_i)
+    B = active.shape[0] - 1
+    for e, k in ti.ndrange(B, active[B, 0]):
+        if k < active[e, 0]:
+            n = active[e, k + 1]
+            at = node_at(e, n, K)
+            v = wall_velocity(node_position(n, dx, grid_i), node_vector(grid, at), grid_f, grid_i[6])
+            for c in ti.static(range(3)):
+                grid[at + c] = v[c]
 
 
 @ti.func

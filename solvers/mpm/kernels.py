@@ -37,12 +37,15 @@ costs far less than indexing a 3- or 4-d ndarray (B and N are read off ``params`
 
 The forward kernels take, after the arrays, src and dst (frames) and keep: −1 in a plain step, s
 in a replay of substep s (which then keeps what the reverse reads; a plain step pays nothing).
-Every kernel's compile-time argument is a scene's ``config`` = (takes_svd, serial, colliders):
-whether any of its materials takes an SVD (p2g.stress_stage: pairs of particles with interleaved
-SVDs, or one particle at a time with none; only the kernels that run the stress, STRESS_KERNELS,
-are bound with it, the others with False), whether the grid's chores (adding, copying, zeroing
-listed nodes) run on the calling thread (grid.py; solver.SERIAL_CHORE_ENVS), and whether the grid
-meets rigid colliders (colliders.py; a scene without them compiles none of their code).
+Every kernel's compile-time argument is a scene's ``config`` = (takes_svd, serial, colliders,
+moving): whether any of its materials takes an SVD (p2g.stress_stage: pairs of particles with
+interleaved SVDs, or one particle at a time with none; only the kernels that run the stress,
+STRESS_KERNELS, are bound with it, the others with False), whether the grid's chores (adding,
+copying, zeroing listed nodes) run on the calling thread (grid.py; solver.SERIAL_CHORE_ENVS),
+whether the grid meets rigid colliders at rest (colliders.py; a scene without them compiles none
+of their code), and whether it meets shapes of moving links (solvers/coupler.py, between
+pre_coupling, which then ends with the grid update up to the walls, and post_coupling, which
+then starts with the walls).
 
 The reverse kernels (REVERSE_KERNELS) take five more arrays:
 - ``grads`` (1, B, N, 25, flat): the gradient of the loss w.r.t. a frame's particle rows — of
@@ -72,7 +75,7 @@ import taichi as ti
 
 from .g2p import gather_adjoint_stage, gather_stage
 from .grid import (clear_adjoint_stage, clear_stage, grid_adjoint_stage, grid_stage, gravity_adjoint_stage,
-                   largest_count, merge_stage, restore_stage)
+                   largest_count, merge_stage, restore_stage, walls_stage)
 from .layout import WIDTH
 from .p2g import p2g_adjoint_stage, scatter_stage, stress_stage
 from .stencil import row_at
@@ -89,7 +92,7 @@ def substep(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, c
     scatter_stage(frames, params, affine, grid, active, part_grid, part_nodes, grid_f, grid_i, src, ti.max(keep, 0))
     merge_stage(config[1], grid, active, part_grid, part_nodes, grid_i)
     largest_count(active)
-    grid_stage(config[2], grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
+    grid_stage(config[2], True, grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
     gather_stage(frames, params, grid, grid_f, grid_i, flags, gathered, src, dst, keep)
     clear_stage(config[1], grid, active, grid_i)
 
@@ -99,11 +102,15 @@ def pre_coupling(config: ti.template(), frames: A, params: A, gravity: A, kinds:
                  affine: A, svd: A, grid: A, active: A, part_grid: A, part_nodes: A,
                  grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                  src: ti.i32, dst: ti.i32, keep: ti.i32):
-    """The substep up to the grid update (stress and p2g): the grid holds momentum and mass."""
+    """The substep up to where the coupler acts: stress and p2g (the grid holds momentum and mass),
+    and, where shapes of moving links meet the grid (config[3]), the grid update up to the walls
+    (the grid holds velocity and mass)."""
     stress_stage(config[0], frames, params, kinds, consts, fiber, affine, svd, grid_f, src, dst, keep)
     scatter_stage(frames, params, affine, grid, active, part_grid, part_nodes, grid_f, grid_i, src, ti.max(keep, 0))
     merge_stage(config[1], grid, active, part_grid, part_nodes, grid_i)
     largest_count(active)
+    if ti.static(config[3]):
+        grid_stage(config[2], False, grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
 
 
 @ti.kernel
@@ -111,8 +118,12 @@ def post_coupling(config: ti.template(), frames: A, params: A, gravity: A, kinds
                   affine: A, svd: A, grid: A, active: A, part_grid: A, part_nodes: A,
                   grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                   src: ti.i32, dst: ti.i32, keep: ti.i32):
-    """The rest of the substep: grid update, g2p, grid cleared."""
-    grid_stage(config[2], grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
+    """The rest of the substep: grid update (or, after the coupler's moving shapes, its walls), g2p,
+    grid cleared."""
+    if ti.static(config[3]):
+        walls_stage(grid, active, grid_f, grid_i)
+    else:
+        grid_stage(config[2], True, grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
     gather_stage(frames, params, grid, grid_f, grid_i, flags, gathered, src, dst, keep)
     clear_stage(config[1], grid, active, grid_i)
 

@@ -9,7 +9,7 @@ import taichi as ti
 import torch
 
 from ..base import Solver
-from ..core import InvalidInputError, available_memory, new_state, runtime, warn_user
+from ..core import GradientError, InvalidInputError, available_memory, new_state, runtime, warn_user
 from ..launch import BoundKernels
 from . import colliders, kernels, layout
 from .adjoint import MPMAdjoint
@@ -54,12 +54,19 @@ class MPMSolver(MPMAdjoint, Solver):
         self.entity_names = []
         self.wall_lower, self.wall_upper = grid.wall_lower, grid.wall_upper
         self.collider_rows, self.collider_data = np.zeros((0, colliders.WIDTH)), np.zeros(0)
+        self.meets_moving = False  # a coupler brings shapes of moving links (set_colliders)
 
-    def set_colliders(self, rows, data=()):
+    def set_colliders(self, rows, data=(), moving=False):
         """Rigid shapes at rest the grid meets, before the first step: colliders.py's rows (C,
-        colliders.WIDTH) and the data of its hulls and height fields (colliders.packed)."""
+        colliders.WIDTH) and the data of its hulls and height fields (colliders.packed); moving:
+        whether a coupler (solvers/coupler.py) brings shapes of moving links between the substep's
+        halves (its walls then wait for them; forward only)."""
+        if moving and self.requires_grad:
+            raise GradientError("MPM solver: shapes of moving links meet the particles forward only; no gradient "
+                                "passes through them yet")
         self.collider_rows = np.asarray(rows, dtype=np.float64).reshape(-1, colliders.WIDTH)
         self.collider_data = np.asarray(data, dtype=np.float64).ravel()
+        self.meets_moving = bool(moving)
         if hasattr(self, "grid_f"):  # built: the boundary arrays again
             self._check_indices()  # (the saved grid keeps more a node with colliders)
             self._allocate_boundaries()
@@ -251,9 +258,9 @@ class MPMSolver(MPMAdjoint, Solver):
         arrays = self._arrays()
         dims = [0] * len(arrays)
         takes_svd = any_needs_svd(self.model.kinds, self.model.consts)
-        self.kernels = BoundKernels((False, self.serial_chores, self.has_colliders), arrays, dims,
-                                    *kernels.KERNELS).bind((takes_svd, self.serial_chores, self.has_colliders), arrays,
-                                                           dims, *kernels.STRESS_KERNELS)
+        config = (self.serial_chores, self.has_colliders, self.meets_moving)
+        self.kernels = BoundKernels((False, *config), arrays, dims, *kernels.KERNELS).bind(
+            (takes_svd, *config), arrays, dims, *kernels.STRESS_KERNELS)
         if self.requires_grad:
             self._bind_reverse()
 

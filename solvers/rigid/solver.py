@@ -479,6 +479,10 @@ class RigidSolver(Solver):
         when not empty), out (the result, at the last substep, when not empty), commit: see
         step.finish_substep; flagged_only: only the envs that advance left to the constraint stage."""
         self._smooth_and_collide(s, inputs, flagged_only)
+        self._finish_substep(s, out, commit, flagged_only)
+
+    def _finish_substep(self, s, out, commit, flagged_only):
+        """The rest of substep s after its smooth stage and colliders (see _substep)."""
         # the solve only where some env has a row to form (the frame is one without rows until
         # then): a scene out of contact never loads the solve's kernel (tens of seconds of LLVM in
         # a fresh process) nor runs it; on a GPU the flag is not read (a wait for the device)
@@ -490,7 +494,9 @@ class RigidSolver(Solver):
         else:
             self.kernels.finish_substep(s, commit, out, flagged_only)
 
-    # -- the shared substep loop (solvers/base.py): the whole rigid substep comes before coupling --
+    # -- the shared substep loop (solvers/base.py): the smooth stage and colliders of frame s come --
+    # -- before coupling (a coupler reads the frame's poses, and adds its forces to qfrc_smooth), --
+    # -- the solve and the integration after it --
     def begin_step(self, inputs):
         self._clear_substep_record()
         if inputs is not None:
@@ -498,10 +504,10 @@ class RigidSolver(Solver):
         self._step_inputs = self._nothing if inputs is None else self._pack_inputs(inputs)
 
     def substep_pre_coupling(self, s):
-        self._substep(s, self._step_inputs if s == 0 else self._nothing, self._nothing, self._commit, 0)
+        self._smooth_and_collide(s, self._step_inputs if s == 0 else self._nothing, 0)
 
     def substep_post_coupling(self, s):
-        pass
+        self._finish_substep(s, self._nothing, self._commit, 0)
 
     def end_step(self, download):
         result = self.download_state() if download and self._commit else None
