@@ -152,3 +152,39 @@ def test_a_differentiable_scene_refuses_moving_shapes_and_names_them():
         else:
             scene.build()
             assert scene.sim.coupler is None and len(scene.mpm_solver.collider_rows) == 1  # (the plane)
+
+
+def _pile_beside_a_jelly(max_contacts):
+    """A pyramid of 30 boxes (4 cm; 4 × 4, 3 × 3, 2 × 2, 1: each on four below it) forming on a plane,
+    beside an elastic block a box is dropped on; RigidOptions(max_contacts=max_contacts); returns
+    (scene, rigid bodies, block)."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, substeps=4),
+                     rigid_options=gs.options.RigidOptions(max_contacts=max_contacts),
+                     mpm_options=gs.options.MPMOptions(lower_bound=(-0.4, -0.3, -0.1), upper_bound=(0.3, 0.3, 0.4),
+                                                       grid_density=32))
+    scene.add_entity(gs.morphs.Plane())
+    size = 0.04
+    places = [(1.004 * size * (i + level / 2), 1.004 * size * (j + level / 2), (0.5 + 1.2 * level) * size)
+              for level in range(4) for j in range(4 - level) for i in range(4 - level)]
+    bodies = [scene.add_entity(gs.morphs.Box(size=(size,) * 3, pos=pos)) for pos in places]
+    block = scene.add_entity(gs.morphs.Box(pos=(-0.2, 0.0, 0.05), size=(0.1, 0.1, 0.1)),
+                             material=gs.materials.MPM.Elastic(E=3e4))
+    bodies.append(scene.add_entity(gs.morphs.Box(size=(0.04, 0.04, 0.04), pos=(-0.2, 0.0, 0.16))))
+    scene.build()
+    return scene, bodies, block
+
+
+def test_contact_slots_growing_mid_step_keep_the_coupled_trajectory():
+    """RigidOptions(max_contacts=None) doubles the rigid contact slots as a pile forms (new arrays
+    inside a substep's pre-coupling half: the coupler binds to them); the scene, a box landing on a
+    jelly block beside the pile, moves bit for bit as one sized for the worst case from the start."""
+    grown, sized = _pile_beside_a_jelly(None), _pile_beside_a_jelly(10 ** 4)
+    start = grown[0]._rigid_solver.data.size["C"]
+    for _ in range(40):
+        for scene, _, _ in (grown, sized):
+            scene.step()
+    assert grown[0]._rigid_solver.data.size["C"] > start
+    assert torch.equal(grown[2].get_particles_pos(), sized[2].get_particles_pos())
+    for a, b in zip(grown[1], sized[1]):
+        assert torch.equal(a.get_qpos(), b.get_qpos())
+    assert float(grown[1][-1].get_pos()[2]) < 0.14  # (the box met the block, 10 cm tall: it rests on it)
