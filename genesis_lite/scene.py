@@ -19,7 +19,7 @@ from . import morphs as gm
 from .entities import DroneEntity, MPMEntity, RigidEntity
 from .entities.common import EntityIndexing, named_argument_errors, replace_columns
 from .entities.mpm_entity import sample_particles
-from .solvers.core import AssetError, GradientError, InvalidInputError, SceneStateError, warn_user
+from .solvers.core import AssetError, InvalidInputError, SceneStateError, warn_user
 from .materials import MPM, Rigid
 from .options import (LegacyCouplerOptions, MPMOptions, RigidOptions, SimOptions, ViewerOptions, VisOptions,
                       check_bool, is_int)
@@ -27,7 +27,7 @@ from .rigid_solver import RigidSolverView
 from .runtime import logger, require_init, runtime, track
 from .simulator import Simulator, refuse_inference_mode
 from .solvers.coupler import Coupler
-from .solvers.coupling import KIND_NAME, Coupling, rigid_colliders
+from .solvers.coupling import Coupling, rigid_colliders
 from .solvers.mpm.solver import MPMSolver
 from .solvers.rigid import merge, mjcf, scale, shapes, urdf
 from .solvers.rigid.solver import RigidSolver
@@ -274,22 +274,11 @@ class Scene:
 
     def _couple(self, sim):
         """Rigid–MPM coupling (solvers/coupling.py): the coupled rigid shapes fixed to the world become
-        the MPM grid's colliders, those of moving links meet it in the coupling stage (solvers/coupler.py),
-        forward only: a differentiable scene with such shapes is refused, naming them."""
+        the MPM grid's colliders, those of moving links meet it in the coupling stage (solvers/coupler.py)."""
         rigid = self._rigid_solver
         couplings = [Coupling(e.material.coup_friction, e.material.coup_softness, e.material.coup_restitution)
                      if e.material.needs_coup else None for e in self.entities if isinstance(e, RigidEntity)]
         (rows, data), (moving_rows, moving_data, geoms) = rigid_colliders(rigid.model, couplings)
-        if len(geoms) and self.sim_options.requires_grad:
-            shapes = collections.defaultdict(list)  # entity → its shapes on moving links, by link (a robot has many)
-            for g, link in geoms:
-                shapes[rigid.entity_names[rigid.model.link_entity[link]]].append(
-                    f"{KIND_NAME[int(rigid.model.geom_type[g])]} of link '{rigid.model.link_name[link]}'")
-            names = "; ".join(f"entity '{entity}': {', '.join(kinds)}" for entity, kinds in shapes.items())
-            raise GradientError(f"scene.build: MPM particles meet rigid shapes on moving links ({names}) forward only: "
-                                f"no gradient passes through their coupling yet; with SimOptions(requires_grad=True) "
-                                f"give these entities materials.Rigid(needs_coup=False) (shapes fixed to the world "
-                                f"couple differentiably), or build without requires_grad")
         self.mpm_solver.set_colliders(rows, data, moving=len(geoms) > 0)
         if len(geoms):
             sim.coupler = Coupler(rigid, self.mpm_solver, moving_rows, moving_data, geoms)

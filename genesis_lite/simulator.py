@@ -387,6 +387,8 @@ class Simulator:
         for s in reversed(range(self.options.substeps)):
             for solver in reversed(solvers):
                 solver.substep_post_coupling_backward(s)
+            if self.coupler is not None:
+                self.coupler.couple_backward(s)
             for solver in reversed(solvers):
                 solver.substep_pre_coupling_backward(s)
         return [solver.end_reverse() for solver in solvers]

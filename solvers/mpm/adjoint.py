@@ -63,11 +63,11 @@ class MPMAdjoint:
         return max(1, min(g.n_nodes, int(np.ceil(CAPACITY_MARGIN * count))))
 
     def _allocate_saved_grid(self, capacity):
-        """saved_grid (S, B, capacity, 4, or 7 with colliders: grid.grid_stage) and saved_nodes
-        (S, B + 1, capacity + 1), zeroed."""
+        """saved_grid (S, B, capacity, saved_channels: grid.grid_stage) and saved_nodes (S, B + 1,
+        capacity + 1), zeroed."""
         S, B = self.substeps, self.n_batch
-        channels = 7 if self.has_colliders else 4
-        self.saved_grid = torch.zeros((S, B, capacity, channels), dtype=runtime.tc_float, device=runtime.device)
+        self.saved_grid = torch.zeros((S, B, capacity, self.saved_channels), dtype=runtime.tc_float,
+                                      device=runtime.device)
         self.saved_nodes = torch.zeros((S, B + 1, capacity + 1), dtype=torch.int32, device=runtime.device)
 
     def set_saved_grid_capacity(self, capacity):
@@ -79,7 +79,7 @@ class MPMAdjoint:
     def _bind_reverse(self):
         arrays = self._arrays() + [self.grads.view(-1), self.grad_params, self.grad_gravity, self.grad_grid.view(-1),
                                    self.scratch.view(-1)]
-        config = (False, self.serial_chores, self.has_colliders, False)
+        config = (False, self.serial_chores, self.has_colliders, self.meets_moving)
         self.reverse_kernels = BoundKernels(config, arrays, [0] * len(arrays), *kernels.REVERSE_KERNELS)
 
     def begin_reverse(self, state, inputs, grad_state_out, warm_start, record=None):

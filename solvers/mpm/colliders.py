@@ -1,7 +1,9 @@
 """Rigid shapes at rest that the MPM grid meets: the rigid side of Genesis's rigid–MPM coupling
 (its LegacyCoupler) for shapes fixed to the world — a ground plane, a table, an obstacle — and
 its adjoint. The shapes' distances (posed_distance, posed_contact) and the rule (respond) serve
-the shapes of moving links too, posed by the rigid solver's frame (solvers/coupler.py).
+the shapes of moving links too, posed by the rigid solver's frame (solvers/coupler.py), whose
+reverse also takes the rule's adjoint in the normal and the influence (respond_adjoint) and the
+normal's derivative in the point (normal_jacobian).
 
 In the grid update, after gravity and before the walls (Genesis's order), each node's velocity v
 meets every collider in turn. With the collider's signed distance d and outward unit normal n at the
@@ -235,22 +237,69 @@ def respond(v, n, w, mu, e):
 
 
 @ti.func
-def _respond_adjoint(v, n, w, mu, e, g):
-    """∂L/∂v of respond at v from g = ∂L/∂(its output)."""
-    out = g
+def respond_adjoint(v, n, w, mu, e, g):
+    """(∂L/∂v, ∂L/∂n, ∂L/∂w) of respond at (v, n, w) from g = ∂L/∂(its output)."""
+    g_v, g_n, g_w = g, ti.Vector.zero(float, 3), 0.0
     vn = v.dot(n)
     if vn < 0.0:
         t = v - vn * n
         T = ti.sqrt(t.dot(t) + ti.static(genesis_eps()))
+        slide = ti.max(0.0, T + vn * mu)
         G = w * g
         g_vn = -e * n.dot(G)
         g_t = ti.Vector.zero(float, 3)
-        if T + vn * mu > 0.0:  # slid = t (1 + μ vn / T)
+        if slide > 0.0:  # slid = t (1 + μ vn / T)
             tg = t.dot(G)
             g_t = (1.0 + mu * vn / T) * G - (mu * vn * tg / (T * T * T)) * t
             g_vn += mu * tg / T
-        out = (1.0 - w) * g + g_t - n.dot(g_t) * n + g_vn * n
-    return out
+        g_vn -= n.dot(g_t)  # (t = v − vn n)
+        g_v = (1.0 - w) * g + g_t + g_vn * n
+        g_n = -e * vn * G - vn * g_t + g_vn * v
+        g_w = g.dot(t / T * slide - e * vn * n - v)
+    return g_v, g_n, g_w
+
+
+@ti.func
+def _respond_adjoint(v, n, w, mu, e, g):
+    """∂L/∂v of respond at v from g = ∂L/∂(its output) (the shape's n and w constant)."""
+    g_v, _, _ = respond_adjoint(v, n, w, mu, e, g)
+    return g_v
+
+
+@ti.func
+def normal_jacobian(grid_f: ti.template(), at, p):
+    """∂n/∂p (3, 3) of shape_distance's normal n at the point p (3,) in the shape's frame (the
+    distance's own gradient in p is n): zero on faces and planes (a hull's, a height field's
+    triangles, a box or cylinder inside), (I − n nᵀ)/r around a point, segment, edge or rim at
+    distance r, the radial part (P − r̂ r̂ᵀ)/ρ on a cylinder's side."""
+    kind = ti.cast(grid_f[at], ti.i32)
+    a, b = grid_f[at + 13], grid_f[at + 14]
+    d, n = shape_distance(grid_f, at, p)
+    J = ti.Matrix.zero(float, 3, 3)
+    ring = ti.Matrix([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]])  # the xy plane's projector
+    if kind == SPHERE:
+        J = (ti.Matrix.identity(float, 3) - n.outer_product(n)) / p.norm()
+    elif kind == CAPSULE:
+        along = ti.Matrix.identity(float, 3)
+        if -b < p[2] and p[2] < b:  # (the segment's side: the clamp follows p's height)
+            along = ring
+        J = (ti.Matrix.identity(float, 3) - n.outer_product(n)) / (d + a) @ along
+    elif kind == CYLINDER:
+        rho = ti.sqrt(p[0] * p[0] + p[1] * p[1])
+        radial = ti.Vector([p[0], p[1], 0.0]) / rho
+        turn = (ring - radial.outer_product(radial)) / rho  # ∂radial/∂p
+        d_side, d_cap = rho - a, ti.abs(p[2]) - b
+        if d_side > 0.0 and d_cap > 0.0:  # the rim: n = (p − the nearest rim point) / d
+            J = (ti.Matrix.identity(float, 3) - n.outer_product(n)) / d @ (ti.Matrix.identity(float, 3) - a * turn)
+        elif d_side > d_cap:
+            J = turn
+    elif kind == BOX:
+        q = ti.abs(p) - ti.Vector([a, b, grid_f[at + 15]])
+        if d > 0.0:  # outside: n = side ⊙ max(q, 0) / d
+            outside = ti.Matrix([[1.0 if (i == j and q[i] > 0.0) else 0.0 for j in ti.static(range(3))]
+                                 for i in ti.static(range(3))])
+            J = (ti.Matrix.identity(float, 3) - n.outer_product(n)) / d @ outside
+    return J
 
 
 @ti.func

@@ -85,8 +85,8 @@ def grid_stage(colliders: ti.template(), walls: ti.template(), grid: ti.template
                 grid[at + c] = v[c]
             if keep >= 0 and k < saved_grid.shape[2]:
                 saved_nodes[keep, e, k + 1] = n
-                for c in ti.static(range(3)):
-                    saved_grid[keep, e, k, c] = v[c]
+                for c in ti.static(range(3)):  # (without the walls: the coupler's input; walls_stage keeps 0:4)
+                    saved_grid[keep, e, k, c if ti.static(walls) else 7 + c] = v[c]
                 saved_grid[keep, e, k, 3] = grid[at + 3]
                 if ti.static(colliders):  # their input, for their adjoint
                     for c in ti.static(range(3)):
@@ -97,9 +97,11 @@ def grid_stage(colliders: ti.template(), walls: ti.template(), grid: ti.template
 
 
 @ti.func
-def walls_stage(grid: ti.template(), active: ti.template(), grid_f: ti.template(), grid_i: ti.template()):
+def walls_stage(grid: ti.template(), active: ti.template(), grid_f: ti.template(), grid_i: ti.template(),
+                saved_grid: ti.template(), keep):
     """The walls on the updated grid's listed nodes (grid_stage's last part, where the shapes of
-    moving links come between; forward only)."""
+    moving links come between); a replay (keep ≥ 0) keeps the result as grid_stage does (0:4 of
+    saved_grid: v, M), the velocity before the coupler being in 7:10."""
     dx, K = 1.0 / grid_f[1], node_count(grid_i)
     B = active.shape[0] - 1
     for e, k in ti.ndrange(B, active[B, 0]):
@@ -109,6 +111,28 @@ def walls_stage(grid: ti.template(), active: ti.template(), grid_f: ti.template(
             v = wall_velocity(node_position(n, dx, grid_i), node_vector(grid, at), grid_f, grid_i[6])
             for c in ti.static(range(3)):
                 grid[at + c] = v[c]
+            if keep >= 0 and k < saved_grid.shape[2]:
+                for c in ti.static(range(3)):
+                    saved_grid[keep, e, k, c] = v[c]
+                saved_grid[keep, e, k, 3] = grid[at + 3]
+
+
+@ti.func
+def walls_adjoint_stage(grid: ti.template(), grad_grid: ti.template(), active: ti.template(), grid_f: ti.template(),
+                        grid_i: ti.template(), saved_grid: ti.template(), s):
+    """Reverse of walls_stage, per listed node of substep s's restored grid: grad_grid's velocity
+    gradient (0:3) through the walls' mask; then the grid's velocity ← the one before the coupler
+    (saved_grid 7:10), what the coupler's reverse and grid_adjoint_stage read."""
+    dx, K = 1.0 / grid_f[1], node_count(grid_i)
+    B = active.shape[0] - 1
+    for e, k in ti.ndrange(B, active[B, 0]):
+        if k < active[e, 0]:
+            n = active[e, k + 1]
+            at = node_at(e, n, K)
+            mask = wall_mask(node_position(n, dx, grid_i), node_vector(grid, at), grid_f, grid_i[6])
+            for c in ti.static(range(3)):
+                grad_grid[at + c] = mask[c] * grad_grid[at + c]
+                grid[at + c] = saved_grid[s, e, k, 7 + c]
 
 
 @ti.func
@@ -184,12 +208,14 @@ def wall_mask(pos, v, grid_f: ti.template(), sticky):
 
 
 @ti.func
-def grid_adjoint_stage(colliders: ti.template(), grid: ti.template(), grad_grid: ti.template(), active: ti.template(),
-                       gravity: ti.template(), grid_f: ti.template(), grid_i: ti.template(), saved_grid: ti.template(),
-                       s):
+def grid_adjoint_stage(colliders: ti.template(), walls: ti.template(), grid: ti.template(), grad_grid: ti.template(),
+                       active: ti.template(), gravity: ti.template(), grid_f: ti.template(), grid_i: ti.template(),
+                       saved_grid: ti.template(), s):
     """Reverse of substep s's update, per listed node (parallel): grad_grid's velocity gradient
     (0:3) → (∂L/∂P (0:3), ∂L/∂M (3)); the grid's velocity is replaced by the gradient of the
-    velocity after gravity, for the gravity sum (gravity_adjoint_stage)."""
+    velocity after gravity, for the gravity sum (gravity_adjoint_stage). Without ``walls`` (a coupler
+    between: walls_adjoint_stage and its reverse came first) the grid holds the velocity before the
+    coupler, the gradient is past the walls, and ∂L/∂M adds to the coupler's."""
     h, dx, K = grid_f[0], 1.0 / grid_f[1], node_count(grid_i)
     B = active.shape[0] - 1
     for e, k in ti.ndrange(B, active[B, 0]):
@@ -199,7 +225,9 @@ def grid_adjoint_stage(colliders: ti.template(), grid: ti.template(), grad_grid:
             v = node_vector(grid, at)
             mass = grid[at + 3]
             pos = node_position(n, dx, grid_i)
-            g_v = wall_mask(pos, v, grid_f, grid_i[6]) * node_vector(grad_grid, at)
+            g_v = node_vector(grad_grid, at)
+            if ti.static(walls):
+                g_v = wall_mask(pos, v, grid_f, grid_i[6]) * g_v
             free = v  # where the mask passes and no collider acts, v = P / M + h g
             if ti.static(colliders):
                 free = ti.Vector([saved_grid[s, e, k, 4 + c] for c in ti.static(range(3))])
@@ -208,7 +236,10 @@ def grid_adjoint_stage(colliders: ti.template(), grid: ti.template(), grad_grid:
             for c in ti.static(range(3)):
                 grad_grid[at + c] = g_v[c] / mass
                 grid[at + c] = g_v[c]
-            grad_grid[at + 3] = -g_v.dot(velocity) / mass
+            g_mass = -g_v.dot(velocity) / mass
+            if ti.static(not walls):
+                g_mass += grad_grid[at + 3]
+            grad_grid[at + 3] = g_mass
 
 
 @ti.func

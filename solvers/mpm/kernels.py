@@ -75,7 +75,7 @@ import taichi as ti
 
 from .g2p import gather_adjoint_stage, gather_stage
 from .grid import (clear_adjoint_stage, clear_stage, grid_adjoint_stage, grid_stage, gravity_adjoint_stage,
-                   largest_count, merge_stage, restore_stage, walls_stage)
+                   largest_count, merge_stage, restore_stage, walls_adjoint_stage, walls_stage)
 from .layout import WIDTH
 from .p2g import p2g_adjoint_stage, scatter_stage, stress_stage
 from .stencil import row_at
@@ -121,7 +121,7 @@ def post_coupling(config: ti.template(), frames: A, params: A, gravity: A, kinds
     """The rest of the substep: grid update (or, after the coupler's moving shapes, its walls), g2p,
     grid cleared."""
     if ti.static(config[3]):
-        walls_stage(grid, active, grid_f, grid_i)
+        walls_stage(grid, active, grid_f, grid_i, saved_grid, keep)
     else:
         grid_stage(config[2], True, grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
     gather_stage(frames, params, grid, grid_f, grid_i, flags, gathered, src, dst, keep)
@@ -165,12 +165,17 @@ def post_coupling_backward(config: ti.template(), frames: A, params: A, gravity:
                            saved_grid: A, saved_nodes: A, grads: A, grad_params: A, grad_gravity: A, grad_grid: A,
                            scratch: A, src: ti.i32):
     """Substep src's updated grid restored (as the replay kept it), then the reverse of
-    post_coupling (g2p and the grid update): grad_grid ← (∂L/∂P, ∂L/∂M), grad_gravity += its part."""
+    post_coupling (g2p and the grid update): grad_grid ← (∂L/∂P, ∂L/∂M), grad_gravity += its part.
+    With a coupler (config[3]) the reverse stops at the walls: grad_grid ← ∂L/∂v after the coupler,
+    the grid's velocity the one before it (the coupler's reverse, then pre_coupling_backward's)."""
     restore_stage(config[1], grid, active, saved_grid, saved_nodes, grid_i, src)
     gather_adjoint_stage(config[1], frames, params, grid, gathered, grads, scratch, grad_grid, part_grid, active,
                          grid_f, grid_i, src)
-    grid_adjoint_stage(config[2], grid, grad_grid, active, gravity, grid_f, grid_i, saved_grid, src)
-    gravity_adjoint_stage(config[1], grid, active, grad_gravity, grid_f, grid_i)
+    if ti.static(config[3]):
+        walls_adjoint_stage(grid, grad_grid, active, grid_f, grid_i, saved_grid, src)
+    else:
+        grid_adjoint_stage(config[2], True, grid, grad_grid, active, gravity, grid_f, grid_i, saved_grid, src)
+        gravity_adjoint_stage(config[1], grid, active, grad_gravity, grid_f, grid_i)
 
 
 @ti.kernel
@@ -180,7 +185,11 @@ def pre_coupling_backward(config: ti.template(), frames: A, params: A, gravity: 
                           saved_grid: A, saved_nodes: A, grads: A, grad_params: A, grad_gravity: A, grad_grid: A,
                           scratch: A, src: ti.i32):
     """The reverse of pre_coupling (p2g and the stress): grads ← the gradient of frame src,
-    grad_params += their part; the touched nodes cleared."""
+    grad_params += their part; the touched nodes cleared. With a coupler (config[3]) the grid
+    update's reverse up to the walls comes first (the coupler's reverse came between)."""
+    if ti.static(config[3]):
+        grid_adjoint_stage(config[2], False, grid, grad_grid, active, gravity, grid_f, grid_i, saved_grid, src)
+        gravity_adjoint_stage(config[1], grid, active, grad_gravity, grid_f, grid_i)
     p2g_adjoint_stage(frames, params, kinds, consts, fiber, affine, svd, grads, grad_params, grad_grid, scratch,
                       grid_f, grid_i, src)
     clear_adjoint_stage(config[1], grid, grad_grid, active, grid_i)

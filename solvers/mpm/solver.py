@@ -9,7 +9,7 @@ import taichi as ti
 import torch
 
 from ..base import Solver
-from ..core import GradientError, InvalidInputError, available_memory, new_state, runtime, warn_user
+from ..core import InvalidInputError, available_memory, new_state, runtime, warn_user
 from ..launch import BoundKernels
 from . import colliders, kernels, layout
 from .adjoint import MPMAdjoint
@@ -60,10 +60,7 @@ class MPMSolver(MPMAdjoint, Solver):
         """Rigid shapes at rest the grid meets, before the first step: colliders.py's rows (C,
         colliders.WIDTH) and the data of its hulls and height fields (colliders.packed); moving:
         whether a coupler (solvers/coupler.py) brings shapes of moving links between the substep's
-        halves (its walls then wait for them; forward only)."""
-        if moving and self.requires_grad:
-            raise GradientError("MPM solver: shapes of moving links meet the particles forward only; no gradient "
-                                "passes through them yet")
+        halves (its walls then wait for them)."""
         self.collider_rows = np.asarray(rows, dtype=np.float64).reshape(-1, colliders.WIDTH)
         self.collider_data = np.asarray(data, dtype=np.float64).ravel()
         self.meets_moving = bool(moving)
@@ -137,7 +134,7 @@ class MPMSolver(MPMAdjoint, Solver):
         frames = S + 1 if self.requires_grad else 2
         sizes = {"the particle frames": frames * B * N * layout.WIDTH, "the grid": B * K * 4}
         if self.requires_grad:
-            sizes["the replay's saved grid"] = S * B * K * (7 if self.has_colliders else 4)
+            sizes["the replay's saved grid"] = S * B * K * self.saved_channels
             if any_needs_svd(self.model.kinds, self.model.consts):
                 sizes["the replay's SVDs"] = S * B * N * layout.SVD_WIDTH
         name = max(sizes, key=sizes.get)
@@ -235,6 +232,12 @@ class MPMSolver(MPMAdjoint, Solver):
     @property
     def has_colliders(self):
         return len(self.collider_rows) > 0
+
+    @property
+    def saved_channels(self):
+        """Numbers a replay keeps per listed node and substep (grid.grid_stage): v, M; with colliders
+        the velocity before them; with a coupler the velocity before it (7:10)."""
+        return 10 if self.meets_moving else (7 if self.has_colliders else 4)
 
     def _allocate_boundaries(self):
         """grid_f and grid_i (kernels.py): the step, the grid, the walls and the colliders."""

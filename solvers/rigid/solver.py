@@ -576,6 +576,15 @@ class RigidSolver(Solver):
         self._commit = 0
 
     def substep_post_coupling_backward(self, s):
+        """Substep s's reverse from its integration back to the smooth force and the link sweep's
+        outputs (qfrc_smooth's gradient is then whole: a coupler's reverse reads it), after the check
+        that the replay's contacts have exact gradients."""
+        self._check_exact(s)
+        self.reverse_kernel[self._rows_in_substep[s]](s)
+
+    def _check_exact(self, s):
+        """Before the last substep's reverse: a GradientError if the replay flagged a contact without
+        an exact gradient."""
         if s == self.sim_options.substeps - 1 and self.data.take_flag("inexact"):  # the replay's contacts
             where = self._inexact_contact()
             if self.rigid_options.enable_mujoco_compatibility:
@@ -608,8 +617,8 @@ class RigidSolver(Solver):
             self.data.take_flag("capped")
 
     def substep_pre_coupling_backward(self, s):
-        """Substep s's reverse, as separate kernels: fused, they compile slower."""
-        self.reverse_kernel[self._rows_in_substep[s]](s)
+        """The rest of substep s's reverse (the contacts' colliders, the geom poses and the down
+        sweep), separate kernels: fused, they compile slower."""
         for bit, reverse in self.collider_reverses:
             if self._colliders_in_substep[s] >> bit & 1:  # else that kind has no contact to reverse
                 reverse(s)

@@ -584,13 +584,19 @@ def collide_adjoint_kind(d: ti.template(), s, e, kind: ti.template()):
 
 @ti.func
 def geom_poses_adjoint(d: ti.template(), s, e):
-    """Reverse of geom_poses: each geom's gradients onto its link's origin and small turn δθ
-    (a turn moves the geom's centre by δθ × (centre − origin) and each axis by δθ × axis)."""
+    """Reverse of geom_poses: each geom's gradients onto its link's pose (geom_pose_adjoint)."""
     for g in range(d.n_geoms):
-        link = d.geom_link[g]
-        g_pos, g_mat, mat = d.geom_xpos.grad[s, e, g], d.geom_xmat.grad[s, e, g], d.geom_xmat[s, e, g]
-        g_rot = (d.geom_xpos[s, e, g] - d.xpos[s, e, link]).cross(g_pos)
-        for j in ti.static(range(3)):
-            g_rot += column(mat, j).cross(column(g_mat, j))
-        accumulate(d.xpos.grad, ti.Vector([s, e, link]), g_pos)
-        accumulate(d.xrot_grad, ti.Vector([s, e, link]), g_rot)
+        geom_pose_adjoint(d, s, e, g, d.geom_xpos.grad[s, e, g], d.geom_xmat.grad[s, e, g])
+
+
+@ti.func
+def geom_pose_adjoint(d: ti.template(), s, e, g, g_pos, g_mat):
+    """Geom g's pose gradients at frame s (g_pos (3,) of geom_xpos, g_mat (3, 3) of geom_xmat) onto
+    its link's origin and small turn δθ (a turn moves the geom's centre by δθ × (centre − origin)
+    and each axis by δθ × axis)."""
+    link, mat = d.geom_link[g], d.geom_xmat[s, e, g]
+    g_rot = (d.geom_xpos[s, e, g] - d.xpos[s, e, link]).cross(g_pos)
+    for j in ti.static(range(3)):
+        g_rot += column(mat, j).cross(column(g_mat, j))
+    accumulate(d.xpos.grad, ti.Vector([s, e, link]), g_pos)
+    accumulate(d.xrot_grad, ti.Vector([s, e, link]), g_rot)
