@@ -380,10 +380,15 @@ class Simulator:
     def _backward_shared(self, states, inputs, grad_states, warm_starts, records):
         """The shared substep loop's reverse (solvers/base.py): load, replay, then mirror order."""
         solvers = [slot.solver for slot in self.slots]
-        for solver, state, pending, grad, warm_start, record in zip(solvers, states, inputs, grad_states, warm_starts,
-                                                                    records):
-            solver.begin_reverse(state, pending, grad, warm_start, record)
-        self._advance([None] * len(solvers), download=False)
+        replayed = False
+        while not replayed:  # (again when a solver's replay storage grew: Solver.replay_again)
+            for solver, state, pending, grad, warm_start, record in zip(solvers, states, inputs, grad_states,
+                                                                        warm_starts, records):
+                solver.begin_reverse(state, pending, grad, warm_start, record)
+            self._advance([None] * len(solvers), download=False)
+            replayed = not any([solver.replay_again() for solver in solvers])
+        for solver in solvers:  # (before any reverse stage: one that raised would leave a solver half reversed)
+            solver.check_replay()
         for s in reversed(range(self.options.substeps)):
             for solver in reversed(solvers):
                 solver.substep_post_coupling_backward(s)

@@ -12,7 +12,7 @@ reverse runs in mirror order, after a replay of the step's forward that leaves e
 intermediates in place:
 
     begin_step(inputs)                              begin_reverse(state, inputs, grad, warm_start, record)
-    for s in substeps:                              (the forward loop, replaying the step)
+    for s in substeps:                              (the forward loop, replaying the step; check_replay)
         pre_coupling(s) of every solver             for s in reversed(substeps):
         couple(s)                                       post_coupling_backward(s), solvers reversed
         post_coupling(s) of every solver                couple_backward(s)
@@ -108,6 +108,15 @@ class Solver:
         reverse."""
         raise NotImplementedError
 
+    def check_replay(self):
+        """After the replay, before any reverse stage (of any solver): raise GradientError if the
+        replayed step has no exact gradient (the rigid solver's inexact contacts); nothing here."""
+
+    def replay_again(self):
+        """After a replay in the shared loop: whether it must be taken again (the solver's replay
+        storage grew and, its state moving with another solver's, it cannot replay alone)."""
+        return False
+
     def substep_post_coupling_backward(self, s):
         raise NotImplementedError
 
@@ -133,6 +142,7 @@ class Solver:
         returns end_reverse()'s gradients."""
         self.begin_reverse(state, inputs, grad_state_out, warm_start, record)
         self.advance()  # the replay
+        self.check_replay()
         for s in reversed(range(self.substeps)):
             self.substep_post_coupling_backward(s)
             self.substep_pre_coupling_backward(s)

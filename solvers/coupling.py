@@ -19,7 +19,6 @@ from .rigid.shapes import quat_to_mat
 COLLIDER_KIND = {geometry.PLANE: colliders.PLANE, geometry.SPHERE: colliders.SPHERE,
                  geometry.CAPSULE: colliders.CAPSULE, geometry.CYLINDER: colliders.CYLINDER,
                  geometry.BOX: colliders.BOX, geometry.MESH: colliders.HULL, geometry.HFIELD: colliders.HFIELD}
-KIND_NAME = {code: name for name, code in geometry.GEOM_CODE.items()}  # a geom type's name, for messages
 
 
 @dataclass(frozen=True)

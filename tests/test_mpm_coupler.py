@@ -359,3 +359,52 @@ def test_contact_slots_growing_mid_step_keep_the_coupled_trajectory():
     for a, b in zip(grown[1], sized[1]):
         assert torch.equal(a.get_qpos(), b.get_qpos())
     assert float(grown[1][-1].get_pos()[2]) < 0.14  # (the box met the block, 10 cm tall: it rests on it)
+
+
+def test_a_saved_grid_grown_in_the_replay_keeps_the_gradient():
+    """A replay that lists more grid nodes than the saved grid holds grows it and takes the shared
+    loop's replay again (the coupler's shapes move with the rigid solver): the gradient keeps its bits
+    (against a scene whose saved grid was large from the start)."""
+    grads, capacities = [], []
+    for capacity in (4, None):
+        scene, block, rigid = _drop_scene(BODIES["box"])
+        if capacity:
+            scene.mpm_solver.set_saved_grid_capacity(capacity)
+        v = torch.tensor([0.3, 0.1, -0.8, 1.0, 2.0, 4.0], dtype=torch.float64, requires_grad=True)
+        rigid.set_dofs_velocity(v)
+        for _ in range(20):
+            scene.step()
+        (block.get_particles_pos()[:, 2].sum() + rigid.get_dofs_position().sum()).backward()
+        grads.append(v.grad)
+        capacities.append(scene.mpm_solver.saved_grid.shape[2])
+    assert capacities[0] > 4 and torch.equal(grads[0], grads[1])
+
+
+def test_a_refused_backward_leaves_the_next_steps_as_they_were():
+    """A backward the rigid solver refuses (a MuJoCo-compatible curved contact: a can tilted on its
+    rim, coupled, beside a falling jelly) raises before any solver's reverse stage runs: the steps
+    after it move the particles as a scene that never tried (a half-run MPM reverse left its grid
+    filled, which the next scatter added to)."""
+    def scene_of():
+        scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True),
+                         rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True),
+                         mpm_options=gs.options.MPMOptions(lower_bound=(-0.5, -0.5, -0.2), upper_bound=(0.5, 0.5, 0.6),
+                                                           grid_density=16))
+        scene.add_entity(gs.morphs.Box(size=(1.0, 1.0, 0.2), pos=(0, 0, -0.1), fixed=True))
+        can = scene.add_entity(gs.morphs.Cylinder(radius=0.05, height=0.2, euler=(np.degrees(0.3), 0, 0),
+                                                  pos=(0, 0, 0.1 * np.cos(0.3) + 0.05 * np.sin(0.3) - 1e-3)))
+        jelly = scene.add_entity(gs.morphs.Box(pos=(0.25, 0.25, 0.3), size=(0.1, 0.1, 0.1)),
+                                 material=gs.materials.MPM.Elastic(E=3e4))
+        scene.build()
+        return scene, can, jelly
+
+    tried, untouched = scene_of(), scene_of()
+    for scene, can, _ in (tried, untouched):
+        can.set_dofs_velocity(torch.zeros(6, dtype=torch.float64, requires_grad=True))
+        scene.step()
+    with pytest.raises(gs.GradientError, match="enable_mujoco_compatibility"):
+        (tried[1].get_pos().sum() + tried[2].get_particles_pos().sum()).backward()
+    for _ in range(5):
+        for scene, _, _ in (tried, untouched):
+            scene.step()
+    assert torch.equal(tried[2].get_particles_pos(), untouched[2].get_particles_pos())

@@ -101,18 +101,28 @@ class MPMAdjoint:
     def end_replay(self):
         """The replay's end (from end_step, before ``current`` moves): if a substep listed more
         nodes than the saved grid holds, grow it to the margin times the largest count and
-        replay the step again, alone (same bits: frame 0 and the inputs are untouched; the colliders
-        are the MPM solver's own, in its fused substep). A coupler that moves state between solvers
-        would need this second replay to run the shared loop with it."""
+        replay the step again (same bits: frame 0 and the inputs are untouched): alone, where the
+        colliders are the MPM solver's own (its fused substep); with a coupler, whose shapes move
+        with the rigid solver, the simulator takes the whole shared loop's replay again
+        (replay_again)."""
         self.replaying = False
         need = int(self.saved_nodes[:, self.n_batch, 0].max())
         if need <= self.saved_grid.shape[2]:
             return
         self.set_saved_grid_capacity(int(np.ceil(CAPACITY_MARGIN * need)))
+        if self.meets_moving:
+            self.regrown = True
+            return
         self.replaying = True
         for s in range(self.substeps):
             self.kernels.substep(*self._frames(s))
         self.replaying = False
+
+    def replay_again(self):
+        """Whether the shared loop's replay just taken must be taken again: the saved grid grew
+        under a coupler (end_replay). Clears the request."""
+        regrown, self.regrown = self.regrown, False
+        return regrown
 
     def end_backward(self):
         self.replaying = False

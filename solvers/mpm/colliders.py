@@ -270,29 +270,31 @@ def _respond_adjoint(v, n, w, mu, e, g):
 def normal_jacobian(grid_f: ti.template(), at, p):
     """∂n/∂p (3, 3) of shape_distance's normal n at the point p (3,) in the shape's frame (the
     distance's own gradient in p is n): zero on faces and planes (a hull's, a height field's
-    triangles, a box or cylinder inside), (I − n nᵀ)/r around a point, segment, edge or rim at
-    distance r, the radial part (P − r̂ r̂ᵀ)/ρ on a cylinder's side."""
+    triangles, a box inside, a cylinder's caps), (I − n nᵀ)/r around a point, segment, edge or rim
+    at distance r, the radial part (P − r̂ r̂ᵀ)/ρ where a cylinder's side is nearest (inside too)."""
     kind = ti.cast(grid_f[at], ti.i32)
     a, b = grid_f[at + 13], grid_f[at + 14]
     d, n = shape_distance(grid_f, at, p)
     J = ti.Matrix.zero(float, 3, 3)
     ring = ti.Matrix([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]])  # the xy plane's projector
-    if kind == SPHERE:
+    # (at a centre, on a segment or on an axis the normal is shape_distance's fixed one: J stays 0)
+    if kind == SPHERE and p.norm() > 0.0:
         J = (ti.Matrix.identity(float, 3) - n.outer_product(n)) / p.norm()
-    elif kind == CAPSULE:
+    elif kind == CAPSULE and d + a > 0.0:
         along = ti.Matrix.identity(float, 3)
         if -b < p[2] and p[2] < b:  # (the segment's side: the clamp follows p's height)
             along = ring
         J = (ti.Matrix.identity(float, 3) - n.outer_product(n)) / (d + a) @ along
     elif kind == CYLINDER:
         rho = ti.sqrt(p[0] * p[0] + p[1] * p[1])
-        radial = ti.Vector([p[0], p[1], 0.0]) / rho
-        turn = (ring - radial.outer_product(radial)) / rho  # ∂radial/∂p
         d_side, d_cap = rho - a, ti.abs(p[2]) - b
-        if d_side > 0.0 and d_cap > 0.0:  # the rim: n = (p − the nearest rim point) / d
-            J = (ti.Matrix.identity(float, 3) - n.outer_product(n)) / d @ (ti.Matrix.identity(float, 3) - a * turn)
-        elif d_side > d_cap:
-            J = turn
+        if rho > 0.0:
+            radial = ti.Vector([p[0], p[1], 0.0]) / rho
+            turn = (ring - radial.outer_product(radial)) / rho  # ∂radial/∂p
+            if d_side > 0.0 and d_cap > 0.0:  # the rim: n = (p − the nearest rim point) / d
+                J = (ti.Matrix.identity(float, 3) - n.outer_product(n)) / d @ (ti.Matrix.identity(float, 3) - a * turn)
+            elif d_side > d_cap:  # the side nearest (inside too)
+                J = turn
     elif kind == BOX:
         q = ti.abs(p) - ti.Vector([a, b, grid_f[at + 15]])
         if d > 0.0:  # outside: n = side ⊙ max(q, 0) / d

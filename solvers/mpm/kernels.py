@@ -30,8 +30,9 @@ costs far less than indexing a 3- or 4-d ndarray (B and N are read off ``params`
 - ``flags`` (1,) int: set to 1 when a particle's new state is not finite;
 - what a replay keeps for the reverse, per substep s (1-sized dummies when the solver does not
   differentiate): ``gathered`` (S, B, N, 3, flat) each particle's gathered velocity (m/s, before the
-  walls); ``saved_grid`` (S, B, cap, 4 or 7) the updated grid's listed nodes, (v (3) m/s, M kg, with
-  colliders the velocity before them (3)) in list order; ``saved_nodes`` (S, B + 1, cap + 1) int
+  walls); ``saved_grid`` (S, B, cap, 4, 7 or 10) the updated grid's listed nodes, (v (3) m/s, M kg,
+  with colliders the velocity before them (3), with a coupler the velocity before it (3)) in list
+  order; ``saved_nodes`` (S, B + 1, cap + 1) int
   their lists, laid out as ``active`` (the counts are whole even where they exceed cap: the solver
   then grows cap and replays again).
 

@@ -55,6 +55,7 @@ class MPMSolver(MPMAdjoint, Solver):
         self.wall_lower, self.wall_upper = grid.wall_lower, grid.wall_upper
         self.collider_rows, self.collider_data = np.zeros((0, colliders.WIDTH)), np.zeros(0)
         self.meets_moving = False  # a coupler brings shapes of moving links (set_colliders)
+        self.regrown = False  # a replay under a coupler outgrew the saved grid (adjoint.end_replay)
 
     def set_colliders(self, rows, data=(), moving=False):
         """Rigid shapes at rest the grid meets, before the first step: colliders.py's rows (C,

@@ -577,15 +577,12 @@ class RigidSolver(Solver):
 
     def substep_post_coupling_backward(self, s):
         """Substep s's reverse from its integration back to the smooth force and the link sweep's
-        outputs (qfrc_smooth's gradient is then whole: a coupler's reverse reads it), after the check
-        that the replay's contacts have exact gradients."""
-        self._check_exact(s)
+        outputs (qfrc_smooth's gradient is then whole: a coupler's reverse reads it)."""
         self.reverse_kernel[self._rows_in_substep[s]](s)
 
-    def _check_exact(self, s):
-        """Before the last substep's reverse: a GradientError if the replay flagged a contact without
-        an exact gradient."""
-        if s == self.sim_options.substeps - 1 and self.data.take_flag("inexact"):  # the replay's contacts
+    def check_replay(self):
+        """A GradientError if the replay flagged a contact without an exact gradient."""
+        if self.data.take_flag("inexact"):  # the replay's contacts
             where = self._inexact_contact()
             if self.rigid_options.enable_mujoco_compatibility:
                 why = (f"under RigidOptions(enable_mujoco_compatibility=True) the convex collider's contacts are "
