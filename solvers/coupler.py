@@ -129,14 +129,16 @@ def _meet(d: ti.template(), grid: ti.template(), grid_f: ti.template(), grid_i: 
 @ti.func
 def _node_box(pos, radius, dx, grid_i: ti.template()):
     """(lo, hi) (3,) int: the grid nodes within ``radius`` m of ``pos`` lie in lo ≤ index < hi on each
-    axis (clipped to the grid; empty where the ball misses it)."""
+    axis (clipped to the grid; empty where the ball misses it, or where the pose is not finite: a
+    body that blew up meets no node)."""
     lo, hi = ti.Vector([0, 0, 0]), ti.Vector([0, 0, 0])
     for a in ti.static(range(3)):
         res = ti.cast(grid_i[3 + a], float)
         first = ti.floor((pos[a] - radius) / dx) - grid_i[a]
         last = ti.floor((pos[a] + radius) / dx) - grid_i[a]
-        lo[a] = ti.cast(ti.min(ti.max(first, 0.0), res), ti.i32)
-        hi[a] = ti.cast(ti.min(ti.max(last + 1.0, 0.0), res), ti.i32)
+        if first == first and last == last:  # (not NaN)
+            lo[a] = ti.cast(ti.min(ti.max(first, 0.0), res), ti.i32)
+            hi[a] = ti.cast(ti.min(ti.max(last + 1.0, 0.0), res), ti.i32)
     return lo, hi
 
 

@@ -410,9 +410,7 @@ def test_a_solve_stopped_at_its_iteration_limit_warns_in_a_differentiable_scene(
                          mpm_options=gs.options.MPMOptions(lower_bound=(2.0, 2.0, 0.0), upper_bound=(2.5, 2.5, 0.5),
                                                            grid_density=16))
         scene.add_entity(gs.morphs.Plane())
-        # (beside particles, a differentiable scene leaves a moving body out of the coupling)
-        box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.3, 0.1), pos=(0.0, 0.0, 0.0495)),
-                               material=gs.materials.Rigid(needs_coup=False))
+        box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.3, 0.1), pos=(0.0, 0.0, 0.0495)))
         if jelly:  # (a scene of two solvers steps them in the shared substep loop)
             scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(2.25, 2.25, 0.25)),
                              material=gs.materials.MPM.Elastic(), name="jelly")

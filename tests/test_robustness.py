@@ -132,8 +132,7 @@ def test_a_backward_through_a_blow_up_leaves_no_warning_for_the_next_rollout(f64
                      rigid_options=gs.options.RigidOptions(enable_joint_limit=False),
                      mpm_options=gs.options.MPMOptions(lower_bound=(-0.3, -0.3, 0.0), upper_bound=(0.3, 0.3, 0.6),
                                                        grid_density=32))
-    wild = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True, pos=(1, 0, 0)), name="wild",
-                            material=gs.materials.Rigid(needs_coup=False))  # (differentiable: no moving coupling)
+    wild = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True, pos=(1, 0, 0)), name="wild")
     jelly = scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.3), size=(0.1, 0.1, 0.1)),
                              material=gs.materials.MPM.Elastic(E=1e5), name="jelly")
     scene.build()
