@@ -241,8 +241,8 @@ def _meet_adjoint(d: ti.template(), grid: ti.template(), grad_grid: ti.template(
                         if distance > 0.0:  # (inside, w is 1 whatever the distance)
                             g_distance = -w / softness * g_w
                         g_R += g_n.outer_product(normal_p)
-                        g_p = g_distance * normal_p + colliders.normal_jacobian(shapes, at, p).transpose() @ (
-                            R.transpose() @ g_n)
+                        turn = colliders.normal_jacobian(shapes, at, p, distance, normal_p)  # ∂n_p/∂p
+                        g_p = g_distance * normal_p + turn.transpose() @ (R.transpose() @ g_n)
                         g_pos -= R @ g_p
                         g_R += (x - pos).outer_product(g_p)
                         g_v = (mass / h) * g_f + g_rel

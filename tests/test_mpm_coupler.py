@@ -147,7 +147,7 @@ def _normals(table: ti.types.ndarray(), points: ti.types.ndarray(), out: ti.type
     for i in range(points.shape[0]):
         p = ti.Vector([points[i, 0], points[i, 1], points[i, 2]])
         d, n = C.shape_distance(table, 0, p)
-        J = C.normal_jacobian(table, 0, p)
+        J = C.normal_jacobian(table, 0, p, d, n)
         out[i, 0] = d
         for a in ti.static(range(3)):
             out[i, 1 + a] = n[a]

@@ -267,14 +267,13 @@ def _respond_adjoint(v, n, w, mu, e, g):
 
 
 @ti.func
-def normal_jacobian(grid_f: ti.template(), at, p):
-    """∂n/∂p (3, 3) of shape_distance's normal n at the point p (3,) in the shape's frame (the
-    distance's own gradient in p is n): zero on faces and planes (a hull's, a height field's
+def normal_jacobian(grid_f: ti.template(), at, p, d, n):
+    """∂n/∂p (3, 3) of shape_distance's normal n at the point p (3,) in the shape's frame, given its
+    (d, n) there (the distance's own gradient in p is n): zero on faces and planes (a hull's, a height field's
     triangles, a box inside, a cylinder's caps), (I − n nᵀ)/r around a point, segment, edge or rim
     at distance r, the radial part (P − r̂ r̂ᵀ)/ρ where a cylinder's side is nearest (inside too)."""
     kind = ti.cast(grid_f[at], ti.i32)
     a, b = grid_f[at + 13], grid_f[at + 14]
-    d, n = shape_distance(grid_f, at, p)
     J = ti.Matrix.zero(float, 3, 3)
     ring = ti.Matrix([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]])  # the xy plane's projector
     # (at a centre, on a segment or on an axis the normal is shape_distance's fixed one: J stays 0)
