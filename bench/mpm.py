@@ -70,6 +70,7 @@ import ctypes  # noqa: E402
 import gc  # noqa: E402
 import json  # noqa: E402
 import os  # noqa: E402
+import runpy  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
@@ -300,7 +301,18 @@ def run_json(command, out):
     """Run a worker process ``command`` that writes its result to the JSON file ``out``; return the
     result, or {"error": …} with the last line of its stderr. Torch's OpenMP threads wait passively
     in both engines (genesis_lite's import sets it where torch comes in through it; Genesis's does
-    not): neither engine's kernels share the cores with spinning threads."""
+    not): neither engine's kernels share the cores with spinning threads.
+    With $GENESIS_LITE_BENCH_INLINE set (tests/test_bench.py), a worker on this interpreter runs in
+    this process instead: on the kernels it has loaded, and its errors raise (its timings and memory
+    are not a fresh process's)."""
+    if os.environ.get("GENESIS_LITE_BENCH_INLINE") and command[0] == sys.executable:
+        argv, sys.argv = sys.argv, command[1:]
+        try:
+            runpy.run_path(command[1], run_name="__main__")
+        finally:
+            sys.argv = argv
+        with open(out) as file:
+            return json.load(file)
     env = {**os.environ, "OMP_WAIT_POLICY": os.environ.get("OMP_WAIT_POLICY", "PASSIVE")}
     proc = subprocess.run(command, capture_output=True, text=True, env=env)
     if proc.returncode != 0 or not os.path.exists(out):
