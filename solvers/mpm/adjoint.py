@@ -86,6 +86,7 @@ class MPMAdjoint:
         """Frame 0 ← the step's start state (B, N · 25), the inputs uploaded, grads ← the gradient
         of the step's end state (None: zero), the parameters' gradients zeroed; the next step
         (the replay) keeps what the reverse reads."""
+        self.clear_listed_nodes()
         self.current = 0
         self.replaying = True
         self.upload_state(state)
@@ -128,10 +129,12 @@ class MPMAdjoint:
         self.replaying = False
 
     def substep_post_coupling_backward(self, s):
+        self.nodes_listed = True
         self.reverse_kernels.post_coupling_backward(s)
 
     def substep_pre_coupling_backward(self, s):
         self.reverse_kernels.pre_coupling_backward(s)
+        self.nodes_listed = False
 
     def end_reverse(self):
         grad_state = self.grads.view(self.n_batch, -1).clone()

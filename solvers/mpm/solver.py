@@ -223,6 +223,7 @@ class MPMSolver(MPMAdjoint, Solver):
         self.flags = ints(1)
         self.current = 0  # the frame holding the current state
         self.replaying = False  # set by begin_reverse until the replay's end_step: keep what the reverse reads
+        self.nodes_listed = False  # a substep's launch listed grid nodes that its last launch has not cleared
         if self.requires_grad:
             self._allocate_reverse()
         else:  # what a replay keeps: never written by plain steps
@@ -302,8 +303,20 @@ class MPMSolver(MPMAdjoint, Solver):
 
     # -- stepping ---------------------------------------------------------------------------
     def begin_step(self, inputs):
+        self.clear_listed_nodes()
         if inputs is not None:
             self.upload_inputs(inputs)
+
+    def clear_listed_nodes(self):
+        """The grid empty again where a substep stopped between its launches (an error or an
+        interrupt between pre and post coupling, or between a substep's reverse launches): the
+        next scatter would add to the nodes it left. Every launch after the first of a substep's
+        keeps the grid's listed nodes; the last clears them."""
+        if self.nodes_listed:
+            for grid in (self.grid, self.active, self.part_grid, self.part_nodes, getattr(self, "grad_grid", None)):
+                if grid is not None:
+                    grid.zero_()
+            self.nodes_listed = False
 
     def _frames(self, s):
         """(source frame, destination frame, keep) of substep s of the step that starts at
@@ -312,10 +325,12 @@ class MPMSolver(MPMAdjoint, Solver):
                 s if self.replaying else -1)
 
     def substep_pre_coupling(self, s):
+        self.nodes_listed = True
         self.kernels.pre_coupling(*self._frames(s))
 
     def substep_post_coupling(self, s):
         self.kernels.post_coupling(*self._frames(s))
+        self.nodes_listed = False
 
     def end_step(self, download):
         if self.replaying:
