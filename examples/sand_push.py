@@ -1,7 +1,7 @@
 """Sand push: optimise a paddle's path so that it pushes a sand pile onto a target.
 
-A blade (a rigid box, 2.4 × 14 × 8 cm, 1 kg) on an x–y carriage (two slide joints,
-``assets/mjcf/paddle.xml``) stands 5 mm above a rigid ground plane, behind a pile of sand (a 10 cm
+A blade (a rigid box, 5 × 14 × 8 cm, 1 kg) on an x–y carriage (two slide joints,
+``assets/mjcf/paddle.xml``) stands 2 mm above a rigid ground plane, behind a pile of sand (a 10 cm
 square, 6 cm high: ``gs.materials.MPM.Sand``, Drucker–Prager, friction angle 30°). The carriage's
 position servos (kp 2000 N/m, kv 90 N·s/m) track a path through ``N_WAYPOINTS`` waypoints, passed in
 equal times (linear in between), from the blade's start. We optimise the waypoints so that the
