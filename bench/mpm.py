@@ -158,13 +158,16 @@ def reset_peak_rss():
 
 
 def init_engine(engine, precision):
-    """Import and initialise ``engine`` ("ours" or "genesis") at ``precision``; return (gs, version)."""
+    """Import and initialise ``engine`` ("ours" or "genesis") at ``precision``, on the CPU (a worker
+    run inline: on the backend gs.init picks by default, as the test process's runtime); return
+    (gs, version)."""
     if engine == "ours":
         sys.path.insert(0, ROOT)
         import genesis_lite as gs
     else:
         import genesis as gs
-    gs.init(backend=gs.cpu, precision=precision, logging_level="warning")
+    inline = engine == "ours" and os.environ.get("GENESIS_LITE_BENCH_INLINE")
+    gs.init(backend=None if inline else gs.cpu, precision=precision, logging_level="warning")
     return gs, getattr(gs, "__version__", "?")
 
 

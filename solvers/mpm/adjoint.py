@@ -86,7 +86,6 @@ class MPMAdjoint:
         """Frame 0 ← the step's start state (B, N · 25), the inputs uploaded, grads ← the gradient
         of the step's end state (None: zero), the parameters' gradients zeroed; the next step
         (the replay) keeps what the reverse reads."""
-        self.clear_listed_nodes()
         self.current = 0
         self.replaying = True
         self.upload_state(state)
@@ -114,10 +113,10 @@ class MPMAdjoint:
         if self.meets_moving:
             self.regrown = True
             return
-        self.replaying = True
+        self.replaying = self.nodes_listed = True
         for s in range(self.substeps):
             self.kernels.substep(*self._frames(s))
-        self.replaying = False
+        self.replaying = self.nodes_listed = False
 
     def replay_again(self):
         """Whether the shared loop's replay just taken must be taken again: the saved grid grew

@@ -341,8 +341,10 @@ class MPMSolver(MPMAdjoint, Solver):
     def advance(self, inputs=None, download=False):
         """A whole step, one launch per substep (kernels.substep fuses pre and post coupling)."""
         self.begin_step(inputs)
+        self.nodes_listed = True  # (a launch that raised midway: its nodes may stay listed)
         for s in range(self.substeps):
             self.kernels.substep(*self._frames(s))
+        self.nodes_listed = False
         return self.end_step(download)
 
     def nonfinite(self):
