@@ -20,7 +20,7 @@ SMALLEST = {
     "render": ["--repeats", "1", "--frames", "2", "--record-frames", "2"],
     "mpm": ["--only", "ours", "--cases", "neohooken-10k", "--repeats", "1", "--no-first-step"],
     "sand_pile": ["--only", "ours", "--angles", "30", "--steps", "2", "--frictions", "5"],
-    "coupling": ["--only", "ours", "--steps", "5", "--cases", "static"],
+    "coupling": ["--only", "ours", "--steps", "10", "--cases", "static", "box"],  # (a snapshot every 10 steps)
     "ik": ["--only", "ours", "--envs", "0", "--repeats", "1"],
     "drone": ["--only", "ours", "--envs", "0", "--repeats", "1"],
     "terrain": ["--only", "ours", "--kinds", "sloped_terrain", "--envs", "4", "--repeats", "1"],
