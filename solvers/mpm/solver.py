@@ -313,9 +313,9 @@ class MPMSolver(MPMAdjoint, Solver):
         next scatter would add to the nodes it left. Every launch after the first of a substep's
         keeps the grid's listed nodes; the last clears them."""
         if self.nodes_listed:
-            for grid in (self.grid, self.active, self.part_grid, self.part_nodes, getattr(self, "grad_grid", None)):
-                if grid is not None:
-                    grid.zero_()
+            for array in [self.grid, self.active, self.part_grid, self.part_nodes] + (
+                    [self.grad_grid] if self.requires_grad else []):
+                array.zero_()
             self.nodes_listed = False
 
     def _frames(self, s):
