@@ -27,7 +27,7 @@ from .rigid_solver import RigidSolverView
 from .runtime import logger, require_init, runtime, track
 from .simulator import Simulator, refuse_inference_mode
 from .solvers.coupler import Coupler
-from .solvers.coupling import Coupling, rigid_colliders
+from .solvers.coupling import rigid_colliders
 from .solvers.mpm.solver import MPMSolver
 from .solvers.rigid import merge, mjcf, scale, shapes, urdf
 from .solvers.rigid.solver import RigidSolver
@@ -113,6 +113,7 @@ class Scene:
         self.sim_options = dataclasses.replace(self.sim_options, substeps=self._substeps())
         self._rigid_solver = RigidSolver(self.sim_options, self.rigid_options)
         self.mpm_solver = None  # made with the first MPM entity
+        self.coupled_entities = set()  # the rigid entities whose shapes the MPM particles meet (set at build)
         self.sim = None
         self.n_envs = 0
         self._epoch = runtime.epoch
@@ -224,6 +225,10 @@ class Scene:
         self.entities.append(entity)
         return entity
 
+    def _rigid_entities(self):
+        """The rigid entities, in their solver's order (the rigid model's link_entity numbers)."""
+        return sorted((e for e in self.entities if isinstance(e, RigidEntity)), key=lambda e: e._solver_idx)
+
     def _solvers(self):
         """The solvers that have entities, rigid first."""
         rigid = any(isinstance(e, RigidEntity) for e in self.entities)
@@ -255,6 +260,9 @@ class Scene:
         for camera in self._cameras:  # their env_idx checked before anything is allocated
             camera._bind_env()
         solvers = self._solvers()
+        if self.mpm_solver in solvers:  # (the default of the MPM solver's input "coupling")
+            self.mpm_solver.set_couplings([(e.material.coup_friction, e.material.coup_softness,
+                                            e.material.coup_restitution) for e in self._rigid_entities()])
         sim = Simulator(self.sim_options, solvers)
         try:
             sim.build(self.n_envs)
@@ -275,13 +283,15 @@ class Scene:
     def _couple(self, sim):
         """Rigid–MPM coupling (solvers/coupling.py): the coupled rigid shapes fixed to the world become
         the MPM grid's colliders, those of moving links meet it in the coupling stage (solvers/coupler.py)."""
-        rigid = self._rigid_solver
-        couplings = [Coupling(e.material.coup_friction, e.material.coup_softness, e.material.coup_restitution)
-                     if e.material.needs_coup else None for e in self.entities if isinstance(e, RigidEntity)]
-        (rows, data), (moving_rows, moving_data, geoms) = rigid_colliders(rigid.model, couplings)
+        rigid, entities = self._rigid_solver, self._rigid_entities()
+        (rows, data), (moving_rows, moving_data, geoms) = rigid_colliders(rigid.model,
+                                                                          [e.material.needs_coup for e in entities])
         self.mpm_solver.set_colliders(rows, data, moving=len(geoms) > 0)
         if len(geoms):
             sim.coupler = Coupler(rigid, self.mpm_solver, moving_rows, moving_data, geoms)
+        model = rigid.model
+        colliding = np.unique(model.link_entity[model.geom_link[model.geom_collides]])
+        self.coupled_entities = {entities[k] for k in colliding if entities[k].material.needs_coup}
 
     def _require_built(self, what):
         if self._destroyed:

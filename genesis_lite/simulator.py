@@ -324,6 +324,9 @@ class Simulator:
         the warm start it started from (its replay then repeats it exactly; None for both where
         the solver needs neither)."""
         split = self._split_inputs(flat_inputs)
+        for k, slot in enumerate(self.slots):
+            slot.solver.skipped_grads = frozenset(name for (solver, name), want in zip(self.flat_input_names, wanted)
+                                                  if solver == k and not want)
         self.hold_before_backward()
         try:
             if len(self.slots) == 1:
@@ -334,6 +337,7 @@ class Simulator:
         finally:  # (also when it raised midway: the next step is a forward one, from its own state)
             for slot in self.slots:
                 slot.uploaded_state = slot.uploaded_inputs = None  # Taichi holds this old step now
+                slot.solver.skipped_grads = frozenset()
                 slot.solver.end_backward()
         grads_states = [grad_state for grad_state, _ in results]
         grads_inputs = [None] * len(flat_inputs)

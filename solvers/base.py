@@ -38,6 +38,9 @@ class Solver:
 
     #: input names whose gradients ``backward`` returns, in order
     grad_input_names = ()
+    #: inputs whose gradient the next backward may leave out (no tensor requiring grad reaches them:
+    #: set by the simulator before each backward); a solver skips the work where it can
+    skipped_grads = frozenset()
     #: inputs that keep their value across ``scene.reset()`` (parameters; controls are cleared)
     persistent_inputs = ()
     #: name → (B, width) tensor of every input's value at build (set by ``build``)

@@ -7,11 +7,9 @@ where the shape collides (a contype or conaffinity; not a morph's collision=Fals
 fixed to the world (a chain of fixed joints up to it) are the MPM solver's colliders at rest; those
 of moving links meet the grid in the coupling stage (solvers/coupler.py), both ways.
 """
-from dataclasses import dataclass
-
 import numpy as np
 
-from .mpm import colliders
+from .mpm import colliders, layout
 from .rigid import geometry
 from .rigid.collision import convex
 from .rigid.shapes import quat_to_mat
@@ -19,15 +17,6 @@ from .rigid.shapes import quat_to_mat
 COLLIDER_KIND = {geometry.PLANE: colliders.PLANE, geometry.SPHERE: colliders.SPHERE,
                  geometry.CAPSULE: colliders.CAPSULE, geometry.CYLINDER: colliders.CYLINDER,
                  geometry.BOX: colliders.BOX, geometry.MESH: colliders.HULL, geometry.HFIELD: colliders.HFIELD}
-
-
-@dataclass(frozen=True)
-class Coupling:
-    """A rigid entity's coupling parameters (its material's): friction μ, softness ς (m) and
-    restitution e of mpm/colliders.py."""
-    friction: float
-    softness: float
-    restitution: float
 
 
 def _static_poses(model):
@@ -82,17 +71,17 @@ def _shape_data(model, g, start):
     return size, np.zeros(0), np.inf if kind == geometry.PLANE else model.geom_rbound[g]
 
 
-def rigid_colliders(model, couplings):
+def rigid_colliders(model, coupled):
     """The colliders of the rigid model's coupled shapes: (static, moving). static: (rows (C, colliders.WIDTH),
     data (D,)) of the shapes fixed to the world (colliders.packed); moving: (rows, data, geoms (C', 2) int:
     each row's rigid geom and its link) of the others, whose rows' poses are unused (the rigid frame's
-    are taken: coupler.py). couplings: per rigid entity (the model's link_entity numbers), a Coupling
-    or None (the entity does not couple)."""
+    are taken: coupler.py). coupled: per rigid entity (the model's link_entity numbers), whether it
+    couples; a row's coupling parameters are its entity's, among the MPM solver's per-env inputs."""
     poses = _static_poses(model)
     tables = {True: ([], [], []), False: ([], [], [])}  # at rest? → (rows, data, geoms)
     for g, (kind, link) in enumerate(zip(model.geom_type, model.geom_link)):
-        coupling = couplings[model.link_entity[link]]
-        if coupling is None or not model.geom_collides[g]:
+        entity = model.link_entity[link]
+        if not coupled[entity] or not model.geom_collides[g]:
             continue
         rows, data, geoms = tables[link in poses]
         pos, rot = np.zeros(3), np.eye(3)
@@ -102,8 +91,7 @@ def rigid_colliders(model, couplings):
         size, shape_data, bound = _shape_data(model, g, sum(len(d) for d in data))
         data.append(shape_data)
         geoms.append((g, link))
-        rows.append([COLLIDER_KIND[int(kind)], *pos, *rot.ravel(), *size, coupling.friction, coupling.softness,
-                     coupling.restitution, bound])
+        rows.append([COLLIDER_KIND[int(kind)], *pos, *rot.ravel(), *size, layout.coupling_column(entity), bound])
 
     def packed(rows, data, geoms):
         return (np.array(rows, dtype=np.float64).reshape(-1, colliders.WIDTH), np.concatenate([np.zeros(0), *data]),

@@ -11,7 +11,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # example → the plot it writes besides <example>.mp4
 EXAMPLES = {"quickstart": "end_effector", "trajectory_optimization": "loss", "system_identification": "loss",
             "push_box": "loss", "material_identification": "fit", "policy": "loss", "soft_robot": "loss",
-            "drone_flight": "loss", "jelly_slide": "loss", "sand_push": "loss"}
+            "drone_flight": "loss", "jelly_slide": "loss", "sand_push": "loss", "coupling_identification": "fit"}
 FLOAT32 = ("policy", "soft_robot")  # gs.init(precision="32"): in conftest's float32 group
 SHORT_RES = (320, 240)  # examples/example_run.py: frames in short mode (width, height)
 MIN_FRAMES = 10

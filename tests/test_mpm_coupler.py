@@ -10,7 +10,9 @@ import taichi as ti
 import torch
 
 import genesis_lite as gs
+from genesis_lite.solvers.core import InvalidInputError
 from genesis_lite.solvers.mpm import colliders as C
+from genesis_lite.solvers.mpm import layout
 
 from .fd_scan import assert_converged, checked_gradient, directional_errors
 
@@ -177,7 +179,7 @@ def test_the_normal_jacobian_is_the_normal_s_derivative(kind):
     around each kind where the normal is smooth (both step sizes agree: not across a region's
     border); the distance's own gradient is the normal."""
     code, size, data = KINDS[kind]
-    row = [code, 0, 0, 0, *np.eye(3).ravel(), *size, 0.3, 0.002, 0.0, 1.0]
+    row = [code, 0, 0, 0, *np.eye(3).ravel(), *size, layout.coupling_column(0), 1.0]
     points = np.random.default_rng(1).uniform(-0.06, 0.06, (2000, 3))
     at = _normals_of(row, data, points)
     h = 1e-6
@@ -196,21 +198,23 @@ def test_the_normal_jacobian_is_the_normal_s_derivative(kind):
 @ti.kernel
 def _respond_both(v: ti.types.ndarray(), n: ti.types.ndarray(), w: ti.f64, mu: ti.f64, e: ti.f64,
                   g: ti.types.ndarray(), out: ti.types.ndarray()):
-    """out (10,) ← respond(v, n, w, μ, e)·g, then respond_adjoint's (∂/∂v (3), ∂/∂n (3), ∂/∂w) of it."""
+    """out (10,) ← respond(v, n, w, μ, e)·g, then respond_adjoint's (∂/∂v (3), ∂/∂n (3), ∂/∂w, ∂/∂μ,
+    ∂/∂e) of it."""
     for _ in range(1):
         V, N, G = ti.Vector([v[0], v[1], v[2]]), ti.Vector([n[0], n[1], n[2]]), ti.Vector([g[0], g[1], g[2]])
         out[0] = C.respond(V, N, w, mu, e).dot(G)
-        g_v, g_n, g_w = C.respond_adjoint(V, N, w, mu, e, G)
+        g_v, g_n, g_w, g_mu, g_e = C.respond_adjoint(V, N, w, mu, e, G)
         for a in ti.static(range(3)):
             out[1 + a] = g_v[a]
             out[4 + a] = g_n[a]
-        out[7] = g_w
+        out[7], out[8], out[9] = g_w, g_mu, g_e
 
 
 @pytest.mark.parametrize("mu, restitution", [(0.3, 0.0), (0.05, 0.4), (3.0, 0.2)])
 def test_respond_adjoint_is_the_rule_s_derivative(mu, restitution):
-    """colliders.respond_adjoint (in the velocity, the normal and the influence) against central
-    differences, sliding (μ small) and stopped (μ large), at random velocities into the shape."""
+    """colliders.respond_adjoint (in the velocity, the normal, the influence, the friction and the
+    restitution) against central differences, sliding (μ small) and stopped (μ large), at random
+    velocities into the shape."""
     rng = np.random.default_rng(4)
     for _ in range(20):
         n = rng.normal(size=3)
@@ -218,7 +222,7 @@ def test_respond_adjoint_is_the_rule_s_derivative(mu, restitution):
         v = rng.normal(size=3) - 1.5 * n
         w, g = rng.uniform(0.2, 1.0), rng.normal(size=3)
 
-        def value(v, n, w):
+        def value(v, n, w, mu=mu, restitution=restitution):
             out = torch.zeros(10, dtype=torch.float64)
             _respond_both(torch.as_tensor(v), torch.as_tensor(n), w, mu, restitution, torch.as_tensor(g), out)
             return out.numpy()
@@ -227,7 +231,10 @@ def test_respond_adjoint_is_the_rule_s_derivative(mu, restitution):
         numeric = [(value(v + h * a, n, w)[0] - value(v - h * a, n, w)[0]) / (2 * h) for a in np.eye(3)]
         numeric += [(value(v, n + h * a, w)[0] - value(v, n - h * a, w)[0]) / (2 * h) for a in np.eye(3)]
         numeric += [(value(v, n, w + h)[0] - value(v, n, w - h)[0]) / (2 * h)]
-        np.testing.assert_allclose(exact[1:8], numeric, atol=1e-7)
+        numeric += [(value(v, n, w, mu=mu + h)[0] - value(v, n, w, mu=mu - h)[0]) / (2 * h)]
+        numeric += [(value(v, n, w, restitution=restitution + h)[0] - value(v, n, w, restitution=restitution - h)[0])
+                    / (2 * h)]
+        np.testing.assert_allclose(exact[1:10], numeric, atol=1e-7)
 
 
 def _drop_scene(body, n_envs=0):
@@ -339,22 +346,108 @@ def test_gradients_of_a_servoed_blade_pushing_sand_match_fd():
     checked_gradient(rollout, target, "sand push: the servo targets")
 
 
-def test_batched_gradients_equal_single_scenes_bit_for_bit():
-    """Two envs dropped differently: each env's gradient has the bits of its own single-env scene."""
-    starts = torch.tensor([[0.3, 0.1, -0.8, 1.0, 2.0, 4.0], [0.1, -0.2, -0.6, -2.0, 0.5, 1.0]], dtype=torch.float64)
+COUPLING_SIZES = torch.tensor([1.0, 0.01, 1.0], dtype=torch.float64)  # of (μ, ς m, e): the FD directions' scales
 
-    def gradient(scene, block, rigid, start):
-        v = start.clone().requires_grad_(True)
+
+def test_gradients_in_the_coupling_parameters_match_fd():
+    """The box landing on the jelly (a shape of a moving link: the coupler) and the plane under the
+    jelly, which is thrown along it (a shape at rest: the MPM grid update; its softness reaching
+    the nodes above it): the loss in each one's coupling friction, softness and restitution
+    (set_coupling), against central differences, bit-identical when repeated; each of the six
+    has a gradient."""
+    scene, block, box = _drop_scene(BODIES["box"])
+    plane = scene.entities[0]
+    start = torch.tensor([0.3, 0.1, -0.8, 1.0, 2.0, 4.0], dtype=torch.float64)
+    weights = torch.linspace(0.5, 1.5, block.n_particles, dtype=torch.float64)
+
+    def rollout(scaled):  # (6,): the box's (μ, ς, e), then the plane's, each over its size
+        scene.reset()
+        box.set_coupling(*(scaled[:3] * COUPLING_SIZES))
+        plane.set_coupling(*(scaled[3:] * COUPLING_SIZES))
+        box.set_dofs_velocity(start)
+        block.set_particles_vel(torch.tensor([0.5, 0.2, -0.3], dtype=torch.float64).repeat(block.n_particles, 1))
+        for _ in range(STEPS):
+            scene.step()
+        return (block.get_particles_pos() * weights[:, None]).sum() + 10 * box.get_dofs_position().sum()
+
+    value = torch.tensor([0.3, 0.4, 0.2, 0.5, 2.0, 0.1], dtype=torch.float64)
+    grad = checked_gradient(rollout, value, "coupling parameters of a moving box and a plane at rest")
+    assert (grad.abs() > 1e-3 * grad.abs().max()).all(), grad
+
+
+def _landing(n_envs, material, box_coupling=None):
+    """The box of BODIES, of ``material``, landing on the jelly, 20 steps; its coupling the material's
+    or set per env (box_coupling: friction, softness, restitution, each (n_envs,)): (particles,
+    box dofs)."""
+    scene, block, box = _drop_scene((BODIES["box"][0], material), n_envs=n_envs)
+    if box_coupling is not None:
+        box.set_coupling(*box_coupling)
+    box.set_dofs_velocity(torch.tensor([0.3, 0.1, -0.8, 1.0, 2.0, 4.0], dtype=torch.float64))
+    for _ in range(20):
+        scene.step()
+    return block.get_particles_pos(), box.get_dofs_position()
+
+
+def test_set_coupling_per_env_is_the_material_s_coupling():
+    """Two envs given two couplings by set_coupling: env 0 has the bits of a scene whose material
+    holds its values, env 1 those of the material's own (BODIES["box"]), and they differ."""
+    material = BODIES["box"][1]
+    other = (0.8, 0.01, 0.4)
+    own = (material.coup_friction, material.coup_softness, material.coup_restitution)
+    batched = _landing(2, material, [torch.tensor(pair, dtype=torch.float64) for pair in zip(other, own)])
+    given = _landing(0, gs.materials.Rigid(rho=400, coup_friction=other[0], coup_softness=other[1],
+                                           coup_restitution=other[2]))
+    built = _landing(0, material)
+    for k in range(2):
+        assert torch.equal(batched[k][0], given[k]) and torch.equal(batched[k][1], built[k])
+    assert not torch.equal(given[0], built[0])
+
+
+def test_coupling_setters_refuse_what_they_cannot_take():
+    scene, block, box = _drop_scene(BODIES["box"])
+    loose = gs.Scene()
+    ball = loose.add_entity(gs.morphs.Sphere(radius=0.1))
+    loose.build()
+    with pytest.raises(InvalidInputError, match="set_coupling: its shapes meet no MPM particles"):
+        ball.set_coupling(friction=0.2)
+    for arg, value, expected in (("friction", -0.1, ">= 0"), ("softness", float("nan"), "finite"),
+                                 ("restitution", 1.5, r"in \[0, 1\]")):
+        with pytest.raises(InvalidInputError, match=f"argument '{arg}' must be .*{expected}"):
+            box.set_coupling(**{arg: value})
+    with pytest.raises(InvalidInputError, match="argument 'friction' must have shape"):
+        box.set_coupling(friction=[0.1, 0.2])
+    with pytest.raises(InvalidInputError, match="argument 'restitution' must be in"):  # (nothing written)
+        box.set_coupling(friction=0.6, restitution=2.0)
+    np.testing.assert_allclose(box.get_coupling().numpy(), [0.3, 0.004, 0.0])
+    box.set_coupling(restitution=0.3)
+    scene.reset()  # (a parameter: kept)
+    np.testing.assert_allclose(box.get_coupling().numpy(), [0.3, 0.004, 0.3])
+    scene, block, box = _drop_scene(BODIES["box"], n_envs=3)
+    box.set_coupling(friction=torch.tensor([0.5, 0.7], dtype=torch.float64), envs_idx=[2, 0])
+    np.testing.assert_allclose(box.get_coupling(envs_idx=[0, 2])[:, 0].numpy(), [0.7, 0.5])
+    np.testing.assert_allclose(box.get_coupling()[:, 0].numpy(), [0.7, 0.3, 0.5])
+
+
+def test_batched_gradients_equal_single_scenes_bit_for_bit():
+    """Two envs dropped differently, the box's coupling friction differing too: each env's gradients
+    (in the box's initial velocity and its friction) have the bits of its own single-env scene."""
+    starts = torch.tensor([[0.3, 0.1, -0.8, 1.0, 2.0, 4.0], [0.1, -0.2, -0.6, -2.0, 0.5, 1.0]], dtype=torch.float64)
+    frictions = torch.tensor([0.3, 0.6], dtype=torch.float64)
+
+    def gradients(scene, block, rigid, start, friction):
+        v, mu = start.clone().requires_grad_(True), friction.clone().requires_grad_(True)
         rigid.set_dofs_velocity(v)
+        rigid.set_coupling(friction=mu)
         for _ in range(20):
             scene.step()
         (block.get_particles_pos()[..., 2].sum() + rigid.get_dofs_position().sum()).backward()
-        return v.grad
+        return v.grad, mu.grad
 
-    batched = gradient(*_drop_scene(BODIES["box"], n_envs=2), starts)
+    batched = gradients(*_drop_scene(BODIES["box"], n_envs=2), starts, frictions)
     for e in range(2):
-        assert torch.equal(batched[e], gradient(*_drop_scene(BODIES["box"]), starts[e]))
-    assert not torch.equal(batched[0], batched[1])
+        single = gradients(*_drop_scene(BODIES["box"]), starts[e], frictions[e])
+        assert torch.equal(batched[0][e], single[0]) and torch.equal(batched[1][e], single[1])
+    assert not torch.equal(batched[0][0], batched[0][1]) and (batched[1] != 0).all()
 
 
 def _pile_beside_a_jelly(max_contacts):

@@ -22,9 +22,11 @@ import trimesh
 import genesis_lite as gs
 from genesis_lite.solvers.core import InvalidInputError
 from genesis_lite.solvers.mpm import colliders as C
+from genesis_lite.solvers.mpm import layout
 from genesis_lite.solvers.rigid.collision import hfield
 from genesis_lite.solvers.rigid.shapes import quat_to_mat
 
+from .fd_scan import checked_gradient
 from .test_mpm_gradients import Rollout, assert_bitwise_reproducible, check_all
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -43,10 +45,14 @@ def rotation(axis, degrees):
     return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
 
 
-def collider(kind, pos, rot, size, friction=0.3, softness=0.002, restitution=0.2, bound=np.inf):
-    """A collider row (solvers/mpm/colliders.py); bound: its bounding radius, m (inf: every node
-    takes its distance)."""
-    return [kind, *pos, *np.asarray(rot).ravel(), *size, friction, softness, restitution, bound]
+def collider(kind, pos, rot, size, entity=0, bound=np.inf):
+    """A collider row (solvers/mpm/colliders.py) of rigid entity number ``entity`` (whose coupling
+    parameters it takes: Rollout's couplings); bound: its bounding radius, m (inf: every node takes
+    its distance)."""
+    return [kind, *pos, *np.asarray(rot).ravel(), *size, layout.coupling_column(entity), bound]
+
+
+COUPLING = (0.3, 0.002, 0.2)  # (μ, ς m, e) of the shapes' entity unless a test says otherwise
 
 
 # under the gradient tests' block (x, y in ±4 cm, z from 10.4 to 18.4 cm, floor wall at 9.4 cm),
@@ -81,26 +87,33 @@ SHAPES["hfield"] = collider(C.HFIELD, (0.0, 0.0, 0.06), rotation((0.2, 1, 0), 10
 def test_gradients_through_each_shape_match_fd(shape):
     planes = {"hull": HULL_PLANES, "hfield": HFIELD_DATA}.get(shape, ())
     rollout = Rollout("neohooken", {}, 0, "generic", seed=2, throw=(0.0, 0.0, -3.0), colliders=[SHAPES[shape]],
-                      planes=planes)
+                      planes=planes, couplings=[COUPLING])
     free = Rollout("neohooken", {}, 0, "generic", seed=2, throw=(0.0, 0.0, -3.0))
     met = rollout.run(rollout.state, rollout.inputs)[0] - free.run(free.state, free.inputs)[0]
     assert abs(met) > 1.0, f"{shape}: the block must meet the shape (loss changed by {met})"
     check_all(rollout, rollout.gradients(), shape, per_particle_only=True)
 
 
-@pytest.mark.parametrize("friction, softness, restitution", [(0.0, 0.0, 0.0), (2.0, 0.01, 0.0), (0.5, 0.0, 1.0)])
-def test_gradients_with_other_coupling_parameters_match_fd(friction, softness, restitution):
+# (μ, ς, e) and which of them are checked: a sharp surface (ς = 0) has no gradient in ς (its
+# influence is a step); with μ = 2, e = 0 the friction stops nodes dead beyond the floor's wall,
+# where the wall's kink at zero velocity makes e's one-sided derivatives differ (a restitution
+# just above 0 starts them moving inwards)
+@pytest.mark.parametrize("friction, softness, restitution, checked", [(0.0, 0.0, 0.0, (0, 2)), (2.0, 0.01, 0.0, (0, 1)),
+                                                                      (0.5, 0.0, 1.0, (0, 2))])
+def test_gradients_with_other_coupling_parameters_match_fd(friction, softness, restitution, checked):
     """No friction and a sharp surface; high friction with a wide softness (nodes outside the
     shapes partly influenced); a full bounce: with a plane and a box crossing it."""
-    shapes = [collider(C.PLANE, (0.0, 0.0, 0.1), rotation((1, 2, 0), 15), (0, 0, 0), friction, softness, restitution),
-              collider(C.BOX, (0.02, 0.0, 0.1), rotation((0, 0, 1), 30), (0.02, 0.02, 0.02), friction, softness,
-                       restitution)]
-    rollout = Rollout("neohooken", {}, 0, "generic", seed=3, throw=(0.0, 0.0, -3.0), colliders=shapes)
-    check_all(rollout, rollout.gradients(), f"μ={friction} ς={softness} e={restitution}", per_particle_only=True)
+    shapes = [collider(C.PLANE, (0.0, 0.0, 0.1), rotation((1, 2, 0), 15), (0, 0, 0)),
+              collider(C.BOX, (0.02, 0.0, 0.1), rotation((0, 0, 1), 30), (0.02, 0.02, 0.02))]
+    rollout = Rollout("neohooken", {}, 0, "generic", seed=3, throw=(0.0, 0.0, -3.0), colliders=shapes,
+                      couplings=[(friction, softness, restitution)])
+    check_all(rollout, rollout.gradients(), f"μ={friction} ς={softness} e={restitution}", per_particle_only=True,
+              coupling_params=checked)
 
 
 def test_gradients_with_colliders_are_bitwise_reproducible_and_batched_as_single():
-    assert_bitwise_reproducible(throw=(0.0, 0.0, -3.0), colliders=[SHAPES["plane"], SHAPES["box"]])
+    assert_bitwise_reproducible(throw=(0.0, 0.0, -3.0), colliders=[SHAPES["plane"], SHAPES["box"]],
+                                couplings=[COUPLING])
 
 
 # -- the shapes' signed distances and poses ------------------------------------------------------
@@ -470,19 +483,76 @@ def test_which_shapes_couple():
     grid in the coupling stage (test_mpm_coupler.py); needs_coup=False and collision=False do not
     couple."""
     scene = gs.Scene(mpm_options=gs.options.MPMOptions(lower_bound=(-0.5, -0.5, -0.2), upper_bound=(0.5, 0.5, 0.6)))
-    scene.add_entity(gs.morphs.Plane(), material=gs.materials.Rigid(coup_friction=0.7, coup_softness=0.01,
-                                                                     coup_restitution=0.5))
+    plane = scene.add_entity(gs.morphs.Plane(), material=gs.materials.Rigid(coup_friction=0.7, coup_softness=0.01,
+                                                                             coup_restitution=0.5))
     scene.add_entity(gs.morphs.Box(pos=(0.3, 0.0, 0.05), size=(0.1, 0.1, 0.1), fixed=True),
                      material=gs.materials.Rigid(needs_coup=False))
     scene.add_entity(gs.morphs.Box(pos=(0.0, 0.3, 0.05), size=(0.1, 0.1, 0.1), fixed=True, collision=False))
-    scene.add_entity(gs.morphs.Sphere(pos=(-0.3, 0.0, 0.3), radius=0.05), name="ball")
+    ball = scene.add_entity(gs.morphs.Sphere(pos=(-0.3, 0.0, 0.3), radius=0.05), name="ball")
     scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.2), size=(0.05, 0.05, 0.05)), material=gs.materials.MPM.Sand())
     scene.build()
     rows = scene.mpm_solver.collider_rows
     assert rows.shape == (1, C.WIDTH) and rows[0, 0] == C.PLANE
-    np.testing.assert_array_equal(rows[0, 16:20], [0.7, 0.01, 0.5, np.inf])  # (a plane: no bounding radius)
-    ball = scene.sim.coupler.rigid.model.link_entity[scene.sim.coupler.geoms[:, 1].numpy()]
-    assert scene.sim.coupler.geoms.shape == (1, 2) and ball[0] == 3  # the fourth rigid entity's sphere
+    # its coupling: the first rigid entity's columns of the per-env inputs; a plane has no bounding radius
+    np.testing.assert_array_equal(rows[0, 16:18], [layout.coupling_column(0), np.inf])
+    np.testing.assert_array_equal(scene.mpm_solver.env_in[0, 3:6].numpy(), [0.7, 0.01, 0.5])
+    np.testing.assert_array_equal(plane.get_coupling().numpy(), [0.7, 0.01, 0.5])
+    owner = scene.sim.coupler.rigid.model.link_entity[scene.sim.coupler.geoms[:, 1].numpy()]
+    assert scene.sim.coupler.geoms.shape == (1, 2) and owner[0] == 3  # the fourth rigid entity's sphere
+    assert scene.coupled_entities == {plane, ball}
+
+
+def _thrown_on_a_plane(n_envs):
+    """Differentiable, float64: a jelly block thrown along a coupled plane (its softness reaching the
+    nodes above it), 32 cells/m, dt 2 ms in 4 substeps; returns (scene, plane, block, loss), where
+    loss(coupling, velocity) runs 20 steps after a reset with the plane's (μ, ς, e) ← coupling
+    ((3,) or (n_envs, 3)) and the particles' velocity ← velocity (3,), and weighs the particles'
+    final positions."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=2e-3, substeps=4, requires_grad=True),
+                     mpm_options=gs.options.MPMOptions(lower_bound=(-0.5, -0.5, -0.2), upper_bound=(0.5, 0.5, 0.6),
+                                                       grid_density=32))
+    plane = scene.add_entity(gs.morphs.Plane())
+    block = scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.05), size=(0.12, 0.12, 0.08)),
+                             material=gs.materials.MPM.Elastic(E=3e4))
+    scene.build(n_envs=n_envs)
+    weights = torch.linspace(0.5, 1.5, 3 * block.n_particles, dtype=torch.float64).view(-1, 3)
+
+    def loss(coupling, velocity):
+        scene.reset()
+        plane.set_coupling(*coupling.unbind(-1))
+        block.set_particles_vel(velocity.expand(block.n_particles, 3))
+        for _ in range(20):
+            scene.step()
+        return (block.get_particles_pos() * weights).sum()
+    return scene, plane, block, loss
+
+
+PLANE_COUPLINGS = torch.tensor([[0.4, 0.02, 0.3], [0.8, 0.01, 0.1]], dtype=torch.float64)
+THROW = torch.tensor([0.6, 0.2, -0.4], dtype=torch.float64)
+
+
+def test_gradients_in_a_plane_s_coupling_match_fd_and_batch_as_single_envs():
+    """Through the scene (no moving shape: the grid update's own reverse): the plane's coupling
+    friction, softness and restitution against central differences, bit-identical when repeated;
+    two envs given two couplings each have the gradient bits of their single-env scene; the
+    particles' velocity gradient keeps its bits whether the coupling's is taken or not."""
+    _, _, _, loss = _thrown_on_a_plane(0)
+    sizes = torch.tensor([1.0, 0.01, 1.0], dtype=torch.float64)  # (μ, ς m, e): the FD directions' scales
+    scaled = checked_gradient(lambda x: loss(x * sizes, THROW), PLANE_COUPLINGS[0] / sizes, "the plane's coupling")
+    assert (scaled.abs() > 1e-3 * scaled.abs().max()).all(), scaled
+
+    def gradients(loss, coupling, wanted):
+        coupling, velocity = coupling.clone().requires_grad_(wanted), THROW.clone().requires_grad_(True)
+        loss(coupling, velocity).backward()
+        return coupling.grad, velocity.grad
+
+    single = [gradients(loss, coupling, True) for coupling in PLANE_COUPLINGS]
+    assert torch.equal(gradients(loss, PLANE_COUPLINGS[0], False)[1], single[0][1])
+    single = [coupling for coupling, _ in single]
+    _, _, _, batched_loss = _thrown_on_a_plane(2)
+    batched, _ = gradients(batched_loss, PLANE_COUPLINGS, True)
+    for e in range(2):
+        assert torch.equal(batched[e], single[e]), (batched[e], single[e])
 
 
 def test_coupler_options_rigid_mpm_false_lets_the_particles_through():

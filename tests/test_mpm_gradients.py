@@ -50,12 +50,14 @@ class Rollout:
     compression, where round-off picks the branch)."""
 
     def __init__(self, kind, params, n_envs, start, seed=0, requires_grad=True, sticky=False, throw=(0.0, 0.0, 0.0),
-                 colliders=(), planes=()):
+                 colliders=(), planes=(), couplings=()):
         """throw (3,) m/s: added to every particle's initial velocity; colliders, planes: rigid shapes
-        at rest (solvers/mpm/colliders.py rows and hull planes)."""
+        at rest (solvers/mpm/colliders.py rows and hull planes); couplings (R, 3): the (μ, ς, e) of
+        the rigid entities the rows name."""
         self.solver = MPMSolver(DT, SUBSTEPS, (0.0, 0.0, -9.81), DENSITY, SPACING, LOWER, UPPER, sticky,
                                 requires_grad)
         self.solver.set_colliders(colliders, planes)
+        self.solver.set_couplings(couplings)
         lattice = np.arange(5) * SPACING
         block = np.stack(np.meshgrid(lattice, lattice, lattice, indexing="ij"), -1).reshape(-1, 3)
         jp = 0.0 if kind == "sand" else 1.0  # Sand's Jp is a log-volume correction (Genesis's _default_Jp)
@@ -139,12 +141,16 @@ class Rollout:
         assert_converged(errors, what)
 
 
-SCALES = {"E": E, "nu": 0.1, "rho": RHO, "actu": 1.0, "gravity": 10.0}  # of the inputs' directions
+SCALES = {"E": E, "nu": 0.1, "rho": RHO, "actu": 1.0, "gravity": 10.0, "coupling": 0.1}  # of the inputs' directions
+# a coupling direction's relative sizes in (μ, ς m, e)
+COUPLING_SIZES = (1.0, 0.01, 1.0)
 
 
-def check_all(rollout, grads, name, per_particle_only=False):
+def check_all(rollout, grads, name, per_particle_only=False, coupling_params=(0, 1, 2)):
     """Position, velocity (and, unless per_particle_only, the affine field and the deformation),
-    each parameter per particle (and entity-wide unless per_particle_only), gravity."""
+    each parameter per particle (and entity-wide unless per_particle_only), gravity, and the rigid
+    entities' coupling parameters (those numbered in coupling_params: 0 μ, 1 ς, 2 e) where colliders
+    point at them."""
     fields = (("pos", range(0, 3), 0.01), ("vel", range(3, 6), 1.0))
     if not per_particle_only:
         fields += (("C", range(6, 15), 1.0), ("F", range(15, 24), 0.1))
@@ -160,6 +166,13 @@ def check_all(rollout, grads, name, per_particle_only=False):
                           SCALES[param])
     rollout.check(grads, f"{name}: gravity", "gravity", torch.tensor(rollout.rng.normal(size=(rollout.B, 3))),
                   SCALES["gravity"])
+    R = len(rollout.solver.couplings)
+    for k, what in enumerate(("μ", "ς", "e")):  # each rigid entity's, where colliders point at them
+        if R and k in coupling_params:
+            direction = np.zeros((rollout.B, R, 3))
+            direction[:, :, k] = rollout.rng.normal(size=(rollout.B, R)) * COUPLING_SIZES[k]
+            rollout.check(grads, f"{name}: coupling {what}", "coupling", torch.tensor(direction.reshape(rollout.B, -1)),
+                          SCALES["coupling"] * COUPLING_SIZES[k])
 
 
 @pytest.mark.parametrize("n_envs", [0, 2])

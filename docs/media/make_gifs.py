@@ -13,7 +13,8 @@ import numpy as np
 from PIL import Image
 
 EXAMPLES = ("quickstart", "trajectory_optimization", "system_identification", "policy", "push_box",
-            "material_identification", "soft_robot", "drone_flight", "jelly_slide", "sand_push")
+            "material_identification", "soft_robot", "drone_flight", "jelly_slide", "sand_push",
+            "coupling_identification")
 MAX_FRAMES = 60
 MIN_FRAMES = 20
 WIDTH = 240  # pixels

@@ -1444,6 +1444,54 @@ class RigidEntity(EntityIndexing):
         self._write_input("solref", (2 * columns[:, None] + np.arange(2)).ravel(), envs, ref)
         self._write_input("solimp", (5 * columns[:, None] + np.arange(5)).ravel(), envs, imp)
 
+    # -- coupling with MPM particles ----------------------------------------------------------------
+    def set_coupling(self, friction=None, softness=None, restitution=None, envs_idx=None):
+        """How the entity's shapes meet MPM particles (solvers/mpm/colliders.py), per env: the
+        Coulomb friction μ ≥ 0, the softness ς ≥ 0 (m: how far outside a shape its influence
+        reaches) and the restitution e in [0, 1] — its material's coup_friction, coup_softness and
+        coup_restitution at build. Each a number for every env of envs_idx, or one per env of
+        envs_idx; one not given keeps its values. Differentiable: the particles' and the bodies'
+        motion through the rule (the set of grid nodes a shape acts on is taken as fixed)."""
+        sim = self._sim()
+        self._require_coupled("set_coupling")
+        envs = self._envs(envs_idx, distinct=True)
+        columns, values = [], []  # (all checked before any is written)
+        for k, (arg, value, upper) in enumerate((("friction", friction, math.inf), ("softness", softness, math.inf),
+                                                 ("restitution", restitution, 1.0))):
+            if value is None:
+                continue
+            given = self._values(value, 1, envs, arg)
+            numbers = given.detach().cpu().numpy()
+            if not ((numbers >= 0.0) & (numbers <= upper)).all():
+                bound = "in [0, 1]" if upper == 1.0 else ">= 0"
+                raise InvalidInputError(f"{self._who}: set_coupling argument '{arg}' must be {bound}, got "
+                                        f"{numbers.ravel()}")
+            columns.append(3 * self._solver_idx + k)
+            values.append(given)
+        if columns:
+            mpm = self.scene.mpm_solver
+            sim.set_input(mpm, "coupling", _replace(sim.inputs(mpm)["coupling"], envs, columns,
+                                                    torch.cat(values, dim=1)))
+
+    def _require_coupled(self, method):
+        """A named error unless the MPM particles meet the entity's shapes (scene.coupled_entities)."""
+        if self not in self.scene.coupled_entities:
+            raise InvalidInputError(f"{self._who}: {method}: its shapes meet no MPM particles (expected a scene "
+                                    f"with MPM entities and the rigid–MPM coupler, and a material with "
+                                    f"needs_coup=True and colliding shapes), got material "
+                                    f"needs_coup={self.material.needs_coup}, MPM entities: "
+                                    f"{self.scene.mpm_solver is not None}, coupler_options.rigid_mpm="
+                                    f"{self.scene.coupler_options.rigid_mpm}")
+
+    def get_coupling(self, envs_idx=None):
+        """(3,) or (n_envs, 3): the coupling friction μ, softness ς (m) and restitution e with MPM
+        particles (set_coupling)."""
+        sim = self._sim()
+        self._require_coupled("get_coupling")
+        envs = self._envs(envs_idx)
+        return self._out(take(sim.inputs(self.scene.mpm_solver)["coupling"], envs,
+                              3 * self._solver_idx + np.arange(3)))
+
     # -- control ------------------------------------------------------------------------------------
     def _control(self, method, mode, targets, dofs_idx_local, envs_idx):
         """Switch the dofs to ``mode`` with ``targets``: {input name: (value, argument name)}; a value

@@ -14,7 +14,8 @@ margin times the nodes the initial particles reach; a replay in which a substep 
 it and replays again. The gradients flow through:
 - the state rows, in ``grads`` (the gradient w.r.t. frame s + 1 becomes the one w.r.t. frame s);
 - the per-particle parameters E, nu, rho, actu, summed per particle over the substeps;
-- gravity, summed per env in a fixed order.
+- gravity and the rigid entities' coupling parameters (the colliders at rest here; the coupler's
+  reverse adds the moving shapes'), summed per env in a fixed order.
 Every sum runs in a fixed order (serial scatters per env, no atomics): repeated rollouts give
 the same bits, and a batched env the bits of a single-env scene.
 """
@@ -32,7 +33,7 @@ CAPACITY_MARGIN = 1.5  # the saved grid holds this many times the nodes counted 
 class MPMAdjoint:
     """Mixin of MPMSolver: its backward."""
 
-    grad_input_names = ("E", "nu", "rho", "actu", "gravity")
+    grad_input_names = ("E", "nu", "rho", "actu", "gravity", "coupling")
 
     def _allocate_reverse(self):
         """Arrays of the reverse and of what a replay keeps (called by MPMSolver._allocate when
@@ -44,7 +45,7 @@ class MPMAdjoint:
 
         self.grads = floats(1, B, N, layout.WIDTH)
         self.grad_params = floats(B, N, len(layout.PARTICLE_INPUTS))
-        self.grad_gravity = floats(B, 3)
+        self.grad_env = floats(*self.env_in.shape)
         self.grad_grid = floats(B, K, 4)
         self.scratch = floats(B, N, 6)
         self.gathered = floats(S, B, N, 3)
@@ -77,7 +78,7 @@ class MPMAdjoint:
         self._bind()
 
     def _bind_reverse(self):
-        arrays = self._arrays() + [self.grads.view(-1), self.grad_params, self.grad_gravity, self.grad_grid.view(-1),
+        arrays = self._arrays() + [self.grads.view(-1), self.grad_params, self.grad_env, self.grad_grid.view(-1),
                                    self.scratch.view(-1)]
         config = (False, self.serial_chores, self.has_colliders, self.meets_moving)
         self.reverse_kernels = BoundKernels(config, arrays, [0] * len(arrays), *kernels.REVERSE_KERNELS)
@@ -88,6 +89,8 @@ class MPMAdjoint:
         (the replay) keeps what the reverse reads."""
         self.current = 0
         self.replaying = True
+        # (the colliders' coupling gradients take a serial pass over every listed node: only when wanted)
+        self.coupling_grads = int("coupling" not in self.skipped_grads)
         self.upload_state(state)
         self.upload_inputs(inputs)
         with torch.no_grad():
@@ -96,7 +99,7 @@ class MPMAdjoint:
             else:
                 self.grads.view(self.n_batch, -1).copy_(grad_state_out)
             self.grad_params.zero_()
-            self.grad_gravity.zero_()
+            self.grad_env.zero_()
 
     def end_replay(self):
         """The replay's end (from end_step, before ``current`` moves): if a substep listed more
@@ -129,14 +132,14 @@ class MPMAdjoint:
 
     def substep_post_coupling_backward(self, s):
         self.nodes_listed = True
-        self.reverse_kernels.post_coupling_backward(s)
+        self.reverse_kernels.post_coupling_backward(s, self.coupling_grads)
 
     def substep_pre_coupling_backward(self, s):
-        self.reverse_kernels.pre_coupling_backward(s)
+        self.reverse_kernels.pre_coupling_backward(s, self.coupling_grads)
         self.nodes_listed = False
 
     def end_reverse(self):
         grad_state = self.grads.view(self.n_batch, -1).clone()
         grads = {name: self.grad_params[:, :, k].clone() for k, name in enumerate(layout.PARTICLE_INPUTS)}
-        grads["gravity"] = self.grad_gravity.clone()
+        grads["gravity"], grads["coupling"] = self.grad_env[:, :3].clone(), self.grad_env[:, 3:].clone()
         return grad_state, grads

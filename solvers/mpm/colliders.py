@@ -17,13 +17,18 @@ as Genesis's ``_func_collide_in_rigid_geom`` with the rigid velocity zero:
         t' = t / T · max(0, T + μ v·n)                      Coulomb: slowed by μ times the normal stop
         v ← w (t' − e (v·n) n) + (1 − w) v
 
-A collider is at rest and a node does not move, so d, n and w are constants of the node: the map
-is of v alone, piecewise smooth (kinks where v·n = 0 and where the friction stops the node), and
-its adjoint (``collide_adjoint``) replays the colliders before each one to find its input.
+A collider is at rest and a node does not move, so d and n are constants of the node: the map is
+of v and the coupling parameters (w of ς) alone, piecewise smooth (kinks where v·n = 0 and where
+the friction stops the node), and its adjoint (``collide_adjoint``) replays the colliders before
+each one to find its input.
 
 Rows live in ``grid_f`` after the walls (COLLIDERS_AT, WIDTH numbers each: kind, position (3) m,
-rotation (9, row-major, world from shape), size (3) m, μ, ς, e, bounding radius m about the
-position (a plane's: infinite)), their count in ``grid_i[7]``. A node farther than the bounding
+rotation (9, row-major, world from shape), size (3) m, where its rigid entity's (μ, ς, e) start
+among the per-env inputs ``env_in`` (layout.coupling_column), bounding radius m about the position
+(a plane's: infinite)), their count in ``grid_i[7]``. μ, ς and e are inputs per env, so that they
+have gradients (``collide_adjoint`` with ``params``; the coupler's reverse for moving shapes):
+∂/∂μ and ∂/∂e of the rule, ∂/∂ς through the influence (``influence_adjoint``); the set of nodes a
+collider acts on (the cutoff, the reach) is frozen, as a contact's feature is. A node farther than the bounding
 radius plus the influence's reach (ς ln 10, where w falls to the cutoff; twice that, for round-off)
 skips the collider's distance: it cannot act there (a scene of many small shapes pays for the
 few a node is near).
@@ -48,7 +53,7 @@ from .constitutive import genesis_eps
 
 PLANE, SPHERE, CAPSULE, CYLINDER, BOX, HULL, HFIELD = range(7)
 FAR = 1e6  # m: a height field's distance beside its rectangle (no influence)
-WIDTH = 20
+WIDTH = 18
 COLLIDERS_AT = 9  # grid_f: h, inv_dx, vol, the walls' lower (3) and upper (3) corners, then the colliders
 INFLUENCE_CUTOFF = 0.1  # Genesis's: a collider acts on a node where its influence exceeds this
 
@@ -197,30 +202,53 @@ def _hull_distance(grid_f: ti.template(), first, count, p):
 
 
 @ti.func
-def _contact(grid_f: ti.template(), c, x):
-    """(acts, n, w, μ, e) of collider c at the node x: acts where its influence w passes the cutoff."""
+def coupling(table: ti.template(), at, env_in: ti.template(), e):
+    """(μ, ς m, e) of the row at table[at] in env e: its rigid entity's, among env e's inputs."""
+    col = ti.cast(table[at + 16], ti.i32)
+    return env_in[e, col], env_in[e, col + 1], env_in[e, col + 2]
+
+
+@ti.func
+def _contact(grid_f: ti.template(), c, x, env_in: ti.template(), e):
+    """(acts, d, n, w, μ, ς, e) of collider c at the node x in env e: acts where its influence w
+    passes the cutoff."""
     at = COLLIDERS_AT + c * WIDTH
-    return posed_contact(grid_f, at, _rotation(grid_f, at), _position(grid_f, at), x)
+    mu, softness, restitution = coupling(grid_f, at, env_in, e)
+    acts, d, n, w = posed_contact(grid_f, at, _rotation(grid_f, at), _position(grid_f, at), x, softness)
+    return acts, d, n, w, mu, softness, restitution
 
 
 @ti.func
-def reach(grid_f: ti.template(), at):
-    """How far (m) from its position the shape of the row at grid_f[at] can act: its bounding radius
-    and the influence's reach (twice ς ln(1 / cutoff), for round-off)."""
-    return grid_f[at + 19] + 2.0 * ti.static(np.log(1.0 / INFLUENCE_CUTOFF)) * ti.max(grid_f[at + 17], 1e-10)
+def reach(table: ti.template(), at, softness):
+    """How far (m) from its position the shape of the row at table[at] can act with softness ς
+    (m): its bounding radius and the influence's reach (twice ς ln(1 / cutoff), for round-off)."""
+    return table[at + 17] + 2.0 * ti.static(np.log(1.0 / INFLUENCE_CUTOFF)) * ti.max(softness, 1e-10)
 
 
 @ti.func
-def posed_contact(grid_f: ti.template(), at, R, pos, x):
-    """(acts, n, w, μ, e) at the node x of the shape of the row at grid_f[at] posed at pos (3,) m,
-    turned by R (posed_distance): acts where its influence w passes the cutoff."""
-    softness = ti.max(grid_f[at + 17], 1e-10)
-    acts, n, w = 0, ti.Vector([0.0, 0.0, 1.0]), 0.0
-    if (x - pos).norm() < reach(grid_f, at):
-        d, normal = posed_distance(grid_f, at, R, pos, x)
-        n, w = normal, ti.min(ti.exp(-d / softness), 1.0)
+def posed_contact(table: ti.template(), at, R, pos, x, softness):
+    """(acts, d m, n (3,), w) at the node x of the shape of the row at table[at] posed at pos (3,) m,
+    turned by R (posed_distance), with softness ς (m): acts where its influence w passes the cutoff
+    (beyond the reach, d is FAR)."""
+    acts, d, n, w = 0, FAR, ti.Vector([0.0, 0.0, 1.0]), 0.0
+    if (x - pos).norm() < reach(table, at, softness):
+        d, n = posed_distance(table, at, R, pos, x)
+        w = ti.min(ti.exp(-d / ti.max(softness, 1e-10)), 1.0)
         acts = w > INFLUENCE_CUTOFF
-    return acts, n, w, grid_f[at + 16], grid_f[at + 18]
+    return acts, d, n, w
+
+
+@ti.func
+def influence_adjoint(d, w, softness, g_w):
+    """(∂L/∂d, ∂L/∂ς) of the influence w = min(exp(−d / max(ς, 1e-10)), 1) at distance d from
+    g_w = ∂L/∂w (inside, d ≤ 0, w is 1 whatever d and ς)."""
+    g_d, g_softness = 0.0, 0.0
+    if d > 0.0:
+        clamped = ti.max(softness, 1e-10)
+        g_d = -w / clamped * g_w
+        if softness > 1e-10:
+            g_softness = w * d / (clamped * clamped) * g_w
+    return g_d, g_softness
 
 
 @ti.func
@@ -238,32 +266,27 @@ def respond(v, n, w, mu, e):
 
 @ti.func
 def respond_adjoint(v, n, w, mu, e, g):
-    """(∂L/∂v, ∂L/∂n, ∂L/∂w) of respond at (v, n, w) from g = ∂L/∂(its output)."""
-    g_v, g_n, g_w = g, ti.Vector.zero(float, 3), 0.0
+    """(∂L/∂v, ∂L/∂n, ∂L/∂w, ∂L/∂μ, ∂L/∂e) of respond at (v, n, w, μ, e) from g = ∂L/∂(its output)."""
+    g_v, g_n, g_w, g_mu, g_e = g, ti.Vector.zero(float, 3), 0.0, 0.0, 0.0
     vn = v.dot(n)
     if vn < 0.0:
         t = v - vn * n
         T = ti.sqrt(t.dot(t) + ti.static(genesis_eps()))
         slide = ti.max(0.0, T + vn * mu)
         G = w * g
+        g_e = -vn * n.dot(G)
         g_vn = -e * n.dot(G)
         g_t = ti.Vector.zero(float, 3)
         if slide > 0.0:  # slid = t (1 + μ vn / T)
             tg = t.dot(G)
             g_t = (1.0 + mu * vn / T) * G - (mu * vn * tg / (T * T * T)) * t
             g_vn += mu * tg / T
+            g_mu = vn * tg / T
         g_vn -= n.dot(g_t)  # (t = v − vn n)
         g_v = (1.0 - w) * g + g_t + g_vn * n
         g_n = -e * vn * G - vn * g_t + g_vn * v
         g_w = g.dot(t / T * slide - e * vn * n - v)
-    return g_v, g_n, g_w
-
-
-@ti.func
-def _respond_adjoint(v, n, w, mu, e, g):
-    """∂L/∂v of respond at v from g = ∂L/∂(its output) (the shape's n and w constant)."""
-    g_v, _, _ = respond_adjoint(v, n, w, mu, e, g)
-    return g_v
+    return g_v, g_n, g_w, g_mu, g_e
 
 
 @ti.func
@@ -304,30 +327,39 @@ def normal_jacobian(grid_f: ti.template(), at, p, d, n):
 
 
 @ti.func
-def collide(grid_f: ti.template(), count, x, v):
-    """The velocity v (3,) m/s of the node at x (3,) m after the ``count`` colliders, in order."""
+def collide(grid_f: ti.template(), count, x, v, env_in: ti.template(), e):
+    """The velocity v (3,) m/s of env e's node at x (3,) m after the ``count`` colliders, in order."""
     out = v
     for c in range(count):
-        acts, n, w, mu, e = _contact(grid_f, c, x)
+        acts, _, n, w, mu, _, restitution = _contact(grid_f, c, x, env_in, e)
         if acts:
-            out = respond(out, n, w, mu, e)
+            out = respond(out, n, w, mu, restitution)
     return out
 
 
 @ti.func
-def collide_adjoint(grid_f: ti.template(), count, x, v, g):
-    """∂L/∂v of ``collide`` at the node x whose velocity before the colliders was v, from
+def collide_adjoint(grid_f: ti.template(), count, x, v, g, env_in: ti.template(), e, grad_env: ti.template(),
+                    params: ti.template()):
+    """∂L/∂v of ``collide`` at env e's node x whose velocity before the colliders was v, from
     g = ∂L/∂(its output): collider c's input is found by replaying colliders 0 … c − 1 (a node
-    meets few)."""
+    meets few). With ``params``, each collider's ∂L/∂(μ, ς, e) is added to grad_env[e] at its
+    columns (not atomically: one thread an env)."""
     out = g
     for back in range(count):
         c = count - 1 - back
-        acts, n, w, mu, e = _contact(grid_f, c, x)
+        acts, d, n, w, mu, softness, restitution = _contact(grid_f, c, x, env_in, e)
         if acts:
             before = v
             for k in range(c):
-                acts_k, n_k, w_k, mu_k, e_k = _contact(grid_f, k, x)
+                acts_k, _, n_k, w_k, mu_k, _, e_k = _contact(grid_f, k, x, env_in, e)
                 if acts_k:
                     before = respond(before, n_k, w_k, mu_k, e_k)
-            out = _respond_adjoint(before, n, w, mu, e, out)
+            g_v, _, g_w, g_mu, g_e = respond_adjoint(before, n, w, mu, restitution, out)
+            if ti.static(params):
+                _, g_softness = influence_adjoint(d, w, softness, g_w)
+                col = ti.cast(grid_f[COLLIDERS_AT + c * WIDTH + 16], ti.i32)
+                grad_env[e, col] = grad_env[e, col] + g_mu
+                grad_env[e, col + 1] = grad_env[e, col + 1] + g_softness
+                grad_env[e, col + 2] = grad_env[e, col + 2] + g_e
+            out = g_v
     return out

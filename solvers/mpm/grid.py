@@ -59,7 +59,7 @@ def largest_count(active: ti.template()):
 
 @ti.func
 def grid_stage(colliders: ti.template(), walls: ti.template(), grid: ti.template(), active: ti.template(),
-               gravity: ti.template(), grid_f: ti.template(), grid_i: ti.template(), saved_grid: ti.template(),
+               env_in: ti.template(), grid_f: ti.template(), grid_i: ti.template(), saved_grid: ti.template(),
                saved_nodes: ti.template(), keep):
     """Momentum → velocity, gravity, the rigid colliders at rest (colliders.py; compiled in when
     ``colliders``), then the walls (Genesis's grid op, restitution 0) unless ``walls`` is False (the
@@ -74,11 +74,11 @@ def grid_stage(colliders: ti.template(), walls: ti.template(), grid: ti.template
         if k < active[e, 0]:
             n = active[e, k + 1]
             at = node_at(e, n, K)
-            free = node_vector(grid, at) / grid[at + 3] + h * ti.Vector([gravity[e, 0], gravity[e, 1], gravity[e, 2]])
+            free = node_vector(grid, at) / grid[at + 3] + h * ti.Vector([env_in[e, 0], env_in[e, 1], env_in[e, 2]])
             pos = node_position(n, dx, grid_i)
             v = free
             if ti.static(colliders):
-                v = collide(grid_f, grid_i[7], pos, free)
+                v = collide(grid_f, grid_i[7], pos, free, env_in, e)
             if ti.static(walls):
                 v = wall_velocity(pos, v, grid_f, grid_i[6])
             for c in ti.static(range(3)):
@@ -209,7 +209,7 @@ def wall_mask(pos, v, grid_f: ti.template(), sticky):
 
 @ti.func
 def grid_adjoint_stage(colliders: ti.template(), walls: ti.template(), grid: ti.template(), grad_grid: ti.template(),
-                       active: ti.template(), gravity: ti.template(), grid_f: ti.template(), grid_i: ti.template(),
+                       active: ti.template(), env_in: ti.template(), grid_f: ti.template(), grid_i: ti.template(),
                        saved_grid: ti.template(), s):
     """Reverse of substep s's update, per listed node (parallel): grad_grid's velocity gradient
     (0:3) → (∂L/∂P (0:3), ∂L/∂M (3)); the grid's velocity is replaced by the gradient of the
@@ -231,8 +231,8 @@ def grid_adjoint_stage(colliders: ti.template(), walls: ti.template(), grid: ti.
             free = v  # where the mask passes and no collider acts, v = P / M + h g
             if ti.static(colliders):
                 free = ti.Vector([saved_grid[s, e, k, 4 + c] for c in ti.static(range(3))])
-                g_v = collide_adjoint(grid_f, grid_i[7], pos, free, g_v)
-            velocity = free - h * ti.Vector([gravity[e, 0], gravity[e, 1], gravity[e, 2]])  # P / M
+                g_v = collide_adjoint(grid_f, grid_i[7], pos, free, g_v, env_in, e, env_in, False)
+            velocity = free - h * ti.Vector([env_in[e, 0], env_in[e, 1], env_in[e, 2]])  # P / M
             for c in ti.static(range(3)):
                 grad_grid[at + c] = g_v[c] / mass
                 grid[at + c] = g_v[c]
@@ -244,8 +244,8 @@ def grid_adjoint_stage(colliders: ti.template(), walls: ti.template(), grid: ti.
 
 @ti.func
 def gravity_adjoint_stage(serial: ti.template(), grid: ti.template(), active: ti.template(),
-                          grad_gravity: ti.template(), grid_f: ti.template(), grid_i: ti.template()):
-    """grad_gravity (B, 3) += h Σ mask ⊙ ∂L/∂v over env e's listed nodes, serially in list order
+                          grad_env: ti.template(), grid_f: ti.template(), grid_i: ti.template()):
+    """grad_env's gravity (B, 0:3) += h Σ mask ⊙ ∂L/∂v over env e's listed nodes, serially in list order
     (deterministic), from what grid_adjoint_stage left in the grid."""
     h, K = grid_f[0], node_count(grid_i)
     B = active.shape[0] - 1
@@ -255,7 +255,31 @@ def gravity_adjoint_stage(serial: ti.template(), grid: ti.template(), active: ti
         for k in range(active[e, 0]):
             total += node_vector(grid, node_at(e, active[e, k + 1], K))
         for c in ti.static(range(3)):
-            grad_gravity[e, c] = grad_gravity[e, c] + h * total[c]
+            grad_env[e, c] = grad_env[e, c] + h * total[c]
+
+
+@ti.func
+def coupling_adjoint_stage(serial: ti.template(), walls: ti.template(), grid: ti.template(),
+                           grad_grid: ti.template(), active: ti.template(), env_in: ti.template(),
+                           grad_env: ti.template(), grid_f: ti.template(), grid_i: ti.template(),
+                           saved_grid: ti.template(), s, wanted):
+    """grad_env += ∂L/∂(μ, ς, e) of the colliders at rest, summed serially per env over its listed
+    nodes in list order (deterministic), before grid_adjoint_stage overwrites what it reads:
+    grad_grid's velocity gradient (through the walls' mask when ``walls``; else past them
+    already) and the velocity before the colliders (saved_grid 4:7). Nothing unless ``wanted``."""
+    dx, K = 1.0 / grid_f[1], node_count(grid_i)
+    B = active.shape[0] - 1
+    ti.loop_config(serialize=serial)
+    for e in range(B * wanted):
+        for k in range(active[e, 0]):
+            n = active[e, k + 1]
+            at = node_at(e, n, K)
+            pos = node_position(n, dx, grid_i)
+            g_v = node_vector(grad_grid, at)
+            if ti.static(walls):
+                g_v = wall_mask(pos, node_vector(grid, at), grid_f, grid_i[6]) * g_v
+            free = ti.Vector([saved_grid[s, e, k, 4 + c] for c in ti.static(range(3))])
+            collide_adjoint(grid_f, grid_i[7], pos, free, g_v, env_in, e, grad_env, True)
 
 
 @ti.func

@@ -9,7 +9,8 @@ costs far less than indexing a 3- or 4-d ndarray (B and N are read off ``params`
 
 - ``frames`` (S + 1 or 2, B, N, 25, flat): particle state rows (layout.STATE), one frame per
   substep boundary (all of them when the step will be differentiated, else two used in turn);
-- ``params`` (B, N, 4): E (Pa), nu, rho (kg/m³), actu per particle; ``gravity`` (B, 3) m/s²;
+- ``params`` (B, N, 4): E (Pa), nu, rho (kg/m³), actu per particle; ``env_in`` (B, 3 + 3R) per env:
+  gravity (3) m/s², then each rigid entity's coupling μ, ς (m), e (layout.ENV_INPUTS);
 - ``kinds`` (N,) int material code, ``consts`` (N, layout.N_CONSTS), ``fiber`` (N, 3) muscle fibre
   directions (as given): the model;
 - ``affine`` (S or 1, B, N, 9, flat): each particle's APIC affine momentum matrix, N·s/m²·m, of
@@ -24,8 +25,8 @@ costs far less than indexing a 3- or 4-d ndarray (B and N are read off ``params`
 - ``part_grid`` (B, K, 4, flat), ``part_nodes`` (B + 1, K + 1) int: the second half of the
   particles' scatter (p2g's, then in the reverse g2p's) and its node list, added into grid
   (grad_grid) at once and zeroed (stencil.scatter_spread);
-- ``grid_f`` (9 + 19 C,): h (s), inv_dx (1/m), vol (m³), walls' lower (3) and upper (3) corners
-  (m), then C rigid colliders' rows (colliders.py);
+- ``grid_f`` (9 + 18 C + D,): h (s), inv_dx (1/m), vol (m³), walls' lower (3) and upper (3) corners
+  (m), then C rigid colliders' rows and their hulls' and height fields' data (colliders.py);
 - ``grid_i`` (8,): the grid's lowest node in cells (3), nodes per axis (3), sticky walls (0/1), C;
 - ``flags`` (1,) int: set to 1 when a particle's new state is not finite;
 - what a replay keeps for the reverse, per substep s (1-sized dummies when the solver does not
@@ -48,11 +49,12 @@ of their code), and whether it meets shapes of moving links (solvers/coupler.py,
 pre_coupling, which then ends with the grid update up to the walls, and post_coupling, which
 then starts with the walls).
 
-The reverse kernels (REVERSE_KERNELS) take five more arrays:
+The reverse kernels (REVERSE_KERNELS) take src and coupling_grads (whether the rigid couplings'
+gradients are wanted: the colliders' pass is skipped otherwise) and five more arrays:
 - ``grads`` (1, B, N, 25, flat): the gradient of the loss w.r.t. a frame's particle rows — of
   frame s + 1 before substep s's reverse, of frame s after it (overwritten in place, row by row);
 - ``grad_params`` (B, N, 4): ∂L/∂(E, nu, rho, actu) per particle, summed over the substeps;
-- ``grad_gravity`` (B, 3): ∂L/∂gravity, summed over the substeps;
+- ``grad_env`` (B, 3 + 3R): ∂L/∂env_in (gravity, the couplings), summed over the substeps;
 - ``grad_grid`` (B, K, 4, flat): per node ∂L/∂v (3) of the updated velocity, then ∂L/∂P (3),
   ∂L/∂M; zero between substeps;
 - ``scratch`` (B, N, 6, flat): per particle ∂L/∂v' of the gathered velocity (3), and ∂L/∂x
@@ -62,9 +64,9 @@ The reverse of substep s (frames s, s + 1 filled by a replay of the step) restor
 updated grid as the replay kept it — after the update, so what a coupler does to the grid
 between pre and post coupling is in it, where rebuilding the grid from frame s would miss it —
 and runs the adjoints in mirror order: g2p (per particle, with the replay's gathered velocity,
-then its scatter into grad_grid serially per env), the grid update (per node, then gravity
-serially per env), p2g and the stress (per particle, with the replay's affine matrices and
-SVDs: the reverse runs no SVD). It takes two launches, post_coupling_backward and
+then its scatter into grad_grid serially per env), the grid update (the colliders' coupling
+parameters serially per env, then per node, then gravity serially per env), p2g and the stress
+(per particle, with the replay's affine matrices and SVDs: the reverse runs no SVD). It takes two launches, post_coupling_backward and
 pre_coupling_backward, as the shared loop interleaves a coupler's reverse between them; the
 stress adjoint (the costliest to compile) is in the second only.
 
@@ -75,8 +77,8 @@ deterministic and a batched env equals a single-env scene.
 import taichi as ti
 
 from .g2p import gather_adjoint_stage, gather_stage
-from .grid import (clear_adjoint_stage, clear_stage, grid_adjoint_stage, grid_stage, gravity_adjoint_stage,
-                   largest_count, merge_stage, restore_stage, walls_adjoint_stage, walls_stage)
+from .grid import (clear_adjoint_stage, clear_stage, coupling_adjoint_stage, grid_adjoint_stage, grid_stage,
+                   gravity_adjoint_stage, largest_count, merge_stage, restore_stage, walls_adjoint_stage, walls_stage)
 from .layout import WIDTH
 from .p2g import p2g_adjoint_stage, scatter_stage, stress_stage
 from .stencil import row_at
@@ -85,7 +87,7 @@ A = ti.types.ndarray()
 
 
 @ti.kernel
-def substep(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
+def substep(config: ti.template(), frames: A, params: A, env_in: A, kinds: A, consts: A, fiber: A, affine: A, svd: A,
             grid: A, active: A, part_grid: A, part_nodes: A, grid_f: A, grid_i: A, flags: A, gathered: A,
             saved_grid: A, saved_nodes: A, src: ti.i32, dst: ti.i32, keep: ti.i32):
     """A whole substep from frame src to frame dst, in one launch (no coupling)."""
@@ -93,13 +95,13 @@ def substep(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, c
     scatter_stage(frames, params, affine, grid, active, part_grid, part_nodes, grid_f, grid_i, src, ti.max(keep, 0))
     merge_stage(config[1], grid, active, part_grid, part_nodes, grid_i)
     largest_count(active)
-    grid_stage(config[2], True, grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
+    grid_stage(config[2], True, grid, active, env_in, grid_f, grid_i, saved_grid, saved_nodes, keep)
     gather_stage(frames, params, grid, grid_f, grid_i, flags, gathered, src, dst, keep)
     clear_stage(config[1], grid, active, grid_i)
 
 
 @ti.kernel
-def pre_coupling(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A,
+def pre_coupling(config: ti.template(), frames: A, params: A, env_in: A, kinds: A, consts: A, fiber: A,
                  affine: A, svd: A, grid: A, active: A, part_grid: A, part_nodes: A,
                  grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                  src: ti.i32, dst: ti.i32, keep: ti.i32):
@@ -111,11 +113,11 @@ def pre_coupling(config: ti.template(), frames: A, params: A, gravity: A, kinds:
     merge_stage(config[1], grid, active, part_grid, part_nodes, grid_i)
     largest_count(active)
     if ti.static(config[3]):
-        grid_stage(config[2], False, grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
+        grid_stage(config[2], False, grid, active, env_in, grid_f, grid_i, saved_grid, saved_nodes, keep)
 
 
 @ti.kernel
-def post_coupling(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A,
+def post_coupling(config: ti.template(), frames: A, params: A, env_in: A, kinds: A, consts: A, fiber: A,
                   affine: A, svd: A, grid: A, active: A, part_grid: A, part_nodes: A,
                   grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                   src: ti.i32, dst: ti.i32, keep: ti.i32):
@@ -124,13 +126,13 @@ def post_coupling(config: ti.template(), frames: A, params: A, gravity: A, kinds
     if ti.static(config[3]):
         walls_stage(grid, active, grid_f, grid_i, saved_grid, keep)
     else:
-        grid_stage(config[2], True, grid, active, gravity, grid_f, grid_i, saved_grid, saved_nodes, keep)
+        grid_stage(config[2], True, grid, active, env_in, grid_f, grid_i, saved_grid, saved_nodes, keep)
     gather_stage(frames, params, grid, grid_f, grid_i, flags, gathered, src, dst, keep)
     clear_stage(config[1], grid, active, grid_i)
 
 
 @ti.kernel
-def write_state(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A,
+def write_state(config: ti.template(), frames: A, params: A, env_in: A, kinds: A, consts: A, fiber: A,
                 affine: A, svd: A, grid: A, active: A, part_grid: A, part_nodes: A,
                 grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                 f: ti.i32, src: A):
@@ -143,7 +145,7 @@ def write_state(config: ti.template(), frames: A, params: A, gravity: A, kinds: 
 
 
 @ti.kernel
-def read_state(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A,
+def read_state(config: ti.template(), frames: A, params: A, env_in: A, kinds: A, consts: A, fiber: A,
                affine: A, svd: A, grid: A, active: A, part_grid: A, part_nodes: A,
                grid_f: A, grid_i: A, flags: A, gathered: A, saved_grid: A, saved_nodes: A,
                f: ti.i32, dst: A):
@@ -160,13 +162,13 @@ STRESS_KERNELS = (substep, pre_coupling)  # bound with the scene's takes_svd (th
 
 
 @ti.kernel
-def post_coupling_backward(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A,
+def post_coupling_backward(config: ti.template(), frames: A, params: A, env_in: A, kinds: A, consts: A, fiber: A,
                            affine: A, svd: A, grid: A, active: A, part_grid: A, part_nodes: A,
                            grid_f: A, grid_i: A, flags: A, gathered: A,
-                           saved_grid: A, saved_nodes: A, grads: A, grad_params: A, grad_gravity: A, grad_grid: A,
-                           scratch: A, src: ti.i32):
+                           saved_grid: A, saved_nodes: A, grads: A, grad_params: A, grad_env: A, grad_grid: A,
+                           scratch: A, src: ti.i32, coupling_grads: ti.i32):
     """Substep src's updated grid restored (as the replay kept it), then the reverse of
-    post_coupling (g2p and the grid update): grad_grid ← (∂L/∂P, ∂L/∂M), grad_gravity += its part.
+    post_coupling (g2p and the grid update): grad_grid ← (∂L/∂P, ∂L/∂M), grad_env += its part.
     With a coupler (config[3]) the reverse stops at the walls: grad_grid ← ∂L/∂v after the coupler,
     the grid's velocity the one before it (the coupler's reverse, then pre_coupling_backward's)."""
     restore_stage(config[1], grid, active, saved_grid, saved_nodes, grid_i, src)
@@ -175,22 +177,28 @@ def post_coupling_backward(config: ti.template(), frames: A, params: A, gravity:
     if ti.static(config[3]):
         walls_adjoint_stage(grid, grad_grid, active, grid_f, grid_i, saved_grid, src)
     else:
-        grid_adjoint_stage(config[2], True, grid, grad_grid, active, gravity, grid_f, grid_i, saved_grid, src)
-        gravity_adjoint_stage(config[1], grid, active, grad_gravity, grid_f, grid_i)
+        if ti.static(config[2]):
+            coupling_adjoint_stage(config[1], True, grid, grad_grid, active, env_in, grad_env, grid_f, grid_i,
+                                   saved_grid, src, coupling_grads)
+        grid_adjoint_stage(config[2], True, grid, grad_grid, active, env_in, grid_f, grid_i, saved_grid, src)
+        gravity_adjoint_stage(config[1], grid, active, grad_env, grid_f, grid_i)
 
 
 @ti.kernel
-def pre_coupling_backward(config: ti.template(), frames: A, params: A, gravity: A, kinds: A, consts: A, fiber: A,
+def pre_coupling_backward(config: ti.template(), frames: A, params: A, env_in: A, kinds: A, consts: A, fiber: A,
                           affine: A, svd: A, grid: A, active: A, part_grid: A, part_nodes: A,
                           grid_f: A, grid_i: A, flags: A, gathered: A,
-                          saved_grid: A, saved_nodes: A, grads: A, grad_params: A, grad_gravity: A, grad_grid: A,
-                          scratch: A, src: ti.i32):
+                          saved_grid: A, saved_nodes: A, grads: A, grad_params: A, grad_env: A, grad_grid: A,
+                          scratch: A, src: ti.i32, coupling_grads: ti.i32):
     """The reverse of pre_coupling (p2g and the stress): grads ← the gradient of frame src,
     grad_params += their part; the touched nodes cleared. With a coupler (config[3]) the grid
     update's reverse up to the walls comes first (the coupler's reverse came between)."""
     if ti.static(config[3]):
-        grid_adjoint_stage(config[2], False, grid, grad_grid, active, gravity, grid_f, grid_i, saved_grid, src)
-        gravity_adjoint_stage(config[1], grid, active, grad_gravity, grid_f, grid_i)
+        if ti.static(config[2]):
+            coupling_adjoint_stage(config[1], False, grid, grad_grid, active, env_in, grad_env, grid_f, grid_i,
+                                   saved_grid, src, coupling_grads)
+        grid_adjoint_stage(config[2], False, grid, grad_grid, active, env_in, grid_f, grid_i, saved_grid, src)
+        gravity_adjoint_stage(config[1], grid, active, grad_env, grid_f, grid_i)
     p2g_adjoint_stage(frames, params, kinds, consts, fiber, affine, svd, grads, grad_params, grad_grid, scratch,
                       grid_f, grid_i, src)
     clear_adjoint_stage(config[1], grid, grad_grid, active, grid_i)

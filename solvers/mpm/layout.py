@@ -10,10 +10,12 @@ each particle's row holds STATE's fields (row-major 3×3 matrices):
 
 Inputs (name → (B, width) tensor): E (B, n) Young's modulus, Pa; nu (B, n) Poisson ratio;
 rho (B, n) density, kg/m³; actu (B, n) muscle actuation, no unit (0 for other materials);
-gravity (B, 3) m/s²; fiber (B, n · 3) muscle fibre directions (as given: not unit), the same in every env (the
+gravity (B, 3) m/s²; coupling (B, 3R): each of the scene's R rigid entities' coupling friction μ,
+softness ς (m) and restitution e (its material's coup_friction, coup_softness, coup_restitution;
+the colliders' rule, colliders.py), per env; fiber (B, n · 3) muscle fibre directions (as given: not unit), the same in every env (the
 kernels read row 0; an input, not model data, so that every step records the directions it ran
 with and its backward replays them: set_muscle may change them between steps). Parameters and
-fibres keep their value across scene.reset(); actu is a control, but part of the state as
+fibres and couplings keep their value across scene.reset(); actu is a control, but part of the state as
 Genesis keeps it: a reset writes it again from each muscle's group actuation in the registered
 state (MPMEntity.restore_groups). fiber has no
 gradient.
@@ -28,10 +30,18 @@ WIDTH = 25
 #: a replay's SVD of F_tmp per particle: U (9, row-major), σ (3), V (9)
 SVD_WIDTH = 21
 
-#: per-particle inputs (B, n_particles), then per-env ones with their width
+#: per-particle inputs (B, n_particles)
 PARTICLE_INPUTS = ("E", "nu", "rho", "actu")
-ENV_INPUTS = {"gravity": 3}
-PERSISTENT_INPUTS = ("E", "nu", "rho", "gravity", "fiber")
+#: per-env inputs, side by side in the kernels' ``env_in`` (B, 3 + 3R): gravity (3), then coupling
+ENV_INPUTS = ("gravity", "coupling")
+PERSISTENT_INPUTS = ("E", "nu", "rho", "gravity", "coupling", "fiber")
+
+
+def coupling_column(entity):
+    """The column of env_in where rigid entity number ``entity``'s (μ, ς, e) start."""
+    return 3 + 3 * entity
+
+
 #: a muscle's fibre direction until set_muscle sets it (Genesis's)
 DEFAULT_FIBER = (0.0, 0.0, 1.0)
 

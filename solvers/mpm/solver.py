@@ -1,8 +1,9 @@
 """The MPM solver: MLS-MPM particles of many materials on one grid (kernels.py), batched over envs.
 
 State per env: every particle's row of layout.STATE, flattened (B, N · 25). Inputs: layout's
-per-particle E, nu, rho, actu, the per-env gravity and the muscle fibres. Bookkeeping only: the physics is in the
-kernels of kernels.py (one launch per substep) and constitutive.py.
+per-particle E, nu, rho, actu, the per-env gravity and rigid entities' couplings, and the muscle
+fibres. Bookkeeping only: the physics is in the kernels of kernels.py (one launch per substep) and
+constitutive.py.
 """
 import numpy as np
 import taichi as ti
@@ -54,6 +55,7 @@ class MPMSolver(MPMAdjoint, Solver):
         self.entity_names = []
         self.wall_lower, self.wall_upper = grid.wall_lower, grid.wall_upper
         self.collider_rows, self.collider_data = np.zeros((0, colliders.WIDTH)), np.zeros(0)
+        self.couplings = np.zeros((0, 3))  # per rigid entity: its (μ, ς, e) at build (set_couplings)
         self.meets_moving = False  # a coupler brings shapes of moving links (set_colliders)
         self.regrown = False  # a replay under a coupler outgrew the saved grid (adjoint.end_replay)
 
@@ -71,6 +73,11 @@ class MPMSolver(MPMAdjoint, Solver):
             if self.requires_grad:
                 self._allocate_saved_grid(self.saved_grid.shape[2])
             self._bind()
+
+    def set_couplings(self, couplings):
+        """Before build: the (μ, ς m, e) of each of the scene's R rigid entities (R, 3), the default
+        of the input "coupling" (B, 3R) that the colliders' rows point into (layout.coupling_column)."""
+        self.couplings = np.asarray(couplings, dtype=np.float64).reshape(-1, 3)
 
     # -- building ---------------------------------------------------------------------------
     def add_entity(self, name, kind, params, E, nu, rho, Jp, positions):
@@ -211,7 +218,7 @@ class MPMSolver(MPMAdjoint, Solver):
         self.n_frames = S + 1 if self.requires_grad else 2
         self.frames = floats(self.n_frames, B, N, layout.WIDTH)
         self.params = floats(B, N, len(layout.PARTICLE_INPUTS))
-        self.gravity_in = floats(B, 3)
+        self.env_in = floats(B, layout.coupling_column(len(self.couplings)))
         self.kinds = torch.as_tensor(m.kinds, device=runtime.device)
         self.consts = torch.as_tensor(m.consts, dtype=runtime.tc_float, device=runtime.device)
         self.fiber = floats(N, 3)  # uploaded from the input "fiber" (layout)
@@ -253,7 +260,7 @@ class MPMSolver(MPMAdjoint, Solver):
     def _arrays(self):
         """The forward kernels' arrays, in their order; the particle rows and the grids flat
         (stencil.row_at, stencil.node_count)."""
-        return [self.frames.view(-1), self.params, self.gravity_in, self.kinds, self.consts, self.fiber,
+        return [self.frames.view(-1), self.params, self.env_in, self.kinds, self.consts, self.fiber,
                 self.affine.view(-1), self.svd.view(-1), self.grid.view(-1), self.active, self.part_grid.view(-1),
                 self.part_nodes, self.grid_f, self.grid_i, self.flags, self.gathered.view(-1), self.saved_grid,
                 self.saved_nodes]
@@ -272,7 +279,7 @@ class MPMSolver(MPMAdjoint, Solver):
     def _default_inputs(self):
         m, B = self.model, self.n_batch
         values = {"E": m.defaults["E"], "nu": m.defaults["nu"], "rho": m.defaults["rho"],
-                  "actu": np.zeros(m.n_particles), "gravity": self.gravity,
+                  "actu": np.zeros(m.n_particles), "gravity": self.gravity, "coupling": self.couplings.ravel(),
                   "fiber": np.tile(layout.DEFAULT_FIBER, m.n_particles)}
         return {name: torch.as_tensor(np.tile(v, (B, 1)), dtype=runtime.tc_float, device=runtime.device)
                 for name, v in values.items()}
@@ -298,7 +305,7 @@ class MPMSolver(MPMAdjoint, Solver):
     def upload_inputs(self, inputs):
         with torch.no_grad():
             self.params.copy_(torch.stack([inputs[name] for name in layout.PARTICLE_INPUTS], dim=-1))
-            self.gravity_in.copy_(inputs["gravity"])
+            self.env_in.copy_(torch.cat([inputs[name] for name in layout.ENV_INPUTS], dim=1))
             self.fiber.copy_(inputs["fiber"][0].view(-1, 3))
 
     # -- stepping ---------------------------------------------------------------------------
