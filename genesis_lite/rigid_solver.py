@@ -19,7 +19,6 @@ step through the weld's anchor and turn as well as through its rows.
 import numpy as np
 import torch
 
-from .entities import RigidEntity
 from .entities.common import EntityIndexing
 from .solvers.core import InvalidInputError, runtime
 from .solvers.rigid.data import DYN_WELD
@@ -52,7 +51,7 @@ class RigidSolverView(EntityIndexing):
 
     # -- scene-wide readouts: the rigid entities' side by side ---------------------------------------
     def _rigid_entities(self):
-        return [entity for entity in self.scene.entities if isinstance(entity, RigidEntity)]
+        return self.scene._rigid_entities()
 
     @property
     def n_links(self):

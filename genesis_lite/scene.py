@@ -24,7 +24,7 @@ from .materials import MPM, Rigid
 from .options import (LegacyCouplerOptions, MPMOptions, RigidOptions, SimOptions, ViewerOptions, VisOptions,
                       check_bool, is_int)
 from .rigid_solver import RigidSolverView
-from .runtime import logger, require_init, runtime, track
+from .runtime import require_init, runtime, track
 from .simulator import Simulator, refuse_inference_mode
 from .solvers.coupler import Coupler
 from .solvers.coupling import rigid_colliders
@@ -227,7 +227,7 @@ class Scene:
 
     def _rigid_entities(self):
         """The rigid entities, in their solver's order (the rigid model's link_entity numbers)."""
-        return sorted((e for e in self.entities if isinstance(e, RigidEntity)), key=lambda e: e._solver_idx)
+        return [e for e in self.entities if isinstance(e, RigidEntity)]
 
     def _solvers(self):
         """The solvers that have entities, rigid first."""

@@ -324,11 +324,11 @@ class Simulator:
         the warm start it started from (its replay then repeats it exactly; None for both where
         the solver needs neither)."""
         split = self._split_inputs(flat_inputs)
-        for k, slot in enumerate(self.slots):
-            slot.solver.skipped_grads = frozenset(name for (solver, name), want in zip(self.flat_input_names, wanted)
-                                                  if solver == k and not want)
         self.hold_before_backward()
         try:
+            for k, slot in enumerate(self.slots):
+                slot.solver.skipped_grads = frozenset(name for (solver, name), want in zip(self.flat_input_names, wanted)
+                                                      if solver == k and not want)
             if len(self.slots) == 1:
                 results = [self.slots[0].solver.backward(states[0], split[0], grad_states[0], warm_starts[0],
                                                          records[0])]

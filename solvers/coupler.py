@@ -169,8 +169,8 @@ def couple_adjoint(serial: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3
     integration ran). Per env, the shapes in reverse order: their wrench's forward replayed (the
     earlier shapes replayed per node), its Jᵀ's reverse (into the dofs' motions, cdof), then the
     nodes' reverse (into the shape's pose, onto its link's origin and turn, its link's velocity,
-    cvel, and its coupling parameters, grad_env: the MPM solver's). Gradients at the rigid solver's reference point take it as fixed, as its own reverse does
-    (kinematics.py)."""
+    cvel, and its coupling parameters, grad_env: the MPM solver's). Gradients at the rigid solver's
+    reference point take it as fixed, as its own reverse does (kinematics.py)."""
     ti.loop_config(serialize=serial)
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
@@ -259,7 +259,7 @@ def _meet_adjoint(d: ti.template(), grid: ti.template(), grad_grid: ti.template(
     geom_pose_adjoint(d, s, e, geoms[c, 0], g_pos, g_R)
     accumulate(d.cvel_w.grad, ti.Vector([s, e, l]), g_spin)
     accumulate(d.cvel_v.grad, ti.Vector([s, e, l]), g_drift)
-    col = ti.cast(shapes[at + 16], ti.i32)
+    col = colliders.coupling_at(shapes, at)
     for a in ti.static(range(3)):
         grad_env[e, col + a] = grad_env[e, col + a] + g_params[a]
 

@@ -91,7 +91,8 @@ def rigid_colliders(model, coupled):
         size, shape_data, bound = _shape_data(model, g, sum(len(d) for d in data))
         data.append(shape_data)
         geoms.append((g, link))
-        rows.append([COLLIDER_KIND[int(kind)], *pos, *rot.ravel(), *size, layout.coupling_column(entity), bound])
+        rows.append([COLLIDER_KIND[int(kind)], *pos, *rot.ravel(), *size,
+                     layout.COUPLING_AT + layout.coupling_columns(entity)[0], bound])
 
     def packed(rows, data, geoms):
         return (np.array(rows, dtype=np.float64).reshape(-1, colliders.WIDTH), np.concatenate([np.zeros(0), *data]),

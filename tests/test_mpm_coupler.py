@@ -179,7 +179,7 @@ def test_the_normal_jacobian_is_the_normal_s_derivative(kind):
     around each kind where the normal is smooth (both step sizes agree: not across a region's
     border); the distance's own gradient is the normal."""
     code, size, data = KINDS[kind]
-    row = [code, 0, 0, 0, *np.eye(3).ravel(), *size, layout.coupling_column(0), 1.0]
+    row = [code, 0, 0, 0, *np.eye(3).ravel(), *size, layout.COUPLING_AT, 1.0]
     points = np.random.default_rng(1).uniform(-0.06, 0.06, (2000, 3))
     at = _normals_of(row, data, points)
     h = 1e-6
@@ -410,6 +410,18 @@ def test_coupling_setters_refuse_what_they_cannot_take():
     loose.build()
     with pytest.raises(InvalidInputError, match="set_coupling: its shapes meet no MPM particles"):
         ball.set_coupling(friction=0.2)
+    with pytest.raises(gs.SceneStateError, match="build"):
+        gs.Scene().add_entity(gs.morphs.Sphere(radius=0.1)).set_coupling(friction=0.2)
+    for options, morph, said in ((gs.options.LegacyCouplerOptions(rigid_mpm=False), gs.morphs.Plane(), "rigid_mpm=False"),
+                                 (None, gs.morphs.Box(size=(0.1, 0.1, 0.1), fixed=True, collision=False),
+                                  "0 colliding shape")):
+        uncoupled = gs.Scene(coupler_options=options)
+        shape = uncoupled.add_entity(morph)
+        uncoupled.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.2), size=(0.05, 0.05, 0.05)),
+                             material=gs.materials.MPM.Elastic())
+        uncoupled.build()
+        with pytest.raises(InvalidInputError, match=f"get_coupling: its shapes meet no MPM particles.*{said}"):
+            shape.get_coupling()
     for arg, value, expected in (("friction", -0.1, ">= 0"), ("softness", float("nan"), "finite"),
                                  ("restitution", 1.5, r"in \[0, 1\]")):
         with pytest.raises(InvalidInputError, match=f"argument '{arg}' must be .*{expected}"):

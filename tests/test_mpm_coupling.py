@@ -49,7 +49,7 @@ def collider(kind, pos, rot, size, entity=0, bound=np.inf):
     """A collider row (solvers/mpm/colliders.py) of rigid entity number ``entity`` (whose coupling
     parameters it takes: Rollout's couplings); bound: its bounding radius, m (inf: every node takes
     its distance)."""
-    return [kind, *pos, *np.asarray(rot).ravel(), *size, layout.coupling_column(entity), bound]
+    return [kind, *pos, *np.asarray(rot).ravel(), *size, layout.COUPLING_AT + layout.coupling_columns(entity)[0], bound]
 
 
 COUPLING = (0.3, 0.002, 0.2)  # (μ, ς m, e) of the shapes' entity unless a test says otherwise
@@ -494,7 +494,7 @@ def test_which_shapes_couple():
     rows = scene.mpm_solver.collider_rows
     assert rows.shape == (1, C.WIDTH) and rows[0, 0] == C.PLANE
     # its coupling: the first rigid entity's columns of the per-env inputs; a plane has no bounding radius
-    np.testing.assert_array_equal(rows[0, 16:18], [layout.coupling_column(0), np.inf])
+    np.testing.assert_array_equal(rows[0, 16:18], [layout.COUPLING_AT, np.inf])
     np.testing.assert_array_equal(scene.mpm_solver.env_in[0, 3:6].numpy(), [0.7, 0.01, 0.5])
     np.testing.assert_array_equal(plane.get_coupling().numpy(), [0.7, 0.01, 0.5])
     owner = scene.sim.coupler.rigid.model.link_entity[scene.sim.coupler.geoms[:, 1].numpy()]

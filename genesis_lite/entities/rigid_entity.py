@@ -12,6 +12,7 @@ import torch
 from ..options import check_bool
 from ..runtime import logger
 from ..solvers.core import InvalidInputError, SceneStateError, refuse_grad, runtime, warn_user
+from ..solvers.mpm.layout import coupling_columns
 from ..solvers.rigid.merge import merged_into
 from ..solvers.rigid.model import BALL, FREE, initial_q
 from . import energy, kinematics
@@ -1466,7 +1467,7 @@ class RigidEntity(EntityIndexing):
                 bound = "in [0, 1]" if upper == 1.0 else ">= 0"
                 raise InvalidInputError(f"{self._who}: set_coupling argument '{arg}' must be {bound}, got "
                                         f"{numbers.ravel()}")
-            columns.append(3 * self._solver_idx + k)
+            columns.append(coupling_columns(self._solver_idx)[k])
             values.append(given)
         if columns:
             mpm = self.scene.mpm_solver
@@ -1476,11 +1477,13 @@ class RigidEntity(EntityIndexing):
     def _require_coupled(self, method):
         """A named error unless the MPM particles meet the entity's shapes (scene.coupled_entities)."""
         if self not in self.scene.coupled_entities:
+            model = self._solver.model
+            colliding = int(model.geom_collides[model.link_entity[model.geom_link] == self._solver_idx].sum())
             raise InvalidInputError(f"{self._who}: {method}: its shapes meet no MPM particles (expected a scene "
                                     f"with MPM entities and the rigid–MPM coupler, and a material with "
                                     f"needs_coup=True and colliding shapes), got material "
-                                    f"needs_coup={self.material.needs_coup}, MPM entities: "
-                                    f"{self.scene.mpm_solver is not None}, coupler_options.rigid_mpm="
+                                    f"needs_coup={self.material.needs_coup}, {colliding} colliding shape(s), MPM "
+                                    f"entities: {self.scene.mpm_solver is not None}, coupler_options.rigid_mpm="
                                     f"{self.scene.coupler_options.rigid_mpm}")
 
     def get_coupling(self, envs_idx=None):
@@ -1489,8 +1492,7 @@ class RigidEntity(EntityIndexing):
         sim = self._sim()
         self._require_coupled("get_coupling")
         envs = self._envs(envs_idx)
-        return self._out(take(sim.inputs(self.scene.mpm_solver)["coupling"], envs,
-                              3 * self._solver_idx + np.arange(3)))
+        return self._out(take(sim.inputs(self.scene.mpm_solver)["coupling"], envs, coupling_columns(self._solver_idx)))
 
     # -- control ------------------------------------------------------------------------------------
     def _control(self, method, mode, targets, dofs_idx_local, envs_idx):

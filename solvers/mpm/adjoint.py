@@ -141,5 +141,6 @@ class MPMAdjoint:
     def end_reverse(self):
         grad_state = self.grads.view(self.n_batch, -1).clone()
         grads = {name: self.grad_params[:, :, k].clone() for k, name in enumerate(layout.PARTICLE_INPUTS)}
-        grads["gravity"], grads["coupling"] = self.grad_env[:, :3].clone(), self.grad_env[:, 3:].clone()
+        at = layout.COUPLING_AT
+        grads["gravity"], grads["coupling"] = self.grad_env[:, :at].clone(), self.grad_env[:, at:].clone()
         return grad_state, grads

@@ -24,8 +24,8 @@ each one to find its input.
 
 Rows live in ``grid_f`` after the walls (COLLIDERS_AT, WIDTH numbers each: kind, position (3) m,
 rotation (9, row-major, world from shape), size (3) m, where its rigid entity's (μ, ς, e) start
-among the per-env inputs ``env_in`` (layout.coupling_column), bounding radius m about the position
-(a plane's: infinite)), their count in ``grid_i[7]``. μ, ς and e are inputs per env, so that they
+among the per-env inputs ``env_in`` (COUPLING; layout.COUPLING_AT, coupling_columns), bounding
+radius m about the position (BOUND; a plane's: infinite)), their count in ``grid_i[7]``. μ, ς and e are inputs per env, so that they
 have gradients (``collide_adjoint`` with ``params``; the coupler's reverse for moving shapes):
 ∂/∂μ and ∂/∂e of the rule, ∂/∂ς through the influence (``influence_adjoint``); the set of nodes a
 collider acts on (the cutoff, the reach) is frozen, as a contact's feature is. A node farther than the bounding
@@ -54,6 +54,7 @@ from .constitutive import genesis_eps
 PLANE, SPHERE, CAPSULE, CYLINDER, BOX, HULL, HFIELD = range(7)
 FAR = 1e6  # m: a height field's distance beside its rectangle (no influence)
 WIDTH = 18
+COUPLING, BOUND = 16, 17  # a row's fields: where its entity's (μ, ς, e) start in env_in; its bounding radius
 COLLIDERS_AT = 9  # grid_f: h, inv_dx, vol, the walls' lower (3) and upper (3) corners, then the colliders
 INFLUENCE_CUTOFF = 0.1  # Genesis's: a collider acts on a node where its influence exceeds this
 
@@ -202,9 +203,15 @@ def _hull_distance(grid_f: ti.template(), first, count, p):
 
 
 @ti.func
+def coupling_at(table: ti.template(), at):
+    """The column of env_in where the (μ, ς, e) of the row at table[at] start."""
+    return ti.cast(table[at + COUPLING], ti.i32)
+
+
+@ti.func
 def coupling(table: ti.template(), at, env_in: ti.template(), e):
     """(μ, ς m, e) of the row at table[at] in env e: its rigid entity's, among env e's inputs."""
-    col = ti.cast(table[at + 16], ti.i32)
+    col = coupling_at(table, at)
     return env_in[e, col], env_in[e, col + 1], env_in[e, col + 2]
 
 
@@ -222,7 +229,7 @@ def _contact(grid_f: ti.template(), c, x, env_in: ti.template(), e):
 def reach(table: ti.template(), at, softness):
     """How far (m) from its position the shape of the row at table[at] can act with softness ς
     (m): its bounding radius and the influence's reach (twice ς ln(1 / cutoff), for round-off)."""
-    return table[at + 17] + 2.0 * ti.static(np.log(1.0 / INFLUENCE_CUTOFF)) * ti.max(softness, 1e-10)
+    return table[at + BOUND] + 2.0 * ti.static(np.log(1.0 / INFLUENCE_CUTOFF)) * ti.max(softness, 1e-10)
 
 
 @ti.func
@@ -357,7 +364,7 @@ def collide_adjoint(grid_f: ti.template(), count, x, v, g, env_in: ti.template()
             g_v, _, g_w, g_mu, g_e = respond_adjoint(before, n, w, mu, restitution, out)
             if ti.static(params):
                 _, g_softness = influence_adjoint(d, w, softness, g_w)
-                col = ti.cast(grid_f[COLLIDERS_AT + c * WIDTH + 16], ti.i32)
+                col = coupling_at(grid_f, COLLIDERS_AT + c * WIDTH)
                 grad_env[e, col] = grad_env[e, col] + g_mu
                 grad_env[e, col + 1] = grad_env[e, col + 1] + g_softness
                 grad_env[e, col + 2] = grad_env[e, col + 2] + g_e

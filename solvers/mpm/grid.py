@@ -209,8 +209,8 @@ def wall_mask(pos, v, grid_f: ti.template(), sticky):
 
 @ti.func
 def grid_adjoint_stage(colliders: ti.template(), walls: ti.template(), grid: ti.template(), grad_grid: ti.template(),
-                       active: ti.template(), env_in: ti.template(), grid_f: ti.template(), grid_i: ti.template(),
-                       saved_grid: ti.template(), s):
+                       active: ti.template(), env_in: ti.template(), grad_env: ti.template(), grid_f: ti.template(),
+                       grid_i: ti.template(), saved_grid: ti.template(), s):
     """Reverse of substep s's update, per listed node (parallel): grad_grid's velocity gradient
     (0:3) → (∂L/∂P (0:3), ∂L/∂M (3)); the grid's velocity is replaced by the gradient of the
     velocity after gravity, for the gravity sum (gravity_adjoint_stage). Without ``walls`` (a coupler
@@ -231,7 +231,7 @@ def grid_adjoint_stage(colliders: ti.template(), walls: ti.template(), grid: ti.
             free = v  # where the mask passes and no collider acts, v = P / M + h g
             if ti.static(colliders):
                 free = ti.Vector([saved_grid[s, e, k, 4 + c] for c in ti.static(range(3))])
-                g_v = collide_adjoint(grid_f, grid_i[7], pos, free, g_v, env_in, e, env_in, False)
+                g_v = collide_adjoint(grid_f, grid_i[7], pos, free, g_v, env_in, e, grad_env, False)
             velocity = free - h * ti.Vector([env_in[e, 0], env_in[e, 1], env_in[e, 2]])  # P / M
             for c in ti.static(range(3)):
                 grad_grid[at + c] = g_v[c] / mass

@@ -180,7 +180,8 @@ def post_coupling_backward(config: ti.template(), frames: A, params: A, env_in: 
         if ti.static(config[2]):
             coupling_adjoint_stage(config[1], True, grid, grad_grid, active, env_in, grad_env, grid_f, grid_i,
                                    saved_grid, src, coupling_grads)
-        grid_adjoint_stage(config[2], True, grid, grad_grid, active, env_in, grid_f, grid_i, saved_grid, src)
+        grid_adjoint_stage(config[2], True, grid, grad_grid, active, env_in, grad_env, grid_f, grid_i,
+                           saved_grid, src)
         gravity_adjoint_stage(config[1], grid, active, grad_env, grid_f, grid_i)
 
 
@@ -197,7 +198,8 @@ def pre_coupling_backward(config: ti.template(), frames: A, params: A, env_in: A
         if ti.static(config[2]):
             coupling_adjoint_stage(config[1], False, grid, grad_grid, active, env_in, grad_env, grid_f, grid_i,
                                    saved_grid, src, coupling_grads)
-        grid_adjoint_stage(config[2], False, grid, grad_grid, active, env_in, grid_f, grid_i, saved_grid, src)
+        grid_adjoint_stage(config[2], False, grid, grad_grid, active, env_in, grad_env, grid_f, grid_i,
+                           saved_grid, src)
         gravity_adjoint_stage(config[1], grid, active, grad_env, grid_f, grid_i)
     p2g_adjoint_stage(frames, params, kinds, consts, fiber, affine, svd, grads, grad_params, grad_grid, scratch,
                       grid_f, grid_i, src)

@@ -23,6 +23,7 @@ gradient.
 Material kinds: each particle has a kind code (KIND) and N_CONSTS constants whose meaning
 depends on the kind (solvers/mpm/constitutive.py: encode).
 """
+import numpy as np
 
 #: field → (first column, last column + 1) of a particle's state row
 STATE = {"pos": (0, 3), "vel": (3, 6), "C": (6, 15), "F": (15, 24), "Jp": (24, 25)}
@@ -37,9 +38,14 @@ ENV_INPUTS = ("gravity", "coupling")
 PERSISTENT_INPUTS = ("E", "nu", "rho", "gravity", "coupling", "fiber")
 
 
-def coupling_column(entity):
-    """The column of env_in where rigid entity number ``entity``'s (μ, ς, e) start."""
-    return 3 + 3 * entity
+#: env_in's first column of the input coupling (gravity's 3 come first)
+COUPLING_AT = 3
+
+
+def coupling_columns(entity):
+    """(3,) int: rigid entity number ``entity``'s (μ, ς, e) columns in the input coupling (B, 3R)
+    (in env_in: COUPLING_AT more)."""
+    return 3 * entity + np.arange(3)
 
 
 #: a muscle's fibre direction until set_muscle sets it (Genesis's)

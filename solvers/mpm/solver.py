@@ -76,7 +76,7 @@ class MPMSolver(MPMAdjoint, Solver):
 
     def set_couplings(self, couplings):
         """Before build: the (μ, ς m, e) of each of the scene's R rigid entities (R, 3), the default
-        of the input "coupling" (B, 3R) that the colliders' rows point into (layout.coupling_column)."""
+        of the input "coupling" (B, 3R) that the colliders' rows point into (layout.COUPLING_AT, coupling_columns)."""
         self.couplings = np.asarray(couplings, dtype=np.float64).reshape(-1, 3)
 
     # -- building ---------------------------------------------------------------------------
@@ -218,7 +218,7 @@ class MPMSolver(MPMAdjoint, Solver):
         self.n_frames = S + 1 if self.requires_grad else 2
         self.frames = floats(self.n_frames, B, N, layout.WIDTH)
         self.params = floats(B, N, len(layout.PARTICLE_INPUTS))
-        self.env_in = floats(B, layout.coupling_column(len(self.couplings)))
+        self.env_in = floats(B, layout.COUPLING_AT + self.couplings.size)
         self.kinds = torch.as_tensor(m.kinds, device=runtime.device)
         self.consts = torch.as_tensor(m.consts, dtype=runtime.tc_float, device=runtime.device)
         self.fiber = floats(N, 3)  # uploaded from the input "fiber" (layout)
