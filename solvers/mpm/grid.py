@@ -259,6 +259,21 @@ def gravity_adjoint_stage(serial: ti.template(), grid: ti.template(), active: ti
 
 
 @ti.func
+def update_adjoint_stage(serial: ti.template(), colliders: ti.template(), walls: ti.template(), grid: ti.template(),
+                         grad_grid: ti.template(), active: ti.template(), env_in: ti.template(),
+                         grad_env: ti.template(), grid_f: ti.template(), grid_i: ti.template(),
+                         saved_grid: ti.template(), s, coupling_grads):
+    """Reverse of substep s's grid update (from the walls' when ``walls``; else after the coupler's
+    reverse): the colliders' coupling parameters (when ``coupling_grads``), then per node, then
+    gravity's sum."""
+    if ti.static(colliders):
+        coupling_adjoint_stage(serial, walls, grid, grad_grid, active, env_in, grad_env, grid_f, grid_i, saved_grid, s,
+                               coupling_grads)
+    grid_adjoint_stage(colliders, walls, grid, grad_grid, active, env_in, grad_env, grid_f, grid_i, saved_grid, s)
+    gravity_adjoint_stage(serial, grid, active, grad_env, grid_f, grid_i)
+
+
+@ti.func
 def coupling_adjoint_stage(serial: ti.template(), walls: ti.template(), grid: ti.template(),
                            grad_grid: ti.template(), active: ti.template(), env_in: ti.template(),
                            grad_env: ti.template(), grid_f: ti.template(), grid_i: ti.template(),

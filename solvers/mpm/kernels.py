@@ -77,8 +77,8 @@ deterministic and a batched env equals a single-env scene.
 import taichi as ti
 
 from .g2p import gather_adjoint_stage, gather_stage
-from .grid import (clear_adjoint_stage, clear_stage, coupling_adjoint_stage, grid_adjoint_stage, grid_stage,
-                   gravity_adjoint_stage, largest_count, merge_stage, restore_stage, walls_adjoint_stage, walls_stage)
+from .grid import (clear_adjoint_stage, clear_stage, grid_stage, largest_count, merge_stage, restore_stage,
+                   update_adjoint_stage, walls_adjoint_stage, walls_stage)
 from .layout import WIDTH
 from .p2g import p2g_adjoint_stage, scatter_stage, stress_stage
 from .stencil import row_at
@@ -177,12 +177,8 @@ def post_coupling_backward(config: ti.template(), frames: A, params: A, env_in: 
     if ti.static(config[3]):
         walls_adjoint_stage(grid, grad_grid, active, grid_f, grid_i, saved_grid, src)
     else:
-        if ti.static(config[2]):
-            coupling_adjoint_stage(config[1], True, grid, grad_grid, active, env_in, grad_env, grid_f, grid_i,
-                                   saved_grid, src, coupling_grads)
-        grid_adjoint_stage(config[2], True, grid, grad_grid, active, env_in, grad_env, grid_f, grid_i,
-                           saved_grid, src)
-        gravity_adjoint_stage(config[1], grid, active, grad_env, grid_f, grid_i)
+        update_adjoint_stage(config[1], config[2], True, grid, grad_grid, active, env_in, grad_env, grid_f, grid_i,
+                             saved_grid, src, coupling_grads)
 
 
 @ti.kernel
@@ -195,12 +191,8 @@ def pre_coupling_backward(config: ti.template(), frames: A, params: A, env_in: A
     grad_params += their part; the touched nodes cleared. With a coupler (config[3]) the grid
     update's reverse up to the walls comes first (the coupler's reverse came between)."""
     if ti.static(config[3]):
-        if ti.static(config[2]):
-            coupling_adjoint_stage(config[1], False, grid, grad_grid, active, env_in, grad_env, grid_f, grid_i,
-                                   saved_grid, src, coupling_grads)
-        grid_adjoint_stage(config[2], False, grid, grad_grid, active, env_in, grad_env, grid_f, grid_i,
-                           saved_grid, src)
-        gravity_adjoint_stage(config[1], grid, active, grad_env, grid_f, grid_i)
+        update_adjoint_stage(config[1], config[2], False, grid, grad_grid, active, env_in, grad_env, grid_f, grid_i,
+                             saved_grid, src, coupling_grads)
     p2g_adjoint_stage(frames, params, kinds, consts, fiber, affine, svd, grads, grad_params, grad_grid, scratch,
                       grid_f, grid_i, src)
     clear_adjoint_stage(config[1], grid, grad_grid, active, grid_i)
