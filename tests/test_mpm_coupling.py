@@ -32,9 +32,9 @@ from .test_mpm_gradients import Rollout, assert_bitwise_reproducible, check_all
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-@pytest.fixture(scope="module", autouse=True)
-def f64_module():
-    gs.init(precision="64", logging_level="warning")
+# every test in float64 unless it asks for f32 (conftest's fixtures, per test: conftest runs the
+# float32 tests first, and a module-scoped init left the module's later tests in float32)
+pytestmark = pytest.mark.usefixtures("f64")
 
 
 def rotation(axis, degrees):
