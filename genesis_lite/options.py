@@ -322,7 +322,8 @@ class MPMOptions(_TimeBased):
         between them.
     boundary_condition (ours): what the walls do to the grid velocity at the nodes beyond
         them: "slip" (Genesis's: the component into the wall is zeroed, the tangential one
-        kept) or "sticky" (every component zeroed: the material sticks to the walls).
+        kept) or "sticky" (where a component moves into the wall, every component is zeroed:
+        the material sticks to the walls, and leaves them freely).
     use_sparse_grid, leaf_block_size: deprecated in Genesis, without effect (a warning when set).
     """
     dt: float = None

@@ -254,6 +254,20 @@ def test_a_material_made_stiffer_than_the_substep_allows_warns(f64, caplog):
     assert f"({__file__}:" in found[0]  # at the user's line
 
 
+def test_a_stability_warning_is_said_again_only_when_worse(f64, caplog):
+    """An optimisation loop that sets the same too-stiff material or too-fast velocity every
+    iteration is warned once (an independent probe saw three warnings a rollout), and again when a
+    later value is worse than any warned."""
+    scene, blob, _ = _scene(_jelly())
+    speed = 1.2 * (1.0 / SMALL["grid_density"]) / (DT / SUBSTEPS)
+    for E, said in ((1e10, True), (1e10, False), (5e9, False), (1e11, True), (2e5, False)):
+        with warns(caplog, "exceeds the stability limit" if said else None):
+            blob.set_material_params(E=E)
+    for scale, said in ((1.0, True), (1.0, False), (0.9, False), (1.5, True)):
+        with warns(caplog, "grid cells a substep" if said else None):
+            blob.set_velocity([0.0, scale * speed, 0.0])
+
+
 @pytest.mark.parametrize("ratio, warned", [(0.75, False), (0.9, True)])
 def test_the_wave_bound_keeps_a_margin_below_dx_over_c(f64, caplog, ratio, warned):
     """A nearly incompressible block (ν 0.45) at a substep h = ratio·dx/c (c the elastic wave

@@ -58,6 +58,9 @@ class MPMSolver(MPMAdjoint, Solver):
         self.couplings = np.zeros((0, 3))  # per rigid entity: its (μ, ς, e) at build (set_couplings)
         self.meets_moving = False  # a coupler brings shapes of moving links (set_colliders)
         self.regrown = False  # a replay under a coupler outgrew the saved grid (adjoint.end_replay)
+        # the worst excess each stability warning has reported (the substep over its limit, cells a
+        # substep): an optimisation loop setting the same stiffness or speed every iteration is told once
+        self.warned_excess = {"substep": 1.0, "speed": 1.0}
 
     def set_colliders(self, rows, data=(), moving=False):
         """Rigid shapes at rest the grid meets, before the first step: colliders.py's rows (C,
@@ -170,18 +173,28 @@ class MPMSolver(MPMAdjoint, Solver):
         """Warn when the substep exceeds the stability limit for particles of Young's modulus E (Pa),
         Poisson ratio nu and density rho (kg/m³), arrays of one shape: Genesis's suggested
         h ≤ 2e-2·dx, and the elastic wave's CFL bound h ≤ WAVE_CFL·dx / c with c = √((λ + 2μ)/ρ)
-        of the stiffest particle (also after set_material_params raises a stiffness)."""
+        of the stiffest particle (also after set_material_params raises a stiffness); only past the
+        worst excess warned before (_worse)."""
         m, h = self.model, self.dt / self.substeps
         E, nu, rho = np.asarray(E, dtype=np.float64), np.asarray(nu, dtype=np.float64), np.asarray(rho, dtype=np.float64)
         modulus = E * (1 - nu) / ((1 + nu) * (1 - 2 * nu))  # λ + 2μ
         wave = float(np.sqrt(np.max(modulus / rho))) if modulus.size else 0.0
         wave_limit = WAVE_CFL * m.grid.dx / wave if wave > 0 else np.inf
         limit = min(GENESIS_DT_PER_DX * m.grid.dx, wave_limit)
-        if h > limit:
+        if self._worse("substep", h / limit):
             warn_user(f"MPM solver (entities: {', '.join(self.entity_names)}): the substep dt / substeps = "
                       f"{h:.3g} s exceeds the stability limit {limit:.3g} s (min of 2e-2·dx = "
                       f"{GENESIS_DT_PER_DX * m.grid.dx:.3g} s and {WAVE_CFL:g}·dx / wave speed = {wave_limit:.3g} s); "
-                      f"the simulation may blow up: raise SimOptions substeps or lower dt")
+                      f"the simulation may blow up: raise SimOptions substeps or lower dt (said again only for a "
+                      f"stiffer material)")
+
+    def _worse(self, kind, excess):
+        """Whether ``excess`` (> 1: past the bound) is worse than any the ``kind`` warning reported;
+        it is then the worst."""
+        if excess <= self.warned_excess[kind]:
+            return False
+        self.warned_excess[kind] = excess
+        return True
 
     def _check_resolution(self):
         """Warn when particles are coarser than the grid's cells: a body's particles then couple
@@ -198,12 +211,13 @@ class MPMSolver(MPMAdjoint, Solver):
     def check_speed(self, speed, who):
         """Warn when a speed (m/s) given to particles crosses more than a grid cell in a substep:
         explicit MPM's transfers are unstable past that (measured: a neo-Hookean block thrown at
-        1.6 cells a substep turned to NaN at its first step). who: the call, for the message."""
+        1.6 cells a substep turned to NaN at its first step); only past the fastest warned before.
+        who: the call, for the message."""
         h, dx = self.dt / self.substeps, self.model.grid.dx
-        if speed * h > dx:
+        if self._worse("speed", speed * h / dx):
             warn_user(f"{who}: a particle speed of {speed:.3g} m/s crosses {speed * h / dx:.3g} grid cells a "
                       f"substep (dt / substeps = {h:.3g} s, dx = {dx:.3g} m): past one cell a substep the "
-                      f"simulation may blow up; raise SimOptions substeps")
+                      f"simulation may blow up; raise SimOptions substeps (said again only for a faster one)")
 
     def _allocate(self):
         m, B, N = self.model, self.n_batch, self.model.n_particles
