@@ -715,6 +715,60 @@ def test_recording_writes_mp4_and_gif_read_back_by_imageio(f32, tmp_path, caplog
         cam.start_recording(str(tmp_path / "folder.mp4"))
 
 
+def test_a_buffered_mp4_above_60_fps_keeps_its_frames(f32, tmp_path):
+    """A recording named as it stops is encoded at 60 fps as it goes and timed at the fps given when
+    saved: its last frame lasted ~1/50 s whatever the fps, so readers decoded 13 frames of 12 at
+    100 fps and 28 at 1000 (independent probe, 2026-12-02); now as many as recorded, at the fps."""
+    import imageio.v2 as imageio
+
+    scene = gs.Scene(**NO_CONTACT)
+    scene.add_entity(gs.morphs.Box(size=(0.3, 0.3, 0.3), pos=(0.0, 0.0, 0.5)))
+    cam = scene.add_camera(res=(32, 24), pos=(2.0, 0.0, 0.5), lookat=(0.0, 0.0, 0.5))
+    scene.build()
+    for fps in (100, 1000):
+        cam.start_recording()
+        for k in range(12):
+            cam.set_pose(pos=(2.0, 0.05 * k, 0.5))
+            cam.render()
+        cam.stop_recording(str(tmp_path / f"{fps}.mp4"), fps=fps)
+        reader = imageio.get_reader(str(tmp_path / f"{fps}.mp4"))
+        assert len([frame for frame in reader]) == 12, fps
+        if fps == 100:  # (imageio's reader says 0 for 1000 fps, as for a file streamed at that rate)
+            assert reader.get_meta_data()["fps"] == fps and reader.get_meta_data()["duration"] == 0.12
+
+
+def test_a_state_that_blew_up_gives_a_named_error_and_no_frames(f32, tmp_path, caplog):
+    """A box thrown by a force past float32's range: the step warns (check_nan is off) and the state
+    is not finite. render() names the link whose pose it cannot draw (it named an internal
+    argument, 'rot'), a camera following the box says so, and a recording streamed to a file leaves
+    those steps' frames out with one warning instead of making scene.step() raise (independent
+    probe, 2026-12-02)."""
+    import imageio.v2 as imageio
+
+    scene = gs.Scene(**NO_CONTACT)
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.2), pos=(0.0, 0.0, 0.5)), name="box")
+    cam = scene.add_camera(res=(64, 48), pos=(2.0, 0.0, 1.0), lookat=(0.0, 0.0, 0.5), fov=40)
+    follower = scene.add_camera(res=(16, 16), pos=(2.0, 0.0, 1.0), lookat=(0.0, 0.0, 0.5))
+    scene.build()
+    follower.follow_entity(box)
+    cam.start_recording(str(tmp_path / "blown.mp4"), fps=100)  # a frame a step
+    scene.step()
+    with caplog.at_level(logging.WARNING, logger="genesis_lite"):
+        for _ in range(3):
+            box.links[0].apply_external_force([3e38, 0.0, 3e38])
+            scene.step()
+    assert not torch.isfinite(box.get_pos()).all()
+    left_out = [r.getMessage() for r in caplog.records if "left out of the recording" in r.getMessage()]
+    assert len(left_out) == 1 and "the pose of link 'box' of entity 'box' is not finite" in left_out[0]
+    cam.stop_recording()
+    assert len([frame for frame in imageio.get_reader(str(tmp_path / "blown.mp4"))]) == 2  # before the force
+    with pytest.raises(gs.SimulationError, match="camera .*render: the pose of link 'box' of entity 'box' is not "
+                                                 "finite: the scene's state cannot be drawn"):
+        cam.render(depth=True)
+    with pytest.raises(gs.SimulationError, match="follow_entity: the position of entity 'box' is not finite"):
+        follower.render()
+
+
 @pytest.mark.restarts  # (conftest: last in the float32 group)
 def test_scenes_ending_finish_their_recordings(f32, tmp_path, caplog):
     """gs.destroy (and a restarting gs.init, and the interpreter's exit) end every scene, whose
@@ -753,6 +807,7 @@ def test_errors_name_the_camera_argument_and_value(f32, tmp_path):
              (dict(res=(64.5, 48)), r"argument 'res'.*got \(64.5, 48\)"),
              (dict(res=(200000, 200000)), r"argument 'res'.* up to 16384, got \(200000, 200000\)"),
              (dict(fov=180), r"camera 1: argument 'fov' must be a vertical field of view in \(0, 180\).*got 180"),
+             (dict(fov=1e-37), r"argument 'fov' must leave a focal length float32 can hold, got 1e-37 degrees"),
              (dict(pos=(0, 0, np.nan)), r"camera 1.set_pose: argument 'pos' must be 3 finite numbers"),
              (dict(pos=(1, 2, 3), lookat=(1, 2, 3)), r"'pos' and 'lookat' must differ, got both \[1.0, 2.0, 3.0\]"),
              (dict(pos=(0, 0, 3), lookat=(0, 0, 0)), r"argument 'up' must be a vector not parallel"),

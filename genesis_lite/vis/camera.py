@@ -85,6 +85,9 @@ class Camera:
                                     f"to {MAX_RES}, got {res!r}")
         self._res = (int(res[0]), int(res[1]))
         self._fov = _check_float(owner, "fov", fov, 0.0, 180.0, "a vertical field of view in (0, 180) degrees")
+        if self.f > np.finfo(np.float32).max:  # (the rasterizer's float32 drew an empty image)
+            raise InvalidInputError(f"{owner}: argument 'fov' must leave a focal length float32 can hold, got {fov!r} "
+                                    f"degrees: {self.f:.3g} pixels")
         self._near = _check_float(owner, "near", near, 0.0, np.inf, "a positive finite distance (m)")
         self._far = _check_float(owner, "far", far, self._near, np.inf, f"a finite distance (m) > near ({near})")
         if env_idx is not None and not (is_int(env_idx) and env_idx >= 0):
@@ -369,6 +372,9 @@ class Camera:
         to the offset is pulled to the entity, smoothed; lookat follows unless the orientation is fixed)."""
         entity, offset, fixed_axis, smoothing, fix_orientation = self._follow
         target = self._entity_pos(entity)
+        if not np.isfinite(target).all():
+            raise SimulationError(f"{self._name}.follow_entity: the position of entity '{entity.name}' is not finite "
+                                  f"({target.tolist()}); the camera cannot follow it")
         weight = 0.0 if smoothing is None else smoothing
         pos = weight * (self._pos - offset) + (1.0 - weight) * target + offset
         for axis, value in enumerate(fixed_axis):
@@ -396,7 +402,7 @@ class Camera:
                                     f"BatchRenderer only), got True")
         self._require_built("render")
         recording = self._recording is not None and not self._paused and not self._recording.streamed
-        images = self._draw(rgb=rgb or recording, depth=depth, segmentation=segmentation, normal=normal)
+        images = self._draw(owner, rgb=rgb or recording, depth=depth, segmentation=segmentation, normal=normal)
         if recording:
             self._recording.add(images["rgb"])
         if depth:
@@ -411,9 +417,10 @@ class Camera:
         lies on the ray through its centre at the drawn depth: world coordinates, or with
         world_frame False the camera's OpenCV frame (x right, y down, z forward); the mask is True
         where something is drawn between near and far."""
-        check_bool(f"{self._name}.render_pointcloud", "world_frame", world_frame)
+        owner = f"{self._name}.render_pointcloud"
+        check_bool(owner, "world_frame", world_frame)
         self._require_built("render_pointcloud")
-        depth = np.minimum(self._draw(depth=True)["depth"], self._far).astype(np.float64)
+        depth = np.minimum(self._draw(owner, depth=True)["depth"], self._far).astype(np.float64)
         rows, cols = np.meshgrid(np.arange(self._res[1]), np.arange(self._res[0]), indexing="ij")
         points = np.stack([depth * (cols + 0.5 - self.cx) / self.f, depth * (rows + 0.5 - self.cy) / self.f, depth],
                           axis=-1)
@@ -422,8 +429,9 @@ class Camera:
             points = points @ opencv_to_world[:3, :3].T + opencv_to_world[:3, 3]
         return points, (self._near < depth) & (depth < self._far * (1.0 - 1e-3))
 
-    def _draw(self, **images):
-        """The images the rasterizer draws of the scene's current state (``images``: which). Its
+    def _draw(self, owner, **images):
+        """The images the rasterizer draws of the scene's current state (``images``: which; owner:
+        the caller, for messages; a state that is not finite raises SimulationError). Its
         buffers, made at the first render and kept, are made outside torch.inference_mode() even
         under it (inference tensors kept there broke every later render outside it)."""
         if self._attached is not None:
@@ -435,7 +443,7 @@ class Camera:
             drawing = scene._camera_visuals()
             view = View(self._pos + self._offset(), self._lookat + self._offset(), self._up, self._fov, self._near,
                         self._far, self._res)
-            meshes, instances = drawing.meshes, drawing.instances(scene._link_kinematics())
+            meshes, instances = drawing.meshes, drawing.instances(owner, scene._link_kinematics())
             spheres, debug_meshes = scene._debug_drawing() if self._debug else (None, [])
             extra = DebugMesh.instances(debug_meshes + scene._contact_arrows()) if self._debug else None
             if extra is not None:
@@ -488,7 +496,14 @@ class Camera:
         self._steps_to_frame -= 1
         if self._steps_to_frame <= 0:
             self._steps_to_frame = self._steps_per_frame
-            self._recording.add(self._draw(rgb=True)["rgb"])
+            try:
+                frame = self._draw(f"{self._name} (recording)", rgb=True)["rgb"]
+            except SimulationError as error:  # the step stands (it warned, without check_nan): no frame
+                if not self._recording.skipped:
+                    logger.warning(f"{error}; its frames are left out of the recording (warned once)")
+                self._recording.skipped += 1
+                return
+            self._recording.add(frame)
 
     def pause_recording(self):
         """Stop appending frames until start_recording() resumes; the frames so far are kept."""

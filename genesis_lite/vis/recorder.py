@@ -19,7 +19,8 @@ odd one gets a black column or row of padding. Preset ultrafast (crf 23): 2 ms a
 GIF: looped, each frame shown for 1/fps s rounded to the format's unit, a hundredth of a second,
 and at least two (browsers show a shorter delay as a tenth of a second: 60 fps plays at 50); its
 frames wait in memory until the file is written (Pillow writes a GIF at once, truncating a
-delay to its unit: it is given rounded).
+delay to its unit: it is given rounded; it also merges equal consecutive frames into one shown
+as long, so a reader may get fewer frames than were recorded, playing the same).
 """
 import os
 import queue
@@ -98,12 +99,20 @@ class _GifWriter:
 
 def mux_h264(raw, filename, fps):
     """The MP4 ``filename`` from the raw H.264 stream in the file ``raw``, at ``fps`` frames/s,
-    without re-encoding: the frames' timestamps follow -r, and the stream's own timing (x264 wrote
-    the rate it encoded at) is rewritten to match, so that players and readers see fps."""
+    without re-encoding, in two passes: the stream's own timing (x264 wrote the rate it encoded at)
+    rewritten to fps, then the frames wrapped with timestamps at fps. (Rewritten while wrapping, the
+    demuxer had already timed the last frame from the old rate: above 60 fps it lasted 1/50 s or so,
+    and readers decoded extra frames, 28 for 12 at 1000 fps.)"""
     tick = Fraction(2 * fps).limit_denominator(1_000_000)  # H.264 counts two ticks a frame
-    subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-loglevel", "error", "-r", str(fps), "-i", raw, "-c",
-                    "copy", "-bsf:v", f"h264_metadata=tick_rate={tick.numerator}/{tick.denominator}", filename],
-                   check=True, capture_output=True)
+    ffmpeg = [imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-loglevel", "error"]
+    timed = raw + ".timed.h264"
+    try:
+        subprocess.run(ffmpeg + ["-i", raw, "-c", "copy", "-bsf:v",
+                                 f"h264_metadata=tick_rate={tick.numerator}/{tick.denominator}", "-f", "h264", timed],
+                       check=True, capture_output=True)
+        subprocess.run(ffmpeg + ["-r", str(fps), "-i", timed, "-c", "copy", filename], check=True, capture_output=True)
+    finally:
+        _remove(timed)
 
 
 def _open_writer(filename, fps, res):
@@ -147,6 +156,7 @@ class Recording:
 
     def __init__(self, owner, res, filename=None, fps=None):
         self.owner, self.res, self.n_frames = owner, res, 0
+        self.skipped = 0  # frames a streamed recording left out (the state to draw was not finite)
         self.streamed = filename is not None
         self._frames = []
         if self.streamed:

@@ -28,7 +28,7 @@ import torch
 
 from .. import morphs as gm
 from ..utils import rotations
-from ..solvers.core import InvalidInputError, runtime
+from ..solvers.core import InvalidInputError, SimulationError, runtime
 from ..solvers.rigid.shapes import hull_mesh, quat_to_mat
 from ..solvers.rigid.collision import hfield
 from ..solvers.rigid.spec import VisualSpec
@@ -169,13 +169,16 @@ class SceneVisuals:
                             _particle_seg(e, k, segmentation_level, scene, len(shapes)))
                            for k, e in enumerate(particle_entities)]
         self._envs = torch.as_tensor(np.asarray(envs), dtype=torch.int64, device=device)
+        self._batched = scene.n_envs > 0
+        self._link_who = {link.idx: link._who for entity in scene._rigid_entities() for link in entity.links}
         self._envs_offset = torch.as_tensor(scene.envs_offset[np.asarray(envs)], dtype=torch.float32, device=device)
 
     def particles(self, extra=None):
         """The Spheres of every MPM entity's particles in the drawn envs (radius: half the particle
         size times VisOptions.particle_size_scale, as Genesis's rasterizer; colour: the entity's
         surface colour; segmentation id: _particle_seg's), then those of ``extra`` (Spheres or
-        None); None when there are none."""
+        None); None when there are none. (Particle positions are always finite: the walls clamp
+        them, even where a blown-up velocity is not.)"""
         parts = [] if extra is None else [extra]
         for entity, color, seg in self._particles:
             with torch.no_grad():
@@ -195,13 +198,18 @@ class SceneVisuals:
                                                         torch.cat([q.color for q in parts]),
                                                         torch.cat([q.seg for q in parts]))
 
-    def instances(self, links):
+    def instances(self, owner, links):
         """The Instances of the frame whose link kinematics are ``links`` (B, L, ≥ 7): per instance
         its link's world pose (position m, quaternion) as float32, moved by its env's offset; None
-        when nothing has a shape."""
+        when nothing has a shape. owner: the caller, for the error a non-finite pose raises."""
         if self.meshes is None or links is None:
             return None
         rows = links[self._env, self._link]
+        finite = torch.isfinite(rows[:, :7]).all(-1)
+        if not bool(finite.all()):
+            k = int(torch.nonzero(~finite)[0, 0])
+            _not_finite(owner, f"the pose of {self._link_who[int(self._link[k])]}",
+                        int(self._env[k]) if self._batched else None)
         rot = rotations.quat_to_mat(rows[:, 3:7]).to(torch.float32)
         return Instances(rot, rows[:, :3].to(torch.float32) + self._offset, self._color, self._seg)
 
@@ -219,3 +227,10 @@ class SceneVisuals:
                   for name in ("rot", "pos", "color", "seg")]
         return self._debug_meshes, Instances(*joined)
 
+
+def _not_finite(owner, what, env):
+    """The error of a drawing whose state is not finite (a simulation that blew up: with
+    SimOptions(check_nan=False), the default, the step only warns)."""
+    where = "" if env is None else f" in env {env}"
+    raise SimulationError(f"{owner}: {what}{where} is not finite: the scene's state cannot be drawn (the simulation "
+                          f"blew up; SimOptions(check_nan=True) raises at the step that makes it so)")
