@@ -241,7 +241,7 @@ def test_arguments_a_method_does_not_take(f64, built):
     scene, robot = built
     raises(gs.InvalidInputError, lambda: robot.set_qpos([0.0, 0.0], relative=True), f"entity '{ENTITY}'",
            "set_qpos", "'relative'", "'qs_idx_local'", "docs/genesis_api.md")
-    raises(gs.InvalidInputError, lambda: robot.get_pos(relative=True), "get_pos", "'relative'", "['envs_idx']")
+    raises(gs.InvalidInputError, lambda: robot.get_ang(relative=True), "get_ang", "'relative'", "['envs_idx']")
     raises(gs.InvalidInputError, lambda: robot.get_link(robot.links[-1].name).get_pos(0, 1),
            f"link '{robot.links[-1].name}' of entity '{ENTITY}'", "get_pos", "too many positional arguments")
     raises(gs.InvalidInputError, lambda: scene.step(foo=1), "gs.Scene", "step", "'foo'", "'update_visualizer'")

@@ -1275,6 +1275,20 @@ def test_link_reference_frames_batched_and_checked(f64):
         box.get_links_pos(ref="centre")
     with pytest.raises(gs.InvalidInputError, match="'relative'"):
         box.get_links_pos(relative=1)
+    # Genesis's pose getters and setters all take relative (its authored and internal link origins,
+    # one here); docs/genesis_api.md said so and get_pos, get_quat, get_vel, set_pos, set_quat refused it
+    link = box.links[0]
+    for method in (box.get_pos, box.get_quat, box.get_vel, box.get_links_quat, link.get_pos, link.get_quat,
+                   link.get_vel):
+        assert torch.equal(method(relative=False), method()), method.__name__
+        with pytest.raises(gs.InvalidInputError, match="'relative'"):
+            method(relative=1)
+    pos, quat = box.get_pos(), box.get_quat()
+    box.set_pos(pos + 0.1, relative=False)
+    box.set_quat(quat, relative=True)
+    assert torch.allclose(box.get_pos(), pos + 0.1, atol=1e-15, rtol=0)
+    with pytest.raises(gs.InvalidInputError, match="'relative'"):
+        box.set_quat(quat, relative="yes")
 
 
 def test_link_reference_frame_readouts_are_differentiable_f64(f64):
@@ -1307,3 +1321,27 @@ def test_link_reference_frame_readouts_are_differentiable_f64(f64):
     assert checked_gradient(lambda v: after_steps(velocity=v), velocity, "initial velocity").abs().max() > 0
     com = torch.tensor([[0.01, -0.02, 0.05]] * arm.n_links, dtype=torch.float64)
     assert checked_gradient(lambda c: after_steps(com=c), com, "centres of mass").abs().max() > 0
+
+
+def test_links_and_entities_know_their_dof_and_coordinate_ranges(f64):
+    """Genesis's RigidLink.joints/n_joints/n_dofs/n_qs/dof_start/dof_end/q_start/q_end and the entity's
+    link_end/dof_end/q_end (an independent probe of Genesis's API found them missing): a welded plane
+    link (no joint, an empty range where its dofs would be), a free box (6 dofs, 7 coordinates) and a
+    fixed KUKA (one hinge a link); each link's range is its joint's, the ranges tile the entity's."""
+    scene = gs.Scene()
+    plane = scene.add_entity(gs.morphs.Plane())
+    box = scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 1.0), size=(0.1, 0.1, 0.1)))
+    arm = scene.add_entity(gs.morphs.URDF(file=pybullet("kuka_iiwa", "model.urdf"), fixed=True))
+    with pytest.raises(gs.SceneStateError, match="call scene.build"):
+        arm.links[1].dof_start
+    scene.build()
+    (ground,), (body,) = plane.links, box.links
+    assert (ground.n_joints, ground.n_dofs, ground.n_qs, ground.dof_start, ground.dof_end) == (0, 0, 0, 0, 0)
+    assert body.joints == box.joints and (body.n_dofs, body.n_qs, body.dof_start, body.q_end) == (6, 7, 0, 7)
+    assert (box.link_end, box.dof_end, box.q_end) == (2, 6, 7)
+    assert (arm.link_start, arm.link_end, arm.dof_start, arm.dof_end, arm.q_start, arm.q_end) == (2, 10, 6, 13, 7, 14)
+    assert arm.links[0].n_joints == 0 and arm.links[0].dof_start == arm.links[0].dof_end == 6
+    starts = [link.dof_start for link in arm.links[1:]]
+    assert starts == [joint.dof_start for joint in arm.joints] == list(range(6, 13))
+    assert [link.q_start for link in arm.links[1:]] == [joint.q_start for joint in arm.joints]
+    assert sum(link.n_dofs for link in arm.links) == arm.n_dofs and arm.links[-1].dof_end == arm.dof_end

@@ -900,6 +900,14 @@ def test_joint_anchors_and_axes_are_mujocos(f64, tmp_path, path):
         kinds.add(joint.type)
     assert kinds >= ({"revolute", "prismatic"} if path == ARM else {"revolute"} if path == REPLICATE
                      else {"revolute", "prismatic", "ball", "free"})
+    single = gs.Scene()
+    alone = single.add_entity(gs.morphs.MJCF(file=path))
+    single.build()
+    alone.set_qpos(torch.tensor(d.qpos))
+    for joint, twin in zip(alone.joints, robot.joints):  # without envs: (3,), as Genesis's (it gave (1, 3))
+        pos, axis = joint.get_anchor_pos(), joint.get_anchor_axis()
+        assert pos.shape == axis.shape == (3,)
+        assert torch.equal(pos, twin.get_anchor_pos()[0]) and torch.equal(axis, twin.get_anchor_axis()[0])
 
 
 def test_morph_arguments_are_checked(f64):

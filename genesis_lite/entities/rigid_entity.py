@@ -111,6 +111,43 @@ class RigidLink:
         """Whether the link is welded to the world (no moving joint between it and the world; once built)."""
         return bool(self._model("is_fixed").link_static[self.idx])
 
+    @property
+    def joints(self):
+        """The joints moving the link against its parent: one, or none for a welded link (a
+        body's several MJCF joints make massless links of their own)."""
+        return [joint for joint in self.entity.joints if joint.link is self]
+
+    @property
+    def n_joints(self):
+        return len(self.joints)
+
+    @property
+    def n_dofs(self):
+        return sum(joint.n_dofs for joint in self.joints)
+
+    @property
+    def n_qs(self):
+        return sum(joint.n_qs for joint in self.joints)
+
+    @property
+    def dof_start(self):
+        """Its first dof in the scene's rigid solver (for a welded link, where its dofs would be),
+        once built; dof_end one past its last."""
+        return int(self._model("dof_start").link_dof0[self.idx])
+
+    @property
+    def dof_end(self):
+        return self.dof_start + self.n_dofs
+
+    @property
+    def q_start(self):
+        """Its first coordinate in the scene's rigid solver (as dof_start); q_end one past its last."""
+        return int(self._model("q_start").link_q0[self.idx])
+
+    @property
+    def q_end(self):
+        return self.q_start + self.n_qs
+
     def _model(self, what):
         """The built scene's rigid model (a named error before build)."""
         self.entity.scene._require_built(f"{self._who}: {what}")
@@ -120,17 +157,19 @@ class RigidLink:
         """The entity's (…, n_links, k) readout for this link alone: (…, k)."""
         return wrap(values[..., 0, :], self.entity.scene)
 
-    def get_pos(self, envs_idx=None):
-        """World position of the link frame origin, m: (3,) or (n_envs, 3)."""
-        return self._one(self.entity.get_links_pos([self.idx_local], envs_idx))
+    def get_pos(self, envs_idx=None, *, relative=True):
+        """World position of the link frame origin, m: (3,) or (n_envs, 3); relative as in
+        RigidEntity.get_links_pos."""
+        return self._one(self.entity.get_links_pos([self.idx_local], envs_idx, relative=relative))
 
-    def get_quat(self, envs_idx=None):
-        """World orientation (w, x, y, z): (4,) or (n_envs, 4)."""
-        return self._one(self.entity.get_links_quat([self.idx_local], envs_idx))
+    def get_quat(self, envs_idx=None, *, relative=True):
+        """World orientation (w, x, y, z): (4,) or (n_envs, 4); relative as in get_pos."""
+        return self._one(self.entity.get_links_quat([self.idx_local], envs_idx, relative=relative))
 
-    def get_vel(self, envs_idx=None):
-        """World linear velocity of the link frame origin, m/s: (3,) or (n_envs, 3)."""
-        return self._one(self.entity.get_links_vel([self.idx_local], envs_idx))
+    def get_vel(self, envs_idx=None, *, relative=True):
+        """World linear velocity of the link frame origin, m/s: (3,) or (n_envs, 3); relative as in
+        get_pos."""
+        return self._one(self.entity.get_links_vel([self.idx_local], envs_idx, relative=relative))
 
     def get_ang(self, envs_idx=None):
         """World angular velocity, rad/s: (3,) or (n_envs, 3)."""
@@ -255,12 +294,12 @@ class RigidJoint:
         """The joint's anchor in the world, m: (3,) or (n_envs, 3), as Genesis's and MuJoCo's xanchor:
         the point of its parent's side where it sits, taken at its coordinate's initial value (a
         slide's does not move with its own coordinate); a free joint's, its body's position."""
-        return wrap(self._anchor(envs_idx)[0], self.entity.scene)
+        return self.entity._out(self._anchor(envs_idx)[0])
 
     def get_anchor_axis(self, envs_idx=None):
         """The joint's axis in the world: (3,) or (n_envs, 3), as Genesis's and MuJoCo's xaxis: a
         hinge's or slide's axis; a ball joint's its parent side's z axis; a free joint's the world's z."""
-        return wrap(self._anchor(envs_idx)[1], self.entity.scene)
+        return self.entity._out(self._anchor(envs_idx)[1])
 
     def _anchor(self, envs_idx):
         """(anchor (B', 3) m, axis (B', 3)) of the joint in the world (the entity's envs_idx rows)."""
@@ -433,6 +472,19 @@ class RigidEntity(EntityIndexing):
     @property
     def n_joints(self):
         return len(self.joints)
+
+    @property
+    def link_end(self):
+        """One past the entity's last link in the scene's rigid solver (once built; dof_end, q_end alike)."""
+        return self.link_start + self.n_links
+
+    @property
+    def dof_end(self):
+        return self.dof_start + self.n_dofs
+
+    @property
+    def q_end(self):
+        return self.q_start + self.n_qs
 
     @property
     def is_free(self):
@@ -674,18 +726,22 @@ class RigidEntity(EntityIndexing):
                                     f"scene.build(), or create it with fixed=False to move it (an MJCF tree "
                                     f"other than the first moves by set_dofs_position or set_qpos)")
 
-    def set_pos(self, pos, envs_idx=None, *, zero_velocity=True, skip_forward=False):
+    def set_pos(self, pos, envs_idx=None, *, zero_velocity=True, relative=True, skip_forward=False):
         """Base position in the world, m: (3,) or (len(envs_idx), 3) (free base only);
-        zero_velocity as in set_dofs_position, skip_forward as in set_dofs_velocity."""
+        zero_velocity as in set_dofs_position, relative as in get_links_pos, skip_forward as in
+        set_dofs_velocity."""
         check_bool(self._who, "skip_forward", skip_forward)
+        check_bool(self._who, "relative", relative)
         self._require_free("set_pos")
         envs = self._envs(envs_idx, distinct=True)
         self._write(self._solver_q([0, 1, 2]), envs, self._values(pos, 3, envs, "pos"), zero_velocity)
 
-    def set_quat(self, quat, envs_idx=None, *, zero_velocity=True, skip_forward=False):
+    def set_quat(self, quat, envs_idx=None, *, zero_velocity=True, relative=True, skip_forward=False):
         """Base orientation (w, x, y, z): (4,) or (len(envs_idx), 4) (free base only); normalised by
-        the kinematics; zero_velocity as in set_dofs_position, skip_forward as in set_dofs_velocity."""
+        the kinematics; zero_velocity as in set_dofs_position, relative as in get_links_pos,
+        skip_forward as in set_dofs_velocity."""
         check_bool(self._who, "skip_forward", skip_forward)
+        check_bool(self._who, "relative", relative)
         self._require_free("set_quat")
         envs = self._envs(envs_idx, distinct=True)
         values = self._values(quat, 4, envs, "quat")
@@ -724,7 +780,9 @@ class RigidEntity(EntityIndexing):
             return self._out(self._coms_world(links, envs_idx)[0])
         return self._out(self._trees_com(links, envs_idx))
 
-    def get_links_quat(self, links_idx_local=None, envs_idx=None):
+    def get_links_quat(self, links_idx_local=None, envs_idx=None, *, relative=True):
+        """Link orientations in the world (w, x, y, z); relative as in get_links_pos."""
+        check_bool(self._who, "relative", relative)
         return self._out(self._links(links_idx_local, envs_idx, slice(3, 7)))
 
     def get_links_ang(self, links_idx_local=None, envs_idx=None):
@@ -780,14 +838,19 @@ class RigidEntity(EntityIndexing):
         """The base link's ``columns`` of its kinematics: (k,) or (len(envs), k)."""
         return self._out(self._link_rows(_BASE, envs_idx, columns)[..., 0, :])
 
-    def get_pos(self, envs_idx=None):
-        """Base link position, m."""
+    def get_pos(self, envs_idx=None, *, relative=True):
+        """Base link position, m; relative as in get_links_pos."""
+        check_bool(self._who, "relative", relative)
         return self._base(envs_idx, slice(0, 3))
 
-    def get_quat(self, envs_idx=None):
+    def get_quat(self, envs_idx=None, *, relative=True):
+        """Base link orientation (w, x, y, z); relative as in get_links_pos."""
+        check_bool(self._who, "relative", relative)
         return self._base(envs_idx, slice(3, 7))
 
-    def get_vel(self, envs_idx=None):
+    def get_vel(self, envs_idx=None, *, relative=True):
+        """Base link origin's linear velocity, m/s; relative as in get_links_pos."""
+        check_bool(self._who, "relative", relative)
         return self._base(envs_idx, slice(10, 13))
 
     def get_ang(self, envs_idx=None):
