@@ -1345,3 +1345,5 @@ def test_links_and_entities_know_their_dof_and_coordinate_ranges(f64):
     assert starts == [joint.dof_start for joint in arm.joints] == list(range(6, 13))
     assert [link.q_start for link in arm.links[1:]] == [joint.q_start for joint in arm.joints]
     assert sum(link.n_dofs for link in arm.links) == arm.n_dofs and arm.links[-1].dof_end == arm.dof_end
+    assert body.joints[0].init_qpos.tolist() == [0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0]  # (Genesis's joint.init_qpos)
+    assert np.concatenate([joint.init_qpos for joint in arm.joints]).tolist() == arm.init_qpos.tolist()

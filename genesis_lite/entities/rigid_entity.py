@@ -281,6 +281,11 @@ class RigidJoint:
         return self.q_start + self.n_qs
 
     @property
+    def init_qpos(self):
+        """(n_qs,) numpy: the joint's coordinates in its entity's init_qpos, as Genesis's."""
+        return self.entity.init_qpos[self.qs_idx_local]
+
+    @property
     def dofs_idx(self):
         """The joint's dofs in the scene's rigid solver (available once the scene is built)."""
         return [self.entity.dof_start + i for i in self.dofs_idx_local]
