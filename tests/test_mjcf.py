@@ -1603,3 +1603,29 @@ def test_links_acc_is_each_origins_acceleration_as_mujocos(f64, tmp_path):
     for _ in range(300):  # (the box comes to rest on the floor)
         scene.step()
     assert float(robot.get_links_acc(links_idx_local=[robot.get_link("box").idx_local]).abs().max()) < 1e-6
+
+
+@pytest.mark.parametrize("tilt", [1e-6, 1.01e-7, 1e-7, 5e-8])
+def test_a_zaxis_next_to_minus_z_turns_as_mujocos(f64, tmp_path, tilt):
+    """A frame whose zaxis lies within 1.4e-6 of −z was turned half a turn about x, where MuJoCo's
+    compiler turns one more than 1e-7 off it about the axis z × n (independent probe, 2026-12-02: a
+    pendulum's mass matrix 5× MuJoCo's, its trajectory apart at once): the link poses at qpos0
+    equal MuJoCo's xquat on both sides of its threshold, for bodies, geoms and fromto capsules."""
+    body = (f'<body name="a"><joint type="hinge" axis="0 1 0"/>{LINK}'
+            f'<body name="b" pos="0.2 0 0" zaxis="{tilt!r} 0 -1"><joint type="hinge" axis="1 0 0"/>'
+            f'<geom type="box" size="0.05 0.02 0.01" pos="0.1 0 0" zaxis="0 {tilt!r} -1"/>'
+            f'<geom type="capsule" size="0.01" fromto="0 0 0 {tilt!r} 0 -0.3"/></body></body>')
+    path = _write(tmp_path, body)
+    m = mujoco.MjModel.from_xml_path(path)
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    mass = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, mass)
+    scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False))
+    robot = scene.add_entity(gs.morphs.MJCF(file=path, default_armature=None))  # (MuJoCo's: none)
+    scene.build()
+    for name in ("a", "b"):  # (a root hinged on the world hangs from a static link of its own)
+        quat = robot.get_link(name).get_quat().numpy()
+        np.testing.assert_allclose(quat * np.sign(quat @ d.xquat[m.body(name).id]), d.xquat[m.body(name).id],
+                                   atol=1e-15)
+    np.testing.assert_allclose(robot.get_mass_mat().numpy(), mass, atol=1e-14)

@@ -79,14 +79,19 @@ def quat_mul(a, b) -> np.ndarray:
 
 
 def quat_z_to(direction) -> np.ndarray:
-    """(4,) w-x-y-z quaternion of the smallest turn taking +z onto ``direction`` (3,) (MuJoCo's
-    mju_quatZ2Vec)."""
+    """(4,) w-x-y-z quaternion of the smallest turn taking +z onto ``direction`` (3,), as MuJoCo's
+    compiler takes it (a zaxis, a fromto): about z × n by atan2(|z × n|, n_z); where |z × n| < 1e-7,
+    about x by 0 or half a turn (its threshold, measured: a zaxis 1e-7 off −z turns about x, 1.01e-7
+    off about y; a threshold of 1.4e-6 here turned such frames half a turn about the other axis)."""
     n = np.asarray(direction, dtype=np.float64) / np.linalg.norm(direction)
-    w = 1.0 + n[2]
-    if w < 1e-12:  # −z: half a turn about x
-        return np.array([0.0, 1.0, 0.0, 0.0])
-    q = np.array([w, -n[1], n[0], 0.0])  # (1 + z·n, z × n), normalised
-    return q / np.linalg.norm(q)
+    axis = np.array([-n[1], n[0], 0.0])
+    sine = np.linalg.norm(axis)
+    if sine < 1e-7:
+        axis, sine = np.array([1.0, 0.0, 0.0]), 0.0
+    else:
+        axis = axis / sine
+    half = np.arctan2(sine, n[2]) / 2.0
+    return np.array([np.cos(half), *(np.sin(half) * axis)])
 
 
 def compose(pos_a, quat_a, pos_b, quat_b) -> tuple[np.ndarray, np.ndarray]:
