@@ -1629,3 +1629,47 @@ def test_a_zaxis_next_to_minus_z_turns_as_mujocos(f64, tmp_path, tilt):
         np.testing.assert_allclose(quat * np.sign(quat @ d.xquat[m.body(name).id]), d.xquat[m.body(name).id],
                                    atol=1e-15)
     np.testing.assert_allclose(robot.get_mass_mat().numpy(), mass, atol=1e-14)
+
+
+@pytest.mark.parametrize("case", ["joint", "ball", "actuatorfrcrange", "forcerange", "ctrlrange", "tendon"])
+def test_a_range_without_its_flag_under_autolimits_false_is_refused_as_mujoco_refuses_it(f64, tmp_path, case):
+    """<compiler autolimits="false">: a range given without its limited flag made the limit vanish
+    silently (independent probe: a joint with range ±0.2 and force bound 0.5 reached 235 rad); MuJoCo
+    4's compiler refuses the file, and so do we, naming the element and attribute. With the flag
+    given, both load it."""
+    joint = {"joint": '<joint name="j" range="-0.2 0.2"/>', "ball": '<joint name="j" type="ball" range="0 0.5"/>',
+             "actuatorfrcrange": '<joint name="j" actuatorfrcrange="-0.5 0.5"/>'}.get(case, '<joint name="j"/>')
+    flagged = {"joint": ' limited="true"', "ball": ' limited="true"', "actuatorfrcrange": ' actuatorfrclimited="true"'}
+    extra = {"forcerange": '<actuator><motor joint="j" forcerange="-1 1"{}/></actuator>',
+             "ctrlrange": '<actuator><motor joint="j" ctrlrange="-1 1"{}/></actuator>',
+             "tendon": '<tendon><fixed name="t" range="-0.1 0.1"{}><joint joint="j" coef="1"/></fixed></tendon>'}
+    flag = {"forcerange": ' forcelimited="true"', "ctrlrange": ' ctrllimited="true"', "tendon": ' limited="true"'}
+    key = {"joint": "range", "ball": "range", "tendon": "range"}.get(case, case)
+    for given in (False, True):
+        body = f'<body name="b">{joint.replace("/>", flagged[case] + "/>") if given and case in flagged else joint}' \
+               f'{LINK}</body>'
+        after = extra[case].format(flag[case] if given else "") if case in extra else ""
+        path = tmp_path / f"{case}_{given}.xml"
+        path.write_text(f'<mujoco><compiler autolimits="false"/><worldbody>{body}</worldbody>{after}</mujoco>')
+        if given:
+            mujoco.MjModel.from_xml_path(str(path))
+            mjcf.load_mjcf(str(path))
+            continue
+        with pytest.raises(ValueError, match="limited"):
+            mujoco.MjModel.from_xml_path(str(path))
+        with pytest.raises(gs.AssetError, match=f"'{key}' given without '.*limited' under <compiler "
+                                                f"autolimits=\"false\">, as MuJoCo's compiler refuses it"):
+            mjcf.load_mjcf(str(path))
+
+
+def test_a_primitive_fitted_to_a_mesh_is_refused(f64, tmp_path):
+    """MuJoCo fits a primitive geom with a ``mesh`` attribute to that mesh (its size, position and
+    mass from the mesh); it was read as the size given, silently (independent probe: a body of
+    4.19 kg where MuJoCo's weighs 0.565), or without a size refused for its size."""
+    (tmp_path / "w.obj").write_text("v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nv 0 0 0.1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+    for geom in ('<geom type="sphere" size="0.1" mesh="w"/>', '<geom type="box" mesh="w"/>'):
+        path = _write(tmp_path, f'<body name="a"><joint/>{geom}</body>', '<asset><mesh name="w" file="w.obj"/></asset>')
+        mujoco.MjModel.from_xml_path(path)  # (MuJoCo loads it)
+        with pytest.raises(gs.AssetError, match=r"body 'a' geom 0: a (sphere|box) fitted to mesh 'w' \(MuJoCo's "
+                                                r"fit-to-mesh\) is not supported yet"):
+            mjcf.load_mjcf(path)

@@ -366,8 +366,7 @@ class _Reader(MJCFDocument):
         scale = np.deg2rad(1.0) if kind == "hinge" and self.degree else 1.0  # angles in the file → rad
         spec.springref = self.numbers(attrs, "springref", 1, what, default=[0.0])[0] * scale
         spec.q0 = self.numbers(attrs, "ref", 1, what, default=[0.0])[0] * scale
-        limited = attrs.get("limited", "auto")
-        if limited == "true" or (limited == "auto" and self.autolimits and "range" in attrs):
+        if self._limited(attrs, "range", "limited", "range" in attrs, what):
             low, high = self.numbers(attrs, "range", 2, what, default=[0.0, 0.0])
             if not low < high:
                 raise self.error(f"{what}: range expected lower < upper, got {attrs.get('range')!r}")
@@ -387,8 +386,7 @@ class _Reader(MJCFDocument):
             setattr(spec, key, self._non_negative(attrs, key, what))
         spec.springdamper = self._springdamper(attrs, what)
         low, high = self.numbers(attrs, "range", 2, what, default=[0.0, 0.0])
-        limited = attrs.get("limited", "auto")
-        if limited == "true" or (limited == "auto" and self.autolimits and "range" in attrs and low < high):
+        if self._limited(attrs, "range", "limited", "range" in attrs and low < high, what):
             if low != 0.0:
                 raise self.error(f"{what}: a ball joint's range expected (0, largest angle), as MuJoCo's, got "
                                  f"{attrs.get('range')!r}")
@@ -418,10 +416,20 @@ class _Reader(MJCFDocument):
                              f"got {attrs['springdamper']!r}")
         return float(given[0]), float(given[1])
 
+    def _limited(self, attrs, key: str, limited_key: str, has_range: bool, what: str) -> bool:
+        """Whether a range ``key`` binds: its ``limited_key`` "true", or "auto" (its default) with
+        a range given (``has_range``) under the compiler's autolimits; with autolimits off, a range
+        given without the flag is refused, as MuJoCo's compiler refuses it (it was dropped)."""
+        limited = attrs.get(limited_key, "auto")
+        if limited == "auto" and has_range and not self.autolimits:
+            raise self.error(f"{what}: '{key}' given without '{limited_key}' under <compiler autolimits=\"false\">, "
+                             f"as MuJoCo's compiler refuses it; set {limited_key}=\"true\" (or \"false\"), or "
+                             f"autolimits=\"true\"")
+        return limited == "true" or (limited == "auto" and has_range)
+
     def _force_bound(self, attrs, key: str, limited_key: str, what: str) -> float:
         """|force| bound (N·m or N) of a force range, inf when there is none."""
-        limited = attrs.get(limited_key, "auto")
-        if not (limited == "true" or (limited == "auto" and self.autolimits and key in attrs)):
+        if not self._limited(attrs, key, limited_key, key in attrs, what):
             return np.inf
         low, high = self.numbers(attrs, key, 2, what, default=[0.0, 0.0])
         if low != -high or high <= 0:
@@ -475,6 +483,9 @@ class _Reader(MJCFDocument):
         """(GeomSpec in the body frame, density kg/m³, stated mass kg or None, an ellipsoid's semi-axes
         (3,) m where the GeomSpec is its polytope, else None) of a <geom>."""
         kind = attrs.get("type", "sphere")
+        if kind in _PRIMITIVES + ("ellipsoid",) and "mesh" in attrs:  # (it was read as the size given)
+            raise self.error(f"{what}: a {kind} fitted to mesh {attrs['mesh']!r} (MuJoCo's fit-to-mesh) is not "
+                             f"supported yet; give the {kind}'s size, or type=\"mesh\"")
         pos, quat = self.frame(attrs, what)
         size = self.numbers(attrs, "size", (1, 2, 3), what, default=np.zeros(3))
         size = np.concatenate([size, np.zeros(3 - len(size))])
@@ -793,8 +804,7 @@ class _Reader(MJCFDocument):
                                    "frictionloss", "solreffriction", "solimpfriction") \
                             and not is_default(key, value) and not at_zero:
                         self.ignored.add(f"<tendon><fixed {key}>")
-                limited = attrs.get("limited", "auto")
-                limited = limited == "true" or (limited == "auto" and self.autolimits and "range" in attrs)
+                limited = self._limited(attrs, "range", "limited", "range" in attrs, what)
                 equality = held.pop(attrs.get("name"), None)
                 stiffness, damping = (self._tendon_coefficient(attrs, key, what) for key in ("stiffness", "damping"))
                 if stiffness:
@@ -932,6 +942,7 @@ class _Reader(MJCFDocument):
             self.ignored.add("<actuator gear> (controls are the joints' forces and positions)")
         bound = self._force_bound(attrs, "forcerange", "forcelimited", what)
         link.effort = min(link.effort, bound)
+        self._limited(attrs, "ctrlrange", "ctrllimited", "ctrlrange" in attrs, what)  # (refused as MuJoCo refuses it)
         for key in ("ctrlrange", "ctrllimited"):
             if key in attrs:
                 self.ignored.add(f"<actuator {key}>")
