@@ -26,7 +26,8 @@ body welded to a moving parent as part of it.
 Bodies: mass, com and inertia from ``<inertial>`` (diaginertia with its frame, or fullinertia),
 else from the body's geoms as solids of their density (or stated mass), as MuJoCo's
 ``inertiafromgeom="auto"`` (a mesh: its solid, exact when closed, else its convex hull; MuJoCo's
-legacy formula differs for non-convex meshes). Geoms: sphere, capsule, cylinder, box (sizes, or
+legacy formula differs for non-convex meshes); "true": from the geoms even where an ``<inertial>``
+is given, but for a body without geoms (MuJoCo 4 keeps its ``<inertial>``). Geoms: sphere, capsule, cylinder, box (sizes, or
 ``fromto``), ellipsoid (weighed as the ellipsoid; it collides as an inscribed polytope,
 shapes.ellipsoid_mesh, with a warning; MuJoCo and Genesis use its exact surface; three equal
 semi-axes make a sphere; its ``fromto`` as MuJoCo's: the third semi-axis half its length, the
@@ -444,7 +445,10 @@ class _Reader(MJCFDocument):
         welded to the world)."""
         solids = self._geoms(self._members(body, "geom", childclass), link, what, static)
         inertial = body.find("inertial")
-        if inertial is not None and self.inertiafromgeom != "true":
+        # (inertiafromgeom "true" overrides an <inertial> where the body has geoms: MuJoCo 4 keeps it
+        # on a body without, measured; it was dropped, the body massless)
+        from_geoms = self.inertiafromgeom == "true" and len(solids) > 0
+        if inertial is not None and not from_geoms:
             link.mass, link.com, link.inertia = self._inertial(inertial, what)
         elif self.inertiafromgeom != "false":
             link.mass, link.com, link.inertia = shapes.combined_mass_properties(solids)
