@@ -1694,3 +1694,23 @@ def test_inertiafromgeom_true_keeps_the_inertial_of_a_body_without_geoms(f64, tm
     scene.build()
     assert [float(robot.get_link(name).get_mass()) for name in ("a", "b")] == pytest.approx(m.body_mass[1:], abs=1e-15)
     np.testing.assert_allclose(robot.get_mass_mat().numpy(), mass, atol=1e-14)
+
+
+def test_actuators_over_defaults_of_other_actuator_types_are_named(f64, tmp_path, caplog):
+    """MuJoCo keeps one actuator default a class, which each actuator type's element writes over; here
+    each type reads its own defaults and <general>'s, so an actuator of a class holding defaults of
+    other types may get other gains than MuJoCo's (independent probe: a <position> without kp under
+    a <general> servo default, kp 1 here, 20 in MuJoCo): the load's warning names it; one of a class
+    with its own type's defaults alone is not named."""
+    extra = ('<default><default class="g"><general gainprm="20" biastype="affine" biasprm="0 -20 -3"/></default>'
+             '<default class="k"><position kp="50" kv="4"/></default>'
+             '<default class="own"><position kp="7"/></default></default>'
+             '<actuator><position name="p1" class="g" joint="j1"/><general name="g2" class="k" joint="j2"/>'
+             '<position name="p3" class="own" joint="j3"/></actuator>')
+    body = ''.join(f'<body name="b{k}" pos="{k} 0 0"><joint name="j{k}" axis="0 1 0"/>{LINK}</body>' for k in (1, 2, 3))
+    with warns(caplog, "defaults of other actuator types") as said:
+        mjcf.load_mjcf(_write(tmp_path, body, extra))
+    assert "<actuator><position name='p1'>: the defaults of other actuator types in its class 'g' (<general>" \
+        in said[0] and "<actuator><general name='g2'>: the defaults of other actuator types in its class 'k' " \
+        "(<position>" in said[0]
+    assert "name='p3'" not in said[0]

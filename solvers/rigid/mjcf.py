@@ -102,7 +102,8 @@ import numpy as np
 from ..core import InvalidInputError
 from . import shapes
 from .collision import hfield
-from .mjcf_document import IDENTITY, MJ_DEFAULTS, ORIENTATIONS, MJCFDocument, axis_angle, is_default, norm, over
+from .mjcf_document import (ACTUATORS, IDENTITY, MJ_DEFAULTS, ORIENTATIONS, MJCFDocument, axis_angle, is_default,
+                            norm, over)
 from .spec import TENDON_JOINTS, GeomSpec, LinkSpec, VisualSpec
 
 _logger = logging.getLogger("genesis_lite")
@@ -888,6 +889,7 @@ class _Reader(MJCFDocument):
                 named = f"name={attrs['name']!r}" if attrs.get("name") else \
                     " ".join(f"{k}={attrs[k]!r}" for k in ("joint", "tendon", "site", "body") if k in attrs)
                 what = f"<actuator><{element.tag} {named}>"
+                self._note_mixed_defaults(element, what)
                 if "tendon" in attrs:
                     on_tendons.append((element.tag, attrs, what))
                 elif attrs.get("joint") in by_joint:
@@ -897,6 +899,19 @@ class _Reader(MJCFDocument):
                     self.ignored.add(f"{what} (it drives no hinge or slide joint)")
         for kind, attrs, what in on_tendons:
             self._tendon_servo(kind, attrs, what, by_joint, driven)
+
+    def _note_mixed_defaults(self, element, what: str):
+        """Name an actuator whose class holds defaults of other actuator types: MuJoCo keeps one
+        actuator default a class, which each type's element writes over (a <position> without kp
+        takes kp from a <general> default's gainprm, a <general> a <position> default's servo),
+        where here each type reads its own and <general>'s (an independent probe: kp 1 and 20 where
+        MuJoCo's were 20 and 50)."""
+        cls = element.get("class", "main")
+        others = [tag for tag in ACTUATORS if tag != element.tag and self.defaults.get(cls, {}).get(tag)]
+        if others:
+            self.ignored.add(f"{what}: the defaults of other actuator types in its class {cls!r} "
+                             f"({', '.join(f'<{tag}>' for tag in others)}; MuJoCo keeps one actuator default a class: "
+                             f"its gains may differ from MuJoCo's)")
 
     def _tendon_servo(self, kind: str, attrs: dict, what: str, by_joint: dict, driven: set):
         """An actuator of a fixed tendon of hinge and slide joints, as Genesis approximates it: its

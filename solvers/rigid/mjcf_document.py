@@ -25,8 +25,8 @@ _SECTIONS = {"compiler", "option", "size", "visual", "statistic", "default", "cu
 _COMPILER = {"angle", "coordinate", "meshdir", "assetdir", "texturedir", "autolimits", "eulerseq",
              "inertiafromgeom", "settotalmass", "strippath", "usethread", "discardvisual", "fusestatic", "fitaabb",
              "saveinertial"}
-_ACTUATORS = ("general", "motor", "position", "velocity", "intvelocity", "damper", "cylinder", "muscle", "adhesion",
-              "plugin")
+ACTUATORS = ("general", "motor", "position", "velocity", "intvelocity", "damper", "cylinder", "muscle", "adhesion",
+             "plugin")
 # MuJoCo's defaults of solver attributes: where one is not read, genesis_lite's rows have it
 MJ_DEFAULTS = {"condim": [3.0], "margin": [0.0], "gap": [0.0], "priority": [0.0], "solmix": [1.0],
                "solref": [0.02, 1.0], "solimp": [0.9, 0.95, 0.001, 0.5, 2.0]}
@@ -224,7 +224,7 @@ class MJCFDocument:
         if cls not in self.defaults and cls != "main":
             raise self.error(f"<{element.tag} name={element.get('name')!r}>: class {cls!r} is not a <default> class")
         classes = self.defaults.get(cls, {})
-        out = dict(classes.get("general", {})) if element.tag in _ACTUATORS else {}
+        out = dict(classes.get("general", {})) if element.tag in ACTUATORS else {}
         tag = "tendon" if element.getparent() is not None and element.getparent().tag == "tendon" else element.tag
         return over(over(out, classes.get(tag, {})), element.attrib)
 
