@@ -500,7 +500,8 @@ class _Reader(MJCFDocument):
             size[2 if kind in ("box", "ellipsoid") else 1] = np.linalg.norm(axis) / 2.0
             if kind in ("box", "ellipsoid"):  # (MuJoCo 4: a square, or round, section of half side size[0])
                 size[1] = size[0]
-            pos, quat = (ends[:3] + ends[3:]) / 2.0, shapes.quat_z_to(axis / norm(self, axis, what))
+            # (z from `to` to `from`, as MuJoCo's compiler turns it, as a site's: the same shape, its bits MuJoCo's)
+            pos, quat = (ends[:3] + ends[3:]) / 2.0, shapes.quat_z_to(-axis / norm(self, axis, what))
         if kind == "plane":  # infinite to the colliders, as MuJoCo's (its size only draws it)
             geom = GeomSpec("plane", np.array([0.0, 0.0, 1.0]), pos, quat)
         elif kind == "mesh":
