@@ -1605,6 +1605,20 @@ def test_links_acc_is_each_origins_acceleration_as_mujocos(f64, tmp_path):
     assert float(robot.get_links_acc(links_idx_local=[robot.get_link("box").idx_local]).abs().max()) < 1e-6
 
 
+def _compiled_both_ways(path):
+    """(MjModel, MjData at qpos0, MuJoCo's mass matrix there, our entity built from the file alone,
+    collisions off, without Genesis's default armature: MuJoCo's none)."""
+    m = mujoco.MjModel.from_xml_path(path)
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    mass = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, mass)
+    scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False))
+    robot = scene.add_entity(gs.morphs.MJCF(file=path, default_armature=None))
+    scene.build()
+    return m, d, mass, robot
+
+
 @pytest.mark.parametrize("tilt", [1e-6, 1.01e-7, 1e-7, 5e-8])
 def test_a_zaxis_next_to_minus_z_turns_as_mujocos(f64, tmp_path, tilt):
     """A frame whose zaxis lies within 1.4e-6 of −z was turned half a turn about x, where MuJoCo's
@@ -1615,15 +1629,7 @@ def test_a_zaxis_next_to_minus_z_turns_as_mujocos(f64, tmp_path, tilt):
             f'<body name="b" pos="0.2 0 0" zaxis="{tilt!r} 0 -1"><joint type="hinge" axis="1 0 0"/>'
             f'<geom type="box" size="0.05 0.02 0.01" pos="0.1 0 0" zaxis="0 {tilt!r} -1"/>'
             f'<geom type="capsule" size="0.01" fromto="0 0 0 {tilt!r} 0 -0.3"/></body></body>')
-    path = _write(tmp_path, body)
-    m = mujoco.MjModel.from_xml_path(path)
-    d = mujoco.MjData(m)
-    mujoco.mj_forward(m, d)
-    mass = np.zeros((m.nv, m.nv))
-    mujoco.mj_fullM(m, d, mass)
-    scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False))
-    robot = scene.add_entity(gs.morphs.MJCF(file=path, default_armature=None))  # (MuJoCo's: none)
-    scene.build()
+    m, d, mass, robot = _compiled_both_ways(_write(tmp_path, body))
     for name in ("a", "b"):  # (a root hinged on the world hangs from a static link of its own)
         quat = robot.get_link(name).get_quat().numpy()
         np.testing.assert_allclose(quat * np.sign(quat @ d.xquat[m.body(name).id]), d.xquat[m.body(name).id],
@@ -1683,15 +1689,7 @@ def test_inertiafromgeom_true_keeps_the_inertial_of_a_body_without_geoms(f64, tm
     body = ('<body name="a"><joint axis="0 1 0"/><inertial pos="0.1 0 0" mass="0.4" diaginertia="1e-3 2e-3 3e-3"/>'
             '<body name="b" pos="0.2 0 0"><joint axis="0 1 0"/><inertial pos="0 0 0" mass="5" diaginertia="1 1 1"/>'
             f'{LINK}</body></body>')
-    path = _write(tmp_path, body, '<compiler inertiafromgeom="true"/>')
-    m = mujoco.MjModel.from_xml_path(path)
-    d = mujoco.MjData(m)
-    mujoco.mj_forward(m, d)
-    mass = np.zeros((m.nv, m.nv))
-    mujoco.mj_fullM(m, d, mass)
-    scene = gs.Scene(rigid_options=gs.options.RigidOptions(enable_collision=False))
-    robot = scene.add_entity(gs.morphs.MJCF(file=path, default_armature=None))
-    scene.build()
+    m, _, mass, robot = _compiled_both_ways(_write(tmp_path, body, '<compiler inertiafromgeom="true"/>'))
     assert [float(robot.get_link(name).get_mass()) for name in ("a", "b")] == pytest.approx(m.body_mass[1:], abs=1e-15)
     np.testing.assert_allclose(robot.get_mass_mat().numpy(), mass, atol=1e-14)
 
