@@ -741,8 +741,18 @@ def test_a_state_that_blew_up_gives_a_named_error_and_no_frames(f32, tmp_path, c
     """A box thrown by a force past float32's range: the step warns (check_nan is off) and the state
     is not finite. render() names the link whose pose it cannot draw (it named an internal
     argument, 'rot'), a camera following the box says so, and a recording streamed to a file leaves
-    those steps' frames out with one warning instead of making scene.step() raise (independent
-    probe, 2026-12-02)."""
+    those steps' frames out, with one warning, and says how many at its end, instead of making
+    scene.step() raise (independent probe, 2026-12-02)."""
+    _check_blown_up_drawing(tmp_path, caplog, 3e38)
+
+
+def test_a_float64_state_past_float32s_range_is_not_drawable_either(f64, tmp_path, caplog):
+    """As above in float64, where the box's position (~1e296 m) stays finite but its float32, as the
+    rasterizer draws it, does not (a review found the float64 rows checked before the cast)."""
+    _check_blown_up_drawing(tmp_path, caplog, 1e300)
+
+
+def _check_blown_up_drawing(tmp_path, caplog, force):
     import imageio.v2 as imageio
 
     scene = gs.Scene(**NO_CONTACT)
@@ -753,17 +763,19 @@ def test_a_state_that_blew_up_gives_a_named_error_and_no_frames(f32, tmp_path, c
     follower.follow_entity(box)
     cam.start_recording(str(tmp_path / "blown.mp4"), fps=100)  # a frame a step
     scene.step()
+    drawable = 1
     with caplog.at_level(logging.WARNING, logger="genesis_lite"):
         for _ in range(3):
-            box.links[0].apply_external_force([3e38, 0.0, 3e38])
+            box.links[0].apply_external_force([force, 0.0, force])
             scene.step()
-    assert not torch.isfinite(box.get_pos()).all()
-    left_out = [r.getMessage() for r in caplog.records if "left out of the recording" in r.getMessage()]
-    assert len(left_out) == 1 and "the pose of link 'box' of entity 'box' is not finite" in left_out[0]
-    cam.stop_recording()
-    assert len([frame for frame in imageio.get_reader(str(tmp_path / "blown.mp4"))]) == 2  # before the force
+            drawable += bool(torch.isfinite(box.get_pos().float()).all())
+        left_out = [r.getMessage() for r in caplog.records if "left out of the recording" in r.getMessage()]
+        assert len(left_out) == 1 and "the pose of link 'box' of entity 'box' is not finite" in left_out[0]
+        cam.stop_recording()
+    assert drawable < 4 and f"{4 - drawable} frames were left out of" in caplog.text
+    assert len([frame for frame in imageio.get_reader(str(tmp_path / "blown.mp4"))]) == drawable
     with pytest.raises(gs.SimulationError, match="camera .*render: the pose of link 'box' of entity 'box' is not "
-                                                 "finite: the scene's state cannot be drawn"):
+                                                 r"finite \(in float32, as drawn\): the scene's state cannot be drawn"):
         cam.render(depth=True)
     with pytest.raises(gs.SimulationError, match="follow_entity: the position of entity 'box' is not finite"):
         follower.render()

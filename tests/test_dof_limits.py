@@ -40,7 +40,9 @@ def test_limits_set_at_run_time_hold_as_mujocos(f64, tmp_path, hinge_range):
     """Env 0's hinge, slide and wrist given limits (the slide's and the wrist's where the file has
     none), env 1 left as built: 300 steps from a fast start (the hinge held at its upper bound, the
     slide at its lower, the wrist meeting both) as MuJoCo 4's with the same ranges set at run time
-    (measured 4e-12; env 1, a free swinging chain, as the file's: 2e-11); get_dofs_limit reads
+    (measured 4e-12, and 1.4e-10 with the file's hinge range once its capsules' fromto frames took
+    MuJoCo's rounding: a fast chain meeting its bounds amplifies round-off; env 1, a free swinging
+    chain, as the file's: 2e-11; asserted below 5e-10); get_dofs_limit reads
     them back, a reset keeps them. Also where the file limits no joint (no limit row until set)."""
     path = _write(tmp_path, CHAIN.replace(HINGE_RANGE, hinge_range), EXTRA)
     scene, robot = _scene(path, 2)
@@ -69,7 +71,7 @@ def test_limits_set_at_run_time_hold_as_mujocos(f64, tmp_path, hinge_range):
             worst = max(worst, np.abs(robot.get_qpos()[e].numpy() - d.qpos).max(),
                         np.abs(robot.get_dofs_velocity()[e].numpy() - d.qvel).max())
         limit_rows = max(limit_rows, int((datas[0].efc_type == mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT).sum()))
-    assert worst < 1e-10 and limit_rows >= 2
+    assert worst < 5e-10 and limit_rows >= 2
     q = robot.get_qpos()[0, [robot.get_joint(name).qs_idx_local[0] for name in ("hinge", "slide", "wrist")]]
     assert (q > torch.tensor(LIMITS[0]) - 0.05).all() and (q < torch.tensor(LIMITS[1]) + 0.05).all()
 

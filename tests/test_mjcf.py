@@ -1634,6 +1634,9 @@ def test_a_zaxis_next_to_minus_z_turns_as_mujocos(f64, tmp_path, tilt):
         quat = robot.get_link(name).get_quat().numpy()
         np.testing.assert_allclose(quat * np.sign(quat @ d.xquat[m.body(name).id]), d.xquat[m.body(name).id],
                                    atol=1e-15)
+    # the box's and the capsule's frames in their body's, MuJoCo's to round-off (a fromto's z from `to` to `from`)
+    np.testing.assert_allclose(robot._solver.model.geom_quat[robot.geom_start + 1: robot.geom_start + 3],
+                               m.geom_quat[1:3], rtol=0, atol=3e-16)
     np.testing.assert_allclose(robot.get_mass_mat().numpy(), mass, atol=1e-14)
 
 
@@ -1668,6 +1671,26 @@ def test_a_range_without_its_flag_under_autolimits_false_is_refused_as_mujoco_re
             mjcf.load_mjcf(str(path))
 
 
+def test_under_autolimits_false_a_zero_range_loads_and_an_unread_actuator_s_range_is_refused(f64, tmp_path):
+    """Beside the test above: MuJoCo refuses a range other than (0, 0) only, and checks the control
+    range of an actuator genesis_lite does not read too (one on a site), but for a damper's, whose
+    control its shortcut limits (a review found the first two otherwise)."""
+    cases = (('<joint name="j" range="0 0"/>', "", None),
+             ('<joint name="j"/>', '<actuator><damper joint="j" kv="1" ctrlrange="0 1"/></actuator>', None),
+             ('<joint name="j"/>', '<actuator><motor site="s" ctrlrange="-1 1"/></actuator>', "ctrlrange"))
+    for joint, actuators, refused in cases:
+        path = _write(tmp_path, f'<body name="b">{joint}<site name="s"/>{LINK}</body>',
+                      f'<compiler autolimits="false"/>{actuators}')
+        if refused is None:
+            mujoco.MjModel.from_xml_path(path)
+            mjcf.load_mjcf(path)
+            continue
+        with pytest.raises(ValueError, match="limited"):
+            mujoco.MjModel.from_xml_path(path)
+        with pytest.raises(gs.AssetError, match=f"<actuator><motor site='s'>: '{refused}' given without"):
+            mjcf.load_mjcf(path)
+
+
 def test_a_primitive_fitted_to_a_mesh_is_refused(f64, tmp_path):
     """MuJoCo fits a primitive geom with a ``mesh`` attribute to that mesh (its size, position and
     mass from the mesh); it was read as the size given, silently (independent probe: a body of
@@ -1687,6 +1710,7 @@ def test_inertiafromgeom_true_keeps_the_inertial_of_a_body_without_geoms(f64, tm
     that body was massless here (independent probe: 1 s apart by 0.4 rad). The masses and the mass
     matrix equal MuJoCo's."""
     body = ('<body name="a"><joint axis="0 1 0"/><inertial pos="0.1 0 0" mass="0.4" diaginertia="1e-3 2e-3 3e-3"/>'
+            '<geom type="box" size="0.1 0.1 0.1" density="0"/>'  # (a geom of no mass: as none, MuJoCo's)
             '<body name="b" pos="0.2 0 0"><joint axis="0 1 0"/><inertial pos="0 0 0" mass="5" diaginertia="1 1 1"/>'
             f'{LINK}</body></body>')
     m, _, mass, robot = _compiled_both_ways(_write(tmp_path, body, '<compiler inertiafromgeom="true"/>'))

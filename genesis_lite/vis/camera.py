@@ -372,9 +372,11 @@ class Camera:
         to the offset is pulled to the entity, smoothed; lookat follows unless the orientation is fixed)."""
         entity, offset, fixed_axis, smoothing, fix_orientation = self._follow
         target = self._entity_pos(entity)
-        if not np.isfinite(target).all():
+        # (past float32's range, as drawn, or so far that the offset vanishes in its rounding: blown up)
+        if not np.abs(target).max() < np.finfo(np.float32).max or np.array_equal(target + offset, target):
             raise SimulationError(f"{self._name}.follow_entity: the position of entity '{entity.name}' is not finite "
-                                  f"({target.tolist()}); the camera cannot follow it")
+                                  f"(in float32, as drawn) or too far to keep the camera's offset from it "
+                                  f"({target.tolist()}); the camera cannot follow it (the simulation blew up)")
         weight = 0.0 if smoothing is None else smoothing
         pos = weight * (self._pos - offset) + (1.0 - weight) * target + offset
         for axis, value in enumerate(fixed_axis):
@@ -519,8 +521,10 @@ class Camera:
         owner = f"{self._name}.stop_recording"
         if self._recording is None:
             raise SceneStateError(f"{owner}: the camera is not recording; call start_recording() first")
+        skipped = self._recording.skipped
         if self._recording.n_frames == 0:  # the recording goes on
-            how = (f"step the scene while recording (a frame every {self._steps_per_frame} steps)"
+            how = (f"the {skipped} frames due were left out, the scene's state not finite" if skipped else
+                   f"step the scene while recording (a frame every {self._steps_per_frame} steps)"
                    if self._recording.streamed else "call camera.render() while recording (each render appends a "
                    "frame)")
             raise SceneStateError(f"{owner}: no frame was recorded; {how}")
@@ -530,6 +534,9 @@ class Camera:
         target = self._recording.target(save_to_filename, fps)  # a bad argument: the recording goes on
         recording, self._recording = self._recording, None
         recording.save(*target)
+        if skipped:
+            logger.warning(f"{owner}: {skipped} frames were left out of {target[0]!r}, the scene's state not finite: "
+                           f"the video is that much shorter than the time it covers")
 
     def _close(self):
         """The scene is destroyed: finish a streamed recording's file (as Genesis does); a buffered

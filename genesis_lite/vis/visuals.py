@@ -205,13 +205,15 @@ class SceneVisuals:
         if self.meshes is None or links is None:
             return None
         rows = links[self._env, self._link]
-        finite = torch.isfinite(rows[:, :7]).all(-1)
+        rot = rotations.quat_to_mat(rows[:, 3:7]).to(torch.float32)
+        pos = rows[:, :3].to(torch.float32) + self._offset
+        # (checked as drawn: a float64 pose past float32's range is finite, its float32 not)
+        finite = torch.isfinite(pos).all(-1) & torch.isfinite(rot).flatten(1).all(-1)
         if not bool(finite.all()):
             k = int(torch.nonzero(~finite)[0, 0])
             _not_finite(owner, f"the pose of {self._link_who[int(self._link[k])]}",
                         int(self._env[k]) if self._batched else None)
-        rot = rotations.quat_to_mat(rows[:, 3:7]).to(torch.float32)
-        return Instances(rot, rows[:, :3].to(torch.float32) + self._offset, self._color, self._seg)
+        return Instances(rot, pos, self._color, self._seg)
 
     def with_debug(self, instances, debug):
         """(MeshSet, Instances) of the scene's shapes (their frame's ``instances``, None when
@@ -232,5 +234,6 @@ def _not_finite(owner, what, env):
     """The error of a drawing whose state is not finite (a simulation that blew up: with
     SimOptions(check_nan=False), the default, the step only warns)."""
     where = "" if env is None else f" in env {env}"
-    raise SimulationError(f"{owner}: {what}{where} is not finite: the scene's state cannot be drawn (the simulation "
-                          f"blew up; SimOptions(check_nan=True) raises at the step that makes it so)")
+    raise SimulationError(f"{owner}: {what}{where} is not finite (in float32, as drawn): the scene's state cannot be "
+                          f"drawn (the simulation blew up; SimOptions(check_nan=True) raises at the step that makes it "
+                          f"so)")

@@ -58,9 +58,10 @@ class MPMSolver(MPMAdjoint, Solver):
         self.couplings = np.zeros((0, 3))  # per rigid entity: its (μ, ς, e) at build (set_couplings)
         self.meets_moving = False  # a coupler brings shapes of moving links (set_colliders)
         self.regrown = False  # a replay under a coupler outgrew the saved grid (adjoint.end_replay)
-        # the worst excess each stability warning has reported (the substep over its limit, cells a
-        # substep): an optimisation loop setting the same stiffness or speed every iteration is told once
-        self.warned_excess = {"substep": 1.0, "speed": 1.0}
+        # the worst excess each stability warning has reported (the substep over its limit; cells a
+        # substep, per call and entity): an optimisation loop setting the same values every iteration
+        # is told once
+        self.warned_excess = {}
 
     def set_colliders(self, rows, data=(), moving=False):
         """Rigid shapes at rest the grid meets, before the first step: colliders.py's rows (C,
@@ -186,12 +187,12 @@ class MPMSolver(MPMAdjoint, Solver):
                       f"{h:.3g} s exceeds the stability limit {limit:.3g} s (min of 2e-2·dx = "
                       f"{GENESIS_DT_PER_DX * m.grid.dx:.3g} s and {WAVE_CFL:g}·dx / wave speed = {wave_limit:.3g} s); "
                       f"the simulation may blow up: raise SimOptions substeps or lower dt (said again only for a "
-                      f"stiffer material)")
+                      f"worse one)")
 
     def _worse(self, kind, excess):
         """Whether ``excess`` (> 1: past the bound) is worse than any the ``kind`` warning reported;
         it is then the worst."""
-        if excess <= self.warned_excess[kind]:
+        if excess <= self.warned_excess.get(kind, 1.0):
             return False
         self.warned_excess[kind] = excess
         return True
@@ -211,13 +212,13 @@ class MPMSolver(MPMAdjoint, Solver):
     def check_speed(self, speed, who):
         """Warn when a speed (m/s) given to particles crosses more than a grid cell in a substep:
         explicit MPM's transfers are unstable past that (measured: a neo-Hookean block thrown at
-        1.6 cells a substep turned to NaN at its first step); only past the fastest warned before.
-        who: the call, for the message."""
+        1.6 cells a substep turned to NaN at its first step); only past the fastest ``who`` warned of
+        before. who: the call and its entity, for the message."""
         h, dx = self.dt / self.substeps, self.model.grid.dx
-        if self._worse("speed", speed * h / dx):
+        if self._worse(("speed", who), speed * h / dx):
             warn_user(f"{who}: a particle speed of {speed:.3g} m/s crosses {speed * h / dx:.3g} grid cells a "
                       f"substep (dt / substeps = {h:.3g} s, dx = {dx:.3g} m): past one cell a substep the "
-                      f"simulation may blow up; raise SimOptions substeps (said again only for a faster one)")
+                      f"simulation may blow up; raise SimOptions substeps (said again here only for a faster one)")
 
     def _allocate(self):
         m, B, N = self.model, self.n_batch, self.model.n_particles

@@ -27,10 +27,10 @@ Bodies: mass, com and inertia from ``<inertial>`` (diaginertia with its frame, o
 else from the body's geoms as solids of their density (or stated mass), as MuJoCo's
 ``inertiafromgeom="auto"`` (a mesh: its solid, exact when closed, else its convex hull; MuJoCo's
 legacy formula differs for non-convex meshes); "true": from the geoms even where an ``<inertial>``
-is given, but for a body without geoms (MuJoCo 4 keeps its ``<inertial>``). Geoms: sphere, capsule, cylinder, box (sizes, or
-``fromto``), ellipsoid (weighed as the ellipsoid; it collides as an inscribed polytope,
-shapes.ellipsoid_mesh, with a warning; MuJoCo and Genesis use its exact surface; three equal
-semi-axes make a sphere; its ``fromto`` as MuJoCo's: the third semi-axis half its length, the
+is given, but for a body without geoms of mass (MuJoCo 4 keeps its ``<inertial>``). Geoms: sphere,
+capsule, cylinder, box (sizes, or ``fromto``), ellipsoid (weighed as the ellipsoid; it collides as an
+inscribed polytope, shapes.ellipsoid_mesh, with a warning; MuJoCo and Genesis use its exact surface;
+three equal semi-axes make a sphere; its ``fromto`` as MuJoCo's: the third semi-axis half its length, the
 section round of size[0]), mesh (``<mesh file scale>`` assets, in the file's own coordinates: MuJoCo's
 re-centring moves the geom frame, not the surface; found in meshdir or beside the file that
 included them; or given by ``vertex`` and ``face``, without faces the vertices' convex hull);
@@ -419,15 +419,20 @@ class _Reader(MJCFDocument):
         return float(given[0]), float(given[1])
 
     def _limited(self, attrs, key: str, limited_key: str, has_range: bool, what: str) -> bool:
-        """Whether a range ``key`` binds: its ``limited_key`` "true", or "auto" (its default) with
-        a range given (``has_range``) under the compiler's autolimits; with autolimits off, a range
-        given without the flag is refused, as MuJoCo's compiler refuses it (it was dropped)."""
+        """Whether a range ``key`` binds: its ``limited_key`` "true", or "auto" (its default) with a
+        range given (``has_range``) under the compiler's autolimits (_refuse_unflagged_range first)."""
+        self._refuse_unflagged_range(attrs, key, limited_key, what)
         limited = attrs.get(limited_key, "auto")
-        if limited == "auto" and has_range and not self.autolimits:
+        return limited == "true" or (limited == "auto" and self.autolimits and has_range)
+
+    def _refuse_unflagged_range(self, attrs, key: str, limited_key: str, what: str):
+        """With autolimits off, a range other than (0, 0) given without its ``limited_key`` is refused,
+        as MuJoCo's compiler refuses it (it was dropped here)."""
+        if (not self.autolimits and attrs.get(limited_key, "auto") == "auto" and key in attrs
+                and np.any(self.numbers(attrs, key, 2, what) != 0.0)):
             raise self.error(f"{what}: '{key}' given without '{limited_key}' under <compiler autolimits=\"false\">, "
                              f"as MuJoCo's compiler refuses it; set {limited_key}=\"true\" (or \"false\"), or "
                              f"autolimits=\"true\"")
-        return limited == "true" or (limited == "auto" and has_range)
 
     def _force_bound(self, attrs, key: str, limited_key: str, what: str) -> float:
         """|force| bound (N·m or N) of a force range, inf when there is none."""
@@ -448,7 +453,7 @@ class _Reader(MJCFDocument):
         inertial = body.find("inertial")
         # (inertiafromgeom "true" overrides an <inertial> where the body has geoms: MuJoCo 4 keeps it
         # on a body without, measured; it was dropped, the body massless)
-        from_geoms = self.inertiafromgeom == "true" and len(solids) > 0
+        from_geoms = self.inertiafromgeom == "true" and any(mass > 1e-14 for _, mass, *_ in solids)  # (MuJoCo's mjEPS)
         if inertial is not None and not from_geoms:
             link.mass, link.com, link.inertia = self._inertial(inertial, what)
         elif self.inertiafromgeom != "false":
@@ -500,7 +505,7 @@ class _Reader(MJCFDocument):
             size[2 if kind in ("box", "ellipsoid") else 1] = np.linalg.norm(axis) / 2.0
             if kind in ("box", "ellipsoid"):  # (MuJoCo 4: a square, or round, section of half side size[0])
                 size[1] = size[0]
-            # (z from `to` to `from`, as MuJoCo's compiler turns it, as a site's: the same shape, its bits MuJoCo's)
+            # (z from `to` to `from`, as MuJoCo's compiler turns it, as a site's: the same shape, MuJoCo's frame)
             pos, quat = (ends[:3] + ends[3:]) / 2.0, shapes.quat_z_to(-axis / norm(self, axis, what))
         if kind == "plane":  # infinite to the colliders, as MuJoCo's (its size only draws it)
             geom = GeomSpec("plane", np.array([0.0, 0.0, 1.0]), pos, quat)
@@ -891,6 +896,9 @@ class _Reader(MJCFDocument):
                     " ".join(f"{k}={attrs[k]!r}" for k in ("joint", "tendon", "site", "body") if k in attrs)
                 what = f"<actuator><{element.tag} {named}>"
                 self._note_mixed_defaults(element, what)
+                for key in ("ctrlrange", "forcerange"):  # (every actuator's, read or not, as MuJoCo's compiler;
+                    if not (key == "ctrlrange" and element.tag == "damper"):  # a damper's control is limited)
+                        self._refuse_unflagged_range(attrs, key, key.replace("range", "limited"), what)
                 if "tendon" in attrs:
                     on_tendons.append((element.tag, attrs, what))
                 elif attrs.get("joint") in by_joint:
@@ -962,7 +970,6 @@ class _Reader(MJCFDocument):
             self.ignored.add("<actuator gear> (controls are the joints' forces and positions)")
         bound = self._force_bound(attrs, "forcerange", "forcelimited", what)
         link.effort = min(link.effort, bound)
-        self._limited(attrs, "ctrlrange", "ctrllimited", "ctrlrange" in attrs, what)  # (refused as MuJoCo refuses it)
         for key in ("ctrlrange", "ctrllimited"):
             if key in attrs:
                 self.ignored.add(f"<actuator {key}>")

@@ -82,7 +82,8 @@ def quat_z_to(direction) -> np.ndarray:
     """(4,) w-x-y-z quaternion of the smallest turn taking +z onto ``direction`` (3,), as MuJoCo's
     compiler takes it (a zaxis, a fromto): about z × n by atan2(|z × n|, n_z); where |z × n| < 1e-7,
     about x by 0 or half a turn (its threshold, measured: a zaxis 1e-7 off −z turns about x, 1.01e-7
-    off about y; a threshold of 1.4e-6 here turned such frames half a turn about the other axis)."""
+    off about y; a threshold of 1.4e-6 here turned such frames half a turn about the other axis).
+    Also a Plane morph's normal (a normal within 1e-7 of ±z is ±z)."""
     n = np.asarray(direction, dtype=np.float64) / np.linalg.norm(direction)
     axis = np.array([-n[1], n[0], 0.0])
     sine = np.linalg.norm(axis)
