@@ -115,7 +115,11 @@ _DIFFERENTIABLE_START = ("a morph's pose is fixed at build; a differentiable sta
 
 def _vec(owner, name, value, n):
     refuse_grad(owner, name, value, _DIFFERENTIABLE_START)
-    arr = np.asarray(value, dtype=np.float64)
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError):  # (ragged)
+        arr = np.full(1, np.nan)
+    arr = arr.astype(np.float64) if arr.dtype.kind in "iuf" else np.full(1, np.nan)  # (no strings, bools, complex)
     if arr.shape != (n,) or not np.all(np.isfinite(arr)):
         raise InvalidInputError(f"{owner}: argument '{name}' must be {n} finite numbers, got {value!r}")
     return arr

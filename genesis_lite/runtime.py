@@ -90,6 +90,7 @@ def init(backend=None, precision="32", seed=None, logging_level="warning", debug
     if logging_level not in _LOG_LEVELS:
         raise InvalidInputError(
             f"gs.init: argument 'logging_level' must be one of {sorted(_LOG_LEVELS)}, got {logging_level!r}")
+    check_bool("gs.init", "debug", debug)
     _check_genesis_extras(eps, theme, logger_verbose_time, performance_mode, use_deterministic_algorithms)
     if seed is not None:
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**32:
@@ -107,6 +108,7 @@ def init(backend=None, precision="32", seed=None, logging_level="warning", debug
             logger.warning(f"gs.init: ending a scene of the runtime before: {type(error).__name__}: {error}")
         forget_kernels()
         ti.reset()
+        runtime.initialized = False  # (until ti.init succeeds: a failed start is not the old runtime)
     ti_float = ti.f64 if precision == "64" else ti.f32
     ti.init(arch=arch, default_fp=ti_float, default_ip=ti.i32, debug=debug, fast_math=False, cfg_optimization=False,
             log_level=_LOG_LEVELS[logging_level], offline_cache=True)
@@ -153,6 +155,7 @@ def destroy():
         errors = _end_scenes()
         forget_kernels()
         ti.reset()
+        runtime.initialized = False  # (until ti.init succeeds: a failed start is not the old runtime)
         runtime.initialized = False
         runtime.options = None
         runtime.epoch += 1

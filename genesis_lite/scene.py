@@ -61,6 +61,16 @@ class SimState:
         return next((state for slot, state in zip(slots, self.states) if slot.solver is solver), None)
 
 
+def _kind(value):
+    """What ``value`` is, for an error message: a tensor's dtype, device and shape, a sequence's
+    length, else its type."""
+    if isinstance(value, torch.Tensor):
+        return f"a {value.dtype} tensor on {value.device} of shape {tuple(value.shape)}"
+    if isinstance(value, (list, tuple)):
+        return f"a {type(value).__name__} of {len(value)}"
+    return type(value).__name__
+
+
 class _NoRigidSolver(SceneStateError, AttributeError):
     """scene.rigid_solver where there is none yet: a SceneStateError that hasattr() and
     getattr(scene, "rigid_solver", default) read as an absent attribute."""
@@ -249,8 +259,7 @@ class Scene:
             raise InvalidInputError(f"scene.build: argument 'n_envs' must be an integer ≥ 0, got {n_envs!r}")
         if not self.entities:
             raise SceneStateError("scene.build: the scene has no entity; add one with scene.add_entity()")
-        self.n_envs_per_row, self.envs_offset = _envs_layout(max(1, int(n_envs)), env_spacing, n_envs_per_row,
-                                                             center_envs_at_origin)
+        spacing = _checked_spacing(env_spacing, n_envs_per_row, center_envs_at_origin)
         rendered = self.vis_options.rendered_envs_idx
         if rendered is not None and any(k >= max(1, n_envs) for k in rendered):
             raise InvalidInputError(f"scene.build: VisOptions argument 'rendered_envs_idx' must be env indices "
@@ -273,6 +282,8 @@ class Scene:
                 solver.destroy()
             raise
         self.sim = sim
+        self.n_envs_per_row, self.envs_offset = _envs_layout(max(1, self.n_envs), spacing, n_envs_per_row,
+                                                             center_envs_at_origin)
         if self._rigid_solver in solvers:
             sim.rigid_solver = RigidSolverView(self)
         for entity in self.entities:
@@ -466,11 +477,42 @@ class Scene:
             raise InvalidInputError(f"scene.reset: argument 'state' must come from this scene's get_state(), "
                                     f"got {given}")
         envs = None if envs_idx is None else _SceneArguments(self, "reset")._envs(envs_idx)
-        sim.reset(None if state is None else state.states, envs)
+        sim.reset(None if state is None else self._checked_states(state), envs)
         if state is not None:
             self._initial_groups = state.groups
         for muscle in self._muscles():
             muscle.restore_groups(self._initial_groups.get(muscle), envs)
+
+    def _checked_states(self, state):
+        """``state``'s tensors, checked as the setters check values (a SimState can be made by hand,
+        or from a saved one): one per solver, each real numbers with data, of its solver's state
+        shape, finite, with non-zero quaternions in each rigid entity's free and ball joints.
+        Returned on gs.device in gs.tc_float."""
+        slots = self.sim.slots
+        if not isinstance(state.states, (list, tuple)) or len(state.states) != len(slots):
+            raise InvalidInputError(f"scene.reset: argument 'state' must hold one state tensor per solver "
+                                    f"({', '.join(type(slot.solver).__name__ for slot in slots)}), got "
+                                    f"{_kind(state.states)}")
+        checked = []
+        for slot, tensor in zip(slots, state.states):
+            who = f"scene.reset: argument 'state' ({type(slot.solver).__name__}'s)"
+            expected = tuple(self.sim.state(slot.solver).shape)
+            if not isinstance(tensor, torch.Tensor) or tensor.is_meta or not tensor.is_floating_point():
+                raise InvalidInputError(f"{who} must be a real tensor with values of shape {expected}, got "
+                                        f"{_kind(tensor)}")
+            if tuple(tensor.shape) != expected:
+                raise InvalidInputError(f"{who} must have shape {expected}, got {tuple(tensor.shape)}")
+            tensor = tensor.detach().to(device=runtime.device, dtype=runtime.tc_float)
+            if not bool(torch.isfinite(tensor).all()):
+                raise InvalidInputError(f"{who} must be finite, got NaN or inf at (env, column) "
+                                        f"{torch.nonzero(~torch.isfinite(tensor))[0].tolist()}")
+            checked.append(tensor)
+        for entity in self.entities:
+            if isinstance(entity, RigidEntity):
+                rigid = checked[[slot.solver for slot in slots].index(entity._solver)]
+                for _, q in entity._turns:
+                    entity._check_quat(rigid[:, entity._solver_q(np.arange(q, q + 4))], "state")
+        return checked
 
     def get_state(self):
         """A snapshot of every solver's state: copies (in the graph when differentiable), never the
@@ -556,9 +598,8 @@ class Scene:
             camera._close()
 
 
-def _envs_layout(n_batch, env_spacing, n_envs_per_row, center):
-    """(envs per row, offsets (n_batch, 3) m): where each env is drawn (Genesis's layout; see
-    Scene.build)."""
+def _checked_spacing(env_spacing, n_envs_per_row, center):
+    """build's layout arguments checked (before anything is allocated); returns env_spacing (2,) m."""
     try:
         spacing = np.asarray(env_spacing, dtype=np.float64)
     except (TypeError, ValueError):
@@ -570,6 +611,12 @@ def _envs_layout(n_batch, env_spacing, n_envs_per_row, center):
         raise InvalidInputError(f"scene.build: argument 'n_envs_per_row' must be a positive integer or None, "
                                 f"got {n_envs_per_row!r}")
     check_bool("scene.build", "center_envs_at_origin", center)
+    return spacing
+
+
+def _envs_layout(n_batch, spacing, n_envs_per_row, center):
+    """(envs per row, offsets (n_batch, 3) m): where each env is drawn (Genesis's layout; see
+    Scene.build), once the solvers took n_batch (their size checks come first)."""
     per_row = n_envs_per_row or int(np.ceil(np.sqrt(n_batch)))
     k = np.arange(n_batch)
     offset = np.stack([k // per_row * spacing[0], k % per_row * spacing[1], np.zeros(n_batch)], axis=-1)

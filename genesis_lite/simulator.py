@@ -97,6 +97,7 @@ class Simulator:
         self.replay_records = []  # and each solver's replay_record() after it
         self.warned_graph_cut = False  # _warn_graph_cut warned since the last reset
         self.warned_gradient = False  # check_first_gradients warned since the last reset
+        self.warned_partial_reset = False  # _warn_partial_reset warned (once a scene)
         self.rigid_solver = None  # Genesis's scene.sim.rigid_solver (rigid_solver.RigidSolverView), set by the scene
         self.coupler = None  # the coupling stage of the shared substep loop (solvers/coupler.py), set by the scene
         self.flat_input_names = ()  # (solver index, input name) of each of _grad_inputs' inputs (set at build)
@@ -193,6 +194,8 @@ class Simulator:
         Controls are cleared, parameters kept. Everything is detached, so a new graph starts:
         a backward through the previous one raises, and a state taken mid-rollout brings no
         graph along (nor does a parameter: set differentiable ones after reset())."""
+        if envs is not None:
+            self._warn_partial_reset()
         if states is not None:
             for slot, state in zip(self.slots, states):
                 slot.initial_state = state.detach().clone()  # the caller's tensor may change later
@@ -215,6 +218,19 @@ class Simulator:
                            else _restored(current[name], defaults[name], envs) for name in defaults}
             current_state = None if envs is None else self.state(slot.solver)
             self.set_state(slot.solver, _restored(current_state, slot.initial_state, envs), envs)
+
+    def _warn_partial_reset(self):
+        """A reset of some envs detaches every env, as a full one (a graph per env would cost a
+        graph per env): a loss on the envs it kept then reaches nothing set before it, and torch's
+        backward says only that the loss does not require grad. Warned once a scene, when it cuts a
+        graph."""
+        if not self.warned_partial_reset and any(
+                (slot.state is not None and slot.state.requires_grad)
+                or any(value.requires_grad for value in (slot.inputs or {}).values()) for slot in self.slots):
+            self.warned_partial_reset = True
+            logger.warning("scene.reset(envs_idx=...) starts a new autograd graph for every env, the ones it keeps "
+                           "too: losses computed after it reach no tensor set before it; call backward before a "
+                           "partial reset (warned once)")
 
     def clear_flags(self):
         """Drop the solvers' non-finite flags: steps taken again (a checkpoint's recompute) raise

@@ -12,11 +12,13 @@ EPS = (1e-5, 1e-6, 1e-7, 1e-8)
 BAR = 1e-5  # relative to ‖g‖
 
 
-def directional_errors(loss, value, seed=0, eps=EPS):
+def directional_errors(loss, value, seed=0, eps=EPS, direction=None):
     """{ε: (g·v − (L(x + εv) − L(x − εv)) / 2ε) / ‖g‖} for each ε of ``eps`` at x = value for a random
-    unit v, where g = ∇L(x) by backward. loss(x) runs one rollout from its start (it resets the
-    scene). ``eps`` in x's units: an input of another scale than 1 takes EPS scaled alike."""
-    direction = torch.tensor(np.random.default_rng(seed).normal(size=value.shape))
+    unit v (or the unit ``direction``), where g = ∇L(x) by backward. loss(x) runs one rollout from
+    its start (it resets the scene). ``eps`` in x's units: an input of another scale than 1 takes
+    EPS scaled alike."""
+    if direction is None:
+        direction = torch.tensor(np.random.default_rng(seed).normal(size=value.shape))
     direction = direction / direction.norm()
     x = value.clone().requires_grad_(True)
     loss(x).backward()

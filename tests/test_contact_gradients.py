@@ -332,6 +332,25 @@ def test_mesh_face_on_a_cap_of_another_size(f64, case, cone):
     _check(case, cone, steps=50, shape="cylinder", ground="mesh pedestal")
 
 
+@pytest.mark.parametrize("cone", ["pyramidal", "elliptic"])
+def test_time_constant_at_its_floor(f64, cone):
+    """A pair's time constant exactly at its floor 2h, as the defaults make it (0.01 s for both
+    geoms, dt 0.01 s, two substeps): the kink passes half of the gradient through it, which central
+    differences converge to (all of it made the time constant's part twice theirs)."""
+    scene, body = _scene(cone, substeps=2)
+    timeconst = 2 * scene.dt / scene.substeps
+
+    def loss(x):
+        scene.reset()
+        return _sliding_softness(scene, body, x, 5)
+
+    nominal = torch.tensor([timeconst, 1.1, 0.8, 0.95, 0.01, 0.5, 2.0], dtype=torch.float64)
+    along_timeconst = torch.zeros(7, dtype=torch.float64)
+    along_timeconst[0] = 1.0
+    for direction in (None, along_timeconst):
+        assert_converged(directional_errors(loss, nominal, direction=direction), f"{cone} at the floor")
+
+
 def test_default_tolerance_converges_an_elliptic_slide_for_its_gradient(f64):
     """pybullet's Panda finger (a convex mesh, 1e6 kg/m³) driven at 0.3 m/s into a fixed box with
     the elliptic cone at the default tolerance, one step: four contacts of one face, one sliding

@@ -4,6 +4,7 @@ what was expected and what was given (SPEC §5). One test per kind of mistake.
 Most tests share one built scene (a 2-dof pendulum named "pendulum"): building compiles
 Taichi kernels, which takes seconds.
 """
+import inspect
 import logging
 import math
 import os
@@ -176,6 +177,34 @@ def test_setter_before_build(f64):
     raises(gs.SceneStateError, lambda: robot.get_dofs_position(), f"entity '{ENTITY}'", "build()")
 
 
+def test_every_entity_method_before_build_raises_a_named_error(f64):
+    """Each public method and property of the entities, links and joints, called before build
+    with zeros for its required arguments, works or raises a GenesisException: some reached the
+    unbuilt model first (get_dofs_velocity, get_mass, set_mass_shift: bare AttributeErrors)."""
+    scene = gs.Scene()
+    robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True), name=ENTITY)
+    box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1)), name="box")
+    blob = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.5, 0.0, 0.5)), material=gs.materials.MPM.Elastic())
+    bare = []
+    for owner in (robot, box, blob, robot.links[1], robot.joints[1]):
+        for name in dir(type(owner)):
+            member = getattr(type(owner), name)
+            if name.startswith("_") or not (callable(member) or isinstance(member, property)):
+                continue
+            try:
+                if isinstance(member, property):
+                    getattr(owner, name)
+                else:
+                    parameters = list(inspect.signature(member).parameters.values())[1:]
+                    getattr(owner, name)(*[0.0 for p in parameters if p.default is p.empty and p.kind in (
+                        p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)])
+            except gs.GenesisException:
+                pass
+            except Exception as error:  # noqa: BLE001 (what the test looks for)
+                bare.append(f"{type(owner).__name__}.{name}: {type(error).__name__}: {error}")
+    assert bare == []
+
+
 def test_build_twice(f64, built):
     scene, _ = built
     raises(gs.SceneStateError, scene.build, "scene.build", "already built")
@@ -260,6 +289,9 @@ def test_genesis_arguments_with_nothing_to_do_here_are_taken_and_checked(f64, bu
     raises(gs.InvalidInputError, lambda: gs.init(precision="64", eps=1e-12), "gs.init", "'eps'", "1e-15")
     raises(gs.InvalidInputError, lambda: gs.init(precision="64", performance_mode="yes"), "'performance_mode'")
     raises(gs.InvalidInputError, lambda: gs.init(precision="64", theme="blue"), "'theme'")
+    # checked before a restart: a string stopped the runtime, and the next gs.init did nothing
+    raises(gs.InvalidInputError, lambda: gs.init(precision="64", debug="yes"), "gs.init", "'debug'", "'yes'")
+    assert scene.is_built
     assert (gs.tc_bool, gs.np_bool, gs.tc_int, gs.np_int) == (torch.bool, np.bool_, torch.int32, np.int32)
     options = gs.options.RigidOptions(max_collision_pairs=300, box_box_detection=True)
     assert (options.max_collision_pairs, options.box_box_detection) == (300, True)
@@ -346,7 +378,30 @@ def test_nan_input(f64, built):
            f"entity '{ENTITY}'", "'velocity'", "finite", "inf")
     raises(gs.InvalidInputError, lambda: robot.control_dofs_position(np.array([np.nan, 0.0])),
            f"entity '{ENTITY}'", "'position'", "finite")
+    raises(gs.InvalidInputError, lambda: robot.get_jacobian(robot.links[-1], local_point=[math.nan, 0.0, 0.0]),
+           f"entity '{ENTITY}'", "get_jacobian", "'local_point'", "finite", "nan")
     assert torch.equal(robot.get_dofs_position(), before)
+
+
+def test_values_that_are_not_numbers(f64, built):
+    """Strings, complex numbers, sparse tensors, a zero slice step and a missing link list are
+    named errors (each was Python's, numpy's or torch's bare one)."""
+    scene, robot = built
+    for call, substrings in [
+            (lambda: gs.morphs.Box(pos="abc"), ("Box", "'pos'", "3 finite numbers", "'abc'")),
+            (lambda: gs.morphs.Box(size=(1j, 1, 1)), ("Box", "'size'", "3 finite numbers")),
+            (lambda: gs.morphs.Plane(normal="abc"), ("Plane", "'normal'")),
+            (lambda: robot.set_sol_params("x"), (f"entity '{ENTITY}'", "'sol_params'", "real numbers", "strings")),
+            (lambda: robot.set_dofs_position([0.1], dofs_idx_local=slice(0, 2, 0)),
+             ("'dofs_idx_local'", "non-zero step")),
+            (lambda: robot.set_dofs_position(torch.tensor([0.1, 0.2]).to_sparse()), ("'position'", "sparse")),
+            (lambda: robot.set_dofs_position([0.1], dofs_idx_local=torch.tensor([1]).to_sparse()),
+             ("'dofs_idx_local'", "dense tensor", "sparse")),
+            (lambda: robot.inverse_kinematics_multilink(None, poss=[[0.3, 0.0, 0.5]]),
+             (f"entity '{ENTITY}'", "'links'", "a list of one entry per link", "NoneType")),
+            (lambda: scene.draw_debug_spheres("x"), ("scene.draw_debug_spheres", "'poss'", "finite numbers")),
+            (lambda: scene.draw_debug_sphere((0.0, 0.0, 0.0), color="red"), ("'color'", "'red'"))]:
+        raises(gs.InvalidInputError, call, *substrings)
 
 
 def test_negative_mass(f64, built):
@@ -488,6 +543,32 @@ def test_reset_to_another_scenes_state(f64, built):
     other.destroy()
 
 
+def test_reset_to_a_bad_state(f64):
+    """A SimState made or edited by hand is checked as the setters check values: a wrong shape,
+    a meta tensor, NaN or a zero quaternion raised nothing (the kernels read past a short tensor,
+    a meta one crashed the process)."""
+    scene = gs.Scene()
+    box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.0, 0.0, 0.5)), name="box")
+    scene.build(n_envs=2)
+    good = scene.get_state()
+    for states, substrings in [
+            ([], ("one state tensor per solver (RigidSolver)", "got a list of 0")),
+            ([good.rigid, good.rigid], ("one state tensor per solver", "got a list of 2")),
+            ([None], ("RigidSolver's) must be a real tensor with values of shape (2, 13)", "got NoneType")),
+            ([good.rigid.to("meta")], ("shape (2, 13)", "got a torch.float64 tensor on meta")),
+            ([good.rigid.long()], ("real tensor", "got a torch.int64 tensor")),
+            ([good.rigid[:, :5]], ("must have shape (2, 13), got (2, 5)",)),
+            ([good.rigid.index_fill(1, torch.tensor([2]), math.nan)], ("must be finite", "(env, column) [0, 2]")),
+            ([good.rigid.index_fill(1, torch.tensor([3, 4, 5, 6]), 0.0)],
+             ("entity 'box': argument 'state' must hold non-zero quaternions",))]:
+        raises(gs.InvalidInputError, lambda: scene.reset(gs.SimState(scene, states, good.groups)), *substrings)
+    moved = good.rigid.clone().float()  # another float dtype is taken, as by the setters
+    moved[1, :3] = torch.tensor([1.0, 2.0, 3.0])
+    scene.reset(gs.SimState(scene, [moved], good.groups))
+    assert box.get_pos().tolist() == [[0.0, 0.0, 0.5], [1.0, 2.0, 3.0]]
+    scene.destroy()
+
+
 def test_zero_quaternion(f64):
     scene = gs.Scene()
     box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1)), name="box")
@@ -549,8 +630,8 @@ def test_mesh_without_a_hull(f64, tmp_path):
     flat.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n")
     scene = gs.Scene()
     scene.add_entity(gs.morphs.Plane())
-    scene.add_entity(gs.morphs.Mesh(file=str(flat), pos=(0, 0, 1)))
-    with pytest.raises(gs.GenesisException, match="convex hull"):
+    scene.add_entity(gs.morphs.Mesh(file=str(flat), pos=(0, 0, 1)), name="tile")
+    with pytest.raises(gs.GenesisException, match="entity 'tile': link 'flat' collision geom 0: .*convex hull"):
         scene.build()
 
 

@@ -575,6 +575,8 @@ def test_mass_matrix_decomposition(f64, two_robots):
         assert (rebuilt - mass).abs().max() <= 1e-12 * mass.abs().max()
         one_lower, one_d_inv = kuka.get_mass_mat(envs_idx=[1], decompose=True)
         assert one_lower.shape == (1, kuka.n_dofs, kuka.n_dofs) and torch.allclose(one_d_inv[0], d_inv[1])
+        with pytest.raises(gs.InvalidInputError, match="'decompose' must be True or False, got 'no'"):
+            kuka.get_mass_mat(decompose="no")  # (was read as true)
     finally:
         kuka.set_dofs_armature(armature)
     lower, d_inv = other.get_mass_mat(decompose=True)  # a two-link chain: d_inv[1] = 1 / M[1, 1]

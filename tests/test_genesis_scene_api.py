@@ -11,7 +11,7 @@ import genesis_lite as gs
 from genesis_lite.solvers.rigid import merge, shapes
 from genesis_lite.solvers.rigid.spec import GeomSpec, LinkSpec
 from genesis_lite.solvers.rigid.urdf import load_urdf
-from tests.conftest import asset, pybullet
+from tests.conftest import asset, pybullet, warns
 
 R2D2, MINITAUR = pybullet("r2d2.urdf"), pybullet("quadruped", "minitaur.urdf")
 KUKA = pybullet("kuka_iiwa", "model.urdf")
@@ -176,6 +176,24 @@ def test_reset_envs_idx_restores_only_those_envs(f64):
     robot.set_dofs_position([[-1.0, -1.0]] * 3)
     scene.reset()
     assert torch.equal(scene.get_state().rigid, registered)
+
+
+def test_a_partial_reset_that_cuts_a_graph_warns_once(f64, caplog):
+    """A partial reset detaches every env (docs/genesis_api.md): a loss on a kept env then reaches
+    nothing, and torch's error said only that it does not require grad."""
+    scene, robot = _pendulum(n_envs=2)
+    with warns(caplog) as seen:
+        scene.reset(envs_idx=[1])  # no graph yet: nothing said
+    assert seen == []
+    q0 = torch.tensor([[0.3, 0.2], [0.1, 0.1]], dtype=torch.float64, requires_grad=True)
+    robot.set_dofs_position(q0)
+    scene.step()
+    with warns(caplog, "starts a new autograd graph for every env, the ones it keeps too") as seen:
+        scene.reset(envs_idx=[1])
+        robot.set_dofs_position(q0)
+        scene.reset(envs_idx=[0])
+    assert len(seen) == 1
+    assert not robot.get_dofs_position().requires_grad
 
 
 @pytest.mark.parametrize("n_envs, envs_idx, expected", [

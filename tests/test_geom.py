@@ -177,6 +177,8 @@ def test_types_devices_and_gradients():
     (lambda: geom.quat_to_xyz(np.ones(4), degrees=1), r"quat_to_xyz: argument 'degrees' must be True or False"),
     (lambda: geom.quat_to_R(torch.ones(4, dtype=torch.complex64)), r"argument 'quat' must hold real numbers"),
     (lambda: geom.random_quaternion(2.5), r"random_quaternion: argument 'batch_size' must be a non-negative integer"),
+    (lambda: geom.transform_by_quat(np.zeros((5, 3)), np.ones((4, 4))),
+     r"transform_by_quat: the arguments' shapes do not fit together .* 'v' \(5, 3\), 'quat' \(4, 4\)"),
 ])
 def test_bad_input_is_named(call, match):
     with pytest.raises(gs.InvalidInputError, match=match):

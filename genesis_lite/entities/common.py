@@ -110,7 +110,12 @@ class EntityIndexing:
         if idx is None:
             return np.arange(n)
         if isinstance(idx, slice):  # as Genesis takes them (its go2 example: slice(6, 18))
+            if idx.step == 0:
+                raise InvalidInputError(f"{self._who}: argument '{arg}' as a slice must have a non-zero step, got {idx!r}")
             return np.arange(n)[idx]
+        if isinstance(idx, torch.Tensor) and (idx.layout != torch.strided or idx.is_meta):
+            raise InvalidInputError(f"{self._who}: argument '{arg}' must be a dense tensor with values, got a "
+                                    f"{idx.layout} tensor on {idx.device}")
         arr = np.atleast_1d(idx.detach().cpu().numpy() if isinstance(idx, torch.Tensor) else np.asarray(idx))
         if arr.size == 0:  # no index (a list of none reads as floats): nothing selected, as in Genesis
             return np.zeros(0, dtype=np.int64)
@@ -148,7 +153,8 @@ class EntityIndexing:
         complex numbers or non-numbers (``expected``: the shape the message states)."""
         self._sim().check_grad_allowed(value, self.name, arg)
         if isinstance(value, torch.Tensor):
-            kind = "complex" if value.is_complex() else "bool" if value.dtype == torch.bool else None
+            kind = "complex" if value.is_complex() else "bool" if value.dtype == torch.bool else \
+                f"a {value.layout} tensor" if value.layout != torch.strided else None
         else:
             try:  # (None, a string or a bool would become NaN, a number or 1.0 in a float conversion)
                 array = np.asarray(value)

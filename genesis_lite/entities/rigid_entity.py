@@ -18,7 +18,7 @@ from ..solvers.rigid.model import BALL, FREE, initial_q
 from . import energy, kinematics
 from .bounds import shapes_aabb
 from ..tensor import wrap
-from .common import EntityIndexing, broadcast, is_range, named_argument_errors, replace_columns as _replace, take
+from .common import EntityIndexing, all_finite, broadcast, is_range, named_argument_errors, replace_columns as _replace, take
 from ..utils.uid import UID
 from ..utils.rotations import euler_xyz_to_quat, quat_mul, quat_to_euler_xyz, quat_to_mat, rotate, rotation_vector
 
@@ -616,11 +616,17 @@ class RigidEntity(EntityIndexing):
     def _qpos_columns(self):
         return self._solver_q(np.arange(self.n_qs))
 
+    @property
+    def _model(self):
+        """The built scene's rigid model (a named error before build)."""
+        self._sim()
+        return self._solver.model
+
     def _solver_q(self, local_qs):
         return self.q_start + np.asarray(local_qs)
 
     def _vel_columns(self, dofs):
-        return self._solver.model.n_qs + self.dof_start + dofs
+        return self._model.n_qs + self.dof_start + dofs
 
     def _dofs_position_all(self, envs_idx):
         """(B', n_dofs) dof positions; a free joint's are its origin and Euler angles, a ball
@@ -964,6 +970,9 @@ class RigidEntity(EntityIndexing):
         if point.shape != (3,):
             raise InvalidInputError(f"entity '{self.name}': {what} argument 'local_point' must hold 3 numbers (m, "
                                     f"in the link frame), got shape {tuple(point.shape)}")
+        if not all_finite(point):
+            raise InvalidInputError(f"entity '{self.name}': {what} argument 'local_point' must be finite, got "
+                                    f"{point.tolist()}")
         return point
 
     def get_jacobian(self, link, local_point=None):
@@ -1011,11 +1020,18 @@ class RigidEntity(EntityIndexing):
         who = f"entity '{self.name}': inverse_kinematics"
         for name, value in (("pos", poss), ("quat", quats), ("local_point", local_points), ("init_qpos", init_qpos)):
             refuse_grad(who, name, value, "the solve is iterative; differentiate get_jacobian or the rollout instead")
-        links = list(links)
+        def listed(values, name):
+            try:
+                return list(values)
+            except TypeError:
+                raise InvalidInputError(f"{who} argument '{name}' must be a list of one entry per link, got "
+                                        f"{type(values).__name__}") from None
+
+        links = listed(links, "links")
         envs = self._envs(envs_idx)
 
         def per_link(values, name):
-            values = list(values) if values is not None else []
+            values = listed(values, name) if values is not None else []
             if values and len(values) != len(links):
                 raise InvalidInputError(f"{who} argument '{name}' expected one entry per link ({len(links)}), got "
                                         f"{len(values)}")
@@ -1087,7 +1103,7 @@ class RigidEntity(EntityIndexing):
         (n_envs, n)); not cumulative. As set_links_mass: the inertia stays; differentiable."""
         links = self._local(links_idx_local, self.n_links, "links_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
-        build = torch.as_tensor(self._solver.model.link_mass0[self.link_start + links], dtype=runtime.tc_float,
+        build = torch.as_tensor(self._model.link_mass0[self.link_start + links], dtype=runtime.tc_float,
                                 device=runtime.device)
         values = build + self._values(mass_shift, len(links), envs, "mass_shift")
         if bool((values.detach() < 0).any()):
@@ -1100,7 +1116,7 @@ class RigidEntity(EntityIndexing):
         ((n, 3) or (n_envs, n, 3), in the link's frame); not cumulative. As set_links_COM, differentiable."""
         links = self._local(links_idx_local, self.n_links, "links_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
-        build = torch.as_tensor(self._solver.model.link_com[self.link_start + links], dtype=runtime.tc_float,
+        build = torch.as_tensor(self._model.link_com[self.link_start + links], dtype=runtime.tc_float,
                                 device=runtime.device)
         self._write_links_com(links, envs, build + self._link_vectors(com_shift, len(links), envs, "com_shift",
                                                                       "set_COM_shift"))
@@ -1164,7 +1180,7 @@ class RigidEntity(EntityIndexing):
     def get_mass(self, envs_idx=None):
         """Total mass of the links that move, kg: () or (n_envs,). As Genesis's, links welded to the
         world are left out (never accelerated, their mass is the world's)."""
-        static = self._solver.model.link_static[self.link_start: self.link_start + self.n_links]
+        static = self._model.link_static[self.link_start: self.link_start + self.n_links]
         moving = self.link_start + np.flatnonzero(static == 0)
         return self._out(self._read_input("mass", moving, envs_idx).sum(-1))
 
@@ -1172,7 +1188,7 @@ class RigidEntity(EntityIndexing):
         """Total mass of the links that move, kg: () or (len(envs_idx),), as Genesis's: every such
         link's mass (and its rotational inertia with it) scaled by one factor, their ratios kept.
         Differentiable."""
-        static = self._solver.model.link_static[self.link_start: self.link_start + self.n_links]
+        static = self._model.link_static[self.link_start: self.link_start + self.n_links]
         moving = self.link_start + np.flatnonzero(static == 0)
         if not len(moving):
             raise InvalidInputError(f"entity '{self.name}': set_mass needs a link that moves; every link is welded "
@@ -1494,12 +1510,7 @@ class RigidEntity(EntityIndexing):
         its two geoms' values as MuJoCo does (averaged, unless an MJCF priority or solmix says otherwise). Differentiable (a time constant held at 2·dt/substeps has none)."""
         geoms = self._local(geoms_idx_local, self.n_geoms, "geoms_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
-        self._sim().check_grad_allowed(sol_params, self.name, "sol_params")
-        if isinstance(sol_params, torch.Tensor):  # kept in the graph: differentiable
-            params = sol_params.as_subclass(torch.Tensor).to(device=runtime.device, dtype=runtime.tc_float)
-        else:
-            params = torch.as_tensor(np.asarray(sol_params, dtype=np.float64), dtype=runtime.tc_float,
-                                     device=runtime.device)
+        params = self._tensor(sol_params, "sol_params", f"(7,) or {(len(envs), 7)}")  # (in the graph: differentiable)
         if params.shape not in ((7,), (len(envs), 7)):
             raise InvalidInputError(f"entity '{self.name}': argument 'sol_params' must be 7 numbers (timeconst, "
                                     f"dampratio, dmin, dmax, width, midpoint, power), or 7 per env of envs_idx "
@@ -1729,6 +1740,7 @@ class RigidEntity(EntityIndexing):
         (n_dofs, n_dofs) or (n_envs, n_dofs, n_dofs); Genesis also adds dt·damping and dt·kv there
         after a step, ours never. decompose: (L, D_inv) instead, L (…, n, n) unit lower triangular
         and D_inv (…, n) such that M = Lᵀ·diag(1 / D_inv)·L. Not differentiable."""
+        check_bool(self._who, "decompose", decompose)
         full = self._sim().mass_matrix(self._solver)  # (its backward raises)
         envs = self._envs(envs_idx)
         mass = full if is_range(envs, full.shape[0]) else full[torch.as_tensor(envs, device=runtime.device)]

@@ -53,7 +53,12 @@ def _arrays(**trailing):
             dtype, device = _common_type(arrays.values())
             for name, array in arrays.items():
                 bound.arguments[name] = torch.as_tensor(array, dtype=dtype, device=device)
-            result = fn(*bound.args, **bound.kwargs)
+            try:
+                result = fn(*bound.args, **bound.kwargs)
+            except RuntimeError as error:  # (torch's: batch shapes that do not broadcast)
+                shapes = ", ".join(f"'{name}' {tuple(bound.arguments[name].shape)}" for name in arrays)
+                raise InvalidInputError(f"gs.utils.geom.{fn.__name__}: the arguments' shapes do not fit together "
+                                        f"(their batch shapes must broadcast), got {shapes} ({error})") from None
             if not any(isinstance(array, torch.Tensor) for array in arrays.values()):
                 result = _to_numpy(result)
             return result if out is None else _write(fn.__name__, out, result)

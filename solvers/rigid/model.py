@@ -288,7 +288,8 @@ def _mass_matrix_pairs(dof_link, link_parent):
     return np.array(pairs, dtype=np.int32).reshape(-1, 2)
 
 
-def build_model(entities_links, self_collision=True, adjacent_collision=False, attachments=None, condim_floor=3):
+def build_model(entities_links, self_collision=True, adjacent_collision=False, attachments=None, condim_floor=3,
+                entity_names=None):
     """Concatenate entities' link lists (each in tree order) into one RigidModel.
 
     entities_links: list of ``list[LinkSpec]``; a free root joint takes its initial pose from
@@ -299,6 +300,7 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False, a
     attachments: {entity index: (parent entity index, its link index)}: that entity's first link
     hangs from that link of an earlier entity (its spec's pos/quat: where, in that link's frame;
     its joint fixed), one kinematic tree with it (Genesis's RigidEntity.attach).
+    entity_names: each entity's name, for the errors of its geoms (None: the links' names alone).
     """
     rows = {k: [] for k in ("name", "parent", "jtype", "pos0", "quat0", "axis", "com", "inertia0", "mass0",
                             "dof0", "q0", "entity", "gravcomp", "same_body", "excluded")}
@@ -354,7 +356,8 @@ def build_model(entities_links, self_collision=True, adjacent_collision=False, a
             for k, geom in enumerate(spec.geoms):
                 geoms.append(geom)
                 geom_links.append(link_idx)
-                geom_names.append(f"link '{spec.name}' collision geom {k}")
+                owner = "" if entity_names is None else f"entity '{entity_names[entity_idx]}': "
+                geom_names.append(f"{owner}link '{spec.name}' collision geom {k}")
             qpos0.extend(initial_q(spec))
         equalities += [(joint_dof[spec.joint_name], -1 if spec.mimic[0] is None else joint_dof[spec.mimic[0]],
                         spec.mimic[2], spec.mimic[1], _softness(spec.mimic_sol))

@@ -89,7 +89,7 @@ class RigidSolver(Solver):
         self.invweight_basis = None  # until at_initial_pose takes it for this model
         condim_floor = 6 if options.enable_rolling_friction else 4 if options.enable_torsional_friction else 3
         self.model = build_model(self.entity_links, options.enable_self_collision, options.enable_adjacent_collision,
-                                 self.attachments, condim_floor)
+                                 self.attachments, condim_floor, self.entity_names)
         if not options.enable_collision:
             self.model = contact.without_pairs(self.model)
         self.model = contact.without_uncollidable(self.model, {v: k for k, v in GEOM_CODE.items()})

@@ -327,20 +327,22 @@ def impedance_gradient(solimp, dist, margin):
 @ti.func
 def _stiffness_damping_adjoint(solref, dmax, h, g_k, g_b):
     """Reverse of ``stiffness_damping``: (∂L/∂solref (2,), ∂L/∂dmax) from ∂L/∂K and ∂L/∂B (a
-    floored divisor, or the time constant held at 2h, passes nothing)."""
+    floored divisor, or the time constant held at 2h, passes nothing). A time constant exactly at
+    2h (the default 0.01 s with dt 0.01 and two substeps, MuJoCo's 0.02 s with one) passes half:
+    the map's kink, whose one-sided derivatives are the full one and zero; half is what central
+    differences converge to (as the friction ties of _contact_params_adjoint)."""
     g_solref, g_dmax = ti.Vector.zero(float, 2), 0.0
     k, b = stiffness_damping(solref, dmax, h)
     if solref[0] > 0:
         tc, ratio = ti.max(solref[0], 2.0 * h), solref[1]
+        through_tc = 1.0 if solref[0] > 2.0 * h else 0.5 if solref[0] == 2.0 * h else 0.0
         if dmax * dmax * tc * tc * ratio * ratio > MINVAL:  # K = 1/(dmax tc ζ)²
             g_dmax -= 2.0 * k / dmax * g_k
             g_solref[1] -= 2.0 * k / ratio * g_k
-            if solref[0] >= 2.0 * h:
-                g_solref[0] -= 2.0 * k / tc * g_k
+            g_solref[0] -= through_tc * 2.0 * k / tc * g_k
         if dmax * tc > MINVAL:  # B = 2/(dmax tc)
             g_dmax -= b / dmax * g_b
-            if solref[0] >= 2.0 * h:
-                g_solref[0] -= b / tc * g_b
+            g_solref[0] -= through_tc * b / tc * g_b
     else:  # direct: K = −solref₀/dmax², B = −solref₁/dmax
         if dmax * dmax > MINVAL:
             g_solref[0] -= g_k / (dmax * dmax)
