@@ -208,6 +208,10 @@ def make_cases():
     near_tie = _stretch(rng, [1.1, 1.1 + 2e-6, 0.9])
     near_tie_wider = _stretch(rng, [1.1, 1.1 + 4e-5, 0.9])
     elastic = {"identity": np.eye(3), "repeated": tie, "nearly repeated": near_tie, "generic": generic}
+    # two singular values 8e-6 apart on either side of the clamp's upper bound 1.0045, off the
+    # middle (the divided difference, 1/4: the derivative limit's 1/2 was 20 % off the gradient);
+    # FD steps of 1e-8 resolve their turn
+    straddle = _stretch(rng, [1.0045 + 6e-6, 1.0045 - 2e-6, 0.99])
     table = [
         ("corotation", {}, elastic, 1.0),
         ("neohooken", {}, elastic, 1.0),
@@ -222,9 +226,10 @@ def make_cases():
         # clamp to [0.975, 1.0045]: σ inside, all outside, mixed
         ("elastoplastic", {"use_von_mises": False},
          {"identity": np.eye(3), "inside": _stretch(rng, [1.003, 0.99, 0.98]), "repeated (clamped)": tie,
-          "mixed": _stretch(rng, [1.02, 1.001, 0.96])}, 1.0),
+          "mixed": _stretch(rng, [1.02, 1.001, 0.96]), "nearly repeated across the bound (clamped)": straddle}, 1.0),
         ("snow", {}, {"identity": np.eye(3), "inside": _stretch(rng, [1.003, 0.99, 0.98]),
-                      "repeated (clamped)": tie, "mixed": _stretch(rng, [1.02, 1.001, 0.96])}, 0.97),
+                      "repeated (clamped)": tie, "mixed": _stretch(rng, [1.02, 1.001, 0.96]),
+                      "nearly repeated across the bound (clamped)": straddle}, 0.97),
         ("sand", {}, {"identity (expansion)": np.eye(3), "repeated (expansion)": tie,
                       "compressed (inside cone)": _stretch(rng, [0.96, 0.955, 0.95]),
                       "compressed (projected)": _stretch(rng, [1.2, 1.0, 0.75]),
@@ -260,7 +265,7 @@ def _loss(result, case, n):
             + np.sum(case["g_tau"] * result["tau"][n]))
 
 
-FD_EPS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
+FD_EPS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
 F32_REVERSE_BAR = 3e-5  # relative; measured ≤ 7e-6
 
 
@@ -435,7 +440,9 @@ def _reference_gradient(case, eps=1e-6):
 def test_float32(f32):
     """The same funcs in float32: forward against Genesis's formulas, reverse against central
     differences of those formulas in float64."""
-    labelled = make_cases()
+    # (not the pair 8e-6 apart across a bound: float32's round-off of their singular values and
+    # vectors, ~1e-7 / 8e-6, is ~1 % of the divided difference there)
+    labelled = [(label, case) for label, case in make_cases() if "across the bound" not in label]
     result = run([c for _, c in labelled], np.float32)
     failures = []
     for n, (label, case) in enumerate(labelled):
