@@ -155,7 +155,6 @@ def destroy():
         errors = _end_scenes()
         forget_kernels()
         ti.reset()
-        runtime.initialized = False  # (until ti.init succeeds: a failed start is not the old runtime)
         runtime.initialized = False
         runtime.options = None
         runtime.epoch += 1

@@ -65,7 +65,8 @@ def _kind(value):
     """What ``value`` is, for an error message: a tensor's dtype, device and shape, a sequence's
     length, else its type."""
     if isinstance(value, torch.Tensor):
-        return f"a {value.dtype} tensor on {value.device} of shape {tuple(value.shape)}"
+        layout = "" if value.layout == torch.strided else f"{value.layout} "
+        return f"a {layout}{value.dtype} tensor on {value.device} of shape {tuple(value.shape)}"
     if isinstance(value, (list, tuple)):
         return f"a {type(value).__name__} of {len(value)}"
     return type(value).__name__
@@ -359,8 +360,7 @@ class Scene:
         ``axis_length`` m and radius ``axis_radius``, red, green and blue (or all ``color``), and a
         sphere of ``origin_size`` m at its origin."""
         return self._add_debug("scene.draw_debug_frame", lambda owner: debug_draw.frames(
-            owner, np.reshape(T, (1, 4, 4)) if np.shape(T) == (4, 4) else T, axis_length, origin_size, axis_radius,
-            color))
+            owner, T, axis_length, origin_size, axis_radius, color))
 
     def draw_debug_frames(self, Ts, axis_length=1.0, origin_size=0.015, axis_radius=0.01, color=None):
         """Frames at the poses ``Ts`` (N, 4, 4), as draw_debug_frame, as one object."""
@@ -497,7 +497,8 @@ class Scene:
         for slot, tensor in zip(slots, state.states):
             who = f"scene.reset: argument 'state' ({type(slot.solver).__name__}'s)"
             expected = tuple(self.sim.state(slot.solver).shape)
-            if not isinstance(tensor, torch.Tensor) or tensor.is_meta or not tensor.is_floating_point():
+            if not isinstance(tensor, torch.Tensor) or tensor.is_meta or tensor.layout != torch.strided \
+                    or not tensor.is_floating_point():
                 raise InvalidInputError(f"{who} must be a real tensor with values of shape {expected}, got "
                                         f"{_kind(tensor)}")
             if tuple(tensor.shape) != expected:

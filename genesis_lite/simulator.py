@@ -98,6 +98,7 @@ class Simulator:
         self.warned_graph_cut = False  # _warn_graph_cut warned since the last reset
         self.warned_gradient = False  # check_first_gradients warned since the last reset
         self.warned_partial_reset = False  # _warn_partial_reset warned (once a scene)
+        self.stepped_back = False  # a step's backward ran since the last reset
         self.rigid_solver = None  # Genesis's scene.sim.rigid_solver (rigid_solver.RigidSolverView), set by the scene
         self.coupler = None  # the coupling stage of the shared substep loop (solvers/coupler.py), set by the scene
         self.flat_input_names = ()  # (solver index, input name) of each of _grad_inputs' inputs (set at build)
@@ -195,7 +196,8 @@ class Simulator:
         a backward through the previous one raises, and a state taken mid-rollout brings no
         graph along (nor does a parameter: set differentiable ones after reset())."""
         if envs is not None:
-            self._warn_partial_reset()
+            self._warn_partial_reset(envs)
+        self.stepped_back = False
         if states is not None:
             for slot, state in zip(self.slots, states):
                 slot.initial_state = state.detach().clone()  # the caller's tensor may change later
@@ -219,12 +221,13 @@ class Simulator:
             current_state = None if envs is None else self.state(slot.solver)
             self.set_state(slot.solver, _restored(current_state, slot.initial_state, envs), envs)
 
-    def _warn_partial_reset(self):
-        """A reset of some envs detaches every env, as a full one (a graph per env would cost a
-        graph per env): a loss on the envs it kept then reaches nothing set before it, and torch's
-        backward says only that the loss does not require grad. Warned once a scene, when it cuts a
-        graph."""
-        if not self.warned_partial_reset and any(
+    def _warn_partial_reset(self, envs):
+        """A reset of some envs (int array) detaches every env, as a full one (a graph per env would
+        cost a graph per env): a loss on the envs it kept then reaches nothing set before it, and
+        torch's backward says only that the loss does not require grad. Warned once a scene, when it
+        cuts a graph that no backward went through and keeps some env."""
+        kept = len(set(np.asarray(envs).tolist())) < self.slots[0].solver.n_batch
+        if not self.warned_partial_reset and kept and not self.stepped_back and any(
                 (slot.state is not None and slot.state.requires_grad)
                 or any(value.requires_grad for value in (slot.inputs or {}).values()) for slot in self.slots):
             self.warned_partial_reset = True
@@ -340,6 +343,7 @@ class Simulator:
         the warm start it started from (its replay then repeats it exactly; None for both where
         the solver needs neither)."""
         split = self._split_inputs(flat_inputs)
+        self.stepped_back = True
         self.hold_before_backward()
         try:
             for k, slot in enumerate(self.slots):

@@ -404,6 +404,16 @@ def test_values_that_are_not_numbers(f64, built):
         raises(gs.InvalidInputError, call, *substrings)
 
 
+def test_debug_drawing_takes_tensors_in_a_graph(f64, built):
+    """A pose read from a differentiable scene (a tensor that requires grad) is drawn as it is: a
+    single sphere or frame raised numpy's bare error on it."""
+    scene, _ = built
+    point = torch.tensor([0.1, 0.2, 0.3], dtype=torch.float64, requires_grad=True)
+    frame = torch.eye(4, dtype=torch.float64).requires_grad_(True)
+    for made in (scene.draw_debug_sphere(point), scene.draw_debug_frame(frame)):
+        scene.clear_debug_object(made)
+
+
 def test_negative_mass(f64, built):
     _, robot = built
     before = robot.get_links_mass().clone()
@@ -557,6 +567,7 @@ def test_reset_to_a_bad_state(f64):
             ([None], ("RigidSolver's) must be a real tensor with values of shape (2, 13)", "got NoneType")),
             ([good.rigid.to("meta")], ("shape (2, 13)", "got a torch.float64 tensor on meta")),
             ([good.rigid.long()], ("real tensor", "got a torch.int64 tensor")),
+            ([good.rigid.to_sparse()], ("real tensor with values", "got a torch.sparse_coo torch.float64 tensor")),
             ([good.rigid[:, :5]], ("must have shape (2, 13), got (2, 5)",)),
             ([good.rigid.index_fill(1, torch.tensor([2]), math.nan)], ("must be finite", "(env, column) [0, 2]")),
             ([good.rigid.index_fill(1, torch.tensor([3, 4, 5, 6]), 0.0)],

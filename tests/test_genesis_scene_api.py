@@ -186,6 +186,13 @@ def test_a_partial_reset_that_cuts_a_graph_warns_once(f64, caplog):
         scene.reset(envs_idx=[1])  # no graph yet: nothing said
     assert seen == []
     q0 = torch.tensor([[0.3, 0.2], [0.1, 0.1]], dtype=torch.float64, requires_grad=True)
+    for envs_idx in ([1], [0, 1]):  # a loss backed through first, or no env kept: nothing lost, nothing said
+        robot.set_dofs_position(q0)
+        scene.step()
+        if envs_idx == [1]:
+            robot.get_dofs_position().sum().backward()
+        with warns(caplog) as seen:
+            scene.reset(envs_idx=envs_idx)
     robot.set_dofs_position(q0)
     scene.step()
     with warns(caplog, "starts a new autograd graph for every env, the ones it keeps too") as seen:

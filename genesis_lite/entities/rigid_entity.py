@@ -1507,7 +1507,9 @@ class RigidEntity(EntityIndexing):
         MuJoCo's (timeconst s, dampratio, dmin, dmax, width m, midpoint, power) = solref then
         solimp, for every env of envs_idx or (len(envs_idx), 7) one row per env; timeconst and
         dampratio both ≤ 0 mean MuJoCo's direct form (−stiffness, −damping). A contact combines
-        its two geoms' values as MuJoCo does (averaged, unless an MJCF priority or solmix says otherwise). Differentiable (a time constant held at 2·dt/substeps has none)."""
+        its two geoms' values as MuJoCo does (averaged, unless an MJCF priority or solmix says
+        otherwise). Differentiable (a time constant raised to 2·dt/substeps has none; one exactly
+        there, half: docs/genesis_api.md)."""
         geoms = self._local(geoms_idx_local, self.n_geoms, "geoms_idx_local", distinct=True)
         envs = self._envs(envs_idx, distinct=True)
         params = self._tensor(sol_params, "sol_params", f"(7,) or {(len(envs), 7)}")  # (in the graph: differentiable)

@@ -55,7 +55,9 @@ def _arrays(**trailing):
                 bound.arguments[name] = torch.as_tensor(array, dtype=dtype, device=device)
             try:
                 result = fn(*bound.args, **bound.kwargs)
-            except RuntimeError as error:  # (torch's: batch shapes that do not broadcast)
+            except RuntimeError as error:  # torch's for batch shapes that do not broadcast (others pass on)
+                if isinstance(error, torch.OutOfMemoryError) or "must match the size" not in str(error):
+                    raise
                 shapes = ", ".join(f"'{name}' {tuple(bound.arguments[name].shape)}" for name in arrays)
                 raise InvalidInputError(f"gs.utils.geom.{fn.__name__}: the arguments' shapes do not fit together "
                                         f"(their batch shapes must broadcast), got {shapes} ({error})") from None

@@ -50,9 +50,12 @@ def _positive(owner, name, value):
     return float(value)
 
 
-def _points(owner, name, value, shape):
-    """``value`` (numpy, list or torch) as a finite float64 array of ``shape`` (None: any length)."""
+def _points(owner, name, value, shape, one=False):
+    """``value`` (numpy, list or torch) as a finite float64 array of ``shape`` (None: any length);
+    one: a leading None also takes a single item given without that axis."""
     array = _floats(value)
+    if one and array.ndim == len(shape) - 1:
+        array = array[None]
     if array.ndim != len(shape) or any(n is not None and n != k for n, k in zip(shape, array.shape)) \
             or not np.isfinite(array).all():
         expected = "(" + ", ".join("N" if n is None else str(n) for n in shape) + ")"
@@ -65,7 +68,7 @@ class DebugSpheres:
     """Spheres of ``scene.draw_debug_spheres``: pos (N, 3) float32 m world, radius m, color rgb."""
 
     def __init__(self, owner, poss, radius, color):
-        pos = _points(owner, "poss", np.reshape(poss, (1, 3)) if np.shape(poss) == (3,) else poss, (None, 3))
+        pos = _points(owner, "poss", poss, (None, 3), one=True)
         self.pos = torch.as_tensor(pos, dtype=torch.float32, device=runtime.device)
         self.radius, self.color = _positive(owner, "radius", radius), _color(owner, color)
 
@@ -170,7 +173,7 @@ def frames(owner, Ts, axis_length, origin_size, axis_radius, color):
     """Coordinate frames at the (N, 4, 4) poses ``Ts``: x, y, z axes, cylinders of ``axis_length``
     m along T's columns (red, green, blue, or all ``color``), and a sphere of radius
     ``origin_size`` m at the origin (white, or ``color``)."""
-    Ts = _points(owner, "T", Ts, (None, 4, 4))
+    Ts = _points(owner, "T", Ts, (None, 4, 4), one=True)
     length, size = _positive(owner, "axis_length", axis_length), _positive(owner, "origin_size", origin_size)
     radius = _positive(owner, "axis_radius", axis_radius)
     rgbs = AXIS_COLORS if color is None else [_color(owner, color)] * 3

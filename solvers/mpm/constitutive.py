@@ -224,7 +224,8 @@ def _return_map(kind, consts, mu, lam, sig, Jp):
     """The plastic return mapping of the singular values σ of F_tmp → (moved: 1 if F_new =
     U diag(f) Vᵀ, else F_new is F_tmp (or J^(1/3) I for liquids); f (3); ∂f/∂σ (3×3, [k, i]); ∂f/∂Jp,
     ∂f/∂μ, ∂f/∂λ (3 each); Jp_new; ∂Jp_new/∂σ (3); ∂Jp_new/∂Jp; piece (3): the piece of a piecewise
-    map each σ is on, −1, 0 or 1 (the clamp's below, inside, above; 0 for the smooth maps))."""
+    map each σ is on, −1, 0 or 1 (the clamp's below, inside, above; 0 where the map has no pieces
+    per σ: von Mises and Sand move all three together, or none))."""
     piece = ti.Vector.zero(float, 3)
     moved = 0
     f = sig
