@@ -511,8 +511,13 @@ class Scene:
         for entity in self.entities:
             if isinstance(entity, RigidEntity):
                 rigid = checked[[slot.solver for slot in slots].index(entity._solver)]
-                for _, q in entity._turns:
-                    entity._check_quat(rigid[:, entity._solver_q(np.arange(q, q + 4))], "state")
+                for joint in entity.joints:
+                    for q in {q for _, q in entity._turns} & set(joint.qs_idx_local):  # its quaternion's first
+                        zero = torch.nonzero(rigid[:, entity._solver_q(np.arange(q, q + 4))].norm(dim=-1) == 0)
+                        if len(zero):
+                            raise InvalidInputError(f"scene.reset: argument 'state' must hold non-zero quaternions "
+                                                    f"(w, x, y, z), got a zero one for joint '{joint.name}' of "
+                                                    f"entity '{entity.name}' in env {int(zero[0])}")
         return checked
 
     def get_state(self):

@@ -184,7 +184,8 @@ def test_every_entity_method_before_build_raises_a_named_error(f64):
     scene = gs.Scene()
     robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True), name=ENTITY)
     box = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1)), name="box")
-    blob = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.5, 0.0, 0.5)), material=gs.materials.MPM.Elastic())
+    blob = scene.add_entity(gs.morphs.Box(size=(0.1, 0.1, 0.1), pos=(0.5, 0.0, 0.5)),
+                            material=gs.materials.MPM.Elastic())
     bare = []
     for owner in (robot, box, blob, robot.links[1], robot.joints[1]):
         for name in dir(type(owner)):
@@ -571,7 +572,8 @@ def test_reset_to_a_bad_state(f64):
             ([good.rigid[:, :5]], ("must have shape (2, 13), got (2, 5)",)),
             ([good.rigid.index_fill(1, torch.tensor([2]), math.nan)], ("must be finite", "(env, column) [0, 2]")),
             ([good.rigid.index_fill(1, torch.tensor([3, 4, 5, 6]), 0.0)],
-             ("entity 'box': argument 'state' must hold non-zero quaternions",))]:
+             ("scene.reset: argument 'state' must hold non-zero quaternions", "joint 'root_joint'",
+              "entity 'box' in env 0"))]:
         raises(gs.InvalidInputError, lambda: scene.reset(gs.SimState(scene, states, good.groups)), *substrings)
     moved = good.rigid.clone().float()  # another float dtype is taken, as by the setters
     moved[1, :3] = torch.tensor([1.0, 2.0, 3.0])

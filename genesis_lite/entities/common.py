@@ -111,7 +111,8 @@ class EntityIndexing:
             return np.arange(n)
         if isinstance(idx, slice):  # as Genesis takes them (its go2 example: slice(6, 18))
             if idx.step == 0:
-                raise InvalidInputError(f"{self._who}: argument '{arg}' as a slice must have a non-zero step, got {idx!r}")
+                raise InvalidInputError(f"{self._who}: argument '{arg}' as a slice must have a non-zero step, "
+                                        f"got {idx!r}")
             return np.arange(n)[idx]
         if isinstance(idx, torch.Tensor) and (idx.layout != torch.strided or idx.is_meta):
             raise InvalidInputError(f"{self._who}: argument '{arg}' must be a dense tensor with values, got a "

@@ -18,7 +18,8 @@ from ..solvers.rigid.model import BALL, FREE, initial_q
 from . import energy, kinematics
 from .bounds import shapes_aabb
 from ..tensor import wrap
-from .common import EntityIndexing, all_finite, broadcast, is_range, named_argument_errors, replace_columns as _replace, take
+from .common import (EntityIndexing, all_finite, broadcast, is_range, named_argument_errors,
+                     replace_columns as _replace, take)
 from ..utils.uid import UID
 from ..utils.rotations import euler_xyz_to_quat, quat_mul, quat_to_euler_xyz, quat_to_mat, rotate, rotation_vector
 
