@@ -151,6 +151,25 @@ def test_destroy_after_a_scene_whose_options_raised(f64):
     gs.init(precision="64")
 
 
+def test_a_failed_restart_leaves_no_half_runtime(f64, monkeypatch):
+    """gs.init with other options stops Taichi before starting it again: a start that fails there
+    leaves the runtime uninitialised (it was left marked as the old one, so the next gs.init with
+    those options did nothing and a build met a stopped Taichi)."""
+    def refuse(*args, **kwargs):
+        raise RuntimeError("no backend")
+
+    monkeypatch.setattr(ti, "init", refuse)
+    with pytest.raises(RuntimeError, match="no backend"):
+        gs.init(precision="32")
+    monkeypatch.undo()
+    with pytest.raises(gs.SceneStateError, match="gs.init"):
+        gs.Scene()
+    gs.init(precision="64")
+    scene, robot = _pendulum()
+    scene.step()
+    assert torch.isfinite(robot.get_dofs_position()).all()
+
+
 @ti.kernel
 def _running_sum(x: ti.types.ndarray(), out: ti.types.ndarray()):
     for i in range(1):
