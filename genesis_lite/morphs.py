@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .options import check_bool, is_int, named_keywords
+from .options import check_bool, is_int, named_keywords, real_array
 from .solvers.core import InvalidInputError, refuse_grad, warn_user
 from .utils import geom, terrain
 
@@ -115,11 +115,7 @@ _DIFFERENTIABLE_START = ("a morph's pose is fixed at build; a differentiable sta
 
 def _vec(owner, name, value, n):
     refuse_grad(owner, name, value, _DIFFERENTIABLE_START)
-    try:
-        arr = np.asarray(value)
-    except (TypeError, ValueError):  # (ragged)
-        arr = np.full(1, np.nan)
-    arr = arr.astype(np.float64) if arr.dtype.kind in "iuf" else np.full(1, np.nan)  # (no strings, bools, complex)
+    arr = real_array(value)
     if arr.shape != (n,) or not np.all(np.isfinite(arr)):
         raise InvalidInputError(f"{owner}: argument '{name}' must be {n} finite numbers, got {value!r}")
     return arr
@@ -127,12 +123,7 @@ def _vec(owner, name, value, n):
 
 def _positive(owner, name, value):
     refuse_grad(owner, name, value, "a shape's size is fixed at build")
-    try:
-        arr = np.atleast_1d(np.asarray(value))
-    except (TypeError, ValueError):  # (ragged)
-        arr = np.full(1, np.nan)
-    if arr.dtype.kind not in "iuf":  # (no bools, strings or objects: numpy would turn "2" and True into 2.0, 1.0)
-        arr = np.full(1, np.nan)
+    arr = real_array(value)
     if not np.all(np.isfinite(arr)) or not np.all(arr > 0):
         raise InvalidInputError(f"{owner}: argument '{name}' must be positive and finite, got {value!r}")
 

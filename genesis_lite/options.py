@@ -4,6 +4,7 @@ import logging
 from dataclasses import dataclass, field, fields
 
 import numpy as np
+import torch
 
 from .solvers.core import InvalidInputError, refuse_grad, warn_user
 
@@ -392,6 +393,19 @@ def check_bool(owner, name, value):
 
 def _check_optional(check, owner, name, value, *args):
     return None if value is None else check(owner, name, value, *args)
+
+
+def real_array(value):
+    """``value`` (numbers, a list, numpy or torch) as a float64 numpy array, or one NaN where it is not
+    real numbers (strings, bools, complex, objects, ragged lists, tensors without data: numpy would
+    turn "2" and True into 2.0 and 1.0), for the callers' named errors."""
+    if isinstance(value, torch.Tensor):
+        value = value.detach().cpu().numpy() if value.layout == torch.strided and not value.is_meta else np.nan
+    try:
+        array = np.asarray(value)
+    except (TypeError, ValueError):
+        return np.full(1, np.nan)
+    return array.astype(np.float64) if array.dtype.kind in "iuf" else np.full(1, np.nan)
 
 
 def is_int(value):

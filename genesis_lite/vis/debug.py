@@ -14,6 +14,7 @@ import functools
 import numpy as np
 import torch
 
+from ..options import real_array
 from ..solvers.core import InvalidInputError, runtime
 from .rasterizer import Instances, Spheres
 from .visuals import SHARP_EDGE
@@ -23,21 +24,9 @@ SPHERE_SUBDIVISIONS = 2
 AXIS_COLORS = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))  # a frame's x, y, z
 
 
-def _floats(value):
-    """``value`` (numpy, list or torch) as a float64 array; NaN where it is not real numbers (strings,
-    bools, complex, ragged), for the callers' named errors."""
-    if isinstance(value, torch.Tensor):
-        value = value.detach().cpu().numpy() if value.layout == torch.strided and not value.is_meta else np.nan
-    try:
-        array = np.asarray(value)
-    except (TypeError, ValueError):
-        return np.full(1, np.nan)
-    return array.astype(np.float64) if array.dtype.kind in "iuf" else np.full(array.shape or 1, np.nan)
-
-
 def _color(owner, color):
     """(3,) rgb in [0, 1] of a (r, g, b[, a]) colour (a named error otherwise)."""
-    rgba = _floats(color)
+    rgba = real_array(color)
     if rgba.shape not in ((3,), (4,)) or not np.all((rgba >= 0) & (rgba <= 1)):
         raise InvalidInputError(f"{owner}: argument 'color' must be (r, g, b) or (r, g, b, a) in [0, 1], got {color!r}")
     return rgba[:3]
@@ -53,7 +42,7 @@ def _positive(owner, name, value):
 def _points(owner, name, value, shape, one=False):
     """``value`` (numpy, list or torch) as a finite float64 array of ``shape`` (None: any length);
     one: a leading None also takes a single item given without that axis."""
-    array = _floats(value)
+    array = real_array(value)
     if one and array.ndim == len(shape) - 1:
         array = array[None]
     if array.ndim != len(shape) or any(n is not None and n != k for n, k in zip(shape, array.shape)) \
