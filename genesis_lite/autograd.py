@@ -1,13 +1,16 @@
 """torch.autograd nodes around the solvers.
 
-Each ``scene.step()`` is one ``_Step`` node: inputs are every solver's state at the start of
-the step and its differentiable inputs (controls, parameters) — all torch tensors; outputs are
-the states after the step. A node keeps only what torch saves for it (its start state and its
-inputs) and each solver's replay record (``solver.replay_record()``: where the rigid constraint
-solves ended, so that the backward's replay repeats the forward exactly without iterating; bounded
-to a few states, else the warm start the step started from), so a rollout's
-memory is about one state per step, and nothing outlives the graph: zeroing and freeing are
-torch's. Getters of derived quantities (link poses) are ``_Read`` nodes.
+A differentiable ``scene.step()`` runs at once and is recorded in the open ``Segment``; reading
+the state (a getter, a setter, a reset) closes it into one ``_Segment`` node: its inputs are every
+solver's state at the start of its first step and the inputs (controls, parameters) that required
+grad in its steps, all torch tensors; its outputs are the states after its last step. So a
+rollout read at its end is one node, and one read every step a node a step. The node keeps only
+what torch saves for it (each step's start state and replay record: ``solver.replay_record()``,
+where the rigid constraint solves ended, so that the backward's replay repeats the forward exactly
+without iterating; bounded to a few states, else the warm start the step started from) and the
+input tensors its steps were given, so a rollout's memory is about one state per step, and
+nothing but those inputs outlives the backward: zeroing and freeing are torch's. Getters of
+derived quantities (link poses) are ``_Read`` nodes.
 
 With ``SimOptions(checkpoint_interval=k)``, only every k-th step saves its state; a step
 without one is recomputed from the nearest checkpoint by its ``Rollout`` during backward. A step
@@ -41,12 +44,15 @@ class Rollout:
         self._last_outputs = ()  # weak references to the states the newest step returned
         self._last_inputs = ((), ())  # the newest step's inputs as given (weakly held), and as recorded
 
-    def keeps_state(self, index, states):
-        """Whether step ``index``, starting from ``states``, keeps them: every interval-th step, and
-        a step whose start states are not the ones the step before returned (a setter replaced
-        them between the two steps, which no recomputation from an earlier checkpoint repeats)."""
-        follows = len(self._last_outputs) == len(states) and all(
+    def follows(self, states):
+        """Whether ``states`` are the ones the last closed segment returned."""
+        return len(self._last_outputs) == len(states) and all(
             ref() is state for ref, state in zip(self._last_outputs, states))
+
+    def keeps_state(self, index, follows):
+        """Whether step ``index`` keeps its start states: every interval-th step, and a step whose
+        start states do not follow the step before's (``follows`` False: a setter replaced them
+        between the two steps, which no recomputation from an earlier checkpoint repeats)."""
         return self.interval == 1 or index % self.interval == 0 or not follows
 
     def record(self, index, states, inputs, kept, warm_starts):
@@ -64,7 +70,7 @@ class Rollout:
                 self.checkpoints[index] = (tuple(s.detach() for s in states), warm_starts)
 
     def stepped(self, outputs):
-        """The newest step returned ``outputs`` (held weakly: a strong link from the rollout, which
+        """The newest segment returned ``outputs`` (held weakly: a strong link from the rollout, which
         every node of the graph holds, to a state whose grad_fn is a node would be a cycle)."""
         self._last_outputs = tuple(weakref.ref(o) for o in outputs)
 
@@ -105,48 +111,97 @@ def _check_generation(sim, generation, what):
                             f"finished rollout; compute the loss and call backward before resetting the scene")
 
 
-class _Step(torch.autograd.Function):
-    @staticmethod
-    def forward(ctx, sim, rollout, index, kept, inputs, wanted, *states_and_tracked):
-        n_states = len(states_and_tracked) - sum(wanted)
-        states = states_and_tracked[:n_states]
-        outs = sim.forward_step(states, inputs, record=kept)
-        ctx.sim, ctx.rollout, ctx.index, ctx.n_states, ctx.kept = weakref.ref(sim), rollout, index, n_states, kept
-        ctx.wanted = wanted
-        rollout.record(index, states, inputs, kept, tuple(sim.started_from))
-        saved, replay = list((*states, *inputs) if kept else inputs), []
+class Segment:
+    """The steps taken since the scene's state was last read (or set): they run at once, and
+    become one autograd node when the state is read (``close``), so that a rollout read at its
+    end pays torch's per-node costs once (a node a step was ~30 µs of a small robot's 150 µs
+    forward and backward step). Per step it keeps the inputs as given (held, not saved: they are
+    the simulator's own tensors, made new by every setter, and mostly the same objects every
+    step), which of them require grad, and, for a step that keeps its start state (see
+    Rollout.keeps_state), that state and its replay record, saved by torch with the node (freed by
+    the backward)."""
+
+    def __init__(self, rollout, states, recording):
+        self.rollout, self.start_states, self.outputs = rollout, states, states
+        self.recording = recording  # taken with grad enabled (torch.is_grad_enabled()) at its first step
+        self.steps = []  # (index, kept, first saved, replay layout, inputs, requires-grad flags, tracked positions)
+        self.saved = []  # the kept steps' start states and replay records, saved with the node
+        self.tracked = []  # the distinct inputs requiring grad, in the order the node takes them
+        self._position = {}  # id(tracked input) → its position in tracked
+
+    def add(self, sim, index, inputs, kept, outputs):
+        """Record step ``index`` that went from ``self.outputs`` to ``outputs`` with ``inputs``
+        (flat tuple), after sim.forward_step."""
+        wanted = tuple(map(_REQUIRES_GRAD, inputs))
+        positions = tuple(self._track(t) for t in itertools.compress(inputs, wanted))
+        first, layout = len(self.saved), None
         if kept:  # each solver's replay record, or where it has none the warm start its step started from
+            self.saved.extend(self.outputs)
             records = tuple(sim.replay_records)
-            warm_starts = tuple(None if record is not None else warm for warm, record in zip(sim.started_from, records))
-            ctx.replay_layout = _flatten((warm_starts, records), replay)
+            if any(record is not None or warm is not None for warm, record in zip(sim.started_from, records)):
+                layout = _flatten((tuple(None if record is not None else warm
+                                         for warm, record in zip(sim.started_from, records)), records), self.saved)
+        self.steps.append((index, kept, first, layout, inputs, wanted, positions))
+        self.outputs = outputs
+
+    def _track(self, tensor):
+        position = self._position.get(id(tensor))
+        if position is None:
+            position = self._position[id(tensor)] = len(self.tracked)
+            self.tracked.append(tensor)  # (held: its id stays its own)
+        return position
+
+    def close(self, sim):
+        """Make the node of these steps, whose outputs are the states after the last step (no node
+        when nothing they started from requires grad, or outside recording). Then the segment lets
+        go of those states: the node holds it, and a strong link from it to its own outputs would be
+        a cycle through torch's graph (see the module's docstring)."""
+        if self.recording and (any(map(_REQUIRES_GRAD, self.start_states)) or self.tracked):
+            with torch.enable_grad():
+                _Segment.apply(sim, self, *self.start_states, *self.tracked)
+        self.rollout.stepped(self.outputs)
+        self.outputs = self.start_states = None
+
+
+class _Segment(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, sim, segment, *tensors):
+        ctx.sim, ctx.segment = weakref.ref(sim), segment
         # saved as tensors, torch frees them with the graph (attributes of ctx would outlive the backward)
-        ctx.n_saved = len(saved)
-        ctx.save_for_backward(*saved, *replay)
-        return outs
+        ctx.save_for_backward(*segment.saved)
+        segment.saved = None
+        return segment.outputs
 
     @staticmethod
     def backward(ctx, *grad_states):
-        sim = _alive(ctx.sim)
-        _check_generation(sim, ctx.rollout.generation, f"step {ctx.index}")
-        sim.hold_before_backward()  # the replays below overwrite what the last step found
-        saved, replay = ctx.saved_tensors[: ctx.n_saved], ctx.saved_tensors[ctx.n_saved:]
-        if ctx.kept:
-            states, inputs = saved[: ctx.n_states], saved[ctx.n_states:]
-            warm_starts, records = _unflatten(ctx.replay_layout, replay)
-        else:
-            if torch.is_grad_enabled():  # (its start states come from a detached recomputation: see _first_order)
-                raise GradientError(_second_order_message(f"step {ctx.index}") + "; with checkpoint_interval > 1 "
-                                    "create_graph=True raises at once")
-            (states, warm_starts, records), inputs = ctx.rollout.start_states(ctx.index), saved
-        with torch.no_grad():
-            try:
-                grads = sim.backward_step(states, inputs, grad_states, warm_starts, records, ctx.wanted)
-            except GradientError as error:  # (which step of the rollout)
-                raise GradientError(f"step {ctx.index}'s backward: {error}") from None
-        grads = (*grads[: ctx.n_states], *itertools.compress(grads[ctx.n_states:], ctx.wanted))
-        if ctx.index == 0:
-            sim.check_first_gradients(grads)
-        return (None,) * 6 + _first_order(f"step {ctx.index}", grads, (*grad_states, *saved))
+        sim, segment, grad_outs = _alive(ctx.sim), ctx.segment, grad_states
+        _check_generation(sim, segment.rollout.generation, f"step {segment.steps[-1][0]}")
+        saved, n_states = ctx.saved_tensors, len(grad_states)
+        grads_tracked = [None] * len(segment.tracked)
+        for index, kept, first, layout, inputs, wanted, positions in reversed(segment.steps):
+            if kept:
+                states = saved[first: first + n_states]
+                warm_starts, records = (None,) * n_states, (None,) * n_states
+                if layout is not None:
+                    warm_starts, records = _unflatten(layout, saved)
+            else:
+                if torch.is_grad_enabled():  # (its start states come from a detached recomputation: see _first_order)
+                    raise GradientError(_second_order_message(f"step {index}") + "; with checkpoint_interval > 1 "
+                                        "create_graph=True raises at once")
+                states, warm_starts, records = segment.rollout.start_states(index)
+            with torch.no_grad():
+                try:
+                    grads = sim.backward_step(states, inputs, grad_states, warm_starts, records, wanted)
+                except GradientError as error:  # (which step of the rollout)
+                    raise GradientError(f"step {index}'s backward: {error}") from None
+            grad_states = grads[:n_states]
+            for position, grad in zip(positions, itertools.compress(grads[n_states:], wanted)):
+                held = grads_tracked[position]
+                grads_tracked[position] = grad if held is None else held + grad
+            if index == 0:
+                sim.check_first_gradients((*grad_states, *itertools.compress(grads[n_states:], wanted)))
+        return (None, None) + _first_order(f"step {segment.steps[0][0]}", (*grad_states, *grads_tracked),
+                                           (*grad_outs, *saved, *segment.tracked))
 
 
 def _flatten(tree, tensors):
@@ -167,18 +222,6 @@ def _unflatten(layout, tensors):
     if isinstance(layout, tuple):
         return tuple(_unflatten(branch, tensors) for branch in layout)
     return None
-
-
-def step(sim, rollout, index, states, inputs):
-    """Run one differentiable step; returns the new states (tuple of tensors). The node's tensor
-    arguments are the states and the inputs that require grad; the other inputs (most of ~20
-    parameters and controls a step) reach it in a tuple: torch's bookkeeping costs per tensor
-    argument, in the forward and again in the backward."""
-    wanted = tuple(map(_REQUIRES_GRAD, inputs))
-    tracked = itertools.compress(inputs, wanted)
-    outs = _Step.apply(sim, rollout, index, rollout.keeps_state(index, states), inputs, wanted, *states, *tracked)
-    rollout.stepped(outs)
-    return outs
 
 
 class _Read(torch.autograd.Function):

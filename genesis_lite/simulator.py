@@ -93,6 +93,7 @@ class Simulator:
         # the other envs')
         self.transient_clears = 0
         self.rollout = None
+        self.segment = None  # the open autograd.Segment: the steps recorded since the state was last read or set
         self.started_from = []  # the solvers' warm starts the last forward_step started from
         self.replay_records = []  # and each solver's replay_record() after it
         self.warned_graph_cut = False  # _warn_graph_cut warned since the last reset
@@ -121,6 +122,8 @@ class Simulator:
         return self._slot_of[solver]
 
     def state(self, solver):
+        if self.segment is not None:  # (reading the state makes the steps before it a node of the graph)
+            self._close_segment()
         slot = self.slot(solver)
         if slot.state is None:
             slot.state = slot.uploaded_state = solver.download_state()
@@ -131,6 +134,7 @@ class Simulator:
         all) changed: a reset or a setter, after which those envs have no contacts until the next
         step (Genesis clears its collider when a state is set)."""
         refuse_inference_mode(f"setting the {type(solver).__name__}'s state")
+        self.segment = None  # (steps whose end state no one read: no loss can reach them)
         slot = self.slot(solver)
         if envs is not None and slot.held_warm_start is not None and slot.held_warm_start[0] is slot.state:
             solver.set_warm_start(slot.held_warm_start[1])  # the other envs keep theirs (upload_state)
@@ -195,6 +199,7 @@ class Simulator:
         Controls are cleared, parameters kept. Everything is detached, so a new graph starts:
         a backward through the previous one raises, and a state taken mid-rollout brings no
         graph along (nor does a parameter: set differentiable ones after reset())."""
+        self._close_segment()
         if envs is not None:
             self._warn_partial_reset(envs)
         self.stepped_back = False
@@ -244,13 +249,7 @@ class Simulator:
 
     def step(self):
         if self.requires_grad:
-            states = tuple(self.state(s.solver) for s in self.slots)
-            flat_inputs = self._grad_inputs()
-            if not torch.is_grad_enabled():
-                self._warn_graph_cut(states + flat_inputs)
-            outs = autograd.step(self, self.rollout, self.step_index, states, flat_inputs)
-            for slot, out in zip(self.slots, outs):
-                slot.state = slot.uploaded_state = out
+            self._record_step()
         elif len(self.slots) == 1:  # the hot path of small scenes: no lists (~0.4 µs a step)
             slot = self.slots[0]
             self._sync_state(slot, slot.state)
@@ -271,6 +270,34 @@ class Simulator:
         self._check_finite()
         self.step_index += 1
         self.transient_clears += 1
+
+    def _record_step(self):
+        """One step, recorded in the open autograd.Segment (a new one after the state was read or
+        set; under torch.no_grad(), one of its own that makes no node)."""
+        recording = torch.is_grad_enabled()
+        flat_inputs = self._grad_inputs()
+        segment, follows = self.segment, True
+        if segment is None or not recording:
+            self._close_segment()
+            states = tuple(self.state(slot.solver) for slot in self.slots)
+            if not recording:
+                self._warn_graph_cut(states + flat_inputs)
+            segment = self.segment = autograd.Segment(self.rollout, states, recording)
+            follows = self.rollout.follows(states)
+        kept = self.rollout.keeps_state(self.step_index, follows)
+        outs = self.forward_step(segment.outputs, flat_inputs, record=kept)
+        self.rollout.record(self.step_index, segment.outputs, flat_inputs, kept, tuple(self.started_from))
+        segment.add(self, self.step_index, flat_inputs, kept, outs)
+        for slot, out in zip(self.slots, outs):
+            slot.state = slot.uploaded_state = out
+        if not recording:
+            self._close_segment()
+
+    def _close_segment(self):
+        """The open segment's steps become one node of the graph (autograd.Segment.close)."""
+        segment, self.segment = self.segment, None
+        if segment is not None:
+            segment.close(self)
 
     def _warn_graph_cut(self, tensors):
         """A step under torch.no_grad() is not recorded, as any torch op there: what required grad
@@ -523,7 +550,7 @@ class Simulator:
         value = getattr(solver, readout)(**options) if slot.held_readouts is None else slot.held_readouts[readout]
         if slot.replaced_envs is not None:
             value = solver.without_last_step(readout, value, torch.as_tensor(slot.replaced_envs, device=value.device))
-        return value if slot.state is None else autograd.not_differentiable(what, slot.state, value)
+        return value if slot.state is None else autograd.not_differentiable(what, self.state(solver), value)
 
     def hold_before_backward(self):
         """Keep what a backward's replays and uploads overwrite of the last step: each solver's

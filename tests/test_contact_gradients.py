@@ -884,21 +884,31 @@ def test_a_replay_from_the_solutions_repeats_a_replay_from_the_warm_start(f64, c
 
 
 def _replay_bytes(node):
-    """Bytes of the replay records (or warm starts) the graph's step nodes from ``node`` down keep;
-    0 for a node whose saved tensors torch has freed."""
+    """Bytes of the replay records (or warm starts) the graph's step nodes (autograd._Segment: the
+    steps between two reads of the state) from ``node`` down keep; 0 for a node whose saved
+    tensors torch has freed."""
     seen, stack, total = set(), [node], 0
     while stack:
         fn = stack.pop()
         if fn is None or id(fn) in seen:
             continue
         seen.add(id(fn))
-        if hasattr(fn, "n_saved"):
+        if hasattr(fn, "segment"):
             try:
-                total += sum(t.numel() * t.element_size() for t in fn.saved_tensors[fn.n_saved:])
+                saved = fn.saved_tensors
+                total += sum(saved[k].numel() * saved[k].element_size() for step in fn.segment.steps
+                             for k in _leaves(step[3]))
             except RuntimeError as error:  # ("... after they have already been freed")
                 assert "freed" in str(error)
         stack.extend(following for following, _ in fn.next_functions)
     return total
+
+
+def _leaves(layout):
+    """The saved tensors' indices in a step's replay layout (nested tuples of ints and Nones)."""
+    if isinstance(layout, int):
+        return [layout]
+    return [k for branch in layout for k in _leaves(branch)] if isinstance(layout, tuple) else []
 
 
 @pytest.mark.parametrize("boxes, substeps", [(1, 1), (3, 10)])

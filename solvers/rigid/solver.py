@@ -4,7 +4,6 @@ State per env: [qpos (Q), qvel (D)]. Inputs per env: INPUTS in data.py. Everythi
 bookkeeping around the kernels of the stage modules; no Python loop runs over envs, links or
 dofs at step time.
 """
-import functools
 import itertools
 import logging
 import math
@@ -55,8 +54,8 @@ class RigidSolver(Solver):
         self.model = self.data = None
         self._inputs_seen = {}  # name → (the input tensor _note_inputs last checked, its version)
         self.friction = self.welds_on = False  # some dof has friction loss; some env a run-time weld
-        self._packed = {}  # width → (the (B, width) buffer _pack_inputs writes, views of its inputs' columns,
-        #                    [the inputs' tensors, versions] it holds)
+        self._packed = {}  # widths of the parts before and after the inputs → _new_packing's buffer, column
+        #                    views and [tensors, versions] held, that _pack_inputs writes
         self.substeps = sim_options.substeps
         self.gravity = rigid_options.gravity or sim_options.gravity  # (3,) m/s²: the default input
         self._commit = 1  # 0 while a backward replays a step: its frames stay for the reverse
@@ -348,21 +347,17 @@ class RigidSolver(Solver):
         buffer kept per width and reused by the next call: the kernels read it before that. (A
         new tensor a step was a new memory mapping once it reached 128 KiB, glibc's mmap threshold
         being fixed there (runtime.keep_large_blocks_off_the_heap): its page faults cost a KUKA's
-        256-env differentiable rollout 18 %.) The inputs alone (a forward step's) are copied only
-        where another tensor or an in-place change replaced one since its buffer took it, each into
-        a view of its columns made with the buffer: a control call each step copies its own
-        columns (a 1024-env KUKA: 310 µs a step for all). Which ones changed is found by C-level
-        maps: a loop over the ~30 inputs in Python cost more than the copy."""
-        width = self.data.input_total + sum(part.shape[1] for part in (*before, *after))
-        if width not in self._packed:
-            buffer = self._empty(width)
-            columns = [buffer[:, start:end] for start, end in self._input_spans]
-            self._packed[width] = (buffer, columns, [[None] * len(INPUTS), [None] * len(INPUTS)])
-        buffer, columns, held = self._packed[width]
-        if before or after:
-            with torch.no_grad():
-                return torch.cat([*before, *map(inputs.__getitem__, INPUTS), *after], dim=1, out=buffer)
-        tensors = list(map(inputs.__getitem__, INPUTS))
+        256-env differentiable rollout 18 %.) A part is copied only where another tensor or an
+        in-place change replaced it since the buffer took it, each into a view of its columns made
+        with the buffer: a control call each step copies its own columns (a 1024-env KUKA: 310 µs a
+        step for all), a backward step its state and gradient besides (a concatenation of all ~30
+        parts cost a small robot's reverse step 12 µs). Which ones changed is found by C-level
+        maps: a loop over the parts in Python cost more than the copy."""
+        tensors = [*before, *map(inputs.__getitem__, INPUTS), *after]
+        widths = (tuple(part.shape[1] for part in before), tuple(part.shape[1] for part in after))
+        if widths not in self._packed:
+            self._packed[widths] = self._new_packing(*widths)
+        buffer, columns, held = self._packed[widths]
         versions = list(map(operator.attrgetter("_version"), tensors))
         for k in itertools.compress(range(len(tensors)), map(operator.or_, map(operator.is_not, tensors, held[0]),
                                                                 map(operator.ne, versions, held[1]))):
@@ -370,11 +365,13 @@ class RigidSolver(Solver):
         held[:] = tensors, versions
         return buffer
 
-    @functools.cached_property
-    def _input_spans(self):
-        """[(first, last + 1) column of each input in the packed inputs], INPUTS order."""
-        ends = np.cumsum([self.data.width(name) for name in INPUTS]).tolist()
-        return [(end - self.data.width(name), end) for name, end in zip(INPUTS, ends)]
+    def _new_packing(self, before, after):
+        """(buffer, views of its parts' columns, [the parts' tensors, versions] it holds: none yet)
+        for parts of widths ``before``, the inputs, ``after``."""
+        ends = np.cumsum([*before, *(self.data.width(name) for name in INPUTS), *after]).tolist()
+        buffer = self._empty(ends[-1] if ends else 0)
+        columns = [buffer[:, start:end] for start, end in zip([0, *ends[:-1]], ends)]
+        return buffer, columns, [[None] * len(columns), [None] * len(columns)]
 
     # -- stepping ---------------------------------------------------------------------------
     def advance(self, inputs=None, download=False):
