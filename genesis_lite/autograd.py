@@ -195,11 +195,12 @@ class _Segment(torch.autograd.Function):
                 except GradientError as error:  # (which step of the rollout)
                     raise GradientError(f"step {index}'s backward: {error}") from None
             grad_states = grads[:n_states]
-            for position, grad in zip(positions, itertools.compress(grads[n_states:], wanted)):
+            for position, grad in zip(positions, grads[n_states:]):
                 held = grads_tracked[position]
-                grads_tracked[position] = grad if held is None else held + grad
+                if grad is not None:
+                    grads_tracked[position] = grad if held is None else held + grad
             if index == 0:
-                sim.check_first_gradients((*grad_states, *itertools.compress(grads[n_states:], wanted)))
+                sim.check_first_gradients(grads)
         return (None, None) + _first_order(f"step {segment.steps[0][0]}", (*grad_states, *grads_tracked),
                                            (*grad_outs, *saved, *segment.tracked))
 

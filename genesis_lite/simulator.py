@@ -16,7 +16,6 @@ from . import autograd
 from .runtime import keep_large_blocks_off_the_heap, logger
 from .solvers.core import GradientError, SceneStateError, SimulationError
 
-_VERSION = operator.attrgetter("_version")  # torch's in-place change counter of a tensor
 
 
 def _restored(table, source, envs):
@@ -64,7 +63,7 @@ class SolverSlot:
         self.inputs = None  # name → (B, width)
         self.input_names = ()  # the inputs' names in the solver's default_inputs order (set at build)
         self.uploaded_state = None  # the tensor Taichi's frame 0 equals (None: unknown)
-        self.uploaded_inputs = None  # ((tensor, ...), (version, ...)): Taichi's inputs equal
+        self.uploaded_inputs = None  # (tensor, ...): Taichi's inputs equal
         self.derived = None  # (state, value) cache of the last derived read
         self.warned_nonfinite = False  # _check_finite warned once since the last reset
         # the parameters the last reset detached from a graph and not set since (their names)
@@ -103,6 +102,7 @@ class Simulator:
         self.rigid_solver = None  # Genesis's scene.sim.rigid_solver (rigid_solver.RigidSolverView), set by the scene
         self.coupler = None  # the coupling stage of the shared substep loop (solvers/coupler.py), set by the scene
         self.flat_input_names = ()  # (solver index, input name) of each of _grad_inputs' inputs (set at build)
+        self._skipped = {}  # requires-grad flags of the flat inputs → _skipped_grads' sets
 
     def build(self, n_envs):
         for slot in self.slots:
@@ -181,13 +181,13 @@ class Simulator:
 
     @staticmethod
     def _pending_inputs(slot, inputs):
-        """``inputs`` if Taichi does not hold them yet (recorded as held from now on), else None."""
+        """``inputs`` if Taichi does not hold them yet (recorded as held from now on), else None. By
+        identity: inputs are never changed in place (every setter makes a new tensor)."""
         tensors = tuple(inputs.values())
-        versions = tuple(map(_VERSION, tensors))
         known = slot.uploaded_inputs
-        if known is not None and known[1] == versions and all(map(operator.is_, tensors, known[0])):
+        if known is not None and len(known) == len(tensors) and all(map(operator.is_, tensors, known)):
             return None
-        slot.uploaded_inputs = (tensors, versions)
+        slot.uploaded_inputs = tensors
         return inputs
 
     # -- stepping ---------------------------------------------------------------------------
@@ -365,17 +365,16 @@ class Simulator:
         return [solver.end_step(download) for solver in solvers]
 
     def backward_step(self, states, flat_inputs, grad_states, warm_starts, records, wanted):
-        """Gradients of one step's states and flat inputs (None for an input whose ``wanted`` flag
-        is False), given the gradients of its outputs and, per solver, its replay record or else
-        the warm start it started from (its replay then repeats it exactly; None for both where
-        the solver needs neither)."""
+        """Gradients of one step's states and of the flat inputs whose ``wanted`` flag is True (in
+        their order), given the gradients of its outputs and, per solver, its replay record or
+        else the warm start it started from (its replay then repeats it exactly; None for both
+        where the solver needs neither)."""
         split = self._split_inputs(flat_inputs)
         self.stepped_back = True
         self.hold_before_backward()
         try:
-            for k, slot in enumerate(self.slots):
-                slot.solver.skipped_grads = frozenset(name for (solver, name), want in zip(self.flat_input_names, wanted)
-                                                      if solver == k and not want)
+            for slot, skipped in zip(self.slots, self._skipped_grads(wanted)):
+                slot.solver.skipped_grads = skipped
             if len(self.slots) == 1:
                 results = [self.slots[0].solver.backward(states[0], split[0], grad_states[0], warm_starts[0],
                                                          records[0])]
@@ -386,13 +385,23 @@ class Simulator:
                 slot.uploaded_state = slot.uploaded_inputs = None  # Taichi holds this old step now
                 slot.solver.skipped_grads = frozenset()
                 slot.solver.end_backward()
-        grads_states = [grad_state for grad_state, _ in results]
-        grads_inputs = [None] * len(flat_inputs)
-        for k in itertools.compress(range(len(flat_inputs)), wanted):  # (a few of ~30 inputs a solver)
-            solver, name = self.flat_input_names[k]
-            grads_inputs[k] = results[solver][1].get(name)
-        _zero_unreached_envs(grad_states, [*grads_states, *grads_inputs])
-        return (*grads_states, *grads_inputs)
+        grads = [grad_state for grad_state, _ in results]
+        # (a few of ~30 inputs a solver)
+        grads += [results[solver][1].get(name) for solver, name in itertools.compress(self.flat_input_names, wanted)]
+        _zero_unreached_envs(grad_states, grads)
+        return grads
+
+    def _skipped_grads(self, wanted):
+        """Per solver, the names of its inputs whose flag in ``wanted`` is False (solver.skipped_grads),
+        kept per pattern of flags: a rollout has a few, and the sets cost ~3 µs a step."""
+        skipped = self._skipped.get(wanted)
+        if skipped is None:
+            if len(self._skipped) >= 64:  # (patterns that come and go)
+                self._skipped.clear()
+            skipped = self._skipped[wanted] = [
+                frozenset(name for (solver, name), want in zip(self.flat_input_names, wanted) if solver == k and not want)
+                for k in range(len(self.slots))]
+        return skipped
 
     def check_first_gradients(self, grads):
         """After the backward of a rollout's first step (its gradients ``grads``, tensors or None):

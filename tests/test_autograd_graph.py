@@ -458,11 +458,12 @@ def test_first_derivatives_with_create_graph_are_the_plain_ones(pendulum):
 
 
 def test_a_step_packs_its_inputs_into_one_kept_buffer(f64):
-    """The rigid step hands its inputs to the kernels packed in a buffer kept per width, not a new
+    """The rigid step hands its inputs to the kernels packed in a buffer kept per layout, not a new
     tensor a step: with glibc's mmap threshold fixed at 128 KiB (keep_large_blocks_off_the_heap),
     a new (256, 167) float32 tensor a step was a new memory mapping, 18 % of a KUKA's 256-env
-    differentiable rollout. The packed values are those of torch.cat, and a forward step and its
-    reverse (state and output gradient around the inputs) each get their own buffer."""
+    differentiable rollout. The packed values are those of torch.cat (only the parts that changed
+    are copied again), and a forward step and its reverse (state and output gradient around the
+    inputs) each get their own buffer."""
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True))
     robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
     scene.build(n_envs=3)
@@ -473,9 +474,10 @@ def test_a_step_packs_its_inputs_into_one_kept_buffer(f64):
         scene.step()
         inputs = scene.sim.slots[0].inputs
         state = scene.sim.state(solver)
-        packs.append((solver._pack_inputs(inputs), solver._pack_inputs(inputs, before=(state,), after=(state,))))
+        packs.append((solver._pack_inputs(inputs), solver._pack_inputs(inputs, state, 2.0 * state)))
         expected = torch.cat([inputs[name] for name in INPUTS], dim=1).detach()
         assert torch.equal(packs[-1][0], expected)
+        assert torch.equal(packs[-1][1], torch.cat([state, expected, 2.0 * state], dim=1).detach())
     assert len({(a.data_ptr(), b.data_ptr()) for a, b in packs}) == 1
     assert packs[0][0].data_ptr() != packs[0][1].data_ptr()
 

@@ -473,7 +473,7 @@ class RigidEntity(EntityIndexing):
         for dof, q in self._free_joints:
             self._dof_q[dof: dof + 3] = self.q_start + q + np.arange(3)
         self._dof_motions = kinematics.DofMotions(self)  # (the Jacobian's columns: get_jacobian, inverse kinematics)
-        self._inputs_held = {}  # input name → (tensor, its version, as numpy, memo): _input_array
+        self._inputs_held = {}  # input name → (tensor, as numpy, memo): _input_array
 
     @property
     def n_joints(self):
@@ -1613,13 +1613,14 @@ class RigidEntity(EntityIndexing):
 
     def _input_array(self, name):
         """(the solver's input ``name`` as a numpy array (B, W), a memo dict for answers about it),
-        kept while the input is the same tensor, unchanged: a control call every step reads the
-        modes, and the targets it zeroes, ~3 µs each."""
+        kept while the input is the same tensor (inputs are never changed in place: every setter
+        makes a new one): a control call every step reads the modes, and the targets it zeroes,
+        ~3 µs each."""
         tensor = self._sim().inputs(self._solver)[name]
         held = self._inputs_held.get(name)
-        if held is None or held[0] is not tensor or held[1] != tensor._version:
-            held = self._inputs_held[name] = (tensor, tensor._version, tensor.detach().cpu().numpy(), {})
-        return held[2], held[3]
+        if held is None or held[0] is not tensor:
+            held = self._inputs_held[name] = (tensor, tensor.detach().cpu().numpy(), {})
+        return held[1], held[2]
 
     def _holds_zeros(self, name, columns, envs):
         """The input ``name`` is 0 at (envs, columns) and no graph stands behind it."""

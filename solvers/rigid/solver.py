@@ -52,10 +52,10 @@ class RigidSolver(Solver):
         self.entity_names = []
         self.attachments = {}  # entity index → (parent entity index, its link index): see attach
         self.model = self.data = None
-        self._inputs_seen = {}  # name → (the input tensor _note_inputs last checked, its version)
+        self._inputs_seen = {}  # name → the input tensor _note_inputs last checked
         self.friction = self.welds_on = False  # some dof has friction loss; some env a run-time weld
-        self._packed = {}  # widths of the parts before and after the inputs → _new_packing's buffer, column
-        #                    views and [tensors, versions] held, that _pack_inputs writes
+        self._packed = {}  # reverse or not → the buffer _pack_inputs writes, its parts' column views and the
+        #                    tensors they hold (_new_packing)
         self.substeps = sim_options.substeps
         self.gravity = rigid_options.gravity or sim_options.gravity  # (3,) m/s²: the default input
         self._commit = 1  # 0 while a backward replays a step: its frames stay for the reverse
@@ -312,10 +312,9 @@ class RigidSolver(Solver):
         gradients the kernels then skip). Keep whether they give some dof friction loss (or the
         model a tendon's) or a limit (or the model a tendon limit), and some env a run-time weld
         (constraint rows).
-        Checked again only for another frictionloss (limit, dyn_welds) tensor, or the same one changed in
-        place by torch (which counts its versions; the setters always give a new tensor): a rollout
-        passes the same one every step, and the check costs ~15 µs of torch amid a step
-        (a tenth of a small robot's differentiable step)."""
+        Checked again only for another frictionloss (limit, dyn_welds) tensor (inputs are never
+        changed in place: see _pack_inputs): a rollout passes the same one every step, and the
+        check costs ~15 µs of torch amid a step (a tenth of a small robot's differentiable step)."""
         wrench = int(inputs["xfrc"] is not self.default_inputs["xfrc"])
         if wrench != self._wrench:  # (kept on the host: reading a GPU header would wait for the device)
             self.data.header[HEADER["wrench"]] = self._wrench = wrench
@@ -329,11 +328,11 @@ class RigidSolver(Solver):
             self.welds_on = bool((inputs["dyn_welds"][:, 0] > 0).any())
 
     def _changed(self, inputs, name):
-        """Whether inputs[name] is another tensor than at the last call, or was changed in place."""
-        tensor, seen = inputs[name], self._inputs_seen.get(name)
-        if seen is not None and tensor is seen[0] and tensor._version == seen[1]:
+        """Whether inputs[name] is another tensor than at the last call."""
+        tensor = inputs[name]
+        if self._inputs_seen.get(name) is tensor:
             return False
-        self._inputs_seen[name] = (tensor, tensor._version)  # (held: its id stays its own)
+        self._inputs_seen[name] = tensor  # (held: its id stays its own)
         return True
 
     def _constrained(self):
@@ -341,37 +340,39 @@ class RigidSolver(Solver):
         joint limits or friction loss."""
         return bool(self.colliders) or self.model.has_equalities or self.limited or self.friction or self.welds_on
 
-    def _pack_inputs(self, inputs, before=(), after=()):
-        """(B, width) of ``before``, every input in INPUTS order, ``after``. The kernels read values
-        only: no graph is built (nor does Taichi see a tensor that requires grad). Written into a
-        buffer kept per width and reused by the next call: the kernels read it before that. (A
+    def _pack_inputs(self, inputs, state=None, grad_state_out=None):
+        """(B, width) of every input in INPUTS order; for a reverse, with the step's start
+        ``state`` before and ``grad_state_out`` after. The kernels read values only: no graph is
+        built (nor does Taichi see a tensor that requires grad). Written into a buffer kept for
+        each of the two layouts and reused by the next call: the kernels read it before that. (A
         new tensor a step was a new memory mapping once it reached 128 KiB, glibc's mmap threshold
         being fixed there (runtime.keep_large_blocks_off_the_heap): its page faults cost a KUKA's
-        256-env differentiable rollout 18 %.) A part is copied only where another tensor or an
-        in-place change replaced it since the buffer took it, each into a view of its columns made
-        with the buffer: a control call each step copies its own columns (a 1024-env KUKA: 310 µs a
-        step for all), a backward step its state and gradient besides (a concatenation of all ~30
-        parts cost a small robot's reverse step 12 µs). Which ones changed is found by C-level
+        256-env differentiable rollout 18 %.) A part is copied only where another tensor replaced
+        it since the buffer took it, each into a view of its columns made with the buffer: a
+        control call each step copies its own columns (a 1024-env KUKA: 310 µs a step for all), a
+        reverse step its state and gradient besides (a concatenation of all ~30 parts cost a small
+        robot's reverse step 12 µs). By identity: inputs are never changed in place (every setter
+        makes a new tensor: entities/common.replace_columns). Which ones changed is found by C-level
         maps: a loop over the parts in Python cost more than the copy."""
-        tensors = [*before, *map(inputs.__getitem__, INPUTS), *after]
-        widths = (tuple(part.shape[1] for part in before), tuple(part.shape[1] for part in after))
-        if widths not in self._packed:
-            self._packed[widths] = self._new_packing(*widths)
-        buffer, columns, held = self._packed[widths]
-        versions = list(map(operator.attrgetter("_version"), tensors))
-        for k in itertools.compress(range(len(tensors)), map(operator.or_, map(operator.is_not, tensors, held[0]),
-                                                                map(operator.ne, versions, held[1]))):
+        reverse = state is not None
+        tensors = [state, *map(inputs.__getitem__, INPUTS), grad_state_out] if reverse else \
+            list(map(inputs.__getitem__, INPUTS))
+        if reverse not in self._packed:
+            self._packed[reverse] = self._new_packing(reverse)
+        buffer, columns, held = self._packed[reverse]
+        for k in itertools.compress(range(len(tensors)), map(operator.is_not, tensors, held)):
             columns[k].copy_(tensors[k].detach())
-        held[:] = tensors, versions
+        held[:] = tensors
         return buffer
 
-    def _new_packing(self, before, after):
-        """(buffer, views of its parts' columns, [the parts' tensors, versions] it holds: none yet)
-        for parts of widths ``before``, the inputs, ``after``."""
-        ends = np.cumsum([*before, *(self.data.width(name) for name in INPUTS), *after]).tolist()
+    def _new_packing(self, reverse):
+        """(buffer, views of its parts' columns, the parts' tensors it holds: none yet) for the
+        inputs, between a start state and its gradient when ``reverse``."""
+        state = [self.state_width] if reverse else []
+        ends = np.cumsum([*state, *(self.data.width(name) for name in INPUTS), *state]).tolist()
         buffer = self._empty(ends[-1] if ends else 0)
         columns = [buffer[:, start:end] for start, end in zip([0, *ends[:-1]], ends)]
-        return buffer, columns, [[None] * len(columns), [None] * len(columns)]
+        return buffer, columns, [None] * len(columns)
 
     # -- stepping ---------------------------------------------------------------------------
     def advance(self, inputs=None, download=False):
@@ -560,7 +561,7 @@ class RigidSolver(Solver):
         step started from or its replay_record: its replay (uncommitted) then repeats it exactly
         (see step.py)."""
         self._note_inputs(inputs)
-        packed = self._pack_inputs(inputs, before=(state,), after=(grad_state_out,))
+        packed = self._pack_inputs(inputs, state, grad_state_out)
         self._grads = self._empty(sum(self.grad_widths))
         self.kernels.prepare_reverse(packed)
         self.data.take_flag("inexact")
