@@ -128,11 +128,13 @@ class Segment:
         self.saved = []  # the kept steps' start states and replay records, saved with the node
         self.tracked = []  # the distinct inputs requiring grad, in the order the node takes them
         self._position = {}  # id(tracked input) → its position in tracked
+        self._patterns = {}  # the steps' requires-grad flags, each pattern once
 
     def add(self, sim, index, inputs, kept, outputs):
         """Record step ``index`` that went from ``self.outputs`` to ``outputs`` with ``inputs``
         (flat tuple), after sim.forward_step."""
         wanted = tuple(map(_REQUIRES_GRAD, inputs))
+        wanted = self._patterns.setdefault(wanted, wanted)  # (one tuple for the steps that share it: ~270 bytes a step)
         positions = tuple(self._track(t) for t in itertools.compress(inputs, wanted))
         first, layout = len(self.saved), None
         if kept:  # each solver's replay record, or where it has none the warm start its step started from

@@ -511,3 +511,53 @@ def test_a_checkpointed_rollout_records_an_input_given_again_once(f64):
     scene.sim.options.checkpoint_interval = 1
     plain = gradient()
     assert scene.sim.rollout.interval == 1 and torch.equal(checkpointed, plain)
+
+
+def _segment_nodes(tensor):
+    """How many step nodes (autograd._Segment) the graph of ``tensor`` holds."""
+    seen, stack, count = set(), [tensor.grad_fn], 0
+    while stack:
+        fn = stack.pop()
+        if fn is None or id(fn) in seen:
+            continue
+        seen.add(id(fn))
+        count += type(fn).__name__ == "_SegmentBackward"
+        stack.extend(following for following, _ in fn.next_functions)
+    return count
+
+
+@pytest.mark.parametrize("checkpoint_interval", [1, 3])
+def test_the_steps_between_two_reads_are_one_node(f64, checkpoint_interval):
+    """A rollout whose state is read at its end is one graph node (torch's per-node costs once,
+    not a step); read every step, a node a step. Both give the same gradients bit for bit, of the
+    initial state, a control per step and a parameter every step shares (its gradient summed over
+    the steps by the node, by torch across nodes), with checkpoints too."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True,
+                                                       checkpoint_interval=checkpoint_interval))
+    robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
+    scene.build()
+    q0 = torch.tensor([0.4, -0.3], dtype=torch.float64, requires_grad=True)
+    damping = torch.tensor([0.2, 0.3], dtype=torch.float64, requires_grad=True)
+    forces = torch.linspace(-1.0, 1.0, 2 * T, dtype=torch.float64).reshape(T, 2).requires_grad_(True)
+
+    def gradients(read_every_step):
+        scene.reset()
+        robot.set_dofs_damping(damping)
+        robot.set_dofs_position(q0)
+        for force in forces.unbind(0):
+            robot.control_dofs_force(force)
+            scene.step()
+            if read_every_step:
+                robot.get_dofs_velocity()
+        q = robot.get_dofs_position()
+        nodes = _segment_nodes(q)
+        q.pow(2).sum().backward()
+        grads = tuple(t.grad.clone() for t in (q0, damping, forces))
+        for t in (q0, damping, forces):
+            t.grad = None
+        return nodes, grads
+
+    (once, at_end), (each, every_step) = gradients(False), gradients(True)
+    assert (once, each) == (1, T)
+    assert all(torch.equal(a, b) for a, b in zip(at_end, every_step))
+    assert all(bool((g != 0).any()) for g in at_end)
