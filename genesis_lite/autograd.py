@@ -178,6 +178,7 @@ class _Segment(torch.autograd.Function):
     def backward(ctx, *grad_states):
         sim, segment, grad_outs = _alive(ctx.sim), ctx.segment, grad_states
         _check_generation(sim, segment.rollout.generation, f"step {segment.steps[-1][0]}")
+        sim.hold_before_backward()  # the recomputations and replays below overwrite what the last step found
         saved, n_states = ctx.saved_tensors, len(grad_states)
         grads_tracked = [None] * len(segment.tracked)
         for index, kept, first, layout, inputs, wanted, positions in reversed(segment.steps):

@@ -134,7 +134,7 @@ class Simulator:
         all) changed: a reset or a setter, after which those envs have no contacts until the next
         step (Genesis clears its collider when a state is set)."""
         refuse_inference_mode(f"setting the {type(solver).__name__}'s state")
-        self.segment = None  # (steps whose end state no one read: no loss can reach them)
+        self._close_segment()  # (the other solvers' states stay in the graph)
         slot = self.slot(solver)
         if envs is not None and slot.held_warm_start is not None and slot.held_warm_start[0] is slot.state:
             solver.set_warm_start(slot.held_warm_start[1])  # the other envs keep theirs (upload_state)
