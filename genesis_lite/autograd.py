@@ -124,6 +124,8 @@ class Segment:
     def __init__(self, rollout, states, recording):
         self.rollout, self.start_states, self.outputs = rollout, states, states
         self.recording = recording  # taken with grad enabled (torch.is_grad_enabled()) at its first step
+        # some state or input of its steps requires grad: its steps are kept from the first such one
+        self.live = recording and any(map(_REQUIRES_GRAD, states))
         self.steps = []  # (index, kept, first saved, replay layout, inputs, requires-grad flags, tracked positions)
         self.saved = []  # the kept steps' start states and replay records, saved with the node
         self.tracked = []  # the distinct inputs requiring grad, in the order the node takes them
@@ -132,8 +134,16 @@ class Segment:
 
     def add(self, sim, index, inputs, kept, outputs):
         """Record step ``index`` that went from ``self.outputs`` to ``outputs`` with ``inputs``
-        (flat tuple), after sim.forward_step."""
+        (flat tuple), after sim.forward_step. A step before which and in which nothing requires
+        grad is not kept (torch makes no node of one): it starts the segment anew from its end
+        (kept, a rollout stepped in a scene with requires_grad but no tensor requiring grad, an
+        evaluation, held a state a step until the next read: found by an adversarial pass)."""
         wanted = tuple(map(_REQUIRES_GRAD, inputs))
+        if not self.live:
+            if not (self.recording and any(wanted)):
+                self.start_states = self.outputs = outputs
+                return
+            self.live = True
         wanted = self._patterns.setdefault(wanted, wanted)  # (one tuple for the steps that share it: ~270 bytes a step)
         positions = tuple(self._track(t) for t in itertools.compress(inputs, wanted))
         first, layout = len(self.saved), None
@@ -155,10 +165,10 @@ class Segment:
 
     def close(self, sim):
         """Make the node of these steps, whose outputs are the states after the last step (no node
-        when nothing they started from requires grad, or outside recording). Then the segment lets
+        when it kept none). Then the segment lets
         go of those states: the node holds it, and a strong link from it to its own outputs would be
         a cycle through torch's graph (see the module's docstring)."""
-        if self.recording and (any(map(_REQUIRES_GRAD, self.start_states)) or self.tracked):
+        if self.steps:
             with torch.enable_grad():
                 _Segment.apply(sim, self, *self.start_states, *self.tracked)
         self.rollout.stepped(self.outputs)

@@ -591,3 +591,54 @@ def test_a_checkpointed_backward_leaves_the_rollout_as_it_was(f64):
     plain, after_backward = rollout(False), rollout(True)
     assert plain[0].numel() > 0 and velocity.grad is not None
     assert all(torch.equal(a, b) for a, b in zip(plain, after_backward))
+
+
+def test_a_jacobian_with_one_grad_outputs_buffer_refilled_in_place(pendulum):
+    """Row by row, torch.autograd.grad with one grad_outputs buffer the caller refills in place
+    (a state's clone hands it to the step's backward as it is): each row is the one a fresh tensor
+    gives (found by an adversarial pass: the reverse step's packing took the buffer for one it held
+    already, and every row repeated the first)."""
+    scene, robot = pendulum
+    scene.reset()
+    v0 = torch.tensor([0.3, -0.2], dtype=torch.float64, requires_grad=True)
+    robot.set_dofs_position([0.4, -0.3])
+    robot.set_dofs_velocity(v0)
+    scene.step()
+    x1 = scene.get_state().rigid
+    buffer, reused, fresh = torch.zeros_like(x1), [], []
+    for i in range(x1.shape[1]):
+        buffer.zero_()
+        buffer[0, i] = 1.0
+        reused.append(torch.autograd.grad(x1, v0, grad_outputs=buffer, retain_graph=True)[0])
+    for i in range(x1.shape[1]):
+        fresh.append(torch.autograd.grad(x1, v0, grad_outputs=torch.eye(x1.shape[1], dtype=x1.dtype)[i:i + 1],
+                                         retain_graph=True)[0])
+    assert torch.equal(torch.stack(reused), torch.stack(fresh))
+    assert torch.linalg.matrix_rank(torch.stack(fresh)) == 2
+
+
+def test_steps_before_anything_requires_grad_keep_nothing(pendulum):
+    """In a scene built with requires_grad, steps before which and in which no tensor requires grad
+    (an evaluation, a warm-up) keep no state for a backward (torch makes no node of one: a segment
+    held a state a step until the next read, an MPM block's 100 KB a step, found by an adversarial
+    pass); a control requiring grad given later gets the gradient it gets with a read between."""
+    scene, robot = pendulum
+    force = torch.tensor([0.3, -0.2], dtype=torch.float64, requires_grad=True)
+
+    def gradient(read_before_the_control):
+        scene.reset()
+        robot.set_dofs_position([0.4, -0.3])
+        for _ in range(5):
+            scene.step()
+        if read_before_the_control:
+            robot.get_dofs_position()
+        else:
+            assert scene.sim.segment is not None and not scene.sim.segment.saved
+        robot.control_dofs_force(force)
+        for _ in range(5):
+            scene.step()
+        (g,) = torch.autograd.grad(robot.get_dofs_position().pow(2).sum(), force)
+        return g
+
+    without, with_read = gradient(False), gradient(True)
+    assert torch.equal(without, with_read) and bool((without != 0).all())

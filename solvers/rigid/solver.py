@@ -351,9 +351,11 @@ class RigidSolver(Solver):
         it since the buffer took it, each into a view of its columns made with the buffer: a
         control call each step copies its own columns (a 1024-env KUKA: 310 µs a step for all), a
         reverse step its state and gradient besides (a concatenation of all ~30 parts cost a small
-        robot's reverse step 12 µs). By identity: inputs are never changed in place (every setter
-        makes a new tensor: entities/common.replace_columns). Which ones changed is found by C-level
-        maps: a loop over the parts in Python cost more than the copy."""
+        robot's reverse step 12 µs). Inputs by identity: they are never changed in place (every
+        setter makes a new tensor: entities/common.replace_columns); the state and its gradient
+        always (the gradient may be the caller's grad_outputs, refilled in place between two
+        torch.autograd.grad calls: found by an adversarial pass). Which ones changed is found by
+        C-level maps: a loop over the parts in Python cost more than the copy."""
         reverse = state is not None
         tensors = [state, *map(inputs.__getitem__, INPUTS), grad_state_out] if reverse else \
             list(map(inputs.__getitem__, INPUTS))
@@ -363,6 +365,8 @@ class RigidSolver(Solver):
         for k in itertools.compress(range(len(tensors)), map(operator.is_not, tensors, held)):
             columns[k].copy_(tensors[k].detach())
         held[:] = tensors
+        if reverse:
+            held[0] = held[-1] = None
         return buffer
 
     def _new_packing(self, reverse):
