@@ -21,6 +21,7 @@ Nodes hold the simulator weakly: the simulator holds the newest state, whose gra
 and a strong link back would be a cycle through torch's C++ graph that Python's collector
 cannot see (every scene would live for ever).
 """
+import collections
 import itertools
 import operator
 import weakref
@@ -30,6 +31,10 @@ import torch
 from .solvers.core import GradientError
 
 _REQUIRES_GRAD = operator.attrgetter("requires_grad")
+# A step a Segment keeps: its index in the rollout; whether it kept its start states, and where they
+# (then its replay layout's tensors) are in the segment's saved tensors; its flat inputs as given,
+# their requires-grad flags, and the positions of those requiring grad in the segment's tracked
+_StepRecord = collections.namedtuple("_StepRecord", "index kept first layout inputs wanted positions")
 
 
 class Rollout:
@@ -41,7 +46,7 @@ class Rollout:
         self.checkpoints = {}  # step index → (states at its start (tuple of tensors), warm starts)
         self.inputs = {}  # step index → inputs (only when interval > 1)
         self._replayed = {}  # step index → (start states, warm starts, replay records) recomputed during backward
-        self._last_outputs = ()  # weak references to the states the newest step returned
+        self._last_outputs = ()  # weak references to the states the last closed segment returned
         self._last_inputs = ((), ())  # the newest step's inputs as given (weakly held), and as recorded
 
     def follows(self, states):
@@ -126,25 +131,31 @@ class Segment:
         self.recording = recording  # taken with grad enabled (torch.is_grad_enabled()) at its first step
         # some state or input of its steps requires grad: its steps are kept from the first such one
         self.live = recording and any(map(_REQUIRES_GRAD, states))
-        self.steps = []  # (index, kept, first saved, replay layout, inputs, requires-grad flags, tracked positions)
+        self.steps = []  # _StepRecord of each step kept
         self.saved = []  # the kept steps' start states and replay records, saved with the node
         self.tracked = []  # the distinct inputs requiring grad, in the order the node takes them
         self._position = {}  # id(tracked input) → its position in tracked
         self._patterns = {}  # the steps' requires-grad flags, each pattern once
 
-    def add(self, sim, index, inputs, kept, outputs):
-        """Record step ``index`` that went from ``self.outputs`` to ``outputs`` with ``inputs``
-        (flat tuple), after sim.forward_step. A step before which and in which nothing requires
-        grad is not kept (torch makes no node of one): it starts the segment anew from its end
-        (kept, a rollout stepped in a scene with requires_grad but no tensor requiring grad, an
-        evaluation, held a state a step until the next read: found by an adversarial pass)."""
+    def flags(self, inputs):
+        """The requires-grad flags of a next step's ``inputs`` (flat tuple), or None when the segment
+        will not keep that step: nothing before it or in it requires grad (torch makes no node of
+        such a step; kept, a rollout stepped in a scene with requires_grad but no tensor requiring
+        grad, an evaluation, held a state a step until the next read: found by an adversarial pass)."""
         wanted = tuple(map(_REQUIRES_GRAD, inputs))
         if not self.live:
             if not (self.recording and any(wanted)):
-                self.start_states = self.outputs = outputs
-                return
+                return None
             self.live = True
-        wanted = self._patterns.setdefault(wanted, wanted)  # (one tuple for the steps that share it: ~270 bytes a step)
+        return self._patterns.setdefault(wanted, wanted)  # (one tuple for the steps that share it: ~270 bytes a step)
+
+    def add(self, sim, index, inputs, wanted, kept, outputs):
+        """Record step ``index`` that went from ``self.outputs`` to ``outputs`` with ``inputs``
+        (flat tuple) and their ``flags`` (None: a step not kept, from whose end the segment starts
+        anew), after sim.forward_step."""
+        if wanted is None:
+            self.start_states = self.outputs = outputs
+            return
         positions = tuple(self._track(t) for t in itertools.compress(inputs, wanted))
         first, layout = len(self.saved), None
         if kept:  # each solver's replay record, or where it has none the warm start its step started from
@@ -153,7 +164,7 @@ class Segment:
             if any(record is not None or warm is not None for warm, record in zip(sim.started_from, records)):
                 layout = _flatten((tuple(None if record is not None else warm
                                          for warm, record in zip(sim.started_from, records)), records), self.saved)
-        self.steps.append((index, kept, first, layout, inputs, wanted, positions))
+        self.steps.append(_StepRecord(index, kept, first, layout, inputs, wanted, positions))
         self.outputs = outputs
 
     def _track(self, tensor):
@@ -165,14 +176,18 @@ class Segment:
 
     def close(self, sim):
         """Make the node of these steps, whose outputs are the states after the last step (no node
-        when it kept none). Then the segment lets
-        go of those states: the node holds it, and a strong link from it to its own outputs would be
-        a cycle through torch's graph (see the module's docstring)."""
+        when it kept none). Then the segment lets go of those states and of its saved tensors: the
+        node holds it, a strong link from it to its own outputs would be a cycle through torch's
+        graph (see the module's docstring), and torch frees the saved ones with the backward. When
+        the node cannot be made (a saved-tensor hook raised, an interrupt), this raises and the
+        segment stays as it was, for the next read to close it (it replaces the half-made node
+        torch may have given the states; dropped, a backward through them raised an IndexError:
+        found by a review)."""
         if self.steps:
             with torch.enable_grad():
                 _Segment.apply(sim, self, *self.start_states, *self.tracked)
         self.rollout.stepped(self.outputs)
-        self.outputs = self.start_states = None
+        self.outputs = self.start_states = self.saved = None
 
 
 class _Segment(torch.autograd.Function):
@@ -181,13 +196,12 @@ class _Segment(torch.autograd.Function):
         ctx.sim, ctx.segment = weakref.ref(sim), segment
         # saved as tensors, torch frees them with the graph (attributes of ctx would outlive the backward)
         ctx.save_for_backward(*segment.saved)
-        segment.saved = None
         return segment.outputs
 
     @staticmethod
     def backward(ctx, *grad_states):
         sim, segment, grad_outs = _alive(ctx.sim), ctx.segment, grad_states
-        _check_generation(sim, segment.rollout.generation, f"step {segment.steps[-1][0]}")
+        _check_generation(sim, segment.rollout.generation, f"step {segment.steps[-1].index}")
         sim.hold_before_backward()  # the recomputations and replays below overwrite what the last step found
         saved, n_states = ctx.saved_tensors, len(grad_states)
         grads_tracked = [None] * len(segment.tracked)
@@ -214,7 +228,7 @@ class _Segment(torch.autograd.Function):
                     grads_tracked[position] = grad if held is None else held + grad
             if index == 0:
                 sim.check_first_gradients(grads)
-        return (None, None) + _first_order(f"step {segment.steps[0][0]}", (*grad_states, *grads_tracked),
+        return (None, None) + _first_order(f"step {segment.steps[0].index}", (*grad_states, *grads_tracked),
                                            (*grad_outs, *saved, *segment.tracked))
 
 
@@ -284,8 +298,8 @@ def not_differentiable(what, anchor, value):
 
 
 def _first_order(what, grads, anchors):
-    """A backward's results ``grads``, computed from ``anchors`` (its output gradients and saved
-    tensors): as they are, unless torch asked for a graph of them (``create_graph=True``); then each
+    """A backward's results ``grads``, computed from ``anchors`` (its output gradients, saved
+    tensors and inputs): as they are, unless torch asked for a graph of them (``create_graph=True``); then each
     is attached to every anchor that requires grad through a node whose backward raises. The
     simulator's gradients are first-order only, and torch's ``once_differentiable`` is not enough:
     its error node hangs off the results alone, so ``torch.autograd.grad(g, inputs=...)`` pruned it

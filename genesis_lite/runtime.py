@@ -166,7 +166,7 @@ def keep_large_blocks_off_the_heap():
     """Fix glibc malloc's mmap threshold at its default (128 KiB); called once a differentiable
     scene is built. Each time a large block is freed glibc raises the threshold (up to 32 MiB),
     after which per-step states (~0.1–10 MB) come from the heap, where the small long-lived
-    allocations made between them (graph nodes, saved inputs) pin the freed holes: a checkpointed
+    allocations made between them (the graph's step records, inputs) pin the freed holes: a checkpointed
     rollout's RSS then grew by one state per step as if nothing were freed (1000 MPM particles,
     float64, checkpoint_interval 100: 196 KB a step; with the threshold fixed, 2.9 KB). Process-
     wide, as malloc is: blocks of 128 KiB and more are mapped and unmapped, as before glibc's first

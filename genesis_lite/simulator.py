@@ -17,7 +17,6 @@ from .runtime import keep_large_blocks_off_the_heap, logger
 from .solvers.core import GradientError, SceneStateError, SimulationError
 
 
-
 def _restored(table, source, envs):
     """``source`` (B, W) when ``envs`` is None, else a detached copy of ``table`` (B, W) whose
     rows ``envs`` come from ``source``."""
@@ -46,12 +45,13 @@ def _zero_unreached_envs(grad_outs, grads):
 
 
 def refuse_inference_mode(what):
-    """Raise under torch.inference_mode(): the scene tells new inputs and states from those Taichi
-    holds by their version counters, which inference tensors lack (a control set there was taken,
-    and every later step, outside the mode too, raised torch's own error from deep inside)."""
+    """Raise under torch.inference_mode(): the states and inputs made there are inference tensors,
+    which torch refuses to save for a backward or to change outside the mode (when version counters
+    still told inputs apart, a control set there was taken, and every later step, outside the
+    mode too, raised torch's own error from deep inside)."""
     if torch.is_inference_mode_enabled():
-        raise SceneStateError(f"{what}: genesis_lite does not run under torch.inference_mode() (its tensors carry no "
-                              f"version counter, which the scene reads); use torch.no_grad() instead")
+        raise SceneStateError(f"{what}: genesis_lite does not run under torch.inference_mode() (torch refuses to "
+                              f"save the tensors made there for a backward); use torch.no_grad() instead")
 
 
 class SolverSlot:
@@ -284,20 +284,22 @@ class Simulator:
                 self._warn_graph_cut(states + flat_inputs)
             segment = self.segment = autograd.Segment(self.rollout, states, recording)
             follows = self.rollout.follows(states)
+        wanted = segment.flags(flat_inputs)
         kept = self.rollout.keeps_state(self.step_index, follows)
-        outs = self.forward_step(segment.outputs, flat_inputs, record=kept)
+        outs = self.forward_step(segment.outputs, flat_inputs, record=kept and wanted is not None)
         self.rollout.record(self.step_index, segment.outputs, flat_inputs, kept, tuple(self.started_from))
-        segment.add(self, self.step_index, flat_inputs, kept, outs)
+        segment.add(self, self.step_index, flat_inputs, wanted, kept, outs)
         for slot, out in zip(self.slots, outs):
             slot.state = slot.uploaded_state = out
         if not recording:
             self._close_segment()
 
     def _close_segment(self):
-        """The open segment's steps become one node of the graph (autograd.Segment.close)."""
-        segment, self.segment = self.segment, None
-        if segment is not None:
-            segment.close(self)
+        """The open segment's steps become one node of the graph (autograd.Segment.close; if that
+        raises, the segment stays open)."""
+        if self.segment is not None:
+            self.segment.close(self)
+            self.segment = None  # (not before: see close)
 
     def _warn_graph_cut(self, tensors):
         """A step under torch.no_grad() is not recorded, as any torch op there: what required grad
@@ -368,10 +370,10 @@ class Simulator:
         """Gradients of one step's states and of the flat inputs whose ``wanted`` flag is True (in
         their order), given the gradients of its outputs and, per solver, its replay record or
         else the warm start it started from (its replay then repeats it exactly; None for both
-        where the solver needs neither)."""
+        where the solver needs neither). The caller holds what the last step left first
+        (hold_before_backward)."""
         split = self._split_inputs(flat_inputs)
         self.stepped_back = True
-        self.hold_before_backward()
         try:
             for slot, skipped in zip(self.slots, self._skipped_grads(wanted)):
                 slot.solver.skipped_grads = skipped

@@ -642,3 +642,30 @@ def test_steps_before_anything_requires_grad_keep_nothing(pendulum):
 
     without, with_read = gradient(False), gradient(True)
     assert torch.equal(without, with_read) and bool((without != 0).all())
+
+
+def test_a_read_that_fails_to_make_the_node_leaves_the_steps_to_the_next(pendulum):
+    """Reading the state makes the node of the steps before it; when that raises (a saved-tensor
+    hook of the caller's, an interrupt), the steps stay for the next read to make it: the gradient
+    is the one without the failure (found by a review: the steps were dropped, and the state kept
+    a half-made node with nothing saved, whose backward raised an IndexError)."""
+    scene, robot = pendulum
+    v0 = torch.tensor([0.3, -0.2], dtype=torch.float64, requires_grad=True)
+
+    def refuse(tensor):
+        raise KeyboardInterrupt
+
+    def gradient(fail_once):
+        scene.reset()
+        robot.set_dofs_velocity(v0)
+        for _ in range(5):
+            scene.step()
+        if fail_once:
+            with pytest.raises(KeyboardInterrupt), torch.autograd.graph.saved_tensors_hooks(refuse, lambda t: t):
+                robot.get_dofs_position()
+        for _ in range(3):
+            scene.step()
+        (g,) = torch.autograd.grad(robot.get_dofs_position().sum(), v0)
+        return g
+
+    assert torch.equal(gradient(True), gradient(False))

@@ -897,7 +897,7 @@ def _replay_bytes(node):
             try:
                 saved = fn.saved_tensors
                 total += sum(saved[k].numel() * saved[k].element_size() for step in fn.segment.steps
-                             for k in _leaves(step[3]))
+                             for k in _leaves(step.layout))
             except RuntimeError as error:  # ("... after they have already been freed")
                 assert "freed" in str(error)
         stack.extend(following for following, _ in fn.next_functions)

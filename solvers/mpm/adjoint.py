@@ -1,6 +1,6 @@
 """The reverse of an MPM step (issue 13): exact hand-written adjoints, in memory bounded by one step.
 
-A step's autograd node keeps only its start state (B, N · 25). ``begin_reverse`` loads it into
+The autograd graph keeps only a step's start state (B, N · 25) and inputs. ``begin_reverse`` loads it into
 frame 0; the replay that follows (base.Solver.backward, or the simulator's shared loop) fills
 frames 0..S (frame s: the state before substep s) and keeps, per substep, what the reverse reads
 besides the frames: each particle's affine matrix, SVD(F_tmp) (for the materials that take one:
@@ -8,8 +8,8 @@ the reverse does not redo it) and gathered velocity, and the updated grid (its l
 velocity and mass, and the lists). Each substep's reverse then restores that grid — saved after
 the update, so a coupler's change to the grid between pre and post coupling is in it, where
 rebuilding the grid from frame s would miss it — and runs the stages' adjoints in mirror order
-(kernels.py). All of it belongs to the solver, one step's worth: the autograd nodes still keep
-only their start states. The saved grid's capacity (nodes per env and substep) starts at the
+(kernels.py). All of it belongs to the solver, one step's worth: the autograd graph still keeps
+only each step's start state and inputs. The saved grid's capacity (nodes per env and substep) starts at the
 margin times the nodes the initial particles reach; a replay in which a substep lists more grows
 it and replays again. The gradients flow through:
 - the state rows, in ``grads`` (the gradient w.r.t. frame s + 1 becomes the one w.r.t. frame s);

@@ -55,7 +55,7 @@ class RigidSolver(Solver):
         self._inputs_seen = {}  # name → the input tensor _note_inputs last checked
         self.friction = self.welds_on = False  # some dof has friction loss; some env a run-time weld
         self._packed = {}  # reverse or not → the buffer _pack_inputs writes, its parts' column views and the
-        #                    tensors they hold (_new_packing)
+        #                    input tensors they hold (_new_packing)
         self.substeps = sim_options.substeps
         self.gravity = rigid_options.gravity or sim_options.gravity  # (3,) m/s²: the default input
         self._commit = 1  # 0 while a backward replays a step: its frames stay for the reverse
@@ -347,36 +347,38 @@ class RigidSolver(Solver):
         each of the two layouts and reused by the next call: the kernels read it before that. (A
         new tensor a step was a new memory mapping once it reached 128 KiB, glibc's mmap threshold
         being fixed there (runtime.keep_large_blocks_off_the_heap): its page faults cost a KUKA's
-        256-env differentiable rollout 18 %.) A part is copied only where another tensor replaced
-        it since the buffer took it, each into a view of its columns made with the buffer: a
-        control call each step copies its own columns (a 1024-env KUKA: 310 µs a step for all), a
-        reverse step its state and gradient besides (a concatenation of all ~30 parts cost a small
-        robot's reverse step 12 µs). Inputs by identity: they are never changed in place (every
-        setter makes a new tensor: entities/common.replace_columns); the state and its gradient
-        always (the gradient may be the caller's grad_outputs, refilled in place between two
-        torch.autograd.grad calls: found by an adversarial pass). Which ones changed is found by
-        C-level maps: a loop over the parts in Python cost more than the copy."""
+        256-env differentiable rollout 18 %.) An input is copied only where another tensor
+        replaced it since the buffer took it (by identity: inputs are never changed in place, every
+        setter makes a new tensor: entities/common.replace_columns), into a view of its columns
+        made with the buffer: a control call each step copies its own columns (a 1024-env KUKA: 310
+        µs a step for all; a concatenation of all ~30 parts cost a small robot's reverse step 12
+        µs). Which ones changed is found by C-level maps: a loop over the parts in Python cost more
+        than the copy. A reverse's state and gradient are copied always (the gradient may be the
+        caller's grad_outputs, refilled in place between two torch.autograd.grad calls: found by an
+        adversarial pass)."""
         reverse = state is not None
-        tensors = [state, *map(inputs.__getitem__, INPUTS), grad_state_out] if reverse else \
-            list(map(inputs.__getitem__, INPUTS))
         if reverse not in self._packed:
             self._packed[reverse] = self._new_packing(reverse)
-        buffer, columns, held = self._packed[reverse]
+        buffer, columns, around, held = self._packed[reverse]
+        tensors = list(map(inputs.__getitem__, INPUTS))
         for k in itertools.compress(range(len(tensors)), map(operator.is_not, tensors, held)):
             columns[k].copy_(tensors[k].detach())
         held[:] = tensors
         if reverse:
-            held[0] = held[-1] = None
+            around[0].copy_(state.detach())
+            around[1].copy_(grad_state_out.detach())
         return buffer
 
     def _new_packing(self, reverse):
-        """(buffer, views of its parts' columns, the parts' tensors it holds: none yet) for the
-        inputs, between a start state and its gradient when ``reverse``."""
+        """(buffer, views of its inputs' columns, views of the state's and its gradient's columns
+        around them when ``reverse`` (else ()), the inputs' tensors it holds: none yet)."""
         state = [self.state_width] if reverse else []
         ends = np.cumsum([*state, *(self.data.width(name) for name in INPUTS), *state]).tolist()
-        buffer = self._empty(ends[-1] if ends else 0)
+        buffer = self._empty(ends[-1])
         columns = [buffer[:, start:end] for start, end in zip([0, *ends[:-1]], ends)]
-        return buffer, columns, [None] * len(columns)
+        if reverse:
+            return buffer, columns[1:-1], (columns[0], columns[-1]), [None] * len(INPUTS)
+        return buffer, columns, (), [None] * len(INPUTS)
 
     # -- stepping ---------------------------------------------------------------------------
     def advance(self, inputs=None, download=False):
