@@ -151,8 +151,8 @@ class Segment:
 
     def add(self, sim, index, inputs, wanted, kept, outputs):
         """Record step ``index`` that went from ``self.outputs`` to ``outputs`` with ``inputs``
-        (flat tuple) and their ``flags`` (None: a step not kept, from whose end the segment starts
-        anew), after sim.forward_step."""
+        (flat tuple) and their requires-grad flags ``wanted`` (``flags``; None: a step not kept,
+        from whose end the segment starts anew), after sim.forward_step."""
         if wanted is None:
             self.start_states = self.outputs = outputs
             return
@@ -177,7 +177,7 @@ class Segment:
     def close(self, sim):
         """Make the node of these steps, whose outputs are the states after the last step (no node
         when it kept none). Then the segment lets go of those states and of its saved tensors: the
-        node holds it, a strong link from it to its own outputs would be a cycle through torch's
+        node holds the segment, a strong link from it to its own outputs would be a cycle through torch's
         graph (see the module's docstring), and torch frees the saved ones with the backward. When
         the node cannot be made (a saved-tensor hook raised, an interrupt), this raises and the
         segment stays as it was, for the next read to close it (it replaces the half-made node
