@@ -6,6 +6,7 @@ The Taichi copy of a solver's state is authoritative between steps when no graph
 value) and Taichi is re-synchronised only when something else (a backward pass) used it.
 """
 import itertools
+import math
 import operator
 import weakref
 
@@ -33,9 +34,11 @@ def _zero_unreached_envs(grad_outs, grads):
     gradient reaches (their output gradients ``grad_outs`` all exactly zero) set to zero, when some
     gradient is not finite: envs are independent, so zero is those rows' exact value, where the
     adjoints' 0 · NaN of an env whose state went non-finite gave NaN (and an input the envs share,
-    a policy's weight, got NaN from an env its loss left out)."""
+    a policy's weight, got NaN from an env its loss left out). Tested by each gradient's sum
+    (NaN and inf carry through it; one overflowing only takes the exact path below, which changes
+    nothing then): a third of an elementwise test's cost, ~20 µs a 256-env KUKA step."""
     grads = [g for g in grads if g is not None]
-    if grads[0].shape[0] == 1 or all(bool(torch.isfinite(g).all()) for g in grads):
+    if grads[0].shape[0] == 1 or all(math.isfinite(float(g.sum())) for g in grads):
         return
     reached = torch.zeros(grads[0].shape[0], dtype=torch.bool, device=grads[0].device)
     for out in grad_outs:
