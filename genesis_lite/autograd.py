@@ -194,6 +194,8 @@ class _Segment(torch.autograd.Function):
     @staticmethod
     def forward(ctx, sim, segment, *tensors):
         ctx.sim, ctx.segment = weakref.ref(sim), segment
+        # (where each input's gradient goes: _first_wanted; False for one that requires none)
+        ctx.edges = tuple(t.grad_fn if t.requires_grad else False for t in tensors)
         # saved as tensors, torch frees them with the graph (attributes of ctx would outlive the backward)
         ctx.save_for_backward(*segment.saved)
         return segment.outputs
@@ -205,7 +207,8 @@ class _Segment(torch.autograd.Function):
         sim.hold_before_backward()  # the recomputations and replays below overwrite what the last step found
         saved, n_states = ctx.saved_tensors, len(grad_states)
         grads_tracked = [None] * len(segment.tracked)
-        for index, kept, first, layout, inputs, wanted, positions in reversed(segment.steps):
+        first_wanted = _first_wanted(segment, ctx.edges[:n_states], ctx.edges[n_states:])
+        for index, kept, first, layout, inputs, wanted, positions in reversed(segment.steps[first_wanted:]):
             if kept:
                 states = saved[first: first + n_states]
                 warm_starts, records = (None,) * n_states, (None,) * n_states
@@ -228,8 +231,31 @@ class _Segment(torch.autograd.Function):
                     grads_tracked[position] = grad if held is None else held + grad
             if index == 0:
                 sim.check_first_gradients(grads)
+        if first_wanted > 0:  # (no gradient of the start states is wanted)
+            grad_states = (None,) * n_states
         return (None, None) + _first_order(f"step {segment.steps[0].index}", (*grad_states, *grads_tracked),
                                            (*grad_outs, *saved, *segment.tracked))
+
+
+def _first_wanted(segment, state_edges, tracked_edges):
+    """The position in segment.steps of the first step whose reverse this backward needs: 0 when
+    the start states' gradient is wanted, else the first step given an input whose gradient is.
+    torch prunes a graph to the paths that reach what a backward asks for (``autograd.grad(loss,
+    [a late control])``), and a node a step ran only the steps after the control; a segment asks
+    torch's engine which of its inputs' nodes it will run (``_will_engine_execute_node``, which
+    torch's own checkpointing uses; every input here has a node: setters make them, none is a
+    leaf; a leaf's edge, None, counts as wanted). Found by an adversarial pass: the whole segment
+    ran, and a step before the control without an exact gradient raised."""
+    will_run = getattr(torch._C, "_will_engine_execute_node", None)
+
+    def needed(edge):
+        return edge is not False and (edge is None or will_run is None or will_run(edge))
+
+    if any(map(needed, state_edges)):
+        return 0
+    wanted = {k for k, edge in enumerate(tracked_edges) if needed(edge)}
+    return next((k for k, step in enumerate(segment.steps) if not wanted.isdisjoint(step.positions)),
+                len(segment.steps))
 
 
 def _flatten(tree, tensors):

@@ -669,3 +669,34 @@ def test_a_read_that_fails_to_make_the_node_leaves_the_steps_to_the_next(pendulu
         return g
 
     assert torch.equal(gradient(True), gradient(False))
+
+
+def test_a_gradient_of_a_late_input_reverses_only_the_steps_after_it(pendulum, monkeypatch):
+    """torch prunes a graph to the paths that reach what a backward asks for: the gradient of a
+    control given at step 15 alone reverses the steps from 15 on, as with a node a step (found by
+    an adversarial pass: the segment reversed all its steps, and an earlier one without an exact
+    gradient raised), and equals a whole backward's bit for bit."""
+    scene, robot = pendulum
+    reversed_steps, backward_step = [], type(scene.sim).backward_step
+    monkeypatch.setattr(type(scene.sim), "backward_step",
+                        lambda sim, *args: reversed_steps.append(1) or backward_step(sim, *args))
+    v0 = torch.tensor([0.3, -0.2], dtype=torch.float64, requires_grad=True)
+    early = torch.tensor([0.5, 0.1], dtype=torch.float64, requires_grad=True)
+    late = torch.tensor([0.2, -0.3], dtype=torch.float64, requires_grad=True)
+
+    def loss():
+        scene.reset()
+        robot.set_dofs_velocity(v0)
+        robot.control_dofs_force(early)
+        for t in range(T):
+            if t == 15:
+                robot.control_dofs_force(late)
+            scene.step()
+        return robot.get_dofs_position().sum()
+
+    (of_late,) = torch.autograd.grad(loss(), [late])
+    assert len(reversed_steps) == T - 15
+    torch.autograd.grad(loss(), [early])
+    assert len(reversed_steps) == 2 * T - 15
+    loss().backward()
+    assert torch.equal(of_late, late.grad) and bool((of_late != 0).all())
