@@ -249,7 +249,12 @@ def _first_wanted(segment, state_edges, tracked_edges):
     will_run = getattr(torch._C, "_will_engine_execute_node", None)
 
     def needed(edge):
-        return edge is not False and (edge is None or will_run is None or will_run(edge))
+        if edge is False:
+            return False
+        try:
+            return edge is None or will_run is None or will_run(edge)
+        except RuntimeError:  # (where torch cannot tell: as wanted)
+            return True
 
     if any(map(needed, state_edges)):
         return 0
