@@ -23,6 +23,15 @@ from .core import InvalidInputError
 _COMPILED = {}
 # launch contexts a kernel of scalar arguments keeps (one per argument tuple: substep, frame...)
 MAX_SCALAR_CONTEXTS = 256
+# Taichi's opt_level (taichi_opt_level) of the rigid kernels that run no iterative solve: 0 skips
+# Taichi's whole-kernel common-subexpression elimination, which walks the whole kernel twice for
+# each expression it removes (quadratic in a kernel's size): Taichi's scoped profiler gave it 4.5 of
+# the 8.4 s Taichi took to compile a differentiable box on a plane's kernels (float64, empty cache;
+# at 0 the convex collider compiled in 15 s instead of 43, its reverse in 8 instead of 31).
+# LLVM's own CSE still runs and the bits are the same (tests/test_compile_once.py). The constraint
+# solve, its reverse and inverse kinematics keep Taichi's 1: the solve ran 2-5 % slower at 0, while
+# the others measured the same at 0 (KUKA at 256 envs, contact scenes at 256 and 1024 envs).
+LIGHT_OPT_LEVEL = 0
 
 
 def forget():
@@ -184,11 +193,12 @@ class BoundKernel:
 class BoundKernels:
     """Kernels bound to one scene's arrays: ``kernels.read_state(0, out)``."""
 
-    def __init__(self, template, arrays, element_dims, *kernels):
-        self.bind(template, arrays, element_dims, *kernels)
+    def __init__(self, template, arrays, element_dims, *kernels, opt_level=1):
+        self.bind(template, arrays, element_dims, *kernels, opt_level=opt_level)
 
-    def bind(self, template, arrays, element_dims, *kernels):
-        """Bind more kernels (or bind them again), with their own compile-time argument; returns self."""
+    def bind(self, template, arrays, element_dims, *kernels, opt_level=1):
+        """Bind more kernels (or bind them again), with their own compile-time argument and Taichi's
+        opt_level (see BoundKernel); returns self."""
         for kernel in kernels:
-            setattr(self, kernel.__name__, BoundKernel(kernel, template, arrays, element_dims))
+            setattr(self, kernel.__name__, BoundKernel(kernel, template, arrays, element_dims, opt_level))
         return self

@@ -28,9 +28,8 @@ import pytest
 import taichi as ti
 
 import genesis_lite as gs
-from genesis_lite.solvers.launch import taichi_opt_level
+from genesis_lite.solvers.launch import LIGHT_OPT_LEVEL, taichi_opt_level
 from genesis_lite.solvers.rigid.collision import convex as cv
-from genesis_lite.solvers.rigid.collision.detect import CONVEX_OPT_LEVEL
 from tests.collider_adjoint import N_COTANGENT, N_INPUTS, _unit3, _unit33
 from tests.test_colliders_convex import (MARGIN, TYPES, VEC3, _convex_cases, _geom, _Harness, _hull, _model,
                                          _random_quat)
@@ -343,7 +342,7 @@ def results():
     args = (batch["types"].astype(np.int32), batch["sizes"], batch["meshes"].astype(np.int32), batch["pos"],
             batch["rot"], batch["margins"], count, feature, cotangent)
     grad = np.zeros((n, K, N_INPUTS))
-    with taichi_opt_level(CONVEX_OPT_LEVEL):  # as the solver compiles convex kernels (plane–mesh: 1; same bits)
+    with taichi_opt_level(LIGHT_OPT_LEVEL):  # as the solver compiles its collider kernels (the same bits)
         _adjoint_kernel(*args, harness.hull_vec, harness.hull_int, grad)
         scan = {}
         for eps in SCAN:

@@ -21,8 +21,8 @@ import trimesh
 
 import genesis_lite as gs
 from genesis_lite.solvers.rigid.collision import convex as cv
-from genesis_lite.solvers.launch import taichi_opt_level
-from genesis_lite.solvers.rigid.collision.detect import CONVEX_OPT_LEVEL, HullView
+from genesis_lite.solvers.launch import LIGHT_OPT_LEVEL, taichi_opt_level
+from genesis_lite.solvers.rigid.collision.detect import HullView
 from genesis_lite.solvers.rigid.data import ArrayView
 from genesis_lite.solvers.rigid.geometry import hull_arrays
 
@@ -106,7 +106,7 @@ class _Harness:
         assert n <= ROWS
         out = (np.zeros(n, np.int32), np.zeros((n, cv.CONVEX_MAX, 3)), np.zeros((n, cv.CONVEX_MAX, 3)),
                np.zeros((n, cv.CONVEX_MAX)), np.zeros((n, cv.CONVEX_MAX, cv.FEATURE_SIZE), np.int32))
-        with taichi_opt_level(CONVEX_OPT_LEVEL):  # compiled as the solver compiles its convex kernels
+        with taichi_opt_level(LIGHT_OPT_LEVEL):  # compiled as the solver compiles its collider kernels
             _convex_kernel(np.asarray(types, np.int32), sizes, np.asarray(meshes, np.int32), pos, rot, margins,
                            self.hull_vec, self.hull_int, *self.ws, *out)
         return out

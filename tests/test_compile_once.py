@@ -8,9 +8,9 @@ import trimesh
 from taichi.lang import impl
 
 import genesis_lite as gs
+from genesis_lite.solvers import launch
 from genesis_lite.solvers.launch import _COMPILED, BoundKernel
 from genesis_lite.solvers.rigid import step
-from genesis_lite.solvers.rigid.collision import detect
 from genesis_lite.solvers.rigid.data import SERIAL_SOLVE_WORK
 from tests.conftest import asset, pybullet
 from tests import test_contact_gradients
@@ -91,9 +91,10 @@ def test_contact_scenes_share_compiled_kernels(f64):
     assert _n_compiled() == compiled, "a new contact scene compiled kernels again"
 
 
-def _convex_rollout(mesh_file):
-    """Final positions and dL/dv0 of cylinders lying on a box with icosahedra on top (every convex
-    kernel: the collider, converge, the collider's reverse), float64, 2 envs, 60 steps."""
+def _contact_rollout(mesh_file):
+    """Final positions and dL/dv0 of cylinders lying on a box with icosahedra on top and a sphere
+    beside them (the convex kernels: the collider, converge, the collider's reverse; a primitive
+    pair's; the constraint solve and its reverse), float64, 2 envs, 60 steps."""
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002, requires_grad=True))
     scene.add_entity(gs.morphs.Box(pos=(0, 0, 0.05), size=(1, 1, 0.1), fixed=True))
     bodies = []
@@ -101,6 +102,7 @@ def _convex_rollout(mesh_file):
         bodies.append(scene.add_entity(gs.morphs.Cylinder(pos=(0.3 * k, 0, 0.149), radius=0.05, height=0.1,
                                                           euler=(90, 10 * k, 0))))
         bodies.append(scene.add_entity(gs.morphs.Mesh(file=mesh_file, pos=(0.3 * k, 0.01, 0.245))))
+    bodies.append(scene.add_entity(gs.morphs.Sphere(pos=(-0.3, 0, 0.149), radius=0.05)))
     scene.build(n_envs=2)
     v0 = torch.tensor([[0.2, 0.0, -0.1, 0.0, 0.3, 0.5], [0.0, 0.1, 0.0, 1.0, 0.0, 0.0]], dtype=torch.float64,
                       requires_grad=True)
@@ -113,15 +115,16 @@ def _convex_rollout(mesh_file):
     return positions.detach(), v0.grad
 
 
-def _record_convex_compiles(monkeypatch):
-    """[(kernel name, opt_level)] of each convex kernel compiled (or loaded from the offline cache)
-    from now on: BoundKernel resolves a kernel's code once per Taichi runtime."""
-    compiled = []
+def _record_compiles(monkeypatch):
+    """{(kernel name, whether it runs the constraint solve or its reverse): {opt_level}} of each rigid
+    kernel compiled (or loaded from the offline cache) from now on: BoundKernel resolves a kernel's
+    code once per Taichi runtime."""
+    compiled = {}
     resolve = BoundKernel._resolve
 
     def recording(self, program, args):
-        if self.kernel is step.converge or (isinstance(self.template, tuple) and self.template[1] == detect.ALL_CONVEX):
-            compiled.append((self.kernel.__name__, impl.current_cfg().opt_level))
+        solve = self.kernel is step.constrain or (self.kernel is step.reverse_dynamics and self.template[1] == 1)
+        compiled.setdefault((self.kernel.__name__, solve), set()).add(impl.current_cfg().opt_level)
         return resolve(self, program, args)
     monkeypatch.setattr(BoundKernel, "_resolve", recording)
     return compiled
@@ -129,22 +132,25 @@ def _record_convex_compiles(monkeypatch):
 
 @pytest.mark.slow
 @pytest.mark.restarts
-def test_convex_kernels_compute_the_same_bits_at_taichi_default_opt_level(f64, tmp_path, monkeypatch):
-    """The convex kernels compile at Taichi's opt_level 0 (detect.CONVEX_OPT_LEVEL: no whole-kernel
-    common-subexpression elimination, two thirds of their compile time); a rollout through them
-    and its gradients are the same bits at Taichi's default, 1. Taichi keeps a kernel's first
-    compile for its runtime's life, so each rollout runs in a new runtime."""
+def test_light_kernels_compute_the_same_bits_at_taichi_default_opt_level(f64, tmp_path, monkeypatch):
+    """Every rigid kernel but those of the constraint solve compiles at Taichi's opt_level 0
+    (launch.LIGHT_OPT_LEVEL: no whole-kernel common-subexpression elimination, most of their
+    compile time); a contact rollout through them and its gradients are the same bits at Taichi's
+    default, 1. Taichi keeps a kernel's first compile for its runtime's life, so each rollout runs in
+    a new runtime."""
     mesh_file = str(tmp_path / "ico.obj")
     trimesh.creation.icosphere(subdivisions=1, radius=0.05).export(mesh_file)
-    compiled = _record_convex_compiles(monkeypatch)
+    compiled = _record_compiles(monkeypatch)
     rollouts = []
-    for level in (detect.CONVEX_OPT_LEVEL, 1):
-        monkeypatch.setattr(detect, "CONVEX_OPT_LEVEL", level)
-        monkeypatch.setattr(detect, "opt_level", lambda kind, level=level: level if kind == detect.ALL_CONVEX else 1)
+    for level in (launch.LIGHT_OPT_LEVEL, 1):
+        monkeypatch.setattr(launch, "LIGHT_OPT_LEVEL", level)
         gs.destroy()
         gs.init(precision="64", logging_level="warning")
-        rollouts.append(_convex_rollout(mesh_file))
-        assert sorted(compiled) == [(name, level) for name in ("collide", "collide_adjoint", "converge")]
+        rollouts.append(_contact_rollout(mesh_file))
+        names = {name for name, _ in compiled}
+        assert {"collide", "collide_adjoint", "converge", "smooth_substep", "reverse_kinematics"} <= names
+        assert {("constrain", True), ("reverse_dynamics", True)} <= set(compiled)
+        assert compiled == {(name, solve): {1 if solve else level} for name, solve in compiled}, compiled
         compiled.clear()
     light, default = rollouts
     assert light[1].abs().sum() > 0

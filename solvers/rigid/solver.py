@@ -14,6 +14,7 @@ import torch
 
 from ..base import GradColumns, Solver
 from ..core import AssetError, GradientError, SimulationError, new_state, runtime
+from .. import launch
 from ..launch import BoundKernel, BoundKernels
 from . import contact, ik, step
 from .collision import detect
@@ -135,17 +136,17 @@ class RigidSolver(Solver):
                               sim.requires_grad, settings)
         element_dims = [len(ELEMENT[a]) for a in ARENAS]
         schedule, arenas = self.data.schedule, self.data.arenas
-        self.kernels = BoundKernels(schedule, arenas, element_dims, *step.KERNELS)
+        light = launch.LIGHT_OPT_LEVEL  # every kernel but those of the constraint solve and inverse kinematics
+        self.kernels = BoundKernels(schedule, arenas, element_dims, *step.KERNELS, opt_level=light)
         m = self.model
         self.inexact_kinds = detect.inexact_kinds(m)  # pair kinds whose contacts may not be closed forms
         # (its bits in the header's colliders_due mask, kernel) of each collider kernel
         self.colliders = [(1 << detect.KERNEL_BIT[kind], BoundKernel(step.collide, (schedule, kind), arenas,
-                                                                     element_dims, detect.opt_level(kind)))
+                                                                     element_dims, light))
                           for kind in detect.kernel_kinds(m)]
         if self.data.size["converged"] and self.inexact_kinds:  # convex contacts → their closed forms
             ccd = (1 << detect.KERNEL_BIT[detect.ALL_CONVEX]) | (1 << detect.KERNEL_BIT[detect.ALL_HFIELD])
-            self.colliders.append((ccd, BoundKernel(step.converge, schedule, arenas, element_dims,
-                                                    detect.CONVEX_OPT_LEVEL)))
+            self.colliders.append((ccd, BoundKernel(step.converge, schedule, arenas, element_dims, light)))
         # the reverse of a substep, without and with the constraint stage
         solve_schedule, elliptic = self.data.solve_schedule, bool(settings["cone"])
         body_eqs = m.n_body_eq > 0 or options.max_dynamic_constraints > 0
@@ -154,11 +155,11 @@ class RigidSolver(Solver):
         self.constrain = BoundKernel(step.constrain, (solve_schedule, elliptic, body_eqs, max_condim), arenas,
                                      element_dims)
         self.reverse_kernel = [BoundKernel(step.reverse_dynamics, (schedule, 0, False, False, 3), arenas,
-                                           element_dims),
+                                           element_dims, light),
                                BoundKernel(step.reverse_dynamics, (solve_schedule, 1, elliptic, body_eqs, max_condim),
                                            arenas, element_dims)]
         self.collider_reverses = [(detect.KERNEL_BIT[kind], BoundKernel(step.collide_adjoint, (schedule, kind),
-                                                                        arenas, element_dims, detect.opt_level(kind)))
+                                                                        arenas, element_dims, light))
                                   for kind in detect.differentiable_kinds(m)]
         self._inverse_kinematics = {serial: BoundKernel(ik.inverse_kinematics, serial, arenas, element_dims)
                                     for serial in (False, True)}

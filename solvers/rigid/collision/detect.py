@@ -288,19 +288,6 @@ ALL_HFIELD = "hfield"
 COLLIDERS.update({kind: (None, False) for kind in (*HFIELD_PAIRS, ALL_HFIELD)})
 BUDGET.update({kind: hfield.HFIELD_MAX for kind in HFIELD_PAIRS})
 GROUPS = {ALL_CONVEX: convex.CONVEX_PAIRS, ALL_HFIELD: HFIELD_PAIRS}  # the kernels that serve several kinds
-# Taichi's opt_level for the convex kernels (ALL_CONVEX's collider and its reverse, and step.converge):
-# 0 skips Taichi's whole-kernel common-subexpression elimination, two thirds of their compile time
-# (float32, empty cache: the collider 43 → 15 s, its reverse 31 → 8 s, converge 6.7 → 2.9 s), the
-# same bits and no measurable change in run time (GJK and EPA are branches and loops over the
-# workspace; LLVM's own CSE still runs). The other kernels keep 1: the constraint solve ran 3-5 %
-# slower at 0.
-CONVEX_OPT_LEVEL = 0
-
-
-def opt_level(kind):
-    """Taichi's opt_level for the collider kernel of ``kind`` and its reverse."""
-    return CONVEX_OPT_LEVEL if kind in GROUPS else 1
-
 
 # Each collider kernel's bit in the header's colliders_due mask: a kernel runs in a substep only
 # when the broad phase (near_pairs) found a pair of its kind in some env
