@@ -27,10 +27,11 @@ MAX_SCALAR_CONTEXTS = 256
 # Taichi's whole-kernel common-subexpression elimination, which walks the whole kernel twice for
 # each expression it removes (quadratic in a kernel's size): Taichi's scoped profiler gave it 4.5 of
 # the 8.4 s Taichi took to compile a differentiable box on a plane's kernels (float64, empty cache;
-# at 0 the convex collider compiled in 15 s instead of 43, its reverse in 8 instead of 31).
-# LLVM's own CSE still runs and the bits are the same (tests/test_compile_once.py). The constraint
-# solve, its reverse and inverse kinematics keep Taichi's 1: the solve ran 2-5 % slower at 0, while
-# the others measured the same at 0 (KUKA at 256 envs, contact scenes at 256 and 1024 envs).
+# float32: at 0 the convex collider compiled in 15 s instead of 43, its reverse in 8 instead of 31).
+# LLVM's own CSE still runs and the bits are the same (tests/test_compile_once.py). The kernels
+# measured run as fast at 0 (KUKA at 256 envs, contact scenes at 256 and 1024 envs) but the
+# constraint solve and its reverse, 2-5 % slower: they keep Taichi's 1, and so does inverse
+# kinematics, an iterative solve too (not measured at 0).
 LIGHT_OPT_LEVEL = 0
 
 

@@ -10,7 +10,7 @@ from taichi.lang import impl
 import genesis_lite as gs
 from genesis_lite.solvers import launch
 from genesis_lite.solvers.launch import _COMPILED, BoundKernel
-from genesis_lite.solvers.rigid import step
+from genesis_lite.solvers.rigid import ik, step
 from genesis_lite.solvers.rigid.data import SERIAL_SOLVE_WORK
 from tests.conftest import asset, pybullet
 from tests import test_contact_gradients
@@ -115,15 +115,35 @@ def _contact_rollout(mesh_file):
     return positions.detach(), v0.grad
 
 
+def _jointed_rollout():
+    """Final joint positions, link positions, mass matrices and dL/d(forces) of a two-link pendulum's
+    contact-free rollout (the one-launch step, the reverse without rows, the getters and their
+    reverse), float64, 2 envs, 30 steps."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True),
+                     rigid_options=gs.options.RigidOptions(enable_collision=False))
+    robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
+    scene.build(n_envs=2)
+    forces = torch.linspace(-1.0, 1.0, 30 * 2 * robot.n_dofs, dtype=torch.float64).reshape(30, 2, -1)
+    forces.requires_grad_(True)
+    robot.set_dofs_position(torch.tensor([[0.3, -0.2], [1.0, 0.5]], dtype=torch.float64))
+    for force in forces.unbind(0):
+        robot.control_dofs_force(force)
+        scene.step()
+    q, links, mass = robot.get_dofs_position(), robot.get_links_pos(), robot.get_mass_mat().detach()
+    (q.pow(2).sum() + links.sum()).backward()
+    return q.detach(), links.detach(), mass.detach(), forces.grad
+
+
 def _record_compiles(monkeypatch):
-    """{(kernel name, whether it runs the constraint solve or its reverse): {opt_level}} of each rigid
-    kernel compiled (or loaded from the offline cache) from now on: BoundKernel resolves a kernel's
-    code once per Taichi runtime."""
+    """{(kernel name, whether it runs an iterative solve: the constraint solve, its reverse, inverse
+    kinematics): {opt_level}} of each rigid kernel compiled (or loaded from the offline cache) from
+    now on: BoundKernel resolves a kernel's code once per Taichi runtime."""
     compiled = {}
     resolve = BoundKernel._resolve
 
     def recording(self, program, args):
-        solve = self.kernel is step.constrain or (self.kernel is step.reverse_dynamics and self.template[1] == 1)
+        solve = (self.kernel in (step.constrain, ik.inverse_kinematics)
+                 or (self.kernel is step.reverse_dynamics and self.template[1] == 1))
         compiled.setdefault((self.kernel.__name__, solve), set()).add(impl.current_cfg().opt_level)
         return resolve(self, program, args)
     monkeypatch.setattr(BoundKernel, "_resolve", recording)
@@ -133,11 +153,11 @@ def _record_compiles(monkeypatch):
 @pytest.mark.slow
 @pytest.mark.restarts
 def test_light_kernels_compute_the_same_bits_at_taichi_default_opt_level(f64, tmp_path, monkeypatch):
-    """Every rigid kernel but those of the constraint solve compiles at Taichi's opt_level 0
+    """Every rigid kernel but those of an iterative solve compiles at Taichi's opt_level 0
     (launch.LIGHT_OPT_LEVEL: no whole-kernel common-subexpression elimination, most of their
-    compile time); a contact rollout through them and its gradients are the same bits at Taichi's
-    default, 1. Taichi keeps a kernel's first compile for its runtime's life, so each rollout runs in
-    a new runtime."""
+    compile time); a contact rollout and a jointed one through them and their gradients are the
+    same bits at Taichi's default, 1. Taichi keeps a kernel's first compile for its runtime's life,
+    so each level runs in a new runtime."""
     mesh_file = str(tmp_path / "ico.obj")
     trimesh.creation.icosphere(subdivisions=1, radius=0.05).export(mesh_file)
     compiled = _record_compiles(monkeypatch)
@@ -146,13 +166,14 @@ def test_light_kernels_compute_the_same_bits_at_taichi_default_opt_level(f64, tm
         monkeypatch.setattr(launch, "LIGHT_OPT_LEVEL", level)
         gs.destroy()
         gs.init(precision="64", logging_level="warning")
-        rollouts.append(_contact_rollout(mesh_file))
+        rollouts.append((*_contact_rollout(mesh_file), *_jointed_rollout()))
         names = {name for name, _ in compiled}
-        assert {"collide", "collide_adjoint", "converge", "smooth_substep", "reverse_kinematics"} <= names
-        assert {("constrain", True), ("reverse_dynamics", True)} <= set(compiled)
+        assert {"collide", "collide_adjoint", "converge", "smooth_substep", "reverse_kinematics", "advance",
+                "read_mass_matrix", "read_links"} <= names
+        assert {("constrain", True), ("reverse_dynamics", True), ("reverse_dynamics", False)} <= set(compiled)
         assert compiled == {(name, solve): {1 if solve else level} for name, solve in compiled}, compiled
         compiled.clear()
     light, default = rollouts
-    assert light[1].abs().sum() > 0
+    assert light[1].abs().sum() > 0 and light[-1].abs().sum() > 0
     for a, b in zip(light, default):
         assert torch.equal(a, b), (a - b).abs().max()
