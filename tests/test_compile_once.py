@@ -8,7 +8,8 @@ import trimesh
 from taichi.lang import impl
 
 import genesis_lite as gs
-from genesis_lite.solvers import launch
+from genesis_lite.solvers import coupler, launch
+from genesis_lite.solvers.mpm import kernels as mpm_kernels
 from genesis_lite.solvers.launch import _COMPILED, BoundKernel
 from genesis_lite.solvers.rigid import ik, step
 from genesis_lite.solvers.rigid.data import SERIAL_SOLVE_WORK
@@ -134,17 +135,40 @@ def _jointed_rollout():
     return q.detach(), links.detach(), mass.detach(), forces.grad
 
 
+def _mpm_rollout():
+    """Final particle positions and dL/dv0 of an elastic block dropped on a fixed rigid box (the MPM's
+    forward and reverse kernels, a collider at rest), float64, 5 steps of 10 substeps."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=2e-3, substeps=10, requires_grad=True),
+                     mpm_options=gs.options.MPMOptions(lower_bound=(-0.2, -0.2, -0.1), upper_bound=(0.2, 0.2, 0.3),
+                                                       grid_density=32))
+    scene.add_entity(gs.morphs.Box(pos=(0, 0, 0.03), size=(0.4, 0.4, 0.06), fixed=True), material=gs.materials.Rigid())
+    jelly = scene.add_entity(gs.morphs.Box(pos=(0, 0, 0.1), size=(0.08, 0.08, 0.08)),
+                             material=gs.materials.MPM.Elastic())
+    scene.build()
+    v0 = torch.linspace(-0.5, 0.5, 3 * jelly.n_particles, dtype=torch.float64).reshape(-1, 3).requires_grad_(True)
+    jelly.set_particles_vel(v0)
+    for _ in range(5):
+        scene.step()
+    positions = jelly.get_particles_pos()
+    positions.pow(2).sum().backward()
+    return positions.detach(), v0.grad
+
+
+# the kernels that keep Taichi's opt_level 1 (launch.LIGHT_OPT_LEVEL), besides the constraint solve's reverse
+HEAVY = (step.constrain, ik.inverse_kinematics, *mpm_kernels.KERNELS, *mpm_kernels.STRESS_KERNELS, coupler.couple,
+         coupler.couple_adjoint)
+
+
 def _record_compiles(monkeypatch):
-    """{(kernel name, whether it runs an iterative solve: the constraint solve, its reverse, inverse
-    kinematics): {opt_level}} of each rigid kernel compiled (or loaded from the offline cache) from
-    now on: BoundKernel resolves a kernel's code once per Taichi runtime."""
+    """{(kernel name, whether it keeps opt_level 1: HEAVY, or the constraint solve's reverse):
+    {opt_level}} of each kernel compiled (or loaded from the offline cache) from now on: BoundKernel
+    resolves a kernel's code once per Taichi runtime."""
     compiled = {}
     resolve = BoundKernel._resolve
 
     def recording(self, program, args):
-        solve = (self.kernel in (step.constrain, ik.inverse_kinematics)
-                 or (self.kernel is step.reverse_dynamics and self.template[1] == 1))
-        compiled.setdefault((self.kernel.__name__, solve), set()).add(impl.current_cfg().opt_level)
+        heavy = self.kernel in HEAVY or (self.kernel is step.reverse_dynamics and self.template[1] == 1)
+        compiled.setdefault((self.kernel.__name__, heavy), set()).add(impl.current_cfg().opt_level)
         return resolve(self, program, args)
     monkeypatch.setattr(BoundKernel, "_resolve", recording)
     return compiled
@@ -153,11 +177,11 @@ def _record_compiles(monkeypatch):
 @pytest.mark.slow
 @pytest.mark.restarts
 def test_light_kernels_compute_the_same_bits_at_taichi_default_opt_level(f64, tmp_path, monkeypatch):
-    """Every rigid kernel but those of an iterative solve compiles at Taichi's opt_level 0
-    (launch.LIGHT_OPT_LEVEL: no whole-kernel common-subexpression elimination, most of their
-    compile time); a contact rollout and a jointed one through them and their gradients are the
-    same bits at Taichi's default, 1. Taichi keeps a kernel's first compile for its runtime's life,
-    so each level runs in a new runtime."""
+    """Every rigid kernel but those of an iterative solve, and the MPM's reverse kernels, compile at
+    Taichi's opt_level 0 (launch.LIGHT_OPT_LEVEL: no whole-kernel common-subexpression elimination,
+    most of their compile time); a contact rollout, a jointed one and an MPM one through them and
+    their gradients are the same bits at Taichi's default, 1. Taichi keeps a kernel's first compile
+    for its runtime's life, so each level runs in a new runtime."""
     mesh_file = str(tmp_path / "ico.obj")
     trimesh.creation.icosphere(subdivisions=1, radius=0.05).export(mesh_file)
     compiled = _record_compiles(monkeypatch)
@@ -166,14 +190,15 @@ def test_light_kernels_compute_the_same_bits_at_taichi_default_opt_level(f64, tm
         monkeypatch.setattr(launch, "LIGHT_OPT_LEVEL", level)
         gs.destroy()
         gs.init(precision="64", logging_level="warning")
-        rollouts.append((*_contact_rollout(mesh_file), *_jointed_rollout()))
+        rollouts.append((*_contact_rollout(mesh_file), *_jointed_rollout(), *_mpm_rollout()))
         names = {name for name, _ in compiled}
         assert {"collide", "collide_adjoint", "converge", "smooth_substep", "reverse_kinematics", "advance",
-                "read_mass_matrix", "read_links"} <= names
-        assert {("constrain", True), ("reverse_dynamics", True), ("reverse_dynamics", False)} <= set(compiled)
-        assert compiled == {(name, solve): {1 if solve else level} for name, solve in compiled}, compiled
+                "read_mass_matrix", "read_links", "pre_coupling_backward", "post_coupling_backward"} <= names
+        assert {("constrain", True), ("reverse_dynamics", True), ("reverse_dynamics", False),
+                ("pre_coupling", True), ("post_coupling", True)} <= set(compiled)
+        assert compiled == {(name, heavy): {1 if heavy else level} for name, heavy in compiled}, compiled
         compiled.clear()
     light, default = rollouts
-    assert light[1].abs().sum() > 0 and light[-1].abs().sum() > 0
+    assert all(light[k].abs().sum() > 0 for k in (1, 5, 7))  # the three rollouts' gradients
     for a, b in zip(light, default):
         assert torch.equal(a, b), (a - b).abs().max()

@@ -23,6 +23,7 @@ import numpy as np
 import torch
 
 from ..core import runtime
+from .. import launch
 from ..launch import BoundKernels
 from . import kernels, layout
 from .constitutive import any_needs_svd
@@ -81,7 +82,9 @@ class MPMAdjoint:
         arrays = self._arrays() + [self.grads.view(-1), self.grad_params, self.grad_env, self.grad_grid.view(-1),
                                    self.scratch.view(-1)]
         config = (False, self.serial_chores, self.has_colliders, self.meets_moving)
-        self.reverse_kernels = BoundKernels(config, arrays, [0] * len(arrays), *kernels.REVERSE_KERNELS)
+        # (at Taichi's light opt_level: launch.LIGHT_OPT_LEVEL; the forward kernels, 8-15 % slower there, at 1)
+        self.reverse_kernels = BoundKernels(config, arrays, [0] * len(arrays), *kernels.REVERSE_KERNELS,
+                                            opt_level=launch.LIGHT_OPT_LEVEL)
 
     def begin_reverse(self, state, inputs, grad_state_out, warm_start, record=None):
         """Frame 0 ← the step's start state (B, N · 25), the inputs uploaded, grads ← the gradient
