@@ -33,7 +33,7 @@ MAX_SCALAR_CONTEXTS = 256
 # contact scenes at 256 and 1024 envs) but the constraint solve and its reverse, 2-5 % slower: they
 # keep Taichi's 1, and so does inverse kinematics, an iterative solve too (not measured at 0). The
 # MPM's reverse kernels ran as fast at 0 (10k neo-Hookean particles, fwd + bwd; their compile 3.0 →
-# 0.75 and 2.3 → 0.56 s, float64), its forward kernels 8-15 % slower (they keep 1); the rigid–MPM
+# 0.75 and 2.3 → 0.56 s, float64), its forward kernels 8-17 % slower (they keep 1); the rigid–MPM
 # coupler's kernels keep 1 (not measured).
 LIGHT_OPT_LEVEL = 0
 

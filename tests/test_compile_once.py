@@ -136,14 +136,16 @@ def _jointed_rollout():
 
 
 def _mpm_rollout():
-    """Final particle positions and dL/dv0 of an elastic block dropped on a fixed rigid box (the MPM's
-    forward and reverse kernels, a collider at rest), float64, 5 steps of 10 substeps."""
+    """Final particle positions and dL/dv0 of an elastic block dropped towards a fixed rigid box, a
+    free sphere beside it (the MPM's forward and reverse kernels with a collider at rest and a moving
+    one, the coupler's), float64, 5 steps of 10 substeps."""
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=2e-3, substeps=10, requires_grad=True),
                      mpm_options=gs.options.MPMOptions(lower_bound=(-0.2, -0.2, -0.1), upper_bound=(0.2, 0.2, 0.3),
                                                        grid_density=32))
     scene.add_entity(gs.morphs.Box(pos=(0, 0, 0.03), size=(0.4, 0.4, 0.06), fixed=True), material=gs.materials.Rigid())
     jelly = scene.add_entity(gs.morphs.Box(pos=(0, 0, 0.1), size=(0.08, 0.08, 0.08)),
                              material=gs.materials.MPM.Elastic())
+    scene.add_entity(gs.morphs.Sphere(pos=(0.07, 0, 0.1), radius=0.02))
     scene.build()
     v0 = torch.linspace(-0.5, 0.5, 3 * jelly.n_particles, dtype=torch.float64).reshape(-1, 3).requires_grad_(True)
     jelly.set_particles_vel(v0)
@@ -195,7 +197,8 @@ def test_light_kernels_compute_the_same_bits_at_taichi_default_opt_level(f64, tm
         assert {"collide", "collide_adjoint", "converge", "smooth_substep", "reverse_kinematics", "advance",
                 "read_mass_matrix", "read_links", "pre_coupling_backward", "post_coupling_backward"} <= names
         assert {("constrain", True), ("reverse_dynamics", True), ("reverse_dynamics", False),
-                ("pre_coupling", True), ("post_coupling", True)} <= set(compiled)
+                ("pre_coupling", True), ("post_coupling", True), ("couple", True), ("couple_adjoint", True)} \
+            <= set(compiled)
         assert compiled == {(name, heavy): {1 if heavy else level} for name, heavy in compiled}, compiled
         compiled.clear()
     light, default = rollouts

@@ -82,7 +82,7 @@ class MPMAdjoint:
         arrays = self._arrays() + [self.grads.view(-1), self.grad_params, self.grad_env, self.grad_grid.view(-1),
                                    self.scratch.view(-1)]
         config = (False, self.serial_chores, self.has_colliders, self.meets_moving)
-        # (at Taichi's light opt_level: launch.LIGHT_OPT_LEVEL; the forward kernels, 8-15 % slower there, at 1)
+        # (at Taichi's light opt_level: launch.LIGHT_OPT_LEVEL; the forward kernels, 8-17 % slower there, at 1)
         self.reverse_kernels = BoundKernels(config, arrays, [0] * len(arrays), *kernels.REVERSE_KERNELS,
                                             opt_level=launch.LIGHT_OPT_LEVEL)
 
