@@ -30,12 +30,18 @@ MAX_SCALAR_CONTEXTS = 256
 # kernels (float64, empty cache; float32: at 0 the convex collider compiled in 15 s instead of 43,
 # its reverse in 8 instead of 31). LLVM's own CSE still runs and the bits are the same
 # (tests/test_compile_once.py). The rigid kernels measured run as fast at 0 (KUKA at 256 envs,
-# contact scenes at 256 and 1024 envs) but the constraint solve and its reverse, 2-5 % slower: they
-# keep Taichi's 1, and so does inverse kinematics, an iterative solve too (not measured at 0). The
+# contact scenes at 256 and 1024 envs) but the constraint solve and its reverse (SOLVE_OPT_LEVEL). The
 # MPM's reverse kernels ran as fast at 0 (10k neo-Hookean particles, fwd + bwd; their compile 3.0 →
 # 0.75 and 2.3 → 0.56 s, float64), its forward kernels 8-17 % slower (they keep 1); the rigid–MPM
 # coupler's kernels keep 1 (not measured).
 LIGHT_OPT_LEVEL = 0
+# Taichi's opt_level of the rigid constraint solve, its reverse and inverse kinematics: at 0 they
+# compile in about half the time (at 1 the solve and its reverse took half the compile time of a
+# cold test suite) and run slower where the solve dominates (at 1024 envs the box 9 %, the a1 5 %,
+# the tower the same; 2026-12-02): 1 for users. The default test suite compiles them at 0
+# (tests/conftest.py); a slow test checks that both levels compute the same bits
+# (tests/test_compile_once.py).
+SOLVE_OPT_LEVEL = 1
 
 
 def forget():

@@ -119,7 +119,7 @@ def _contact_rollout(mesh_file):
 def _jointed_rollout():
     """Final joint positions, link positions, mass matrices and dL/d(forces) of a two-link pendulum's
     contact-free rollout (the one-launch step, the reverse without rows, the getters and their
-    reverse), float64, 2 envs, 30 steps."""
+    reverse), float64, 2 envs, 30 steps; then the qpos inverse kinematics finds for its tip."""
     scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True),
                      rigid_options=gs.options.RigidOptions(enable_collision=False))
     robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
@@ -132,7 +132,9 @@ def _jointed_rollout():
         scene.step()
     q, links, mass = robot.get_dofs_position(), robot.get_links_pos(), robot.get_mass_mat().detach()
     (q.pow(2).sum() + links.sum()).backward()
-    return q.detach(), links.detach(), mass.detach(), forces.grad
+    tip = robot.links[-1]
+    reach = robot.inverse_kinematics(tip, pos=links.detach()[:, -1] * 0.9, max_samples=3, seed=0)
+    return q.detach(), links.detach(), mass.detach(), forces.grad, reach
 
 
 def _mpm_rollout():
@@ -156,21 +158,22 @@ def _mpm_rollout():
     return positions.detach(), v0.grad
 
 
-# the kernels that keep Taichi's opt_level 1 (launch.LIGHT_OPT_LEVEL), besides the constraint solve's reverse
-HEAVY = (step.constrain, ik.inverse_kinematics, *mpm_kernels.KERNELS, *mpm_kernels.STRESS_KERNELS, coupler.couple,
-         coupler.couple_adjoint)
+# the kernels at launch.SOLVE_OPT_LEVEL (besides the constraint solve's reverse), and those always at 1
+SOLVE = (step.constrain, ik.inverse_kinematics)
+ONE = (*mpm_kernels.KERNELS, *mpm_kernels.STRESS_KERNELS, coupler.couple, coupler.couple_adjoint)
 
 
 def _record_compiles(monkeypatch):
-    """{(kernel name, whether it keeps opt_level 1: HEAVY, or the constraint solve's reverse):
-    {opt_level}} of each kernel compiled (or loaded from the offline cache) from now on: BoundKernel
-    resolves a kernel's code once per Taichi runtime."""
+    """{(kernel name, its kind: "light", "solve" (SOLVE or the constraint solve's reverse) or "one"
+    (ONE)): {opt_level}} of each kernel compiled (or loaded from the offline cache) from now on:
+    BoundKernel resolves a kernel's code once per Taichi runtime."""
     compiled = {}
     resolve = BoundKernel._resolve
 
     def recording(self, program, args):
-        heavy = self.kernel in HEAVY or (self.kernel is step.reverse_dynamics and self.template[1] == 1)
-        compiled.setdefault((self.kernel.__name__, heavy), set()).add(impl.current_cfg().opt_level)
+        kind = "one" if self.kernel in ONE else "solve" if self.kernel in SOLVE or (
+            self.kernel is step.reverse_dynamics and self.template[1] == 1) else "light"
+        compiled.setdefault((self.kernel.__name__, kind), set()).add(impl.current_cfg().opt_level)
         return resolve(self, program, args)
     monkeypatch.setattr(BoundKernel, "_resolve", recording)
     return compiled
@@ -181,27 +184,32 @@ def _record_compiles(monkeypatch):
 def test_light_kernels_compute_the_same_bits_at_taichi_default_opt_level(f64, tmp_path, monkeypatch):
     """Every rigid kernel but those of an iterative solve, and the MPM's reverse kernels, compile at
     Taichi's opt_level 0 (launch.LIGHT_OPT_LEVEL: no whole-kernel common-subexpression elimination,
-    most of their compile time); a contact rollout, a jointed one and an MPM one through them and
-    their gradients are the same bits at Taichi's default, 1. Taichi keeps a kernel's first compile
-    for its runtime's life, so each level runs in a new runtime."""
+    most of their compile time), the constraint solve, its reverse and inverse kinematics at
+    launch.SOLVE_OPT_LEVEL (1 for users, 0 in the test suite: tests/conftest.py); a contact rollout,
+    a jointed one and an MPM one through them and their gradients are the same bits with every
+    kernel at Taichi's default, 1. Taichi keeps a kernel's first compile for its runtime's life, so
+    each setting runs in a new runtime."""
     mesh_file = str(tmp_path / "ico.obj")
     trimesh.creation.icosphere(subdivisions=1, radius=0.05).export(mesh_file)
     compiled = _record_compiles(monkeypatch)
     rollouts = []
-    for level in (launch.LIGHT_OPT_LEVEL, 1):
-        monkeypatch.setattr(launch, "LIGHT_OPT_LEVEL", level)
+    for light, solve in ((launch.LIGHT_OPT_LEVEL, launch.SOLVE_OPT_LEVEL), (1, 1)):
+        monkeypatch.setattr(launch, "LIGHT_OPT_LEVEL", light)
+        monkeypatch.setattr(launch, "SOLVE_OPT_LEVEL", solve)
         gs.destroy()
         gs.init(precision="64", logging_level="warning")
         rollouts.append((*_contact_rollout(mesh_file), *_jointed_rollout(), *_mpm_rollout()))
         names = {name for name, _ in compiled}
         assert {"collide", "collide_adjoint", "converge", "smooth_substep", "reverse_kinematics", "advance",
                 "read_mass_matrix", "read_links", "pre_coupling_backward", "post_coupling_backward"} <= names
-        assert {("constrain", True), ("reverse_dynamics", True), ("reverse_dynamics", False),
-                ("pre_coupling", True), ("post_coupling", True), ("couple", True), ("couple_adjoint", True)} \
+        assert {("constrain", "solve"), ("reverse_dynamics", "solve"), ("inverse_kinematics", "solve"),
+                ("reverse_dynamics", "light"),
+                ("pre_coupling", "one"), ("post_coupling", "one"), ("couple", "one"), ("couple_adjoint", "one")} \
             <= set(compiled)
-        assert compiled == {(name, heavy): {1 if heavy else level} for name, heavy in compiled}, compiled
+        levels = {"light": light, "solve": solve, "one": 1}
+        assert compiled == {(name, kind): {levels[kind]} for name, kind in compiled}, compiled
         compiled.clear()
     light, default = rollouts
-    assert all(light[k].abs().sum() > 0 for k in (1, 5, 7))  # the three rollouts' gradients
+    assert all(light[k].abs().sum() > 0 for k in (1, 5, 8))  # the three rollouts' gradients
     for a, b in zip(light, default):
         assert torch.equal(a, b), (a - b).abs().max()

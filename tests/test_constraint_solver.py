@@ -16,6 +16,8 @@ import pytest
 import taichi as ti
 
 import genesis_lite as gs
+from genesis_lite.solvers import launch
+from genesis_lite.solvers.launch import taichi_opt_level
 from genesis_lite.solvers.rigid.constraint import solver as cs
 
 EQUALITY, FRICTION_DOF, FRICTION_TENDON, CONTACT_ELLIPTIC = (
@@ -299,7 +301,8 @@ def results():
     rng = np.random.default_rng(7)
     for name, cases in scenes.items():
         view.load(cases, rng)
-        _solve_all(view)
+        with taichi_opt_level(launch.SOLVE_OPT_LEVEL):  # compiled as the solver compiles its solve
+            _solve_all(view)
         out = {key: getattr(view, key).to_numpy()[0] for key in
                ("qacc", "qacc_smooth", "efc_force", "efc_state", "qfrc_constraint", "solver_niter", "solver_H")}
         for e, c in enumerate(cases):

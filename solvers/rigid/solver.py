@@ -136,7 +136,8 @@ class RigidSolver(Solver):
                               sim.requires_grad, settings)
         element_dims = [len(ELEMENT[a]) for a in ARENAS]
         schedule, arenas = self.data.schedule, self.data.arenas
-        light = launch.LIGHT_OPT_LEVEL  # every kernel but those of the constraint solve and inverse kinematics
+        # (read at bind time: the test suite sets them)
+        light, solve = launch.LIGHT_OPT_LEVEL, launch.SOLVE_OPT_LEVEL  # solve: the constraint solve and IK's
         self.kernels = BoundKernels(schedule, arenas, element_dims, *step.KERNELS, opt_level=light)
         m = self.model
         self.inexact_kinds = detect.inexact_kinds(m)  # pair kinds whose contacts may not be closed forms
@@ -153,15 +154,15 @@ class RigidSolver(Solver):
         # 6: the torsional and rolling rows compiled in (condim 4 too: one kernel fewer to compile), 3: not
         max_condim = 6 if m.pair_condim.max(initial=3) > 3 else 3
         self.constrain = BoundKernel(step.constrain, (solve_schedule, elliptic, body_eqs, max_condim), arenas,
-                                     element_dims)
+                                     element_dims, solve)
         self.reverse_kernel = [BoundKernel(step.reverse_dynamics, (schedule, 0, False, False, 3), arenas,
                                            element_dims, light),
                                BoundKernel(step.reverse_dynamics, (solve_schedule, 1, elliptic, body_eqs, max_condim),
-                                           arenas, element_dims)]
+                                           arenas, element_dims, solve)]
         self.collider_reverses = [(detect.KERNEL_BIT[kind], BoundKernel(step.collide_adjoint, (schedule, kind),
                                                                         arenas, element_dims, light))
                                   for kind in detect.differentiable_kinds(m)]
-        self._inverse_kinematics = {serial: BoundKernel(ik.inverse_kinematics, serial, arenas, element_dims)
+        self._inverse_kinematics = {serial: BoundKernel(ik.inverse_kinematics, serial, arenas, element_dims, solve)
                                     for serial in (False, True)}
 
     def _default_inputs(self):
