@@ -13,9 +13,11 @@ nothing but those inputs outlives the backward: zeroing and freeing are torch's.
 derived quantities (link poses) are ``_Read`` nodes.
 
 With ``SimOptions(checkpoint_interval=k)``, only every k-th step saves its state; a step
-without one is recomputed from the nearest checkpoint by its ``Rollout`` during backward. A step
-whose start state is not what the step before it returned (a setter replaced it in between)
-saves its state too: a recomputation from an earlier checkpoint would not repeat the setter.
+without one is recomputed during backward from the nearest checkpoint, which its node saved
+with the inputs of the steps between (``Segment._take_replay``: the ``Rollout`` itself holds one
+interval). A step whose start state is not what the step before it returned (a setter replaced
+it in between) saves its state too: a recomputation from an earlier checkpoint would not repeat
+the setter.
 
 Nodes hold the simulator weakly: the simulator holds the newest state, whose grad_fn is a node,
 and a strong link back would be a cycle through torch's C++ graph that Python's collector
@@ -38,13 +40,15 @@ _StepRecord = collections.namedtuple("_StepRecord", "index kept first layout inp
 
 
 class Rollout:
-    """Per-rollout record (one per ``scene.reset()``): checkpointed states and step inputs."""
+    """Per-rollout record (one per ``scene.reset()``): with checkpoint_interval > 1, the newest
+    checkpointed state and the inputs of the steps since, from which a segment takes what its
+    recomputations need (Segment.add): the rollout itself keeps no more than a checkpoint interval."""
 
     def __init__(self, sim, interval):
         self.sim, self.interval = weakref.ref(sim), interval
         self.generation = sim.generation
-        self.checkpoints = {}  # step index → (states at its start (tuple of tensors), warm starts)
-        self.inputs = {}  # step index → inputs (only when interval > 1)
+        self.checkpoints = {}  # step index → (states at its start (tuple of tensors), warm starts): the newest
+        self.inputs = {}  # step index → inputs, of the steps from the newest checkpoint on (interval > 1)
         self._replayed = {}  # step index → (start states, warm starts, replay records) recomputed during backward
         self._last_outputs = ()  # weak references to the states the last closed segment returned
         self._last_inputs = ((), ())  # the newest step's inputs as given (weakly held), and as recorded
@@ -62,6 +66,8 @@ class Rollout:
 
     def record(self, index, states, inputs, kept, warm_starts):
         if self.interval > 1:  # detached: an input computed from a state would close a cycle through the graph
+            if kept:  # (the segments took what they need from before: a long rollout holds one interval)
+                self.checkpoints, self.inputs = {}, {}
             given, recorded = self._last_inputs
             same = len(given) == len(inputs)
             # an input given again (a parameter, a control held) shares the step before's record: a
@@ -79,22 +85,23 @@ class Rollout:
         every node of the graph holds, to a state whose grad_fn is a node would be a cycle)."""
         self._last_outputs = tuple(weakref.ref(o) for o in outputs)
 
-    def start_states(self, index):
+    def start_states(self, index, checkpoints, inputs):
         """(states, warm starts, replay records) of step ``index``, recomputed from the checkpoint
-        before it (from its warm starts too: the same steps again, bit for bit); the steps up to
-        the next checkpoint are kept for the calls that follow (backward goes down the steps).
-        The last of them was not taken again: its records are None (its replay solves from the
-        warm starts)."""
+        before it (from its warm starts too: the same steps again, bit for bit) in ``checkpoints``
+        through the steps' ``inputs`` (a segment's: Segment.add); the steps up to the next
+        checkpoint are kept for the calls that follow (backward goes down the steps). The last of
+        them was not taken again: its records are None (its replay solves from the warm starts)."""
         if index not in self._replayed:
-            first = max(k for k in self.checkpoints if k <= index)
-            states, warm_starts = self.checkpoints[first]
+            first = max(k for k in checkpoints if k <= index)
+            states, warm_starts = checkpoints[first]
             self._replayed = {}
             sim = _alive(self.sim)
             with torch.no_grad():
                 k = first
-                while k + 1 in self.inputs and k + 1 not in self.checkpoints:
-                    following = sim.forward_step(states, self.inputs[k], warm_starts)
-                    self._replayed[k] = (states, warm_starts, tuple(sim.replay_records))
+                while k + 1 in inputs and k + 1 not in checkpoints:
+                    following = sim.forward_step(states, inputs[k], warm_starts)
+                    if k > first:  # (a checkpoint's step keeps its states: held here, they outlived the graph)
+                        self._replayed[k] = (states, warm_starts, tuple(sim.replay_records))
                     states, warm_starts = following, sim.warm_starts()
                     k += 1
                 self._replayed[k] = (states, warm_starts, (None,) * len(states))
@@ -136,6 +143,12 @@ class Segment:
         self.tracked = []  # the distinct inputs requiring grad, in the order the node takes them
         self._position = {}  # id(tracked input) → its position in tracked
         self._patterns = {}  # the steps' requires-grad flags, each pattern once
+        # (checkpoint_interval > 1) what the recomputation of its steps that keep no start states
+        # needs, taken from the rollout as they are recorded: the checkpoints they start from
+        # (index → (states, warm starts); saved with the node at close: base_indices, base_layout)
+        # and the inputs of the steps from the first of them on (index → inputs, detached)
+        self.bases, self.replay = {}, {}
+        self.base_indices = self.base_layout = None
 
     def flags(self, inputs):
         """The requires-grad flags of a next step's ``inputs`` (flat tuple), or None when the segment
@@ -157,6 +170,8 @@ class Segment:
             self.start_states = self.outputs = outputs
             return
         positions = tuple(self._track(t) for t in itertools.compress(inputs, wanted))
+        if self.rollout.interval > 1:
+            self._take_replay(index, kept)
         first, layout = len(self.saved), None
         if kept:  # each solver's replay record, or where it has none the warm start its step started from
             self.saved.extend(self.outputs)
@@ -166,6 +181,19 @@ class Segment:
                                          for warm, record in zip(sim.started_from, records)), records), self.saved)
         self.steps.append(_StepRecord(index, kept, first, layout, inputs, wanted, positions))
         self.outputs = outputs
+
+    def _take_replay(self, index, kept):
+        """Take from the rollout what recomputing step ``index`` needs (the rollout lets go of it at
+        its next checkpoint): its checkpoint if it keeps one, else, for the first such step, the
+        checkpoint before it and the inputs of the steps between; and the step's inputs."""
+        rollout = self.rollout
+        if kept:
+            self.bases[index] = rollout.checkpoints[index]
+        elif not self.bases:
+            base = max(rollout.checkpoints)  # (the rollout's only one: the newest, before index)
+            self.bases[base] = rollout.checkpoints[base]
+            self.replay.update((k, rollout.inputs[k]) for k in range(base, index))
+        self.replay[index] = rollout.inputs[index]
 
     def _track(self, tensor):
         position = self._position.get(id(tensor))
@@ -184,10 +212,13 @@ class Segment:
         torch may have given the states; dropped, a backward through them raised an IndexError:
         found by a review)."""
         if self.steps:
+            if self.bases:  # saved with the node, so that torch frees them with the graph
+                self.base_indices = tuple(self.bases)
+                self.base_layout = _flatten(tuple(self.bases.values()), self.saved)
             with torch.enable_grad():
                 _Segment.apply(sim, self, *self.start_states, *self.tracked)
         self.rollout.stepped(self.outputs)
-        self.outputs = self.start_states = self.saved = None
+        self.outputs = self.start_states = self.saved = self.bases = None
 
 
 class _Segment(torch.autograd.Function):
@@ -208,6 +239,8 @@ class _Segment(torch.autograd.Function):
         saved, n_states = ctx.saved_tensors, len(grad_states)
         grads_tracked = [None] * len(segment.tracked)
         first_wanted = _first_wanted(segment, ctx.edges[:n_states], ctx.edges[n_states:])
+        bases = None if segment.base_layout is None else \
+            dict(zip(segment.base_indices, _unflatten(segment.base_layout, saved)))
         for index, kept, first, layout, inputs, wanted, positions in reversed(segment.steps[first_wanted:]):
             if kept:
                 states = saved[first: first + n_states]
@@ -218,7 +251,7 @@ class _Segment(torch.autograd.Function):
                 if torch.is_grad_enabled():  # (its start states come from a detached recomputation: see _first_order)
                     raise GradientError(_second_order_message(f"step {index}") + "; with checkpoint_interval > 1 "
                                         "create_graph=True raises at once")
-                states, warm_starts, records = segment.rollout.start_states(index)
+                states, warm_starts, records = segment.rollout.start_states(index, bases, segment.replay)
             with torch.no_grad():
                 try:
                     grads = sim.backward_step(states, inputs, grad_states, warm_starts, records, wanted)

@@ -499,18 +499,31 @@ def test_a_checkpointed_rollout_records_an_input_given_again_once(f64):
             if t < 6:  # the last two steps keep the sixth's control
                 robot.control_dofs_force(force)
             scene.step()
-        (robot.get_dofs_position() ** 2).sum().backward()
+        final = robot.get_dofs_position()
+        (final ** 2).sum().backward()
         grad, forces.grad = forces.grad.clone(), None
-        return grad
+        return grad, final
 
-    checkpointed = gradient()
-    records = scene.sim.rollout.inputs
+    checkpointed, final = gradient()
+    assert sorted(scene.sim.rollout.inputs) == [4, 5, 6, 7]  # (the rollout keeps an interval: the node the rest)
+    records = _segment_node(final).segment.replay
     shared = [sum(a is b for a, b in zip(records[k], records[k + 1])) for k in range(7)]
     assert all(n == len(records[0]) - 1 for n in shared[:5]) and shared[6] == len(records[0])
     assert shared[5] == len(records[0])
     scene.sim.options.checkpoint_interval = 1
-    plain = gradient()
+    plain, _ = gradient()
     assert scene.sim.rollout.interval == 1 and torch.equal(checkpointed, plain)
+
+
+def _segment_node(tensor):
+    """The first step node (autograd._Segment) of the graph of ``tensor``, depth first."""
+    stack = [tensor.grad_fn]
+    while stack:
+        fn = stack.pop()
+        if type(fn).__name__ == "_SegmentBackward":
+            return fn
+        stack.extend(following for following, _ in fn.next_functions if following is not None)
+    return None
 
 
 def _segment_nodes(tensor):
@@ -561,6 +574,51 @@ def test_the_steps_between_two_reads_are_one_node(f64, checkpoint_interval):
     assert (once, each) == (1, T)
     assert all(torch.equal(a, b) for a, b in zip(at_end, every_step))
     assert all(bool((g != 0).any()) for g in at_end)
+
+
+def test_a_checkpointed_rollout_holds_one_interval_and_its_nodes_the_rest(f64):
+    """With checkpoint_interval k the rollout holds the newest checkpoint and the inputs since (at
+    most k steps); each node saves the checkpoints its recomputations start from with torch, which
+    frees them with the backward. The rollout kept every step's inputs and every checkpoint until
+    scene.reset(): an evaluation under torch.no_grad() and a training loop that cut its graph by
+    setters instead of resets grew without bound, and a backwarded graph that stayed referenced
+    (losses kept in a list) kept its checkpoints (an independent probe, 2026-12-02). A jelly (its
+    particle setters replace its whole state: the graph is cut); gradients as with k = 1, bit for
+    bit, chunk after chunk."""
+    import gc
+    import weakref
+    grads = {}
+    for interval in (1, 4):
+        scene = gs.Scene(sim_options=gs.options.SimOptions(dt=1e-3, substeps=2, requires_grad=True,
+                                                           checkpoint_interval=interval),
+                         mpm_options=gs.options.MPMOptions(lower_bound=(-0.3, -0.3, 0.0), upper_bound=(0.3, 0.3, 0.6),
+                                                           grid_density=32))
+        jelly = scene.add_entity(gs.morphs.Box(pos=(0.0, 0.0, 0.2), size=(0.06, 0.06, 0.06)),
+                                 material=gs.materials.MPM.Elastic(E=1e4))
+        scene.build()
+        rollout = scene.sim.rollout
+        with torch.no_grad():  # an evaluation
+            for _ in range(12):
+                scene.step()
+        assert len(rollout.inputs) <= interval and len(rollout.checkpoints) <= 1
+        kicks = torch.linspace(-0.5, 0.5, 3 * 3, dtype=torch.float64).reshape(3, 3).requires_grad_(True)
+        losses, checkpoints = [], []
+        for kick in kicks:  # truncated backpropagation through time: no reset
+            jelly.set_particles_pos(jelly.get_particles_pos().detach())  # (cuts the graph)
+            jelly.set_particles_vel(kick)
+            for _ in range(6):
+                scene.step()
+                checkpoints += [weakref.ref(s) for states, _ in rollout.checkpoints.values() for s in states]
+            losses.append(jelly.get_particles_pos()[:, 2].mean())
+            losses[-1].backward()  # (the loss kept: its graph stays referenced)
+            assert len(rollout.inputs) <= interval and len(rollout.checkpoints) <= 1
+        gc.collect()
+        newest = [id(s) for states, _ in rollout.checkpoints.values() for s in states]
+        assert bool(checkpoints) == (interval > 1)
+        assert all(ref() is None or id(ref()) in newest for ref in checkpoints)  # freed by the backwards
+        grads[interval] = kicks.grad
+        scene.destroy()
+    assert torch.equal(grads[1], grads[4]) and bool((grads[4][:, 2] != 0).all())
 
 
 def test_a_checkpointed_backward_leaves_the_rollout_as_it_was(f64):
