@@ -3,6 +3,7 @@ scenes, debug spheres) against references we did not write: the pinhole projecti
 corners, a sphere's analytic silhouette, trimesh's ray casts of URDF visual meshes posed by
 yourdfpy's forward kinematics, imageio reading the videos back, and (when an OpenGL context can be
 made) moderngl drawing the same triangles."""
+import glob
 import logging
 import os
 
@@ -16,7 +17,7 @@ import genesis_lite as gs
 from genesis_lite.solvers.rigid import merge
 from genesis_lite.solvers.rigid.urdf import load_urdf
 from genesis_lite.vis.visuals import scene_shapes
-from tests.conftest import pybullet
+from tests.conftest import pybullet, warns
 
 KUKA, R2D2 = pybullet("kuka_iiwa", "model.urdf"), pybullet("r2d2.urdf")
 KUKA_Q = [0.3, 0.5, -0.2, -1.0, 0.4, 0.8, 0.1]
@@ -781,18 +782,55 @@ def _check_blown_up_drawing(tmp_path, caplog, force):
         follower.render()
 
 
+def test_an_env_that_blew_up_is_left_out_of_the_others_drawing(f32, caplog):
+    """A camera drawing several envs draws those whose state is finite, with a warning naming the env
+    that blew up (said again only when another does), as an RL run meets it; it raised, and a
+    recording lost every frame, as long as that env was not reset. Nothing left to draw raises."""
+    scene = gs.Scene(**NO_CONTACT)
+    box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.2), pos=(0.0, 0.0, 0.5)), name="box")
+    cam = scene.add_camera(res=(64, 48), pos=(3.0, 0.0, 1.5), lookat=(0.0, 0.0, 0.5), fov=60)
+    scene.build(n_envs=3, env_spacing=(1.0, 1.0))
+    scene.step()
+    whole = cam.render(rgb=False, segmentation=True)[2]
+    for _ in range(3):
+        box.links[0].apply_external_force([3e38, 0.0, 3e38], envs_idx=[1])
+        scene.step()
+    assert not bool(torch.isfinite(box.get_pos()[1]).all()) and bool(torch.isfinite(box.get_pos()[[0, 2]]).all())
+    with warns(caplog, r"camera 0.render: env\(s\) \[1\] drawn without the shapes whose pose is not finite .*link "
+                       r"'box' of entity 'box'"):
+        drawn = cam.render(rgb=False, segmentation=True)[2]
+    with warns(caplog, None):  # said once
+        cam.render(rgb=False)
+    boxes = lambda seg: int((seg == box.links[0].idx).sum())  # noqa: E731
+    assert 0 < boxes(drawn) < boxes(whole)  # two boxes of three (they fell 0.04 s: about the same pixels)
+    for _ in range(3):
+        box.links[0].apply_external_force([3e38, 0.0, 3e38], envs_idx=[0, 2])
+        scene.step()
+    with pytest.raises(gs.SimulationError, match="camera 0.render: the pose of link 'box' of entity 'box' in env 0 is "
+                                                 "not finite"):
+        cam.render()
+
+
 @pytest.mark.restarts  # (conftest: last in the float32 group)
 def test_scenes_ending_finish_their_recordings(f32, tmp_path, caplog):
     """gs.destroy (and a restarting gs.init, and the interpreter's exit) end every scene, whose
     cameras finish a streamed recording's file (Genesis's atexit destroy does); a buffered one,
-    without a file, is dropped with a warning."""
+    without a file, is dropped with a warning; a streamed one without frames too, its ffmpeg
+    process ended (it stayed alive, one a scene)."""
     import imageio.v2 as imageio
 
     scene = gs.Scene(**NO_CONTACT)
     scene.add_entity(gs.morphs.Box(size=(0.3, 0.3, 0.3), pos=(0.0, 0.0, 1.0)))
     streamed = scene.add_camera(res=(32, 24), pos=(2.0, 0.0, 0.5), lookat=(0.0, 0.0, 0.5))
     buffered = scene.add_camera(res=(32, 24), pos=(2.0, 0.0, 0.5), lookat=(0.0, 0.0, 0.5))
+    idle = gs.Scene(**NO_CONTACT)
+    idle.add_entity(gs.morphs.Box())
+    idle_camera = idle.add_camera(res=(32, 24))
     scene.build()
+    idle.build()
+    running = _ffmpeg_children()
+    idle_camera.start_recording(str(tmp_path / "never.mp4"))  # its scene never steps
+    assert _ffmpeg_children() == running + 1
     streamed.start_recording(str(tmp_path / "streamed.mp4"), fps=100)  # a frame a step (dt 0.01 s)
     buffered.start_recording()
     for _ in range(30):
@@ -803,7 +841,23 @@ def test_scenes_ending_finish_their_recordings(f32, tmp_path, caplog):
         scene.step()
     assert len([frame for frame in imageio.get_reader(str(tmp_path / "streamed.mp4"))]) == 30  # (len(): inf)
     assert any("camera 1: a recording of 30 frames was dropped" in r.getMessage() for r in caplog.records)
+    assert _ffmpeg_children() == running
+    with pytest.raises(gs.SceneStateError, match="camera 0.stop_recording: the scene was destroyed"):
+        streamed.stop_recording()  # (it said the camera was not recording)
     gs.init(precision="32")
+
+
+def _ffmpeg_children():
+    """How many ffmpeg processes this process started that still run (Linux's /proc)."""
+    count = 0
+    for stat in glob.glob("/proc/[0-9]*/stat"):
+        try:
+            with open(stat) as file:
+                name, rest = file.read().rsplit(")", 1)
+        except OSError:  # (it ended meanwhile)
+            continue
+        count += int(rest.split()[1]) == os.getpid() and "ffmpeg" in name
+    return count
 
 
 # ------------------------------------------------------------------ errors
@@ -823,7 +877,8 @@ def test_errors_name_the_camera_argument_and_value(f32, tmp_path):
              (dict(pos=(0, 0, np.nan)), r"camera 1.set_pose: argument 'pos' must be 3 finite numbers"),
              (dict(pos=(1, 2, 3), lookat=(1, 2, 3)), r"'pos' and 'lookat' must differ, got both \[1.0, 2.0, 3.0\]"),
              (dict(pos=(0, 0, 3), lookat=(0, 0, 0)), r"argument 'up' must be a vector not parallel"),
-             (dict(near=1.0, far=0.5), r"argument 'far' must be a finite distance \(m\) > near"),
+             (dict(near=1.0, far=0.5), r"argument 'far' must be a distance \(m\) > near \(1.0\) that float32 can hold"),
+             (dict(far=1e39), r"argument 'far' must be a distance .* that float32 can hold, got 1e\+39"),
              (dict(GUI=True), r"argument 'GUI' must be False.*headless"),
              (dict(model="thinlens"), r"argument 'model' must be 'pinhole'"),
              (dict(spp=64), r"argument 'spp' is a thinlens/raytracer setting"),
@@ -845,6 +900,11 @@ def test_errors_name_the_camera_argument_and_value(f32, tmp_path):
         cam.start_recording()
     with pytest.raises(gs.SceneStateError, match="no frame was recorded"):
         cam.stop_recording(str(tmp_path / "a.mp4"))
+    cam.render()
+    # a file that cannot be created (ffmpeg failed without a word: the video was lost, or its frames)
+    with pytest.raises(gs.InvalidInputError, match=r"camera 0: argument 'save_to_filename' must be a file that can be "
+                                                   r"written, got '/proc/clip.mp4' \("):
+        cam.stop_recording("/proc/clip.mp4")
     with pytest.raises(gs.InvalidInputError, match=r"argument 'antialiasing' must be False"):
         cam.render(antialiasing=True)
     with pytest.raises(gs.InvalidInputError, match=r"follow_entity: argument 'entity' must be a rigid entity .*, "
@@ -855,6 +915,9 @@ def test_errors_name_the_camera_argument_and_value(f32, tmp_path):
             cam.set_pose(transform=transform)  # a mirror, a last row that is not (0, 0, 0, 1)
     cam.render()
     cam.stop_recording(str(tmp_path / "a.gif"))  # the recording went on after the errors
+    with pytest.raises(gs.InvalidInputError, match=r"camera 0.start_recording: argument 'save_to_filename' must be a "
+                                                   r"file that can be written, got '/proc/clip.gif'"):
+        cam.start_recording("/proc/clip.gif")
     cam.start_recording(str(tmp_path / "b.mp4"), fps=30)
     cam.render()  # adds no frame to a recording started with a file: its steps do
     with pytest.raises(gs.SceneStateError, match=r"no frame was recorded; step the scene while recording \(a frame "

@@ -89,7 +89,9 @@ class Camera:
             raise InvalidInputError(f"{owner}: argument 'fov' must leave a focal length float32 can hold, got {fov!r} "
                                     f"degrees: {self.f:.3g} pixels")
         self._near = _check_float(owner, "near", near, 0.0, np.inf, "a positive finite distance (m)")
-        self._far = _check_float(owner, "far", far, self._near, np.inf, f"a finite distance (m) > near ({near})")
+        # (the rasterizer's depths are float32: a farther far made the background's depth inf)
+        self._far = _check_float(owner, "far", far, self._near, float(np.finfo(np.float32).max),
+                                 f"a distance (m) > near ({near}) that float32 can hold")
         if env_idx is not None and not (is_int(env_idx) and env_idx >= 0):
             raise InvalidInputError(f"{owner}: argument 'env_idx' must be None or an env index (integer ≥ 0), "
                                     f"got {env_idx!r}")
@@ -520,6 +522,7 @@ class Camera:
         ``<script>_cam_<idx>_<date>_<time>.mp4`` in the working folder) at ``fps`` (default 60)."""
         owner = f"{self._name}.stop_recording"
         if self._recording is None:
+            self._scene._require_alive(owner)  # (its end finished or dropped the recording: say so)
             raise SceneStateError(f"{owner}: the camera is not recording; call start_recording() first")
         skipped = self._recording.skipped
         if self._recording.n_frames == 0:  # the recording goes on
@@ -540,11 +543,12 @@ class Camera:
 
     def _close(self):
         """The scene is destroyed: finish a streamed recording's file (as Genesis does); a buffered
-        one has no file yet and is dropped, with a warning when it held frames."""
+        one has no file yet and is dropped, with a warning when it held frames, as is a streamed
+        one without frames (its encoder stopped: it would leave no valid video)."""
         recording, self._recording = self._recording, None
         if recording is not None and recording.streamed and recording.n_frames:
             recording.save(*recording.target())
-        elif recording is not None and not recording.streamed:
+        elif recording is not None:
             if recording.n_frames:
                 logger.warning(f"{self._name}: a recording of {recording.n_frames} frames was dropped with its scene "
                                f"(it had no file: stop_recording(save_to_filename) saves one)")

@@ -22,6 +22,7 @@ frames wait in memory until the file is written (Pillow writes a GIF at once, tr
 delay to its unit: it is given rounded; it also merges equal consecutive frames into one shown
 as long, so a reader may get fewer frames than were recorded, playing the same).
 """
+import logging
 import os
 import queue
 import subprocess
@@ -57,10 +58,26 @@ def check_target(owner, filename, fps):
                                 f"{filename!r} ({folder} does not exist)")
     if os.path.isdir(filename):
         raise InvalidInputError(f"{owner}: argument 'save_to_filename' must name a file, got {filename!r}, a folder")
+    _check_writable(owner, filename)
     fps = DEFAULT_FPS if fps is None else fps
     if isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating)) or not 0 < fps < np.inf:
         raise InvalidInputError(f"{owner}: argument 'fps' must be a positive number of frames per second, got {fps!r}")
     return filename, float(fps)
+
+
+def _check_writable(owner, filename):
+    """Open ``filename`` for appending, as a probe (a file it creates is removed again): a folder
+    the user may not write to, or a read-only one, raises here, not in the encoder (which says
+    nothing: ffmpeg's exit status is not checked) or at the scene's step."""
+    existed = os.path.exists(filename)
+    try:
+        with open(filename, "ab"):
+            pass
+    except OSError as error:
+        raise InvalidInputError(f"{owner}: argument 'save_to_filename' must be a file that can be written, got "
+                                f"{filename!r} ({error.strerror})") from error
+    if not existed:
+        os.remove(filename)
 
 
 class _Mp4Writer:
@@ -68,6 +85,7 @@ class _Mp4Writer:
     stream, for mux_h264)."""
 
     def __init__(self, filename, fps, res, raw=False):
+        self._filename = filename
         width, height = res
         extra = (_EVEN if width % 2 or height % 2 else []) + (["-f", "h264"] if raw else [])
         self._encoder = imageio_ffmpeg.write_frames(filename, (width, height), fps=fps, codec="libx264",
@@ -81,6 +99,9 @@ class _Mp4Writer:
 
     def close(self):
         self._encoder.close()
+        # (imageio-ffmpeg does not check ffmpeg's exit status: a file it could not write is silent)
+        if not os.path.exists(self._filename) or os.path.getsize(self._filename) == 0:
+            raise OSError(f"ffmpeg wrote nothing to {self._filename!r}")
 
 
 class _GifWriter:
@@ -219,13 +240,20 @@ class Recording:
             self._remove_raw()
 
     def discard(self):
-        """Drop a buffered recording (no file is written)."""
+        """Drop the recording: its encoder stops (a streamed one's too: its ffmpeg process would
+        outlive the scene) and no file is written."""
+        encoder_log = logging.getLogger("imageio_ffmpeg")  # (it warns that a video without frames is invalid)
+        level = encoder_log.level
+        encoder_log.setLevel(logging.ERROR)
         try:
             self._stream.close()
         except Exception:  # nothing is kept of it: an encoder's failure does not matter any more
             pass
+        finally:
+            encoder_log.setLevel(level)
         self._frames = []
-        self._remove_raw()
+        if not self.streamed:
+            self._remove_raw()
 
     def _finish(self, finish, filename):
         try:

@@ -28,7 +28,7 @@ import torch
 
 from .. import morphs as gm
 from ..utils import rotations
-from ..solvers.core import InvalidInputError, SimulationError, runtime
+from ..solvers.core import InvalidInputError, SimulationError, runtime, warn_user
 from ..solvers.rigid.shapes import hull_mesh, quat_to_mat
 from ..solvers.rigid.collision import hfield
 from ..solvers.rigid.spec import VisualSpec
@@ -172,6 +172,7 @@ class SceneVisuals:
         self._batched = scene.n_envs > 0
         self._link_who = {link.idx: link._who for entity in scene._rigid_entities() for link in entity.links}
         self._envs_offset = torch.as_tensor(scene.envs_offset[np.asarray(envs)], dtype=torch.float32, device=device)
+        self._left_out = set()  # the envs instances() warned it draws without their non-finite shapes
 
     def particles(self, extra=None):
         """The Spheres of every MPM entity's particles in the drawn envs (radius: half the particle
@@ -201,7 +202,9 @@ class SceneVisuals:
     def instances(self, owner, links):
         """The Instances of the frame whose link kinematics are ``links`` (B, L, ≥ 7): per instance
         its link's world pose (position m, quaternion) as float32, moved by its env's offset; None
-        when nothing has a shape. owner: the caller, for the error a non-finite pose raises."""
+        when nothing has a shape. A shape whose pose is not finite (its env blew up) is left out
+        (collapsed to a point), with a warning, while some drawn env has none; else it raises.
+        owner: the caller, for messages."""
         if self.meshes is None or links is None:
             return None
         rows = links[self._env, self._link]
@@ -209,11 +212,23 @@ class SceneVisuals:
         pos = rows[:, :3].to(torch.float32) + self._offset
         # (checked as drawn: a float64 pose past float32's range is finite, its float32 not)
         finite = torch.isfinite(pos).all(-1) & torch.isfinite(rot).flatten(1).all(-1)
-        if not bool(finite.all()):
-            k = int(torch.nonzero(~finite)[0, 0])
+        if bool(finite.all()):
+            return Instances(rot, pos, self._color, self._seg)
+        blown = set(self._env[~finite].tolist())
+        k = int(torch.nonzero(~finite)[0, 0])
+        if not self._batched or blown >= set(self._envs.tolist()):  # nothing left to draw
             _not_finite(owner, f"the pose of {self._link_who[int(self._link[k])]}",
                         int(self._env[k]) if self._batched else None)
-        return Instances(rot, pos, self._color, self._seg)
+        # (an env that blew up among others, as RL runs meet them: the others are drawn, and its
+        # shapes whose pose is finite; the others collapse to a point, a triangle that covers no pixel)
+        if not blown <= self._left_out:
+            self._left_out |= blown
+            warn_user(f"{owner}: env(s) {sorted(blown)} drawn without the shapes whose pose is not finite (in float32, "
+                      f"as drawn; the simulation blew up there), such as {self._link_who[int(self._link[k])]}; the "
+                      f"other envs are drawn whole (said again when another env blows up)")
+        hidden = ~finite
+        return Instances(rot.masked_fill(hidden[:, None, None], 0.0), pos.masked_fill(hidden[:, None], 0.0),
+                         self._color, self._seg)
 
     def with_debug(self, instances, debug):
         """(MeshSet, Instances) of the scene's shapes (their frame's ``instances``, None when
