@@ -57,7 +57,7 @@ class SimState:
         return self._of(self.scene.mpm_solver)
 
     def _of(self, solver):
-        slots = self.scene.sim.slots
+        slots = self.scene._require_built("SimState").slots
         return next((state for slot, state in zip(slots, self.states) if slot.solver is solver), None)
 
 
@@ -170,6 +170,7 @@ class Scene:
         contact force on it (vis/debug.py); vis_mode is what the cameras draw (None: "visual" for a
         rigid entity, its visual shapes, or "collision", its collision shapes, as Genesis's;
         "particle" for particles)."""
+        self._require_alive("scene.add_entity")
         if self.is_built:
             raise SceneStateError("scene.add_entity: the scene is already built; add every entity before build()")
         if not isinstance(morph, gm.Morph):
@@ -253,6 +254,8 @@ class Scene:
         row k // n_envs_per_row (x) and column k % n_envs_per_row (y). For rendering only: every
         env is simulated at the origin and positions never include the offset.
         """
+        require_init("scene.build")
+        self._require_alive("scene.build")  # (a destroyed scene is not built again: nothing could step it)
         if self.is_built:
             raise SceneStateError("scene.build: the scene is already built; build() may be called once")
         refuse_inference_mode("scene.build")
@@ -305,12 +308,15 @@ class Scene:
         colliding = np.unique(model.link_entity[model.geom_link[model.geom_collides]])
         self.coupled_entities = {entities[k] for k in colliding if entities[k].material.needs_coup}
 
-    def _require_built(self, what):
+    def _require_alive(self, what):
         if self._destroyed:
             raise SceneStateError(f"{what}: the scene was destroyed (scene.destroy(), gs.destroy(), or gs.init() "
                                   f"restarting the runtime); build a new scene")
         if self._epoch != runtime.epoch:
             raise SceneStateError(f"{what}: gs.init() was called again after this scene was made; build a new scene")
+
+    def _require_built(self, what):
+        self._require_alive(what)
         if not self.is_built:
             raise SceneStateError(f"{what}: call scene.build() first")
         return self.sim
@@ -323,6 +329,7 @@ class Scene:
         does and which are refused): res (width, height) pixels, pos / lookat (3,) m, up (3,), fov
         vertical degrees, near / far m, env_idx (batched scenes), debug (draws debug spheres too).
         Before or after build (Genesis: before only). Returns the Camera."""
+        self._require_alive("scene.add_camera")
         camera = Camera(self, len(self._cameras), model, res, pos, lookat, up, fov, aperture, focus_dist, GUI, spp,
                         denoise, near, far, env_idx, debug)
         if self.is_built:
@@ -486,8 +493,8 @@ class Scene:
     def _checked_states(self, state):
         """``state``'s tensors, checked as the setters check values (a SimState can be made by hand,
         or from a saved one): one per solver, each real numbers with data, of its solver's state
-        shape, finite, with non-zero quaternions in each rigid entity's free and ball joints.
-        Returned on gs.device in gs.tc_float."""
+        shape, finite, with non-zero quaternions in each rigid entity's free and ball joints and
+        every MPM particle inside the walls. Returned on gs.device in gs.tc_float."""
         slots = self.sim.slots
         if not isinstance(state.states, (list, tuple)) or len(state.states) != len(slots):
             raise InvalidInputError(f"scene.reset: argument 'state' must hold one state tensor per solver "
@@ -508,9 +515,12 @@ class Scene:
                 raise InvalidInputError(f"{who} must be finite, got NaN or inf at (env, column) "
                                         f"{torch.nonzero(~torch.isfinite(tensor))[0].tolist()}")
             checked.append(tensor)
+        solvers = [slot.solver for slot in slots]
         for entity in self.entities:
+            if isinstance(entity, MPMEntity):
+                entity._check_state(checked[solvers.index(entity._solver)], "scene.reset")
             if isinstance(entity, RigidEntity):
-                rigid = checked[[slot.solver for slot in slots].index(entity._solver)]
+                rigid = checked[solvers.index(entity._solver)]
                 for joint in entity.joints:
                     for q in {q for _, q in entity._turns} & set(joint.qs_idx_local):  # its quaternion's first
                         zero = torch.nonzero(rigid[:, entity._solver_q(np.arange(q, q + 4))].norm(dim=-1) == 0)

@@ -535,12 +535,19 @@ def test_default_armature_reaches_every_joint_dof(f64):
 
 
 def test_destroyed_scene_says_so(f64):
+    """Everything on a destroyed scene raises a named error: adding a camera returned one that failed
+    at its first render, adding an entity and building again allocated a simulator nothing could
+    step, and a state taken before raised an AttributeError (an independent probe, 2026-12-02)."""
     scene = gs.Scene()
     scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
     scene.build()
+    state = scene.get_state()
     scene.destroy()
-    with pytest.raises(gs.SceneStateError, match="scene.step: the scene was destroyed"):
-        scene.step()
+    for call, what in ((scene.step, "scene.step"), (scene.add_camera, "scene.add_camera"),
+                       (lambda: scene.add_entity(gs.morphs.Box()), "scene.add_entity"),
+                       (scene.build, "scene.build"), (lambda: state.rigid, "SimState")):
+        with pytest.raises(gs.SceneStateError, match=f"{what}: the scene was destroyed"):
+            call()
 
 
 def test_reset_to_another_scenes_state(f64, built):
@@ -636,6 +643,21 @@ def test_sol_params_out_of_range(f64, params):
     _, box = _box_on_plane()
     with pytest.raises(gs.InvalidInputError, match="argument 'sol_params' expected timeconst and dampratio"):
         box.set_sol_params(params)
+
+
+def test_sol_params_at_the_impedance_bounds_are_clamped_as_mujoco_does(f64):
+    """dmin = dmax = 0 is in the range the message states (0 ≤ dmin ≤ dmax < 1) and was refused; the
+    kernels clamp impedances to MuJoCo's [1e-4, 0.9999], so a box resting on a plane steps as with
+    1e-4, bit for bit."""
+    finals = []
+    for dmin_dmax in (0.0, 1e-4):
+        plane, box = _box_on_plane()
+        for entity in (plane, box):  # (a contact mixes its two geoms' parameters)
+            entity.set_sol_params((0.02, 1.0, dmin_dmax, dmin_dmax, 0.001, 0.5, 2.0))
+        for _ in range(20):
+            box.scene.step()
+        finals.append(box.get_pos())
+    assert torch.equal(*finals) and bool(torch.isfinite(finals[0]).all())
 
 
 def test_mesh_without_a_hull(f64, tmp_path):

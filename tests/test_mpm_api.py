@@ -508,7 +508,12 @@ def test_entity_state_errors(f64):
     assert torch.equal(sand.get_particles_pos(), on_walls.expand(2, 8, 3))
     cases = [(lambda: sand.set_particles_pos(torch.full((2, 8, 3), -0.6, dtype=torch.float64)), gs.InvalidInputError,
               "entity 'sand': argument 'poss' must put every particle inside the MPM walls (or on them)"),
-             (lambda: sand.set_position([0.0, 0.0, 0.999]), gs.InvalidInputError, "inside the MPM walls"),
+             # (the message names set_position's argument and the value given, not set_particles_pos's)
+             (lambda: sand.set_position([0.0, 0.0, 0.999]), gs.InvalidInputError,
+              "entity 'sand': argument 'value' must put every particle inside the MPM walls"),
+             (lambda: sand.set_position([[0.0, 0.0, 0.3]] * 3), gs.InvalidInputError,
+              "entity 'sand': argument 'value' must have shape (2, 3) or (3,) for every env (or one that broadcasts "
+              "to it), got (3, 3)"),
              (lambda: sand.set_particles_vel(torch.zeros(3, 8, 3)), gs.InvalidInputError,
               "entity 'sand': argument 'vels' must have shape (2, 8, 3)"),
              (lambda: sand.set_particles_vel(torch.zeros(8, 2)), gs.InvalidInputError, "'vels' must have shape"),

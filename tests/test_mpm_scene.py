@@ -232,6 +232,21 @@ def test_positions_the_walls_clamped_are_accepted_back_in_float32(f32):
     pos = blob.get_particles_pos()
     assert float(pos[:, 2].min()) == np.float32(0.1 + 3.0 / 32)  # on the floor's wall, rounded
     blob.set_particles_pos(pos)
+    scene.reset(scene.get_state())  # and so does reset(state)
+
+
+def test_reset_to_a_state_with_particles_outside_the_walls_raises(f64):
+    """A SimState made or edited by hand is checked as set_particles_pos checks positions: one with
+    particles past a wall was taken, and the next step put the whole body on that wall."""
+    scene, blob, _ = _scene(_jelly(), n_envs=2)
+    state = scene.get_state()
+    before = blob.get_particles_pos()
+    rows = state.mpm.clone().view(2, -1, layout.WIDTH)
+    rows[1, 3, 2] = 0.7  # one particle of env 1 above the top wall (0.6 − 3 cells)
+    with pytest.raises(gs.InvalidInputError, match="scene.reset, entity 'blob': argument 'state' must put every "
+                                                   "particle inside the MPM walls"):
+        scene.reset(gs.SimState(scene, [rows.view(2, -1)], state.groups))
+    assert torch.equal(blob.get_particles_pos(), before)  # nothing was reset
 
 
 def test_a_substep_above_the_stability_limit_warns(f64, caplog):

@@ -129,11 +129,15 @@ def test_repeated_launches_take_each_calls_arguments(f64):
 def test_destroy_ends_scenes_and_init_starts_again(f64):
     scene, robot = _pendulum()
     scene.step()
+    unbuilt = gs.Scene()
+    unbuilt.add_entity(gs.morphs.Box())
     gs.destroy()
     with pytest.raises(gs.SceneStateError, match="gs.init"):
         scene.step()
     with pytest.raises(gs.SceneStateError, match="gs.init"):
         gs.Scene()
+    with pytest.raises(gs.SceneStateError, match="scene.build: call gs.init"):  # (an AttributeError)
+        unbuilt.build()
     gs.destroy()  # twice is harmless
     gs.init(precision="64")
     scene, robot = _pendulum()

@@ -146,6 +146,14 @@ class MPMEntity(EntityIndexing):
         rows = state.reshape(state.shape[0], -1, layout.WIDTH)[:, self.particle_start: self.particle_end, first:last]
         return rows.clone() if is_range(envs, state.shape[0]) else rows[torch.as_tensor(envs, device=rows.device)]
 
+    def _check_state(self, state, owner):
+        """Raise unless the positions in ``state`` (a scene state tensor of the solver's, (B,
+        n_particles · WIDTH)) put this entity's particles inside the walls, as set_particles_pos
+        requires (the kernels would clamp them onto a wall). owner: the caller, for the message."""
+        rows = state.reshape(state.shape[0], -1, layout.WIDTH)[:, self.particle_start: self.particle_end]
+        _check_inside(f"{owner}, entity '{self.name}'", "state", rows[..., slice(*layout.STATE["pos"])].cpu().numpy(),
+                      self._solver.wall_lower, self._solver.wall_upper, strictly=False)
+
     def _field(self, name, envs_idx):
         """State field ``name`` (layout.STATE) of every particle: (…, n, width)."""
         return self._out(self._particle_rows(self._envs(envs_idx), *layout.STATE[name]))
@@ -235,9 +243,14 @@ class MPMEntity(EntityIndexing):
             if self.init_particles is None:
                 raise SceneStateError(f"entity '{self.name}': set_position with a centre needs the sampled "
                                       f"particles, which the scene did not give the entity")
-            offsets = torch.as_tensor(self.init_particles - np.asarray(self.morph.pos), dtype=tensor.dtype,
-                                      device=tensor.device)
-            tensor = offsets + tensor[..., None, :]
+            centres = self._values(tensor, 3, self._envs(envs_idx, distinct=True), "value")  # (len(envs), 3)
+            offsets = torch.as_tensor(self.init_particles - np.asarray(self.morph.pos), dtype=centres.dtype,
+                                      device=centres.device)
+            tensor = offsets + centres[:, None, :]  # (len(envs), n_particles, 3)
+            # (checked here so that the message names this call's argument, not set_particles_pos's)
+            _check_inside(f"entity '{self.name}'", "value", tensor.detach().cpu().numpy(), self._solver.wall_lower,
+                          self._solver.wall_upper, strictly=False)
+            tensor = tensor[0] if self.scene.n_envs == 0 else tensor
         self.set_particles_pos(tensor, None, envs_idx)
 
     def set_velocity(self, vels, envs_idx=None):

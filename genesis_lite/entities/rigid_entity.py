@@ -61,9 +61,10 @@ def _finite_length(value):
 
 
 def _check_sol_params(name, p):
-    """(timeconst, dampratio, dmin, dmax, width, midpoint, power) within MuJoCo's ranges."""
+    """(timeconst, dampratio, dmin, dmax, width, midpoint, power) within MuJoCo's ranges (the kernels
+    clamp the impedances into [1e-4, 0.9999] as MuJoCo does: dmin or dmax 0 means 1e-4)."""
     standard, direct = p[0] > 0 and p[1] > 0, p[0] <= 0 and p[1] <= 0
-    ok = (np.all(np.isfinite(p)) and (standard or direct) and 0 <= p[2] < 1 and 0 < p[3] < 1 and p[2] <= p[3]
+    ok = (np.all(np.isfinite(p)) and (standard or direct) and 0 <= p[2] < 1 and 0 <= p[3] < 1 and p[2] <= p[3]
           and p[4] >= 0 and 0 < p[5] < 1 and p[6] >= 1)
     if not ok:
         raise InvalidInputError(f"entity '{name}': argument 'sol_params' expected timeconst and dampratio both > 0 "
