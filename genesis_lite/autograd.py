@@ -15,9 +15,10 @@ derived quantities (link poses) are ``_Read`` nodes.
 With ``SimOptions(checkpoint_interval=k)``, only every k-th step saves its state; a step
 without one is recomputed during backward from the nearest checkpoint, which its node saved
 with the inputs of the steps between (``Segment._take_replay``: the ``Rollout`` itself holds one
-interval). A step whose start state is not what the step before it returned (a setter replaced
-it in between) saves its state too: a recomputation from an earlier checkpoint would not repeat
-the setter.
+interval; a backward that stops early, as ``autograd.grad`` of a late input, leaves at most an
+interval of recomputed states there until its next recomputation). A step whose start state is
+not what the step before it returned (a setter replaced it in between) saves its state too: a
+recomputation from an earlier checkpoint would not repeat the setter.
 
 Nodes hold the simulator weakly: the simulator holds the newest state, whose grad_fn is a node,
 and a strong link back would be a cycle through torch's C++ graph that Python's collector
@@ -88,7 +89,7 @@ class Rollout:
     def start_states(self, index, checkpoints, inputs):
         """(states, warm starts, replay records) of step ``index``, recomputed from the checkpoint
         before it (from its warm starts too: the same steps again, bit for bit) in ``checkpoints``
-        through the steps' ``inputs`` (a segment's: Segment.add); the steps up to the next
+        through the steps' ``inputs`` (a segment's: Segment._take_replay); the steps up to the next
         checkpoint are kept for the calls that follow (backward goes down the steps). The last of
         them was not taken again: its records are None (its replay solves from the warm starts)."""
         if index not in self._replayed:

@@ -270,9 +270,10 @@ class Simulator:
             for name in slot.solver.transient_inputs:  # (the build's tensor: no upload when unused)
                 if slot.inputs[name] is not slot.solver.default_inputs[name]:
                     slot.inputs = {**slot.inputs, name: slot.solver.default_inputs[name]}
-        self._check_finite()
+        # (counted first: a caught check_nan error, then another step, recorded two steps at one index)
         self.step_index += 1
         self.transient_clears += 1
+        self._check_finite()
 
     def _record_step(self):
         """One step, recorded in the open autograd.Segment (a new one after the state was read or
@@ -470,7 +471,7 @@ class Simulator:
         for slot in self.slots:
             if not (self.options.check_nan or slot.solver.watches_nonfinite) or not slot.solver.nonfinite():
                 continue
-            message = (f"step {self.step_index}: the {type(slot.solver).__name__} state became non-finite "
+            message = (f"step {self.step_index - 1}: the {type(slot.solver).__name__} state became non-finite "
                        f"(entities: {', '.join(self._nonfinite_entities(slot))}); reduce dt, check inputs and "
                        f"parameters")
             if self.options.check_nan:

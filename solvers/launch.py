@@ -30,7 +30,7 @@ MAX_SCALAR_CONTEXTS = 256
 # kernels (float64, empty cache; float32: at 0 the convex collider compiled in 15 s instead of 43,
 # its reverse in 8 instead of 31). LLVM's own CSE still runs and the bits are the same
 # (tests/test_compile_once.py). The rigid kernels measured run as fast at 0 (KUKA at 256 envs,
-# contact scenes at 256 and 1024 envs) but the constraint solve and its reverse (SOLVE_OPT_LEVEL). The
+# contact scenes at 256 and 1024 envs); the constraint solve and its reverse do not (SOLVE_OPT_LEVEL). The
 # MPM's reverse kernels ran as fast at 0 (10k neo-Hookean particles, fwd + bwd; their compile 3.0 →
 # 0.75 and 2.3 → 0.56 s, float64), its forward kernels 8-17 % slower (they keep 1); the rigid–MPM
 # coupler's kernels keep 1 (not measured).

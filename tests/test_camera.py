@@ -784,7 +784,7 @@ def _check_blown_up_drawing(tmp_path, caplog, force):
 
 def test_an_env_that_blew_up_is_left_out_of_the_others_drawing(f32, caplog):
     """A camera drawing several envs draws those whose state is finite, with a warning naming the env
-    that blew up (said again only when another does), as an RL run meets it; it raised, and a
+    that blew up (said again only when an env blows up anew), as an RL run meets it; it raised, and a
     recording lost every frame, as long as that env was not reset. Nothing left to draw raises."""
     scene = gs.Scene(**NO_CONTACT)
     box = scene.add_entity(gs.morphs.Box(size=(0.2, 0.2, 0.2), pos=(0.0, 0.0, 0.5)), name="box")
@@ -803,6 +803,13 @@ def test_an_env_that_blew_up_is_left_out_of_the_others_drawing(f32, caplog):
         cam.render(rgb=False)
     boxes = lambda seg: int((seg == box.links[0].idx).sum())  # noqa: E731
     assert 0 < boxes(drawn) < boxes(whole)  # two boxes of three (they fell 0.04 s: about the same pixels)
+    scene.reset(envs_idx=[1])
+    cam.render()
+    for _ in range(3):
+        box.links[0].apply_external_force([3e38, 0.0, 3e38], envs_idx=[1])
+        scene.step()
+    with warns(caplog, r"env\(s\) \[1\] drawn without"):  # (blown up anew after its reset)
+        cam.render()
     for _ in range(3):
         box.links[0].apply_external_force([3e38, 0.0, 3e38], envs_idx=[0, 2])
         scene.step()
@@ -841,7 +848,7 @@ def test_scenes_ending_finish_their_recordings(f32, tmp_path, caplog):
         scene.step()
     assert len([frame for frame in imageio.get_reader(str(tmp_path / "streamed.mp4"))]) == 30  # (len(): inf)
     assert any("camera 1: a recording of 30 frames was dropped" in r.getMessage() for r in caplog.records)
-    assert _ffmpeg_children() == running
+    assert _ffmpeg_children() == running and not (tmp_path / "never.mp4").exists()  # (no header-only file)
     with pytest.raises(gs.SceneStateError, match="camera 0.stop_recording: the scene was destroyed"):
         streamed.stop_recording()  # (it said the camera was not recording)
     gs.init(precision="32")
@@ -879,6 +886,7 @@ def test_errors_name_the_camera_argument_and_value(f32, tmp_path):
              (dict(pos=(0, 0, 3), lookat=(0, 0, 0)), r"argument 'up' must be a vector not parallel"),
              (dict(near=1.0, far=0.5), r"argument 'far' must be a distance \(m\) > near \(1.0\) that float32 can hold"),
              (dict(far=1e39), r"argument 'far' must be a distance .* that float32 can hold, got 1e\+39"),
+             (dict(near=1e39), r"argument 'near' must be a positive distance \(m\) that float32 can hold"),
              (dict(GUI=True), r"argument 'GUI' must be False.*headless"),
              (dict(model="thinlens"), r"argument 'model' must be 'pinhole'"),
              (dict(spp=64), r"argument 'spp' is a thinlens/raytracer setting"),
@@ -886,6 +894,7 @@ def test_errors_name_the_camera_argument_and_value(f32, tmp_path):
     for kwargs, message in cases:
         with pytest.raises(gs.InvalidInputError, match=message):
             scene.add_camera(**kwargs)
+    scene.add_camera(far=float(np.finfo(np.float32).max))  # (the largest float32 itself)
     for name in ("show_world_frame", "visualize_mpm_boundary"):
         with pytest.raises(gs.InvalidInputError, match=rf"VisOptions argument '{name}' must keep its default"):
             gs.Scene(vis_options=gs.options.VisOptions(**{name: True})).add_camera()

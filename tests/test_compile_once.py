@@ -116,6 +116,28 @@ def _contact_rollout(mesh_file):
     return positions.detach(), v0.grad
 
 
+def _welded_rollout():
+    """Final positions and dL/dv0 of two boxes welded to each other at run time, sliding on a plane
+    with the elliptic cone and torsional and rolling friction, float64, 40 envs (past
+    SERIAL_SOLVE_WORK: the solve and its reverse on the thread pool), 20 steps: the variants of the
+    constraint solve the contact rollout leaves out."""
+    options = gs.options.RigidOptions(friction_cone=gs.friction_cone.elliptic, enable_torsional_friction=True,
+                                      enable_rolling_friction=True, max_dynamic_constraints=1)
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.005, requires_grad=True), rigid_options=options)
+    scene.add_entity(gs.morphs.Plane())
+    boxes = [scene.add_entity(gs.morphs.Box(pos=(0.12 * k, 0, 0.05), size=(0.1, 0.1, 0.1))) for k in range(2)]
+    scene.build(n_envs=40)
+    assert 40 * 12 > SERIAL_SOLVE_WORK
+    scene.sim.rigid_solver.add_weld_constraint(boxes[0].links[0].idx, boxes[1].links[0].idx)
+    v0 = torch.linspace(-1.0, 1.0, 40 * 6, dtype=torch.float64).reshape(40, 6).requires_grad_(True)
+    boxes[0].set_dofs_velocity(v0)
+    for _ in range(20):
+        scene.step()
+    positions = torch.stack([box.get_pos() for box in boxes])
+    positions.pow(2).sum().backward()
+    return positions.detach(), v0.grad
+
+
 def _jointed_rollout():
     """Final joint positions, link positions, mass matrices and dL/d(forces) of a two-link pendulum's
     contact-free rollout (the one-launch step, the reverse without rows, the getters and their
@@ -186,19 +208,21 @@ def test_light_kernels_compute_the_same_bits_at_taichi_default_opt_level(f64, tm
     Taichi's opt_level 0 (launch.LIGHT_OPT_LEVEL: no whole-kernel common-subexpression elimination,
     most of their compile time), the constraint solve, its reverse and inverse kinematics at
     launch.SOLVE_OPT_LEVEL (1 for users, 0 in the test suite: tests/conftest.py); a contact rollout,
-    a jointed one and an MPM one through them and their gradients are the same bits with every
-    kernel at Taichi's default, 1. Taichi keeps a kernel's first compile for its runtime's life, so
-    each setting runs in a new runtime."""
+    a welded one (the solve's elliptic, condim-6, equality and thread-pool variants), a jointed one
+    with inverse kinematics and an MPM one through them and their gradients are the same bits in the
+    suite's setting, the users' and with every kernel at Taichi's default, 1. Taichi keeps a
+    kernel's first compile for its runtime's life, so each setting runs in a new runtime."""
     mesh_file = str(tmp_path / "ico.obj")
     trimesh.creation.icosphere(subdivisions=1, radius=0.05).export(mesh_file)
     compiled = _record_compiles(monkeypatch)
     rollouts = []
-    for light, solve in ((launch.LIGHT_OPT_LEVEL, launch.SOLVE_OPT_LEVEL), (1, 1)):
+    settings = dict.fromkeys(((launch.LIGHT_OPT_LEVEL, launch.SOLVE_OPT_LEVEL), (launch.LIGHT_OPT_LEVEL, 1), (1, 1)))
+    for light, solve in settings:
         monkeypatch.setattr(launch, "LIGHT_OPT_LEVEL", light)
         monkeypatch.setattr(launch, "SOLVE_OPT_LEVEL", solve)
         gs.destroy()
         gs.init(precision="64", logging_level="warning")
-        rollouts.append((*_contact_rollout(mesh_file), *_jointed_rollout(), *_mpm_rollout()))
+        rollouts.append((*_contact_rollout(mesh_file), *_jointed_rollout(), *_mpm_rollout(), *_welded_rollout()))
         names = {name for name, _ in compiled}
         assert {"collide", "collide_adjoint", "converge", "smooth_substep", "reverse_kinematics", "advance",
                 "read_mass_matrix", "read_links", "pre_coupling_backward", "post_coupling_backward"} <= names
@@ -209,7 +233,7 @@ def test_light_kernels_compute_the_same_bits_at_taichi_default_opt_level(f64, tm
         levels = {"light": light, "solve": solve, "one": 1}
         assert compiled == {(name, kind): {levels[kind]} for name, kind in compiled}, compiled
         compiled.clear()
-    light, default = rollouts
-    assert all(light[k].abs().sum() > 0 for k in (1, 5, 8))  # the three rollouts' gradients
-    for a, b in zip(light, default):
-        assert torch.equal(a, b), (a - b).abs().max()
+    assert len(rollouts) == 3 and all(rollouts[0][k].abs().sum() > 0 for k in (1, 5, 8, 10))  # the gradients
+    for other in rollouts[1:]:
+        for a, b in zip(rollouts[0], other):
+            assert torch.equal(a, b), (a - b).abs().max()

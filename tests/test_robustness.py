@@ -42,12 +42,17 @@ def test_diverging_entity_does_not_touch_others(f64):
 def test_check_nan_names_step_and_entities(f64):
     scene, wild, _ = _two_pendulums(check_nan=True)
     _diverge(wild)
+    taken = 0
     with pytest.raises(gs.SimulationError, match=r"step \d+.*wild") as info:
         for _ in range(50):
+            taken += 1
             scene.step()
     # the diverging entity alone (the message listed every entity of the solver: in a scene of
     # several robots the user could not tell which one; found by an adversarial pass)
     assert "(entities: wild)" in str(info.value), str(info.value)
+    assert str(info.value).startswith(f"step {taken - 1}:")  # the step that raised, counted from 0
+    # and counted: a caught error, then another step, recorded two steps at one index (a review)
+    assert scene.sim.step_index == taken
 
 
 def test_rigid_blow_up_warns_once_a_rollout_without_check_nan(f64, caplog):

@@ -88,9 +88,10 @@ class Camera:
         if self.f > np.finfo(np.float32).max:  # (the rasterizer's float32 drew an empty image)
             raise InvalidInputError(f"{owner}: argument 'fov' must leave a focal length float32 can hold, got {fov!r} "
                                     f"degrees: {self.f:.3g} pixels")
-        self._near = _check_float(owner, "near", near, 0.0, np.inf, "a positive finite distance (m)")
         # (the rasterizer's depths are float32: a farther far made the background's depth inf)
-        self._far = _check_float(owner, "far", far, self._near, float(np.finfo(np.float32).max),
+        largest = float(np.nextafter(np.float64(np.finfo(np.float32).max), np.inf))  # (the bounds are open)
+        self._near = _check_float(owner, "near", near, 0.0, largest, "a positive distance (m) that float32 can hold")
+        self._far = _check_float(owner, "far", far, self._near, largest,
                                  f"a distance (m) > near ({near}) that float32 can hold")
         if env_idx is not None and not (is_int(env_idx) and env_idx >= 0):
             raise InvalidInputError(f"{owner}: argument 'env_idx' must be None or an env index (integer ≥ 0), "

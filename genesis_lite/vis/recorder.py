@@ -241,7 +241,8 @@ class Recording:
 
     def discard(self):
         """Drop the recording: its encoder stops (a streamed one's too: its ffmpeg process would
-        outlive the scene) and no file is written."""
+        outlive the scene) and no file is left (a streamed one without frames: ffmpeg's header
+        alone, no valid video)."""
         encoder_log = logging.getLogger("imageio_ffmpeg")  # (it warns that a video without frames is invalid)
         level = encoder_log.level
         encoder_log.setLevel(logging.ERROR)
@@ -254,6 +255,8 @@ class Recording:
         self._frames = []
         if not self.streamed:
             self._remove_raw()
+        elif not self.n_frames:
+            _remove(self.filename)
 
     def _finish(self, finish, filename):
         try:

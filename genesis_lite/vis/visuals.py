@@ -172,7 +172,7 @@ class SceneVisuals:
         self._batched = scene.n_envs > 0
         self._link_who = {link.idx: link._who for entity in scene._rigid_entities() for link in entity.links}
         self._envs_offset = torch.as_tensor(scene.envs_offset[np.asarray(envs)], dtype=torch.float32, device=device)
-        self._left_out = set()  # the envs instances() warned it draws without their non-finite shapes
+        self._left_out = set()  # the envs the last frame was drawn without (instances() warned of them)
 
     def particles(self, extra=None):
         """The Spheres of every MPM entity's particles in the drawn envs (radius: half the particle
@@ -213,6 +213,7 @@ class SceneVisuals:
         # (checked as drawn: a float64 pose past float32's range is finite, its float32 not)
         finite = torch.isfinite(pos).all(-1) & torch.isfinite(rot).flatten(1).all(-1)
         if bool(finite.all()):
+            self._left_out = set()
             return Instances(rot, pos, self._color, self._seg)
         blown = set(self._env[~finite].tolist())
         k = int(torch.nonzero(~finite)[0, 0])
@@ -221,11 +222,12 @@ class SceneVisuals:
                         int(self._env[k]) if self._batched else None)
         # (an env that blew up among others, as RL runs meet them: the others are drawn, and its
         # shapes whose pose is finite; the others collapse to a point, a triangle that covers no pixel)
-        if not blown <= self._left_out:
-            self._left_out |= blown
+        warn = not blown <= self._left_out
+        self._left_out = blown
+        if warn:
             warn_user(f"{owner}: env(s) {sorted(blown)} drawn without the shapes whose pose is not finite (in float32, "
                       f"as drawn; the simulation blew up there), such as {self._link_who[int(self._link[k])]}; the "
-                      f"other envs are drawn whole (said again when another env blows up)")
+                      f"other envs are drawn whole (said again when an env blows up anew)")
         hidden = ~finite
         return Instances(rot.masked_fill(hidden[:, None, None], 0.0), pos.masked_fill(hidden[:, None], 0.0),
                          self._color, self._seg)
