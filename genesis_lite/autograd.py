@@ -43,7 +43,8 @@ _StepRecord = collections.namedtuple("_StepRecord", "index kept first layout inp
 class Rollout:
     """Per-rollout record (one per ``scene.reset()``): with checkpoint_interval > 1, the newest
     checkpointed state and the inputs of the steps since, from which a segment takes what its
-    recomputations need (Segment.add): the rollout itself keeps no more than a checkpoint interval."""
+    recomputations need (Segment._take_replay): the rollout itself keeps no more than a checkpoint
+    interval."""
 
     def __init__(self, sim, interval):
         self.sim, self.interval = weakref.ref(sim), interval
