@@ -15,6 +15,7 @@ import torch
 
 from . import autograd
 from .runtime import keep_large_blocks_off_the_heap, logger
+from .entities.common import replace_columns
 from .solvers.core import GradientError, SceneStateError, SimulationError
 
 
@@ -80,6 +81,10 @@ class SolverSlot:
         # (state, warm start): the solver's warm start for that state as the forward left it, kept
         # while a backward's replays overwrite the solver's (None: the solver holds it)
         self.held_warm_start = None
+        # the setters' writes into the state since it last changed otherwise (a step, a reset):
+        # [(envs, columns, values)], and the (B, width) bool mask of the entries they cover (None:
+        # none yet; False: not tracked, no graph to cut: write_state)
+        self.writes, self.written = [], None
 
 
 class Simulator:
@@ -147,6 +152,35 @@ class Simulator:
         slot.replaced_envs[slice(None) if envs is None else envs] = True
         slot.state = slot.uploaded_state = state
         slot.derived = slot.held_warm_start = None
+        slot.writes, slot.written = [], None
+
+    def write_state(self, solver, envs, columns, values):
+        """State columns ``columns`` of the envs ``envs`` (int arrays) ← values (len(envs),
+        len(columns)), out of place: a setter's write. Once the writes since the state last changed
+        otherwise cover every entry of a state in a graph, the state is made of them alone: written
+        over by two setters (positions, then velocities), it still led back through their index_put
+        to the graph before, and a truncated-BPTT loop's backward to that chunk's freed graph."""
+        slot = self.slot(solver)
+        state = self.state(solver)
+        written = slot.written
+        if written is None:  # the first write since: tracked when there is a graph to cut
+            written = np.zeros(state.shape, dtype=bool) if state.requires_grad else False
+        if written is False:
+            self.set_state(solver, replace_columns(state, envs, columns, values), envs)
+            slot.written = False
+            return
+        writes = slot.writes
+        writes.append((envs, columns, values))
+        written[np.ix_(envs, columns)] = True
+        if written.all():
+            state = state.detach()  # (every entry is written below: what it held is gone)
+            for write in writes:
+                state = replace_columns(state, *write)
+            self.set_state(solver, state, None)
+            slot.written = False  # (nothing left to cut until the state changes otherwise)
+        else:
+            self.set_state(solver, replace_columns(state, envs, columns, values), envs)
+            slot.writes, slot.written = writes, written
 
     def inputs(self, solver):
         return self.slot(solver).inputs
@@ -267,6 +301,7 @@ class Simulator:
                 slot.uploaded_state = None
         for slot in self.slots:
             slot.derived = slot.replaced_envs = slot.held_readouts = slot.held_warm_start = None
+            slot.writes, slot.written = [], None
             for name in slot.solver.transient_inputs:  # (the build's tensor: no upload when unused)
                 if slot.inputs[name] is not slot.solver.default_inputs[name]:
                     slot.inputs = {**slot.inputs, name: slot.solver.default_inputs[name]}

@@ -621,6 +621,45 @@ def test_a_checkpointed_rollout_holds_one_interval_and_its_nodes_the_rest(f64):
     assert torch.equal(grads[1], grads[4]) and bool((grads[4][:, 2] != 0).all())
 
 
+@pytest.mark.parametrize("checkpoint_interval", [1, 3])
+def test_setters_that_write_the_whole_state_cut_its_graph(f64, checkpoint_interval):
+    """Truncated backpropagation through time without resets: each chunk starts from the state the
+    last one left, set again detached by two setters (positions keeping the velocities, then the
+    velocities), and backwards its own loss. Together they write every entry of the state, which is
+    then made of their writes alone: it led back through their index_put to the previous chunk's
+    graph, already freed, and the third chunk's backward raised torch's "backward through the graph
+    a second time". Each chunk's gradient equals a fresh rollout's from the same state, bit for bit."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True,
+                                                       checkpoint_interval=checkpoint_interval))
+    robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
+    scene.build()
+    forces = torch.linspace(-1, 1, 4 * 5 * 2, dtype=torch.float64).reshape(4, 5, 2).requires_grad_(True)
+
+    def chunk(k):
+        for force in forces[k]:
+            robot.control_dofs_force(force)
+            scene.step()
+        loss = (robot.get_dofs_position() ** 2).sum()
+        loss.backward()
+        return loss.detach()
+
+    robot.set_dofs_position([0.2, 0.1])
+    starts, losses = [], []
+    for k in range(4):
+        q, v = robot.get_dofs_position().detach(), robot.get_dofs_velocity().detach()
+        starts.append((q, v))
+        robot.set_dofs_position(q, zero_velocity=False)
+        robot.set_dofs_velocity(v)
+        losses.append(chunk(k))
+    truncated, forces.grad = forces.grad.clone(), None
+    for k, (q, v) in enumerate(starts):
+        scene.reset()
+        robot.set_dofs_position(q, zero_velocity=False)
+        robot.set_dofs_velocity(v)
+        assert torch.equal(chunk(k), losses[k])
+    assert torch.equal(truncated, forces.grad) and bool((truncated != 0).all())
+
+
 def test_a_checkpointed_backward_leaves_the_rollout_as_it_was(f64):
     """A backward whose steps are recomputed from a checkpoint (checkpoint_interval > 1) overwrites
     the solver's last-step contacts and warm start: they are held before the first recompute, so

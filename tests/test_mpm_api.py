@@ -14,6 +14,7 @@ import trimesh
 
 import genesis_lite as gs
 from genesis_lite.entities import MPMEntity
+from genesis_lite.entities.common import replace_columns
 from genesis_lite.entities.mpm_entity import sample_particles
 from genesis_lite.simulator import Simulator
 from genesis_lite.solvers.mpm import layout, sampling
@@ -385,6 +386,9 @@ class FakeSim:
 
     def set_state(self, solver, state, envs=None):
         self._state = state
+
+    def write_state(self, solver, envs, columns, values):
+        self._state = replace_columns(self._state, envs, columns, values)
 
     def inputs(self, solver):
         return self._inputs

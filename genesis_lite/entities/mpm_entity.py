@@ -163,10 +163,7 @@ class MPMEntity(EntityIndexing):
         array) in envs ← values (len(envs), len(parts), their total width), out of place."""
         first, last = layout.STATE[names[0]][0], layout.STATE[names[-1]][1]
         columns = ((self.particle_start + parts)[:, None] * layout.WIDTH + np.arange(first, last)[None, :]).ravel()
-        sim = self._sim()
-        table = sim.state(self._solver)
-        sim.set_state(self._solver, replace_columns(table, envs, columns, values.reshape(len(envs), len(columns))),
-                      envs)
+        self._sim().write_state(self._solver, envs, columns, values.reshape(len(envs), len(columns)))
 
     def _write_input(self, name, parts, envs, values):
         """Per-particle input ``name`` of particles ``parts`` in envs ← values (len(envs), len(parts))."""

@@ -578,8 +578,7 @@ class RigidEntity(EntityIndexing):
         if zero_velocity:
             columns = np.concatenate([columns, self._vel_columns(np.arange(self.n_dofs))])
             values = torch.cat([values, values.new_zeros(len(envs), self.n_dofs)], dim=1)
-        sim = self._sim()
-        sim.set_state(self._solver, _replace(sim.state(self._solver), envs, columns, values), envs)
+        self._sim().write_state(self._solver, envs, columns, values)
 
     def _read_input(self, name, columns, envs_idx):
         envs = None if envs_idx is None else self._envs(envs_idx)
