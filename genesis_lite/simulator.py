@@ -15,7 +15,7 @@ import torch
 
 from . import autograd
 from .runtime import keep_large_blocks_off_the_heap, logger
-from .entities.common import replace_columns
+from .entities.common import is_range, replace_columns
 from .solvers.core import GradientError, SceneStateError, SimulationError
 
 
@@ -82,8 +82,8 @@ class SolverSlot:
         # while a backward's replays overwrite the solver's (None: the solver holds it)
         self.held_warm_start = None
         # the setters' writes into the state since it last changed otherwise (a step, a reset):
-        # [(envs, columns, values)], and the (B, width) bool mask of the entries they cover (None:
-        # none yet; False: not tracked, no graph to cut: write_state)
+        # [(envs, columns, values)], and the (width,) bool mask of the columns they wrote in every
+        # env (None: none yet; False: not tracked, no graph to cut: write_state)
         self.writes, self.written = [], None
 
 
@@ -157,21 +157,23 @@ class Simulator:
     def write_state(self, solver, envs, columns, values):
         """State columns ``columns`` of the envs ``envs`` (int arrays) ← values (len(envs),
         len(columns)), out of place: a setter's write. Once the writes since the state last changed
-        otherwise cover every entry of a state in a graph, the state is made of them alone: written
-        over by two setters (positions, then velocities), it still led back through their index_put
+        otherwise have written every column of a state in a graph in every env, the state is made
+        of them alone (replayed in order on a detached copy): written over by two setters
+        (positions, then velocities), it still led back through their index_put
         to the graph before, and a truncated-BPTT loop's backward to that chunk's freed graph."""
         slot = self.slot(solver)
         state = self.state(solver)
         written = slot.written
         if written is None:  # the first write since: tracked when there is a graph to cut
-            written = np.zeros(state.shape, dtype=bool) if state.requires_grad else False
+            written = np.zeros(state.shape[1], dtype=bool) if state.requires_grad else False
         if written is False:
             self.set_state(solver, replace_columns(state, envs, columns, values), envs)
             slot.written = False
             return
         writes = slot.writes
         writes.append((envs, columns, values))
-        written[np.ix_(envs, columns)] = True
+        if is_range(envs, state.shape[0]):  # (the columns written in every env count: the usual setter)
+            written[columns] = True
         if written.all():
             state = state.detach()  # (every entry is written below: what it held is gone)
             for write in writes:
