@@ -81,10 +81,10 @@ class SolverSlot:
         # (state, warm start): the solver's warm start for that state as the forward left it, kept
         # while a backward's replays overwrite the solver's (None: the solver holds it)
         self.held_warm_start = None
-        # the setters' writes into the state since it last changed otherwise (a step, a reset):
-        # [(envs, columns, values)], and the (width,) bool mask of the columns they wrote in every
-        # env (None: none yet; False: not tracked, no graph to cut: write_state)
-        self.writes, self.written = [], None
+        # the setters' writes into the state since it last changed otherwise (a step, a reset),
+        # made into a detached copy of it (None: none), and the (width,) bool mask of the columns
+        # they wrote in every env (None: none yet; False: not tracked, no graph to cut): write_state
+        self.fresh, self.written = None, None
 
 
 class Simulator:
@@ -152,37 +152,36 @@ class Simulator:
         slot.replaced_envs[slice(None) if envs is None else envs] = True
         slot.state = slot.uploaded_state = state
         slot.derived = slot.held_warm_start = None
-        slot.writes, slot.written = [], None
+        slot.fresh, slot.written = None, None
 
     def write_state(self, solver, envs, columns, values):
         """State columns ``columns`` of the envs ``envs`` (int arrays) ← values (len(envs),
-        len(columns)), out of place: a setter's write. Once the writes since the state last changed
-        otherwise have written every column of a state in a graph in every env, the state is made
-        of them alone (replayed in order on a detached copy): written over by two setters
-        (positions, then velocities), it still led back through their index_put
-        to the graph before, and a truncated-BPTT loop's backward to that chunk's freed graph."""
+        len(columns)), out of place: a setter's write. A state in a graph is also written, write by
+        write, into a detached copy of it (``fresh``: the writes alone, taken at the call in its
+        grad mode); once those writes have written every column in every env, that copy, equal in
+        value, becomes the state: written over by two setters (positions, then velocities), the
+        state still led back through their index_put to the graph before, and a truncated-BPTT
+        loop's backward to that chunk's freed graph."""
         slot = self.slot(solver)
         state = self.state(solver)
-        written = slot.written
+        fresh, written = slot.fresh, slot.written
         if written is None:  # the first write since: tracked when there is a graph to cut
-            written = np.zeros(state.shape[1], dtype=bool) if state.requires_grad else False
+            fresh, written = (state.detach(), np.zeros(state.shape[1], dtype=bool)) if state.requires_grad \
+                else (None, False)
         if written is False:
             self.set_state(solver, replace_columns(state, envs, columns, values), envs)
             slot.written = False
             return
-        writes = slot.writes
-        writes.append((envs, columns, values))
+        fresh = replace_columns(fresh, envs, columns, values)
         if is_range(envs, state.shape[0]):  # (the columns written in every env count: the usual setter)
+            written = written.copy()
             written[columns] = True
         if written.all():
-            state = state.detach()  # (every entry is written below: what it held is gone)
-            for write in writes:
-                state = replace_columns(state, *write)
-            self.set_state(solver, state, None)
-            slot.written = False  # (nothing left to cut until the state changes otherwise)
+            self.set_state(solver, fresh, None)
+            slot.written = False  # (the state's graph reaches only what the writes gave: not tracked further)
         else:
             self.set_state(solver, replace_columns(state, envs, columns, values), envs)
-            slot.writes, slot.written = writes, written
+            slot.fresh, slot.written = fresh, written  # (after set_state, which may raise and resets them)
 
     def inputs(self, solver):
         return self.slot(solver).inputs
@@ -303,7 +302,7 @@ class Simulator:
                 slot.uploaded_state = None
         for slot in self.slots:
             slot.derived = slot.replaced_envs = slot.held_readouts = slot.held_warm_start = None
-            slot.writes, slot.written = [], None
+            slot.fresh, slot.written = None, None
             for name in slot.solver.transient_inputs:  # (the build's tensor: no upload when unused)
                 if slot.inputs[name] is not slot.solver.default_inputs[name]:
                     slot.inputs = {**slot.inputs, name: slot.solver.default_inputs[name]}

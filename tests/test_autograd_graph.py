@@ -660,6 +660,34 @@ def test_setters_that_write_the_whole_state_cut_its_graph(f64, checkpoint_interv
     assert torch.equal(truncated, forces.grad) and bool((truncated != 0).all())
 
 
+def test_setters_completing_the_state_take_each_write_as_it_was_made(f64):
+    """The state a setter completes (every column written since the last step) is made of the writes
+    as they were made (a review of its first version, which replayed them then): a value refilled
+    in place after its setter, a write under torch.no_grad() and a write that raised change nothing
+    later. Each case against the same writes completed in a scene whose state is in no graph."""
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.01, requires_grad=True))
+    robot = scene.add_entity(gs.morphs.URDF(file=asset("pendulum2.urdf"), fixed=True))
+    scene.build(n_envs=2)
+    force = torch.full((2, 2), 0.5, dtype=torch.float64, requires_grad=True)
+    v0 = torch.tensor([[2.0], [4.0]], dtype=torch.float64, requires_grad=True)
+    for in_graph in (True, False):
+        scene.reset()
+        if in_graph:
+            robot.control_dofs_force(force)
+        scene.step()
+        assert robot.get_dofs_position().requires_grad == in_graph
+        buffer = torch.tensor([[1.0, 5.0], [3.0, 6.0]], dtype=torch.float64)
+        robot.set_dofs_velocity(buffer)
+        buffer.fill_(7.0)  # (refilled after the setter took it)
+        with torch.no_grad():
+            robot.set_dofs_velocity(v0, dofs_idx_local=[1])
+        with pytest.raises(gs.SceneStateError), torch.inference_mode():
+            robot.set_dofs_velocity(torch.zeros(2, 2))
+        robot.set_dofs_position(torch.zeros(2, 2), zero_velocity=False)  # completes the state
+        assert robot.get_dofs_velocity().tolist() == [[1.0, 2.0], [3.0, 4.0]]
+        assert not robot.get_dofs_velocity().requires_grad  # (v0 was set under no_grad)
+
+
 def test_a_checkpointed_backward_leaves_the_rollout_as_it_was(f64):
     """A backward whose steps are recomputed from a checkpoint (checkpoint_interval > 1) overwrites
     the solver's last-step contacts and warm start: they are held before the first recompute, so
