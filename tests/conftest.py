@@ -53,8 +53,10 @@ def pytest_configure(config):
     """The asset cache (solvers/asset_cache.py) in a folder of the run's own (each xdist worker's):
     tests neither read what other runs or versions left there nor fill the user's. The constraint
     solve and its reverse compile at Taichi's opt_level 0 (launch.SOLVE_OPT_LEVEL): half the compile
-    time of a cold suite went to them at 1, the users' level, which runs them faster but computes
-    the same bits (the slow test_light_kernels_compute_the_same_bits_at_taichi_default_opt_level)."""
+    time of a cold suite went to them at 1, the users' level, which runs them faster and computes
+    the same bits in the variants the slow
+    test_light_kernels_compute_the_same_bits_at_taichi_default_opt_level runs (the suite runs the
+    others at 0 only)."""
     launch.SOLVE_OPT_LEVEL = 0
     folder = tempfile.mkdtemp(prefix="genesis_lite_assets_")
     os.environ["GENESIS_LITE_CACHE_DIR"] = folder
