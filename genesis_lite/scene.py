@@ -24,7 +24,7 @@ from .materials import MPM, Rigid
 from .options import (LegacyCouplerOptions, MPMOptions, RigidOptions, SimOptions, ViewerOptions, VisOptions,
                       check_bool, is_int)
 from .rigid_solver import RigidSolverView
-from .runtime import require_init, runtime, track
+from .runtime import free_dropped_scenes, require_init, runtime, track
 from .simulator import Simulator, refuse_inference_mode
 from .solvers.coupler import Coupler
 from .solvers.coupling import rigid_colliders
@@ -276,6 +276,7 @@ class Scene:
         if self.mpm_solver in solvers:  # (the default of the MPM solver's input "coupling")
             self.mpm_solver.set_couplings([(e.material.coup_friction, e.material.coup_softness,
                                             e.material.coup_restitution) for e in self._rigid_entities()])
+        free_dropped_scenes()  # (before this scene allocates)
         sim = Simulator(self.sim_options, solvers)
         try:
             sim.build(self.n_envs)
@@ -286,6 +287,7 @@ class Scene:
                 solver.destroy()
             raise
         self.sim = sim
+        self._footprint = sum(solver.memory_bytes() for solver in solvers)
         self.n_envs_per_row, self.envs_offset = _envs_layout(max(1, self.n_envs), spacing, n_envs_per_row,
                                                              center_envs_at_origin)
         if self._rigid_solver in solvers:
@@ -307,6 +309,10 @@ class Scene:
         model = rigid.model
         colliding = np.unique(model.link_entity[model.geom_link[model.geom_collides]])
         self.coupled_entities = {entities[k] for k in colliding if entities[k].material.needs_coup}
+
+    def _held_bytes(self):
+        """Bytes of the solvers' arrays the scene holds (0 before build and once destroyed)."""
+        return 0 if self.sim is None else self._footprint
 
     def _require_alive(self, what):
         if self._destroyed:

@@ -26,6 +26,8 @@ Fused or not, a step gives the same bits: the same stage functions run in the sa
 """
 from collections.abc import Mapping
 
+import torch
+
 
 class Solver:
     """Abstract solver. B is the number of environments (1 when the scene is not batched)."""
@@ -181,6 +183,31 @@ class Solver:
     def destroy(self):
         """Free the solver's arrays."""
         raise NotImplementedError
+
+    def memory_bytes(self):
+        """Bytes of the torch tensors among the solver's attributes (inside lists, tuples and dicts
+        too), each storage counted once: what its build allocated."""
+        return tensor_bytes(vars(self).values())
+
+
+def tensor_bytes(values):
+    """Bytes of the storages of the torch tensors among ``values`` and inside their lists, tuples
+    and dicts, each storage counted once."""
+    storages = {}
+
+    def visit(value):
+        if isinstance(value, torch.Tensor):
+            storages[value.untyped_storage().data_ptr()] = value.untyped_storage().nbytes()
+        elif isinstance(value, (list, tuple)):
+            for item in value:
+                visit(item)
+        elif isinstance(value, dict):
+            for item in value.values():
+                visit(item)
+
+    for value in values:
+        visit(value)
+    return sum(storages.values())
 
 
 class GradColumns(Mapping):

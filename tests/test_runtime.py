@@ -1,11 +1,14 @@
 """gs.init and gs.destroy: the backend actually started decides torch's device, a missing GPU
 gives one warning and the CPU for both, no path hands device memory to CPU kernels, and kernels
 are compiled without fast math; torch's OpenMP threads wait passively unless the user says otherwise."""
+import gc
 import importlib
 import logging
 import os
 import subprocess
 import sys
+import types
+import weakref
 
 import numpy as np
 import pytest
@@ -172,6 +175,34 @@ def test_a_failed_restart_leaves_no_half_runtime(f64, monkeypatch):
     scene, robot = _pendulum()
     scene.step()
     assert torch.isfinite(robot.get_dofs_position()).all()
+
+
+def test_a_build_frees_the_dropped_scenes_once_they_hold_enough(f64, monkeypatch):
+    """A dropped scene is freed by Python's cycle collector (it and its entities refer to each other),
+    which counts objects, not bytes: a loop rebuilding a large scene kept every dead one. A build
+    collects once the built scenes hold COLLECT_AFTER_BYTES more than after the last collection; scenes
+    kept alive move that mark, so they do not make every later build collect."""
+    rt = importlib.import_module("genesis_lite.runtime")  # (gs.runtime is the runtime object)
+    footprint = _pendulum()[0]._held_bytes()
+    assert footprint > 0
+    gc.collect()
+    collections = []
+    monkeypatch.setattr(rt, "gc", types.SimpleNamespace(collect=lambda: collections.append(gc.collect())))
+    monkeypatch.setattr(rt, "_held_after_collection", rt._held_bytes())
+    monkeypatch.setattr(rt, "COLLECT_AFTER_BYTES", 2.5 * footprint)
+    gc.disable()
+    try:
+        dropped = [weakref.ref(_pendulum()[0]) for _ in range(4)]  # the fourth build collects the first three
+        assert len(collections) == 1 and [ref() is None for ref in dropped] == [True] * 3 + [False]
+        kept = [_pendulum()[0] for _ in range(6)]
+        assert len(collections) == 3  # building the 3rd and the 6th: the mark follows the scenes kept
+        assert all(scene._held_bytes() == footprint for scene in kept)
+        for scene in kept:
+            scene.destroy()  # (holds nothing more: the mark comes down)
+        dropped = [weakref.ref(_pendulum()[0]) for _ in range(4)]
+        assert len(collections) == 4 and [ref() is None for ref in dropped] == [True] * 3 + [False]
+    finally:
+        gc.enable()
 
 
 @ti.kernel

@@ -12,7 +12,7 @@ import operator
 import numpy as np
 import torch
 
-from ..base import GradColumns, Solver
+from ..base import GradColumns, Solver, tensor_bytes
 from ..core import AssetError, GradientError, SimulationError, new_state, runtime
 from .. import launch
 from ..launch import BoundKernel, BoundKernels
@@ -714,6 +714,10 @@ class RigidSolver(Solver):
         if readout == "contacts":
             out[envs, :, :2] = -1.0
         return out
+
+    def memory_bytes(self):
+        """The arenas' bytes, and those of the tensors among the solver's attributes."""
+        return tensor_bytes(list(vars(self).values()) + ([] if self.data is None else [self.data.arenas]))
 
     def destroy(self):
         """Free the arenas and the input packs (the compiled kernels stay, for every later scene)."""
