@@ -236,6 +236,10 @@ class URDF(Morph):
     def _check(self):
         owner = type(self).__name__
         self.file = _file_path(owner, self.file, xml=True)
+        if self.file.lower().endswith(".xacro"):  # (its macros would be skipped as unknown elements)
+            raise InvalidInputError(f"{owner}: argument 'file': xacro files are not supported yet (Genesis expands them "
+                                    f"with the xacro package), got {self.file!r}; expand it first: "
+                                    f"xacro robot.urdf.xacro > robot.urdf")
         self.scale = _isotropic_scale(owner, self.scale)
         self.file_meshes_are_zup = _meshes_zup(owner, self.file_meshes_are_zup, self.file, False)
         self.default_armature = _armature(owner, self.default_armature)
@@ -521,13 +525,14 @@ class Terrain(Morph):
             self._no_subterrains()
         refuse_grad("Terrain", "height_field", self.height_field, "a terrain's heights are fixed at build")
         try:
-            heights = np.asarray(self.height_field.cpu() if hasattr(self.height_field, "cpu") else self.height_field,
-                                 dtype=np.float64)
+            given = np.asarray(self.height_field.cpu() if hasattr(self.height_field, "cpu") else self.height_field)
         except (TypeError, ValueError):
-            heights = np.full(1, np.nan)
+            given = np.full(1, np.nan)
+        # (real numbers only: numpy would take a complex one's real part, a bool as 0 or 1)
+        heights = given.astype(np.float64) if given.dtype.kind in "iuf" else np.full(1, np.nan)
         if heights.ndim != 2 or min(heights.shape) < 2 or not np.all(np.isfinite(heights)):
-            raise InvalidInputError(f"Terrain: argument 'height_field' must be a 2-d array of finite heights of at "
-                                    f"least 2 × 2 points, got {_described(self.height_field)}")
+            raise InvalidInputError(f"Terrain: argument 'height_field' must be a 2-d array of finite real heights of "
+                                    f"at least 2 × 2 points, got {_described(self.height_field)}")
         self.height_field = heights
 
     def _generated(self):

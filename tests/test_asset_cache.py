@@ -125,7 +125,7 @@ def test_a_symlinked_urdf_reads_the_meshes_beside_the_link(cache, tmp_path):
 
 def test_a_mesh_appearing_where_it_is_looked_for_first_is_read(cache, tmp_path):
     """package://pkg/meshes/cube.obj is found as pkg/meshes/cube.obj from pkg/urdf/ (its parent);
-    a cube.obj put later at pkg/urdf/meshes/, looked at first, is what the next load reads."""
+    a cube.obj put later at pkg/urdf/pkg/meshes/, looked at first, is what the next load reads."""
     package = tmp_path / "pkg"
     mesh_robot(package, half=0.1)
     (package / "urdf").mkdir()
@@ -133,8 +133,8 @@ def test_a_mesh_appearing_where_it_is_looked_for_first_is_read(cache, tmp_path):
     (package / "urdf" / "robot.urdf").write_text(text)
     path = str(package / "urdf" / "robot.urdf")
     assert np.abs(load_urdf(path)[1].geoms[0].vertices).max() == 0.1
-    (package / "urdf" / "meshes").mkdir()
-    (package / "urdf" / "meshes" / "cube.obj").write_text(cube_obj(0.3))
+    (package / "urdf" / "pkg" / "meshes").mkdir(parents=True)
+    (package / "urdf" / "pkg" / "meshes" / "cube.obj").write_text(cube_obj(0.3))
     assert np.abs(load_urdf(path)[1].geoms[0].vertices).max() == 0.3
 
 

@@ -377,6 +377,12 @@ def test_inverse_kinematics_turns_ball_joints(f64):
     assert float(error[:3].norm()) < 5e-4 and float(error[3:].norm()) < 5e-3
     robot.set_qpos(qpos)
     torch.testing.assert_close(hand.get_pos(), pos, rtol=0, atol=5e-4)
+    # a ball joint left out keeps its quaternion bit for bit, also one a little off unit norm (a step
+    # of zero turned and normalised it)
+    start = qpos.clone()
+    start[:4] = torch.tensor([1.0, 1e-3, 0.0, 0.0], dtype=torch.float64)
+    qpos = robot.inverse_kinematics(hand, pos=pos + 0.01, init_qpos=start, dofs_idx_local=[3, 4, 5, 6])
+    assert torch.equal(qpos[:4], start[:4]) and not torch.equal(qpos[4:], start[4:])
 
 
 def test_ball_joint_inputs_are_checked(f64):

@@ -107,6 +107,9 @@ def test_morph_arguments():
            "Box: arguments 'euler' and 'quat' cannot both be set")
     assert np.allclose(gs.morphs.Box(euler=(0.0, 0.0, 90.0)).quat, [np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5)])
     assert gs.morphs.Box().quat.tolist() == [1.0, 0.0, 0.0, 0.0] and gs.morphs.Box().euler.tolist() == [0.0, 0.0, 0.0]
+    # a xacro file (Genesis expands it; read as URDF, its macros' links and joints were skipped)
+    raises(gs.InvalidInputError, lambda: gs.morphs.URDF(file="robot.urdf.xacro"), "URDF: argument 'file'",
+           "xacro files are not supported yet", "robot.urdf.xacro")
 
 
 def test_morph_keywords():

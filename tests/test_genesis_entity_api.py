@@ -1349,3 +1349,14 @@ def test_links_and_entities_know_their_dof_and_coordinate_ranges(f64):
     assert sum(link.n_dofs for link in arm.links) == arm.n_dofs and arm.links[-1].dof_end == arm.dof_end
     assert body.joints[0].init_qpos.tolist() == [0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0]  # (Genesis's joint.init_qpos)
     assert np.concatenate([joint.init_qpos for joint in arm.joints]).tolist() == arm.init_qpos.tolist()
+    # geom_end, joint_start/joint_end and a joint's scene-wide idx (a second probe found them missing)
+    assert (plane.geom_end, box.geom_start, box.geom_end, arm.geom_start) == (1, 1, 2, 2) and arm.geom_end > 2
+    assert (plane.joint_start, plane.joint_end, box.joint_start, box.joint_end) == (0, 0, 0, 1)
+    assert (arm.joint_start, arm.joint_end) == (1, 8) and [joint.idx for joint in arm.joints] == list(range(1, 8))
+    # Genesis's get_link / get_joint by uid (digits of it)
+    assert arm.get_link(uid=arm.links[3].uid.short()) is arm.links[3]
+    assert arm.get_joint(uid=str(arm.joints[2].uid)[5:20]) is arm.joints[2]
+    for call, said in ((lambda: arm.get_link(), "get_link missing a required argument: 'name' or 'uid'"),
+                       (lambda: arm.get_joint(uid="not hex"), "get_joint argument 'uid' must be digits of one uid")):
+        with pytest.raises(gs.InvalidInputError, match=said):
+            call()

@@ -130,6 +130,10 @@ def test_homogeneous_transforms():
     assert np.abs(geom.trans_to_T(VECS[0])[:3, :3] - np.eye(3)).max() == 0.0
     out = np.empty((N, 4, 4))
     assert geom.trans_quat_to_T(VECS, QUATS, out=out) is out and np.abs(out - T).max() == 0.0
+    rotvecs = np.empty((N, 3))  # (Genesis's quat_to_rotvec and rotvec_to_quat take out after the argument)
+    assert geom.quat_to_rotvec(QUATS, rotvecs) is rotvecs and np.abs(rotvecs - geom.quat_to_rotvec(QUATS)).max() == 0
+    quats = np.empty((N, 4))
+    assert geom.rotvec_to_quat(rotvecs, quats) is quats and np.abs(quats - geom.rotvec_to_quat(rotvecs)).max() == 0
 
 
 def test_types_devices_and_gradients():

@@ -252,8 +252,10 @@ def test_terrain_in_a_batch_steps_each_env_as_alone(f64):
 
 
 @pytest.mark.parametrize("kwargs, said", [
-    ({"height_field": np.zeros(4)}, "2-d array of finite heights"),
-    ({"height_field": np.array([[0.0, np.nan], [0.0, 0.0]])}, "2-d array of finite heights"),
+    ({"height_field": np.zeros(4)}, "2-d array of finite real heights"),
+    ({"height_field": np.array([[0.0, np.nan], [0.0, 0.0]])}, "2-d array of finite real heights"),
+    ({"height_field": np.zeros((3, 3)) + 1j}, "finite real heights"),  # (numpy took the real part)
+    ({"height_field": np.ones((3, 3), dtype=bool)}, "finite real heights"),
     ({"height_field": np.zeros((3, 3)), "horizontal_scale": -1.0}, "'horizontal_scale' must be positive"),
     ({"height_field": np.zeros((3, 3)), "fixed": False}, "always fixed"),
     ({"height_field": np.zeros((3, 3)), "n_subterrains": (2, 2)}, r"\['n_subterrains'\] generate subterrains"),
@@ -275,7 +277,7 @@ def test_terrain_bad_input_is_named(kwargs, said):
     ('<hfield name="h" nrow="2" ncol="2" size="1 1 0.1 0.1"/>',
      '<body><freejoint/><geom type="hfield" hfield="h"/></body>', "height field only in the worldbody"),
 ])
-def test_mjcf_height_field_bad_input_is_named(tmp_path, asset, body, said):
+def test_mjcf_height_field_bad_input_is_named(f64, tmp_path, asset, body, said):
     path = tmp_path / "bad.xml"
     body = body or '<geom type="hfield" hfield="h"/>'
     path.write_text(f"<mujoco><asset>{asset}</asset><worldbody>{body}"

@@ -208,6 +208,45 @@ def test_inverse_kinematics_moves_only_the_path_to_the_link(f64, respect_joint_l
     assert float(qpos[6]) == 3.2 and error[:3].norm() <= 5e-4
 
 
+def test_inverse_kinematics_draws_restarts_within_a_one_sided_limit(f64):
+    """A revolute joint limited on one side (set_dofs_limit with an infinite bound): the restarts are
+    drawn within a turn of its limit, so the joint reaches the target's angle a turn away, inside the
+    limit (drawn in [−π, π], a restart near the angle outside the limit was solved and returned)."""
+    _, robot = _scene(KUKA, True)
+    ee = robot.links[-1]
+    reaching = torch.tensor([1.0, 0.6, 0.0, -1.0, 0.0, 0.5, 0.0], dtype=torch.float64)
+    robot.set_qpos(reaching)
+    target = ee.get_pos().clone()
+    robot.set_qpos(torch.zeros(7, dtype=torch.float64))
+    robot.set_dofs_limit([-np.inf], [0.2], dofs_idx_local=[0])
+    start = reaching.clone()
+    start[0] = 0.0
+    qpos, error = robot.inverse_kinematics(ee, pos=target, init_qpos=start, dofs_idx_local=[0], pos_tol=0.05,
+                                           return_error=True)
+    assert float(qpos[0]) <= 0.2 and float(error[:3].norm()) <= 0.05
+    assert abs(float(qpos[0]) - (1.0 - 2.0 * np.pi)) < 0.2
+
+
+def test_inverse_kinematics_without_limits_runs_every_sample_from_the_last_ones_end(f64):
+    """respect_joint_limit=False: no restart is drawn, and, as Genesis's, each of max_samples
+    samples goes on from where the last ended (it ran one sample: max_samples ignored). Pose
+    targets the KUKA reaches from its zero pose only in more steps of max_step_size 0.05 than one
+    sample's 20."""
+    _, robot = _scene(KUKA, True, n_envs=4)
+    rng = np.random.default_rng(5)
+    ee = robot.links[-1]
+    targets = [_reachable(robot, rng, ee) for _ in range(4)]
+    pos = torch.stack([t[0][k] for k, t in enumerate(targets)])
+    quat = torch.stack([t[1][k] for k, t in enumerate(targets)])
+
+    def solve(samples):
+        _, error = robot.inverse_kinematics(ee, pos=pos, quat=quat, respect_joint_limit=False, max_step_size=0.05,
+                                            max_samples=samples, return_error=True)
+        return (error[:, :3].norm(dim=1) <= 5e-4) & (error[:, 3:].norm(dim=1) <= 5e-3)
+
+    assert not solve(1).any() and solve(50).all()
+
+
 @pytest.mark.parametrize("option, value, words", [
     ("max_samples", 0, "'max_samples' must be an integer >= 1"),
     ("max_solver_iters", -3, "'max_solver_iters' must be an integer >= 0"),

@@ -738,11 +738,50 @@ LINK = '<geom type="sphere" size="0.1"/>'
      "<equality><connect name=None>: names ['b'] inside a <replicate> and ['base'] outside it"),
     (f'<body name="b"><joint name="j"/><geom type="sphere" size="0.1" solimp="0.9 0.95 0.001 0.5 2 3"/></body>', "",
      "attribute 'solimp' expected 1 or 2 or 3 or 4 or 5 finite numbers"),
+    # what MuJoCo 4's compiler refuses (each was loaded: the later of two names won, mass was taken away)
+    (f'<body name="b"><joint name="j"/>{LINK}<body name="c"><joint name="j"/>{LINK}</body></body>', "",
+     "joint names expected unique, got repeated names ['j']"),
+    (f'<body name="b"><joint name="j"/><geom type="mesh" mesh="m"/></body>',
+     '<asset><mesh name="m" vertex="0 0 0 1 0 0 0 1 0 0 0 1"/><mesh name="m" vertex="0 0 0 2 0 0 0 2 0 0 0 2"/></asset>',
+     "<mesh name='m'>: mesh names expected unique, got 'm' twice"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>',
+     '<asset><material name="red" rgba="1 0 0 1"/><material name="red"/></asset>',
+     "material names expected unique, got 'red' twice"),
+    (f'<body name="b"><joint name="j"/><geom type="mesh" mesh="m"/></body>',
+     '<asset><mesh name="m" refpos="0.5 0 0" vertex="0 0 0 1 0 0 0 1 0 0 0 1"/></asset>',
+     "<mesh name='m'>: attributes ['refpos'] are not supported yet"),
+    (f'<body name="b"><joint name="j"/><geom type="sphere" size="0.1" density="-100"/></body>', "",
+     "attribute 'density' expected >= 0, got '-100'"),
+    (f'<body name="b"><joint name="j"/><inertial pos="0 0 0" mass="1" diaginertia="0.01 0.01 0.03"/></body>', "",
+     "<inertial>: inertia expected principal moments with A"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<tendon><fixed><joint joint="typo" coef="1"/></fixed></tendon>',
+     "expected <joint joint coef> children naming joints of the file, got ['typo']"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<actuator><motor joint="typo"/></actuator>',
+     "<actuator><motor joint='typo'>: joint expected a joint of the file, got 'typo'"),
+    (f'<body name="b"><joint name="j" range="1 -1"/>{LINK}</body>', "", "range expected lower < upper, got '1 -1'"),
 ])
 def test_unsupported_or_malformed_files_are_named(f64, tmp_path, body, extra, said):
     scene = gs.Scene()
     with pytest.raises(AssetError, match=f"MJCF '.*robot.xml' \\(entity '.*'\\): .*{_escaped(said)}"):
         scene.add_entity(gs.morphs.MJCF(file=_write(tmp_path, body, extra)))
+
+
+def test_what_mujoco_reads_as_no_range_or_names_itself_loads(f64, tmp_path):
+    """Ranges of 0 0 (MuJoCo's default, "no range" under autolimits: they were refused as lower ≥
+    upper), and an unnamed body beside a body named as the name generated for it (refused as a
+    repeated name), load as MuJoCo 4 loads them."""
+    body = (f'<body><joint name="h" range="0 0" actuatorfrcrange="0 0"/>{LINK}<body name="body0"><joint name="k"/>'
+            f'{LINK}</body></body>')
+    path = _write(tmp_path, body, '<actuator><motor joint="k" forcerange="0 0"/></actuator>')
+    scene = gs.Scene()
+    robot = scene.add_entity(gs.morphs.MJCF(file=path))
+    scene.build()
+    model = mujoco.MjModel.from_xml_path(str(path))
+    assert model.jnt_limited.tolist() == [0, 0] and model.jnt_actfrclimited.tolist() == [0, 0]
+    lower, upper = robot.get_dofs_limit()
+    assert torch.isinf(lower).all() and torch.isinf(upper).all()
+    assert (robot.get_dofs_force_range()[1] >= 1e30).all()  # (unbounded)
+    assert len({link.name for link in robot.links}) == robot.n_links and "body0" in [l.name for l in robot.links]
 
 
 def _escaped(text):

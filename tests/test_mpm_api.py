@@ -625,7 +625,8 @@ def test_muscle_actuation(f64):
     cases = [(lambda: sand.set_actuation([1.0]), "entity 'sand': set_actuation needs a gs.materials.MPM.Muscle entity, "
                                                  "got MPM.Sand"),
              (lambda: sand.set_muscle(muscle_group=[0] * 8), "set_muscle needs a gs.materials.MPM.Muscle"),
-             (lambda: muscle.set_actuation([1.0, 2.0, 3.0]), "'actu' must have shape (2, 2)"),
+             (lambda: muscle.set_actuation([1.0, 2.0, 3.0]), "'actus' must have shape (2, 2)"),
+             (lambda: muscle.set_actuation(actus=[np.nan, 0.0]), "'actus' must be finite"),  # (Genesis's name)
              (lambda: muscle.set_muscle(muscle_group=[0, 2] * 4), "'muscle_group' must be 8 integers in [0, 2)"),
              (lambda: muscle.set_muscle(muscle_group=[0.0] * 8), "'muscle_group'"),
              (lambda: muscle.set_muscle(muscle_direction=[np.nan, 0.0, 1.0]), "'muscle_direction' must hold finite"),

@@ -290,6 +290,15 @@ def test_package_uri_found_in_ancestor_folder(tmp_path):
     found, tried = resolve_mesh_path("package://pkg/meshes/m.obj", str(pkg / "urdf" / "robots"))
     assert found == str(pkg / "meshes" / "m.obj") and found in tried
     assert resolve_mesh_path(BOX_OBJ, "/nowhere") == (BOX_OBJ, [BOX_OBJ])
+    # another package's mesh, where the URDF's own package has a file of the same name (it was taken)
+    gripper = tmp_path / "ws" / "src" / "gripper" / "meshes"
+    gripper.mkdir(parents=True)
+    shutil.copy(BOX_OBJ, gripper / "m.obj")
+    found, _ = resolve_mesh_path("package://gripper/meshes/m.obj", str(pkg / "urdf" / "robots"))
+    assert found == str(gripper / "m.obj")
+    # a package folder named otherwise than its package: the path without the package's name
+    found, _ = resolve_mesh_path("package://pkg_description/meshes/m.obj", str(pkg / "urdf" / "robots"))
+    assert found == str(pkg / "meshes" / "m.obj")
 
 
 def test_absolute_mesh_path(tmp_path):

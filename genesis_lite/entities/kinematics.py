@@ -138,15 +138,17 @@ class _Joints:
         return q
 
     def samples(self, q, generator, count):
-        """(count, B', n_qs): q with its moving scalar joints drawn uniformly within their limits (a
-        revolute joint without limits in [−π, π]; a prismatic one without keeps its value)."""
-        finite = torch.isfinite(self.lower) & torch.isfinite(self.upper)
-        lower = torch.where(finite, self.lower, -np.pi)
-        upper = torch.where(finite, self.upper, np.pi)
+        """(count, B', n_qs): q (within the limits) with its moving scalar joints drawn uniformly
+        within their limits: a revolute joint limited on one side within a turn from that limit,
+        one without limits in [−π, π]; a prismatic one not limited on both sides keeps its value."""
+        has_lower, has_upper = torch.isfinite(self.lower), torch.isfinite(self.upper)
+        lower = torch.where(has_lower, self.lower, torch.where(has_upper, self.upper - 2.0 * np.pi, -np.pi))
+        upper = torch.where(has_upper, self.upper, torch.where(has_lower, self.lower + 2.0 * np.pi, np.pi))
         draw = lower + torch.rand(count, q.shape[0], len(self.qs), generator=generator, dtype=q.dtype).to(q.device) * (
             upper - lower)
-        out = q.expand(count, *q.shape).clone()
-        out[..., self.qs] = torch.where(self.moving & (finite | self.revolute), draw, out[..., self.qs])
+        out = self.clipped(q).expand(count, *q.shape).clone()
+        drawn = self.moving & ((has_lower & has_upper) | self.revolute)
+        out[..., self.qs] = torch.where(drawn, draw, out[..., self.qs])
         return out
 
 
@@ -190,8 +192,8 @@ def solve_ik(entity, goals, start, envs, dofs, options):
     exceeds max_step_size. Genesis's rule, per env: a sample runs up to max_solver_iters steps
     and stops where every goal is within pos_tol and rot_tol (that qpos is the answer); else its
     last qpos becomes the best where no goal's position or rotation error is worse than the best
-    one's (the first sample's always), and another start is drawn within the limits (when
-    respected). One kernel runs it all (solvers/rigid/ik.py), the starts drawn beforehand.
+    one's (the first sample's always), and the next sample starts from a qpos drawn within the
+    limits where they are respected, else from where the last one ended. One kernel runs it all (solvers/rigid/ik.py), the starts drawn beforehand.
     options: respect_joint_limit, max_samples, max_solver_iters, damping, pos_tol, rot_tol,
     max_step_size, seed. Returns (the best qpos (B', n_qs), its errors (B', K, 6))."""
     motions = entity._dof_motions
@@ -199,8 +201,9 @@ def solve_ik(entity, goals, start, envs, dofs, options):
     moving = on_path & np.isin(np.arange(entity.n_dofs), dofs)
     joints = _Joints(entity, options["respect_joint_limit"], moving, envs)
     generator = torch.Generator().manual_seed(0 if options["seed"] is None else int(options["seed"]))
-    samples = options["max_samples"] if joints.limited else 1
-    starts = torch.cat([joints.clipped(start)[None], joints.samples(start, generator, samples - 1)])
+    samples = options["max_samples"]
+    starts = torch.cat([joints.clipped(start)[None], joints.samples(start, generator, samples - 1)]) \
+        if joints.limited else start[None]
     rows, K, D = len(envs), len(goals), entity.n_dofs
     solver = entity._solver
     ints = lambda values: torch.tensor(values, dtype=torch.int32, device=start.device)  # noqa: E731

@@ -325,21 +325,21 @@ class MPMEntity(EntityIndexing):
             raise InvalidInputError(f"entity '{self.name}': {method} needs a gs.materials.MPM.Muscle entity, got "
                                     f"{type(self.material).__qualname__}")
 
-    def set_actuation(self, actu, envs_idx=None):
+    def set_actuation(self, actus, envs_idx=None):
         """Muscle actuation per group (no unit): a scalar for all groups, (n_groups,), or
         (len(envs_idx), n_groups); each particle takes its group's value (set_muscle) until the
-        next call or scene.reset(). Differentiable in ``actu``."""
+        next call or scene.reset(). Differentiable in ``actus``."""
         self._require_muscle("set_actuation")
         envs = self._envs(envs_idx, distinct=True)
         n_groups = self.material.n_groups
         target = (n_groups,) if self.scene.n_envs == 0 else (len(envs), n_groups)
-        given = self._tensor(actu, "actu", target)
+        given = self._tensor(actus, "actus", target)
         groups = broadcast(given, target)
         if groups is None:
-            raise InvalidInputError(f"entity '{self.name}': argument 'actu' must have shape {target} (one value per "
+            raise InvalidInputError(f"entity '{self.name}': argument 'actus' must have shape {target} (one value per "
                                     f"muscle group), or be one number, got {tuple(given.shape)}")
         if not all_finite(groups.detach()):
-            raise InvalidInputError(f"entity '{self.name}': argument 'actu' must be finite, got NaN or inf")
+            raise InvalidInputError(f"entity '{self.name}': argument 'actus' must be finite, got NaN or inf")
         groups = groups.reshape(len(envs), n_groups)
         self._group_actuation = replace_columns(self._group_actuations(), envs, np.arange(n_groups), groups)
         self._write_actuation(envs)

@@ -90,10 +90,11 @@ def _with_link_axis(link, arg, value):
 
 @named_argument_errors
 class RigidLink:
-    """A link: ``name``, ``idx`` (scene-wide), ``idx_local`` (within its entity)."""
+    """A link: ``name``, ``idx`` (scene-wide), ``idx_local`` (within its entity), ``uid``."""
 
     def __init__(self, entity, name, idx_local):
         self.entity, self.name, self.idx_local = entity, name, idx_local
+        self.uid = UID()
 
     @property
     def _who(self):
@@ -245,11 +246,13 @@ class RigidLink:
 
 
 class RigidJoint:
-    """The joint attaching a link to its parent: ``type`` is "fixed", "revolute", "prismatic", "ball" or "free"."""
+    """The joint attaching a link to its parent: ``type`` is "fixed", "revolute", "prismatic", "ball" or "free";
+    ``uid``."""
 
     def __init__(self, entity, name, type, link, dofs_idx_local, qs_idx_local):
         self.entity, self.name, self.type, self.link = entity, name, type, link
         self.dofs_idx_local, self.qs_idx_local = dofs_idx_local, qs_idx_local
+        self.uid = UID()
 
     @property
     def n_dofs(self):
@@ -263,6 +266,11 @@ class RigidJoint:
     def idx_local(self):
         """The joint's place in its entity's ``joints``."""
         return self.entity.joints.index(self)
+
+    @property
+    def idx(self):
+        """Its place among the scene's rigid joints (once built)."""
+        return self.entity.joint_start + self.idx_local
 
     @property
     def dof_start(self):
@@ -436,7 +444,7 @@ class RigidEntity(EntityIndexing):
                 return link
         return self.links[-1]
 
-    _BUILD_ATTRS = ("link_start", "dof_start", "q_start", "geom_start", "_dof_q", "_free_joints", "_ball_joints",
+    _BUILD_ATTRS = ("link_start", "dof_start", "q_start", "geom_start", "joint_start", "_dof_q", "_free_joints", "_ball_joints",
                     "_turns", "_quat_joint_dofs", "_dof_motions")
 
     def __getattr__(self, attr):
@@ -456,6 +464,8 @@ class RigidEntity(EntityIndexing):
         self.q_start = int(model.link_q0[mine[0]])
         # the entity's geoms are contiguous: the model lists them link by link, entity by entity
         self.geom_start = int(np.searchsorted(model.geom_link, mine[0]))
+        entities = self.scene._rigid_entities()
+        self.joint_start = sum(entity.n_joints for entity in entities[:entities.index(self)])
         # (first local dof, first local q) of each free joint: the base's, and those of later trees'
         # free roots (an MJCF with several bodies in its worldbody)
         first = [(int(model.link_dof0[l]) - self.dof_start, int(model.link_q0[l]) - self.q_start) for l in mine]
@@ -482,12 +492,21 @@ class RigidEntity(EntityIndexing):
 
     @property
     def link_end(self):
-        """One past the entity's last link in the scene's rigid solver (once built; dof_end, q_end alike)."""
+        """One past the entity's last link in the scene's rigid solver (once built; dof_end, q_end, geom_end,
+        joint_end alike)."""
         return self.link_start + self.n_links
 
     @property
     def dof_end(self):
         return self.dof_start + self.n_dofs
+
+    @property
+    def geom_end(self):
+        return self.geom_start + self.n_geoms
+
+    @property
+    def joint_end(self):
+        return self.joint_start + self.n_joints
 
     @property
     def q_end(self):
@@ -535,7 +554,10 @@ class RigidEntity(EntityIndexing):
             return np.array([q for spec in self._specs for q in initial_q(spec)], dtype=np.float64)
         return self._solver.model.qpos0[self.q_start: self.q_start + self.n_qs].copy()
 
-    def get_link(self, name):
+    def get_link(self, name=None, uid=None):
+        """The link named ``name``, else the one whose uid holds the digits ``uid`` (Genesis's)."""
+        if name is None:
+            return self._by_uid("get_link", self.links, uid)
         for link in self.links:
             if link.name == name:
                 return link
@@ -548,7 +570,10 @@ class RigidEntity(EntityIndexing):
         raise InvalidInputError(f"entity '{self.name}': get_link argument 'name' must be one of "
                                 f"{[link.name for link in self.links]}, got {name!r}")
 
-    def get_joint(self, name):
+    def get_joint(self, name=None, uid=None):
+        """The joint named ``name``, else the one whose uid holds the digits ``uid`` (Genesis's)."""
+        if name is None:
+            return self._by_uid("get_joint", self.joints, uid)
         for joint in self.joints:
             if joint.name == name:
                 return joint
@@ -560,6 +585,16 @@ class RigidEntity(EntityIndexing):
                                     f"{[joint.name for joint in self.joints]}")
         raise InvalidInputError(f"entity '{self.name}': get_joint argument 'name' must be one of "
                                 f"{[joint.name for joint in self.joints]}, got {name!r}")
+
+    def _by_uid(self, who, members, uid):
+        if uid is None:
+            raise InvalidInputError(f"entity '{self.name}': {who} missing a required argument: 'name' or 'uid'")
+        found = [member for member in members if isinstance(uid, str) and uid and uid in str(member.uid)]
+        if len(found) != 1:
+            raise InvalidInputError(f"entity '{self.name}': {who} argument 'uid' must be digits of one uid of "
+                                    f"{[member.uid.short() for member in members]}, got {uid!r}"
+                                    + (f" ({len(found)} hold it)" if found else ""))
+        return found[0]
 
     # -- argument checking ----------------------------------------------------------------------
     # -- raw state/input access -------------------------------------------------------------------
@@ -996,8 +1031,8 @@ class RigidEntity(EntityIndexing):
         (or one per env) and turns the link to ``quat`` (4,) (w, x, y, z), world frame; None: that
         part is free. Genesis's arguments and defaults: damped least squares (damping) from
         init_qpos (else the current qpos) for at most max_solver_iters steps of at most
-        max_step_size, restarted from up to max_samples draws within the joint limits (with
-        respect_joint_limit) until the position error ≤ pos_tol m and the rotation error ≤ rot_tol
+        max_step_size, restarted up to max_samples times (from draws within the joint limits with
+        respect_joint_limit, else from where the last run ended) until the position error ≤ pos_tol m and the rotation error ≤ rot_tol
         rad; pos_mask: the world axes the position counts along, rot_mask: all three, or the one
         axis of the link to align with the target's (entities/kinematics.py); only dofs_idx_local
         move. return_error: also the (…, 6) error (position m, world; rotation vector rad, link

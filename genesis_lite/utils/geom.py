@@ -35,11 +35,12 @@ __all__ = ["inv_quat", "normalize", "xyz_to_quat", "quat_to_xyz", "quat_to_R", "
 _SLERP_LINEAR = 1e-15
 
 
-def _arrays(**trailing):
+def _arrays(positional_out=False, **trailing):
     """Decorate a torch function of the named array arguments, each with its trailing shape
     (an int, a tuple, or () for any): numpy arrays and lists become tensors, shapes are checked,
     and the result is numpy again when no argument was a tensor. Genesis's keyword ``out`` (an
-    array or tensor of the result's shape) receives a single result and is returned."""
+    array or tensor of the result's shape) receives a single result and is returned; with
+    ``positional_out`` it may also follow the arguments, as Genesis's signature has it there."""
     trailing = {name: (shape,) if isinstance(shape, int) else shape for name, shape in trailing.items()}
 
     def decorate(fn):
@@ -47,6 +48,8 @@ def _arrays(**trailing):
 
         @functools.wraps(fn)
         def run(*args, out=None, **kwargs):
+            if positional_out and out is None and len(args) == len(signature.parameters) + 1:
+                *args, out = args
             bound = signature.bind(*args, **kwargs)
             arrays = {name: _array(fn.__name__, name, bound.arguments[name], shape)
                       for name, shape in trailing.items() if bound.arguments.get(name) is not None}
@@ -216,13 +219,13 @@ def axis_angle_to_quat(angle, axis):
     return normalize(torch.cat([torch.cos(half), normalize(axis) * torch.sin(half)], dim=-1))
 
 
-@_arrays(quat=4)
+@_arrays(positional_out=True, quat=4)  # (Genesis's quat_to_rotvec(quat, out=None))
 def quat_to_rotvec(quat):
     """(..., 4) quaternions → (..., 3) rotation vectors: axis × angle, angle in [0, π]."""
     return rotations.rotation_vector(_rotation("quat_to_rotvec", "quat", quat))
 
 
-@_arrays(rotvec=3)
+@_arrays(positional_out=True, rotvec=3)  # (Genesis's rotvec_to_quat(rotvec, out=None))
 def rotvec_to_quat(rotvec):
     """(..., 3) rotation vectors (axis × angle, rad) → (..., 4) unit quaternions, w ≥ 0 for
     angles up to π."""

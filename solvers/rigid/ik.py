@@ -2,7 +2,8 @@
 kinematics, every sample and iteration of every env inside the kernel (Genesis's method and
 rules; genesis_lite/entities/kinematics.py states them and builds the arrays).
 
-Per env (row r of ``envs``), sample after sample (``starts[k]``), up to ``iterations`` steps:
+Per env (row r of ``envs``), sample after sample (``starts[k]`` where limits are respected, else
+each from the last one's end), up to ``iterations`` steps:
 the entity's links are posed at the trial qpos in the frame no step uses (the last: the link
 getters' own, which recompute it from the state), each goal's error is its masked position
 error (world) and rotation vector from the link to the target (link frame); where every goal is
@@ -19,7 +20,7 @@ Arrays (r: row of ``envs``; K goals; D, Q the entity's dofs and qs):
   joints (n_joints, 4) i32: kind (FREE_MOVE, TURN, SCALAR), local dof, local q, scalar index;
   limits (R, n_scalar, 2); moving (D,) i32; goal_link (K,) i32 (solver link); goal_spec (K, 9):
   point in the link (3), error mask (6); targets (R, K, 7): pos (3), unit quat (4);
-  starts (samples, R, Q); options (4,): damping, pos_tol, rot_tol, max_step;
+  starts (samples, R, Q) (limits respected; else (1, R, Q)); options (4,): damping, pos_tol, rot_tol, max_step;
   scratch: jac (R, 6K, D), gram (R, 6K, 6K), vec (R, 6K, 2), q (R, Q), step (R, D);
   out: best_q (R, Q), best_err (R, K, 6).
 """
@@ -67,8 +68,9 @@ def _solve_row(d: ti.template(), r, e, envs: ti.template(), sizes: ti.template()
     solved = False
     for sample in range(sizes[4]):
         if not solved:
-            for k in range(Q):
-                q[r, k] = starts[sample, r, k]
+            if sample == 0 or sizes[6] != 0:  # without limits a sample goes on from the last one's end
+                for k in range(Q):
+                    q[r, k] = starts[sample, r, k]
             iteration = 0
             while iteration <= sizes[5] and not solved:
                 _pose(d, f, e, r, sizes, q)
@@ -188,19 +190,20 @@ def _damped_step(r, jac: ti.template(), gram: ti.template(), vec: ti.template(),
 @ti.func
 def _move(r, sizes: ti.template(), joints: ti.template(), limits: ti.template(), moving: ti.template(),
           q: ti.template(), step: ti.template()):
-    """q[r] moved by step[r]: a free joint's position along the world axes, a quaternion turned
-    about its own axes (q ⊗ exp(ω/2)), a scalar joint by its step, clipped to its limits where
-    they are respected and it moves."""
+    """q[r] moved by step[r]: a free joint's position along the world axes, a moving quaternion
+    turned about its own axes (q ⊗ exp(ω/2)), a scalar joint by its step, clipped to its limits
+    where they are respected and it moves."""
     for j in range(sizes[8]):
         kind, dof, at = joints[j, 0], joints[j, 1], joints[j, 2]
         if kind == FREE_MOVE:
             for c in ti.static(range(3)):
                 q[r, at + c] += step[r, dof + c]
         elif kind == TURN:
-            quat = quat_integrate(ti.Vector([q[r, at + c] for c in ti.static(range(4))]),
-                                  ti.Vector([step[r, dof + c] for c in ti.static(range(3))]), 1.0)
-            for c in ti.static(range(4)):
-                q[r, at + c] = quat[c]
+            if moving[dof]:  # (a turn by zero would still normalise the quaternion of one that does not)
+                quat = quat_integrate(ti.Vector([q[r, at + c] for c in ti.static(range(4))]),
+                                      ti.Vector([step[r, dof + c] for c in ti.static(range(3))]), 1.0)
+                for c in ti.static(range(4)):
+                    q[r, at + c] = quat[c]
         else:
             value = q[r, at] + step[r, dof]
             if sizes[6] and moving[dof]:

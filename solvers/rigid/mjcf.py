@@ -178,6 +178,15 @@ class _Reader(MJCFDocument):
                        if not (exclude_ground_plane and self.attrs(*member[:2]).get("type") == "plane")]
         if not bodies and not world_geoms:
             raise self.error("<worldbody> expected at least one <body> or geom, got none")
+        for tags, kind in ((("body",), "body"), (("joint", "freejoint"), "joint")):  # (MuJoCo refuses them too)
+            named = [element.get("name") for worldbody in worldbodies for element in worldbody.iter(*tags)
+                     if element.get("name")]
+            repeated = sorted({name for name in named if named.count(name) > 1})
+            if repeated:
+                raise self.error(f"{kind} names expected unique, got repeated names {repeated}")
+        self.body_names, self.joint_names = ({element.get("name") for worldbody in worldbodies
+                                              for element in worldbody.iter(*tags)} - {None}
+                                             for tags in (("body",), ("joint", "freejoint")))
         links = []
         self.static_links = set()  # the links welded to the world (the only ones a plane may be on)
         self.sites = {}  # site name → (its body's name, its position (3,) m and turn (4,) in the body's frame)
@@ -192,8 +201,8 @@ class _Reader(MJCFDocument):
             self._geoms(world_geoms, links[-1], "<worldbody>", static=True)
         names = [link.name for link in links]
         repeated = sorted({name for name in names if names.count(name) > 1})
-        if repeated:  # (MuJoCo refuses them too)
-            raise self.error(f"body names expected unique, got repeated names {repeated}")
+        if repeated:  # (a joint's link named after its body and joint, or a world link, met a body's name)
+            raise self.error(f"link names expected unique, got repeated names {repeated}")
         self._set_total_mass(links)
         self._equalities(links)
         self._tendons(links)
@@ -217,7 +226,7 @@ class _Reader(MJCFDocument):
         outer: (pos, quat) of the <frame>s it sits in, in its parent's frame."""
         attrs = self.attrs(body, childclass)
         childclass = body.get("childclass", childclass)
-        name = attrs.get("name") or f"body{len(links)}"
+        name = attrs.get("name") or self._unnamed(f"body{len(links)}")
         what = f"body {name!r}"
         self.ignore_unread(body, attrs)
         self._check_children(body, what)
@@ -248,6 +257,14 @@ class _Reader(MJCFDocument):
         index = len(links) - 1
         for child, child_class, child_outer in self._members(body, "body", childclass):
             self._body(child, index, child_class, links, child_outer)
+
+    def _unnamed(self, stem: str) -> str:
+        """A name for an unnamed body: ``stem``, or with a suffix where a body of the file has it."""
+        name, k = stem, 0
+        while name in self.body_names:
+            k += 1
+            name = f"{stem}_{k}"
+        return name
 
     def _sites(self, body, childclass: str, name: str):
         """Note the frames of the body's sites (in its frame; a ``fromto`` site at its middle, its z
@@ -368,7 +385,7 @@ class _Reader(MJCFDocument):
         scale = np.deg2rad(1.0) if kind == "hinge" and self.degree else 1.0  # angles in the file → rad
         spec.springref = self.numbers(attrs, "springref", 1, what, default=[0.0])[0] * scale
         spec.q0 = self.numbers(attrs, "ref", 1, what, default=[0.0])[0] * scale
-        if self._limited(attrs, "range", "limited", "range" in attrs, what):
+        if self._limited(attrs, "range", "limited", self._range_given(attrs, "range", what), what):
             low, high = self.numbers(attrs, "range", 2, what, default=[0.0, 0.0])
             if not low < high:
                 raise self.error(f"{what}: range expected lower < upper, got {attrs.get('range')!r}")
@@ -425,18 +442,23 @@ class _Reader(MJCFDocument):
         limited = attrs.get(limited_key, "auto")
         return limited == "true" or (limited == "auto" and self.autolimits and has_range)
 
+    def _range_given(self, attrs, key: str, what: str) -> bool:
+        """Whether a range ``key`` is given other than (0, 0), MuJoCo's default, which its compiler
+        reads as no range (its autolimits limit where range[0] < range[1]; a range given the other
+        way round is refused below rather than left unlimited)."""
+        return key in attrs and bool(np.any(self.numbers(attrs, key, 2, what) != 0.0))
+
     def _refuse_unflagged_range(self, attrs, key: str, limited_key: str, what: str):
         """With autolimits off, a range other than (0, 0) given without its ``limited_key`` is refused,
         as MuJoCo's compiler refuses it (it was dropped here)."""
-        if (not self.autolimits and attrs.get(limited_key, "auto") == "auto" and key in attrs
-                and np.any(self.numbers(attrs, key, 2, what) != 0.0)):
+        if not self.autolimits and attrs.get(limited_key, "auto") == "auto" and self._range_given(attrs, key, what):
             raise self.error(f"{what}: '{key}' given without '{limited_key}' under <compiler autolimits=\"false\">, "
                              f"as MuJoCo's compiler refuses it; set {limited_key}=\"true\" (or \"false\"), or "
                              f"autolimits=\"true\"")
 
     def _force_bound(self, attrs, key: str, limited_key: str, what: str) -> float:
         """|force| bound (N·m or N) of a force range, inf when there is none."""
-        if not self._limited(attrs, key, limited_key, key in attrs, what):
+        if not self._limited(attrs, key, limited_key, self._range_given(attrs, key, what), what):
             return np.inf
         low, high = self.numbers(attrs, key, 2, what, default=[0.0, 0.0])
         if low != -high or high <= 0:
@@ -539,7 +561,7 @@ class _Reader(MJCFDocument):
         friction = [*friction, *MJ_FRICTION[len(friction):]]
         geom.friction, geom.friction_torsional, geom.friction_rolling = (float(f) for f in friction)
         self._contact_params(geom, attrs, what)
-        density = self.numbers(attrs, "density", 1, what, default=[1000.0])[0]
+        density = self._non_negative(attrs, "density", what) if "density" in attrs else 1000.0
         mass = self._non_negative(attrs, "mass", what) if "mass" in attrs else None
         return geom, density, mass, size if geom.type == "mesh" and kind == "ellipsoid" else None
 
@@ -623,8 +645,12 @@ class _Reader(MJCFDocument):
             inertia = np.diag(self.numbers(attrs, "diaginertia", 3, what, default=np.zeros(3)))
         rot = shapes.quat_to_mat(quat)
         inertia = rot @ inertia @ rot.T
-        if np.linalg.eigvalsh(0.5 * (inertia + inertia.T))[0] < -1e-6 * max(abs(inertia).max(), 1e-300):
+        moments = np.linalg.eigvalsh(0.5 * (inertia + inertia.T))
+        if moments[0] < -1e-6 * max(abs(inertia).max(), 1e-300):
             raise self.error(f"{what}: inertia expected positive semi-definite, got {inertia.tolist()}")
+        if moments[0] + moments[1] < moments[2] - max(1e-14, 1e-10 * moments[2]):  # (MuJoCo's compiler refuses it)
+            raise self.error(f"{what}: inertia expected principal moments with A + B >= C, as a body's, got "
+                             f"{moments.tolist()}")
         return float(mass), com, 0.5 * (inertia + inertia.T)
 
     # ---------------------------------------------------------------- equalities and actuators
@@ -815,7 +841,7 @@ class _Reader(MJCFDocument):
                                    "frictionloss", "solreffriction", "solimpfriction") \
                             and not is_default(key, value) and not at_zero:
                         self.ignored.add(f"<tendon><fixed {key}>")
-                limited = self._limited(attrs, "range", "limited", "range" in attrs, what)
+                limited = self._limited(attrs, "range", "limited", self._range_given(attrs, "range", what), what)
                 equality = held.pop(attrs.get("name"), None)
                 stiffness, damping = (self._tendon_coefficient(attrs, key, what) for key in ("stiffness", "damping"))
                 if stiffness:
@@ -824,6 +850,10 @@ class _Reader(MJCFDocument):
                 if frictionloss < 0:  # (MuJoCo takes it and forms no row: refused rather than dropped)
                     raise self.error(f"{what}: frictionloss expected ≥ 0, got {attrs['frictionloss']!r}")
                 if not (limited or equality or stiffness or damping or frictionloss):
+                    unknown = [child.get("joint") for child in element if child.get("joint") not in self.joint_names]
+                    if unknown:  # (it does nothing, but MuJoCo refuses it)
+                        raise self.error(f"{what}: expected <joint joint coef> children naming joints of the file, "
+                                         f"got {unknown}")
                     continue
                 lower, upper = (self.numbers(attrs, "range", 2, what, default=[0.0, 0.0]) if limited
                                 else (-np.inf, np.inf))
@@ -899,6 +929,8 @@ class _Reader(MJCFDocument):
                 for key in ("ctrlrange", "forcerange"):  # (every actuator's, read or not, as MuJoCo's compiler;
                     if not (key == "ctrlrange" and element.tag == "damper"):  # a damper's control is limited)
                         self._refuse_unflagged_range(attrs, key, key.replace("range", "limited"), what)
+                if "joint" in attrs and attrs["joint"] not in self.joint_names:  # (MuJoCo refuses it too)
+                    raise self.error(f"{what}: joint expected a joint of the file, got {attrs['joint']!r}")
                 if "tendon" in attrs:
                     on_tendons.append((element.tag, attrs, what))
                 elif attrs.get("joint") in by_joint:

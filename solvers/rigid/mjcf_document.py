@@ -287,7 +287,7 @@ class MJCFDocument:
         """({mesh name: (source, scale (3,))}, {material name: rgba (4,)}); a mesh's source: its
         candidate files, or (vertices (V, 3), faces (F, 3)) given in the file (``vertex``, ``face``;
         without faces, the vertices' convex hull, as MuJoCo's compiler takes it)."""
-        meshes, materials = {}, {}
+        meshes, materials, material_names = {}, {}, set()
         for asset in self.root.findall("asset"):
             for mesh in asset.findall("mesh"):
                 attrs = self.attrs(mesh, "main")
@@ -298,11 +298,17 @@ class MJCFDocument:
                 if "file" not in attrs and "name" not in attrs:  # (MuJoCo's compiler refuses it too)
                     raise self.error("<mesh vertex=...>: a mesh without a file expected a name, got none")
                 name = attrs.get("name") or os.path.splitext(os.path.basename(attrs["file"]))[0]
+                what = f"<mesh name={name!r}>"
+                if name in meshes:  # (MuJoCo refuses it too; the later one replaced the first)
+                    raise self.error(f"{what}: mesh names expected unique, got {name!r} twice")
+                moved = sorted(key for key in ("refpos", "refquat") if key in attrs)
+                if moved:  # (they move the geoms using the mesh: unread, each would stand elsewhere)
+                    raise self.error(f"{what}: attributes {moved} are not supported yet, got "
+                                     f"{[attrs[key] for key in moved]}; move the mesh's vertices instead")
                 for key in attrs:
                     if key not in ("name", "class", "file", "scale", "content_type", "vertex", "face"):
                         self.ignored.add(f"<mesh {key}> (a mesh's volume and inertia are its solid's, exact for "
                                          f"a closed mesh, its convex hull's for an open one)")
-                what = f"<mesh name={name!r}>"
                 scale = self.numbers(attrs, "scale", 3, what, default=np.ones(3))
                 if "file" in attrs:
                     folders = [self.meshdir] + ([os.path.join(self.included_from[mesh], self.meshdir_given),
@@ -312,6 +318,10 @@ class MJCFDocument:
                     meshes[name] = (self._given_mesh(attrs, what), scale)
             for material in asset.findall("material"):
                 attrs = self.attrs(material, "main")
+                if "name" in attrs and attrs["name"] in material_names:  # (MuJoCo refuses it too)
+                    raise self.error(f"<material name={attrs['name']!r}>: material names expected unique, got "
+                                     f"{attrs['name']!r} twice")
+                material_names.add(attrs.get("name"))
                 if "name" in attrs and "rgba" in attrs:
                     materials[attrs["name"]] = self.numbers(attrs, "rgba", 4, f"<material name={attrs['name']!r}>")
         return meshes, materials
@@ -331,6 +341,8 @@ class MJCFDocument:
                                      f"elevation")
                 if "name" not in attrs:
                     raise self.error(f"{what}: expected a name, got none")
+                if attrs["name"] in hfields:  # (MuJoCo refuses it too)
+                    raise self.error(f"{what}: height field names expected unique, got {attrs['name']!r} twice")
                 nrow, ncol = (self._grid_count(attrs, key, what) for key in ("nrow", "ncol"))
                 size = self.numbers(attrs, "size", 4, what)
                 if not np.all(size > 0):  # (MuJoCo's compiler refuses it too)

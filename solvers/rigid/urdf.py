@@ -663,16 +663,16 @@ def resolve_mesh_path(filename: str, folder: str) -> tuple[str | None, list[str]
     """(existing path or None, candidate paths tried) for a URDF mesh `filename`.
 
     Absolute paths are used as is; relative ones are relative to `folder` (the URDF's).
-    `package://pkg/rest` is looked up as `pkg/rest` and then `rest` in `folder` and each of
-    its parents, which finds the usual layouts pkg/urdf/robot.urdf + pkg/meshes/x.stl.
+    `package://pkg/rest` is looked up as `pkg/rest` in `folder` and each of its parents, then as
+    `rest` there (a package folder named otherwise), which finds the usual layouts
+    pkg/urdf/robot.urdf + pkg/meshes/x.stl, and another package's file before a file of the same
+    name in the URDF's own.
     """
     name = filename[len("file://"):] if filename.startswith("file://") else filename
     if name.startswith("package://"):
         rest = name[len("package://"):]
         tails = [rest, rest.split("/", 1)[1]] if "/" in rest else [rest]
-        candidates = []
-        for base in _ancestors(folder):
-            candidates.extend(os.path.join(base, tail) for tail in tails)
+        candidates = [os.path.join(base, tail) for tail in tails for base in _ancestors(folder)]
     elif os.path.isabs(name):
         candidates = [name]
     else:
