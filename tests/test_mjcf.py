@@ -784,6 +784,19 @@ def test_what_mujoco_reads_as_no_range_or_names_itself_loads(f64, tmp_path):
     assert len({link.name for link in robot.links}) == robot.n_links and "body0" in [l.name for l in robot.links]
 
 
+@pytest.mark.parametrize("depth", [300, 1500])
+def test_a_long_chain_of_nested_bodies_loads_or_is_named(f64, tmp_path, depth):
+    """300 nested bodies (a rope), which MuJoCo 4 loads, were refused as XML nested too deep; past
+    Python's recursion (MuJoCo's parser stops at ~500 elements) the error is named."""
+    chain = "".join(f'<body name="b{k}" pos="0 0 -0.01"><joint axis="0 1 0"/><geom size="0.003"/>' for k in range(depth))
+    path = _write(tmp_path, f'<body name="top" pos="0 0 5">{chain}{"</body>" * depth}</body>')
+    if depth < 500:
+        assert gs.Scene().add_entity(gs.morphs.MJCF(file=path)).n_dofs == depth
+    else:
+        with pytest.raises(AssetError, match="body 'top': its bodies nest too deep to be read"):
+            gs.Scene().add_entity(gs.morphs.MJCF(file=path))
+
+
 def _escaped(text):
     return "".join("\\" + c if c in "()[]<>.*'" else c for c in text)
 

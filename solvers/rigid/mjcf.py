@@ -194,7 +194,10 @@ class _Reader(MJCFDocument):
             self._sites(worldbody, "main", "world")
         self.world_link = bool(world_geoms)  # (the world's geoms' link takes the name "world")
         for root, childclass, outer in bodies:  # several trees: one entity, as Genesis and MuJoCo load them
-            self._body(root, -1, childclass, links, outer)
+            try:
+                self._body(root, -1, childclass, links, outer)
+            except RecursionError:  # (MuJoCo's parser stops at ~500 nested elements; ours goes to ~600 bodies)
+                raise self.error(f"body {root.get('name')!r}: its bodies nest too deep to be read") from None
         if world_geoms:  # MuJoCo's body 0: static, massless, its geoms collide with every tree's
             links.append(_link("world", -1, "", "fixed", np.zeros(3), IDENTITY.copy()))
             self.static_links.add(len(links) - 1)

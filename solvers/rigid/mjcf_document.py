@@ -100,7 +100,7 @@ class MJCFDocument:
         folder, else to the including file's, as MuJoCo takes them)."""
         if path in seen:
             raise AssetError(f"MJCF '{self.path}': <include> cycle through '{path}'")
-        parser = etree.XMLParser(remove_comments=True)
+        parser = etree.XMLParser(remove_comments=True, huge_tree=True)  # (a chain of bodies nests past 256)
         try:
             root = etree.parse(path, parser).getroot() if text is None else etree.fromstring(text.encode(), parser)
         except (OSError, etree.XMLSyntaxError) as exc:
