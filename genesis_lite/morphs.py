@@ -237,8 +237,8 @@ class URDF(Morph):
         owner = type(self).__name__
         self.file = _file_path(owner, self.file, xml=True)
         if self.file.lower().endswith(".xacro"):  # (its macros would be skipped as unknown elements)
-            raise InvalidInputError(f"{owner}: argument 'file': xacro files are not supported yet (Genesis expands them "
-                                    f"with the xacro package), got {self.file!r}; expand it first: "
+            raise InvalidInputError(f"{owner}: argument 'file': xacro files are not supported yet (Genesis expands "
+                                    f"them with the xacro package), got {self.file!r}; expand it first: "
                                     f"xacro robot.urdf.xacro > robot.urdf")
         self.scale = _isotropic_scale(owner, self.scale)
         self.file_meshes_are_zup = _meshes_zup(owner, self.file_meshes_are_zup, self.file, False)

@@ -37,7 +37,7 @@ def track(scene):
 
 # A scene and its entities refer to each other (entity.scene, as Genesis's), so a scene the user
 # drops is freed by Python's cycle collector, which runs by counts of objects made, not by bytes:
-# a loop rebuilding a 60 MiB MPM scene held every dead one (+750 MiB after 12 builds). So a build
+# a loop rebuilding a 60 MiB MPM scene held every dead one (+815 MiB after 12 builds). So a build
 # collects when the built scenes not destroyed hold this much more than after the last collection
 # (a full collection took 0.1–0.15 s here after a scene's compiles; scenes kept alive on purpose only
 # move the mark).

@@ -286,8 +286,8 @@ class Scene:
             for solver in solvers:
                 solver.destroy()
             raise
-        self.sim = sim
         self._footprint = sum(solver.memory_bytes() for solver in solvers)
+        self.sim = sim
         self.n_envs_per_row, self.envs_offset = _envs_layout(max(1, self.n_envs), spacing, n_envs_per_row,
                                                              center_envs_at_origin)
         if self._rigid_solver in solvers:

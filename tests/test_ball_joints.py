@@ -383,6 +383,13 @@ def test_inverse_kinematics_turns_ball_joints(f64):
     start[:4] = torch.tensor([1.0, 1e-3, 0.0, 0.0], dtype=torch.float64)
     qpos = robot.inverse_kinematics(hand, pos=pos + 0.01, init_qpos=start, dofs_idx_local=[3, 4, 5, 6])
     assert torch.equal(qpos[:4], start[:4]) and not torch.equal(qpos[4:], start[4:])
+    # two of a ball joint's three dofs move it (a first version of the above left it still)
+    robot.set_dofs_position(torch.tensor([0.0, 0.3, -0.2, 0, 0, 0, 0], dtype=torch.float64), dofs_idx_local=range(7))
+    pos = hand.get_pos().clone()
+    robot.set_dofs_position(torch.zeros(7, dtype=torch.float64), dofs_idx_local=list(range(7)))
+    qpos, error = robot.inverse_kinematics(hand, pos=pos, respect_joint_limit=False, max_solver_iters=100,
+                                           dofs_idx_local=[1, 2], return_error=True)
+    assert float(error[:3].norm()) < 5e-4
 
 
 def test_ball_joint_inputs_are_checked(f64):

@@ -1357,6 +1357,6 @@ def test_links_and_entities_know_their_dof_and_coordinate_ranges(f64):
     assert arm.get_link(uid=arm.links[3].uid.short()) is arm.links[3]
     assert arm.get_joint(uid=str(arm.joints[2].uid)[5:20]) is arm.joints[2]
     for call, said in ((lambda: arm.get_link(), "get_link missing a required argument: 'name' or 'uid'"),
-                       (lambda: arm.get_joint(uid="not hex"), "get_joint argument 'uid' must be digits of one uid")):
+                       (lambda: arm.get_joint(uid="not hex"), "get_joint argument 'uid' must be digits of a uid")):
         with pytest.raises(gs.InvalidInputError, match=said):
             call()

@@ -97,15 +97,21 @@ def _reachable(robot, rng, link):
     return pos, quat
 
 
+def _reachable_targets(n_envs, seed):
+    """(KUKA, its end effector, (n_envs, 3) positions and (n_envs, 4) quaternions it reaches)."""
+    _, robot = _scene(KUKA, True, n_envs=n_envs)
+    rng = np.random.default_rng(seed)
+    ee = robot.links[-1]
+    targets = [_reachable(robot, rng, ee) for _ in range(n_envs)]
+    pos = torch.stack([t[0][k] for k, t in enumerate(targets)])
+    quat = torch.stack([t[1][k] for k, t in enumerate(targets)])
+    return robot, ee, pos, quat
+
+
 def test_inverse_kinematics_reaches_poses(f64):
     """Pose targets the KUKA can reach, from its zero pose: within Genesis's tolerances, in its
     limits, the scene's state unchanged; batched targets per env; a position-only target."""
-    scene, robot = _scene(KUKA, True, n_envs=3)
-    rng = np.random.default_rng(3)
-    ee = robot.links[-1]
-    targets = [_reachable(robot, rng, ee) for _ in range(3)]
-    pos = torch.stack([t[0][k] for k, t in enumerate(targets)])
-    quat = torch.stack([t[1][k] for k, t in enumerate(targets)])
+    robot, ee, pos, quat = _reachable_targets(3, seed=3)
     before = robot.get_qpos().clone()
     qpos, error = robot.inverse_kinematics(ee, pos=pos, quat=quat, return_error=True)
     assert isinstance(qpos, gs.Tensor) and isinstance(error, gs.Tensor)  # (SPEC §2; the error was a plain one)
@@ -232,12 +238,7 @@ def test_inverse_kinematics_without_limits_runs_every_sample_from_the_last_ones_
     samples goes on from where the last ended (it ran one sample: max_samples ignored). Pose
     targets the KUKA reaches from its zero pose only in more steps of max_step_size 0.05 than one
     sample's 20."""
-    _, robot = _scene(KUKA, True, n_envs=4)
-    rng = np.random.default_rng(5)
-    ee = robot.links[-1]
-    targets = [_reachable(robot, rng, ee) for _ in range(4)]
-    pos = torch.stack([t[0][k] for k, t in enumerate(targets)])
-    quat = torch.stack([t[1][k] for k, t in enumerate(targets)])
+    robot, ee, pos, quat = _reachable_targets(4, seed=5)
 
     def solve(samples):
         _, error = robot.inverse_kinematics(ee, pos=pos, quat=quat, respect_joint_limit=False, max_step_size=0.05,

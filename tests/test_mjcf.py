@@ -742,7 +742,8 @@ LINK = '<geom type="sphere" size="0.1"/>'
     (f'<body name="b"><joint name="j"/>{LINK}<body name="c"><joint name="j"/>{LINK}</body></body>', "",
      "joint names expected unique, got repeated names ['j']"),
     (f'<body name="b"><joint name="j"/><geom type="mesh" mesh="m"/></body>',
-     '<asset><mesh name="m" vertex="0 0 0 1 0 0 0 1 0 0 0 1"/><mesh name="m" vertex="0 0 0 2 0 0 0 2 0 0 0 2"/></asset>',
+     '<asset><mesh name="m" vertex="0 0 0 1 0 0 0 1 0 0 0 1"/>'
+     '<mesh name="m" vertex="0 0 0 2 0 0 0 2 0 0 0 2"/></asset>',
      "<mesh name='m'>: mesh names expected unique, got 'm' twice"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>',
      '<asset><material name="red" rgba="1 0 0 1"/><material name="red"/></asset>',
@@ -751,11 +752,16 @@ LINK = '<geom type="sphere" size="0.1"/>'
      '<asset><mesh name="m" refpos="0.5 0 0" vertex="0 0 0 1 0 0 0 1 0 0 0 1"/></asset>',
      "<mesh name='m'>: attributes ['refpos'] are not supported yet"),
     (f'<body name="b"><joint name="j"/><geom type="sphere" size="0.1" density="-100"/></body>', "",
-     "attribute 'density' expected >= 0, got '-100'"),
+     "attribute 'density' expected >= 0 on a moving body, got '-100'"),
+    (f'<body name="b"><joint name="j"/>{LINK}</body>', '<asset><hfield name="h" nrow="2" ncol="2" size="1 1 0.1 0.1"/>'
+     '<hfield name="h" nrow="3" ncol="3" size="1 1 0.1 0.1"/></asset>', "height field names expected unique"),
+    (f'<body name="b"><joint name="j" type="ball"/>{LINK}</body>',
+     '<tendon><fixed><joint joint="j" coef="1"/></fixed></tendon>',
+     "naming hinge or slide joints of the file, got ['j']"),
     (f'<body name="b"><joint name="j"/><inertial pos="0 0 0" mass="1" diaginertia="0.01 0.01 0.03"/></body>', "",
      "<inertial>: inertia expected principal moments with A"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<tendon><fixed><joint joint="typo" coef="1"/></fixed></tendon>',
-     "expected <joint joint coef> children naming joints of the file, got ['typo']"),
+     "expected <joint joint coef> children naming hinge or slide joints of the file, got ['typo']"),
     (f'<body name="b"><joint name="j"/>{LINK}</body>', '<actuator><motor joint="typo"/></actuator>',
      "<actuator><motor joint='typo'>: joint expected a joint of the file, got 'typo'"),
     (f'<body name="b"><joint name="j" range="1 -1"/>{LINK}</body>', "", "range expected lower < upper, got '1 -1'"),
@@ -784,11 +790,30 @@ def test_what_mujoco_reads_as_no_range_or_names_itself_loads(f64, tmp_path):
     assert len({link.name for link in robot.links}) == robot.n_links and "body0" in [l.name for l in robot.links]
 
 
+
+def test_what_mujoco_loads_beside_what_it_refuses_loads(f64, tmp_path):
+    """A world geom of negative density, a mesh's identity refpos/refquat, and an inertia breaking
+    A + B ≥ C under <compiler balanceinertia="true"> (its moments set to their mean), as MuJoCo 4."""
+    body = ('<geom type="box" size="1 1 0.1" pos="0 0 -0.1" density="-100"/><body name="b" pos="0 0 1">'
+            '<joint name="j"/><inertial pos="0 0 0" mass="2" diaginertia="0.01 0.02 0.05"/>'
+            '<geom type="mesh" mesh="m" contype="0" conaffinity="0" mass="0"/></body>')
+    extra = ('<compiler balanceinertia="true"/><asset><mesh name="m" refpos="0 0 0" refquat="1 0 0 0" '
+             'vertex="0 0 0 0.1 0 0 0 0.1 0 0 0 0.1"/></asset>')
+    path = _write(tmp_path, body, extra)
+    model = mujoco.MjModel.from_xml_path(str(path))
+    scene = gs.Scene()
+    robot = scene.add_entity(gs.morphs.MJCF(file=path))
+    scene.build()
+    (spec,) = [spec for spec in robot._specs if spec.name == "b"]
+    np.testing.assert_allclose(spec.inertia, np.diag(model.body_inertia[model.body("b").id]), atol=1e-15)
+
+
 @pytest.mark.parametrize("depth", [300, 1500])
 def test_a_long_chain_of_nested_bodies_loads_or_is_named(f64, tmp_path, depth):
     """300 nested bodies (a rope), which MuJoCo 4 loads, were refused as XML nested too deep; past
     Python's recursion (MuJoCo's parser stops at ~500 elements) the error is named."""
-    chain = "".join(f'<body name="b{k}" pos="0 0 -0.01"><joint axis="0 1 0"/><geom size="0.003"/>' for k in range(depth))
+    chain = "".join(f'<body name="b{k}" pos="0 0 -0.01"><joint axis="0 1 0"/><geom size="0.003"/>'
+                    for k in range(depth))
     path = _write(tmp_path, f'<body name="top" pos="0 0 5">{chain}{"</body>" * depth}</body>')
     if depth < 500:
         assert gs.Scene().add_entity(gs.morphs.MJCF(file=path)).n_dofs == depth

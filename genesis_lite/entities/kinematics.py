@@ -193,7 +193,8 @@ def solve_ik(entity, goals, start, envs, dofs, options):
     and stops where every goal is within pos_tol and rot_tol (that qpos is the answer); else its
     last qpos becomes the best where no goal's position or rotation error is worse than the best
     one's (the first sample's always), and the next sample starts from a qpos drawn within the
-    limits where they are respected, else from where the last one ended. One kernel runs it all (solvers/rigid/ik.py), the starts drawn beforehand.
+    limits where they are respected, else from where the last one ended. One kernel runs it all
+    (solvers/rigid/ik.py), the starts drawn beforehand.
     options: respect_joint_limit, max_samples, max_solver_iters, damping, pos_tol, rot_tol,
     max_step_size, seed. Returns (the best qpos (B', n_qs), its errors (B', K, 6))."""
     motions = entity._dof_motions

@@ -444,8 +444,8 @@ class RigidEntity(EntityIndexing):
                 return link
         return self.links[-1]
 
-    _BUILD_ATTRS = ("link_start", "dof_start", "q_start", "geom_start", "joint_start", "_dof_q", "_free_joints", "_ball_joints",
-                    "_turns", "_quat_joint_dofs", "_dof_motions")
+    _BUILD_ATTRS = ("link_start", "dof_start", "q_start", "geom_start", "joint_start", "_dof_q", "_free_joints",
+                    "_ball_joints", "_turns", "_quat_joint_dofs", "_dof_motions")
 
     def __getattr__(self, attr):
         # only reached when normal lookup fails: a build-time attribute used before build()
@@ -589,12 +589,11 @@ class RigidEntity(EntityIndexing):
     def _by_uid(self, who, members, uid):
         if uid is None:
             raise InvalidInputError(f"entity '{self.name}': {who} missing a required argument: 'name' or 'uid'")
-        found = [member for member in members if isinstance(uid, str) and uid and uid in str(member.uid)]
-        if len(found) != 1:
-            raise InvalidInputError(f"entity '{self.name}': {who} argument 'uid' must be digits of one uid of "
-                                    f"{[member.uid.short() for member in members]}, got {uid!r}"
-                                    + (f" ({len(found)} hold it)" if found else ""))
-        return found[0]
+        for member in members:  # (the first that holds them, as Genesis's)
+            if isinstance(uid, str) and uid and uid in str(member.uid):
+                return member
+        raise InvalidInputError(f"entity '{self.name}': {who} argument 'uid' must be digits of a uid of "
+                                f"{[member.uid.short() for member in members]}, got {uid!r}")
 
     # -- argument checking ----------------------------------------------------------------------
     # -- raw state/input access -------------------------------------------------------------------
@@ -1032,12 +1031,12 @@ class RigidEntity(EntityIndexing):
         part is free. Genesis's arguments and defaults: damped least squares (damping) from
         init_qpos (else the current qpos) for at most max_solver_iters steps of at most
         max_step_size, restarted up to max_samples times (from draws within the joint limits with
-        respect_joint_limit, else from where the last run ended) until the position error ≤ pos_tol m and the rotation error ≤ rot_tol
-        rad; pos_mask: the world axes the position counts along, rot_mask: all three, or the one
-        axis of the link to align with the target's (entities/kinematics.py); only dofs_idx_local
-        move. return_error: also the (…, 6) error (position m, world; rotation vector rad, link
-        frame) of the qpos returned, the best found. The scene's state is not changed; not
-        differentiable."""
+        respect_joint_limit, else from where the last run ended) until the position error ≤ pos_tol
+        m and the rotation error ≤ rot_tol rad; pos_mask: the world axes the position counts along,
+        rot_mask: all three, or the one axis of the link to align with the target's
+        (entities/kinematics.py); only dofs_idx_local move. return_error: also the (…, 6) error
+        (position m, world; rotation vector rad, link frame) of the qpos returned, the best found. The
+        scene's state is not changed; not differentiable."""
         out = self.inverse_kinematics_multilink(
             [link], None if pos is None else [pos], None if quat is None else [quat],
             None if local_point is None else [local_point], init_qpos, respect_joint_limit, max_samples,

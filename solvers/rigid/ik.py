@@ -199,7 +199,8 @@ def _move(r, sizes: ti.template(), joints: ti.template(), limits: ti.template(),
             for c in ti.static(range(3)):
                 q[r, at + c] += step[r, dof + c]
         elif kind == TURN:
-            if moving[dof]:  # (a turn by zero would still normalise the quaternion of one that does not)
+            if moving[dof] or moving[dof + 1] or moving[dof + 2]:  # (a turn by zero would still normalise
+                # the quaternion of one that does not move)
                 quat = quat_integrate(ti.Vector([q[r, at + c] for c in ti.static(range(4))]),
                                       ti.Vector([step[r, dof + c] for c in ti.static(range(3))]), 1.0)
                 for c in ti.static(range(4)):

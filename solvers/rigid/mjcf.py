@@ -2,8 +2,8 @@
 
 Read as MuJoCo's compiler reads it: ``<include>`` files inlined (several ``<default>`` and
 ``<worldbody>`` sections merge), ``<default>`` classes (nested, ``class`` and ``childclass``),
-``<compiler angle meshdir assetdir autolimits eulerseq inertiafromgeom settotalmass>``, every orientation form
-(quat, axisangle, euler, xyaxes, zaxis).
+``<compiler angle meshdir assetdir autolimits eulerseq inertiafromgeom settotalmass balanceinertia>``,
+every orientation form (quat, axisangle, euler, xyaxes, zaxis).
 
 Trees: the bodies in ``<worldbody>`` are the roots of one entity's trees, in the file's order
 (MuJoCo's body and dof order; the first tree's root is the entity's base, as in Genesis); the
@@ -77,7 +77,11 @@ Ball joints (MuJoCo's: a quaternion, three dofs about the body's own axes) with 
 friction loss, a spring (stiffness) and MuJoCo's cone limit (range (0, θ): θ the largest angle of
 the turn; limited by autolimits only where range[0] < range[1], as MuJoCo's compiler).
 Refused (AssetError naming the element): a ball joint's force range, a limited ball joint's range
-not starting at 0, a ball joint followed by a hinge or ball in one body (as MuJoCo refuses them),
+not starting at 0, a ball joint followed by a hinge or ball in one body, repeated body, joint, mesh,
+material or height-field names, a negative density on a moving body, an ``<inertial>`` whose
+principal moments break A + B ≥ C (unless ``<compiler balanceinertia="true">``: set to their mean),
+tendons and actuators naming no joint of the file (as MuJoCo refuses them), a mesh's refpos or
+refquat other than the identity (MuJoCo moves its geoms by them),
 a free joint below a root body, a
 ``springyield`` (a joint's or a sprung tendon's), a polynomial stiffness (a joint's or a
 tendon's; a tendon's damping too), a free joint's stiffness or springdamper, sdf geoms, a height
@@ -501,6 +505,9 @@ class _Reader(MJCFDocument):
             if geom.type == "plane" and not static:
                 raise self.error(f"{where}: a plane only in the worldbody or a body welded to it (MuJoCo's compiler "
                                  f"refuses it elsewhere), got one on a moving body")
+            if density < 0 and not static:  # (MuJoCo's compiler refuses it too: it took mass away)
+                raise self.error(f"{where}: attribute 'density' expected >= 0 on a moving body, got "
+                                 f"{attrs['density']!r}")
             if geom.type == "hfield" and not static:
                 raise self.error(f"{where}: a height field only in the worldbody or a body welded to it (on a moving "
                                  f"body: not yet), got one on a moving body")
@@ -564,7 +571,7 @@ class _Reader(MJCFDocument):
         friction = [*friction, *MJ_FRICTION[len(friction):]]
         geom.friction, geom.friction_torsional, geom.friction_rolling = (float(f) for f in friction)
         self._contact_params(geom, attrs, what)
-        density = self._non_negative(attrs, "density", what) if "density" in attrs else 1000.0
+        density = self.numbers(attrs, "density", 1, what, default=[1000.0])[0]
         mass = self._non_negative(attrs, "mass", what) if "mass" in attrs else None
         return geom, density, mass, size if geom.type == "mesh" and kind == "ellipsoid" else None
 
@@ -652,8 +659,10 @@ class _Reader(MJCFDocument):
         if moments[0] < -1e-6 * max(abs(inertia).max(), 1e-300):
             raise self.error(f"{what}: inertia expected positive semi-definite, got {inertia.tolist()}")
         if moments[0] + moments[1] < moments[2] - max(1e-14, 1e-10 * moments[2]):  # (MuJoCo's compiler refuses it)
-            raise self.error(f"{what}: inertia expected principal moments with A + B >= C, as a body's, got "
-                             f"{moments.tolist()}")
+            if not self.balanceinertia:
+                raise self.error(f"{what}: inertia expected principal moments with A + B >= C, as a body's, got "
+                                 f"{moments.tolist()} (MuJoCo's <compiler balanceinertia=\"true\"> balances them)")
+            return float(mass), com, np.eye(3) * moments.mean()  # (balanced: the three set to their mean)
         return float(mass), com, 0.5 * (inertia + inertia.T)
 
     # ---------------------------------------------------------------- equalities and actuators
@@ -853,10 +862,10 @@ class _Reader(MJCFDocument):
                 if frictionloss < 0:  # (MuJoCo takes it and forms no row: refused rather than dropped)
                     raise self.error(f"{what}: frictionloss expected ≥ 0, got {attrs['frictionloss']!r}")
                 if not (limited or equality or stiffness or damping or frictionloss):
-                    unknown = [child.get("joint") for child in element if child.get("joint") not in self.joint_names]
+                    unknown = [child.get("joint") for child in element if child.get("joint") not in by_joint]
                     if unknown:  # (it does nothing, but MuJoCo refuses it)
-                        raise self.error(f"{what}: expected <joint joint coef> children naming joints of the file, "
-                                         f"got {unknown}")
+                        raise self.error(f"{what}: expected <joint joint coef> children naming hinge or slide joints "
+                                         f"of the file, got {unknown}")
                     continue
                 lower, upper = (self.numbers(attrs, "range", 2, what, default=[0.0, 0.0]) if limited
                                 else (-np.inf, np.inf))

@@ -24,7 +24,9 @@ _SECTIONS = {"compiler", "option", "size", "visual", "statistic", "default", "cu
 # compiler attributes read here, or with no effect on the model read (paths, threads, frames' storage)
 _COMPILER = {"angle", "coordinate", "meshdir", "assetdir", "texturedir", "autolimits", "eulerseq",
              "inertiafromgeom", "settotalmass", "strippath", "usethread", "discardvisual", "fusestatic", "fitaabb",
-             "saveinertial"}
+             "saveinertial", "balanceinertia"}
+# a mesh's reference frame, which MuJoCo's compiler moves its geoms by, at the identity
+MESH_REFERENCE = {"refpos": np.zeros(3), "refquat": np.array([1.0, 0.0, 0.0, 0.0])}
 ACTUATORS = ("general", "motor", "position", "velocity", "intvelocity", "damper", "cylinder", "muscle", "adhesion",
              "plugin")
 # MuJoCo's defaults of solver attributes: where one is not read, genesis_lite's rows have it
@@ -74,6 +76,7 @@ class MJCFDocument:
         if len(self.eulerseq) != 3 or any(c not in "xyzXYZ" for c in self.eulerseq):
             raise self.error(f"<compiler eulerseq> expected 3 of x, y, z, X, Y, Z, got {self.eulerseq!r}")
         self.inertiafromgeom = compiler.get("inertiafromgeom", "auto")
+        self.balanceinertia = compiler.get("balanceinertia", "false") == "true"
         self.settotalmass = float(self.numbers(compiler, "settotalmass", 1, "<compiler>", default=[-1.0])[0])
         for replicate in reversed(list(root.iter("replicate"))):  # (the innermost first: its suffix comes first)
             self._replicate(replicate)
@@ -301,12 +304,13 @@ class MJCFDocument:
                 what = f"<mesh name={name!r}>"
                 if name in meshes:  # (MuJoCo refuses it too; the later one replaced the first)
                     raise self.error(f"{what}: mesh names expected unique, got {name!r} twice")
-                moved = sorted(key for key in ("refpos", "refquat") if key in attrs)
-                if moved:  # (they move the geoms using the mesh: unread, each would stand elsewhere)
+                moved = sorted(key for key, identity in MESH_REFERENCE.items() if key in attrs
+                               and np.any(self.numbers(attrs, key, len(identity), what) != identity))
+                if moved:  # (MuJoCo moves the geoms using the mesh by them: unread, each would stand elsewhere)
                     raise self.error(f"{what}: attributes {moved} are not supported yet, got "
                                      f"{[attrs[key] for key in moved]}; move the mesh's vertices instead")
                 for key in attrs:
-                    if key not in ("name", "class", "file", "scale", "content_type", "vertex", "face"):
+                    if key not in ("name", "class", "file", "scale", "content_type", "vertex", "face", *MESH_REFERENCE):
                         self.ignored.add(f"<mesh {key}> (a mesh's volume and inertia are its solid's, exact for "
                                          f"a closed mesh, its convex hull's for an open one)")
                 scale = self.numbers(attrs, "scale", 3, what, default=np.ones(3))
