@@ -1353,6 +1353,8 @@ def test_links_and_entities_know_their_dof_and_coordinate_ranges(f64):
     assert (plane.geom_end, box.geom_start, box.geom_end, arm.geom_start) == (1, 1, 2, 2) and arm.geom_end > 2
     assert (plane.joint_start, plane.joint_end, box.joint_start, box.joint_end) == (0, 0, 0, 1)
     assert (arm.joint_start, arm.joint_end) == (1, 8) and [joint.idx for joint in arm.joints] == list(range(1, 8))
+    assert [link.root_idx for link in box.links + arm.links] == [1] + [2] * arm.n_links
+    assert body.is_built and arm.joints[0].is_built
     # Genesis's get_link / get_joint by uid (digits of it)
     assert arm.get_link(uid=arm.links[3].uid.short()) is arm.links[3]
     assert arm.get_joint(uid=str(arm.joints[2].uid)[5:20]) is arm.joints[2]

@@ -115,6 +115,15 @@ class RigidLink:
         return bool(self._model("is_fixed").link_static[self.idx])
 
     @property
+    def root_idx(self):
+        """The scene-wide index of the root link of its tree (once built)."""
+        return int(self._model("root_idx").link_root[self.idx])
+
+    @property
+    def is_built(self):
+        return self.entity.is_built
+
+    @property
     def joints(self):
         """The joints moving the link against its parent: one, or none for a welded link (a
         body's several MJCF joints make massless links of their own)."""
@@ -271,6 +280,10 @@ class RigidJoint:
     def idx(self):
         """Its place among the scene's rigid joints (once built)."""
         return self.entity.joint_start + self.idx_local
+
+    @property
+    def is_built(self):
+        return self.entity.is_built
 
     @property
     def dof_start(self):
