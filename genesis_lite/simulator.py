@@ -577,9 +577,10 @@ class Simulator:
         _last_step)."""
         return self._last_step(solver, "get_dofs_acc", "dofs_dynamics")[:, 1]
 
-    def links_acc(self, solver):
-        """(B, L, 3) the last step's links' classical linear accelerations (solver.links_acc; see _last_step)."""
-        return self._last_step(solver, "get_links_acc", "links_acc")
+    def links_acc(self, solver, what):
+        """(B, L, 6) the last step's links' classical linear and angular accelerations (solver.links_acc;
+        see _last_step)."""
+        return self._last_step(solver, what, "links_acc")
 
     def contacts(self, solver, what, trimmed=False):
         """(B, W, 12) the last step's contacts (solver.contacts, trimmed or not; see _last_step: after

@@ -1648,8 +1648,8 @@ ACC_BODIES = ('<geom type="plane" size="5 5 0.1"/>'
 
 def test_links_acc_is_each_origins_acceleration_as_mujocos(f64, tmp_path):
     """get_links_acc: the classical linear acceleration of each link origin in the last step (its start
-    state, the acceleration it integrated), gravity out: MuJoCo 4's mj_objectAcceleration of the body
-    frame (after mj_rnePostConstraint) plus gravity, for a hinge, slide and ball chain swinging and a
+    state, the acceleration it integrated), gravity out, and get_links_acc_ang its angular acceleration:
+    MuJoCo 4's mj_objectAcceleration of the body frame (after mj_rnePostConstraint; plus gravity), for a hinge, slide and ball chain swinging and a
     box (its centre of mass off its origin) landing and spinning on the floor, 200 steps, read after
     the link poses and the mass matrix at the new state were; zeros before the first step and after
     a reset; a box at rest reads zero. (The state's integrated acceleration: MuJoCo's where no joint
@@ -1666,14 +1666,15 @@ def test_links_acc_is_each_origins_acceleration_as_mujocos(f64, tmp_path):
         for name in names:
             acc = np.zeros(6)
             mujoco.mj_objectAcceleration(m, d, mujoco.mjtObj.mjOBJ_XBODY, m.body(name).id, acc, 0)
-            expected.append(acc[3:] + m.opt.gravity)
+            expected.append(np.concatenate([acc[3:] + m.opt.gravity, acc[:3]]))
         touching += d.ncon > 0
         mujoco.mj_step(m, d)
         scene.step()
         robot.get_links_pos(), robot.get_mass_mat()  # (readouts at the new state leave the last step's be)
-        ours = robot.get_links_acc(links_idx_local=[robot.get_link(name).idx_local for name in names]).numpy()
+        links = [robot.get_link(name).idx_local for name in names]
+        ours = torch.cat([robot.get_links_acc(links_idx_local=links), robot.get_links_acc_ang(links)], -1).numpy()
         worst = max(worst, np.abs(ours - np.array(expected)).max())
-    print(f"\nget_links_acc against MuJoCo: {worst:.1e} m/s² at worst")
+    print(f"\nget_links_acc and get_links_acc_ang against MuJoCo: {worst:.1e} (m/s², rad/s²) at worst")
     assert worst < 1e-9 and touching > 100
     scene.reset()
     assert torch.equal(robot.get_links_acc(), torch.zeros(robot.n_links, 3, dtype=torch.float64))

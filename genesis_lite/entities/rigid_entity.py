@@ -1775,10 +1775,18 @@ class RigidEntity(EntityIndexing):
         ours are one, so both read the same. Zeros in an env before its first step and after a reset
         or setter replaced its state. Not differentiable."""
         check_bool(f"entity '{self.name}': get_links_acc", "relative", relative)
+        return self._links_acc("get_links_acc", links_idx_local, envs_idx, slice(0, 3))
+
+    def get_links_acc_ang(self, links_idx_local=None, envs_idx=None):
+        """Angular acceleration of each link, world frame, rad/s²: (n, 3) or (n_envs, n, 3), as
+        Genesis's, in the last step's last substep (as get_links_acc). Not differentiable."""
+        return self._links_acc("get_links_acc_ang", links_idx_local, envs_idx, slice(3, 6))
+
+    def _links_acc(self, what, links_idx_local, envs_idx, part):
         links = self._local(links_idx_local, self.n_links, "links_idx_local")
-        full = self._sim().links_acc(self._solver)
+        full = self._sim().links_acc(self._solver, what)
         envs = torch.as_tensor(self._envs(envs_idx), device=runtime.device)
-        return self._out(full[envs][:, torch.as_tensor(self.link_start + links, device=runtime.device)])
+        return self._out(full[envs][:, torch.as_tensor(self.link_start + links, device=runtime.device), part])
 
     def _last_step_dofs(self, full, dofs_idx_local, envs_idx):
         """The entity's columns ``dofs_idx_local`` and rows ``envs_idx`` of a (B, D) readout."""

@@ -672,9 +672,10 @@ class RigidSolver(Solver):
         return out
 
     def links_acc(self):
-        """(B, L, 3) m/s² the last step's last substep's classical linear acceleration of each link's
-        origin, world frame, gravity out (step.read_links_acc; zeros before any step)."""
-        out = torch.zeros((self.n_batch, self.model.n_links, 3), dtype=runtime.tc_float, device=runtime.device)
+        """(B, L, 6) the last step's last substep's classical linear acceleration of each link's
+        origin (m/s², gravity out) and its angular acceleration (rad/s²), world frame
+        (step.read_links_acc; zeros before any step)."""
+        out = torch.zeros((self.n_batch, self.model.n_links, 6), dtype=runtime.tc_float, device=runtime.device)
         if self._stepped:
             self.kernels.read_links_acc(out)
         return out
@@ -706,7 +707,7 @@ class RigidSolver(Solver):
 
     @staticmethod
     def without_last_step(readout, value, envs):
-        """``value`` of ``readout`` (contacts (B, C, 12), dofs_dynamics (B, 2, D), links_acc (B, L, 3))
+        """``value`` of ``readout`` (contacts (B, C, 12), dofs_dynamics (B, 2, D), links_acc (B, L, 6))
         as if the envs of the bool mask ``envs`` (B,) had taken no step: no contacts (rows as the
         unused ones: geom −1, the rest 0), no force, no acceleration."""
         out = value.clone()

@@ -534,11 +534,12 @@ def read_links(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, 
 
 @ti.kernel
 def read_links_acc(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: M3, dst: A):
-    """dst (B, L, 3) ← each link origin's classical linear acceleration (m/s², world frame) in the
-    last step's last substep: the link's spatial acceleration at its tree's reference — cacc (the
-    velocity products and the base's −gravity, taken back out here) plus Σ cdof·q̈ over the dofs
-    from the root down to it — moved to the origin, a + α × r + ω × (v + ω × r), r = origin −
-    reference (as _point_bias_acceleration moves it, q̈ added)."""
+    """dst (B, L, 6) ← each link's classical linear acceleration of its origin (m/s²) and angular
+    acceleration α (rad/s²), world frame, in the last step's last substep: the link's spatial
+    acceleration at its tree's reference — cacc (the velocity products and the base's −gravity,
+    taken back out here) plus Σ cdof·q̈ over the dofs from the root down to it — its linear part
+    moved to the origin, a + α × r + ω × (v + ω × r), r = origin − reference (as
+    _point_bias_acceleration moves it, q̈ added)."""
     ti.loop_config(serialize=schedule[1])
     for e in range(n_batch(ints)):
         d = bind(ints, f1, v3, v4, m3)
@@ -555,7 +556,7 @@ def read_links_acc(schedule: ti.template(), ints: I, f1: F, v3: V3, v4: V4, m3: 
             w, r = d.cvel_w[s, e, l], d.xpos[s, e, l] - reference(d, s, e, l)
             out = acc + alpha.cross(r) + w.cross(d.cvel_v[s, e, l] + w.cross(r))
             for k in ti.static(range(3)):
-                dst[e, l, k] = out[k]
+                dst[e, l, k], dst[e, l, 3 + k] = out[k], alpha[k]
 
 
 @ti.kernel
