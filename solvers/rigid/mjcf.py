@@ -182,15 +182,14 @@ class _Reader(MJCFDocument):
                        if not (exclude_ground_plane and self.attrs(*member[:2]).get("type") == "plane")]
         if not bodies and not world_geoms:
             raise self.error("<worldbody> expected at least one <body> or geom, got none")
-        for tags, kind in ((("body",), "body"), (("joint", "freejoint"), "joint")):  # (MuJoCo refuses them too)
-            named = [element.get("name") for worldbody in worldbodies for element in worldbody.iter(*tags)
-                     if element.get("name")]
+        kinds = {"body": ("body",), "joint": ("joint", "freejoint")}
+        names = {kind: [element.get("name") for worldbody in worldbodies for element in worldbody.iter(*tags)
+                        if element.get("name")] for kind, tags in kinds.items()}
+        for kind, named in names.items():  # (MuJoCo refuses repeated ones too)
             repeated = sorted({name for name in named if named.count(name) > 1})
             if repeated:
                 raise self.error(f"{kind} names expected unique, got repeated names {repeated}")
-        self.body_names, self.joint_names = ({element.get("name") for worldbody in worldbodies
-                                              for element in worldbody.iter(*tags)} - {None}
-                                             for tags in (("body",), ("joint", "freejoint")))
+        self.body_names, self.joint_names = set(names["body"]), set(names["joint"])
         links = []
         self.static_links = set()  # the links welded to the world (the only ones a plane may be on)
         self.sites = {}  # site name → (its body's name, its position (3,) m and turn (4,) in the body's frame)
