@@ -15,11 +15,13 @@ import check_adjoint, eps_scan, cases_from_quats``.
 
 Cases are dicts of float64 arrays (N cases): pos1 (N, 3), rot1 (N, 3, 3), size1 (N, 3), pos2,
 rot2, size2 likewise, margin (N,); ``cases_from_quats`` builds one from MuJoCo quaternions and
-``cases_from_dicts`` from tests/test_colliders_primitive.py's case dicts.
+``cases_from_dicts`` from tests/test_colliders_primitive.py's case dicts. They reach the kernel in
+its float: float32 arrays under ``gs.init(precision="32")``.
 """
 import mujoco
 import numpy as np
 import taichi as ti
+from taichi.lang import impl
 
 from genesis_lite.solvers.core import runtime
 
@@ -104,10 +106,11 @@ def adjoint_vs_fd(decide, evaluate, adjoint, max_contacts, cases, seed=0, eps=1e
     """
     n = len(cases["margin"])
     rng = np.random.default_rng(seed)
+    real = np.float32 if impl.get_runtime().default_fp == ti.f32 else np.float64  # the kernels' float
     out = {"count": np.zeros(n, np.int32), "feature": np.zeros((n, max_contacts), np.int32),
-           "grad": np.zeros((n, max_contacts, N_INPUTS)), "fd": np.zeros((n, max_contacts, N_INPUTS)),
-           "cotangent": rng.normal(size=(n, max_contacts, N_COTANGENT))}
-    args = [np.ascontiguousarray(cases[key], dtype=np.float64)
+           "grad": np.zeros((n, max_contacts, N_INPUTS), real), "fd": np.zeros((n, max_contacts, N_INPUTS), real),
+           "cotangent": rng.normal(size=(n, max_contacts, N_COTANGENT)).astype(real)}
+    args = [np.ascontiguousarray(cases[key], dtype=real)
             for key in ("pos1", "rot1", "size1", "pos2", "rot2", "size2", "margin")]
     _kernel(decide, evaluate, adjoint, max_contacts)(*args, out["cotangent"], eps, out["count"], out["feature"],
                                                      out["grad"], out["fd"])

@@ -67,6 +67,20 @@ def test_standing_cylinder_adjoint_matches_fd(f64):
     assert scan[1e-6] < scan[1e-5] or scan[1e-5] < 1e-9, scan
 
 
+def test_plane_cylinder_adjoint_matches_fd_in_float32(f32):
+    """float32 makes the rim direction perpendicular to the axis before normalising it (a float32
+    unit axis is off unit by ~1e-7: primitive._across); its adjoint, against float32 central FD at
+    the best eps of a scan (rounding ~1e-7 / eps, truncation ~eps²). Without the projection's own
+    terms the adjoint is off by 0.3 (relative)."""
+    cases = _cases("plane_cylinder")
+    decide, evaluate, adjoint = (primitive.plane_cylinder_decide, primitive.plane_cylinder_evaluate,
+                                 primitive.plane_cylinder_evaluate_adjoint)
+    _, features, _ = check_adjoint(decide, evaluate, adjoint, primitive.PLANE_CYLINDER_MAX, cases)
+    _, best = eps_scan(decide, evaluate, adjoint, primitive.PLANE_CYLINDER_MAX, cases, (3e-3, 1e-3, 3e-4))
+    assert EXPECTED_FEATURES["plane_cylinder"] <= set(features.tolist())
+    assert best <= 2e-3, f"plane–cylinder in float32: adjoint differs from central FD by {best:.3g} (relative)"
+
+
 # ---------------------------------------------------------------- frame helpers for segments in [-1, 1]
 #
 # segment_pair_terms / segment_pair_params (used by the box colliders) have no primitive

@@ -210,6 +210,30 @@ def test_float32_lands_and_rests(f32, shape):
     assert float(entity.get_dofs_velocity().abs().max()) < 1e-3
 
 
+def test_float32_upright_cylinders_stand_whatever_their_yaw(f32):
+    """float32, MuJoCo's plane–cylinder rule: cylinders standing on the plane, turned about their
+    axis by 0–80°, stay on it for 0.4 s at their half height, touching it at every step. A turned
+    unit axis is off unit by ~1e-7 in float32, which once made the rim the axis: no contact, and
+    the larger can fell 0.37 m through the floor."""
+    yaws = np.radians([0.0, 15.0, 30.0, 45.0, 60.0, 80.0])
+    sizes = ((0.41, 0.22), (0.1, 0.1), (0.05, 0.2))  # (radius, half height) m
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=0.002), show_viewer=False,
+                     rigid_options=gs.options.RigidOptions(enable_mujoco_compatibility=True))
+    scene.add_entity(gs.morphs.Plane())
+    cans = [scene.add_entity(gs.morphs.Cylinder(radius=r, height=2 * h, pos=(2.0 * k, 0.0, h)))
+            for k, (r, h) in enumerate(sizes)]
+    scene.build(n_envs=len(yaws))
+    turned = torch.tensor(np.stack([np.cos(yaws / 2), 0 * yaws, 0 * yaws, np.sin(yaws / 2)], 1), dtype=gs.tc_float)
+    for can in cans:
+        can.set_quat(turned)
+    for _ in range(200):
+        scene.step()
+        for can in cans:
+            assert (can.get_contacts()["valid_mask"].sum(1) >= 3).all()
+    for can, (_, h) in zip(cans, sizes):
+        assert torch.allclose(can.get_pos()[:, 2], torch.full((len(yaws),), h, dtype=gs.tc_float), rtol=0, atol=1e-3)
+
+
 def test_contact_readouts_of_a_batch_with_and_without_contacts(f64):
     """Two envs: a 2 kg box resting on the plane (four corner contacts) and one 1 m up (none). The
     contact rows past an env's count are geom −1 and zeros, so no read-out carries garbage: the net

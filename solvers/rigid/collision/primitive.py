@@ -37,6 +37,7 @@ which passes the capsule axis (column 2 of rot2); build the frame with
 """
 import numpy as np
 import taichi as ti
+from taichi.lang import impl
 
 from ..spatial import dot3, mat_vec
 from .convex import RIM_TILT, STANDING_TILT
@@ -228,7 +229,7 @@ plane_capsule = collider(plane_capsule_decide, plane_capsule_evaluate, PLANE_CAP
 # ---------------------------------------------------------------- plane – cylinder
 # feature = point + 4 flipped + 8 flat.
 #   flipped: the cylinder axis a is replaced by -a so that it points towards the plane (n·a > 0).
-#   flat: the disks are parallel to the plane (|a (n·a) - n|² < MINVAL²), so the rim direction
+#   flat: the disks are parallel to the plane (|a (n·a) - n|² < _flat_across2()), so the rim direction
 #         is the cylinder's x axis instead of the plane normal's component across the axis.
 #   point: NEAR_RIM the lowest rim point of the disk nearer the plane; FAR_RIM the same rim
 #          direction on the other disk; SIDE_A / SIDE_B the two other corners of an equilateral
@@ -236,6 +237,22 @@ plane_capsule = collider(plane_capsule_decide, plane_capsule_evaluate, PLANE_CAP
 # MuJoCo emits nothing unless NEAR_RIM is within margin; then FAR_RIM if within margin, then
 # SIDE_A and SIDE_B together if their (common) distance is within margin.
 NEAR_RIM, FAR_RIM, SIDE_A, SIDE_B = 0, 1, 2, 3
+
+
+def _single_precision():
+    """True when the kernels compute in float32 (decided at compile time)."""
+    return impl.get_runtime().default_fp == ti.f32
+
+
+# |a (n·a) - n|² below which the disks count as flat (at compile time). float64: MuJoCo's MINVAL².
+# float32: (1e-5)². There a unit axis is off unit by ~1e-7 (a quaternion turned 45° about z
+# gives R[2, 2] = 0.99999994), which puts an across of that size along the axis: with MINVAL² an
+# upright can's "rim" was its axis, rim points 0.4 m above or below the disk, and a can standing
+# on the floor fell through it. Flat below 1e-5 rad, the triangle's points lie at most r 1e-5 / 2
+# above the lowest rim point; above it, the across is made perpendicular to the axis before it
+# is normalised (float32 only), so that the ~1e-7 along the axis cannot tilt the rim out of its disk.
+def _flat_across2():
+    return 1e-10 if _single_precision() else MINVAL * MINVAL
 
 
 @ti.func
@@ -253,12 +270,22 @@ def _plane_cylinder_terms(pos1, rot1, pos2, rot2, size2, flipped, flat):
         axis = -axis
         along = -along
     dist0 = dot3(pos2 - pos1, n)
-    rim = axis * along - n
+    rim = _across(axis, along, n)
     if flat:
         rim = column(rot2, 0) * size2[0]
     else:
         rim = rim * (size2[0] / ti.sqrt(dot3(rim, rim)))
     return n, axis * size2[1], rim, dist0, along * size2[1], dot3(rim, n)
+
+
+@ti.func
+def _across(axis, along, n):
+    """The plane normal's component across the cylinder axis, negated: a (n·a) - n (3,); in float32
+    made perpendicular to the axis (_flat_across2)."""
+    across = axis * along - n
+    if ti.static(_single_precision()):
+        across -= axis * dot3(axis, across)
+    return across
 
 
 @ti.func
@@ -277,8 +304,12 @@ def _plane_cylinder_terms_adjoint(pos1, rot1, pos2, rot2, size2, flipped, flat, 
     g_rot2 = ti.Matrix.zero(float, 3, 3)
     if flat:
         g_rot2 = column_adjoint(g_rim_all * size2[0], 0)
-    else:  # rim = R unit(axis along - n)
-        g_across = normalize3_adjoint(axis * along - n, g_rim_all * size2[0], 0.0)
+    else:  # rim = R unit(across), across = axis along - n (float32: projected off the axis)
+        raw = axis * along - n
+        g_across = normalize3_adjoint(_across(axis, along, n), g_rim_all * size2[0], 0.0)
+        if ti.static(_single_precision()):  # across = raw - axis (axis·raw)
+            g_axis -= g_across * dot3(axis, raw) + raw * dot3(axis, g_across)
+            g_across -= axis * dot3(axis, g_across)
         g_axis += g_across * along
         g_along += dot3(g_across, axis)
         g_n_all -= g_across
@@ -296,7 +327,7 @@ def plane_cylinder_decide(pos1, rot1, size1, pos2, rot2, size2, margin):
     along = dot3(n, axis)
     across = axis * along - n
     flipped = 1 if along > 0 else 0
-    flat = 1 if dot3(across, across) < MINVAL * MINVAL else 0
+    flat = 1 if dot3(across, across) < ti.static(_flat_across2()) else 0
     _, _, _, dist0, axis_drop, rim_drop = _plane_cylinder_terms(pos1, rot1, pos2, rot2, size2, flipped, flat)
     base = 4 * flipped + 8 * flat
     feature = ti.Vector.zero(ti.i32, PLANE_CYLINDER_MAX)
