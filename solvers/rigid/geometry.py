@@ -82,7 +82,7 @@ def geom_arrays(geoms, link_of, where_of):
         out["type"].append(GEOM_CODE[geom.type])
         out["link"].append(link_of[k])
         out["pos"].append(np.asarray(geom.pos, dtype=np.float64))
-        out["quat"].append(quat / np.linalg.norm(quat))
+        out["quat"].append(shapes.normalized(quat)[0])
         out["size"].append(size)
         out["rbound"].append(rbound)
         out["aabb_half"].append(_aabb_half(geom.type, size))

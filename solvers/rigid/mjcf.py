@@ -280,9 +280,7 @@ class _Reader(MJCFDocument):
             what = f"body {name!r} site {attrs.get('name')!r}"
             pos, quat = self.frame(attrs, what)
             if "fromto" in attrs:
-                ends = self.numbers(attrs, "fromto", 6, what)
-                axis = ends[3:] - ends[:3]
-                pos, quat = (ends[:3] + ends[3:]) / 2.0, shapes.quat_z_to(-axis / norm(self, axis, what))
+                pos, quat, _ = self._fromto(attrs, what)
             if attrs.get("name") in self.sites:  # (MuJoCo refuses them too)
                 raise self.error(f"{what}: site names expected unique, got {attrs['name']!r} twice")
             if attrs.get("name") is not None:
@@ -383,7 +381,8 @@ class _Reader(MJCFDocument):
         if kind == "ball":
             return self._ball(attrs, link_name, name, what)
         axis = self.numbers(attrs, "axis", 3, what, default=[0.0, 0.0, 1.0])
-        axis = axis / norm(self, axis, what)
+        norm(self, axis, what)
+        axis = shapes.normalized(axis)[0]
         spec = _link(link_name, -1, name, _JOINTS[kind], np.zeros(3), IDENTITY.copy(), axis)
         for key in ("damping", "armature", "frictionloss", "stiffness"):
             setattr(spec, key, self._non_negative(attrs, key, what))
@@ -520,6 +519,14 @@ class _Reader(MJCFDocument):
                 link.visuals.append(self._visual(geom, attrs))
         return solids
 
+    def _fromto(self, attrs: dict, what: str):
+        """(centre (3,) m, quaternion (4,), half length m) of a geom's or site's ``fromto``: z from `to`
+        to `from`, as MuJoCo's compiler turns it (mjuu_z2quat of from − to), rounded as it rounds."""
+        ends = self.numbers(attrs, "fromto", 6, what)
+        norm(self, ends[3:] - ends[:3], what)
+        towards_from = ends[:3] - ends[3:]
+        return (ends[:3] + ends[3:]) / 2.0, shapes.quat_z_to(towards_from), shapes.normalized(towards_from)[1] / 2
+
     def _geom(self, attrs: dict, what: str):
         """(GeomSpec in the body frame, density kg/m³, stated mass kg or None, an ellipsoid's semi-axes
         (3,) m where the GeomSpec is its polytope, else None) of a <geom>."""
@@ -531,13 +538,9 @@ class _Reader(MJCFDocument):
         size = self.numbers(attrs, "size", (1, 2, 3), what, default=np.zeros(3))
         size = np.concatenate([size, np.zeros(3 - len(size))])
         if "fromto" in attrs and kind in ("capsule", "cylinder", "box", "ellipsoid"):
-            ends = self.numbers(attrs, "fromto", 6, what)
-            axis = ends[3:] - ends[:3]
-            size[2 if kind in ("box", "ellipsoid") else 1] = np.linalg.norm(axis) / 2.0
+            pos, quat, size[2 if kind in ("box", "ellipsoid") else 1] = self._fromto(attrs, what)
             if kind in ("box", "ellipsoid"):  # (MuJoCo 4: a square, or round, section of half side size[0])
                 size[1] = size[0]
-            # (z from `to` to `from`, as MuJoCo's compiler turns it, as a site's: the same shape, MuJoCo's frame)
-            pos, quat = (ends[:3] + ends[3:]) / 2.0, shapes.quat_z_to(-axis / norm(self, axis, what))
         if kind == "plane":  # infinite to the colliders, as MuJoCo's (its size only draws it)
             geom = GeomSpec("plane", np.array([0.0, 0.0, 1.0]), pos, quat)
         elif kind == "mesh":

@@ -5,6 +5,7 @@
 over its class, numbers and frames (every orientation form) read with named errors, the mesh
 and material assets, and the record of what is ignored (said in one warning).
 """
+import math
 import os
 from copy import deepcopy as copy_element
 
@@ -14,7 +15,6 @@ from lxml import etree
 from ..core import AssetError
 from . import shapes
 from .collision import hfield
-from .urdf import mat_to_quat
 
 IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 ORIENTATIONS = ("quat", "axisangle", "euler", "xyaxes", "zaxis")
@@ -268,21 +268,27 @@ class MJCFDocument:
             for axis_name, angle in zip(self.eulerseq, self.numbers(attrs, "euler", 3, what)):
                 turn = axis_angle(np.eye(3)["xyz".index(axis_name.lower())], self._angle(angle))
                 q = shapes.quat_mul(q, turn) if axis_name.islower() else shapes.quat_mul(turn, q)
+                q = shapes.normalized(q)[0]
         elif kind == "xyaxes":
             v = self.numbers(attrs, "xyaxes", 6, what)
-            x = v[:3] / norm(self, v[:3], what)
-            y = v[3:] - x * (x @ v[3:])
-            y = y / norm(self, y, what)
-            q = mat_to_quat(np.stack([x, y, np.cross(x, y)], axis=1))
+            norm(self, v[:3], what)
+            x = shapes.normalized(v[:3])[0]
+            y = v[3:] - x * (x[0] * v[3] + x[1] * v[4] + x[2] * v[5])
+            norm(self, y, what)
+            y = shapes.normalized(y)[0]
+            z = shapes.normalized([x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0]])[0]
+            q = shapes.frame_quat(x, y, z)
         else:
             z = self.numbers(attrs, "zaxis", 3, what)
-            q = shapes.quat_z_to(z / norm(self, z, what))
+            norm(self, z, what)
+            q = shapes.quat_z_to(z)
         if not np.linalg.norm(q) > 1e-12:
             raise self.error(f"{what}: attribute {kind!r} expected a non-zero rotation, got {attrs[kind]!r}")
-        return pos, q / np.linalg.norm(q)
+        return pos, shapes.normalized(q)[0]
 
     def _angle(self, value: float) -> float:
-        return np.deg2rad(value) if self.degree else float(value)
+        """An angle attribute in rad (degrees converted as MuJoCo's compiler rounds them: / 180 π)."""
+        return float(value) / 180.0 * np.pi if self.degree else float(value)
 
     # ---------------------------------------------------------------- assets
 
@@ -455,5 +461,6 @@ def norm(reader: MJCFDocument, v: np.ndarray, what: str) -> float:
 
 
 def axis_angle(axis, angle: float) -> np.ndarray:
-    axis = np.asarray(axis, dtype=np.float64)
-    return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis / np.linalg.norm(axis)])
+    """(4,) quaternion of a turn by angle (rad) about axis (3,), as MuJoCo's compiler rounds it."""
+    half = angle / 2
+    return np.array([math.cos(half), *(math.sin(half) * shapes.normalized(axis)[0])])

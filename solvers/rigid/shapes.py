@@ -6,10 +6,11 @@ origin. Units: metres, kilograms, kg/m³ for densities, kg·m² for inertias.
 
 ``geometry_mass_properties`` is also what the URDF loader uses for links without
 ``<inertial>`` (and ``combined_mass_properties`` the MJCF loader, whose geoms have densities of
-their own). The loaders' frame arithmetic is here too: ``quat_to_mat``, ``quat_mul``,
-``quat_z_to``, ``compose``.
+their own). The loaders' frame arithmetic is here too, rounded as MuJoCo's compiler rounds it:
+``quat_to_mat``, ``quat_mul``, ``normalized``, ``frame_quat``, ``quat_z_to``, ``compose``.
 """
 import functools
+import math
 import os
 
 import numpy as np
@@ -73,9 +74,50 @@ def quat_to_mat(quat) -> np.ndarray:
 
 
 def quat_mul(a, b) -> np.ndarray:
-    """Hamilton product a ⊗ b of w-x-y-z quaternions (4,)."""
-    aw, av, bw, bv = a[0], np.asarray(a[1:]), b[0], np.asarray(b[1:])
-    return np.concatenate([[aw * bw - av @ bv], aw * bv + bw * av + np.cross(av, bv)])
+    """Hamilton product a ⊗ b of w-x-y-z quaternions (4,), summed in MuJoCo's order (mju_mulQuat,
+    and spatial.quat_mul in the kernels), so that frames composed here round as MuJoCo's compiler
+    rounds them."""
+    aw, ax, ay, az = (float(v) for v in a)
+    bw, bx, by, bz = (float(v) for v in b)
+    return np.array([aw * bw - ax * bx - ay * by - az * bz,
+                     aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw])
+
+
+def normalized(v) -> tuple[np.ndarray, float]:
+    """(v / |v|, |v|) of a vector v, rounded as MuJoCo's compiler rounds it (mjuu_normvec): the
+    squares summed in order; a vector already unit within 1e-14 is left as it is, and one whose
+    squares sum below 1e-14 too, its length then taken as 0. (With numpy's norm and an unconditional
+    division a geom turned by ``euler`` was a bit off MuJoCo's and touched a plane MuJoCo's did not.)"""
+    v = np.array(v, dtype=np.float64)
+    total = 0.0
+    for x in v:
+        total += x * x
+    if total < 1e-14:
+        return v, 0.0
+    length = math.sqrt(total)
+    return (v / length if abs(length - 1.0) > 1e-14 else v), length
+
+
+def frame_quat(x, y, z) -> np.ndarray:
+    """(4,) w-x-y-z quaternion of the turn whose matrix has columns x, y, z (3,) (orthonormal), as
+    MuJoCo's compiler converts a frame (mjuu_frame2quat): the largest of |w|, |x|, |y|, |z| from the
+    diagonal, the other three from sums and differences of off-diagonal pairs divided by it."""
+    a = np.array([x, y, z], dtype=np.float64)  # a[c, r]: row r of column c
+    if a[0, 0] + a[1, 1] + a[2, 2] > 0:
+        w = 0.5 * math.sqrt(1 + a[0, 0] + a[1, 1] + a[2, 2])
+        q = [w, 0.25 * (a[1, 2] - a[2, 1]) / w, 0.25 * (a[2, 0] - a[0, 2]) / w, 0.25 * (a[0, 1] - a[1, 0]) / w]
+    elif a[0, 0] > a[1, 1] and a[0, 0] > a[2, 2]:
+        v = 0.5 * math.sqrt(1 + a[0, 0] - a[1, 1] - a[2, 2])
+        q = [0.25 * (a[1, 2] - a[2, 1]) / v, v, 0.25 * (a[1, 0] + a[0, 1]) / v, 0.25 * (a[2, 0] + a[0, 2]) / v]
+    elif a[1, 1] > a[2, 2]:
+        v = 0.5 * math.sqrt(1 - a[0, 0] + a[1, 1] - a[2, 2])
+        q = [0.25 * (a[2, 0] - a[0, 2]) / v, 0.25 * (a[1, 0] + a[0, 1]) / v, v, 0.25 * (a[2, 1] + a[1, 2]) / v]
+    else:
+        v = 0.5 * math.sqrt(1 - a[0, 0] - a[1, 1] + a[2, 2])
+        q = [0.25 * (a[0, 1] - a[1, 0]) / v, 0.25 * (a[2, 0] + a[0, 2]) / v, 0.25 * (a[2, 1] + a[1, 2]) / v, v]
+    return normalized(q)[0]
 
 
 def quat_z_to(direction) -> np.ndarray:
@@ -84,23 +126,19 @@ def quat_z_to(direction) -> np.ndarray:
     about x by 0 or half a turn (its threshold, measured: a zaxis 1e-7 off −z turns about x, 1.01e-7
     off about y; a threshold of 1.4e-6 here turned such frames half a turn about the other axis).
     Also a Plane morph's normal (a normal within 1e-7 of ±z is ±z)."""
-    n = np.asarray(direction, dtype=np.float64) / np.linalg.norm(direction)
-    axis = np.array([-n[1], n[0], 0.0])
-    sine = np.linalg.norm(axis)
-    if sine < 1e-7:
-        axis, sine = np.array([1.0, 0.0, 0.0]), 0.0
-    else:
-        axis = axis / sine
-    half = np.arctan2(sine, n[2]) / 2.0
-    return np.array([np.cos(half), *(np.sin(half) * axis)])
+    n, _ = normalized(direction)
+    axis, sine = normalized([-n[1], n[0], 0.0])  # z × n
+    if sine < 1e-10:  # (its squares below 1e-14: sine 0)
+        axis = np.array([1.0, 0.0, 0.0])
+    half = math.atan2(sine, n[2]) / 2
+    return np.array([math.cos(half), *(math.sin(half) * axis)])
 
 
 def compose(pos_a, quat_a, pos_b, quat_b) -> tuple[np.ndarray, np.ndarray]:
     """Pose b (pos (3,), quat (4,)) given in frame a, expressed in frame a's parent:
     (pos_a + R_a pos_b, quat_a ⊗ quat_b), unit, w ≥ 0."""
     pos = np.asarray(pos_a, dtype=np.float64) + quat_to_mat(quat_a) @ np.asarray(pos_b, dtype=np.float64)
-    quat = quat_mul(np.asarray(quat_a, dtype=np.float64), np.asarray(quat_b, dtype=np.float64))
-    quat /= np.linalg.norm(quat)
+    quat, _ = normalized(quat_mul(quat_a, quat_b))
     return pos, (-quat if quat[0] < 0 else quat)
 
 
